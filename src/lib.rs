@@ -1,1 +1,21 @@
-//! vksplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU reference.
+//! vksplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
+//! reference renderer that the GPU is checked against.
+
+pub mod camera;
+pub mod cpu;
+pub mod frame;
+pub mod output;
+pub mod scene;
+pub mod stats;
+
+/// The built-in demo scene (PLAYBOT LOD6, CC BY 4.0, see `assets/README.md`).
+pub const DEMO_SCENE_PLY: &[u8] = include_bytes!("../assets/playbot_lod6_1873_sh2.ply");
+
+/// Loads the built-in demo scene.
+pub fn demo_scene() -> scene::Scene {
+    scene::ply::parse(
+        DEMO_SCENE_PLY,
+        std::path::Path::new("<built-in demo scene>"),
+    )
+    .expect("the embedded demo scene is a valid PLY")
+}

@@ -1,1 +1,223 @@
-fn main() {}
+//! The `vksplat` command line.
+
+use anyhow::{bail, Result};
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use vksplat::camera::{self, Camera};
+use vksplat::output::{self, ImageFormat};
+use vksplat::scene::{self, Scene};
+
+#[derive(Parser)]
+#[command(
+    name = "vksplat",
+    version,
+    about = "3D Gaussian Splatting renderer (Vulkan compute + exact CPU reference)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene to a PNG or EXR image.
+    Render(RenderArgs),
+    /// Print a scene's size, bounds and parameter statistics.
+    Info(SceneArg),
+}
+
+#[derive(Args)]
+struct SceneArg {
+    /// Scene: an INRIA .ply, or a trained model directory (uses point_cloud/iteration_<largest>/).
+    #[arg(required_unless_present = "demo")]
+    scene: Option<PathBuf>,
+    /// Use the built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
+    #[arg(long, conflicts_with = "scene")]
+    demo: bool,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    #[command(flatten)]
+    scene: SceneArg,
+    /// INRIA cameras.json to take the camera from.
+    #[arg(long, value_name = "FILE")]
+    cameras: Option<PathBuf>,
+    /// Camera of --cameras: list index or img_name (default 0).
+    #[arg(long, value_name = "N|NAME", requires = "cameras")]
+    camera: Option<String>,
+    /// Output image (.png or .exr; EXR holds R, G, B, A and depth Z).
+    #[arg(short, long, value_name = "OUT", default_value = "render.png")]
+    output: PathBuf,
+    /// Output width in pixels (alone: keeps the aspect ratio).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Output height in pixels (alone: keeps the aspect ratio).
+    #[arg(long)]
+    height: Option<u32>,
+    /// Scale the camera's resolution (focal lengths scale with it).
+    #[arg(long, conflicts_with_all = ["width", "height"])]
+    scale: Option<f32>,
+    /// Background colour, linear R,G,B in [0, 1] (or "black" / "white").
+    #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = parse_background)]
+    background: [f32; 3],
+    /// Render with the CPU reference renderer.
+    #[arg(long)]
+    cpu: bool,
+    /// Write 16-bit PNG instead of 8-bit.
+    #[arg(long)]
+    png16: bool,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    overwrite: bool,
+}
+
+fn parse_background(s: &str) -> Result<[f32; 3], String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "black" => return Ok([0.0; 3]),
+        "white" => return Ok([1.0; 3]),
+        _ => {}
+    }
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != 3 {
+        return Err(format!("expected R,G,B (three numbers), got \"{s}\""));
+    }
+    let mut out = [0f32; 3];
+    for (o, p) in out.iter_mut().zip(parts) {
+        *o = p
+            .trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("\"{p}\" is not a finite number"))?;
+    }
+    Ok(out)
+}
+
+fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
+    if arg.demo {
+        return Ok((
+            vksplat::demo_scene(),
+            "built-in demo scene (PLAYBOT)".into(),
+        ));
+    }
+    let Some(path) = arg.scene.as_deref() else {
+        bail!("no scene given; pass a .ply file, a model directory or --demo");
+    };
+    let resolved = scene::resolve_scene_path(path)?;
+    Ok((scene::load(path)?, resolved.display().to_string()))
+}
+
+fn choose_camera(args: &RenderArgs, scene: &Scene) -> Result<Camera> {
+    let cam = match &args.cameras {
+        Some(path) => {
+            let cams = camera::load_cameras_json(path)?;
+            if cams.is_empty() {
+                bail!("{}: holds no cameras", path.display());
+            }
+            camera::select_camera(&cams, args.camera.as_deref().unwrap_or("0"), path)?
+        }
+        None => camera::default_camera(&scene.positions, 1280, 720),
+    };
+    Ok(cam.resized(args.width, args.height, args.scale)?)
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    let format = ImageFormat::from_path(&args.output, args.png16)?;
+    if !args.overwrite && args.output.exists() {
+        return Err(output::OutputError::Exists(args.output.clone()).into());
+    }
+    let (scene, name) = load_scene(&args.scene)?;
+    let cam = choose_camera(args, &scene)?;
+    cam.validate()?;
+    let opts = vksplat::cpu::RenderOptions {
+        background: args.background,
+    };
+    let start = std::time::Instant::now();
+    let frame = vksplat::cpu::render(&scene.activated(), &cam, &opts);
+    let elapsed = start.elapsed();
+    output::write_frame(&frame, &args.output, format, args.overwrite)?;
+    eprintln!(
+        "rendered {name} ({} Gaussians) from camera \"{}\" at {}x{} on the CPU in {:.1} ms -> {}",
+        scene.len(),
+        cam.name,
+        cam.width,
+        cam.height,
+        elapsed.as_secs_f64() * 1e3,
+        args.output.display()
+    );
+    Ok(())
+}
+
+fn fmt3(v: [f32; 3]) -> String {
+    format!("({:.4}, {:.4}, {:.4})", v[0], v[1], v[2])
+}
+
+fn info(arg: &SceneArg) -> Result<()> {
+    let (scene, name) = load_scene(arg)?;
+    let s = vksplat::stats::scene_stats(&scene);
+    println!("scene       {name}");
+    println!("gaussians   {}", s.count);
+    println!(
+        "sh degree   {} ({} coefficients per channel)",
+        s.sh_degree,
+        scene.sh_coeffs()
+    );
+    if let Some((lo, hi)) = s.bounds {
+        println!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
+    }
+    println!(
+        "bulk        centre {} (per-axis median), radius {:.4} (95% of centres within), 2-98% box {} .. {}",
+        fmt3(s.bulk.centre.into()),
+        s.bulk.radius,
+        fmt3(s.bulk.lo.into()),
+        fmt3(s.bulk.hi.into())
+    );
+    println!();
+    println!(
+        "{:<28} {:>12} {:>12} {:>12} {:>12}",
+        "quantity", "min", "max", "mean", "std"
+    );
+    for (label, v) in [
+        ("scale (exp, all axes)", s.scale),
+        ("max scale per Gaussian", s.max_scale),
+        ("log scale (stored)", s.log_scale),
+        ("opacity (sigmoid)", s.opacity),
+        ("opacity logit (stored)", s.opacity_logit),
+    ] {
+        println!(
+            "{label:<28} {:>12.6} {:>12.6} {:>12.6} {:>12.6}",
+            v.min, v.max, v.mean, v.std
+        );
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Render(args) => render(args),
+        Command::Info(arg) => info(arg),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", error_sentence(&e));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// One sentence: the outermost message with its causes appended.
+fn error_sentence(e: &anyhow::Error) -> String {
+    let mut s = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !s.contains(&c) {
+            s.push_str(": ");
+            s.push_str(&c);
+        }
+    }
+    s
+}

@@ -1,0 +1,386 @@
+//! Pinhole cameras in OpenCV axes (x right, y down, z forward), INRIA `cameras.json`
+//! loading, a default camera that frames a scene's bulk, and resolution overrides.
+
+use glam::{Mat3, Vec3};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Largest accepted image side, in pixels (the common `maxImageDimension2D`).
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// A pinhole camera. Pixel `(i, j)` is evaluated at exactly `(i, j)` and a point projects
+/// to `(fx * x / z + cx - 0.5, fy * y / z + cy - 0.5)`, the reference's convention
+/// (principal point `cx = W / 2`, pixel centres at `+0.5`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    /// Name (the `img_name` of a cameras.json entry, or a description).
+    pub name: String,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x, in pixels.
+    pub fx: f32,
+    /// Focal length along y, in pixels.
+    pub fy: f32,
+    /// Principal point x, in pixels (`width / 2` for reference cameras).
+    pub cx: f32,
+    /// Principal point y, in pixels (`height / 2` for reference cameras).
+    pub cy: f32,
+    /// World-to-camera rotation.
+    pub rotation: Mat3,
+    /// World-to-camera translation: `p_cam = rotation * p_world + translation`.
+    pub translation: Vec3,
+}
+
+/// Error raised while building or loading cameras.
+#[derive(Debug, thiserror::Error)]
+pub enum CameraError {
+    /// The camera file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// File involved.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// The camera file is not what it should be.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// File involved.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A requested camera does not exist.
+    #[error("{path}: {message}")]
+    NotFound {
+        /// File involved.
+        path: PathBuf,
+        /// What was asked for and what exists.
+        message: String,
+    },
+    /// A camera parameter is unusable.
+    #[error("{0}")]
+    BadParameter(String),
+}
+
+impl Camera {
+    /// Builds a camera from vertical field of view (radians), looking from `eye` at
+    /// `target` with `up` the world's up direction.
+    pub fn look_at(
+        name: &str,
+        width: u32,
+        height: u32,
+        vfov: f32,
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+    ) -> Self {
+        let forward = (target - eye).normalize_or(Vec3::Z);
+        let down = -up.normalize_or(Vec3::NEG_Y);
+        let mut right = down.cross(forward);
+        if right.length_squared() < 1e-12 {
+            // Looking straight along the up axis: any perpendicular will do.
+            right = forward.any_orthonormal_vector();
+        }
+        let right = right.normalize();
+        let cam_down = forward.cross(right);
+        // Rows of the world-to-camera rotation are the camera axes in world space.
+        let rotation = Mat3::from_cols(right, cam_down, forward).transpose();
+        let fy = height as f32 / (2.0 * (vfov * 0.5).tan());
+        Camera {
+            name: name.to_string(),
+            width,
+            height,
+            fx: fy,
+            fy,
+            cx: width as f32 / 2.0,
+            cy: height as f32 / 2.0,
+            rotation,
+            translation: -(rotation * eye),
+        }
+    }
+
+    /// Camera centre in world space.
+    pub fn position(&self) -> Vec3 {
+        -(self.rotation.transpose() * self.translation)
+    }
+
+    /// `tan(fovx / 2)` as the reference derives it (`W / (2 fx)`).
+    pub fn tan_half_fov_x(&self) -> f32 {
+        self.width as f32 / (2.0 * self.fx)
+    }
+
+    /// `tan(fovy / 2)` as the reference derives it (`H / (2 fy)`).
+    pub fn tan_half_fov_y(&self) -> f32 {
+        self.height as f32 / (2.0 * self.fy)
+    }
+
+    /// Number of 16x16 tiles along x and y.
+    pub fn tile_grid(&self) -> (u32, u32) {
+        (self.width.div_ceil(16), self.height.div_ceil(16))
+    }
+
+    /// The same view at another resolution: focal lengths and principal point scale with it.
+    pub fn with_resolution(&self, width: u32, height: u32) -> Result<Camera, CameraError> {
+        check_resolution(width, height)?;
+        let sx = width as f32 / self.width as f32;
+        let sy = height as f32 / self.height as f32;
+        Ok(Camera {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            ..self.clone()
+        })
+    }
+
+    /// Applies `--width/--height` (either alone keeps the aspect ratio) or `--scale`.
+    pub fn resized(
+        &self,
+        width: Option<u32>,
+        height: Option<u32>,
+        scale: Option<f32>,
+    ) -> Result<Camera, CameraError> {
+        let aspect = self.height as f64 / self.width as f64;
+        if scale.is_some() && (width.is_some() || height.is_some()) {
+            return Err(CameraError::BadParameter(
+                "give either --scale or --width/--height, not both".into(),
+            ));
+        }
+        let (w, h) = match (width, height, scale) {
+            (None, None, None) => return Ok(self.clone()),
+            (_, _, Some(s)) => {
+                if !(s.is_finite() && s > 0.0) {
+                    return Err(CameraError::BadParameter(format!(
+                        "--scale {s} must be a positive number"
+                    )));
+                }
+                let w = (self.width as f64 * s as f64).round();
+                let h = (self.height as f64 * s as f64).round();
+                (clamp_side(w, "--scale")?, clamp_side(h, "--scale")?)
+            }
+            (Some(w), Some(h), _) => (w, h),
+            (Some(w), None, _) => (w, clamp_side((w as f64 * aspect).round(), "--width")?),
+            (None, Some(h), _) => (clamp_side((h as f64 / aspect).round(), "--height")?, h),
+        };
+        self.with_resolution(w, h)
+    }
+
+    /// Checks that the camera can be rendered: sane resolution and finite, positive intrinsics.
+    pub fn validate(&self) -> Result<(), CameraError> {
+        check_resolution(self.width, self.height)?;
+        let finite = [self.fx, self.fy, self.cx, self.cy]
+            .iter()
+            .all(|v| v.is_finite())
+            && self.rotation.is_finite()
+            && self.translation.is_finite();
+        if !finite || self.fx <= 0.0 || self.fy <= 0.0 {
+            return Err(CameraError::BadParameter(format!(
+                "camera \"{}\" has non-finite or non-positive intrinsics or pose (fx {}, fy {})",
+                self.name, self.fx, self.fy
+            )));
+        }
+        Ok(())
+    }
+}
+
+fn clamp_side(v: f64, flag: &str) -> Result<u32, CameraError> {
+    if v >= 1.0 && v <= MAX_IMAGE_SIDE as f64 {
+        Ok(v as u32)
+    } else {
+        Err(CameraError::BadParameter(format!(
+            "{flag} gives an image side of {v} pixels; it must be between 1 and {MAX_IMAGE_SIDE}"
+        )))
+    }
+}
+
+/// Rejects zero or absurd resolutions.
+pub fn check_resolution(width: u32, height: u32) -> Result<(), CameraError> {
+    if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(CameraError::BadParameter(format!(
+            "resolution {width}x{height} is not usable; each side must be between 1 and {MAX_IMAGE_SIDE} pixels"
+        )));
+    }
+    Ok(())
+}
+
+#[derive(Deserialize)]
+struct JsonCamera {
+    #[serde(default)]
+    id: Option<serde_json::Value>,
+    #[serde(default)]
+    img_name: Option<String>,
+    width: u32,
+    height: u32,
+    position: [f64; 3],
+    rotation: [[f64; 3]; 3],
+    fx: f64,
+    fy: f64,
+}
+
+/// Loads every camera of an INRIA `cameras.json`.
+pub fn load_cameras_json(path: &Path) -> Result<Vec<Camera>, CameraError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CameraError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_cameras_json(&text, path)
+}
+
+/// Parses an INRIA `cameras.json` held in memory; `path` names it in errors.
+pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, CameraError> {
+    let invalid = |message: String| CameraError::Invalid {
+        path: path.to_path_buf(),
+        message,
+    };
+    let entries: Vec<JsonCamera> = serde_json::from_str(text).map_err(|e| {
+        invalid(format!(
+            "is not an INRIA cameras.json (a list of {{id, img_name, width, height, position, rotation, fx, fy}}): {e}"
+        ))
+    })?;
+    let mut cams = Vec::with_capacity(entries.len());
+    for (i, e) in entries.iter().enumerate() {
+        let name = e.img_name.clone().unwrap_or_else(|| match &e.id {
+            Some(id) => format!("id {id}"),
+            None => format!("camera {i}"),
+        });
+        // Stored rows are the camera-to-world rotation; world-to-camera is its transpose.
+        let c2w = glam::DMat3::from_cols_array_2d(&e.rotation).transpose();
+        let w2c = c2w.transpose();
+        let pos = glam::DVec3::from_array(e.position);
+        let t = -(w2c * pos);
+        let cam = Camera {
+            name,
+            width: e.width,
+            height: e.height,
+            fx: e.fx as f32,
+            fy: e.fy as f32,
+            cx: e.width as f32 / 2.0,
+            cy: e.height as f32 / 2.0,
+            rotation: w2c.as_mat3(),
+            translation: t.as_vec3(),
+        };
+        cam.validate()
+            .map_err(|err| invalid(format!("entry {i} (\"{}\"): {err}", cam.name)))?;
+        let det = c2w.determinant();
+        if !((0.9..1.1).contains(&det)) {
+            return Err(invalid(format!(
+                "entry {i} (\"{}\"): rotation is not a rotation matrix (determinant {det:.4})",
+                cam.name
+            )));
+        }
+        cams.push(cam);
+    }
+    Ok(cams)
+}
+
+/// Picks one camera by list index (`"3"`) or by `img_name`.
+pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera, CameraError> {
+    if let Ok(i) = which.parse::<usize>() {
+        return cams.get(i).cloned().ok_or_else(|| CameraError::NotFound {
+            path: path.to_path_buf(),
+            message: format!(
+                "camera index {i} is out of range; the file has {} cameras (0..{})",
+                cams.len(),
+                cams.len().saturating_sub(1)
+            ),
+        });
+    }
+    cams.iter()
+        .find(|c| c.name == which)
+        .cloned()
+        .ok_or_else(|| {
+            let names: Vec<&str> = cams.iter().take(5).map(|c| c.name.as_str()).collect();
+            CameraError::NotFound {
+                path: path.to_path_buf(),
+                message: format!(
+                    "has no camera named \"{which}\" (names include {}{})",
+                    names.join(", "),
+                    if cams.len() > 5 { ", ..." } else { "" }
+                ),
+            }
+        })
+}
+
+/// Robust extent of a point set: per-axis median centre and the 95th-percentile
+/// distance from it, so a few stray Gaussians far away do not spoil the framing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BulkBounds {
+    /// Per-axis median of the positions.
+    pub centre: Vec3,
+    /// 95th percentile of the distances to `centre`.
+    pub radius: f32,
+    /// 2nd percentile per axis.
+    pub lo: Vec3,
+    /// 98th percentile per axis.
+    pub hi: Vec3,
+}
+
+/// Computes [`BulkBounds`] of `positions` (finite values only).
+pub fn bulk_bounds(positions: &[[f32; 3]]) -> BulkBounds {
+    if positions.is_empty() {
+        return BulkBounds {
+            centre: Vec3::ZERO,
+            radius: 1.0,
+            lo: Vec3::ZERO,
+            hi: Vec3::ZERO,
+        };
+    }
+    let pct = |v: &mut Vec<f32>, p: f64| -> f32 {
+        let idx = ((v.len() - 1) as f64 * p).round() as usize;
+        let (_, x, _) = v.select_nth_unstable_by(idx, |a, b| a.total_cmp(b));
+        *x
+    };
+    let mut axes: Vec<Vec<f32>> = (0..3)
+        .map(|a| positions.iter().map(|p| p[a]).collect())
+        .collect();
+    let mut centre = [0f32; 3];
+    let mut lo = [0f32; 3];
+    let mut hi = [0f32; 3];
+    for a in 0..3 {
+        centre[a] = pct(&mut axes[a], 0.5);
+        lo[a] = pct(&mut axes[a], 0.02);
+        hi[a] = pct(&mut axes[a], 0.98);
+    }
+    let centre = Vec3::from(centre);
+    let mut dist: Vec<f32> = positions
+        .iter()
+        .map(|p| (Vec3::from(*p) - centre).length())
+        .collect();
+    let radius = pct(&mut dist, 0.95).max(1e-3);
+    BulkBounds {
+        centre,
+        radius,
+        lo: lo.into(),
+        hi: hi.into(),
+    }
+}
+
+/// Default vertical field of view of generated cameras (50 degrees).
+pub const DEFAULT_VFOV_DEG: f32 = 50.0;
+
+/// A camera that frames the bulk of `positions`: it looks at the median point from the
+/// -z side, 20 degrees above the horizon (world up is -y, the INRIA/COLMAP convention),
+/// far enough for the 95th-percentile sphere to fit the narrower field of view.
+pub fn default_camera(positions: &[[f32; 3]], width: u32, height: u32) -> Camera {
+    let b = bulk_bounds(positions);
+    let vfov = DEFAULT_VFOV_DEG.to_radians();
+    let hfov = 2.0 * ((width as f32 / height as f32) * (vfov * 0.5).tan()).atan();
+    let half = 0.5 * vfov.min(hfov);
+    let distance = b.radius / half.sin() * 1.05;
+    let elevation = 20f32.to_radians();
+    let dir = Vec3::new(0.0, -elevation.sin(), -elevation.cos());
+    Camera::look_at(
+        "default",
+        width,
+        height,
+        vfov,
+        b.centre + dir * distance,
+        b.centre,
+        Vec3::NEG_Y,
+    )
+}

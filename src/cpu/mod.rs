@@ -1,0 +1,347 @@
+//! The CPU reference renderer: the reference 3DGS forward pass, stage by stage, in f32.
+//!
+//! It is written for clarity and is the yardstick the GPU pipeline is held to. Each stage
+//! is a public function so the GPU stages can be compared against its intermediate values:
+//! [`preprocess`] -> [`tile_keys`] -> [`sort_pairs`] -> [`tile_ranges`] -> [`blend`].
+//! The rules are those of `shared/docs/reference-semantics.md`.
+
+pub mod sh;
+
+use crate::camera::Camera;
+use crate::frame::Frame;
+use crate::scene::ActivatedScene;
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+/// Tile side in pixels.
+pub const TILE_SIZE: u32 = 16;
+/// Gaussians whose view depth is at or below this are culled.
+pub const NEAR_PLANE: f32 = 0.2;
+/// Added to the diagonal of every 2D covariance (the reference's low-pass filter).
+pub const COV2D_DILATION: f32 = 0.3;
+/// Upper clamp of a Gaussian's alpha at a pixel.
+pub const ALPHA_MAX: f32 = 0.99;
+/// Contributions with alpha below this are skipped.
+pub const ALPHA_MIN: f32 = 1.0 / 255.0;
+/// A pixel is finished before its transmittance would drop below this.
+pub const T_MIN: f32 = 0.0001;
+
+/// Options shared by every renderer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// Colour added behind the Gaussians, weighted by the final transmittance.
+    pub background: [f32; 3],
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            background: [0.0; 3],
+        }
+    }
+}
+
+/// Per-Gaussian output of [`preprocess`]. A culled Gaussian has `radius == 0` and
+/// touches no tile.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Projected {
+    /// Projected centre in pixel coordinates (pixel `(i, j)` is evaluated at `(i, j)`).
+    pub mean2d: [f32; 2],
+    /// View-space depth `z`.
+    pub depth: f32,
+    /// Inverse 2D covariance `(A, B, C)`: `power = -0.5 (A dx^2 + C dy^2) - B dx dy`.
+    pub conic: [f32; 3],
+    /// Activated opacity.
+    pub opacity: f32,
+    /// RGB from SH.
+    pub color: [f32; 3],
+    /// Screen-space radius in pixels (0 when culled).
+    pub radius: i32,
+    /// First tile (x, y) touched, inclusive.
+    pub rect_min: [u32; 2],
+    /// Last tile (x, y) touched, exclusive.
+    pub rect_max: [u32; 2],
+}
+
+impl Projected {
+    /// Number of tiles in the Gaussian's tile rectangle (0 when culled).
+    pub fn tiles_touched(&self) -> u32 {
+        if self.radius <= 0 {
+            return 0;
+        }
+        (self.rect_max[0] - self.rect_min[0]) * (self.rect_max[1] - self.rect_min[1])
+    }
+}
+
+/// Rotation matrix of a unit quaternion `(w, x, y, z)`.
+pub fn quat_to_mat3(q: [f32; 4]) -> Mat3 {
+    let [r, x, y, z] = q;
+    Mat3::from_cols(
+        Vec3::new(
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y + r * z),
+            2.0 * (x * z - r * y),
+        ),
+        Vec3::new(
+            2.0 * (x * y - r * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z + r * x),
+        ),
+        Vec3::new(
+            2.0 * (x * z + r * y),
+            2.0 * (y * z - r * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ),
+    )
+}
+
+/// 3D covariance `R S S^T R^T` (symmetric, full matrix).
+pub fn covariance_3d(scale: [f32; 3], rotation: [f32; 4]) -> Mat3 {
+    let m = quat_to_mat3(rotation) * Mat3::from_diagonal(Vec3::from(scale));
+    m * m.transpose()
+}
+
+/// 2D covariance `(a, b, c)` = xx, xy, yy of `J W Sigma W^T J^T`, before the dilation.
+/// `view` is the view-space centre; `x/z` and `y/z` are clamped to 1.3 tan(fov/2).
+pub fn covariance_2d(view: Vec3, cov3d: Mat3, cam: &Camera) -> [f32; 3] {
+    let limx = 1.3 * cam.tan_half_fov_x();
+    let limy = 1.3 * cam.tan_half_fov_y();
+    let z = view.z;
+    let tx = (view.x / z).clamp(-limx, limx) * z;
+    let ty = (view.y / z).clamp(-limy, limy) * z;
+    // Rows of J (the third row is zero).
+    let j0 = Vec3::new(cam.fx / z, 0.0, -(cam.fx * tx) / (z * z));
+    let j1 = Vec3::new(0.0, cam.fy / z, -(cam.fy * ty) / (z * z));
+    // Rows of T = J W.
+    let w_t = cam.rotation.transpose();
+    let t0 = w_t * j0;
+    let t1 = w_t * j1;
+    let s0 = cov3d * t0;
+    let s1 = cov3d * t1;
+    [t0.dot(s0), t0.dot(s1), t1.dot(s1)]
+}
+
+/// The reference's preprocess for one Gaussian.
+pub fn preprocess_one(scene: &ActivatedScene, i: usize, cam: &Camera, sh_degree: u32) -> Projected {
+    let culled = Projected::default();
+    let mean = Vec3::from(scene.positions[i]);
+    let view = cam.rotation * mean + cam.translation;
+    if view.z <= NEAR_PLANE {
+        return culled;
+    }
+    let cov3d = covariance_3d(scene.scales[i], scene.rotations[i]);
+    let [a, b, c] = covariance_2d(view, cov3d, cam);
+    let (a, c) = (a + COV2D_DILATION, c + COV2D_DILATION);
+    let det = a * c - b * b;
+    if det == 0.0 {
+        return culled;
+    }
+    let det_inv = 1.0 / det;
+    let conic = [c * det_inv, -b * det_inv, a * det_inv];
+    let mid = 0.5 * (a + c);
+    let disc = (mid * mid - det).max(0.1).sqrt();
+    let (lambda1, lambda2) = (mid + disc, mid - disc);
+    let radius = (3.0 * lambda1.max(lambda2).sqrt()).ceil();
+    let inv_z = 1.0 / view.z;
+    let mean2d = [
+        cam.fx * view.x * inv_z + cam.cx - 0.5,
+        cam.fy * view.y * inv_z + cam.cy - 0.5,
+    ];
+    let (rect_min, rect_max) = tile_rect(mean2d, radius, cam.tile_grid());
+    if (rect_max[0] - rect_min[0]) * (rect_max[1] - rect_min[1]) == 0 {
+        return culled;
+    }
+    let dir = (mean - cam.position()).normalize();
+    let stride = scene.sh_stride();
+    let color = sh::eval_sh(
+        sh_degree.min(scene.sh_degree),
+        &scene.sh[i * stride..(i + 1) * stride],
+        dir,
+    );
+    Projected {
+        mean2d,
+        depth: view.z,
+        conic,
+        opacity: scene.opacities[i],
+        color,
+        radius: radius as i32,
+        rect_min,
+        rect_max,
+    }
+}
+
+/// Tile rectangle `[min, max)` of a disc of radius `radius` around `p`, clamped to the grid
+/// (the reference's `getRect`, with C's truncating float-to-int conversion).
+pub fn tile_rect(p: [f32; 2], radius: f32, grid: (u32, u32)) -> ([u32; 2], [u32; 2]) {
+    let t = TILE_SIZE as f32;
+    let clamp = |v: f32, hi: u32| -> u32 { (v as i32).max(0).min(hi as i32) as u32 };
+    (
+        [
+            clamp((p[0] - radius) / t, grid.0),
+            clamp((p[1] - radius) / t, grid.1),
+        ],
+        [
+            clamp((p[0] + radius + t - 1.0) / t, grid.0),
+            clamp((p[1] + radius + t - 1.0) / t, grid.1),
+        ],
+    )
+}
+
+/// Preprocesses every Gaussian (in parallel). `sh_degree` caps the bands used.
+pub fn preprocess(scene: &ActivatedScene, cam: &Camera, sh_degree: u32) -> Vec<Projected> {
+    (0..scene.len())
+        .into_par_iter()
+        .map(|i| preprocess_one(scene, i, cam, sh_degree))
+        .collect()
+}
+
+/// Sort key of a (tile, Gaussian) pair: tile id in the high 32 bits, the depth's float
+/// bits in the low 32 (depth > 0, so the bits order like the floats).
+pub fn tile_key(tile_id: u32, depth: f32) -> u64 {
+    ((tile_id as u64) << 32) | depth.to_bits() as u64
+}
+
+/// One key and value per (Gaussian, touched tile), emitted in Gaussian index order and,
+/// within a Gaussian, row by row over its tile rectangle.
+pub fn tile_keys(projected: &[Projected], cam: &Camera) -> (Vec<u64>, Vec<u32>) {
+    let (tiles_x, _) = cam.tile_grid();
+    let total: usize = projected.iter().map(|p| p.tiles_touched() as usize).sum();
+    let mut keys = Vec::with_capacity(total);
+    let mut values = Vec::with_capacity(total);
+    for (i, p) in projected.iter().enumerate() {
+        if p.tiles_touched() == 0 {
+            continue;
+        }
+        for y in p.rect_min[1]..p.rect_max[1] {
+            for x in p.rect_min[0]..p.rect_max[0] {
+                keys.push(tile_key(y * tiles_x + x, p.depth));
+                values.push(i as u32);
+            }
+        }
+    }
+    (keys, values)
+}
+
+/// Stable sort of the pairs by key, so equal keys keep Gaussian index order.
+pub fn sort_pairs(keys: &[u64], values: &[u32]) -> (Vec<u64>, Vec<u32>) {
+    let mut pairs: Vec<(u64, u32)> = keys.iter().copied().zip(values.iter().copied()).collect();
+    pairs.par_sort_by_key(|p| p.0);
+    pairs.into_iter().unzip()
+}
+
+/// `[start, end)` of each tile's run in the sorted keys.
+pub fn tile_ranges(sorted_keys: &[u64], num_tiles: usize) -> Vec<[u32; 2]> {
+    let mut ranges = vec![[0u32; 2]; num_tiles];
+    for (i, &k) in sorted_keys.iter().enumerate() {
+        let tile = (k >> 32) as usize;
+        if i == 0 || (sorted_keys[i - 1] >> 32) as usize != tile {
+            ranges[tile][0] = i as u32;
+        }
+        if i + 1 == sorted_keys.len() || (sorted_keys[i + 1] >> 32) as usize != tile {
+            ranges[tile][1] = i as u32 + 1;
+        }
+    }
+    ranges
+}
+
+/// Result of compositing one pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelResult {
+    /// Accumulated colour, without the background.
+    pub color: [f32; 3],
+    /// Final transmittance.
+    pub transmittance: f32,
+    /// Sum of `depth * alpha * T`.
+    pub weighted_depth: f32,
+}
+
+/// Composites the Gaussians `ids` (front to back) at pixel `(px, py)` with the reference rules.
+pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> PixelResult {
+    let mut t = 1.0f32;
+    let mut color = [0.0f32; 3];
+    let mut depth = 0.0f32;
+    for &id in ids {
+        let g = &projected[id as usize];
+        let dx = g.mean2d[0] - px;
+        let dy = g.mean2d[1] - py;
+        let [ca, cb, cc] = g.conic;
+        let power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
+        if power > 0.0 {
+            continue;
+        }
+        let alpha = ALPHA_MAX.min(g.opacity * power.exp());
+        if alpha < ALPHA_MIN {
+            continue;
+        }
+        let test_t = t * (1.0 - alpha);
+        if test_t < T_MIN {
+            break;
+        }
+        let w = alpha * t;
+        for ch in 0..3 {
+            color[ch] += g.color[ch] * w;
+        }
+        depth += g.depth * w;
+        t = test_t;
+    }
+    PixelResult {
+        color,
+        transmittance: t,
+        weighted_depth: depth,
+    }
+}
+
+/// Blends every tile (in parallel) into a frame.
+pub fn blend(
+    projected: &[Projected],
+    sorted_values: &[u32],
+    ranges: &[[u32; 2]],
+    cam: &Camera,
+    background: [f32; 3],
+) -> Frame {
+    let (tiles_x, tiles_y) = cam.tile_grid();
+    let (w, h) = (cam.width, cam.height);
+    let tiles: Vec<Vec<(usize, PixelResult)>> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let [start, end] = ranges[tile as usize];
+            let ids = &sorted_values[start as usize..end as usize];
+            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+            let mut out = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
+            for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(h) {
+                for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(w) {
+                    let r = blend_pixel(projected, ids, x as f32, y as f32);
+                    out.push((y as usize * w as usize + x as usize, r));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut frame = Frame::background(w, h, background);
+    for (idx, r) in tiles.into_iter().flatten() {
+        let t = r.transmittance;
+        frame.color[idx] = [
+            r.color[0] + t * background[0],
+            r.color[1] + t * background[1],
+            r.color[2] + t * background[2],
+        ];
+        let alpha = 1.0 - t;
+        frame.alpha[idx] = alpha;
+        frame.depth[idx] = if alpha > 0.0 {
+            r.weighted_depth / alpha
+        } else {
+            0.0
+        };
+    }
+    frame
+}
+
+/// Renders a frame on the CPU with the reference semantics.
+pub fn render(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) -> Frame {
+    let projected = preprocess(scene, cam, scene.sh_degree);
+    let (keys, values) = tile_keys(&projected, cam);
+    let (sorted_keys, sorted_values) = sort_pairs(&keys, &values);
+    let (tx, ty) = cam.tile_grid();
+    let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
+    blend(&projected, &sorted_values, &ranges, cam, opts.background)
+}

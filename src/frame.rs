@@ -1,0 +1,35 @@
+//! A rendered frame: colour, alpha and depth planes, shared by both renderers and the writers.
+
+/// The result of rendering one camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB including the background term `T * background`, row-major, unclamped.
+    pub color: Vec<[f32; 3]>,
+    /// Opacity `1 - T_final` per pixel.
+    pub alpha: Vec<f32>,
+    /// Alpha-weighted view-space depth normalised by alpha; 0 where alpha is 0.
+    pub depth: Vec<f32>,
+}
+
+impl Frame {
+    /// A frame filled with `background`, alpha 0 and depth 0.
+    pub fn background(width: u32, height: u32, background: [f32; 3]) -> Frame {
+        let n = width as usize * height as usize;
+        Frame {
+            width,
+            height,
+            color: vec![background; n],
+            alpha: vec![0.0; n],
+            depth: vec![0.0; n],
+        }
+    }
+
+    /// Row-major pixel index.
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.width as usize + x as usize
+    }
+}

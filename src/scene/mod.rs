@@ -1,0 +1,226 @@
+//! The scene model: Gaussians in the parameterisation the original 3DGS trainer stores.
+//!
+//! [`Scene`] keeps the values exactly as a trained INRIA PLY holds them (log scales,
+//! opacity logits, unnormalised quaternions, SH coefficients), so a scene written back
+//! to PLY is bit-identical. [`Scene::activated`] applies the reference activations
+//! (exp, sigmoid, quaternion normalisation) once, producing the arrays the renderers
+//! consume and the GPU upload copies.
+//!
+//! # Memory layout (structure of arrays, all `f32`, upload-ready)
+//! - `positions[i]`: `[x, y, z]` world space.
+//! - `log_scales[i]`: `[s0, s1, s2]` natural log of the axis scales.
+//! - `rotations[i]`: `[w, x, y, z]` as stored (`rot_0..3`), not normalised.
+//! - `opacity_logits[i]`: inverse-sigmoid opacity.
+//! - `sh`: `sh_coeffs() * 3` floats per Gaussian, coefficient-major with the colour
+//!   channel innermost: coefficient `k` of channel `c` of Gaussian `i` is
+//!   `sh[i * sh_stride() + k * 3 + c]`; `k = 0` is the DC term (`f_dc_c`), and
+//!   `k >= 1` is `f_rest[c * K + (k - 1)]` of the PLY with `K = sh_coeffs() - 1`.
+
+pub mod ply;
+
+use std::path::{Path, PathBuf};
+
+/// Number of SH coefficients per colour channel for a degree (0..=3).
+pub const fn sh_coeffs_for_degree(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1)) as usize
+}
+
+/// A set of 3D Gaussians in the trainer's (pre-activation) parameterisation.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    /// SH degree, 0..=3.
+    pub sh_degree: u32,
+    /// World-space centres.
+    pub positions: Vec<[f32; 3]>,
+    /// Natural logarithms of the three axis scales.
+    pub log_scales: Vec<[f32; 3]>,
+    /// Rotation quaternions `(w, x, y, z)`, as stored.
+    pub rotations: Vec<[f32; 4]>,
+    /// Opacity before the sigmoid.
+    pub opacity_logits: Vec<f32>,
+    /// SH coefficients, `sh_stride()` floats per Gaussian (see the module docs).
+    pub sh: Vec<f32>,
+}
+
+/// Gaussians after the reference activations, ready to render or upload.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ActivatedScene {
+    /// SH degree, 0..=3.
+    pub sh_degree: u32,
+    /// World-space centres.
+    pub positions: Vec<[f32; 3]>,
+    /// Axis scales, `exp(log_scale)`.
+    pub scales: Vec<[f32; 3]>,
+    /// Normalised rotation quaternions `(w, x, y, z)`.
+    pub rotations: Vec<[f32; 4]>,
+    /// Opacities, `sigmoid(logit)`.
+    pub opacities: Vec<f32>,
+    /// SH coefficients, same layout as [`Scene::sh`].
+    pub sh: Vec<f32>,
+}
+
+impl ActivatedScene {
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+    /// True when the scene holds no Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+    /// Floats of SH per Gaussian.
+    pub fn sh_stride(&self) -> usize {
+        sh_coeffs_for_degree(self.sh_degree) * 3
+    }
+}
+
+/// The logistic sigmoid in f32, as PyTorch evaluates it for the reference.
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+impl Scene {
+    /// An empty scene of the given SH degree.
+    pub fn empty(sh_degree: u32) -> Self {
+        Scene {
+            sh_degree,
+            ..Default::default()
+        }
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when the scene holds no Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// SH coefficients per colour channel.
+    pub fn sh_coeffs(&self) -> usize {
+        sh_coeffs_for_degree(self.sh_degree)
+    }
+
+    /// Floats of SH per Gaussian.
+    pub fn sh_stride(&self) -> usize {
+        self.sh_coeffs() * 3
+    }
+
+    /// Checks that every array has the length the Gaussian count implies.
+    pub fn check_consistent(&self) -> Result<(), String> {
+        let n = self.len();
+        if self.sh_degree > 3 {
+            return Err(format!("SH degree {} is above 3", self.sh_degree));
+        }
+        if self.log_scales.len() != n
+            || self.rotations.len() != n
+            || self.opacity_logits.len() != n
+            || self.sh.len() != n * self.sh_stride()
+        {
+            return Err("attribute arrays have inconsistent lengths".into());
+        }
+        Ok(())
+    }
+
+    /// Applies the reference activations: `exp` to scales, sigmoid to opacity and
+    /// quaternion normalisation.
+    pub fn activated(&self) -> ActivatedScene {
+        ActivatedScene {
+            sh_degree: self.sh_degree,
+            positions: self.positions.clone(),
+            scales: self
+                .log_scales
+                .iter()
+                .map(|s| [s[0].exp(), s[1].exp(), s[2].exp()])
+                .collect(),
+            rotations: self.rotations.iter().map(|q| normalize_quat(*q)).collect(),
+            opacities: self.opacity_logits.iter().map(|&o| sigmoid(o)).collect(),
+            sh: self.sh.clone(),
+        }
+    }
+}
+
+/// Normalises a quaternion the way `torch.nn.functional.normalize` does (divide by the norm).
+pub fn normalize_quat(q: [f32; 4]) -> [f32; 4] {
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
+}
+
+/// Error raised while loading a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be opened or read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// File involved.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// The file's contents are not a valid scene.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// File involved.
+        path: PathBuf,
+        /// What is wrong, as one sentence.
+        message: String,
+    },
+}
+
+impl SceneError {
+    pub(crate) fn invalid(path: &Path, message: impl Into<String>) -> Self {
+        SceneError::Invalid {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Resolves a scene path: a file is used as is; a trained model directory resolves to
+/// `point_cloud/iteration_<largest N>/point_cloud.ply`, as the reference viewer does.
+pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
+    let meta = std::fs::metadata(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if !meta.is_dir() {
+        return Ok(path.to_path_buf());
+    }
+    let pc_dir = path.join("point_cloud");
+    let entries = std::fs::read_dir(&pc_dir).map_err(|_| {
+        SceneError::invalid(
+            path,
+            "is a directory but has no point_cloud/ folder; pass a .ply file or a trained model directory",
+        )
+    })?;
+    let best = entries
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let n: u64 = name.strip_prefix("iteration_")?.parse().ok()?;
+            e.path()
+                .join("point_cloud.ply")
+                .is_file()
+                .then_some((n, e.path()))
+        })
+        .max_by_key(|(n, _)| *n);
+    match best {
+        Some((_, dir)) => Ok(dir.join("point_cloud.ply")),
+        None => Err(SceneError::invalid(
+            path,
+            "has no point_cloud/iteration_<N>/point_cloud.ply",
+        )),
+    }
+}
+
+/// Loads a scene from a PLY file or a trained model directory.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let file = resolve_scene_path(path)?;
+    let bytes = std::fs::read(&file).map_err(|source| SceneError::Io {
+        path: file.clone(),
+        source,
+    })?;
+    ply::parse(&bytes, &file)
+}
