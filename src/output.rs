@@ -132,10 +132,11 @@ pub fn encode_png(
     };
     let encoder = image::codecs::png::PngEncoder::new(out);
     if sixteen_bit {
+        // The encoder takes native-endian samples and writes them big-endian.
         let mut bytes = Vec::with_capacity(frame.color.len() * 6);
         for c in &frame.color {
             for &v in c {
-                bytes.extend_from_slice(&to_u16(v).to_be_bytes());
+                bytes.extend_from_slice(&to_u16(v).to_ne_bytes());
             }
         }
         encoder

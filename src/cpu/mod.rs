@@ -278,8 +278,8 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
             break;
         }
         let w = alpha * t;
-        for ch in 0..3 {
-            color[ch] += g.color[ch] * w;
+        for (c, gc) in color.iter_mut().zip(g.color) {
+            *c += gc * w;
         }
         depth += g.depth * w;
         t = test_t;

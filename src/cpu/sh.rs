@@ -1,5 +1,9 @@
 //! Real spherical harmonics up to degree 3, evaluated exactly as the reference does.
 
+// The constants keep the reference source's digits; they round to f32 exactly as its
+// `const float` declarations do.
+#![allow(clippy::excessive_precision)]
+
 use glam::Vec3;
 
 /// Band 0 constant.

@@ -253,12 +253,14 @@ fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
         9 => 1,
         24 => 2,
         45 => 3,
-        n => return Err(SceneError::invalid(
-            path,
-            format!(
+        n => {
+            return Err(SceneError::invalid(
+                path,
+                format!(
                 "has {n} f_rest_* properties; 3DGS files have 0, 9, 24 or 45 (SH degree 0 to 3)"
             ),
-        )),
+            ))
+        }
     };
     let f_rest = (0..n_rest)
         .map(|i| find(&format!("f_rest_{i}")))

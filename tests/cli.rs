@@ -1,0 +1,246 @@
+//! The `vksplat` binary: the README's demo command, `info`, and one clear error (non-zero
+//! exit, no panic, no output file) for each bad input.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use vksplat::scene::ply;
+
+fn vksplat(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vksplat"))
+        .args(args)
+        .env("VKSPLAT_VALIDATE", "1")
+        .output()
+        .expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs a command that must fail: returns its one-line error, checking there was no panic
+/// and no output file.
+fn fails(args: &[&str], out: &Path) -> String {
+    let o = vksplat(args);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{args:?} must fail");
+    assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
+    assert!(e.starts_with("error: "), "{args:?}: {e}");
+    assert_eq!(e.trim_end().lines().count(), 1, "one sentence: {e}");
+    assert!(!out.exists(), "{args:?} left an output file");
+    e
+}
+
+#[test]
+fn demo_render_writes_a_picture_of_the_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.png");
+    let o = vksplat(&["render", "--demo", "-o", out.to_str().unwrap(), "--cpu"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (1280, 720));
+    // The default camera frames the object: a good share of pixels is covered, the
+    // border is background.
+    let covered = img.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
+    let share = covered as f64 / (1280.0 * 720.0);
+    assert!((0.05..0.8).contains(&share), "covered share {share}");
+    assert!(img.get_pixel(0, 0).0 == [0, 0, 0] && img.get_pixel(1279, 719).0 == [0, 0, 0]);
+    // Running it again does not overwrite without --overwrite.
+    let e = fails(
+        &["render", "--demo", "-o", out.to_str().unwrap(), "--cpu"],
+        Path::new("/nonexistent"),
+    );
+    assert!(
+        e.contains("already exists") && e.contains("--overwrite"),
+        "{e}"
+    );
+    let o = vksplat(&[
+        "render",
+        "--demo",
+        "-o",
+        out.to_str().unwrap(),
+        "--cpu",
+        "--overwrite",
+        "--width",
+        "320",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(image::open(&out).unwrap().width(), 320);
+    assert_eq!(image::open(&out).unwrap().height(), 180);
+}
+
+#[test]
+fn exr_render_with_background_and_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d.exr");
+    let o = vksplat(&[
+        "render",
+        "--demo",
+        "--cpu",
+        "-o",
+        out.to_str().unwrap(),
+        "--scale",
+        "0.25",
+        "--background",
+        "1,1,1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
+    assert_eq!(img.layer_data[0].size.width(), 320);
+    assert_eq!(img.layer_data[0].channel_data.list.len(), 5);
+}
+
+#[test]
+fn info_prints_the_statistics() {
+    let o = vksplat(&["info", "--demo"]);
+    assert!(o.status.success());
+    let s = String::from_utf8_lossy(&o.stdout);
+    for needle in [
+        "gaussians   1873",
+        "sh degree   2",
+        "bounds",
+        "max scale per Gaussian",
+        "opacity logit (stored)",
+        "log scale (stored)",
+    ] {
+        assert!(s.contains(needle), "missing {needle:?} in\n{s}");
+    }
+}
+
+fn write_scene(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn bad_inputs_give_one_clear_error_each() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = out.to_str().unwrap();
+    let good = ply::to_bytes(
+        &common::random_scene(20, 1, 4),
+        ply::PlyEncoding::BinaryLittleEndian,
+    );
+    let scene = write_scene(dir.path(), "good.ply", &good);
+    let s = scene.to_str().unwrap();
+    let truncated = write_scene(dir.path(), "cut.ply", &good[..good.len() - 10]);
+    let mut nan_scene = common::random_scene(5, 0, 4);
+    nan_scene.positions[3][0] = f32::NAN;
+    let nan = write_scene(
+        dir.path(),
+        "nan.ply",
+        &ply::to_bytes(&nan_scene, ply::PlyEncoding::BinaryLittleEndian),
+    );
+    let cams = write_scene(dir.path(), "cameras.json", br#"[{"id": 0, "img_name": "a", "width": 64, "height": 48, "position": [0,0,-3], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 50, "fy": 50}]"#);
+    let broken_cams = write_scene(dir.path(), "broken.json", b"{ not json");
+    let c = cams.to_str().unwrap();
+    let jpg = dir.path().join("x.jpg");
+
+    let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
+        (
+            vec!["render", "/nonexistent/x.ply", "-o", o],
+            vec!["/nonexistent/x.ply", "cannot read"],
+        ),
+        (
+            vec!["render", truncated.to_str().unwrap(), "-o", o],
+            vec!["cut.ply", "truncated"],
+        ),
+        (
+            vec!["render", nan.to_str().unwrap(), "-o", o],
+            vec!["nan.ply", "vertex 3", "non-finite"],
+        ),
+        (
+            vec![
+                "render",
+                s,
+                "--cameras",
+                broken_cams.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            vec!["broken.json", "cameras.json"],
+        ),
+        (
+            vec![
+                "render",
+                s,
+                "--cameras",
+                "/nonexistent/cameras.json",
+                "-o",
+                o,
+            ],
+            vec!["/nonexistent/cameras.json", "cannot read"],
+        ),
+        (
+            vec!["render", s, "--cameras", c, "--camera", "5", "-o", o],
+            vec!["cameras.json", "index 5 is out of range", "1 cameras"],
+        ),
+        (
+            vec!["render", s, "--cameras", c, "--camera", "nope", "-o", o],
+            vec!["no camera named \"nope\""],
+        ),
+        (
+            vec!["render", s, "--width", "0", "-o", o],
+            vec!["between 1 and 16384"],
+        ),
+        (
+            vec!["render", s, "--width", "100000", "--height", "10", "-o", o],
+            vec!["100000x10", "not usable"],
+        ),
+        (vec!["render", s, "--scale", "0", "-o", o], vec!["--scale"]),
+        (
+            vec!["render", s, "--scale", "1000", "-o", o],
+            vec!["--scale", "16384"],
+        ),
+        (
+            vec!["render", s, "-o", jpg.to_str().unwrap()],
+            vec!["x.jpg", "unknown image format"],
+        ),
+        (
+            vec!["info", truncated.to_str().unwrap()],
+            vec!["cut.ply", "truncated"],
+        ),
+    ];
+    for (args, needles) in cases {
+        let mut args = args.clone();
+        args.push("--cpu");
+        if args[0] == "info" {
+            args.pop();
+        }
+        let e = fails(&args, &out);
+        for n in needles {
+            assert!(e.contains(n), "{args:?}: expected {n:?} in {e}");
+        }
+    }
+    // Flag errors from clap also exit non-zero without a panic.
+    let bad_bg = vksplat(&["render", s, "--background", "1,2", "-o", o]);
+    assert!(!bad_bg.status.success() && stderr(&bad_bg).contains("R,G,B"));
+    assert!(!out.exists());
+}
+
+#[test]
+fn cameras_json_camera_selected_by_name_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cam.png");
+    let data = common::shared_data();
+    let o = vksplat(&[
+        "render",
+        data.join("playbot_lod6_1873_sh2.ply").to_str().unwrap(),
+        "--cameras",
+        data.join("playbot_orbit_cameras.synthetic.json")
+            .to_str()
+            .unwrap(),
+        "--camera",
+        "playbot_orbit_006",
+        "--scale",
+        "0.25",
+        "--cpu",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("playbot_orbit_006"));
+    assert_eq!(image::open(&out).unwrap().width(), 320);
+}

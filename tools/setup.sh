@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Installs what vksplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
+# driver (so no GPU is needed), the Khronos validation layer, and the GLSL compiler
+# libraries the `shaderc` crate links (glslang + SPIRV-Tools static archives).
+# Idempotent: does nothing when everything is present. Needs root (or sudo).
+set -euo pipefail
+
+packages=(
+  libvulkan1 libvulkan-dev mesa-vulkan-drivers vulkan-tools vulkan-validationlayers
+  libshaderc-dev glslang-dev spirv-tools glslc
+  pkg-config openexr
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  exit 0
+fi
+echo "setup: installing ${missing[*]}" >&2
+sudo=""
+if [ "$(id -u)" -ne 0 ]; then
+  command -v sudo >/dev/null || { echo "setup: run as root or install sudo" >&2; exit 1; }
+  sudo="sudo"
+fi
+$sudo apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
