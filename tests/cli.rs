@@ -89,6 +89,22 @@ fn exr_render_with_background_and_scale() {
     let img = exr::prelude::read_all_flat_layers_from_file(&out).unwrap();
     assert_eq!(img.layer_data[0].size.width(), 320);
     assert_eq!(img.layer_data[0].channel_data.list.len(), 5);
+    // OpenEXR's own tool (installed by tools/setup.sh) reads the file and its channels.
+    let header = Command::new("exrheader")
+        .arg(&out)
+        .output()
+        .expect("exrheader is installed by tools/setup.sh");
+    let text = String::from_utf8_lossy(&header.stdout);
+    assert!(header.status.success(), "{text}");
+    for ch in [
+        "A, 32-bit floating-point",
+        "B, 32-bit",
+        "G, 32-bit",
+        "R, 32-bit",
+        "Z, 32-bit",
+    ] {
+        assert!(text.contains(ch), "exrheader lacks {ch:?}:\n{text}");
+    }
 }
 
 #[test]
