@@ -1,0 +1,52 @@
+#version 460
+// Duplicate-per-tile keys: each visible Gaussian writes one (key, value) pair per tile of
+// its rectangle at its scanned offset, so pairs are in Gaussian index order and equal keys
+// stay in index order through the stable sort. Pairs past the key capacity are dropped
+// (the host sees the exact total and grows the buffers). Thread 0 also publishes the
+// number of keys to sort and the ranges stage's indirect dispatch.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = 2) readonly buffer RectBuf { uvec2 rects[]; };
+layout(std430, binding = 3) readonly buffer OffsetBuf { uint offsets[]; };
+layout(std430, binding = 4) writeonly buffer KeyBuf { uvec2 keys[]; };
+layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
+layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+
+#define RANGES_WORKGROUP 256u
+
+void main() {
+    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint capacity = params.counts.w;
+    if (i == 0u) {
+        // The exact total says whether the scan total wrapped past 2^32.
+        uint total = counters.touched_hi != 0u ? capacity : min(counters.scan_total, capacity);
+        counters.sort_count = total;
+        // A 2D grid beyond 65535 groups (the minimum maxComputeWorkGroupCount[0]).
+        uint groups = (total + RANGES_WORKGROUP - 1u) / RANGES_WORKGROUP;
+        counters.ranges_groups_x = min(groups, 65535u);
+        counters.ranges_groups_y = (groups + 65534u) / 65535u;
+        counters.ranges_groups_z = 1u;
+    }
+    if (i >= params.counts.x) return;
+    uvec2 rect = rects[i];
+    uvec2 rmin = unpack_tile(rect.x);
+    uvec2 rmax = unpack_tile(rect.y);
+    if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
+    uint depth_bits = floatBitsToUint(splats[i].mean_depth_opacity.z);
+    uint tiles_x = params.image.z;
+    uint off = offsets[i];
+    for (uint y = rmin.y; y < rmax.y; y++) {
+        for (uint x = rmin.x; x < rmax.x; x++) {
+            if (off < capacity) {
+                keys[off] = uvec2(depth_bits, y * tiles_x + x);
+                values[off] = i;
+            }
+            off++;
+        }
+    }
+}

@@ -1,0 +1,156 @@
+#version 460
+// Preprocess: per Gaussian, cull at the near plane, project, 2D covariance with the 0.3
+// dilation, conic, radius, tile rectangle, SH colour, depth and tiles touched. One thread
+// per Gaussian; mirrors cpu::preprocess_one line by line.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; };
+layout(std430, binding = 2) readonly buffer ShBuf { float sh[]; };
+layout(std430, binding = 3) writeonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
+layout(std430, binding = 5) writeonly buffer TouchedBuf { uint tiles_touched[]; };
+layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+
+const float SH_C0 = 0.28209479177387814;
+const float SH_C1 = 0.4886025119029199;
+const float SH_C2[5] = float[](1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
+                               -1.0925484305920792, 0.5462742152960396);
+const float SH_C3[7] = float[](-0.5900435899266435, 2.890611442640554, -0.4570457994644658,
+                               0.3731763325901154, -0.4570457994644658, 1.445305721320277,
+                               -0.5900435899266435);
+
+vec3 coeff(uint base, uint k) {
+    return vec3(sh[base + 3u * k], sh[base + 3u * k + 1u], sh[base + 3u * k + 2u]);
+}
+
+vec3 eval_sh(uint base, uint degree, vec3 dir) {
+    vec3 result = SH_C0 * coeff(base, 0u);
+    if (degree > 0u) {
+        float x = dir.x, y = dir.y, z = dir.z;
+        result = result - SH_C1 * y * coeff(base, 1u) + SH_C1 * z * coeff(base, 2u) - SH_C1 * x * coeff(base, 3u);
+        if (degree > 1u) {
+            float xx = x * x, yy = y * y, zz = z * z;
+            float xy = x * y, yz = y * z, xz = x * z;
+            result = result + SH_C2[0] * xy * coeff(base, 4u) + SH_C2[1] * yz * coeff(base, 5u)
+                + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(base, 6u) + SH_C2[3] * xz * coeff(base, 7u)
+                + SH_C2[4] * (xx - yy) * coeff(base, 8u);
+            if (degree > 2u) {
+                result = result + SH_C3[0] * y * (3.0 * xx - yy) * coeff(base, 9u)
+                    + SH_C3[1] * xy * z * coeff(base, 10u)
+                    + SH_C3[2] * y * (4.0 * zz - xx - yy) * coeff(base, 11u)
+                    + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coeff(base, 12u)
+                    + SH_C3[4] * x * (4.0 * zz - xx - yy) * coeff(base, 13u)
+                    + SH_C3[5] * z * (xx - yy) * coeff(base, 14u)
+                    + SH_C3[6] * x * (xx - 3.0 * yy) * coeff(base, 15u);
+            }
+        }
+    }
+    return max(result + 0.5, vec3(0.0));
+}
+
+// Rotation matrix of a unit quaternion (w, x, y, z), as columns.
+mat3 quat_to_mat3(vec4 q) {
+    float r = q.x, x = q.y, y = q.z, z = q.w;
+    return mat3(
+        vec3(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + r * z), 2.0 * (x * z - r * y)),
+        vec3(2.0 * (x * y - r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + r * x)),
+        vec3(2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)));
+}
+
+// C's truncating float-to-int conversion, clamped to [0, hi].
+uint clamp_tile(float v, uint hi) {
+    return uint(clamp(int(v), 0, int(hi)));
+}
+
+shared uint s_touched_lo[256];
+shared uint s_visible;
+
+void main() {
+    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint n = params.counts.x;
+    uint touched = 0u;
+    if (gl_LocalInvocationIndex == 0u) s_visible = 0u;
+    if (i < n) {
+        Gaussian g = gaussians[i];
+        vec3 mean = g.pos_opacity.xyz;
+        vec3 view = vec3(dot(params.w2c_row0.xyz, mean) + params.w2c_row0.w,
+                         dot(params.w2c_row1.xyz, mean) + params.w2c_row1.w,
+                         dot(params.w2c_row2.xyz, mean) + params.w2c_row2.w);
+        Splat s;
+        s.mean_depth_opacity = vec4(0.0);
+        s.conic_radius = vec4(0.0);
+        s.color = vec4(0.0);
+        uvec2 rect = uvec2(0u);
+        if (view.z > NEAR_PLANE) {
+            mat3 m = quat_to_mat3(g.rotation) * mat3(g.scale.x, 0.0, 0.0, 0.0, g.scale.y, 0.0, 0.0, 0.0, g.scale.z);
+            mat3 cov3d = m * transpose(m);
+            float fx = params.focal.x, fy = params.focal.y;
+            float limx = 1.3 * params.tan_fov.x, limy = 1.3 * params.tan_fov.y;
+            float z = view.z;
+            float tx = clamp(view.x / z, -limx, limx) * z;
+            float ty = clamp(view.y / z, -limy, limy) * z;
+            vec3 j0 = vec3(fx / z, 0.0, -(fx * tx) / (z * z));
+            vec3 j1 = vec3(0.0, fy / z, -(fy * ty) / (z * z));
+            // Rows of T = J W, with W the world-to-camera rotation: t_i = W^T j_i. GLSL's
+            // mat3(a, b, c) takes columns, so the rows of W as columns give W^T.
+            mat3 w_t = mat3(params.w2c_row0.xyz, params.w2c_row1.xyz, params.w2c_row2.xyz);
+            vec3 t0 = w_t * j0;
+            vec3 t1 = w_t * j1;
+            vec3 s0 = cov3d * t0;
+            vec3 s1 = cov3d * t1;
+            float a = dot(t0, s0) + COV2D_DILATION;
+            float b = dot(t0, s1);
+            float c = dot(t1, s1) + COV2D_DILATION;
+            float det = a * c - b * b;
+            if (det != 0.0) {
+                float det_inv = 1.0 / det;
+                vec3 conic = vec3(c * det_inv, -b * det_inv, a * det_inv);
+                float mid = 0.5 * (a + c);
+                float disc = sqrt(max(mid * mid - det, 0.1));
+                float radius = ceil(3.0 * sqrt(max(mid + disc, mid - disc)));
+                float inv_z = 1.0 / z;
+                vec2 mean2d = vec2(fx * view.x * inv_z + params.focal.z - 0.5,
+                                   fy * view.y * inv_z + params.focal.w - 0.5);
+                uint gx = params.image.z, gy = params.image.w;
+                uvec2 rmin = uvec2(clamp_tile((mean2d.x - radius) / 16.0, gx),
+                                   clamp_tile((mean2d.y - radius) / 16.0, gy));
+                uvec2 rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
+                                   clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
+                touched = (rmax.x - rmin.x) * (rmax.y - rmin.y);
+                if (touched != 0u) {
+                    vec3 dir = normalize(mean - params.cam_pos.xyz);
+                    uint stride = params.counts.z * 3u;
+                    vec3 color = eval_sh(i * stride, params.counts.y, dir);
+                    s.mean_depth_opacity = vec4(mean2d, z, g.pos_opacity.w);
+                    s.conic_radius = vec4(conic, radius);
+                    s.color = vec4(color, 0.0);
+                    rect = uvec2(pack_tile(rmin.x, rmin.y), pack_tile(rmax.x, rmax.y));
+                }
+            }
+        }
+        splats[i] = s;
+        rects[i] = rect;
+        tiles_touched[i] = touched;
+    }
+    // Exact 64-bit total of tiles touched: a workgroup sum (each term < 2^20 tiles, 256
+    // terms < 2^28, no overflow), then one atomic add with carry per workgroup.
+    s_touched_lo[gl_LocalInvocationIndex] = touched;
+    barrier();
+    if (touched != 0u) atomicAdd(s_visible, 1u);
+    for (uint stride = 128u; stride > 0u; stride >>= 1u) {
+        if (gl_LocalInvocationIndex < stride) {
+            s_touched_lo[gl_LocalInvocationIndex] += s_touched_lo[gl_LocalInvocationIndex + stride];
+        }
+        barrier();
+    }
+    if (gl_LocalInvocationIndex == 0u && s_touched_lo[0] != 0u) {
+        uint sum = s_touched_lo[0];
+        uint old = atomicAdd(counters.touched_lo, sum);
+        if (old + sum < old) atomicAdd(counters.touched_hi, 1u);
+        atomicAdd(counters.visible, s_visible);
+    }
+}

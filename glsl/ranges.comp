@@ -1,0 +1,20 @@
+#version 460
+// Tile ranges: [start, end) of each tile's run in the sorted keys. Tiles without any pair
+// keep the zeros the frame cleared them to. Dispatched indirectly over the sorted count.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(local_size_x = 256) in;
+
+layout(std430, binding = 0) readonly buffer KeyBuf { uvec2 keys[]; };
+layout(std430, binding = 1) writeonly buffer RangeBuf { uvec2 ranges[]; };
+layout(std430, binding = 2) readonly buffer CounterBuf { Counters counters; };
+
+void main() {
+    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint n = counters.sort_count;
+    if (i >= n) return;
+    uint tile = keys[i].y;
+    if (i == 0u || keys[i - 1u].y != tile) ranges[tile].x = i;
+    if (i + 1u == n || keys[i + 1u].y != tile) ranges[tile].y = i + 1u;
+}

@@ -1,0 +1,68 @@
+// Shared interface of the splatting stages: constants, the per-frame parameter block, the
+// per-Gaussian records and the key layout. Host mirrors live in src/render/types.rs, whose
+// tests pin every size and offset.
+#ifndef SPLAT_COMMON_GLSL
+#define SPLAT_COMMON_GLSL
+
+// Reference rules (shared/docs/reference-semantics.md).
+#define TILE_SIZE 16u
+#define TILE_PIXELS 256u
+#define NEAR_PLANE 0.2
+#define COV2D_DILATION 0.3
+#define ALPHA_MAX 0.99
+#define ALPHA_MIN (1.0 / 255.0)
+#define T_MIN 0.0001
+
+// Per-frame parameters (one record, written with vkCmdUpdateBuffer).
+struct FrameParams {
+    vec4 w2c_row0;      // world-to-camera rotation row 0; w = translation.x
+    vec4 w2c_row1;      // row 1; w = translation.y
+    vec4 w2c_row2;      // row 2; w = translation.z
+    vec4 cam_pos;       // camera centre (xyz)
+    vec4 focal;         // fx, fy, cx, cy
+    vec4 tan_fov;       // tan(fovx/2), tan(fovy/2) as W/(2 fx), H/(2 fy)
+    vec4 background;    // rgb
+    uvec4 image;        // width, height, tiles_x, tiles_y
+    uvec4 counts;       // gaussians, active SH degree, stored SH coefficients per channel, key capacity
+};
+
+// A Gaussian as uploaded (activated values).
+struct Gaussian {
+    vec4 pos_opacity;   // xyz centre, w = opacity (sigmoid applied)
+    vec4 scale;         // xyz axis scales (exp applied)
+    vec4 rotation;      // normalised quaternion (w, x, y, z)
+};
+
+// A projected Gaussian, written by preprocess, read by blend.
+struct Splat {
+    vec4 mean_depth_opacity;  // mean2d.xy, view depth, opacity
+    vec4 conic_radius;        // conic A, B, C, radius (pixels; 0 when culled)
+    vec4 color;               // rgb from SH
+};
+
+// Frame counters (one record, cleared at the start of each frame).
+struct Counters {
+    uint scan_total;     // sum of tiles touched mod 2^32 (written by the scan)
+    uint sort_count;     // min(scan_total, key capacity): number of keys sorted
+    uint touched_lo;     // exact 64-bit sum of tiles touched (low word) ...
+    uint touched_hi;     // ... and high word, so overflow past 2^32 is detected
+    uint ranges_groups_x;  // VkDispatchIndirectCommand of the ranges stage
+    uint ranges_groups_y;
+    uint ranges_groups_z;
+    uint visible;        // Gaussians that touch at least one tile
+};
+
+// Tile rectangles are packed as two uints: x | y << 16 for min (inclusive) and max
+// (exclusive); 16 bits suffice for 16384 / 16 = 1024 tiles per side.
+uint pack_tile(uint x, uint y) { return x | (y << 16u); }
+uvec2 unpack_tile(uint v) { return uvec2(v & 0xFFFFu, v >> 16u); }
+
+// Sort key of a (tile, Gaussian) pair, as uvec2(lo, hi): lo = float bits of the view depth
+// (depth > 0.2 so the bits order like the floats), hi = tile id = y * tiles_x + x.
+
+// Linear workgroup id of a (possibly 2D) dispatch grid, see gpu::dispatch_grid.
+uint linear_group_id() {
+    return gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
+}
+
+#endif

@@ -1,0 +1,600 @@
+//! The Vulkan splatting pipeline. A frame is recorded top to bottom as
+//! preprocess -> scan -> keys -> sort -> ranges -> blend -> readback, in one command buffer
+//! with a barrier between each pair of stages and a timestamp pair around each stage.
+//!
+//! The number of (tile, Gaussian) pairs is only known on the GPU. The key buffers are
+//! sized from a capacity kept across frames; the keys stage drops pairs beyond it and the
+//! preprocess stage counts the exact 64-bit total, so after the frame the host sees whether
+//! the capacity sufficed. Only when a frame proves it too small are the buffers grown and
+//! the frame recorded again; the CPU never waits in the middle of a frame.
+
+pub mod blend;
+pub mod keys;
+pub mod preprocess;
+pub mod ranges;
+pub mod types;
+
+use crate::camera::Camera;
+use crate::cpu::RenderOptions;
+use crate::frame::Frame;
+use crate::gpu::sync::{barrier, barrier_uses, Access};
+use crate::gpu::{
+    BufferSlice, Count, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
+    MemoryKind, RadixSort, Scan,
+};
+use crate::scene::ActivatedScene;
+use ash::vk;
+use types::{Counters, FrameParams, GpuGaussian, Splat};
+
+/// A scene uploaded to the device.
+pub struct GpuScene {
+    gaussians: GpuBuffer,
+    sh: GpuBuffer,
+    count: u32,
+    sh_degree: u32,
+    sh_coeffs: u32,
+}
+
+impl GpuScene {
+    /// Number of Gaussians.
+    pub fn len(&self) -> u32 {
+        self.count
+    }
+    /// True when the scene is empty.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+    /// Device bytes held by the scene.
+    pub fn device_bytes(&self) -> u64 {
+        self.gaussians.size() + self.sh.size()
+    }
+}
+
+/// GPU time of each stage of the last frame, in milliseconds (timestamp queries).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StageTimings {
+    /// Cull, project, covariance, SH colour, tile rectangles.
+    pub preprocess: f64,
+    /// Prefix sum of tiles touched.
+    pub scan: f64,
+    /// Duplicate-per-tile keys.
+    pub keys: f64,
+    /// Radix sort of the keys.
+    pub sort: f64,
+    /// Tile ranges.
+    pub ranges: f64,
+    /// Per-tile blending.
+    pub blend: f64,
+    /// Image copies to host-visible memory.
+    pub readback: f64,
+    /// First timestamp to last.
+    pub total: f64,
+}
+
+impl StageTimings {
+    /// The stages in pipeline order with their names.
+    pub fn stages(&self) -> [(&'static str, f64); 7] {
+        [
+            ("preprocess", self.preprocess),
+            ("scan", self.scan),
+            ("keys", self.keys),
+            ("sort", self.sort),
+            ("ranges", self.ranges),
+            ("blend", self.blend),
+            ("readback", self.readback),
+        ]
+    }
+}
+
+/// What the last frame needed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// Gaussians that touched at least one tile.
+    pub visible: u32,
+    /// (tile, Gaussian) pairs sorted.
+    pub pairs: u64,
+    /// Key bits the sort processed.
+    pub key_bits: u32,
+    /// Times the frame was recorded again after growing the key buffers.
+    pub regrows: u32,
+}
+
+/// Intermediate buffers of a frame, read back for tests against the CPU reference.
+#[derive(Clone, Debug, Default)]
+pub struct Intermediates {
+    /// Preprocess output per Gaussian.
+    pub splats: Vec<Splat>,
+    /// Packed tile rectangles per Gaussian (`x | y << 16`, min inclusive, max exclusive).
+    pub rects: Vec<[u32; 2]>,
+    /// Exclusive prefix sum of tiles touched.
+    pub offsets: Vec<u32>,
+    /// Frame counters.
+    pub counters: Counters,
+    /// Sorted keys `(depth bits, tile id)`.
+    pub keys: Vec<[u32; 2]>,
+    /// Sorted values (Gaussian indices).
+    pub values: Vec<u32>,
+    /// `[start, end)` per tile.
+    pub ranges: Vec<[u32; 2]>,
+}
+
+/// Key bits the sort needs for `num_tiles` tiles: 32 depth bits plus the tile id's bits.
+pub fn key_bits(num_tiles: u32) -> u32 {
+    32 + (32 - num_tiles.saturating_sub(1).leading_zeros())
+}
+
+/// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
+struct FrameBuffers {
+    gaussians: u32,
+    width: u32,
+    height: u32,
+    capacity: u32,
+    params: GpuBuffer,
+    counters: GpuBuffer,
+    splats: GpuBuffer,
+    rects: GpuBuffer,
+    offsets: GpuBuffer,
+    scan_scratch: GpuBuffer,
+    keys: GpuBuffer,
+    values: GpuBuffer,
+    sort_scratch: GpuBuffer,
+    ranges: GpuBuffer,
+    color: GpuImage,
+    depth: GpuImage,
+    readback: GpuBuffer,
+}
+
+impl FrameBuffers {
+    fn new(ctx: &GpuContext, gaussians: u32, width: u32, height: u32, capacity: u32) -> GpuResult<Self> {
+        let n = u64::from(gaussians.max(1));
+        let tiles = u64::from(width.div_ceil(16)) * u64::from(height.div_ceil(16));
+        let pixels = u64::from(width) * u64::from(height);
+        let dev = |name: &str, bytes: u64| GpuBuffer::new(ctx, name, bytes, MemoryKind::Device);
+        Ok(FrameBuffers {
+            gaussians,
+            width,
+            height,
+            capacity,
+            params: dev("frame params", std::mem::size_of::<FrameParams>() as u64)?,
+            counters: dev("counters", std::mem::size_of::<Counters>() as u64)?,
+            splats: dev("splats", n * std::mem::size_of::<Splat>() as u64)?,
+            rects: dev("tile rects", n * 8)?,
+            offsets: dev("tiles touched / offsets", n * 4)?,
+            scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
+            keys: dev("keys", u64::from(capacity) * 8)?,
+            values: dev("values", u64::from(capacity) * 4)?,
+            sort_scratch: dev("sort scratch", RadixSort::scratch_size(capacity))?,
+            ranges: dev("tile ranges", tiles * 8)?,
+            color: GpuImage::new(ctx, "color+alpha image", width, height, vk::Format::R32G32B32A32_SFLOAT)?,
+            depth: GpuImage::new(ctx, "depth image", width, height, vk::Format::R32_SFLOAT)?,
+            readback: GpuBuffer::new(ctx, "frame readback", pixels * 20 + 32, MemoryKind::Readback)?,
+        })
+    }
+
+    fn device_bytes(&self) -> u64 {
+        [
+            &self.params,
+            &self.counters,
+            &self.splats,
+            &self.rects,
+            &self.offsets,
+            &self.scan_scratch,
+            &self.keys,
+            &self.values,
+            &self.sort_scratch,
+            &self.ranges,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum::<u64>()
+            + self.color.bytes()
+            + self.depth.bytes()
+    }
+
+    fn readback_offsets(&self) -> (u64, u64, u64) {
+        let pixels = u64::from(self.width) * u64::from(self.height);
+        (0, pixels * 16, pixels * 20)
+    }
+}
+
+/// The GPU renderer: pipelines, per-frame buffers and the timestamp pool.
+pub struct GpuRenderer {
+    preprocess: preprocess::Preprocess,
+    scan: Scan,
+    keys: keys::Keys,
+    sort: RadixSort,
+    ranges: ranges::Ranges,
+    blend: blend::Blend,
+    timer: GpuTimer,
+    frame: Option<FrameBuffers>,
+    timings: StageTimings,
+    stats: FrameStats,
+    ctx: GpuContext,
+}
+
+/// Smallest key capacity allocated.
+const MIN_CAPACITY: u32 = 1 << 16;
+
+impl GpuRenderer {
+    /// Builds every pipeline on `ctx`.
+    pub fn new(ctx: GpuContext) -> GpuResult<Self> {
+        Ok(GpuRenderer {
+            preprocess: preprocess::Preprocess::new(&ctx)?,
+            scan: Scan::new(&ctx)?,
+            keys: keys::Keys::new(&ctx)?,
+            sort: RadixSort::new(&ctx)?,
+            ranges: ranges::Ranges::new(&ctx)?,
+            blend: blend::Blend::new(&ctx)?,
+            timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
+            frame: None,
+            timings: StageTimings::default(),
+            stats: FrameStats::default(),
+            ctx,
+        })
+    }
+
+    /// The device context.
+    pub fn ctx(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// Uploads activated Gaussians.
+    pub fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
+        let count = u32::try_from(scene.len()).map_err(|_| {
+            GpuError::InvalidArgument(format!("{} Gaussians exceed the 2^32 limit of one upload", scene.len()))
+        })?;
+        let records: Vec<GpuGaussian> = (0..scene.len())
+            .map(|i| {
+                let p = scene.positions[i];
+                let s = scene.scales[i];
+                GpuGaussian {
+                    pos_opacity: [p[0], p[1], p[2], scene.opacities[i]],
+                    scale: [s[0], s[1], s[2], 0.0],
+                    rotation: scene.rotations[i],
+                }
+            })
+            .collect();
+        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", (records.len() * 48) as u64, MemoryKind::Device)?;
+        gaussians.upload(&self.ctx, &records)?;
+        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", (scene.sh.len() * 4) as u64, MemoryKind::Device)?;
+        sh.upload(&self.ctx, &scene.sh)?;
+        Ok(GpuScene {
+            gaussians,
+            sh,
+            count,
+            sh_degree: scene.sh_degree,
+            sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
+        })
+    }
+
+    /// GPU time per stage of the last frame.
+    pub fn timings(&self) -> &StageTimings {
+        &self.timings
+    }
+
+    /// Counts of the last frame.
+    pub fn stats(&self) -> &FrameStats {
+        &self.stats
+    }
+
+    /// Device bytes held by the per-frame buffers.
+    pub fn frame_device_bytes(&self) -> u64 {
+        self.frame.as_ref().map_or(0, |f| f.device_bytes())
+    }
+
+    /// Renders one frame.
+    pub fn render(&mut self, scene: &GpuScene, cam: &Camera, opts: &RenderOptions) -> GpuResult<Frame> {
+        self.render_inner(scene, cam, opts, false).map(|(f, _)| f)
+    }
+
+    /// Renders one frame and reads back every intermediate buffer (for tests).
+    pub fn render_with_intermediates(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<(Frame, Intermediates)> {
+        self.render_inner(scene, cam, opts, true)
+            .map(|(f, i)| (f, i.unwrap_or_default()))
+    }
+
+    fn max_capacity(&self) -> u32 {
+        // Keys are 8 bytes; one storage-buffer binding must cover them all.
+        let range = u64::from(self.ctx.info().max_storage_buffer_range);
+        (range / 8).min(u64::from(u32::MAX)) as u32
+    }
+
+    fn ensure_frame(&mut self, scene: &GpuScene, cam: &Camera, capacity: u32) -> GpuResult<()> {
+        let fits = self.frame.as_ref().is_some_and(|f| {
+            f.gaussians >= scene.count && f.width == cam.width && f.height == cam.height && f.capacity >= capacity
+        });
+        if !fits {
+            // Free the old buffers first so peak memory is not doubled.
+            self.frame = None;
+            let gaussians = self.frame_gaussians(scene);
+            self.frame = Some(FrameBuffers::new(&self.ctx, gaussians, cam.width, cam.height, capacity)?);
+        }
+        Ok(())
+    }
+
+    fn frame_gaussians(&self, scene: &GpuScene) -> u32 {
+        scene.count
+    }
+
+    fn render_inner(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        intermediates: bool,
+    ) -> GpuResult<(Frame, Option<Intermediates>)> {
+        cam.validate()
+            .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
+        let initial = self
+            .frame
+            .as_ref()
+            .map_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)), |f| f.capacity)
+            .min(self.max_capacity());
+        self.ensure_frame(scene, cam, initial)?;
+        let mut regrows = 0;
+        loop {
+            self.record_and_submit(scene, cam, opts)?;
+            let counters = self.read_counters()?;
+            let pairs = counters.pairs();
+            let capacity = self.frame.as_ref().map_or(0, |f| f.capacity);
+            if pairs <= u64::from(capacity) {
+                self.stats = FrameStats {
+                    visible: counters.visible,
+                    pairs,
+                    key_bits: key_bits(cam.tile_grid().0 * cam.tile_grid().1),
+                    regrows,
+                };
+                break;
+            }
+            let max = self.max_capacity();
+            if pairs > u64::from(max) {
+                return Err(GpuError::InvalidArgument(format!(
+                    "this frame needs {pairs} tile/Gaussian pairs, more than the {max} one storage buffer of this device can hold ({} bytes); render at a lower resolution or with fewer Gaussians",
+                    u64::from(max) * 8
+                )));
+            }
+            // Grow with headroom so a camera path does not regrow every few frames.
+            let grown = (pairs + pairs / 4).min(u64::from(max)) as u32;
+            self.ensure_frame(scene, cam, grown)?;
+            regrows += 1;
+        }
+        self.timings = self.read_timings()?;
+        let frame = self.read_frame(cam)?;
+        let inter = if intermediates {
+            Some(self.read_intermediates(scene, cam)?)
+        } else {
+            None
+        };
+        Ok((frame, inter))
+    }
+
+    fn record_and_submit(&mut self, scene: &GpuScene, cam: &Camera, opts: &RenderOptions) -> GpuResult<()> {
+        let Self {
+            preprocess,
+            scan,
+            keys,
+            sort,
+            ranges,
+            blend,
+            timer,
+            frame,
+            ctx,
+            ..
+        } = self;
+        let f = frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+        let (tiles_x, tiles_y) = cam.tile_grid();
+        let pos = cam.position();
+        let r = cam.rotation;
+        let t = cam.translation;
+        let params = FrameParams {
+            w2c_row0: [r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x],
+            w2c_row1: [r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y],
+            w2c_row2: [r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z],
+            cam_pos: [pos.x, pos.y, pos.z, 0.0],
+            focal: [cam.fx, cam.fy, cam.cx, cam.cy],
+            tan_fov: [cam.tan_half_fov_x(), cam.tan_half_fov_y(), 0.0, 0.0],
+            background: [opts.background[0], opts.background[1], opts.background[2], 0.0],
+            image: [cam.width, cam.height, tiles_x, tiles_y],
+            counts: [scene.count, scene.sh_degree, scene.sh_coeffs, f.capacity],
+        };
+        let n = scene.count;
+        let bits = key_bits(tiles_x * tiles_y);
+        let whole = |b: &GpuBuffer| -> BufferSlice { b.whole() };
+        ctx.submit_and_wait("frame", |cmd| {
+            let device = ctx.device();
+            timer.reset(ctx, cmd);
+            // SAFETY: cmd is recording; the buffers are alive and large enough.
+            unsafe {
+                device.cmd_update_buffer(cmd, f.params.handle(), 0, bytemuck::bytes_of(&params));
+                device.cmd_fill_buffer(cmd, f.counters.handle(), 0, vk::WHOLE_SIZE, 0);
+                device.cmd_fill_buffer(cmd, f.ranges.handle(), 0, vk::WHOLE_SIZE, 0);
+            }
+            f.color.transition_to_general(ctx, cmd);
+            f.depth.transition_to_general(ctx, cmd);
+            // Params, counters and ranges: from the clears to the shaders that use them.
+            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+
+            timer.stage(ctx, cmd, "preprocess", |cmd| {
+                preprocess.record(
+                    ctx,
+                    cmd,
+                    &preprocess::PreprocessBindings {
+                        params: whole(&f.params),
+                        gaussians: whole(&scene.gaussians),
+                        sh: whole(&scene.sh),
+                        splats: whole(&f.splats),
+                        rects: whole(&f.rects),
+                        tiles_touched: whole(&f.offsets),
+                        counters: whole(&f.counters),
+                    },
+                    n,
+                )
+            })?;
+            // Tiles touched -> scan input; counters -> keys.
+            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+
+            timer.stage(ctx, cmd, "scan", |cmd| {
+                scan.record(
+                    ctx,
+                    cmd,
+                    f.offsets.slice(0, u64::from(n) * 4),
+                    f.offsets.slice(0, u64::from(n) * 4),
+                    (&f.counters, types::COUNTER_SCAN_TOTAL),
+                    whole(&f.scan_scratch),
+                    n,
+                )
+            })?;
+            // Offsets and the scan total -> keys.
+            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+
+            timer.stage(ctx, cmd, "keys", |cmd| {
+                keys.record(
+                    ctx,
+                    cmd,
+                    &keys::KeysBindings {
+                        params: whole(&f.params),
+                        splats: whole(&f.splats),
+                        rects: whole(&f.rects),
+                        offsets: whole(&f.offsets),
+                        keys: whole(&f.keys),
+                        values: whole(&f.values),
+                        counters: whole(&f.counters),
+                    },
+                    n,
+                )
+            })?;
+            // The sort opens with its own barrier from compute writes (its contract).
+            timer.stage(ctx, cmd, "sort", |cmd| {
+                sort.record(
+                    ctx,
+                    cmd,
+                    &f.keys,
+                    &f.values,
+                    &f.sort_scratch,
+                    Count::Device {
+                        buffer: &f.counters,
+                        offset: types::COUNTER_SORT_COUNT,
+                        max_n: f.capacity,
+                    },
+                    bits,
+                )
+            })?;
+            // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
+            barrier_uses(ctx, cmd, &[Access::ComputeWrite], &[Access::ComputeRead, Access::IndirectRead]);
+
+            timer.stage(ctx, cmd, "ranges", |cmd| {
+                ranges.record(
+                    ctx,
+                    cmd,
+                    whole(&f.keys),
+                    whole(&f.ranges),
+                    whole(&f.counters),
+                    f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
+                )
+            })?;
+            // Ranges -> blend.
+            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+
+            timer.stage(ctx, cmd, "blend", |cmd| {
+                blend.record(
+                    ctx,
+                    cmd,
+                    &blend::BlendBindings {
+                        params: whole(&f.params),
+                        splats: whole(&f.splats),
+                        values: whole(&f.values),
+                        ranges: whole(&f.ranges),
+                        color: &f.color,
+                        depth: &f.depth,
+                    },
+                    (tiles_x, tiles_y),
+                )
+            })?;
+            // Images and counters -> copies.
+            barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+
+            timer.stage(ctx, cmd, "readback", |cmd| {
+                let (color_off, depth_off, counters_off) = f.readback_offsets();
+                f.color.copy_to_buffer(ctx, cmd, &f.readback, color_off);
+                f.depth.copy_to_buffer(ctx, cmd, &f.readback, depth_off);
+                let region = [vk::BufferCopy::default()
+                    .src_offset(0)
+                    .dst_offset(counters_off)
+                    .size(std::mem::size_of::<Counters>() as u64)];
+                // SAFETY: both buffers are alive and the region is inside them.
+                unsafe { device.cmd_copy_buffer(cmd, f.counters.handle(), f.readback.handle(), &region) };
+                Ok(())
+            })?;
+            barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
+            Ok(())
+        })
+    }
+
+    fn read_counters(&self) -> GpuResult<Counters> {
+        let f = self.frame.as_ref().ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let (_, _, off) = f.readback_offsets();
+        let bytes = f.readback.mapped()?;
+        Ok(bytemuck::pod_read_unaligned(&bytes[off as usize..off as usize + 32]))
+    }
+
+    fn read_timings(&self) -> GpuResult<StageTimings> {
+        let stages = self.timer.read(&self.ctx)?;
+        let mut t = StageTimings::default();
+        for (name, ms) in &stages {
+            let slot = match name.as_str() {
+                "preprocess" => &mut t.preprocess,
+                "scan" => &mut t.scan,
+                "keys" => &mut t.keys,
+                "sort" => &mut t.sort,
+                "ranges" => &mut t.ranges,
+                "blend" => &mut t.blend,
+                "readback" => &mut t.readback,
+                _ => continue,
+            };
+            *slot = *ms;
+        }
+        t.total = self.timer.span_ms(&self.ctx)?;
+        Ok(t)
+    }
+
+    fn read_frame(&self, cam: &Camera) -> GpuResult<Frame> {
+        let f = self.frame.as_ref().ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let bytes = f.readback.mapped()?;
+        let pixels = cam.width as usize * cam.height as usize;
+        let (color_off, depth_off, _) = f.readback_offsets();
+        let rgba: &[[f32; 4]] = bytemuck::cast_slice(&bytes[color_off as usize..color_off as usize + pixels * 16]);
+        let depth: &[f32] = bytemuck::cast_slice(&bytes[depth_off as usize..depth_off as usize + pixels * 4]);
+        Ok(Frame {
+            width: cam.width,
+            height: cam.height,
+            color: rgba.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+            alpha: rgba.iter().map(|p| p[3]).collect(),
+            depth: depth.to_vec(),
+        })
+    }
+
+    fn read_intermediates(&self, scene: &GpuScene, cam: &Camera) -> GpuResult<Intermediates> {
+        let f = self.frame.as_ref().ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let ctx = &self.ctx;
+        let n = scene.count as usize;
+        let counters = self.read_counters()?;
+        let sorted = counters.sort_count as usize;
+        let (tx, ty) = cam.tile_grid();
+        Ok(Intermediates {
+            splats: f.splats.read(ctx, n)?,
+            rects: f.rects.read(ctx, n)?,
+            offsets: f.offsets.read(ctx, n)?,
+            counters,
+            keys: f.keys.read(ctx, sorted)?,
+            values: f.values.read(ctx, sorted)?,
+            ranges: f.ranges.read(ctx, (tx * ty) as usize)?,
+        })
+    }
+}

@@ -1,0 +1,137 @@
+//! Host mirrors of the records in `glsl/splat_common.glsl` (std430). The tests pin every
+//! size and offset so the two sides cannot drift.
+
+use bytemuck::{Pod, Zeroable};
+
+/// Per-frame parameters (`FrameParams` in GLSL).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct FrameParams {
+    /// World-to-camera rotation row 0, `w` = translation x.
+    pub w2c_row0: [f32; 4],
+    /// Row 1, `w` = translation y.
+    pub w2c_row1: [f32; 4],
+    /// Row 2, `w` = translation z.
+    pub w2c_row2: [f32; 4],
+    /// Camera centre (xyz).
+    pub cam_pos: [f32; 4],
+    /// fx, fy, cx, cy.
+    pub focal: [f32; 4],
+    /// tan(fovx/2), tan(fovy/2).
+    pub tan_fov: [f32; 4],
+    /// Background rgb.
+    pub background: [f32; 4],
+    /// width, height, tiles_x, tiles_y.
+    pub image: [u32; 4],
+    /// Gaussians, active SH degree, stored SH coefficients per channel, key capacity.
+    pub counts: [u32; 4],
+}
+
+/// One uploaded Gaussian (`Gaussian` in GLSL), activated.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuGaussian {
+    /// Centre xyz, opacity in `w`.
+    pub pos_opacity: [f32; 4],
+    /// Axis scales (xyz).
+    pub scale: [f32; 4],
+    /// Unit quaternion (w, x, y, z).
+    pub rotation: [f32; 4],
+}
+
+/// A projected Gaussian (`Splat` in GLSL).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Splat {
+    /// mean2d x, y, view depth, opacity.
+    pub mean_depth_opacity: [f32; 4],
+    /// Conic A, B, C and the radius in pixels (0 when culled).
+    pub conic_radius: [f32; 4],
+    /// RGB.
+    pub color: [f32; 4],
+}
+
+/// Frame counters (`Counters` in GLSL).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Counters {
+    /// Sum of tiles touched modulo 2^32 (the scan's total).
+    pub scan_total: u32,
+    /// Number of keys sorted: min(total, capacity).
+    pub sort_count: u32,
+    /// Exact sum of tiles touched, low word.
+    pub touched_lo: u32,
+    /// Exact sum of tiles touched, high word.
+    pub touched_hi: u32,
+    /// Indirect dispatch of the ranges stage.
+    pub ranges_groups: [u32; 3],
+    /// Gaussians touching at least one tile.
+    pub visible: u32,
+}
+
+impl Counters {
+    /// The exact number of (tile, Gaussian) pairs the frame needs.
+    pub fn pairs(&self) -> u64 {
+        (u64::from(self.touched_hi) << 32) | u64::from(self.touched_lo)
+    }
+}
+
+/// Byte offset of `Counters::scan_total`.
+pub const COUNTER_SCAN_TOTAL: u64 = 0;
+/// Byte offset of `Counters::sort_count`.
+pub const COUNTER_SORT_COUNT: u64 = 4;
+/// Byte offset of `Counters::ranges_groups`.
+pub const COUNTER_RANGES_GROUPS: u64 = 16;
+
+/// Packs a tile coordinate as the shaders do (`x | y << 16`).
+pub fn unpack_tile(v: u32) -> [u32; 2] {
+    [v & 0xFFFF, v >> 16]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn layouts_match_the_glsl_header() {
+        assert_eq!(size_of::<FrameParams>(), 144);
+        assert_eq!(offset_of!(FrameParams, w2c_row0), 0);
+        assert_eq!(offset_of!(FrameParams, w2c_row1), 16);
+        assert_eq!(offset_of!(FrameParams, w2c_row2), 32);
+        assert_eq!(offset_of!(FrameParams, cam_pos), 48);
+        assert_eq!(offset_of!(FrameParams, focal), 64);
+        assert_eq!(offset_of!(FrameParams, tan_fov), 80);
+        assert_eq!(offset_of!(FrameParams, background), 96);
+        assert_eq!(offset_of!(FrameParams, image), 112);
+        assert_eq!(offset_of!(FrameParams, counts), 128);
+
+        assert_eq!(size_of::<GpuGaussian>(), 48);
+        assert_eq!(offset_of!(GpuGaussian, pos_opacity), 0);
+        assert_eq!(offset_of!(GpuGaussian, scale), 16);
+        assert_eq!(offset_of!(GpuGaussian, rotation), 32);
+
+        assert_eq!(size_of::<Splat>(), 48);
+        assert_eq!(offset_of!(Splat, mean_depth_opacity), 0);
+        assert_eq!(offset_of!(Splat, conic_radius), 16);
+        assert_eq!(offset_of!(Splat, color), 32);
+
+        assert_eq!(size_of::<Counters>(), 32);
+        assert_eq!(offset_of!(Counters, scan_total) as u64, COUNTER_SCAN_TOTAL);
+        assert_eq!(offset_of!(Counters, sort_count) as u64, COUNTER_SORT_COUNT);
+        assert_eq!(offset_of!(Counters, touched_lo), 8);
+        assert_eq!(offset_of!(Counters, touched_hi), 12);
+        assert_eq!(offset_of!(Counters, ranges_groups) as u64, COUNTER_RANGES_GROUPS);
+        assert_eq!(offset_of!(Counters, visible), 28);
+    }
+
+    #[test]
+    fn pair_count_is_64_bit() {
+        let c = Counters {
+            touched_lo: 5,
+            touched_hi: 2,
+            ..Default::default()
+        };
+        assert_eq!(c.pairs(), (2u64 << 32) + 5);
+    }
+}
