@@ -1,0 +1,308 @@
+//! RAII storage buffers backed by gpu-allocator, plus upload/read-back helpers.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::context::Shared;
+use super::sync::{barrier, Access};
+use super::{GpuContext, GpuError, GpuResult, VkContext};
+
+/// Where a buffer's memory lives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MemoryKind {
+    /// Device-local; used by shaders.
+    Device,
+    /// Host-visible, written by the CPU and read by the GPU.
+    Upload,
+    /// Host-visible, written by the GPU and read by the CPU.
+    Readback,
+}
+
+/// A named Vulkan buffer with its memory; freed on drop.
+pub struct GpuBuffer {
+    shared: Arc<Shared>,
+    buffer: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    kind: MemoryKind,
+    name: String,
+}
+
+/// A byte range of a buffer, as bound to a shader.
+#[derive(Clone, Copy)]
+pub struct BufferSlice<'a> {
+    /// The buffer.
+    pub buffer: &'a GpuBuffer,
+    /// Start in bytes (must respect minStorageBufferOffsetAlignment when bound).
+    pub offset: u64,
+    /// Length in bytes.
+    pub size: u64,
+}
+
+impl<'a> From<&'a GpuBuffer> for BufferSlice<'a> {
+    fn from(buffer: &'a GpuBuffer) -> Self {
+        buffer.whole()
+    }
+}
+
+impl GpuBuffer {
+    /// Creates a buffer of `size` bytes (rounded up to at least 4) usable as storage,
+    /// transfer source/destination and indirect-dispatch arguments.
+    pub fn new(ctx: &GpuContext, name: &str, size: u64, kind: MemoryKind) -> GpuResult<Self> {
+        let size = size.max(4);
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_SRC
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::INDIRECT_BUFFER;
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let device = &ctx.shared.device;
+        // SAFETY: valid create info; the buffer is destroyed in Drop or on error below.
+        let buffer = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        // SAFETY: the buffer was just created from this device.
+        let requirements = unsafe { device.get_buffer_memory_requirements(buffer) };
+        let location = match kind {
+            MemoryKind::Device => MemoryLocation::GpuOnly,
+            MemoryKind::Upload => MemoryLocation::CpuToGpu,
+            MemoryKind::Readback => MemoryLocation::GpuToCpu,
+        };
+        let allocation = ctx
+            .shared
+            .allocator
+            .lock()
+            .map_err(|_| GpuError::InvalidArgument("allocator mutex poisoned".into()))
+            .and_then(|mut alloc| {
+                alloc
+                    .allocate(&AllocationCreateDesc {
+                        name,
+                        requirements,
+                        location,
+                        linear: true,
+                        allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+                    })
+                    .map_err(|source| GpuError::Alloc {
+                        name: name.to_string(),
+                        bytes: size,
+                        source,
+                    })
+            });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: unused buffer with no memory bound.
+                unsafe { device.destroy_buffer(buffer, None) };
+                return Err(e);
+            }
+        };
+        let this = Self {
+            shared: ctx.shared.clone(),
+            buffer,
+            allocation: Some(allocation),
+            size,
+            kind,
+            name: name.to_string(),
+        };
+        let alloc = this
+            .allocation
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("allocation missing".into()))?;
+        // SAFETY: memory and offset come from an allocation made for these requirements;
+        // on error `this` drops and frees both.
+        unsafe { device.bind_buffer_memory(buffer, alloc.memory(), alloc.offset()) }
+            .vk("vkBindBufferMemory")?;
+        ctx.set_name(buffer, name);
+        Ok(this)
+    }
+
+    /// Creates a device-local buffer holding `data` (uploaded through a staging buffer).
+    pub fn from_slice<T: bytemuck::Pod>(
+        ctx: &GpuContext,
+        name: &str,
+        data: &[T],
+    ) -> GpuResult<Self> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let buffer = Self::new(ctx, name, bytes.len() as u64, MemoryKind::Device)?;
+        buffer.upload(ctx, data)?;
+        Ok(buffer)
+    }
+
+    /// Copies `data` into the start of this buffer through a staging buffer and waits.
+    pub fn upload<T: bytemuck::Pod>(&self, ctx: &GpuContext, data: &[T]) -> GpuResult<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        if bytes.len() as u64 > self.size {
+            return Err(GpuError::InvalidArgument(format!(
+                "uploading {} bytes into buffer '{}' of {} bytes",
+                bytes.len(),
+                self.name,
+                self.size
+            )));
+        }
+        let mut staging = Self::new(
+            ctx,
+            &format!("{} (upload staging)", self.name),
+            bytes.len() as u64,
+            MemoryKind::Upload,
+        )?;
+        staging.write_mapped(bytes)?;
+        ctx.submit_and_wait("upload", |cmd| {
+            // Earlier GPU work on this buffer must finish before it is overwritten.
+            barrier(ctx, cmd, Access::Any, Access::TransferWrite);
+            let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
+            // SAFETY: both buffers are alive and large enough.
+            unsafe {
+                ctx.device()
+                    .cmd_copy_buffer(cmd, staging.buffer, self.buffer, &region)
+            };
+            // Make the copy visible to whatever the next submission does with it.
+            barrier(ctx, cmd, Access::TransferWrite, Access::Any);
+            Ok(())
+        })
+    }
+
+    /// Reads the first `count` elements back through a staging buffer (waits for the GPU).
+    pub fn read<T: bytemuck::Pod>(&self, ctx: &GpuContext, count: usize) -> GpuResult<Vec<T>> {
+        let bytes = (count * std::mem::size_of::<T>()) as u64;
+        if bytes > self.size {
+            return Err(GpuError::InvalidArgument(format!(
+                "reading {bytes} bytes from buffer '{}' of {} bytes",
+                self.name, self.size
+            )));
+        }
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = Self::new(
+            ctx,
+            &format!("{} (read-back staging)", self.name),
+            bytes,
+            MemoryKind::Readback,
+        )?;
+        ctx.submit_and_wait("read back", |cmd| {
+            barrier(ctx, cmd, Access::Any, Access::TransferRead);
+            let region = [vk::BufferCopy::default().size(bytes)];
+            // SAFETY: both buffers are alive and large enough.
+            unsafe {
+                ctx.device()
+                    .cmd_copy_buffer(cmd, self.buffer, staging.buffer, &region)
+            };
+            barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
+            Ok(())
+        })?;
+        let mapped = staging.mapped()?;
+        let mut out = vec![T::zeroed(); count];
+        bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&mapped[..bytes as usize]);
+        Ok(out)
+    }
+
+    /// Reads all elements that fit in the buffer.
+    pub fn read_all<T: bytemuck::Pod>(&self, ctx: &GpuContext) -> GpuResult<Vec<T>> {
+        self.read(ctx, (self.size / std::mem::size_of::<T>() as u64) as usize)
+    }
+
+    /// Writes bytes into a host-visible buffer's mapping.
+    pub fn write_mapped(&mut self, bytes: &[u8]) -> GpuResult<()> {
+        let name = self.name.clone();
+        let slice = self
+            .allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or_else(|| GpuError::InvalidArgument(format!("buffer '{name}' is not mapped")))?;
+        if bytes.len() > slice.len() {
+            return Err(GpuError::InvalidArgument(format!(
+                "writing {} bytes into mapped buffer '{name}' of {}",
+                bytes.len(),
+                slice.len()
+            )));
+        }
+        slice[..bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// The mapping of a host-visible buffer.
+    pub fn mapped(&self) -> GpuResult<&[u8]> {
+        self.allocation
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .ok_or_else(|| {
+                GpuError::InvalidArgument(format!("buffer '{}' is not mapped", self.name))
+            })
+    }
+
+    /// Records vkCmdFillBuffer of `value` over `size` bytes from `offset` (multiples of 4,
+    /// or `vk::WHOLE_SIZE`). The caller places barriers (TransferWrite).
+    pub fn fill(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        offset: u64,
+        size: u64,
+        value: u32,
+    ) {
+        // SAFETY: the buffer is alive and has TRANSFER_DST usage.
+        unsafe {
+            ctx.device()
+                .cmd_fill_buffer(cmd, self.buffer, offset, size, value)
+        };
+    }
+
+    /// Size in bytes.
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// The raw handle.
+    pub fn handle(&self) -> vk::Buffer {
+        self.buffer
+    }
+
+    /// The debug name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Memory kind.
+    pub fn kind(&self) -> MemoryKind {
+        self.kind
+    }
+
+    /// The whole buffer as a slice.
+    pub fn whole(&self) -> BufferSlice<'_> {
+        BufferSlice {
+            buffer: self,
+            offset: 0,
+            size: self.size,
+        }
+    }
+
+    /// A byte range of the buffer.
+    pub fn slice(&self, offset: u64, size: u64) -> BufferSlice<'_> {
+        BufferSlice {
+            buffer: self,
+            offset,
+            size,
+        }
+    }
+}
+
+impl Drop for GpuBuffer {
+    fn drop(&mut self) {
+        // SAFETY: the owner guarantees the GPU no longer uses this buffer (the usual
+        // Vulkan rule); memory is freed after the buffer is destroyed.
+        unsafe { self.shared.device.destroy_buffer(self.buffer, None) };
+        if let Some(allocation) = self.allocation.take() {
+            if let Ok(mut alloc) = self.shared.allocator.lock() {
+                if let Err(e) = alloc.free(allocation) {
+                    eprintln!("vksplat: freeing buffer '{}' failed: {e}", self.name);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! GPU building blocks on raw Vulkan compute: context, buffers, shaders, barriers,
+//! timing, and the reusable prefix-sum and radix-sort stages.
+
+pub mod buffer;
+pub mod context;
+pub mod scan;
+pub mod shader;
+pub mod sort;
+pub mod sync;
+pub mod timing;
+
+pub use buffer::{BufferSlice, GpuBuffer, MemoryKind};
+pub use context::{ContextOptions, DeviceInfo, GpuContext};
+pub use scan::Scan;
+pub use shader::{ComputePipeline, ShaderError};
+pub use sort::{Count, RadixSort};
+pub use sync::Access;
+pub use timing::GpuTimer;
+
+use ash::vk;
+
+/// Every error the GPU layer reports, with enough context to act on it.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// The Vulkan loader library could not be loaded.
+    #[error("could not load the Vulkan loader (is libvulkan1 installed?): {0}")]
+    Loader(String),
+    /// A Vulkan call failed.
+    #[error("Vulkan call {call} failed: {result}")]
+    Vk {
+        /// The Vulkan entry point (and what it was doing).
+        call: &'static str,
+        /// The result code.
+        result: vk::Result,
+    },
+    /// No usable device, or the requested one does not exist.
+    #[error("no suitable Vulkan device: {0}")]
+    NoDevice(String),
+    /// A required layer, extension or feature is missing.
+    #[error("missing Vulkan support: {0}")]
+    Missing(String),
+    /// Memory allocation failed.
+    #[error("allocating {bytes} bytes for buffer '{name}' failed: {source}")]
+    Alloc {
+        /// Buffer name.
+        name: String,
+        /// Bytes requested.
+        bytes: u64,
+        /// Allocator error.
+        source: gpu_allocator::AllocationError,
+    },
+    /// A shader failed to compile or load.
+    #[error(transparent)]
+    Shader(#[from] ShaderError),
+    /// An argument was out of range (buffer too small, bad key bits, ...).
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+}
+
+/// Result alias for the GPU layer.
+pub type GpuResult<T> = Result<T, GpuError>;
+
+/// Helper turning a `VkResult` into a [`GpuError::Vk`] naming the call.
+pub(crate) trait VkContext<T> {
+    fn vk(self, call: &'static str) -> GpuResult<T>;
+}
+
+impl<T> VkContext<T> for Result<T, vk::Result> {
+    fn vk(self, call: &'static str) -> GpuResult<T> {
+        self.map_err(|result| GpuError::Vk { call, result })
+    }
+}
+
+/// Splits `groups` workgroups into an x/y grid that respects `max_x`
+/// (maxComputeWorkGroupCount[0]); shaders recover the linear id as `x + y * num_x`
+/// and ignore ids past the end.
+pub fn dispatch_grid(groups: u32, max_x: u32) -> [u32; 3] {
+    if groups <= max_x {
+        [groups, 1, 1]
+    } else {
+        [max_x, groups.div_ceil(max_x), 1]
+    }
+}
+
+/// Rounds `value` up to a multiple of `align` (a power of two or any non-zero value).
+pub(crate) fn align_up(value: u64, align: u64) -> u64 {
+    value.div_ceil(align) * align
+}

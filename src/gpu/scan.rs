@@ -1,0 +1,209 @@
+//! Exclusive prefix sum of u32 values, multi-level reduce-then-scan:
+//! block sums -> scan of the block sums (recursively) -> scan blocks and add back.
+//!
+//! Sums are computed modulo 2^32: a total >= 2^32 wraps, and refusing such inputs is
+//! the caller's job (the renderer bounds its counts).
+
+use ash::vk;
+
+use super::shader::BindingKind;
+use super::sync::{barrier, Access};
+use super::{
+    dispatch_grid, BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
+};
+
+/// Invocations per scan workgroup.
+pub const SCAN_WG: u32 = 256;
+/// Consecutive elements each invocation handles.
+pub const SCAN_ITEMS: u32 = 16;
+/// Elements per scan workgroup (block).
+pub const SCAN_BLOCK: u32 = SCAN_WG * SCAN_ITEMS;
+/// Alignment of sub-ranges carved out of scratch buffers (the largest
+/// minStorageBufferOffsetAlignment Vulkan allows).
+pub const SCRATCH_ALIGN: u64 = 256;
+
+/// Push constants of `scan_reduce`, `scan_block` and `scan_add`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ScanPush {
+    /// Number of elements.
+    pub n: u32,
+    /// Non-zero: write the grand total to `totals[total_index]` (scan_block only).
+    pub write_total: u32,
+    /// u32 index of the total in the total buffer.
+    pub total_index: u32,
+    /// Padding to 16 bytes.
+    pub pad: u32,
+}
+
+/// The `#define`s every scan shader is compiled with.
+pub fn scan_defines() -> Vec<(&'static str, String)> {
+    vec![
+        ("SCAN_WG", SCAN_WG.to_string()),
+        ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
+        ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),
+    ]
+}
+
+/// The prefix-sum pipelines.
+pub struct Scan {
+    reduce: ComputePipeline,
+    block: ComputePipeline,
+    add: ComputePipeline,
+    max_groups_x: u32,
+}
+
+impl Scan {
+    /// Compiles the scan shaders and builds their pipelines.
+    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        let defines = scan_defines();
+        let push = std::mem::size_of::<ScanPush>() as u32;
+        let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
+        Ok(Self {
+            reduce: ComputePipeline::from_embedded(
+                ctx,
+                "scan_reduce",
+                &defines,
+                &buffers(2),
+                push,
+                SCAN_WG,
+            )?,
+            block: ComputePipeline::from_embedded(
+                ctx,
+                "scan_block",
+                &defines,
+                &buffers(3),
+                push,
+                SCAN_WG,
+            )?,
+            add: ComputePipeline::from_embedded(
+                ctx,
+                "scan_add",
+                &defines,
+                &buffers(3),
+                push,
+                SCAN_WG,
+            )?,
+            max_groups_x: ctx.info().max_workgroup_count[0],
+        })
+    }
+
+    /// Scratch bytes needed to scan `n` elements (0 when one workgroup suffices).
+    pub fn scratch_size(n: u32) -> u64 {
+        if n <= SCAN_BLOCK {
+            0
+        } else {
+            let groups = n.div_ceil(SCAN_BLOCK);
+            super::align_up(u64::from(groups) * 4, SCRATCH_ALIGN) + Self::scratch_size(groups)
+        }
+    }
+
+    /// Records an exclusive prefix sum of `n` u32s from `input` into `output` (which
+    /// may be the same range) and writes the total to the u32 at byte `total.1` of
+    /// `total.0`.
+    ///
+    /// Barrier contract: the caller makes earlier writes of `input` visible to compute
+    /// shader reads, and orders earlier accesses of `output`, `scratch` and the total
+    /// before this (compute-to-compute barrier). On return, `output` and the total
+    /// have been written by compute shaders and the caller places the barrier from
+    /// [`Access::ComputeWrite`] to its next use. Slice offsets must respect
+    /// minStorageBufferOffsetAlignment.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        input: BufferSlice,
+        output: BufferSlice,
+        total: (&GpuBuffer, u64),
+        scratch: BufferSlice,
+        n: u32,
+    ) -> GpuResult<()> {
+        let bytes = u64::from(n) * 4;
+        if input.size < bytes || output.size < bytes {
+            return Err(GpuError::InvalidArgument(format!(
+                "scan of {n} elements needs {bytes} bytes; input '{}' has {}, output '{}' has {}",
+                input.buffer.name(),
+                input.size,
+                output.buffer.name(),
+                output.size
+            )));
+        }
+        if total.1 % 4 != 0 || total.1 + 4 > total.0.size() {
+            return Err(GpuError::InvalidArgument(format!(
+                "scan total offset {} is not a u32 slot inside '{}' ({} bytes)",
+                total.1,
+                total.0.name(),
+                total.0.size()
+            )));
+        }
+        let need = Self::scratch_size(n);
+        if scratch.size < need {
+            return Err(GpuError::InvalidArgument(format!(
+                "scan of {n} elements needs {need} scratch bytes, '{}' slice has {}",
+                scratch.buffer.name(),
+                scratch.size
+            )));
+        }
+        self.record_level(ctx, cmd, input, output, total, scratch, n)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn record_level(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        input: BufferSlice,
+        output: BufferSlice,
+        total: (&GpuBuffer, u64),
+        scratch: BufferSlice,
+        n: u32,
+    ) -> GpuResult<()> {
+        if n <= SCAN_BLOCK {
+            // Bind only the neighbourhood of the total slot (from an offset aligned for
+            // any device) so hazard tracking sees the one word written.
+            let base = total.1 / SCRATCH_ALIGN * SCRATCH_ALIGN;
+            let total_slice = total.0.slice(base, total.1 + 4 - base);
+            let push = ScanPush {
+                n,
+                write_total: 1,
+                total_index: ((total.1 - base) / 4) as u32,
+                pad: 0,
+            };
+            return self.block.dispatch(
+                ctx,
+                cmd,
+                &[input, output, total_slice],
+                bytemuck::bytes_of(&push),
+                [1, 1, 1],
+            );
+        }
+        let groups = n.div_ceil(SCAN_BLOCK);
+        let sums_bytes = super::align_up(u64::from(groups) * 4, SCRATCH_ALIGN);
+        let sums = scratch.buffer.slice(scratch.offset, u64::from(groups) * 4);
+        let rest = scratch
+            .buffer
+            .slice(scratch.offset + sums_bytes, scratch.size - sums_bytes);
+        let push = ScanPush {
+            n,
+            write_total: 0,
+            total_index: 0,
+            pad: 0,
+        };
+        let grid = dispatch_grid(groups, self.max_groups_x);
+        self.reduce
+            .dispatch(ctx, cmd, &[input, sums], bytemuck::bytes_of(&push), grid)?;
+        // Block sums: written above, scanned in place below.
+        barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+        self.record_level(ctx, cmd, sums, sums, total, rest, groups)?;
+        // Scanned block sums are read by the add-back pass.
+        barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+        self.add.dispatch(
+            ctx,
+            cmd,
+            &[input, sums, output],
+            bytemuck::bytes_of(&push),
+            grid,
+        )
+    }
+}

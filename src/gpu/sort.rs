@@ -1,0 +1,422 @@
+//! Stable LSD radix sort of (64-bit key, u32 value) pairs on the GPU.
+//!
+//! Keys are `uvec2 (lo, hi)` (8 bytes, no int64 needed); only the low `key_bits` bits
+//! take part, in `ceil(key_bits / RADIX_BITS)` passes. Each pass is reduce-then-scan
+//! (no spinning on other workgroups, so it runs on any device and any subgroup size):
+//! 1. `sort_histogram`: per-block digit counts, written digit-major;
+//! 2. [`Scan`] of that table: the output offset of every (digit, block);
+//! 3. `sort_scatter`: each block ranks its elements stably and scatters them.
+//!
+//! Passes ping-pong between the caller's buffers and scratch; after an odd number of
+//! passes `sort_copy` moves the result back, so **the result always ends in the
+//! caller's `keys` and `values` buffers**.
+//!
+//! The element count may live on the GPU ([`Count::Device`]): a one-invocation
+//! `sort_setup` dispatch reads it and writes the indirect dispatch arguments, so the
+//! CPU never waits mid-frame.
+
+use ash::vk;
+
+use super::scan::{Scan, SCRATCH_ALIGN};
+use super::shader::BindingKind;
+use super::sync::{barrier, barrier_uses, Access};
+use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult};
+
+/// Tunables of the sort kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SortConfig {
+    /// Bits per pass (digit width): 1..=8.
+    pub radix_bits: u32,
+    /// Invocations per workgroup (a multiple of every subgroup size, e.g. 128 or 256).
+    pub workgroup_size: u32,
+    /// Consecutive elements per invocation.
+    pub items_per_thread: u32,
+}
+
+/// Default sort tuning (measured on lavapipe; see the module tests/bench).
+pub const DEFAULT_SORT_CONFIG: SortConfig = SortConfig {
+    radix_bits: 4,
+    workgroup_size: 256,
+    items_per_thread: 16,
+};
+
+/// u32 index of the clamped element count in the sort's meta words.
+pub const META_N: u32 = 0;
+/// u32 index of the number of blocks.
+pub const META_BLOCKS: u32 = 1;
+/// u32 index of the VkDispatchIndirectCommand (x, y, z) for the per-block passes.
+pub const META_DISPATCH: u32 = 2;
+/// Bytes reserved for the meta words.
+pub const META_BYTES: u64 = 32;
+
+/// Push constants of `sort_setup`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SortSetupPush {
+    /// Element count when given by the host.
+    pub host_n: u32,
+    /// u32 index of the count in the count buffer, or `u32::MAX` for `host_n`.
+    pub count_index: u32,
+    /// Capacity: the count is clamped to this.
+    pub max_n: u32,
+    /// maxComputeWorkGroupCount[0].
+    pub max_groups_x: u32,
+}
+
+/// Push constants of `sort_histogram` and `sort_scatter`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SortPassPush {
+    /// First key bit of this pass's digit.
+    pub shift: u32,
+    /// Digit width of this pass (the last pass may be narrower).
+    pub bits: u32,
+    /// Row length of the digit-major histogram table (blocks at capacity).
+    pub hist_stride: u32,
+    /// Padding to 16 bytes.
+    pub pad: u32,
+}
+
+/// How many elements to sort.
+#[derive(Clone, Copy)]
+pub enum Count<'a> {
+    /// Known on the host.
+    Host(u32),
+    /// A u32 at byte `offset` of `buffer`, written on the GPU; clamped to `max_n`,
+    /// which sizes the scratch and dispatch arithmetic.
+    Device {
+        /// Buffer holding the count.
+        buffer: &'a GpuBuffer,
+        /// Byte offset (multiple of 4).
+        offset: u64,
+        /// Capacity (the keys/values buffers hold at least this many).
+        max_n: u32,
+    },
+}
+
+/// Byte ranges inside the sort scratch buffer.
+#[derive(Clone, Copy, Debug)]
+struct ScratchLayout {
+    keys: (u64, u64),
+    values: (u64, u64),
+    hist: (u64, u64),
+    offsets: (u64, u64),
+    scan: (u64, u64),
+    scan_total: u64,
+    total: u64,
+    hist_stride: u32,
+}
+
+impl ScratchLayout {
+    fn new(config: &SortConfig, max_n: u32) -> Self {
+        let block = config.workgroup_size * config.items_per_thread;
+        let hist_stride = max_n.div_ceil(block).max(1);
+        let table_len = hist_stride * (1u32 << config.radix_bits);
+        let mut cursor = align_up(META_BYTES, SCRATCH_ALIGN);
+        let mut take = |bytes: u64| {
+            let range = (cursor, bytes);
+            cursor = align_up(cursor + bytes.max(4), SCRATCH_ALIGN);
+            range
+        };
+        let keys = take(u64::from(max_n) * 8);
+        let values = take(u64::from(max_n) * 4);
+        let hist = take(u64::from(table_len) * 4);
+        let offsets = take(u64::from(table_len) * 4);
+        let scan = take(Scan::scratch_size(table_len));
+        // Kept apart from the indirect arguments in the meta words.
+        let scan_total = take(4).0;
+        Self {
+            keys,
+            values,
+            hist,
+            offsets,
+            scan,
+            scan_total,
+            total: cursor,
+            hist_stride,
+        }
+    }
+}
+
+/// The radix sort pipelines (plus the scan they use).
+pub struct RadixSort {
+    config: SortConfig,
+    setup: ComputePipeline,
+    histogram: ComputePipeline,
+    scatter: ComputePipeline,
+    copy: ComputePipeline,
+    scan: Scan,
+    max_groups_x: u32,
+}
+
+impl RadixSort {
+    /// Builds the sort with [`DEFAULT_SORT_CONFIG`].
+    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        Self::with_config(ctx, DEFAULT_SORT_CONFIG)
+    }
+
+    /// Builds the sort with explicit tunables (for benchmarking).
+    pub fn with_config(ctx: &GpuContext, config: SortConfig) -> GpuResult<Self> {
+        let radix = 1u32 << config.radix_bits;
+        let shared_bytes = (radix * config.workgroup_size + radix + config.workgroup_size) * 4;
+        if !(1..=8).contains(&config.radix_bits)
+            || config.workgroup_size == 0
+            || config.items_per_thread == 0
+            || config.workgroup_size > ctx.info().max_workgroup_invocations
+            || shared_bytes > ctx.info().max_shared_memory
+            || config.workgroup_size % radix != 0 && radix % config.workgroup_size != 0
+        {
+            return Err(GpuError::InvalidArgument(format!(
+                "sort config {config:?} needs {shared_bytes} bytes of shared memory or \
+                 exceeds the device limits"
+            )));
+        }
+        let defines = vec![
+            ("SORT_RADIX_BITS", config.radix_bits.to_string()),
+            ("SORT_RADIX", format!("{radix}u")),
+            ("SORT_WG", config.workgroup_size.to_string()),
+            ("SORT_ITEMS", format!("{}u", config.items_per_thread)),
+            (
+                "SORT_BLOCK",
+                format!("{}u", config.workgroup_size * config.items_per_thread),
+            ),
+            ("META_N", META_N.to_string()),
+            ("META_BLOCKS", META_BLOCKS.to_string()),
+            ("META_DISPATCH", META_DISPATCH.to_string()),
+        ];
+        let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
+        let setup_push = std::mem::size_of::<SortSetupPush>() as u32;
+        let pass_push = std::mem::size_of::<SortPassPush>() as u32;
+        Ok(Self {
+            config,
+            setup: ComputePipeline::from_embedded(
+                ctx,
+                "sort_setup",
+                &defines,
+                &buffers(2),
+                setup_push,
+                1,
+            )?,
+            histogram: ComputePipeline::from_embedded(
+                ctx,
+                "sort_histogram",
+                &defines,
+                &buffers(3),
+                pass_push,
+                config.workgroup_size,
+            )?,
+            scatter: ComputePipeline::from_embedded(
+                ctx,
+                "sort_scatter",
+                &defines,
+                &buffers(6),
+                pass_push,
+                config.workgroup_size,
+            )?,
+            copy: ComputePipeline::from_embedded(
+                ctx,
+                "sort_copy",
+                &defines,
+                &buffers(5),
+                0,
+                config.workgroup_size,
+            )?,
+            scan: Scan::new(ctx)?,
+            max_groups_x: ctx.info().max_workgroup_count[0],
+        })
+    }
+
+    /// Scratch bytes the default configuration needs for up to `max_n` elements.
+    pub fn scratch_size(max_n: u32) -> u64 {
+        ScratchLayout::new(&DEFAULT_SORT_CONFIG, max_n).total
+    }
+
+    /// Scratch bytes this instance's configuration needs for up to `max_n` elements.
+    pub fn scratch_size_for(&self, max_n: u32) -> u64 {
+        ScratchLayout::new(&self.config, max_n).total
+    }
+
+    /// The tunables in use.
+    pub fn config(&self) -> SortConfig {
+        self.config
+    }
+
+    /// Records a stable sort of `count` (key, value) pairs by the low `key_bits` bits
+    /// of the key (1..=64; 0 records nothing). `keys` holds `uvec2 (lo, hi)` per
+    /// element, `values` one u32; both hold the sorted result afterwards. Elements
+    /// past the count are not touched. `scratch` must hold
+    /// [`RadixSort::scratch_size_for`]`(max_n)` bytes (max_n = the host count or the
+    /// device capacity).
+    ///
+    /// Barrier contract:
+    /// - Before: the sort opens with a barrier from compute-shader and transfer
+    ///   writes (and compute/indirect reads, for reusing `scratch`) to its own uses,
+    ///   so keys, values and the count written by earlier compute shaders or
+    ///   copies/fills in the same queue need no extra barrier. Host writes are covered
+    ///   by queue submission as usual.
+    /// - After: the last writes to `keys`/`values` are compute-shader storage writes
+    ///   and **the sort places no trailing barrier**: the caller records one from
+    ///   [`Access::ComputeWrite`] to its next use (e.g. `ComputeRead`, `TransferRead`).
+    ///   `scratch` must not be reused before such a barrier either.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        keys: &GpuBuffer,
+        values: &GpuBuffer,
+        scratch: &GpuBuffer,
+        count: Count,
+        key_bits: u32,
+    ) -> GpuResult<()> {
+        if key_bits > 64 {
+            return Err(GpuError::InvalidArgument(format!(
+                "radix sort key_bits {key_bits} exceeds the 64-bit key"
+            )));
+        }
+        let (max_n, count_slot) = match count {
+            Count::Host(n) => (n, None),
+            Count::Device {
+                buffer,
+                offset,
+                max_n,
+            } => {
+                if offset % 4 != 0 || offset + 4 > buffer.size() {
+                    return Err(GpuError::InvalidArgument(format!(
+                        "sort count offset {offset} is not a u32 slot inside '{}' ({} bytes)",
+                        buffer.name(),
+                        buffer.size()
+                    )));
+                }
+                (max_n, Some((buffer, offset)))
+            }
+        };
+        if max_n == 0 || key_bits == 0 {
+            return Ok(());
+        }
+        let layout = ScratchLayout::new(&self.config, max_n);
+        let checks = [
+            (keys, u64::from(max_n) * 8, "keys"),
+            (values, u64::from(max_n) * 4, "values"),
+            (scratch, layout.total, "scratch"),
+        ];
+        for (buffer, need, what) in checks {
+            if buffer.size() < need {
+                return Err(GpuError::InvalidArgument(format!(
+                    "radix sort of up to {max_n} elements needs {need} bytes of {what}, \
+                     buffer '{}' has {}",
+                    buffer.name(),
+                    buffer.size()
+                )));
+            }
+        }
+        let meta = scratch.slice(0, META_BYTES);
+        let dispatch_args = scratch.slice(u64::from(META_DISPATCH) * 4, 12);
+        let tmp_keys = scratch.slice(layout.keys.0, layout.keys.1);
+        let tmp_values = scratch.slice(layout.values.0, layout.values.1);
+        let hist = scratch.slice(layout.hist.0, layout.hist.1);
+        let offsets = scratch.slice(layout.offsets.0, layout.offsets.1);
+        let scan_scratch = scratch.slice(layout.scan.0, layout.scan.1);
+        let user_keys = keys.slice(0, u64::from(max_n) * 8);
+        let user_values = values.slice(0, u64::from(max_n) * 4);
+
+        // Entry barrier (see the contract above).
+        barrier_uses(
+            ctx,
+            cmd,
+            &[
+                Access::ComputeReadWrite,
+                Access::TransferWrite,
+                Access::IndirectRead,
+            ],
+            &[Access::ComputeReadWrite, Access::TransferWrite],
+        );
+        if count_slot.is_some() {
+            // Blocks past the device count never write their histogram column, and the
+            // scan covers the whole capacity: those columns must read as zero.
+            hist.buffer.fill(ctx, cmd, hist.offset, hist.size, 0);
+            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+        }
+        let setup_push = SortSetupPush {
+            host_n: max_n,
+            count_index: match count_slot {
+                Some((_, offset)) => u32::try_from(offset / 4).map_err(|_| {
+                    GpuError::InvalidArgument("sort count offset beyond 16 GiB".into())
+                })?,
+                None => u32::MAX,
+            },
+            max_n,
+            max_groups_x: self.max_groups_x,
+        };
+        let count_binding = count_slot.map_or(meta, |(b, _)| b.whole());
+        self.setup.dispatch(
+            ctx,
+            cmd,
+            &[count_binding, meta],
+            bytemuck::bytes_of(&setup_push),
+            [1, 1, 1],
+        )?;
+        // The meta words feed both shaders and the indirect dispatches.
+        barrier_uses(
+            ctx,
+            cmd,
+            &[Access::ComputeWrite],
+            &[Access::ComputeRead, Access::IndirectRead],
+        );
+
+        let passes = key_bits.div_ceil(self.config.radix_bits);
+        for pass in 0..passes {
+            let shift = pass * self.config.radix_bits;
+            let push = SortPassPush {
+                shift,
+                bits: self.config.radix_bits.min(key_bits - shift),
+                hist_stride: layout.hist_stride,
+                pad: 0,
+            };
+            let (src, dst) = if pass % 2 == 0 {
+                ((user_keys, user_values), (tmp_keys, tmp_values))
+            } else {
+                ((tmp_keys, tmp_values), (user_keys, user_values))
+            };
+            self.histogram.dispatch_indirect(
+                ctx,
+                cmd,
+                &[meta, src.0, hist],
+                bytemuck::bytes_of(&push),
+                dispatch_args,
+            )?;
+            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+            self.scan.record(
+                ctx,
+                cmd,
+                hist,
+                offsets,
+                (scratch, layout.scan_total),
+                scan_scratch,
+                layout.hist_stride << self.config.radix_bits,
+            )?;
+            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+            self.scatter.dispatch_indirect(
+                ctx,
+                cmd,
+                &[meta, src.0, src.1, offsets, dst.0, dst.1],
+                bytemuck::bytes_of(&push),
+                dispatch_args,
+            )?;
+            if pass + 1 < passes || passes % 2 == 1 {
+                // The scattered pairs are the next pass's (or the copy's) input.
+                barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+            }
+        }
+        if passes % 2 == 1 {
+            self.copy.dispatch_indirect(
+                ctx,
+                cmd,
+                &[meta, tmp_keys, tmp_values, user_keys, user_values],
+                &[],
+                dispatch_args,
+            )?;
+        }
+        Ok(())
+    }
+}

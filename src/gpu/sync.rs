@@ -1,0 +1,133 @@
+//! Barriers expressed as "this memory goes from use X to use Y", mapped to
+//! synchronization2 stage/access flags in one place.
+
+use ash::vk;
+
+use super::{BufferSlice, GpuContext};
+
+/// One way a command uses memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    /// Read by a compute shader (storage buffer).
+    ComputeRead,
+    /// Written by a compute shader.
+    ComputeWrite,
+    /// Read and written by a compute shader.
+    ComputeReadWrite,
+    /// Source of a copy.
+    TransferRead,
+    /// Destination of a copy or fill.
+    TransferWrite,
+    /// Read by the host after a fence wait.
+    HostRead,
+    /// Written by the host before submission.
+    HostWrite,
+    /// Read as VkDispatchIndirectCommand by vkCmdDispatchIndirect.
+    IndirectRead,
+    /// Anything (used around one-shot set-up copies, never per frame).
+    Any,
+}
+
+impl Access {
+    /// The sync2 stage and access masks of this use.
+    pub fn flags(self) -> (vk::PipelineStageFlags2, vk::AccessFlags2) {
+        use vk::AccessFlags2 as A;
+        use vk::PipelineStageFlags2 as S;
+        match self {
+            Access::ComputeRead => (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
+            Access::ComputeWrite => (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+            Access::ComputeReadWrite => (
+                S::COMPUTE_SHADER,
+                A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE,
+            ),
+            Access::TransferRead => (S::ALL_TRANSFER, A::TRANSFER_READ),
+            Access::TransferWrite => (S::ALL_TRANSFER, A::TRANSFER_WRITE),
+            Access::HostRead => (S::HOST, A::HOST_READ),
+            Access::HostWrite => (S::HOST, A::HOST_WRITE),
+            Access::IndirectRead => (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
+            Access::Any => (S::ALL_COMMANDS, A::MEMORY_READ | A::MEMORY_WRITE),
+        }
+    }
+}
+
+fn combine(uses: &[Access]) -> (vk::PipelineStageFlags2, vk::AccessFlags2) {
+    uses.iter().fold(
+        (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE),
+        |(s, a), u| {
+            let (us, ua) = u.flags();
+            (s | us, a | ua)
+        },
+    )
+}
+
+/// A buffer range moving from one set of uses to another.
+pub struct BufferTransition<'a> {
+    /// The range.
+    pub slice: BufferSlice<'a>,
+    /// Uses before the barrier.
+    pub from: &'a [Access],
+    /// Uses after the barrier.
+    pub to: &'a [Access],
+}
+
+/// Global memory barrier: all memory goes from uses `from` to uses `to`.
+pub fn barrier_uses(ctx: &GpuContext, cmd: vk::CommandBuffer, from: &[Access], to: &[Access]) {
+    let (src_stage, src_access) = combine(from);
+    let (dst_stage, dst_access) = combine(to);
+    let barriers = [vk::MemoryBarrier2::default()
+        .src_stage_mask(src_stage)
+        .src_access_mask(src_access)
+        .dst_stage_mask(dst_stage)
+        .dst_access_mask(dst_access)];
+    let dep = vk::DependencyInfo::default().memory_barriers(&barriers);
+    // SAFETY: cmd is in the recording state (caller contract); the info is valid.
+    unsafe { ctx.device().cmd_pipeline_barrier2(cmd, &dep) };
+}
+
+/// Global memory barrier for a single use on each side.
+pub fn barrier(ctx: &GpuContext, cmd: vk::CommandBuffer, from: Access, to: Access) {
+    barrier_uses(ctx, cmd, &[from], &[to]);
+}
+
+/// Buffer memory barriers, batched into one vkCmdPipelineBarrier2.
+pub fn buffer_barriers(ctx: &GpuContext, cmd: vk::CommandBuffer, transitions: &[BufferTransition]) {
+    let barriers: Vec<vk::BufferMemoryBarrier2> = transitions
+        .iter()
+        .map(|t| {
+            let (src_stage, src_access) = combine(t.from);
+            let (dst_stage, dst_access) = combine(t.to);
+            vk::BufferMemoryBarrier2::default()
+                .src_stage_mask(src_stage)
+                .src_access_mask(src_access)
+                .dst_stage_mask(dst_stage)
+                .dst_access_mask(dst_access)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .buffer(t.slice.buffer.handle())
+                .offset(t.slice.offset)
+                .size(t.slice.size)
+        })
+        .collect();
+    let dep = vk::DependencyInfo::default().buffer_memory_barriers(&barriers);
+    // SAFETY: cmd is recording; the buffers are alive for the call.
+    unsafe { ctx.device().cmd_pipeline_barrier2(cmd, &dep) };
+}
+
+/// One buffer going from `from` to `to`.
+pub fn buffer_barrier(
+    ctx: &GpuContext,
+    cmd: vk::CommandBuffer,
+    slice: BufferSlice,
+    from: Access,
+    to: Access,
+) {
+    buffer_barriers(
+        ctx,
+        cmd,
+        &[BufferTransition {
+            slice,
+            from: &[from],
+            to: &[to],
+        }],
+    );
+}

@@ -1,0 +1,504 @@
+//! GPU prefix sum and radix sort against CPU references, on whatever Vulkan device is
+//! available (lavapipe in CI), with validation on: any validation message fails.
+
+use vksplat::gpu::buffer::{GpuBuffer, MemoryKind};
+use vksplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};
+use vksplat::gpu::shader::compile_glsl;
+use vksplat::gpu::sort::{Count, RadixSort, SortConfig, SortPassPush, SortSetupPush};
+use vksplat::gpu::sync::{barrier, Access};
+use vksplat::gpu::{ContextOptions, GpuContext, GpuTimer};
+
+fn context() -> GpuContext {
+    let ctx = GpuContext::new(&ContextOptions {
+        device: None,
+        validation: true,
+    })
+    .expect("create Vulkan context with validation");
+    eprintln!("device: {}", ctx.info());
+    ctx
+}
+
+fn assert_no_validation_messages(ctx: &GpuContext) {
+    let messages = ctx.validation_messages();
+    assert!(
+        messages.is_empty(),
+        "validation messages:\n{}",
+        messages.join("\n")
+    );
+}
+
+/// SplitMix64: fixed-seed test data without extra dependencies.
+struct Rng(u64);
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn next_u32(&mut self) -> u32 {
+        (self.next_u64() >> 32) as u32
+    }
+    fn next_f32(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 / (1u32 << 24) as f32
+    }
+}
+
+#[test]
+fn push_constant_layouts_are_pinned() {
+    use std::mem::{offset_of, size_of};
+    assert_eq!(size_of::<ScanPush>(), 16);
+    assert_eq!(offset_of!(ScanPush, n), 0);
+    assert_eq!(offset_of!(ScanPush, write_total), 4);
+    assert_eq!(offset_of!(ScanPush, total_index), 8);
+    assert_eq!(size_of::<SortSetupPush>(), 16);
+    assert_eq!(offset_of!(SortSetupPush, host_n), 0);
+    assert_eq!(offset_of!(SortSetupPush, count_index), 4);
+    assert_eq!(offset_of!(SortSetupPush, max_n), 8);
+    assert_eq!(offset_of!(SortSetupPush, max_groups_x), 12);
+    assert_eq!(size_of::<SortPassPush>(), 16);
+    assert_eq!(offset_of!(SortPassPush, shift), 0);
+    assert_eq!(offset_of!(SortPassPush, bits), 4);
+    assert_eq!(offset_of!(SortPassPush, hist_stride), 8);
+}
+
+#[test]
+fn shader_compile_error_names_file_and_line() {
+    let broken = "#version 460\nlayout(local_size_x = 1) in;\nvoid main() { int x = ; }\n";
+    let err = compile_glsl("broken", broken, &[]).expect_err("broken GLSL must not compile");
+    let text = err.to_string();
+    assert!(text.contains("glsl/broken.comp:3"), "message was: {text}");
+}
+
+#[test]
+fn context_reports_device_and_no_validation_messages() {
+    let ctx = context();
+    assert!(ctx.validation_enabled());
+    assert!(ctx.info().subgroup_size >= 1);
+    assert!(ctx.info().max_workgroup_count[0] >= 65535);
+    let buffer = GpuBuffer::from_slice(&ctx, "roundtrip", &[1u32, 2, 3, 4, 5]).expect("upload");
+    assert_eq!(
+        buffer.read::<u32>(&ctx, 5).expect("read"),
+        vec![1, 2, 3, 4, 5]
+    );
+    let host = GpuBuffer::new(&ctx, "host", 16, MemoryKind::Readback).expect("readback buffer");
+    assert_eq!(host.size(), 16);
+    drop(host);
+    drop(buffer);
+    assert_no_validation_messages(&ctx);
+}
+
+fn gpu_scan(ctx: &GpuContext, scan: &Scan, data: &[u32], in_place: bool) -> (Vec<u32>, u32) {
+    let n = data.len() as u32;
+    let input = GpuBuffer::new(ctx, "scan input", 4 * u64::from(n), MemoryKind::Device)
+        .expect("input buffer");
+    input.upload(ctx, data).expect("upload");
+    let output = GpuBuffer::new(ctx, "scan output", 4 * u64::from(n), MemoryKind::Device)
+        .expect("output buffer");
+    let total = GpuBuffer::from_slice(ctx, "scan total", &[0xDEAD_BEEFu32; 4]).expect("total");
+    let scratch = GpuBuffer::new(
+        ctx,
+        "scan scratch",
+        Scan::scratch_size(n),
+        MemoryKind::Device,
+    )
+    .expect("scratch");
+    let out = if in_place { &input } else { &output };
+    ctx.submit_and_wait("scan test", |cmd| {
+        scan.record(
+            ctx,
+            cmd,
+            input.whole(),
+            out.whole(),
+            (&total, 8),
+            scratch.whole(),
+            n,
+        )?;
+        barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+        Ok(())
+    })
+    .expect("scan");
+    let result = out.read::<u32>(ctx, data.len()).expect("read scan");
+    let totals = total.read::<u32>(ctx, 4).expect("read total");
+    assert_eq!(totals[0], 0xDEAD_BEEF, "scan wrote outside its total slot");
+    (result, totals[2])
+}
+
+#[test]
+fn prefix_sum_matches_cpu() {
+    let ctx = context();
+    let scan = Scan::new(&ctx).expect("scan pipelines");
+    let b = SCAN_BLOCK as usize;
+    let mut sizes = vec![
+        0,
+        1,
+        2,
+        3,
+        1000,
+        12345,
+        b - 1,
+        b,
+        b + 1,
+        2 * b - 1,
+        2 * b,
+        2 * b + 1,
+    ];
+    sizes.extend([b * b - 1, b * b, b * b + 1, (1 << 20) + 3]);
+    let mut rng = Rng(7);
+    for (i, &n) in sizes.iter().enumerate() {
+        // Small values keep totals below 2^32 even for the 16M-element case.
+        let data: Vec<u32> = (0..n).map(|_| rng.next_u32() % 200).collect();
+        let mut expected = Vec::with_capacity(n);
+        let mut sum = 0u32;
+        for &x in &data {
+            expected.push(sum);
+            sum = sum.wrapping_add(x);
+        }
+        let (result, total) = gpu_scan(&ctx, &scan, &data, i % 2 == 1);
+        assert!(result == expected, "scan mismatch for n = {n}");
+        assert_eq!(total, sum, "total mismatch for n = {n}");
+    }
+    assert_no_validation_messages(&ctx);
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Mode {
+    Host,
+    /// Count in a device buffer; the buffers have room for `capacity` elements.
+    Device {
+        capacity: usize,
+    },
+}
+
+fn mask_of(key_bits: u32) -> u64 {
+    if key_bits >= 64 {
+        u64::MAX
+    } else {
+        (1u64 << key_bits) - 1
+    }
+}
+
+/// Sorts `keys`/`values` on the GPU and checks against a CPU stable sort, including
+/// that elements past the count are untouched.
+fn check_sort(
+    ctx: &GpuContext,
+    sort: &RadixSort,
+    keys: &[u64],
+    key_bits: u32,
+    mode: Mode,
+    what: &str,
+) {
+    let n = keys.len();
+    let capacity = match mode {
+        Mode::Host => n,
+        Mode::Device { capacity } => capacity.max(n),
+    };
+    let mut rng = Rng(n as u64 ^ 0x5eed);
+    let mut all_keys: Vec<u64> = keys.to_vec();
+    all_keys.extend((n..capacity).map(|_| rng.next_u64()));
+    let values: Vec<u32> = (0..capacity as u32).collect();
+    let packed: Vec<[u32; 2]> = all_keys
+        .iter()
+        .map(|&k| [k as u32, (k >> 32) as u32])
+        .collect();
+    let key_buf =
+        GpuBuffer::new(ctx, "keys", 8 * capacity as u64, MemoryKind::Device).expect("keys");
+    key_buf.upload(ctx, &packed).expect("upload keys");
+    let value_buf =
+        GpuBuffer::new(ctx, "values", 4 * capacity as u64, MemoryKind::Device).expect("values");
+    value_buf.upload(ctx, &values).expect("upload values");
+    let count_buf = GpuBuffer::from_slice(ctx, "count", &[0u32, 0, n as u32, 0]).expect("count");
+    let scratch = GpuBuffer::new(
+        ctx,
+        "sort scratch",
+        sort.scratch_size_for(capacity as u32),
+        MemoryKind::Device,
+    )
+    .expect("scratch");
+    let count = match mode {
+        Mode::Host => Count::Host(n as u32),
+        Mode::Device { .. } => Count::Device {
+            buffer: &count_buf,
+            offset: 8,
+            max_n: capacity as u32,
+        },
+    };
+    ctx.submit_and_wait("sort test", |cmd| {
+        sort.record(ctx, cmd, &key_buf, &value_buf, &scratch, count, key_bits)?;
+        barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+        Ok(())
+    })
+    .expect("sort");
+    let got_keys: Vec<[u32; 2]> = key_buf.read(ctx, capacity).expect("read keys");
+    let got_values: Vec<u32> = value_buf.read(ctx, capacity).expect("read values");
+
+    let mask = mask_of(key_bits);
+    let mut expected: Vec<(u64, u32)> = all_keys[..n].iter().copied().zip(0u32..).collect();
+    expected.sort_by_key(|&(k, _)| k & mask);
+    for (i, &(k, v)) in expected.iter().enumerate() {
+        let got = u64::from(got_keys[i][0]) | (u64::from(got_keys[i][1]) << 32);
+        assert!(
+            got == k && got_values[i] == v,
+            "{what}: n = {n}, key_bits = {key_bits}, {mode:?}: element {i} is ({got:#x}, {}), \
+             expected ({k:#x}, {v})",
+            got_values[i]
+        );
+    }
+    assert!(
+        got_keys[n..] == packed[n..],
+        "{what}: keys past the count changed"
+    );
+    assert!(
+        got_values[n..] == values[n..],
+        "{what}: values past the count changed"
+    );
+}
+
+/// Keys like the renderer's: hi = tile id (clustered), lo = f32 bits of a depth.
+fn tile_depth_keys(rng: &mut Rng, n: usize) -> Vec<u64> {
+    (0..n)
+        .map(|i| {
+            let cluster = (i / 97) as u32 * 37 % 3600;
+            let tile = if rng.next_u32() % 8 == 0 {
+                rng.next_u32() % 3600
+            } else {
+                (cluster + rng.next_u32() % 5) % 3600
+            };
+            let depth = 0.2 + rng.next_f32() * 49.8;
+            (u64::from(tile) << 32) | u64::from(depth.to_bits())
+        })
+        .collect()
+}
+
+fn patterns(rng: &mut Rng, n: usize) -> Vec<(&'static str, Vec<u64>)> {
+    let random: Vec<u64> = (0..n).map(|_| rng.next_u64()).collect();
+    let mut sorted = random.clone();
+    sorted.sort_unstable();
+    let reversed: Vec<u64> = sorted.iter().rev().copied().collect();
+    vec![
+        ("random", random),
+        ("all equal", vec![0x1234_5678_9abc_def0; n]),
+        ("sorted", sorted),
+        ("reverse sorted", reversed),
+        ("tile|depth", tile_depth_keys(rng, n)),
+    ]
+}
+
+#[test]
+fn radix_sort_matches_cpu_stable_sort() {
+    let ctx = context();
+    let sort = RadixSort::new(&ctx).expect("sort pipelines");
+    let c = sort.config();
+    let block = (c.workgroup_size * c.items_per_thread) as usize;
+    let mut rng = Rng(42);
+    let sizes = [
+        0,
+        1,
+        2,
+        3,
+        1000,
+        block - 1,
+        block,
+        block + 1,
+        2 * block - 1,
+        2 * block + 1,
+        12345,
+    ];
+    for &n in &sizes {
+        for (what, keys) in patterns(&mut rng, n) {
+            for key_bits in [16, 33, 44, 64] {
+                check_sort(&ctx, &sort, &keys, key_bits, Mode::Host, what);
+            }
+            check_sort(
+                &ctx,
+                &sort,
+                &keys,
+                44,
+                Mode::Device {
+                    capacity: n + n / 3 + 5,
+                },
+                what,
+            );
+        }
+    }
+    assert_no_validation_messages(&ctx);
+}
+
+#[test]
+fn radix_sort_large_and_device_count() {
+    let ctx = context();
+    let sort = RadixSort::new(&ctx).expect("sort pipelines");
+    let mut rng = Rng(9);
+    let n = (1 << 20) + 3;
+    let keys = tile_depth_keys(&mut rng, n);
+    check_sort(&ctx, &sort, &keys, 44, Mode::Host, "tile|depth large");
+    let random: Vec<u64> = (0..n).map(|_| rng.next_u64()).collect();
+    check_sort(
+        &ctx,
+        &sort,
+        &random,
+        33,
+        Mode::Device { capacity: n + 5000 },
+        "random large",
+    );
+    // Device count of zero with a non-zero capacity.
+    check_sort(
+        &ctx,
+        &sort,
+        &[],
+        44,
+        Mode::Device { capacity: 5000 },
+        "empty device count",
+    );
+    // A device count larger than the capacity is clamped to the capacity.
+    let keys: Vec<u64> = (0..3000).map(|_| rng.next_u64()).collect();
+    check_sort(
+        &ctx,
+        &sort,
+        &keys,
+        64,
+        Mode::Device { capacity: 3000 },
+        "exact capacity",
+    );
+    assert_no_validation_messages(&ctx);
+}
+
+#[test]
+fn radix_sort_other_configs() {
+    let ctx = context();
+    let mut rng = Rng(3);
+    for config in [
+        SortConfig {
+            radix_bits: 8,
+            workgroup_size: 16,
+            items_per_thread: 64,
+        },
+        SortConfig {
+            radix_bits: 4,
+            workgroup_size: 64,
+            items_per_thread: 7,
+        },
+    ] {
+        let sort = RadixSort::with_config(&ctx, config).expect("sort pipelines");
+        for n in [0, 1, 1023, 1024, 1025, 20000] {
+            for (what, keys) in patterns(&mut rng, n) {
+                check_sort(&ctx, &sort, &keys, 44, Mode::Host, what);
+                check_sort(
+                    &ctx,
+                    &sort,
+                    &keys,
+                    13,
+                    Mode::Device { capacity: n + 100 },
+                    what,
+                );
+            }
+        }
+    }
+    assert_no_validation_messages(&ctx);
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Timing of the 2^20-pair sort (44 key bits) and the 2^20-element scan.
+/// `cargo test --test gpu_sort -- --ignored --nocapture bench`;
+/// `VKSPLAT_SORT_CONFIG=bits,wg,items` overrides the sort tuning.
+#[test]
+#[ignore]
+fn bench_sort_and_scan_1m() {
+    let ctx = GpuContext::new(&ContextOptions::default()).expect("context");
+    eprintln!("device: {}", ctx.info());
+    let config = std::env::var("VKSPLAT_SORT_CONFIG").ok().and_then(|s| {
+        let v: Vec<u32> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+        (v.len() == 3).then(|| SortConfig {
+            radix_bits: v[0],
+            workgroup_size: v[1],
+            items_per_thread: v[2],
+        })
+    });
+    let sort = match config {
+        Some(c) => RadixSort::with_config(&ctx, c),
+        None => RadixSort::new(&ctx),
+    }
+    .expect("sort");
+    let scan = Scan::new(&ctx).expect("scan");
+    let n = 1u32 << 20;
+    let mut rng = Rng(1);
+    let keys: Vec<[u32; 2]> = tile_depth_keys(&mut rng, n as usize)
+        .iter()
+        .map(|&k| [k as u32, (k >> 32) as u32])
+        .collect();
+    let values: Vec<u32> = (0..n).collect();
+    let key_buf = GpuBuffer::from_slice(&ctx, "keys", &keys).expect("keys");
+    let value_buf = GpuBuffer::from_slice(&ctx, "values", &values).expect("values");
+    let scratch = GpuBuffer::new(
+        &ctx,
+        "scratch",
+        sort.scratch_size_for(n),
+        MemoryKind::Device,
+    )
+    .expect("scratch");
+    let counts: Vec<u32> = (0..n).map(|_| rng.next_u32() % 64).collect();
+    let scan_buf = GpuBuffer::from_slice(&ctx, "scan data", &counts).expect("scan data");
+    let scan_out =
+        GpuBuffer::new(&ctx, "scan out", 4 * u64::from(n), MemoryKind::Device).expect("out");
+    let scan_scratch = GpuBuffer::new(
+        &ctx,
+        "scan scratch",
+        Scan::scratch_size(n),
+        MemoryKind::Device,
+    )
+    .expect("s");
+    let mut timer = GpuTimer::new(&ctx, "bench timer", 4).expect("timer");
+    let (mut sort_ms, mut scan_ms) = (Vec::new(), Vec::new());
+    for iteration in 0..8 {
+        key_buf.upload(&ctx, &keys).expect("reset keys");
+        let start = std::time::Instant::now();
+        ctx.submit_and_wait("bench", |cmd| {
+            timer.reset(&ctx, cmd);
+            timer.stage(&ctx, cmd, "sort", |cmd| {
+                sort.record(
+                    &ctx,
+                    cmd,
+                    &key_buf,
+                    &value_buf,
+                    &scratch,
+                    Count::Host(n),
+                    44,
+                )
+            })?;
+            barrier(&ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+            timer.stage(&ctx, cmd, "scan", |cmd| {
+                scan.record(
+                    &ctx,
+                    cmd,
+                    scan_buf.whole(),
+                    scan_out.whole(),
+                    (&scratch, 20),
+                    scan_scratch.whole(),
+                    n,
+                )
+            })
+        })
+        .expect("bench run");
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+        let times = timer.read(&ctx).expect("timestamps");
+        eprintln!("iteration {iteration}: {times:?} (wall {wall:.1} ms)");
+        if iteration >= 2 {
+            sort_ms.push(times[0].1);
+            scan_ms.push(times[1].1);
+        }
+    }
+    eprintln!(
+        "config {:?}: sort 2^20 pairs x 44 bits median {:.2} ms (min {:.2}, max {:.2}); \
+         scan 2^20 median {:.3} ms",
+        sort.config(),
+        median(sort_ms.clone()),
+        sort_ms.iter().copied().fold(f64::MAX, f64::min),
+        sort_ms.iter().copied().fold(0.0, f64::max),
+        median(scan_ms)
+    );
+}
