@@ -15,6 +15,9 @@ pub const DEMO_SCENE_PLY: &[u8] = include_bytes!("../assets/playbot_lod6_1873_sh
 
 /// Loads the built-in demo scene.
 pub fn demo_scene() -> scene::Scene {
-    scene::ply::parse(DEMO_SCENE_PLY, std::path::Path::new("<built-in demo scene>"))
-        .expect("the embedded demo scene is a valid PLY")
+    scene::ply::parse(
+        DEMO_SCENE_PLY,
+        std::path::Path::new("<built-in demo scene>"),
+    )
+    .expect("the embedded demo scene is a valid PLY")
 }

@@ -3,6 +3,7 @@
 
 pub mod buffer;
 pub mod context;
+pub mod image;
 pub mod scan;
 pub mod shader;
 pub mod sort;
@@ -11,6 +12,7 @@ pub mod timing;
 
 pub use buffer::{BufferSlice, GpuBuffer, MemoryKind};
 pub use context::{ContextOptions, DeviceInfo, GpuContext};
+pub use image::GpuImage;
 pub use scan::Scan;
 pub use shader::{ComputePipeline, ShaderError};
 pub use sort::{Count, RadixSort};

@@ -33,7 +33,27 @@ pub const SOURCES: &[(&str, &str)] = &[
         include_str!("../../glsl/sort_scatter.comp"),
     ),
     ("sort_copy.comp", include_str!("../../glsl/sort_copy.comp")),
+    (
+        "splat_common.glsl",
+        include_str!("../../glsl/splat_common.glsl"),
+    ),
+    (
+        "preprocess.comp",
+        include_str!("../../glsl/preprocess.comp"),
+    ),
+    ("keys.comp", include_str!("../../glsl/keys.comp")),
+    ("ranges.comp", include_str!("../../glsl/ranges.comp")),
+    ("blend.comp", include_str!("../../glsl/blend.comp")),
 ];
+
+/// A resource bound to one slot of a pipeline's push-descriptor set.
+#[derive(Clone, Copy)]
+pub enum Resource<'a> {
+    /// A storage buffer range.
+    Buffer(BufferSlice<'a>),
+    /// A storage image in GENERAL layout.
+    Image(&'a super::GpuImage),
+}
 
 /// Shader compilation failures.
 #[derive(Debug, thiserror::Error)]
@@ -246,17 +266,33 @@ impl ComputePipeline {
         buffers: &[BufferSlice],
         push: &[u8],
     ) -> GpuResult<()> {
-        if buffers.len() != self.bindings.len()
-            || self
-                .bindings
-                .iter()
-                .any(|b| *b != BindingKind::StorageBuffer)
-        {
+        let resources: Vec<Resource> = buffers.iter().map(|b| Resource::Buffer(*b)).collect();
+        self.bind_resources(ctx, cmd, &resources, push)
+    }
+
+    /// Binds the pipeline, pushes the descriptors (binding i = `resources[i]`, buffers
+    /// or storage images matching the layout) and the push constants.
+    pub fn bind_resources(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        resources: &[Resource],
+        push: &[u8],
+    ) -> GpuResult<()> {
+        let matches = resources.len() == self.bindings.len()
+            && resources.iter().zip(&self.bindings).all(|(r, b)| {
+                matches!(
+                    (r, b),
+                    (Resource::Buffer(_), BindingKind::StorageBuffer)
+                        | (Resource::Image(_), BindingKind::StorageImage)
+                )
+            });
+        if !matches {
             return Err(GpuError::InvalidArgument(format!(
-                "pipeline '{}' expects {} buffer bindings, got {}",
+                "pipeline '{}' expects bindings {:?}, got {} resources of other kinds",
                 self.name,
-                self.bindings.len(),
-                buffers.len()
+                self.bindings,
+                resources.len()
             )));
         }
         if push.len() != self.push_size as usize {
@@ -267,28 +303,42 @@ impl ComputePipeline {
                 push.len()
             )));
         }
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+        let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = resources
             .iter()
-            .map(|b| {
-                [vk::DescriptorBufferInfo::default()
+            .map(|r| match r {
+                Resource::Buffer(b) => [vk::DescriptorBufferInfo::default()
                     .buffer(b.buffer.handle())
                     .offset(b.offset)
-                    // An empty range is not allowed; bind the rest of the buffer.
-                    .range(if b.size == 0 { vk::WHOLE_SIZE } else { b.size })]
+                    .range(b.size)],
+                Resource::Image(_) => [vk::DescriptorBufferInfo::default()],
             })
             .collect();
-        let writes: Vec<vk::WriteDescriptorSet> = infos
+        let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = resources
+            .iter()
+            .map(|r| match r {
+                Resource::Image(i) => [vk::DescriptorImageInfo::default()
+                    .image_view(i.view())
+                    .image_layout(vk::ImageLayout::GENERAL)],
+                Resource::Buffer(_) => [vk::DescriptorImageInfo::default()],
+            })
+            .collect();
+        let writes: Vec<vk::WriteDescriptorSet> = resources
             .iter()
             .enumerate()
-            .map(|(i, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_binding(i as u32)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
+            .map(|(i, r)| {
+                let write = vk::WriteDescriptorSet::default().dst_binding(i as u32);
+                match r {
+                    Resource::Buffer(_) => write
+                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                        .buffer_info(&buffer_infos[i]),
+                    Resource::Image(_) => write
+                        .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
+                        .image_info(&image_infos[i]),
+                }
             })
             .collect();
         let device = ctx.device();
-        // SAFETY: cmd is recording; buffers are alive; layout matches the pipeline.
+        // SAFETY: cmd is recording; buffers and images are alive; the layout matches.
         unsafe {
             device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             ctx.shared.push_descriptor.cmd_push_descriptor_set(
@@ -302,6 +352,24 @@ impl ComputePipeline {
                 device.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
             }
         }
+        Ok(())
+    }
+
+    /// Binds buffers and images and dispatches `groups` workgroups.
+    pub fn dispatch_resources(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        resources: &[Resource],
+        push: &[u8],
+        groups: [u32; 3],
+    ) -> GpuResult<()> {
+        self.bind_resources(ctx, cmd, resources, push)?;
+        // SAFETY: pipeline and descriptors bound above.
+        unsafe {
+            ctx.device()
+                .cmd_dispatch(cmd, groups[0], groups[1], groups[2])
+        };
         Ok(())
     }
 

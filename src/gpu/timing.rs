@@ -135,6 +135,34 @@ impl GpuTimer {
     }
 }
 
+impl GpuTimer {
+    /// After the submission finished: milliseconds from the first stage's start to the
+    /// last stage's end (0 when nothing was timed).
+    pub fn span_ms(&self, ctx: &GpuContext) -> GpuResult<f64> {
+        if self.stages.is_empty() {
+            return Ok(0.0);
+        }
+        let mut first = [0u64; 1];
+        let mut last = [0u64; 1];
+        let last_index = self.stages.len() as u32 * 2 - 1;
+        // SAFETY: the queries were written by a completed submission; WAIT blocks until
+        // they are available.
+        unsafe {
+            let device = ctx.device();
+            let flags = vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT;
+            device
+                .get_query_pool_results(self.pool, 0, &mut first, flags)
+                .vk("vkGetQueryPoolResults")?;
+            device
+                .get_query_pool_results(self.pool, last_index, &mut last, flags)
+                .vk("vkGetQueryPoolResults")?;
+        }
+        let delta =
+            (last[0] & self.valid_mask).wrapping_sub(first[0] & self.valid_mask) & self.valid_mask;
+        Ok(delta as f64 * self.period_ns / 1e6)
+    }
+}
+
 impl Drop for GpuTimer {
     fn drop(&mut self) {
         // SAFETY: the owner guarantees no pending submission uses the pool.

@@ -30,12 +30,19 @@ impl Blend {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
         use BindingKind::{StorageBuffer as B, StorageImage as I};
-        let pipeline = ComputePipeline::from_embedded(ctx, "blend", &[], &[B, B, B, B, I, I], 0)?;
+        let pipeline =
+            ComputePipeline::from_embedded(ctx, "blend", &[], &[B, B, B, B, I, I], 0, 256)?;
         Ok(Blend { pipeline })
     }
 
     /// Records one workgroup per tile (the tile grid is at most 1024x1024).
-    pub fn record(&self, ctx: &GpuContext, cmd: vk::CommandBuffer, b: &BlendBindings, tiles: (u32, u32)) -> GpuResult<()> {
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        b: &BlendBindings,
+        tiles: (u32, u32),
+    ) -> GpuResult<()> {
         self.pipeline.dispatch_resources(
             ctx,
             cmd,

@@ -34,18 +34,36 @@ pub struct KeysBindings<'a> {
 impl Keys {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
-        let pipeline = ComputePipeline::from_embedded(ctx, "keys", &[], &[BindingKind::StorageBuffer; 7], 0)?;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "keys",
+            &[],
+            &[BindingKind::StorageBuffer; 7],
+            0,
+            WORKGROUP,
+        )?;
         Ok(Keys { pipeline })
     }
 
     /// Records the dispatch for `n` Gaussians (at least one workgroup, so the counters
     /// are always written).
-    pub fn record(&self, ctx: &GpuContext, cmd: vk::CommandBuffer, b: &KeysBindings, n: u32) -> GpuResult<()> {
-        let groups = dispatch_grid(n.div_ceil(WORKGROUP).max(1), ctx.info().max_workgroup_count[0]);
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        b: &KeysBindings,
+        n: u32,
+    ) -> GpuResult<()> {
+        let groups = dispatch_grid(
+            n.div_ceil(WORKGROUP).max(1),
+            ctx.info().max_workgroup_count[0],
+        );
         self.pipeline.dispatch(
             ctx,
             cmd,
-            &[b.params, b.splats, b.rects, b.offsets, b.keys, b.values, b.counters],
+            &[
+                b.params, b.splats, b.rects, b.offsets, b.keys, b.values, b.counters,
+            ],
             &[],
             groups,
         )

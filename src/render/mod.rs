@@ -19,8 +19,8 @@ use crate::cpu::RenderOptions;
 use crate::frame::Frame;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
-    BufferSlice, Count, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
-    MemoryKind, RadixSort, Scan,
+    Count, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer, MemoryKind, RadixSort,
+    Scan,
 };
 use crate::scene::ActivatedScene;
 use ash::vk;
@@ -145,7 +145,13 @@ struct FrameBuffers {
 }
 
 impl FrameBuffers {
-    fn new(ctx: &GpuContext, gaussians: u32, width: u32, height: u32, capacity: u32) -> GpuResult<Self> {
+    fn new(
+        ctx: &GpuContext,
+        gaussians: u32,
+        width: u32,
+        height: u32,
+        capacity: u32,
+    ) -> GpuResult<Self> {
         let n = u64::from(gaussians.max(1));
         let tiles = u64::from(width.div_ceil(16)) * u64::from(height.div_ceil(16));
         let pixels = u64::from(width) * u64::from(height);
@@ -165,9 +171,20 @@ impl FrameBuffers {
             values: dev("values", u64::from(capacity) * 4)?,
             sort_scratch: dev("sort scratch", RadixSort::scratch_size(capacity))?,
             ranges: dev("tile ranges", tiles * 8)?,
-            color: GpuImage::new(ctx, "color+alpha image", width, height, vk::Format::R32G32B32A32_SFLOAT)?,
+            color: GpuImage::new(
+                ctx,
+                "color+alpha image",
+                width,
+                height,
+                vk::Format::R32G32B32A32_SFLOAT,
+            )?,
             depth: GpuImage::new(ctx, "depth image", width, height, vk::Format::R32_SFLOAT)?,
-            readback: GpuBuffer::new(ctx, "frame readback", pixels * 20 + 32, MemoryKind::Readback)?,
+            readback: GpuBuffer::new(
+                ctx,
+                "frame readback",
+                pixels * 20 + 32,
+                MemoryKind::Readback,
+            )?,
         })
     }
 
@@ -241,7 +258,10 @@ impl GpuRenderer {
     /// Uploads activated Gaussians.
     pub fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
         let count = u32::try_from(scene.len()).map_err(|_| {
-            GpuError::InvalidArgument(format!("{} Gaussians exceed the 2^32 limit of one upload", scene.len()))
+            GpuError::InvalidArgument(format!(
+                "{} Gaussians exceed the 2^32 limit of one upload",
+                scene.len()
+            ))
         })?;
         let records: Vec<GpuGaussian> = (0..scene.len())
             .map(|i| {
@@ -254,9 +274,19 @@ impl GpuRenderer {
                 }
             })
             .collect();
-        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", (records.len() * 48) as u64, MemoryKind::Device)?;
+        let gaussians = GpuBuffer::new(
+            &self.ctx,
+            "gaussians",
+            (records.len() * 48) as u64,
+            MemoryKind::Device,
+        )?;
         gaussians.upload(&self.ctx, &records)?;
-        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", (scene.sh.len() * 4) as u64, MemoryKind::Device)?;
+        let sh = GpuBuffer::new(
+            &self.ctx,
+            "sh coefficients",
+            (scene.sh.len() * 4) as u64,
+            MemoryKind::Device,
+        )?;
         sh.upload(&self.ctx, &scene.sh)?;
         Ok(GpuScene {
             gaussians,
@@ -283,7 +313,12 @@ impl GpuRenderer {
     }
 
     /// Renders one frame.
-    pub fn render(&mut self, scene: &GpuScene, cam: &Camera, opts: &RenderOptions) -> GpuResult<Frame> {
+    pub fn render(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<Frame> {
         self.render_inner(scene, cam, opts, false).map(|(f, _)| f)
     }
 
@@ -306,13 +341,18 @@ impl GpuRenderer {
 
     fn ensure_frame(&mut self, scene: &GpuScene, cam: &Camera, capacity: u32) -> GpuResult<()> {
         let fits = self.frame.as_ref().is_some_and(|f| {
-            f.gaussians >= scene.count && f.width == cam.width && f.height == cam.height && f.capacity >= capacity
+            f.gaussians >= scene.count
+                && f.width == cam.width
+                && f.height == cam.height
+                && f.capacity >= capacity
         });
         if !fits {
             // Free the old buffers first so peak memory is not doubled.
             self.frame = None;
             let gaussians = self.frame_gaussians(scene);
-            self.frame = Some(FrameBuffers::new(&self.ctx, gaussians, cam.width, cam.height, capacity)?);
+            self.frame = Some(FrameBuffers::new(
+                &self.ctx, gaussians, cam.width, cam.height, capacity,
+            )?);
         }
         Ok(())
     }
@@ -333,7 +373,9 @@ impl GpuRenderer {
         let initial = self
             .frame
             .as_ref()
-            .map_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)), |f| f.capacity)
+            .map_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)), |f| {
+                f.capacity
+            })
             .min(self.max_capacity());
         self.ensure_frame(scene, cam, initial)?;
         let mut regrows = 0;
@@ -373,7 +415,12 @@ impl GpuRenderer {
         Ok((frame, inter))
     }
 
-    fn record_and_submit(&mut self, scene: &GpuScene, cam: &Camera, opts: &RenderOptions) -> GpuResult<()> {
+    fn record_and_submit(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<()> {
         let Self {
             preprocess,
             scan,
@@ -400,13 +447,17 @@ impl GpuRenderer {
             cam_pos: [pos.x, pos.y, pos.z, 0.0],
             focal: [cam.fx, cam.fy, cam.cx, cam.cy],
             tan_fov: [cam.tan_half_fov_x(), cam.tan_half_fov_y(), 0.0, 0.0],
-            background: [opts.background[0], opts.background[1], opts.background[2], 0.0],
+            background: [
+                opts.background[0],
+                opts.background[1],
+                opts.background[2],
+                0.0,
+            ],
             image: [cam.width, cam.height, tiles_x, tiles_y],
             counts: [scene.count, scene.sh_degree, scene.sh_coeffs, f.capacity],
         };
         let n = scene.count;
         let bits = key_bits(tiles_x * tiles_y);
-        let whole = |b: &GpuBuffer| -> BufferSlice { b.whole() };
         ctx.submit_and_wait("frame", |cmd| {
             let device = ctx.device();
             timer.reset(ctx, cmd);
@@ -426,13 +477,13 @@ impl GpuRenderer {
                     ctx,
                     cmd,
                     &preprocess::PreprocessBindings {
-                        params: whole(&f.params),
-                        gaussians: whole(&scene.gaussians),
-                        sh: whole(&scene.sh),
-                        splats: whole(&f.splats),
-                        rects: whole(&f.rects),
-                        tiles_touched: whole(&f.offsets),
-                        counters: whole(&f.counters),
+                        params: f.params.whole(),
+                        gaussians: scene.gaussians.whole(),
+                        sh: scene.sh.whole(),
+                        splats: f.splats.whole(),
+                        rects: f.rects.whole(),
+                        tiles_touched: f.offsets.whole(),
+                        counters: f.counters.whole(),
                     },
                     n,
                 )
@@ -447,7 +498,7 @@ impl GpuRenderer {
                     f.offsets.slice(0, u64::from(n) * 4),
                     f.offsets.slice(0, u64::from(n) * 4),
                     (&f.counters, types::COUNTER_SCAN_TOTAL),
-                    whole(&f.scan_scratch),
+                    f.scan_scratch.whole(),
                     n,
                 )
             })?;
@@ -459,13 +510,13 @@ impl GpuRenderer {
                     ctx,
                     cmd,
                     &keys::KeysBindings {
-                        params: whole(&f.params),
-                        splats: whole(&f.splats),
-                        rects: whole(&f.rects),
-                        offsets: whole(&f.offsets),
-                        keys: whole(&f.keys),
-                        values: whole(&f.values),
-                        counters: whole(&f.counters),
+                        params: f.params.whole(),
+                        splats: f.splats.whole(),
+                        rects: f.rects.whole(),
+                        offsets: f.offsets.whole(),
+                        keys: f.keys.whole(),
+                        values: f.values.whole(),
+                        counters: f.counters.whole(),
                     },
                     n,
                 )
@@ -487,15 +538,20 @@ impl GpuRenderer {
                 )
             })?;
             // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
-            barrier_uses(ctx, cmd, &[Access::ComputeWrite], &[Access::ComputeRead, Access::IndirectRead]);
+            barrier_uses(
+                ctx,
+                cmd,
+                &[Access::ComputeWrite],
+                &[Access::ComputeRead, Access::IndirectRead],
+            );
 
             timer.stage(ctx, cmd, "ranges", |cmd| {
                 ranges.record(
                     ctx,
                     cmd,
-                    whole(&f.keys),
-                    whole(&f.ranges),
-                    whole(&f.counters),
+                    f.keys.whole(),
+                    f.ranges.whole(),
+                    f.counters.whole(),
                     f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
                 )
             })?;
@@ -507,17 +563,19 @@ impl GpuRenderer {
                     ctx,
                     cmd,
                     &blend::BlendBindings {
-                        params: whole(&f.params),
-                        splats: whole(&f.splats),
-                        values: whole(&f.values),
-                        ranges: whole(&f.ranges),
+                        params: f.params.whole(),
+                        splats: f.splats.whole(),
+                        values: f.values.whole(),
+                        ranges: f.ranges.whole(),
                         color: &f.color,
                         depth: &f.depth,
                     },
                     (tiles_x, tiles_y),
                 )
             })?;
-            // Images and counters -> copies.
+            // Images -> copy sources; counters (written by compute) -> copy.
+            f.color.transition_for_copy(ctx, cmd);
+            f.depth.transition_for_copy(ctx, cmd);
             barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
 
             timer.stage(ctx, cmd, "readback", |cmd| {
@@ -529,7 +587,9 @@ impl GpuRenderer {
                     .dst_offset(counters_off)
                     .size(std::mem::size_of::<Counters>() as u64)];
                 // SAFETY: both buffers are alive and the region is inside them.
-                unsafe { device.cmd_copy_buffer(cmd, f.counters.handle(), f.readback.handle(), &region) };
+                unsafe {
+                    device.cmd_copy_buffer(cmd, f.counters.handle(), f.readback.handle(), &region)
+                };
                 Ok(())
             })?;
             barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
@@ -538,10 +598,15 @@ impl GpuRenderer {
     }
 
     fn read_counters(&self) -> GpuResult<Counters> {
-        let f = self.frame.as_ref().ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let f = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
         let (_, _, off) = f.readback_offsets();
         let bytes = f.readback.mapped()?;
-        Ok(bytemuck::pod_read_unaligned(&bytes[off as usize..off as usize + 32]))
+        Ok(bytemuck::pod_read_unaligned(
+            &bytes[off as usize..off as usize + 32],
+        ))
     }
 
     fn read_timings(&self) -> GpuResult<StageTimings> {
@@ -565,12 +630,17 @@ impl GpuRenderer {
     }
 
     fn read_frame(&self, cam: &Camera) -> GpuResult<Frame> {
-        let f = self.frame.as_ref().ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let f = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
         let bytes = f.readback.mapped()?;
         let pixels = cam.width as usize * cam.height as usize;
         let (color_off, depth_off, _) = f.readback_offsets();
-        let rgba: &[[f32; 4]] = bytemuck::cast_slice(&bytes[color_off as usize..color_off as usize + pixels * 16]);
-        let depth: &[f32] = bytemuck::cast_slice(&bytes[depth_off as usize..depth_off as usize + pixels * 4]);
+        let rgba: &[[f32; 4]] =
+            bytemuck::cast_slice(&bytes[color_off as usize..color_off as usize + pixels * 16]);
+        let depth: &[f32] =
+            bytemuck::cast_slice(&bytes[depth_off as usize..depth_off as usize + pixels * 4]);
         Ok(Frame {
             width: cam.width,
             height: cam.height,
@@ -581,7 +651,10 @@ impl GpuRenderer {
     }
 
     fn read_intermediates(&self, scene: &GpuScene, cam: &Camera) -> GpuResult<Intermediates> {
-        let f = self.frame.as_ref().ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let f = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
         let ctx = &self.ctx;
         let n = scene.count as usize;
         let counters = self.read_counters()?;

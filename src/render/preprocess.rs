@@ -33,17 +33,38 @@ pub struct PreprocessBindings<'a> {
 impl Preprocess {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
-        let pipeline = ComputePipeline::from_embedded(ctx, "preprocess", &[], &[BindingKind::StorageBuffer; 7], 0)?;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "preprocess",
+            &[],
+            &[BindingKind::StorageBuffer; 7],
+            0,
+            WORKGROUP,
+        )?;
         Ok(Preprocess { pipeline })
     }
 
     /// Records the dispatch for `n` Gaussians.
-    pub fn record(&self, ctx: &GpuContext, cmd: vk::CommandBuffer, b: &PreprocessBindings, n: u32) -> GpuResult<()> {
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        b: &PreprocessBindings,
+        n: u32,
+    ) -> GpuResult<()> {
         let groups = dispatch_grid(n.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
         self.pipeline.dispatch(
             ctx,
             cmd,
-            &[b.params, b.gaussians, b.sh, b.splats, b.rects, b.tiles_touched, b.counters],
+            &[
+                b.params,
+                b.gaussians,
+                b.sh,
+                b.splats,
+                b.rects,
+                b.tiles_touched,
+                b.counters,
+            ],
             &[],
             groups,
         )

@@ -17,7 +17,14 @@ pub struct Ranges {
 impl Ranges {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
-        let pipeline = ComputePipeline::from_embedded(ctx, "ranges", &[], &[BindingKind::StorageBuffer; 3], 0)?;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "ranges",
+            &[],
+            &[BindingKind::StorageBuffer; 3],
+            0,
+            WORKGROUP,
+        )?;
         Ok(Ranges { pipeline })
     }
 

@@ -121,7 +121,10 @@ mod tests {
         assert_eq!(offset_of!(Counters, sort_count) as u64, COUNTER_SORT_COUNT);
         assert_eq!(offset_of!(Counters, touched_lo), 8);
         assert_eq!(offset_of!(Counters, touched_hi), 12);
-        assert_eq!(offset_of!(Counters, ranges_groups) as u64, COUNTER_RANGES_GROUPS);
+        assert_eq!(
+            offset_of!(Counters, ranges_groups) as u64,
+            COUNTER_RANGES_GROUPS
+        );
         assert_eq!(offset_of!(Counters, visible), 28);
     }
 
