@@ -1,11 +1,19 @@
 #version 460
-// Blend: one 16x16 workgroup per tile. The tile's sorted Gaussians are fetched into shared
-// memory in batches of 256 and composited front to back with the reference rules; the
-// workgroup stops as soon as every pixel of the tile is finished.
+// Blend: one workgroup per 16x16 tile, compositing the tile's sorted Gaussians front to back
+// with the reference rules. Two variants of the same arithmetic, chosen per device:
+//  - STRIP == 1 (GPUs): one invocation per pixel; Gaussians are fetched into shared memory
+//    in batches of 256, and the workgroup stops once every pixel of the tile is finished.
+//  - STRIP > 1 (CPU devices such as lavapipe, where every loop-indexed memory load is a
+//    per-lane scalar loop): one invocation per STRIP pixels of a row, reading each Gaussian
+//    once for all of them; an invocation stops once all its pixels are finished.
+#ifndef STRIP
+#define STRIP 1
+#endif
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 16, local_size_y = 16) in;
+layout(local_size_x = 16 / STRIP, local_size_y = 16) in;
 
 layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
 layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
@@ -14,6 +22,34 @@ layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
 layout(binding = 4, rgba32f) uniform writeonly image2D out_color;  // rgb + T * background, alpha = 1 - T
 layout(binding = 5, r32f) uniform writeonly image2D out_depth;     // alpha-normalised depth
 
+// Composites one Gaussian into one pixel's state (the reference's per-pixel rule).
+void composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
+               inout float T, inout vec3 C, inout float D, inout bool done) {
+    vec2 d = mean_opacity_depth.xy - pixf;
+    float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+    float alpha = min(ALPHA_MAX, mean_opacity_depth.z * exp(power));
+    if (power <= 0.0 && alpha >= ALPHA_MIN) {
+        float test_t = T * (1.0 - alpha);
+        if (test_t < T_MIN) {
+            done = true;
+        } else {
+            float w = alpha * T;
+            C += color * w;
+            D += mean_opacity_depth.w * w;
+            T = test_t;
+        }
+    }
+}
+
+void write_pixel(uvec2 pix, float T, vec3 C, float D) {
+    if (pix.x < params.image.x && pix.y < params.image.y) {
+        float a = 1.0 - T;
+        imageStore(out_color, ivec2(pix), vec4(C + T * params.background.rgb, a));
+        imageStore(out_depth, ivec2(pix), vec4(a > 0.0 ? D / a : 0.0));
+    }
+}
+
+#if STRIP == 1
 shared vec4 s_mean_opacity[TILE_PIXELS];  // mean2d.xy, opacity, depth
 shared vec4 s_conic[TILE_PIXELS];         // A, B, C
 shared vec4 s_color[TILE_PIXELS];
@@ -48,28 +84,42 @@ void main() {
         barrier();
         uint count = min(TILE_PIXELS, n - batch);
         for (uint j = 0u; !done && j < count; j++) {
-            vec4 mo = s_mean_opacity[j];
-            vec3 con = s_conic[j].xyz;
-            vec2 d = mo.xy - pixf;
-            float power = -0.5 * (con.x * d.x * d.x + con.z * d.y * d.y) - con.y * d.x * d.y;
-            if (power > 0.0) continue;
-            float alpha = min(ALPHA_MAX, mo.z * exp(power));
-            if (alpha < ALPHA_MIN) continue;
-            float test_t = T * (1.0 - alpha);
-            if (test_t < T_MIN) {
-                done = true;
-                break;
-            }
-            float w = alpha * T;
-            C += s_color[j].rgb * w;
-            D += mo.w * w;
-            T = test_t;
+            composite(s_mean_opacity[j], s_conic[j].xyz, s_color[j].rgb, pixf, T, C, D, done);
         }
         barrier();
     }
-    if (inside) {
-        float a = 1.0 - T;
-        imageStore(out_color, ivec2(pix), vec4(C + T * params.background.rgb, a));
-        imageStore(out_depth, ivec2(pix), vec4(a > 0.0 ? D / a : 0.0));
+    write_pixel(pix, T, C, D);
+}
+#else
+void main() {
+    uvec2 tile = gl_WorkGroupID.xy;
+    uint tile_id = tile.y * params.image.z + tile.x;
+    uvec2 pix0 = tile * TILE_SIZE + uvec2(gl_LocalInvocationID.x * STRIP, gl_LocalInvocationID.y);
+    float T[STRIP];
+    vec3 C[STRIP];
+    float D[STRIP];
+    bool done[STRIP];
+    [[unroll]] for (uint p = 0u; p < STRIP; p++) {
+        T[p] = 1.0;
+        C[p] = vec3(0.0);
+        D[p] = 0.0;
+        done[p] = pix0.x + p >= params.image.x || pix0.y >= params.image.y;
+    }
+    uvec2 range = ranges[tile_id];
+    for (uint k = range.x; k < range.y; k++) {
+        bool all_done = true;
+        [[unroll]] for (uint p = 0u; p < STRIP; p++) all_done = all_done && done[p];
+        if (all_done) break;
+        Splat s = splats[values[k]];
+        vec4 mo = vec4(s.mean_depth_opacity.xy, s.mean_depth_opacity.w, s.mean_depth_opacity.z);
+        [[unroll]] for (uint p = 0u; p < STRIP; p++) {
+            if (!done[p]) {
+                composite(mo, s.conic_radius.xyz, s.color.rgb, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
+            }
+        }
+    }
+    [[unroll]] for (uint p = 0u; p < STRIP; p++) {
+        write_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p]);
     }
 }
+#endif

@@ -37,16 +37,26 @@ void main() {
     uvec2 rmin = unpack_tile(rect.x);
     uvec2 rmax = unpack_tile(rect.y);
     if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
-    uint depth_bits = floatBitsToUint(splats[i].mean_depth_opacity.z);
+    Splat s = splats[i];
+    uint depth_bits = floatBitsToUint(s.mean_depth_opacity.z);
+    float bound = alpha_bound(s.mean_depth_opacity.w);
     uint tiles_x = params.image.z;
     uint off = offsets[i];
+    // This Gaussian's slots end where the next one's begin (or at the scan total).
+    uint end = i + 1u < params.counts.x ? offsets[i + 1u] : counters.scan_total;
     for (uint y = rmin.y; y < rmax.y; y++) {
         for (uint x = rmin.x; x < rmax.x; x++) {
-            if (off < capacity) {
+            // The same test preprocess counted with (tile_receives in splat_common.glsl).
+            if (!tile_receives(s.mean_depth_opacity.xy, s.conic_radius.xyz, bound, uvec2(x, y))) continue;
+            if (off < min(end, capacity)) {
                 keys[off] = uvec2(depth_bits, y * tiles_x + x);
                 values[off] = i;
             }
             off++;
         }
+    }
+    for (; off < min(end, capacity); off++) {
+        keys[off] = uvec2(0xFFFFFFFFu, SENTINEL_TILE);
+        values[off] = i;
     }
 }

@@ -120,7 +120,13 @@ void main() {
                                    clamp_tile((mean2d.y - radius) / 16.0, gy));
                 uvec2 rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
                                    clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
-                touched = (rmax.x - rmin.x) * (rmax.y - rmin.y);
+                // Count the tiles of the reference rectangle that receive anything.
+                float bound = alpha_bound(g.pos_opacity.w);
+                for (uint ty = rmin.y; ty < rmax.y; ty++) {
+                    for (uint tx = rmin.x; tx < rmax.x; tx++) {
+                        touched += tile_receives(mean2d, conic, bound, uvec2(tx, ty)) ? 1u : 0u;
+                    }
+                }
                 if (touched != 0u) {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);
                     uint stride = params.counts.z * 3u;

@@ -15,6 +15,7 @@ void main() {
     uint n = counters.sort_count;
     if (i >= n) return;
     uint tile = keys[i].y;
+    if (tile == SENTINEL_TILE) return;
     if (i == 0u || keys[i - 1u].y != tile) ranges[tile].x = i;
     if (i + 1u == n || keys[i + 1u].y != tile) ranges[tile].y = i + 1u;
 }

@@ -60,6 +60,41 @@ uvec2 unpack_tile(uint v) { return uvec2(v & 0xFFFFu, v >> 16u); }
 // Sort key of a (tile, Gaussian) pair, as uvec2(lo, hi): lo = float bits of the view depth
 // (depth > 0.2 so the bits order like the floats), hi = tile id = y * tiles_x + x.
 
+// Exact tile culling. A Gaussian adds to pixel d (offset from its centre) only when
+// opacity * exp(-q(d)/2) >= 1/255, q(d) = A dx^2 + 2 B dx dy + C dy^2, i.e. when
+// q(d) <= 2 ln(255 opacity). A tile of its reference rectangle where the minimum of q over
+// the tile's pixel square exceeds that bound receives nothing from it, so dropping the pair
+// changes no pixel; it only saves sorting and blending work. The small margin keeps the test
+// conservative against rounding in the per-pixel evaluation.
+float alpha_bound(float opacity) {
+    precise float b = 2.0 * log(255.0 * opacity) * 1.001 + 0.01;
+    return b;
+}
+
+// Key of a padding pair (never produced when the count and the emission agree): its tile id
+// is past every real tile, so it sorts last and the ranges stage ignores it.
+#define SENTINEL_TILE 0xFFFFFFFFu
+
+// Minimum over dy in [lo, hi] of A a^2 + 2 B a dy + C dy^2 (an edge at dx = a).
+// `precise` forbids contraction, so preprocess (which counts) and keys (which emits)
+// evaluate the test bit-identically.
+float edge_min(float a, float lo, float hi, float A, float B, float C) {
+    precise float dy = clamp(-B * a / C, lo, hi);
+    precise float q = A * a * a + 2.0 * B * a * dy + C * dy * dy;
+    return q;
+}
+
+bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 tile) {
+    // Pixel positions of the tile are tile * 16 + {0..15}; use the continuous square.
+    precise vec2 lo = vec2(tile * TILE_SIZE) - mean2d;
+    precise vec2 hi = lo + vec2(float(TILE_SIZE - 1u));
+    if (lo.x <= 0.0 && hi.x >= 0.0 && lo.y <= 0.0 && hi.y >= 0.0) return bound >= 0.0;
+    float A = conic.x, B = conic.y, C = conic.z;
+    float m = min(min(edge_min(lo.x, lo.y, hi.y, A, B, C), edge_min(hi.x, lo.y, hi.y, A, B, C)),
+                  min(edge_min(lo.y, lo.x, hi.x, C, B, A), edge_min(hi.y, lo.x, hi.x, C, B, A)));
+    return m <= bound;
+}
+
 // Linear workgroup id of a (possibly 2D) dispatch grid, see gpu::dispatch_grid.
 uint linear_group_id() {
     return gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;

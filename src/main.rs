@@ -5,7 +5,9 @@ use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use vksplat::camera::{self, Camera};
+use vksplat::gpu::{ContextOptions, GpuContext};
 use vksplat::output::{self, ImageFormat};
+use vksplat::render::GpuRenderer;
 use vksplat::scene::{self, Scene};
 
 #[derive(Parser)]
@@ -25,6 +27,37 @@ enum Command {
     Render(RenderArgs),
     /// Print a scene's size, bounds and parameter statistics.
     Info(SceneArg),
+    /// Render the same camera repeatedly and report per-stage GPU times.
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    scene: SceneArg,
+    /// INRIA cameras.json to take the camera from.
+    #[arg(long, value_name = "FILE")]
+    cameras: Option<PathBuf>,
+    /// Camera of --cameras: list index or img_name (default 0).
+    #[arg(long, value_name = "N|NAME", requires = "cameras")]
+    camera: Option<String>,
+    /// Output width in pixels.
+    #[arg(long)]
+    width: Option<u32>,
+    /// Output height in pixels.
+    #[arg(long)]
+    height: Option<u32>,
+    /// Measured frames.
+    #[arg(long, default_value_t = 10)]
+    frames: usize,
+    /// Discarded warm-up frames.
+    #[arg(long, default_value_t = 2)]
+    warmup: usize,
+    /// Benchmark the CPU reference renderer instead (wall clock).
+    #[arg(long)]
+    cpu: bool,
+    #[command(flatten)]
+    gpu: GpuArgs,
 }
 
 #[derive(Args)]
@@ -35,6 +68,21 @@ struct SceneArg {
     /// Use the built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
     #[arg(long, conflicts_with = "scene")]
     demo: bool,
+}
+
+#[derive(Args)]
+struct GpuArgs {
+    /// Vulkan device: index or part of its name (default: discrete, then integrated,
+    /// then CPU; also VKSPLAT_DEVICE).
+    #[arg(long, value_name = "N|NAME")]
+    device: Option<String>,
+    /// Enable the Khronos validation layer (also VKSPLAT_VALIDATE=1); any message it
+    /// prints makes the command fail.
+    #[arg(long)]
+    validate: bool,
+    /// Print the chosen device and memory use.
+    #[arg(short, long)]
+    verbose: bool,
 }
 
 #[derive(Args)]
@@ -62,9 +110,14 @@ struct RenderArgs {
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white").
     #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = parse_background)]
     background: [f32; 3],
-    /// Render with the CPU reference renderer.
+    /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     cpu: bool,
+    /// Print the GPU time of each pipeline stage (timestamp queries).
+    #[arg(long)]
+    timings: bool,
+    #[command(flatten)]
+    gpu: GpuArgs,
     /// Write 16-bit PNG instead of 8-bit.
     #[arg(long)]
     png16: bool,
@@ -135,11 +188,18 @@ fn render(args: &RenderArgs) -> Result<()> {
         background: args.background,
     };
     let start = std::time::Instant::now();
-    let frame = vksplat::cpu::render(&scene.activated(), &cam, &opts);
+    let (frame, how) = if args.cpu {
+        (
+            vksplat::cpu::render(&scene.activated(), &cam, &opts),
+            "on the CPU".to_string(),
+        )
+    } else {
+        render_gpu(args, &scene, &cam, &opts)?
+    };
     let elapsed = start.elapsed();
     output::write_frame(&frame, &args.output, format, args.overwrite)?;
     eprintln!(
-        "rendered {name} ({} Gaussians) from camera \"{}\" at {}x{} on the CPU in {:.1} ms -> {}",
+        "rendered {name} ({} Gaussians) from camera \"{}\" at {}x{} {how} in {:.1} ms -> {}",
         scene.len(),
         cam.name,
         cam.width,
@@ -148,6 +208,162 @@ fn render(args: &RenderArgs) -> Result<()> {
         args.output.display()
     );
     Ok(())
+}
+
+fn render_gpu(
+    args: &RenderArgs,
+    scene: &Scene,
+    cam: &Camera,
+    opts: &vksplat::cpu::RenderOptions,
+) -> Result<(vksplat::frame::Frame, String)> {
+    let ctx = GpuContext::new(&ContextOptions {
+        device: args.gpu.device.clone(),
+        validation: args.gpu.validate,
+    })?;
+    if args.gpu.verbose {
+        eprintln!("device: {}", ctx.info());
+    }
+    let validating = ctx.validation_enabled();
+    let mut renderer = GpuRenderer::new(ctx)?;
+    let gpu_scene = renderer.upload(&scene.activated())?;
+    let frame = renderer.render(&gpu_scene, cam, opts)?;
+    if args.timings {
+        let t = renderer.timings();
+        eprintln!("{:<12} {:>10}", "stage", "GPU ms");
+        for (stage, ms) in t.stages() {
+            eprintln!("{stage:<12} {ms:>10.3}");
+        }
+        eprintln!("{:<12} {:>10.3}", "frame", t.total);
+        let st = renderer.stats();
+        eprintln!(
+            "visible Gaussians {}, tile pairs {}, key bits {}",
+            st.visible, st.pairs, st.key_bits
+        );
+    }
+    if args.gpu.verbose {
+        eprintln!(
+            "device memory: scene {} bytes, per-frame buffers {} bytes",
+            gpu_scene.device_bytes(),
+            renderer.frame_device_bytes()
+        );
+    }
+    if validating {
+        let messages = renderer.ctx().validation_messages();
+        if !messages.is_empty() {
+            bail!(
+                "the Vulkan validation layer reported {} message(s) (printed above)",
+                messages.len()
+            );
+        }
+    }
+    let device = renderer.ctx().info().name.clone();
+    Ok((frame, format!("on {device}")))
+}
+
+fn bench(args: &BenchArgs) -> Result<()> {
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let (scene, name) = load_scene(&args.scene)?;
+    let cam = match &args.cameras {
+        Some(path) => {
+            let cams = camera::load_cameras_json(path)?;
+            camera::select_camera(&cams, args.camera.as_deref().unwrap_or("0"), path)?
+        }
+        None => camera::default_camera(&scene.positions, 1280, 720),
+    };
+    let cam = cam.resized(args.width, args.height, None)?;
+    cam.validate()?;
+    let opts = vksplat::cpu::RenderOptions::default();
+    let act = scene.activated();
+    println!(
+        "scene {name}: {} Gaussians, {}x{}",
+        scene.len(),
+        cam.width,
+        cam.height
+    );
+    let mut walls = Vec::new();
+    if args.cpu {
+        for i in 0..args.warmup + args.frames {
+            let t = std::time::Instant::now();
+            std::hint::black_box(vksplat::cpu::render(&act, &cam, &opts));
+            if i >= args.warmup {
+                walls.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+        println!(
+            "device: CPU reference ({} threads)",
+            rayon::current_num_threads()
+        );
+    } else {
+        let ctx = GpuContext::new(&ContextOptions {
+            device: args.gpu.device.clone(),
+            validation: args.gpu.validate,
+        })?;
+        println!("device: {}", ctx.info());
+        let mut renderer = GpuRenderer::new(ctx)?;
+        let gpu_scene = renderer.upload(&act)?;
+        let mut stages: Vec<Vec<f64>> = vec![Vec::new(); 8];
+        for i in 0..args.warmup + args.frames {
+            let t = std::time::Instant::now();
+            std::hint::black_box(renderer.render(&gpu_scene, &cam, &opts)?);
+            if i >= args.warmup {
+                walls.push(t.elapsed().as_secs_f64() * 1e3);
+                let tm = renderer.timings();
+                for (k, (_, ms)) in tm.stages().iter().enumerate() {
+                    stages[k].push(*ms);
+                }
+                stages[7].push(tm.total);
+            }
+        }
+        let names = [
+            "preprocess",
+            "scan",
+            "keys",
+            "sort",
+            "ranges",
+            "blend",
+            "readback",
+            "frame (GPU)",
+        ];
+        println!(
+            "{:<12} {:>9} {:>9} {:>9} {:>9}",
+            "stage", "min ms", "median", "p95", "max"
+        );
+        for (n, v) in names.iter().zip(&mut stages) {
+            let s = summary(v);
+            println!(
+                "{n:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}",
+                s[0], s[1], s[2], s[3]
+            );
+        }
+        let st = renderer.stats();
+        println!(
+            "visible Gaussians {}, tile pairs {}, key bits {}",
+            st.visible, st.pairs, st.key_bits
+        );
+        println!(
+            "device memory: scene {} B, per-frame {} B ({:.1} B per Gaussian)",
+            gpu_scene.device_bytes(),
+            renderer.frame_device_bytes(),
+            (gpu_scene.device_bytes() + renderer.frame_device_bytes()) as f64
+                / scene.len().max(1) as f64
+        );
+    }
+    let s = summary(&mut walls);
+    println!(
+        "{:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}",
+        "wall clock", s[0], s[1], s[2], s[3]
+    );
+    println!("frames/s (median wall clock) {:.2}", 1e3 / s[1]);
+    Ok(())
+}
+
+/// min, median, p95, max of `v` (sorted in place).
+fn summary(v: &mut [f64]) -> [f64; 4] {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    [v[0], at(0.5), at(0.95), v[v.len() - 1]]
 }
 
 fn fmt3(v: [f32; 3]) -> String {
@@ -199,6 +415,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Render(args) => render(args),
         Command::Info(arg) => info(arg),
+        Command::Bench(args) => bench(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

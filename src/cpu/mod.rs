@@ -195,6 +195,51 @@ pub fn preprocess(scene: &ActivatedScene, cam: &Camera, sh_degree: u32) -> Vec<P
         .collect()
 }
 
+/// Mirror of `tile_receives` in `glsl/splat_common.glsl`: whether any pixel of tile
+/// `tile` can get alpha >= 1/255 from a Gaussian with this centre, conic and opacity
+/// (with the GPU's small conservative margin). The GPU drops pairs for which this is false;
+/// they contribute nothing, so the image is unchanged. The reference renderer itself keeps
+/// every pair of the rectangle; tests use this to compare tile membership.
+pub fn tile_receives(mean2d: [f32; 2], conic: [f32; 3], opacity: f32, tile: [u32; 2]) -> bool {
+    let bound = 2.0 * (255.0 * opacity).ln() * 1.001 + 0.01;
+    let t = TILE_SIZE as f32;
+    let lo = [
+        tile[0] as f32 * t - mean2d[0],
+        tile[1] as f32 * t - mean2d[1],
+    ];
+    let hi = [lo[0] + t - 1.0, lo[1] + t - 1.0];
+    if lo[0] <= 0.0 && hi[0] >= 0.0 && lo[1] <= 0.0 && hi[1] >= 0.0 {
+        return bound >= 0.0;
+    }
+    let [a, b, c] = conic;
+    let edge = |e: f32, lo: f32, hi: f32, a: f32, b: f32, c: f32| {
+        let d = (-b * e / c).clamp(lo, hi);
+        a * e * e + 2.0 * b * e * d + c * d * d
+    };
+    let m = edge(lo[0], lo[1], hi[1], a, b, c)
+        .min(edge(hi[0], lo[1], hi[1], a, b, c))
+        .min(edge(lo[1], lo[0], hi[0], c, b, a))
+        .min(edge(hi[1], lo[0], hi[0], c, b, a));
+    m <= bound
+}
+
+/// Largest alpha (before the 0.99 clamp) Gaussian `g` reaches at any pixel of `tile`,
+/// evaluated pixel by pixel with the blend's formula.
+pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], width: u32, height: u32) -> f32 {
+    let mut best = 0.0f32;
+    for y in tile[1] * TILE_SIZE..((tile[1] + 1) * TILE_SIZE).min(height) {
+        for x in tile[0] * TILE_SIZE..((tile[0] + 1) * TILE_SIZE).min(width) {
+            let dx = g.mean2d[0] - x as f32;
+            let dy = g.mean2d[1] - y as f32;
+            let power = -0.5 * (g.conic[0] * dx * dx + g.conic[2] * dy * dy) - g.conic[1] * dx * dy;
+            if power <= 0.0 {
+                best = best.max(g.opacity * power.exp());
+            }
+        }
+    }
+    best
+}
+
 /// Sort key of a (tile, Gaussian) pair: tile id in the high 32 bits, the depth's float
 /// bits in the low 32 (depth > 0, so the bits order like the floats).
 pub fn tile_key(tile_id: u32, depth: f32) -> u64 {

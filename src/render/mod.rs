@@ -233,21 +233,32 @@ pub struct GpuRenderer {
 const MIN_CAPACITY: u32 = 1 << 16;
 
 impl GpuRenderer {
-    /// Builds every pipeline on `ctx`.
+    /// Builds every pipeline on `ctx`, with the blend variant suited to the device.
     pub fn new(ctx: GpuContext) -> GpuResult<Self> {
+        let strip = blend::default_strip(&ctx);
+        Self::with_blend_strip(ctx, strip)
+    }
+
+    /// Builds every pipeline with `strip` pixels per blend invocation (see [`blend::STRIPS`]).
+    pub fn with_blend_strip(ctx: GpuContext, strip: u32) -> GpuResult<Self> {
         Ok(GpuRenderer {
             preprocess: preprocess::Preprocess::new(&ctx)?,
             scan: Scan::new(&ctx)?,
             keys: keys::Keys::new(&ctx)?,
             sort: RadixSort::new(&ctx)?,
             ranges: ranges::Ranges::new(&ctx)?,
-            blend: blend::Blend::new(&ctx)?,
+            blend: blend::Blend::new(&ctx, strip)?,
             timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
             frame: None,
             timings: StageTimings::default(),
             stats: FrameStats::default(),
             ctx,
         })
+    }
+
+    /// Pixels per blend invocation in use.
+    pub fn blend_strip(&self) -> u32 {
+        self.blend.strip()
     }
 
     /// The device context.

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests: hand-built scenes and cameras.
 #![allow(dead_code)]
 
+pub mod gpu;
+
 use glam::{Mat3, Vec3};
 use std::path::PathBuf;
 use vksplat::camera::Camera;

@@ -1,0 +1,135 @@
+//! GPU test helpers: one renderer per test binary (pipelines compile once), validation on.
+#![allow(dead_code)]
+
+use std::sync::{Mutex, MutexGuard, OnceLock};
+use vksplat::camera::Camera;
+use vksplat::frame::Frame;
+use vksplat::gpu::{ContextOptions, GpuContext};
+use vksplat::render::GpuRenderer;
+
+/// The shared renderer (validation layer on; the blend variant for the device).
+pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
+    static R: OnceLock<Mutex<GpuRenderer>> = OnceLock::new();
+    R.get_or_init(|| Mutex::new(new_renderer(None)))
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+}
+
+/// A fresh renderer with validation on and, if given, a fixed blend strip.
+pub fn new_renderer(strip: Option<u32>) -> GpuRenderer {
+    let ctx = GpuContext::new(&ContextOptions {
+        validation: true,
+        ..Default::default()
+    })
+    .expect("a Vulkan device (lavapipe) with the validation layer");
+    match strip {
+        Some(s) => GpuRenderer::with_blend_strip(ctx, s),
+        None => GpuRenderer::new(ctx),
+    }
+    .expect("pipelines build")
+}
+
+/// Fails on any validation-layer message.
+pub fn assert_validation_clean(r: &GpuRenderer) {
+    let msgs = r.ctx().validation_messages();
+    assert!(msgs.is_empty(), "validation messages:\n{}", msgs.join("\n"));
+}
+
+/// Image comparison figures.
+#[derive(Debug)]
+pub struct Comparison {
+    /// PSNR of colour clamped to [0, 1].
+    pub psnr: f64,
+    /// Share of pixels whose 8-bit colour is within 1/255 in every channel.
+    pub within: f64,
+    /// PSNR of alpha.
+    pub alpha_psnr: f64,
+    /// Largest relative depth difference where both alphas exceed 0.5.
+    pub depth_rel: f64,
+}
+
+fn psnr(se: f64, n: usize) -> f64 {
+    let mse = se / n.max(1) as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (1.0 / mse).log10()
+    }
+}
+
+/// Compares a GPU frame with the CPU reference frame.
+pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
+    assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
+    let (mut se, mut within, mut ase, mut depth_rel) = (0.0f64, 0usize, 0.0f64, 0.0f64);
+    for i in 0..gpu.color.len() {
+        let mut ok = true;
+        for ch in 0..3 {
+            let (g, c) = (gpu.color[i][ch], cpu.color[i][ch]);
+            let d = g.clamp(0.0, 1.0) as f64 - c.clamp(0.0, 1.0) as f64;
+            se += d * d;
+            ok &= (vksplat::output::to_u8(g) as i32 - vksplat::output::to_u8(c) as i32).abs() <= 1;
+        }
+        within += ok as usize;
+        let da = (gpu.alpha[i] - cpu.alpha[i]) as f64;
+        ase += da * da;
+        if gpu.alpha[i] > 0.5 && cpu.alpha[i] > 0.5 {
+            let rel = ((gpu.depth[i] - cpu.depth[i]).abs() / cpu.depth[i].abs().max(1e-6)) as f64;
+            depth_rel = depth_rel.max(rel);
+        }
+    }
+    Comparison {
+        psnr: psnr(se, gpu.color.len() * 3),
+        within: within as f64 / gpu.color.len() as f64,
+        alpha_psnr: psnr(ase, gpu.alpha.len()),
+        depth_rel,
+    }
+}
+
+/// Writes `actual`, `expected` and `diff` PNGs for a failed golden comparison and returns
+/// where they went.
+pub fn dump_failure(name: &str, gpu: &Frame, cpu: &Frame) -> String {
+    let dir = std::env::temp_dir().join("vksplat-test-failures");
+    let _ = std::fs::create_dir_all(&dir);
+    let mut diff = cpu.clone();
+    for i in 0..diff.color.len() {
+        for ch in 0..3 {
+            diff.color[i][ch] = ((gpu.color[i][ch] - cpu.color[i][ch]).abs() * 10.0).min(1.0);
+        }
+    }
+    use vksplat::output::{write_frame, ImageFormat};
+    let _ = write_frame(
+        gpu,
+        &dir.join(format!("{name}.actual.png")),
+        ImageFormat::Png8,
+        true,
+    );
+    let _ = write_frame(
+        cpu,
+        &dir.join(format!("{name}.expected.png")),
+        ImageFormat::Png8,
+        true,
+    );
+    let _ = write_frame(
+        &diff,
+        &dir.join(format!("{name}.diff.png")),
+        ImageFormat::Png8,
+        true,
+    );
+    dir.display().to_string()
+}
+
+/// A camera `factor` of the way from the target to the orbit camera `cam` (close-ups
+/// for factor < 1), still looking at `target`.
+pub fn move_towards(cam: &Camera, target: glam::Vec3, factor: f32, name: &str) -> Camera {
+    let eye = target + (cam.position() - target) * factor;
+    let vfov = 2.0 * (cam.height as f32 / (2.0 * cam.fy)).atan();
+    Camera::look_at(
+        name,
+        cam.width,
+        cam.height,
+        vfov,
+        eye,
+        target,
+        glam::Vec3::NEG_Y,
+    )
+}
