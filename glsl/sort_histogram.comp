@@ -16,8 +16,11 @@ layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
 layout(std430, binding = 1) readonly buffer Keys { uvec2 keys[]; };
 layout(std430, binding = 2) writeonly buffer Hist { uint hist[]; };
 
-// counts[digit * SORT_WG + thread]: each thread counts its own items in its own column.
-shared uint counts[SORT_RADIX * SORT_WG];
+#define SORT_KEYS keys
+#include "sort_common.glsl"
+
+// Per-subgroup digit totals: subgroup_counts[digit * SORT_MAX_SUBGROUPS + subgroup].
+shared uint subgroup_counts[SORT_RADIX * SORT_MAX_SUBGROUPS];
 
 void main() {
     uint block = linear_group_id();
@@ -25,23 +28,26 @@ void main() {
         return;
     }
     uint n = meta[META_N];
-    uint t = gl_LocalInvocationID.x;
-    for (uint d = 0; d < SORT_RADIX; ++d) {
-        counts[d * SORT_WG + t] = 0u;
-    }
     uint mask = (1u << pc.bits) - 1u;
-    uint begin = block * SORT_BLOCK + t * SORT_ITEMS;
-    uint end = min(begin + SORT_ITEMS, n);
-    for (uint i = begin; i < end; ++i) {
-        uint slot = key_digit(keys[i], pc.shift, mask) * SORT_WG + t;
-        counts[slot] += 1u;
+    uint begin = block * SORT_BLOCK + gl_LocalInvocationID.x * SORT_ITEMS;
+
+    // Each invocation counts its consecutive items in registers.
+    uint packed[SORT_PACKED_WORDS];
+    count_digits(begin, n, mask, packed);
+
+    for (uint d = 0; d < SORT_RADIX; ++d) {
+        uint total = subgroupAdd(unpack_count(packed, d));
+        if (subgroupElect()) {
+            subgroup_counts[d * SORT_MAX_SUBGROUPS + gl_SubgroupID] = total;
+        }
     }
     barrier();
-    for (uint d = t; d < SORT_RADIX; d += SORT_WG) {
+    uint t = gl_LocalInvocationID.x;
+    if (t < SORT_RADIX) {
         uint sum = 0;
-        for (uint j = 0; j < SORT_WG; ++j) {
-            sum += counts[d * SORT_WG + j];
+        for (uint s = 0; s < gl_NumSubgroups; ++s) {
+            sum += subgroup_counts[t * SORT_MAX_SUBGROUPS + s];
         }
-        hist[d * pc.hist_stride + block] = sum;
+        hist[t * pc.hist_stride + block] = sum;
     }
 }

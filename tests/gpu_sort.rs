@@ -370,12 +370,10 @@ fn radix_sort_other_configs() {
     let mut rng = Rng(3);
     for config in [
         SortConfig {
-            radix_bits: 8,
             workgroup_size: 16,
-            items_per_thread: 64,
+            items_per_thread: 255,
         },
         SortConfig {
-            radix_bits: 4,
             workgroup_size: 64,
             items_per_thread: 7,
         },
@@ -405,7 +403,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Timing of the 2^20-pair sort (44 key bits) and the 2^20-element scan.
 /// `cargo test --test gpu_sort -- --ignored --nocapture bench`;
-/// `VKSPLAT_SORT_CONFIG=bits,wg,items` overrides the sort tuning.
+/// `VKSPLAT_SORT_CONFIG=workgroup_size,items` overrides the sort tuning.
 #[test]
 #[ignore]
 fn bench_sort_and_scan_1m() {
@@ -413,10 +411,9 @@ fn bench_sort_and_scan_1m() {
     eprintln!("device: {}", ctx.info());
     let config = std::env::var("VKSPLAT_SORT_CONFIG").ok().and_then(|s| {
         let v: Vec<u32> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
-        (v.len() == 3).then(|| SortConfig {
-            radix_bits: v[0],
-            workgroup_size: v[1],
-            items_per_thread: v[2],
+        (v.len() == 2).then(|| SortConfig {
+            workgroup_size: v[0],
+            items_per_thread: v[1],
         })
     });
     let sort = match config {
@@ -453,6 +450,34 @@ fn bench_sort_and_scan_1m() {
     )
     .expect("s");
     let mut timer = GpuTimer::new(&ctx, "bench timer", 4).expect("timer");
+    if std::env::var_os("VKSPLAT_SORT_PROFILE").is_some() {
+        let mut stage_timer = GpuTimer::new(&ctx, "profile timer", 64).expect("timer");
+        for _ in 0..3 {
+            key_buf.upload(&ctx, &keys).expect("reset keys");
+            ctx.submit_and_wait("profile", |cmd| {
+                stage_timer.reset(&ctx, cmd);
+                sort.record_timed(
+                    &ctx,
+                    cmd,
+                    &key_buf,
+                    &value_buf,
+                    &scratch,
+                    Count::Host(n),
+                    44,
+                    Some(&mut stage_timer),
+                )
+            })
+            .expect("profile run");
+        }
+        let mut totals: Vec<(String, f64)> = Vec::new();
+        for (name, ms) in stage_timer.read(&ctx).expect("timestamps") {
+            match totals.iter_mut().find(|(n, _)| *n == name) {
+                Some(entry) => entry.1 += ms,
+                None => totals.push((name, ms)),
+            }
+        }
+        eprintln!("per-stage totals over all passes: {totals:?}");
+    }
     let (mut sort_ms, mut scan_ms) = (Vec::new(), Vec::new());
     for iteration in 0..8 {
         key_buf.upload(&ctx, &keys).expect("reset keys");

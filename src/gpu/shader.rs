@@ -12,6 +12,10 @@ use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
 pub const SOURCES: &[(&str, &str)] = &[
     ("common.glsl", include_str!("../../glsl/common.glsl")),
     (
+        "sort_common.glsl",
+        include_str!("../../glsl/sort_common.glsl"),
+    ),
+    (
         "scan_reduce.comp",
         include_str!("../../glsl/scan_reduce.comp"),
     ),

@@ -20,22 +20,28 @@ use ash::vk;
 use super::scan::{Scan, SCRATCH_ALIGN};
 use super::shader::BindingKind;
 use super::sync::{barrier, barrier_uses, Access};
-use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult};
+use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer};
+
+/// Bits per radix pass (digit width). Fixed: the kernels count digits in
+/// register-packed 8-bit counters, four digits to a word.
+pub const RADIX_BITS: u32 = 4;
+/// Digits per pass.
+pub const RADIX: u32 = 1 << RADIX_BITS;
+/// Smallest subgroup size the kernels support (per-subgroup shared arrays are sized
+/// for `workgroup_size / MIN_SUBGROUP_SIZE` subgroups).
+pub const MIN_SUBGROUP_SIZE: u32 = 4;
 
 /// Tunables of the sort kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SortConfig {
-    /// Bits per pass (digit width): 1..=8.
-    pub radix_bits: u32,
-    /// Invocations per workgroup (a multiple of every subgroup size, e.g. 128 or 256).
+    /// Invocations per workgroup (a multiple of the subgroup size, e.g. 64 or 256).
     pub workgroup_size: u32,
-    /// Consecutive elements per invocation.
+    /// Consecutive elements per invocation (1..=255: counters are 8 bits).
     pub items_per_thread: u32,
 }
 
-/// Default sort tuning (measured on lavapipe; see the module tests/bench).
+/// Default sort tuning (measured on lavapipe, see the bench test).
 pub const DEFAULT_SORT_CONFIG: SortConfig = SortConfig {
-    radix_bits: 4,
     workgroup_size: 256,
     items_per_thread: 16,
 };
@@ -111,7 +117,7 @@ impl ScratchLayout {
     fn new(config: &SortConfig, max_n: u32) -> Self {
         let block = config.workgroup_size * config.items_per_thread;
         let hist_stride = max_n.div_ceil(block).max(1);
-        let table_len = hist_stride * (1u32 << config.radix_bits);
+        let table_len = hist_stride * RADIX;
         let mut cursor = align_up(META_BYTES, SCRATCH_ALIGN);
         let mut take = |bytes: u64| {
             let range = (cursor, bytes);
@@ -157,29 +163,30 @@ impl RadixSort {
 
     /// Builds the sort with explicit tunables (for benchmarking).
     pub fn with_config(ctx: &GpuContext, config: SortConfig) -> GpuResult<Self> {
-        let radix = 1u32 << config.radix_bits;
-        let shared_bytes = (radix * config.workgroup_size + radix + config.workgroup_size) * 4;
-        if !(1..=8).contains(&config.radix_bits)
-            || config.workgroup_size == 0
-            || config.items_per_thread == 0
-            || config.workgroup_size > ctx.info().max_workgroup_invocations
-            || shared_bytes > ctx.info().max_shared_memory
-            || config.workgroup_size % radix != 0 && radix % config.workgroup_size != 0
+        let info = ctx.info();
+        let max_subgroups = config.workgroup_size.div_ceil(MIN_SUBGROUP_SIZE);
+        let shared_bytes = (RADIX * max_subgroups + config.workgroup_size) * 4;
+        if config.workgroup_size == 0
+            || !(1..=255).contains(&config.items_per_thread)
+            || config.workgroup_size > info.max_workgroup_invocations
+            || shared_bytes > info.max_shared_memory
+            || info.subgroup_size < MIN_SUBGROUP_SIZE
         {
             return Err(GpuError::InvalidArgument(format!(
-                "sort config {config:?} needs {shared_bytes} bytes of shared memory or \
-                 exceeds the device limits"
+                "sort config {config:?} (subgroup size {}, {shared_bytes} bytes of shared \
+                 memory) is outside what the kernels or the device support",
+                info.subgroup_size
             )));
         }
         let defines = vec![
-            ("SORT_RADIX_BITS", config.radix_bits.to_string()),
-            ("SORT_RADIX", format!("{radix}u")),
+            ("SORT_RADIX", RADIX.to_string()),
             ("SORT_WG", config.workgroup_size.to_string()),
             ("SORT_ITEMS", format!("{}u", config.items_per_thread)),
             (
                 "SORT_BLOCK",
                 format!("{}u", config.workgroup_size * config.items_per_thread),
             ),
+            ("SORT_MAX_SUBGROUPS", max_subgroups.to_string()),
             ("META_N", META_N.to_string()),
             ("META_BLOCKS", META_BLOCKS.to_string()),
             ("META_DISPATCH", META_DISPATCH.to_string()),
@@ -269,6 +276,30 @@ impl RadixSort {
         count: Count,
         key_bits: u32,
     ) -> GpuResult<()> {
+        self.record_timed(ctx, cmd, keys, values, scratch, count, key_bits, None)
+    }
+
+    /// [`RadixSort::record`] with every dispatch wrapped in its own timer stage
+    /// (`sort histogram`, `sort scan`, `sort scatter`, ... per pass), for profiling.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_timed(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        keys: &GpuBuffer,
+        values: &GpuBuffer,
+        scratch: &GpuBuffer,
+        count: Count,
+        key_bits: u32,
+        mut timer: Option<&mut GpuTimer>,
+    ) -> GpuResult<()> {
+        let mut stage =
+            |name: &str, body: &mut dyn FnMut(vk::CommandBuffer) -> GpuResult<()>| match timer
+                .as_deref_mut()
+            {
+                Some(t) => t.stage(ctx, cmd, name, body),
+                None => body(cmd),
+            };
         if key_bits > 64 {
             return Err(GpuError::InvalidArgument(format!(
                 "radix sort key_bits {key_bits} exceeds the 64-bit key"
@@ -364,12 +395,12 @@ impl RadixSort {
             &[Access::ComputeRead, Access::IndirectRead],
         );
 
-        let passes = key_bits.div_ceil(self.config.radix_bits);
+        let passes = key_bits.div_ceil(RADIX_BITS);
         for pass in 0..passes {
-            let shift = pass * self.config.radix_bits;
+            let shift = pass * RADIX_BITS;
             let push = SortPassPush {
                 shift,
-                bits: self.config.radix_bits.min(key_bits - shift),
+                bits: RADIX_BITS.min(key_bits - shift),
                 hist_stride: layout.hist_stride,
                 pad: 0,
             };
@@ -378,44 +409,52 @@ impl RadixSort {
             } else {
                 ((tmp_keys, tmp_values), (user_keys, user_values))
             };
-            self.histogram.dispatch_indirect(
-                ctx,
-                cmd,
-                &[meta, src.0, hist],
-                bytemuck::bytes_of(&push),
-                dispatch_args,
-            )?;
+            stage("sort histogram", &mut |cmd| {
+                self.histogram.dispatch_indirect(
+                    ctx,
+                    cmd,
+                    &[meta, src.0, hist],
+                    bytemuck::bytes_of(&push),
+                    dispatch_args,
+                )
+            })?;
             barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
-            self.scan.record(
-                ctx,
-                cmd,
-                hist,
-                offsets,
-                (scratch, layout.scan_total),
-                scan_scratch,
-                layout.hist_stride << self.config.radix_bits,
-            )?;
+            stage("sort scan", &mut |cmd| {
+                self.scan.record(
+                    ctx,
+                    cmd,
+                    hist,
+                    offsets,
+                    (scratch, layout.scan_total),
+                    scan_scratch,
+                    layout.hist_stride * RADIX,
+                )
+            })?;
             barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
-            self.scatter.dispatch_indirect(
-                ctx,
-                cmd,
-                &[meta, src.0, src.1, offsets, dst.0, dst.1],
-                bytemuck::bytes_of(&push),
-                dispatch_args,
-            )?;
+            stage("sort scatter", &mut |cmd| {
+                self.scatter.dispatch_indirect(
+                    ctx,
+                    cmd,
+                    &[meta, src.0, src.1, offsets, dst.0, dst.1],
+                    bytemuck::bytes_of(&push),
+                    dispatch_args,
+                )
+            })?;
             if pass + 1 < passes || passes % 2 == 1 {
                 // The scattered pairs are the next pass's (or the copy's) input.
                 barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
             }
         }
         if passes % 2 == 1 {
-            self.copy.dispatch_indirect(
-                ctx,
-                cmd,
-                &[meta, tmp_keys, tmp_values, user_keys, user_values],
-                &[],
-                dispatch_args,
-            )?;
+            stage("sort copy", &mut |cmd| {
+                self.copy.dispatch_indirect(
+                    ctx,
+                    cmd,
+                    &[meta, tmp_keys, tmp_values, user_keys, user_values],
+                    &[],
+                    dispatch_args,
+                )
+            })?;
         }
         Ok(())
     }
