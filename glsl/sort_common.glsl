@@ -1,36 +1,62 @@
 // Radix sort helpers shared by sort_histogram and sort_scatter. Include after the
-// push constants (`pc.shift`) and after defining SORT_KEYS as the key array's name.
+// push constants (`pc.shift`, `pc.bits`), the meta buffer and after defining SORT_KEYS
+// as the key array's name.
+//
+// Element layout inside a block of SORT_BLOCK = SORT_WG * SORT_ITEMS elements:
+// subgroup s owns the contiguous chunk of gl_SubgroupSize * SORT_ITEMS elements
+// starting at s * gl_SubgroupSize * SORT_ITEMS, processed as SORT_ITEMS rows of
+// gl_SubgroupSize consecutive elements (row k, lane l -> chunk + k * size + l). So
+// (subgroup, row, lane) order is input order, and loads are contiguous per row.
+// Everything is generic over gl_SubgroupSize (needs full subgroups, <= 128 lanes).
 #ifndef VKSPLAT_SORT_COMMON_GLSL
 #define VKSPLAT_SORT_COMMON_GLSL
 
-#if SORT_RADIX != 16
-#error "the register-packed digit counters assume 4-bit digits"
-#endif
+// Per-subgroup digit counters: subgroup_counts[subgroup * SORT_RADIX + digit].
+shared uint subgroup_counts[SORT_MAX_SUBGROUPS * SORT_RADIX];
 
-// SORT_RADIX 8-bit counters packed four to a word (so SORT_ITEMS must stay below 256).
-#define SORT_PACKED_WORDS (SORT_RADIX / 4)
-
-// Counts the digits of this invocation's SORT_ITEMS consecutive keys in registers,
-// using selects rather than dynamically indexed (shared or private) memory.
-void count_digits(uint begin, uint n, uint mask, out uint packed[SORT_PACKED_WORDS]) {
-    for (uint w = 0; w < SORT_PACKED_WORDS; ++w) {
-        packed[w] = 0u;
-    }
-    for (uint k = 0; k < SORT_ITEMS; ++k) {
-        uint i = begin + k;
-        if (i < n) {
-            uint digit = key_digit(SORT_KEYS[i], pc.shift, mask);
-            uint increment = 1u << ((digit & 3u) * 8u);
-            for (uint w = 0; w < SORT_PACKED_WORDS; ++w) {
-                packed[w] += (digit >> 2) == w ? increment : 0u;
-            }
-        }
-    }
+// Index of element (row) of this invocation's subgroup chunk in block `block`.
+uint sort_element_index(uint block, uint row) {
+    return block * SORT_BLOCK + (gl_SubgroupID * SORT_ITEMS + row) * gl_SubgroupSize
+        + gl_SubgroupInvocationID;
 }
 
-// The count of `digit` (a compile-time constant in unrolled loops).
-uint unpack_count(uint packed[SORT_PACKED_WORDS], uint digit) {
-    return (packed[digit >> 2] >> ((digit & 3u) * 8u)) & 0xFFu;
+// Ballot of the lanes whose valid digit equals ours ("multi-split" match), built from
+// one ballot per digit bit, so no dynamic indexing and no shared-memory atomics.
+uvec4 match_digit(uint digit, bool valid) {
+    uvec4 match = subgroupBallot(valid);
+    for (uint b = 0; b < pc.bits; ++b) {
+        bool bit = ((digit >> b) & 1u) != 0u;
+        uvec4 ballot = subgroupBallot(bit);
+        match &= bit ? ballot : ~ballot;
+    }
+    return match;
+}
+
+void clear_subgroup_counts() {
+    for (uint d = gl_SubgroupInvocationID; d < SORT_RADIX; d += gl_SubgroupSize) {
+        subgroup_counts[gl_SubgroupID * SORT_RADIX + d] = 0u;
+    }
+    subgroupMemoryBarrierShared();
+    subgroupBarrier();
+}
+
+// Counts one row's digits into this subgroup's counters; returns, for a valid lane,
+// its rank among equal digits of the subgroup's chunk so far (input order).
+uint count_row(uint digit, bool valid) {
+    uvec4 match = match_digit(digit, valid);
+    uint before_in_row = subgroupBallotExclusiveBitCount(match);
+    uint slot = gl_SubgroupID * SORT_RADIX + digit;
+    uint prior = valid ? subgroup_counts[slot] : 0u;
+    // Every lane has read its counter before the row's last lane of each digit
+    // advances it.
+    subgroupMemoryBarrierShared();
+    subgroupBarrier();
+    if (valid && subgroupBallotFindMSB(match) == gl_SubgroupInvocationID) {
+        subgroup_counts[slot] = prior + before_in_row + 1u;
+    }
+    subgroupMemoryBarrierShared();
+    subgroupBarrier();
+    return prior + before_in_row;
 }
 
 #endif

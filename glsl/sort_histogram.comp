@@ -19,9 +19,6 @@ layout(std430, binding = 2) writeonly buffer Hist { uint hist[]; };
 #define SORT_KEYS keys
 #include "sort_common.glsl"
 
-// Per-subgroup digit totals: subgroup_counts[digit * SORT_MAX_SUBGROUPS + subgroup].
-shared uint subgroup_counts[SORT_RADIX * SORT_MAX_SUBGROUPS];
-
 void main() {
     uint block = linear_group_id();
     if (block >= meta[META_BLOCKS]) {
@@ -29,25 +26,23 @@ void main() {
     }
     uint n = meta[META_N];
     uint mask = (1u << pc.bits) - 1u;
-    uint begin = block * SORT_BLOCK + gl_LocalInvocationID.x * SORT_ITEMS;
-
-    // Each invocation counts its consecutive items in registers.
-    uint packed[SORT_PACKED_WORDS];
-    count_digits(begin, n, mask, packed);
-
-    for (uint d = 0; d < SORT_RADIX; ++d) {
-        uint total = subgroupAdd(unpack_count(packed, d));
-        if (subgroupElect()) {
-            subgroup_counts[d * SORT_MAX_SUBGROUPS + gl_SubgroupID] = total;
+    clear_subgroup_counts();
+    for (uint row = 0; row < SORT_ITEMS; ++row) {
+        uint i = sort_element_index(block, row);
+        bool valid = i < n;
+        if (valid) {
+            // Order does not matter here, so shared atomics (cheaper than the
+            // ballot-based ranking the scatter needs) into per-subgroup counters.
+            uint digit = key_digit(keys[i], pc.shift, mask);
+            atomicAdd(subgroup_counts[gl_SubgroupID * SORT_RADIX + digit], 1u);
         }
     }
     barrier();
-    uint t = gl_LocalInvocationID.x;
-    if (t < SORT_RADIX) {
+    for (uint d = gl_LocalInvocationID.x; d < SORT_RADIX; d += SORT_WG) {
         uint sum = 0;
         for (uint s = 0; s < gl_NumSubgroups; ++s) {
-            sum += subgroup_counts[t * SORT_MAX_SUBGROUPS + s];
+            sum += subgroup_counts[s * SORT_RADIX + d];
         }
-        hist[t * pc.hist_stride + block] = sum;
+        hist[d * pc.hist_stride + block] = sum;
     }
 }

@@ -370,10 +370,12 @@ fn radix_sort_other_configs() {
     let mut rng = Rng(3);
     for config in [
         SortConfig {
-            workgroup_size: 16,
-            items_per_thread: 255,
+            radix_bits: 4,
+            workgroup_size: 256,
+            items_per_thread: 16,
         },
         SortConfig {
+            radix_bits: 5,
             workgroup_size: 64,
             items_per_thread: 7,
         },
@@ -403,7 +405,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Timing of the 2^20-pair sort (44 key bits) and the 2^20-element scan.
 /// `cargo test --test gpu_sort -- --ignored --nocapture bench`;
-/// `VKSPLAT_SORT_CONFIG=workgroup_size,items` overrides the sort tuning.
+/// `VKSPLAT_SORT_CONFIG=radix_bits,workgroup_size,items` overrides the sort tuning.
 #[test]
 #[ignore]
 fn bench_sort_and_scan_1m() {
@@ -411,9 +413,10 @@ fn bench_sort_and_scan_1m() {
     eprintln!("device: {}", ctx.info());
     let config = std::env::var("VKSPLAT_SORT_CONFIG").ok().and_then(|s| {
         let v: Vec<u32> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
-        (v.len() == 2).then(|| SortConfig {
-            workgroup_size: v[0],
-            items_per_thread: v[1],
+        (v.len() == 3).then(|| SortConfig {
+            radix_bits: v[0],
+            workgroup_size: v[1],
+            items_per_thread: v[2],
         })
     });
     let sort = match config {

@@ -37,6 +37,8 @@ pub struct DeviceInfo {
     pub api_version: String,
     /// Subgroup size.
     pub subgroup_size: u32,
+    /// Smallest subgroup size a compute shader may run with (subgroup size control).
+    pub min_subgroup_size: u32,
     /// maxComputeWorkGroupCount.
     pub max_workgroup_count: [u32; 3],
     /// maxComputeWorkGroupInvocations.
@@ -416,9 +418,11 @@ impl GpuContext {
         // Device properties and features.
         let mut props11 = vk::PhysicalDeviceVulkan11Properties::default();
         let mut props12 = vk::PhysicalDeviceVulkan12Properties::default();
+        let mut props13 = vk::PhysicalDeviceVulkan13Properties::default();
         let mut props2 = vk::PhysicalDeviceProperties2::default()
             .push_next(&mut props11)
-            .push_next(&mut props12);
+            .push_next(&mut props12)
+            .push_next(&mut props13);
         // SAFETY: valid handle, chain of valid structs.
         unsafe { instance.get_physical_device_properties2(physical_device, &mut props2) };
         let limits = props[index].limits;
@@ -433,6 +437,7 @@ impl GpuContext {
             ),
             api_version: version_string(props[index].api_version),
             subgroup_size: props11.subgroup_size,
+            min_subgroup_size: props13.min_subgroup_size.clamp(1, props11.subgroup_size.max(1)),
             max_workgroup_count: limits.max_compute_work_group_count,
             max_workgroup_invocations: limits.max_compute_work_group_invocations,
             max_shared_memory: limits.max_compute_shared_memory_size,
@@ -441,14 +446,16 @@ impl GpuContext {
             timestamp_period_ns: limits.timestamp_period,
             timestamp_valid_bits,
         };
-        let needed_ops = vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::ARITHMETIC;
+        let needed_ops = vk::SubgroupFeatureFlags::BASIC
+            | vk::SubgroupFeatureFlags::ARITHMETIC
+            | vk::SubgroupFeatureFlags::BALLOT;
         if !props11.subgroup_supported_operations.contains(needed_ops)
             || !props11
                 .subgroup_supported_stages
                 .contains(vk::ShaderStageFlags::COMPUTE)
         {
             return Err(GpuError::Missing(format!(
-                "{} lacks basic+arithmetic subgroup operations in compute shaders",
+                "{} lacks basic/arithmetic/ballot subgroup operations in compute shaders",
                 info.name
             )));
         }

@@ -1,7 +1,7 @@
 //! Stable LSD radix sort of (64-bit key, u32 value) pairs on the GPU.
 //!
 //! Keys are `uvec2 (lo, hi)` (8 bytes, no int64 needed); only the low `key_bits` bits
-//! take part, in `ceil(key_bits / RADIX_BITS)` passes. Each pass is reduce-then-scan
+//! take part, in `ceil(key_bits / radix_bits)` passes. Each pass is reduce-then-scan
 //! (no spinning on other workgroups, so it runs on any device and any subgroup size):
 //! 1. `sort_histogram`: per-block digit counts, written digit-major;
 //! 2. [`Scan`] of that table: the output offset of every (digit, block);
@@ -22,27 +22,21 @@ use super::shader::BindingKind;
 use super::sync::{barrier, barrier_uses, Access};
 use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer};
 
-/// Bits per radix pass (digit width). Fixed: the kernels count digits in
-/// register-packed 8-bit counters, four digits to a word.
-pub const RADIX_BITS: u32 = 4;
-/// Digits per pass.
-pub const RADIX: u32 = 1 << RADIX_BITS;
-/// Smallest subgroup size the kernels support (per-subgroup shared arrays are sized
-/// for `workgroup_size / MIN_SUBGROUP_SIZE` subgroups).
-pub const MIN_SUBGROUP_SIZE: u32 = 4;
-
 /// Tunables of the sort kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SortConfig {
-    /// Invocations per workgroup (a multiple of the subgroup size, e.g. 64 or 256).
+    /// Bits per pass (digit width), 1..=8.
+    pub radix_bits: u32,
+    /// Invocations per workgroup (a multiple of the subgroup size, e.g. 128).
     pub workgroup_size: u32,
-    /// Consecutive elements per invocation (1..=255: counters are 8 bits).
+    /// Rows of one subgroup's chunk: elements per invocation.
     pub items_per_thread: u32,
 }
 
 /// Default sort tuning (measured on lavapipe, see the bench test).
 pub const DEFAULT_SORT_CONFIG: SortConfig = SortConfig {
-    workgroup_size: 256,
+    radix_bits: 8,
+    workgroup_size: 128,
     items_per_thread: 16,
 };
 
@@ -117,7 +111,7 @@ impl ScratchLayout {
     fn new(config: &SortConfig, max_n: u32) -> Self {
         let block = config.workgroup_size * config.items_per_thread;
         let hist_stride = max_n.div_ceil(block).max(1);
-        let table_len = hist_stride * RADIX;
+        let table_len = hist_stride << config.radix_bits;
         let mut cursor = align_up(META_BYTES, SCRATCH_ALIGN);
         let mut take = |bytes: u64| {
             let range = (cursor, bytes);
@@ -164,13 +158,16 @@ impl RadixSort {
     /// Builds the sort with explicit tunables (for benchmarking).
     pub fn with_config(ctx: &GpuContext, config: SortConfig) -> GpuResult<Self> {
         let info = ctx.info();
-        let max_subgroups = config.workgroup_size.div_ceil(MIN_SUBGROUP_SIZE);
-        let shared_bytes = (RADIX * max_subgroups + config.workgroup_size) * 4;
-        if config.workgroup_size == 0
-            || !(1..=255).contains(&config.items_per_thread)
+        let radix = 1u32 << config.radix_bits.min(8);
+        // Per-subgroup counters are sized for the smallest subgroups the device may use.
+        let max_subgroups = config.workgroup_size.div_ceil(info.min_subgroup_size.max(1));
+        let shared_bytes = (radix * max_subgroups + config.workgroup_size) * 4;
+        if !(1..=8).contains(&config.radix_bits)
+            || config.workgroup_size == 0
+            || config.items_per_thread == 0
             || config.workgroup_size > info.max_workgroup_invocations
             || shared_bytes > info.max_shared_memory
-            || info.subgroup_size < MIN_SUBGROUP_SIZE
+            || info.subgroup_size > 128
         {
             return Err(GpuError::InvalidArgument(format!(
                 "sort config {config:?} (subgroup size {}, {shared_bytes} bytes of shared \
@@ -179,7 +176,7 @@ impl RadixSort {
             )));
         }
         let defines = vec![
-            ("SORT_RADIX", RADIX.to_string()),
+            ("SORT_RADIX", format!("{radix}u")),
             ("SORT_WG", config.workgroup_size.to_string()),
             ("SORT_ITEMS", format!("{}u", config.items_per_thread)),
             (
@@ -395,12 +392,12 @@ impl RadixSort {
             &[Access::ComputeRead, Access::IndirectRead],
         );
 
-        let passes = key_bits.div_ceil(RADIX_BITS);
+        let passes = key_bits.div_ceil(self.config.radix_bits);
         for pass in 0..passes {
-            let shift = pass * RADIX_BITS;
+            let shift = pass * self.config.radix_bits;
             let push = SortPassPush {
                 shift,
-                bits: RADIX_BITS.min(key_bits - shift),
+                bits: self.config.radix_bits.min(key_bits - shift),
                 hist_stride: layout.hist_stride,
                 pad: 0,
             };
@@ -427,7 +424,7 @@ impl RadixSort {
                     offsets,
                     (scratch, layout.scan_total),
                     scan_scratch,
-                    layout.hist_stride * RADIX,
+                    layout.hist_stride << self.config.radix_bits,
                 )
             })?;
             barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
