@@ -142,6 +142,11 @@ pub struct GpuContext {
     pub(crate) full_subgroups: bool,
 }
 
+/// Records and prints every WARNING/ERROR message of the validation layer.
+///
+/// # Safety
+/// Called by the Vulkan loader with valid callback data and the `user` pointer given
+/// at messenger creation (a `*const MessageLog` that outlives the messenger).
 unsafe extern "system" fn debug_callback(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     types: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -182,7 +187,7 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
 }
 
 fn cstr_array(bytes: &[std::ffi::c_char]) -> String {
-    // SAFETY-free conversion: the array is NUL-terminated by the driver, but be defensive.
+    // Fixed-size, NUL-terminated by the driver; stop at the array end regardless.
     let bytes: Vec<u8> = bytes
         .iter()
         .take_while(|&&c| c != 0)
@@ -363,11 +368,8 @@ impl GpuContext {
             families
                 .iter()
                 .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
-                .map(|i| (i as u32, f_bits(&families[i])))
+                .map(|i| (i as u32, families[i].timestamp_valid_bits))
         };
-        fn f_bits(f: &vk::QueueFamilyProperties) -> u32 {
-            f.timestamp_valid_bits
-        }
         let usable = |i: usize| {
             props[i].api_version >= vk::API_VERSION_1_3
                 && compute_family(physical_devices[i]).is_some()
@@ -437,7 +439,9 @@ impl GpuContext {
             ),
             api_version: version_string(props[index].api_version),
             subgroup_size: props11.subgroup_size,
-            min_subgroup_size: props13.min_subgroup_size.clamp(1, props11.subgroup_size.max(1)),
+            min_subgroup_size: props13
+                .min_subgroup_size
+                .clamp(1, props11.subgroup_size.max(1)),
             max_workgroup_count: limits.max_compute_work_group_count,
             max_workgroup_invocations: limits.max_compute_work_group_invocations,
             max_shared_memory: limits.max_compute_shared_memory_size,
