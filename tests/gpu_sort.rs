@@ -169,6 +169,11 @@ enum Mode {
     Device {
         capacity: usize,
     },
+    /// Device count `overstate` larger than the capacity (= the number of keys): the
+    /// sort must clamp it.
+    DeviceOverstated {
+        overstate: u32,
+    },
 }
 
 fn mask_of(key_bits: u32) -> u64 {
@@ -193,6 +198,11 @@ fn check_sort(
     let capacity = match mode {
         Mode::Host => n,
         Mode::Device { capacity } => capacity.max(n),
+        Mode::DeviceOverstated { .. } => n,
+    };
+    let device_count = match mode {
+        Mode::DeviceOverstated { overstate } => n as u32 + overstate,
+        _ => n as u32,
     };
     let mut rng = Rng(n as u64 ^ 0x5eed);
     let mut all_keys: Vec<u64> = keys.to_vec();
@@ -208,7 +218,8 @@ fn check_sort(
     let value_buf =
         GpuBuffer::new(ctx, "values", 4 * capacity as u64, MemoryKind::Device).expect("values");
     value_buf.upload(ctx, &values).expect("upload values");
-    let count_buf = GpuBuffer::from_slice(ctx, "count", &[0u32, 0, n as u32, 0]).expect("count");
+    let count_buf =
+        GpuBuffer::from_slice(ctx, "count", &[0u32, 0, device_count, 0]).expect("count");
     let scratch = GpuBuffer::new(
         ctx,
         "sort scratch",
@@ -218,7 +229,7 @@ fn check_sort(
     .expect("scratch");
     let count = match mode {
         Mode::Host => Count::Host(n as u32),
-        Mode::Device { .. } => Count::Device {
+        Mode::Device { .. } | Mode::DeviceOverstated { .. } => Count::Device {
             buffer: &count_buf,
             offset: 8,
             max_n: capacity as u32,
@@ -360,6 +371,46 @@ fn radix_sort_large_and_device_count() {
         64,
         Mode::Device { capacity: 3000 },
         "exact capacity",
+    );
+    let overstated = Mode::DeviceOverstated {
+        overstate: 1_000_000,
+    };
+    check_sort(&ctx, &sort, &keys, 64, overstated, "count above capacity");
+    assert_no_validation_messages(&ctx);
+}
+
+/// The 2D dispatch grid (used past maxComputeWorkGroupCount[0] workgroups), forced with
+/// a tiny pretend limit so small inputs need several rows of workgroups.
+#[test]
+fn two_dimensional_dispatch_grid() {
+    let ctx = context();
+    let scan = Scan::new(&ctx).expect("scan").with_dispatch_limit(3);
+    let mut rng = Rng(11);
+    for n in [SCAN_BLOCK as usize * 7 + 5, SCAN_BLOCK as usize * 9] {
+        let data: Vec<u32> = (0..n).map(|_| rng.next_u32() % 1000).collect();
+        let mut expected = Vec::with_capacity(n);
+        let mut sum = 0u32;
+        for &x in &data {
+            expected.push(sum);
+            sum += x;
+        }
+        let (result, total) = gpu_scan(&ctx, &scan, &data, false);
+        assert!(result == expected, "2D-grid scan mismatch for n = {n}");
+        assert_eq!(total, sum);
+    }
+    let sort = RadixSort::new(&ctx).expect("sort").with_dispatch_limit(4);
+    let c = sort.config();
+    let n = (c.workgroup_size * c.items_per_thread) as usize * 10 + 17;
+    let keys = tile_depth_keys(&mut rng, n);
+    check_sort(&ctx, &sort, &keys, 44, Mode::Host, "2D grid, host count");
+    let capacity = n + 9000;
+    check_sort(
+        &ctx,
+        &sort,
+        &keys,
+        33,
+        Mode::Device { capacity },
+        "2D grid, device count",
     );
     assert_no_validation_messages(&ctx);
 }

@@ -245,6 +245,14 @@ impl RadixSort {
         })
     }
 
+    /// Pretends maxComputeWorkGroupCount[0] is `max_x` (at most the real limit), so
+    /// tests can exercise the 2D dispatch grid with small inputs.
+    pub fn with_dispatch_limit(mut self, max_x: u32) -> Self {
+        self.max_groups_x = self.max_groups_x.min(max_x.max(1));
+        self.scan = self.scan.with_dispatch_limit(max_x);
+        self
+    }
+
     /// Scratch bytes the default configuration needs for up to `max_n` elements.
     pub fn scratch_size(max_n: u32) -> u64 {
         ScratchLayout::new(&DEFAULT_SORT_CONFIG, max_n).total
