@@ -87,6 +87,26 @@ fn context_reports_device_and_no_validation_messages() {
     drop(host);
     drop(buffer);
     assert_no_validation_messages(&ctx);
+    // Leaked objects would be reported while the device and instance are destroyed.
+    let log = ctx.validation_log();
+    let sort = RadixSort::new(&ctx).expect("sort pipelines");
+    let mut timer = GpuTimer::new(&ctx, "timer", 2).expect("timer");
+    ctx.submit_and_wait("timer smoke test", |cmd| {
+        timer.reset(&ctx, cmd);
+        timer.stage(&ctx, cmd, "nothing", |_| Ok(()))
+    })
+    .expect("submit");
+    let times = timer.read(&ctx).expect("timestamps");
+    assert_eq!(times.len(), 1);
+    assert!(times[0].1 >= 0.0);
+    drop((sort, timer));
+    drop(ctx);
+    let messages = log.lock().map(|m| m.clone()).unwrap_or_default();
+    assert!(
+        messages.is_empty(),
+        "teardown messages:\n{}",
+        messages.join("\n")
+    );
 }
 
 fn gpu_scan(ctx: &GpuContext, scan: &Scan, data: &[u32], in_place: bool) -> (Vec<u32>, u32) {

@@ -594,6 +594,12 @@ impl GpuContext {
         self.messages.lock().map(|m| m.clone()).unwrap_or_default()
     }
 
+    /// The shared message log itself, to inspect messages emitted while the context
+    /// is torn down (leaked objects are reported at vkDestroyDevice).
+    pub fn validation_log(&self) -> Arc<Mutex<Vec<String>>> {
+        self.messages.clone()
+    }
+
     /// Gives a Vulkan object a debug name (no-op without VK_EXT_debug_utils).
     pub fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
         self.shared.set_name(handle, name);
