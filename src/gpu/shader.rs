@@ -128,6 +128,20 @@ pub enum BindingKind {
     StorageImage,
 }
 
+/// What is bound to one binding slot at dispatch time.
+#[derive(Clone, Copy)]
+pub enum Resource<'a> {
+    /// A storage buffer range.
+    Buffer(BufferSlice<'a>),
+    /// A storage image view in `layout` (normally `GENERAL`).
+    Image {
+        /// The view.
+        view: vk::ImageView,
+        /// Its layout while the dispatch runs.
+        layout: vk::ImageLayout,
+    },
+}
+
 /// A compute pipeline with a push-descriptor set layout and push constants.
 pub struct ComputePipeline {
     shared: Arc<Shared>,
@@ -250,17 +264,32 @@ impl ComputePipeline {
         buffers: &[BufferSlice],
         push: &[u8],
     ) -> GpuResult<()> {
-        if buffers.len() != self.bindings.len()
-            || self
-                .bindings
-                .iter()
-                .any(|b| *b != BindingKind::StorageBuffer)
-        {
+        let resources: Vec<Resource> = buffers.iter().map(|&b| Resource::Buffer(b)).collect();
+        self.bind_resources(ctx, cmd, &resources, push)
+    }
+
+    /// Like [`ComputePipeline::bind`] for pipelines that also use storage images.
+    pub fn bind_resources(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        resources: &[Resource],
+        push: &[u8],
+    ) -> GpuResult<()> {
+        let matches = resources.len() == self.bindings.len()
+            && resources.iter().zip(&self.bindings).all(|(r, b)| {
+                matches!(
+                    (r, b),
+                    (Resource::Buffer(_), BindingKind::StorageBuffer)
+                        | (Resource::Image { .. }, BindingKind::StorageImage)
+                )
+            });
+        if !matches {
             return Err(GpuError::InvalidArgument(format!(
-                "pipeline '{}' expects {} buffer bindings, got {}",
+                "pipeline '{}' expects bindings {:?}, got {} resources of other kinds",
                 self.name,
-                self.bindings.len(),
-                buffers.len()
+                self.bindings,
+                resources.len()
             )));
         }
         if push.len() != self.push_size as usize {
@@ -271,28 +300,43 @@ impl ComputePipeline {
                 push.len()
             )));
         }
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+        let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = resources
             .iter()
-            .map(|b| {
-                [vk::DescriptorBufferInfo::default()
+            .map(|r| match r {
+                Resource::Buffer(b) => [vk::DescriptorBufferInfo::default()
                     .buffer(b.buffer.handle())
                     .offset(b.offset)
                     // An empty range is not allowed; bind the rest of the buffer.
-                    .range(if b.size == 0 { vk::WHOLE_SIZE } else { b.size })]
+                    .range(if b.size == 0 { vk::WHOLE_SIZE } else { b.size })],
+                Resource::Image { .. } => [vk::DescriptorBufferInfo::default()],
             })
             .collect();
-        let writes: Vec<vk::WriteDescriptorSet> = infos
+        let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = resources
+            .iter()
+            .map(|r| match r {
+                Resource::Image { view, layout } => [vk::DescriptorImageInfo::default()
+                    .image_view(*view)
+                    .image_layout(*layout)],
+                Resource::Buffer(_) => [vk::DescriptorImageInfo::default()],
+            })
+            .collect();
+        let writes: Vec<vk::WriteDescriptorSet> = resources
             .iter()
             .enumerate()
-            .map(|(i, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_binding(i as u32)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
+            .map(|(i, r)| {
+                let write = vk::WriteDescriptorSet::default().dst_binding(i as u32);
+                match r {
+                    Resource::Buffer(_) => write
+                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                        .buffer_info(&buffer_infos[i]),
+                    Resource::Image { .. } => write
+                        .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
+                        .image_info(&image_infos[i]),
+                }
             })
             .collect();
         let device = ctx.device();
-        // SAFETY: cmd is recording; buffers are alive; layout matches the pipeline.
+        // SAFETY: cmd is recording; the resources are alive; the layout matches.
         unsafe {
             device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             ctx.shared.push_descriptor.cmd_push_descriptor_set(
