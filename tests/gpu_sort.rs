@@ -72,6 +72,20 @@ fn shader_compile_error_names_file_and_line() {
 }
 
 #[test]
+fn unknown_device_is_a_clear_error() {
+    let result = GpuContext::new(&ContextOptions {
+        device: Some("no-such-device-xyz".into()),
+        validation: false,
+    });
+    let err = result.err().expect("an unknown device name must fail");
+    let text = err.to_string();
+    assert!(
+        text.contains("no-such-device-xyz") && text.contains("#0"),
+        "{text}"
+    );
+}
+
+#[test]
 fn context_reports_device_and_no_validation_messages() {
     let ctx = context();
     assert!(ctx.validation_enabled());
