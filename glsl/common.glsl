@@ -8,6 +8,7 @@
 
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_ballot : require
 
 #ifndef WG_SIZE
 #error "define WG_SIZE (the workgroup size) before including common.glsl"

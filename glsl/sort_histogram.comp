@@ -16,8 +16,8 @@ layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
 layout(std430, binding = 1) readonly buffer Keys { uvec2 keys[]; };
 layout(std430, binding = 2) writeonly buffer Hist { uint hist[]; };
 
-// counts[digit * SORT_WG + thread]: each thread counts its own items in its own column.
-shared uint counts[SORT_RADIX * SORT_WG];
+#define SORT_KEYS keys
+#include "sort_common.glsl"
 
 void main() {
     uint block = linear_group_id();
@@ -25,22 +25,23 @@ void main() {
         return;
     }
     uint n = meta[META_N];
-    uint t = gl_LocalInvocationID.x;
-    for (uint d = 0; d < SORT_RADIX; ++d) {
-        counts[d * SORT_WG + t] = 0u;
-    }
     uint mask = (1u << pc.bits) - 1u;
-    uint begin = block * SORT_BLOCK + t * SORT_ITEMS;
-    uint end = min(begin + SORT_ITEMS, n);
-    for (uint i = begin; i < end; ++i) {
-        uint slot = key_digit(keys[i], pc.shift, mask) * SORT_WG + t;
-        counts[slot] += 1u;
+    clear_subgroup_counts();
+    for (uint row = 0; row < SORT_ITEMS; ++row) {
+        uint i = sort_element_index(block, row);
+        bool valid = i < n;
+        if (valid) {
+            // Order does not matter here, so shared atomics (cheaper than the
+            // ballot-based ranking the scatter needs) into per-subgroup counters.
+            uint digit = key_digit(keys[i], pc.shift, mask);
+            atomicAdd(subgroup_counts[gl_SubgroupID * SORT_RADIX + digit], 1u);
+        }
     }
     barrier();
-    for (uint d = t; d < SORT_RADIX; d += SORT_WG) {
+    for (uint d = gl_LocalInvocationID.x; d < SORT_RADIX; d += SORT_WG) {
         uint sum = 0;
-        for (uint j = 0; j < SORT_WG; ++j) {
-            sum += counts[d * SORT_WG + j];
+        for (uint s = 0; s < gl_NumSubgroups; ++s) {
+            sum += subgroup_counts[s * SORT_RADIX + d];
         }
         hist[d * pc.hist_stride + block] = sum;
     }

@@ -8,7 +8,9 @@
 
 mod common;
 
-use common::gpu::{assert_validation_clean, compare, dump_failure, move_towards, new_renderer, renderer};
+use common::gpu::{
+    assert_validation_clean, compare, dump_failure, move_towards, new_renderer, renderer,
+};
 use glam::Vec3;
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, RenderOptions};
@@ -24,13 +26,20 @@ fn orbit(name: &str, i: usize, w: u32, h: u32) -> Camera {
     cams[i].with_resolution(w, h).unwrap()
 }
 
-fn check_frame(r: &mut GpuRenderer, label: &str, s: &ActivatedScene, cam: &Camera, opts: &RenderOptions) {
+fn check_frame(
+    r: &mut GpuRenderer,
+    label: &str,
+    s: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) {
     let gs = r.upload(s).unwrap();
     let g = r.render(&gs, cam, opts).unwrap();
     let c = cpu::render(s, cam, opts);
     let cmp = compare(&g, &c);
     eprintln!("{label}: {cmp:?}, pairs {}", r.stats().pairs);
-    let ok = cmp.psnr >= 55.0 && cmp.within >= 0.999 && cmp.alpha_psnr >= 55.0 && cmp.depth_rel <= 1e-3;
+    let ok =
+        cmp.psnr >= 55.0 && cmp.within >= 0.999 && cmp.alpha_psnr >= 55.0 && cmp.depth_rel <= 1e-3;
     if !ok {
         let dir = dump_failure(&label.replace(' ', "_"), &g, &c);
         panic!("{label}: {cmp:?} (images in {dir})");
@@ -51,14 +60,50 @@ fn playbot_lods_match_from_orbit_close_and_inside() {
     ] {
         let s = load(file).activated();
         let wide = orbit(cams, 5, w, h);
-        check_frame(&mut r, &format!("{file} orbit 5"), &s, &wide, &RenderOptions::default());
+        check_frame(
+            &mut r,
+            &format!("{file} orbit 5"),
+            &s,
+            &wide,
+            &RenderOptions::default(),
+        );
         if w <= 640 {
             let close = move_towards(&wide, target, 0.25, "close-up");
-            check_frame(&mut r, &format!("{file} close-up"), &s, &close, &RenderOptions { background: [1.0, 1.0, 1.0] });
+            check_frame(
+                &mut r,
+                &format!("{file} close-up"),
+                &s,
+                &close,
+                &RenderOptions {
+                    background: [1.0, 1.0, 1.0],
+                },
+            );
             let far = move_towards(&orbit(cams, 17, w, h), target, 3.0, "wide");
-            check_frame(&mut r, &format!("{file} wide"), &s, &far, &RenderOptions::default());
-            let inside = Camera::look_at("inside", w, h, 1.4, Vec3::new(0.1, -0.6, -0.1), Vec3::new(0.0, -0.2, 1.0), Vec3::NEG_Y);
-            check_frame(&mut r, &format!("{file} inside"), &s, &inside, &RenderOptions { background: [0.2, 0.3, 0.4] });
+            check_frame(
+                &mut r,
+                &format!("{file} wide"),
+                &s,
+                &far,
+                &RenderOptions::default(),
+            );
+            let inside = Camera::look_at(
+                "inside",
+                w,
+                h,
+                1.4,
+                Vec3::new(0.1, -0.6, -0.1),
+                Vec3::new(0.0, -0.2, 1.0),
+                Vec3::NEG_Y,
+            );
+            check_frame(
+                &mut r,
+                &format!("{file} inside"),
+                &s,
+                &inside,
+                &RenderOptions {
+                    background: [0.2, 0.3, 0.4],
+                },
+            );
         }
     }
 }
@@ -67,13 +112,42 @@ fn playbot_lods_match_from_orbit_close_and_inside() {
 fn plant_and_train_match() {
     let mut r = renderer();
     let plant = load("plant_113k_sh0.ply").activated();
-    check_frame(&mut r, "plant orbit 0", &plant, &orbit("plant_orbit_cameras.synthetic.json", 0, 640, 360), &RenderOptions::default());
-    let close = move_towards(&orbit("plant_orbit_cameras.synthetic.json", 9, 480, 360), Vec3::ZERO, 0.3, "close-up");
-    check_frame(&mut r, "plant close-up", &plant, &close, &RenderOptions::default());
+    check_frame(
+        &mut r,
+        "plant orbit 0",
+        &plant,
+        &orbit("plant_orbit_cameras.synthetic.json", 0, 640, 360),
+        &RenderOptions::default(),
+    );
+    let close = move_towards(
+        &orbit("plant_orbit_cameras.synthetic.json", 9, 480, 360),
+        Vec3::ZERO,
+        0.3,
+        "close-up",
+    );
+    check_frame(
+        &mut r,
+        "plant close-up",
+        &plant,
+        &close,
+        &RenderOptions::default(),
+    );
     let train = load("train3_sh3.ply").activated();
-    check_frame(&mut r, "train3 default", &train, &camera::default_camera(&train.positions, 320, 240), &RenderOptions::default());
+    check_frame(
+        &mut r,
+        "train3 default",
+        &train,
+        &camera::default_camera(&train.positions, 320, 240),
+        &RenderOptions::default(),
+    );
     let demo = vksplat::demo_scene().activated();
-    check_frame(&mut r, "demo default", &demo, &camera::default_camera(&demo.positions, 1280, 720), &RenderOptions::default());
+    check_frame(
+        &mut r,
+        "demo default",
+        &demo,
+        &camera::default_camera(&demo.positions, 1280, 720),
+        &RenderOptions::default(),
+    );
 }
 
 #[test]
@@ -86,7 +160,13 @@ fn both_blend_variants_match_the_reference() {
     for strip in vksplat::render::blend::STRIPS {
         let mut r = new_renderer(Some(strip));
         assert_eq!(r.blend_strip(), strip);
-        check_frame(&mut r, &format!("strip {strip}"), &s, &cam, &RenderOptions::default());
+        check_frame(
+            &mut r,
+            &format!("strip {strip}"),
+            &s,
+            &cam,
+            &RenderOptions::default(),
+        );
         let gs = r.upload(&s).unwrap();
         frames.push(r.render(&gs, &cam, &RenderOptions::default()).unwrap());
     }
@@ -111,19 +191,46 @@ fn gaussians_outside_the_view_change_no_pixel() {
     for k in 0..50 {
         let k = k as f32;
         // Behind the camera, far to the side, and beyond the near plane's reach.
-        common::push_gaussian(&mut more, (eye + back * (1.0 + k * 0.1)).into(), 0.05, 0.9, [1.0, 0.0, 0.0]);
-        common::push_gaussian(&mut more, (eye + right * (50.0 + k)).into(), 0.05, 0.9, [0.0, 1.0, 0.0]);
-        common::push_gaussian(&mut more, (eye + (cam.rotation.transpose() * Vec3::Z) * 0.1).into(), 0.01, 0.9, [0.0, 0.0, 1.0]);
+        common::push_gaussian(
+            &mut more,
+            (eye + back * (1.0 + k * 0.1)).into(),
+            0.05,
+            0.9,
+            [1.0, 0.0, 0.0],
+        );
+        common::push_gaussian(
+            &mut more,
+            (eye + right * (50.0 + k)).into(),
+            0.05,
+            0.9,
+            [0.0, 1.0, 0.0],
+        );
+        common::push_gaussian(
+            &mut more,
+            (eye + (cam.rotation.transpose() * Vec3::Z) * 0.1).into(),
+            0.01,
+            0.9,
+            [0.0, 0.0, 1.0],
+        );
     }
     let gs = r.upload(&more.activated()).unwrap();
     let with_more = r.render(&gs, &cam, &opts).unwrap();
-    assert_eq!(with_more, reference, "invisible Gaussians changed the image");
-    assert_eq!(r.stats().visible as usize, base.len() - count_culled(&base, &cam));
+    assert_eq!(
+        with_more, reference,
+        "invisible Gaussians changed the image"
+    );
+    assert_eq!(
+        r.stats().visible as usize,
+        base.len() - count_culled(&base, &cam)
+    );
     assert_validation_clean(&r);
 }
 
 fn count_culled(s: &Scene, cam: &Camera) -> usize {
-    cpu::preprocess(&s.activated(), cam, s.sh_degree).iter().filter(|p| p.tiles_touched() == 0).count()
+    cpu::preprocess(&s.activated(), cam, s.sh_degree)
+        .iter()
+        .filter(|p| p.tiles_touched() == 0)
+        .count()
         + 0 * cam.width as usize
 }
 
@@ -133,7 +240,15 @@ fn empty_scene_renders_the_background_and_renders_are_deterministic() {
     let empty = Scene::empty(2).activated();
     let cam = camera::default_camera(&[], 100, 70);
     let gs = r.upload(&empty).unwrap();
-    let f = r.render(&gs, &cam, &RenderOptions { background: [0.25, 0.5, 0.75] }).unwrap();
+    let f = r
+        .render(
+            &gs,
+            &cam,
+            &RenderOptions {
+                background: [0.25, 0.5, 0.75],
+            },
+        )
+        .unwrap();
     assert!(f.color.iter().all(|c| *c == [0.25, 0.5, 0.75]));
     assert!(f.alpha.iter().all(|&a| a == 0.0) && f.depth.iter().all(|&d| d == 0.0));
     let s = load("playbot_lod3_31k_sh2.ply").activated();
@@ -141,7 +256,12 @@ fn empty_scene_renders_the_background_and_renders_are_deterministic() {
     let gs = r.upload(&s).unwrap();
     let a = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
     let b = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
-    assert!(a.color.iter().flatten().zip(b.color.iter().flatten()).all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert!(a
+        .color
+        .iter()
+        .flatten()
+        .zip(b.color.iter().flatten())
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
     assert_eq!(a, b);
     assert_validation_clean(&r);
 }
@@ -152,10 +272,18 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
     // the initial capacity, so the frame is recorded again with larger buffers.
     let mut s = Scene::empty(0);
     for k in 0..64 {
-        common::push_gaussian(&mut s, [0.01 * k as f32, 0.0, 3.0 + 0.01 * k as f32], 4.0, 0.05, [0.5, 0.2, 0.1]);
+        common::push_gaussian(
+            &mut s,
+            [0.01 * k as f32, 0.0, 3.0 + 0.01 * k as f32],
+            4.0,
+            0.05,
+            [0.5, 0.2, 0.1],
+        );
     }
     let act = s.activated();
-    let cam = common::axis_camera(50.0).with_resolution(1280, 720).unwrap();
+    let cam = common::axis_camera(50.0)
+        .with_resolution(1280, 720)
+        .unwrap();
     let mut r = new_renderer(None);
     let gs = r.upload(&act).unwrap();
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
@@ -172,7 +300,11 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
 
 fn resident_bytes() -> u64 {
     let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
-    let pages: u64 = statm.split_whitespace().nth(1).and_then(|v| v.parse().ok()).unwrap_or(0);
+    let pages: u64 = statm
+        .split_whitespace()
+        .nth(1)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
     pages * 4096
 }
 
@@ -181,7 +313,10 @@ fn two_hundred_frames_do_not_grow_memory() {
     let mut r = new_renderer(None);
     let s = load("playbot_lod6_1873_sh2.ply").activated();
     let gs = r.upload(&s).unwrap();
-    let cams = camera::load_cameras_json(&common::shared_data().join("playbot_orbit_cameras.synthetic.json")).unwrap();
+    let cams = camera::load_cameras_json(
+        &common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
+    )
+    .unwrap();
     let mut after_warmup = (0, 0);
     for i in 0..200 {
         let cam = cams[i % cams.len()].with_resolution(160, 90).unwrap();
@@ -191,8 +326,15 @@ fn two_hundred_frames_do_not_grow_memory() {
         }
     }
     let (rss, dev) = (resident_bytes(), r.frame_device_bytes());
-    eprintln!("resident {} -> {} bytes, device {} -> {} bytes", after_warmup.0, rss, after_warmup.1, dev);
+    eprintln!(
+        "resident {} -> {} bytes, device {} -> {} bytes",
+        after_warmup.0, rss, after_warmup.1, dev
+    );
     assert_eq!(dev, after_warmup.1, "device buffers grew");
-    assert!(rss <= after_warmup.0 + 8 * 1024 * 1024, "host memory grew from {} to {rss} bytes", after_warmup.0);
+    assert!(
+        rss <= after_warmup.0 + 8 * 1024 * 1024,
+        "host memory grew from {} to {rss} bytes",
+        after_warmup.0
+    );
     assert_validation_clean(&r);
 }

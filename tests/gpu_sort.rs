@@ -72,6 +72,20 @@ fn shader_compile_error_names_file_and_line() {
 }
 
 #[test]
+fn unknown_device_is_a_clear_error() {
+    let result = GpuContext::new(&ContextOptions {
+        device: Some("no-such-device-xyz".into()),
+        validation: false,
+    });
+    let err = result.err().expect("an unknown device name must fail");
+    let text = err.to_string();
+    assert!(
+        text.contains("no-such-device-xyz") && text.contains("#0"),
+        "{text}"
+    );
+}
+
+#[test]
 fn context_reports_device_and_no_validation_messages() {
     let ctx = context();
     assert!(ctx.validation_enabled());
@@ -87,6 +101,26 @@ fn context_reports_device_and_no_validation_messages() {
     drop(host);
     drop(buffer);
     assert_no_validation_messages(&ctx);
+    // Leaked objects would be reported while the device and instance are destroyed.
+    let log = ctx.validation_log();
+    let sort = RadixSort::new(&ctx).expect("sort pipelines");
+    let mut timer = GpuTimer::new(&ctx, "timer", 2).expect("timer");
+    ctx.submit_and_wait("timer smoke test", |cmd| {
+        timer.reset(&ctx, cmd);
+        timer.stage(&ctx, cmd, "nothing", |_| Ok(()))
+    })
+    .expect("submit");
+    let times = timer.read(&ctx).expect("timestamps");
+    assert_eq!(times.len(), 1);
+    assert!(times[0].1 >= 0.0);
+    drop((sort, timer));
+    drop(ctx);
+    let messages = log.lock().map(|m| m.clone()).unwrap_or_default();
+    assert!(
+        messages.is_empty(),
+        "teardown messages:\n{}",
+        messages.join("\n")
+    );
 }
 
 fn gpu_scan(ctx: &GpuContext, scan: &Scan, data: &[u32], in_place: bool) -> (Vec<u32>, u32) {
@@ -169,6 +203,11 @@ enum Mode {
     Device {
         capacity: usize,
     },
+    /// Device count `overstate` larger than the capacity (= the number of keys): the
+    /// sort must clamp it.
+    DeviceOverstated {
+        overstate: u32,
+    },
 }
 
 fn mask_of(key_bits: u32) -> u64 {
@@ -193,6 +232,11 @@ fn check_sort(
     let capacity = match mode {
         Mode::Host => n,
         Mode::Device { capacity } => capacity.max(n),
+        Mode::DeviceOverstated { .. } => n,
+    };
+    let device_count = match mode {
+        Mode::DeviceOverstated { overstate } => n as u32 + overstate,
+        _ => n as u32,
     };
     let mut rng = Rng(n as u64 ^ 0x5eed);
     let mut all_keys: Vec<u64> = keys.to_vec();
@@ -208,7 +252,8 @@ fn check_sort(
     let value_buf =
         GpuBuffer::new(ctx, "values", 4 * capacity as u64, MemoryKind::Device).expect("values");
     value_buf.upload(ctx, &values).expect("upload values");
-    let count_buf = GpuBuffer::from_slice(ctx, "count", &[0u32, 0, n as u32, 0]).expect("count");
+    let count_buf =
+        GpuBuffer::from_slice(ctx, "count", &[0u32, 0, device_count, 0]).expect("count");
     let scratch = GpuBuffer::new(
         ctx,
         "sort scratch",
@@ -218,7 +263,7 @@ fn check_sort(
     .expect("scratch");
     let count = match mode {
         Mode::Host => Count::Host(n as u32),
-        Mode::Device { .. } => Count::Device {
+        Mode::Device { .. } | Mode::DeviceOverstated { .. } => Count::Device {
             buffer: &count_buf,
             offset: 8,
             max_n: capacity as u32,
@@ -361,6 +406,46 @@ fn radix_sort_large_and_device_count() {
         Mode::Device { capacity: 3000 },
         "exact capacity",
     );
+    let overstated = Mode::DeviceOverstated {
+        overstate: 1_000_000,
+    };
+    check_sort(&ctx, &sort, &keys, 64, overstated, "count above capacity");
+    assert_no_validation_messages(&ctx);
+}
+
+/// The 2D dispatch grid (used past maxComputeWorkGroupCount[0] workgroups), forced with
+/// a tiny pretend limit so small inputs need several rows of workgroups.
+#[test]
+fn two_dimensional_dispatch_grid() {
+    let ctx = context();
+    let scan = Scan::new(&ctx).expect("scan").with_dispatch_limit(3);
+    let mut rng = Rng(11);
+    for n in [SCAN_BLOCK as usize * 7 + 5, SCAN_BLOCK as usize * 9] {
+        let data: Vec<u32> = (0..n).map(|_| rng.next_u32() % 1000).collect();
+        let mut expected = Vec::with_capacity(n);
+        let mut sum = 0u32;
+        for &x in &data {
+            expected.push(sum);
+            sum += x;
+        }
+        let (result, total) = gpu_scan(&ctx, &scan, &data, false);
+        assert!(result == expected, "2D-grid scan mismatch for n = {n}");
+        assert_eq!(total, sum);
+    }
+    let sort = RadixSort::new(&ctx).expect("sort").with_dispatch_limit(4);
+    let c = sort.config();
+    let n = (c.workgroup_size * c.items_per_thread) as usize * 10 + 17;
+    let keys = tile_depth_keys(&mut rng, n);
+    check_sort(&ctx, &sort, &keys, 44, Mode::Host, "2D grid, host count");
+    let capacity = n + 9000;
+    check_sort(
+        &ctx,
+        &sort,
+        &keys,
+        33,
+        Mode::Device { capacity },
+        "2D grid, device count",
+    );
     assert_no_validation_messages(&ctx);
 }
 
@@ -370,12 +455,12 @@ fn radix_sort_other_configs() {
     let mut rng = Rng(3);
     for config in [
         SortConfig {
-            radix_bits: 8,
-            workgroup_size: 16,
-            items_per_thread: 64,
+            radix_bits: 4,
+            workgroup_size: 256,
+            items_per_thread: 16,
         },
         SortConfig {
-            radix_bits: 4,
+            radix_bits: 5,
             workgroup_size: 64,
             items_per_thread: 7,
         },
@@ -405,7 +490,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Timing of the 2^20-pair sort (44 key bits) and the 2^20-element scan.
 /// `cargo test --test gpu_sort -- --ignored --nocapture bench`;
-/// `VKSPLAT_SORT_CONFIG=bits,wg,items` overrides the sort tuning.
+/// `VKSPLAT_SORT_CONFIG=radix_bits,workgroup_size,items` overrides the sort tuning.
 #[test]
 #[ignore]
 fn bench_sort_and_scan_1m() {
@@ -453,6 +538,34 @@ fn bench_sort_and_scan_1m() {
     )
     .expect("s");
     let mut timer = GpuTimer::new(&ctx, "bench timer", 4).expect("timer");
+    if std::env::var_os("VKSPLAT_SORT_PROFILE").is_some() {
+        let mut stage_timer = GpuTimer::new(&ctx, "profile timer", 64).expect("timer");
+        for _ in 0..3 {
+            key_buf.upload(&ctx, &keys).expect("reset keys");
+            ctx.submit_and_wait("profile", |cmd| {
+                stage_timer.reset(&ctx, cmd);
+                sort.record_timed(
+                    &ctx,
+                    cmd,
+                    &key_buf,
+                    &value_buf,
+                    &scratch,
+                    Count::Host(n),
+                    44,
+                    Some(&mut stage_timer),
+                )
+            })
+            .expect("profile run");
+        }
+        let mut totals: Vec<(String, f64)> = Vec::new();
+        for (name, ms) in stage_timer.read(&ctx).expect("timestamps") {
+            match totals.iter_mut().find(|(n, _)| *n == name) {
+                Some(entry) => entry.1 += ms,
+                None => totals.push((name, ms)),
+            }
+        }
+        eprintln!("per-stage totals over all passes: {totals:?}");
+    }
     let (mut sort_ms, mut scan_ms) = (Vec::new(), Vec::new());
     for iteration in 0..8 {
         key_buf.upload(&ctx, &keys).expect("reset keys");

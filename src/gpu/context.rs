@@ -37,6 +37,8 @@ pub struct DeviceInfo {
     pub api_version: String,
     /// Subgroup size.
     pub subgroup_size: u32,
+    /// Smallest subgroup size a compute shader may run with (subgroup size control).
+    pub min_subgroup_size: u32,
     /// maxComputeWorkGroupCount.
     pub max_workgroup_count: [u32; 3],
     /// maxComputeWorkGroupInvocations.
@@ -140,6 +142,11 @@ pub struct GpuContext {
     pub(crate) full_subgroups: bool,
 }
 
+/// Records and prints every WARNING/ERROR message of the validation layer.
+///
+/// # Safety
+/// Called by the Vulkan loader with valid callback data and the `user` pointer given
+/// at messenger creation (a `*const MessageLog` that outlives the messenger).
 unsafe extern "system" fn debug_callback(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     types: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -180,7 +187,7 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
 }
 
 fn cstr_array(bytes: &[std::ffi::c_char]) -> String {
-    // SAFETY-free conversion: the array is NUL-terminated by the driver, but be defensive.
+    // Fixed-size, NUL-terminated by the driver; stop at the array end regardless.
     let bytes: Vec<u8> = bytes
         .iter()
         .take_while(|&&c| c != 0)
@@ -361,11 +368,8 @@ impl GpuContext {
             families
                 .iter()
                 .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
-                .map(|i| (i as u32, f_bits(&families[i])))
+                .map(|i| (i as u32, families[i].timestamp_valid_bits))
         };
-        fn f_bits(f: &vk::QueueFamilyProperties) -> u32 {
-            f.timestamp_valid_bits
-        }
         let usable = |i: usize| {
             props[i].api_version >= vk::API_VERSION_1_3
                 && compute_family(physical_devices[i]).is_some()
@@ -416,9 +420,11 @@ impl GpuContext {
         // Device properties and features.
         let mut props11 = vk::PhysicalDeviceVulkan11Properties::default();
         let mut props12 = vk::PhysicalDeviceVulkan12Properties::default();
+        let mut props13 = vk::PhysicalDeviceVulkan13Properties::default();
         let mut props2 = vk::PhysicalDeviceProperties2::default()
             .push_next(&mut props11)
-            .push_next(&mut props12);
+            .push_next(&mut props12)
+            .push_next(&mut props13);
         // SAFETY: valid handle, chain of valid structs.
         unsafe { instance.get_physical_device_properties2(physical_device, &mut props2) };
         let limits = props[index].limits;
@@ -433,6 +439,9 @@ impl GpuContext {
             ),
             api_version: version_string(props[index].api_version),
             subgroup_size: props11.subgroup_size,
+            min_subgroup_size: props13
+                .min_subgroup_size
+                .clamp(1, props11.subgroup_size.max(1)),
             max_workgroup_count: limits.max_compute_work_group_count,
             max_workgroup_invocations: limits.max_compute_work_group_invocations,
             max_shared_memory: limits.max_compute_shared_memory_size,
@@ -441,14 +450,16 @@ impl GpuContext {
             timestamp_period_ns: limits.timestamp_period,
             timestamp_valid_bits,
         };
-        let needed_ops = vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::ARITHMETIC;
+        let needed_ops = vk::SubgroupFeatureFlags::BASIC
+            | vk::SubgroupFeatureFlags::ARITHMETIC
+            | vk::SubgroupFeatureFlags::BALLOT;
         if !props11.subgroup_supported_operations.contains(needed_ops)
             || !props11
                 .subgroup_supported_stages
                 .contains(vk::ShaderStageFlags::COMPUTE)
         {
             return Err(GpuError::Missing(format!(
-                "{} lacks basic+arithmetic subgroup operations in compute shaders",
+                "{} lacks basic/arithmetic/ballot subgroup operations in compute shaders",
                 info.name
             )));
         }
@@ -581,6 +592,12 @@ impl GpuContext {
     /// Every WARNING/ERROR message the validation layer reported so far.
     pub fn validation_messages(&self) -> Vec<String> {
         self.messages.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+
+    /// The shared message log itself, to inspect messages emitted while the context
+    /// is torn down (leaked objects are reported at vkDestroyDevice).
+    pub fn validation_log(&self) -> Arc<Mutex<Vec<String>>> {
+        self.messages.clone()
     }
 
     /// Gives a Vulkan object a debug name (no-op without VK_EXT_debug_utils).

@@ -88,6 +88,13 @@ impl Scan {
         })
     }
 
+    /// Pretends maxComputeWorkGroupCount[0] is `max_x` (at most the real limit), so
+    /// tests can exercise the 2D dispatch grid with small inputs.
+    pub fn with_dispatch_limit(mut self, max_x: u32) -> Self {
+        self.max_groups_x = self.max_groups_x.min(max_x.max(1));
+        self
+    }
+
     /// Scratch bytes needed to scan `n` elements (0 when one workgroup suffices).
     pub fn scratch_size(n: u32) -> u64 {
         if n <= SCAN_BLOCK {

@@ -12,6 +12,10 @@ use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
 pub const SOURCES: &[(&str, &str)] = &[
     ("common.glsl", include_str!("../../glsl/common.glsl")),
     (
+        "sort_common.glsl",
+        include_str!("../../glsl/sort_common.glsl"),
+    ),
+    (
         "scan_reduce.comp",
         include_str!("../../glsl/scan_reduce.comp"),
     ),
@@ -45,15 +49,6 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("ranges.comp", include_str!("../../glsl/ranges.comp")),
     ("blend.comp", include_str!("../../glsl/blend.comp")),
 ];
-
-/// A resource bound to one slot of a pipeline's push-descriptor set.
-#[derive(Clone, Copy)]
-pub enum Resource<'a> {
-    /// A storage buffer range.
-    Buffer(BufferSlice<'a>),
-    /// A storage image in GENERAL layout.
-    Image(&'a super::GpuImage),
-}
 
 /// Shader compilation failures.
 #[derive(Debug, thiserror::Error)]
@@ -142,6 +137,20 @@ pub enum BindingKind {
     StorageBuffer,
     /// `image2D` with a format qualifier.
     StorageImage,
+}
+
+/// What is bound to one binding slot at dispatch time.
+#[derive(Clone, Copy)]
+pub enum Resource<'a> {
+    /// A storage buffer range.
+    Buffer(BufferSlice<'a>),
+    /// A storage image view in `layout` (normally `GENERAL`).
+    Image {
+        /// The view.
+        view: vk::ImageView,
+        /// Its layout while the dispatch runs.
+        layout: vk::ImageLayout,
+    },
 }
 
 /// A compute pipeline with a push-descriptor set layout and push constants.
@@ -266,12 +275,11 @@ impl ComputePipeline {
         buffers: &[BufferSlice],
         push: &[u8],
     ) -> GpuResult<()> {
-        let resources: Vec<Resource> = buffers.iter().map(|b| Resource::Buffer(*b)).collect();
+        let resources: Vec<Resource> = buffers.iter().map(|&b| Resource::Buffer(b)).collect();
         self.bind_resources(ctx, cmd, &resources, push)
     }
 
-    /// Binds the pipeline, pushes the descriptors (binding i = `resources[i]`, buffers
-    /// or storage images matching the layout) and the push constants.
+    /// Like [`ComputePipeline::bind`] for pipelines that also use storage images.
     pub fn bind_resources(
         &self,
         ctx: &GpuContext,
@@ -284,7 +292,7 @@ impl ComputePipeline {
                 matches!(
                     (r, b),
                     (Resource::Buffer(_), BindingKind::StorageBuffer)
-                        | (Resource::Image(_), BindingKind::StorageImage)
+                        | (Resource::Image { .. }, BindingKind::StorageImage)
                 )
             });
         if !matches {
@@ -309,16 +317,17 @@ impl ComputePipeline {
                 Resource::Buffer(b) => [vk::DescriptorBufferInfo::default()
                     .buffer(b.buffer.handle())
                     .offset(b.offset)
-                    .range(b.size)],
-                Resource::Image(_) => [vk::DescriptorBufferInfo::default()],
+                    // An empty range is not allowed; bind the rest of the buffer.
+                    .range(if b.size == 0 { vk::WHOLE_SIZE } else { b.size })],
+                Resource::Image { .. } => [vk::DescriptorBufferInfo::default()],
             })
             .collect();
         let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = resources
             .iter()
             .map(|r| match r {
-                Resource::Image(i) => [vk::DescriptorImageInfo::default()
-                    .image_view(i.view())
-                    .image_layout(vk::ImageLayout::GENERAL)],
+                Resource::Image { view, layout } => [vk::DescriptorImageInfo::default()
+                    .image_view(*view)
+                    .image_layout(*layout)],
                 Resource::Buffer(_) => [vk::DescriptorImageInfo::default()],
             })
             .collect();
@@ -331,14 +340,14 @@ impl ComputePipeline {
                     Resource::Buffer(_) => write
                         .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                         .buffer_info(&buffer_infos[i]),
-                    Resource::Image(_) => write
+                    Resource::Image { .. } => write
                         .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
                         .image_info(&image_infos[i]),
                 }
             })
             .collect();
         let device = ctx.device();
-        // SAFETY: cmd is recording; buffers and images are alive; the layout matches.
+        // SAFETY: cmd is recording; the resources are alive; the layout matches.
         unsafe {
             device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             ctx.shared.push_descriptor.cmd_push_descriptor_set(

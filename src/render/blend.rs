@@ -93,8 +93,14 @@ impl Blend {
                 Resource::Buffer(b.splats),
                 Resource::Buffer(b.values),
                 Resource::Buffer(b.ranges),
-                Resource::Image(b.color),
-                Resource::Image(b.depth),
+                Resource::Image {
+                    view: b.color.view(),
+                    layout: vk::ImageLayout::GENERAL,
+                },
+                Resource::Image {
+                    view: b.depth.view(),
+                    layout: vk::ImageLayout::GENERAL,
+                },
             ],
             &[],
             [tiles.0, tiles.1, 1],
