@@ -46,6 +46,8 @@ pub struct Comparison {
     pub alpha_psnr: f64,
     /// Largest relative depth difference where both alphas exceed 0.5.
     pub depth_rel: f64,
+    /// Share of pixels with both alphas above 0.5 whose depth is within 1e-3 relative.
+    pub depth_within: f64,
 }
 
 fn psnr(se: f64, n: usize) -> f64 {
@@ -61,6 +63,7 @@ fn psnr(se: f64, n: usize) -> f64 {
 pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
     assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
     let (mut se, mut within, mut ase, mut depth_rel) = (0.0f64, 0usize, 0.0f64, 0.0f64);
+    let (mut covered, mut depth_ok) = (0usize, 0usize);
     for i in 0..gpu.color.len() {
         let mut ok = true;
         for ch in 0..3 {
@@ -75,6 +78,8 @@ pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
         if gpu.alpha[i] > 0.5 && cpu.alpha[i] > 0.5 {
             let rel = ((gpu.depth[i] - cpu.depth[i]).abs() / cpu.depth[i].abs().max(1e-6)) as f64;
             depth_rel = depth_rel.max(rel);
+            covered += 1;
+            depth_ok += (rel <= 1e-3) as usize;
         }
     }
     Comparison {
@@ -82,6 +87,11 @@ pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
         within: within as f64 / gpu.color.len() as f64,
         alpha_psnr: psnr(ase, gpu.alpha.len()),
         depth_rel,
+        depth_within: if covered == 0 {
+            1.0
+        } else {
+            depth_ok as f64 / covered as f64
+        },
     }
 }
 
