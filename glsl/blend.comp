@@ -9,6 +9,9 @@
 #ifndef STRIP
 #define STRIP 1
 #endif
+#ifndef TEXEL_FETCH
+#define TEXEL_FETCH 0
+#endif
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
@@ -16,29 +19,36 @@
 layout(local_size_x = 16 / STRIP, local_size_y = 16) in;
 
 layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+#if !TEXEL_FETCH
 layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = 2) readonly buffer ValueBuf { uint values[]; };
+#else
+// Texel-buffer views of the same splats (3 rgba32f texels each) and sorted values: on CPU
+// implementations texel fetches compile to straight-line gathers, unlike buffer loads.
+layout(binding = 1) uniform samplerBuffer splat_texels;
+layout(binding = 2) uniform usamplerBuffer value_texels;
+#endif
 layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
 layout(binding = 4, rgba32f) uniform writeonly image2D out_color;  // rgb + T * background, alpha = 1 - T
 layout(binding = 5, r32f) uniform writeonly image2D out_depth;     // alpha-normalised depth
 
-// Composites one Gaussian into one pixel's state (the reference's per-pixel rule).
+// Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
+// written without branches: SIMD implementations execute both sides of a divergent branch
+// anyway, so selects are cheaper than masked control flow. Identical results.
 void composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
                inout float T, inout vec3 C, inout float D, inout bool done) {
     vec2 d = mean_opacity_depth.xy - pixf;
     float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
-    float alpha = min(ALPHA_MAX, mean_opacity_depth.z * exp(power));
-    if (power <= 0.0 && alpha >= ALPHA_MIN) {
-        float test_t = T * (1.0 - alpha);
-        if (test_t < T_MIN) {
-            done = true;
-        } else {
-            float w = alpha * T;
-            C += color * w;
-            D += mean_opacity_depth.w * w;
-            T = test_t;
-        }
-    }
+    float alpha = min(ALPHA_MAX, mean_opacity_depth.z * exp(min(power, 0.0)));
+    bool take = !done && power <= 0.0 && alpha >= ALPHA_MIN;
+    float test_t = T * (1.0 - alpha);
+    bool stop = take && test_t < T_MIN;
+    bool add = take && !stop;
+    float w = add ? alpha * T : 0.0;
+    C += color * w;
+    D += mean_opacity_depth.w * w;
+    T = add ? test_t : T;
+    done = done || stop;
 }
 
 void write_pixel(uvec2 pix, float T, vec3 C, float D) {
@@ -49,7 +59,7 @@ void write_pixel(uvec2 pix, float T, vec3 C, float D) {
     }
 }
 
-#if STRIP == 1
+#if !TEXEL_FETCH
 shared vec4 s_mean_opacity[TILE_PIXELS];  // mean2d.xy, opacity, depth
 shared vec4 s_conic[TILE_PIXELS];         // A, B, C
 shared vec4 s_color[TILE_PIXELS];
@@ -110,12 +120,14 @@ void main() {
         bool all_done = true;
         [[unroll]] for (uint p = 0u; p < STRIP; p++) all_done = all_done && done[p];
         if (all_done) break;
-        Splat s = splats[values[k]];
+        int g = int(texelFetch(value_texels, int(k)).x) * 3;
+        Splat s;
+        s.mean_depth_opacity = texelFetch(splat_texels, g);
+        s.conic_radius = texelFetch(splat_texels, g + 1);
+        s.color = texelFetch(splat_texels, g + 2);
         vec4 mo = vec4(s.mean_depth_opacity.xy, s.mean_depth_opacity.w, s.mean_depth_opacity.z);
         [[unroll]] for (uint p = 0u; p < STRIP; p++) {
-            if (!done[p]) {
-                composite(mo, s.conic_radius.xyz, s.color.rgb, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
-            }
+            composite(mo, s.conic_radius.xyz, s.color.rgb, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
         }
     }
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {

@@ -136,9 +136,9 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates, cam: &Camera)
         per_gaussian[v as usize] += 1;
     }
     let mut acc = 0u32;
-    for i in 0..n {
-        assert_eq!(inter.offsets[i], acc, "{label}: offset {i}");
-        acc += per_gaussian[i];
+    for (i, (&offset, &count)) in inter.offsets.iter().zip(&per_gaussian).enumerate() {
+        assert_eq!(offset, acc, "{label}: offset {i}");
+        acc += count;
     }
     assert_eq!(u64::from(acc), pairs);
     assert_eq!(inter.counters.scan_total, acc);

@@ -56,7 +56,8 @@ impl GpuBuffer {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST
-            | vk::BufferUsageFlags::INDIRECT_BUFFER;
+            | vk::BufferUsageFlags::INDIRECT_BUFFER
+            | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)
@@ -304,5 +305,49 @@ impl Drop for GpuBuffer {
                 }
             }
         }
+    }
+}
+
+/// A typed view of a buffer range for `texelFetch` (uniform texel buffer); destroyed on drop.
+pub struct BufferView {
+    shared: Arc<Shared>,
+    view: vk::BufferView,
+}
+
+impl BufferView {
+    /// Views `size` bytes of `buffer` from `offset` as texels of `format`.
+    pub fn new(
+        ctx: &GpuContext,
+        buffer: &GpuBuffer,
+        format: vk::Format,
+        offset: u64,
+        size: u64,
+    ) -> GpuResult<Self> {
+        let info = vk::BufferViewCreateInfo::default()
+            .buffer(buffer.handle())
+            .format(format)
+            .offset(offset)
+            .range(size);
+        // SAFETY: the buffer was created with UNIFORM_TEXEL_BUFFER usage; the view is
+        // destroyed in Drop, and its owner keeps the buffer alive as long as the view.
+        let view = unsafe { ctx.shared.device.create_buffer_view(&info, None) }
+            .vk("vkCreateBufferView")?;
+        ctx.set_name(view, buffer.name());
+        Ok(BufferView {
+            shared: ctx.shared.clone(),
+            view,
+        })
+    }
+
+    /// The Vulkan handle.
+    pub fn handle(&self) -> vk::BufferView {
+        self.view
+    }
+}
+
+impl Drop for BufferView {
+    fn drop(&mut self) {
+        // SAFETY: the owner guarantees no submitted work still uses the view.
+        unsafe { self.shared.device.destroy_buffer_view(self.view, None) };
     }
 }

@@ -49,6 +49,8 @@ pub struct DeviceInfo {
     pub min_storage_buffer_offset_alignment: u64,
     /// maxStorageBufferRange in bytes.
     pub max_storage_buffer_range: u32,
+    /// maxTexelBufferElements.
+    pub max_texel_buffer_elements: u32,
     /// Nanoseconds per timestamp tick.
     pub timestamp_period_ns: f32,
     /// Valid bits in compute-queue timestamps (0 = no timestamps).
@@ -447,6 +449,7 @@ impl GpuContext {
             max_shared_memory: limits.max_compute_shared_memory_size,
             min_storage_buffer_offset_alignment: limits.min_storage_buffer_offset_alignment,
             max_storage_buffer_range: limits.max_storage_buffer_range,
+            max_texel_buffer_elements: limits.max_texel_buffer_elements,
             timestamp_period_ns: limits.timestamp_period,
             timestamp_valid_bits,
         };

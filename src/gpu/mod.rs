@@ -10,7 +10,7 @@ pub mod sort;
 pub mod sync;
 pub mod timing;
 
-pub use buffer::{BufferSlice, GpuBuffer, MemoryKind};
+pub use buffer::{BufferSlice, BufferView, GpuBuffer, MemoryKind};
 pub use context::{ContextOptions, DeviceInfo, GpuContext};
 pub use image::GpuImage;
 pub use scan::Scan;

@@ -137,6 +137,8 @@ pub enum BindingKind {
     StorageBuffer,
     /// `image2D` with a format qualifier.
     StorageImage,
+    /// `samplerBuffer` / `usamplerBuffer` read with `texelFetch`.
+    UniformTexelBuffer,
 }
 
 /// What is bound to one binding slot at dispatch time.
@@ -151,6 +153,8 @@ pub enum Resource<'a> {
         /// Its layout while the dispatch runs.
         layout: vk::ImageLayout,
     },
+    /// A uniform texel buffer view.
+    TexelBuffer(vk::BufferView),
 }
 
 /// A compute pipeline with a push-descriptor set layout and push constants.
@@ -202,6 +206,7 @@ impl ComputePipeline {
                     .descriptor_type(match kind {
                         BindingKind::StorageBuffer => vk::DescriptorType::STORAGE_BUFFER,
                         BindingKind::StorageImage => vk::DescriptorType::STORAGE_IMAGE,
+                        BindingKind::UniformTexelBuffer => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
                     })
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
@@ -293,6 +298,7 @@ impl ComputePipeline {
                     (r, b),
                     (Resource::Buffer(_), BindingKind::StorageBuffer)
                         | (Resource::Image { .. }, BindingKind::StorageImage)
+                        | (Resource::TexelBuffer(_), BindingKind::UniformTexelBuffer)
                 )
             });
         if !matches {
@@ -319,7 +325,9 @@ impl ComputePipeline {
                     .offset(b.offset)
                     // An empty range is not allowed; bind the rest of the buffer.
                     .range(if b.size == 0 { vk::WHOLE_SIZE } else { b.size })],
-                Resource::Image { .. } => [vk::DescriptorBufferInfo::default()],
+                Resource::Image { .. } | Resource::TexelBuffer(_) => {
+                    [vk::DescriptorBufferInfo::default()]
+                }
             })
             .collect();
         let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = resources
@@ -328,7 +336,16 @@ impl ComputePipeline {
                 Resource::Image { view, layout } => [vk::DescriptorImageInfo::default()
                     .image_view(*view)
                     .image_layout(*layout)],
-                Resource::Buffer(_) => [vk::DescriptorImageInfo::default()],
+                Resource::Buffer(_) | Resource::TexelBuffer(_) => {
+                    [vk::DescriptorImageInfo::default()]
+                }
+            })
+            .collect();
+        let texel_views: Vec<[vk::BufferView; 1]> = resources
+            .iter()
+            .map(|r| match r {
+                Resource::TexelBuffer(view) => [*view],
+                _ => [vk::BufferView::null()],
             })
             .collect();
         let writes: Vec<vk::WriteDescriptorSet> = resources
@@ -343,6 +360,9 @@ impl ComputePipeline {
                     Resource::Image { .. } => write
                         .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
                         .image_info(&image_infos[i]),
+                    Resource::TexelBuffer(_) => write
+                        .descriptor_type(vk::DescriptorType::UNIFORM_TEXEL_BUFFER)
+                        .texel_buffer_view(&texel_views[i]),
                 }
             })
             .collect();

@@ -10,6 +10,8 @@ use super::{BufferSlice, GpuContext};
 pub enum Access {
     /// Read by a compute shader (storage buffer).
     ComputeRead,
+    /// Read by a compute shader through a sampled/texel-buffer descriptor (`texelFetch`).
+    ComputeSampledRead,
     /// Written by a compute shader.
     ComputeWrite,
     /// Read and written by a compute shader.
@@ -35,6 +37,7 @@ impl Access {
         use vk::PipelineStageFlags2 as S;
         match self {
             Access::ComputeRead => (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
+            Access::ComputeSampledRead => (S::COMPUTE_SHADER, A::SHADER_SAMPLED_READ),
             Access::ComputeWrite => (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             Access::ComputeReadWrite => (
                 S::COMPUTE_SHADER,

@@ -5,33 +5,83 @@ use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use ash::vk;
 
+/// Which blend kernel to build. Both composite with the same per-pixel arithmetic.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlendKernel {
+    /// One invocation per pixel; the tile's Gaussians are fetched into shared memory in
+    /// batches of 256 and the workgroup stops when every pixel is finished. For GPUs.
+    Shared,
+    /// One invocation per `strip` pixels of a row, reading Gaussians through texel-buffer
+    /// fetches (no shared memory, no barriers); an invocation stops when its pixels are
+    /// finished. For CPU implementations such as lavapipe, where loop-indexed buffer and
+    /// shared-memory loads become per-lane scalar loops but texel fetches do not.
+    Texel {
+        /// Pixels per invocation: 1, 2, 4, 8 or 16.
+        strip: u32,
+    },
+}
+
+/// Supported strip lengths of [`BlendKernel::Texel`].
+pub const STRIPS: [u32; 5] = [1, 2, 4, 8, 16];
+
+impl BlendKernel {
+    /// The kernel for a device: [`BlendKernel::Shared`] on GPUs, texel fetches with two
+    /// pixels per invocation on CPU devices (fastest on lavapipe, see BENCHMARKS.md).
+    /// `VKSPLAT_BLEND` (`shared`, `texel` or `texel:N`) overrides.
+    pub fn for_device(ctx: &GpuContext) -> BlendKernel {
+        if let Some(k) = std::env::var("VKSPLAT_BLEND")
+            .ok()
+            .and_then(|v| v.parse().ok())
+        {
+            return k;
+        }
+        if ctx.info().device_type == vk::PhysicalDeviceType::CPU {
+            BlendKernel::Texel { strip: 2 }
+        } else {
+            BlendKernel::Shared
+        }
+    }
+
+    /// Every supported kernel (for tests and benchmarks).
+    pub fn all() -> Vec<BlendKernel> {
+        std::iter::once(BlendKernel::Shared)
+            .chain(STRIPS.iter().map(|&strip| BlendKernel::Texel { strip }))
+            .collect()
+    }
+
+    fn texel(self) -> bool {
+        matches!(self, BlendKernel::Texel { .. })
+    }
+
+    fn strip(self) -> u32 {
+        match self {
+            BlendKernel::Shared => 1,
+            BlendKernel::Texel { strip } => strip,
+        }
+    }
+}
+
+impl std::str::FromStr for BlendKernel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "shared" => Ok(BlendKernel::Shared),
+            "texel" => Ok(BlendKernel::Texel { strip: 1 }),
+            other => other
+                .strip_prefix("texel:")
+                .and_then(|n| n.parse::<u32>().ok())
+                .filter(|n| STRIPS.contains(n))
+                .map(|strip| BlendKernel::Texel { strip })
+                .ok_or_else(|| format!("unknown blend kernel {other:?}; use shared, texel or texel:N (N in {STRIPS:?})")),
+        }
+    }
+}
+
 /// The blend pipeline.
 pub struct Blend {
     pipeline: ComputePipeline,
-    strip: u32,
+    kernel: BlendKernel,
 }
-
-/// Pixels per invocation the blend uses on a device: 1 on GPUs (shared-memory batches,
-/// one pixel per thread); 8 on CPU implementations such as lavapipe, whose memory loads
-/// are per-lane scalar loops, so one load should serve several pixels.
-/// `VKSPLAT_BLEND_STRIP` (1, 2, 4, 8 or 16) overrides.
-pub fn default_strip(ctx: &GpuContext) -> u32 {
-    if let Some(s) = std::env::var("VKSPLAT_BLEND_STRIP")
-        .ok()
-        .and_then(|v| v.parse::<u32>().ok())
-        .filter(|s| STRIPS.contains(s))
-    {
-        return s;
-    }
-    if ctx.info().device_type == vk::PhysicalDeviceType::CPU {
-        8
-    } else {
-        1
-    }
-}
-
-/// Supported pixels-per-invocation values.
-pub const STRIPS: [u32; 5] = [1, 2, 4, 8, 16];
 
 /// Resources the stage reads and writes.
 pub struct BlendBindings<'a> {
@@ -41,6 +91,10 @@ pub struct BlendBindings<'a> {
     pub splats: BufferSlice<'a>,
     /// Sorted values (Gaussian indices).
     pub values: BufferSlice<'a>,
+    /// Texel view of `splats` (R32G32B32A32_SFLOAT), for the texel kernel.
+    pub splat_texels: Option<vk::BufferView>,
+    /// Texel view of `values` (R32_UINT), for the texel kernel.
+    pub value_texels: Option<vk::BufferView>,
     /// Tile ranges.
     pub ranges: BufferSlice<'a>,
     /// rgba32f colour + alpha image (written, GENERAL layout).
@@ -50,31 +104,39 @@ pub struct BlendBindings<'a> {
 }
 
 impl Blend {
-    /// Compiles the shader with `strip` pixels per invocation (one of [`STRIPS`]).
-    pub fn new(ctx: &GpuContext, strip: u32) -> GpuResult<Self> {
-        use BindingKind::{StorageBuffer as B, StorageImage as I};
-        if !STRIPS.contains(&strip) {
+    /// Compiles the shader for `kernel`.
+    pub fn new(ctx: &GpuContext, kernel: BlendKernel) -> GpuResult<Self> {
+        use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
+        if !STRIPS.contains(&kernel.strip()) {
             return Err(crate::gpu::GpuError::InvalidArgument(format!(
-                "blend strip {strip} is not one of {STRIPS:?}"
+                "blend strip {} is not one of {STRIPS:?}",
+                kernel.strip()
             )));
         }
-        let defines = [("STRIP", strip.to_string())];
+        let defines = [
+            ("STRIP", kernel.strip().to_string()),
+            ("TEXEL_FETCH", u32::from(kernel.texel()).to_string()),
+        ];
+        let bindings = if kernel.texel() {
+            [B, T, T, B, I, I]
+        } else {
+            [B, B, B, B, I, I]
+        };
         // local_size_x (the full-subgroups requirement looks at the X dimension).
-        let invocations = 16 / strip;
-        let pipeline = ComputePipeline::from_embedded(
-            ctx,
-            "blend",
-            &defines,
-            &[B, B, B, B, I, I],
-            0,
-            invocations,
-        )?;
-        Ok(Blend { pipeline, strip })
+        let local_x = 16 / kernel.strip();
+        let pipeline =
+            ComputePipeline::from_embedded(ctx, "blend", &defines, &bindings, 0, local_x)?;
+        Ok(Blend { pipeline, kernel })
     }
 
-    /// Pixels per invocation.
-    pub fn strip(&self) -> u32 {
-        self.strip
+    /// The kernel in use.
+    pub fn kernel(&self) -> BlendKernel {
+        self.kernel
+    }
+
+    /// Whether the kernel reads texel-buffer views of the splats and values.
+    pub fn needs_texel_views(&self) -> bool {
+        self.kernel.texel()
     }
 
     /// Records one workgroup per tile (the tile grid is at most 1024x1024).
@@ -85,13 +147,22 @@ impl Blend {
         b: &BlendBindings,
         tiles: (u32, u32),
     ) -> GpuResult<()> {
+        let (splats, values) = match (self.kernel, b.splat_texels, b.value_texels) {
+            (BlendKernel::Shared, _, _) => (Resource::Buffer(b.splats), Resource::Buffer(b.values)),
+            (_, Some(s), Some(v)) => (Resource::TexelBuffer(s), Resource::TexelBuffer(v)),
+            _ => {
+                return Err(crate::gpu::GpuError::InvalidArgument(
+                    "the texel blend kernel needs texel views of the splats and values".into(),
+                ))
+            }
+        };
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
             &[
                 Resource::Buffer(b.params),
-                Resource::Buffer(b.splats),
-                Resource::Buffer(b.values),
+                splats,
+                values,
                 Resource::Buffer(b.ranges),
                 Resource::Image {
                     view: b.color.view(),

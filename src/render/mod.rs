@@ -19,8 +19,8 @@ use crate::cpu::RenderOptions;
 use crate::frame::Frame;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
-    Count, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer, MemoryKind, RadixSort,
-    Scan,
+    BufferView, Count, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer, MemoryKind,
+    RadixSort, Scan,
 };
 use crate::scene::ActivatedScene;
 use ash::vk;
@@ -124,7 +124,10 @@ pub fn key_bits(num_tiles: u32) -> u32 {
 }
 
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
+/// (Fields drop in order: the texel views go before the buffers they view.)
 struct FrameBuffers {
+    splat_texels: Option<BufferView>,
+    value_texels: Option<BufferView>,
     gaussians: u32,
     width: u32,
     height: u32,
@@ -151,24 +154,56 @@ impl FrameBuffers {
         width: u32,
         height: u32,
         capacity: u32,
+        texel_views: bool,
     ) -> GpuResult<Self> {
         let n = u64::from(gaussians.max(1));
         let tiles = u64::from(width.div_ceil(16)) * u64::from(height.div_ceil(16));
         let pixels = u64::from(width) * u64::from(height);
         let dev = |name: &str, bytes: u64| GpuBuffer::new(ctx, name, bytes, MemoryKind::Device);
+        let splats = dev("splats", n * std::mem::size_of::<Splat>() as u64)?;
+        let values = dev("values", u64::from(capacity) * 4)?;
+        let (splat_texels, value_texels) = if texel_views {
+            let max = u64::from(ctx.info().max_texel_buffer_elements);
+            if n * 3 > max || u64::from(capacity) > max {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the strip blend needs texel buffers of {} and {capacity} elements; this device allows {max}",
+                    n * 3
+                )));
+            }
+            (
+                Some(BufferView::new(
+                    ctx,
+                    &splats,
+                    vk::Format::R32G32B32A32_SFLOAT,
+                    0,
+                    splats.size(),
+                )?),
+                Some(BufferView::new(
+                    ctx,
+                    &values,
+                    vk::Format::R32_UINT,
+                    0,
+                    values.size(),
+                )?),
+            )
+        } else {
+            (None, None)
+        };
         Ok(FrameBuffers {
+            splat_texels,
+            value_texels,
             gaussians,
             width,
             height,
             capacity,
             params: dev("frame params", std::mem::size_of::<FrameParams>() as u64)?,
             counters: dev("counters", std::mem::size_of::<Counters>() as u64)?,
-            splats: dev("splats", n * std::mem::size_of::<Splat>() as u64)?,
+            splats,
             rects: dev("tile rects", n * 8)?,
             offsets: dev("tiles touched / offsets", n * 4)?,
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
             keys: dev("keys", u64::from(capacity) * 8)?,
-            values: dev("values", u64::from(capacity) * 4)?,
+            values,
             sort_scratch: dev("sort scratch", RadixSort::scratch_size(capacity))?,
             ranges: dev("tile ranges", tiles * 8)?,
             color: GpuImage::new(
@@ -233,21 +268,21 @@ pub struct GpuRenderer {
 const MIN_CAPACITY: u32 = 1 << 16;
 
 impl GpuRenderer {
-    /// Builds every pipeline on `ctx`, with the blend variant suited to the device.
+    /// Builds every pipeline on `ctx`, with the blend kernel suited to the device.
     pub fn new(ctx: GpuContext) -> GpuResult<Self> {
-        let strip = blend::default_strip(&ctx);
-        Self::with_blend_strip(ctx, strip)
+        let kernel = blend::BlendKernel::for_device(&ctx);
+        Self::with_blend_kernel(ctx, kernel)
     }
 
-    /// Builds every pipeline with `strip` pixels per blend invocation (see [`blend::STRIPS`]).
-    pub fn with_blend_strip(ctx: GpuContext, strip: u32) -> GpuResult<Self> {
+    /// Builds every pipeline with the given blend kernel.
+    pub fn with_blend_kernel(ctx: GpuContext, kernel: blend::BlendKernel) -> GpuResult<Self> {
         Ok(GpuRenderer {
             preprocess: preprocess::Preprocess::new(&ctx)?,
             scan: Scan::new(&ctx)?,
             keys: keys::Keys::new(&ctx)?,
             sort: RadixSort::new(&ctx)?,
             ranges: ranges::Ranges::new(&ctx)?,
-            blend: blend::Blend::new(&ctx, strip)?,
+            blend: blend::Blend::new(&ctx, kernel)?,
             timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
             frame: None,
             timings: StageTimings::default(),
@@ -256,9 +291,9 @@ impl GpuRenderer {
         })
     }
 
-    /// Pixels per blend invocation in use.
-    pub fn blend_strip(&self) -> u32 {
-        self.blend.strip()
+    /// The blend kernel in use.
+    pub fn blend_kernel(&self) -> blend::BlendKernel {
+        self.blend.kernel()
     }
 
     /// The device context.
@@ -360,16 +395,17 @@ impl GpuRenderer {
         if !fits {
             // Free the old buffers first so peak memory is not doubled.
             self.frame = None;
-            let gaussians = self.frame_gaussians(scene);
+            let views = self.blend.needs_texel_views();
             self.frame = Some(FrameBuffers::new(
-                &self.ctx, gaussians, cam.width, cam.height, capacity,
+                &self.ctx,
+                scene.count,
+                cam.width,
+                cam.height,
+                capacity,
+                views,
             )?);
         }
         Ok(())
-    }
-
-    fn frame_gaussians(&self, scene: &GpuScene) -> u32 {
-        scene.count
     }
 
     fn render_inner(
@@ -566,8 +602,14 @@ impl GpuRenderer {
                     f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
                 )
             })?;
-            // Ranges -> blend.
-            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+            // Ranges, sorted values and splats -> blend (storage reads, or texel fetches in
+            // the texel kernel).
+            barrier_uses(
+                ctx,
+                cmd,
+                &[Access::ComputeWrite],
+                &[Access::ComputeRead, Access::ComputeSampledRead],
+            );
 
             timer.stage(ctx, cmd, "blend", |cmd| {
                 blend.record(
@@ -577,6 +619,8 @@ impl GpuRenderer {
                         params: f.params.whole(),
                         splats: f.splats.whole(),
                         values: f.values.whole(),
+                        splat_texels: f.splat_texels.as_ref().map(|v| v.handle()),
+                        value_texels: f.value_texels.as_ref().map(|v| v.handle()),
                         ranges: f.ranges.whole(),
                         color: &f.color,
                         depth: &f.depth,

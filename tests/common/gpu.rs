@@ -5,6 +5,7 @@ use std::sync::{Mutex, MutexGuard, OnceLock};
 use vksplat::camera::Camera;
 use vksplat::frame::Frame;
 use vksplat::gpu::{ContextOptions, GpuContext};
+use vksplat::render::blend::BlendKernel;
 use vksplat::render::GpuRenderer;
 
 /// The shared renderer (validation layer on; the blend variant for the device).
@@ -15,15 +16,15 @@ pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
         .unwrap_or_else(|e| e.into_inner())
 }
 
-/// A fresh renderer with validation on and, if given, a fixed blend strip.
-pub fn new_renderer(strip: Option<u32>) -> GpuRenderer {
+/// A fresh renderer with validation on and, if given, a fixed blend kernel.
+pub fn new_renderer(kernel: Option<BlendKernel>) -> GpuRenderer {
     let ctx = GpuContext::new(&ContextOptions {
         validation: true,
         ..Default::default()
     })
     .expect("a Vulkan device (lavapipe) with the validation layer");
-    match strip {
-        Some(s) => GpuRenderer::with_blend_strip(ctx, s),
+    match kernel {
+        Some(k) => GpuRenderer::with_blend_kernel(ctx, k),
         None => GpuRenderer::new(ctx),
     }
     .expect("pipelines build")
