@@ -260,3 +260,82 @@ fn cameras_json_camera_selected_by_name_renders() {
     assert!(stderr(&o).contains("playbot_orbit_006"));
     assert_eq!(image::open(&out).unwrap().width(), 320);
 }
+
+#[test]
+fn gpu_is_the_default_and_matches_cpu_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let gpu = dir.path().join("gpu.png");
+    let cpu = dir.path().join("cpu.png");
+    let o = vksplat(&[
+        "render",
+        "--demo",
+        "--width",
+        "480",
+        "-o",
+        gpu.to_str().unwrap(),
+        "--timings",
+        "--validate",
+        "-v",
+    ]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    for needle in [
+        "device: #",
+        "preprocess",
+        "scan",
+        "keys",
+        "sort",
+        "ranges",
+        "blend",
+        "readback",
+        "frame",
+        "tile pairs",
+        "device memory",
+    ] {
+        assert!(e.contains(needle), "missing {needle:?} in\n{e}");
+    }
+    assert!(!e.contains("on the CPU"), "{e}");
+    let o = vksplat(&[
+        "render",
+        "--demo",
+        "--width",
+        "480",
+        "-o",
+        cpu.to_str().unwrap(),
+        "--cpu",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (g, c) = (
+        image::open(&gpu).unwrap().to_rgb8(),
+        image::open(&cpu).unwrap().to_rgb8(),
+    );
+    assert_eq!(g.dimensions(), c.dimensions());
+    let close = g
+        .pixels()
+        .zip(c.pixels())
+        .filter(|(a, b)| {
+            a.0.iter()
+                .zip(b.0)
+                .all(|(x, y)| (*x as i32 - y as i32).abs() <= 1)
+        })
+        .count();
+    assert!(
+        close as f64 >= 0.999 * (480.0 * 270.0),
+        "{close} pixels within 1/255"
+    );
+    // A device that does not exist is one clear error.
+    let o = vksplat(&[
+        "render",
+        "--demo",
+        "-o",
+        dir.path().join("x.png").to_str().unwrap(),
+        "--device",
+        "no-such-gpu",
+    ]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("no-such-gpu") && !e.contains("panicked"),
+        "{e}"
+    );
+    assert!(!dir.path().join("x.png").exists());
+}

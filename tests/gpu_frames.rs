@@ -338,3 +338,29 @@ fn two_hundred_frames_do_not_grow_memory() {
     );
     assert_validation_clean(&r);
 }
+
+#[test]
+fn teardown_leaves_no_allocation_and_no_validation_message() {
+    let mut r = new_renderer(None);
+    let log = r.ctx().validation_log();
+    let s = load("playbot_lod6_1873_sh2.ply").activated();
+    let gs = r.upload(&s).unwrap();
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 3, 200, 120);
+    r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    assert!(r.ctx().live_allocations().0 > 0);
+    drop(gs);
+    let ctx = r.into_context();
+    assert_eq!(
+        ctx.live_allocations(),
+        (0, 0),
+        "gpu-allocator still holds allocations"
+    );
+    drop(ctx);
+    // vkDestroyDevice reports any object still alive through the validation layer.
+    let messages = log.lock().unwrap().clone();
+    assert!(
+        messages.is_empty(),
+        "teardown messages:\n{}",
+        messages.join("\n")
+    );
+}

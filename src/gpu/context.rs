@@ -597,6 +597,18 @@ impl GpuContext {
         self.messages.lock().map(|m| m.clone()).unwrap_or_default()
     }
 
+    /// Live gpu-allocator allocations and their bytes (what its leak log would report if
+    /// the allocator were dropped now).
+    pub fn live_allocations(&self) -> (usize, u64) {
+        match self.shared.allocator.lock() {
+            Ok(a) => {
+                let report = a.generate_report();
+                (report.allocations.len(), report.total_allocated_bytes)
+            }
+            Err(_) => (0, 0),
+        }
+    }
+
     /// The shared message log itself, to inspect messages emitted while the context
     /// is torn down (leaked objects are reported at vkDestroyDevice).
     pub fn validation_log(&self) -> Arc<Mutex<Vec<String>>> {

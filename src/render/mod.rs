@@ -296,6 +296,12 @@ impl GpuRenderer {
         self.blend.kernel()
     }
 
+    /// Destroys the pipelines and per-frame resources and returns the context (for
+    /// checking that nothing is left allocated).
+    pub fn into_context(self) -> GpuContext {
+        self.ctx
+    }
+
     /// The device context.
     pub fn ctx(&self) -> &GpuContext {
         &self.ctx
