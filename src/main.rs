@@ -216,6 +216,7 @@ fn render_gpu(
     cam: &Camera,
     opts: &vksplat::cpu::RenderOptions,
 ) -> Result<(vksplat::frame::Frame, String)> {
+    let t0 = std::time::Instant::now();
     let ctx = GpuContext::new(&ContextOptions {
         device: args.gpu.device.clone(),
         validation: args.gpu.validate,
@@ -224,7 +225,15 @@ fn render_gpu(
         eprintln!("device: {}", ctx.info());
     }
     let validating = ctx.validation_enabled();
+    let t1 = std::time::Instant::now();
     let mut renderer = GpuRenderer::new(ctx)?;
+    if args.gpu.verbose {
+        eprintln!(
+            "start-up: device {:.0} ms, shaders and pipelines {:.0} ms",
+            (t1 - t0).as_secs_f64() * 1e3,
+            t1.elapsed().as_secs_f64() * 1e3
+        );
+    }
     let gpu_scene = renderer.upload(&scene.activated())?;
     let frame = renderer.render(&gpu_scene, cam, opts)?;
     if args.timings {

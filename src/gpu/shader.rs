@@ -124,10 +124,108 @@ pub fn compile_glsl(
 }
 
 /// Compiles the embedded shader `glsl/<name>.comp`.
+///
+/// Compiled SPIR-V is cached on disk (see [`shader_cache_dir`]): compiling every shader
+/// with glslang takes over a second, most of a short render's start-up. The cache key
+/// covers every embedded source, the shader name and its defines, so any change to any
+/// shader misses. A damaged entry is ignored and rewritten.
 pub fn compile_embedded(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, ShaderError> {
+    compile_embedded_cached(name, defines, shader_cache_dir().as_deref())
+}
+
+/// [`compile_embedded`] with an explicit cache directory (`None`: no cache).
+pub fn compile_embedded_cached(
+    name: &str,
+    defines: &[(&str, String)],
+    cache_dir: Option<&std::path::Path>,
+) -> Result<Vec<u32>, ShaderError> {
     let file = format!("{name}.comp");
     let source = embedded(&file).ok_or(ShaderError::Unknown(file))?;
-    compile_glsl(name, source, defines)
+    let cached =
+        cache_dir.map(|dir| dir.join(format!("{name}-{:016x}.spv", cache_key(name, defines))));
+    if let Some(words) = cached.as_deref().and_then(read_spirv) {
+        return Ok(words);
+    }
+    let words = compile_glsl(name, source, defines)?;
+    if let Some(path) = cached {
+        write_spirv(&path, &words);
+    }
+    Ok(words)
+}
+
+/// Where compiled shaders are cached: `$VKSPLAT_SHADER_CACHE`, else
+/// `$XDG_CACHE_HOME/vksplat/spirv`, else `~/.cache/vksplat/spirv`. `None` (no caching)
+/// when `VKSPLAT_NO_SHADER_CACHE` is set or no location is known.
+pub fn shader_cache_dir() -> Option<std::path::PathBuf> {
+    use std::path::PathBuf;
+    if std::env::var_os("VKSPLAT_NO_SHADER_CACHE").is_some() {
+        return None;
+    }
+    if let Some(dir) = std::env::var_os("VKSPLAT_SHADER_CACHE") {
+        return Some(PathBuf::from(dir));
+    }
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+    Some(base.join("vksplat").join("spirv"))
+}
+
+/// FNV-1a over every embedded source, the crate version, the shader name and its defines.
+fn cache_key(name: &str, defines: &[(&str, String)]) -> u64 {
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    let mut feed = |bytes: &[u8]| {
+        for &b in bytes {
+            hash ^= u64::from(b);
+            hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        // A separator so that concatenations cannot collide.
+        hash ^= 0xff;
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    };
+    feed(env!("CARGO_PKG_VERSION").as_bytes());
+    for (file, text) in SOURCES {
+        feed(file.as_bytes());
+        feed(text.as_bytes());
+    }
+    feed(name.as_bytes());
+    for (k, v) in defines {
+        feed(k.as_bytes());
+        feed(v.as_bytes());
+    }
+    hash
+}
+
+fn read_spirv(path: &std::path::Path) -> Option<Vec<u32>> {
+    let bytes = std::fs::read(path).ok()?;
+    if bytes.len() < 20 || bytes.len() % 4 != 0 {
+        return None;
+    }
+    let words: Vec<u32> = bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    (words[0] == 0x0723_0203).then_some(words)
+}
+
+/// Best effort: a cache that cannot be written only costs the next start-up time.
+fn write_spirv(path: &std::path::Path, words: &[u32]) {
+    let Some(dir) = path.parent() else { return };
+    if std::fs::create_dir_all(dir).is_err() {
+        return;
+    }
+    // Unique per process and call, so concurrent writers never share a temporary file.
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
+    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+    if std::fs::write(&tmp, bytes).is_ok() && std::fs::rename(&tmp, path).is_ok() {
+        return;
+    }
+    let _ = std::fs::remove_file(&tmp);
 }
 
 /// What a binding slot holds.
@@ -455,5 +553,49 @@ impl Drop for ComputePipeline {
             device.destroy_descriptor_set_layout(self.set_layout, None);
             device.destroy_shader_module(self.module, None);
         }
+    }
+}
+
+#[cfg(test)]
+mod cache_tests {
+    use super::*;
+
+    #[test]
+    fn cache_hits_misses_and_ignores_damaged_entries() {
+        let dir = std::env::temp_dir().join(format!("vksplat-cache-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let defines = [("STRIP", "2".to_string()), ("TEXEL_FETCH", "1".to_string())];
+        let fresh = compile_embedded_cached("blend", &defines, Some(&dir)).unwrap();
+        let entries: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        assert_eq!(
+            entries.len(),
+            1,
+            "one entry, no temporary files left: {entries:?}"
+        );
+        assert_eq!(read_spirv(&entries[0]).unwrap(), fresh);
+        // A hit returns what the cache holds (here another valid module, to prove it is read).
+        let other = compile_embedded_cached("ranges", &[], None).unwrap();
+        write_spirv(&entries[0], &other);
+        assert_eq!(
+            compile_embedded_cached("blend", &defines, Some(&dir)).unwrap(),
+            other
+        );
+        // Other defines are another entry.
+        let strip4 = [("STRIP", "4".to_string()), ("TEXEL_FETCH", "1".to_string())];
+        assert_ne!(
+            compile_embedded_cached("blend", &strip4, Some(&dir)).unwrap(),
+            other
+        );
+        // A damaged entry is ignored and replaced by a fresh compile.
+        std::fs::write(&entries[0], b"not spir-v at all").unwrap();
+        assert_eq!(
+            compile_embedded_cached("blend", &defines, Some(&dir)).unwrap(),
+            fresh
+        );
+        assert_eq!(read_spirv(&entries[0]).unwrap(), fresh);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
