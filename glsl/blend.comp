@@ -87,9 +87,9 @@ void main() {
         uint k = batch + gl_LocalInvocationIndex;
         if (k < n) {
             Splat s = splats[values[range.x + k]];
-            s_mean_opacity[gl_LocalInvocationIndex] = vec4(s.mean_depth_opacity.xy, s.mean_depth_opacity.w, s.mean_depth_opacity.z);
-            s_conic[gl_LocalInvocationIndex] = s.conic_radius;
-            s_color[gl_LocalInvocationIndex] = s.color;
+            s_mean_opacity[gl_LocalInvocationIndex] = vec4(s.mean_opacity_bound.xyz, s.conic_depth.w);
+            s_conic[gl_LocalInvocationIndex] = s.conic_depth;
+            s_color[gl_LocalInvocationIndex] = s.color_radius;
         }
         barrier();
         uint count = min(TILE_PIXELS, n - batch);
@@ -121,13 +121,12 @@ void main() {
         [[unroll]] for (uint p = 0u; p < STRIP; p++) all_done = all_done && done[p];
         if (all_done) break;
         int g = int(texelFetch(value_texels, int(k)).x) * 3;
-        Splat s;
-        s.mean_depth_opacity = texelFetch(splat_texels, g);
-        s.conic_radius = texelFetch(splat_texels, g + 1);
-        s.color = texelFetch(splat_texels, g + 2);
-        vec4 mo = vec4(s.mean_depth_opacity.xy, s.mean_depth_opacity.w, s.mean_depth_opacity.z);
+        vec4 mob = texelFetch(splat_texels, g);
+        vec4 cd = texelFetch(splat_texels, g + 1);
+        vec3 color = texelFetch(splat_texels, g + 2).rgb;
+        vec4 mo = vec4(mob.xyz, cd.w);
         [[unroll]] for (uint p = 0u; p < STRIP; p++) {
-            composite(mo, s.conic_radius.xyz, s.color.rgb, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
+            composite(mo, cd.xyz, color, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
         }
     }
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {

@@ -38,8 +38,8 @@ void main() {
     uvec2 rmax = unpack_tile(rect.y);
     if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
     Splat s = splats[i];
-    uint depth_bits = floatBitsToUint(s.mean_depth_opacity.z);
-    float bound = alpha_bound(s.mean_depth_opacity.w);
+    uint depth_bits = floatBitsToUint(s.conic_depth.w);
+    float bound = s.mean_opacity_bound.w;
     uint tiles_x = params.image.z;
     uint off = offsets[i];
     // This Gaussian's slots end where the next one's begin (or at the scan total).
@@ -47,7 +47,7 @@ void main() {
     for (uint y = rmin.y; y < rmax.y; y++) {
         for (uint x = rmin.x; x < rmax.x; x++) {
             // The same test preprocess counted with (tile_receives in splat_common.glsl).
-            if (!tile_receives(s.mean_depth_opacity.xy, s.conic_radius.xyz, bound, uvec2(x, y))) continue;
+            if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y))) continue;
             if (off < min(end, capacity)) {
                 keys[off] = uvec2(depth_bits, y * tiles_x + x);
                 values[off] = i;

@@ -81,9 +81,9 @@ void main() {
                          dot(params.w2c_row1.xyz, mean) + params.w2c_row1.w,
                          dot(params.w2c_row2.xyz, mean) + params.w2c_row2.w);
         Splat s;
-        s.mean_depth_opacity = vec4(0.0);
-        s.conic_radius = vec4(0.0);
-        s.color = vec4(0.0);
+        s.mean_opacity_bound = vec4(0.0);
+        s.conic_depth = vec4(0.0);
+        s.color_radius = vec4(0.0);
         uvec2 rect = uvec2(0u);
         if (view.z > NEAR_PLANE) {
             mat3 m = quat_to_mat3(g.rotation) * mat3(g.scale.x, 0.0, 0.0, 0.0, g.scale.y, 0.0, 0.0, 0.0, g.scale.z);
@@ -131,9 +131,9 @@ void main() {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);
                     uint stride = params.counts.z * 3u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);
-                    s.mean_depth_opacity = vec4(mean2d, z, g.pos_opacity.w);
-                    s.conic_radius = vec4(conic, radius);
-                    s.color = vec4(color, 0.0);
+                    s.mean_opacity_bound = vec4(mean2d, g.pos_opacity.w, bound);
+                    s.conic_depth = vec4(conic, z);
+                    s.color_radius = vec4(color, radius);
                     rect = uvec2(pack_tile(rmin.x, rmin.y), pack_tile(rmax.x, rmax.y));
                 }
             }

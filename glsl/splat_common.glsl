@@ -33,11 +33,12 @@ struct Gaussian {
     vec4 rotation;      // normalised quaternion (w, x, y, z)
 };
 
-// A projected Gaussian, written by preprocess, read by blend.
+// A projected Gaussian, written by preprocess, read by keys and blend. The first two
+// vec4s hold everything needed to tell whether it reaches a pixel (see alpha_bound).
 struct Splat {
-    vec4 mean_depth_opacity;  // mean2d.xy, view depth, opacity
-    vec4 conic_radius;        // conic A, B, C, radius (pixels; 0 when culled)
-    vec4 color;               // rgb from SH
+    vec4 mean_opacity_bound;  // mean2d.xy, opacity, alpha_bound(opacity)
+    vec4 conic_depth;         // conic A, B, C, view depth
+    vec4 color_radius;        // rgb from SH, radius (pixels; 0 when culled)
 };
 
 // Frame counters (one record, cleared at the start of each frame).

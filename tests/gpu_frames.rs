@@ -298,47 +298,6 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
     assert_validation_clean(&r);
 }
 
-fn resident_bytes() -> u64 {
-    let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
-    let pages: u64 = statm
-        .split_whitespace()
-        .nth(1)
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0);
-    pages * 4096
-}
-
-#[test]
-fn two_hundred_frames_do_not_grow_memory() {
-    let mut r = new_renderer(None);
-    let s = load("playbot_lod6_1873_sh2.ply").activated();
-    let gs = r.upload(&s).unwrap();
-    let cams = camera::load_cameras_json(
-        &common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
-    )
-    .unwrap();
-    let mut after_warmup = (0, 0);
-    for i in 0..200 {
-        let cam = cams[i % cams.len()].with_resolution(160, 90).unwrap();
-        r.render(&gs, &cam, &RenderOptions::default()).unwrap();
-        if i == 19 {
-            after_warmup = (resident_bytes(), r.frame_device_bytes());
-        }
-    }
-    let (rss, dev) = (resident_bytes(), r.frame_device_bytes());
-    eprintln!(
-        "resident {} -> {} bytes, device {} -> {} bytes",
-        after_warmup.0, rss, after_warmup.1, dev
-    );
-    assert_eq!(dev, after_warmup.1, "device buffers grew");
-    assert!(
-        rss <= after_warmup.0 + 8 * 1024 * 1024,
-        "host memory grew from {} to {rss} bytes",
-        after_warmup.0
-    );
-    assert_validation_clean(&r);
-}
-
 #[test]
 fn teardown_leaves_no_allocation_and_no_validation_message() {
     let mut r = new_renderer(None);

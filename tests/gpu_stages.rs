@@ -43,7 +43,7 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
     let n = cpu_p.len();
     let mut gpu_visible = 0u32;
     for (i, (c, g)) in cpu_p.iter().zip(&inter.splats).enumerate() {
-        let g_radius = g.conic_radius[3];
+        let g_radius = g.color_radius[3];
         if g_radius == 0.0 {
             // Culled on the GPU: either culled on the CPU too, or every tile of its CPU
             // rectangle receives less than 1/255 (exact tile culling), or it sits on the
@@ -68,7 +68,8 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
             c.radius > 0,
             "{label}: Gaussian {i} visible on the GPU only: {g:?}"
         );
-        let [mx, my, depth, opacity] = g.mean_depth_opacity;
+        let [mx, my, opacity, _bound] = g.mean_opacity_bound;
+        let depth = g.conic_depth[3];
         for (gv, cv) in [(mx, c.mean2d[0]), (my, c.mean2d[1])] {
             assert!(
                 (gv - cv).abs() <= 1e-3 + 2e-6 * cv.abs(),
@@ -84,9 +85,9 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
         let scale = c.conic.iter().fold(0f32, |m, v| m.max(v.abs()));
         for k in 0..3 {
             assert!(
-                (g.conic_radius[k] - c.conic[k]).abs() <= 2e-3 * scale,
+                (g.conic_depth[k] - c.conic[k]).abs() <= 2e-3 * scale,
                 "{label}: Gaussian {i} conic {:?} vs {:?}",
-                &g.conic_radius[..3],
+                &g.conic_depth[..3],
                 c.conic
             );
         }
@@ -97,9 +98,9 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
         );
         for k in 0..3 {
             assert!(
-                (g.color[k] - c.color[k]).abs() <= 2e-5,
+                (g.color_radius[k] - c.color[k]).abs() <= 2e-5,
                 "{label}: Gaussian {i} colour {:?} vs {:?}",
-                g.color,
+                &g.color_radius[..3],
                 c.color
             );
         }
@@ -147,7 +148,7 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates, cam: &Camera)
     for (k, (key, &v)) in inter.keys.iter().zip(&inter.values).enumerate() {
         assert_eq!(
             key[0],
-            inter.splats[v as usize].mean_depth_opacity[2].to_bits(),
+            inter.splats[v as usize].conic_depth[3].to_bits(),
             "{label}: key {k} depth"
         );
         assert!(key[1] < tiles, "{label}: key {k} tile {}", key[1]);

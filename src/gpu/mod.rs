@@ -11,7 +11,7 @@ pub mod sync;
 pub mod timing;
 
 pub use buffer::{BufferSlice, BufferView, GpuBuffer, MemoryKind};
-pub use context::{ContextOptions, DeviceInfo, GpuContext};
+pub use context::{ContextOptions, DeviceInfo, FrameSlot, GpuContext};
 pub use image::GpuImage;
 pub use scan::Scan;
 pub use shader::{ComputePipeline, ShaderError};

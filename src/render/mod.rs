@@ -19,8 +19,8 @@ use crate::cpu::RenderOptions;
 use crate::frame::Frame;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
-    BufferView, Count, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer, MemoryKind,
-    RadixSort, Scan,
+    BufferView, Count, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
+    MemoryKind, RadixSort, Scan,
 };
 use crate::scene::ActivatedScene;
 use ash::vk;
@@ -258,6 +258,7 @@ pub struct GpuRenderer {
     ranges: ranges::Ranges,
     blend: blend::Blend,
     timer: GpuTimer,
+    slot: FrameSlot,
     frame: Option<FrameBuffers>,
     timings: StageTimings,
     stats: FrameStats,
@@ -284,6 +285,7 @@ impl GpuRenderer {
             ranges: ranges::Ranges::new(&ctx)?,
             blend: blend::Blend::new(&ctx, kernel)?,
             timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
+            slot: FrameSlot::new(&ctx, "frame")?,
             frame: None,
             timings: StageTimings::default(),
             stats: FrameStats::default(),
@@ -482,6 +484,7 @@ impl GpuRenderer {
             ranges,
             blend,
             timer,
+            slot,
             frame,
             ctx,
             ..
@@ -511,7 +514,7 @@ impl GpuRenderer {
         };
         let n = scene.count;
         let bits = key_bits(tiles_x * tiles_y);
-        ctx.submit_and_wait("frame", |cmd| {
+        ctx.submit_slot(slot, |cmd| {
             let device = ctx.device();
             timer.reset(ctx, cmd);
             // SAFETY: cmd is recording; the buffers are alive and large enough.

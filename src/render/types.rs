@@ -43,12 +43,13 @@ pub struct GpuGaussian {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Splat {
-    /// mean2d x, y, view depth, opacity.
-    pub mean_depth_opacity: [f32; 4],
-    /// Conic A, B, C and the radius in pixels (0 when culled).
-    pub conic_radius: [f32; 4],
-    /// RGB.
-    pub color: [f32; 4],
+    /// mean2d x, y, opacity, and the bound `2 ln(255 opacity)` (with margin) on the
+    /// quadratic form below which the Gaussian reaches alpha 1/255.
+    pub mean_opacity_bound: [f32; 4],
+    /// Conic A, B, C and the view depth.
+    pub conic_depth: [f32; 4],
+    /// RGB and the radius in pixels (0 when culled).
+    pub color_radius: [f32; 4],
 }
 
 /// Frame counters (`Counters` in GLSL).
@@ -112,9 +113,9 @@ mod tests {
         assert_eq!(offset_of!(GpuGaussian, rotation), 32);
 
         assert_eq!(size_of::<Splat>(), 48);
-        assert_eq!(offset_of!(Splat, mean_depth_opacity), 0);
-        assert_eq!(offset_of!(Splat, conic_radius), 16);
-        assert_eq!(offset_of!(Splat, color), 32);
+        assert_eq!(offset_of!(Splat, mean_opacity_bound), 0);
+        assert_eq!(offset_of!(Splat, conic_depth), 16);
+        assert_eq!(offset_of!(Splat, color_radius), 32);
 
         assert_eq!(size_of::<Counters>(), 32);
         assert_eq!(offset_of!(Counters, scan_total) as u64, COUNTER_SCAN_TOTAL);
