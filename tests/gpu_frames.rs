@@ -323,3 +323,32 @@ fn teardown_leaves_no_allocation_and_no_validation_message() {
         messages.join("\n")
     );
 }
+
+#[test]
+fn a_scene_beyond_one_storage_binding_is_refused_with_the_numbers() {
+    let mut r = renderer();
+    // SH degree 3: 192 bytes of coefficients per Gaussian. Just past the device's
+    // maxStorageBufferRange (128 MiB on lavapipe: 699,051 Gaussians).
+    let range = u64::from(r.ctx().info().max_storage_buffer_range);
+    let n = (range / 192 + 1) as usize;
+    assert!(
+        n < 30_000_000,
+        "this test is sized for lavapipe-like limits (range {range})"
+    );
+    let mut s = Scene::empty(3);
+    s.positions = vec![[0.0, 0.0, 5.0]; n];
+    s.log_scales = vec![[-3.0; 3]; n];
+    s.rotations = vec![[1.0, 0.0, 0.0, 0.0]; n];
+    s.opacity_logits = vec![0.0; n];
+    s.sh = vec![0.0; n * 48];
+    let e = match r.upload(&s.activated()) {
+        Ok(_) => panic!("{n} SH3 Gaussians must not fit one binding of {range} bytes"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains(&format!("{n} Gaussians")) && e.contains(&range.to_string()),
+        "{e}"
+    );
+    assert_validation_clean(&r);
+    drop(r);
+}

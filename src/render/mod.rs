@@ -123,6 +123,17 @@ pub fn key_bits(num_tiles: u32) -> u32 {
     32 + (32 - num_tiles.saturating_sub(1).leading_zeros())
 }
 
+/// Refuses a buffer that one storage-buffer binding of the device cannot cover.
+fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
+    let max = u64::from(ctx.info().max_storage_buffer_range);
+    if bytes > max {
+        return Err(GpuError::InvalidArgument(format!(
+            "{what} needs {bytes} bytes in one storage buffer, but this device binds at most {max} bytes (maxStorageBufferRange); use fewer Gaussians or a device with a larger limit"
+        )));
+    }
+    Ok(())
+}
+
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
 /// (Fields drop in order: the texel views go before the buffers they view.)
 struct FrameBuffers {
@@ -159,7 +170,10 @@ impl FrameBuffers {
         let n = u64::from(gaussians.max(1));
         let tiles = u64::from(width.div_ceil(16)) * u64::from(height.div_ceil(16));
         let pixels = u64::from(width) * u64::from(height);
-        let dev = |name: &str, bytes: u64| GpuBuffer::new(ctx, name, bytes, MemoryKind::Device);
+        let dev = |name: &str, bytes: u64| {
+            check_binding(ctx, name, bytes)?;
+            GpuBuffer::new(ctx, name, bytes, MemoryKind::Device)
+        };
         let splats = dev("splats", n * std::mem::size_of::<Splat>() as u64)?;
         let values = dev("values", u64::from(capacity) * 4)?;
         let (splat_texels, value_texels) = if texel_views {
@@ -328,19 +342,21 @@ impl GpuRenderer {
                 }
             })
             .collect();
-        let gaussians = GpuBuffer::new(
+        let record_bytes = (records.len() * std::mem::size_of::<GpuGaussian>()) as u64;
+        let sh_bytes = (scene.sh.len() * 4) as u64;
+        check_binding(
             &self.ctx,
-            "gaussians",
-            (records.len() * 48) as u64,
-            MemoryKind::Device,
+            &format!("a scene of {count} Gaussians"),
+            record_bytes,
         )?;
+        check_binding(
+            &self.ctx,
+            &format!("the SH coefficients of {count} Gaussians"),
+            sh_bytes,
+        )?;
+        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
         gaussians.upload(&self.ctx, &records)?;
-        let sh = GpuBuffer::new(
-            &self.ctx,
-            "sh coefficients",
-            (scene.sh.len() * 4) as u64,
-            MemoryKind::Device,
-        )?;
+        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
         sh.upload(&self.ctx, &scene.sh)?;
         Ok(GpuScene {
             gaussians,
