@@ -326,7 +326,7 @@ fn teardown_leaves_no_allocation_and_no_validation_message() {
 
 #[test]
 fn a_scene_beyond_one_storage_binding_is_refused_with_the_numbers() {
-    let mut r = renderer();
+    let r = renderer();
     // SH degree 3: 192 bytes of coefficients per Gaussian. Just past the device's
     // maxStorageBufferRange (128 MiB on lavapipe: 699,051 Gaussians).
     let range = u64::from(r.ctx().info().max_storage_buffer_range);
