@@ -1,7 +1,7 @@
 #version 460
-// Duplicate-per-tile keys: each visible Gaussian writes one (key, value) pair per tile of
-// its rectangle at its scanned offset, so pairs are in Gaussian index order and equal keys
-// stay in index order through the stable sort. Pairs past the key capacity are dropped
+// Duplicate-per-tile keys: the k-th Gaussian in depth order writes one (key, value) pair per
+// tile it reaches at its scanned offset, so pairs come out in (depth, index) order and the
+// stable pair sort only has to order the tile bits. Pairs past the key capacity are dropped
 // (the host sees the exact total and grows the buffers). Thread 0 also publishes the
 // number of keys to sort and the ranges stage's indirect dispatch.
 #extension GL_GOOGLE_include_directive : require
@@ -16,13 +16,14 @@ layout(std430, binding = 3) readonly buffer OffsetBuf { uint offsets[]; };
 layout(std430, binding = 4) writeonly buffer KeyBuf { uvec2 keys[]; };
 layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(std430, binding = 7) readonly buffer OrderBuf { uint depth_order[]; };
 
 #define RANGES_WORKGROUP 256u
 
 void main() {
-    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
     uint capacity = params.counts.w;
-    if (i == 0u) {
+    if (k == 0u) {
         // The exact total says whether the scan total wrapped past 2^32.
         uint total = counters.touched_hi != 0u ? capacity : min(counters.scan_total, capacity);
         counters.sort_count = total;
@@ -32,7 +33,8 @@ void main() {
         counters.ranges_groups_y = (groups + 65534u) / 65535u;
         counters.ranges_groups_z = 1u;
     }
-    if (i >= params.counts.x) return;
+    if (k >= params.counts.x) return;
+    uint i = depth_order[k];
     uvec2 rect = rects[i];
     uvec2 rmin = unpack_tile(rect.x);
     uvec2 rmax = unpack_tile(rect.y);
@@ -41,9 +43,9 @@ void main() {
     uint depth_bits = floatBitsToUint(s.conic_depth.w);
     float bound = s.mean_opacity_bound.w;
     uint tiles_x = params.image.z;
-    uint off = offsets[i];
+    uint off = offsets[k];
     // This Gaussian's slots end where the next one's begin (or at the scan total).
-    uint end = i + 1u < params.counts.x ? offsets[i + 1u] : counters.scan_total;
+    uint end = k + 1u < params.counts.x ? offsets[k + 1u] : counters.scan_total;
     for (uint y = rmin.y; y < rmax.y; y++) {
         for (uint x = rmin.x; x < rmax.x; x++) {
             // The same test preprocess counted with (tile_receives in splat_common.glsl).

@@ -1,7 +1,8 @@
 #version 460
 // Preprocess: per Gaussian, cull at the near plane, project, 2D covariance with the 0.3
 // dilation, conic, radius, tile rectangle, SH colour, depth and tiles touched. One thread
-// per Gaussian; mirrors cpu::preprocess_one line by line.
+// per Gaussian; mirrors cpu::preprocess_one line by line. Also writes each Gaussian's depth
+// sort key (depth bits, tiles touched) and index, for the depth order stage.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
@@ -12,8 +13,9 @@ layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; 
 layout(std430, binding = 2) readonly buffer ShBuf { float sh[]; };
 layout(std430, binding = 3) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
-layout(std430, binding = 5) writeonly buffer TouchedBuf { uint tiles_touched[]; };
+layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uvec2 depth_keys[]; };  // (depth bits or ~0 when culled, tiles touched)
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(std430, binding = 7) writeonly buffer DepthValueBuf { uint depth_values[]; };
 
 const float SH_C0 = 0.28209479177387814;
 const float SH_C1 = 0.4886025119029199;
@@ -140,7 +142,9 @@ void main() {
         }
         splats[i] = s;
         rects[i] = rect;
-        tiles_touched[i] = touched;
+        // Culled Gaussians sort after every visible one.
+        depth_keys[i] = uvec2(touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu, touched);
+        depth_values[i] = i;
     }
     // Exact 64-bit total of tiles touched: a workgroup sum (each term < 2^20 tiles, 256
     // terms < 2^28, no overflow), then one atomic add with carry per workgroup.

@@ -312,34 +312,28 @@ fn bench(args: &BenchArgs) -> Result<()> {
         println!("device: {}", ctx.info());
         let mut renderer = GpuRenderer::new(ctx)?;
         let gpu_scene = renderer.upload(&act)?;
-        let mut stages: Vec<Vec<f64>> = vec![Vec::new(); 8];
+        // (stage name, samples), in pipeline order, then the whole frame.
+        let mut stages: Vec<(&str, Vec<f64>)> = Vec::new();
         for i in 0..args.warmup + args.frames {
             let t = std::time::Instant::now();
             std::hint::black_box(renderer.render(&gpu_scene, &cam, &opts)?);
             if i >= args.warmup {
                 walls.push(t.elapsed().as_secs_f64() * 1e3);
                 let tm = renderer.timings();
-                for (k, (_, ms)) in tm.stages().iter().enumerate() {
-                    stages[k].push(*ms);
+                let samples = tm.stages().into_iter().chain([("frame (GPU)", tm.total)]);
+                for (k, (name, ms)) in samples.enumerate() {
+                    if stages.len() <= k {
+                        stages.push((name, Vec::new()));
+                    }
+                    stages[k].1.push(ms);
                 }
-                stages[7].push(tm.total);
             }
         }
-        let names = [
-            "preprocess",
-            "scan",
-            "keys",
-            "sort",
-            "ranges",
-            "blend",
-            "readback",
-            "frame (GPU)",
-        ];
         println!(
             "{:<12} {:>9} {:>9} {:>9} {:>9}",
             "stage", "min ms", "median", "p95", "max"
         );
-        for (n, v) in names.iter().zip(&mut stages) {
+        for (n, v) in &mut stages {
             let s = summary(v);
             println!(
                 "{n:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}",

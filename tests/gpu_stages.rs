@@ -131,15 +131,29 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates, cam: &Camera)
         "{label}: capacity sufficed"
     );
     assert_eq!(inter.keys.len() as u64, pairs);
-    // Scan: exclusive prefix sum; each Gaussian's pairs fill exactly its slot.
+    // Depth order: a permutation of the Gaussians, visible ones by (depth, index), culled
+    // ones after them in index order (a stable sort of (depth bits or !0) keys).
+    let sort_key = |i: u32| {
+        let sp = &inter.splats[i as usize];
+        let depth_bits = if sp.color_radius[3] > 0.0 {
+            sp.conic_depth[3].to_bits()
+        } else {
+            u32::MAX
+        };
+        (depth_bits, i)
+    };
+    let mut expected: Vec<u32> = (0..n as u32).collect();
+    expected.sort_by_key(|&i| sort_key(i));
+    assert_eq!(inter.order, expected, "{label}: depth order");
+    // Scan: exclusive prefix sum in depth order; each Gaussian's pairs fill exactly its slot.
     let mut per_gaussian = vec![0u32; n];
     for &v in &inter.values {
         per_gaussian[v as usize] += 1;
     }
     let mut acc = 0u32;
-    for (i, (&offset, &count)) in inter.offsets.iter().zip(&per_gaussian).enumerate() {
-        assert_eq!(offset, acc, "{label}: offset {i}");
-        acc += count;
+    for (k, (&offset, &g)) in inter.offsets.iter().zip(&inter.order).enumerate() {
+        assert_eq!(offset, acc, "{label}: offset of depth rank {k}");
+        acc += per_gaussian[g as usize];
     }
     assert_eq!(u64::from(acc), pairs);
     assert_eq!(inter.counters.scan_total, acc);

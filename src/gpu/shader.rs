@@ -46,6 +46,7 @@ pub const SOURCES: &[(&str, &str)] = &[
         include_str!("../../glsl/preprocess.comp"),
     ),
     ("keys.comp", include_str!("../../glsl/keys.comp")),
+    ("order.comp", include_str!("../../glsl/order.comp")),
     ("ranges.comp", include_str!("../../glsl/ranges.comp")),
     ("blend.comp", include_str!("../../glsl/blend.comp")),
 ];

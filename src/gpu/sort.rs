@@ -296,10 +296,27 @@ impl RadixSort {
         count: Count,
         key_bits: u32,
     ) -> GpuResult<()> {
-        self.record_timed(ctx, cmd, keys, values, scratch, count, key_bits, None)
+        self.record_timed(ctx, cmd, keys, values, scratch, count, 0..key_bits, None)
     }
 
-    /// [`RadixSort::record`] with every dispatch wrapped in its own timer stage
+    /// Like [`RadixSort::record`], ordering by key bits `bits` only (e.g. `32..44` for
+    /// the tile id of pairs that are already in depth order: the sort is stable, so
+    /// bits below the range keep the order they arrive in). Same barrier contract.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_bits(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        keys: &GpuBuffer,
+        values: &GpuBuffer,
+        scratch: &GpuBuffer,
+        count: Count,
+        bits: std::ops::Range<u32>,
+    ) -> GpuResult<()> {
+        self.record_timed(ctx, cmd, keys, values, scratch, count, bits, None)
+    }
+
+    /// [`RadixSort::record_bits`] with every dispatch wrapped in its own timer stage
     /// (`sort histogram`, `sort scan`, `sort scatter`, ... per pass), for profiling.
     #[allow(clippy::too_many_arguments)]
     pub fn record_timed(
@@ -310,9 +327,11 @@ impl RadixSort {
         values: &GpuBuffer,
         scratch: &GpuBuffer,
         count: Count,
-        key_bits: u32,
+        bits: std::ops::Range<u32>,
         mut timer: Option<&mut GpuTimer>,
     ) -> GpuResult<()> {
+        let (first_bit, end_bit) = (bits.start, bits.end);
+        let key_bits = end_bit.saturating_sub(first_bit);
         let mut stage =
             |name: &str, body: &mut dyn FnMut(vk::CommandBuffer) -> GpuResult<()>| match timer
                 .as_deref_mut()
@@ -320,9 +339,9 @@ impl RadixSort {
                 Some(t) => t.stage(ctx, cmd, name, body),
                 None => body(cmd),
             };
-        if key_bits > 64 {
+        if end_bit > 64 || first_bit > end_bit {
             return Err(GpuError::InvalidArgument(format!(
-                "radix sort key_bits {key_bits} exceeds the 64-bit key"
+                "radix sort bits {first_bit}..{end_bit} are not a range inside the 64-bit key"
             )));
         }
         let (max_n, count_slot) = match count {
@@ -417,10 +436,10 @@ impl RadixSort {
 
         let passes = key_bits.div_ceil(self.config.radix_bits);
         for pass in 0..passes {
-            let shift = pass * self.config.radix_bits;
+            let shift = first_bit + pass * self.config.radix_bits;
             let push = SortPassPush {
                 shift,
-                bits: self.config.radix_bits.min(key_bits - shift),
+                bits: self.config.radix_bits.min(end_bit - shift),
                 hist_stride: layout.hist_stride,
                 pad: 0,
             };

@@ -1,5 +1,5 @@
-//! Duplicate-per-tile keys stage (`glsl/keys.comp`): one thread per Gaussian writes its
-//! (tile | depth, index) pairs at its scanned offset.
+//! Duplicate-per-tile keys stage (`glsl/keys.comp`): one thread per Gaussian, in depth
+//! order, writes its (tile | depth, index) pairs at its scanned offset.
 
 use crate::gpu::shader::BindingKind;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
@@ -21,7 +21,7 @@ pub struct KeysBindings<'a> {
     pub splats: BufferSlice<'a>,
     /// Packed tile rectangles.
     pub rects: BufferSlice<'a>,
-    /// Exclusive prefix sum of tiles touched.
+    /// Exclusive prefix sum of tiles touched, in depth order.
     pub offsets: BufferSlice<'a>,
     /// Keys, `uvec2(depth bits, tile id)` (written).
     pub keys: BufferSlice<'a>,
@@ -29,6 +29,8 @@ pub struct KeysBindings<'a> {
     pub values: BufferSlice<'a>,
     /// Counters (sort count and ranges dispatch written).
     pub counters: BufferSlice<'a>,
+    /// Gaussian indices in depth order.
+    pub depth_order: BufferSlice<'a>,
 }
 
 impl Keys {
@@ -38,7 +40,7 @@ impl Keys {
             ctx,
             "keys",
             &[],
-            &[BindingKind::StorageBuffer; 7],
+            &[BindingKind::StorageBuffer; 8],
             0,
             WORKGROUP,
         )?;
@@ -62,7 +64,14 @@ impl Keys {
             ctx,
             cmd,
             &[
-                b.params, b.splats, b.rects, b.offsets, b.keys, b.values, b.counters,
+                b.params,
+                b.splats,
+                b.rects,
+                b.offsets,
+                b.keys,
+                b.values,
+                b.counters,
+                b.depth_order,
             ],
             &[],
             groups,

@@ -1,6 +1,13 @@
 //! The Vulkan splatting pipeline. A frame is recorded top to bottom as
-//! preprocess -> scan -> keys -> sort -> ranges -> blend -> readback, in one command buffer
-//! with a barrier between each pair of stages and a timestamp pair around each stage.
+//! preprocess -> order -> scan -> keys -> sort -> ranges -> blend -> readback, in one
+//! command buffer with a barrier between each pair of stages and a timestamp pair around
+//! each stage.
+//!
+//! Sorting: the reference orders each tile's Gaussians by a stable sort of
+//! `tile << 32 | depth` keys emitted in Gaussian order. Here the Gaussians are first sorted
+//! by depth (stable, 32 bits, one key per Gaussian), the pairs are emitted in that order,
+//! and the pair sort orders only the tile bits: the result is the same
+//! `(tile, depth, index)` order with far fewer passes over the (many more) pairs.
 //!
 //! The number of (tile, Gaussian) pairs is only known on the GPU. The key buffers are
 //! sized from a capacity kept across frames; the keys stage drops pairs beyond it and the
@@ -10,6 +17,7 @@
 
 pub mod blend;
 pub mod keys;
+pub mod order;
 pub mod preprocess;
 pub mod ranges;
 pub mod types;
@@ -55,6 +63,8 @@ impl GpuScene {
 pub struct StageTimings {
     /// Cull, project, covariance, SH colour, tile rectangles.
     pub preprocess: f64,
+    /// Depth sort of the Gaussians and tiles-touched counts in depth order.
+    pub order: f64,
     /// Prefix sum of tiles touched.
     pub scan: f64,
     /// Duplicate-per-tile keys.
@@ -73,9 +83,10 @@ pub struct StageTimings {
 
 impl StageTimings {
     /// The stages in pipeline order with their names.
-    pub fn stages(&self) -> [(&'static str, f64); 7] {
+    pub fn stages(&self) -> [(&'static str, f64); 8] {
         [
             ("preprocess", self.preprocess),
+            ("order", self.order),
             ("scan", self.scan),
             ("keys", self.keys),
             ("sort", self.sort),
@@ -93,7 +104,8 @@ pub struct FrameStats {
     pub visible: u32,
     /// (tile, Gaussian) pairs sorted.
     pub pairs: u64,
-    /// Key bits the sort processed.
+    /// Key bits that order the pairs: 32 depth bits (sorted once per Gaussian by the
+    /// order stage) plus the tile id's bits (sorted per pair by the sort stage).
     pub key_bits: u32,
     /// Times the frame was recorded again after growing the key buffers.
     pub regrows: u32,
@@ -106,7 +118,9 @@ pub struct Intermediates {
     pub splats: Vec<Splat>,
     /// Packed tile rectangles per Gaussian (`x | y << 16`, min inclusive, max exclusive).
     pub rects: Vec<[u32; 2]>,
-    /// Exclusive prefix sum of tiles touched.
+    /// Gaussian indices in depth order (culled Gaussians last).
+    pub order: Vec<u32>,
+    /// Exclusive prefix sum of tiles touched, in depth order.
     pub offsets: Vec<u32>,
     /// Frame counters.
     pub counters: Counters,
@@ -118,9 +132,14 @@ pub struct Intermediates {
     pub ranges: Vec<[u32; 2]>,
 }
 
-/// Key bits the sort needs for `num_tiles` tiles: 32 depth bits plus the tile id's bits.
+/// Key bits that order the pairs for `num_tiles` tiles: 32 depth bits plus the tile id's.
 pub fn key_bits(num_tiles: u32) -> u32 {
-    32 + (32 - num_tiles.saturating_sub(1).leading_zeros())
+    32 + tile_bits(num_tiles)
+}
+
+/// Bits of a tile id for `num_tiles` tiles.
+pub fn tile_bits(num_tiles: u32) -> u32 {
+    32 - num_tiles.saturating_sub(1).leading_zeros()
 }
 
 /// Refuses a buffer that one storage-buffer binding of the device cannot cover.
@@ -148,6 +167,8 @@ struct FrameBuffers {
     splats: GpuBuffer,
     rects: GpuBuffer,
     offsets: GpuBuffer,
+    depth_keys: GpuBuffer,
+    depth_values: GpuBuffer,
     scan_scratch: GpuBuffer,
     keys: GpuBuffer,
     values: GpuBuffer,
@@ -214,11 +235,17 @@ impl FrameBuffers {
             counters: dev("counters", std::mem::size_of::<Counters>() as u64)?,
             splats,
             rects: dev("tile rects", n * 8)?,
-            offsets: dev("tiles touched / offsets", n * 4)?,
+            offsets: dev("tiles touched / offsets in depth order", n * 4)?,
+            depth_keys: dev("depth keys", n * 8)?,
+            depth_values: dev("depth order", n * 4)?,
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
             keys: dev("keys", u64::from(capacity) * 8)?,
             values,
-            sort_scratch: dev("sort scratch", RadixSort::scratch_size(capacity))?,
+            // Shared by the depth sort (n Gaussians) and the pair sort (capacity pairs).
+            sort_scratch: dev(
+                "sort scratch",
+                RadixSort::scratch_size(capacity.max(gaussians)),
+            )?,
             ranges: dev("tile ranges", tiles * 8)?,
             color: GpuImage::new(
                 ctx,
@@ -244,6 +271,8 @@ impl FrameBuffers {
             &self.splats,
             &self.rects,
             &self.offsets,
+            &self.depth_keys,
+            &self.depth_values,
             &self.scan_scratch,
             &self.keys,
             &self.values,
@@ -266,6 +295,7 @@ impl FrameBuffers {
 /// The GPU renderer: pipelines, per-frame buffers and the timestamp pool.
 pub struct GpuRenderer {
     preprocess: preprocess::Preprocess,
+    order: order::Order,
     scan: Scan,
     keys: keys::Keys,
     sort: RadixSort,
@@ -293,6 +323,7 @@ impl GpuRenderer {
     pub fn with_blend_kernel(ctx: GpuContext, kernel: blend::BlendKernel) -> GpuResult<Self> {
         Ok(GpuRenderer {
             preprocess: preprocess::Preprocess::new(&ctx)?,
+            order: order::Order::new(&ctx)?,
             scan: Scan::new(&ctx)?,
             keys: keys::Keys::new(&ctx)?,
             sort: RadixSort::new(&ctx)?,
@@ -494,6 +525,7 @@ impl GpuRenderer {
     ) -> GpuResult<()> {
         let Self {
             preprocess,
+            order,
             scan,
             keys,
             sort,
@@ -529,7 +561,7 @@ impl GpuRenderer {
             counts: [scene.count, scene.sh_degree, scene.sh_coeffs, f.capacity],
         };
         let n = scene.count;
-        let bits = key_bits(tiles_x * tiles_y);
+        let pair_bits = 32..32 + tile_bits(tiles_x * tiles_y);
         ctx.submit_slot(slot, |cmd| {
             let device = ctx.device();
             timer.reset(ctx, cmd);
@@ -554,13 +586,28 @@ impl GpuRenderer {
                         sh: scene.sh.whole(),
                         splats: f.splats.whole(),
                         rects: f.rects.whole(),
-                        tiles_touched: f.offsets.whole(),
+                        depth_keys: f.depth_keys.whole(),
                         counters: f.counters.whole(),
+                        depth_values: f.depth_values.whole(),
                     },
                     n,
                 )
             })?;
-            // Tiles touched -> scan input; counters -> keys.
+            // The depth sort opens with its own barrier from compute writes (its contract).
+            timer.stage(ctx, cmd, "order", |cmd| {
+                order.record(
+                    ctx,
+                    cmd,
+                    sort,
+                    f.params.whole(),
+                    &f.depth_keys,
+                    &f.depth_values,
+                    &f.sort_scratch,
+                    f.offsets.whole(),
+                    n,
+                )
+            })?;
+            // Tiles touched in depth order -> scan; depth order and counters -> keys.
             barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
 
             timer.stage(ctx, cmd, "scan", |cmd| {
@@ -589,13 +636,15 @@ impl GpuRenderer {
                         keys: f.keys.whole(),
                         values: f.values.whole(),
                         counters: f.counters.whole(),
+                        depth_order: f.depth_values.whole(),
                     },
                     n,
                 )
             })?;
             // The sort opens with its own barrier from compute writes (its contract).
+            // Pairs arrive in depth order: only the tile bits remain to be sorted.
             timer.stage(ctx, cmd, "sort", |cmd| {
-                sort.record(
+                sort.record_bits(
                     ctx,
                     cmd,
                     &f.keys,
@@ -606,7 +655,7 @@ impl GpuRenderer {
                         offset: types::COUNTER_SORT_COUNT,
                         max_n: f.capacity,
                     },
-                    bits,
+                    pair_bits.clone(),
                 )
             })?;
             // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
@@ -695,6 +744,7 @@ impl GpuRenderer {
         for (name, ms) in &stages {
             let slot = match name.as_str() {
                 "preprocess" => &mut t.preprocess,
+                "order" => &mut t.order,
                 "scan" => &mut t.scan,
                 "keys" => &mut t.keys,
                 "sort" => &mut t.sort,
@@ -743,6 +793,7 @@ impl GpuRenderer {
         Ok(Intermediates {
             splats: f.splats.read(ctx, n)?,
             rects: f.rects.read(ctx, n)?,
+            order: f.depth_values.read(ctx, n)?,
             offsets: f.offsets.read(ctx, n)?,
             counters,
             keys: f.keys.read(ctx, sorted)?,

@@ -24,10 +24,12 @@ pub struct PreprocessBindings<'a> {
     pub splats: BufferSlice<'a>,
     /// Packed tile rectangle per Gaussian (written).
     pub rects: BufferSlice<'a>,
-    /// Tiles touched per Gaussian (written).
-    pub tiles_touched: BufferSlice<'a>,
+    /// Depth sort key `(depth bits or !0 when culled, tiles touched)` per Gaussian (written).
+    pub depth_keys: BufferSlice<'a>,
     /// Counters (atomically updated).
     pub counters: BufferSlice<'a>,
+    /// Gaussian index per Gaussian, the depth sort's values (written).
+    pub depth_values: BufferSlice<'a>,
 }
 
 impl Preprocess {
@@ -37,7 +39,7 @@ impl Preprocess {
             ctx,
             "preprocess",
             &[],
-            &[BindingKind::StorageBuffer; 7],
+            &[BindingKind::StorageBuffer; 8],
             0,
             WORKGROUP,
         )?;
@@ -62,8 +64,9 @@ impl Preprocess {
                 b.sh,
                 b.splats,
                 b.rects,
-                b.tiles_touched,
+                b.depth_keys,
                 b.counters,
+                b.depth_values,
             ],
             &[],
             groups,
