@@ -12,6 +12,7 @@
 #ifndef TEXEL_FETCH
 #define TEXEL_FETCH 0
 #endif
+#define CHUNK_W min(4u, 16u / STRIP)
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
@@ -104,7 +105,17 @@ void main() {
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
     uint tile_id = tile.y * params.image.z + tile.x;
-    uvec2 pix0 = tile * TILE_SIZE + uvec2(gl_LocalInvocationID.x * STRIP, gl_LocalInvocationID.y);
+    // Each run of 8 consecutive invocations (what lavapipe executes as one SIMD vector)
+    // covers a compact block of CHUNK_W strips by 8 / CHUNK_W rows instead of one long row:
+    // neighbouring pixels see the same Gaussians and finish together (measured: 8x2 pixel
+    // blocks blend about 10 % faster than 16x1 rows). Only a layout choice: correct for any
+    // subgroup size.
+    uint li = gl_LocalInvocationIndex;
+    uint chunk = li / 8u, lane = li % 8u;
+    uint chunks_x = (16u / STRIP) / CHUNK_W;
+    uvec2 strip_xy = uvec2((chunk % chunks_x) * CHUNK_W + lane % CHUNK_W,
+                           (chunk / chunks_x) * (8u / CHUNK_W) + lane / CHUNK_W);
+    uvec2 pix0 = tile * TILE_SIZE + uvec2(strip_xy.x * STRIP, strip_xy.y);
     float T[STRIP];
     vec3 C[STRIP];
     float D[STRIP];
