@@ -31,22 +31,32 @@ enum Command {
     Bench(BenchArgs),
 }
 
+/// Where the camera comes from and at which resolution.
 #[derive(Args)]
-struct BenchArgs {
-    #[command(flatten)]
-    scene: SceneArg,
+struct CameraArgs {
     /// INRIA cameras.json to take the camera from.
     #[arg(long, value_name = "FILE")]
     cameras: Option<PathBuf>,
     /// Camera of --cameras: list index or img_name (default 0).
     #[arg(long, value_name = "N|NAME", requires = "cameras")]
     camera: Option<String>,
-    /// Output width in pixels.
+    /// Output width in pixels (alone: keeps the aspect ratio).
     #[arg(long)]
     width: Option<u32>,
-    /// Output height in pixels.
+    /// Output height in pixels (alone: keeps the aspect ratio).
     #[arg(long)]
     height: Option<u32>,
+    /// Scale the camera's resolution (focal lengths scale with it).
+    #[arg(long, conflicts_with_all = ["width", "height"])]
+    scale: Option<f32>,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    scene: SceneArg,
+    #[command(flatten)]
+    view: CameraArgs,
     /// Measured frames.
     #[arg(long, default_value_t = 10)]
     frames: usize,
@@ -89,24 +99,11 @@ struct GpuArgs {
 struct RenderArgs {
     #[command(flatten)]
     scene: SceneArg,
-    /// INRIA cameras.json to take the camera from.
-    #[arg(long, value_name = "FILE")]
-    cameras: Option<PathBuf>,
-    /// Camera of --cameras: list index or img_name (default 0).
-    #[arg(long, value_name = "N|NAME", requires = "cameras")]
-    camera: Option<String>,
+    #[command(flatten)]
+    view: CameraArgs,
     /// Output image (.png or .exr; EXR holds R, G, B, A and depth Z).
     #[arg(short, long, value_name = "OUT", default_value = "render.png")]
     output: PathBuf,
-    /// Output width in pixels (alone: keeps the aspect ratio).
-    #[arg(long)]
-    width: Option<u32>,
-    /// Output height in pixels (alone: keeps the aspect ratio).
-    #[arg(long)]
-    height: Option<u32>,
-    /// Scale the camera's resolution (focal lengths scale with it).
-    #[arg(long, conflicts_with_all = ["width", "height"])]
-    scale: Option<f32>,
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white").
     #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = parse_background)]
     background: [f32; 3],
@@ -162,7 +159,7 @@ fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     Ok((scene::load(path)?, resolved.display().to_string()))
 }
 
-fn choose_camera(args: &RenderArgs, scene: &Scene) -> Result<Camera> {
+fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
     let cam = match &args.cameras {
         Some(path) => {
             let cams = camera::load_cameras_json(path)?;
@@ -182,7 +179,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         return Err(output::OutputError::Exists(args.output.clone()).into());
     }
     let (scene, name) = load_scene(&args.scene)?;
-    let cam = choose_camera(args, &scene)?;
+    let cam = choose_camera(&args.view, &scene)?;
     cam.validate()?;
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
@@ -274,14 +271,7 @@ fn bench(args: &BenchArgs) -> Result<()> {
         bail!("--frames must be at least 1");
     }
     let (scene, name) = load_scene(&args.scene)?;
-    let cam = match &args.cameras {
-        Some(path) => {
-            let cams = camera::load_cameras_json(path)?;
-            camera::select_camera(&cams, args.camera.as_deref().unwrap_or("0"), path)?
-        }
-        None => camera::default_camera(&scene.positions, 1280, 720),
-    };
-    let cam = cam.resized(args.width, args.height, None)?;
+    let cam = choose_camera(&args.view, &scene)?;
     cam.validate()?;
     let opts = vksplat::cpu::RenderOptions::default();
     let act = scene.activated();
@@ -440,4 +430,17 @@ fn error_sentence(e: &anyhow::Error) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// clap checks argument definitions (duplicate names, bad references) only in debug
+    /// assertions at parse time; this makes a definition error fail the test suite.
+    #[test]
+    fn command_line_definition_is_valid() {
+        Cli::command().debug_assert();
+    }
 }

@@ -339,3 +339,53 @@ fn gpu_is_the_default_and_matches_cpu_output() {
     );
     assert!(!dir.path().join("x.png").exists());
 }
+
+#[test]
+fn bench_reports_every_stage() {
+    let o = vksplat(&[
+        "bench", "--demo", "--width", "320", "--frames", "3", "--warmup", "1",
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for stage in [
+        "preprocess",
+        "order",
+        "scan",
+        "keys",
+        "sort",
+        "ranges",
+        "blend",
+        "readback",
+        "frame (GPU)",
+        "wall clock",
+    ] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(stage))
+            .unwrap_or_else(|| panic!("no {stage} line in\n{out}"));
+        let median: f64 = line
+            .split_whitespace()
+            .rev()
+            .nth(2)
+            .and_then(|v| v.parse().ok())
+            .unwrap();
+        assert!(median >= 0.0 && median.is_finite(), "{line}");
+    }
+    let frame_line = out.lines().find(|l| l.starts_with("frame (GPU)")).unwrap();
+    let frame_median: f64 = frame_line
+        .split_whitespace()
+        .rev()
+        .nth(2)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(frame_median > 0.0, "{frame_line}");
+    assert!(
+        out.contains("tile pairs") && out.contains("B per Gaussian"),
+        "{out}"
+    );
+    let o = vksplat(&["bench", "--demo", "--frames", "2", "--cpu"]);
+    assert!(o.status.success() && String::from_utf8_lossy(&o.stdout).contains("CPU reference"));
+    let o = vksplat(&["bench", "--demo", "--frames", "0"]);
+    assert!(!o.status.success() && stderr(&o).contains("--frames"));
+}

@@ -130,17 +130,22 @@ impl GpuImage {
         &self.name
     }
 
-    /// Records a transition from "whatever the last frame left" (UNDEFINED: its contents
-    /// are overwritten) to GENERAL for storage writes, ordered after the previous frame's
-    /// copy out of it.
-    pub fn transition_to_general(&self, ctx: &GpuContext, cmd: vk::CommandBuffer) {
+    /// Records a layout transition with the given sync2 scopes.
+    fn transition(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        src: (vk::PipelineStageFlags2, vk::AccessFlags2),
+        dst: (vk::PipelineStageFlags2, vk::AccessFlags2),
+        layouts: (vk::ImageLayout, vk::ImageLayout),
+    ) {
         let barrier = [vk::ImageMemoryBarrier2::default()
-            .src_stage_mask(vk::PipelineStageFlags2::ALL_TRANSFER)
-            .src_access_mask(vk::AccessFlags2::NONE)
-            .dst_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-            .dst_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
-            .old_layout(vk::ImageLayout::UNDEFINED)
-            .new_layout(vk::ImageLayout::GENERAL)
+            .src_stage_mask(src.0)
+            .src_access_mask(src.1)
+            .dst_stage_mask(dst.0)
+            .dst_access_mask(dst.1)
+            .old_layout(layouts.0)
+            .new_layout(layouts.1)
             .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .image(self.image)
@@ -150,23 +155,44 @@ impl GpuImage {
         unsafe { ctx.device().cmd_pipeline_barrier2(cmd, &dep) };
     }
 
+    /// Records a transition from "whatever the last frame left" (UNDEFINED: its contents
+    /// are overwritten) to GENERAL for storage writes, ordered after the previous frame's
+    /// copy out of it.
+    pub fn transition_to_general(&self, ctx: &GpuContext, cmd: vk::CommandBuffer) {
+        self.transition(
+            ctx,
+            cmd,
+            (
+                vk::PipelineStageFlags2::ALL_TRANSFER,
+                vk::AccessFlags2::NONE,
+            ),
+            (
+                vk::PipelineStageFlags2::COMPUTE_SHADER,
+                vk::AccessFlags2::SHADER_STORAGE_WRITE,
+            ),
+            (vk::ImageLayout::UNDEFINED, vk::ImageLayout::GENERAL),
+        );
+    }
+
     /// Records the transition from storage writes (GENERAL) to a copy source
     /// (TRANSFER_SRC_OPTIMAL), making the compute writes visible to the copy.
     pub fn transition_for_copy(&self, ctx: &GpuContext, cmd: vk::CommandBuffer) {
-        let barrier = [vk::ImageMemoryBarrier2::default()
-            .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-            .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
-            .dst_stage_mask(vk::PipelineStageFlags2::ALL_TRANSFER)
-            .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
-            .old_layout(vk::ImageLayout::GENERAL)
-            .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(self.image)
-            .subresource_range(Self::range())];
-        let dep = vk::DependencyInfo::default().image_memory_barriers(&barrier);
-        // SAFETY: cmd is recording; the image is alive.
-        unsafe { ctx.device().cmd_pipeline_barrier2(cmd, &dep) };
+        self.transition(
+            ctx,
+            cmd,
+            (
+                vk::PipelineStageFlags2::COMPUTE_SHADER,
+                vk::AccessFlags2::SHADER_STORAGE_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags2::ALL_TRANSFER,
+                vk::AccessFlags2::TRANSFER_READ,
+            ),
+            (
+                vk::ImageLayout::GENERAL,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            ),
+        );
     }
 
     /// Records a copy of the whole image (in TRANSFER_SRC_OPTIMAL layout, see
