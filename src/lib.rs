@@ -1,9 +1,11 @@
 //! vksplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
 //! reference renderer that the GPU is checked against.
 
+pub mod bench;
 pub mod camera;
 pub mod cpu;
 pub mod frame;
+pub mod gen;
 pub mod gpu;
 pub mod output;
 pub mod render;

@@ -29,6 +29,27 @@ enum Command {
     Info(SceneArg),
     /// Render the same camera repeatedly and report per-stage GPU times.
     Bench(BenchArgs),
+    /// Write a synthetic scene (seeded) as an INRIA PLY, for scaling benchmarks.
+    Gen(GenArgs),
+}
+
+#[derive(Args)]
+struct GenArgs {
+    /// Number of Gaussians (e.g. 100000 or 1e5).
+    #[arg(value_parser = vksplat::bench::parse_count)]
+    count: usize,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// SH degree (0..=3).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=3))]
+    sh_degree: u32,
+    /// Output .ply file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    overwrite: bool,
 }
 
 /// Where the camera comes from and at which resolution.
@@ -53,10 +74,35 @@ struct CameraArgs {
 
 #[derive(Args)]
 struct BenchArgs {
-    #[command(flatten)]
-    scene: SceneArg,
+    /// Scene (.ply or model directory); not needed with --sweep gaussians=...
+    scene: Option<PathBuf>,
+    /// Use the built-in demo scene.
+    #[arg(long, conflicts_with = "scene")]
+    demo: bool,
     #[command(flatten)]
     view: CameraArgs,
+    /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `vksplat gen`) and/or
+    /// `resolution=720p,1080p,4k,WxH`; repeat the flag for both (all combinations run).
+    #[arg(long, value_name = "AXIS=V1,V2,...")]
+    sweep: Vec<String>,
+    /// Seed of the synthetic scenes of a Gaussians sweep.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// SH degree of the synthetic scenes of a Gaussians sweep.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=3))]
+    sh_degree: u32,
+    /// Write the report(s) as JSON.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Write the report(s) as CSV (one row per stage).
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+    /// Write an SVG plot of the sweep (stacked stage times and a stage breakdown).
+    #[arg(long, value_name = "FILE.svg")]
+    plot: Option<PathBuf>,
+    /// Replace output files that exist.
+    #[arg(long)]
+    overwrite: bool,
     /// Measured frames.
     #[arg(long, default_value_t = 10)]
     frames: usize,
@@ -266,97 +312,175 @@ fn render_gpu(
     Ok((frame, format!("on {device}")))
 }
 
+fn gen(args: &GenArgs) -> Result<()> {
+    let scene = vksplat::gen::synthetic_scene(args.count, args.seed, args.sh_degree);
+    let bytes =
+        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
+    output::write_atomically(&args.output, args.overwrite, |w| {
+        use std::io::Write;
+        w.write_all(&bytes)
+            .map_err(|source| output::OutputError::Io {
+                path: args.output.clone(),
+                source,
+            })
+    })?;
+    eprintln!(
+        "wrote {} synthetic Gaussians (seed {}, SH degree {}) to {}",
+        scene.len(),
+        args.seed,
+        args.sh_degree,
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// The sweep axes of `bench`: Gaussian counts and resolutions (either may be empty).
+struct Sweeps {
+    counts: Vec<usize>,
+    resolutions: Vec<(u32, u32)>,
+}
+
+fn parse_sweeps(sweeps: &[String]) -> Result<Sweeps> {
+    let (mut counts, mut resolutions) = (Vec::new(), Vec::new());
+    for sweep in sweeps {
+        let Some((axis, values)) = sweep.split_once('=') else {
+            bail!("--sweep {sweep:?}: expected AXIS=V1,V2,... with AXIS gaussians or resolution");
+        };
+        for v in values.split(',').filter(|v| !v.trim().is_empty()) {
+            match axis.trim() {
+                "gaussians" => {
+                    counts.push(vksplat::bench::parse_count(v).map_err(anyhow::Error::msg)?)
+                }
+                "resolution" => resolutions
+                    .push(vksplat::bench::parse_resolution(v).map_err(anyhow::Error::msg)?),
+                other => {
+                    bail!("--sweep {sweep:?}: unknown axis {other:?}; use gaussians or resolution")
+                }
+            }
+        }
+    }
+    Ok(Sweeps {
+        counts,
+        resolutions,
+    })
+}
+
 fn bench(args: &BenchArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let (scene, name) = load_scene(&args.scene)?;
-    let cam = choose_camera(&args.view, &scene)?;
-    cam.validate()?;
-    let opts = vksplat::cpu::RenderOptions::default();
-    let act = scene.activated();
-    println!(
-        "scene {name}: {} Gaussians, {}x{}",
-        scene.len(),
-        cam.width,
-        cam.height
-    );
-    let mut walls = Vec::new();
-    if args.cpu {
-        for i in 0..args.warmup + args.frames {
-            let t = std::time::Instant::now();
-            std::hint::black_box(vksplat::cpu::render(&act, &cam, &opts));
-            if i >= args.warmup {
-                walls.push(t.elapsed().as_secs_f64() * 1e3);
-            }
+    for path in [&args.json, &args.csv, &args.plot].into_iter().flatten() {
+        if !args.overwrite && path.exists() {
+            return Err(output::OutputError::Exists(path.clone()).into());
         }
-        println!(
-            "device: CPU reference ({} threads)",
-            rayon::current_num_threads()
-        );
+    }
+    let Sweeps {
+        counts,
+        resolutions,
+    } = parse_sweeps(&args.sweep)?;
+    let file_scene = if counts.is_empty() {
+        Some(load_scene(&SceneArg {
+            scene: args.scene.clone(),
+            demo: args.demo,
+        })?)
+    } else {
+        if args.scene.is_some() || args.demo {
+            bail!("a Gaussians sweep generates its own scenes; drop the scene argument or the gaussians sweep");
+        }
+        None
+    };
+    let counts: Vec<Option<usize>> = if counts.is_empty() {
+        vec![None]
+    } else {
+        counts.into_iter().map(Some).collect()
+    };
+    let resolutions: Vec<Option<(u32, u32)>> = if resolutions.is_empty() {
+        vec![None]
+    } else {
+        resolutions.into_iter().map(Some).collect()
+    };
+    let mut renderer = if args.cpu {
+        None
     } else {
         let ctx = GpuContext::new(&ContextOptions {
             device: args.gpu.device.clone(),
             validation: args.gpu.validate,
         })?;
-        println!("device: {}", ctx.info());
-        let mut renderer = GpuRenderer::new(ctx)?;
-        let gpu_scene = renderer.upload(&act)?;
-        // (stage name, samples), in pipeline order, then the whole frame.
-        let mut stages: Vec<(&str, Vec<f64>)> = Vec::new();
-        for i in 0..args.warmup + args.frames {
-            let t = std::time::Instant::now();
-            std::hint::black_box(renderer.render(&gpu_scene, &cam, &opts)?);
-            if i >= args.warmup {
-                walls.push(t.elapsed().as_secs_f64() * 1e3);
-                let tm = renderer.timings();
-                let samples = tm.stages().into_iter().chain([("frame (GPU)", tm.total)]);
-                for (k, (name, ms)) in samples.enumerate() {
-                    if stages.len() <= k {
-                        stages.push((name, Vec::new()));
-                    }
-                    stages[k].1.push(ms);
+        Some(GpuRenderer::new(ctx)?)
+    };
+    let mut reports = Vec::new();
+    for count in &counts {
+        let (scene, name) = match (count, &file_scene) {
+            (Some(n), _) => (
+                vksplat::gen::synthetic_scene(*n, args.seed, args.sh_degree),
+                format!("synthetic {n} (seed {}, SH {})", args.seed, args.sh_degree),
+            ),
+            (None, Some((s, name))) => (s.clone(), name.clone()),
+            (None, None) => bail!("no scene"),
+        };
+        let act = scene.activated();
+        for res in &resolutions {
+            let cam = match res {
+                Some((w, h)) if count.is_some() || args.view.cameras.is_none() => {
+                    camera::default_camera(&scene.positions, *w, *h)
                 }
-            }
+                Some((w, h)) => choose_camera(&args.view, &scene)?.with_resolution(*w, *h)?,
+                None => choose_camera(&args.view, &scene)?,
+            };
+            cam.validate()?;
+            let report = match renderer.as_mut() {
+                Some(r) => {
+                    vksplat::bench::bench_gpu(r, &act, &name, &cam, args.frames, args.warmup)?
+                }
+                None => vksplat::bench::bench_cpu(&act, &name, &cam, args.frames, args.warmup),
+            };
+            println!("{}", report.to_text());
+            reports.push(report);
         }
-        println!(
-            "{:<12} {:>9} {:>9} {:>9} {:>9}",
-            "stage", "min ms", "median", "p95", "max"
-        );
-        for (n, v) in &mut stages {
-            let s = summary(v);
-            println!(
-                "{n:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}",
-                s[0], s[1], s[2], s[3]
+    }
+    if let Some(r) = &renderer {
+        let messages = r.ctx().validation_messages();
+        if !messages.is_empty() {
+            bail!(
+                "the Vulkan validation layer reported {} message(s) (printed above)",
+                messages.len()
             );
         }
-        let st = renderer.stats();
-        println!(
-            "visible Gaussians {}, tile pairs {}, key bits {}",
-            st.visible, st.pairs, st.key_bits
-        );
-        println!(
-            "device memory: scene {} B, per-frame {} B ({:.1} B per Gaussian)",
-            gpu_scene.device_bytes(),
-            renderer.frame_device_bytes(),
-            (gpu_scene.device_bytes() + renderer.frame_device_bytes()) as f64
-                / scene.len().max(1) as f64
-        );
     }
-    let s = summary(&mut walls);
-    println!(
-        "{:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}",
-        "wall clock", s[0], s[1], s[2], s[3]
-    );
-    println!("frames/s (median wall clock) {:.2}", 1e3 / s[1]);
+    let write_text = |path: &PathBuf, text: String| -> Result<()> {
+        output::write_atomically(path, args.overwrite, |w| {
+            use std::io::Write;
+            w.write_all(text.as_bytes())
+                .map_err(|source| output::OutputError::Io {
+                    path: path.clone(),
+                    source,
+                })
+        })?;
+        Ok(())
+    };
+    if let Some(path) = &args.json {
+        let json = if reports.len() == 1 {
+            serde_json::to_string_pretty(&reports[0])?
+        } else {
+            serde_json::to_string_pretty(&reports)?
+        };
+        write_text(path, json)?;
+    }
+    if let Some(path) = &args.csv {
+        write_text(path, vksplat::bench::to_csv(&reports))?;
+    }
+    if let Some(path) = &args.plot {
+        let tmp = path.with_extension("svg.tmp");
+        if let Err(e) = vksplat::bench::plot_sweep(&reports, &tmp) {
+            let _ = std::fs::remove_file(&tmp);
+            bail!("{e}");
+        }
+        let svg =
+            std::fs::read_to_string(&tmp).map_err(|e| anyhow::anyhow!("{}: {e}", tmp.display()))?;
+        let _ = std::fs::remove_file(&tmp);
+        write_text(path, svg)?;
+    }
     Ok(())
-}
-
-/// min, median, p95, max of `v` (sorted in place).
-fn summary(v: &mut [f64]) -> [f64; 4] {
-    v.sort_by(|a, b| a.total_cmp(b));
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    [v[0], at(0.5), at(0.95), v[v.len() - 1]]
 }
 
 fn fmt3(v: [f32; 3]) -> String {
@@ -409,6 +533,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render(args),
         Command::Info(arg) => info(arg),
         Command::Bench(args) => bench(args),
+        Command::Gen(args) => gen(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -389,3 +389,145 @@ fn bench_reports_every_stage() {
     let o = vksplat(&["bench", "--demo", "--frames", "0"]);
     assert!(!o.status.success() && stderr(&o).contains("--frames"));
 }
+
+#[test]
+fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("report.json");
+    let o = vksplat(&[
+        "bench",
+        "--demo",
+        "--width",
+        "256",
+        "--frames",
+        "2",
+        "--warmup",
+        "1",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let stages = report["stages"].as_array().unwrap();
+    let names: Vec<&str> = stages.iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        [
+            "preprocess",
+            "order",
+            "scan",
+            "keys",
+            "sort",
+            "ranges",
+            "blend",
+            "readback"
+        ]
+    );
+    for s in stages {
+        for k in ["min", "median", "p95", "max"] {
+            assert!(s[k].as_f64().unwrap() > 0.0, "{s}");
+        }
+        assert!(
+            s["min"].as_f64() <= s["median"].as_f64() && s["median"].as_f64() <= s["max"].as_f64()
+        );
+    }
+    for k in [
+        "fps",
+        "sort_keys_per_s",
+        "blend_evaluations_per_s",
+        "device_bytes_per_gaussian",
+    ] {
+        assert!(report[k].as_f64().unwrap() > 0.0, "{k} in {report}");
+    }
+    assert_eq!(report["gaussians"], 1873);
+    assert_eq!(report["renderer"], "gpu");
+    assert!(
+        report["device"].as_str().unwrap().len() > 3
+            && report["vulkan"].as_str().unwrap().starts_with('1')
+    );
+    assert!(report["pairs"].as_u64().unwrap() > 1000 && report["visible"].as_u64().unwrap() > 100);
+    // The stage times add up to about the frame (timestamps bracket each stage; the
+    // barriers between stages take the rest).
+    let sum: f64 = stages.iter().map(|s| s["median"].as_f64().unwrap()).sum();
+    let frame = report["frame_ms"]["median"].as_f64().unwrap();
+    assert!(
+        sum <= frame * 1.25 && sum >= frame * 0.5,
+        "stages {sum} ms vs frame {frame} ms"
+    );
+    // Existing outputs are not overwritten unasked.
+    let o = vksplat(&[
+        "bench",
+        "--demo",
+        "--frames",
+        "1",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("--overwrite"));
+
+    let (csv, svg) = (dir.path().join("sweep.csv"), dir.path().join("sweep.svg"));
+    let o = vksplat(&[
+        "bench",
+        "--sweep",
+        "gaussians=500,2e3",
+        "--sweep",
+        "resolution=160x90",
+        "--frames",
+        "1",
+        "--warmup",
+        "0",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<&str> = text.lines().collect();
+    assert!(rows[0].starts_with("scene,gaussians,width,height,renderer,stage,min_ms,median_ms"));
+    assert_eq!(
+        rows.len(),
+        1 + 2 * 10,
+        "two points x (8 stages + frame + wall)"
+    );
+    assert!(
+        rows.iter().any(|r| r.contains(",500,160,90,gpu,blend,"))
+            && rows.iter().any(|r| r.contains(",2000,160,90,gpu,sort,"))
+    );
+    let plot = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        plot.starts_with("<svg") && plot.contains("time vs Gaussians") && plot.contains("blend")
+    );
+    assert!(std::fs::read_dir(dir.path()).unwrap().all(|e| !e
+        .unwrap()
+        .file_name()
+        .to_string_lossy()
+        .ends_with(".tmp")));
+    // Bad sweeps are one clear error.
+    let o = vksplat(&["bench", "--sweep", "colours=3"]);
+    assert!(!o.status.success() && stderr(&o).contains("unknown axis"));
+    let o = vksplat(&["bench", "--sweep", "gaussians=lots"]);
+    assert!(!o.status.success() && stderr(&o).contains("not a number of Gaussians"));
+}
+
+#[test]
+fn gen_writes_a_loadable_synthetic_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("synthetic.ply");
+    let o = vksplat(&[
+        "gen",
+        "2e3",
+        "--seed",
+        "5",
+        "--sh-degree",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s = vksplat::scene::load(&out).unwrap();
+    assert_eq!((s.len(), s.sh_degree), (2000, 1));
+    assert_eq!(s, vksplat::gen::synthetic_scene(2000, 5, 1));
+    let o = vksplat(&["gen", "10", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("already exists"));
+}

@@ -298,6 +298,8 @@ pub struct PixelResult {
     pub transmittance: f32,
     /// Sum of `depth * alpha * T`.
     pub weighted_depth: f32,
+    /// Gaussians evaluated, up to and including the one that finished the pixel.
+    pub evaluated: u32,
 }
 
 /// Composites the Gaussians `ids` (front to back) at pixel `(px, py)` with the reference rules.
@@ -305,7 +307,9 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
     let mut t = 1.0f32;
     let mut color = [0.0f32; 3];
     let mut depth = 0.0f32;
+    let mut evaluated = 0u32;
     for &id in ids {
+        evaluated += 1;
         let g = &projected[id as usize];
         let dx = g.mean2d[0] - px;
         let dy = g.mean2d[1] - py;
@@ -333,6 +337,7 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
         color,
         transmittance: t,
         weighted_depth: depth,
+        evaluated,
     }
 }
 
@@ -383,10 +388,91 @@ pub fn blend(
 
 /// Renders a frame on the CPU with the reference semantics.
 pub fn render(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) -> Frame {
+    render_timed(scene, cam, opts).0
+}
+
+/// Wall-clock time of each phase of a CPU render, in milliseconds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CpuTimings {
+    /// [`preprocess`].
+    pub preprocess: f64,
+    /// [`tile_keys`].
+    pub keys: f64,
+    /// [`sort_pairs`].
+    pub sort: f64,
+    /// [`tile_ranges`].
+    pub ranges: f64,
+    /// [`blend`].
+    pub blend: f64,
+    /// The whole render.
+    pub total: f64,
+    /// Number of (tile, Gaussian) pairs.
+    pub pairs: u64,
+}
+
+impl CpuTimings {
+    /// The phases in order with their names.
+    pub fn stages(&self) -> [(&'static str, f64); 5] {
+        [
+            ("preprocess", self.preprocess),
+            ("keys", self.keys),
+            ("sort", self.sort),
+            ("ranges", self.ranges),
+            ("blend", self.blend),
+        ]
+    }
+}
+
+/// [`render`], timing each phase.
+pub fn render_timed(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> (Frame, CpuTimings) {
+    let start = std::time::Instant::now();
+    let mut t = CpuTimings::default();
+    let mut lap = std::time::Instant::now();
+    let mut take = |slot: &mut f64| {
+        *slot = lap.elapsed().as_secs_f64() * 1e3;
+        lap = std::time::Instant::now();
+    };
     let projected = preprocess(scene, cam, scene.sh_degree);
+    take(&mut t.preprocess);
     let (keys, values) = tile_keys(&projected, cam);
+    take(&mut t.keys);
     let (sorted_keys, sorted_values) = sort_pairs(&keys, &values);
+    take(&mut t.sort);
     let (tx, ty) = cam.tile_grid();
     let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
-    blend(&projected, &sorted_values, &ranges, cam, opts.background)
+    take(&mut t.ranges);
+    let frame = blend(&projected, &sorted_values, &ranges, cam, opts.background);
+    take(&mut t.blend);
+    t.total = start.elapsed().as_secs_f64() * 1e3;
+    t.pairs = sorted_keys.len() as u64;
+    (frame, t)
+}
+
+/// Pixel-Gaussian evaluations a front-to-back blend performs: for every pixel, the
+/// Gaussians of its tile's list up to and including the one that finishes it (all of them
+/// when it never finishes). `list(tile)` gives a tile's Gaussians in blend order.
+pub fn count_evaluations<'a>(
+    projected: &[Projected],
+    cam: &Camera,
+    list: impl Fn(usize) -> &'a [u32] + Sync,
+) -> u64 {
+    let (tiles_x, tiles_y) = cam.tile_grid();
+    (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let ids = list(tile as usize);
+            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+            let mut n = 0u64;
+            for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(cam.height) {
+                for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(cam.width) {
+                    n += u64::from(blend_pixel(projected, ids, x as f32, y as f32).evaluated);
+                }
+            }
+            n
+        })
+        .sum()
 }
