@@ -408,6 +408,7 @@ fn bench(args: &BenchArgs) -> Result<()> {
         })?;
         Some(GpuRenderer::new(ctx)?)
     };
+    let points = counts.len() * resolutions.len();
     let mut reports = Vec::new();
     for count in &counts {
         let (scene, name) = match (count, &file_scene) {
@@ -430,13 +431,32 @@ fn bench(args: &BenchArgs) -> Result<()> {
             cam.validate()?;
             let report = match renderer.as_mut() {
                 Some(r) => {
-                    vksplat::bench::bench_gpu(r, &act, &name, &cam, args.frames, args.warmup)?
+                    vksplat::bench::bench_gpu(r, &act, &name, &cam, args.frames, args.warmup)
                 }
-                None => vksplat::bench::bench_cpu(&act, &name, &cam, args.frames, args.warmup),
+                None => Ok(vksplat::bench::bench_cpu(
+                    &act,
+                    &name,
+                    &cam,
+                    args.frames,
+                    args.warmup,
+                )),
             };
-            println!("{}", report.to_text());
-            reports.push(report);
+            match report {
+                Ok(report) => {
+                    println!("{}", report.to_text());
+                    reports.push(report);
+                }
+                // In a sweep, a point beyond the device's limits is reported and skipped so
+                // the other points still produce their results.
+                Err(e @ vksplat::gpu::GpuError::InvalidArgument(_)) if points > 1 => {
+                    eprintln!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
+                }
+                Err(e) => return Err(e.into()),
+            }
         }
+    }
+    if reports.is_empty() {
+        bail!("every point of the sweep exceeded the device's limits (see above)");
     }
     if let Some(r) = &renderer {
         let messages = r.ctx().validation_messages();
