@@ -68,7 +68,7 @@ shared uint s_done;
 
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
-    uint tile_id = tile.y * params.image.z + tile.x;
+    uint tile_id = tile.y * params.bins.y + tile.x;  // this kernel runs with 16-pixel bins
     uvec2 pix = tile * TILE_SIZE + gl_LocalInvocationID.xy;
     bool inside = pix.x < params.image.x && pix.y < params.image.y;
     vec2 pixf = vec2(pix);
@@ -104,7 +104,6 @@ void main() {
 #else
 void main() {
     uvec2 tile = gl_WorkGroupID.xy;
-    uint tile_id = tile.y * params.image.z + tile.x;
     // Each run of 8 consecutive invocations (what lavapipe executes as one SIMD vector)
     // covers a compact block of CHUNK_W strips by 8 / CHUNK_W rows instead of one long row:
     // neighbouring pixels see the same Gaussians and finish together (measured: 8x2 pixel
@@ -126,7 +125,11 @@ void main() {
         D[p] = 0.0;
         done[p] = pix0.x + p >= params.image.x || pix0.y >= params.image.y;
     }
-    uvec2 range = ranges[tile_id];
+    // This invocation's pixels lie in one bin (strips never cross a bin); pixels past the
+    // image edge have no bin.
+    uvec2 bin = pix0 / params.bins.x;
+    uvec2 range = pix0.y < params.image.y && pix0.x < params.image.x
+        ? ranges[bin.y * params.bins.y + bin.x] : uvec2(0u);
     for (uint k = range.x; k < range.y; k++) {
         bool all_done = true;
         [[unroll]] for (uint p = 0u; p < STRIP; p++) all_done = all_done && done[p];

@@ -42,16 +42,18 @@ void main() {
     Splat s = splats[i];
     uint depth_bits = floatBitsToUint(s.conic_depth.w);
     float bound = s.mean_opacity_bound.w;
-    uint tiles_x = params.image.z;
+    uint bins_x = params.bins.y;
+    uvec2 bmin = rmin * params.bins.w;
+    uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
     uint off = offsets[k];
     // This Gaussian's slots end where the next one's begin (or at the scan total).
     uint end = k + 1u < params.counts.x ? offsets[k + 1u] : counters.scan_total;
-    for (uint y = rmin.y; y < rmax.y; y++) {
-        for (uint x = rmin.x; x < rmax.x; x++) {
+    for (uint y = bmin.y; y < bmax.y; y++) {
+        for (uint x = bmin.x; x < bmax.x; x++) {
             // The same test preprocess counted with (tile_receives in splat_common.glsl).
-            if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y))) continue;
+            if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
             if (off < min(end, capacity)) {
-                keys[off] = uvec2(depth_bits, y * tiles_x + x);
+                keys[off] = uvec2(depth_bits, y * bins_x + x);
                 values[off] = i;
             }
             off++;

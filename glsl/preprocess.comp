@@ -122,11 +122,13 @@ void main() {
                                    clamp_tile((mean2d.y - radius) / 16.0, gy));
                 uvec2 rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
                                    clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
-                // Count the tiles of the reference rectangle that receive anything.
+                // Count the bins of the reference rectangle that receive anything.
                 float bound = alpha_bound(g.pos_opacity.w);
-                for (uint ty = rmin.y; ty < rmax.y; ty++) {
-                    for (uint tx = rmin.x; tx < rmax.x; tx++) {
-                        touched += tile_receives(mean2d, conic, bound, uvec2(tx, ty)) ? 1u : 0u;
+                uvec2 bmin = rmin * params.bins.w;
+                uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
+                for (uint by = bmin.y; by < bmax.y; by++) {
+                    for (uint bx = bmin.x; bx < bmax.x; bx++) {
+                        touched += tile_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x) ? 1u : 0u;
                     }
                 }
                 if (touched != 0u) {

@@ -24,7 +24,13 @@ struct FrameParams {
     vec4 background;    // rgb
     uvec4 image;        // width, height, tiles_x, tiles_y
     uvec4 counts;       // gaussians, active SH degree, stored SH coefficients per channel, key capacity
+    uvec4 bins;         // bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size
 };
+
+// Pairs are keyed by bins: the reference's 16x16 tiles, or 8x8 quarters of them (for CPU
+// devices, where a shorter list per pixel block is worth more pairs). Either way only bins
+// inside the Gaussian's reference tile rectangle are candidates, so the reference's
+// clipping at that rectangle is kept exactly.
 
 // A Gaussian as uploaded (activated values).
 struct Gaussian {
@@ -58,8 +64,8 @@ struct Counters {
 uint pack_tile(uint x, uint y) { return x | (y << 16u); }
 uvec2 unpack_tile(uint v) { return uvec2(v & 0xFFFFu, v >> 16u); }
 
-// Sort key of a (tile, Gaussian) pair, as uvec2(lo, hi): lo = float bits of the view depth
-// (depth > 0.2 so the bits order like the floats), hi = tile id = y * tiles_x + x.
+// Sort key of a (bin, Gaussian) pair, as uvec2(lo, hi): lo = float bits of the view depth
+// (depth > 0.2 so the bits order like the floats), hi = bin id = y * bins_x + x.
 
 // Exact tile culling. A Gaussian adds to pixel d (offset from its centre) only when
 // opacity * exp(-q(d)/2) >= 1/255, q(d) = A dx^2 + 2 B dx dy + C dy^2, i.e. when
@@ -85,10 +91,10 @@ float edge_min(float a, float lo, float hi, float A, float B, float C) {
     return q;
 }
 
-bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 tile) {
-    // Pixel positions of the tile are tile * 16 + {0..15}; use the continuous square.
-    precise vec2 lo = vec2(tile * TILE_SIZE) - mean2d;
-    precise vec2 hi = lo + vec2(float(TILE_SIZE - 1u));
+bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size) {
+    // Pixel positions of the bin are bin * size + {0..size-1}; use the continuous square.
+    precise vec2 lo = vec2(bin * size) - mean2d;
+    precise vec2 hi = lo + vec2(float(size - 1u));
     if (lo.x <= 0.0 && hi.x >= 0.0 && lo.y <= 0.0 && hi.y >= 0.0) return bound >= 0.0;
     float A = conic.x, B = conic.y, C = conic.z;
     float m = min(min(edge_min(lo.x, lo.y, hi.y, A, B, C), edge_min(hi.x, lo.y, hi.y, A, B, C)),

@@ -216,8 +216,9 @@ pub fn bench_gpu(
             ..Default::default()
         })
         .collect();
-    let evaluations = cpu::count_evaluations(&projected, cam, |t| {
-        let [a, b] = inter.ranges[t];
+    let (bins_x, size) = (inter.bins.0, inter.bin_size);
+    let evaluations = cpu::count_evaluations(&projected, cam, |x, y| {
+        let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
         &inter.values[a as usize..b as usize]
     });
     let info = renderer.ctx().info();
@@ -293,8 +294,8 @@ pub fn bench_cpu(
     let (sorted_keys, sorted_values) = cpu::sort_pairs(&keys, &values);
     let (tx, ty) = cam.tile_grid();
     let ranges = cpu::tile_ranges(&sorted_keys, (tx * ty) as usize);
-    let evaluations = cpu::count_evaluations(&projected, cam, |t| {
-        let [a, b] = ranges[t];
+    let evaluations = cpu::count_evaluations(&projected, cam, |x, y| {
+        let [a, b] = ranges[((y / 16) * tx + x / 16) as usize];
         &sorted_values[a as usize..b as usize]
     });
     let visible = projected.iter().filter(|p| p.tiles_touched() > 0).count() as u64;

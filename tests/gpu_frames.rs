@@ -268,8 +268,9 @@ fn empty_scene_renders_the_background_and_renders_are_deterministic() {
 
 #[test]
 fn key_buffers_grow_when_a_frame_needs_more_pairs() {
-    // 64 Gaussians that each cover the whole 1280x720 frame: 64 x 3600 pairs, more than
-    // the initial capacity, so the frame is recorded again with larger buffers.
+    // 64 Gaussians that each cover the whole 1280x720 frame: 64 pairs per bin (3,600
+    // 16-pixel or 14,400 8-pixel bins), more than the initial capacity, so the frame is
+    // recorded again with larger buffers.
     let mut s = Scene::empty(0);
     for k in 0..64 {
         common::push_gaussian(
@@ -288,7 +289,12 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
     let gs = r.upload(&act).unwrap();
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
     assert_eq!(r.stats().regrows, 1);
-    assert_eq!(r.stats().pairs, 64 * 3600);
+    let (bx, by) = vksplat::render::bin_grid(r.blend_kernel().bin_size(), 1280, 720);
+    assert_eq!(
+        r.stats().pairs,
+        64 * u64::from(bx * by),
+        "every Gaussian covers every bin"
+    );
     let c = cpu::render(&act, &cam, &RenderOptions::default());
     let cmp = compare(&g, &c);
     assert!(cmp.psnr >= 55.0 && cmp.within >= 0.999, "{cmp:?}");

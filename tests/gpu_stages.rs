@@ -20,12 +20,13 @@
 
 mod common;
 
-use common::gpu::{assert_validation_clean, move_towards, renderer};
+use common::gpu::{assert_validation_clean, move_towards, new_renderer, renderer};
 use std::collections::{BTreeMap, HashSet};
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, Projected, RenderOptions};
+use vksplat::render::blend::BlendKernel;
 use vksplat::render::types::unpack_tile;
-use vksplat::render::Intermediates;
+use vksplat::render::{GpuRenderer, Intermediates};
 use vksplat::scene::{self, ActivatedScene};
 
 fn load(name: &str) -> ActivatedScene {
@@ -52,7 +53,7 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
                 let near = (c.depth - cpu::NEAR_PLANE).abs() < 1e-5;
                 let all_empty = (c.rect_min[1]..c.rect_max[1]).all(|y| {
                     (c.rect_min[0]..c.rect_max[0]).all(|x| {
-                        cpu::max_alpha_in_tile(c, [x, y], cam.width, cam.height)
+                        cpu::max_alpha_in_tile(c, [x, y], 16, cam.width, cam.height)
                             < 1.0 / 255.0 * 1.001
                     })
                 });
@@ -122,7 +123,7 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
     assert_eq!(inter.splats.len(), n);
 }
 
-fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates, cam: &Camera) {
+fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates) {
     let n = inter.offsets.len();
     let pairs = inter.counters.pairs();
     assert_eq!(
@@ -158,7 +159,7 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates, cam: &Camera)
     assert_eq!(u64::from(acc), pairs);
     assert_eq!(inter.counters.scan_total, acc);
     // Keys: (depth bits, tile) of their value; sorted, and stable for equal keys.
-    let tiles = cam.tile_grid().0 * cam.tile_grid().1;
+    let tiles = inter.bins.0 * inter.bins.1;
     for (k, (key, &v)) in inter.keys.iter().zip(&inter.values).enumerate() {
         assert_eq!(
             key[0],
@@ -210,13 +211,19 @@ fn check_tile_membership(label: &str, cpu_p: &[Projected], inter: &Intermediates
     for (k, v) in inter.keys.iter().zip(&inter.values) {
         gpu_tiles.entry(k[1]).or_default().push(*v);
     }
+    // The GPU keys pairs by bins of `size` pixels (16: the reference tiles, or 8: their
+    // quarters); each bin is compared with the reference list of the tile containing it.
+    let (size, (bins_x, bins_y)) = (inter.bin_size, inter.bins);
     let tx = cam.tile_grid().0;
     let (mut dropped, mut band) = (0usize, 0usize);
-    let all: HashSet<u32> = cpu_tiles.keys().chain(gpu_tiles.keys()).copied().collect();
-    for t in all {
-        let tile = [t % tx, t / tx];
-        let c = cpu_tiles.get(&t).cloned().unwrap_or_default();
-        let g = gpu_tiles.get(&t).cloned().unwrap_or_default();
+    for b in 0..bins_x * bins_y {
+        let bin = [b % bins_x, b / bins_x];
+        let tile = [bin[0] * size / 16, bin[1] * size / 16];
+        let c = cpu_tiles
+            .get(&(tile[1] * tx + tile[0]))
+            .cloned()
+            .unwrap_or_default();
+        let g = gpu_tiles.get(&b).cloned().unwrap_or_default();
         let cs: HashSet<u32> = c.iter().copied().collect();
         let gs: HashSet<u32> = g.iter().copied().collect();
         let on_edge = |p: &Projected| {
@@ -231,13 +238,13 @@ fn check_tile_membership(label: &str, cpu_p: &[Projected], inter: &Intermediates
         };
         for &id in cs.difference(&gs) {
             let p = &cpu_p[id as usize];
-            let a = cpu::max_alpha_in_tile(p, tile, cam.width, cam.height);
+            let a = cpu::max_alpha_in_tile(p, bin, size, cam.width, cam.height);
             if a < 1.0 / 255.0 {
-                dropped += 1; // exact culling: contributes nothing here
+                dropped += 1; // exact culling: contributes nothing to this bin
             } else {
                 assert!(
                     a < 1.001 / 255.0 || on_edge(p),
-                    "{label}: tile {tile:?} lost Gaussian {id} with alpha {a}"
+                    "{label}: bin {bin:?} lost Gaussian {id} with alpha {a}"
                 );
                 band += 1;
             }
@@ -246,13 +253,13 @@ fn check_tile_membership(label: &str, cpu_p: &[Projected], inter: &Intermediates
             let p = &cpu_p[id as usize];
             assert!(
                 p.radius == 0 || on_edge(p),
-                "{label}: tile {tile:?} gained Gaussian {id}"
+                "{label}: bin {bin:?} gained Gaussian {id}"
             );
             band += 1;
         }
         let common_c: Vec<u32> = c.iter().copied().filter(|v| gs.contains(v)).collect();
         let common_g: Vec<u32> = g.iter().copied().filter(|v| cs.contains(v)).collect();
-        assert_eq!(common_c, common_g, "{label}: order in tile {tile:?}");
+        assert_eq!(common_c, common_g, "{label}: order in bin {bin:?}");
     }
     eprintln!(
         "{label}: cpu pairs {}, gpu pairs {}, culled exactly {dropped}, boundary band {band}",
@@ -266,15 +273,18 @@ fn check_tile_membership(label: &str, cpu_p: &[Projected], inter: &Intermediates
 }
 
 fn run_case(label: &str, scene: &ActivatedScene, cam: &Camera) {
-    let mut r = renderer();
+    run_case_on(&mut renderer(), label, scene, cam);
+}
+
+fn run_case_on(r: &mut GpuRenderer, label: &str, scene: &ActivatedScene, cam: &Camera) {
     let gs = r.upload(scene).unwrap();
     let opts = RenderOptions::default();
     let (_, inter) = r.render_with_intermediates(&gs, cam, &opts).unwrap();
     let cpu_p = cpu::preprocess(scene, cam, scene.sh_degree);
     check_preprocess(label, &cpu_p, &inter, cam);
-    check_scan_keys_sort_ranges(label, &inter, cam);
+    check_scan_keys_sort_ranges(label, &inter);
     check_tile_membership(label, &cpu_p, &inter, cam);
-    assert_validation_clean(&r);
+    assert_validation_clean(r);
 }
 
 #[test]
@@ -284,6 +294,17 @@ fn stages_match_on_playbot_lod3_orbit_and_close_up() {
     run_case("lod3 orbit", &s, &cam);
     let close = move_towards(&cam, glam::Vec3::new(0.0, -0.5, 0.0), 0.3, "close-up");
     run_case("lod3 close-up", &s, &close);
+}
+
+#[test]
+fn stages_match_with_16_pixel_bins_of_the_gpu_kernel() {
+    // The default kernel on lavapipe keys pairs by 8-pixel bins; the GPU kernel by the
+    // reference's 16-pixel tiles. Both are held to the same checks.
+    let mut r = new_renderer(Some(BlendKernel::Shared));
+    assert_eq!(r.blend_kernel().bin_size(), 16);
+    let s = load("playbot_lod3_31k_sh2.ply");
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 640, 360);
+    run_case_on(&mut r, "lod3 orbit, 16-pixel bins", &s, &cam);
 }
 
 #[test]

@@ -195,14 +195,20 @@ pub fn preprocess(scene: &ActivatedScene, cam: &Camera, sh_degree: u32) -> Vec<P
         .collect()
 }
 
-/// Mirror of `tile_receives` in `glsl/splat_common.glsl`: whether any pixel of tile
-/// `tile` can get alpha >= 1/255 from a Gaussian with this centre, conic and opacity
-/// (with the GPU's small conservative margin). The GPU drops pairs for which this is false;
-/// they contribute nothing, so the image is unchanged. The reference renderer itself keeps
-/// every pair of the rectangle; tests use this to compare tile membership.
-pub fn tile_receives(mean2d: [f32; 2], conic: [f32; 3], opacity: f32, tile: [u32; 2]) -> bool {
+/// Mirror of `tile_receives` in `glsl/splat_common.glsl`: whether any pixel of the
+/// `size`-pixel bin `tile` can get alpha >= 1/255 from a Gaussian with this centre, conic
+/// and opacity (with the GPU's small conservative margin). The GPU drops pairs for which
+/// this is false; they contribute nothing, so the image is unchanged. The reference renderer
+/// itself keeps every pair of the rectangle; tests use this to compare membership.
+pub fn tile_receives(
+    mean2d: [f32; 2],
+    conic: [f32; 3],
+    opacity: f32,
+    tile: [u32; 2],
+    size: u32,
+) -> bool {
     let bound = 2.0 * (255.0 * opacity).ln() * 1.001 + 0.01;
-    let t = TILE_SIZE as f32;
+    let t = size as f32;
     let lo = [
         tile[0] as f32 * t - mean2d[0],
         tile[1] as f32 * t - mean2d[1],
@@ -223,12 +229,12 @@ pub fn tile_receives(mean2d: [f32; 2], conic: [f32; 3], opacity: f32, tile: [u32
     m <= bound
 }
 
-/// Largest alpha (before the 0.99 clamp) Gaussian `g` reaches at any pixel of `tile`,
-/// evaluated pixel by pixel with the blend's formula.
-pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], width: u32, height: u32) -> f32 {
+/// Largest alpha (before the 0.99 clamp) Gaussian `g` reaches at any pixel of the
+/// `size`-pixel bin `tile`, evaluated pixel by pixel with the blend's formula.
+pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], size: u32, width: u32, height: u32) -> f32 {
     let mut best = 0.0f32;
-    for y in tile[1] * TILE_SIZE..((tile[1] + 1) * TILE_SIZE).min(height) {
-        for x in tile[0] * TILE_SIZE..((tile[0] + 1) * TILE_SIZE).min(width) {
+    for y in tile[1] * size..((tile[1] + 1) * size).min(height) {
+        for x in tile[0] * size..((tile[0] + 1) * size).min(width) {
             let dx = g.mean2d[0] - x as f32;
             let dy = g.mean2d[1] - y as f32;
             let power = -0.5 * (g.conic[0] * dx * dx + g.conic[2] * dy * dy) - g.conic[1] * dx * dy;
@@ -453,26 +459,21 @@ pub fn render_timed(
 }
 
 /// Pixel-Gaussian evaluations a front-to-back blend performs: for every pixel, the
-/// Gaussians of its tile's list up to and including the one that finishes it (all of them
-/// when it never finishes). `list(tile)` gives a tile's Gaussians in blend order.
+/// Gaussians of its list up to and including the one that finishes it (all of them when it
+/// never finishes). `list(x, y)` gives pixel (x, y)'s Gaussians in blend order.
 pub fn count_evaluations<'a>(
     projected: &[Projected],
     cam: &Camera,
-    list: impl Fn(usize) -> &'a [u32] + Sync,
+    list: impl Fn(u32, u32) -> &'a [u32] + Sync,
 ) -> u64 {
-    let (tiles_x, tiles_y) = cam.tile_grid();
-    (0..tiles_x * tiles_y)
+    (0..cam.height)
         .into_par_iter()
-        .map(|tile| {
-            let ids = list(tile as usize);
-            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
-            let mut n = 0u64;
-            for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(cam.height) {
-                for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(cam.width) {
-                    n += u64::from(blend_pixel(projected, ids, x as f32, y as f32).evaluated);
-                }
-            }
-            n
+        .map(|y| {
+            (0..cam.width)
+                .map(|x| {
+                    u64::from(blend_pixel(projected, list(x, y), x as f32, y as f32).evaluated)
+                })
+                .sum::<u64>()
         })
         .sum()
 }

@@ -21,8 +21,8 @@ pub enum BlendKernel {
     },
 }
 
-/// Supported strip lengths of [`BlendKernel::Texel`].
-pub const STRIPS: [u32; 5] = [1, 2, 4, 8, 16];
+/// Supported strip lengths of [`BlendKernel::Texel`] (a strip never crosses an 8-pixel bin).
+pub const STRIPS: [u32; 4] = [1, 2, 4, 8];
 
 impl BlendKernel {
     /// The kernel for a device: [`BlendKernel::Shared`] on GPUs, texel fetches with two
@@ -47,6 +47,17 @@ impl BlendKernel {
         std::iter::once(BlendKernel::Shared)
             .chain(STRIPS.iter().map(|&strip| BlendKernel::Texel { strip }))
             .collect()
+    }
+
+    /// Side of the pixel bins the pairs are keyed by: the reference's 16x16 tiles for the
+    /// shared kernel (one list per workgroup); 8x8 quarters for the texel kernel, whose
+    /// invocations each read their own list, so shorter lists per pixel block pay for the
+    /// extra pairs (measured on lavapipe: see BENCHMARKS.md).
+    pub fn bin_size(self) -> u32 {
+        match self {
+            BlendKernel::Shared => 16,
+            BlendKernel::Texel { .. } => 8,
+        }
     }
 
     fn texel(self) -> bool {

@@ -128,16 +128,25 @@ pub struct Intermediates {
     pub keys: Vec<[u32; 2]>,
     /// Sorted values (Gaussian indices).
     pub values: Vec<u32>,
-    /// `[start, end)` per tile.
+    /// `[start, end)` per bin.
     pub ranges: Vec<[u32; 2]>,
+    /// Side of the bins in pixels (16: the reference tiles; 8: their quarters).
+    pub bin_size: u32,
+    /// Bins along x and y.
+    pub bins: (u32, u32),
 }
 
-/// Key bits that order the pairs for `num_tiles` tiles: 32 depth bits plus the tile id's.
+/// Key bits that order the pairs for `num_tiles` bins: 32 depth bits plus the bin id's.
 pub fn key_bits(num_tiles: u32) -> u32 {
     32 + tile_bits(num_tiles)
 }
 
-/// Bits of a tile id for `num_tiles` tiles.
+/// Side in pixels and grid of the bins pairs are keyed by, for a bin size and image.
+pub fn bin_grid(bin_size: u32, width: u32, height: u32) -> (u32, u32) {
+    (width.div_ceil(bin_size), height.div_ceil(bin_size))
+}
+
+/// Bits of a bin (tile) id for `num_tiles` bins.
 pub fn tile_bits(num_tiles: u32) -> u32 {
     32 - num_tiles.saturating_sub(1).leading_zeros()
 }
@@ -187,9 +196,11 @@ impl FrameBuffers {
         height: u32,
         capacity: u32,
         texel_views: bool,
+        bin_size: u32,
     ) -> GpuResult<Self> {
         let n = u64::from(gaussians.max(1));
-        let tiles = u64::from(width.div_ceil(16)) * u64::from(height.div_ceil(16));
+        let (bins_x, bins_y) = bin_grid(bin_size, width, height);
+        let bins = u64::from(bins_x) * u64::from(bins_y);
         let pixels = u64::from(width) * u64::from(height);
         let dev = |name: &str, bytes: u64| {
             check_binding(ctx, name, bytes)?;
@@ -246,7 +257,7 @@ impl FrameBuffers {
                 "sort scratch",
                 RadixSort::scratch_size(capacity.max(gaussians)),
             )?,
-            ranges: dev("tile ranges", tiles * 8)?,
+            ranges: dev("bin ranges", bins * 8)?,
             color: GpuImage::new(
                 ctx,
                 "color+alpha image",
@@ -336,6 +347,11 @@ impl GpuRenderer {
             stats: FrameStats::default(),
             ctx,
         })
+    }
+
+    fn bin_count(&self, cam: &Camera) -> u32 {
+        let (x, y) = bin_grid(self.blend.kernel().bin_size(), cam.width, cam.height);
+        x * y
     }
 
     /// The blend kernel in use.
@@ -458,6 +474,7 @@ impl GpuRenderer {
                 cam.height,
                 capacity,
                 views,
+                self.blend.kernel().bin_size(),
             )?);
         }
         Ok(())
@@ -490,7 +507,7 @@ impl GpuRenderer {
                 self.stats = FrameStats {
                     visible: counters.visible,
                     pairs,
-                    key_bits: key_bits(cam.tile_grid().0 * cam.tile_grid().1),
+                    key_bits: key_bits(self.bin_count(cam)),
                     regrows,
                 };
                 break;
@@ -541,6 +558,8 @@ impl GpuRenderer {
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
         let (tiles_x, tiles_y) = cam.tile_grid();
+        let bin_size = blend.kernel().bin_size();
+        let (bins_x, bins_y) = bin_grid(bin_size, cam.width, cam.height);
         let pos = cam.position();
         let r = cam.rotation;
         let t = cam.translation;
@@ -559,9 +578,10 @@ impl GpuRenderer {
             ],
             image: [cam.width, cam.height, tiles_x, tiles_y],
             counts: [scene.count, scene.sh_degree, scene.sh_coeffs, f.capacity],
+            bins: [bin_size, bins_x, bins_y, 16 / bin_size],
         };
         let n = scene.count;
-        let pair_bits = 32..32 + tile_bits(tiles_x * tiles_y);
+        let pair_bits = 32..32 + tile_bits(bins_x * bins_y);
         ctx.submit_slot(slot, |cmd| {
             let device = ctx.device();
             timer.reset(ctx, cmd);
@@ -789,7 +809,8 @@ impl GpuRenderer {
         let n = scene.count as usize;
         let counters = self.read_counters()?;
         let sorted = counters.sort_count as usize;
-        let (tx, ty) = cam.tile_grid();
+        let bin_size = self.blend.kernel().bin_size();
+        let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
         Ok(Intermediates {
             splats: f.splats.read(ctx, n)?,
             rects: f.rects.read(ctx, n)?,
@@ -798,7 +819,9 @@ impl GpuRenderer {
             counters,
             keys: f.keys.read(ctx, sorted)?,
             values: f.values.read(ctx, sorted)?,
-            ranges: f.ranges.read(ctx, (tx * ty) as usize)?,
+            ranges: f.ranges.read(ctx, (bx * by) as usize)?,
+            bin_size,
+            bins: (bx, by),
         })
     }
 }
