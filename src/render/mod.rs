@@ -109,6 +109,9 @@ pub struct FrameStats {
     pub key_bits: u32,
     /// Times the frame was recorded again after growing the key buffers.
     pub regrows: u32,
+    /// Side of the bins the pairs were keyed by (the kernel's preferred size, or 16 when a
+    /// frame needed more pairs than one buffer holds at the smaller size).
+    pub bin_size: u32,
 }
 
 /// Intermediate buffers of a frame, read back for tests against the CPU reference.
@@ -252,10 +255,14 @@ impl FrameBuffers {
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
             keys: dev("keys", u64::from(capacity) * 8)?,
             values,
-            // Shared by the depth sort (n Gaussians) and the pair sort (capacity pairs).
-            sort_scratch: dev(
+            // Shared by the depth sort (n Gaussians) and the pair sort (capacity pairs). The
+            // sort binds slices of it, the largest 8 bytes per key, which the capacity
+            // bound (max_capacity) keeps inside one binding.
+            sort_scratch: GpuBuffer::new(
+                ctx,
                 "sort scratch",
                 RadixSort::scratch_size(capacity.max(gaussians)),
+                MemoryKind::Device,
             )?,
             ranges: dev("bin ranges", bins * 8)?,
             color: GpuImage::new(
@@ -317,6 +324,8 @@ pub struct GpuRenderer {
     frame: Option<FrameBuffers>,
     timings: StageTimings,
     stats: FrameStats,
+    /// Bin size of the frame being rendered (see [`FrameStats::bin_size`]).
+    bin_size: u32,
     ctx: GpuContext,
 }
 
@@ -345,12 +354,13 @@ impl GpuRenderer {
             frame: None,
             timings: StageTimings::default(),
             stats: FrameStats::default(),
+            bin_size: kernel.bin_size(),
             ctx,
         })
     }
 
     fn bin_count(&self, cam: &Camera) -> u32 {
-        let (x, y) = bin_grid(self.blend.kernel().bin_size(), cam.width, cam.height);
+        let (x, y) = bin_grid(self.bin_size, cam.width, cam.height);
         x * y
     }
 
@@ -497,6 +507,7 @@ impl GpuRenderer {
             })
             .min(self.max_capacity());
         self.ensure_frame(scene, cam, initial)?;
+        self.bin_size = self.blend.kernel().bin_size();
         let mut regrows = 0;
         loop {
             self.record_and_submit(scene, cam, opts)?;
@@ -509,10 +520,17 @@ impl GpuRenderer {
                     pairs,
                     key_bits: key_bits(self.bin_count(cam)),
                     regrows,
+                    bin_size: self.bin_size,
                 };
                 break;
             }
             let max = self.max_capacity();
+            if pairs > u64::from(max) && self.bin_size < 16 {
+                // Fewer, larger bins need fewer pairs; the texel kernel blends either.
+                self.bin_size = 16;
+                regrows += 1;
+                continue;
+            }
             if pairs > u64::from(max) {
                 return Err(GpuError::InvalidArgument(format!(
                     "this frame needs {pairs} tile/Gaussian pairs, more than the {max} one storage buffer of this device can hold ({} bytes); render at a lower resolution or with fewer Gaussians",
@@ -552,13 +570,14 @@ impl GpuRenderer {
             slot,
             frame,
             ctx,
+            bin_size,
             ..
         } = self;
         let f = frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
         let (tiles_x, tiles_y) = cam.tile_grid();
-        let bin_size = blend.kernel().bin_size();
+        let bin_size = *bin_size;
         let (bins_x, bins_y) = bin_grid(bin_size, cam.width, cam.height);
         let pos = cam.position();
         let r = cam.rotation;
@@ -809,7 +828,7 @@ impl GpuRenderer {
         let n = scene.count as usize;
         let counters = self.read_counters()?;
         let sorted = counters.sort_count as usize;
-        let bin_size = self.blend.kernel().bin_size();
+        let bin_size = self.bin_size;
         let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
         Ok(Intermediates {
             splats: f.splats.read(ctx, n)?,
