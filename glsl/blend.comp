@@ -32,6 +32,7 @@ layout(binding = 2) uniform usamplerBuffer value_texels;
 layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
 layout(binding = 4, rgba32f) uniform writeonly image2D out_color;  // rgb + T * background, alpha = 1 - T
 layout(binding = 5, r32f) uniform writeonly image2D out_depth;     // alpha-normalised depth
+layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 
 // Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
 // written without branches: SIMD implementations execute both sides of a divergent branch
@@ -78,6 +79,9 @@ void main() {
     float D = 0.0;
     uvec2 range = ranges[tile_id];
     uint n = range.y - range.x;
+    if (gl_LocalInvocationIndex == 0u) {
+        REPORT_LOOP(counters.max_list_loop, n + n / TILE_PIXELS + 16u);
+    }
     for (uint batch = 0u; batch < n; batch += TILE_PIXELS) {
         // Stop when every pixel of the tile is done (uniform: all threads read one count).
         if (gl_LocalInvocationIndex == 0u) s_done = 0u;
@@ -130,8 +134,10 @@ void main() {
     uvec2 bin = pix0 / params.bins.x;
     uvec2 range = pix0.y < params.image.y && pix0.x < params.image.x
         ? ranges[bin.y * params.bins.y + bin.x] : uvec2(0u);
-    for (uint k = range.x; k < range.y; k++) {
-        bool all_done = true;
+    uint k = range.x;
+    bool all_done = false;
+    for (; k < range.y; k++) {
+        all_done = true;
         [[unroll]] for (uint p = 0u; p < STRIP; p++) all_done = all_done && done[p];
         if (all_done) break;
         int g = int(texelFetch(value_texels, int(k)).x) * 3;
@@ -142,6 +148,10 @@ void main() {
         [[unroll]] for (uint p = 0u; p < STRIP; p++) {
             composite(mo, cd.xyz, color, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
         }
+    }
+    // Cut off before the end of the list with pixels still unfinished (see LOOP_REPORT).
+    if (k < range.y && !all_done) {
+        REPORT_LOOP(counters.max_list_loop, range.y - range.x + 16u);
     }
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {
         write_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p]);

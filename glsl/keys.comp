@@ -48,8 +48,10 @@ void main() {
     uint off = offsets[k];
     // This Gaussian's slots end where the next one's begin (or at the scan total).
     uint end = k + 1u < params.counts.x ? offsets[k + 1u] : counters.scan_total;
-    for (uint y = bmin.y; y < bmax.y; y++) {
-        for (uint x = bmin.x; x < bmax.x; x++) {
+    uint y = bmin.y;
+    uint x = bmax.x;
+    for (; y < bmax.y; y++) {
+        for (x = bmin.x; x < bmax.x; x++) {
             // The same test preprocess counted with (tile_receives in splat_common.glsl).
             if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
             if (off < min(end, capacity)) {
@@ -58,6 +60,10 @@ void main() {
             }
             off++;
         }
+    }
+    // Cut off (see LOOP_REPORT): both loops must have run to their ends.
+    if (y < bmax.y || x < bmax.x) {
+        REPORT_LOOP(counters.max_bins_loop, (bmax.x - bmin.x + 1u) * (bmax.y - bmin.y) + 16u);
     }
     for (; off < min(end, capacity); off++) {
         keys[off] = uvec2(0xFFFFFFFFu, SENTINEL_TILE);

@@ -126,10 +126,16 @@ void main() {
                 float bound = alpha_bound(g.pos_opacity.w);
                 uvec2 bmin = rmin * params.bins.w;
                 uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
-                for (uint by = bmin.y; by < bmax.y; by++) {
-                    for (uint bx = bmin.x; bx < bmax.x; bx++) {
+                uint by = bmin.y;
+                uint bx = bmax.x;
+                for (; by < bmax.y; by++) {
+                    for (bx = bmin.x; bx < bmax.x; bx++) {
                         touched += tile_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x) ? 1u : 0u;
                     }
+                }
+                // Cut off (see LOOP_REPORT): both loops must have run to their ends.
+                if (by < bmax.y || bx < bmax.x) {
+                    REPORT_LOOP(counters.max_bins_loop, (bmax.x - bmin.x + 1u) * (bmax.y - bmin.y) + 16u);
                 }
                 if (touched != 0u) {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);

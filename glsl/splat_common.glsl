@@ -57,7 +57,21 @@ struct Counters {
     uint ranges_groups_y;
     uint ranges_groups_z;
     uint visible;        // Gaussians that touch at least one tile
+    uint max_bins_loop;  // largest bin loop of one Gaussian (preprocess, keys) ...
+    uint max_list_loop;  // ... and list loop of one bin (blend), recorded past LOOP_REPORT
+    uint pad0;
+    uint pad1;
 };
+
+// CPU implementations may end every loop of an invocation after a fixed total number of
+// iterations (llvmpipe: 65,535, shared by all loops), silently. A long loop that stopped
+// before its end for no reason of its own was cut off: it is reported in
+// Counters.max_*_loop (with the iterations it needed) so the host can choose larger bins
+// or refuse the frame instead of returning an incomplete image. Only long loops can be cut
+// off, which keeps these atomics rare.
+#define LOOP_REPORT 4096u
+#define REPORT_LOOP(FIELD, ITERATIONS) \
+    if ((ITERATIONS) > LOOP_REPORT) atomicMax(FIELD, (ITERATIONS))
 
 // Tile rectangles are packed as two uints: x | y << 16 for min (inclusive) and max
 // (exclusive); 16 bits suffice for 16384 / 16 = 1024 tiles per side.

@@ -396,3 +396,69 @@ fn texel_kernel_falls_back_to_16_pixel_bins_when_pairs_overflow() {
     assert!(cmp.psnr >= 55.0 && cmp.within >= 0.999, "{cmp:?}");
     assert_validation_clean(&r);
 }
+
+#[test]
+fn lavapipe_loop_limit_means_larger_bins_or_a_clear_refusal() {
+    // llvmpipe ends all loops of a shader invocation after 65,535 iterations in total.
+    // (1) At 3840x2160 a Gaussian covering the frame spans 129,600 8-pixel bins: the
+    //     frame falls back to 16-pixel bins (32,400) and still matches the reference.
+    let mut s = Scene::empty(0);
+    for k in 0..3 {
+        let f = k as f32;
+        common::push_gaussian(
+            &mut s,
+            [0.01 * f, 0.0, 3.0 + 0.1 * f],
+            4.0,
+            0.2,
+            [0.9, 0.4, 0.1],
+        );
+    }
+    let act = s.activated();
+    let cam = common::axis_camera(50.0)
+        .with_resolution(3840, 2160)
+        .unwrap();
+    let mut r = new_renderer(Some(vksplat::render::blend::BlendKernel::Texel {
+        strip: 2,
+    }));
+    let limited = r.ctx().info().name.contains("llvmpipe");
+    let gs = r.upload(&act).unwrap();
+    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    if limited {
+        assert_eq!(r.stats().bin_size, 16, "fell back to 16-pixel bins");
+    }
+    let c = cpu::render(&act, &cam, &RenderOptions::default());
+    let cmp = compare(&g, &c);
+    assert!(cmp.psnr >= 55.0 && cmp.within >= 0.999, "{cmp:?}");
+
+    // (2) 70,000 Gaussians piled on one pixel: the far pixels of their bin never finish,
+    //     so the blend would need 70,000 iterations there. On llvmpipe that is refused.
+    let mut s = Scene::empty(0);
+    for k in 0..70_000 {
+        common::push_gaussian(
+            &mut s,
+            [-0.6, -0.6, 3.0 + 1e-5 * k as f32],
+            0.01,
+            0.9,
+            [1.0, 1.0, 1.0],
+        );
+    }
+    let act = s.activated();
+    let cam = common::axis_camera(50.0);
+    let gs = r.upload(&act).unwrap();
+    match r.render(&gs, &cam, &RenderOptions::default()) {
+        Err(e) if limited => {
+            let e = e.to_string();
+            assert!(
+                e.contains("65535") && e.contains("Gaussians in one bin") && e.contains("llvmpipe"),
+                "{e}"
+            );
+        }
+        Err(e) => panic!("only llvmpipe has a loop limit: {e}"),
+        Ok(frame) => {
+            assert!(!limited, "llvmpipe must refuse a frame it cannot finish");
+            let c = cpu::render(&act, &cam, &RenderOptions::default());
+            assert!(compare(&frame, &c).psnr >= 55.0);
+        }
+    }
+    assert_validation_clean(&r);
+}

@@ -623,8 +623,23 @@ fn radix_sort_of_a_bit_range_keeps_lower_bits_in_arrival_order() {
     let ctx = context();
     let sort = RadixSort::new(&ctx).expect("sort");
     let mut rng = Rng(77);
-    for n in [0usize, 1, 4095, 4097, 100_003] {
-        let keys: Vec<u64> = tile_depth_keys(&mut rng, n);
+    for (n, bits) in [
+        (0usize, 32..44),
+        (1, 32..44),
+        (4095, 32..44),
+        (4097, 32..49),
+        (100_003, 32..44),
+        (70_001, 32..49),
+        (5000, 36..61),
+    ] {
+        let mut keys: Vec<u64> = tile_depth_keys(&mut rng, n);
+        if bits.end > 44 {
+            // Bin ids past 16 bits (a 4K frame of 8-pixel bins has 129,600).
+            for k in &mut keys {
+                let hi = (*k >> 32) * 37 % 129_600;
+                *k = (hi << 32) | (*k & 0xFFFF_FFFF);
+            }
+        }
         let packed: Vec<[u32; 2]> = keys.iter().map(|&k| [k as u32, (k >> 32) as u32]).collect();
         let values: Vec<u32> = (0..n as u32).collect();
         let cap = n.max(1);
@@ -649,7 +664,7 @@ fn radix_sort_of_a_bit_range_keeps_lower_bits_in_arrival_order() {
                 &value_buf,
                 &scratch,
                 Count::Host(n as u32),
-                32..44,
+                bits.clone(),
             )?;
             vksplat::gpu::sync::barrier(
                 &ctx,
@@ -664,14 +679,15 @@ fn radix_sort_of_a_bit_range_keeps_lower_bits_in_arrival_order() {
         let got_values: Vec<u32> = value_buf.read(&ctx, n).expect("read");
         let mut expected: Vec<(u64, u32)> =
             keys.iter().copied().zip(values.iter().copied()).collect();
-        expected.sort_by_key(|&(k, _)| (k >> 32) & 0xFFF);
+        let mask = (1u64 << (bits.end - bits.start)) - 1;
+        expected.sort_by_key(|&(k, _)| (k >> bits.start) & mask);
         let want_keys: Vec<[u32; 2]> = expected
             .iter()
             .map(|&(k, _)| [k as u32, (k >> 32) as u32])
             .collect();
         let want_values: Vec<u32> = expected.iter().map(|&(_, v)| v).collect();
-        assert_eq!(got_keys, want_keys, "n = {n}");
-        assert_eq!(got_values, want_values, "n = {n}");
+        assert_eq!(got_keys, want_keys, "n = {n}, bits {bits:?}");
+        assert_eq!(got_values, want_values, "n = {n}, bits {bits:?}");
     }
     let e = sort.record_bits(
         &ctx,

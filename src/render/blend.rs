@@ -112,6 +112,8 @@ pub struct BlendBindings<'a> {
     pub color: &'a GpuImage,
     /// r32f depth image (written, GENERAL layout).
     pub depth: &'a GpuImage,
+    /// Counters (loop lengths reported).
+    pub counters: BufferSlice<'a>,
 }
 
 impl Blend {
@@ -129,9 +131,9 @@ impl Blend {
             ("TEXEL_FETCH", u32::from(kernel.texel()).to_string()),
         ];
         let bindings = if kernel.texel() {
-            [B, T, T, B, I, I]
+            [B, T, T, B, I, I, B]
         } else {
-            [B, B, B, B, I, I]
+            [B, B, B, B, I, I, B]
         };
         // local_size_x (the full-subgroups requirement looks at the X dimension).
         let local_x = 16 / kernel.strip();
@@ -183,6 +185,7 @@ impl Blend {
                     view: b.depth.view(),
                     layout: vk::ImageLayout::GENERAL,
                 },
+                Resource::Buffer(b.counters),
             ],
             &[],
             [tiles.0, tiles.1, 1],

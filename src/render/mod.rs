@@ -276,7 +276,7 @@ impl FrameBuffers {
             readback: GpuBuffer::new(
                 ctx,
                 "frame readback",
-                pixels * 20 + 32,
+                pixels * 20 + std::mem::size_of::<Counters>() as u64,
                 MemoryKind::Readback,
             )?,
         })
@@ -331,6 +331,12 @@ pub struct GpuRenderer {
 
 /// Smallest key capacity allocated.
 const MIN_CAPACITY: u32 = 1 << 16;
+
+/// llvmpipe (lavapipe) ends all loops of a shader invocation after this many iterations in
+/// total (gallivm's `LP_MAX_TGSI_LOOP_ITERATIONS`), silently. The shaders report their
+/// longest loops (`Counters::max_bins_loop`, `max_list_loop`) so a frame that would hit
+/// the limit is rendered with larger bins or refused, never returned incomplete.
+pub const CPU_LOOP_LIMIT: u32 = 65_535;
 
 impl GpuRenderer {
     /// Builds every pipeline on `ctx`, with the blend kernel suited to the device.
@@ -460,6 +466,12 @@ impl GpuRenderer {
             .map(|(f, i)| (f, i.unwrap_or_default()))
     }
 
+    /// Whether the device is a CPU implementation with llvmpipe's loop limit.
+    fn loop_limited(&self) -> bool {
+        let info = self.ctx.info();
+        info.device_type == vk::PhysicalDeviceType::CPU && info.name.contains("llvmpipe")
+    }
+
     fn max_capacity(&self) -> u32 {
         // Keys are 8 bytes; one storage-buffer binding must cover them all.
         let range = u64::from(self.ctx.info().max_storage_buffer_range);
@@ -514,6 +526,24 @@ impl GpuRenderer {
             let counters = self.read_counters()?;
             let pairs = counters.pairs();
             let capacity = self.frame.as_ref().map_or(0, |f| f.capacity);
+            if pairs <= u64::from(capacity) && self.loop_limited() {
+                let bins_loop = counters.max_bins_loop;
+                if bins_loop > CPU_LOOP_LIMIT && self.bin_size < 16 {
+                    // Four times fewer iterations per Gaussian with 16-pixel bins.
+                    self.bin_size = 16;
+                    regrows += 1;
+                    continue;
+                }
+                let worst = bins_loop.max(counters.max_list_loop);
+                if worst > CPU_LOOP_LIMIT {
+                    return Err(GpuError::InvalidArgument(format!(
+                        "this frame needs a shader loop of {worst} iterations ({} bins of one Gaussian, {} Gaussians in one bin), but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations in total, which would silently drop Gaussians; render at a lower resolution, or on another device",
+                        bins_loop,
+                        counters.max_list_loop,
+                        self.ctx.info().name
+                    )));
+                }
+            }
             if pairs <= u64::from(capacity) {
                 self.stats = FrameStats {
                     visible: counters.visible,
@@ -716,12 +746,12 @@ impl GpuRenderer {
                 )
             })?;
             // Ranges, sorted values and splats -> blend (storage reads, or texel fetches in
-            // the texel kernel).
+            // the texel kernel); counters -> the blend's loop-length atomics.
             barrier_uses(
                 ctx,
                 cmd,
                 &[Access::ComputeWrite],
-                &[Access::ComputeRead, Access::ComputeSampledRead],
+                &[Access::ComputeReadWrite, Access::ComputeSampledRead],
             );
 
             timer.stage(ctx, cmd, "blend", |cmd| {
@@ -737,6 +767,7 @@ impl GpuRenderer {
                         ranges: f.ranges.whole(),
                         color: &f.color,
                         depth: &f.depth,
+                        counters: f.counters.whole(),
                     },
                     (tiles_x, tiles_y),
                 )
@@ -773,7 +804,7 @@ impl GpuRenderer {
         let (_, _, off) = f.readback_offsets();
         let bytes = f.readback.mapped()?;
         Ok(bytemuck::pod_read_unaligned(
-            &bytes[off as usize..off as usize + 32],
+            &bytes[off as usize..off as usize + std::mem::size_of::<Counters>()],
         ))
     }
 

@@ -70,6 +70,12 @@ pub struct Counters {
     pub ranges_groups: [u32; 3],
     /// Gaussians touching at least one tile.
     pub visible: u32,
+    /// Largest bin loop of one Gaussian, recorded when above 4096 (CPU loop limits).
+    pub max_bins_loop: u32,
+    /// Largest list loop of one bin in the blend, recorded when above 4096.
+    pub max_list_loop: u32,
+    /// Padding.
+    pub pad: [u32; 2],
 }
 
 impl Counters {
@@ -120,7 +126,7 @@ mod tests {
         assert_eq!(offset_of!(Splat, conic_depth), 16);
         assert_eq!(offset_of!(Splat, color_radius), 32);
 
-        assert_eq!(size_of::<Counters>(), 32);
+        assert_eq!(size_of::<Counters>(), 48);
         assert_eq!(offset_of!(Counters, scan_total) as u64, COUNTER_SCAN_TOTAL);
         assert_eq!(offset_of!(Counters, sort_count) as u64, COUNTER_SORT_COUNT);
         assert_eq!(offset_of!(Counters, touched_lo), 8);
@@ -130,6 +136,8 @@ mod tests {
             COUNTER_RANGES_GROUPS
         );
         assert_eq!(offset_of!(Counters, visible), 28);
+        assert_eq!(offset_of!(Counters, max_bins_loop), 32);
+        assert_eq!(offset_of!(Counters, max_list_loop), 36);
     }
 
     #[test]
