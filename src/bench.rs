@@ -163,6 +163,30 @@ impl BenchReport {
     }
 }
 
+/// Appends one frame's stage times to per-stage sample lists (created on first use).
+fn push_stage_samples<'a>(
+    samples: &mut Vec<(String, Vec<f64>)>,
+    stages: impl IntoIterator<Item = (&'a str, f64)>,
+) {
+    for (k, (stage, ms)) in stages.into_iter().enumerate() {
+        if samples.len() <= k {
+            samples.push((stage.to_string(), Vec::new()));
+        }
+        samples[k].1.push(ms);
+    }
+}
+
+/// Summarises per-stage sample lists.
+fn stage_reports(samples: Vec<(String, Vec<f64>)>) -> Vec<StageReport> {
+    samples
+        .into_iter()
+        .map(|(name, v)| StageReport {
+            name,
+            ms: Stat::of(&v),
+        })
+        .collect()
+}
+
 fn per_second(count: u64, ms: f64) -> f64 {
     if ms > 0.0 {
         count as f64 / (ms / 1e3)
@@ -197,12 +221,7 @@ pub fn bench_gpu(
         wall.push(elapsed);
         let tm = renderer.timings();
         frame.push(tm.total);
-        for (k, (stage, ms)) in tm.stages().into_iter().enumerate() {
-            if stage_samples.len() <= k {
-                stage_samples.push((stage.to_string(), Vec::new()));
-            }
-            stage_samples[k].1.push(ms);
-        }
+        push_stage_samples(&mut stage_samples, tm.stages());
     }
     let stats = renderer.stats().clone();
     let (_, inter) = renderer.render_with_intermediates(&gpu_scene, cam, &opts)?;
@@ -222,13 +241,7 @@ pub fn bench_gpu(
         &inter.values[a as usize..b as usize]
     });
     let info = renderer.ctx().info();
-    let stages: Vec<StageReport> = stage_samples
-        .into_iter()
-        .map(|(name, v)| StageReport {
-            name,
-            ms: Stat::of(&v),
-        })
-        .collect();
+    let stages = stage_reports(stage_samples);
     let wall_ms = Stat::of(&wall);
     let mut report = BenchReport {
         scene: name.to_string(),
@@ -282,12 +295,7 @@ pub fn bench_cpu(
         pairs = tm.pairs;
         wall.push(elapsed);
         frame.push(tm.total);
-        for (k, (stage, ms)) in tm.stages().into_iter().enumerate() {
-            if stage_samples.len() <= k {
-                stage_samples.push((stage.to_string(), Vec::new()));
-            }
-            stage_samples[k].1.push(ms);
-        }
+        push_stage_samples(&mut stage_samples, tm.stages());
     }
     let projected = cpu::preprocess(scene, cam, scene.sh_degree);
     let (keys, values) = cpu::tile_keys(&projected, cam);
@@ -299,13 +307,7 @@ pub fn bench_cpu(
         &sorted_values[a as usize..b as usize]
     });
     let visible = projected.iter().filter(|p| p.tiles_touched() > 0).count() as u64;
-    let stages: Vec<StageReport> = stage_samples
-        .into_iter()
-        .map(|(name, v)| StageReport {
-            name,
-            ms: Stat::of(&v),
-        })
-        .collect();
+    let stages = stage_reports(stage_samples);
     let wall_ms = Stat::of(&wall);
     let mut report = BenchReport {
         scene: name.to_string(),
