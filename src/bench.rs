@@ -8,7 +8,6 @@ use crate::gpu::GpuResult;
 use crate::render::GpuRenderer;
 use crate::scene::ActivatedScene;
 use serde::Serialize;
-use std::path::Path;
 
 /// min / median / p95 / max of a series of samples, in milliseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -409,162 +408,165 @@ pub fn parse_count(s: &str) -> Result<usize, String> {
     Ok(v as usize)
 }
 
-/// Writes an SVG with the per-stage medians of a sweep stacked against `x` (one panel per
-/// axis that varies: Gaussians and megapixels) and a per-stage breakdown of the last report.
-pub fn plot_sweep(reports: &[BenchReport], path: &Path) -> Result<(), String> {
+/// An SVG with the per-stage medians of a sweep stacked against `x` (one panel per axis
+/// that varies: Gaussians and megapixels) and a per-stage breakdown of the last report.
+pub fn plot_sweep(reports: &[BenchReport]) -> Result<String, String> {
     use plotters::prelude::*;
-    let err = |e: &dyn std::fmt::Display| format!("{}: cannot draw the plot: {e}", path.display());
-    let stage_names: Vec<String> = reports
-        .first()
-        .map(|r| r.stages.iter().map(|s| s.name.clone()).collect())
-        .unwrap_or_default();
-    let root = SVGBackend::new(path, (1500, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let panels = root.split_evenly((1, 3));
-    let palette = [
-        &RED,
-        &BLUE,
-        &GREEN,
-        &MAGENTA,
-        &CYAN,
-        &BLACK,
-        &YELLOW,
-        &RGBColor(255, 140, 0),
-    ];
-    let stacked = |area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
-                   title: &str,
-                   xlabel: &str,
-                   xs: Vec<(f64, &BenchReport)>|
-     -> Result<(), String> {
-        if xs.len() < 2 {
-            area.titled(
-                &format!("{title}: needs two or more points"),
-                ("sans-serif", 16),
+    let err = |e: &dyn std::fmt::Display| format!("cannot draw the plot: {e}");
+    let mut svg = String::new();
+    {
+        let stage_names: Vec<String> = reports
+            .first()
+            .map(|r| r.stages.iter().map(|s| s.name.clone()).collect())
+            .unwrap_or_default();
+        let root = SVGBackend::with_string(&mut svg, (1500, 500)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let panels = root.split_evenly((1, 3));
+        let palette = [
+            &RED,
+            &BLUE,
+            &GREEN,
+            &MAGENTA,
+            &CYAN,
+            &BLACK,
+            &YELLOW,
+            &RGBColor(255, 140, 0),
+        ];
+        let stacked = |area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+                       title: &str,
+                       xlabel: &str,
+                       xs: Vec<(f64, &BenchReport)>|
+         -> Result<(), String> {
+            if xs.len() < 2 {
+                area.titled(
+                    &format!("{title}: needs two or more points"),
+                    ("sans-serif", 16),
+                )
+                .map_err(|e| err(&e))?;
+                return Ok(());
+            }
+            let xmin = xs.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+            let xmax = xs.iter().map(|p| p.0).fold(0.0, f64::max);
+            let ymax = xs.iter().map(|p| p.1.frame_ms.median).fold(0.0, f64::max) * 1.1;
+            let mut chart = ChartBuilder::on(area)
+                .caption(title, ("sans-serif", 18))
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d((xmin..xmax).log_scale(), 0.0..ymax.max(1e-3))
+                .map_err(|e| err(&e))?;
+            chart
+                .configure_mesh()
+                .x_desc(xlabel)
+                .y_desc("ms (median, stacked)")
+                .x_labels(6)
+                .x_label_formatter(&|v| {
+                    if *v >= 1000.0 {
+                        format!("{v:.0e}")
+                    } else {
+                        format!("{v:.2}")
+                    }
+                })
+                .light_line_style(WHITE)
+                .draw()
+                .map_err(|e| err(&e))?;
+            for (k, name) in stage_names.iter().enumerate() {
+                let colour = palette[k % palette.len()];
+                let line: Vec<(f64, f64)> = xs
+                    .iter()
+                    .map(|(x, r)| {
+                        (
+                            *x,
+                            r.stages
+                                .iter()
+                                .take(k + 1)
+                                .map(|s| s.ms.median)
+                                .sum::<f64>(),
+                        )
+                    })
+                    .collect();
+                chart
+                    .draw_series(LineSeries::new(line, colour.stroke_width(2)))
+                    .map_err(|e| err(&e))?
+                    .label(name.as_str())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 15, y)], colour.stroke_width(2))
+                    });
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| err(&e))?;
+            Ok(())
+        };
+        // Panel 1: against Gaussians at the first resolution; panel 2: against pixels at the
+        // first Gaussian count.
+        let first = reports.first().ok_or_else(|| err(&"no reports"))?;
+        let by_n: Vec<(f64, &BenchReport)> = reports
+            .iter()
+            .filter(|r| (r.width, r.height) == (first.width, first.height))
+            .map(|r| (r.gaussians as f64, r))
+            .collect();
+        let by_px: Vec<(f64, &BenchReport)> = reports
+            .iter()
+            .filter(|r| r.gaussians == first.gaussians)
+            .map(|r| ((r.width as f64 * r.height as f64) / 1e6, r))
+            .collect();
+        stacked(
+            &panels[0],
+            &format!("time vs Gaussians at {}x{}", first.width, first.height),
+            "Gaussians",
+            by_n,
+        )?;
+        stacked(
+            &panels[1],
+            &format!("time vs megapixels at {} Gaussians", first.gaussians),
+            "megapixels",
+            by_px,
+        )?;
+        // Panel 3: per-stage breakdown of the last (largest) point.
+        let last = reports.last().ok_or_else(|| err(&"no reports"))?;
+        let ymax = last.stages.iter().map(|s| s.ms.median).fold(0.0, f64::max) * 1.1;
+        let mut chart = ChartBuilder::on(&panels[2])
+            .caption(
+                format!(
+                    "stages: {} Gaussians, {}x{}",
+                    last.gaussians, last.width, last.height
+                ),
+                ("sans-serif", 18),
             )
-            .map_err(|e| err(&e))?;
-            return Ok(());
-        }
-        let xmin = xs.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-        let xmax = xs.iter().map(|p| p.0).fold(0.0, f64::max);
-        let ymax = xs.iter().map(|p| p.1.frame_ms.median).fold(0.0, f64::max) * 1.1;
-        let mut chart = ChartBuilder::on(area)
-            .caption(title, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d((xmin..xmax).log_scale(), 0.0..ymax.max(1e-3))
+            .build_cartesian_2d((0..last.stages.len()).into_segmented(), 0.0..ymax.max(1e-3))
             .map_err(|e| err(&e))?;
+        let names: Vec<String> = last.stages.iter().map(|s| s.name.clone()).collect();
         chart
             .configure_mesh()
-            .x_desc(xlabel)
-            .y_desc("ms (median, stacked)")
-            .x_labels(6)
-            .x_label_formatter(&|v| {
-                if *v >= 1000.0 {
-                    format!("{v:.0e}")
-                } else {
-                    format!("{v:.2}")
-                }
+            .x_labels(names.len())
+            .x_label_formatter(&|v| match v {
+                SegmentValue::CenterOf(i) => names.get(*i).cloned().unwrap_or_default(),
+                _ => String::new(),
             })
+            .y_desc("ms (median)")
             .light_line_style(WHITE)
             .draw()
             .map_err(|e| err(&e))?;
-        for (k, name) in stage_names.iter().enumerate() {
-            let colour = palette[k % palette.len()];
-            let line: Vec<(f64, f64)> = xs
-                .iter()
-                .map(|(x, r)| {
-                    (
-                        *x,
-                        r.stages
-                            .iter()
-                            .take(k + 1)
-                            .map(|s| s.ms.median)
-                            .sum::<f64>(),
-                    )
-                })
-                .collect();
-            chart
-                .draw_series(LineSeries::new(line, colour.stroke_width(2)))
-                .map_err(|e| err(&e))?
-                .label(name.as_str())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 15, y)], colour.stroke_width(2))
-                });
-        }
         chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
+            .draw_series(last.stages.iter().enumerate().map(|(i, s)| {
+                let colour = palette[i % palette.len()].filled();
+                Rectangle::new(
+                    [
+                        (SegmentValue::Exact(i), 0.0),
+                        (SegmentValue::Exact(i + 1), s.ms.median),
+                    ],
+                    colour,
+                )
+            }))
             .map_err(|e| err(&e))?;
-        Ok(())
-    };
-    // Panel 1: against Gaussians at the first resolution; panel 2: against pixels at the
-    // first Gaussian count.
-    let first = reports.first().ok_or_else(|| err(&"no reports"))?;
-    let by_n: Vec<(f64, &BenchReport)> = reports
-        .iter()
-        .filter(|r| (r.width, r.height) == (first.width, first.height))
-        .map(|r| (r.gaussians as f64, r))
-        .collect();
-    let by_px: Vec<(f64, &BenchReport)> = reports
-        .iter()
-        .filter(|r| r.gaussians == first.gaussians)
-        .map(|r| ((r.width as f64 * r.height as f64) / 1e6, r))
-        .collect();
-    stacked(
-        &panels[0],
-        &format!("time vs Gaussians at {}x{}", first.width, first.height),
-        "Gaussians",
-        by_n,
-    )?;
-    stacked(
-        &panels[1],
-        &format!("time vs megapixels at {} Gaussians", first.gaussians),
-        "megapixels",
-        by_px,
-    )?;
-    // Panel 3: per-stage breakdown of the last (largest) point.
-    let last = reports.last().ok_or_else(|| err(&"no reports"))?;
-    let ymax = last.stages.iter().map(|s| s.ms.median).fold(0.0, f64::max) * 1.1;
-    let mut chart = ChartBuilder::on(&panels[2])
-        .caption(
-            format!(
-                "stages: {} Gaussians, {}x{}",
-                last.gaussians, last.width, last.height
-            ),
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d((0..last.stages.len()).into_segmented(), 0.0..ymax.max(1e-3))
-        .map_err(|e| err(&e))?;
-    let names: Vec<String> = last.stages.iter().map(|s| s.name.clone()).collect();
-    chart
-        .configure_mesh()
-        .x_labels(names.len())
-        .x_label_formatter(&|v| match v {
-            SegmentValue::CenterOf(i) => names.get(*i).cloned().unwrap_or_default(),
-            _ => String::new(),
-        })
-        .y_desc("ms (median)")
-        .light_line_style(WHITE)
-        .draw()
-        .map_err(|e| err(&e))?;
-    chart
-        .draw_series(last.stages.iter().enumerate().map(|(i, s)| {
-            let colour = palette[i % palette.len()].filled();
-            Rectangle::new(
-                [
-                    (SegmentValue::Exact(i), 0.0),
-                    (SegmentValue::Exact(i + 1), s.ms.median),
-                ],
-                colour,
-            )
-        }))
-        .map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))?;
-    Ok(())
+        root.present().map_err(|e| err(&e))?;
+    }
+    Ok(svg)
 }

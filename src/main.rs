@@ -141,6 +141,29 @@ struct GpuArgs {
     verbose: bool,
 }
 
+impl GpuArgs {
+    /// The Vulkan context these flags ask for.
+    fn context(&self) -> Result<GpuContext> {
+        Ok(GpuContext::new(&ContextOptions {
+            device: self.device.clone(),
+            validation: self.validate,
+        })?)
+    }
+}
+
+/// Fails when the validation layer (if enabled) reported anything; the messages were
+/// printed as they came.
+fn fail_on_validation_messages(ctx: &GpuContext) -> Result<()> {
+    let messages = ctx.validation_messages();
+    if !messages.is_empty() {
+        bail!(
+            "the Vulkan validation layer reported {} message(s) (printed above)",
+            messages.len()
+        );
+    }
+    Ok(())
+}
+
 #[derive(Args)]
 struct RenderArgs {
     #[command(flatten)]
@@ -260,14 +283,10 @@ fn render_gpu(
     opts: &vksplat::cpu::RenderOptions,
 ) -> Result<(vksplat::frame::Frame, String)> {
     let t0 = std::time::Instant::now();
-    let ctx = GpuContext::new(&ContextOptions {
-        device: args.gpu.device.clone(),
-        validation: args.gpu.validate,
-    })?;
+    let ctx = args.gpu.context()?;
     if args.gpu.verbose {
         eprintln!("device: {}", ctx.info());
     }
-    let validating = ctx.validation_enabled();
     let t1 = std::time::Instant::now();
     let mut renderer = GpuRenderer::new(ctx)?;
     if args.gpu.verbose {
@@ -299,15 +318,7 @@ fn render_gpu(
             renderer.frame_device_bytes()
         );
     }
-    if validating {
-        let messages = renderer.ctx().validation_messages();
-        if !messages.is_empty() {
-            bail!(
-                "the Vulkan validation layer reported {} message(s) (printed above)",
-                messages.len()
-            );
-        }
-    }
+    fail_on_validation_messages(renderer.ctx())?;
     let device = renderer.ctx().info().name.clone();
     Ok((frame, format!("on {device}")))
 }
@@ -316,14 +327,7 @@ fn gen(args: &GenArgs) -> Result<()> {
     let scene = vksplat::gen::synthetic_scene(args.count, args.seed, args.sh_degree);
     let bytes =
         vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
-    output::write_atomically(&args.output, args.overwrite, |w| {
-        use std::io::Write;
-        w.write_all(&bytes)
-            .map_err(|source| output::OutputError::Io {
-                path: args.output.clone(),
-                source,
-            })
-    })?;
+    output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
     eprintln!(
         "wrote {} synthetic Gaussians (seed {}, SH degree {}) to {}",
         scene.len(),
@@ -402,11 +406,7 @@ fn bench(args: &BenchArgs) -> Result<()> {
     let mut renderer = if args.cpu {
         None
     } else {
-        let ctx = GpuContext::new(&ContextOptions {
-            device: args.gpu.device.clone(),
-            validation: args.gpu.validate,
-        })?;
-        Some(GpuRenderer::new(ctx)?)
+        Some(GpuRenderer::new(args.gpu.context()?)?)
     };
     let points = counts.len() * resolutions.len();
     let mut reports = Vec::new();
@@ -459,23 +459,10 @@ fn bench(args: &BenchArgs) -> Result<()> {
         bail!("every point of the sweep exceeded the device's limits (see above)");
     }
     if let Some(r) = &renderer {
-        let messages = r.ctx().validation_messages();
-        if !messages.is_empty() {
-            bail!(
-                "the Vulkan validation layer reported {} message(s) (printed above)",
-                messages.len()
-            );
-        }
+        fail_on_validation_messages(r.ctx())?;
     }
     let write_text = |path: &PathBuf, text: String| -> Result<()> {
-        output::write_atomically(path, args.overwrite, |w| {
-            use std::io::Write;
-            w.write_all(text.as_bytes())
-                .map_err(|source| output::OutputError::Io {
-                    path: path.clone(),
-                    source,
-                })
-        })?;
+        output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
         Ok(())
     };
     if let Some(path) = &args.json {
@@ -490,14 +477,7 @@ fn bench(args: &BenchArgs) -> Result<()> {
         write_text(path, vksplat::bench::to_csv(&reports))?;
     }
     if let Some(path) = &args.plot {
-        let tmp = path.with_extension("svg.tmp");
-        if let Err(e) = vksplat::bench::plot_sweep(&reports, &tmp) {
-            let _ = std::fs::remove_file(&tmp);
-            bail!("{e}");
-        }
-        let svg =
-            std::fs::read_to_string(&tmp).map_err(|e| anyhow::anyhow!("{}: {e}", tmp.display()))?;
-        let _ = std::fs::remove_file(&tmp);
+        let svg = vksplat::bench::plot_sweep(&reports).map_err(anyhow::Error::msg)?;
         write_text(path, svg)?;
     }
     Ok(())

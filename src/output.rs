@@ -118,6 +118,20 @@ pub fn write_atomically(
     result
 }
 
+/// Writes `bytes` to `path` atomically (see [`write_atomically`]).
+pub fn write_bytes_atomically(
+    path: &Path,
+    overwrite: bool,
+    bytes: &[u8],
+) -> Result<(), OutputError> {
+    write_atomically(path, overwrite, |w| {
+        w.write_all(bytes).map_err(|source| OutputError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    })
+}
+
 /// Encodes the colour plane as PNG.
 pub fn encode_png(
     frame: &Frame,
