@@ -16,6 +16,7 @@
 //!   `sh[i * sh_stride() + k * 3 + c]`; `k = 0` is the DC term (`f_dc_c`), and
 //!   `k >= 1` is `f_rest[c * K + (k - 1)]` of the PLY with `K = sh_coeffs() - 1`.
 
+pub mod filter;
 pub mod ply;
 
 use std::path::{Path, PathBuf};
