@@ -104,11 +104,19 @@ void main() {
             vec3 t1 = w_t * j1;
             vec3 s0 = cov3d * t0;
             vec3 s1 = cov3d * t1;
-            float a = dot(t0, s0) + COV2D_DILATION;
+            float a = dot(t0, s0);
             float b = dot(t0, s1);
-            float c = dot(t1, s1) + COV2D_DILATION;
+            float c = dot(t1, s1);
+            float det_before = a * c - b * b;
+            a += COV2D_DILATION;
+            c += COV2D_DILATION;
             float det = a * c - b * b;
             if (det != 0.0) {
+                // Optional antialiasing compensation (cam_pos.w = 1), as cpu::preprocess_one.
+                float opacity = g.pos_opacity.w;
+                if (params.cam_pos.w != 0.0) {
+                    opacity *= sqrt(max(ANTIALIAS_MIN_RATIO, det_before / det));
+                }
                 float det_inv = 1.0 / det;
                 vec3 conic = vec3(c * det_inv, -b * det_inv, a * det_inv);
                 float mid = 0.5 * (a + c);
@@ -123,7 +131,7 @@ void main() {
                 uvec2 rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
                                    clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
                 // Count the bins of the reference rectangle that receive anything.
-                float bound = alpha_bound(g.pos_opacity.w);
+                float bound = alpha_bound(opacity);
                 uvec2 bmin = rmin * params.bins.w;
                 uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
                 uint by = bmin.y;
@@ -141,7 +149,7 @@ void main() {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);
                     uint stride = params.counts.z * 3u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);
-                    s.mean_opacity_bound = vec4(mean2d, g.pos_opacity.w, bound);
+                    s.mean_opacity_bound = vec4(mean2d, opacity, bound);
                     s.conic_depth = vec4(conic, z);
                     s.color_radius = vec4(color, radius);
                     rect = uvec2(pack_tile(rmin.x, rmin.y), pack_tile(rmax.x, rmax.y));

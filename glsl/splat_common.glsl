@@ -9,6 +9,7 @@
 #define TILE_PIXELS 256u
 #define NEAR_PLANE 0.2
 #define COV2D_DILATION 0.3
+#define ANTIALIAS_MIN_RATIO 0.000025
 #define ALPHA_MAX 0.99
 #define ALPHA_MIN (1.0 / 255.0)
 #define T_MIN 0.0001

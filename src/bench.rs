@@ -296,7 +296,7 @@ pub fn bench_cpu(
         frame.push(tm.total);
         push_stage_samples(&mut stage_samples, tm.stages());
     }
-    let projected = cpu::preprocess(scene, cam, scene.sh_degree);
+    let projected = cpu::preprocess(scene, cam, scene.sh_degree, false);
     let (keys, values) = cpu::tile_keys(&projected, cam);
     let (sorted_keys, sorted_values) = cpu::sort_pairs(&keys, &values);
     let (tx, ty) = cam.tile_grid();

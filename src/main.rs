@@ -252,6 +252,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     cam.validate()?;
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
+        ..Default::default()
     };
     let start = std::time::Instant::now();
     let (frame, how) = if args.cpu {

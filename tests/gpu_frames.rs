@@ -82,6 +82,7 @@ fn playbot_lods_match_from_orbit_close_and_inside() {
                 &close,
                 &RenderOptions {
                     background: [1.0, 1.0, 1.0],
+                    ..Default::default()
                 },
             );
             let far = move_towards(&orbit(cams, 17, w, h), target, 3.0, "wide");
@@ -108,6 +109,7 @@ fn playbot_lods_match_from_orbit_close_and_inside() {
                 &inside,
                 &RenderOptions {
                     background: [0.2, 0.3, 0.4],
+                    ..Default::default()
                 },
             );
         }
@@ -153,6 +155,29 @@ fn plant_and_train_match() {
         &demo,
         &camera::default_camera(&demo.positions, 1280, 720),
         &RenderOptions::default(),
+    );
+}
+
+#[test]
+fn antialiased_mode_matches_the_reference() {
+    let mut r = renderer();
+    let s = load("playbot_lod3_31k_sh2.ply").activated();
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 3, 480, 270);
+    let opts = RenderOptions {
+        antialiased: true,
+        ..Default::default()
+    };
+    check_frame(&mut r, "antialiased", &s, &cam, &opts);
+    // And it is not the plain render: compensation lowers the opacity of small splats.
+    let gs = r.upload(&s).unwrap();
+    let aa = r.render(&gs, &cam, &opts).unwrap();
+    let plain = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let lowered = (0..aa.alpha.len())
+        .filter(|&i| aa.alpha[i] + 1e-3 < plain.alpha[i])
+        .count();
+    assert!(
+        lowered > aa.alpha.len() / 100,
+        "only {lowered} pixels changed"
     );
 }
 
@@ -246,6 +271,7 @@ fn empty_scene_renders_the_background_and_renders_are_deterministic() {
             &cam,
             &RenderOptions {
                 background: [0.25, 0.5, 0.75],
+                ..Default::default()
             },
         )
         .unwrap();

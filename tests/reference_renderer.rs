@@ -12,7 +12,10 @@ fn render(s: &Scene, background: [f32; 3]) -> Frame {
     cpu::render(
         &s.activated(),
         &axis_camera(50.0),
-        &RenderOptions { background },
+        &RenderOptions {
+            background,
+            ..Default::default()
+        },
     )
 }
 
@@ -279,7 +282,7 @@ fn keys_are_emitted_in_index_order_and_sorted_stably() {
         p[2] += 3.0;
     }
     let cam = axis_camera(40.0);
-    let projected = cpu::preprocess(&s.activated(), &cam, 1);
+    let projected = cpu::preprocess(&s.activated(), &cam, 1, false);
     let (keys, values) = cpu::tile_keys(&projected, &cam);
     assert_eq!(
         keys.len(),
@@ -299,4 +302,32 @@ fn keys_are_emitted_in_index_order_and_sorted_stably() {
     let ranges = cpu::tile_ranges(&sk, 16);
     let total: u32 = ranges.iter().map(|r| r[1] - r[0]).sum();
     assert_eq!(total as usize, sk.len());
+}
+
+#[test]
+fn antialiased_mode_scales_opacity_by_the_dilation_compensation() {
+    // Isotropic Gaussian facing the camera: the 2D covariance is v I with v = (f s / z)^2,
+    // so det_before / det_after = (v / (v + 0.3))^2 and the compensation is v / (v + 0.3).
+    for (scale, z) in [(0.2f32, 5.0f32), (0.01, 5.0), (0.0001, 5.0)] {
+        let mut s = Scene::empty(0);
+        push_gaussian(&mut s, [0.0, 0.0, z], scale, 0.8, [1.0, 1.0, 1.0]);
+        let opacity = s.activated().opacities[0] as f64;
+        let opts = RenderOptions {
+            antialiased: true,
+            ..Default::default()
+        };
+        let f = cpu::render(&s.activated(), &axis_camera(50.0), &opts);
+        let v = (50.0f64 * scale as f64 / z as f64).powi(2);
+        let factor = (v / (v + 0.3)).max(0.000025f64.sqrt());
+        let want = (opacity * factor).min(0.99);
+        let want = if want < 1.0 / 255.0 { 0.0 } else { want };
+        let got = f.alpha[f.index(32, 32)] as f64;
+        assert!(
+            (got - want).abs() < 1e-5,
+            "scale {scale}: alpha {got} vs {want}"
+        );
+        // Off by default: the plain render is the uncompensated opacity.
+        let plain = render(&s, [0.0; 3]);
+        assert!((plain.alpha[plain.index(32, 32)] as f64 - opacity.min(0.99)).abs() < 1e-5);
+    }
 }

@@ -27,19 +27,18 @@ pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 pub const T_MIN: f32 = 0.0001;
 
 /// Options shared by every renderer.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct RenderOptions {
     /// Colour added behind the Gaussians, weighted by the final transmittance.
     pub background: [f32; 3],
+    /// Opacity compensation for scenes trained with the antialiased (mip) setting: each
+    /// opacity is multiplied by `sqrt(max(2.5e-5, det_before / det_after))` of the 0.3
+    /// dilation (the reference's optional `antialiasing` flag). Off by default.
+    pub antialiased: bool,
 }
 
-impl Default for RenderOptions {
-    fn default() -> Self {
-        RenderOptions {
-            background: [0.0; 3],
-        }
-    }
-}
+/// Lower bound of the antialiasing compensation's determinant ratio (the reference's).
+pub const ANTIALIAS_MIN_RATIO: f32 = 0.000025;
 
 /// Per-Gaussian output of [`preprocess`]. A culled Gaussian has `radius == 0` and
 /// touches no tile.
@@ -121,8 +120,15 @@ pub fn covariance_2d(view: Vec3, cov3d: Mat3, cam: &Camera) -> [f32; 3] {
     [t0.dot(s0), t0.dot(s1), t1.dot(s1)]
 }
 
-/// The reference's preprocess for one Gaussian.
-pub fn preprocess_one(scene: &ActivatedScene, i: usize, cam: &Camera, sh_degree: u32) -> Projected {
+/// The reference's preprocess for one Gaussian. `antialiased` applies the opacity
+/// compensation of [`RenderOptions::antialiased`].
+pub fn preprocess_one(
+    scene: &ActivatedScene,
+    i: usize,
+    cam: &Camera,
+    sh_degree: u32,
+    antialiased: bool,
+) -> Projected {
     let culled = Projected::default();
     let mean = Vec3::from(scene.positions[i]);
     let view = cam.rotation * mean + cam.translation;
@@ -131,11 +137,17 @@ pub fn preprocess_one(scene: &ActivatedScene, i: usize, cam: &Camera, sh_degree:
     }
     let cov3d = covariance_3d(scene.scales[i], scene.rotations[i]);
     let [a, b, c] = covariance_2d(view, cov3d, cam);
+    let det_before = a * c - b * b;
     let (a, c) = (a + COV2D_DILATION, c + COV2D_DILATION);
     let det = a * c - b * b;
     if det == 0.0 {
         return culled;
     }
+    let opacity = if antialiased {
+        scene.opacities[i] * (det_before / det).max(ANTIALIAS_MIN_RATIO).sqrt()
+    } else {
+        scene.opacities[i]
+    };
     let det_inv = 1.0 / det;
     let conic = [c * det_inv, -b * det_inv, a * det_inv];
     let mid = 0.5 * (a + c);
@@ -162,7 +174,7 @@ pub fn preprocess_one(scene: &ActivatedScene, i: usize, cam: &Camera, sh_degree:
         mean2d,
         depth: view.z,
         conic,
-        opacity: scene.opacities[i],
+        opacity,
         color,
         radius: radius as i32,
         rect_min,
@@ -187,11 +199,17 @@ pub fn tile_rect(p: [f32; 2], radius: f32, grid: (u32, u32)) -> ([u32; 2], [u32;
     )
 }
 
-/// Preprocesses every Gaussian (in parallel). `sh_degree` caps the bands used.
-pub fn preprocess(scene: &ActivatedScene, cam: &Camera, sh_degree: u32) -> Vec<Projected> {
+/// Preprocesses every Gaussian (in parallel). `sh_degree` caps the bands used;
+/// `antialiased` as in [`preprocess_one`].
+pub fn preprocess(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    sh_degree: u32,
+    antialiased: bool,
+) -> Vec<Projected> {
     (0..scene.len())
         .into_par_iter()
-        .map(|i| preprocess_one(scene, i, cam, sh_degree))
+        .map(|i| preprocess_one(scene, i, cam, sh_degree, antialiased))
         .collect()
 }
 
@@ -442,7 +460,7 @@ pub fn render_timed(
         *slot = lap.elapsed().as_secs_f64() * 1e3;
         lap = std::time::Instant::now();
     };
-    let projected = preprocess(scene, cam, scene.sh_degree);
+    let projected = preprocess(scene, cam, scene.sh_degree, opts.antialiased);
     take(&mut t.preprocess);
     let (keys, values) = tile_keys(&projected, cam);
     take(&mut t.keys);

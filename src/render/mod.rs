@@ -616,7 +616,12 @@ impl GpuRenderer {
             w2c_row0: [r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x],
             w2c_row1: [r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y],
             w2c_row2: [r.x_axis.z, r.y_axis.z, r.z_axis.z, t.z],
-            cam_pos: [pos.x, pos.y, pos.z, 0.0],
+            cam_pos: [
+                pos.x,
+                pos.y,
+                pos.z,
+                if opts.antialiased { 1.0 } else { 0.0 },
+            ],
             focal: [cam.fx, cam.fy, cam.cx, cam.cy],
             tan_fov: [cam.tan_half_fov_x(), cam.tan_half_fov_y(), 0.0, 0.0],
             background: [

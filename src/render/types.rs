@@ -13,7 +13,7 @@ pub struct FrameParams {
     pub w2c_row1: [f32; 4],
     /// Row 2, `w` = translation z.
     pub w2c_row2: [f32; 4],
-    /// Camera centre (xyz).
+    /// Camera centre (xyz); `w` is 1 with the antialiasing opacity compensation, else 0.
     pub cam_pos: [f32; 4],
     /// fx, fy, cx, cy.
     pub focal: [f32; 4],
