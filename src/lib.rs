@@ -10,6 +10,7 @@ pub mod gpu;
 pub mod output;
 pub mod render;
 pub mod scene;
+pub mod sequence;
 pub mod stats;
 
 /// The built-in demo scene (PLAYBOT LOD6, CC BY 4.0, see `assets/README.md`).

@@ -6,9 +6,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use vksplat::camera::{self, Camera};
 use vksplat::gpu::{ContextOptions, GpuContext};
-use vksplat::output::{self, ImageFormat};
+use vksplat::output;
 use vksplat::render::GpuRenderer;
+use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::{self, Scene};
+use vksplat::sequence::{Existing, FrameRange, OutputPattern, ProgressStyle};
 
 #[derive(Parser)]
 #[command(
@@ -58,8 +60,10 @@ struct CameraArgs {
     /// INRIA cameras.json to take the camera from.
     #[arg(long, value_name = "FILE")]
     cameras: Option<PathBuf>,
-    /// Camera of --cameras: list index or img_name (default 0).
-    #[arg(long, value_name = "N|NAME", requires = "cameras")]
+    /// Cameras of the path: all, an index, a list 0,3,7, a range 10..20 (end
+    /// exclusive) or 10..=20, or img_names [default: all when the output is a pattern or
+    /// directory, else 0].
+    #[arg(long, value_name = "SPEC")]
     camera: Option<String>,
     /// Output width in pixels (alone: keeps the aspect ratio).
     #[arg(long)]
@@ -170,26 +174,156 @@ struct RenderArgs {
     scene: SceneArg,
     #[command(flatten)]
     view: CameraArgs,
-    /// Output image (.png or .exr; EXR holds R, G, B, A and depth Z).
+    #[command(flatten)]
+    path: PathArgs,
+    /// Output: a file (.png or .exr), a pattern with {} / {:05} (frame number) or {name}
+    /// (camera name), e.g. out/frame_{:05}.exr, or a directory (out/ gives
+    /// out/frame_00000.png, ...).
     #[arg(short, long, value_name = "OUT", default_value = "render.png")]
     output: PathBuf,
+    /// What to write: rgb, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
+    /// (R, G, B, A, Z) for EXR]. Depth PNGs are colour-mapped for looking at.
+    #[arg(long, value_name = "MODE")]
+    mode: Option<output::RenderMode>,
+    /// Frames of the path to render: 100..200 (end exclusive), 100..=199, 100.., ..50 or 7.
+    /// File names keep the frame's number in the whole path, so split runs give the files
+    /// of one run.
+    #[arg(long, value_name = "RANGE")]
+    frames: Option<FrameRange>,
+    /// Resume: skip frames whose files exist (write only the missing files of a frame).
+    #[arg(long, conflicts_with = "overwrite")]
+    skip_existing: bool,
+    /// Replace output files that exist.
+    #[arg(long)]
+    overwrite: bool,
+    /// Image format of a directory output: png or exr.
+    #[arg(long, value_name = "EXT", default_value = "png", value_parser = ["png", "exr"])]
+    format: String,
+    /// Write 16-bit PNG (colour and alpha) instead of 8-bit.
+    #[arg(long)]
+    png16: bool,
+    /// Write EXR channels as 16-bit half floats instead of 32-bit floats.
+    #[arg(long)]
+    exr_half: bool,
+    /// Depth range NEAR,FAR of colour-mapped depth PNGs (default: each frame's 1st-99th
+    /// percentile; fix it for a steady video).
+    #[arg(long, value_name = "NEAR,FAR", value_parser = parse_depth_range)]
+    depth_range: Option<[f32; 2]>,
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white").
     #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = parse_background)]
     background: [f32; 3],
+    #[command(flatten)]
+    filter: FilterArgs,
+    /// Opacity compensation for scenes trained with antialiasing (mip) settings:
+    /// opacity * sqrt(max(2.5e-5, det_before / det_after)) of the 0.3 dilation.
+    #[arg(long)]
+    antialiased: bool,
     /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     cpu: bool,
-    /// Print the GPU time of each pipeline stage (timestamp queries).
+    /// Print the GPU time of each pipeline stage (timestamp queries; the mean over the
+    /// frames of a path).
     #[arg(long)]
     timings: bool,
+    /// Threads that encode and write images while the next frame renders (0: encode on
+    /// the rendering thread).
+    #[arg(long, value_name = "N", default_value_t = vksplat::sequence::default_encode_threads())]
+    encode_threads: usize,
+    /// No progress display (the summary is still printed).
+    #[arg(long, short)]
+    quiet: bool,
     #[command(flatten)]
     gpu: GpuArgs,
-    /// Write 16-bit PNG instead of 8-bit.
-    #[arg(long)]
-    png16: bool,
-    /// Replace the output file if it exists.
-    #[arg(long)]
-    overwrite: bool,
+}
+
+/// Camera paths generated or interpolated by vksplat.
+#[derive(Args)]
+struct PathArgs {
+    /// Render a turntable orbit of FRAMES frames around the scene's bulk (world up -y).
+    #[arg(long, value_name = "FRAMES", conflicts_with = "cameras")]
+    orbit: Option<usize>,
+    /// Orbit centre X,Y,Z (default: the per-axis median of the Gaussians).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, requires = "orbit")]
+    orbit_centre: Option<[f32; 3]>,
+    /// Orbit radius (default: far enough for the bulk to fit the view).
+    #[arg(long, value_name = "R", requires = "orbit")]
+    orbit_radius: Option<f32>,
+    /// Orbit elevation above the horizon, degrees.
+    #[arg(long, value_name = "DEG", default_value_t = 20.0, requires = "orbit")]
+    orbit_elevation: f32,
+    /// Orbit start angle, degrees (0: the default camera's view, from -z).
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, requires = "orbit")]
+    orbit_start: f32,
+    /// World up axis of the orbit X,Y,Z (INRIA/COLMAP scenes: 0,-1,0).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, default_value = "0,-1,0", requires = "orbit")]
+    orbit_up: [f32; 3],
+    /// Vertical field of view of generated cameras (orbit, default camera), degrees.
+    #[arg(long, value_name = "DEG", default_value_t = camera::DEFAULT_VFOV_DEG)]
+    vfov: f32,
+    /// Frames per second of a keyframe path (default: the file's).
+    #[arg(long, value_name = "FPS")]
+    fps: Option<f32>,
+    /// Total frames of a keyframe path (default: from its fps and duration).
+    #[arg(long, value_name = "N")]
+    path_frames: Option<usize>,
+}
+
+/// Which Gaussians to render (applied on upload; the file is not changed).
+#[derive(Args)]
+struct FilterArgs {
+    /// Render with at most this SH degree (0..3).
+    #[arg(long, value_name = "D", value_parser = clap::value_parser!(u32).range(0..=3))]
+    sh_degree: Option<u32>,
+    /// Drop Gaussians whose largest scale (world units, after exp) is above S.
+    #[arg(long, value_name = "S")]
+    max_scale: Option<f32>,
+    /// Drop Gaussians whose opacity (after the sigmoid) is below O.
+    #[arg(long, value_name = "O")]
+    min_opacity: Option<f32>,
+    /// Keep only Gaussians whose centre is inside the box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
+    #[arg(long, value_name = "BOX", value_parser = vksplat::scene::filter::parse_crop, allow_hyphen_values = true)]
+    crop: Option<[[f32; 3]; 2]>,
+}
+
+impl FilterArgs {
+    fn filter(&self) -> Result<SceneFilter> {
+        let f = SceneFilter {
+            max_scale: self.max_scale,
+            min_opacity: self.min_opacity,
+            crop: self.crop,
+            sh_degree: self.sh_degree,
+        };
+        f.validate().map_err(anyhow::Error::msg)?;
+        Ok(f)
+    }
+}
+
+fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected X,Y,Z (three numbers), got \"{s}\""))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!(
+            "expected X,Y,Z (three finite numbers), got \"{s}\""
+        )),
+    }
+}
+
+fn parse_depth_range(s: &str) -> Result<[f32; 2], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected NEAR,FAR, got \"{s}\""))?;
+    match v[..] {
+        [n, f] if n.is_finite() && f.is_finite() && n != f => Ok([n, f]),
+        _ => Err(format!(
+            "expected NEAR,FAR (two different finite numbers), got \"{s}\""
+        )),
+    }
 }
 
 fn parse_background(s: &str) -> Result<[f32; 3], String> {
@@ -242,47 +376,245 @@ fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
     Ok(cam.resized(args.width, args.height, args.scale)?)
 }
 
-fn render(args: &RenderArgs) -> Result<()> {
-    let format = ImageFormat::from_path(&args.output, args.png16)?;
-    if !args.overwrite && args.output.exists() {
-        return Err(output::OutputError::Exists(args.output.clone()).into());
+/// The cameras of the path with their frame numbers, at the requested resolution.
+fn camera_path(args: &RenderArgs, scene: &Scene, sequence: bool) -> Result<Vec<(usize, Camera)>> {
+    let view = &args.view;
+    let vfov = args.path.vfov;
+    if !(vfov > 0.0 && vfov < 180.0) {
+        bail!("--vfov must be between 0 and 180 degrees, got {vfov}");
     }
+    let (all, source): (Vec<Camera>, Option<&PathBuf>) = if let Some(n) = args.path.orbit {
+        if n == 0 {
+            bail!("--orbit needs at least one frame");
+        }
+        (orbit_cameras(args, scene, n)?, None)
+    } else if let Some(path) = &view.cameras {
+        let cams = camera::load_cameras_json(path)?;
+        if cams.is_empty() {
+            bail!("{}: holds no cameras", path.display());
+        }
+        (cams, Some(path))
+    } else {
+        let mut cam = camera::default_camera(&scene.positions, 1280, 720);
+        if vfov != camera::DEFAULT_VFOV_DEG {
+            cam = Camera::look_at(
+                "default",
+                1280,
+                720,
+                vfov.to_radians(),
+                cam.position(),
+                cam.position() + cam.rotation.transpose() * glam::Vec3::Z,
+                glam::Vec3::NEG_Y,
+            );
+        }
+        (vec![cam], None)
+    };
+    let label = source
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("<camera path>"));
+    let chosen: Vec<usize> = match &view.camera {
+        Some(spec) => select_indices(&all, spec, &label)?,
+        None if sequence => (0..all.len()).collect(),
+        None => vec![0],
+    };
+    chosen
+        .into_iter()
+        .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
+        .collect()
+}
+
+/// Indices of the cameras a `--camera` spec names: `all`, indices, `a..b` / `a..=b`
+/// ranges and names, separated by commas.
+fn select_indices(cams: &[Camera], spec: &str, path: &std::path::Path) -> Result<Vec<usize>> {
+    let mut out = Vec::new();
+    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        if part == "all" {
+            out.extend(0..cams.len());
+        } else if part.contains("..") {
+            let r: FrameRange = part.parse().map_err(anyhow::Error::msg)?;
+            let end = r.end.unwrap_or(cams.len());
+            if end > cams.len() {
+                bail!(
+                    "{}: camera range {part} ends past the last camera ({} cameras)",
+                    path.display(),
+                    cams.len()
+                );
+            }
+            out.extend(r.start..end);
+        } else {
+            let cam = camera::select_camera(cams, part, path)?;
+            let i = match part.parse::<usize>() {
+                Ok(i) => i,
+                Err(_) => cams.iter().position(|c| c.name == cam.name).unwrap_or(0),
+            };
+            out.push(i);
+        }
+    }
+    if out.is_empty() {
+        bail!("{}: --camera {spec:?} selects no camera", path.display());
+    }
+    Ok(out)
+}
+
+fn orbit_cameras(args: &RenderArgs, scene: &Scene, frames: usize) -> Result<Vec<Camera>> {
+    let p = &args.path;
+    let b = camera::bulk_bounds(&scene.positions);
+    let centre = p.orbit_centre.map(glam::Vec3::from).unwrap_or(b.centre);
+    let up = glam::Vec3::from(p.orbit_up).normalize_or_zero();
+    if up == glam::Vec3::ZERO {
+        bail!("--orbit-up must not be the zero vector");
+    }
+    let (w, h) = (1280u32, 720u32);
+    let vfov = p.vfov.to_radians();
+    let hfov = 2.0 * ((w as f32 / h as f32) * (vfov * 0.5).tan()).atan();
+    let radius = match p.orbit_radius {
+        Some(r) if r.is_finite() && r > 0.0 => r,
+        Some(r) => bail!("--orbit-radius must be positive, got {r}"),
+        None => b.radius / (0.5 * vfov.min(hfov)).sin() * 1.05,
+    };
+    // Horizontal basis perpendicular to up; angle 0 looks from -z (the default camera).
+    let reference = if up.cross(glam::Vec3::Z).length() > 1e-3 {
+        glam::Vec3::NEG_Z
+    } else {
+        glam::Vec3::X
+    };
+    let e1 = (reference - up * reference.dot(up)).normalize();
+    let e2 = up.cross(e1);
+    let elev = p.orbit_elevation.to_radians();
+    Ok((0..frames)
+        .map(|k| {
+            let a = p.orbit_start.to_radians() + std::f32::consts::TAU * k as f32 / frames as f32;
+            let horizontal = e1 * a.cos() + e2 * a.sin();
+            let dir = horizontal * elev.cos() + up * elev.sin();
+            Camera::look_at(
+                &format!("orbit_{k:05}"),
+                w,
+                h,
+                vfov,
+                centre + dir * radius,
+                centre,
+                up,
+            )
+        })
+        .collect())
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    let pattern = OutputPattern::parse(&args.output, &args.format).map_err(anyhow::Error::msg)?;
+    let out_opts = output::OutputOptions {
+        mode: args.mode,
+        png16: args.png16,
+        exr_half: args.exr_half,
+        depth_range: args.depth_range,
+    };
+    // Fail on a bad file name before loading anything.
+    output::plan_files(&pattern.path(0, "x"), &out_opts)?;
+    let filter = args.filter.filter()?;
     let (scene, name) = load_scene(&args.scene)?;
-    let cam = choose_camera(&args.view, &scene)?;
-    cam.validate()?;
+    let total = scene.len();
+    let scene = if filter.is_identity_for(&scene) {
+        scene
+    } else {
+        let kept = filter.apply(&scene);
+        eprintln!(
+            "filters keep {} of {total} Gaussians (SH degree {})",
+            kept.len(),
+            kept.sh_degree
+        );
+        kept
+    };
+    let cams = camera_path(args, &scene, pattern.is_sequence())?;
+    for (_, c) in &cams {
+        c.validate()?;
+    }
+    let existing = if args.overwrite {
+        Existing::Overwrite
+    } else if args.skip_existing {
+        Existing::Skip
+    } else {
+        Existing::Refuse
+    };
+    let plan = vksplat::sequence::plan(&cams, &pattern, args.frames, &out_opts, existing)?;
+    if plan.removed_temporaries > 0 {
+        eprintln!(
+            "removed {} temporary file(s) left by an interrupted run",
+            plan.removed_temporaries
+        );
+    }
+    if plan.frames.is_empty() {
+        eprintln!(
+            "all {} frame(s) already exist; nothing to render",
+            plan.skipped
+        );
+        return Ok(());
+    }
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
-        ..Default::default()
+        antialiased: args.antialiased,
     };
-    let start = std::time::Instant::now();
-    let (frame, how) = if args.cpu {
-        (
-            vksplat::cpu::render(&scene.activated(), &cam, &opts),
-            "on the CPU".to_string(),
+    let run_opts = vksplat::sequence::RunOptions {
+        overwrite: args.overwrite,
+        encode_threads: args.encode_threads,
+        queue_depth: args.encode_threads.max(1) + 1,
+        progress: if args.quiet {
+            ProgressStyle::Quiet
+        } else {
+            ProgressStyle::Auto
+        },
+    };
+    let act = scene.activated();
+    let (summary, how) = if args.cpu {
+        let mut render = |cam: &Camera| Ok(vksplat::cpu::render(&act, cam, &opts));
+        let s = vksplat::sequence::run(&plan.frames, &mut render, &run_opts)?;
+        (s, "on the CPU".to_string())
+    } else {
+        render_gpu(args, &act, &plan.frames, &opts, &run_opts)?
+    };
+    let first = &plan.frames[0];
+    let what = if plan.frames.len() == 1 && plan.skipped == 0 {
+        format!(
+            "from camera \"{}\" at {}x{} -> {}",
+            first.camera.name,
+            first.camera.width,
+            first.camera.height,
+            first.files[0].path.display()
         )
     } else {
-        render_gpu(args, &scene, &cam, &opts)?
+        format!(
+            "{} frame(s) at {}x{}{} -> {}",
+            summary.written,
+            first.camera.width,
+            first.camera.height,
+            if plan.skipped > 0 {
+                format!(" ({} skipped: already written)", plan.skipped)
+            } else {
+                String::new()
+            },
+            args.output.display()
+        )
     };
-    let elapsed = start.elapsed();
-    output::write_frame(&frame, &args.output, format, args.overwrite)?;
     eprintln!(
-        "rendered {name} ({} Gaussians) from camera \"{}\" at {}x{} {how} in {:.1} ms -> {}",
+        "rendered {name} ({} Gaussians) {what} {how} in {:.2} s: {:.2} frames/s; rendering {:.2} s, encoding {:.2} s on {}",
         scene.len(),
-        cam.name,
-        cam.width,
-        cam.height,
-        elapsed.as_secs_f64() * 1e3,
-        args.output.display()
+        summary.wall_s,
+        summary.frames_per_s(),
+        summary.render_s,
+        summary.encode_s,
+        match args.encode_threads {
+            0 => "the rendering thread".to_string(),
+            n => format!("{n} thread(s), overlapped"),
+        }
     );
     Ok(())
 }
 
 fn render_gpu(
     args: &RenderArgs,
-    scene: &Scene,
-    cam: &Camera,
+    scene: &vksplat::scene::ActivatedScene,
+    frames: &[vksplat::sequence::FramePlan],
     opts: &vksplat::cpu::RenderOptions,
-) -> Result<(vksplat::frame::Frame, String)> {
+    run_opts: &vksplat::sequence::RunOptions,
+) -> Result<(vksplat::sequence::Summary, String)> {
     let t0 = std::time::Instant::now();
     let ctx = args.gpu.context()?;
     if args.gpu.verbose {
@@ -297,20 +629,37 @@ fn render_gpu(
             t1.elapsed().as_secs_f64() * 1e3
         );
     }
-    let gpu_scene = renderer.upload(&scene.activated())?;
-    let frame = renderer.render(&gpu_scene, cam, opts)?;
-    if args.timings {
+    let gpu_scene = renderer.upload(scene)?;
+    let mut stage_sums: Vec<(&'static str, f64)> = Vec::new();
+    let mut frame_sum = 0.0;
+    let mut last_stats = None;
+    let mut render = |cam: &Camera| -> Result<vksplat::frame::Frame> {
+        let frame = renderer.render(&gpu_scene, cam, opts)?;
         let t = renderer.timings();
-        eprintln!("{:<12} {:>10}", "stage", "GPU ms");
-        for (stage, ms) in t.stages() {
-            eprintln!("{stage:<12} {ms:>10.3}");
+        if stage_sums.is_empty() {
+            stage_sums = t.stages().iter().map(|(s, _)| (*s, 0.0)).collect();
         }
-        eprintln!("{:<12} {:>10.3}", "frame", t.total);
-        let st = renderer.stats();
-        eprintln!(
-            "visible Gaussians {}, tile pairs {}, key bits {}",
-            st.visible, st.pairs, st.key_bits
-        );
+        for (sum, (_, ms)) in stage_sums.iter_mut().zip(t.stages()) {
+            sum.1 += ms;
+        }
+        frame_sum += t.total;
+        last_stats = Some(renderer.stats().clone());
+        Ok(frame)
+    };
+    let summary = vksplat::sequence::run(frames, &mut render, run_opts);
+    let n = frames.len().max(1) as f64;
+    if args.timings && !stage_sums.is_empty() {
+        eprintln!("{:<12} {:>10}", "stage", "GPU ms");
+        for (stage, ms) in &stage_sums {
+            eprintln!("{stage:<12} {:>10.3}", ms / n);
+        }
+        eprintln!("{:<12} {:>10.3}", "frame", frame_sum / n);
+        if let Some(st) = &last_stats {
+            eprintln!(
+                "visible Gaussians {}, tile pairs {}, key bits {} (last frame)",
+                st.visible, st.pairs, st.key_bits
+            );
+        }
     }
     if args.gpu.verbose {
         eprintln!(
@@ -319,9 +668,10 @@ fn render_gpu(
             renderer.frame_device_bytes()
         );
     }
+    let summary = summary?;
     fail_on_validation_messages(renderer.ctx())?;
     let device = renderer.ctx().info().name.clone();
-    Ok((frame, format!("on {device}")))
+    Ok((summary, format!("on {device}")))
 }
 
 fn gen(args: &GenArgs) -> Result<()> {

@@ -174,29 +174,63 @@ pub fn encode_png(
     }
 }
 
-/// Encodes colour, alpha and depth as a 32-bit float OpenEXR with channels R, G, B, A, Z.
-pub fn encode_exr(
+/// Which planes of a frame an OpenEXR file holds, and at which precision.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExrChannels {
+    /// R, G, B colour.
+    pub rgb: bool,
+    /// A (opacity `1 - T`).
+    pub alpha: bool,
+    /// Z (alpha-normalised view depth).
+    pub depth: bool,
+    /// 16-bit half floats instead of 32-bit floats.
+    pub half: bool,
+}
+
+impl ExrChannels {
+    /// R, G, B, A and Z in 32-bit float.
+    pub const ALL: ExrChannels = ExrChannels {
+        rgb: true,
+        alpha: true,
+        depth: true,
+        half: false,
+    };
+}
+
+/// Encodes the chosen planes of `frame` as an OpenEXR image (channels sorted by name,
+/// as OpenEXR requires: A, B, G, R, Z).
+pub fn encode_exr_channels(
     frame: &Frame,
+    channels: ExrChannels,
     out: &mut (impl Write + std::io::Seek),
     path: &Path,
 ) -> Result<(), OutputError> {
     use exr::prelude::*;
-    let n = frame.color.len();
-    let plane = |f: &dyn Fn(usize) -> f32| -> Vec<f32> { (0..n).map(f).collect() };
-    let channel = |name: &str, data: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(data));
-    // OpenEXR wants channels sorted by name: A, B, G, R, Z.
-    let channels = AnyChannels::sort(SmallVec::from_vec(vec![
-        channel("R", plane(&|i| frame.color[i][0])),
-        channel("G", plane(&|i| frame.color[i][1])),
-        channel("B", plane(&|i| frame.color[i][2])),
-        channel("A", frame.alpha.clone()),
-        channel("Z", frame.depth.clone()),
-    ]));
+    let samples = |data: Vec<f32>| {
+        if channels.half {
+            FlatSamples::F16(data.into_iter().map(f16::from_f32).collect())
+        } else {
+            FlatSamples::F32(data)
+        }
+    };
+    let mut list = Vec::new();
+    if channels.rgb {
+        for (c, name) in ["R", "G", "B"].into_iter().enumerate() {
+            let plane = frame.color.iter().map(|p| p[c]).collect();
+            list.push(AnyChannel::new(name, samples(plane)));
+        }
+    }
+    if channels.alpha {
+        list.push(AnyChannel::new("A", samples(frame.alpha.clone())));
+    }
+    if channels.depth {
+        list.push(AnyChannel::new("Z", samples(frame.depth.clone())));
+    }
     let layer = Layer::new(
         (frame.width as usize, frame.height as usize),
         LayerAttributes::named("vksplat"),
         Encoding::SMALL_LOSSLESS,
-        channels,
+        AnyChannels::sort(SmallVec::from_vec(list)),
     );
     Image::from_layer(layer)
         .write()
@@ -208,7 +242,123 @@ pub fn encode_exr(
         })
 }
 
-/// Writes a frame to `path` in `format`, atomically.
+/// Encodes colour, alpha and depth as a 32-bit float OpenEXR with channels R, G, B, A, Z.
+pub fn encode_exr(
+    frame: &Frame,
+    out: &mut (impl Write + std::io::Seek),
+    path: &Path,
+) -> Result<(), OutputError> {
+    encode_exr_channels(frame, ExrChannels::ALL, out, path)
+}
+
+/// Encodes one 8- or 16-bit grey plane (values in [0, 1]) as PNG.
+pub fn encode_png_grey(
+    width: u32,
+    height: u32,
+    plane: &[f32],
+    sixteen_bit: bool,
+    out: &mut impl Write,
+    path: &Path,
+) -> Result<(), OutputError> {
+    use image::ImageEncoder;
+    let encoder = image::codecs::png::PngEncoder::new(out);
+    let result = if sixteen_bit {
+        let bytes: Vec<u8> = plane
+            .iter()
+            .flat_map(|&v| to_u16(v).to_ne_bytes())
+            .collect();
+        encoder.write_image(&bytes, width, height, image::ExtendedColorType::L16)
+    } else {
+        let bytes: Vec<u8> = plane.iter().map(|&v| to_u8(v)).collect();
+        encoder.write_image(&bytes, width, height, image::ExtendedColorType::L8)
+    };
+    result.map_err(|e| OutputError::Encode {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// The "turbo" colour map (Google's polynomial approximation, Anton Mikhailov 2019),
+/// `t` in [0, 1] from dark blue to dark red.
+pub fn turbo(t: f32) -> [f32; 3] {
+    let x = t.clamp(0.0, 1.0);
+    let v = [1.0, x, x * x, x * x * x, x * x * x * x, x * x * x * x * x];
+    let poly = |k: [f32; 6]| -> f32 { (0..6).map(|i| k[i] * v[i]).sum::<f32>().clamp(0.0, 1.0) };
+    [
+        poly([
+            0.135_721_38,
+            4.615_392_6,
+            -42.660_322,
+            132.131_08,
+            -152.942_4,
+            59.286_38,
+        ]),
+        poly([
+            0.091_402_61,
+            2.194_188_4,
+            4.842_966_6,
+            -14.185_033,
+            4.277_298_5,
+            2.829_566,
+        ]),
+        poly([
+            0.106_673_3,
+            12.641_946,
+            -60.582_05,
+            110.362_77,
+            -89.903_11,
+            27.348_25,
+        ]),
+    ]
+}
+
+/// The depth range a colour-mapped depth image spans: the 1st and 99th percentiles of
+/// the depth of pixels whose alpha exceeds 0.5 (any covered pixel when there are none).
+/// `None` for a frame that covers no pixel.
+pub fn depth_percentiles(frame: &Frame) -> Option<[f32; 2]> {
+    let pick = |min_alpha: f32| -> Vec<f32> {
+        frame
+            .depth
+            .iter()
+            .zip(&frame.alpha)
+            .filter(|(d, a)| **a > min_alpha && d.is_finite() && **d > 0.0)
+            .map(|(d, _)| *d)
+            .collect()
+    };
+    let mut d = pick(0.5);
+    if d.is_empty() {
+        d = pick(0.0);
+    }
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_unstable_by(|a, b| a.total_cmp(b));
+    let at = |p: f64| d[((d.len() - 1) as f64 * p).round() as usize];
+    Some([at(0.01), at(0.99)])
+}
+
+/// The depth plane as an 8-bit colour-mapped image for looking at: near is warm, far is
+/// cold (turbo), over `range` (`[near, far]`, by default [`depth_percentiles`]), and each
+/// pixel is weighted by its alpha so empty space is black.
+pub fn depth_colormap(frame: &Frame, range: Option<[f32; 2]>) -> Vec<[f32; 3]> {
+    let Some([near, far]) = range.or_else(|| depth_percentiles(frame)) else {
+        return vec![[0.0; 3]; frame.depth.len()];
+    };
+    let span = (far - near).abs().max(1e-6);
+    frame
+        .depth
+        .iter()
+        .zip(&frame.alpha)
+        .map(|(&d, &a)| {
+            if a <= 0.0 || !d.is_finite() {
+                return [0.0; 3];
+            }
+            turbo((far - d) / span).map(|c| c * a.clamp(0.0, 1.0))
+        })
+        .collect()
+}
+
+/// Writes a frame to `path` in `format`, atomically (colour for PNG; R, G, B, A, Z for EXR).
 pub fn write_frame(
     frame: &Frame,
     path: &Path,
@@ -219,5 +369,145 @@ pub fn write_frame(
         ImageFormat::Png8 => encode_png(frame, false, w, path),
         ImageFormat::Png16 => encode_png(frame, true, w, path),
         ImageFormat::Exr => encode_exr(frame, w, path),
+    })
+}
+
+/// What a render writes per frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RenderMode {
+    /// Colour (EXR: R, G, B, A).
+    Rgb,
+    /// Opacity only (PNG: grey; EXR: A).
+    Alpha,
+    /// Depth only (PNG: colour-mapped for looking at; EXR: Z in view units).
+    Depth,
+    /// Colour and depth (PNG: the colour file plus a `<stem>.depth.png` beside it;
+    /// EXR: R, G, B, A, Z in one file).
+    RgbDepth,
+}
+
+impl std::str::FromStr for RenderMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "rgb" => Ok(RenderMode::Rgb),
+            "alpha" => Ok(RenderMode::Alpha),
+            "depth" => Ok(RenderMode::Depth),
+            "rgb+depth" => Ok(RenderMode::RgbDepth),
+            _ => Err(format!(
+                "unknown mode \"{s}\"; use rgb, alpha, depth or rgb+depth"
+            )),
+        }
+    }
+}
+
+/// How frames are written: the file format comes from each file name.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct OutputOptions {
+    /// What to write; `None` means colour for PNG and colour plus depth for EXR.
+    pub mode: Option<RenderMode>,
+    /// 16-bit PNG for colour and alpha (colour-mapped depth is always 8-bit).
+    pub png16: bool,
+    /// Half-float EXR channels.
+    pub exr_half: bool,
+    /// Fixed `[near, far]` of colour-mapped depth PNGs (default: per-frame percentiles).
+    pub depth_range: Option<[f32; 2]>,
+}
+
+/// One file of a frame and what it holds.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FileContent {
+    /// PNG of the colour plane.
+    PngColor {
+        /// 16 bits per sample.
+        sixteen_bit: bool,
+    },
+    /// Grey PNG of the alpha plane.
+    PngAlpha {
+        /// 16 bits per sample.
+        sixteen_bit: bool,
+    },
+    /// 8-bit PNG of the colour-mapped depth plane.
+    PngDepth {
+        /// Fixed `[near, far]`, or per-frame percentiles.
+        range: Option<[f32; 2]>,
+    },
+    /// OpenEXR with these channels.
+    Exr(ExrChannels),
+}
+
+/// A file to write for a frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FileSpec {
+    /// Destination.
+    pub path: PathBuf,
+    /// What it holds.
+    pub content: FileContent,
+}
+
+/// The files a frame written to `path` consists of under `opts`.
+pub fn plan_files(path: &Path, opts: &OutputOptions) -> Result<Vec<FileSpec>, OutputError> {
+    let format = ImageFormat::from_path(path, opts.png16)?;
+    let spec = |path: PathBuf, content| FileSpec { path, content };
+    if format == ImageFormat::Exr {
+        let mode = opts.mode.unwrap_or(RenderMode::RgbDepth);
+        let channels = ExrChannels {
+            rgb: matches!(mode, RenderMode::Rgb | RenderMode::RgbDepth),
+            alpha: matches!(
+                mode,
+                RenderMode::Rgb | RenderMode::RgbDepth | RenderMode::Alpha
+            ),
+            depth: matches!(mode, RenderMode::Depth | RenderMode::RgbDepth),
+            half: opts.exr_half,
+        };
+        return Ok(vec![spec(path.to_path_buf(), FileContent::Exr(channels))]);
+    }
+    let sixteen_bit = opts.png16;
+    let depth = FileContent::PngDepth {
+        range: opts.depth_range,
+    };
+    Ok(match opts.mode.unwrap_or(RenderMode::Rgb) {
+        RenderMode::Rgb => vec![spec(path.into(), FileContent::PngColor { sixteen_bit })],
+        RenderMode::Alpha => vec![spec(path.into(), FileContent::PngAlpha { sixteen_bit })],
+        RenderMode::Depth => vec![spec(path.into(), depth)],
+        RenderMode::RgbDepth => vec![
+            spec(path.into(), FileContent::PngColor { sixteen_bit }),
+            spec(depth_sibling(path), depth),
+        ],
+    })
+}
+
+/// `dir/name.png` -> `dir/name.depth.png`.
+pub fn depth_sibling(path: &Path) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!("{stem}.depth.png"))
+}
+
+/// Writes one planned file of `frame`, atomically.
+pub fn write_file(frame: &Frame, file: &FileSpec, overwrite: bool) -> Result<(), OutputError> {
+    let path = file.path.as_path();
+    write_atomically(path, overwrite, |w| match &file.content {
+        FileContent::PngColor { sixteen_bit } => encode_png(frame, *sixteen_bit, w, path),
+        FileContent::PngAlpha { sixteen_bit } => encode_png_grey(
+            frame.width,
+            frame.height,
+            &frame.alpha,
+            *sixteen_bit,
+            w,
+            path,
+        ),
+        FileContent::PngDepth { range } => {
+            let colours = Frame {
+                color: depth_colormap(frame, *range),
+                alpha: Vec::new(),
+                depth: Vec::new(),
+                ..*frame
+            };
+            encode_png(&colours, false, w, path)
+        }
+        FileContent::Exr(channels) => encode_exr_channels(frame, *channels, w, path),
     })
 }
