@@ -61,8 +61,8 @@ struct CameraArgs {
     #[arg(long, value_name = "FILE")]
     cameras: Option<PathBuf>,
     /// Cameras of the path: all, an index, a list 0,3,7, a range 10..20 (end
-    /// exclusive) or 10..=20, or img_names [default: all when the output is a pattern or
-    /// directory, else 0].
+    /// exclusive) or 10..=20, or img_names [default: all; a single output file needs
+    /// exactly one].
     #[arg(long, value_name = "SPEC")]
     camera: Option<String>,
     /// Output width in pixels (alone: keeps the aspect ratio).
@@ -377,7 +377,7 @@ fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
 }
 
 /// The cameras of the path with their frame numbers, at the requested resolution.
-fn camera_path(args: &RenderArgs, scene: &Scene, sequence: bool) -> Result<Vec<(usize, Camera)>> {
+fn camera_path(args: &RenderArgs, scene: &Scene) -> Result<Vec<(usize, Camera)>> {
     let view = &args.view;
     let vfov = args.path.vfov;
     if !(vfov > 0.0 && vfov < 180.0) {
@@ -414,8 +414,9 @@ fn camera_path(args: &RenderArgs, scene: &Scene, sequence: bool) -> Result<Vec<(
         .unwrap_or_else(|| PathBuf::from("<camera path>"));
     let chosen: Vec<usize> = match &view.camera {
         Some(spec) => select_indices(&all, spec, &label)?,
-        None if sequence => (0..all.len()).collect(),
-        None => vec![0],
+        // A single output file with several cameras is refused by the plan, naming
+        // --camera and patterns.
+        None => (0..all.len()).collect(),
     };
     chosen
         .into_iter()
@@ -523,7 +524,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         );
         kept
     };
-    let cams = camera_path(args, &scene, pattern.is_sequence())?;
+    let cams = camera_path(args, &scene)?;
     for (_, c) in &cams {
         c.validate()?;
     }

@@ -252,7 +252,7 @@ pub fn plan(
 ) -> Result<Plan, SequenceError> {
     if cameras.len() > 1 && !pattern.is_sequence() {
         return Err(SequenceError::Invalid(format!(
-            "{} cameras but the output names one file; use a pattern such as out/frame_{{:05}}.png, out/{{name}}.png or a directory",
+            "{} cameras but the output names one file; pick one with --camera N, or write a sequence with a pattern such as out/frame_{{:05}}.png, out/{{name}}.png or a directory",
             cameras.len()
         )));
     }
