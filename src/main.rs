@@ -876,7 +876,46 @@ fn info(arg: &SceneArg) -> Result<()> {
             v.min, v.max, v.mean, v.std
         );
     }
+    print_histogram(
+        "largest scale per Gaussian (world units); 'kept' = share kept by --max-scale <bin end>",
+        &s.max_scale_histogram,
+        true,
+    );
+    print_histogram(
+        "opacity (after the sigmoid); 'kept' = share kept by --min-opacity <bin start>",
+        &s.opacity_histogram,
+        false,
+    );
     Ok(())
+}
+
+/// Prints a log-binned histogram as text bars with the share a threshold at each bin
+/// edge keeps (below the bin's end for `upper`, from the bin's start otherwise).
+fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper: bool) {
+    println!();
+    println!("{title}");
+    if h.counts.is_empty() {
+        println!("  (no positive values)");
+        return;
+    }
+    let peak = h.counts.iter().copied().max().unwrap_or(1).max(1);
+    let total = h.total.max(1) as f64;
+    let mut below = 0usize;
+    let above_all: usize = h.counts.iter().sum();
+    for (i, &c) in h.counts.iter().enumerate() {
+        let kept = if upper { below + c } else { above_all - below };
+        below += c;
+        let bar = "#".repeat((c * 40).div_ceil(peak));
+        println!(
+            "  [{:>9}, {:>9})  {c:>10}  kept {:>6.2} %  {bar}",
+            format!("{:.3e}", h.edges[i]),
+            format!("{:.3e}", h.edges[i + 1]),
+            100.0 * kept as f64 / total,
+        );
+    }
+    if h.outside > 0 {
+        println!("  zero, negative or not finite: {}", h.outside);
+    }
 }
 
 fn main() -> ExitCode {

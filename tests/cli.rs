@@ -531,3 +531,35 @@ fn gen_writes_a_loadable_synthetic_scene() {
     let o = vksplat(&["gen", "10", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("already exists"));
 }
+
+#[test]
+fn info_prints_log_binned_histograms_that_count_every_gaussian() {
+    let o = vksplat(&["info", "--demo"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for title in ["largest scale per Gaussian", "opacity (after the sigmoid)"] {
+        let section: Vec<&str> = out
+            .split(title)
+            .nth(1)
+            .unwrap_or_else(|| panic!("no {title} histogram in:\n{out}"))
+            .lines()
+            .skip(1)
+            .take_while(|l| l.trim_start().starts_with('['))
+            .collect();
+        assert!(section.len() >= 2, "{title}: {section:?}");
+        let counts: usize = section
+            .iter()
+            .map(|l| {
+                l.split(')')
+                    .nth(1)
+                    .unwrap()
+                    .split_whitespace()
+                    .next()
+                    .unwrap()
+                    .parse::<usize>()
+                    .unwrap()
+            })
+            .sum();
+        assert_eq!(counts, 1873, "{title}");
+    }
+}
