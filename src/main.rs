@@ -143,6 +143,10 @@ struct GpuArgs {
     /// Print the chosen device and memory use.
     #[arg(short, long)]
     verbose: bool,
+    /// Device memory the renderer may use, in bytes (K/M/G suffixes; also
+    /// VKSPLAT_MEMORY_LIMIT); default: the device-local heap.
+    #[arg(long, value_name = "BYTES", value_parser = vksplat::gpu::context::parse_bytes)]
+    memory_limit: Option<u64>,
 }
 
 impl GpuArgs {
@@ -151,6 +155,7 @@ impl GpuArgs {
         Ok(GpuContext::new(&ContextOptions {
             device: self.device.clone(),
             validation: self.validate,
+            memory_limit: self.memory_limit,
         })?)
     }
 }

@@ -12,6 +12,7 @@ fn context() -> GpuContext {
     let ctx = GpuContext::new(&ContextOptions {
         device: None,
         validation: true,
+        ..Default::default()
     })
     .expect("create Vulkan context with validation");
     eprintln!("device: {}", ctx.info());
@@ -76,6 +77,7 @@ fn unknown_device_is_a_clear_error() {
     let result = GpuContext::new(&ContextOptions {
         device: Some("no-such-device-xyz".into()),
         validation: false,
+        ..Default::default()
     });
     let err = result.err().expect("an unknown device name must fail");
     let text = err.to_string();

@@ -72,11 +72,13 @@ impl GpuBuffer {
             MemoryKind::Upload => MemoryLocation::CpuToGpu,
             MemoryKind::Readback => MemoryLocation::GpuToCpu,
         };
-        let allocation = ctx
-            .shared
-            .allocator
-            .lock()
-            .map_err(|_| GpuError::InvalidArgument("allocator mutex poisoned".into()))
+        let allocation = GpuContext::check_budget(&ctx.shared, name, requirements.size)
+            .and_then(|()| {
+                ctx.shared
+                    .allocator
+                    .lock()
+                    .map_err(|_| GpuError::InvalidArgument("allocator mutex poisoned".into()))
+            })
             .and_then(|mut alloc| {
                 alloc
                     .allocate(&AllocationCreateDesc {
@@ -86,11 +88,7 @@ impl GpuBuffer {
                         linear: true,
                         allocation_scheme: AllocationScheme::GpuAllocatorManaged,
                     })
-                    .map_err(|source| GpuError::Alloc {
-                        name: name.to_string(),
-                        bytes: size,
-                        source,
-                    })
+                    .map_err(|source| GpuError::from_alloc(&ctx.shared, name, size, source))
             });
         let allocation = match allocation {
             Ok(a) => a,

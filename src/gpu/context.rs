@@ -20,6 +20,27 @@ pub struct ContextOptions {
     /// Enable VK_LAYER_KHRONOS_validation (with synchronization validation when
     /// available); `VKSPLAT_VALIDATE=1` also turns it on.
     pub validation: bool,
+    /// Device memory this context may allocate, in bytes; `VKSPLAT_MEMORY_LIMIT` (e.g.
+    /// `512M`, `2G`) sets it when `None`. The default and the ceiling is the size of the
+    /// largest device-local heap.
+    pub memory_limit: Option<u64>,
+}
+
+/// Parses a byte count: a number with an optional K, M, G or T suffix (powers of 1024).
+pub fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let (num, mult) = match t.chars().last().map(|c| c.to_ascii_uppercase()) {
+        Some('K') => (&t[..t.len() - 1], 1u64 << 10),
+        Some('M') => (&t[..t.len() - 1], 1 << 20),
+        Some('G') => (&t[..t.len() - 1], 1 << 30),
+        Some('T') => (&t[..t.len() - 1], 1 << 40),
+        _ => (t, 1),
+    };
+    num.trim()
+        .parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(mult))
+        .ok_or_else(|| format!("\"{text}\" is not a byte count (e.g. 536870912, 512M, 2G)"))
 }
 
 /// What we know about the chosen device, for printing and for dispatch limits.
@@ -55,6 +76,10 @@ pub struct DeviceInfo {
     pub timestamp_period_ns: f32,
     /// Valid bits in compute-queue timestamps (0 = no timestamps).
     pub timestamp_valid_bits: u32,
+    /// Size of the largest device-local memory heap, in bytes.
+    pub device_local_bytes: u64,
+    /// Device memory this context allows itself (see [`ContextOptions::memory_limit`]).
+    pub memory_budget: u64,
 }
 
 impl std::fmt::Display for DeviceInfo {
@@ -91,6 +116,8 @@ pub(crate) struct Shared {
     pub(crate) debug_device: Option<ash::ext::debug_utils::Device>,
     pub(crate) push_descriptor: ash::khr::push_descriptor::Device,
     pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// Bytes the allocator may hand out in all (see [`DeviceInfo::memory_budget`]).
+    pub(crate) memory_budget: u64,
 }
 
 impl Shared {
@@ -430,6 +457,24 @@ impl GpuContext {
         // SAFETY: valid handle, chain of valid structs.
         unsafe { instance.get_physical_device_properties2(physical_device, &mut props2) };
         let limits = props[index].limits;
+        // SAFETY: valid handle.
+        let mem = unsafe { instance.get_physical_device_memory_properties(physical_device) };
+        let device_local_bytes = mem.memory_heaps[..mem.memory_heap_count as usize]
+            .iter()
+            .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
+            .map(|h| h.size)
+            .max()
+            .unwrap_or(0);
+        let limit = match options.memory_limit {
+            Some(l) => Some(l),
+            None => match std::env::var("VKSPLAT_MEMORY_LIMIT") {
+                Ok(v) if !v.trim().is_empty() => Some(parse_bytes(&v).map_err(|e| {
+                    GpuError::InvalidArgument(format!("VKSPLAT_MEMORY_LIMIT: {e}"))
+                })?),
+                _ => None,
+            },
+        };
+        let memory_budget = limit.map_or(device_local_bytes, |l| l.min(device_local_bytes));
         let info = DeviceInfo {
             index,
             name: names[index].clone(),
@@ -452,6 +497,8 @@ impl GpuContext {
             max_texel_buffer_elements: limits.max_texel_buffer_elements,
             timestamp_period_ns: limits.timestamp_period,
             timestamp_valid_bits,
+            device_local_bytes,
+            memory_budget,
         };
         let needed_ops = vk::SubgroupFeatureFlags::BASIC
             | vk::SubgroupFeatureFlags::ARITHMETIC
@@ -542,6 +589,7 @@ impl GpuContext {
             debug_device,
             push_descriptor,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            memory_budget: info.memory_budget,
         });
         // SAFETY: queue family index and queue index 0 were requested above.
         let queue = unsafe { shared.device.get_device_queue(queue_family, 0) };
@@ -607,6 +655,24 @@ impl GpuContext {
             }
             Err(_) => (0, 0),
         }
+    }
+
+    /// Fails with [`GpuError::OutOfMemory`] when allocating `bytes` more for `name`
+    /// would exceed the memory budget; called before every allocation.
+    pub(crate) fn check_budget(shared: &Shared, name: &str, bytes: u64) -> GpuResult<()> {
+        let in_use = match shared.allocator.lock() {
+            Ok(a) => a.generate_report().total_allocated_bytes,
+            Err(_) => 0,
+        };
+        if in_use.saturating_add(bytes) > shared.memory_budget {
+            return Err(GpuError::OutOfMemory {
+                name: name.to_string(),
+                bytes,
+                in_use,
+                budget: shared.memory_budget,
+            });
+        }
+        Ok(())
     }
 
     /// The shared message log itself, to inspect messages emitted while the context

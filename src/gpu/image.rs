@@ -71,6 +71,7 @@ impl GpuImage {
         // SAFETY: the image was just created from this device.
         let requirements = unsafe { device.get_image_memory_requirements(image) };
         let bytes = requirements.size;
+        GpuContext::check_budget(&ctx.shared, name, bytes)?;
         let allocation = ctx
             .shared
             .allocator
@@ -83,11 +84,7 @@ impl GpuImage {
                 linear: false,
                 allocation_scheme: AllocationScheme::GpuAllocatorManaged,
             })
-            .map_err(|source| GpuError::Alloc {
-                name: name.to_string(),
-                bytes,
-                source,
-            })?;
+            .map_err(|source| GpuError::from_alloc(&ctx.shared, name, bytes, source))?;
         // SAFETY: memory from an allocation made for this image's requirements.
         unsafe { device.bind_image_memory(image, allocation.memory(), allocation.offset()) }
             .vk("vkBindImageMemory")?;

@@ -28,7 +28,7 @@ pub enum GpuError {
     #[error("could not load the Vulkan loader (is libvulkan1 installed?): {0}")]
     Loader(String),
     /// A Vulkan call failed.
-    #[error("Vulkan call {call} failed: {result}")]
+    #[error("Vulkan call {call} failed: {result}{}", vk_hint(*result))]
     Vk {
         /// The Vulkan entry point (and what it was doing).
         call: &'static str,
@@ -51,12 +51,65 @@ pub enum GpuError {
         /// Allocator error.
         source: gpu_allocator::AllocationError,
     },
+    /// An allocation would exceed the device memory budget (or the device is out of
+    /// memory).
+    #[error("out of device memory: buffer '{name}' needs {bytes} bytes, {in_use} of the {budget} bytes this renderer may use are taken (the budget is the device-local heap, or VKSPLAT_MEMORY_LIMIT); use a smaller resolution, fewer Gaussians or a larger device")]
+    OutOfMemory {
+        /// Buffer or image name.
+        name: String,
+        /// Bytes requested.
+        bytes: u64,
+        /// Bytes already allocated.
+        in_use: u64,
+        /// The budget.
+        budget: u64,
+    },
     /// A shader failed to compile or load.
     #[error(transparent)]
     Shader(#[from] ShaderError),
     /// An argument was out of range (buffer too small, bad key bits, ...).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+}
+
+fn vk_hint(result: vk::Result) -> &'static str {
+    match result {
+        vk::Result::ERROR_DEVICE_LOST => {
+            " (the device was lost: a driver reset or crash; frames already written are complete)"
+        }
+        vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | vk::Result::ERROR_OUT_OF_HOST_MEMORY => {
+            " (out of memory: use a smaller resolution or fewer Gaussians)"
+        }
+        _ => "",
+    }
+}
+
+impl GpuError {
+    /// Maps an allocator failure: running out of memory becomes [`GpuError::OutOfMemory`].
+    pub(crate) fn from_alloc(
+        shared: &context::Shared,
+        name: &str,
+        bytes: u64,
+        source: gpu_allocator::AllocationError,
+    ) -> GpuError {
+        match source {
+            gpu_allocator::AllocationError::OutOfMemory => GpuError::OutOfMemory {
+                name: name.to_string(),
+                bytes,
+                in_use: shared
+                    .allocator
+                    .lock()
+                    .map(|a| a.generate_report().total_allocated_bytes)
+                    .unwrap_or(0),
+                budget: shared.memory_budget,
+            },
+            source => GpuError::Alloc {
+                name: name.to_string(),
+                bytes,
+                source,
+            },
+        }
+    }
 }
 
 /// Result alias for the GPU layer.
