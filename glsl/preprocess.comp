@@ -4,6 +4,7 @@
 // per Gaussian; mirrors cpu::preprocess_one line by line. Also writes each Gaussian's depth
 // sort key (depth bits, tiles touched) and index, for the depth order stage.
 #extension GL_GOOGLE_include_directive : require
+#define WORKGROUP_COUNT64
 #include "splat_common.glsl"
 
 layout(local_size_x = 256) in;
@@ -68,7 +69,6 @@ uint clamp_tile(float v, uint hi) {
     return uint(clamp(int(v), 0, int(hi)));
 }
 
-shared uint s_touched_lo[256];
 shared uint s_visible;
 
 void main() {
@@ -162,21 +162,12 @@ void main() {
         depth_keys[i] = uvec2(touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu, touched);
         depth_values[i] = i;
     }
-    // Exact 64-bit total of tiles touched: a workgroup sum (each term < 2^20 tiles, 256
-    // terms < 2^28, no overflow), then one atomic add with carry per workgroup.
-    s_touched_lo[gl_LocalInvocationIndex] = touched;
-    barrier();
+    // Exact 64-bit total of tiles touched (each term < 2^20 tiles).
+    uint sum = workgroup_sum_256(touched);
     if (touched != 0u) atomicAdd(s_visible, 1u);
-    for (uint stride = 128u; stride > 0u; stride >>= 1u) {
-        if (gl_LocalInvocationIndex < stride) {
-            s_touched_lo[gl_LocalInvocationIndex] += s_touched_lo[gl_LocalInvocationIndex + stride];
-        }
-        barrier();
-    }
-    if (gl_LocalInvocationIndex == 0u && s_touched_lo[0] != 0u) {
-        uint sum = s_touched_lo[0];
-        uint old = atomicAdd(counters.touched_lo, sum);
-        if (old + sum < old) atomicAdd(counters.touched_hi, 1u);
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && sum != 0u) {
+        ATOMIC_ADD_U64(counters.touched_lo, counters.touched_hi, sum);
         atomicAdd(counters.visible, s_visible);
     }
 }

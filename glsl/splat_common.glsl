@@ -122,4 +122,34 @@ uint linear_group_id() {
     return gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
 }
 
+#ifdef WORKGROUP_COUNT64
+// Exact 64-bit counting across workgroups, without 64-bit atomics: each workgroup sums its
+// terms in shared memory, then one invocation adds the sum to a (lo, hi) pair of u32 with
+// an atomic add and carries into hi when lo wrapped. The adder that crosses 2^32 sees it
+// (old + sum < old), so the carry is exact under any interleaving.
+shared uint s_count64[256];
+
+// Sum of `value` over a 256-invocation workgroup, valid in invocation 0. Every invocation
+// must call it (barriers); the caller keeps 256 * max(value) below 2^32 (e.g. < 2^24 each).
+uint workgroup_sum_256(uint value) {
+    s_count64[gl_LocalInvocationIndex] = value;
+    barrier();
+    for (uint stride = 128u; stride > 0u; stride >>= 1u) {
+        if (gl_LocalInvocationIndex < stride) {
+            s_count64[gl_LocalInvocationIndex] += s_count64[gl_LocalInvocationIndex + stride];
+        }
+        barrier();
+    }
+    return s_count64[0];
+}
+
+#define ATOMIC_ADD_U64(lo, hi, sum)                 \
+    {                                               \
+        uint add64_old_ = atomicAdd(lo, (sum));     \
+        if (add64_old_ + (sum) < add64_old_) {      \
+            atomicAdd(hi, 1u);                      \
+        }                                           \
+    }
+#endif
+
 #endif

@@ -180,7 +180,7 @@ impl std::str::FromStr for FrameRange {
 impl FrameRange {
     /// True when frame `k` is in the range.
     pub fn contains(&self, k: usize) -> bool {
-        k >= self.start && self.end.is_none_or(|e| k < e)
+        k >= self.start && self.end.map_or(true, |e| k < e)
     }
 }
 
@@ -259,7 +259,7 @@ pub fn plan(
     let mut frames = Vec::new();
     let mut seen = HashSet::new();
     for (k, cam) in cameras {
-        if !range.is_none_or(|r| r.contains(*k)) {
+        if !range.map_or(true, |r| r.contains(*k)) {
             continue;
         }
         let files = output::plan_files(&pattern.path(*k, &cam.name), opts)?;
