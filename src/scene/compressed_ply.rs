@@ -209,12 +209,11 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
                     t.count
                 )));
             }
-            let k = t
-                .el
-                .properties
-                .iter()
-                .filter(|p| p.name().starts_with("f_rest_"))
-                .count();
+            let k =
+                t.el.properties
+                    .iter()
+                    .filter(|p| p.name().starts_with("f_rest_"))
+                    .count();
             let degree = match k {
                 0 => 0,
                 9 => 1,
@@ -251,13 +250,13 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         }
         let [pp, pr, ps, pc] = [0, 1, 2, 3].map(|k| verts.get(i, vert_cols[k]) as u32);
         let p = unpack_11_10_11(pp);
-        scene
-            .positions
-            .push(std::array::from_fn(|a| lerp(bounds[a], bounds[3 + a], p[a])));
+        scene.positions.push(std::array::from_fn(|a| {
+            lerp(bounds[a], bounds[3 + a], p[a])
+        }));
         let s = unpack_11_10_11(ps);
-        scene
-            .log_scales
-            .push(std::array::from_fn(|a| lerp(bounds[6 + a], bounds[9 + a], s[a])));
+        scene.log_scales.push(std::array::from_fn(|a| {
+            lerp(bounds[6 + a], bounds[9 + a], s[a])
+        }));
         scene.rotations.push(unpack_rotation(pr));
         let rgba = pc.to_be_bytes();
         scene.opacity_logits.push(logit_from_u8(rgba[3]));

@@ -102,7 +102,10 @@ pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<(Scene, SceneFormat), Sc
     if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
         let header = ply::parse_header(bytes, path)?;
         if compressed_ply::is_compressed(&header) {
-            return Ok((compressed_ply::parse(bytes, path)?, SceneFormat::CompressedPly));
+            return Ok((
+                compressed_ply::parse(bytes, path)?,
+                SceneFormat::CompressedPly,
+            ));
         }
         let encoding = header.encoding();
         return Ok((ply::parse(bytes, path)?, SceneFormat::InriaPly(encoding)));
@@ -184,7 +187,10 @@ mod tests {
     #[test]
     fn unknown_bytes_are_named_not_guessed() {
         let e = parse_bytes(b"hello world", Path::new("x.bin")).unwrap_err();
-        assert!(e.to_string().contains("not a recognised scene format"), "{e}");
+        assert!(
+            e.to_string().contains("not a recognised scene format"),
+            "{e}"
+        );
         let e = parse_bytes(b"", Path::new("x.bin")).unwrap_err();
         assert!(e.to_string().contains("not a recognised"), "{e}");
     }

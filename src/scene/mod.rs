@@ -268,9 +268,12 @@ pub(crate) fn color_from_dc(dc: f32) -> f32 {
 /// Checks a decoded scene the way the PLY loader checks its values: every value finite and
 /// every quaternion of non-zero length. `what` names the format in the message.
 pub(crate) fn check_decoded(scene: &Scene, path: &Path, what: &str) -> Result<(), SceneError> {
-    scene
-        .check_consistent()
-        .map_err(|m| SceneError::invalid(path, format!("decodes to an inconsistent {what} scene: {m}")))?;
+    scene.check_consistent().map_err(|m| {
+        SceneError::invalid(
+            path,
+            format!("decodes to an inconsistent {what} scene: {m}"),
+        )
+    })?;
     for i in 0..scene.len() {
         let finite = scene.positions[i].iter().all(|v| v.is_finite())
             && scene.log_scales[i].iter().all(|v| v.is_finite())

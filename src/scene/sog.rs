@@ -150,7 +150,11 @@ pub(crate) fn parse(source: Source<'_>, path: &Path) -> Result<Scene, SceneError
     parse_with(&meta_bytes, &mut files, path)
 }
 
-fn parse_with(meta_bytes: &[u8], files: &mut SogFiles<'_>, path: &Path) -> Result<Scene, SceneError> {
+fn parse_with(
+    meta_bytes: &[u8],
+    files: &mut SogFiles<'_>,
+    path: &Path,
+) -> Result<Scene, SceneError> {
     let bad = |m: String| SceneError::invalid(path, m);
     let meta: Meta = serde_json::from_slice(meta_bytes)
         .map_err(|e| bad(format!("has a SOG meta.json that is not valid: {e}")))?;
@@ -179,7 +183,13 @@ fn parse_with(meta_bytes: &[u8], files: &mut SogFiles<'_>, path: &Path) -> Resul
             )));
         }
     }
-    if !meta.means.mins.iter().chain(&meta.means.maxs).all(|v| v.is_finite()) {
+    if !meta
+        .means
+        .mins
+        .iter()
+        .chain(&meta.means.maxs)
+        .all(|v| v.is_finite())
+    {
         return Err(bad("has non-finite SOG means bounds".into()));
     }
     let n = meta.count;
@@ -193,7 +203,11 @@ fn parse_with(meta_bytes: &[u8], files: &mut SogFiles<'_>, path: &Path) -> Resul
     let mut texture = |name: String| -> Result<Texture, SceneError> {
         let bytes = files.read(&name)?;
         let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::WebP)
-            .map_err(|e| bad(format!("cannot decode its SOG texture \"{name}\" as WebP: {e}")))?
+            .map_err(|e| {
+                bad(format!(
+                    "cannot decode its SOG texture \"{name}\" as WebP: {e}"
+                ))
+            })?
             .to_rgba8();
         let (w, h) = (img.width() as u64, img.height() as u64);
         if w * h < n {
@@ -286,7 +300,9 @@ fn parse_with(meta_bytes: &[u8], files: &mut SogFiles<'_>, path: &Path) -> Resul
                 *r = kept.next().unwrap_or(0.0);
             }
         }
-        rot[largest] = (1.0 - rot.iter().map(|v| v * v).sum::<f32>()).max(0.0).sqrt();
+        rot[largest] = (1.0 - rot.iter().map(|v| v * v).sum::<f32>())
+            .max(0.0)
+            .sqrt();
         scene.rotations.push(rot);
         let c = sh0.px(i);
         scene.opacity_logits.push(logit_from_u8(c[3]));

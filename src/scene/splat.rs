@@ -141,7 +141,10 @@ mod tests {
     #[test]
     fn bad_lengths_and_values_are_rejected() {
         let e = parse(&[0u8; 33], Path::new("t.splat")).unwrap_err();
-        assert!(e.to_string().contains("not a multiple of the 32-byte"), "{e}");
+        assert!(
+            e.to_string().contains("not a multiple of the 32-byte"),
+            "{e}"
+        );
         let mut b = vec![0u8; 32];
         b[12..16].copy_from_slice(&(-1.0f32).to_le_bytes());
         let e = parse(&b, Path::new("t.splat")).unwrap_err();

@@ -173,7 +173,14 @@ impl Header {
     }
 }
 
-const STREAM_NAMES: [&str; 6] = ["positions", "alphas", "colours", "scales", "rotations", "SH"];
+const STREAM_NAMES: [&str; 6] = [
+    "positions",
+    "alphas",
+    "colours",
+    "scales",
+    "rotations",
+    "SH",
+];
 
 /// Parses an SPZ file (any supported version and wrapper) held in memory; returns the
 /// scene, the version and the wrapper. `path` is used in error messages only.
@@ -215,10 +222,7 @@ fn gunzip_payload(bytes: &[u8], path: &Path) -> Result<Vec<u8>, SceneError> {
     };
     let mut gz = flate2::read::GzDecoder::new(bytes);
     let mut head = Vec::with_capacity(16);
-    (&mut gz)
-        .take(16)
-        .read_to_end(&mut head)
-        .map_err(corrupt)?;
+    (&mut gz).take(16).read_to_end(&mut head).map_err(corrupt)?;
     let h = Header::parse(&head, path)?;
     // Read at most one byte more than the header promises, so a lying count cannot make
     // this allocate more than the stream really holds, and extra data is detected.
@@ -334,13 +338,16 @@ fn unzstd_streams(h: &Header, bytes: &[u8], path: &Path) -> Result<Vec<Vec<u8>>,
         let src = &bytes[offset as usize..end as usize];
         let mut out = Vec::new();
         if want > 0 || !src.is_empty() {
-            let decoder = ruzstd::decoding::StreamingDecoder::new(src).map_err(|e| {
-                bad(format!("has a corrupt zstd {name} stream ({e})"))
-            })?;
+            let decoder = ruzstd::decoding::StreamingDecoder::new(src)
+                .map_err(|e| bad(format!("has a corrupt zstd {name} stream ({e})")))?;
             decoder
                 .take(want.saturating_add(1))
                 .read_to_end(&mut out)
-                .map_err(|e| bad(format!("has a corrupt or truncated zstd {name} stream ({e})")))?;
+                .map_err(|e| {
+                    bad(format!(
+                        "has a corrupt or truncated zstd {name} stream ({e})"
+                    ))
+                })?;
         }
         if out.len() as u64 != want {
             return Err(bad(format!(
@@ -381,9 +388,9 @@ fn decode(h: &Header, s: [&[u8]; 6], path: &Path) -> Result<Scene, SceneError> {
             flip[a] * fixed as f32 * step
         });
         scene.positions.push(p);
-        scene
-            .log_scales
-            .push(std::array::from_fn(|a| scales[3 * i + a] as f32 / 16.0 - 10.0));
+        scene.log_scales.push(std::array::from_fn(|a| {
+            scales[3 * i + a] as f32 / 16.0 - 10.0
+        }));
         let xyzw = if h.version >= 3 {
             let r = &rotations[4 * i..4 * i + 4];
             unpack_smallest_three(u32::from_le_bytes([r[0], r[1], r[2], r[3]]))
@@ -393,9 +400,7 @@ fn decode(h: &Header, s: [&[u8]; 6], path: &Path) -> Result<Scene, SceneError> {
             let w = (1.0 - v.iter().map(|c| c * c).sum::<f32>()).max(0.0).sqrt();
             [v[0], v[1], v[2], w]
         };
-        scene
-            .rotations
-            .push([xyzw[3], xyzw[0], -xyzw[1], -xyzw[2]]);
+        scene.rotations.push([xyzw[3], xyzw[0], -xyzw[1], -xyzw[2]]);
         scene.opacity_logits.push(logit_from_u8(alphas[i]));
         for c in 0..3 {
             scene
@@ -458,12 +463,12 @@ fn to_u8(x: f32) -> u8 {
     x.round().clamp(0.0, 255.0) as u8
 }
 
-/// Quantises one SH coefficient to a byte `round(x * 128) + 128` on a grid of `bucket`
-/// (8 for band 1, 16 above: Niantic's default 5 and 4 bits).
+/// Quantises one SH coefficient to the byte `x * 128 + 128` rounded once, straight to a grid
+/// of `bucket` (8 for band 1, 16 above: Niantic's default 5 and 4 bits), so the error is at
+/// most half a bucket inside the representable range.
 fn quantize_sh(x: f32, bucket: i32) -> u8 {
-    let q = (x * 128.0).round() as i32 + 128;
-    let q = (q + bucket / 2).div_euclid(bucket) * bucket;
-    q.clamp(0, 255) as u8
+    let steps = (x * 128.0 / bucket as f32).round().clamp(-256.0, 256.0) as i32;
+    (steps * bucket + 128).clamp(0, 255) as u8
 }
 
 /// The largest `fractional_bits <= 12` at which every position fits the signed 24-bit range.
@@ -508,7 +513,9 @@ pub fn to_bytes_v3(scene: &Scene) -> Result<Vec<u8>, String> {
     let stride = scene.sh_stride();
     for i in 0..n {
         for c in 0..3 {
-            out.push(to_u8(scene.sh[i * stride + c] * (COLOR_SCALE * 255.0) + 127.5));
+            out.push(to_u8(
+                scene.sh[i * stride + c] * (COLOR_SCALE * 255.0) + 127.5,
+            ));
         }
     }
     for s in &scene.log_scales {
@@ -522,7 +529,10 @@ pub fn to_bytes_v3(scene: &Scene) -> Result<Vec<u8>, String> {
         out.extend_from_slice(&packed.to_le_bytes());
     }
     for i in 0..n {
-        for (j, &v) in scene.sh[i * stride + 3..(i + 1) * stride].iter().enumerate() {
+        for (j, &v) in scene.sh[i * stride + 3..(i + 1) * stride]
+            .iter()
+            .enumerate()
+        {
             let bucket = if j < 9 { 8 } else { 16 };
             out.push(quantize_sh(RUB_SH_SIGN[j / 3] * v, bucket));
         }
