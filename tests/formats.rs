@@ -72,8 +72,8 @@ fn field_errors(
             .max((sigmoid(a.opacity_logits[i]) - sigmoid(b.opacity_logits[j])).abs());
         let dca = &a.sh[i * sa..i * sa + 3];
         if dca.iter().all(|&v| dc_included(v)) {
-            for c in 0..3 {
-                e.dc = e.dc.max((dca[c] - b.sh[j * sb + c]).abs());
+            for (x, y) in dca.iter().zip(&b.sh[j * sb..j * sb + 3]) {
+                e.dc = e.dc.max((x - y).abs());
             }
         } else {
             e.dc_excluded += 1;
