@@ -33,6 +33,31 @@ enum Command {
     Bench(BenchArgs),
     /// Write a synthetic scene (seeded) as an INRIA PLY, for scaling benchmarks.
     Gen(GenArgs),
+    /// Convert a scene (any readable format) to .ply, .splat or .spz, chosen by OUT's extension.
+    Convert(ConvertArgs),
+}
+
+#[derive(Args)]
+struct ConvertArgs {
+    /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
+    input: PathBuf,
+    /// Output file: .ply (INRIA, lossless), .splat or .spz (SPZ v3, gzip).
+    output: PathBuf,
+    /// Write at most this SH degree (higher bands are dropped).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=3))]
+    sh_degree: Option<u32>,
+    /// Drop Gaussians whose largest axis scale (world units) is above this.
+    #[arg(long)]
+    max_scale: Option<f32>,
+    /// Drop Gaussians whose opacity is below this (0..1).
+    #[arg(long)]
+    min_opacity: Option<f32>,
+    /// Keep only Gaussians whose centre lies in this box.
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::scene::filter::parse_crop, allow_hyphen_values = true)]
+    crop: Option<[[f32; 3]; 2]>,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    overwrite: bool,
 }
 
 #[derive(Args)]
@@ -844,10 +869,50 @@ fn fmt3(v: [f32; 3]) -> String {
     format!("({:.4}, {:.4}, {:.4})", v[0], v[1], v[2])
 }
 
+fn cmd_convert(args: &ConvertArgs) -> Result<()> {
+    use vksplat::scene::write::{convert, ConvertOptions};
+    let filter = vksplat::scene::filter::SceneFilter {
+        max_scale: args.max_scale,
+        min_opacity: args.min_opacity,
+        crop: args.crop,
+        sh_degree: args.sh_degree,
+    };
+    let options = ConvertOptions {
+        filter,
+        overwrite: args.overwrite,
+    };
+    let r = convert(&args.input, &args.output, &options)?;
+    eprintln!(
+        "converted {} ({}, {} Gaussians) -> {} ({}, {} Gaussians, SH degree {}, {} bytes)",
+        args.input.display(),
+        r.input_format,
+        r.read,
+        args.output.display(),
+        r.output_format,
+        r.written,
+        r.sh_degree,
+        r.bytes
+    );
+    Ok(())
+}
+
 fn info(arg: &SceneArg) -> Result<()> {
-    let (scene, name) = load_scene(arg)?;
+    let (scene, name, format) = match arg.scene.as_deref() {
+        Some(path) if !arg.demo => {
+            let (scene, format) = scene::load_with_format(path)?;
+            let name = scene::resolve_scene_path(path)?.display().to_string();
+            (scene, name, Some(format))
+        }
+        _ => {
+            let (scene, name) = load_scene(arg)?;
+            (scene, name, None)
+        }
+    };
     let s = vksplat::stats::scene_stats(&scene);
     println!("scene       {name}");
+    if let Some(format) = format {
+        println!("format      {format}");
+    }
     println!("gaussians   {}", s.count);
     println!(
         "sh degree   {} ({} coefficients per channel)",
@@ -930,6 +995,7 @@ fn main() -> ExitCode {
         Command::Info(arg) => info(arg),
         Command::Bench(args) => bench(args),
         Command::Gen(args) => gen(args),
+        Command::Convert(args) => cmd_convert(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -27,7 +27,7 @@ impl SceneFilter {
         self.max_scale.is_none()
             && self.min_opacity.is_none()
             && self.crop.is_none()
-            && self.sh_degree.is_none_or(|d| d >= scene.sh_degree)
+            && self.sh_degree.map_or(true, |d| d >= scene.sh_degree)
     }
 
     /// Checks the parameters themselves (finite, ordered box, degree 0..=3).
@@ -64,13 +64,14 @@ impl SceneFilter {
         if let Some(max) = self.max_scale {
             let s = scene.log_scales[i];
             let largest = s[0].max(s[1]).max(s[2]).exp();
-            // NaN compares false, so a Gaussian with a NaN scale is dropped too.
-            if !(largest <= max) {
+            // A Gaussian with a NaN scale is dropped too.
+            if largest.is_nan() || largest > max {
                 return false;
             }
         }
         if let Some(min) = self.min_opacity {
-            if !(sigmoid(scene.opacity_logits[i]) >= min) {
+            let opacity = sigmoid(scene.opacity_logits[i]);
+            if opacity.is_nan() || opacity < min {
                 return false;
             }
         }

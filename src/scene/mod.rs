@@ -16,8 +16,16 @@
 //!   `sh[i * sh_stride() + k * 3 + c]`; `k = 0` is the DC term (`f_dc_c`), and
 //!   `k >= 1` is `f_rest[c * K + (k - 1)]` of the PLY with `K = sh_coeffs() - 1`.
 
+pub mod compressed_ply;
+pub mod detect;
 pub mod filter;
 pub mod ply;
+pub mod sog;
+pub mod splat;
+pub mod spz;
+pub mod write;
+
+pub use detect::{load_with_format, parse_bytes, SceneFormat};
 
 use std::path::{Path, PathBuf};
 
@@ -179,7 +187,8 @@ impl SceneError {
     }
 }
 
-/// Resolves a scene path: a file is used as is; a trained model directory resolves to
+/// Resolves a scene path: a file is used as is; an unbundled SOG directory resolves to its
+/// `meta.json`; a trained model directory resolves to
 /// `point_cloud/iteration_<largest N>/point_cloud.ply`, as the reference viewer does.
 pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
     let meta = std::fs::metadata(path).map_err(|source| SceneError::Io {
@@ -189,11 +198,14 @@ pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
     if !meta.is_dir() {
         return Ok(path.to_path_buf());
     }
+    if path.join("meta.json").is_file() {
+        return Ok(path.join("meta.json"));
+    }
     let pc_dir = path.join("point_cloud");
     let entries = std::fs::read_dir(&pc_dir).map_err(|_| {
         SceneError::invalid(
             path,
-            "is a directory but has no point_cloud/ folder; pass a .ply file or a trained model directory",
+            "is a directory but has neither a point_cloud/ folder nor a SOG meta.json; pass a scene file, a SOG directory or a trained model directory",
         )
     })?;
     let best = entries
@@ -216,12 +228,79 @@ pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
     }
 }
 
-/// Loads a scene from a PLY file or a trained model directory.
+/// Loads a scene from any supported file (format detected from its content), an unbundled
+/// SOG directory or a trained model directory.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    let file = resolve_scene_path(path)?;
-    let bytes = std::fs::read(&file).map_err(|source| SceneError::Io {
-        path: file.clone(),
+    load_with_format(path).map(|(scene, _)| scene)
+}
+
+/// Reads a whole file, mapping failures to [`SceneError::Io`].
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, SceneError> {
+    std::fs::read(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
         source,
+    })
+}
+
+/// The opacity logit of an 8-bit alpha, with alpha clamped to `[0.5, 254.5] / 255` so
+/// that 0 and 255 (fully transparent / opaque) still give finite logits.
+pub(crate) fn logit_from_u8(alpha: u8) -> f32 {
+    logit_clamped(alpha as f32 / 255.0)
+}
+
+/// Inverse sigmoid of `p`, with `p` clamped to `[0.5/255, 254.5/255]` (half an 8-bit step
+/// inside the open interval), so every decoded opacity has a finite logit.
+pub(crate) fn logit_clamped(p: f32) -> f32 {
+    let p = p.clamp(0.5 / 255.0, 254.5 / 255.0);
+    (p / (1.0 - p)).ln()
+}
+
+/// The SH DC coefficient whose colour is `rgb` (0..1): `(rgb - 0.5) / C0`.
+pub(crate) fn dc_from_color(rgb: f32) -> f32 {
+    (rgb - 0.5) / crate::cpu::sh::SH_C0
+}
+
+/// The colour (0..1, unclamped) of an SH DC coefficient: `0.5 + C0 * dc`.
+pub(crate) fn color_from_dc(dc: f32) -> f32 {
+    0.5 + crate::cpu::sh::SH_C0 * dc
+}
+
+/// Checks a decoded scene the way the PLY loader checks its values: every value finite and
+/// every quaternion of non-zero length. `what` names the format in the message.
+pub(crate) fn check_decoded(scene: &Scene, path: &Path, what: &str) -> Result<(), SceneError> {
+    scene.check_consistent().map_err(|m| {
+        SceneError::invalid(
+            path,
+            format!("decodes to an inconsistent {what} scene: {m}"),
+        )
     })?;
-    ply::parse(&bytes, &file)
+    for i in 0..scene.len() {
+        let finite = scene.positions[i].iter().all(|v| v.is_finite())
+            && scene.log_scales[i].iter().all(|v| v.is_finite())
+            && scene.rotations[i].iter().all(|v| v.is_finite())
+            && scene.opacity_logits[i].is_finite();
+        if !finite {
+            return Err(SceneError::invalid(
+                path,
+                format!("{what} Gaussian {i} decodes to a non-finite value"),
+            ));
+        }
+        let q = scene.rotations[i];
+        if q.iter().map(|v| v * v).sum::<f32>() == 0.0 {
+            return Err(SceneError::invalid(
+                path,
+                format!("{what} Gaussian {i} has a zero-length rotation quaternion"),
+            ));
+        }
+    }
+    if let Some(k) = scene.sh.iter().position(|v| !v.is_finite()) {
+        return Err(SceneError::invalid(
+            path,
+            format!(
+                "{what} Gaussian {} decodes to a non-finite SH coefficient",
+                k / scene.sh_stride().max(1)
+            ),
+        ));
+    }
+    Ok(())
 }

@@ -8,14 +8,14 @@ use super::{sh_coeffs_for_degree, Scene, SceneError};
 use std::path::Path;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Format {
+pub(crate) enum Format {
     Ascii,
     BinaryLe,
     BinaryBe,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum ScalarType {
+pub(crate) enum ScalarType {
     I8,
     U8,
     I16,
@@ -40,7 +40,7 @@ impl ScalarType {
             _ => return None,
         })
     }
-    fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             ScalarType::I8 | ScalarType::U8 => 1,
             ScalarType::I16 | ScalarType::U16 => 2,
@@ -48,7 +48,7 @@ impl ScalarType {
             ScalarType::F64 => 8,
         }
     }
-    fn read(self, b: &[u8], big_endian: bool) -> f64 {
+    pub(crate) fn read(self, b: &[u8], big_endian: bool) -> f64 {
         macro_rules! rd {
             ($t:ty, $n:expr) => {{
                 let mut a = [0u8; $n];
@@ -74,7 +74,7 @@ impl ScalarType {
 }
 
 #[derive(Clone, Debug)]
-enum Property {
+pub(crate) enum Property {
     Scalar {
         name: String,
         ty: ScalarType,
@@ -87,7 +87,7 @@ enum Property {
 }
 
 impl Property {
-    fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         match self {
             Property::Scalar { name, .. } | Property::List { name, .. } => name,
         }
@@ -95,19 +95,42 @@ impl Property {
 }
 
 #[derive(Clone, Debug)]
-struct Element {
-    name: String,
-    count: u64,
-    properties: Vec<Property>,
+pub(crate) struct Element {
+    pub(crate) name: String,
+    pub(crate) count: u64,
+    pub(crate) properties: Vec<Property>,
 }
 
-struct Header {
-    format: Format,
-    elements: Vec<Element>,
-    body_offset: usize,
+pub(crate) struct Header {
+    pub(crate) format: Format,
+    pub(crate) elements: Vec<Element>,
+    pub(crate) body_offset: usize,
 }
 
-fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneError> {
+impl Header {
+    /// The element called `name`, if the header declares one.
+    pub(crate) fn element(&self, name: &str) -> Option<&Element> {
+        self.elements.iter().find(|e| e.name == name)
+    }
+
+    /// The body encoding as the public enum.
+    pub(crate) fn encoding(&self) -> PlyEncoding {
+        match self.format {
+            Format::Ascii => PlyEncoding::Ascii,
+            Format::BinaryLe => PlyEncoding::BinaryLittleEndian,
+            Format::BinaryBe => PlyEncoding::BinaryBigEndian,
+        }
+    }
+}
+
+impl Element {
+    /// True when the element has a property called `name`.
+    pub(crate) fn has(&self, name: &str) -> bool {
+        self.properties.iter().any(|p| p.name() == name)
+    }
+}
+
+pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneError> {
     let bad = |m: String| SceneError::invalid(path, m);
     if !bytes.starts_with(b"ply\n") && !bytes.starts_with(b"ply\r\n") {
         return Err(bad(
@@ -513,7 +536,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
-/// Encoding used by [`write`].
+/// Encoding of a PLY body, as read or as written by [`to_bytes`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PlyEncoding {
     /// `binary_little_endian`, what the trainer writes.

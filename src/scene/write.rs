@@ -1,0 +1,138 @@
+//! Scene writers and `vksplat convert`: load any format, filter, write INRIA PLY, `.splat`
+//! or SPZ v3 chosen by the output's extension, atomically.
+
+use super::filter::SceneFilter;
+use super::{ply, splat, spz, Scene, SceneError, SceneFormat};
+use crate::output::OutputError;
+use std::path::{Path, PathBuf};
+
+/// A format [`to_bytes`] can write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// INRIA PLY, binary little-endian, any SH degree (lossless).
+    Ply,
+    /// antimatter15 `.splat` (SH DC only, 8-bit colour/opacity/rotation).
+    Splat,
+    /// Niantic SPZ v3, gzip, RUB axes.
+    Spz,
+}
+
+impl OutputFormat {
+    /// Chooses the writer from a file name's extension (`.ply`, `.splat`, `.spz`).
+    pub fn from_path(path: &Path) -> Result<OutputFormat, ConvertError> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref()
+        {
+            Some("ply") => Ok(OutputFormat::Ply),
+            Some("splat") => Ok(OutputFormat::Splat),
+            Some("spz") => Ok(OutputFormat::Spz),
+            _ => Err(ConvertError::UnknownFormat(path.to_path_buf())),
+        }
+    }
+}
+
+impl std::fmt::Display for OutputFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            OutputFormat::Ply => "INRIA PLY (binary little-endian)",
+            OutputFormat::Splat => "antimatter15 .splat",
+            OutputFormat::Spz => "SPZ v3 (gzip)",
+        })
+    }
+}
+
+/// Error raised by [`convert`].
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    /// The input could not be loaded.
+    #[error(transparent)]
+    Load(#[from] SceneError),
+    /// The output could not be written.
+    #[error(transparent)]
+    Write(#[from] OutputError),
+    /// The output's extension names no writer.
+    #[error("{0}: unknown output format; use a .ply, .splat or .spz file name")]
+    UnknownFormat(PathBuf),
+    /// The filter parameters are invalid.
+    #[error("{0}")]
+    Filter(String),
+    /// The scene cannot be represented in the output format.
+    #[error("{path}: cannot be written as {format}: {message}")]
+    Encode {
+        /// Output file.
+        path: PathBuf,
+        /// Output format.
+        format: OutputFormat,
+        /// Why.
+        message: String,
+    },
+}
+
+/// Serialises a scene in `format`.
+pub fn to_bytes(scene: &Scene, format: OutputFormat) -> Result<Vec<u8>, String> {
+    match format {
+        OutputFormat::Ply => Ok(ply::to_bytes(scene, ply::PlyEncoding::BinaryLittleEndian)),
+        OutputFormat::Splat => Ok(splat::to_bytes(scene)),
+        OutputFormat::Spz => spz::to_bytes_v3(scene),
+    }
+}
+
+/// Options of [`convert`].
+#[derive(Clone, Debug, Default)]
+pub struct ConvertOptions {
+    /// Selection and SH truncation applied before writing.
+    pub filter: SceneFilter,
+    /// Replace an existing output file.
+    pub overwrite: bool,
+}
+
+/// What [`convert`] did.
+#[derive(Clone, Debug)]
+pub struct ConvertReport {
+    /// Detected input format.
+    pub input_format: SceneFormat,
+    /// Output format.
+    pub output_format: OutputFormat,
+    /// Gaussians read.
+    pub read: usize,
+    /// Gaussians written (after the filters).
+    pub written: usize,
+    /// SH degree written.
+    pub sh_degree: u32,
+    /// Bytes written.
+    pub bytes: usize,
+}
+
+/// Loads `input` (any supported format), applies the filter and writes `output` in the
+/// format its extension names. An existing output is refused unless `overwrite`; the file
+/// is written to a temporary name and renamed, so it never appears half-written.
+pub fn convert(
+    input: &Path,
+    output: &Path,
+    options: &ConvertOptions,
+) -> Result<ConvertReport, ConvertError> {
+    let output_format = OutputFormat::from_path(output)?;
+    options.filter.validate().map_err(ConvertError::Filter)?;
+    if !options.overwrite && output.exists() {
+        return Err(OutputError::Exists(output.to_path_buf()).into());
+    }
+    let (scene, input_format) = super::load_with_format(input)?;
+    let filtered = options.filter.apply(&scene);
+    let bytes = to_bytes(&filtered, output_format).map_err(|message| ConvertError::Encode {
+        path: output.to_path_buf(),
+        format: output_format,
+        message,
+    })?;
+    crate::output::write_bytes_atomically(output, options.overwrite, &bytes)?;
+    Ok(ConvertReport {
+        input_format,
+        output_format,
+        read: scene.len(),
+        written: filtered.len(),
+        sh_degree: filtered.sh_degree,
+        bytes: bytes.len(),
+    })
+}
