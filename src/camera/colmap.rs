@@ -7,7 +7,7 @@
 //! the distorted models (`SIMPLE_RADIAL`, `RADIAL`, `OPENCV`, `FULL_OPENCV`, `FOV`) when
 //! every distortion parameter is exactly zero.
 
-use super::{check_resolution, quat_wxyz_to_mat, Camera, CameraError, CameraFormat};
+use super::{quat_wxyz_to_mat, Camera, CameraError, CameraFormat, MAX_IMAGE_SIDE};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -373,9 +373,13 @@ fn pinhole(
             model.name
         ));
     }
-    let side = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
-    let (width, height) = (side(width), side(height));
-    check_resolution(width, height).map_err(|e| format!("camera {id}: {e}"))?;
+    let max = MAX_IMAGE_SIDE as u64;
+    if width == 0 || height == 0 || width > max || height > max {
+        return Err(format!(
+            "camera {id}: resolution {width}x{height} is not usable; each side must be between 1 and {max} pixels"
+        ));
+    }
+    let (width, height) = (width as u32, height as u32);
     if !(focal.iter().all(|f| f.is_finite() && *f > 0.0) && principal.iter().all(|c| c.is_finite()))
     {
         return Err(format!(
