@@ -752,7 +752,7 @@ fn orbit_front_view_and_invariants() {
         centre: Some(Vec3::ZERO),
         radius: Some(5.0),
         elevation_deg: 0.0,
-        vfov_deg: 51.28201164861056,
+        vfov_deg: 51.282_01,
         width: 640,
         height: 480,
         ..Default::default()

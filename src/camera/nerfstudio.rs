@@ -73,7 +73,8 @@ pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraE
             DMat3::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]]);
         let centre = DVec3::new(m[3], m[7], m[11]);
         let err = rotation_error(c2w_gl);
-        if !(err < 1e-3) || !centre.is_finite() {
+        // rotation_error is infinite for non-finite input.
+        if err >= 1e-3 || !centre.is_finite() {
             return Err(bad(format!(
                 "camera_to_world is not a rigid transform (rotation part off by {err:.3e}, or \
                  non-finite values)"
