@@ -7,6 +7,7 @@
 //! of a file that was filtered beforehand.
 
 use super::{sigmoid, Scene};
+use std::cmp::Ordering;
 
 /// Which Gaussians to keep and how many SH bands to use.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -27,7 +28,7 @@ impl SceneFilter {
         self.max_scale.is_none()
             && self.min_opacity.is_none()
             && self.crop.is_none()
-            && self.sh_degree.is_none_or(|d| d >= scene.sh_degree)
+            && self.sh_degree.map_or(true, |d| d >= scene.sh_degree)
     }
 
     /// Checks the parameters themselves (finite, ordered box, degree 0..=3).
@@ -65,12 +66,19 @@ impl SceneFilter {
             let s = scene.log_scales[i];
             let largest = s[0].max(s[1]).max(s[2]).exp();
             // NaN compares false, so a Gaussian with a NaN scale is dropped too.
-            if !(largest <= max) {
+            if !matches!(
+                largest.partial_cmp(&max),
+                Some(Ordering::Less | Ordering::Equal)
+            ) {
                 return false;
             }
         }
         if let Some(min) = self.min_opacity {
-            if !(sigmoid(scene.opacity_logits[i]) >= min) {
+            let opacity = sigmoid(scene.opacity_logits[i]);
+            if !matches!(
+                opacity.partial_cmp(&min),
+                Some(Ordering::Greater | Ordering::Equal)
+            ) {
                 return false;
             }
         }
