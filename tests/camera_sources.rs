@@ -162,6 +162,40 @@ fn inria_json_front_camera() {
 }
 
 #[test]
+fn inria_json_malformed() {
+    let entry = |rotation: &str, fx: &str| {
+        format!(
+            r#"[{{"id": 0, "img_name": "a", "width": 64, "height": 48, "position": [0, 0, -5],
+                 "rotation": {rotation}, "fx": {fx}, "fy": 50}}]"#
+        )
+    };
+    let eye = "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]";
+    let cases = [
+        (
+            entry("[[0, 0, 0], [0, 0, 0], [0, 0, 0]]", "50"),
+            "not a rotation matrix",
+        ),
+        (entry("[[1, 0], [0, 1]]", "50"), "not an INRIA cameras.json"),
+        (entry(eye, "0"), "non-positive intrinsics"),
+        (entry(eye, "NaN"), "not valid JSON"),
+        (entry(eye, "1e999"), "not valid JSON"),
+        (
+            entry(eye, "50").replace("\"width\": 64", "\"width\": 0"),
+            "not usable",
+        ),
+        (r#"[{"id": 0}]"#.to_string(), "missing field"),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (text, msg) in cases {
+        let e = load_err(&write(dir.path(), "cameras.json", &text));
+        assert!(
+            e.contains(msg) && e.contains("cameras.json"),
+            "{text}\n  -> {e}"
+        );
+    }
+}
+
+#[test]
 fn inria_json_rotation_columns_are_camera_axes() {
     // The synthetic orbit files: stored rows are the camera-to-world rotation, so its
     // columns are the camera axes; every camera of the ring looks at the bulk centre.
