@@ -16,7 +16,7 @@ use std::path::Path;
 pub const KEYFRAME_VERSION: u32 = 1;
 /// Frames per second when the file gives none.
 pub const DEFAULT_FPS: f64 = 30.0;
-/// Largest number of frames a path may expand to.
+/// Largest number of frames a generated path (keyframes or orbit) may have.
 pub const MAX_FRAMES: usize = 1_000_000;
 
 #[derive(Serialize, Deserialize)]
@@ -73,7 +73,7 @@ pub struct Keyframe {
     pub vfov_deg: f64,
 }
 
-/// A validated keyframe path.
+/// A validated keyframe path (built by [`KeyframePath::parse`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct KeyframePath {
     /// Image width in pixels.
@@ -85,11 +85,16 @@ pub struct KeyframePath {
     /// Total frame count, spread evenly from the first to the last keyframe, if the file
     /// gives one.
     pub frames: Option<usize>,
-    /// Keyframes, strictly increasing in time.
-    pub keyframes: Vec<Keyframe>,
+    /// Keyframes: at least one, strictly increasing in time (private so that holds).
+    keyframes: Vec<Keyframe>,
 }
 
 impl KeyframePath {
+    /// The keyframes, in time order.
+    pub fn keyframes(&self) -> &[Keyframe] {
+        &self.keyframes
+    }
+
     /// Parses and validates a keyframe file held in memory (`path` names it in errors).
     pub fn parse(text: &str, path: &Path) -> Result<Self, CameraError> {
         let invalid = |message: String| CameraError::Invalid {

@@ -1,6 +1,7 @@
 //! The built-in turntable: cameras evenly spaced on a circle around the scene, all looking
 //! at its centre. With default parameters, frame 0 is [`default_camera`](super::default_camera).
 
+use super::keyframes::MAX_FRAMES;
 use super::{bulk_bounds, check_resolution, Camera, CameraError, DEFAULT_VFOV_DEG};
 use glam::Vec3;
 
@@ -55,8 +56,11 @@ impl Default for OrbitParams {
 pub fn orbit(positions: &[[f32; 3]], p: &OrbitParams) -> Result<Vec<Camera>, CameraError> {
     let bad = |m: String| Err(CameraError::BadParameter(m));
     check_resolution(p.width, p.height)?;
-    if p.frames == 0 {
-        return bad("an orbit needs at least one frame".into());
+    if !(1..=MAX_FRAMES).contains(&p.frames) {
+        return bad(format!(
+            "an orbit has {} frames; it needs between 1 and {MAX_FRAMES}",
+            p.frames
+        ));
     }
     if !(p.vfov_deg.is_finite() && p.vfov_deg > 0.0 && p.vfov_deg < 180.0) {
         return bad(format!(
