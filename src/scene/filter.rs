@@ -7,7 +7,6 @@
 //! of a file that was filtered beforehand.
 
 use super::{sigmoid, Scene};
-use std::cmp::Ordering;
 
 /// Which Gaussians to keep and how many SH bands to use.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -65,20 +64,14 @@ impl SceneFilter {
         if let Some(max) = self.max_scale {
             let s = scene.log_scales[i];
             let largest = s[0].max(s[1]).max(s[2]).exp();
-            // NaN compares false, so a Gaussian with a NaN scale is dropped too.
-            if !matches!(
-                largest.partial_cmp(&max),
-                Some(Ordering::Less | Ordering::Equal)
-            ) {
+            // A Gaussian with a NaN scale is dropped too.
+            if largest.is_nan() || largest > max {
                 return false;
             }
         }
         if let Some(min) = self.min_opacity {
             let opacity = sigmoid(scene.opacity_logits[i]);
-            if !matches!(
-                opacity.partial_cmp(&min),
-                Some(Ordering::Greater | Ordering::Equal)
-            ) {
+            if opacity.is_nan() || opacity < min {
                 return false;
             }
         }
