@@ -1,9 +1,24 @@
-//! Pinhole cameras in OpenCV axes (x right, y down, z forward), INRIA `cameras.json`
-//! loading, a default camera that frames a scene's bulk, and resolution overrides.
+//! Pinhole cameras in OpenCV axes (x right, y down, z forward), where they come from
+//! (INRIA `cameras.json`, COLMAP sparse models, nerfstudio camera paths, our keyframe
+//! paths, a built-in orbit), a default camera that frames a scene's bulk, and resolution
+//! overrides. `docs/cameras.md` writes down every convention and conversion.
 
-use glam::{Mat3, Vec3};
-use serde::Deserialize;
-use std::path::{Path, PathBuf};
+pub mod colmap;
+pub mod inria;
+pub mod keyframes;
+mod load;
+pub mod nerfstudio;
+pub mod orbit;
+mod select;
+
+pub use inria::{load_cameras_json, parse_cameras_json};
+pub use keyframes::{keyframes_to_json, KeyframePath};
+pub use load::{detect_camera_format, load_camera_file, CameraFormat, PathTiming};
+pub use orbit::{orbit, OrbitParams};
+pub use select::{select_camera, select_cameras};
+
+use glam::{DMat3, DVec3, Mat3, Vec3};
+use std::path::PathBuf;
 
 /// Largest accepted image side, in pixels (the common `maxImageDimension2D`).
 pub const MAX_IMAGE_SIDE: u32 = 16384;
@@ -208,104 +223,6 @@ pub fn check_resolution(width: u32, height: u32) -> Result<(), CameraError> {
     Ok(())
 }
 
-#[derive(Deserialize)]
-struct JsonCamera {
-    #[serde(default)]
-    id: Option<serde_json::Value>,
-    #[serde(default)]
-    img_name: Option<String>,
-    width: u32,
-    height: u32,
-    position: [f64; 3],
-    rotation: [[f64; 3]; 3],
-    fx: f64,
-    fy: f64,
-}
-
-/// Loads every camera of an INRIA `cameras.json`.
-pub fn load_cameras_json(path: &Path) -> Result<Vec<Camera>, CameraError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CameraError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    parse_cameras_json(&text, path)
-}
-
-/// Parses an INRIA `cameras.json` held in memory; `path` names it in errors.
-pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, CameraError> {
-    let invalid = |message: String| CameraError::Invalid {
-        path: path.to_path_buf(),
-        message,
-    };
-    let entries: Vec<JsonCamera> = serde_json::from_str(text).map_err(|e| {
-        invalid(format!(
-            "is not an INRIA cameras.json (a list of {{id, img_name, width, height, position, rotation, fx, fy}}): {e}"
-        ))
-    })?;
-    let mut cams = Vec::with_capacity(entries.len());
-    for (i, e) in entries.iter().enumerate() {
-        let name = e.img_name.clone().unwrap_or_else(|| match &e.id {
-            Some(id) => format!("id {id}"),
-            None => format!("camera {i}"),
-        });
-        // Stored rows are the camera-to-world rotation; world-to-camera is its transpose.
-        let c2w = glam::DMat3::from_cols_array_2d(&e.rotation).transpose();
-        let w2c = c2w.transpose();
-        let pos = glam::DVec3::from_array(e.position);
-        let t = -(w2c * pos);
-        let cam = Camera {
-            name,
-            width: e.width,
-            height: e.height,
-            fx: e.fx as f32,
-            fy: e.fy as f32,
-            cx: e.width as f32 / 2.0,
-            cy: e.height as f32 / 2.0,
-            rotation: w2c.as_mat3(),
-            translation: t.as_vec3(),
-        };
-        cam.validate()
-            .map_err(|err| invalid(format!("entry {i} (\"{}\"): {err}", cam.name)))?;
-        let det = c2w.determinant();
-        if !((0.9..1.1).contains(&det)) {
-            return Err(invalid(format!(
-                "entry {i} (\"{}\"): rotation is not a rotation matrix (determinant {det:.4})",
-                cam.name
-            )));
-        }
-        cams.push(cam);
-    }
-    Ok(cams)
-}
-
-/// Picks one camera by list index (`"3"`) or by `img_name`.
-pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera, CameraError> {
-    if let Ok(i) = which.parse::<usize>() {
-        return cams.get(i).cloned().ok_or_else(|| CameraError::NotFound {
-            path: path.to_path_buf(),
-            message: format!(
-                "camera index {i} is out of range; the file has {} cameras (0..{})",
-                cams.len(),
-                cams.len().saturating_sub(1)
-            ),
-        });
-    }
-    cams.iter()
-        .find(|c| c.name == which)
-        .cloned()
-        .ok_or_else(|| {
-            let names: Vec<&str> = cams.iter().take(5).map(|c| c.name.as_str()).collect();
-            CameraError::NotFound {
-                path: path.to_path_buf(),
-                message: format!(
-                    "has no camera named \"{which}\" (names include {}{})",
-                    names.join(", "),
-                    if cams.len() > 5 { ", ..." } else { "" }
-                ),
-            }
-        })
-}
-
 /// Robust extent of a point set: per-axis median centre and the 95th-percentile
 /// distance from it, so a few stray Gaussians far away do not spoil the framing.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -365,22 +282,85 @@ pub const DEFAULT_VFOV_DEG: f32 = 50.0;
 
 /// A camera that frames the bulk of `positions`: it looks at the median point from the
 /// -z side, 20 degrees above the horizon (world up is -y, the INRIA/COLMAP convention),
-/// far enough for the 95th-percentile sphere to fit the narrower field of view.
+/// far enough for the 95th-percentile sphere to fit the narrower field of view. It is
+/// frame 0 of the default [`orbit`].
 pub fn default_camera(positions: &[[f32; 3]], width: u32, height: u32) -> Camera {
     let b = bulk_bounds(positions);
     let vfov = DEFAULT_VFOV_DEG.to_radians();
-    let hfov = 2.0 * ((width as f32 / height as f32) * (vfov * 0.5).tan()).atan();
-    let half = 0.5 * vfov.min(hfov);
-    let distance = b.radius / half.sin() * 1.05;
-    let elevation = 20f32.to_radians();
-    let dir = Vec3::new(0.0, -elevation.sin(), -elevation.cos());
-    Camera::look_at(
-        "default",
+    let distance = orbit::framing_distance(b.radius, width, height, vfov);
+    let view = orbit::OrbitView {
+        centre: b.centre,
+        distance,
+        elevation: orbit::DEFAULT_ELEVATION_DEG.to_radians(),
+        azimuth: 0.0,
+        up: Vec3::NEG_Y,
+    };
+    view.camera("default", width, height, vfov)
+}
+
+/// Rotation matrix of a quaternion `(w, x, y, z)`, normalised first (as COLMAP does);
+/// `None` for a zero-length or non-finite quaternion.
+pub(crate) fn quat_wxyz_to_mat(q: [f64; 4]) -> Option<DMat3> {
+    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if !n.is_finite() || n < 1e-12 {
+        return None;
+    }
+    let [w, x, y, z] = q.map(|v| v / n);
+    // COLMAP's qvec2rotmat, row by row.
+    Some(DMat3::from_cols_array_2d(&[
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y + w * z),
+            2.0 * (x * z - w * y),
+        ],
+        [
+            2.0 * (x * y - w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z + w * x),
+        ],
+        [
+            2.0 * (x * z + w * y),
+            2.0 * (y * z - w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]))
+}
+
+/// Largest deviation of `r` from a proper rotation: `max |R^T R - I|` and `|det R - 1|`.
+pub(crate) fn rotation_error(r: DMat3) -> f64 {
+    let d = r.transpose() * r - DMat3::IDENTITY;
+    let off =
+        d.to_cols_array().iter().fold(
+            0f64,
+            |m, v| if v.is_nan() { f64::NAN } else { m.max(v.abs()) },
+        );
+    if off.is_nan() {
+        return f64::INFINITY;
+    }
+    off.max((r.determinant() - 1.0).abs())
+}
+
+/// A pinhole camera from a camera-to-world pose in OpenCV axes (columns of `c2w` are the
+/// camera's right, down and forward axes in world space) and the camera centre.
+pub(crate) fn camera_from_c2w(
+    name: String,
+    width: u32,
+    height: u32,
+    focal: [f64; 2],
+    principal: [f64; 2],
+    c2w: DMat3,
+    centre: DVec3,
+) -> Camera {
+    let w2c = c2w.transpose();
+    Camera {
+        name,
         width,
         height,
-        vfov,
-        b.centre + dir * distance,
-        b.centre,
-        Vec3::NEG_Y,
-    )
+        fx: focal[0] as f32,
+        fy: focal[1] as f32,
+        cx: principal[0] as f32,
+        cy: principal[1] as f32,
+        rotation: w2c.as_mat3(),
+        translation: (-(w2c * centre)).as_vec3(),
+    }
 }
