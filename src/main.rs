@@ -82,7 +82,9 @@ struct GenArgs {
 /// Where the camera comes from and at which resolution.
 #[derive(Args)]
 struct CameraArgs {
-    /// INRIA cameras.json to take the camera from.
+    /// Camera file: INRIA cameras.json, a COLMAP sparse model (folder, or cameras/images
+    /// .txt/.bin), a nerfstudio camera_path.json or a vksplat keyframe JSON (see
+    /// docs/cameras.md); the format is detected from the content.
     #[arg(long, value_name = "FILE")]
     cameras: Option<PathBuf>,
     /// Cameras of the path: all, an index, a list 0,3,7, a range 10..20 (end
@@ -395,11 +397,17 @@ fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
 fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
     let cam = match &args.cameras {
         Some(path) => {
-            let cams = camera::load_cameras_json(path)?;
-            if cams.is_empty() {
-                bail!("{}: holds no cameras", path.display());
+            let (cams, _) = camera::load_camera_file(path, &camera::PathTiming::default())?;
+            let spec = args.camera.as_deref().unwrap_or("0");
+            let mut picked = camera::select_cameras(&cams, spec, path)?;
+            if picked.len() != 1 {
+                bail!(
+                    "{}: --camera {spec:?} selects {} cameras; bench takes one",
+                    path.display(),
+                    picked.len()
+                );
             }
-            camera::select_camera(&cams, args.camera.as_deref().unwrap_or("0"), path)?
+            picked.remove(0)
         }
         None => camera::default_camera(&scene.positions, 1280, 720),
     };
@@ -407,127 +415,59 @@ fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
 }
 
 /// The cameras of the path with their frame numbers, at the requested resolution.
-fn camera_path(args: &RenderArgs, scene: &Scene) -> Result<Vec<(usize, Camera)>> {
+/// Also returns a description of the source for the summary.
+fn camera_path(args: &RenderArgs, scene: &Scene) -> Result<(Vec<(usize, Camera)>, String)> {
     let view = &args.view;
-    let vfov = args.path.vfov;
-    if !(vfov > 0.0 && vfov < 180.0) {
-        bail!("--vfov must be between 0 and 180 degrees, got {vfov}");
-    }
-    let (all, source): (Vec<Camera>, Option<&PathBuf>) = if let Some(n) = args.path.orbit {
-        if n == 0 {
-            bail!("--orbit needs at least one frame");
-        }
-        (orbit_cameras(args, scene, n)?, None)
+    let p = &args.path;
+    let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
+        let params = camera::OrbitParams {
+            frames,
+            centre: p.orbit_centre.map(glam::Vec3::from),
+            radius: p.orbit_radius,
+            elevation_deg: p.orbit_elevation,
+            up: glam::Vec3::from(p.orbit_up),
+            start_deg: p.orbit_start,
+            vfov_deg: p.vfov,
+            ..Default::default()
+        };
+        (
+            camera::orbit(&scene.positions, &params)?,
+            PathBuf::from("--orbit"),
+            format!("an orbit of {frames} frames"),
+        )
     } else if let Some(path) = &view.cameras {
-        let cams = camera::load_cameras_json(path)?;
-        if cams.is_empty() {
-            bail!("{}: holds no cameras", path.display());
-        }
-        (cams, Some(path))
+        let timing = camera::PathTiming {
+            frames: p.path_frames,
+            fps: p.fps,
+        };
+        let (cams, format) = camera::load_camera_file(path, &timing)?;
+        let source = format!("{} ({format}, {} cameras)", path.display(), cams.len());
+        (cams, path.clone(), source)
     } else {
-        let mut cam = camera::default_camera(&scene.positions, 1280, 720);
-        if vfov != camera::DEFAULT_VFOV_DEG {
-            cam = Camera::look_at(
-                "default",
-                1280,
-                720,
-                vfov.to_radians(),
-                cam.position(),
-                cam.position() + cam.rotation.transpose() * glam::Vec3::Z,
-                glam::Vec3::NEG_Y,
-            );
-        }
-        (vec![cam], None)
+        let params = camera::OrbitParams {
+            frames: 1,
+            vfov_deg: p.vfov,
+            ..Default::default()
+        };
+        let mut cams = camera::orbit(&scene.positions, &params)?;
+        cams[0].name = "default".into();
+        (
+            cams,
+            PathBuf::from("<default camera>"),
+            "the default camera".into(),
+        )
     };
-    let label = source
-        .cloned()
-        .unwrap_or_else(|| PathBuf::from("<camera path>"));
     let chosen: Vec<usize> = match &view.camera {
-        Some(spec) => select_indices(&all, spec, &label)?,
+        Some(spec) => camera::select_camera_indices(&all, spec, &label)?,
         // A single output file with several cameras is refused by the plan, naming
         // --camera and patterns.
         None => (0..all.len()).collect(),
     };
-    chosen
+    let cams = chosen
         .into_iter()
         .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
-        .collect()
-}
-
-/// Indices of the cameras a `--camera` spec names: `all`, indices, `a..b` / `a..=b`
-/// ranges and names, separated by commas.
-fn select_indices(cams: &[Camera], spec: &str, path: &std::path::Path) -> Result<Vec<usize>> {
-    let mut out = Vec::new();
-    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        if part == "all" {
-            out.extend(0..cams.len());
-        } else if part.contains("..") {
-            let r: FrameRange = part.parse().map_err(anyhow::Error::msg)?;
-            let end = r.end.unwrap_or(cams.len());
-            if end > cams.len() {
-                bail!(
-                    "{}: camera range {part} ends past the last camera ({} cameras)",
-                    path.display(),
-                    cams.len()
-                );
-            }
-            out.extend(r.start..end);
-        } else {
-            let cam = camera::select_camera(cams, part, path)?;
-            let i = match part.parse::<usize>() {
-                Ok(i) => i,
-                Err(_) => cams.iter().position(|c| c.name == cam.name).unwrap_or(0),
-            };
-            out.push(i);
-        }
-    }
-    if out.is_empty() {
-        bail!("{}: --camera {spec:?} selects no camera", path.display());
-    }
-    Ok(out)
-}
-
-fn orbit_cameras(args: &RenderArgs, scene: &Scene, frames: usize) -> Result<Vec<Camera>> {
-    let p = &args.path;
-    let b = camera::bulk_bounds(&scene.positions);
-    let centre = p.orbit_centre.map(glam::Vec3::from).unwrap_or(b.centre);
-    let up = glam::Vec3::from(p.orbit_up).normalize_or_zero();
-    if up == glam::Vec3::ZERO {
-        bail!("--orbit-up must not be the zero vector");
-    }
-    let (w, h) = (1280u32, 720u32);
-    let vfov = p.vfov.to_radians();
-    let hfov = 2.0 * ((w as f32 / h as f32) * (vfov * 0.5).tan()).atan();
-    let radius = match p.orbit_radius {
-        Some(r) if r.is_finite() && r > 0.0 => r,
-        Some(r) => bail!("--orbit-radius must be positive, got {r}"),
-        None => b.radius / (0.5 * vfov.min(hfov)).sin() * 1.05,
-    };
-    // Horizontal basis perpendicular to up; angle 0 looks from -z (the default camera).
-    let reference = if up.cross(glam::Vec3::Z).length() > 1e-3 {
-        glam::Vec3::NEG_Z
-    } else {
-        glam::Vec3::X
-    };
-    let e1 = (reference - up * reference.dot(up)).normalize();
-    let e2 = up.cross(e1);
-    let elev = p.orbit_elevation.to_radians();
-    Ok((0..frames)
-        .map(|k| {
-            let a = p.orbit_start.to_radians() + std::f32::consts::TAU * k as f32 / frames as f32;
-            let horizontal = e1 * a.cos() + e2 * a.sin();
-            let dir = horizontal * elev.cos() + up * elev.sin();
-            Camera::look_at(
-                &format!("orbit_{k:05}"),
-                w,
-                h,
-                vfov,
-                centre + dir * radius,
-                centre,
-                up,
-            )
-        })
-        .collect())
+        .collect::<Result<Vec<_>>>()?;
+    Ok((cams, source))
 }
 
 fn render(args: &RenderArgs) -> Result<()> {
@@ -554,7 +494,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         );
         kept
     };
-    let cams = camera_path(args, &scene)?;
+    let (cams, source) = camera_path(args, &scene)?;
     for (_, c) in &cams {
         c.validate()?;
     }
@@ -604,7 +544,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     let first = &plan.frames[0];
     let what = if plan.frames.len() == 1 && plan.skipped == 0 {
         format!(
-            "from camera \"{}\" at {}x{} -> {}",
+            "from camera \"{}\" of {source} at {}x{} -> {}",
             first.camera.name,
             first.camera.width,
             first.camera.height,
@@ -612,7 +552,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         )
     } else {
         format!(
-            "{} frame(s) at {}x{}{} -> {}",
+            "{} frame(s) of {source} at {}x{}{} -> {}",
             summary.written,
             first.camera.width,
             first.camera.height,

@@ -468,3 +468,44 @@ fn progress_lines_and_summary_without_a_terminal() {
     ]);
     assert!(!q.contains("ETA"), "{q}");
 }
+
+#[test]
+fn every_camera_file_format_renders_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cameras");
+    for (source, frames) in [
+        (fixtures.join("colmap_text"), None),
+        (fixtures.join("nerfstudio_camera_path.json"), None),
+        (fixtures.join("keyframes_example.json"), Some("12")),
+        (
+            common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
+            None,
+        ),
+    ] {
+        let name = source.file_stem().unwrap().to_string_lossy().into_owned();
+        let out = dir.path().join(&name);
+        let out_dir = format!("{}/", out.display());
+        let mut args = vec![
+            "render",
+            "--demo",
+            "--cameras",
+            s(&source),
+            "--width",
+            "48",
+            "-o",
+            &out_dir,
+        ];
+        if let Some(n) = frames {
+            args.extend(["--path-frames", n]);
+        }
+        let e = ok(&args);
+        let written = files(&out);
+        assert!(!written.is_empty(), "{name}: {e}");
+        if let Some(n) = frames {
+            assert_eq!(written.len(), n.parse::<usize>().unwrap(), "{name}");
+        }
+        for k in written.keys() {
+            decodes(&out.join(k)).unwrap();
+        }
+    }
+}

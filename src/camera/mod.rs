@@ -15,7 +15,7 @@ pub use inria::{load_cameras_json, parse_cameras_json};
 pub use keyframes::{keyframes_to_json, KeyframePath};
 pub use load::{detect_camera_format, load_camera_file, CameraFormat, PathTiming};
 pub use orbit::{orbit, OrbitParams};
-pub use select::{select_camera, select_cameras};
+pub use select::{select_camera, select_camera_indices, select_cameras};
 
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use std::path::PathBuf;

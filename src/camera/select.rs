@@ -43,6 +43,18 @@ pub fn select_cameras(
     spec: &str,
     path: &Path,
 ) -> Result<Vec<Camera>, CameraError> {
+    Ok(select_camera_indices(cams, spec, path)?
+        .into_iter()
+        .map(|i| cams[i].clone())
+        .collect())
+}
+
+/// The positions in `cams` of the cameras [`select_cameras`] picks, in the same order.
+pub fn select_camera_indices(
+    cams: &[Camera],
+    spec: &str,
+    path: &Path,
+) -> Result<Vec<usize>, CameraError> {
     let not_found = |message: String| CameraError::NotFound {
         path: path.to_path_buf(),
         message,
@@ -57,7 +69,7 @@ pub fn select_cameras(
         if cams.is_empty() {
             return Err(not_found("has no cameras".into()));
         }
-        return Ok(cams.to_vec());
+        return Ok((0..cams.len()).collect());
     }
     let mut picked = Vec::new();
     for item in spec.split(',').map(str::trim) {
@@ -67,7 +79,8 @@ pub fn select_cameras(
             )));
         }
         if let Ok(i) = item.parse::<usize>() {
-            picked.push(index(cams, i, path)?.clone());
+            index(cams, i, path)?;
+            picked.push(i);
         } else if let Some(range) = parse_range(item) {
             let (start, end) = range.map_err(not_found)?;
             let end = end.unwrap_or(cams.len());
@@ -83,9 +96,10 @@ pub fn select_cameras(
                     cams.len()
                 )));
             }
-            picked.extend_from_slice(&cams[start..end]);
+            picked.extend(start..end);
         } else {
-            picked.push(by_name(cams, item, path)?.clone());
+            let found = by_name(cams, item, path)?;
+            picked.extend(cams.iter().position(|c| std::ptr::eq(c, found)));
         }
     }
     Ok(picked)
