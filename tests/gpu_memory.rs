@@ -1,11 +1,16 @@
-//! Long-run memory: host and device memory stay flat over many frames. In its own test
-//! binary so that no other test allocates in the process while resident memory is measured.
+//! Long runs: a 1000-frame camera path rendered and written in one process keeps host and
+//! device memory flat, and its files equal frames rendered one per process. In its own
+//! test binary so that no other test allocates in the process while resident memory is
+//! measured.
 
 mod common;
 
-use vksplat::camera;
+use std::path::Path;
+use std::process::Command;
+use vksplat::camera::{self, OrbitParams};
 use vksplat::cpu::RenderOptions;
-use vksplat::scene;
+use vksplat::output::OutputOptions;
+use vksplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
 
 fn resident_bytes() -> u64 {
     let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
@@ -18,40 +23,70 @@ fn resident_bytes() -> u64 {
 }
 
 #[test]
-fn two_hundred_frames_do_not_grow_memory() {
+fn a_thousand_frame_path_keeps_memory_flat_and_matches_one_frame_per_process() {
     let frames: usize = std::env::var("VKSPLAT_MEMORY_TEST_FRAMES")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(200);
-    let mut r = common::gpu::new_renderer(None);
-    let s = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-        .unwrap()
-        .activated();
-    let gs = r.upload(&s).unwrap();
-    let cams = camera::load_cameras_json(
-        &common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
+        .unwrap_or(1000);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("long");
+    let scene = vksplat::demo_scene();
+    // The path `vksplat render --demo --orbit N --width 64` renders.
+    let cams: Vec<(usize, camera::Camera)> = camera::orbit(
+        &scene.positions,
+        &OrbitParams {
+            frames,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+    .into_iter()
+    .map(|c| c.resized(Some(64), None, None).unwrap())
+    .enumerate()
+    .collect();
+    let pattern = OutputPattern::parse(&out.join("{:04}.png"), "png").unwrap();
+    let plan = sequence::plan(
+        &cams,
+        &pattern,
+        None,
+        &OutputOptions::default(),
+        Existing::Refuse,
     )
     .unwrap();
+    let mut r = common::gpu::new_renderer(None);
+    let gs = r.upload(&scene.activated()).unwrap();
     let mut samples = Vec::new();
-    for i in 0..frames {
-        let cam = cams[i % cams.len()].with_resolution(160, 90).unwrap();
-        r.render(&gs, &cam, &RenderOptions::default()).unwrap();
-        if i % 50 == 49 {
+    let mut rendered = 0usize;
+    let mut render = |cam: &camera::Camera| {
+        let f = r.render(&gs, cam, &RenderOptions::default())?;
+        rendered += 1;
+        if rendered % 100 == 0 {
             samples.push((
-                i + 1,
+                rendered,
                 resident_bytes(),
                 r.frame_device_bytes(),
                 r.ctx().live_allocations(),
             ));
         }
-    }
+        Ok(f)
+    };
+    let summary = sequence::run(
+        &plan.frames,
+        &mut render,
+        &RunOptions {
+            progress: ProgressStyle::Quiet,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(summary.written, frames);
     eprintln!("(frame, resident bytes, per-frame device bytes, live allocations): {samples:?}");
     let first = samples[0];
     let last = *samples.last().unwrap();
     assert_eq!(last.2, first.2, "device buffers grew");
     assert_eq!(last.3, first.3, "gpu-allocator allocations grew");
-    // Allow 512 KiB of allocator and driver noise between frame 50 and the last (measured:
-    // about 24 KiB over 550 frames; before the frame slot was reused, 10 KiB per frame).
+    // Allow 2 MiB of allocator and driver noise between frame 100 and the last (measured:
+    // tens of KiB; before the frame slot was reused, 10 KiB per frame, i.e. 9 MB here).
     assert!(
         last.1 <= first.1 + 2 * 1024 * 1024,
         "host memory grew from {} to {} bytes",
@@ -59,4 +94,26 @@ fn two_hundred_frames_do_not_grow_memory() {
         last.1
     );
     common::gpu::assert_validation_clean(&r);
+    drop(r);
+
+    // Frames rendered one per process are the same files.
+    let single = dir.path().join("single");
+    let n = frames.to_string();
+    for k in [0, frames / 2, frames - 1] {
+        let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+            .args(["render", "--demo", "--orbit", &n, "--width", "64", "-q"])
+            .args(["--frames", &k.to_string(), "-o"])
+            .arg(single.join("{:04}.png"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let name = format!("{k:04}.png");
+        let a = std::fs::read(out.join(&name)).unwrap();
+        let b = std::fs::read(single.join(&name)).unwrap();
+        assert!(
+            a == b,
+            "frame {k} differs between the long run and its own process"
+        );
+    }
+    assert!(Path::new(&out.join(format!("{:04}.png", frames - 1))).exists());
 }
