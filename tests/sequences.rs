@@ -509,3 +509,73 @@ fn every_camera_file_format_renders_from_the_command_line() {
         }
     }
 }
+
+/// A device lost in the middle of a path (simulated: the renderer fails at frame 3 with
+/// VK_ERROR_DEVICE_LOST) stops the run with one error naming the frame, and every frame
+/// finished before it is complete on disk, with and without encoder threads.
+#[test]
+fn a_device_lost_mid_path_stops_cleanly_with_finished_frames_intact() {
+    use vksplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
+    let scene = vksplat::demo_scene();
+    let act = scene.activated();
+    let cams: Vec<(usize, vksplat::camera::Camera)> = vksplat::camera::orbit(
+        &scene.positions,
+        &vksplat::camera::OrbitParams {
+            frames: 6,
+            width: 64,
+            height: 36,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+    .into_iter()
+    .enumerate()
+    .collect();
+    for threads in [0, 2] {
+        let dir = tempfile::tempdir().unwrap();
+        let pattern = OutputPattern::parse(&dir.path().join("{}.exr"), "png").unwrap();
+        let plan = sequence::plan(
+            &cams,
+            &pattern,
+            None,
+            &vksplat::output::OutputOptions::default(),
+            Existing::Refuse,
+        )
+        .unwrap();
+        let mut k = 0;
+        let mut render = |cam: &vksplat::camera::Camera| -> anyhow::Result<vksplat::frame::Frame> {
+            k += 1;
+            if k == 4 {
+                return Err(vksplat::gpu::GpuError::Vk {
+                    call: "vkQueueSubmit",
+                    result: ash::vk::Result::ERROR_DEVICE_LOST,
+                }
+                .into());
+            }
+            Ok(cpu::render(&act, cam, &RenderOptions::default()))
+        };
+        let e = sequence::run(
+            &plan.frames,
+            &mut render,
+            &RunOptions {
+                encode_threads: threads,
+                progress: ProgressStyle::Quiet,
+                ..Default::default()
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with(
+                "frame 3: Vulkan call vkQueueSubmit failed: ERROR_DEVICE_LOST (the device was lost"
+            ) && e.ends_with("(3 frame(s) written before it are complete)"),
+            "{e}"
+        );
+        let written = files(dir.path());
+        let names: Vec<String> = written.keys().map(|k| k.display().to_string()).collect();
+        assert_eq!(names, ["0.exr", "1.exr", "2.exr"], "threads {threads}");
+        for n in &names {
+            decodes(&dir.path().join(n)).unwrap();
+        }
+    }
+}

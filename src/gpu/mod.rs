@@ -28,7 +28,7 @@ pub enum GpuError {
     #[error("could not load the Vulkan loader (is libvulkan1 installed?): {0}")]
     Loader(String),
     /// A Vulkan call failed.
-    #[error("Vulkan call {call} failed: {result}{}", vk_hint(*result))]
+    #[error("Vulkan call {call} failed: {result:?}{}", vk_hint(*result))]
     Vk {
         /// The Vulkan entry point (and what it was doing).
         call: &'static str,
@@ -74,9 +74,7 @@ pub enum GpuError {
 
 fn vk_hint(result: vk::Result) -> &'static str {
     match result {
-        vk::Result::ERROR_DEVICE_LOST => {
-            " (the device was lost: a driver reset or crash; frames already written are complete)"
-        }
+        vk::Result::ERROR_DEVICE_LOST => " (the device was lost: a driver reset or crash)",
         vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | vk::Result::ERROR_OUT_OF_HOST_MEMORY => {
             " (out of memory: use a smaller resolution or fewer Gaussians)"
         }
