@@ -11,7 +11,10 @@ layout(local_size_x = 256) in;
 
 layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
 layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; };
-layout(std430, binding = 2) readonly buffer ShBuf { float sh[]; };
+// SH coefficients, coefficient-major with the colour channel innermost, each Gaussian's
+// floats padded to whole RGBA32F texels (sh_texel_stride in src/render/mod.rs). Read as a
+// texel buffer, which addresses far more than one storage binding on some devices.
+layout(binding = 2) uniform samplerBuffer sh_texels;
 layout(std430, binding = 3) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
 layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uvec2 depth_keys[]; };  // (depth bits or ~0 when culled, tiles touched)
@@ -26,8 +29,14 @@ const float SH_C3[7] = float[](-0.5900435899266435, 2.890611442640554, -0.457045
                                0.3731763325901154, -0.4570457994644658, 1.445305721320277,
                                -0.5900435899266435);
 
+// Float `idx` of the SH texels. `base` is a multiple of 4 and `k` a constant in every call
+// below, so after inlining the component index is a constant.
+float sh_float(uint idx) {
+    return texelFetch(sh_texels, int(idx >> 2u))[idx & 3u];
+}
+
 vec3 coeff(uint base, uint k) {
-    return vec3(sh[base + 3u * k], sh[base + 3u * k + 1u], sh[base + 3u * k + 2u]);
+    return vec3(sh_float(base + 3u * k), sh_float(base + 3u * k + 1u), sh_float(base + 3u * k + 2u));
 }
 
 vec3 eval_sh(uint base, uint degree, vec3 dir) {
@@ -147,7 +156,7 @@ void main() {
                 }
                 if (touched != 0u) {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);
-                    uint stride = params.counts.z * 3u;
+                    uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);
                     s.mean_opacity_bound = vec4(mean2d, opacity, bound);
                     s.conic_depth = vec4(conic, z);

@@ -36,6 +36,8 @@ use types::{Counters, FrameParams, GpuGaussian, Splat};
 
 /// A scene uploaded to the device.
 pub struct GpuScene {
+    // The view goes before the buffer it views.
+    sh_texels: BufferView,
     gaussians: GpuBuffer,
     sh: GpuBuffer,
     count: u32,
@@ -163,6 +165,12 @@ fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
         )));
     }
     Ok(())
+}
+
+/// RGBA32F texels of SH per Gaussian: the `3 (d + 1)^2` floats rounded up to whole texels
+/// (`glsl/preprocess.comp` computes the same stride).
+pub fn sh_texel_stride(sh_degree: u32) -> u32 {
+    (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
 }
 
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
@@ -406,22 +414,42 @@ impl GpuRenderer {
             })
             .collect();
         let record_bytes = (records.len() * std::mem::size_of::<GpuGaussian>()) as u64;
-        let sh_bytes = (scene.sh.len() * 4) as u64;
         check_binding(
             &self.ctx,
             &format!("a scene of {count} Gaussians"),
             record_bytes,
         )?;
-        check_binding(
-            &self.ctx,
-            &format!("the SH coefficients of {count} Gaussians"),
-            sh_bytes,
-        )?;
+        // SH is read through an RGBA32F texel buffer (texel buffers address up to
+        // maxTexelBufferElements texels, far beyond one storage binding on lavapipe), each
+        // Gaussian's floats padded to whole texels.
+        let stride = scene.sh_stride();
+        let padded = sh_texel_stride(scene.sh_degree) as usize * 4;
+        let texels = scene.len() as u64 * padded as u64 / 4;
+        let max_texels = u64::from(self.ctx.info().max_texel_buffer_elements);
+        if texels > max_texels {
+            return Err(GpuError::InvalidArgument(format!(
+                "the SH coefficients of {count} Gaussians need {texels} texels ({} bytes) in one texel buffer, but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians, a lower --sh-degree or a device with a larger limit",
+                texels * 16
+            )));
+        }
+        let mut sh_padded = vec![0f32; scene.len() * padded];
+        if stride > 0 {
+            for (dst, src) in sh_padded
+                .chunks_exact_mut(padded)
+                .zip(scene.sh.chunks_exact(stride))
+            {
+                dst[..stride].copy_from_slice(src);
+            }
+        }
+        let sh_bytes = (sh_padded.len() * 4).max(16) as u64;
         let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
         gaussians.upload(&self.ctx, &records)?;
         let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
-        sh.upload(&self.ctx, &scene.sh)?;
+        sh.upload(&self.ctx, &sh_padded)?;
+        let sh_texels =
+            BufferView::new(&self.ctx, &sh, vk::Format::R32G32B32A32_SFLOAT, 0, sh_bytes)?;
         Ok(GpuScene {
+            sh_texels,
             gaussians,
             sh,
             count,
@@ -657,7 +685,7 @@ impl GpuRenderer {
                     &preprocess::PreprocessBindings {
                         params: f.params.whole(),
                         gaussians: scene.gaussians.whole(),
-                        sh: scene.sh.whole(),
+                        sh_texels: scene.sh_texels.handle(),
                         splats: f.splats.whole(),
                         rects: f.rects.whole(),
                         depth_keys: f.depth_keys.whole(),

@@ -1,6 +1,6 @@
 //! Preprocess stage (`glsl/preprocess.comp`): one thread per Gaussian.
 
-use crate::gpu::shader::BindingKind;
+use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
@@ -18,8 +18,8 @@ pub struct PreprocessBindings<'a> {
     pub params: BufferSlice<'a>,
     /// GpuGaussian per Gaussian.
     pub gaussians: BufferSlice<'a>,
-    /// SH coefficients.
-    pub sh: BufferSlice<'a>,
+    /// SH coefficients: an RGBA32F texel view, `sh_texel_stride` texels per Gaussian.
+    pub sh_texels: vk::BufferView,
     /// Splat per Gaussian (written).
     pub splats: BufferSlice<'a>,
     /// Packed tile rectangle per Gaussian (written).
@@ -39,7 +39,16 @@ impl Preprocess {
             ctx,
             "preprocess",
             &[],
-            &[BindingKind::StorageBuffer; 8],
+            &[
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::UniformTexelBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+            ],
             0,
             WORKGROUP,
         )?;
@@ -55,18 +64,18 @@ impl Preprocess {
         n: u32,
     ) -> GpuResult<()> {
         let groups = dispatch_grid(n.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
-        self.pipeline.dispatch(
+        self.pipeline.dispatch_resources(
             ctx,
             cmd,
             &[
-                b.params,
-                b.gaussians,
-                b.sh,
-                b.splats,
-                b.rects,
-                b.depth_keys,
-                b.counters,
-                b.depth_values,
+                Resource::Buffer(b.params),
+                Resource::Buffer(b.gaussians),
+                Resource::TexelBuffer(b.sh_texels),
+                Resource::Buffer(b.splats),
+                Resource::Buffer(b.rects),
+                Resource::Buffer(b.depth_keys),
+                Resource::Buffer(b.counters),
+                Resource::Buffer(b.depth_values),
             ],
             &[],
             groups,
