@@ -66,9 +66,16 @@ pub fn load_camera_file(
             let cams = match kind {
                 JsonKind::Inria => inria::parse_cameras_json(&text, path)?,
                 JsonKind::Nerfstudio => nerfstudio::parse_camera_path(&text, path)?,
-                JsonKind::Keyframes => {
-                    keyframes::KeyframePath::parse(&text, path)?.cameras(timing)?
-                }
+                JsonKind::Keyframes => keyframes::KeyframePath::parse(&text, path)?
+                    .cameras(timing)
+                    // Sampling errors (too many frames, a degenerate camera) name the file.
+                    .map_err(|e| match e {
+                        CameraError::BadParameter(message) => CameraError::Invalid {
+                            path: path.to_path_buf(),
+                            message,
+                        },
+                        other => other,
+                    })?,
             };
             (cams, kind.format())
         }
