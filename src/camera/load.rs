@@ -68,12 +68,15 @@ pub fn load_camera_file(
                 JsonKind::Nerfstudio => nerfstudio::parse_camera_path(&text, path)?,
                 JsonKind::Keyframes => keyframes::KeyframePath::parse(&text, path)?
                     .cameras(timing)
-                    // Sampling errors (too many frames, a degenerate camera) name the file.
+                    // Without --frames/--fps overrides, a sampling error (too many frames,
+                    // a degenerate camera) is the file's own, so it names the file.
                     .map_err(|e| match e {
-                        CameraError::BadParameter(message) => CameraError::Invalid {
-                            path: path.to_path_buf(),
-                            message,
-                        },
+                        CameraError::BadParameter(message) if *timing == PathTiming::default() => {
+                            CameraError::Invalid {
+                                path: path.to_path_buf(),
+                                message,
+                            }
+                        }
                         other => other,
                     })?,
             };

@@ -438,6 +438,11 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         body.check_fits(el)?;
         let mut row = vec![0f64; el.properties.len()];
         if ei != vi {
+            // A row without properties holds no bytes: there is nothing to read, and
+            // looping over a claimed 2^64 of them would never end.
+            if el.properties.is_empty() {
+                continue;
+            }
             for r in 0..el.count {
                 body.read_row(el, r, &mut row)?;
             }
