@@ -358,6 +358,22 @@ fn good_sog_meta() -> String {
 
 /// A stored zip of `meta` and the tiny SOG's textures, with `replace` swapping one of them.
 fn sog_zip(meta: &str, replace: Option<(&str, Vec<u8>)>) -> Vec<u8> {
+    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let opts =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (name, bytes) in sog_files(meta) {
+        let bytes = match &replace {
+            Some((r, b)) if *r == name => b.clone(),
+            _ => bytes,
+        };
+        zip.start_file(name, opts).unwrap();
+        zip.write_all(&bytes).unwrap();
+    }
+    zip.finish().unwrap().into_inner()
+}
+
+/// The files of the tiny SOG: `meta` and its WebP textures.
+fn sog_files(meta: &str) -> Vec<(&'static str, Vec<u8>)> {
     let px = |f: &dyn Fn(u8) -> [u8; 4]| -> Vec<u8> { (0..4u8).flat_map(f).collect() };
     let centroids: Vec<u8> = (0..192u32)
         .flat_map(|i| [i as u8, 128, 255 - i as u8, 255])
@@ -375,18 +391,33 @@ fn sog_zip(meta: &str, replace: Option<(&str, Vec<u8>)>) -> Vec<u8> {
         ("shN_centroids.webp", webp(192, 1, &centroids)),
         ("shN_labels.webp", webp(2, 2, &px(&|i| [i, 0, 0, 255]))),
     ];
-    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    let opts =
-        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
-    for (name, bytes) in files {
-        let bytes = match &replace {
-            Some((r, b)) if *r == name => b.clone(),
-            _ => bytes,
-        };
-        zip.start_file(name, opts).unwrap();
-        zip.write_all(&bytes).unwrap();
+    files
+}
+
+/// An unbundled SOG directory `sog/` (loaded as the directory).
+fn sog_dir_case(name: &'static str, meta: &str, expect: Expect) -> Case {
+    let names = [
+        "sog/meta.json",
+        "sog/means_l.webp",
+        "sog/means_u.webp",
+        "sog/scales.webp",
+        "sog/quats.webp",
+        "sog/sh0.webp",
+        "sog/shN_centroids.webp",
+        "sog/shN_labels.webp",
+    ];
+    let files = sog_files(meta);
+    assert_eq!(files.len(), names.len());
+    Case {
+        name,
+        kind: Kind::Scene,
+        files: names
+            .into_iter()
+            .zip(files.into_iter().map(|(_, b)| b))
+            .collect(),
+        arg: "sog",
+        expect,
     }
-    zip.finish().unwrap().into_inner()
 }
 
 // Cameras.
@@ -1090,6 +1121,23 @@ fn cases() -> Vec<Case> {
             sog_zip(&good_sog_meta(), None),
             Renders(4),
         ),
+        // PlayCanvas SOG (unbundled directories).
+        sog_dir_case(
+            "sog_dir_count_2_pow_40",
+            &sog_meta(two_40, "2", 256, 4, r#""means_l.webp","means_u.webp""#),
+            Error("too small for the 1099511627776 Gaussians"),
+        ),
+        sog_dir_case(
+            "sog_dir_bad_json",
+            "{\"version\": 2, \"count\": 4,",
+            Error("has a SOG meta.json that is not valid"),
+        ),
+        sog_dir_case(
+            "sog_dir_path_traversal",
+            &sog_meta("4", "2", 256, 4, r#""../sog/means_l.webp","means_u.webp""#),
+            Error("only plain file names beside meta.json are allowed"),
+        ),
+        sog_dir_case("sog_dir_four_gaussians", &good_sog_meta(), Renders(4)),
         // Content detection.
         scene_case(
             "unknown_bytes",

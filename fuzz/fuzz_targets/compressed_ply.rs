@@ -3,5 +3,6 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = vksplat::scene::compressed_ply::parse(data, std::path::Path::new("fuzz.compressed.ply"));
+    let _ =
+        vksplat::scene::compressed_ply::parse(data, std::path::Path::new("fuzz.compressed.ply"));
 });
