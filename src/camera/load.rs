@@ -66,9 +66,19 @@ pub fn load_camera_file(
             let cams = match kind {
                 JsonKind::Inria => inria::parse_cameras_json(&text, path)?,
                 JsonKind::Nerfstudio => nerfstudio::parse_camera_path(&text, path)?,
-                JsonKind::Keyframes => {
-                    keyframes::KeyframePath::parse(&text, path)?.cameras(timing)?
-                }
+                JsonKind::Keyframes => keyframes::KeyframePath::parse(&text, path)?
+                    .cameras(timing)
+                    // Without --frames/--fps overrides, a sampling error (too many frames,
+                    // a degenerate camera) is the file's own, so it names the file.
+                    .map_err(|e| match e {
+                        CameraError::BadParameter(message) if *timing == PathTiming::default() => {
+                            CameraError::Invalid {
+                                path: path.to_path_buf(),
+                                message,
+                            }
+                        }
+                        other => other,
+                    })?,
             };
             (cams, kind.format())
         }

@@ -438,12 +438,21 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         body.check_fits(el)?;
         let mut row = vec![0f64; el.properties.len()];
         if ei != vi {
+            // A row without properties holds no bytes: there is nothing to read, and
+            // looping over a claimed 2^64 of them would never end.
+            if el.properties.is_empty() {
+                continue;
+            }
             for r in 0..el.count {
                 body.read_row(el, r, &mut row)?;
             }
             continue;
         }
-        let n = el.count as usize;
+        // Every property of a row takes at least one byte in any encoding, so a lying
+        // count (an ASCII header may claim 2^40 vertices) cannot reserve more rows than
+        // the remaining bytes can hold.
+        let room = (bytes.len() - body.pos) / el.properties.len().max(1);
+        let n = (el.count as usize).min(room);
         scene.positions.reserve_exact(n);
         scene.log_scales.reserve_exact(n);
         scene.rotations.reserve_exact(n);
@@ -524,6 +533,17 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
                 "has {} bytes after the last element the header declares; its counts do not match the data",
                 bytes.len() - body.pos
             ),
+        ));
+    }
+    if header.format == Format::Ascii
+        && body.pos > header.body_offset
+        && !bytes[body.pos..].iter().any(|&b| b == b'\n' || b == b'\r')
+    {
+        // Every writer ends the last row with a line break; without one, a file cut
+        // inside its last number would load with that number shortened.
+        return Err(SceneError::invalid(
+            path,
+            "ends inside its last value, without a line break after it; the file is truncated",
         ));
     }
     if header.format == Format::Ascii && bytes[body.pos..].iter().any(|b| !b.is_ascii_whitespace())

@@ -150,6 +150,11 @@ pub(crate) fn parse(source: Source<'_>, path: &Path) -> Result<Scene, SceneError
     parse_with(&meta_bytes, &mut files, path)
 }
 
+/// Parses a SOG zip bundle (`.sog`) held in memory. `path` is used in error messages only.
+pub fn parse_zip(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
+    parse(Source::Zip(bytes), path)
+}
+
 fn parse_with(
     meta_bytes: &[u8],
     files: &mut SogFiles<'_>,

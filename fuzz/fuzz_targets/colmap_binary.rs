@@ -1,0 +1,15 @@
+#![no_main]
+//! COLMAP binary model: the input is the length of `cameras.bin` (u32 LE), `cameras.bin`,
+//! then `images.bin`.
+use libfuzzer_sys::fuzz_target;
+use std::path::Path;
+
+fuzz_target!(|data: &[u8]| {
+    let (cams, images) = vksplat_fuzz::split_len_prefixed(data);
+    let _ = vksplat::camera::colmap::parse_colmap_binary(
+        cams,
+        Path::new("cameras.bin"),
+        images,
+        Path::new("images.bin"),
+    );
+});
