@@ -1162,7 +1162,7 @@ fn cases() -> Vec<Case> {
             "cams_empty_list",
             "cameras.json",
             "[]",
-            Error("is a INRIA cameras.json with no cameras in it"),
+            Error("holds no cameras (INRIA cameras.json)"),
         ),
         camera_case(
             "cams_missing_fx",

@@ -86,7 +86,7 @@ pub fn load_camera_file(
     if cams.is_empty() {
         return Err(CameraError::Invalid {
             path: path.to_path_buf(),
-            message: format!("is a {format} with no cameras in it"),
+            message: format!("holds no cameras ({format})"),
         });
     }
     Ok((cams, format))
