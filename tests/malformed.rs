@@ -1260,7 +1260,7 @@ fn cases() -> Vec<Case> {
             "ns_empty_path",
             "camera_path.json",
             r#"{"render_width":64,"render_height":48,"camera_path":[]}"#,
-            Error("with no cameras in it"),
+            Error("holds no cameras"),
         ),
         // Keyframe paths.
         camera_case(
@@ -1417,7 +1417,7 @@ fn cases() -> Vec<Case> {
             COLMAP_CAMS.into(),
             b"# nothing\n".to_vec(),
             false,
-            "with no cameras in it",
+            "holds no cameras",
         ),
         // COLMAP binary.
         {
