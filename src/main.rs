@@ -247,9 +247,13 @@ struct RenderArgs {
     #[command(flatten)]
     filter: FilterArgs,
     /// Opacity compensation for scenes trained with antialiasing (mip) settings:
-    /// opacity * sqrt(max(2.5e-5, det_before / det_after)) of the 0.3 dilation.
+    /// opacity * sqrt(max(2.5e-5, det_before / det_after)) of the 0.3 dilation. On by
+    /// default when the file records antialiased training (SPZ flag, SOG meta.json).
     #[arg(long)]
     antialiased: bool,
+    /// Render without the compensation even when the file records antialiased training.
+    #[arg(long, conflicts_with = "antialiased")]
+    no_antialiased: bool,
     /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     cpu: bool,
@@ -519,9 +523,15 @@ fn render(args: &RenderArgs) -> Result<()> {
         );
         return Ok(());
     }
+    let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
+    if scene.antialiased && !args.antialiased && !args.no_antialiased {
+        eprintln!(
+            "note: {name} records that it was trained with antialiasing; rendering with its opacity compensation (--no-antialiased turns it off)"
+        );
+    }
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
-        antialiased: args.antialiased,
+        antialiased,
     };
     let run_opts = vksplat::sequence::RunOptions {
         overwrite: args.overwrite,
@@ -833,6 +843,13 @@ fn cmd_convert(args: &ConvertArgs) -> Result<()> {
         r.sh_degree,
         r.bytes
     );
+    if r.antialiased_flag_lost {
+        eprintln!(
+            "note: {} records that the scene was trained with antialiasing; {} cannot record that, so render the output with --antialiased",
+            args.input.display(),
+            r.output_format
+        );
+    }
     Ok(())
 }
 
@@ -852,6 +869,9 @@ fn info(arg: &SceneArg) -> Result<()> {
     println!("scene       {name}");
     if let Some(format) = format {
         println!("format      {format}");
+        if scene.antialiased {
+            println!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
+        }
     }
     println!("gaussians   {}", s.count);
     println!(

@@ -6,6 +6,7 @@
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 use vksplat::camera;
 use vksplat::cpu::{self, RenderOptions};
 use vksplat::scene::spz::SpzCompression;
@@ -699,7 +700,7 @@ fn detection_uses_content_not_extension() {
 }
 
 fn vksplat(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_vksplat"))
+    Command::new(env!("CARGO_BIN_EXE_vksplat"))
         .args(args)
         .output()
         .expect("the binary runs")
@@ -831,4 +832,74 @@ fn mutated_files_never_panic() {
     // The uncompressed payload itself is a valid SPZ v3.
     let (_, f) = scene::parse_bytes(&files[0].1, Path::new("raw.spz")).unwrap();
     assert_eq!(f.to_string(), "SPZ v3 (uncompressed)");
+}
+
+/// A file that records antialiased training (SPZ header flag, SOG `antialias`) renders with
+/// the opacity compensation by default; `--no-antialiased` turns it off, and converting
+/// to a format that cannot record the flag says so.
+#[test]
+fn antialiased_training_flag_is_read_written_and_honoured() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene =
+        vksplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+    scene.antialiased = true;
+    let spz = dir.path().join("aa.spz");
+    std::fs::write(&spz, vksplat::scene::spz::to_bytes_v3(&scene).unwrap()).unwrap();
+    let back = vksplat::scene::load(&spz).unwrap();
+    assert!(back.antialiased);
+    scene.antialiased = false;
+    let plain = vksplat::scene::spz::to_bytes_v3(&scene).unwrap();
+    assert!(
+        !vksplat::scene::parse_bytes(&plain, Path::new("plain.spz"))
+            .unwrap()
+            .0
+            .antialiased
+    );
+
+    let run = |out: &str, extra: &[&str]| -> String {
+        let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+            .arg("render")
+            .arg(&spz)
+            .args(["--width", "160", "--cpu", "-o"])
+            .arg(dir.path().join(out))
+            .args(extra)
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{e}");
+        e
+    };
+    let e = run("default.png", &[]);
+    assert!(e.contains("trained with antialiasing"), "{e}");
+    run("forced.png", &["--antialiased"]);
+    run("off.png", &["--no-antialiased"]);
+    let read = |n: &str| std::fs::read(dir.path().join(n)).unwrap();
+    assert_eq!(read("default.png"), read("forced.png"));
+    assert_ne!(read("default.png"), read("off.png"));
+
+    // SOG: the `antialias` field of meta.json.
+    let sog = dir.path().join("sog");
+    std::fs::create_dir(&sog).unwrap();
+    let src = common::shared_data().join("playbot_lod3_31k_sh2_sog");
+    for e in std::fs::read_dir(&src).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), sog.join(e.file_name())).unwrap();
+    }
+    assert!(!vksplat::scene::load(&sog).unwrap().antialiased);
+    let meta = sog.join("meta.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&meta).unwrap()).unwrap();
+    json["antialias"] = true.into();
+    std::fs::write(&meta, json.to_string()).unwrap();
+    assert!(vksplat::scene::load(&sog).unwrap().antialiased);
+
+    // PLY cannot record the flag: convert says so.
+    let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+        .arg("convert")
+        .arg(&spz)
+        .arg(dir.path().join("aa.ply"))
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && e.contains("--antialiased"), "{e}");
 }

@@ -91,6 +91,7 @@ impl SceneFilter {
             .sh_degree
             .map_or(scene.sh_degree, |d| d.min(scene.sh_degree));
         let mut out = Scene::empty(degree);
+        out.antialiased = scene.antialiased;
         let keep: Vec<usize> = (0..scene.len()).filter(|&i| self.keeps(scene, i)).collect();
         let in_stride = scene.sh_stride();
         let out_stride = out.sh_stride();

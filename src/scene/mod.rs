@@ -49,6 +49,11 @@ pub struct Scene {
     pub opacity_logits: Vec<f32>,
     /// SH coefficients, `sh_stride()` floats per Gaussian (see the module docs).
     pub sh: Vec<f32>,
+    /// The file records that the scene was trained with antialiasing (the SPZ header's
+    /// antialiased flag, SOG's `antialias`): it should be rendered with the opacity
+    /// compensation of [`crate::cpu::RenderOptions::antialiased`]. INRIA PLY and `.splat`
+    /// cannot record it.
+    pub antialiased: bool,
 }
 
 /// Gaussians after the reference activations, ready to render or upload.

@@ -28,6 +28,9 @@ const MAX_ENTRY_BYTES: u64 = 1 << 30;
 struct Meta {
     version: Option<u32>,
     count: u64,
+    /// The scene was trained with antialiasing.
+    #[serde(default)]
+    antialias: bool,
     means: Means,
     scales: Codebooked,
     quats: Files,
@@ -270,6 +273,7 @@ fn parse_with(
     let degree = sh_n.as_ref().map_or(0, |(s, ..)| s.bands);
 
     let mut scene = Scene::empty(degree);
+    scene.antialiased = meta.antialias;
     scene.positions.reserve_exact(n);
     scene.log_scales.reserve_exact(n);
     scene.rotations.reserve_exact(n);

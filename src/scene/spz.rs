@@ -47,6 +47,8 @@ pub const RUB_SH_SIGN: [f32; 15] = [
 ];
 
 const FLAG_EXTENSIONS: u8 = 0x2;
+/// Header flag: the scene was trained with antialiasing.
+const FLAG_ANTIALIASED: u8 = 0x1;
 
 /// How an SPZ payload is wrapped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -372,6 +374,7 @@ fn decode(h: &Header, s: [&[u8]; 6], path: &Path) -> Result<Scene, SceneError> {
     let [positions, alphas, colors, scales, rotations, sh] = s;
     let n = h.count as usize;
     let mut scene = Scene::empty(h.sh_degree);
+    scene.antialiased = h.flags & FLAG_ANTIALIASED != 0;
     let rest = h.sh_bytes() as usize;
     let step = 1.0 / (1u32 << h.fractional_bits) as f32;
     let flip = [1.0f32, -1.0, -1.0];
@@ -498,7 +501,12 @@ pub fn to_bytes_v3(scene: &Scene) -> Result<Vec<u8>, String> {
     out.extend_from_slice(&MAGIC.to_le_bytes());
     out.extend_from_slice(&3u32.to_le_bytes());
     out.extend_from_slice(&count.to_le_bytes());
-    out.extend_from_slice(&[scene.sh_degree as u8, fb, 0, 0]);
+    let flags = if scene.antialiased {
+        FLAG_ANTIALIASED
+    } else {
+        0
+    };
+    out.extend_from_slice(&[scene.sh_degree as u8, fb, flags, 0]);
     let scale = (1u32 << fb) as f32;
     let flip = [1.0f32, -1.0, -1.0];
     for p in &scene.positions {

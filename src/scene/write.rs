@@ -104,6 +104,8 @@ pub struct ConvertReport {
     pub sh_degree: u32,
     /// Bytes written.
     pub bytes: usize,
+    /// The input records antialiased training but the output format cannot say so.
+    pub antialiased_flag_lost: bool,
 }
 
 /// Loads `input` (any supported format), applies the filter and writes `output` in the
@@ -134,5 +136,6 @@ pub fn convert(
         written: filtered.len(),
         sh_degree: filtered.sh_degree,
         bytes: bytes.len(),
+        antialiased_flag_lost: scene.antialiased && output_format != OutputFormat::Spz,
     })
 }
