@@ -357,13 +357,30 @@ fn remove_stale_temporaries(dirs: &HashSet<PathBuf>, planned: &HashSet<PathBuf>)
             let Ok(pid) = pid.parse::<u32>() else {
                 continue;
             };
-            let alive = pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists();
+            let alive = pid == std::process::id() || process_running(pid);
             if names.contains(name) && !alive && std::fs::remove_file(e.path()).is_ok() {
                 removed += 1;
             }
         }
     }
     removed
+}
+
+/// Whether process `pid` exists and has not exited (a zombie, killed but not yet reaped
+/// by its parent, counts as exited). Where `/proc` is missing, every process counts as
+/// running, so nothing is removed.
+fn process_running(pid: u32) -> bool {
+    if !Path::new("/proc/self").exists() {
+        return true;
+    }
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        // The state follows the parenthesised command name: "pid (comm) S ...".
+        Ok(stat) => stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .map_or(true, |state| state != "Z" && state != "X"),
+        Err(_) => false,
+    }
 }
 
 /// How progress is shown.
@@ -647,6 +664,21 @@ mod tests {
                 "{bad}"
             );
         }
+    }
+
+    #[test]
+    fn exited_and_zombie_processes_do_not_count_as_running() {
+        assert!(process_running(std::process::id()));
+        assert!(!process_running(4_000_000_000));
+        // A child that exited but is not reaped yet is a zombie: its temporaries are stale.
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let pid = child.id();
+        let start = std::time::Instant::now();
+        while process_running(pid) && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(!process_running(pid));
+        child.wait().unwrap();
     }
 
     #[test]
