@@ -9,7 +9,7 @@
 use std::time::Instant;
 use vksplat::camera;
 use vksplat::cpu::{self, RenderOptions};
-use vksplat::gen::{synthetic_scene, Rng};
+use vksplat::gen::{synthetic_scene, tile_depth_keys, Rng};
 use vksplat::gpu::sync::{barrier, Access};
 use vksplat::gpu::{
     ContextOptions, Count, GpuBuffer, GpuContext, GpuTimer, MemoryKind, RadixSort, Scan,
@@ -26,24 +26,6 @@ fn stats(mut v: Vec<f64>) -> String {
         at(0.95),
         v[v.len() - 1]
     )
-}
-
-/// Keys shaped like real tile|depth keys: clustered tiles of a 1280x720 frame, depths in
-/// [0.2, 50].
-fn tile_depth_keys(n: usize, seed: u64) -> Vec<[u32; 2]> {
-    let mut rng = Rng(seed);
-    (0..n)
-        .map(|i| {
-            let cluster = (i / 97) as u32 * 37 % 3600;
-            let tile = if rng.next_u64() % 8 == 0 {
-                (rng.next_u64() % 3600) as u32
-            } else {
-                (cluster + (rng.next_u64() % 5) as u32) % 3600
-            };
-            let depth = rng.range(0.2, 50.0);
-            [depth.to_bits(), tile]
-        })
-        .collect()
 }
 
 fn time_gpu(
@@ -82,7 +64,10 @@ fn main() {
     let sort = RadixSort::new(&ctx).expect("sort");
     let scan = Scan::new(&ctx).expect("scan");
     for &n in sizes {
-        let keys = tile_depth_keys(n, 42);
+        let keys: Vec<[u32; 2]> = tile_depth_keys(&mut Rng(42), n)
+            .into_iter()
+            .map(|k| [k as u32, (k >> 32) as u32])
+            .collect();
         let values: Vec<u32> = (0..n as u32).collect();
         let key_buf = GpuBuffer::from_slice(&ctx, "keys", &keys).expect("keys");
         let value_buf = GpuBuffer::from_slice(&ctx, "values", &values).expect("values");

@@ -21,6 +21,10 @@ impl Rng {
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         z ^ (z >> 31)
     }
+    /// Next 32 random bits (the high half of [`Rng::next_u64`]).
+    pub fn next_u32(&mut self) -> u32 {
+        (self.next_u64() >> 32) as u32
+    }
     /// Uniform in [0, 1).
     pub fn unit(&mut self) -> f32 {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
@@ -50,6 +54,24 @@ enum Surface {
     Ground,
     /// A sphere.
     Sphere { centre: Vec3, radius: f32 },
+}
+
+/// `n` sort keys shaped like the renderer's tile|depth pairs of a 1280x720 frame: the high
+/// word a tile id of 3,600 (mostly runs of neighbouring tiles, one in eight anywhere), the
+/// low word the f32 bits of a depth in [0.2, 50). For sort tests and benchmarks.
+pub fn tile_depth_keys(rng: &mut Rng, n: usize) -> Vec<u64> {
+    (0..n)
+        .map(|i| {
+            let cluster = (i / 97) as u32 * 37 % 3600;
+            let tile = if rng.next_u32() % 8 == 0 {
+                rng.next_u32() % 3600
+            } else {
+                (cluster + rng.next_u32() % 5) % 3600
+            };
+            let depth = rng.range(0.2, 50.0);
+            (u64::from(tile) << 32) | u64::from(depth.to_bits())
+        })
+        .collect()
 }
 
 /// Generates `n` Gaussians with SH degree `sh_degree` from `seed`.

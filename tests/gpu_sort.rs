@@ -1,6 +1,7 @@
 //! GPU prefix sum and radix sort against CPU references, on whatever Vulkan device is
 //! available (lavapipe in CI), with validation on: any validation message fails.
 
+use vksplat::gen::{tile_depth_keys, Rng};
 use vksplat::gpu::buffer::{GpuBuffer, MemoryKind};
 use vksplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};
 use vksplat::gpu::shader::compile_glsl;
@@ -26,24 +27,6 @@ fn assert_no_validation_messages(ctx: &GpuContext) {
         "validation messages:\n{}",
         messages.join("\n")
     );
-}
-
-/// SplitMix64: fixed-seed test data without extra dependencies.
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn next_u32(&mut self) -> u32 {
-        (self.next_u64() >> 32) as u32
-    }
-    fn next_f32(&mut self) -> f32 {
-        (self.next_u32() >> 8) as f32 / (1u32 << 24) as f32
-    }
 }
 
 #[test]
@@ -300,22 +283,6 @@ fn check_sort(
         got_values[n..] == values[n..],
         "{what}: values past the count changed"
     );
-}
-
-/// Keys like the renderer's: hi = tile id (clustered), lo = f32 bits of a depth.
-fn tile_depth_keys(rng: &mut Rng, n: usize) -> Vec<u64> {
-    (0..n)
-        .map(|i| {
-            let cluster = (i / 97) as u32 * 37 % 3600;
-            let tile = if rng.next_u32() % 8 == 0 {
-                rng.next_u32() % 3600
-            } else {
-                (cluster + rng.next_u32() % 5) % 3600
-            };
-            let depth = 0.2 + rng.next_f32() * 49.8;
-            (u64::from(tile) << 32) | u64::from(depth.to_bits())
-        })
-        .collect()
 }
 
 fn patterns(rng: &mut Rng, n: usize) -> Vec<(&'static str, Vec<u64>)> {
