@@ -29,6 +29,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 use vksplat::camera::{self, Camera, PathTiming};
 use vksplat::cpu::{self, RenderOptions};
+use vksplat::scene::compressed_ply::{CHUNK_PROPS, VERTEX_PROPS};
 use vksplat::scene::{self, Scene};
 
 /// The longest a CLI run on a tiny file may take before it counts as a hang.
@@ -251,27 +252,6 @@ fn spz_v4(count: u32, n: usize, toc_offset: u32, size_delta: u64) -> Vec<u8> {
     b
 }
 
-const CHUNK_PROPS: [&str; 18] = [
-    "min_x",
-    "min_y",
-    "min_z",
-    "max_x",
-    "max_y",
-    "max_z",
-    "min_scale_x",
-    "min_scale_y",
-    "min_scale_z",
-    "max_scale_x",
-    "max_scale_y",
-    "max_scale_z",
-    "min_r",
-    "min_g",
-    "min_b",
-    "max_r",
-    "max_g",
-    "max_b",
-];
-
 /// A PlayCanvas compressed PLY: `chunks` chunk rows of `bounds`, `verts` packed vertices of
 /// type `packed_ty`, and the element counts the header declares.
 fn cply(
@@ -287,12 +267,7 @@ fn cply(
         h.push_str(&format!("property float {p}\n"));
     }
     h.push_str(&format!("element vertex {declared_verts}\n"));
-    for p in [
-        "packed_position",
-        "packed_rotation",
-        "packed_scale",
-        "packed_color",
-    ] {
+    for p in VERTEX_PROPS {
         h.push_str(&format!("property {packed_ty} {p}\n"));
     }
     h.push_str("end_header\n");

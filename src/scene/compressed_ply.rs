@@ -20,7 +20,8 @@ use std::path::Path;
 /// Gaussians per chunk.
 pub const CHUNK_SIZE: u64 = 256;
 
-const CHUNK_PROPS: [&str; 18] = [
+/// Properties of each `chunk` row (bounds of its positions, scales and colours), in order.
+pub const CHUNK_PROPS: [&str; 18] = [
     "min_x",
     "min_y",
     "min_z",
@@ -40,7 +41,8 @@ const CHUNK_PROPS: [&str; 18] = [
     "max_g",
     "max_b",
 ];
-const VERTEX_PROPS: [&str; 4] = [
+/// Properties of each packed `vertex` row, in order.
+pub const VERTEX_PROPS: [&str; 4] = [
     "packed_position",
     "packed_rotation",
     "packed_scale",
