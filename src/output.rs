@@ -242,15 +242,6 @@ pub fn encode_exr_channels(
         })
 }
 
-/// Encodes colour, alpha and depth as a 32-bit float OpenEXR with channels R, G, B, A, Z.
-pub fn encode_exr(
-    frame: &Frame,
-    out: &mut (impl Write + std::io::Seek),
-    path: &Path,
-) -> Result<(), OutputError> {
-    encode_exr_channels(frame, ExrChannels::ALL, out, path)
-}
-
 /// Encodes one 8- or 16-bit grey plane (values in [0, 1]) as PNG.
 pub fn encode_png_grey(
     width: u32,
@@ -365,11 +356,19 @@ pub fn write_frame(
     format: ImageFormat,
     overwrite: bool,
 ) -> Result<(), OutputError> {
-    write_atomically(path, overwrite, |w| match format {
-        ImageFormat::Png8 => encode_png(frame, false, w, path),
-        ImageFormat::Png16 => encode_png(frame, true, w, path),
-        ImageFormat::Exr => encode_exr(frame, w, path),
-    })
+    let content = match format {
+        ImageFormat::Png8 => FileContent::PngColor { sixteen_bit: false },
+        ImageFormat::Png16 => FileContent::PngColor { sixteen_bit: true },
+        ImageFormat::Exr => FileContent::Exr(ExrChannels::ALL),
+    };
+    write_file(
+        frame,
+        &FileSpec {
+            path: path.to_path_buf(),
+            content,
+        },
+        overwrite,
+    )
 }
 
 /// What a render writes per frame.
