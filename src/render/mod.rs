@@ -432,15 +432,19 @@ impl GpuRenderer {
                 texels * 16
             )));
         }
-        let mut sh_padded = vec![0f32; scene.len() * padded];
-        if stride > 0 {
-            for (dst, src) in sh_padded
+        // SH degrees 1 and 3 fill whole texels already and upload as they are.
+        let sh_padded: std::borrow::Cow<[f32]> = if stride == padded {
+            std::borrow::Cow::Borrowed(&scene.sh)
+        } else {
+            let mut v = vec![0f32; scene.len() * padded];
+            for (dst, src) in v
                 .chunks_exact_mut(padded)
                 .zip(scene.sh.chunks_exact(stride))
             {
                 dst[..stride].copy_from_slice(src);
             }
-        }
+            std::borrow::Cow::Owned(v)
+        };
         let sh_bytes = (sh_padded.len() * 4).max(16) as u64;
         let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
         gaussians.upload(&self.ctx, &records)?;
