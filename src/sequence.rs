@@ -447,11 +447,6 @@ impl Summary {
     }
 }
 
-enum Done {
-    Written { encode_s: f64 },
-    Failed(output::OutputError),
-}
-
 struct Progress {
     total: usize,
     done: usize,
@@ -529,42 +524,44 @@ pub fn run(
     let start = Instant::now();
     let mut progress = Progress::new(frames.len(), opts.progress);
     let mut summary = Summary::default();
+    let mut failure: Option<SequenceError> = None;
     let overwrite = opts.overwrite;
-    let write_all = |frame: &Frame, files: &[FileSpec]| -> Result<f64, output::OutputError> {
+    let write_all = |frame: &Frame, files: &[FileSpec]| -> Written {
         let t = Instant::now();
         for f in files {
             output::write_file(frame, f, overwrite)?;
         }
         Ok(t.elapsed().as_secs_f64())
     };
-    let mut failure: Option<SequenceError> = None;
-    if opts.encode_threads == 0 {
-        for p in frames {
-            let t = Instant::now();
-            let frame = match render(&p.camera) {
-                Ok(f) => f,
-                Err(e) => {
-                    failure = Some(render_error(p.index, &e, summary.written));
-                    break;
-                }
-            };
-            summary.render_s += t.elapsed().as_secs_f64();
-            match write_all(&frame, &p.files) {
-                Ok(s) => {
-                    summary.encode_s += s;
-                    summary.written += 1;
-                    progress.frame_done();
-                }
-                Err(e) => {
-                    failure = Some(e.into());
-                    break;
-                }
+    // Counts a frame whose files were written, or keeps the first error.
+    let mut record = |written: Written,
+                      summary: &mut Summary,
+                      failure: &mut Option<SequenceError>| {
+        match written {
+            Ok(encode_s) => {
+                summary.encode_s += encode_s;
+                summary.written += 1;
+                progress.frame_done();
+            }
+            Err(e) => {
+                failure.get_or_insert(e.into());
             }
         }
+    };
+    if opts.encode_threads == 0 {
+        render_frames(
+            frames,
+            render,
+            &mut summary,
+            &mut failure,
+            |frame, p, summary, failure| {
+                record(write_all(&frame, &p.files), summary, failure);
+            },
+        );
     } else {
         let (job_tx, job_rx) = mpsc::sync_channel::<(Frame, Vec<FileSpec>)>(opts.queue_depth);
         let job_rx = Arc::new(Mutex::new(job_rx));
-        let (done_tx, done_rx) = mpsc::channel::<Done>();
+        let (done_tx, done_rx) = mpsc::channel::<Written>();
         std::thread::scope(|scope| {
             for _ in 0..opts.encode_threads {
                 let job_rx = Arc::clone(&job_rx);
@@ -575,58 +572,37 @@ pub fn run(
                     let Ok((frame, files)) = job else {
                         break;
                     };
-                    let done = match write_all(&frame, &files) {
-                        Ok(encode_s) => Done::Written { encode_s },
-                        Err(e) => Done::Failed(e),
-                    };
-                    if done_tx.send(done).is_err() {
+                    if done_tx.send(write_all(&frame, &files)).is_err() {
                         break;
                     }
                 });
             }
             drop(done_tx);
-            let mut on_done =
-                |d: Done, summary: &mut Summary, failure: &mut Option<SequenceError>| match d {
-                    Done::Written { encode_s } => {
-                        summary.encode_s += encode_s;
-                        summary.written += 1;
-                        progress.frame_done();
+            render_frames(
+                frames,
+                render,
+                &mut summary,
+                &mut failure,
+                |frame, p, summary, failure| {
+                    // A full queue blocks here until an encoder is free. The encoders only stop
+                    // once the queue is closed, so the send succeeds.
+                    let _ = job_tx.send((frame, p.files.clone()));
+                    while let Ok(d) = done_rx.try_recv() {
+                        record(d, summary, failure);
                     }
-                    Done::Failed(e) => {
-                        failure.get_or_insert(e.into());
-                    }
-                };
-            for p in frames {
-                while let Ok(d) = done_rx.try_recv() {
-                    on_done(d, &mut summary, &mut failure);
-                }
-                if failure.is_some() {
-                    break;
-                }
-                let t = Instant::now();
-                let frame = match render(&p.camera) {
-                    Ok(f) => f,
-                    Err(e) => {
-                        failure = Some(render_error(p.index, &e, usize::MAX));
-                        break;
-                    }
-                };
-                summary.render_s += t.elapsed().as_secs_f64();
-                if job_tx.send((frame, p.files.clone())).is_err() {
-                    break;
-                }
-            }
+                },
+            );
             drop(job_tx);
             // Let the encoders finish what they hold, so every frame handed over is complete.
             for d in done_rx.iter() {
-                on_done(d, &mut summary, &mut failure);
+                record(d, &mut summary, &mut failure);
             }
         });
-        if let Some(SequenceError::Render { written, .. }) = &mut failure {
-            *written = summary.written;
-        }
     }
     progress.finish();
+    if let Some(SequenceError::Render { written, .. }) = &mut failure {
+        *written = summary.written;
+    }
     summary.wall_s = start.elapsed().as_secs_f64();
     match failure {
         Some(e) => Err(e),
@@ -634,11 +610,37 @@ pub fn run(
     }
 }
 
-fn render_error(index: usize, e: &anyhow::Error, written: usize) -> SequenceError {
-    SequenceError::Render {
-        index,
-        message: format!("{e:#}"),
-        written,
+/// The outcome of writing one frame's files: seconds spent encoding, or the error.
+type Written = Result<f64, output::OutputError>;
+
+/// Renders `frames` in order and hands each to `deliver`, until the first render error or
+/// until `deliver` has recorded a failure.
+fn render_frames(
+    frames: &[FramePlan],
+    render: &mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
+    summary: &mut Summary,
+    failure: &mut Option<SequenceError>,
+    mut deliver: impl FnMut(Frame, &FramePlan, &mut Summary, &mut Option<SequenceError>),
+) {
+    for p in frames {
+        if failure.is_some() {
+            return;
+        }
+        let t = Instant::now();
+        match render(&p.camera) {
+            Ok(frame) => {
+                summary.render_s += t.elapsed().as_secs_f64();
+                deliver(frame, p, summary, failure);
+            }
+            Err(e) => {
+                *failure = Some(SequenceError::Render {
+                    index: p.index,
+                    message: format!("{e:#}"),
+                    // Filled in once the frames handed over are written.
+                    written: 0,
+                });
+            }
+        }
     }
 }
 
