@@ -1,0 +1,8 @@
+//! The subcommands of the `vksplat` binary, one file each, and the arguments they share.
+
+pub mod bench;
+pub mod common;
+pub mod convert;
+pub mod gen;
+pub mod info;
+pub mod render;
