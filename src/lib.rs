@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod camera;
+pub mod console;
 pub mod cpu;
 pub mod frame;
 pub mod gen;

@@ -4,6 +4,7 @@ mod cli;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
+use vksplat::note;
 
 #[derive(Parser)]
 #[command(
@@ -17,16 +18,23 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
+// Negative numbers are values, not flags (`--orbit-elevation -10`): every subcommand
+// allows them.
 enum Command {
     /// Render a scene to a PNG or EXR image.
+    #[command(allow_negative_numbers = true)]
     Render(cli::render::RenderArgs),
     /// Print a scene's size, bounds and parameter statistics.
+    #[command(allow_negative_numbers = true)]
     Info(cli::common::SceneArg),
     /// Render the same camera repeatedly and report per-stage GPU times.
+    #[command(allow_negative_numbers = true)]
     Bench(cli::bench::BenchArgs),
-    /// Write a synthetic scene (seeded) as an INRIA PLY, for scaling benchmarks.
+    /// Write a synthetic scene (seeded) as .ply, .splat or .spz, for scaling benchmarks.
+    #[command(allow_negative_numbers = true)]
     Gen(cli::gen::GenArgs),
     /// Convert a scene (any readable format) to .ply, .splat or .spz, chosen by OUT's extension.
+    #[command(allow_negative_numbers = true)]
     Convert(cli::convert::ConvertArgs),
 }
 
@@ -39,12 +47,24 @@ fn main() -> ExitCode {
         Command::Gen(args) => cli::gen::gen(args),
         Command::Convert(args) => cli::convert::convert(args),
     };
+    // A closed pipe (`vksplat info scene.ply | head`) is not an error; any other failure to
+    // write the command's output is.
+    let result = result.and_then(|()| match vksplat::console::stdout_error() {
+        Some(e) => Err(anyhow::anyhow!("writing to standard output failed: {e}")),
+        None => Ok(()),
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {}", error_sentence(&e));
-            ExitCode::FAILURE
-        }
+        Err(e) => match e.downcast_ref::<cli::render::Interrupted>() {
+            Some(stopped) => {
+                note!("{stopped}");
+                ExitCode::from(130)
+            }
+            None => {
+                note!("error: {}", error_sentence(&e));
+                ExitCode::FAILURE
+            }
+        },
     }
 }
 

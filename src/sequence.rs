@@ -14,6 +14,7 @@ use crate::output::{self, FileSpec, OutputOptions};
 use std::collections::HashSet;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -41,11 +42,12 @@ impl OutputPattern {
     /// Parses `output`. A path that is an existing directory or ends with a separator
     /// names a directory: frames go to `frame_{:05}.<dir_extension>` inside it.
     /// Placeholders: `{}` (frame number), `{:0N}` (zero-padded to N digits), `{name}`
-    /// (camera name); `{{` and `}}` are literal braces.
+    /// (camera name); `{{` and `}}` are literal braces. The habits of other tools work
+    /// too: `%d` / `%04d` (printf, ffmpeg; `%%` is a literal `%`) and `####` (one digit
+    /// per `#`, as in Nuke and Houdini).
     pub fn parse(output: &Path, dir_extension: &str) -> Result<OutputPattern, String> {
         let text = output.to_string_lossy().into_owned();
-        let is_dir = output.is_dir() || text.ends_with('/') || text.ends_with('\\');
-        if is_dir {
+        if names_directory(output) {
             let dir = text.trim_end_matches(['/', '\\']);
             let dir = if dir.is_empty() { "/" } else { dir };
             return Ok(OutputPattern {
@@ -61,6 +63,52 @@ impl OutputPattern {
         let mut chars = text.chars().peekable();
         while let Some(c) = chars.next() {
             match c {
+                '%' if chars.peek() == Some(&'%') => {
+                    chars.next();
+                    lit.push('%');
+                }
+                '%' => {
+                    let mut digits = String::new();
+                    while let Some(d) = chars.peek().filter(|d| d.is_ascii_digit()) {
+                        digits.push(*d);
+                        chars.next();
+                    }
+                    if chars.next() != Some('d') {
+                        return Err(format!(
+                            "{text}: unknown '%' placeholder; use %d or %05d (a literal % is %%)"
+                        ));
+                    }
+                    let width = if digits.is_empty() {
+                        0
+                    } else {
+                        digits.parse::<usize>().unwrap_or(usize::MAX)
+                    };
+                    if width > 12 {
+                        return Err(format!(
+                            "{text}: frame numbers are padded to at most 12 digits"
+                        ));
+                    }
+                    if !lit.is_empty() {
+                        pieces.push(Piece::Text(std::mem::take(&mut lit)));
+                    }
+                    pieces.push(Piece::Index { width });
+                }
+                '#' => {
+                    let mut width = 1;
+                    while chars.peek() == Some(&'#') {
+                        chars.next();
+                        width += 1;
+                    }
+                    if width > 12 {
+                        return Err(format!(
+                            "{text}: frame numbers are padded to at most 12 digits"
+                        ));
+                    }
+                    if !lit.is_empty() {
+                        pieces.push(Piece::Text(std::mem::take(&mut lit)));
+                    }
+                    pieces.push(Piece::Index { width });
+                }
                 '{' if chars.peek() == Some(&'{') => {
                     chars.next();
                     lit.push('{');
@@ -118,69 +166,125 @@ impl OutputPattern {
             match p {
                 Piece::Text(t) => s.push_str(t),
                 Piece::Index { width } => s.push_str(&format!("{index:0width$}")),
-                Piece::Name => s.extend(name.chars().map(|c| {
-                    if c == '/' || c == '\\' || c.is_control() {
-                        '_'
-                    } else {
-                        c
-                    }
-                })),
+                Piece::Name => s.push_str(&file_safe_name(name)),
             }
         }
         PathBuf::from(s)
     }
 }
 
-/// A range of frame numbers, `start..end` (end exclusive, `None` = to the end).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FrameRange {
-    /// First frame.
-    pub start: usize,
-    /// One past the last frame, or `None` for the end of the path.
-    pub end: Option<usize>,
+/// True when an output names a directory: it exists as one or ends with a separator.
+pub fn names_directory(output: &Path) -> bool {
+    let text = output.to_string_lossy();
+    output.is_dir() || text.ends_with('/') || text.ends_with('\\')
 }
 
-impl std::str::FromStr for FrameRange {
-    type Err = String;
-    /// `100..200` (end exclusive), `100..=199`, `100..`, `..200`, or one frame `7`.
-    fn from_str(s: &str) -> Result<Self, String> {
-        let num = |t: &str| -> Result<usize, String> {
-            t.trim().parse::<usize>().map_err(|_| {
-                format!("\"{s}\" is not a frame range (e.g. 100..200, 100..=199, 100.., 7)")
-            })
-        };
-        let range = if let Some((a, b)) = s.split_once("..=") {
-            FrameRange {
-                start: if a.trim().is_empty() { 0 } else { num(a)? },
-                end: Some(num(b)? + 1),
-            }
-        } else if let Some((a, b)) = s.split_once("..") {
-            FrameRange {
-                start: if a.trim().is_empty() { 0 } else { num(a)? },
-                end: if b.trim().is_empty() {
-                    None
-                } else {
-                    Some(num(b)?)
-                },
-            }
-        } else {
-            let k = num(s)?;
-            FrameRange {
-                start: k,
-                end: Some(k + 1),
-            }
-        };
-        if range.end.is_some_and(|e| e <= range.start) {
-            return Err(format!("frame range \"{s}\" is empty"));
+/// A camera name as a file name: an image extension is dropped (COLMAP and INRIA names
+/// are the photos' file names, and `front.png` should give `front.png`, not
+/// `front.png.png`), and path separators, control characters and white space become `_`.
+pub fn file_safe_name(name: &str) -> String {
+    const IMAGE_EXTENSIONS: [&str; 9] = [
+        "png", "jpg", "jpeg", "exr", "tif", "tiff", "bmp", "webp", "npy",
+    ];
+    let stem = match name.rsplit_once('.') {
+        Some((stem, ext))
+            if !stem.is_empty() && IMAGE_EXTENSIONS.iter().any(|e| e.eq_ignore_ascii_case(ext)) =>
+        {
+            stem
         }
-        Ok(range)
+        _ => name,
+    };
+    let safe: String = stem
+        .chars()
+        .map(|c| {
+            if c == '/' || c == '\\' || c.is_control() || c.is_whitespace() {
+                '_'
+            } else {
+                c
+            }
+        })
+        .collect();
+    if safe.is_empty() {
+        "camera".into()
+    } else {
+        safe
     }
 }
 
-impl FrameRange {
-    /// True when frame `k` is in the range.
+/// The frames of a path to render (`--frames`): frame numbers, lists and ranges in the
+/// syntax of `--camera` (`7`, `0,3,7`, `100..200` end exclusive, `100..=199`, `100..`,
+/// `..50`, mixed freely). Frame numbers are positions in the whole path, the numbers the
+/// file names carry, whatever `--camera` selected.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameSelection {
+    text: String,
+    /// `(start, end)` with `end` exclusive, `None` meaning the end of the path.
+    items: Vec<(usize, Option<usize>)>,
+}
+
+impl std::str::FromStr for FrameSelection {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || {
+            format!("\"{s}\" is not a frame selection (e.g. 7, 0,3,7, 100..200, 100..=199, 100..)")
+        };
+        let mut items = Vec::new();
+        for item in s.split(',').map(str::trim) {
+            let (start, end) = if let Ok(k) = item.parse::<usize>() {
+                (k, Some(k.saturating_add(1)))
+            } else {
+                match crate::camera::parse_index_range(item) {
+                    Some(Ok(range)) => range,
+                    Some(Err(e)) => return Err(e),
+                    None => return Err(bad()),
+                }
+            };
+            if end.is_some_and(|e| e <= start) {
+                return Err(format!("frame range \"{item}\" is empty"));
+            }
+            items.push((start, end));
+        }
+        Ok(FrameSelection {
+            text: s.trim().to_string(),
+            items,
+        })
+    }
+}
+
+impl FrameSelection {
+    /// True when frame `k` is selected.
     pub fn contains(&self, k: usize) -> bool {
-        k >= self.start && self.end.map_or(true, |e| k < e)
+        self.items
+            .iter()
+            .any(|&(start, end)| k >= start && end.map_or(true, |e| k < e))
+    }
+
+    /// Checks that every item lies inside a path of `len` frames: a frame or a range
+    /// reaching past the last frame is an error (as with `--camera`), not silently cut;
+    /// an open range (`100..`) runs to the end.
+    pub fn check(&self, len: usize) -> Result<(), String> {
+        for &(start, end) in &self.items {
+            if start >= len || end.is_some_and(|e| e > len) {
+                let last = match end {
+                    Some(e) if e == start + 1 => format!("frame {start}"),
+                    Some(e) => format!("frames {start}..={}", e - 1),
+                    None => format!("frames {start}.."),
+                };
+                return Err(format!(
+                    "--frames {}: {last} reaches past the end of the path, which has {len} frame(s) ({}){}",
+                    self.text,
+                    crate::camera::index_span(len),
+                    if start < len { format!("; use {start}.. to render to the end") } else { String::new() }
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl std::fmt::Display for FrameSelection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
     }
 }
 
@@ -240,28 +344,29 @@ pub enum SequenceError {
 }
 
 /// Plans a path: frame `k` renders `cameras[k]` into `pattern.path(k, name)`. Only frames
-/// in `range` are planned. Checks that no two frames share a file and applies
+/// in `selection` are planned. Checks that no two frames share a file and applies
 /// `existing`; creates missing output directories and removes temporaries left by an
 /// interrupted run.
 pub fn plan(
     cameras: &[(usize, Camera)],
     pattern: &OutputPattern,
-    range: Option<FrameRange>,
+    selection: Option<&FrameSelection>,
     opts: &OutputOptions,
     existing: Existing,
 ) -> Result<Plan, SequenceError> {
-    if cameras.len() > 1 && !pattern.is_sequence() {
+    let chosen: Vec<&(usize, Camera)> = cameras
+        .iter()
+        .filter(|(k, _)| selection.map_or(true, |s| s.contains(*k)))
+        .collect();
+    if chosen.len() > 1 && !pattern.is_sequence() {
         return Err(SequenceError::Invalid(format!(
-            "{} cameras but the output names one file; pick one with --camera N, or write a sequence with a pattern such as out/frame_{{:05}}.png, out/{{name}}.png or a directory",
-            cameras.len()
+            "{} frames but the output names one file; pick one with --camera N or --frames N, or write a sequence with a pattern such as out/frame_{{:05}}.png, out/frame_%05d.png, out/{{name}}.png or a directory",
+            chosen.len()
         )));
     }
     let mut frames = Vec::new();
     let mut seen = HashSet::new();
-    for (k, cam) in cameras {
-        if !range.map_or(true, |r| r.contains(*k)) {
-            continue;
-        }
+    for (k, cam) in chosen {
         let files = output::plan_files(&pattern.path(*k, &cam.name), opts)?;
         for f in &files {
             if !seen.insert(f.path.clone()) {
@@ -279,8 +384,15 @@ pub fn plan(
     }
     if frames.is_empty() {
         return Err(SequenceError::Invalid(format!(
-            "no frames to render: the path has {} camera(s) and the frame range selects none of them",
-            cameras.len()
+            "no frames to render: --frames {} selects none of the {} frame(s) chosen ({})",
+            selection.map_or(String::new(), |s| s.to_string()),
+            cameras.len(),
+            cameras
+                .iter()
+                .map(|(k, _)| k.to_string())
+                .take(10)
+                .collect::<Vec<_>>()
+                .join(", ")
         )));
     }
     let mut dirs = HashSet::new();
@@ -406,6 +518,12 @@ pub struct RunOptions {
     pub queue_depth: usize,
     /// Progress display.
     pub progress: ProgressStyle,
+    /// Resuming: a file that another process wrote while this run was going is kept and
+    /// counted in [`Summary::appeared`], not an error.
+    pub skip_existing: bool,
+    /// Set (by a Ctrl-C / SIGTERM handler) to stop before the next frame: frames already
+    /// rendered are written completely, and the summary says the run was interrupted.
+    pub cancel: Option<Arc<AtomicBool>>,
 }
 
 impl Default for RunOptions {
@@ -415,6 +533,8 @@ impl Default for RunOptions {
             encode_threads: default_encode_threads(),
             queue_depth: 2,
             progress: ProgressStyle::Auto,
+            skip_existing: false,
+            cancel: None,
         }
     }
 }
@@ -438,6 +558,11 @@ pub struct Summary {
     pub render_s: f64,
     /// Seconds spent encoding and writing, summed over threads.
     pub encode_s: f64,
+    /// Files that appeared while the run was going (another process wrote them) and were
+    /// kept, with [`RunOptions::skip_existing`].
+    pub appeared: usize,
+    /// The run stopped early because [`RunOptions::cancel`] was set.
+    pub interrupted: bool,
 }
 
 impl Summary {
@@ -495,7 +620,7 @@ impl Progress {
             let elapsed = self.start.elapsed().as_secs_f64();
             let rate = self.done as f64 / elapsed.max(1e-9);
             let eta = (self.total - self.done) as f64 / rate.max(1e-9);
-            eprintln!(
+            crate::note!(
                 "{}/{} frames ({:.0} %), {rate:.2} frames/s, ETA {eta:.0} s",
                 self.done,
                 self.total,
@@ -526,20 +651,27 @@ pub fn run(
     let mut summary = Summary::default();
     let mut failure: Option<SequenceError> = None;
     let overwrite = opts.overwrite;
+    let skip_existing = opts.skip_existing;
     let write_all = |frame: &Frame, files: &[FileSpec]| -> Written {
         let t = Instant::now();
+        let mut appeared = 0;
         for f in files {
-            output::write_file(frame, f, overwrite)?;
+            match output::write_file(frame, f, overwrite) {
+                // Another process (a parallel run of the same path) wrote it meanwhile.
+                Err(output::OutputError::Exists(_)) if skip_existing => appeared += 1,
+                other => other?,
+            }
         }
-        Ok(t.elapsed().as_secs_f64())
+        Ok((t.elapsed().as_secs_f64(), appeared))
     };
     // Counts a frame whose files were written, or keeps the first error.
     let mut record = |written: Written,
                       summary: &mut Summary,
                       failure: &mut Option<SequenceError>| {
         match written {
-            Ok(encode_s) => {
+            Ok((encode_s, appeared)) => {
                 summary.encode_s += encode_s;
+                summary.appeared += appeared;
                 summary.written += 1;
                 progress.frame_done();
             }
@@ -551,6 +683,7 @@ pub fn run(
     if opts.encode_threads == 0 {
         render_frames(
             frames,
+            opts.cancel.as_deref(),
             render,
             &mut summary,
             &mut failure,
@@ -580,6 +713,7 @@ pub fn run(
             drop(done_tx);
             render_frames(
                 frames,
+                opts.cancel.as_deref(),
                 render,
                 &mut summary,
                 &mut failure,
@@ -610,13 +744,15 @@ pub fn run(
     }
 }
 
-/// The outcome of writing one frame's files: seconds spent encoding, or the error.
-type Written = Result<f64, output::OutputError>;
+/// The outcome of writing one frame's files: seconds spent encoding and the files found
+/// already written by another process, or the error.
+type Written = Result<(f64, usize), output::OutputError>;
 
 /// Renders `frames` in order and hands each to `deliver`, until the first render error or
 /// until `deliver` has recorded a failure.
 fn render_frames(
     frames: &[FramePlan],
+    cancel: Option<&AtomicBool>,
     render: &mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
     summary: &mut Summary,
     failure: &mut Option<SequenceError>,
@@ -624,6 +760,10 @@ fn render_frames(
 ) {
     for p in frames {
         if failure.is_some() {
+            return;
+        }
+        if cancel.is_some_and(|c| c.load(Ordering::SeqCst)) {
+            summary.interrupted = true;
             return;
         }
         let t = Instant::now();
@@ -660,7 +800,20 @@ mod tests {
         assert_eq!(p.path(1, ""), PathBuf::from("x{}.png"));
         let p = OutputPattern::parse(Path::new("somewhere/"), "exr").unwrap();
         assert_eq!(p.path(3, ""), PathBuf::from("somewhere/frame_00003.exr"));
-        for bad in ["a{b}.png", "a{.png", "a}.png", "{:x}.png"] {
+        let p = OutputPattern::parse(Path::new("out/f_%04d.png"), "png").unwrap();
+        assert_eq!(p.path(42, "x"), PathBuf::from("out/f_0042.png"));
+        let p = OutputPattern::parse(Path::new("out/f_%d_100%%.png"), "png").unwrap();
+        assert_eq!(p.path(42, "x"), PathBuf::from("out/f_42_100%.png"));
+        let p = OutputPattern::parse(Path::new("out/f.####.exr"), "png").unwrap();
+        assert_eq!(p.path(7, "x"), PathBuf::from("out/f.0007.exr"));
+        // Camera names: image extensions dropped, white space and separators replaced.
+        let p = OutputPattern::parse(Path::new("r/{name}.png"), "png").unwrap();
+        assert_eq!(p.path(0, "front.png"), PathBuf::from("r/front.png"));
+        assert_eq!(p.path(0, "IMG 01.JPG"), PathBuf::from("r/IMG_01.png"));
+        assert_eq!(p.path(0, "shot.v2"), PathBuf::from("r/shot.v2.png"));
+        for bad in [
+            "a{b}.png", "a{.png", "a}.png", "{:x}.png", "a%s.png", "%13d.png",
+        ] {
             assert!(
                 OutputPattern::parse(Path::new(bad), "png").is_err(),
                 "{bad}"
@@ -684,46 +837,33 @@ mod tests {
     }
 
     #[test]
-    fn frame_ranges_parse() {
-        let r = |s: &str| s.parse::<FrameRange>();
-        assert_eq!(
-            r("100..200").unwrap(),
-            FrameRange {
-                start: 100,
-                end: Some(200)
-            }
+    fn frame_selections_parse_like_camera_specs() {
+        let sel = |s: &str| s.parse::<FrameSelection>();
+        let picked = |s: &str, n: usize| -> Vec<usize> {
+            let f = sel(s).unwrap();
+            (0..n).filter(|&k| f.contains(k)).collect()
+        };
+        assert_eq!(picked("100..103", 200), [100, 101, 102]);
+        assert_eq!(picked("100..=102", 200), [100, 101, 102]);
+        assert_eq!(picked("197..", 200), [197, 198, 199]);
+        assert_eq!(picked("..3", 200), [0, 1, 2]);
+        assert_eq!(picked("7", 200), [7]);
+        assert_eq!(picked("0,3,7", 10), [0, 3, 7]);
+        assert_eq!(picked("8..,1..=2", 10), [1, 2, 8, 9]);
+        assert!(sel("4..").unwrap().contains(1 << 40));
+        for bad in ["5..5", "a..b", "", "1,,2", "3..=", "x"] {
+            assert!(sel(bad).is_err(), "{bad}");
+        }
+        // Inside the path: fine; reaching past its end: an error in the notation the
+        // option reads, pointing at the open range.
+        assert!(sel("0..10").unwrap().check(10).is_ok());
+        assert!(sel("5..").unwrap().check(10).is_ok());
+        let e = sel("5..20").unwrap().check(10).unwrap_err();
+        assert!(
+            e.contains("frames 5..=19") && e.contains("0..=9") && e.contains("use 5.."),
+            "{e}"
         );
-        assert_eq!(
-            r("100..=199").unwrap(),
-            FrameRange {
-                start: 100,
-                end: Some(200)
-            }
-        );
-        assert_eq!(
-            r("5..").unwrap(),
-            FrameRange {
-                start: 5,
-                end: None
-            }
-        );
-        assert_eq!(
-            r("..3").unwrap(),
-            FrameRange {
-                start: 0,
-                end: Some(3)
-            }
-        );
-        assert_eq!(
-            r("7").unwrap(),
-            FrameRange {
-                start: 7,
-                end: Some(8)
-            }
-        );
-        assert!(r("5..5").is_err());
-        assert!(r("a..b").is_err());
-        assert!(r("").is_err());
-        assert!(r("4..").unwrap().contains(1 << 40));
+        let e = sel("12").unwrap().check(10).unwrap_err();
+        assert!(e.contains("frame 12") && !e.contains("use"), "{e}");
     }
 }

@@ -810,17 +810,17 @@ fn orbit_front_view_and_invariants() {
     let cams = orbit(&scene.positions, &p).unwrap();
     assert_eq!(cams.len(), 36);
     let b = camera::bulk_bounds(&scene.positions);
-    let radius0 = (cams[0].position() - b.centre).length();
+    let radius0 = (cams[0].position() - b.box_centre()).length();
     let up = Vec3::NEG_Y;
     for (k, c) in cams.iter().enumerate() {
         assert_eq!(c.name, format!("orbit_{k:05}"));
         c.validate().unwrap();
-        let (pc, z) = project(c, b.centre);
+        let (pc, z) = project(c, b.box_centre());
         assert!(
             z > 0.0 && (pc - Vec2::new(c.cx, c.cy)).length() < 1e-3,
             "frame {k}: centre at {pc}"
         );
-        let d = c.position() - b.centre;
+        let d = c.position() - b.box_centre();
         assert!(
             (d.length() - radius0).abs() < 1e-4 * radius0,
             "frame {k}: radius {}",
@@ -832,7 +832,7 @@ fn orbit_front_view_and_invariants() {
             "frame {k}: elevation {elevation}"
         );
         // Evenly spaced: 10 degrees between neighbours, and the last does not repeat the first.
-        let next = cams[(k + 1) % cams.len()].position() - b.centre;
+        let next = cams[(k + 1) % cams.len()].position() - b.box_centre();
         let step = d
             .normalize()
             .dot(next.normalize())

@@ -75,9 +75,9 @@ fn default_camera_frames_the_bulk_despite_outliers() {
     s.positions.push([500.0, -800.0, 900.0]);
     let after = camera::default_camera(&s.positions, 320, 180);
     assert!((before.position() - after.position()).length() < 0.05);
-    // The bulk centre projects near the image centre.
+    // The centre of the robust box projects to the image centre.
     let b = camera::bulk_bounds(&s.positions);
-    let p = after.rotation * b.centre + after.translation;
+    let p = after.rotation * b.box_centre() + after.translation;
     let (u, v) = (
         after.fx * p.x / p.z + after.cx,
         after.fy * p.y / p.z + after.cy,

@@ -44,8 +44,8 @@ pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, Camera
     let mut cams = Vec::with_capacity(entries.len());
     for (i, e) in entries.iter().enumerate() {
         let name = e.img_name.clone().unwrap_or_else(|| match &e.id {
-            Some(id) => format!("id {id}"),
-            None => format!("camera {i}"),
+            Some(id) => format!("camera_{id}"),
+            None => format!("camera_{i}"),
         });
         // Stored rows are the camera-to-world rotation; world-to-camera is its transpose.
         let c2w = glam::DMat3::from_cols_array_2d(&e.rotation).transpose();

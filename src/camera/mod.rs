@@ -12,10 +12,12 @@ pub mod orbit;
 mod select;
 
 pub use inria::{load_cameras_json, parse_cameras_json};
-pub use keyframes::{keyframes_to_json, KeyframePath};
+pub use keyframes::{keyframes_to_json, KeyframePath, MAX_FRAMES as MAX_PATH_FRAMES};
 pub use load::{detect_camera_format, load_camera_file, CameraFormat, PathTiming};
 pub use orbit::{orbit, OrbitParams};
-pub use select::{select_camera, select_camera_indices, select_cameras};
+pub use select::{
+    index_span, parse_index_range, select_camera, select_camera_indices, select_cameras,
+};
 
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use std::path::PathBuf;
@@ -237,6 +239,13 @@ pub struct BulkBounds {
     pub hi: Vec3,
 }
 
+impl BulkBounds {
+    /// Centre of the robust box `lo..hi`: the point generated cameras look at.
+    pub fn box_centre(&self) -> Vec3 {
+        0.5 * (self.lo + self.hi)
+    }
+}
+
 /// Computes [`BulkBounds`] of `positions` (finite values only).
 pub fn bulk_bounds(positions: &[[f32; 3]]) -> BulkBounds {
     if positions.is_empty() {
@@ -280,18 +289,28 @@ pub fn bulk_bounds(positions: &[[f32; 3]]) -> BulkBounds {
 /// Default vertical field of view of generated cameras (50 degrees).
 pub const DEFAULT_VFOV_DEG: f32 = 50.0;
 
-/// A camera that frames the bulk of `positions`: it looks at the median point from the
+/// A camera that frames the bulk of `positions`: it looks at the centre of the robust
+/// bounding box (2nd-98th percentile per axis, so stray Gaussians do not spoil it) from the
 /// -z side, 20 degrees above the horizon (world up is -y, the INRIA/COLMAP convention),
-/// far enough for the 95th-percentile sphere to fit the narrower field of view. It is
-/// frame 0 of the default [`orbit`].
+/// far enough for the whole box to lie inside the view with a 5% margin. It is frame 0 of
+/// the default [`orbit`].
 pub fn default_camera(positions: &[[f32; 3]], width: u32, height: u32) -> Camera {
     let b = bulk_bounds(positions);
     let vfov = DEFAULT_VFOV_DEG.to_radians();
-    let distance = orbit::framing_distance(b.radius, width, height, vfov);
+    let elevation = orbit::DEFAULT_ELEVATION_DEG.to_radians();
+    let centre = b.box_centre();
     let view = orbit::OrbitView {
-        centre: b.centre,
-        distance,
-        elevation: orbit::DEFAULT_ELEVATION_DEG.to_radians(),
+        centre,
+        distance: orbit::box_framing_distance(
+            &b,
+            centre,
+            elevation,
+            Vec3::NEG_Y,
+            width,
+            height,
+            vfov,
+        ),
+        elevation,
         azimuth: 0.0,
         up: Vec3::NEG_Y,
     };

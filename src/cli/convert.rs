@@ -1,58 +1,65 @@
 //! `vksplat convert`: any readable scene format to PLY, .splat or SPZ.
 
+use super::common::{check_output_file, FilterArgs};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
+use vksplat::note;
+use vksplat::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
 
 #[derive(Args)]
+#[command(after_help = "Examples:
+  vksplat convert scene.ply scene.spz
+  vksplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
+  vksplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1")]
 pub(crate) struct ConvertArgs {
     /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
     pub(crate) input: PathBuf,
-    /// Output file: .ply (INRIA, lossless), .splat or .spz (SPZ v3, gzip).
+    /// Output file: .ply (INRIA, lossless), .splat (DC colour only) or .spz (SPZ v3, gzip).
     pub(crate) output: PathBuf,
-    /// Write at most this SH degree (higher bands are dropped).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=3))]
-    pub(crate) sh_degree: Option<u32>,
-    /// Drop Gaussians whose largest axis scale (world units) is above this.
-    #[arg(long)]
-    pub(crate) max_scale: Option<f32>,
-    /// Drop Gaussians whose opacity is below this (0..1).
-    #[arg(long)]
-    pub(crate) min_opacity: Option<f32>,
-    /// Keep only Gaussians whose centre lies in this box.
-    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::scene::filter::parse_crop, allow_hyphen_values = true)]
-    pub(crate) crop: Option<[[f32; 3]; 2]>,
+    #[command(flatten)]
+    pub(crate) filter: FilterArgs,
     /// Replace the output file if it exists.
     #[arg(long)]
     pub(crate) overwrite: bool,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
-    use vksplat::scene::write::{convert, ConvertOptions};
-    let filter = vksplat::scene::filter::SceneFilter {
-        max_scale: args.max_scale,
-        min_opacity: args.min_opacity,
-        crop: args.crop,
-        sh_degree: args.sh_degree,
-    };
+    // Name, folder and existing-file problems are reported before the input is read.
+    OutputFormat::from_path(&args.output)?;
+    check_output_file(&args.output, args.overwrite)?;
     let options = ConvertOptions {
-        filter,
+        filter: args.filter.filter()?,
         overwrite: args.overwrite,
     };
-    let r = convert(&args.input, &args.output, &options)?;
-    eprintln!(
-        "converted {} ({}, {} Gaussians) -> {} ({}, {} Gaussians, SH degree {}, {} bytes)",
+    let r = convert_scene(&args.input, &args.output, &options)?;
+    note!(
+        "converted {} ({}, {}) -> {} ({}, {}, SH degree {}, {} bytes)",
         args.input.display(),
         r.input_format,
-        r.read,
+        super::plural(r.read, "Gaussian"),
         args.output.display(),
         r.output_format,
-        r.written,
+        super::plural(r.written, "Gaussian"),
         r.sh_degree,
         r.bytes
     );
+    if let Some(from) = r.sh_dropped_from {
+        note!(
+            "note: {} stores no SH bands beyond the DC colour; the scene's SH degree {from} was reduced to {}",
+            r.output_format,
+            r.sh_degree
+        );
+    }
+    if r.written == 0 && r.read > 0 {
+        note!(
+            "note: the filters removed all {} Gaussians; {} holds an empty scene",
+            r.read,
+            args.output.display()
+        );
+    }
     if r.antialiased_flag_lost {
-        eprintln!(
+        note!(
             "note: {} records that the scene was trained with antialiasing; {} cannot record that, so render the output with --antialiased",
             args.input.display(),
             r.output_format

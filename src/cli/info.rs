@@ -2,6 +2,7 @@
 
 use super::common::{load_scene, SceneArg};
 use anyhow::Result;
+use vksplat::outln;
 use vksplat::scene;
 
 pub(crate) fn fmt3(v: [f32; 3]) -> String {
@@ -21,33 +22,37 @@ pub(crate) fn info(arg: &SceneArg) -> Result<()> {
         }
     };
     let s = vksplat::stats::scene_stats(&scene);
-    println!("scene       {name}");
+    outln!("scene       {name}");
     if let Some(format) = format {
-        println!("format      {format}");
+        outln!("format      {format}");
         if scene.antialiased {
-            println!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
+            outln!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
         }
     }
-    println!("gaussians   {}", s.count);
-    println!(
+    outln!("gaussians   {}", s.count);
+    outln!(
         "sh degree   {} ({} coefficients per channel)",
         s.sh_degree,
         scene.sh_coeffs()
     );
     if let Some((lo, hi)) = s.bounds {
-        println!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
+        outln!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
     }
-    println!(
+    outln!(
         "bulk        centre {} (per-axis median), radius {:.4} (95% of centres within), 2-98% box {} .. {}",
         fmt3(s.bulk.centre.into()),
         s.bulk.radius,
         fmt3(s.bulk.lo.into()),
         fmt3(s.bulk.hi.into())
     );
-    println!();
-    println!(
+    outln!();
+    outln!(
         "{:<28} {:>12} {:>12} {:>12} {:>12}",
-        "quantity", "min", "max", "mean", "std"
+        "quantity",
+        "min",
+        "max",
+        "mean",
+        "std"
     );
     for (label, v) in [
         ("scale (exp, all axes)", s.scale),
@@ -56,9 +61,12 @@ pub(crate) fn info(arg: &SceneArg) -> Result<()> {
         ("opacity (sigmoid)", s.opacity),
         ("opacity logit (stored)", s.opacity_logit),
     ] {
-        println!(
+        outln!(
             "{label:<28} {:>12.6} {:>12.6} {:>12.6} {:>12.6}",
-            v.min, v.max, v.mean, v.std
+            v.min,
+            v.max,
+            v.mean,
+            v.std
         );
     }
     print_histogram(
@@ -77,10 +85,10 @@ pub(crate) fn info(arg: &SceneArg) -> Result<()> {
 /// Prints a log-binned histogram as text bars with the share a threshold at each bin
 /// edge keeps (below the bin's end for `upper`, from the bin's start otherwise).
 pub(crate) fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper: bool) {
-    println!();
-    println!("{title}");
+    outln!();
+    outln!("{title}");
     if h.counts.is_empty() {
-        println!("  (no positive values)");
+        outln!("  (no positive values)");
         return;
     }
     let peak = h.counts.iter().copied().max().unwrap_or(1).max(1);
@@ -91,7 +99,7 @@ pub(crate) fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper:
         let kept = if upper { below + c } else { above_all - below };
         below += c;
         let bar = "#".repeat((c * 40).div_ceil(peak));
-        println!(
+        outln!(
             "  [{:>9}, {:>9})  {c:>10}  kept {:>6.2} %  {bar}",
             format!("{:.3e}", h.edges[i]),
             format!("{:.3e}", h.edges[i + 1]),
@@ -99,6 +107,6 @@ pub(crate) fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper:
         );
     }
     if h.outside > 0 {
-        println!("  zero, negative or not finite: {}", h.outside);
+        outln!("  zero, negative or not finite: {}", h.outside);
     }
 }

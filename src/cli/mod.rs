@@ -6,3 +6,13 @@ pub mod convert;
 pub mod gen;
 pub mod info;
 pub mod render;
+pub mod values;
+
+/// `1 camera`, `3 cameras`: a count with its noun in the right number (nouns taking `s`).
+pub(crate) fn plural(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}

@@ -1,19 +1,33 @@
 //! `vksplat render`: one camera or a camera path to PNG/EXR files.
 
 use super::common::{
-    fail_on_validation_messages, load_scene, parse_background, parse_depth_range, CameraArgs,
-    FilterArgs, GpuArgs, PathArgs, SceneArg,
+    camera_path, check_output_dir, fail_on_validation_messages, load_scene, CameraArgs, FilterArgs,
+    GpuArgs, PathArgs, SceneArg,
 };
-use anyhow::Result;
+use super::{plural, values};
+use anyhow::{bail, Result};
 use clap::Args;
-use std::path::PathBuf;
-use vksplat::camera::{self, Camera};
-use vksplat::output;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use vksplat::camera::Camera;
+use vksplat::note;
+use vksplat::output::{self, FileContent};
 use vksplat::render::GpuRenderer;
-use vksplat::scene::Scene;
-use vksplat::sequence::{Existing, FrameRange, OutputPattern, ProgressStyle};
+use vksplat::sequence::{Existing, FrameSelection, OutputPattern, ProgressStyle, Summary};
+
+/// Output of a single frame when `-o` is not given.
+const DEFAULT_OUTPUT: &str = "render.png";
+/// Output of a path of several frames when `-o` is not given.
+const DEFAULT_SEQUENCE_OUTPUT: &str = "render/frame_{:05}.png";
 
 #[derive(Args)]
+#[command(after_help = "Examples:
+  vksplat render scene.ply -o view.png
+  vksplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr
+  vksplat render model_dir/ --cameras cameras.json --camera 0,8,16 -o renders/{name}.png
+  vksplat render scene.spz --cameras path.json --frames 100..200 -o out/ --format exr
+  vksplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume")]
 pub(crate) struct RenderArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArg,
@@ -21,29 +35,30 @@ pub(crate) struct RenderArgs {
     pub(crate) view: CameraArgs,
     #[command(flatten)]
     pub(crate) path: PathArgs,
-    /// Output: a file (.png or .exr), a pattern with {} / {:05} (frame number) or {name}
-    /// (camera name), e.g. out/frame_{:05}.exr, or a directory (out/ gives
-    /// out/frame_00000.png, ...).
-    #[arg(short, long, value_name = "OUT", default_value = "render.png")]
-    pub(crate) output: PathBuf,
+    /// Output: a file (.png or .exr), a pattern with {} / {:05} / %05d / ##### (frame
+    /// number) or {name} (camera name), e.g. out/frame_{:05}.exr, or a directory (out/
+    /// gives out/frame_00000.png, ...) [default: render.png for one frame,
+    /// render/frame_{:05}.png for several].
+    #[arg(short, long, value_name = "OUT")]
+    pub(crate) output: Option<PathBuf>,
     /// What to write: rgb, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
     /// (R, G, B, A, Z) for EXR]. Depth PNGs are colour-mapped for looking at.
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
-    /// Frames of the path to render: 100..200 (end exclusive), 100..=199, 100.., ..50 or 7.
-    /// File names keep the frame's number in the whole path, so split runs give the files
-    /// of one run.
-    #[arg(long, value_name = "RANGE")]
-    pub(crate) frames: Option<FrameRange>,
+    /// Frames of the path to render, numbered in the whole path (before --camera): 7,
+    /// 0,3,7, 100..200 (end exclusive), 100..=199, 100.. or ..50. File names keep the
+    /// frame's number, so split runs give the files of one run.
+    #[arg(long, value_name = "SPEC")]
+    pub(crate) frames: Option<FrameSelection>,
     /// Resume: skip frames whose files exist (write only the missing files of a frame).
     #[arg(long, conflicts_with = "overwrite")]
     pub(crate) skip_existing: bool,
     /// Replace output files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
-    /// Image format of a directory output: png or exr.
-    #[arg(long, value_name = "EXT", default_value = "png", value_parser = ["png", "exr"])]
-    pub(crate) format: String,
+    /// Image format of a directory output (-o out/): png or exr [default: png].
+    #[arg(long, value_name = "EXT", value_parser = ["png", "exr"])]
+    pub(crate) format: Option<String>,
     /// Write 16-bit PNG (colour and alpha) instead of 8-bit.
     #[arg(long)]
     pub(crate) png16: bool,
@@ -52,10 +67,10 @@ pub(crate) struct RenderArgs {
     pub(crate) exr_half: bool,
     /// Depth range NEAR,FAR of colour-mapped depth PNGs (default: each frame's 1st-99th
     /// percentile; fix it for a steady video).
-    #[arg(long, value_name = "NEAR,FAR", value_parser = parse_depth_range)]
+    #[arg(long, value_name = "NEAR,FAR", value_parser = values::depth_range, allow_hyphen_values = true)]
     pub(crate) depth_range: Option<[f32; 2]>,
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white").
-    #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = parse_background)]
+    #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = values::background, allow_hyphen_values = true)]
     pub(crate) background: [f32; 3],
     #[command(flatten)]
     pub(crate) filter: FilterArgs,
@@ -70,13 +85,13 @@ pub(crate) struct RenderArgs {
     /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     pub(crate) cpu: bool,
-    /// Print the GPU time of each pipeline stage (timestamp queries; the mean over the
-    /// frames of a path).
+    /// Print the time of each pipeline stage: GPU timestamps, or with --cpu the wall
+    /// clock of the CPU reference's phases (the mean over the frames of a path).
     #[arg(long)]
     pub(crate) timings: bool,
     /// Threads that encode and write images while the next frame renders (0: encode on
-    /// the rendering thread).
-    #[arg(long, value_name = "N", default_value_t = vksplat::sequence::default_encode_threads())]
+    /// the rendering thread; at most 64).
+    #[arg(long, value_name = "N", default_value_t = vksplat::sequence::default_encode_threads(), value_parser = values::int_in(0usize, 64))]
     pub(crate) encode_threads: usize,
     /// No progress display (the summary is still printed).
     #[arg(long, short)]
@@ -85,75 +100,119 @@ pub(crate) struct RenderArgs {
     pub(crate) gpu: GpuArgs,
 }
 
-/// The cameras of the path with their frame numbers, at the requested resolution.
-/// Also returns a description of the source for the summary.
-pub(crate) fn camera_path(
+/// The render was stopped by Ctrl-C or SIGTERM; `main` prints the message without
+/// "error:" and exits with status 130.
+#[derive(Debug)]
+pub(crate) struct Interrupted(pub(crate) String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// A flag set by the first Ctrl-C or SIGTERM, so a path stops after the frames in hand
+/// are written completely; a second signal ends the process at once.
+fn interrupt_flag() -> Arc<AtomicBool> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [SIGINT, SIGTERM] {
+        // Registered first, so it sees the flag as the previous signal left it.
+        let _ = signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&flag));
+        let _ = signal_hook::flag::register(signal, Arc::clone(&flag));
+    }
+    flag
+}
+
+/// Refuses output options that the chosen output would silently ignore.
+fn check_output_options(
     args: &RenderArgs,
-    scene: &Scene,
-) -> Result<(Vec<(usize, Camera)>, String)> {
-    let view = &args.view;
-    let p = &args.path;
-    let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
-        let params = camera::OrbitParams {
-            frames,
-            centre: p.orbit_centre.map(glam::Vec3::from),
-            radius: p.orbit_radius,
-            elevation_deg: p.orbit_elevation,
-            up: glam::Vec3::from(p.orbit_up),
-            start_deg: p.orbit_start,
-            vfov_deg: p.vfov,
-            ..Default::default()
-        };
-        (
-            camera::orbit(&scene.positions, &params)?,
-            PathBuf::from("--orbit"),
-            format!("an orbit of {frames} frames"),
-        )
-    } else if let Some(path) = &view.cameras {
-        let timing = camera::PathTiming {
-            frames: p.path_frames,
-            fps: p.fps,
-        };
-        let (cams, format) = camera::load_camera_file(path, &timing)?;
-        let source = format!("{} ({format}, {} cameras)", path.display(), cams.len());
-        (cams, path.clone(), source)
-    } else {
-        let params = camera::OrbitParams {
-            frames: 1,
-            vfov_deg: p.vfov,
-            ..Default::default()
-        };
-        let mut cams = camera::orbit(&scene.positions, &params)?;
-        cams[0].name = "default".into();
-        (
-            cams,
-            PathBuf::from("<default camera>"),
-            "the default camera".into(),
-        )
-    };
-    let chosen: Vec<usize> = match &view.camera {
-        Some(spec) => camera::select_camera_indices(&all, spec, &label)?,
-        // A single output file with several cameras is refused by the plan, naming
-        // --camera and patterns.
-        None => (0..all.len()).collect(),
-    };
-    let cams = chosen
-        .into_iter()
-        .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
-        .collect::<Result<Vec<_>>>()?;
-    Ok((cams, source))
+    output: &Path,
+    pattern: &OutputPattern,
+    opts: &output::OutputOptions,
+) -> Result<()> {
+    if args.format.is_some() && !vksplat::sequence::names_directory(output) {
+        bail!(
+            "--format sets the image format of a directory output (-o out/); {} names its format by its extension",
+            output.display()
+        );
+    }
+    let files = output::plan_files(&pattern.path(0, "x"), opts)?;
+    let writes = |pred: fn(&FileContent) -> bool| files.iter().any(|f| pred(&f.content));
+    if args.png16
+        && !writes(|c| {
+            matches!(
+                c,
+                FileContent::PngColor { .. } | FileContent::PngAlpha { .. }
+            )
+        })
+    {
+        bail!(
+            "--png16 applies to PNG colour and alpha files; {} writes none (EXR is float, depth PNGs are colour-mapped 8-bit)",
+            output.display()
+        );
+    }
+    if args.exr_half && !writes(|c| matches!(c, FileContent::Exr(_))) {
+        bail!(
+            "--exr-half applies to EXR output; {} is not an EXR file",
+            output.display()
+        );
+    }
+    if args.depth_range.is_some() && !writes(|c| matches!(c, FileContent::PngDepth { .. })) {
+        bail!(
+            "--depth-range sets the colour map of depth PNGs; {} writes none (use --mode depth or rgb+depth with a .png output; EXR stores depth as it is)",
+            output.display()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses Vulkan-only options with `--cpu`.
+fn check_cpu_options(args: &RenderArgs) -> Result<()> {
+    let g = &args.gpu;
+    let gpu_only = [
+        ("--device", g.device.is_some()),
+        ("--memory-limit", g.memory_limit.is_some()),
+        ("--validate", g.validate),
+    ];
+    if let Some((flag, _)) = gpu_only.iter().find(|(_, set)| *set) {
+        bail!("{flag} applies to the Vulkan pipeline; --cpu renders with the CPU reference");
+    }
+    Ok(())
 }
 
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
-    let pattern = OutputPattern::parse(&args.output, &args.format).map_err(anyhow::Error::msg)?;
+    if args.cpu {
+        check_cpu_options(args)?;
+    }
     let out_opts = output::OutputOptions {
         mode: args.mode,
         png16: args.png16,
         exr_half: args.exr_half,
         depth_range: args.depth_range,
     };
-    // Fail on a bad file name before loading anything.
-    output::plan_files(&pattern.path(0, "x"), &out_opts)?;
+    let format = args.format.as_deref().unwrap_or("png");
+    // Bad names and unwritable folders are reported before anything is loaded.
+    let explicit = match &args.output {
+        Some(out) => {
+            let pattern = OutputPattern::parse(out, format).map_err(anyhow::Error::msg)?;
+            check_output_options(args, out, &pattern, &out_opts)?;
+            let first = pattern.path(0, "x");
+            check_output_dir(
+                first
+                    .parent()
+                    .filter(|d| !d.as_os_str().is_empty())
+                    .unwrap_or(Path::new(".")),
+            )?;
+            Some((out.clone(), pattern))
+        }
+        None => {
+            check_output_dir(Path::new("."))?;
+            None
+        }
+    };
     let filter = args.filter.filter()?;
     let (scene, name) = load_scene(&args.scene)?;
     let total = scene.len();
@@ -161,17 +220,42 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         scene
     } else {
         let kept = filter.apply(&scene);
-        eprintln!(
+        note!(
             "filters keep {} of {total} Gaussians (SH degree {})",
             kept.len(),
             kept.sh_degree
         );
         kept
     };
-    let (cams, source) = camera_path(args, &scene)?;
-    for (_, c) in &cams {
-        c.validate()?;
+    let path = camera_path(&args.view, &args.path, &scene)?;
+    if let Some(frames) = &args.frames {
+        frames.check(path.len).map_err(anyhow::Error::msg)?;
     }
+    let selected = path
+        .cameras
+        .iter()
+        .filter(|(k, _)| args.frames.as_ref().map_or(true, |f| f.contains(*k)))
+        .count();
+    let (output_name, pattern) = match explicit {
+        Some(p) => p,
+        None => {
+            let out = PathBuf::from(if selected > 1 {
+                DEFAULT_SEQUENCE_OUTPUT
+            } else {
+                DEFAULT_OUTPUT
+            });
+            let pattern = OutputPattern::parse(&out, format).map_err(anyhow::Error::msg)?;
+            check_output_options(args, &out, &pattern, &out_opts)?;
+            if selected > 1 {
+                note!(
+                    "no -o given: writing {} frames to {}",
+                    selected,
+                    out.display()
+                );
+            }
+            (out, pattern)
+        }
+    };
     let existing = if args.overwrite {
         Existing::Overwrite
     } else if args.skip_existing {
@@ -179,23 +263,29 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     } else {
         Existing::Refuse
     };
-    let plan = vksplat::sequence::plan(&cams, &pattern, args.frames, &out_opts, existing)?;
+    let plan = vksplat::sequence::plan(
+        &path.cameras,
+        &pattern,
+        args.frames.as_ref(),
+        &out_opts,
+        existing,
+    )?;
     if plan.removed_temporaries > 0 {
-        eprintln!(
+        note!(
             "removed {} temporary file(s) left by an interrupted run",
             plan.removed_temporaries
         );
     }
     if plan.frames.is_empty() {
-        eprintln!(
-            "all {} frame(s) already exist; nothing to render",
-            plan.skipped
+        note!(
+            "all {} already exist; nothing to render",
+            plural(plan.skipped, "frame")
         );
         return Ok(());
     }
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
     if scene.antialiased && !args.antialiased && !args.no_antialiased {
-        eprintln!(
+        note!(
             "note: {name} records that it was trained with antialiasing; rendering with its opacity compensation (--no-antialiased turns it off)"
         );
     }
@@ -212,28 +302,41 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         } else {
             ProgressStyle::Auto
         },
+        skip_existing: args.skip_existing,
+        cancel: Some(interrupt_flag()),
     };
     let act = scene.activated();
     let (summary, how) = if args.cpu {
-        let mut render = |cam: &Camera| Ok(vksplat::cpu::render(&act, cam, &opts));
-        let s = vksplat::sequence::run(&plan.frames, &mut render, &run_opts)?;
-        (s, "on the CPU".to_string())
+        render_cpu(args, &act, &plan.frames, &opts, &run_opts)?
     } else {
         render_gpu(args, &act, &plan.frames, &opts, &run_opts)?
     };
+    if summary.interrupted {
+        return Err(Interrupted(format!(
+            "interrupted after {} of {}; every file written is complete; run the same command with --skip-existing to finish",
+            summary.written,
+            plural(plan.frames.len(), "frame")
+        ))
+        .into());
+    }
     let first = &plan.frames[0];
     let what = if plan.frames.len() == 1 && plan.skipped == 0 {
+        let from = if path.source == "the default camera" {
+            "from the default camera".to_string()
+        } else {
+            format!("from camera \"{}\" of {}", first.camera.name, path.source)
+        };
         format!(
-            "from camera \"{}\" of {source} at {}x{} -> {}",
-            first.camera.name,
+            "{from} at {}x{} -> {}",
             first.camera.width,
             first.camera.height,
             first.files[0].path.display()
         )
     } else {
         format!(
-            "{} frame(s) of {source} at {}x{}{} -> {}",
-            summary.written,
+            "{} of {} at {}x{}{} -> {}",
+            plural(summary.written, "frame"),
+            path.source,
             first.camera.width,
             first.camera.height,
             if plan.skipped > 0 {
@@ -241,79 +344,138 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
             } else {
                 String::new()
             },
-            args.output.display()
+            output_name.display()
         )
     };
-    eprintln!(
-        "rendered {name} ({} Gaussians) {what} {how} in {:.2} s: {:.2} frames/s; rendering {:.2} s, encoding {:.2} s on {}",
-        scene.len(),
+    note!(
+        "rendered {name} ({}) {what} {how} in {:.2} s: {:.2} frames/s; rendering {:.2} s, encoding {:.2} s on {}",
+        plural(scene.len(), "Gaussian"),
         summary.wall_s,
         summary.frames_per_s(),
         summary.render_s,
         summary.encode_s,
         match args.encode_threads {
             0 => "the rendering thread".to_string(),
-            n => format!("{n} thread(s), overlapped"),
+            n => format!("{}, overlapped", plural(n, "thread")),
         }
     );
+    if summary.appeared > 0 {
+        note!(
+            "kept {} that another run wrote meanwhile",
+            plural(summary.appeared, "file")
+        );
+    }
     Ok(())
 }
 
-pub(crate) fn render_gpu(
+/// Sums of per-stage times over the frames of a path, printed by `--timings`.
+#[derive(Default)]
+struct StageSums {
+    stages: Vec<(&'static str, f64)>,
+    total: f64,
+    frames: usize,
+}
+
+impl StageSums {
+    fn add(&mut self, stages: &[(&'static str, f64)], total: f64) {
+        if self.stages.is_empty() {
+            self.stages = stages.iter().map(|(s, _)| (*s, 0.0)).collect();
+        }
+        for (sum, (_, ms)) in self.stages.iter_mut().zip(stages) {
+            sum.1 += ms;
+        }
+        self.total += total;
+        self.frames += 1;
+    }
+
+    /// The mean of each stage, as a table on stderr.
+    fn print(&self, unit: &str) {
+        if self.frames == 0 {
+            return;
+        }
+        let n = self.frames as f64;
+        note!("{:<12} {:>10}", "stage", unit);
+        for (stage, ms) in &self.stages {
+            note!("{stage:<12} {:>10.3}", ms / n);
+        }
+        note!("{:<12} {:>10.3}", "frame", self.total / n);
+    }
+}
+
+fn render_cpu(
     args: &RenderArgs,
     scene: &vksplat::scene::ActivatedScene,
     frames: &[vksplat::sequence::FramePlan],
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
-) -> Result<(vksplat::sequence::Summary, String)> {
+) -> Result<(Summary, String)> {
+    if args.gpu.verbose {
+        note!(
+            "renderer: the CPU reference on {}",
+            plural(rayon::current_num_threads(), "thread")
+        );
+    }
+    let mut sums = StageSums::default();
+    let mut pairs = 0;
+    let mut render = |cam: &Camera| {
+        let (frame, t) = vksplat::cpu::render_timed(scene, cam, opts);
+        sums.add(&t.stages(), t.total);
+        pairs = t.pairs;
+        Ok(frame)
+    };
+    let summary = vksplat::sequence::run(frames, &mut render, run_opts);
+    if args.timings {
+        sums.print("CPU ms");
+        note!("tile pairs {pairs} (last frame)");
+    }
+    Ok((summary?, "on the CPU".to_string()))
+}
+
+fn render_gpu(
+    args: &RenderArgs,
+    scene: &vksplat::scene::ActivatedScene,
+    frames: &[vksplat::sequence::FramePlan],
+    opts: &vksplat::cpu::RenderOptions,
+    run_opts: &vksplat::sequence::RunOptions,
+) -> Result<(Summary, String)> {
     let t0 = std::time::Instant::now();
     let ctx = args.gpu.context()?;
     if args.gpu.verbose {
-        eprintln!("device: {}", ctx.info());
+        note!("device: {}", ctx.info());
     }
     let t1 = std::time::Instant::now();
     let mut renderer = GpuRenderer::new(ctx)?;
     if args.gpu.verbose {
-        eprintln!(
+        note!(
             "start-up: device {:.0} ms, shaders and pipelines {:.0} ms",
             (t1 - t0).as_secs_f64() * 1e3,
             t1.elapsed().as_secs_f64() * 1e3
         );
     }
     let gpu_scene = renderer.upload(scene)?;
-    let mut stage_sums: Vec<(&'static str, f64)> = Vec::new();
-    let mut frame_sum = 0.0;
+    let mut sums = StageSums::default();
     let mut last_stats = None;
     let mut render = |cam: &Camera| -> Result<vksplat::frame::Frame> {
         let frame = renderer.render(&gpu_scene, cam, opts)?;
         let t = renderer.timings();
-        if stage_sums.is_empty() {
-            stage_sums = t.stages().iter().map(|(s, _)| (*s, 0.0)).collect();
-        }
-        for (sum, (_, ms)) in stage_sums.iter_mut().zip(t.stages()) {
-            sum.1 += ms;
-        }
-        frame_sum += t.total;
+        sums.add(&t.stages(), t.total);
         last_stats = Some(renderer.stats().clone());
         Ok(frame)
     };
     let summary = vksplat::sequence::run(frames, &mut render, run_opts);
-    let n = frames.len().max(1) as f64;
-    if args.timings && !stage_sums.is_empty() {
-        eprintln!("{:<12} {:>10}", "stage", "GPU ms");
-        for (stage, ms) in &stage_sums {
-            eprintln!("{stage:<12} {:>10.3}", ms / n);
-        }
-        eprintln!("{:<12} {:>10.3}", "frame", frame_sum / n);
+    if args.timings {
+        sums.print("GPU ms");
         if let Some(st) = &last_stats {
-            eprintln!(
+            note!(
                 "visible Gaussians {}, tile pairs {}, key bits {} (last frame)",
-                st.visible, st.pairs, st.key_bits
+                st.visible,
+                st.pairs,
+                st.key_bits
             );
         }
     }
     if args.gpu.verbose {
-        eprintln!(
+        note!(
             "device memory: scene {} bytes, per-frame buffers {} bytes",
             gpu_scene.device_bytes(),
             renderer.frame_device_bytes()

@@ -299,7 +299,7 @@ impl Drop for GpuBuffer {
         if let Some(allocation) = self.allocation.take() {
             if let Ok(mut alloc) = self.shared.allocator.lock() {
                 if let Err(e) = alloc.free(allocation) {
-                    eprintln!("vksplat: freeing buffer '{}' failed: {e}", self.name);
+                    crate::note!("vksplat: freeing buffer '{}' failed: {e}", self.name);
                 }
             }
         }

@@ -43,6 +43,21 @@ pub fn parse_bytes(text: &str) -> Result<u64, String> {
         .ok_or_else(|| format!("\"{text}\" is not a byte count (e.g. 536870912, 512M, 2G)"))
 }
 
+/// The device a `--device` choice names: a whole number is an index and only an index
+/// (`1` never matches the digits in "LLVM 15"); anything else matches a device whose
+/// name contains it, ignoring case. `None` when nothing matches.
+pub fn select_device(choice: &str, names: &[String]) -> Option<usize> {
+    let choice = choice.trim();
+    if let Ok(index) = choice.parse::<usize>() {
+        return (index < names.len()).then_some(index);
+    }
+    let lower = choice.to_lowercase();
+    if lower.is_empty() {
+        return None;
+    }
+    names.iter().position(|n| n.to_lowercase().contains(&lower))
+}
+
 /// What we know about the chosen device, for printing and for dispatch limits.
 #[derive(Clone, Debug)]
 pub struct DeviceInfo {
@@ -190,7 +205,7 @@ unsafe extern "system" fn debug_callback(
             .unwrap_or_default()
     };
     let text = format!("[vulkan {severity:?} {types:?}] {message}");
-    eprintln!("{text}");
+    crate::note!("{text}");
     // SAFETY: `user` points at the boxed MessageLog owned by `Shared`, which outlives
     // the messenger (and the instance whose creation/destruction it also watches).
     if let Some(log) = unsafe { (user as *const MessageLog).as_ref() } {
@@ -404,34 +419,31 @@ impl GpuContext {
                 && compute_family(physical_devices[i]).is_some()
         };
         let index = match &device_choice {
-            Some(choice) => {
-                let lower = choice.to_lowercase();
-                let found = choice
-                    .parse::<usize>()
-                    .ok()
-                    .filter(|&i| i < names.len())
-                    .or_else(|| names.iter().position(|n| n.to_lowercase().contains(&lower)));
-                match found {
-                    Some(i) if usable(i) => i,
-                    Some(i) => {
-                        return Err(GpuError::NoDevice(format!(
-                            "device '{}' lacks Vulkan 1.3 or a compute queue",
-                            names[i]
-                        )))
-                    }
-                    None => {
-                        return Err(GpuError::NoDevice(format!(
-                            "no device matches '{choice}'; available: {}",
-                            names
-                                .iter()
-                                .enumerate()
-                                .map(|(i, n)| format!("#{i} {n}"))
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        )))
-                    }
+            Some(choice) => match select_device(choice, &names) {
+                Some(i) if usable(i) => i,
+                Some(i) => {
+                    return Err(GpuError::NoDevice(format!(
+                        "device '{}' lacks Vulkan 1.3 or a compute queue",
+                        names[i]
+                    )))
                 }
-            }
+                None => {
+                    let what = if choice.trim().parse::<usize>().is_ok() {
+                        format!("there is no device #{}", choice.trim())
+                    } else {
+                        format!("no device name contains '{choice}'")
+                    };
+                    return Err(GpuError::NoDevice(format!(
+                        "{what}; available: {}",
+                        names
+                            .iter()
+                            .enumerate()
+                            .map(|(i, n)| format!("#{i} {n}"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )));
+                }
+            },
             None => (0..names.len())
                 .filter(|&i| usable(i))
                 .min_by_key(|&i| type_rank(props[i].device_type))
@@ -869,5 +881,27 @@ impl GpuContext {
             let _ = unsafe { device.queue_wait_idle(self.queue) };
         }
         result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::select_device;
+
+    #[test]
+    fn a_number_is_only_an_index_and_a_name_only_a_name() {
+        let names = vec![
+            "llvmpipe (LLVM 15.0.6, 256 bits)".to_string(),
+            "NVIDIA H100".to_string(),
+        ];
+        assert_eq!(select_device("0", &names), Some(0));
+        assert_eq!(select_device("1", &names), Some(1));
+        // An index past the end does not fall back to the digits in "LLVM 15".
+        assert_eq!(select_device("15", &names), None);
+        assert_eq!(select_device("2", &names), None);
+        assert_eq!(select_device("nvidia", &names), Some(1));
+        assert_eq!(select_device("LLVMpipe", &names), Some(0));
+        assert_eq!(select_device("radeon", &names), None);
+        assert_eq!(select_device("", &names), None);
     }
 }

@@ -18,8 +18,20 @@ pub enum OutputFormat {
 }
 
 impl OutputFormat {
-    /// Chooses the writer from a file name's extension (`.ply`, `.splat`, `.spz`).
+    /// Chooses the writer from a file name's extension (`.ply`, `.splat`, `.spz`). A
+    /// `.compressed.ply` name is refused rather than silently written as INRIA PLY: there
+    /// is no compressed-PLY writer.
     pub fn from_path(path: &Path) -> Result<OutputFormat, ConvertError> {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        if name.ends_with(".compressed.ply") {
+            return Err(ConvertError::Unsupported {
+                path: path.to_path_buf(),
+                message: "writing PlayCanvas compressed PLY is not supported; name the output .ply (INRIA, lossless), .splat or .spz".into(),
+            });
+        }
         match path
             .extension()
             .and_then(|e| e.to_str())
@@ -30,6 +42,16 @@ impl OutputFormat {
             Some("splat") => Ok(OutputFormat::Splat),
             Some("spz") => Ok(OutputFormat::Spz),
             _ => Err(ConvertError::UnknownFormat(path.to_path_buf())),
+        }
+    }
+}
+
+impl OutputFormat {
+    /// The highest SH degree the format stores (`.splat` keeps only the DC colour).
+    pub fn max_sh_degree(self) -> u32 {
+        match self {
+            OutputFormat::Ply | OutputFormat::Spz => 3,
+            OutputFormat::Splat => 0,
         }
     }
 }
@@ -56,6 +78,14 @@ pub enum ConvertError {
     /// The output's extension names no writer.
     #[error("{0}: unknown output format; use a .ply, .splat or .spz file name")]
     UnknownFormat(PathBuf),
+    /// The output names a format or a destination that cannot be written.
+    #[error("{path}: {message}")]
+    Unsupported {
+        /// Output file.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
     /// The filter parameters are invalid.
     #[error("{0}")]
     Filter(String),
@@ -102,6 +132,9 @@ pub struct ConvertReport {
     pub written: usize,
     /// SH degree written.
     pub sh_degree: u32,
+    /// SH degree of the scene before writing, when the output format stores fewer bands
+    /// (`.splat`: DC only) and higher bands were dropped.
+    pub sh_dropped_from: Option<u32>,
     /// Bytes written.
     pub bytes: usize,
     /// The input records antialiased training but the output format cannot say so.
@@ -118,6 +151,12 @@ pub fn convert(
 ) -> Result<ConvertReport, ConvertError> {
     let output_format = OutputFormat::from_path(output)?;
     options.filter.validate().map_err(ConvertError::Filter)?;
+    if same_file(input, output) {
+        return Err(ConvertError::Unsupported {
+            path: output.to_path_buf(),
+            message: "is the input file; write the converted scene to another file".into(),
+        });
+    }
     if !options.overwrite && output.exists() {
         return Err(OutputError::Exists(output.to_path_buf()).into());
     }
@@ -134,8 +173,18 @@ pub fn convert(
         output_format,
         read: scene.len(),
         written: filtered.len(),
-        sh_degree: filtered.sh_degree,
+        sh_degree: filtered.sh_degree.min(output_format.max_sh_degree()),
+        sh_dropped_from: (filtered.sh_degree > output_format.max_sh_degree())
+            .then_some(filtered.sh_degree),
         bytes: bytes.len(),
         antialiased_flag_lost: scene.antialiased && output_format != OutputFormat::Spz,
     })
+}
+
+/// True when `a` and `b` name the same existing file (through links or `..`, too).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
 }
