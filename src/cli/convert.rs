@@ -25,6 +25,8 @@ pub(crate) struct ConvertArgs {
     /// Replace the output file if it exists.
     #[arg(long)]
     pub(crate) overwrite: bool,
+    #[command(flatten)]
+    pub(crate) transform: super::transform::TransformArgs,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
@@ -36,10 +38,14 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
         sh_degree: args.sh_degree,
     };
     let options = ConvertOptions {
+        transform: args.transform.transform()?,
         filter,
         overwrite: args.overwrite,
     };
     let r = convert(&args.input, &args.output, &options)?;
+    if let Some(t) = &options.transform {
+        eprintln!("transformed: {} Gaussians by {t}", r.read);
+    }
     eprintln!(
         "converted {} ({}, {} Gaussians) -> {} ({}, {} Gaussians, SH degree {}, {} bytes)",
         args.input.display(),

@@ -6,3 +6,4 @@ pub mod convert;
 pub mod gen;
 pub mod info;
 pub mod render;
+pub mod transform;
