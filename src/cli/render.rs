@@ -59,8 +59,9 @@ pub(crate) struct RenderArgs {
     pub(crate) background: [f32; 3],
     #[command(flatten)]
     pub(crate) filter: FilterArgs,
+    // Boxed: keeps the Render variant of main's Command enum small.
     #[command(flatten)]
-    pub(crate) transform: super::transform::TransformArgs,
+    pub(crate) transform: Box<super::transform::TransformArgs>,
     /// Opacity compensation for scenes trained with antialiasing (mip) settings:
     /// opacity * sqrt(max(2.5e-5, det_before / det_after)) of the 0.3 dilation. On by
     /// default when the file records antialiased training (SPZ flag, SOG meta.json).

@@ -42,7 +42,8 @@ pub(crate) struct TransformArgs {
         help_heading = "Scene transform"
     )]
     pub(crate) rotate: Vec<String>,
-    /// Translate the scene by X,Y,Z, last.
+    /// Translate the scene by X,Y,Z, last. The filters (--crop) and the cameras see the
+    /// transformed scene.
     #[arg(
         long,
         value_name = "X,Y,Z",
