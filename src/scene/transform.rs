@@ -189,8 +189,9 @@ impl SceneTransform {
     /// The matrix `M` ((2l+1) x (2l+1), row-major) that maps the coefficients `c` of SH band
     /// `band` (1..=3) of one colour channel to the transformed coefficients `M c`, so that
     /// the transformed SH evaluated at `d` equals the original at `Q^T d`. Band 0 is
-    /// unchanged (`[1.0]`).
+    /// unchanged (`[1.0]`). Panics for a band above 3, which no scene holds.
     pub fn sh_band_matrix(&self, band: u32) -> Vec<f64> {
+        assert!(band <= 3, "SH band {band} is above 3");
         let m = 2 * band as usize + 1;
         if band == 0 {
             return vec![1.0];
@@ -245,6 +246,7 @@ impl SceneTransform {
             }
         }
         if self.orthogonal == DMat3::IDENTITY {
+            // Nothing turns: orientations and view-dependent colour stay as they are.
             return Ok(scene);
         }
         let r = self.gaussian_rotation();
@@ -256,7 +258,7 @@ impl SceneTransform {
             .map(|l| self.sh_band_matrix(l))
             .collect();
         let mut band_in = [0.0f64; 7];
-        for coeffs in scene.sh.chunks_exact_mut(stride.max(1)) {
+        for coeffs in scene.sh.chunks_exact_mut(stride) {
             for (l, matrix) in (1..=scene.sh_degree as usize).zip(&bands) {
                 let (first, m) = (l * l, 2 * l + 1);
                 for c in 0..3 {
@@ -386,7 +388,7 @@ fn sh_band_basis(band: u32, d: DVec3, out: &mut [f64; 7]) {
             c2[3] * x * z,
             c2[4] * (xx - yy),
         ]),
-        _ => out.copy_from_slice(&[
+        3 => out.copy_from_slice(&[
             c3[0] * y * (3.0 * xx - yy),
             c3[1] * x * y * z,
             c3[2] * y * (4.0 * zz - xx - yy),
@@ -395,6 +397,7 @@ fn sh_band_basis(band: u32, d: DVec3, out: &mut [f64; 7]) {
             c3[5] * z * (xx - yy),
             c3[6] * x * (xx - 3.0 * yy),
         ]),
+        _ => unreachable!("sh_band_matrix checks the band"),
     }
 }
 
