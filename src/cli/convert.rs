@@ -22,6 +22,8 @@ pub(crate) struct ConvertArgs {
     /// Replace the output file if it exists.
     #[arg(long)]
     pub(crate) overwrite: bool,
+    #[command(flatten)]
+    pub(crate) transform: super::transform::TransformArgs,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
@@ -29,10 +31,14 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
     OutputFormat::from_path(&args.output)?;
     check_output_file(&args.output, args.overwrite)?;
     let options = ConvertOptions {
+        transform: args.transform.transform()?,
         filter: args.filter.filter()?,
         overwrite: args.overwrite,
     };
     let r = convert_scene(&args.input, &args.output, &options)?;
+    if let Some(t) = &options.transform {
+        note!("transformed: {} by {t}", super::plural(r.read, "Gaussian"));
+    }
     note!(
         "converted {} ({}, {}) -> {} ({}, {}, SH degree {}, {} bytes)",
         args.input.display(),

@@ -6,6 +6,7 @@ pub mod convert;
 pub mod gen;
 pub mod info;
 pub mod render;
+pub mod transform;
 pub mod values;
 
 /// `1 camera`, `3 cameras`: a count with its noun in the right number (nouns taking `s`).

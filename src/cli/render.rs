@@ -74,6 +74,9 @@ pub(crate) struct RenderArgs {
     pub(crate) background: [f32; 3],
     #[command(flatten)]
     pub(crate) filter: FilterArgs,
+    // Boxed: keeps the Render variant of main's Command enum small.
+    #[command(flatten)]
+    pub(crate) transform: Box<super::transform::TransformArgs>,
     /// Opacity compensation for scenes trained with antialiasing (mip) settings:
     /// opacity * sqrt(max(2.5e-5, det_before / det_after)) of the 0.3 dilation. On by
     /// default when the file records antialiased training (SPZ flag, SOG meta.json).
@@ -214,7 +217,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         }
     };
     let filter = args.filter.filter()?;
+    let transform = args.transform.transform()?;
     let (scene, name) = load_scene(&args.scene)?;
+    let scene = super::transform::apply(transform.as_ref(), scene)?;
     let total = scene.len();
     let scene = if filter.is_identity_for(&scene) {
         scene

@@ -23,6 +23,7 @@ pub mod ply;
 pub mod sog;
 pub mod splat;
 pub mod spz;
+pub mod transform;
 pub mod write;
 
 pub use detect::{load_with_format, parse_bytes, SceneFormat};

@@ -1,7 +1,8 @@
-//! Scene writers and `vksplat convert`: load any format, filter, write INRIA PLY, `.splat`
-//! or SPZ v3 chosen by the output's extension, atomically.
+//! Scene writers and `vksplat convert`: load any format, transform, filter, write INRIA
+//! PLY, `.splat` or SPZ v3 chosen by the output's extension, atomically.
 
 use super::filter::SceneFilter;
+use super::transform::SceneTransform;
 use super::{ply, splat, spz, Scene, SceneError, SceneFormat};
 use crate::output::OutputError;
 use std::path::{Path, PathBuf};
@@ -89,6 +90,14 @@ pub enum ConvertError {
     /// The filter parameters are invalid.
     #[error("{0}")]
     Filter(String),
+    /// The transform gives values that are not finite.
+    #[error("{path}: {message}")]
+    Transform {
+        /// Input file.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
     /// The scene cannot be represented in the output format.
     #[error("{path}: cannot be written as {format}: {message}")]
     Encode {
@@ -113,6 +122,9 @@ pub fn to_bytes(scene: &Scene, format: OutputFormat) -> Result<Vec<u8>, String> 
 /// Options of [`convert`].
 #[derive(Clone, Debug, Default)]
 pub struct ConvertOptions {
+    /// Transform applied to the loaded scene, before the filter (so a crop box is in the
+    /// transformed frame).
+    pub transform: Option<SceneTransform>,
     /// Selection and SH truncation applied before writing.
     pub filter: SceneFilter,
     /// Replace an existing output file.
@@ -141,9 +153,10 @@ pub struct ConvertReport {
     pub antialiased_flag_lost: bool,
 }
 
-/// Loads `input` (any supported format), applies the filter and writes `output` in the
-/// format its extension names. An existing output is refused unless `overwrite`; the file
-/// is written to a temporary name and renamed, so it never appears half-written.
+/// Loads `input` (any supported format), applies the transform and then the filter, and
+/// writes `output` in the format its extension names. An existing output is refused unless
+/// `overwrite`; the file is written to a temporary name and renamed, so it never appears
+/// half-written.
 pub fn convert(
     input: &Path,
     output: &Path,
@@ -161,6 +174,14 @@ pub fn convert(
         return Err(OutputError::Exists(output.to_path_buf()).into());
     }
     let (scene, input_format) = super::load_with_format(input)?;
+    let read = scene.len();
+    let scene = match &options.transform {
+        Some(t) => t.apply(scene).map_err(|message| ConvertError::Transform {
+            path: input.to_path_buf(),
+            message,
+        })?,
+        None => scene,
+    };
     let filtered = options.filter.apply(&scene);
     let bytes = to_bytes(&filtered, output_format).map_err(|message| ConvertError::Encode {
         path: output.to_path_buf(),
@@ -171,7 +192,7 @@ pub fn convert(
     Ok(ConvertReport {
         input_format,
         output_format,
-        read: scene.len(),
+        read,
         written: filtered.len(),
         sh_degree: filtered.sh_degree.min(output_format.max_sh_degree()),
         sh_dropped_from: (filtered.sh_degree > output_format.max_sh_degree())
