@@ -162,28 +162,10 @@ impl Camera {
         height: Option<u32>,
         scale: Option<f32>,
     ) -> Result<Camera, CameraError> {
-        let aspect = self.height as f64 / self.width as f64;
-        if scale.is_some() && (width.is_some() || height.is_some()) {
-            return Err(CameraError::BadParameter(
-                "give either --scale or --width/--height, not both".into(),
-            ));
+        if width.is_none() && height.is_none() && scale.is_none() {
+            return Ok(self.clone());
         }
-        let (w, h) = match (width, height, scale) {
-            (None, None, None) => return Ok(self.clone()),
-            (_, _, Some(s)) => {
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(CameraError::BadParameter(format!(
-                        "--scale {s} must be a positive number"
-                    )));
-                }
-                let w = (self.width as f64 * s as f64).round();
-                let h = (self.height as f64 * s as f64).round();
-                (clamp_side(w, "--scale")?, clamp_side(h, "--scale")?)
-            }
-            (Some(w), Some(h), _) => (w, h),
-            (Some(w), None, _) => (w, clamp_side((w as f64 * aspect).round(), "--width")?),
-            (None, Some(h), _) => (clamp_side((h as f64 / aspect).round(), "--height")?, h),
-        };
+        let (w, h) = resized_dims((self.width, self.height), width, height, scale)?;
         self.with_resolution(w, h)
     }
 
@@ -213,6 +195,39 @@ fn clamp_side(v: f64, flag: &str) -> Result<u32, CameraError> {
             "{flag} gives an image side of {v} pixels; it must be between 1 and {MAX_IMAGE_SIDE}"
         )))
     }
+}
+
+/// The size `--width/--height` (either alone keeps the aspect ratio of `size`) or
+/// `--scale` give an image of `size`.
+pub fn resized_dims(
+    size: (u32, u32),
+    width: Option<u32>,
+    height: Option<u32>,
+    scale: Option<f32>,
+) -> Result<(u32, u32), CameraError> {
+    let aspect = size.1 as f64 / size.0 as f64;
+    if scale.is_some() && (width.is_some() || height.is_some()) {
+        return Err(CameraError::BadParameter(
+            "give either --scale or --width/--height, not both".into(),
+        ));
+    }
+    let (w, h) = match (width, height, scale) {
+        (None, None, None) => (size.0, size.1),
+        (_, _, Some(s)) => {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(CameraError::BadParameter(format!(
+                    "--scale {s} must be a positive number"
+                )));
+            }
+            let w = (size.0 as f64 * s as f64).round();
+            let h = (size.1 as f64 * s as f64).round();
+            (clamp_side(w, "--scale")?, clamp_side(h, "--scale")?)
+        }
+        (Some(w), Some(h), _) => (w, h),
+        (Some(w), None, _) => (w, clamp_side((w as f64 * aspect).round(), "--width")?),
+        (None, Some(h), _) => (clamp_side((h as f64 / aspect).round(), "--height")?, h),
+    };
+    Ok((w, h))
 }
 
 /// Rejects zero or absurd resolutions.

@@ -245,10 +245,16 @@ mod tests {
             e.contains("index 8 is out of range") && e.contains("8 cameras"),
             "{e}"
         );
+        // Ranges past the end are errors in the notation the option reads, as with --frames.
         let e = names("5..9", 8).unwrap_err();
-        assert!(e.contains("\"5..9\" is out of range"), "{e}");
+        assert!(
+            e.contains("\"5..9\" reaches past the last camera")
+                && e.contains("0..=7")
+                && e.contains("use 5.."),
+            "{e}"
+        );
         let e = names("5..=8", 8).unwrap_err();
-        assert!(e.contains("out of range"), "{e}");
+        assert!(e.contains("reaches past"), "{e}");
         let e = names("5..5", 8).unwrap_err();
         assert!(e.contains("is empty"), "{e}");
         let e = names("6..2", 8).unwrap_err();

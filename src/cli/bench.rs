@@ -1,24 +1,38 @@
 //! `vksplat bench`: per-stage GPU (or CPU reference) timings of one camera, and sweeps.
 
-use super::common::{fail_on_validation_messages, load_scene, CameraArgs, GpuArgs, SceneArg};
+use super::common::{
+    camera_path, check_output_file, fail_on_validation_messages, load_scene, CameraArgs,
+    FilterArgs, GpuArgs, PathArgs, SceneArg,
+};
+use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::camera::{self, Camera};
+use vksplat::camera::Camera;
 use vksplat::output;
 use vksplat::render::GpuRenderer;
 use vksplat::scene::Scene;
 use vksplat::{note, outln};
 
 #[derive(Args)]
+#[command(after_help = "Examples:
+  vksplat bench scene.ply --frames 20
+  vksplat bench scene.ply --cameras cameras.json --camera 5 --width 1920 --json b.json
+  vksplat bench --sweep gaussians=1e4,1e5,1e6 --sweep resolution=720p,1080p --plot sweep.svg
+  vksplat bench scene.ply --cpu")]
 pub(crate) struct BenchArgs {
-    /// Scene (.ply or model directory); not needed with --sweep gaussians=...
+    /// Scene: any supported format or a model directory; not needed with
+    /// --sweep gaussians=...
     pub(crate) scene: Option<PathBuf>,
     /// Use the built-in demo scene.
     #[arg(long, conflicts_with = "scene")]
     pub(crate) demo: bool,
     #[command(flatten)]
     pub(crate) view: CameraArgs,
+    #[command(flatten)]
+    pub(crate) path: PathArgs,
+    #[command(flatten)]
+    pub(crate) filter: FilterArgs,
     /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `vksplat gen`) and/or
     /// `resolution=720p,1080p,4k,WxH`; repeat the flag for both (all combinations run).
     #[arg(long, value_name = "AXIS=V1,V2,...")]
@@ -26,9 +40,6 @@ pub(crate) struct BenchArgs {
     /// Seed of the synthetic scenes of a Gaussians sweep.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
-    /// SH degree of the synthetic scenes of a Gaussians sweep.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=3))]
-    pub(crate) sh_degree: u32,
     /// Write the report(s) as JSON.
     #[arg(long, value_name = "FILE")]
     pub(crate) json: Option<PathBuf>,
@@ -42,11 +53,14 @@ pub(crate) struct BenchArgs {
     #[arg(long)]
     pub(crate) overwrite: bool,
     /// Measured frames.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = values::int_in(1usize, 100_000))]
     pub(crate) frames: usize,
     /// Discarded warm-up frames.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = values::int_in(0usize, 100_000))]
     pub(crate) warmup: usize,
+    /// Print no report on stdout (write it with --json/--csv).
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
     /// Benchmark the CPU reference renderer instead (wall clock).
     #[arg(long)]
     pub(crate) cpu: bool,
@@ -54,24 +68,27 @@ pub(crate) struct BenchArgs {
     pub(crate) gpu: GpuArgs,
 }
 
-pub(crate) fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
-    let cam = match &args.cameras {
-        Some(path) => {
-            let (cams, _) = camera::load_camera_file(path, &camera::PathTiming::default())?;
-            let spec = args.camera.as_deref().unwrap_or("0");
-            let mut picked = camera::select_cameras(&cams, spec, path)?;
-            if picked.len() != 1 {
-                bail!(
-                    "{}: --camera {spec:?} selects {} cameras; bench takes one",
-                    path.display(),
-                    picked.len()
-                );
-            }
-            picked.remove(0)
+/// The camera a benchmark times: the one `--camera` selects of the path (`--orbit`,
+/// `--cameras` or the default camera), or its first.
+pub(crate) fn choose_camera(view: &CameraArgs, path: &PathArgs, scene: &Scene) -> Result<Camera> {
+    let camera = view.camera.is_some();
+    let path = camera_path(view, path, scene)?;
+    match path.cameras.as_slice() {
+        [(_, one)] => Ok(one.clone()),
+        [(k, first), ..] if !camera => {
+            note!(
+                "timing camera {k} (\"{}\") of {}; pick another with --camera",
+                first.name,
+                path.source
+            );
+            Ok(first.clone())
         }
-        None => camera::default_camera(&scene.positions, 1280, 720),
-    };
-    Ok(cam.resized(args.width, args.height, args.scale)?)
+        many => bail!(
+            "--camera selects {} of {}; bench times one camera",
+            super::plural(many.len(), "camera"),
+            path.source
+        ),
+    }
 }
 
 /// The sweep axes of `bench`: Gaussian counts and resolutions (either may be empty).
@@ -106,23 +123,34 @@ pub(crate) fn parse_sweeps(sweeps: &[String]) -> Result<Sweeps> {
 }
 
 pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
+    // Report files are checked (and their folders created) before the benchmark runs.
     for path in [&args.json, &args.csv, &args.plot].into_iter().flatten() {
-        if !args.overwrite && path.exists() {
-            return Err(output::OutputError::Exists(path.clone()).into());
-        }
+        check_output_file(path, args.overwrite)?;
     }
+    let filter = args.filter.filter()?;
+    // --sh-degree caps a file scene's degree and sets the synthetic scenes' degree.
+    let synthetic_sh_degree = args.filter.sh_degree.unwrap_or(2);
     let Sweeps {
         counts,
         resolutions,
     } = parse_sweeps(&args.sweep)?;
     let file_scene = if counts.is_empty() {
-        Some(load_scene(&SceneArg {
+        let (scene, name) = load_scene(&SceneArg {
             scene: args.scene.clone(),
             demo: args.demo,
-        })?)
+        })?;
+        if filter.is_identity_for(&scene) {
+            Some((scene, name))
+        } else {
+            let kept = filter.apply(&scene);
+            note!(
+                "filters keep {} of {} Gaussians (SH degree {})",
+                kept.len(),
+                scene.len(),
+                kept.sh_degree
+            );
+            Some((kept, name))
+        }
     } else {
         if args.scene.is_some() || args.demo {
             bail!("a Gaussians sweep generates its own scenes; drop the scene argument or the gaussians sweep");
@@ -149,21 +177,27 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     for count in &counts {
         let (scene, name) = match (count, &file_scene) {
             (Some(n), _) => (
-                vksplat::gen::synthetic_scene(*n, args.seed, args.sh_degree),
-                format!("synthetic {n} (seed {}, SH {})", args.seed, args.sh_degree),
+                filter.apply(&vksplat::gen::synthetic_scene(
+                    *n,
+                    args.seed,
+                    synthetic_sh_degree,
+                )),
+                format!(
+                    "synthetic {n} (seed {}, SH {synthetic_sh_degree})",
+                    args.seed
+                ),
             ),
             (None, Some((s, name))) => (s.clone(), name.clone()),
             (None, None) => bail!("no scene"),
         };
         let act = scene.activated();
         for res in &resolutions {
-            let cam = match res {
-                Some((w, h)) if count.is_some() || args.view.cameras.is_none() => {
-                    camera::default_camera(&scene.positions, *w, *h)
-                }
-                Some((w, h)) => choose_camera(&args.view, &scene)?.with_resolution(*w, *h)?,
-                None => choose_camera(&args.view, &scene)?,
-            };
+            // A resolution of the sweep replaces --width/--height/--scale.
+            let mut view = args.view.clone();
+            if let Some((w, h)) = res {
+                (view.width, view.height, view.scale) = (Some(*w), Some(*h), None);
+            }
+            let cam = choose_camera(&view, &args.path, &scene)?;
             cam.validate()?;
             let report = match renderer.as_mut() {
                 Some(r) => {
@@ -179,7 +213,9 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             };
             match report {
                 Ok(report) => {
-                    outln!("{}", report.to_text());
+                    if !args.quiet {
+                        outln!("{}", report.to_text());
+                    }
                     reports.push(report);
                 }
                 // In a sweep, a point beyond the device's limits is reported and skipped so

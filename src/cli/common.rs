@@ -11,7 +11,7 @@ use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::{self, Scene};
 
 /// Where the camera comes from and at which resolution.
-#[derive(Args)]
+#[derive(Args, Clone)]
 pub(crate) struct CameraArgs {
     /// Camera file: INRIA cameras.json, a COLMAP sparse model (folder, or cameras/images
     /// .txt/.bin), a nerfstudio camera_path.json or a vksplat keyframe JSON (see
@@ -219,6 +219,10 @@ pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Res
         _ => "--path-frames",
     };
     let vfov = p.vfov.unwrap_or(camera::DEFAULT_VFOV_DEG);
+    // Generated cameras are made at the requested size (square pixels whatever the
+    // aspect); camera files are rescaled.
+    let (width, height) = camera::resized_dims((1280, 720), view.width, view.height, view.scale)?;
+    let generated = view.cameras.is_none();
     let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
         if sampling {
             bail!("{sampling_flags} set the sampling of a keyframe path (--cameras KEYFRAMES.json); an orbit's frame count is --orbit FRAMES");
@@ -231,7 +235,8 @@ pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Res
             up: glam::Vec3::from(p.orbit_up),
             start_deg: p.orbit_start,
             vfov_deg: vfov,
-            ..Default::default()
+            width,
+            height,
         };
         (
             camera::orbit(&scene.positions, &params)?,
@@ -270,6 +275,8 @@ pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Res
         let params = camera::OrbitParams {
             frames: 1,
             vfov_deg: vfov,
+            width,
+            height,
             ..Default::default()
         };
         let mut cams = camera::orbit(&scene.positions, &params)?;
@@ -286,7 +293,13 @@ pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Res
     };
     let cameras = chosen
         .into_iter()
-        .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
+        .map(|i| {
+            Ok(if generated {
+                (i, all[i].clone())
+            } else {
+                (i, all[i].resized(view.width, view.height, view.scale)?)
+            })
+        })
         .collect::<Result<Vec<_>>>()?;
     for (_, c) in &cameras {
         c.validate()?;
