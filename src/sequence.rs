@@ -262,7 +262,7 @@ pub fn plan(
         if !range.map_or(true, |r| r.contains(*k)) {
             continue;
         }
-        let files = output::plan_files(&pattern.path(*k, &cam.name), opts)?;
+        let files = output::plan_files(&pattern.path(*k, &cam.name), Some(cam), opts)?;
         for f in &files {
             if !seen.insert(f.path.clone()) {
                 return Err(SequenceError::Invalid(format!(

@@ -4,7 +4,8 @@ use super::common::{fail_on_validation_messages, load_scene, CameraArgs, GpuArgs
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::camera::{self, Camera};
+use vksplat::bench::BenchCamera;
+use vksplat::camera;
 use vksplat::output;
 use vksplat::render::GpuRenderer;
 use vksplat::scene::Scene;
@@ -53,12 +54,13 @@ pub(crate) struct BenchArgs {
     pub(crate) gpu: GpuArgs,
 }
 
-pub(crate) fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
-    let cam = match &args.cameras {
+/// The camera bench times: `--camera` (default 0) of `--cameras`, or the default camera.
+pub(crate) fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<BenchCamera> {
+    let timed = match &args.cameras {
         Some(path) => {
             let (cams, _) = camera::load_camera_file(path, &camera::PathTiming::default())?;
             let spec = args.camera.as_deref().unwrap_or("0");
-            let mut picked = camera::select_cameras(&cams, spec, path)?;
+            let picked = camera::select_camera_indices(&cams, spec, path)?;
             if picked.len() != 1 {
                 bail!(
                     "{}: --camera {spec:?} selects {} cameras; bench takes one",
@@ -66,11 +68,27 @@ pub(crate) fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> 
                     picked.len()
                 );
             }
-            picked.remove(0)
+            BenchCamera {
+                camera: cams[picked[0]].clone(),
+                index: Some(picked[0]),
+                source: path.display().to_string(),
+            }
         }
-        None => camera::default_camera(&scene.positions, 1280, 720),
+        None => default_camera(scene, 1280, 720),
     };
-    Ok(cam.resized(args.width, args.height, args.scale)?)
+    Ok(BenchCamera {
+        camera: timed.camera.resized(args.width, args.height, args.scale)?,
+        ..timed
+    })
+}
+
+/// The default camera of `scene` (framing its bulk) at `width` x `height`.
+fn default_camera(scene: &Scene, width: u32, height: u32) -> BenchCamera {
+    BenchCamera {
+        camera: camera::default_camera(&scene.positions, width, height),
+        index: None,
+        source: "default camera".into(),
+    }
 }
 
 /// The sweep axes of `bench`: Gaussian counts and resolutions (either may be empty).
@@ -156,22 +174,29 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         };
         let act = scene.activated();
         for res in &resolutions {
-            let cam = match res {
+            let timed = match res {
                 Some((w, h)) if count.is_some() || args.view.cameras.is_none() => {
-                    camera::default_camera(&scene.positions, *w, *h)
+                    default_camera(&scene, *w, *h)
                 }
-                Some((w, h)) => choose_camera(&args.view, &scene)?.with_resolution(*w, *h)?,
+                Some((w, h)) => {
+                    let chosen = choose_camera(&args.view, &scene)?;
+                    BenchCamera {
+                        camera: chosen.camera.with_resolution(*w, *h)?,
+                        ..chosen
+                    }
+                }
                 None => choose_camera(&args.view, &scene)?,
             };
+            let cam = &timed.camera;
             cam.validate()?;
             let report = match renderer.as_mut() {
                 Some(r) => {
-                    vksplat::bench::bench_gpu(r, &act, &name, &cam, args.frames, args.warmup)
+                    vksplat::bench::bench_gpu(r, &act, &name, &timed, args.frames, args.warmup)
                 }
                 None => Ok(vksplat::bench::bench_cpu(
                     &act,
                     &name,
-                    &cam,
+                    &timed,
                     args.frames,
                     args.warmup,
                 )),
@@ -200,13 +225,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
         Ok(())
     };
+    if points > 1 {
+        println!("sweep summary (medians):");
+        print!("{}", vksplat::bench::summary_table(&reports));
+    }
     if let Some(path) = &args.json {
-        let json = if reports.len() == 1 {
-            serde_json::to_string_pretty(&reports[0])?
-        } else {
-            serde_json::to_string_pretty(&reports)?
-        };
-        write_text(path, json)?;
+        write_text(path, vksplat::bench::to_json(&reports))?;
     }
     if let Some(path) = &args.csv {
         write_text(path, vksplat::bench::to_csv(&reports))?;

@@ -4,7 +4,7 @@ use super::common::{
     fail_on_validation_messages, load_scene, parse_background, parse_depth_range, CameraArgs,
     FilterArgs, GpuArgs, PathArgs, SceneArg,
 };
-use anyhow::Result;
+use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 use vksplat::camera::{self, Camera};
@@ -26,8 +26,9 @@ pub(crate) struct RenderArgs {
     /// out/frame_00000.png, ...).
     #[arg(short, long, value_name = "OUT", default_value = "render.png")]
     pub(crate) output: PathBuf,
-    /// What to write: rgb, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
-    /// (R, G, B, A, Z) for EXR]. Depth PNGs are colour-mapped for looking at.
+    /// What to write: rgb, rgba, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
+    /// (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background (straight colour;
+    /// EXR as rgb). Depth PNGs are colour-mapped for looking at.
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
     /// Frames of the path to render: 100..200 (end exclusive), 100..=199, 100.., ..50 or 7.
@@ -47,9 +48,18 @@ pub(crate) struct RenderArgs {
     /// Write 16-bit PNG (colour and alpha) instead of 8-bit.
     #[arg(long)]
     pub(crate) png16: bool,
-    /// Write EXR channels as 16-bit half floats instead of 32-bit floats.
+    /// Write EXR R, G, B, A as 16-bit half floats instead of 32-bit floats (Z stays
+    /// 32-bit).
     #[arg(long)]
     pub(crate) exr_half: bool,
+    /// Keep the background in EXR R, G, B (the reference's image, as PNG shows it). By
+    /// default EXR colour is premultiplied over transparent black, ready to composite.
+    #[arg(long)]
+    pub(crate) exr_background: bool,
+    /// Also write the rendered cameras (after --camera and resizing) as an INRIA
+    /// cameras.json, which --cameras reads back.
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) export_cameras: Option<PathBuf>,
     /// Depth range NEAR,FAR of colour-mapped depth PNGs (default: each frame's 1st-99th
     /// percentile; fix it for a steady video).
     #[arg(long, value_name = "NEAR,FAR", value_parser = parse_depth_range)]
@@ -144,6 +154,31 @@ pub(crate) fn camera_path(
     Ok((cams, source))
 }
 
+/// Writes the camera path as an INRIA cameras.json (the whole path, whatever --frames
+/// renders of it). With --skip-existing an identical file is left as it is.
+fn export_cameras(
+    path: &std::path::Path,
+    cams: &[(usize, Camera)],
+    args: &RenderArgs,
+) -> Result<()> {
+    let json = camera::inria::to_json(cams)?;
+    if !args.overwrite && args.skip_existing && path.exists() {
+        if std::fs::read(path).ok().as_deref() == Some(json.as_bytes()) {
+            return Ok(());
+        }
+        bail!(
+            "{}: already exists and holds other cameras; pass --overwrite to replace it",
+            path.display()
+        );
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("{}: cannot create the folder: {e}", dir.display()))?;
+    }
+    output::write_bytes_atomically(path, args.overwrite, json.as_bytes())?;
+    Ok(())
+}
+
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let pattern = OutputPattern::parse(&args.output, &args.format).map_err(anyhow::Error::msg)?;
     let out_opts = output::OutputOptions {
@@ -151,9 +186,19 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         png16: args.png16,
         exr_half: args.exr_half,
         depth_range: args.depth_range,
+        background: args.background,
+        exr_background: args.exr_background,
     };
     // Fail on a bad file name before loading anything.
-    output::plan_files(&pattern.path(0, "x"), &out_opts)?;
+    output::plan_files(&pattern.path(0, "x"), None, &out_opts)?;
+    if args.exr_background && !pattern.path(0, "x").to_string_lossy().ends_with(".exr") {
+        bail!("--exr-background applies to EXR output only; the output is not .exr");
+    }
+    if let Some(path) = &args.export_cameras {
+        if path.exists() && !args.overwrite && !args.skip_existing {
+            return Err(output::OutputError::Exists(path.clone()).into());
+        }
+    }
     let filter = args.filter.filter()?;
     let (scene, name) = load_scene(&args.scene)?;
     let total = scene.len();
@@ -180,6 +225,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         Existing::Refuse
     };
     let plan = vksplat::sequence::plan(&cams, &pattern, args.frames, &out_opts, existing)?;
+    if let Some(path) = &args.export_cameras {
+        export_cameras(path, &cams, args)?;
+    }
     if plan.removed_temporaries > 0 {
         eprintln!(
             "removed {} temporary file(s) left by an interrupted run",
