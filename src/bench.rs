@@ -1026,3 +1026,30 @@ pub fn plot_sweep(reports: &[BenchReport]) -> Result<String, String> {
     }
     Ok(svg)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_labels_are_short_and_exact_enough() {
+        assert_eq!(count_label(300.0), "300");
+        assert_eq!(count_label(1000.0), "1k");
+        assert_eq!(count_label(1200.0), "1.2k");
+        assert_eq!(count_label(250_000.0), "250k");
+        assert_eq!(count_label(2.5e6), "2.5M");
+        assert_eq!(value_label(0.003072), "0.00307");
+        assert_eq!(value_label(0.9216), "0.922");
+        assert_eq!(value_label(8.2944), "8.29");
+        assert_eq!(value_label(100.0), "100");
+        assert_eq!(value_label(0.0), "0");
+    }
+
+    #[test]
+    fn log_ticks_give_at_least_three_values_inside_the_range() {
+        assert_eq!(log_ticks(0.9, 60.0), [1.0, 2.0, 5.0, 10.0, 20.0, 50.0]);
+        // Less than a decade: denser steps.
+        assert_eq!(log_ticks(68.0, 330.0), [70.0, 100.0, 150.0, 200.0, 300.0]);
+        assert!(log_ticks(0.0, 1.0).is_empty());
+    }
+}

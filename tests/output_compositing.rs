@@ -149,7 +149,10 @@ fn exr_is_premultiplied_with_z_infinite_where_empty_and_the_camera_in_its_header
     // Z: the depth where something was rendered, +inf ("no surface") where alpha is 0.
     let z = plane(&channels, "Z");
     let empty = over_bg.alpha.iter().filter(|&&a| a == 0.0).count();
-    assert!(empty > 100 && z.len() - empty > 1000, "{empty} empty pixels");
+    assert!(
+        empty > 100 && z.len() - empty > 1000,
+        "{empty} empty pixels"
+    );
     for (i, (&zi, &a)) in z.iter().zip(&over_bg.alpha).enumerate() {
         if a == 0.0 {
             assert_eq!(zi, f32::INFINITY, "pixel {i}");

@@ -29,13 +29,15 @@ pub(crate) struct BenchArgs {
     /// SH degree of the synthetic scenes of a Gaussians sweep.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=3))]
     pub(crate) sh_degree: u32,
-    /// Write the report(s) as JSON.
+    /// Write the report as JSON: {"schema_version": 1, "runs": [...]}, one run per point
+    /// of a sweep, each naming the timed camera.
     #[arg(long, value_name = "FILE")]
     pub(crate) json: Option<PathBuf>,
     /// Write the report(s) as CSV (one row per stage).
     #[arg(long, value_name = "FILE")]
     pub(crate) csv: Option<PathBuf>,
-    /// Write an SVG plot of the sweep (stacked stage times and a stage breakdown).
+    /// Write an SVG plot of the sweep: frame time per resolution and per Gaussian count,
+    /// the stage times of every series as stacked areas, and a stage breakdown.
     #[arg(long, value_name = "FILE.svg")]
     pub(crate) plot: Option<PathBuf>,
     /// Replace output files that exist.

@@ -191,7 +191,8 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     // Fail on a bad file name before loading anything.
     output::plan_files(&pattern.path(0, "x"), None, &out_opts)?;
-    if args.exr_background && !pattern.path(0, "x").to_string_lossy().ends_with(".exr") {
+    let format = output::ImageFormat::from_path(&pattern.path(0, "x"), false)?;
+    if args.exr_background && format != output::ImageFormat::Exr {
         bail!("--exr-background applies to EXR output only; the output is not .exr");
     }
     if let Some(path) = &args.export_cameras {
