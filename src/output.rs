@@ -1,7 +1,16 @@
-//! Image output: PNG (8 or 16 bit) and OpenEXR (32-bit float R, G, B, A, Z), written
-//! atomically (a temporary file in the destination folder, then a rename), so a crash or
-//! an error never leaves a truncated image behind.
+//! Image output: PNG (8 or 16 bit; RGB, RGBA, grey or colour-mapped depth) and OpenEXR
+//! (R, G, B, A, Z for compositing, with the camera in the header), written atomically (a
+//! temporary file in the destination folder, then a rename), so a crash or an error never
+//! leaves a truncated image behind.
+//!
+//! A frame's colour holds the background term `T * background` (the reference's image).
+//! EXR and RGBA PNG files are made for compositing instead: their colour is the frame's
+//! colour without that term, recovered as `color - (1 - alpha) * background` (the
+//! renderers give `alpha = 1 - T`, so this is exact up to a float rounding of about 1e-7).
+//! EXR stores it premultiplied by alpha, as OpenEXR expects; PNG stores it straight
+//! (divided by alpha), as PNG expects.
 
+use crate::camera::Camera;
 use crate::frame::Frame;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -175,32 +184,121 @@ pub fn encode_png(
 }
 
 /// Which planes of a frame an OpenEXR file holds, and at which precision.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ExrChannels {
     /// R, G, B colour.
     pub rgb: bool,
     /// A (opacity `1 - T`).
     pub alpha: bool,
-    /// Z (alpha-normalised view depth).
+    /// Z (alpha-normalised view depth; `+inf`, "no surface", where alpha is 0).
     pub depth: bool,
-    /// 16-bit half floats instead of 32-bit floats.
+    /// 16-bit half floats for R, G, B and A instead of 32-bit floats (Z stays 32-bit:
+    /// half floats hold depth to only 11 significant bits).
     pub half: bool,
+    /// The background the frame's colour holds as `T * background`, removed from R, G, B
+    /// to give premultiplied colour. Zero keeps the colour as rendered (the reference's
+    /// image, background included).
+    pub remove_background: [f32; 3],
 }
 
 impl ExrChannels {
-    /// R, G, B, A and Z in 32-bit float.
+    /// R, G, B, A and Z in 32-bit float, the colour as rendered.
     pub const ALL: ExrChannels = ExrChannels {
         rgb: true,
         alpha: true,
         depth: true,
         half: false,
+        remove_background: [0.0; 3],
     };
 }
 
+/// The frame's colour without its background term: `color - (1 - alpha) * background`,
+/// premultiplied colour (the accumulated `sum c_i alpha_i T_i` of the reference).
+pub fn premultiplied_color(frame: &Frame, background: [f32; 3]) -> Vec<[f32; 3]> {
+    if background == [0.0; 3] {
+        return frame.color.clone();
+    }
+    frame
+        .color
+        .iter()
+        .zip(&frame.alpha)
+        .map(|(c, &a)| {
+            let t = 1.0 - a;
+            [
+                c[0] - t * background[0],
+                c[1] - t * background[1],
+                c[2] - t * background[2],
+            ]
+        })
+        .collect()
+}
+
+/// `worldToCamera` of OpenEXR's standard attributes for `cam`, as the 16 floats of an
+/// `M44f`, row by row. OpenEXR multiplies row vectors (`p_camera = p_world * M`, the
+/// translation in the last row) and its camera space is x right, y up, z forward (the
+/// direction of view; points in front have positive z): our OpenCV camera space with y
+/// negated.
+pub fn exr_world_to_camera(cam: &Camera) -> [f32; 16] {
+    let r = cam.rotation.as_dmat3();
+    let t = cam.translation.as_dvec3();
+    let flip = [1.0, -1.0, 1.0];
+    let mut m = [0f32; 16];
+    for axis in 0..3 {
+        // Column `axis` of the row-vector matrix is the camera axis' row of [R | t].
+        // `+ 0.0` turns the -0.0 of a negated zero into 0.0.
+        let row = r.row(axis) * flip[axis] + 0.0;
+        m[axis] = row.x as f32;
+        m[4 + axis] = row.y as f32;
+        m[8 + axis] = row.z as f32;
+        m[12 + axis] = (t[axis] * flip[axis] + 0.0) as f32;
+    }
+    m[15] = 1.0;
+    m
+}
+
+/// `worldToNDC` of OpenEXR's standard attributes for `cam`, row by row (row vectors, as
+/// [`exr_world_to_camera`]). A world point `p` maps to `(x, y, z, w) = (p, 1) * M`, and
+/// `(x / w, y / w)` is its position in the image with `(0, 0)` the top-left and `(1, 1)`
+/// the bottom-right corner of the image: `((fx X / Z + cx) / W, (fy Y / Z + cy) / H)` for
+/// the OpenCV camera point `(X, Y, Z)`. `z / w = 1 - 0.2 / Z` is 0 at the renderer's near
+/// plane (0.2) and tends to 1 far away (OpenEXR discards it).
+pub fn exr_world_to_ndc(cam: &Camera) -> [f32; 16] {
+    let r = cam.rotation.as_dmat3();
+    let t = cam.translation.as_dvec3();
+    let (w, h) = (cam.width as f64, cam.height as f64);
+    let (fx, fy, cx, cy) = (
+        cam.fx as f64 / w,
+        cam.fy as f64 / h,
+        cam.cx as f64 / w,
+        cam.cy as f64 / h,
+    );
+    let near = crate::cpu::NEAR_PLANE as f64;
+    // Column-vector rows of the projection: [x, y, z, w] = P * (p, 1).
+    let depth = (r.row(2), t.z);
+    let rows = [
+        (r.row(0) * fx + depth.0 * cx, t.x * fx + depth.1 * cx),
+        (r.row(1) * fy + depth.0 * cy, t.y * fy + depth.1 * cy),
+        (depth.0, depth.1 - near),
+        depth,
+    ];
+    let mut m = [0f32; 16];
+    for (col, (v, tr)) in rows.iter().enumerate() {
+        m[col] = v.x as f32;
+        m[4 + col] = v.y as f32;
+        m[8 + col] = v.z as f32;
+        m[12 + col] = *tr as f32;
+    }
+    m
+}
+
 /// Encodes the chosen planes of `frame` as an OpenEXR image (channels sorted by name,
-/// as OpenEXR requires: A, B, G, R, Z).
+/// as OpenEXR requires: A, B, G, R, Z). R, G, B lose `channels.remove_background`; Z is
+/// `+inf` where alpha is 0 (no surface) and always 32-bit float. With a camera, the header
+/// holds its `worldToCamera` and `worldToNDC` ([`exr_world_to_camera`],
+/// [`exr_world_to_ndc`]).
 pub fn encode_exr_channels(
     frame: &Frame,
+    camera: Option<&Camera>,
     channels: ExrChannels,
     out: &mut (impl Write + std::io::Seek),
     path: &Path,
@@ -215,8 +313,9 @@ pub fn encode_exr_channels(
     };
     let mut list = Vec::new();
     if channels.rgb {
+        let color = premultiplied_color(frame, channels.remove_background);
         for (c, name) in ["R", "G", "B"].into_iter().enumerate() {
-            let plane = frame.color.iter().map(|p| p[c]).collect();
+            let plane = color.iter().map(|p| p[c]).collect();
             list.push(AnyChannel::new(name, samples(plane)));
         }
     }
@@ -224,11 +323,22 @@ pub fn encode_exr_channels(
         list.push(AnyChannel::new("A", samples(frame.alpha.clone())));
     }
     if channels.depth {
-        list.push(AnyChannel::new("Z", samples(frame.depth.clone())));
+        let z = frame
+            .depth
+            .iter()
+            .zip(&frame.alpha)
+            .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
+            .collect();
+        list.push(AnyChannel::new("Z", FlatSamples::F32(z)));
+    }
+    let mut attributes = LayerAttributes::named("vksplat");
+    if let Some(cam) = camera {
+        attributes.world_to_camera = Some(exr_world_to_camera(cam));
+        attributes.world_to_normalized_device = Some(exr_world_to_ndc(cam));
     }
     let layer = Layer::new(
         (frame.width as usize, frame.height as usize),
-        LayerAttributes::named("vksplat"),
+        attributes,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(SmallVec::from_vec(list)),
     );
@@ -240,6 +350,60 @@ pub fn encode_exr_channels(
             path: path.to_path_buf(),
             message: e.to_string(),
         })
+}
+
+/// Straight (un-premultiplied) colour for an RGBA PNG: the frame's colour without its
+/// background term, divided by alpha; black where alpha is 0 (fully transparent, so the
+/// colour there is never seen).
+pub fn straight_color(frame: &Frame, background: [f32; 3]) -> Vec<[f32; 3]> {
+    premultiplied_color(frame, background)
+        .into_iter()
+        .zip(&frame.alpha)
+        .map(|(c, &a)| if a > 0.0 { c.map(|v| v / a) } else { [0.0; 3] })
+        .collect()
+}
+
+/// Encodes `frame` as an RGBA PNG with a transparent background: straight colour
+/// ([`straight_color`]) and alpha `1 - T`, each quantised like [`to_u8`] / [`to_u16`].
+pub fn encode_png_rgba(
+    frame: &Frame,
+    background: [f32; 3],
+    sixteen_bit: bool,
+    out: &mut impl Write,
+    path: &Path,
+) -> Result<(), OutputError> {
+    use image::ImageEncoder;
+    let color = straight_color(frame, background);
+    let pixels = color
+        .iter()
+        .zip(&frame.alpha)
+        .map(|(c, &a)| [c[0], c[1], c[2], a]);
+    let encoder = image::codecs::png::PngEncoder::new(out);
+    let result = if sixteen_bit {
+        // The encoder takes native-endian samples and writes them big-endian.
+        let bytes: Vec<u8> = pixels
+            .flat_map(|p| p.map(|v| to_u16(v).to_ne_bytes()))
+            .flatten()
+            .collect();
+        encoder.write_image(
+            &bytes,
+            frame.width,
+            frame.height,
+            image::ExtendedColorType::Rgba16,
+        )
+    } else {
+        let bytes: Vec<u8> = pixels.flat_map(|p| p.map(to_u8)).collect();
+        encoder.write_image(
+            &bytes,
+            frame.width,
+            frame.height,
+            image::ExtendedColorType::Rgba8,
+        )
+    };
+    result.map_err(|e| OutputError::Encode {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
 }
 
 /// Encodes one 8- or 16-bit grey plane (values in [0, 1]) as PNG.
@@ -349,7 +513,8 @@ pub fn depth_colormap(frame: &Frame, range: Option<[f32; 2]>) -> Vec<[f32; 3]> {
         .collect()
 }
 
-/// Writes a frame to `path` in `format`, atomically (colour for PNG; R, G, B, A, Z for EXR).
+/// Writes a frame to `path` in `format`, atomically (colour for PNG; R, G, B, A, Z for EXR,
+/// the colour as rendered and no camera in the header).
 pub fn write_frame(
     frame: &Frame,
     path: &Path,
@@ -366,6 +531,7 @@ pub fn write_frame(
         &FileSpec {
             path: path.to_path_buf(),
             content,
+            camera: None,
         },
         overwrite,
     )
@@ -374,8 +540,11 @@ pub fn write_frame(
 /// What a render writes per frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RenderMode {
-    /// Colour (EXR: R, G, B, A).
+    /// Colour (PNG: RGB with the background; EXR: R, G, B, A).
     Rgb,
+    /// Colour with alpha over a transparent background (PNG: RGBA, straight colour; EXR:
+    /// R, G, B, A as for `Rgb`).
+    Rgba,
     /// Opacity only (PNG: grey; EXR: A).
     Alpha,
     /// Depth only (PNG: colour-mapped for looking at; EXR: Z in view units).
@@ -390,11 +559,12 @@ impl std::str::FromStr for RenderMode {
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
             "rgb" => Ok(RenderMode::Rgb),
+            "rgba" => Ok(RenderMode::Rgba),
             "alpha" => Ok(RenderMode::Alpha),
             "depth" => Ok(RenderMode::Depth),
             "rgb+depth" => Ok(RenderMode::RgbDepth),
             _ => Err(format!(
-                "unknown mode \"{s}\"; use rgb, alpha, depth or rgb+depth"
+                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth or rgb+depth"
             )),
         }
     }
@@ -411,6 +581,12 @@ pub struct OutputOptions {
     pub exr_half: bool,
     /// Fixed `[near, far]` of colour-mapped depth PNGs (default: per-frame percentiles).
     pub depth_range: Option<[f32; 2]>,
+    /// The background the frames are rendered over (their colour holds `T * background`);
+    /// EXR and RGBA PNG files leave it out.
+    pub background: [f32; 3],
+    /// Keep the background in EXR R, G, B (the reference's image, as in RGB PNGs) instead
+    /// of premultiplied colour over transparent black.
+    pub exr_background: bool,
 }
 
 /// One file of a frame and what it holds.
@@ -420,6 +596,13 @@ pub enum FileContent {
     PngColor {
         /// 16 bits per sample.
         sixteen_bit: bool,
+    },
+    /// RGBA PNG: straight colour without the background, and alpha.
+    PngRgba {
+        /// 16 bits per sample.
+        sixteen_bit: bool,
+        /// The background the frame's colour holds, removed.
+        background: [f32; 3],
     },
     /// Grey PNG of the alpha plane.
     PngAlpha {
@@ -442,22 +625,38 @@ pub struct FileSpec {
     pub path: PathBuf,
     /// What it holds.
     pub content: FileContent,
+    /// The camera the frame is rendered from, recorded in EXR headers.
+    pub camera: Option<Camera>,
 }
 
-/// The files a frame written to `path` consists of under `opts`.
-pub fn plan_files(path: &Path, opts: &OutputOptions) -> Result<Vec<FileSpec>, OutputError> {
+/// The files a frame from `camera` written to `path` consists of under `opts`.
+pub fn plan_files(
+    path: &Path,
+    camera: Option<&Camera>,
+    opts: &OutputOptions,
+) -> Result<Vec<FileSpec>, OutputError> {
     let format = ImageFormat::from_path(path, opts.png16)?;
-    let spec = |path: PathBuf, content| FileSpec { path, content };
+    let spec = |path: PathBuf, content| FileSpec {
+        path,
+        content,
+        camera: camera.cloned(),
+    };
     if format == ImageFormat::Exr {
         let mode = opts.mode.unwrap_or(RenderMode::RgbDepth);
+        let colour = matches!(
+            mode,
+            RenderMode::Rgb | RenderMode::Rgba | RenderMode::RgbDepth
+        );
         let channels = ExrChannels {
-            rgb: matches!(mode, RenderMode::Rgb | RenderMode::RgbDepth),
-            alpha: matches!(
-                mode,
-                RenderMode::Rgb | RenderMode::RgbDepth | RenderMode::Alpha
-            ),
+            rgb: colour,
+            alpha: colour || mode == RenderMode::Alpha,
             depth: matches!(mode, RenderMode::Depth | RenderMode::RgbDepth),
             half: opts.exr_half,
+            remove_background: if opts.exr_background {
+                [0.0; 3]
+            } else {
+                opts.background
+            },
         };
         return Ok(vec![spec(path.to_path_buf(), FileContent::Exr(channels))]);
     }
@@ -467,6 +666,13 @@ pub fn plan_files(path: &Path, opts: &OutputOptions) -> Result<Vec<FileSpec>, Ou
     };
     Ok(match opts.mode.unwrap_or(RenderMode::Rgb) {
         RenderMode::Rgb => vec![spec(path.into(), FileContent::PngColor { sixteen_bit })],
+        RenderMode::Rgba => vec![spec(
+            path.into(),
+            FileContent::PngRgba {
+                sixteen_bit,
+                background: opts.background,
+            },
+        )],
         RenderMode::Alpha => vec![spec(path.into(), FileContent::PngAlpha { sixteen_bit })],
         RenderMode::Depth => vec![spec(path.into(), depth)],
         RenderMode::RgbDepth => vec![
@@ -490,6 +696,10 @@ pub fn write_file(frame: &Frame, file: &FileSpec, overwrite: bool) -> Result<(),
     let path = file.path.as_path();
     write_atomically(path, overwrite, |w| match &file.content {
         FileContent::PngColor { sixteen_bit } => encode_png(frame, *sixteen_bit, w, path),
+        FileContent::PngRgba {
+            sixteen_bit,
+            background,
+        } => encode_png_rgba(frame, *background, *sixteen_bit, w, path),
         FileContent::PngAlpha { sixteen_bit } => encode_png_grey(
             frame.width,
             frame.height,
@@ -507,6 +717,8 @@ pub fn write_file(frame: &Frame, file: &FileSpec, overwrite: bool) -> Result<(),
             };
             encode_png(&colours, false, w, path)
         }
-        FileContent::Exr(channels) => encode_exr_channels(frame, *channels, w, path),
+        FileContent::Exr(channels) => {
+            encode_exr_channels(frame, file.camera.as_ref(), *channels, w, path)
+        }
     })
 }

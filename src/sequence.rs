@@ -367,7 +367,7 @@ pub fn plan(
     let mut frames = Vec::new();
     let mut seen = HashSet::new();
     for (k, cam) in chosen {
-        let files = output::plan_files(&pattern.path(*k, &cam.name), opts)?;
+        let files = output::plan_files(&pattern.path(*k, &cam.name), Some(cam), opts)?;
         for f in &files {
             if !seen.insert(f.path.clone()) {
                 return Err(SequenceError::Invalid(format!(

@@ -62,7 +62,12 @@ fn exr_has_rgbaz_channels_equal_to_the_frame() {
         assert_eq!(plane(name), want, "channel {name}");
     }
     assert_eq!(plane("A"), f.alpha);
-    assert_eq!(plane("Z"), f.depth);
+    // Z is the depth where something was rendered and +inf ("no surface") where not.
+    let z: Vec<f32> = (f.depth.iter().zip(&f.alpha))
+        .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
+        .collect();
+    assert_eq!(plane("Z"), z);
+    assert!(z.iter().any(|v| v.is_infinite()) && z.iter().any(|v| v.is_finite()));
 }
 
 #[test]

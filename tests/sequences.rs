@@ -262,12 +262,17 @@ fn exr_and_png16_hold_the_in_memory_render() {
     assert_eq!(names, ["A", "B", "G", "R", "Z"]);
     let plane =
         |c: &AnyChannel<FlatSamples>| -> Vec<f32> { c.sample_data.values_as_f32().collect() };
-    let colour = |ch: usize| -> Vec<f32> { frame.color.iter().map(|p| p[ch]).collect() };
+    // EXR colour is premultiplied (the background term removed); Z is +inf where empty.
+    let premultiplied = vksplat::output::premultiplied_color(&frame, [0.1, 0.2, 0.3]);
+    let colour = |ch: usize| -> Vec<f32> { premultiplied.iter().map(|p| p[ch]).collect() };
+    let z: Vec<f32> = (frame.depth.iter().zip(&frame.alpha))
+        .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
+        .collect();
     same("A", &plane(&chans[0]), &frame.alpha);
     same("B", &plane(&chans[1]), &colour(2));
     same("G", &plane(&chans[2]), &colour(1));
     same("R", &plane(&chans[3]), &colour(0));
-    same("Z", &plane(&chans[4]), &frame.depth);
+    same("Z", &plane(&chans[4]), &z);
     // Half floats: R, G, B, A only (mode rgb), each the f16 rounding of the value.
     let chans = read(&half_path);
     let names: Vec<String> = chans.iter().map(|c| c.name.to_string()).collect();
@@ -319,8 +324,10 @@ fn depth_modes_write_depth() {
         .sample_data
         .values_as_f32()
         .collect();
-    let covered: Vec<f32> = z.iter().copied().filter(|&d| d > 0.0).collect();
+    // Empty pixels hold +inf ("no surface"), covered ones their depth.
+    let covered: Vec<f32> = z.iter().copied().filter(|&d| d.is_finite()).collect();
     assert!(covered.len() > z.len() / 20);
+    assert!(z.iter().all(|&d| d.is_finite() || d == f32::INFINITY) && z[0] == f32::INFINITY);
     // The demo camera stands a few units from the robot.
     assert!(covered.iter().all(|&d| d > 0.2 && d < 20.0));
     // The colour-mapped PNG: black where nothing is, colours elsewhere.

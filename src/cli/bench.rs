@@ -8,11 +8,11 @@ use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::camera::Camera;
+use vksplat::bench::BenchCamera;
 use vksplat::output;
 use vksplat::render::GpuRenderer;
 use vksplat::scene::Scene;
-use vksplat::{note, outln};
+use vksplat::{note, out, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
@@ -40,13 +40,15 @@ pub(crate) struct BenchArgs {
     /// Seed of the synthetic scenes of a Gaussians sweep.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
-    /// Write the report(s) as JSON.
+    /// Write the report as JSON: {"schema_version": 1, "runs": [...]}, one run per point
+    /// of a sweep, each naming the timed camera.
     #[arg(long, value_name = "FILE")]
     pub(crate) json: Option<PathBuf>,
     /// Write the report(s) as CSV (one row per stage).
     #[arg(long, value_name = "FILE")]
     pub(crate) csv: Option<PathBuf>,
-    /// Write an SVG plot of the sweep (stacked stage times and a stage breakdown).
+    /// Write an SVG plot of the sweep: frame time per resolution and per Gaussian count,
+    /// the stage times of every series as stacked areas, and a stage breakdown.
     #[arg(long, value_name = "FILE.svg")]
     pub(crate) plot: Option<PathBuf>,
     /// Replace output files that exist.
@@ -70,18 +72,29 @@ pub(crate) struct BenchArgs {
 
 /// The camera a benchmark times: the one `--camera` selects of the path (`--orbit`,
 /// `--cameras` or the default camera), or its first.
-pub(crate) fn choose_camera(view: &CameraArgs, path: &PathArgs, scene: &Scene) -> Result<Camera> {
+pub(crate) fn choose_camera(
+    view: &CameraArgs,
+    path: &PathArgs,
+    scene: &Scene,
+) -> Result<BenchCamera> {
     let camera = view.camera.is_some();
     let path = camera_path(view, path, scene)?;
+    let timed = |(k, cam): &(usize, vksplat::camera::Camera)| BenchCamera {
+        camera: cam.clone(),
+        // The default camera is no camera of a file.
+        index: (path.source != "the default camera").then_some(*k),
+        source: path.source.clone(),
+    };
     match path.cameras.as_slice() {
-        [(_, one)] => Ok(one.clone()),
-        [(k, first), ..] if !camera => {
+        [one] => Ok(timed(one)),
+        [first, ..] if !camera => {
             note!(
-                "timing camera {k} (\"{}\") of {}; pick another with --camera",
-                first.name,
+                "timing camera {} (\"{}\") of {}; pick another with --camera",
+                first.0,
+                first.1.name,
                 path.source
             );
-            Ok(first.clone())
+            Ok(timed(first))
         }
         many => bail!(
             "--camera selects {} of {}; bench times one camera",
@@ -197,16 +210,17 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             if let Some((w, h)) = res {
                 (view.width, view.height, view.scale) = (Some(*w), Some(*h), None);
             }
-            let cam = choose_camera(&view, &args.path, &scene)?;
+            let timed = choose_camera(&view, &args.path, &scene)?;
+            let cam = &timed.camera;
             cam.validate()?;
             let report = match renderer.as_mut() {
                 Some(r) => {
-                    vksplat::bench::bench_gpu(r, &act, &name, &cam, args.frames, args.warmup)
+                    vksplat::bench::bench_gpu(r, &act, &name, &timed, args.frames, args.warmup)
                 }
                 None => Ok(vksplat::bench::bench_cpu(
                     &act,
                     &name,
-                    &cam,
+                    &timed,
                     args.frames,
                     args.warmup,
                 )),
@@ -227,6 +241,10 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             }
         }
     }
+    if points > 1 && !args.quiet {
+        outln!("sweep summary (medians):");
+        out!("{}", vksplat::bench::summary_table(&reports));
+    }
     if reports.is_empty() {
         bail!("every point of the sweep exceeded the device's limits (see above)");
     }
@@ -238,12 +256,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         Ok(())
     };
     if let Some(path) = &args.json {
-        let json = if reports.len() == 1 {
-            serde_json::to_string_pretty(&reports[0])?
-        } else {
-            serde_json::to_string_pretty(&reports)?
-        };
-        write_text(path, json)?;
+        write_text(path, vksplat::bench::to_json(&reports))?;
     }
     if let Some(path) = &args.csv {
         write_text(path, vksplat::bench::to_csv(&reports))?;

@@ -41,8 +41,9 @@ pub(crate) struct RenderArgs {
     /// render/frame_{:05}.png for several].
     #[arg(short, long, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
-    /// What to write: rgb, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
-    /// (R, G, B, A, Z) for EXR]. Depth PNGs are colour-mapped for looking at.
+    /// What to write: rgb, rgba, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
+    /// (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background (straight colour;
+    /// EXR as rgb). Depth PNGs are colour-mapped for looking at.
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
     /// Frames of the path to render, numbered in the whole path (before --camera): 7,
@@ -62,9 +63,18 @@ pub(crate) struct RenderArgs {
     /// Write 16-bit PNG (colour and alpha) instead of 8-bit.
     #[arg(long)]
     pub(crate) png16: bool,
-    /// Write EXR channels as 16-bit half floats instead of 32-bit floats.
+    /// Write EXR R, G, B, A as 16-bit half floats instead of 32-bit floats (Z stays
+    /// 32-bit).
     #[arg(long)]
     pub(crate) exr_half: bool,
+    /// Keep the background in EXR R, G, B (the reference's image, as PNG shows it). By
+    /// default EXR colour is premultiplied over transparent black, ready to composite.
+    #[arg(long)]
+    pub(crate) exr_background: bool,
+    /// Also write the rendered cameras (after --camera and resizing) as an INRIA
+    /// cameras.json, which --cameras reads back.
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) export_cameras: Option<PathBuf>,
     /// Depth range NEAR,FAR of colour-mapped depth PNGs (default: each frame's 1st-99th
     /// percentile; fix it for a steady video).
     #[arg(long, value_name = "NEAR,FAR", value_parser = values::depth_range, allow_hyphen_values = true)]
@@ -142,7 +152,7 @@ fn check_output_options(
             output.display()
         );
     }
-    let files = output::plan_files(&pattern.path(0, "x"), opts)?;
+    let files = output::plan_files(&pattern.path(0, "x"), None, opts)?;
     let writes = |pred: fn(&FileContent) -> bool| files.iter().any(|f| pred(&f.content));
     if args.png16
         && !writes(|c| {
@@ -163,12 +173,36 @@ fn check_output_options(
             output.display()
         );
     }
+    if args.exr_background && !writes(|c| matches!(c, FileContent::Exr(_))) {
+        bail!(
+            "--exr-background applies to EXR output; {} is not an EXR file",
+            output.display()
+        );
+    }
     if args.depth_range.is_some() && !writes(|c| matches!(c, FileContent::PngDepth { .. })) {
         bail!(
             "--depth-range sets the colour map of depth PNGs; {} writes none (use --mode depth or rgb+depth with a .png output; EXR stores depth as it is)",
             output.display()
         );
     }
+    Ok(())
+}
+
+/// Writes the camera path as an INRIA cameras.json (the whole path, whatever --frames
+/// renders of it, so every part of a split run writes the same file). With
+/// --skip-existing an identical file is left as it is.
+fn export_cameras(path: &Path, cams: &[(usize, Camera)], args: &RenderArgs) -> Result<()> {
+    let json = vksplat::camera::inria::to_json(cams)?;
+    if !args.overwrite && args.skip_existing && path.exists() {
+        if std::fs::read(path).ok().as_deref() == Some(json.as_bytes()) {
+            return Ok(());
+        }
+        bail!(
+            "{}: already exists and holds other cameras; pass --overwrite to replace it",
+            path.display()
+        );
+    }
+    output::write_bytes_atomically(path, args.overwrite, json.as_bytes())?;
     Ok(())
 }
 
@@ -195,8 +229,15 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         png16: args.png16,
         exr_half: args.exr_half,
         depth_range: args.depth_range,
+        background: args.background,
+        exr_background: args.exr_background,
     };
     let format = args.format.as_deref().unwrap_or("png");
+    if let Some(path) = &args.export_cameras {
+        if !args.skip_existing {
+            super::common::check_output_file(path, args.overwrite)?;
+        }
+    }
     // Bad names and unwritable folders are reported before anything is loaded.
     let explicit = match &args.output {
         Some(out) => {
@@ -233,6 +274,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         kept
     };
     let path = camera_path(&args.view, &args.path, &scene)?;
+    if let Some(file) = &args.export_cameras {
+        export_cameras(file, &path.cameras, args)?;
+    }
     if let Some(frames) = &args.frames {
         frames.check(path.len).map_err(anyhow::Error::msg)?;
     }

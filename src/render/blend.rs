@@ -72,6 +72,16 @@ impl BlendKernel {
     }
 }
 
+/// The kernel as `VKSPLAT_BLEND` names it: `shared` or `texel:N`.
+impl std::fmt::Display for BlendKernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BlendKernel::Shared => write!(f, "shared"),
+            BlendKernel::Texel { strip } => write!(f, "texel:{strip}"),
+        }
+    }
+}
+
 impl std::str::FromStr for BlendKernel {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
