@@ -158,7 +158,9 @@ fn check_output_options(
         && !writes(|c| {
             matches!(
                 c,
-                FileContent::PngColor { .. } | FileContent::PngAlpha { .. }
+                FileContent::PngColor { .. }
+                    | FileContent::PngRgba { .. }
+                    | FileContent::PngAlpha { .. }
             )
         })
     {
