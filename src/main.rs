@@ -24,9 +24,9 @@ enum Command {
     /// Render a scene to a PNG or EXR image.
     #[command(allow_negative_numbers = true)]
     Render(cli::render::RenderArgs),
-    /// Print a scene's size, bounds and parameter statistics.
+    /// Print a scene's size, bounds and parameter statistics (or what a camera file holds).
     #[command(allow_negative_numbers = true)]
-    Info(cli::common::SceneArg),
+    Info(cli::info::InfoArgs),
     /// Render the same camera repeatedly and report per-stage GPU times.
     #[command(allow_negative_numbers = true)]
     Bench(cli::bench::BenchArgs),

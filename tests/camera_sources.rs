@@ -1229,7 +1229,9 @@ fn selection_on_loaded_cameras() {
     assert_eq!(pick("side, front.png").unwrap(), ["side.png", "front.png"]);
     let e = pick("0..3").unwrap_err().to_string();
     assert!(
-        e.contains("out of range") && e.contains("colmap_text"),
+        e.contains("reaches past the last camera")
+            && e.contains("0..=1")
+            && e.contains("colmap_text"),
         "{e}"
     );
     let e = pick("back").unwrap_err().to_string();

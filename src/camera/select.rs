@@ -10,8 +10,8 @@ pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera
         return cams.get(i).cloned().ok_or_else(|| CameraError::NotFound {
             path: path.to_path_buf(),
             message: format!(
-                "camera index {i} is out of range; there are {} cameras ({})",
-                cams.len(),
+                "camera index {i} is out of range; there {} ({})",
+                count_cameras(cams.len()),
                 index_span(cams.len())
             ),
         });
@@ -91,8 +91,8 @@ pub fn select_camera_indices(
             }
             if end > cams.len() {
                 return Err(not_found(format!(
-                    "camera range \"{item}\" reaches past the last camera; there are {} ({}){}",
-                    cams.len(),
+                    "camera range \"{item}\" reaches past the last camera; there {} ({}){}",
+                    count_cameras(cams.len()),
                     index_span(cams.len()),
                     if start < cams.len() {
                         format!("; use {start}.. to go to the end")
@@ -114,8 +114,8 @@ fn index<'a>(cams: &'a [Camera], i: usize, path: &Path) -> Result<&'a Camera, Ca
     cams.get(i).ok_or_else(|| CameraError::NotFound {
         path: path.to_path_buf(),
         message: format!(
-            "camera index {i} is out of range; there are {} cameras ({})",
-            cams.len(),
+            "camera index {i} is out of range; there {} ({})",
+            count_cameras(cams.len()),
             index_span(cams.len())
         ),
     })
@@ -128,6 +128,15 @@ pub fn index_span(len: usize) -> String {
         0 => "none".into(),
         1 => "only 0".into(),
         n => format!("0..={}", n - 1),
+    }
+}
+
+/// "is 1 camera", "are 8 cameras".
+fn count_cameras(n: usize) -> String {
+    if n == 1 {
+        "is 1 camera".into()
+    } else {
+        format!("are {n} cameras")
     }
 }
 

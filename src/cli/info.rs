@@ -1,26 +1,53 @@
-//! `vksplat info`: a scene's size, bounds and parameter statistics.
+//! `vksplat info`: a scene's size, bounds and parameter statistics (or what a camera
+//! file holds), as text or JSON.
 
 use super::common::{load_scene, SceneArg};
+use super::plural;
 use anyhow::Result;
+use clap::Args;
+use serde_json::json;
 use vksplat::outln;
 use vksplat::scene;
+
+#[derive(Args)]
+#[command(after_help = "Examples:
+  vksplat info scene.ply
+  vksplat info model_dir/ --json > stats.json
+  vksplat info cameras.json")]
+pub(crate) struct InfoArgs {
+    #[command(flatten)]
+    pub(crate) scene: SceneArg,
+    /// Print the statistics as JSON (for scripts) instead of text.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
 
 pub(crate) fn fmt3(v: [f32; 3]) -> String {
     format!("({:.4}, {:.4}, {:.4})", v[0], v[1], v[2])
 }
 
-pub(crate) fn info(arg: &SceneArg) -> Result<()> {
+pub(crate) fn info(args: &InfoArgs) -> Result<()> {
+    let arg = &args.scene;
     let (scene, name, format) = match arg.scene.as_deref() {
-        Some(path) if !arg.demo => {
-            let (scene, format) = scene::load_with_format(path)?;
-            let name = scene::resolve_scene_path(path)?.display().to_string();
-            (scene, name, Some(format))
-        }
+        Some(path) if !arg.demo => match scene::load_with_format(path) {
+            Ok((scene, format)) => {
+                let name = scene::resolve_scene_path(path)?.display().to_string();
+                (scene, name, Some(format))
+            }
+            // A camera file given where a scene belongs: say what it holds.
+            Err(e) => match vksplat::camera::detect_camera_format(path) {
+                Ok(_) => return camera_file_info(path, args.json),
+                Err(_) => return Err(e.into()),
+            },
+        },
         _ => {
             let (scene, name) = load_scene(arg)?;
             (scene, name, None)
         }
     };
+    if args.json {
+        return print_json(&scene, &name, format.map(|f| f.to_string()));
+    }
     let s = vksplat::stats::scene_stats(&scene);
     outln!("scene       {name}");
     if let Some(format) = format {
@@ -31,9 +58,9 @@ pub(crate) fn info(arg: &SceneArg) -> Result<()> {
     }
     outln!("gaussians   {}", s.count);
     outln!(
-        "sh degree   {} ({} coefficients per channel)",
+        "sh degree   {} ({} per channel)",
         s.sh_degree,
-        scene.sh_coeffs()
+        plural(scene.sh_coeffs(), "coefficient")
     );
     if let Some((lo, hi)) = s.bounds {
         outln!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
@@ -109,4 +136,85 @@ pub(crate) fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper:
     if h.outside > 0 {
         outln!("  zero, negative or not finite: {}", h.outside);
     }
+}
+
+/// What a camera file holds: its format, the number of cameras, their resolutions and
+/// the first names.
+fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
+    let (cams, format) =
+        vksplat::camera::load_camera_file(path, &vksplat::camera::PathTiming::default())?;
+    let mut sizes: Vec<(u32, u32)> = cams.iter().map(|c| (c.width, c.height)).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let names: Vec<&str> = cams.iter().take(5).map(|c| c.name.as_str()).collect();
+    if json {
+        outln!(
+            "{}",
+            serde_json::to_string_pretty(&json!({
+                "path": path.display().to_string(),
+                "kind": "cameras",
+                "format": format.to_string(),
+                "cameras": cams.len(),
+                "resolutions": sizes.iter().map(|(w, h)| [w, h]).collect::<Vec<_>>(),
+                "names": cams.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(),
+            }))?
+        );
+        return Ok(());
+    }
+    outln!(
+        "{} is a camera file, not a scene: render a scene with --cameras {}",
+        path.display(),
+        path.display()
+    );
+    outln!("format      {format}");
+    outln!("cameras     {}", cams.len());
+    outln!(
+        "resolution  {}",
+        sizes
+            .iter()
+            .map(|(w, h)| format!("{w}x{h}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    outln!(
+        "names       {}{}",
+        names.join(", "),
+        if cams.len() > names.len() {
+            ", ..."
+        } else {
+            ""
+        }
+    );
+    Ok(())
+}
+
+/// The statistics as one JSON object (`schema_version` 1).
+fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Result<()> {
+    let s = vksplat::stats::scene_stats(scene);
+    let summary = |v: vksplat::stats::Summary| json!({"min": v.min, "max": v.max, "mean": v.mean, "std": v.std});
+    let histogram = |h: &vksplat::stats::Histogram| json!({"edges": h.edges, "counts": h.counts, "outside": h.outside, "total": h.total});
+    let v3 = |v: glam::Vec3| [v.x, v.y, v.z];
+    let value = json!({
+        "schema_version": 1,
+        "scene": name,
+        "format": format,
+        "antialiased": scene.antialiased,
+        "gaussians": s.count,
+        "sh_degree": s.sh_degree,
+        "bounds": s.bounds.map(|(lo, hi)| json!({"min": lo, "max": hi})),
+        "bulk": {
+            "median": v3(s.bulk.centre),
+            "radius_95": s.bulk.radius,
+            "box_2_98": {"min": v3(s.bulk.lo), "max": v3(s.bulk.hi)},
+        },
+        "scale": summary(s.scale),
+        "max_scale": summary(s.max_scale),
+        "log_scale": summary(s.log_scale),
+        "opacity": summary(s.opacity),
+        "opacity_logit": summary(s.opacity_logit),
+        "max_scale_histogram": histogram(&s.max_scale_histogram),
+        "opacity_histogram": histogram(&s.opacity_histogram),
+    });
+    outln!("{}", serde_json::to_string_pretty(&value)?);
+    Ok(())
 }

@@ -142,6 +142,9 @@ pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<(Scene, SceneFormat), Sc
     if has_splat_extension || splat::is_plausible(bytes) {
         return Ok((splat::parse(bytes, path)?, SceneFormat::Splat));
     }
+    if bytes.is_empty() {
+        return Err(SceneError::invalid(path, "is empty (0 bytes)"));
+    }
     Err(SceneError::invalid(
         path,
         format!(
