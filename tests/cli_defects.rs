@@ -790,8 +790,14 @@ fn readme_and_help_agree() {
                 .split(|ch: char| ch == ' ' || ch == ',' || ch == '=')
                 .find(|w| w.starts_with("--"))
                 .unwrap_or("");
-            if t.starts_with('-') && !flag.is_empty() && flag != "--help" && !readme.contains(flag)
-            {
+            // `-o, --output <OUT>`: the README may use either spelling.
+            let short = t
+                .strip_prefix('-')
+                .filter(|r| r.chars().nth(1) == Some(','))
+                .map(|r| format!("-{}", &r[..1]));
+            let documented =
+                readme.contains(flag) || short.is_some_and(|sh| readme.contains(&format!("{sh} ")));
+            if t.starts_with('-') && !flag.is_empty() && flag != "--help" && !documented {
                 undocumented.push(format!("{c} {flag}"));
             }
         }
