@@ -795,8 +795,10 @@ fn readme_and_help_agree() {
                 .strip_prefix('-')
                 .filter(|r| r.chars().nth(1) == Some(','))
                 .map(|r| format!("-{}", &r[..1]));
-            let documented =
-                readme.contains(flag) || short.is_some_and(|sh| readme.contains(&format!("{sh} ")));
+            let documented = readme.contains(flag)
+                || short.is_some_and(|sh| {
+                    readme.contains(&format!("{sh} ")) || readme.contains(&format!("{sh}]"))
+                });
             if t.starts_with('-') && !flag.is_empty() && flag != "--help" && !documented {
                 undocumented.push(format!("{c} {flag}"));
             }
