@@ -7,6 +7,7 @@ pub mod cpu;
 pub mod frame;
 pub mod gen;
 pub mod gpu;
+pub mod image_file;
 pub mod metrics;
 pub mod output;
 pub mod render;

@@ -719,7 +719,6 @@ mod tests {
             let got = flip(&a, &b, W, H, flip_default_ppd());
             assert!((got - at_default).abs() < 2e-5, "{name}: {got:.7} vs {at_default:.7}");
             let got = flip(&a, &b, W, H, 67.0);
-            let got = flip(&a, &b, W, H, 67.0);
             assert!((got - at_67).abs() < 2e-5, "{name} at 67 ppd: {got:.7} vs {at_67:.7}");
         }
     }
