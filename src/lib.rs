@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod camera;
 pub mod cpu;
+pub mod diff_image;
 pub mod frame;
 pub mod gen;
 pub mod gpu;

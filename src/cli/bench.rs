@@ -1,9 +1,11 @@
 //! `vksplat bench`: per-stage GPU (or CPU reference) timings of one camera, and sweeps.
 
-use super::common::{fail_on_validation_messages, load_scene, CameraArgs, GpuArgs, SceneArg};
+use super::common::{
+    fail_on_validation_messages, load_scene, model_cameras, CameraArgs, GpuArgs, SceneArg,
+};
 use anyhow::{bail, Result};
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use vksplat::camera::{self, Camera};
 use vksplat::output;
 use vksplat::render::GpuRenderer;
@@ -16,6 +18,9 @@ pub(crate) struct BenchArgs {
     /// Use the built-in demo scene.
     #[arg(long, conflicts_with = "scene")]
     pub(crate) demo: bool,
+    /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
+    #[arg(long, value_name = "N", conflicts_with = "demo")]
+    pub(crate) iteration: Option<u64>,
     #[command(flatten)]
     pub(crate) view: CameraArgs,
     /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `vksplat gen`) and/or
@@ -53,8 +58,14 @@ pub(crate) struct BenchArgs {
     pub(crate) gpu: GpuArgs,
 }
 
-pub(crate) fn choose_camera(args: &CameraArgs, scene: &Scene) -> Result<Camera> {
-    let cam = match &args.cameras {
+/// The camera to time: one of `cameras` (`--cameras`, or a model directory's own), or the
+/// default camera.
+pub(crate) fn choose_camera(
+    args: &CameraArgs,
+    cameras: Option<&Path>,
+    scene: &Scene,
+) -> Result<Camera> {
+    let cam = match cameras {
         Some(path) => {
             let (cams, _) = camera::load_camera_file(path, &camera::PathTiming::default())?;
             let spec = args.camera.as_deref().unwrap_or("0");
@@ -117,11 +128,18 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         counts,
         resolutions,
     } = parse_sweeps(&args.sweep)?;
+    let scene_arg = SceneArg {
+        scene: args.scene.clone(),
+        demo: args.demo,
+        iteration: args.iteration,
+    };
+    let cameras = match &args.view.cameras {
+        Some(file) => Some(file.clone()),
+        None if counts.is_empty() => model_cameras(&scene_arg),
+        None => None,
+    };
     let file_scene = if counts.is_empty() {
-        Some(load_scene(&SceneArg {
-            scene: args.scene.clone(),
-            demo: args.demo,
-        })?)
+        Some(load_scene(&scene_arg)?)
     } else {
         if args.scene.is_some() || args.demo {
             bail!("a Gaussians sweep generates its own scenes; drop the scene argument or the gaussians sweep");
@@ -157,11 +175,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         let act = scene.activated();
         for res in &resolutions {
             let cam = match res {
-                Some((w, h)) if count.is_some() || args.view.cameras.is_none() => {
+                Some((w, h)) if count.is_some() || cameras.is_none() => {
                     camera::default_camera(&scene.positions, *w, *h)
                 }
-                Some((w, h)) => choose_camera(&args.view, &scene)?.with_resolution(*w, *h)?,
-                None => choose_camera(&args.view, &scene)?,
+                Some((w, h)) => choose_camera(&args.view, cameras.as_deref(), &scene)?
+                    .with_resolution(*w, *h)?,
+                None => choose_camera(&args.view, cameras.as_deref(), &scene)?,
             };
             cam.validate()?;
             let report = match renderer.as_mut() {

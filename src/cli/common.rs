@@ -4,7 +4,7 @@
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::camera;
+use vksplat::camera::{self, Camera};
 use vksplat::gpu::{ContextOptions, GpuContext};
 use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::{self, Scene};
@@ -41,6 +41,9 @@ pub(crate) struct SceneArg {
     /// Use the built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
     #[arg(long, conflicts_with = "scene")]
     pub(crate) demo: bool,
+    /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
+    #[arg(long, value_name = "N", conflicts_with = "demo")]
+    pub(crate) iteration: Option<u64>,
 }
 
 #[derive(Args)]
@@ -208,6 +211,96 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     let Some(path) = arg.scene.as_deref() else {
         bail!("no scene given; pass a .ply file, a model directory or --demo");
     };
-    let resolved = scene::resolve_scene_path(path)?;
-    Ok((scene::load(path)?, resolved.display().to_string()))
+    let resolved = scene::resolve_scene_path_at(path, arg.iteration)?;
+    Ok((scene::load(&resolved)?, resolved.display().to_string()))
+}
+
+/// The `cameras.json` of a trained model directory given as the scene (one with a
+/// `point_cloud/` folder), for commands given no camera option; prints a one-line note
+/// saying which cameras are used, or that the model has none and the default camera is.
+pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
+    let dir = scene.scene.as_deref().filter(|_| !scene.demo)?;
+    if !dir.join("point_cloud").is_dir() {
+        return None;
+    }
+    let file = dir.join("cameras.json");
+    if file.is_file() {
+        eprintln!(
+            "note: using the model's cameras, {} (--cameras or --orbit choose others)",
+            file.display()
+        );
+        Some(file)
+    } else {
+        eprintln!(
+            "note: model directory {} has no cameras.json; using the default camera",
+            dir.display()
+        );
+        None
+    }
+}
+
+/// The cameras of the path with their frame numbers, at the requested resolution.
+/// Also returns a description of the source for the summary. Without `--cameras` or
+/// `--orbit`, a trained model directory's own cameras.json is used ([`model_cameras`]),
+/// else the default camera.
+pub(crate) fn camera_path(
+    view: &CameraArgs,
+    p: &PathArgs,
+    scene_arg: &SceneArg,
+    scene: &Scene,
+) -> Result<(Vec<(usize, Camera)>, String)> {
+    let cameras = match (&view.cameras, p.orbit) {
+        (Some(file), _) => Some(file.clone()),
+        (None, None) => model_cameras(scene_arg),
+        (None, Some(_)) => None,
+    };
+    let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
+        let params = camera::OrbitParams {
+            frames,
+            centre: p.orbit_centre.map(glam::Vec3::from),
+            radius: p.orbit_radius,
+            elevation_deg: p.orbit_elevation,
+            up: glam::Vec3::from(p.orbit_up),
+            start_deg: p.orbit_start,
+            vfov_deg: p.vfov,
+            ..Default::default()
+        };
+        (
+            camera::orbit(&scene.positions, &params)?,
+            PathBuf::from("--orbit"),
+            format!("an orbit of {frames} frames"),
+        )
+    } else if let Some(path) = &cameras {
+        let timing = camera::PathTiming {
+            frames: p.path_frames,
+            fps: p.fps,
+        };
+        let (cams, format) = camera::load_camera_file(path, &timing)?;
+        let source = format!("{} ({format}, {} cameras)", path.display(), cams.len());
+        (cams, path.clone(), source)
+    } else {
+        let params = camera::OrbitParams {
+            frames: 1,
+            vfov_deg: p.vfov,
+            ..Default::default()
+        };
+        let mut cams = camera::orbit(&scene.positions, &params)?;
+        cams[0].name = "default".into();
+        (
+            cams,
+            PathBuf::from("<default camera>"),
+            "the default camera".into(),
+        )
+    };
+    let chosen: Vec<usize> = match &view.camera {
+        Some(spec) => camera::select_camera_indices(&all, spec, &label)?,
+        // A single output file with several cameras is refused by the plan, naming
+        // --camera and patterns.
+        None => (0..all.len()).collect(),
+    };
+    let cams = chosen
+        .into_iter()
+        .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok((cams, source))
 }

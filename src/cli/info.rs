@@ -11,8 +11,9 @@ pub(crate) fn fmt3(v: [f32; 3]) -> String {
 pub(crate) fn info(arg: &SceneArg) -> Result<()> {
     let (scene, name, format) = match arg.scene.as_deref() {
         Some(path) if !arg.demo => {
-            let (scene, format) = scene::load_with_format(path)?;
-            let name = scene::resolve_scene_path(path)?.display().to_string();
+            let file = scene::resolve_scene_path_at(path, arg.iteration)?;
+            let (scene, format) = scene::load_with_format(&file)?;
+            let name = file.display().to_string();
             (scene, name, Some(format))
         }
         _ => {

@@ -1,16 +1,15 @@
 //! `vksplat render`: one camera or a camera path to PNG/EXR files.
 
 use super::common::{
-    fail_on_validation_messages, load_scene, parse_background, parse_depth_range, CameraArgs,
-    FilterArgs, GpuArgs, PathArgs, SceneArg,
+    camera_path, fail_on_validation_messages, load_scene, parse_background, parse_depth_range,
+    CameraArgs, FilterArgs, GpuArgs, PathArgs, SceneArg,
 };
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::camera::{self, Camera};
+use vksplat::camera::Camera;
 use vksplat::output;
 use vksplat::render::GpuRenderer;
-use vksplat::scene::Scene;
 use vksplat::sequence::{Existing, FrameRange, OutputPattern, ProgressStyle};
 
 #[derive(Args)]
@@ -85,65 +84,6 @@ pub(crate) struct RenderArgs {
     pub(crate) gpu: GpuArgs,
 }
 
-/// The cameras of the path with their frame numbers, at the requested resolution.
-/// Also returns a description of the source for the summary.
-pub(crate) fn camera_path(
-    args: &RenderArgs,
-    scene: &Scene,
-) -> Result<(Vec<(usize, Camera)>, String)> {
-    let view = &args.view;
-    let p = &args.path;
-    let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
-        let params = camera::OrbitParams {
-            frames,
-            centre: p.orbit_centre.map(glam::Vec3::from),
-            radius: p.orbit_radius,
-            elevation_deg: p.orbit_elevation,
-            up: glam::Vec3::from(p.orbit_up),
-            start_deg: p.orbit_start,
-            vfov_deg: p.vfov,
-            ..Default::default()
-        };
-        (
-            camera::orbit(&scene.positions, &params)?,
-            PathBuf::from("--orbit"),
-            format!("an orbit of {frames} frames"),
-        )
-    } else if let Some(path) = &view.cameras {
-        let timing = camera::PathTiming {
-            frames: p.path_frames,
-            fps: p.fps,
-        };
-        let (cams, format) = camera::load_camera_file(path, &timing)?;
-        let source = format!("{} ({format}, {} cameras)", path.display(), cams.len());
-        (cams, path.clone(), source)
-    } else {
-        let params = camera::OrbitParams {
-            frames: 1,
-            vfov_deg: p.vfov,
-            ..Default::default()
-        };
-        let mut cams = camera::orbit(&scene.positions, &params)?;
-        cams[0].name = "default".into();
-        (
-            cams,
-            PathBuf::from("<default camera>"),
-            "the default camera".into(),
-        )
-    };
-    let chosen: Vec<usize> = match &view.camera {
-        Some(spec) => camera::select_camera_indices(&all, spec, &label)?,
-        // A single output file with several cameras is refused by the plan, naming
-        // --camera and patterns.
-        None => (0..all.len()).collect(),
-    };
-    let cams = chosen
-        .into_iter()
-        .map(|i| Ok((i, all[i].resized(view.width, view.height, view.scale)?)))
-        .collect::<Result<Vec<_>>>()?;
-    Ok((cams, source))
-}
-
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let pattern = OutputPattern::parse(&args.output, &args.format).map_err(anyhow::Error::msg)?;
     let out_opts = output::OutputOptions {
@@ -168,7 +108,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         );
         kept
     };
-    let (cams, source) = camera_path(args, &scene)?;
+    let (cams, source) = camera_path(&args.view, &args.path, &args.scene, &scene)?;
     for (_, c) in &cams {
         c.validate()?;
     }
