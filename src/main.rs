@@ -28,6 +28,10 @@ enum Command {
     Gen(cli::gen::GenArgs),
     /// Convert a scene (any readable format) to .ply, .splat or .spz, chosen by OUT's extension.
     Convert(cli::convert::ConvertArgs),
+    /// Compare a scene's GPU renders with the CPU reference, or two images (PSNR, SSIM, errors).
+    Compare(cli::compare::CompareArgs),
+    /// Render a model's cameras and compare them with the photos (PSNR, SSIM, FLIP).
+    Eval(cli::eval::EvalArgs),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +42,8 @@ fn main() -> ExitCode {
         Command::Bench(args) => cli::bench::bench(args),
         Command::Gen(args) => cli::gen::gen(args),
         Command::Convert(args) => cli::convert::convert(args),
+        Command::Compare(args) => cli::compare::compare(args),
+        Command::Eval(args) => cli::eval::eval(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
