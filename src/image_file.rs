@@ -221,22 +221,26 @@ fn read_exr(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
 fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
     const MAGIC: &[u8] = b"\x93NUMPY";
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
-        return Err(invalid(path, "is not a NumPy .npy file (no \\x93NUMPY magic)"));
+        return Err(invalid(
+            path,
+            "is not a NumPy .npy file (no \\x93NUMPY magic)",
+        ));
     }
     let major = bytes[6];
-    let (header_len, start) = match major {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10usize),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        _ => {
-            return Err(invalid(
+    let (header_len, start) =
+        match major {
+            1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10usize),
+            2 | 3 if bytes.len() >= 12 => (
+                u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+                12,
+            ),
+            _ => return Err(invalid(
                 path,
-                format!("has .npy format version {major}, which this reader does not know (1, 2 or 3)"),
-            ))
-        }
-    };
+                format!(
+                    "has .npy format version {major}, which this reader does not know (1, 2 or 3)"
+                ),
+            )),
+        };
     let header = bytes
         .get(start..start.saturating_add(header_len))
         .and_then(|h| std::str::from_utf8(h).ok())
@@ -404,7 +408,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("a.npy");
         for (descr, bytes) in [
-            ("<f2", exr::prelude::f16::from_f32(0.25).to_bits().to_le_bytes().to_vec()),
+            (
+                "<f2",
+                exr::prelude::f16::from_f32(0.25)
+                    .to_bits()
+                    .to_le_bytes()
+                    .to_vec(),
+            ),
             ("<f8", 0.25f64.to_le_bytes().to_vec()),
         ] {
             let mut file = edit_header(npy_bytes(&[1, 1], &[0.0]), "<f4", descr);
@@ -423,7 +433,10 @@ mod tests {
         let cases: Vec<(Vec<u8>, &str)> = vec![
             (b"not numpy".to_vec(), "magic"),
             (npy_bytes(&[2, 2, 3], &[0.0; 5]), "bytes of data"),
-            (edit_header(npy_bytes(&[1, 1], &[0.0]), "<f4", "<i4"), "dtype"),
+            (
+                edit_header(npy_bytes(&[1, 1], &[0.0]), "<f4", "<i4"),
+                "dtype",
+            ),
             (
                 edit_header(npy_bytes(&[1, 1], &[0.0]), "False", "True "),
                 "Fortran",

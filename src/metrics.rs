@@ -73,7 +73,11 @@ pub fn error_stats(reference: &[f32], test: &[f32], channels: usize, peak: f64) 
             se += d * d;
             abs_sum += d;
             // NaN compares false, so a NaN difference is caught by the PSNR, not hidden here.
-            max_abs = if d > max_abs || d.is_nan() { d } else { max_abs };
+            max_abs = if d > max_abs || d.is_nan() {
+                d
+            } else {
+                max_abs
+            };
             ok &= (q(x) - q(y)).abs() <= 1;
         }
         within += ok as usize;
@@ -403,11 +407,9 @@ const CSF: [[f64; 4]; 3] = [
 /// evaluated as separable passes (each term is a product of two 1D Gaussians) with the
 /// image edge repeated outside.
 fn csf_filter(plane: &[f64], width: usize, height: usize, csf: [f64; 4], ppd: f64) -> Vec<f64> {
-    let max_b = CSF
-        .iter()
-        .flat_map(|c| [c[1], c[3]])
-        .fold(0.0f64, f64::max);
-    let radius = (3.0 * (max_b / (2.0 * std::f64::consts::PI.powi(2))).sqrt() * ppd).ceil() as usize;
+    let max_b = CSF.iter().flat_map(|c| [c[1], c[3]]).fold(0.0f64, f64::max);
+    let radius =
+        (3.0 * (max_b / (2.0 * std::f64::consts::PI.powi(2))).sqrt() * ppd).ceil() as usize;
     let [a1, b1, a2, b2] = csf;
     // The 2D term k * g(x) g(y) with g = exp(-pi^2 x^2 / b), k = a sqrt(pi / b): split it
     // as sqrt(k) g(x) times sqrt(k) g(y), then normalise by the 2D kernel's total.
@@ -422,10 +424,7 @@ fn csf_filter(plane: &[f64], width: usize, height: usize, csf: [f64; 4], ppd: f6
                 .collect()
         })
         .collect();
-    let total: f64 = terms
-        .iter()
-        .map(|t| t.iter().sum::<f64>().powi(2))
-        .sum();
+    let total: f64 = terms.iter().map(|t| t.iter().sum::<f64>().powi(2)).sum();
     let mut out = vec![0.0; plane.len()];
     for t in &terms {
         let f = separable_filter(plane, width, height, t, t, Padding::Clamp);
@@ -683,7 +682,8 @@ mod tests {
     #[test]
     fn ssim_is_the_mean_over_channels() {
         let (_, a, b) = pairs().remove(1);
-        let plane = |img: &[f32], c: usize| img.iter().skip(c).step_by(3).copied().collect::<Vec<_>>();
+        let plane =
+            |img: &[f32], c: usize| img.iter().skip(c).step_by(3).copied().collect::<Vec<_>>();
         let per_channel: f64 = (0..3)
             .map(|c| ssim(&plane(&a, c), &plane(&b, c), W, H, 1))
             .sum::<f64>()
@@ -717,9 +717,15 @@ mod tests {
         ];
         for ((name, a, b), (at_default, at_67)) in pairs().into_iter().zip(want) {
             let got = flip(&a, &b, W, H, flip_default_ppd());
-            assert!((got - at_default).abs() < 2e-5, "{name}: {got:.7} vs {at_default:.7}");
+            assert!(
+                (got - at_default).abs() < 2e-5,
+                "{name}: {got:.7} vs {at_default:.7}"
+            );
             let got = flip(&a, &b, W, H, 67.0);
-            assert!((got - at_67).abs() < 2e-5, "{name} at 67 ppd: {got:.7} vs {at_67:.7}");
+            assert!(
+                (got - at_67).abs() < 2e-5,
+                "{name} at 67 ppd: {got:.7} vs {at_67:.7}"
+            );
         }
     }
 

@@ -212,7 +212,9 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
                 .trim()
                 .parse()
                 .map_err(|_| anyhow!("{PERTURB_RED_ENV}={v:?} is not a number"))?;
-            eprintln!("note: {PERTURB_RED_ENV}={d} shifts the GPU frames' red channel (a test-only knob)");
+            eprintln!(
+                "note: {PERTURB_RED_ENV}={d} shifts the GPU frames' red channel (a test-only knob)"
+            );
             d
         }
         Err(_) => 0.0,
@@ -264,7 +266,15 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
 
     println!(
         "{:>5}  {:<16} {:>9} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9}  result",
-        "frame", "camera", "colour dB", "SSIM", "within %", "max err", "alpha dB", "alpha %", "depth dB"
+        "frame",
+        "camera",
+        "colour dB",
+        "SSIM",
+        "within %",
+        "max err",
+        "alpha dB",
+        "alpha %",
+        "depth dB"
     );
     let mut records = Vec::new();
     for (k, cam) in &cams {
@@ -319,7 +329,11 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
     }
     fail_on_validation_messages(renderer.ctx())?;
 
-    let failed: Vec<usize> = records.iter().filter(|r| !r.pass).map(|r| r.frame).collect();
+    let failed: Vec<usize> = records
+        .iter()
+        .filter(|r| !r.pass)
+        .map(|r| r.frame)
+        .collect();
     let report = RenderReport {
         scene: name.clone(),
         reference: "CPU reference renderer".into(),
@@ -336,11 +350,14 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         args.overwrite,
         &serde_json::to_string_pretty(&report)?,
     )?;
-    write_text(&dir.join("report.csv"), args.overwrite, &render_csv(&report.frames))?;
+    write_text(
+        &dir.join("report.csv"),
+        args.overwrite,
+        &render_csv(&report.frames),
+    )?;
 
-    let min = |f: &dyn Fn(&FrameRecord) -> f64| {
-        report.frames.iter().map(f).fold(f64::INFINITY, f64::min)
-    };
+    let min =
+        |f: &dyn Fn(&FrameRecord) -> f64| report.frames.iter().map(f).fold(f64::INFINITY, f64::min);
     println!(
         "{} frame(s) of {name} from {source}: GPU ({device}, blend kernel {}) vs CPU reference: lowest colour PSNR {} dB, lowest alpha PSNR {} dB, lowest within 1/255 {:.3} %; {}; report in {}",
         report.frames.len(),
@@ -360,7 +377,14 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
             .frames
             .iter()
             .filter(|r| !r.pass)
-            .map(|r| format!("frame {} (\"{}\": {})", r.frame, r.camera, r.failures.join(", ")))
+            .map(|r| {
+                format!(
+                    "frame {} (\"{}\": {})",
+                    r.frame,
+                    r.camera,
+                    r.failures.join(", ")
+                )
+            })
             .collect();
         bail!(
             "{} of {} frame(s) fail --min-psnr {} / --min-within {} %: {}",
@@ -395,7 +419,13 @@ pub(crate) fn csv_cell(s: &str) -> String {
 
 /// The CSV columns of one plane's statistics.
 fn stats_cells(s: &ErrorStats) -> String {
-    format!("{},{},{},{}", db_csv(s.psnr), s.max_abs, s.mean_abs, s.within)
+    format!(
+        "{},{},{},{}",
+        db_csv(s.psnr),
+        s.max_abs,
+        s.mean_abs,
+        s.within
+    )
 }
 
 /// PSNR for CSV: full precision, `inf` for identical planes.
@@ -457,7 +487,13 @@ struct ImageReport {
 
 /// The channels to compare: `--channels`, or every channel when both images have the
 /// same ones (two single-channel images are compared whatever their names).
-fn choose_channels(args: &CompareArgs, a: &Path, pa: &Planes, b: &Path, pb: &Planes) -> Result<Vec<String>> {
+fn choose_channels(
+    args: &CompareArgs,
+    a: &Path,
+    pa: &Planes,
+    b: &Path,
+    pb: &Planes,
+) -> Result<Vec<String>> {
     if let Some(list) = &args.channels {
         let names: Vec<String> = list
             .split(',')
@@ -540,7 +576,10 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
     let mut group = |label: &str, members: &[&str], left: &mut Vec<String>| {
         if members.iter().all(|m| left.iter().any(|l| l == m)) {
             left.retain(|l| !members.contains(&l.as_str()));
-            groups.push((label.into(), members.iter().map(|s| s.to_string()).collect()));
+            groups.push((
+                label.into(),
+                members.iter().map(|s| s.to_string()).collect(),
+            ));
         }
     };
     group("color", &["R", "G", "B"], &mut left);
@@ -564,7 +603,10 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
             }
             1.0
         } else {
-            let m = ra.iter().filter(|v| v.is_finite()).fold(0.0f32, |m, v| m.max(v.abs()));
+            let m = ra
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0f32, |m, v| m.max(v.abs()));
             if m > 0.0 {
                 m as f64
             } else {
@@ -576,7 +618,8 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
         let flip = (label == "color" && members.len() == 3)
             .then(|| metrics::flip(&ra, &rb, w, h, metrics::flip_default_ppd()));
         if displayable {
-            gate.check(label, &stats, &mut failures);
+            let plane = if label == "color" { "colour" } else { label };
+            gate.check(plane, &stats, &mut failures);
         }
         if diff.is_none() || (label == "color") {
             let scale = 1.0 / peak as f32;
@@ -632,7 +675,11 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
         check_free(&files, args.overwrite)?;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
-        write_text(&files[0], args.overwrite, &serde_json::to_string_pretty(&report)?)?;
+        write_text(
+            &files[0],
+            args.overwrite,
+            &serde_json::to_string_pretty(&report)?,
+        )?;
         let mut csv = String::from("plane,channels,psnr,max_abs,mean_abs,within,peak,ssim,flip\n");
         for r in &report.groups {
             let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
@@ -658,7 +705,10 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
         pa.width,
         pa.height,
         if failures.is_empty() {
-            format!("pass (--min-psnr {}, --min-within {} %)", gate.min_psnr, gate.min_within)
+            format!(
+                "pass (--min-psnr {}, --min-within {} %)",
+                gate.min_psnr, gate.min_within
+            )
         } else {
             "FAIL".into()
         }

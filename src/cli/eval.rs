@@ -119,7 +119,9 @@ struct EvalReport {
 }
 
 /// Photo file extensions tried after a camera's name, in order.
-const PHOTO_EXTENSIONS: [&str; 9] = ["png", "jpg", "jpeg", "webp", "exr", "npy", "PNG", "JPG", "JPEG"];
+const PHOTO_EXTENSIONS: [&str; 9] = [
+    "png", "jpg", "jpeg", "webp", "exr", "npy", "PNG", "JPG", "JPEG",
+];
 
 /// The photo of camera `name` in `dir`: `dir/name` when the name has an extension and
 /// that file exists, else `dir/<name or its stem>.<ext>`. `Err` lists what was tried.
@@ -214,11 +216,7 @@ fn stem(name: &str) -> &str {
 
 /// The cameras of `split`, with their indices in the camera file, in image-name order,
 /// and a sentence saying which rule chose them.
-fn split_cameras(
-    cams: Vec<Camera>,
-    split: &str,
-    images: &Path,
-) -> (Vec<(usize, Camera)>, String) {
+fn split_cameras(cams: Vec<Camera>, split: &str, images: &Path) -> (Vec<(usize, Camera)>, String) {
     let mut ordered: Vec<(usize, Camera)> = cams.into_iter().enumerate().collect();
     // The trainer sorts its cameras by image name before holding out test views.
     ordered.sort_by(|a, b| a.1.name.cmp(&b.1.name));
@@ -236,9 +234,7 @@ fn split_cameras(
         }
         None => (
             Box::new(|k, _: &Camera| k % LLFF_HOLD == 0),
-            format!(
-                "every {LLFF_HOLD}th camera in image-name order is a test camera (llffhold)"
-            ),
+            format!("every {LLFF_HOLD}th camera in image-name order is a test camera (llffhold)"),
         ),
     };
     let chosen = ordered
@@ -261,7 +257,10 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
             args.images.display()
         );
     }
-    let files = [args.output.join("report.json"), args.output.join("report.csv")];
+    let files = [
+        args.output.join("report.json"),
+        args.output.join("report.csv"),
+    ];
     if let Some(p) = files.iter().find(|p| !args.overwrite && p.exists()) {
         return Err(output::OutputError::Exists(p.clone()).into());
     }
@@ -307,11 +306,12 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         }
     }
     if jobs.is_empty() {
-        bail!("no camera of the {} split has a photo in {}", args.split, args.images.display());
+        bail!(
+            "no camera of the {} split has a photo in {}",
+            args.split,
+            args.images.display()
+        );
     }
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("{}: cannot create the report directory", args.output.display()))?;
-
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
@@ -441,6 +441,13 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         mean.ssim,
         mean.flip
     ));
+    // Created only now, so a run stopped by a bad photo leaves nothing behind.
+    std::fs::create_dir_all(&args.output).with_context(|| {
+        format!(
+            "{}: cannot create the report directory",
+            args.output.display()
+        )
+    })?;
     let report = EvalReport {
         scene: name.clone(),
         cameras: cameras_file.display().to_string(),
@@ -466,7 +473,10 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         if report.skipped.is_empty() {
             String::new()
         } else {
-            format!(", {} camera(s) without a photo skipped", report.skipped.len())
+            format!(
+                ", {} camera(s) without a photo skipped",
+                report.skipped.len()
+            )
         },
         args.output.display()
     );

@@ -211,7 +211,9 @@ pub fn resolve_scene_path_at(path: &Path, iteration: Option<u64>) -> Result<Path
         if let Some(n) = iteration {
             return Err(SceneError::invalid(
                 path,
-                format!("is not a trained model directory, so iteration {n} cannot be chosen in it"),
+                format!(
+                    "is not a trained model directory, so iteration {n} cannot be chosen in it"
+                ),
             ));
         }
         return Ok(if meta.is_dir() {
