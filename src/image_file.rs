@@ -227,20 +227,21 @@ fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
         ));
     }
     let major = bytes[6];
-    let (header_len, start) =
-        match major {
-            1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10usize),
-            2 | 3 if bytes.len() >= 12 => (
-                u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-                12,
-            ),
-            _ => return Err(invalid(
+    let (header_len, start) = match major {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10usize),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        _ => {
+            return Err(invalid(
                 path,
                 format!(
                     "has .npy format version {major}, which this reader does not know (1, 2 or 3)"
                 ),
-            )),
-        };
+            ))
+        }
+    };
     let header = bytes
         .get(start..start.saturating_add(header_len))
         .and_then(|h| std::str::from_utf8(h).ok())

@@ -106,15 +106,14 @@ struct Gate {
 impl Gate {
     /// Why `stats` of `plane` fails the gate, if it does.
     fn check(&self, plane: &str, stats: &ErrorStats, why: &mut Vec<String>) {
-        // NaN compares false: a NaN PSNR fails.
-        if !(stats.psnr >= self.min_psnr) {
+        if stats.psnr.is_nan() || stats.psnr < self.min_psnr {
             why.push(format!(
                 "{plane} PSNR {} dB < {}",
                 db(stats.psnr),
                 self.min_psnr
             ));
         }
-        if !(stats.within * 100.0 >= self.min_within) {
+        if stats.within * 100.0 < self.min_within {
             why.push(format!(
                 "{plane} within 1/255 {:.3} % < {}",
                 stats.within * 100.0,

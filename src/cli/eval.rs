@@ -224,23 +224,23 @@ fn split_cameras(cams: Vec<Camera>, split: &str, images: &Path) -> (Vec<(usize, 
         return (ordered, "all cameras".into());
     }
     let want_test = split == "test";
-    let (is_test, rule): (Box<dyn Fn(usize, &Camera) -> bool>, String) = match test_list(images) {
-        Some((file, names)) => {
-            let names: Vec<String> = names.iter().map(|n| stem(n).to_string()).collect();
-            (
-                Box::new(move |_, c: &Camera| names.iter().any(|n| n == stem(&c.name))),
-                format!("the test images listed in {}", file.display()),
-            )
+    let list = test_list(images);
+    let rule = match &list {
+        Some((file, _)) => format!("the test images listed in {}", file.display()),
+        None => {
+            format!("every {LLFF_HOLD}th camera in image-name order is a test camera (llffhold)")
         }
-        None => (
-            Box::new(|k, _: &Camera| k % LLFF_HOLD == 0),
-            format!("every {LLFF_HOLD}th camera in image-name order is a test camera (llffhold)"),
-        ),
     };
     let chosen = ordered
         .into_iter()
         .enumerate()
-        .filter(|(k, (_, c))| is_test(*k, c) == want_test)
+        .filter(|(k, (_, c))| {
+            let is_test = match &list {
+                Some((_, names)) => names.iter().any(|n| stem(n) == stem(&c.name)),
+                None => k % LLFF_HOLD == 0,
+            };
+            is_test == want_test
+        })
         .map(|(_, c)| c)
         .collect();
     (chosen, rule)
@@ -521,6 +521,26 @@ mod tests {
         assert_eq!(train.len(), 17);
         assert!(train.iter().all(|(_, c)| !got.contains(&c.name.as_str())));
         assert_eq!(split_cameras(file, "all", none).0.len(), 20);
+    }
+
+    #[test]
+    fn a_data_sets_test_txt_is_an_explicit_split() {
+        let dir = tempfile::tempdir().unwrap();
+        let images = dir.path().join("images");
+        std::fs::create_dir_all(dir.path().join("sparse/0")).unwrap();
+        std::fs::write(dir.path().join("sparse/0/test.txt"), "img_3.JPG\nimg_5.png\n").unwrap();
+        let cams: Vec<Camera> = (0..9)
+            .map(|i| {
+                let mut c = camera::default_camera(&[[0.0; 3]], 8, 8);
+                c.name = format!("img_{i}");
+                c
+            })
+            .collect();
+        let (test, rule) = split_cameras(cams.clone(), "test", &images);
+        let names: Vec<&str> = test.iter().map(|(_, c)| c.name.as_str()).collect();
+        assert_eq!(names, ["img_3", "img_5"]);
+        assert!(rule.contains("test.txt"), "{rule}");
+        assert_eq!(split_cameras(cams, "train", &images).0.len(), 7);
     }
 
     #[test]
