@@ -125,10 +125,16 @@ pub fn read_image(path: &Path) -> Result<Planes, ImageError> {
         path: path.to_path_buf(),
         source,
     })?;
+    parse_image(&bytes, path)
+}
+
+/// Decodes an image file held in memory; `path` chooses the format by its extension, as
+/// in [`read_image`], and names the file in errors.
+pub fn parse_image(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
     match extension(path).as_str() {
-        "exr" => read_exr(&bytes, path),
-        "npy" => read_npy(&bytes, path),
-        _ => read_raster(&bytes, path),
+        "exr" => read_exr(bytes, path),
+        "npy" => read_npy(bytes, path),
+        _ => read_raster(bytes, path),
     }
 }
 
@@ -312,13 +318,13 @@ fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
         .filter(|_| h > 0 && w > 0)
         .ok_or_else(|| invalid(path, format!("has an unusable shape {shape:?}")))?;
     let data = &bytes[start + header_len..];
-    if data.len() != count * size {
+    if count.checked_mul(size) != Some(data.len()) {
         return Err(invalid(
             path,
             format!(
                 "holds {} bytes of data where shape {shape:?} of {descr} needs {}",
                 data.len(),
-                count * size
+                count as u128 * size as u128
             ),
         ));
     }
@@ -402,6 +408,37 @@ mod tests {
             .unwrap();
         file[at..at + to.len()].copy_from_slice(to.as_bytes());
         file
+    }
+
+    /// Every prefix of a valid file and every single-byte corruption of its header is an
+    /// error or an image, never a panic (the `npy` fuzz target explores further).
+    #[test]
+    fn truncated_or_corrupted_npy_never_panics() {
+        let good = npy_bytes(&[2, 3, 3], &[0.5; 18]);
+        let path = Path::new("x.npy");
+        for n in 0..good.len() {
+            let _ = parse_image(&good[..n], path);
+        }
+        for i in 0..128.min(good.len()) {
+            for b in [0u8, b'9', b',', b')', b'(', b'\'', 0xff] {
+                let mut bad = good.clone();
+                bad[i] = b;
+                let _ = parse_image(&bad, path);
+            }
+        }
+        // Shapes whose element or byte counts overflow 64 bits.
+        for shape in [[1u64 << 32, 1 << 32, 5], [1 << 30, 1 << 30, 5]] {
+            let text = format!(
+                "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}\n",
+                shape[0], shape[1], shape[2]
+            );
+            let mut file = b"\x93NUMPY\x01\x00".to_vec();
+            file.extend_from_slice(&(text.len() as u16).to_le_bytes());
+            file.extend_from_slice(text.as_bytes());
+            file.extend_from_slice(&[0; 16]);
+            let e = parse_image(&file, path).unwrap_err().to_string();
+            assert!(e.contains("shape") || e.contains("bytes of data"), "{e}");
+        }
     }
 
     #[test]

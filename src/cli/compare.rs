@@ -99,7 +99,8 @@ pub(crate) struct CompareArgs {
 #[derive(Clone, Copy, Serialize)]
 struct Gate {
     min_psnr: f64,
-    /// Percent.
+    /// Percent (the statistics' `within` is a share from 0 to 1).
+    #[serde(rename = "min_within_percent")]
     min_within: f64,
 }
 

@@ -528,7 +528,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let images = dir.path().join("images");
         std::fs::create_dir_all(dir.path().join("sparse/0")).unwrap();
-        std::fs::write(dir.path().join("sparse/0/test.txt"), "img_3.JPG\nimg_5.png\n").unwrap();
+        std::fs::write(
+            dir.path().join("sparse/0/test.txt"),
+            "img_3.JPG\nimg_5.png\n",
+        )
+        .unwrap();
         let cams: Vec<Camera> = (0..9)
             .map(|i| {
                 let mut c = camera::default_camera(&[[0.0; 3]], 8, 8);
