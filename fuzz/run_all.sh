@@ -6,7 +6,7 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 SECS="${1:-240}"; shift || true
 TARGETS=("$@")
-[ ${#TARGETS[@]} -gt 0 ] || TARGETS=(ply detect compressed_ply spz splat sog_meta colmap_binary colmap_text cameras_json nerfstudio keyframes sog_zip)
+[ ${#TARGETS[@]} -gt 0 ] || TARGETS=(ply detect compressed_ply spz splat sog_meta colmap_binary colmap_text cameras_json nerfstudio keyframes sog_zip npy)
 mkdir -p fuzz/logs
 for t in "${TARGETS[@]}"; do
   mkdir -p fuzz/corpus/$t

@@ -36,6 +36,12 @@ enum Command {
     /// Convert a scene (any readable format) to .ply, .splat or .spz, chosen by OUT's extension.
     #[command(allow_negative_numbers = true)]
     Convert(cli::convert::ConvertArgs),
+    /// Compare a scene's GPU renders with the CPU reference, or two images (PSNR, SSIM, errors).
+    #[command(allow_negative_numbers = true)]
+    Compare(cli::compare::CompareArgs),
+    /// Render a model's cameras and compare them with the photos (PSNR, SSIM, FLIP).
+    #[command(allow_negative_numbers = true)]
+    Eval(cli::eval::EvalArgs),
 }
 
 fn main() -> ExitCode {
@@ -46,6 +52,8 @@ fn main() -> ExitCode {
         Command::Bench(args) => cli::bench::bench(args),
         Command::Gen(args) => cli::gen::gen(args),
         Command::Convert(args) => cli::convert::convert(args),
+        Command::Compare(args) => cli::compare::compare(args),
+        Command::Eval(args) => cli::eval::eval(args),
     };
     // A closed pipe (`vksplat info scene.ply | head`) is not an error; any other failure to
     // write the command's output is.

@@ -734,7 +734,9 @@ fn interrupting_a_path_stops_cleanly() {
 fn readme_and_help_agree() {
     let readme =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
-    let commands = ["render", "info", "bench", "gen", "convert"];
+    let commands = [
+        "render", "info", "bench", "gen", "convert", "compare", "eval",
+    ];
     let helps: Vec<String> = commands
         .iter()
         .map(|c| {

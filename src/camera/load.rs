@@ -44,14 +44,15 @@ pub struct PathTiming {
     pub fps: Option<f32>,
 }
 
-/// Where the cameras of `path` are: a format and the file (or model directory) to read.
+/// Where the cameras of `path` are: a COLMAP model directory, or JSON text and its file.
 enum Source {
     Colmap(PathBuf),
-    Json(String),
+    Json(String, PathBuf),
 }
 
 /// Loads every camera of a camera file and tells which format it was.
-/// A COLMAP model is given as its directory (holding `cameras`+`images` `.bin` or `.txt`,
+/// A directory holding a `cameras.json` (a trained model directory) stands for that file;
+/// a COLMAP model is given as its directory (holding `cameras`+`images` `.bin` or `.txt`,
 /// directly or under `sparse/0/` or `sparse/`) or as the path of one of those files;
 /// anything else must be JSON: a list (INRIA), or an object with `camera_path`
 /// (nerfstudio) or `keyframes` (ours).
@@ -61,7 +62,8 @@ pub fn load_camera_file(
 ) -> Result<(Vec<Camera>, CameraFormat), CameraError> {
     let (cams, format) = match locate(path)? {
         Source::Colmap(dir) => colmap::load_colmap_model(&dir)?,
-        Source::Json(text) => {
+        Source::Json(text, file) => {
+            let path = file.as_path();
             let kind = detect_json(&text, path)?;
             let cams = match kind {
                 JsonKind::Inria => inria::parse_cameras_json(&text, path)?,
@@ -96,7 +98,7 @@ pub fn load_camera_file(
 pub fn detect_camera_format(path: &Path) -> Result<CameraFormat, CameraError> {
     match locate(path)? {
         Source::Colmap(dir) => Ok(colmap::find_model(&dir)?.1),
-        Source::Json(text) => Ok(detect_json(&text, path)?.format()),
+        Source::Json(text, file) => Ok(detect_json(&text, &file)?.format()),
     }
 }
 
@@ -123,6 +125,10 @@ fn locate(path: &Path) -> Result<Source, CameraError> {
         source,
     };
     let meta = std::fs::metadata(path).map_err(io)?;
+    let model_cameras = path.join("cameras.json");
+    if meta.is_dir() && model_cameras.is_file() {
+        return locate(&model_cameras);
+    }
     if meta.is_dir() {
         return Ok(Source::Colmap(path.to_path_buf()));
     }
@@ -144,7 +150,7 @@ fn locate(path: &Path) -> Result<Source, CameraError> {
                   given as its directory or as its images.bin/images.txt"
             .into(),
     })?;
-    Ok(Source::Json(text))
+    Ok(Source::Json(text, path.to_path_buf()))
 }
 
 fn detect_json(text: &str, path: &Path) -> Result<JsonKind, CameraError> {

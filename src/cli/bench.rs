@@ -27,6 +27,9 @@ pub(crate) struct BenchArgs {
     /// Use the built-in demo scene.
     #[arg(long, conflicts_with = "scene")]
     pub(crate) demo: bool,
+    /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
+    #[arg(long, value_name = "N", conflicts_with = "demo")]
+    pub(crate) iteration: Option<u64>,
     #[command(flatten)]
     pub(crate) view: CameraArgs,
     #[command(flatten)]
@@ -75,10 +78,11 @@ pub(crate) struct BenchArgs {
 pub(crate) fn choose_camera(
     view: &CameraArgs,
     path: &PathArgs,
+    scene_arg: &SceneArg,
     scene: &Scene,
 ) -> Result<BenchCamera> {
     let camera = view.camera.is_some();
-    let path = camera_path(view, path, scene)?;
+    let path = camera_path(view, path, scene_arg, scene)?;
     let timed = |(k, cam): &(usize, vksplat::camera::Camera)| BenchCamera {
         camera: cam.clone(),
         // The default camera is no camera of a file.
@@ -147,11 +151,13 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         counts,
         resolutions,
     } = parse_sweeps(&args.sweep)?;
+    let scene_arg = SceneArg {
+        scene: args.scene.clone(),
+        demo: args.demo,
+        iteration: args.iteration,
+    };
     let file_scene = if counts.is_empty() {
-        let (scene, name) = load_scene(&SceneArg {
-            scene: args.scene.clone(),
-            demo: args.demo,
-        })?;
+        let (scene, name) = load_scene(&scene_arg)?;
         if filter.is_identity_for(&scene) {
             Some((scene, name))
         } else {
@@ -210,7 +216,16 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             if let Some((w, h)) = res {
                 (view.width, view.height, view.scale) = (Some(*w), Some(*h), None);
             }
-            let timed = choose_camera(&view, &args.path, &scene)?;
+            // Synthetic scenes are no model directory.
+            let source = match count {
+                Some(_) => SceneArg {
+                    scene: None,
+                    demo: false,
+                    iteration: None,
+                },
+                None => scene_arg.clone(),
+            };
+            let timed = choose_camera(&view, &args.path, &source, &scene)?;
             let cam = &timed.camera;
             cam.validate()?;
             let report = match renderer.as_mut() {

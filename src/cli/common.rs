@@ -33,7 +33,7 @@ pub(crate) struct CameraArgs {
     pub(crate) scale: Option<f32>,
 }
 
-#[derive(Args)]
+#[derive(Args, Clone)]
 pub(crate) struct SceneArg {
     /// Scene: INRIA .ply, compressed .ply, .splat, .spz or SOG (detected from the content),
     /// or a trained model directory (uses point_cloud/iteration_<largest>/).
@@ -42,6 +42,9 @@ pub(crate) struct SceneArg {
     /// Use the built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
     #[arg(long, conflicts_with = "scene")]
     pub(crate) demo: bool,
+    /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
+    #[arg(long, value_name = "N", conflicts_with = "demo")]
+    pub(crate) iteration: Option<u64>,
 }
 
 #[derive(Args)]
@@ -161,8 +164,32 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     let Some(path) = arg.scene.as_deref() else {
         bail!("no scene given; pass a .ply file, a model directory or --demo");
     };
-    let resolved = scene::resolve_scene_path(path)?;
-    Ok((scene::load(path)?, resolved.display().to_string()))
+    let resolved = scene::resolve_scene_path_at(path, arg.iteration)?;
+    Ok((scene::load(&resolved)?, resolved.display().to_string()))
+}
+
+/// The `cameras.json` of a trained model directory given as the scene (one with a
+/// `point_cloud/` folder), for commands given no camera option; prints a one-line note
+/// saying which cameras are used, or that the model has none and the default camera is.
+pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
+    let dir = scene.scene.as_deref().filter(|_| !scene.demo)?;
+    if !dir.join("point_cloud").is_dir() {
+        return None;
+    }
+    let file = dir.join("cameras.json");
+    if file.is_file() {
+        vksplat::note!(
+            "note: using the model's cameras, {} (--cameras or --orbit choose others)",
+            file.display()
+        );
+        Some(file)
+    } else {
+        vksplat::note!(
+            "note: model directory {} has no cameras.json; using the default camera",
+            dir.display()
+        );
+        None
+    }
 }
 
 /// Checks, before any work starts, that `path` can be written: an existing file is
@@ -209,9 +236,20 @@ pub(crate) struct CameraPath {
     pub(crate) source: String,
 }
 
-/// Builds the camera path of `--orbit`, `--cameras` or the default camera, applies
-/// `--camera` and the resolution options, and refuses options the source ignores.
-pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Result<CameraPath> {
+/// Builds the camera path of `--orbit`, `--cameras`, a model directory's own
+/// cameras.json ([`model_cameras`]) or the default camera, applies `--camera` and the
+/// resolution options, and refuses options the source ignores.
+pub(crate) fn camera_path(
+    view: &CameraArgs,
+    p: &PathArgs,
+    scene_arg: &SceneArg,
+    scene: &Scene,
+) -> Result<CameraPath> {
+    let camera_file = match (&view.cameras, p.orbit) {
+        (Some(file), _) => Some(file.clone()),
+        (None, None) => model_cameras(scene_arg),
+        (None, Some(_)) => None,
+    };
     let sampling = p.fps.is_some() || p.path_frames.is_some();
     let sampling_flags = match (p.fps.is_some(), p.path_frames.is_some()) {
         (true, true) => "--fps and --path-frames",
@@ -222,7 +260,7 @@ pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Res
     // Generated cameras are made at the requested size (square pixels whatever the
     // aspect); camera files are rescaled.
     let (width, height) = camera::resized_dims((1280, 720), view.width, view.height, view.scale)?;
-    let generated = view.cameras.is_none();
+    let generated = camera_file.is_none();
     let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
         if sampling {
             bail!("{sampling_flags} set the sampling of a keyframe path (--cameras KEYFRAMES.json); an orbit's frame count is --orbit FRAMES");
@@ -243,7 +281,7 @@ pub(crate) fn camera_path(view: &CameraArgs, p: &PathArgs, scene: &Scene) -> Res
             PathBuf::from("--orbit"),
             format!("an orbit of {}", super::plural(frames, "frame")),
         )
-    } else if let Some(path) = &view.cameras {
+    } else if let Some(path) = &camera_file {
         if p.vfov.is_some() {
             bail!(
                 "--vfov sets the field of view of generated cameras (--orbit, the default camera); {} brings its own intrinsics",

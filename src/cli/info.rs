@@ -29,11 +29,10 @@ pub(crate) fn fmt3(v: [f32; 3]) -> String {
 pub(crate) fn info(args: &InfoArgs) -> Result<()> {
     let arg = &args.scene;
     let (scene, name, format) = match arg.scene.as_deref() {
-        Some(path) if !arg.demo => match scene::load_with_format(path) {
-            Ok((scene, format)) => {
-                let name = scene::resolve_scene_path(path)?.display().to_string();
-                (scene, name, Some(format))
-            }
+        Some(path) if !arg.demo => match scene::resolve_scene_path_at(path, arg.iteration)
+            .and_then(|file| Ok((scene::load_with_format(&file)?, file)))
+        {
+            Ok(((scene, format), file)) => (scene, file.display().to_string(), Some(format)),
             // A camera file given where a scene belongs: say what it holds.
             Err(e) => match vksplat::camera::detect_camera_format(path) {
                 Ok(_) => return camera_file_info(path, args.json),

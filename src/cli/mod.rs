@@ -2,7 +2,9 @@
 
 pub mod bench;
 pub mod common;
+pub mod compare;
 pub mod convert;
+pub mod eval;
 pub mod gen;
 pub mod info;
 pub mod render;

@@ -275,7 +275,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         );
         kept
     };
-    let path = camera_path(&args.view, &args.path, &scene)?;
+    let path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
     if let Some(file) = &args.export_cameras {
         export_cameras(file, &path.cameras, args)?;
     }

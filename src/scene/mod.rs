@@ -197,15 +197,31 @@ impl SceneError {
 /// `meta.json`; a trained model directory resolves to
 /// `point_cloud/iteration_<largest N>/point_cloud.ply`, as the reference viewer does.
 pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
+    resolve_scene_path_at(path, None)
+}
+
+/// [`resolve_scene_path`], with `iteration` choosing `point_cloud/iteration_<N>` of a
+/// trained model directory instead of the largest (an error listing the iterations there
+/// when it is missing, or when `path` is not a model directory).
+pub fn resolve_scene_path_at(path: &Path, iteration: Option<u64>) -> Result<PathBuf, SceneError> {
     let meta = std::fs::metadata(path).map_err(|source| SceneError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    if !meta.is_dir() {
-        return Ok(path.to_path_buf());
-    }
-    if path.join("meta.json").is_file() {
-        return Ok(path.join("meta.json"));
+    if !meta.is_dir() || path.join("meta.json").is_file() {
+        if let Some(n) = iteration {
+            return Err(SceneError::invalid(
+                path,
+                format!(
+                    "is not a trained model directory, so iteration {n} cannot be chosen in it"
+                ),
+            ));
+        }
+        return Ok(if meta.is_dir() {
+            path.join("meta.json")
+        } else {
+            path.to_path_buf()
+        });
     }
     let pc_dir = path.join("point_cloud");
     let entries = std::fs::read_dir(&pc_dir).map_err(|_| {
@@ -214,7 +230,7 @@ pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
             "is a directory but has neither a point_cloud/ folder nor a SOG meta.json; pass a scene file, a SOG directory or a trained model directory",
         )
     })?;
-    let best = entries
+    let mut found: Vec<(u64, PathBuf)> = entries
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().into_owned();
@@ -224,10 +240,26 @@ pub fn resolve_scene_path(path: &Path) -> Result<PathBuf, SceneError> {
                 .is_file()
                 .then_some((n, e.path()))
         })
-        .max_by_key(|(n, _)| *n);
-    match best {
-        Some((_, dir)) => Ok(dir.join("point_cloud.ply")),
-        None => Err(SceneError::invalid(
+        .collect();
+    found.sort_by_key(|(n, _)| *n);
+    let chosen = match iteration {
+        None => found.last(),
+        Some(n) => found.iter().find(|(k, _)| *k == n),
+    };
+    match (chosen, iteration) {
+        (Some((_, dir)), _) => Ok(dir.join("point_cloud.ply")),
+        (None, Some(n)) if !found.is_empty() => Err(SceneError::invalid(
+            path,
+            format!(
+                "has no point_cloud/iteration_{n}/point_cloud.ply; its iterations are {}",
+                found
+                    .iter()
+                    .map(|(k, _)| k.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )),
+        _ => Err(SceneError::invalid(
             path,
             "has no point_cloud/iteration_<N>/point_cloud.ply",
         )),

@@ -51,31 +51,13 @@ pub struct Comparison {
     pub depth_within: f64,
 }
 
-fn psnr(se: f64, n: usize) -> f64 {
-    let mse = se / n.max(1) as f64;
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (1.0 / mse).log10()
-    }
-}
-
-/// Compares a GPU frame with the CPU reference frame.
+/// Compares a GPU frame with the CPU reference frame: colour and alpha figures from
+/// `vksplat::metrics`, plus the relative depth error where both alphas exceed 0.5.
 pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
     assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
-    let (mut se, mut within, mut ase, mut depth_rel) = (0.0f64, 0usize, 0.0f64, 0.0f64);
-    let (mut covered, mut depth_ok) = (0usize, 0usize);
-    for i in 0..gpu.color.len() {
-        let mut ok = true;
-        for ch in 0..3 {
-            let (g, c) = (gpu.color[i][ch], cpu.color[i][ch]);
-            let d = g.clamp(0.0, 1.0) as f64 - c.clamp(0.0, 1.0) as f64;
-            se += d * d;
-            ok &= (vksplat::output::to_u8(g) as i32 - vksplat::output::to_u8(c) as i32).abs() <= 1;
-        }
-        within += ok as usize;
-        let da = (gpu.alpha[i] - cpu.alpha[i]) as f64;
-        ase += da * da;
+    let m = vksplat::metrics::compare_frames(cpu, gpu);
+    let (mut depth_rel, mut covered, mut depth_ok) = (0.0f64, 0usize, 0usize);
+    for i in 0..gpu.alpha.len() {
         if gpu.alpha[i] > 0.5 && cpu.alpha[i] > 0.5 {
             let rel = ((gpu.depth[i] - cpu.depth[i]).abs() / cpu.depth[i].abs().max(1e-6)) as f64;
             depth_rel = depth_rel.max(rel);
@@ -84,9 +66,9 @@ pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
         }
     }
     Comparison {
-        psnr: psnr(se, gpu.color.len() * 3),
-        within: within as f64 / gpu.color.len() as f64,
-        alpha_psnr: psnr(ase, gpu.alpha.len()),
+        psnr: m.color.psnr,
+        within: m.color.within,
+        alpha_psnr: m.alpha.psnr,
         depth_rel,
         depth_within: if covered == 0 {
             1.0

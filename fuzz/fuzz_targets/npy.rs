@@ -1,0 +1,7 @@
+#![no_main]
+//! NumPy .npy arrays as `compare` and `eval` read them.
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = vksplat::image_file::parse_image(data, std::path::Path::new("image.npy"));
+});

@@ -1,0 +1,572 @@
+//! `vksplat eval`: renders the cameras of a trained model and compares each render with
+//! the ground-truth photo of the same name, as the original 3DGS `render.py` +
+//! `metrics.py` do: PSNR, SSIM and LDR-FLIP per image and on average.
+
+use super::common::{fail_on_validation_messages, load_scene, model_cameras, GpuArgs, SceneArg};
+use super::compare::{csv_cell, db, db_csv};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use vksplat::camera::{self, Camera};
+use vksplat::image_file::{self, Planes};
+use vksplat::metrics;
+use vksplat::output;
+use vksplat::render::GpuRenderer;
+use vksplat::{note, outln};
+
+/// Every `LLFF_HOLD`-th camera (in image-name order, from the first) is a test camera when
+/// the data set names no split: the original code's `llffhold`.
+pub(crate) const LLFF_HOLD: usize = 8;
+
+#[derive(Args)]
+#[command(after_help = "\
+Photos are found by the camera's img_name in DIR, with any of the extensions .png, .jpg, \
+.jpeg, .webp, .exr, .npy (lower or upper case). Cameras are taken in image-name order, as \
+the trainer sorts them; --split test keeps cameras 0, 8, 16, ... of that order (the \
+llffhold rule), train the others, unless DIR/../sparse/0/test.txt lists the test images. \
+A photo with alpha is composited over --background. A photo smaller than the camera by \
+one factor on both sides (images downscaled for training) is compared with a render at \
+its size. Renders are clamped to [0, 1] and quantised to 8 bits as render.py saves them \
+(--float keeps the float values). SSIM: 11x11 Gaussian window, sigma 1.5, zero padding, \
+as the original utils/loss_utils.py; FLIP: NVIDIA's LDR-FLIP, mean over the image, with \
+the values as sRGB-encoded display values. PSNR of identical images is \"inf\" in the \
+table and the CSV and null in the JSON.
+
+Examples:
+  vksplat eval model/ --images dataset/images --split test
+  vksplat eval scene.ply --cameras cameras.json --images photos/ -o eval_report/")]
+pub(crate) struct EvalArgs {
+    #[command(flatten)]
+    pub(crate) scene: SceneArg,
+    /// Camera file (INRIA cameras.json, COLMAP model, or a model directory) [default: the
+    /// model directory's cameras.json].
+    #[arg(long, value_name = "FILE")]
+    pub(crate) cameras: Option<PathBuf>,
+    /// Folder of the ground-truth photos, named after the cameras.
+    #[arg(long, value_name = "DIR")]
+    pub(crate) images: PathBuf,
+    /// Which cameras to evaluate: test (every 8th, or the data set's test.txt), train (the
+    /// others) or all.
+    #[arg(long, value_name = "SPLIT", default_value = "test", value_parser = ["test", "train", "all"])]
+    pub(crate) split: String,
+    /// Leave out cameras without a photo (with a note) instead of stopping.
+    #[arg(long)]
+    pub(crate) skip_missing: bool,
+    /// Report directory: report.json and report.csv.
+    #[arg(short, long, value_name = "DIR", default_value = "eval_report")]
+    pub(crate) output: PathBuf,
+    /// Replace report files that exist.
+    #[arg(long)]
+    pub(crate) overwrite: bool,
+    /// Background colour, linear R,G,B in [0, 1] (or "black" / "white"); photos with
+    /// alpha are composited over it too.
+    #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = super::values::background, allow_hyphen_values = true)]
+    pub(crate) background: [f32; 3],
+    /// Compare the float render (clamped to [0, 1]) instead of its 8-bit quantisation.
+    #[arg(long)]
+    pub(crate) float: bool,
+    /// Pixels per degree of visual angle for FLIP [default: 67.02, FLIP's own: 0.7 m from
+    /// a 0.7 m wide 3840-pixel display].
+    #[arg(long, value_name = "PPD")]
+    pub(crate) ppd: Option<f64>,
+    /// Opacity compensation for scenes trained with antialiasing (see `render --help`).
+    #[arg(long)]
+    pub(crate) antialiased: bool,
+    /// Render without the compensation even when the file records antialiased training.
+    #[arg(long, conflicts_with = "antialiased")]
+    pub(crate) no_antialiased: bool,
+    /// Render with the CPU reference renderer instead of the Vulkan pipeline.
+    #[arg(long)]
+    pub(crate) cpu: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+    #[command(flatten)]
+    pub(crate) gpu: GpuArgs,
+}
+
+/// One evaluated image, as the reports hold it.
+#[derive(Serialize)]
+struct ImageRecord {
+    frame: usize,
+    camera: String,
+    photo: String,
+    width: u32,
+    height: u32,
+    psnr: f64,
+    ssim: f64,
+    flip: f64,
+}
+
+#[derive(Serialize)]
+struct Means {
+    psnr: f64,
+    ssim: f64,
+    flip: f64,
+}
+
+#[derive(Serialize)]
+struct EvalReport {
+    scene: String,
+    cameras: String,
+    images: String,
+    split: String,
+    split_rule: String,
+    renderer: String,
+    quantized: bool,
+    ppd: f64,
+    results: Vec<ImageRecord>,
+    skipped: Vec<String>,
+    mean: Option<Means>,
+}
+
+/// Photo file extensions tried after a camera's name, in order.
+const PHOTO_EXTENSIONS: [&str; 9] = [
+    "png", "jpg", "jpeg", "webp", "exr", "npy", "PNG", "JPG", "JPEG",
+];
+
+/// The photo of camera `name` in `dir`: `dir/name` when the name has an extension and
+/// that file exists, else `dir/<name or its stem>.<ext>`. `Err` lists what was tried.
+fn find_photo(dir: &Path, name: &str) -> std::result::Result<PathBuf, String> {
+    let direct = dir.join(name);
+    let has_ext = Path::new(name)
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| image_file::EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()));
+    if has_ext && direct.is_file() {
+        return Ok(direct);
+    }
+    let stem = if has_ext {
+        Path::new(name)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| name.to_string())
+    } else {
+        name.to_string()
+    };
+    for ext in PHOTO_EXTENSIONS {
+        let p = dir.join(format!("{stem}.{ext}"));
+        if p.is_file() {
+            return Ok(p);
+        }
+    }
+    Err(format!(
+        "{}.{{{}}}",
+        dir.join(&stem).display(),
+        PHOTO_EXTENSIONS[..6].join(",")
+    ))
+}
+
+/// The resolution to render a camera at for a photo of `(pw, ph)`: the camera's own, or
+/// the photo's when it is smaller by one factor on both sides, up to the rounding of each
+/// side to whole pixels (`|pw * ch - ph * cw| <= (cw + ch) / 2`).
+pub(crate) fn render_size(cw: u32, ch: u32, pw: u32, ph: u32) -> Option<(u32, u32)> {
+    if (pw, ph) == (cw, ch) {
+        return Some((cw, ch));
+    }
+    let (cw64, ch64, pw64, ph64) = (cw as u64, ch as u64, pw as u64, ph as u64);
+    let uniform = 2 * (pw64 * ch64).abs_diff(ph64 * cw64) <= cw64 + ch64;
+    (pw <= cw && ph <= ch && pw > 0 && ph > 0 && uniform).then_some((pw, ph))
+}
+
+/// A photo as `H x W x 3` colour in [0, 1]: grey is spread to RGB, and alpha composites
+/// the colour over `background`.
+fn photo_rgb(p: &Planes, path: &Path, background: [f32; 3]) -> Result<Vec<f32>> {
+    let rgb = if let Some(v) = p.interleave(&["R", "G", "B"]) {
+        v
+    } else if let Some(y) = p.channel("Y") {
+        y.values.iter().flat_map(|&v| [v, v, v]).collect()
+    } else {
+        bail!(
+            "{}: has no colour channels (R, G, B or grey); its channels are {}",
+            path.display(),
+            p.names().join(", ")
+        );
+    };
+    let mut rgb: Vec<f32> = rgb.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
+    if let Some(a) = p.channel("A") {
+        for (px, &a) in rgb.chunks_mut(3).zip(&a.values) {
+            let a = a.clamp(0.0, 1.0);
+            for (c, bg) in px.iter_mut().zip(background) {
+                *c = *c * a + bg * (1.0 - a);
+            }
+        }
+    }
+    Ok(rgb)
+}
+
+/// The test image names of `images/../sparse/0/test.txt`, when the data set has one.
+fn test_list(images: &Path) -> Option<(PathBuf, Vec<String>)> {
+    let file = images.parent()?.join("sparse").join("0").join("test.txt");
+    let text = std::fs::read_to_string(&file).ok()?;
+    let names = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .map(str::to_string)
+        .collect();
+    Some((file, names))
+}
+
+/// A name without a photo extension, so `IMG_1.JPG` in a list matches camera `IMG_1`.
+fn stem(name: &str) -> &str {
+    match name.rsplit_once('.') {
+        Some((s, e)) if image_file::EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()) => s,
+        _ => name,
+    }
+}
+
+/// The cameras of `split`, with their indices in the camera file, in image-name order,
+/// and a sentence saying which rule chose them.
+fn split_cameras(cams: Vec<Camera>, split: &str, images: &Path) -> (Vec<(usize, Camera)>, String) {
+    let mut ordered: Vec<(usize, Camera)> = cams.into_iter().enumerate().collect();
+    // The trainer sorts its cameras by image name before holding out test views.
+    ordered.sort_by(|a, b| a.1.name.cmp(&b.1.name));
+    if split == "all" {
+        return (ordered, "all cameras".into());
+    }
+    let want_test = split == "test";
+    let list = test_list(images);
+    let rule = match &list {
+        Some((file, _)) => format!("the test images listed in {}", file.display()),
+        None => {
+            format!("every {LLFF_HOLD}th camera in image-name order is a test camera (llffhold)")
+        }
+    };
+    let chosen = ordered
+        .into_iter()
+        .enumerate()
+        .filter(|(k, (_, c))| {
+            let is_test = match &list {
+                Some((_, names)) => names.iter().any(|n| stem(n) == stem(&c.name)),
+                None => k % LLFF_HOLD == 0,
+            };
+            is_test == want_test
+        })
+        .map(|(_, c)| c)
+        .collect();
+    (chosen, rule)
+}
+
+pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
+    let ppd = args.ppd.unwrap_or_else(metrics::flip_default_ppd);
+    if !(ppd.is_finite() && ppd > 0.0) {
+        bail!("--ppd {ppd} must be a positive number");
+    }
+    if !args.images.is_dir() {
+        bail!(
+            "{}: is not a folder of photos (--images)",
+            args.images.display()
+        );
+    }
+    let files = [
+        args.output.join("report.json"),
+        args.output.join("report.csv"),
+    ];
+    if let Some(p) = files.iter().find(|p| !args.overwrite && p.exists()) {
+        return Err(output::OutputError::Exists(p.clone()).into());
+    }
+    let cameras_file = match &args.cameras {
+        Some(f) => f.clone(),
+        None => match model_cameras(&args.scene) {
+            Some(f) => f,
+            None => bail!("eval needs the cameras of the photos: pass --cameras FILE (a cameras.json, a COLMAP model or a model directory), or a trained model directory holding cameras.json"),
+        },
+    };
+    let (scene, name) = load_scene(&args.scene)?;
+    let (all, format) = camera::load_camera_file(&cameras_file, &camera::PathTiming::default())?;
+    let total = all.len();
+    let (cams, rule) = split_cameras(all, &args.split, &args.images);
+    if cams.is_empty() {
+        bail!(
+            "{}: the {} split is empty ({total} camera(s); {rule})",
+            cameras_file.display(),
+            args.split
+        );
+    }
+    note!(
+        "{} split: {} of {total} camera(s) of {} ({format}); {rule}",
+        args.split,
+        cams.len(),
+        cameras_file.display()
+    );
+
+    // Match every camera with its photo before rendering anything.
+    let mut jobs = Vec::new();
+    let mut skipped = Vec::new();
+    for (k, cam) in cams {
+        match find_photo(&args.images, &cam.name) {
+            Ok(photo) => jobs.push((k, cam, photo)),
+            Err(tried) if args.skip_missing => {
+                note!("note: camera {k} (\"{}\") has no photo ({tried}); skipped", cam.name);
+                skipped.push(cam.name.clone());
+            }
+            Err(tried) => bail!(
+                "camera {k} (\"{}\") has no photo: looked for {tried} (--skip-missing leaves such cameras out)",
+                cam.name
+            ),
+        }
+    }
+    if jobs.is_empty() {
+        bail!(
+            "no camera of the {} split has a photo in {}",
+            args.split,
+            args.images.display()
+        );
+    }
+    let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
+    let opts = vksplat::cpu::RenderOptions {
+        background: args.background,
+        antialiased,
+    };
+    let act = scene.activated();
+    let mut gpu = if args.cpu {
+        None
+    } else {
+        let renderer = GpuRenderer::new(args.gpu.context()?)?;
+        let uploaded = renderer.upload(&act)?;
+        Some((renderer, uploaded))
+    };
+    let renderer_name = match &gpu {
+        Some((r, _)) => format!("GPU pipeline on {}", r.ctx().info().name),
+        None => "CPU reference renderer".into(),
+    };
+
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let bar = indicatif::ProgressBar::new(jobs.len() as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40.cyan/blue} {pos}/{len} images  ETA {eta}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    };
+    outln!(
+        "{:>5}  {:<24} {:>9} {:>9} {:>9}  {:>9}",
+        "frame",
+        "camera",
+        "PSNR dB",
+        "SSIM",
+        "FLIP",
+        "size"
+    );
+    let mut results = Vec::new();
+    for (k, cam, photo_path) in &jobs {
+        bar.set_message(cam.name.clone());
+        let photo = image_file::read_image(photo_path)?;
+        let (w, h) = render_size(cam.width, cam.height, photo.width, photo.height).ok_or_else(|| {
+            anyhow::anyhow!(
+                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}; a photo may only be smaller by one factor on both sides (images downscaled for training)",
+                cam.name,
+                cam.width,
+                cam.height,
+                photo_path.display(),
+                photo.width,
+                photo.height
+            )
+        })?;
+        let cam = cam.with_resolution(w, h)?;
+        cam.validate()?;
+        let truth = photo_rgb(&photo, photo_path, args.background)?;
+        let frame = match gpu.as_mut() {
+            Some((r, s)) => r.render(s, &cam, &opts)?,
+            None => vksplat::cpu::render(&act, &cam, &opts),
+        };
+        let render: Vec<f32> = metrics::clamped_color(&frame)
+            .into_iter()
+            .map(|v| {
+                if args.float {
+                    v
+                } else {
+                    output::to_u8(v) as f32 / 255.0
+                }
+            })
+            .collect();
+        let (wu, hu) = (w as usize, h as usize);
+        let record = ImageRecord {
+            frame: *k,
+            camera: cam.name.clone(),
+            photo: photo_path.display().to_string(),
+            width: w,
+            height: h,
+            psnr: metrics::psnr(&truth, &render, 1.0),
+            ssim: metrics::ssim(&truth, &render, wu, hu, 3),
+            flip: metrics::flip(&truth, &render, wu, hu, ppd),
+        };
+        bar.suspend(|| {
+            outln!(
+                "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}",
+                record.frame,
+                record.camera,
+                db(record.psnr),
+                record.ssim,
+                record.flip,
+                format!("{w}x{h}")
+            )
+        });
+        results.push(record);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if let Some((r, _)) = &gpu {
+        fail_on_validation_messages(r.ctx())?;
+    }
+    let n = results.len() as f64;
+    let mean = Means {
+        psnr: results.iter().map(|r| r.psnr).sum::<f64>() / n,
+        ssim: results.iter().map(|r| r.ssim).sum::<f64>() / n,
+        flip: results.iter().map(|r| r.flip).sum::<f64>() / n,
+    };
+    outln!(
+        "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}",
+        "",
+        format!("mean of {}", results.len()),
+        db(mean.psnr),
+        mean.ssim,
+        mean.flip
+    );
+    let mut csv = String::from("frame,camera,photo,width,height,psnr,ssim,flip\n");
+    for r in &results {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{}\n",
+            r.frame,
+            csv_cell(&r.camera),
+            csv_cell(&r.photo),
+            r.width,
+            r.height,
+            db_csv(r.psnr),
+            r.ssim,
+            r.flip
+        ));
+    }
+    csv.push_str(&format!(
+        "mean,,,,,{},{},{}\n",
+        db_csv(mean.psnr),
+        mean.ssim,
+        mean.flip
+    ));
+    // Created only now, so a run stopped by a bad photo leaves nothing behind.
+    std::fs::create_dir_all(&args.output).with_context(|| {
+        format!(
+            "{}: cannot create the report directory",
+            args.output.display()
+        )
+    })?;
+    let report = EvalReport {
+        scene: name.clone(),
+        cameras: cameras_file.display().to_string(),
+        images: args.images.display().to_string(),
+        split: args.split.clone(),
+        split_rule: rule,
+        renderer: renderer_name.clone(),
+        quantized: !args.float,
+        ppd,
+        results,
+        skipped,
+        mean: Some(mean),
+    };
+    output::write_bytes_atomically(
+        &files[0],
+        args.overwrite,
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    output::write_bytes_atomically(&files[1], args.overwrite, csv.as_bytes())?;
+    note!(
+        "evaluated {} image(s) of {name} ({renderer_name}){}; report in {}",
+        report.results.len(),
+        if report.skipped.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", {} camera(s) without a photo skipped",
+                report.skipped.len()
+            )
+        },
+        args.output.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn downscaled_photos_render_at_their_size_other_sizes_are_refused() {
+        assert_eq!(render_size(1600, 1064, 1600, 1064), Some((1600, 1064)));
+        assert_eq!(render_size(1600, 1064, 800, 532), Some((800, 532)));
+        assert_eq!(render_size(1600, 1064, 400, 266), Some((400, 266)));
+        // Rational factor 2/3, and a side rounded to whole pixels (1297 / 2 = 648.5).
+        assert_eq!(render_size(1200, 900, 800, 600), Some((800, 600)));
+        assert_eq!(render_size(1297, 840, 648, 420), Some((648, 420)));
+        // Larger, different aspect ratio, or only one side smaller.
+        assert_eq!(render_size(800, 600, 1600, 1200), None);
+        assert_eq!(render_size(800, 600, 400, 400), None);
+        assert_eq!(render_size(800, 600, 800, 300), None);
+    }
+
+    #[test]
+    fn llffhold_takes_every_eighth_camera_in_name_order() {
+        let cam = |n: &str| {
+            let mut c = camera::default_camera(&[[0.0; 3]], 8, 8);
+            c.name = n.into();
+            c
+        };
+        // File order: test cameras first (as the trainer writes cameras.json), then train.
+        let names: Vec<String> = (0..20).map(|i| format!("img_{i:03}")).collect();
+        let mut file: Vec<Camera> = [0, 8, 16].iter().map(|&i| cam(&names[i])).collect();
+        file.extend((0..20).filter(|i| i % 8 != 0).map(|i| cam(&names[i])));
+        let none = Path::new("/nonexistent/images");
+        let (test, rule) = split_cameras(file.clone(), "test", none);
+        let got: Vec<&str> = test.iter().map(|(_, c)| c.name.as_str()).collect();
+        assert_eq!(got, ["img_000", "img_008", "img_016"], "{rule}");
+        assert_eq!(test.iter().map(|(k, _)| *k).collect::<Vec<_>>(), [0, 1, 2]);
+        let (train, _) = split_cameras(file.clone(), "train", none);
+        assert_eq!(train.len(), 17);
+        assert!(train.iter().all(|(_, c)| !got.contains(&c.name.as_str())));
+        assert_eq!(split_cameras(file, "all", none).0.len(), 20);
+    }
+
+    #[test]
+    fn a_data_sets_test_txt_is_an_explicit_split() {
+        let dir = tempfile::tempdir().unwrap();
+        let images = dir.path().join("images");
+        std::fs::create_dir_all(dir.path().join("sparse/0")).unwrap();
+        std::fs::write(
+            dir.path().join("sparse/0/test.txt"),
+            "img_3.JPG\nimg_5.png\n",
+        )
+        .unwrap();
+        let cams: Vec<Camera> = (0..9)
+            .map(|i| {
+                let mut c = camera::default_camera(&[[0.0; 3]], 8, 8);
+                c.name = format!("img_{i}");
+                c
+            })
+            .collect();
+        let (test, rule) = split_cameras(cams.clone(), "test", &images);
+        let names: Vec<&str> = test.iter().map(|(_, c)| c.name.as_str()).collect();
+        assert_eq!(names, ["img_3", "img_5"]);
+        assert!(rule.contains("test.txt"), "{rule}");
+        assert_eq!(split_cameras(cams, "train", &images).0.len(), 7);
+    }
+
+    #[test]
+    fn photos_are_found_by_name_with_any_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("a.png"), b"").unwrap();
+        std::fs::write(dir.path().join("b.JPG"), b"").unwrap();
+        std::fs::write(dir.path().join("c.exr"), b"").unwrap();
+        assert!(find_photo(dir.path(), "a").unwrap().ends_with("a.png"));
+        assert!(find_photo(dir.path(), "b").unwrap().ends_with("b.JPG"));
+        assert!(find_photo(dir.path(), "b.JPG").unwrap().ends_with("b.JPG"));
+        // A COLMAP-style name with an extension also finds a converted photo.
+        assert!(find_photo(dir.path(), "c.jpg").unwrap().ends_with("c.exr"));
+        let e = find_photo(dir.path(), "d").unwrap_err();
+        assert!(e.contains("d.{png,jpg,jpeg,webp,exr,npy}"), "{e}");
+    }
+}
