@@ -789,7 +789,7 @@ fn readme_and_help_agree() {
         for line in h.lines() {
             let t = line.trim_start();
             let flag = t
-                .split(|ch: char| ch == ' ' || ch == ',' || ch == '=')
+                .split([' ', ',', '='])
                 .find(|w| w.starts_with("--"))
                 .unwrap_or("");
             // `-o, --output <OUT>`: the README may use either spelling.

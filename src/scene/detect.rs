@@ -194,7 +194,8 @@ mod tests {
             e.to_string().contains("not a recognised scene format"),
             "{e}"
         );
+        // An empty file says so, rather than listing no first bytes.
         let e = parse_bytes(b"", Path::new("x.bin")).unwrap_err();
-        assert!(e.to_string().contains("not a recognised"), "{e}");
+        assert!(e.to_string().contains("is empty (0 bytes)"), "{e}");
     }
 }
