@@ -16,6 +16,7 @@ pub mod render;
 pub mod scene;
 pub mod sequence;
 pub mod stats;
+pub mod view;
 
 /// The built-in demo scene (PLAYBOT LOD6, CC BY 4.0, see `assets/README.md`).
 pub const DEMO_SCENE_PLY: &[u8] = include_bytes!("../assets/playbot_lod6_1873_sh2.ply");
