@@ -42,6 +42,9 @@ enum Command {
     /// Render a model's cameras and compare them with the photos (PSNR, SSIM, FLIP).
     #[command(allow_negative_numbers = true)]
     Eval(cli::eval::EvalArgs),
+    /// Serve an interactive viewer of a scene to a browser (orbit, fly, filters, cameras, keyframes).
+    #[command(allow_negative_numbers = true)]
+    View(cli::view::ViewArgs),
 }
 
 fn main() -> ExitCode {
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
         Command::Convert(args) => cli::convert::convert(args),
         Command::Compare(args) => cli::compare::compare(args),
         Command::Eval(args) => cli::eval::eval(args),
+        Command::View(args) => cli::view::view(args),
     };
     // A closed pipe (`vksplat info scene.ply | head`) is not an error; any other failure to
     // write the command's output is.

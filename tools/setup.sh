@@ -9,6 +9,7 @@ packages=(
   libvulkan1 libvulkan-dev mesa-vulkan-drivers vulkan-tools vulkan-validationlayers
   libshaderc-dev glslang-dev spirv-tools glslc
   pkg-config openexr
+  chromium chromium-driver
 )
 
 missing=()

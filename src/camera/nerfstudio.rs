@@ -103,3 +103,90 @@ pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraE
     }
     Ok(cams)
 }
+
+/// Writes `cams` as a nerfstudio camera path, one entry per camera (the frames, as
+/// `ns-render camera-path` renders them), which [`parse_camera_path`] reads back as the
+/// same poses. nerfstudio cameras have square pixels and a centred principal point, so
+/// each camera's `fy` is kept (as the vertical `fov`) and `fx`, `cx`, `cy` are not; the
+/// cameras must share a resolution.
+pub fn to_camera_path_json(cams: &[Camera], fps: f64) -> Result<String, CameraError> {
+    let bad = |m: String| Err(CameraError::BadParameter(m));
+    let Some(first) = cams.first() else {
+        return bad("a camera path needs at least one camera".into());
+    };
+    if !(fps.is_finite() && fps > 0.0) {
+        return bad(format!("fps {fps} must be a positive number"));
+    }
+    let gl_to_cv = DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0));
+    let mut entries = Vec::with_capacity(cams.len());
+    for c in cams {
+        c.validate()?;
+        if (c.width, c.height) != (first.width, first.height) {
+            return bad(format!(
+                "camera \"{}\" is {}x{} but the first is {}x{}; a camera path has one resolution",
+                c.name, c.width, c.height, first.width, first.height
+            ));
+        }
+        let c2w = c.rotation.as_dmat3().transpose();
+        let centre = -(c2w * c.translation.as_dvec3());
+        let gl = c2w * gl_to_cv;
+        // Row-major: element (r, c) is the row r of column c.
+        let mut m = [0.0f64; 16];
+        for r in 0..3 {
+            for k in 0..3 {
+                m[4 * r + k] = gl.col(k)[r] + 0.0;
+            }
+            m[4 * r + 3] = centre[r];
+        }
+        m[15] = 1.0;
+        let fov = (2.0 * (c.height as f64 / (2.0 * c.fy as f64)).atan()).to_degrees();
+        entries.push(serde_json::json!({
+            "camera_to_world": m,
+            "fov": fov,
+            "aspect": c.width as f64 / c.height as f64,
+        }));
+    }
+    let file = serde_json::json!({
+        "camera_type": "perspective",
+        "render_width": first.width,
+        "render_height": first.height,
+        "fps": fps,
+        "seconds": cams.len() as f64 / fps,
+        "camera_path": entries,
+    });
+    serde_json::to_string_pretty(&file)
+        .map_err(|e| CameraError::BadParameter(format!("cannot write the camera path: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn written_paths_read_back() {
+        let cams: Vec<Camera> = (0..3)
+            .map(|i| {
+                let mut c = crate::camera::default_camera(
+                    &[[0.0, 0.0, 0.0], [1.0, 2.0, 3.0 + i as f32]],
+                    80,
+                    60,
+                );
+                c.name = format!("c{i}");
+                c
+            })
+            .collect();
+        let text = to_camera_path_json(&cams, 24.0).unwrap();
+        let back = parse_camera_path(&text, Path::new("p.json")).unwrap();
+        assert_eq!(back.len(), 3);
+        for (a, b) in cams.iter().zip(&back) {
+            assert_eq!((a.width, a.height), (b.width, b.height));
+            assert!((a.position() - b.position()).length() < 1e-5);
+            assert!(a.rotation.abs_diff_eq(b.rotation, 1e-6));
+            assert!((a.fy - b.fy).abs() < 1e-3, "{} {}", a.fy, b.fy);
+        }
+        let mut other = cams[1].clone();
+        other.width = 81;
+        assert!(to_camera_path_json(&[cams[0].clone(), other], 24.0).is_err());
+        assert!(to_camera_path_json(&[], 24.0).is_err());
+    }
+}

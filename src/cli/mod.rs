@@ -10,6 +10,7 @@ pub mod info;
 pub mod render;
 pub mod transform;
 pub mod values;
+pub mod view;
 
 /// `1 camera`, `3 cameras`: a count with its noun in the right number (nouns taking `s`).
 pub(crate) fn plural(n: usize, noun: &str) -> String {

@@ -128,7 +128,7 @@ impl std::error::Error for Interrupted {}
 
 /// A flag set by the first Ctrl-C or SIGTERM, so a path stops after the frames in hand
 /// are written completely; a second signal ends the process at once.
-fn interrupt_flag() -> Arc<AtomicBool> {
+pub(crate) fn interrupt_flag() -> Arc<AtomicBool> {
     use signal_hook::consts::{SIGINT, SIGTERM};
     let flag = Arc::new(AtomicBool::new(false));
     for signal in [SIGINT, SIGTERM] {

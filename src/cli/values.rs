@@ -45,6 +45,15 @@ pub(crate) fn unit_f32(s: &str) -> Result<f32, String> {
     }
 }
 
+/// A size `WxH` (`1920x1080`), each side 1..=16384.
+pub(crate) fn size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT such as 1920x1080, got \"{s}\""))?;
+    let side = int_in(1u32, vksplat::camera::MAX_IMAGE_SIDE);
+    Ok((side(w)?, side(h)?))
+}
+
 /// A field of view in degrees, strictly between 0 and 180.
 pub(crate) fn fov_deg(s: &str) -> Result<f32, String> {
     let v = finite(s)?;
