@@ -1,0 +1,521 @@
+// vksplat view: the page. The server renders; this file keeps the camera and the
+// settings, turns mouse and keys into camera moves, sends view requests over the
+// WebSocket and draws the frames that come back. Protocol: src/view/protocol.rs.
+'use strict';
+(() => {
+  const $ = (id) => document.getElementById(id);
+  const canvas = $('view');
+  const ctx2d = canvas.getContext('2d');
+
+  // ---- vector helpers (arrays of 3 numbers) ----
+  const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+  const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+  const mul = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const len = (a) => Math.sqrt(dot(a, a));
+  const unit = (a) => { const l = len(a); return l > 1e-12 ? mul(a, 1 / l) : [0, 0, 0]; };
+  // Rotation of v about the unit axis k by angle a (Rodrigues).
+  const rotate = (v, k, a) => {
+    const c = Math.cos(a), s = Math.sin(a);
+    return add(add(mul(v, c), mul(cross(k, v), s)), mul(k, dot(k, v) * (1 - c)));
+  };
+
+  // ---- state ----
+  const cam = {
+    pos: [0, 0, -5], right: [1, 0, 0], down: [0, 1, 0], fwd: [0, 0, 1],
+    focus: [0, 0, 0], vfov: 50, aspect: 1, // aspect: fx / fy
+  };
+  const settings = {
+    scale_modifier: 1, max_scale: null, min_opacity: 0, sh_degree: null,
+    background: [0, 0, 0], mode: 'rgb',
+  };
+  const V = window.vksplatViewer = {
+    connected: false, hello: null, frames: 0, previewFrames: 0, fullFrames: 0, lastSeq: 0,
+    lastFrame: null, errors: [], cameraIndex: -1, keyframes: [], screenshots: 0,
+    lastExport: null, upFlipped: false, turntable: false, sent: 0,
+    get camera() { return entry(); },
+    get settings() { return JSON.parse(JSON.stringify(settings)); },
+  };
+  let ws = null;
+  let seq = 0;
+  let dirty = false; // the view changed since the last request
+  let dirtyInteractive = false;
+  let movedAt = 0; // when the last interactive request went out
+  let restPending = false;
+  let reconnectDelay = 500;
+
+  const upSign = () => (V.upFlipped ? -1 : 1);
+  const worldUp = () => mul(V.hello ? V.hello.up : [0, -1, 0], upSign());
+  const size = () => (V.hello ? V.hello.size : 1);
+
+  // Re-derive the axes so the camera looks at `target` with no roll about world up.
+  function lookAt(target) {
+    const fwd = unit(sub(target, cam.pos));
+    if (len(fwd) === 0) return;
+    let right = unit(cross(mul(worldUp(), -1), fwd));
+    if (len(right) === 0) right = cam.right; // looking straight along the up axis
+    cam.fwd = fwd;
+    cam.right = unit(sub(right, mul(fwd, dot(right, fwd))));
+    cam.down = cross(fwd, cam.right);
+  }
+
+  // The view as a cameras.json entry at the canvas's size.
+  function entry() {
+    const w = Math.max(1, canvas.width), h = Math.max(1, canvas.height);
+    const fy = h / (2 * Math.tan((cam.vfov * Math.PI) / 360));
+    const r = cam.right, d = cam.down, f = cam.fwd;
+    return {
+      id: 0, img_name: 'view', width: w, height: h, position: cam.pos.slice(),
+      rotation: [[r[0], d[0], f[0]], [r[1], d[1], f[1]], [r[2], d[2], f[2]]],
+      fx: fy * cam.aspect, fy,
+    };
+  }
+
+  // Takes pose and intrinsics from a cameras.json entry; the focus goes in front of it
+  // at the distance of the scene's centre.
+  function snapTo(e) {
+    const col = (k) => [e.rotation[0][k], e.rotation[1][k], e.rotation[2][k]];
+    cam.pos = e.position.slice();
+    cam.right = unit(col(0)); cam.down = unit(col(1)); cam.fwd = unit(col(2));
+    cam.vfov = (2 * Math.atan(e.height / (2 * e.fy)) * 180) / Math.PI;
+    cam.aspect = e.fx / e.fy;
+    const centre = V.hello ? V.hello.centre : [0, 0, 0];
+    const depth = dot(sub(centre, cam.pos), cam.fwd);
+    cam.focus = add(cam.pos, mul(cam.fwd, depth > 1e-3 * size() ? depth : size()));
+    changed(false);
+  }
+
+  function changed(interactive) {
+    dirty = true;
+    dirtyInteractive = interactive;
+  }
+
+  // ---- camera moves ----
+  function orbit(yaw, pitch) {
+    const up = worldUp();
+    let off = sub(cam.pos, cam.focus);
+    off = rotate(off, up, yaw);
+    const right = unit(cross(mul(up, -1), unit(mul(off, -1))));
+    const tilted = len(right) > 0 ? rotate(off, right, pitch) : off;
+    // Stay clear of the poles so the view never flips over.
+    const cosUp = dot(unit(tilted), up);
+    if (Math.abs(cosUp) < 0.995) off = tilted;
+    cam.pos = add(cam.focus, off);
+    lookAt(cam.focus);
+    changed(true);
+  }
+
+  function pan(dx, dy) {
+    const dist = len(sub(cam.focus, cam.pos));
+    const perPixel = (2 * dist * Math.tan((cam.vfov * Math.PI) / 360)) / Math.max(1, canvas.clientHeight);
+    const move = add(mul(cam.right, -dx * perPixel), mul(cam.down, -dy * perPixel));
+    cam.pos = add(cam.pos, move);
+    cam.focus = add(cam.focus, move);
+    changed(true);
+  }
+
+  function zoom(factor) {
+    const dist = Math.max(len(sub(cam.focus, cam.pos)) * factor, 1e-4 * size());
+    cam.pos = sub(cam.focus, mul(cam.fwd, dist));
+    changed(true);
+  }
+
+  function fly(delta) {
+    cam.pos = add(cam.pos, delta);
+    cam.focus = add(cam.focus, delta);
+    changed(true);
+  }
+
+  // ---- mouse ----
+  let drag = null;
+  canvas.addEventListener('contextmenu', (e) => e.preventDefault());
+  canvas.addEventListener('pointerdown', (e) => {
+    canvas.focus();
+    canvas.setPointerCapture(e.pointerId);
+    drag = { x: e.clientX, y: e.clientY, pan: e.button === 2 || e.button === 1 || e.shiftKey };
+  });
+  canvas.addEventListener('pointermove', (e) => {
+    if (!drag) return;
+    const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+    drag.x = e.clientX; drag.y = e.clientY;
+    if (drag.pan) pan(dx, dy);
+    else orbit(-dx * 0.005, dy * 0.005);
+  });
+  const endDrag = () => { drag = null; };
+  canvas.addEventListener('pointerup', endDrag);
+  canvas.addEventListener('pointercancel', endDrag);
+  canvas.addEventListener('wheel', (e) => {
+    e.preventDefault();
+    const step = e.deltaMode === 1 ? e.deltaY * 33 : e.deltaY;
+    zoom(Math.exp(Math.max(-200, Math.min(200, step)) * 0.0015));
+  }, { passive: false });
+
+  // ---- keys ----
+  const held = new Set();
+  const typing = (e) => /^(INPUT|SELECT|TEXTAREA)$/.test(e.target.tagName) && e.target.type !== 'range' && e.target.type !== 'checkbox';
+  window.addEventListener('keydown', (e) => {
+    if (typing(e) || e.ctrlKey || e.metaKey || e.altKey) return;
+    const k = e.key.toLowerCase();
+    if ('wasdqe'.includes(k) && k.length === 1) { held.add(k); e.preventDefault(); return; }
+    if (e.key === '+' || e.key === '=') setScale(settings.scale_modifier * 1.1);
+    else if (e.key === '-' || e.key === '_') setScale(settings.scale_modifier / 1.1);
+    else if (k === 'n') stepCamera(1);
+    else if (k === 'p') stepCamera(-1);
+    else if (k === 't') toggleTurntable();
+    else if (k === 'k') addKeyframe();
+    else if (k === 'r') resetView();
+    else return;
+    e.preventDefault();
+  });
+  window.addEventListener('keyup', (e) => { held.delete(e.key.toLowerCase()); });
+  window.addEventListener('blur', () => held.clear());
+
+  // ---- controls ----
+  const scaleSlider = $('scale');
+  function setScale(s) {
+    s = Math.min(Math.max(s, 0.01), 10);
+    settings.scale_modifier = Math.round(s * 1e4) / 1e4;
+    scaleSlider.value = Math.log10(settings.scale_modifier);
+    $('scale-out').textContent = settings.scale_modifier.toFixed(2);
+    changed(false);
+  }
+  scaleSlider.addEventListener('input', () => {
+    settings.scale_modifier = Math.round(10 ** Number(scaleSlider.value) * 1e4) / 1e4;
+    $('scale-out').textContent = settings.scale_modifier.toFixed(2);
+    changed(true);
+  });
+
+  // Max scale: log-spaced over the scene's range; the rightmost position is off.
+  const maxSlider = $('maxscale');
+  function maxScaleAt(t) {
+    if (!V.hello || t >= 1000) return null;
+    const [lo, hi] = V.hello.max_scale_range;
+    return lo * (hi / lo) ** (t / 1000);
+  }
+  maxSlider.addEventListener('input', () => {
+    const m = maxScaleAt(Number(maxSlider.value));
+    settings.max_scale = m === null ? null : Number(m.toPrecision(4));
+    $('maxscale-out').textContent = m === null ? 'off' : settings.max_scale.toPrecision(3);
+    changed(true);
+  });
+  $('minopacity').addEventListener('input', (e) => {
+    settings.min_opacity = Number(e.target.value);
+    $('minopacity-out').textContent = settings.min_opacity.toFixed(2);
+    changed(true);
+  });
+  $('sh').addEventListener('input', (e) => {
+    const d = Number(e.target.value);
+    settings.sh_degree = V.hello && d >= V.hello.sh_degree ? null : d;
+    $('sh-out').textContent = String(d);
+    changed(false);
+  });
+  $('background').addEventListener('input', (e) => {
+    const hex = e.target.value;
+    settings.background = [1, 3, 5].map((i) => parseInt(hex.slice(i, i + 2), 16) / 255);
+    changed(false);
+  });
+  $('mode').addEventListener('change', (e) => { settings.mode = e.target.value; changed(false); });
+  $('flip-up').addEventListener('change', (e) => {
+    V.upFlipped = e.target.checked;
+    lookAt(cam.focus);
+    changed(false);
+  });
+  for (const el of [scaleSlider, maxSlider, $('minopacity')]) {
+    el.addEventListener('change', () => changed(false)); // released: full quality
+  }
+  $('panel-toggle').addEventListener('click', () => $('panel').classList.toggle('collapsed'));
+  $('reset').addEventListener('click', resetView);
+  $('turntable').addEventListener('click', toggleTurntable);
+  $('shot-png').addEventListener('click', () => screenshot('png'));
+  $('shot-exr').addEventListener('click', () => screenshot('exr'));
+  $('kf-add').addEventListener('click', addKeyframe);
+  $('kf-preview').addEventListener('click', togglePreview);
+  $('kf-export').addEventListener('click', () => exportKeyframes('vksplat'));
+  $('kf-export-ns').addEventListener('click', () => exportKeyframes('nerfstudio'));
+
+  function resetView() {
+    if (V.hello) { V.cameraIndex = V.hello.cameras.length ? 0 : -1; snapTo(V.hello.initial_camera); markCamera(); }
+  }
+
+  function toggleTurntable() {
+    V.turntable = !V.turntable;
+    $('turntable').textContent = V.turntable ? '❚❚ Turntable' : '▶ Turntable';
+  }
+
+  // ---- cameras ----
+  function fillCameras() {
+    const list = $('cameras');
+    list.textContent = '';
+    V.hello.cameras.forEach((c, i) => {
+      const li = document.createElement('li');
+      li.textContent = c.name;
+      li.title = `${c.camera.width}x${c.camera.height}`;
+      li.addEventListener('click', () => selectCamera(i));
+      list.appendChild(li);
+    });
+  }
+  function markCamera() {
+    [...$('cameras').children].forEach((li, i) => li.classList.toggle('current', i === V.cameraIndex));
+    const cur = $('cameras').children[V.cameraIndex];
+    if (cur) cur.scrollIntoView({ block: 'nearest' });
+  }
+  function selectCamera(i) {
+    const n = V.hello ? V.hello.cameras.length : 0;
+    if (!n) return;
+    V.cameraIndex = ((i % n) + n) % n;
+    snapTo(V.hello.cameras[V.cameraIndex].camera);
+    markCamera();
+  }
+  const stepCamera = (d) => selectCamera(V.cameraIndex < 0 ? 0 : V.cameraIndex + d);
+  V.selectCamera = selectCamera;
+
+  // ---- keyframes ----
+  const pose = () => ({ pos: cam.pos.slice(), right: cam.right.slice(), down: cam.down.slice(), fwd: cam.fwd.slice(), focus: cam.focus.slice(), vfov: cam.vfov, aspect: cam.aspect });
+  function addKeyframe() { V.keyframes.push(pose()); fillKeyframes(); }
+  function fillKeyframes() {
+    const list = $('keyframes');
+    list.textContent = '';
+    V.keyframes.forEach((k, i) => {
+      const li = document.createElement('li');
+      const label = document.createElement('span');
+      label.textContent = `t = ${(i * spacing()).toFixed(1)} s`;
+      label.title = 'go to this keyframe';
+      label.addEventListener('click', () => { Object.assign(cam, JSON.parse(JSON.stringify(k))); changed(false); });
+      li.appendChild(label);
+      const button = (text, title, fn) => {
+        const b = document.createElement('button');
+        b.textContent = text; b.title = title; b.addEventListener('click', fn); li.appendChild(b);
+      };
+      button('↑', 'earlier', () => { if (i > 0) { [V.keyframes[i - 1], V.keyframes[i]] = [V.keyframes[i], V.keyframes[i - 1]]; fillKeyframes(); } });
+      button('↓', 'later', () => { if (i + 1 < V.keyframes.length) { [V.keyframes[i + 1], V.keyframes[i]] = [V.keyframes[i], V.keyframes[i + 1]]; fillKeyframes(); } });
+      button('✕', 'delete', () => { V.keyframes.splice(i, 1); fillKeyframes(); });
+      list.appendChild(li);
+    });
+  }
+  const spacing = () => Math.min(600, Math.max(0.1, Number($('kf-spacing').value) || 1));
+  const fps = () => Math.min(240, Math.max(1, Math.round(Number($('kf-fps').value) || 30)));
+  $('kf-spacing').addEventListener('change', fillKeyframes);
+
+  // A keyframe's camera at the canvas's size.
+  function keyframeEntry(k) {
+    const saved = pose();
+    Object.assign(cam, k);
+    const e = entry();
+    Object.assign(cam, saved);
+    return e;
+  }
+  function exportKeyframes(format) {
+    if (!V.keyframes.length) { showError('no keyframes yet: "Add" puts the current camera in the path'); return; }
+    send({
+      type: 'export_keyframes', seq: ++seq, format, fps: fps(),
+      keyframes: V.keyframes.map((k, i) => ({ time: Math.round(i * spacing() * 1e6) / 1e6, camera: keyframeEntry(k) })),
+    });
+  }
+
+  // Preview: positions straight between keyframes, rotations by quaternion slerp (the
+  // exported path itself is a Catmull-Rom spline, see docs/cameras.md).
+  let preview = null;
+  function togglePreview() {
+    if (preview) { preview = null; $('kf-preview').textContent = '▶ Preview'; return; }
+    if (V.keyframes.length < 2) { showError('a path needs two keyframes to preview'); return; }
+    preview = { start: performance.now() };
+    $('kf-preview').textContent = '■ Stop';
+  }
+  const toQuat = (k) => {
+    // Rotation matrix with columns right, down, fwd to a quaternion (w, x, y, z).
+    const m = [[k.right[0], k.down[0], k.fwd[0]], [k.right[1], k.down[1], k.fwd[1]], [k.right[2], k.down[2], k.fwd[2]]];
+    const tr = m[0][0] + m[1][1] + m[2][2];
+    let q;
+    if (tr > 0) { const s = Math.sqrt(tr + 1) * 2; q = [0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s]; }
+    else if (m[0][0] > m[1][1] && m[0][0] > m[2][2]) { const s = Math.sqrt(1 + m[0][0] - m[1][1] - m[2][2]) * 2; q = [(m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s]; }
+    else if (m[1][1] > m[2][2]) { const s = Math.sqrt(1 + m[1][1] - m[0][0] - m[2][2]) * 2; q = [(m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s]; }
+    else { const s = Math.sqrt(1 + m[2][2] - m[0][0] - m[1][1]) * 2; q = [(m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s]; }
+    return q;
+  };
+  const quatCols = ([w, x, y, z]) => [
+    [1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)],
+    [2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)],
+    [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)],
+  ];
+  function slerp(a, b, t) {
+    let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+    if (d < 0) { b = b.map((v) => -v); d = -d; }
+    if (d > 0.9995) { const q = a.map((v, i) => v + (b[i] - v) * t); const l = Math.hypot(...q); return q.map((v) => v / l); }
+    const th = Math.acos(d), s = Math.sin(th);
+    return a.map((v, i) => (v * Math.sin((1 - t) * th) + b[i] * Math.sin(t * th)) / s);
+  }
+  function previewStep(now) {
+    const span = spacing() * (V.keyframes.length - 1);
+    const t = ((now - preview.start) / 1000) % span;
+    const i = Math.min(V.keyframes.length - 2, Math.floor(t / spacing()));
+    const f = t / spacing() - i;
+    const a = V.keyframes[i], b = V.keyframes[i + 1];
+    const cols = quatCols(slerp(toQuat(a), toQuat(b), f));
+    cam.pos = add(mul(a.pos, 1 - f), mul(b.pos, f));
+    cam.focus = add(mul(a.focus, 1 - f), mul(b.focus, f));
+    [cam.right, cam.down, cam.fwd] = cols.map(unit);
+    cam.vfov = a.vfov * (1 - f) + b.vfov * f;
+    cam.aspect = a.aspect * (1 - f) + b.aspect * f;
+    changed(true);
+  }
+
+  // ---- screenshots and downloads ----
+  function screenshot(format) {
+    send({ type: 'screenshot', seq: ++seq, format, camera: entry(), settings });
+  }
+  function download(blob, name) {
+    const a = document.createElement('a');
+    a.href = URL.createObjectURL(blob);
+    a.download = name;
+    document.body.appendChild(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+  }
+
+  // ---- errors ----
+  let bannerTimer = null;
+  function showError(message) {
+    V.errors.push(message);
+    const b = $('banner');
+    b.textContent = message;
+    b.hidden = false;
+    clearTimeout(bannerTimer);
+    bannerTimer = setTimeout(() => { b.hidden = true; }, 8000);
+  }
+  $('banner').addEventListener('click', () => { $('banner').hidden = true; });
+
+  // ---- connection ----
+  function send(msg) {
+    if (!ws || ws.readyState !== WebSocket.OPEN) return false;
+    ws.send(JSON.stringify(msg));
+    V.sent += 1;
+    return true;
+  }
+  function connect() {
+    ws = new WebSocket(`ws://${location.host}/ws`);
+    ws.binaryType = 'arraybuffer';
+    ws.onopen = () => { V.connected = true; reconnectDelay = 500; };
+    ws.onclose = () => {
+      if (V.connected) showError('disconnected from the viewer server; reconnecting…');
+      V.connected = false;
+      setTimeout(connect, reconnectDelay);
+      reconnectDelay = Math.min(reconnectDelay * 2, 10000);
+    };
+    ws.onmessage = (ev) => (typeof ev.data === 'string' ? onText(ev.data) : onBinary(ev.data));
+  }
+  function onText(text) {
+    let m;
+    try { m = JSON.parse(text); } catch (e) { showError(`bad message from the server: ${e}`); return; }
+    if (m.type === 'hello') onHello(m);
+    else if (m.type === 'error') showError(m.message);
+    else if (m.type === 'camera') { snapTo(m.camera); }
+    else if (m.type === 'export') {
+      V.lastExport = m;
+      download(new Blob([m.text], { type: 'application/json' }), m.filename);
+    }
+  }
+  function onHello(h) {
+    if (h.version !== 1) { showError(`the server speaks protocol ${h.version}; reload the page`); return; }
+    const first = !V.hello;
+    V.hello = h;
+    $('scene-name').textContent = h.scene;
+    $('scene-name').title = h.scene;
+    $('sh').max = String(h.sh_degree);
+    if (first) {
+      $('sh').value = String(h.sh_degree);
+      $('sh-out').textContent = String(h.sh_degree);
+      fillCameras();
+      resetView();
+    } else {
+      changed(false); // reconnected: render the current view again
+    }
+  }
+  let drawToken = 0;
+  const fpsTimes = [];
+  function onBinary(buf) {
+    const view = new DataView(buf);
+    if (buf.byteLength < 4) return;
+    const n = view.getUint32(0, true);
+    let h;
+    try { h = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n))); } catch (e) { showError(`bad frame header: ${e}`); return; }
+    const payload = new Uint8Array(buf, 4 + n);
+    if (h.kind === 'screenshot') {
+      V.screenshots += 1;
+      download(new Blob([payload], { type: h.format === 'png' ? 'image/png' : 'image/x-exr' }), h.filename);
+      return;
+    }
+    if (h.kind !== 'frame') return;
+    const token = ++drawToken;
+    createImageBitmap(new Blob([payload], { type: `image/${h.encoding}` })).then((bmp) => {
+      if (token === drawToken) {
+        ctx2d.imageSmoothingEnabled = true;
+        ctx2d.drawImage(bmp, 0, 0, canvas.width, canvas.height);
+      }
+      bmp.close();
+      V.frames += 1;
+      if (h.quality === 'full') V.fullFrames += 1; else V.previewFrames += 1;
+      V.lastSeq = h.seq;
+      V.lastFrame = h;
+      const now = performance.now();
+      fpsTimes.push(now);
+      while (fpsTimes.length && now - fpsTimes[0] > 1000) fpsTimes.shift();
+      readout(h);
+    }, (e) => showError(`cannot decode a frame: ${e}`));
+  }
+  function readout(h) {
+    const t = h.timings;
+    const f = (v) => v.toFixed(2).padStart(7);
+    $('readout').textContent =
+      `${fpsTimes.length} frames/s   ${h.width}x${h.height} ${h.quality}\n` +
+      `frame ${h.wall_ms.toFixed(1)} ms (encode ${h.encode_ms.toFixed(1)})\n` +
+      `preprocess ${f(t.preprocess)}\norder      ${f(t.order)}\nscan       ${f(t.scan)}\n` +
+      `keys       ${f(t.keys)}\nsort       ${f(t.sort)}\nranges     ${f(t.ranges)}\n` +
+      `blend      ${f(t.blend)}\ntotal      ${f(t.total)} ms\n` +
+      `visible ${h.visible.toLocaleString()}  pairs ${h.pairs.toLocaleString()}\n` +
+      (V.hello ? V.hello.device : '');
+  }
+
+  // ---- the loop: canvas size, fly, turntable, requests ----
+  function fitCanvas() {
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.max(1, Math.round(canvas.clientWidth * dpr));
+    const h = Math.max(1, Math.round(canvas.clientHeight * dpr));
+    if (w !== canvas.width || h !== canvas.height) {
+      canvas.width = w; canvas.height = h;
+      changed(false);
+    }
+  }
+  let last = performance.now();
+  function tick(now) {
+    const dt = Math.min(0.1, (now - last) / 1000);
+    last = now;
+    fitCanvas();
+    if (held.size) {
+      const speed = size() * 0.6 * (held.has('shift') || window.__shift ? 4 : 1) * dt;
+      let d = [0, 0, 0];
+      if (held.has('w')) d = add(d, cam.fwd);
+      if (held.has('s')) d = sub(d, cam.fwd);
+      if (held.has('d')) d = add(d, cam.right);
+      if (held.has('a')) d = sub(d, cam.right);
+      if (held.has('e')) d = add(d, worldUp());
+      if (held.has('q')) d = sub(d, worldUp());
+      if (len(d) > 0) fly(mul(unit(d), speed));
+    }
+    if (V.turntable) orbit((20 * Math.PI / 180) * dt, 0);
+    if (preview) previewStep(now);
+    if (dirty && V.hello && send({ type: 'view', seq: ++seq, camera: entry(), settings, interactive: dirtyInteractive })) {
+      dirty = false;
+      restPending = dirtyInteractive;
+      movedAt = now;
+    } else if (restPending && now - movedAt > 150 && !drag) {
+      if (send({ type: 'rest', seq: ++seq })) restPending = false;
+    }
+    requestAnimationFrame(tick);
+  }
+  window.addEventListener('keydown', (e) => { window.__shift = e.shiftKey; });
+  window.addEventListener('keyup', (e) => { window.__shift = e.shiftKey; });
+  connect();
+  requestAnimationFrame(tick);
+})();
