@@ -35,6 +35,7 @@
     lastFrame: null, errors: [], cameraIndex: -1, keyframes: [], screenshots: 0,
     lastExport: null, upFlipped: false, turntable: false, sent: 0,
     get camera() { return entry(); },
+    get focus() { return cam.focus.slice(); },
     get settings() { return JSON.parse(JSON.stringify(settings)); },
   };
   let ws = null;
