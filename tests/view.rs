@@ -21,8 +21,20 @@ fn cameras(dir: &Path) -> PathBuf {
     vksplat_ok(
         dir,
         &[
-            "render", "--demo", "--cpu", "--quiet", "--orbit", "3", "--width", "96", "--height",
-            "64", "--export-cameras", "cams.json", "-o", "orbit/f_{}.png",
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--orbit",
+            "3",
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--export-cameras",
+            "cams.json",
+            "-o",
+            "orbit/f_{}.png",
         ],
     );
     file
@@ -33,7 +45,15 @@ fn render_camera(dir: &Path, k: usize, extra: &[&str], name: &str) -> image::Rgb
     let out = format!("{name}.png");
     let ks = k.to_string();
     let mut args = vec![
-        "render", "--demo", "--cpu", "--quiet", "--cameras", "cams.json", "--camera", &ks, "-o",
+        "render",
+        "--demo",
+        "--cpu",
+        "--quiet",
+        "--cameras",
+        "cams.json",
+        "--camera",
+        &ks,
+        "-o",
         &out,
     ];
     args.extend_from_slice(extra);
@@ -66,8 +86,8 @@ fn resting_frames_equal_render_bit_for_bit() {
     assert_eq!(hello["gaussians"], 1873);
     assert_eq!(hello["sh_degree"], 2);
     assert_eq!(hello["up"], json!([0.0, -1.0, 0.0]));
-    let [lo, hi] = [&hello["max_scale_range"][0], &hello["max_scale_range"][1]]
-        .map(|v| v.as_f64().unwrap());
+    let [lo, hi] =
+        [&hello["max_scale_range"][0], &hello["max_scale_range"][1]].map(|v| v.as_f64().unwrap());
     assert!(0.0 < lo && lo < hi, "{lo} {hi}");
 
     // select_camera snaps to camera 1 with its intrinsics and size.
@@ -78,12 +98,23 @@ fn resting_frames_equal_render_bit_for_bit() {
     let frame = c.frame(seq, true, WAIT);
     assert_eq!(frame.header["encoding"], "png");
     assert_eq!(
-        (frame.header["width"].as_u64(), frame.header["height"].as_u64()),
+        (
+            frame.header["width"].as_u64(),
+            frame.header["height"].as_u64()
+        ),
         (Some(96), Some(64))
     );
     assert!(frame.header["visible"].as_u64().unwrap() > 0);
     assert!(frame.header["pairs"].as_u64().unwrap() > 0);
-    for stage in ["preprocess", "order", "scan", "keys", "sort", "ranges", "blend"] {
+    for stage in [
+        "preprocess",
+        "order",
+        "scan",
+        "keys",
+        "sort",
+        "ranges",
+        "blend",
+    ] {
         assert!(
             frame.header["timings"][stage].is_number(),
             "stage {stage} missing"
@@ -114,7 +145,14 @@ fn resting_frames_equal_render_bit_for_bit() {
         &render_camera(
             d,
             2,
-            &["--max-scale", "0.02", "--sh-degree", "1", "--background", "0.25,0.5,1"],
+            &[
+                "--max-scale",
+                "0.02",
+                "--sh-degree",
+                "1",
+                "--background",
+                "0.25,0.5,1",
+            ],
             "cam2filtered",
         ),
         "view of camera 2 with max_scale 0.02",
@@ -125,7 +163,8 @@ fn resting_frames_equal_render_bit_for_bit() {
 
     // Alpha and depth modes as render --mode alpha / depth.
     for mode in ["alpha", "depth"] {
-        let seq = c.send(json!({"type": "view", "camera": c.camera(2), "settings": {"mode": mode}}));
+        let seq =
+            c.send(json!({"type": "view", "camera": c.camera(2), "settings": {"mode": mode}}));
         let frame = c.frame(seq, true, WAIT);
         assert_same(
             &frame.rgb(),
@@ -136,7 +175,8 @@ fn resting_frames_equal_render_bit_for_bit() {
 
     // While moving: a JPEG preview; without a `rest` the full frame follows by itself.
     // (Settings left out are the last ones sent: back to the defaults.)
-    let seq = c.send(json!({"type": "view", "camera": c.camera(0), "settings": {}, "interactive": true}));
+    let seq =
+        c.send(json!({"type": "view", "camera": c.camera(0), "settings": {}, "interactive": true}));
     let preview = c.frame(seq, false, WAIT);
     assert_eq!(preview.header["encoding"], "jpeg");
     let full = c.frame(seq, true, WAIT);
@@ -167,7 +207,8 @@ fn scale_modifier_frame_equals_render_with_scale_modifier() {
     cameras(d);
     let viewer = Viewer::start(d, &["--demo", "--cpu", "--cameras", "cams.json"]);
     let mut c = viewer.connect();
-    let seq = c.send(json!({"type": "view", "camera": c.camera(1), "settings": {"scale_modifier": 0.6}}));
+    let seq =
+        c.send(json!({"type": "view", "camera": c.camera(1), "settings": {"scale_modifier": 0.6}}));
     let frame = c.frame(seq, true, WAIT);
     assert_same(
         &frame.rgb(),
@@ -347,7 +388,9 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
     let keyframes: Vec<Value> = (0..3)
         .map(|k| json!({"time": k as f64, "camera": c.camera(k)}))
         .collect();
-    c.send(json!({"type": "export_keyframes", "format": "vksplat", "fps": 2, "keyframes": keyframes}));
+    c.send(
+        json!({"type": "export_keyframes", "format": "vksplat", "fps": 2, "keyframes": keyframes}),
+    );
     let export = c.text("export", WAIT);
     assert_eq!(export["filename"], "keyframes.json");
     std::fs::write(d.join("keyframes.json"), export["text"].as_str().unwrap()).unwrap();
@@ -355,11 +398,19 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
     vksplat_ok(
         d,
         &[
-            "render", "--demo", "--cpu", "--quiet", "--cameras", "keyframes.json", "-o",
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--cameras",
+            "keyframes.json",
+            "-o",
             "path/f_{:05}.png",
         ],
     );
-    let frames: Vec<PathBuf> = (0..5).map(|k| d.join(format!("path/f_{k:05}.png"))).collect();
+    let frames: Vec<PathBuf> = (0..5)
+        .map(|k| d.join(format!("path/f_{k:05}.png")))
+        .collect();
     assert!(frames.iter().all(|f| f.exists()));
     assert!(!d.join("path/f_00005.png").exists());
     let shown: Vec<image::RgbImage> = (0..3)
@@ -372,7 +423,10 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
         assert_same(img, &read_rgb(&frames[2 * k]), &format!("keyframe {k}"));
         // The keyframe is the camera it was made from (up to the file's rounding).
         let (n, max) = diff(img, &render_camera(d, k, &[], &format!("cam{k}")));
-        assert!(max <= 2 && n < 96 * 64 / 50, "keyframe {k}: {n} pixels by {max}");
+        assert!(
+            max <= 2 && n < 96 * 64 / 50,
+            "keyframe {k}: {n} pixels by {max}"
+        );
     }
     // nerfstudio's camera_path.json: the same path sampled at 2 frames/s.
     c.send(json!({"type": "export_keyframes", "format": "nerfstudio", "fps": 2, "keyframes": keyframes}));
@@ -382,13 +436,23 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
     vksplat_ok(
         d,
         &[
-            "render", "--demo", "--cpu", "--quiet", "--cameras", "camera_path.json", "-o",
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--cameras",
+            "camera_path.json",
+            "-o",
             "ns/f_{:05}.png",
         ],
     );
-    for k in 0..3 {
-        let (n, max) = diff(&read_rgb(&d.join(format!("ns/f_{:05}.png", 2 * k))), &shown[k]);
-        assert!(max <= 2 && n < 96 * 64 / 50, "nerfstudio frame {}: {n} pixels by {max}", 2 * k);
+    for (k, img) in shown.iter().enumerate() {
+        let (n, max) = diff(&read_rgb(&d.join(format!("ns/f_{:05}.png", 2 * k))), img);
+        assert!(
+            max <= 2 && n < 96 * 64 / 50,
+            "nerfstudio frame {}: {n} pixels by {max}",
+            2 * k
+        );
     }
     assert!(!d.join("ns/f_00005.png").exists());
 }

@@ -146,13 +146,11 @@ impl Browser {
 
     /// The page's state.
     fn state(&self) -> Value {
-        self.js(
-            "const V = window.vksplatViewer; if (!V) return null; \
+        self.js("const V = window.vksplatViewer; if (!V) return null; \
              return {camera: V.camera, settings: V.settings, frames: V.frames, \
              fullFrames: V.fullFrames, lastSeq: V.lastSeq, errors: V.errors, \
              cameraIndex: V.cameraIndex, connected: V.connected, focus: V.focus, \
-             hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};",
-        )
+             hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};")
     }
 
     /// Polls the page's state until `ok` holds (or panics after `within`).
@@ -294,12 +292,30 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     let mut render = vec!["render"];
     render.extend(&scene_args);
     render.extend([
-        "--cpu", "--quiet", "--orbit", "3", "--width", "160", "--height", "120",
-        "--export-cameras", "cams.json", "-o", "orbit/f_{}.png",
+        "--cpu",
+        "--quiet",
+        "--orbit",
+        "3",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--export-cameras",
+        "cams.json",
+        "-o",
+        "orbit/f_{}.png",
     ]);
     vksplat_ok(d, &render);
     let mut args = scene_args.clone();
-    args.extend(["--cpu", "--cameras", "cams.json", "--max-resolution", "640x400"]);
+    let max_resolution =
+        std::env::var("VKSPLAT_VIEWER_MAX_RESOLUTION").unwrap_or_else(|_| "640x400".into());
+    args.extend([
+        "--cpu",
+        "--cameras",
+        "cams.json",
+        "--max-resolution",
+        &max_resolution,
+    ]);
     let mut viewer = Viewer::start(d, &args);
     let browser = Browser::start();
     browser.call("POST", "/url", Some(json!({"url": viewer.url})));
@@ -320,7 +336,11 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     let (p0, p1) = (vec3(&before["position"]), vec3(&s["camera"]["position"]));
     let (r0, r1) = (len(sub(p0, focus)), len(sub(p1, vec3(&s["focus"]))));
     assert!((r0 - r1).abs() < 1e-3 * r0, "orbit radius {r0} -> {r1}");
-    assert!(len(sub(p0, p1)) > 0.05 * r0, "orbit moved {}", len(sub(p0, p1)));
+    assert!(
+        len(sub(p0, p1)) > 0.05 * r0,
+        "orbit moved {}",
+        len(sub(p0, p1))
+    );
     // Still looking at the focus.
     let fwd = axis(&s["camera"], 2);
     let to_focus = sub(vec3(&s["focus"]), p1);
@@ -333,9 +353,15 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         s["camera"]["position"] != before["camera"]["position"]
             && s["lastSeq"].as_u64() > before["lastSeq"].as_u64()
     });
-    let moved = sub(vec3(&s["camera"]["position"]), vec3(&before["camera"]["position"]));
+    let moved = sub(
+        vec3(&s["camera"]["position"]),
+        vec3(&before["camera"]["position"]),
+    );
     let fwd = axis(&before["camera"], 2);
-    assert!(dot(moved, fwd) > 0.05 * size, "W moved {moved:?} along {fwd:?}");
+    assert!(
+        dot(moved, fwd) > 0.05 * size,
+        "W moved {moved:?} along {fwd:?}"
+    );
     assert!(
         dot(moved, fwd) > 0.99 * len(moved),
         "W moved sideways: {moved:?}"
@@ -353,6 +379,14 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
             && s["lastSeq"].as_u64() > before["lastSeq"].as_u64()
     });
     assert_eq!(s["camera"], before["camera"], "the slider moved the camera");
+    // And back right by as much: the log-spaced slider returns to about 1.
+    let low = s["settings"]["scale_modifier"].as_f64().unwrap();
+    browser.drag("#scale", 60, 0, 0);
+    let s = browser.wait("scale slider back", Duration::from_secs(60), |s| {
+        s["settings"]["scale_modifier"].as_f64() > Some(low * 2.0)
+    });
+    let back = s["settings"]["scale_modifier"].as_f64().unwrap();
+    assert!((0.8..1.25).contains(&back), "scale {low} -> {back}");
 
     // Clicking camera 2 of the list snaps to its pose and field of view.
     let item = browser.element("#cameras li:nth-child(3)");
@@ -401,5 +435,8 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     }
     let mean = sum / n;
     let var = sum2 / n - mean * mean;
-    assert!(var > 100.0 && mean > 5.0, "blank canvas: mean {mean}, variance {var}");
+    assert!(
+        var > 100.0 && mean > 5.0,
+        "blank canvas: mean {mean}, variance {var}"
+    );
 }

@@ -188,7 +188,9 @@ fn open_browser(url: &str) {
             std::thread::spawn(move || {
                 if let Ok(status) = c.wait() {
                     if !status.success() {
-                        note!("note: xdg-open could not open a browser; open the URL above yourself");
+                        note!(
+                            "note: xdg-open could not open a browser; open the URL above yourself"
+                        );
                     }
                 }
             });
@@ -203,10 +205,7 @@ mod tests {
 
     #[test]
     fn hosts_parse() {
-        assert!(listen_address("127.0.0.1", 0)
-            .unwrap()
-            .ip()
-            .is_loopback());
+        assert!(listen_address("127.0.0.1", 0).unwrap().ip().is_loopback());
         assert!(listen_address("::1", 8080).unwrap().ip().is_loopback());
         assert!(listen_address("no such host.invalid", 1).is_err());
     }

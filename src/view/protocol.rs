@@ -280,8 +280,8 @@ pub fn split_binary(message: &[u8]) -> Option<(Value, &[u8])> {
 /// --cameras` makes of the same entry); the message says what is wrong.
 pub fn camera_from_entry(entry: &Value) -> Result<Camera, String> {
     let text = format!("[{entry}]");
-    let mut cams = inria::parse_cameras_json(&text, Path::new("the camera"))
-        .map_err(|e| e.to_string())?;
+    let mut cams =
+        inria::parse_cameras_json(&text, Path::new("the camera")).map_err(|e| e.to_string())?;
     cams.pop()
         .ok_or_else(|| "the camera entry is empty".to_string())
 }

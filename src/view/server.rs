@@ -16,8 +16,8 @@
 
 use super::page;
 use super::protocol::{
-    binary_message, camera_from_entry, camera_to_entry, ClientMessage, FrameHeader,
-    KeyframeIn, PathFormat, Quality, ServerMessage, ShotHeader, StageMs,
+    binary_message, camera_from_entry, camera_to_entry, ClientMessage, FrameHeader, KeyframeIn,
+    PathFormat, Quality, ServerMessage, ShotHeader, StageMs,
 };
 use super::source::{FrameSource, ShotFormat, ViewFrame, ViewSettings};
 use crate::camera::{keyframes, nerfstudio, Camera, PathTiming};
@@ -209,8 +209,9 @@ struct ShotJob {
 
 /// From the worker to a connection thread.
 enum Outgoing {
+    // Boxed: a frame's header and camera are much larger than a screenshot's.
     Frame {
-        job: FrameJob,
+        job: Box<FrameJob>,
         result: Result<ViewFrame, String>,
     },
     Shot {
@@ -247,11 +248,13 @@ fn render_worker(mut source: Box<dyn FrameSource>, shared: &Shared) {
         let message = match job {
             Job::Frame(job) => {
                 let result = guarded(|| source.render(&job.camera, &job.settings));
-                Outgoing::Frame { job, result }
+                Outgoing::Frame {
+                    job: Box::new(job),
+                    result,
+                }
             }
             Job::Shot(job) => {
-                let result =
-                    guarded(|| source.screenshot(&job.camera, &job.settings, job.format));
+                let result = guarded(|| source.screenshot(&job.camera, &job.settings, job.format));
                 Outgoing::Shot {
                     seq: job.seq,
                     format: job.format,
@@ -293,7 +296,9 @@ fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> Result<T, String> {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
         Ok(Ok(v)) => Ok(v),
         Ok(Err(e)) => Err(format!("render failed: {}", error_sentence(&e))),
-        Err(_) => Err("the renderer failed unexpectedly (a bug; the message is in the server's log)".into()),
+        Err(_) => Err(
+            "the renderer failed unexpectedly (a bug; the message is in the server's log)".into(),
+        ),
     }
 }
 

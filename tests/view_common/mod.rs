@@ -226,7 +226,10 @@ impl Client {
                     panic!("request {seq} failed: {}", v["message"])
                 }
                 Some(_) => {}
-                None => panic!("no {} frame for request {seq} within {within:?}", if full { "full" } else { "preview" }),
+                None => panic!(
+                    "no {} frame for request {seq} within {within:?}",
+                    if full { "full" } else { "preview" }
+                ),
             }
         }
     }

@@ -225,7 +225,9 @@
   for (const el of [scaleSlider, maxSlider, $('minopacity')]) {
     el.addEventListener('change', () => changed(false)); // released: full quality
   }
-  $('panel-toggle').addEventListener('click', () => $('panel').classList.toggle('collapsed'));
+  $('panel-toggle').addEventListener('click', () => {
+    $('panel-toggle').textContent = $('panel').classList.toggle('collapsed') ? 'Show' : 'Hide';
+  });
   $('reset').addEventListener('click', resetView);
   $('turntable').addEventListener('click', toggleTurntable);
   $('shot-png').addEventListener('click', () => screenshot('png'));
