@@ -49,6 +49,7 @@ fn render_camera(dir: &Path, k: usize, extra: &[&str], name: &str) -> image::Rgb
         "--demo",
         "--cpu",
         "--quiet",
+        "--overwrite",
         "--cameras",
         "cams.json",
         "--camera",
@@ -125,6 +126,38 @@ fn resting_frames_equal_render_bit_for_bit() {
         &render_camera(d, 1, &[], "cam1"),
         "select_camera 1",
     );
+
+    // A screenshot of the view: PNG as render writes it, EXR with the five channels.
+    let seq = c.send(json!({"type": "screenshot", "format": "png"}));
+    let shot = c.frame_of_kind("screenshot", seq, WAIT);
+    assert_eq!(shot.header["format"], "png");
+    assert_same(
+        &shot.rgb(),
+        &render_camera(d, 1, &[], "cam1"),
+        "PNG screenshot",
+    );
+    let seq = c.send(json!({"type": "screenshot", "format": "exr"}));
+    let shot = c.frame_of_kind("screenshot", seq, WAIT);
+    assert!(shot.header["filename"].as_str().unwrap().ends_with(".exr"));
+    std::fs::write(d.join("shot.exr"), &shot.payload).unwrap();
+    vksplat_ok(
+        d,
+        &[
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--cameras",
+            "cams.json",
+            "--camera",
+            "1",
+            "-o",
+            "ref.exr",
+        ],
+    );
+    let o = vksplat_ok(d, &["compare", "shot.exr", "ref.exr"]);
+    let report = String::from_utf8_lossy(&o.stdout);
+    assert!(report.contains("inf"), "identical EXRs: {report}");
 
     // select_camera at another size, as render --width resizes it.
     let seq = c.send(json!({"type": "select_camera", "index": 0, "width": 72}));
@@ -359,6 +392,46 @@ fn closed_tabs_free_their_state_and_http_serves_the_page() {
     let mut out = String::new();
     let _ = s.read_to_string(&mut out);
     assert!(out.starts_with("HTTP/1.1 403"), "{out}");
+}
+
+#[test]
+fn sigterm_stops_the_server_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut viewer = Viewer::start(dir.path(), &["--demo", "--cpu", "--width", "64"]);
+    let mut c = viewer.connect();
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+    c.frame(seq, true, WAIT);
+    let pid = viewer.child.id().to_string();
+    let o = std::process::Command::new("kill")
+        .args(["-TERM", &pid])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        if let Some(s) = viewer.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the server did not stop"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "{status:?}");
+    let err: Vec<String> = viewer.stderr.try_iter().collect();
+    assert!(err.iter().any(|l| l.contains("viewer stopped")), "{err:?}");
+    // The page's connection was closed, not left hanging.
+    let closed = (0..100).any(|_| match c.ws.read() {
+        Ok(tungstenite::Message::Close(_)) | Err(tungstenite::Error::ConnectionClosed) => true,
+        Err(tungstenite::Error::Io(e)) => !matches!(
+            e.kind(),
+            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+        ),
+        Err(_) => true,
+        Ok(_) => false,
+    });
+    assert!(closed);
 }
 
 #[test]

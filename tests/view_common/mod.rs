@@ -234,6 +234,22 @@ impl Client {
         }
     }
 
+    /// Waits for a binary message of header `kind` (`frame`, `screenshot`) for `seq`.
+    pub fn frame_of_kind(&mut self, kind: &str, seq: u64, within: Duration) -> Frame {
+        let deadline = Instant::now() + within;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.next(left) {
+                Some(Incoming::Frame(f)) if f.header["kind"] == kind && f.seq() == seq => return f,
+                Some(Incoming::Text(v)) if v["type"] == "error" && v["seq"] == seq => {
+                    panic!("request {seq} failed: {}", v["message"])
+                }
+                Some(_) => {}
+                None => panic!("no {kind} for request {seq} within {within:?}"),
+            }
+        }
+    }
+
     /// Waits for a text message of `kind`, skipping frames and others.
     pub fn text(&mut self, kind: &str, within: Duration) -> Value {
         let deadline = Instant::now() + within;

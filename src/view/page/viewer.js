@@ -175,7 +175,7 @@
   // ---- controls ----
   const scaleSlider = $('scale');
   function setScale(s) {
-    s = Math.min(Math.max(s, 0.01), 10);
+    s = Math.min(Math.max(s, 0.1), 10); // the slider's range
     settings.scale_modifier = Math.round(s * 1e4) / 1e4;
     scaleSlider.value = Math.log10(settings.scale_modifier);
     $('scale-out').textContent = settings.scale_modifier.toFixed(2);
