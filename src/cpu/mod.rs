@@ -73,13 +73,15 @@ impl RenderOptions {
     pub fn keeps(&self, scene: &ActivatedScene, i: usize) -> bool {
         if let Some(max) = self.max_scale {
             let s = scene.scales[i];
-            // `<=` is false for NaN: a NaN scale is dropped, as by `SceneFilter`.
-            if !(s[0].max(s[1]).max(s[2]) <= max) {
+            let largest = s[0].max(s[1]).max(s[2]);
+            // A NaN scale is dropped, as by `SceneFilter`.
+            if largest.is_nan() || largest > max {
                 return false;
             }
         }
         if let Some(min) = self.min_opacity {
-            if !(scene.opacities[i] >= min) {
+            let opacity = scene.opacities[i];
+            if opacity.is_nan() || opacity < min {
                 return false;
             }
         }
