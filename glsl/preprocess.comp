@@ -96,8 +96,15 @@ void main() {
         s.conic_depth = vec4(0.0);
         s.color_radius = vec4(0.0);
         uvec2 rect = uvec2(0u);
-        if (view.z > NEAR_PLANE) {
-            mat3 m = quat_to_mat3(g.rotation) * mat3(g.scale.x, 0.0, 0.0, 0.0, g.scale.y, 0.0, 0.0, 0.0, g.scale.z);
+        // Per-frame filters, as cpu::RenderOptions::keeps: `<=` and `>=` are false for NaN,
+        // so a NaN scale or opacity is dropped whenever its filter is on.
+        float max_scale = params.filters.y, min_opacity = params.filters.z;
+        bool kept = (max_scale < 0.0 || max(max(g.scale.x, g.scale.y), g.scale.z) <= max_scale)
+            && (min_opacity < 0.0 || g.pos_opacity.w >= min_opacity);
+        if (kept && view.z > NEAR_PLANE) {
+            // The reference's scaling_modifier: S = modifier * scale.
+            float sm = params.filters.x;
+            mat3 m = quat_to_mat3(g.rotation) * mat3(sm * g.scale.x, 0.0, 0.0, 0.0, sm * g.scale.y, 0.0, 0.0, 0.0, sm * g.scale.z);
             mat3 cov3d = m * transpose(m);
             float fx = params.focal.x, fy = params.focal.y;
             float limx = 1.3 * params.tan_fov.x, limy = 1.3 * params.tan_fov.y;

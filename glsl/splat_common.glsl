@@ -26,6 +26,7 @@ struct FrameParams {
     uvec4 image;        // width, height, tiles_x, tiles_y
     uvec4 counts;       // gaussians, active SH degree, stored SH coefficients per channel, key capacity
     uvec4 bins;         // bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size
+    vec4 filters;       // scale modifier, max scale (< 0: none), min opacity (< 0: none)
 };
 
 // Pairs are keyed by bins: the reference's 16x16 tiles, or 8x8 quarters of them (for CPU

@@ -62,7 +62,8 @@ pub struct BenchCamera {
     pub camera: Camera,
     /// Its index in the camera file, if it comes from one.
     pub index: Option<usize>,
-    /// Where it comes from: the camera file, or `default camera` (framing the scene).
+    /// Where it comes from: the camera file described (`path (format, N cameras)`), or
+    /// `the default camera` (framing the scene).
     pub source: String,
 }
 
@@ -73,7 +74,7 @@ pub struct CameraReport {
     pub name: String,
     /// Its index in the camera file (`null` for the default camera).
     pub index: Option<usize>,
-    /// The camera file, or `default camera`.
+    /// The camera file described (`path (format, N cameras)`), or `the default camera`.
     pub source: String,
 }
 
@@ -258,18 +259,18 @@ pub fn bench_gpu(
     scene: &ActivatedScene,
     name: &str,
     camera: &BenchCamera,
+    opts: &RenderOptions,
     frames: usize,
     warmup: usize,
 ) -> GpuResult<BenchReport> {
     let cam = &camera.camera;
-    let opts = RenderOptions::default();
     let gpu_scene = renderer.upload(scene)?;
     let mut stage_samples: Vec<(String, Vec<f64>)> = Vec::new();
     let (mut frame, mut wall) = (Vec::new(), Vec::new());
     let mut peak = 0u64;
     for i in 0..warmup + frames {
         let t = std::time::Instant::now();
-        std::hint::black_box(renderer.render(&gpu_scene, cam, &opts)?);
+        std::hint::black_box(renderer.render(&gpu_scene, cam, opts)?);
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         peak = peak.max(renderer.ctx().live_allocations().1);
         if i < warmup {
@@ -281,7 +282,7 @@ pub fn bench_gpu(
         push_stage_samples(&mut stage_samples, tm.stages());
     }
     let stats = renderer.stats().clone();
-    let (_, inter) = renderer.render_with_intermediates(&gpu_scene, cam, &opts)?;
+    let (_, inter) = renderer.render_with_intermediates(&gpu_scene, cam, opts)?;
     let projected: Vec<Projected> = inter
         .splats
         .iter()
@@ -336,17 +337,17 @@ pub fn bench_cpu(
     scene: &ActivatedScene,
     name: &str,
     camera: &BenchCamera,
+    opts: &RenderOptions,
     frames: usize,
     warmup: usize,
 ) -> BenchReport {
     let cam = &camera.camera;
-    let opts = RenderOptions::default();
     let mut stage_samples: Vec<(String, Vec<f64>)> = Vec::new();
     let (mut frame, mut wall) = (Vec::new(), Vec::new());
     let mut pairs = 0;
     for i in 0..warmup + frames {
         let t = std::time::Instant::now();
-        let (_, tm) = cpu::render_timed(scene, cam, &opts);
+        let (_, tm) = cpu::render_timed(scene, cam, opts);
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         if i < warmup {
             continue;
@@ -356,7 +357,7 @@ pub fn bench_cpu(
         frame.push(tm.total);
         push_stage_samples(&mut stage_samples, tm.stages());
     }
-    let projected = cpu::preprocess(scene, cam, scene.sh_degree, false);
+    let projected = cpu::preprocess(scene, cam, &cpu::RenderOptions::default());
     let (keys, values) = cpu::tile_keys(&projected, cam);
     let (sorted_keys, sorted_values) = cpu::sort_pairs(&keys, &values);
     let (tx, ty) = cam.tile_grid();

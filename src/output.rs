@@ -693,8 +693,18 @@ pub fn depth_sibling(path: &Path) -> PathBuf {
 
 /// Writes one planned file of `frame`, atomically.
 pub fn write_file(frame: &Frame, file: &FileSpec, overwrite: bool) -> Result<(), OutputError> {
+    write_atomically(&file.path, overwrite, |w| encode_file(frame, file, w))
+}
+
+/// Encodes one planned file of `frame` into `w` (what [`write_file`] writes; `file.path`
+/// names it in errors). The viewer's screenshots are encoded by this too.
+pub fn encode_file(
+    frame: &Frame,
+    file: &FileSpec,
+    w: &mut (impl Write + std::io::Seek),
+) -> Result<(), OutputError> {
     let path = file.path.as_path();
-    write_atomically(path, overwrite, |w| match &file.content {
+    match &file.content {
         FileContent::PngColor { sixteen_bit } => encode_png(frame, *sixteen_bit, w, path),
         FileContent::PngRgba {
             sixteen_bit,
@@ -720,5 +730,5 @@ pub fn write_file(frame: &Frame, file: &FileSpec, overwrite: bool) -> Result<(),
         FileContent::Exr(channels) => {
             encode_exr_channels(frame, file.camera.as_ref(), *channels, w, path)
         }
-    })
+    }
 }

@@ -708,3 +708,56 @@ fn model_directories_cameras_and_iterations() {
     );
     assert!(e.contains("--cameras"), "{e}");
 }
+
+/// `--scale-modifier` (the reference's scaling_modifier) is checked against the reference
+/// like any frame, changes the image, and is refused where it means nothing.
+#[test]
+fn scale_modifier_renders_match_the_reference_and_change_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = succeeds(&[
+        "compare",
+        "--demo",
+        "--width",
+        "200",
+        "--scale-modifier",
+        "0.6",
+        "-o",
+        s(&dir.path().join("rep")),
+    ]);
+    assert!(out.contains("all pass"), "{out}");
+    let plain = dir.path().join("plain.png");
+    let small = dir.path().join("small.png");
+    succeeds(&["render", "--demo", "--width", "200", "-o", s(&plain)]);
+    succeeds(&[
+        "render",
+        "--demo",
+        "--width",
+        "200",
+        "--scale-modifier",
+        "0.6",
+        "-o",
+        s(&small),
+    ]);
+    let (a, b) = (
+        image::open(&plain).unwrap().to_rgb8(),
+        image::open(&small).unwrap().to_rgb8(),
+    );
+    let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    assert!(changed > 1000, "only {changed} pixels changed");
+    let never = dir.path().join("never.png");
+    for bad in ["0", "-1", "nan"] {
+        let o = vksplat(&["render", "--demo", "--scale-modifier", bad, "-o", s(&never)]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {e}");
+        assert!(
+            e.contains("--scale-modifier") && !e.contains("panicked"),
+            "{e}"
+        );
+        assert!(!never.exists());
+    }
+    let e = fails(
+        &["compare", s(&plain), s(&small), "--scale-modifier", "2"],
+        &never,
+    );
+    assert!(e.contains("--scale-modifier"), "{e}");
+}

@@ -280,7 +280,7 @@ fn run_case_on(r: &mut GpuRenderer, label: &str, scene: &ActivatedScene, cam: &C
     let gs = r.upload(scene).unwrap();
     let opts = RenderOptions::default();
     let (_, inter) = r.render_with_intermediates(&gs, cam, &opts).unwrap();
-    let cpu_p = cpu::preprocess(scene, cam, scene.sh_degree, false);
+    let cpu_p = cpu::preprocess(scene, cam, &cpu::RenderOptions::default());
     check_preprocess(label, &cpu_p, &inter, cam);
     check_scan_keys_sort_ranges(label, &inter);
     check_tile_membership(label, &cpu_p, &inter, cam);

@@ -508,7 +508,7 @@ fn cases() -> Vec<Case> {
             "ply_empty_file",
             "s.ply",
             Vec::new(),
-            Error("not a recognised scene format"),
+            Error("is empty (0 bytes)"),
         ),
         scene_case(
             "ply_header_only_magic",
@@ -1515,7 +1515,7 @@ fn check_render(name: &str, s: &Scene) {
         &test_camera(),
         &RenderOptions {
             background: bg,
-            antialiased: false,
+            ..Default::default()
         },
     );
     assert!(
@@ -1740,8 +1740,9 @@ fn valid_scene_files() -> Vec<(&'static str, Vec<u8>)> {
 
 /// Fragments a truncated file's error may contain: each says the file is cut short or
 /// is no longer recognisable as its format.
-const TRUNCATION_FRAGMENTS: [&str; 9] = [
+const TRUNCATION_FRAGMENTS: [&str; 10] = [
     "truncated",
+    "is empty (0 bytes)",
     "header lies",
     "not a recognised scene format",
     "not a multiple of the 32-byte",

@@ -282,7 +282,14 @@ fn keys_are_emitted_in_index_order_and_sorted_stably() {
         p[2] += 3.0;
     }
     let cam = axis_camera(40.0);
-    let projected = cpu::preprocess(&s.activated(), &cam, 1, false);
+    let projected = cpu::preprocess(
+        &s.activated(),
+        &cam,
+        &RenderOptions {
+            sh_degree: Some(1),
+            ..Default::default()
+        },
+    );
     let (keys, values) = cpu::tile_keys(&projected, &cam);
     assert_eq!(
         keys.len(),

@@ -214,9 +214,10 @@ fn a_killed_run_resumes_to_the_files_of_an_uninterrupted_run() {
 fn exr_and_png16_hold_the_in_memory_render() {
     let dir = tempfile::tempdir().unwrap();
     let scene = vksplat::demo_scene();
-    let cam = vksplat::camera::default_camera(&scene.positions, 1280, 720)
-        .resized(Some(200), None, None)
-        .unwrap();
+    // The CLI makes the default camera at the requested size (it frames the scene for
+    // that aspect ratio), not a 1280x720 camera scaled down.
+    let (w, h) = vksplat::camera::resized_dims((1280, 720), Some(200), None, None).unwrap();
+    let cam = vksplat::camera::default_camera(&scene.positions, w, h);
     let frame = cpu::render(
         &scene.activated(),
         &cam,
@@ -416,7 +417,7 @@ fn sequence_errors_are_clear() {
         e
     };
     let e = fails(&["render", "--demo", "--orbit", "3", "-o", s(&one)]);
-    assert!(e.contains("3 cameras") && e.contains("pattern"), "{e}");
+    assert!(e.contains("3 frames") && e.contains("pattern"), "{e}");
     assert!(!one.exists());
     let e = fails(&["render", "--demo", "--orbit", "3", "-o", "x/{bad}.png"]);
     assert!(e.contains("placeholder"), "{e}");
@@ -430,7 +431,7 @@ fn sequence_errors_are_clear() {
         "-o",
         s(&dir.path().join("{}.png")),
     ]);
-    assert!(e.contains("no frames"), "{e}");
+    assert!(e.contains("past the end"), "{e}");
     let e = fails(&["render", "--demo", "--frames", "9..2", "-o", "{}.png"]);
     assert!(e.contains("empty"), "{e}");
     let e = fails(&[
@@ -461,7 +462,7 @@ fn progress_lines_and_summary_without_a_terminal() {
     ]);
     assert!(e.contains("10/10 frames (100 %)"), "{e}");
     assert!(e.contains("frames/s") && e.contains("ETA"), "{e}");
-    assert!(e.contains("rendered") && e.contains("10 frame(s)"), "{e}");
+    assert!(e.contains("rendered") && e.contains("10 frames"), "{e}");
     let q = ok(&[
         "render",
         "--demo",

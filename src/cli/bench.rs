@@ -36,6 +36,10 @@ pub(crate) struct BenchArgs {
     pub(crate) path: PathArgs,
     #[command(flatten)]
     pub(crate) filter: FilterArgs,
+    /// Multiply every Gaussian's scales by M before projecting (the reference rasterizer's
+    /// scaling_modifier; < 1 shrinks the splats, > 1 grows them).
+    #[arg(long, value_name = "M", default_value_t = 1.0, value_parser = values::positive_f32)]
+    pub(crate) scale_modifier: f32,
     /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `vksplat gen`) and/or
     /// `resolution=720p,1080p,4k,WxH`; repeat the flag for both (all combinations run).
     #[arg(long, value_name = "AXIS=V1,V2,...")]
@@ -228,14 +232,25 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             let timed = choose_camera(&view, &args.path, &source, &scene)?;
             let cam = &timed.camera;
             cam.validate()?;
+            let opts = vksplat::cpu::RenderOptions {
+                scale_modifier: args.scale_modifier,
+                ..Default::default()
+            };
             let report = match renderer.as_mut() {
-                Some(r) => {
-                    vksplat::bench::bench_gpu(r, &act, &name, &timed, args.frames, args.warmup)
-                }
+                Some(r) => vksplat::bench::bench_gpu(
+                    r,
+                    &act,
+                    &name,
+                    &timed,
+                    &opts,
+                    args.frames,
+                    args.warmup,
+                ),
                 None => Ok(vksplat::bench::bench_cpu(
                     &act,
                     &name,
                     &timed,
+                    &opts,
                     args.frames,
                     args.warmup,
                 )),

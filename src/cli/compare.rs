@@ -90,6 +90,10 @@ pub(crate) struct CompareArgs {
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white").
     #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = super::values::background, allow_hyphen_values = true)]
     pub(crate) background: [f32; 3],
+    /// Multiply every Gaussian's scales by M before projecting (the reference rasterizer's
+    /// scaling_modifier; < 1 shrinks the splats, > 1 grows them).
+    #[arg(long, value_name = "M", default_value_t = 1.0, value_parser = super::values::positive_f32)]
+    pub(crate) scale_modifier: f32,
     /// Opacity compensation for scenes trained with antialiasing (see `render --help`).
     #[arg(long)]
     pub(crate) antialiased: bool,
@@ -261,6 +265,8 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
+        scale_modifier: args.scale_modifier,
+        ..Default::default()
     };
     let ctx = args.gpu.context()?;
     let kernel = args
@@ -551,9 +557,10 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
         || v.width.is_some()
         || v.height.is_some()
         || v.scale.is_some()
+        || args.scale_modifier != 1.0
         || args.path.orbit.is_some();
     if scene_only {
-        bail!("camera, resolution, --iteration, --frames and --blend-kernel options apply to comparing a scene's renders, not two images");
+        bail!("camera, resolution, --iteration, --frames, --blend-kernel and --scale-modifier options apply to comparing a scene's renders, not two images");
     }
     let pa = image_file::read_image(a)?;
     let pb = image_file::read_image(b)?;

@@ -319,6 +319,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
+        ..Default::default()
     };
     let act = scene.activated();
     let mut gpu = if args.cpu {

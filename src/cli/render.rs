@@ -84,6 +84,10 @@ pub(crate) struct RenderArgs {
     pub(crate) background: [f32; 3],
     #[command(flatten)]
     pub(crate) filter: FilterArgs,
+    /// Multiply every Gaussian's scales by M before projecting (the reference rasterizer's
+    /// scaling_modifier; < 1 shrinks the splats, > 1 grows them).
+    #[arg(long, value_name = "M", default_value_t = 1.0, value_parser = values::positive_f32)]
+    pub(crate) scale_modifier: f32,
     // Boxed: keeps the Render variant of main's Command enum small.
     #[command(flatten)]
     pub(crate) transform: Box<super::transform::TransformArgs>,
@@ -343,6 +347,8 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
+        scale_modifier: args.scale_modifier,
+        ..Default::default()
     };
     let run_opts = vksplat::sequence::RunOptions {
         overwrite: args.overwrite,

@@ -27,7 +27,7 @@ pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 pub const T_MIN: f32 = 0.0001;
 
 /// Options shared by every renderer.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Colour added behind the Gaussians, weighted by the final transmittance.
     pub background: [f32; 3],
@@ -35,6 +35,85 @@ pub struct RenderOptions {
     /// opacity is multiplied by `sqrt(max(2.5e-5, det_before / det_after))` of the 0.3
     /// dilation (the reference's optional `antialiasing` flag). Off by default.
     pub antialiased: bool,
+    /// Every Gaussian's axis scales are multiplied by this before its covariance is built
+    /// (the reference rasterizer's `scaling_modifier`, `S = modifier * scale`). 1 by default.
+    pub scale_modifier: f32,
+    /// Gaussians whose largest axis scale (activated, before the modifier) is above this,
+    /// or NaN, are culled: the frame equals that of a scene without them
+    /// (`SceneFilter::max_scale`), without re-uploading anything. `None` keeps all.
+    pub max_scale: Option<f32>,
+    /// Gaussians whose activated opacity is below this, or NaN, are culled
+    /// (`SceneFilter::min_opacity`). `None` keeps all.
+    pub min_opacity: Option<f32>,
+    /// SH degree evaluated, at most the scene's. `None` evaluates the scene's own.
+    pub sh_degree: Option<u32>,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            background: [0.0; 3],
+            antialiased: false,
+            scale_modifier: 1.0,
+            max_scale: None,
+            min_opacity: None,
+            sh_degree: None,
+        }
+    }
+}
+
+impl RenderOptions {
+    /// The SH degree evaluated for a scene of degree `scene_degree`.
+    pub fn active_sh_degree(&self, scene_degree: u32) -> u32 {
+        self.sh_degree.map_or(scene_degree, |d| d.min(scene_degree))
+    }
+
+    /// Whether Gaussian `i` passes the per-frame filters ([`Self::max_scale`],
+    /// [`Self::min_opacity`]); the GPU's preprocess applies the same test.
+    pub fn keeps(&self, scene: &ActivatedScene, i: usize) -> bool {
+        if let Some(max) = self.max_scale {
+            let s = scene.scales[i];
+            let largest = s[0].max(s[1]).max(s[2]);
+            // A NaN scale is dropped, as by `SceneFilter`.
+            if largest.is_nan() || largest > max {
+                return false;
+            }
+        }
+        if let Some(min) = self.min_opacity {
+            let opacity = scene.opacities[i];
+            if opacity.is_nan() || opacity < min {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Checks the values (finite, positive modifier and scale, opacity in [0, 1]).
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.scale_modifier.is_finite() && self.scale_modifier > 0.0) {
+            return Err(format!(
+                "the scale modifier must be a positive number, got {}",
+                self.scale_modifier
+            ));
+        }
+        if let Some(m) = self.max_scale {
+            if !(m.is_finite() && m > 0.0) {
+                return Err(format!("the max scale must be a positive number, got {m}"));
+            }
+        }
+        if let Some(o) = self.min_opacity {
+            if !(0.0..=1.0).contains(&o) {
+                return Err(format!("the min opacity must be in [0, 1], got {o}"));
+            }
+        }
+        if !self.background.iter().all(|c| c.is_finite()) {
+            return Err(format!(
+                "the background must be finite, got {:?}",
+                self.background
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Lower bound of the antialiasing compensation's determinant ratio (the reference's).
@@ -120,22 +199,26 @@ pub fn covariance_2d(view: Vec3, cov3d: Mat3, cam: &Camera) -> [f32; 3] {
     [t0.dot(s0), t0.dot(s1), t1.dot(s1)]
 }
 
-/// The reference's preprocess for one Gaussian. `antialiased` applies the opacity
-/// compensation of [`RenderOptions::antialiased`].
+/// The reference's preprocess for one Gaussian, with the options' filters, scale
+/// modifier, SH degree and antialiasing compensation.
 pub fn preprocess_one(
     scene: &ActivatedScene,
     i: usize,
     cam: &Camera,
-    sh_degree: u32,
-    antialiased: bool,
+    opts: &RenderOptions,
 ) -> Projected {
     let culled = Projected::default();
+    if !opts.keeps(scene, i) {
+        return culled;
+    }
     let mean = Vec3::from(scene.positions[i]);
     let view = cam.rotation * mean + cam.translation;
     if view.z <= NEAR_PLANE {
         return culled;
     }
-    let cov3d = covariance_3d(scene.scales[i], scene.rotations[i]);
+    let m = opts.scale_modifier;
+    let s = scene.scales[i];
+    let cov3d = covariance_3d([m * s[0], m * s[1], m * s[2]], scene.rotations[i]);
     let [a, b, c] = covariance_2d(view, cov3d, cam);
     let det_before = a * c - b * b;
     let (a, c) = (a + COV2D_DILATION, c + COV2D_DILATION);
@@ -143,7 +226,7 @@ pub fn preprocess_one(
     if det == 0.0 {
         return culled;
     }
-    let opacity = if antialiased {
+    let opacity = if opts.antialiased {
         scene.opacities[i] * (det_before / det).max(ANTIALIAS_MIN_RATIO).sqrt()
     } else {
         scene.opacities[i]
@@ -166,7 +249,7 @@ pub fn preprocess_one(
     let dir = (mean - cam.position()).normalize();
     let stride = scene.sh_stride();
     let color = sh::eval_sh(
-        sh_degree.min(scene.sh_degree),
+        opts.active_sh_degree(scene.sh_degree),
         &scene.sh[i * stride..(i + 1) * stride],
         dir,
     );
@@ -199,17 +282,11 @@ pub fn tile_rect(p: [f32; 2], radius: f32, grid: (u32, u32)) -> ([u32; 2], [u32;
     )
 }
 
-/// Preprocesses every Gaussian (in parallel). `sh_degree` caps the bands used;
-/// `antialiased` as in [`preprocess_one`].
-pub fn preprocess(
-    scene: &ActivatedScene,
-    cam: &Camera,
-    sh_degree: u32,
-    antialiased: bool,
-) -> Vec<Projected> {
+/// Preprocesses every Gaussian (in parallel), as [`preprocess_one`].
+pub fn preprocess(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) -> Vec<Projected> {
     (0..scene.len())
         .into_par_iter()
-        .map(|i| preprocess_one(scene, i, cam, sh_degree, antialiased))
+        .map(|i| preprocess_one(scene, i, cam, opts))
         .collect()
 }
 
@@ -460,7 +537,7 @@ pub fn render_timed(
         *slot = lap.elapsed().as_secs_f64() * 1e3;
         lap = std::time::Instant::now();
     };
-    let projected = preprocess(scene, cam, scene.sh_degree, opts.antialiased);
+    let projected = preprocess(scene, cam, opts);
     take(&mut t.preprocess);
     let (keys, values) = tile_keys(&projected, cam);
     take(&mut t.keys);

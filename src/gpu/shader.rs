@@ -49,6 +49,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("order.comp", include_str!("../../glsl/order.comp")),
     ("ranges.comp", include_str!("../../glsl/ranges.comp")),
     ("blend.comp", include_str!("../../glsl/blend.comp")),
+    ("pack.comp", include_str!("../../glsl/pack.comp")),
     (
         "count64_test.comp",
         include_str!("../../glsl/count64_test.comp"),

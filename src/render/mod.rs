@@ -1,7 +1,9 @@
 //! The Vulkan splatting pipeline. A frame is recorded top to bottom as
 //! preprocess -> order -> scan -> keys -> sort -> ranges -> blend -> readback, in one
 //! command buffer with a barrier between each pair of stages and a timestamp pair around
-//! each stage.
+//! each stage. The frame's recording (up to the blend) is one path for every consumer;
+//! only the readback differs by what the consumer needs ([`Readback`]): float colour,
+//! alpha and depth for files and checks, or 8-bit RGBA packed on the device for display.
 //!
 //! Sorting: the reference orders each tile's Gaussians by a stable sort of
 //! `tile << 32 | depth` keys emitted in Gaussian order. Here the Gaussians are first sorted
@@ -18,6 +20,7 @@
 pub mod blend;
 pub mod keys;
 pub mod order;
+pub mod pack;
 pub mod preprocess;
 pub mod ranges;
 pub mod types;
@@ -33,6 +36,28 @@ use crate::gpu::{
 use crate::scene::ActivatedScene;
 use ash::vk;
 use types::{Counters, FrameParams, GpuGaussian, Splat};
+
+/// What a frame reads back to the host after it is rendered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Readback {
+    /// Colour, alpha and depth as floats (a [`Frame`]): 20 bytes per pixel.
+    #[default]
+    Float,
+    /// Colour packed to 8-bit RGBA on the device (alpha 255), quantised as
+    /// [`crate::output::to_u8`]: 4 bytes per pixel. For display.
+    Rgba8,
+}
+
+/// A frame read back as 8-bit RGBA.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Rgba8Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width * height * 4` bytes, row-major, top row first; alpha is 255.
+    pub rgba: Vec<u8>,
+}
 
 /// A scene uploaded to the device.
 pub struct GpuScene {
@@ -196,6 +221,8 @@ struct FrameBuffers {
     ranges: GpuBuffer,
     color: GpuImage,
     depth: GpuImage,
+    /// 8-bit RGBA of the colour image; made on the first [`Readback::Rgba8`] frame.
+    packed: Option<GpuBuffer>,
     readback: GpuBuffer,
 }
 
@@ -281,6 +308,7 @@ impl FrameBuffers {
                 vk::Format::R32G32B32A32_SFLOAT,
             )?,
             depth: GpuImage::new(ctx, "depth image", width, height, vk::Format::R32_SFLOAT)?,
+            packed: None,
             readback: GpuBuffer::new(
                 ctx,
                 "frame readback",
@@ -308,6 +336,7 @@ impl FrameBuffers {
         .iter()
         .map(|b| b.size())
         .sum::<u64>()
+            + self.packed.as_ref().map_or(0, |b| b.size())
             + self.color.bytes()
             + self.depth.bytes()
     }
@@ -327,6 +356,7 @@ pub struct GpuRenderer {
     sort: RadixSort,
     ranges: ranges::Ranges,
     blend: blend::Blend,
+    pack: pack::Pack,
     timer: GpuTimer,
     slot: FrameSlot,
     frame: Option<FrameBuffers>,
@@ -363,6 +393,7 @@ impl GpuRenderer {
             sort: RadixSort::new(&ctx)?,
             ranges: ranges::Ranges::new(&ctx)?,
             blend: blend::Blend::new(&ctx, kernel)?,
+            pack: pack::Pack::new(&ctx)?,
             timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
             slot: FrameSlot::new(&ctx, "frame")?,
             frame: None,
@@ -484,7 +515,20 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Frame> {
-        self.render_inner(scene, cam, opts, false).map(|(f, _)| f)
+        self.render_frame(scene, cam, opts, Readback::Float)?;
+        self.read_frame(cam)
+    }
+
+    /// Renders one frame and reads back only its colour, packed to 8-bit RGBA on the
+    /// device (equal to [`crate::output::to_u8`] of [`Self::render`]'s colour).
+    pub fn render_rgba8(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<Rgba8Frame> {
+        self.render_frame(scene, cam, opts, Readback::Rgba8)?;
+        self.read_rgba8(cam)
     }
 
     /// Renders one frame and reads back every intermediate buffer (for tests).
@@ -494,8 +538,8 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<(Frame, Intermediates)> {
-        self.render_inner(scene, cam, opts, true)
-            .map(|(f, i)| (f, i.unwrap_or_default()))
+        self.render_frame(scene, cam, opts, Readback::Float)?;
+        Ok((self.read_frame(cam)?, self.read_intermediates(scene, cam)?))
     }
 
     /// Whether the device is a CPU implementation with llvmpipe's loop limit.
@@ -534,15 +578,18 @@ impl GpuRenderer {
         Ok(())
     }
 
-    fn render_inner(
+    /// Renders one frame, leaving the result on the device and in the readback buffer as
+    /// `readback` says, with the timings and counts of the frame read.
+    fn render_frame(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-        intermediates: bool,
-    ) -> GpuResult<(Frame, Option<Intermediates>)> {
+        readback: Readback,
+    ) -> GpuResult<()> {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
+        opts.validate().map_err(GpuError::InvalidArgument)?;
         let initial = self
             .frame
             .as_ref()
@@ -554,7 +601,10 @@ impl GpuRenderer {
         self.bin_size = self.blend.kernel().bin_size();
         let mut regrows = 0;
         loop {
-            self.record_and_submit(scene, cam, opts)?;
+            if readback == Readback::Rgba8 {
+                self.ensure_packed()?;
+            }
+            self.record_and_submit(scene, cam, opts, readback)?;
             let counters = self.read_counters()?;
             let pairs = counters.pairs();
             let capacity = self.frame.as_ref().map_or(0, |f| f.capacity);
@@ -605,13 +655,26 @@ impl GpuRenderer {
             regrows += 1;
         }
         self.timings = self.read_timings()?;
-        let frame = self.read_frame(cam)?;
-        let inter = if intermediates {
-            Some(self.read_intermediates(scene, cam)?)
-        } else {
-            None
-        };
-        Ok((frame, inter))
+        Ok(())
+    }
+
+    /// Makes the packed RGBA8 buffer of the current frame buffers.
+    fn ensure_packed(&mut self) -> GpuResult<()> {
+        let f = self
+            .frame
+            .as_mut()
+            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+        if f.packed.is_none() {
+            let bytes = u64::from(f.width) * u64::from(f.height) * 4;
+            check_binding(&self.ctx, "packed rgba8 frame", bytes)?;
+            f.packed = Some(GpuBuffer::new(
+                &self.ctx,
+                "packed rgba8 frame",
+                bytes,
+                MemoryKind::Device,
+            )?);
+        }
+        Ok(())
     }
 
     fn record_and_submit(
@@ -619,6 +682,7 @@ impl GpuRenderer {
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
+        readback: Readback,
     ) -> GpuResult<()> {
         let Self {
             preprocess,
@@ -628,6 +692,7 @@ impl GpuRenderer {
             sort,
             ranges,
             blend,
+            pack,
             timer,
             slot,
             frame,
@@ -663,8 +728,19 @@ impl GpuRenderer {
                 0.0,
             ],
             image: [cam.width, cam.height, tiles_x, tiles_y],
-            counts: [scene.count, scene.sh_degree, scene.sh_coeffs, f.capacity],
+            counts: [
+                scene.count,
+                opts.active_sh_degree(scene.sh_degree),
+                scene.sh_coeffs,
+                f.capacity,
+            ],
             bins: [bin_size, bins_x, bins_y, 16 / bin_size],
+            filters: [
+                opts.scale_modifier,
+                opts.max_scale.unwrap_or(-1.0),
+                opts.min_opacity.unwrap_or(-1.0),
+                0.0,
+            ],
         };
         let n = scene.count;
         let pair_bits = 32..32 + tile_bits(bins_x * bins_y);
@@ -809,15 +885,47 @@ impl GpuRenderer {
                     (tiles_x, tiles_y),
                 )
             })?;
-            // Images -> copy sources; counters (written by compute) -> copy.
-            f.color.transition_for_copy(ctx, cmd);
-            f.depth.transition_for_copy(ctx, cmd);
-            barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
-
+            // Only what the consumer needs leaves the device. Float: the images are the
+            // copy sources. Rgba8: the colour image is packed by a compute pass (timed
+            // with the readback) and only the packed buffer is copied.
             timer.stage(ctx, cmd, "readback", |cmd| {
                 let (color_off, depth_off, counters_off) = f.readback_offsets();
-                f.color.copy_to_buffer(ctx, cmd, &f.readback, color_off);
-                f.depth.copy_to_buffer(ctx, cmd, &f.readback, depth_off);
+                match (readback, f.packed.as_ref()) {
+                    (Readback::Float, _) => {
+                        // Images -> copy sources; counters (written by compute) -> copy.
+                        f.color.transition_for_copy(ctx, cmd);
+                        f.depth.transition_for_copy(ctx, cmd);
+                        barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+                        f.color.copy_to_buffer(ctx, cmd, &f.readback, color_off);
+                        f.depth.copy_to_buffer(ctx, cmd, &f.readback, depth_off);
+                    }
+                    (Readback::Rgba8, Some(packed)) => {
+                        // The blend's image writes -> the pack's image reads.
+                        barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+                        pack.record(ctx, cmd, &f.color, packed.whole(), (f.width, f.height))?;
+                        // Packed pixels and counters (written by compute) -> copy.
+                        barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+                        let region = [vk::BufferCopy::default()
+                            .src_offset(0)
+                            .dst_offset(color_off)
+                            .size(packed.size())];
+                        // SAFETY: both buffers are alive; the readback holds 16 bytes per
+                        // pixel at color_off, the packed buffer 4.
+                        unsafe {
+                            device.cmd_copy_buffer(
+                                cmd,
+                                packed.handle(),
+                                f.readback.handle(),
+                                &region,
+                            )
+                        };
+                    }
+                    (Readback::Rgba8, None) => {
+                        return Err(GpuError::InvalidArgument(
+                            "the packed frame buffer is missing".into(),
+                        ))
+                    }
+                }
                 let region = [vk::BufferCopy::default()
                     .src_offset(0)
                     .dst_offset(counters_off)
@@ -884,6 +992,21 @@ impl GpuRenderer {
             color: rgba.iter().map(|p| [p[0], p[1], p[2]]).collect(),
             alpha: rgba.iter().map(|p| p[3]).collect(),
             depth: depth.to_vec(),
+        })
+    }
+
+    fn read_rgba8(&self, cam: &Camera) -> GpuResult<Rgba8Frame> {
+        let f = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let bytes = f.readback.mapped()?;
+        let len = cam.width as usize * cam.height as usize * 4;
+        let (color_off, _, _) = f.readback_offsets();
+        Ok(Rgba8Frame {
+            width: cam.width,
+            height: cam.height,
+            rgba: bytes[color_off as usize..color_off as usize + len].to_vec(),
         })
     }
 

@@ -27,6 +27,9 @@ pub struct FrameParams {
     pub counts: [u32; 4],
     /// Bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size.
     pub bins: [u32; 4],
+    /// Scale modifier, max scale (< 0: no limit), min opacity (< 0: no limit), unused:
+    /// the per-frame options of `cpu::RenderOptions`, applied by preprocess.
+    pub filters: [f32; 4],
 }
 
 /// One uploaded Gaussian (`Gaussian` in GLSL), activated.
@@ -104,7 +107,7 @@ mod tests {
 
     #[test]
     fn layouts_match_the_glsl_header() {
-        assert_eq!(size_of::<FrameParams>(), 160);
+        assert_eq!(size_of::<FrameParams>(), 176);
         assert_eq!(offset_of!(FrameParams, w2c_row0), 0);
         assert_eq!(offset_of!(FrameParams, w2c_row1), 16);
         assert_eq!(offset_of!(FrameParams, w2c_row2), 32);
@@ -115,6 +118,7 @@ mod tests {
         assert_eq!(offset_of!(FrameParams, image), 112);
         assert_eq!(offset_of!(FrameParams, counts), 128);
         assert_eq!(offset_of!(FrameParams, bins), 144);
+        assert_eq!(offset_of!(FrameParams, filters), 160);
 
         assert_eq!(size_of::<GpuGaussian>(), 48);
         assert_eq!(offset_of!(GpuGaussian, pos_opacity), 0);

@@ -5,7 +5,12 @@
 //! packed there) and float planes only where a mode or a screenshot needs them.
 
 use crate::camera::Camera;
-use crate::render::{FrameStats, StageTimings};
+use crate::cpu::RenderOptions;
+use crate::frame::Frame;
+use crate::gpu::{ContextOptions, GpuContext};
+use crate::output::{depth_colormap, encode_file, plan_files, to_u8, OutputOptions, RenderMode};
+use crate::render::{FrameStats, GpuRenderer, GpuScene, StageTimings};
+use crate::scene::Scene;
 
 /// What the page shows.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -134,4 +139,150 @@ pub trait FrameSource: Send {
         settings: &ViewSettings,
         format: ShotFormat,
     ) -> anyhow::Result<Vec<u8>>;
+}
+
+/// The Vulkan pipeline behind the viewer: the scene uploaded once; settings change per
+/// frame (the filters, scale modifier and SH degree are read by preprocess); colour frames
+/// are packed to RGBA8 on the device and only those bytes are read back.
+pub struct GpuSource {
+    // Dropped before the renderer, whose context frees it.
+    scene: GpuScene,
+    renderer: GpuRenderer,
+    sh_degree: u32,
+    antialiased: bool,
+}
+
+impl GpuSource {
+    /// Opens device `device` (an index; `None`: the default device), builds the pipeline
+    /// and uploads `scene`.
+    pub fn new(
+        scene: &Scene,
+        device: Option<usize>,
+        antialiased: bool,
+    ) -> anyhow::Result<GpuSource> {
+        let ctx = GpuContext::new(&ContextOptions {
+            device: device.map(|d| d.to_string()),
+            ..Default::default()
+        })?;
+        Self::with_context(ctx, scene, antialiased)
+    }
+
+    /// As [`Self::new`], on an opened context.
+    pub fn with_context(
+        ctx: GpuContext,
+        scene: &Scene,
+        antialiased: bool,
+    ) -> anyhow::Result<GpuSource> {
+        let renderer = GpuRenderer::new(ctx)?;
+        let gpu_scene = renderer.upload(&scene.activated())?;
+        Ok(GpuSource {
+            scene: gpu_scene,
+            renderer,
+            sh_degree: scene.sh_degree,
+            antialiased,
+        })
+    }
+
+    /// The device's name.
+    pub fn device_name(&self) -> String {
+        self.renderer.ctx().info().name.clone()
+    }
+
+    /// The renderer (for its context, e.g. the validation messages).
+    pub fn renderer(&self) -> &GpuRenderer {
+        &self.renderer
+    }
+
+    fn options(&self, s: &ViewSettings) -> anyhow::Result<RenderOptions> {
+        s.validate(self.sh_degree).map_err(anyhow::Error::msg)?;
+        Ok(render_options(s, self.antialiased))
+    }
+}
+
+/// The render options matching `settings` (what `render` builds from the same flags).
+pub fn render_options(settings: &ViewSettings, antialiased: bool) -> RenderOptions {
+    RenderOptions {
+        background: settings.background,
+        antialiased,
+        scale_modifier: settings.scale_modifier,
+        max_scale: settings.max_scale,
+        min_opacity: (settings.min_opacity > 0.0).then_some(settings.min_opacity),
+        sh_degree: settings.sh_degree,
+    }
+}
+
+/// The frame of a float render in `mode`, as the PNG `render --mode` writes would show it:
+/// colour, opacity as grey, or depth through the turbo map over the frame's percentiles.
+pub fn frame_rgba8(frame: &Frame, mode: ViewMode) -> Vec<u8> {
+    let grey = |v: f32| {
+        let g = to_u8(v);
+        [g, g, g, 255]
+    };
+    match mode {
+        ViewMode::Rgb => frame
+            .color
+            .iter()
+            .flat_map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2]), 255])
+            .collect(),
+        ViewMode::Alpha => frame.alpha.iter().flat_map(|&a| grey(a)).collect(),
+        ViewMode::Depth => depth_colormap(frame, None)
+            .iter()
+            .flat_map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2]), 255])
+            .collect(),
+    }
+}
+
+/// Encodes `frame` as `vksplat render` writes it with the matching `--mode`: PNG of the
+/// mode, or EXR with R, G, B, A and Z (premultiplied, the camera in the header).
+pub fn encode_shot(
+    frame: &Frame,
+    cam: &Camera,
+    settings: &ViewSettings,
+    format: ShotFormat,
+) -> anyhow::Result<Vec<u8>> {
+    let (name, mode) = match (format, settings.mode) {
+        (ShotFormat::Exr, _) => ("screenshot.exr", RenderMode::RgbDepth),
+        (ShotFormat::Png, ViewMode::Rgb) => ("screenshot.png", RenderMode::Rgb),
+        (ShotFormat::Png, ViewMode::Alpha) => ("screenshot.png", RenderMode::Alpha),
+        (ShotFormat::Png, ViewMode::Depth) => ("screenshot.png", RenderMode::Depth),
+    };
+    let opts = OutputOptions {
+        mode: Some(mode),
+        background: settings.background,
+        ..Default::default()
+    };
+    let files = plan_files(std::path::Path::new(name), Some(cam), &opts)?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    encode_file(frame, &files[0], &mut out)?;
+    Ok(out.into_inner())
+}
+
+impl FrameSource for GpuSource {
+    fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame> {
+        let opts = self.options(settings)?;
+        let start = std::time::Instant::now();
+        let rgba8 = match settings.mode {
+            ViewMode::Rgb => self.renderer.render_rgba8(&self.scene, cam, &opts)?.rgba,
+            mode => frame_rgba8(&self.renderer.render(&self.scene, cam, &opts)?, mode),
+        };
+        Ok(ViewFrame {
+            width: cam.width,
+            height: cam.height,
+            rgba8,
+            timings: self.renderer.timings().clone(),
+            stats: self.renderer.stats().clone(),
+            wall_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    fn screenshot(
+        &mut self,
+        cam: &Camera,
+        settings: &ViewSettings,
+        format: ShotFormat,
+    ) -> anyhow::Result<Vec<u8>> {
+        let opts = self.options(settings)?;
+        let frame = self.renderer.render(&self.scene, cam, &opts)?;
+        encode_shot(&frame, cam, settings, format)
+    }
 }

@@ -1,0 +1,28 @@
+#version 460
+// Pack: the frame's colour as 8-bit RGBA (alpha 255) for consumers that show it (the
+// viewer), so a quarter of the colour plane's bytes leaves the device. Quantised exactly as
+// output::to_u8 on the host: clamp(v * 255 + 0.5, 0, 255) truncated, NaN to 0, with the
+// multiply and the add rounded separately (`precise` forbids fusing them), so a packed
+// frame equals the PNG that `vksplat render` writes from the float frame, bit for bit.
+
+layout(local_size_x = 16, local_size_y = 16) in;
+
+layout(binding = 0, rgba32f) uniform readonly image2D color;  // rgb + T * background
+layout(std430, binding = 1) writeonly buffer PackedBuf { uint packed[]; };
+
+layout(push_constant) uniform Push { uint width; uint height; };
+
+uint to_u8(float v) {
+    precise float x = v * 255.0;
+    precise float y = x + 0.5;
+    // `!(y >= 0)` catches NaN and negatives (Rust's saturating cast gives 0 for both).
+    if (!(y >= 0.0)) return 0u;
+    return uint(min(y, 255.0));
+}
+
+void main() {
+    uvec2 p = gl_GlobalInvocationID.xy;
+    if (p.x >= width || p.y >= height) return;
+    vec4 c = imageLoad(color, ivec2(p));
+    packed[p.y * width + p.x] = to_u8(c.r) | (to_u8(c.g) << 8) | (to_u8(c.b) << 16) | (255u << 24);
+}

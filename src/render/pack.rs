@@ -1,0 +1,56 @@
+//! Pack stage (`glsl/pack.comp`): the colour image as 8-bit RGBA on the device, quantised
+//! as [`crate::output::to_u8`], so a consumer that only shows the frame reads back a
+//! quarter of the colour plane's bytes and no alpha or depth.
+
+use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
+use ash::vk;
+
+/// Workgroup side (16 x 16 invocations).
+const SIDE: u32 = 16;
+
+/// The pack pipeline.
+pub struct Pack {
+    pipeline: ComputePipeline,
+}
+
+impl Pack {
+    /// Compiles the shader and builds the pipeline.
+    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "pack",
+            &[],
+            &[BindingKind::StorageImage, BindingKind::StorageBuffer],
+            8,
+            SIDE,
+        )?;
+        Ok(Pack { pipeline })
+    }
+
+    /// Records the packing of `color` (GENERAL layout, written by the blend) into
+    /// `packed` (`width * height` u32, row-major, top row first).
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        color: &GpuImage,
+        packed: BufferSlice,
+        (width, height): (u32, u32),
+    ) -> GpuResult<()> {
+        let push: [u32; 2] = [width, height];
+        self.pipeline.dispatch_resources(
+            ctx,
+            cmd,
+            &[
+                Resource::Image {
+                    view: color.view(),
+                    layout: vk::ImageLayout::GENERAL,
+                },
+                Resource::Buffer(packed),
+            ],
+            bytemuck::bytes_of(&push),
+            [width.div_ceil(SIDE), height.div_ceil(SIDE), 1],
+        )
+    }
+}
