@@ -3,8 +3,9 @@
 //! to its sender while the server and other tabs go on; keyframes exported by the viewer
 //! render with `render --cameras` to the frames the viewer shows at them.
 //!
-//! The viewer and the reference renders both use the CPU reference renderer (`--cpu`):
-//! exact and the same on every machine.
+//! Frames are compared with `render` on the same renderer: the Vulkan pipeline (lavapipe
+//! in CI) and the CPU reference (`--cpu`). The other tests use the CPU reference: exact
+//! and the same on every machine.
 
 mod view_common;
 
@@ -42,12 +43,22 @@ fn cameras(dir: &Path) -> PathBuf {
 
 /// `vksplat render --demo --cpu --cameras cams.json --camera K EXTRA` as RGB.
 fn render_camera(dir: &Path, k: usize, extra: &[&str], name: &str) -> image::RgbImage {
+    render_camera_on(dir, &["--cpu"], k, extra, name)
+}
+
+/// `vksplat render --demo BACKEND --cameras cams.json --camera K EXTRA` as RGB.
+fn render_camera_on(
+    dir: &Path,
+    backend: &[&str],
+    k: usize,
+    extra: &[&str],
+    name: &str,
+) -> image::RgbImage {
     let out = format!("{name}.png");
     let ks = k.to_string();
     let mut args = vec![
         "render",
         "--demo",
-        "--cpu",
         "--quiet",
         "--overwrite",
         "--cameras",
@@ -57,6 +68,7 @@ fn render_camera(dir: &Path, k: usize, extra: &[&str], name: &str) -> image::Rgb
         "-o",
         &out,
     ];
+    args.extend_from_slice(backend);
     args.extend_from_slice(extra);
     vksplat_ok(dir, &args);
     read_rgb(&dir.join(out))
@@ -76,11 +88,24 @@ fn assert_same(got: &image::RgbImage, want: &image::RgbImage, what: &str) {
 }
 
 #[test]
-fn resting_frames_equal_render_bit_for_bit() {
+fn resting_frames_equal_render_bit_for_bit_on_the_gpu() {
+    resting_frames_equal_render(&[]);
+}
+
+#[test]
+fn resting_frames_equal_render_bit_for_bit_on_the_cpu() {
+    resting_frames_equal_render(&["--cpu"]);
+}
+
+fn resting_frames_equal_render(backend: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     cameras(d);
-    let viewer = Viewer::start(d, &["--demo", "--cpu", "--cameras", "cams.json"]);
+    let mut args = vec!["--demo", "--cameras", "cams.json"];
+    args.extend_from_slice(backend);
+    let viewer = Viewer::start(d, &args);
+    let render_camera =
+        |d: &Path, k, extra: &[&str], name: &str| render_camera_on(d, backend, k, extra, name);
     let mut c = viewer.connect();
     let hello = c.hello.clone();
     assert_eq!(hello["cameras"].as_array().map(Vec::len), Some(3));
@@ -140,21 +165,19 @@ fn resting_frames_equal_render_bit_for_bit() {
     let shot = c.frame_of_kind("screenshot", seq, WAIT);
     assert!(shot.header["filename"].as_str().unwrap().ends_with(".exr"));
     std::fs::write(d.join("shot.exr"), &shot.payload).unwrap();
-    vksplat_ok(
-        d,
-        &[
-            "render",
-            "--demo",
-            "--cpu",
-            "--quiet",
-            "--cameras",
-            "cams.json",
-            "--camera",
-            "1",
-            "-o",
-            "ref.exr",
-        ],
-    );
+    let mut exr = vec![
+        "render",
+        "--demo",
+        "--quiet",
+        "--cameras",
+        "cams.json",
+        "--camera",
+        "1",
+        "-o",
+        "ref.exr",
+    ];
+    exr.extend_from_slice(backend);
+    vksplat_ok(d, &exr);
     let o = vksplat_ok(d, &["compare", "shot.exr", "ref.exr"]);
     let report = String::from_utf8_lossy(&o.stdout);
     assert!(report.contains("inf"), "identical EXRs: {report}");
@@ -230,15 +253,23 @@ fn resting_frames_equal_render_bit_for_bit() {
     assert!(w * h <= 250_000 && w * 2 == h * 3, "preview {w}x{h}");
 }
 
-/// The splat scale factor against `render --scale-modifier`.
-/// WAITS FOR THE MERGE of main's `--scale-modifier` (the other half of issue 13): until
-/// `render` has the flag this test fails at the `render` call.
+/// The splat scale factor and the filters against `render --scale-modifier` and the
+/// filter flags, on both renderers.
 #[test]
 fn scale_modifier_frame_equals_render_with_scale_modifier() {
+    scale_modifier_equals_render(&[]);
+    scale_modifier_equals_render(&["--cpu"]);
+}
+
+fn scale_modifier_equals_render(backend: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     cameras(d);
-    let viewer = Viewer::start(d, &["--demo", "--cpu", "--cameras", "cams.json"]);
+    let mut args = vec!["--demo", "--cameras", "cams.json"];
+    args.extend_from_slice(backend);
+    let viewer = Viewer::start(d, &args);
+    let render_camera =
+        |d: &Path, k, extra: &[&str], name: &str| render_camera_on(d, backend, k, extra, name);
     let mut c = viewer.connect();
     let seq =
         c.send(json!({"type": "view", "camera": c.camera(1), "settings": {"scale_modifier": 0.6}}));
@@ -249,6 +280,30 @@ fn scale_modifier_frame_equals_render_with_scale_modifier() {
         "scale_modifier 0.6",
     );
     assert!(diff(&frame.rgb(), &render_camera(d, 1, &[], "cam1")).0 > 0);
+    // Every slider at once.
+    let settings =
+        json!({"scale_modifier": 1.7, "min_opacity": 0.3, "max_scale": 0.05, "sh_degree": 0});
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0), "settings": settings}));
+    let frame = c.frame(seq, true, WAIT);
+    assert_same(
+        &frame.rgb(),
+        &render_camera(
+            d,
+            0,
+            &[
+                "--scale-modifier",
+                "1.7",
+                "--min-opacity",
+                "0.3",
+                "--max-scale",
+                "0.05",
+                "--sh-degree",
+                "0",
+            ],
+            "cam0all",
+        ),
+        "all settings",
+    );
 }
 
 /// Waits for an error message (skipping frames); returns its text.

@@ -106,13 +106,13 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)>
         _ => [stats.max_scale.min.max(1e-6), stats.max_scale.max.max(1e-5)],
     };
     let (source, device): (Box<dyn FrameSource>, String) = if args.cpu {
-        let src = vksplat::view::cpu_source::CpuSource::new(scene.clone(), antialiased);
+        let src = vksplat::view::cpu_source::CpuSource::new(&scene, antialiased);
         let device = src.device_name();
         (Box::new(src), device)
     } else {
-        bail!(
-            "the viewer's Vulkan renderer is not in this build yet; pass --cpu to view with the CPU reference renderer"
-        );
+        let src = vksplat::view::source::GpuSource::new(&scene, args.device, antialiased)?;
+        let device = src.device_name();
+        (Box::new(src), device)
     };
     let bulk = stats.bulk;
     let hello = Hello {

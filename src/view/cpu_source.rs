@@ -2,40 +2,32 @@
 //! --cpu`), for machines without a Vulkan device and as the exact reference the GPU
 //! frames are checked against.
 
-use super::pixels::{encode_screenshot, frame_rgba8};
-use super::source::{FrameSource, ShotFormat, ViewFrame, ViewSettings};
+use super::source::{
+    encode_shot, frame_rgba8, render_options, FrameSource, ShotFormat, ViewFrame, ViewSettings,
+};
 use crate::camera::Camera;
 use crate::cpu;
 use crate::frame::Frame;
 use crate::render::{FrameStats, StageTimings};
-use crate::scene::filter::SceneFilter;
 use crate::scene::{ActivatedScene, Scene};
 
-/// The filters of the last frame and the scene they gave, so moving the camera does not
-/// filter the scene again.
-struct Filtered {
-    filter: SceneFilter,
-    scale_modifier: f32,
-    scene: ActivatedScene,
-}
-
-/// Renders with [`crate::cpu`]; settings apply as `render --cpu` applies the matching
-/// flags: `--max-scale`, `--min-opacity` and `--sh-degree` filter the scene before it is
-/// activated, and the scale modifier multiplies the activated scales.
+/// Renders with [`crate::cpu`]; the settings become the same [`cpu::RenderOptions`] the
+/// GPU source uses (and `render --cpu` builds from the matching flags), so the scene is
+/// activated once and every slider applies per frame.
 pub struct CpuSource {
-    scene: Scene,
+    scene: ActivatedScene,
+    sh_degree: u32,
     antialiased: bool,
-    cached: Option<Filtered>,
 }
 
 impl CpuSource {
     /// A renderer of `scene`; `antialiased` turns on the opacity compensation of
     /// antialiased (mip) training, as `render --antialiased`.
-    pub fn new(scene: Scene, antialiased: bool) -> CpuSource {
+    pub fn new(scene: &Scene, antialiased: bool) -> CpuSource {
         CpuSource {
-            scene,
+            scene: scene.activated(),
+            sh_degree: scene.sh_degree,
             antialiased,
-            cached: None,
         }
     }
 
@@ -47,41 +39,6 @@ impl CpuSource {
         )
     }
 
-    /// The scene `settings` select, filtered and activated (cached between frames).
-    fn scene_for(&mut self, settings: &ViewSettings) -> &ActivatedScene {
-        let filter = SceneFilter {
-            max_scale: settings.max_scale,
-            // 0 keeps every Gaussian, as `render` without `--min-opacity`.
-            min_opacity: (settings.min_opacity > 0.0).then_some(settings.min_opacity),
-            crop: None,
-            sh_degree: settings.sh_degree,
-        };
-        let fresh = self.cached.as_ref().map_or(true, |c| {
-            c.filter != filter || c.scale_modifier != settings.scale_modifier
-        });
-        if fresh {
-            let mut scene = if filter.is_identity_for(&self.scene) {
-                self.scene.activated()
-            } else {
-                filter.apply(&self.scene).activated()
-            };
-            if settings.scale_modifier != 1.0 {
-                for s in &mut scene.scales {
-                    *s = s.map(|v| v * settings.scale_modifier);
-                }
-            }
-            self.cached = Some(Filtered {
-                filter,
-                scale_modifier: settings.scale_modifier,
-                scene,
-            });
-        }
-        match &self.cached {
-            Some(c) => &c.scene,
-            None => unreachable!("the cache was filled above"),
-        }
-    }
-
     /// The reference pipeline stage by stage (as [`cpu::render_timed`]), keeping the
     /// count of visible Gaussians the page shows.
     fn render_frame(
@@ -90,11 +47,10 @@ impl CpuSource {
         settings: &ViewSettings,
     ) -> anyhow::Result<(Frame, StageTimings, FrameStats)> {
         settings
-            .validate(self.scene.sh_degree)
+            .validate(self.sh_degree)
             .map_err(anyhow::Error::msg)?;
         cam.validate()?;
-        let antialiased = self.antialiased;
-        let scene = self.scene_for(settings);
+        let opts = render_options(settings, self.antialiased);
         let start = std::time::Instant::now();
         let mut lap = start;
         let mut take = || {
@@ -103,7 +59,7 @@ impl CpuSource {
             ms
         };
         let mut t = StageTimings::default();
-        let projected = cpu::preprocess(scene, cam, scene.sh_degree, antialiased);
+        let projected = cpu::preprocess(&self.scene, cam, &opts);
         t.preprocess = take();
         let (keys, values) = cpu::tile_keys(&projected, cam);
         t.keys = take();
@@ -112,13 +68,7 @@ impl CpuSource {
         let (tx, ty) = cam.tile_grid();
         let ranges = cpu::tile_ranges(&sorted_keys, (tx * ty) as usize);
         t.ranges = take();
-        let frame = cpu::blend(
-            &projected,
-            &sorted_values,
-            &ranges,
-            cam,
-            settings.background,
-        );
+        let frame = cpu::blend(&projected, &sorted_values, &ranges, cam, opts.background);
         t.blend = take();
         t.total = start.elapsed().as_secs_f64() * 1e3;
         let stats = FrameStats {
@@ -151,7 +101,7 @@ impl FrameSource for CpuSource {
         format: ShotFormat,
     ) -> anyhow::Result<Vec<u8>> {
         let (frame, _, _) = self.render_frame(cam, settings)?;
-        encode_screenshot(&frame, cam, settings, format)
+        encode_shot(&frame, cam, settings, format)
     }
 }
 
@@ -159,33 +109,26 @@ impl FrameSource for CpuSource {
 mod tests {
     use super::*;
 
-    /// The source's colour frame is `cpu::render` of the same camera, quantised.
+    /// The source's frame is `cpu::render` with the matching options, quantised.
     #[test]
-    fn frame_equals_the_reference_render() {
+    fn frames_equal_the_reference_render() {
         let scene = crate::demo_scene();
         let cam = crate::camera::default_camera(&scene.positions, 64, 48);
-        let mut src = CpuSource::new(scene.clone(), false);
-        let settings = ViewSettings::default();
-        let got = src.render(&cam, &settings).unwrap();
-        let want = cpu::render(&scene.activated(), &cam, &cpu::RenderOptions::default());
-        assert_eq!(got.rgba8, frame_rgba8(&want, settings.mode));
-        assert!(got.stats.visible > 0 && got.stats.pairs > 0);
-        // A max-scale filter equals rendering the filtered scene.
-        let filtered = ViewSettings {
-            max_scale: Some(0.01),
-            ..Default::default()
-        };
-        let got = src.render(&cam, &filtered).unwrap();
-        let f = SceneFilter {
-            max_scale: Some(0.01),
-            ..Default::default()
-        };
-        let want = cpu::render(
-            &f.apply(&scene).activated(),
-            &cam,
-            &cpu::RenderOptions::default(),
-        );
-        assert_eq!(got.rgba8, frame_rgba8(&want, filtered.mode));
+        let mut src = CpuSource::new(&scene, false);
+        let act = scene.activated();
+        for settings in [
+            ViewSettings::default(),
+            ViewSettings {
+                max_scale: Some(0.01),
+                scale_modifier: 0.5,
+                ..Default::default()
+            },
+        ] {
+            let got = src.render(&cam, &settings).unwrap();
+            let want = cpu::render(&act, &cam, &render_options(&settings, false));
+            assert_eq!(got.rgba8, frame_rgba8(&want, settings.mode));
+            assert!(got.stats.visible > 0 && got.stats.pairs > 0);
+        }
         // Bad settings are an error, not a frame.
         let bad = ViewSettings {
             scale_modifier: f32::NAN,
