@@ -584,3 +584,44 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
     }
     assert!(!d.join("ns/f_00005.png").exists());
 }
+
+/// Interactive rate with the 125k robot on the Vulkan pipeline: a client that keeps the
+/// camera moving, as a drag does, for 5 s. Prints the preview frames per second (the
+/// issue aims at 10 or more on lavapipe); run with `--ignored` (needs ../shared/data).
+#[test]
+#[ignore]
+fn preview_rate_with_the_125k_scene() {
+    let scene =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/playbot_lod2_125k_sh2.ply");
+    let dir = tempfile::tempdir().unwrap();
+    let viewer = Viewer::start(dir.path(), &[scene.to_str().unwrap()]);
+    let mut c = viewer.connect();
+    let mut cam = c.hello["initial_camera"].clone();
+    cam["width"] = 1280.into();
+    cam["height"] = 720.into();
+    let start = std::time::Instant::now();
+    let (mut previews, mut fulls, mut k) = (0, 0, 0.0f64);
+    let mut size = String::new();
+    // As a page during a drag: a move every 30 ms, frames read in between.
+    while start.elapsed() < Duration::from_secs(5) {
+        k += 0.01;
+        let mut moved = cam.clone();
+        moved["position"][0] = (cam["position"][0].as_f64().unwrap() + k * 0.1).into();
+        c.send(json!({"type": "view", "camera": moved, "interactive": true}));
+        let next_move = std::time::Instant::now() + Duration::from_millis(30);
+        while std::time::Instant::now() < next_move {
+            if let Some(Incoming::Frame(f)) = c.next(Duration::from_millis(5)) {
+                if f.full() {
+                    fulls += 1;
+                } else {
+                    previews += 1;
+                    size = format!("{}x{}", f.header["width"], f.header["height"]);
+                }
+            }
+        }
+    }
+    let rate = previews as f64 / start.elapsed().as_secs_f64();
+    println!("{rate:.1} preview frames/s at {size} (1280x720 canvas), {fulls} full frames");
+    assert!(rate > 0.0);
+    assert_eq!(fulls, 0, "a full frame was rendered while the camera moved");
+}
