@@ -309,8 +309,8 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     let mut args = scene_args.clone();
     let max_resolution =
         std::env::var("VKSPLAT_VIEWER_MAX_RESOLUTION").unwrap_or_else(|_| "640x400".into());
+    // The Vulkan pipeline (lavapipe in CI), as `vksplat view` runs by default.
     args.extend([
-        "--cpu",
         "--cameras",
         "cams.json",
         "--max-resolution",

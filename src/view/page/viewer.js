@@ -423,7 +423,7 @@
     if (h.version !== 1) { showError(`the server speaks protocol ${h.version}; reload the page`); return; }
     const first = !V.hello;
     V.hello = h;
-    $('scene-name').textContent = h.scene;
+    $('scene-name').textContent = h.scene.split('/').filter(Boolean).pop() || h.scene;
     $('scene-name').title = h.scene;
     $('sh').max = String(h.sh_degree);
     if (first) {
