@@ -393,7 +393,7 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     );
     // A click at the centre is 1 again.
     browser.drag("#scale", 0, 0, 0);
-    let s = browser.wait("scale slider centre", Duration::from_secs(60), |s| {
+    let before = browser.wait("scale slider centre", Duration::from_secs(60), |s| {
         s["settings"]["scale_modifier"].as_f64() == Some(1.0)
     });
 
