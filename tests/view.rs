@@ -330,12 +330,19 @@ fn bad_messages_are_refused_and_other_tabs_go_on() {
     let mut bad = viewer.connect();
     let mut good = viewer.connect();
     let cam = good.camera(0);
+    let first = {
+        let seq = good.send(json!({"type": "view", "camera": cam}));
+        good.frame(seq, true, WAIT).rgb()
+    };
+    // The good tab's frames stay the same whatever the other tab does (its own
+    // settings, too).
     let good_frame = |good: &mut Client, what: &str| {
         let seq = good.send(json!({"type": "view", "camera": cam}));
         let f = good.frame(seq, true, WAIT);
-        assert_eq!(f.header["width"], 96, "after {what}");
+        assert_eq!(diff(&f.rgb(), &first), (0, 0), "after {what}");
     };
-    good_frame(&mut good, "start");
+    bad.send(json!({"type": "settings", "settings": {"mode": "depth", "scale_modifier": 2.0}}));
+    good_frame(&mut good, "the other tab's settings");
 
     let entry = bad.camera(0);
     let with = |field: &str, v: Value| {
@@ -440,6 +447,18 @@ fn closed_tabs_free_their_state_and_http_serves_the_page() {
     assert!(get("/viewer.css").contains("text/css"));
     assert!(get("/etc/passwd").starts_with("HTTP/1.1 404"));
     assert!(get("/../Cargo.toml").starts_with("HTTP/1.1 404"));
+    // Another host name (a rebound DNS name) is refused.
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(
+        s,
+        "GET / HTTP/1.1\r\nHost: evil.example:{}\r\n\r\n",
+        viewer.port
+    )
+    .unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    assert!(out.starts_with("HTTP/1.1 403"), "{out}");
     // A WebSocket from another site's page is refused.
     let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();

@@ -126,6 +126,7 @@ impl Server {
             cameras: scene.cameras,
             sh_degree,
             stop,
+            loopback: self.listener.local_addr()?.ip().is_loopback(),
             queue: Mutex::new(Queue::default()),
             wake: Condvar::new(),
         };
@@ -157,6 +158,8 @@ struct Shared<'a> {
     cameras: Vec<Camera>,
     sh_degree: u32,
     stop: &'a AtomicBool,
+    /// Bound to a loopback address: requests must name a loopback host.
+    loopback: bool,
     queue: Mutex<Queue>,
     wake: Condvar,
 }
@@ -393,6 +396,15 @@ fn serve_connection(mut stream: TcpStream, shared: &Shared) {
     let Some((req, rest)) = read_head(&mut stream) else {
         return;
     };
+    if shared.loopback && !loopback_host(&req) {
+        respond(
+            &mut stream,
+            "403 Forbidden",
+            "text/plain",
+            b"the viewer answers only to localhost names\n",
+        );
+        return;
+    }
     if req.method != "GET" {
         respond(
             &mut stream,
@@ -411,6 +423,23 @@ fn serve_connection(mut stream: TcpStream, shared: &Shared) {
         Some((content_type, body)) => respond(&mut stream, "200 OK", content_type, body),
         None => respond(&mut stream, "404 Not Found", "text/plain", b"not found\n"),
     }
+}
+
+/// The Host header names a loopback address (`localhost`, `127.x.y.z`, `[::1]`, any
+/// port). A server on loopback refuses other names, so a web page whose domain was
+/// re-pointed at 127.0.0.1 (DNS rebinding) cannot reach it.
+fn loopback_host(req: &Request) -> bool {
+    let Some(host) = req.header("Host") else {
+        return false;
+    };
+    let name = match host.strip_prefix('[') {
+        Some(v6) => v6.split(']').next().unwrap_or(""),
+        None => host.rsplit_once(':').map_or(host, |(n, _)| n),
+    };
+    name.eq_ignore_ascii_case("localhost")
+        || name
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
 }
 
 /// Origin `http://host:port` must name the Host the page was loaded from: another site
@@ -1057,5 +1086,22 @@ mod tests {
         assert!(same_origin(&req(None)));
         assert!(same_origin(&req(Some("http://127.0.0.1:8080"))));
         assert!(!same_origin(&req(Some("http://evil.example"))));
+        let host = |h: &str| Request {
+            method: "GET".into(),
+            path: "/".into(),
+            headers: vec![("Host".into(), h.into())],
+        };
+        for ok in [
+            "127.0.0.1:8080",
+            "localhost:1",
+            "LOCALHOST",
+            "[::1]:9000",
+            "127.3.2.1",
+        ] {
+            assert!(loopback_host(&host(ok)), "{ok}");
+        }
+        for bad in ["evil.example:8080", "10.0.0.1:8080", "[fe80::1]:80", ""] {
+            assert!(!loopback_host(&host(bad)), "{bad}");
+        }
     }
 }

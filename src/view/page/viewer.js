@@ -487,7 +487,7 @@
     const h = Math.max(1, Math.round(canvas.clientHeight * dpr));
     if (w !== canvas.width || h !== canvas.height) {
       canvas.width = w; canvas.height = h;
-      changed(false);
+      changed(true); // a resize is a move: previews, then the full frame at rest
     }
   }
   let last = performance.now();
