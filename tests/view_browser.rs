@@ -150,6 +150,9 @@ impl Browser {
              return {camera: V.camera, settings: V.settings, frames: V.frames, \
              fullFrames: V.fullFrames, lastSeq: V.lastSeq, errors: V.errors, \
              cameraIndex: V.cameraIndex, connected: V.connected, focus: V.focus, \
+             screenshots: V.screenshots, keyframes: V.keyframes.length, \
+             lastExport: V.lastExport, turntable: V.turntable, \
+             banner: document.getElementById('banner').hidden ? null : document.getElementById('banner').textContent, \
              hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};")
     }
 
@@ -421,6 +424,108 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     assert!(end["fullFrames"].as_u64() > first["fullFrames"].as_u64());
     assert_eq!(end["errors"], json!([]), "the page showed errors");
     assert!(s["frames"].as_u64() >= Some(4));
+
+    // Turntable: T starts the rotation about the focus, T stops it.
+    browser.hold_key("t", 50);
+    let spinning = browser.wait("turntable", Duration::from_secs(30), |s| {
+        s["turntable"] == true
+    });
+    let moved = browser.wait("turntable moves", Duration::from_secs(30), |s| {
+        s["camera"]["position"] != spinning["camera"]["position"]
+    });
+    browser.hold_key("t", 50);
+    browser.wait("turntable stops", Duration::from_secs(30), |s| {
+        s["turntable"] == false
+    });
+    let r0 = len(sub(
+        vec3(&spinning["camera"]["position"]),
+        vec3(&spinning["focus"]),
+    ));
+    let r1 = len(sub(
+        vec3(&moved["camera"]["position"]),
+        vec3(&moved["focus"]),
+    ));
+    assert!((r0 - r1).abs() < 1e-3 * r0, "turntable radius {r0} -> {r1}");
+
+    // Three keyframes (camera 0, 1, 2 by N), exported as the keyframe JSON render reads.
+    browser.hold_key("n", 30); // camera 0 (after 2, wrapping)
+    let add = browser.element("#kf-add");
+    for k in 0..3 {
+        browser.wait("camera step", Duration::from_secs(30), |s| {
+            s["cameraIndex"] == k
+        });
+        browser.call("POST", &format!("/element/{add}/click"), Some(json!({})));
+        browser.wait("keyframe added", Duration::from_secs(30), |s| {
+            s["keyframes"] == k + 1
+        });
+        browser.hold_key("n", 30);
+    }
+    let export = browser.element("#kf-export");
+    browser.call("POST", &format!("/element/{export}/click"), Some(json!({})));
+    let s = browser.wait("export", Duration::from_secs(30), |s| {
+        !s["lastExport"].is_null()
+    });
+    let text = s["lastExport"]["text"].as_str().expect("exported text");
+    let path: Value = serde_json::from_str(text).expect("the export is JSON");
+    assert_eq!(
+        path["keyframes"].as_array().map(Vec::len),
+        Some(3),
+        "{text}"
+    );
+    std::fs::write(d.join("keyframes.json"), text).unwrap();
+    let mut render = vec!["render"];
+    render.extend(&scene_args);
+    render.extend([
+        "--cpu",
+        "--quiet",
+        "--cameras",
+        "keyframes.json",
+        "--scale",
+        "0.1",
+        "--frames",
+        "0",
+        "-o",
+        "kf.png",
+    ]);
+    vksplat_ok(d, &render);
+
+    // The screenshot button downloads a file of the view.
+    let shot = browser.element("#shot-png");
+    browser.call("POST", &format!("/element/{shot}/click"), Some(json!({})));
+    browser.wait("screenshot", Duration::from_secs(60), |s| {
+        s["screenshots"] == 1
+    });
+
+    // A server error appears in the page's banner.
+    browser.js("window.vksplatViewer.send({type: 'dance'}); return null;");
+    let s = browser.wait("error banner", Duration::from_secs(30), |s| {
+        !s["banner"].is_null()
+    });
+    assert!(
+        s["banner"].as_str().unwrap().contains("dance"),
+        "{}",
+        s["banner"]
+    );
+    // Dismissed by a click, as before the screenshot of the page below.
+    browser.js("document.getElementById('banner').click(); return null;");
+    browser.wait("banner closed", Duration::from_secs(10), |s| {
+        s["banner"].is_null()
+    });
+    browser.hold_key("p", 30);
+    let before = browser.wait("camera 2 again", Duration::from_secs(30), |s| {
+        s["cameraIndex"] == 2
+    });
+    browser.wait("a frame of camera 2", Duration::from_secs(60), |s| {
+        s["lastSeq"].as_u64() > before["lastSeq"].as_u64()
+    });
+    std::thread::sleep(Duration::from_millis(1500));
+    let end = browser.state();
+    assert_eq!(
+        end["errors"].as_array().map(Vec::len),
+        Some(1),
+        "{}",
+        end["errors"]
+    );
     assert!(viewer.alive());
 
     // The page screenshot shows a picture in the canvas area (left of the panel).

@@ -396,6 +396,7 @@
     V.sent += 1;
     return true;
   }
+  V.send = send; // for tests and the console
   function connect() {
     ws = new WebSocket(`ws://${location.host}/ws`);
     ws.binaryType = 'arraybuffer';
