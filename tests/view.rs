@@ -103,7 +103,8 @@ fn resting_frames_equal_render(backend: &[&str]) {
     cameras(d);
     let mut args = vec!["--demo", "--cameras", "cams.json"];
     args.extend_from_slice(backend);
-    let viewer = Viewer::start(d, &args);
+    // The Vulkan validation layer watches the GPU viewer; it prints what it finds.
+    let viewer = Viewer::start_with_env(d, &args, &[("VKSPLAT_VALIDATE", "1")]);
     let render_camera =
         |d: &Path, k, extra: &[&str], name: &str| render_camera_on(d, backend, k, extra, name);
     let mut c = viewer.connect();
@@ -251,6 +252,11 @@ fn resting_frames_equal_render(backend: &[&str]) {
         preview.header["height"].as_u64().unwrap(),
     );
     assert!(w * h <= 250_000 && w * 2 == h * 3, "preview {w}x{h}");
+    let err: Vec<String> = viewer.stderr.try_iter().collect();
+    assert!(
+        !err.iter().any(|l| l.contains("[vulkan")),
+        "validation messages: {err:?}"
+    );
 }
 
 /// The splat scale factor and the filters against `render --scale-modifier` and the

@@ -43,10 +43,16 @@ pub struct Viewer {
 impl Viewer {
     /// Starts `vksplat view ARGS --port 0` in `dir` and waits (60 s at most) for the URL.
     pub fn start(dir: &Path, args: &[&str]) -> Viewer {
+        Self::start_with_env(dir, args, &[])
+    }
+
+    /// As [`Viewer::start`] with environment variables (`VKSPLAT_VALIDATE=1`).
+    pub fn start_with_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Viewer {
         let mut child = Command::new(bin())
             .arg("view")
             .args(args)
             .args(["--port", "0"])
+            .envs(env.iter().copied())
             .current_dir(dir)
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())

@@ -25,6 +25,7 @@
   const cam = {
     pos: [0, 0, -5], right: [1, 0, 0], down: [0, 1, 0], fwd: [0, 0, 1],
     focus: [0, 0, 0], vfov: 50, aspect: 1, // aspect: fx / fy
+    principal: [0.5, 0.5], // cx / width, cy / height
   };
   const settings = {
     scale_modifier: 1, max_scale: null, min_opacity: 0, sh_degree: null,
@@ -66,11 +67,17 @@
     const w = Math.max(1, canvas.width), h = Math.max(1, canvas.height);
     const fy = h / (2 * Math.tan((cam.vfov * Math.PI) / 360));
     const r = cam.right, d = cam.down, f = cam.fwd;
-    return {
+    const e = {
       id: 0, img_name: 'view', width: w, height: h, position: cam.pos.slice(),
       rotation: [[r[0], d[0], f[0]], [r[1], d[1], f[1]], [r[2], d[2], f[2]]],
       fx: fy * cam.aspect, fy,
     };
+    // An off-centre principal point (a COLMAP camera's) is kept, in proportion.
+    if (cam.principal[0] !== 0.5 || cam.principal[1] !== 0.5) {
+      e.cx = cam.principal[0] * w;
+      e.cy = cam.principal[1] * h;
+    }
+    return e;
   }
 
   // Takes pose and intrinsics from a cameras.json entry; the focus goes in front of it
@@ -81,6 +88,10 @@
     cam.right = unit(col(0)); cam.down = unit(col(1)); cam.fwd = unit(col(2));
     cam.vfov = (2 * Math.atan(e.height / (2 * e.fy)) * 180) / Math.PI;
     cam.aspect = e.fx / e.fy;
+    cam.principal = [
+      typeof e.cx === 'number' ? e.cx / e.width : 0.5,
+      typeof e.cy === 'number' ? e.cy / e.height : 0.5,
+    ];
     const centre = V.hello ? V.hello.centre : [0, 0, 0];
     const depth = dot(sub(centre, cam.pos), cam.fwd);
     cam.focus = add(cam.pos, mul(cam.fwd, depth > 1e-3 * size() ? depth : size()));
@@ -274,7 +285,7 @@
   V.selectCamera = selectCamera;
 
   // ---- keyframes ----
-  const pose = () => ({ pos: cam.pos.slice(), right: cam.right.slice(), down: cam.down.slice(), fwd: cam.fwd.slice(), focus: cam.focus.slice(), vfov: cam.vfov, aspect: cam.aspect });
+  const pose = () => ({ pos: cam.pos.slice(), right: cam.right.slice(), down: cam.down.slice(), fwd: cam.fwd.slice(), focus: cam.focus.slice(), vfov: cam.vfov, aspect: cam.aspect, principal: cam.principal.slice() });
   function addKeyframe() { V.keyframes.push(pose()); fillKeyframes(); }
   function fillKeyframes() {
     const list = $('keyframes');
