@@ -3,34 +3,11 @@
 
 mod common;
 
+use common::cli::{fails, stderr, vksplat};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use vksplat::scene::ply;
-
-fn vksplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vksplat"))
-        .args(args)
-        .env("VKSPLAT_VALIDATE", "1")
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs a command that must fail: returns its one-line error, checking there was no panic
-/// and no output file.
-fn fails(args: &[&str], out: &Path) -> String {
-    let o = vksplat(args);
-    let e = stderr(&o);
-    assert!(!o.status.success(), "{args:?} must fail");
-    assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
-    assert!(e.starts_with("error: "), "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "one sentence: {e}");
-    assert!(!out.exists(), "{args:?} left an output file");
-    e
-}
 
 #[test]
 fn demo_render_writes_a_picture_of_the_robot() {

@@ -2,53 +2,13 @@
 //! every command, so each stays fixed. Renders use the CPU reference at small sizes (fast
 //! and device-independent) unless the item is about the GPU path.
 
+mod common;
+
+use common::cli::{bin, fails, ok, s, stderr, stdout, vksplat, vksplat_in};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_vksplat")
-}
-
-fn vksplat_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(bin())
-        .args(args)
-        .current_dir(dir)
-        .env("VKSPLAT_VALIDATE", "1")
-        .output()
-        .expect("the binary runs")
-}
-
-fn vksplat(args: &[&str]) -> Output {
-    vksplat_in(Path::new("."), args)
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn ok(args: &[&str]) -> Output {
-    let o = vksplat(args);
-    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
-    o
-}
-
-/// Runs a command that must fail with one `error:` sentence (no panic) and leave `out`
-/// absent; returns the sentence.
-fn fails(args: &[&str], out: &Path) -> String {
-    let o = vksplat(args);
-    let e = stderr(&o);
-    assert!(!o.status.success(), "{args:?} must fail");
-    assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
-    assert!(e.starts_with("error: "), "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "one sentence: {e}");
-    assert!(!out.exists(), "{args:?} left {}", out.display());
-    e
-}
 
 /// A clap usage error: non-zero exit, no panic, the message contains `needle`.
 fn usage_error(args: &[&str], needle: &str) {
@@ -57,10 +17,6 @@ fn usage_error(args: &[&str], needle: &str) {
     assert!(!o.status.success(), "{args:?} must fail");
     assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
     assert!(e.contains(needle), "{args:?}: {e}");
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// An INRIA cameras.json with a camera named after its photo and one without `img_name`.

@@ -4,32 +4,13 @@
 
 mod common;
 
+use common::cli::{s, stderr, stdout, vksplat, vksplat_env};
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
 use vksplat::camera::Camera;
 use vksplat::metrics;
-
-fn vksplat_env(args: &[&str], env: &[(&str, &str)]) -> Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_vksplat"));
-    cmd.args(args).env("VKSPLAT_VALIDATE", "1");
-    for (k, v) in env {
-        cmd.env(k, v);
-    }
-    cmd.output().expect("the binary runs")
-}
-
-fn vksplat(args: &[&str]) -> Output {
-    vksplat_env(args, &[])
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
 
 /// Runs a command that must succeed and returns its stdout.
 fn succeeds(args: &[&str]) -> String {
@@ -49,10 +30,6 @@ fn fails(args: &[&str], out: &Path) -> String {
     assert!(last.starts_with("error: "), "{args:?}: {e}");
     assert!(!out.exists(), "{args:?} left an output file");
     last.to_string()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 fn read_json(p: &Path) -> Value {

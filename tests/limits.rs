@@ -4,8 +4,10 @@
 
 mod common;
 
+use common::cli::s;
+
 use common::gpu::{assert_validation_clean, compare, renderer};
-use std::path::Path;
+
 use std::process::Command;
 use vksplat::camera;
 use vksplat::cpu::{self, RenderOptions};
@@ -92,10 +94,6 @@ fn renders_at_16x16_and_smaller_match_the_reference() {
     check("16x16", 16, 16);
     check("1x1", 1, 1);
     check("17x3", 17, 3);
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// A camera path whose fourth camera needs more device memory than allowed: the run stops

@@ -4,47 +4,16 @@
 //! rendered in memory (the binary's `--cpu` path is the same code, so most comparisons
 //! are exact).
 
+mod common;
+
+use common::cli::{fails, ok, s};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, RenderOptions};
 use vksplat::frame::Frame;
 use vksplat::output;
-
-fn vksplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vksplat"))
-        .args(args)
-        .env("VKSPLAT_VALIDATE", "1")
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(args: &[&str]) -> Output {
-    let o = vksplat(args);
-    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
-    o
-}
-
-/// Runs a command that must fail: returns its one-line error, checking there was no panic
-/// and no output file.
-fn fails(args: &[&str], out: &Path) -> String {
-    let o = vksplat(args);
-    let e = stderr(&o);
-    assert!(!o.status.success(), "{args:?} must fail");
-    assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
-    assert!(e.starts_with("error: "), "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "one sentence: {e}");
-    assert!(!out.exists(), "{args:?} left an output file");
-    e
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// The demo scene's default camera at 200x113, written as a cameras.json for the binary;
 /// returns the file and the camera as read back (what the binary renders).

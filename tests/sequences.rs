@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::cli::s;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -54,10 +56,6 @@ fn same(label: &str, got: &[f32], want: &[f32]) {
     if let Some(i) = (0..got.len()).find(|&i| got[i].to_bits() != want[i].to_bits()) {
         panic!("{label}: sample {i} is {} instead of {}", got[i], want[i]);
     }
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// Decodes an image file completely (PNG with `image`, EXR with `exr`): a truncated file

@@ -6,38 +6,14 @@
 
 mod common;
 
+use common::cli::{fails, stderr, vksplat};
+
 use glam::{DMat3, DQuat, DVec3, Mat3, Vec3};
-use std::path::Path;
-use std::process::{Command, Output};
+
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::sh::eval_sh;
 use vksplat::scene::transform::SceneTransform;
 use vksplat::scene::{self, Scene};
-
-fn vksplat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vksplat"))
-        .args(args)
-        .env("VKSPLAT_VALIDATE", "1")
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs a command that must fail: returns its one-line error, checking there was no panic
-/// and no output file.
-fn fails(args: &[&str], out: &Path) -> String {
-    let o = vksplat(args);
-    let e = stderr(&o);
-    assert!(!o.status.success(), "{args:?} must fail");
-    assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
-    assert!(e.starts_with("error: "), "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "one sentence: {e}");
-    assert!(!out.exists(), "{args:?} left an output file");
-    e
-}
 
 fn random_unit(rng: &mut common::Rng) -> DVec3 {
     loop {

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: hand-built scenes and cameras.
 #![allow(dead_code)]
 
+pub mod cli;
 pub mod gpu;
 
 use glam::{Mat3, Vec3};
