@@ -7,6 +7,7 @@
 //! in CI) and the CPU reference (`--cpu`). The other tests use the CPU reference: exact
 //! and the same on every machine.
 
+mod common;
 mod view_common;
 
 use serde_json::{json, Value};
@@ -103,8 +104,9 @@ fn resting_frames_equal_render(backend: &[&str]) {
     cameras(d);
     let mut args = vec!["--demo", "--cameras", "cams.json"];
     args.extend_from_slice(backend);
-    // The Vulkan validation layer watches the GPU viewer; it prints what it finds.
-    let viewer = Viewer::start_with_env(d, &args, &[("VKSPLAT_VALIDATE", "1")]);
+    // The Vulkan validation layer watches the GPU viewer (common::cli turns it on); it
+    // prints what it finds.
+    let viewer = Viewer::start(d, &args);
     let render_camera =
         |d: &Path, k, extra: &[&str], name: &str| render_camera_on(d, backend, k, extra, name);
     let mut c = viewer.connect();
@@ -518,7 +520,7 @@ fn sigterm_stops_the_server_cleanly() {
 fn port_in_use_is_one_clear_error() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = taken.local_addr().unwrap().port().to_string();
-    let o = std::process::Command::new(view_common::bin())
+    let o = std::process::Command::new(common::cli::bin())
         .args(["view", "--demo", "--cpu", "--port", &port])
         .output()
         .unwrap();

@@ -7,6 +7,7 @@
 //! `VKSPLAT_VIEWER_SCREENSHOT=path.png` also saves the page screenshot (the README's
 //! docs/viewer.png is made so, with `VKSPLAT_VIEWER_SCENE=scene.ply`).
 
+mod common;
 mod view_common;
 
 use serde_json::{json, Value};

@@ -1,27 +1,21 @@
 //! Helpers of the viewer tests: a `vksplat view` process on a free loopback port and a
-//! WebSocket client with deadlines on every wait.
+//! WebSocket client with deadlines on every wait. The binary runs through
+//! `common::cli` (validation layer on).
 #![allow(dead_code)]
 
+use super::common::cli;
 use serde_json::Value;
 use std::io::{BufRead, BufReader, ErrorKind};
 use std::net::TcpStream;
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Output, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tungstenite::{Message, WebSocket};
 
-pub fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_vksplat")
-}
-
 /// Runs `vksplat` to completion; panics with its stderr on failure.
 pub fn vksplat_ok(dir: &Path, args: &[&str]) -> Output {
-    let o = Command::new(bin())
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("the binary runs");
+    let o = cli::vksplat_in(dir, args);
     assert!(
         o.status.success(),
         "vksplat {args:?}: {}",
@@ -48,7 +42,7 @@ impl Viewer {
 
     /// As [`Viewer::start`] with environment variables (`VKSPLAT_VALIDATE=1`).
     pub fn start_with_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Viewer {
-        let mut child = Command::new(bin())
+        let mut child = cli::command()
             .arg("view")
             .args(args)
             .args(["--port", "0"])
