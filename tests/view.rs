@@ -420,6 +420,44 @@ fn bad_messages_are_refused_and_other_tabs_go_on() {
     assert!(viewer.alive());
 }
 
+/// A frame the renderer cannot make (here: more device memory than the budget) is an
+/// error for the tab that asked; the renderer and the other tabs go on.
+#[test]
+fn render_errors_go_to_the_tab_that_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut viewer = Viewer::start_with_env(
+        dir.path(),
+        &["--demo", "--width", "96", "--max-resolution", "8000x8000"],
+        &[("VKSPLAT_MEMORY_LIMIT", "24M")],
+    );
+    let mut a = viewer.connect();
+    let mut b = viewer.connect();
+    let small = a.camera(0);
+    let mut big = small.clone();
+    for (k, f) in [("width", 6000.0), ("height", 3375.0)] {
+        big[k] = (f as u64).into();
+    }
+    for k in ["fx", "fy"] {
+        big[k] = (big[k].as_f64().unwrap() * 62.5).into();
+    }
+    let seq = a.send(json!({"type": "view", "camera": big}));
+    let e = loop {
+        match a.next(WAIT) {
+            Some(Incoming::Text(v)) if v["type"] == "error" => break v,
+            Some(_) => {}
+            None => panic!("no error for the oversized frame"),
+        }
+    };
+    assert_eq!(e["seq"], seq);
+    let message = e["message"].as_str().unwrap();
+    assert!(message.contains("out of device memory"), "{message}");
+    assert!(viewer.alive());
+    for c in [&mut b, &mut a] {
+        let seq = c.send(json!({"type": "view", "camera": small}));
+        assert_eq!(c.frame(seq, true, WAIT).header["width"], 96);
+    }
+}
+
 #[test]
 fn closed_tabs_free_their_state_and_http_serves_the_page() {
     use std::io::{Read, Write};

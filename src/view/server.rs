@@ -862,7 +862,7 @@ impl<'s, 'a> Session<'s, 'a> {
         let cam = cams.get(index).ok_or_else(|| {
             format!(
                 "camera {index} does not exist; the scene has {} (0..{})",
-                crate_plural(cams.len()),
+                camera_count(cams.len()),
                 cams.len()
             )
         })?;
@@ -969,7 +969,8 @@ impl<'s, 'a> Session<'s, 'a> {
     }
 }
 
-fn crate_plural(n: usize) -> String {
+/// `1 camera`, `3 cameras`.
+fn camera_count(n: usize) -> String {
     if n == 1 {
         "1 camera".into()
     } else {
