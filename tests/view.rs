@@ -621,6 +621,16 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
             "keyframe {k}: {n} pixels by {max}"
         );
     }
+    // The page's preview plays the frames the server samples: those render makes.
+    c.send(json!({"type": "sample_keyframes", "fps": 2, "keyframes": keyframes}));
+    let path = c.text("path", WAIT);
+    assert_eq!(path["cameras"].as_array().map(Vec::len), Some(5));
+    for k in [1, 3] {
+        let seq = c.send(json!({"type": "view", "camera": path["cameras"][k]}));
+        let shown = c.frame(seq, true, WAIT).rgb();
+        assert_same(&shown, &read_rgb(&frames[k]), &format!("path frame {k}"));
+    }
+
     // nerfstudio's camera_path.json: the same path sampled at 2 frames/s.
     c.send(json!({"type": "export_keyframes", "format": "nerfstudio", "fps": 2, "keyframes": keyframes}));
     let ns = c.text("export", WAIT);

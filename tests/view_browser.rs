@@ -152,7 +152,7 @@ impl Browser {
              fullFrames: V.fullFrames, lastSeq: V.lastSeq, errors: V.errors, \
              cameraIndex: V.cameraIndex, connected: V.connected, focus: V.focus, \
              screenshots: V.screenshots, keyframes: V.keyframes.length, \
-             lastExport: V.lastExport, turntable: V.turntable, \
+             lastExport: V.lastExport, turntable: V.turntable, pathFrames: V.pathFrames, \
              banner: document.getElementById('banner').hidden ? null : document.getElementById('banner').textContent, \
              hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};")
     }
@@ -489,6 +489,27 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         "kf.png",
     ]);
     vksplat_ok(d, &render);
+
+    // Preview plays the path the server sampled: 3 keys 2 s apart at 30 frames/s, 121 frames.
+    let preview = browser.element("#kf-preview");
+    let before = browser.state();
+    browser.call(
+        "POST",
+        &format!("/element/{preview}/click"),
+        Some(json!({})),
+    );
+    let playing = browser.wait("preview", Duration::from_secs(30), |s| {
+        s["pathFrames"] == 121
+    });
+    browser.wait("preview moves", Duration::from_secs(30), |s| {
+        s["camera"]["position"] != playing["camera"]["position"]
+            && s["lastSeq"].as_u64() > before["lastSeq"].as_u64()
+    });
+    browser.call(
+        "POST",
+        &format!("/element/{preview}/click"),
+        Some(json!({})),
+    );
 
     // The screenshot button downloads a file of the view.
     let shot = browser.element("#shot-png");

@@ -74,6 +74,14 @@ pub enum ClientMessage {
         fps: f32,
         keyframes: Vec<KeyframeIn>,
     },
+    /// The frames of the keyframe path (as `render --cameras` renders the exported
+    /// file), for the page's preview; answered with a `path` message.
+    SampleKeyframes {
+        #[serde(default)]
+        seq: u64,
+        fps: f32,
+        keyframes: Vec<KeyframeIn>,
+    },
 }
 
 /// A keyframe as the page sends it.
@@ -175,6 +183,15 @@ pub enum ServerMessage {
         text: String,
         /// The keyframes as `render --cameras` reads them back from the file (the view at
         /// each keyframe equals the rendered frame at its time).
+        cameras: Vec<Value>,
+    },
+    /// The frames of a keyframe path, for the preview.
+    Path {
+        /// The request's `seq`.
+        seq: u64,
+        /// Frames per second.
+        fps: f64,
+        /// One cameras.json entry per frame.
         cameras: Vec<Value>,
     },
 }

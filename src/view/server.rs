@@ -784,6 +784,11 @@ impl<'s, 'a> Session<'s, 'a> {
                 fps,
                 keyframes,
             } => (seq, self.export(seq, format, fps, &keyframes)),
+            ClientMessage::SampleKeyframes {
+                seq,
+                fps,
+                keyframes,
+            } => (seq, self.sample(seq, fps, &keyframes)),
         };
         if let Err(e) = result {
             self.send_error(&e, Some(seq));
@@ -947,6 +952,23 @@ impl<'s, 'a> Session<'s, 'a> {
         Ok(())
     }
 
+    fn sample(&mut self, seq: u64, fps: f32, keyframes: &[KeyframeIn]) -> Result<(), String> {
+        let frames = sample_path(fps, keyframes)?;
+        let cameras = frames
+            .iter()
+            .enumerate()
+            .map(|(i, c)| camera_to_entry(c, i))
+            .collect::<Result<Vec<_>, _>>()?;
+        let reply = ServerMessage::Path {
+            seq,
+            fps: fps as f64,
+            cameras,
+        };
+        let text = serde_json::to_string(&reply).map_err(|e| e.to_string())?;
+        let _ = self.ws.send(Message::text(text));
+        Ok(())
+    }
+
     /// Puts a frame request in this client's slot (replacing an older one): its size
     /// capped by `--max-resolution`, previews scaled down further.
     fn submit_frame(&mut self, job: FrameJob) {
@@ -1023,21 +1045,7 @@ pub fn export_path(
     fps: f32,
     keyframes: &[KeyframeIn],
 ) -> Result<(String, Vec<Camera>), String> {
-    if keyframes.is_empty() {
-        return Err("no keyframes to export: add the current camera with \"Add\" first".into());
-    }
-    let mut cams = Vec::with_capacity(keyframes.len());
-    let mut times = Vec::with_capacity(keyframes.len());
-    for (i, k) in keyframes.iter().enumerate() {
-        let c = camera_from_entry(&k.camera).map_err(|e| format!("keyframe {i}: {e}"))?;
-        cams.push(c);
-        times.push(k.time);
-    }
-    let text = keyframes::keyframes_to_json(&cams, &times, fps)
-        .map_err(|e| format!("cannot export the keyframes: {e}"))?;
-    let name = Path::new("keyframes.json");
-    let path = keyframes::KeyframePath::parse(&text, name)
-        .map_err(|e| format!("the exported keyframes do not read back: {e}"))?;
+    let (text, path) = keyframe_path(fps, keyframes)?;
     let at_keys: Vec<Camera> = path
         .keyframes()
         .iter()
@@ -1055,6 +1063,47 @@ pub fn export_path(
             Ok((text, at_keys))
         }
     }
+}
+
+/// Most frames a path preview sends to the page.
+pub const MAX_PREVIEW_FRAMES: usize = 10_000;
+
+/// The frames of the keyframe path, as `render --cameras keyframes.json` renders them.
+pub fn sample_path(fps: f32, keyframes: &[KeyframeIn]) -> Result<Vec<Camera>, String> {
+    let (_, path) = keyframe_path(fps, keyframes)?;
+    let frames = path
+        .cameras(&PathTiming::default())
+        .map_err(|e| format!("cannot sample the path: {e}"))?;
+    if frames.len() > MAX_PREVIEW_FRAMES {
+        return Err(format!(
+            "the path has {} frames; a preview shows at most {MAX_PREVIEW_FRAMES} (lower Frames/s)",
+            frames.len()
+        ));
+    }
+    Ok(frames)
+}
+
+/// The keyframe file of the page's keyframes and the path it reads back as.
+fn keyframe_path(
+    fps: f32,
+    keyframes: &[KeyframeIn],
+) -> Result<(String, keyframes::KeyframePath), String> {
+    if keyframes.is_empty() {
+        return Err("no keyframes to export: add the current camera with \"Add\" first".into());
+    }
+    let mut cams = Vec::with_capacity(keyframes.len());
+    let mut times = Vec::with_capacity(keyframes.len());
+    for (i, k) in keyframes.iter().enumerate() {
+        let c = camera_from_entry(&k.camera).map_err(|e| format!("keyframe {i}: {e}"))?;
+        cams.push(c);
+        times.push(k.time);
+    }
+    let text = keyframes::keyframes_to_json(&cams, &times, fps)
+        .map_err(|e| format!("cannot export the keyframes: {e}"))?;
+    let name = Path::new("keyframes.json");
+    let path = keyframes::KeyframePath::parse(&text, name)
+        .map_err(|e| format!("the exported keyframes do not read back: {e}"))?;
+    Ok((text, path))
 }
 
 #[cfg(test)]

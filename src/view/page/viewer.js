@@ -34,7 +34,7 @@
   const V = window.vksplatViewer = {
     connected: false, hello: null, frames: 0, previewFrames: 0, fullFrames: 0, lastSeq: 0,
     lastFrame: null, errors: [], cameraIndex: -1, keyframes: [], screenshots: 0,
-    lastExport: null, upFlipped: false, turntable: false, sent: 0,
+    lastExport: null, pathFrames: 0, upFlipped: false, turntable: false, sent: 0,
     get camera() { return entry(); },
     get focus() { return cam.focus.slice(); },
     get settings() { return JSON.parse(JSON.stringify(settings)); },
@@ -82,7 +82,7 @@
 
   // Takes pose and intrinsics from a cameras.json entry; the focus goes in front of it
   // at the distance of the scene's centre.
-  function snapTo(e) {
+  function snapTo(e, interactive = false) {
     const col = (k) => [e.rotation[0][k], e.rotation[1][k], e.rotation[2][k]];
     cam.pos = e.position.slice();
     cam.right = unit(col(0)); cam.down = unit(col(1)); cam.fwd = unit(col(2));
@@ -95,7 +95,7 @@
     const centre = V.hello ? V.hello.centre : [0, 0, 0];
     const depth = dot(sub(centre, cam.pos), cam.fwd);
     cam.focus = add(cam.pos, mul(cam.fwd, depth > 1e-3 * size() ? depth : size()));
-    changed(false);
+    changed(interactive);
   }
 
   function changed(interactive) {
@@ -144,6 +144,7 @@
   canvas.addEventListener('contextmenu', (e) => e.preventDefault());
   canvas.addEventListener('pointerdown', (e) => {
     canvas.focus();
+    if (preview) stopPreview();
     canvas.setPointerCapture(e.pointerId);
     drag = { x: e.clientX, y: e.clientY, pan: e.button === 2 || e.button === 1 || e.shiftKey };
   });
@@ -323,55 +324,39 @@
     if (!V.keyframes.length) { showError('no keyframes yet: "Add" puts the current camera in the path'); return; }
     send({
       type: 'export_keyframes', seq: ++seq, format, fps: fps(),
-      keyframes: V.keyframes.map((k, i) => ({ time: Math.round(i * spacing() * 1e6) / 1e6, camera: keyframeEntry(k) })),
+      keyframes: keyframeList(),
     });
   }
 
-  // Preview: positions straight between keyframes, rotations by quaternion slerp (the
-  // exported path itself is a Catmull-Rom spline, see docs/cameras.md).
+  // Preview: the server samples the path as `render --cameras` will (Catmull-Rom
+  // positions, slerped rotations, docs/cameras.md); the page plays those frames.
   let preview = null;
+  function keyframeList() {
+    return V.keyframes.map((k, i) => ({ time: Math.round(i * spacing() * 1e6) / 1e6, camera: keyframeEntry(k) }));
+  }
   function togglePreview() {
-    if (preview) { preview = null; $('kf-preview').textContent = '▶ Preview'; return; }
+    if (preview) { stopPreview(); return; }
     if (V.keyframes.length < 2) { showError('a path needs two keyframes to preview'); return; }
-    preview = { start: performance.now() };
+    send({ type: 'sample_keyframes', seq: ++seq, fps: fps(), keyframes: keyframeList() });
+    $('kf-preview').textContent = '… Preview';
+  }
+  function stopPreview() {
+    preview = null;
+    $('kf-preview').textContent = '▶ Preview';
+    changed(false);
+  }
+  function startPreview(m) {
+    if (!m.cameras.length) return;
+    preview = { frames: m.cameras, fps: m.fps, start: performance.now(), shown: -1 };
+    V.pathFrames = m.cameras.length;
     $('kf-preview').textContent = '■ Stop';
   }
-  const toQuat = (k) => {
-    // Rotation matrix with columns right, down, fwd to a quaternion (w, x, y, z).
-    const m = [[k.right[0], k.down[0], k.fwd[0]], [k.right[1], k.down[1], k.fwd[1]], [k.right[2], k.down[2], k.fwd[2]]];
-    const tr = m[0][0] + m[1][1] + m[2][2];
-    let q;
-    if (tr > 0) { const s = Math.sqrt(tr + 1) * 2; q = [0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s]; }
-    else if (m[0][0] > m[1][1] && m[0][0] > m[2][2]) { const s = Math.sqrt(1 + m[0][0] - m[1][1] - m[2][2]) * 2; q = [(m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s]; }
-    else if (m[1][1] > m[2][2]) { const s = Math.sqrt(1 + m[1][1] - m[0][0] - m[2][2]) * 2; q = [(m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s]; }
-    else { const s = Math.sqrt(1 + m[2][2] - m[0][0] - m[1][1]) * 2; q = [(m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s]; }
-    return q;
-  };
-  const quatCols = ([w, x, y, z]) => [
-    [1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)],
-    [2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)],
-    [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)],
-  ];
-  function slerp(a, b, t) {
-    let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
-    if (d < 0) { b = b.map((v) => -v); d = -d; }
-    if (d > 0.9995) { const q = a.map((v, i) => v + (b[i] - v) * t); const l = Math.hypot(...q); return q.map((v) => v / l); }
-    const th = Math.acos(d), s = Math.sin(th);
-    return a.map((v, i) => (v * Math.sin((1 - t) * th) + b[i] * Math.sin(t * th)) / s);
-  }
   function previewStep(now) {
-    const span = spacing() * (V.keyframes.length - 1);
-    const t = ((now - preview.start) / 1000) % span;
-    const i = Math.min(V.keyframes.length - 2, Math.floor(t / spacing()));
-    const f = t / spacing() - i;
-    const a = V.keyframes[i], b = V.keyframes[i + 1];
-    const cols = quatCols(slerp(toQuat(a), toQuat(b), f));
-    cam.pos = add(mul(a.pos, 1 - f), mul(b.pos, f));
-    cam.focus = add(mul(a.focus, 1 - f), mul(b.focus, f));
-    [cam.right, cam.down, cam.fwd] = cols.map(unit);
-    cam.vfov = a.vfov * (1 - f) + b.vfov * f;
-    cam.aspect = a.aspect * (1 - f) + b.aspect * f;
-    changed(true);
+    const n = preview.frames.length;
+    const k = Math.floor(((now - preview.start) / 1000) * preview.fps) % n;
+    if (k === preview.shown) return;
+    preview.shown = k;
+    snapTo(preview.frames[k], true);
   }
 
   // ---- screenshots and downloads ----
@@ -424,8 +409,12 @@
     let m;
     try { m = JSON.parse(text); } catch (e) { showError(`bad message from the server: ${e}`); return; }
     if (m.type === 'hello') onHello(m);
-    else if (m.type === 'error') showError(m.message);
+    else if (m.type === 'error') {
+      showError(m.message);
+      if (!preview) $('kf-preview').textContent = '▶ Preview';
+    }
     else if (m.type === 'camera') { snapTo(m.camera); }
+    else if (m.type === 'path') { startPreview(m); }
     else if (m.type === 'export') {
       V.lastExport = m;
       download(new Blob([m.text], { type: 'application/json' }), m.filename);
