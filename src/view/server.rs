@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{mpsc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tungstenite::protocol::{Role, WebSocketConfig};
@@ -85,6 +85,8 @@ const MAX_HEAD: usize = 16 * 1024;
 const POLL: Duration = Duration::from_millis(10);
 /// Longest WebSocket message a client may send (a long keyframe list fits).
 const MAX_MESSAGE: usize = 4 << 20;
+/// TCP connections at once (page files, WebSockets, and those still sending a request).
+const MAX_CONNECTIONS: usize = 64;
 /// A write to a client that does not read for this long ends its connection.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -127,6 +129,7 @@ impl Server {
             sh_degree,
             stop,
             loopback: self.listener.local_addr()?.ip().is_loopback(),
+            connections: AtomicUsize::new(0),
             queue: Mutex::new(Queue::default()),
             wake: Condvar::new(),
         };
@@ -136,7 +139,17 @@ impl Server {
             while !stop.load(Ordering::Relaxed) {
                 match self.listener.accept() {
                     Ok((stream, _)) => {
-                        let _ = s.spawn(move || serve_connection(stream, shared));
+                        // Connections beyond the bound are closed at once (a client that
+                        // opens sockets in a loop cannot exhaust the threads).
+                        if shared.connections.fetch_add(1, Ordering::Relaxed) >= MAX_CONNECTIONS {
+                            shared.connections.fetch_sub(1, Ordering::Relaxed);
+                            drop(stream);
+                            continue;
+                        }
+                        let _ = s.spawn(move || {
+                            serve_connection(stream, shared);
+                            shared.connections.fetch_sub(1, Ordering::Relaxed);
+                        });
                     }
                     Err(e) if e.kind() == ErrorKind::WouldBlock => std::thread::sleep(POLL),
                     Err(e) if e.kind() == ErrorKind::Interrupted => {}
@@ -160,6 +173,8 @@ struct Shared<'a> {
     stop: &'a AtomicBool,
     /// Bound to a loopback address: requests must name a loopback host.
     loopback: bool,
+    /// Open TCP connections (each has a thread).
+    connections: AtomicUsize,
     queue: Mutex<Queue>,
     wake: Condvar,
 }
