@@ -478,6 +478,17 @@ fn closed_tabs_free_their_state_and_http_serves_the_page() {
         while c.ws.read().is_ok() {}
         std::thread::sleep(Duration::from_millis(30));
     }
+    // Sockets that never send a request (more than the server keeps) do not stop it.
+    let idle: Vec<std::net::TcpStream> = (0..100)
+        .filter_map(|_| std::net::TcpStream::connect(("127.0.0.1", viewer.port)).ok())
+        .collect();
+    assert!(idle.len() > 64);
+    drop(idle);
+    // Their threads see the end of the stream at once; give them a moment to go.
+    std::thread::sleep(Duration::from_millis(500));
+    let mut c = viewer.connect();
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+    c.frame(seq, true, WAIT);
     let get = |path: &str| {
         let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
