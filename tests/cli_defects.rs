@@ -712,6 +712,7 @@ fn readme_and_help_agree() {
         "--no-fail-fast",
         "--lib",
         "--bins",
+        "--ignored",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {

@@ -166,6 +166,10 @@
 
   // ---- keys ----
   const held = new Set();
+  let shiftDown = false; // fly faster
+  for (const type of ['keydown', 'keyup']) {
+    window.addEventListener(type, (e) => { shiftDown = e.shiftKey; });
+  }
   const typing = (e) => /^(INPUT|SELECT|TEXTAREA)$/.test(e.target.tagName) && e.target.type !== 'range' && e.target.type !== 'checkbox';
   window.addEventListener('keydown', (e) => {
     if (typing(e) || e.ctrlKey || e.metaKey || e.altKey) return;
@@ -182,7 +186,7 @@
     e.preventDefault();
   });
   window.addEventListener('keyup', (e) => { held.delete(e.key.toLowerCase()); });
-  window.addEventListener('blur', () => held.clear());
+  window.addEventListener('blur', () => { held.clear(); shiftDown = false; });
 
   // ---- controls ----
   const scaleSlider = $('scale');
@@ -497,7 +501,7 @@
     last = now;
     fitCanvas();
     if (held.size) {
-      const speed = size() * 0.6 * (held.has('shift') || window.__shift ? 4 : 1) * dt;
+      const speed = size() * 0.6 * (shiftDown ? 4 : 1) * dt;
       let d = [0, 0, 0];
       if (held.has('w')) d = add(d, cam.fwd);
       if (held.has('s')) d = sub(d, cam.fwd);
@@ -518,8 +522,6 @@
     }
     requestAnimationFrame(tick);
   }
-  window.addEventListener('keydown', (e) => { window.__shift = e.shiftKey; });
-  window.addEventListener('keyup', (e) => { window.__shift = e.shiftKey; });
   connect();
   requestAnimationFrame(tick);
 })();
