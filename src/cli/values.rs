@@ -173,4 +173,13 @@ mod tests {
         assert!(depth_range("1,1").unwrap_err().contains("differ"));
         assert!(vec3("1,2").unwrap_err().contains("X,Y,Z"));
     }
+
+    #[test]
+    fn sizes_parse_with_their_limits() {
+        assert_eq!(size("1920x1080").unwrap(), (1920, 1080));
+        assert_eq!(size("64X48").unwrap(), (64, 48));
+        assert!(size("1920").unwrap_err().contains("WIDTHxHEIGHT"));
+        assert!(size("0x10").unwrap_err().contains("between 1 and"));
+        assert!(size("100000x10").unwrap_err().contains("between 1 and"));
+    }
 }
