@@ -565,6 +565,65 @@ fn sigterm_stops_the_server_cleanly() {
     assert!(closed);
 }
 
+/// `--open` runs xdg-open with the URL; an xdg-open that fails is a note, the server
+/// goes on.
+#[test]
+fn open_runs_xdg_open_with_the_url() {
+    use std::os::unix::fs::PermissionsExt;
+    for works in [true, false] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let bin = d.join("bin");
+        std::fs::create_dir(&bin).unwrap();
+        let script = bin.join("xdg-open");
+        let log = d.join("opened.txt");
+        std::fs::write(
+            &script,
+            format!(
+                "#!/bin/sh\necho \"$1\" > '{}'\nexit {}\n",
+                log.display(),
+                if works { 0 } else { 3 }
+            ),
+        )
+        .unwrap();
+        std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let path = format!(
+            "{}:{}",
+            bin.display(),
+            std::env::var("PATH").unwrap_or_default()
+        );
+        let mut viewer = Viewer::start_with_env(
+            d,
+            &["--demo", "--cpu", "--open"],
+            &[("PATH", path.as_str())],
+        );
+        let deadline = std::time::Instant::now() + WAIT;
+        while !log.exists() {
+            assert!(std::time::Instant::now() < deadline, "xdg-open never ran");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        std::thread::sleep(Duration::from_millis(200));
+        let opened = std::fs::read_to_string(&log).unwrap();
+        assert_eq!(opened.trim(), viewer.url);
+        if !works {
+            let deadline = std::time::Instant::now() + WAIT;
+            let mut err = Vec::new();
+            while !err
+                .iter()
+                .any(|l: &String| l.contains("xdg-open could not open"))
+            {
+                assert!(std::time::Instant::now() < deadline, "no note: {err:?}");
+                err.extend(viewer.stderr.try_iter());
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+        assert!(viewer.alive());
+        let mut c = viewer.connect();
+        let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+        c.frame(seq, true, WAIT);
+    }
+}
+
 #[test]
 fn port_in_use_is_one_clear_error() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
