@@ -5,11 +5,16 @@
 //!   page's settings), and [`source::GpuSource`], the Vulkan pipeline behind it.
 //! * [`cpu_source`]: the same from the CPU reference renderer (`view --cpu`).
 //! * [`protocol`]: the messages between page and server.
-//! * [`server`]: HTTP for the page, the WebSocket per tab, and the render worker.
+//! * [`server`]: the listener, the page's files, the WebSocket upgrade and the render
+//!   worker; `session` is one tab's connection, `http` the little HTTP it needs.
+//! * [`paths`]: keyframe paths from the page (exports and the preview's frames).
 //! * [`page`]: the page itself (HTML, JS, CSS embedded in the binary).
 
 pub mod cpu_source;
+mod http;
 pub mod page;
+pub mod paths;
 pub mod protocol;
 pub mod server;
+mod session;
 pub mod source;
