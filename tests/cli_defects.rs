@@ -713,6 +713,7 @@ fn readme_and_help_agree() {
         "--lib",
         "--bins",
         "--ignored",
+        "--nocapture",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {

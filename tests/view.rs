@@ -730,16 +730,24 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
     assert!(!d.join("ns/f_00005.png").exists());
 }
 
-/// Interactive rate with the 125k robot on the Vulkan pipeline: a client that keeps the
-/// camera moving, as a drag does, for 5 s. Prints the preview frames per second (the
-/// issue aims at 10 or more on lavapipe); run with `--ignored` (needs ../shared/data).
+/// Interactive rate with the 125k robot on the Vulkan pipeline and the CPU reference: a
+/// client that keeps the camera moving, as a drag does, for 5 s. Prints the preview
+/// frames per second (the issue aims at 10 or more on lavapipe); run with `--ignored`
+/// (needs ../shared/data).
 #[test]
 #[ignore]
 fn preview_rate_with_the_125k_scene() {
+    preview_rate(&[]);
+    preview_rate(&["--cpu"]);
+}
+
+fn preview_rate(backend: &[&str]) {
     let scene =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/playbot_lod2_125k_sh2.ply");
     let dir = tempfile::tempdir().unwrap();
-    let viewer = Viewer::start(dir.path(), &[scene.to_str().unwrap()]);
+    let mut args = vec![scene.to_str().unwrap()];
+    args.extend_from_slice(backend);
+    let viewer = Viewer::start(dir.path(), &args);
     let mut c = viewer.connect();
     let mut cam = c.hello["initial_camera"].clone();
     cam["width"] = 1280.into();
@@ -766,7 +774,9 @@ fn preview_rate_with_the_125k_scene() {
         }
     }
     let rate = previews as f64 / start.elapsed().as_secs_f64();
-    println!("{rate:.1} preview frames/s at {size} (1280x720 canvas), {fulls} full frames");
+    println!(
+        "{backend:?}: {rate:.1} preview frames/s, the last at {size} (1280x720 canvas), {fulls} full frames"
+    );
     assert!(rate > 0.0);
     assert_eq!(fulls, 0, "a full frame was rendered while the camera moved");
 }

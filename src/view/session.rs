@@ -16,6 +16,11 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tungstenite::{Message, WebSocket};
 
+/// The blend of a preview frame should take about this long (ms).
+const PREVIEW_BLEND_MS: f64 = 50.0;
+/// Previews are never smaller than this many pixels.
+const MIN_PREVIEW_PIXELS: f64 = 60_000.0;
+
 /// One tab: its camera, settings and the WebSocket.
 pub(super) struct Session<'s, 'a> {
     id: u64,
@@ -30,6 +35,10 @@ pub(super) struct Session<'s, 'a> {
     window_start: Instant,
     window_count: u32,
     window_warned: bool,
+    /// Pixels of this tab's previews: lowered while their blend takes longer than
+    /// [`PREVIEW_BLEND_MS`] (a slow renderer, `--cpu`), raised back up to
+    /// [`ServerConfig::preview_pixels`](super::server::ServerConfig::preview_pixels).
+    preview_pixels: f64,
 }
 
 impl<'s, 'a> Session<'s, 'a> {
@@ -50,6 +59,7 @@ impl<'s, 'a> Session<'s, 'a> {
             window_start: Instant::now(),
             window_count: 0,
             window_warned: false,
+            preview_pixels: shared.config.preview_pixels as f64,
         }
     }
 
@@ -119,13 +129,40 @@ impl<'s, 'a> Session<'s, 'a> {
         false
     }
 
+    /// Scales the preview size so that the blend of a preview, the stage whose time
+    /// grows with the pixels, takes about [`PREVIEW_BLEND_MS`] (between
+    /// [`MIN_PREVIEW_PIXELS`] and the configured size); the per-Gaussian stages do not
+    /// shrink with the frame, so they are left out. Damped so the size does not swing.
+    fn adapt_preview(&mut self, frame: &ViewFrame) {
+        let pixels = frame.width as f64 * frame.height as f64;
+        let blend = frame.timings.blend;
+        if !(blend > 0.0 && pixels > 0.0) {
+            return;
+        }
+        let ratio = (PREVIEW_BLEND_MS / blend).clamp(0.25, 4.0).sqrt();
+        let target = pixels * ratio;
+        let max = self.shared.config.preview_pixels as f64;
+        // A fast frame smaller than the budget (a small canvas) keeps the budget.
+        let budget = if ratio >= 1.0 {
+            self.preview_pixels.max(target)
+        } else {
+            target
+        };
+        self.preview_pixels = budget.clamp(MIN_PREVIEW_PIXELS.min(max), max);
+    }
+
     /// Writes what the worker finished for this client; false when the socket is gone.
     fn deliver(&mut self) -> bool {
         while let Ok(out) = self.rx.try_recv() {
             let sent = match out {
                 Outgoing::Frame { job, result } => {
                     let message = match result {
-                        Ok(frame) => self.encode_frame(&job, &frame),
+                        Ok(frame) => {
+                            if job.quality == Quality::Preview {
+                                self.adapt_preview(&frame);
+                            }
+                            self.encode_frame(&job, &frame)
+                        }
                         Err(e) => Err(e),
                     };
                     let sent = match message {
@@ -478,7 +515,7 @@ impl<'s, 'a> Session<'s, 'a> {
         let capped = cap_resolution(&job.camera, config.max_resolution);
         let camera = match job.quality {
             Quality::Full => capped,
-            Quality::Preview => cap_pixels(&capped, config.preview_pixels),
+            Quality::Preview => cap_pixels(&capped, self.preview_pixels as u32),
         };
         let mut q = self.shared.queue();
         if let Some(p) = q.clients.get_mut(&self.id) {
