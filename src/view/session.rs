@@ -135,20 +135,9 @@ impl<'s, 'a> Session<'s, 'a> {
     /// shrink with the frame, so they are left out. Damped so the size does not swing.
     fn adapt_preview(&mut self, frame: &ViewFrame) {
         let pixels = frame.width as f64 * frame.height as f64;
-        let blend = frame.timings.blend;
-        if !(blend > 0.0 && pixels > 0.0) {
-            return;
-        }
-        let ratio = (PREVIEW_BLEND_MS / blend).clamp(0.25, 4.0).sqrt();
-        let target = pixels * ratio;
         let max = self.shared.config.preview_pixels as f64;
-        // A fast frame smaller than the budget (a small canvas) keeps the budget.
-        let budget = if ratio >= 1.0 {
-            self.preview_pixels.max(target)
-        } else {
-            target
-        };
-        self.preview_pixels = budget.clamp(MIN_PREVIEW_PIXELS.min(max), max);
+        self.preview_pixels =
+            next_preview_budget(self.preview_pixels, pixels, frame.timings.blend, max);
     }
 
     /// Writes what the worker finished for this client; false when the socket is gone.
@@ -549,6 +538,22 @@ pub(super) fn error_text(message: &str, seq: Option<u64>) -> String {
     .unwrap_or_default()
 }
 
+/// The preview budget after a preview of `pixels` whose blend took `blend_ms`.
+fn next_preview_budget(budget: f64, pixels: f64, blend_ms: f64, max: f64) -> f64 {
+    if !(blend_ms > 0.0 && pixels > 0.0) {
+        return budget;
+    }
+    let ratio = (PREVIEW_BLEND_MS / blend_ms).clamp(0.25, 4.0).sqrt();
+    let target = pixels * ratio;
+    // A fast frame smaller than the budget (a small canvas) keeps the budget.
+    let next = if ratio >= 1.0 {
+        budget.max(target)
+    } else {
+        target
+    };
+    next.clamp(MIN_PREVIEW_PIXELS.min(max), max)
+}
+
 /// `cam` scaled down (aspect kept, intrinsics scaled) to fit `max` (width, height).
 pub fn cap_resolution(cam: &Camera, max: (u32, u32)) -> Camera {
     if cam.width <= max.0 && cam.height <= max.1 {
@@ -576,6 +581,28 @@ fn resize_by(cam: &Camera, s: f64) -> Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn preview_budget_follows_the_blend_time() {
+        let max = 250_000.0;
+        // Slow blends shrink it (damped), down to the floor.
+        let b = next_preview_budget(max, max, 4.0 * PREVIEW_BLEND_MS, max);
+        assert_eq!(b, max / 2.0);
+        assert_eq!(next_preview_budget(b, b, 1e6, max), b / 2.0);
+        assert_eq!(
+            next_preview_budget(b / 2.0, b / 2.0, 1e6, max),
+            MIN_PREVIEW_PIXELS
+        );
+        // Fast ones grow it back up to the configured size.
+        assert_eq!(
+            next_preview_budget(100_000.0, 100_000.0, 1.0, max),
+            200_000.0
+        );
+        assert_eq!(next_preview_budget(200_000.0, 200_000.0, 1.0, max), max);
+        // A small canvas rendered fast keeps the budget; no timing keeps it too.
+        assert_eq!(next_preview_budget(max, 10_000.0, 1.0, max), max);
+        assert_eq!(next_preview_budget(123.0, 10_000.0, 0.0, max), 123.0);
+    }
 
     #[test]
     fn caps_keep_the_aspect_ratio() {
