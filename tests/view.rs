@@ -118,6 +118,16 @@ fn resting_frames_equal_render(backend: &[&str]) {
     let [lo, hi] =
         [&hello["max_scale_range"][0], &hello["max_scale_range"][1]].map(|v| v.as_f64().unwrap());
     assert!(0.0 < lo && lo < hi, "{lo} {hi}");
+    let hist = &hello["max_scale_histogram"];
+    let counts: Vec<u64> = hist["counts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_u64().unwrap())
+        .collect();
+    assert_eq!(hist["edges"].as_array().unwrap().len(), counts.len() + 1);
+    assert_eq!(counts.iter().sum::<u64>(), 1873);
+    assert_eq!(hist["edges"][0].as_f64(), Some(lo));
 
     // select_camera snaps to camera 1 with its intrinsics and size.
     let seq = c.send(json!({"type": "select_camera", "index": 1}));

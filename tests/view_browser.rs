@@ -153,6 +153,7 @@ impl Browser {
              cameraIndex: V.cameraIndex, connected: V.connected, focus: V.focus, \
              screenshots: V.screenshots, keyframes: V.keyframes.length, \
              lastExport: V.lastExport, turntable: V.turntable, pathFrames: V.pathFrames, \
+             histLabel: document.getElementById('hist-label').textContent, \
              banner: document.getElementById('banner').hidden ? null : document.getElementById('banner').textContent, \
              hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};")
     }
@@ -401,6 +402,20 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         s["settings"]["scale_modifier"].as_f64() == Some(1.0)
     });
 
+    // The max-scale slider, pulled left, sets a threshold inside the scene's range and
+    // the histogram label says how much is kept; back at the right end it is off.
+    assert!(before["histLabel"].as_str().unwrap().contains("Gaussians"));
+    browser.drag("#maxscale", -40, 0, 0);
+    let s = browser.wait("max scale", Duration::from_secs(30), |s| {
+        s["settings"]["max_scale"].is_number()
+    });
+    let label = s["histLabel"].as_str().unwrap();
+    assert!(label.contains("% kept"), "{label}");
+    browser.drag("#maxscale", 135, 0, 0);
+    let before = browser.wait("max scale off", Duration::from_secs(30), |s| {
+        s["settings"]["max_scale"].is_null()
+    });
+
     // Clicking camera 2 of the list snaps to its pose and field of view.
     let item = browser.element("#cameras li:nth-child(3)");
     browser.call("POST", &format!("/element/{item}/click"), Some(json!({})));
@@ -551,6 +566,7 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     assert!(viewer.alive());
 
     // The page screenshot shows a picture in the canvas area (left of the panel).
+    browser.js("document.getElementById('panel').scrollTop = 0; return null;");
     let png = browser.screenshot_png();
     if let Ok(path) = std::env::var("VKSPLAT_VIEWER_SCREENSHOT") {
         std::fs::write(&path, &png).unwrap();

@@ -5,7 +5,9 @@ use super::{plural, values};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::net::{SocketAddr, ToSocketAddrs};
-use vksplat::view::protocol::{camera_to_entry, Hello, NamedCamera, PROTOCOL_VERSION};
+use vksplat::view::protocol::{
+    camera_to_entry, Hello, NamedCamera, ScaleHistogram, PROTOCOL_VERSION,
+};
 use vksplat::view::server::{ServedScene, Server, ServerConfig};
 use vksplat::view::source::FrameSource;
 use vksplat::{note, outln};
@@ -125,6 +127,10 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)>
         bounds_hi: bulk.hi.to_array(),
         size: bulk.radius.max(1e-6),
         max_scale_range,
+        max_scale_histogram: ScaleHistogram {
+            edges: hist.edges.clone(),
+            counts: hist.counts.clone(),
+        },
         up: [0.0, -1.0, 0.0],
         cameras: named,
         initial_camera,

@@ -135,6 +135,9 @@ pub struct Hello {
     /// Smallest and largest per-Gaussian max scale (the edges of the log-binned
     /// histogram of `info`): the range of the max-scale slider.
     pub max_scale_range: [f64; 2],
+    /// The log-binned histogram of the per-Gaussian max scale (bin edges, one more than
+    /// the counts), drawn under the slider.
+    pub max_scale_histogram: ScaleHistogram,
     /// World up (-y for INRIA/COLMAP scenes).
     pub up: [f32; 3],
     /// The scene's cameras.
@@ -147,6 +150,15 @@ pub struct Hello {
     pub max_resolution: [u32; 2],
     /// Pixels of a preview frame while the camera moves.
     pub preview_pixels: u32,
+}
+
+/// A histogram in `hello`.
+#[derive(Debug, Default, Serialize)]
+pub struct ScaleHistogram {
+    /// Bin edges, increasing.
+    pub edges: Vec<f64>,
+    /// Gaussians per bin.
+    pub counts: Vec<usize>,
 }
 
 /// A text message to the page.

@@ -214,8 +214,42 @@
     const m = maxScaleAt(Number(maxSlider.value));
     settings.max_scale = m === null ? null : Number(m.toPrecision(4));
     $('maxscale-out').textContent = m === null ? 'off' : settings.max_scale.toPrecision(3);
+    drawHistogram();
     changed(true);
   });
+
+  // The scene's max-scale histogram under the slider: bar widths follow the log-spaced
+  // slider, bars below the threshold are lit, and the share kept is estimated from them
+  // (within the threshold's bin, log-linearly; the readout's "visible" is exact).
+  function drawHistogram() {
+    const h = V.hello && V.hello.max_scale_histogram;
+    const box = $('hist');
+    if (!h || !h.counts.length) { box.hidden = true; return; }
+    const lo = Math.log(h.edges[0]), span = Math.log(h.edges[h.edges.length - 1]) - lo;
+    const peak = Math.max(...h.counts.map((c) => Math.log1p(c)));
+    const t = settings.max_scale;
+    if (box.children.length !== h.counts.length) {
+      box.textContent = '';
+      h.counts.forEach((c, i) => {
+        const bar = document.createElement('div');
+        bar.style.flexGrow = String((Math.log(h.edges[i + 1]) - Math.log(h.edges[i])) / span);
+        bar.style.height = `${(100 * Math.log1p(c)) / peak}%`;
+        bar.title = `${h.edges[i].toPrecision(2)}–${h.edges[i + 1].toPrecision(2)}: ${c.toLocaleString()}`;
+        box.appendChild(bar);
+      });
+    }
+    const total = h.counts.reduce((a, b) => a + b, 0);
+    let kept = 0;
+    h.counts.forEach((c, i) => {
+      const [a, b] = [h.edges[i], h.edges[i + 1]];
+      const share = t === null || t >= b ? 1 : t <= a ? 0 : Math.log(t / a) / Math.log(b / a);
+      kept += c * share;
+      box.children[i].classList.toggle('kept', share > 0);
+    });
+    $('hist-label').textContent = t === null
+      ? `${total.toLocaleString()} Gaussians, largest scale ${h.edges[0].toPrecision(2)}–${h.edges[h.edges.length - 1].toPrecision(2)}`
+      : `≈ ${((100 * kept) / Math.max(1, total)).toFixed(1)} % kept (scale ≤ ${t.toPrecision(3)})`;
+  }
   $('minopacity').addEventListener('input', (e) => {
     settings.min_opacity = Number(e.target.value);
     $('minopacity-out').textContent = settings.min_opacity.toFixed(2);
@@ -435,6 +469,7 @@
       $('sh').value = String(h.sh_degree);
       $('sh-out').textContent = String(h.sh_degree);
       fillCameras();
+      drawHistogram();
       resetView();
     } else {
       changed(false); // reconnected: render the current view again
