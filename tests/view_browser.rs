@@ -154,6 +154,7 @@ impl Browser {
              screenshots: V.screenshots, keyframes: V.keyframes.length, \
              lastExport: V.lastExport, turntable: V.turntable, pathFrames: V.pathFrames, \
              histLabel: document.getElementById('hist-label').textContent, \
+             upFlipped: V.upFlipped, \
              banner: document.getElementById('banner').hidden ? null : document.getElementById('banner').textContent, \
              hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};")
     }
@@ -462,6 +463,23 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         vec3(&moved["focus"]),
     ));
     assert!((r0 - r1).abs() < 1e-3 * r0, "turntable radius {r0} -> {r1}");
+
+    // "Flip up axis" turns the view about its axis: the camera's down axis, along world
+    // +y (up is -y), points along -y after the flip, and back after a second click.
+    let down_y = |s: &Value| axis(&s["camera"], 1)[1];
+    let flip = browser.element("#flip-up");
+    let before = browser.state();
+    assert!(down_y(&before) > 0.0, "{}", before["camera"]);
+    browser.call("POST", &format!("/element/{flip}/click"), Some(json!({})));
+    let flipped = browser.wait("flip", Duration::from_secs(30), |s| {
+        s["upFlipped"] == true && s["lastSeq"].as_u64() > before["lastSeq"].as_u64()
+    });
+    assert!(down_y(&flipped) < 0.0, "{}", flipped["camera"]);
+    browser.call("POST", &format!("/element/{flip}/click"), Some(json!({})));
+    let back = browser.wait("unflip", Duration::from_secs(30), |s| {
+        s["upFlipped"] == false
+    });
+    assert!(down_y(&back) > 0.0);
 
     // Three keyframes (camera 0, 1, 2 by N), exported as the keyframe JSON render reads.
     browser.hold_key("n", 30); // camera 0 (after 2, wrapping)
