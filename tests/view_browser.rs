@@ -582,6 +582,9 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         end["errors"]
     );
     assert!(viewer.alive());
+    // The validation layer (on through common::cli) found nothing in the GPU viewer.
+    let log: Vec<String> = viewer.stderr.try_iter().collect();
+    assert!(!log.iter().any(|l| l.contains("[vulkan")), "{log:?}");
 
     // The page screenshot shows a picture in the canvas area (left of the panel).
     browser.js("document.getElementById('panel').scrollTop = 0; return null;");
