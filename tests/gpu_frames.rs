@@ -666,3 +666,63 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
     }
     assert_validation_clean(&r);
 }
+
+/// The viewer's previews (frames while the camera moves) draw the most important
+/// Gaussians, uploaded once: a preview equals a render of exactly that subset, the view at
+/// rest draws the whole scene, and `set_preview(0)` previews with the whole scene.
+#[test]
+fn viewer_previews_draw_the_most_important_gaussians() {
+    use vksplat::view::source::{FrameSource, GpuSource, ViewSettings, DEFAULT_PREVIEW_GAUSSIANS};
+    let scene = load("playbot_lod2_125k_sh2.ply");
+    // The ranking: every kept Gaussian weighs at least as much as every dropped one.
+    let weight = |i: usize| {
+        let mut s = scene.log_scales[i];
+        s.sort_by(f32::total_cmp);
+        vksplat::scene::sigmoid(scene.opacity_logits[i]) * (s[1] + s[2]).exp()
+    };
+    let keep = scene.most_important(1000);
+    assert_eq!(keep.len(), 1000);
+    assert!(keep.windows(2).all(|w| w[0] < w[1]), "kept in scene order");
+    let lightest_kept = keep
+        .iter()
+        .map(|&i| weight(i))
+        .fold(f32::INFINITY, f32::min);
+    let heaviest_dropped = (0..scene.len())
+        .filter(|i| keep.binary_search(i).is_err())
+        .map(weight)
+        .fold(0.0, f32::max);
+    assert!(lightest_kept >= heaviest_dropped);
+    assert_eq!(scene.most_important(usize::MAX).len(), scene.len());
+
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 4, 320, 180);
+    let settings = ViewSettings::default();
+    let mut src = GpuSource::new(&scene, None, false).unwrap();
+    assert_eq!(src.preview_gaussians() as usize, DEFAULT_PREVIEW_GAUSSIANS);
+    let full = src.render(&cam, &settings).unwrap();
+    let preview = src.render_preview(&cam, &settings).unwrap();
+    assert_eq!(full.gaussians as usize, scene.len());
+    assert_eq!(preview.gaussians as usize, DEFAULT_PREVIEW_GAUSSIANS);
+    assert!(full.rgba8 != preview.rgba8);
+    // The preview is the render of the subset, bit for bit.
+    let subset = scene
+        .select(
+            &scene.most_important(DEFAULT_PREVIEW_GAUSSIANS),
+            scene.sh_degree,
+        )
+        .activated();
+    let mut r = renderer();
+    let gs = r.upload(&subset).unwrap();
+    let want = r
+        .render_rgba8(&gs, &cam, &RenderOptions::default())
+        .unwrap();
+    assert!(
+        want.rgba == preview.rgba8,
+        "the preview is not the subset's render"
+    );
+    // Off: previews draw everything.
+    src.set_preview(&scene, 0).unwrap();
+    assert_eq!(src.preview_gaussians() as usize, scene.len());
+    assert!(src.render_preview(&cam, &settings).unwrap().rgba8 == full.rgba8);
+    assert_validation_clean(src.renderer());
+    assert_validation_clean(&r);
+}

@@ -778,7 +778,14 @@ fn preview_rate(backend: &[&str]) {
                     fulls += 1;
                 } else {
                     previews += 1;
-                    size = format!("{}x{}", f.header["width"], f.header["height"]);
+                    size = format!(
+                        "{}x{} (wall {:.1} ms, GPU {:.1} ms: {})",
+                        f.header["width"],
+                        f.header["height"],
+                        f.header["wall_ms"].as_f64().unwrap_or(0.0),
+                        f.header["timings"]["total"].as_f64().unwrap_or(0.0),
+                        f.header["timings"]
+                    );
                 }
             }
         }

@@ -47,6 +47,12 @@ pub(crate) struct ViewArgs {
     /// integrated, then CPU).
     #[arg(long, value_name = "N", conflicts_with = "cpu")]
     pub(crate) device: Option<usize>,
+    /// While the camera moves, draw only the N most important Gaussians (opacity times
+    /// the area of the largest cross-section), so previews stay fluid; the view at rest
+    /// always draws all. 0 previews with the whole scene. Scenes of at most 2N
+    /// Gaussians always preview whole.
+    #[arg(long, value_name = "N", default_value_t = vksplat::view::source::DEFAULT_PREVIEW_GAUSSIANS, conflicts_with = "cpu")]
+    pub(crate) preview_gaussians: usize,
     /// Opacity compensation for scenes trained with antialiasing (as render
     /// --antialiased); on by default when the file records it.
     #[arg(long)]
@@ -112,7 +118,17 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)>
         let device = src.device_name();
         (Box::new(src), device)
     } else {
-        let src = vksplat::view::source::GpuSource::new(&scene, args.device, antialiased)?;
+        let mut src = vksplat::view::source::GpuSource::new(&scene, args.device, antialiased)?;
+        if args.preview_gaussians != vksplat::view::source::DEFAULT_PREVIEW_GAUSSIANS {
+            src.set_preview(&scene, args.preview_gaussians)?;
+        }
+        if src.preview_gaussians() < scene.len() as u32 {
+            note!(
+                "previews while the camera moves draw the {} most important of {} Gaussians; the view at rest draws all (--preview-gaussians N changes it)",
+                src.preview_gaussians(),
+                scene.len()
+            );
+        }
         let device = src.device_name();
         (Box::new(src), device)
     };

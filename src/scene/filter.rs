@@ -90,24 +90,8 @@ impl SceneFilter {
         let degree = self
             .sh_degree
             .map_or(scene.sh_degree, |d| d.min(scene.sh_degree));
-        let mut out = Scene::empty(degree);
-        out.antialiased = scene.antialiased;
         let keep: Vec<usize> = (0..scene.len()).filter(|&i| self.keeps(scene, i)).collect();
-        let in_stride = scene.sh_stride();
-        let out_stride = out.sh_stride();
-        out.positions.reserve(keep.len());
-        out.sh.reserve(keep.len() * out_stride);
-        for &i in &keep {
-            out.positions.push(scene.positions[i]);
-            out.log_scales.push(scene.log_scales[i]);
-            out.rotations.push(scene.rotations[i]);
-            out.opacity_logits.push(scene.opacity_logits[i]);
-            // Coefficient-major, channel innermost: the first `out_stride` floats are
-            // exactly the bands 0..=degree.
-            out.sh
-                .extend_from_slice(&scene.sh[i * in_stride..i * in_stride + out_stride]);
-        }
-        out
+        scene.select(&keep, degree)
     }
 }
 

@@ -103,6 +103,53 @@ impl Scene {
         }
     }
 
+    /// The Gaussians at `indices` (in that order) with SH bands up to `sh_degree` (at
+    /// most the scene's), the flags kept.
+    pub fn select(&self, indices: &[usize], sh_degree: u32) -> Scene {
+        let mut out = Scene::empty(sh_degree.min(self.sh_degree));
+        out.antialiased = self.antialiased;
+        let in_stride = self.sh_stride();
+        let out_stride = out.sh_stride();
+        out.positions.reserve(indices.len());
+        out.sh.reserve(indices.len() * out_stride);
+        for &i in indices {
+            out.positions.push(self.positions[i]);
+            out.log_scales.push(self.log_scales[i]);
+            out.rotations.push(self.rotations[i]);
+            out.opacity_logits.push(self.opacity_logits[i]);
+            // Coefficient-major, channel innermost: the first `out_stride` floats are
+            // exactly the bands 0..=degree.
+            out.sh
+                .extend_from_slice(&self.sh[i * in_stride..i * in_stride + out_stride]);
+        }
+        out
+    }
+
+    /// The indices of the `n` Gaussians that matter most to an image, in scene order:
+    /// ranked by opacity times the area of the largest cross-section (the two largest
+    /// axis scales), the splats that cover the most of any view. NaN weights rank last,
+    /// ties by index.
+    pub fn most_important(&self, n: usize) -> Vec<usize> {
+        let weight = |i: usize| {
+            let mut s = self.log_scales[i];
+            s.sort_by(f32::total_cmp);
+            let w = sigmoid(self.opacity_logits[i]) * (s[1] + s[2]).exp();
+            if w.is_nan() {
+                f32::NEG_INFINITY
+            } else {
+                w
+            }
+        };
+        let mut order: Vec<(f32, usize)> = (0..self.len()).map(|i| (weight(i), i)).collect();
+        if n < order.len() {
+            order.select_nth_unstable_by(n, |a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            order.truncate(n);
+        }
+        let mut keep: Vec<usize> = order.into_iter().map(|(_, i)| i).collect();
+        keep.sort_unstable();
+        keep
+    }
+
     /// Number of Gaussians.
     pub fn len(&self) -> usize {
         self.positions.len()

@@ -91,6 +91,7 @@ impl FrameSource for CpuSource {
             timings,
             stats,
             wall_ms: start.elapsed().as_secs_f64() * 1e3,
+            gaussians: self.scene.len() as u32,
         })
     }
 

@@ -263,6 +263,8 @@ pub struct FrameHeader {
     pub encoding: &'static str,
     /// Stage times.
     pub timings: StageMs,
+    /// Gaussians the frame was drawn from (a preview may draw the most important only).
+    pub gaussians: u32,
     /// Gaussians that touched a tile.
     pub visible: u32,
     /// (tile, Gaussian) pairs.

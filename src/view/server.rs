@@ -260,7 +260,10 @@ fn render_worker(mut source: Box<dyn FrameSource>, shared: &Shared) {
         };
         let message = match job {
             Job::Frame(job) => {
-                let result = guarded(|| source.render(&job.camera, &job.settings));
+                let result = guarded(|| match job.quality {
+                    Quality::Preview => source.render_preview(&job.camera, &job.settings),
+                    Quality::Full => source.render(&job.camera, &job.settings),
+                });
                 Outgoing::Frame {
                     job: Box::new(job),
                     result,

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use tungstenite::{Message, WebSocket};
 
 /// The blend of a preview frame should take about this long (ms).
-const PREVIEW_BLEND_MS: f64 = 50.0;
+const PREVIEW_BLEND_MS: f64 = 25.0;
 /// Previews are never smaller than this many pixels.
 const MIN_PREVIEW_PIXELS: f64 = 60_000.0;
 
@@ -241,6 +241,7 @@ impl<'s, 'a> Session<'s, 'a> {
             quality: job.quality,
             encoding,
             timings: StageMs::from(&frame.timings),
+            gaussians: frame.gaussians,
             visible: frame.stats.visible,
             pairs: frame.stats.pairs,
             wall_ms: frame.wall_ms,

@@ -115,6 +115,8 @@ pub struct ViewFrame {
     pub stats: FrameStats,
     /// Wall time of the render call (submit to readback), milliseconds.
     pub wall_ms: f64,
+    /// Gaussians the frame was drawn from: the scene's, or a preview's subset.
+    pub gaussians: u32,
 }
 
 /// Screenshot formats: written by the same code as `vksplat render`.
@@ -131,6 +133,15 @@ pub enum ShotFormat {
 pub trait FrameSource: Send {
     /// Renders `cam` (its size is the frame's) with `settings`.
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame>;
+    /// Renders a preview while the camera moves: by default the same as [`Self::render`];
+    /// a source may draw fewer Gaussians (see [`GpuSource::set_preview`]).
+    fn render_preview(
+        &mut self,
+        cam: &Camera,
+        settings: &ViewSettings,
+    ) -> anyhow::Result<ViewFrame> {
+        self.render(cam, settings)
+    }
     /// Renders `cam` at full quality and encodes it as a file of `format`, as
     /// `vksplat render` would write it with the flags matching `settings`.
     fn screenshot(
@@ -145,12 +156,19 @@ pub trait FrameSource: Send {
 /// frame (the filters, scale modifier and SH degree are read by preprocess); colour frames
 /// are packed to RGBA8 on the device and only those bytes are read back.
 pub struct GpuSource {
-    // Dropped before the renderer, whose context frees it.
+    // Dropped before the renderer, whose context frees them.
     scene: GpuScene,
+    /// The most important Gaussians of the scene, drawn while the camera moves.
+    preview: Option<GpuScene>,
     renderer: GpuRenderer,
     sh_degree: u32,
     antialiased: bool,
 }
+
+/// Gaussians a preview draws by default: on lavapipe a frame's per-Gaussian stages
+/// (preprocess, depth order, keys) cost about 1 ms per 1,000 Gaussians, so a preview of
+/// more would not keep the viewer near 10 updates per second.
+pub const DEFAULT_PREVIEW_GAUSSIANS: usize = 24_576;
 
 impl GpuSource {
     /// Opens device `device` (an index; `None`: the default device), builds the pipeline
@@ -175,11 +193,59 @@ impl GpuSource {
     ) -> anyhow::Result<GpuSource> {
         let renderer = GpuRenderer::new(ctx)?;
         let gpu_scene = renderer.upload(&scene.activated())?;
-        Ok(GpuSource {
+        let mut source = GpuSource {
             scene: gpu_scene,
+            preview: None,
             renderer,
             sh_degree: scene.sh_degree,
             antialiased,
+        };
+        source.set_preview(scene, DEFAULT_PREVIEW_GAUSSIANS)?;
+        Ok(source)
+    }
+
+    /// Previews (frames while the camera moves) draw the `n` most important Gaussians of
+    /// `scene` ([`Scene::most_important`]), uploaded once beside the scene; resting frames
+    /// and screenshots always draw all of them. Scenes of at most `2 n` Gaussians, and
+    /// `n == 0`, preview with the whole scene.
+    pub fn set_preview(&mut self, scene: &Scene, n: usize) -> anyhow::Result<()> {
+        self.preview = None;
+        if n > 0 && scene.len() > 2 * n {
+            let subset = scene.select(&scene.most_important(n), scene.sh_degree);
+            self.preview = Some(self.renderer.upload(&subset.activated())?);
+        }
+        Ok(())
+    }
+
+    /// Gaussians a preview draws.
+    pub fn preview_gaussians(&self) -> u32 {
+        self.preview.as_ref().unwrap_or(&self.scene).len()
+    }
+
+    fn render_scene(
+        &mut self,
+        preview: bool,
+        cam: &Camera,
+        settings: &ViewSettings,
+    ) -> anyhow::Result<ViewFrame> {
+        let opts = self.options(settings)?;
+        let scene = match (&self.preview, preview) {
+            (Some(p), true) => p,
+            _ => &self.scene,
+        };
+        let start = std::time::Instant::now();
+        let rgba8 = match settings.mode {
+            ViewMode::Rgb => self.renderer.render_rgba8(scene, cam, &opts)?.rgba,
+            mode => frame_rgba8(&self.renderer.render(scene, cam, &opts)?, mode),
+        };
+        Ok(ViewFrame {
+            width: cam.width,
+            height: cam.height,
+            rgba8,
+            timings: self.renderer.timings().clone(),
+            stats: self.renderer.stats().clone(),
+            wall_ms: start.elapsed().as_secs_f64() * 1e3,
+            gaussians: scene.len(),
         })
     }
 
@@ -259,20 +325,15 @@ pub fn encode_shot(
 
 impl FrameSource for GpuSource {
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame> {
-        let opts = self.options(settings)?;
-        let start = std::time::Instant::now();
-        let rgba8 = match settings.mode {
-            ViewMode::Rgb => self.renderer.render_rgba8(&self.scene, cam, &opts)?.rgba,
-            mode => frame_rgba8(&self.renderer.render(&self.scene, cam, &opts)?, mode),
-        };
-        Ok(ViewFrame {
-            width: cam.width,
-            height: cam.height,
-            rgba8,
-            timings: self.renderer.timings().clone(),
-            stats: self.renderer.stats().clone(),
-            wall_ms: start.elapsed().as_secs_f64() * 1e3,
-        })
+        self.render_scene(false, cam, settings)
+    }
+
+    fn render_preview(
+        &mut self,
+        cam: &Camera,
+        settings: &ViewSettings,
+    ) -> anyhow::Result<ViewFrame> {
+        self.render_scene(true, cam, settings)
     }
 
     fn screenshot(

@@ -516,7 +516,9 @@
       `preprocess ${f(t.preprocess)}\norder      ${f(t.order)}\nscan       ${f(t.scan)}\n` +
       `keys       ${f(t.keys)}\nsort       ${f(t.sort)}\nranges     ${f(t.ranges)}\n` +
       `blend      ${f(t.blend)}\ntotal      ${f(t.total)} ms\n` +
-      `visible ${h.visible.toLocaleString()}  pairs ${h.pairs.toLocaleString()}\n` +
+      `visible ${h.visible.toLocaleString()} of ${h.gaussians.toLocaleString()}` +
+      (V.hello && h.gaussians < V.hello.gaussians ? ' (preview: the most important)' : '') +
+      `  pairs ${h.pairs.toLocaleString()}\n` +
       (V.hello ? V.hello.device : '');
   }
 
