@@ -65,3 +65,17 @@ macro_rules! note {
     () => { $crate::console::write_stderr(format_args!("\n")) };
     ($($arg:tt)*) => { $crate::console::write_stderr(format_args!("{}\n", format_args!($($arg)*))) };
 }
+
+/// An error as one sentence: the outermost message with each cause appended that it
+/// does not already contain (`context: cause: cause`).
+pub fn error_sentence(e: &anyhow::Error) -> String {
+    let mut s = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !s.contains(&c) {
+            s.push_str(": ");
+            s.push_str(&c);
+        }
+    }
+    s
+}

@@ -73,24 +73,11 @@ fn main() -> ExitCode {
                 ExitCode::from(130)
             }
             None => {
-                note!("error: {}", error_sentence(&e));
+                note!("error: {}", vksplat::console::error_sentence(&e));
                 ExitCode::FAILURE
             }
         },
     }
-}
-
-/// One sentence: the outermost message with its causes appended.
-fn error_sentence(e: &anyhow::Error) -> String {
-    let mut s = e.to_string();
-    for cause in e.chain().skip(1) {
-        let c = cause.to_string();
-        if !s.contains(&c) {
-            s.push_str(": ");
-            s.push_str(&c);
-        }
-    }
-    s
 }
 
 #[cfg(test)]

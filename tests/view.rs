@@ -153,6 +153,8 @@ fn resting_frames_equal_render(backend: &[&str]) {
         "sort",
         "ranges",
         "blend",
+        "readback",
+        "total",
     ] {
         assert!(
             frame.header["timings"][stage].is_number(),

@@ -86,7 +86,7 @@ impl GpuScene {
 }
 
 /// GPU time of each stage of the last frame, in milliseconds (timestamp queries).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StageTimings {
     /// Cull, project, covariance, SH colour, tile rectangles.
     pub preprocess: f64,

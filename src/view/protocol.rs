@@ -218,34 +218,6 @@ pub enum Quality {
     Full,
 }
 
-/// GPU (or CPU) milliseconds of each stage, as the readout shows them.
-#[derive(Debug, Serialize)]
-pub struct StageMs {
-    pub preprocess: f64,
-    pub order: f64,
-    pub scan: f64,
-    pub keys: f64,
-    pub sort: f64,
-    pub ranges: f64,
-    pub blend: f64,
-    pub total: f64,
-}
-
-impl From<&StageTimings> for StageMs {
-    fn from(t: &StageTimings) -> Self {
-        StageMs {
-            preprocess: t.preprocess,
-            order: t.order,
-            scan: t.scan,
-            keys: t.keys,
-            sort: t.sort,
-            ranges: t.ranges,
-            blend: t.blend,
-            total: t.total,
-        }
-    }
-}
-
 /// The header of a binary frame message.
 #[derive(Debug, Serialize)]
 pub struct FrameHeader {
@@ -262,7 +234,7 @@ pub struct FrameHeader {
     /// `"jpeg"` or `"png"`.
     pub encoding: &'static str,
     /// Stage times.
-    pub timings: StageMs,
+    pub timings: StageTimings,
     /// Gaussians the frame was drawn from (a preview may draw the most important only).
     pub gaussians: u32,
     /// Gaussians that touched a tile.

@@ -311,23 +311,14 @@ fn next_job(q: &mut Queue) -> Option<(Job, mpsc::Sender<Outgoing>)> {
 fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> Result<T, String> {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
         Ok(Ok(v)) => Ok(v),
-        Ok(Err(e)) => Err(format!("render failed: {}", error_sentence(&e))),
+        Ok(Err(e)) => Err(format!(
+            "render failed: {}",
+            crate::console::error_sentence(&e)
+        )),
         Err(_) => Err(
             "the renderer failed unexpectedly (a bug; the message is in the server's log)".into(),
         ),
     }
-}
-
-fn error_sentence(e: &anyhow::Error) -> String {
-    let mut s = e.to_string();
-    for cause in e.chain().skip(1) {
-        let c = cause.to_string();
-        if !s.contains(&c) {
-            s.push_str(": ");
-            s.push_str(&c);
-        }
-    }
-    s
 }
 
 /// One TCP connection: a file of the page, or the upgrade to a WebSocket.

@@ -5,7 +5,7 @@
 use super::paths::{export_path, sample_path};
 use super::protocol::{
     binary_message, camera_from_entry, camera_to_entry, ClientMessage, FrameHeader, KeyframeIn,
-    PathFormat, Quality, ServerMessage, ShotHeader, StageMs,
+    PathFormat, Quality, ServerMessage, ShotHeader,
 };
 use super::server::{FrameJob, Outgoing, Shared, ShotJob};
 use super::source::{ShotFormat, ViewFrame, ViewSettings};
@@ -240,7 +240,7 @@ impl<'s, 'a> Session<'s, 'a> {
             height: h,
             quality: job.quality,
             encoding,
-            timings: StageMs::from(&frame.timings),
+            timings: frame.timings.clone(),
             gaussians: frame.gaussians,
             visible: frame.stats.visible,
             pairs: frame.stats.pairs,

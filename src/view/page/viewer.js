@@ -515,7 +515,7 @@
       `frame ${h.wall_ms.toFixed(1)} ms (encode ${h.encode_ms.toFixed(1)})\n` +
       `preprocess ${f(t.preprocess)}\norder      ${f(t.order)}\nscan       ${f(t.scan)}\n` +
       `keys       ${f(t.keys)}\nsort       ${f(t.sort)}\nranges     ${f(t.ranges)}\n` +
-      `blend      ${f(t.blend)}\ntotal      ${f(t.total)} ms\n` +
+      `blend      ${f(t.blend)}\nreadback   ${f(t.readback)}\ntotal      ${f(t.total)} ms\n` +
       `visible ${h.visible.toLocaleString()} of ${h.gaussians.toLocaleString()}` +
       (V.hello && h.gaussians < V.hello.gaussians ? ' (preview: the most important)' : '') +
       `  pairs ${h.pairs.toLocaleString()}\n` +
