@@ -102,6 +102,9 @@ fn compare_passes_on_every_real_scene_with_the_defaults() {
                     "{scene}: {f}"
                 );
             }
+            // FLIP is reported (not gated): near 0 for frames this close.
+            let flip = f["flip"].as_f64().unwrap();
+            assert!((0.0..0.01).contains(&flip), "{scene}: FLIP {flip}");
             let diff = report.join(f["diff"].as_str().unwrap());
             let img = image::open(&diff).unwrap();
             // The heat map plus its colour bar.
@@ -147,6 +150,8 @@ fn a_perturbed_blend_fails_with_exit_1_naming_the_frames() {
     let json = read_json(&report.join("report.json"));
     assert_eq!(json["pass"], false);
     assert_eq!(json["failed_frames"], serde_json::json!([3, 7]));
+    // The perturbation shows in FLIP too (reported, not gated).
+    assert!(json["frames"][0]["flip"].as_f64().unwrap() > 0.0);
     let psnr = json["frames"][0]["color"]["psnr"].as_f64().unwrap();
     let want = 10.0 * (3.0f64 / 1e-4).log10();
     // Pixels whose red is already clamped at 1 cannot move, so the PSNR is a little above

@@ -171,6 +171,8 @@ struct FrameRecord {
     height: u32,
     color: ErrorStats,
     ssim: f64,
+    /// Mean LDR-FLIP of the colour (0: identical).
+    flip: f64,
     alpha: ErrorStats,
     depth: ErrorStats,
     diff: String,
@@ -281,11 +283,12 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
     let gpu_scene = renderer.upload(&act)?;
 
     outln!(
-        "{:>5}  {:<16} {:>9} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9}  result",
+        "{:>5}  {:<16} {:>9} {:>8} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9}  result",
         "frame",
         "camera",
         "colour dB",
         "SSIM",
+        "FLIP",
         "within %",
         "max err",
         "alpha dB",
@@ -302,11 +305,15 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         }
         let cpu = vksplat::cpu::render(&act, cam, &opts);
         let m = metrics::compare_frames(&cpu, &gpu);
-        let error = diff_image::per_pixel_max_abs(
-            &metrics::clamped_color(&cpu),
-            &metrics::clamped_color(&gpu),
-            3,
+        let (reference, test) = (metrics::clamped_color(&cpu), metrics::clamped_color(&gpu));
+        let flip = metrics::flip(
+            &reference,
+            &test,
+            cam.width as usize,
+            cam.height as usize,
+            metrics::flip_default_ppd(),
         );
+        let error = diff_image::per_pixel_max_abs(&reference, &test, 3);
         let heat = diff_image::heatmap(cam.width, cam.height, &error, args.magnify);
         output::write_frame(
             &heat,
@@ -318,10 +325,11 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         gate.check("colour", &m.color, &mut failures);
         gate.check("alpha", &m.alpha, &mut failures);
         outln!(
-            "{k:>5}  {:<16} {:>9} {:>8.5} {:>9.3} {:>8.5} {:>9} {:>9.3} {:>9}  {}",
+            "{k:>5}  {:<16} {:>9} {:>8.5} {:>8.5} {:>9.3} {:>8.5} {:>9} {:>9.3} {:>9}  {}",
             short(&cam.name, 16),
             db(m.color.psnr),
             m.ssim,
+            flip,
             m.color.within * 100.0,
             m.color.max_abs,
             db(m.alpha.psnr),
@@ -336,6 +344,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
             height: cam.height,
             color: m.color,
             ssim: m.ssim,
+            flip,
             alpha: m.alpha,
             depth: m.depth,
             diff: diff_name(*k),
@@ -455,17 +464,18 @@ pub(crate) fn db_csv(v: f64) -> String {
 
 fn render_csv(frames: &[FrameRecord]) -> String {
     let mut s = String::from(
-        "frame,camera,width,height,color_psnr,color_max_abs,color_mean_abs,color_within,ssim,alpha_psnr,alpha_max_abs,alpha_mean_abs,alpha_within,depth_psnr,depth_max_abs,depth_mean_abs,depth_within,depth_peak,diff,pass\n",
+        "frame,camera,width,height,color_psnr,color_max_abs,color_mean_abs,color_within,ssim,flip,alpha_psnr,alpha_max_abs,alpha_mean_abs,alpha_within,depth_psnr,depth_max_abs,depth_mean_abs,depth_within,depth_peak,diff,pass\n",
     );
     for r in frames {
         s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.frame,
             csv_cell(&r.camera),
             r.width,
             r.height,
             stats_cells(&r.color),
             r.ssim,
+            r.flip,
             stats_cells(&r.alpha),
             stats_cells(&r.depth),
             r.depth.peak,
