@@ -60,6 +60,21 @@ impl OutputPattern {
         }
         let mut pieces = Vec::new();
         let mut lit = String::new();
+        // A frame-number placeholder of `width` digits (`%0Nd` or `#...#`), after the
+        // literal text before it.
+        let push_index =
+            |pieces: &mut Vec<Piece>, lit: &mut String, width: usize| -> Result<(), String> {
+                if width > 12 {
+                    return Err(format!(
+                        "{text}: frame numbers are padded to at most 12 digits"
+                    ));
+                }
+                if !lit.is_empty() {
+                    pieces.push(Piece::Text(std::mem::take(lit)));
+                }
+                pieces.push(Piece::Index { width });
+                Ok(())
+            };
         let mut chars = text.chars().peekable();
         while let Some(c) = chars.next() {
             match c {
@@ -83,15 +98,7 @@ impl OutputPattern {
                     } else {
                         digits.parse::<usize>().unwrap_or(usize::MAX)
                     };
-                    if width > 12 {
-                        return Err(format!(
-                            "{text}: frame numbers are padded to at most 12 digits"
-                        ));
-                    }
-                    if !lit.is_empty() {
-                        pieces.push(Piece::Text(std::mem::take(&mut lit)));
-                    }
-                    pieces.push(Piece::Index { width });
+                    push_index(&mut pieces, &mut lit, width)?;
                 }
                 '#' => {
                     let mut width = 1;
@@ -99,15 +106,7 @@ impl OutputPattern {
                         chars.next();
                         width += 1;
                     }
-                    if width > 12 {
-                        return Err(format!(
-                            "{text}: frame numbers are padded to at most 12 digits"
-                        ));
-                    }
-                    if !lit.is_empty() {
-                        pieces.push(Piece::Text(std::mem::take(&mut lit)));
-                    }
-                    pieces.push(Piece::Index { width });
+                    push_index(&mut pieces, &mut lit, width)?;
                 }
                 '{' if chars.peek() == Some(&'{') => {
                     chars.next();

@@ -696,7 +696,7 @@ fn viewer_previews_draw_the_most_important_gaussians() {
 
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 4, 320, 180);
     let settings = ViewSettings::default();
-    let mut src = GpuSource::new(&scene, None, false).unwrap();
+    let mut src = GpuSource::new(&scene, None, false, DEFAULT_PREVIEW_GAUSSIANS).unwrap();
     assert_eq!(src.preview_gaussians() as usize, DEFAULT_PREVIEW_GAUSSIANS);
     let full = src.render(&cam, &settings).unwrap();
     let preview = src.render_preview(&cam, &settings).unwrap();

@@ -118,10 +118,12 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)>
         let device = src.device_name();
         (Box::new(src), device)
     } else {
-        let mut src = vksplat::view::source::GpuSource::new(&scene, args.device, antialiased)?;
-        if args.preview_gaussians != vksplat::view::source::DEFAULT_PREVIEW_GAUSSIANS {
-            src.set_preview(&scene, args.preview_gaussians)?;
-        }
+        let src = vksplat::view::source::GpuSource::new(
+            &scene,
+            args.device,
+            antialiased,
+            args.preview_gaussians,
+        )?;
         if src.preview_gaussians() < scene.len() as u32 {
             note!(
                 "previews while the camera moves draw the {} most important of {} Gaussians; the view at rest draws all (--preview-gaussians N changes it)",

@@ -172,17 +172,19 @@ pub const DEFAULT_PREVIEW_GAUSSIANS: usize = 24_576;
 
 impl GpuSource {
     /// Opens device `device` (an index; `None`: the default device), builds the pipeline
-    /// and uploads `scene`.
+    /// and uploads `scene`, and beside it the preview subset of `preview_gaussians`
+    /// ([`Self::set_preview`]; [`DEFAULT_PREVIEW_GAUSSIANS`] unless the user asks).
     pub fn new(
         scene: &Scene,
         device: Option<usize>,
         antialiased: bool,
+        preview_gaussians: usize,
     ) -> anyhow::Result<GpuSource> {
         let ctx = GpuContext::new(&ContextOptions {
             device: device.map(|d| d.to_string()),
             ..Default::default()
         })?;
-        Self::with_context(ctx, scene, antialiased)
+        Self::with_context(ctx, scene, antialiased, preview_gaussians)
     }
 
     /// As [`Self::new`], on an opened context.
@@ -190,6 +192,7 @@ impl GpuSource {
         ctx: GpuContext,
         scene: &Scene,
         antialiased: bool,
+        preview_gaussians: usize,
     ) -> anyhow::Result<GpuSource> {
         let renderer = GpuRenderer::new(ctx)?;
         let gpu_scene = renderer.upload(&scene.activated())?;
@@ -200,7 +203,7 @@ impl GpuSource {
             sh_degree: scene.sh_degree,
             antialiased,
         };
-        source.set_preview(scene, DEFAULT_PREVIEW_GAUSSIANS)?;
+        source.set_preview(scene, preview_gaussians)?;
         Ok(source)
     }
 
