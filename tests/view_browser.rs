@@ -5,7 +5,8 @@
 //! and a screenshot of the page must show a rendered scene.
 //!
 //! `VKSPLAT_VIEWER_SCREENSHOT=path.png` also saves the page screenshot (the README's
-//! docs/viewer.png is made so, with `VKSPLAT_VIEWER_SCENE=scene.ply`).
+//! docs/viewer.png is made so, with `VKSPLAT_VIEWER_SCENE=/absolute/path/scene.ply`: the
+//! test runs in a temporary directory).
 
 mod common;
 mod view_common;
