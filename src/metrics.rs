@@ -97,6 +97,75 @@ pub fn error_stats(reference: &[f32], test: &[f32], channels: usize, peak: f64) 
     }
 }
 
+/// What an image plane holds, which decides how [`plane_metrics`] compares it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlaneKind {
+    /// Displayable colour (RGB, or grey): clamped to [0, 1], peak 1, with SSIM, and
+    /// LDR-FLIP when it has three channels.
+    Colour,
+    /// Alpha: clamped to [0, 1], peak 1.
+    Alpha,
+    /// Any other data (depth, features): compared as given, peak the largest finite
+    /// absolute value of the reference (1 when it has none).
+    Data,
+}
+
+/// The figures of one plane set of two images: error statistics, and for colour SSIM and
+/// LDR-FLIP.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PlaneMetrics {
+    /// PSNR, error figures and 8-bit agreement.
+    #[serde(flatten)]
+    pub stats: ErrorStats,
+    /// SSIM ([`ssim`]), for colour.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ssim: Option<f64>,
+    /// Mean LDR-FLIP ([`flip`] at [`flip_default_ppd`]), for three-channel colour.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flip: Option<f64>,
+}
+
+/// Compares `test` with `reference`, `width x height x channels` samples each, by the
+/// rules of `kind` (the rules of `vksplat compare A B`). Colour and alpha samples are
+/// clamped to [0, 1] in place, so a caller can draw a difference map of exactly what was
+/// compared (divided by the returned peak).
+pub fn plane_metrics(
+    reference: &mut [f32],
+    test: &mut [f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    kind: PlaneKind,
+) -> PlaneMetrics {
+    let peak = match kind {
+        PlaneKind::Colour | PlaneKind::Alpha => {
+            for v in reference.iter_mut().chain(test.iter_mut()) {
+                *v = v.clamp(0.0, 1.0);
+            }
+            1.0
+        }
+        PlaneKind::Data => {
+            let m = reference
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0f32, |m, v| m.max(v.abs()));
+            if m > 0.0 {
+                m as f64
+            } else {
+                1.0
+            }
+        }
+    };
+    let stats = error_stats(reference, test, channels, peak);
+    let colour = kind == PlaneKind::Colour;
+    PlaneMetrics {
+        stats,
+        ssim: colour.then(|| ssim(reference, test, width, height, channels)),
+        flip: (colour && channels == 3)
+            .then(|| flip(reference, test, width, height, flip_default_ppd())),
+    }
+}
+
 /// The metrics of a rendered frame against the reference's render of the same camera.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct FrameComparison {

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what vksplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
 # driver (so no GPU is needed), the Khronos validation layer, and the GLSL compiler
-# libraries the `shaderc` crate links (glslang + SPIRV-Tools static archives).
+# libraries the `shaderc` crate links (glslang + SPIRV-Tools static archives), Chromium
+# for the viewer's browser test, and Python with venv for the Python package.
 # Idempotent: does nothing when everything is present. Needs root (or sudo).
 set -euo pipefail
 
@@ -11,6 +12,14 @@ packages=(
   pkg-config openexr
   chromium chromium-driver
 )
+# Python (for the `vksplat` package and its tests): any python3 >= 3.9 with venv and pip;
+# Debian's when the machine has none of its own.
+venv_probe=$(mktemp -d)
+if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 9))' 2>/dev/null \
+  || ! python3 -m venv "$venv_probe/v" >/dev/null 2>&1; then
+  packages+=(python3 python3-venv python3-pip)
+fi
+rm -rf "$venv_probe"
 
 missing=()
 for p in "${packages[@]}"; do

@@ -1,9 +1,25 @@
 #!/usr/bin/env bash
 # The test command from the README: installs system packages if missing, then runs the
 # whole suite on lavapipe with the Khronos validation layer enabled (any validation
-# message fails the GPU tests).
+# message fails the GPU tests): the Rust tests, then the Python package built with pip
+# in a fresh virtualenv (target/pyenv) and its pytest suite.
+# Arguments go to `cargo test` (e.g. a test name); VKSPLAT_SKIP_PYTHON=1 skips the
+# Python part.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
 export VKSPLAT_VALIDATE=1
 cargo test --all-targets "$@"
+
+if [ "${VKSPLAT_SKIP_PYTHON:-0}" = 1 ]; then
+  exit 0
+fi
+# The Python package: built and installed as a user does (`pip install ./python`), into
+# a virtualenv made anew, and tested against the command-line binary built above.
+venv=target/pyenv
+rm -rf "$venv"
+python3 -m venv "$venv"
+"$venv/bin/pip" install -q --upgrade pip
+CARGO_TARGET_DIR="$PWD/target/python" "$venv/bin/pip" install -q "./python[notebook,test]"
+cargo build -q --bin vksplat
+VKSPLAT_BIN="$PWD/target/debug/vksplat" "$venv/bin/pytest" -q python/tests

@@ -12,7 +12,7 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use vksplat::diff_image;
 use vksplat::image_file::{self, Planes};
-use vksplat::metrics::{self, ErrorStats};
+use vksplat::metrics::{self, ErrorStats, PlaneKind};
 use vksplat::output::{self, ImageFormat};
 use vksplat::render::blend::BlendKernel;
 use vksplat::render::GpuRenderer;
@@ -623,28 +623,14 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
     for (label, members) in &groups {
         let bm: Vec<String> = members.iter().map(|m| b_name(m)).collect();
         let (mut ra, mut rb) = (take(&pa, members), take(&pb, &bm));
-        let displayable = label == "color" || label == "alpha";
-        let peak = if displayable {
-            for v in ra.iter_mut().chain(rb.iter_mut()) {
-                *v = v.clamp(0.0, 1.0);
-            }
-            1.0
-        } else {
-            let m = ra
-                .iter()
-                .filter(|v| v.is_finite())
-                .fold(0.0f32, |m, v| m.max(v.abs()));
-            if m > 0.0 {
-                m as f64
-            } else {
-                1.0
-            }
+        let kind = match label.as_str() {
+            "color" => PlaneKind::Colour,
+            "alpha" => PlaneKind::Alpha,
+            _ => PlaneKind::Data,
         };
-        let stats = metrics::error_stats(&ra, &rb, members.len(), peak);
-        let ssim = (label == "color").then(|| metrics::ssim(&ra, &rb, w, h, members.len()));
-        let flip = (label == "color" && members.len() == 3)
-            .then(|| metrics::flip(&ra, &rb, w, h, metrics::flip_default_ppd()));
-        if displayable {
+        let m = metrics::plane_metrics(&mut ra, &mut rb, w, h, members.len(), kind);
+        let (stats, peak) = (m.stats, m.stats.peak);
+        if kind != PlaneKind::Data {
             let plane = if label == "color" { "colour" } else { label };
             gate.check(plane, &stats, &mut failures);
         }
@@ -660,8 +646,8 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
             group: label.clone(),
             channels: members.clone(),
             stats,
-            ssim,
-            flip,
+            ssim: m.ssim,
+            flip: m.flip,
         });
     }
     outln!(

@@ -1,0 +1,926 @@
+//! `vksplat._native`: the Rust side of the Python package.
+//!
+//! The public API is the Python package `vksplat` (python/vksplat/__init__.py), which
+//! turns numpy arrays into the little-endian `f32` bytes this module takes and wraps the
+//! bytes it returns as arrays. Arrays cross as bytes so the module needs nothing beyond
+//! the stable ABI (one wheel for every CPython >= 3.9). Everything long-running releases
+//! the GIL; every error becomes a Python exception carrying the sentence the command line
+//! prints; a panic is caught and raised as `RuntimeError`, never unwound into Python.
+
+use glam::{Mat3, Vec3};
+use pyo3::exceptions::{PyFileExistsError, PyFileNotFoundError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyByteArray, PyBytes, PyDict};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+use vksplat::camera::{self, Camera};
+use vksplat::cpu::RenderOptions;
+use vksplat::frame::Frame;
+use vksplat::gpu::{ContextOptions, GpuContext, GpuError};
+use vksplat::metrics::{self, PlaneKind};
+use vksplat::render::{GpuRenderer, GpuScene};
+use vksplat::scene::{self, ActivatedScene, Scene};
+
+/// A camera as it crosses the boundary: name, width, height, `[fx, fy, cx, cy]` and the
+/// world-to-camera matrix, row-major 4x4 (OpenCV axes).
+type CamTuple = (String, u32, u32, [f32; 4], [f32; 16]);
+
+/// The planes a render returns: colour `B x H x W x 3`, alpha and depth `B x H x W`, each
+/// as `f32` bytes, `None` where not asked for.
+type Planes<'py> = (
+    Option<Bound<'py, PyByteArray>>,
+    Option<Bound<'py, PyByteArray>>,
+    Option<Bound<'py, PyByteArray>>,
+);
+
+// ---------------------------------------------------------------------------------------
+// Errors
+
+/// An error as a Python exception: a missing file is `FileNotFoundError`, an output that
+/// exists (without `overwrite`) `FileExistsError`, a device
+/// failure `RuntimeError`, anything else (bad input) `ValueError`; the message is the
+/// command line's sentence.
+fn py_err(e: anyhow::Error) -> PyErr {
+    let sentence = vksplat::console::error_sentence(&e);
+    for cause in e.chain() {
+        if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+            if io.kind() == std::io::ErrorKind::NotFound {
+                return PyFileNotFoundError::new_err(sentence);
+            }
+        }
+        if let Some(vksplat::output::OutputError::Exists(_)) = cause.downcast_ref() {
+            return PyFileExistsError::new_err(sentence);
+        }
+        if cause.downcast_ref::<GpuError>().is_some() {
+            return PyRuntimeError::new_err(sentence);
+        }
+    }
+    PyValueError::new_err(sentence)
+}
+
+fn value_err(message: impl Into<String>) -> PyErr {
+    PyValueError::new_err(message.into())
+}
+
+/// Runs `f`, turning a panic into `RuntimeError` so none unwinds into Python.
+fn guarded<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(result) => result,
+        Err(payload) => {
+            let what = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PyRuntimeError::new_err(format!(
+                "internal error in vksplat (please report it): {what}"
+            )))
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Byte helpers
+
+fn floats(bytes: &[u8], what: &str, count: usize) -> PyResult<Vec<f32>> {
+    if bytes.len() != count * 4 {
+        return Err(value_err(format!(
+            "{what}: expected {count} float32 values, got {} bytes",
+            bytes.len()
+        )));
+    }
+    Ok(bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
+}
+
+fn rows<const N: usize>(v: &[f32]) -> Vec<[f32; N]> {
+    v.chunks_exact(N)
+        .map(|c| std::array::from_fn(|i| c[i]))
+        .collect()
+}
+
+fn byte_array<'py, T: bytemuck::Pod>(py: Python<'py>, v: &[T]) -> Bound<'py, PyByteArray> {
+    PyByteArray::new(py, bytemuck::cast_slice(v))
+}
+
+// ---------------------------------------------------------------------------------------
+// Cameras
+
+fn to_camera(t: &CamTuple) -> PyResult<Camera> {
+    let (name, width, height, k, m) = t;
+    // Row-major [R t; 0 1]: glam takes columns, so R's rows become the transpose's columns.
+    let rotation = Mat3::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]]);
+    let cam = Camera {
+        name: name.clone(),
+        width: *width,
+        height: *height,
+        fx: k[0],
+        fy: k[1],
+        cx: k[2],
+        cy: k[3],
+        rotation,
+        translation: Vec3::new(m[3], m[7], m[11]),
+    };
+    cam.validate()
+        .map_err(|e| value_err(format!("camera \"{name}\": {e}")))?;
+    Ok(cam)
+}
+
+fn from_camera(c: &Camera) -> CamTuple {
+    let r = c.rotation.transpose().to_cols_array(); // rows of R
+    let t = c.translation;
+    (
+        c.name.clone(),
+        c.width,
+        c.height,
+        [c.fx, c.fy, c.cx, c.cy],
+        [
+            r[0], r[1], r[2], t.x, r[3], r[4], r[5], t.y, r[6], r[7], r[8], t.z, 0.0, 0.0, 0.0, 1.0,
+        ],
+    )
+}
+
+/// Every camera of a camera file (INRIA cameras.json, COLMAP model, nerfstudio path,
+/// vksplat keyframes; a trained model directory stands for its cameras.json).
+#[pyfunction]
+#[pyo3(signature = (path, frames=None, fps=None))]
+fn load_cameras(
+    py: Python<'_>,
+    path: PathBuf,
+    frames: Option<usize>,
+    fps: Option<f32>,
+) -> PyResult<Vec<CamTuple>> {
+    py.detach(|| {
+        guarded(|| {
+            let timing = camera::PathTiming { frames, fps };
+            let (cams, _) =
+                camera::load_camera_file(&path, &timing).map_err(|e| py_err(e.into()))?;
+            Ok(cams.iter().map(from_camera).collect())
+        })
+    })
+}
+
+/// Writes cameras as an INRIA cameras.json (read back by `load_cameras` and the CLI's
+/// `--cameras`), atomically.
+#[pyfunction]
+#[pyo3(signature = (path, cameras, overwrite=false))]
+fn save_cameras(path: PathBuf, cameras: Vec<CamTuple>, overwrite: bool) -> PyResult<()> {
+    guarded(|| {
+        let cams = cameras
+            .iter()
+            .map(to_camera)
+            .collect::<PyResult<Vec<_>>>()?;
+        let numbered: Vec<(usize, Camera)> = cams.into_iter().enumerate().collect();
+        let text = camera::inria::to_json(&numbered).map_err(|e| py_err(e.into()))?;
+        vksplat::output::write_bytes_atomically(&path, overwrite, text.as_bytes())
+            .map_err(|e| py_err(e.into()))
+    })
+}
+
+/// A turntable orbit around the scene's bulk (see `vksplat render --orbit`).
+#[pyfunction]
+#[pyo3(signature = (scene, frames, width, height, vfov, elevation, start, up, centre=None, radius=None))]
+#[allow(clippy::too_many_arguments)]
+fn orbit(
+    scene: &PyScene,
+    frames: usize,
+    width: u32,
+    height: u32,
+    vfov: f32,
+    elevation: f32,
+    start: f32,
+    up: [f32; 3],
+    centre: Option<[f32; 3]>,
+    radius: Option<f32>,
+) -> PyResult<Vec<CamTuple>> {
+    guarded(|| {
+        let params = camera::OrbitParams {
+            frames,
+            centre: centre.map(Vec3::from),
+            radius,
+            elevation_deg: elevation,
+            up: Vec3::from(up),
+            start_deg: start,
+            vfov_deg: vfov,
+            width,
+            height,
+        };
+        let cams = camera::orbit(&scene.raw.positions, &params).map_err(|e| py_err(e.into()))?;
+        Ok(cams.iter().map(from_camera).collect())
+    })
+}
+
+/// The camera `vksplat render` uses when given none.
+#[pyfunction]
+fn default_camera(scene: &PyScene, width: u32, height: u32) -> PyResult<CamTuple> {
+    guarded(|| {
+        camera::check_resolution(width, height).map_err(|e| py_err(e.into()))?;
+        Ok(from_camera(&camera::default_camera(
+            &scene.raw.positions,
+            width,
+            height,
+        )))
+    })
+}
+
+/// A camera at `eye` looking at `target`, `up` the world's up, vertical field of view in
+/// degrees.
+#[pyfunction]
+#[pyo3(signature = (eye, target, up, width, height, vfov, name=String::new()))]
+fn look_at(
+    eye: [f32; 3],
+    target: [f32; 3],
+    up: [f32; 3],
+    width: u32,
+    height: u32,
+    vfov: f32,
+    name: String,
+) -> PyResult<CamTuple> {
+    guarded(|| {
+        camera::check_resolution(width, height).map_err(|e| py_err(e.into()))?;
+        if !(vfov > 0.0 && vfov < 180.0) {
+            return Err(value_err(format!(
+                "the vertical field of view must be between 0 and 180 degrees, got {vfov}"
+            )));
+        }
+        let cam = Camera::look_at(
+            &name,
+            width,
+            height,
+            vfov.to_radians(),
+            Vec3::from(eye),
+            Vec3::from(target),
+            Vec3::from(up),
+        );
+        cam.validate().map_err(|e| py_err(e.into()))?;
+        Ok(from_camera(&cam))
+    })
+}
+
+/// The centre of the scene's robust bounding box (2nd-98th percentile per axis), what
+/// the default camera and orbits look at.
+#[pyfunction]
+fn bulk_centre(scene: &PyScene) -> [f32; 3] {
+    camera::bulk_bounds(&scene.raw.positions)
+        .box_centre()
+        .to_array()
+}
+
+// ---------------------------------------------------------------------------------------
+// Scenes
+
+static NEXT_SCENE_ID: AtomicU64 = AtomicU64::new(1);
+
+/// A scene: the trainer's parameters as stored and the activated arrays the renderers
+/// read. Immutable, so a renderer can keep its upload for as long as it sees the same id.
+#[pyclass(module = "vksplat._native", name = "Scene", frozen)]
+struct PyScene {
+    raw: Scene,
+    act: ActivatedScene,
+    id: u64,
+    source: String,
+}
+
+impl PyScene {
+    fn new(raw: Scene, act: ActivatedScene, source: String) -> Self {
+        PyScene {
+            raw,
+            act,
+            id: NEXT_SCENE_ID.fetch_add(1, Ordering::Relaxed),
+            source,
+        }
+    }
+}
+
+#[pymethods]
+impl PyScene {
+    /// Number of Gaussians.
+    fn __len__(&self) -> usize {
+        self.raw.len()
+    }
+
+    /// SH degree, 0..=3.
+    #[getter]
+    fn sh_degree(&self) -> u32 {
+        self.raw.sh_degree
+    }
+
+    /// Whether the file records antialiased training.
+    #[getter]
+    fn antialiased(&self) -> bool {
+        self.raw.antialiased
+    }
+
+    /// Where the scene came from.
+    #[getter]
+    fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// A number unique to this scene object.
+    #[getter]
+    fn id(&self) -> u64 {
+        self.id
+    }
+
+    /// One array as little-endian f32 bytes: means, quats, scales, opacities, sh (the
+    /// activated values the renderers read) or log_scales, raw_quats, opacity_logits (the
+    /// trainer's parameters).
+    fn array<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyBytes>> {
+        let bytes: &[u8] = match name {
+            "means" => bytemuck::cast_slice(&self.act.positions),
+            "quats" => bytemuck::cast_slice(&self.act.rotations),
+            "scales" => bytemuck::cast_slice(&self.act.scales),
+            "opacities" => bytemuck::cast_slice(&self.act.opacities),
+            "sh" => bytemuck::cast_slice(&self.act.sh),
+            "log_scales" => bytemuck::cast_slice(&self.raw.log_scales),
+            "raw_quats" => bytemuck::cast_slice(&self.raw.rotations),
+            "opacity_logits" => bytemuck::cast_slice(&self.raw.opacity_logits),
+            other => return Err(value_err(format!("no array called {other:?}"))),
+        };
+        Ok(PyBytes::new(py, bytes))
+    }
+
+    /// Writes the scene in the format `path`'s extension names (.ply, .splat, .spz),
+    /// atomically; an existing file is refused unless `overwrite`.
+    #[pyo3(signature = (path, overwrite=false))]
+    fn save(&self, py: Python<'_>, path: PathBuf, overwrite: bool) -> PyResult<()> {
+        py.detach(|| {
+            guarded(|| {
+                let format =
+                    scene::write::OutputFormat::from_path(&path).map_err(|e| py_err(e.into()))?;
+                let bytes = scene::write::to_bytes(&self.raw, format)
+                    .map_err(|m| value_err(format!("{}: {m}", path.display())))?;
+                vksplat::output::write_bytes_atomically(&path, overwrite, &bytes)
+                    .map_err(|e| py_err(e.into()))
+            })
+        })
+    }
+
+    /// The Gaussians whose largest scale is at most `max_scale` and whose opacity is at
+    /// least `min_opacity`, with SH bands up to `sh_degree` (as the CLI's filters).
+    #[pyo3(signature = (max_scale=None, min_opacity=None, sh_degree=None))]
+    fn filtered(
+        &self,
+        max_scale: Option<f32>,
+        min_opacity: Option<f32>,
+        sh_degree: Option<u32>,
+    ) -> PyResult<PyScene> {
+        guarded(|| {
+            let f = scene::filter::SceneFilter {
+                max_scale,
+                min_opacity,
+                crop: None,
+                sh_degree,
+            };
+            f.validate().map_err(value_err)?;
+            let raw = f.apply(&self.raw);
+            let act = raw.activated();
+            Ok(PyScene::new(raw, act, self.source.clone()))
+        })
+    }
+}
+
+/// Loads a scene from any supported file, a SOG directory or a trained model directory
+/// (`iteration` picks point_cloud/iteration_N; default the largest).
+#[pyfunction]
+#[pyo3(signature = (path, iteration=None))]
+fn load(py: Python<'_>, path: PathBuf, iteration: Option<u64>) -> PyResult<PyScene> {
+    py.detach(|| {
+        guarded(|| {
+            let resolved =
+                scene::resolve_scene_path_at(&path, iteration).map_err(|e| py_err(e.into()))?;
+            let raw = scene::load(&resolved).map_err(|e| py_err(e.into()))?;
+            let act = raw.activated();
+            Ok(PyScene::new(raw, act, resolved.display().to_string()))
+        })
+    })
+}
+
+/// The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
+#[pyfunction]
+fn demo() -> PyScene {
+    let raw = vksplat::demo_scene();
+    let act = raw.activated();
+    PyScene::new(raw, act, "built-in demo scene (PLAYBOT)".into())
+}
+
+fn check_finite(name: &str, v: &[f32], per: usize) -> PyResult<()> {
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        return Err(value_err(format!(
+            "{name}[{}] is {}; every value must be finite",
+            i / per.max(1),
+            v[i]
+        )));
+    }
+    Ok(())
+}
+
+fn sh_degree_of(coeffs: usize) -> PyResult<u32> {
+    match coeffs {
+        1 => Ok(0),
+        4 => Ok(1),
+        9 => Ok(2),
+        16 => Ok(3),
+        k => Err(value_err(format!(
+            "sh has {k} coefficients per channel; it must have 1, 4, 9 or 16 (SH degree 0 to 3)"
+        ))),
+    }
+}
+
+/// Checks a quaternion array: finite and non-zero.
+fn check_quats(quats: &[[f32; 4]]) -> PyResult<()> {
+    if let Some(i) = quats
+        .iter()
+        .position(|q| q.iter().map(|v| v * v).sum::<f32>() < 1e-30)
+    {
+        return Err(value_err(format!(
+            "quats[{i}] is {:?}, a zero quaternion has no rotation",
+            quats[i]
+        )));
+    }
+    Ok(())
+}
+
+/// A scene from arrays, `activated` (scales, opacities in [0, 1], any non-zero
+/// quaternions) or raw (log scales, opacity logits, quaternions as the trainer stores
+/// them). Shapes were checked by the Python side; values are checked here.
+#[pyfunction]
+#[pyo3(signature = (n, sh_coeffs, means, quats, scales, opacities, sh, activated, antialiased=false))]
+#[allow(clippy::too_many_arguments)]
+fn scene_from_arrays(
+    n: usize,
+    sh_coeffs: usize,
+    means: &[u8],
+    quats: &[u8],
+    scales: &[u8],
+    opacities: &[u8],
+    sh: &[u8],
+    activated: bool,
+    antialiased: bool,
+) -> PyResult<PyScene> {
+    guarded(|| {
+        let sh_degree = sh_degree_of(sh_coeffs)?;
+        let means = floats(means, "means", n * 3)?;
+        let quats = floats(quats, "quats", n * 4)?;
+        let scales = floats(scales, "scales", n * 3)?;
+        let opacities = floats(opacities, "opacities", n)?;
+        let sh = floats(sh, "sh", n * sh_coeffs * 3)?;
+        let (scale_name, opacity_name) = if activated {
+            ("scales", "opacities")
+        } else {
+            ("log_scales", "opacity_logits")
+        };
+        check_finite("means", &means, 3)?;
+        check_finite("quats", &quats, 4)?;
+        check_finite(scale_name, &scales, 3)?;
+        check_finite(opacity_name, &opacities, 1)?;
+        check_finite("sh", &sh, sh_coeffs * 3)?;
+        let quats: Vec<[f32; 4]> = rows(&quats);
+        check_quats(&quats)?;
+        let mut raw = Scene::empty(sh_degree);
+        raw.positions = rows(&means);
+        raw.sh = sh.clone();
+        raw.antialiased = antialiased;
+        let act = if activated {
+            if let Some(i) = scales.iter().position(|&s| s <= 0.0) {
+                return Err(value_err(format!(
+                    "scales[{}] is {}; activated scales must be positive (pass log scales with activated=False)",
+                    i / 3,
+                    scales[i]
+                )));
+            }
+            if let Some(i) = opacities.iter().position(|o| !(0.0..=1.0).contains(o)) {
+                return Err(value_err(format!(
+                    "opacities[{i}] is {}; activated opacities must be in [0, 1] (pass logits with activated=False)",
+                    opacities[i]
+                )));
+            }
+            let scales: Vec<[f32; 3]> = rows(&scales);
+            raw.log_scales = scales.iter().map(|s| s.map(f32::ln)).collect();
+            // Logits of 0 and 1 are infinite: clamp to the nearest representable
+            // probabilities so that the stored parameters stay finite.
+            raw.opacity_logits = opacities
+                .iter()
+                .map(|&p| {
+                    let p = p.clamp(f32::MIN_POSITIVE, 1.0 - f32::EPSILON / 2.0);
+                    (p / (1.0 - p)).ln()
+                })
+                .collect();
+            // Unit quaternions are used as given, so a loaded scene's arrays give back the
+            // same scene bit for bit; others are normalised as the trainer does.
+            let unit: Vec<[f32; 4]> = quats
+                .iter()
+                .map(|q| {
+                    let n2: f32 = q.iter().map(|v| v * v).sum();
+                    if (n2 - 1.0).abs() <= 4.0 * f32::EPSILON {
+                        *q
+                    } else {
+                        scene::normalize_quat(*q)
+                    }
+                })
+                .collect();
+            raw.rotations = quats;
+            ActivatedScene {
+                sh_degree,
+                positions: raw.positions.clone(),
+                scales,
+                rotations: unit,
+                opacities,
+                sh,
+            }
+        } else {
+            raw.log_scales = rows(&scales);
+            raw.rotations = quats;
+            raw.opacity_logits = opacities;
+            let act = raw.activated();
+            if let Some(i) = act
+                .scales
+                .iter()
+                .position(|s| s.iter().any(|v| !v.is_finite()))
+            {
+                return Err(value_err(format!(
+                    "log_scales[{i}] is {:?}; its exponential overflows",
+                    raw.log_scales[i]
+                )));
+            }
+            act
+        };
+        Ok(PyScene::new(raw, act, "arrays".into()))
+    })
+}
+
+// ---------------------------------------------------------------------------------------
+// Rendering
+
+/// What a render returns and how.
+struct Want {
+    rgb: bool,
+    alpha: bool,
+    depth: bool,
+}
+
+/// Per-frame render options from keyword arguments.
+#[allow(clippy::too_many_arguments)]
+fn options(
+    scene: &PyScene,
+    background: [f32; 3],
+    sh_degree: Option<u32>,
+    scale_modifier: f32,
+    max_scale: Option<f32>,
+    min_opacity: Option<f32>,
+    antialiased: Option<bool>,
+) -> PyResult<RenderOptions> {
+    if let Some(d) = sh_degree {
+        if d > 3 {
+            return Err(value_err(format!("sh_degree must be 0 to 3, got {d}")));
+        }
+    }
+    let opts = RenderOptions {
+        background,
+        antialiased: antialiased.unwrap_or(scene.raw.antialiased),
+        scale_modifier,
+        max_scale,
+        min_opacity,
+        sh_degree,
+    };
+    opts.validate().map_err(value_err)?;
+    Ok(opts)
+}
+
+fn cameras(cams: &[CamTuple]) -> PyResult<Vec<Camera>> {
+    let cams = cams.iter().map(to_camera).collect::<PyResult<Vec<_>>>()?;
+    if let Some(first) = cams.first() {
+        if let Some(other) = cams
+            .iter()
+            .find(|c| (c.width, c.height) != (first.width, first.height))
+        {
+            return Err(value_err(format!(
+                "a batch renders cameras of one size: \"{}\" is {}x{} and \"{}\" is {}x{}",
+                first.name, first.width, first.height, other.name, other.width, other.height
+            )));
+        }
+    } else {
+        return Err(value_err("no camera to render"));
+    }
+    Ok(cams)
+}
+
+/// Concatenates the wanted planes of the frames.
+fn planes<'py>(py: Python<'py>, frames: &[Frame], want: &Want) -> Planes<'py> {
+    let gather = |f: &dyn Fn(&Frame) -> &[f32]| -> Vec<f32> {
+        frames.iter().flat_map(|fr| f(fr).iter().copied()).collect()
+    };
+    let rgb = want
+        .rgb
+        .then(|| byte_array(py, &gather(&|f| bytemuck::cast_slice(&f.color))));
+    let alpha = want.alpha.then(|| byte_array(py, &gather(&|f| &f.alpha)));
+    let depth = want.depth.then(|| byte_array(py, &gather(&|f| &f.depth)));
+    (rgb, alpha, depth)
+}
+
+/// State behind a renderer's lock. The uploaded scene is declared first so it is freed
+/// before the renderer (and its device).
+struct RendererState {
+    scene: Option<(u64, GpuScene)>,
+    gpu: GpuRenderer,
+    uploads: u64,
+    frames: u64,
+    timings: Vec<(&'static str, f64)>,
+}
+
+/// The Vulkan renderer: pipelines and per-frame buffers, and the last scene uploaded.
+#[pyclass(module = "vksplat._native", name = "Renderer", frozen)]
+struct PyRenderer {
+    state: Mutex<RendererState>,
+    device: String,
+    validation: bool,
+}
+
+#[pymethods]
+impl PyRenderer {
+    /// Opens `device` (index or part of its name; default: discrete, then integrated,
+    /// then CPU; also VKSPLAT_DEVICE). VKSPLAT_VALIDATE=1 turns the validation layer on,
+    /// and any message it prints fails the render.
+    #[new]
+    #[pyo3(signature = (device=None))]
+    fn new(py: Python<'_>, device: Option<String>) -> PyResult<Self> {
+        py.detach(|| {
+            guarded(|| {
+                let ctx = GpuContext::new(&ContextOptions {
+                    device,
+                    validation: false,
+                    memory_limit: None,
+                })
+                .map_err(|e| py_err(e.into()))?;
+                let name = ctx.info().name.clone();
+                let validation = ctx.validation_enabled();
+                let gpu = GpuRenderer::new(ctx).map_err(|e| py_err(e.into()))?;
+                Ok(PyRenderer {
+                    state: Mutex::new(RendererState {
+                        scene: None,
+                        gpu,
+                        uploads: 0,
+                        frames: 0,
+                        timings: Vec::new(),
+                    }),
+                    device: name,
+                    validation,
+                })
+            })
+        })
+    }
+
+    /// The device's name.
+    #[getter]
+    fn device(&self) -> &str {
+        &self.device
+    }
+
+    /// Renders `cameras` (all of one size) of `scene`; returns the wanted planes of all
+    /// frames, concatenated. The scene is uploaded only when it is not the last one.
+    #[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, rgb, alpha, depth))]
+    #[allow(clippy::too_many_arguments)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        scene: &PyScene,
+        cameras: Vec<CamTuple>,
+        background: [f32; 3],
+        sh_degree: Option<u32>,
+        scale_modifier: f32,
+        max_scale: Option<f32>,
+        min_opacity: Option<f32>,
+        antialiased: Option<bool>,
+        rgb: bool,
+        alpha: bool,
+        depth: bool,
+    ) -> PyResult<Planes<'py>> {
+        let opts = options(
+            scene,
+            background,
+            sh_degree,
+            scale_modifier,
+            max_scale,
+            min_opacity,
+            antialiased,
+        )?;
+        let cams = self::cameras(&cameras)?;
+        let frames = py.detach(|| {
+            guarded(|| {
+                let mut guard = self.state.lock().map_err(|_| {
+                    PyRuntimeError::new_err("the renderer failed earlier; create a new one")
+                })?;
+                let st = &mut *guard;
+                if st.scene.as_ref().map(|(id, _)| *id) != Some(scene.id) {
+                    st.scene = None; // free the old upload first
+                    let uploaded = st.gpu.upload(&scene.act).map_err(|e| py_err(e.into()))?;
+                    st.scene = Some((scene.id, uploaded));
+                    st.uploads += 1;
+                }
+                let gpu_scene = &st.scene.as_ref().expect("uploaded above").1;
+                let mut frames = Vec::with_capacity(cams.len());
+                for cam in &cams {
+                    frames.push(
+                        st.gpu
+                            .render(gpu_scene, cam, &opts)
+                            .map_err(|e| py_err(e.into()))?,
+                    );
+                    st.frames += 1;
+                }
+                st.timings = st.gpu.timings().stages().to_vec();
+                if self.validation {
+                    let messages = st.gpu.ctx().validation_messages();
+                    if !messages.is_empty() {
+                        return Err(PyRuntimeError::new_err(format!(
+                            "the Vulkan validation layer reported {} message(s): {}",
+                            messages.len(),
+                            messages.join(" | ")
+                        )));
+                    }
+                }
+                Ok(frames)
+            })
+        })?;
+        let want = Want { rgb, alpha, depth };
+        Ok(planes(py, &frames, &want))
+    }
+
+    /// GPU milliseconds of each stage of the last frame, in pipeline order.
+    #[getter]
+    fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        if let Ok(st) = self.state.lock() {
+            for (name, ms) in &st.timings {
+                d.set_item(*name, *ms)?;
+            }
+        }
+        Ok(d)
+    }
+
+    /// Counters: scene uploads, frames rendered, device bytes of the uploaded scene and of
+    /// the per-frame buffers.
+    #[getter]
+    fn counters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        if let Ok(st) = self.state.lock() {
+            d.set_item("uploads", st.uploads)?;
+            d.set_item("frames", st.frames)?;
+            d.set_item(
+                "scene_bytes",
+                st.scene.as_ref().map_or(0, |(_, s)| s.device_bytes()),
+            )?;
+            d.set_item("frame_bytes", st.gpu.frame_device_bytes())?;
+        }
+        Ok(d)
+    }
+}
+
+/// Renders on the CPU reference renderer (rayon threads); same arguments as
+/// `Renderer.render`.
+#[pyfunction]
+#[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, rgb, alpha, depth))]
+#[allow(clippy::too_many_arguments)]
+fn render_cpu<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    cameras: Vec<CamTuple>,
+    background: [f32; 3],
+    sh_degree: Option<u32>,
+    scale_modifier: f32,
+    max_scale: Option<f32>,
+    min_opacity: Option<f32>,
+    antialiased: Option<bool>,
+    rgb: bool,
+    alpha: bool,
+    depth: bool,
+) -> PyResult<Planes<'py>> {
+    let opts = options(
+        scene,
+        background,
+        sh_degree,
+        scale_modifier,
+        max_scale,
+        min_opacity,
+        antialiased,
+    )?;
+    let cams = self::cameras(&cameras)?;
+    let frames = py.detach(|| {
+        guarded(|| {
+            Ok(cams
+                .iter()
+                .map(|cam| vksplat::cpu::render(&scene.act, cam, &opts))
+                .collect::<Vec<_>>())
+        })
+    })?;
+    Ok(planes(py, &frames, &Want { rgb, alpha, depth }))
+}
+
+// ---------------------------------------------------------------------------------------
+// Images and metrics
+
+/// Reads an image (PNG 8/16-bit, JPEG, WebP, OpenEXR, .npy): width, height, channel names
+/// and the samples interleaved per pixel as f32 bytes (8/16-bit scaled to [0, 1]).
+#[pyfunction]
+fn read_image<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(u32, u32, Vec<String>, Bound<'py, PyByteArray>)> {
+    let planes = py.detach(|| {
+        guarded(|| vksplat::image_file::read_image(&path).map_err(|e| py_err(e.into())))
+    })?;
+    let names: Vec<String> = planes.channels.iter().map(|c| c.name.clone()).collect();
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    let samples = planes.interleave(&refs).unwrap_or_default();
+    Ok((planes.width, planes.height, names, byte_array(py, &samples)))
+}
+
+/// The metrics of `vksplat compare A B` for one plane: `kind` is "color", "alpha" or
+/// "data".
+#[pyfunction]
+fn compare<'py>(
+    py: Python<'py>,
+    reference: &[u8],
+    test: &[u8],
+    width: usize,
+    height: usize,
+    channels: usize,
+    kind: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let kind = match kind {
+        "color" | "colour" => PlaneKind::Colour,
+        "alpha" => PlaneKind::Alpha,
+        "data" => PlaneKind::Data,
+        other => {
+            return Err(value_err(format!(
+                "kind must be \"color\", \"alpha\" or \"data\", got {other:?}"
+            )))
+        }
+    };
+    let count = width * height * channels;
+    let mut a = floats(reference, "reference", count)?;
+    let mut b = floats(test, "test", count)?;
+    let m = py.detach(|| {
+        guarded(|| {
+            Ok(metrics::plane_metrics(
+                &mut a, &mut b, width, height, channels, kind,
+            ))
+        })
+    })?;
+    let d = PyDict::new(py);
+    d.set_item("psnr", m.stats.psnr)?;
+    d.set_item("ssim", m.ssim)?;
+    d.set_item("flip", m.flip)?;
+    d.set_item("max_abs", m.stats.max_abs)?;
+    d.set_item("mean_abs", m.stats.mean_abs)?;
+    d.set_item("within", m.stats.within)?;
+    d.set_item("peak", m.stats.peak)?;
+    Ok(d)
+}
+
+/// PNG bytes of an `H x W x 3` float colour image (8-bit, as `vksplat render` writes).
+#[pyfunction]
+fn encode_png<'py>(
+    py: Python<'py>,
+    rgb: &[u8],
+    width: u32,
+    height: u32,
+) -> PyResult<Bound<'py, PyBytes>> {
+    let n = width as usize * height as usize;
+    let color = rows(&floats(rgb, "rgb", n * 3)?);
+    let frame = Frame {
+        width,
+        height,
+        color,
+        alpha: vec![0.0; n],
+        depth: vec![0.0; n],
+    };
+    let mut out = Vec::new();
+    vksplat::output::encode_png(&frame, false, &mut out, Path::new("<memory>"))
+        .map_err(|e| py_err(e.into()))?;
+    Ok(PyBytes::new(py, &out))
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScene>()?;
+    m.add_class::<PyRenderer>()?;
+    m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add_function(wrap_pyfunction!(demo, m)?)?;
+    m.add_function(wrap_pyfunction!(scene_from_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
+    m.add_function(wrap_pyfunction!(save_cameras, m)?)?;
+    m.add_function(wrap_pyfunction!(orbit, m)?)?;
+    m.add_function(wrap_pyfunction!(default_camera, m)?)?;
+    m.add_function(wrap_pyfunction!(look_at, m)?)?;
+    m.add_function(wrap_pyfunction!(bulk_centre, m)?)?;
+    m.add_function(wrap_pyfunction!(render_cpu, m)?)?;
+    m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(encode_png, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

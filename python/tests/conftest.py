@@ -1,0 +1,59 @@
+"""Shared fixtures: the real scenes of ../shared/data, the `vksplat` command-line binary
+(VKSPLAT_BIN, or the repository's target/debug or target/release build) and one GPU
+renderer for the session."""
+
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+import vksplat
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+DATA = REPO.parent / "shared" / "data"
+
+
+def data(name: str) -> pathlib.Path:
+    path = DATA / name
+    if not path.exists():
+        pytest.fail(f"test data {path} is missing (the read-only ../shared/data folder)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def cli() -> pathlib.Path:
+    env = os.environ.get("VKSPLAT_BIN")
+    candidates = [pathlib.Path(env)] if env else [
+        REPO / "target" / "debug" / "vksplat",
+        REPO / "target" / "release" / "vksplat",
+    ]
+    for c in candidates:
+        if c.is_file():
+            return c
+    pytest.fail(
+        "the vksplat binary was not found (build it with `cargo build`, or set VKSPLAT_BIN); "
+        f"looked at {', '.join(map(str, candidates))}"
+    )
+
+
+def run_cli(binary: pathlib.Path, *args: str) -> subprocess.CompletedProcess:
+    proc = subprocess.run([str(binary), *map(str, args)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise AssertionError(f"vksplat {' '.join(map(str, args))} failed:\n{proc.stderr}")
+    return proc
+
+
+@pytest.fixture(scope="session")
+def renderer() -> vksplat.Renderer:
+    return vksplat.Renderer()
+
+
+@pytest.fixture(scope="session")
+def lod3() -> vksplat.Scene:
+    return vksplat.load(data("playbot_lod3_31k_sh2.ply"))
+
+
+@pytest.fixture(scope="session")
+def demo() -> vksplat.Scene:
+    return vksplat.demo()

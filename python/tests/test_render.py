@@ -1,0 +1,184 @@
+"""GPU and CPU renders through Python against the command line, batches, the GIL and
+memory."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import vksplat
+from conftest import data, run_cli
+
+
+def exr_planes(path):
+    arr, names = vksplat.read_image(path)
+    return {n: arr[..., i] for i, n in enumerate(names)}
+
+
+@pytest.fixture(scope="module")
+def cameras_file(tmp_path_factory, lod3):
+    # Cameras both sides parse from one file, so they are the same bit for bit.
+    path = tmp_path_factory.mktemp("cams") / "cameras.json"
+    vksplat.save_cameras(path, vksplat.orbit(lod3, frames=4, width=160, height=120))
+    return path
+
+
+@pytest.mark.parametrize("cpu", [False, True], ids=["gpu", "cpu"])
+def test_render_equals_cli_bit_for_bit(cpu, tmp_path, lod3, renderer, cli, cameras_file):
+    cam = vksplat.load_cameras(cameras_file)[1]
+    if cpu:
+        out = vksplat.render_cpu(lod3, cam)
+    else:
+        out = renderer.render(lod3, cam)
+    exr = tmp_path / "cli.exr"
+    args = [data("playbot_lod3_31k_sh2.ply"), "--cameras", cameras_file, "--camera", "1", "-o", exr, "-q"]
+    run_cli(cli, "render", *args, *(["--cpu"] if cpu else []))
+    p = exr_planes(exr)
+    assert out["rgb"].shape == (120, 160, 3) and out["rgb"].dtype == np.float32
+    rgb = np.stack([p["R"], p["G"], p["B"]], axis=-1)
+    assert np.array_equal(out["rgb"], rgb)
+    assert np.array_equal(out["alpha"], p["A"])
+    covered = out["alpha"] > 0
+    assert covered.mean() > 0.2, "the camera should see the scene"
+    # The EXR's Z is +inf where nothing was hit; the array has 0 there.
+    assert np.array_equal(out["depth"][covered], p["Z"][covered])
+    assert np.all(np.isinf(p["Z"][~covered])) and np.all(out["depth"][~covered] == 0)
+
+
+def test_png_from_cli_matches_gpu_and_cpu(tmp_path, lod3, renderer, cli, cameras_file):
+    cam = vksplat.load_cameras(cameras_file)[2]
+    png = tmp_path / "cli.png"
+    run_cli(cli, "render", data("playbot_lod3_31k_sh2.ply"), "--cameras", cameras_file,
+            "--camera", "2", "-o", png, "-q")
+    gpu = renderer.render(lod3, cam, mode="rgb")["rgb"]
+    cpu = vksplat.render_cpu(lod3, cam, mode="rgb")["rgb"]
+    m = vksplat.compare(png, gpu)
+    assert m["within"] == 1.0 and m["max_abs"] <= 0.5 / 255 + 1e-7
+    m = vksplat.compare(cpu, gpu)
+    assert m["psnr"] >= 55 and m["within"] >= 0.999
+
+
+def test_modes_and_options(lod3, renderer, cameras_file):
+    cam = vksplat.load_cameras(cameras_file)[0]
+    assert set(renderer.render(lod3, cam, mode="rgb")) == {"rgb"}
+    assert set(renderer.render(lod3, cam, mode="rgba")) == {"rgb", "alpha"}
+    assert set(renderer.render(lod3, cam, mode="rgb+depth")) == {"rgb", "depth"}
+    white = renderer.render(lod3, cam, background=(1, 1, 1))
+    black = renderer.render(lod3, cam)
+    t = 1 - black["alpha"][..., None]
+    assert np.allclose(white["rgb"], black["rgb"] + t, atol=1e-6)
+    # Explicit viewmat/K/width/height give the same frame as the Camera.
+    same = renderer.render(lod3, viewmat=cam.viewmat, K=cam.K, width=cam.width, height=cam.height)
+    assert np.array_equal(same["rgb"], black["rgb"])
+    # A lower SH degree and a smaller scale modifier change the image.
+    assert not np.array_equal(renderer.render(lod3, cam, sh_degree=0)["rgb"], black["rgb"])
+    small = renderer.render(lod3, cam, scale_modifier=0.5)
+    assert small["alpha"].sum() < black["alpha"].sum()
+    with pytest.raises(ValueError, match="mode"):
+        renderer.render(lod3, cam, mode="rgb+normals")
+    with pytest.raises(ValueError, match="scale modifier"):
+        renderer.render(lod3, cam, scale_modifier=-1)
+    with pytest.raises(ValueError, match="camera, or all of viewmat"):
+        renderer.render(lod3, viewmat=cam.viewmat)
+
+
+def test_max_scale_equals_filtered_scene(lod3, renderer, cameras_file):
+    cam = vksplat.load_cameras(cameras_file)[3]
+    cut = float(np.quantile(lod3.scales.max(axis=1), 0.5))
+    per_frame = renderer.render(lod3, cam, max_scale=cut)
+    filtered = lod3.filtered(max_scale=cut)
+    assert 0 < len(filtered) < len(lod3)
+    assert np.array_equal(per_frame["rgb"], renderer.render(filtered, cam)["rgb"])
+
+
+def test_batch_equals_one_by_one_and_uploads_once(lod3, cameras_file):
+    r = vksplat.Renderer()
+    cams = vksplat.load_cameras(cameras_file)
+    batch = r.render(lod3, cams)
+    assert batch["rgb"].shape == (4, 120, 160, 3) and batch["depth"].shape == (4, 120, 160)
+    assert r.counters["uploads"] == 1 and r.counters["frames"] == 4
+    for i, cam in enumerate(cams):
+        one = r.render(lod3, cam)
+        for k in ("rgb", "alpha", "depth"):
+            assert np.array_equal(batch[k][i], one[k])
+    assert r.counters["uploads"] == 1 and r.counters["frames"] == 8
+    assert r.counters["scene_bytes"] > 0 and r.counters["frame_bytes"] > 0
+    # A (B, 4, 4) viewmat is a batch too.
+    vm = np.stack([c.viewmat for c in cams])
+    again = r.render(lod3, viewmat=vm, K=cams[0].K, width=160, height=120, mode="rgb")
+    assert np.array_equal(again["rgb"], batch["rgb"])
+    # Another scene is uploaded once, and coming back uploads the first again.
+    other = vksplat.demo()
+    r.render(other, cams[0])
+    r.render(other, cams[1])
+    assert r.counters["uploads"] == 2
+    r.render(lod3, cams[0])
+    assert r.counters["uploads"] == 3
+    with pytest.raises(ValueError, match="one size"):
+        r.render(lod3, [cams[0], cams[1].resized(80, 60)])
+
+
+def test_cpu_batch(demo):
+    cams = vksplat.orbit(demo, frames=2, width=64, height=48)
+    batch = vksplat.render_cpu(demo, cams)
+    assert batch["rgb"].shape == (2, 48, 64, 3)
+    assert np.array_equal(batch["rgb"][1], vksplat.render_cpu(demo, cams[1])["rgb"])
+
+
+def test_timings_and_device(lod3, renderer, cameras_file):
+    renderer.render(lod3, vksplat.load_cameras(cameras_file)[0])
+    t = renderer.timings
+    assert list(t) == ["preprocess", "order", "scan", "keys", "sort", "ranges", "blend", "readback"]
+    assert all(v >= 0 for v in t.values()) and sum(t.values()) > 0
+    assert isinstance(renderer.device, str) and renderer.device
+
+
+def test_gil_is_released_while_rendering(lod3):
+    r = vksplat.Renderer()
+    cam = vksplat.default_camera(lod3, 640, 480)
+    r.render(lod3, cam)  # upload and warm up
+    done = threading.Event()
+    spent = []
+
+    def work():
+        start = time.perf_counter()
+        for _ in range(3):
+            r.render(lod3, cam)
+        spent.append(time.perf_counter() - start)
+        done.set()
+
+    ticks = 0
+    thread = threading.Thread(target=work)
+    thread.start()
+    while not done.is_set():
+        ticks += 1
+    thread.join()
+    # With the GIL held for a whole frame this loop could not run while frames render.
+    assert spent[0] > 0.05
+    assert ticks > 10_000, f"only {ticks} iterations of the main thread in {spent[0]:.3f} s"
+
+
+def _rss_bytes():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096
+
+
+def test_memory_stays_flat_over_200_frames(demo):
+    r = vksplat.Renderer()
+    cams = vksplat.orbit(demo, frames=8, width=128, height=96)
+    for i in range(20):
+        out = r.render(demo, cams[i % 8])
+    before = _rss_bytes()
+    for i in range(200):
+        out = r.render(demo, cams[i % 8])
+        cpu_view = out["rgb"].mean()
+    after = _rss_bytes()
+    assert np.isfinite(cpu_view)
+    # A leaked frame (128 x 96 x 5 floats) per render would add 50 MB.
+    assert after - before < 12 * 2**20, f"RSS grew by {(after - before) / 2**20:.1f} MiB"
+
+
+def test_device_errors():
+    with pytest.raises(RuntimeError, match="no-such-device"):
+        vksplat.Renderer(device="no-such-device")

@@ -1,0 +1,169 @@
+"""Scenes and cameras: loading, arrays, from_arrays round trips and its errors, saving."""
+
+import json
+
+import numpy as np
+import pytest
+
+import vksplat
+from conftest import data
+
+
+def test_arrays_of_a_loaded_scene(lod3):
+    n = len(lod3)
+    assert n > 30_000
+    assert lod3.means.shape == (n, 3) and lod3.means.dtype == np.float32
+    assert lod3.quats.shape == (n, 4)
+    assert np.allclose(np.linalg.norm(lod3.quats, axis=1), 1, atol=1e-5)
+    assert lod3.scales.shape == (n, 3) and np.all(lod3.scales > 0)
+    assert lod3.opacities.shape == (n,) and np.all((lod3.opacities >= 0) & (lod3.opacities <= 1))
+    assert lod3.sh.shape == (n, 9, 3) and lod3.sh_degree == 2
+    raw = lod3.raw()
+    assert np.allclose(np.exp(raw["scales"]), lod3.scales, rtol=1e-6, atol=0)
+    assert np.allclose(1 / (1 + np.exp(-raw["opacities"])), lod3.opacities, atol=1e-6)
+    with pytest.raises(ValueError):
+        lod3.means[0, 0] = 1.0  # read-only views
+
+
+@pytest.mark.parametrize("activated", [True, False], ids=["activated", "raw"])
+def test_from_arrays_renders_identically(activated, lod3, renderer):
+    arrays = (
+        dict(means=lod3.means, quats=lod3.quats, scales=lod3.scales,
+             opacities=lod3.opacities, sh=lod3.sh)
+        if activated else lod3.raw()
+    )
+    built = vksplat.Scene.from_arrays(**arrays, activated=activated)
+    assert len(built) == len(lod3) and built.sh_degree == lod3.sh_degree
+    cam = vksplat.default_camera(lod3, 160, 120)
+    a, b = renderer.render(lod3, cam), renderer.render(built, cam)
+    for k in a:
+        assert np.array_equal(a[k], b[k]), k
+    assert np.array_equal(vksplat.render_cpu(lod3, cam)["rgb"], vksplat.render_cpu(built, cam)["rgb"])
+
+
+def test_from_arrays_float64_and_colors(demo, renderer):
+    n = len(demo)
+    s = vksplat.Scene.from_arrays(
+        demo.means.astype(np.float64), demo.quats, demo.scales, demo.opacities,
+        colors=np.full((n, 3), 0.25),
+    )
+    assert s.sh_degree == 0 and s.sh.shape == (n, 1, 3)
+    cam = vksplat.default_camera(s, 64, 48)
+    out = renderer.render(s, cam, mode="rgba")
+    covered = out["alpha"] > 0.5
+    # Colour 0.25 everywhere: the premultiplied colour is 0.25 * alpha.
+    assert np.allclose(out["rgb"][covered], 0.25 * out["alpha"][covered][:, None], atol=1e-5)
+
+
+def _good(n=3):
+    return dict(
+        means=np.zeros((n, 3), np.float32),
+        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+        scales=np.full((n, 3), 0.1, np.float32),
+        opacities=np.full(n, 0.5, np.float32),
+        sh=np.zeros((n, 1, 3), np.float32),
+    )
+
+
+@pytest.mark.parametrize(
+    "change, error, message",
+    [
+        (dict(means=np.zeros((3, 2), np.float32)), ValueError, r"means must have shape \(N, 3\)"),
+        (dict(quats=np.zeros((2, 4), np.float32) + 1), ValueError, r"quats must have shape \(3, 4\)"),
+        (dict(scales=np.zeros((3, 3), np.int32)), TypeError, "scales must be an array of floats"),
+        (dict(sh=np.zeros((3, 5, 3), np.float32)), ValueError, "1, 4, 9 or 16"),
+        (dict(means=np.array([[0, 0, 0], [0, np.nan, 0], [0, 0, 0]], np.float32)), ValueError,
+         r"means\[1\] is NaN; every value must be finite"),
+        (dict(opacities=np.array([0.5, np.inf, 0.5], np.float32)), ValueError, r"opacities\[1\] is inf"),
+        (dict(scales=np.array([[0.1] * 3, [0.1] * 3, [0.1, -0.2, 0.1]], np.float32)), ValueError,
+         r"scales\[2\] is -0.2; activated scales must be positive"),
+        (dict(quats=np.array([[1, 0, 0, 0], [0, 0, 0, 0], [1, 0, 0, 0]], np.float32)), ValueError,
+         r"quats\[1\] is \[0.0, 0.0, 0.0, 0.0\], a zero quaternion"),
+        (dict(opacities=np.array([0.5, 1.5, 0.5], np.float32)), ValueError, r"opacities\[1\] is 1.5"),
+    ],
+    ids=["means-shape", "n-mismatch", "int-dtype", "sh-coeffs", "nan", "inf", "negative-scale",
+         "zero-quat", "opacity-range"],
+)
+def test_from_arrays_errors(change, error, message):
+    arrays = {**_good(), **change}
+    with pytest.raises(error, match=message):
+        vksplat.Scene.from_arrays(**arrays)
+
+
+def test_from_arrays_needs_one_colour_source():
+    arrays = _good()
+    with pytest.raises(ValueError, match="exactly one of sh"):
+        vksplat.Scene.from_arrays(**arrays, colors=np.zeros((3, 3)))
+
+
+def test_save_and_load_round_trip(tmp_path, demo):
+    path = tmp_path / "out.ply"
+    demo.save(path)
+    back = vksplat.load(path)
+    for k in ("means", "quats", "scales", "opacities", "sh"):
+        assert np.array_equal(getattr(back, k), getattr(demo, k)), k
+    with pytest.raises(FileExistsError, match="out.ply"):
+        demo.save(path)
+    demo.save(path, overwrite=True)
+    with pytest.raises(ValueError, match="out.xyz"):
+        demo.save(tmp_path / "out.xyz")
+
+
+def test_load_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="missing.ply"):
+        vksplat.load(tmp_path / "missing.ply")
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 2\nend_header\n")
+    with pytest.raises(ValueError, match="bad.ply"):
+        vksplat.load(bad)
+
+
+def test_cameras_round_trip_and_errors(tmp_path, lod3):
+    cams = vksplat.orbit(lod3, frames=3, width=100, height=80)
+    assert [c.name for c in cams] == ["orbit_00000", "orbit_00001", "orbit_00002"]
+    path = tmp_path / "cams.json"
+    vksplat.save_cameras(path, cams)
+    back = vksplat.load_cameras(path)
+    for a, b in zip(cams, back):
+        assert np.array_equal(a.K, b.K) and (a.width, a.height) == (b.width, b.height)
+        assert np.allclose(a.viewmat, b.viewmat, atol=1e-6)
+    assert len(json.loads(path.read_text())) == 3
+    real = vksplat.load_cameras(data("playbot_orbit_cameras.synthetic.json"))
+    assert len(real) > 1 and real[0].viewmat.shape == (4, 4)
+    with pytest.raises(FileExistsError):
+        vksplat.save_cameras(path, cams)
+    with pytest.raises(FileNotFoundError):
+        vksplat.load_cameras(tmp_path / "none.json")
+    (tmp_path / "broken.json").write_text("{")
+    with pytest.raises(ValueError, match="broken.json"):
+        vksplat.load_cameras(tmp_path / "broken.json")
+    with pytest.raises(ValueError, match="K must be"):
+        vksplat.Camera(np.eye(4), np.eye(3) * 2, 10, 10)
+
+
+def test_look_at_and_camera_conventions(demo, renderer):
+    cam = vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, -1, 0), width=64, height=48)
+    assert np.allclose(cam.position, [0, 0, -3], atol=1e-6)
+    # OpenCV axes: the camera looks along +z of its frame; the target is straight ahead.
+    p = cam.viewmat @ np.array([0, 0, 0, 1.0])
+    assert p[2] > 0 and abs(p[0]) < 1e-6 and abs(p[1]) < 1e-6
+    assert cam.K[0, 2] == 32 and cam.K[1, 2] == 24
+
+
+def test_compare_metrics(tmp_path):
+    rng = np.random.default_rng(1)
+    a = rng.random((32, 48, 3), dtype=np.float32) * 0.5 + 0.25
+    same = vksplat.compare(a, a)
+    assert same["psnr"] == float("inf") and same["ssim"] == pytest.approx(1.0) and same["flip"] == 0
+    shifted = vksplat.compare(a, a + np.float32(0.01))
+    # A constant offset d has PSNR -20 log10(d).
+    assert shifted["psnr"] == pytest.approx(40.0, abs=1e-3)
+    assert shifted["max_abs"] == pytest.approx(0.01, abs=1e-6)
+    u8 = (a * 255).round().astype(np.uint8)
+    assert vksplat.compare(u8, u8)["psnr"] == float("inf")
+    with pytest.raises(ValueError, match="differ in shape"):
+        vksplat.compare(a, a[:10])
+    with pytest.raises(TypeError, match="dtype"):
+        vksplat.compare(a.astype(np.complex64), a)
+    with pytest.raises(ValueError, match="kind"):
+        vksplat.compare(a, a, kind="colours")

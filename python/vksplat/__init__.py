@@ -1,0 +1,579 @@
+"""vksplat: 3D Gaussian Splatting on raw Vulkan compute, with an exact CPU reference.
+
+Load a scene, render it on the GPU (``Renderer``) or on the CPU reference
+(``render_cpu``), compare images (``compare``), all with numpy arrays in gsplat's
+conventions: OpenCV camera axes (x right, y down, z forward), a world-to-camera 4x4
+``viewmat``, 3x3 intrinsics ``K``, float32 arrays, channels last.
+
+    import vksplat
+    scene = vksplat.load("point_cloud.ply")
+    cam = vksplat.default_camera(scene, 640, 480)
+    out = vksplat.Renderer().render(scene, cam)
+    out["rgb"].shape  # (480, 640, 3)
+
+Errors are Python exceptions carrying the sentence the command line prints:
+``FileNotFoundError`` for missing files, ``ValueError`` (or ``TypeError`` for a
+wrong dtype) for bad input, ``RuntimeError`` for device failures.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _native
+
+__version__ = _native.__version__
+
+__all__ = [
+    "Camera",
+    "Renderer",
+    "Scene",
+    "compare",
+    "default_camera",
+    "demo",
+    "load",
+    "load_cameras",
+    "look_at",
+    "orbit",
+    "read_image",
+    "render_cpu",
+    "save_cameras",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+ArrayLike = Any
+
+# ---------------------------------------------------------------------------------------
+# Array helpers
+
+
+def _floats(
+    name: str, value: ArrayLike, shape: Tuple[Optional[int], ...], strict: bool = False
+) -> np.ndarray:
+    """`value` as a C-contiguous little-endian float32 array of `shape` (None: any size).
+    Strict (Gaussian arrays): floating-point dtypes only; otherwise integers are fine too
+    (a background of ``(1, 1, 1)``)."""
+    arr = np.asarray(value)
+    kinds = "f" if strict else "fiu"
+    if arr.dtype.kind not in kinds:
+        what = "floats (float16/32/64)" if strict else "numbers"
+        raise TypeError(f"{name} must be an array of {what}, got dtype {arr.dtype}")
+    if arr.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, arr.shape)):
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"{name} must have shape {want}, got {tuple(arr.shape)}")
+    return np.ascontiguousarray(arr, dtype="<f4")
+
+
+def _view(data: Union[bytes, bytearray], shape: Tuple[int, ...]) -> np.ndarray:
+    return np.frombuffer(data, dtype="<f4").reshape(shape)
+
+
+# ---------------------------------------------------------------------------------------
+# Cameras
+
+
+class Camera:
+    """A pinhole camera in OpenCV axes (gsplat's convention).
+
+    ``viewmat`` is the 4x4 world-to-camera matrix (``p_cam = R p_world + t``), ``K`` the
+    3x3 intrinsics ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` where a point projects to
+    ``(fx x/z + cx, fy y/z + cy)`` and pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``.
+    """
+
+    __slots__ = ("viewmat", "K", "width", "height", "name")
+
+    def __init__(
+        self,
+        viewmat: ArrayLike,
+        K: ArrayLike,
+        width: int,
+        height: int,
+        name: str = "",
+    ) -> None:
+        self.viewmat = _floats("viewmat", viewmat, (4, 4)).copy()
+        self.K = _floats("K", K, (3, 3)).copy()
+        if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))):
+            raise TypeError(f"width and height must be integers, got {width!r} and {height!r}")
+        self.width = int(width)
+        self.height = int(height)
+        self.name = str(name)
+        # Checked now, so a bad camera is reported where it is made.
+        self._tuple()
+
+    def _tuple(self) -> tuple:
+        K = self.K
+        if K[0, 1] != 0 or K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+            raise ValueError(
+                f"camera {self.name!r}: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}"
+            )
+        if not np.all(np.isfinite(self.viewmat)) or not np.all(np.isfinite(K)):
+            raise ValueError(f"camera {self.name!r}: viewmat and K must be finite")
+        if self.viewmat[3].tolist() != [0.0, 0.0, 0.0, 1.0]:
+            raise ValueError(
+                f"camera {self.name!r}: the last row of viewmat must be [0, 0, 0, 1], got {self.viewmat[3].tolist()}"
+            )
+        return (
+            self.name,
+            self.width,
+            self.height,
+            [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])],
+            [float(v) for v in self.viewmat.reshape(-1)],
+        )
+
+    @classmethod
+    def _from_tuple(cls, t: tuple) -> "Camera":
+        name, width, height, (fx, fy, cx, cy), m = t
+        K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float32)
+        return cls(np.array(m, dtype=np.float32).reshape(4, 4), K, width, height, name)
+
+    @property
+    def position(self) -> np.ndarray:
+        """The camera centre in world space."""
+        R = self.viewmat[:3, :3].astype(np.float64)
+        t = self.viewmat[:3, 3].astype(np.float64)
+        return (-R.T @ t).astype(np.float32)
+
+    def resized(self, width: int, height: int) -> "Camera":
+        """The same view at another resolution (intrinsics scaled)."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0] *= sx
+        K[1] *= sy
+        K[2] = [0, 0, 1]
+        return Camera(self.viewmat, K, width, height, self.name)
+
+    def __repr__(self) -> str:
+        return f"Camera(name={self.name!r}, width={self.width}, height={self.height})"
+
+
+def load_cameras(
+    path: PathLike, frames: Optional[int] = None, fps: Optional[float] = None
+) -> List[Camera]:
+    """Every camera of a camera file: INRIA cameras.json, a COLMAP sparse model (folder or
+    cameras/images .txt/.bin), a nerfstudio camera_path.json or a vksplat keyframe JSON
+    (``frames``/``fps`` resample a keyframe path); a trained model directory stands for
+    its cameras.json."""
+    return [Camera._from_tuple(t) for t in _native.load_cameras(os.fspath(path), frames, fps)]
+
+
+def save_cameras(path: PathLike, cameras: Iterable[Camera], overwrite: bool = False) -> None:
+    """Writes cameras as an INRIA cameras.json (readable by ``load_cameras`` and by
+    ``vksplat render --cameras``); an existing file is refused unless ``overwrite``."""
+    _native.save_cameras(os.fspath(path), [c._tuple() for c in cameras], overwrite)
+
+
+def look_at(
+    eye: ArrayLike,
+    target: ArrayLike,
+    up: ArrayLike = (0.0, -1.0, 0.0),
+    width: int = 512,
+    height: int = 512,
+    vfov: float = 50.0,
+    name: str = "",
+) -> Camera:
+    """A camera at ``eye`` looking at ``target``; ``up`` is the world's up direction
+    (INRIA/COLMAP scenes: -y), ``vfov`` the vertical field of view in degrees."""
+    return Camera._from_tuple(
+        _native.look_at(
+            _vec3("eye", eye), _vec3("target", target), _vec3("up", up), width, height, vfov, name
+        )
+    )
+
+
+def _vec3(name: str, v: ArrayLike) -> List[float]:
+    return [float(x) for x in _floats(name, v, (3,))]
+
+
+def default_camera(scene: "Scene", width: int = 1280, height: int = 720) -> Camera:
+    """The camera ``vksplat render`` uses when given none: it frames the scene's bulk."""
+    return Camera._from_tuple(_native.default_camera(scene._s, width, height))
+
+
+def orbit(
+    scene: "Scene",
+    frames: int = 120,
+    width: int = 1280,
+    height: int = 720,
+    vfov: float = 50.0,
+    elevation: float = 20.0,
+    start: float = 0.0,
+    up: ArrayLike = (0.0, -1.0, 0.0),
+    centre: Optional[ArrayLike] = None,
+    radius: Optional[float] = None,
+) -> List[Camera]:
+    """A turntable orbit of ``frames`` cameras around the scene's bulk, as
+    ``vksplat render --orbit``."""
+    return [
+        Camera._from_tuple(t)
+        for t in _native.orbit(
+            scene._s,
+            frames,
+            width,
+            height,
+            vfov,
+            elevation,
+            start,
+            _vec3("up", up),
+            None if centre is None else _vec3("centre", centre),
+            radius,
+        )
+    ]
+
+
+# ---------------------------------------------------------------------------------------
+# Scenes
+
+
+class Scene:
+    """A set of 3D Gaussians. Arrays are read-only float32 views: ``means (N, 3)``,
+    ``quats (N, 4)`` (wxyz, normalised), ``scales (N, 3)`` and ``opacities (N,)``
+    (activated), ``sh (N, (d+1)^2, 3)``; ``raw()`` gives the trainer's parameters."""
+
+    __slots__ = ("_s",)
+
+    def __init__(self, native: Any) -> None:
+        self._s = native
+
+    def __len__(self) -> int:
+        return len(self._s)
+
+    def __repr__(self) -> str:
+        return f"Scene({len(self)} Gaussians, SH degree {self.sh_degree}, from {self.source})"
+
+    @property
+    def sh_degree(self) -> int:
+        return self._s.sh_degree
+
+    @property
+    def antialiased(self) -> bool:
+        """Whether the file records antialiased training (rendered with the opacity
+        compensation unless ``antialiased=False`` is passed)."""
+        return self._s.antialiased
+
+    @property
+    def source(self) -> str:
+        return self._s.source
+
+    def _array(self, name: str, shape: Tuple[int, ...]) -> np.ndarray:
+        return _view(self._s.array(name), shape)
+
+    @property
+    def means(self) -> np.ndarray:
+        return self._array("means", (len(self), 3))
+
+    @property
+    def quats(self) -> np.ndarray:
+        return self._array("quats", (len(self), 4))
+
+    @property
+    def scales(self) -> np.ndarray:
+        return self._array("scales", (len(self), 3))
+
+    @property
+    def opacities(self) -> np.ndarray:
+        return self._array("opacities", (len(self),))
+
+    @property
+    def sh(self) -> np.ndarray:
+        k = (self.sh_degree + 1) ** 2
+        return self._array("sh", (len(self), k, 3))
+
+    def raw(self) -> Dict[str, np.ndarray]:
+        """The trainer's parameters: ``means``, ``log_scales``, ``quats`` (as stored, not
+        normalised), ``opacity_logits`` and ``sh``; ``Scene.from_arrays(**scene.raw(),
+        activated=False)`` gives the same scene back."""
+        n = len(self)
+        return {
+            "means": self.means,
+            "quats": self._array("raw_quats", (n, 4)),
+            "scales": self._array("log_scales", (n, 3)),
+            "opacities": self._array("opacity_logits", (n,)),
+            "sh": self.sh,
+        }
+
+    @classmethod
+    def from_arrays(
+        cls,
+        means: ArrayLike,
+        quats: ArrayLike,
+        scales: ArrayLike,
+        opacities: ArrayLike,
+        sh: Optional[ArrayLike] = None,
+        colors: Optional[ArrayLike] = None,
+        activated: bool = True,
+        antialiased: bool = False,
+    ) -> "Scene":
+        """A scene from arrays. With ``activated=True`` (default): positive ``scales``,
+        ``opacities`` in [0, 1] and any non-zero quaternions (wxyz; normalised, unit ones
+        kept as given). With ``activated=False``: log scales, opacity logits and
+        quaternions as the trainer stores them. Colour is ``sh (N, K, 3)`` with K = 1, 4,
+        9 or 16, or ``colors (N, 3)`` in [0, 1] (converted to the DC term)."""
+        means_a = np.asarray(means)
+        if means_a.ndim != 2 or means_a.shape[1:] != (3,):
+            raise ValueError(f"means must have shape (N, 3), got {tuple(means_a.shape)}")
+        n = means_a.shape[0]
+        m = _floats("means", means_a, (n, 3), strict=True)
+        q = _floats("quats", quats, (n, 4), strict=True)
+        s = _floats("scales", scales, (n, 3), strict=True)
+        o = _floats("opacities", opacities, (n,), strict=True)
+        if (sh is None) == (colors is None):
+            raise ValueError("pass exactly one of sh (N, K, 3) and colors (N, 3)")
+        if colors is not None:
+            c = _floats("colors", colors, (n, 3), strict=True)
+            # The DC term whose evaluation (SH_C0 * dc + 0.5) gives the colour back.
+            sh_a = ((c - 0.5) / 0.28209479177387814).astype("<f4").reshape(n, 1, 3)
+        else:
+            sh_a = np.asarray(sh)
+            if sh_a.ndim != 3 or sh_a.shape[0] != n or sh_a.shape[2] != 3:
+                raise ValueError(f"sh must have shape ({n}, K, 3), got {tuple(sh_a.shape)}")
+            sh_a = _floats("sh", sh_a, (n, sh_a.shape[1], 3), strict=True)
+        return cls(
+            _native.scene_from_arrays(
+                n,
+                sh_a.shape[1],
+                m.tobytes(),
+                q.tobytes(),
+                s.tobytes(),
+                o.tobytes(),
+                sh_a.tobytes(),
+                bool(activated),
+                bool(antialiased),
+            )
+        )
+
+    def save(self, path: PathLike, overwrite: bool = False) -> None:
+        """Writes the scene as .ply (lossless), .splat or .spz (by extension),
+        atomically; an existing file is refused unless ``overwrite``."""
+        self._s.save(os.fspath(path), overwrite)
+
+    def filtered(
+        self,
+        max_scale: Optional[float] = None,
+        min_opacity: Optional[float] = None,
+        sh_degree: Optional[int] = None,
+    ) -> "Scene":
+        """A new scene without the Gaussians the CLI's ``--max-scale``/``--min-opacity``
+        drop, its SH cut to ``sh_degree``."""
+        return Scene(self._s.filtered(max_scale, min_opacity, sh_degree))
+
+
+def load(path: PathLike, iteration: Optional[int] = None) -> Scene:
+    """Loads a scene: INRIA .ply, compressed .ply, .splat, .spz, SOG, or a trained model
+    directory (``iteration`` picks point_cloud/iteration_N, default the largest)."""
+    return Scene(_native.load(os.fspath(path), iteration))
+
+
+def demo() -> Scene:
+    """The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0)."""
+    return Scene(_native.demo())
+
+
+# ---------------------------------------------------------------------------------------
+# Rendering
+
+_PLANES = ("rgb", "alpha", "depth")
+
+
+def _mode(mode: str) -> Tuple[bool, bool, bool]:
+    parts = set(mode.replace("rgba", "rgb+alpha").split("+"))
+    unknown = parts - set(_PLANES)
+    if unknown or not parts:
+        raise ValueError(
+            f"mode must join rgb, alpha and depth with '+' (e.g. 'rgb', 'rgba', 'rgb+depth', "
+            f"'rgb+alpha+depth'), got {mode!r}"
+        )
+    return ("rgb" in parts, "alpha" in parts, "depth" in parts)
+
+
+def _cameras(
+    camera: Union[Camera, Sequence[Camera], None],
+    viewmat: Optional[ArrayLike],
+    K: Optional[ArrayLike],
+    width: Optional[int],
+    height: Optional[int],
+) -> Tuple[List[Camera], bool]:
+    explicit = [v is not None for v in (viewmat, K, width, height)]
+    if camera is not None:
+        if any(explicit):
+            raise ValueError("pass a camera or viewmat/K/width/height, not both")
+        if isinstance(camera, Camera):
+            return [camera], False
+        cams = list(camera)
+        if not cams or not all(isinstance(c, Camera) for c in cams):
+            raise TypeError("camera must be a Camera or a non-empty list of Cameras")
+        return cams, True
+    if not all(explicit):
+        raise ValueError("pass a camera, or all of viewmat, K, width and height")
+    vm = np.asarray(viewmat)
+    if vm.ndim == 3:
+        return [Camera(v, K, width, height, f"view {i}") for i, v in enumerate(vm)], True
+    return [Camera(vm, K, width, height)], False
+
+
+def _options(background: ArrayLike, sh_degree, scale_modifier, max_scale, min_opacity, antialiased):
+    bg = [float(x) for x in _floats("background", background, (3,))]
+    return (
+        bg,
+        sh_degree,
+        float(scale_modifier),
+        None if max_scale is None else float(max_scale),
+        None if min_opacity is None else float(min_opacity),
+        antialiased,
+    )
+
+
+def _outputs(planes, cams: List[Camera], batch: bool, want) -> Dict[str, np.ndarray]:
+    b, h, w = len(cams), cams[0].height, cams[0].width
+    out: Dict[str, np.ndarray] = {}
+    for name, data, on in zip(_PLANES, planes, want):
+        if not on:
+            continue
+        shape = (b, h, w, 3) if name == "rgb" else (b, h, w)
+        arr = _view(data, shape)
+        out[name] = arr if batch else arr[0]
+    return out
+
+
+class Renderer:
+    """The Vulkan renderer. ``device``: index or part of a device name (default:
+    discrete GPU, then integrated, then CPU, e.g. lavapipe; also VKSPLAT_DEVICE).
+
+    The last scene rendered stays on the device: rendering it again (another camera,
+    a batch) does not upload it again (see ``counters``)."""
+
+    def __init__(self, device: Union[int, str, None] = None) -> None:
+        self._r = _native.Renderer(None if device is None else str(device))
+
+    @property
+    def device(self) -> str:
+        """The name of the Vulkan device."""
+        return self._r.device
+
+    @property
+    def timings(self) -> Dict[str, float]:
+        """GPU milliseconds of each stage of the last frame (timestamp queries):
+        preprocess, order, scan, keys, sort, ranges, blend, readback."""
+        return dict(self._r.timings)
+
+    @property
+    def counters(self) -> Dict[str, int]:
+        """``uploads`` (scenes uploaded), ``frames`` (frames rendered), ``scene_bytes`` and
+        ``frame_bytes`` (device memory of the uploaded scene and of the frame buffers)."""
+        return dict(self._r.counters)
+
+    def render(
+        self,
+        scene: Scene,
+        camera: Union[Camera, Sequence[Camera], None] = None,
+        *,
+        viewmat: Optional[ArrayLike] = None,
+        K: Optional[ArrayLike] = None,
+        width: Optional[int] = None,
+        height: Optional[int] = None,
+        background: ArrayLike = (0.0, 0.0, 0.0),
+        sh_degree: Optional[int] = None,
+        scale_modifier: float = 1.0,
+        max_scale: Optional[float] = None,
+        min_opacity: Optional[float] = None,
+        antialiased: Optional[bool] = None,
+        mode: str = "rgb+alpha+depth",
+    ) -> Dict[str, np.ndarray]:
+        """Renders ``scene`` from ``camera`` (or ``viewmat``/``K``/``width``/``height``).
+
+        Returns a dict of float32 arrays: ``rgb (H, W, 3)`` (with the background, not
+        clamped), ``alpha (H, W)`` and ``depth (H, W)`` (alpha-weighted view depth
+        divided by alpha, 0 where empty), as ``mode`` asks (``'rgb'``, ``'rgba'``,
+        ``'rgb+depth'``, ...). A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
+        batch: arrays gain a leading ``B``. ``max_scale``/``min_opacity`` drop
+        Gaussians for this frame only, exactly as ``--max-scale``/``--min-opacity``.
+        The GIL is released while rendering."""
+        want = _mode(mode)
+        cams, batch = _cameras(camera, viewmat, K, width, height)
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
+        opts = _options(background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased)
+        planes = self._r.render(scene._s, [c._tuple() for c in cams], *opts, *want)
+        return _outputs(planes, cams, batch, want)
+
+
+def render_cpu(
+    scene: Scene,
+    camera: Union[Camera, Sequence[Camera], None] = None,
+    *,
+    viewmat: Optional[ArrayLike] = None,
+    K: Optional[ArrayLike] = None,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    background: ArrayLike = (0.0, 0.0, 0.0),
+    sh_degree: Optional[int] = None,
+    scale_modifier: float = 1.0,
+    max_scale: Optional[float] = None,
+    min_opacity: Optional[float] = None,
+    antialiased: Optional[bool] = None,
+    mode: str = "rgb+alpha+depth",
+) -> Dict[str, np.ndarray]:
+    """``Renderer.render`` on the CPU reference renderer (the original 3DGS rasterizer's
+    rules in f32, multithreaded): the yardstick the GPU is checked against."""
+    want = _mode(mode)
+    cams, batch = _cameras(camera, viewmat, K, width, height)
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
+    opts = _options(background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased)
+    planes = _native.render_cpu(scene._s, [c._tuple() for c in cams], *opts, *want)
+    return _outputs(planes, cams, batch, want)
+
+
+# ---------------------------------------------------------------------------------------
+# Images and metrics
+
+
+def read_image(path: PathLike) -> Tuple[np.ndarray, List[str]]:
+    """Reads PNG (8/16-bit), JPEG, WebP, OpenEXR or .npy as ``(H, W, C)`` float32 (8- and
+    16-bit scaled to [0, 1]) and its channel names (``R, G, B, A, Z, ...``)."""
+    w, h, names, data = _native.read_image(os.fspath(path))
+    return _view(data, (h, w, len(names))), names
+
+
+def _image(x: Union[ArrayLike, PathLike], name: str) -> np.ndarray:
+    if isinstance(x, (str, os.PathLike)):
+        arr, names = read_image(x)
+        for group in (["R", "G", "B"], ["Y"]):
+            if all(g in names for g in group):
+                return arr[..., [names.index(g) for g in group]]
+        return arr
+    arr = np.asarray(x)
+    if arr.dtype == np.uint8:
+        arr = arr.astype(np.float32) / 255.0
+    elif arr.dtype == np.uint16:
+        arr = arr.astype(np.float32) / 65535.0
+    elif arr.dtype.kind != "f":
+        raise TypeError(f"{name} must be a float, uint8 or uint16 array, got dtype {arr.dtype}")
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.ndim != 3:
+        raise ValueError(f"{name} must have shape (H, W) or (H, W, C), got {tuple(arr.shape)}")
+    return np.ascontiguousarray(arr, dtype="<f4")
+
+
+def compare(
+    reference: Union[ArrayLike, PathLike],
+    test: Union[ArrayLike, PathLike],
+    kind: str = "color",
+) -> Dict[str, Optional[float]]:
+    """The metrics of ``vksplat compare``: PSNR (dB, ``inf`` when equal), SSIM (the 3DGS
+    evaluation's), LDR-FLIP (3-channel colour), largest and mean absolute error, the share
+    of pixels whose 8-bit values are within 1/255, and the peak.
+
+    ``reference`` and ``test`` are ``(H, W, C)`` or ``(H, W)`` arrays (float, or uint8 /
+    uint16 scaled to [0, 1]) or image paths (their R, G, B are used). ``kind``:
+    ``"color"`` (clamped to [0, 1]), ``"alpha"``, or ``"data"`` (as given, peak the
+    reference's largest value)."""
+    a = _image(reference, "reference")
+    b = _image(test, "test")
+    if a.shape != b.shape:
+        raise ValueError(f"the images differ in shape: reference {a.shape}, test {b.shape}")
+    h, w, c = a.shape
+    return dict(_native.compare(a.tobytes(), b.tobytes(), w, h, c, kind))

@@ -1,0 +1,107 @@
+"""Type stubs of vksplat's compiled module (the public API is the `vksplat` package)."""
+
+from typing import Dict, List, Optional, Sequence, Tuple
+
+CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float]]
+Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray]]
+
+__version__: str
+
+class Scene:
+    def __len__(self) -> int: ...
+    @property
+    def sh_degree(self) -> int: ...
+    @property
+    def antialiased(self) -> bool: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def id(self) -> int: ...
+    def array(self, name: str) -> bytes: ...
+    def save(self, path: str, overwrite: bool = False) -> None: ...
+    def filtered(
+        self,
+        max_scale: Optional[float] = None,
+        min_opacity: Optional[float] = None,
+        sh_degree: Optional[int] = None,
+    ) -> "Scene": ...
+
+class Renderer:
+    def __init__(self, device: Optional[str] = None) -> None: ...
+    @property
+    def device(self) -> str: ...
+    @property
+    def timings(self) -> Dict[str, float]: ...
+    @property
+    def counters(self) -> Dict[str, int]: ...
+    def render(
+        self,
+        scene: Scene,
+        cameras: List[CamTuple],
+        background: Sequence[float],
+        sh_degree: Optional[int],
+        scale_modifier: float,
+        max_scale: Optional[float],
+        min_opacity: Optional[float],
+        antialiased: Optional[bool],
+        rgb: bool,
+        alpha: bool,
+        depth: bool,
+    ) -> Planes: ...
+
+def load(path: str, iteration: Optional[int] = None) -> Scene: ...
+def demo() -> Scene: ...
+def scene_from_arrays(
+    n: int,
+    sh_coeffs: int,
+    means: bytes,
+    quats: bytes,
+    scales: bytes,
+    opacities: bytes,
+    sh: bytes,
+    activated: bool,
+    antialiased: bool = False,
+) -> Scene: ...
+def load_cameras(path: str, frames: Optional[int] = None, fps: Optional[float] = None) -> List[CamTuple]: ...
+def save_cameras(path: str, cameras: List[CamTuple], overwrite: bool = False) -> None: ...
+def orbit(
+    scene: Scene,
+    frames: int,
+    width: int,
+    height: int,
+    vfov: float,
+    elevation: float,
+    start: float,
+    up: Sequence[float],
+    centre: Optional[Sequence[float]] = None,
+    radius: Optional[float] = None,
+) -> List[CamTuple]: ...
+def default_camera(scene: Scene, width: int, height: int) -> CamTuple: ...
+def look_at(
+    eye: Sequence[float],
+    target: Sequence[float],
+    up: Sequence[float],
+    width: int,
+    height: int,
+    vfov: float,
+    name: str = "",
+) -> CamTuple: ...
+def bulk_centre(scene: Scene) -> List[float]: ...
+def render_cpu(
+    scene: Scene,
+    cameras: List[CamTuple],
+    background: Sequence[float],
+    sh_degree: Optional[int],
+    scale_modifier: float,
+    max_scale: Optional[float],
+    min_opacity: Optional[float],
+    antialiased: Optional[bool],
+    rgb: bool,
+    alpha: bool,
+    depth: bool,
+) -> Planes: ...
+def read_image(path: str) -> Tuple[int, int, List[str], bytearray]: ...
+def compare(
+    reference: bytes, test: bytes, width: int, height: int, channels: int, kind: str
+) -> Dict[str, Optional[float]]: ...
+def encode_png(rgb: bytes, width: int, height: int) -> bytes: ...
