@@ -123,6 +123,8 @@ pub struct BenchReport {
     pub vulkan: String,
     /// Blend kernel as `VKSPLAT_BLEND` names it (`shared`, `texel:2`; GPU only).
     pub blend_kernel: Option<String>,
+    /// The alpha falloff rendered (`gaussian` or `power`, `--kernel`).
+    pub kernel: String,
     /// Measured frames.
     pub frames: usize,
     /// Discarded warm-up frames.
@@ -177,6 +179,11 @@ impl BenchReport {
             )
         } else {
             self.device.clone()
+        };
+        let renderer = if self.kernel == "gaussian" {
+            renderer
+        } else {
+            format!("{renderer}, {} kernel", self.kernel)
         };
         let mut out = format!(
             "scene {}: {} Gaussians\ncamera {} at {}x{}\nrenderer: {renderer}\n",
@@ -294,7 +301,7 @@ pub fn bench_gpu(
         })
         .collect();
     let (bins_x, size) = (inter.bins.0, inter.bin_size);
-    let evaluations = cpu::count_evaluations(&projected, cam, |x, y| {
+    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
         let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
         &inter.values[a as usize..b as usize]
     });
@@ -312,6 +319,7 @@ pub fn bench_gpu(
         driver: info.driver.clone(),
         vulkan: info.api_version.clone(),
         blend_kernel: Some(renderer.blend_kernel().to_string()),
+        kernel: opts.kernel.to_string(),
         frames,
         warmup,
         stages,
@@ -357,12 +365,12 @@ pub fn bench_cpu(
         frame.push(tm.total);
         push_stage_samples(&mut stage_samples, tm.stages());
     }
-    let projected = cpu::preprocess(scene, cam, &cpu::RenderOptions::default());
+    let projected = cpu::preprocess(scene, cam, opts);
     let (keys, values) = cpu::tile_keys(&projected, cam);
     let (sorted_keys, sorted_values) = cpu::sort_pairs(&keys, &values);
     let (tx, ty) = cam.tile_grid();
     let ranges = cpu::tile_ranges(&sorted_keys, (tx * ty) as usize);
-    let evaluations = cpu::count_evaluations(&projected, cam, |x, y| {
+    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
         let [a, b] = ranges[((y / 16) * tx + x / 16) as usize];
         &sorted_values[a as usize..b as usize]
     });
@@ -380,6 +388,7 @@ pub fn bench_cpu(
         driver: "-".into(),
         vulkan: "-".into(),
         blend_kernel: None,
+        kernel: opts.kernel.to_string(),
         frames,
         warmup,
         stages,

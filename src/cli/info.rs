@@ -55,6 +55,14 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             outln!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
         }
     }
+    if scene.kernel == vksplat::cpu::SplatKernel::Gaussian {
+        outln!("kernel      gaussian");
+    } else {
+        outln!(
+            "kernel      {}: the file records it (rendered with it by default; --kernel overrides)",
+            scene.kernel
+        );
+    }
     outln!("gaussians   {}", s.count);
     outln!(
         "sh degree   {} ({} per channel)",
@@ -198,6 +206,7 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
         "scene": name,
         "format": format,
         "antialiased": scene.antialiased,
+        "kernel": scene.kernel.name(),
         "gaussians": s.count,
         "sh_degree": s.sh_degree,
         "bounds": s.bounds.map(|(lo, hi)| json!({"min": lo, "max": hi})),

@@ -2,7 +2,7 @@
 
 use super::common::{
     camera_path, check_output_dir, fail_on_validation_messages, load_scene, CameraArgs, FilterArgs,
-    GpuArgs, PathArgs, SceneArg,
+    GpuArgs, KernelArg, PathArgs, SceneArg,
 };
 use super::{plural, values};
 use anyhow::{bail, Result};
@@ -99,6 +99,8 @@ pub(crate) struct RenderArgs {
     /// Render without the compensation even when the file records antialiased training.
     #[arg(long, conflicts_with = "antialiased")]
     pub(crate) no_antialiased: bool,
+    #[command(flatten)]
+    pub(crate) kernel: KernelArg,
     /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     pub(crate) cpu: bool,
@@ -348,6 +350,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         background: args.background,
         antialiased,
         scale_modifier: args.scale_modifier,
+        kernel: args.kernel.resolve(&scene, &name),
         ..Default::default()
     };
     let run_opts = vksplat::sequence::RunOptions {

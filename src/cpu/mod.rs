@@ -26,6 +26,83 @@ pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 /// A pixel is finished before its transmittance would drop below this.
 pub const T_MIN: f32 = 0.0001;
 
+/// The falloff of a splat's alpha with the squared Mahalanobis distance `d2` of a pixel
+/// from its 2D centre (`d2 = A dx^2 + 2 B dx dy + C dy^2` with the conic, i.e.
+/// `d2 = -2 power` in the reference's terms). Chosen with `--kernel`; both kernels follow the
+/// same 1/255 skip, 0.99 clamp and 1e-4 transmittance rules.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum SplatKernel {
+    /// `opacity * exp(-d2 / 2)`: the reference's Gaussian.
+    #[default]
+    Gaussian,
+    /// `opacity * max(0, 1 - d2 / 9)`: the power-function kernel, whose support ends at the
+    /// 3-sigma ellipse (inside the reference's radius, so its tile rectangle clips nothing).
+    Power,
+}
+
+impl SplatKernel {
+    /// Every kernel, in `--kernel` order.
+    pub const ALL: [SplatKernel; 2] = [SplatKernel::Gaussian, SplatKernel::Power];
+
+    /// The name `--kernel` and the PLY comment use.
+    pub fn name(self) -> &'static str {
+        match self {
+            SplatKernel::Gaussian => "gaussian",
+            SplatKernel::Power => "power",
+        }
+    }
+
+    /// Alpha before the 0.99 clamp at a pixel where the reference's exponent is `power`
+    /// (`power = -d2 / 2 <= 0`).
+    pub fn falloff(self, opacity: f32, power: f32) -> f32 {
+        match self {
+            SplatKernel::Gaussian => opacity * power.exp(),
+            SplatKernel::Power => {
+                let d2 = -2.0 * power;
+                opacity * (1.0 - d2 / 9.0).max(0.0)
+            }
+        }
+    }
+
+    /// Exact bound of the tile culling: a pixel at squared Mahalanobis distance `d2` can get
+    /// alpha >= 1/255 only when `d2 <= bound`. Gaussian: `2 ln(255 opacity)`; power:
+    /// `9 (1 - 1 / (255 opacity))`. Both with the same small conservative margin (relative
+    /// 1e-3 plus 0.01) against rounding in the per-pixel evaluation; negative when the
+    /// Gaussian reaches 1/255 nowhere. Mirrors `alpha_bound` in `glsl/splat_common.glsl`.
+    pub fn alpha_bound(self, opacity: f32) -> f32 {
+        let exact = match self {
+            SplatKernel::Gaussian => 2.0 * (255.0 * opacity).ln(),
+            SplatKernel::Power => 9.0 * (1.0 - 1.0 / (255.0 * opacity)),
+        };
+        exact * 1.001 + 0.01
+    }
+
+    /// The value the shaders receive (`FrameParams.filters.w`, `SPLAT_KERNEL`).
+    pub fn shader_id(self) -> u32 {
+        match self {
+            SplatKernel::Gaussian => 0,
+            SplatKernel::Power => 1,
+        }
+    }
+}
+
+impl std::fmt::Display for SplatKernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SplatKernel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "gaussian" => Ok(SplatKernel::Gaussian),
+            "power" => Ok(SplatKernel::Power),
+            other => Err(format!("unknown kernel {other:?}; use gaussian or power")),
+        }
+    }
+}
+
 /// Options shared by every renderer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -47,6 +124,8 @@ pub struct RenderOptions {
     pub min_opacity: Option<f32>,
     /// SH degree evaluated, at most the scene's. `None` evaluates the scene's own.
     pub sh_degree: Option<u32>,
+    /// Alpha falloff of every splat ([`SplatKernel::Gaussian`] by default, the reference).
+    pub kernel: SplatKernel,
 }
 
 impl Default for RenderOptions {
@@ -58,6 +137,7 @@ impl Default for RenderOptions {
             max_scale: None,
             min_opacity: None,
             sh_degree: None,
+            kernel: SplatKernel::Gaussian,
         }
     }
 }
@@ -291,18 +371,20 @@ pub fn preprocess(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) ->
 }
 
 /// Mirror of `tile_receives` in `glsl/splat_common.glsl`: whether any pixel of the
-/// `size`-pixel bin `tile` can get alpha >= 1/255 from a Gaussian with this centre, conic
-/// and opacity (with the GPU's small conservative margin). The GPU drops pairs for which
-/// this is false; they contribute nothing, so the image is unchanged. The reference renderer
-/// itself keeps every pair of the rectangle; tests use this to compare membership.
+/// `size`-pixel bin `tile` can get alpha >= 1/255 from a splat with this centre, conic
+/// and opacity under `kernel` (with the GPU's small conservative margin, see
+/// [`SplatKernel::alpha_bound`]). The GPU drops pairs for which this is false; they
+/// contribute nothing, so the image is unchanged. The reference renderer itself keeps every
+/// pair of the rectangle; tests use this to compare membership.
 pub fn tile_receives(
     mean2d: [f32; 2],
     conic: [f32; 3],
     opacity: f32,
+    kernel: SplatKernel,
     tile: [u32; 2],
     size: u32,
 ) -> bool {
-    let bound = 2.0 * (255.0 * opacity).ln() * 1.001 + 0.01;
+    let bound = kernel.alpha_bound(opacity);
     let t = size as f32;
     let lo = [
         tile[0] as f32 * t - mean2d[0],
@@ -325,8 +407,15 @@ pub fn tile_receives(
 }
 
 /// Largest alpha (before the 0.99 clamp) Gaussian `g` reaches at any pixel of the
-/// `size`-pixel bin `tile`, evaluated pixel by pixel with the blend's formula.
-pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], size: u32, width: u32, height: u32) -> f32 {
+/// `size`-pixel bin `tile` under `kernel`, evaluated pixel by pixel with the blend's formula.
+pub fn max_alpha_in_tile(
+    g: &Projected,
+    kernel: SplatKernel,
+    tile: [u32; 2],
+    size: u32,
+    width: u32,
+    height: u32,
+) -> f32 {
     let mut best = 0.0f32;
     for y in tile[1] * size..((tile[1] + 1) * size).min(height) {
         for x in tile[0] * size..((tile[0] + 1) * size).min(width) {
@@ -334,7 +423,7 @@ pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], size: u32, width: u32, h
             let dy = g.mean2d[1] - y as f32;
             let power = -0.5 * (g.conic[0] * dx * dx + g.conic[2] * dy * dy) - g.conic[1] * dx * dy;
             if power <= 0.0 {
-                best = best.max(g.opacity * power.exp());
+                best = best.max(kernel.falloff(g.opacity, power));
             }
         }
     }
@@ -403,8 +492,15 @@ pub struct PixelResult {
     pub evaluated: u32,
 }
 
-/// Composites the Gaussians `ids` (front to back) at pixel `(px, py)` with the reference rules.
-pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> PixelResult {
+/// Composites the Gaussians `ids` (front to back) at pixel `(px, py)` with the reference
+/// rules and the alpha falloff of `kernel`.
+pub fn blend_pixel(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+) -> PixelResult {
     let mut t = 1.0f32;
     let mut color = [0.0f32; 3];
     let mut depth = 0.0f32;
@@ -419,7 +515,7 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
         if power > 0.0 {
             continue;
         }
-        let alpha = ALPHA_MAX.min(g.opacity * power.exp());
+        let alpha = ALPHA_MAX.min(kernel.falloff(g.opacity, power));
         if alpha < ALPHA_MIN {
             continue;
         }
@@ -442,13 +538,14 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
     }
 }
 
-/// Blends every tile (in parallel) into a frame.
+/// Blends every tile (in parallel) into a frame, with the alpha falloff of `kernel`.
 pub fn blend(
     projected: &[Projected],
     sorted_values: &[u32],
     ranges: &[[u32; 2]],
     cam: &Camera,
     background: [f32; 3],
+    kernel: SplatKernel,
 ) -> Frame {
     let (tiles_x, tiles_y) = cam.tile_grid();
     let (w, h) = (cam.width, cam.height);
@@ -461,7 +558,7 @@ pub fn blend(
             let mut out = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
             for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(h) {
                 for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(w) {
-                    let r = blend_pixel(projected, ids, x as f32, y as f32);
+                    let r = blend_pixel(projected, ids, x as f32, y as f32, kernel);
                     out.push((y as usize * w as usize + x as usize, r));
                 }
             }
@@ -546,7 +643,14 @@ pub fn render_timed(
     let (tx, ty) = cam.tile_grid();
     let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
     take(&mut t.ranges);
-    let frame = blend(&projected, &sorted_values, &ranges, cam, opts.background);
+    let frame = blend(
+        &projected,
+        &sorted_values,
+        &ranges,
+        cam,
+        opts.background,
+        opts.kernel,
+    );
     take(&mut t.blend);
     t.total = start.elapsed().as_secs_f64() * 1e3;
     t.pairs = sorted_keys.len() as u64;
@@ -559,6 +663,7 @@ pub fn render_timed(
 pub fn count_evaluations<'a>(
     projected: &[Projected],
     cam: &Camera,
+    kernel: SplatKernel,
     list: impl Fn(u32, u32) -> &'a [u32] + Sync,
 ) -> u64 {
     (0..cam.height)
@@ -566,7 +671,9 @@ pub fn count_evaluations<'a>(
         .map(|y| {
             (0..cam.width)
                 .map(|x| {
-                    u64::from(blend_pixel(projected, list(x, y), x as f32, y as f32).evaluated)
+                    u64::from(
+                        blend_pixel(projected, list(x, y), x as f32, y as f32, kernel).evaluated,
+                    )
                 })
                 .sum::<u64>()
         })

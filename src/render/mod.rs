@@ -26,7 +26,7 @@ pub mod ranges;
 pub mod types;
 
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
+use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
@@ -355,7 +355,10 @@ pub struct GpuRenderer {
     keys: keys::Keys,
     sort: RadixSort,
     ranges: ranges::Ranges,
+    /// Blend pipelines by alpha falloff: the Gaussian one is built with the renderer, the
+    /// power one on the first frame that needs it.
     blend: blend::Blend,
+    power_blend: Option<blend::Blend>,
     pack: pack::Pack,
     timer: GpuTimer,
     slot: FrameSlot,
@@ -392,7 +395,8 @@ impl GpuRenderer {
             keys: keys::Keys::new(&ctx)?,
             sort: RadixSort::new(&ctx)?,
             ranges: ranges::Ranges::new(&ctx)?,
-            blend: blend::Blend::new(&ctx, kernel)?,
+            blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
+            power_blend: None,
             pack: pack::Pack::new(&ctx)?,
             timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
             slot: FrameSlot::new(&ctx, "frame")?,
@@ -598,6 +602,13 @@ impl GpuRenderer {
             })
             .min(self.max_capacity());
         self.ensure_frame(scene, cam, initial)?;
+        if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
+            self.power_blend = Some(blend::Blend::new(
+                &self.ctx,
+                self.blend.kernel(),
+                SplatKernel::Power,
+            )?);
+        }
         self.bin_size = self.blend.kernel().bin_size();
         let mut regrows = 0;
         loop {
@@ -692,6 +703,7 @@ impl GpuRenderer {
             sort,
             ranges,
             blend,
+            power_blend,
             pack,
             timer,
             slot,
@@ -700,6 +712,15 @@ impl GpuRenderer {
             bin_size,
             ..
         } = self;
+        let blend = match (opts.kernel, power_blend.as_ref()) {
+            (SplatKernel::Gaussian, _) => &*blend,
+            (SplatKernel::Power, Some(b)) => b,
+            (SplatKernel::Power, None) => {
+                return Err(GpuError::InvalidArgument(
+                    "the power-kernel blend pipeline is missing".into(),
+                ))
+            }
+        };
         let f = frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
@@ -739,7 +760,7 @@ impl GpuRenderer {
                 opts.scale_modifier,
                 opts.max_scale.unwrap_or(-1.0),
                 opts.min_opacity.unwrap_or(-1.0),
-                0.0,
+                opts.kernel.shader_id() as f32,
             ],
         };
         let n = scene.count;

@@ -55,6 +55,10 @@ pub struct Scene {
     /// compensation of [`crate::cpu::RenderOptions::antialiased`]. INRIA PLY and `.splat`
     /// cannot record it.
     pub antialiased: bool,
+    /// The alpha falloff the scene is made for ([`crate::cpu::SplatKernel`]), as the file
+    /// records it (INRIA PLY: a `comment vksplat kernel power` header line); Gaussian when
+    /// it records none. `render` uses it unless `--kernel` says otherwise.
+    pub kernel: crate::cpu::SplatKernel,
 }
 
 /// Gaussians after the reference activations, ready to render or upload.
@@ -108,6 +112,7 @@ impl Scene {
     pub fn select(&self, indices: &[usize], sh_degree: u32) -> Scene {
         let mut out = Scene::empty(sh_degree.min(self.sh_degree));
         out.antialiased = self.antialiased;
+        out.kernel = self.kernel;
         let in_stride = self.sh_stride();
         let out_stride = out.sh_stride();
         out.positions.reserve(indices.len());

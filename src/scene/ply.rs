@@ -2,9 +2,12 @@
 //!
 //! Accepts `binary_little_endian`, `binary_big_endian` and `ascii` files. Vertex
 //! properties are looked up by name, so extra or reordered properties are fine. Other
-//! elements (e.g. faces) are parsed past and ignored.
+//! elements (e.g. faces) are parsed past and ignored. A header line
+//! `comment vksplat kernel power` records that the scene is made for the power-function
+//! kernel ([`SplatKernel`]); the writer adds it for such scenes.
 
 use super::{sh_coeffs_for_degree, Scene, SceneError};
+use crate::cpu::SplatKernel;
 use std::path::Path;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,12 +108,33 @@ pub(crate) struct Header {
     pub(crate) format: Format,
     pub(crate) elements: Vec<Element>,
     pub(crate) body_offset: usize,
+    /// `comment` lines: the header line number (1-based) and the text after `comment`.
+    pub(crate) comments: Vec<(usize, String)>,
 }
+
+/// The header comment that records a scene's alpha falloff: `comment vksplat kernel NAME`.
+pub const KERNEL_COMMENT: &str = "vksplat kernel";
 
 impl Header {
     /// The element called `name`, if the header declares one.
     pub(crate) fn element(&self, name: &str) -> Option<&Element> {
         self.elements.iter().find(|e| e.name == name)
+    }
+
+    /// The alpha falloff a `comment vksplat kernel NAME` line records (Gaussian without
+    /// one); an unknown name is an error naming the line.
+    pub(crate) fn kernel(&self, path: &Path) -> Result<SplatKernel, SceneError> {
+        let mut kernel = SplatKernel::Gaussian;
+        for (line, text) in &self.comments {
+            let words: Vec<&str> = text.split_whitespace().collect();
+            if words.len() < 2 || words[..2].join(" ") != KERNEL_COMMENT {
+                continue;
+            }
+            kernel = words[2..].join(" ").parse().map_err(|e: String| {
+                SceneError::invalid(path, format!("header line {line}: \"comment {text}\": {e}"))
+            })?;
+        }
+        Ok(kernel)
     }
 
     /// The body encoding as the public enum.
@@ -157,6 +181,7 @@ pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneErr
 
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut comments = Vec::new();
     for (lineno, line) in header.lines().enumerate().skip(1) {
         let mut words = line.split_whitespace();
         let Some(keyword) = words.next() else {
@@ -179,7 +204,8 @@ pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneErr
                     _ => return Err(line_err("unknown PLY format")),
                 });
             }
-            "comment" | "obj_info" => {}
+            "comment" => comments.push((lineno + 1, rest.join(" "))),
+            "obj_info" => {}
             "element" => {
                 if rest.len() != 2 {
                     return Err(line_err("malformed element line"));
@@ -228,6 +254,7 @@ pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneErr
         format,
         elements,
         body_offset,
+        comments,
     })
 }
 
@@ -434,6 +461,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         path,
     };
     let mut scene = Scene::empty(map.sh_degree);
+    scene.kernel = header.kernel(path)?;
     for (ei, el) in header.elements.iter().enumerate() {
         body.check_fits(el)?;
         let mut row = vec![0f64; el.properties.len()];
@@ -586,7 +614,12 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
         PlyEncoding::BinaryBigEndian => "binary_big_endian",
         PlyEncoding::Ascii => "ascii",
     };
-    let mut out = format!("ply\nformat {format} 1.0\nelement vertex {}\n", scene.len());
+    let mut out = format!("ply\nformat {format} 1.0\n");
+    // Only a non-default kernel is recorded, so Gaussian scenes keep the trainer's header.
+    if scene.kernel != SplatKernel::Gaussian {
+        out.push_str(&format!("comment {KERNEL_COMMENT} {}\n", scene.kernel));
+    }
+    out.push_str(&format!("element vertex {}\n", scene.len()));
     for n in &names {
         out.push_str(&format!("property float {n}\n"));
     }

@@ -129,6 +129,9 @@ pub struct ConvertOptions {
     pub filter: SceneFilter,
     /// Replace an existing output file.
     pub overwrite: bool,
+    /// Record this alpha falloff in the output instead of the input's (`Scene::kernel`;
+    /// only PLY can record one).
+    pub kernel: Option<crate::cpu::SplatKernel>,
 }
 
 /// What [`convert`] did.
@@ -151,6 +154,9 @@ pub struct ConvertReport {
     pub bytes: usize,
     /// The input records antialiased training but the output format cannot say so.
     pub antialiased_flag_lost: bool,
+    /// The input records a non-Gaussian kernel (`cpu::SplatKernel`) that the output format
+    /// cannot record (only PLY can).
+    pub kernel_lost: Option<crate::cpu::SplatKernel>,
 }
 
 /// Loads `input` (any supported format), applies the transform and then the filter, and
@@ -173,7 +179,10 @@ pub fn convert(
     if !options.overwrite && output.exists() {
         return Err(OutputError::Exists(output.to_path_buf()).into());
     }
-    let (scene, input_format) = super::load_with_format(input)?;
+    let (mut scene, input_format) = super::load_with_format(input)?;
+    if let Some(kernel) = options.kernel {
+        scene.kernel = kernel;
+    }
     let read = scene.len();
     let scene = match &options.transform {
         Some(t) => t.apply(scene).map_err(|message| ConvertError::Transform {
@@ -199,6 +208,9 @@ pub fn convert(
             .then_some(filtered.sh_degree),
         bytes: bytes.len(),
         antialiased_flag_lost: scene.antialiased && output_format != OutputFormat::Spz,
+        kernel_lost: (scene.kernel != crate::cpu::SplatKernel::Gaussian
+            && output_format != OutputFormat::Ply)
+            .then_some(scene.kernel),
     })
 }
 
