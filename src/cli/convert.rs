@@ -77,6 +77,14 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
             r.output_format
         );
     }
+    if r.features_dropped > 0 {
+        note!(
+            "note: {} stores no feature channels; the {} of {} were dropped (PLY keeps them as feat_*)",
+            r.output_format,
+            super::plural(r.features_dropped, "channel"),
+            args.input.display()
+        );
+    }
     if let Some(kernel) = r.kernel_lost {
         note!(
             "note: {} records that the scene is made for the {kernel} kernel; {} cannot record that, so render the output with --kernel {kernel}",

@@ -501,8 +501,30 @@ pub fn blend_pixel(
     py: f32,
     kernel: SplatKernel,
 ) -> PixelResult {
-    let mut t = 1.0f32;
     let mut color = [0.0f32; 3];
+    let mut r = blend_pixel_with(projected, ids, px, py, kernel, |id, w| {
+        for (c, gc) in color.iter_mut().zip(projected[id as usize].color) {
+            *c += gc * w;
+        }
+    });
+    r.color = color;
+    r
+}
+
+/// The reference's per-pixel compositing loop: for every Gaussian of `ids` (front to back)
+/// that the rules add to pixel `(px, py)`, calls `add(id, alpha * T)` with its weight, and
+/// returns the transmittance and weighted depth (`color` zero: the caller accumulates what
+/// it blends). [`blend_pixel`] blends colour with it and [`blend_features_pixel`] feature
+/// channels, so both follow exactly the same alpha, skip and stop rules.
+pub fn blend_pixel_with(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+    mut add: impl FnMut(u32, f32),
+) -> PixelResult {
+    let mut t = 1.0f32;
     let mut depth = 0.0f32;
     let mut evaluated = 0u32;
     for &id in ids {
@@ -524,18 +546,98 @@ pub fn blend_pixel(
             break;
         }
         let w = alpha * t;
-        for (c, gc) in color.iter_mut().zip(g.color) {
-            *c += gc * w;
-        }
+        add(id, w);
         depth += g.depth * w;
         t = test_t;
     }
     PixelResult {
-        color,
+        color: [0.0; 3],
         transmittance: t,
         weighted_depth: depth,
         evaluated,
     }
+}
+
+/// Composites the `k` feature channels of the Gaussians `ids` at pixel `(px, py)` into
+/// `out` (`k` floats, zeroed first) with the colour rules and no background.
+#[allow(clippy::too_many_arguments)]
+pub fn blend_features_pixel(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+    features: &[f32],
+    k: usize,
+    out: &mut [f32],
+) {
+    out.fill(0.0);
+    blend_pixel_with(projected, ids, px, py, kernel, |id, w| {
+        let f = &features[id as usize * k..(id as usize + 1) * k];
+        for (o, v) in out.iter_mut().zip(f) {
+            *o += v * w;
+        }
+    });
+}
+
+/// Blends the `k` feature channels per Gaussian (`features`, Gaussian-major) of every
+/// tile front to back, with exactly the colour rules (same alpha, transmittance, skip and
+/// stop; background 0): `width * height * k` floats, pixel-major, row by row.
+pub fn blend_features(
+    projected: &[Projected],
+    sorted_values: &[u32],
+    ranges: &[[u32; 2]],
+    cam: &Camera,
+    kernel: SplatKernel,
+    features: &[f32],
+    k: usize,
+) -> Vec<f32> {
+    let (tiles_x, _) = cam.tile_grid();
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut out = vec![0f32; w * h * k];
+    if k == 0 {
+        return out;
+    }
+    out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
+        for (x, px) in row.chunks_exact_mut(k).enumerate() {
+            let tile = (y as u32 / TILE_SIZE) * tiles_x + x as u32 / TILE_SIZE;
+            let [start, end] = ranges[tile as usize];
+            let ids = &sorted_values[start as usize..end as usize];
+            blend_features_pixel(projected, ids, x as f32, y as f32, kernel, features, k, px);
+        }
+    });
+    out
+}
+
+/// Renders a frame and the scene's feature channels ([`blend_features`]) on the CPU.
+pub fn render_features(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> (Frame, Vec<f32>) {
+    let projected = preprocess(scene, cam, opts);
+    let (keys, values) = tile_keys(&projected, cam);
+    let (sorted_keys, sorted_values) = sort_pairs(&keys, &values);
+    let (tx, ty) = cam.tile_grid();
+    let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
+    let frame = blend(
+        &projected,
+        &sorted_values,
+        &ranges,
+        cam,
+        opts.background,
+        opts.kernel,
+    );
+    let features = blend_features(
+        &projected,
+        &sorted_values,
+        &ranges,
+        cam,
+        opts.kernel,
+        &scene.features,
+        scene.feature_count,
+    );
+    (frame, features)
 }
 
 /// Blends every tile (in parallel) into a frame, with the alpha falloff of `kernel`.

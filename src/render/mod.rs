@@ -18,6 +18,7 @@
 //! the frame recorded again; the CPU never waits in the middle of a frame.
 
 pub mod blend;
+pub mod features;
 pub mod keys;
 pub mod order;
 pub mod pack;
@@ -85,6 +86,21 @@ impl GpuScene {
     }
 }
 
+/// A scene's feature channels uploaded to the device: one buffer per group of four
+/// channels, a vec4 per Gaussian (zero past the last channel).
+pub struct GpuFeatures {
+    groups: Vec<GpuBuffer>,
+    channels: usize,
+    count: u32,
+}
+
+impl GpuFeatures {
+    /// Channels per Gaussian (K).
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+}
+
 /// GPU time of each stage of the last frame, in milliseconds (timestamp queries).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StageTimings {
@@ -102,6 +118,8 @@ pub struct StageTimings {
     pub ranges: f64,
     /// Per-tile blending.
     pub blend: f64,
+    /// Feature channels blended after the colour (0 unless the frame rendered features).
+    pub features: f64,
     /// Image copies to host-visible memory.
     pub readback: f64,
     /// First timestamp to last.
@@ -109,9 +127,10 @@ pub struct StageTimings {
 }
 
 impl StageTimings {
-    /// The stages in pipeline order with their names.
-    pub fn stages(&self) -> [(&'static str, f64); 8] {
-        [
+    /// The stages in pipeline order with their names; `features` only when the frame
+    /// blended feature channels.
+    pub fn stages(&self) -> Vec<(&'static str, f64)> {
+        let mut stages = vec![
             ("preprocess", self.preprocess),
             ("order", self.order),
             ("scan", self.scan),
@@ -119,8 +138,12 @@ impl StageTimings {
             ("sort", self.sort),
             ("ranges", self.ranges),
             ("blend", self.blend),
-            ("readback", self.readback),
-        ]
+        ];
+        if self.features > 0.0 {
+            stages.push(("features", self.features));
+        }
+        stages.push(("readback", self.readback));
+        stages
     }
 }
 
@@ -359,6 +382,11 @@ pub struct GpuRenderer {
     /// power one on the first frame that needs it.
     blend: blend::Blend,
     power_blend: Option<blend::Blend>,
+    /// Feature blend pipelines by `SplatKernel::shader_id`, built on first use.
+    feature_blends: [Option<features::FeatureBlend>; 2],
+    /// Per group of four channels, the feature image of the last features frame (vec4 per
+    /// pixel), kept across frames of the same size.
+    feature_images: Vec<GpuBuffer>,
     pack: pack::Pack,
     timer: GpuTimer,
     slot: FrameSlot,
@@ -397,6 +425,8 @@ impl GpuRenderer {
             ranges: ranges::Ranges::new(&ctx)?,
             blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
             power_blend: None,
+            feature_blends: [None, None],
+            feature_images: Vec::new(),
             pack: pack::Pack::new(&ctx)?,
             timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
             slot: FrameSlot::new(&ctx, "frame")?,
@@ -497,6 +527,102 @@ impl GpuRenderer {
         })
     }
 
+    /// Uploads the scene's feature channels (four per buffer, for the feature blend).
+    pub fn upload_features(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+        let k = scene.feature_count;
+        let n = scene.len();
+        if k == 0 || scene.features.len() != n * k {
+            return Err(GpuError::InvalidArgument(format!(
+                "the scene has no feature channels to upload ({} values for {n} Gaussians and {k} channels)",
+                scene.features.len()
+            )));
+        }
+        let count = u32::try_from(n).map_err(|_| {
+            GpuError::InvalidArgument(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
+        })?;
+        let mut groups = Vec::new();
+        for g in 0..features::groups(k) {
+            let mut v = vec![[0f32; 4]; n.max(1)];
+            for (i, dst) in v.iter_mut().enumerate().take(n) {
+                for (c, d) in dst.iter_mut().enumerate() {
+                    let ch = g * features::CHANNELS_PER_GROUP + c;
+                    if ch < k {
+                        *d = scene.features[i * k + ch];
+                    }
+                }
+            }
+            let name = format!("features {}..{}", g * 4, (g * 4 + 4).min(k));
+            let bytes = (v.len() * 16) as u64;
+            check_binding(&self.ctx, &name, bytes)?;
+            let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
+            buf.upload(&self.ctx, &v)?;
+            groups.push(buf);
+        }
+        Ok(GpuFeatures {
+            groups,
+            channels: k,
+            count,
+        })
+    }
+
+    /// Renders one frame and blends the uploaded feature channels over the same sorted
+    /// lists with the colour rules (background 0), timed as the `features` stage: the frame
+    /// and `width * height * K` floats, pixel-major.
+    pub fn render_features(
+        &mut self,
+        scene: &GpuScene,
+        features: &GpuFeatures,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<(Frame, Vec<f32>)> {
+        if features.count != scene.count {
+            return Err(GpuError::InvalidArgument(format!(
+                "the features were uploaded for {} Gaussians, the scene has {}",
+                features.count, scene.count
+            )));
+        }
+        let slot = opts.kernel.shader_id() as usize;
+        if self.feature_blends[slot].is_none() {
+            self.feature_blends[slot] = Some(features::FeatureBlend::new(&self.ctx, opts.kernel)?);
+        }
+        let groups = features.groups.len();
+        let pixels = u64::from(cam.width) * u64::from(cam.height);
+        let bytes = pixels * 16;
+        if self.feature_images.len() < groups
+            || self
+                .feature_images
+                .first()
+                .is_some_and(|b| b.size() != bytes)
+        {
+            self.feature_images.clear();
+            check_binding(&self.ctx, "feature image", bytes)?;
+            for g in 0..groups {
+                self.feature_images.push(GpuBuffer::new(
+                    &self.ctx,
+                    &format!("feature image {g}"),
+                    bytes,
+                    MemoryKind::Device,
+                )?);
+            }
+        }
+        self.render_frame_with(scene, cam, opts, Readback::Float, Some(features))?;
+        let frame = self.read_frame(cam)?;
+        let k = features.channels;
+        let mut out = vec![0f32; pixels as usize * k];
+        for (g, image) in self.feature_images.iter().take(groups).enumerate() {
+            let px: Vec<[f32; 4]> = image.read(&self.ctx, pixels as usize)?;
+            for (dst, src) in out.chunks_exact_mut(k).zip(&px) {
+                for (c, v) in src.iter().enumerate() {
+                    let ch = g * features::CHANNELS_PER_GROUP + c;
+                    if ch < k {
+                        dst[ch] = *v;
+                    }
+                }
+            }
+        }
+        Ok((frame, out))
+    }
+
     /// GPU time per stage of the last frame.
     pub fn timings(&self) -> &StageTimings {
         &self.timings
@@ -591,6 +717,18 @@ impl GpuRenderer {
         opts: &RenderOptions,
         readback: Readback,
     ) -> GpuResult<()> {
+        self.render_frame_with(scene, cam, opts, readback, None)
+    }
+
+    /// [`Self::render_frame`], also blending `features` when given.
+    fn render_frame_with(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        readback: Readback,
+        features: Option<&GpuFeatures>,
+    ) -> GpuResult<()> {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         opts.validate().map_err(GpuError::InvalidArgument)?;
@@ -615,7 +753,7 @@ impl GpuRenderer {
             if readback == Readback::Rgba8 {
                 self.ensure_packed()?;
             }
-            self.record_and_submit(scene, cam, opts, readback)?;
+            self.record_and_submit(scene, cam, opts, readback, features)?;
             let counters = self.read_counters()?;
             let pairs = counters.pairs();
             let capacity = self.frame.as_ref().map_or(0, |f| f.capacity);
@@ -694,6 +832,7 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
         readback: Readback,
+        features: Option<&GpuFeatures>,
     ) -> GpuResult<()> {
         let Self {
             preprocess,
@@ -704,6 +843,8 @@ impl GpuRenderer {
             ranges,
             blend,
             power_blend,
+            feature_blends,
+            feature_images,
             pack,
             timer,
             slot,
@@ -712,6 +853,17 @@ impl GpuRenderer {
             bin_size,
             ..
         } = self;
+        let feature_job = match features {
+            Some(feat) => Some((
+                feat,
+                feature_blends[opts.kernel.shader_id() as usize]
+                    .as_ref()
+                    .ok_or_else(|| {
+                        GpuError::InvalidArgument("the feature blend pipeline is missing".into())
+                    })?,
+            )),
+            None => None,
+        };
         let blend = match (opts.kernel, power_blend.as_ref()) {
             (SplatKernel::Gaussian, _) => &*blend,
             (SplatKernel::Power, Some(b)) => b,
@@ -906,6 +1058,29 @@ impl GpuRenderer {
                     (tiles_x, tiles_y),
                 )
             })?;
+            if let Some((feat, pipeline)) = &feature_job {
+                // The blend's loop-length atomics on the counters -> the feature blend's.
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                timer.stage(ctx, cmd, "features", |cmd| {
+                    for (input, output) in feat.groups.iter().zip(feature_images.iter()) {
+                        pipeline.record(
+                            ctx,
+                            cmd,
+                            &features::FeatureBindings {
+                                params: f.params.whole(),
+                                splats: f.splats.whole(),
+                                values: f.values.whole(),
+                                ranges: f.ranges.whole(),
+                                features: input.whole(),
+                                output: output.whole(),
+                                counters: f.counters.whole(),
+                            },
+                            (cam.width, cam.height),
+                        )?;
+                    }
+                    Ok(())
+                })?;
+            }
             // Only what the consumer needs leaves the device. Float: the images are the
             // copy sources. Rgba8: the colour image is packed by a compute pass (timed
             // with the readback) and only the packed buffer is copied.
@@ -986,6 +1161,7 @@ impl GpuRenderer {
                 "sort" => &mut t.sort,
                 "ranges" => &mut t.ranges,
                 "blend" => &mut t.blend,
+                "features" => &mut t.features,
                 "readback" => &mut t.readback,
                 _ => continue,
             };

@@ -4,9 +4,11 @@
 //! properties are looked up by name, so extra or reordered properties are fine. Other
 //! elements (e.g. faces) are parsed past and ignored. A header line
 //! `comment vksplat kernel power` records that the scene is made for the power-function
-//! kernel ([`SplatKernel`]); the writer adds it for such scenes.
+//! kernel ([`SplatKernel`]); the writer adds it for such scenes. Float properties
+//! `feat_0 .. feat_{K-1}` (K <= 64) are the Gaussians' feature channels, written back after
+//! `rot_*`.
 
-use super::{sh_coeffs_for_degree, Scene, SceneError};
+use super::{sh_coeffs_for_degree, Scene, SceneError, MAX_FEATURES};
 use crate::cpu::SplatKernel;
 use std::path::Path;
 
@@ -271,6 +273,8 @@ struct VertexMap {
     scale: [usize; 3],
     rot: [usize; 4],
     sh_degree: u32,
+    /// `feat_0 .. feat_{K-1}`.
+    features: Vec<usize>,
 }
 
 fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
@@ -315,6 +319,21 @@ fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
     let f_rest = (0..n_rest)
         .map(|i| find(&format!("f_rest_{i}")))
         .collect::<Result<Vec<_>, _>>()?;
+    let n_feat = el
+        .properties
+        .iter()
+        .filter(|p| p.name().starts_with("feat_"))
+        .count();
+    if n_feat > MAX_FEATURES {
+        return Err(SceneError::invalid(
+            path,
+            format!("has {n_feat} feat_* properties; a Gaussian carries at most {MAX_FEATURES} feature channels"),
+        ));
+    }
+    // Named feat_0 .. feat_{K-1}: a gap is reported as the missing name.
+    let features = (0..n_feat)
+        .map(|i| find(&format!("feat_{i}")))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(VertexMap {
         xyz: [find("x")?, find("y")?, find("z")?],
         f_dc: [find("f_dc_0")?, find("f_dc_1")?, find("f_dc_2")?],
@@ -328,6 +347,7 @@ fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
             find("rot_3")?,
         ],
         sh_degree,
+        features,
     })
 }
 
@@ -462,6 +482,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     };
     let mut scene = Scene::empty(map.sh_degree);
     scene.kernel = header.kernel(path)?;
+    scene.feature_count = map.features.len();
     for (ei, el) in header.elements.iter().enumerate() {
         body.check_fits(el)?;
         let mut row = vec![0f64; el.properties.len()];
@@ -486,6 +507,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         scene.rotations.reserve_exact(n);
         scene.opacity_logits.reserve_exact(n);
         scene.sh.reserve_exact(n * scene.sh_stride());
+        scene.features.reserve_exact(n * map.features.len());
         let k_rest = sh_coeffs_for_degree(map.sh_degree) - 1;
         let all_f32 = header.format != Format::Ascii
             && el.properties.iter().all(|p| {
@@ -552,6 +574,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
                     scene.sh.push(get(map.f_rest[c * k_rest + k])?);
                 }
             }
+            for &f in &map.features {
+                scene.features.push(get(f)?);
+            }
         }
     }
     if header.format != Format::Ascii && body.pos != bytes.len() {
@@ -596,7 +621,8 @@ pub enum PlyEncoding {
 }
 
 /// Serialises a scene as an INRIA PLY with the trainer's property order
-/// (`x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_*`).
+/// (`x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_*`), then `feat_*` when the scene
+/// has feature channels.
 pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     let k_rest = scene.sh_coeffs() - 1;
     let mut names: Vec<String> = [
@@ -609,6 +635,7 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     names.push("opacity".into());
     names.extend((0..3).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
+    names.extend((0..scene.feature_count).map(|i| format!("feat_{i}")));
     let format = match encoding {
         PlyEncoding::BinaryLittleEndian => "binary_little_endian",
         PlyEncoding::BinaryBigEndian => "binary_big_endian",
@@ -641,6 +668,8 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
         row.push(scene.opacity_logits[i]);
         row.extend_from_slice(&scene.log_scales[i]);
         row.extend_from_slice(&scene.rotations[i]);
+        let k = scene.feature_count;
+        row.extend_from_slice(&scene.features[i * k..(i + 1) * k]);
         match encoding {
             PlyEncoding::BinaryLittleEndian => row
                 .iter()

@@ -157,6 +157,9 @@ pub struct ConvertReport {
     /// The input records a non-Gaussian kernel (`cpu::SplatKernel`) that the output format
     /// cannot record (only PLY can).
     pub kernel_lost: Option<crate::cpu::SplatKernel>,
+    /// Feature channels per Gaussian that the output format cannot hold and dropped (only
+    /// PLY keeps `feat_*`); 0 when none were lost.
+    pub features_dropped: usize,
 }
 
 /// Loads `input` (any supported format), applies the transform and then the filter, and
@@ -211,6 +214,11 @@ pub fn convert(
         kernel_lost: (scene.kernel != crate::cpu::SplatKernel::Gaussian
             && output_format != OutputFormat::Ply)
             .then_some(scene.kernel),
+        features_dropped: if output_format == OutputFormat::Ply {
+            0
+        } else {
+            scene.feature_count
+        },
     })
 }
 
