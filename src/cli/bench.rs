@@ -75,6 +75,11 @@ pub(crate) struct BenchArgs {
     /// Benchmark the CPU reference renderer instead (wall clock).
     #[arg(long)]
     pub(crate) cpu: bool,
+    /// Attach feature channels (an N x K NumPy array, as `render --features`); a scene with
+    /// feature channels (these, or its PLY feat_*) is benchmarked with its feature blend,
+    /// reported as the `features` stage.
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) gpu: GpuArgs,
 }
@@ -162,8 +167,14 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         demo: args.demo,
         iteration: args.iteration,
     };
+    if args.features.is_some() && !counts.is_empty() {
+        bail!("--features attaches channels to a scene file; a Gaussians sweep generates its own scenes");
+    }
     let file_scene = if counts.is_empty() {
-        let (scene, name) = load_scene(&scene_arg)?;
+        let (mut scene, name) = load_scene(&scene_arg)?;
+        if let Some(file) = &args.features {
+            vksplat::scene::features::attach_npy(&mut scene, file)?;
+        }
         if filter.is_identity_for(&scene) {
             Some((scene, name))
         } else {

@@ -29,6 +29,10 @@ pub(crate) struct ConvertArgs {
     /// which `render` follows) [default: the input's].
     #[arg(long, value_name = "gaussian|power")]
     pub(crate) kernel: Option<vksplat::cpu::SplatKernel>,
+    /// Attach feature channels from an N x K NumPy array (float32 or float16; written as
+    /// feat_* PLY properties; other formats drop them with a note).
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
@@ -40,6 +44,7 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
         filter: args.filter.filter()?,
         overwrite: args.overwrite,
         kernel: args.kernel,
+        features: args.features.clone(),
     };
     let r = convert_scene(&args.input, &args.output, &options)?;
     if let Some(t) = &options.transform {

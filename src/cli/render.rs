@@ -41,11 +41,17 @@ pub(crate) struct RenderArgs {
     /// render/frame_{:05}.png for several].
     #[arg(short, long, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
-    /// What to write: rgb, rgba, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
-    /// (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background (straight colour;
-    /// EXR as rgb). Depth PNGs are colour-mapped for looking at.
+    /// What to write: rgb, rgba, alpha, depth, rgb+depth or features [default: rgb for
+    /// PNG, rgb+depth (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background
+    /// (straight colour; EXR as rgb). Depth PNGs are colour-mapped for looking at.
+    /// features: the scene's feature channels blended like colour over 0, as EXR (feat.0
+    /// ... feat.K-1, A, Z) or .npy (H x W x K float32).
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
+    /// Feature channels for the scene's Gaussians: an N x K NumPy array (float32 or
+    /// float16, N the scene's Gaussian count, K 1..64), replacing any feat_* of the file.
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
     /// Frames of the path to render, numbered in the whole path (before --camera): 7,
     /// 0,3,7, 100..200 (end exclusive), 100..=199, 100.. or ..50. File names keep the
     /// frame's number, so split runs give the files of one run.
@@ -175,11 +181,16 @@ fn check_output_options(
             output.display()
         );
     }
-    if args.exr_half && !writes(|c| matches!(c, FileContent::Exr(_))) {
+    if args.exr_half
+        && !writes(|c| matches!(c, FileContent::Exr(_) | FileContent::ExrFeatures { .. }))
+    {
         bail!(
             "--exr-half applies to EXR output; {} is not an EXR file",
             output.display()
         );
+    }
+    if args.exr_background && args.mode == Some(output::RenderMode::Features) {
+        bail!("--exr-background does not apply to --mode features: features are blended over 0, without a background");
     }
     if args.exr_background && !writes(|c| matches!(c, FileContent::Exr(_))) {
         bail!(
@@ -267,7 +278,14 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let filter = args.filter.filter()?;
     let transform = args.transform.transform()?;
-    let (scene, name) = load_scene(&args.scene)?;
+    let (mut scene, name) = load_scene(&args.scene)?;
+    if let Some(file) = &args.features {
+        vksplat::scene::features::attach_npy(&mut scene, file)?;
+    }
+    let render_features = args.mode == Some(output::RenderMode::Features);
+    if render_features && scene.feature_count == 0 {
+        bail!("--mode features needs feature channels, but {name} has none; give them as feat_* PLY properties or with --features FILE.npy");
+    }
     let scene = super::transform::apply(transform.as_ref(), scene)?;
     let total = scene.len();
     let scene = if filter.is_identity_for(&scene) {
@@ -367,9 +385,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let act = scene.activated();
     let (summary, how) = if args.cpu {
-        render_cpu(args, &act, &plan.frames, &opts, &run_opts)?
+        render_cpu(args, &act, &plan.frames, &opts, &run_opts, render_features)?
     } else {
-        render_gpu(args, &act, &plan.frames, &opts, &run_opts)?
+        render_gpu(args, &act, &plan.frames, &opts, &run_opts, render_features)?
     };
     if summary.interrupted {
         return Err(Interrupted(format!(
@@ -468,6 +486,7 @@ fn render_cpu(
     frames: &[vksplat::sequence::FramePlan],
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
+    features: bool,
 ) -> Result<(Summary, String)> {
     if args.gpu.verbose {
         note!(
@@ -478,7 +497,11 @@ fn render_cpu(
     let mut sums = StageSums::default();
     let mut pairs = 0;
     let mut render = |cam: &Camera| {
-        let (frame, t) = vksplat::cpu::render_timed(scene, cam, opts);
+        let (frame, t) = if features {
+            vksplat::cpu::render_features_timed(scene, cam, opts)
+        } else {
+            vksplat::cpu::render_timed(scene, cam, opts)
+        };
         sums.add(&t.stages(), t.total);
         pairs = t.pairs;
         Ok(frame)
@@ -497,6 +520,7 @@ fn render_gpu(
     frames: &[vksplat::sequence::FramePlan],
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
+    features: bool,
 ) -> Result<(Summary, String)> {
     let t0 = std::time::Instant::now();
     let ctx = args.gpu.context()?;
@@ -513,10 +537,18 @@ fn render_gpu(
         );
     }
     let gpu_scene = renderer.upload(scene)?;
+    let gpu_features = if features {
+        Some(renderer.upload_features(scene)?)
+    } else {
+        None
+    };
     let mut sums = StageSums::default();
     let mut last_stats = None;
     let mut render = |cam: &Camera| -> Result<vksplat::frame::Frame> {
-        let frame = renderer.render(&gpu_scene, cam, opts)?;
+        let frame = match &gpu_features {
+            Some(f) => renderer.render_features(&gpu_scene, f, cam, opts)?,
+            None => renderer.render(&gpu_scene, cam, opts)?,
+        };
         let t = renderer.timings();
         sums.add(&t.stages(), t.total);
         last_stats = Some(renderer.stats().clone());

@@ -609,35 +609,10 @@ pub fn blend_features(
     out
 }
 
-/// Renders a frame and the scene's feature channels ([`blend_features`]) on the CPU.
-pub fn render_features(
-    scene: &ActivatedScene,
-    cam: &Camera,
-    opts: &RenderOptions,
-) -> (Frame, Vec<f32>) {
-    let projected = preprocess(scene, cam, opts);
-    let (keys, values) = tile_keys(&projected, cam);
-    let (sorted_keys, sorted_values) = sort_pairs(&keys, &values);
-    let (tx, ty) = cam.tile_grid();
-    let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
-    let frame = blend(
-        &projected,
-        &sorted_values,
-        &ranges,
-        cam,
-        opts.background,
-        opts.kernel,
-    );
-    let features = blend_features(
-        &projected,
-        &sorted_values,
-        &ranges,
-        cam,
-        opts.kernel,
-        &scene.features,
-        scene.feature_count,
-    );
-    (frame, features)
+/// Renders a frame with the scene's feature channels ([`blend_features`] into
+/// [`Frame::features`]) on the CPU.
+pub fn render_features(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) -> Frame {
+    render_features_timed(scene, cam, opts).0
 }
 
 /// Blends every tile (in parallel) into a frame, with the alpha falloff of `kernel`.
@@ -704,6 +679,8 @@ pub struct CpuTimings {
     pub ranges: f64,
     /// [`blend`].
     pub blend: f64,
+    /// [`blend_features`] (0 unless the render blended feature channels).
+    pub features: f64,
     /// The whole render.
     pub total: f64,
     /// Number of (tile, Gaussian) pairs.
@@ -711,15 +688,20 @@ pub struct CpuTimings {
 }
 
 impl CpuTimings {
-    /// The phases in order with their names.
-    pub fn stages(&self) -> [(&'static str, f64); 5] {
-        [
+    /// The phases in order with their names; `features` only when the render blended
+    /// feature channels.
+    pub fn stages(&self) -> Vec<(&'static str, f64)> {
+        let mut stages = vec![
             ("preprocess", self.preprocess),
             ("keys", self.keys),
             ("sort", self.sort),
             ("ranges", self.ranges),
             ("blend", self.blend),
-        ]
+        ];
+        if self.features > 0.0 {
+            stages.push(("features", self.features));
+        }
+        stages
     }
 }
 
@@ -728,6 +710,24 @@ pub fn render_timed(
     scene: &ActivatedScene,
     cam: &Camera,
     opts: &RenderOptions,
+) -> (Frame, CpuTimings) {
+    render_timed_with(scene, cam, opts, false)
+}
+
+/// [`render_features`], timing each phase (the feature blend as `features`).
+pub fn render_features_timed(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> (Frame, CpuTimings) {
+    render_timed_with(scene, cam, opts, true)
+}
+
+fn render_timed_with(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+    features: bool,
 ) -> (Frame, CpuTimings) {
     let start = std::time::Instant::now();
     let mut t = CpuTimings::default();
@@ -745,7 +745,7 @@ pub fn render_timed(
     let (tx, ty) = cam.tile_grid();
     let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
     take(&mut t.ranges);
-    let frame = blend(
+    let mut frame = blend(
         &projected,
         &sorted_values,
         &ranges,
@@ -754,6 +754,19 @@ pub fn render_timed(
         opts.kernel,
     );
     take(&mut t.blend);
+    if features {
+        frame.features = blend_features(
+            &projected,
+            &sorted_values,
+            &ranges,
+            cam,
+            opts.kernel,
+            &scene.features,
+            scene.feature_count,
+        );
+        frame.feature_count = scene.feature_count;
+        take(&mut t.features);
+    }
     t.total = start.elapsed().as_secs_f64() * 1e3;
     t.pairs = sorted_keys.len() as u64;
     (frame, t)

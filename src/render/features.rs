@@ -3,8 +3,8 @@
 //! (one dispatch per group of four), with the colour rules and background 0.
 
 use crate::cpu::SplatKernel;
-use crate::gpu::shader::BindingKind;
-use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
 use ash::vk;
 
 /// Channels blended per dispatch (one vec4 per Gaussian and per pixel).
@@ -18,6 +18,7 @@ pub fn groups(k: usize) -> usize {
 /// The feature blend pipeline for one alpha falloff (compiled in as `SPLAT_KERNEL`).
 pub struct FeatureBlend {
     pipeline: ComputePipeline,
+    texel: bool,
 }
 
 /// Resources one group's dispatch reads and writes.
@@ -36,21 +37,29 @@ pub struct FeatureBindings<'a> {
     pub output: BufferSlice<'a>,
     /// Counters (loop lengths reported).
     pub counters: BufferSlice<'a>,
+    /// Texel views of `splats` (R32G32B32A32_SFLOAT), `values` (R32_UINT) and `features`
+    /// (R32G32B32A32_SFLOAT), for the texel-fetch variant.
+    pub texels: Option<[vk::BufferView; 3]>,
 }
 
 impl FeatureBlend {
-    /// Compiles the shader with the falloff of `kernel`.
-    pub fn new(ctx: &GpuContext, kernel: SplatKernel) -> GpuResult<Self> {
-        let defines = [("SPLAT_KERNEL", format!("{}u", kernel.shader_id()))];
-        let pipeline = ComputePipeline::from_embedded(
-            ctx,
-            "blend_features",
-            &defines,
-            &[BindingKind::StorageBuffer; 7],
-            0,
-            16,
-        )?;
-        Ok(FeatureBlend { pipeline })
+    /// Compiles the shader with the falloff of `kernel`; `texel` reads the splats, values
+    /// and features through texel-buffer views (for CPU devices, as the texel blend).
+    pub fn new(ctx: &GpuContext, kernel: SplatKernel, texel: bool) -> GpuResult<Self> {
+        use BindingKind::{StorageBuffer as B, UniformTexelBuffer as T};
+        let defines = [
+            ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
+            ("TEXEL_FETCH", u32::from(texel).to_string()),
+        ];
+        let bindings = if texel { [B, T, T, B, T, B, B] } else { [B; 7] };
+        let pipeline =
+            ComputePipeline::from_embedded(ctx, "blend_features", &defines, &bindings, 0, 16)?;
+        Ok(FeatureBlend { pipeline, texel })
+    }
+
+    /// Whether the pipeline reads texel-buffer views.
+    pub fn texel(&self) -> bool {
+        self.texel
     }
 
     /// Records one group's dispatch: one 16x16 workgroup per 16x16 pixel block.
@@ -61,11 +70,34 @@ impl FeatureBlend {
         b: &FeatureBindings,
         size: (u32, u32),
     ) -> GpuResult<()> {
-        self.pipeline.dispatch(
+        let (splats, values, features) =
+            match (self.texel, b.texels) {
+                (false, _) => (
+                    Resource::Buffer(b.splats),
+                    Resource::Buffer(b.values),
+                    Resource::Buffer(b.features),
+                ),
+                (true, Some([s, v, f])) => (
+                    Resource::TexelBuffer(s),
+                    Resource::TexelBuffer(v),
+                    Resource::TexelBuffer(f),
+                ),
+                (true, None) => return Err(GpuError::InvalidArgument(
+                    "the texel feature blend needs texel views of the splats, values and features"
+                        .into(),
+                )),
+            };
+        self.pipeline.dispatch_resources(
             ctx,
             cmd,
             &[
-                b.params, b.splats, b.values, b.ranges, b.features, b.output, b.counters,
+                Resource::Buffer(b.params),
+                splats,
+                values,
+                Resource::Buffer(b.ranges),
+                features,
+                Resource::Buffer(b.output),
+                Resource::Buffer(b.counters),
             ],
             &[],
             [size.0.div_ceil(16), size.1.div_ceil(16), 1],

@@ -89,6 +89,8 @@ impl GpuScene {
 /// A scene's feature channels uploaded to the device: one buffer per group of four
 /// channels, a vec4 per Gaussian (zero past the last channel).
 pub struct GpuFeatures {
+    // The views go before the buffers they view.
+    views: Vec<BufferView>,
     groups: Vec<GpuBuffer>,
     channels: usize,
     count: u32,
@@ -540,7 +542,7 @@ impl GpuRenderer {
         let count = u32::try_from(n).map_err(|_| {
             GpuError::InvalidArgument(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
         })?;
-        let mut groups = Vec::new();
+        let (mut groups, mut views) = (Vec::new(), Vec::new());
         for g in 0..features::groups(k) {
             let mut v = vec![[0f32; 4]; n.max(1)];
             for (i, dst) in v.iter_mut().enumerate().take(n) {
@@ -556,9 +558,19 @@ impl GpuRenderer {
             check_binding(&self.ctx, &name, bytes)?;
             let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
             buf.upload(&self.ctx, &v)?;
+            if self.blend.needs_texel_views() {
+                views.push(BufferView::new(
+                    &self.ctx,
+                    &buf,
+                    vk::Format::R32G32B32A32_SFLOAT,
+                    0,
+                    bytes,
+                )?);
+            }
             groups.push(buf);
         }
         Ok(GpuFeatures {
+            views,
             groups,
             channels: k,
             count,
@@ -567,14 +579,14 @@ impl GpuRenderer {
 
     /// Renders one frame and blends the uploaded feature channels over the same sorted
     /// lists with the colour rules (background 0), timed as the `features` stage: the frame
-    /// and `width * height * K` floats, pixel-major.
+    /// with [`Frame::features`] (`width * height * K` floats, pixel-major).
     pub fn render_features(
         &mut self,
         scene: &GpuScene,
         features: &GpuFeatures,
         cam: &Camera,
         opts: &RenderOptions,
-    ) -> GpuResult<(Frame, Vec<f32>)> {
+    ) -> GpuResult<Frame> {
         if features.count != scene.count {
             return Err(GpuError::InvalidArgument(format!(
                 "the features were uploaded for {} Gaussians, the scene has {}",
@@ -583,7 +595,11 @@ impl GpuRenderer {
         }
         let slot = opts.kernel.shader_id() as usize;
         if self.feature_blends[slot].is_none() {
-            self.feature_blends[slot] = Some(features::FeatureBlend::new(&self.ctx, opts.kernel)?);
+            self.feature_blends[slot] = Some(features::FeatureBlend::new(
+                &self.ctx,
+                opts.kernel,
+                self.blend.needs_texel_views(),
+            )?);
         }
         let groups = features.groups.len();
         let pixels = u64::from(cam.width) * u64::from(cam.height);
@@ -606,7 +622,7 @@ impl GpuRenderer {
             }
         }
         self.render_frame_with(scene, cam, opts, Readback::Float, Some(features))?;
-        let frame = self.read_frame(cam)?;
+        let mut frame = self.read_frame(cam)?;
         let k = features.channels;
         let mut out = vec![0f32; pixels as usize * k];
         for (g, image) in self.feature_images.iter().take(groups).enumerate() {
@@ -620,7 +636,9 @@ impl GpuRenderer {
                 }
             }
         }
-        Ok((frame, out))
+        frame.feature_count = k;
+        frame.features = out;
+        Ok(frame)
     }
 
     /// GPU time per stage of the last frame.
@@ -1062,7 +1080,15 @@ impl GpuRenderer {
                 // The blend's loop-length atomics on the counters -> the feature blend's.
                 barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
                 timer.stage(ctx, cmd, "features", |cmd| {
-                    for (input, output) in feat.groups.iter().zip(feature_images.iter()) {
+                    for (g, (input, output)) in
+                        feat.groups.iter().zip(feature_images.iter()).enumerate()
+                    {
+                        let texels = match (&f.splat_texels, &f.value_texels, feat.views.get(g)) {
+                            (Some(s), Some(v), Some(fv)) if pipeline.texel() => {
+                                Some([s.handle(), v.handle(), fv.handle()])
+                            }
+                            _ => None,
+                        };
                         pipeline.record(
                             ctx,
                             cmd,
@@ -1074,6 +1100,7 @@ impl GpuRenderer {
                                 features: input.whole(),
                                 output: output.whole(),
                                 counters: f.counters.whole(),
+                                texels,
                             },
                             (cam.width, cam.height),
                         )?;
@@ -1189,6 +1216,8 @@ impl GpuRenderer {
             color: rgba.iter().map(|p| [p[0], p[1], p[2]]).collect(),
             alpha: rgba.iter().map(|p| p[3]).collect(),
             depth: depth.to_vec(),
+            feature_count: 0,
+            features: Vec::new(),
         })
     }
 

@@ -132,6 +132,9 @@ pub struct ConvertOptions {
     /// Record this alpha falloff in the output instead of the input's (`Scene::kernel`;
     /// only PLY can record one).
     pub kernel: Option<crate::cpu::SplatKernel>,
+    /// Feature channels to attach to the input first: an N x K NumPy array
+    /// ([`super::features::attach_npy`]); only PLY keeps them.
+    pub features: Option<std::path::PathBuf>,
 }
 
 /// What [`convert`] did.
@@ -185,6 +188,9 @@ pub fn convert(
     let (mut scene, input_format) = super::load_with_format(input)?;
     if let Some(kernel) = options.kernel {
         scene.kernel = kernel;
+    }
+    if let Some(file) = &options.features {
+        super::features::attach_npy(&mut scene, file)?;
     }
     let read = scene.len();
     let scene = match &options.transform {
