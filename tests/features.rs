@@ -517,3 +517,38 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
     let e = fails(&["render", s(&gap), "-o", s(&out)], &out);
     assert!(e.contains("\"feat_1\""), "{e}");
 }
+
+/// `feat_*` survive a PLY round trip in every encoding, the filters and transforms keep
+/// each Gaussian's features with it, and `select` carries them.
+#[test]
+fn ply_features_round_trip_and_follow_the_gaussians() {
+    use vksplat::scene::ply::{parse, to_bytes, PlyEncoding};
+    let mut s = common::random_scene(50, 1, 9);
+    random_features(&mut s, 9, 3);
+    for enc in [
+        PlyEncoding::BinaryLittleEndian,
+        PlyEncoding::BinaryBigEndian,
+        PlyEncoding::Ascii,
+    ] {
+        let back = parse(&to_bytes(&s, enc), Path::new("f.ply")).unwrap();
+        assert_eq!(back, s, "{enc:?}");
+    }
+    let picked = s.select(&[7, 3, 40], 0);
+    assert_eq!(picked.feature_count, 9);
+    assert_eq!(&picked.features[9..18], &s.features[27..36]);
+    let filter = vksplat::scene::filter::SceneFilter {
+        min_opacity: Some(0.5),
+        ..Default::default()
+    };
+    let kept = filter.apply(&s);
+    assert!(kept.len() < s.len() && !kept.is_empty());
+    for (j, p) in kept.positions.iter().enumerate() {
+        let i = s.positions.iter().position(|q| q == p).unwrap();
+        assert_eq!(
+            kept.features[j * 9..(j + 1) * 9],
+            s.features[i * 9..(i + 1) * 9]
+        );
+    }
+    assert!(s.set_features(65, vec![0.0; 50 * 65]).is_err());
+    assert!(s.set_features(2, vec![0.0; 99]).is_err());
+}
