@@ -54,6 +54,7 @@ pub const SOURCES: &[(&str, &str)] = &[
         include_str!("../../glsl/blend_features.comp"),
     ),
     ("pack.comp", include_str!("../../glsl/pack.comp")),
+    ("shade.comp", include_str!("../../glsl/shade.comp")),
     (
         "count64_test.comp",
         include_str!("../../glsl/count64_test.comp"),

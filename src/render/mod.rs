@@ -24,6 +24,7 @@ pub mod order;
 pub mod pack;
 pub mod preprocess;
 pub mod ranges;
+pub mod shade;
 pub mod types;
 
 use crate::camera::Camera;
@@ -103,6 +104,21 @@ impl GpuFeatures {
     }
 }
 
+/// What a frame blends besides colour: the scene's features, and the neural shader
+/// applied to them.
+type FeatureJob<'a> = (&'a GpuFeatures, Option<&'a shade::GpuShader>);
+
+/// The feature images of a frame: one plane per group of four channels.
+struct FeaturePlanes {
+    buffer: GpuBuffer,
+    /// Bytes from one plane to the next.
+    plane_bytes: u64,
+    /// Bytes of one plane's pixels.
+    pixel_bytes: u64,
+    /// Planes held.
+    groups: u64,
+}
+
 /// GPU time of each stage of the last frame, in milliseconds (timestamp queries).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StageTimings {
@@ -122,6 +138,8 @@ pub struct StageTimings {
     pub blend: f64,
     /// Feature channels blended after the colour (0 unless the frame rendered features).
     pub features: f64,
+    /// The neural shader (0 unless the frame was shaded).
+    pub shade: f64,
     /// Image copies to host-visible memory.
     pub readback: f64,
     /// First timestamp to last.
@@ -143,6 +161,9 @@ impl StageTimings {
         ];
         if self.features > 0.0 {
             stages.push(("features", self.features));
+        }
+        if self.shade > 0.0 {
+            stages.push(("shade", self.shade));
         }
         stages.push(("readback", self.readback));
         stages
@@ -386,9 +407,12 @@ pub struct GpuRenderer {
     power_blend: Option<blend::Blend>,
     /// Feature blend pipelines by `SplatKernel::shader_id`, built on first use.
     feature_blends: [Option<features::FeatureBlend>; 2],
-    /// Per group of four channels, the feature image of the last features frame (vec4 per
-    /// pixel), kept across frames of the same size.
-    feature_images: Vec<GpuBuffer>,
+    /// The feature images of the last features frame, one plane per group of four
+    /// channels (vec4 per pixel) in one buffer, planes `plane_bytes` apart (a multiple of
+    /// the storage-buffer offset alignment); kept across frames of the same size.
+    feature_planes: Option<FeaturePlanes>,
+    /// The neural shader's pipeline, built on first use.
+    shade: Option<shade::Shade>,
     pack: pack::Pack,
     timer: GpuTimer,
     slot: FrameSlot,
@@ -428,9 +452,11 @@ impl GpuRenderer {
             blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
             power_blend: None,
             feature_blends: [None, None],
-            feature_images: Vec::new(),
+            feature_planes: None,
+            shade: None,
             pack: pack::Pack::new(&ctx)?,
-            timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
+            // Two timestamps per stage: up to ten stages (features and shade included).
+            timer: GpuTimer::new(&ctx, "frame timestamps", 32)?,
             slot: FrameSlot::new(&ctx, "frame")?,
             frame: None,
             timings: StageTimings::default(),
@@ -601,33 +627,109 @@ impl GpuRenderer {
                 self.blend.needs_texel_views(),
             )?);
         }
-        let groups = features.groups.len();
         let pixels = u64::from(cam.width) * u64::from(cam.height);
-        let bytes = pixels * 16;
-        if self.feature_images.len() < groups
-            || self
-                .feature_images
-                .first()
-                .is_some_and(|b| b.size() != bytes)
-        {
-            self.feature_images.clear();
-            check_binding(&self.ctx, "feature image", bytes)?;
-            for g in 0..groups {
-                self.feature_images.push(GpuBuffer::new(
-                    &self.ctx,
-                    &format!("feature image {g}"),
-                    bytes,
-                    MemoryKind::Device,
-                )?);
-            }
-        }
-        self.render_frame_with(scene, cam, opts, Readback::Float, Some(features))?;
+        self.ensure_feature_planes(features, pixels)?;
+        self.render_frame_with(scene, cam, opts, Readback::Float, Some((features, None)))?;
         let mut frame = self.read_frame(cam)?;
-        let k = features.channels;
-        let mut out = vec![0f32; pixels as usize * k];
-        for (g, image) in self.feature_images.iter().take(groups).enumerate() {
-            let px: Vec<[f32; 4]> = image.read(&self.ctx, pixels as usize)?;
-            for (dst, src) in out.chunks_exact_mut(k).zip(&px) {
+        frame.feature_count = features.channels;
+        frame.features = self.read_feature_planes(features.channels, pixels as usize)?;
+        Ok(frame)
+    }
+
+    /// Renders one frame, blends the uploaded feature channels and shades them with the
+    /// neural shader ([`crate::mlp`]) as its own `shade` stage: the frame's colour is
+    /// `alpha * mlp(...) + (1 - alpha) * background`; alpha and depth are the frame's.
+    pub fn render_shaded(
+        &mut self,
+        scene: &GpuScene,
+        features: &GpuFeatures,
+        shader: &shade::GpuShader,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<Frame> {
+        if features.count != scene.count {
+            return Err(GpuError::InvalidArgument(format!(
+                "the features were uploaded for {} Gaussians, the scene has {}",
+                features.count, scene.count
+            )));
+        }
+        if shader.channels() != features.channels {
+            return Err(GpuError::InvalidArgument(format!(
+                "the shader takes {} feature channels but the scene has {}",
+                shader.channels(),
+                features.channels
+            )));
+        }
+        if self.loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
+            return Err(GpuError::InvalidArgument(format!(
+                "the neural shader needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations; use narrower layers, or the CPU reference (--cpu)",
+                shader.iterations,
+                self.ctx.info().name
+            )));
+        }
+        let slot = opts.kernel.shader_id() as usize;
+        if self.feature_blends[slot].is_none() {
+            self.feature_blends[slot] = Some(features::FeatureBlend::new(
+                &self.ctx,
+                opts.kernel,
+                self.blend.needs_texel_views(),
+            )?);
+        }
+        if self.shade.is_none() {
+            self.shade = Some(shade::Shade::new(&self.ctx)?);
+        }
+        let pixels = u64::from(cam.width) * u64::from(cam.height);
+        self.ensure_feature_planes(features, pixels)?;
+        self.render_frame_with(
+            scene,
+            cam,
+            opts,
+            Readback::Float,
+            Some((features, Some(shader))),
+        )?;
+        self.read_frame(cam)
+    }
+
+    /// Makes the feature planes hold `features`' groups for `pixels` pixels.
+    fn ensure_feature_planes(&mut self, features: &GpuFeatures, pixels: u64) -> GpuResult<()> {
+        let groups = features.groups.len() as u64;
+        let align = self.ctx.info().min_storage_buffer_offset_alignment.max(16);
+        let plane_bytes = (pixels * 16).div_ceil(align) * align;
+        let fits = self
+            .feature_planes
+            .as_ref()
+            .is_some_and(|p| p.plane_bytes == plane_bytes && p.groups >= groups);
+        if !fits {
+            self.feature_planes = None;
+            check_binding(&self.ctx, "feature image", plane_bytes * groups)?;
+            self.feature_planes = Some(FeaturePlanes {
+                buffer: GpuBuffer::new(
+                    &self.ctx,
+                    "feature images",
+                    plane_bytes * groups,
+                    MemoryKind::Device,
+                )?,
+                plane_bytes,
+                pixel_bytes: pixels * 16,
+                groups,
+            });
+        }
+        Ok(())
+    }
+
+    /// The `k` blended channels of the last features frame, pixel-major.
+    fn read_feature_planes(&self, k: usize, pixels: usize) -> GpuResult<Vec<f32>> {
+        let planes = self
+            .feature_planes
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no feature image was rendered".into()))?;
+        let stride = (planes.plane_bytes / 16) as usize;
+        let groups = features::groups(k);
+        let all: Vec<[f32; 4]> = planes.buffer.read(&self.ctx, stride * groups)?;
+        let mut out = vec![0f32; pixels * k];
+        for g in 0..groups {
+            let plane = &all[g * stride..g * stride + pixels];
+            for (dst, src) in out.chunks_exact_mut(k).zip(plane) {
                 for (c, v) in src.iter().enumerate() {
                     let ch = g * features::CHANNELS_PER_GROUP + c;
                     if ch < k {
@@ -636,9 +738,7 @@ impl GpuRenderer {
                 }
             }
         }
-        frame.feature_count = k;
-        frame.features = out;
-        Ok(frame)
+        Ok(out)
     }
 
     /// GPU time per stage of the last frame.
@@ -738,14 +838,15 @@ impl GpuRenderer {
         self.render_frame_with(scene, cam, opts, readback, None)
     }
 
-    /// [`Self::render_frame`], also blending `features` when given.
+    /// [`Self::render_frame`], also blending `features` when given, and shading them
+    /// with the neural shader when one comes with them.
     fn render_frame_with(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
         readback: Readback,
-        features: Option<&GpuFeatures>,
+        features: Option<FeatureJob>,
     ) -> GpuResult<()> {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
@@ -850,7 +951,7 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
         readback: Readback,
-        features: Option<&GpuFeatures>,
+        features: Option<FeatureJob>,
     ) -> GpuResult<()> {
         let Self {
             preprocess,
@@ -862,7 +963,8 @@ impl GpuRenderer {
             blend,
             power_blend,
             feature_blends,
-            feature_images,
+            feature_planes,
+            shade,
             pack,
             timer,
             slot,
@@ -872,7 +974,7 @@ impl GpuRenderer {
             ..
         } = self;
         let feature_job = match features {
-            Some(feat) => Some((
+            Some((feat, _)) => Some((
                 feat,
                 feature_blends[opts.kernel.shader_id() as usize]
                     .as_ref()
@@ -1080,9 +1182,13 @@ impl GpuRenderer {
                 // The blend's loop-length atomics on the counters -> the feature blend's.
                 barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
                 timer.stage(ctx, cmd, "features", |cmd| {
-                    for (g, (input, output)) in
-                        feat.groups.iter().zip(feature_images.iter()).enumerate()
-                    {
+                    let planes = feature_planes.as_ref().ok_or_else(|| {
+                        GpuError::InvalidArgument("the feature images are missing".into())
+                    })?;
+                    for (g, input) in feat.groups.iter().enumerate() {
+                        let output = planes
+                            .buffer
+                            .slice(g as u64 * planes.plane_bytes, planes.pixel_bytes);
                         let texels = match (&f.splat_texels, &f.value_texels, feat.views.get(g)) {
                             (Some(s), Some(v), Some(fv)) if pipeline.texel() => {
                                 Some([s.handle(), v.handle(), fv.handle()])
@@ -1098,7 +1204,7 @@ impl GpuRenderer {
                                 values: f.values.whole(),
                                 ranges: f.ranges.whole(),
                                 features: input.whole(),
-                                output: output.whole(),
+                                output,
                                 counters: f.counters.whole(),
                                 texels,
                             },
@@ -1107,6 +1213,30 @@ impl GpuRenderer {
                     }
                     Ok(())
                 })?;
+                if let Some(shader) = features.and_then(|(_, s)| s) {
+                    let (planes, pipeline) = match (feature_planes.as_ref(), shade.as_ref()) {
+                        (Some(p), Some(s)) => (p, s),
+                        _ => {
+                            return Err(GpuError::InvalidArgument(
+                                "the neural shader's pipeline or images are missing".into(),
+                            ))
+                        }
+                    };
+                    // The feature blend's writes (and the blend's colour image) -> reads.
+                    barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+                    timer.stage(ctx, cmd, "shade", |cmd| {
+                        pipeline.record(
+                            ctx,
+                            cmd,
+                            shader,
+                            planes.buffer.whole(),
+                            (planes.plane_bytes / 16) as u32,
+                            &f.color,
+                            cam,
+                            opts.background,
+                        )
+                    })?;
+                }
             }
             // Only what the consumer needs leaves the device. Float: the images are the
             // copy sources. Rgba8: the colour image is packed by a compute pass (timed
@@ -1189,6 +1319,7 @@ impl GpuRenderer {
                 "ranges" => &mut t.ranges,
                 "blend" => &mut t.blend,
                 "features" => &mut t.features,
+                "shade" => &mut t.shade,
                 "readback" => &mut t.readback,
                 _ => continue,
             };
