@@ -371,3 +371,141 @@ fn gpu_shade_stage_matches_the_reference() {
     }
     common::gpu::assert_validation_clean(&r);
 }
+
+#[test]
+fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
+    use common::cli::{fails, ok, s};
+    let dir = tempfile::tempdir().unwrap();
+    let scene_file = common::shared_data().join("playbot_lod6_1873_sh2.ply");
+    let n = scene::load(&scene_file).unwrap().len();
+    let k = 3;
+    let mut rng = common::Rng(9);
+    let feats: Vec<f32> = (0..n * k).map(|_| rng.range(0.0, 1.0)).collect();
+    let npy = dir.path().join("f.npy");
+    std::fs::write(&npy, vksplat::image_file::npy_bytes(&[n, k], &feats)).unwrap();
+    let (tensors, d) = network(
+        &["features", "view_dir"],
+        &[k + 3, 8, 3],
+        &["relu", "sigmoid"],
+        4,
+    );
+    let shader = dir.path().join("shader.safetensors");
+    std::fs::write(&shader, file_of(&tensors, Some(&d))).unwrap();
+    let out = |name: &str| dir.path().join(name);
+    let common_args = |o: &std::path::Path| -> Vec<String> {
+        [
+            s(&scene_file),
+            "--features",
+            s(&npy),
+            "--shader",
+            s(&shader),
+            "--width",
+            "96",
+            "--height",
+            "72",
+            "--background",
+            "0.2,0.3,0.4",
+            "-q",
+            "-o",
+            s(o),
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect()
+    };
+    let run = |o: &std::path::Path, extra: &[&str]| {
+        let mut a = vec!["render".to_string()];
+        a.extend(common_args(o));
+        a.extend(extra.iter().map(|x| x.to_string()));
+        let refs: Vec<&str> = a.iter().map(String::as_str).collect();
+        ok(&refs)
+    };
+    run(&out("gpu.exr"), &["--timings"]);
+    run(&out("cpu.exr"), &["--cpu"]);
+    let o = run(&out("gpu.png"), &[]);
+    assert!(o.status.success());
+    let gpu = vksplat::image_file::read_image(&out("gpu.exr")).unwrap();
+    let cpu = vksplat::image_file::read_image(&out("cpu.exr")).unwrap();
+    let rgb = |p: &vksplat::image_file::Planes| p.interleave(&["R", "G", "B"]).unwrap();
+    let (g, c) = (rgb(&gpu), rgb(&cpu));
+    let psnr = vksplat::metrics::psnr(&c, &g, 1.0);
+    assert!(psnr >= 55.0, "GPU vs CPU shaded: {psnr} dB");
+    // Not the plain colour render: the shader's output shows.
+    let mut a = vec!["render".to_string()];
+    a.extend(
+        common_args(&out("plain2.exr"))
+            .into_iter()
+            .filter(|x| x != "--shader" && x != s(&shader)),
+    );
+    let refs: Vec<&str> = a.iter().map(String::as_str).collect();
+    ok(&refs);
+    let plain = vksplat::image_file::read_image(&out("plain2.exr")).unwrap();
+    assert!(vksplat::metrics::psnr(&rgb(&plain), &g, 1.0) < 40.0);
+
+    // Errors: K mismatch, no features, a broken file, with --mode features.
+    let (t2, d2) = network(&["features"], &[k + 1, 4, 3], &["relu", "sigmoid"], 2);
+    let wrong = out("wrong.safetensors");
+    std::fs::write(&wrong, file_of(&t2, Some(&d2))).unwrap();
+    let o = out("x.png");
+    let e = fails(
+        &[
+            "render",
+            s(&scene_file),
+            "--features",
+            s(&npy),
+            "--shader",
+            s(&wrong),
+            "-o",
+            s(&o),
+        ],
+        &o,
+    );
+    assert!(
+        e.contains("takes 4 feature channels but the scene has 3"),
+        "{e}"
+    );
+    let e = fails(
+        &[
+            "render",
+            s(&scene_file),
+            "--shader",
+            s(&shader),
+            "-o",
+            s(&o),
+        ],
+        &o,
+    );
+    assert!(e.contains("but the scene has 0"), "{e}");
+    let broken = out("broken.safetensors");
+    std::fs::write(&broken, b"\x10\0\0\0\0\0\0\0{}").unwrap();
+    let e = fails(
+        &[
+            "render",
+            s(&scene_file),
+            "--features",
+            s(&npy),
+            "--shader",
+            s(&broken),
+            "-o",
+            s(&o),
+        ],
+        &o,
+    );
+    assert!(e.contains("broken.safetensors"), "{e}");
+    let e = fails(
+        &[
+            "render",
+            s(&scene_file),
+            "--features",
+            s(&npy),
+            "--shader",
+            s(&shader),
+            "--mode",
+            "features",
+            "-o",
+            s(&out("x.exr")),
+        ],
+        &out("x.exr"),
+    );
+    assert!(e.contains("choose one"), "{e}");
+}

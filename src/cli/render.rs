@@ -52,6 +52,11 @@ pub(crate) struct RenderArgs {
     /// float16, N the scene's Gaussian count, K 1..64), replacing any feat_* of the file.
     #[arg(long, value_name = "FILE.npy")]
     pub(crate) features: Option<PathBuf>,
+    /// Neural shader: a per-pixel MLP (safetensors with a vksplat_mlp description; README
+    /// "Neural shader") applied to the blended feature channels (and optionally the view
+    /// direction and alpha). The colour written is alpha * MLP + (1 - alpha) * background.
+    #[arg(long, value_name = "FILE.safetensors")]
+    pub(crate) shader: Option<PathBuf>,
     /// Frames of the path to render, numbered in the whole path (before --camera): 7,
     /// 0,3,7, 100..200 (end exclusive), 100..=199, 100.. or ..50. File names keep the
     /// frame's number, so split runs give the files of one run.
@@ -286,6 +291,18 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if render_features && scene.feature_count == 0 {
         bail!("--mode features needs feature channels, but {name} has none; give them as feat_* PLY properties or with --features FILE.npy");
     }
+    let shader = match &args.shader {
+        Some(path) => {
+            if render_features {
+                bail!("--shader writes the shaded colour and --mode features the feature channels; choose one");
+            }
+            let mlp = vksplat::mlp::Mlp::load(path)?;
+            mlp.check_channels(scene.feature_count)
+                .map_err(|e| anyhow::anyhow!("{}: {e} ({name})", path.display()))?;
+            Some(mlp)
+        }
+        None => None,
+    };
     let scene = super::transform::apply(transform.as_ref(), scene)?;
     let total = scene.len();
     let scene = if filter.is_identity_for(&scene) {
@@ -385,9 +402,25 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let act = scene.activated();
     let (summary, how) = if args.cpu {
-        render_cpu(args, &act, &plan.frames, &opts, &run_opts, render_features)?
+        render_cpu(
+            args,
+            &act,
+            &plan.frames,
+            &opts,
+            &run_opts,
+            render_features,
+            shader.as_ref(),
+        )?
     } else {
-        render_gpu(args, &act, &plan.frames, &opts, &run_opts, render_features)?
+        render_gpu(
+            args,
+            &act,
+            &plan.frames,
+            &opts,
+            &run_opts,
+            render_features,
+            shader.as_ref(),
+        )?
     };
     if summary.interrupted {
         return Err(Interrupted(format!(
@@ -487,6 +520,7 @@ fn render_cpu(
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
     features: bool,
+    shader: Option<&vksplat::mlp::Mlp>,
 ) -> Result<(Summary, String)> {
     if args.gpu.verbose {
         note!(
@@ -497,12 +531,30 @@ fn render_cpu(
     let mut sums = StageSums::default();
     let mut pairs = 0;
     let mut render = |cam: &Camera| {
-        let (frame, t) = if features {
+        let (mut frame, t) = if features || shader.is_some() {
             vksplat::cpu::render_features_timed(scene, cam, opts)
         } else {
             vksplat::cpu::render_timed(scene, cam, opts)
         };
-        sums.add(&t.stages(), t.total);
+        let mut stages = t.stages().to_vec();
+        let mut total = t.total;
+        if let Some(mlp) = shader {
+            let start = std::time::Instant::now();
+            frame.color = vksplat::mlp::shade(
+                mlp,
+                cam,
+                &frame.features,
+                frame.feature_count,
+                &frame.alpha,
+                opts.background,
+            );
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            stages.push(("shade", ms));
+            total += ms;
+            frame.features.clear();
+            frame.feature_count = 0;
+        }
+        sums.add(&stages, total);
         pairs = t.pairs;
         Ok(frame)
     };
@@ -521,6 +573,7 @@ fn render_gpu(
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
     features: bool,
+    shader: Option<&vksplat::mlp::Mlp>,
 ) -> Result<(Summary, String)> {
     let t0 = std::time::Instant::now();
     let ctx = args.gpu.context()?;
@@ -537,17 +590,22 @@ fn render_gpu(
         );
     }
     let gpu_scene = renderer.upload(scene)?;
-    let gpu_features = if features {
+    let gpu_features = if features || shader.is_some() {
         Some(renderer.upload_features(scene)?)
     } else {
         None
     };
+    let gpu_shader = match shader {
+        Some(m) => Some(vksplat::render::shade::GpuShader::new(renderer.ctx(), m)?),
+        None => None,
+    };
     let mut sums = StageSums::default();
     let mut last_stats = None;
     let mut render = |cam: &Camera| -> Result<vksplat::frame::Frame> {
-        let frame = match &gpu_features {
-            Some(f) => renderer.render_features(&gpu_scene, f, cam, opts)?,
-            None => renderer.render(&gpu_scene, cam, opts)?,
+        let frame = match (&gpu_features, &gpu_shader) {
+            (Some(f), Some(s)) => renderer.render_shaded(&gpu_scene, f, s, cam, opts)?,
+            (Some(f), None) => renderer.render_features(&gpu_scene, f, cam, opts)?,
+            _ => renderer.render(&gpu_scene, cam, opts)?,
         };
         let t = renderer.timings();
         sums.add(&t.stages(), t.total);
