@@ -1,6 +1,7 @@
 #version 460
 // Blend: one workgroup per 16x16 tile, compositing the tile's sorted Gaussians front to back
-// with the reference rules. Two variants of the same arithmetic, chosen per device:
+// with the reference rules and the alpha falloff of SPLAT_KERNEL. Two variants of the same
+// arithmetic, chosen per device:
 //  - STRIP == 1 (GPUs): one invocation per pixel; Gaussians are fetched into shared memory
 //    in batches of 256, and the workgroup stops once every pixel of the tile is finished.
 //  - STRIP > 1 (CPU devices such as lavapipe, where every loop-indexed memory load is a
@@ -11,6 +12,11 @@
 #endif
 #ifndef TEXEL_FETCH
 #define TEXEL_FETCH 0
+#endif
+// The alpha falloff (SPLAT_KERNEL_GAUSSIAN or SPLAT_KERNEL_POWER), fixed per pipeline:
+// llvmpipe would evaluate both sides of a runtime branch on it.
+#ifndef SPLAT_KERNEL
+#define SPLAT_KERNEL 0u
 #endif
 #define CHUNK_W min(4u, 16u / STRIP)
 #extension GL_GOOGLE_include_directive : require
@@ -41,7 +47,7 @@ void composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
                inout float T, inout vec3 C, inout float D, inout bool done) {
     vec2 d = mean_opacity_depth.xy - pixf;
     float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
-    float alpha = min(ALPHA_MAX, mean_opacity_depth.z * exp(min(power, 0.0)));
+    float alpha = min(ALPHA_MAX, kernel_falloff(SPLAT_KERNEL, mean_opacity_depth.z, min(power, 0.0)));
     bool take = !done && power <= 0.0 && alpha >= ALPHA_MIN;
     float test_t = T * (1.0 - alpha);
     bool stop = take && test_t < T_MIN;

@@ -147,7 +147,7 @@ void main() {
                 uvec2 rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
                                    clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
                 // Count the bins of the reference rectangle that receive anything.
-                float bound = alpha_bound(opacity);
+                float bound = alpha_bound(opacity, uint(params.filters.w));
                 uvec2 bmin = rmin * params.bins.w;
                 uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
                 uint by = bmin.y;

@@ -26,8 +26,23 @@ struct FrameParams {
     uvec4 image;        // width, height, tiles_x, tiles_y
     uvec4 counts;       // gaussians, active SH degree, stored SH coefficients per channel, key capacity
     uvec4 bins;         // bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size
-    vec4 filters;       // scale modifier, max scale (< 0: none), min opacity (< 0: none)
+    vec4 filters;       // scale modifier, max scale (< 0: none), min opacity (< 0: none), kernel (SPLAT_KERNEL_*)
 };
+
+// Alpha falloff with the squared Mahalanobis distance d2 = -2 power (cpu::SplatKernel):
+// Gaussian opacity * exp(-d2 / 2), the reference; power opacity * max(0, 1 - d2 / 9).
+#define SPLAT_KERNEL_GAUSSIAN 0u
+#define SPLAT_KERNEL_POWER 1u
+
+// Alpha before the 0.99 clamp where the reference's exponent is `power` (<= 0). The blend
+// passes its compile-time SPLAT_KERNEL, so each blend pipeline holds one formula only.
+float kernel_falloff(uint kernel, float opacity, float power) {
+    if (kernel == SPLAT_KERNEL_POWER) {
+        float d2 = -2.0 * power;
+        return opacity * max(0.0, 1.0 - d2 / 9.0);
+    }
+    return opacity * exp(power);
+}
 
 // Pairs are keyed by bins: the reference's 16x16 tiles, or 8x8 quarters of them (for CPU
 // devices, where a shorter list per pixel block is worth more pairs). Either way only bins
@@ -83,14 +98,20 @@ uvec2 unpack_tile(uint v) { return uvec2(v & 0xFFFFu, v >> 16u); }
 // Sort key of a (bin, Gaussian) pair, as uvec2(lo, hi): lo = float bits of the view depth
 // (depth > 0.2 so the bits order like the floats), hi = bin id = y * bins_x + x.
 
-// Exact tile culling. A Gaussian adds to pixel d (offset from its centre) only when
-// opacity * exp(-q(d)/2) >= 1/255, q(d) = A dx^2 + 2 B dx dy + C dy^2, i.e. when
-// q(d) <= 2 ln(255 opacity). A tile of its reference rectangle where the minimum of q over
-// the tile's pixel square exceeds that bound receives nothing from it, so dropping the pair
-// changes no pixel; it only saves sorting and blending work. The small margin keeps the test
-// conservative against rounding in the per-pixel evaluation.
-float alpha_bound(float opacity) {
-    precise float b = 2.0 * log(255.0 * opacity) * 1.001 + 0.01;
+// Exact tile culling. A splat adds to pixel d (offset from its centre) only when its alpha
+// is >= 1/255; with q(d) = A dx^2 + 2 B dx dy + C dy^2 (the squared Mahalanobis distance)
+// that is, for the Gaussian kernel, opacity * exp(-q/2) >= 1/255, i.e. q <= 2 ln(255 opacity),
+// and for the power kernel opacity * (1 - q/9) >= 1/255, i.e. q <= 9 (1 - 1/(255 opacity)).
+// A tile of its reference rectangle where the minimum of q over the tile's pixel square
+// exceeds the kernel's bound receives nothing from it, so dropping the pair changes no
+// pixel; it only saves sorting and blending work. The small margin keeps the test
+// conservative against rounding in the per-pixel evaluation. Mirrors
+// cpu::SplatKernel::alpha_bound.
+float alpha_bound(float opacity, uint kernel) {
+    precise float exact = kernel == SPLAT_KERNEL_POWER
+        ? 9.0 * (1.0 - 1.0 / (255.0 * opacity))
+        : 2.0 * log(255.0 * opacity);
+    precise float b = exact * 1.001 + 0.01;
     return b;
 }
 

@@ -123,6 +123,10 @@ pub struct BenchReport {
     pub vulkan: String,
     /// Blend kernel as `VKSPLAT_BLEND` names it (`shared`, `texel:2`; GPU only).
     pub blend_kernel: Option<String>,
+    /// The alpha falloff rendered (`gaussian` or `power`, `--kernel`).
+    pub kernel: String,
+    /// Feature channels blended per frame (the `features` stage), 0 for colour only.
+    pub feature_channels: usize,
     /// Measured frames.
     pub frames: usize,
     /// Discarded warm-up frames.
@@ -178,6 +182,14 @@ impl BenchReport {
         } else {
             self.device.clone()
         };
+        let mut renderer = if self.kernel == "gaussian" {
+            renderer
+        } else {
+            format!("{renderer}, {} kernel", self.kernel)
+        };
+        if self.feature_channels > 0 {
+            renderer += &format!(", {} feature channels blended", self.feature_channels);
+        }
         let mut out = format!(
             "scene {}: {} Gaussians\ncamera {} at {}x{}\nrenderer: {renderer}\n",
             self.scene,
@@ -265,12 +277,21 @@ pub fn bench_gpu(
 ) -> GpuResult<BenchReport> {
     let cam = &camera.camera;
     let gpu_scene = renderer.upload(scene)?;
+    // A scene with feature channels is benchmarked with its feature blend.
+    let gpu_features = if scene.feature_count > 0 {
+        Some(renderer.upload_features(scene)?)
+    } else {
+        None
+    };
     let mut stage_samples: Vec<(String, Vec<f64>)> = Vec::new();
     let (mut frame, mut wall) = (Vec::new(), Vec::new());
     let mut peak = 0u64;
     for i in 0..warmup + frames {
         let t = std::time::Instant::now();
-        std::hint::black_box(renderer.render(&gpu_scene, cam, opts)?);
+        match &gpu_features {
+            Some(f) => std::hint::black_box(renderer.render_features(&gpu_scene, f, cam, opts)?),
+            None => std::hint::black_box(renderer.render(&gpu_scene, cam, opts)?),
+        };
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         peak = peak.max(renderer.ctx().live_allocations().1);
         if i < warmup {
@@ -294,7 +315,7 @@ pub fn bench_gpu(
         })
         .collect();
     let (bins_x, size) = (inter.bins.0, inter.bin_size);
-    let evaluations = cpu::count_evaluations(&projected, cam, |x, y| {
+    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
         let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
         &inter.values[a as usize..b as usize]
     });
@@ -312,6 +333,8 @@ pub fn bench_gpu(
         driver: info.driver.clone(),
         vulkan: info.api_version.clone(),
         blend_kernel: Some(renderer.blend_kernel().to_string()),
+        kernel: opts.kernel.to_string(),
+        feature_channels: scene.feature_count,
         frames,
         warmup,
         stages,
@@ -347,7 +370,11 @@ pub fn bench_cpu(
     let mut pairs = 0;
     for i in 0..warmup + frames {
         let t = std::time::Instant::now();
-        let (_, tm) = cpu::render_timed(scene, cam, opts);
+        let (_, tm) = if scene.feature_count > 0 {
+            cpu::render_features_timed(scene, cam, opts)
+        } else {
+            cpu::render_timed(scene, cam, opts)
+        };
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         if i < warmup {
             continue;
@@ -357,12 +384,12 @@ pub fn bench_cpu(
         frame.push(tm.total);
         push_stage_samples(&mut stage_samples, tm.stages());
     }
-    let projected = cpu::preprocess(scene, cam, &cpu::RenderOptions::default());
+    let projected = cpu::preprocess(scene, cam, opts);
     let (keys, values) = cpu::tile_keys(&projected, cam);
     let (sorted_keys, sorted_values) = cpu::sort_pairs(&keys, &values);
     let (tx, ty) = cam.tile_grid();
     let ranges = cpu::tile_ranges(&sorted_keys, (tx * ty) as usize);
-    let evaluations = cpu::count_evaluations(&projected, cam, |x, y| {
+    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
         let [a, b] = ranges[((y / 16) * tx + x / 16) as usize];
         &sorted_values[a as usize..b as usize]
     });
@@ -380,6 +407,8 @@ pub fn bench_cpu(
         driver: "-".into(),
         vulkan: "-".into(),
         blend_kernel: None,
+        kernel: opts.kernel.to_string(),
+        feature_channels: scene.feature_count,
         frames,
         warmup,
         stages,

@@ -62,6 +62,8 @@ pub fn heatmap(width: u32, height: u32, error: &[f32], magnify: f32) -> Frame {
         color,
         alpha: Vec::new(),
         depth: Vec::new(),
+        feature_count: 0,
+        features: Vec::new(),
     }
 }
 

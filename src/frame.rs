@@ -13,6 +13,10 @@ pub struct Frame {
     pub alpha: Vec<f32>,
     /// Alpha-weighted view-space depth normalised by alpha; 0 where alpha is 0.
     pub depth: Vec<f32>,
+    /// Feature channels per pixel in [`Self::features`] (0 unless features were rendered).
+    pub feature_count: usize,
+    /// Blended feature channels (background 0), `feature_count` per pixel, row-major.
+    pub features: Vec<f32>,
 }
 
 impl Frame {
@@ -25,6 +29,8 @@ impl Frame {
             color: vec![background; n],
             alpha: vec![0.0; n],
             depth: vec![0.0; n],
+            feature_count: 0,
+            features: Vec::new(),
         }
     }
 

@@ -222,9 +222,19 @@ fn read_exr(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
     })
 }
 
-/// Reads a NumPy `.npy` array of float32, float16 or float64 (little-endian, C order),
-/// shaped `H x W x C` (C from 1 to 5: Y, Y A, R G B, R G B A, R G B A Z) or `H x W` (Y).
-fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
+/// A NumPy array of floats read by [`parse_npy_array`]: its shape and its values in C
+/// order, converted to f32.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NpyArray {
+    /// The array's shape.
+    pub shape: Vec<usize>,
+    /// `shape.iter().product()` values, C order.
+    pub data: Vec<f32>,
+}
+
+/// Reads a NumPy `.npy` array of float32, float16 or float64 (little-endian, C order) of
+/// any shape; errors name the file.
+pub fn parse_npy_array(bytes: &[u8], path: &Path) -> Result<NpyArray, ImageError> {
     const MAGIC: &[u8] = b"\x93NUMPY";
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
         return Err(invalid(
@@ -292,6 +302,45 @@ fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
             ))
         }
     };
+    let count = shape
+        .iter()
+        .try_fold(1usize, |n, &d| n.checked_mul(d))
+        .ok_or_else(|| invalid(path, format!("has an unusable shape {shape:?}")))?;
+    let data = &bytes[start + header_len..];
+    if count.checked_mul(size) != Some(data.len()) {
+        return Err(invalid(
+            path,
+            format!(
+                "holds {} bytes of data where shape {shape:?} of {descr} needs {}",
+                data.len(),
+                count as u128 * size as u128
+            ),
+        ));
+    }
+    let data: Vec<f32> = match size {
+        4 => data
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect(),
+        2 => data
+            .chunks_exact(2)
+            .map(|b| exr::prelude::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32())
+            .collect(),
+        _ => data
+            .chunks_exact(8)
+            .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])) as f32)
+            .collect(),
+    };
+    Ok(NpyArray { shape, data })
+}
+
+/// Reads a NumPy `.npy` array of float32, float16 or float64 (little-endian, C order),
+/// shaped `H x W x C` (C from 1 to 5: Y, Y A, R G B, R G B A, R G B A Z) or `H x W` (Y).
+fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
+    let NpyArray {
+        shape,
+        data: samples,
+    } = parse_npy_array(bytes, path)?;
     let (h, w, c) = match shape[..] {
         [h, w] => (h, w, 1),
         [h, w, c] if (1..=5).contains(&c) => (h, w, c),
@@ -312,36 +361,9 @@ fn read_npy(bytes: &[u8], path: &Path) -> Result<Planes, ImageError> {
             ))
         }
     };
-    let count = h
-        .checked_mul(w)
-        .and_then(|n| n.checked_mul(c))
-        .filter(|_| h > 0 && w > 0)
-        .ok_or_else(|| invalid(path, format!("has an unusable shape {shape:?}")))?;
-    let data = &bytes[start + header_len..];
-    if count.checked_mul(size) != Some(data.len()) {
-        return Err(invalid(
-            path,
-            format!(
-                "holds {} bytes of data where shape {shape:?} of {descr} needs {}",
-                data.len(),
-                count as u128 * size as u128
-            ),
-        ));
+    if h == 0 || w == 0 {
+        return Err(invalid(path, format!("has an unusable shape {shape:?}")));
     }
-    let samples: Vec<f32> = match size {
-        4 => data
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect(),
-        2 => data
-            .chunks_exact(2)
-            .map(|b| exr::prelude::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32())
-            .collect(),
-        _ => data
-            .chunks_exact(8)
-            .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])) as f32)
-            .collect(),
-    };
     let too_big = |_| invalid(path, format!("has sides {w}x{h} beyond 2^32 pixels"));
     let names = default_names(c).unwrap_or(&["Y"]);
     Ok(deinterleave(

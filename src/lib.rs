@@ -11,6 +11,7 @@ pub mod gen;
 pub mod gpu;
 pub mod image_file;
 pub mod metrics;
+pub mod mlp;
 pub mod output;
 pub mod render;
 pub mod scene;

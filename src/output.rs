@@ -40,6 +40,15 @@ pub enum OutputError {
     /// The file name's extension names no supported format.
     #[error("{0}: unknown image format; use a .png or .exr file name")]
     UnknownFormat(PathBuf),
+    /// `--mode features` with a file that is neither EXR nor `.npy`.
+    #[error("{0}: --mode features writes EXR (feat.0 ... feat.K-1, A, Z) or NumPy .npy (H x W x K); use a .exr or .npy file name")]
+    FeaturesFormat(PathBuf),
+    /// A `.npy` output without `--mode features`.
+    #[error("{0}: .npy output holds feature channels; add --mode features (or use a .png or .exr file name)")]
+    NpyNeedsFeatures(PathBuf),
+    /// A feature output for a frame rendered without feature channels.
+    #[error("{0}: the frame has no feature channels to write")]
+    NoFeatures(PathBuf),
 }
 
 /// Image file formats.
@@ -552,6 +561,9 @@ pub enum RenderMode {
     /// Colour and depth (PNG: the colour file plus a `<stem>.depth.png` beside it;
     /// EXR: R, G, B, A, Z in one file).
     RgbDepth,
+    /// The scene's feature channels blended with the colour rules, background 0 (EXR:
+    /// `feat.0` ... `feat.{K-1}`, A, Z; `.npy`: H x W x K float32). No PNG.
+    Features,
 }
 
 impl std::str::FromStr for RenderMode {
@@ -563,8 +575,9 @@ impl std::str::FromStr for RenderMode {
             "alpha" => Ok(RenderMode::Alpha),
             "depth" => Ok(RenderMode::Depth),
             "rgb+depth" => Ok(RenderMode::RgbDepth),
+            "features" => Ok(RenderMode::Features),
             _ => Err(format!(
-                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth or rgb+depth"
+                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth, rgb+depth or features"
             )),
         }
     }
@@ -616,6 +629,13 @@ pub enum FileContent {
     },
     /// OpenEXR with these channels.
     Exr(ExrChannels),
+    /// OpenEXR of the feature channels `feat.0` ... `feat.{K-1}`, A and Z.
+    ExrFeatures {
+        /// 16-bit half floats for the features and A (Z stays 32-bit).
+        half: bool,
+    },
+    /// NumPy `.npy` of the feature channels, H x W x K float32.
+    NpyFeatures,
 }
 
 /// A file to write for a frame.
@@ -635,12 +655,28 @@ pub fn plan_files(
     camera: Option<&Camera>,
     opts: &OutputOptions,
 ) -> Result<Vec<FileSpec>, OutputError> {
-    let format = ImageFormat::from_path(path, opts.png16)?;
     let spec = |path: PathBuf, content| FileSpec {
         path,
         content,
         camera: camera.cloned(),
     };
+    let npy = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if opts.mode == Some(RenderMode::Features) {
+        let content = match ImageFormat::from_path(path, false) {
+            _ if npy => FileContent::NpyFeatures,
+            Ok(ImageFormat::Exr) => FileContent::ExrFeatures {
+                half: opts.exr_half,
+            },
+            _ => return Err(OutputError::FeaturesFormat(path.to_path_buf())),
+        };
+        return Ok(vec![spec(path.to_path_buf(), content)]);
+    }
+    if npy {
+        return Err(OutputError::NpyNeedsFeatures(path.to_path_buf()));
+    }
+    let format = ImageFormat::from_path(path, opts.png16)?;
     if format == ImageFormat::Exr {
         let mode = opts.mode.unwrap_or(RenderMode::RgbDepth);
         let colour = matches!(
@@ -665,6 +701,7 @@ pub fn plan_files(
         range: opts.depth_range,
     };
     Ok(match opts.mode.unwrap_or(RenderMode::Rgb) {
+        RenderMode::Features => return Err(OutputError::FeaturesFormat(path.to_path_buf())),
         RenderMode::Rgb => vec![spec(path.into(), FileContent::PngColor { sixteen_bit })],
         RenderMode::Rgba => vec![spec(
             path.into(),
@@ -723,6 +760,8 @@ pub fn encode_file(
                 color: depth_colormap(frame, *range),
                 alpha: Vec::new(),
                 depth: Vec::new(),
+                feature_count: 0,
+                features: Vec::new(),
                 ..*frame
             };
             encode_png(&colours, false, w, path)
@@ -730,5 +769,82 @@ pub fn encode_file(
         FileContent::Exr(channels) => {
             encode_exr_channels(frame, file.camera.as_ref(), *channels, w, path)
         }
+        FileContent::ExrFeatures { half } => {
+            encode_exr_features(frame, file.camera.as_ref(), *half, w, path)
+        }
+        FileContent::NpyFeatures => {
+            if frame.feature_count == 0 {
+                return Err(OutputError::NoFeatures(path.to_path_buf()));
+            }
+            let bytes = crate::image_file::npy_bytes(
+                &[
+                    frame.height as usize,
+                    frame.width as usize,
+                    frame.feature_count,
+                ],
+                &frame.features,
+            );
+            w.write_all(&bytes).map_err(|e| OutputError::Encode {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
+        }
     }
+}
+
+/// Encodes the frame's feature channels as an OpenEXR image with channels `feat.0` ...
+/// `feat.{K-1}` (half floats with `half`), A (`1 - T`) and Z (as [`encode_exr_channels`]),
+/// and the camera in the header.
+pub fn encode_exr_features(
+    frame: &Frame,
+    camera: Option<&Camera>,
+    half: bool,
+    out: &mut (impl Write + std::io::Seek),
+    path: &Path,
+) -> Result<(), OutputError> {
+    use exr::prelude::*;
+    let k = frame.feature_count;
+    if k == 0 {
+        return Err(OutputError::NoFeatures(path.to_path_buf()));
+    }
+    let samples = |data: Vec<f32>| {
+        if half {
+            FlatSamples::F16(data.into_iter().map(f16::from_f32).collect())
+        } else {
+            FlatSamples::F32(data)
+        }
+    };
+    let mut list: Vec<AnyChannel<FlatSamples>> = (0..k)
+        .map(|c| {
+            let plane = frame.features.iter().skip(c).step_by(k).copied().collect();
+            AnyChannel::new(format!("feat.{c}").as_str(), samples(plane))
+        })
+        .collect();
+    list.push(AnyChannel::new("A", samples(frame.alpha.clone())));
+    let z = frame
+        .depth
+        .iter()
+        .zip(&frame.alpha)
+        .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
+        .collect();
+    list.push(AnyChannel::new("Z", FlatSamples::F32(z)));
+    let mut attributes = LayerAttributes::named("vksplat");
+    if let Some(cam) = camera {
+        attributes.world_to_camera = Some(exr_world_to_camera(cam));
+        attributes.world_to_normalized_device = Some(exr_world_to_ndc(cam));
+    }
+    let layer = Layer::new(
+        (frame.width as usize, frame.height as usize),
+        attributes,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(list)),
+    );
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(out)
+        .map_err(|e| OutputError::Encode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
 }

@@ -555,3 +555,129 @@ fn info_prints_log_binned_histograms_that_count_every_gaussian() {
         assert_eq!(counts, 1873, "{title}");
     }
 }
+
+/// `--kernel power` on render, bench and compare; a PLY that records the kernel (header
+/// `comment vksplat kernel power`, written by `convert --kernel`) renders with it, with a
+/// note, unless `--kernel` overrides; `info` prints it; `convert` keeps it in PLY and says
+/// when a format cannot; a bad kernel name is one clear error.
+#[test]
+fn kernel_flag_and_the_ply_kernel_comment() {
+    use common::cli::{ok, s, stdout};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let plain = common::shared_data().join("playbot_lod6_1873_sh2.ply");
+    let power = d.join("power.ply");
+    ok(&["convert", s(&plain), s(&power), "--kernel", "power"]);
+    let bytes = std::fs::read(&power).unwrap();
+    let header = String::from_utf8_lossy(&bytes[..400]);
+    assert!(
+        header.contains("\ncomment vksplat kernel power\n"),
+        "{header}"
+    );
+    assert_eq!(
+        vksplat::scene::load(&power).unwrap().kernel,
+        vksplat::cpu::SplatKernel::Power
+    );
+    // A Gaussian scene's PLY stays as the trainer writes it (no comment).
+    let back = d.join("back.ply");
+    ok(&["convert", s(&power), s(&back), "--kernel", "gaussian"]);
+    assert!(!String::from_utf8_lossy(&std::fs::read(&back).unwrap()[..400]).contains("comment"));
+    // PLY to PLY keeps it; .splat cannot record it and says so.
+    let kept = d.join("kept.ply");
+    ok(&["convert", s(&power), s(&kept)]);
+    assert_eq!(std::fs::read(&kept).unwrap(), bytes);
+    let o = ok(&["convert", s(&power), s(&d.join("p.splat"))]);
+    assert!(stderr(&o).contains("--kernel power"), "{}", stderr(&o));
+
+    let info = stdout(&ok(&["info", s(&power)]));
+    assert!(info.contains("kernel      power"), "{info}");
+    assert!(stdout(&ok(&["info", s(&plain)])).contains("kernel      gaussian"));
+    let json: serde_json::Value =
+        serde_json::from_str(&stdout(&ok(&["info", s(&power), "--json"]))).unwrap();
+    assert_eq!(json["kernel"], "power");
+
+    // render: the file's kernel with a note; --kernel overrides; GPU and CPU alike.
+    let render = |scene: &Path, out: &str, extra: &[&str]| -> String {
+        let mut args = vec!["render", s(scene), "--width", "160", "-o"];
+        let out = d.join(out);
+        args.push(s(&out));
+        args.extend_from_slice(extra);
+        stderr(&ok(&args))
+    };
+    let e = render(&power, "file.png", &["--cpu"]);
+    assert!(e.contains("records the power kernel"), "{e}");
+    render(&plain, "flag.png", &["--cpu", "--kernel", "power"]);
+    render(&power, "override.png", &["--cpu", "--kernel", "gaussian"]);
+    render(&plain, "gaussian.png", &["--cpu"]);
+    render(&power, "gpu.exr", &[]);
+    render(&power, "cpu.exr", &["--cpu"]);
+    let read = |n: &str| std::fs::read(d.join(n)).unwrap();
+    assert_eq!(read("file.png"), read("flag.png"));
+    assert_eq!(read("override.png"), read("gaussian.png"));
+    assert_ne!(read("file.png"), read("gaussian.png"));
+    ok(&[
+        "compare",
+        s(&d.join("cpu.exr")),
+        s(&d.join("gpu.exr")),
+        "--min-psnr",
+        "55",
+    ]);
+
+    // compare and bench take the flag and report it.
+    let report = d.join("report");
+    ok(&[
+        "compare",
+        s(&plain),
+        "--kernel",
+        "power",
+        "--width",
+        "160",
+        "-o",
+        s(&report),
+    ]);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.join("report.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["kernel"], "power");
+    assert_eq!(json["pass"], true);
+    let o = ok(&[
+        "bench",
+        s(&power),
+        "--width",
+        "160",
+        "--frames",
+        "1",
+        "--warmup",
+        "0",
+    ]);
+    assert!(stdout(&o).contains("power kernel"), "{}", stdout(&o));
+
+    // Bad names: the flag, and the header comment (one sentence naming the line).
+    let o = vksplat(&[
+        "render",
+        "--demo",
+        "--kernel",
+        "cubic",
+        "-o",
+        s(&d.join("x.png")),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("use gaussian or power"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.join("x.png").exists());
+    let mut bad = bytes.clone();
+    let at = header.find("kernel power").unwrap() + "kernel ".len();
+    bad[at..at + 5].copy_from_slice(b"cubic");
+    let bad_ply = write_scene(d, "bad.ply", &bad);
+    let e = fails(
+        &["render", s(&bad_ply), "-o", s(&d.join("y.png"))],
+        &d.join("y.png"),
+    );
+    assert!(
+        e.contains("header line 3") && e.contains("unknown kernel \"cubic\""),
+        "{e}"
+    );
+}

@@ -23,7 +23,7 @@ mod common;
 use common::gpu::{assert_validation_clean, move_towards, new_renderer, renderer};
 use std::collections::{BTreeMap, HashSet};
 use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, Projected, RenderOptions};
+use vksplat::cpu::{self, Projected, RenderOptions, SplatKernel};
 use vksplat::render::blend::BlendKernel;
 use vksplat::render::types::unpack_tile;
 use vksplat::render::{GpuRenderer, Intermediates};
@@ -40,7 +40,13 @@ fn orbit(name: &str, i: usize, w: u32, h: u32) -> Camera {
     cams[i].with_resolution(w, h).unwrap()
 }
 
-fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam: &Camera) {
+fn check_preprocess(
+    label: &str,
+    cpu_p: &[Projected],
+    inter: &Intermediates,
+    cam: &Camera,
+    kernel: SplatKernel,
+) {
     let n = cpu_p.len();
     let mut gpu_visible = 0u32;
     for (i, (c, g)) in cpu_p.iter().zip(&inter.splats).enumerate() {
@@ -53,7 +59,7 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
                 let near = (c.depth - cpu::NEAR_PLANE).abs() < 1e-5;
                 let all_empty = (c.rect_min[1]..c.rect_max[1]).all(|y| {
                     (c.rect_min[0]..c.rect_max[0]).all(|x| {
-                        cpu::max_alpha_in_tile(c, [x, y], 16, cam.width, cam.height)
+                        cpu::max_alpha_in_tile(c, kernel, [x, y], 16, cam.width, cam.height)
                             < 1.0 / 255.0 * 1.001
                     })
                 });
@@ -69,7 +75,7 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
             c.radius > 0,
             "{label}: Gaussian {i} visible on the GPU only: {g:?}"
         );
-        let [mx, my, opacity, _bound] = g.mean_opacity_bound;
+        let [mx, my, opacity, bound] = g.mean_opacity_bound;
         let depth = g.conic_depth[3];
         for (gv, cv) in [(mx, c.mean2d[0]), (my, c.mean2d[1])] {
             assert!(
@@ -83,6 +89,12 @@ fn check_preprocess(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam
             c.depth
         );
         assert_eq!(opacity, c.opacity, "{label}: Gaussian {i} opacity");
+        // The tile-culling bound is the kernel's own (log and division: a few ulp).
+        let want = kernel.alpha_bound(c.opacity);
+        assert!(
+            (bound - want).abs() <= 1e-5 * want.abs().max(1.0),
+            "{label}: Gaussian {i} bound {bound} vs {want} ({kernel} kernel)"
+        );
         let scale = c.conic.iter().fold(0f32, |m, v| m.max(v.abs()));
         for k in 0..3 {
             assert!(
@@ -200,7 +212,13 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates) {
     assert_eq!(u64::from(covered), pairs);
 }
 
-fn check_tile_membership(label: &str, cpu_p: &[Projected], inter: &Intermediates, cam: &Camera) {
+fn check_tile_membership(
+    label: &str,
+    cpu_p: &[Projected],
+    inter: &Intermediates,
+    cam: &Camera,
+    kernel: SplatKernel,
+) {
     let (keys, values) = cpu::tile_keys(cpu_p, cam);
     let (sk, sv) = cpu::sort_pairs(&keys, &values);
     let mut cpu_tiles: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
@@ -238,7 +256,7 @@ fn check_tile_membership(label: &str, cpu_p: &[Projected], inter: &Intermediates
         };
         for &id in cs.difference(&gs) {
             let p = &cpu_p[id as usize];
-            let a = cpu::max_alpha_in_tile(p, bin, size, cam.width, cam.height);
+            let a = cpu::max_alpha_in_tile(p, kernel, bin, size, cam.width, cam.height);
             if a < 1.0 / 255.0 {
                 dropped += 1; // exact culling: contributes nothing to this bin
             } else {
@@ -277,14 +295,24 @@ fn run_case(label: &str, scene: &ActivatedScene, cam: &Camera) {
 }
 
 fn run_case_on(r: &mut GpuRenderer, label: &str, scene: &ActivatedScene, cam: &Camera) {
+    run_case_with(r, label, scene, cam, &RenderOptions::default());
+}
+
+fn run_case_with(
+    r: &mut GpuRenderer,
+    label: &str,
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> Intermediates {
     let gs = r.upload(scene).unwrap();
-    let opts = RenderOptions::default();
-    let (_, inter) = r.render_with_intermediates(&gs, cam, &opts).unwrap();
-    let cpu_p = cpu::preprocess(scene, cam, &cpu::RenderOptions::default());
-    check_preprocess(label, &cpu_p, &inter, cam);
+    let (_, inter) = r.render_with_intermediates(&gs, cam, opts).unwrap();
+    let cpu_p = cpu::preprocess(scene, cam, opts);
+    check_preprocess(label, &cpu_p, &inter, cam, opts.kernel);
     check_scan_keys_sort_ranges(label, &inter);
-    check_tile_membership(label, &cpu_p, &inter, cam);
+    check_tile_membership(label, &cpu_p, &inter, cam, opts.kernel);
     assert_validation_clean(r);
+    inter
 }
 
 #[test]
@@ -329,4 +357,40 @@ fn stages_match_on_train3_sh3() {
     let s = load("train3_sh3.ply");
     let cam = camera::default_camera(&s.positions, 320, 240);
     run_case("train3", &s, &cam);
+}
+
+/// The keys stage culls tiles with the power kernel's own bound, `d2 <= 9 (1 - 1/(255
+/// opacity))`: every pair of the reference rectangle it drops gets alpha < 1/255 at every
+/// pixel under that kernel (checked pixel by pixel in `check_tile_membership`), and it
+/// drops more pairs than the Gaussian bound would (whose support is wider), on both bin
+/// sizes.
+#[test]
+fn stages_match_with_the_power_kernel_and_its_tile_culling() {
+    let s = load("playbot_lod3_31k_sh2.ply");
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 640, 360);
+    let close = move_towards(&cam, glam::Vec3::new(0.0, -0.5, 0.0), 0.3, "close-up");
+    let power = RenderOptions {
+        kernel: SplatKernel::Power,
+        ..Default::default()
+    };
+    for (kernel, label) in [
+        (None, "power, device kernel"),
+        (Some(BlendKernel::Shared), "power, 16-pixel bins"),
+    ] {
+        let mut r = new_renderer(kernel);
+        for (cam, view) in [(&cam, "orbit"), (&close, "close-up")] {
+            let label = format!("{label}, {view}");
+            let p = run_case_with(&mut r, &label, &s, cam, &power);
+            let gs = r.upload(&s).unwrap();
+            let (_, g) = r
+                .render_with_intermediates(&gs, cam, &RenderOptions::default())
+                .unwrap();
+            assert!(
+                p.counters.pairs() < g.counters.pairs(),
+                "{label}: power pairs {} vs Gaussian pairs {}",
+                p.counters.pairs(),
+                g.counters.pairs()
+            );
+        }
+    }
 }

@@ -338,3 +338,289 @@ fn antialiased_mode_scales_opacity_by_the_dilation_compensation() {
         assert!((plain.alpha[plain.index(32, 32)] as f64 - opacity.min(0.99)).abs() < 1e-5);
     }
 }
+
+fn power_options(background: [f32; 3]) -> RenderOptions {
+    RenderOptions {
+        background,
+        kernel: cpu::SplatKernel::Power,
+        ..Default::default()
+    }
+}
+
+/// The power kernel's alpha, `opacity * max(0, 1 - d2 / 9)`, in f32 from the projected
+/// conic exactly as the rules say, then through the 0.99 clamp and the 1/255 skip; as the
+/// frame stores it (`1 - T` with `T = 1 - alpha`).
+fn power_alpha_f32(p: &cpu::Projected, px: f32, py: f32) -> f32 {
+    let (dx, dy) = (p.mean2d[0] - px, p.mean2d[1] - py);
+    let [a, b, c] = p.conic;
+    let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+    let d2 = -2.0 * power;
+    let alpha = (p.opacity * (1.0 - d2 / 9.0).max(0.0)).min(0.99);
+    if power > 0.0 || alpha < 1.0 / 255.0 {
+        0.0
+    } else {
+        1.0 - (1.0 - alpha)
+    }
+}
+
+#[test]
+fn power_kernel_gives_opacity_times_one_minus_d2_over_9() {
+    // Facing the camera on the axis: variance (f s / z)^2 + 0.3 = 4.3 px^2, centre (32, 32);
+    // the support ends at d2 = 9, i.e. 3 sqrt(4.3) = 6.22 px from the centre.
+    let (z, scale, rgb) = (5.0f32, 0.2f32, [0.6f32, 0.3, 0.9]);
+    let bg = [0.1f32, 0.2, 0.3];
+    let var = (50.0f64 * scale as f64 / z as f64).powi(2) + 0.3;
+    for opacity in [0.8f32, 0.05, 0.999] {
+        let mut s = Scene::empty(0);
+        push_gaussian(&mut s, [0.0, 0.0, z], scale, opacity, rgb);
+        let act = s.activated();
+        let o = act.opacities[0] as f64;
+        let f = cpu::render(&act, &axis_camera(50.0), &power_options(bg));
+        let p = cpu::preprocess(&act, &axis_camera(50.0), &power_options(bg))[0];
+        let (mut inside, mut outside) = (0, 0);
+        for (dx, dy) in [
+            (0, 0),
+            (1, 0),
+            (0, 2),
+            (3, -2),
+            (5, 0),
+            (0, 6),
+            (-6, -1),
+            (6, 2),
+            (4, 5),
+            (0, 7),
+            (-9, 3),
+        ] {
+            let (px, py) = (32 + dx, 32 + dy);
+            let d2 = f64::from(dx * dx + dy * dy) / var;
+            let mut alpha = (o * (1.0 - d2 / 9.0).max(0.0)).min(0.99);
+            if alpha < 1.0 / 255.0 {
+                alpha = 0.0;
+            }
+            let i = f.index(px as u32, py as u32);
+            assert!(
+                (f.alpha[i] as f64 - alpha).abs() < 2e-6,
+                "opacity {opacity}, pixel ({px},{py}), d2 {d2}: {} vs {alpha}",
+                f.alpha[i]
+            );
+            // Bit for bit the formula in f32 on the projected conic.
+            assert_eq!(
+                f.alpha[i].to_bits(),
+                power_alpha_f32(&p, px as f32, py as f32).to_bits(),
+                "opacity {opacity}, pixel ({px},{py})"
+            );
+            if d2 > 9.0 {
+                assert_eq!(f.alpha[i], 0.0, "outside the support at d2 {d2}");
+                assert_eq!(f.color[i], bg);
+                outside += 1;
+            } else if alpha > 0.0 {
+                inside += 1;
+            }
+            for c in 0..3 {
+                let want = rgb[c] as f64 * alpha + (1.0 - alpha) * bg[c] as f64;
+                assert!(
+                    (f.color[i][c] as f64 - want).abs() < 2e-6,
+                    "pixel ({px},{py}) channel {c}"
+                );
+            }
+        }
+        assert!(
+            inside >= 5 && outside == 4,
+            "{inside} inside, {outside} outside"
+        );
+    }
+    // 6 px out (d2 = 8.37): 0.8 gives 0.8 * 0.070 = 0.056, but 0.05 gives 0.0035 < 1/255.
+    let at = |opacity: f32, dx: u32| {
+        let mut s = Scene::empty(0);
+        push_gaussian(&mut s, [0.0, 0.0, z], scale, opacity, rgb);
+        let f = cpu::render(&s.activated(), &axis_camera(50.0), &power_options(bg));
+        f.alpha[f.index(32 + dx, 32)]
+    };
+    assert!(at(0.8, 6) > 0.05);
+    assert_eq!(at(0.05, 6), 0.0);
+    assert!(at(0.05, 5) > 0.01);
+    // The 0.99 clamp, and the Gaussian kernel differs (exp(-d2/2) > 1 - d2/9 nowhere
+    // but the centre).
+    assert_eq!(at(0.999, 0), 1.0 - (1.0 - 0.99f32));
+    let mut s = Scene::empty(0);
+    push_gaussian(&mut s, [0.0, 0.0, z], scale, 0.8, rgb);
+    let g = render(&s, bg);
+    let pw = cpu::render(&s.activated(), &axis_camera(50.0), &power_options(bg));
+    assert!(g.alpha[g.index(35, 32)] < pw.alpha[pw.index(35, 32)]);
+}
+
+#[test]
+fn power_kernel_blends_two_splats_front_to_back() {
+    // Two splats on the axis, the nearer one listed second: pixel (32, 32) gets
+    // a1 + a2 (1 - a1) alpha and c1 a1 + c2 a2 (1 - a1) colour, a_i = o_i (1 - d2_i / 9).
+    let mut s = Scene::empty(0);
+    push_gaussian(&mut s, [0.0, 0.0, 6.0], 0.3, 0.7, [0.0, 0.0, 1.0]);
+    push_gaussian(&mut s, [0.0, 0.0, 3.0], 0.05, 0.6, [1.0, 0.0, 0.0]);
+    let act = s.activated();
+    let cam = axis_camera(50.0);
+    let f = cpu::render(&act, &cam, &power_options([0.0; 3]));
+    // (34, 33): d^2 = 5 px^2 from both centres.
+    let var = |scale: f64, z: f64| (50.0 * scale / z).powi(2) + 0.3;
+    let a = |o: f32, v: f64| f64::from(o) * (1.0 - 5.0 / v / 9.0);
+    let (far, near) = (
+        a(act.opacities[0], var(0.3, 6.0)),
+        a(act.opacities[1], var(0.05, 3.0)),
+    );
+    assert!(
+        far > 0.1 && near > 0.1,
+        "both inside their support: {far} {near}"
+    );
+    let i = f.index(34, 33);
+    let alpha = near + far * (1.0 - near);
+    assert!(
+        (f.alpha[i] as f64 - alpha).abs() < 2e-6,
+        "{} vs {alpha}",
+        f.alpha[i]
+    );
+    assert!((f.color[i][0] as f64 - near).abs() < 2e-6);
+    assert!((f.color[i][2] as f64 - far * (1.0 - near)).abs() < 2e-6);
+    let depth = (3.0 * near + 6.0 * far * (1.0 - near)) / alpha;
+    assert!((f.depth[i] as f64 - depth).abs() < 1e-4);
+}
+
+/// Random projected splats (centre, conic of a rotated ellipse, opacity) around a 64x64
+/// pixel window.
+fn random_splats(n: usize, seed: u64) -> Vec<cpu::Projected> {
+    let mut rng = common::Rng(seed);
+    (0..n)
+        .map(|_| {
+            let (l1, l2) = (rng.range(0.3, 150.0), rng.range(0.3, 150.0));
+            let t = rng.range(0.0, std::f32::consts::PI);
+            let (c, s) = (t.cos(), t.sin());
+            // Covariance R diag(l1, l2) R^T, conic its inverse.
+            let (a, b, d) = (
+                c * c * l1 + s * s * l2,
+                c * s * (l1 - l2),
+                s * s * l1 + c * c * l2,
+            );
+            let det = a * d - b * b;
+            cpu::Projected {
+                mean2d: [rng.range(-30.0, 94.0), rng.range(-30.0, 94.0)],
+                conic: [d / det, -b / det, a / det],
+                opacity: rng.range(0.0, 1.0).powi(3),
+                radius: 1,
+                ..Default::default()
+            }
+        })
+        .collect()
+}
+
+/// The tile test is exact for each kernel: a tile it rejects gets alpha < 1/255 at every
+/// pixel under that kernel (brute force), for 16- and 8-pixel bins. The bound is the
+/// kernel's own: the power kernel's rejects tiles the Gaussian bound keeps, and would be
+/// wrong for the Gaussian kernel.
+#[test]
+fn tile_culling_is_exact_for_each_kernel() {
+    use cpu::SplatKernel::{Gaussian, Power};
+    let splats = random_splats(1000, 7);
+    for size in [16u32, 8] {
+        let tiles = 64 / size;
+        let (mut power_only, mut wrong_for_gaussian, mut kept_empty, mut kept) = (0, 0, 0, 0);
+        for (i, p) in splats.iter().enumerate() {
+            for ty in 0..tiles {
+                for tx in 0..tiles {
+                    let tile = [tx, ty];
+                    for kernel in [Gaussian, Power] {
+                        let receives =
+                            cpu::tile_receives(p.mean2d, p.conic, p.opacity, kernel, tile, size);
+                        let best = cpu::max_alpha_in_tile(p, kernel, tile, size, 64, 64);
+                        assert!(
+                            receives || best < 1.0 / 255.0,
+                            "splat {i} {p:?}, {size}-pixel tile {tile:?}: rejected by the {kernel} test but reaches alpha {best}"
+                        );
+                        if receives {
+                            kept += 1;
+                            kept_empty += usize::from(best < 1.0 / 255.0);
+                        }
+                    }
+                    let power = cpu::tile_receives(p.mean2d, p.conic, p.opacity, Power, tile, size);
+                    let gauss =
+                        cpu::tile_receives(p.mean2d, p.conic, p.opacity, Gaussian, tile, size);
+                    if gauss && !power {
+                        power_only += 1;
+                        let best = cpu::max_alpha_in_tile(p, Gaussian, tile, size, 64, 64);
+                        wrong_for_gaussian += usize::from(best >= 1.0 / 255.0);
+                    }
+                }
+            }
+        }
+        eprintln!(
+            "{size}-pixel tiles: kept {kept} (of which {kept_empty} receive nothing at a pixel), \
+             {power_only} culled by the power bound only, {wrong_for_gaussian} of them lit by the Gaussian"
+        );
+        assert!(power_only > 50, "the power bound is tighter: {power_only}");
+        assert!(
+            wrong_for_gaussian * 2 > power_only,
+            "{wrong_for_gaussian} of {power_only}"
+        );
+        // Tight: the continuous-square test keeps few tiles whose pixels all stay below 1/255.
+        assert!(kept_empty * 20 < kept, "{kept_empty} of {kept}");
+    }
+}
+
+/// A CPU render whose (tile, splat) pairs are culled with `tile_receives` of the kernel is
+/// bit for bit the plain reference render (which keeps the whole rectangle), on a real
+/// scene from an orbit and a close-up, for both kernels.
+#[test]
+fn tile_culled_render_equals_the_reference_render_bit_for_bit() {
+    let scene = vksplat::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
+        .unwrap()
+        .activated();
+    let cams = vksplat::camera::load_cameras_json(
+        &common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
+    )
+    .unwrap();
+    let orbit = cams[2].with_resolution(480, 270).unwrap();
+    let close = common::gpu::move_towards(&orbit, Vec3::new(0.0, -0.5, 0.0), 0.3, "close-up");
+    for cam in [&orbit, &close] {
+        for kernel in cpu::SplatKernel::ALL {
+            let opts = RenderOptions {
+                background: [0.2, 0.3, 0.4],
+                kernel,
+                ..Default::default()
+            };
+            let plain = cpu::render(&scene, cam, &opts);
+            let projected = cpu::preprocess(&scene, cam, &opts);
+            let (keys, values) = cpu::tile_keys(&projected, cam);
+            let (tx, ty) = cam.tile_grid();
+            let (keys, values): (Vec<u64>, Vec<u32>) = keys
+                .iter()
+                .zip(&values)
+                .filter(|(k, v)| {
+                    let tile = (*k >> 32) as u32;
+                    let p = &projected[**v as usize];
+                    cpu::tile_receives(
+                        p.mean2d,
+                        p.conic,
+                        p.opacity,
+                        kernel,
+                        [tile % tx, tile / tx],
+                        16,
+                    )
+                })
+                .map(|(k, v)| (*k, *v))
+                .unzip();
+            let (sk, sv) = cpu::sort_pairs(&keys, &values);
+            let ranges = cpu::tile_ranges(&sk, (tx * ty) as usize);
+            let culled = cpu::blend(&projected, &sv, &ranges, cam, opts.background, kernel);
+            let all: usize = projected.iter().map(|p| p.tiles_touched() as usize).sum();
+            eprintln!("{} {kernel}: {} of {all} pairs kept", cam.name, sk.len());
+            assert!(sk.len() < all, "some pairs are culled");
+            let bits = |f: &Frame| -> Vec<u32> {
+                f.color
+                    .iter()
+                    .flatten()
+                    .chain(&f.alpha)
+                    .chain(&f.depth)
+                    .map(|v| v.to_bits())
+                    .collect()
+            };
+            assert!(bits(&culled) == bits(&plain), "{} {kernel}", cam.name);
+        }
+    }
+}

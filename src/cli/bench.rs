@@ -2,7 +2,7 @@
 
 use super::common::{
     camera_path, check_output_file, fail_on_validation_messages, load_scene, CameraArgs,
-    FilterArgs, GpuArgs, PathArgs, SceneArg,
+    FilterArgs, GpuArgs, KernelArg, PathArgs, SceneArg,
 };
 use super::values;
 use anyhow::{bail, Result};
@@ -40,6 +40,8 @@ pub(crate) struct BenchArgs {
     /// scaling_modifier; < 1 shrinks the splats, > 1 grows them).
     #[arg(long, value_name = "M", default_value_t = 1.0, value_parser = values::positive_f32)]
     pub(crate) scale_modifier: f32,
+    #[command(flatten)]
+    pub(crate) kernel: KernelArg,
     /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `vksplat gen`) and/or
     /// `resolution=720p,1080p,4k,WxH`; repeat the flag for both (all combinations run).
     #[arg(long, value_name = "AXIS=V1,V2,...")]
@@ -73,6 +75,11 @@ pub(crate) struct BenchArgs {
     /// Benchmark the CPU reference renderer instead (wall clock).
     #[arg(long)]
     pub(crate) cpu: bool,
+    /// Attach feature channels (an N x K NumPy array, as `render --features`); a scene with
+    /// feature channels (these, or its PLY feat_*) is benchmarked with its feature blend,
+    /// reported as the `features` stage.
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) gpu: GpuArgs,
 }
@@ -160,8 +167,14 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         demo: args.demo,
         iteration: args.iteration,
     };
+    if args.features.is_some() && !counts.is_empty() {
+        bail!("--features attaches channels to a scene file; a Gaussians sweep generates its own scenes");
+    }
     let file_scene = if counts.is_empty() {
-        let (scene, name) = load_scene(&scene_arg)?;
+        let (mut scene, name) = load_scene(&scene_arg)?;
+        if let Some(file) = &args.features {
+            vksplat::scene::features::attach_npy(&mut scene, file)?;
+        }
         if filter.is_identity_for(&scene) {
             Some((scene, name))
         } else {
@@ -214,6 +227,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             (None, None) => bail!("no scene"),
         };
         let act = scene.activated();
+        let kernel = args.kernel.resolve(&scene, &name);
         for res in &resolutions {
             // A resolution of the sweep replaces --width/--height/--scale.
             let mut view = args.view.clone();
@@ -234,6 +248,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             cam.validate()?;
             let opts = vksplat::cpu::RenderOptions {
                 scale_modifier: args.scale_modifier,
+                kernel,
                 ..Default::default()
             };
             let report = match renderer.as_mut() {

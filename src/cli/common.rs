@@ -6,6 +6,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use vksplat::camera::{self, Camera, CameraFormat};
+use vksplat::cpu::SplatKernel;
 use vksplat::gpu::{ContextOptions, GpuContext};
 use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::{self, Scene};
@@ -122,6 +123,33 @@ pub(crate) struct PathArgs {
     /// Total frames of a keyframe path (default: from its fps and duration).
     #[arg(long, value_name = "N", value_parser = values::int_in(1usize, camera::MAX_PATH_FRAMES))]
     pub(crate) path_frames: Option<usize>,
+}
+
+/// The alpha falloff (`--kernel`).
+#[derive(Args, Clone, Default)]
+pub(crate) struct KernelArg {
+    /// Alpha falloff of the splats: gaussian (the reference: opacity * exp(-d2/2)) or power
+    /// (opacity * max(0, 1 - d2/9), ending at 3 sigma), d2 the squared Mahalanobis distance
+    /// [default: the kernel the scene file records, else gaussian].
+    #[arg(long, value_name = "gaussian|power")]
+    pub(crate) kernel: Option<SplatKernel>,
+}
+
+impl KernelArg {
+    /// The kernel to render `scene` with: `--kernel`, else the one the file records (with a
+    /// note when that is not the default).
+    pub(crate) fn resolve(&self, scene: &Scene, name: &str) -> SplatKernel {
+        if let Some(k) = self.kernel {
+            return k;
+        }
+        if scene.kernel != SplatKernel::Gaussian {
+            vksplat::note!(
+                "note: {name} records the {} kernel; rendering with it (--kernel gaussian overrides)",
+                scene.kernel
+            );
+        }
+        scene.kernel
+    }
 }
 
 /// Which Gaussians to keep (applied after loading; the input file is not changed).

@@ -4,7 +4,8 @@
 //! status CI can gate on.
 
 use super::common::{
-    camera_path, fail_on_validation_messages, load_scene, CameraArgs, GpuArgs, PathArgs, SceneArg,
+    camera_path, fail_on_validation_messages, load_scene, CameraArgs, GpuArgs, KernelArg, PathArgs,
+    SceneArg,
 };
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -101,6 +102,8 @@ pub(crate) struct CompareArgs {
     #[arg(long, conflicts_with = "antialiased")]
     pub(crate) no_antialiased: bool,
     #[command(flatten)]
+    pub(crate) kernel: KernelArg,
+    #[command(flatten)]
     pub(crate) gpu: GpuArgs,
 }
 
@@ -186,6 +189,8 @@ struct RenderReport {
     reference: String,
     test: String,
     blend_kernel: String,
+    /// The alpha falloff both renderers used (`--kernel`).
+    kernel: String,
     thresholds: Gate,
     magnify: f32,
     frames: Vec<FrameRecord>,
@@ -268,6 +273,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         background: args.background,
         antialiased,
         scale_modifier: args.scale_modifier,
+        kernel: args.kernel.resolve(&scene, &name),
         ..Default::default()
     };
     let ctx = args.gpu.context()?;
@@ -364,6 +370,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         reference: "CPU reference renderer".into(),
         test: format!("GPU pipeline on {device}"),
         blend_kernel: kernel_name(kernel),
+        kernel: opts.kernel.to_string(),
         thresholds: gate,
         magnify: args.magnify,
         pass: failed.is_empty(),
@@ -568,9 +575,10 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
         || v.height.is_some()
         || v.scale.is_some()
         || args.scale_modifier != 1.0
+        || args.kernel.kernel.is_some()
         || args.path.orbit.is_some();
     if scene_only {
-        bail!("camera, resolution, --iteration, --frames, --blend-kernel and --scale-modifier options apply to comparing a scene's renders, not two images");
+        bail!("camera, resolution, --iteration, --frames, --blend-kernel, --kernel and --scale-modifier options apply to comparing a scene's renders, not two images");
     }
     let pa = image_file::read_image(a)?;
     let pb = image_file::read_image(b)?;

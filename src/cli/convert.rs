@@ -11,7 +11,8 @@ use vksplat::scene::write::{convert as convert_scene, ConvertOptions, OutputForm
 #[command(after_help = "Examples:
   vksplat convert scene.ply scene.spz
   vksplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
-  vksplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1")]
+  vksplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
+  vksplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel")]
 pub(crate) struct ConvertArgs {
     /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
     pub(crate) input: PathBuf,
@@ -24,6 +25,14 @@ pub(crate) struct ConvertArgs {
     pub(crate) overwrite: bool,
     #[command(flatten)]
     pub(crate) transform: super::transform::TransformArgs,
+    /// Record this alpha falloff in the output (gaussian or power; a PLY header comment,
+    /// which `render` follows) [default: the input's].
+    #[arg(long, value_name = "gaussian|power")]
+    pub(crate) kernel: Option<vksplat::cpu::SplatKernel>,
+    /// Attach feature channels from an N x K NumPy array (float32 or float16; written as
+    /// feat_* PLY properties; other formats drop them with a note).
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
@@ -34,6 +43,8 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
         transform: args.transform.transform()?,
         filter: args.filter.filter()?,
         overwrite: args.overwrite,
+        kernel: args.kernel,
+        features: args.features.clone(),
     };
     let r = convert_scene(&args.input, &args.output, &options)?;
     if let Some(t) = &options.transform {
@@ -67,6 +78,21 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
     if r.antialiased_flag_lost {
         note!(
             "note: {} records that the scene was trained with antialiasing; {} cannot record that, so render the output with --antialiased",
+            args.input.display(),
+            r.output_format
+        );
+    }
+    if r.features_dropped > 0 {
+        note!(
+            "note: {} stores no feature channels; the {} of {} were dropped (PLY keeps them as feat_*)",
+            r.output_format,
+            super::plural(r.features_dropped, "channel"),
+            args.input.display()
+        );
+    }
+    if let Some(kernel) = r.kernel_lost {
+        note!(
+            "note: {} records that the scene is made for the {kernel} kernel; {} cannot record that, so render the output with --kernel {kernel}",
             args.input.display(),
             r.output_format
         );

@@ -2,7 +2,9 @@
 //! the ground-truth photo of the same name, as the original 3DGS `render.py` +
 //! `metrics.py` do: PSNR, SSIM and LDR-FLIP per image and on average.
 
-use super::common::{fail_on_validation_messages, load_scene, model_cameras, GpuArgs, SceneArg};
+use super::common::{
+    fail_on_validation_messages, load_scene, model_cameras, GpuArgs, KernelArg, SceneArg,
+};
 use super::compare::{csv_cell, db, db_csv};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -76,6 +78,8 @@ pub(crate) struct EvalArgs {
     /// Render without the compensation even when the file records antialiased training.
     #[arg(long, conflicts_with = "antialiased")]
     pub(crate) no_antialiased: bool,
+    #[command(flatten)]
+    pub(crate) kernel: KernelArg,
     /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     pub(crate) cpu: bool,
@@ -319,6 +323,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     let opts = vksplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
+        kernel: args.kernel.resolve(&scene, &name),
         ..Default::default()
     };
     let act = scene.activated();

@@ -20,6 +20,9 @@ pub(crate) struct InfoArgs {
     /// Print the statistics as JSON (for scripts) instead of text.
     #[arg(long)]
     pub(crate) json: bool,
+    /// Feature channels to attach first: an N x K NumPy array (as `render --features`).
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<std::path::PathBuf>,
 }
 
 pub(crate) fn fmt3(v: [f32; 3]) -> String {
@@ -44,6 +47,10 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             (scene, name, None)
         }
     };
+    let mut scene = scene;
+    if let Some(file) = &args.features {
+        scene::features::attach_npy(&mut scene, file)?;
+    }
     if args.json {
         return print_json(&scene, &name, format.map(|f| f.to_string()));
     }
@@ -55,12 +62,26 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             outln!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
         }
     }
+    if scene.kernel == vksplat::cpu::SplatKernel::Gaussian {
+        outln!("kernel      gaussian");
+    } else {
+        outln!(
+            "kernel      {}: the file records it (rendered with it by default; --kernel overrides)",
+            scene.kernel
+        );
+    }
     outln!("gaussians   {}", s.count);
     outln!(
         "sh degree   {} ({} per channel)",
         s.sh_degree,
         plural(scene.sh_coeffs(), "coefficient")
     );
+    if scene.feature_count > 0 {
+        outln!(
+            "features    {} per Gaussian",
+            plural(scene.feature_count, "channel")
+        );
+    }
     if let Some((lo, hi)) = s.bounds {
         outln!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
     }
@@ -105,6 +126,22 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
         &s.opacity_histogram,
         false,
     );
+    if scene.feature_count > 0 {
+        outln!();
+        outln!(
+            "{:<28} {:>12} {:>12} {:>12}",
+            "feature channel",
+            "min",
+            "mean",
+            "max"
+        );
+        for (k, [min, mean, max]) in scene::features::channel_stats(&scene).iter().enumerate() {
+            outln!(
+                "{:<28} {min:>12.6} {mean:>12.6} {max:>12.6}",
+                format!("feat_{k}")
+            );
+        }
+    }
     Ok(())
 }
 
@@ -198,6 +235,12 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
         "scene": name,
         "format": format,
         "antialiased": scene.antialiased,
+        "kernel": scene.kernel.name(),
+        "feature_channels": scene.feature_count,
+        "features": scene::features::channel_stats(scene)
+            .iter()
+            .map(|[min, mean, max]| json!({"min": min, "max": max, "mean": mean}))
+            .collect::<Vec<_>>(),
         "gaussians": s.count,
         "sh_degree": s.sh_degree,
         "bounds": s.bounds.map(|(lo, hi)| json!({"min": lo, "max": hi})),

@@ -2,7 +2,7 @@
 
 use super::common::{
     camera_path, check_output_dir, fail_on_validation_messages, load_scene, CameraArgs, FilterArgs,
-    GpuArgs, PathArgs, SceneArg,
+    GpuArgs, KernelArg, PathArgs, SceneArg,
 };
 use super::{plural, values};
 use anyhow::{bail, Result};
@@ -41,11 +41,22 @@ pub(crate) struct RenderArgs {
     /// render/frame_{:05}.png for several].
     #[arg(short, long, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
-    /// What to write: rgb, rgba, alpha, depth or rgb+depth [default: rgb for PNG, rgb+depth
-    /// (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background (straight colour;
-    /// EXR as rgb). Depth PNGs are colour-mapped for looking at.
+    /// What to write: rgb, rgba, alpha, depth, rgb+depth or features [default: rgb for
+    /// PNG, rgb+depth (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background
+    /// (straight colour; EXR as rgb). Depth PNGs are colour-mapped for looking at.
+    /// features: the scene's feature channels blended like colour over 0, as EXR (feat.0
+    /// ... feat.K-1, A, Z) or .npy (H x W x K float32).
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
+    /// Feature channels for the scene's Gaussians: an N x K NumPy array (float32 or
+    /// float16, N the scene's Gaussian count, K 1..64), replacing any feat_* of the file.
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
+    /// Neural shader: a per-pixel MLP (safetensors with a vksplat_mlp description; README
+    /// "Neural shader") applied to the blended feature channels (and optionally the view
+    /// direction and alpha). The colour written is alpha * MLP + (1 - alpha) * background.
+    #[arg(long, value_name = "FILE.safetensors")]
+    pub(crate) shader: Option<PathBuf>,
     /// Frames of the path to render, numbered in the whole path (before --camera): 7,
     /// 0,3,7, 100..200 (end exclusive), 100..=199, 100.. or ..50. File names keep the
     /// frame's number, so split runs give the files of one run.
@@ -99,6 +110,8 @@ pub(crate) struct RenderArgs {
     /// Render without the compensation even when the file records antialiased training.
     #[arg(long, conflicts_with = "antialiased")]
     pub(crate) no_antialiased: bool,
+    #[command(flatten)]
+    pub(crate) kernel: KernelArg,
     /// Render with the CPU reference renderer instead of the Vulkan pipeline.
     #[arg(long)]
     pub(crate) cpu: bool,
@@ -173,11 +186,16 @@ fn check_output_options(
             output.display()
         );
     }
-    if args.exr_half && !writes(|c| matches!(c, FileContent::Exr(_))) {
+    if args.exr_half
+        && !writes(|c| matches!(c, FileContent::Exr(_) | FileContent::ExrFeatures { .. }))
+    {
         bail!(
             "--exr-half applies to EXR output; {} is not an EXR file",
             output.display()
         );
+    }
+    if args.exr_background && args.mode == Some(output::RenderMode::Features) {
+        bail!("--exr-background does not apply to --mode features: features are blended over 0, without a background");
     }
     if args.exr_background && !writes(|c| matches!(c, FileContent::Exr(_))) {
         bail!(
@@ -265,7 +283,26 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let filter = args.filter.filter()?;
     let transform = args.transform.transform()?;
-    let (scene, name) = load_scene(&args.scene)?;
+    let (mut scene, name) = load_scene(&args.scene)?;
+    if let Some(file) = &args.features {
+        vksplat::scene::features::attach_npy(&mut scene, file)?;
+    }
+    let render_features = args.mode == Some(output::RenderMode::Features);
+    if render_features && scene.feature_count == 0 {
+        bail!("--mode features needs feature channels, but {name} has none; give them as feat_* PLY properties or with --features FILE.npy");
+    }
+    let shader = match &args.shader {
+        Some(path) => {
+            if render_features {
+                bail!("--shader writes the shaded colour and --mode features the feature channels; choose one");
+            }
+            let mlp = vksplat::mlp::Mlp::load(path)?;
+            mlp.check_channels(scene.feature_count)
+                .map_err(|e| anyhow::anyhow!("{}: {e} ({name})", path.display()))?;
+            Some(mlp)
+        }
+        None => None,
+    };
     let scene = super::transform::apply(transform.as_ref(), scene)?;
     let total = scene.len();
     let scene = if filter.is_identity_for(&scene) {
@@ -348,6 +385,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         background: args.background,
         antialiased,
         scale_modifier: args.scale_modifier,
+        kernel: args.kernel.resolve(&scene, &name),
         ..Default::default()
     };
     let run_opts = vksplat::sequence::RunOptions {
@@ -364,9 +402,25 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let act = scene.activated();
     let (summary, how) = if args.cpu {
-        render_cpu(args, &act, &plan.frames, &opts, &run_opts)?
+        render_cpu(
+            args,
+            &act,
+            &plan.frames,
+            &opts,
+            &run_opts,
+            render_features,
+            shader.as_ref(),
+        )?
     } else {
-        render_gpu(args, &act, &plan.frames, &opts, &run_opts)?
+        render_gpu(
+            args,
+            &act,
+            &plan.frames,
+            &opts,
+            &run_opts,
+            render_features,
+            shader.as_ref(),
+        )?
     };
     if summary.interrupted {
         return Err(Interrupted(format!(
@@ -465,6 +519,8 @@ fn render_cpu(
     frames: &[vksplat::sequence::FramePlan],
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
+    features: bool,
+    shader: Option<&vksplat::mlp::Mlp>,
 ) -> Result<(Summary, String)> {
     if args.gpu.verbose {
         note!(
@@ -475,8 +531,30 @@ fn render_cpu(
     let mut sums = StageSums::default();
     let mut pairs = 0;
     let mut render = |cam: &Camera| {
-        let (frame, t) = vksplat::cpu::render_timed(scene, cam, opts);
-        sums.add(&t.stages(), t.total);
+        let (mut frame, t) = if features || shader.is_some() {
+            vksplat::cpu::render_features_timed(scene, cam, opts)
+        } else {
+            vksplat::cpu::render_timed(scene, cam, opts)
+        };
+        let mut stages = t.stages().to_vec();
+        let mut total = t.total;
+        if let Some(mlp) = shader {
+            let start = std::time::Instant::now();
+            frame.color = vksplat::mlp::shade(
+                mlp,
+                cam,
+                &frame.features,
+                frame.feature_count,
+                &frame.alpha,
+                opts.background,
+            );
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            stages.push(("shade", ms));
+            total += ms;
+            frame.features.clear();
+            frame.feature_count = 0;
+        }
+        sums.add(&stages, total);
         pairs = t.pairs;
         Ok(frame)
     };
@@ -494,6 +572,8 @@ fn render_gpu(
     frames: &[vksplat::sequence::FramePlan],
     opts: &vksplat::cpu::RenderOptions,
     run_opts: &vksplat::sequence::RunOptions,
+    features: bool,
+    shader: Option<&vksplat::mlp::Mlp>,
 ) -> Result<(Summary, String)> {
     let t0 = std::time::Instant::now();
     let ctx = args.gpu.context()?;
@@ -510,10 +590,23 @@ fn render_gpu(
         );
     }
     let gpu_scene = renderer.upload(scene)?;
+    let gpu_features = if features || shader.is_some() {
+        Some(renderer.upload_features(scene)?)
+    } else {
+        None
+    };
+    let gpu_shader = match shader {
+        Some(m) => Some(vksplat::render::shade::GpuShader::new(renderer.ctx(), m)?),
+        None => None,
+    };
     let mut sums = StageSums::default();
     let mut last_stats = None;
     let mut render = |cam: &Camera| -> Result<vksplat::frame::Frame> {
-        let frame = renderer.render(&gpu_scene, cam, opts)?;
+        let frame = match (&gpu_features, &gpu_shader) {
+            (Some(f), Some(s)) => renderer.render_shaded(&gpu_scene, f, s, cam, opts)?,
+            (Some(f), None) => renderer.render_features(&gpu_scene, f, cam, opts)?,
+            _ => renderer.render(&gpu_scene, cam, opts)?,
+        };
         let t = renderer.timings();
         sums.add(&t.stages(), t.total);
         last_stats = Some(renderer.stats().clone());

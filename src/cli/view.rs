@@ -1,6 +1,6 @@
 //! `vksplat view`: serve an interactive viewer of a scene to a browser.
 
-use super::common::{camera_path, load_scene, CameraArgs, PathArgs, SceneArg};
+use super::common::{camera_path, load_scene, CameraArgs, KernelArg, PathArgs, SceneArg};
 use super::{plural, values};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -60,6 +60,8 @@ pub(crate) struct ViewArgs {
     /// Render without the compensation even when the file records antialiased training.
     #[arg(long, conflicts_with = "antialiased")]
     pub(crate) no_antialiased: bool,
+    #[command(flatten)]
+    pub(crate) kernel: KernelArg,
 }
 
 /// The address `--host`/`--port` name (the first the name resolves to).
@@ -81,7 +83,9 @@ fn listen_address(host: &str, port: u16) -> Result<SocketAddr> {
 
 /// The scene, its cameras and the renderer, as the server gets them.
 fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)> {
-    let (scene, name) = load_scene(&args.scene)?;
+    let (mut scene, name) = load_scene(&args.scene)?;
+    // The sources render with the scene's kernel.
+    scene.kernel = args.kernel.resolve(&scene, &name);
     if scene.is_empty() {
         bail!("{name} holds no Gaussians; there is nothing to view");
     }

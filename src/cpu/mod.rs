@@ -26,6 +26,83 @@ pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 /// A pixel is finished before its transmittance would drop below this.
 pub const T_MIN: f32 = 0.0001;
 
+/// The falloff of a splat's alpha with the squared Mahalanobis distance `d2` of a pixel
+/// from its 2D centre (`d2 = A dx^2 + 2 B dx dy + C dy^2` with the conic, i.e.
+/// `d2 = -2 power` in the reference's terms). Chosen with `--kernel`; both kernels follow the
+/// same 1/255 skip, 0.99 clamp and 1e-4 transmittance rules.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum SplatKernel {
+    /// `opacity * exp(-d2 / 2)`: the reference's Gaussian.
+    #[default]
+    Gaussian,
+    /// `opacity * max(0, 1 - d2 / 9)`: the power-function kernel, whose support ends at the
+    /// 3-sigma ellipse (inside the reference's radius, so its tile rectangle clips nothing).
+    Power,
+}
+
+impl SplatKernel {
+    /// Every kernel, in `--kernel` order.
+    pub const ALL: [SplatKernel; 2] = [SplatKernel::Gaussian, SplatKernel::Power];
+
+    /// The name `--kernel` and the PLY comment use.
+    pub fn name(self) -> &'static str {
+        match self {
+            SplatKernel::Gaussian => "gaussian",
+            SplatKernel::Power => "power",
+        }
+    }
+
+    /// Alpha before the 0.99 clamp at a pixel where the reference's exponent is `power`
+    /// (`power = -d2 / 2 <= 0`).
+    pub fn falloff(self, opacity: f32, power: f32) -> f32 {
+        match self {
+            SplatKernel::Gaussian => opacity * power.exp(),
+            SplatKernel::Power => {
+                let d2 = -2.0 * power;
+                opacity * (1.0 - d2 / 9.0).max(0.0)
+            }
+        }
+    }
+
+    /// Exact bound of the tile culling: a pixel at squared Mahalanobis distance `d2` can get
+    /// alpha >= 1/255 only when `d2 <= bound`. Gaussian: `2 ln(255 opacity)`; power:
+    /// `9 (1 - 1 / (255 opacity))`. Both with the same small conservative margin (relative
+    /// 1e-3 plus 0.01) against rounding in the per-pixel evaluation; negative when the
+    /// Gaussian reaches 1/255 nowhere. Mirrors `alpha_bound` in `glsl/splat_common.glsl`.
+    pub fn alpha_bound(self, opacity: f32) -> f32 {
+        let exact = match self {
+            SplatKernel::Gaussian => 2.0 * (255.0 * opacity).ln(),
+            SplatKernel::Power => 9.0 * (1.0 - 1.0 / (255.0 * opacity)),
+        };
+        exact * 1.001 + 0.01
+    }
+
+    /// The value the shaders receive (`FrameParams.filters.w`, `SPLAT_KERNEL`).
+    pub fn shader_id(self) -> u32 {
+        match self {
+            SplatKernel::Gaussian => 0,
+            SplatKernel::Power => 1,
+        }
+    }
+}
+
+impl std::fmt::Display for SplatKernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SplatKernel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "gaussian" => Ok(SplatKernel::Gaussian),
+            "power" => Ok(SplatKernel::Power),
+            other => Err(format!("unknown kernel {other:?}; use gaussian or power")),
+        }
+    }
+}
+
 /// Options shared by every renderer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -47,6 +124,8 @@ pub struct RenderOptions {
     pub min_opacity: Option<f32>,
     /// SH degree evaluated, at most the scene's. `None` evaluates the scene's own.
     pub sh_degree: Option<u32>,
+    /// Alpha falloff of every splat ([`SplatKernel::Gaussian`] by default, the reference).
+    pub kernel: SplatKernel,
 }
 
 impl Default for RenderOptions {
@@ -58,6 +137,7 @@ impl Default for RenderOptions {
             max_scale: None,
             min_opacity: None,
             sh_degree: None,
+            kernel: SplatKernel::Gaussian,
         }
     }
 }
@@ -291,18 +371,20 @@ pub fn preprocess(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) ->
 }
 
 /// Mirror of `tile_receives` in `glsl/splat_common.glsl`: whether any pixel of the
-/// `size`-pixel bin `tile` can get alpha >= 1/255 from a Gaussian with this centre, conic
-/// and opacity (with the GPU's small conservative margin). The GPU drops pairs for which
-/// this is false; they contribute nothing, so the image is unchanged. The reference renderer
-/// itself keeps every pair of the rectangle; tests use this to compare membership.
+/// `size`-pixel bin `tile` can get alpha >= 1/255 from a splat with this centre, conic
+/// and opacity under `kernel` (with the GPU's small conservative margin, see
+/// [`SplatKernel::alpha_bound`]). The GPU drops pairs for which this is false; they
+/// contribute nothing, so the image is unchanged. The reference renderer itself keeps every
+/// pair of the rectangle; tests use this to compare membership.
 pub fn tile_receives(
     mean2d: [f32; 2],
     conic: [f32; 3],
     opacity: f32,
+    kernel: SplatKernel,
     tile: [u32; 2],
     size: u32,
 ) -> bool {
-    let bound = 2.0 * (255.0 * opacity).ln() * 1.001 + 0.01;
+    let bound = kernel.alpha_bound(opacity);
     let t = size as f32;
     let lo = [
         tile[0] as f32 * t - mean2d[0],
@@ -325,8 +407,15 @@ pub fn tile_receives(
 }
 
 /// Largest alpha (before the 0.99 clamp) Gaussian `g` reaches at any pixel of the
-/// `size`-pixel bin `tile`, evaluated pixel by pixel with the blend's formula.
-pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], size: u32, width: u32, height: u32) -> f32 {
+/// `size`-pixel bin `tile` under `kernel`, evaluated pixel by pixel with the blend's formula.
+pub fn max_alpha_in_tile(
+    g: &Projected,
+    kernel: SplatKernel,
+    tile: [u32; 2],
+    size: u32,
+    width: u32,
+    height: u32,
+) -> f32 {
     let mut best = 0.0f32;
     for y in tile[1] * size..((tile[1] + 1) * size).min(height) {
         for x in tile[0] * size..((tile[0] + 1) * size).min(width) {
@@ -334,7 +423,7 @@ pub fn max_alpha_in_tile(g: &Projected, tile: [u32; 2], size: u32, width: u32, h
             let dy = g.mean2d[1] - y as f32;
             let power = -0.5 * (g.conic[0] * dx * dx + g.conic[2] * dy * dy) - g.conic[1] * dx * dy;
             if power <= 0.0 {
-                best = best.max(g.opacity * power.exp());
+                best = best.max(kernel.falloff(g.opacity, power));
             }
         }
     }
@@ -403,10 +492,39 @@ pub struct PixelResult {
     pub evaluated: u32,
 }
 
-/// Composites the Gaussians `ids` (front to back) at pixel `(px, py)` with the reference rules.
-pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> PixelResult {
-    let mut t = 1.0f32;
+/// Composites the Gaussians `ids` (front to back) at pixel `(px, py)` with the reference
+/// rules and the alpha falloff of `kernel`.
+pub fn blend_pixel(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+) -> PixelResult {
     let mut color = [0.0f32; 3];
+    let mut r = blend_pixel_with(projected, ids, px, py, kernel, |id, w| {
+        for (c, gc) in color.iter_mut().zip(projected[id as usize].color) {
+            *c += gc * w;
+        }
+    });
+    r.color = color;
+    r
+}
+
+/// The reference's per-pixel compositing loop: for every Gaussian of `ids` (front to back)
+/// that the rules add to pixel `(px, py)`, calls `add(id, alpha * T)` with its weight, and
+/// returns the transmittance and weighted depth (`color` zero: the caller accumulates what
+/// it blends). [`blend_pixel`] blends colour with it and [`blend_features_pixel`] feature
+/// channels, so both follow exactly the same alpha, skip and stop rules.
+pub fn blend_pixel_with(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+    mut add: impl FnMut(u32, f32),
+) -> PixelResult {
+    let mut t = 1.0f32;
     let mut depth = 0.0f32;
     let mut evaluated = 0u32;
     for &id in ids {
@@ -419,7 +537,7 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
         if power > 0.0 {
             continue;
         }
-        let alpha = ALPHA_MAX.min(g.opacity * power.exp());
+        let alpha = ALPHA_MAX.min(kernel.falloff(g.opacity, power));
         if alpha < ALPHA_MIN {
             continue;
         }
@@ -428,27 +546,83 @@ pub fn blend_pixel(projected: &[Projected], ids: &[u32], px: f32, py: f32) -> Pi
             break;
         }
         let w = alpha * t;
-        for (c, gc) in color.iter_mut().zip(g.color) {
-            *c += gc * w;
-        }
+        add(id, w);
         depth += g.depth * w;
         t = test_t;
     }
     PixelResult {
-        color,
+        color: [0.0; 3],
         transmittance: t,
         weighted_depth: depth,
         evaluated,
     }
 }
 
-/// Blends every tile (in parallel) into a frame.
+/// Composites the `k` feature channels of the Gaussians `ids` at pixel `(px, py)` into
+/// `out` (`k` floats, zeroed first) with the colour rules and no background.
+#[allow(clippy::too_many_arguments)]
+pub fn blend_features_pixel(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+    features: &[f32],
+    k: usize,
+    out: &mut [f32],
+) {
+    out.fill(0.0);
+    blend_pixel_with(projected, ids, px, py, kernel, |id, w| {
+        let f = &features[id as usize * k..(id as usize + 1) * k];
+        for (o, v) in out.iter_mut().zip(f) {
+            *o += v * w;
+        }
+    });
+}
+
+/// Blends the `k` feature channels per Gaussian (`features`, Gaussian-major) of every
+/// tile front to back, with exactly the colour rules (same alpha, transmittance, skip and
+/// stop; background 0): `width * height * k` floats, pixel-major, row by row.
+pub fn blend_features(
+    projected: &[Projected],
+    sorted_values: &[u32],
+    ranges: &[[u32; 2]],
+    cam: &Camera,
+    kernel: SplatKernel,
+    features: &[f32],
+    k: usize,
+) -> Vec<f32> {
+    let (tiles_x, _) = cam.tile_grid();
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut out = vec![0f32; w * h * k];
+    if k == 0 {
+        return out;
+    }
+    out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
+        for (x, px) in row.chunks_exact_mut(k).enumerate() {
+            let tile = (y as u32 / TILE_SIZE) * tiles_x + x as u32 / TILE_SIZE;
+            let [start, end] = ranges[tile as usize];
+            let ids = &sorted_values[start as usize..end as usize];
+            blend_features_pixel(projected, ids, x as f32, y as f32, kernel, features, k, px);
+        }
+    });
+    out
+}
+
+/// Renders a frame with the scene's feature channels ([`blend_features`] into
+/// [`Frame::features`]) on the CPU.
+pub fn render_features(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) -> Frame {
+    render_features_timed(scene, cam, opts).0
+}
+
+/// Blends every tile (in parallel) into a frame, with the alpha falloff of `kernel`.
 pub fn blend(
     projected: &[Projected],
     sorted_values: &[u32],
     ranges: &[[u32; 2]],
     cam: &Camera,
     background: [f32; 3],
+    kernel: SplatKernel,
 ) -> Frame {
     let (tiles_x, tiles_y) = cam.tile_grid();
     let (w, h) = (cam.width, cam.height);
@@ -461,7 +635,7 @@ pub fn blend(
             let mut out = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
             for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(h) {
                 for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(w) {
-                    let r = blend_pixel(projected, ids, x as f32, y as f32);
+                    let r = blend_pixel(projected, ids, x as f32, y as f32, kernel);
                     out.push((y as usize * w as usize + x as usize, r));
                 }
             }
@@ -505,6 +679,8 @@ pub struct CpuTimings {
     pub ranges: f64,
     /// [`blend`].
     pub blend: f64,
+    /// [`blend_features`] (0 unless the render blended feature channels).
+    pub features: f64,
     /// The whole render.
     pub total: f64,
     /// Number of (tile, Gaussian) pairs.
@@ -512,15 +688,20 @@ pub struct CpuTimings {
 }
 
 impl CpuTimings {
-    /// The phases in order with their names.
-    pub fn stages(&self) -> [(&'static str, f64); 5] {
-        [
+    /// The phases in order with their names; `features` only when the render blended
+    /// feature channels.
+    pub fn stages(&self) -> Vec<(&'static str, f64)> {
+        let mut stages = vec![
             ("preprocess", self.preprocess),
             ("keys", self.keys),
             ("sort", self.sort),
             ("ranges", self.ranges),
             ("blend", self.blend),
-        ]
+        ];
+        if self.features > 0.0 {
+            stages.push(("features", self.features));
+        }
+        stages
     }
 }
 
@@ -529,6 +710,24 @@ pub fn render_timed(
     scene: &ActivatedScene,
     cam: &Camera,
     opts: &RenderOptions,
+) -> (Frame, CpuTimings) {
+    render_timed_with(scene, cam, opts, false)
+}
+
+/// [`render_features`], timing each phase (the feature blend as `features`).
+pub fn render_features_timed(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> (Frame, CpuTimings) {
+    render_timed_with(scene, cam, opts, true)
+}
+
+fn render_timed_with(
+    scene: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+    features: bool,
 ) -> (Frame, CpuTimings) {
     let start = std::time::Instant::now();
     let mut t = CpuTimings::default();
@@ -546,8 +745,28 @@ pub fn render_timed(
     let (tx, ty) = cam.tile_grid();
     let ranges = tile_ranges(&sorted_keys, (tx * ty) as usize);
     take(&mut t.ranges);
-    let frame = blend(&projected, &sorted_values, &ranges, cam, opts.background);
+    let mut frame = blend(
+        &projected,
+        &sorted_values,
+        &ranges,
+        cam,
+        opts.background,
+        opts.kernel,
+    );
     take(&mut t.blend);
+    if features {
+        frame.features = blend_features(
+            &projected,
+            &sorted_values,
+            &ranges,
+            cam,
+            opts.kernel,
+            &scene.features,
+            scene.feature_count,
+        );
+        frame.feature_count = scene.feature_count;
+        take(&mut t.features);
+    }
     t.total = start.elapsed().as_secs_f64() * 1e3;
     t.pairs = sorted_keys.len() as u64;
     (frame, t)
@@ -559,6 +778,7 @@ pub fn render_timed(
 pub fn count_evaluations<'a>(
     projected: &[Projected],
     cam: &Camera,
+    kernel: SplatKernel,
     list: impl Fn(u32, u32) -> &'a [u32] + Sync,
 ) -> u64 {
     (0..cam.height)
@@ -566,7 +786,9 @@ pub fn count_evaluations<'a>(
         .map(|y| {
             (0..cam.width)
                 .map(|x| {
-                    u64::from(blend_pixel(projected, list(x, y), x as f32, y as f32).evaluated)
+                    u64::from(
+                        blend_pixel(projected, list(x, y), x as f32, y as f32, kernel).evaluated,
+                    )
                 })
                 .sum::<u64>()
         })

@@ -49,7 +49,12 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("order.comp", include_str!("../../glsl/order.comp")),
     ("ranges.comp", include_str!("../../glsl/ranges.comp")),
     ("blend.comp", include_str!("../../glsl/blend.comp")),
+    (
+        "blend_features.comp",
+        include_str!("../../glsl/blend_features.comp"),
+    ),
     ("pack.comp", include_str!("../../glsl/pack.comp")),
+    ("shade.comp", include_str!("../../glsl/shade.comp")),
     (
         "count64_test.comp",
         include_str!("../../glsl/count64_test.comp"),

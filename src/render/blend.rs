@@ -1,6 +1,7 @@
 //! Blend stage (`glsl/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
+use crate::cpu::SplatKernel;
 use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use ash::vk;
@@ -98,10 +99,12 @@ impl std::str::FromStr for BlendKernel {
     }
 }
 
-/// The blend pipeline.
+/// The blend pipeline, for one [`BlendKernel`] and one alpha falloff ([`SplatKernel`],
+/// compiled in as `SPLAT_KERNEL`).
 pub struct Blend {
     pipeline: ComputePipeline,
     kernel: BlendKernel,
+    splat_kernel: SplatKernel,
 }
 
 /// Resources the stage reads and writes.
@@ -127,8 +130,12 @@ pub struct BlendBindings<'a> {
 }
 
 impl Blend {
-    /// Compiles the shader for `kernel`.
-    pub fn new(ctx: &GpuContext, kernel: BlendKernel) -> GpuResult<Self> {
+    /// Compiles the shader for `kernel` with the falloff of `splat_kernel`.
+    pub fn new(
+        ctx: &GpuContext,
+        kernel: BlendKernel,
+        splat_kernel: SplatKernel,
+    ) -> GpuResult<Self> {
         use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
         if !STRIPS.contains(&kernel.strip()) {
             return Err(crate::gpu::GpuError::InvalidArgument(format!(
@@ -139,6 +146,7 @@ impl Blend {
         let defines = [
             ("STRIP", kernel.strip().to_string()),
             ("TEXEL_FETCH", u32::from(kernel.texel()).to_string()),
+            ("SPLAT_KERNEL", format!("{}u", splat_kernel.shader_id())),
         ];
         let bindings = if kernel.texel() {
             [B, T, T, B, I, I, B]
@@ -149,12 +157,21 @@ impl Blend {
         let local_x = 16 / kernel.strip();
         let pipeline =
             ComputePipeline::from_embedded(ctx, "blend", &defines, &bindings, 0, local_x)?;
-        Ok(Blend { pipeline, kernel })
+        Ok(Blend {
+            pipeline,
+            kernel,
+            splat_kernel,
+        })
     }
 
     /// The kernel in use.
     pub fn kernel(&self) -> BlendKernel {
         self.kernel
+    }
+
+    /// The alpha falloff compiled in.
+    pub fn splat_kernel(&self) -> SplatKernel {
+        self.splat_kernel
     }
 
     /// Whether the kernel reads texel-buffer views of the splats and values.

@@ -18,15 +18,17 @@
 //! the frame recorded again; the CPU never waits in the middle of a frame.
 
 pub mod blend;
+pub mod features;
 pub mod keys;
 pub mod order;
 pub mod pack;
 pub mod preprocess;
 pub mod ranges;
+pub mod shade;
 pub mod types;
 
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
+use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
@@ -85,6 +87,38 @@ impl GpuScene {
     }
 }
 
+/// A scene's feature channels uploaded to the device: one buffer per group of four
+/// channels, a vec4 per Gaussian (zero past the last channel).
+pub struct GpuFeatures {
+    // The views go before the buffers they view.
+    views: Vec<BufferView>,
+    groups: Vec<GpuBuffer>,
+    channels: usize,
+    count: u32,
+}
+
+impl GpuFeatures {
+    /// Channels per Gaussian (K).
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+}
+
+/// What a frame blends besides colour: the scene's features, and the neural shader
+/// applied to them.
+type FeatureJob<'a> = (&'a GpuFeatures, Option<&'a shade::GpuShader>);
+
+/// The feature images of a frame: one plane per group of four channels.
+struct FeaturePlanes {
+    buffer: GpuBuffer,
+    /// Bytes from one plane to the next.
+    plane_bytes: u64,
+    /// Bytes of one plane's pixels.
+    pixel_bytes: u64,
+    /// Planes held.
+    groups: u64,
+}
+
 /// GPU time of each stage of the last frame, in milliseconds (timestamp queries).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StageTimings {
@@ -102,6 +136,10 @@ pub struct StageTimings {
     pub ranges: f64,
     /// Per-tile blending.
     pub blend: f64,
+    /// Feature channels blended after the colour (0 unless the frame rendered features).
+    pub features: f64,
+    /// The neural shader (0 unless the frame was shaded).
+    pub shade: f64,
     /// Image copies to host-visible memory.
     pub readback: f64,
     /// First timestamp to last.
@@ -109,9 +147,10 @@ pub struct StageTimings {
 }
 
 impl StageTimings {
-    /// The stages in pipeline order with their names.
-    pub fn stages(&self) -> [(&'static str, f64); 8] {
-        [
+    /// The stages in pipeline order with their names; `features` only when the frame
+    /// blended feature channels.
+    pub fn stages(&self) -> Vec<(&'static str, f64)> {
+        let mut stages = vec![
             ("preprocess", self.preprocess),
             ("order", self.order),
             ("scan", self.scan),
@@ -119,8 +158,15 @@ impl StageTimings {
             ("sort", self.sort),
             ("ranges", self.ranges),
             ("blend", self.blend),
-            ("readback", self.readback),
-        ]
+        ];
+        if self.features > 0.0 {
+            stages.push(("features", self.features));
+        }
+        if self.shade > 0.0 {
+            stages.push(("shade", self.shade));
+        }
+        stages.push(("readback", self.readback));
+        stages
     }
 }
 
@@ -355,7 +401,18 @@ pub struct GpuRenderer {
     keys: keys::Keys,
     sort: RadixSort,
     ranges: ranges::Ranges,
+    /// Blend pipelines by alpha falloff: the Gaussian one is built with the renderer, the
+    /// power one on the first frame that needs it.
     blend: blend::Blend,
+    power_blend: Option<blend::Blend>,
+    /// Feature blend pipelines by `SplatKernel::shader_id`, built on first use.
+    feature_blends: [Option<features::FeatureBlend>; 2],
+    /// The feature images of the last features frame, one plane per group of four
+    /// channels (vec4 per pixel) in one buffer, planes `plane_bytes` apart (a multiple of
+    /// the storage-buffer offset alignment); kept across frames of the same size.
+    feature_planes: Option<FeaturePlanes>,
+    /// The neural shader's pipeline, built on first use.
+    shade: Option<shade::Shade>,
     pack: pack::Pack,
     timer: GpuTimer,
     slot: FrameSlot,
@@ -392,9 +449,14 @@ impl GpuRenderer {
             keys: keys::Keys::new(&ctx)?,
             sort: RadixSort::new(&ctx)?,
             ranges: ranges::Ranges::new(&ctx)?,
-            blend: blend::Blend::new(&ctx, kernel)?,
+            blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
+            power_blend: None,
+            feature_blends: [None, None],
+            feature_planes: None,
+            shade: None,
             pack: pack::Pack::new(&ctx)?,
-            timer: GpuTimer::new(&ctx, "frame timestamps", 16)?,
+            // Two timestamps per stage: up to ten stages (features and shade included).
+            timer: GpuTimer::new(&ctx, "frame timestamps", 32)?,
             slot: FrameSlot::new(&ctx, "frame")?,
             frame: None,
             timings: StageTimings::default(),
@@ -493,6 +555,192 @@ impl GpuRenderer {
         })
     }
 
+    /// Uploads the scene's feature channels (four per buffer, for the feature blend).
+    pub fn upload_features(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+        let k = scene.feature_count;
+        let n = scene.len();
+        if k == 0 || scene.features.len() != n * k {
+            return Err(GpuError::InvalidArgument(format!(
+                "the scene has no feature channels to upload ({} values for {n} Gaussians and {k} channels)",
+                scene.features.len()
+            )));
+        }
+        let count = u32::try_from(n).map_err(|_| {
+            GpuError::InvalidArgument(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
+        })?;
+        let (mut groups, mut views) = (Vec::new(), Vec::new());
+        for g in 0..features::groups(k) {
+            let mut v = vec![[0f32; 4]; n.max(1)];
+            for (i, dst) in v.iter_mut().enumerate().take(n) {
+                for (c, d) in dst.iter_mut().enumerate() {
+                    let ch = g * features::CHANNELS_PER_GROUP + c;
+                    if ch < k {
+                        *d = scene.features[i * k + ch];
+                    }
+                }
+            }
+            let name = format!("features {}..{}", g * 4, (g * 4 + 4).min(k));
+            let bytes = (v.len() * 16) as u64;
+            check_binding(&self.ctx, &name, bytes)?;
+            let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
+            buf.upload(&self.ctx, &v)?;
+            if self.blend.needs_texel_views() {
+                views.push(BufferView::new(
+                    &self.ctx,
+                    &buf,
+                    vk::Format::R32G32B32A32_SFLOAT,
+                    0,
+                    bytes,
+                )?);
+            }
+            groups.push(buf);
+        }
+        Ok(GpuFeatures {
+            views,
+            groups,
+            channels: k,
+            count,
+        })
+    }
+
+    /// Renders one frame and blends the uploaded feature channels over the same sorted
+    /// lists with the colour rules (background 0), timed as the `features` stage: the frame
+    /// with [`Frame::features`] (`width * height * K` floats, pixel-major).
+    pub fn render_features(
+        &mut self,
+        scene: &GpuScene,
+        features: &GpuFeatures,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<Frame> {
+        if features.count != scene.count {
+            return Err(GpuError::InvalidArgument(format!(
+                "the features were uploaded for {} Gaussians, the scene has {}",
+                features.count, scene.count
+            )));
+        }
+        let slot = opts.kernel.shader_id() as usize;
+        if self.feature_blends[slot].is_none() {
+            self.feature_blends[slot] = Some(features::FeatureBlend::new(
+                &self.ctx,
+                opts.kernel,
+                self.blend.needs_texel_views(),
+            )?);
+        }
+        let pixels = u64::from(cam.width) * u64::from(cam.height);
+        self.ensure_feature_planes(features, pixels)?;
+        self.render_frame_with(scene, cam, opts, Readback::Float, Some((features, None)))?;
+        let mut frame = self.read_frame(cam)?;
+        frame.feature_count = features.channels;
+        frame.features = self.read_feature_planes(features.channels, pixels as usize)?;
+        Ok(frame)
+    }
+
+    /// Renders one frame, blends the uploaded feature channels and shades them with the
+    /// neural shader ([`crate::mlp`]) as its own `shade` stage: the frame's colour is
+    /// `alpha * mlp(...) + (1 - alpha) * background`; alpha and depth are the frame's.
+    pub fn render_shaded(
+        &mut self,
+        scene: &GpuScene,
+        features: &GpuFeatures,
+        shader: &shade::GpuShader,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<Frame> {
+        if features.count != scene.count {
+            return Err(GpuError::InvalidArgument(format!(
+                "the features were uploaded for {} Gaussians, the scene has {}",
+                features.count, scene.count
+            )));
+        }
+        if shader.channels() != features.channels {
+            return Err(GpuError::InvalidArgument(format!(
+                "the shader takes {} feature channels but the scene has {}",
+                shader.channels(),
+                features.channels
+            )));
+        }
+        if self.loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
+            return Err(GpuError::InvalidArgument(format!(
+                "the neural shader needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations; use narrower layers, or the CPU reference (--cpu)",
+                shader.iterations,
+                self.ctx.info().name
+            )));
+        }
+        let slot = opts.kernel.shader_id() as usize;
+        if self.feature_blends[slot].is_none() {
+            self.feature_blends[slot] = Some(features::FeatureBlend::new(
+                &self.ctx,
+                opts.kernel,
+                self.blend.needs_texel_views(),
+            )?);
+        }
+        if self.shade.is_none() {
+            self.shade = Some(shade::Shade::new(&self.ctx)?);
+        }
+        let pixels = u64::from(cam.width) * u64::from(cam.height);
+        self.ensure_feature_planes(features, pixels)?;
+        self.render_frame_with(
+            scene,
+            cam,
+            opts,
+            Readback::Float,
+            Some((features, Some(shader))),
+        )?;
+        self.read_frame(cam)
+    }
+
+    /// Makes the feature planes hold `features`' groups for `pixels` pixels.
+    fn ensure_feature_planes(&mut self, features: &GpuFeatures, pixels: u64) -> GpuResult<()> {
+        let groups = features.groups.len() as u64;
+        let align = self.ctx.info().min_storage_buffer_offset_alignment.max(16);
+        let plane_bytes = (pixels * 16).div_ceil(align) * align;
+        let fits = self
+            .feature_planes
+            .as_ref()
+            .is_some_and(|p| p.plane_bytes == plane_bytes && p.groups >= groups);
+        if !fits {
+            self.feature_planes = None;
+            check_binding(&self.ctx, "feature image", plane_bytes * groups)?;
+            self.feature_planes = Some(FeaturePlanes {
+                buffer: GpuBuffer::new(
+                    &self.ctx,
+                    "feature images",
+                    plane_bytes * groups,
+                    MemoryKind::Device,
+                )?,
+                plane_bytes,
+                pixel_bytes: pixels * 16,
+                groups,
+            });
+        }
+        Ok(())
+    }
+
+    /// The `k` blended channels of the last features frame, pixel-major.
+    fn read_feature_planes(&self, k: usize, pixels: usize) -> GpuResult<Vec<f32>> {
+        let planes = self
+            .feature_planes
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no feature image was rendered".into()))?;
+        let stride = (planes.plane_bytes / 16) as usize;
+        let groups = features::groups(k);
+        let all: Vec<[f32; 4]> = planes.buffer.read(&self.ctx, stride * groups)?;
+        let mut out = vec![0f32; pixels * k];
+        for g in 0..groups {
+            let plane = &all[g * stride..g * stride + pixels];
+            for (dst, src) in out.chunks_exact_mut(k).zip(plane) {
+                for (c, v) in src.iter().enumerate() {
+                    let ch = g * features::CHANNELS_PER_GROUP + c;
+                    if ch < k {
+                        dst[ch] = *v;
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// GPU time per stage of the last frame.
     pub fn timings(&self) -> &StageTimings {
         &self.timings
@@ -587,6 +835,19 @@ impl GpuRenderer {
         opts: &RenderOptions,
         readback: Readback,
     ) -> GpuResult<()> {
+        self.render_frame_with(scene, cam, opts, readback, None)
+    }
+
+    /// [`Self::render_frame`], also blending `features` when given, and shading them
+    /// with the neural shader when one comes with them.
+    fn render_frame_with(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        readback: Readback,
+        features: Option<FeatureJob>,
+    ) -> GpuResult<()> {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         opts.validate().map_err(GpuError::InvalidArgument)?;
@@ -598,13 +859,20 @@ impl GpuRenderer {
             })
             .min(self.max_capacity());
         self.ensure_frame(scene, cam, initial)?;
+        if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
+            self.power_blend = Some(blend::Blend::new(
+                &self.ctx,
+                self.blend.kernel(),
+                SplatKernel::Power,
+            )?);
+        }
         self.bin_size = self.blend.kernel().bin_size();
         let mut regrows = 0;
         loop {
             if readback == Readback::Rgba8 {
                 self.ensure_packed()?;
             }
-            self.record_and_submit(scene, cam, opts, readback)?;
+            self.record_and_submit(scene, cam, opts, readback, features)?;
             let counters = self.read_counters()?;
             let pairs = counters.pairs();
             let capacity = self.frame.as_ref().map_or(0, |f| f.capacity);
@@ -683,6 +951,7 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
         readback: Readback,
+        features: Option<FeatureJob>,
     ) -> GpuResult<()> {
         let Self {
             preprocess,
@@ -692,6 +961,10 @@ impl GpuRenderer {
             sort,
             ranges,
             blend,
+            power_blend,
+            feature_blends,
+            feature_planes,
+            shade,
             pack,
             timer,
             slot,
@@ -700,6 +973,26 @@ impl GpuRenderer {
             bin_size,
             ..
         } = self;
+        let feature_job = match features {
+            Some((feat, _)) => Some((
+                feat,
+                feature_blends[opts.kernel.shader_id() as usize]
+                    .as_ref()
+                    .ok_or_else(|| {
+                        GpuError::InvalidArgument("the feature blend pipeline is missing".into())
+                    })?,
+            )),
+            None => None,
+        };
+        let blend = match (opts.kernel, power_blend.as_ref()) {
+            (SplatKernel::Gaussian, _) => &*blend,
+            (SplatKernel::Power, Some(b)) => b,
+            (SplatKernel::Power, None) => {
+                return Err(GpuError::InvalidArgument(
+                    "the power-kernel blend pipeline is missing".into(),
+                ))
+            }
+        };
         let f = frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
@@ -739,7 +1032,7 @@ impl GpuRenderer {
                 opts.scale_modifier,
                 opts.max_scale.unwrap_or(-1.0),
                 opts.min_opacity.unwrap_or(-1.0),
-                0.0,
+                opts.kernel.shader_id() as f32,
             ],
         };
         let n = scene.count;
@@ -885,6 +1178,66 @@ impl GpuRenderer {
                     (tiles_x, tiles_y),
                 )
             })?;
+            if let Some((feat, pipeline)) = &feature_job {
+                // The blend's loop-length atomics on the counters -> the feature blend's.
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                timer.stage(ctx, cmd, "features", |cmd| {
+                    let planes = feature_planes.as_ref().ok_or_else(|| {
+                        GpuError::InvalidArgument("the feature images are missing".into())
+                    })?;
+                    for (g, input) in feat.groups.iter().enumerate() {
+                        let output = planes
+                            .buffer
+                            .slice(g as u64 * planes.plane_bytes, planes.pixel_bytes);
+                        let texels = match (&f.splat_texels, &f.value_texels, feat.views.get(g)) {
+                            (Some(s), Some(v), Some(fv)) if pipeline.texel() => {
+                                Some([s.handle(), v.handle(), fv.handle()])
+                            }
+                            _ => None,
+                        };
+                        pipeline.record(
+                            ctx,
+                            cmd,
+                            &features::FeatureBindings {
+                                params: f.params.whole(),
+                                splats: f.splats.whole(),
+                                values: f.values.whole(),
+                                ranges: f.ranges.whole(),
+                                features: input.whole(),
+                                output,
+                                counters: f.counters.whole(),
+                                texels,
+                            },
+                            (cam.width, cam.height),
+                        )?;
+                    }
+                    Ok(())
+                })?;
+                if let Some(shader) = features.and_then(|(_, s)| s) {
+                    let (planes, pipeline) = match (feature_planes.as_ref(), shade.as_ref()) {
+                        (Some(p), Some(s)) => (p, s),
+                        _ => {
+                            return Err(GpuError::InvalidArgument(
+                                "the neural shader's pipeline or images are missing".into(),
+                            ))
+                        }
+                    };
+                    // The feature blend's writes (and the blend's colour image) -> reads.
+                    barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+                    timer.stage(ctx, cmd, "shade", |cmd| {
+                        pipeline.record(
+                            ctx,
+                            cmd,
+                            shader,
+                            planes.buffer.whole(),
+                            (planes.plane_bytes / 16) as u32,
+                            &f.color,
+                            cam,
+                            opts.background,
+                        )
+                    })?;
+                }
+            }
             // Only what the consumer needs leaves the device. Float: the images are the
             // copy sources. Rgba8: the colour image is packed by a compute pass (timed
             // with the readback) and only the packed buffer is copied.
@@ -965,6 +1318,8 @@ impl GpuRenderer {
                 "sort" => &mut t.sort,
                 "ranges" => &mut t.ranges,
                 "blend" => &mut t.blend,
+                "features" => &mut t.features,
+                "shade" => &mut t.shade,
                 "readback" => &mut t.readback,
                 _ => continue,
             };
@@ -992,6 +1347,8 @@ impl GpuRenderer {
             color: rgba.iter().map(|p| [p[0], p[1], p[2]]).collect(),
             alpha: rgba.iter().map(|p| p[3]).collect(),
             depth: depth.to_vec(),
+            feature_count: 0,
+            features: Vec::new(),
         })
     }
 

@@ -27,8 +27,10 @@ pub struct FrameParams {
     pub counts: [u32; 4],
     /// Bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size.
     pub bins: [u32; 4],
-    /// Scale modifier, max scale (< 0: no limit), min opacity (< 0: no limit), unused:
-    /// the per-frame options of `cpu::RenderOptions`, applied by preprocess.
+    /// Scale modifier, max scale (< 0: no limit), min opacity (< 0: no limit), and the
+    /// alpha falloff (`cpu::SplatKernel::shader_id` as a float): the per-frame options of
+    /// `cpu::RenderOptions`, applied by preprocess (the falloff also picks the blend
+    /// pipeline).
     pub filters: [f32; 4],
 }
 
@@ -48,8 +50,10 @@ pub struct GpuGaussian {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Splat {
-    /// mean2d x, y, opacity, and the bound `2 ln(255 opacity)` (with margin) on the
-    /// quadratic form below which the Gaussian reaches alpha 1/255.
+    /// mean2d x, y, opacity, and the bound on the quadratic form (squared Mahalanobis
+    /// distance) below which the splat reaches alpha 1/255 under the frame's kernel
+    /// (`cpu::SplatKernel::alpha_bound`: `2 ln(255 opacity)` or `9 (1 - 1/(255 opacity))`,
+    /// with margin).
     pub mean_opacity_bound: [f32; 4],
     /// Conic A, B, C and the view depth.
     pub conic_depth: [f32; 4],

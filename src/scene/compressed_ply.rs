@@ -236,6 +236,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let k_rest = super::sh_coeffs_for_degree(sh_degree) - 1;
 
     let mut scene = Scene::empty(sh_degree);
+    scene.kernel = header.kernel(path)?;
     scene.positions.reserve_exact(n);
     scene.log_scales.reserve_exact(n);
     scene.rotations.reserve_exact(n);

@@ -18,6 +18,7 @@
 
 pub mod compressed_ply;
 pub mod detect;
+pub mod features;
 pub mod filter;
 pub mod ply;
 pub mod sog;
@@ -55,7 +56,20 @@ pub struct Scene {
     /// compensation of [`crate::cpu::RenderOptions::antialiased`]. INRIA PLY and `.splat`
     /// cannot record it.
     pub antialiased: bool,
+    /// The alpha falloff the scene is made for ([`crate::cpu::SplatKernel`]), as the file
+    /// records it (INRIA PLY: a `comment vksplat kernel power` header line); Gaussian when
+    /// it records none. `render` uses it unless `--kernel` says otherwise.
+    pub kernel: crate::cpu::SplatKernel,
+    /// Feature channels per Gaussian (0 without features, else 1..=[`MAX_FEATURES`]).
+    pub feature_count: usize,
+    /// `feature_count` floats per Gaussian, Gaussian-major: channel `k` of Gaussian `i` is
+    /// `features[i * feature_count + k]` (PLY properties `feat_0 .. feat_{K-1}`, or
+    /// `--features FILE.npy`).
+    pub features: Vec<f32>,
 }
+
+/// Most feature channels a Gaussian may carry.
+pub const MAX_FEATURES: usize = 64;
 
 /// Gaussians after the reference activations, ready to render or upload.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -72,6 +86,10 @@ pub struct ActivatedScene {
     pub opacities: Vec<f32>,
     /// SH coefficients, same layout as [`Scene::sh`].
     pub sh: Vec<f32>,
+    /// Feature channels per Gaussian, as [`Scene::feature_count`].
+    pub feature_count: usize,
+    /// Features, same layout as [`Scene::features`].
+    pub features: Vec<f32>,
 }
 
 impl ActivatedScene {
@@ -108,6 +126,8 @@ impl Scene {
     pub fn select(&self, indices: &[usize], sh_degree: u32) -> Scene {
         let mut out = Scene::empty(sh_degree.min(self.sh_degree));
         out.antialiased = self.antialiased;
+        out.kernel = self.kernel;
+        out.feature_count = self.feature_count;
         let in_stride = self.sh_stride();
         let out_stride = out.sh_stride();
         out.positions.reserve(indices.len());
@@ -121,6 +141,9 @@ impl Scene {
             // exactly the bands 0..=degree.
             out.sh
                 .extend_from_slice(&self.sh[i * in_stride..i * in_stride + out_stride]);
+            let k = self.feature_count;
+            out.features
+                .extend_from_slice(&self.features[i * k..(i + 1) * k]);
         }
         out
     }
@@ -180,6 +203,7 @@ impl Scene {
             || self.rotations.len() != n
             || self.opacity_logits.len() != n
             || self.sh.len() != n * self.sh_stride()
+            || self.features.len() != n * self.feature_count
         {
             return Err("attribute arrays have inconsistent lengths".into());
         }
@@ -200,7 +224,24 @@ impl Scene {
             rotations: self.rotations.iter().map(|q| normalize_quat(*q)).collect(),
             opacities: self.opacity_logits.iter().map(|&o| sigmoid(o)).collect(),
             sh: self.sh.clone(),
+            feature_count: self.feature_count,
+            features: self.features.clone(),
         }
+    }
+
+    /// Attaches `count` feature channels per Gaussian (`features.len()` must be
+    /// `len() * count`), replacing any the scene held.
+    pub fn set_features(&mut self, count: usize, features: Vec<f32>) -> Result<(), String> {
+        if count > MAX_FEATURES || features.len() != self.len() * count {
+            return Err(format!(
+                "{} feature values do not make {count} channels (at most {MAX_FEATURES}) for each of {} Gaussians",
+                features.len(),
+                self.len()
+            ));
+        }
+        self.feature_count = count;
+        self.features = features;
+        Ok(())
     }
 }
 

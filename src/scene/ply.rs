@@ -2,9 +2,14 @@
 //!
 //! Accepts `binary_little_endian`, `binary_big_endian` and `ascii` files. Vertex
 //! properties are looked up by name, so extra or reordered properties are fine. Other
-//! elements (e.g. faces) are parsed past and ignored.
+//! elements (e.g. faces) are parsed past and ignored. A header line
+//! `comment vksplat kernel power` records that the scene is made for the power-function
+//! kernel ([`SplatKernel`]); the writer adds it for such scenes. Float properties
+//! `feat_0 .. feat_{K-1}` (K <= 64) are the Gaussians' feature channels, written back after
+//! `rot_*`.
 
-use super::{sh_coeffs_for_degree, Scene, SceneError};
+use super::{sh_coeffs_for_degree, Scene, SceneError, MAX_FEATURES};
+use crate::cpu::SplatKernel;
 use std::path::Path;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,12 +110,33 @@ pub(crate) struct Header {
     pub(crate) format: Format,
     pub(crate) elements: Vec<Element>,
     pub(crate) body_offset: usize,
+    /// `comment` lines: the header line number (1-based) and the text after `comment`.
+    pub(crate) comments: Vec<(usize, String)>,
 }
+
+/// The header comment that records a scene's alpha falloff: `comment vksplat kernel NAME`.
+pub const KERNEL_COMMENT: &str = "vksplat kernel";
 
 impl Header {
     /// The element called `name`, if the header declares one.
     pub(crate) fn element(&self, name: &str) -> Option<&Element> {
         self.elements.iter().find(|e| e.name == name)
+    }
+
+    /// The alpha falloff a `comment vksplat kernel NAME` line records (Gaussian without
+    /// one); an unknown name is an error naming the line.
+    pub(crate) fn kernel(&self, path: &Path) -> Result<SplatKernel, SceneError> {
+        let mut kernel = SplatKernel::Gaussian;
+        for (line, text) in &self.comments {
+            let words: Vec<&str> = text.split_whitespace().collect();
+            if words.len() < 2 || words[..2].join(" ") != KERNEL_COMMENT {
+                continue;
+            }
+            kernel = words[2..].join(" ").parse().map_err(|e: String| {
+                SceneError::invalid(path, format!("header line {line}: \"comment {text}\": {e}"))
+            })?;
+        }
+        Ok(kernel)
     }
 
     /// The body encoding as the public enum.
@@ -157,6 +183,7 @@ pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneErr
 
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut comments = Vec::new();
     for (lineno, line) in header.lines().enumerate().skip(1) {
         let mut words = line.split_whitespace();
         let Some(keyword) = words.next() else {
@@ -179,7 +206,8 @@ pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneErr
                     _ => return Err(line_err("unknown PLY format")),
                 });
             }
-            "comment" | "obj_info" => {}
+            "comment" => comments.push((lineno + 1, rest.join(" "))),
+            "obj_info" => {}
             "element" => {
                 if rest.len() != 2 {
                     return Err(line_err("malformed element line"));
@@ -228,6 +256,7 @@ pub(crate) fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, SceneErr
         format,
         elements,
         body_offset,
+        comments,
     })
 }
 
@@ -244,6 +273,8 @@ struct VertexMap {
     scale: [usize; 3],
     rot: [usize; 4],
     sh_degree: u32,
+    /// `feat_0 .. feat_{K-1}`.
+    features: Vec<usize>,
 }
 
 fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
@@ -288,6 +319,21 @@ fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
     let f_rest = (0..n_rest)
         .map(|i| find(&format!("f_rest_{i}")))
         .collect::<Result<Vec<_>, _>>()?;
+    let n_feat = el
+        .properties
+        .iter()
+        .filter(|p| p.name().starts_with("feat_"))
+        .count();
+    if n_feat > MAX_FEATURES {
+        return Err(SceneError::invalid(
+            path,
+            format!("has {n_feat} feat_* properties; a Gaussian carries at most {MAX_FEATURES} feature channels"),
+        ));
+    }
+    // Named feat_0 .. feat_{K-1}: a gap is reported as the missing name.
+    let features = (0..n_feat)
+        .map(|i| find(&format!("feat_{i}")))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(VertexMap {
         xyz: [find("x")?, find("y")?, find("z")?],
         f_dc: [find("f_dc_0")?, find("f_dc_1")?, find("f_dc_2")?],
@@ -301,6 +347,7 @@ fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
             find("rot_3")?,
         ],
         sh_degree,
+        features,
     })
 }
 
@@ -434,6 +481,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         path,
     };
     let mut scene = Scene::empty(map.sh_degree);
+    scene.kernel = header.kernel(path)?;
+    scene.feature_count = map.features.len();
     for (ei, el) in header.elements.iter().enumerate() {
         body.check_fits(el)?;
         let mut row = vec![0f64; el.properties.len()];
@@ -458,6 +507,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         scene.rotations.reserve_exact(n);
         scene.opacity_logits.reserve_exact(n);
         scene.sh.reserve_exact(n * scene.sh_stride());
+        scene.features.reserve_exact(n * map.features.len());
         let k_rest = sh_coeffs_for_degree(map.sh_degree) - 1;
         let all_f32 = header.format != Format::Ascii
             && el.properties.iter().all(|p| {
@@ -524,6 +574,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
                     scene.sh.push(get(map.f_rest[c * k_rest + k])?);
                 }
             }
+            for &f in &map.features {
+                scene.features.push(get(f)?);
+            }
         }
     }
     if header.format != Format::Ascii && body.pos != bytes.len() {
@@ -568,7 +621,8 @@ pub enum PlyEncoding {
 }
 
 /// Serialises a scene as an INRIA PLY with the trainer's property order
-/// (`x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_*`).
+/// (`x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_*`), then `feat_*` when the scene
+/// has feature channels.
 pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     let k_rest = scene.sh_coeffs() - 1;
     let mut names: Vec<String> = [
@@ -581,12 +635,18 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     names.push("opacity".into());
     names.extend((0..3).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
+    names.extend((0..scene.feature_count).map(|i| format!("feat_{i}")));
     let format = match encoding {
         PlyEncoding::BinaryLittleEndian => "binary_little_endian",
         PlyEncoding::BinaryBigEndian => "binary_big_endian",
         PlyEncoding::Ascii => "ascii",
     };
-    let mut out = format!("ply\nformat {format} 1.0\nelement vertex {}\n", scene.len());
+    let mut out = format!("ply\nformat {format} 1.0\n");
+    // Only a non-default kernel is recorded, so Gaussian scenes keep the trainer's header.
+    if scene.kernel != SplatKernel::Gaussian {
+        out.push_str(&format!("comment {KERNEL_COMMENT} {}\n", scene.kernel));
+    }
+    out.push_str(&format!("element vertex {}\n", scene.len()));
     for n in &names {
         out.push_str(&format!("property float {n}\n"));
     }
@@ -608,6 +668,8 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
         row.push(scene.opacity_logits[i]);
         row.extend_from_slice(&scene.log_scales[i]);
         row.extend_from_slice(&scene.rotations[i]);
+        let k = scene.feature_count;
+        row.extend_from_slice(&scene.features[i * k..(i + 1) * k]);
         match encoding {
             PlyEncoding::BinaryLittleEndian => row
                 .iter()

@@ -129,6 +129,12 @@ pub struct ConvertOptions {
     pub filter: SceneFilter,
     /// Replace an existing output file.
     pub overwrite: bool,
+    /// Record this alpha falloff in the output instead of the input's (`Scene::kernel`;
+    /// only PLY can record one).
+    pub kernel: Option<crate::cpu::SplatKernel>,
+    /// Feature channels to attach to the input first: an N x K NumPy array
+    /// ([`super::features::attach_npy`]); only PLY keeps them.
+    pub features: Option<std::path::PathBuf>,
 }
 
 /// What [`convert`] did.
@@ -151,6 +157,12 @@ pub struct ConvertReport {
     pub bytes: usize,
     /// The input records antialiased training but the output format cannot say so.
     pub antialiased_flag_lost: bool,
+    /// The input records a non-Gaussian kernel (`cpu::SplatKernel`) that the output format
+    /// cannot record (only PLY can).
+    pub kernel_lost: Option<crate::cpu::SplatKernel>,
+    /// Feature channels per Gaussian that the output format cannot hold and dropped (only
+    /// PLY keeps `feat_*`); 0 when none were lost.
+    pub features_dropped: usize,
 }
 
 /// Loads `input` (any supported format), applies the transform and then the filter, and
@@ -173,7 +185,13 @@ pub fn convert(
     if !options.overwrite && output.exists() {
         return Err(OutputError::Exists(output.to_path_buf()).into());
     }
-    let (scene, input_format) = super::load_with_format(input)?;
+    let (mut scene, input_format) = super::load_with_format(input)?;
+    if let Some(kernel) = options.kernel {
+        scene.kernel = kernel;
+    }
+    if let Some(file) = &options.features {
+        super::features::attach_npy(&mut scene, file)?;
+    }
     let read = scene.len();
     let scene = match &options.transform {
         Some(t) => t.apply(scene).map_err(|message| ConvertError::Transform {
@@ -199,6 +217,14 @@ pub fn convert(
             .then_some(filtered.sh_degree),
         bytes: bytes.len(),
         antialiased_flag_lost: scene.antialiased && output_format != OutputFormat::Spz,
+        kernel_lost: (scene.kernel != crate::cpu::SplatKernel::Gaussian
+            && output_format != OutputFormat::Ply)
+            .then_some(scene.kernel),
+        features_dropped: if output_format == OutputFormat::Ply {
+            0
+        } else {
+            scene.feature_count
+        },
     })
 }
 

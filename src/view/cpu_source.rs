@@ -18,16 +18,18 @@ pub struct CpuSource {
     scene: ActivatedScene,
     sh_degree: u32,
     antialiased: bool,
+    kernel: cpu::SplatKernel,
 }
 
 impl CpuSource {
-    /// A renderer of `scene`; `antialiased` turns on the opacity compensation of
-    /// antialiased (mip) training, as `render --antialiased`.
+    /// A renderer of `scene` (with its [`Scene::kernel`]); `antialiased` turns on the
+    /// opacity compensation of antialiased (mip) training, as `render --antialiased`.
     pub fn new(scene: &Scene, antialiased: bool) -> CpuSource {
         CpuSource {
             scene: scene.activated(),
             sh_degree: scene.sh_degree,
             antialiased,
+            kernel: scene.kernel,
         }
     }
 
@@ -50,7 +52,7 @@ impl CpuSource {
             .validate(self.sh_degree)
             .map_err(anyhow::Error::msg)?;
         cam.validate()?;
-        let opts = render_options(settings, self.antialiased);
+        let opts = render_options(settings, self.antialiased, self.kernel);
         let start = std::time::Instant::now();
         let mut lap = start;
         let mut take = || {
@@ -68,7 +70,14 @@ impl CpuSource {
         let (tx, ty) = cam.tile_grid();
         let ranges = cpu::tile_ranges(&sorted_keys, (tx * ty) as usize);
         t.ranges = take();
-        let frame = cpu::blend(&projected, &sorted_values, &ranges, cam, opts.background);
+        let frame = cpu::blend(
+            &projected,
+            &sorted_values,
+            &ranges,
+            cam,
+            opts.background,
+            opts.kernel,
+        );
         t.blend = take();
         t.total = start.elapsed().as_secs_f64() * 1e3;
         let stats = FrameStats {
@@ -126,7 +135,11 @@ mod tests {
             },
         ] {
             let got = src.render(&cam, &settings).unwrap();
-            let want = cpu::render(&act, &cam, &render_options(&settings, false));
+            let want = cpu::render(
+                &act,
+                &cam,
+                &render_options(&settings, false, Default::default()),
+            );
             assert_eq!(got.rgba8, frame_rgba8(&want, settings.mode));
             assert!(got.stats.visible > 0 && got.stats.pairs > 0);
         }

@@ -5,7 +5,7 @@
 //! packed there) and float planes only where a mode or a screenshot needs them.
 
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
+use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
 use crate::gpu::{ContextOptions, GpuContext};
 use crate::output::{depth_colormap, encode_file, plan_files, to_u8, OutputOptions, RenderMode};
@@ -163,6 +163,8 @@ pub struct GpuSource {
     renderer: GpuRenderer,
     sh_degree: u32,
     antialiased: bool,
+    /// The alpha falloff (the scene's [`Scene::kernel`]).
+    kernel: SplatKernel,
 }
 
 /// Gaussians a preview draws by default: on lavapipe a frame's per-Gaussian stages
@@ -202,6 +204,7 @@ impl GpuSource {
             renderer,
             sh_degree: scene.sh_degree,
             antialiased,
+            kernel: scene.kernel,
         };
         source.set_preview(scene, preview_gaussians)?;
         Ok(source)
@@ -264,12 +267,16 @@ impl GpuSource {
 
     fn options(&self, s: &ViewSettings) -> anyhow::Result<RenderOptions> {
         s.validate(self.sh_degree).map_err(anyhow::Error::msg)?;
-        Ok(render_options(s, self.antialiased))
+        Ok(render_options(s, self.antialiased, self.kernel))
     }
 }
 
 /// The render options matching `settings` (what `render` builds from the same flags).
-pub fn render_options(settings: &ViewSettings, antialiased: bool) -> RenderOptions {
+pub fn render_options(
+    settings: &ViewSettings,
+    antialiased: bool,
+    kernel: SplatKernel,
+) -> RenderOptions {
     RenderOptions {
         background: settings.background,
         antialiased,
@@ -277,6 +284,7 @@ pub fn render_options(settings: &ViewSettings, antialiased: bool) -> RenderOptio
         max_scale: settings.max_scale,
         min_opacity: (settings.min_opacity > 0.0).then_some(settings.min_opacity),
         sh_degree: settings.sh_degree,
+        kernel,
     }
 }
 

@@ -1,0 +1,79 @@
+#version 460
+// Feature blend: after the colour blend, composites four feature channels of every splat
+// (one group of a scene's K channels; dispatched once per group, without sorting again)
+// front to back over the same bin lists, with exactly the colour rules (same alpha,
+// transmittance, skip and stop; background 0). One invocation per pixel, 16x16 per
+// workgroup, each reading its own bin's list, so it works with 8- and 16-pixel bins.
+// TEXEL_FETCH (CPU devices, as the texel blend kernel): splats, values and features are
+// read through texel-buffer views, which lavapipe compiles to gathers instead of per-lane
+// scalar loops.
+#ifndef SPLAT_KERNEL
+#define SPLAT_KERNEL 0u
+#endif
+#ifndef TEXEL_FETCH
+#define TEXEL_FETCH 0
+#endif
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+
+layout(local_size_x = 16, local_size_y = 16) in;
+
+layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+#if !TEXEL_FETCH
+layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = 2) readonly buffer ValueBuf { uint values[]; };
+#else
+layout(binding = 1) uniform samplerBuffer splat_texels;   // 3 rgba32f texels per splat
+layout(binding = 2) uniform usamplerBuffer value_texels;
+#endif
+layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
+// This group's four channels per Gaussian (zero-padded past K).
+#if !TEXEL_FETCH
+layout(std430, binding = 4) readonly buffer FeatureBuf { vec4 features[]; };
+#else
+layout(binding = 4) uniform samplerBuffer feature_texels;
+#endif
+// This group's four channels per pixel, row-major.
+layout(std430, binding = 5) writeonly buffer OutBuf { vec4 out_features[]; };
+layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+
+void main() {
+    uvec2 pix = gl_GlobalInvocationID.xy;
+    if (pix.x >= params.image.x || pix.y >= params.image.y) return;
+    vec2 pixf = vec2(pix);
+    uvec2 bin = pix / params.bins.x;
+    uvec2 range = ranges[bin.y * params.bins.y + bin.x];
+    float T = 1.0;
+    vec4 F = vec4(0.0);
+    bool done = false;
+    uint k = range.x;
+    // The colour blend's composite(), with features in place of colour and no depth.
+    for (; k < range.y && !done; k++) {
+#if !TEXEL_FETCH
+        uint g = values[k];
+        vec4 mob = splats[g].mean_opacity_bound;
+        vec3 conic = splats[g].conic_depth.xyz;
+        vec4 feature = features[g];
+#else
+        int g = int(texelFetch(value_texels, int(k)).x);
+        vec4 mob = texelFetch(splat_texels, g * 3);
+        vec3 conic = texelFetch(splat_texels, g * 3 + 1).xyz;
+        vec4 feature = texelFetch(feature_texels, g);
+#endif
+        vec2 d = mob.xy - pixf;
+        float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+        float alpha = min(ALPHA_MAX, kernel_falloff(SPLAT_KERNEL, mob.z, min(power, 0.0)));
+        bool take = power <= 0.0 && alpha >= ALPHA_MIN;
+        float test_t = T * (1.0 - alpha);
+        bool stop = take && test_t < T_MIN;
+        bool add = take && !stop;
+        F += feature * (add ? alpha * T : 0.0);
+        T = add ? test_t : T;
+        done = stop;
+    }
+    // Cut off before the end of the list (see LOOP_REPORT).
+    if (k < range.y && !done) {
+        REPORT_LOOP(counters.max_list_loop, range.y - range.x + 16u);
+    }
+    out_features[pix.y * params.image.x + pix.x] = F;
+}

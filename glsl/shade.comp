@@ -1,0 +1,93 @@
+#version 460
+// Neural shader: a per-pixel MLP over the blended feature image (src/mlp.rs documents the
+// file format and the evaluation order, which the CPU reference shares). Reads the feature
+// channels (K, in groups of four), optionally the pixel's view direction and alpha, runs
+// the layers, and writes alpha * mlp + (1 - alpha) * background into the colour image
+// (alpha is kept). One invocation per pixel.
+#extension GL_GOOGLE_include_directive : require
+
+#define MAX_WIDTH 128
+#define MAX_LAYERS 8
+
+layout(local_size_x = 16, local_size_y = 16) in;
+
+// 112 bytes of push constants (src/render/shade.rs ShadePush).
+layout(push_constant) uniform ShadeParams {
+    uvec4 size;        // width, height, K, groups of four channels
+    uvec4 code;        // input code (Mlp::input_code), layers, plane stride in vec4s, 0
+    vec4 intrinsics;   // fx, fy, cx, cy
+    vec4 rot0;         // rows of the world-to-camera rotation
+    vec4 rot1;
+    vec4 rot2;
+    vec4 background;
+} p;
+
+// 4 * MAX_LAYERS header words (inputs, outputs, activation, float offset), then the
+// weights and biases as float bits.
+layout(std430, binding = 0) readonly buffer MlpBuf { uint words[]; };
+// Feature planes: group g's vec4 of pixel i at g * plane stride + i.
+layout(std430, binding = 1) readonly buffer FeatureBuf { vec4 features[]; };
+layout(binding = 2, rgba32f) uniform image2D color;  // rgb + T * background, alpha = 1 - T
+
+float weight(uint i) {
+    return uintBitsToFloat(words[4u * MAX_LAYERS + i]);
+}
+
+float activate(uint kind, float x) {
+    if (kind == 1u) return max(x, 0.0);
+    if (kind == 2u) return 1.0 / (1.0 + exp(-x));
+    if (kind == 3u) return tanh(x);
+    return x;
+}
+
+void main() {
+    uvec2 pix = gl_GlobalInvocationID.xy;
+    if (pix.x >= p.size.x || pix.y >= p.size.y) return;
+    uint index = pix.y * p.size.x + pix.x;
+    vec4 c = imageLoad(color, ivec2(pix));
+    float alpha = c.a;
+
+    // Two halves: the current layer's inputs and its outputs, swapped after each layer.
+    float act[2 * MAX_WIDTH];
+    uint n = 0u;
+    uint slots = (p.code.x >> 4) & 3u;
+    for (uint s = 0u; s < slots; s++) {
+        uint id = (p.code.x >> (8u + 2u * s)) & 3u;
+        if (id == 0u) {
+            for (uint k = 0u; k < p.size.z; k++) {
+                act[n++] = features[(k >> 2) * p.code.z + index][k & 3u];
+            }
+        } else if (id == 1u) {
+            vec3 d = vec3((float(pix.x) + 0.5 - p.intrinsics.z) / p.intrinsics.x,
+                          (float(pix.y) + 0.5 - p.intrinsics.w) / p.intrinsics.y, 1.0);
+            vec3 w = d.x * p.rot0.xyz + d.y * p.rot1.xyz + d.z * p.rot2.xyz;
+            w = w / length(w);
+            act[n++] = w.x;
+            act[n++] = w.y;
+            act[n++] = w.z;
+        } else {
+            act[n++] = alpha;
+        }
+    }
+
+    uint cur = 0u;
+    for (uint l = 0u; l < p.code.y; l++) {
+        uint ins = words[4u * l];
+        uint outs = words[4u * l + 1u];
+        uint kind = words[4u * l + 2u];
+        uint base = words[4u * l + 3u];
+        uint next = MAX_WIDTH - cur;
+        for (uint o = 0u; o < outs; o++) {
+            // Bias first, then the products in input order: the CPU reference's order.
+            precise float acc = weight(base + outs * ins + o);
+            for (uint i = 0u; i < ins; i++) {
+                acc += weight(base + o * ins + i) * act[cur + i];
+            }
+            act[next + o] = activate(kind, acc);
+        }
+        cur = next;
+    }
+    float t = 1.0 - alpha;
+    vec3 rgb = alpha * vec3(act[cur], act[cur + 1u], act[cur + 2u]) + t * p.background.rgb;
+    imageStore(color, ivec2(pix), vec4(rgb, alpha));
+}

@@ -1,0 +1,106 @@
+//! Feature blend stage (`glsl/blend_features.comp`): after the colour blend, composites a
+//! scene's K feature channels over the same sorted bin lists, four channels per dispatch
+//! (one dispatch per group of four), with the colour rules and background 0.
+
+use crate::cpu::SplatKernel;
+use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
+use ash::vk;
+
+/// Channels blended per dispatch (one vec4 per Gaussian and per pixel).
+pub const CHANNELS_PER_GROUP: usize = 4;
+
+/// Groups of [`CHANNELS_PER_GROUP`] channels that hold `k` channels.
+pub fn groups(k: usize) -> usize {
+    k.div_ceil(CHANNELS_PER_GROUP)
+}
+
+/// The feature blend pipeline for one alpha falloff (compiled in as `SPLAT_KERNEL`).
+pub struct FeatureBlend {
+    pipeline: ComputePipeline,
+    texel: bool,
+}
+
+/// Resources one group's dispatch reads and writes.
+pub struct FeatureBindings<'a> {
+    /// FrameParams.
+    pub params: BufferSlice<'a>,
+    /// Splats (preprocess output).
+    pub splats: BufferSlice<'a>,
+    /// Sorted values (Gaussian indices).
+    pub values: BufferSlice<'a>,
+    /// Bin ranges.
+    pub ranges: BufferSlice<'a>,
+    /// The group's four channels per Gaussian (vec4).
+    pub features: BufferSlice<'a>,
+    /// The group's four channels per pixel (vec4, row-major; written).
+    pub output: BufferSlice<'a>,
+    /// Counters (loop lengths reported).
+    pub counters: BufferSlice<'a>,
+    /// Texel views of `splats` (R32G32B32A32_SFLOAT), `values` (R32_UINT) and `features`
+    /// (R32G32B32A32_SFLOAT), for the texel-fetch variant.
+    pub texels: Option<[vk::BufferView; 3]>,
+}
+
+impl FeatureBlend {
+    /// Compiles the shader with the falloff of `kernel`; `texel` reads the splats, values
+    /// and features through texel-buffer views (for CPU devices, as the texel blend).
+    pub fn new(ctx: &GpuContext, kernel: SplatKernel, texel: bool) -> GpuResult<Self> {
+        use BindingKind::{StorageBuffer as B, UniformTexelBuffer as T};
+        let defines = [
+            ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
+            ("TEXEL_FETCH", u32::from(texel).to_string()),
+        ];
+        let bindings = if texel { [B, T, T, B, T, B, B] } else { [B; 7] };
+        let pipeline =
+            ComputePipeline::from_embedded(ctx, "blend_features", &defines, &bindings, 0, 16)?;
+        Ok(FeatureBlend { pipeline, texel })
+    }
+
+    /// Whether the pipeline reads texel-buffer views.
+    pub fn texel(&self) -> bool {
+        self.texel
+    }
+
+    /// Records one group's dispatch: one 16x16 workgroup per 16x16 pixel block.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        b: &FeatureBindings,
+        size: (u32, u32),
+    ) -> GpuResult<()> {
+        let (splats, values, features) =
+            match (self.texel, b.texels) {
+                (false, _) => (
+                    Resource::Buffer(b.splats),
+                    Resource::Buffer(b.values),
+                    Resource::Buffer(b.features),
+                ),
+                (true, Some([s, v, f])) => (
+                    Resource::TexelBuffer(s),
+                    Resource::TexelBuffer(v),
+                    Resource::TexelBuffer(f),
+                ),
+                (true, None) => return Err(GpuError::InvalidArgument(
+                    "the texel feature blend needs texel views of the splats, values and features"
+                        .into(),
+                )),
+            };
+        self.pipeline.dispatch_resources(
+            ctx,
+            cmd,
+            &[
+                Resource::Buffer(b.params),
+                splats,
+                values,
+                Resource::Buffer(b.ranges),
+                features,
+                Resource::Buffer(b.output),
+                Resource::Buffer(b.counters),
+            ],
+            &[],
+            [size.0.div_ceil(16), size.1.div_ceil(16), 1],
+        )
+    }
+}
