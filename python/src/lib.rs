@@ -26,9 +26,10 @@ use vksplat::scene::{self, ActivatedScene, Scene};
 /// world-to-camera matrix, row-major 4x4 (OpenCV axes).
 type CamTuple = (String, u32, u32, [f32; 4], [f32; 16]);
 
-/// The planes a render returns: colour `B x H x W x 3`, alpha and depth `B x H x W`, each
-/// as `f32` bytes, `None` where not asked for.
+/// The planes a render returns: colour `B x H x W x 3`, alpha and depth `B x H x W`,
+/// features `B x H x W x K`, each as `f32` bytes, `None` where not asked for.
 type Planes<'py> = (
+    Option<Bound<'py, PyByteArray>>,
     Option<Bound<'py, PyByteArray>>,
     Option<Bound<'py, PyByteArray>>,
     Option<Bound<'py, PyByteArray>>,
@@ -314,6 +315,18 @@ impl PyScene {
         self.raw.antialiased
     }
 
+    /// Feature channels per Gaussian (0 without features).
+    #[getter]
+    fn feature_count(&self) -> usize {
+        self.raw.feature_count
+    }
+
+    /// The falloff the file records ("gaussian" unless a PLY says `power`).
+    #[getter]
+    fn kernel(&self) -> &'static str {
+        self.raw.kernel.name()
+    }
+
     /// Where the scene came from.
     #[getter]
     fn source(&self) -> &str {
@@ -339,6 +352,7 @@ impl PyScene {
             "log_scales" => bytemuck::cast_slice(&self.raw.log_scales),
             "raw_quats" => bytemuck::cast_slice(&self.raw.rotations),
             "opacity_logits" => bytemuck::cast_slice(&self.raw.opacity_logits),
+            "features" => bytemuck::cast_slice(&self.act.features),
             other => return Err(value_err(format!("no array called {other:?}"))),
         };
         Ok(PyBytes::new(py, bytes))
@@ -449,7 +463,7 @@ fn check_quats(quats: &[[f32; 4]]) -> PyResult<()> {
 /// quaternions) or raw (log scales, opacity logits, quaternions as the trainer stores
 /// them). Shapes were checked by the Python side; values are checked here.
 #[pyfunction]
-#[pyo3(signature = (n, sh_coeffs, means, quats, scales, opacities, sh, activated, antialiased=false))]
+#[pyo3(signature = (n, sh_coeffs, means, quats, scales, opacities, sh, activated, antialiased=false, feature_count=0, features=None))]
 #[allow(clippy::too_many_arguments)]
 fn scene_from_arrays(
     n: usize,
@@ -461,9 +475,19 @@ fn scene_from_arrays(
     sh: &[u8],
     activated: bool,
     antialiased: bool,
+    feature_count: usize,
+    features: Option<&[u8]>,
 ) -> PyResult<PyScene> {
     guarded(|| {
         let sh_degree = sh_degree_of(sh_coeffs)?;
+        let features = match features {
+            Some(b) => {
+                let f = floats(b, "features", n * feature_count)?;
+                check_finite("features", &f, feature_count)?;
+                f
+            }
+            None => Vec::new(),
+        };
         let means = floats(means, "means", n * 3)?;
         let quats = floats(quats, "quats", n * 4)?;
         let scales = floats(scales, "scales", n * 3)?;
@@ -485,6 +509,10 @@ fn scene_from_arrays(
         raw.positions = rows(&means);
         raw.sh = sh.clone();
         raw.antialiased = antialiased;
+        if feature_count > 0 {
+            raw.set_features(feature_count, features.clone())
+                .map_err(value_err)?;
+        }
         let act = if activated {
             if let Some(i) = scales.iter().position(|&s| s <= 0.0) {
                 return Err(value_err(format!(
@@ -531,6 +559,8 @@ fn scene_from_arrays(
                 rotations: unit,
                 opacities,
                 sh,
+                feature_count: raw.feature_count,
+                features,
             }
         } else {
             raw.log_scales = rows(&scales);
@@ -561,6 +591,7 @@ struct Want {
     rgb: bool,
     alpha: bool,
     depth: bool,
+    features: bool,
 }
 
 /// Per-frame render options from keyword arguments.
@@ -573,7 +604,12 @@ fn options(
     max_scale: Option<f32>,
     min_opacity: Option<f32>,
     antialiased: Option<bool>,
+    kernel: Option<&str>,
 ) -> PyResult<RenderOptions> {
+    let kernel = match kernel {
+        Some(k) => k.parse::<vksplat::cpu::SplatKernel>().map_err(value_err)?,
+        None => scene.raw.kernel,
+    };
     if let Some(d) = sh_degree {
         if d > 3 {
             return Err(value_err(format!("sh_degree must be 0 to 3, got {d}")));
@@ -586,6 +622,7 @@ fn options(
         max_scale,
         min_opacity,
         sh_degree,
+        kernel,
     };
     opts.validate().map_err(value_err)?;
     Ok(opts)
@@ -609,6 +646,17 @@ fn cameras(cams: &[CamTuple]) -> PyResult<Vec<Camera>> {
     Ok(cams)
 }
 
+/// Refuses a features render of a scene without features.
+fn check_features(scene: &PyScene, features: bool) -> PyResult<()> {
+    if features && scene.raw.feature_count == 0 {
+        return Err(value_err(format!(
+            "mode 'features' needs feature channels, but {} has none (Scene.from_arrays(features=...), or feat_* PLY properties)",
+            scene.source
+        )));
+    }
+    Ok(())
+}
+
 /// Concatenates the wanted planes of the frames.
 fn planes<'py>(py: Python<'py>, frames: &[Frame], want: &Want) -> Planes<'py> {
     let gather = |f: &dyn Fn(&Frame) -> &[f32]| -> Vec<f32> {
@@ -619,12 +667,16 @@ fn planes<'py>(py: Python<'py>, frames: &[Frame], want: &Want) -> Planes<'py> {
         .then(|| byte_array(py, &gather(&|f| bytemuck::cast_slice(&f.color))));
     let alpha = want.alpha.then(|| byte_array(py, &gather(&|f| &f.alpha)));
     let depth = want.depth.then(|| byte_array(py, &gather(&|f| &f.depth)));
-    (rgb, alpha, depth)
+    let features = want
+        .features
+        .then(|| byte_array(py, &gather(&|f| &f.features)));
+    (rgb, alpha, depth, features)
 }
 
 /// State behind a renderer's lock. The uploaded scene is declared first so it is freed
 /// before the renderer (and its device).
 struct RendererState {
+    features: Option<(u64, vksplat::render::GpuFeatures)>,
     scene: Option<(u64, GpuScene)>,
     gpu: GpuRenderer,
     uploads: u64,
@@ -661,6 +713,7 @@ impl PyRenderer {
                 let gpu = GpuRenderer::new(ctx).map_err(|e| py_err(e.into()))?;
                 Ok(PyRenderer {
                     state: Mutex::new(RendererState {
+                        features: None,
                         scene: None,
                         gpu,
                         uploads: 0,
@@ -682,7 +735,7 @@ impl PyRenderer {
 
     /// Renders `cameras` (all of one size) of `scene`; returns the wanted planes of all
     /// frames, concatenated. The scene is uploaded only when it is not the last one.
-    #[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, rgb, alpha, depth))]
+    #[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rgb, alpha, depth, features))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -695,9 +748,11 @@ impl PyRenderer {
         max_scale: Option<f32>,
         min_opacity: Option<f32>,
         antialiased: Option<bool>,
+        kernel: Option<&str>,
         rgb: bool,
         alpha: bool,
         depth: bool,
+        features: bool,
     ) -> PyResult<Planes<'py>> {
         let opts = options(
             scene,
@@ -707,7 +762,9 @@ impl PyRenderer {
             max_scale,
             min_opacity,
             antialiased,
+            kernel,
         )?;
+        check_features(scene, features)?;
         let cams = self::cameras(&cameras)?;
         let frames = py.detach(|| {
             guarded(|| {
@@ -721,14 +778,22 @@ impl PyRenderer {
                     st.scene = Some((scene.id, uploaded));
                     st.uploads += 1;
                 }
+                if features && st.features.as_ref().map(|(id, _)| *id) != Some(scene.id) {
+                    st.features = None;
+                    let uploaded = st
+                        .gpu
+                        .upload_features(&scene.act)
+                        .map_err(|e| py_err(e.into()))?;
+                    st.features = Some((scene.id, uploaded));
+                }
                 let gpu_scene = &st.scene.as_ref().expect("uploaded above").1;
                 let mut frames = Vec::with_capacity(cams.len());
                 for cam in &cams {
-                    frames.push(
-                        st.gpu
-                            .render(gpu_scene, cam, &opts)
-                            .map_err(|e| py_err(e.into()))?,
-                    );
+                    let frame = match (&st.features, features) {
+                        (Some((_, f)), true) => st.gpu.render_features(gpu_scene, f, cam, &opts),
+                        _ => st.gpu.render(gpu_scene, cam, &opts),
+                    };
+                    frames.push(frame.map_err(|e| py_err(e.into()))?);
                     st.frames += 1;
                 }
                 st.timings = st.gpu.timings().stages().to_vec();
@@ -745,7 +810,12 @@ impl PyRenderer {
                 Ok(frames)
             })
         })?;
-        let want = Want { rgb, alpha, depth };
+        let want = Want {
+            rgb,
+            alpha,
+            depth,
+            features,
+        };
         Ok(planes(py, &frames, &want))
     }
 
@@ -782,7 +852,7 @@ impl PyRenderer {
 /// Renders on the CPU reference renderer (rayon threads); same arguments as
 /// `Renderer.render`.
 #[pyfunction]
-#[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, rgb, alpha, depth))]
+#[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rgb, alpha, depth, features))]
 #[allow(clippy::too_many_arguments)]
 fn render_cpu<'py>(
     py: Python<'py>,
@@ -794,9 +864,11 @@ fn render_cpu<'py>(
     max_scale: Option<f32>,
     min_opacity: Option<f32>,
     antialiased: Option<bool>,
+    kernel: Option<&str>,
     rgb: bool,
     alpha: bool,
     depth: bool,
+    features: bool,
 ) -> PyResult<Planes<'py>> {
     let opts = options(
         scene,
@@ -806,17 +878,34 @@ fn render_cpu<'py>(
         max_scale,
         min_opacity,
         antialiased,
+        kernel,
     )?;
+    check_features(scene, features)?;
     let cams = self::cameras(&cameras)?;
     let frames = py.detach(|| {
         guarded(|| {
             Ok(cams
                 .iter()
-                .map(|cam| vksplat::cpu::render(&scene.act, cam, &opts))
+                .map(|cam| {
+                    if features {
+                        vksplat::cpu::render_features(&scene.act, cam, &opts)
+                    } else {
+                        vksplat::cpu::render(&scene.act, cam, &opts)
+                    }
+                })
                 .collect::<Vec<_>>())
         })
     })?;
-    Ok(planes(py, &frames, &Want { rgb, alpha, depth }))
+    Ok(planes(
+        py,
+        &frames,
+        &Want {
+            rgb,
+            alpha,
+            depth,
+            features,
+        },
+    ))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -897,6 +986,8 @@ fn encode_png<'py>(
         color,
         alpha: vec![0.0; n],
         depth: vec![0.0; n],
+        feature_count: 0,
+        features: Vec::new(),
     };
     let mut out = Vec::new();
     vksplat::output::encode_png(&frame, false, &mut out, Path::new("<memory>"))

@@ -182,3 +182,34 @@ def test_memory_stays_flat_over_200_frames(demo):
 def test_device_errors():
     with pytest.raises(RuntimeError, match="no-such-device"):
         vksplat.Renderer(device="no-such-device")
+
+
+def test_features_and_power_kernel_equal_the_cli(tmp_path, cli, cameras_file, renderer):
+    base = vksplat.load(data("playbot_lod3_31k_sh2.ply"))
+    n, k = len(base), 5
+    feats = np.random.default_rng(4).uniform(-1, 2, (n, k)).astype(np.float32)
+    scene = vksplat.Scene.from_arrays(**base.raw(), activated=False, features=feats)
+    assert scene.feature_count == k and np.array_equal(scene.features, feats)
+    assert base.features is None and base.kernel == "gaussian"
+    cam = vksplat.load_cameras(cameras_file)[1]
+    npy = tmp_path / "f.npy"
+    np.save(npy, feats)
+    for kernel in ("gaussian", "power"):
+        out = tmp_path / f"cli_{kernel}.npy"
+        run_cli(cli, "render", data("playbot_lod3_31k_sh2.ply"), "--features", npy, "--mode",
+                "features", "--kernel", kernel, "--cameras", cameras_file, "--camera", "1",
+                "-o", out, "-q")
+        gpu = renderer.render(scene, cam, mode="features+alpha", kernel=kernel)
+        assert gpu["features"].shape == (120, 160, k)
+        assert np.array_equal(gpu["features"], np.load(out)), kernel
+        cpu = vksplat.render_cpu(scene, cam, mode="features", kernel=kernel)
+        for c in range(k):
+            m = vksplat.compare(cpu["features"][..., c], gpu["features"][..., c], kind="data")
+            assert m["psnr"] >= 55, (kernel, c, m)
+    g = renderer.render(scene, cam, mode="rgb")["rgb"]
+    p = renderer.render(scene, cam, mode="rgb", kernel="power")["rgb"]
+    assert not np.array_equal(g, p)
+    with pytest.raises(ValueError, match="needs feature channels"):
+        renderer.render(base, cam, mode="features")
+    with pytest.raises(ValueError, match="kernel"):
+        renderer.render(base, cam, kernel="cubic")

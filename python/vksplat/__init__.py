@@ -257,6 +257,22 @@ class Scene:
     def source(self) -> str:
         return self._s.source
 
+    @property
+    def feature_count(self) -> int:
+        """Feature channels per Gaussian (K; 0 without features)."""
+        return self._s.feature_count
+
+    @property
+    def kernel(self) -> str:
+        """The falloff the file records: "gaussian" (the reference) or "power"."""
+        return self._s.kernel
+
+    @property
+    def features(self) -> Optional[np.ndarray]:
+        """The feature channels ``(N, K)``, or None when the scene has none."""
+        k = self.feature_count
+        return self._array("features", (len(self), k)) if k else None
+
     def _array(self, name: str, shape: Tuple[int, ...]) -> np.ndarray:
         return _view(self._s.array(name), shape)
 
@@ -305,12 +321,14 @@ class Scene:
         colors: Optional[ArrayLike] = None,
         activated: bool = True,
         antialiased: bool = False,
+        features: Optional[ArrayLike] = None,
     ) -> "Scene":
         """A scene from arrays. With ``activated=True`` (default): positive ``scales``,
         ``opacities`` in [0, 1] and any non-zero quaternions (wxyz; normalised, unit ones
         kept as given). With ``activated=False``: log scales, opacity logits and
         quaternions as the trainer stores them. Colour is ``sh (N, K, 3)`` with K = 1, 4,
-        9 or 16, or ``colors (N, 3)`` in [0, 1] (converted to the DC term)."""
+        9 or 16, or ``colors (N, 3)`` in [0, 1] (converted to the DC term). ``features
+        (N, K)``, K = 1..64, are feature channels (``mode="features"`` renders them)."""
         means_a = np.asarray(means)
         if means_a.ndim != 2 or means_a.shape[1:] != (3,):
             raise ValueError(f"means must have shape (N, 3), got {tuple(means_a.shape)}")
@@ -330,6 +348,12 @@ class Scene:
             if sh_a.ndim != 3 or sh_a.shape[0] != n or sh_a.shape[2] != 3:
                 raise ValueError(f"sh must have shape ({n}, K, 3), got {tuple(sh_a.shape)}")
             sh_a = _floats("sh", sh_a, (n, sh_a.shape[1], 3), strict=True)
+        feats = None
+        if features is not None:
+            fa = np.asarray(features)
+            if fa.ndim != 2 or fa.shape[0] != n or not 1 <= fa.shape[1] <= 64:
+                raise ValueError(f"features must have shape ({n}, K) with K 1..64, got {tuple(fa.shape)}")
+            feats = _floats("features", fa, (n, fa.shape[1]), strict=True)
         return cls(
             _native.scene_from_arrays(
                 n,
@@ -341,6 +365,8 @@ class Scene:
                 sh_a.tobytes(),
                 bool(activated),
                 bool(antialiased),
+                0 if feats is None else feats.shape[1],
+                None if feats is None else feats.tobytes(),
             )
         )
 
@@ -374,18 +400,18 @@ def demo() -> Scene:
 # ---------------------------------------------------------------------------------------
 # Rendering
 
-_PLANES = ("rgb", "alpha", "depth")
+_PLANES = ("rgb", "alpha", "depth", "features")
 
 
-def _mode(mode: str) -> Tuple[bool, bool, bool]:
+def _mode(mode: str) -> Tuple[bool, bool, bool, bool]:
     parts = set(mode.replace("rgba", "rgb+alpha").split("+"))
     unknown = parts - set(_PLANES)
     if unknown or not parts:
         raise ValueError(
-            f"mode must join rgb, alpha and depth with '+' (e.g. 'rgb', 'rgba', 'rgb+depth', "
-            f"'rgb+alpha+depth'), got {mode!r}"
+            f"mode must join rgb, alpha, depth and features with '+' (e.g. 'rgb', 'rgba', "
+            f"'rgb+depth', 'rgb+alpha+depth', 'features+alpha'), got {mode!r}"
         )
-    return ("rgb" in parts, "alpha" in parts, "depth" in parts)
+    return tuple(p in parts for p in _PLANES)  # type: ignore[return-value]
 
 
 def _cameras(
@@ -413,7 +439,9 @@ def _cameras(
     return [Camera(vm, K, width, height)], False
 
 
-def _options(background: ArrayLike, sh_degree, scale_modifier, max_scale, min_opacity, antialiased):
+def _options(
+    background: ArrayLike, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
+):
     bg = [float(x) for x in _floats("background", background, (3,))]
     return (
         bg,
@@ -422,16 +450,17 @@ def _options(background: ArrayLike, sh_degree, scale_modifier, max_scale, min_op
         None if max_scale is None else float(max_scale),
         None if min_opacity is None else float(min_opacity),
         antialiased,
+        kernel,
     )
 
 
-def _outputs(planes, cams: List[Camera], batch: bool, want) -> Dict[str, np.ndarray]:
+def _outputs(planes, cams: List[Camera], batch: bool, want, k: int) -> Dict[str, np.ndarray]:
     b, h, w = len(cams), cams[0].height, cams[0].width
     out: Dict[str, np.ndarray] = {}
     for name, data, on in zip(_PLANES, planes, want):
         if not on:
             continue
-        shape = (b, h, w, 3) if name == "rgb" else (b, h, w)
+        shape = {"rgb": (b, h, w, 3), "features": (b, h, w, k)}.get(name, (b, h, w))
         arr = _view(data, shape)
         out[name] = arr if batch else arr[0]
     return out
@@ -479,6 +508,7 @@ class Renderer:
         max_scale: Optional[float] = None,
         min_opacity: Optional[float] = None,
         antialiased: Optional[bool] = None,
+        kernel: Optional[str] = None,
         mode: str = "rgb+alpha+depth",
     ) -> Dict[str, np.ndarray]:
         """Renders ``scene`` from ``camera`` (or ``viewmat``/``K``/``width``/``height``).
@@ -486,7 +516,10 @@ class Renderer:
         Returns a dict of float32 arrays: ``rgb (H, W, 3)`` (with the background, not
         clamped), ``alpha (H, W)`` and ``depth (H, W)`` (alpha-weighted view depth
         divided by alpha, 0 where empty), as ``mode`` asks (``'rgb'``, ``'rgba'``,
-        ``'rgb+depth'``, ...). A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
+        ``'rgb+depth'``, ``'features'``: the scene's K feature channels blended with the
+        colour rules over 0, ``(H, W, K)``). ``kernel``: ``"gaussian"`` (the reference's
+        falloff) or ``"power"`` (``opacity * max(0, 1 - d2/9)``); default the scene's
+        recorded kernel. A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
         batch: arrays gain a leading ``B``. ``max_scale``/``min_opacity`` drop
         Gaussians for this frame only, exactly as ``--max-scale``/``--min-opacity``.
         The GIL is released while rendering."""
@@ -494,9 +527,11 @@ class Renderer:
         cams, batch = _cameras(camera, viewmat, K, width, height)
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
-        opts = _options(background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased)
+        opts = _options(
+            background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
+        )
         planes = self._r.render(scene._s, [c._tuple() for c in cams], *opts, *want)
-        return _outputs(planes, cams, batch, want)
+        return _outputs(planes, cams, batch, want, scene.feature_count)
 
 
 def render_cpu(
@@ -513,6 +548,7 @@ def render_cpu(
     max_scale: Optional[float] = None,
     min_opacity: Optional[float] = None,
     antialiased: Optional[bool] = None,
+    kernel: Optional[str] = None,
     mode: str = "rgb+alpha+depth",
 ) -> Dict[str, np.ndarray]:
     """``Renderer.render`` on the CPU reference renderer (the original 3DGS rasterizer's
@@ -521,9 +557,11 @@ def render_cpu(
     cams, batch = _cameras(camera, viewmat, K, width, height)
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
-    opts = _options(background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased)
+    opts = _options(
+        background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
+    )
     planes = _native.render_cpu(scene._s, [c._tuple() for c in cams], *opts, *want)
-    return _outputs(planes, cams, batch, want)
+    return _outputs(planes, cams, batch, want, scene.feature_count)
 
 
 # ---------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 from typing import Dict, List, Optional, Sequence, Tuple
 
 CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float]]
-Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray]]
+Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray], Optional[bytearray]]
 
 __version__: str
 
@@ -15,6 +15,10 @@ class Scene:
     def antialiased(self) -> bool: ...
     @property
     def source(self) -> str: ...
+    @property
+    def feature_count(self) -> int: ...
+    @property
+    def kernel(self) -> str: ...
     @property
     def id(self) -> int: ...
     def array(self, name: str) -> bytes: ...
@@ -44,9 +48,11 @@ class Renderer:
         max_scale: Optional[float],
         min_opacity: Optional[float],
         antialiased: Optional[bool],
+        kernel: Optional[str],
         rgb: bool,
         alpha: bool,
         depth: bool,
+        features: bool,
     ) -> Planes: ...
 
 def load(path: str, iteration: Optional[int] = None) -> Scene: ...
@@ -61,6 +67,8 @@ def scene_from_arrays(
     sh: bytes,
     activated: bool,
     antialiased: bool = False,
+    feature_count: int = 0,
+    features: Optional[bytes] = None,
 ) -> Scene: ...
 def load_cameras(path: str, frames: Optional[int] = None, fps: Optional[float] = None) -> List[CamTuple]: ...
 def save_cameras(path: str, cameras: List[CamTuple], overwrite: bool = False) -> None: ...
@@ -96,9 +104,11 @@ def render_cpu(
     max_scale: Optional[float],
     min_opacity: Optional[float],
     antialiased: Optional[bool],
+    kernel: Optional[str],
     rgb: bool,
     alpha: bool,
     depth: bool,
+    features: bool,
 ) -> Planes: ...
 def read_image(path: str) -> Tuple[int, int, List[str], bytearray]: ...
 def compare(
