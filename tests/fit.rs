@@ -203,6 +203,32 @@ fn same_seed_same_bytes() {
     let a = run("a.ply", "3");
     assert_eq!(a, run("b.ply", "3"), "same seed, same output");
     assert_ne!(a, run("c.ply", "4"), "another seed, another fit");
+    // One worker thread gives the same bytes as the default pool.
+    let one = dir.path().join("one.ply");
+    let o = common::cli::vksplat_env(
+        &[
+            "fit",
+            s(&input),
+            "-o",
+            s(&one),
+            "--gaussians",
+            "30",
+            "--max-gaussians",
+            "60",
+            "--steps",
+            "60",
+            "--densify-every",
+            "20",
+            "--batch",
+            "512",
+            "--seed",
+            "3",
+            "-q",
+        ],
+        &[("RAYON_NUM_THREADS", "1")],
+    );
+    assert!(o.status.success(), "{}", common::cli::stderr(&o));
+    assert_eq!(a, std::fs::read(one).unwrap(), "one thread, same output");
 }
 
 /// Density control changes the count as configured: never beyond --max-gaussians, no

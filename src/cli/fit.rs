@@ -26,7 +26,7 @@ pub(crate) struct FitArgs {
     /// Output PLY (features as feat_*, colours from the turbo colormap of the magnitude).
     #[arg(short, long, value_name = "OUT.ply")]
     pub(crate) output: PathBuf,
-    /// Extent of a grid input [default: from the sidecar INPUT.json].
+    /// Extent of a grid input [default: from the sidecar INPUT.json that gen --rf writes, e.g. dipole.npy.json].
     #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::fit::parse_bounds)]
     pub(crate) bounds: Option<[f32; 6]>,
     /// Gaussians at the start.

@@ -544,10 +544,12 @@ pub fn fit(
     let ext = model::extents(data.bounds);
     let volume = f64::from(ext[0]) * f64::from(ext[1]) * f64::from(ext[2]);
     let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt();
-    // Cells about the size of the Gaussians at the largest count.
-    let final_scale = 0.5 * (volume / cfg.max_gaussians as f64).cbrt() as f32;
-    let grid = CellGrid::with_side(data.bounds, final_scale);
+    // Cells about the size of the Gaussians at the largest count, but no more than four
+    // per sample of a batch (each batch keeps a start index per cell).
     let batch = cfg.batch.max(1);
+    let final_scale = 0.5 * (volume / cfg.max_gaussians as f64).cbrt() as f32;
+    let sparse_limit = (volume / (4.0 * batch as f64)).cbrt() as f32;
+    let grid = CellGrid::with_side(data.bounds, final_scale.max(sparse_limit));
     let n_batches = train_idx.len().div_ceil(batch).max(1);
     let batches: Vec<Points> = (0..n_batches)
         .map(|b| {
@@ -624,6 +626,11 @@ pub fn fit(
     for step in 1..=cfg.steps {
         let points = &batches[(step - 1) % n_batches];
         let lg = model::loss_and_grad(&mdl, &loss_cfg, &grid, points);
+        if !lg.total().is_finite() || lg.grad.iter().any(|g| !g.is_finite()) {
+            return Err(format!(
+                "the optimisation diverged at step {step} (a non-finite loss or gradient); try other --scale-reg or --batch values"
+            ));
+        }
         for (s, v) in score.iter_mut().zip(&lg.score) {
             *s += v;
         }
