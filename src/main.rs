@@ -30,9 +30,12 @@ enum Command {
     /// Render the same camera repeatedly and report per-stage GPU times.
     #[command(allow_negative_numbers = true)]
     Bench(cli::bench::BenchArgs),
-    /// Write a synthetic scene (seeded) as .ply, .splat or .spz, for scaling benchmarks.
+    /// Write a synthetic scene (seeded) as .ply, .splat or .spz, or a synthetic RF field (--rf) as .npy.
     #[command(allow_negative_numbers = true)]
     Gen(cli::gen::GenArgs),
+    /// Fit Gaussians with feature channels to field samples (a grid .npy, or samples .npy/.csv).
+    #[command(allow_negative_numbers = true)]
+    Fit(cli::fit::FitArgs),
     /// Convert a scene (any readable format) to .ply, .splat or .spz, chosen by OUT's extension.
     #[command(allow_negative_numbers = true)]
     Convert(cli::convert::ConvertArgs),
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
         Command::Info(arg) => cli::info::info(arg),
         Command::Bench(args) => cli::bench::bench(args),
         Command::Gen(args) => cli::gen::gen(args),
+        Command::Fit(args) => cli::fit::fit(args),
         Command::Convert(args) => cli::convert::convert(args),
         Command::Compare(args) => cli::compare::compare(args),
         Command::Eval(args) => cli::eval::eval(args),

@@ -5,6 +5,7 @@ pub mod common;
 pub mod compare;
 pub mod convert;
 pub mod eval;
+pub mod fit;
 pub mod gen;
 pub mod info;
 pub mod render;

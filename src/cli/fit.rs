@@ -1,0 +1,254 @@
+//! `vksplat fit`: Gaussians with feature channels fitted to RF field samples.
+
+use super::common::check_output_file;
+use super::values;
+use anyhow::{bail, Result};
+use clap::Args;
+use std::path::PathBuf;
+use std::time::Instant;
+use vksplat::cpu::SplatKernel;
+use vksplat::fit::{FitConfig, Layout};
+use vksplat::{note, outln};
+
+#[derive(Args)]
+#[command(after_help = "Examples:
+  vksplat gen --rf dipole dipole.npy
+  vksplat fit dipole.npy -o dipole.ply --report dipole_fit.json
+  vksplat fit samples.csv -o field.ply --gaussians 500 --max-gaussians 2000 --kernel power
+
+Inputs: a dense grid .npy (X x Y x Z x C, points spread over --bounds like numpy.linspace,
+or over the bounds of the sidecar FILE.npy.json that `gen --rf` writes), or scattered
+samples (.npy or .csv, N x (3 + C): x, y, z, then C values; a CSV may start with a header
+row and may hold # comments). The C values become the Gaussians' features feat_0..feat_{C-1}.")]
+pub(crate) struct FitArgs {
+    /// Field samples: a grid .npy (X x Y x Z x C) or samples .npy / .csv (N x (3 + C)).
+    pub(crate) input: PathBuf,
+    /// Output PLY (features as feat_*, colours from the turbo colormap of the magnitude).
+    #[arg(short, long, value_name = "OUT.ply")]
+    pub(crate) output: PathBuf,
+    /// Extent of a grid input [default: from the sidecar INPUT.json that gen --rf writes, e.g. dipole.npy.json].
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::fit::parse_bounds)]
+    pub(crate) bounds: Option<[f32; 6]>,
+    /// Gaussians at the start.
+    #[arg(long, value_name = "N", default_value_t = 1000, value_parser = values::int_in(1usize, 10_000_000))]
+    pub(crate) gaussians: usize,
+    /// Density control never goes beyond this many Gaussians.
+    #[arg(long, value_name = "M", default_value_t = 4000, value_parser = values::int_in(1usize, 10_000_000))]
+    pub(crate) max_gaussians: usize,
+    /// Optimisation steps (one mini-batch each).
+    #[arg(long, value_name = "S", default_value_t = FitConfig::default().steps, value_parser = values::int_in(1usize, 10_000_000))]
+    pub(crate) steps: usize,
+    /// Prune and densify every M steps, during the first three quarters of the steps (0: never).
+    #[arg(long, value_name = "M", default_value_t = 100)]
+    pub(crate) densify_every: usize,
+    /// Prune Gaussians whose opacity falls below this (also once at the end).
+    #[arg(long, value_name = "O", default_value_t = 0.005, value_parser = values::unit_f32)]
+    pub(crate) min_opacity: f32,
+    /// The channel that weights the loss (weight 0.1 + 0.9 |value| / max |value|).
+    #[arg(long, value_name = "C", default_value_t = 0)]
+    pub(crate) magnitude_channel: usize,
+    /// Fraction of the samples held out to measure the error (0 to 0.9).
+    #[arg(long, value_name = "F", default_value_t = 0.1, value_parser = holdout)]
+    pub(crate) holdout: f32,
+    /// Training samples per step.
+    #[arg(long, value_name = "B", default_value_t = FitConfig::default().batch, value_parser = values::int_in(1usize, 1 << 30))]
+    pub(crate) batch: usize,
+    /// Weight of the scale regulariser (mean over Gaussians of sum_j (scale_j / diagonal)^2).
+    #[arg(long, value_name = "W", default_value_t = FitConfig::default().scale_reg, value_parser = non_negative)]
+    pub(crate) scale_reg: f32,
+    /// Random seed (initialisation, hold-out and batches).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Falloff of the Gaussians: gaussian (exp(-d2/2), truncated at d2 = 16) or power (max(0, 1 - d2/9)).
+    #[arg(long, value_name = "gaussian|power", default_value = "gaussian")]
+    pub(crate) kernel: SplatKernel,
+    /// Also write a JSON report (inputs, parameters, losses, held-out error, counts, time).
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) report: Option<PathBuf>,
+    /// Replace output files that exist.
+    #[arg(long)]
+    pub(crate) overwrite: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+fn holdout(s: &str) -> Result<f32, String> {
+    let v = values::unit_f32(s)?;
+    if v <= 0.9 {
+        Ok(v)
+    } else {
+        Err(format!("must be between 0 and 0.9, got {v}"))
+    }
+}
+
+fn non_negative(s: &str) -> Result<f32, String> {
+    let v = values::any_f32(s)?;
+    if v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be 0 or more, got {v}"))
+    }
+}
+
+pub(crate) fn fit(args: &FitArgs) -> Result<()> {
+    let started = Instant::now();
+    let ext = args
+        .output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if ext.as_deref() != Some("ply") {
+        bail!(
+            "{}: fit writes a PLY (feat_* properties); name the output .ply",
+            args.output.display()
+        );
+    }
+    if args.output == args.input || args.report.as_ref() == Some(&args.input) {
+        bail!(
+            "{}: is the input file; choose another output",
+            args.input.display()
+        );
+    }
+    if args.report.as_ref() == Some(&args.output) {
+        bail!("{}: is both the PLY and the report", args.output.display());
+    }
+    check_output_file(&args.output, args.overwrite)?;
+    if let Some(r) = &args.report {
+        check_output_file(r, args.overwrite)?;
+    }
+    if args.gaussians > args.max_gaussians {
+        bail!(
+            "--gaussians {} is above --max-gaussians {}",
+            args.gaussians,
+            args.max_gaussians
+        );
+    }
+    let data = vksplat::fit::load(&args.input, args.bounds)?;
+    if args.magnitude_channel >= data.k {
+        bail!(
+            "{}: --magnitude-channel {} is not one of its channels (it has {}: 0 to {})",
+            args.input.display(),
+            args.magnitude_channel,
+            data.k,
+            data.k - 1
+        );
+    }
+    let cfg = FitConfig {
+        kernel: args.kernel,
+        initial: args.gaussians,
+        max_gaussians: args.max_gaussians,
+        steps: args.steps,
+        densify_every: args.densify_every,
+        min_opacity: args.min_opacity,
+        magnitude_channel: args.magnitude_channel,
+        holdout: args.holdout,
+        seed: args.seed,
+        batch: args.batch,
+        scale_reg: args.scale_reg,
+        ..FitConfig::default()
+    };
+    let layout = match &data.layout {
+        Layout::Grid(s) => format!("grid {} x {} x {} x {}", s[0], s[1], s[2], s[3]),
+        Layout::SamplesNpy => "samples (.npy)".into(),
+        Layout::SamplesCsv => "samples (.csv)".into(),
+    };
+    if !args.quiet {
+        note!(
+            "fitting {} Gaussians (at most {}, {} kernel) to {} samples of {} channels from {} ({layout})",
+            cfg.initial,
+            cfg.max_gaussians,
+            cfg.kernel,
+            data.len(),
+            data.k,
+            args.input.display()
+        );
+    }
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let bar = indicatif::ProgressBar::new(cfg.steps as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40.cyan/blue} step {pos}/{len}  ETA {eta}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    };
+    let outcome = vksplat::fit::fit(&data, &cfg, &mut |p| {
+        if p.step % 10 == 0 || p.step == cfg.steps {
+            bar.set_message(format!("loss {:.3e}  {} Gaussians", p.loss, p.gaussians));
+            bar.set_position(p.step as u64);
+        }
+    })
+    .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
+    bar.finish_and_clear();
+    let scene = vksplat::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
+    let bytes =
+        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
+    vksplat::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let grown: usize = outcome.history.iter().map(|h| h.cloned + h.split).sum();
+    let pruned: usize = outcome.history.iter().map(|h| h.pruned).sum();
+    if let Some(report) = &args.report {
+        let value = serde_json::json!({
+            "input": args.input.display().to_string(),
+            "layout": layout,
+            "samples": data.len(),
+            "channels": data.k,
+            "bounds": data.bounds,
+            "bounds_from": data.bounds_source,
+            "output": args.output.display().to_string(),
+            "parameters": cfg,
+            "train_samples": outcome.train_samples,
+            "holdout_samples": outcome.holdout_samples,
+            "final_loss": {
+                "data": outcome.final_loss.0,
+                "scale_regulariser": outcome.final_loss.1,
+                "total": outcome.final_loss.0 + outcome.final_loss.1,
+                "on": "all training samples",
+            },
+            "holdout_relative_l2": outcome.holdout.as_ref().map(|h| h.relative_l2),
+            "holdout_relative_l2_per_channel": outcome.holdout.as_ref().map(|h| h.per_channel.clone()),
+            "gaussians": {
+                "initial": cfg.initial,
+                "final": outcome.model.len(),
+                "pruned": pruned,
+                "added": grown,
+            },
+            "density_control": outcome.history,
+            "seconds": seconds,
+            "threads": rayon::current_num_threads(),
+        });
+        let text = serde_json::to_string_pretty(&value)? + "\n";
+        vksplat::output::write_bytes_atomically(report, args.overwrite, text.as_bytes())?;
+    }
+    let error = match &outcome.holdout {
+        Some(h) => format!(
+            "held-out relative L2 error {:.4} ({} samples; per channel {})",
+            h.relative_l2,
+            outcome.holdout_samples,
+            h.per_channel
+                .iter()
+                .map(|e| format!("{e:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        None => "no held-out samples (--holdout 0)".into(),
+    };
+    outln!(
+        "fitted {} Gaussians ({} initial, {grown} added, {pruned} pruned) to {} samples in {} steps, {seconds:.1} s; training loss {:.4e}; {error}",
+        outcome.model.len(),
+        cfg.initial,
+        outcome.train_samples,
+        cfg.steps,
+        outcome.final_loss.0 + outcome.final_loss.1,
+    );
+    if !args.quiet {
+        note!("wrote {}", args.output.display());
+        if let Some(r) = &args.report {
+            note!("wrote {}", r.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,776 @@
+//! `vksplat fit`: Gaussians with feature channels fitted to field samples (RF fields).
+//!
+//! Inputs ([`load`]): a dense grid `.npy` (`X x Y x Z x C`, its points spread over
+//! `--bounds` like `numpy.linspace` on each axis, see [`crate::rf`]) or scattered samples
+//! (`.npy` or `.csv`, `N x (3 + C)`: x, y, z, then C values). The C values are the features
+//! (K = C). The model, loss and gradients are in [`model`]; Adam and the density control in
+//! [`optim`]; [`fit`] runs the optimisation.
+//!
+//! Loss weights: `w_n = 0.1 + 0.9 |y_nm| / max_n |y_nm|` (m the magnitude channel), so the
+//! strong part of the field counts ten times as much as where it vanishes, which still
+//! counts. Held-out error: `sqrt(sum |f - y|^2 / sum |y|^2)` over every channel of the
+//! held-out samples, unweighted.
+
+pub mod model;
+pub mod optim;
+
+use crate::cpu::SplatKernel;
+use crate::gen::Rng;
+use crate::scene::{Scene, MAX_FEATURES};
+use model::{CellGrid, LossConfig, Model, Points, FEAT, LOGIT, ROT, SCALE};
+use optim::{Adam, DensityStep};
+use std::path::{Path, PathBuf};
+
+/// A malformed input: the file and what is wrong with it.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {message}", path.display())]
+pub struct InputError {
+    /// The file.
+    pub path: PathBuf,
+    /// What is wrong.
+    pub message: String,
+}
+
+fn bad(path: &Path, message: impl Into<String>) -> InputError {
+    InputError {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// How the samples were given.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Layout {
+    /// A dense grid of this shape `[X, Y, Z, C]`.
+    Grid([usize; 4]),
+    /// Scattered samples from a `.npy`.
+    SamplesNpy,
+    /// Scattered samples from a `.csv`.
+    SamplesCsv,
+}
+
+/// Field samples: positions and `k` values each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldData {
+    /// Sample positions.
+    pub positions: Vec<[f32; 3]>,
+    /// `k` values per sample.
+    pub values: Vec<f32>,
+    /// Channels per sample.
+    pub k: usize,
+    /// The box the samples fill, `[xmin, ymin, zmin, xmax, ymax, zmax]`.
+    pub bounds: [f32; 6],
+    /// How they were given.
+    pub layout: Layout,
+    /// Where the bounds came from: `--bounds`, a sidecar file, or the samples.
+    pub bounds_source: String,
+}
+
+impl FieldData {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+    /// True without samples.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+}
+
+/// Parses `xmin,ymin,zmin,xmax,ymax,zmax` (six finite numbers, each min below its max).
+pub fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 6 {
+        return Err(format!(
+            "expected 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {} in \"{s}\"",
+            parts.len()
+        ));
+    }
+    let mut b = [0f32; 6];
+    for (v, p) in b.iter_mut().zip(&parts) {
+        *v = p
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("\"{p}\" is not a finite number"))?;
+    }
+    check_bounds(b)?;
+    Ok(b)
+}
+
+fn check_bounds(b: [f32; 6]) -> Result<(), String> {
+    for (a, name) in ["x", "y", "z"].iter().enumerate() {
+        if b[a].is_nan() || b[a + 3].is_nan() || b[a] >= b[a + 3] {
+            return Err(format!(
+                "{name}min ({}) must be below {name}max ({})",
+                b[a],
+                b[a + 3]
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Reads the bounds from the sidecar JSON `gen --rf` writes (`"bounds": [6 numbers]`).
+fn sidecar_bounds(path: &Path) -> Result<[f32; 6], InputError> {
+    let text = std::fs::read_to_string(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(path, format!("is not valid JSON: {e}")))?;
+    let b: Vec<f32> = value
+        .get("bounds")
+        .and_then(|b| b.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_f64())
+                .map(|v| v as f32)
+                .collect()
+        })
+        .unwrap_or_default();
+    let b: [f32; 6] = b
+        .try_into()
+        .map_err(|_| bad(path, "has no \"bounds\" of 6 numbers"))?;
+    check_bounds(b).map_err(|m| bad(path, format!("\"bounds\": {m}")))?;
+    Ok(b)
+}
+
+/// Loads field samples from `path` (`.npy` grid or samples, or `.csv` samples). A grid
+/// takes `bounds`, else those of its sidecar `PATH.json` ([`crate::rf::sidecar_path`]);
+/// scattered samples carry their positions and take no bounds.
+pub fn load(path: &Path, bounds: Option<[f32; 6]>) -> Result<FieldData, InputError> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let bytes = std::fs::read(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
+    let data = match ext.as_str() {
+        "npy" => load_npy(&bytes, path, bounds)?,
+        "csv" => {
+            if bounds.is_some() {
+                return Err(bad(path, "holds scattered samples, which carry their own positions; --bounds is only for a dense grid"));
+            }
+            load_csv(&bytes, path)?
+        }
+        _ => {
+            return Err(bad(
+                path,
+                "has an unknown input format; fit reads a .npy (grid X x Y x Z x C, or samples N x (3 + C)) or a .csv (N rows of x, y, z and C values)",
+            ))
+        }
+    };
+    if data.k > MAX_FEATURES {
+        return Err(bad(
+            path,
+            format!(
+                "has {} value channels; a Gaussian carries at most {MAX_FEATURES} features",
+                data.k
+            ),
+        ));
+    }
+    Ok(data)
+}
+
+fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<FieldData, InputError> {
+    let array = crate::image_file::parse_npy_array(bytes, path).map_err(|e| {
+        let m = e.to_string();
+        let prefix = format!("{}: ", path.display());
+        bad(path, m.strip_prefix(&prefix).unwrap_or(&m))
+    })?;
+    let first_bad = |data: &[f32]| data.iter().position(|v| !v.is_finite());
+    match array.shape[..] {
+        [x, y, z, c] => {
+            if x * y * z * c == 0 {
+                return Err(bad(
+                    path,
+                    format!("is an empty grid (shape {:?}); a grid needs at least one point and one channel", array.shape),
+                ));
+            }
+            if let Some(at) = first_bad(&array.data) {
+                let (p, ch) = (at / c, at % c);
+                return Err(bad(
+                    path,
+                    format!(
+                        "has a non-finite value ({}) at grid point [{}, {}, {}], channel {ch}",
+                        array.data[at],
+                        p / (y * z),
+                        p / z % y,
+                        p % z
+                    ),
+                ));
+            }
+            let (bounds, source) = match bounds {
+                Some(b) => (b, "--bounds".to_string()),
+                None => {
+                    let side = crate::rf::sidecar_path(path);
+                    if !side.exists() {
+                        return Err(bad(
+                            path,
+                            format!(
+                                "is a dense grid ({x} x {y} x {z} x {c}) and needs its extent: give --bounds xmin,ymin,zmin,xmax,ymax,zmax (there is no sidecar {} beside it)",
+                                side.display()
+                            ),
+                        ));
+                    }
+                    (sidecar_bounds(&side)?, side.display().to_string())
+                }
+            };
+            let mut positions = Vec::with_capacity(x * y * z);
+            for i in 0..x {
+                let px = crate::rf::grid_coordinate(bounds[0], bounds[3], i, x);
+                for j in 0..y {
+                    let py = crate::rf::grid_coordinate(bounds[1], bounds[4], j, y);
+                    for l in 0..z {
+                        let pz = crate::rf::grid_coordinate(bounds[2], bounds[5], l, z);
+                        positions.push([px, py, pz]);
+                    }
+                }
+            }
+            Ok(FieldData {
+                positions,
+                values: array.data,
+                k: c,
+                bounds,
+                layout: Layout::Grid([x, y, z, c]),
+                bounds_source: source,
+            })
+        }
+        [n, cols] => {
+            if bounds.is_some() {
+                return Err(bad(path, "holds scattered samples, which carry their own positions; --bounds is only for a dense grid"));
+            }
+            if cols < 4 {
+                return Err(bad(
+                    path,
+                    format!("has {cols} columns; samples are N x (3 + C): x, y, z and at least one value"),
+                ));
+            }
+            if n == 0 {
+                return Err(bad(path, "holds no samples (0 rows)"));
+            }
+            if let Some(at) = first_bad(&array.data) {
+                return Err(bad(
+                    path,
+                    format!(
+                        "has a non-finite value ({}) at sample {}, column {}",
+                        array.data[at],
+                        at / cols,
+                        at % cols
+                    ),
+                ));
+            }
+            Ok(samples(array.data, cols, Layout::SamplesNpy))
+        }
+        _ => Err(bad(
+            path,
+            format!(
+                "has shape {:?}; fit reads a dense grid X x Y x Z x C (4-D) or samples N x (3 + C) (2-D)",
+                array.shape
+            ),
+        )),
+    }
+}
+
+/// Scattered samples from rows of `cols` values (x, y, z, values).
+fn samples(rows: Vec<f32>, cols: usize, layout: Layout) -> FieldData {
+    let k = cols - 3;
+    let n = rows.len() / cols;
+    let mut positions = Vec::with_capacity(n);
+    let mut values = Vec::with_capacity(n * k);
+    let mut b = [
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    for row in rows.chunks_exact(cols) {
+        positions.push([row[0], row[1], row[2]]);
+        values.extend_from_slice(&row[3..]);
+        for a in 0..3 {
+            b[a] = b[a].min(row[a]);
+            b[a + 3] = b[a + 3].max(row[a]);
+        }
+    }
+    FieldData {
+        positions,
+        values,
+        k,
+        bounds: b,
+        layout,
+        bounds_source: "the samples' extent".into(),
+    }
+}
+
+fn load_csv(bytes: &[u8], path: &Path) -> Result<FieldData, InputError> {
+    let text =
+        std::str::from_utf8(bytes).map_err(|_| bad(path, "is not a text (UTF-8) CSV file"))?;
+    let mut rows = Vec::new();
+    // (line number, columns) of the row that set the width (a header or the first row).
+    let mut width: Option<(usize, usize)> = None;
+    let mut seen_row = false;
+    for (i, line) in text.lines().enumerate() {
+        let lineno = i + 1;
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = t.split(',').map(str::trim).collect();
+        let parsed: Vec<Option<f32>> = fields.iter().map(|f| f.parse::<f32>().ok()).collect();
+        if !seen_row && width.is_none() && parsed.iter().any(Option::is_none) {
+            // A header row (column names).
+            width = Some((lineno, fields.len()));
+            continue;
+        }
+        seen_row = true;
+        if let Some((at, w)) = width {
+            if fields.len() != w {
+                return Err(bad(
+                    path,
+                    format!(
+                        "line {lineno} has {} values where line {at} has {w}; every row needs x, y, z and the same number of values",
+                        fields.len()
+                    ),
+                ));
+            }
+        } else {
+            width = Some((lineno, fields.len()));
+        }
+        for (c, (f, v)) in fields.iter().zip(&parsed).enumerate() {
+            match v {
+                None => {
+                    return Err(bad(
+                        path,
+                        format!("line {lineno}, column {}: \"{f}\" is not a number", c + 1),
+                    ))
+                }
+                Some(v) if !v.is_finite() => {
+                    return Err(bad(
+                        path,
+                        format!("line {lineno}, column {}: {f} is not a finite value", c + 1),
+                    ))
+                }
+                Some(v) => rows.push(*v),
+            }
+        }
+    }
+    let cols = width.map_or(0, |w| w.1);
+    if !seen_row {
+        return Err(bad(path, "holds no samples (no data rows)"));
+    }
+    if cols < 4 {
+        return Err(bad(
+            path,
+            format!("has {cols} columns; samples are rows of x, y, z and at least one value"),
+        ));
+    }
+    Ok(samples(rows, cols, Layout::SamplesCsv))
+}
+
+/// The fitting options.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FitConfig {
+    /// Kernel of the Gaussians.
+    #[serde(serialize_with = "kernel_name")]
+    pub kernel: SplatKernel,
+    /// Gaussians at the start.
+    pub initial: usize,
+    /// Never more than this many.
+    pub max_gaussians: usize,
+    /// Optimisation steps.
+    pub steps: usize,
+    /// Density control every this many steps (0: never).
+    pub densify_every: usize,
+    /// Density control stops after this fraction of the steps.
+    pub densify_until: f32,
+    /// Each density step adds at most this fraction of the current count.
+    pub grow_fraction: f32,
+    /// Prune Gaussians whose opacity falls below this.
+    pub min_opacity: f32,
+    /// The channel that weights the loss.
+    pub magnitude_channel: usize,
+    /// Fraction of the samples held out.
+    pub holdout: f32,
+    /// Seed of every random choice.
+    pub seed: u64,
+    /// Training samples per step (a mini-batch; all when fewer).
+    pub batch: usize,
+    /// Weight of the scale regulariser.
+    pub scale_reg: f32,
+    /// Learning rate of the positions, in units of the data's diagonal.
+    pub lr_position: f32,
+    /// Learning rate of the log scales.
+    pub lr_scale: f32,
+    /// Learning rate of the quaternions.
+    pub lr_rotation: f32,
+    /// Learning rate of the opacity logits.
+    pub lr_opacity: f32,
+    /// Learning rate of the features, in units of the data's largest absolute value.
+    pub lr_feature: f32,
+    /// Every learning rate falls exponentially to this fraction at the last step.
+    pub lr_final_fraction: f32,
+}
+
+fn kernel_name<S: serde::Serializer>(k: &SplatKernel, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(k.name())
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            kernel: SplatKernel::Gaussian,
+            initial: 1000,
+            max_gaussians: 4000,
+            steps: 1500,
+            densify_every: 100,
+            densify_until: 0.75,
+            grow_fraction: 0.25,
+            min_opacity: 0.005,
+            magnitude_channel: 0,
+            holdout: 0.1,
+            seed: 1,
+            batch: 16384,
+            scale_reg: 0.01,
+            lr_position: 1e-3,
+            lr_scale: 0.01,
+            lr_rotation: 0.01,
+            lr_opacity: 0.05,
+            lr_feature: 0.02,
+            lr_final_fraction: 0.1,
+        }
+    }
+}
+
+/// Held-out errors.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct HoldoutError {
+    /// `sqrt(sum |f - y|^2 / sum |y|^2)` over all channels.
+    pub relative_l2: f64,
+    /// The same per channel.
+    pub per_channel: Vec<f64>,
+}
+
+/// A progress report after a step.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    /// Steps done.
+    pub step: usize,
+    /// The batch's loss (data term plus regulariser) at that step.
+    pub loss: f64,
+    /// Gaussians now.
+    pub gaussians: usize,
+}
+
+/// What [`fit`] produced.
+#[derive(Clone, Debug)]
+pub struct FitOutcome {
+    /// The fitted Gaussians.
+    pub model: Model,
+    /// Every density-control step, the final prune last.
+    pub history: Vec<DensityStep>,
+    /// Samples trained on.
+    pub train_samples: usize,
+    /// Samples held out.
+    pub holdout_samples: usize,
+    /// Loss on all training samples at the end (data term, regulariser).
+    pub final_loss: (f64, f64),
+    /// Held-out error (none without held-out samples).
+    pub holdout: Option<HoldoutError>,
+    /// Min and max of the magnitude channel in the data (for the colormap).
+    pub magnitude_range: (f32, f32),
+}
+
+/// The loss weight of each sample (see the module docs).
+pub fn weights(data: &FieldData, channel: usize) -> Vec<f32> {
+    let k = data.k;
+    let max = (0..data.len())
+        .map(|n| data.values[n * k + channel].abs())
+        .fold(0f32, f32::max);
+    (0..data.len())
+        .map(|n| {
+            if max > 0.0 {
+                0.1 + 0.9 * data.values[n * k + channel].abs() / max
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+/// Fits Gaussians to `data`. Deterministic for a given configuration (any thread count).
+pub fn fit(
+    data: &FieldData,
+    cfg: &FitConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<FitOutcome, String> {
+    let k = data.k;
+    if cfg.magnitude_channel >= k {
+        return Err(format!(
+            "--magnitude-channel {} is not a channel of the data, which has {k} (0 to {})",
+            cfg.magnitude_channel,
+            k - 1
+        ));
+    }
+    if cfg.initial == 0 || cfg.initial > cfg.max_gaussians {
+        return Err(format!(
+            "--gaussians {} must be between 1 and --max-gaussians ({})",
+            cfg.initial, cfg.max_gaussians
+        ));
+    }
+    let mut rng = Rng(cfg.seed ^ 0xF17_5EED_0000_0000);
+    let n = data.len();
+    let w_all = weights(data, cfg.magnitude_channel);
+    // Seeded shuffle (Fisher-Yates), the first share held out.
+    let mut idx: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        idx.swap(i, j);
+    }
+    let n_hold = if cfg.holdout > 0.0 && n >= 2 {
+        ((n as f64 * f64::from(cfg.holdout)).round() as usize).clamp(1, n - 1)
+    } else {
+        0
+    };
+    let (hold_idx, train_idx) = idx.split_at(n_hold);
+    let gather = |ids: &[usize]| -> (Vec<[f32; 3]>, Vec<f32>, Vec<f32>) {
+        (
+            ids.iter().map(|&i| data.positions[i]).collect(),
+            ids.iter()
+                .flat_map(|&i| &data.values[i * k..(i + 1) * k])
+                .copied()
+                .collect(),
+            ids.iter().map(|&i| w_all[i]).collect(),
+        )
+    };
+    let ext = model::extents(data.bounds);
+    let volume = f64::from(ext[0]) * f64::from(ext[1]) * f64::from(ext[2]);
+    let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt();
+    // Cells about the size of the Gaussians at the largest count, but no more than four
+    // per sample of a batch (each batch keeps a start index per cell).
+    let batch = cfg.batch.max(1);
+    let final_scale = 0.5 * (volume / cfg.max_gaussians as f64).cbrt() as f32;
+    let sparse_limit = (volume / (4.0 * batch as f64)).cbrt() as f32;
+    let grid = CellGrid::with_side(data.bounds, final_scale.max(sparse_limit));
+    let n_batches = train_idx.len().div_ceil(batch).max(1);
+    let batches: Vec<Points> = (0..n_batches)
+        .map(|b| {
+            let (a, z) = (
+                b * train_idx.len() / n_batches,
+                (b + 1) * train_idx.len() / n_batches,
+            );
+            let (p, v, w) = gather(&train_idx[a..z]);
+            Points::binned(&grid, &p, &v, &w, k)
+        })
+        .collect();
+    let holdout = {
+        let (p, v, w) = gather(hold_idx);
+        Points::binned(&grid, &p, &v, &w, k)
+    };
+    let y_max = data
+        .values
+        .iter()
+        .fold(0f32, |m, v| m.max(v.abs()))
+        .max(1e-12);
+
+    // Initialisation: centres drawn from the training samples with probability
+    // proportional to their weight, isotropic, features so that the overlapping
+    // Gaussians add up to the sample's values.
+    let s0 = 0.5 * (volume / cfg.initial as f64).cbrt() as f32;
+    let kernel_integral = match cfg.kernel {
+        SplatKernel::Gaussian => 15.75f32, // (2 pi)^(3/2)
+        SplatKernel::Power => 45.24,       // 4 pi * 3.6
+    };
+    let overlap = (cfg.initial as f32 / volume as f32 * kernel_integral * s0 * s0 * s0).max(1.0);
+    let mut cdf = Vec::with_capacity(train_idx.len());
+    let mut acc = 0f64;
+    for &i in train_idx {
+        acc += f64::from(w_all[i]);
+        cdf.push(acc);
+    }
+    let mut mdl = Model::new(k);
+    for _ in 0..cfg.initial {
+        let u = f64::from(rng.unit()) * acc;
+        let pick = cdf.partition_point(|&c| c <= u).min(train_idx.len() - 1);
+        let i = train_idx[pick];
+        let p = data.positions[i];
+        for v in p {
+            mdl.params.push(v + rng.range(-0.5, 0.5) * s0);
+        }
+        mdl.params.extend_from_slice(&[s0.ln(); 3]);
+        mdl.params.extend_from_slice(&[1.0, 0.0, 0.0, 0.0]);
+        mdl.params.push(0.0);
+        for c in 0..k {
+            mdl.params.push(data.values[i * k + c] / (0.5 * overlap));
+        }
+    }
+    let loss_cfg = LossConfig {
+        kernel: cfg.kernel,
+        scale_reg: cfg.scale_reg,
+        reg_length: diag,
+    };
+    let stride = mdl.stride();
+    let base_lr: Vec<f32> = (0..stride)
+        .map(|j| match j {
+            0..=2 => cfg.lr_position * diag,
+            SCALE..=5 => cfg.lr_scale,
+            ROT..=9 => cfg.lr_rotation,
+            LOGIT => cfg.lr_opacity,
+            _ => cfg.lr_feature * y_max,
+        })
+        .collect();
+    let min_log_scale = (1e-3 * diag).ln();
+    let max_log_scale = (0.5 * diag).ln();
+    let mut adam = Adam::new(mdl.params.len());
+    let mut score = vec![0f32; mdl.len()];
+    let mut history = Vec::new();
+    let densify_until = (cfg.steps as f64 * f64::from(cfg.densify_until)) as usize;
+    for step in 1..=cfg.steps {
+        let points = &batches[(step - 1) % n_batches];
+        let lg = model::loss_and_grad(&mdl, &loss_cfg, &grid, points);
+        if !lg.total().is_finite() || lg.grad.iter().any(|g| !g.is_finite()) {
+            return Err(format!(
+                "the optimisation diverged at step {step} (a non-finite loss or gradient); try other --scale-reg or --batch values"
+            ));
+        }
+        for (s, v) in score.iter_mut().zip(&lg.score) {
+            *s += v;
+        }
+        let t = (step - 1) as f32 / cfg.steps.max(2).saturating_sub(1) as f32;
+        let decay = cfg.lr_final_fraction.powf(t);
+        let lr: Vec<f32> = base_lr.iter().map(|l| l * decay).collect();
+        adam.step(&mut mdl.params, &lg.grad, &lr);
+        // Keep the parameters in range: quaternions unit, scales between 1e-3 and 0.5 of
+        // the diagonal, centres inside the bounds.
+        for g in mdl.params.chunks_exact_mut(stride) {
+            let q = &mut g[ROT..ROT + 4];
+            let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+            if norm > 1e-12 && norm.is_finite() {
+                q.iter_mut().for_each(|v| *v /= norm);
+            } else {
+                q.copy_from_slice(&[1.0, 0.0, 0.0, 0.0]);
+            }
+            for j in 0..3 {
+                g[SCALE + j] = g[SCALE + j].clamp(min_log_scale, max_log_scale);
+                g[j] = g[j].clamp(data.bounds[j], data.bounds[j + 3]);
+            }
+            g[LOGIT] = g[LOGIT].clamp(-12.0, 12.0);
+        }
+        if cfg.densify_every > 0
+            && step % cfg.densify_every == 0
+            && step <= densify_until
+            && step < cfg.steps
+        {
+            let before = mdl.len();
+            let pruned = optim::prune(&mut mdl, &mut adam, &mut score, cfg.min_opacity);
+            let room = cfg.max_gaussians.saturating_sub(mdl.len());
+            let budget = room.min((mdl.len() as f32 * cfg.grow_fraction).ceil() as usize);
+            let (cloned, split) = optim::densify(&mut mdl, &mut adam, &score, budget);
+            score = vec![0.0; mdl.len()];
+            history.push(DensityStep {
+                step,
+                before,
+                pruned,
+                cloned,
+                split,
+                after: mdl.len(),
+            });
+        }
+        progress(Progress {
+            step,
+            loss: lg.total(),
+            gaussians: mdl.len(),
+        });
+    }
+    // A last prune, so no Gaussian below --min-opacity is written.
+    let before = mdl.len();
+    let pruned = optim::prune(&mut mdl, &mut adam, &mut score, cfg.min_opacity);
+    history.push(DensityStep {
+        step: cfg.steps,
+        before,
+        pruned,
+        after: mdl.len(),
+        ..Default::default()
+    });
+    // Loss over all training samples.
+    let (mut num, mut den) = (0f64, 0f64);
+    for points in &batches {
+        let f = model::forward(&mdl, cfg.kernel, &grid, points);
+        let sum_w: f64 = points.weights.iter().map(|&w| f64::from(w)).sum();
+        num += model::data_loss(&f, points, k) * sum_w;
+        den += sum_w;
+    }
+    let reg_only = model::regulariser(&mdl, &loss_cfg, None);
+    let holdout_error = (!holdout.is_empty()).then(|| {
+        let f = model::forward(&mdl, cfg.kernel, &grid, &holdout);
+        let mut num = vec![0f64; k];
+        let mut den = vec![0f64; k];
+        for (fv, yv) in f.chunks_exact(k).zip(holdout.values.chunks_exact(k)) {
+            for c in 0..k {
+                num[c] += f64::from(fv[c] - yv[c]).powi(2);
+                den[c] += f64::from(yv[c]).powi(2);
+            }
+        }
+        let total = (num.iter().sum::<f64>() / den.iter().sum::<f64>().max(1e-300)).sqrt();
+        HoldoutError {
+            relative_l2: total,
+            per_channel: (0..k)
+                .map(|c| (num[c] / den[c].max(1e-300)).sqrt())
+                .collect(),
+        }
+    });
+    let m = cfg.magnitude_channel;
+    let range = (0..n)
+        .map(|i| data.values[i * k + m])
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    Ok(FitOutcome {
+        model: mdl,
+        history,
+        train_samples: train_idx.len(),
+        holdout_samples: n_hold,
+        final_loss: (num / den.max(1e-300), reg_only),
+        holdout: holdout_error,
+        magnitude_range: range,
+    })
+}
+
+/// The fitted Gaussians as a scene: features `feat_*`, colour (`f_dc`) from the turbo
+/// colormap of the fitted magnitude channel at each centre (the data's range of that
+/// channel mapped to 0..1), SH degree 0, the kernel recorded.
+pub fn to_scene(outcome: &FitOutcome, kernel: SplatKernel, magnitude_channel: usize) -> Scene {
+    let mdl = &outcome.model;
+    let k = mdl.k;
+    let centres: Vec<[f32; 3]> = (0..mdl.len())
+        .map(|i| {
+            let g = mdl.gaussian(i);
+            [g[0], g[1], g[2]]
+        })
+        .collect();
+    let f = model::evaluate(mdl, kernel, &centres);
+    let (lo, hi) = outcome.magnitude_range;
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let mut scene = Scene::empty(0);
+    scene.kernel = kernel;
+    for (i, &c) in centres.iter().enumerate() {
+        let g = mdl.gaussian(i);
+        scene.positions.push(c);
+        scene
+            .log_scales
+            .push([g[SCALE], g[SCALE + 1], g[SCALE + 2]]);
+        scene
+            .rotations
+            .push([g[ROT], g[ROT + 1], g[ROT + 2], g[ROT + 3]]);
+        scene.opacity_logits.push(g[LOGIT]);
+        let t = (f[i * k + magnitude_channel] - lo) / span;
+        let rgb = crate::output::turbo(t);
+        for v in rgb {
+            scene.sh.push((v - 0.5) / crate::cpu::sh::SH_C0);
+        }
+        scene.features.extend_from_slice(&g[FEAT..]);
+    }
+    scene.feature_count = k;
+    scene
+}
+
+#[cfg(test)]
+mod tests;
