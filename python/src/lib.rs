@@ -594,27 +594,47 @@ struct Want {
     features: bool,
 }
 
-/// Per-frame render options from keyword arguments.
-#[allow(clippy::too_many_arguments)]
-fn options(
+/// Per-frame options as the Python side passes them: background, SH degree, scale
+/// modifier, max scale, min opacity, antialiased (None: the scene's flag), kernel (None:
+/// the scene's).
+type OptTuple = (
+    [f32; 3],
+    Option<u32>,
+    f32,
+    Option<f32>,
+    Option<f32>,
+    Option<bool>,
+    Option<String>,
+);
+
+/// The planes wanted: rgb, alpha, depth, features.
+type WantTuple = (bool, bool, bool, bool);
+
+/// A checked render request.
+struct Request {
+    opts: RenderOptions,
+    cams: Vec<Camera>,
+    want: Want,
+}
+
+/// Checks the options, the cameras and the planes asked for.
+fn request(
     scene: &PyScene,
-    background: [f32; 3],
-    sh_degree: Option<u32>,
-    scale_modifier: f32,
-    max_scale: Option<f32>,
-    min_opacity: Option<f32>,
-    antialiased: Option<bool>,
-    kernel: Option<&str>,
-) -> PyResult<RenderOptions> {
-    let kernel = match kernel {
-        Some(k) => k.parse::<vksplat::cpu::SplatKernel>().map_err(value_err)?,
-        None => scene.raw.kernel,
-    };
+    cameras: &[CamTuple],
+    options: OptTuple,
+    want: WantTuple,
+) -> PyResult<Request> {
+    let (background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel) =
+        options;
     if let Some(d) = sh_degree {
         if d > 3 {
             return Err(value_err(format!("sh_degree must be 0 to 3, got {d}")));
         }
     }
+    let kernel = match kernel {
+        Some(k) => k.parse::<vksplat::cpu::SplatKernel>().map_err(value_err)?,
+        None => scene.raw.kernel,
+    };
     let opts = RenderOptions {
         background,
         antialiased: antialiased.unwrap_or(scene.raw.antialiased),
@@ -625,7 +645,18 @@ fn options(
         kernel,
     };
     opts.validate().map_err(value_err)?;
-    Ok(opts)
+    let (rgb, alpha, depth, features) = want;
+    check_features(scene, features)?;
+    Ok(Request {
+        opts,
+        cams: self::cameras(cameras)?,
+        want: Want {
+            rgb,
+            alpha,
+            depth,
+            features,
+        },
+    })
 }
 
 fn cameras(cams: &[CamTuple]) -> PyResult<Vec<Camera>> {
@@ -735,37 +766,16 @@ impl PyRenderer {
 
     /// Renders `cameras` (all of one size) of `scene`; returns the wanted planes of all
     /// frames, concatenated. The scene is uploaded only when it is not the last one.
-    #[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rgb, alpha, depth, features))]
-    #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
         py: Python<'py>,
         scene: &PyScene,
         cameras: Vec<CamTuple>,
-        background: [f32; 3],
-        sh_degree: Option<u32>,
-        scale_modifier: f32,
-        max_scale: Option<f32>,
-        min_opacity: Option<f32>,
-        antialiased: Option<bool>,
-        kernel: Option<&str>,
-        rgb: bool,
-        alpha: bool,
-        depth: bool,
-        features: bool,
+        options: OptTuple,
+        want: WantTuple,
     ) -> PyResult<Planes<'py>> {
-        let opts = options(
-            scene,
-            background,
-            sh_degree,
-            scale_modifier,
-            max_scale,
-            min_opacity,
-            antialiased,
-            kernel,
-        )?;
-        check_features(scene, features)?;
-        let cams = self::cameras(&cameras)?;
+        let Request { opts, cams, want } = request(scene, &cameras, options, want)?;
+        let features = want.features;
         let frames = py.detach(|| {
             guarded(|| {
                 let mut guard = self.state.lock().map_err(|_| {
@@ -810,12 +820,6 @@ impl PyRenderer {
                 Ok(frames)
             })
         })?;
-        let want = Want {
-            rgb,
-            alpha,
-            depth,
-            features,
-        };
         Ok(planes(py, &frames, &want))
     }
 
@@ -852,36 +856,15 @@ impl PyRenderer {
 /// Renders on the CPU reference renderer (rayon threads); same arguments as
 /// `Renderer.render`.
 #[pyfunction]
-#[pyo3(signature = (scene, cameras, background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rgb, alpha, depth, features))]
-#[allow(clippy::too_many_arguments)]
 fn render_cpu<'py>(
     py: Python<'py>,
     scene: &PyScene,
     cameras: Vec<CamTuple>,
-    background: [f32; 3],
-    sh_degree: Option<u32>,
-    scale_modifier: f32,
-    max_scale: Option<f32>,
-    min_opacity: Option<f32>,
-    antialiased: Option<bool>,
-    kernel: Option<&str>,
-    rgb: bool,
-    alpha: bool,
-    depth: bool,
-    features: bool,
+    options: OptTuple,
+    want: WantTuple,
 ) -> PyResult<Planes<'py>> {
-    let opts = options(
-        scene,
-        background,
-        sh_degree,
-        scale_modifier,
-        max_scale,
-        min_opacity,
-        antialiased,
-        kernel,
-    )?;
-    check_features(scene, features)?;
-    let cams = self::cameras(&cameras)?;
+    let Request { opts, cams, want } = request(scene, &cameras, options, want)?;
+    let features = want.features;
     let frames = py.detach(|| {
         guarded(|| {
             Ok(cams
@@ -896,16 +879,7 @@ fn render_cpu<'py>(
                 .collect::<Vec<_>>())
         })
     })?;
-    Ok(planes(
-        py,
-        &frames,
-        &Want {
-            rgb,
-            alpha,
-            depth,
-            features,
-        },
-    ))
+    Ok(planes(py, &frames, &want))
 }
 
 // ---------------------------------------------------------------------------------------

@@ -439,19 +439,24 @@ def _cameras(
     return [Camera(vm, K, width, height)], False
 
 
-def _options(
-    background: ArrayLike, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
-):
-    bg = [float(x) for x in _floats("background", background, (3,))]
-    return (
-        bg,
-        sh_degree,
-        float(scale_modifier),
-        None if max_scale is None else float(max_scale),
-        None if min_opacity is None else float(min_opacity),
-        antialiased,
-        kernel,
+def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[str, np.ndarray]:
+    """The shared body of ``Renderer.render`` and ``render_cpu``: checks the arguments,
+    calls the native renderer and wraps its planes as arrays."""
+    want = _mode(kw["mode"])
+    cams, batch = _cameras(camera, kw["viewmat"], kw["K"], kw["width"], kw["height"])
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
+    opts = (
+        [float(x) for x in _floats("background", kw["background"], (3,))],
+        kw["sh_degree"],
+        float(kw["scale_modifier"]),
+        None if kw["max_scale"] is None else float(kw["max_scale"]),
+        None if kw["min_opacity"] is None else float(kw["min_opacity"]),
+        kw["antialiased"],
+        kw["kernel"],
     )
+    planes = native_render(scene._s, [c._tuple() for c in cams], opts, want)
+    return _outputs(planes, cams, batch, want, scene.feature_count)
 
 
 def _outputs(planes, cams: List[Camera], batch: bool, want, k: int) -> Dict[str, np.ndarray]:
@@ -523,15 +528,8 @@ class Renderer:
         batch: arrays gain a leading ``B``. ``max_scale``/``min_opacity`` drop
         Gaussians for this frame only, exactly as ``--max-scale``/``--min-opacity``.
         The GIL is released while rendering."""
-        want = _mode(mode)
-        cams, batch = _cameras(camera, viewmat, K, width, height)
-        if not isinstance(scene, Scene):
-            raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
-        opts = _options(
-            background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
-        )
-        planes = self._r.render(scene._s, [c._tuple() for c in cams], *opts, *want)
-        return _outputs(planes, cams, batch, want, scene.feature_count)
+        kw = dict(locals())
+        return _render(self._r.render, kw.pop("scene"), kw.pop("camera"), kw)
 
 
 def render_cpu(
@@ -553,15 +551,8 @@ def render_cpu(
 ) -> Dict[str, np.ndarray]:
     """``Renderer.render`` on the CPU reference renderer (the original 3DGS rasterizer's
     rules in f32, multithreaded): the yardstick the GPU is checked against."""
-    want = _mode(mode)
-    cams, batch = _cameras(camera, viewmat, K, width, height)
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
-    opts = _options(
-        background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
-    )
-    planes = _native.render_cpu(scene._s, [c._tuple() for c in cams], *opts, *want)
-    return _outputs(planes, cams, batch, want, scene.feature_count)
+    kw = dict(locals())
+    return _render(_native.render_cpu, kw.pop("scene"), kw.pop("camera"), kw)
 
 
 # ---------------------------------------------------------------------------------------

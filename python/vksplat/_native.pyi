@@ -3,6 +3,10 @@
 from typing import Dict, List, Optional, Sequence, Tuple
 
 CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float]]
+# background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
+Options = Tuple[
+    Sequence[float], Optional[int], float, Optional[float], Optional[float], Optional[bool], Optional[str]
+]
 Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray], Optional[bytearray]]
 
 __version__: str
@@ -42,17 +46,8 @@ class Renderer:
         self,
         scene: Scene,
         cameras: List[CamTuple],
-        background: Sequence[float],
-        sh_degree: Optional[int],
-        scale_modifier: float,
-        max_scale: Optional[float],
-        min_opacity: Optional[float],
-        antialiased: Optional[bool],
-        kernel: Optional[str],
-        rgb: bool,
-        alpha: bool,
-        depth: bool,
-        features: bool,
+        options: Options,
+        want: Tuple[bool, bool, bool, bool],
     ) -> Planes: ...
 
 def load(path: str, iteration: Optional[int] = None) -> Scene: ...
@@ -98,17 +93,8 @@ def bulk_centre(scene: Scene) -> List[float]: ...
 def render_cpu(
     scene: Scene,
     cameras: List[CamTuple],
-    background: Sequence[float],
-    sh_degree: Optional[int],
-    scale_modifier: float,
-    max_scale: Optional[float],
-    min_opacity: Optional[float],
-    antialiased: Optional[bool],
-    kernel: Optional[str],
-    rgb: bool,
-    alpha: bool,
-    depth: bool,
-    features: bool,
+    options: Options,
+    want: Tuple[bool, bool, bool, bool],
 ) -> Planes: ...
 def read_image(path: str) -> Tuple[int, int, List[str], bytearray]: ...
 def compare(
