@@ -714,6 +714,9 @@ fn readme_and_help_agree() {
         "--bins",
         "--ignored",
         "--nocapture",
+        // tools/colormap_shader.py in the RF walkthrough.
+        "--channel",
+        "--range",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {
