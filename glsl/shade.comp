@@ -24,13 +24,14 @@ layout(push_constant) uniform ShadeParams {
 
 // 4 * MAX_LAYERS header words (inputs, outputs, activation, float offset), then the
 // weights and biases as float bits.
-layout(std430, binding = 0) readonly buffer MlpBuf { uint words[]; };
+// Read through a texel view (R32_UINT): see src/render/shade.rs.
+layout(binding = 0) uniform usamplerBuffer words_view;
 // Feature planes: group g's vec4 of pixel i at g * plane stride + i.
 layout(std430, binding = 1) readonly buffer FeatureBuf { vec4 features[]; };
 layout(binding = 2, rgba32f) uniform image2D color;  // rgb + T * background, alpha = 1 - T
 
 float weight(uint i) {
-    return uintBitsToFloat(words[4u * MAX_LAYERS + i]);
+    return uintBitsToFloat(texelFetch(words_view, int(4u * MAX_LAYERS + i)).x);
 }
 
 float activate(uint kind, float x) {
@@ -72,10 +73,10 @@ void main() {
 
     uint cur = 0u;
     for (uint l = 0u; l < p.code.y; l++) {
-        uint ins = words[4u * l];
-        uint outs = words[4u * l + 1u];
-        uint kind = words[4u * l + 2u];
-        uint base = words[4u * l + 3u];
+        uint ins = texelFetch(words_view, int(4u * l)).x;
+        uint outs = texelFetch(words_view, int(4u * l + 1u)).x;
+        uint kind = texelFetch(words_view, int(4u * l + 2u)).x;
+        uint base = texelFetch(words_view, int(4u * l + 3u)).x;
         uint next = MAX_WIDTH - cur;
         for (uint o = 0u; o < outs; o++) {
             // Bias first, then the products in input order: the CPU reference's order.

@@ -4,7 +4,8 @@
 use crate::camera::Camera;
 use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{
-    BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuImage, GpuResult, MemoryKind,
+    BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuImage, GpuResult,
+    MemoryKind,
 };
 use crate::mlp::Mlp;
 use ash::vk;
@@ -27,6 +28,9 @@ const _: () = assert!(std::mem::size_of::<ShadePush>() == 112);
 
 /// A neural shader on the device.
 pub struct GpuShader {
+    /// The words as an R32_UINT texel view: on CPU devices a loop-indexed storage-buffer
+    /// load becomes a per-lane scalar loop, a texel fetch does not.
+    view: BufferView,
     words: GpuBuffer,
     channels: usize,
     layers: u32,
@@ -39,6 +43,13 @@ impl GpuShader {
     /// Uploads `mlp`.
     pub fn new(ctx: &GpuContext, mlp: &Mlp) -> GpuResult<Self> {
         let words = mlp.gpu_words();
+        let max = u64::from(ctx.info().max_texel_buffer_elements);
+        if words.len() as u64 > max {
+            return Err(crate::gpu::GpuError::InvalidArgument(format!(
+                "the neural shader's {} weights exceed the {max} texels this device reads from one texel buffer (maxTexelBufferElements); use a smaller network",
+                words.len()
+            )));
+        }
         let buf = GpuBuffer::new(
             ctx,
             "neural shader weights",
@@ -46,6 +57,7 @@ impl GpuShader {
             MemoryKind::Device,
         )?;
         buf.upload(ctx, &words)?;
+        let view = BufferView::new(ctx, &buf, vk::Format::R32_UINT, 0, buf.size())?;
         let iterations = mlp
             .layers
             .iter()
@@ -53,6 +65,7 @@ impl GpuShader {
             .sum::<u64>()
             + (mlp.feature_channels() + mlp.extra_inputs()) as u64;
         Ok(GpuShader {
+            view,
             words: buf,
             channels: mlp.feature_channels(),
             layers: mlp.layers.len() as u32,
@@ -85,7 +98,7 @@ impl Shade {
             "shade",
             &[],
             &[
-                BindingKind::StorageBuffer,
+                BindingKind::UniformTexelBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::StorageImage,
             ],
@@ -130,7 +143,7 @@ impl Shade {
             ctx,
             cmd,
             &[
-                Resource::Buffer(shader.words.whole()),
+                Resource::TexelBuffer(shader.view.handle()),
                 Resource::Buffer(features),
                 Resource::Image {
                     view: color.view(),
