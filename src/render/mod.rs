@@ -613,22 +613,7 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Frame> {
-        if features.count != scene.count {
-            return Err(GpuError::InvalidArgument(format!(
-                "the features were uploaded for {} Gaussians, the scene has {}",
-                features.count, scene.count
-            )));
-        }
-        let slot = opts.kernel.shader_id() as usize;
-        if self.feature_blends[slot].is_none() {
-            self.feature_blends[slot] = Some(features::FeatureBlend::new(
-                &self.ctx,
-                opts.kernel,
-                self.blend.needs_texel_views(),
-            )?);
-        }
-        let pixels = u64::from(cam.width) * u64::from(cam.height);
-        self.ensure_feature_planes(features, pixels)?;
+        let pixels = self.prepare_features(scene, features, cam, opts)?;
         self.render_frame_with(scene, cam, opts, Readback::Float, Some((features, None)))?;
         let mut frame = self.read_frame(cam)?;
         frame.feature_count = features.channels;
@@ -647,12 +632,7 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Frame> {
-        if features.count != scene.count {
-            return Err(GpuError::InvalidArgument(format!(
-                "the features were uploaded for {} Gaussians, the scene has {}",
-                features.count, scene.count
-            )));
-        }
+        self.prepare_features(scene, features, cam, opts)?;
         if shader.channels() != features.channels {
             return Err(GpuError::InvalidArgument(format!(
                 "the shader takes {} feature channels but the scene has {}",
@@ -667,19 +647,9 @@ impl GpuRenderer {
                 self.ctx.info().name
             )));
         }
-        let slot = opts.kernel.shader_id() as usize;
-        if self.feature_blends[slot].is_none() {
-            self.feature_blends[slot] = Some(features::FeatureBlend::new(
-                &self.ctx,
-                opts.kernel,
-                self.blend.needs_texel_views(),
-            )?);
-        }
         if self.shade.is_none() {
             self.shade = Some(shade::Shade::new(&self.ctx)?);
         }
-        let pixels = u64::from(cam.width) * u64::from(cam.height);
-        self.ensure_feature_planes(features, pixels)?;
         self.render_frame_with(
             scene,
             cam,
@@ -688,6 +658,35 @@ impl GpuRenderer {
             Some((features, Some(shader))),
         )?;
         self.read_frame(cam)
+    }
+
+    /// What every features frame needs before it is recorded: features uploaded for this
+    /// scene, the feature blend pipeline of the frame's kernel, and feature planes of the
+    /// frame's size. Returns the frame's pixel count.
+    fn prepare_features(
+        &mut self,
+        scene: &GpuScene,
+        features: &GpuFeatures,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<u64> {
+        if features.count != scene.count {
+            return Err(GpuError::InvalidArgument(format!(
+                "the features were uploaded for {} Gaussians, the scene has {}",
+                features.count, scene.count
+            )));
+        }
+        let slot = opts.kernel.shader_id() as usize;
+        if self.feature_blends[slot].is_none() {
+            self.feature_blends[slot] = Some(features::FeatureBlend::new(
+                &self.ctx,
+                opts.kernel,
+                self.blend.needs_texel_views(),
+            )?);
+        }
+        let pixels = u64::from(cam.width) * u64::from(cam.height);
+        self.ensure_feature_planes(features, pixels)?;
+        Ok(pixels)
     }
 
     /// Makes the feature planes hold `features`' groups for `pixels` pixels.
