@@ -332,33 +332,9 @@ pub fn encode_exr_channels(
         list.push(AnyChannel::new("A", samples(frame.alpha.clone())));
     }
     if channels.depth {
-        let z = frame
-            .depth
-            .iter()
-            .zip(&frame.alpha)
-            .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
-            .collect();
-        list.push(AnyChannel::new("Z", FlatSamples::F32(z)));
+        list.push(exr_depth_channel(frame));
     }
-    let mut attributes = LayerAttributes::named("vksplat");
-    if let Some(cam) = camera {
-        attributes.world_to_camera = Some(exr_world_to_camera(cam));
-        attributes.world_to_normalized_device = Some(exr_world_to_ndc(cam));
-    }
-    let layer = Layer::new(
-        (frame.width as usize, frame.height as usize),
-        attributes,
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(SmallVec::from_vec(list)),
-    );
-    Image::from_layer(layer)
-        .write()
-        .non_parallel()
-        .to_buffered(out)
-        .map_err(|e| OutputError::Encode {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })
+    write_exr_layer(list, frame, camera, out, path)
 }
 
 /// Straight (un-premultiplied) colour for an RGBA PNG: the frame's colour without its
@@ -821,13 +797,31 @@ pub fn encode_exr_features(
         })
         .collect();
     list.push(AnyChannel::new("A", samples(frame.alpha.clone())));
+    list.push(exr_depth_channel(frame));
+    write_exr_layer(list, frame, camera, out, path)
+}
+
+/// The EXR `Z` channel of a frame: always 32-bit, +inf where nothing was hit.
+fn exr_depth_channel(frame: &Frame) -> exr::prelude::AnyChannel<exr::prelude::FlatSamples> {
+    use exr::prelude::*;
     let z = frame
         .depth
         .iter()
         .zip(&frame.alpha)
         .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
         .collect();
-    list.push(AnyChannel::new("Z", FlatSamples::F32(z)));
+    AnyChannel::new("Z", FlatSamples::F32(z))
+}
+
+/// Writes `channels` as one EXR layer of the frame's size, with the camera's matrices.
+fn write_exr_layer(
+    channels: Vec<exr::prelude::AnyChannel<exr::prelude::FlatSamples>>,
+    frame: &Frame,
+    camera: Option<&Camera>,
+    out: &mut (impl Write + std::io::Seek),
+    path: &Path,
+) -> Result<(), OutputError> {
+    use exr::prelude::*;
     let mut attributes = LayerAttributes::named("vksplat");
     if let Some(cam) = camera {
         attributes.world_to_camera = Some(exr_world_to_camera(cam));
@@ -837,7 +831,7 @@ pub fn encode_exr_features(
         (frame.width as usize, frame.height as usize),
         attributes,
         Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(SmallVec::from_vec(list)),
+        AnyChannels::sort(SmallVec::from_vec(channels)),
     );
     Image::from_layer(layer)
         .write()
