@@ -80,8 +80,23 @@ pub enum ShaderError {
     },
 }
 
-fn embedded(name: &str) -> Option<&'static str> {
-    SOURCES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+/// The source of `glsl/<name>`: read from `$VKSPLAT_GLSL_DIR/<name>` when that variable is
+/// set (shader development: edit and re-run without rebuilding; such compiles skip the
+/// SPIR-V cache), else the copy embedded in the binary.
+fn embedded(name: &str) -> Option<String> {
+    if let Some(dir) = glsl_dir() {
+        if let Ok(text) = std::fs::read_to_string(dir.join(name)) {
+            return Some(text);
+        }
+    }
+    SOURCES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, s)| (*s).to_string())
+}
+
+fn glsl_dir() -> Option<std::path::PathBuf> {
+    std::env::var_os("VKSPLAT_GLSL_DIR").map(std::path::PathBuf::from)
 }
 
 /// Compiles GLSL compute source to SPIR-V for Vulkan 1.3 with optimisation.
@@ -115,7 +130,7 @@ pub fn compile_glsl(
         embedded(requested)
             .map(|content| shaderc::ResolvedInclude {
                 resolved_name: format!("glsl/{requested}"),
-                content: content.to_string(),
+                content,
             })
             .ok_or_else(|| format!("no embedded include named glsl/{requested}"))
     });
@@ -152,12 +167,13 @@ pub fn compile_embedded_cached(
 ) -> Result<Vec<u32>, ShaderError> {
     let file = format!("{name}.comp");
     let source = embedded(&file).ok_or(ShaderError::Unknown(file))?;
+    let cache_dir = cache_dir.filter(|_| glsl_dir().is_none());
     let cached =
         cache_dir.map(|dir| dir.join(format!("{name}-{:016x}.spv", cache_key(name, defines))));
     if let Some(words) = cached.as_deref().and_then(read_spirv) {
         return Ok(words);
     }
-    let words = compile_glsl(name, source, defines)?;
+    let words = compile_glsl(name, &source, defines)?;
     if let Some(path) = cached {
         write_spirv(&path, &words);
     }
