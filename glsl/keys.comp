@@ -17,6 +17,7 @@ layout(std430, binding = 4) writeonly buffer KeyBuf { uvec2 keys[]; };
 layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) readonly buffer OrderBuf { uint depth_order[]; };
+layout(std430, binding = 8) readonly buffer BinMaskBuf { uint bin_masks[]; };
 
 #define RANGES_WORKGROUP 256u
 
@@ -48,22 +49,39 @@ void main() {
     uint off = offsets[k];
     // This Gaussian's slots end where the next one's begin (or at the scan total).
     uint end = k + 1u < params.counts.x ? offsets[k + 1u] : counters.scan_total;
-    uint y = bmin.y;
-    uint x = bmax.x;
-    for (; y < bmax.y; y++) {
-        for (x = bmin.x; x < bmax.x; x++) {
-            // The same test preprocess counted with (tile_receives in splat_common.glsl).
-            if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
-            if (off < min(end, capacity)) {
+    uint limit = min(end, capacity);
+    uint w = bmax.x - bmin.x;
+    if (w * (bmax.y - bmin.y) <= BIN_MASK_BINS) {
+        // The bins preprocess found, in the same row-major order.
+        uint mask = bin_masks[i];
+        while (mask != 0u) {
+            uint j = uint(findLSB(mask));
+            mask &= mask - 1u;
+            uint y = bmin.y + j / w, x = bmin.x + j % w;
+            if (off < limit) {
                 keys[off] = uvec2(depth_bits, y * bins_x + x);
                 values[off] = i;
             }
             off++;
         }
-    }
-    // Cut off (see LOOP_REPORT): both loops must have run to their ends.
-    if (y < bmax.y || x < bmax.x) {
-        REPORT_LOOP(counters.max_bins_loop, (bmax.x - bmin.x + 1u) * (bmax.y - bmin.y) + 16u);
+    } else {
+        uint y = bmin.y;
+        uint x = bmax.x;
+        for (; y < bmax.y; y++) {
+            for (x = bmin.x; x < bmax.x; x++) {
+                // The same test preprocess counted with (tile_receives in splat_common.glsl).
+                if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
+                if (off < limit) {
+                    keys[off] = uvec2(depth_bits, y * bins_x + x);
+                    values[off] = i;
+                }
+                off++;
+            }
+        }
+        // Cut off (see LOOP_REPORT): both loops must have run to their ends.
+        if (y < bmax.y || x < bmax.x) {
+            REPORT_LOOP(counters.max_bins_loop, (bmax.x - bmin.x + 1u) * (bmax.y - bmin.y) + 16u);
+        }
     }
     for (; off < min(end, capacity); off++) {
         keys[off] = uvec2(0xFFFFFFFFu, SENTINEL_TILE);

@@ -20,6 +20,8 @@ layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
 layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uvec2 depth_keys[]; };  // (depth bits or ~0 when culled, tiles touched)
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) writeonly buffer DepthValueBuf { uint depth_values[]; };
+// Which bins of a small rectangle receive the splat (see BIN_MASK_BINS in splat_common).
+layout(std430, binding = 8) writeonly buffer BinMaskBuf { uint bin_masks[]; };
 
 const float SH_C0 = 0.28209479177387814;
 const float SH_C1 = 0.4886025119029199;
@@ -84,6 +86,7 @@ void main() {
     uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
     uint n = params.counts.x;
     uint touched = 0u;
+    uint mask = 0u;
     if (gl_LocalInvocationIndex == 0u) s_visible = 0u;
     if (i < n) {
         Gaussian g = gaussians[i];
@@ -152,9 +155,13 @@ void main() {
                 uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
                 uint by = bmin.y;
                 uint bx = bmax.x;
+                uint bit = 1u;  // bit of bin (bx, by) in row-major order; 0 past the 32nd
                 for (; by < bmax.y; by++) {
                     for (bx = bmin.x; bx < bmax.x; bx++) {
-                        touched += tile_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x) ? 1u : 0u;
+                        bool receives = tile_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x);
+                        touched += receives ? 1u : 0u;
+                        mask |= receives ? bit : 0u;
+                        bit <<= 1u;
                     }
                 }
                 // Cut off (see LOOP_REPORT): both loops must have run to their ends.
@@ -177,10 +184,12 @@ void main() {
         // Culled Gaussians sort after every visible one.
         depth_keys[i] = uvec2(touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu, touched);
         depth_values[i] = i;
+        bin_masks[i] = touched != 0u ? mask : 0u;
     }
     // Exact 64-bit total of tiles touched (each term < 2^20 tiles).
     uint sum = workgroup_sum_256(touched);
-    if (touched != 0u) atomicAdd(s_visible, 1u);
+    uint visible = subgroupAdd(touched != 0u ? 1u : 0u);
+    if (subgroupElect() && visible != 0u) atomicAdd(s_visible, visible);
     barrier();
     if (gl_LocalInvocationIndex == 0u && sum != 0u) {
         ATOMIC_ADD_U64(counters.touched_lo, counters.touched_hi, sum);

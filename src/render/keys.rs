@@ -31,6 +31,8 @@ pub struct KeysBindings<'a> {
     pub counters: BufferSlice<'a>,
     /// Gaussian indices in depth order.
     pub depth_order: BufferSlice<'a>,
+    /// Receiving bins of small tile rectangles, from preprocess.
+    pub bin_masks: BufferSlice<'a>,
 }
 
 impl Keys {
@@ -40,7 +42,7 @@ impl Keys {
             ctx,
             "keys",
             &[],
-            &[BindingKind::StorageBuffer; 8],
+            &[BindingKind::StorageBuffer; 9],
             0,
             WORKGROUP,
         )?;
@@ -72,6 +74,7 @@ impl Keys {
                 b.values,
                 b.counters,
                 b.depth_order,
+                b.bin_masks,
             ],
             &[],
             groups,

@@ -30,6 +30,8 @@ pub struct PreprocessBindings<'a> {
     pub counters: BufferSlice<'a>,
     /// Gaussian index per Gaussian, the depth sort's values (written).
     pub depth_values: BufferSlice<'a>,
+    /// Receiving bins of small tile rectangles, one bit per bin (written).
+    pub bin_masks: BufferSlice<'a>,
 }
 
 impl Preprocess {
@@ -43,6 +45,7 @@ impl Preprocess {
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::UniformTexelBuffer,
+                BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
@@ -76,6 +79,7 @@ impl Preprocess {
                 Resource::Buffer(b.depth_keys),
                 Resource::Buffer(b.counters),
                 Resource::Buffer(b.depth_values),
+                Resource::Buffer(b.bin_masks),
             ],
             &[],
             groups,
