@@ -22,6 +22,12 @@ echo "## blend kernels, playbot_lod2_125k_sh2 1280x720"
 for k in shared texel texel:2 texel:4 texel:8; do
   echo "### VKSPLAT_BLEND=$k"; VKSPLAT_BLEND=$k $B bench $D/playbot_lod2_125k_sh2.ply --cameras $PC --frames 5 --warmup 1 | grep -E "blend kernel|^blend|wall"
 done
+echo "## where llvmpipe spends the LOD2 frame (perf samples per shader block)"
+if command -v perf >/dev/null; then
+  python3 tools/profile_stages.py --binary $B --frames 5 -- $D/playbot_lod2_125k_sh2.ply --cameras $PC
+else
+  echo "perf not installed: skipped"
+fi
 echo "## CPU reference, playbot_lod2_125k_sh2 1280x720"
 $B bench $D/playbot_lod2_125k_sh2.ply --cameras $PC --frames 5 --warmup 1 --cpu
 echo "## scaling sweep (synthetic scenes, SH 2, default camera)"
