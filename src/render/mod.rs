@@ -16,6 +16,13 @@
 //! preprocess stage counts the exact 64-bit total, so after the frame the host sees whether
 //! the capacity sufficed. Only when a frame proves it too small are the buffers grown and
 //! the frame recorded again; the CPU never waits in the middle of a frame.
+//!
+//! Frames in flight: [`GpuRenderer::submit`] records and submits a frame and returns a
+//! [`Ticket`]; [`GpuRenderer::finish`] waits for it, checks its counters (recording it
+//! again when it needs more), and reads it back. Each of the (at most two) frames in flight
+//! has its own command buffer, fence, timestamp queries and frame buffers, so frame n+1
+//! renders while frame n is read back ([`path::GpuPath`] drives camera paths this way).
+//! [`GpuRenderer::render`] is a submit followed by its finish.
 
 pub mod blend;
 pub mod features;
@@ -396,6 +403,10 @@ impl FrameBuffers {
 
 /// The GPU renderer: pipelines, per-frame buffers and the timestamp pool.
 pub struct GpuRenderer {
+    /// The resources of each frame in flight: one set, and a second one made when a frame
+    /// is submitted while another is still in flight ([`Self::submit`]). First, so that
+    /// it drops first: a set waits for a frame still in flight before the pipelines go.
+    sets: Vec<FrameSet>,
     preprocess: preprocess::Preprocess,
     order: order::Order,
     scan: Scan,
@@ -411,9 +422,6 @@ pub struct GpuRenderer {
     /// The neural shader's pipeline, built on first use.
     shade: Option<shade::Shade>,
     pack: pack::Pack,
-    /// The resources of each frame in flight: one set, and a second one made when a frame
-    /// is submitted while another is still in flight ([`Self::submit`]).
-    sets: Vec<FrameSet>,
     /// The set of the last finished frame (what [`Self::render_with_intermediates`] reads).
     last: usize,
     /// Key capacity the frames have needed so far (the largest set's); a new or resized
