@@ -11,7 +11,7 @@
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::output::{self, FileSpec, OutputOptions};
-use std::collections::HashSet;
+use std::collections::{HashSet, VecDeque};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -523,6 +523,9 @@ pub struct RunOptions {
     /// Set (by a Ctrl-C / SIGTERM handler) to stop before the next frame: frames already
     /// rendered are written completely, and the summary says the run was interrupted.
     pub cancel: Option<Arc<AtomicBool>>,
+    /// Frames in flight with [`run_pipelined`]: 2 submits frame `n + 1` before frame `n`
+    /// is read back; 1 renders one frame at a time. [`run`] always renders one at a time.
+    pub frames_in_flight: usize,
 }
 
 impl Default for RunOptions {
@@ -534,6 +537,7 @@ impl Default for RunOptions {
             progress: ProgressStyle::Auto,
             skip_existing: false,
             cancel: None,
+            frames_in_flight: 1,
         }
     }
 }
@@ -635,14 +639,71 @@ impl Progress {
     }
 }
 
+/// A renderer that may keep several frames in flight: [`run_pipelined`] submits frame
+/// `n + 1` before it finishes frame `n`.
+pub trait FrameSource {
+    /// Starts rendering `cam` (recorded and submitted; not waited for).
+    fn submit(&mut self, cam: &Camera) -> anyhow::Result<()>;
+    /// Waits for the oldest frame submitted and not finished yet, and reads it back.
+    fn finish(&mut self) -> anyhow::Result<Frame>;
+    /// Drops the frames submitted and not finished (after an error stopped the run).
+    fn discard(&mut self);
+}
+
+/// A closure rendering one frame at a time as a [`FrameSource`]: it renders in
+/// `submit` and hands the frame over in `finish`.
+struct OneAtATime<'r> {
+    render: &'r mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
+    done: VecDeque<Frame>,
+}
+
+impl FrameSource for OneAtATime<'_> {
+    fn submit(&mut self, cam: &Camera) -> anyhow::Result<()> {
+        let frame = (self.render)(cam)?;
+        self.done.push_back(frame);
+        Ok(())
+    }
+
+    fn finish(&mut self) -> anyhow::Result<Frame> {
+        self.done
+            .pop_front()
+            .ok_or_else(|| anyhow::anyhow!("no frame was submitted"))
+    }
+
+    fn discard(&mut self) {
+        self.done.clear();
+    }
+}
+
 /// Renders every planned frame with `render` and writes its files. With
 /// `encode_threads > 0`, frames are encoded and written on worker threads while the next
 /// frame renders (at most `queue_depth` rendered frames wait). The first error stops the
 /// run: frames already handed to the encoders are finished, so every file on disk is
-/// complete, and the error says how many frames were written.
+/// complete, and the error says how many frames were written. One frame is rendered at a
+/// time ([`RunOptions::frames_in_flight`] does not apply; see [`run_pipelined`]).
 pub fn run(
     frames: &[FramePlan],
     render: &mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
+    opts: &RunOptions,
+) -> Result<Summary, SequenceError> {
+    let mut source = OneAtATime {
+        render,
+        done: VecDeque::new(),
+    };
+    let opts = RunOptions {
+        frames_in_flight: 1,
+        ..opts.clone()
+    };
+    run_pipelined(frames, &mut source, &opts)
+}
+
+/// [`run`] with a renderer that keeps up to [`RunOptions::frames_in_flight`] frames in
+/// flight: frame `n + 1` is submitted before frame `n` is finished (read back) and handed
+/// to the encoders. Files, errors and their frame numbers are those of [`run`]: a frame
+/// that fails to submit is reported after the frames before it are written.
+pub fn run_pipelined(
+    frames: &[FramePlan],
+    source: &mut dyn FrameSource,
     opts: &RunOptions,
 ) -> Result<Summary, SequenceError> {
     let start = Instant::now();
@@ -679,11 +740,13 @@ pub fn run(
             }
         }
     };
+    let depth = opts.frames_in_flight.max(1);
     if opts.encode_threads == 0 {
         render_frames(
             frames,
             opts.cancel.as_deref(),
-            render,
+            depth,
+            source,
             &mut summary,
             &mut failure,
             |frame, p, summary, failure| {
@@ -713,7 +776,8 @@ pub fn run(
             render_frames(
                 frames,
                 opts.cancel.as_deref(),
-                render,
+                depth,
+                source,
                 &mut summary,
                 &mut failure,
                 |frame, p, summary, failure| {
@@ -747,39 +811,73 @@ pub fn run(
 /// already written by another process, or the error.
 type Written = Result<(f64, usize), output::OutputError>;
 
-/// Renders `frames` in order and hands each to `deliver`, until the first render error or
-/// until `deliver` has recorded a failure.
+/// Renders `frames` in order, up to `depth` in flight, and hands each to `deliver` in
+/// order, until the first render error or until `deliver` has recorded a failure.
 fn render_frames(
     frames: &[FramePlan],
     cancel: Option<&AtomicBool>,
-    render: &mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
+    depth: usize,
+    source: &mut dyn FrameSource,
     summary: &mut Summary,
     failure: &mut Option<SequenceError>,
     mut deliver: impl FnMut(Frame, &FramePlan, &mut Summary, &mut Option<SequenceError>),
 ) {
-    for p in frames {
+    let render_error = |p: &FramePlan, e: anyhow::Error| SequenceError::Render {
+        index: p.index,
+        message: format!("{e:#}"),
+        // Filled in once the frames handed over are written.
+        written: 0,
+    };
+    let mut next = frames.iter();
+    let mut in_flight: VecDeque<&FramePlan> = VecDeque::new();
+    // A frame that failed to submit: reported once the frames before it are delivered.
+    let mut submit_failure = None;
+    let mut submitting = true;
+    loop {
+        while submitting && in_flight.len() < depth && failure.is_none() {
+            if cancel.is_some_and(|c| c.load(Ordering::SeqCst)) {
+                // Frames in flight are rendered already: they are finished and written.
+                summary.interrupted = true;
+                submitting = false;
+                break;
+            }
+            let Some(p) = next.next() else {
+                submitting = false;
+                break;
+            };
+            let t = Instant::now();
+            let submitted = source.submit(&p.camera);
+            summary.render_s += t.elapsed().as_secs_f64();
+            match submitted {
+                Ok(()) => in_flight.push_back(p),
+                Err(e) => {
+                    submit_failure = Some(render_error(p, e));
+                    submitting = false;
+                }
+            }
+        }
         if failure.is_some() {
-            return;
+            break;
         }
-        if cancel.is_some_and(|c| c.load(Ordering::SeqCst)) {
-            summary.interrupted = true;
-            return;
-        }
+        let Some(p) = in_flight.pop_front() else {
+            break;
+        };
         let t = Instant::now();
-        match render(&p.camera) {
-            Ok(frame) => {
-                summary.render_s += t.elapsed().as_secs_f64();
-                deliver(frame, p, summary, failure);
-            }
+        let finished = source.finish();
+        summary.render_s += t.elapsed().as_secs_f64();
+        match finished {
+            Ok(frame) => deliver(frame, p, summary, failure),
             Err(e) => {
-                *failure = Some(SequenceError::Render {
-                    index: p.index,
-                    message: format!("{e:#}"),
-                    // Filled in once the frames handed over are written.
-                    written: 0,
-                });
+                *failure = Some(render_error(p, e));
+                break;
             }
         }
+    }
+    if !in_flight.is_empty() {
+        source.discard();
+    }
+    if failure.is_none() {
+        *failure = submit_failure;
     }
 }
 

@@ -13,6 +13,7 @@ use std::sync::Arc;
 use vksplat::camera::Camera;
 use vksplat::note;
 use vksplat::output::{self, FileContent};
+use vksplat::render::path::GpuPath;
 use vksplat::render::GpuRenderer;
 use vksplat::sequence::{Existing, FrameSelection, OutputPattern, ProgressStyle, Summary};
 
@@ -123,6 +124,11 @@ pub(crate) struct RenderArgs {
     /// the rendering thread; at most 64).
     #[arg(long, value_name = "N", default_value_t = vksplat::sequence::default_encode_threads(), value_parser = values::int_in(0usize, 64))]
     pub(crate) encode_threads: usize,
+    /// Frames of a path in flight on the device: 2 records and submits frame n+1 before
+    /// frame n is read back and encoded (two sets of per-frame buffers); 1 renders one
+    /// frame at a time. The files are the same either way [default: 2].
+    #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 2))]
+    pub(crate) frames_in_flight: Option<usize>,
     /// No progress display (the summary is still printed).
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -237,6 +243,7 @@ fn check_cpu_options(args: &RenderArgs) -> Result<()> {
         ("--device", g.device.is_some()),
         ("--memory-limit", g.memory_limit.is_some()),
         ("--validate", g.validate),
+        ("--frames-in-flight", args.frames_in_flight.is_some()),
     ];
     if let Some((flag, _)) = gpu_only.iter().find(|(_, set)| *set) {
         bail!("{flag} applies to the Vulkan pipeline; --cpu renders with the CPU reference");
@@ -399,6 +406,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         },
         skip_existing: args.skip_existing,
         cancel: Some(interrupt_flag()),
+        frames_in_flight: args.frames_in_flight.unwrap_or(2),
     };
     let act = scene.activated();
     let (summary, how) = if args.cpu {
@@ -601,18 +609,17 @@ fn render_gpu(
     };
     let mut sums = StageSums::default();
     let mut last_stats = None;
-    let mut render = |cam: &Camera| -> Result<vksplat::frame::Frame> {
-        let frame = match (&gpu_features, &gpu_shader) {
-            (Some(f), Some(s)) => renderer.render_shaded(&gpu_scene, f, s, cam, opts)?,
-            (Some(f), None) => renderer.render_features(&gpu_scene, f, cam, opts)?,
-            _ => renderer.render(&gpu_scene, cam, opts)?,
-        };
-        let t = renderer.timings();
-        sums.add(&t.stages(), t.total);
-        last_stats = Some(renderer.stats().clone());
-        Ok(frame)
+    let summary = {
+        let mut source = GpuPath::new(&mut renderer, &gpu_scene, opts, run_opts.frames_in_flight)
+            .on_frame(|t, stats| {
+                sums.add(&t.stages(), t.total);
+                last_stats = Some(stats.clone());
+            });
+        if let Some(f) = &gpu_features {
+            source = source.with_features(f, gpu_shader.as_ref());
+        }
+        vksplat::sequence::run_pipelined(frames, &mut source, run_opts)
     };
-    let summary = vksplat::sequence::run(frames, &mut render, run_opts);
     if args.timings {
         sums.print("GPU ms");
         if let Some(st) = &last_stats {
@@ -626,9 +633,13 @@ fn render_gpu(
     }
     if args.gpu.verbose {
         note!(
-            "device memory: scene {} bytes, per-frame buffers {} bytes",
+            "device memory: scene {} bytes, per-frame buffers {} bytes ({})",
             gpu_scene.device_bytes(),
-            renderer.frame_device_bytes()
+            renderer.frame_device_bytes(),
+            match renderer.frame_sets() {
+                1 => "one frame in flight".to_string(),
+                n => format!("{n} frames in flight, a set each"),
+            }
         );
     }
     let summary = summary?;

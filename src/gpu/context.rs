@@ -785,6 +785,9 @@ pub struct FrameSlot {
     pool: vk::CommandPool,
     cmd: vk::CommandBuffer,
     fence: vk::Fence,
+    /// A submission of this slot has not been waited for yet
+    /// ([`GpuContext::submit_slot_nowait`]).
+    pending: bool,
 }
 
 impl FrameSlot {
@@ -801,6 +804,7 @@ impl FrameSlot {
             pool,
             cmd: vk::CommandBuffer::null(),
             fence: vk::Fence::null(),
+            pending: false,
         };
         let alloc = vk::CommandBufferAllocateInfo::default()
             .command_pool(pool)
@@ -823,8 +827,12 @@ impl Drop for FrameSlot {
     fn drop(&mut self) {
         let device = &self.shared.device;
         // SAFETY: submit_slot waits for its submission before returning (or idles the
-        // queue on error), so nothing is pending; freeing the pool frees the buffer.
+        // queue on error); a submission left pending by submit_slot_nowait is waited for
+        // here, so nothing is pending; freeing the pool frees the buffer.
         unsafe {
+            if self.pending {
+                let _ = device.wait_for_fences(&[self.fence], true, u64::MAX);
+            }
             device.destroy_fence(self.fence, None);
             device.destroy_command_pool(self.pool, None);
         }
@@ -838,14 +846,28 @@ impl GpuContext {
         slot: &mut FrameSlot,
         record: impl FnOnce(vk::CommandBuffer) -> GpuResult<R>,
     ) -> GpuResult<R> {
+        let out = self.submit_slot_nowait(slot, record)?;
+        self.wait_slot(slot)?;
+        Ok(out)
+    }
+
+    /// Records into `slot`'s command buffer (reset first) and submits it without waiting:
+    /// the CPU can record another slot meanwhile. [`Self::wait_slot`] waits for it. A slot
+    /// still pending from an earlier call is waited for before it is reused.
+    pub fn submit_slot_nowait<R>(
+        &self,
+        slot: &mut FrameSlot,
+        record: impl FnOnce(vk::CommandBuffer) -> GpuResult<R>,
+    ) -> GpuResult<R> {
+        self.wait_slot(slot)?;
         let device = &self.shared.device;
         // The queue is externally synchronised by the context's pool mutex.
-        let _queue = self
+        let queue = self
             .command_pool
             .lock()
             .map_err(|_| GpuError::InvalidArgument("command pool mutex poisoned".into()))?;
-        let run = || -> GpuResult<R> {
-            // SAFETY: the previous submission of this slot completed (we waited for it),
+        let run = |slot: &mut FrameSlot| -> GpuResult<R> {
+            // SAFETY: the previous submission of this slot completed (waited for above),
             // so the pool and fence can be reset.
             unsafe {
                 device
@@ -869,18 +891,38 @@ impl GpuContext {
                 device
                     .queue_submit2(self.queue, &submit, slot.fence)
                     .vk("vkQueueSubmit2")?;
-                device
-                    .wait_for_fences(&[slot.fence], true, u64::MAX)
-                    .vk("vkWaitForFences")?;
             }
+            slot.pending = true;
             Ok(out)
         };
-        let result = run();
+        let result = run(slot);
         if result.is_err() {
             // SAFETY: make sure nothing of this slot is still pending.
             let _ = unsafe { device.queue_wait_idle(self.queue) };
+            slot.pending = false;
         }
+        drop(queue);
         result
+    }
+
+    /// Waits for `slot`'s submission (nothing to wait for when none is pending).
+    pub fn wait_slot(&self, slot: &mut FrameSlot) -> GpuResult<()> {
+        if !slot.pending {
+            return Ok(());
+        }
+        let device = &self.shared.device;
+        // SAFETY: the fence was submitted with the slot's command buffer.
+        let waited =
+            unsafe { device.wait_for_fences(&[slot.fence], true, u64::MAX) }.vk("vkWaitForFences");
+        if waited.is_err() {
+            // The queue is externally synchronised by the context's pool mutex.
+            if let Ok(_queue) = self.command_pool.lock() {
+                // SAFETY: make sure nothing of this slot is still pending.
+                let _ = unsafe { device.queue_wait_idle(self.queue) };
+            }
+        }
+        slot.pending = false;
+        waited
     }
 }
 

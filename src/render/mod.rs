@@ -16,12 +16,20 @@
 //! preprocess stage counts the exact 64-bit total, so after the frame the host sees whether
 //! the capacity sufficed. Only when a frame proves it too small are the buffers grown and
 //! the frame recorded again; the CPU never waits in the middle of a frame.
+//!
+//! Frames in flight: [`GpuRenderer::submit`] records and submits a frame and returns a
+//! [`Ticket`]; [`GpuRenderer::finish`] waits for it, checks its counters (recording it
+//! again when it needs more), and reads it back. Each of the (at most two) frames in flight
+//! has its own command buffer, fence, timestamp queries and frame buffers, so frame n+1
+//! renders while frame n is read back ([`path::GpuPath`] drives camera paths this way).
+//! [`GpuRenderer::render`] is a submit followed by its finish.
 
 pub mod blend;
 pub mod features;
 pub mod keys;
 pub mod order;
 pub mod pack;
+pub mod path;
 pub mod preprocess;
 pub mod ranges;
 pub mod shade;
@@ -398,6 +406,10 @@ impl FrameBuffers {
 
 /// The GPU renderer: pipelines, per-frame buffers and the timestamp pool.
 pub struct GpuRenderer {
+    /// The resources of each frame in flight: one set, and a second one made when a frame
+    /// is submitted while another is still in flight ([`Self::submit`]). First, so that
+    /// it drops first: a set waits for a frame still in flight before the pipelines go.
+    sets: Vec<FrameSet>,
     preprocess: preprocess::Preprocess,
     order: order::Order,
     scan: Scan,
@@ -410,21 +422,75 @@ pub struct GpuRenderer {
     power_blend: Option<blend::Blend>,
     /// Feature blend pipelines by `SplatKernel::shader_id`, built on first use.
     feature_blends: [Option<features::FeatureBlend>; 2],
-    /// The feature images of the last features frame, one plane per group of four
-    /// channels (vec4 per pixel) in one buffer, planes `plane_bytes` apart (a multiple of
-    /// the storage-buffer offset alignment); kept across frames of the same size.
-    feature_planes: Option<FeaturePlanes>,
     /// The neural shader's pipeline, built on first use.
     shade: Option<shade::Shade>,
     pack: pack::Pack,
-    timer: GpuTimer,
-    slot: FrameSlot,
-    frame: Option<FrameBuffers>,
+    /// The set of the last finished frame (what [`Self::render_with_intermediates`] reads).
+    last: usize,
+    /// Key capacity the frames have needed so far (the largest set's); a new or resized
+    /// set starts with it.
+    capacity: Option<u32>,
+    /// Number of the next frame submitted (matches tickets to their sets).
+    serial: u64,
     timings: StageTimings,
     stats: FrameStats,
-    /// Bin size of the frame being rendered (see [`FrameStats::bin_size`]).
-    bin_size: u32,
     ctx: GpuContext,
+}
+
+/// Frames one renderer keeps in flight at most ([`GpuRenderer::submit`]).
+pub const MAX_FRAMES_IN_FLIGHT: usize = 2;
+
+/// The resources of one frame in flight: command buffer and fence, timestamp queries,
+/// frame buffers and feature images. (Fields drop in order: the slot goes first and waits
+/// for a submission still pending, before the buffers it uses go.)
+struct FrameSet {
+    slot: FrameSlot,
+    timer: GpuTimer,
+    frame: Option<FrameBuffers>,
+    /// The feature images of this set's last features frame, one plane per group of four
+    /// channels (vec4 per pixel) in one buffer, planes `plane_bytes` apart (a multiple of
+    /// the storage-buffer offset alignment); kept across frames of the same size.
+    feature_planes: Option<FeaturePlanes>,
+    /// Bin size of the frame recorded in this set (see [`FrameStats::bin_size`]).
+    bin_size: u32,
+    /// The serial number of the frame submitted in this set and not finished yet.
+    pending: Option<u64>,
+}
+
+impl FrameSet {
+    fn new(ctx: &GpuContext, index: usize, bin_size: u32) -> GpuResult<Self> {
+        Ok(FrameSet {
+            slot: FrameSlot::new(ctx, &format!("frame {index}"))?,
+            // Two timestamps per stage: up to ten stages (features and shade included).
+            timer: GpuTimer::new(ctx, &format!("frame {index} timestamps"), 32)?,
+            frame: None,
+            feature_planes: None,
+            bin_size,
+            pending: None,
+        })
+    }
+}
+
+/// A frame submitted by [`GpuRenderer::submit`] (or [`GpuRenderer::submit_features`]),
+/// still being rendered; [`GpuRenderer::finish`] (or [`GpuRenderer::finish_rgba8`]) waits
+/// for it and reads it back. It borrows the scene (and features) the frame reads, so they
+/// outlive the work on the device.
+#[must_use = "a submitted frame is read back (and its resources freed for the next) by GpuRenderer::finish"]
+pub struct Ticket<'a> {
+    set: usize,
+    serial: u64,
+    scene: &'a GpuScene,
+    cam: Camera,
+    opts: RenderOptions,
+    readback: Readback,
+    features: Option<FeatureJob<'a>>,
+}
+
+impl Ticket<'_> {
+    /// The camera of the frame.
+    pub fn camera(&self) -> &Camera {
+        &self.cam
+    }
 }
 
 /// Smallest key capacity allocated.
@@ -455,23 +521,16 @@ impl GpuRenderer {
             blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
             power_blend: None,
             feature_blends: [None, None],
-            feature_planes: None,
             shade: None,
             pack: pack::Pack::new(&ctx)?,
-            // Two timestamps per stage: up to ten stages (features and shade included).
-            timer: GpuTimer::new(&ctx, "frame timestamps", 32)?,
-            slot: FrameSlot::new(&ctx, "frame")?,
-            frame: None,
+            sets: vec![FrameSet::new(&ctx, 0, kernel.bin_size())?],
+            last: 0,
+            capacity: None,
+            serial: 0,
             timings: StageTimings::default(),
             stats: FrameStats::default(),
-            bin_size: kernel.bin_size(),
             ctx,
         })
-    }
-
-    fn bin_count(&self, cam: &Camera) -> u32 {
-        let (x, y) = bin_grid(self.bin_size, cam.width, cam.height);
-        x * y
     }
 
     /// The blend kernel in use.
@@ -616,12 +675,8 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Frame> {
-        let pixels = self.prepare_features(scene, features, cam, opts)?;
-        self.render_frame_with(scene, cam, opts, Readback::Float, Some((features, None)))?;
-        let mut frame = self.read_frame(cam)?;
-        frame.feature_count = features.channels;
-        frame.features = self.read_feature_planes(features.channels, pixels as usize)?;
-        Ok(frame)
+        let ticket = self.submit_features(scene, features, None, cam, opts)?;
+        self.finish(ticket)
     }
 
     /// Renders one frame, blends the uploaded feature channels and shades them with the
@@ -635,44 +690,20 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Frame> {
-        self.prepare_features(scene, features, cam, opts)?;
-        if shader.channels() != features.channels {
-            return Err(GpuError::InvalidArgument(format!(
-                "the shader takes {} feature channels but the scene has {}",
-                shader.channels(),
-                features.channels
-            )));
-        }
-        if self.loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
-            return Err(GpuError::InvalidArgument(format!(
-                "the neural shader needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations; use narrower layers, or the CPU reference (--cpu)",
-                shader.iterations,
-                self.ctx.info().name
-            )));
-        }
-        if self.shade.is_none() {
-            self.shade = Some(shade::Shade::new(&self.ctx)?);
-        }
-        self.render_frame_with(
-            scene,
-            cam,
-            opts,
-            Readback::Float,
-            Some((features, Some(shader))),
-        )?;
-        self.read_frame(cam)
+        let ticket = self.submit_features(scene, features, Some(shader), cam, opts)?;
+        self.finish(ticket)
     }
 
     /// What every features frame needs before it is recorded: features uploaded for this
-    /// scene, the feature blend pipeline of the frame's kernel, and feature planes of the
-    /// frame's size. Returns the frame's pixel count.
+    /// scene, the feature blend pipeline of the frame's kernel and, with a shader, the
+    /// shader's checks and pipeline.
     fn prepare_features(
         &mut self,
         scene: &GpuScene,
         features: &GpuFeatures,
-        cam: &Camera,
+        shader: Option<&shade::GpuShader>,
         opts: &RenderOptions,
-    ) -> GpuResult<u64> {
+    ) -> GpuResult<()> {
         if features.count != scene.count {
             return Err(GpuError::InvalidArgument(format!(
                 "the features were uploaded for {} Gaussians, the scene has {}",
@@ -687,24 +718,46 @@ impl GpuRenderer {
                 self.blend.needs_texel_views(),
             )?);
         }
-        let pixels = u64::from(cam.width) * u64::from(cam.height);
-        self.ensure_feature_planes(features, pixels)?;
-        Ok(pixels)
+        if let Some(shader) = shader {
+            if shader.channels() != features.channels {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the shader takes {} feature channels but the scene has {}",
+                    shader.channels(),
+                    features.channels
+                )));
+            }
+            if self.loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the neural shader needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations; use narrower layers, or the CPU reference (--cpu)",
+                    shader.iterations,
+                    self.ctx.info().name
+                )));
+            }
+            if self.shade.is_none() {
+                self.shade = Some(shade::Shade::new(&self.ctx)?);
+            }
+        }
+        Ok(())
     }
 
-    /// Makes the feature planes hold `features`' groups for `pixels` pixels.
-    fn ensure_feature_planes(&mut self, features: &GpuFeatures, pixels: u64) -> GpuResult<()> {
+    /// Makes set `set`'s feature planes hold `features`' groups for `pixels` pixels.
+    fn ensure_feature_planes(
+        &mut self,
+        set: usize,
+        features: &GpuFeatures,
+        pixels: u64,
+    ) -> GpuResult<()> {
         let groups = features.groups.len() as u64;
         let align = self.ctx.info().min_storage_buffer_offset_alignment.max(16);
         let plane_bytes = (pixels * 16).div_ceil(align) * align;
-        let fits = self
-            .feature_planes
+        let planes = &mut self.sets[set].feature_planes;
+        let fits = planes
             .as_ref()
             .is_some_and(|p| p.plane_bytes == plane_bytes && p.groups >= groups);
         if !fits {
-            self.feature_planes = None;
+            *planes = None;
             check_binding(&self.ctx, "feature image", plane_bytes * groups)?;
-            self.feature_planes = Some(FeaturePlanes {
+            *planes = Some(FeaturePlanes {
                 buffer: GpuBuffer::new(
                     &self.ctx,
                     "feature images",
@@ -719,9 +772,9 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// The `k` blended channels of the last features frame, pixel-major.
-    fn read_feature_planes(&self, k: usize, pixels: usize) -> GpuResult<Vec<f32>> {
-        let planes = self
+    /// The `k` blended channels of set `set`'s last features frame, pixel-major.
+    fn read_feature_planes(&self, set: usize, k: usize, pixels: usize) -> GpuResult<Vec<f32>> {
+        let planes = self.sets[set]
             .feature_planes
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no feature image was rendered".into()))?;
@@ -743,19 +796,34 @@ impl GpuRenderer {
         Ok(out)
     }
 
-    /// GPU time per stage of the last frame.
+    /// GPU time per stage of the last frame finished.
     pub fn timings(&self) -> &StageTimings {
         &self.timings
     }
 
-    /// Counts of the last frame.
+    /// Counts of the last frame finished.
     pub fn stats(&self) -> &FrameStats {
         &self.stats
     }
 
-    /// Device bytes held by the per-frame buffers.
+    /// Device bytes held by the per-frame buffers, of every frame in flight: with two
+    /// frames in flight ([`Self::submit`]) there are two sets of them.
     pub fn frame_device_bytes(&self) -> u64 {
-        self.frame.as_ref().map_or(0, |f| f.device_bytes())
+        self.sets
+            .iter()
+            .filter_map(|s| s.frame.as_ref())
+            .map(|f| f.device_bytes())
+            .sum()
+    }
+
+    /// Sets of per-frame resources made so far: 1, or 2 once two frames were in flight.
+    pub fn frame_sets(&self) -> usize {
+        self.sets.len()
+    }
+
+    /// Frames submitted and not finished yet.
+    pub fn frames_in_flight(&self) -> usize {
+        self.sets.iter().filter(|s| s.pending.is_some()).count()
     }
 
     /// Renders one frame.
@@ -765,8 +833,8 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Frame> {
-        self.render_frame(scene, cam, opts, Readback::Float)?;
-        self.read_frame(cam)
+        let ticket = self.submit(scene, cam, opts, Readback::Float)?;
+        self.finish(ticket)
     }
 
     /// Renders one frame and reads back only its colour, packed to 8-bit RGBA on the
@@ -777,8 +845,8 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Rgba8Frame> {
-        self.render_frame(scene, cam, opts, Readback::Rgba8)?;
-        self.read_rgba8(cam)
+        let ticket = self.submit(scene, cam, opts, Readback::Rgba8)?;
+        self.finish_rgba8(ticket)
     }
 
     /// Renders one frame and reads back every intermediate buffer (for tests).
@@ -788,8 +856,87 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<(Frame, Intermediates)> {
-        self.render_frame(scene, cam, opts, Readback::Float)?;
-        Ok((self.read_frame(cam)?, self.read_intermediates(scene, cam)?))
+        let frame = self.render(scene, cam, opts)?;
+        Ok((frame, self.read_intermediates(scene, cam)?))
+    }
+
+    /// Records frame `cam` and submits it to the device without waiting for it: the CPU
+    /// can submit the next frame (up to [`MAX_FRAMES_IN_FLIGHT`] in flight, each with its
+    /// own command buffer, fence, timestamps and frame buffers) while this one renders,
+    /// and read it back with [`Self::finish`] (or [`Self::finish_rgba8`] for
+    /// [`Readback::Rgba8`]). Frames may be finished in any order. The second set of
+    /// per-frame resources is made the first time two frames are in flight (doubling the
+    /// device memory of [`Self::frame_device_bytes`]).
+    pub fn submit<'a>(
+        &mut self,
+        scene: &'a GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        readback: Readback,
+    ) -> GpuResult<Ticket<'a>> {
+        self.submit_with(scene, cam, opts, readback, None)
+    }
+
+    /// [`Self::submit`] for a frame that also blends the uploaded feature channels
+    /// ([`Self::render_features`]) and, with a shader, shades them
+    /// ([`Self::render_shaded`]); [`Self::finish`] reads it back.
+    pub fn submit_features<'a>(
+        &mut self,
+        scene: &'a GpuScene,
+        features: &'a GpuFeatures,
+        shader: Option<&'a shade::GpuShader>,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<Ticket<'a>> {
+        self.prepare_features(scene, features, shader, opts)?;
+        self.submit_with(scene, cam, opts, Readback::Float, Some((features, shader)))
+    }
+
+    /// Waits for a frame submitted with [`Readback::Float`] and reads it back (with its
+    /// feature channels when it was submitted with features and no shader). When the
+    /// frame needed more tile/Gaussian pairs than its buffers hold, or larger bins, it is
+    /// recorded again (and waited for) here, as [`Self::render`] does. The timings and
+    /// counts ([`Self::timings`], [`Self::stats`]) become this frame's.
+    pub fn finish(&mut self, ticket: Ticket) -> GpuResult<Frame> {
+        if ticket.readback != Readback::Float {
+            // Still wait, so the set is free again.
+            self.complete(&ticket)?;
+            return Err(GpuError::InvalidArgument(
+                "the frame was submitted with Readback::Rgba8; finish it with finish_rgba8".into(),
+            ));
+        }
+        self.complete(&ticket)?;
+        let mut frame = self.read_frame(ticket.set, &ticket.cam)?;
+        if let Some((features, None)) = ticket.features {
+            let pixels = ticket.cam.width as usize * ticket.cam.height as usize;
+            frame.feature_count = features.channels;
+            frame.features = self.read_feature_planes(ticket.set, features.channels, pixels)?;
+        }
+        Ok(frame)
+    }
+
+    /// [`Self::finish`] for a frame submitted with [`Readback::Rgba8`].
+    pub fn finish_rgba8(&mut self, ticket: Ticket) -> GpuResult<Rgba8Frame> {
+        self.complete(&ticket)?;
+        if ticket.readback != Readback::Rgba8 {
+            return Err(GpuError::InvalidArgument(
+                "the frame was submitted with Readback::Float; finish it with finish".into(),
+            ));
+        }
+        self.read_rgba8(ticket.set, &ticket.cam)
+    }
+
+    /// Waits for a submitted frame without reading it back, freeing its resources for the
+    /// next frame (after an error stopped a path).
+    pub fn discard(&mut self, ticket: Ticket) -> GpuResult<()> {
+        let set = self.sets.get_mut(ticket.set).ok_or_else(|| {
+            GpuError::InvalidArgument("the ticket is not from this renderer".into())
+        })?;
+        if set.pending == Some(ticket.serial) {
+            set.pending = None;
+            self.ctx.wait_slot(&mut set.slot)?;
+        }
+        Ok(())
     }
 
     /// Whether the device is a CPU implementation with llvmpipe's loop limit.
@@ -804,8 +951,16 @@ impl GpuRenderer {
         (range / 8).min(u64::from(u32::MAX)) as u32
     }
 
-    fn ensure_frame(&mut self, scene: &GpuScene, cam: &Camera, capacity: u32) -> GpuResult<()> {
-        let fits = self.frame.as_ref().is_some_and(|f| {
+    /// Makes set `set`'s frame buffers fit the scene, the camera and `capacity` pairs.
+    fn ensure_frame(
+        &mut self,
+        set: usize,
+        scene: &GpuScene,
+        cam: &Camera,
+        capacity: u32,
+    ) -> GpuResult<()> {
+        let frame = &mut self.sets[set].frame;
+        let fits = frame.as_ref().is_some_and(|f| {
             f.gaussians >= scene.count
                 && f.width == cam.width
                 && f.height == cam.height
@@ -813,9 +968,9 @@ impl GpuRenderer {
         });
         if !fits {
             // Free the old buffers first so peak memory is not doubled.
-            self.frame = None;
+            *frame = None;
             let views = self.blend.needs_texel_views();
-            self.frame = Some(FrameBuffers::new(
+            *frame = Some(FrameBuffers::new(
                 &self.ctx,
                 scene.count,
                 cam.width,
@@ -828,39 +983,33 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Renders one frame, leaving the result on the device and in the readback buffer as
-    /// `readback` says, with the timings and counts of the frame read.
-    fn render_frame(
-        &mut self,
-        scene: &GpuScene,
-        cam: &Camera,
-        opts: &RenderOptions,
-        readback: Readback,
-    ) -> GpuResult<()> {
-        self.render_frame_with(scene, cam, opts, readback, None)
+    /// A set with no frame in flight (made when every set made so far is busy).
+    fn free_set(&mut self) -> GpuResult<usize> {
+        if let Some(i) = self.sets.iter().position(|s| s.pending.is_none()) {
+            return Ok(i);
+        }
+        if self.sets.len() >= MAX_FRAMES_IN_FLIGHT {
+            return Err(GpuError::InvalidArgument(format!(
+                "{MAX_FRAMES_IN_FLIGHT} frames are in flight already; finish one before submitting another"
+            )));
+        }
+        let set = FrameSet::new(&self.ctx, self.sets.len(), self.blend.kernel().bin_size())?;
+        self.sets.push(set);
+        Ok(self.sets.len() - 1)
     }
 
-    /// [`Self::render_frame`], also blending `features` when given, and shading them
-    /// with the neural shader when one comes with them.
-    fn render_frame_with(
+    /// Checks a frame, makes its resources in a free set, and records and submits it.
+    fn submit_with<'a>(
         &mut self,
-        scene: &GpuScene,
+        scene: &'a GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
         readback: Readback,
-        features: Option<FeatureJob>,
-    ) -> GpuResult<()> {
+        features: Option<FeatureJob<'a>>,
+    ) -> GpuResult<Ticket<'a>> {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         opts.validate().map_err(GpuError::InvalidArgument)?;
-        let initial = self
-            .frame
-            .as_ref()
-            .map_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)), |f| {
-                f.capacity
-            })
-            .min(self.max_capacity());
-        self.ensure_frame(scene, cam, initial)?;
         if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
             self.power_blend = Some(blend::Blend::new(
                 &self.ctx,
@@ -868,22 +1017,74 @@ impl GpuRenderer {
                 SplatKernel::Power,
             )?);
         }
-        self.bin_size = self.blend.kernel().bin_size();
+        let set = self.free_set()?;
+        let initial = self
+            .capacity
+            .unwrap_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)))
+            .min(self.max_capacity());
+        self.ensure_frame(set, scene, cam, initial)?;
+        self.sets[set].bin_size = self.blend.kernel().bin_size();
+        let ticket = Ticket {
+            set,
+            serial: self.serial,
+            scene,
+            cam: cam.clone(),
+            opts: opts.clone(),
+            readback,
+            features,
+        };
+        self.serial += 1;
+        self.record_ticket(&ticket, false)?;
+        self.sets[set].pending = Some(ticket.serial);
+        Ok(ticket)
+    }
+
+    /// Makes what the ticket's readback and features need in its set, then records and
+    /// submits the frame (and waits for it when `wait`).
+    fn record_ticket(&mut self, t: &Ticket, wait: bool) -> GpuResult<()> {
+        if t.readback == Readback::Rgba8 {
+            self.ensure_packed(t.set)?;
+        }
+        if let Some((features, _)) = t.features {
+            let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
+            self.ensure_feature_planes(t.set, features, pixels)?;
+        }
+        self.record_and_submit(
+            t.set, t.scene, &t.cam, &t.opts, t.readback, t.features, wait,
+        )
+    }
+
+    /// Waits for the ticket's frame and checks its counters: when the frame needed more
+    /// pairs than its buffers hold, or larger bins, it is recorded again with larger
+    /// buffers or bins and waited for, until it is complete. Then the timings and counts
+    /// are the frame's.
+    fn complete(&mut self, t: &Ticket) -> GpuResult<()> {
+        let set = self.sets.get_mut(t.set).ok_or_else(|| {
+            GpuError::InvalidArgument("the ticket is not from this renderer".into())
+        })?;
+        if set.pending != Some(t.serial) {
+            return Err(GpuError::InvalidArgument(
+                "the ticket's frame was finished already, or is not from this renderer".into(),
+            ));
+        }
+        // The set is free again whatever happens below.
+        set.pending = None;
+        self.ctx.wait_slot(&mut set.slot)?;
+        let cam = &t.cam;
         let mut regrows = 0;
         loop {
-            if readback == Readback::Rgba8 {
-                self.ensure_packed()?;
-            }
-            self.record_and_submit(scene, cam, opts, readback, features)?;
-            let counters = self.read_counters()?;
+            let counters = self.read_counters(t.set)?;
             let pairs = counters.pairs();
-            let capacity = self.frame.as_ref().map_or(0, |f| f.capacity);
+            let set = &self.sets[t.set];
+            let capacity = set.frame.as_ref().map_or(0, |f| f.capacity);
+            let bin_size = set.bin_size;
             if pairs <= u64::from(capacity) && self.loop_limited() {
                 let bins_loop = counters.max_bins_loop;
-                if bins_loop > CPU_LOOP_LIMIT && self.bin_size < 16 {
+                if bins_loop > CPU_LOOP_LIMIT && bin_size < 16 {
                     // Four times fewer iterations per Gaussian with 16-pixel bins.
-                    self.bin_size = 16;
+                    self.sets[t.set].bin_size = 16;
                     regrows += 1;
+                    self.record_ticket(t, true)?;
                     continue;
                 }
                 let worst = bins_loop.max(counters.max_list_loop);
@@ -897,20 +1098,23 @@ impl GpuRenderer {
                 }
             }
             if pairs <= u64::from(capacity) {
+                let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
                 self.stats = FrameStats {
                     visible: counters.visible,
                     pairs,
-                    key_bits: key_bits(self.bin_count(cam)),
+                    key_bits: key_bits(bx * by),
                     regrows,
-                    bin_size: self.bin_size,
+                    bin_size,
                 };
+                self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
                 break;
             }
             let max = self.max_capacity();
-            if pairs > u64::from(max) && self.bin_size < 16 {
+            if pairs > u64::from(max) && bin_size < 16 {
                 // Fewer, larger bins need fewer pairs; the texel kernel blends either.
-                self.bin_size = 16;
+                self.sets[t.set].bin_size = 16;
                 regrows += 1;
+                self.record_ticket(t, true)?;
                 continue;
             }
             if pairs > u64::from(max) {
@@ -921,16 +1125,18 @@ impl GpuRenderer {
             }
             // Grow with headroom so a camera path does not regrow every few frames.
             let grown = (pairs + pairs / 4).min(u64::from(max)) as u32;
-            self.ensure_frame(scene, cam, grown)?;
+            self.ensure_frame(t.set, t.scene, cam, grown)?;
             regrows += 1;
+            self.record_ticket(t, true)?;
         }
-        self.timings = self.read_timings()?;
+        self.timings = self.read_timings(t.set)?;
+        self.last = t.set;
         Ok(())
     }
 
-    /// Makes the packed RGBA8 buffer of the current frame buffers.
-    fn ensure_packed(&mut self) -> GpuResult<()> {
-        let f = self
+    /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.
+    fn ensure_packed(&mut self, set: usize) -> GpuResult<()> {
+        let f = self.sets[set]
             .frame
             .as_mut()
             .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
@@ -947,13 +1153,18 @@ impl GpuRenderer {
         Ok(())
     }
 
+    /// Records the frame into set `set`'s command buffer and submits it; waits for it
+    /// when `wait`.
+    #[allow(clippy::too_many_arguments)]
     fn record_and_submit(
         &mut self,
+        set: usize,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
         readback: Readback,
         features: Option<FeatureJob>,
+        wait: bool,
     ) -> GpuResult<()> {
         let Self {
             preprocess,
@@ -965,16 +1176,22 @@ impl GpuRenderer {
             blend,
             power_blend,
             feature_blends,
-            feature_planes,
             shade,
             pack,
-            timer,
-            slot,
-            frame,
+            sets,
             ctx,
-            bin_size,
             ..
         } = self;
+        let FrameSet {
+            slot,
+            timer,
+            frame,
+            feature_planes,
+            bin_size,
+            ..
+        } = sets
+            .get_mut(set)
+            .ok_or_else(|| GpuError::InvalidArgument(format!("no frame set {set}")))?;
         let feature_job = match features {
             Some((feat, _)) => Some((
                 feat,
@@ -1039,7 +1256,7 @@ impl GpuRenderer {
         };
         let n = scene.count;
         let pair_bits = 32..32 + tile_bits(bins_x * bins_y);
-        ctx.submit_slot(slot, |cmd| {
+        let record = |cmd| {
             let device = ctx.device();
             timer.reset(ctx, cmd);
             // SAFETY: cmd is recording; the buffers are alive and large enough.
@@ -1295,11 +1512,16 @@ impl GpuRenderer {
             })?;
             barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
             Ok(())
-        })
+        };
+        if wait {
+            ctx.submit_slot(slot, record)
+        } else {
+            ctx.submit_slot_nowait(slot, record)
+        }
     }
 
-    fn read_counters(&self) -> GpuResult<Counters> {
-        let f = self
+    fn read_counters(&self, set: usize) -> GpuResult<Counters> {
+        let f = self.sets[set]
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
@@ -1310,8 +1532,9 @@ impl GpuRenderer {
         ))
     }
 
-    fn read_timings(&self) -> GpuResult<StageTimings> {
-        let stages = self.timer.read(&self.ctx)?;
+    fn read_timings(&self, set: usize) -> GpuResult<StageTimings> {
+        let timer = &self.sets[set].timer;
+        let stages = timer.read(&self.ctx)?;
         let mut t = StageTimings::default();
         for (name, ms) in &stages {
             let slot = match name.as_str() {
@@ -1329,12 +1552,12 @@ impl GpuRenderer {
             };
             *slot = *ms;
         }
-        t.total = self.timer.span_ms(&self.ctx)?;
+        t.total = timer.span_ms(&self.ctx)?;
         Ok(t)
     }
 
-    fn read_frame(&self, cam: &Camera) -> GpuResult<Frame> {
-        let f = self
+    fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
+        let f = self.sets[set]
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
@@ -1356,8 +1579,8 @@ impl GpuRenderer {
         })
     }
 
-    fn read_rgba8(&self, cam: &Camera) -> GpuResult<Rgba8Frame> {
-        let f = self
+    fn read_rgba8(&self, set: usize, cam: &Camera) -> GpuResult<Rgba8Frame> {
+        let f = self.sets[set]
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
@@ -1371,16 +1594,18 @@ impl GpuRenderer {
         })
     }
 
+    /// The intermediate buffers of the last frame finished.
     fn read_intermediates(&self, scene: &GpuScene, cam: &Camera) -> GpuResult<Intermediates> {
-        let f = self
+        let set = &self.sets[self.last];
+        let f = set
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
         let ctx = &self.ctx;
         let n = scene.count as usize;
-        let counters = self.read_counters()?;
+        let counters = self.read_counters(self.last)?;
         let sorted = counters.sort_count as usize;
-        let bin_size = self.bin_size;
+        let bin_size = set.bin_size;
         let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
         Ok(Intermediates {
             splats: f.splats.read(ctx, n)?,
