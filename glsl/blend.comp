@@ -36,9 +36,15 @@ layout(binding = 1) uniform samplerBuffer splat_texels;
 layout(binding = 2) uniform usamplerBuffer value_texels;
 #endif
 layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
-layout(binding = 4, rgba32f) uniform writeonly image2D out_color;  // rgb + T * background, alpha = 1 - T
-layout(binding = 5, r32f) uniform writeonly image2D out_depth;     // alpha-normalised depth
+layout(binding = 4, rgba32f) uniform image2D out_color;  // rgb + T * background, alpha = 1 - T
+layout(binding = 5, r32f) uniform image2D out_depth;     // alpha-normalised depth
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+// A frame keyed in depth-ordered chunks (src/render/mod.rs) is blended once per chunk:
+// every chunk but the first resumes each pixel from the state the previous one left in
+// the images, and every chunk but the last leaves that state instead of the final pixel.
+// Compositing is sequential per pixel, so the result equals one pass bit for bit. A frame
+// in one piece is (resume 0, last 1).
+layout(push_constant) uniform ChunkFlags { uint resume; uint last; } chunk;
 
 // Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
 // written without branches: SIMD implementations execute both sides of a divergent branch
@@ -59,8 +65,25 @@ void composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
     done = done || stop;
 }
 
-void write_pixel(uvec2 pix, float T, vec3 C, float D) {
+// The state between chunks: colour = (C, T), with T negated once the pixel is done (T
+// stays above T_MIN > 0, so the sign carries the flag exactly); depth = D.
+void load_pixel(uvec2 pix, inout float T, inout vec3 C, inout float D, inout bool done) {
+    if (chunk.resume != 0u && pix.x < params.image.x && pix.y < params.image.y) {
+        vec4 state = imageLoad(out_color, ivec2(pix));
+        C = state.rgb;
+        T = abs(state.a);
+        done = state.a < 0.0;
+        D = imageLoad(out_depth, ivec2(pix)).x;
+    }
+}
+
+void write_pixel(uvec2 pix, float T, vec3 C, float D, bool done) {
     if (pix.x < params.image.x && pix.y < params.image.y) {
+        if (chunk.last == 0u) {
+            imageStore(out_color, ivec2(pix), vec4(C, done ? -T : T));
+            imageStore(out_depth, ivec2(pix), vec4(D));
+            return;
+        }
         float a = 1.0 - T;
         imageStore(out_color, ivec2(pix), vec4(C + T * params.background.rgb, a));
         imageStore(out_depth, ivec2(pix), vec4(a > 0.0 ? D / a : 0.0));
@@ -83,6 +106,7 @@ void main() {
     float T = 1.0;
     vec3 C = vec3(0.0);
     float D = 0.0;
+    load_pixel(pix, T, C, D, done);
     uvec2 range = ranges[tile_id];
     uint n = range.y - range.x;
     if (gl_LocalInvocationIndex == 0u) {
@@ -109,7 +133,7 @@ void main() {
         }
         barrier();
     }
-    write_pixel(pix, T, C, D);
+    write_pixel(pix, T, C, D, done);
 }
 #else
 void main() {
@@ -134,6 +158,7 @@ void main() {
         C[p] = vec3(0.0);
         D[p] = 0.0;
         done[p] = pix0.x + p >= params.image.x || pix0.y >= params.image.y;
+        load_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p], done[p]);
     }
     // This invocation's pixels lie in one bin (strips never cross a bin); pixels past the
     // image edge have no bin.
@@ -160,7 +185,7 @@ void main() {
         REPORT_LOOP(counters.max_list_loop, range.y - range.x + 16u);
     }
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {
-        write_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p]);
+        write_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p], done[p]);
     }
 }
 #endif

@@ -4,13 +4,18 @@
 // stable pair sort only has to order the tile bits. Pairs past the key capacity are dropped
 // (the host sees the exact total and grows the buffers). Thread 0 also publishes the
 // number of keys to sort and the ranges stage's indirect dispatch.
+// A frame whose pairs do not fit the key buffers is keyed in chunks of consecutive
+// depth-ordered Gaussians [first, end), each writing its pairs from slot `base` (the
+// scanned offset of `first`) on; a frame in one piece is the chunk (0, n, 0).
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
 layout(local_size_x = 256) in;
 
 layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
-layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
+// The splats as 3 rgba32f texels each: texel buffers address more than one storage
+// binding on some devices (lavapipe: 128 M texels against 128 MiB).
+layout(binding = 1) uniform samplerBuffer splat_texels;
 layout(std430, binding = 2) readonly buffer RectBuf { uvec2 rects[]; };
 layout(std430, binding = 3) readonly buffer OffsetBuf { uint offsets[]; };
 layout(std430, binding = 4) writeonly buffer KeyBuf { uvec2 keys[]; };
@@ -18,15 +23,20 @@ layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) readonly buffer OrderBuf { uint depth_order[]; };
 layout(std430, binding = 8) readonly buffer BinMaskBuf { uint bin_masks[]; };
+layout(push_constant) uniform Chunk { uint first; uint end; uint base; } chunk;
 
 #define RANGES_WORKGROUP 256u
 
 void main() {
-    uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint k = chunk.first + linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint n = params.counts.x;
     uint capacity = params.counts.w;
-    if (k == 0u) {
-        // The exact total says whether the scan total wrapped past 2^32.
-        uint total = counters.touched_hi != 0u ? capacity : min(counters.scan_total, capacity);
+    if (k == chunk.first) {
+        // The exact total says whether the scan total of a whole frame wrapped past 2^32;
+        // a chunk's pairs (offsets mod 2^32 apart) always fit the capacity.
+        bool whole = chunk.first == 0u && chunk.end >= n;
+        uint next = chunk.end < n ? offsets[chunk.end] : counters.scan_total;
+        uint total = whole && counters.touched_hi != 0u ? capacity : min(next - chunk.base, capacity);
         counters.sort_count = total;
         // A 2D grid beyond 65535 groups (the minimum maxComputeWorkGroupCount[0]).
         uint groups = (total + RANGES_WORKGROUP - 1u) / RANGES_WORKGROUP;
@@ -34,21 +44,22 @@ void main() {
         counters.ranges_groups_y = (groups + 65534u) / 65535u;
         counters.ranges_groups_z = 1u;
     }
-    if (k >= params.counts.x) return;
+    if (k >= chunk.end) return;
     uint i = depth_order[k];
     uvec2 rect = rects[i];
     uvec2 rmin = unpack_tile(rect.x);
     uvec2 rmax = unpack_tile(rect.y);
     if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
-    Splat s = splats[i];
-    uint depth_bits = floatBitsToUint(s.conic_depth.w);
-    float bound = s.mean_opacity_bound.w;
+    vec4 mean_opacity_bound = texelFetch(splat_texels, int(i * 3u));
+    vec4 conic_depth = texelFetch(splat_texels, int(i * 3u + 1u));
+    uint depth_bits = floatBitsToUint(conic_depth.w);
+    float bound = mean_opacity_bound.w;
     uint bins_x = params.bins.y;
     uvec2 bmin = rmin * params.bins.w;
     uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
-    uint off = offsets[k];
+    uint off = offsets[k] - chunk.base;
     // This Gaussian's slots end where the next one's begin (or at the scan total).
-    uint end = k + 1u < params.counts.x ? offsets[k + 1u] : counters.scan_total;
+    uint end = (k + 1u < n ? offsets[k + 1u] : counters.scan_total) - chunk.base;
     uint limit = min(end, capacity);
     uint w = bmax.x - bmin.x;
     if (w * (bmax.y - bmin.y) <= BIN_MASK_BINS) {
@@ -70,7 +81,7 @@ void main() {
         for (; y < bmax.y; y++) {
             for (x = bmin.x; x < bmax.x; x++) {
                 // The same test preprocess counted with (tile_receives in splat_common.glsl).
-                if (!tile_receives(s.mean_opacity_bound.xy, s.conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
+                if (!tile_receives(mean_opacity_bound.xy, conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
                 if (off < limit) {
                     keys[off] = uvec2(depth_bits, y * bins_x + x);
                     values[off] = i;

@@ -20,8 +20,14 @@ layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
 layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uvec2 depth_keys[]; };  // (depth bits or ~0 when culled, tiles touched)
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) writeonly buffer DepthValueBuf { uint depth_values[]; };
-// Which bins of a small rectangle receive the splat (see BIN_MASK_BINS in splat_common).
+// Which bins of a small rectangle receive the splat (see BIN_MASK_BINS in splat_common),
+// indexed by the global Gaussian index (4 bytes each: one binding holds any scene the SH
+// texels allow).
 layout(std430, binding = 8) writeonly buffer BinMaskBuf { uint bin_masks[]; };
+// The window of Gaussians this dispatch handles: bindings 1, 3, 4, 5 and 7 start at
+// Gaussian `first` (one storage binding may not cover a large scene, so the host
+// dispatches once per window); the SH texels and the indices written are global.
+layout(push_constant) uniform Window { uint first; uint count; } window;
 
 const float SH_C0 = 0.28209479177387814;
 const float SH_C1 = 0.4886025119029199;
@@ -83,13 +89,13 @@ uint clamp_tile(float v, uint hi) {
 shared uint s_visible;
 
 void main() {
-    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
-    uint n = params.counts.x;
+    uint w = linear_group_id() * 256u + gl_LocalInvocationIndex;  // index in the window
+    uint i = window.first + w;
     uint touched = 0u;
     uint mask = 0u;
     if (gl_LocalInvocationIndex == 0u) s_visible = 0u;
-    if (i < n) {
-        Gaussian g = gaussians[i];
+    if (w < window.count) {
+        Gaussian g = gaussians[w];
         vec3 mean = g.pos_opacity.xyz;
         vec3 view = vec3(dot(params.w2c_row0.xyz, mean) + params.w2c_row0.w,
                          dot(params.w2c_row1.xyz, mean) + params.w2c_row1.w,
@@ -179,11 +185,11 @@ void main() {
                 }
             }
         }
-        splats[i] = s;
-        rects[i] = rect;
+        splats[w] = s;
+        rects[w] = rect;
         // Culled Gaussians sort after every visible one.
-        depth_keys[i] = uvec2(touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu, touched);
-        depth_values[i] = i;
+        depth_keys[w] = uvec2(touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu, touched);
+        depth_values[w] = i;
         bin_masks[i] = touched != 0u ? mask : 0u;
     }
     // Exact 64-bit total of tiles touched (each term < 2^20 tiles).

@@ -151,8 +151,11 @@ pub struct BenchReport {
     pub device_bytes_per_gaussian: f64,
     /// Pairs sorted per second at the median sort time.
     pub sort_keys_per_s: f64,
+    /// Depth-ordered chunks each frame was keyed and blended in (1: at once; GPU only).
+    pub chunks: u32,
     /// Pixel-Gaussian evaluations of one frame's blend (per pixel, the Gaussians of its
-    /// tile's list up to the one that finished it).
+    /// tile's list up to the one that finished it); 0 when not counted (a frame in
+    /// chunks, whose lists are not kept).
     pub blend_evaluations: u64,
     /// `blend_evaluations` per second at the median blend time.
     pub blend_evaluations_per_s: f64,
@@ -222,6 +225,12 @@ impl BenchReport {
             "frames/s (median wall clock) {:.2}\nvisible Gaussians {}, tile pairs {}, key bits {}\nsort {:.3e} keys/s, blend {} pixel-Gaussian evaluations, {:.3e}/s\n",
             self.fps, self.visible, self.pairs, self.key_bits, self.sort_keys_per_s, self.blend_evaluations, self.blend_evaluations_per_s
         );
+        if self.chunks > 1 {
+            out += &format!(
+                "frame keyed and blended in {} depth-ordered chunks (blend evaluations not counted)\n",
+                self.chunks
+            );
+        }
         if self.renderer == "gpu" {
             out += &format!(
                 "device memory: peak {} B ({:.1} B per Gaussian)\n",
@@ -303,22 +312,27 @@ pub fn bench_gpu(
         push_stage_samples(&mut stage_samples, tm.stages());
     }
     let stats = renderer.stats().clone();
-    let (_, inter) = renderer.render_with_intermediates(&gpu_scene, cam, opts)?;
-    let projected: Vec<Projected> = inter
-        .splats
-        .iter()
-        .map(|s| Projected {
-            mean2d: [s.mean_opacity_bound[0], s.mean_opacity_bound[1]],
-            opacity: s.mean_opacity_bound[2],
-            conic: [s.conic_depth[0], s.conic_depth[1], s.conic_depth[2]],
-            ..Default::default()
+    // Counted from one more frame's lists, which a frame in chunks does not keep.
+    let evaluations = if stats.chunks > 1 {
+        0
+    } else {
+        let (_, inter) = renderer.render_with_intermediates(&gpu_scene, cam, opts)?;
+        let projected: Vec<Projected> = inter
+            .splats
+            .iter()
+            .map(|s| Projected {
+                mean2d: [s.mean_opacity_bound[0], s.mean_opacity_bound[1]],
+                opacity: s.mean_opacity_bound[2],
+                conic: [s.conic_depth[0], s.conic_depth[1], s.conic_depth[2]],
+                ..Default::default()
+            })
+            .collect();
+        let (bins_x, size) = (inter.bins.0, inter.bin_size);
+        cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
+            let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
+            &inter.values[a as usize..b as usize]
         })
-        .collect();
-    let (bins_x, size) = (inter.bins.0, inter.bin_size);
-    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
-        let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
-        &inter.values[a as usize..b as usize]
-    });
+    };
     let info = renderer.ctx().info();
     let stages = stage_reports(stage_samples);
     let wall_ms = Stat::of(&wall);
@@ -344,6 +358,7 @@ pub fn bench_gpu(
         visible: u64::from(stats.visible),
         pairs: stats.pairs,
         key_bits: stats.key_bits,
+        chunks: stats.chunks,
         device_bytes_peak: peak,
         device_bytes_per_gaussian: peak as f64 / scene.len().max(1) as f64,
         sort_keys_per_s: 0.0,
@@ -418,6 +433,7 @@ pub fn bench_cpu(
         visible,
         pairs,
         key_bits: crate::render::key_bits(tx * ty),
+        chunks: 1,
         device_bytes_peak: 0,
         device_bytes_per_gaussian: 0.0,
         sort_keys_per_s: 0.0,

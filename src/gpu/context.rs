@@ -21,8 +21,9 @@ pub struct ContextOptions {
     /// available); `VKSPLAT_VALIDATE=1` also turns it on.
     pub validation: bool,
     /// Device memory this context may allocate, in bytes; `VKSPLAT_MEMORY_LIMIT` (e.g.
-    /// `512M`, `2G`) sets it when `None`. The default and the ceiling is the size of the
-    /// largest device-local heap.
+    /// `512M`, `2G`) sets it when `None`. The default is the size of the largest
+    /// device-local heap, which is also the ceiling on GPUs (on CPU devices, whose device
+    /// memory is host memory, a larger limit is honoured).
     pub memory_limit: Option<u64>,
 }
 
@@ -486,7 +487,15 @@ impl GpuContext {
                 _ => None,
             },
         };
-        let memory_budget = limit.map_or(device_local_bytes, |l| l.min(device_local_bytes));
+        // On a CPU implementation device memory is host memory and the advertised heap is
+        // only a figure (lavapipe: 2 GiB), so an explicit limit may go beyond it; on a GPU
+        // the heap caps it.
+        let host_memory = props[index].device_type == vk::PhysicalDeviceType::CPU;
+        let memory_budget = match limit {
+            Some(l) if host_memory => l,
+            Some(l) => l.min(device_local_bytes),
+            None => device_local_bytes,
+        };
         let info = DeviceInfo {
             index,
             name: names[index].clone(),

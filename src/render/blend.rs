@@ -127,6 +127,10 @@ pub struct BlendBindings<'a> {
     pub depth: &'a GpuImage,
     /// Counters (loop lengths reported).
     pub counters: BufferSlice<'a>,
+    /// Resume each pixel from the state a previous chunk left in the images.
+    pub resume: bool,
+    /// Write the final pixels (else the state for the next chunk).
+    pub last: bool,
 }
 
 impl Blend {
@@ -156,7 +160,7 @@ impl Blend {
         // local_size_x (the full-subgroups requirement looks at the X dimension).
         let local_x = 16 / kernel.strip();
         let pipeline =
-            ComputePipeline::from_embedded(ctx, "blend", &defines, &bindings, 0, local_x)?;
+            ComputePipeline::from_embedded(ctx, "blend", &defines, &bindings, 8, local_x)?;
         Ok(Blend {
             pipeline,
             kernel,
@@ -214,7 +218,7 @@ impl Blend {
                 },
                 Resource::Buffer(b.counters),
             ],
-            &[],
+            bytemuck::cast_slice(&[u32::from(b.resume), u32::from(b.last)]),
             [tiles.0, tiles.1, 1],
         )
     }

@@ -1,7 +1,8 @@
 //! Duplicate-per-tile keys stage (`glsl/keys.comp`): one thread per Gaussian, in depth
-//! order, writes its (tile | depth, index) pairs at its scanned offset.
+//! order, writes its (tile | depth, index) pairs at its scanned offset; or the Gaussians
+//! of one chunk of the depth order, relative to the chunk's first offset.
 
-use crate::gpu::shader::BindingKind;
+use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
@@ -17,8 +18,8 @@ pub struct Keys {
 pub struct KeysBindings<'a> {
     /// FrameParams.
     pub params: BufferSlice<'a>,
-    /// Splats (depth).
-    pub splats: BufferSlice<'a>,
+    /// Texel view of the splats (R32G32B32A32_SFLOAT, 3 texels per splat).
+    pub splat_texels: vk::BufferView,
     /// Packed tile rectangles.
     pub rects: BufferSlice<'a>,
     /// Exclusive prefix sum of tiles touched, in depth order.
@@ -31,7 +32,7 @@ pub struct KeysBindings<'a> {
     pub counters: BufferSlice<'a>,
     /// Gaussian indices in depth order.
     pub depth_order: BufferSlice<'a>,
-    /// Receiving bins of small tile rectangles, from preprocess.
+    /// Receiving bins of small tile rectangles, from preprocess (global index).
     pub bin_masks: BufferSlice<'a>,
 }
 
@@ -42,42 +43,157 @@ impl Keys {
             ctx,
             "keys",
             &[],
-            &[BindingKind::StorageBuffer; 9],
-            0,
+            &[
+                BindingKind::StorageBuffer,
+                BindingKind::UniformTexelBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+                BindingKind::StorageBuffer,
+            ],
+            12,
             WORKGROUP,
         )?;
         Ok(Keys { pipeline })
     }
 
-    /// Records the dispatch for `n` Gaussians (at least one workgroup, so the counters
-    /// are always written).
+    /// Records the dispatch for the depth-ordered Gaussians `chunk.first..chunk.end` (at
+    /// least one workgroup, so the counters are always written).
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
         b: &KeysBindings,
-        n: u32,
+        chunk: Chunk,
     ) -> GpuResult<()> {
         let groups = dispatch_grid(
-            n.div_ceil(WORKGROUP).max(1),
+            (chunk.end - chunk.first).div_ceil(WORKGROUP).max(1),
             ctx.info().max_workgroup_count[0],
         );
-        self.pipeline.dispatch(
+        let push = [chunk.first, chunk.end, chunk.base];
+        self.pipeline.dispatch_resources(
             ctx,
             cmd,
             &[
-                b.params,
-                b.splats,
-                b.rects,
-                b.offsets,
-                b.keys,
-                b.values,
-                b.counters,
-                b.depth_order,
-                b.bin_masks,
+                Resource::Buffer(b.params),
+                Resource::TexelBuffer(b.splat_texels),
+                Resource::Buffer(b.rects),
+                Resource::Buffer(b.offsets),
+                Resource::Buffer(b.keys),
+                Resource::Buffer(b.values),
+                Resource::Buffer(b.counters),
+                Resource::Buffer(b.depth_order),
+                Resource::Buffer(b.bin_masks),
             ],
-            &[],
+            bytemuck::cast_slice(&push),
             groups,
         )
+    }
+}
+
+/// Consecutive Gaussians of the depth order keyed together: `first..end`, whose pairs
+/// start at scanned offset `base` (mod 2^32). A frame in one piece is `(0, n, 0)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Chunk {
+    /// First Gaussian (index in depth order).
+    pub first: u32,
+    /// One past the last.
+    pub end: u32,
+    /// Scanned offset of `first`, modulo 2^32.
+    pub base: u32,
+    /// Pairs of the chunk.
+    pub pairs: u64,
+}
+
+impl Chunk {
+    /// All `n` Gaussians in one piece.
+    pub fn whole(n: u32) -> Chunk {
+        Chunk {
+            first: 0,
+            end: n,
+            base: 0,
+            pairs: 0,
+        }
+    }
+}
+
+/// Splits the visible Gaussians of the depth order into consecutive chunks of at most
+/// `limit` pairs each (a single Gaussian with more pairs makes a chunk of its own).
+/// `offsets` is the exclusive scan of tiles touched in depth order modulo 2^32 (one entry
+/// per visible Gaussian) and `total` the exact pair count; the 64-bit offsets are
+/// recovered from the wraps (each Gaussian touches fewer than 2^32 tiles). No visible
+/// Gaussian: one empty chunk, so the frame is still blended.
+pub fn plan_chunks(offsets: &[u32], total: u64, limit: u64) -> Vec<Chunk> {
+    let mut exact = Vec::with_capacity(offsets.len() + 1);
+    let (mut high, mut last) = (0u64, 0u32);
+    for &o in offsets {
+        if o < last {
+            high += 1 << 32;
+        }
+        last = o;
+        exact.push(high | u64::from(o));
+    }
+    exact.push(total);
+    let n = offsets.len();
+    let mut chunks = Vec::new();
+    let mut first = 0usize;
+    while first < n {
+        let start = exact[first];
+        // The last end whose pairs fit, but at least one Gaussian.
+        let fit = exact[first + 1..].partition_point(|&e| e - start <= limit);
+        let end = first + fit.max(1);
+        chunks.push(Chunk {
+            first: first as u32,
+            end: end as u32,
+            base: start as u32,
+            pairs: exact[end] - start,
+        });
+        first = end;
+    }
+    if chunks.is_empty() {
+        chunks.push(Chunk::default());
+    }
+    chunks
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunks_cover_the_order_within_the_limit() {
+        // Tiles touched 3, 5, 1, 7, 2: offsets 0, 3, 8, 9, 16, total 18.
+        let runs = |chunks: Vec<Chunk>| -> Vec<(u32, u32, u32, u64)> {
+            chunks
+                .iter()
+                .map(|c| (c.first, c.end, c.base, c.pairs))
+                .collect()
+        };
+        assert_eq!(
+            runs(plan_chunks(&[0, 3, 8, 9, 16], 18, 8)),
+            vec![(0, 2, 0, 8), (2, 4, 8, 8), (4, 5, 16, 2)]
+        );
+        // A Gaussian of 12 pairs, over the limit, makes a chunk of its own.
+        assert_eq!(
+            runs(plan_chunks(&[0, 3, 15], 16, 8)),
+            vec![(0, 1, 0, 3), (1, 2, 3, 12), (2, 3, 15, 1)]
+        );
+    }
+
+    #[test]
+    fn chunk_offsets_past_2_pow_32_are_exact() {
+        // Three Gaussians of 2^31 + 1 pairs each: the scan wraps after the second.
+        let big = (1u64 << 31) + 1;
+        let offsets = [0u32, big as u32, (2 * big) as u32];
+        let chunks = plan_chunks(&offsets, 3 * big, big);
+        assert_eq!(chunks.len(), 3);
+        for (i, c) in chunks.iter().enumerate() {
+            assert_eq!((c.first, c.end, c.pairs), (i as u32, i as u32 + 1, big));
+            assert_eq!(c.base, (i as u64 * big) as u32);
+        }
+        assert_eq!(plan_chunks(&[], 0, 10), vec![Chunk::default()]);
     }
 }

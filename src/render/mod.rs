@@ -155,6 +155,25 @@ pub struct StageTimings {
 }
 
 impl StageTimings {
+    /// Adds another submission's times of the same frame (a frame in chunks).
+    fn add(&mut self, other: &StageTimings) {
+        for (mine, theirs) in [
+            (&mut self.preprocess, other.preprocess),
+            (&mut self.order, other.order),
+            (&mut self.scan, other.scan),
+            (&mut self.keys, other.keys),
+            (&mut self.sort, other.sort),
+            (&mut self.ranges, other.ranges),
+            (&mut self.blend, other.blend),
+            (&mut self.features, other.features),
+            (&mut self.shade, other.shade),
+            (&mut self.readback, other.readback),
+            (&mut self.total, other.total),
+        ] {
+            *mine += theirs;
+        }
+    }
+
     /// The stages in pipeline order with their names; `features` only when the frame
     /// blended feature channels.
     pub fn stages(&self) -> Vec<(&'static str, f64)> {
@@ -193,6 +212,9 @@ pub struct FrameStats {
     /// Side of the bins the pairs were keyed by (the kernel's preferred size, or 16 when a
     /// frame needed more pairs than one buffer holds at the smaller size).
     pub bin_size: u32,
+    /// Depth-ordered chunks the pairs were keyed, sorted and blended in: 1 when they fit
+    /// the key buffers at once (see [`GpuRenderer`]'s chunked frames).
+    pub chunks: u32,
 }
 
 /// Intermediate buffers of a frame, read back for tests against the CPU reference.
@@ -208,7 +230,8 @@ pub struct Intermediates {
     pub offsets: Vec<u32>,
     /// Frame counters.
     pub counters: Counters,
-    /// Sorted keys `(depth bits, tile id)`.
+    /// Sorted keys `(depth bits, tile id)` (of the last chunk, for a frame in chunks; so
+    /// are the values, the ranges and the sort count).
     pub keys: Vec<[u32; 2]>,
     /// Sorted values (Gaussian indices).
     pub values: Vec<u32>,
@@ -255,7 +278,7 @@ pub fn sh_texel_stride(sh_degree: u32) -> u32 {
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
 /// (Fields drop in order: the texel views go before the buffers they view.)
 struct FrameBuffers {
-    splat_texels: Option<BufferView>,
+    splat_texels: BufferView,
     value_texels: Option<BufferView>,
     gaussians: u32,
     width: u32,
@@ -279,6 +302,9 @@ struct FrameBuffers {
     /// 8-bit RGBA of the colour image; made on the first [`Readback::Rgba8`] frame.
     packed: Option<GpuBuffer>,
     readback: GpuBuffer,
+    /// The scanned offsets read back to plan a frame's chunks (host-visible); made on
+    /// the first frame rendered in chunks.
+    chunk_offsets: Option<GpuBuffer>,
 }
 
 impl FrameBuffers {
@@ -299,34 +325,39 @@ impl FrameBuffers {
             check_binding(ctx, name, bytes)?;
             GpuBuffer::new(ctx, name, bytes, MemoryKind::Device)
         };
-        let splats = dev("splats", n * std::mem::size_of::<Splat>() as u64)?;
+        // The splats are written in preprocess windows and read through a texel view (keys,
+        // texel blend), so one binding need not hold them all; the shared blend kernel
+        // binds them whole.
+        let splat_bytes = n * std::mem::size_of::<Splat>() as u64;
+        if !texel_views {
+            check_binding(ctx, "splats", splat_bytes)?;
+        }
+        let max_texels = u64::from(ctx.info().max_texel_buffer_elements);
+        if n * 3 > max_texels || (texel_views && u64::from(capacity) > max_texels) {
+            return Err(GpuError::InvalidArgument(format!(
+                "{gaussians} Gaussians need texel buffers of {} texels (3 per splat), but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians or a device with a larger limit",
+                n * 3
+            )));
+        }
+        let splats = GpuBuffer::new(ctx, "splats", splat_bytes, MemoryKind::Device)?;
         let values = dev("values", u64::from(capacity) * 4)?;
-        let (splat_texels, value_texels) = if texel_views {
-            let max = u64::from(ctx.info().max_texel_buffer_elements);
-            if n * 3 > max || u64::from(capacity) > max {
-                return Err(GpuError::InvalidArgument(format!(
-                    "the strip blend needs texel buffers of {} and {capacity} elements; this device allows {max}",
-                    n * 3
-                )));
-            }
-            (
-                Some(BufferView::new(
-                    ctx,
-                    &splats,
-                    vk::Format::R32G32B32A32_SFLOAT,
-                    0,
-                    splats.size(),
-                )?),
-                Some(BufferView::new(
-                    ctx,
-                    &values,
-                    vk::Format::R32_UINT,
-                    0,
-                    values.size(),
-                )?),
-            )
+        let splat_texels = BufferView::new(
+            ctx,
+            &splats,
+            vk::Format::R32G32B32A32_SFLOAT,
+            0,
+            splats.size(),
+        )?;
+        let value_texels = if texel_views {
+            Some(BufferView::new(
+                ctx,
+                &values,
+                vk::Format::R32_UINT,
+                0,
+                values.size(),
+            )?)
         } else {
-            (None, None)
+            None
         };
         Ok(FrameBuffers {
             splat_texels,
@@ -371,6 +402,7 @@ impl FrameBuffers {
                 pixels * 20 + std::mem::size_of::<Counters>() as u64,
                 MemoryKind::Readback,
             )?,
+            chunk_offsets: None,
         })
     }
 
@@ -434,6 +466,10 @@ pub struct GpuRenderer {
     serial: u64,
     timings: StageTimings,
     stats: FrameStats,
+    /// Whether colour frames are rendered in chunks: set by the first frame whose pairs
+    /// do not fit one key buffer, and kept (a camera path does not find out again).
+    chunked: bool,
+    split: SplitLimits,
     ctx: GpuContext,
 }
 
@@ -484,6 +520,8 @@ pub struct Ticket<'a> {
     opts: RenderOptions,
     readback: Readback,
     features: Option<FeatureJob<'a>>,
+    /// Rendered in chunks when finished (nothing of it is in flight).
+    chunked: bool,
 }
 
 impl Ticket<'_> {
@@ -491,6 +529,39 @@ impl Ticket<'_> {
     pub fn camera(&self) -> &Camera {
         &self.cam
     }
+}
+
+/// Overrides of the device limits that split a frame, so that small scenes in tests take
+/// the paths large scenes take. Splitting never changes the image: it is bit-identical.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SplitLimits {
+    /// Gaussians per preprocess window, rounded down to a multiple of 256 (0: as many as
+    /// one storage binding holds, 2.8 M on lavapipe).
+    pub window: u32,
+    /// Pairs per chunk (0: as many as one key buffer holds, 16.7 M on lavapipe). Nonzero
+    /// renders every colour frame in chunks, even one that would fit at once.
+    pub chunk_pairs: u32,
+}
+
+/// Chunks recorded per submission of a chunked frame (four timed stages each, within the
+/// frame timer's capacity).
+const CHUNKS_PER_SUBMIT: usize = 6;
+
+/// What one submission of a frame records.
+#[derive(Clone, Copy)]
+enum Pass<'a> {
+    /// The whole frame: preprocess to readback, every Gaussian in one chunk.
+    Whole,
+    /// Preprocess, depth order and scan, then the counters and the scanned offsets to
+    /// the host, which plans the chunks.
+    Front,
+    /// Keys, sort, ranges and blend for each chunk, after a [`Pass::Front`]; `first`:
+    /// the frame's first chunk is among them; `last`: so is its last (then the readback).
+    Chunks {
+        chunks: &'a [keys::Chunk],
+        first: bool,
+        last: bool,
+    },
 }
 
 /// Smallest key capacity allocated.
@@ -529,8 +600,29 @@ impl GpuRenderer {
             serial: 0,
             timings: StageTimings::default(),
             stats: FrameStats::default(),
+            chunked: false,
+            split: SplitLimits::default(),
             ctx,
         })
+    }
+
+    /// Splits frames as if the device's limits were `limits` (for tests; see
+    /// [`SplitLimits`]).
+    pub fn set_split_limits(&mut self, limits: SplitLimits) {
+        self.split = limits;
+    }
+
+    /// Gaussians per preprocess window: as many as one storage binding holds of the
+    /// largest per-Gaussian record (48 bytes), a multiple of the workgroup.
+    fn preprocess_window(&self) -> u32 {
+        let range = u64::from(self.ctx.info().max_storage_buffer_range);
+        let per_binding = (range / std::mem::size_of::<Splat>() as u64).min(u64::from(u32::MAX));
+        let device = (per_binding as u32 / preprocess::WORKGROUP * preprocess::WORKGROUP)
+            .max(preprocess::WORKGROUP);
+        match self.split.window {
+            0 => device,
+            w => w.clamp(preprocess::WORKGROUP, device),
+        }
     }
 
     /// The blend kernel in use.
@@ -568,12 +660,8 @@ impl GpuRenderer {
                 }
             })
             .collect();
+        // Preprocess binds windows of the records, so one binding need not hold them all.
         let record_bytes = (records.len() * std::mem::size_of::<GpuGaussian>()) as u64;
-        check_binding(
-            &self.ctx,
-            &format!("a scene of {count} Gaussians"),
-            record_bytes,
-        )?;
         // SH is read through an RGBA32F texel buffer (texel buffers address up to
         // maxTexelBufferElements texels, far beyond one storage binding on lavapipe), each
         // Gaussian's floats padded to whole texels.
@@ -1024,6 +1112,15 @@ impl GpuRenderer {
             .min(self.max_capacity());
         self.ensure_frame(set, scene, cam, initial)?;
         self.sets[set].bin_size = self.blend.kernel().bin_size();
+        // A frame rendered in chunks needs the host between its submissions (to plan the
+        // chunks), so it is rendered when it is finished, not in flight. Colour frames go
+        // in chunks once one frame's pairs did not fit one key buffer, when the test limits
+        // say so, or when the first guess of pairs (4 per Gaussian) exceeds one key buffer
+        // already. The feature blend and the neural shader run in one piece only.
+        let chunked = features.is_none()
+            && (self.chunked
+                || self.split.chunk_pairs > 0
+                || u64::from(scene.count) * 4 > u64::from(self.max_capacity()));
         let ticket = Ticket {
             set,
             serial: self.serial,
@@ -1032,16 +1129,19 @@ impl GpuRenderer {
             opts: opts.clone(),
             readback,
             features,
+            chunked,
         };
         self.serial += 1;
-        self.record_ticket(&ticket, false)?;
+        if !chunked {
+            self.record_ticket(&ticket, false, Pass::Whole)?;
+        }
         self.sets[set].pending = Some(ticket.serial);
         Ok(ticket)
     }
 
     /// Makes what the ticket's readback and features need in its set, then records and
-    /// submits the frame (and waits for it when `wait`).
-    fn record_ticket(&mut self, t: &Ticket, wait: bool) -> GpuResult<()> {
+    /// submits `pass` of the frame (and waits for it when `wait`).
+    fn record_ticket(&mut self, t: &Ticket, wait: bool, pass: Pass) -> GpuResult<()> {
         if t.readback == Readback::Rgba8 {
             self.ensure_packed(t.set)?;
         }
@@ -1050,14 +1150,15 @@ impl GpuRenderer {
             self.ensure_feature_planes(t.set, features, pixels)?;
         }
         self.record_and_submit(
-            t.set, t.scene, &t.cam, &t.opts, t.readback, t.features, wait,
+            t.set, t.scene, &t.cam, &t.opts, t.readback, t.features, wait, pass,
         )
     }
 
     /// Waits for the ticket's frame and checks its counters: when the frame needed more
     /// pairs than its buffers hold, or larger bins, it is recorded again with larger
-    /// buffers or bins and waited for, until it is complete. Then the timings and counts
-    /// are the frame's.
+    /// buffers or bins and waited for, until it is complete; when it needs more pairs than
+    /// one key buffer holds, it is rendered in chunks. Then the timings and counts are the
+    /// frame's.
     fn complete(&mut self, t: &Ticket) -> GpuResult<()> {
         let set = self.sets.get_mut(t.set).ok_or_else(|| {
             GpuError::InvalidArgument("the ticket is not from this renderer".into())
@@ -1071,20 +1172,52 @@ impl GpuRenderer {
         set.pending = None;
         self.ctx.wait_slot(&mut set.slot)?;
         let cam = &t.cam;
+        let max = self.max_capacity();
+        let mut chunked = t.chunked;
         let mut regrows = 0;
         loop {
-            let counters = self.read_counters(t.set)?;
+            let counters = if chunked {
+                match self.render_chunks(t)? {
+                    Some(counters) => counters,
+                    None => {
+                        // Larger bins or key buffers: the frame is planned again.
+                        regrows += 1;
+                        continue;
+                    }
+                }
+            } else {
+                self.read_counters(t.set)?
+            };
             let pairs = counters.pairs();
             let set = &self.sets[t.set];
             let capacity = set.frame.as_ref().map_or(0, |f| f.capacity);
             let bin_size = set.bin_size;
-            if pairs <= u64::from(capacity) && self.loop_limited() {
+            // Feature frames are not chunked: on a device, or under split limits, whose
+            // key buffer holds fewer pairs, they are refused.
+            let one_piece_max = match self.split.chunk_pairs {
+                0 => max,
+                forced => forced.min(max),
+            };
+            if t.features.is_some() && pairs > u64::from(one_piece_max) {
+                if bin_size < 16 {
+                    self.sets[t.set].bin_size = 16;
+                    regrows += 1;
+                    self.record_ticket(t, true, Pass::Whole)?;
+                    continue;
+                }
+                return Err(GpuError::InvalidArgument(format!(
+                    "this frame needs {pairs} tile/Gaussian pairs, more than the {one_piece_max} one key buffer of this device holds ({} bytes); colour frames are then rendered in chunks, but feature channels and the neural shader are not yet: render at a lower resolution or with fewer Gaussians",
+                    u64::from(one_piece_max) * 8
+                )));
+            }
+            let complete = chunked || pairs <= u64::from(capacity);
+            if complete && self.loop_limited() {
                 let bins_loop = counters.max_bins_loop;
-                if bins_loop > CPU_LOOP_LIMIT && bin_size < 16 {
+                if !chunked && bins_loop > CPU_LOOP_LIMIT && bin_size < 16 {
                     // Four times fewer iterations per Gaussian with 16-pixel bins.
                     self.sets[t.set].bin_size = 16;
                     regrows += 1;
-                    self.record_ticket(t, true)?;
+                    self.record_ticket(t, true, Pass::Whole)?;
                     continue;
                 }
                 let worst = bins_loop.max(counters.max_list_loop);
@@ -1097,7 +1230,8 @@ impl GpuRenderer {
                     )));
                 }
             }
-            if pairs <= u64::from(capacity) {
+            if complete {
+                let bin_size = self.sets[t.set].bin_size;
                 let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
                 self.stats = FrameStats {
                     visible: counters.visible,
@@ -1105,33 +1239,116 @@ impl GpuRenderer {
                     key_bits: key_bits(bx * by),
                     regrows,
                     bin_size,
+                    chunks: if chunked { self.stats.chunks } else { 1 },
                 };
+                let capacity = self.sets[t.set].frame.as_ref().map_or(0, |f| f.capacity);
                 self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
                 break;
             }
-            let max = self.max_capacity();
             if pairs > u64::from(max) && bin_size < 16 {
                 // Fewer, larger bins need fewer pairs; the texel kernel blends either.
                 self.sets[t.set].bin_size = 16;
                 regrows += 1;
-                self.record_ticket(t, true)?;
+                self.record_ticket(t, true, Pass::Whole)?;
                 continue;
             }
             if pairs > u64::from(max) {
-                return Err(GpuError::InvalidArgument(format!(
-                    "this frame needs {pairs} tile/Gaussian pairs, more than the {max} one storage buffer of this device can hold ({} bytes); render at a lower resolution or with fewer Gaussians",
-                    u64::from(max) * 8
-                )));
+                // Too many pairs for one key buffer: this frame and the next in chunks.
+                self.chunked = true;
+                chunked = true;
+                regrows += 1;
+                continue;
             }
             // Grow with headroom so a camera path does not regrow every few frames.
             let grown = (pairs + pairs / 4).min(u64::from(max)) as u32;
             self.ensure_frame(t.set, t.scene, cam, grown)?;
             regrows += 1;
-            self.record_ticket(t, true)?;
+            self.record_ticket(t, true, Pass::Whole)?;
         }
-        self.timings = self.read_timings(t.set)?;
+        if !chunked {
+            self.timings = self.read_timings(t.set)?;
+        }
         self.last = t.set;
         Ok(())
+    }
+
+    /// Renders the ticket's frame in depth-ordered chunks whose pairs fit the key buffers:
+    /// one submission up to the scan, whose offsets the host reads to plan the chunks, then
+    /// keys, sort, ranges and blend per chunk, each blend resuming every pixel where the
+    /// previous chunk left it (`glsl/blend.comp`). The chunks' lists are, tile by tile,
+    /// consecutive runs of the one-piece frame's lists, so the image is bit-identical.
+    /// Returns the frame's counters, or None when the frame must be planned again (larger
+    /// bins, or key buffers grown for its largest chunk).
+    fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<Counters>> {
+        let max = self.max_capacity();
+        let f = self.sets[t.set]
+            .frame
+            .as_mut()
+            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+        if f.chunk_offsets.is_none() {
+            f.chunk_offsets = Some(GpuBuffer::new(
+                &self.ctx,
+                "scanned offsets (chunk planning)",
+                u64::from(f.gaussians.max(1)) * 4,
+                MemoryKind::Readback,
+            )?);
+        }
+        self.record_ticket(t, true, Pass::Front)?;
+        let mut timings = self.read_timings(t.set)?;
+        let front = self.read_counters(t.set)?;
+        let pairs = front.pairs();
+        let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
+        if (bins_cut || pairs > u64::from(max)) && self.sets[t.set].bin_size < 16 {
+            // As in one piece: 16-pixel bins first (fewer pairs and bin-loop iterations).
+            self.sets[t.set].bin_size = 16;
+            return Ok(None);
+        }
+        let limit = match self.split.chunk_pairs {
+            0 => max,
+            forced => forced.min(max),
+        };
+        let (chunks, capacity) = {
+            let f = self.sets[t.set]
+                .frame
+                .as_ref()
+                .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+            let visible = (front.visible as usize).min(t.scene.count as usize);
+            let bytes = f
+                .chunk_offsets
+                .as_ref()
+                .ok_or_else(|| GpuError::InvalidArgument("chunk offsets missing".into()))?
+                .mapped()?;
+            let offsets: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..visible * 4]);
+            (
+                keys::plan_chunks(&offsets, pairs, u64::from(limit)),
+                f.capacity,
+            )
+        };
+        let largest = chunks.iter().map(|c| c.pairs).max().unwrap_or(0);
+        if largest > u64::from(capacity) {
+            if largest > u64::from(max) {
+                return Err(GpuError::InvalidArgument(format!(
+                    "one Gaussian of this frame touches {largest} bins, more than the {max} pairs one storage buffer of this device can hold; render at a lower resolution"
+                )));
+            }
+            let grown = (largest + largest / 4).min(u64::from(max)) as u32;
+            self.ensure_frame(t.set, t.scene, &t.cam, grown)?;
+            return Ok(None);
+        }
+        let batches = chunks.len().div_ceil(CHUNKS_PER_SUBMIT);
+        for (b, batch) in chunks.chunks(CHUNKS_PER_SUBMIT).enumerate() {
+            let pass = Pass::Chunks {
+                chunks: batch,
+                first: b == 0,
+                last: b + 1 == batches,
+            };
+            self.record_ticket(t, true, pass)?;
+            timings.add(&self.read_timings(t.set)?);
+        }
+        self.timings = timings;
+        self.stats.chunks = chunks.len() as u32;
+        // Copied after the last chunk: the front's totals, the chunks' loop lengths.
+        self.read_counters(t.set).map(Some)
     }
 
     /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.
@@ -1165,7 +1382,9 @@ impl GpuRenderer {
         readback: Readback,
         features: Option<FeatureJob>,
         wait: bool,
+        pass: Pass,
     ) -> GpuResult<()> {
+        let window = self.preprocess_window();
         let Self {
             preprocess,
             order,
@@ -1256,149 +1475,219 @@ impl GpuRenderer {
         };
         let n = scene.count;
         let pair_bits = 32..32 + tile_bits(bins_x * bins_y);
+        let whole = [keys::Chunk::whole(n)];
+        let (chunks, first_chunks, last_chunks) = match pass {
+            Pass::Whole => (&whole[..], true, true),
+            Pass::Front => (&[][..], true, false),
+            Pass::Chunks {
+                chunks,
+                first,
+                last,
+            } => (chunks, first, last),
+        };
+        let front = !matches!(pass, Pass::Chunks { .. });
         let record = |cmd| {
             let device = ctx.device();
             timer.reset(ctx, cmd);
-            // SAFETY: cmd is recording; the buffers are alive and large enough.
-            unsafe {
-                device.cmd_update_buffer(cmd, f.params.handle(), 0, bytemuck::bytes_of(&params));
-                device.cmd_fill_buffer(cmd, f.counters.handle(), 0, vk::WHOLE_SIZE, 0);
-                device.cmd_fill_buffer(cmd, f.ranges.handle(), 0, vk::WHOLE_SIZE, 0);
+            if !front {
+                // Everything the previous submission of this frame wrote (the scan, the
+                // images, the counters) -> this one; its reads -> this one's writes.
+                barrier(ctx, cmd, Access::Any, Access::Any);
+            } else {
+                // SAFETY: cmd is recording; the buffers are alive and large enough.
+                unsafe {
+                    device.cmd_update_buffer(
+                        cmd,
+                        f.params.handle(),
+                        0,
+                        bytemuck::bytes_of(&params),
+                    );
+                    device.cmd_fill_buffer(cmd, f.counters.handle(), 0, vk::WHOLE_SIZE, 0);
+                    device.cmd_fill_buffer(cmd, f.ranges.handle(), 0, vk::WHOLE_SIZE, 0);
+                }
+                f.color.transition_to_general(ctx, cmd);
+                f.depth.transition_to_general(ctx, cmd);
+                // Params, counters and ranges: from the clears to the shaders that use them.
+                barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+
+                timer.stage(ctx, cmd, "preprocess", |cmd| {
+                    preprocess.record(
+                        ctx,
+                        cmd,
+                        &preprocess::PreprocessBindings {
+                            params: f.params.whole(),
+                            gaussians: scene.gaussians.whole(),
+                            sh_texels: scene.sh_texels.handle(),
+                            splats: f.splats.whole(),
+                            rects: f.rects.whole(),
+                            depth_keys: f.depth_keys.whole(),
+                            counters: f.counters.whole(),
+                            depth_values: f.depth_values.whole(),
+                            bin_masks: f.bin_masks.whole(),
+                        },
+                        n,
+                        window,
+                    )
+                })?;
+                // The depth sort opens with its own barrier from compute writes (its contract).
+                timer.stage(ctx, cmd, "order", |cmd| {
+                    order.record(
+                        ctx,
+                        cmd,
+                        sort,
+                        f.params.whole(),
+                        &f.depth_keys,
+                        &f.depth_values,
+                        &f.sort_scratch,
+                        f.offsets.whole(),
+                        n,
+                    )
+                })?;
+                // Tiles touched in depth order -> scan; depth order and counters -> keys.
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+
+                timer.stage(ctx, cmd, "scan", |cmd| {
+                    scan.record(
+                        ctx,
+                        cmd,
+                        f.offsets.slice(0, u64::from(n) * 4),
+                        f.offsets.slice(0, u64::from(n) * 4),
+                        (&f.counters, types::COUNTER_SCAN_TOTAL),
+                        f.scan_scratch.whole(),
+                        n,
+                    )
+                })?;
+                // Offsets and the scan total -> keys; the splats (preprocess) -> its texel reads.
+                barrier_uses(
+                    ctx,
+                    cmd,
+                    &[Access::ComputeWrite],
+                    &[Access::ComputeReadWrite, Access::ComputeSampledRead],
+                );
             }
-            f.color.transition_to_general(ctx, cmd);
-            f.depth.transition_to_general(ctx, cmd);
-            // Params, counters and ranges: from the clears to the shaders that use them.
-            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+            if let Pass::Front = pass {
+                // The counters and the scanned offsets -> copies for the host.
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::TransferRead);
+                let planning = f.chunk_offsets.as_ref().ok_or_else(|| {
+                    GpuError::InvalidArgument("the chunk planning buffer is missing".into())
+                })?;
+                let (_, _, counters_off) = f.readback_offsets();
+                let counters = [vk::BufferCopy::default()
+                    .dst_offset(counters_off)
+                    .size(std::mem::size_of::<Counters>() as u64)];
+                let offsets = [vk::BufferCopy::default().size(planning.size())];
+                // SAFETY: the buffers are alive and the regions are inside them (the
+                // planning buffer holds one offset per Gaussian, as the offsets buffer).
+                unsafe {
+                    device.cmd_copy_buffer(
+                        cmd,
+                        f.counters.handle(),
+                        f.readback.handle(),
+                        &counters,
+                    );
+                    device.cmd_copy_buffer(cmd, f.offsets.handle(), planning.handle(), &offsets);
+                }
+                barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
+                return Ok(());
+            }
+            for (c, &chunk) in chunks.iter().enumerate() {
+                let resume = !(first_chunks && c == 0);
+                if resume {
+                    if c > 0 {
+                        // The previous chunk's uses of the keys, values, ranges, counters
+                        // and images -> this chunk's clears and writes.
+                        barrier(ctx, cmd, Access::Any, Access::Any);
+                    }
+                    f.ranges.fill(ctx, cmd, 0, vk::WHOLE_SIZE, 0);
+                    // Cleared ranges -> the ranges stage.
+                    barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+                }
+                timer.stage(ctx, cmd, "keys", |cmd| {
+                    keys.record(
+                        ctx,
+                        cmd,
+                        &keys::KeysBindings {
+                            params: f.params.whole(),
+                            splat_texels: f.splat_texels.handle(),
+                            rects: f.rects.whole(),
+                            offsets: f.offsets.whole(),
+                            keys: f.keys.whole(),
+                            values: f.values.whole(),
+                            counters: f.counters.whole(),
+                            depth_order: f.depth_values.whole(),
+                            bin_masks: f.bin_masks.whole(),
+                        },
+                        chunk,
+                    )
+                })?;
+                // The sort opens with its own barrier from compute writes (its contract).
+                // Pairs arrive in depth order: only the tile bits remain to be sorted.
+                timer.stage(ctx, cmd, "sort", |cmd| {
+                    sort.record_bits(
+                        ctx,
+                        cmd,
+                        &f.keys,
+                        &f.values,
+                        &f.sort_scratch,
+                        Count::Device {
+                            buffer: &f.counters,
+                            offset: types::COUNTER_SORT_COUNT,
+                            max_n: f.capacity,
+                        },
+                        pair_bits.clone(),
+                    )
+                })?;
+                // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
+                barrier_uses(
+                    ctx,
+                    cmd,
+                    &[Access::ComputeWrite],
+                    &[Access::ComputeRead, Access::IndirectRead],
+                );
 
-            timer.stage(ctx, cmd, "preprocess", |cmd| {
-                preprocess.record(
+                timer.stage(ctx, cmd, "ranges", |cmd| {
+                    ranges.record(
+                        ctx,
+                        cmd,
+                        f.keys.whole(),
+                        f.ranges.whole(),
+                        f.counters.whole(),
+                        f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
+                    )
+                })?;
+                // Ranges, sorted values and splats -> blend (storage reads, or texel fetches in
+                // the texel kernel); counters -> the blend's loop-length atomics.
+                barrier_uses(
                     ctx,
                     cmd,
-                    &preprocess::PreprocessBindings {
-                        params: f.params.whole(),
-                        gaussians: scene.gaussians.whole(),
-                        sh_texels: scene.sh_texels.handle(),
-                        splats: f.splats.whole(),
-                        rects: f.rects.whole(),
-                        depth_keys: f.depth_keys.whole(),
-                        counters: f.counters.whole(),
-                        depth_values: f.depth_values.whole(),
-                        bin_masks: f.bin_masks.whole(),
-                    },
-                    n,
-                )
-            })?;
-            // The depth sort opens with its own barrier from compute writes (its contract).
-            timer.stage(ctx, cmd, "order", |cmd| {
-                order.record(
-                    ctx,
-                    cmd,
-                    sort,
-                    f.params.whole(),
-                    &f.depth_keys,
-                    &f.depth_values,
-                    &f.sort_scratch,
-                    f.offsets.whole(),
-                    n,
-                )
-            })?;
-            // Tiles touched in depth order -> scan; depth order and counters -> keys.
-            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                    &[Access::ComputeWrite],
+                    &[Access::ComputeReadWrite, Access::ComputeSampledRead],
+                );
 
-            timer.stage(ctx, cmd, "scan", |cmd| {
-                scan.record(
-                    ctx,
-                    cmd,
-                    f.offsets.slice(0, u64::from(n) * 4),
-                    f.offsets.slice(0, u64::from(n) * 4),
-                    (&f.counters, types::COUNTER_SCAN_TOTAL),
-                    f.scan_scratch.whole(),
-                    n,
-                )
-            })?;
-            // Offsets and the scan total -> keys.
-            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
-
-            timer.stage(ctx, cmd, "keys", |cmd| {
-                keys.record(
-                    ctx,
-                    cmd,
-                    &keys::KeysBindings {
-                        params: f.params.whole(),
-                        splats: f.splats.whole(),
-                        rects: f.rects.whole(),
-                        offsets: f.offsets.whole(),
-                        keys: f.keys.whole(),
-                        values: f.values.whole(),
-                        counters: f.counters.whole(),
-                        depth_order: f.depth_values.whole(),
-                        bin_masks: f.bin_masks.whole(),
-                    },
-                    n,
-                )
-            })?;
-            // The sort opens with its own barrier from compute writes (its contract).
-            // Pairs arrive in depth order: only the tile bits remain to be sorted.
-            timer.stage(ctx, cmd, "sort", |cmd| {
-                sort.record_bits(
-                    ctx,
-                    cmd,
-                    &f.keys,
-                    &f.values,
-                    &f.sort_scratch,
-                    Count::Device {
-                        buffer: &f.counters,
-                        offset: types::COUNTER_SORT_COUNT,
-                        max_n: f.capacity,
-                    },
-                    pair_bits.clone(),
-                )
-            })?;
-            // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
-            barrier_uses(
-                ctx,
-                cmd,
-                &[Access::ComputeWrite],
-                &[Access::ComputeRead, Access::IndirectRead],
-            );
-
-            timer.stage(ctx, cmd, "ranges", |cmd| {
-                ranges.record(
-                    ctx,
-                    cmd,
-                    f.keys.whole(),
-                    f.ranges.whole(),
-                    f.counters.whole(),
-                    f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
-                )
-            })?;
-            // Ranges, sorted values and splats -> blend (storage reads, or texel fetches in
-            // the texel kernel); counters -> the blend's loop-length atomics.
-            barrier_uses(
-                ctx,
-                cmd,
-                &[Access::ComputeWrite],
-                &[Access::ComputeReadWrite, Access::ComputeSampledRead],
-            );
-
-            timer.stage(ctx, cmd, "blend", |cmd| {
-                blend.record(
-                    ctx,
-                    cmd,
-                    &blend::BlendBindings {
-                        params: f.params.whole(),
-                        splats: f.splats.whole(),
-                        values: f.values.whole(),
-                        splat_texels: f.splat_texels.as_ref().map(|v| v.handle()),
-                        value_texels: f.value_texels.as_ref().map(|v| v.handle()),
-                        ranges: f.ranges.whole(),
-                        color: &f.color,
-                        depth: &f.depth,
-                        counters: f.counters.whole(),
-                    },
-                    (tiles_x, tiles_y),
-                )
-            })?;
+                timer.stage(ctx, cmd, "blend", |cmd| {
+                    blend.record(
+                        ctx,
+                        cmd,
+                        &blend::BlendBindings {
+                            params: f.params.whole(),
+                            splats: f.splats.whole(),
+                            values: f.values.whole(),
+                            splat_texels: Some(f.splat_texels.handle()),
+                            value_texels: f.value_texels.as_ref().map(|v| v.handle()),
+                            ranges: f.ranges.whole(),
+                            color: &f.color,
+                            depth: &f.depth,
+                            counters: f.counters.whole(),
+                            resume,
+                            last: last_chunks && c + 1 == chunks.len(),
+                        },
+                        (tiles_x, tiles_y),
+                    )
+                })?;
+            }
+            if !last_chunks {
+                return Ok(());
+            }
             if let Some((feat, pipeline)) = &feature_job {
                 // The blend's loop-length atomics on the counters -> the feature blend's.
                 barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
@@ -1411,7 +1700,7 @@ impl GpuRenderer {
                             .buffer
                             .slice(g as u64 * planes.plane_bytes, planes.pixel_bytes);
                         let texels = match (&f.splat_texels, &f.value_texels, feat.views.get(g)) {
-                            (Some(s), Some(v), Some(fv)) if pipeline.texel() => {
+                            (s, Some(v), Some(fv)) if pipeline.texel() => {
                                 Some([s.handle(), v.handle(), fv.handle()])
                             }
                             _ => None,
@@ -1550,7 +1839,8 @@ impl GpuRenderer {
                 "readback" => &mut t.readback,
                 _ => continue,
             };
-            *slot = *ms;
+            // Chunks time their stages once each.
+            *slot += *ms;
         }
         t.total = timer.span_ms(&self.ctx)?;
         Ok(t)

@@ -1,6 +1,8 @@
-//! Preprocess stage (`glsl/preprocess.comp`): one thread per Gaussian.
+//! Preprocess stage (`glsl/preprocess.comp`): one thread per Gaussian, dispatched once per
+//! window of Gaussians whose per-Gaussian arrays fit one storage binding each.
 
 use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
@@ -30,7 +32,8 @@ pub struct PreprocessBindings<'a> {
     pub counters: BufferSlice<'a>,
     /// Gaussian index per Gaussian, the depth sort's values (written).
     pub depth_values: BufferSlice<'a>,
-    /// Receiving bins of small tile rectangles, one bit per bin (written).
+    /// Receiving bins of small tile rectangles, one bit per bin, by global Gaussian
+    /// index (written; bound whole).
     pub bin_masks: BufferSlice<'a>,
 }
 
@@ -52,37 +55,68 @@ impl Preprocess {
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
             ],
-            0,
+            8,
             WORKGROUP,
         )?;
         Ok(Preprocess { pipeline })
     }
 
-    /// Records the dispatch for `n` Gaussians.
+    /// Records the dispatches for `n` Gaussians, `window` (a multiple of [`WORKGROUP`]) at
+    /// a time: each binds the window's slices of the per-Gaussian buffers (the whole
+    /// buffers when one window holds every Gaussian).
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
         b: &PreprocessBindings,
         n: u32,
+        window: u32,
     ) -> GpuResult<()> {
-        let groups = dispatch_grid(n.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
-        self.pipeline.dispatch_resources(
-            ctx,
-            cmd,
-            &[
-                Resource::Buffer(b.params),
-                Resource::Buffer(b.gaussians),
-                Resource::TexelBuffer(b.sh_texels),
-                Resource::Buffer(b.splats),
-                Resource::Buffer(b.rects),
-                Resource::Buffer(b.depth_keys),
-                Resource::Buffer(b.counters),
-                Resource::Buffer(b.depth_values),
-                Resource::Buffer(b.bin_masks),
-            ],
-            &[],
-            groups,
-        )
+        let window = window.max(WORKGROUP) / WORKGROUP * WORKGROUP;
+        let mut first = 0u32;
+        while first < n {
+            let count = window.min(n - first);
+            if first > 0 {
+                // The previous window's counter atomics -> this window's.
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+            }
+            let whole = count == n;
+            let part = |s, stride| window_slice(s, whole, first, count, stride);
+            let groups =
+                dispatch_grid(count.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
+            let push = [first, count];
+            self.pipeline.dispatch_resources(
+                ctx,
+                cmd,
+                &[
+                    Resource::Buffer(b.params),
+                    Resource::Buffer(part(b.gaussians, 48)),
+                    Resource::TexelBuffer(b.sh_texels),
+                    Resource::Buffer(part(b.splats, 48)),
+                    Resource::Buffer(part(b.rects, 8)),
+                    Resource::Buffer(part(b.depth_keys, 8)),
+                    Resource::Buffer(b.counters),
+                    Resource::Buffer(part(b.depth_values, 4)),
+                    Resource::Buffer(b.bin_masks),
+                ],
+                bytemuck::cast_slice(&push),
+                groups,
+            )?;
+            first += count;
+        }
+        Ok(())
+    }
+}
+
+/// Gaussians `first..first + count` of a per-Gaussian buffer of `stride` bytes each (the
+/// buffer as given when the window is `whole`).
+fn window_slice(s: BufferSlice, whole: bool, first: u32, count: u32, stride: u64) -> BufferSlice {
+    if whole {
+        return s;
+    }
+    BufferSlice {
+        buffer: s.buffer,
+        offset: s.offset + u64::from(first) * stride,
+        size: u64::from(count) * stride,
     }
 }
