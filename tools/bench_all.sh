@@ -34,6 +34,10 @@ echo "## scaling sweep (synthetic scenes, SH 2, default camera)"
 $B bench --sweep gaussians=1e3,1e4,1e5,1e6 --sweep resolution=720p,1080p,4k --frames 3 --warmup 1 \
   --csv docs/benchmarks/scaling.csv --json docs/benchmarks/scaling.json --plot docs/benchmarks/scaling.svg --overwrite \
   | grep -E "^scene|^frame|^blend |^sort |^wall|evaluations"
+echo "## scaling sweep to 10 M Gaussians at 1080p (chunked frames; lavapipe's 2 GiB heap is raised)"
+VKSPLAT_MEMORY_LIMIT=16G $B bench --sweep gaussians=3e6,1e7 --sweep resolution=1080p --frames 1 --warmup 0 \
+  --csv docs/benchmarks/scaling_10m.csv --json docs/benchmarks/scaling_10m.json --plot docs/benchmarks/scaling_10m.svg --overwrite \
+  | grep -E "^scene|^frame|^blend |^sort |^wall|chunks|device memory"
 echo "## start-up (render --demo --width 64 -v)"
 VKSPLAT_NO_SHADER_CACHE=1 $B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
 $B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
