@@ -127,6 +127,8 @@ pub struct BenchReport {
     pub kernel: String,
     /// Feature channels blended per frame (the `features` stage), 0 for colour only.
     pub feature_channels: usize,
+    /// The scene was uploaded compact (SH as fp16; `--compact`).
+    pub compact: bool,
     /// Measured frames.
     pub frames: usize,
     /// Discarded warm-up frames.
@@ -233,8 +235,14 @@ impl BenchReport {
         }
         if self.renderer == "gpu" {
             out += &format!(
-                "device memory: peak {} B ({:.1} B per Gaussian)\n",
-                self.device_bytes_peak, self.device_bytes_per_gaussian
+                "device memory: peak {} B ({:.1} B per Gaussian){}\n",
+                self.device_bytes_peak,
+                self.device_bytes_per_gaussian,
+                if self.compact {
+                    ", compact scene (SH as fp16)"
+                } else {
+                    ""
+                }
             );
         }
         out
@@ -349,6 +357,7 @@ pub fn bench_gpu(
         blend_kernel: Some(renderer.blend_kernel().to_string()),
         kernel: opts.kernel.to_string(),
         feature_channels: scene.feature_count,
+        compact: gpu_scene.is_compact(),
         frames,
         warmup,
         stages,
@@ -424,6 +433,7 @@ pub fn bench_cpu(
         blend_kernel: None,
         kernel: opts.kernel.to_string(),
         feature_channels: scene.feature_count,
+        compact: false,
         frames,
         warmup,
         stages,

@@ -34,16 +34,7 @@ fn load(name: &str) -> ActivatedScene {
 /// Colour, alpha and depth equal bit for bit (NaN-safe: the bits are compared).
 fn assert_bit_identical(label: &str, split: &Frame, whole: &Frame) {
     assert_eq!((split.width, split.height), (whole.width, whole.height));
-    let bits = |f: &Frame| -> Vec<u32> {
-        f.color
-            .iter()
-            .flatten()
-            .chain(&f.alpha)
-            .chain(&f.depth)
-            .map(|v| v.to_bits())
-            .collect()
-    };
-    let (a, b) = (bits(split), bits(whole));
+    let (a, b) = (common::frame_bits(split), common::frame_bits(whole));
     let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
     assert_eq!(differing, 0, "{label}: {differing} values differ");
 }

@@ -611,16 +611,11 @@ fn tile_culled_render_equals_the_reference_render_bit_for_bit() {
             let all: usize = projected.iter().map(|p| p.tiles_touched() as usize).sum();
             eprintln!("{} {kernel}: {} of {all} pairs kept", cam.name, sk.len());
             assert!(sk.len() < all, "some pairs are culled");
-            let bits = |f: &Frame| -> Vec<u32> {
-                f.color
-                    .iter()
-                    .flatten()
-                    .chain(&f.alpha)
-                    .chain(&f.depth)
-                    .map(|v| v.to_bits())
-                    .collect()
-            };
-            assert!(bits(&culled) == bits(&plain), "{} {kernel}", cam.name);
+            assert!(
+                common::frame_bits(&culled) == common::frame_bits(&plain),
+                "{} {kernel}",
+                cam.name
+            );
         }
     }
 }

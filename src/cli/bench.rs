@@ -75,6 +75,9 @@ pub(crate) struct BenchArgs {
     /// Benchmark the CPU reference renderer instead (wall clock).
     #[arg(long)]
     pub(crate) cpu: bool,
+    /// Upload the scene in compact form (SH coefficients as fp16), as `render --compact`.
+    #[arg(long, conflicts_with = "cpu")]
+    pub(crate) compact: bool,
     /// Attach feature channels (an N x K NumPy array, as `render --features`); a scene with
     /// feature channels (these, or its PLY feat_*) is benchmarked with its feature blend,
     /// reported as the `features` stage.
@@ -206,7 +209,9 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     let mut renderer = if args.cpu {
         None
     } else {
-        Some(GpuRenderer::new(args.gpu.context()?)?)
+        let mut renderer = GpuRenderer::new(args.gpu.context()?)?;
+        renderer.set_compact(args.compact);
+        Some(renderer)
     };
     let points = counts.len() * resolutions.len();
     let mut reports = Vec::new();

@@ -129,6 +129,10 @@ pub(crate) struct RenderArgs {
     /// frame at a time. The files are the same either way [default: 2].
     #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 2))]
     pub(crate) frames_in_flight: Option<usize>,
+    /// Compact device copy of the scene: SH coefficients as fp16 (half the bytes of the
+    /// largest per-Gaussian array). Not exact: colours carry fp16's rounding of the SH.
+    #[arg(long)]
+    pub(crate) compact: bool,
     /// No progress display (the summary is still printed).
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -244,6 +248,7 @@ fn check_cpu_options(args: &RenderArgs) -> Result<()> {
         ("--memory-limit", g.memory_limit.is_some()),
         ("--validate", g.validate),
         ("--frames-in-flight", args.frames_in_flight.is_some()),
+        ("--compact", args.compact),
     ];
     if let Some((flag, _)) = gpu_only.iter().find(|(_, set)| *set) {
         bail!("{flag} applies to the Vulkan pipeline; --cpu renders with the CPU reference");
@@ -590,6 +595,7 @@ fn render_gpu(
     }
     let t1 = std::time::Instant::now();
     let mut renderer = GpuRenderer::new(ctx)?;
+    renderer.set_compact(args.compact);
     if args.gpu.verbose {
         note!(
             "start-up: device {:.0} ms, shaders and pipelines {:.0} ms",

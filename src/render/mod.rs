@@ -78,9 +78,14 @@ pub struct GpuScene {
     count: u32,
     sh_degree: u32,
     sh_coeffs: u32,
+    compact: bool,
 }
 
 impl GpuScene {
+    /// Whether the SH coefficients were uploaded as fp16 ([`GpuRenderer::set_compact`]).
+    pub fn is_compact(&self) -> bool {
+        self.compact
+    }
     /// Number of Gaussians.
     pub fn len(&self) -> u32 {
         self.count
@@ -470,6 +475,8 @@ pub struct GpuRenderer {
     /// do not fit one key buffer, and kept (a camera path does not find out again).
     chunked: bool,
     split: SplitLimits,
+    /// Upload SH coefficients as fp16 ([`Self::set_compact`]).
+    compact: bool,
     ctx: GpuContext,
 }
 
@@ -602,6 +609,7 @@ impl GpuRenderer {
             stats: FrameStats::default(),
             chunked: false,
             split: SplitLimits::default(),
+            compact: false,
             ctx,
         })
     }
@@ -639,6 +647,14 @@ impl GpuRenderer {
     /// The device context.
     pub fn ctx(&self) -> &GpuContext {
         &self.ctx
+    }
+
+    /// Compact mode for the scenes uploaded from now on: SH coefficients as fp16 (half the
+    /// bytes of the largest per-Gaussian array: 96 instead of 192 at SH degree 3), read
+    /// through an RGBA16F texel view by the same preprocess shader. Not exact: the colours
+    /// differ from the fp32 render by fp16's rounding (BENCHMARKS.md measures the PSNR).
+    pub fn set_compact(&mut self, on: bool) {
+        self.compact = on;
     }
 
     /// Uploads activated Gaussians.
@@ -688,13 +704,30 @@ impl GpuRenderer {
             }
             std::borrow::Cow::Owned(v)
         };
-        let sh_bytes = (sh_padded.len() * 4).max(16) as u64;
         let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
         gaussians.upload(&self.ctx, &records)?;
-        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
-        sh.upload(&self.ctx, &sh_padded)?;
-        let sh_texels =
-            BufferView::new(&self.ctx, &sh, vk::Format::R32G32B32A32_SFLOAT, 0, sh_bytes)?;
+        let (sh, format, sh_bytes) = if self.compact {
+            // Round to nearest fp16; beyond fp16's range (|x| > 65504) becomes infinite.
+            let halves: Vec<u16> = sh_padded
+                .iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect();
+            let bytes = (halves.len() * 2).max(8) as u64;
+            let sh = GpuBuffer::new(
+                &self.ctx,
+                "sh coefficients (fp16)",
+                bytes,
+                MemoryKind::Device,
+            )?;
+            sh.upload(&self.ctx, &halves)?;
+            (sh, vk::Format::R16G16B16A16_SFLOAT, bytes)
+        } else {
+            let bytes = (sh_padded.len() * 4).max(16) as u64;
+            let sh = GpuBuffer::new(&self.ctx, "sh coefficients", bytes, MemoryKind::Device)?;
+            sh.upload(&self.ctx, &sh_padded)?;
+            (sh, vk::Format::R32G32B32A32_SFLOAT, bytes)
+        };
+        let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
         Ok(GpuScene {
             sh_texels,
             gaussians,
@@ -702,6 +735,7 @@ impl GpuRenderer {
             count,
             sh_degree: scene.sh_degree,
             sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
+            compact: self.compact,
         })
     }
 

@@ -78,3 +78,15 @@ pub fn axis_camera(f: f32) -> Camera {
         translation: Vec3::ZERO,
     }
 }
+
+/// The bits of a frame's colour, alpha and depth, in that order: equal bits mean a
+/// bit-identical frame (NaN-safe, unlike comparing the floats).
+pub fn frame_bits(f: &vksplat::frame::Frame) -> Vec<u32> {
+    f.color
+        .iter()
+        .flatten()
+        .chain(&f.alpha)
+        .chain(&f.depth)
+        .map(|v| v.to_bits())
+        .collect()
+}
