@@ -1073,6 +1073,16 @@ impl GpuRenderer {
         (range / 8).min(u64::from(u32::MAX)) as u32
     }
 
+    /// Pairs one piece of a frame may hold: one key buffer's worth, or fewer under the
+    /// split limits of tests ([`SplitLimits::chunk_pairs`]).
+    fn pairs_per_piece(&self) -> u32 {
+        let max = self.max_capacity();
+        match self.split.chunk_pairs {
+            0 => max,
+            forced => forced.min(max),
+        }
+    }
+
     /// Makes set `set`'s frame buffers fit the scene, the camera and `capacity` pairs.
     fn ensure_frame(
         &mut self,
@@ -1210,9 +1220,9 @@ impl GpuRenderer {
         let mut chunked = t.chunked;
         let mut regrows = 0;
         loop {
-            let counters = if chunked {
+            let (counters, chunks) = if chunked {
                 match self.render_chunks(t)? {
-                    Some(counters) => counters,
+                    Some(done) => done,
                     None => {
                         // Larger bins or key buffers: the frame is planned again.
                         regrows += 1;
@@ -1220,7 +1230,7 @@ impl GpuRenderer {
                     }
                 }
             } else {
-                self.read_counters(t.set)?
+                (self.read_counters(t.set)?, 1)
             };
             let pairs = counters.pairs();
             let set = &self.sets[t.set];
@@ -1228,10 +1238,7 @@ impl GpuRenderer {
             let bin_size = set.bin_size;
             // Feature frames are not chunked: on a device, or under split limits, whose
             // key buffer holds fewer pairs, they are refused.
-            let one_piece_max = match self.split.chunk_pairs {
-                0 => max,
-                forced => forced.min(max),
-            };
+            let one_piece_max = self.pairs_per_piece();
             if t.features.is_some() && pairs > u64::from(one_piece_max) {
                 if bin_size < 16 {
                     self.sets[t.set].bin_size = 16;
@@ -1265,7 +1272,6 @@ impl GpuRenderer {
                 }
             }
             if complete {
-                let bin_size = self.sets[t.set].bin_size;
                 let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
                 self.stats = FrameStats {
                     visible: counters.visible,
@@ -1273,9 +1279,8 @@ impl GpuRenderer {
                     key_bits: key_bits(bx * by),
                     regrows,
                     bin_size,
-                    chunks: if chunked { self.stats.chunks } else { 1 },
+                    chunks,
                 };
-                let capacity = self.sets[t.set].frame.as_ref().map_or(0, |f| f.capacity);
                 self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
                 break;
             }
@@ -1311,9 +1316,9 @@ impl GpuRenderer {
     /// keys, sort, ranges and blend per chunk, each blend resuming every pixel where the
     /// previous chunk left it (`glsl/blend.comp`). The chunks' lists are, tile by tile,
     /// consecutive runs of the one-piece frame's lists, so the image is bit-identical.
-    /// Returns the frame's counters, or None when the frame must be planned again (larger
-    /// bins, or key buffers grown for its largest chunk).
-    fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<Counters>> {
+    /// Returns the frame's counters and its number of chunks, or None when the frame must
+    /// be planned again (larger bins, or key buffers grown for its largest chunk).
+    fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<(Counters, u32)>> {
         let max = self.max_capacity();
         let f = self.sets[t.set]
             .frame
@@ -1337,10 +1342,7 @@ impl GpuRenderer {
             self.sets[t.set].bin_size = 16;
             return Ok(None);
         }
-        let limit = match self.split.chunk_pairs {
-            0 => max,
-            forced => forced.min(max),
-        };
+        let limit = self.pairs_per_piece();
         let (chunks, capacity) = {
             let f = self.sets[t.set]
                 .frame
@@ -1380,9 +1382,9 @@ impl GpuRenderer {
             timings.add(&self.read_timings(t.set)?);
         }
         self.timings = timings;
-        self.stats.chunks = chunks.len() as u32;
         // Copied after the last chunk: the front's totals, the chunks' loop lengths.
-        self.read_counters(t.set).map(Some)
+        let counters = self.read_counters(t.set)?;
+        Ok(Some((counters, chunks.len() as u32)))
     }
 
     /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.
