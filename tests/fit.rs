@@ -426,33 +426,30 @@ fn malformed_inputs_fail_clearly_without_output() {
         &samples,
         "--bounds is only for a dense grid",
     );
-    let short = d.join("short.csv");
-    std::fs::write(&short, "x,y,z,v\n0,0,0,1\n1,1,1,2\n1,2,3\n").unwrap();
-    expect(
-        fit(&short, &[]),
-        &short,
-        "line 4 has 3 values where line 1 has 4",
-    );
-    let nan_csv = d.join("nan.csv");
-    std::fs::write(&nan_csv, "0,0,0,1\n1,1,1,NaN\n").unwrap();
-    expect(
-        fit(&nan_csv, &[]),
-        &nan_csv,
-        "line 2, column 4: NaN is not a finite value",
-    );
-    let word = d.join("word.csv");
-    std::fs::write(&word, "0,0,0,1\n1,1,one,2\n").unwrap();
-    expect(
-        fit(&word, &[]),
-        &word,
-        "line 2, column 3: \"one\" is not a number",
-    );
-    let empty_csv = d.join("empty.csv");
-    std::fs::write(&empty_csv, "x,y,z,v\n").unwrap();
-    expect(fit(&empty_csv, &[]), &empty_csv, "holds no samples");
-    let txt = d.join("field.txt");
-    std::fs::write(&txt, "0 0 0 1\n").unwrap();
-    expect(fit(&txt, &[]), &txt, "unknown input format");
+    // Text inputs: each file, what it holds, and the error naming what is wrong with it.
+    for (name, text, message) in [
+        (
+            "short.csv",
+            "x,y,z,v\n0,0,0,1\n1,1,1,2\n1,2,3\n",
+            "line 4 has 3 values where line 1 has 4",
+        ),
+        (
+            "nan.csv",
+            "0,0,0,1\n1,1,1,NaN\n",
+            "line 2, column 4: NaN is not a finite value",
+        ),
+        (
+            "word.csv",
+            "0,0,0,1\n1,1,one,2\n",
+            "line 2, column 3: \"one\" is not a number",
+        ),
+        ("empty.csv", "x,y,z,v\n", "holds no samples"),
+        ("field.txt", "0 0 0 1\n", "unknown input format"),
+    ] {
+        let path = d.join(name);
+        std::fs::write(&path, text).unwrap();
+        expect(fit(&path, &[]), &path, message);
+    }
     let missing = d.join("missing.npy");
     expect(fit(&missing, &[]), &missing, "cannot read");
     // Not a PLY output; more initial Gaussians than the cap.

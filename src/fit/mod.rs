@@ -275,27 +275,15 @@ fn samples(rows: Vec<f32>, cols: usize, layout: Layout) -> FieldData {
     let n = rows.len() / cols;
     let mut positions = Vec::with_capacity(n);
     let mut values = Vec::with_capacity(n * k);
-    let mut b = [
-        f32::INFINITY,
-        f32::INFINITY,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        f32::NEG_INFINITY,
-        f32::NEG_INFINITY,
-    ];
     for row in rows.chunks_exact(cols) {
         positions.push([row[0], row[1], row[2]]);
         values.extend_from_slice(&row[3..]);
-        for a in 0..3 {
-            b[a] = b[a].min(row[a]);
-            b[a + 3] = b[a + 3].max(row[a]);
-        }
     }
     FieldData {
+        bounds: model::point_bounds(&positions),
         positions,
         values,
         k,
-        bounds: b,
         layout,
         bounds_source: "the samples' extent".into(),
     }

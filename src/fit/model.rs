@@ -206,6 +206,26 @@ impl CellGrid {
     }
 }
 
+/// The axis-aligned box of `positions`: (xmin, ymin, zmin, xmax, ymax, zmax); infinite
+/// and empty (min > max) when there are none.
+pub fn point_bounds(positions: &[[f32; 3]]) -> [f32; 6] {
+    let mut b = [
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    for p in positions {
+        for a in 0..3 {
+            b[a] = b[a].min(p[a]);
+            b[a + 3] = b[a + 3].max(p[a]);
+        }
+    }
+    b
+}
+
 /// The sides of `bounds`, each at least 1e-3 of the largest (and 1e-6), so flat data
 /// still gets a box.
 pub fn extents(bounds: [f32; 6]) -> [f32; 3] {
@@ -600,21 +620,7 @@ pub fn evaluate(model: &Model, kernel: SplatKernel, positions: &[[f32; 3]]) -> V
     if positions.is_empty() {
         return Vec::new();
     }
-    let mut b = [
-        f32::INFINITY,
-        f32::INFINITY,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        f32::NEG_INFINITY,
-        f32::NEG_INFINITY,
-    ];
-    for p in positions {
-        for a in 0..3 {
-            b[a] = b[a].min(p[a]);
-            b[a + 3] = b[a + 3].max(p[a]);
-        }
-    }
-    let grid = CellGrid::new(b, positions.len(), 8.0);
+    let grid = CellGrid::new(point_bounds(positions), positions.len(), 8.0);
     let points = Points::binned(&grid, positions, &[], &[], model.k);
     let f = forward(model, kernel, &grid, &points);
     let k = model.k;
