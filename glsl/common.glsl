@@ -81,4 +81,9 @@ uint key_digit(uvec2 key, uint shift, uint mask) {
     return bits & mask;
 }
 
+// Bits [shift, shift + popcount(mask)) of a 32-bit key (shift < 32).
+uint key_digit(uint key, uint shift, uint mask) {
+    return (key >> shift) & mask;
+}
+
 #endif

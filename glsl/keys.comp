@@ -18,7 +18,8 @@ layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
 layout(binding = 1) uniform samplerBuffer splat_texels;
 layout(std430, binding = 2) readonly buffer RectBuf { uvec2 rects[]; };
 layout(std430, binding = 3) readonly buffer OffsetBuf { uint offsets[]; };
-layout(std430, binding = 4) writeonly buffer KeyBuf { uvec2 keys[]; };
+// Tile (bin) ids: pairs are written in depth order, so the key needs no depth bits.
+layout(std430, binding = 4) writeonly buffer KeyBuf { uint keys[]; };
 layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) readonly buffer OrderBuf { uint depth_order[]; };
@@ -50,10 +51,6 @@ void main() {
     uvec2 rmin = unpack_tile(rect.x);
     uvec2 rmax = unpack_tile(rect.y);
     if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
-    vec4 mean_opacity_bound = texelFetch(splat_texels, int(i * 3u));
-    vec4 conic_depth = texelFetch(splat_texels, int(i * 3u + 1u));
-    uint depth_bits = floatBitsToUint(conic_depth.w);
-    float bound = mean_opacity_bound.w;
     uint bins_x = params.bins.y;
     uvec2 bmin = rmin * params.bins.w;
     uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
@@ -70,12 +67,16 @@ void main() {
             mask &= mask - 1u;
             uint y = bmin.y + j / w, x = bmin.x + j % w;
             if (off < limit) {
-                keys[off] = uvec2(depth_bits, y * bins_x + x);
+                keys[off] = y * bins_x + x;
                 values[off] = i;
             }
             off++;
         }
     } else {
+        // Larger rectangles test every bin again, with the splat's conic.
+        vec4 mean_opacity_bound = texelFetch(splat_texels, int(i * 3u));
+        vec4 conic_depth = texelFetch(splat_texels, int(i * 3u + 1u));
+        float bound = mean_opacity_bound.w;
         uint y = bmin.y;
         uint x = bmax.x;
         for (; y < bmax.y; y++) {
@@ -83,7 +84,7 @@ void main() {
                 // The same test preprocess counted with (tile_receives in splat_common.glsl).
                 if (!tile_receives(mean_opacity_bound.xy, conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
                 if (off < limit) {
-                    keys[off] = uvec2(depth_bits, y * bins_x + x);
+                    keys[off] = y * bins_x + x;
                     values[off] = i;
                 }
                 off++;
@@ -95,7 +96,7 @@ void main() {
         }
     }
     for (; off < min(end, capacity); off++) {
-        keys[off] = uvec2(0xFFFFFFFFu, SENTINEL_TILE);
+        keys[off] = SENTINEL_TILE;
         values[off] = i;
     }
 }

@@ -1,6 +1,6 @@
 #version 460
-// Depth order, second half: after the stable depth sort of (depth bits, tiles touched) keys,
-// lay the tiles-touched counts out in depth order for the scan. Keys are then emitted in
+// Depth order, second half: after the stable depth sort of the depth-bit keys (values: the
+// Gaussian indices), gather the tiles-touched counts into depth order for the scan. Keys are then emitted in
 // depth order, so the pair sort only needs the tile bits: for equal tiles the stable sort
 // keeps depth order, and for equal depths the depth sort kept index order, which is exactly
 // the order of a stable sort of the full tile << 32 | depth keys emitted in index order.
@@ -10,10 +10,11 @@
 layout(local_size_x = 256) in;
 
 layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
-layout(std430, binding = 1) readonly buffer DepthKeyBuf { uvec2 depth_keys[]; };
-layout(std430, binding = 2) writeonly buffer TouchedBuf { uint touched_in_order[]; };
+layout(std430, binding = 1) readonly buffer OrderBuf { uint depth_order[]; };
+layout(std430, binding = 2) readonly buffer TouchedBuf { uint touched_by_index[]; };
+layout(std430, binding = 3) writeonly buffer TouchedInOrderBuf { uint touched_in_order[]; };
 
 void main() {
     uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
-    if (k < params.counts.x) touched_in_order[k] = depth_keys[k].y;
+    if (k < params.counts.x) touched_in_order[k] = touched_by_index[depth_order[k]];
 }

@@ -2,7 +2,7 @@
 // Preprocess: per Gaussian, cull at the near plane, project, 2D covariance with the 0.3
 // dilation, conic, radius, tile rectangle, SH colour, depth and tiles touched. One thread
 // per Gaussian; mirrors cpu::preprocess_one line by line. Also writes each Gaussian's depth
-// sort key (depth bits, tiles touched) and index, for the depth order stage.
+// sort key (depth bits), index and tiles touched, for the depth order stage.
 #extension GL_GOOGLE_include_directive : require
 #define WORKGROUP_COUNT64
 #include "splat_common.glsl"
@@ -17,13 +17,15 @@ layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; 
 layout(binding = 2) uniform samplerBuffer sh_texels;
 layout(std430, binding = 3) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
-layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uvec2 depth_keys[]; };  // (depth bits or ~0 when culled, tiles touched)
+layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uint depth_keys[]; };  // depth bits, or ~0 when culled
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) writeonly buffer DepthValueBuf { uint depth_values[]; };
 // Which bins of a small rectangle receive the splat (see BIN_MASK_BINS in splat_common),
 // indexed by the global Gaussian index (4 bytes each: one binding holds any scene the SH
 // texels allow).
 layout(std430, binding = 8) writeonly buffer BinMaskBuf { uint bin_masks[]; };
+// Tiles touched, by the global Gaussian index (gathered into depth order by order.comp).
+layout(std430, binding = 9) writeonly buffer TouchedBuf { uint touched_by_index[]; };
 // The window of Gaussians this dispatch handles: bindings 1, 3, 4, 5 and 7 start at
 // Gaussian `first` (one storage binding may not cover a large scene, so the host
 // dispatches once per window); the SH texels and the indices written are global.
@@ -188,7 +190,8 @@ void main() {
         splats[w] = s;
         rects[w] = rect;
         // Culled Gaussians sort after every visible one.
-        depth_keys[w] = uvec2(touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu, touched);
+        depth_keys[w] = touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu;
+        touched_by_index[i] = touched;
         depth_values[w] = i;
         bin_masks[i] = touched != 0u ? mask : 0u;
     }

@@ -6,7 +6,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(std430, binding = 0) readonly buffer KeyBuf { uvec2 keys[]; };
+layout(std430, binding = 0) readonly buffer KeyBuf { uint keys[]; };
 layout(std430, binding = 1) writeonly buffer RangeBuf { uvec2 ranges[]; };
 layout(std430, binding = 2) readonly buffer CounterBuf { Counters counters; };
 
@@ -14,8 +14,8 @@ void main() {
     uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
     uint n = counters.sort_count;
     if (i >= n) return;
-    uint tile = keys[i].y;
+    uint tile = keys[i];
     if (tile == SENTINEL_TILE) return;
-    if (i == 0u || keys[i - 1u].y != tile) ranges[tile].x = i;
-    if (i + 1u == n || keys[i + 1u].y != tile) ranges[tile].y = i + 1u;
+    if (i == 0u || keys[i - 1u] != tile) ranges[tile].x = i;
+    if (i + 1u == n || keys[i + 1u] != tile) ranges[tile].y = i + 1u;
 }

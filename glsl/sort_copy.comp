@@ -5,9 +5,9 @@
 #include "common.glsl"
 
 layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
-layout(std430, binding = 1) readonly buffer KeysIn { uvec2 keys_in[]; };
+layout(std430, binding = 1) readonly buffer KeysIn { SORT_KEY keys_in[]; };
 layout(std430, binding = 2) readonly buffer ValuesIn { uint values_in[]; };
-layout(std430, binding = 3) writeonly buffer KeysOut { uvec2 keys_out[]; };
+layout(std430, binding = 3) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
 layout(std430, binding = 4) writeonly buffer ValuesOut { uint values_out[]; };
 
 void main() {

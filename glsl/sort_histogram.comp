@@ -13,7 +13,7 @@ layout(push_constant) uniform Push {
 } pc;
 
 layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
-layout(std430, binding = 1) readonly buffer Keys { uvec2 keys[]; };
+layout(std430, binding = 1) readonly buffer Keys { SORT_KEY keys[]; };
 layout(std430, binding = 2) writeonly buffer Hist { uint hist[]; };
 
 #define SORT_KEYS keys

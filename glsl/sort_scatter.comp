@@ -14,10 +14,10 @@ layout(push_constant) uniform Push {
 } pc;
 
 layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
-layout(std430, binding = 1) readonly buffer KeysIn { uvec2 keys_in[]; };
+layout(std430, binding = 1) readonly buffer KeysIn { SORT_KEY keys_in[]; };
 layout(std430, binding = 2) readonly buffer ValuesIn { uint values_in[]; };
 layout(std430, binding = 3) readonly buffer Offsets { uint offsets[]; };
-layout(std430, binding = 4) writeonly buffer KeysOut { uvec2 keys_out[]; };
+layout(std430, binding = 4) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
 layout(std430, binding = 5) writeonly buffer ValuesOut { uint values_out[]; };
 
 #define SORT_KEYS keys_in
@@ -31,12 +31,12 @@ void main() {
     uint n = meta[META_N];
     uint mask = (1u << pc.bits) - 1u;
     clear_subgroup_counts();
-    uvec2 keys[SORT_ITEMS];
+    SORT_KEY keys[SORT_ITEMS];
     uint ranks[SORT_ITEMS];
     for (uint row = 0; row < SORT_ITEMS; ++row) {
         uint i = sort_element_index(block, row);
         bool valid = i < n;
-        keys[row] = valid ? keys_in[i] : uvec2(0u);
+        keys[row] = valid ? keys_in[i] : SORT_KEY(0u);
         ranks[row] = count_row(key_digit(keys[row], pc.shift, mask), valid);
     }
     barrier();

@@ -203,8 +203,16 @@ fn mask_of(key_bits: u32) -> u64 {
     }
 }
 
+/// Key words of one key as the sort stores it: `[lo, hi]` for 64-bit keys, `[lo]` (the
+/// key's low 32 bits) for 32-bit ones.
+fn pack_keys(keys: &[u64], words: u32) -> Vec<u32> {
+    keys.iter()
+        .flat_map(|&k| [k as u32, (k >> 32) as u32].into_iter().take(words as usize))
+        .collect()
+}
+
 /// Sorts `keys`/`values` on the GPU and checks against a CPU stable sort, including
-/// that elements past the count are untouched.
+/// that elements past the count are untouched. A 32-bit sort sees the keys' low words.
 fn check_sort(
     ctx: &GpuContext,
     sort: &RadixSort,
@@ -224,15 +232,19 @@ fn check_sort(
         _ => n as u32,
     };
     let mut rng = Rng(n as u64 ^ 0x5eed);
-    let mut all_keys: Vec<u64> = keys.to_vec();
-    all_keys.extend((n..capacity).map(|_| rng.next_u64()));
+    let words = sort.config().key_words;
+    let width_mask = mask_of(32 * words);
+    let mut all_keys: Vec<u64> = keys.iter().map(|&k| k & width_mask).collect();
+    all_keys.extend((n..capacity).map(|_| rng.next_u64() & width_mask));
     let values: Vec<u32> = (0..capacity as u32).collect();
-    let packed: Vec<[u32; 2]> = all_keys
-        .iter()
-        .map(|&k| [k as u32, (k >> 32) as u32])
-        .collect();
-    let key_buf =
-        GpuBuffer::new(ctx, "keys", 8 * capacity as u64, MemoryKind::Device).expect("keys");
+    let packed = pack_keys(&all_keys, words);
+    let key_buf = GpuBuffer::new(
+        ctx,
+        "keys",
+        4 * u64::from(words) * capacity.max(1) as u64,
+        MemoryKind::Device,
+    )
+    .expect("keys");
     key_buf.upload(ctx, &packed).expect("upload keys");
     let value_buf =
         GpuBuffer::new(ctx, "values", 4 * capacity as u64, MemoryKind::Device).expect("values");
@@ -260,14 +272,20 @@ fn check_sort(
         Ok(())
     })
     .expect("sort");
-    let got_keys: Vec<[u32; 2]> = key_buf.read(ctx, capacity).expect("read keys");
+    let got_keys: Vec<u32> = key_buf
+        .read(ctx, capacity * words as usize)
+        .expect("read keys");
     let got_values: Vec<u32> = value_buf.read(ctx, capacity).expect("read values");
 
     let mask = mask_of(key_bits);
     let mut expected: Vec<(u64, u32)> = all_keys[..n].iter().copied().zip(0u32..).collect();
     expected.sort_by_key(|&(k, _)| k & mask);
+    let w = words as usize;
     for (i, &(k, v)) in expected.iter().enumerate() {
-        let got = u64::from(got_keys[i][0]) | (u64::from(got_keys[i][1]) << 32);
+        let got = got_keys[i * w..(i + 1) * w]
+            .iter()
+            .rev()
+            .fold(0u64, |acc, &word| (acc << 32) | u64::from(word));
         assert!(
             got == k && got_values[i] == v,
             "{what}: n = {n}, key_bits = {key_bits}, {mode:?}: element {i} is ({got:#x}, {}), \
@@ -276,7 +294,7 @@ fn check_sort(
         );
     }
     assert!(
-        got_keys[n..] == packed[n..],
+        got_keys[n * w..] == packed[n * w..],
         "{what}: keys past the count changed"
     );
     assert!(
@@ -336,6 +354,46 @@ fn radix_sort_matches_cpu_stable_sort() {
             );
         }
     }
+    assert_no_validation_messages(&ctx);
+}
+
+/// The 32-bit key variant (the renderer's depth order and pair sort) against a CPU stable
+/// sort: every pattern and block boundary, host and device counts, a 2^20-element sort,
+/// and a bit range past the key refused.
+#[test]
+fn radix_sort_of_32_bit_keys_matches_cpu_stable_sort() {
+    let ctx = context();
+    let sort = RadixSort::new_32(&ctx).expect("sort pipelines");
+    let c = sort.config();
+    assert_eq!(c.key_words, 1);
+    let block = (c.workgroup_size * c.items_per_thread) as usize;
+    let mut rng = Rng(4242);
+    for n in [0, 1, 3, block - 1, block, block + 1, 2 * block + 1, 12345] {
+        for (what, keys) in patterns(&mut rng, n) {
+            for key_bits in [12, 17, 32] {
+                check_sort(&ctx, &sort, &keys, key_bits, Mode::Host, what);
+            }
+            let device = Mode::Device {
+                capacity: n + n / 3 + 5,
+            };
+            check_sort(&ctx, &sort, &keys, 32, device, what);
+        }
+    }
+    let n = (1 << 20) + 3;
+    let random: Vec<u64> = (0..n).map(|_| rng.next_u64()).collect();
+    let device = Mode::Device { capacity: n + 77 };
+    check_sort(&ctx, &sort, &random, 32, device, "random large");
+    check_sort(&ctx, &sort, &random, 14, Mode::Host, "random large, 14 bits");
+    let e = sort.record_bits(
+        &ctx,
+        vk_null_cmd(),
+        &dummy(&ctx),
+        &dummy(&ctx),
+        &dummy(&ctx),
+        Count::Host(1),
+        0..33,
+    );
+    assert!(e.is_err_and(|e| e.to_string().contains("0..33") && e.to_string().contains("32-bit")));
     assert_no_validation_messages(&ctx);
 }
 
@@ -427,17 +485,26 @@ fn radix_sort_other_configs() {
             radix_bits: 4,
             workgroup_size: 256,
             items_per_thread: 16,
+            key_words: 2,
         },
         SortConfig {
             radix_bits: 5,
             workgroup_size: 64,
             items_per_thread: 7,
+            key_words: 2,
+        },
+        SortConfig {
+            radix_bits: 5,
+            workgroup_size: 64,
+            items_per_thread: 7,
+            key_words: 1,
         },
     ] {
         let sort = RadixSort::with_config(&ctx, config).expect("sort pipelines");
+        let key_bits = if config.key_words == 1 { 32 } else { 44 };
         for n in [0, 1, 1023, 1024, 1025, 20000] {
             for (what, keys) in patterns(&mut rng, n) {
-                check_sort(&ctx, &sort, &keys, 44, Mode::Host, what);
+                check_sort(&ctx, &sort, &keys, key_bits, Mode::Host, what);
                 check_sort(
                     &ctx,
                     &sort,
@@ -471,6 +538,7 @@ fn bench_sort_and_scan_1m() {
             radix_bits: v[0],
             workgroup_size: v[1],
             items_per_thread: v[2],
+            key_words: 2,
         })
     });
     let sort = match config {

@@ -170,23 +170,17 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates) {
     }
     assert_eq!(u64::from(acc), pairs);
     assert_eq!(inter.counters.scan_total, acc);
-    // Keys: (depth bits, tile) of their value; sorted, and stable for equal keys.
+    // Keys: the tile of each pair; pairs sorted by (tile, depth of their Gaussian, index),
+    // so stable for equal tiles.
     let tiles = inter.bins.0 * inter.bins.1;
-    for (k, (key, &v)) in inter.keys.iter().zip(&inter.values).enumerate() {
-        assert_eq!(
-            key[0],
-            inter.splats[v as usize].conic_depth[3].to_bits(),
-            "{label}: key {k} depth"
-        );
-        assert!(key[1] < tiles, "{label}: key {k} tile {}", key[1]);
+    let depth = |v: u32| inter.splats[v as usize].conic_depth[3].to_bits();
+    for (k, (&key, &v)) in inter.keys.iter().zip(&inter.values).enumerate() {
+        assert!(key < tiles, "{label}: key {k} tile {key}");
         if k > 0 {
-            let prev = (
-                inter.keys[k - 1][1],
-                inter.keys[k - 1][0],
-                inter.values[k - 1],
-            );
+            let p = inter.values[k - 1];
+            let prev = (inter.keys[k - 1], depth(p), p);
             assert!(
-                prev < (key[1], key[0], v),
+                prev < (key, depth(v), v),
                 "{label}: pairs {} and {k} out of order",
                 k - 1
             );
@@ -200,11 +194,11 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates) {
             assert!(
                 inter.keys[r[0] as usize..r[1] as usize]
                     .iter()
-                    .all(|k| k[1] == t as u32),
+                    .all(|&k| k == t as u32),
                 "{label}: range of tile {t}"
             );
-            assert!(r[0] == 0 || inter.keys[r[0] as usize - 1][1] != t as u32);
-            assert!(r[1] as usize == inter.keys.len() || inter.keys[r[1] as usize][1] != t as u32);
+            assert!(r[0] == 0 || inter.keys[r[0] as usize - 1] != t as u32);
+            assert!(r[1] as usize == inter.keys.len() || inter.keys[r[1] as usize] != t as u32);
         } else {
             assert_eq!(*r, [0, 0], "{label}: empty tile {t}");
         }
@@ -227,7 +221,7 @@ fn check_tile_membership(
     }
     let mut gpu_tiles: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
     for (k, v) in inter.keys.iter().zip(&inter.values) {
-        gpu_tiles.entry(k[1]).or_default().push(*v);
+        gpu_tiles.entry(*k).or_default().push(*v);
     }
     // The GPU keys pairs by bins of `size` pixels (16: the reference tiles, or 8: their
     // quarters); each bin is compared with the reference list of the tile containing it.

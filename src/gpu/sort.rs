@@ -1,7 +1,8 @@
-//! Stable LSD radix sort of (64-bit key, u32 value) pairs on the GPU.
+//! Stable LSD radix sort of (64-bit or 32-bit key, u32 value) pairs on the GPU.
 //!
-//! Keys are `uvec2 (lo, hi)` (8 bytes, no int64 needed); only the low `key_bits` bits
-//! take part, in `ceil(key_bits / radix_bits)` passes. Each pass is reduce-then-scan
+//! Keys are `uvec2 (lo, hi)` (8 bytes, no int64 needed) or, with
+//! [`SortConfig::key_words`] = 1, one `uint` (a third fewer bytes moved per pass); only
+//! the low `key_bits` bits take part, in `ceil(key_bits / radix_bits)` passes. Each pass is reduce-then-scan
 //! (no spinning on other workgroups, so it runs on any device and any subgroup size):
 //! 1. `sort_histogram`: per-block digit counts, written digit-major;
 //! 2. [`Scan`] of that table: the output offset of every (digit, block);
@@ -41,6 +42,16 @@ pub struct SortConfig {
     pub workgroup_size: u32,
     /// Rows of one subgroup's chunk: elements per invocation.
     pub items_per_thread: u32,
+    /// u32 words per key: 2 for 64-bit keys stored as `uvec2 (lo, hi)`, 1 for 32-bit
+    /// keys stored as `uint`.
+    pub key_words: u32,
+}
+
+impl SortConfig {
+    /// Bytes per key.
+    pub fn key_bytes(&self) -> u64 {
+        u64::from(self.key_words) * 4
+    }
 }
 
 /// Default sort tuning, measured on lavapipe with the bench test: 8-bit digits halve
@@ -51,6 +62,13 @@ pub const DEFAULT_SORT_CONFIG: SortConfig = SortConfig {
     radix_bits: 8,
     workgroup_size: 128,
     items_per_thread: 32,
+    key_words: 2,
+};
+
+/// [`DEFAULT_SORT_CONFIG`] for 32-bit keys (the renderer's depth order and pair sort).
+pub const SORT_CONFIG_32: SortConfig = SortConfig {
+    key_words: 1,
+    ..DEFAULT_SORT_CONFIG
 };
 
 /// u32 index of the clamped element count in the sort's meta words.
@@ -131,7 +149,7 @@ impl ScratchLayout {
             cursor = align_up(cursor + bytes.max(4), SCRATCH_ALIGN);
             range
         };
-        let keys = take(u64::from(max_n) * 8);
+        let keys = take(u64::from(max_n) * config.key_bytes());
         let values = take(u64::from(max_n) * 4);
         let hist = take(u64::from(table_len) * 4);
         let offsets = take(u64::from(table_len) * 4);
@@ -163,9 +181,14 @@ pub struct RadixSort {
 }
 
 impl RadixSort {
-    /// Builds the sort with [`DEFAULT_SORT_CONFIG`].
+    /// Builds the sort with [`DEFAULT_SORT_CONFIG`] (64-bit keys).
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
         Self::with_config(ctx, DEFAULT_SORT_CONFIG)
+    }
+
+    /// Builds the sort with [`SORT_CONFIG_32`] (32-bit keys).
+    pub fn new_32(ctx: &GpuContext) -> GpuResult<Self> {
+        Self::with_config(ctx, SORT_CONFIG_32)
     }
 
     /// Builds the sort with explicit tunables (for benchmarking).
@@ -178,6 +201,7 @@ impl RadixSort {
             .div_ceil(info.min_subgroup_size.max(1));
         let shared_bytes = (radix * max_subgroups + config.workgroup_size) * 4;
         if !(1..=8).contains(&config.radix_bits)
+            || !(1..=2).contains(&config.key_words)
             || config.workgroup_size == 0
             || config.items_per_thread == 0
             || config.workgroup_size > info.max_workgroup_invocations
@@ -190,7 +214,9 @@ impl RadixSort {
                 info.subgroup_size
             )));
         }
+        let key_type = if config.key_words == 1 { "uint" } else { "uvec2" };
         let defines = vec![
+            ("SORT_KEY", key_type.to_string()),
             ("SORT_RADIX", format!("{radix}u")),
             ("SORT_WG", config.workgroup_size.to_string()),
             ("SORT_ITEMS", format!("{}u", config.items_per_thread)),
@@ -255,7 +281,12 @@ impl RadixSort {
 
     /// Scratch bytes the default configuration needs for up to `max_n` elements.
     pub fn scratch_size(max_n: u32) -> u64 {
-        ScratchLayout::new(&DEFAULT_SORT_CONFIG, max_n).total
+        Self::scratch_size_with(&DEFAULT_SORT_CONFIG, max_n)
+    }
+
+    /// Scratch bytes `config` needs for up to `max_n` elements.
+    pub fn scratch_size_with(config: &SortConfig, max_n: u32) -> u64 {
+        ScratchLayout::new(config, max_n).total
     }
 
     /// Scratch bytes this instance's configuration needs for up to `max_n` elements.
@@ -269,8 +300,8 @@ impl RadixSort {
     }
 
     /// Records a stable sort of `count` (key, value) pairs by the low `key_bits` bits
-    /// of the key (1..=64; 0 records nothing). `keys` holds `uvec2 (lo, hi)` per
-    /// element, `values` one u32; both hold the sorted result afterwards. Elements
+    /// of the key (1..=64, or 1..=32 for 32-bit keys; 0 records nothing). `keys` holds
+    /// `uvec2 (lo, hi)` per element (one `uint` for 32-bit keys), `values` one u32; both hold the sorted result afterwards. Elements
     /// past the count are not touched. `scratch` must hold
     /// [`RadixSort::scratch_size_for`]`(max_n)` bytes (max_n = the host count or the
     /// device capacity).
@@ -339,9 +370,10 @@ impl RadixSort {
                 Some(t) => t.stage(ctx, cmd, name, body),
                 None => body(cmd),
             };
-        if end_bit > 64 || first_bit > end_bit {
+        let width = self.config.key_words * 32;
+        if end_bit > width || first_bit > end_bit {
             return Err(GpuError::InvalidArgument(format!(
-                "radix sort bits {first_bit}..{end_bit} are not a range inside the 64-bit key"
+                "radix sort bits {first_bit}..{end_bit} are not a range inside the {width}-bit key"
             )));
         }
         let (max_n, count_slot) = match count {
@@ -366,7 +398,7 @@ impl RadixSort {
         }
         let layout = ScratchLayout::new(&self.config, max_n);
         let checks = [
-            (keys, u64::from(max_n) * 8, "keys"),
+            (keys, u64::from(max_n) * self.config.key_bytes(), "keys"),
             (values, u64::from(max_n) * 4, "values"),
             (scratch, layout.total, "scratch"),
         ];
@@ -387,7 +419,7 @@ impl RadixSort {
         let hist = scratch.slice(layout.hist.0, layout.hist.1);
         let offsets = scratch.slice(layout.offsets.0, layout.offsets.1);
         let scan_scratch = scratch.slice(layout.scan.0, layout.scan.1);
-        let user_keys = keys.slice(0, u64::from(max_n) * 8);
+        let user_keys = keys.slice(0, u64::from(max_n) * self.config.key_bytes());
         let user_values = values.slice(0, u64::from(max_n) * 4);
 
         // Entry barrier (see the contract above).

@@ -43,6 +43,7 @@ use crate::gpu::{
     BufferView, Count, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
     MemoryKind, RadixSort, Scan,
 };
+use crate::gpu::sort::SORT_CONFIG_32;
 use crate::scene::ActivatedScene;
 use ash::vk;
 use types::{Counters, FrameParams, GpuGaussian, Splat};
@@ -235,9 +236,10 @@ pub struct Intermediates {
     pub offsets: Vec<u32>,
     /// Frame counters.
     pub counters: Counters,
-    /// Sorted keys `(depth bits, tile id)` (of the last chunk, for a frame in chunks; so
-    /// are the values, the ranges and the sort count).
-    pub keys: Vec<[u32; 2]>,
+    /// Sorted keys: the bin (tile) ids; pairs arrive in depth order, so the keys carry no
+    /// depth (of the last chunk, for a frame in chunks; so are the values, the ranges and
+    /// the sort count).
+    pub keys: Vec<u32>,
     /// Sorted values (Gaussian indices).
     pub values: Vec<u32>,
     /// `[start, end)` per bin.
@@ -295,6 +297,7 @@ struct FrameBuffers {
     rects: GpuBuffer,
     offsets: GpuBuffer,
     depth_keys: GpuBuffer,
+    touched: GpuBuffer,
     depth_values: GpuBuffer,
     bin_masks: GpuBuffer,
     scan_scratch: GpuBuffer,
@@ -376,19 +379,20 @@ impl FrameBuffers {
             splats,
             rects: dev("tile rects", n * 8)?,
             offsets: dev("tiles touched / offsets in depth order", n * 4)?,
-            depth_keys: dev("depth keys", n * 8)?,
+            depth_keys: dev("depth keys", n * 4)?,
+            touched: dev("tiles touched by Gaussian", n * 4)?,
             depth_values: dev("depth order", n * 4)?,
             bin_masks: dev("bin masks", n * 4)?,
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
-            keys: dev("keys", u64::from(capacity) * 8)?,
+            keys: dev("keys", u64::from(capacity) * 4)?,
             values,
             // Shared by the depth sort (n Gaussians) and the pair sort (capacity pairs). The
-            // sort binds slices of it, the largest 8 bytes per key, which the capacity
+            // sort binds slices of it, the largest 4 bytes per key, which the capacity
             // bound (max_capacity) keeps inside one binding.
             sort_scratch: GpuBuffer::new(
                 ctx,
                 "sort scratch",
-                RadixSort::scratch_size(capacity.max(gaussians)),
+                RadixSort::scratch_size_with(&SORT_CONFIG_32, capacity.max(gaussians)),
                 MemoryKind::Device,
             )?,
             ranges: dev("bin ranges", bins * 8)?,
@@ -419,6 +423,7 @@ impl FrameBuffers {
             &self.rects,
             &self.offsets,
             &self.depth_keys,
+            &self.touched,
             &self.depth_values,
             &self.bin_masks,
             &self.scan_scratch,
@@ -594,7 +599,7 @@ impl GpuRenderer {
             order: order::Order::new(&ctx)?,
             scan: Scan::new(&ctx)?,
             keys: keys::Keys::new(&ctx)?,
-            sort: RadixSort::new(&ctx)?,
+            sort: RadixSort::new_32(&ctx)?,
             ranges: ranges::Ranges::new(&ctx)?,
             blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
             power_blend: None,
@@ -1068,9 +1073,9 @@ impl GpuRenderer {
     }
 
     fn max_capacity(&self) -> u32 {
-        // Keys are 8 bytes; one storage-buffer binding must cover them all.
+        // Keys and values are 4 bytes; one storage-buffer binding must cover them all.
         let range = u64::from(self.ctx.info().max_storage_buffer_range);
-        (range / 8).min(u64::from(u32::MAX)) as u32
+        (range / 4).min(u64::from(u32::MAX)) as u32
     }
 
     /// Pairs one piece of a frame may hold: one key buffer's worth, or fewer under the
@@ -1248,7 +1253,7 @@ impl GpuRenderer {
                 }
                 return Err(GpuError::InvalidArgument(format!(
                     "this frame needs {pairs} tile/Gaussian pairs, more than the {one_piece_max} one key buffer of this device holds ({} bytes); colour frames are then rendered in chunks, but feature channels and the neural shader are not yet: render at a lower resolution or with fewer Gaussians",
-                    u64::from(one_piece_max) * 8
+                    u64::from(one_piece_max) * 4
                 )));
             }
             let complete = chunked || pairs <= u64::from(capacity);
@@ -1510,7 +1515,7 @@ impl GpuRenderer {
             ],
         };
         let n = scene.count;
-        let pair_bits = 32..32 + tile_bits(bins_x * bins_y);
+        let pair_bits = 0..tile_bits(bins_x * bins_y);
         let whole = [keys::Chunk::whole(n)];
         let (chunks, first_chunks, last_chunks) = match pass {
             Pass::Whole => (&whole[..], true, true),
@@ -1560,6 +1565,7 @@ impl GpuRenderer {
                             counters: f.counters.whole(),
                             depth_values: f.depth_values.whole(),
                             bin_masks: f.bin_masks.whole(),
+                            touched: f.touched.whole(),
                         },
                         n,
                         window,
@@ -1575,6 +1581,7 @@ impl GpuRenderer {
                         &f.depth_keys,
                         &f.depth_values,
                         &f.sort_scratch,
+                        f.touched.whole(),
                         f.offsets.whole(),
                         n,
                     )

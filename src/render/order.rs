@@ -1,6 +1,6 @@
 //! Depth order stage: a stable radix sort of every Gaussian by view depth (culled ones
-//! last), then `glsl/order.comp` lays the tiles-touched counts out in that order for the
-//! scan. Emitting pairs in depth order lets the pair sort order the tile bits only, with
+//! last; 32-bit keys, the Gaussian indices as values), then `glsl/order.comp` gathers the
+//! tiles-touched counts into that order for the scan. Emitting pairs in depth order lets the pair sort order the tile bits only, with
 //! the same result as sorting the full `tile << 32 | depth` keys (see `glsl/order.comp`).
 
 use crate::gpu::shader::BindingKind;
@@ -28,7 +28,7 @@ impl Order {
             ctx,
             "order",
             &[],
-            &[BindingKind::StorageBuffer; 3],
+            &[BindingKind::StorageBuffer; 4],
             0,
             WORKGROUP,
         )?;
@@ -36,8 +36,9 @@ impl Order {
     }
 
     /// Records the depth sort of `n` Gaussians (`depth_keys`/`depth_values` hold the
-    /// result afterwards) and the gather of their tiles-touched counts into
-    /// `touched_in_order`. The caller places the barrier after (compute write -> read).
+    /// result afterwards; `sort` takes 32-bit keys) and the gather of their tiles-touched
+    /// counts (`touched`, by Gaussian index) into `touched_in_order`. The caller places
+    /// the barrier after (compute write -> read).
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -48,6 +49,7 @@ impl Order {
         depth_keys: &GpuBuffer,
         depth_values: &GpuBuffer,
         scratch: &GpuBuffer,
+        touched: BufferSlice,
         touched_in_order: BufferSlice,
         n: u32,
     ) -> GpuResult<()> {
@@ -66,7 +68,7 @@ impl Order {
         self.pipeline.dispatch(
             ctx,
             cmd,
-            &[params, depth_keys.whole(), touched_in_order],
+            &[params, depth_values.whole(), touched, touched_in_order],
             &[],
             groups,
         )

@@ -26,7 +26,7 @@ pub struct PreprocessBindings<'a> {
     pub splats: BufferSlice<'a>,
     /// Packed tile rectangle per Gaussian (written).
     pub rects: BufferSlice<'a>,
-    /// Depth sort key `(depth bits or !0 when culled, tiles touched)` per Gaussian (written).
+    /// Depth sort key (depth bits, or !0 when culled) per Gaussian (written).
     pub depth_keys: BufferSlice<'a>,
     /// Counters (atomically updated).
     pub counters: BufferSlice<'a>,
@@ -35,6 +35,8 @@ pub struct PreprocessBindings<'a> {
     /// Receiving bins of small tile rectangles, one bit per bin, by global Gaussian
     /// index (written; bound whole).
     pub bin_masks: BufferSlice<'a>,
+    /// Tiles touched, by global Gaussian index (written; bound whole).
+    pub touched: BufferSlice<'a>,
 }
 
 impl Preprocess {
@@ -48,6 +50,7 @@ impl Preprocess {
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::UniformTexelBuffer,
+                BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
@@ -94,10 +97,11 @@ impl Preprocess {
                     Resource::TexelBuffer(b.sh_texels),
                     Resource::Buffer(part(b.splats, 48)),
                     Resource::Buffer(part(b.rects, 8)),
-                    Resource::Buffer(part(b.depth_keys, 8)),
+                    Resource::Buffer(part(b.depth_keys, 4)),
                     Resource::Buffer(b.counters),
                     Resource::Buffer(part(b.depth_values, 4)),
                     Resource::Buffer(b.bin_masks),
+                    Resource::Buffer(b.touched),
                 ],
                 bytemuck::cast_slice(&push),
                 groups,
