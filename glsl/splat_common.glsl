@@ -95,8 +95,9 @@ struct Counters {
 uint pack_tile(uint x, uint y) { return x | (y << 16u); }
 uvec2 unpack_tile(uint v) { return uvec2(v & 0xFFFFu, v >> 16u); }
 
-// Sort key of a (bin, Gaussian) pair, as uvec2(lo, hi): lo = float bits of the view depth
-// (depth > 0.2 so the bits order like the floats), hi = bin id = y * bins_x + x.
+// Sort key of a (bin, Gaussian) pair: the bin id y * bins_x + x (32 bits). Pairs are
+// emitted in depth order (the order stage sorted the float bits of the view depths, which
+// order like the floats since depth > 0.2), and the pair sort is stable.
 
 // Exact tile culling. A splat adds to pixel d (offset from its centre) only when its alpha
 // is >= 1/255; with q(d) = A dx^2 + 2 B dx dy + C dy^2 (the squared Mahalanobis distance)

@@ -207,7 +207,11 @@ fn mask_of(key_bits: u32) -> u64 {
 /// key's low 32 bits) for 32-bit ones.
 fn pack_keys(keys: &[u64], words: u32) -> Vec<u32> {
     keys.iter()
-        .flat_map(|&k| [k as u32, (k >> 32) as u32].into_iter().take(words as usize))
+        .flat_map(|&k| {
+            [k as u32, (k >> 32) as u32]
+                .into_iter()
+                .take(words as usize)
+        })
         .collect()
 }
 
@@ -383,7 +387,14 @@ fn radix_sort_of_32_bit_keys_matches_cpu_stable_sort() {
     let random: Vec<u64> = (0..n).map(|_| rng.next_u64()).collect();
     let device = Mode::Device { capacity: n + 77 };
     check_sort(&ctx, &sort, &random, 32, device, "random large");
-    check_sort(&ctx, &sort, &random, 14, Mode::Host, "random large, 14 bits");
+    check_sort(
+        &ctx,
+        &sort,
+        &random,
+        14,
+        Mode::Host,
+        "random large, 14 bits",
+    );
     let e = sort.record_bits(
         &ctx,
         vk_null_cmd(),

@@ -214,7 +214,11 @@ impl RadixSort {
                 info.subgroup_size
             )));
         }
-        let key_type = if config.key_words == 1 { "uint" } else { "uvec2" };
+        let key_type = if config.key_words == 1 {
+            "uint"
+        } else {
+            "uvec2"
+        };
         let defines = vec![
             ("SORT_KEY", key_type.to_string()),
             ("SORT_RADIX", format!("{radix}u")),

@@ -24,7 +24,7 @@ pub struct KeysBindings<'a> {
     pub rects: BufferSlice<'a>,
     /// Exclusive prefix sum of tiles touched, in depth order.
     pub offsets: BufferSlice<'a>,
-    /// Keys, `uvec2(depth bits, tile id)` (written).
+    /// Keys: the bin (tile) id of each pair, 32 bits (written).
     pub keys: BufferSlice<'a>,
     /// Values, Gaussian indices (written).
     pub values: BufferSlice<'a>,

@@ -9,7 +9,8 @@
 //! `tile << 32 | depth` keys emitted in Gaussian order. Here the Gaussians are first sorted
 //! by depth (stable, 32 bits, one key per Gaussian), the pairs are emitted in that order,
 //! and the pair sort orders only the tile bits: the result is the same
-//! `(tile, depth, index)` order with far fewer passes over the (many more) pairs.
+//! `(tile, depth, index)` order with far fewer passes over the (many more) pairs. Both sorts
+//! use 32-bit keys (depth bits; bin id), so each pass moves 8 bytes per element, not 12.
 //!
 //! The number of (tile, Gaussian) pairs is only known on the GPU. The key buffers are
 //! sized from a capacity kept across frames; the keys stage drops pairs beyond it and the
@@ -38,12 +39,12 @@ pub mod types;
 use crate::camera::Camera;
 use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
+use crate::gpu::sort::SORT_CONFIG_32;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
     BufferView, Count, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
     MemoryKind, RadixSort, Scan,
 };
-use crate::gpu::sort::SORT_CONFIG_32;
 use crate::scene::ActivatedScene;
 use ash::vk;
 use types::{Counters, FrameParams, GpuGaussian, Splat};
@@ -550,7 +551,7 @@ pub struct SplitLimits {
     /// Gaussians per preprocess window, rounded down to a multiple of 256 (0: as many as
     /// one storage binding holds, 2.8 M on lavapipe).
     pub window: u32,
-    /// Pairs per chunk (0: as many as one key buffer holds, 16.7 M on lavapipe). Nonzero
+    /// Pairs per chunk (0: as many as one key buffer holds, 33.5 M on lavapipe). Nonzero
     /// renders every colour frame in chunks, even one that would fit at once.
     pub chunk_pairs: u32,
 }
