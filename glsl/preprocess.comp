@@ -10,7 +10,31 @@
 layout(local_size_x = 256) in;
 
 layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+#ifndef COMPACT_GAUSSIANS
+#define COMPACT_GAUSSIANS 0
+#endif
+#if COMPACT_GAUSSIANS
+// A compact upload (--compact): centre and opacity in f32, the axis scales and the rotation
+// as fp16 pairs (GpuGaussianCompact in src/render/types.rs); unpacking is exact.
+struct GaussianCompact {
+    vec4 pos_opacity;
+    uvec4 shape;  // (scale x, y), (scale z, rotation w), (rotation x, y), (rotation z, 0)
+};
+layout(std430, binding = 1) readonly buffer GaussianBuf { GaussianCompact gaussians[]; };
+Gaussian load_gaussian(uint w) {
+    GaussianCompact c = gaussians[w];
+    vec2 sxy = unpackHalf2x16(c.shape.x), szw = unpackHalf2x16(c.shape.y);
+    vec2 rxy = unpackHalf2x16(c.shape.z), rz = unpackHalf2x16(c.shape.w);
+    Gaussian g;
+    g.pos_opacity = c.pos_opacity;
+    g.scale = vec4(sxy, szw.x, 0.0);
+    g.rotation = vec4(szw.y, rxy, rz.x);
+    return g;
+}
+#else
 layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; };
+Gaussian load_gaussian(uint w) { return gaussians[w]; }
+#endif
 // SH coefficients, coefficient-major with the colour channel innermost, each Gaussian's
 // floats padded to whole RGBA32F texels (sh_texel_stride in src/render/mod.rs). Read as a
 // texel buffer, which addresses far more than one storage binding on some devices.
@@ -97,7 +121,7 @@ void main() {
     uint mask = 0u;
     if (gl_LocalInvocationIndex == 0u) s_visible = 0u;
     if (w < window.count) {
-        Gaussian g = gaussians[w];
+        Gaussian g = load_gaussian(w);
         vec3 mean = g.pos_opacity.xyz;
         vec3 view = vec3(dot(params.w2c_row0.xyz, mean) + params.w2c_row0.w,
                          dot(params.w2c_row1.xyz, mean) + params.w2c_row1.w,

@@ -127,7 +127,7 @@ pub struct BenchReport {
     pub kernel: String,
     /// Feature channels blended per frame (the `features` stage), 0 for colour only.
     pub feature_channels: usize,
-    /// The scene was uploaded compact (SH as fp16; `--compact`).
+    /// The scene was uploaded compact (SH, scales and rotations as fp16; `--compact`).
     pub compact: bool,
     /// Measured frames.
     pub frames: usize,
@@ -239,7 +239,7 @@ impl BenchReport {
                 self.device_bytes_peak,
                 self.device_bytes_per_gaussian,
                 if self.compact {
-                    ", compact scene (SH as fp16)"
+                    ", compact scene (fp16 SH, scales, rotations)"
                 } else {
                     ""
                 }

@@ -75,7 +75,7 @@ pub(crate) struct BenchArgs {
     /// Benchmark the CPU reference renderer instead (wall clock).
     #[arg(long)]
     pub(crate) cpu: bool,
-    /// Upload the scene in compact form (SH coefficients as fp16), as `render --compact`.
+    /// Upload the scene in compact form (SH, scales and rotations as fp16), as `render --compact`.
     #[arg(long, conflicts_with = "cpu")]
     pub(crate) compact: bool,
     /// Attach feature channels (an N x K NumPy array, as `render --features`); a scene with

@@ -129,8 +129,9 @@ pub(crate) struct RenderArgs {
     /// frame at a time. The files are the same either way [default: 2].
     #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 2))]
     pub(crate) frames_in_flight: Option<usize>,
-    /// Compact device copy of the scene: SH coefficients as fp16 (half the bytes of the
-    /// largest per-Gaussian array). Not exact: colours carry fp16's rounding of the SH.
+    /// Compact device copy of the scene: SH coefficients, axis scales and rotations as fp16
+    /// (centres and opacities stay f32): 16 bytes per Gaussian fewer, plus 2 per SH float
+    /// (112 in all at SH degree 3). Not exact: frames carry fp16's rounding of those values.
     #[arg(long)]
     pub(crate) compact: bool,
     /// No progress display (the summary is still printed).

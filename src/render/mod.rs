@@ -47,7 +47,7 @@ use crate::gpu::{
 };
 use crate::scene::ActivatedScene;
 use ash::vk;
-use types::{Counters, FrameParams, GpuGaussian, Splat};
+use types::{Counters, FrameParams, GpuGaussian, GpuGaussianCompact, Splat};
 
 /// What a frame reads back to the host after it is rendered.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -84,7 +84,7 @@ pub struct GpuScene {
 }
 
 impl GpuScene {
-    /// Whether the SH coefficients were uploaded as fp16 ([`GpuRenderer::set_compact`]).
+    /// Whether the scene was uploaded compact ([`GpuRenderer::set_compact`]: fp16 SH, scales and rotations).
     pub fn is_compact(&self) -> bool {
         self.compact
     }
@@ -454,6 +454,8 @@ pub struct GpuRenderer {
     /// it drops first: a set waits for a frame still in flight before the pipelines go.
     sets: Vec<FrameSet>,
     preprocess: preprocess::Preprocess,
+    /// The preprocess pipeline of compact scenes, built on the first frame of one.
+    compact_preprocess: Option<preprocess::Preprocess>,
     order: order::Order,
     scan: Scan,
     keys: keys::Keys,
@@ -481,7 +483,7 @@ pub struct GpuRenderer {
     /// do not fit one key buffer, and kept (a camera path does not find out again).
     chunked: bool,
     split: SplitLimits,
-    /// Upload SH coefficients as fp16 ([`Self::set_compact`]).
+    /// Upload scenes compact: fp16 SH, scales and rotations ([`Self::set_compact`]).
     compact: bool,
     ctx: GpuContext,
 }
@@ -596,7 +598,8 @@ impl GpuRenderer {
     /// Builds every pipeline with the given blend kernel.
     pub fn with_blend_kernel(ctx: GpuContext, kernel: blend::BlendKernel) -> GpuResult<Self> {
         Ok(GpuRenderer {
-            preprocess: preprocess::Preprocess::new(&ctx)?,
+            preprocess: preprocess::Preprocess::new(&ctx, false)?,
+            compact_preprocess: None,
             order: order::Order::new(&ctx)?,
             scan: Scan::new(&ctx)?,
             keys: keys::Keys::new(&ctx)?,
@@ -657,8 +660,10 @@ impl GpuRenderer {
 
     /// Compact mode for the scenes uploaded from now on: SH coefficients as fp16 (half the
     /// bytes of the largest per-Gaussian array: 96 instead of 192 at SH degree 3), read
-    /// through an RGBA16F texel view by the same preprocess shader. Not exact: the colours
-    /// differ from the fp32 render by fp16's rounding (BENCHMARKS.md measures the PSNR).
+    /// through an RGBA16F texel view, and 32-byte records instead of 48 (axis scales and
+    /// rotation as fp16; centre and opacity stay f32), unpacked by a preprocess variant.
+    /// Not exact: frames equal the exact render of [`ActivatedScene::compact_rounded`],
+    /// which differs from the scene by fp16's rounding (BENCHMARKS.md measures the PSNR).
     pub fn set_compact(&mut self, on: bool) {
         self.compact = on;
     }
@@ -671,19 +676,33 @@ impl GpuRenderer {
                 scene.len()
             ))
         })?;
-        let records: Vec<GpuGaussian> = (0..scene.len())
-            .map(|i| {
-                let p = scene.positions[i];
-                let s = scene.scales[i];
-                GpuGaussian {
-                    pos_opacity: [p[0], p[1], p[2], scene.opacities[i]],
-                    scale: [s[0], s[1], s[2], 0.0],
-                    rotation: scene.rotations[i],
-                }
-            })
-            .collect();
         // Preprocess binds windows of the records, so one binding need not hold them all.
-        let record_bytes = (records.len() * std::mem::size_of::<GpuGaussian>()) as u64;
+        let gaussians = if self.compact {
+            let records: Vec<GpuGaussianCompact> = (0..scene.len())
+                .map(|i| {
+                    GpuGaussianCompact::new(
+                        scene.positions[i],
+                        scene.opacities[i],
+                        scene.scales[i],
+                        scene.rotations[i],
+                    )
+                })
+                .collect();
+            self.upload_records("gaussians (compact)", &records)?
+        } else {
+            let records: Vec<GpuGaussian> = (0..scene.len())
+                .map(|i| {
+                    let p = scene.positions[i];
+                    let s = scene.scales[i];
+                    GpuGaussian {
+                        pos_opacity: [p[0], p[1], p[2], scene.opacities[i]],
+                        scale: [s[0], s[1], s[2], 0.0],
+                        rotation: scene.rotations[i],
+                    }
+                })
+                .collect();
+            self.upload_records("gaussians", &records)?
+        };
         // SH is read through an RGBA32F texel buffer (texel buffers address up to
         // maxTexelBufferElements texels, far beyond one storage binding on lavapipe), each
         // Gaussian's floats padded to whole texels.
@@ -710,8 +729,6 @@ impl GpuRenderer {
             }
             std::borrow::Cow::Owned(v)
         };
-        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
-        gaussians.upload(&self.ctx, &records)?;
         let (sh, format, sh_bytes) = if self.compact {
             // Round to nearest fp16; beyond fp16's range (|x| > 65504) becomes infinite.
             let halves: Vec<u16> = sh_padded
@@ -743,6 +760,14 @@ impl GpuRenderer {
             sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
             compact: self.compact,
         })
+    }
+
+    /// A device buffer holding `records`.
+    fn upload_records<T: bytemuck::Pod>(&self, name: &str, records: &[T]) -> GpuResult<GpuBuffer> {
+        let bytes = std::mem::size_of_val(records) as u64;
+        let buffer = GpuBuffer::new(&self.ctx, name, bytes, MemoryKind::Device)?;
+        buffer.upload(&self.ctx, records)?;
+        Ok(buffer)
     }
 
     /// Uploads the scene's feature channels (four per buffer, for the feature blend).
@@ -1148,6 +1173,9 @@ impl GpuRenderer {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         opts.validate().map_err(GpuError::InvalidArgument)?;
+        if scene.compact && self.compact_preprocess.is_none() {
+            self.compact_preprocess = Some(preprocess::Preprocess::new(&self.ctx, true)?);
+        }
         if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
             self.power_blend = Some(blend::Blend::new(
                 &self.ctx,
@@ -1429,6 +1457,7 @@ impl GpuRenderer {
         let window = self.preprocess_window();
         let Self {
             preprocess,
+            compact_preprocess,
             order,
             scan,
             keys,
@@ -1463,6 +1492,15 @@ impl GpuRenderer {
                     })?,
             )),
             None => None,
+        };
+        let preprocess = match (scene.compact, compact_preprocess.as_ref()) {
+            (false, _) => &*preprocess,
+            (true, Some(p)) => p,
+            (true, None) => {
+                return Err(GpuError::InvalidArgument(
+                    "the compact preprocess pipeline is missing".into(),
+                ))
+            }
         };
         let blend = match (opts.kernel, power_blend.as_ref()) {
             (SplatKernel::Gaussian, _) => &*blend,

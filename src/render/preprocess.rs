@@ -12,13 +12,15 @@ pub const WORKGROUP: u32 = 256;
 /// The preprocess pipeline.
 pub struct Preprocess {
     pipeline: ComputePipeline,
+    /// Bytes per Gaussian record: 48 (`GpuGaussian`) or 32 (`GpuGaussianCompact`).
+    record_bytes: u64,
 }
 
 /// Buffers the stage reads and writes.
 pub struct PreprocessBindings<'a> {
     /// FrameParams.
     pub params: BufferSlice<'a>,
-    /// GpuGaussian per Gaussian.
+    /// GpuGaussian (or GpuGaussianCompact, for the compact pipeline) per Gaussian.
     pub gaussians: BufferSlice<'a>,
     /// SH coefficients: an RGBA32F texel view, `sh_texel_stride` texels per Gaussian.
     pub sh_texels: vk::BufferView,
@@ -40,12 +42,13 @@ pub struct PreprocessBindings<'a> {
 }
 
 impl Preprocess {
-    /// Compiles the shader and builds the pipeline.
-    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+    /// Compiles the shader and builds the pipeline, for 48-byte records or (`compact`)
+    /// 32-byte ones.
+    pub fn new(ctx: &GpuContext, compact: bool) -> GpuResult<Self> {
         let pipeline = ComputePipeline::from_embedded(
             ctx,
             "preprocess",
-            &[],
+            &[("COMPACT_GAUSSIANS", u32::from(compact).to_string())],
             &[
                 BindingKind::StorageBuffer,
                 BindingKind::StorageBuffer,
@@ -61,7 +64,10 @@ impl Preprocess {
             8,
             WORKGROUP,
         )?;
-        Ok(Preprocess { pipeline })
+        Ok(Preprocess {
+            pipeline,
+            record_bytes: if compact { 32 } else { 48 },
+        })
     }
 
     /// Records the dispatches for `n` Gaussians, `window` (a multiple of [`WORKGROUP`]) at
@@ -93,7 +99,7 @@ impl Preprocess {
                 cmd,
                 &[
                     Resource::Buffer(b.params),
-                    Resource::Buffer(part(b.gaussians, 48)),
+                    Resource::Buffer(part(b.gaussians, self.record_bytes)),
                     Resource::TexelBuffer(b.sh_texels),
                     Resource::Buffer(part(b.splats, 48)),
                     Resource::Buffer(part(b.rects, 8)),

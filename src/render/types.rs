@@ -46,6 +46,39 @@ pub struct GpuGaussian {
     pub rotation: [f32; 4],
 }
 
+/// One Gaussian of a compact upload (`GaussianCompact` in GLSL): the centre and opacity in
+/// f32, the axis scales and the rotation as fp16 pairs (`packHalf2x16` order: the first
+/// value in the low half).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuGaussianCompact {
+    /// Centre xyz, opacity in `w`.
+    pub pos_opacity: [f32; 4],
+    /// (scale x, scale y), (scale z, rotation w), (rotation x, rotation y), (rotation z, 0).
+    pub shape: [u32; 4],
+}
+
+impl GpuGaussianCompact {
+    /// The compact record of a Gaussian (rounding to nearest fp16, as
+    /// `ActivatedScene::compact_rounded`).
+    pub fn new(position: [f32; 3], opacity: f32, scale: [f32; 3], rotation: [f32; 4]) -> Self {
+        let pack = |a: f32, b: f32| {
+            u32::from(half::f16::from_f32(a).to_bits())
+                | (u32::from(half::f16::from_f32(b).to_bits()) << 16)
+        };
+        let [w, x, y, z] = rotation;
+        GpuGaussianCompact {
+            pos_opacity: [position[0], position[1], position[2], opacity],
+            shape: [
+                pack(scale[0], scale[1]),
+                pack(scale[2], w),
+                pack(x, y),
+                pack(z, 0.0),
+            ],
+        }
+    }
+}
+
 /// A projected Gaussian (`Splat` in GLSL).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -128,6 +161,10 @@ mod tests {
         assert_eq!(offset_of!(GpuGaussian, pos_opacity), 0);
         assert_eq!(offset_of!(GpuGaussian, scale), 16);
         assert_eq!(offset_of!(GpuGaussian, rotation), 32);
+
+        assert_eq!(size_of::<GpuGaussianCompact>(), 32);
+        assert_eq!(offset_of!(GpuGaussianCompact, pos_opacity), 0);
+        assert_eq!(offset_of!(GpuGaussianCompact, shape), 16);
 
         assert_eq!(size_of::<Splat>(), 48);
         assert_eq!(offset_of!(Splat, mean_opacity_bound), 0);

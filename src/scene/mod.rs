@@ -105,6 +105,19 @@ impl ActivatedScene {
     pub fn sh_stride(&self) -> usize {
         sh_coeffs_for_degree(self.sh_degree) * 3
     }
+
+    /// The scene as a compact upload (`--compact`) holds it, back in f32: axis scales,
+    /// rotations and SH coefficients rounded to the nearest fp16; centres, opacities and
+    /// features unchanged. The CPU reference renders this to check compact GPU frames.
+    pub fn compact_rounded(&self) -> ActivatedScene {
+        let round = |x: f32| half::f16::from_f32(x).to_f32();
+        ActivatedScene {
+            scales: self.scales.iter().map(|s| s.map(round)).collect(),
+            rotations: self.rotations.iter().map(|q| q.map(round)).collect(),
+            sh: self.sh.iter().map(|&x| round(x)).collect(),
+            ..self.clone()
+        }
+    }
 }
 
 /// The logistic sigmoid in f32, as PyTorch evaluates it for the reference.
