@@ -69,7 +69,13 @@ pub fn error_stats(reference: &[f32], test: &[f32], channels: usize, peak: f64) 
     for (r, t) in reference.chunks(channels).zip(test.chunks(channels)) {
         let mut ok = true;
         for (&x, &y) in r.iter().zip(t) {
-            let d = (y as f64 - x as f64).abs();
+            // Equal samples differ by nothing, equal infinities included (an EXR's Z is
+            // +inf wherever nothing was hit, and inf - inf would be NaN).
+            let d = if x == y {
+                0.0
+            } else {
+                (y as f64 - x as f64).abs()
+            };
             se += d * d;
             abs_sum += d;
             // NaN compares false, so a NaN difference is caught by the PSNR, not hidden here.
@@ -796,6 +802,19 @@ mod tests {
                 "{name} at 67 ppd: {got:.7} vs {at_67:.7}"
             );
         }
+    }
+
+    #[test]
+    fn equal_infinite_samples_count_as_equal() {
+        // EXR depth is +inf where nothing was hit: identical planes compare as identical.
+        let z = [1.0, f32::INFINITY, 2.5, f32::INFINITY];
+        let same = error_stats(&z, &z, 1, 2.5);
+        assert_eq!(same.psnr, f64::INFINITY);
+        assert_eq!((same.max_abs, same.within), (0.0, 1.0));
+        let mut hit = z;
+        hit[1] = 2.0; // a surface where the reference has none
+        let differs = error_stats(&z, &hit, 1, 2.5);
+        assert!(differs.max_abs.is_infinite() && differs.within < 1.0);
     }
 
     #[test]
