@@ -51,6 +51,11 @@ void main() {
     uvec2 rmin = unpack_tile(rect.x);
     uvec2 rmax = unpack_tile(rect.y);
     if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
+    // Only larger rectangles (below) test bins with the splat's conic, but fetching it
+    // here, outside the divergent branch, measured about 1 ms faster on lavapipe.
+    vec4 mean_opacity_bound = texelFetch(splat_texels, int(i * 3u));
+    vec4 conic_depth = texelFetch(splat_texels, int(i * 3u + 1u));
+    float bound = mean_opacity_bound.w;
     uint bins_x = params.bins.y;
     uvec2 bmin = rmin * params.bins.w;
     uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
@@ -73,10 +78,6 @@ void main() {
             off++;
         }
     } else {
-        // Larger rectangles test every bin again, with the splat's conic.
-        vec4 mean_opacity_bound = texelFetch(splat_texels, int(i * 3u));
-        vec4 conic_depth = texelFetch(splat_texels, int(i * 3u + 1u));
-        float bound = mean_opacity_bound.w;
         uint y = bmin.y;
         uint x = bmax.x;
         for (; y < bmax.y; y++) {

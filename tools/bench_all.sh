@@ -38,6 +38,21 @@ echo "## scaling sweep to 10 M Gaussians at 1080p (chunked frames; lavapipe's 2 
 VKSPLAT_MEMORY_LIMIT=16G $B bench --sweep gaussians=3e6,1e7 --sweep resolution=1080p --frames 1 --warmup 0 \
   --csv docs/benchmarks/scaling_10m.csv --json docs/benchmarks/scaling_10m.json --plot docs/benchmarks/scaling_10m.svg --overwrite \
   | grep -E "^scene|^frame|^blend |^sort |^wall|chunks|device memory"
+echo "## --compact against the exact render, every scene at 1280x720"
+tools/bench_compact.sh $B
+echo "## 10 M Gaussians at SH 3, 1920x1080: gen, exact and --compact (bench; render to EXR and compare)"
+T=$(mktemp -d)
+export VKSPLAT_MEMORY_LIMIT=16G
+/usr/bin/time -f "gen: wall %e s, peak RSS %M KB" $B gen 10000000 -o $T/big.ply --sh-degree 3
+for c in "" "--compact"; do
+  echo "### bench $c"
+  /usr/bin/time -f "bench $c: wall %e s, peak RSS %M KB" $B bench $T/big.ply --width 1920 --height 1080 --frames 1 --warmup 0 $c 2>&1 \
+    | grep -E "^frame|chunks|device memory|wall"
+  $B render $T/big.ply --width 1920 --height 1080 -o $T/big$c.exr -q $c >/dev/null 2>&1
+done
+$B compare $T/big--compact.exr $T/big.exr
+unset VKSPLAT_MEMORY_LIMIT
+rm -rf "$T"
 echo "## start-up (render --demo --width 64 -v)"
 VKSPLAT_NO_SHADER_CACHE=1 $B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
 $B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
