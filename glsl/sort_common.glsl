@@ -1,7 +1,7 @@
 // Radix sort helpers shared by sort_histogram and sort_scatter. Include after the
-// push constants (`pc.shift`, `pc.bits`), the meta buffer and after defining SORT_KEYS
-// as the key array's name. SORT_KEY (a define from the host) is the key's type: `uvec2`
-// (lo, hi) for 64-bit keys, `uint` for 32-bit ones.
+// push constants (`pc.shift`, `pc.bits`) and the meta buffer. SORT_KEY (a define from the
+// host) is the key's type: `uvec2` (lo, hi) for 64-bit keys, `uint` for 32-bit ones;
+// SORT_TEXEL_IO = 1 reads and writes 32-bit keys and values through texel views.
 //
 // Element layout inside a block of SORT_BLOCK = SORT_WG * SORT_ITEMS elements:
 // subgroup s owns the contiguous chunk of gl_SubgroupSize * SORT_ITEMS elements

@@ -13,10 +13,17 @@ layout(push_constant) uniform Push {
 } pc;
 
 layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
+#if SORT_TEXEL_IO
+// 32-bit keys read through an R32UI texel view: llvmpipe turns texel fetches into straight
+// per-lane loads, storage-buffer loads into a guarded loop per component.
+layout(binding = 1) uniform usamplerBuffer keys_tex;
+#define LOAD_KEY(i) texelFetch(keys_tex, int(i)).x
+#else
 layout(std430, binding = 1) readonly buffer Keys { SORT_KEY keys[]; };
+#define LOAD_KEY(i) keys[i]
+#endif
 layout(std430, binding = 2) writeonly buffer Hist { uint hist[]; };
 
-#define SORT_KEYS keys
 #include "sort_common.glsl"
 
 void main() {
@@ -33,7 +40,7 @@ void main() {
         if (valid) {
             // Order does not matter here, so shared atomics (cheaper than the
             // ballot-based ranking the scatter needs) into per-subgroup counters.
-            uint digit = key_digit(keys[i], pc.shift, mask);
+            uint digit = key_digit(LOAD_KEY(i), pc.shift, mask);
             atomicAdd(subgroup_counts[gl_SubgroupID * SORT_RADIX + digit], 1u);
         }
     }

@@ -14,13 +14,30 @@ layout(push_constant) uniform Push {
 } pc;
 
 layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
+layout(std430, binding = 3) readonly buffer Offsets { uint offsets[]; };
+#if SORT_TEXEL_IO
+// 32-bit keys and values through R32UI texel views (see sort_histogram.comp): texel fetches
+// and imageStore are straight per-lane code on llvmpipe, storage-buffer accesses are not.
+layout(binding = 1) uniform usamplerBuffer keys_in;
+layout(binding = 2) uniform usamplerBuffer values_in;
+layout(binding = 4, r32ui) uniform writeonly uimageBuffer keys_out;
+layout(binding = 5, r32ui) uniform writeonly uimageBuffer values_out;
+#define LOAD_KEY(i) texelFetch(keys_in, int(i)).x
+#define LOAD_VALUE(i) texelFetch(values_in, int(i)).x
+#define STORE_PAIR(dst, key, value) \
+    imageStore(keys_out, int(dst), uvec4(key)); \
+    imageStore(values_out, int(dst), uvec4(value))
+#else
 layout(std430, binding = 1) readonly buffer KeysIn { SORT_KEY keys_in[]; };
 layout(std430, binding = 2) readonly buffer ValuesIn { uint values_in[]; };
-layout(std430, binding = 3) readonly buffer Offsets { uint offsets[]; };
 layout(std430, binding = 4) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
 layout(std430, binding = 5) writeonly buffer ValuesOut { uint values_out[]; };
-
-#define SORT_KEYS keys_in
+#define LOAD_KEY(i) keys_in[i]
+#define LOAD_VALUE(i) values_in[i]
+#define STORE_PAIR(dst, key, value) \
+    keys_out[dst] = key; \
+    values_out[dst] = value
+#endif
 #include "sort_common.glsl"
 
 void main() {
@@ -36,7 +53,7 @@ void main() {
     for (uint row = 0; row < SORT_ITEMS; ++row) {
         uint i = sort_element_index(block, row);
         bool valid = i < n;
-        keys[row] = valid ? keys_in[i] : SORT_KEY(0u);
+        keys[row] = valid ? LOAD_KEY(i) : SORT_KEY(0u);
         ranks[row] = count_row(key_digit(keys[row], pc.shift, mask), valid);
     }
     barrier();
@@ -56,8 +73,7 @@ void main() {
         if (i < n) {
             uint digit = key_digit(keys[row], pc.shift, mask);
             uint dst = subgroup_counts[gl_SubgroupID * SORT_RADIX + digit] + ranks[row];
-            keys_out[dst] = keys[row];
-            values_out[dst] = values_in[i];
+            STORE_PAIR(dst, keys[row], LOAD_VALUE(i));
         }
     }
 }

@@ -2,10 +2,14 @@
 //! available (lavapipe in CI), with validation on: any validation message fails.
 
 use vksplat::gen::{tile_depth_keys, Rng};
+use vksplat::gpu::buffer::BufferView;
 use vksplat::gpu::buffer::{GpuBuffer, MemoryKind};
 use vksplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};
 use vksplat::gpu::shader::compile_glsl;
-use vksplat::gpu::sort::{Count, RadixSort, SortConfig, SortPassPush, SortSetupPush};
+use vksplat::gpu::sort::{
+    Count, RadixSort, SortConfig, SortPassPush, SortSetupPush, SortTexels, DEFAULT_SORT_CONFIG,
+    SORT_CONFIG_32,
+};
 use vksplat::gpu::sync::{barrier, Access};
 use vksplat::gpu::{ContextOptions, GpuContext, GpuTimer};
 
@@ -270,8 +274,35 @@ fn check_sort(
             max_n: capacity as u32,
         },
     };
+    // A texel-I/O sort reads and writes through R32_UINT views of the same bytes.
+    let view = |b: &GpuBuffer, (offset, size): (u64, u64)| {
+        BufferView::new(ctx, b, ash::vk::Format::R32_UINT, offset, size.max(4)).expect("view")
+    };
+    let views = sort.config().texel_io.then(|| {
+        let [k, v] = RadixSort::scratch_pair_ranges(&sort.config(), capacity as u32);
+        [
+            view(&key_buf, (0, key_buf.size())),
+            view(&value_buf, (0, value_buf.size())),
+            view(&scratch, k),
+            view(&scratch, v),
+        ]
+    });
     ctx.submit_and_wait("sort test", |cmd| {
-        sort.record(ctx, cmd, &key_buf, &value_buf, &scratch, count, key_bits)?;
+        match &views {
+            Some([k, v, sk, sv]) => {
+                let texels = SortTexels {
+                    keys: k.handle(),
+                    values: v.handle(),
+                    scratch_keys: sk.handle(),
+                    scratch_values: sv.handle(),
+                };
+                let bits = 0..key_bits;
+                sort.record_texel(
+                    ctx, cmd, &key_buf, &value_buf, &scratch, count, bits, &texels,
+                )?
+            }
+            None => sort.record(ctx, cmd, &key_buf, &value_buf, &scratch, count, key_bits)?,
+        }
         barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
         Ok(())
     })
@@ -361,13 +392,33 @@ fn radix_sort_matches_cpu_stable_sort() {
     assert_no_validation_messages(&ctx);
 }
 
-/// The 32-bit key variant (the renderer's depth order and pair sort) against a CPU stable
-/// sort: every pattern and block boundary, host and device counts, a 2^20-element sort,
-/// and a bit range past the key refused.
+/// The 32-bit key variants (the renderer's depth order and pair sort: through storage
+/// buffers, and through texel views on CPU devices) against a CPU stable sort: every
+/// pattern and block boundary, host and device counts, a 2^20-element sort, and a bit
+/// range past the key refused.
 #[test]
 fn radix_sort_of_32_bit_keys_matches_cpu_stable_sort() {
     let ctx = context();
-    let sort = RadixSort::new_32(&ctx).expect("sort pipelines");
+    for texel_io in [false, true] {
+        let config = SortConfig {
+            texel_io,
+            ..SORT_CONFIG_32
+        };
+        let sort = RadixSort::with_config(&ctx, config).expect("sort pipelines");
+        check_32_bit_sort(&ctx, &sort);
+    }
+    let refused = SortConfig {
+        texel_io: true,
+        ..DEFAULT_SORT_CONFIG
+    };
+    assert!(
+        RadixSort::with_config(&ctx, refused).is_err(),
+        "texel I/O needs 32-bit keys"
+    );
+    assert_no_validation_messages(&ctx);
+}
+
+fn check_32_bit_sort(ctx: &GpuContext, sort: &RadixSort) {
     let c = sort.config();
     assert_eq!(c.key_words, 1);
     let block = (c.workgroup_size * c.items_per_thread) as usize;
@@ -375,37 +426,37 @@ fn radix_sort_of_32_bit_keys_matches_cpu_stable_sort() {
     for n in [0, 1, 3, block - 1, block, block + 1, 2 * block + 1, 12345] {
         for (what, keys) in patterns(&mut rng, n) {
             for key_bits in [12, 17, 32] {
-                check_sort(&ctx, &sort, &keys, key_bits, Mode::Host, what);
+                check_sort(ctx, sort, &keys, key_bits, Mode::Host, what);
             }
             let device = Mode::Device {
                 capacity: n + n / 3 + 5,
             };
-            check_sort(&ctx, &sort, &keys, 32, device, what);
+            check_sort(ctx, sort, &keys, 32, device, what);
         }
     }
     let n = (1 << 20) + 3;
     let random: Vec<u64> = (0..n).map(|_| rng.next_u64()).collect();
     let device = Mode::Device { capacity: n + 77 };
-    check_sort(&ctx, &sort, &random, 32, device, "random large");
-    check_sort(
-        &ctx,
-        &sort,
-        &random,
-        14,
-        Mode::Host,
-        "random large, 14 bits",
-    );
+    check_sort(ctx, sort, &random, 32, device, "random large");
+    check_sort(ctx, sort, &random, 14, Mode::Host, "random large, 14 bits");
+    // Bits past the key are refused (by the storage-buffer variant; the texel variant
+    // refuses any call without its views first).
     let e = sort.record_bits(
-        &ctx,
+        ctx,
         vk_null_cmd(),
-        &dummy(&ctx),
-        &dummy(&ctx),
-        &dummy(&ctx),
+        &dummy(ctx),
+        &dummy(ctx),
+        &dummy(ctx),
         Count::Host(1),
         0..33,
     );
-    assert!(e.is_err_and(|e| e.to_string().contains("0..33") && e.to_string().contains("32-bit")));
-    assert_no_validation_messages(&ctx);
+    let text = e.expect_err("refused").to_string();
+    let expected = if sort.config().texel_io {
+        "texel"
+    } else {
+        "0..33 are not a range inside the 32-bit key"
+    };
+    assert!(text.contains(expected), "{text}");
 }
 
 #[test]
@@ -497,18 +548,21 @@ fn radix_sort_other_configs() {
             workgroup_size: 256,
             items_per_thread: 16,
             key_words: 2,
+            texel_io: false,
         },
         SortConfig {
             radix_bits: 5,
             workgroup_size: 64,
             items_per_thread: 7,
             key_words: 2,
+            texel_io: false,
         },
         SortConfig {
             radix_bits: 5,
             workgroup_size: 64,
             items_per_thread: 7,
             key_words: 1,
+            texel_io: false,
         },
     ] {
         let sort = RadixSort::with_config(&ctx, config).expect("sort pipelines");
@@ -550,6 +604,7 @@ fn bench_sort_and_scan_1m() {
             workgroup_size: v[1],
             items_per_thread: v[2],
             key_words: 2,
+            texel_io: false,
         })
     });
     let sort = match config {

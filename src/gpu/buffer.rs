@@ -57,7 +57,8 @@ impl GpuBuffer {
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST
             | vk::BufferUsageFlags::INDIRECT_BUFFER
-            | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+            | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER
+            | vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)
@@ -326,7 +327,7 @@ impl BufferView {
             .format(format)
             .offset(offset)
             .range(size);
-        // SAFETY: the buffer was created with UNIFORM_TEXEL_BUFFER usage; the view is
+        // SAFETY: the buffer was created with texel buffer usages; the view is
         // destroyed in Drop, and its owner keeps the buffer alive as long as the view.
         let view = unsafe { ctx.shared.device.create_buffer_view(&info, None) }
             .vk("vkCreateBufferView")?;

@@ -264,6 +264,8 @@ pub enum BindingKind {
     StorageImage,
     /// `samplerBuffer` / `usamplerBuffer` read with `texelFetch`.
     UniformTexelBuffer,
+    /// `imageBuffer` / `uimageBuffer` with a format qualifier, written with `imageStore`.
+    StorageTexelBuffer,
 }
 
 /// What is bound to one binding slot at dispatch time.
@@ -332,6 +334,7 @@ impl ComputePipeline {
                         BindingKind::StorageBuffer => vk::DescriptorType::STORAGE_BUFFER,
                         BindingKind::StorageImage => vk::DescriptorType::STORAGE_IMAGE,
                         BindingKind::UniformTexelBuffer => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
+                        BindingKind::StorageTexelBuffer => vk::DescriptorType::STORAGE_TEXEL_BUFFER,
                     })
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
@@ -423,7 +426,10 @@ impl ComputePipeline {
                     (r, b),
                     (Resource::Buffer(_), BindingKind::StorageBuffer)
                         | (Resource::Image { .. }, BindingKind::StorageImage)
-                        | (Resource::TexelBuffer(_), BindingKind::UniformTexelBuffer)
+                        | (
+                            Resource::TexelBuffer(_),
+                            BindingKind::UniformTexelBuffer | BindingKind::StorageTexelBuffer
+                        )
                 )
             });
         if !matches {
@@ -486,7 +492,12 @@ impl ComputePipeline {
                         .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
                         .image_info(&image_infos[i]),
                     Resource::TexelBuffer(_) => write
-                        .descriptor_type(vk::DescriptorType::UNIFORM_TEXEL_BUFFER)
+                        .descriptor_type(match self.bindings[i] {
+                            BindingKind::StorageTexelBuffer => {
+                                vk::DescriptorType::STORAGE_TEXEL_BUFFER
+                            }
+                            _ => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
+                        })
                         .texel_buffer_view(&texel_views[i]),
                 }
             })
@@ -554,7 +565,20 @@ impl ComputePipeline {
         push: &[u8],
         args: BufferSlice,
     ) -> GpuResult<()> {
-        self.bind(ctx, cmd, buffers, push)?;
+        let resources: Vec<Resource> = buffers.iter().map(|&b| Resource::Buffer(b)).collect();
+        self.dispatch_indirect_resources(ctx, cmd, &resources, push, args)
+    }
+
+    /// [`Self::dispatch_indirect`] with buffers, images and texel views.
+    pub fn dispatch_indirect_resources(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        resources: &[Resource],
+        push: &[u8],
+        args: BufferSlice,
+    ) -> GpuResult<()> {
+        self.bind_resources(ctx, cmd, resources, push)?;
         // SAFETY: pipeline and descriptors bound above; args holds 12 bytes.
         unsafe {
             ctx.device()

@@ -29,7 +29,7 @@
 use ash::vk;
 
 use super::scan::{Scan, SCRATCH_ALIGN};
-use super::shader::BindingKind;
+use super::shader::{BindingKind, Resource};
 use super::sync::{barrier, barrier_uses, Access};
 use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer};
 
@@ -45,6 +45,11 @@ pub struct SortConfig {
     /// u32 words per key: 2 for 64-bit keys stored as `uvec2 (lo, hi)`, 1 for 32-bit
     /// keys stored as `uint`.
     pub key_words: u32,
+    /// Read and write the keys and values through R32_UINT texel views (32-bit keys
+    /// only; the caller passes the views, [`SortTexels`]). On llvmpipe texel fetches and
+    /// `imageStore` are straight per-lane code where storage-buffer accesses are a
+    /// guarded loop per component (`tests/store_paths.rs` measures both).
+    pub texel_io: bool,
 }
 
 impl SortConfig {
@@ -63,6 +68,7 @@ pub const DEFAULT_SORT_CONFIG: SortConfig = SortConfig {
     workgroup_size: 128,
     items_per_thread: 32,
     key_words: 2,
+    texel_io: false,
 };
 
 /// [`DEFAULT_SORT_CONFIG`] for 32-bit keys (the renderer's depth order and pair sort).
@@ -70,6 +76,21 @@ pub const SORT_CONFIG_32: SortConfig = SortConfig {
     key_words: 1,
     ..DEFAULT_SORT_CONFIG
 };
+
+/// Texel views (R32_UINT) a sort with [`SortConfig::texel_io`] reads and writes: over the
+/// same bytes as the `keys` and `values` buffers passed to the record call, and over the
+/// scratch's key and value ranges for the same `max_n` ([`RadixSort::scratch_pair_ranges`]).
+#[derive(Clone, Copy)]
+pub struct SortTexels {
+    /// The caller's keys.
+    pub keys: vk::BufferView,
+    /// The caller's values.
+    pub values: vk::BufferView,
+    /// The scratch's keys.
+    pub scratch_keys: vk::BufferView,
+    /// The scratch's values.
+    pub scratch_values: vk::BufferView,
+}
 
 /// u32 index of the clamped element count in the sort's meta words.
 pub const META_N: u32 = 0;
@@ -169,6 +190,17 @@ impl ScratchLayout {
     }
 }
 
+/// Between the sort's dispatches: compute writes -> the next dispatch's storage reads and
+/// writes and texel fetches (of the texel-I/O variant).
+fn pass_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
+    barrier_uses(
+        ctx,
+        cmd,
+        &[Access::ComputeWrite],
+        &[Access::ComputeReadWrite, Access::ComputeSampledRead],
+    );
+}
+
 /// The radix sort pipelines (plus the scan they use).
 pub struct RadixSort {
     config: SortConfig,
@@ -202,6 +234,7 @@ impl RadixSort {
         let shared_bytes = (radix * max_subgroups + config.workgroup_size) * 4;
         if !(1..=8).contains(&config.radix_bits)
             || !(1..=2).contains(&config.key_words)
+            || (config.texel_io && config.key_words != 1)
             || config.workgroup_size == 0
             || config.items_per_thread == 0
             || config.workgroup_size > info.max_workgroup_invocations
@@ -221,6 +254,7 @@ impl RadixSort {
         };
         let defines = vec![
             ("SORT_KEY", key_type.to_string()),
+            ("SORT_TEXEL_IO", u32::from(config.texel_io).to_string()),
             ("SORT_RADIX", format!("{radix}u")),
             ("SORT_WG", config.workgroup_size.to_string()),
             ("SORT_ITEMS", format!("{}u", config.items_per_thread)),
@@ -234,6 +268,16 @@ impl RadixSort {
             ("META_DISPATCH", META_DISPATCH.to_string()),
         ];
         let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
+        // Bindings of the keys and values: texel views for reading and writing, or buffers.
+        let (read, write) = if config.texel_io {
+            (
+                BindingKind::UniformTexelBuffer,
+                BindingKind::StorageTexelBuffer,
+            )
+        } else {
+            (BindingKind::StorageBuffer, BindingKind::StorageBuffer)
+        };
+        let storage = BindingKind::StorageBuffer;
         let setup_push = std::mem::size_of::<SortSetupPush>() as u32;
         let pass_push = std::mem::size_of::<SortPassPush>() as u32;
         Ok(Self {
@@ -250,7 +294,7 @@ impl RadixSort {
                 ctx,
                 "sort_histogram",
                 &defines,
-                &buffers(3),
+                &[storage, read, storage],
                 pass_push,
                 config.workgroup_size,
             )?,
@@ -258,7 +302,7 @@ impl RadixSort {
                 ctx,
                 "sort_scatter",
                 &defines,
-                &buffers(6),
+                &[storage, read, read, storage, write, write],
                 pass_push,
                 config.workgroup_size,
             )?,
@@ -266,7 +310,7 @@ impl RadixSort {
                 ctx,
                 "sort_copy",
                 &defines,
-                &buffers(5),
+                &[storage, read, read, write, write],
                 0,
                 config.workgroup_size,
             )?,
@@ -296,6 +340,13 @@ impl RadixSort {
     /// Scratch bytes this instance's configuration needs for up to `max_n` elements.
     pub fn scratch_size_for(&self, max_n: u32) -> u64 {
         ScratchLayout::new(&self.config, max_n).total
+    }
+
+    /// Byte ranges `(offset, size)` of the keys and the values inside the scratch of a
+    /// sort of up to `max_n` elements under `config` (for [`SortTexels`]' views).
+    pub fn scratch_pair_ranges(config: &SortConfig, max_n: u32) -> [(u64, u64); 2] {
+        let layout = ScratchLayout::new(config, max_n);
+        [layout.keys, layout.values]
     }
 
     /// The tunables in use.
@@ -351,6 +402,33 @@ impl RadixSort {
         self.record_timed(ctx, cmd, keys, values, scratch, count, bits, None)
     }
 
+    /// [`RadixSort::record_bits`] for a sort with [`SortConfig::texel_io`]: `texels` are
+    /// the R32_UINT views of `keys`, `values` and the scratch's key and value ranges.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_texel(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        keys: &GpuBuffer,
+        values: &GpuBuffer,
+        scratch: &GpuBuffer,
+        count: Count,
+        bits: std::ops::Range<u32>,
+        texels: &SortTexels,
+    ) -> GpuResult<()> {
+        self.record_impl(
+            ctx,
+            cmd,
+            keys,
+            values,
+            scratch,
+            count,
+            bits,
+            None,
+            Some(texels),
+        )
+    }
+
     /// [`RadixSort::record_bits`] with every dispatch wrapped in its own timer stage
     /// (`sort histogram`, `sort scan`, `sort scatter`, ... per pass), for profiling.
     #[allow(clippy::too_many_arguments)]
@@ -363,8 +441,35 @@ impl RadixSort {
         scratch: &GpuBuffer,
         count: Count,
         bits: std::ops::Range<u32>,
-        mut timer: Option<&mut GpuTimer>,
+        timer: Option<&mut GpuTimer>,
     ) -> GpuResult<()> {
+        self.record_impl(ctx, cmd, keys, values, scratch, count, bits, timer, None)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn record_impl(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        keys: &GpuBuffer,
+        values: &GpuBuffer,
+        scratch: &GpuBuffer,
+        count: Count,
+        bits: std::ops::Range<u32>,
+        mut timer: Option<&mut GpuTimer>,
+        texels: Option<&SortTexels>,
+    ) -> GpuResult<()> {
+        if self.config.texel_io != texels.is_some() {
+            return Err(GpuError::InvalidArgument(format!(
+                "a sort {} texel I/O needs {} texel views",
+                if self.config.texel_io {
+                    "with"
+                } else {
+                    "without"
+                },
+                if self.config.texel_io { "its" } else { "no" },
+            )));
+        }
         let (first_bit, end_bit) = (bits.start, bits.end);
         let key_bits = end_bit.saturating_sub(first_bit);
         let mut stage =
@@ -425,6 +530,23 @@ impl RadixSort {
         let scan_scratch = scratch.slice(layout.scan.0, layout.scan.1);
         let user_keys = keys.slice(0, u64::from(max_n) * self.config.key_bytes());
         let user_values = values.slice(0, u64::from(max_n) * 4);
+        // The keys and values as bound: texel views, or buffer slices.
+        let (user, tmp) = match texels {
+            Some(t) => (
+                (
+                    Resource::TexelBuffer(t.keys),
+                    Resource::TexelBuffer(t.values),
+                ),
+                (
+                    Resource::TexelBuffer(t.scratch_keys),
+                    Resource::TexelBuffer(t.scratch_values),
+                ),
+            ),
+            None => (
+                (Resource::Buffer(user_keys), Resource::Buffer(user_values)),
+                (Resource::Buffer(tmp_keys), Resource::Buffer(tmp_values)),
+            ),
+        };
 
         // Entry barrier (see the contract above).
         barrier_uses(
@@ -435,7 +557,11 @@ impl RadixSort {
                 Access::TransferWrite,
                 Access::IndirectRead,
             ],
-            &[Access::ComputeReadWrite, Access::TransferWrite],
+            &[
+                Access::ComputeReadWrite,
+                Access::ComputeSampledRead,
+                Access::TransferWrite,
+            ],
         );
         if count_slot.is_some() {
             // Blocks past the device count never write their histogram column, and the
@@ -480,20 +606,20 @@ impl RadixSort {
                 pad: 0,
             };
             let (src, dst) = if pass % 2 == 0 {
-                ((user_keys, user_values), (tmp_keys, tmp_values))
+                (user, tmp)
             } else {
-                ((tmp_keys, tmp_values), (user_keys, user_values))
+                (tmp, user)
             };
             stage("sort histogram", &mut |cmd| {
-                self.histogram.dispatch_indirect(
+                self.histogram.dispatch_indirect_resources(
                     ctx,
                     cmd,
-                    &[meta, src.0, hist],
+                    &[Resource::Buffer(meta), src.0, Resource::Buffer(hist)],
                     bytemuck::bytes_of(&push),
                     dispatch_args,
                 )
             })?;
-            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+            pass_barrier(ctx, cmd);
             stage("sort scan", &mut |cmd| {
                 self.scan.record(
                     ctx,
@@ -505,27 +631,34 @@ impl RadixSort {
                     layout.hist_stride << self.config.radix_bits,
                 )
             })?;
-            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+            pass_barrier(ctx, cmd);
             stage("sort scatter", &mut |cmd| {
-                self.scatter.dispatch_indirect(
+                self.scatter.dispatch_indirect_resources(
                     ctx,
                     cmd,
-                    &[meta, src.0, src.1, offsets, dst.0, dst.1],
+                    &[
+                        Resource::Buffer(meta),
+                        src.0,
+                        src.1,
+                        Resource::Buffer(offsets),
+                        dst.0,
+                        dst.1,
+                    ],
                     bytemuck::bytes_of(&push),
                     dispatch_args,
                 )
             })?;
             if pass + 1 < passes || passes % 2 == 1 {
                 // The scattered pairs are the next pass's (or the copy's) input.
-                barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
+                pass_barrier(ctx, cmd);
             }
         }
         if passes % 2 == 1 {
             stage("sort copy", &mut |cmd| {
-                self.copy.dispatch_indirect(
+                self.copy.dispatch_indirect_resources(
                     ctx,
                     cmd,
-                    &[meta, tmp_keys, tmp_values, user_keys, user_values],
+                    &[Resource::Buffer(meta), tmp.0, tmp.1, user.0, user.1],
                     &[],
                     dispatch_args,
                 )

@@ -61,7 +61,8 @@ impl BlendKernel {
         }
     }
 
-    fn texel(self) -> bool {
+    /// Whether the kernel reads the splats and values through texel views (CPU devices).
+    pub fn texel(self) -> bool {
         matches!(self, BlendKernel::Texel { .. })
     }
 

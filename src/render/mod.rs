@@ -39,7 +39,7 @@ pub mod types;
 use crate::camera::Camera;
 use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
-use crate::gpu::sort::SORT_CONFIG_32;
+use crate::gpu::sort::{SortConfig, SortTexels, SORT_CONFIG_32};
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
     BufferView, Count, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
@@ -283,9 +283,21 @@ pub fn sh_texel_stride(sh_degree: u32) -> u32 {
     (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
 }
 
+/// R32_UINT texel views the sorts read and write on CPU devices ([`SortConfig::texel_io`]):
+/// the depth order's keys, values and scratch halves, and the pair sort's (its values are
+/// viewed by [`FrameBuffers::value_texels`]).
+struct SortViews {
+    depth_keys: BufferView,
+    depth_values: BufferView,
+    depth_scratch: [BufferView; 2],
+    keys: BufferView,
+    pair_scratch: [BufferView; 2],
+}
+
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
 /// (Fields drop in order: the texel views go before the buffers they view.)
 struct FrameBuffers {
+    sort_views: Option<SortViews>,
     splat_texels: BufferView,
     value_texels: Option<BufferView>,
     gaussians: u32,
@@ -368,7 +380,38 @@ impl FrameBuffers {
         } else {
             None
         };
+        let depth_keys = dev("depth keys", n * 4)?;
+        let depth_values = dev("depth order", n * 4)?;
+        let keys = dev("keys", u64::from(capacity) * 4)?;
+        // Shared by the depth sort (the Gaussians) and the pair sort (capacity pairs). The
+        // sort binds slices of it, the largest 4 bytes per key, which the capacity bound
+        // (max_capacity) keeps inside one binding.
+        let sort_scratch = GpuBuffer::new(
+            ctx,
+            "sort scratch",
+            RadixSort::scratch_size_with(&SORT_CONFIG_32, capacity.max(gaussians)),
+            MemoryKind::Device,
+        )?;
+        let sort_views = if texel_views {
+            let view = |b: &GpuBuffer, (offset, size): (u64, u64)| {
+                BufferView::new(ctx, b, vk::Format::R32_UINT, offset, size.max(4))
+            };
+            let scratch_views = |max_n: u32| -> GpuResult<[BufferView; 2]> {
+                let [k, v] = RadixSort::scratch_pair_ranges(&SORT_CONFIG_32, max_n);
+                Ok([view(&sort_scratch, k)?, view(&sort_scratch, v)?])
+            };
+            Some(SortViews {
+                depth_keys: view(&depth_keys, (0, depth_keys.size()))?,
+                depth_values: view(&depth_values, (0, depth_values.size()))?,
+                depth_scratch: scratch_views(gaussians.max(1))?,
+                keys: view(&keys, (0, keys.size()))?,
+                pair_scratch: scratch_views(capacity)?,
+            })
+        } else {
+            None
+        };
         Ok(FrameBuffers {
+            sort_views,
             splat_texels,
             value_texels,
             gaussians,
@@ -380,22 +423,14 @@ impl FrameBuffers {
             splats,
             rects: dev("tile rects", n * 8)?,
             offsets: dev("tiles touched / offsets in depth order", n * 4)?,
-            depth_keys: dev("depth keys", n * 4)?,
+            depth_keys,
             touched: dev("tiles touched by Gaussian", n * 4)?,
-            depth_values: dev("depth order", n * 4)?,
+            depth_values,
             bin_masks: dev("bin masks", n * 4)?,
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
-            keys: dev("keys", u64::from(capacity) * 4)?,
+            keys,
             values,
-            // Shared by the depth sort (n Gaussians) and the pair sort (capacity pairs). The
-            // sort binds slices of it, the largest 4 bytes per key, which the capacity
-            // bound (max_capacity) keeps inside one binding.
-            sort_scratch: GpuBuffer::new(
-                ctx,
-                "sort scratch",
-                RadixSort::scratch_size_with(&SORT_CONFIG_32, capacity.max(gaussians)),
-                MemoryKind::Device,
-            )?,
+            sort_scratch,
             ranges: dev("bin ranges", bins * 8)?,
             color: GpuImage::new(
                 ctx,
@@ -413,6 +448,27 @@ impl FrameBuffers {
                 MemoryKind::Readback,
             )?,
             chunk_offsets: None,
+        })
+    }
+
+    /// The depth order's sort views, when the sorts read through texel views.
+    fn depth_sort_texels(&self) -> Option<SortTexels> {
+        self.sort_views.as_ref().map(|v| SortTexels {
+            keys: v.depth_keys.handle(),
+            values: v.depth_values.handle(),
+            scratch_keys: v.depth_scratch[0].handle(),
+            scratch_values: v.depth_scratch[1].handle(),
+        })
+    }
+
+    /// The pair sort's views, when the sorts read through texel views.
+    fn pair_sort_texels(&self) -> Option<SortTexels> {
+        let v = self.sort_views.as_ref()?;
+        Some(SortTexels {
+            keys: v.keys.handle(),
+            values: self.value_texels.as_ref()?.handle(),
+            scratch_keys: v.pair_scratch[0].handle(),
+            scratch_values: v.pair_scratch[1].handle(),
         })
     }
 
@@ -603,7 +659,14 @@ impl GpuRenderer {
             order: order::Order::new(&ctx)?,
             scan: Scan::new(&ctx)?,
             keys: keys::Keys::new(&ctx)?,
-            sort: RadixSort::new_32(&ctx)?,
+            // Texel-view I/O where the blend reads texel views too (CPU devices).
+            sort: RadixSort::with_config(
+                &ctx,
+                SortConfig {
+                    texel_io: kernel.texel(),
+                    ..SORT_CONFIG_32
+                },
+            )?,
             ranges: ranges::Ranges::new(&ctx)?,
             blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
             power_blend: None,
@@ -1616,13 +1679,14 @@ impl GpuRenderer {
                         ctx,
                         cmd,
                         sort,
-                        f.params.whole(),
+                        &f.params,
                         &f.depth_keys,
                         &f.depth_values,
                         &f.sort_scratch,
+                        f.depth_sort_texels().as_ref(),
                         f.touched.whole(),
                         f.offsets.whole(),
-                        n,
+                        (n, f.gaussians.max(1)),
                     )
                 })?;
                 // Tiles touched in depth order -> scan; depth order and counters -> keys.
@@ -1705,19 +1769,18 @@ impl GpuRenderer {
                 // The sort opens with its own barrier from compute writes (its contract).
                 // Pairs arrive in depth order: only the tile bits remain to be sorted.
                 timer.stage(ctx, cmd, "sort", |cmd| {
-                    sort.record_bits(
-                        ctx,
-                        cmd,
-                        &f.keys,
-                        &f.values,
-                        &f.sort_scratch,
-                        Count::Device {
-                            buffer: &f.counters,
-                            offset: types::COUNTER_SORT_COUNT,
-                            max_n: f.capacity,
-                        },
-                        pair_bits.clone(),
-                    )
+                    let count = Count::Device {
+                        buffer: &f.counters,
+                        offset: types::COUNTER_SORT_COUNT,
+                        max_n: f.capacity,
+                    };
+                    let (k, v, s) = (&f.keys, &f.values, &f.sort_scratch);
+                    match f.pair_sort_texels() {
+                        Some(t) => {
+                            sort.record_texel(ctx, cmd, k, v, s, count, pair_bits.clone(), &t)
+                        }
+                        None => sort.record_bits(ctx, cmd, k, v, s, count, pair_bits.clone()),
+                    }
                 })?;
                 // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
                 barrier_uses(

@@ -4,6 +4,7 @@
 //! the same result as sorting the full `tile << 32 | depth` keys (see `glsl/order.comp`).
 
 use crate::gpu::shader::BindingKind;
+use crate::gpu::sort::SortTexels;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{
     dispatch_grid, BufferSlice, ComputePipeline, Count, GpuBuffer, GpuContext, GpuResult, RadixSort,
@@ -15,6 +16,9 @@ pub const WORKGROUP: u32 = 256;
 
 /// Depth bits sorted: the whole float (positive, so its bits order like the values).
 pub const DEPTH_BITS: u32 = 32;
+
+/// Byte offset of `FrameParams::counts` (`x`: the Gaussian count) in the params buffer.
+const COUNTS_OFFSET: u64 = std::mem::offset_of!(super::types::FrameParams, counts) as u64;
 
 /// The gather pipeline of the depth order stage.
 pub struct Order {
@@ -35,40 +39,51 @@ impl Order {
         Ok(Order { pipeline })
     }
 
-    /// Records the depth sort of `n` Gaussians (`depth_keys`/`depth_values` hold the
-    /// result afterwards; `sort` takes 32-bit keys) and the gather of their tiles-touched
-    /// counts (`touched`, by Gaussian index) into `touched_in_order`. The caller places
-    /// the barrier after (compute write -> read).
+    /// Records the depth sort of the frame's `n` Gaussians (`depth_keys`/`depth_values`
+    /// hold the result afterwards; `sort` takes 32-bit keys; the count is read from
+    /// `params` on the device, so the scratch is laid out for the `max_n` the buffers hold,
+    /// as `texels` are when the sort reads through texel views) and the gather of their
+    /// tiles-touched counts (`touched`, by Gaussian index) into `touched_in_order`. The
+    /// caller places the barrier after (compute write -> read).
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
         sort: &RadixSort,
-        params: BufferSlice,
+        params: &GpuBuffer,
         depth_keys: &GpuBuffer,
         depth_values: &GpuBuffer,
         scratch: &GpuBuffer,
+        texels: Option<&SortTexels>,
         touched: BufferSlice,
         touched_in_order: BufferSlice,
-        n: u32,
+        (n, max_n): (u32, u32),
     ) -> GpuResult<()> {
-        sort.record(
-            ctx,
-            cmd,
-            depth_keys,
-            depth_values,
-            scratch,
-            Count::Host(n),
-            DEPTH_BITS,
-        )?;
+        let count = Count::Device {
+            buffer: params,
+            offset: COUNTS_OFFSET,
+            max_n,
+        };
+        let bits = 0..DEPTH_BITS;
+        match texels {
+            Some(t) => {
+                sort.record_texel(ctx, cmd, depth_keys, depth_values, scratch, count, bits, t)?
+            }
+            None => sort.record_bits(ctx, cmd, depth_keys, depth_values, scratch, count, bits)?,
+        }
         // Sorted depth keys -> gather.
         barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
         let groups = dispatch_grid(n.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
         self.pipeline.dispatch(
             ctx,
             cmd,
-            &[params, depth_values.whole(), touched, touched_in_order],
+            &[
+                params.whole(),
+                depth_values.whole(),
+                touched,
+                touched_in_order,
+            ],
             &[],
             groups,
         )

@@ -1,0 +1,78 @@
+//! Microbenchmark (ignored): how lavapipe's per-lane memory operations cost by path.
+//! `cargo test --release --test store_paths -- --ignored --nocapture`
+
+use ash::vk;
+use vksplat::gpu::buffer::{BufferView, GpuBuffer, MemoryKind};
+use vksplat::gpu::shader::{compile_glsl, BindingKind, Resource};
+use vksplat::gpu::{ComputePipeline, ContextOptions, GpuContext, GpuTimer};
+
+const HEAD: &str = "#version 460\nlayout(local_size_x = 256) in;\n";
+
+#[test]
+#[ignore]
+fn store_and_load_paths() {
+    let ctx = GpuContext::new(&ContextOptions::default()).expect("context");
+    let n: u32 = 1 << 22;
+    let perm: Vec<u32> = (0..n).map(|i| (i.wrapping_mul(2654435761)) % n).collect();
+    let src: Vec<u32> = (0..n).collect();
+    let perm_buf = GpuBuffer::from_slice(&ctx, "perm", &perm).unwrap();
+    let src_buf = GpuBuffer::from_slice(&ctx, "src", &src).unwrap();
+    let dst_buf = GpuBuffer::new(&ctx, "dst", 16 * u64::from(n), MemoryKind::Device).unwrap();
+    let u32_view =
+        |b: &GpuBuffer, bytes| BufferView::new(&ctx, b, vk::Format::R32_UINT, 0, bytes).unwrap();
+    let v4_view = |b: &GpuBuffer| {
+        BufferView::new(&ctx, b, vk::Format::R32G32B32A32_SFLOAT, 0, b.size()).unwrap()
+    };
+    let src_view = u32_view(&src_buf, src_buf.size());
+    let perm_view = u32_view(&perm_buf, perm_buf.size());
+    let dst_view = u32_view(&dst_buf, 4 * u64::from(n));
+    let dst_v4 = v4_view(&dst_buf);
+    use BindingKind::*;
+    let cases: Vec<(&str, String, Vec<BindingKind>)> = vec![
+        ("ssbo load/ssbo scatter u32", "layout(std430, binding=0) readonly buffer A { uint a[]; }; layout(std430, binding=1) readonly buffer P { uint p[]; }; layout(std430, binding=2) writeonly buffer D { uint d[]; };\nvoid main() { uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u; d[p[i]] = a[i]; }".into(), vec![StorageBuffer, StorageBuffer, StorageBuffer]),
+        ("texel load/imageStore scatter u32", "layout(binding=0) uniform usamplerBuffer a; layout(binding=1) uniform usamplerBuffer p; layout(binding=2, r32ui) uniform writeonly uimageBuffer d;\nvoid main() { int i = int(gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u); imageStore(d, int(texelFetch(p, i).x), texelFetch(a, i)); }".into(), vec![UniformTexelBuffer, UniformTexelBuffer, StorageTexelBuffer]),
+        ("ssbo load/ssbo store vec4 (contiguous)", "layout(std430, binding=0) readonly buffer A { uint a[]; }; layout(std430, binding=1) readonly buffer P { uint p[]; }; layout(std430, binding=2) writeonly buffer D { vec4 d[]; };\nvoid main() { uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u; d[i] = vec4(float(a[i]), 1.0, 2.0, float(p[i])); }".into(), vec![StorageBuffer, StorageBuffer, StorageBuffer]),
+        ("texel load/imageStore vec4 (contiguous)", "layout(binding=0) uniform usamplerBuffer a; layout(binding=1) uniform usamplerBuffer p; layout(binding=2, rgba32f) uniform writeonly imageBuffer d;\nvoid main() { int i = int(gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u); imageStore(d, i, vec4(float(texelFetch(a, i).x), 1.0, 2.0, float(texelFetch(p, i).x))); }".into(), vec![UniformTexelBuffer, UniformTexelBuffer, StorageTexelBuffer]),
+    ];
+    let mut timer = GpuTimer::new(&ctx, "t", 8).unwrap();
+    for (name, body, kinds) in cases {
+        let spirv = compile_glsl(name, &format!("{HEAD}{body}"), &[]).unwrap();
+        let p = ComputePipeline::new(&ctx, "case", &spirv, &kinds, 0, 256).unwrap();
+        let texel = kinds[0] == UniformTexelBuffer;
+        let vec4 = name.contains("vec4");
+        let res: Vec<Resource> = if texel {
+            vec![
+                Resource::TexelBuffer(src_view.handle()),
+                Resource::TexelBuffer(perm_view.handle()),
+                Resource::TexelBuffer(if vec4 {
+                    dst_v4.handle()
+                } else {
+                    dst_view.handle()
+                }),
+            ]
+        } else {
+            vec![
+                Resource::Buffer(src_buf.whole()),
+                Resource::Buffer(perm_buf.whole()),
+                Resource::Buffer(dst_buf.whole()),
+            ]
+        };
+        let mut ms = Vec::new();
+        for _ in 0..4 {
+            ctx.submit_and_wait("mb", |cmd| {
+                timer.reset(&ctx, cmd);
+                timer.stage(&ctx, cmd, "x", |cmd| {
+                    p.dispatch_resources(&ctx, cmd, &res, &[], [256, n / 65536, 1])
+                })
+            })
+            .unwrap();
+            ms.push(timer.span_ms(&ctx).unwrap());
+        }
+        ms.sort_by(f64::total_cmp);
+        eprintln!(
+            "{name:45} {:.2} ms for {n} elements ({:.1} ns each)",
+            ms[1],
+            ms[1] * 1e6 / f64::from(n)
+        );
+    }
+}
