@@ -16,14 +16,43 @@ layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
 // The splats as 3 rgba32f texels each: texel buffers address more than one storage
 // binding on some devices (lavapipe: 128 M texels against 128 MiB).
 layout(binding = 1) uniform samplerBuffer splat_texels;
+// Keys are the bin ids: pairs are written in depth order, so the key needs no depth bits.
+#ifndef KEYS_TEXEL_IO
+#define KEYS_TEXEL_IO 0
+#endif
+#if KEYS_TEXEL_IO
+// CPU devices: the per-Gaussian arrays through texel views, the pairs written with
+// imageStore (straight per-lane code on llvmpipe, where storage-buffer accesses are a
+// guarded loop per component; see tests/store_paths.rs).
+layout(binding = 2) uniform usamplerBuffer rects_tex;
+layout(binding = 3) uniform usamplerBuffer offsets_tex;
+layout(binding = 4, r32ui) uniform writeonly uimageBuffer keys_img;
+layout(binding = 5, r32ui) uniform writeonly uimageBuffer values_img;
+layout(binding = 7) uniform usamplerBuffer order_tex;
+layout(binding = 8) uniform usamplerBuffer masks_tex;
+#define RECT(i) texelFetch(rects_tex, int(i)).xy
+#define OFFSET(k) texelFetch(offsets_tex, int(k)).x
+#define ORDER(k) texelFetch(order_tex, int(k)).x
+#define MASK(i) texelFetch(masks_tex, int(i)).x
+#define STORE_PAIR(off, key, value) \
+    imageStore(keys_img, int(off), uvec4(key)); \
+    imageStore(values_img, int(off), uvec4(value))
+#else
 layout(std430, binding = 2) readonly buffer RectBuf { uvec2 rects[]; };
 layout(std430, binding = 3) readonly buffer OffsetBuf { uint offsets[]; };
-// Tile (bin) ids: pairs are written in depth order, so the key needs no depth bits.
 layout(std430, binding = 4) writeonly buffer KeyBuf { uint keys[]; };
 layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
-layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(std430, binding = 7) readonly buffer OrderBuf { uint depth_order[]; };
 layout(std430, binding = 8) readonly buffer BinMaskBuf { uint bin_masks[]; };
+#define RECT(i) rects[i]
+#define OFFSET(k) offsets[k]
+#define ORDER(k) depth_order[k]
+#define MASK(i) bin_masks[i]
+#define STORE_PAIR(off, key, value) \
+    keys[off] = key; \
+    values[off] = value
+#endif
+layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
 layout(push_constant) uniform Chunk { uint first; uint end; uint base; } chunk;
 
 #define RANGES_WORKGROUP 256u
@@ -36,7 +65,7 @@ void main() {
         // The exact total says whether the scan total of a whole frame wrapped past 2^32;
         // a chunk's pairs (offsets mod 2^32 apart) always fit the capacity.
         bool whole = chunk.first == 0u && chunk.end >= n;
-        uint next = chunk.end < n ? offsets[chunk.end] : counters.scan_total;
+        uint next = chunk.end < n ? OFFSET(chunk.end) : counters.scan_total;
         uint total = whole && counters.touched_hi != 0u ? capacity : min(next - chunk.base, capacity);
         counters.sort_count = total;
         // A 2D grid beyond 65535 groups (the minimum maxComputeWorkGroupCount[0]).
@@ -46,8 +75,8 @@ void main() {
         counters.ranges_groups_z = 1u;
     }
     if (k >= chunk.end) return;
-    uint i = depth_order[k];
-    uvec2 rect = rects[i];
+    uint i = ORDER(k);
+    uvec2 rect = RECT(i);
     uvec2 rmin = unpack_tile(rect.x);
     uvec2 rmax = unpack_tile(rect.y);
     if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
@@ -59,21 +88,20 @@ void main() {
     uint bins_x = params.bins.y;
     uvec2 bmin = rmin * params.bins.w;
     uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
-    uint off = offsets[k] - chunk.base;
+    uint off = OFFSET(k) - chunk.base;
     // This Gaussian's slots end where the next one's begin (or at the scan total).
-    uint end = (k + 1u < n ? offsets[k + 1u] : counters.scan_total) - chunk.base;
+    uint end = (k + 1u < n ? OFFSET(k + 1u) : counters.scan_total) - chunk.base;
     uint limit = min(end, capacity);
     uint w = bmax.x - bmin.x;
     if (w * (bmax.y - bmin.y) <= BIN_MASK_BINS) {
         // The bins preprocess found, in the same row-major order.
-        uint mask = bin_masks[i];
+        uint mask = MASK(i);
         while (mask != 0u) {
             uint j = uint(findLSB(mask));
             mask &= mask - 1u;
             uint y = bmin.y + j / w, x = bmin.x + j % w;
             if (off < limit) {
-                keys[off] = y * bins_x + x;
-                values[off] = i;
+                STORE_PAIR(off, y * bins_x + x, i);
             }
             off++;
         }
@@ -85,8 +113,7 @@ void main() {
                 // The same test preprocess counted with (tile_receives in splat_common.glsl).
                 if (!tile_receives(mean_opacity_bound.xy, conic_depth.xyz, bound, uvec2(x, y), params.bins.x)) continue;
                 if (off < limit) {
-                    keys[off] = y * bins_x + x;
-                    values[off] = i;
+                    STORE_PAIR(off, y * bins_x + x, i);
                 }
                 off++;
             }
@@ -97,7 +124,6 @@ void main() {
         }
     }
     for (; off < min(end, capacity); off++) {
-        keys[off] = SENTINEL_TILE;
-        values[off] = i;
+        STORE_PAIR(off, SENTINEL_TILE, i);
     }
 }

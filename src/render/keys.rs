@@ -12,6 +12,7 @@ pub const WORKGROUP: u32 = 256;
 /// The key-duplication pipeline.
 pub struct Keys {
     pipeline: ComputePipeline,
+    texel_io: bool,
 }
 
 /// Buffers the stage reads and writes.
@@ -20,44 +21,64 @@ pub struct KeysBindings<'a> {
     pub params: BufferSlice<'a>,
     /// Texel view of the splats (R32G32B32A32_SFLOAT, 3 texels per splat).
     pub splat_texels: vk::BufferView,
-    /// Packed tile rectangles.
-    pub rects: BufferSlice<'a>,
-    /// Exclusive prefix sum of tiles touched, in depth order.
-    pub offsets: BufferSlice<'a>,
-    /// Keys: the bin (tile) id of each pair, 32 bits (written).
-    pub keys: BufferSlice<'a>,
-    /// Values, Gaussian indices (written).
-    pub values: BufferSlice<'a>,
     /// Counters (sort count and ranges dispatch written).
     pub counters: BufferSlice<'a>,
+    /// The per-Gaussian arrays read and the pairs written: storage buffers, or (for the
+    /// texel-I/O pipeline) texel views.
+    pub io: KeysIo<'a>,
+}
+
+/// What the keys stage reads per Gaussian and writes per pair, as bound: storage-buffer
+/// slices, or texel views (R32G32_UINT for the rectangles, R32_UINT for the rest).
+pub struct KeysIo<'a> {
+    /// Packed tile rectangles.
+    pub rects: Resource<'a>,
+    /// Exclusive prefix sum of tiles touched, in depth order.
+    pub offsets: Resource<'a>,
+    /// Keys: the bin (tile) id of each pair, 32 bits (written).
+    pub keys: Resource<'a>,
+    /// Values, Gaussian indices (written).
+    pub values: Resource<'a>,
     /// Gaussian indices in depth order.
-    pub depth_order: BufferSlice<'a>,
+    pub depth_order: Resource<'a>,
     /// Receiving bins of small tile rectangles, from preprocess (global index).
-    pub bin_masks: BufferSlice<'a>,
+    pub bin_masks: Resource<'a>,
 }
 
 impl Keys {
-    /// Compiles the shader and builds the pipeline.
-    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+    /// Compiles the shader and builds the pipeline: reading and writing storage buffers,
+    /// or (`texel_io`, for CPU devices) texel views.
+    pub fn new(ctx: &GpuContext, texel_io: bool) -> GpuResult<Self> {
+        use BindingKind::*;
+        let (read, write) = if texel_io {
+            (UniformTexelBuffer, StorageTexelBuffer)
+        } else {
+            (StorageBuffer, StorageBuffer)
+        };
         let pipeline = ComputePipeline::from_embedded(
             ctx,
             "keys",
-            &[],
+            &[("KEYS_TEXEL_IO", u32::from(texel_io).to_string())],
             &[
-                BindingKind::StorageBuffer,
-                BindingKind::UniformTexelBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
+                StorageBuffer,
+                UniformTexelBuffer,
+                read,
+                read,
+                write,
+                write,
+                StorageBuffer,
+                read,
+                read,
             ],
             12,
             WORKGROUP,
         )?;
-        Ok(Keys { pipeline })
+        Ok(Keys { pipeline, texel_io })
+    }
+
+    /// Whether the pipeline reads and writes texel views.
+    pub fn texel_io(&self) -> bool {
+        self.texel_io
     }
 
     /// Records the dispatch for the depth-ordered Gaussians `chunk.first..chunk.end` (at
@@ -80,13 +101,13 @@ impl Keys {
             &[
                 Resource::Buffer(b.params),
                 Resource::TexelBuffer(b.splat_texels),
-                Resource::Buffer(b.rects),
-                Resource::Buffer(b.offsets),
-                Resource::Buffer(b.keys),
-                Resource::Buffer(b.values),
+                b.io.rects,
+                b.io.offsets,
+                b.io.keys,
+                b.io.values,
                 Resource::Buffer(b.counters),
-                Resource::Buffer(b.depth_order),
-                Resource::Buffer(b.bin_masks),
+                b.io.depth_order,
+                b.io.bin_masks,
             ],
             bytemuck::cast_slice(&push),
             groups,

@@ -39,6 +39,7 @@ pub mod types;
 use crate::camera::Camera;
 use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
+use crate::gpu::shader::Resource;
 use crate::gpu::sort::{SortConfig, SortTexels, SORT_CONFIG_32};
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
@@ -283,15 +284,20 @@ pub fn sh_texel_stride(sh_degree: u32) -> u32 {
     (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
 }
 
-/// R32_UINT texel views the sorts read and write on CPU devices ([`SortConfig::texel_io`]):
-/// the depth order's keys, values and scratch halves, and the pair sort's (its values are
-/// viewed by [`FrameBuffers::value_texels`]).
+/// Texel views the sorts and the keys stage read and write on CPU devices
+/// ([`SortConfig::texel_io`], `KEYS_TEXEL_IO`), R32_UINT unless noted: the depth order's
+/// keys, values and scratch halves, the pair sort's (its values are viewed by
+/// [`FrameBuffers::value_texels`]), and what the keys stage reads per Gaussian.
 struct SortViews {
     depth_keys: BufferView,
     depth_values: BufferView,
     depth_scratch: [BufferView; 2],
     keys: BufferView,
     pair_scratch: [BufferView; 2],
+    /// R32G32_UINT.
+    rects: BufferView,
+    offsets: BufferView,
+    bin_masks: BufferView,
 }
 
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
@@ -383,6 +389,9 @@ impl FrameBuffers {
         let depth_keys = dev("depth keys", n * 4)?;
         let depth_values = dev("depth order", n * 4)?;
         let keys = dev("keys", u64::from(capacity) * 4)?;
+        let rects = dev("tile rects", n * 8)?;
+        let offsets = dev("tiles touched / offsets in depth order", n * 4)?;
+        let bin_masks = dev("bin masks", n * 4)?;
         // Shared by the depth sort (the Gaussians) and the pair sort (capacity pairs). The
         // sort binds slices of it, the largest 4 bytes per key, which the capacity bound
         // (max_capacity) keeps inside one binding.
@@ -396,16 +405,20 @@ impl FrameBuffers {
             let view = |b: &GpuBuffer, (offset, size): (u64, u64)| {
                 BufferView::new(ctx, b, vk::Format::R32_UINT, offset, size.max(4))
             };
+            let whole = |b: &GpuBuffer| view(b, (0, b.size()));
             let scratch_views = |max_n: u32| -> GpuResult<[BufferView; 2]> {
                 let [k, v] = RadixSort::scratch_pair_ranges(&SORT_CONFIG_32, max_n);
                 Ok([view(&sort_scratch, k)?, view(&sort_scratch, v)?])
             };
             Some(SortViews {
-                depth_keys: view(&depth_keys, (0, depth_keys.size()))?,
-                depth_values: view(&depth_values, (0, depth_values.size()))?,
+                depth_keys: whole(&depth_keys)?,
+                depth_values: whole(&depth_values)?,
                 depth_scratch: scratch_views(gaussians.max(1))?,
-                keys: view(&keys, (0, keys.size()))?,
+                keys: whole(&keys)?,
                 pair_scratch: scratch_views(capacity)?,
+                rects: BufferView::new(ctx, &rects, vk::Format::R32G32_UINT, 0, rects.size())?,
+                offsets: whole(&offsets)?,
+                bin_masks: whole(&bin_masks)?,
             })
         } else {
             None
@@ -421,12 +434,12 @@ impl FrameBuffers {
             params: dev("frame params", std::mem::size_of::<FrameParams>() as u64)?,
             counters: dev("counters", std::mem::size_of::<Counters>() as u64)?,
             splats,
-            rects: dev("tile rects", n * 8)?,
-            offsets: dev("tiles touched / offsets in depth order", n * 4)?,
+            rects,
+            offsets,
             depth_keys,
             touched: dev("tiles touched by Gaussian", n * 4)?,
             depth_values,
-            bin_masks: dev("bin masks", n * 4)?,
+            bin_masks,
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
             keys,
             values,
@@ -458,6 +471,34 @@ impl FrameBuffers {
             values: v.depth_values.handle(),
             scratch_keys: v.depth_scratch[0].handle(),
             scratch_values: v.depth_scratch[1].handle(),
+        })
+    }
+
+    /// What the keys stage reads and writes, as its pipeline binds them.
+    fn keys_io(&self, texel_io: bool) -> GpuResult<keys::KeysIo<'_>> {
+        let views = (self.sort_views.as_ref(), self.value_texels.as_ref());
+        Ok(match (texel_io, views) {
+            (false, _) => keys::KeysIo {
+                rects: Resource::Buffer(self.rects.whole()),
+                offsets: Resource::Buffer(self.offsets.whole()),
+                keys: Resource::Buffer(self.keys.whole()),
+                values: Resource::Buffer(self.values.whole()),
+                depth_order: Resource::Buffer(self.depth_values.whole()),
+                bin_masks: Resource::Buffer(self.bin_masks.whole()),
+            },
+            (true, (Some(v), Some(values))) => keys::KeysIo {
+                rects: Resource::TexelBuffer(v.rects.handle()),
+                offsets: Resource::TexelBuffer(v.offsets.handle()),
+                keys: Resource::TexelBuffer(v.keys.handle()),
+                values: Resource::TexelBuffer(values.handle()),
+                depth_order: Resource::TexelBuffer(v.depth_values.handle()),
+                bin_masks: Resource::TexelBuffer(v.bin_masks.handle()),
+            },
+            (true, _) => {
+                return Err(GpuError::InvalidArgument(
+                    "the keys stage's texel views are missing".into(),
+                ))
+            }
         })
     }
 
@@ -658,7 +699,7 @@ impl GpuRenderer {
             compact_preprocess: None,
             order: order::Order::new(&ctx)?,
             scan: Scan::new(&ctx)?,
-            keys: keys::Keys::new(&ctx)?,
+            keys: keys::Keys::new(&ctx, kernel.texel())?,
             // Texel-view I/O where the blend reads texel views too (CPU devices).
             sort: RadixSort::with_config(
                 &ctx,
@@ -1755,13 +1796,8 @@ impl GpuRenderer {
                         &keys::KeysBindings {
                             params: f.params.whole(),
                             splat_texels: f.splat_texels.handle(),
-                            rects: f.rects.whole(),
-                            offsets: f.offsets.whole(),
-                            keys: f.keys.whole(),
-                            values: f.values.whole(),
                             counters: f.counters.whole(),
-                            depth_order: f.depth_values.whole(),
-                            bin_masks: f.bin_masks.whole(),
+                            io: f.keys_io(keys.texel_io())?,
                         },
                         chunk,
                     )
