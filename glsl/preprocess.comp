@@ -13,16 +13,16 @@ layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
 #ifndef COMPACT_GAUSSIANS
 #define COMPACT_GAUSSIANS 0
 #endif
-#if COMPACT_GAUSSIANS
+#ifndef PREPROCESS_TEXEL_IO
+#define PREPROCESS_TEXEL_IO 0
+#endif
 // A compact upload (--compact): centre and opacity in f32, the axis scales and the rotation
 // as fp16 pairs (GpuGaussianCompact in src/render/types.rs); unpacking is exact.
 struct GaussianCompact {
     vec4 pos_opacity;
     uvec4 shape;  // (scale x, y), (scale z, rotation w), (rotation x, y), (rotation z, 0)
 };
-layout(std430, binding = 1) readonly buffer GaussianBuf { GaussianCompact gaussians[]; };
-Gaussian load_gaussian(uint w) {
-    GaussianCompact c = gaussians[w];
+Gaussian unpack_compact(GaussianCompact c) {
     vec2 sxy = unpackHalf2x16(c.shape.x), szw = unpackHalf2x16(c.shape.y);
     vec2 rxy = unpackHalf2x16(c.shape.z), rz = unpackHalf2x16(c.shape.w);
     Gaussian g;
@@ -31,28 +31,83 @@ Gaussian load_gaussian(uint w) {
     g.rotation = vec4(szw.y, rxy, rz.x);
     return g;
 }
+#if PREPROCESS_TEXEL_IO
+// CPU devices: the records through an RGBA32UI texel view and every output written with
+// imageStore, all by the global index (the views cover whole buffers, so windows only
+// bound the dispatch): llvmpipe turns these into straight per-lane code, storage-buffer
+// accesses into a guarded loop per component (tests/store_paths.rs).
+layout(binding = 1) uniform usamplerBuffer gaussian_texels;
+#if COMPACT_GAUSSIANS
+Gaussian load_gaussian(uint w, uint i) {
+    GaussianCompact c;
+    c.pos_opacity = uintBitsToFloat(texelFetch(gaussian_texels, int(2u * i)));
+    c.shape = texelFetch(gaussian_texels, int(2u * i + 1u));
+    return unpack_compact(c);
+}
+#else
+Gaussian load_gaussian(uint w, uint i) {
+    Gaussian g;
+    g.pos_opacity = uintBitsToFloat(texelFetch(gaussian_texels, int(3u * i)));
+    g.scale = uintBitsToFloat(texelFetch(gaussian_texels, int(3u * i + 1u)));
+    g.rotation = uintBitsToFloat(texelFetch(gaussian_texels, int(3u * i + 2u)));
+    return g;
+}
+#endif
+#elif COMPACT_GAUSSIANS
+layout(std430, binding = 1) readonly buffer GaussianBuf { GaussianCompact gaussians[]; };
+Gaussian load_gaussian(uint w, uint i) { return unpack_compact(gaussians[w]); }
 #else
 layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; };
-Gaussian load_gaussian(uint w) { return gaussians[w]; }
+Gaussian load_gaussian(uint w, uint i) { return gaussians[w]; }
 #endif
 // SH coefficients, coefficient-major with the colour channel innermost, each Gaussian's
 // floats padded to whole RGBA32F texels (sh_texel_stride in src/render/mod.rs). Read as a
 // texel buffer, which addresses far more than one storage binding on some devices.
 layout(binding = 2) uniform samplerBuffer sh_texels;
+layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+// Outputs, per Gaussian: the splat, its tile rectangle, its depth key (depth bits, or ~0
+// when culled) and index for the depth sort, which bins of a small rectangle receive it
+// (see BIN_MASK_BINS in splat_common) and its tiles touched (gathered into depth order by
+// order.comp). Bin masks and tiles touched are indexed globally (4 bytes each: one binding
+// holds any scene the SH texels allow), the rest by the index in the window.
+#if PREPROCESS_TEXEL_IO
+layout(binding = 3, rgba32f) uniform writeonly imageBuffer splats_img;
+layout(binding = 4, rg32ui) uniform writeonly uimageBuffer rects_img;
+layout(binding = 5, r32ui) uniform writeonly uimageBuffer depth_keys_img;
+layout(binding = 7, r32ui) uniform writeonly uimageBuffer depth_values_img;
+layout(binding = 8, r32ui) uniform writeonly uimageBuffer bin_masks_img;
+layout(binding = 9, r32ui) uniform writeonly uimageBuffer touched_img;
+void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mask, uint touched) {
+    int t = int(i);
+    imageStore(splats_img, 3 * t, s.mean_opacity_bound);
+    imageStore(splats_img, 3 * t + 1, s.conic_depth);
+    imageStore(splats_img, 3 * t + 2, s.color_radius);
+    imageStore(rects_img, t, uvec4(rect, 0u, 0u));
+    imageStore(depth_keys_img, t, uvec4(depth_key));
+    imageStore(depth_values_img, t, uvec4(i));
+    imageStore(bin_masks_img, t, uvec4(mask));
+    imageStore(touched_img, t, uvec4(touched));
+}
+#else
 layout(std430, binding = 3) writeonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
-layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uint depth_keys[]; };  // depth bits, or ~0 when culled
-layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uint depth_keys[]; };
 layout(std430, binding = 7) writeonly buffer DepthValueBuf { uint depth_values[]; };
-// Which bins of a small rectangle receive the splat (see BIN_MASK_BINS in splat_common),
-// indexed by the global Gaussian index (4 bytes each: one binding holds any scene the SH
-// texels allow).
 layout(std430, binding = 8) writeonly buffer BinMaskBuf { uint bin_masks[]; };
-// Tiles touched, by the global Gaussian index (gathered into depth order by order.comp).
 layout(std430, binding = 9) writeonly buffer TouchedBuf { uint touched_by_index[]; };
+void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mask, uint touched) {
+    splats[w] = s;
+    rects[w] = rect;
+    depth_keys[w] = depth_key;
+    depth_values[w] = i;
+    bin_masks[i] = mask;
+    touched_by_index[i] = touched;
+}
+#endif
 // The window of Gaussians this dispatch handles: bindings 1, 3, 4, 5 and 7 start at
 // Gaussian `first` (one storage binding may not cover a large scene, so the host
-// dispatches once per window); the SH texels and the indices written are global.
+// dispatches once per window); the SH texels and the indices written are global (and so
+// is every binding of the texel-I/O variant).
 layout(push_constant) uniform Window { uint first; uint count; } window;
 
 const float SH_C0 = 0.28209479177387814;
@@ -121,7 +176,7 @@ void main() {
     uint mask = 0u;
     if (gl_LocalInvocationIndex == 0u) s_visible = 0u;
     if (w < window.count) {
-        Gaussian g = load_gaussian(w);
+        Gaussian g = load_gaussian(w, i);
         vec3 mean = g.pos_opacity.xyz;
         vec3 view = vec3(dot(params.w2c_row0.xyz, mean) + params.w2c_row0.w,
                          dot(params.w2c_row1.xyz, mean) + params.w2c_row1.w,
@@ -211,13 +266,9 @@ void main() {
                 }
             }
         }
-        splats[w] = s;
-        rects[w] = rect;
         // Culled Gaussians sort after every visible one.
-        depth_keys[w] = touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu;
-        touched_by_index[i] = touched;
-        depth_values[w] = i;
-        bin_masks[i] = touched != 0u ? mask : 0u;
+        uint depth_key = touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu;
+        store_outputs(w, i, s, rect, depth_key, touched != 0u ? mask : 0u, touched);
     }
     // Exact 64-bit total of tiles touched (each term < 2^20 tiles).
     uint sum = workgroup_sum_256(touched);

@@ -74,8 +74,10 @@ pub struct Rgba8Frame {
 
 /// A scene uploaded to the device.
 pub struct GpuScene {
-    // The view goes before the buffer it views.
+    // The views go before the buffers they view.
     sh_texels: BufferView,
+    /// RGBA32UI view of the records, for the texel-I/O preprocess (CPU devices).
+    gaussian_texels: Option<BufferView>,
     gaussians: GpuBuffer,
     sh: GpuBuffer,
     count: u32,
@@ -298,6 +300,7 @@ struct SortViews {
     rects: BufferView,
     offsets: BufferView,
     bin_masks: BufferView,
+    touched: BufferView,
 }
 
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
@@ -392,6 +395,7 @@ impl FrameBuffers {
         let rects = dev("tile rects", n * 8)?;
         let offsets = dev("tiles touched / offsets in depth order", n * 4)?;
         let bin_masks = dev("bin masks", n * 4)?;
+        let touched = dev("tiles touched by Gaussian", n * 4)?;
         // Shared by the depth sort (the Gaussians) and the pair sort (capacity pairs). The
         // sort binds slices of it, the largest 4 bytes per key, which the capacity bound
         // (max_capacity) keeps inside one binding.
@@ -419,6 +423,7 @@ impl FrameBuffers {
                 rects: BufferView::new(ctx, &rects, vk::Format::R32G32_UINT, 0, rects.size())?,
                 offsets: whole(&offsets)?,
                 bin_masks: whole(&bin_masks)?,
+                touched: whole(&touched)?,
             })
         } else {
             None
@@ -437,7 +442,7 @@ impl FrameBuffers {
             rects,
             offsets,
             depth_keys,
-            touched: dev("tiles touched by Gaussian", n * 4)?,
+            touched,
             depth_values,
             bin_masks,
             scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
@@ -472,6 +477,25 @@ impl FrameBuffers {
             scratch_keys: v.depth_scratch[0].handle(),
             scratch_values: v.depth_scratch[1].handle(),
         })
+    }
+
+    /// The views of the texel-I/O preprocess, over this frame's buffers and `scene`'s
+    /// records.
+    fn preprocess_texels(&self, scene: &GpuScene) -> GpuResult<preprocess::PreprocessTexels> {
+        match (self.sort_views.as_ref(), scene.gaussian_texels.as_ref()) {
+            (Some(v), Some(g)) => Ok(preprocess::PreprocessTexels {
+                gaussians: g.handle(),
+                splats: self.splat_texels.handle(),
+                rects: v.rects.handle(),
+                depth_keys: v.depth_keys.handle(),
+                depth_values: v.depth_values.handle(),
+                bin_masks: v.bin_masks.handle(),
+                touched: v.touched.handle(),
+            }),
+            _ => Err(GpuError::InvalidArgument(
+                "the preprocess stage's texel views are missing (scene uploaded by another renderer?)".into(),
+            )),
+        }
     }
 
     /// What the keys stage reads and writes, as its pipeline binds them.
@@ -695,7 +719,7 @@ impl GpuRenderer {
     /// Builds every pipeline with the given blend kernel.
     pub fn with_blend_kernel(ctx: GpuContext, kernel: blend::BlendKernel) -> GpuResult<Self> {
         Ok(GpuRenderer {
-            preprocess: preprocess::Preprocess::new(&ctx, false)?,
+            preprocess: preprocess::Preprocess::new(&ctx, false, kernel.texel())?,
             compact_preprocess: None,
             order: order::Order::new(&ctx)?,
             scan: Scan::new(&ctx)?,
@@ -855,8 +879,21 @@ impl GpuRenderer {
             (sh, vk::Format::R32G32B32A32_SFLOAT, bytes)
         };
         let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
+        let gaussian_texels = if self.preprocess.texel_io() {
+            let bytes = gaussians.size() / 16 * 16;
+            Some(BufferView::new(
+                &self.ctx,
+                &gaussians,
+                vk::Format::R32G32B32A32_UINT,
+                0,
+                bytes,
+            )?)
+        } else {
+            None
+        };
         Ok(GpuScene {
             sh_texels,
+            gaussian_texels,
             gaussians,
             sh,
             count,
@@ -868,7 +905,8 @@ impl GpuRenderer {
 
     /// A device buffer holding `records`.
     fn upload_records<T: bytemuck::Pod>(&self, name: &str, records: &[T]) -> GpuResult<GpuBuffer> {
-        let bytes = std::mem::size_of_val(records) as u64;
+        // At least one texel, so the preprocess's texel view is valid for an empty scene.
+        let bytes = (std::mem::size_of_val(records) as u64).max(16);
         let buffer = GpuBuffer::new(&self.ctx, name, bytes, MemoryKind::Device)?;
         buffer.upload(&self.ctx, records)?;
         Ok(buffer)
@@ -1278,7 +1316,11 @@ impl GpuRenderer {
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         opts.validate().map_err(GpuError::InvalidArgument)?;
         if scene.compact && self.compact_preprocess.is_none() {
-            self.compact_preprocess = Some(preprocess::Preprocess::new(&self.ctx, true)?);
+            self.compact_preprocess = Some(preprocess::Preprocess::new(
+                &self.ctx,
+                true,
+                self.preprocess.texel_io(),
+            )?);
         }
         if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
             self.power_blend = Some(blend::Blend::new(
@@ -1709,6 +1751,11 @@ impl GpuRenderer {
                             depth_values: f.depth_values.whole(),
                             bin_masks: f.bin_masks.whole(),
                             touched: f.touched.whole(),
+                            texels: if preprocess.texel_io() {
+                                Some(f.preprocess_texels(scene)?)
+                            } else {
+                                None
+                            },
                         },
                         n,
                         window,

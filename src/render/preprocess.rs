@@ -14,6 +14,28 @@ pub struct Preprocess {
     pipeline: ComputePipeline,
     /// Bytes per Gaussian record: 48 (`GpuGaussian`) or 32 (`GpuGaussianCompact`).
     record_bytes: u64,
+    texel_io: bool,
+}
+
+/// Texel views of the texel-I/O variant (CPU devices), each over a whole buffer and
+/// indexed by the global Gaussian index: the records (RGBA32UI), the splats (RGBA32F),
+/// the rectangles (RG32UI) and the rest (R32UI).
+#[derive(Clone, Copy)]
+pub struct PreprocessTexels {
+    /// The Gaussian records.
+    pub gaussians: vk::BufferView,
+    /// The splats (written).
+    pub splats: vk::BufferView,
+    /// The tile rectangles (written).
+    pub rects: vk::BufferView,
+    /// The depth keys (written).
+    pub depth_keys: vk::BufferView,
+    /// The depth sort's values (written).
+    pub depth_values: vk::BufferView,
+    /// The bin masks (written).
+    pub bin_masks: vk::BufferView,
+    /// Tiles touched (written).
+    pub touched: vk::BufferView,
 }
 
 /// Buffers the stage reads and writes.
@@ -39,27 +61,39 @@ pub struct PreprocessBindings<'a> {
     pub bin_masks: BufferSlice<'a>,
     /// Tiles touched, by global Gaussian index (written; bound whole).
     pub touched: BufferSlice<'a>,
+    /// The views the texel-I/O variant binds instead of the buffers above.
+    pub texels: Option<PreprocessTexels>,
 }
 
 impl Preprocess {
     /// Compiles the shader and builds the pipeline, for 48-byte records or (`compact`)
-    /// 32-byte ones.
-    pub fn new(ctx: &GpuContext, compact: bool) -> GpuResult<Self> {
+    /// 32-byte ones, reading and writing storage buffers or (`texel_io`, for CPU devices)
+    /// texel views.
+    pub fn new(ctx: &GpuContext, compact: bool, texel_io: bool) -> GpuResult<Self> {
+        use BindingKind::*;
+        let (read, write) = if texel_io {
+            (UniformTexelBuffer, StorageTexelBuffer)
+        } else {
+            (StorageBuffer, StorageBuffer)
+        };
         let pipeline = ComputePipeline::from_embedded(
             ctx,
             "preprocess",
-            &[("COMPACT_GAUSSIANS", u32::from(compact).to_string())],
             &[
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::UniformTexelBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageBuffer,
+                ("COMPACT_GAUSSIANS", u32::from(compact).to_string()),
+                ("PREPROCESS_TEXEL_IO", u32::from(texel_io).to_string()),
+            ],
+            &[
+                StorageBuffer,
+                read,
+                UniformTexelBuffer,
+                write,
+                write,
+                write,
+                StorageBuffer,
+                write,
+                write,
+                write,
             ],
             8,
             WORKGROUP,
@@ -67,7 +101,13 @@ impl Preprocess {
         Ok(Preprocess {
             pipeline,
             record_bytes: if compact { 32 } else { 48 },
+            texel_io,
         })
+    }
+
+    /// Whether the pipeline reads and writes texel views.
+    pub fn texel_io(&self) -> bool {
+        self.texel_io
     }
 
     /// Records the dispatches for `n` Gaussians, `window` (a multiple of [`WORKGROUP`]) at
@@ -94,10 +134,20 @@ impl Preprocess {
             let groups =
                 dispatch_grid(count.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
             let push = [first, count];
-            self.pipeline.dispatch_resources(
-                ctx,
-                cmd,
-                &[
+            let resources = match (self.texel_io, b.texels) {
+                (true, Some(t)) => [
+                    Resource::Buffer(b.params),
+                    Resource::TexelBuffer(t.gaussians),
+                    Resource::TexelBuffer(b.sh_texels),
+                    Resource::TexelBuffer(t.splats),
+                    Resource::TexelBuffer(t.rects),
+                    Resource::TexelBuffer(t.depth_keys),
+                    Resource::Buffer(b.counters),
+                    Resource::TexelBuffer(t.depth_values),
+                    Resource::TexelBuffer(t.bin_masks),
+                    Resource::TexelBuffer(t.touched),
+                ],
+                (false, _) => [
                     Resource::Buffer(b.params),
                     Resource::Buffer(part(b.gaussians, self.record_bytes)),
                     Resource::TexelBuffer(b.sh_texels),
@@ -109,6 +159,16 @@ impl Preprocess {
                     Resource::Buffer(b.bin_masks),
                     Resource::Buffer(b.touched),
                 ],
+                (true, None) => {
+                    return Err(crate::gpu::GpuError::InvalidArgument(
+                        "the preprocess stage's texel views are missing".into(),
+                    ))
+                }
+            };
+            self.pipeline.dispatch_resources(
+                ctx,
+                cmd,
+                &resources,
                 bytemuck::cast_slice(&push),
                 groups,
             )?;
