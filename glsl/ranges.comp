@@ -6,7 +6,14 @@
 
 layout(local_size_x = 256) in;
 
+#if RANGES_TEXEL_IO
+// CPU devices: the keys through a texel view (straight per-lane loads on llvmpipe).
+layout(binding = 0) uniform usamplerBuffer keys_tex;
+#define KEY(i) texelFetch(keys_tex, int(i)).x
+#else
 layout(std430, binding = 0) readonly buffer KeyBuf { uint keys[]; };
+#define KEY(i) keys[i]
+#endif
 layout(std430, binding = 1) writeonly buffer RangeBuf { uvec2 ranges[]; };
 layout(std430, binding = 2) readonly buffer CounterBuf { Counters counters; };
 
@@ -14,8 +21,8 @@ void main() {
     uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
     uint n = counters.sort_count;
     if (i >= n) return;
-    uint tile = keys[i];
+    uint tile = KEY(i);
     if (tile == SENTINEL_TILE) return;
-    if (i == 0u || keys[i - 1u] != tile) ranges[tile].x = i;
-    if (i + 1u == n || keys[i + 1u] != tile) ranges[tile].y = i + 1u;
+    if (i == 0u || KEY(i - 1u) != tile) ranges[tile].x = i;
+    if (i + 1u == n || KEY(i + 1u) != tile) ranges[tile].y = i + 1u;
 }

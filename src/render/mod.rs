@@ -732,7 +732,7 @@ impl GpuRenderer {
                     ..SORT_CONFIG_32
                 },
             )?,
-            ranges: ranges::Ranges::new(&ctx)?,
+            ranges: ranges::Ranges::new(&ctx, kernel.texel())?,
             blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
             power_blend: None,
             feature_blends: [None, None],
@@ -1865,19 +1865,28 @@ impl GpuRenderer {
                         None => sort.record_bits(ctx, cmd, k, v, s, count, pair_bits.clone()),
                     }
                 })?;
-                // Sorted keys -> ranges; the ranges dispatch arguments (written by keys) -> indirect read.
+                // Sorted keys -> ranges (storage or texel reads); the ranges dispatch
+                // arguments (written by keys) -> indirect read.
                 barrier_uses(
                     ctx,
                     cmd,
                     &[Access::ComputeWrite],
-                    &[Access::ComputeRead, Access::IndirectRead],
+                    &[
+                        Access::ComputeRead,
+                        Access::ComputeSampledRead,
+                        Access::IndirectRead,
+                    ],
                 );
 
                 timer.stage(ctx, cmd, "ranges", |cmd| {
+                    let sorted_keys = match (ranges.texel_io(), f.sort_views.as_ref()) {
+                        (true, Some(v)) => Resource::TexelBuffer(v.keys.handle()),
+                        _ => Resource::Buffer(f.keys.whole()),
+                    };
                     ranges.record(
                         ctx,
                         cmd,
-                        f.keys.whole(),
+                        sorted_keys,
                         f.ranges.whole(),
                         f.counters.whole(),
                         f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),

@@ -1,7 +1,7 @@
 //! Tile-ranges stage (`glsl/ranges.comp`): start/end of each tile's run in the sorted keys,
 //! dispatched indirectly over the device-side key count.
 
-use crate::gpu::shader::BindingKind;
+use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
@@ -12,33 +12,51 @@ pub const WORKGROUP: u32 = 256;
 /// The tile-ranges pipeline.
 pub struct Ranges {
     pipeline: ComputePipeline,
+    texel_io: bool,
 }
 
 impl Ranges {
-    /// Compiles the shader and builds the pipeline.
-    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+    /// Compiles the shader and builds the pipeline: reading the sorted keys from a
+    /// storage buffer or (`texel_io`, for CPU devices) an R32_UINT texel view.
+    pub fn new(ctx: &GpuContext, texel_io: bool) -> GpuResult<Self> {
+        let keys = if texel_io {
+            BindingKind::UniformTexelBuffer
+        } else {
+            BindingKind::StorageBuffer
+        };
         let pipeline = ComputePipeline::from_embedded(
             ctx,
             "ranges",
-            &[],
-            &[BindingKind::StorageBuffer; 3],
+            &[("RANGES_TEXEL_IO", u32::from(texel_io).to_string())],
+            &[keys, BindingKind::StorageBuffer, BindingKind::StorageBuffer],
             0,
             WORKGROUP,
         )?;
-        Ok(Ranges { pipeline })
+        Ok(Ranges { pipeline, texel_io })
+    }
+
+    /// Whether the pipeline reads the keys through a texel view.
+    pub fn texel_io(&self) -> bool {
+        self.texel_io
     }
 
     /// Records the indirect dispatch; `args` holds the VkDispatchIndirectCommand.
+    /// `sorted_keys` is a buffer slice, or the keys' texel view for the texel-I/O pipeline.
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        sorted_keys: BufferSlice,
+        sorted_keys: Resource,
         ranges: BufferSlice,
         counters: BufferSlice,
         args: BufferSlice,
     ) -> GpuResult<()> {
+        let resources = [
+            sorted_keys,
+            Resource::Buffer(ranges),
+            Resource::Buffer(counters),
+        ];
         self.pipeline
-            .dispatch_indirect(ctx, cmd, &[sorted_keys, ranges, counters], &[], args)
+            .dispatch_indirect_resources(ctx, cmd, &resources, &[], args)
     }
 }
