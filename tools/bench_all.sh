@@ -9,15 +9,20 @@ D=../shared/data
 PC=$D/playbot_orbit_cameras.synthetic.json
 mkdir -p docs/benchmarks
 echo "## device"; vulkaninfo --summary 2>/dev/null | grep -E "deviceName|driverInfo|apiVersion" | head -3 || true
+J=$(mktemp -d)
 for res in 1280x720 1920x1080; do
   w=${res%x*}; h=${res#*x}
   echo "## per-scene GPU, $res, camera 0"
   for s in playbot_lod6_1873_sh2 playbot_lod3_31k_sh2 playbot_lod2_125k_sh2 playbot_lod1_250k_sh1; do
-    $B bench $D/$s.ply --cameras $PC --camera 0 --width $w --height $h --frames 10 --warmup 2
+    $B bench $D/$s.ply --cameras $PC --camera 0 --width $w --height $h --frames 10 --warmup 2 --json $J/$res-$s.json
   done
-  $B bench $D/plant_113k_sh0.ply --cameras $D/plant_orbit_cameras.synthetic.json --width $w --height $h --frames 10 --warmup 2
-  $B bench $D/train3_sh3.ply --width $w --height $h --frames 10 --warmup 2
+  $B bench $D/plant_113k_sh0.ply --cameras $D/plant_orbit_cameras.synthetic.json --width $w --height $h --frames 10 --warmup 2 --json $J/$res-plant.json
+  $B bench $D/train3_sh3.ply --width $w --height $h --frames 10 --warmup 2 --json $J/$res-train3.json
+  echo "### table, $res"
+  python3 tools/bench_table.py $J/$res-playbot_lod6_1873_sh2.json $J/$res-playbot_lod3_31k_sh2.json \
+    $J/$res-playbot_lod2_125k_sh2.json $J/$res-playbot_lod1_250k_sh1.json $J/$res-plant.json $J/$res-train3.json
 done
+rm -rf "$J"
 echo "## blend kernels, playbot_lod2_125k_sh2 1280x720"
 for k in shared texel texel:2 texel:4 texel:8; do
   echo "### VKSPLAT_BLEND=$k"; VKSPLAT_BLEND=$k $B bench $D/playbot_lod2_125k_sh2.ply --cameras $PC --frames 5 --warmup 1 | grep -E "blend kernel|^blend|wall"
