@@ -35,6 +35,33 @@ fn store_and_load_paths() {
         ("texel load/imageStore vec4 (contiguous)", "layout(binding=0) uniform usamplerBuffer a; layout(binding=1) uniform usamplerBuffer p; layout(binding=2, rgba32f) uniform writeonly imageBuffer d;\nvoid main() { int i = int(gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u); imageStore(d, i, vec4(float(texelFetch(a, i).x), 1.0, 2.0, float(texelFetch(p, i).x))); }".into(), vec![UniformTexelBuffer, UniformTexelBuffer, StorageTexelBuffer]),
     ];
     let mut timer = GpuTimer::new(&ctx, "t", 8).unwrap();
+    // The blend's output path: imageStore of a vec4 into a 2D image vs a texel buffer.
+    let (w, h) = (2048u32, n / 2048);
+    let image =
+        vksplat::gpu::GpuImage::new(&ctx, "image", w, h, vk::Format::R32G32B32A32_SFLOAT).unwrap();
+    for (name, body, kinds) in [
+        ("imageStore vec4 into image2D", "layout(binding=0, rgba32f) uniform writeonly image2D d;\nvoid main() { uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u; imageStore(d, ivec2(i % 2048u, i / 2048u), vec4(float(i), 1.0, 2.0, 3.0)); }", vec![StorageImage]),
+        ("imageStore vec4 into imageBuffer", "layout(binding=0, rgba32f) uniform writeonly imageBuffer d;\nvoid main() { uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * 65536u; imageStore(d, int(i), vec4(float(i), 1.0, 2.0, 3.0)); }", vec![StorageTexelBuffer]),
+    ] {
+        let spirv = compile_glsl(name, &format!("{HEAD}{body}"), &[]).unwrap();
+        let p = ComputePipeline::new(&ctx, "case", &spirv, &kinds, 0, 256).unwrap();
+        let res = if kinds[0] == StorageImage {
+            [Resource::Image { view: image.view(), layout: vk::ImageLayout::GENERAL }]
+        } else {
+            [Resource::TexelBuffer(dst_v4.handle())]
+        };
+        let mut ms = Vec::new();
+        for _ in 0..4 {
+            ctx.submit_and_wait("mb", |cmd| {
+                image.transition_to_general(&ctx, cmd);
+                timer.reset(&ctx, cmd);
+                timer.stage(&ctx, cmd, "x", |cmd| p.dispatch_resources(&ctx, cmd, &res, &[], [256, n / 65536, 1]))
+            }).unwrap();
+            ms.push(timer.span_ms(&ctx).unwrap());
+        }
+        ms.sort_by(f64::total_cmp);
+        eprintln!("{name:45} {:.2} ms for {n} elements ({:.1} ns each)", ms[1], ms[1] * 1e6 / f64::from(n));
+    }
     for (name, body, kinds) in cases {
         let spirv = compile_glsl(name, &format!("{HEAD}{body}"), &[]).unwrap();
         let p = ComputePipeline::new(&ctx, "case", &spirv, &kinds, 0, 256).unwrap();
