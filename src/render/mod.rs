@@ -709,6 +709,12 @@ const MIN_CAPACITY: u32 = 1 << 16;
 /// the limit is rendered with larger bins or refused, never returned incomplete.
 pub const CPU_LOOP_LIMIT: u32 = 65_535;
 
+/// Most pairs a frame keys by 8-pixel bins (the texel kernel's); past this it uses
+/// 16-pixel bins, whose fewer pairs then cost less to sort than the shorter lists save in
+/// the blend (measured on lavapipe: 1e6 Gaussians at 1080p took 5.76 s with 30.8 M pairs
+/// of 8-pixel bins and 3.41 s with 9.0 M of 16-pixel bins; BENCHMARKS.md, "Scaling").
+pub const SMALL_BIN_MAX_PAIRS: u32 = 1 << 24;
+
 impl GpuRenderer {
     /// Builds every pipeline on `ctx`, with the blend kernel suited to the device.
     pub fn new(ctx: GpuContext) -> GpuResult<Self> {
@@ -1464,7 +1470,7 @@ impl GpuRenderer {
                 self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
                 break;
             }
-            if pairs > u64::from(max) && bin_size < 16 {
+            if pairs > u64::from(max.min(SMALL_BIN_MAX_PAIRS)) && bin_size < 16 {
                 // Fewer, larger bins need fewer pairs; the texel kernel blends either.
                 self.sets[t.set].bin_size = 16;
                 regrows += 1;
@@ -1517,7 +1523,8 @@ impl GpuRenderer {
         let front = self.read_counters(t.set)?;
         let pairs = front.pairs();
         let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
-        if (bins_cut || pairs > u64::from(max)) && self.sets[t.set].bin_size < 16 {
+        let too_many = pairs > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
+        if (bins_cut || too_many) && self.sets[t.set].bin_size < 16 {
             // As in one piece: 16-pixel bins first (fewer pairs and bin-loop iterations).
             self.sets[t.set].bin_size = 16;
             return Ok(None);
