@@ -34,8 +34,16 @@ layout(std430, binding = 4) readonly buffer FeatureBuf { vec4 features[]; };
 layout(binding = 4) uniform samplerBuffer feature_texels;
 #endif
 // This group's four channels per pixel, row-major.
-layout(std430, binding = 5) writeonly buffer OutBuf { vec4 out_features[]; };
+layout(std430, binding = 5) buffer OutBuf { vec4 out_features[]; };
 layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+// A frame keyed in depth-ordered chunks runs this before each chunk's colour blend: every
+// chunk but the first resumes each pixel's channels from the output and its transmittance
+// and stop from the colour image's between-chunk state (colour = (C, T), T negated once
+// the pixel is done; glsl/blend.comp), which at that point is the state the previous
+// chunk left. Compositing is sequential per pixel, so the channels equal one pass bit for
+// bit. A frame in one piece is resume 0.
+layout(binding = 7, rgba32f) uniform readonly image2D color_state;
+layout(push_constant) uniform ChunkFlags { uint resume; uint pad; } chunk;
 
 void main() {
     uvec2 pix = gl_GlobalInvocationID.xy;
@@ -46,6 +54,13 @@ void main() {
     float T = 1.0;
     vec4 F = vec4(0.0);
     bool done = false;
+    uint o = pix.y * params.image.x + pix.x;
+    if (chunk.resume != 0u) {
+        float state = imageLoad(color_state, ivec2(pix)).a;
+        T = abs(state);
+        done = state < 0.0;
+        F = out_features[o];
+    }
     uint k = range.x;
     // The colour blend's composite(), with features in place of colour and no depth.
     for (; k < range.y && !done; k++) {
@@ -75,5 +90,5 @@ void main() {
     if (k < range.y && !done) {
         REPORT_LOOP(counters.max_list_loop, range.y - range.x + 16u);
     }
-    out_features[pix.y * params.image.x + pix.x] = F;
+    out_features[o] = F;
 }

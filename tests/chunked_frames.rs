@@ -159,36 +159,53 @@ fn chunks_equal_one_piece_with_the_shared_kernel_the_power_falloff_and_a_backgro
 }
 
 #[test]
-fn a_features_frame_that_needs_chunks_is_refused_clearly() {
+fn features_frames_in_chunks_equal_one_piece_and_the_reference() {
+    // Feature channels are blended chunk by chunk, each chunk resuming every pixel's
+    // channels and transmittance: K = 5 (two groups of four) must not change by a bit.
     let mut r = renderer();
-    let mut sc = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
-    let k = 3;
-    let v = (0..sc.len() * k).map(|i| (i % 7) as f32 * 0.1).collect();
+    let mut sc = scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
+    let k = 5;
+    let mut rng = common::Rng(5);
+    let v = (0..sc.len() * k).map(|_| rng.range(-1.0, 1.0)).collect();
     sc.set_features(k, v).unwrap();
     let s = sc.activated();
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 5, 320, 180);
     let opts = RenderOptions::default();
     let gs = r.upload(&s).unwrap();
     let gf = r.upload_features(&s).unwrap();
-    // Fits: rendered as before, even with chunked colour frames.
-    r.set_split_limits(SplitLimits {
-        window: 256,
-        chunk_pairs: 1_000_000,
-    });
-    r.render_features(&gs, &gf, &cam, &opts).unwrap();
+    let whole = r.render_features(&gs, &gf, &cam, &opts).unwrap();
     assert_eq!(r.stats().chunks, 1);
     r.set_split_limits(SplitLimits {
-        window: 0,
-        chunk_pairs: 100,
+        window: 4096,
+        chunk_pairs: 4_000,
     });
-    let Err(err) = r.render_features(&gs, &gf, &cam, &opts) else {
-        panic!("a features frame over the key buffer is refused");
-    };
-    let err = err.to_string();
+    let split = r.render_features(&gs, &gf, &cam, &opts).unwrap();
+    let chunks = r.stats().chunks;
     r.set_split_limits(SplitLimits::default());
+    assert!(chunks >= 4, "{chunks} chunks");
+    assert_bit_identical("features frame in chunks", &split, &whole);
+    let bits = |f: &Frame| f.features.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(split.features.len(), whole.features.len());
+    let differing = bits(&split)
+        .iter()
+        .zip(&bits(&whole))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(
+        differing, 0,
+        "{differing} feature values differ ({chunks} chunks)"
+    );
+    // And the split frame's channels against the CPU reference's, like a colour plane.
+    let c = cpu::render_features(&s, &cam, &opts);
+    let worst = split
+        .features
+        .iter()
+        .zip(&c.features)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
     assert!(
-        err.contains("tile/Gaussian pairs") && err.contains("feature channels"),
-        "{err}"
+        worst < 2e-3,
+        "largest feature difference to the CPU reference {worst}"
     );
     assert_validation_clean(&r);
 }

@@ -542,27 +542,23 @@ fn two_dimensional_dispatch_grid() {
 fn radix_sort_other_configs() {
     let ctx = context();
     let mut rng = Rng(3);
+    let odd = SortConfig {
+        radix_bits: 5,
+        workgroup_size: 64,
+        items_per_thread: 7,
+        ..DEFAULT_SORT_CONFIG
+    };
     for config in [
         SortConfig {
             radix_bits: 4,
             workgroup_size: 256,
             items_per_thread: 16,
-            key_words: 2,
-            texel_io: false,
+            ..DEFAULT_SORT_CONFIG
         },
+        odd,
         SortConfig {
-            radix_bits: 5,
-            workgroup_size: 64,
-            items_per_thread: 7,
-            key_words: 2,
-            texel_io: false,
-        },
-        SortConfig {
-            radix_bits: 5,
-            workgroup_size: 64,
-            items_per_thread: 7,
             key_words: 1,
-            texel_io: false,
+            ..odd
         },
     ] {
         let sort = RadixSort::with_config(&ctx, config).expect("sort pipelines");

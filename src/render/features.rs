@@ -4,7 +4,7 @@
 
 use crate::cpu::SplatKernel;
 use crate::gpu::shader::{BindingKind, Resource};
-use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
+use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuImage, GpuResult};
 use ash::vk;
 
 /// Channels blended per dispatch (one vec4 per Gaussian and per pixel).
@@ -40,20 +40,29 @@ pub struct FeatureBindings<'a> {
     /// Texel views of `splats` (R32G32B32A32_SFLOAT), `values` (R32_UINT) and `features`
     /// (R32G32B32A32_SFLOAT), for the texel-fetch variant.
     pub texels: Option<[vk::BufferView; 3]>,
+    /// The colour image: between chunks it holds each pixel's transmittance and stop.
+    pub color: &'a GpuImage,
+    /// Resume every pixel from the output and the colour image's between-chunk state
+    /// (every chunk of a frame in chunks but the first), instead of starting afresh.
+    pub resume: bool,
 }
 
 impl FeatureBlend {
     /// Compiles the shader with the falloff of `kernel`; `texel` reads the splats, values
     /// and features through texel-buffer views (for CPU devices, as the texel blend).
     pub fn new(ctx: &GpuContext, kernel: SplatKernel, texel: bool) -> GpuResult<Self> {
-        use BindingKind::{StorageBuffer as B, UniformTexelBuffer as T};
+        use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
         let defines = [
             ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
             ("TEXEL_FETCH", u32::from(texel).to_string()),
         ];
-        let bindings = if texel { [B, T, T, B, T, B, B] } else { [B; 7] };
+        let bindings = if texel {
+            [B, T, T, B, T, B, B, I]
+        } else {
+            [B, B, B, B, B, B, B, I]
+        };
         let pipeline =
-            ComputePipeline::from_embedded(ctx, "blend_features", &defines, &bindings, 0, 16)?;
+            ComputePipeline::from_embedded(ctx, "blend_features", &defines, &bindings, 8, 16)?;
         Ok(FeatureBlend { pipeline, texel })
     }
 
@@ -98,8 +107,12 @@ impl FeatureBlend {
                 features,
                 Resource::Buffer(b.output),
                 Resource::Buffer(b.counters),
+                Resource::Image {
+                    view: b.color.view(),
+                    layout: vk::ImageLayout::GENERAL,
+                },
             ],
-            &[],
+            bytemuck::cast_slice(&[u32::from(b.resume), 0]),
             [size.0.div_ceil(16), size.1.div_ceil(16), 1],
         )
     }

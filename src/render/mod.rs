@@ -1343,14 +1343,14 @@ impl GpuRenderer {
         self.ensure_frame(set, scene, cam, initial)?;
         self.sets[set].bin_size = self.blend.kernel().bin_size();
         // A frame rendered in chunks needs the host between its submissions (to plan the
-        // chunks), so it is rendered when it is finished, not in flight. Colour frames go
-        // in chunks once one frame's pairs did not fit one key buffer, when the test limits
+        // chunks), so it is rendered when it is finished, not in flight. Frames go in
+        // chunks once one frame's pairs did not fit one key buffer, when the test limits
         // say so, or when the first guess of pairs (4 per Gaussian) exceeds one key buffer
-        // already. The feature blend and the neural shader run in one piece only.
-        let chunked = features.is_none()
-            && (self.chunked
-                || self.split.chunk_pairs > 0
-                || u64::from(scene.count) * 4 > u64::from(self.max_capacity()));
+        // already. Feature channels are blended chunk by chunk too (before each chunk's
+        // colour blend), and the neural shader runs once after the last chunk.
+        let chunked = self.chunked
+            || self.split.chunk_pairs > 0
+            || u64::from(scene.count) * 4 > u64::from(self.max_capacity());
         let ticket = Ticket {
             set,
             serial: self.serial,
@@ -1422,21 +1422,6 @@ impl GpuRenderer {
             let set = &self.sets[t.set];
             let capacity = set.frame.as_ref().map_or(0, |f| f.capacity);
             let bin_size = set.bin_size;
-            // Feature frames are not chunked: on a device, or under split limits, whose
-            // key buffer holds fewer pairs, they are refused.
-            let one_piece_max = self.pairs_per_piece();
-            if t.features.is_some() && pairs > u64::from(one_piece_max) {
-                if bin_size < 16 {
-                    self.sets[t.set].bin_size = 16;
-                    regrows += 1;
-                    self.record_ticket(t, true, Pass::Whole)?;
-                    continue;
-                }
-                return Err(GpuError::InvalidArgument(format!(
-                    "this frame needs {pairs} tile/Gaussian pairs, more than the {one_piece_max} one key buffer of this device holds ({} bytes); colour frames are then rendered in chunks, but feature channels and the neural shader are not yet: render at a lower resolution or with fewer Gaussians",
-                    u64::from(one_piece_max) * 4
-                )));
-            }
             let complete = chunked || pairs <= u64::from(capacity);
             if complete && self.loop_limited() {
                 let bins_loop = counters.max_bins_loop;
@@ -1899,14 +1884,56 @@ impl GpuRenderer {
                         f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
                     )
                 })?;
-                // Ranges, sorted values and splats -> blend (storage reads, or texel fetches in
-                // the texel kernel); counters -> the blend's loop-length atomics.
+                // Ranges, sorted values and splats -> blend and feature blend (storage reads,
+                // or texel fetches in the texel kernels); counters -> their loop-length atomics.
                 barrier_uses(
                     ctx,
                     cmd,
                     &[Access::ComputeWrite],
                     &[Access::ComputeReadWrite, Access::ComputeSampledRead],
                 );
+
+                if let Some((feat, pipeline)) = &feature_job {
+                    // Before the colour blend: a resumed chunk reads the pixels' transmittance
+                    // as the previous chunk left it in the colour image.
+                    timer.stage(ctx, cmd, "features", |cmd| {
+                        let planes = feature_planes.as_ref().ok_or_else(|| {
+                            GpuError::InvalidArgument("the feature images are missing".into())
+                        })?;
+                        for (g, input) in feat.groups.iter().enumerate() {
+                            let output = planes
+                                .buffer
+                                .slice(g as u64 * planes.plane_bytes, planes.pixel_bytes);
+                            let texels = match (&f.splat_texels, &f.value_texels, feat.views.get(g))
+                            {
+                                (s, Some(v), Some(fv)) if pipeline.texel() => {
+                                    Some([s.handle(), v.handle(), fv.handle()])
+                                }
+                                _ => None,
+                            };
+                            pipeline.record(
+                                ctx,
+                                cmd,
+                                &features::FeatureBindings {
+                                    params: f.params.whole(),
+                                    splats: f.splats.whole(),
+                                    values: f.values.whole(),
+                                    ranges: f.ranges.whole(),
+                                    features: input.whole(),
+                                    output,
+                                    counters: f.counters.whole(),
+                                    texels,
+                                    color: &f.color,
+                                    resume,
+                                },
+                                (cam.width, cam.height),
+                            )?;
+                        }
+                        Ok(())
+                    })?;
+                    // Its colour-image reads and loop-length atomics -> the blend's.
+                    barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                }
 
                 timer.stage(ctx, cmd, "blend", |cmd| {
                     blend.record(
@@ -1932,41 +1959,7 @@ impl GpuRenderer {
             if !last_chunks {
                 return Ok(());
             }
-            if let Some((feat, pipeline)) = &feature_job {
-                // The blend's loop-length atomics on the counters -> the feature blend's.
-                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-                timer.stage(ctx, cmd, "features", |cmd| {
-                    let planes = feature_planes.as_ref().ok_or_else(|| {
-                        GpuError::InvalidArgument("the feature images are missing".into())
-                    })?;
-                    for (g, input) in feat.groups.iter().enumerate() {
-                        let output = planes
-                            .buffer
-                            .slice(g as u64 * planes.plane_bytes, planes.pixel_bytes);
-                        let texels = match (&f.splat_texels, &f.value_texels, feat.views.get(g)) {
-                            (s, Some(v), Some(fv)) if pipeline.texel() => {
-                                Some([s.handle(), v.handle(), fv.handle()])
-                            }
-                            _ => None,
-                        };
-                        pipeline.record(
-                            ctx,
-                            cmd,
-                            &features::FeatureBindings {
-                                params: f.params.whole(),
-                                splats: f.splats.whole(),
-                                values: f.values.whole(),
-                                ranges: f.ranges.whole(),
-                                features: input.whole(),
-                                output,
-                                counters: f.counters.whole(),
-                                texels,
-                            },
-                            (cam.width, cam.height),
-                        )?;
-                    }
-                    Ok(())
-                })?;
+            if feature_job.is_some() {
                 if let Some(shader) = features.and_then(|(_, s)| s) {
                     let (planes, pipeline) = match (feature_planes.as_ref(), shade.as_ref()) {
                         (Some(p), Some(s)) => (p, s),
