@@ -585,9 +585,20 @@ fn texel_kernel_falls_back_to_16_pixel_bins_past_its_pair_limit() {
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
     assert_eq!(r.stats().bin_size, 16);
     assert_eq!(r.stats().pairs, 1200 * 3600);
+    assert!(r.stats().regrows >= 1, "the first frame tried 8-pixel bins");
     let c = cpu::render(&act, &cam, &RenderOptions::default());
     let cmp = compare(&g, &c);
     assert!(cmp.psnr >= 55.0 && cmp.within >= 0.999, "{cmp:?}");
+    // The next frame of the same size starts with 16-pixel bins (no attempt dropped), and
+    // gives the same image.
+    let again = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    assert_eq!((r.stats().bin_size, r.stats().regrows), (16, 0));
+    assert!(common::frame_bits(&again) == common::frame_bits(&g));
+    // Another size starts with the kernel's 8-pixel bins again (and keeps them: its pairs
+    // fit under the limit).
+    let small = cam.with_resolution(320, 180).unwrap();
+    r.render(&gs, &small, &RenderOptions::default()).unwrap();
+    assert_eq!((r.stats().bin_size, r.stats().regrows), (8, 0));
     assert_validation_clean(&r);
 }
 

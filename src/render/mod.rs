@@ -602,6 +602,10 @@ pub struct GpuRenderer {
     stats: FrameStats,
     /// Whether colour frames are rendered in chunks: set by the first frame whose pairs
     /// do not fit one key buffer, and kept (a camera path does not find out again).
+    /// (Gaussians, width, height) of the last finished frame that needed 16-pixel bins
+    /// for its pairs where the kernel prefers smaller ones: the next frames of that size
+    /// start with 16-pixel bins instead of planning and dropping a first attempt.
+    large_bins: Option<(u32, u32, u32)>,
     chunked: bool,
     split: SplitLimits,
     /// Upload scenes compact: fp16 SH, scales and rotations ([`Self::set_compact`]).
@@ -751,6 +755,7 @@ impl GpuRenderer {
             timings: StageTimings::default(),
             stats: FrameStats::default(),
             chunked: false,
+            large_bins: None,
             split: SplitLimits::default(),
             compact: false,
             ctx,
@@ -1341,7 +1346,12 @@ impl GpuRenderer {
             .unwrap_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)))
             .min(self.max_capacity());
         self.ensure_frame(set, scene, cam, initial)?;
-        self.sets[set].bin_size = self.blend.kernel().bin_size();
+        let preferred = self.blend.kernel().bin_size();
+        self.sets[set].bin_size = if self.large_bins == Some((scene.count, cam.width, cam.height)) {
+            16
+        } else {
+            preferred
+        };
         // A frame rendered in chunks needs the host between its submissions (to plan the
         // chunks), so it is rendered when it is finished, not in flight. Frames go in
         // chunks once one frame's pairs did not fit one key buffer, when the test limits
@@ -1443,6 +1453,12 @@ impl GpuRenderer {
                 }
             }
             if complete {
+                // Larger bins stick while the pairs say the preferred ones would not do: an
+                // 8-pixel bin frame has at most 4 times the pairs of a 16-pixel one.
+                let preferred = self.blend.kernel().bin_size();
+                let sticky =
+                    bin_size > preferred && pairs * 4 > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
+                self.large_bins = sticky.then_some((t.scene.count, cam.width, cam.height));
                 let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
                 self.stats = FrameStats {
                     visible: counters.visible,
