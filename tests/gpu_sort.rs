@@ -297,9 +297,8 @@ fn check_sort(
                     scratch_values: sv.handle(),
                 };
                 let bits = 0..key_bits;
-                sort.record_texel(
-                    ctx, cmd, &key_buf, &value_buf, &scratch, count, bits, &texels,
-                )?
+                let (k, v) = (&key_buf, &value_buf);
+                sort.record_views(ctx, cmd, k, v, &scratch, count, bits, Some(&texels))?
             }
             None => sort.record(ctx, cmd, &key_buf, &value_buf, &scratch, count, key_bits)?,
         }

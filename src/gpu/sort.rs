@@ -2,8 +2,9 @@
 //!
 //! Keys are `uvec2 (lo, hi)` (8 bytes, no int64 needed) or, with
 //! [`SortConfig::key_words`] = 1, one `uint` (a third fewer bytes moved per pass); only
-//! the low `key_bits` bits take part, in `ceil(key_bits / radix_bits)` passes. Each pass is reduce-then-scan
-//! (no spinning on other workgroups, so it runs on any device and any subgroup size):
+//! the low `key_bits` bits take part, in `ceil(key_bits / radix_bits)` passes. Each pass
+//! is reduce-then-scan (no spinning on other workgroups, so it runs on any device and any
+//! subgroup size):
 //! 1. `sort_histogram`: per-block digit counts, written digit-major;
 //! 2. [`Scan`] of that table: the output offset of every (digit, block);
 //! 3. `sort_scatter`: each block ranks its elements stably and scatters them. Each
@@ -218,11 +219,6 @@ impl RadixSort {
         Self::with_config(ctx, DEFAULT_SORT_CONFIG)
     }
 
-    /// Builds the sort with [`SORT_CONFIG_32`] (32-bit keys).
-    pub fn new_32(ctx: &GpuContext) -> GpuResult<Self> {
-        Self::with_config(ctx, SORT_CONFIG_32)
-    }
-
     /// Builds the sort with explicit tunables (for benchmarking).
     pub fn with_config(ctx: &GpuContext, config: SortConfig) -> GpuResult<Self> {
         let info = ctx.info();
@@ -356,8 +352,9 @@ impl RadixSort {
 
     /// Records a stable sort of `count` (key, value) pairs by the low `key_bits` bits
     /// of the key (1..=64, or 1..=32 for 32-bit keys; 0 records nothing). `keys` holds
-    /// `uvec2 (lo, hi)` per element (one `uint` for 32-bit keys), `values` one u32; both hold the sorted result afterwards. Elements
-    /// past the count are not touched. `scratch` must hold
+    /// `uvec2 (lo, hi)` per element (one `uint` for 32-bit keys), `values` one u32; both
+    /// hold the sorted result afterwards. Elements past the count are not touched.
+    /// `scratch` must hold
     /// [`RadixSort::scratch_size_for`]`(max_n)` bytes (max_n = the host count or the
     /// device capacity).
     ///
@@ -402,10 +399,11 @@ impl RadixSort {
         self.record_timed(ctx, cmd, keys, values, scratch, count, bits, None)
     }
 
-    /// [`RadixSort::record_bits`] for a sort with [`SortConfig::texel_io`]: `texels` are
-    /// the R32_UINT views of `keys`, `values` and the scratch's key and value ranges.
+    /// [`RadixSort::record_bits`] with the views a sort with [`SortConfig::texel_io`]
+    /// reads and writes (the R32_UINT views of `keys`, `values` and the scratch's key and
+    /// value ranges), or `None` for a storage-buffer sort.
     #[allow(clippy::too_many_arguments)]
-    pub fn record_texel(
+    pub fn record_views(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
@@ -414,19 +412,9 @@ impl RadixSort {
         scratch: &GpuBuffer,
         count: Count,
         bits: std::ops::Range<u32>,
-        texels: &SortTexels,
+        texels: Option<&SortTexels>,
     ) -> GpuResult<()> {
-        self.record_impl(
-            ctx,
-            cmd,
-            keys,
-            values,
-            scratch,
-            count,
-            bits,
-            None,
-            Some(texels),
-        )
+        self.record_impl(ctx, cmd, keys, values, scratch, count, bits, None, texels)
     }
 
     /// [`RadixSort::record_bits`] with every dispatch wrapped in its own timer stage

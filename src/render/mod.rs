@@ -286,10 +286,11 @@ pub fn sh_texel_stride(sh_degree: u32) -> u32 {
     (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
 }
 
-/// Texel views the sorts and the keys stage read and write on CPU devices
-/// ([`SortConfig::texel_io`], `KEYS_TEXEL_IO`), R32_UINT unless noted: the depth order's
-/// keys, values and scratch halves, the pair sort's (its values are viewed by
-/// [`FrameBuffers::value_texels`]), and what the keys stage reads per Gaussian.
+/// Texel views the sorts, preprocess, keys and ranges read and write on CPU devices
+/// ([`SortConfig::texel_io`], `PREPROCESS_TEXEL_IO`, `KEYS_TEXEL_IO`, `RANGES_TEXEL_IO`),
+/// R32_UINT unless noted: the depth order's keys, values and scratch halves, the pair
+/// sort's (its values are viewed by [`FrameBuffers::value_texels`], the splats by
+/// [`FrameBuffers::splat_texels`]), and the other per-Gaussian arrays.
 struct SortViews {
     depth_keys: BufferView,
     depth_values: BufferView,
@@ -600,12 +601,12 @@ pub struct GpuRenderer {
     serial: u64,
     timings: StageTimings,
     stats: FrameStats,
-    /// Whether colour frames are rendered in chunks: set by the first frame whose pairs
-    /// do not fit one key buffer, and kept (a camera path does not find out again).
     /// (Gaussians, width, height) of the last finished frame that needed 16-pixel bins
     /// for its pairs where the kernel prefers smaller ones: the next frames of that size
     /// start with 16-pixel bins instead of planning and dropping a first attempt.
     large_bins: Option<(u32, u32, u32)>,
+    /// Whether frames are rendered in chunks: set by the first frame whose pairs do not
+    /// fit one key buffer, and kept (a camera path does not find out again).
     chunked: bool,
     split: SplitLimits,
     /// Upload scenes compact: fp16 SH, scales and rotations ([`Self::set_compact`]).
@@ -1866,12 +1867,8 @@ impl GpuRenderer {
                         max_n: f.capacity,
                     };
                     let (k, v, s) = (&f.keys, &f.values, &f.sort_scratch);
-                    match f.pair_sort_texels() {
-                        Some(t) => {
-                            sort.record_texel(ctx, cmd, k, v, s, count, pair_bits.clone(), &t)
-                        }
-                        None => sort.record_bits(ctx, cmd, k, v, s, count, pair_bits.clone()),
-                    }
+                    let texels = f.pair_sort_texels();
+                    sort.record_views(ctx, cmd, k, v, s, count, pair_bits.clone(), texels.as_ref())
                 })?;
                 // Sorted keys -> ranges (storage or texel reads); the ranges dispatch
                 // arguments (written by keys) -> indirect read.

@@ -65,13 +65,8 @@ impl Order {
             offset: COUNTS_OFFSET,
             max_n,
         };
-        let bits = 0..DEPTH_BITS;
-        match texels {
-            Some(t) => {
-                sort.record_texel(ctx, cmd, depth_keys, depth_values, scratch, count, bits, t)?
-            }
-            None => sort.record_bits(ctx, cmd, depth_keys, depth_values, scratch, count, bits)?,
-        }
+        let (keys, values, bits) = (depth_keys, depth_values, 0..DEPTH_BITS);
+        sort.record_views(ctx, cmd, keys, values, scratch, count, bits, texels)?;
         // Sorted depth keys -> gather.
         barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
         let groups = dispatch_grid(n.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
