@@ -72,6 +72,15 @@ pub fn fails(args: &[&str], out: &Path) -> String {
     e
 }
 
+/// The last line of a command's standard error, checking that the command failed and did
+/// not panic (a run that stops part-way prints its progress first).
+pub fn failure_last_line(o: &Output) -> String {
+    let e = stderr(o);
+    assert!(!o.status.success(), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+    e.trim_end().lines().last().unwrap_or_default().to_string()
+}
+
 /// A path as the `&str` argument the binary takes.
 pub fn s(p: &Path) -> &str {
     p.to_str().expect("test paths are UTF-8")
