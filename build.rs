@@ -1,41 +1,80 @@
-//! Links the GLSL compiler.
-//!
-//! The `shaderc` crate (feature `prefer-static-linking`) links Debian's
-//! `libshaderc_combined.a`, which on Debian does not contain glslang or
-//! SPIRV-Tools. Those come from the static archives of `glslang-dev` and
-//! `spirv-tools`, linked here in dependency order (see
-//! `../shared/docs/toolchain.md`). Set `VKSPLAT_NO_SYSTEM_GLSLANG=1` to skip this
-//! when shaderc is built from source or found elsewhere.
+//! Compiles every compute shader variant (`src/gpu/shader_set.rs`) to SPIR-V with `glslc`
+//! (shaderc's command line, Debian package `glslc`) and embeds the modules, so that no
+//! binary, test or Python extension links a GLSL compiler and start-up compiles no GLSL.
+//! A GLSL error fails the build with glslc's `glsl/<file>:<line>: error: ...` message.
+//! `GLSLC` names another compiler executable.
+
+#[path = "src/gpu/shader_set.rs"]
+#[allow(dead_code)]
+mod shader_set;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 fn main() {
-    println!("cargo:rerun-if-env-changed=VKSPLAT_NO_SYSTEM_GLSLANG");
     println!("cargo:rerun-if-changed=build.rs");
-    if std::env::var_os("VKSPLAT_NO_SYSTEM_GLSLANG").is_some() {
-        return;
-    }
-    let arch = std::env::var("CARGO_CFG_TARGET_ARCH").unwrap_or_default();
-    let triplet = match arch.as_str() {
-        "x86_64" => "x86_64-linux-gnu",
-        "aarch64" => "aarch64-linux-gnu",
-        other => {
-            println!("cargo:warning=vksplat: no Debian library path known for {other}");
-            return;
+    println!("cargo:rerun-if-changed=glsl");
+    println!("cargo:rerun-if-changed=src/gpu/shader_set.rs");
+    println!("cargo:rerun-if-env-changed=GLSLC");
+    let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
+    let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("OUT_DIR"));
+    let spirv_dir = out.join("spirv");
+    std::fs::create_dir_all(&spirv_dir).expect("create OUT_DIR/spirv");
+
+    let variants = shader_set::shader_variants();
+    let shared = shader_set::shared_defines();
+    let next = AtomicUsize::new(0);
+    let errors = Mutex::new(Vec::new());
+    let workers = std::thread::available_parallelism()
+        .map_or(2, |n| n.get())
+        .clamp(1, 8);
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(variant) = variants.get(i) else {
+                    break;
+                };
+                let defines: Vec<(&str, &str)> = shared
+                    .iter()
+                    .chain(&variant.defines)
+                    .map(|(k, v)| (k.as_str(), v.as_str()))
+                    .collect();
+                let file = format!("glsl/{}.comp", variant.shader);
+                let output = spirv_dir.join(format!("{i:03}-{}.spv", variant.shader));
+                if let Err(e) = shader_set::compile_glsl_file(
+                    &root,
+                    &file,
+                    &[Path::new("glsl")],
+                    &defines,
+                    &output,
+                ) {
+                    errors
+                        .lock()
+                        .unwrap()
+                        .push(format!("{} ({file}):\n{e}", variant.key()));
+                }
+            });
         }
-    };
-    println!("cargo:rustc-link-search=native=/usr/lib/{triplet}");
-    for lib in [
-        "glslang",
-        "MachineIndependent",
-        "GenericCodeGen",
-        "OSDependent",
-        "OGLCompiler",
-        "HLSL",
-        "SPIRV",
-        "SPIRV-Tools-opt",
-        "SPIRV-Tools",
-        "glslang-default-resource-limits",
-    ] {
-        println!("cargo:rustc-link-lib=static={lib}");
+    });
+    let errors = errors.into_inner().unwrap();
+    if !errors.is_empty() {
+        panic!("compiling the shaders failed:\n{}", errors.join("\n\n"));
     }
-    println!("cargo:rustc-link-lib=dylib=stdc++");
+
+    let mut table = String::from(
+        "/// Every shader variant's SPIR-V, compiled by build.rs, by `ShaderVariant::key`.\n\
+         pub static PREBUILT: &[(&str, &[u8])] = &[\n",
+    );
+    for (i, variant) in variants.iter().enumerate() {
+        let path = spirv_dir.join(format!("{i:03}-{}.spv", variant.shader));
+        table.push_str(&format!(
+            "    ({:?}, include_bytes!({:?})),\n",
+            variant.key(),
+            path.display().to_string()
+        ));
+    }
+    table.push_str("];\n");
+    std::fs::write(out.join("prebuilt_shaders.rs"), table).expect("write prebuilt_shaders.rs");
 }

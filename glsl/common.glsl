@@ -1,8 +1,8 @@
 // Shared header for all vksplat compute shaders.
 //
-// Tunables and buffer layouts are defined on the host (src/gpu/scan.rs, src/gpu/sort.rs)
-// and passed in as #defines, so Rust is the single source of truth; this header checks
-// they are present and provides the helpers every stage uses.
+// Constants shared with the host are defined once, in Rust (src/gpu/shader_set.rs), and
+// passed in as #defines; the sort's tunables are specialization constants
+// (sort_spec.glsl). This header provides the helpers every stage uses.
 #ifndef VKSPLAT_COMMON_GLSL
 #define VKSPLAT_COMMON_GLSL
 
@@ -10,11 +10,16 @@
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
 
+#ifdef WG_SIZE_SPEC_ID
+// The workgroup size is a specialization constant (the sort's).
+layout(local_size_x_id = WG_SIZE_SPEC_ID, local_size_y = 1, local_size_z = 1) in;
+#define WG_SIZE gl_WorkGroupSize.x
+#else
 #ifndef WG_SIZE
-#error "define WG_SIZE (the workgroup size) before including common.glsl"
+#error "define WG_SIZE (the workgroup size) or WG_SIZE_SPEC_ID before including common.glsl"
 #endif
-
 layout(local_size_x = WG_SIZE, local_size_y = 1, local_size_z = 1) in;
+#endif
 
 // Linear workgroup id for 1D work spread over a 2D grid (maxComputeWorkGroupCount[0]
 // is only 65535 on many devices). Ids past the end must be ignored by the caller.

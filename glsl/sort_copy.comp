@@ -1,8 +1,9 @@
 #version 460
 // Radix sort epilogue for odd pass counts: copies the result from the scratch
 // ping-pong buffers back into the caller's key/value buffers.
-#define WG_SIZE SORT_WG
+#define WG_SIZE_SPEC_ID SORT_SPEC_WG
 #include "common.glsl"
+#include "sort_spec.glsl"
 
 layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
 #if SORT_TEXEL_IO

@@ -2,8 +2,9 @@
 // Radix sort pass step 1: per-block digit histogram, written digit-major
 // (hist[digit * hist_stride + block]) so one exclusive scan of the table yields every
 // (digit, block) output offset in stable order.
-#define WG_SIZE SORT_WG
+#define WG_SIZE_SPEC_ID SORT_SPEC_WG
 #include "common.glsl"
+#include "sort_spec.glsl"
 
 layout(push_constant) uniform Push {
     uint shift;

@@ -3,8 +3,9 @@
 // (block's offset for its digit, from the scanned histogram)
 // + (equal digits in earlier subgroups' chunks) + (its rank within its subgroup's
 // chunk, from count_row), so equal digits keep their input order.
-#define WG_SIZE SORT_WG
+#define WG_SIZE_SPEC_ID SORT_SPEC_WG
 #include "common.glsl"
+#include "sort_spec.glsl"
 
 layout(push_constant) uniform Push {
     uint shift;

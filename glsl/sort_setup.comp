@@ -4,6 +4,7 @@
 // per-block passes into the sort's meta words.
 #define WG_SIZE 1
 #include "common.glsl"
+#include "sort_spec.glsl"
 
 layout(push_constant) uniform Push {
     uint host_n;

@@ -58,8 +58,14 @@ done
 $B compare $T/big--compact.exr $T/big.exr
 unset VKSPLAT_MEMORY_LIMIT
 rm -rf "$T"
-echo "## start-up (render --demo --width 64 -v)"
-VKSPLAT_NO_SHADER_CACHE=1 $B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
-$B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
+echo "## start-up (render --demo, 1280x720, -v): empty caches (Mesa's and vksplat's), then warm"
+C=$(mktemp -d)
+for run in first second third; do
+  /usr/bin/time -f "$run run: %e s wall" env XDG_CACHE_HOME="$C" MESA_SHADER_CACHE_DIR="$C/mesa" \
+    $B render --demo -o "$C/demo.png" --overwrite -v 2>&1 | grep -E "start-up|wall"
+done
+/usr/bin/time -f "Mesa cache off: %e s wall" env XDG_CACHE_HOME="$C" MESA_SHADER_CACHE_DISABLE=true \
+  $B render --demo -o "$C/demo.png" --overwrite -v 2>&1 | grep -E "start-up|wall"
+rm -rf "$C"
 echo "## cargo bench --bench building_blocks"
 cargo bench -q --bench building_blocks 2>&1 | grep -vE "^\s*(Compiling|Finished|Running)"

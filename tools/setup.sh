@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Installs what vksplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
-# driver (so no GPU is needed), the Khronos validation layer, and the GLSL compiler
-# libraries the `shaderc` crate links (glslang + SPIRV-Tools static archives), Chromium
+# driver (so no GPU is needed), the Khronos validation layer, the GLSL compiler `glslc`
+# that build.rs compiles the shaders with (and spirv-tools to inspect them), Chromium
 # for the viewer's browser test, and Python with venv for the Python package.
 # Idempotent: does nothing when everything is present. Needs root (or sudo).
 set -euo pipefail
 
 packages=(
   libvulkan1 libvulkan-dev mesa-vulkan-drivers vulkan-tools vulkan-validationlayers
-  libshaderc-dev glslang-dev spirv-tools glslc
+  glslc spirv-tools
   pkg-config openexr
   chromium chromium-driver
 )

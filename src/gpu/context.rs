@@ -2,11 +2,13 @@
 
 use std::ffi::{c_void, CStr, CString};
 use std::mem::ManuallyDrop;
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
+use super::pipeline_cache::{self, CacheIdentity};
 use super::{GpuError, GpuResult, VkContext};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -134,6 +136,11 @@ pub(crate) struct Shared {
     pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
     /// Bytes the allocator may hand out in all (see [`DeviceInfo::memory_budget`]).
     pub(crate) memory_budget: u64,
+    /// Every pipeline is created through this cache.
+    pub(crate) pipeline_cache: vk::PipelineCache,
+    /// Where the cache is written back when the device goes, and the bytes it was loaded
+    /// with (written back only when the driver's data grew).
+    pipeline_cache_file: Option<(PathBuf, CacheIdentity, usize)>,
 }
 
 impl Shared {
@@ -161,6 +168,15 @@ impl Drop for Shared {
         // device before the messenger and instance.
         unsafe {
             let _ = self.device.device_wait_idle();
+            if let Some((dir, identity, loaded)) = &self.pipeline_cache_file {
+                if let Ok(data) = self.device.get_pipeline_cache_data(self.pipeline_cache) {
+                    if data.len() > *loaded {
+                        pipeline_cache::store(dir, identity, &data);
+                    }
+                }
+            }
+            self.device
+                .destroy_pipeline_cache(self.pipeline_cache, None);
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
             if let Some(debug) = &self.debug_instance {
@@ -598,6 +614,34 @@ impl GpuContext {
                 return Err(GpuError::Missing(format!("gpu-allocator: {e}")));
             }
         };
+        // The pipeline cache, seeded from disk when this driver build wrote one.
+        let base_props = props[index];
+        let identity = CacheIdentity {
+            vendor_id: base_props.vendor_id,
+            device_id: base_props.device_id,
+            uuid: base_props.pipeline_cache_uuid,
+        };
+        let cache_dir = pipeline_cache::cache_dir();
+        let initial = cache_dir
+            .as_deref()
+            .and_then(|dir| pipeline_cache::load(dir, &identity))
+            .unwrap_or_default();
+        let cache_info = vk::PipelineCacheCreateInfo::default().initial_data(&initial);
+        // SAFETY: valid device; the initial data's header was checked against this device
+        // (drivers also check it and ignore data they cannot use).
+        let pipeline_cache = match unsafe { device.create_pipeline_cache(&cache_info, None) } {
+            Ok(cache) => cache,
+            Err(result) => {
+                drop(allocator);
+                // SAFETY: nothing else was created from the device yet.
+                unsafe { device.destroy_device(None) };
+                return Err(GpuError::Vk {
+                    call: "vkCreatePipelineCache",
+                    result,
+                });
+            }
+        };
+        let pipeline_cache_file = cache_dir.map(|dir| (dir, identity, initial.len()));
         // Ownership of the instance/messenger moves into Shared.
         guard.0 = None;
         let shared = Arc::new(Shared {
@@ -611,6 +655,8 @@ impl GpuContext {
             push_descriptor,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             memory_budget: info.memory_budget,
+            pipeline_cache,
+            pipeline_cache_file,
         });
         // SAFETY: queue family index and queue index 0 were requested above.
         let queue = unsafe { shared.device.get_device_queue(queue_family, 0) };
@@ -634,6 +680,11 @@ impl GpuContext {
             validation,
             full_subgroups,
         })
+    }
+
+    /// The pipeline cache every pipeline is created through.
+    pub fn pipeline_cache(&self) -> vk::PipelineCache {
+        self.shared.pipeline_cache
     }
 
     /// The raw ash device.

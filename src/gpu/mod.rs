@@ -4,8 +4,10 @@
 pub mod buffer;
 pub mod context;
 pub mod image;
+pub mod pipeline_cache;
 pub mod scan;
 pub mod shader;
+pub mod shader_set;
 pub mod sort;
 pub mod sync;
 pub mod timing;

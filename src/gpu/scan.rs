@@ -12,12 +12,7 @@ use super::{
     dispatch_grid, BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
 };
 
-/// Invocations per scan workgroup.
-pub const SCAN_WG: u32 = 256;
-/// Consecutive elements each invocation handles.
-pub const SCAN_ITEMS: u32 = 16;
-/// Elements per scan workgroup (block).
-pub const SCAN_BLOCK: u32 = SCAN_WG * SCAN_ITEMS;
+pub use super::shader_set::{SCAN_BLOCK, SCAN_ITEMS, SCAN_WG};
 /// Alignment of sub-ranges carved out of scratch buffers (the largest
 /// minStorageBufferOffsetAlignment Vulkan allows).
 pub const SCRATCH_ALIGN: u64 = 256;
@@ -36,15 +31,6 @@ pub struct ScanPush {
     pub pad: u32,
 }
 
-/// The `#define`s every scan shader is compiled with.
-pub fn scan_defines() -> Vec<(&'static str, String)> {
-    vec![
-        ("SCAN_WG", SCAN_WG.to_string()),
-        ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
-        ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),
-    ]
-}
-
 /// The prefix-sum pipelines.
 pub struct Scan {
     reduce: ComputePipeline,
@@ -56,7 +42,7 @@ pub struct Scan {
 impl Scan {
     /// Compiles the scan shaders and builds their pipelines.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
-        let defines = scan_defines();
+        let defines = [];
         let push = std::mem::size_of::<ScanPush>() as u32;
         let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
         Ok(Self {

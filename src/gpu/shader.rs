@@ -1,4 +1,4 @@
-//! GLSL compute shaders compiled with shaderc at start-up, and the RAII
+//! Compute shaders (SPIR-V compiled at build time, see `build.rs`), and the RAII
 //! [`ComputePipeline`] that binds them through push descriptors.
 
 use std::sync::Arc;
@@ -6,253 +6,156 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::context::Shared;
+use super::shader_set;
 use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
 
-/// Shader sources embedded in the binary, by file name under `glsl/`.
-pub const SOURCES: &[(&str, &str)] = &[
+/// SPIR-V compiled at build time (build.rs), by [`shader_set::ShaderVariant::key`].
+mod prebuilt {
+    include!(concat!(env!("OUT_DIR"), "/prebuilt_shaders.rs"));
+}
+
+/// The GLSL headers, for compiling other sources at run time ([`compile_glsl`]).
+const HEADERS: &[(&str, &str)] = &[
     ("common.glsl", include_str!("../../glsl/common.glsl")),
     (
         "sort_common.glsl",
         include_str!("../../glsl/sort_common.glsl"),
     ),
-    (
-        "scan_reduce.comp",
-        include_str!("../../glsl/scan_reduce.comp"),
-    ),
-    (
-        "scan_block.comp",
-        include_str!("../../glsl/scan_block.comp"),
-    ),
-    ("scan_add.comp", include_str!("../../glsl/scan_add.comp")),
-    (
-        "sort_setup.comp",
-        include_str!("../../glsl/sort_setup.comp"),
-    ),
-    (
-        "sort_histogram.comp",
-        include_str!("../../glsl/sort_histogram.comp"),
-    ),
-    (
-        "sort_scatter.comp",
-        include_str!("../../glsl/sort_scatter.comp"),
-    ),
-    ("sort_copy.comp", include_str!("../../glsl/sort_copy.comp")),
+    ("sort_spec.glsl", include_str!("../../glsl/sort_spec.glsl")),
     (
         "splat_common.glsl",
         include_str!("../../glsl/splat_common.glsl"),
     ),
-    (
-        "preprocess.comp",
-        include_str!("../../glsl/preprocess.comp"),
-    ),
-    ("keys.comp", include_str!("../../glsl/keys.comp")),
-    ("order.comp", include_str!("../../glsl/order.comp")),
-    ("ranges.comp", include_str!("../../glsl/ranges.comp")),
-    ("blend.comp", include_str!("../../glsl/blend.comp")),
-    (
-        "blend_features.comp",
-        include_str!("../../glsl/blend_features.comp"),
-    ),
-    ("pack.comp", include_str!("../../glsl/pack.comp")),
-    ("shade.comp", include_str!("../../glsl/shade.comp")),
-    (
-        "count64_test.comp",
-        include_str!("../../glsl/count64_test.comp"),
-    ),
 ];
 
-/// Shader compilation failures.
+/// Shader failures.
 #[derive(Debug, thiserror::Error)]
 pub enum ShaderError {
-    /// shaderc could not be initialised.
-    #[error("shaderc initialisation failed: {0}")]
-    Init(String),
-    /// No embedded shader has this name.
-    #[error("no embedded shader named glsl/{0}")]
+    /// No variant with these defines was compiled at build time.
+    #[error(
+        "no shader variant '{0}' was compiled at build time (the variants are listed in \
+         src/gpu/shader_set.rs)"
+    )]
     Unknown(String),
     /// The GLSL did not compile; the message carries `glsl/<file>:<line>:`.
     #[error("compiling {file} failed:\n{message}")]
     Compile {
         /// `glsl/<name>.comp`
         file: String,
-        /// shaderc's diagnostics.
+        /// glslc's diagnostics.
         message: String,
     },
-}
-
-/// The source of `glsl/<name>`: read from `$VKSPLAT_GLSL_DIR/<name>` when that variable is
-/// set (shader development: edit and re-run without rebuilding; such compiles skip the
-/// SPIR-V cache), else the copy embedded in the binary.
-fn embedded(name: &str) -> Option<String> {
-    if let Some(dir) = glsl_dir() {
-        if let Ok(text) = std::fs::read_to_string(dir.join(name)) {
-            return Some(text);
-        }
-    }
-    SOURCES
-        .iter()
-        .find(|(n, _)| *n == name)
-        .map(|(_, s)| (*s).to_string())
 }
 
 fn glsl_dir() -> Option<std::path::PathBuf> {
     std::env::var_os("VKSPLAT_GLSL_DIR").map(std::path::PathBuf::from)
 }
 
-/// Compiles GLSL compute source to SPIR-V for Vulkan 1.3 with optimisation.
-/// `name` is the stage name without extension; diagnostics refer to
-/// `glsl/<name>.comp:<line>`. `#include "x.glsl"` resolves from [`SOURCES`];
-/// `defines` become `#define NAME VALUE` lines.
+/// A scratch directory for one run-time compile, removed on drop.
+struct ScratchDir(std::path::PathBuf);
+
+impl ScratchDir {
+    fn new() -> Result<Self, String> {
+        static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("vksplat-glsl-{}-{n}", std::process::id()));
+        std::fs::create_dir_all(dir.join("glsl")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        Ok(ScratchDir(dir))
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Compiles GLSL compute source to SPIR-V for Vulkan 1.3 with optimisation, at run time
+/// (with `glslc`, which must be installed: shader development and tests only; the
+/// shipped shaders are compiled at build time). `name` is the stage name without
+/// extension; diagnostics refer to `glsl/<name>.comp:<line>`. `#include "x.glsl"` resolves
+/// the shipped headers; `defines` become `#define NAME VALUE` lines, after the constants
+/// every shader gets ([`shader_set::shared_defines`]).
 pub fn compile_glsl(
     name: &str,
     source: &str,
     defines: &[(&str, String)],
 ) -> Result<Vec<u32>, ShaderError> {
     let file = format!("glsl/{name}.comp");
-    let compiler = shaderc::Compiler::new().map_err(|e| ShaderError::Init(e.to_string()))?;
-    let mut options =
-        shaderc::CompileOptions::new().map_err(|e| ShaderError::Init(e.to_string()))?;
-    options.set_target_env(
-        shaderc::TargetEnv::Vulkan,
-        shaderc::EnvVersion::Vulkan1_3 as u32,
-    );
-    options.set_optimization_level(shaderc::OptimizationLevel::Performance);
-    for (key, value) in defines {
-        if key.contains('\0') || value.contains('\0') {
-            return Err(ShaderError::Compile {
-                file,
-                message: format!("define {key:?} contains a NUL byte"),
-            });
-        }
-        options.add_macro_definition(key, Some(value));
-    }
-    options.set_include_callback(|requested, _kind, _from, _depth| {
-        embedded(requested)
-            .map(|content| shaderc::ResolvedInclude {
-                resolved_name: format!("glsl/{requested}"),
-                content,
-            })
-            .ok_or_else(|| format!("no embedded include named glsl/{requested}"))
-    });
-    compiler
-        .compile_into_spirv(
-            source,
-            shaderc::ShaderKind::Compute,
-            &file,
-            "main",
-            Some(&options),
-        )
-        .map(|artifact| artifact.as_binary().to_vec())
-        .map_err(|e| ShaderError::Compile {
-            file: file.clone(),
-            message: e.to_string(),
-        })
-}
-
-/// Compiles the embedded shader `glsl/<name>.comp`.
-///
-/// Compiled SPIR-V is cached on disk (see [`shader_cache_dir`]): compiling every shader
-/// with glslang takes over a second, most of a short render's start-up. The cache key
-/// covers every embedded source, the shader name and its defines, so any change to any
-/// shader misses. A damaged entry is ignored and rewritten.
-pub fn compile_embedded(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, ShaderError> {
-    compile_embedded_cached(name, defines, shader_cache_dir().as_deref())
-}
-
-/// [`compile_embedded`] with an explicit cache directory (`None`: no cache).
-pub fn compile_embedded_cached(
-    name: &str,
-    defines: &[(&str, String)],
-    cache_dir: Option<&std::path::Path>,
-) -> Result<Vec<u32>, ShaderError> {
-    let file = format!("{name}.comp");
-    let source = embedded(&file).ok_or(ShaderError::Unknown(file))?;
-    let cache_dir = cache_dir.filter(|_| glsl_dir().is_none());
-    let cached =
-        cache_dir.map(|dir| dir.join(format!("{name}-{:016x}.spv", cache_key(name, defines))));
-    if let Some(words) = cached.as_deref().and_then(read_spirv) {
-        return Ok(words);
-    }
-    let words = compile_glsl(name, &source, defines)?;
-    if let Some(path) = cached {
-        write_spirv(&path, &words);
-    }
-    Ok(words)
-}
-
-/// Where compiled shaders are cached: `$VKSPLAT_SHADER_CACHE`, else
-/// `$XDG_CACHE_HOME/vksplat/spirv`, else `~/.cache/vksplat/spirv`. `None` (no caching)
-/// when `VKSPLAT_NO_SHADER_CACHE` is set or no location is known.
-pub fn shader_cache_dir() -> Option<std::path::PathBuf> {
-    use std::path::PathBuf;
-    if std::env::var_os("VKSPLAT_NO_SHADER_CACHE").is_some() {
-        return None;
-    }
-    if let Some(dir) = std::env::var_os("VKSPLAT_SHADER_CACHE") {
-        return Some(PathBuf::from(dir));
-    }
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
-    Some(base.join("vksplat").join("spirv"))
-}
-
-/// FNV-1a over every embedded source, the crate version, the shader name and its defines.
-fn cache_key(name: &str, defines: &[(&str, String)]) -> u64 {
-    let mut hash = 0xcbf2_9ce4_8422_2325u64;
-    let mut feed = |bytes: &[u8]| {
-        for &b in bytes {
-            hash ^= u64::from(b);
-            hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-        // A separator so that concatenations cannot collide.
-        hash ^= 0xff;
-        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+    let compile_error = |message: String| ShaderError::Compile {
+        file: file.clone(),
+        message,
     };
-    feed(env!("CARGO_PKG_VERSION").as_bytes());
-    for (file, text) in SOURCES {
-        feed(file.as_bytes());
-        feed(text.as_bytes());
+    let scratch = ScratchDir::new().map_err(compile_error)?;
+    let glsl = scratch.0.join("glsl");
+    for (header, text) in HEADERS {
+        std::fs::write(glsl.join(header), text).map_err(|e| compile_error(e.to_string()))?;
     }
-    feed(name.as_bytes());
-    for (k, v) in defines {
-        feed(k.as_bytes());
-        feed(v.as_bytes());
+    if name.contains(['/', '\\']) {
+        return Err(compile_error(format!("{name:?} is not a plain stage name")));
     }
-    hash
+    std::fs::write(glsl.join(format!("{name}.comp")), source)
+        .map_err(|e| compile_error(e.to_string()))?;
+    run_glslc(
+        &scratch.0,
+        &file,
+        &glsl,
+        defines,
+        &scratch.0.join("out.spv"),
+    )
 }
 
-fn read_spirv(path: &std::path::Path) -> Option<Vec<u32>> {
-    let bytes = std::fs::read(path).ok()?;
-    if bytes.len() < 20 || bytes.len() % 4 != 0 {
-        return None;
-    }
-    let words: Vec<u32> = bytes
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+fn run_glslc(
+    cwd: &std::path::Path,
+    file: &str,
+    include: &std::path::Path,
+    defines: &[(&str, String)],
+    output: &std::path::Path,
+) -> Result<Vec<u32>, ShaderError> {
+    let shared = shader_set::shared_defines();
+    let all: Vec<(&str, &str)> = shared
+        .iter()
+        .map(|(k, v)| (k.as_str(), v.as_str()))
+        .chain(defines.iter().map(|(k, v)| (*k, v.as_str())))
         .collect();
-    (words[0] == 0x0723_0203).then_some(words)
+    shader_set::compile_glsl_file(cwd, file, &[include], &all, output).map_err(|message| {
+        ShaderError::Compile {
+            file: file.to_string(),
+            message,
+        }
+    })
 }
 
-/// Best effort: a cache that cannot be written only costs the next start-up time.
-fn write_spirv(path: &std::path::Path, words: &[u32]) {
-    let Some(dir) = path.parent() else { return };
-    if std::fs::create_dir_all(dir).is_err() {
-        return;
+/// The SPIR-V of `glsl/<name>.comp` with `defines`: the module compiled at build time, or,
+/// when `VKSPLAT_GLSL_DIR` is set (shader development: edit and re-run without
+/// rebuilding), `$VKSPLAT_GLSL_DIR/<name>.comp` compiled now with `glslc`.
+pub fn shader_spirv(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, ShaderError> {
+    if let Some(dir) = glsl_dir() {
+        let scratch = ScratchDir::new().map_err(|message| ShaderError::Compile {
+            file: format!("{name}.comp"),
+            message,
+        })?;
+        let file = dir.join(format!("{name}.comp"));
+        return run_glslc(
+            &scratch.0,
+            &file.display().to_string(),
+            &dir,
+            defines,
+            &scratch.0.join("out.spv"),
+        );
     }
-    // Unique per process and call, so concurrent writers never share a temporary file.
-    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let name = path
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
-    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-    if std::fs::write(&tmp, bytes).is_ok() && std::fs::rename(&tmp, path).is_ok() {
-        return;
-    }
-    let _ = std::fs::remove_file(&tmp);
+    let key = shader_set::variant_key(name, defines.iter().map(|(k, v)| (*k, v.as_str())));
+    let bytes = prebuilt::PREBUILT
+        .iter()
+        .find(|(k, _)| *k == key)
+        .map(|(_, bytes)| *bytes)
+        .ok_or(ShaderError::Unknown(key))?;
+    Ok(shader_set::spirv_words(bytes).expect("build.rs checked every module's SPIR-V"))
+}
+
+/// Keys of every variant compiled at build time.
+pub fn prebuilt_variants() -> impl Iterator<Item = &'static str> {
+    prebuilt::PREBUILT.iter().map(|(k, _)| *k)
 }
 
 /// What a binding slot holds.
@@ -306,6 +209,19 @@ impl ComputePipeline {
         bindings: &[BindingKind],
         push_size: u32,
         workgroup_size: u32,
+    ) -> GpuResult<Self> {
+        Self::new_specialized(ctx, name, spirv, bindings, push_size, workgroup_size, &[])
+    }
+
+    /// [`Self::new`] with specialization constants: `(constant_id, u32 value)` pairs.
+    pub fn new_specialized(
+        ctx: &GpuContext,
+        name: &str,
+        spirv: &[u32],
+        bindings: &[BindingKind],
+        push_size: u32,
+        workgroup_size: u32,
+        specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
         let device = &ctx.shared.device;
         let mut this = Self {
@@ -366,27 +282,45 @@ impl ComputePipeline {
             } else {
                 vk::PipelineShaderStageCreateFlags::empty()
             };
-        let stage = vk::PipelineShaderStageCreateInfo::default()
+        let entries: Vec<vk::SpecializationMapEntry> = specialization
+            .iter()
+            .enumerate()
+            .map(|(i, &(id, _))| vk::SpecializationMapEntry {
+                constant_id: id,
+                offset: 4 * i as u32,
+                size: 4,
+            })
+            .collect();
+        let values: Vec<u32> = specialization.iter().map(|&(_, v)| v).collect();
+        let spec_info = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(bytemuck::cast_slice(&values));
+        let mut stage = vk::PipelineShaderStageCreateInfo::default()
             .flags(stage_flags)
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(this.module)
             .name(c"main");
+        if !specialization.is_empty() {
+            stage = stage.specialization_info(&spec_info);
+        }
         let info = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(this.layout)];
         // SAFETY: valid create info.
         let pipelines =
-            unsafe { device.create_compute_pipelines(vk::PipelineCache::null(), &info, None) }
-                .map_err(|(_, result)| GpuError::Vk {
+            unsafe { device.create_compute_pipelines(ctx.pipeline_cache(), &info, None) }.map_err(
+                |(_, result)| GpuError::Vk {
                     call: "vkCreateComputePipelines",
                     result,
-                })?;
+                },
+            )?;
         this.pipeline = pipelines[0];
         ctx.set_name(this.pipeline, name);
         Ok(this)
     }
 
-    /// Compiles the embedded `glsl/<shader>.comp` with `defines` and builds the pipeline.
+    /// Builds the pipeline of `glsl/<shader>.comp` with `defines` (a variant compiled at
+    /// build time, see [`shader_spirv`]).
     pub fn from_embedded(
         ctx: &GpuContext,
         shader: &str,
@@ -395,8 +329,38 @@ impl ComputePipeline {
         push_size: u32,
         workgroup_size: u32,
     ) -> GpuResult<Self> {
-        let spirv = compile_embedded(shader, defines)?;
-        Self::new(ctx, shader, &spirv, bindings, push_size, workgroup_size)
+        Self::from_embedded_specialized(
+            ctx,
+            shader,
+            defines,
+            bindings,
+            push_size,
+            workgroup_size,
+            &[],
+        )
+    }
+
+    /// [`Self::from_embedded`] with specialization constants (`(constant_id, value)`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_embedded_specialized(
+        ctx: &GpuContext,
+        shader: &str,
+        defines: &[(&str, String)],
+        bindings: &[BindingKind],
+        push_size: u32,
+        workgroup_size: u32,
+        specialization: &[(u32, u32)],
+    ) -> GpuResult<Self> {
+        let spirv = shader_spirv(shader, defines)?;
+        Self::new_specialized(
+            ctx,
+            shader,
+            &spirv,
+            bindings,
+            push_size,
+            workgroup_size,
+            specialization,
+        )
     }
 
     /// Binds the pipeline, pushes the buffer descriptors (binding i = `buffers[i]`) and
@@ -604,49 +568,5 @@ impl Drop for ComputePipeline {
             device.destroy_descriptor_set_layout(self.set_layout, None);
             device.destroy_shader_module(self.module, None);
         }
-    }
-}
-
-#[cfg(test)]
-mod cache_tests {
-    use super::*;
-
-    #[test]
-    fn cache_hits_misses_and_ignores_damaged_entries() {
-        let dir = std::env::temp_dir().join(format!("vksplat-cache-test-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let defines = [("STRIP", "2".to_string()), ("TEXEL_FETCH", "1".to_string())];
-        let fresh = compile_embedded_cached("blend", &defines, Some(&dir)).unwrap();
-        let entries: Vec<_> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .collect();
-        assert_eq!(
-            entries.len(),
-            1,
-            "one entry, no temporary files left: {entries:?}"
-        );
-        assert_eq!(read_spirv(&entries[0]).unwrap(), fresh);
-        // A hit returns what the cache holds (here another valid module, to prove it is read).
-        let other = compile_embedded_cached("ranges", &[], None).unwrap();
-        write_spirv(&entries[0], &other);
-        assert_eq!(
-            compile_embedded_cached("blend", &defines, Some(&dir)).unwrap(),
-            other
-        );
-        // Other defines are another entry.
-        let strip4 = [("STRIP", "4".to_string()), ("TEXEL_FETCH", "1".to_string())];
-        assert_ne!(
-            compile_embedded_cached("blend", &strip4, Some(&dir)).unwrap(),
-            other
-        );
-        // A damaged entry is ignored and replaced by a fresh compile.
-        std::fs::write(&entries[0], b"not spir-v at all").unwrap();
-        assert_eq!(
-            compile_embedded_cached("blend", &defines, Some(&dir)).unwrap(),
-            fresh
-        );
-        assert_eq!(read_spirv(&entries[0]).unwrap(), fresh);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -31,6 +31,7 @@ use ash::vk;
 
 use super::scan::{Scan, SCRATCH_ALIGN};
 use super::shader::{BindingKind, Resource};
+use super::shader_set::{SORT_SPEC_ITEMS, SORT_SPEC_MAX_SUBGROUPS, SORT_SPEC_RADIX, SORT_SPEC_WG};
 use super::sync::{barrier, barrier_uses, Access};
 use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer};
 
@@ -93,12 +94,9 @@ pub struct SortTexels {
     pub scratch_values: vk::BufferView,
 }
 
-/// u32 index of the clamped element count in the sort's meta words.
-pub const META_N: u32 = 0;
-/// u32 index of the number of blocks.
-pub const META_BLOCKS: u32 = 1;
-/// u32 index of the VkDispatchIndirectCommand (x, y, z) for the per-block passes.
-pub const META_DISPATCH: u32 = 2;
+/// u32 indices of the clamped element count, the number of blocks and the
+/// VkDispatchIndirectCommand (x, y, z) for the per-block passes in the sort's meta words.
+pub use super::shader_set::{META_BLOCKS, META_DISPATCH, META_N};
 /// Bytes reserved for the meta words.
 pub const META_BYTES: u64 = 32;
 
@@ -248,20 +246,16 @@ impl RadixSort {
         } else {
             "uvec2"
         };
-        let defines = vec![
+        // The key type and the I/O path select the module; the tunables specialize it.
+        let defines = [
             ("SORT_KEY", key_type.to_string()),
             ("SORT_TEXEL_IO", u32::from(config.texel_io).to_string()),
-            ("SORT_RADIX", format!("{radix}u")),
-            ("SORT_WG", config.workgroup_size.to_string()),
-            ("SORT_ITEMS", format!("{}u", config.items_per_thread)),
-            (
-                "SORT_BLOCK",
-                format!("{}u", config.workgroup_size * config.items_per_thread),
-            ),
-            ("SORT_MAX_SUBGROUPS", max_subgroups.to_string()),
-            ("META_N", META_N.to_string()),
-            ("META_BLOCKS", META_BLOCKS.to_string()),
-            ("META_DISPATCH", META_DISPATCH.to_string()),
+        ];
+        let spec = [
+            (SORT_SPEC_WG, config.workgroup_size),
+            (SORT_SPEC_ITEMS, config.items_per_thread),
+            (SORT_SPEC_RADIX, radix),
+            (SORT_SPEC_MAX_SUBGROUPS, max_subgroups),
         ];
         let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
         // Bindings of the keys and values: texel views for reading and writing, or buffers.
@@ -278,37 +272,41 @@ impl RadixSort {
         let pass_push = std::mem::size_of::<SortPassPush>() as u32;
         Ok(Self {
             config,
-            setup: ComputePipeline::from_embedded(
+            setup: ComputePipeline::from_embedded_specialized(
                 ctx,
                 "sort_setup",
                 &defines,
                 &buffers(2),
                 setup_push,
                 1,
+                &spec,
             )?,
-            histogram: ComputePipeline::from_embedded(
+            histogram: ComputePipeline::from_embedded_specialized(
                 ctx,
                 "sort_histogram",
                 &defines,
                 &[storage, read, storage],
                 pass_push,
                 config.workgroup_size,
+                &spec,
             )?,
-            scatter: ComputePipeline::from_embedded(
+            scatter: ComputePipeline::from_embedded_specialized(
                 ctx,
                 "sort_scatter",
                 &defines,
                 &[storage, read, read, storage, write, write],
                 pass_push,
                 config.workgroup_size,
+                &spec,
             )?,
-            copy: ComputePipeline::from_embedded(
+            copy: ComputePipeline::from_embedded_specialized(
                 ctx,
                 "sort_copy",
                 &defines,
                 &[storage, read, read, write, write],
                 0,
                 config.workgroup_size,
+                &spec,
             )?,
             scan: Scan::new(ctx)?,
             max_groups_x: ctx.info().max_workgroup_count[0],

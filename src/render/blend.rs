@@ -22,8 +22,9 @@ pub enum BlendKernel {
     },
 }
 
-/// Supported strip lengths of [`BlendKernel::Texel`] (a strip never crosses an 8-pixel bin).
-pub const STRIPS: [u32; 4] = [1, 2, 4, 8];
+/// Supported strip lengths of [`BlendKernel::Texel`] (a strip never crosses an 8-pixel bin;
+/// each has a module compiled at build time).
+pub use crate::gpu::shader_set::STRIPS;
 
 impl BlendKernel {
     /// The kernel for a device: [`BlendKernel::Shared`] on GPUs, texel fetches with two

@@ -1,0 +1,235 @@
+// Every compute shader variant vksplat ships, the constants the shaders share with the
+// host, and the one GLSL -> SPIR-V compile call (Khronos' `glslc`, shaderc's command line).
+//
+// This file is compiled twice: into the library (`crate::gpu::shader_set`) and into the
+// build script (`include!`d by `build.rs`), which compiles every variant below to SPIR-V
+// and embeds it, so no binary or test links a GLSL compiler. It therefore uses `std` only.
+// Runtime compilation exists only for shader development (`VKSPLAT_GLSL_DIR`), through the
+// same [`compile_glsl_file`].
+
+/// Invocations per scan workgroup.
+pub const SCAN_WG: u32 = 256;
+/// Consecutive elements each scan invocation handles.
+pub const SCAN_ITEMS: u32 = 16;
+/// Elements per scan workgroup (block).
+pub const SCAN_BLOCK: u32 = SCAN_WG * SCAN_ITEMS;
+
+/// Radix sort meta buffer: u32 index of the element count.
+pub const META_N: u32 = 0;
+/// Radix sort meta buffer: u32 index of the block count.
+pub const META_BLOCKS: u32 = 1;
+/// Radix sort meta buffer: u32 index of the indirect dispatch arguments (x, y, z).
+pub const META_DISPATCH: u32 = 2;
+
+/// Pixels per blend invocation that a texel blend kernel may be built for.
+pub const STRIPS: [u32; 4] = [1, 2, 4, 8];
+
+/// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
+pub const SORT_SPEC_WG: u32 = 0;
+/// Specialization constant id of the items each sort invocation handles.
+pub const SORT_SPEC_ITEMS: u32 = 1;
+/// Specialization constant id of the radix (digits per pass).
+pub const SORT_SPEC_RADIX: u32 = 2;
+/// Specialization constant id of the most subgroups a sort workgroup may have.
+pub const SORT_SPEC_MAX_SUBGROUPS: u32 = 3;
+
+/// The `#define`s every shader is compiled with: the constants above, so that the host
+/// (Rust) is their one source.
+pub fn shared_defines() -> Vec<(String, String)> {
+    [
+        ("SCAN_WG", SCAN_WG.to_string()),
+        ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
+        ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),
+        ("META_N", META_N.to_string()),
+        ("META_BLOCKS", META_BLOCKS.to_string()),
+        ("META_DISPATCH", META_DISPATCH.to_string()),
+        ("SORT_SPEC_WG", SORT_SPEC_WG.to_string()),
+        ("SORT_SPEC_ITEMS", SORT_SPEC_ITEMS.to_string()),
+        ("SORT_SPEC_RADIX", SORT_SPEC_RADIX.to_string()),
+        (
+            "SORT_SPEC_MAX_SUBGROUPS",
+            SORT_SPEC_MAX_SUBGROUPS.to_string(),
+        ),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
+}
+
+/// One compiled variant: a shader of `glsl/` and the defines that select the variant.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ShaderVariant {
+    /// File stem under `glsl/` (`blend` for `glsl/blend.comp`).
+    pub shader: String,
+    /// `NAME=VALUE` defines, in the order given.
+    pub defines: Vec<(String, String)>,
+}
+
+impl ShaderVariant {
+    /// The variant's lookup key: the shader and its defines sorted by name, so that the
+    /// order a caller lists them in does not matter.
+    pub fn key(&self) -> String {
+        variant_key(
+            &self.shader,
+            self.defines.iter().map(|(k, v)| (k.as_str(), v.as_str())),
+        )
+    }
+}
+
+/// [`ShaderVariant::key`] of `shader` with `defines`.
+pub fn variant_key<'a>(
+    shader: &str,
+    defines: impl IntoIterator<Item = (&'a str, &'a str)>,
+) -> String {
+    let mut pairs: Vec<(&str, &str)> = defines.into_iter().collect();
+    pairs.sort();
+    let mut key = shader.to_string();
+    for (k, v) in pairs {
+        key.push(' ');
+        key.push_str(k);
+        key.push('=');
+        key.push_str(v);
+    }
+    key
+}
+
+/// Every variant that the renderer, the sort, the scan and the tests use: each boolean or
+/// enumerated choice a stage is built with. Numeric tunables of the sort are
+/// specialization constants instead, so any configuration the device allows uses these.
+pub fn shader_variants() -> Vec<ShaderVariant> {
+    fn v(shader: &str, defines: &[(&str, String)]) -> ShaderVariant {
+        ShaderVariant {
+            shader: shader.to_string(),
+            defines: defines
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect(),
+        }
+    }
+    let bit = |b: bool| u32::from(b).to_string();
+    // SplatKernel::shader_id values: 0 Gaussian, 1 power.
+    let splat_kernels = ["0u", "1u"];
+    let mut out = Vec::new();
+    for shader in [
+        "scan_reduce",
+        "scan_block",
+        "scan_add",
+        "order",
+        "pack",
+        "shade",
+        "count64_test",
+    ] {
+        out.push(v(shader, &[]));
+    }
+    // Sort: 64-bit keys through buffers, 32-bit keys through buffers or texel views.
+    for (key, texel) in [("uvec2", false), ("uint", false), ("uint", true)] {
+        for shader in ["sort_setup", "sort_histogram", "sort_scatter", "sort_copy"] {
+            out.push(v(
+                shader,
+                &[("SORT_KEY", key.to_string()), ("SORT_TEXEL_IO", bit(texel))],
+            ));
+        }
+    }
+    for texel in [false, true] {
+        for compact in [false, true] {
+            out.push(v(
+                "preprocess",
+                &[
+                    ("COMPACT_GAUSSIANS", bit(compact)),
+                    ("PREPROCESS_TEXEL_IO", bit(texel)),
+                ],
+            ));
+        }
+        out.push(v("keys", &[("KEYS_TEXEL_IO", bit(texel))]));
+        out.push(v("ranges", &[("RANGES_TEXEL_IO", bit(texel))]));
+        for kernel in splat_kernels {
+            out.push(v(
+                "blend_features",
+                &[
+                    ("SPLAT_KERNEL", kernel.to_string()),
+                    ("TEXEL_FETCH", bit(texel)),
+                ],
+            ));
+        }
+    }
+    for kernel in splat_kernels {
+        // The shared kernel (one pixel per invocation, buffers) and the texel strips.
+        out.push(v(
+            "blend",
+            &[
+                ("STRIP", "1".to_string()),
+                ("TEXEL_FETCH", bit(false)),
+                ("SPLAT_KERNEL", kernel.to_string()),
+            ],
+        ));
+        for strip in STRIPS {
+            out.push(v(
+                "blend",
+                &[
+                    ("STRIP", strip.to_string()),
+                    ("TEXEL_FETCH", bit(true)),
+                    ("SPLAT_KERNEL", kernel.to_string()),
+                ],
+            ));
+        }
+    }
+    out
+}
+
+/// Compiles the compute shader `file` (which `glslc` reports as `display` in its
+/// diagnostics, e.g. `glsl/blend.comp`) to SPIR-V for Vulkan 1.3 with optimisation,
+/// running `glslc` in `cwd` with `include_dirs` searched by `#include`. On failure the
+/// error holds glslc's diagnostics (`glsl/<file>:<line>: error: ...`).
+pub fn compile_glsl_file(
+    cwd: &std::path::Path,
+    display: &str,
+    include_dirs: &[&std::path::Path],
+    defines: &[(&str, &str)],
+    output: &std::path::Path,
+) -> Result<Vec<u32>, String> {
+    let glslc = std::env::var_os("GLSLC").unwrap_or_else(|| "glslc".into());
+    let mut cmd = std::process::Command::new(&glslc);
+    cmd.current_dir(cwd)
+        .arg("--target-env=vulkan1.3")
+        .arg("-O")
+        .arg("-fshader-stage=compute");
+    for dir in include_dirs {
+        cmd.arg("-I").arg(dir);
+    }
+    for (k, v) in defines {
+        if k.contains(['\0', '=']) || v.contains('\0') {
+            return Err(format!(
+                "{display}: define {k:?} = {v:?} is not a valid macro"
+            ));
+        }
+        cmd.arg(format!("-D{k}={v}"));
+    }
+    cmd.arg(display).arg("-o").arg(output);
+    let result = cmd.output().map_err(|e| {
+        format!(
+            "cannot run {} (the GLSL compiler; Debian package `glslc`): {e}",
+            std::path::Path::new(&glslc).display()
+        )
+    })?;
+    if !result.status.success() {
+        let mut text = String::from_utf8_lossy(&result.stderr).trim().to_string();
+        if text.is_empty() {
+            text = format!("glslc exited with {}", result.status);
+        }
+        return Err(text);
+    }
+    let bytes = std::fs::read(output).map_err(|e| format!("{}: {e}", output.display()))?;
+    spirv_words(&bytes).ok_or_else(|| format!("{display}: glslc wrote no valid SPIR-V"))
+}
+
+/// SPIR-V bytes as little-endian words, if they start with the SPIR-V magic number.
+pub fn spirv_words(bytes: &[u8]) -> Option<Vec<u32>> {
+    if bytes.len() < 20 || bytes.len() % 4 != 0 {
+        return None;
+    }
+    let words: Vec<u32> = bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    (words[0] == 0x0723_0203).then_some(words)
+}
