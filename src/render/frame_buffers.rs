@@ -1,0 +1,453 @@
+//! Per-frame device resources: the frame buffers sized by the scene, the resolution and
+//! the key capacity, the feature planes, and the set of them each frame in flight owns.
+
+use super::types::{Counters, FrameParams, Splat};
+use crate::camera::Camera;
+use crate::gpu::shader::Resource;
+use crate::gpu::sort::{SortTexels, SORT_CONFIG_32};
+use crate::gpu::{
+    BufferView, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
+    MemoryKind, RadixSort, Scan,
+};
+use ash::vk;
+
+use super::{bin_grid, keys, preprocess, GpuFeatures, GpuRenderer, GpuScene, MAX_FRAMES_IN_FLIGHT};
+
+/// The feature images of a frame: one plane per group of four channels.
+pub(super) struct FeaturePlanes {
+    pub(super) buffer: GpuBuffer,
+    /// Bytes from one plane to the next.
+    pub(super) plane_bytes: u64,
+    /// Bytes of one plane's pixels.
+    pub(super) pixel_bytes: u64,
+    /// Planes held.
+    pub(super) groups: u64,
+}
+
+/// Refuses a buffer that one storage-buffer binding of the device cannot cover.
+pub(super) fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
+    let max = u64::from(ctx.info().max_storage_buffer_range);
+    if bytes > max {
+        return Err(GpuError::InvalidArgument(format!(
+            "{what} needs {bytes} bytes in one storage buffer, but this device binds at most {max} bytes (maxStorageBufferRange); use fewer Gaussians or a device with a larger limit"
+        )));
+    }
+    Ok(())
+}
+
+/// Texel views the sorts, preprocess, keys and ranges read and write on CPU devices
+/// ([`SortConfig::texel_io`], `PREPROCESS_TEXEL_IO`, `KEYS_TEXEL_IO`, `RANGES_TEXEL_IO`),
+/// R32_UINT unless noted: the depth order's keys, values and scratch halves, the pair
+/// sort's (its values are viewed by [`FrameBuffers::value_texels`], the splats by
+/// [`FrameBuffers::splat_texels`]), and the other per-Gaussian arrays.
+pub(super) struct SortViews {
+    pub(super) depth_keys: BufferView,
+    pub(super) depth_values: BufferView,
+    pub(super) depth_scratch: [BufferView; 2],
+    pub(super) keys: BufferView,
+    pub(super) pair_scratch: [BufferView; 2],
+    /// R32G32_UINT.
+    pub(super) rects: BufferView,
+    pub(super) offsets: BufferView,
+    pub(super) bin_masks: BufferView,
+    pub(super) touched: BufferView,
+}
+
+/// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
+/// (Fields drop in order: the texel views go before the buffers they view.)
+pub(super) struct FrameBuffers {
+    pub(super) sort_views: Option<SortViews>,
+    pub(super) splat_texels: BufferView,
+    pub(super) value_texels: Option<BufferView>,
+    pub(super) gaussians: u32,
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) capacity: u32,
+    pub(super) params: GpuBuffer,
+    pub(super) counters: GpuBuffer,
+    pub(super) splats: GpuBuffer,
+    pub(super) rects: GpuBuffer,
+    pub(super) offsets: GpuBuffer,
+    pub(super) depth_keys: GpuBuffer,
+    pub(super) touched: GpuBuffer,
+    pub(super) depth_values: GpuBuffer,
+    pub(super) bin_masks: GpuBuffer,
+    pub(super) scan_scratch: GpuBuffer,
+    pub(super) keys: GpuBuffer,
+    pub(super) values: GpuBuffer,
+    pub(super) sort_scratch: GpuBuffer,
+    pub(super) ranges: GpuBuffer,
+    pub(super) color: GpuImage,
+    pub(super) depth: GpuImage,
+    /// 8-bit RGBA of the colour image; made on the first [`Readback::Rgba8`] frame.
+    pub(super) packed: Option<GpuBuffer>,
+    pub(super) readback: GpuBuffer,
+    /// The scanned offsets read back to plan a frame's chunks (host-visible); made on
+    /// the first frame rendered in chunks.
+    pub(super) chunk_offsets: Option<GpuBuffer>,
+}
+
+impl FrameBuffers {
+    pub(super) fn new(
+        ctx: &GpuContext,
+        gaussians: u32,
+        width: u32,
+        height: u32,
+        capacity: u32,
+        texel_views: bool,
+        bin_size: u32,
+    ) -> GpuResult<Self> {
+        let n = u64::from(gaussians.max(1));
+        let (bins_x, bins_y) = bin_grid(bin_size, width, height);
+        let bins = u64::from(bins_x) * u64::from(bins_y);
+        let pixels = u64::from(width) * u64::from(height);
+        let dev = |name: &str, bytes: u64| {
+            check_binding(ctx, name, bytes)?;
+            GpuBuffer::new(ctx, name, bytes, MemoryKind::Device)
+        };
+        // The splats are written in preprocess windows and read through a texel view (keys,
+        // texel blend), so one binding need not hold them all; the shared blend kernel
+        // binds them whole.
+        let splat_bytes = n * std::mem::size_of::<Splat>() as u64;
+        if !texel_views {
+            check_binding(ctx, "splats", splat_bytes)?;
+        }
+        let max_texels = u64::from(ctx.info().max_texel_buffer_elements);
+        if n * 3 > max_texels || (texel_views && u64::from(capacity) > max_texels) {
+            return Err(GpuError::InvalidArgument(format!(
+                "{gaussians} Gaussians need texel buffers of {} texels (3 per splat), but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians or a device with a larger limit",
+                n * 3
+            )));
+        }
+        let splats = GpuBuffer::new(ctx, "splats", splat_bytes, MemoryKind::Device)?;
+        let values = dev("values", u64::from(capacity) * 4)?;
+        let splat_texels = BufferView::new(
+            ctx,
+            &splats,
+            vk::Format::R32G32B32A32_SFLOAT,
+            0,
+            splats.size(),
+        )?;
+        let value_texels = if texel_views {
+            Some(BufferView::new(
+                ctx,
+                &values,
+                vk::Format::R32_UINT,
+                0,
+                values.size(),
+            )?)
+        } else {
+            None
+        };
+        let depth_keys = dev("depth keys", n * 4)?;
+        let depth_values = dev("depth order", n * 4)?;
+        let keys = dev("keys", u64::from(capacity) * 4)?;
+        let rects = dev("tile rects", n * 8)?;
+        let offsets = dev("tiles touched / offsets in depth order", n * 4)?;
+        let bin_masks = dev("bin masks", n * 4)?;
+        let touched = dev("tiles touched by Gaussian", n * 4)?;
+        // Shared by the depth sort (the Gaussians) and the pair sort (capacity pairs). The
+        // sort binds slices of it, the largest 4 bytes per key, which the capacity bound
+        // (max_capacity) keeps inside one binding.
+        let sort_scratch = GpuBuffer::new(
+            ctx,
+            "sort scratch",
+            RadixSort::scratch_size_with(&SORT_CONFIG_32, capacity.max(gaussians)),
+            MemoryKind::Device,
+        )?;
+        let sort_views = if texel_views {
+            let view = |b: &GpuBuffer, (offset, size): (u64, u64)| {
+                BufferView::new(ctx, b, vk::Format::R32_UINT, offset, size.max(4))
+            };
+            let whole = |b: &GpuBuffer| view(b, (0, b.size()));
+            let scratch_views = |max_n: u32| -> GpuResult<[BufferView; 2]> {
+                let [k, v] = RadixSort::scratch_pair_ranges(&SORT_CONFIG_32, max_n);
+                Ok([view(&sort_scratch, k)?, view(&sort_scratch, v)?])
+            };
+            Some(SortViews {
+                depth_keys: whole(&depth_keys)?,
+                depth_values: whole(&depth_values)?,
+                depth_scratch: scratch_views(gaussians.max(1))?,
+                keys: whole(&keys)?,
+                pair_scratch: scratch_views(capacity)?,
+                rects: BufferView::new(ctx, &rects, vk::Format::R32G32_UINT, 0, rects.size())?,
+                offsets: whole(&offsets)?,
+                bin_masks: whole(&bin_masks)?,
+                touched: whole(&touched)?,
+            })
+        } else {
+            None
+        };
+        Ok(FrameBuffers {
+            sort_views,
+            splat_texels,
+            value_texels,
+            gaussians,
+            width,
+            height,
+            capacity,
+            params: dev("frame params", std::mem::size_of::<FrameParams>() as u64)?,
+            counters: dev("counters", std::mem::size_of::<Counters>() as u64)?,
+            splats,
+            rects,
+            offsets,
+            depth_keys,
+            touched,
+            depth_values,
+            bin_masks,
+            scan_scratch: dev("scan scratch", Scan::scratch_size(gaussians).max(16))?,
+            keys,
+            values,
+            sort_scratch,
+            ranges: dev("bin ranges", bins * 8)?,
+            color: GpuImage::new(
+                ctx,
+                "color+alpha image",
+                width,
+                height,
+                vk::Format::R32G32B32A32_SFLOAT,
+            )?,
+            depth: GpuImage::new(ctx, "depth image", width, height, vk::Format::R32_SFLOAT)?,
+            packed: None,
+            readback: GpuBuffer::new(
+                ctx,
+                "frame readback",
+                pixels * 20 + std::mem::size_of::<Counters>() as u64,
+                MemoryKind::Readback,
+            )?,
+            chunk_offsets: None,
+        })
+    }
+
+    /// The depth order's sort views, when the sorts read through texel views.
+    pub(super) fn depth_sort_texels(&self) -> Option<SortTexels> {
+        self.sort_views.as_ref().map(|v| SortTexels {
+            keys: v.depth_keys.handle(),
+            values: v.depth_values.handle(),
+            scratch_keys: v.depth_scratch[0].handle(),
+            scratch_values: v.depth_scratch[1].handle(),
+        })
+    }
+
+    /// The views of the texel-I/O preprocess, over this frame's buffers and `scene`'s
+    /// records.
+    pub(super) fn preprocess_texels(
+        &self,
+        scene: &GpuScene,
+    ) -> GpuResult<preprocess::PreprocessTexels> {
+        match (self.sort_views.as_ref(), scene.gaussian_texels.as_ref()) {
+            (Some(v), Some(g)) => Ok(preprocess::PreprocessTexels {
+                gaussians: g.handle(),
+                splats: self.splat_texels.handle(),
+                rects: v.rects.handle(),
+                depth_keys: v.depth_keys.handle(),
+                depth_values: v.depth_values.handle(),
+                bin_masks: v.bin_masks.handle(),
+                touched: v.touched.handle(),
+            }),
+            _ => Err(GpuError::InvalidArgument(
+                "the preprocess stage's texel views are missing (scene uploaded by another renderer?)".into(),
+            )),
+        }
+    }
+
+    /// What the keys stage reads and writes, as its pipeline binds them.
+    pub(super) fn keys_io(&self, texel_io: bool) -> GpuResult<keys::KeysIo<'_>> {
+        let views = (self.sort_views.as_ref(), self.value_texels.as_ref());
+        Ok(match (texel_io, views) {
+            (false, _) => keys::KeysIo {
+                rects: Resource::Buffer(self.rects.whole()),
+                offsets: Resource::Buffer(self.offsets.whole()),
+                keys: Resource::Buffer(self.keys.whole()),
+                values: Resource::Buffer(self.values.whole()),
+                depth_order: Resource::Buffer(self.depth_values.whole()),
+                bin_masks: Resource::Buffer(self.bin_masks.whole()),
+            },
+            (true, (Some(v), Some(values))) => keys::KeysIo {
+                rects: Resource::TexelBuffer(v.rects.handle()),
+                offsets: Resource::TexelBuffer(v.offsets.handle()),
+                keys: Resource::TexelBuffer(v.keys.handle()),
+                values: Resource::TexelBuffer(values.handle()),
+                depth_order: Resource::TexelBuffer(v.depth_values.handle()),
+                bin_masks: Resource::TexelBuffer(v.bin_masks.handle()),
+            },
+            (true, _) => {
+                return Err(GpuError::InvalidArgument(
+                    "the keys stage's texel views are missing".into(),
+                ))
+            }
+        })
+    }
+
+    /// The pair sort's views, when the sorts read through texel views.
+    pub(super) fn pair_sort_texels(&self) -> Option<SortTexels> {
+        let v = self.sort_views.as_ref()?;
+        Some(SortTexels {
+            keys: v.keys.handle(),
+            values: self.value_texels.as_ref()?.handle(),
+            scratch_keys: v.pair_scratch[0].handle(),
+            scratch_values: v.pair_scratch[1].handle(),
+        })
+    }
+
+    pub(super) fn device_bytes(&self) -> u64 {
+        [
+            &self.params,
+            &self.counters,
+            &self.splats,
+            &self.rects,
+            &self.offsets,
+            &self.depth_keys,
+            &self.touched,
+            &self.depth_values,
+            &self.bin_masks,
+            &self.scan_scratch,
+            &self.keys,
+            &self.values,
+            &self.sort_scratch,
+            &self.ranges,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum::<u64>()
+            + self.packed.as_ref().map_or(0, |b| b.size())
+            + self.color.bytes()
+            + self.depth.bytes()
+    }
+
+    pub(super) fn readback_offsets(&self) -> (u64, u64, u64) {
+        let pixels = u64::from(self.width) * u64::from(self.height);
+        (0, pixels * 16, pixels * 20)
+    }
+}
+
+/// The resources of one frame in flight: command buffer and fence, timestamp queries,
+/// frame buffers and feature images. (Fields drop in order: the slot goes first and waits
+/// for a submission still pending, before the buffers it uses go.)
+pub(super) struct FrameSet {
+    pub(super) slot: FrameSlot,
+    pub(super) timer: GpuTimer,
+    pub(super) frame: Option<FrameBuffers>,
+    /// The feature images of this set's last features frame, one plane per group of four
+    /// channels (vec4 per pixel) in one buffer, planes `plane_bytes` apart (a multiple of
+    /// the storage-buffer offset alignment); kept across frames of the same size.
+    pub(super) feature_planes: Option<FeaturePlanes>,
+    /// Bin size of the frame recorded in this set (see [`FrameStats::bin_size`]).
+    pub(super) bin_size: u32,
+    /// The serial number of the frame submitted in this set and not finished yet.
+    pub(super) pending: Option<u64>,
+}
+
+impl FrameSet {
+    pub(super) fn new(ctx: &GpuContext, index: usize, bin_size: u32) -> GpuResult<Self> {
+        Ok(FrameSet {
+            slot: FrameSlot::new(ctx, &format!("frame {index}"))?,
+            // Two timestamps per stage: up to ten stages (features and shade included).
+            timer: GpuTimer::new(ctx, &format!("frame {index} timestamps"), 32)?,
+            frame: None,
+            feature_planes: None,
+            bin_size,
+            pending: None,
+        })
+    }
+}
+
+impl GpuRenderer {
+    /// Makes set `set`'s feature planes hold `features`' groups for `pixels` pixels.
+    pub(super) fn ensure_feature_planes(
+        &mut self,
+        set: usize,
+        features: &GpuFeatures,
+        pixels: u64,
+    ) -> GpuResult<()> {
+        let groups = features.groups.len() as u64;
+        let align = self.ctx.info().min_storage_buffer_offset_alignment.max(16);
+        let plane_bytes = (pixels * 16).div_ceil(align) * align;
+        let planes = &mut self.sets[set].feature_planes;
+        let fits = planes
+            .as_ref()
+            .is_some_and(|p| p.plane_bytes == plane_bytes && p.groups >= groups);
+        if !fits {
+            *planes = None;
+            check_binding(&self.ctx, "feature image", plane_bytes * groups)?;
+            *planes = Some(FeaturePlanes {
+                buffer: GpuBuffer::new(
+                    &self.ctx,
+                    "feature images",
+                    plane_bytes * groups,
+                    MemoryKind::Device,
+                )?,
+                plane_bytes,
+                pixel_bytes: pixels * 16,
+                groups,
+            });
+        }
+        Ok(())
+    }
+
+    /// Makes set `set`'s frame buffers fit the scene, the camera and `capacity` pairs.
+    pub(super) fn ensure_frame(
+        &mut self,
+        set: usize,
+        scene: &GpuScene,
+        cam: &Camera,
+        capacity: u32,
+    ) -> GpuResult<()> {
+        let frame = &mut self.sets[set].frame;
+        let fits = frame.as_ref().is_some_and(|f| {
+            f.gaussians >= scene.count
+                && f.width == cam.width
+                && f.height == cam.height
+                && f.capacity >= capacity
+        });
+        if !fits {
+            // Free the old buffers first so peak memory is not doubled.
+            *frame = None;
+            let views = self.blend.needs_texel_views();
+            *frame = Some(FrameBuffers::new(
+                &self.ctx,
+                scene.count,
+                cam.width,
+                cam.height,
+                capacity,
+                views,
+                self.blend.kernel().bin_size(),
+            )?);
+        }
+        Ok(())
+    }
+
+    /// A set with no frame in flight (made when every set made so far is busy).
+    pub(super) fn free_set(&mut self) -> GpuResult<usize> {
+        if let Some(i) = self.sets.iter().position(|s| s.pending.is_none()) {
+            return Ok(i);
+        }
+        if self.sets.len() >= MAX_FRAMES_IN_FLIGHT {
+            return Err(GpuError::InvalidArgument(format!(
+                "{MAX_FRAMES_IN_FLIGHT} frames are in flight already; finish one before submitting another"
+            )));
+        }
+        let set = FrameSet::new(&self.ctx, self.sets.len(), self.blend.kernel().bin_size())?;
+        self.sets.push(set);
+        Ok(self.sets.len() - 1)
+    }
+
+    /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.
+    pub(super) fn ensure_packed(&mut self, set: usize) -> GpuResult<()> {
+        let f = self.sets[set]
+            .frame
+            .as_mut()
+            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+        if f.packed.is_none() {
+            let bytes = u64::from(f.width) * u64::from(f.height) * 4;
+            check_binding(&self.ctx, "packed rgba8 frame", bytes)?;
+            f.packed = Some(GpuBuffer::new(
+                &self.ctx,
+                "packed rgba8 frame",
+                bytes,
+                MemoryKind::Device,
+            )?);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,148 @@
+//! Reading a finished frame back to the host: pixels, counters, feature planes and the
+//! intermediate buffers the tests compare with the CPU reference.
+
+use super::types::{Counters, Splat};
+use crate::camera::Camera;
+use crate::frame::Frame;
+use crate::gpu::{GpuError, GpuResult};
+
+use super::{bin_grid, features, GpuRenderer, GpuScene, Rgba8Frame};
+
+/// Intermediate buffers of a frame, read back for tests against the CPU reference.
+#[derive(Clone, Debug, Default)]
+pub struct Intermediates {
+    /// Preprocess output per Gaussian.
+    pub splats: Vec<Splat>,
+    /// Packed tile rectangles per Gaussian (`x | y << 16`, min inclusive, max exclusive).
+    pub rects: Vec<[u32; 2]>,
+    /// Gaussian indices in depth order (culled Gaussians last).
+    pub order: Vec<u32>,
+    /// Exclusive prefix sum of tiles touched, in depth order.
+    pub offsets: Vec<u32>,
+    /// Frame counters.
+    pub counters: Counters,
+    /// Sorted keys: the bin (tile) ids; pairs arrive in depth order, so the keys carry no
+    /// depth (of the last chunk, for a frame in chunks; so are the values, the ranges and
+    /// the sort count).
+    pub keys: Vec<u32>,
+    /// Sorted values (Gaussian indices).
+    pub values: Vec<u32>,
+    /// `[start, end)` per bin.
+    pub ranges: Vec<[u32; 2]>,
+    /// Side of the bins in pixels (16: the reference tiles; 8: their quarters).
+    pub bin_size: u32,
+    /// Bins along x and y.
+    pub bins: (u32, u32),
+}
+
+impl GpuRenderer {
+    /// The `k` blended channels of set `set`'s last features frame, pixel-major.
+    pub(super) fn read_feature_planes(
+        &self,
+        set: usize,
+        k: usize,
+        pixels: usize,
+    ) -> GpuResult<Vec<f32>> {
+        let planes = self.sets[set]
+            .feature_planes
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no feature image was rendered".into()))?;
+        let stride = (planes.plane_bytes / 16) as usize;
+        let groups = features::groups(k);
+        let all: Vec<[f32; 4]> = planes.buffer.read(&self.ctx, stride * groups)?;
+        let mut out = vec![0f32; pixels * k];
+        for g in 0..groups {
+            let plane = &all[g * stride..g * stride + pixels];
+            for (dst, src) in out.chunks_exact_mut(k).zip(plane) {
+                for (c, v) in src.iter().enumerate() {
+                    let ch = g * features::CHANNELS_PER_GROUP + c;
+                    if ch < k {
+                        dst[ch] = *v;
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    pub(super) fn read_counters(&self, set: usize) -> GpuResult<Counters> {
+        let f = self.sets[set]
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let (_, _, off) = f.readback_offsets();
+        let bytes = f.readback.mapped()?;
+        Ok(bytemuck::pod_read_unaligned(
+            &bytes[off as usize..off as usize + std::mem::size_of::<Counters>()],
+        ))
+    }
+
+    pub(super) fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
+        let f = self.sets[set]
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let bytes = f.readback.mapped()?;
+        let pixels = cam.width as usize * cam.height as usize;
+        let (color_off, depth_off, _) = f.readback_offsets();
+        let rgba: &[[f32; 4]] =
+            bytemuck::cast_slice(&bytes[color_off as usize..color_off as usize + pixels * 16]);
+        let depth: &[f32] =
+            bytemuck::cast_slice(&bytes[depth_off as usize..depth_off as usize + pixels * 4]);
+        Ok(Frame {
+            width: cam.width,
+            height: cam.height,
+            color: rgba.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+            alpha: rgba.iter().map(|p| p[3]).collect(),
+            depth: depth.to_vec(),
+            feature_count: 0,
+            features: Vec::new(),
+        })
+    }
+
+    pub(super) fn read_rgba8(&self, set: usize, cam: &Camera) -> GpuResult<Rgba8Frame> {
+        let f = self.sets[set]
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let bytes = f.readback.mapped()?;
+        let len = cam.width as usize * cam.height as usize * 4;
+        let (color_off, _, _) = f.readback_offsets();
+        Ok(Rgba8Frame {
+            width: cam.width,
+            height: cam.height,
+            rgba: bytes[color_off as usize..color_off as usize + len].to_vec(),
+        })
+    }
+
+    /// The intermediate buffers of the last frame finished.
+    pub(super) fn read_intermediates(
+        &self,
+        scene: &GpuScene,
+        cam: &Camera,
+    ) -> GpuResult<Intermediates> {
+        let set = &self.sets[self.last];
+        let f = set
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+        let ctx = &self.ctx;
+        let n = scene.count as usize;
+        let counters = self.read_counters(self.last)?;
+        let sorted = counters.sort_count as usize;
+        let bin_size = set.bin_size;
+        let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
+        Ok(Intermediates {
+            splats: f.splats.read(ctx, n)?,
+            rects: f.rects.read(ctx, n)?,
+            order: f.depth_values.read(ctx, n)?,
+            offsets: f.offsets.read(ctx, n)?,
+            counters,
+            keys: f.keys.read(ctx, sorted)?,
+            values: f.values.read(ctx, sorted)?,
+            ranges: f.ranges.read(ctx, (bx * by) as usize)?,
+            bin_size,
+            bins: (bx, by),
+        })
+    }
+}

@@ -1,0 +1,373 @@
+//! Scheduling a frame: the capacity and bin-size policy, regrowing, and depth-ordered
+//! chunks for frames whose pairs exceed one key buffer.
+
+use super::types::{Counters, Splat};
+use crate::camera::Camera;
+use crate::cpu::{RenderOptions, SplatKernel};
+use crate::gpu::{GpuBuffer, GpuError, GpuResult, MemoryKind};
+use ash::vk;
+
+use super::{
+    blend, keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket,
+};
+
+/// Key bits that order the pairs for `num_tiles` bins: 32 depth bits plus the bin id's.
+pub fn key_bits(num_tiles: u32) -> u32 {
+    32 + tile_bits(num_tiles)
+}
+
+/// Side in pixels and grid of the bins pairs are keyed by, for a bin size and image.
+pub fn bin_grid(bin_size: u32, width: u32, height: u32) -> (u32, u32) {
+    (width.div_ceil(bin_size), height.div_ceil(bin_size))
+}
+
+/// Bits of a bin (tile) id for `num_tiles` bins.
+pub fn tile_bits(num_tiles: u32) -> u32 {
+    32 - num_tiles.saturating_sub(1).leading_zeros()
+}
+
+/// Overrides of the device limits that split a frame, so that small scenes in tests take
+/// the paths large scenes take. Splitting never changes the image: it is bit-identical.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SplitLimits {
+    /// Gaussians per preprocess window, rounded down to a multiple of 256 (0: as many as
+    /// one storage binding holds, 2.8 M on lavapipe).
+    pub window: u32,
+    /// Pairs per chunk (0: as many as one key buffer holds, 33.5 M on lavapipe). Nonzero
+    /// renders every colour frame in chunks, even one that would fit at once.
+    pub chunk_pairs: u32,
+}
+
+/// Chunks recorded per submission of a chunked frame (four timed stages each, within the
+/// frame timer's capacity).
+pub(super) const CHUNKS_PER_SUBMIT: usize = 6;
+
+/// What one submission of a frame records.
+#[derive(Clone, Copy)]
+pub(super) enum Pass<'a> {
+    /// The whole frame: preprocess to readback, every Gaussian in one chunk.
+    Whole,
+    /// Preprocess, depth order and scan, then the counters and the scanned offsets to
+    /// the host, which plans the chunks.
+    Front,
+    /// Keys, sort, ranges and blend for each chunk, after a [`Pass::Front`]; `first`:
+    /// the frame's first chunk is among them; `last`: so is its last (then the readback).
+    Chunks {
+        chunks: &'a [keys::Chunk],
+        first: bool,
+        last: bool,
+    },
+}
+
+/// Smallest key capacity allocated.
+pub(super) const MIN_CAPACITY: u32 = 1 << 16;
+
+/// llvmpipe (lavapipe) ends all loops of a shader invocation after this many iterations in
+/// total (gallivm's `LP_MAX_TGSI_LOOP_ITERATIONS`), silently. The shaders report their
+/// longest loops (`Counters::max_bins_loop`, `max_list_loop`) so a frame that would hit
+/// the limit is rendered with larger bins or refused, never returned incomplete.
+pub const CPU_LOOP_LIMIT: u32 = 65_535;
+
+/// Most pairs a frame keys by 8-pixel bins (the texel kernel's); past this it uses
+/// 16-pixel bins, whose fewer pairs then cost less to sort than the shorter lists save in
+/// the blend (measured on lavapipe: 1e6 Gaussians at 1080p took 5.76 s with 30.8 M pairs
+/// of 8-pixel bins and 3.41 s with 9.0 M of 16-pixel bins; BENCHMARKS.md, "Scaling").
+pub const SMALL_BIN_MAX_PAIRS: u32 = 1 << 24;
+
+impl GpuRenderer {
+    /// Gaussians per preprocess window: as many as one storage binding holds of the
+    /// largest per-Gaussian record (48 bytes), a multiple of the workgroup.
+    pub(super) fn preprocess_window(&self) -> u32 {
+        let range = u64::from(self.ctx.info().max_storage_buffer_range);
+        let per_binding = (range / std::mem::size_of::<Splat>() as u64).min(u64::from(u32::MAX));
+        let device = (per_binding as u32 / preprocess::WORKGROUP * preprocess::WORKGROUP)
+            .max(preprocess::WORKGROUP);
+        match self.split.window {
+            0 => device,
+            w => w.clamp(preprocess::WORKGROUP, device),
+        }
+    }
+
+    /// Whether the device is a CPU implementation with llvmpipe's loop limit.
+    pub(super) fn loop_limited(&self) -> bool {
+        let info = self.ctx.info();
+        info.device_type == vk::PhysicalDeviceType::CPU && info.name.contains("llvmpipe")
+    }
+
+    pub(super) fn max_capacity(&self) -> u32 {
+        // Keys and values are 4 bytes; one storage-buffer binding must cover them all.
+        let range = u64::from(self.ctx.info().max_storage_buffer_range);
+        (range / 4).min(u64::from(u32::MAX)) as u32
+    }
+
+    /// Pairs one piece of a frame may hold: one key buffer's worth, or fewer under the
+    /// split limits of tests ([`SplitLimits::chunk_pairs`]).
+    pub(super) fn pairs_per_piece(&self) -> u32 {
+        let max = self.max_capacity();
+        match self.split.chunk_pairs {
+            0 => max,
+            forced => forced.min(max),
+        }
+    }
+
+    /// Checks a frame, makes its resources in a free set, and records and submits it.
+    pub(super) fn submit_with<'a>(
+        &mut self,
+        scene: &'a GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+        readback: Readback,
+        features: Option<FeatureJob<'a>>,
+    ) -> GpuResult<Ticket<'a>> {
+        cam.validate()
+            .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
+        opts.validate().map_err(GpuError::InvalidArgument)?;
+        if scene.compact && self.compact_preprocess.is_none() {
+            self.compact_preprocess = Some(preprocess::Preprocess::new(
+                &self.ctx,
+                true,
+                self.preprocess.texel_io(),
+            )?);
+        }
+        if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
+            self.power_blend = Some(blend::Blend::new(
+                &self.ctx,
+                self.blend.kernel(),
+                SplatKernel::Power,
+            )?);
+        }
+        let set = self.free_set()?;
+        let initial = self
+            .capacity
+            .unwrap_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)))
+            .min(self.max_capacity());
+        self.ensure_frame(set, scene, cam, initial)?;
+        let preferred = self.blend.kernel().bin_size();
+        self.sets[set].bin_size = if self.large_bins == Some((scene.count, cam.width, cam.height)) {
+            16
+        } else {
+            preferred
+        };
+        // A frame rendered in chunks needs the host between its submissions (to plan the
+        // chunks), so it is rendered when it is finished, not in flight. Frames go in
+        // chunks once one frame's pairs did not fit one key buffer, when the test limits
+        // say so, or when the first guess of pairs (4 per Gaussian) exceeds one key buffer
+        // already. Feature channels are blended chunk by chunk too (before each chunk's
+        // colour blend), and the neural shader runs once after the last chunk.
+        let chunked = self.chunked
+            || self.split.chunk_pairs > 0
+            || u64::from(scene.count) * 4 > u64::from(self.max_capacity());
+        let ticket = Ticket {
+            set,
+            serial: self.serial,
+            scene,
+            cam: cam.clone(),
+            opts: opts.clone(),
+            readback,
+            features,
+            chunked,
+        };
+        self.serial += 1;
+        if !chunked {
+            self.record_ticket(&ticket, false, Pass::Whole)?;
+        }
+        self.sets[set].pending = Some(ticket.serial);
+        Ok(ticket)
+    }
+
+    /// Makes what the ticket's readback and features need in its set, then records and
+    /// submits `pass` of the frame (and waits for it when `wait`).
+    pub(super) fn record_ticket(&mut self, t: &Ticket, wait: bool, pass: Pass) -> GpuResult<()> {
+        if t.readback == Readback::Rgba8 {
+            self.ensure_packed(t.set)?;
+        }
+        if let Some((features, _)) = t.features {
+            let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
+            self.ensure_feature_planes(t.set, features, pixels)?;
+        }
+        self.record_and_submit(
+            t.set, t.scene, &t.cam, &t.opts, t.readback, t.features, wait, pass,
+        )
+    }
+
+    /// Waits for the ticket's frame and checks its counters: when the frame needed more
+    /// pairs than its buffers hold, or larger bins, it is recorded again with larger
+    /// buffers or bins and waited for, until it is complete; when it needs more pairs than
+    /// one key buffer holds, it is rendered in chunks. Then the timings and counts are the
+    /// frame's.
+    pub(super) fn complete(&mut self, t: &Ticket) -> GpuResult<()> {
+        let set = self.sets.get_mut(t.set).ok_or_else(|| {
+            GpuError::InvalidArgument("the ticket is not from this renderer".into())
+        })?;
+        if set.pending != Some(t.serial) {
+            return Err(GpuError::InvalidArgument(
+                "the ticket's frame was finished already, or is not from this renderer".into(),
+            ));
+        }
+        // The set is free again whatever happens below.
+        set.pending = None;
+        self.ctx.wait_slot(&mut set.slot)?;
+        let cam = &t.cam;
+        let max = self.max_capacity();
+        let mut chunked = t.chunked;
+        let mut regrows = 0;
+        loop {
+            let (counters, chunks) = if chunked {
+                match self.render_chunks(t)? {
+                    Some(done) => done,
+                    None => {
+                        // Larger bins or key buffers: the frame is planned again.
+                        regrows += 1;
+                        continue;
+                    }
+                }
+            } else {
+                (self.read_counters(t.set)?, 1)
+            };
+            let pairs = counters.pairs();
+            let set = &self.sets[t.set];
+            let capacity = set.frame.as_ref().map_or(0, |f| f.capacity);
+            let bin_size = set.bin_size;
+            let complete = chunked || pairs <= u64::from(capacity);
+            if complete && self.loop_limited() {
+                let bins_loop = counters.max_bins_loop;
+                if !chunked && bins_loop > CPU_LOOP_LIMIT && bin_size < 16 {
+                    // Four times fewer iterations per Gaussian with 16-pixel bins.
+                    self.sets[t.set].bin_size = 16;
+                    regrows += 1;
+                    self.record_ticket(t, true, Pass::Whole)?;
+                    continue;
+                }
+                let worst = bins_loop.max(counters.max_list_loop);
+                if worst > CPU_LOOP_LIMIT {
+                    return Err(GpuError::InvalidArgument(format!(
+                        "this frame needs a shader loop of {worst} iterations ({} bins of one Gaussian, {} Gaussians in one bin), but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations in total, which would silently drop Gaussians; render at a lower resolution, or on another device",
+                        bins_loop,
+                        counters.max_list_loop,
+                        self.ctx.info().name
+                    )));
+                }
+            }
+            if complete {
+                // Larger bins stick while the pairs say the preferred ones would not do: an
+                // 8-pixel bin frame has at most 4 times the pairs of a 16-pixel one.
+                let preferred = self.blend.kernel().bin_size();
+                let sticky =
+                    bin_size > preferred && pairs * 4 > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
+                self.large_bins = sticky.then_some((t.scene.count, cam.width, cam.height));
+                let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
+                self.stats = FrameStats {
+                    visible: counters.visible,
+                    pairs,
+                    key_bits: key_bits(bx * by),
+                    regrows,
+                    bin_size,
+                    chunks,
+                };
+                self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
+                break;
+            }
+            if pairs > u64::from(max.min(SMALL_BIN_MAX_PAIRS)) && bin_size < 16 {
+                // Fewer, larger bins need fewer pairs; the texel kernel blends either.
+                self.sets[t.set].bin_size = 16;
+                regrows += 1;
+                self.record_ticket(t, true, Pass::Whole)?;
+                continue;
+            }
+            if pairs > u64::from(max) {
+                // Too many pairs for one key buffer: this frame and the next in chunks.
+                self.chunked = true;
+                chunked = true;
+                regrows += 1;
+                continue;
+            }
+            // Grow with headroom so a camera path does not regrow every few frames.
+            let grown = (pairs + pairs / 4).min(u64::from(max)) as u32;
+            self.ensure_frame(t.set, t.scene, cam, grown)?;
+            regrows += 1;
+            self.record_ticket(t, true, Pass::Whole)?;
+        }
+        if !chunked {
+            self.timings = self.read_timings(t.set)?;
+        }
+        self.last = t.set;
+        Ok(())
+    }
+
+    /// Renders the ticket's frame in depth-ordered chunks whose pairs fit the key buffers:
+    /// one submission up to the scan, whose offsets the host reads to plan the chunks, then
+    /// keys, sort, ranges and blend per chunk, each blend resuming every pixel where the
+    /// previous chunk left it (`glsl/blend.comp`). The chunks' lists are, tile by tile,
+    /// consecutive runs of the one-piece frame's lists, so the image is bit-identical.
+    /// Returns the frame's counters and its number of chunks, or None when the frame must
+    /// be planned again (larger bins, or key buffers grown for its largest chunk).
+    pub(super) fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<(Counters, u32)>> {
+        let max = self.max_capacity();
+        let f = self.sets[t.set]
+            .frame
+            .as_mut()
+            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+        if f.chunk_offsets.is_none() {
+            f.chunk_offsets = Some(GpuBuffer::new(
+                &self.ctx,
+                "scanned offsets (chunk planning)",
+                u64::from(f.gaussians.max(1)) * 4,
+                MemoryKind::Readback,
+            )?);
+        }
+        self.record_ticket(t, true, Pass::Front)?;
+        let mut timings = self.read_timings(t.set)?;
+        let front = self.read_counters(t.set)?;
+        let pairs = front.pairs();
+        let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
+        let too_many = pairs > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
+        if (bins_cut || too_many) && self.sets[t.set].bin_size < 16 {
+            // As in one piece: 16-pixel bins first (fewer pairs and bin-loop iterations).
+            self.sets[t.set].bin_size = 16;
+            return Ok(None);
+        }
+        let limit = self.pairs_per_piece();
+        let (chunks, capacity) = {
+            let f = self.sets[t.set]
+                .frame
+                .as_ref()
+                .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+            let visible = (front.visible as usize).min(t.scene.count as usize);
+            let bytes = f
+                .chunk_offsets
+                .as_ref()
+                .ok_or_else(|| GpuError::InvalidArgument("chunk offsets missing".into()))?
+                .mapped()?;
+            let offsets: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..visible * 4]);
+            (
+                keys::plan_chunks(&offsets, pairs, u64::from(limit)),
+                f.capacity,
+            )
+        };
+        let largest = chunks.iter().map(|c| c.pairs).max().unwrap_or(0);
+        if largest > u64::from(capacity) {
+            if largest > u64::from(max) {
+                return Err(GpuError::InvalidArgument(format!(
+                    "one Gaussian of this frame touches {largest} bins, more than the {max} pairs one storage buffer of this device can hold; render at a lower resolution"
+                )));
+            }
+            let grown = (largest + largest / 4).min(u64::from(max)) as u32;
+            self.ensure_frame(t.set, t.scene, &t.cam, grown)?;
+            return Ok(None);
+        }
+        let batches = chunks.len().div_ceil(CHUNKS_PER_SUBMIT);
+        for (b, batch) in chunks.chunks(CHUNKS_PER_SUBMIT).enumerate() {
+            let pass = Pass::Chunks {
+                chunks: batch,
+                first: b == 0,
+                last: b + 1 == batches,
+            };
+            self.record_ticket(t, true, pass)?;
+            timings.add(&self.read_timings(t.set)?);
+        }
+        self.timings = timings;
+        // Copied after the last chunk: the front's totals, the chunks' loop lengths.
+        let counters = self.read_counters(t.set)?;
+        Ok(Some((counters, chunks.len() as u32)))
+    }
+}

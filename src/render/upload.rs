@@ -1,0 +1,239 @@
+//! Scene upload: the Gaussians' records, their SH coefficients and feature channels on
+//! the device ([`GpuScene`], [`GpuFeatures`]).
+
+use super::types::{GpuGaussian, GpuGaussianCompact};
+use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
+use crate::scene::ActivatedScene;
+use ash::vk;
+
+use super::{check_binding, features, shade, GpuRenderer};
+
+/// A scene uploaded to the device.
+pub struct GpuScene {
+    // The views go before the buffers they view.
+    pub(super) sh_texels: BufferView,
+    /// RGBA32UI view of the records, for the texel-I/O preprocess (CPU devices).
+    pub(super) gaussian_texels: Option<BufferView>,
+    pub(super) gaussians: GpuBuffer,
+    pub(super) sh: GpuBuffer,
+    pub(super) count: u32,
+    pub(super) sh_degree: u32,
+    pub(super) sh_coeffs: u32,
+    pub(super) compact: bool,
+}
+
+impl GpuScene {
+    /// Whether the scene was uploaded compact ([`GpuRenderer::set_compact`]: fp16 SH, scales and rotations).
+    pub fn is_compact(&self) -> bool {
+        self.compact
+    }
+    /// Number of Gaussians.
+    pub fn len(&self) -> u32 {
+        self.count
+    }
+    /// True when the scene is empty.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+    /// Device bytes held by the scene.
+    pub fn device_bytes(&self) -> u64 {
+        self.gaussians.size() + self.sh.size()
+    }
+}
+
+/// A scene's feature channels uploaded to the device: one buffer per group of four
+/// channels, a vec4 per Gaussian (zero past the last channel).
+pub struct GpuFeatures {
+    // The views go before the buffers they view.
+    pub(super) views: Vec<BufferView>,
+    pub(super) groups: Vec<GpuBuffer>,
+    pub(super) channels: usize,
+    pub(super) count: u32,
+}
+
+impl GpuFeatures {
+    /// Channels per Gaussian (K).
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+}
+
+/// What a frame blends besides colour: the scene's features, and the neural shader
+/// applied to them.
+pub(super) type FeatureJob<'a> = (&'a GpuFeatures, Option<&'a shade::GpuShader>);
+
+/// RGBA32F texels of SH per Gaussian: the `3 (d + 1)^2` floats rounded up to whole texels
+/// (`glsl/preprocess.comp` computes the same stride).
+pub fn sh_texel_stride(sh_degree: u32) -> u32 {
+    (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
+}
+
+impl GpuRenderer {
+    /// Uploads activated Gaussians.
+    pub fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
+        let count = u32::try_from(scene.len()).map_err(|_| {
+            GpuError::InvalidArgument(format!(
+                "{} Gaussians exceed the 2^32 limit of one upload",
+                scene.len()
+            ))
+        })?;
+        // Preprocess binds windows of the records, so one binding need not hold them all.
+        let gaussians = if self.compact {
+            let records: Vec<GpuGaussianCompact> = (0..scene.len())
+                .map(|i| {
+                    GpuGaussianCompact::new(
+                        scene.positions[i],
+                        scene.opacities[i],
+                        scene.scales[i],
+                        scene.rotations[i],
+                    )
+                })
+                .collect();
+            self.upload_records("gaussians (compact)", &records)?
+        } else {
+            let records: Vec<GpuGaussian> = (0..scene.len())
+                .map(|i| {
+                    let p = scene.positions[i];
+                    let s = scene.scales[i];
+                    GpuGaussian {
+                        pos_opacity: [p[0], p[1], p[2], scene.opacities[i]],
+                        scale: [s[0], s[1], s[2], 0.0],
+                        rotation: scene.rotations[i],
+                    }
+                })
+                .collect();
+            self.upload_records("gaussians", &records)?
+        };
+        // SH is read through an RGBA32F texel buffer (texel buffers address up to
+        // maxTexelBufferElements texels, far beyond one storage binding on lavapipe), each
+        // Gaussian's floats padded to whole texels.
+        let stride = scene.sh_stride();
+        let padded = sh_texel_stride(scene.sh_degree) as usize * 4;
+        let texels = scene.len() as u64 * padded as u64 / 4;
+        let max_texels = u64::from(self.ctx.info().max_texel_buffer_elements);
+        if texels > max_texels {
+            return Err(GpuError::InvalidArgument(format!(
+                "the SH coefficients of {count} Gaussians need {texels} texels ({} bytes) in one texel buffer, but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians, a lower --sh-degree or a device with a larger limit",
+                texels * 16
+            )));
+        }
+        // SH degrees 1 and 3 fill whole texels already and upload as they are.
+        let sh_padded: std::borrow::Cow<[f32]> = if stride == padded {
+            std::borrow::Cow::Borrowed(&scene.sh)
+        } else {
+            let mut v = vec![0f32; scene.len() * padded];
+            for (dst, src) in v
+                .chunks_exact_mut(padded)
+                .zip(scene.sh.chunks_exact(stride))
+            {
+                dst[..stride].copy_from_slice(src);
+            }
+            std::borrow::Cow::Owned(v)
+        };
+        let (sh, format, sh_bytes) = if self.compact {
+            // Round to nearest fp16; beyond fp16's range (|x| > 65504) becomes infinite.
+            let halves: Vec<u16> = sh_padded
+                .iter()
+                .map(|&x| half::f16::from_f32(x).to_bits())
+                .collect();
+            let bytes = (halves.len() * 2).max(8) as u64;
+            let sh = GpuBuffer::new(
+                &self.ctx,
+                "sh coefficients (fp16)",
+                bytes,
+                MemoryKind::Device,
+            )?;
+            sh.upload(&self.ctx, &halves)?;
+            (sh, vk::Format::R16G16B16A16_SFLOAT, bytes)
+        } else {
+            let bytes = (sh_padded.len() * 4).max(16) as u64;
+            let sh = GpuBuffer::new(&self.ctx, "sh coefficients", bytes, MemoryKind::Device)?;
+            sh.upload(&self.ctx, &sh_padded)?;
+            (sh, vk::Format::R32G32B32A32_SFLOAT, bytes)
+        };
+        let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
+        let gaussian_texels = if self.preprocess.texel_io() {
+            let bytes = gaussians.size() / 16 * 16;
+            Some(BufferView::new(
+                &self.ctx,
+                &gaussians,
+                vk::Format::R32G32B32A32_UINT,
+                0,
+                bytes,
+            )?)
+        } else {
+            None
+        };
+        Ok(GpuScene {
+            sh_texels,
+            gaussian_texels,
+            gaussians,
+            sh,
+            count,
+            sh_degree: scene.sh_degree,
+            sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
+            compact: self.compact,
+        })
+    }
+
+    /// A device buffer holding `records`.
+    pub(super) fn upload_records<T: bytemuck::Pod>(
+        &self,
+        name: &str,
+        records: &[T],
+    ) -> GpuResult<GpuBuffer> {
+        // At least one texel, so the preprocess's texel view is valid for an empty scene.
+        let bytes = (std::mem::size_of_val(records) as u64).max(16);
+        let buffer = GpuBuffer::new(&self.ctx, name, bytes, MemoryKind::Device)?;
+        buffer.upload(&self.ctx, records)?;
+        Ok(buffer)
+    }
+
+    /// Uploads the scene's feature channels (four per buffer, for the feature blend).
+    pub fn upload_features(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+        let k = scene.feature_count;
+        let n = scene.len();
+        if k == 0 || scene.features.len() != n * k {
+            return Err(GpuError::InvalidArgument(format!(
+                "the scene has no feature channels to upload ({} values for {n} Gaussians and {k} channels)",
+                scene.features.len()
+            )));
+        }
+        let count = u32::try_from(n).map_err(|_| {
+            GpuError::InvalidArgument(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
+        })?;
+        let (mut groups, mut views) = (Vec::new(), Vec::new());
+        for g in 0..features::groups(k) {
+            let mut v = vec![[0f32; 4]; n.max(1)];
+            for (i, dst) in v.iter_mut().enumerate().take(n) {
+                for (c, d) in dst.iter_mut().enumerate() {
+                    let ch = g * features::CHANNELS_PER_GROUP + c;
+                    if ch < k {
+                        *d = scene.features[i * k + ch];
+                    }
+                }
+            }
+            let name = format!("features {}..{}", g * 4, (g * 4 + 4).min(k));
+            let bytes = (v.len() * 16) as u64;
+            check_binding(&self.ctx, &name, bytes)?;
+            let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
+            buf.upload(&self.ctx, &v)?;
+            if self.blend.needs_texel_views() {
+                views.push(BufferView::new(
+                    &self.ctx,
+                    &buf,
+                    vk::Format::R32G32B32A32_SFLOAT,
+                    0,
+                    bytes,
+                )?);
+            }
+            groups.push(buf);
+        }
+        Ok(GpuFeatures {
+            views,
+            groups,
+            channels: k,
+            count,
+        })
+    }
+}
