@@ -4,15 +4,14 @@
 //! must not change a single bit of colour, alpha or depth: compositing is sequential per
 //! pixel and the chunks' per-tile lists are consecutive runs of the one-piece lists. The
 //! split frames are also held to the CPU reference with the whole-frame thresholds of
-//! `tests/gpu_frames.rs` (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255).
+//! `tests/all/gpu_frames.rs` (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255).
 //!
 //! A real scene over one storage binding's worth of Gaussians is
 //! `a_scene_beyond_one_storage_binding_renders_in_preprocess_windows` in
-//! `tests/gpu_frames.rs`; the 10 M-Gaussian frame is checked by hand (BENCHMARKS.md).
+//! `tests/all/gpu_frames.rs`; the 10 M-Gaussian frame is checked by hand (BENCHMARKS.md).
 
-mod common;
-
-use common::gpu::{assert_validation_clean, compare, dump_failure, new_renderer, renderer};
+use crate::common;
+use crate::common::gpu::{assert_validation_clean, compare, dump_failure, new_renderer, renderer};
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, RenderOptions, SplatKernel};
 use vksplat::frame::Frame;

@@ -1,8 +1,7 @@
 //! The CPU reference renderer against closed-form values of the reference rules.
 
-mod common;
-
-use common::{axis_camera, push_gaussian};
+use crate::common;
+use crate::common::{axis_camera, push_gaussian};
 use glam::Vec3;
 use vksplat::cpu::{self, sh, RenderOptions};
 use vksplat::frame::Frame;

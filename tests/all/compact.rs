@@ -5,9 +5,8 @@
 //! thresholds (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255) of the CPU reference
 //! of that scene; the upload must take 16 bytes fewer per Gaussian plus half the SH bytes.
 
-mod common;
-
-use common::gpu::{assert_validation_clean, compare, renderer};
+use crate::common;
+use crate::common::gpu::{assert_validation_clean, compare, renderer};
 use vksplat::camera;
 use vksplat::cpu::{self, RenderOptions};
 use vksplat::scene;

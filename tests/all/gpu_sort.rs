@@ -585,7 +585,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Timing of the 2^20-pair sort (44 key bits) and the 2^20-element scan.
-/// `cargo test --test gpu_sort -- --ignored --nocapture bench`;
+/// `cargo test --test all gpu_sort::bench -- --ignored --nocapture`;
 /// `VKSPLAT_SORT_CONFIG=radix_bits,workgroup_size,items` overrides the sort tuning.
 #[test]
 #[ignore]

@@ -18,9 +18,8 @@
 //!   Gaussian's largest alpha in the tile is within 0.1 % of 1/255. Order within a tile is
 //!   compared exactly on the Gaussians both sides keep.
 
-mod common;
-
-use common::gpu::{assert_validation_clean, move_towards, new_renderer, renderer};
+use crate::common;
+use crate::common::gpu::{assert_validation_clean, move_towards, new_renderer, renderer};
 use std::collections::{BTreeMap, HashSet};
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, Projected, RenderOptions, SplatKernel};

@@ -1,9 +1,8 @@
 //! The `vksplat` binary: the README's demo command, `info`, and one clear error (non-zero
 //! exit, no panic, no output file) for each bad input.
 
-mod common;
-
-use common::cli::{fails, stderr, vksplat};
+use crate::common;
+use crate::common::cli::{fails, stderr, vksplat};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

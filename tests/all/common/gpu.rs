@@ -1,4 +1,4 @@
-//! GPU test helpers: one renderer per test binary (pipelines compile once), validation on.
+//! GPU test helpers: one renderer shared by the tests (pipelines compile once), validation on.
 #![allow(dead_code)]
 
 use std::sync::{Mutex, MutexGuard, OnceLock};

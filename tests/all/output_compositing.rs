@@ -4,9 +4,7 @@
 //! rendered in memory (the binary's `--cpu` path is the same code, so most comparisons
 //! are exact).
 
-mod common;
-
-use common::cli::{fails, ok, s};
+use crate::common::cli::{fails, ok, s};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -21,8 +21,7 @@
 //!
 //! Truncation sweeps cut small valid files of every format at many offsets.
 
-mod common;
-
+use crate::common;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

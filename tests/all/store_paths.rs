@@ -1,5 +1,5 @@
 //! Microbenchmark (ignored): how lavapipe's per-lane memory operations cost by path.
-//! `cargo test --release --test store_paths -- --ignored --nocapture`
+//! `cargo test --release --test all store_paths:: -- --ignored --nocapture`
 
 use ash::vk;
 use vksplat::gpu::buffer::{BufferView, GpuBuffer, MemoryKind};

@@ -2,8 +2,7 @@
 //! intrinsics, the orbit and keyframe paths behave, selection specs work, and malformed
 //! inputs give clear errors instead of panics.
 
-mod common;
-
+use crate::common;
 use glam::{DMat3, DQuat, Mat3, Vec2, Vec3};
 use std::path::{Path, PathBuf};
 use vksplat::camera::{

@@ -1,7 +1,6 @@
 //! Every real INRIA scene in `../shared/data/` loads and renders a recognisable image.
 
-mod common;
-
+use crate::common;
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, RenderOptions};
 use vksplat::scene;

@@ -6,10 +6,9 @@
 //! reference; an error mid-path names its frame and leaves only complete files.
 //! Lavapipe with the validation layer on (any message fails).
 
-mod common;
-
-use common::cli::s;
-use common::gpu::{assert_validation_clean, compare, new_renderer};
+use crate::common;
+use crate::common::cli::s;
+use crate::common::gpu::{assert_validation_clean, compare, new_renderer};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;

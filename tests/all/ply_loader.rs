@@ -1,9 +1,8 @@
 //! INRIA PLY loading: round trips, property lookup by name, encodings, model directories,
 //! and one clear error per malformed input.
 
-mod common;
-
-use common::random_scene;
+use crate::common;
+use crate::common::random_scene;
 use std::path::Path;
 use vksplat::scene::{self, ply, Scene, SceneError};
 

@@ -1,10 +1,9 @@
 //! Long runs: a 1000-frame camera path rendered and written in one process keeps host and
-//! device memory flat, and its files equal frames rendered one per process. In its own
-//! test binary so that no other test allocates in the process while resident memory is
-//! measured.
+//! device memory flat, and its files equal frames rendered one per process. The test runs
+//! itself in a process of its own (the test binary again, filtered to this one test) so
+//! that no other test allocates in the process while resident memory is measured.
 
-mod common;
-
+use crate::common;
 use std::path::Path;
 use std::process::Command;
 use vksplat::camera::{self, OrbitParams};
@@ -22,8 +21,39 @@ fn resident_bytes() -> u64 {
     pages * 4096
 }
 
+/// Set for the process the test starts: there it measures.
+const CHILD: &str = "VKSPLAT_MEMORY_TEST_CHILD";
+
 #[test]
 fn a_thousand_frame_path_keeps_memory_flat_and_matches_one_frame_per_process() {
+    if std::env::var_os(CHILD).is_some() {
+        thousand_frame_path();
+        return;
+    }
+    // The test's name as the harness knows it: the module path without the crate name.
+    let name = concat!(
+        module_path!(),
+        "::a_thousand_frame_path_keeps_memory_flat_and_matches_one_frame_per_process"
+    );
+    let name = name.split_once("::").map_or(name, |(_, rest)| rest);
+    let o = Command::new(std::env::current_exe().unwrap())
+        .args([name, "--exact", "--nocapture", "--test-threads=1"])
+        .env(CHILD, "1")
+        .output()
+        .unwrap();
+    let (out, err) = (common::cli::stdout(&o), common::cli::stderr(&o));
+    eprintln!("{err}");
+    assert!(
+        o.status.success(),
+        "the test in its own process failed:\n{out}\n{err}"
+    );
+    assert!(
+        out.contains("test result: ok. 1 passed"),
+        "the test did not run in its own process:\n{out}"
+    );
+}
+
+fn thousand_frame_path() {
     let frames: usize = std::env::var("VKSPLAT_MEMORY_TEST_FRAMES")
         .ok()
         .and_then(|v| v.parse().ok())

@@ -7,13 +7,11 @@
 //! in CI) and the CPU reference (`--cpu`). The other tests use the CPU reference: exact
 //! and the same on every machine.
 
-mod common;
-mod view_common;
-
+use crate::common;
+use crate::view_common::{diff, read_rgb, vksplat_ok, Client, Incoming, Viewer};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use view_common::{diff, read_rgb, vksplat_ok, Client, Incoming, Viewer};
 
 const WAIT: Duration = Duration::from_secs(60);
 

@@ -8,16 +8,13 @@
 //! docs/viewer.png is made so, with `VKSPLAT_VIEWER_SCENE=/absolute/path/scene.ply`: the
 //! test runs in a temporary directory).
 
-mod common;
-mod view_common;
-
+use crate::view_common::{vksplat_ok, Viewer};
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-use view_common::{vksplat_ok, Viewer};
 
 const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
 const CHROMIUM: &str = "/usr/bin/chromium";

@@ -2,9 +2,8 @@
 //! real scene, a perturbed blend failing, image comparisons, evaluation against photos
 //! made here (CPU reference renders with seeded noise), and trained model directories.
 
-mod common;
-
-use common::cli::{s, stderr, stdout, vksplat, vksplat_env};
+use crate::common;
+use crate::common::cli::{s, stderr, stdout, vksplat, vksplat_env};
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -36,7 +35,7 @@ fn read_json(p: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
 }
 
-/// The real scenes of `tests/real_scenes.rs` with their camera file (or the default camera).
+/// The real scenes of `tests/all/real_scenes.rs` with their camera file (or the default camera).
 const REAL_SCENES: [(&str, Option<&str>); 6] = [
     (
         "playbot_lod6_1873_sh2.ply",
@@ -69,7 +68,7 @@ fn compare_passes_on_every_real_scene_with_the_defaults() {
         let report = dir.path().join(format!("r{k}"));
         let cams_path = cams.map(|c| common::shared_data().join(c));
         // Two cameras of the first scene, one of the others, at 320x180: lavapipe and the
-        // CPU reference are slow, and the full-resolution agreement is tests/gpu_frames.rs'.
+        // CPU reference are slow, and the full-resolution agreement is tests/all/gpu_frames.rs'.
         let mut args = vec![
             "compare",
             s(&scene_path),

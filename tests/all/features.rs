@@ -6,9 +6,8 @@
 //! differences are f32 rounding in preprocess and a pixel whose transmittance lands within
 //! rounding of the 1e-4 stop.
 
-mod common;
-
-use common::{axis_camera, push_gaussian};
+use crate::common;
+use crate::common::{axis_camera, push_gaussian};
 use std::path::Path;
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, RenderOptions, SplatKernel};

@@ -1,8 +1,6 @@
 //! PNG and EXR writers: values read back equal the frame; writes are atomic and never
 //! replace an existing file unasked.
 
-mod common;
-
 use vksplat::frame::Frame;
 use vksplat::output::{self, ImageFormat, OutputError};
 

@@ -2,9 +2,8 @@
 //! one run, an interrupted run resumes to the same files and never leaves a truncated
 //! frame, outputs read back equal to the in-memory render, render modes and filters.
 
-mod common;
-
-use common::cli::s;
+use crate::common;
+use crate::common::cli::s;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -9,9 +9,8 @@
 //! is below 1e-4 but its depth can be tens of times the pixel's mean depth (seen in
 //! inside-the-scene views).
 
-mod common;
-
-use common::gpu::{
+use crate::common;
+use crate::common::gpu::{
     assert_validation_clean, compare, dump_failure, move_towards, new_renderer, renderer,
 };
 use glam::Vec3;

@@ -3,9 +3,8 @@
 //! error (and no output file) for each malformed input. Gradients are checked against
 //! finite differences in the unit tests of `src/fit/tests.rs`.
 
-mod common;
-
-use common::cli::{fails, ok, s, stdout};
+use crate::common;
+use crate::common::cli::{fails, ok, s, stdout};
 use std::path::{Path, PathBuf};
 use vksplat::gen::Rng;
 use vksplat::image_file::npy_bytes;

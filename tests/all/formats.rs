@@ -3,8 +3,7 @@
 //! renders of the same camera (PSNR), writer round trips, malformed input and the
 //! `convert` / `info` commands.
 
-mod common;
-
+use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use vksplat::camera;

@@ -2,8 +2,7 @@
 //! evaluation written here, the background rule, and the GPU shade stage against the CPU
 //! reference on a real scene (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255).
 
-mod common;
-
+use crate::common;
 use vksplat::camera::{self, Camera};
 use vksplat::cpu::{self, RenderOptions, SplatKernel};
 use vksplat::mlp::{self, Activation, Mlp, MlpInput};

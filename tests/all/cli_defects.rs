@@ -2,9 +2,7 @@
 //! every command, so each stays fixed. Renders use the CPU reference at small sizes (fast
 //! and device-independent) unless the item is about the GPU path.
 
-mod common;
-
-use common::cli::{bin, fails, ok, s, stderr, stdout, vksplat, vksplat_in};
+use crate::common::cli::{bin, fails, ok, s, stderr, stdout, vksplat, vksplat_in};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

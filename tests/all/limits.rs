@@ -2,11 +2,10 @@
 //! extreme resolutions (8K and 16x16), running out of device memory in the middle of a
 //! camera path, and determinism across processes.
 
-mod common;
+use crate::common;
+use crate::common::cli::s;
 
-use common::cli::s;
-
-use common::gpu::{assert_validation_clean, compare, renderer};
+use crate::common::gpu::{assert_validation_clean, compare, renderer};
 
 use std::process::Command;
 use vksplat::camera;

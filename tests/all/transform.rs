@@ -4,9 +4,8 @@
 //! the identity, and the binary applies them in `render` and `convert` and refuses bad
 //! values in one sentence.
 
-mod common;
-
-use common::cli::{fails, stderr, vksplat};
+use crate::common;
+use crate::common::cli::{fails, stderr, vksplat};
 
 use glam::{DMat3, DQuat, DVec3, Mat3, Vec3};
 

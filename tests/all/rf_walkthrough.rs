@@ -2,9 +2,7 @@
 //! colour-map shader from tools/colormap_shader.py -> render --shader, on the GPU and the
 //! CPU reference (which agree to PSNR >= 55 dB per channel and for the shaded colour).
 
-mod common;
-
-use common::cli::{ok, s};
+use crate::common::cli::{ok, s};
 use std::path::Path;
 
 fn planes(path: &Path, names: &[&str]) -> Vec<f32> {
