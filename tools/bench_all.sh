@@ -63,3 +63,5 @@ VKSPLAT_NO_SHADER_CACHE=1 $B render --demo --width 64 -o /tmp/vksplat-startup.pn
 $B render --demo --width 64 -o /tmp/vksplat-startup.png --overwrite -v 2>&1 | grep -E "start-up"
 echo "## cargo bench --bench building_blocks"
 cargo bench -q --bench building_blocks 2>&1 | grep -vE "^\s*(Compiling|Finished|Running)"
+echo "## cargo bench --bench tuning"
+cargo bench -q --bench tuning 2>&1 | grep -vE "^\s*(Compiling|Finished|Running)"

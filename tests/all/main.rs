@@ -35,7 +35,6 @@ mod real_scenes;
 mod reference_renderer;
 mod rf_walkthrough;
 mod sequences;
-mod store_paths;
 mod transform;
 mod view;
 mod view_browser;
