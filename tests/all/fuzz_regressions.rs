@@ -11,6 +11,11 @@ use vksplat::scene;
 /// A found input runs in well under this (they are small); more means a hang came back.
 const PER_INPUT: Duration = Duration::from_secs(10);
 
+/// How many found inputs each target's directory holds, targets in name order. Inputs
+/// that are no longer found (a moved directory, a lost file) fail the test instead of
+/// leaving nothing to run: add a target or raise its count with each input kept.
+const EXPECTED: &[(&str, usize)] = &[("ply", 3)];
+
 /// Runs `data` through the parser of fuzz target `target`, as `fuzz/fuzz_targets/<target>.rs`
 /// does; returns the error message, if any.
 fn run(target: &str, data: &[u8]) -> Result<(), String> {
@@ -93,6 +98,7 @@ fn root() -> PathBuf {
 #[test]
 fn every_found_input_gives_a_clean_result() {
     let mut count = 0;
+    let mut per_target = Vec::new();
     let mut targets: Vec<_> = std::fs::read_dir(root())
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -106,6 +112,7 @@ fn every_found_input_gives_a_clean_result() {
             .map(|e| e.unwrap().path())
             .collect();
         files.sort();
+        per_target.push((target.clone(), files.len()));
         for file in files {
             let data = std::fs::read(&file).unwrap();
             let start = Instant::now();
@@ -125,4 +132,8 @@ fn every_found_input_gives_a_clean_result() {
         }
     }
     eprintln!("{count} fuzz regression inputs ran cleanly");
+    let expected: Vec<(String, usize)> = EXPECTED.iter().map(|&(t, n)| (t.into(), n)).collect();
+    assert_eq!(per_target, expected, "inputs run per target");
+    assert_eq!(count, EXPECTED.iter().map(|&(_, n)| n).sum::<usize>());
+    assert!(count > 0, "no fuzz regression input ran");
 }
