@@ -752,8 +752,7 @@ fn preview_rate_with_the_125k_scene() {
 }
 
 fn preview_rate(backend: &[&str]) {
-    let scene =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/playbot_lod2_125k_sh2.ply");
+    let scene = common::shared_data().join("playbot_lod2_125k_sh2.ply");
     let dir = tempfile::tempdir().unwrap();
     let mut args = vec![scene.to_str().unwrap()];
     args.extend_from_slice(backend);

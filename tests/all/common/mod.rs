@@ -9,9 +9,16 @@ use std::path::PathBuf;
 use vksplat::camera::Camera;
 use vksplat::scene::Scene;
 
-/// `../shared/data`, the read-only real scenes.
+/// `../shared/data`, the read-only real scenes. They are always there (in CI too), so a
+/// test that needs them fails without them instead of skipping.
 pub fn shared_data() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    assert!(
+        dir.is_dir(),
+        "{} is missing: the tests need the read-only real scenes there",
+        dir.display()
+    );
+    dir
 }
 
 /// Inverse sigmoid, to store a wanted opacity.
