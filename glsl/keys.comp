@@ -23,7 +23,7 @@ layout(binding = 1) uniform samplerBuffer splat_texels;
 #if KEYS_TEXEL_IO
 // CPU devices: the per-Gaussian arrays through texel views, the pairs written with
 // imageStore (straight per-lane code on llvmpipe, where storage-buffer accesses are a
-// guarded loop per component; see tests/store_paths.rs).
+// guarded loop per component; see benches/tuning.rs).
 layout(binding = 2) uniform usamplerBuffer rects_tex;
 layout(binding = 3) uniform usamplerBuffer offsets_tex;
 layout(binding = 4, r32ui) uniform writeonly uimageBuffer keys_img;

@@ -35,7 +35,7 @@ Gaussian unpack_compact(GaussianCompact c) {
 // CPU devices: the records through an RGBA32UI texel view and every output written with
 // imageStore, all by the global index (the views cover whole buffers, so windows only
 // bound the dispatch): llvmpipe turns these into straight per-lane code, storage-buffer
-// accesses into a guarded loop per component (tests/store_paths.rs).
+// accesses into a guarded loop per component (benches/tuning.rs).
 layout(binding = 1) uniform usamplerBuffer gaussian_texels;
 #if COMPACT_GAUSSIANS
 Gaussian load_gaussian(uint w, uint i) {

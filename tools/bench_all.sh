@@ -69,3 +69,5 @@ done
 rm -rf "$C"
 echo "## cargo bench --bench building_blocks"
 cargo bench -q --bench building_blocks 2>&1 | grep -vE "^\s*(Compiling|Finished|Running)"
+echo "## cargo bench --bench tuning"
+cargo bench -q --bench tuning 2>&1 | grep -vE "^\s*(Compiling|Finished|Running)"

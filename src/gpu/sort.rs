@@ -50,7 +50,7 @@ pub struct SortConfig {
     /// Read and write the keys and values through R32_UINT texel views (32-bit keys
     /// only; the caller passes the views, [`SortTexels`]). On llvmpipe texel fetches and
     /// `imageStore` are straight per-lane code where storage-buffer accesses are a
-    /// guarded loop per component (`tests/store_paths.rs` measures both).
+    /// guarded loop per component (`benches/tuning.rs` measures both).
     pub texel_io: bool,
 }
 
@@ -61,8 +61,8 @@ impl SortConfig {
     }
 }
 
-/// Default sort tuning, measured on lavapipe with the bench test: 8-bit digits halve
-/// the passes of 4-bit ones, and 32 items per invocation beat 16 (fewer blocks, a
+/// Default sort tuning, measured on lavapipe with `benches/tuning.rs`: 8-bit digits
+/// halve the passes of 4-bit ones, and 32 items per invocation beat 16 (fewer blocks, a
 /// smaller histogram table). 128 invocations keep the per-subgroup counters
 /// (256 digits x 16 subgroups of 8 lanes) within 32 KiB of shared memory.
 pub const DEFAULT_SORT_CONFIG: SortConfig = SortConfig {

@@ -1,0 +1,798 @@
+//! `vksplat view` over its WebSocket, as a page uses it: frames equal `vksplat render` of
+//! the same camera and settings bit for bit; every bad message is refused with an error
+//! to its sender while the server and other tabs go on; keyframes exported by the viewer
+//! render with `render --cameras` to the frames the viewer shows at them.
+//!
+//! Frames are compared with `render` on the same renderer: the Vulkan pipeline (lavapipe
+//! in CI) and the CPU reference (`--cpu`). The other tests use the CPU reference: exact
+//! and the same on every machine.
+
+use crate::common;
+use crate::view_common::{diff, read_rgb, vksplat_ok, Client, Incoming, Viewer};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+const WAIT: Duration = Duration::from_secs(60);
+
+/// Three cameras of an orbit around the demo robot at 96x64, as an INRIA cameras.json.
+fn cameras(dir: &Path) -> PathBuf {
+    let file = dir.join("cams.json");
+    vksplat_ok(
+        dir,
+        &[
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--orbit",
+            "3",
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--export-cameras",
+            "cams.json",
+            "-o",
+            "orbit/f_{}.png",
+        ],
+    );
+    file
+}
+
+/// `vksplat render --demo --cpu --cameras cams.json --camera K EXTRA` as RGB.
+fn render_camera(dir: &Path, k: usize, extra: &[&str], name: &str) -> image::RgbImage {
+    render_camera_on(dir, &["--cpu"], k, extra, name)
+}
+
+/// `vksplat render --demo BACKEND --cameras cams.json --camera K EXTRA` as RGB.
+fn render_camera_on(
+    dir: &Path,
+    backend: &[&str],
+    k: usize,
+    extra: &[&str],
+    name: &str,
+) -> image::RgbImage {
+    let out = format!("{name}.png");
+    let ks = k.to_string();
+    let mut args = vec![
+        "render",
+        "--demo",
+        "--quiet",
+        "--overwrite",
+        "--cameras",
+        "cams.json",
+        "--camera",
+        &ks,
+        "-o",
+        &out,
+    ];
+    args.extend_from_slice(backend);
+    args.extend_from_slice(extra);
+    vksplat_ok(dir, &args);
+    read_rgb(&dir.join(out))
+}
+
+fn assert_same(got: &image::RgbImage, want: &image::RgbImage, what: &str) {
+    let (n, max) = diff(got, want);
+    assert_eq!(
+        n, 0,
+        "{what}: {n} pixels differ (by up to {max}) from vksplat render"
+    );
+    // Not a blank picture that would equal another blank picture.
+    assert!(
+        want.pixels().filter(|p| p.0 != [0, 0, 0]).count() > 100,
+        "{what}: the reference shows nothing"
+    );
+}
+
+#[test]
+fn resting_frames_equal_render_bit_for_bit_on_the_gpu() {
+    resting_frames_equal_render(&[]);
+}
+
+#[test]
+fn resting_frames_equal_render_bit_for_bit_on_the_cpu() {
+    resting_frames_equal_render(&["--cpu"]);
+}
+
+fn resting_frames_equal_render(backend: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    cameras(d);
+    let mut args = vec!["--demo", "--cameras", "cams.json"];
+    args.extend_from_slice(backend);
+    // The Vulkan validation layer watches the GPU viewer (common::cli turns it on); it
+    // prints what it finds.
+    let viewer = Viewer::start(d, &args);
+    let render_camera =
+        |d: &Path, k, extra: &[&str], name: &str| render_camera_on(d, backend, k, extra, name);
+    let mut c = viewer.connect();
+    let hello = c.hello.clone();
+    assert_eq!(hello["cameras"].as_array().map(Vec::len), Some(3));
+    assert_eq!(hello["gaussians"], 1873);
+    assert_eq!(hello["sh_degree"], 2);
+    assert_eq!(hello["up"], json!([0.0, -1.0, 0.0]));
+    let [lo, hi] =
+        [&hello["max_scale_range"][0], &hello["max_scale_range"][1]].map(|v| v.as_f64().unwrap());
+    assert!(0.0 < lo && lo < hi, "{lo} {hi}");
+    let hist = &hello["max_scale_histogram"];
+    let counts: Vec<u64> = hist["counts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_u64().unwrap())
+        .collect();
+    assert_eq!(hist["edges"].as_array().unwrap().len(), counts.len() + 1);
+    assert_eq!(counts.iter().sum::<u64>(), 1873);
+    assert_eq!(hist["edges"][0].as_f64(), Some(lo));
+
+    // select_camera snaps to camera 1 with its intrinsics and size.
+    let seq = c.send(json!({"type": "select_camera", "index": 1}));
+    let snapped = c.text("camera", WAIT);
+    assert_eq!(snapped["index"], 1);
+    assert_eq!(snapped["camera"]["width"], 96);
+    let frame = c.frame(seq, true, WAIT);
+    assert_eq!(frame.header["encoding"], "png");
+    assert_eq!(
+        (
+            frame.header["width"].as_u64(),
+            frame.header["height"].as_u64()
+        ),
+        (Some(96), Some(64))
+    );
+    assert!(frame.header["visible"].as_u64().unwrap() > 0);
+    assert!(frame.header["pairs"].as_u64().unwrap() > 0);
+    for stage in [
+        "preprocess",
+        "order",
+        "scan",
+        "keys",
+        "sort",
+        "ranges",
+        "blend",
+        "readback",
+        "total",
+    ] {
+        assert!(
+            frame.header["timings"][stage].is_number(),
+            "stage {stage} missing"
+        );
+    }
+    assert_same(
+        &frame.rgb(),
+        &render_camera(d, 1, &[], "cam1"),
+        "select_camera 1",
+    );
+
+    // A screenshot of the view: PNG as render writes it, EXR with the five channels.
+    let seq = c.send(json!({"type": "screenshot", "format": "png"}));
+    let shot = c.frame_of_kind("screenshot", seq, WAIT);
+    assert_eq!(shot.header["format"], "png");
+    assert_same(
+        &shot.rgb(),
+        &render_camera(d, 1, &[], "cam1"),
+        "PNG screenshot",
+    );
+    let seq = c.send(json!({"type": "screenshot", "format": "exr"}));
+    let shot = c.frame_of_kind("screenshot", seq, WAIT);
+    assert!(shot.header["filename"].as_str().unwrap().ends_with(".exr"));
+    std::fs::write(d.join("shot.exr"), &shot.payload).unwrap();
+    let mut exr = vec![
+        "render",
+        "--demo",
+        "--quiet",
+        "--cameras",
+        "cams.json",
+        "--camera",
+        "1",
+        "-o",
+        "ref.exr",
+    ];
+    exr.extend_from_slice(backend);
+    vksplat_ok(d, &exr);
+    let o = vksplat_ok(d, &["compare", "shot.exr", "ref.exr"]);
+    let report = String::from_utf8_lossy(&o.stdout);
+    assert!(report.contains("inf"), "identical EXRs: {report}");
+
+    // select_camera at another size, as render --width resizes it.
+    let seq = c.send(json!({"type": "select_camera", "index": 0, "width": 72}));
+    let frame = c.frame(seq, true, WAIT);
+    assert_same(
+        &frame.rgb(),
+        &render_camera(d, 0, &["--width", "72"], "cam0w72"),
+        "select_camera 0 at width 72",
+    );
+
+    // A camera entry with a max-scale filter, SH degree 1 and a background, as render's
+    // flags.
+    let settings = json!({"max_scale": 0.02, "sh_degree": 1, "background": [0.25, 0.5, 1.0]});
+    let seq = c.send(json!({"type": "view", "camera": c.camera(2), "settings": settings}));
+    let frame = c.frame(seq, true, WAIT);
+    assert_same(
+        &frame.rgb(),
+        &render_camera(
+            d,
+            2,
+            &[
+                "--max-scale",
+                "0.02",
+                "--sh-degree",
+                "1",
+                "--background",
+                "0.25,0.5,1",
+            ],
+            "cam2filtered",
+        ),
+        "view of camera 2 with max_scale 0.02",
+    );
+    // The filter changed the picture (so the comparison above could fail).
+    let unfiltered = render_camera(d, 2, &["--background", "0.25,0.5,1"], "cam2");
+    assert!(diff(&frame.rgb(), &unfiltered).0 > 0);
+
+    // Alpha and depth modes as render --mode alpha / depth.
+    for mode in ["alpha", "depth"] {
+        let seq =
+            c.send(json!({"type": "view", "camera": c.camera(2), "settings": {"mode": mode}}));
+        let frame = c.frame(seq, true, WAIT);
+        assert_same(
+            &frame.rgb(),
+            &render_camera(d, 2, &["--mode", mode], mode),
+            mode,
+        );
+    }
+
+    // While moving: a JPEG preview; without a `rest` the full frame follows by itself.
+    // (Settings left out are the last ones sent: back to the defaults.)
+    let seq =
+        c.send(json!({"type": "view", "camera": c.camera(0), "settings": {}, "interactive": true}));
+    let preview = c.frame(seq, false, WAIT);
+    assert_eq!(preview.header["encoding"], "jpeg");
+    let full = c.frame(seq, true, WAIT);
+    assert_same(&full.rgb(), &render_camera(d, 0, &[], "cam0"), "rest frame");
+
+    // A canvas over --max-resolution is scaled down with its aspect ratio.
+    let mut big = c.camera(0);
+    big["width"] = 3840.into();
+    big["height"] = 2560.into();
+    big["fx"] = (big["fx"].as_f64().unwrap() * 40.0).into();
+    big["fy"] = (big["fy"].as_f64().unwrap() * 40.0).into();
+    let seq = c.send(json!({"type": "view", "camera": big, "interactive": true}));
+    let preview = c.frame(seq, false, WAIT);
+    let (w, h) = (
+        preview.header["width"].as_u64().unwrap(),
+        preview.header["height"].as_u64().unwrap(),
+    );
+    assert!(w * h <= 250_000 && w * 2 == h * 3, "preview {w}x{h}");
+    let err: Vec<String> = viewer.stderr.try_iter().collect();
+    assert!(
+        !err.iter().any(|l| l.contains("[vulkan")),
+        "validation messages: {err:?}"
+    );
+}
+
+/// The splat scale factor and the filters against `render --scale-modifier` and the
+/// filter flags, on both renderers.
+#[test]
+fn scale_modifier_frame_equals_render_with_scale_modifier() {
+    scale_modifier_equals_render(&[]);
+    scale_modifier_equals_render(&["--cpu"]);
+}
+
+fn scale_modifier_equals_render(backend: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    cameras(d);
+    let mut args = vec!["--demo", "--cameras", "cams.json"];
+    args.extend_from_slice(backend);
+    let viewer = Viewer::start(d, &args);
+    let render_camera =
+        |d: &Path, k, extra: &[&str], name: &str| render_camera_on(d, backend, k, extra, name);
+    let mut c = viewer.connect();
+    let seq =
+        c.send(json!({"type": "view", "camera": c.camera(1), "settings": {"scale_modifier": 0.6}}));
+    let frame = c.frame(seq, true, WAIT);
+    assert_same(
+        &frame.rgb(),
+        &render_camera(d, 1, &["--scale-modifier", "0.6"], "cam1s06"),
+        "scale_modifier 0.6",
+    );
+    assert!(diff(&frame.rgb(), &render_camera(d, 1, &[], "cam1")).0 > 0);
+    // Every slider at once.
+    let settings =
+        json!({"scale_modifier": 1.7, "min_opacity": 0.3, "max_scale": 0.05, "sh_degree": 0});
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0), "settings": settings}));
+    let frame = c.frame(seq, true, WAIT);
+    assert_same(
+        &frame.rgb(),
+        &render_camera(
+            d,
+            0,
+            &[
+                "--scale-modifier",
+                "1.7",
+                "--min-opacity",
+                "0.3",
+                "--max-scale",
+                "0.05",
+                "--sh-degree",
+                "0",
+            ],
+            "cam0all",
+        ),
+        "all settings",
+    );
+}
+
+/// Waits for an error message (skipping frames); returns its text.
+fn error(c: &mut Client, what: &str) -> String {
+    let deadline = std::time::Instant::now() + WAIT;
+    loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        match c.next(left) {
+            Some(Incoming::Text(v)) if v["type"] == "error" => {
+                return v["message"].as_str().unwrap_or("").to_string()
+            }
+            Some(_) => {}
+            None => panic!("{what}: no error message"),
+        }
+    }
+}
+
+#[test]
+fn bad_messages_are_refused_and_other_tabs_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    cameras(d);
+    let mut viewer = Viewer::start(d, &["--demo", "--cpu", "--cameras", "cams.json"]);
+    let mut bad = viewer.connect();
+    let mut good = viewer.connect();
+    let cam = good.camera(0);
+    let first = {
+        let seq = good.send(json!({"type": "view", "camera": cam}));
+        good.frame(seq, true, WAIT).rgb()
+    };
+    // The good tab's frames stay the same whatever the other tab does (its own
+    // settings, too).
+    let good_frame = |good: &mut Client, what: &str| {
+        let seq = good.send(json!({"type": "view", "camera": cam}));
+        let f = good.frame(seq, true, WAIT);
+        assert_eq!(diff(&f.rgb(), &first), (0, 0), "after {what}");
+    };
+    bad.send(json!({"type": "settings", "settings": {"mode": "depth", "scale_modifier": 2.0}}));
+    good_frame(&mut good, "the other tab's settings");
+
+    let entry = bad.camera(0);
+    let with = |field: &str, v: Value| {
+        let mut e = entry.clone();
+        e[field] = v;
+        json!({"type": "view", "camera": e}).to_string()
+    };
+    let cases: Vec<(&str, String, &str)> = vec![
+        ("malformed JSON", "{\"type\": \"view\", ".into(), "not understood"),
+        ("unknown type", r#"{"type": "dance", "seq": 3}"#.into(), "dance"),
+        ("no type", r#"{"seq": 3}"#.into(), "not understood"),
+        ("NaN position (null)", with("position", json!([null, 0, 0])), "camera refused"),
+        ("infinite position", with("position", json!([0, 0, 0])).replace("[0,0,0]", "[1e999,0,0]"), "not understood"),
+        ("NaN rotation", with("rotation", json!([[null, 0, 0], [0, 1, 0], [0, 0, 1]])), "camera refused"),
+        ("0x0 canvas", with("width", json!(0)).replace("\"height\":64", "\"height\":0"), "resolution"),
+        ("100000x100000 canvas", with("width", json!(100000)).replace("\"height\":64", "\"height\":100000"), "resolution"),
+        ("negative focal length", with("fx", json!(-5)), "camera refused"),
+        ("not a rotation", with("rotation", json!([[2, 0, 0], [0, 2, 0], [0, 0, 2]])), "rotation"),
+        ("scale modifier 0", json!({"type": "settings", "settings": {"scale_modifier": 0}}).to_string(), "scale_modifier"),
+        ("min opacity 2", json!({"type": "settings", "settings": {"min_opacity": 2}}).to_string(), "min_opacity"),
+        ("SH degree 7", json!({"type": "settings", "settings": {"sh_degree": 7}}).to_string(), "sh_degree"),
+        ("background 2", json!({"type": "settings", "settings": {"background": [2, 0, 0]}}).to_string(), "background"),
+        ("max scale -1", json!({"type": "settings", "settings": {"max_scale": -1}}).to_string(), "max_scale"),
+        ("unknown mode", json!({"type": "settings", "settings": {"mode": "x-ray"}}).to_string(), "not understood"),
+        ("rest before a view", json!({"type": "rest"}).to_string(), "rest before any view"),
+        ("camera index 99", json!({"type": "select_camera", "index": 99}).to_string(), "camera 99 does not exist"),
+        ("no keyframes", json!({"type": "export_keyframes", "format": "vksplat", "fps": 30, "keyframes": []}).to_string(), "no keyframes"),
+        ("keyframe fps 0", json!({"type": "export_keyframes", "format": "vksplat", "fps": 0, "keyframes": [{"time": 0, "camera": entry}]}).to_string(), "fps"),
+        ("wrong field type", json!({"type": "select_camera", "index": "one"}).to_string(), "not understood"),
+    ];
+    for (what, text, needle) in &cases {
+        bad.send_raw(text);
+        let e = error(&mut bad, what);
+        assert!(e.contains(needle), "{what}: error {e:?} lacks {needle:?}");
+        assert!(viewer.alive(), "{what} stopped the server");
+        good_frame(&mut good, what);
+    }
+    // A binary message.
+    bad.ws
+        .send(tungstenite::Message::binary(vec![1u8, 2, 3]))
+        .unwrap();
+    assert!(error(&mut bad, "binary").contains("binary"));
+
+    // The bad tab itself still works after all of that.
+    let seq = bad.send(json!({"type": "view", "camera": entry}));
+    bad.frame(seq, true, WAIT);
+
+    // A flood: thousands of messages at once are cut off with one error; the newest
+    // accepted request still gets its frame, the other tab is served meanwhile.
+    let mut last = 0;
+    for _ in 0..3000 {
+        last = bad.send(json!({"type": "view", "camera": entry, "interactive": true}));
+    }
+    let e = error(&mut bad, "flood");
+    assert!(e.contains("too many messages"), "{e}");
+    good_frame(&mut good, "flood");
+    std::thread::sleep(Duration::from_millis(1100));
+    let seq = bad.send(json!({"type": "view", "camera": entry}));
+    assert!(seq > last);
+    bad.frame(seq, true, WAIT);
+    assert!(viewer.alive());
+
+    // An oversized message closes only that connection.
+    let huge = format!("{{\"type\":\"rest\",\"pad\":\"{}\"}}", "x".repeat(5 << 20));
+    let _ = bad.ws.send(tungstenite::Message::text(huge));
+    good_frame(&mut good, "an oversized message");
+    assert!(viewer.alive());
+}
+
+/// A frame the renderer cannot make (here: more device memory than the budget) is an
+/// error for the tab that asked; the renderer and the other tabs go on.
+#[test]
+fn render_errors_go_to_the_tab_that_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut viewer = Viewer::start_with_env(
+        dir.path(),
+        &["--demo", "--width", "96", "--max-resolution", "8000x8000"],
+        &[("VKSPLAT_MEMORY_LIMIT", "24M")],
+    );
+    let mut a = viewer.connect();
+    let mut b = viewer.connect();
+    let small = a.camera(0);
+    let mut big = small.clone();
+    for (k, f) in [("width", 6000.0), ("height", 3375.0)] {
+        big[k] = (f as u64).into();
+    }
+    for k in ["fx", "fy"] {
+        big[k] = (big[k].as_f64().unwrap() * 62.5).into();
+    }
+    let seq = a.send(json!({"type": "view", "camera": big}));
+    let e = loop {
+        match a.next(WAIT) {
+            Some(Incoming::Text(v)) if v["type"] == "error" => break v,
+            Some(_) => {}
+            None => panic!("no error for the oversized frame"),
+        }
+    };
+    assert_eq!(e["seq"], seq);
+    let message = e["message"].as_str().unwrap();
+    assert!(message.contains("out of device memory"), "{message}");
+    assert!(viewer.alive());
+    for c in [&mut b, &mut a] {
+        let seq = c.send(json!({"type": "view", "camera": small}));
+        assert_eq!(c.frame(seq, true, WAIT).header["width"], 96);
+    }
+}
+
+#[test]
+fn closed_tabs_free_their_state_and_http_serves_the_page() {
+    use std::io::{Read, Write};
+    let dir = tempfile::tempdir().unwrap();
+    let viewer = Viewer::start(dir.path(), &["--demo", "--cpu", "--width", "48"]);
+    // More tabs than the server holds at once (16), one after the other: each closed
+    // tab's slot is freed, so every one connects.
+    for i in 0..24 {
+        let mut c = viewer.connect();
+        let cam = c.camera(0);
+        assert_eq!(cam["width"], 48, "--width applies to the camera list");
+        if i % 8 == 0 {
+            let seq = c.send(json!({"type": "view", "camera": cam}));
+            c.frame(seq, true, WAIT);
+        }
+        c.ws.close(None).unwrap();
+        // Until the server has seen the close.
+        while c.ws.read().is_ok() {}
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    // Sockets that never send a request (more than the server keeps) do not stop it.
+    let idle: Vec<std::net::TcpStream> = (0..100)
+        .filter_map(|_| std::net::TcpStream::connect(("127.0.0.1", viewer.port)).ok())
+        .collect();
+    assert!(idle.len() > 64);
+    drop(idle);
+    // Their threads see the end of the stream at once; give them a moment to go.
+    std::thread::sleep(Duration::from_millis(500));
+    let mut c = viewer.connect();
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+    c.frame(seq, true, WAIT);
+    let get = |path: &str| {
+        let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        write!(s, "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+        let mut out = String::new();
+        let _ = s.read_to_string(&mut out);
+        out
+    };
+    let index = get("/");
+    assert!(index.starts_with("HTTP/1.1 200"), "{index}");
+    assert!(index.contains("viewer.js"));
+    assert!(get("/viewer.js").contains("vksplatViewer"));
+    assert!(get("/viewer.css").contains("text/css"));
+    assert!(get("/etc/passwd").starts_with("HTTP/1.1 404"));
+    assert!(get("/../Cargo.toml").starts_with("HTTP/1.1 404"));
+    // Another host name (a rebound DNS name) is refused.
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(
+        s,
+        "GET / HTTP/1.1\r\nHost: evil.example:{}\r\n\r\n",
+        viewer.port
+    )
+    .unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    assert!(out.starts_with("HTTP/1.1 403"), "{out}");
+    // A WebSocket from another site's page is refused.
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(s, "GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{}\r\nOrigin: http://evil.example\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n", viewer.port).unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    assert!(out.starts_with("HTTP/1.1 403"), "{out}");
+}
+
+#[test]
+fn sigterm_stops_the_server_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut viewer = Viewer::start(dir.path(), &["--demo", "--cpu", "--width", "64"]);
+    let mut c = viewer.connect();
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+    c.frame(seq, true, WAIT);
+    let pid = viewer.child.id().to_string();
+    let o = std::process::Command::new("kill")
+        .args(["-TERM", &pid])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        if let Some(s) = viewer.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the server did not stop"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "{status:?}");
+    let err: Vec<String> = viewer.stderr.try_iter().collect();
+    assert!(err.iter().any(|l| l.contains("viewer stopped")), "{err:?}");
+    // The page's connection was closed, not left hanging.
+    let closed = (0..100).any(|_| match c.ws.read() {
+        Ok(tungstenite::Message::Close(_)) | Err(tungstenite::Error::ConnectionClosed) => true,
+        Err(tungstenite::Error::Io(e)) => !matches!(
+            e.kind(),
+            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+        ),
+        Err(_) => true,
+        Ok(_) => false,
+    });
+    assert!(closed);
+}
+
+/// `--open` runs xdg-open with the URL; an xdg-open that fails is a note, the server
+/// goes on.
+#[test]
+fn open_runs_xdg_open_with_the_url() {
+    use std::os::unix::fs::PermissionsExt;
+    for works in [true, false] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let bin = d.join("bin");
+        std::fs::create_dir(&bin).unwrap();
+        let script = bin.join("xdg-open");
+        let log = d.join("opened.txt");
+        std::fs::write(
+            &script,
+            format!(
+                "#!/bin/sh\necho \"$1\" > '{}'\nexit {}\n",
+                log.display(),
+                if works { 0 } else { 3 }
+            ),
+        )
+        .unwrap();
+        std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let path = format!(
+            "{}:{}",
+            bin.display(),
+            std::env::var("PATH").unwrap_or_default()
+        );
+        let mut viewer = Viewer::start_with_env(
+            d,
+            &["--demo", "--cpu", "--open"],
+            &[("PATH", path.as_str())],
+        );
+        let deadline = std::time::Instant::now() + WAIT;
+        while !log.exists() {
+            assert!(std::time::Instant::now() < deadline, "xdg-open never ran");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        std::thread::sleep(Duration::from_millis(200));
+        let opened = std::fs::read_to_string(&log).unwrap();
+        assert_eq!(opened.trim(), viewer.url);
+        if !works {
+            let deadline = std::time::Instant::now() + WAIT;
+            let mut err = Vec::new();
+            while !err
+                .iter()
+                .any(|l: &String| l.contains("xdg-open could not open"))
+            {
+                assert!(std::time::Instant::now() < deadline, "no note: {err:?}");
+                err.extend(viewer.stderr.try_iter());
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+        assert!(viewer.alive());
+        let mut c = viewer.connect();
+        let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+        c.frame(seq, true, WAIT);
+    }
+}
+
+#[test]
+fn port_in_use_is_one_clear_error() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    let o = std::process::Command::new(common::cli::bin())
+        .args(["view", "--demo", "--cpu", "--port", &port])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(!e.contains("panicked"), "{e}");
+    assert!(
+        e.starts_with("error: ") && e.contains(&format!("port {port}")) && e.contains("in use"),
+        "{e}"
+    );
+}
+
+#[test]
+fn exported_keyframes_render_to_what_the_viewer_shows() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    cameras(d);
+    let viewer = Viewer::start(d, &["--demo", "--cpu", "--cameras", "cams.json"]);
+    let mut c = viewer.connect();
+    let keyframes: Vec<Value> = (0..3)
+        .map(|k| json!({"time": k as f64, "camera": c.camera(k)}))
+        .collect();
+    c.send(
+        json!({"type": "export_keyframes", "format": "vksplat", "fps": 2, "keyframes": keyframes}),
+    );
+    let export = c.text("export", WAIT);
+    assert_eq!(export["filename"], "keyframes.json");
+    std::fs::write(d.join("keyframes.json"), export["text"].as_str().unwrap()).unwrap();
+    // fps 2: keyframes at 0, 1, 2 s are frames 0, 2, 4.
+    vksplat_ok(
+        d,
+        &[
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--cameras",
+            "keyframes.json",
+            "-o",
+            "path/f_{:05}.png",
+        ],
+    );
+    let frames: Vec<PathBuf> = (0..5)
+        .map(|k| d.join(format!("path/f_{k:05}.png")))
+        .collect();
+    assert!(frames.iter().all(|f| f.exists()));
+    assert!(!d.join("path/f_00005.png").exists());
+    let shown: Vec<image::RgbImage> = (0..3)
+        .map(|k| {
+            let seq = c.send(json!({"type": "view", "camera": export["cameras"][k]}));
+            c.frame(seq, true, WAIT).rgb()
+        })
+        .collect();
+    for (k, img) in shown.iter().enumerate() {
+        assert_same(img, &read_rgb(&frames[2 * k]), &format!("keyframe {k}"));
+        // The keyframe is the camera it was made from (up to the file's rounding).
+        let (n, max) = diff(img, &render_camera(d, k, &[], &format!("cam{k}")));
+        assert!(
+            max <= 2 && n < 96 * 64 / 50,
+            "keyframe {k}: {n} pixels by {max}"
+        );
+    }
+    // The page's preview plays the frames the server samples: those render makes.
+    c.send(json!({"type": "sample_keyframes", "fps": 2, "keyframes": keyframes}));
+    let path = c.text("path", WAIT);
+    assert_eq!(path["cameras"].as_array().map(Vec::len), Some(5));
+    for k in [1, 3] {
+        let seq = c.send(json!({"type": "view", "camera": path["cameras"][k]}));
+        let shown = c.frame(seq, true, WAIT).rgb();
+        assert_same(&shown, &read_rgb(&frames[k]), &format!("path frame {k}"));
+    }
+
+    // nerfstudio's camera_path.json: the same path sampled at 2 frames/s.
+    c.send(json!({"type": "export_keyframes", "format": "nerfstudio", "fps": 2, "keyframes": keyframes}));
+    let ns = c.text("export", WAIT);
+    assert_eq!(ns["filename"], "camera_path.json");
+    std::fs::write(d.join("camera_path.json"), ns["text"].as_str().unwrap()).unwrap();
+    vksplat_ok(
+        d,
+        &[
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--cameras",
+            "camera_path.json",
+            "-o",
+            "ns/f_{:05}.png",
+        ],
+    );
+    for (k, img) in shown.iter().enumerate() {
+        let (n, max) = diff(&read_rgb(&d.join(format!("ns/f_{:05}.png", 2 * k))), img);
+        assert!(
+            max <= 2 && n < 96 * 64 / 50,
+            "nerfstudio frame {}: {n} pixels by {max}",
+            2 * k
+        );
+    }
+    assert!(!d.join("ns/f_00005.png").exists());
+}
+
+/// Interactive rate with the 125k robot on the Vulkan pipeline and the CPU reference: a
+/// client that keeps the camera moving, as a drag does, for 5 s. Prints the preview
+/// frames per second (the issue aims at 10 or more on lavapipe); run with `--ignored`
+/// (needs ../shared/data).
+#[test]
+#[ignore]
+fn preview_rate_with_the_125k_scene() {
+    preview_rate(&[]);
+    preview_rate(&["--cpu"]);
+}
+
+fn preview_rate(backend: &[&str]) {
+    let scene = common::shared_data().join("playbot_lod2_125k_sh2.ply");
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = vec![scene.to_str().unwrap()];
+    args.extend_from_slice(backend);
+    let viewer = Viewer::start(dir.path(), &args);
+    let mut c = viewer.connect();
+    let mut cam = c.hello["initial_camera"].clone();
+    cam["width"] = 1280.into();
+    cam["height"] = 720.into();
+    let start = std::time::Instant::now();
+    let (mut previews, mut fulls, mut k) = (0, 0, 0.0f64);
+    let mut size = String::new();
+    // As a page during a drag: a move every 30 ms, frames read in between.
+    while start.elapsed() < Duration::from_secs(5) {
+        k += 0.01;
+        let mut moved = cam.clone();
+        moved["position"][0] = (cam["position"][0].as_f64().unwrap() + k * 0.1).into();
+        c.send(json!({"type": "view", "camera": moved, "interactive": true}));
+        let next_move = std::time::Instant::now() + Duration::from_millis(30);
+        while std::time::Instant::now() < next_move {
+            if let Some(Incoming::Frame(f)) = c.next(Duration::from_millis(5)) {
+                if f.full() {
+                    fulls += 1;
+                } else {
+                    previews += 1;
+                    size = format!(
+                        "{}x{} (wall {:.1} ms, GPU {:.1} ms: {})",
+                        f.header["width"],
+                        f.header["height"],
+                        f.header["wall_ms"].as_f64().unwrap_or(0.0),
+                        f.header["timings"]["total"].as_f64().unwrap_or(0.0),
+                        f.header["timings"]
+                    );
+                }
+            }
+        }
+    }
+    let rate = previews as f64 / start.elapsed().as_secs_f64();
+    println!(
+        "{backend:?}: {rate:.1} preview frames/s, the last at {size} (1280x720 canvas), {fulls} full frames"
+    );
+    assert!(rate > 0.0);
+    assert_eq!(fulls, 0, "a full frame was rendered while the camera moved");
+}
