@@ -4,6 +4,9 @@
 //! A GLSL error fails the build with glslc's `glsl/<file>:<line>: error: ...` message.
 //! `GLSLC` names another compiler executable.
 
+#[path = "src/rules.rs"]
+#[allow(dead_code)]
+mod rules;
 #[path = "src/gpu/shader_set.rs"]
 #[allow(dead_code)]
 mod shader_set;
@@ -16,6 +19,7 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=glsl");
     println!("cargo:rerun-if-changed=src/gpu/shader_set.rs");
+    println!("cargo:rerun-if-changed=src/rules.rs");
     println!("cargo:rerun-if-env-changed=GLSLC");
     let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("OUT_DIR"));

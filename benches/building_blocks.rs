@@ -10,6 +10,7 @@ use std::time::Instant;
 use vksplat::camera;
 use vksplat::cpu::{self, RenderOptions};
 use vksplat::gen::{synthetic_scene, tile_depth_keys, Rng};
+use vksplat::gpu::sort::SortJob;
 use vksplat::gpu::sync::{barrier, Access};
 use vksplat::gpu::{
     ContextOptions, Count, GpuBuffer, GpuContext, GpuTimer, MemoryKind, RadixSort, Scan,
@@ -88,15 +89,10 @@ fn main() {
                 runs,
                 warmup,
                 |cmd| {
-                    sort.record_bits(
-                        &ctx,
-                        cmd,
-                        &key_buf,
-                        &value_buf,
-                        &scratch,
-                        Count::Host(n as u32),
-                        bits.clone(),
-                    )?;
+                    let job =
+                        SortJob::new(&key_buf, &value_buf, &scratch, Count::Host(n as u32), 0)
+                            .bits(bits.clone());
+                    sort.record(&ctx, cmd, &job)?;
                     barrier(&ctx, cmd, Access::ComputeWrite, Access::TransferRead);
                     Ok(())
                 },

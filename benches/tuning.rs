@@ -17,7 +17,7 @@
 use ash::vk;
 use vksplat::gen::{tile_depth_keys, Rng};
 use vksplat::gpu::shader::{compile_glsl, BindingKind, Resource};
-use vksplat::gpu::sort::SortConfig;
+use vksplat::gpu::sort::{SortConfig, SortJob};
 use vksplat::gpu::sync::{barrier, Access};
 use vksplat::gpu::{
     BufferView, ComputePipeline, ContextOptions, Count, GpuBuffer, GpuContext, GpuImage, GpuTimer,
@@ -144,16 +144,8 @@ fn sort_and_scan(ctx: &GpuContext, n: u32, iterations: usize) {
             key_buf.upload(ctx, &keys).expect("reset keys");
             ctx.submit_and_wait("profile", |cmd| {
                 stage_timer.reset(ctx, cmd);
-                sort.record_timed(
-                    ctx,
-                    cmd,
-                    &key_buf,
-                    &value_buf,
-                    &scratch,
-                    Count::Host(n),
-                    0..44,
-                    Some(&mut stage_timer),
-                )
+                let job = SortJob::new(&key_buf, &value_buf, &scratch, Count::Host(n), 44);
+                sort.record_timed(ctx, cmd, &job, &mut stage_timer)
             })
             .expect("profile run");
         }
@@ -173,7 +165,8 @@ fn sort_and_scan(ctx: &GpuContext, n: u32, iterations: usize) {
         ctx.submit_and_wait("bench", |cmd| {
             timer.reset(ctx, cmd);
             timer.stage(ctx, cmd, "sort", |cmd| {
-                sort.record(ctx, cmd, &key_buf, &value_buf, &scratch, Count::Host(n), 44)
+                let job = SortJob::new(&key_buf, &value_buf, &scratch, Count::Host(n), 44);
+                sort.record(ctx, cmd, &job)
             })?;
             barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
             timer.stage(ctx, cmd, "scan", |cmd| {

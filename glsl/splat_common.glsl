@@ -4,15 +4,12 @@
 #ifndef SPLAT_COMMON_GLSL
 #define SPLAT_COMMON_GLSL
 
-// Reference rules (shared/docs/reference-semantics.md).
-#define TILE_SIZE 16u
-#define TILE_PIXELS 256u
-#define NEAR_PLANE 0.2
-#define COV2D_DILATION 0.3
-#define ANTIALIAS_MIN_RATIO 0.000025
-#define ALPHA_MAX 0.99
-#define ALPHA_MIN (1.0 / 255.0)
-#define T_MIN 0.0001
+// Reference rules (shared/docs/reference-semantics.md): TILE_SIZE, TILE_PIXELS,
+// NEAR_PLANE, COV2D_DILATION, ANTIALIAS_MIN_RATIO, ALPHA_MAX, ALPHA_MIN and T_MIN are
+// #defines from the host, defined once in src/rules.rs.
+#ifndef T_MIN
+#error "the reference's constants come from the host (src/rules.rs); compile through build.rs"
+#endif
 
 // Per-frame parameters (one record, written with vkCmdUpdateBuffer).
 struct FrameParams {

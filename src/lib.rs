@@ -16,6 +16,7 @@ pub mod mlp;
 pub mod output;
 pub mod render;
 pub mod rf;
+pub mod rules;
 pub mod scene;
 pub mod sequence;
 pub mod stats;

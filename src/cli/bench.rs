@@ -284,7 +284,11 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                 }
                 // In a sweep, a point beyond the device's limits is reported and skipped so
                 // the other points still produce their results.
-                Err(e @ vksplat::gpu::GpuError::InvalidArgument(_)) if points > 1 => {
+                Err(
+                    e @ (vksplat::gpu::GpuError::DeviceLimit { .. }
+                    | vksplat::gpu::GpuError::Input(_)
+                    | vksplat::gpu::GpuError::InvalidArgument(_)),
+                ) if points > 1 => {
                     note!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
                 }
                 Err(e) => return Err(e.into()),

@@ -13,18 +13,9 @@ use crate::scene::ActivatedScene;
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
-/// Tile side in pixels.
-pub const TILE_SIZE: u32 = 16;
-/// Gaussians whose view depth is at or below this are culled.
-pub const NEAR_PLANE: f32 = 0.2;
-/// Added to the diagonal of every 2D covariance (the reference's low-pass filter).
-pub const COV2D_DILATION: f32 = 0.3;
-/// Upper clamp of a Gaussian's alpha at a pixel.
-pub const ALPHA_MAX: f32 = 0.99;
-/// Contributions with alpha below this are skipped.
-pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-/// A pixel is finished before its transmittance would drop below this.
-pub const T_MIN: f32 = 0.0001;
+pub use crate::rules::{
+    ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO, COV2D_DILATION, NEAR_PLANE, TILE_SIZE, T_MIN,
+};
 
 /// The falloff of a splat's alpha with the squared Mahalanobis distance `d2` of a pixel
 /// from its 2D centre (`d2 = A dx^2 + 2 B dx dy + C dy^2` with the conic, i.e.
@@ -195,9 +186,6 @@ impl RenderOptions {
         Ok(())
     }
 }
-
-/// Lower bound of the antialiasing compensation's determinant ratio (the reference's).
-pub const ANTIALIAS_MIN_RATIO: f32 = 0.000025;
 
 /// Per-Gaussian output of [`preprocess`]. A culled Gaussian has `radius == 0` and
 /// touches no tile.

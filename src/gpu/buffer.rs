@@ -78,7 +78,7 @@ impl GpuBuffer {
                 ctx.shared
                     .allocator
                     .lock()
-                    .map_err(|_| GpuError::InvalidArgument("allocator mutex poisoned".into()))
+                    .map_err(|_| GpuError::Internal("allocator mutex poisoned".into()))
             })
             .and_then(|mut alloc| {
                 alloc
@@ -110,7 +110,7 @@ impl GpuBuffer {
         let alloc = this
             .allocation
             .as_ref()
-            .ok_or_else(|| GpuError::InvalidArgument("allocation missing".into()))?;
+            .ok_or_else(|| GpuError::Internal("allocation missing".into()))?;
         // SAFETY: memory and offset come from an allocation made for these requirements;
         // on error `this` drops and frees both.
         unsafe { device.bind_buffer_memory(buffer, alloc.memory(), alloc.offset()) }

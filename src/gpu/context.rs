@@ -497,9 +497,10 @@ impl GpuContext {
         let limit = match options.memory_limit {
             Some(l) => Some(l),
             None => match std::env::var("VKSPLAT_MEMORY_LIMIT") {
-                Ok(v) if !v.trim().is_empty() => Some(parse_bytes(&v).map_err(|e| {
-                    GpuError::InvalidArgument(format!("VKSPLAT_MEMORY_LIMIT: {e}"))
-                })?),
+                Ok(v) if !v.trim().is_empty() => Some(
+                    parse_bytes(&v)
+                        .map_err(|e| GpuError::Input(format!("VKSPLAT_MEMORY_LIMIT: {e}")))?,
+                ),
                 _ => None,
             },
         };
@@ -774,7 +775,7 @@ impl GpuContext {
         let pool = self
             .command_pool
             .lock()
-            .map_err(|_| GpuError::InvalidArgument("command pool mutex poisoned".into()))?;
+            .map_err(|_| GpuError::Internal("command pool mutex poisoned".into()))?;
         let alloc_info = vk::CommandBufferAllocateInfo::default()
             .command_pool(*pool)
             .level(vk::CommandBufferLevel::PRIMARY)
@@ -925,7 +926,7 @@ impl GpuContext {
         let queue = self
             .command_pool
             .lock()
-            .map_err(|_| GpuError::InvalidArgument("command pool mutex poisoned".into()))?;
+            .map_err(|_| GpuError::Internal("command pool mutex poisoned".into()))?;
         let run = |slot: &mut FrameSlot| -> GpuResult<R> {
             // SAFETY: the previous submission of this slot completed (waited for above),
             // so the pool and fence can be reset.

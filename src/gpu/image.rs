@@ -76,7 +76,7 @@ impl GpuImage {
             .shared
             .allocator
             .lock()
-            .map_err(|_| GpuError::InvalidArgument("allocator mutex poisoned".into()))?
+            .map_err(|_| GpuError::Internal("allocator mutex poisoned".into()))?
             .allocate(&AllocationCreateDesc {
                 name,
                 requirements,

@@ -5,6 +5,7 @@ pub mod buffer;
 pub mod context;
 pub mod image;
 pub mod pipeline_cache;
+pub mod reflect;
 pub mod scan;
 pub mod shader;
 pub mod shader_set;
@@ -69,9 +70,30 @@ pub enum GpuError {
     /// A shader failed to compile or load.
     #[error(transparent)]
     Shader(#[from] ShaderError),
-    /// An argument was out of range (buffer too small, bad key bits, ...).
+    /// A caller of the library passed something out of range (a buffer too small, key
+    /// bits outside the key, a ticket of another renderer, ...).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// What the user asked for cannot be rendered as asked (a camera, options, features
+    /// that do not fit the scene, an environment setting); the message says what to change.
+    #[error("{0}")]
+    Input(String),
+    /// The frame or scene needs more of a device limit than the device has.
+    #[error("{message}")]
+    DeviceLimit {
+        /// The Vulkan limit (e.g. `maxStorageBufferRange`) or the driver's.
+        limit: &'static str,
+        /// What the work needs, in the limit's unit.
+        needed: u64,
+        /// What the device allows.
+        max: u64,
+        /// The whole sentence, with what to do about it.
+        message: String,
+    },
+    /// An invariant of vksplat itself does not hold: a bug, not a problem of the input
+    /// or the device.
+    #[error("internal error (a bug in vksplat; please report it): {0}")]
+    Internal(String),
 }
 
 fn vk_hint(result: vk::Result) -> &'static str {

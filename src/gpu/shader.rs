@@ -81,7 +81,16 @@ pub fn compile_glsl(
     source: &str,
     defines: &[(&str, String)],
 ) -> Result<Vec<u32>, ShaderError> {
-    let file = format!("glsl/{name}.comp");
+    // Diagnostics name `glsl/<name>.comp`, the file glslc reads; a name that is no plain
+    // file name (a benchmark's case label) is written with `_` for the other characters.
+    let stem: String = name
+        .chars()
+        .map(|c| match c {
+            'a'..='z' | 'A'..='Z' | '0'..='9' | '_' | '-' | '.' | ' ' => c,
+            _ => '_',
+        })
+        .collect();
+    let file = format!("glsl/{stem}.comp");
     let compile_error = |message: String| ShaderError::Compile {
         file: file.clone(),
         message,
@@ -91,10 +100,7 @@ pub fn compile_glsl(
     for (header, text) in HEADERS {
         std::fs::write(glsl.join(header), text).map_err(|e| compile_error(e.to_string()))?;
     }
-    if name.contains(['/', '\\']) {
-        return Err(compile_error(format!("{name:?} is not a plain stage name")));
-    }
-    std::fs::write(glsl.join(format!("{name}.comp")), source)
+    std::fs::write(glsl.join(format!("{stem}.comp")), source)
         .map_err(|e| compile_error(e.to_string()))?;
     run_glslc(
         &scratch.0,
@@ -159,7 +165,7 @@ pub fn prebuilt_variants() -> impl Iterator<Item = &'static str> {
 }
 
 /// What a binding slot holds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum BindingKind {
     /// `buffer` block (std430).
     StorageBuffer,
@@ -223,6 +229,8 @@ impl ComputePipeline {
         workgroup_size: u32,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
+        // The module must bind what the host binds (the two sides cannot drift).
+        super::reflect::check(name, spirv, bindings, push_size).map_err(GpuError::Internal)?;
         let device = &ctx.shared.device;
         let mut this = Self {
             shared: ctx.shared.clone(),
@@ -397,7 +405,7 @@ impl ComputePipeline {
                 )
             });
         if !matches {
-            return Err(GpuError::InvalidArgument(format!(
+            return Err(GpuError::Internal(format!(
                 "pipeline '{}' expects bindings {:?}, got {} resources of other kinds",
                 self.name,
                 self.bindings,
@@ -405,7 +413,7 @@ impl ComputePipeline {
             )));
         }
         if push.len() != self.push_size as usize {
-            return Err(GpuError::InvalidArgument(format!(
+            return Err(GpuError::Internal(format!(
                 "pipeline '{}' expects {} push-constant bytes, got {}",
                 self.name,
                 self.push_size,

@@ -33,10 +33,36 @@ pub const SORT_SPEC_RADIX: u32 = 2;
 /// Specialization constant id of the most subgroups a sort workgroup may have.
 pub const SORT_SPEC_MAX_SUBGROUPS: u32 = 3;
 
-/// The `#define`s every shader is compiled with: the constants above, so that the host
-/// (Rust) is their one source.
+/// A float constant as a GLSL literal that parses to the same f32 (Rust prints the
+/// shortest decimal that round-trips).
+fn glsl_float(x: f32) -> String {
+    let text = format!("{x:?}");
+    if text.contains(['.', 'e']) {
+        text
+    } else {
+        format!("{text}.0")
+    }
+}
+
+/// The `#define`s every shader is compiled with: the constants above and the reference's
+/// rules (`crate::rules`), so that the host (Rust) is their one source.
 pub fn shared_defines() -> Vec<(String, String)> {
+    use crate::rules;
     [
+        ("TILE_SIZE", format!("{}u", rules::TILE_SIZE)),
+        (
+            "TILE_PIXELS",
+            format!("{}u", rules::TILE_SIZE * rules::TILE_SIZE),
+        ),
+        ("NEAR_PLANE", glsl_float(rules::NEAR_PLANE)),
+        ("COV2D_DILATION", glsl_float(rules::COV2D_DILATION)),
+        (
+            "ANTIALIAS_MIN_RATIO",
+            glsl_float(rules::ANTIALIAS_MIN_RATIO),
+        ),
+        ("ALPHA_MAX", glsl_float(rules::ALPHA_MAX)),
+        ("ALPHA_MIN", glsl_float(rules::ALPHA_MIN)),
+        ("T_MIN", glsl_float(rules::T_MIN)),
         ("SCAN_WG", SCAN_WG.to_string()),
         ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
         ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),

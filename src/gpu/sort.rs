@@ -145,6 +145,58 @@ pub enum Count<'a> {
     },
 }
 
+/// One sort to record ([`RadixSort::record`]): the buffers it sorts in place, its scratch,
+/// the element count, the key bits that order, and the texel views of a texel-I/O sort.
+#[derive(Clone)]
+pub struct SortJob<'a> {
+    /// Keys, sorted in place.
+    pub keys: &'a GpuBuffer,
+    /// Values, moved with their keys.
+    pub values: &'a GpuBuffer,
+    /// Scratch of [`RadixSort::scratch_size_with`] bytes for the count's capacity.
+    pub scratch: &'a GpuBuffer,
+    /// How many elements.
+    pub count: Count<'a>,
+    /// The key bits that order (`0..key_bits` for whole keys; a sub-range such as `32..44`
+    /// for the tile id of pairs already in depth order: the sort is stable, so bits below
+    /// the range keep the order they arrive in).
+    pub bits: std::ops::Range<u32>,
+    /// The views a sort with [`SortConfig::texel_io`] reads and writes (R32_UINT views of
+    /// `keys`, `values` and the scratch's key and value ranges); `None` otherwise.
+    pub texels: Option<&'a SortTexels>,
+}
+
+impl<'a> SortJob<'a> {
+    /// Sorts `count` elements of `keys`/`values` by their low `key_bits` bits, through
+    /// storage buffers.
+    pub fn new(
+        keys: &'a GpuBuffer,
+        values: &'a GpuBuffer,
+        scratch: &'a GpuBuffer,
+        count: Count<'a>,
+        key_bits: u32,
+    ) -> Self {
+        SortJob {
+            keys,
+            values,
+            scratch,
+            count,
+            bits: 0..key_bits,
+            texels: None,
+        }
+    }
+
+    /// Orders by key bits `bits` only.
+    pub fn bits(self, bits: std::ops::Range<u32>) -> Self {
+        SortJob { bits, ..self }
+    }
+
+    /// Reads and writes through `texels` (a sort with [`SortConfig::texel_io`]).
+    pub fn texels(self, texels: Option<&'a SortTexels>) -> Self {
+        SortJob { texels, ..self }
+    }
+}
+
 /// Byte ranges inside the sort scratch buffer.
 #[derive(Clone, Copy, Debug)]
 struct ScratchLayout {
@@ -348,8 +400,8 @@ impl RadixSort {
         self.config
     }
 
-    /// Records a stable sort of `count` (key, value) pairs by the low `key_bits` bits
-    /// of the key (1..=64, or 1..=32 for 32-bit keys; 0 records nothing). `keys` holds
+    /// Records a stable sort of the job's `count` (key, value) pairs by its key bits (a
+    /// range inside the 64- or 32-bit key; an empty range records nothing). `keys` holds
     /// `uvec2 (lo, hi)` per element (one `uint` for 32-bit keys), `values` one u32; both
     /// hold the sorted result afterwards. Elements past the count are not touched.
     /// `scratch` must hold
@@ -366,85 +418,37 @@ impl RadixSort {
     ///   and **the sort places no trailing barrier**: the caller records one from
     ///   [`Access::ComputeWrite`] to its next use (e.g. `ComputeRead`, `TransferRead`).
     ///   `scratch` must not be reused before such a barrier either.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record(
-        &self,
-        ctx: &GpuContext,
-        cmd: vk::CommandBuffer,
-        keys: &GpuBuffer,
-        values: &GpuBuffer,
-        scratch: &GpuBuffer,
-        count: Count,
-        key_bits: u32,
-    ) -> GpuResult<()> {
-        self.record_timed(ctx, cmd, keys, values, scratch, count, 0..key_bits, None)
+    pub fn record(&self, ctx: &GpuContext, cmd: vk::CommandBuffer, job: &SortJob) -> GpuResult<()> {
+        self.record_impl(ctx, cmd, job, None)
     }
 
-    /// Like [`RadixSort::record`], ordering by key bits `bits` only (e.g. `32..44` for
-    /// the tile id of pairs that are already in depth order: the sort is stable, so
-    /// bits below the range keep the order they arrive in). Same barrier contract.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_bits(
-        &self,
-        ctx: &GpuContext,
-        cmd: vk::CommandBuffer,
-        keys: &GpuBuffer,
-        values: &GpuBuffer,
-        scratch: &GpuBuffer,
-        count: Count,
-        bits: std::ops::Range<u32>,
-    ) -> GpuResult<()> {
-        self.record_timed(ctx, cmd, keys, values, scratch, count, bits, None)
-    }
-
-    /// [`RadixSort::record_bits`] with the views a sort with [`SortConfig::texel_io`]
-    /// reads and writes (the R32_UINT views of `keys`, `values` and the scratch's key and
-    /// value ranges), or `None` for a storage-buffer sort.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_views(
-        &self,
-        ctx: &GpuContext,
-        cmd: vk::CommandBuffer,
-        keys: &GpuBuffer,
-        values: &GpuBuffer,
-        scratch: &GpuBuffer,
-        count: Count,
-        bits: std::ops::Range<u32>,
-        texels: Option<&SortTexels>,
-    ) -> GpuResult<()> {
-        self.record_impl(ctx, cmd, keys, values, scratch, count, bits, None, texels)
-    }
-
-    /// [`RadixSort::record_bits`] with every dispatch wrapped in its own timer stage
+    /// [`RadixSort::record`] with every dispatch wrapped in its own timer stage
     /// (`sort histogram`, `sort scan`, `sort scatter`, ... per pass), for profiling.
-    #[allow(clippy::too_many_arguments)]
     pub fn record_timed(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        keys: &GpuBuffer,
-        values: &GpuBuffer,
-        scratch: &GpuBuffer,
-        count: Count,
-        bits: std::ops::Range<u32>,
-        timer: Option<&mut GpuTimer>,
+        job: &SortJob,
+        timer: &mut GpuTimer,
     ) -> GpuResult<()> {
-        self.record_impl(ctx, cmd, keys, values, scratch, count, bits, timer, None)
+        self.record_impl(ctx, cmd, job, Some(timer))
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn record_impl(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        keys: &GpuBuffer,
-        values: &GpuBuffer,
-        scratch: &GpuBuffer,
-        count: Count,
-        bits: std::ops::Range<u32>,
+        job: &SortJob,
         mut timer: Option<&mut GpuTimer>,
-        texels: Option<&SortTexels>,
     ) -> GpuResult<()> {
+        let SortJob {
+            keys,
+            values,
+            scratch,
+            count,
+            ref bits,
+            texels,
+        } = *job;
         if self.config.texel_io != texels.is_some() {
             return Err(GpuError::InvalidArgument(format!(
                 "a sort {} texel I/O needs {} texel views",

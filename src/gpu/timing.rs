@@ -55,7 +55,8 @@ impl GpuTimer {
     }
 
     /// Records `body` between a debug label and a timestamp pair named `name`.
-    /// Without timestamp support (or past capacity) only the label is recorded.
+    /// Without timestamp support only the label is recorded; a stage past the timer's
+    /// capacity is an error ([`GpuError::Internal`]), never silently untimed.
     pub fn stage<R>(
         &mut self,
         ctx: &GpuContext,
@@ -65,14 +66,23 @@ impl GpuTimer {
     ) -> GpuResult<R> {
         let label = CString::new(name)
             .map_err(|_| GpuError::InvalidArgument(format!("stage name {name:?} has a NUL")))?;
+        let index = self.stages.len() as u32 * 2;
+        if index + 1 >= self.capacity {
+            // A stage would go untimed: the owner sized the timer for fewer stages than it
+            // records.
+            return Err(GpuError::Internal(format!(
+                "a timer of {} stages cannot time stage {} ({name})",
+                self.capacity / 2,
+                self.stages.len() + 1
+            )));
+        }
         let debug = self.shared.debug_device.as_ref();
         if let Some(debug) = debug {
             let info = vk::DebugUtilsLabelEXT::default().label_name(&label);
             // SAFETY: cmd is recording; the label outlives the call.
             unsafe { debug.cmd_begin_debug_utils_label(cmd, &info) };
         }
-        let index = self.stages.len() as u32 * 2;
-        let timed = self.valid_mask != 0 && index + 1 < self.capacity;
+        let timed = self.valid_mask != 0;
         if timed {
             // SAFETY: query `index` was reset by `reset` in this command buffer.
             unsafe {

@@ -197,7 +197,7 @@ impl Blend {
             (BlendKernel::Shared, _, _) => (Resource::Buffer(b.splats), Resource::Buffer(b.values)),
             (_, Some(s), Some(v)) => (Resource::TexelBuffer(s), Resource::TexelBuffer(v)),
             _ => {
-                return Err(crate::gpu::GpuError::InvalidArgument(
+                return Err(crate::gpu::GpuError::Internal(
                     "the texel blend kernel needs texel views of the splats and values".into(),
                 ))
             }

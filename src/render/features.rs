@@ -91,7 +91,7 @@ impl FeatureBlend {
                     Resource::TexelBuffer(v),
                     Resource::TexelBuffer(f),
                 ),
-                (true, None) => return Err(GpuError::InvalidArgument(
+                (true, None) => return Err(GpuError::Internal(
                     "the texel feature blend needs texel views of the splats, values and features"
                         .into(),
                 )),

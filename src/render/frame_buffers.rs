@@ -11,7 +11,10 @@ use crate::gpu::{
 };
 use ash::vk;
 
-use super::{bin_grid, keys, preprocess, GpuFeatures, GpuRenderer, GpuScene, MAX_FRAMES_IN_FLIGHT};
+use super::{
+    bin_grid, keys, preprocess, GpuFeatures, GpuRenderer, GpuScene, MAX_FRAMES_IN_FLIGHT,
+    MAX_STAGES_PER_SUBMIT,
+};
 
 /// The feature images of a frame: one plane per group of four channels.
 pub(super) struct FeaturePlanes {
@@ -28,9 +31,14 @@ pub(super) struct FeaturePlanes {
 pub(super) fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
     let max = u64::from(ctx.info().max_storage_buffer_range);
     if bytes > max {
-        return Err(GpuError::InvalidArgument(format!(
-            "{what} needs {bytes} bytes in one storage buffer, but this device binds at most {max} bytes (maxStorageBufferRange); use fewer Gaussians or a device with a larger limit"
-        )));
+        return Err(GpuError::DeviceLimit {
+            limit: "maxStorageBufferRange",
+            needed: bytes,
+            max,
+            message: format!(
+                "{what} needs {bytes} bytes in one storage buffer, but this device binds at most {max} bytes (maxStorageBufferRange); use fewer Gaussians or a device with a larger limit"
+            ),
+        });
     }
     Ok(())
 }
@@ -114,10 +122,15 @@ impl FrameBuffers {
         }
         let max_texels = u64::from(ctx.info().max_texel_buffer_elements);
         if n * 3 > max_texels || (texel_views && u64::from(capacity) > max_texels) {
-            return Err(GpuError::InvalidArgument(format!(
-                "{gaussians} Gaussians need texel buffers of {} texels (3 per splat), but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians or a device with a larger limit",
-                n * 3
-            )));
+            return Err(GpuError::DeviceLimit {
+                limit: "maxTexelBufferElements",
+                needed: (n * 3).max(u64::from(capacity)),
+                max: max_texels,
+                message: format!(
+                    "{gaussians} Gaussians need texel buffers of {} texels (3 per splat), but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians or a device with a larger limit",
+                    n * 3
+                ),
+            });
         }
         let splats = GpuBuffer::new(ctx, "splats", splat_bytes, MemoryKind::Device)?;
         let values = dev("values", u64::from(capacity) * 4)?;
@@ -272,7 +285,7 @@ impl FrameBuffers {
                 bin_masks: Resource::TexelBuffer(v.bin_masks.handle()),
             },
             (true, _) => {
-                return Err(GpuError::InvalidArgument(
+                return Err(GpuError::Internal(
                     "the keys stage's texel views are missing".into(),
                 ))
             }
@@ -343,7 +356,11 @@ impl FrameSet {
         Ok(FrameSet {
             slot: FrameSlot::new(ctx, &format!("frame {index}"))?,
             // Two timestamps per stage: up to ten stages (features and shade included).
-            timer: GpuTimer::new(ctx, &format!("frame {index} timestamps"), 32)?,
+            timer: GpuTimer::new(
+                ctx,
+                &format!("frame {index} timestamps"),
+                MAX_STAGES_PER_SUBMIT,
+            )?,
             frame: None,
             feature_planes: None,
             bin_size,
@@ -403,7 +420,7 @@ impl GpuRenderer {
         if !fits {
             // Free the old buffers first so peak memory is not doubled.
             *frame = None;
-            let views = self.blend.needs_texel_views();
+            let views = self.pipelines.texel_io();
             *frame = Some(FrameBuffers::new(
                 &self.ctx,
                 scene.count,
@@ -411,7 +428,7 @@ impl GpuRenderer {
                 cam.height,
                 capacity,
                 views,
-                self.blend.kernel().bin_size(),
+                self.pipelines.kernel().bin_size(),
             )?);
         }
         Ok(())
@@ -427,7 +444,11 @@ impl GpuRenderer {
                 "{MAX_FRAMES_IN_FLIGHT} frames are in flight already; finish one before submitting another"
             )));
         }
-        let set = FrameSet::new(&self.ctx, self.sets.len(), self.blend.kernel().bin_size())?;
+        let set = FrameSet::new(
+            &self.ctx,
+            self.sets.len(),
+            self.pipelines.kernel().bin_size(),
+        )?;
         self.sets.push(set);
         Ok(self.sets.len() - 1)
     }
@@ -437,7 +458,7 @@ impl GpuRenderer {
         let f = self.sets[set]
             .frame
             .as_mut()
-            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+            .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
         if f.packed.is_none() {
             let bytes = u64::from(f.width) * u64::from(f.height) * 4;
             check_binding(&self.ctx, "packed rgba8 frame", bytes)?;

@@ -37,27 +37,30 @@ pub mod shade;
 pub mod types;
 
 mod frame_buffers;
+mod pipelines;
 mod readback;
 mod record;
 mod schedule;
 mod timings;
 mod upload;
 
-use frame_buffers::{check_binding, FrameSet};
-pub use readback::Intermediates;
+use frame_buffers::{check_binding, FrameBuffers, FrameSet};
+use pipelines::{FrameNeeds, Pipelines};
+pub use readback::{ForwardState, Intermediates};
 use schedule::Pass;
+use schedule::CHUNKS_PER_SUBMIT;
 pub use schedule::{
     bin_grid, key_bits, tile_bits, SplitLimits, CPU_LOOP_LIMIT, SMALL_BIN_MAX_PAIRS,
 };
-pub use timings::{FrameStats, StageTimings};
+use timings::MAX_STAGES_PER_SUBMIT;
+pub use timings::{FrameStats, Stage, StageTimings};
 use upload::FeatureJob;
 pub use upload::{sh_texel_stride, GpuFeatures, GpuScene};
 
 use crate::camera::Camera;
-use crate::cpu::{RenderOptions, SplatKernel};
+use crate::cpu::RenderOptions;
 use crate::frame::Frame;
-use crate::gpu::sort::{SortConfig, SORT_CONFIG_32};
-use crate::gpu::{GpuContext, GpuError, GpuResult, RadixSort, Scan};
+use crate::gpu::{GpuContext, GpuError, GpuResult};
 
 /// What a frame reads back to the host after it is rendered.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -87,23 +90,8 @@ pub struct GpuRenderer {
     /// is submitted while another is still in flight ([`Self::submit`]). First, so that
     /// it drops first: a set waits for a frame still in flight before the pipelines go.
     sets: Vec<FrameSet>,
-    preprocess: preprocess::Preprocess,
-    /// The preprocess pipeline of compact scenes, built on the first frame of one.
-    compact_preprocess: Option<preprocess::Preprocess>,
-    order: order::Order,
-    scan: Scan,
-    keys: keys::Keys,
-    sort: RadixSort,
-    ranges: ranges::Ranges,
-    /// Blend pipelines by alpha falloff: the Gaussian one is built with the renderer, the
-    /// power one on the first frame that needs it.
-    blend: blend::Blend,
-    power_blend: Option<blend::Blend>,
-    /// Feature blend pipelines by `SplatKernel::shader_id`, built on first use.
-    feature_blends: [Option<features::FeatureBlend>; 2],
-    /// The neural shader's pipeline, built on first use.
-    shade: Option<shade::Shade>,
-    pack: pack::Pack,
+    /// Built the first time a frame needs each.
+    pipelines: Pipelines,
     /// The set of the last finished frame (what [`Self::render_with_intermediates`] reads).
     last: usize,
     /// Key capacity the frames have needed so far (the largest set's); a new or resized
@@ -147,6 +135,17 @@ pub struct Ticket<'a> {
 }
 
 impl Ticket<'_> {
+    /// What recording the frame takes: the pipelines it needs.
+    fn needs(&self) -> FrameNeeds {
+        FrameNeeds {
+            compact: self.scene.compact,
+            kernel: self.opts.kernel,
+            features: self.features.is_some(),
+            shade: matches!(self.features, Some((_, Some(_)))),
+            pack: self.readback == Readback::Rgba8,
+        }
+    }
+
     /// The camera of the frame.
     pub fn camera(&self) -> &Camera {
         &self.cam
@@ -163,25 +162,7 @@ impl GpuRenderer {
     /// Builds every pipeline with the given blend kernel.
     pub fn with_blend_kernel(ctx: GpuContext, kernel: blend::BlendKernel) -> GpuResult<Self> {
         Ok(GpuRenderer {
-            preprocess: preprocess::Preprocess::new(&ctx, false, kernel.texel())?,
-            compact_preprocess: None,
-            order: order::Order::new(&ctx)?,
-            scan: Scan::new(&ctx)?,
-            keys: keys::Keys::new(&ctx, kernel.texel())?,
-            // Texel-view I/O where the blend reads texel views too (CPU devices).
-            sort: RadixSort::with_config(
-                &ctx,
-                SortConfig {
-                    texel_io: kernel.texel(),
-                    ..SORT_CONFIG_32
-                },
-            )?,
-            ranges: ranges::Ranges::new(&ctx, kernel.texel())?,
-            blend: blend::Blend::new(&ctx, kernel, SplatKernel::Gaussian)?,
-            power_blend: None,
-            feature_blends: [None, None],
-            shade: None,
-            pack: pack::Pack::new(&ctx)?,
+            pipelines: Pipelines::new(kernel),
             sets: vec![FrameSet::new(&ctx, 0, kernel.bin_size())?],
             last: 0,
             capacity: None,
@@ -202,9 +183,15 @@ impl GpuRenderer {
         self.split = limits;
     }
 
+    /// Pipelines built so far (each the first time a frame needed it) and the
+    /// milliseconds that took.
+    pub fn pipelines_built(&self) -> (u32, f64) {
+        self.pipelines.built()
+    }
+
     /// The blend kernel in use.
     pub fn blend_kernel(&self) -> blend::BlendKernel {
-        self.blend.kernel()
+        self.pipelines.kernel()
     }
 
     /// Destroys the pipelines and per-frame resources and returns the context (for
@@ -258,46 +245,38 @@ impl GpuRenderer {
     }
 
     /// What every features frame needs before it is recorded: features uploaded for this
-    /// scene, the feature blend pipeline of the frame's kernel and, with a shader, the
-    /// shader's checks and pipeline.
+    /// scene and, with a shader, a shader that takes them and fits the device's loops.
     fn prepare_features(
         &mut self,
         scene: &GpuScene,
         features: &GpuFeatures,
         shader: Option<&shade::GpuShader>,
-        opts: &RenderOptions,
     ) -> GpuResult<()> {
         if features.count != scene.count {
-            return Err(GpuError::InvalidArgument(format!(
+            return Err(GpuError::Input(format!(
                 "the features were uploaded for {} Gaussians, the scene has {}",
                 features.count, scene.count
             )));
         }
-        let slot = opts.kernel.shader_id() as usize;
-        if self.feature_blends[slot].is_none() {
-            self.feature_blends[slot] = Some(features::FeatureBlend::new(
-                &self.ctx,
-                opts.kernel,
-                self.blend.needs_texel_views(),
-            )?);
-        }
         if let Some(shader) = shader {
             if shader.channels() != features.channels {
-                return Err(GpuError::InvalidArgument(format!(
+                return Err(GpuError::Input(format!(
                     "the shader takes {} feature channels but the scene has {}",
                     shader.channels(),
                     features.channels
                 )));
             }
             if self.loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
-                return Err(GpuError::InvalidArgument(format!(
-                    "the neural shader needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations; use narrower layers, or the CPU reference (--cpu)",
-                    shader.iterations,
-                    self.ctx.info().name
-                )));
-            }
-            if self.shade.is_none() {
-                self.shade = Some(shade::Shade::new(&self.ctx)?);
+                return Err(GpuError::DeviceLimit {
+                    limit: "llvmpipe's loop iterations per invocation",
+                    needed: shader.iterations,
+                    max: u64::from(CPU_LOOP_LIMIT),
+                    message: format!(
+                        "the neural shader needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations; use narrower layers, or the CPU reference (--cpu)",
+                        shader.iterations,
+                        self.ctx.info().name
+                    ),
+                });
             }
         }
         Ok(())
@@ -395,7 +374,7 @@ impl GpuRenderer {
         cam: &Camera,
         opts: &RenderOptions,
     ) -> GpuResult<Ticket<'a>> {
-        self.prepare_features(scene, features, shader, opts)?;
+        self.prepare_features(scene, features, shader)?;
         self.submit_with(scene, cam, opts, Readback::Float, Some((features, shader)))
     }
 

@@ -4,7 +4,7 @@
 //! the same result as sorting the full `tile << 32 | depth` keys (see `glsl/order.comp`).
 
 use crate::gpu::shader::BindingKind;
-use crate::gpu::sort::SortTexels;
+use crate::gpu::sort::{SortJob, SortTexels};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{
     dispatch_grid, BufferSlice, ComputePipeline, Count, GpuBuffer, GpuContext, GpuResult, RadixSort,
@@ -65,8 +65,8 @@ impl Order {
             offset: COUNTS_OFFSET,
             max_n,
         };
-        let (keys, values, bits) = (depth_keys, depth_values, 0..DEPTH_BITS);
-        sort.record_views(ctx, cmd, keys, values, scratch, count, bits, texels)?;
+        let job = SortJob::new(depth_keys, depth_values, scratch, count, DEPTH_BITS).texels(texels);
+        sort.record(ctx, cmd, &job)?;
         // Sorted depth keys -> gather.
         barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
         let groups = dispatch_grid(n.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);

@@ -160,7 +160,7 @@ impl Preprocess {
                     Resource::Buffer(b.touched),
                 ],
                 (true, None) => {
-                    return Err(crate::gpu::GpuError::InvalidArgument(
+                    return Err(crate::gpu::GpuError::Internal(
                         "the preprocess stage's texel views are missing".into(),
                     ))
                 }

@@ -4,7 +4,7 @@
 use super::types::{Counters, Splat};
 use crate::camera::Camera;
 use crate::frame::Frame;
-use crate::gpu::{GpuError, GpuResult};
+use crate::gpu::{BufferSlice, GpuError, GpuImage, GpuResult};
 
 use super::{bin_grid, features, GpuRenderer, GpuScene, Rgba8Frame};
 
@@ -69,7 +69,7 @@ impl GpuRenderer {
         let f = self.sets[set]
             .frame
             .as_ref()
-            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
         let (_, _, off) = f.readback_offsets();
         let bytes = f.readback.mapped()?;
         Ok(bytemuck::pod_read_unaligned(
@@ -81,7 +81,7 @@ impl GpuRenderer {
         let f = self.sets[set]
             .frame
             .as_ref()
-            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
         let bytes = f.readback.mapped()?;
         let pixels = cam.width as usize * cam.height as usize;
         let (color_off, depth_off, _) = f.readback_offsets();
@@ -104,7 +104,7 @@ impl GpuRenderer {
         let f = self.sets[set]
             .frame
             .as_ref()
-            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
         let bytes = f.readback.mapped()?;
         let len = cam.width as usize * cam.height as usize * 4;
         let (color_off, _, _) = f.readback_offsets();
@@ -125,7 +125,7 @@ impl GpuRenderer {
         let f = set
             .frame
             .as_ref()
-            .ok_or_else(|| GpuError::InvalidArgument("no frame".into()))?;
+            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
         let ctx = &self.ctx;
         let n = scene.count as usize;
         let counters = self.read_counters(self.last)?;
@@ -143,6 +143,61 @@ impl GpuRenderer {
             ranges: f.ranges.read(ctx, (bx * by) as usize)?,
             bin_size,
             bins: (bx, by),
+        })
+    }
+}
+
+/// What the last finished frame left on the device that a backward pass reads, through
+/// one handle: the projected Gaussians, the sorted (bin, Gaussian) pairs, each bin's range
+/// of them, and the colour image whose alpha is each pixel's `1 - T_final`. Valid until
+/// the renderer records its next frame. For a frame rendered in depth-ordered chunks the
+/// pairs and ranges are the last chunk's ([`super::FrameStats::chunks`] says how many there were).
+/// The per-pixel last contributor is not saved by the forward kernels yet (the backward
+/// pass adds it).
+pub struct ForwardState<'a> {
+    /// One [`Splat`] per Gaussian: mean2d, opacity, conic, depth, colour, radius.
+    pub splats: BufferSlice<'a>,
+    /// Sorted pair values: the Gaussian index of each (bin, Gaussian) pair, by bin and
+    /// then depth; `pairs` of them.
+    pub sorted_gaussians: BufferSlice<'a>,
+    /// Sorted pair keys: the bin id of each pair.
+    pub sorted_bins: BufferSlice<'a>,
+    /// Pairs sorted.
+    pub pairs: u32,
+    /// `[start, end)` into the sorted pairs per bin (`uvec2`), bins row-major.
+    pub ranges: BufferSlice<'a>,
+    /// Side of the bins in pixels, and bins along x and y.
+    pub bin_size: u32,
+    /// Bins along x and y.
+    pub bins: (u32, u32),
+    /// RGBA32F: composited colour and alpha `1 - T_final` per pixel.
+    pub color: &'a GpuImage,
+    /// R32F: alpha-normalised depth per pixel.
+    pub depth: &'a GpuImage,
+    /// The frame's constants (`FrameParams`).
+    pub params: BufferSlice<'a>,
+}
+
+impl GpuRenderer {
+    /// The saved state of the last finished frame ([`ForwardState`]).
+    pub fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
+        let set = &self.sets[self.last];
+        let f = set
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no frame was rendered yet".into()))?;
+        let counters = self.read_counters(self.last)?;
+        Ok(ForwardState {
+            splats: f.splats.whole(),
+            sorted_gaussians: f.values.whole(),
+            sorted_bins: f.keys.whole(),
+            pairs: counters.sort_count,
+            ranges: f.ranges.whole(),
+            bin_size: set.bin_size,
+            bins: bin_grid(set.bin_size, f.width, f.height),
+            color: &f.color,
+            depth: &f.depth,
+            params: f.params.whole(),
         })
     }
 }

@@ -3,13 +3,11 @@
 
 use super::types::{Counters, Splat};
 use crate::camera::Camera;
-use crate::cpu::{RenderOptions, SplatKernel};
+use crate::cpu::RenderOptions;
 use crate::gpu::{GpuBuffer, GpuError, GpuResult, MemoryKind};
 use ash::vk;
 
-use super::{
-    blend, keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket,
-};
+use super::{keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};
 
 /// Key bits that order the pairs for `num_tiles` bins: 32 depth bits plus the bin id's.
 pub fn key_bits(num_tiles: u32) -> u32 {
@@ -119,30 +117,15 @@ impl GpuRenderer {
         readback: Readback,
         features: Option<FeatureJob<'a>>,
     ) -> GpuResult<Ticket<'a>> {
-        cam.validate()
-            .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
-        opts.validate().map_err(GpuError::InvalidArgument)?;
-        if scene.compact && self.compact_preprocess.is_none() {
-            self.compact_preprocess = Some(preprocess::Preprocess::new(
-                &self.ctx,
-                true,
-                self.preprocess.texel_io(),
-            )?);
-        }
-        if opts.kernel == SplatKernel::Power && self.power_blend.is_none() {
-            self.power_blend = Some(blend::Blend::new(
-                &self.ctx,
-                self.blend.kernel(),
-                SplatKernel::Power,
-            )?);
-        }
+        cam.validate().map_err(|e| GpuError::Input(e.to_string()))?;
+        opts.validate().map_err(GpuError::Input)?;
         let set = self.free_set()?;
         let initial = self
             .capacity
             .unwrap_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)))
             .min(self.max_capacity());
         self.ensure_frame(set, scene, cam, initial)?;
-        let preferred = self.blend.kernel().bin_size();
+        let preferred = self.pipelines.kernel().bin_size();
         self.sets[set].bin_size = if self.large_bins == Some((scene.count, cam.width, cam.height)) {
             16
         } else {
@@ -185,9 +168,7 @@ impl GpuRenderer {
             let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
             self.ensure_feature_planes(t.set, features, pixels)?;
         }
-        self.record_and_submit(
-            t.set, t.scene, &t.cam, &t.opts, t.readback, t.features, wait, pass,
-        )
+        self.record_and_submit(t, wait, pass)
     }
 
     /// Waits for the ticket's frame and checks its counters: when the frame needed more
@@ -240,18 +221,23 @@ impl GpuRenderer {
                 }
                 let worst = bins_loop.max(counters.max_list_loop);
                 if worst > CPU_LOOP_LIMIT {
-                    return Err(GpuError::InvalidArgument(format!(
+                    return Err(GpuError::DeviceLimit {
+                        limit: "llvmpipe's loop iterations per invocation",
+                        needed: u64::from(worst),
+                        max: u64::from(CPU_LOOP_LIMIT),
+                        message: format!(
                         "this frame needs a shader loop of {worst} iterations ({} bins of one Gaussian, {} Gaussians in one bin), but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations in total, which would silently drop Gaussians; render at a lower resolution, or on another device",
                         bins_loop,
                         counters.max_list_loop,
                         self.ctx.info().name
-                    )));
+                    ),
+                    });
                 }
             }
             if complete {
                 // Larger bins stick while the pairs say the preferred ones would not do: an
                 // 8-pixel bin frame has at most 4 times the pairs of a 16-pixel one.
-                let preferred = self.blend.kernel().bin_size();
+                let preferred = self.pipelines.kernel().bin_size();
                 let sticky =
                     bin_size > preferred && pairs * 4 > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
                 self.large_bins = sticky.then_some((t.scene.count, cam.width, cam.height));
@@ -306,7 +292,7 @@ impl GpuRenderer {
         let f = self.sets[t.set]
             .frame
             .as_mut()
-            .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+            .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
         if f.chunk_offsets.is_none() {
             f.chunk_offsets = Some(GpuBuffer::new(
                 &self.ctx,
@@ -331,12 +317,12 @@ impl GpuRenderer {
             let f = self.sets[t.set]
                 .frame
                 .as_ref()
-                .ok_or_else(|| GpuError::InvalidArgument("frame buffers missing".into()))?;
+                .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
             let visible = (front.visible as usize).min(t.scene.count as usize);
             let bytes = f
                 .chunk_offsets
                 .as_ref()
-                .ok_or_else(|| GpuError::InvalidArgument("chunk offsets missing".into()))?
+                .ok_or_else(|| GpuError::Internal("chunk offsets missing".into()))?
                 .mapped()?;
             let offsets: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..visible * 4]);
             (
@@ -347,9 +333,14 @@ impl GpuRenderer {
         let largest = chunks.iter().map(|c| c.pairs).max().unwrap_or(0);
         if largest > u64::from(capacity) {
             if largest > u64::from(max) {
-                return Err(GpuError::InvalidArgument(format!(
+                return Err(GpuError::DeviceLimit {
+                    limit: "maxStorageBufferRange",
+                    needed: largest,
+                    max: u64::from(max),
+                    message: format!(
                     "one Gaussian of this frame touches {largest} bins, more than the {max} pairs one storage buffer of this device can hold; render at a lower resolution"
-                )));
+                ),
+                });
             }
             let grown = (largest + largest / 4).min(u64::from(max)) as u32;
             self.ensure_frame(t.set, t.scene, &t.cam, grown)?;

@@ -45,7 +45,7 @@ impl GpuShader {
         let words = mlp.gpu_words();
         let max = u64::from(ctx.info().max_texel_buffer_elements);
         if words.len() as u64 > max {
-            return Err(crate::gpu::GpuError::InvalidArgument(format!(
+            return Err(crate::gpu::GpuError::Input(format!(
                 "the neural shader's {} weights exceed the {max} texels this device reads from one texel buffer (maxTexelBufferElements); use a smaller network",
                 words.len()
             )));

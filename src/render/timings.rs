@@ -1,8 +1,89 @@
 //! GPU time per stage (timestamp queries) and what a frame needed.
 
-use crate::gpu::GpuResult;
+use crate::gpu::{GpuError, GpuResult};
 
-use super::GpuRenderer;
+use super::{GpuRenderer, CHUNKS_PER_SUBMIT};
+
+/// The timed stages of a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Cull, project, covariance, SH colour, tile rectangles.
+    Preprocess,
+    /// Depth sort of the Gaussians and tiles touched in depth order.
+    Order,
+    /// Prefix sum of tiles touched.
+    Scan,
+    /// Duplicate-per-tile keys.
+    Keys,
+    /// Radix sort of the keys.
+    Sort,
+    /// Tile ranges.
+    Ranges,
+    /// Feature channels, blended before the colour of the same chunk.
+    Features,
+    /// Per-tile blending.
+    Blend,
+    /// The neural shader.
+    Shade,
+    /// Copies (and packing) to host-visible memory.
+    Readback,
+}
+
+impl Stage {
+    /// Every stage, in the order reports list them (a chunk records its features before
+    /// its blend).
+    pub const ALL: [Stage; 10] = [
+        Stage::Preprocess,
+        Stage::Order,
+        Stage::Scan,
+        Stage::Keys,
+        Stage::Sort,
+        Stage::Ranges,
+        Stage::Blend,
+        Stage::Features,
+        Stage::Shade,
+        Stage::Readback,
+    ];
+
+    /// The stage's name in timings, debug labels and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Preprocess => "preprocess",
+            Stage::Order => "order",
+            Stage::Scan => "scan",
+            Stage::Keys => "keys",
+            Stage::Sort => "sort",
+            Stage::Ranges => "ranges",
+            Stage::Features => "features",
+            Stage::Blend => "blend",
+            Stage::Shade => "shade",
+            Stage::Readback => "readback",
+        }
+    }
+
+    fn from_name(name: &str) -> Option<Stage> {
+        Stage::ALL.into_iter().find(|s| s.name() == name)
+    }
+}
+
+/// Stages the front of a frame records (preprocess, order, scan).
+pub(super) const FRONT_STAGES: u32 = 3;
+/// Stages each chunk records (keys, sort, ranges, features, blend).
+pub(super) const CHUNK_STAGES: u32 = 5;
+/// Stages after the last chunk (shade, readback).
+pub(super) const FINAL_STAGES: u32 = 2;
+
+/// Timed stages one submission records at most: a whole frame, or a batch of
+/// [`CHUNKS_PER_SUBMIT`] chunks with the frame's end; the frame timers hold this many.
+pub(super) const MAX_STAGES_PER_SUBMIT: u32 = {
+    let whole = FRONT_STAGES + CHUNK_STAGES + FINAL_STAGES;
+    let chunks = CHUNKS_PER_SUBMIT as u32 * CHUNK_STAGES + FINAL_STAGES;
+    if whole > chunks {
+        whole
+    } else {
+        chunks
+    }
+};
 
 /// GPU time of each stage of the last frame, in milliseconds (timestamp queries).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
@@ -32,45 +113,53 @@ pub struct StageTimings {
 }
 
 impl StageTimings {
-    /// Adds another submission's times of the same frame (a frame in chunks).
-    pub(super) fn add(&mut self, other: &StageTimings) {
-        for (mine, theirs) in [
-            (&mut self.preprocess, other.preprocess),
-            (&mut self.order, other.order),
-            (&mut self.scan, other.scan),
-            (&mut self.keys, other.keys),
-            (&mut self.sort, other.sort),
-            (&mut self.ranges, other.ranges),
-            (&mut self.blend, other.blend),
-            (&mut self.features, other.features),
-            (&mut self.shade, other.shade),
-            (&mut self.readback, other.readback),
-            (&mut self.total, other.total),
-        ] {
-            *mine += theirs;
+    fn slot(&mut self, stage: Stage) -> &mut f64 {
+        match stage {
+            Stage::Preprocess => &mut self.preprocess,
+            Stage::Order => &mut self.order,
+            Stage::Scan => &mut self.scan,
+            Stage::Keys => &mut self.keys,
+            Stage::Sort => &mut self.sort,
+            Stage::Ranges => &mut self.ranges,
+            Stage::Features => &mut self.features,
+            Stage::Blend => &mut self.blend,
+            Stage::Shade => &mut self.shade,
+            Stage::Readback => &mut self.readback,
         }
     }
 
-    /// The stages in pipeline order with their names; `features` only when the frame
-    /// blended feature channels.
+    /// Milliseconds of `stage`.
+    pub fn get(&self, stage: Stage) -> f64 {
+        match stage {
+            Stage::Preprocess => self.preprocess,
+            Stage::Order => self.order,
+            Stage::Scan => self.scan,
+            Stage::Keys => self.keys,
+            Stage::Sort => self.sort,
+            Stage::Ranges => self.ranges,
+            Stage::Features => self.features,
+            Stage::Blend => self.blend,
+            Stage::Shade => self.shade,
+            Stage::Readback => self.readback,
+        }
+    }
+
+    /// Adds another submission's times of the same frame (a frame in chunks).
+    pub(super) fn add(&mut self, other: &StageTimings) {
+        for stage in Stage::ALL {
+            *self.slot(stage) += other.get(stage);
+        }
+        self.total += other.total;
+    }
+
+    /// The stages in pipeline order with their names; `features` and `shade` only when the
+    /// frame had them.
     pub fn stages(&self) -> Vec<(&'static str, f64)> {
-        let mut stages = vec![
-            ("preprocess", self.preprocess),
-            ("order", self.order),
-            ("scan", self.scan),
-            ("keys", self.keys),
-            ("sort", self.sort),
-            ("ranges", self.ranges),
-            ("blend", self.blend),
-        ];
-        if self.features > 0.0 {
-            stages.push(("features", self.features));
-        }
-        if self.shade > 0.0 {
-            stages.push(("shade", self.shade));
-        }
-        stages.push(("readback", self.readback));
-        stages
+        Stage::ALL
+            .into_iter()
+            .filter(|&s| !matches!(s, Stage::Features | Stage::Shade) || self.get(s) > 0.0)
+            .map(|s| (s.name(), self.get(s)))
+            .collect()
     }
 }
 
@@ -100,21 +189,11 @@ impl GpuRenderer {
         let stages = timer.read(&self.ctx)?;
         let mut t = StageTimings::default();
         for (name, ms) in &stages {
-            let slot = match name.as_str() {
-                "preprocess" => &mut t.preprocess,
-                "order" => &mut t.order,
-                "scan" => &mut t.scan,
-                "keys" => &mut t.keys,
-                "sort" => &mut t.sort,
-                "ranges" => &mut t.ranges,
-                "blend" => &mut t.blend,
-                "features" => &mut t.features,
-                "shade" => &mut t.shade,
-                "readback" => &mut t.readback,
-                _ => continue,
-            };
+            let stage = Stage::from_name(name).ok_or_else(|| {
+                GpuError::Internal(format!("the frame timed an unknown stage {name:?}"))
+            })?;
             // Chunks time their stages once each.
-            *slot += *ms;
+            *t.slot(stage) += *ms;
         }
         t.total = timer.span_ms(&self.ctx)?;
         Ok(t)

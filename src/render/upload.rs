@@ -72,7 +72,7 @@ impl GpuRenderer {
     /// Uploads activated Gaussians.
     pub fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
         let count = u32::try_from(scene.len()).map_err(|_| {
-            GpuError::InvalidArgument(format!(
+            GpuError::Input(format!(
                 "{} Gaussians exceed the 2^32 limit of one upload",
                 scene.len()
             ))
@@ -112,10 +112,15 @@ impl GpuRenderer {
         let texels = scene.len() as u64 * padded as u64 / 4;
         let max_texels = u64::from(self.ctx.info().max_texel_buffer_elements);
         if texels > max_texels {
-            return Err(GpuError::InvalidArgument(format!(
-                "the SH coefficients of {count} Gaussians need {texels} texels ({} bytes) in one texel buffer, but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians, a lower --sh-degree or a device with a larger limit",
-                texels * 16
-            )));
+            return Err(GpuError::DeviceLimit {
+                limit: "maxTexelBufferElements",
+                needed: texels,
+                max: max_texels,
+                message: format!(
+                    "the SH coefficients of {count} Gaussians need {texels} texels ({} bytes) in one texel buffer, but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians, a lower --sh-degree or a device with a larger limit",
+                    texels * 16
+                ),
+            });
         }
         // SH degrees 1 and 3 fill whole texels already and upload as they are.
         let sh_padded: std::borrow::Cow<[f32]> = if stride == padded {
@@ -152,7 +157,7 @@ impl GpuRenderer {
             (sh, vk::Format::R32G32B32A32_SFLOAT, bytes)
         };
         let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
-        let gaussian_texels = if self.preprocess.texel_io() {
+        let gaussian_texels = if self.pipelines.texel_io() {
             let bytes = gaussians.size() / 16 * 16;
             Some(BufferView::new(
                 &self.ctx,
@@ -194,13 +199,13 @@ impl GpuRenderer {
         let k = scene.feature_count;
         let n = scene.len();
         if k == 0 || scene.features.len() != n * k {
-            return Err(GpuError::InvalidArgument(format!(
+            return Err(GpuError::Input(format!(
                 "the scene has no feature channels to upload ({} values for {n} Gaussians and {k} channels)",
                 scene.features.len()
             )));
         }
         let count = u32::try_from(n).map_err(|_| {
-            GpuError::InvalidArgument(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
+            GpuError::Input(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
         })?;
         let (mut groups, mut views) = (Vec::new(), Vec::new());
         for g in 0..features::groups(k) {
@@ -218,7 +223,7 @@ impl GpuRenderer {
             check_binding(&self.ctx, &name, bytes)?;
             let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
             buf.upload(&self.ctx, &v)?;
-            if self.blend.needs_texel_views() {
+            if self.pipelines.texel_io() {
                 views.push(BufferView::new(
                     &self.ctx,
                     &buf,

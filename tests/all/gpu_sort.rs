@@ -7,8 +7,8 @@ use vksplat::gpu::buffer::{GpuBuffer, MemoryKind};
 use vksplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};
 use vksplat::gpu::shader::compile_glsl;
 use vksplat::gpu::sort::{
-    Count, RadixSort, SortConfig, SortPassPush, SortSetupPush, SortTexels, DEFAULT_SORT_CONFIG,
-    SORT_CONFIG_32,
+    Count, RadixSort, SortConfig, SortJob, SortPassPush, SortSetupPush, SortTexels,
+    DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
 };
 use vksplat::gpu::sync::{barrier, Access};
 use vksplat::gpu::{ContextOptions, GpuContext, GpuTimer};
@@ -296,11 +296,14 @@ fn check_sort(
                     scratch_keys: sk.handle(),
                     scratch_values: sv.handle(),
                 };
-                let bits = 0..key_bits;
-                let (k, v) = (&key_buf, &value_buf);
-                sort.record_views(ctx, cmd, k, v, &scratch, count, bits, Some(&texels))?
+                let job = SortJob::new(&key_buf, &value_buf, &scratch, count, key_bits)
+                    .texels(Some(&texels));
+                sort.record(ctx, cmd, &job)?
             }
-            None => sort.record(ctx, cmd, &key_buf, &value_buf, &scratch, count, key_bits)?,
+            None => {
+                let job = SortJob::new(&key_buf, &value_buf, &scratch, count, key_bits);
+                sort.record(ctx, cmd, &job)?
+            }
         }
         barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
         Ok(())
@@ -440,14 +443,11 @@ fn check_32_bit_sort(ctx: &GpuContext, sort: &RadixSort) {
     check_sort(ctx, sort, &random, 14, Mode::Host, "random large, 14 bits");
     // Bits past the key are refused (by the storage-buffer variant; the texel variant
     // refuses any call without its views first).
-    let e = sort.record_bits(
+    let (a, b, c) = (dummy(ctx), dummy(ctx), dummy(ctx));
+    let e = sort.record(
         ctx,
         vk_null_cmd(),
-        &dummy(ctx),
-        &dummy(ctx),
-        &dummy(ctx),
-        Count::Host(1),
-        0..33,
+        &SortJob::new(&a, &b, &c, Count::Host(1), 0).bits(0..33),
     );
     let text = e.expect_err("refused").to_string();
     let expected = if sort.config().texel_io {
@@ -620,15 +620,9 @@ fn radix_sort_of_a_bit_range_keeps_lower_bits_in_arrival_order() {
         )
         .expect("scratch");
         ctx.submit_and_wait("bit range sort", |cmd| {
-            sort.record_bits(
-                &ctx,
-                cmd,
-                &key_buf,
-                &value_buf,
-                &scratch,
-                Count::Host(n as u32),
-                bits.clone(),
-            )?;
+            let job = SortJob::new(&key_buf, &value_buf, &scratch, Count::Host(n as u32), 0)
+                .bits(bits.clone());
+            sort.record(&ctx, cmd, &job)?;
             vksplat::gpu::sync::barrier(
                 &ctx,
                 cmd,
@@ -652,14 +646,11 @@ fn radix_sort_of_a_bit_range_keeps_lower_bits_in_arrival_order() {
         assert_eq!(got_keys, want_keys, "n = {n}, bits {bits:?}");
         assert_eq!(got_values, want_values, "n = {n}, bits {bits:?}");
     }
-    let e = sort.record_bits(
+    let (a, b, c) = (dummy(&ctx), dummy(&ctx), dummy(&ctx));
+    let e = sort.record(
         &ctx,
         vk_null_cmd(),
-        &dummy(&ctx),
-        &dummy(&ctx),
-        &dummy(&ctx),
-        Count::Host(1),
-        40..70,
+        &SortJob::new(&a, &b, &c, Count::Host(1), 0).bits(40..70),
     );
     assert!(e.is_err_and(|e| e.to_string().contains("40..70")));
     assert_no_validation_messages(&ctx);

@@ -35,6 +35,7 @@ mod real_scenes;
 mod reference_renderer;
 mod rf_walkthrough;
 mod sequences;
+mod shader_interface;
 mod transform;
 mod view;
 mod view_browser;

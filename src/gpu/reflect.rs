@@ -1,0 +1,362 @@
+//! A small reflection of compiled SPIR-V: the descriptor bindings a module declares (with
+//! their kind), its push-constant block (member offsets and size), and the array strides
+//! and member offsets of its buffer blocks. [`check`] compares them with what the host
+//! binds, so the GLSL and the Rust side of a stage cannot drift apart unnoticed: every
+//! pipeline is checked when it is built, and `shader_interface_matches_the_host` builds
+//! every variant.
+
+use super::shader::BindingKind;
+
+/// What a module declares, as far as the host binds it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Interface {
+    /// `(binding, kind)` of every descriptor of set 0 the module still uses (the optimiser
+    /// removes unused ones), sorted by binding.
+    pub bindings: Vec<(u32, BindingKind)>,
+    /// Member offsets of the push-constant block, in member order.
+    pub push_offsets: Vec<u32>,
+    /// Bytes of the push-constant block (last member's offset plus its size).
+    pub push_size: u32,
+    /// `(binding, stride)` of storage buffers whose block is one runtime array of
+    /// structs or scalars.
+    pub array_strides: Vec<(u32, u32)>,
+}
+
+const OP_TYPE_INT: u16 = 21;
+const OP_TYPE_FLOAT: u16 = 22;
+const OP_TYPE_VECTOR: u16 = 23;
+const OP_TYPE_MATRIX: u16 = 24;
+const OP_TYPE_IMAGE: u16 = 25;
+const OP_TYPE_SAMPLED_IMAGE: u16 = 27;
+const OP_TYPE_ARRAY: u16 = 28;
+const OP_TYPE_RUNTIME_ARRAY: u16 = 29;
+const OP_TYPE_STRUCT: u16 = 30;
+const OP_TYPE_POINTER: u16 = 32;
+const OP_CONSTANT: u16 = 43;
+const OP_VARIABLE: u16 = 59;
+const OP_DECORATE: u16 = 71;
+const OP_MEMBER_DECORATE: u16 = 72;
+
+const DECORATION_ARRAY_STRIDE: u32 = 6;
+const DECORATION_BINDING: u32 = 33;
+const DECORATION_DESCRIPTOR_SET: u32 = 34;
+const DECORATION_OFFSET: u32 = 35;
+
+const STORAGE_UNIFORM_CONSTANT: u32 = 0;
+const STORAGE_PUSH_CONSTANT: u32 = 9;
+const STORAGE_STORAGE_BUFFER: u32 = 12;
+
+const DIM_BUFFER: u32 = 5;
+
+#[derive(Clone, Debug)]
+enum Type {
+    Scalar(u32),
+    Vector(u32, u32),
+    Matrix(u32, u32),
+    Image {
+        dim: u32,
+        sampled: u32,
+    },
+    SampledImage(u32),
+    /// Length id (element stride from the ArrayStride decoration).
+    Array(u32),
+    RuntimeArray,
+    Struct(Vec<u32>),
+    /// Pointee type.
+    Pointer(u32),
+}
+
+/// Reads the interface of a SPIR-V module; `Err` names what is malformed.
+pub fn reflect(words: &[u32]) -> Result<Interface, String> {
+    use std::collections::HashMap;
+    if words.len() < 5 || words[0] != 0x0723_0203 {
+        return Err("not a SPIR-V module".into());
+    }
+    let mut types: HashMap<u32, Type> = HashMap::new();
+    let mut constants: HashMap<u32, u32> = HashMap::new();
+    let mut bindings: HashMap<u32, u32> = HashMap::new();
+    let mut sets: HashMap<u32, u32> = HashMap::new();
+    let mut strides: HashMap<u32, u32> = HashMap::new();
+    let mut offsets: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut variables: Vec<(u32, u32, u32)> = Vec::new(); // (id, pointer type, storage)
+    let mut i = 5;
+    while i < words.len() {
+        let count = (words[i] >> 16) as usize;
+        let op = (words[i] & 0xffff) as u16;
+        if count == 0 || i + count > words.len() {
+            return Err(format!("instruction at word {i} runs past the end"));
+        }
+        let w = &words[i + 1..i + count];
+        let arg = |k: usize| w.get(k).copied().unwrap_or(0);
+        match op {
+            OP_TYPE_INT | OP_TYPE_FLOAT => {
+                types.insert(arg(0), Type::Scalar(arg(1) / 8));
+            }
+            OP_TYPE_VECTOR => {
+                types.insert(arg(0), Type::Vector(arg(1), arg(2)));
+            }
+            OP_TYPE_MATRIX => {
+                types.insert(arg(0), Type::Matrix(arg(1), arg(2)));
+            }
+            OP_TYPE_IMAGE => {
+                types.insert(
+                    arg(0),
+                    Type::Image {
+                        dim: arg(2),
+                        sampled: arg(6),
+                    },
+                );
+            }
+            OP_TYPE_SAMPLED_IMAGE => {
+                types.insert(arg(0), Type::SampledImage(arg(1)));
+            }
+            OP_TYPE_ARRAY => {
+                types.insert(arg(0), Type::Array(arg(2)));
+            }
+            OP_TYPE_RUNTIME_ARRAY => {
+                types.insert(arg(0), Type::RuntimeArray);
+            }
+            OP_TYPE_STRUCT => {
+                types.insert(arg(0), Type::Struct(w[1..].to_vec()));
+            }
+            OP_TYPE_POINTER => {
+                types.insert(arg(0), Type::Pointer(arg(2)));
+            }
+            OP_CONSTANT => {
+                constants.insert(arg(1), arg(2));
+            }
+            OP_VARIABLE => variables.push((arg(1), arg(0), arg(2))),
+            OP_DECORATE => match arg(1) {
+                DECORATION_BINDING => {
+                    bindings.insert(arg(0), arg(2));
+                }
+                DECORATION_DESCRIPTOR_SET => {
+                    sets.insert(arg(0), arg(2));
+                }
+                DECORATION_ARRAY_STRIDE => {
+                    strides.insert(arg(0), arg(2));
+                }
+                _ => {}
+            },
+            OP_MEMBER_DECORATE if arg(2) == DECORATION_OFFSET => {
+                offsets.insert((arg(0), arg(1)), arg(3));
+            }
+            _ => {}
+        }
+        i += count;
+    }
+    let size_of = |t: u32| -> Option<u32> {
+        fn size(
+            t: u32,
+            types: &std::collections::HashMap<u32, Type>,
+            constants: &std::collections::HashMap<u32, u32>,
+            strides: &std::collections::HashMap<u32, u32>,
+            offsets: &std::collections::HashMap<(u32, u32), u32>,
+            depth: u32,
+        ) -> Option<u32> {
+            if depth > 16 {
+                return None;
+            }
+            match types.get(&t)? {
+                Type::Scalar(bytes) => Some(*bytes),
+                Type::Vector(c, n) => {
+                    Some(size(*c, types, constants, strides, offsets, depth + 1)? * n)
+                }
+                Type::Matrix(c, n) => {
+                    Some(size(*c, types, constants, strides, offsets, depth + 1)? * n)
+                }
+                Type::Array(len) => Some(strides.get(&t)? * constants.get(len)?),
+                Type::Struct(members) => {
+                    let last = members.len().checked_sub(1)? as u32;
+                    let off = offsets.get(&(t, last))?;
+                    Some(
+                        off + size(
+                            members[last as usize],
+                            types,
+                            constants,
+                            strides,
+                            offsets,
+                            depth + 1,
+                        )?,
+                    )
+                }
+                _ => None,
+            }
+        }
+        size(t, &types, &constants, &strides, &offsets, 0)
+    };
+    let mut interface = Interface::default();
+    for &(id, pointer, storage) in &variables {
+        let pointee = match types.get(&pointer) {
+            Some(Type::Pointer(pointee)) => *pointee,
+            _ => continue,
+        };
+        match storage {
+            STORAGE_PUSH_CONSTANT => {
+                let Some(Type::Struct(members)) = types.get(&pointee) else {
+                    return Err("the push constants are not a block".into());
+                };
+                interface.push_offsets = (0..members.len() as u32)
+                    .map(|m| offsets.get(&(pointee, m)).copied().unwrap_or(u32::MAX))
+                    .collect();
+                interface.push_size =
+                    size_of(pointee).ok_or("the push-constant block's size cannot be computed")?;
+            }
+            STORAGE_STORAGE_BUFFER | STORAGE_UNIFORM_CONSTANT => {
+                let Some(&binding) = bindings.get(&id) else {
+                    continue;
+                };
+                if sets.get(&id).copied().unwrap_or(0) != 0 {
+                    return Err(format!("binding {binding} is not in descriptor set 0"));
+                }
+                let kind = match (storage, types.get(&pointee)) {
+                    (STORAGE_STORAGE_BUFFER, _) => BindingKind::StorageBuffer,
+                    (_, Some(Type::SampledImage(image))) => match types.get(image) {
+                        Some(Type::Image {
+                            dim: DIM_BUFFER, ..
+                        }) => BindingKind::UniformTexelBuffer,
+                        _ => {
+                            return Err(format!(
+                                "binding {binding}: a sampled image other than a texel buffer"
+                            ))
+                        }
+                    },
+                    (
+                        _,
+                        Some(Type::Image {
+                            dim: DIM_BUFFER,
+                            sampled: 2,
+                        }),
+                    ) => BindingKind::StorageTexelBuffer,
+                    // SPIR-V 1.6 declares a samplerBuffer as a sampled (1) buffer image.
+                    (
+                        _,
+                        Some(Type::Image {
+                            dim: DIM_BUFFER,
+                            sampled: 1,
+                        }),
+                    ) => BindingKind::UniformTexelBuffer,
+                    (_, Some(Type::Image { sampled: 2, .. })) => BindingKind::StorageImage,
+                    _ => {
+                        return Err(format!(
+                            "binding {binding}: a descriptor kind vksplat does not bind"
+                        ))
+                    }
+                };
+                interface.bindings.push((binding, kind));
+                if kind == BindingKind::StorageBuffer {
+                    if let Some(Type::Struct(members)) = types.get(&pointee) {
+                        if let [array] = members[..] {
+                            if let (Some(Type::RuntimeArray), Some(&stride)) =
+                                (types.get(&array), strides.get(&array))
+                            {
+                                interface.array_strides.push((binding, stride));
+                            }
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    interface.bindings.sort_by_key(|&(b, _)| b);
+    interface.array_strides.sort();
+    Ok(interface)
+}
+
+/// Checks that a module binds what the host passes: every binding the module uses is in
+/// `bindings` with the same kind, and its push-constant block is `push_size` bytes.
+pub fn check(
+    name: &str,
+    words: &[u32],
+    bindings: &[BindingKind],
+    push_size: u32,
+) -> Result<Interface, String> {
+    let interface = reflect(words).map_err(|e| format!("shader {name}: {e}"))?;
+    for &(binding, kind) in &interface.bindings {
+        match bindings.get(binding as usize) {
+            Some(&host) if host == kind => {}
+            Some(&host) => {
+                return Err(format!(
+                    "shader {name} declares binding {binding} as {kind:?}, the host binds {host:?}"
+                ))
+            }
+            None => {
+                return Err(format!(
+                    "shader {name} declares binding {binding} ({kind:?}), the host binds only {}",
+                    bindings.len()
+                ))
+            }
+        }
+    }
+    // A block the optimiser removed (no member used) has no size; any other must match.
+    if interface.push_size != push_size && !interface.push_offsets.is_empty() {
+        return Err(format!(
+            "shader {name} has {} bytes of push constants, the host pushes {push_size}",
+            interface.push_size
+        ));
+    }
+    Ok(interface)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shader::compile_glsl;
+    use BindingKind::*;
+
+    #[test]
+    fn reflection_reads_bindings_push_constants_and_strides_and_catches_drift() {
+        let source = "#version 460
+layout(local_size_x = 64) in;
+struct S { vec4 a; vec4 b; float c; };
+layout(push_constant) uniform P { uint n; uint pad; vec4 v; } pc;
+layout(std430, binding = 0) buffer A { S items[]; };
+layout(binding = 1) uniform usamplerBuffer t;
+layout(binding = 2, r32ui) uniform writeonly uimageBuffer o;
+layout(binding = 3, rgba32f) uniform writeonly image2D img;
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    items[i].a += vec4(float(texelFetch(t, int(i)).x + pc.n)) + pc.v;
+    imageStore(o, int(i), uvec4(uint(items[i].c)));
+    imageStore(img, ivec2(i, 0), items[i].b);
+}
+";
+        let words = compile_glsl("reflect_test", source, &[]).expect("compiles");
+        let found = reflect(&words).expect("reflects");
+        assert_eq!(
+            found.bindings,
+            vec![
+                (0, StorageBuffer),
+                (1, UniformTexelBuffer),
+                (2, StorageTexelBuffer),
+                (3, StorageImage)
+            ]
+        );
+        assert_eq!(found.push_offsets, vec![0, 4, 16]);
+        assert_eq!(found.push_size, 32);
+        // std430: 36 bytes rounded up to the 16-byte alignment of the vec4 members.
+        assert_eq!(found.array_strides, vec![(0, 48)]);
+        let host = [
+            StorageBuffer,
+            UniformTexelBuffer,
+            StorageTexelBuffer,
+            StorageImage,
+        ];
+        assert!(check("t", &words, &host, 32).is_ok());
+        // Every kind of drift is caught.
+        let wrong_kind = [
+            StorageBuffer,
+            StorageBuffer,
+            StorageTexelBuffer,
+            StorageImage,
+        ];
+        let e = check("t", &words, &wrong_kind, 32).unwrap_err();
+        assert!(e.contains("binding 1"), "{e}");
+        let e = check("t", &words, &host[..3], 32).unwrap_err();
+        assert!(e.contains("binding 3"), "{e}");
+        let e = check("t", &words, &host, 16).unwrap_err();
+        assert!(e.contains("32 bytes of push constants"), "{e}");
+        assert!(reflect(&words[..3]).is_err());
+    }
+}

@@ -1,0 +1,194 @@
+//! The renderer's pipelines, each built the first time a frame needs it: a renderer that
+//! never renders features builds no feature blend, a command that only uploads builds no
+//! pipeline at all, and the compact and power-kernel variants cost nothing until used.
+
+use crate::cpu::SplatKernel;
+use crate::gpu::sort::{SortConfig, SORT_CONFIG_32};
+use crate::gpu::{GpuContext, GpuError, GpuResult, RadixSort, Scan};
+
+use super::blend::{Blend, BlendKernel};
+use super::features::FeatureBlend;
+use super::keys::Keys;
+use super::order::Order;
+use super::pack::Pack;
+use super::preprocess::Preprocess;
+use super::ranges::Ranges;
+use super::shade::Shade;
+
+/// What one frame records, so what it needs built.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct FrameNeeds {
+    /// 32-byte compact records (the compact preprocess variant).
+    pub compact: bool,
+    /// The alpha falloff (a blend variant each).
+    pub kernel: SplatKernel,
+    /// Feature channels are blended.
+    pub features: bool,
+    /// The neural shader runs.
+    pub shade: bool,
+    /// Colour is packed to RGBA8 on the device.
+    pub pack: bool,
+}
+
+/// Every pipeline the renderer may use, built on first use.
+pub(super) struct Pipelines {
+    kernel: BlendKernel,
+    /// By [`FrameNeeds::compact`].
+    preprocess: [Option<Preprocess>; 2],
+    order: Option<Order>,
+    scan: Option<Scan>,
+    keys: Option<Keys>,
+    sort: Option<RadixSort>,
+    ranges: Option<Ranges>,
+    /// By [`SplatKernel::shader_id`].
+    blend: [Option<Blend>; 2],
+    /// By [`SplatKernel::shader_id`].
+    feature_blend: [Option<FeatureBlend>; 2],
+    shade: Option<Shade>,
+    pack: Option<Pack>,
+    /// Pipelines built so far, and the milliseconds it took.
+    built: (u32, f64),
+}
+
+/// The pipelines one frame records with.
+#[derive(Clone, Copy)]
+pub(super) struct FramePipelines<'a> {
+    pub preprocess: &'a Preprocess,
+    pub order: &'a Order,
+    pub scan: &'a Scan,
+    pub keys: &'a Keys,
+    pub sort: &'a RadixSort,
+    pub ranges: &'a Ranges,
+    pub blend: &'a Blend,
+    pub feature_blend: Option<&'a FeatureBlend>,
+    pub shade: Option<&'a Shade>,
+    pub pack: Option<&'a Pack>,
+}
+
+/// Builds `slot`'s pipeline with `make` unless it is there already, counting it in
+/// `built`.
+fn ensure<T>(
+    built: &mut (u32, f64),
+    slot: &mut Option<T>,
+    make: impl FnOnce() -> GpuResult<T>,
+) -> GpuResult<()> {
+    if slot.is_none() {
+        let start = std::time::Instant::now();
+        *slot = Some(make()?);
+        built.0 += 1;
+        built.1 += start.elapsed().as_secs_f64() * 1e3;
+    }
+    Ok(())
+}
+
+fn built<'a, T>(slot: &'a Option<T>, what: &str) -> GpuResult<&'a T> {
+    slot.as_ref()
+        .ok_or_else(|| GpuError::Internal(format!("the {what} pipeline was not built")))
+}
+
+impl Pipelines {
+    /// No pipeline yet; texel I/O on every stage when the blend kernel reads texel views
+    /// (CPU devices).
+    pub fn new(kernel: BlendKernel) -> Self {
+        Pipelines {
+            kernel,
+            preprocess: [None, None],
+            order: None,
+            scan: None,
+            keys: None,
+            sort: None,
+            ranges: None,
+            blend: [None, None],
+            feature_blend: [None, None],
+            shade: None,
+            pack: None,
+            built: (0, 0.0),
+        }
+    }
+
+    /// Pipelines built so far and the milliseconds building them took (driver compiles
+    /// included).
+    pub fn built(&self) -> (u32, f64) {
+        self.built
+    }
+
+    /// The blend kernel every frame uses.
+    pub fn kernel(&self) -> BlendKernel {
+        self.kernel
+    }
+
+    /// Whether the stages read and write texel views (CPU devices).
+    pub fn texel_io(&self) -> bool {
+        self.kernel.texel()
+    }
+
+    /// Builds what a frame with `needs` records and is not built yet.
+    pub fn prepare(&mut self, ctx: &GpuContext, needs: FrameNeeds) -> GpuResult<()> {
+        let texel = self.texel_io();
+        let kernel = self.kernel;
+        let compact = needs.compact;
+        ensure(
+            &mut self.built,
+            &mut self.preprocess[usize::from(compact)],
+            || Preprocess::new(ctx, compact, texel),
+        )?;
+        ensure(&mut self.built, &mut self.order, || Order::new(ctx))?;
+        ensure(&mut self.built, &mut self.scan, || Scan::new(ctx))?;
+        ensure(&mut self.built, &mut self.keys, || Keys::new(ctx, texel))?;
+        // Texel-view I/O where the blend reads texel views too (CPU devices).
+        ensure(&mut self.built, &mut self.sort, || {
+            RadixSort::with_config(
+                ctx,
+                SortConfig {
+                    texel_io: texel,
+                    ..SORT_CONFIG_32
+                },
+            )
+        })?;
+        ensure(&mut self.built, &mut self.ranges, || {
+            Ranges::new(ctx, texel)
+        })?;
+        let id = needs.kernel.shader_id() as usize;
+        ensure(&mut self.built, &mut self.blend[id], || {
+            Blend::new(ctx, kernel, needs.kernel)
+        })?;
+        if needs.features {
+            ensure(&mut self.built, &mut self.feature_blend[id], || {
+                FeatureBlend::new(ctx, needs.kernel, texel)
+            })?;
+        }
+        if needs.shade {
+            ensure(&mut self.built, &mut self.shade, || Shade::new(ctx))?;
+        }
+        if needs.pack {
+            ensure(&mut self.built, &mut self.pack, || Pack::new(ctx))?;
+        }
+        Ok(())
+    }
+
+    /// The pipelines of a frame with `needs` ([`Self::prepare`]d before).
+    pub fn frame(&self, needs: FrameNeeds) -> GpuResult<FramePipelines<'_>> {
+        let id = needs.kernel.shader_id() as usize;
+        Ok(FramePipelines {
+            preprocess: built(&self.preprocess[usize::from(needs.compact)], "preprocess")?,
+            order: built(&self.order, "depth order")?,
+            scan: built(&self.scan, "scan")?,
+            keys: built(&self.keys, "keys")?,
+            sort: built(&self.sort, "sort")?,
+            ranges: built(&self.ranges, "ranges")?,
+            blend: built(&self.blend[id], "blend")?,
+            feature_blend: match needs.features {
+                true => Some(built(&self.feature_blend[id], "feature blend")?),
+                false => None,
+            },
+            shade: match needs.shade {
+                true => Some(built(&self.shade, "neural shader")?),
+                false => None,
+            },
+            pack: match needs.pack {
+                true => Some(built(&self.pack, "pack")?),
+                false => None,
+            },
+        })
+    }
+}

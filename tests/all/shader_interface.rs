@@ -1,0 +1,170 @@
+//! The shader interface cannot drift: every variant compiled at build time is built by its
+//! stage (each pipeline reflects its SPIR-V and refuses bindings or push constants the
+//! host does not match, `gpu::reflect::check`), and the records the host lays out
+//! (`#[repr(C)]` mirrors in `render/types.rs`, push-constant structs) have the strides and
+//! member offsets the compiled shaders use.
+
+use crate::common;
+
+use std::mem::{offset_of, size_of};
+use vksplat::cpu::SplatKernel;
+use vksplat::gpu::reflect::{reflect, Interface};
+use vksplat::gpu::scan::ScanPush;
+use vksplat::gpu::shader::{prebuilt_variants, shader_spirv, BindingKind, ComputePipeline};
+use vksplat::gpu::sort::{
+    SortConfig, SortPassPush, SortSetupPush, DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
+};
+use vksplat::gpu::{RadixSort, Scan};
+use vksplat::render::blend::{Blend, BlendKernel};
+use vksplat::render::features::FeatureBlend;
+use vksplat::render::keys::Keys;
+use vksplat::render::order::Order;
+use vksplat::render::pack::Pack;
+use vksplat::render::preprocess::Preprocess;
+use vksplat::render::ranges::Ranges;
+use vksplat::render::shade::Shade;
+use vksplat::render::types::{GpuGaussian, GpuGaussianCompact, Splat};
+
+fn interface(shader: &str, defines: &[(&str, &str)]) -> Interface {
+    let defines: Vec<(&str, String)> = defines.iter().map(|&(k, v)| (k, v.to_string())).collect();
+    let words = shader_spirv(shader, &defines).expect("a prebuilt variant");
+    reflect(&words).expect("valid SPIR-V")
+}
+
+#[test]
+fn every_stage_variant_builds_against_its_compiled_interface() {
+    let r = common::gpu::renderer();
+    let ctx = r.ctx();
+    let mut built = 0;
+    for texel in [false, true] {
+        for compact in [false, true] {
+            Preprocess::new(ctx, compact, texel).expect("preprocess");
+            built += 1;
+        }
+        Keys::new(ctx, texel).expect("keys");
+        Ranges::new(ctx, texel).expect("ranges");
+        built += 2;
+        for kernel in SplatKernel::ALL {
+            FeatureBlend::new(ctx, kernel, texel).expect("feature blend");
+            built += 1;
+        }
+    }
+    for kernel in SplatKernel::ALL {
+        for blend in BlendKernel::all() {
+            Blend::new(ctx, blend, kernel).expect("blend");
+            built += 1;
+        }
+    }
+    Order::new(ctx).expect("order");
+    Scan::new(ctx).expect("scan");
+    Pack::new(ctx).expect("pack");
+    Shade::new(ctx).expect("shade");
+    built += 1 + 3 + 1 + 1;
+    let sorts = [
+        DEFAULT_SORT_CONFIG,
+        SORT_CONFIG_32,
+        SortConfig {
+            texel_io: true,
+            ..SORT_CONFIG_32
+        },
+    ];
+    for config in sorts {
+        RadixSort::with_config(ctx, config).expect("sort");
+        built += 4;
+    }
+    ComputePipeline::from_embedded(
+        ctx,
+        "count64_test",
+        &[],
+        &[BindingKind::StorageBuffer],
+        0,
+        256,
+    )
+    .expect("count64_test");
+    built += 1;
+    // Every prebuilt module was built above: none is dead weight, none unchecked.
+    assert_eq!(built, prebuilt_variants().count());
+    common::gpu::assert_validation_clean(&r);
+}
+
+#[test]
+fn a_stage_that_binds_other_kinds_than_its_shader_is_refused() {
+    let r = common::gpu::renderer();
+    let e = ComputePipeline::from_embedded(
+        r.ctx(),
+        "count64_test",
+        &[],
+        &[BindingKind::StorageImage],
+        0,
+        256,
+    )
+    .err()
+    .expect("a storage buffer bound as an image is refused");
+    assert!(e.to_string().contains("binding 0"), "{e}");
+}
+
+#[test]
+fn record_strides_and_push_constants_match_the_host_structs() {
+    for compact in ["0", "1"] {
+        let i = interface(
+            "preprocess",
+            &[("COMPACT_GAUSSIANS", compact), ("PREPROCESS_TEXEL_IO", "0")],
+        );
+        let record = match compact {
+            "0" => size_of::<GpuGaussian>(),
+            _ => size_of::<GpuGaussianCompact>(),
+        };
+        // Binding 1: the Gaussian records; binding 3: the splats written.
+        assert!(i.array_strides.contains(&(1, record as u32)), "{i:?}");
+        assert!(
+            i.array_strides.contains(&(3, size_of::<Splat>() as u32)),
+            "{i:?}"
+        );
+    }
+    let blend = interface(
+        "blend",
+        &[("STRIP", "1"), ("TEXEL_FETCH", "0"), ("SPLAT_KERNEL", "0u")],
+    );
+    assert!(
+        blend
+            .array_strides
+            .contains(&(1, size_of::<Splat>() as u32)),
+        "{blend:?}"
+    );
+
+    let scan = interface("scan_block", &[]);
+    assert_eq!(
+        scan.push_offsets,
+        [
+            offset_of!(ScanPush, n),
+            offset_of!(ScanPush, write_total),
+            offset_of!(ScanPush, total_index),
+            offset_of!(ScanPush, pad),
+        ]
+        .map(|o| o as u32)
+    );
+    assert_eq!(scan.push_size as usize, size_of::<ScanPush>());
+    let sort = [("SORT_KEY", "uint"), ("SORT_TEXEL_IO", "0")];
+    let setup = interface("sort_setup", &sort);
+    assert_eq!(
+        setup.push_offsets,
+        [
+            offset_of!(SortSetupPush, host_n),
+            offset_of!(SortSetupPush, count_index),
+            offset_of!(SortSetupPush, max_n),
+            offset_of!(SortSetupPush, max_groups_x),
+        ]
+        .map(|o| o as u32)
+    );
+    let pass = interface("sort_scatter", &sort);
+    assert_eq!(
+        pass.push_offsets,
+        [
+            offset_of!(SortPassPush, shift),
+            offset_of!(SortPassPush, bits),
+            offset_of!(SortPassPush, hist_stride),
+            offset_of!(SortPassPush, pad),
+        ]
+        .map(|o| o as u32)
+    );
+}
