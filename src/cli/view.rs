@@ -9,7 +9,7 @@ use vksplat::view::protocol::{
     camera_to_entry, Hello, NamedCamera, ScaleHistogram, PROTOCOL_VERSION,
 };
 use vksplat::view::server::{ServedScene, Server, ServerConfig};
-use vksplat::view::source::FrameSource;
+use vksplat::view::source::ViewSource;
 use vksplat::{note, outln};
 
 #[derive(Args)]
@@ -82,7 +82,7 @@ fn listen_address(host: &str, port: u16) -> Result<SocketAddr> {
 }
 
 /// The scene, its cameras and the renderer, as the server gets them.
-fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)> {
+fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> {
     let (mut scene, name) = load_scene(&args.scene)?;
     // The sources render with the scene's kernel.
     scene.kernel = args.kernel.resolve(&scene, &name);
@@ -117,7 +117,7 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)>
         (Some(&lo), Some(&hi)) if lo < hi => [lo, hi],
         _ => [stats.max_scale.min.max(1e-6), stats.max_scale.max.max(1e-5)],
     };
-    let (source, device): (Box<dyn FrameSource>, String) = if args.cpu {
+    let (source, device): (Box<dyn ViewSource>, String) = if args.cpu {
         let src = vksplat::view::cpu_source::CpuSource::new(&scene, antialiased);
         let device = src.device_name();
         (Box::new(src), device)

@@ -19,7 +19,7 @@ use super::http::{loopback_host, read_head, respond, same_origin, Request};
 use super::page;
 use super::protocol::{Quality, ServerMessage};
 use super::session::Session;
-use super::source::{FrameSource, ShotFormat, ViewFrame, ViewSettings};
+use super::source::{ShotFormat, ViewFrame, ViewSettings, ViewSource};
 use crate::camera::Camera;
 use std::collections::BTreeMap;
 use std::io::{ErrorKind, Write};
@@ -111,7 +111,7 @@ impl Server {
     /// Serves until `stop` is set, then closes every connection and returns.
     pub fn run(
         self,
-        source: Box<dyn FrameSource>,
+        source: Box<dyn ViewSource>,
         scene: ServedScene,
         stop: &AtomicBool,
     ) -> anyhow::Result<()> {
@@ -240,7 +240,7 @@ enum Job {
 }
 
 /// Renders requests round-robin over the clients until the server stops.
-fn render_worker(mut source: Box<dyn FrameSource>, shared: &Shared) {
+fn render_worker(mut source: Box<dyn ViewSource>, shared: &Shared) {
     loop {
         let (job, tx) = {
             let mut q = shared.queue();
