@@ -7,7 +7,7 @@ use super::protocol::{
     binary_message, camera_from_entry, camera_to_entry, ClientMessage, FrameHeader, KeyframeIn,
     PathFormat, Quality, ServerMessage, ShotHeader,
 };
-use super::server::{FrameJob, Outgoing, Shared, ShotJob};
+use super::queue::{FrameJob, Outgoing, Shared, ShotJob};
 use super::source::{ShotFormat, ViewFrame, ViewSettings};
 use crate::camera::Camera;
 use std::io::ErrorKind;
@@ -37,7 +37,7 @@ pub(super) struct Session<'s, 'a> {
     window_warned: bool,
     /// Pixels of this tab's previews: lowered while their blend takes longer than
     /// [`PREVIEW_BLEND_MS`] (a slow renderer, `--cpu`), raised back up to
-    /// [`ServerConfig::preview_pixels`](super::server::ServerConfig::preview_pixels).
+    /// [`ServerConfig::preview_pixels`](super::queue::ServerConfig::preview_pixels).
     preview_pixels: f64,
 }
 
