@@ -1,16 +1,21 @@
-//! What the viewer's threads share: the server's tunables, the served scene, and per
-//! tab the slots the render worker takes its work from and the channel to the tab.
+//! What the viewer's threads share: the server's tunables, the served scene, the open
+//! connections, and per tab the slots the render worker takes its work from and the
+//! channel to the tab's writer.
 //!
 //! The accept loop and the render worker ([`server`](super::server)) and each tab's
-//! [`session`](super::session) depend on this module, not on each other.
+//! reader and writer ([`session`](super::session)) depend on this module; the session
+//! does not import the server (which hands it each WebSocket connection).
 
 use super::protocol::Quality;
 use super::source::{ShotFormat, ViewFrame, ViewSettings};
 use crate::camera::Camera;
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{mpsc, Condvar, Mutex, MutexGuard};
-use std::time::Duration;
+use std::net::{Shutdown, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+use tungstenite::protocol::CloseFrame;
+use tungstenite::Bytes;
 
 /// Tunables of the server.
 #[derive(Clone, Debug)]
@@ -45,28 +50,42 @@ impl Default for ServerConfig {
 }
 
 /// State shared by the accept loop, the connections and the worker.
-pub(super) struct Shared<'a> {
+pub(super) struct Shared {
     pub(super) config: ServerConfig,
     pub(super) hello_text: String,
     pub(super) cameras: Vec<Camera>,
     pub(super) sh_degree: u32,
-    pub(super) stop: &'a AtomicBool,
+    pub(super) stop: Arc<AtomicBool>,
     /// Bound to a loopback address: requests must name a loopback host.
     pub(super) loopback: bool,
-    /// Open TCP connections (each has a thread).
-    pub(super) connections: AtomicUsize,
+    /// Open TCP connections (each has a thread), by id: on stop the server shuts their
+    /// reading side, which ends every blocked read.
+    pub(super) connections: Mutex<BTreeMap<u64, TcpStream>>,
     pub(super) queue: Mutex<Queue>,
+    /// Wakes the render worker: new work, a frame written, a tab gone, the stop.
     pub(super) wake: Condvar,
 }
 
-impl Shared<'_> {
+impl Shared {
     pub(super) fn queue(&self) -> MutexGuard<'_, Queue> {
         // A panic while holding the lock leaves plain data; keep serving.
         self.queue.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    pub(super) fn connections(&self) -> MutexGuard<'_, BTreeMap<u64, TcpStream>> {
+        self.connections.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
     pub(super) fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Relaxed)
+        self.stop.load(Ordering::SeqCst)
+    }
+
+    /// Ends every blocked read of every connection (their threads then finish); the
+    /// writing side stays open, so each tab is sent a close message.
+    pub(super) fn shut_connections(&self) {
+        for stream in self.connections().values() {
+            let _ = stream.shutdown(Shutdown::Read);
+        }
     }
 }
 
@@ -82,11 +101,17 @@ pub(super) struct Queue {
 pub(super) struct Pending {
     /// The newest frame request (overwritten by newer ones).
     pub(super) frame: Option<FrameJob>,
+    /// The full frame of the last preview's view, due when the camera has not moved for
+    /// [`ServerConfig::rest_delay`]: the worker moves it to `frame` then.
+    pub(super) rest: Option<(Instant, FrameJob)>,
     /// The newest screenshot request.
     pub(super) shot: Option<ShotJob>,
     /// A frame was rendered and is not yet written to the socket.
     pub(super) frame_in_flight: bool,
-    /// To the client's connection thread.
+    /// Pixels of this tab's previews (see `session::next_preview_budget`): set by the
+    /// tab's writer after each preview, read when a preview is requested.
+    pub(super) preview_pixels: f64,
+    /// To the client's writer thread.
     pub(super) tx: mpsc::Sender<Outgoing>,
 }
 
@@ -105,7 +130,8 @@ pub(super) struct ShotJob {
     pub(super) format: ShotFormat,
 }
 
-/// From the worker to a connection thread.
+/// To a tab's writer thread: from the worker (frames, screenshots) and from the tab's
+/// reader (answers, and the replies to pings and closes).
 pub(super) enum Outgoing {
     // Boxed: a frame's header and camera are much larger than a screenshot's.
     Frame {
@@ -117,4 +143,12 @@ pub(super) enum Outgoing {
         format: ShotFormat,
         result: Result<Vec<u8>, String>,
     },
+    /// A JSON message.
+    Text(String),
+    /// The answer to a ping.
+    Pong(Bytes),
+    /// Send a close message (the client's own, echoed, or the server's) and end.
+    Close(Option<CloseFrame>),
+    /// End without a word (the connection is gone).
+    End,
 }
