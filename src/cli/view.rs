@@ -8,8 +8,8 @@ use std::net::{SocketAddr, ToSocketAddrs};
 use vksplat::view::protocol::{
     camera_to_entry, Hello, NamedCamera, ScaleHistogram, PROTOCOL_VERSION,
 };
-use vksplat::view::server::{ServedScene, Server, ServerConfig};
-use vksplat::view::source::FrameSource;
+use vksplat::view::server::{ServedScene, Server, ServerConfig, Stopper};
+use vksplat::view::source::ViewSource;
 use vksplat::{note, outln};
 
 #[derive(Args)]
@@ -82,7 +82,7 @@ fn listen_address(host: &str, port: u16) -> Result<SocketAddr> {
 }
 
 /// The scene, its cameras and the renderer, as the server gets them.
-fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)> {
+fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> {
     let (mut scene, name) = load_scene(&args.scene)?;
     // The sources render with the scene's kernel.
     scene.kernel = args.kernel.resolve(&scene, &name);
@@ -117,7 +117,7 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn FrameSource>, ServedScene, String)>
         (Some(&lo), Some(&hi)) if lo < hi => [lo, hi],
         _ => [stats.max_scale.min.max(1e-6), stats.max_scale.max.max(1e-5)],
     };
-    let (source, device): (Box<dyn FrameSource>, String) = if args.cpu {
+    let (source, device): (Box<dyn ViewSource>, String) = if args.cpu {
         let src = vksplat::view::cpu_source::CpuSource::new(&scene, antialiased);
         let device = src.device_name();
         (Box::new(src), device)
@@ -196,9 +196,30 @@ pub(crate) fn view(args: &ViewArgs) -> Result<()> {
     if args.open {
         open_browser(&url);
     }
-    let stop = super::render::interrupt_flag();
-    server.run(source, scene, &stop)?;
+    stop_on_signals(server.stopper()?)?;
+    server.run(source, scene)?;
     note!("viewer stopped");
+    Ok(())
+}
+
+/// Stops the server on SIGINT or SIGTERM; a second one ends the process at once (as in
+/// `render`). The signal handler writes a byte to a socket pair; a thread blocked on
+/// the other end calls [`Stopper::stop`] (which a signal handler may not).
+fn stop_on_signals(stopper: Stopper) -> Result<()> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    use std::io::Read;
+    use std::os::unix::net::UnixStream;
+    // Registered first: the second signal sees the flag the first one set.
+    let _ = super::render::interrupt_flag();
+    let (mut signalled, wake) = UnixStream::pair()?;
+    for signal in [SIGINT, SIGTERM] {
+        signal_hook::low_level::pipe::register(signal, wake.try_clone()?)?;
+    }
+    std::thread::spawn(move || {
+        if signalled.read_exact(&mut [0u8]).is_ok() {
+            stopper.stop();
+        }
+    });
     Ok(())
 }
 

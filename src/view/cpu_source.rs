@@ -3,7 +3,7 @@
 //! frames are checked against.
 
 use super::source::{
-    encode_shot, frame_rgba8, render_options, FrameSource, ShotFormat, ViewFrame, ViewSettings,
+    encode_shot, frame_rgba8, render_options, ShotFormat, ViewFrame, ViewSettings, ViewSource,
 };
 use crate::camera::Camera;
 use crate::cpu;
@@ -89,7 +89,7 @@ impl CpuSource {
     }
 }
 
-impl FrameSource for CpuSource {
+impl ViewSource for CpuSource {
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame> {
         let start = std::time::Instant::now();
         let (frame, timings, stats) = self.render_frame(cam, settings)?;

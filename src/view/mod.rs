@@ -6,7 +6,8 @@
 //! * [`cpu_source`]: the same from the CPU reference renderer (`view --cpu`).
 //! * [`protocol`]: the messages between page and server.
 //! * [`server`]: the listener, the page's files, the WebSocket upgrade and the render
-//!   worker; `session` is one tab's connection, `http` the little HTTP it needs.
+//!   worker; `session` is one tab's connection, `http` the little HTTP it needs, `queue`
+//!   what they share (the tunables, each tab's pending work and its channel).
 //! * [`paths`]: keyframe paths from the page (exports and the preview's frames).
 //! * [`page`]: the page itself (HTML, JS, CSS embedded in the binary).
 
@@ -15,6 +16,7 @@ mod http;
 pub mod page;
 pub mod paths;
 pub mod protocol;
+mod queue;
 pub mod server;
 mod session;
 pub mod source;

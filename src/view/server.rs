@@ -11,56 +11,38 @@
 //!
 //! Nothing a client sends can stop the server or other clients: every message is parsed
 //! into a [`ClientMessage`](super::protocol::ClientMessage) and checked (cameras by the
-//! `cameras.json` reader, settings by [`ViewSettings::validate`]); what is refused is
+//! `cameras.json` reader, settings by
+//! [`ViewSettings::validate`](super::source::ViewSettings::validate)); what is refused is
 //! answered with an `error` message to that client. A render error or a renderer panic
 //! is sent to the tab that asked.
+//!
+//! Nothing polls; every thread blocks until it has something to do:
+//!
+//! * The accept loop blocks in `accept`. [`Stopper::stop`] sets the stop flag and
+//!   connects to the listener, which wakes it; it then shuts the reading side of every
+//!   open connection, which ends their blocked reads (each tab is sent a close
+//!   message), and wakes the worker.
+//! * A connection's thread reads the request head with blocking reads until a
+//!   deadline, then serves a file or hands the socket to its tab (`session`: a reader
+//!   on that thread, a writer on another, and a channel from the worker and the reader
+//!   to the writer).
+//! * The render worker waits on a condition variable: for work, or until the next
+//!   rest frame is due (its time-out is that moment, not a polling interval).
 
-use super::http::{loopback_host, read_head, respond, same_origin, Request};
+use super::http::{loopback_host, read_head, respond, websocket_handshake};
 use super::page;
 use super::protocol::{Quality, ServerMessage};
-use super::session::Session;
-use super::source::{FrameSource, ShotFormat, ViewFrame, ViewSettings};
+pub use super::queue::ServerConfig;
+use super::queue::{FrameJob, Outgoing, Queue, Shared, ShotJob};
+use super::session;
+use super::source::ViewSource;
 use crate::camera::Camera;
 use std::collections::BTreeMap;
-use std::io::{ErrorKind, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{mpsc, Condvar, Mutex, MutexGuard};
-use std::time::Duration;
-use tungstenite::protocol::{Role, WebSocketConfig};
-use tungstenite::WebSocket;
-
-/// Tunables of the server.
-#[derive(Clone, Debug)]
-pub struct ServerConfig {
-    /// Largest rendered frame (`--max-resolution`); larger canvases keep their aspect
-    /// ratio and are scaled down.
-    pub max_resolution: (u32, u32),
-    /// Pixels of an interactive (preview) frame at most.
-    pub preview_pixels: u32,
-    /// After this long without a new interactive request the view is rendered at full
-    /// quality, even if the page never says it rests.
-    pub rest_delay: Duration,
-    /// WebSocket clients at once; more are refused with HTTP 503.
-    pub max_clients: usize,
-    /// Messages a client may send per second; more are dropped with one error.
-    pub max_messages_per_s: u32,
-    /// JPEG quality of preview frames (1-100).
-    pub jpeg_quality: u8,
-}
-
-impl Default for ServerConfig {
-    fn default() -> Self {
-        ServerConfig {
-            max_resolution: (1920, 1080),
-            preview_pixels: 250_000,
-            rest_delay: Duration::from_millis(200),
-            max_clients: 16,
-            max_messages_per_s: 400,
-            jpeg_quality: 80,
-        }
-    }
-}
+use std::io::ErrorKind;
+use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
 /// What the server serves: the `hello` every tab gets and the scene's cameras.
 pub struct ServedScene {
@@ -70,16 +52,31 @@ pub struct ServedScene {
     pub cameras: Vec<Camera>,
 }
 
-/// A bound listener; [`Server::run`] serves until the stop flag is set.
+/// A bound listener; [`Server::run`] serves until a [`Stopper`] stops it.
 pub struct Server {
     listener: TcpListener,
     config: ServerConfig,
+    stop: Arc<AtomicBool>,
 }
 
-/// How often blocked loops look at the stop flag.
-pub(super) const POLL: Duration = Duration::from_millis(10);
-/// Longest WebSocket message a client may send (a long keyframe list fits).
-const MAX_MESSAGE: usize = 4 << 20;
+/// Stops a [`Server`] from any thread (and before it runs): see [`Stopper::stop`].
+#[derive(Clone, Debug)]
+pub struct Stopper {
+    stop: Arc<AtomicBool>,
+    /// The listener's address (a loopback one where it listens on all).
+    addr: SocketAddr,
+}
+
+impl Stopper {
+    /// Makes [`Server::run`] close every connection and return: sets the stop flag,
+    /// then connects to the listener to wake its blocking `accept`. (Should that
+    /// connection fail, the next one to come in wakes it.)
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+        let _ = TcpStream::connect_timeout(&self.addr, Duration::from_secs(1));
+    }
+}
+
 /// TCP connections at once (page files, WebSockets, and those still sending a request).
 const MAX_CONNECTIONS: usize = 64;
 /// A write to a client that does not read for this long ends its connection.
@@ -99,8 +96,11 @@ impl Server {
                 anyhow::anyhow!("cannot listen on {addr}: {e}")
             }
         })?;
-        listener.set_nonblocking(true)?;
-        Ok(Server { listener, config })
+        Ok(Server {
+            listener,
+            config,
+            stop: Arc::new(AtomicBool::new(false)),
+        })
     }
 
     /// The address bound (with the port chosen for port 0).
@@ -108,13 +108,23 @@ impl Server {
         self.listener.local_addr()
     }
 
-    /// Serves until `stop` is set, then closes every connection and returns.
-    pub fn run(
-        self,
-        source: Box<dyn FrameSource>,
-        scene: ServedScene,
-        stop: &AtomicBool,
-    ) -> anyhow::Result<()> {
+    /// What stops [`Server::run`].
+    pub fn stopper(&self) -> std::io::Result<Stopper> {
+        let mut addr = self.listener.local_addr()?;
+        if addr.ip().is_unspecified() {
+            addr.set_ip(match addr {
+                SocketAddr::V4(_) => Ipv4Addr::LOCALHOST.into(),
+                SocketAddr::V6(_) => Ipv6Addr::LOCALHOST.into(),
+            });
+        }
+        Ok(Stopper {
+            stop: Arc::clone(&self.stop),
+            addr,
+        })
+    }
+
+    /// Serves until a [`Stopper`] stops it, then closes every connection and returns.
+    pub fn run(self, source: Box<dyn ViewSource>, scene: ServedScene) -> anyhow::Result<()> {
         let sh_degree = scene.hello.sh_degree;
         let hello_text = serde_json::to_string(&ServerMessage::Hello(Box::new(scene.hello)))?;
         let shared = Shared {
@@ -122,116 +132,59 @@ impl Server {
             hello_text,
             cameras: scene.cameras,
             sh_degree,
-            stop,
+            stop: self.stop,
             loopback: self.listener.local_addr()?.ip().is_loopback(),
-            connections: AtomicUsize::new(0),
+            connections: Mutex::new(BTreeMap::new()),
             queue: Mutex::new(Queue::default()),
             wake: Condvar::new(),
         };
         std::thread::scope(|s| {
             let shared = &shared;
             let worker = s.spawn(move || render_worker(source, shared));
-            while !stop.load(Ordering::Relaxed) {
-                match self.listener.accept() {
-                    Ok((stream, _)) => {
-                        // Connections beyond the bound are closed at once (a client that
-                        // opens sockets in a loop cannot exhaust the threads).
-                        if shared.connections.fetch_add(1, Ordering::Relaxed) >= MAX_CONNECTIONS {
-                            shared.connections.fetch_sub(1, Ordering::Relaxed);
-                            drop(stream);
-                            continue;
-                        }
-                        let _ = s.spawn(move || {
-                            serve_connection(stream, shared);
-                            shared.connections.fetch_sub(1, Ordering::Relaxed);
-                        });
-                    }
-                    Err(e) if e.kind() == ErrorKind::WouldBlock => std::thread::sleep(POLL),
-                    Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            let mut last_id = 0u64;
+            while !shared.stopping() {
+                let stream = match self.listener.accept() {
+                    Ok((stream, _)) => stream,
+                    Err(e) if e.kind() == ErrorKind::Interrupted => continue,
                     // Out of file descriptors and the like: wait rather than spin.
-                    Err(_) => std::thread::sleep(Duration::from_millis(100)),
+                    Err(_) => {
+                        std::thread::sleep(Duration::from_millis(100));
+                        continue;
+                    }
+                };
+                if shared.stopping() {
+                    break;
                 }
+                // Kept to end its reads on stop.
+                let Ok(handle) = stream.try_clone() else {
+                    continue;
+                };
+                {
+                    let mut open = shared.connections();
+                    // Connections beyond the bound are closed at once (a client that
+                    // opens sockets in a loop cannot exhaust the threads).
+                    if open.len() >= MAX_CONNECTIONS {
+                        continue;
+                    }
+                    last_id += 1;
+                    open.insert(last_id, handle);
+                }
+                let id = last_id;
+                let _ = s.spawn(move || {
+                    serve_connection(stream, shared);
+                    shared.connections().remove(&id);
+                });
             }
-            shared.wake.notify_all();
+            shared.shut_connections();
+            {
+                // Under the lock: the worker checks the flag under it before it waits.
+                let _queue = shared.queue();
+                shared.wake.notify_all();
+            }
             let _ = worker.join();
         });
         Ok(())
     }
-}
-
-/// State shared by the accept loop, the connections and the worker.
-pub(super) struct Shared<'a> {
-    pub(super) config: ServerConfig,
-    pub(super) hello_text: String,
-    pub(super) cameras: Vec<Camera>,
-    pub(super) sh_degree: u32,
-    pub(super) stop: &'a AtomicBool,
-    /// Bound to a loopback address: requests must name a loopback host.
-    pub(super) loopback: bool,
-    /// Open TCP connections (each has a thread).
-    pub(super) connections: AtomicUsize,
-    pub(super) queue: Mutex<Queue>,
-    pub(super) wake: Condvar,
-}
-
-impl Shared<'_> {
-    pub(super) fn queue(&self) -> MutexGuard<'_, Queue> {
-        // A panic while holding the lock leaves plain data; keep serving.
-        self.queue.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
-    pub(super) fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Relaxed)
-    }
-}
-
-/// Work waiting for the worker, per client.
-#[derive(Default)]
-pub(super) struct Queue {
-    pub(super) clients: BTreeMap<u64, Pending>,
-    pub(super) next_id: u64,
-    pub(super) last_served: u64,
-}
-
-/// One client's slots.
-pub(super) struct Pending {
-    /// The newest frame request (overwritten by newer ones).
-    pub(super) frame: Option<FrameJob>,
-    /// The newest screenshot request.
-    pub(super) shot: Option<ShotJob>,
-    /// A frame was rendered and is not yet written to the socket.
-    pub(super) frame_in_flight: bool,
-    /// To the client's connection thread.
-    pub(super) tx: mpsc::Sender<Outgoing>,
-}
-
-#[derive(Clone)]
-pub(super) struct FrameJob {
-    pub(super) seq: u64,
-    pub(super) camera: Camera,
-    pub(super) settings: ViewSettings,
-    pub(super) quality: Quality,
-}
-
-pub(super) struct ShotJob {
-    pub(super) seq: u64,
-    pub(super) camera: Camera,
-    pub(super) settings: ViewSettings,
-    pub(super) format: ShotFormat,
-}
-
-/// From the worker to a connection thread.
-pub(super) enum Outgoing {
-    // Boxed: a frame's header and camera are much larger than a screenshot's.
-    Frame {
-        job: Box<FrameJob>,
-        result: Result<ViewFrame, String>,
-    },
-    Shot {
-        seq: u64,
-        format: ShotFormat,
-        result: Result<Vec<u8>, String>,
-    },
 }
 
 enum Job {
@@ -240,7 +193,7 @@ enum Job {
 }
 
 /// Renders requests round-robin over the clients until the server stops.
-fn render_worker(mut source: Box<dyn FrameSource>, shared: &Shared) {
+fn render_worker(mut source: Box<dyn ViewSource>, shared: &Shared) {
     loop {
         let (job, tx) = {
             let mut q = shared.queue();
@@ -248,14 +201,18 @@ fn render_worker(mut source: Box<dyn FrameSource>, shared: &Shared) {
                 if shared.stopping() {
                     return;
                 }
+                let now = Instant::now();
+                let next_rest = start_rests(&mut q, now);
                 if let Some(found) = next_job(&mut q) {
                     break found;
                 }
-                q = shared
-                    .wake
-                    .wait_timeout(q, Duration::from_millis(100))
-                    .unwrap_or_else(|p| p.into_inner())
-                    .0;
+                q = match next_rest {
+                    Some(due) => {
+                        let wait = shared.wake.wait_timeout(q, due - now);
+                        wait.unwrap_or_else(|p| p.into_inner()).0
+                    }
+                    None => shared.wake.wait(q).unwrap_or_else(|p| p.into_inner()),
+                };
             }
         };
         let message = match job {
@@ -281,6 +238,23 @@ fn render_worker(mut source: Box<dyn FrameSource>, shared: &Shared) {
         // A client that left meanwhile drops its receiver; nothing to do.
         let _ = tx.send(message);
     }
+}
+
+/// Puts each tab's rest frame that is due in its frame slot (it replaces the preview
+/// there: the same view); returns when the next one is due.
+fn start_rests(q: &mut Queue, now: Instant) -> Option<Instant> {
+    let mut next: Option<Instant> = None;
+    for p in q.clients.values_mut() {
+        match p.rest.take() {
+            Some((due, job)) if due <= now => p.frame = Some(job),
+            Some((due, job)) => {
+                next = Some(next.map_or(due, |n| n.min(due)));
+                p.rest = Some((due, job));
+            }
+            None => {}
+        }
+    }
+    next
 }
 
 /// The next client after the last served one with work, and its job.
@@ -323,18 +297,21 @@ fn guarded<T>(f: impl FnOnce() -> anyhow::Result<T>) -> Result<T, String> {
 
 /// One TCP connection: a file of the page, or the upgrade to a WebSocket.
 fn serve_connection(mut stream: TcpStream, shared: &Shared) {
-    // The listener is non-blocking; accepted sockets must not be.
-    if stream.set_nonblocking(false).is_err()
-        || stream.set_read_timeout(Some(POLL)).is_err()
-        || stream.set_write_timeout(Some(WRITE_TIMEOUT)).is_err()
-    {
+    if stream.set_write_timeout(Some(WRITE_TIMEOUT)).is_err() {
         return;
     }
     let _ = stream.set_nodelay(true);
-    let Some((req, rest)) = read_head(&mut stream) else {
+    let Some((req, bytes, head_len)) = read_head(&mut stream) else {
         return;
     };
-    if shared.loopback && !loopback_host(&req) {
+    let path = req.path.split('?').next().unwrap_or("");
+    // The handshake's own checks (Host, Origin, the number of tabs) answer in
+    // tungstenite's callback.
+    if path == "/ws" && websocket_handshake(&req) {
+        session::serve(stream, bytes, head_len, shared);
+        return;
+    }
+    if shared.loopback && !loopback_host(req.header("Host")) {
         respond(
             &mut stream,
             "403 Forbidden",
@@ -352,22 +329,7 @@ fn serve_connection(mut stream: TcpStream, shared: &Shared) {
         );
         return;
     }
-    let path = req.path.split('?').next().unwrap_or("");
     if path == "/ws" {
-        upgrade(stream, &req, rest, shared);
-        return;
-    }
-    match page::file(path) {
-        Some((content_type, body)) => respond(&mut stream, "200 OK", content_type, body),
-        None => respond(&mut stream, "404 Not Found", "text/plain", b"not found\n"),
-    }
-}
-
-fn upgrade(mut stream: TcpStream, req: &Request, rest: Vec<u8>, shared: &Shared) {
-    let is_upgrade = req
-        .header("Upgrade")
-        .is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
-    let Some(key) = req.header("Sec-WebSocket-Key").filter(|_| is_upgrade) else {
         respond(
             &mut stream,
             "400 Bad Request",
@@ -375,54 +337,9 @@ fn upgrade(mut stream: TcpStream, req: &Request, rest: Vec<u8>, shared: &Shared)
             b"expected a WebSocket upgrade\n",
         );
         return;
-    };
-    if !same_origin(req) {
-        respond(
-            &mut stream,
-            "403 Forbidden",
-            "text/plain",
-            b"the WebSocket must come from the viewer's own page\n",
-        );
-        return;
     }
-    let (tx, rx) = mpsc::channel();
-    let id = {
-        let mut q = shared.queue();
-        if q.clients.len() >= shared.config.max_clients {
-            drop(q);
-            respond(
-                &mut stream,
-                "503 Service Unavailable",
-                "text/plain",
-                b"too many viewer tabs are open\n",
-            );
-            return;
-        }
-        q.next_id += 1;
-        let id = q.next_id;
-        q.clients.insert(
-            id,
-            Pending {
-                frame: None,
-                shot: None,
-                frame_in_flight: false,
-                tx,
-            },
-        );
-        id
-    };
-    let accept = tungstenite::handshake::derive_accept_key(key.as_bytes());
-    let head = format!(
-        "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {accept}\r\n\r\n"
-    );
-    if stream.write_all(head.as_bytes()).is_ok() {
-        let config = WebSocketConfig::default()
-            .max_message_size(Some(MAX_MESSAGE))
-            .max_frame_size(Some(MAX_MESSAGE));
-        let ws = WebSocket::from_partially_read(stream, rest, Role::Server, Some(config));
-        let mut session = Session::new(id, ws, rx, shared);
-        session.run();
+    match page::file(path) {
+        Some((content_type, body)) => respond(&mut stream, "200 OK", content_type, body),
+        None => respond(&mut stream, "404 Not Found", "text/plain", b"not found\n"),
     }
-    shared.queue().clients.remove(&id);
-    shared.wake.notify_all();
 }

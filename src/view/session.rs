@@ -1,83 +1,346 @@
-//! One tab's connection: its WebSocket, camera and settings. It parses and checks what
-//! the page sends, puts frame requests in the tab's slot for the render worker, writes
-//! the worker's frames (JPEG previews, PNG at rest), answers the rest directly.
+//! One tab's connection: its WebSocket, camera and settings.
+//!
+//! Two threads serve a tab, and neither polls:
+//!
+//! * The reader (the connection's thread) owns the tab's state. It blocks in
+//!   tungstenite's `read` (no time-out), parses and checks what the page sends, puts
+//!   frame requests in the tab's slot for the render worker and queues its answers for
+//!   the writer. The rest timer is the worker's: a preview request leaves a full frame
+//!   due [`ServerConfig::rest_delay`](super::queue::ServerConfig::rest_delay) later.
+//! * The writer is the only thread that writes to the socket once the handshake is
+//!   done. It blocks on its channel and writes what arrives at once: the worker's frames
+//!   (encoded here: JPEG previews, PNG at rest) and screenshots, the reader's answers,
+//!   pongs and the close message.
+//!
+//! Both use tungstenite over the same `TcpStream` (`&TcpStream` reads and writes): the
+//! reader's WebSocket only reads, the writer's only writes. tungstenite answers pings
+//! and closes by itself inside `read`; those automatic writes would interleave with the
+//! writer's frames, so the reader's stream ([`Reading`]) drops writes after the
+//! handshake and the reader passes pings and closes on to the writer, which answers
+//! them. The handshake itself is tungstenite's (`accept_hdr_with_config`): the Host and
+//! Origin checks and the number of tabs are decided in its callback, which answers a
+//! refusal with the HTTP error.
+//!
+//! The end: a client's close is echoed by the writer; a broken connection ends the
+//! reader, which tells the writer to stop; a writer that cannot write shuts the socket,
+//! which ends the reader's blocked read; when the server stops it shuts the reading
+//! side of every socket, and each reader has its writer send a close message.
 
+use super::http::{loopback_host, refusal, same_origin};
 use super::paths::{export_path, sample_path};
 use super::protocol::{
     binary_message, camera_from_entry, camera_to_entry, ClientMessage, FrameHeader, KeyframeIn,
     PathFormat, Quality, ServerMessage, ShotHeader,
 };
-use super::server::{FrameJob, Outgoing, Shared, ShotJob};
+use super::queue::{FrameJob, Outgoing, Pending, Shared, ShotJob};
 use super::source::{ShotFormat, ViewFrame, ViewSettings};
 use crate::camera::Camera;
-use std::io::ErrorKind;
-use std::net::TcpStream;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{Shutdown, TcpStream};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
+use tungstenite::handshake::server::{ErrorResponse, Request, Response};
+use tungstenite::http::StatusCode;
+use tungstenite::protocol::{Role, WebSocketConfig};
 use tungstenite::{Message, WebSocket};
 
 /// The blend of a preview frame should take about this long (ms).
 const PREVIEW_BLEND_MS: f64 = 25.0;
 /// Previews are never smaller than this many pixels.
 const MIN_PREVIEW_PIXELS: f64 = 60_000.0;
+/// Longest WebSocket message a client may send (a long keyframe list fits).
+const MAX_MESSAGE: usize = 4 << 20;
 
-/// One tab: its camera, settings and the WebSocket.
-pub(super) struct Session<'s, 'a> {
-    id: u64,
-    ws: WebSocket<TcpStream>,
-    rx: mpsc::Receiver<Outgoing>,
-    shared: &'s Shared<'a>,
-    /// The last frame request, for `rest`, `settings` and the rest timer.
-    last: Option<FrameJob>,
-    settings: ViewSettings,
-    /// When the last interactive request came (a full frame follows after the delay).
-    moving_since: Option<Instant>,
-    window_start: Instant,
-    window_count: u32,
-    window_warned: bool,
-    /// Pixels of this tab's previews: lowered while their blend takes longer than
-    /// [`PREVIEW_BLEND_MS`] (a slow renderer, `--cpu`), raised back up to
-    /// [`ServerConfig::preview_pixels`](super::server::ServerConfig::preview_pixels).
-    preview_pixels: f64,
+/// Serves one tab on this thread and a writer thread: the WebSocket handshake on the
+/// socket whose request head (`bytes[..head_len]`, any bytes past it after) was read,
+/// then the tab until either side ends.
+pub(super) fn serve(stream: TcpStream, bytes: Vec<u8>, head_len: usize, shared: &Shared) {
+    let config = WebSocketConfig::default()
+        .max_message_size(Some(MAX_MESSAGE))
+        .max_frame_size(Some(MAX_MESSAGE));
+    let (tx, rx) = mpsc::channel();
+    let mut id = None;
+    let reading = Reading {
+        socket: &stream,
+        bytes,
+        at: 0,
+        head_len,
+        upgraded: false,
+    };
+    let worker_tx = tx.clone();
+    let registered = &mut id;
+    // The signature is tungstenite's (its `Callback`), large error and all.
+    #[allow(clippy::result_large_err)]
+    let check = move |req: &Request, response: Response| -> Result<Response, ErrorResponse> {
+        let header = |name: &str| req.headers().get(name).and_then(|v| v.to_str().ok());
+        if shared.loopback && !loopback_host(header("Host")) {
+            return Err(refusal(
+                StatusCode::FORBIDDEN,
+                "the viewer answers only to localhost names\n",
+            ));
+        }
+        if !same_origin(header("Origin"), header("Host")) {
+            return Err(refusal(
+                StatusCode::FORBIDDEN,
+                "the WebSocket must come from the viewer's own page\n",
+            ));
+        }
+        *registered = Some(register(shared, worker_tx).ok_or_else(|| {
+            refusal(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "too many viewer tabs are open\n",
+            )
+        })?);
+        Ok(response)
+    };
+    // A refusal was written by tungstenite; any other failure ends the connection.
+    let ws = tungstenite::accept_hdr_with_config(reading, check, Some(config)).ok();
+    if let (Some(mut ws), Some(id)) = (ws, id) {
+        if stream.set_read_timeout(None).is_ok() {
+            ws.get_mut().upgraded = true;
+            let writer = Writer {
+                ws: WebSocket::from_raw_socket(&stream, Role::Server, Some(config)),
+                id,
+                shared,
+            };
+            std::thread::scope(|s| {
+                s.spawn(move || writer.run(rx));
+                let last = Session::new(id, tx.clone(), shared).run(&mut ws);
+                // No more work for this tab; then the writer's last message.
+                unregister(shared, id);
+                let _ = tx.send(last);
+            });
+        }
+    }
+    if let Some(id) = id {
+        unregister(shared, id);
+    }
 }
 
-impl<'s, 'a> Session<'s, 'a> {
-    pub(super) fn new(
-        id: u64,
-        ws: WebSocket<TcpStream>,
-        rx: mpsc::Receiver<Outgoing>,
-        shared: &'s Shared<'a>,
-    ) -> Self {
-        Session {
-            id,
-            ws,
-            rx,
-            shared,
-            last: None,
-            settings: ViewSettings::default(),
-            moving_since: None,
-            window_start: Instant::now(),
-            window_count: 0,
-            window_warned: false,
+/// A new tab's slots, unless [`ServerConfig::max_clients`](super::queue::ServerConfig)
+/// are open.
+fn register(shared: &Shared, tx: mpsc::Sender<Outgoing>) -> Option<u64> {
+    let mut q = shared.queue();
+    if q.clients.len() >= shared.config.max_clients {
+        return None;
+    }
+    q.next_id += 1;
+    let id = q.next_id;
+    q.clients.insert(
+        id,
+        Pending {
+            frame: None,
+            rest: None,
+            shot: None,
+            frame_in_flight: false,
             preview_pixels: shared.config.preview_pixels as f64,
+            tx,
+        },
+    );
+    Some(id)
+}
+
+fn unregister(shared: &Shared, id: u64) {
+    shared.queue().clients.remove(&id);
+    shared.wake.notify_all();
+}
+
+/// The socket as the reader's WebSocket sees it. Reads give the request head the
+/// server already read (for the handshake), then the bytes read past it, then the
+/// socket. Writes reach the socket only until the handshake is done (its response);
+/// afterwards they are dropped: they are tungstenite's automatic answers to pings and
+/// closes, which the writer sends instead.
+struct Reading<'s> {
+    socket: &'s TcpStream,
+    bytes: Vec<u8>,
+    at: usize,
+    head_len: usize,
+    upgraded: bool,
+}
+
+impl Read for Reading<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        // The handshake reads only the head: tungstenite refuses bytes past the request.
+        let end = if self.upgraded {
+            self.bytes.len()
+        } else {
+            self.head_len
+        };
+        if self.at < end {
+            let n = buf.len().min(end - self.at);
+            buf[..n].copy_from_slice(&self.bytes[self.at..self.at + n]);
+            self.at += n;
+            return Ok(n);
+        }
+        if !self.upgraded {
+            return Ok(0);
+        }
+        self.socket.read(buf)
+    }
+}
+
+impl Write for Reading<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.upgraded {
+            Ok(buf.len())
+        } else {
+            self.socket.write(buf)
         }
     }
 
-    pub(super) fn run(&mut self) {
-        if self
-            .ws
-            .send(Message::text(self.shared.hello_text.clone()))
-            .is_err()
-        {
-            return;
+    fn flush(&mut self) -> std::io::Result<()> {
+        if self.upgraded {
+            Ok(())
+        } else {
+            self.socket.flush()
         }
-        loop {
-            if self.shared.stopping() {
-                let _ = self.ws.close(None);
-                let _ = self.ws.flush();
-                return;
+    }
+}
+
+/// A tab's writer: the only thread writing to its socket after the handshake.
+struct Writer<'s> {
+    ws: WebSocket<&'s TcpStream>,
+    id: u64,
+    shared: &'s Shared,
+}
+
+impl Writer<'_> {
+    /// Writes what arrives until the reader's last message (or a failed write).
+    fn run(mut self, rx: mpsc::Receiver<Outgoing>) {
+        while let Ok(out) = rx.recv() {
+            let sent = match out {
+                Outgoing::Frame { job, result } => self.frame(&job, result),
+                Outgoing::Shot {
+                    seq,
+                    format,
+                    result,
+                } => match result {
+                    Ok(bytes) => {
+                        let header = ShotHeader {
+                            kind: "screenshot",
+                            seq,
+                            format,
+                            filename: format!(
+                                "vksplat_{}.{}",
+                                unix_seconds(),
+                                match format {
+                                    ShotFormat::Png => "png",
+                                    ShotFormat::Exr => "exr",
+                                }
+                            ),
+                        };
+                        self.send(Message::binary(binary_message(&header, &bytes)))
+                    }
+                    Err(e) => self.send(Message::text(error_text(&e, Some(seq)))),
+                },
+                Outgoing::Text(text) => self.send(Message::text(text)),
+                Outgoing::Pong(data) => self.send(Message::Pong(data)),
+                Outgoing::Close(frame) => {
+                    let sent = self.ws.close(frame);
+                    let _ = self.retry(sent);
+                    break;
+                }
+                Outgoing::End => break,
+            };
+            if sent.is_err() {
+                break;
             }
-            match self.ws.read() {
+        }
+        // Ends the reader's read where this side ended first (a write failed), and
+        // closes the connection from the server's side.
+        let _ = self.ws.get_ref().shutdown(Shutdown::Both);
+    }
+
+    fn send(&mut self, message: Message) -> tungstenite::Result<()> {
+        let sent = self.ws.send(message);
+        self.retry(sent)
+    }
+
+    /// Finishes a write a signal interrupted (tungstenite keeps what is unwritten).
+    fn retry(&mut self, mut result: tungstenite::Result<()>) -> tungstenite::Result<()> {
+        while matches!(&result, Err(tungstenite::Error::Io(e)) if e.kind() == ErrorKind::Interrupted)
+        {
+            result = self.ws.flush();
+        }
+        result
+    }
+
+    /// Encodes and writes a rendered frame (or its error); then the worker may render
+    /// the tab's next one.
+    fn frame(
+        &mut self,
+        job: &FrameJob,
+        result: Result<ViewFrame, String>,
+    ) -> tungstenite::Result<()> {
+        let message = match result {
+            Ok(frame) => {
+                if job.quality == Quality::Preview {
+                    self.adapt_preview(&frame);
+                }
+                encode_frame(job, &frame, self.shared.config.jpeg_quality)
+            }
+            Err(e) => Err(e),
+        };
+        let sent = match message {
+            Ok(bytes) => self.send(Message::binary(bytes)),
+            Err(e) => self.send(Message::text(error_text(&e, Some(job.seq)))),
+        };
+        if let Some(p) = self.shared.queue().clients.get_mut(&self.id) {
+            p.frame_in_flight = false;
+        }
+        self.shared.wake.notify_all();
+        sent
+    }
+
+    /// Scales the preview size so that the blend of a preview, the stage whose time
+    /// grows with the pixels, takes about [`PREVIEW_BLEND_MS`] (between
+    /// [`MIN_PREVIEW_PIXELS`] and the configured size); the per-Gaussian stages do not
+    /// shrink with the frame, so they are left out. Damped so the size does not swing.
+    fn adapt_preview(&mut self, frame: &ViewFrame) {
+        let pixels = frame.width as f64 * frame.height as f64;
+        let max = self.shared.config.preview_pixels as f64;
+        if let Some(p) = self.shared.queue().clients.get_mut(&self.id) {
+            p.preview_pixels =
+                next_preview_budget(p.preview_pixels, pixels, frame.timings.blend, max);
+        }
+    }
+}
+
+/// One tab's state, kept by its reader.
+struct Session<'s> {
+    id: u64,
+    /// To the tab's writer.
+    tx: mpsc::Sender<Outgoing>,
+    shared: &'s Shared,
+    /// The last frame request (full quality, before the size caps), for `rest`,
+    /// `settings` and screenshots without a camera.
+    last: Option<FrameJob>,
+    settings: ViewSettings,
+    window_start: Instant,
+    window_count: u32,
+    window_warned: bool,
+}
+
+impl<'s> Session<'s> {
+    fn new(id: u64, tx: mpsc::Sender<Outgoing>, shared: &'s Shared) -> Self {
+        Session {
+            id,
+            tx,
+            shared,
+            last: None,
+            settings: ViewSettings::default(),
+            window_start: Instant::now(),
+            window_count: 0,
+            window_warned: false,
+        }
+    }
+
+    /// Reads and handles the page's messages until the connection ends; returns the
+    /// writer's last message.
+    fn run(&mut self, ws: &mut WebSocket<Reading>) -> Outgoing {
+        self.send(Outgoing::Text(self.shared.hello_text.clone()));
+        loop {
+            match ws.read() {
                 Ok(Message::Text(text)) => {
                     if self.admit() {
                         self.handle(text.as_str());
@@ -88,23 +351,31 @@ impl<'s, 'a> Session<'s, 'a> {
                         self.send_error("binary messages are not understood; send JSON text", None);
                     }
                 }
+                Ok(Message::Ping(data)) => self.send(Outgoing::Pong(data)),
+                Ok(Message::Close(frame)) => return Outgoing::Close(frame),
                 Ok(_) => {}
-                Err(tungstenite::Error::Io(e))
-                    if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                Err(tungstenite::Error::Io(e)) if e.kind() == ErrorKind::Interrupted => {}
                 Err(tungstenite::Error::Capacity(e)) => {
                     // The connection cannot resynchronise after an oversized frame.
                     self.send_error(&format!("message refused: {e}; closing"), None);
-                    let _ = self.ws.close(None);
-                    let _ = self.ws.flush();
-                    return;
+                    return Outgoing::Close(None);
                 }
-                Err(_) => return,
+                // The server stops: it shut the reading side of the socket.
+                Err(_) if self.shared.stopping() => return Outgoing::Close(None),
+                Err(_) => return Outgoing::End,
             }
-            if !self.deliver() {
-                return;
-            }
-            self.rest_timer();
         }
+    }
+
+    /// Queues a message for the writer (gone only when the connection is).
+    fn send(&self, out: Outgoing) {
+        let _ = self.tx.send(out);
+    }
+
+    fn send_text(&self, message: &ServerMessage) -> Result<(), String> {
+        let text = serde_json::to_string(message).map_err(|e| e.to_string())?;
+        self.send(Outgoing::Text(text));
+        Ok(())
     }
 
     /// Counts a message against the rate limit; false drops it (one error per second).
@@ -129,145 +400,8 @@ impl<'s, 'a> Session<'s, 'a> {
         false
     }
 
-    /// Scales the preview size so that the blend of a preview, the stage whose time
-    /// grows with the pixels, takes about [`PREVIEW_BLEND_MS`] (between
-    /// [`MIN_PREVIEW_PIXELS`] and the configured size); the per-Gaussian stages do not
-    /// shrink with the frame, so they are left out. Damped so the size does not swing.
-    fn adapt_preview(&mut self, frame: &ViewFrame) {
-        let pixels = frame.width as f64 * frame.height as f64;
-        let max = self.shared.config.preview_pixels as f64;
-        self.preview_pixels =
-            next_preview_budget(self.preview_pixels, pixels, frame.timings.blend, max);
-    }
-
-    /// Writes what the worker finished for this client; false when the socket is gone.
-    fn deliver(&mut self) -> bool {
-        while let Ok(out) = self.rx.try_recv() {
-            let sent = match out {
-                Outgoing::Frame { job, result } => {
-                    let message = match result {
-                        Ok(frame) => {
-                            if job.quality == Quality::Preview {
-                                self.adapt_preview(&frame);
-                            }
-                            self.encode_frame(&job, &frame)
-                        }
-                        Err(e) => Err(e),
-                    };
-                    let sent = match message {
-                        Ok(bytes) => self.ws.send(Message::binary(bytes)),
-                        Err(e) => self.ws.send(Message::text(error_text(&e, Some(job.seq)))),
-                    };
-                    if let Some(p) = self.shared.queue().clients.get_mut(&self.id) {
-                        p.frame_in_flight = false;
-                    }
-                    self.shared.wake.notify_all();
-                    sent
-                }
-                Outgoing::Shot {
-                    seq,
-                    format,
-                    result,
-                } => match result {
-                    Ok(bytes) => {
-                        let header = ShotHeader {
-                            kind: "screenshot",
-                            seq,
-                            format,
-                            filename: format!(
-                                "vksplat_{}.{}",
-                                unix_seconds(),
-                                match format {
-                                    ShotFormat::Png => "png",
-                                    ShotFormat::Exr => "exr",
-                                }
-                            ),
-                        };
-                        self.ws
-                            .send(Message::binary(binary_message(&header, &bytes)))
-                    }
-                    Err(e) => self.ws.send(Message::text(error_text(&e, Some(seq)))),
-                },
-            };
-            if sent.is_err() {
-                return false;
-            }
-        }
-        true
-    }
-
-    /// JPEG for previews, PNG for full frames, behind the frame header.
-    fn encode_frame(&self, job: &FrameJob, frame: &ViewFrame) -> Result<Vec<u8>, String> {
-        use image::ImageEncoder;
-        let start = Instant::now();
-        let (w, h) = (frame.width, frame.height);
-        if frame.rgba8.len() != w as usize * h as usize * 4 {
-            return Err(format!(
-                "the renderer returned {} bytes for a {w}x{h} frame",
-                frame.rgba8.len()
-            ));
-        }
-        let rgb: Vec<u8> = frame
-            .rgba8
-            .chunks_exact(4)
-            .flat_map(|p| [p[0], p[1], p[2]])
-            .collect();
-        let mut bytes = Vec::new();
-        let (encoding, result) = match job.quality {
-            Quality::Preview => (
-                "jpeg",
-                image::codecs::jpeg::JpegEncoder::new_with_quality(
-                    &mut bytes,
-                    self.shared.config.jpeg_quality,
-                )
-                .write_image(&rgb, w, h, image::ExtendedColorType::Rgb8),
-            ),
-            Quality::Full => (
-                "png",
-                image::codecs::png::PngEncoder::new_with_quality(
-                    &mut bytes,
-                    image::codecs::png::CompressionType::Fast,
-                    image::codecs::png::FilterType::Adaptive,
-                )
-                .write_image(&rgb, w, h, image::ExtendedColorType::Rgb8),
-            ),
-        };
-        result.map_err(|e| format!("encoding the frame failed: {e}"))?;
-        let header = FrameHeader {
-            kind: "frame",
-            seq: job.seq,
-            width: w,
-            height: h,
-            quality: job.quality,
-            encoding,
-            timings: frame.timings.clone(),
-            gaussians: frame.gaussians,
-            visible: frame.stats.visible,
-            pairs: frame.stats.pairs,
-            wall_ms: frame.wall_ms,
-            encode_ms: start.elapsed().as_secs_f64() * 1e3,
-        };
-        Ok(binary_message(&header, &bytes))
-    }
-
-    /// A full frame of the last view once the camera stopped moving.
-    fn rest_timer(&mut self) {
-        let due = self
-            .moving_since
-            .is_some_and(|t| t.elapsed() >= self.shared.config.rest_delay);
-        if due {
-            self.moving_since = None;
-            if let Some(job) = self.last.clone() {
-                self.submit_frame(FrameJob {
-                    quality: Quality::Full,
-                    ..job
-                });
-            }
-        }
-    }
-
-    fn send_error(&mut self, message: &str, seq: Option<u64>) {
-        let _ = self.ws.send(Message::text(error_text(message, seq)));
+    fn send_error(&self, message: &str, seq: Option<u64>) {
+        self.send(Outgoing::Text(error_text(message, seq)));
     }
 
     fn handle(&mut self, text: &str) {
@@ -338,7 +472,6 @@ impl<'s, 'a> Session<'s, 'a> {
         let camera = camera_from_entry(camera).map_err(|e| format!("camera refused: {e}"))?;
         let settings = self.checked_settings(settings)?;
         self.settings = settings.clone();
-        self.moving_since = interactive.then(Instant::now);
         self.submit_frame(FrameJob {
             seq,
             camera,
@@ -356,7 +489,6 @@ impl<'s, 'a> Session<'s, 'a> {
         let settings = self.checked_settings(Some(settings))?;
         self.settings = settings.clone();
         if let Some(job) = self.last.clone() {
-            self.moving_since = None;
             self.submit_frame(FrameJob {
                 seq,
                 settings,
@@ -368,7 +500,6 @@ impl<'s, 'a> Session<'s, 'a> {
     }
 
     fn rest(&mut self, seq: u64) -> Result<(), String> {
-        self.moving_since = None;
         let job = self
             .last
             .clone()
@@ -401,14 +532,11 @@ impl<'s, 'a> Session<'s, 'a> {
             .and_then(|c| c.validate().map(|()| c))
             .map_err(|e| format!("camera {index} at that size: {e}"))?;
         let entry = camera_to_entry(&cam, index)?;
-        let reply = ServerMessage::Camera {
+        self.send_text(&ServerMessage::Camera {
             seq,
             index,
             camera: entry,
-        };
-        let text = serde_json::to_string(&reply).map_err(|e| e.to_string())?;
-        let _ = self.ws.send(Message::text(text));
-        self.moving_since = None;
+        })?;
         let settings = self.settings.clone();
         self.submit_frame(FrameJob {
             seq,
@@ -462,7 +590,7 @@ impl<'s, 'a> Session<'s, 'a> {
             .enumerate()
             .map(|(i, c)| camera_to_entry(c, i))
             .collect::<Result<Vec<_>, _>>()?;
-        let reply = ServerMessage::Export {
+        self.send_text(&ServerMessage::Export {
             seq,
             format,
             filename: match format {
@@ -471,10 +599,7 @@ impl<'s, 'a> Session<'s, 'a> {
             },
             text,
             cameras: entries,
-        };
-        let text = serde_json::to_string(&reply).map_err(|e| e.to_string())?;
-        let _ = self.ws.send(Message::text(text));
-        Ok(())
+        })
     }
 
     fn sample(&mut self, seq: u64, fps: f32, keyframes: &[KeyframeIn]) -> Result<(), String> {
@@ -484,18 +609,19 @@ impl<'s, 'a> Session<'s, 'a> {
             .enumerate()
             .map(|(i, c)| camera_to_entry(c, i))
             .collect::<Result<Vec<_>, _>>()?;
-        let reply = ServerMessage::Path {
+        self.send_text(&ServerMessage::Path {
             seq,
             fps: fps as f64,
             cameras,
-        };
-        let text = serde_json::to_string(&reply).map_err(|e| e.to_string())?;
-        let _ = self.ws.send(Message::text(text));
-        Ok(())
+        })
     }
 
     /// Puts a frame request in this client's slot (replacing an older one): its size
-    /// capped by `--max-resolution`, previews scaled down further.
+    /// capped by `--max-resolution`, previews scaled down further. A preview leaves the
+    /// full frame of its view due after [`ServerConfig::rest_delay`]; a full frame
+    /// cancels a due one.
+    ///
+    /// [`ServerConfig::rest_delay`]: super::queue::ServerConfig::rest_delay
     fn submit_frame(&mut self, job: FrameJob) {
         self.last = Some(FrameJob {
             quality: Quality::Full,
@@ -503,17 +629,80 @@ impl<'s, 'a> Session<'s, 'a> {
         });
         let config = &self.shared.config;
         let capped = cap_resolution(&job.camera, config.max_resolution);
-        let camera = match job.quality {
-            Quality::Full => capped,
-            Quality::Preview => cap_pixels(&capped, self.preview_pixels as u32),
-        };
         let mut q = self.shared.queue();
         if let Some(p) = q.clients.get_mut(&self.id) {
+            let (camera, rest) = match job.quality {
+                Quality::Full => (capped, None),
+                Quality::Preview => {
+                    let full = FrameJob {
+                        camera: capped.clone(),
+                        quality: Quality::Full,
+                        ..job.clone()
+                    };
+                    let due = Instant::now() + config.rest_delay;
+                    (
+                        cap_pixels(&capped, p.preview_pixels as u32),
+                        Some((due, full)),
+                    )
+                }
+            };
             p.frame = Some(FrameJob { camera, ..job });
+            p.rest = rest;
         }
         drop(q);
         self.shared.wake.notify_all();
     }
+}
+
+/// JPEG for previews, PNG for full frames, behind the frame header.
+fn encode_frame(job: &FrameJob, frame: &ViewFrame, jpeg_quality: u8) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    let start = Instant::now();
+    let (w, h) = (frame.width, frame.height);
+    if frame.rgba8.len() != w as usize * h as usize * 4 {
+        return Err(format!(
+            "the renderer returned {} bytes for a {w}x{h} frame",
+            frame.rgba8.len()
+        ));
+    }
+    let rgb: Vec<u8> = frame
+        .rgba8
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let mut bytes = Vec::new();
+    let (encoding, result) = match job.quality {
+        Quality::Preview => (
+            "jpeg",
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, jpeg_quality)
+                .write_image(&rgb, w, h, image::ExtendedColorType::Rgb8),
+        ),
+        Quality::Full => (
+            "png",
+            image::codecs::png::PngEncoder::new_with_quality(
+                &mut bytes,
+                image::codecs::png::CompressionType::Fast,
+                image::codecs::png::FilterType::Adaptive,
+            )
+            .write_image(&rgb, w, h, image::ExtendedColorType::Rgb8),
+        ),
+    };
+    result.map_err(|e| format!("encoding the frame failed: {e}"))?;
+    let header = FrameHeader {
+        kind: "frame",
+        seq: job.seq,
+        width: w,
+        height: h,
+        quality: job.quality,
+        encoding,
+        timings: frame.timings.clone(),
+        gaussians: frame.gaussians,
+        visible: frame.stats.visible,
+        pairs: frame.stats.pairs,
+        wall_ms: frame.wall_ms,
+        encode_ms: start.elapsed().as_secs_f64() * 1e3,
+    };
+    Ok(binary_message(&header, &bytes))
 }
 
 /// `1 camera`, `3 cameras`.

@@ -1,6 +1,6 @@
 //! The renderer behind the viewer: one frame for a camera and the page's settings.
 //!
-//! The server only knows [`FrameSource`]; [`GpuSource`] renders with the Vulkan
+//! The server only knows [`ViewSource`]; [`GpuSource`] renders with the Vulkan
 //! pipeline, reading back RGBA8 for colour frames (the image stays on the GPU and is
 //! packed there) and float planes only where a mode or a screenshot needs them.
 
@@ -129,8 +129,9 @@ pub enum ShotFormat {
     Exr,
 }
 
-/// What the server asks of a renderer. Errors are messages for the page.
-pub trait FrameSource: Send {
+/// What the viewer's server asks of a renderer. Errors are messages for the page. (Not
+/// [`crate::sequence::FrameSource`], which feeds `render`'s pipelined frame sequences.)
+pub trait ViewSource: Send {
     /// Renders `cam` (its size is the frame's) with `settings`.
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame>;
     /// Renders a preview while the camera moves: by default the same as [`Self::render`];
@@ -334,7 +335,7 @@ pub fn encode_shot(
     Ok(out.into_inner())
 }
 
-impl FrameSource for GpuSource {
+impl ViewSource for GpuSource {
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame> {
         self.render_scene(false, cam, settings)
     }

@@ -818,7 +818,7 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
 /// rest draws the whole scene, and `set_preview(0)` previews with the whole scene.
 #[test]
 fn viewer_previews_draw_the_most_important_gaussians() {
-    use vksplat::view::source::{FrameSource, GpuSource, ViewSettings, DEFAULT_PREVIEW_GAUSSIANS};
+    use vksplat::view::source::{GpuSource, ViewSettings, ViewSource, DEFAULT_PREVIEW_GAUSSIANS};
     let scene = load("playbot_lod2_125k_sh2.ply");
     // The ranking: every kept Gaussian weighs at least as much as every dropped one.
     let weight = |i: usize| {

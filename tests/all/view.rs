@@ -533,6 +533,115 @@ fn closed_tabs_free_their_state_and_http_serves_the_page() {
     let mut out = String::new();
     let _ = s.read_to_string(&mut out);
     assert!(out.starts_with("HTTP/1.1 403"), "{out}");
+    // So is one naming another host (the WebSocket handshake's own check).
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(s, "GET /ws HTTP/1.1\r\nHost: evil.example:{}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n", viewer.port).unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    assert!(out.starts_with("HTTP/1.1 403"), "{out}");
+    assert!(out.contains("localhost names"), "{out}");
+}
+
+/// Context switches of every thread of process `pid` so far (Linux).
+fn context_switches(pid: u32) -> u64 {
+    let mut total = 0;
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap() {
+        let status =
+            std::fs::read_to_string(task.unwrap().path().join("status")).unwrap_or_default();
+        for line in status.lines() {
+            if line.starts_with("voluntary_ctxt_switches:")
+                || line.starts_with("nonvoluntary_ctxt_switches:")
+            {
+                total += line
+                    .split_whitespace()
+                    .nth(1)
+                    .and_then(|n| n.parse::<u64>().ok())
+                    .unwrap_or(0);
+            }
+        }
+    }
+    total
+}
+
+/// The tab limit is answered with HTTP 503; pings are answered with their payload; a
+/// client's close is answered with a close and frees its slot; an idle server with open
+/// tabs sleeps (nothing polls: no wake-ups while nothing happens).
+#[test]
+fn tab_limit_pings_closes_and_an_idle_server() {
+    use std::io::{Read, Write};
+    use tungstenite::Message;
+    let dir = tempfile::tempdir().unwrap();
+    let viewer = Viewer::start(dir.path(), &["--demo", "--cpu", "--width", "32"]);
+    let mut tabs: Vec<Client> = (0..16).map(|_| viewer.connect()).collect();
+    let cam = tabs[0].camera(0);
+    let seq = tabs[0].send(json!({"type": "view", "camera": cam}));
+    tabs[0].frame(seq, true, WAIT);
+    let handshake = format!("GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n", viewer.port);
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", viewer.port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    s.write_all(handshake.as_bytes()).unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    assert!(out.starts_with("HTTP/1.1 503"), "{out}");
+    assert!(out.contains("too many viewer tabs"), "{out}");
+
+    // Idle: the 16 tabs, the listener and the worker wait without waking. (The server
+    // used to poll every 10 ms: some 1,700 switches a second here.)
+    std::thread::sleep(Duration::from_millis(500));
+    let pid = viewer.child.id();
+    let before = context_switches(pid);
+    std::thread::sleep(Duration::from_secs(2));
+    let switches = context_switches(pid) - before;
+    assert!(
+        switches < 20,
+        "{switches} context switches in 2 s of idling"
+    );
+
+    let c = &mut tabs[3];
+    c.ws.send(Message::Ping(b"are you there".to_vec().into()))
+        .unwrap();
+    let deadline = std::time::Instant::now() + WAIT;
+    loop {
+        assert!(std::time::Instant::now() < deadline, "no pong");
+        match c.ws.read() {
+            Ok(Message::Pong(data)) => {
+                assert_eq!(&data[..], b"are you there");
+                break;
+            }
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => panic!("WebSocket failed: {e}"),
+        }
+    }
+    c.ws.close(None).unwrap();
+    let deadline = std::time::Instant::now() + WAIT;
+    loop {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no answer to the close"
+        );
+        match c.ws.read() {
+            // tungstenite reports the server's close as the end of the connection.
+            Err(tungstenite::Error::ConnectionClosed) => break,
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => panic!("the close was not answered: {e}"),
+        }
+    }
+    // Its slot is free: a 16th tab connects again and is served.
+    tabs.remove(3);
+    let mut c = viewer.connect();
+    let seq = c.send(json!({"type": "view", "camera": c.camera(0)}));
+    c.frame(seq, true, WAIT);
 }
 
 #[test]
