@@ -117,6 +117,11 @@ impl GpuImage {
         self.view
     }
 
+    /// Width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
     /// Bytes of texel data (what a copy to a buffer writes).
     pub fn bytes(&self) -> u64 {
         u64::from(self.width) * u64::from(self.height) * self.texel_bytes

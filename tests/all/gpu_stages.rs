@@ -387,3 +387,40 @@ fn stages_match_with_the_power_kernel_and_its_tile_culling() {
         }
     }
 }
+
+/// The saved forward state a backward pass reads (`GpuRenderer::forward_state`) is the
+/// frame just finished: its splats, its sorted pairs and bin ranges, and its image, whose
+/// alpha is `1 - T_final`.
+#[test]
+fn forward_state_is_the_finished_frames_pairs_ranges_and_transmittance() {
+    let mut r = renderer();
+    let s = load("playbot_lod3_31k_sh2.ply");
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 320, 180);
+    let gs = r.upload(&s).unwrap();
+    let (frame, inter) = r
+        .render_with_intermediates(&gs, &cam, &RenderOptions::default())
+        .unwrap();
+    let state = r.forward_state().unwrap();
+    let ctx = r.ctx();
+    assert_eq!(state.pairs as usize, inter.values.len());
+    assert!(state.pairs > 1000, "a real frame: {} pairs", state.pairs);
+    assert_eq!((state.bin_size, state.bins), (inter.bin_size, inter.bins));
+    let values: Vec<u32> = state
+        .sorted_gaussians
+        .buffer
+        .read(ctx, inter.values.len())
+        .unwrap();
+    let keys: Vec<u32> = state
+        .sorted_bins
+        .buffer
+        .read(ctx, inter.keys.len())
+        .unwrap();
+    let ranges: Vec<[u32; 2]> = state.ranges.buffer.read(ctx, inter.ranges.len()).unwrap();
+    let splats: Vec<vksplat::render::types::Splat> =
+        state.splats.buffer.read(ctx, inter.splats.len()).unwrap();
+    assert_eq!((values, keys), (inter.values.clone(), inter.keys.clone()));
+    assert_eq!(ranges, inter.ranges);
+    assert_eq!(splats, inter.splats);
+    assert_eq!(state.color.size(), (frame.width, frame.height));
+    assert_validation_clean(&r);
+}
