@@ -13,6 +13,7 @@ pub mod gpu;
 pub mod image_file;
 pub mod metrics;
 pub mod mlp;
+pub mod model;
 pub mod output;
 pub mod render;
 pub mod rf;

@@ -281,7 +281,7 @@ pub fn exr_world_to_ndc(cam: &Camera) -> [f32; 16] {
         cam.cx as f64 / w,
         cam.cy as f64 / h,
     );
-    let near = crate::cpu::NEAR_PLANE as f64;
+    let near = crate::model::NEAR_PLANE as f64;
     // Column-vector rows of the projection: [x, y, z, w] = P * (p, 1).
     let depth = (r.row(2), t.z);
     let rows = [

@@ -37,7 +37,6 @@ pub mod shade;
 pub mod types;
 
 use crate::camera::Camera;
-use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::{SortConfig, SortTexels, SORT_CONFIG_32};
@@ -46,7 +45,7 @@ use crate::gpu::{
     BufferView, Count, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
     MemoryKind, RadixSort, Scan,
 };
-use crate::scene::ActivatedScene;
+use crate::model::{ActivatedScene, RenderOptions, SplatKernel};
 use ash::vk;
 use types::{Counters, FrameParams, GpuGaussian, GpuGaussianCompact, Splat};
 
