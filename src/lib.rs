@@ -8,6 +8,7 @@ pub mod cpu;
 pub mod diff_image;
 pub mod fit;
 pub mod frame;
+pub mod fsutil;
 pub mod gen;
 pub mod gpu;
 pub mod image_file;

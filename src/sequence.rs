@@ -10,6 +10,7 @@
 
 use crate::camera::Camera;
 use crate::frame::Frame;
+use crate::fsutil;
 use crate::output::{self, FileSpec, OutputOptions};
 use std::collections::{HashSet, VecDeque};
 use std::io::IsTerminal;
@@ -445,8 +446,8 @@ pub fn plan(
     })
 }
 
-/// Removes `.<name>.<pid>.tmp` files (see [`output::write_atomically`]) of planned outputs
-/// whose writer process is gone.
+/// Removes the temporary files of [`output::write_atomically`] (see
+/// [`fsutil::temporary_owner`]) of planned outputs whose writer process is gone.
 fn remove_stale_temporaries(dirs: &HashSet<PathBuf>, planned: &HashSet<PathBuf>) -> usize {
     let names: HashSet<String> = planned
         .iter()
@@ -459,13 +460,7 @@ fn remove_stale_temporaries(dirs: &HashSet<PathBuf>, planned: &HashSet<PathBuf>)
         };
         for e in entries.flatten() {
             let file = e.file_name().to_string_lossy().into_owned();
-            let Some(rest) = file.strip_prefix('.').and_then(|r| r.strip_suffix(".tmp")) else {
-                continue;
-            };
-            let Some((name, pid)) = rest.rsplit_once('.') else {
-                continue;
-            };
-            let Ok(pid) = pid.parse::<u32>() else {
+            let Some((name, pid)) = fsutil::temporary_owner(&file) else {
                 continue;
             };
             let alive = pid == std::process::id() || process_running(pid);

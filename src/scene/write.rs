@@ -4,7 +4,7 @@
 use super::filter::SceneFilter;
 use super::transform::SceneTransform;
 use super::{ply, splat, spz, Scene, SceneError, SceneFormat};
-use crate::output::OutputError;
+use crate::fsutil::{self, WriteError};
 use std::path::{Path, PathBuf};
 
 /// A format [`to_bytes`] can write.
@@ -75,7 +75,7 @@ pub enum ConvertError {
     Load(#[from] SceneError),
     /// The output could not be written.
     #[error(transparent)]
-    Write(#[from] OutputError),
+    Write(#[from] WriteError),
     /// The output's extension names no writer.
     #[error("{0}: unknown output format; use a .ply, .splat or .spz file name")]
     UnknownFormat(PathBuf),
@@ -183,7 +183,7 @@ pub fn convert(
         });
     }
     if !options.overwrite && output.exists() {
-        return Err(OutputError::Exists(output.to_path_buf()).into());
+        return Err(WriteError::Exists(output.to_path_buf()).into());
     }
     let (mut scene, input_format) = super::load_with_format(input)?;
     if let Some(kernel) = options.kernel {
@@ -206,7 +206,7 @@ pub fn convert(
         format: output_format,
         message,
     })?;
-    crate::output::write_bytes_atomically(output, options.overwrite, &bytes)?;
+    fsutil::write_bytes_atomically(output, options.overwrite, &bytes)?;
     Ok(ConvertReport {
         input_format,
         output_format,
