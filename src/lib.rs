@@ -1,6 +1,7 @@
 //! vksplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
 //! reference renderer that the GPU is checked against.
 
+#[cfg(feature = "cli")]
 pub mod bench;
 pub mod camera;
 pub mod console;
@@ -21,6 +22,7 @@ pub mod rf;
 pub mod scene;
 pub mod sequence;
 pub mod stats;
+#[cfg(feature = "viewer")]
 pub mod view;
 
 /// The built-in demo scene (PLAYBOT LOD6, CC BY 4.0, see `assets/README.md`).

@@ -492,7 +492,7 @@ fn process_running(pid: u32) -> bool {
 /// How progress is shown.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ProgressStyle {
-    /// A bar on a terminal, plain lines otherwise.
+    /// A bar on a terminal (with the `cli` feature), plain lines otherwise.
     #[default]
     Auto,
     /// Plain lines (about every 10 % or 10 s).
@@ -576,23 +576,55 @@ struct Progress {
     start: Instant,
     last_line: Instant,
     last_decile: usize,
-    bar: Option<indicatif::ProgressBar>,
+    bar: Option<Bar>,
     lines: bool,
+}
+
+/// The terminal progress bar (with the `cli` feature).
+#[cfg(feature = "cli")]
+type Bar = indicatif::ProgressBar;
+
+/// Without the `cli` feature there is no terminal progress bar: [`ProgressStyle::Auto`]
+/// prints lines.
+#[cfg(not(feature = "cli"))]
+enum Bar {}
+
+#[cfg(not(feature = "cli"))]
+impl Bar {
+    fn set_position(&self, _: u64) {
+        match *self {}
+    }
+    fn finish_and_clear(&self) {
+        match *self {}
+    }
+}
+
+/// A progress bar of `total` frames on the terminal, where the `cli` feature has one.
+fn terminal_bar(total: usize) -> Option<Bar> {
+    #[cfg(feature = "cli")]
+    {
+        let bar = indicatif::ProgressBar::new(total as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40.cyan/blue} {pos}/{len} frames  {per_sec}  ETA {eta}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        Some(bar)
+    }
+    #[cfg(not(feature = "cli"))]
+    {
+        let _ = total;
+        None
+    }
 }
 
 impl Progress {
     fn new(total: usize, style: ProgressStyle) -> Progress {
         let tty = std::io::stderr().is_terminal();
-        let bar = (style == ProgressStyle::Auto && tty).then(|| {
-            let bar = indicatif::ProgressBar::new(total as u64);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{bar:40.cyan/blue} {pos}/{len} frames  {per_sec}  ETA {eta}  {msg}",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            bar
-        });
+        let bar = (style == ProgressStyle::Auto && tty)
+            .then(|| terminal_bar(total))
+            .flatten();
         Progress {
             total,
             done: 0,
