@@ -2,14 +2,19 @@
 """Prints the module-level dependency graph of the vksplat library and its cycles.
 
 An edge `a -> b` means some file of module `a` (src/a.rs or src/a/...) names
-`crate::b` (in a `use` line, a `use crate::{b, ...}` group, or a path in the code).
-Comments are ignored; code under `#[cfg(test)]` counts like any other code, except
-with --no-tests, which drops `#[cfg(test)] mod ... { ... }` blocks and files named
+`crate::b` (in a `use` line, a `use crate::{b, ...}` group, or a path in the code;
+`self::` and `super::` paths are resolved to theirs). `lib` is the crate root
+(src/lib.rs and its items, e.g. `crate::demo_scene`); an exported macro
+(`crate::note!`) counts as a use of the module defining it. Comments and strings are
+ignored; code under `#[cfg(test)]` counts like any other code, except with
+--no-tests, which drops `#[cfg(test)] mod ... { ... }` blocks and files named
 tests.rs. The binary (src/main.rs, src/cli/) uses the library as `vksplat::` and is
-left out.
+left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
 
     tools/module_graph.py                # top-level modules: edges, then cycles
-    tools/module_graph.py --depth 2      # submodules (scene::write -> output, ...)
+    tools/module_graph.py --depth 2      # submodules as nodes (scene::write -> fsutil,
+                                         # ...); edges between a module and its own
+                                         # submodules are left out
     tools/module_graph.py --mermaid      # the edges as a mermaid flowchart
     tools/module_graph.py --layers       # the modules by layer (a cycle is one node)
     tools/module_graph.py --why a b      # the lines behind the edge a -> b
