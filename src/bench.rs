@@ -3,10 +3,10 @@
 //! every figure is measured.
 
 use crate::camera::Camera;
-use crate::cpu::{self, Projected, RenderOptions};
+use crate::cpu::{self, Projected};
 use crate::gpu::GpuResult;
+use crate::model::{ActivatedScene, RenderOptions};
 use crate::render::GpuRenderer;
-use crate::scene::ActivatedScene;
 use serde::Serialize;
 
 /// min / median / p95 / max of a series of samples, in milliseconds.

@@ -4,8 +4,9 @@
 //! small fuzzy Gaussians around those surfaces (low opacity), and 5 % are large, sparse,
 //! faint background Gaussians on a distant shell. World up is -y, like INRIA scenes.
 
-use crate::cpu::sh::SH_C0;
-use crate::scene::{sh_coeffs_for_degree, Scene};
+use crate::model::sh::SH_C0;
+use crate::model::sh_coeffs_for_degree;
+use crate::scene::Scene;
 use glam::{Quat, Vec3};
 
 /// SplitMix64: small, fast, reproducible across platforms.

@@ -1,6 +1,7 @@
 //! vksplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
 //! reference renderer that the GPU is checked against.
 
+#[cfg(feature = "cli")]
 pub mod bench;
 pub mod camera;
 pub mod console;
@@ -8,11 +9,13 @@ pub mod cpu;
 pub mod diff_image;
 pub mod fit;
 pub mod frame;
+pub mod fsutil;
 pub mod gen;
 pub mod gpu;
 pub mod image_file;
 pub mod metrics;
 pub mod mlp;
+pub mod model;
 pub mod output;
 pub mod render;
 pub mod rf;
@@ -20,6 +23,7 @@ pub mod rules;
 pub mod scene;
 pub mod sequence;
 pub mod stats;
+#[cfg(feature = "viewer")]
 pub mod view;
 
 /// The built-in demo scene (PLAYBOT LOD6, CC BY 4.0, see `assets/README.md`).

@@ -1,7 +1,7 @@
 //! Image output: PNG (8 or 16 bit; RGB, RGBA, grey or colour-mapped depth) and OpenEXR
-//! (R, G, B, A, Z for compositing, with the camera in the header), written atomically (a
-//! temporary file in the destination folder, then a rename), so a crash or an error never
-//! leaves a truncated image behind.
+//! (R, G, B, A, Z for compositing, with the camera in the header), written atomically
+//! ([`crate::fsutil`]: a temporary file in the destination folder, then a rename), so a
+//! crash or an error never leaves a truncated image behind.
 //!
 //! A frame's colour holds the background term `T * background` (the reference's image).
 //! EXR and RGBA PNG files are made for compositing instead: their colour is the frame's
@@ -12,6 +12,7 @@
 
 use crate::camera::Camera;
 use crate::frame::Frame;
+use crate::fsutil::{self, WriteError};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -93,47 +94,24 @@ pub fn to_u16(v: f32) -> u16 {
     (v * 65535.0 + 0.5).clamp(0.0, 65535.0) as u16
 }
 
-/// Runs `write` against a temporary file beside `path`, then renames it into place.
-/// The temporary file is removed on failure. With `overwrite == false` an existing
-/// `path` is an error and is left untouched.
+impl From<WriteError> for OutputError {
+    fn from(e: WriteError) -> OutputError {
+        match e {
+            WriteError::Io { path, source } => OutputError::Io { path, source },
+            WriteError::Exists(path) => OutputError::Exists(path),
+        }
+    }
+}
+
+/// Runs `write` against a temporary file beside `path`, then renames it into place
+/// ([`fsutil::write_atomically`]). The temporary file is removed on failure. With
+/// `overwrite == false` an existing `path` is an error and is left untouched.
 pub fn write_atomically(
     path: &Path,
     overwrite: bool,
     write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> Result<(), OutputError>,
 ) -> Result<(), OutputError> {
-    if !overwrite && path.exists() {
-        return Err(OutputError::Exists(path.to_path_buf()));
-    }
-    let io = |source| OutputError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let result = (|| {
-        let file = std::fs::File::create(&tmp).map_err(io)?;
-        let mut writer = std::io::BufWriter::new(file);
-        write(&mut writer)?;
-        writer.flush().map_err(io)?;
-        let file = writer.into_inner().map_err(|e| io(e.into_error()))?;
-        file.sync_all().map_err(io)?;
-        drop(file);
-        if !overwrite && path.exists() {
-            return Err(OutputError::Exists(path.to_path_buf()));
-        }
-        std::fs::rename(&tmp, path).map_err(io)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    fsutil::write_atomically(path, overwrite, write)
 }
 
 /// Writes `bytes` to `path` atomically (see [`write_atomically`]).
@@ -142,12 +120,7 @@ pub fn write_bytes_atomically(
     overwrite: bool,
     bytes: &[u8],
 ) -> Result<(), OutputError> {
-    write_atomically(path, overwrite, |w| {
-        w.write_all(bytes).map_err(|source| OutputError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
-    })
+    Ok(fsutil::write_bytes_atomically(path, overwrite, bytes)?)
 }
 
 /// Encodes the colour plane as PNG.
@@ -281,7 +254,7 @@ pub fn exr_world_to_ndc(cam: &Camera) -> [f32; 16] {
         cam.cx as f64 / w,
         cam.cy as f64 / h,
     );
-    let near = crate::cpu::NEAR_PLANE as f64;
+    let near = crate::model::NEAR_PLANE as f64;
     // Column-vector rows of the projection: [x, y, z, w] = P * (p, 1).
     let depth = (r.row(2), t.z);
     let rows = [

@@ -10,6 +10,7 @@
 
 use crate::camera::Camera;
 use crate::frame::Frame;
+use crate::fsutil;
 use crate::output::{self, FileSpec, OutputOptions};
 use std::collections::{HashSet, VecDeque};
 use std::io::IsTerminal;
@@ -445,8 +446,8 @@ pub fn plan(
     })
 }
 
-/// Removes `.<name>.<pid>.tmp` files (see [`output::write_atomically`]) of planned outputs
-/// whose writer process is gone.
+/// Removes the temporary files of [`output::write_atomically`] (see
+/// [`fsutil::temporary_owner`]) of planned outputs whose writer process is gone.
 fn remove_stale_temporaries(dirs: &HashSet<PathBuf>, planned: &HashSet<PathBuf>) -> usize {
     let names: HashSet<String> = planned
         .iter()
@@ -459,13 +460,7 @@ fn remove_stale_temporaries(dirs: &HashSet<PathBuf>, planned: &HashSet<PathBuf>)
         };
         for e in entries.flatten() {
             let file = e.file_name().to_string_lossy().into_owned();
-            let Some(rest) = file.strip_prefix('.').and_then(|r| r.strip_suffix(".tmp")) else {
-                continue;
-            };
-            let Some((name, pid)) = rest.rsplit_once('.') else {
-                continue;
-            };
-            let Ok(pid) = pid.parse::<u32>() else {
+            let Some((name, pid)) = fsutil::temporary_owner(&file) else {
                 continue;
             };
             let alive = pid == std::process::id() || process_running(pid);
@@ -497,7 +492,7 @@ fn process_running(pid: u32) -> bool {
 /// How progress is shown.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ProgressStyle {
-    /// A bar on a terminal, plain lines otherwise.
+    /// A bar on a terminal (with the `cli` feature), plain lines otherwise.
     #[default]
     Auto,
     /// Plain lines (about every 10 % or 10 s).
@@ -581,23 +576,55 @@ struct Progress {
     start: Instant,
     last_line: Instant,
     last_decile: usize,
-    bar: Option<indicatif::ProgressBar>,
+    bar: Option<Bar>,
     lines: bool,
+}
+
+/// The terminal progress bar (with the `cli` feature).
+#[cfg(feature = "cli")]
+type Bar = indicatif::ProgressBar;
+
+/// Without the `cli` feature there is no terminal progress bar: [`ProgressStyle::Auto`]
+/// prints lines.
+#[cfg(not(feature = "cli"))]
+enum Bar {}
+
+#[cfg(not(feature = "cli"))]
+impl Bar {
+    fn set_position(&self, _: u64) {
+        match *self {}
+    }
+    fn finish_and_clear(&self) {
+        match *self {}
+    }
+}
+
+/// A progress bar of `total` frames on the terminal, where the `cli` feature has one.
+fn terminal_bar(total: usize) -> Option<Bar> {
+    #[cfg(feature = "cli")]
+    {
+        let bar = indicatif::ProgressBar::new(total as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40.cyan/blue} {pos}/{len} frames  {per_sec}  ETA {eta}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        Some(bar)
+    }
+    #[cfg(not(feature = "cli"))]
+    {
+        let _ = total;
+        None
+    }
 }
 
 impl Progress {
     fn new(total: usize, style: ProgressStyle) -> Progress {
         let tty = std::io::stderr().is_terminal();
-        let bar = (style == ProgressStyle::Auto && tty).then(|| {
-            let bar = indicatif::ProgressBar::new(total as u64);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{bar:40.cyan/blue} {pos}/{len} frames  {per_sec}  ETA {eta}  {msg}",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            bar
-        });
+        let bar = (style == ProgressStyle::Auto && tty)
+            .then(|| terminal_bar(total))
+            .flatten();
         Progress {
             total,
             done: 0,

@@ -53,6 +53,9 @@ fn py_err(e: anyhow::Error) -> PyErr {
         if let Some(vksplat::output::OutputError::Exists(_)) = cause.downcast_ref() {
             return PyFileExistsError::new_err(sentence);
         }
+        if let Some(vksplat::fsutil::WriteError::Exists(_)) = cause.downcast_ref() {
+            return PyFileExistsError::new_err(sentence);
+        }
         if cause.downcast_ref::<GpuError>().is_some() {
             return PyRuntimeError::new_err(sentence);
         }

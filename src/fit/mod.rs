@@ -14,8 +14,8 @@
 pub mod model;
 pub mod optim;
 
-use crate::cpu::SplatKernel;
 use crate::gen::Rng;
+use crate::model::SplatKernel;
 use crate::scene::{Scene, MAX_FEATURES};
 use model::{CellGrid, LossConfig, Model, Points, FEAT, LOGIT, ROT, SCALE};
 use optim::{Adam, DensityStep};
@@ -752,7 +752,7 @@ pub fn to_scene(outcome: &FitOutcome, kernel: SplatKernel, magnitude_channel: us
         let t = (f[i * k + magnitude_channel] - lo) / span;
         let rgb = crate::output::turbo(t);
         for v in rgb {
-            scene.sh.push((v - 0.5) / crate::cpu::sh::SH_C0);
+            scene.sh.push((v - 0.5) / crate::model::sh::SH_C0);
         }
         scene.features.extend_from_slice(&g[FEAT..]);
     }

@@ -14,7 +14,7 @@
 //! Gaussian per task, each accumulating its own gradient. So every result is the same for
 //! any number of threads.
 
-use crate::cpu::SplatKernel;
+use crate::model::SplatKernel;
 use rayon::prelude::*;
 
 /// `d2` beyond which the Gaussian kernel is taken as 0 (4 sigma).

@@ -4,7 +4,7 @@
 //! `$XDG_CACHE_HOME/vksplat/pipelines`, else `~/.cache/vksplat/pipelines`;
 //! `VKSPLAT_NO_PIPELINE_CACHE=1` turns it off). A file whose header does not name this
 //! device and driver (vendor, device id, cache UUID), or that is damaged, is ignored with a
-//! note and replaced. The cache is written back, atomically (temporary file, then rename),
+//! note and replaced. The cache is written back, atomically ([`crate::fsutil`]),
 //! when the context goes and the driver's data grew. Whether it saves time depends on the
 //! driver: Mesa's lavapipe keeps its own disk cache of compiled shaders and returns only a
 //! header here (BENCHMARKS.md, "Start-up").
@@ -88,15 +88,9 @@ pub fn store(dir: &Path, identity: &CacheIdentity, data: &[u8]) {
     if identity.check(data).is_err() || std::fs::create_dir_all(dir).is_err() {
         return;
     }
-    let path = identity.file(dir);
-    // Unique per process and call, so concurrent writers never share a temporary file.
-    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = dir.join(format!(".pipelines.{}.{n}.tmp", std::process::id()));
-    if std::fs::write(&tmp, data).is_ok() && std::fs::rename(&tmp, &path).is_ok() {
-        return;
-    }
-    let _ = std::fs::remove_file(&tmp);
+    // The temporary file is unique per process and call, so concurrent writers never
+    // share one.
+    let _ = crate::fsutil::write_bytes_atomically(&identity.file(dir), true, data);
 }
 
 #[cfg(test)]

@@ -1,9 +1,9 @@
 //! Blend stage (`glsl/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
-use crate::cpu::SplatKernel;
 use crate::gpu::shader::{BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
+use crate::model::SplatKernel;
 use ash::vk;
 
 /// Which blend kernel to build. Both composite with the same per-pixel arithmetic.

@@ -58,9 +58,9 @@ use upload::FeatureJob;
 pub use upload::{sh_texel_stride, GpuFeatures, GpuScene};
 
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
 use crate::frame::Frame;
 use crate::gpu::{GpuContext, GpuError, GpuResult};
+use crate::model::RenderOptions;
 
 /// What a frame reads back to the host after it is rendered.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

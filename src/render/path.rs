@@ -6,8 +6,8 @@
 use super::{shade::GpuShader, FrameStats, GpuFeatures, GpuRenderer, GpuScene, Readback};
 use super::{StageTimings, Ticket, MAX_FRAMES_IN_FLIGHT};
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
 use crate::frame::Frame;
+use crate::model::RenderOptions;
 use crate::sequence::FrameSource;
 use std::collections::VecDeque;
 

@@ -12,11 +12,11 @@ use super::{
     GpuScene, Pass, Readback, Stage, Ticket,
 };
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::SortJob;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
+use crate::model::RenderOptions;
 use crate::render::shade::GpuShader;
 use ash::vk;
 

@@ -3,8 +3,8 @@
 
 use super::types::{Counters, Splat};
 use crate::camera::Camera;
-use crate::cpu::RenderOptions;
 use crate::gpu::{GpuBuffer, GpuError, GpuResult, MemoryKind};
+use crate::model::RenderOptions;
 use ash::vk;
 
 use super::{keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};

@@ -28,13 +28,11 @@ pub mod transform;
 pub mod write;
 
 pub use detect::{load_with_format, parse_bytes, SceneFormat};
+// The activated scene belongs to the splat model the renderers share; re-exported here,
+// where it used to live.
+pub use crate::model::{sh_coeffs_for_degree, ActivatedScene};
 
 use std::path::{Path, PathBuf};
-
-/// Number of SH coefficients per colour channel for a degree (0..=3).
-pub const fn sh_coeffs_for_degree(degree: u32) -> usize {
-    ((degree + 1) * (degree + 1)) as usize
-}
 
 /// A set of 3D Gaussians in the trainer's (pre-activation) parameterisation.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -53,13 +51,13 @@ pub struct Scene {
     pub sh: Vec<f32>,
     /// The file records that the scene was trained with antialiasing (the SPZ header's
     /// antialiased flag, SOG's `antialias`): it should be rendered with the opacity
-    /// compensation of [`crate::cpu::RenderOptions::antialiased`]. INRIA PLY and `.splat`
+    /// compensation of [`crate::model::RenderOptions::antialiased`]. INRIA PLY and `.splat`
     /// cannot record it.
     pub antialiased: bool,
-    /// The alpha falloff the scene is made for ([`crate::cpu::SplatKernel`]), as the file
+    /// The alpha falloff the scene is made for ([`crate::model::SplatKernel`]), as the file
     /// records it (INRIA PLY: a `comment vksplat kernel power` header line); Gaussian when
     /// it records none. `render` uses it unless `--kernel` says otherwise.
-    pub kernel: crate::cpu::SplatKernel,
+    pub kernel: crate::model::SplatKernel,
     /// Feature channels per Gaussian (0 without features, else 1..=[`MAX_FEATURES`]).
     pub feature_count: usize,
     /// `feature_count` floats per Gaussian, Gaussian-major: channel `k` of Gaussian `i` is
@@ -70,55 +68,6 @@ pub struct Scene {
 
 /// Most feature channels a Gaussian may carry.
 pub const MAX_FEATURES: usize = 64;
-
-/// Gaussians after the reference activations, ready to render or upload.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ActivatedScene {
-    /// SH degree, 0..=3.
-    pub sh_degree: u32,
-    /// World-space centres.
-    pub positions: Vec<[f32; 3]>,
-    /// Axis scales, `exp(log_scale)`.
-    pub scales: Vec<[f32; 3]>,
-    /// Normalised rotation quaternions `(w, x, y, z)`.
-    pub rotations: Vec<[f32; 4]>,
-    /// Opacities, `sigmoid(logit)`.
-    pub opacities: Vec<f32>,
-    /// SH coefficients, same layout as [`Scene::sh`].
-    pub sh: Vec<f32>,
-    /// Feature channels per Gaussian, as [`Scene::feature_count`].
-    pub feature_count: usize,
-    /// Features, same layout as [`Scene::features`].
-    pub features: Vec<f32>,
-}
-
-impl ActivatedScene {
-    /// Number of Gaussians.
-    pub fn len(&self) -> usize {
-        self.positions.len()
-    }
-    /// True when the scene holds no Gaussians.
-    pub fn is_empty(&self) -> bool {
-        self.positions.is_empty()
-    }
-    /// Floats of SH per Gaussian.
-    pub fn sh_stride(&self) -> usize {
-        sh_coeffs_for_degree(self.sh_degree) * 3
-    }
-
-    /// The scene as a compact upload (`--compact`) holds it, back in f32: axis scales,
-    /// rotations and SH coefficients rounded to the nearest fp16; centres, opacities and
-    /// features unchanged. The CPU reference renders this to check compact GPU frames.
-    pub fn compact_rounded(&self) -> ActivatedScene {
-        let round = |x: f32| half::f16::from_f32(x).to_f32();
-        ActivatedScene {
-            scales: self.scales.iter().map(|s| s.map(round)).collect(),
-            rotations: self.rotations.iter().map(|q| q.map(round)).collect(),
-            sh: self.sh.iter().map(|&x| round(x)).collect(),
-            ..self.clone()
-        }
-    }
-}
 
 /// The logistic sigmoid in f32, as PyTorch evaluates it for the reference.
 pub fn sigmoid(x: f32) -> f32 {
@@ -396,12 +345,12 @@ pub(crate) fn logit_clamped(p: f32) -> f32 {
 
 /// The SH DC coefficient whose colour is `rgb` (0..1): `(rgb - 0.5) / C0`.
 pub(crate) fn dc_from_color(rgb: f32) -> f32 {
-    (rgb - 0.5) / crate::cpu::sh::SH_C0
+    (rgb - 0.5) / crate::model::sh::SH_C0
 }
 
 /// The colour (0..1, unclamped) of an SH DC coefficient: `0.5 + C0 * dc`.
 pub(crate) fn color_from_dc(dc: f32) -> f32 {
-    0.5 + crate::cpu::sh::SH_C0 * dc
+    0.5 + crate::model::sh::SH_C0 * dc
 }
 
 /// Checks a decoded scene the way the PLY loader checks its values: every value finite and

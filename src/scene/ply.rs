@@ -9,7 +9,7 @@
 //! `rot_*`.
 
 use super::{sh_coeffs_for_degree, Scene, SceneError, MAX_FEATURES};
-use crate::cpu::SplatKernel;
+use crate::model::SplatKernel;
 use std::path::Path;
 
 #[derive(Clone, Copy, Debug, PartialEq)]

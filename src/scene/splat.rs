@@ -126,7 +126,7 @@ mod tests {
         assert_eq!(s.positions, vec![[1.0, -2.0, 3.0]]);
         assert!((s.log_scales[0][0] - 0.5f32.ln()).abs() < 1e-7);
         assert_eq!(s.rotations[0], [127.0 / 128.0, 0.0, 0.0, 0.0]);
-        let c0 = crate::cpu::sh::SH_C0;
+        let c0 = crate::model::sh::SH_C0;
         assert!((s.sh[0] - 0.5 / c0).abs() < 1e-5);
         assert!((s.sh[2] + 0.5 / c0).abs() < 1e-5);
         assert!((sigmoid(s.opacity_logits[0]) - 191.0 / 255.0).abs() < 1e-6);

@@ -556,14 +556,16 @@ mod tests {
 
     #[test]
     fn smallest_three_round_trips_within_its_step() {
-        let mut rng = crate::gen::Rng(7);
+        // xorshift64, uniform in [-1, 1): the scene module does not lean on `gen`.
+        let mut state = 7u64;
+        let mut uniform = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+        };
         for _ in 0..1000 {
-            let q = super::super::normalize_quat([
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            ]);
+            let q = super::super::normalize_quat([uniform(), uniform(), uniform(), uniform()]);
             let back = unpack_smallest_three(pack_smallest_three(q));
             // Same rotation up to sign; each kept component within half a 9-bit step.
             let dot: f32 = q.iter().zip(&back).map(|(a, b)| a * b).sum();
@@ -591,9 +593,9 @@ mod tests {
         for k in 1..16 {
             let mut sh = vec![0f32; 48];
             sh[3 * k] = 0.1;
-            let a = crate::cpu::sh::eval_sh(3, &sh, d)[0];
+            let a = crate::model::sh::eval_sh(3, &sh, d)[0];
             sh[3 * k] = 0.1 * RUB_SH_SIGN[k - 1];
-            let b = crate::cpu::sh::eval_sh(3, &sh, f)[0];
+            let b = crate::model::sh::eval_sh(3, &sh, f)[0];
             assert!((a - b).abs() < 1e-5, "coefficient {k}: {a} vs {b}");
         }
     }

@@ -14,13 +14,13 @@
 //!   direction). Every band of real SH is mapped onto itself by any orthogonal `Q`, proper
 //!   or not, so each band's coefficients are multiplied by one small matrix
 //!   ([`SceneTransform::sh_band_matrix`]), fitted in f64 to the exact basis the renderers
-//!   evaluate (`crate::cpu::sh::eval_sh`, its order, signs and constants).
+//!   evaluate (`crate::model::sh::eval_sh`, its order, signs and constants).
 //!
 //! Composition ([`SceneTransform::then`]) is closed: flips, rotations, scales and
 //! translations in any order collapse into one `s Q x + t`.
 
 use super::Scene;
-use crate::cpu::sh::{SH_C1, SH_C2, SH_C3};
+use crate::model::sh::{SH_C1, SH_C2, SH_C3};
 use glam::{DMat3, DQuat, DVec3};
 
 /// Entries of `Q` and of the SH band matrices this close to -1, 0 or 1 are set to that
@@ -371,7 +371,7 @@ fn sample_directions() -> impl Iterator<Item = DVec3> {
 }
 
 /// The basis functions of SH band `band` at unit direction `d`, in f64, in the order, with
-/// the signs and with the (f32) constants of `crate::cpu::sh::eval_sh`, written into
+/// the signs and with the (f32) constants of `crate::model::sh::eval_sh`, written into
 /// `out[..2 * band + 1]`.
 fn sh_band_basis(band: u32, d: DVec3, out: &mut [f64; 7]) {
     let (x, y, z) = (d.x, d.y, d.z);

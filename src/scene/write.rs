@@ -4,7 +4,7 @@
 use super::filter::SceneFilter;
 use super::transform::SceneTransform;
 use super::{ply, splat, spz, Scene, SceneError, SceneFormat};
-use crate::output::OutputError;
+use crate::fsutil::{self, WriteError};
 use std::path::{Path, PathBuf};
 
 /// A format [`to_bytes`] can write.
@@ -75,7 +75,7 @@ pub enum ConvertError {
     Load(#[from] SceneError),
     /// The output could not be written.
     #[error(transparent)]
-    Write(#[from] OutputError),
+    Write(#[from] WriteError),
     /// The output's extension names no writer.
     #[error("{0}: unknown output format; use a .ply, .splat or .spz file name")]
     UnknownFormat(PathBuf),
@@ -131,7 +131,7 @@ pub struct ConvertOptions {
     pub overwrite: bool,
     /// Record this alpha falloff in the output instead of the input's (`Scene::kernel`;
     /// only PLY can record one).
-    pub kernel: Option<crate::cpu::SplatKernel>,
+    pub kernel: Option<crate::model::SplatKernel>,
     /// Feature channels to attach to the input first: an N x K NumPy array
     /// ([`super::features::attach_npy`]); only PLY keeps them.
     pub features: Option<std::path::PathBuf>,
@@ -159,7 +159,7 @@ pub struct ConvertReport {
     pub antialiased_flag_lost: bool,
     /// The input records a non-Gaussian kernel (`cpu::SplatKernel`) that the output format
     /// cannot record (only PLY can).
-    pub kernel_lost: Option<crate::cpu::SplatKernel>,
+    pub kernel_lost: Option<crate::model::SplatKernel>,
     /// Feature channels per Gaussian that the output format cannot hold and dropped (only
     /// PLY keeps `feat_*`); 0 when none were lost.
     pub features_dropped: usize,
@@ -183,7 +183,7 @@ pub fn convert(
         });
     }
     if !options.overwrite && output.exists() {
-        return Err(OutputError::Exists(output.to_path_buf()).into());
+        return Err(WriteError::Exists(output.to_path_buf()).into());
     }
     let (mut scene, input_format) = super::load_with_format(input)?;
     if let Some(kernel) = options.kernel {
@@ -206,7 +206,7 @@ pub fn convert(
         format: output_format,
         message,
     })?;
-    crate::output::write_bytes_atomically(output, options.overwrite, &bytes)?;
+    fsutil::write_bytes_atomically(output, options.overwrite, &bytes)?;
     Ok(ConvertReport {
         input_format,
         output_format,
@@ -217,7 +217,7 @@ pub fn convert(
             .then_some(filtered.sh_degree),
         bytes: bytes.len(),
         antialiased_flag_lost: scene.antialiased && output_format != OutputFormat::Spz,
-        kernel_lost: (scene.kernel != crate::cpu::SplatKernel::Gaussian
+        kernel_lost: (scene.kernel != crate::model::SplatKernel::Gaussian
             && output_format != OutputFormat::Ply)
             .then_some(scene.kernel),
         features_dropped: if output_format == OutputFormat::Ply {

@@ -5,9 +5,9 @@
 //! packed there) and float planes only where a mode or a screenshot needs them.
 
 use crate::camera::Camera;
-use crate::cpu::{RenderOptions, SplatKernel};
 use crate::frame::Frame;
 use crate::gpu::{ContextOptions, GpuContext};
+use crate::model::{RenderOptions, SplatKernel};
 use crate::output::{depth_colormap, encode_file, plan_files, to_u8, OutputOptions, RenderMode};
 use crate::render::{FrameStats, GpuRenderer, GpuScene, StageTimings};
 use crate::scene::Scene;
