@@ -164,18 +164,7 @@ pub fn prebuilt_variants() -> impl Iterator<Item = &'static str> {
     prebuilt::PREBUILT.iter().map(|(k, _)| *k)
 }
 
-/// What a binding slot holds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum BindingKind {
-    /// `buffer` block (std430).
-    StorageBuffer,
-    /// `image2D` with a format qualifier.
-    StorageImage,
-    /// `samplerBuffer` / `usamplerBuffer` read with `texelFetch`.
-    UniformTexelBuffer,
-    /// `imageBuffer` / `uimageBuffer` with a format qualifier, written with `imageStore`.
-    StorageTexelBuffer,
-}
+pub use super::reflect::BindingKind;
 
 /// What is bound to one binding slot at dispatch time.
 #[derive(Clone, Copy)]

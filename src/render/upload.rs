@@ -3,7 +3,7 @@
 
 use super::types::{GpuGaussian, GpuGaussianCompact};
 use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
-use crate::scene::ActivatedScene;
+use crate::model::ActivatedScene;
 use ash::vk;
 
 use super::{check_binding, features, shade, GpuRenderer};

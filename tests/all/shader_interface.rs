@@ -8,9 +8,11 @@ use crate::common;
 
 use std::mem::{offset_of, size_of};
 use vksplat::cpu::SplatKernel;
-use vksplat::gpu::reflect::{reflect, Interface};
+use vksplat::gpu::reflect::{check, reflect, Interface};
 use vksplat::gpu::scan::ScanPush;
-use vksplat::gpu::shader::{prebuilt_variants, shader_spirv, BindingKind, ComputePipeline};
+use vksplat::gpu::shader::{
+    compile_glsl, prebuilt_variants, shader_spirv, BindingKind, ComputePipeline,
+};
 use vksplat::gpu::sort::{
     SortConfig, SortPassPush, SortSetupPush, DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
 };
@@ -167,4 +169,60 @@ fn record_strides_and_push_constants_match_the_host_structs() {
         ]
         .map(|o| o as u32)
     );
+}
+
+#[test]
+fn reflection_reads_bindings_push_constants_and_strides_and_catches_drift() {
+    use BindingKind::*;
+    let source = "#version 460
+layout(local_size_x = 64) in;
+struct S { vec4 a; vec4 b; float c; };
+layout(push_constant) uniform P { uint n; uint pad; vec4 v; } pc;
+layout(std430, binding = 0) buffer A { S items[]; };
+layout(binding = 1) uniform usamplerBuffer t;
+layout(binding = 2, r32ui) uniform writeonly uimageBuffer o;
+layout(binding = 3, rgba32f) uniform writeonly image2D img;
+void main() {
+uint i = gl_GlobalInvocationID.x;
+items[i].a += vec4(float(texelFetch(t, int(i)).x + pc.n)) + pc.v;
+imageStore(o, int(i), uvec4(uint(items[i].c)));
+imageStore(img, ivec2(i, 0), items[i].b);
+}
+";
+    let words = compile_glsl("reflect_test", source, &[]).expect("compiles");
+    let found = reflect(&words).expect("reflects");
+    assert_eq!(
+        found.bindings,
+        vec![
+            (0, StorageBuffer),
+            (1, UniformTexelBuffer),
+            (2, StorageTexelBuffer),
+            (3, StorageImage)
+        ]
+    );
+    assert_eq!(found.push_offsets, vec![0, 4, 16]);
+    assert_eq!(found.push_size, 32);
+    // std430: 36 bytes rounded up to the 16-byte alignment of the vec4 members.
+    assert_eq!(found.array_strides, vec![(0, 48)]);
+    let host = [
+        StorageBuffer,
+        UniformTexelBuffer,
+        StorageTexelBuffer,
+        StorageImage,
+    ];
+    assert!(check("t", &words, &host, 32).is_ok());
+    // Every kind of drift is caught.
+    let wrong_kind = [
+        StorageBuffer,
+        StorageBuffer,
+        StorageTexelBuffer,
+        StorageImage,
+    ];
+    let e = check("t", &words, &wrong_kind, 32).unwrap_err();
+    assert!(e.contains("binding 1"), "{e}");
+    let e = check("t", &words, &host[..3], 32).unwrap_err();
+    assert!(e.contains("binding 3"), "{e}");
+    let e = check("t", &words, &host, 16).unwrap_err();
+    assert!(e.contains("32 bytes of push constants"), "{e}");
+    assert!(reflect(&words[..3]).is_err());
 }
