@@ -203,11 +203,11 @@ pub struct ActivatedScene {
     pub rotations: Vec<[f32; 4]>,
     /// Opacities, `sigmoid(logit)`.
     pub opacities: Vec<f32>,
-    /// SH coefficients, same layout as [`Scene::sh`].
+    /// SH coefficients, same layout as [`crate::scene::Scene::sh`].
     pub sh: Vec<f32>,
-    /// Feature channels per Gaussian, as [`Scene::feature_count`].
+    /// Feature channels per Gaussian, as [`crate::scene::Scene::feature_count`].
     pub feature_count: usize,
-    /// Features, same layout as [`Scene::features`].
+    /// Features, same layout as [`crate::scene::Scene::features`].
     pub features: Vec<f32>,
 }
 
