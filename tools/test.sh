@@ -21,5 +21,6 @@ rm -rf "$venv"
 python3 -m venv "$venv"
 "$venv/bin/pip" install -q --upgrade pip
 CARGO_TARGET_DIR="$PWD/target/python" "$venv/bin/pip" install -q "./python[notebook,test]"
-cargo build -q --bin vksplat
+# The binary `cargo test` built for the integration tests (same profile: nothing to rebuild).
+cargo build -q --profile test --bin vksplat
 VKSPLAT_BIN="$PWD/target/debug/vksplat" "$venv/bin/pytest" -q python/tests
