@@ -25,20 +25,20 @@
 
 layout(local_size_x = 16 / STRIP, local_size_y = 16) in;
 
-layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = BLEND_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #if !TEXEL_FETCH
-layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
-layout(std430, binding = 2) readonly buffer ValueBuf { uint values[]; };
+layout(std430, binding = BLEND_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = BLEND_VALUES) readonly buffer ValueBuf { uint values[]; };
 #else
 // Texel-buffer views of the same splats (3 rgba32f texels each) and sorted values: on CPU
 // implementations texel fetches compile to straight-line gathers, unlike buffer loads.
-layout(binding = 1) uniform samplerBuffer splat_texels;
-layout(binding = 2) uniform usamplerBuffer value_texels;
+layout(binding = BLEND_SPLATS) uniform samplerBuffer splat_texels;
+layout(binding = BLEND_VALUES) uniform usamplerBuffer value_texels;
 #endif
-layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
-layout(binding = 4, rgba32f) uniform image2D out_color;  // rgb + T * background, alpha = 1 - T
-layout(binding = 5, r32f) uniform image2D out_depth;     // alpha-normalised depth
-layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(std430, binding = BLEND_RANGES) readonly buffer RangeBuf { uvec2 ranges[]; };
+layout(binding = BLEND_COLOR, rgba32f) uniform image2D out_color;  // rgb + T * background, alpha = 1 - T
+layout(binding = BLEND_DEPTH, r32f) uniform image2D out_depth;     // alpha-normalised depth
+layout(std430, binding = BLEND_COUNTERS) buffer CounterBuf { Counters counters; };
 // A frame keyed in depth-ordered chunks (src/render/mod.rs) is blended once per chunk:
 // every chunk but the first resumes each pixel from the state the previous one left in
 // the images, and every chunk but the last leaves that state instead of the final pixel.

@@ -18,31 +18,31 @@
 
 layout(local_size_x = 16, local_size_y = 16) in;
 
-layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = BLEND_FEATURES_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #if !TEXEL_FETCH
-layout(std430, binding = 1) readonly buffer SplatBuf { Splat splats[]; };
-layout(std430, binding = 2) readonly buffer ValueBuf { uint values[]; };
+layout(std430, binding = BLEND_FEATURES_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = BLEND_FEATURES_VALUES) readonly buffer ValueBuf { uint values[]; };
 #else
-layout(binding = 1) uniform samplerBuffer splat_texels;   // 3 rgba32f texels per splat
-layout(binding = 2) uniform usamplerBuffer value_texels;
+layout(binding = BLEND_FEATURES_SPLATS) uniform samplerBuffer splat_texels;   // 3 rgba32f texels per splat
+layout(binding = BLEND_FEATURES_VALUES) uniform usamplerBuffer value_texels;
 #endif
-layout(std430, binding = 3) readonly buffer RangeBuf { uvec2 ranges[]; };
+layout(std430, binding = BLEND_FEATURES_RANGES) readonly buffer RangeBuf { uvec2 ranges[]; };
 // This group's four channels per Gaussian (zero-padded past K).
 #if !TEXEL_FETCH
-layout(std430, binding = 4) readonly buffer FeatureBuf { vec4 features[]; };
+layout(std430, binding = BLEND_FEATURES_FEATURES) readonly buffer FeatureBuf { vec4 features[]; };
 #else
-layout(binding = 4) uniform samplerBuffer feature_texels;
+layout(binding = BLEND_FEATURES_FEATURES) uniform samplerBuffer feature_texels;
 #endif
 // This group's four channels per pixel, row-major.
-layout(std430, binding = 5) buffer OutBuf { vec4 out_features[]; };
-layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(std430, binding = BLEND_FEATURES_OUTPUT) buffer OutBuf { vec4 out_features[]; };
+layout(std430, binding = BLEND_FEATURES_COUNTERS) buffer CounterBuf { Counters counters; };
 // A frame keyed in depth-ordered chunks runs this before each chunk's colour blend: every
 // chunk but the first resumes each pixel's channels from the output and its transmittance
 // and stop from the colour image's between-chunk state (colour = (C, T), T negated once
 // the pixel is done; glsl/blend.comp), which at that point is the state the previous
 // chunk left. Compositing is sequential per pixel, so the channels equal one pass bit for
 // bit. A frame in one piece is resume 0.
-layout(binding = 7, rgba32f) uniform readonly image2D color_state;
+layout(binding = BLEND_FEATURES_COLOR_STATE, rgba32f) uniform readonly image2D color_state;
 layout(push_constant) uniform ChunkFlags { uint resume; uint pad; } chunk;
 
 void main() {

@@ -8,7 +8,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(std430, binding = 0) buffer CountBuf { uint lo; uint hi; uint seed; };
+layout(std430, binding = COUNT64_TEST_COUNT) buffer CountBuf { uint lo; uint hi; uint seed; };
 
 void main() {
     uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;

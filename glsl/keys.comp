@@ -12,10 +12,10 @@
 
 layout(local_size_x = 256) in;
 
-layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = KEYS_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 // The splats as 3 rgba32f texels each: texel buffers address more than one storage
 // binding on some devices (lavapipe: 128 M texels against 128 MiB).
-layout(binding = 1) uniform samplerBuffer splat_texels;
+layout(binding = KEYS_SPLAT_TEXELS) uniform samplerBuffer splat_texels;
 // Keys are the bin ids: pairs are written in depth order, so the key needs no depth bits.
 #ifndef KEYS_TEXEL_IO
 #define KEYS_TEXEL_IO 0
@@ -24,12 +24,12 @@ layout(binding = 1) uniform samplerBuffer splat_texels;
 // CPU devices: the per-Gaussian arrays through texel views, the pairs written with
 // imageStore (straight per-lane code on llvmpipe, where storage-buffer accesses are a
 // guarded loop per component; see benches/tuning.rs).
-layout(binding = 2) uniform usamplerBuffer rects_tex;
-layout(binding = 3) uniform usamplerBuffer offsets_tex;
-layout(binding = 4, r32ui) uniform writeonly uimageBuffer keys_img;
-layout(binding = 5, r32ui) uniform writeonly uimageBuffer values_img;
-layout(binding = 7) uniform usamplerBuffer order_tex;
-layout(binding = 8) uniform usamplerBuffer masks_tex;
+layout(binding = KEYS_RECTS) uniform usamplerBuffer rects_tex;
+layout(binding = KEYS_OFFSETS) uniform usamplerBuffer offsets_tex;
+layout(binding = KEYS_KEYS, r32ui) uniform writeonly uimageBuffer keys_img;
+layout(binding = KEYS_VALUES, r32ui) uniform writeonly uimageBuffer values_img;
+layout(binding = KEYS_DEPTH_ORDER) uniform usamplerBuffer order_tex;
+layout(binding = KEYS_BIN_MASKS) uniform usamplerBuffer masks_tex;
 #define RECT(i) texelFetch(rects_tex, int(i)).xy
 #define OFFSET(k) texelFetch(offsets_tex, int(k)).x
 #define ORDER(k) texelFetch(order_tex, int(k)).x
@@ -38,12 +38,12 @@ layout(binding = 8) uniform usamplerBuffer masks_tex;
     imageStore(keys_img, int(off), uvec4(key)); \
     imageStore(values_img, int(off), uvec4(value))
 #else
-layout(std430, binding = 2) readonly buffer RectBuf { uvec2 rects[]; };
-layout(std430, binding = 3) readonly buffer OffsetBuf { uint offsets[]; };
-layout(std430, binding = 4) writeonly buffer KeyBuf { uint keys[]; };
-layout(std430, binding = 5) writeonly buffer ValueBuf { uint values[]; };
-layout(std430, binding = 7) readonly buffer OrderBuf { uint depth_order[]; };
-layout(std430, binding = 8) readonly buffer BinMaskBuf { uint bin_masks[]; };
+layout(std430, binding = KEYS_RECTS) readonly buffer RectBuf { uvec2 rects[]; };
+layout(std430, binding = KEYS_OFFSETS) readonly buffer OffsetBuf { uint offsets[]; };
+layout(std430, binding = KEYS_KEYS) writeonly buffer KeyBuf { uint keys[]; };
+layout(std430, binding = KEYS_VALUES) writeonly buffer ValueBuf { uint values[]; };
+layout(std430, binding = KEYS_DEPTH_ORDER) readonly buffer OrderBuf { uint depth_order[]; };
+layout(std430, binding = KEYS_BIN_MASKS) readonly buffer BinMaskBuf { uint bin_masks[]; };
 #define RECT(i) rects[i]
 #define OFFSET(k) offsets[k]
 #define ORDER(k) depth_order[k]
@@ -52,7 +52,7 @@ layout(std430, binding = 8) readonly buffer BinMaskBuf { uint bin_masks[]; };
     keys[off] = key; \
     values[off] = value
 #endif
-layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(std430, binding = KEYS_COUNTERS) buffer CounterBuf { Counters counters; };
 layout(push_constant) uniform Chunk { uint first; uint end; uint base; } chunk;
 
 #define RANGES_WORKGROUP 256u

@@ -9,10 +9,10 @@
 
 layout(local_size_x = 256) in;
 
-layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
-layout(std430, binding = 1) readonly buffer OrderBuf { uint depth_order[]; };
-layout(std430, binding = 2) readonly buffer TouchedBuf { uint touched_by_index[]; };
-layout(std430, binding = 3) writeonly buffer TouchedInOrderBuf { uint touched_in_order[]; };
+layout(std430, binding = ORDER_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = ORDER_DEPTH_ORDER) readonly buffer OrderBuf { uint depth_order[]; };
+layout(std430, binding = ORDER_TOUCHED) readonly buffer TouchedBuf { uint touched_by_index[]; };
+layout(std430, binding = ORDER_TOUCHED_IN_ORDER) writeonly buffer TouchedInOrderBuf { uint touched_in_order[]; };
 
 void main() {
     uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;

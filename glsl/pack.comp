@@ -7,8 +7,8 @@
 
 layout(local_size_x = 16, local_size_y = 16) in;
 
-layout(binding = 0, rgba32f) uniform readonly image2D color;  // rgb + T * background
-layout(std430, binding = 1) writeonly buffer PackedBuf { uint packed[]; };
+layout(binding = PACK_COLOR, rgba32f) uniform readonly image2D color;  // rgb + T * background
+layout(std430, binding = PACK_PACKED) writeonly buffer PackedBuf { uint packed[]; };
 
 layout(push_constant) uniform Push { uint width; uint height; };
 

@@ -9,7 +9,7 @@
 
 layout(local_size_x = 256) in;
 
-layout(std430, binding = 0) readonly buffer ParamsBuf { FrameParams params; };
+layout(std430, binding = PREPROCESS_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #ifndef COMPACT_GAUSSIANS
 #define COMPACT_GAUSSIANS 0
 #endif
@@ -36,7 +36,7 @@ Gaussian unpack_compact(GaussianCompact c) {
 // imageStore, all by the global index (the views cover whole buffers, so windows only
 // bound the dispatch): llvmpipe turns these into straight per-lane code, storage-buffer
 // accesses into a guarded loop per component (benches/tuning.rs).
-layout(binding = 1) uniform usamplerBuffer gaussian_texels;
+layout(binding = PREPROCESS_GAUSSIANS) uniform usamplerBuffer gaussian_texels;
 #if COMPACT_GAUSSIANS
 Gaussian load_gaussian(uint w, uint i) {
     GaussianCompact c;
@@ -54,29 +54,29 @@ Gaussian load_gaussian(uint w, uint i) {
 }
 #endif
 #elif COMPACT_GAUSSIANS
-layout(std430, binding = 1) readonly buffer GaussianBuf { GaussianCompact gaussians[]; };
+layout(std430, binding = PREPROCESS_GAUSSIANS) readonly buffer GaussianBuf { GaussianCompact gaussians[]; };
 Gaussian load_gaussian(uint w, uint i) { return unpack_compact(gaussians[w]); }
 #else
-layout(std430, binding = 1) readonly buffer GaussianBuf { Gaussian gaussians[]; };
+layout(std430, binding = PREPROCESS_GAUSSIANS) readonly buffer GaussianBuf { Gaussian gaussians[]; };
 Gaussian load_gaussian(uint w, uint i) { return gaussians[w]; }
 #endif
 // SH coefficients, coefficient-major with the colour channel innermost, each Gaussian's
 // floats padded to whole RGBA32F texels (sh_texel_stride in src/render/mod.rs). Read as a
 // texel buffer, which addresses far more than one storage binding on some devices.
-layout(binding = 2) uniform samplerBuffer sh_texels;
-layout(std430, binding = 6) buffer CounterBuf { Counters counters; };
+layout(binding = PREPROCESS_SH) uniform samplerBuffer sh_texels;
+layout(std430, binding = PREPROCESS_COUNTERS) buffer CounterBuf { Counters counters; };
 // Outputs, per Gaussian: the splat, its tile rectangle, its depth key (depth bits, or ~0
 // when culled) and index for the depth sort, which bins of a small rectangle receive it
 // (see BIN_MASK_BINS in splat_common) and its tiles touched (gathered into depth order by
 // order.comp). Bin masks and tiles touched are indexed globally (4 bytes each: one binding
 // holds any scene the SH texels allow), the rest by the index in the window.
 #if PREPROCESS_TEXEL_IO
-layout(binding = 3, rgba32f) uniform writeonly imageBuffer splats_img;
-layout(binding = 4, rg32ui) uniform writeonly uimageBuffer rects_img;
-layout(binding = 5, r32ui) uniform writeonly uimageBuffer depth_keys_img;
-layout(binding = 7, r32ui) uniform writeonly uimageBuffer depth_values_img;
-layout(binding = 8, r32ui) uniform writeonly uimageBuffer bin_masks_img;
-layout(binding = 9, r32ui) uniform writeonly uimageBuffer touched_img;
+layout(binding = PREPROCESS_SPLATS, rgba32f) uniform writeonly imageBuffer splats_img;
+layout(binding = PREPROCESS_RECTS, rg32ui) uniform writeonly uimageBuffer rects_img;
+layout(binding = PREPROCESS_DEPTH_KEYS, r32ui) uniform writeonly uimageBuffer depth_keys_img;
+layout(binding = PREPROCESS_DEPTH_VALUES, r32ui) uniform writeonly uimageBuffer depth_values_img;
+layout(binding = PREPROCESS_BIN_MASKS, r32ui) uniform writeonly uimageBuffer bin_masks_img;
+layout(binding = PREPROCESS_TOUCHED, r32ui) uniform writeonly uimageBuffer touched_img;
 void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mask, uint touched) {
     int t = int(i);
     imageStore(splats_img, 3 * t, s.mean_opacity_bound);
@@ -89,12 +89,12 @@ void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mas
     imageStore(touched_img, t, uvec4(touched));
 }
 #else
-layout(std430, binding = 3) writeonly buffer SplatBuf { Splat splats[]; };
-layout(std430, binding = 4) writeonly buffer RectBuf { uvec2 rects[]; };
-layout(std430, binding = 5) writeonly buffer DepthKeyBuf { uint depth_keys[]; };
-layout(std430, binding = 7) writeonly buffer DepthValueBuf { uint depth_values[]; };
-layout(std430, binding = 8) writeonly buffer BinMaskBuf { uint bin_masks[]; };
-layout(std430, binding = 9) writeonly buffer TouchedBuf { uint touched_by_index[]; };
+layout(std430, binding = PREPROCESS_SPLATS) writeonly buffer SplatBuf { Splat splats[]; };
+layout(std430, binding = PREPROCESS_RECTS) writeonly buffer RectBuf { uvec2 rects[]; };
+layout(std430, binding = PREPROCESS_DEPTH_KEYS) writeonly buffer DepthKeyBuf { uint depth_keys[]; };
+layout(std430, binding = PREPROCESS_DEPTH_VALUES) writeonly buffer DepthValueBuf { uint depth_values[]; };
+layout(std430, binding = PREPROCESS_BIN_MASKS) writeonly buffer BinMaskBuf { uint bin_masks[]; };
+layout(std430, binding = PREPROCESS_TOUCHED) writeonly buffer TouchedBuf { uint touched_by_index[]; };
 void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mask, uint touched) {
     splats[w] = s;
     rects[w] = rect;

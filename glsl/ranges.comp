@@ -8,14 +8,14 @@ layout(local_size_x = 256) in;
 
 #if RANGES_TEXEL_IO
 // CPU devices: the keys through a texel view (straight per-lane loads on llvmpipe).
-layout(binding = 0) uniform usamplerBuffer keys_tex;
+layout(binding = RANGES_KEYS) uniform usamplerBuffer keys_tex;
 #define KEY(i) texelFetch(keys_tex, int(i)).x
 #else
-layout(std430, binding = 0) readonly buffer KeyBuf { uint keys[]; };
+layout(std430, binding = RANGES_KEYS) readonly buffer KeyBuf { uint keys[]; };
 #define KEY(i) keys[i]
 #endif
-layout(std430, binding = 1) writeonly buffer RangeBuf { uvec2 ranges[]; };
-layout(std430, binding = 2) readonly buffer CounterBuf { Counters counters; };
+layout(std430, binding = RANGES_RANGES) writeonly buffer RangeBuf { uvec2 ranges[]; };
+layout(std430, binding = RANGES_COUNTERS) readonly buffer CounterBuf { Counters counters; };
 
 void main() {
     uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;

@@ -11,9 +11,9 @@ layout(push_constant) uniform Push {
     uint pad;
 } pc;
 
-layout(std430, binding = 0) buffer Input { uint data_in[]; };
-layout(std430, binding = 1) readonly buffer BlockOffsets { uint block_offsets[]; };
-layout(std430, binding = 2) buffer Output { uint data_out[]; };
+layout(std430, binding = SCAN_ADD_DATA_IN) buffer Input { uint data_in[]; };
+layout(std430, binding = SCAN_ADD_BLOCK_OFFSETS) readonly buffer BlockOffsets { uint block_offsets[]; };
+layout(std430, binding = SCAN_ADD_DATA_OUT) buffer Output { uint data_out[]; };
 
 void main() {
     uint block = linear_group_id();

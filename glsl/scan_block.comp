@@ -11,9 +11,9 @@ layout(push_constant) uniform Push {
     uint pad;
 } pc;
 
-layout(std430, binding = 0) buffer Input { uint data_in[]; };
-layout(std430, binding = 1) buffer Output { uint data_out[]; };
-layout(std430, binding = 2) buffer Total { uint totals[]; };
+layout(std430, binding = SCAN_BLOCK_DATA_IN) buffer Input { uint data_in[]; };
+layout(std430, binding = SCAN_BLOCK_DATA_OUT) buffer Output { uint data_out[]; };
+layout(std430, binding = SCAN_BLOCK_TOTALS) buffer Total { uint totals[]; };
 
 void main() {
     uint begin = gl_LocalInvocationID.x * SCAN_ITEMS;

@@ -10,8 +10,8 @@ layout(push_constant) uniform Push {
     uint pad;
 } pc;
 
-layout(std430, binding = 0) readonly buffer Input { uint data_in[]; };
-layout(std430, binding = 1) writeonly buffer BlockSums { uint block_sums[]; };
+layout(std430, binding = SCAN_REDUCE_DATA_IN) readonly buffer Input { uint data_in[]; };
+layout(std430, binding = SCAN_REDUCE_BLOCK_SUMS) writeonly buffer BlockSums { uint block_sums[]; };
 
 void main() {
     uint block = linear_group_id();

@@ -25,10 +25,10 @@ layout(push_constant) uniform ShadeParams {
 // 4 * MAX_LAYERS header words (inputs, outputs, activation, float offset), then the
 // weights and biases as float bits.
 // Read through a texel view (R32_UINT): see src/render/shade.rs.
-layout(binding = 0) uniform usamplerBuffer words_view;
+layout(binding = SHADE_WORDS) uniform usamplerBuffer words_view;
 // Feature planes: group g's vec4 of pixel i at g * plane stride + i.
-layout(std430, binding = 1) readonly buffer FeatureBuf { vec4 features[]; };
-layout(binding = 2, rgba32f) uniform image2D color;  // rgb + T * background, alpha = 1 - T
+layout(std430, binding = SHADE_FEATURES) readonly buffer FeatureBuf { vec4 features[]; };
+layout(binding = SHADE_COLOR, rgba32f) uniform image2D color;  // rgb + T * background, alpha = 1 - T
 
 float weight(uint i) {
     return uintBitsToFloat(texelFetch(words_view, int(4u * MAX_LAYERS + i)).x);

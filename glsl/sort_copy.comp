@@ -5,20 +5,20 @@
 #include "common.glsl"
 #include "sort_spec.glsl"
 
-layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
+layout(std430, binding = SORT_COPY_META) readonly buffer Meta { uint meta[]; };
 #if SORT_TEXEL_IO
-layout(binding = 1) uniform usamplerBuffer keys_in;
-layout(binding = 2) uniform usamplerBuffer values_in;
-layout(binding = 3, r32ui) uniform writeonly uimageBuffer keys_out;
-layout(binding = 4, r32ui) uniform writeonly uimageBuffer values_out;
+layout(binding = SORT_COPY_KEYS_IN) uniform usamplerBuffer keys_in;
+layout(binding = SORT_COPY_VALUES_IN) uniform usamplerBuffer values_in;
+layout(binding = SORT_COPY_KEYS_OUT, r32ui) uniform writeonly uimageBuffer keys_out;
+layout(binding = SORT_COPY_VALUES_OUT, r32ui) uniform writeonly uimageBuffer values_out;
 #define COPY(i) \
     imageStore(keys_out, int(i), texelFetch(keys_in, int(i))); \
     imageStore(values_out, int(i), texelFetch(values_in, int(i)))
 #else
-layout(std430, binding = 1) readonly buffer KeysIn { SORT_KEY keys_in[]; };
-layout(std430, binding = 2) readonly buffer ValuesIn { uint values_in[]; };
-layout(std430, binding = 3) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
-layout(std430, binding = 4) writeonly buffer ValuesOut { uint values_out[]; };
+layout(std430, binding = SORT_COPY_KEYS_IN) readonly buffer KeysIn { SORT_KEY keys_in[]; };
+layout(std430, binding = SORT_COPY_VALUES_IN) readonly buffer ValuesIn { uint values_in[]; };
+layout(std430, binding = SORT_COPY_KEYS_OUT) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
+layout(std430, binding = SORT_COPY_VALUES_OUT) writeonly buffer ValuesOut { uint values_out[]; };
 #define COPY(i) \
     keys_out[i] = keys_in[i]; \
     values_out[i] = values_in[i]

@@ -13,17 +13,17 @@ layout(push_constant) uniform Push {
     uint pad;
 } pc;
 
-layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
+layout(std430, binding = SORT_HISTOGRAM_META) readonly buffer Meta { uint meta[]; };
 #if SORT_TEXEL_IO
 // 32-bit keys read through an R32UI texel view: llvmpipe turns texel fetches into straight
 // per-lane loads, storage-buffer loads into a guarded loop per component.
-layout(binding = 1) uniform usamplerBuffer keys_tex;
+layout(binding = SORT_HISTOGRAM_KEYS) uniform usamplerBuffer keys_tex;
 #define LOAD_KEY(i) texelFetch(keys_tex, int(i)).x
 #else
-layout(std430, binding = 1) readonly buffer Keys { SORT_KEY keys[]; };
+layout(std430, binding = SORT_HISTOGRAM_KEYS) readonly buffer Keys { SORT_KEY keys[]; };
 #define LOAD_KEY(i) keys[i]
 #endif
-layout(std430, binding = 2) writeonly buffer Hist { uint hist[]; };
+layout(std430, binding = SORT_HISTOGRAM_HIST) writeonly buffer Hist { uint hist[]; };
 
 #include "sort_common.glsl"
 

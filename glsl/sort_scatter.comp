@@ -14,25 +14,25 @@ layout(push_constant) uniform Push {
     uint pad;
 } pc;
 
-layout(std430, binding = 0) readonly buffer Meta { uint meta[]; };
-layout(std430, binding = 3) readonly buffer Offsets { uint offsets[]; };
+layout(std430, binding = SORT_SCATTER_META) readonly buffer Meta { uint meta[]; };
+layout(std430, binding = SORT_SCATTER_OFFSETS) readonly buffer Offsets { uint offsets[]; };
 #if SORT_TEXEL_IO
 // 32-bit keys and values through R32UI texel views (see sort_histogram.comp): texel fetches
 // and imageStore are straight per-lane code on llvmpipe, storage-buffer accesses are not.
-layout(binding = 1) uniform usamplerBuffer keys_in;
-layout(binding = 2) uniform usamplerBuffer values_in;
-layout(binding = 4, r32ui) uniform writeonly uimageBuffer keys_out;
-layout(binding = 5, r32ui) uniform writeonly uimageBuffer values_out;
+layout(binding = SORT_SCATTER_KEYS_IN) uniform usamplerBuffer keys_in;
+layout(binding = SORT_SCATTER_VALUES_IN) uniform usamplerBuffer values_in;
+layout(binding = SORT_SCATTER_KEYS_OUT, r32ui) uniform writeonly uimageBuffer keys_out;
+layout(binding = SORT_SCATTER_VALUES_OUT, r32ui) uniform writeonly uimageBuffer values_out;
 #define LOAD_KEY(i) texelFetch(keys_in, int(i)).x
 #define LOAD_VALUE(i) texelFetch(values_in, int(i)).x
 #define STORE_PAIR(dst, key, value) \
     imageStore(keys_out, int(dst), uvec4(key)); \
     imageStore(values_out, int(dst), uvec4(value))
 #else
-layout(std430, binding = 1) readonly buffer KeysIn { SORT_KEY keys_in[]; };
-layout(std430, binding = 2) readonly buffer ValuesIn { uint values_in[]; };
-layout(std430, binding = 4) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
-layout(std430, binding = 5) writeonly buffer ValuesOut { uint values_out[]; };
+layout(std430, binding = SORT_SCATTER_KEYS_IN) readonly buffer KeysIn { SORT_KEY keys_in[]; };
+layout(std430, binding = SORT_SCATTER_VALUES_IN) readonly buffer ValuesIn { uint values_in[]; };
+layout(std430, binding = SORT_SCATTER_KEYS_OUT) writeonly buffer KeysOut { SORT_KEY keys_out[]; };
+layout(std430, binding = SORT_SCATTER_VALUES_OUT) writeonly buffer ValuesOut { uint values_out[]; };
 #define LOAD_KEY(i) keys_in[i]
 #define LOAD_VALUE(i) values_in[i]
 #define STORE_PAIR(dst, key, value) \

@@ -13,8 +13,8 @@ layout(push_constant) uniform Push {
     uint max_groups_x;
 } pc;
 
-layout(std430, binding = 0) readonly buffer Count { uint counts[]; };
-layout(std430, binding = 1) writeonly buffer Meta { uint meta[]; };
+layout(std430, binding = SORT_SETUP_COUNT) readonly buffer Count { uint counts[]; };
+layout(std430, binding = SORT_SETUP_META) writeonly buffer Meta { uint meta[]; };
 
 void main() {
     uint n = pc.count_index == 0xFFFFFFFFu ? pc.host_n : counts[pc.count_index];

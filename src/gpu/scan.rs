@@ -6,7 +6,8 @@
 
 use ash::vk;
 
-use super::shader::BindingKind;
+use super::shader::{by_binding, BindingKind};
+use super::shader_set::bindings;
 use super::sync::{barrier, Access};
 use super::{
     dispatch_grid, BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
@@ -44,13 +45,16 @@ impl Scan {
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
         let defines = [];
         let push = std::mem::size_of::<ScanPush>() as u32;
-        let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
+        let storage = BindingKind::StorageBuffer;
         Ok(Self {
             reduce: ComputePipeline::from_embedded(
                 ctx,
                 "scan_reduce",
                 &defines,
-                &buffers(2),
+                &by_binding([
+                    (bindings::scan_reduce::DATA_IN, storage),
+                    (bindings::scan_reduce::BLOCK_SUMS, storage),
+                ])?,
                 push,
                 SCAN_WG,
             )?,
@@ -58,7 +62,11 @@ impl Scan {
                 ctx,
                 "scan_block",
                 &defines,
-                &buffers(3),
+                &by_binding([
+                    (bindings::scan_block::DATA_IN, storage),
+                    (bindings::scan_block::DATA_OUT, storage),
+                    (bindings::scan_block::TOTALS, storage),
+                ])?,
                 push,
                 SCAN_WG,
             )?,
@@ -66,7 +74,11 @@ impl Scan {
                 ctx,
                 "scan_add",
                 &defines,
-                &buffers(3),
+                &by_binding([
+                    (bindings::scan_add::DATA_IN, storage),
+                    (bindings::scan_add::BLOCK_OFFSETS, storage),
+                    (bindings::scan_add::DATA_OUT, storage),
+                ])?,
                 push,
                 SCAN_WG,
             )?,
@@ -166,7 +178,11 @@ impl Scan {
             return self.block.dispatch(
                 ctx,
                 cmd,
-                &[input, output, total_slice],
+                &by_binding([
+                    (bindings::scan_block::DATA_IN, input),
+                    (bindings::scan_block::DATA_OUT, output),
+                    (bindings::scan_block::TOTALS, total_slice),
+                ])?,
                 bytemuck::bytes_of(&push),
                 [1, 1, 1],
             );
@@ -184,8 +200,12 @@ impl Scan {
             pad: 0,
         };
         let grid = dispatch_grid(groups, self.max_groups_x);
+        let reduce = by_binding([
+            (bindings::scan_reduce::DATA_IN, input),
+            (bindings::scan_reduce::BLOCK_SUMS, sums),
+        ])?;
         self.reduce
-            .dispatch(ctx, cmd, &[input, sums], bytemuck::bytes_of(&push), grid)?;
+            .dispatch(ctx, cmd, &reduce, bytemuck::bytes_of(&push), grid)?;
         // Block sums: written above, scanned in place below.
         barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeReadWrite);
         self.record_level(ctx, cmd, sums, sums, total, rest, groups)?;
@@ -194,7 +214,11 @@ impl Scan {
         self.add.dispatch(
             ctx,
             cmd,
-            &[input, sums, output],
+            &by_binding([
+                (bindings::scan_add::DATA_IN, input),
+                (bindings::scan_add::BLOCK_OFFSETS, sums),
+                (bindings::scan_add::DATA_OUT, output),
+            ])?,
             bytemuck::bytes_of(&push),
             grid,
         )

@@ -567,3 +567,9 @@ impl Drop for ComputePipeline {
         }
     }
 }
+
+/// What a stage binds, `(binding, value)` by the shader's named bindings
+/// ([`shader_set::bindings`]), in binding order: each slot exactly once.
+pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> GpuResult<[T; N]> {
+    shader_set::by_binding(items).map_err(GpuError::Internal)
+}

@@ -44,6 +44,65 @@ fn glsl_float(x: f32) -> String {
     }
 }
 
+/// Named descriptor bindings, one module per shader (`glsl/<shader>.comp`), in binding
+/// order; each name is also a GLSL `#define <SHADER>_<NAME> <index>` (e.g.
+/// `PREPROCESS_SPLATS`), so the shader and the Rust stage that binds it name the same slot.
+macro_rules! shader_bindings {
+    ($($shader:ident { $($name:ident),* $(,)? })*) => {
+        /// Binding indices by shader and name.
+        pub mod bindings {
+            $(
+                #[allow(missing_docs)]
+                pub mod $shader {
+                    shader_bindings!(@index 0u32; $($name),*);
+                    /// The names in binding order.
+                    pub const NAMES: &[&str] = &[$(stringify!($name)),*];
+                }
+            )*
+            /// Every shader's binding names, in binding order.
+            pub const ALL: &[(&str, &[&str])] = &[$((stringify!($shader), $shader::NAMES)),*];
+        }
+    };
+    (@index $i:expr; $name:ident $(, $rest:ident)*) => {
+        pub const $name: u32 = $i;
+        shader_bindings!(@index $i + 1; $($rest),*);
+    };
+    (@index $i:expr;) => {};
+}
+
+shader_bindings! {
+    preprocess { PARAMS, GAUSSIANS, SH, SPLATS, RECTS, DEPTH_KEYS, COUNTERS, DEPTH_VALUES, BIN_MASKS, TOUCHED }
+    order { PARAMS, DEPTH_ORDER, TOUCHED, TOUCHED_IN_ORDER }
+    keys { PARAMS, SPLAT_TEXELS, RECTS, OFFSETS, KEYS, VALUES, COUNTERS, DEPTH_ORDER, BIN_MASKS }
+    ranges { KEYS, RANGES, COUNTERS }
+    blend { PARAMS, SPLATS, VALUES, RANGES, COLOR, DEPTH, COUNTERS }
+    blend_features { PARAMS, SPLATS, VALUES, RANGES, FEATURES, OUTPUT, COUNTERS, COLOR_STATE }
+    pack { COLOR, PACKED }
+    shade { WORDS, FEATURES, COLOR }
+    scan_reduce { DATA_IN, BLOCK_SUMS }
+    scan_block { DATA_IN, DATA_OUT, TOTALS }
+    scan_add { DATA_IN, BLOCK_OFFSETS, DATA_OUT }
+    sort_setup { COUNT, META }
+    sort_histogram { META, KEYS, HIST }
+    sort_scatter { META, KEYS_IN, VALUES_IN, OFFSETS, KEYS_OUT, VALUES_OUT }
+    sort_copy { META, KEYS_IN, VALUES_IN, KEYS_OUT, VALUES_OUT }
+    count64_test { COUNT }
+}
+
+/// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
+pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> Result<[T; N], String> {
+    let mut out: [Option<T>; N] = [None; N];
+    for (binding, value) in items {
+        match out.get_mut(binding as usize) {
+            Some(slot @ None) => *slot = Some(value),
+            Some(Some(_)) => return Err(format!("binding {binding} is given twice")),
+            None => return Err(format!("binding {binding} is past the {N} slots")),
+        }
+    }
+    // Every slot is filled: N items, none twice, none out of range.
+    Ok(out.map(|v| v.expect("each of the N slots was filled once")))
+}
+
 /// The `#define`s every shader is compiled with: the constants above and the reference's
 /// rules (`crate::rules`), so that the host (Rust) is their one source.
 pub fn shared_defines() -> Vec<(String, String)> {
@@ -79,6 +138,12 @@ pub fn shared_defines() -> Vec<(String, String)> {
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
+    .chain(bindings::ALL.iter().flat_map(|(shader, names)| {
+        names
+            .iter()
+            .enumerate()
+            .map(move |(i, name)| (format!("{}_{name}", shader.to_uppercase()), i.to_string()))
+    }))
     .collect()
 }
 

@@ -30,7 +30,8 @@
 use ash::vk;
 
 use super::scan::{Scan, SCRATCH_ALIGN};
-use super::shader::{BindingKind, Resource};
+use super::shader::{by_binding, BindingKind, Resource};
+use super::shader_set::bindings;
 use super::shader_set::{SORT_SPEC_ITEMS, SORT_SPEC_MAX_SUBGROUPS, SORT_SPEC_RADIX, SORT_SPEC_WG};
 use super::sync::{barrier, barrier_uses, Access};
 use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer};
@@ -309,7 +310,6 @@ impl RadixSort {
             (SORT_SPEC_RADIX, radix),
             (SORT_SPEC_MAX_SUBGROUPS, max_subgroups),
         ];
-        let buffers = |n: usize| vec![BindingKind::StorageBuffer; n];
         // Bindings of the keys and values: texel views for reading and writing, or buffers.
         let (read, write) = if config.texel_io {
             (
@@ -328,7 +328,10 @@ impl RadixSort {
                 ctx,
                 "sort_setup",
                 &defines,
-                &buffers(2),
+                &by_binding([
+                    (bindings::sort_setup::COUNT, storage),
+                    (bindings::sort_setup::META, storage),
+                ])?,
                 setup_push,
                 1,
                 &spec,
@@ -337,7 +340,11 @@ impl RadixSort {
                 ctx,
                 "sort_histogram",
                 &defines,
-                &[storage, read, storage],
+                &by_binding([
+                    (bindings::sort_histogram::META, storage),
+                    (bindings::sort_histogram::KEYS, read),
+                    (bindings::sort_histogram::HIST, storage),
+                ])?,
                 pass_push,
                 config.workgroup_size,
                 &spec,
@@ -346,7 +353,14 @@ impl RadixSort {
                 ctx,
                 "sort_scatter",
                 &defines,
-                &[storage, read, read, storage, write, write],
+                &by_binding([
+                    (bindings::sort_scatter::META, storage),
+                    (bindings::sort_scatter::KEYS_IN, read),
+                    (bindings::sort_scatter::VALUES_IN, read),
+                    (bindings::sort_scatter::OFFSETS, storage),
+                    (bindings::sort_scatter::KEYS_OUT, write),
+                    (bindings::sort_scatter::VALUES_OUT, write),
+                ])?,
                 pass_push,
                 config.workgroup_size,
                 &spec,
@@ -355,7 +369,13 @@ impl RadixSort {
                 ctx,
                 "sort_copy",
                 &defines,
-                &[storage, read, read, write, write],
+                &by_binding([
+                    (bindings::sort_copy::META, storage),
+                    (bindings::sort_copy::KEYS_IN, read),
+                    (bindings::sort_copy::VALUES_IN, read),
+                    (bindings::sort_copy::KEYS_OUT, write),
+                    (bindings::sort_copy::VALUES_OUT, write),
+                ])?,
                 0,
                 config.workgroup_size,
                 &spec,
@@ -574,7 +594,10 @@ impl RadixSort {
         self.setup.dispatch(
             ctx,
             cmd,
-            &[count_binding, meta],
+            &by_binding([
+                (bindings::sort_setup::COUNT, count_binding),
+                (bindings::sort_setup::META, meta),
+            ])?,
             bytemuck::bytes_of(&setup_push),
             [1, 1, 1],
         )?;
@@ -604,7 +627,11 @@ impl RadixSort {
                 self.histogram.dispatch_indirect_resources(
                     ctx,
                     cmd,
-                    &[Resource::Buffer(meta), src.0, Resource::Buffer(hist)],
+                    &by_binding([
+                        (bindings::sort_histogram::META, Resource::Buffer(meta)),
+                        (bindings::sort_histogram::KEYS, src.0),
+                        (bindings::sort_histogram::HIST, Resource::Buffer(hist)),
+                    ])?,
                     bytemuck::bytes_of(&push),
                     dispatch_args,
                 )
@@ -626,14 +653,14 @@ impl RadixSort {
                 self.scatter.dispatch_indirect_resources(
                     ctx,
                     cmd,
-                    &[
-                        Resource::Buffer(meta),
-                        src.0,
-                        src.1,
-                        Resource::Buffer(offsets),
-                        dst.0,
-                        dst.1,
-                    ],
+                    &by_binding([
+                        (bindings::sort_scatter::META, Resource::Buffer(meta)),
+                        (bindings::sort_scatter::KEYS_IN, src.0),
+                        (bindings::sort_scatter::VALUES_IN, src.1),
+                        (bindings::sort_scatter::OFFSETS, Resource::Buffer(offsets)),
+                        (bindings::sort_scatter::KEYS_OUT, dst.0),
+                        (bindings::sort_scatter::VALUES_OUT, dst.1),
+                    ])?,
                     bytemuck::bytes_of(&push),
                     dispatch_args,
                 )
@@ -648,7 +675,13 @@ impl RadixSort {
                 self.copy.dispatch_indirect_resources(
                     ctx,
                     cmd,
-                    &[Resource::Buffer(meta), tmp.0, tmp.1, user.0, user.1],
+                    &by_binding([
+                        (bindings::sort_copy::META, Resource::Buffer(meta)),
+                        (bindings::sort_copy::KEYS_IN, tmp.0),
+                        (bindings::sort_copy::VALUES_IN, tmp.1),
+                        (bindings::sort_copy::KEYS_OUT, user.0),
+                        (bindings::sort_copy::VALUES_OUT, user.1),
+                    ])?,
                     &[],
                     dispatch_args,
                 )

@@ -1,7 +1,8 @@
 //! Blend stage (`glsl/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::blend as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use crate::model::SplatKernel;
 use ash::vk;
@@ -154,11 +155,16 @@ impl Blend {
             ("TEXEL_FETCH", u32::from(kernel.texel()).to_string()),
             ("SPLAT_KERNEL", format!("{}u", splat_kernel.shader_id())),
         ];
-        let bindings = if kernel.texel() {
-            [B, T, T, B, I, I, B]
-        } else {
-            [B, B, B, B, I, I, B]
-        };
+        let read = if kernel.texel() { T } else { B };
+        let bindings = by_binding([
+            (slot::PARAMS, B),
+            (slot::SPLATS, read),
+            (slot::VALUES, read),
+            (slot::RANGES, B),
+            (slot::COLOR, I),
+            (slot::DEPTH, I),
+            (slot::COUNTERS, B),
+        ])?;
         // local_size_x (the full-subgroups requirement looks at the X dimension).
         let local_x = 16 / kernel.strip();
         let pipeline =
@@ -205,21 +211,27 @@ impl Blend {
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
-            &[
-                Resource::Buffer(b.params),
-                splats,
-                values,
-                Resource::Buffer(b.ranges),
-                Resource::Image {
-                    view: b.color.view(),
-                    layout: vk::ImageLayout::GENERAL,
-                },
-                Resource::Image {
-                    view: b.depth.view(),
-                    layout: vk::ImageLayout::GENERAL,
-                },
-                Resource::Buffer(b.counters),
-            ],
+            &by_binding([
+                (slot::PARAMS, Resource::Buffer(b.params)),
+                (slot::SPLATS, splats),
+                (slot::VALUES, values),
+                (slot::RANGES, Resource::Buffer(b.ranges)),
+                (
+                    slot::COLOR,
+                    Resource::Image {
+                        view: b.color.view(),
+                        layout: vk::ImageLayout::GENERAL,
+                    },
+                ),
+                (
+                    slot::DEPTH,
+                    Resource::Image {
+                        view: b.depth.view(),
+                        layout: vk::ImageLayout::GENERAL,
+                    },
+                ),
+                (slot::COUNTERS, Resource::Buffer(b.counters)),
+            ])?,
             bytemuck::cast_slice(&[u32::from(b.resume), u32::from(b.last)]),
             [tiles.0, tiles.1, 1],
         )

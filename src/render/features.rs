@@ -2,7 +2,8 @@
 //! scene's K feature channels over the same sorted bin lists, four channels per dispatch
 //! (one dispatch per group of four), with the colour rules and background 0.
 
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::blend_features as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuImage, GpuResult};
 use crate::model::SplatKernel;
 use ash::vk;
@@ -56,11 +57,17 @@ impl FeatureBlend {
             ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
             ("TEXEL_FETCH", u32::from(texel).to_string()),
         ];
-        let bindings = if texel {
-            [B, T, T, B, T, B, B, I]
-        } else {
-            [B, B, B, B, B, B, B, I]
-        };
+        let read = if texel { T } else { B };
+        let bindings = by_binding([
+            (slot::PARAMS, B),
+            (slot::SPLATS, read),
+            (slot::VALUES, read),
+            (slot::RANGES, B),
+            (slot::FEATURES, read),
+            (slot::OUTPUT, B),
+            (slot::COUNTERS, B),
+            (slot::COLOR_STATE, I),
+        ])?;
         let pipeline =
             ComputePipeline::from_embedded(ctx, "blend_features", &defines, &bindings, 8, 16)?;
         Ok(FeatureBlend { pipeline, texel })
@@ -99,19 +106,22 @@ impl FeatureBlend {
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
-            &[
-                Resource::Buffer(b.params),
-                splats,
-                values,
-                Resource::Buffer(b.ranges),
-                features,
-                Resource::Buffer(b.output),
-                Resource::Buffer(b.counters),
-                Resource::Image {
-                    view: b.color.view(),
-                    layout: vk::ImageLayout::GENERAL,
-                },
-            ],
+            &by_binding([
+                (slot::PARAMS, Resource::Buffer(b.params)),
+                (slot::SPLATS, splats),
+                (slot::VALUES, values),
+                (slot::RANGES, Resource::Buffer(b.ranges)),
+                (slot::FEATURES, features),
+                (slot::OUTPUT, Resource::Buffer(b.output)),
+                (slot::COUNTERS, Resource::Buffer(b.counters)),
+                (
+                    slot::COLOR_STATE,
+                    Resource::Image {
+                        view: b.color.view(),
+                        layout: vk::ImageLayout::GENERAL,
+                    },
+                ),
+            ])?,
             bytemuck::cast_slice(&[u32::from(b.resume), 0]),
             [size.0.div_ceil(16), size.1.div_ceil(16), 1],
         )

@@ -2,7 +2,8 @@
 //! order, writes its (tile | depth, index) pairs at its scanned offset; or the Gaussians
 //! of one chunk of the depth order, relative to the chunk's first offset.
 
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::keys as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
@@ -59,17 +60,17 @@ impl Keys {
             ctx,
             "keys",
             &[("KEYS_TEXEL_IO", u32::from(texel_io).to_string())],
-            &[
-                StorageBuffer,
-                UniformTexelBuffer,
-                read,
-                read,
-                write,
-                write,
-                StorageBuffer,
-                read,
-                read,
-            ],
+            &by_binding([
+                (slot::PARAMS, StorageBuffer),
+                (slot::SPLAT_TEXELS, UniformTexelBuffer),
+                (slot::RECTS, read),
+                (slot::OFFSETS, read),
+                (slot::KEYS, write),
+                (slot::VALUES, write),
+                (slot::COUNTERS, StorageBuffer),
+                (slot::DEPTH_ORDER, read),
+                (slot::BIN_MASKS, read),
+            ])?,
             12,
             WORKGROUP,
         )?;
@@ -98,17 +99,17 @@ impl Keys {
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
-            &[
-                Resource::Buffer(b.params),
-                Resource::TexelBuffer(b.splat_texels),
-                b.io.rects,
-                b.io.offsets,
-                b.io.keys,
-                b.io.values,
-                Resource::Buffer(b.counters),
-                b.io.depth_order,
-                b.io.bin_masks,
-            ],
+            &by_binding([
+                (slot::PARAMS, Resource::Buffer(b.params)),
+                (slot::SPLAT_TEXELS, Resource::TexelBuffer(b.splat_texels)),
+                (slot::RECTS, b.io.rects),
+                (slot::OFFSETS, b.io.offsets),
+                (slot::KEYS, b.io.keys),
+                (slot::VALUES, b.io.values),
+                (slot::COUNTERS, Resource::Buffer(b.counters)),
+                (slot::DEPTH_ORDER, b.io.depth_order),
+                (slot::BIN_MASKS, b.io.bin_masks),
+            ])?,
             bytemuck::cast_slice(&push),
             groups,
         )

@@ -3,7 +3,8 @@
 //! tiles-touched counts into that order for the scan. Emitting pairs in depth order lets the pair sort order the tile bits only, with
 //! the same result as sorting the full `tile << 32 | depth` keys (see `glsl/order.comp`).
 
-use crate::gpu::shader::BindingKind;
+use crate::gpu::shader::{by_binding, BindingKind};
+use crate::gpu::shader_set::bindings::order as slot;
 use crate::gpu::sort::{SortJob, SortTexels};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{
@@ -32,7 +33,12 @@ impl Order {
             ctx,
             "order",
             &[],
-            &[BindingKind::StorageBuffer; 4],
+            &by_binding([
+                (slot::PARAMS, BindingKind::StorageBuffer),
+                (slot::DEPTH_ORDER, BindingKind::StorageBuffer),
+                (slot::TOUCHED, BindingKind::StorageBuffer),
+                (slot::TOUCHED_IN_ORDER, BindingKind::StorageBuffer),
+            ])?,
             0,
             WORKGROUP,
         )?;
@@ -73,12 +79,12 @@ impl Order {
         self.pipeline.dispatch(
             ctx,
             cmd,
-            &[
-                params.whole(),
-                depth_values.whole(),
-                touched,
-                touched_in_order,
-            ],
+            &by_binding([
+                (slot::PARAMS, params.whole()),
+                (slot::DEPTH_ORDER, depth_values.whole()),
+                (slot::TOUCHED, touched),
+                (slot::TOUCHED_IN_ORDER, touched_in_order),
+            ])?,
             &[],
             groups,
         )

@@ -2,7 +2,8 @@
 //! as [`crate::output::to_u8`], so a consumer that only shows the frame reads back a
 //! quarter of the colour plane's bytes and no alpha or depth.
 
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::pack as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use ash::vk;
 
@@ -21,7 +22,10 @@ impl Pack {
             ctx,
             "pack",
             &[],
-            &[BindingKind::StorageImage, BindingKind::StorageBuffer],
+            &by_binding([
+                (slot::COLOR, BindingKind::StorageImage),
+                (slot::PACKED, BindingKind::StorageBuffer),
+            ])?,
             8,
             SIDE,
         )?;
@@ -42,13 +46,16 @@ impl Pack {
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
-            &[
-                Resource::Image {
-                    view: color.view(),
-                    layout: vk::ImageLayout::GENERAL,
-                },
-                Resource::Buffer(packed),
-            ],
+            &by_binding([
+                (
+                    slot::COLOR,
+                    Resource::Image {
+                        view: color.view(),
+                        layout: vk::ImageLayout::GENERAL,
+                    },
+                ),
+                (slot::PACKED, Resource::Buffer(packed)),
+            ])?,
             bytemuck::bytes_of(&push),
             [width.div_ceil(SIDE), height.div_ceil(SIDE), 1],
         )

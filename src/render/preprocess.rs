@@ -1,7 +1,7 @@
 //! Preprocess stage (`glsl/preprocess.comp`): one thread per Gaussian, dispatched once per
 //! window of Gaussians whose per-Gaussian arrays fit one storage binding each.
 
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
@@ -70,6 +70,7 @@ impl Preprocess {
     /// 32-byte ones, reading and writing storage buffers or (`texel_io`, for CPU devices)
     /// texel views.
     pub fn new(ctx: &GpuContext, compact: bool, texel_io: bool) -> GpuResult<Self> {
+        use crate::gpu::shader_set::bindings::preprocess as b;
         use BindingKind::*;
         let (read, write) = if texel_io {
             (UniformTexelBuffer, StorageTexelBuffer)
@@ -83,18 +84,18 @@ impl Preprocess {
                 ("COMPACT_GAUSSIANS", u32::from(compact).to_string()),
                 ("PREPROCESS_TEXEL_IO", u32::from(texel_io).to_string()),
             ],
-            &[
-                StorageBuffer,
-                read,
-                UniformTexelBuffer,
-                write,
-                write,
-                write,
-                StorageBuffer,
-                write,
-                write,
-                write,
-            ],
+            &by_binding([
+                (b::PARAMS, StorageBuffer),
+                (b::GAUSSIANS, read),
+                (b::SH, UniformTexelBuffer),
+                (b::SPLATS, write),
+                (b::RECTS, write),
+                (b::DEPTH_KEYS, write),
+                (b::COUNTERS, StorageBuffer),
+                (b::DEPTH_VALUES, write),
+                (b::BIN_MASKS, write),
+                (b::TOUCHED, write),
+            ])?,
             8,
             WORKGROUP,
         )?;
@@ -121,6 +122,7 @@ impl Preprocess {
         n: u32,
         window: u32,
     ) -> GpuResult<()> {
+        use crate::gpu::shader_set::bindings::preprocess as slot;
         let window = window.max(WORKGROUP) / WORKGROUP * WORKGROUP;
         let mut first = 0u32;
         while first < n {
@@ -135,30 +137,36 @@ impl Preprocess {
                 dispatch_grid(count.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
             let push = [first, count];
             let resources = match (self.texel_io, b.texels) {
-                (true, Some(t)) => [
-                    Resource::Buffer(b.params),
-                    Resource::TexelBuffer(t.gaussians),
-                    Resource::TexelBuffer(b.sh_texels),
-                    Resource::TexelBuffer(t.splats),
-                    Resource::TexelBuffer(t.rects),
-                    Resource::TexelBuffer(t.depth_keys),
-                    Resource::Buffer(b.counters),
-                    Resource::TexelBuffer(t.depth_values),
-                    Resource::TexelBuffer(t.bin_masks),
-                    Resource::TexelBuffer(t.touched),
-                ],
-                (false, _) => [
-                    Resource::Buffer(b.params),
-                    Resource::Buffer(part(b.gaussians, self.record_bytes)),
-                    Resource::TexelBuffer(b.sh_texels),
-                    Resource::Buffer(part(b.splats, 48)),
-                    Resource::Buffer(part(b.rects, 8)),
-                    Resource::Buffer(part(b.depth_keys, 4)),
-                    Resource::Buffer(b.counters),
-                    Resource::Buffer(part(b.depth_values, 4)),
-                    Resource::Buffer(b.bin_masks),
-                    Resource::Buffer(b.touched),
-                ],
+                (true, Some(t)) => by_binding([
+                    (slot::PARAMS, Resource::Buffer(b.params)),
+                    (slot::GAUSSIANS, Resource::TexelBuffer(t.gaussians)),
+                    (slot::SH, Resource::TexelBuffer(b.sh_texels)),
+                    (slot::SPLATS, Resource::TexelBuffer(t.splats)),
+                    (slot::RECTS, Resource::TexelBuffer(t.rects)),
+                    (slot::DEPTH_KEYS, Resource::TexelBuffer(t.depth_keys)),
+                    (slot::COUNTERS, Resource::Buffer(b.counters)),
+                    (slot::DEPTH_VALUES, Resource::TexelBuffer(t.depth_values)),
+                    (slot::BIN_MASKS, Resource::TexelBuffer(t.bin_masks)),
+                    (slot::TOUCHED, Resource::TexelBuffer(t.touched)),
+                ])?,
+                (false, _) => by_binding([
+                    (slot::PARAMS, Resource::Buffer(b.params)),
+                    (
+                        slot::GAUSSIANS,
+                        Resource::Buffer(part(b.gaussians, self.record_bytes)),
+                    ),
+                    (slot::SH, Resource::TexelBuffer(b.sh_texels)),
+                    (slot::SPLATS, Resource::Buffer(part(b.splats, 48))),
+                    (slot::RECTS, Resource::Buffer(part(b.rects, 8))),
+                    (slot::DEPTH_KEYS, Resource::Buffer(part(b.depth_keys, 4))),
+                    (slot::COUNTERS, Resource::Buffer(b.counters)),
+                    (
+                        slot::DEPTH_VALUES,
+                        Resource::Buffer(part(b.depth_values, 4)),
+                    ),
+                    (slot::BIN_MASKS, Resource::Buffer(b.bin_masks)),
+                    (slot::TOUCHED, Resource::Buffer(b.touched)),
+                ])?,
                 (true, None) => {
                     return Err(crate::gpu::GpuError::Internal(
                         "the preprocess stage's texel views are missing".into(),

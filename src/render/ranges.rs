@@ -1,7 +1,8 @@
 //! Tile-ranges stage (`glsl/ranges.comp`): start/end of each tile's run in the sorted keys,
 //! dispatched indirectly over the device-side key count.
 
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::ranges as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
@@ -28,7 +29,11 @@ impl Ranges {
             ctx,
             "ranges",
             &[("RANGES_TEXEL_IO", u32::from(texel_io).to_string())],
-            &[keys, BindingKind::StorageBuffer, BindingKind::StorageBuffer],
+            &by_binding([
+                (slot::KEYS, keys),
+                (slot::RANGES, BindingKind::StorageBuffer),
+                (slot::COUNTERS, BindingKind::StorageBuffer),
+            ])?,
             0,
             WORKGROUP,
         )?;
@@ -51,11 +56,11 @@ impl Ranges {
         counters: BufferSlice,
         args: BufferSlice,
     ) -> GpuResult<()> {
-        let resources = [
-            sorted_keys,
-            Resource::Buffer(ranges),
-            Resource::Buffer(counters),
-        ];
+        let resources = by_binding([
+            (slot::KEYS, sorted_keys),
+            (slot::RANGES, Resource::Buffer(ranges)),
+            (slot::COUNTERS, Resource::Buffer(counters)),
+        ])?;
         self.pipeline
             .dispatch_indirect_resources(ctx, cmd, &resources, &[], args)
     }

@@ -2,7 +2,8 @@
 //! feature image, after the blend and the feature blend, writing the colour image.
 
 use crate::camera::Camera;
-use crate::gpu::shader::{BindingKind, Resource};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::shade as slot;
 use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuImage, GpuResult,
     MemoryKind,
@@ -97,11 +98,11 @@ impl Shade {
             ctx,
             "shade",
             &[],
-            &[
-                BindingKind::UniformTexelBuffer,
-                BindingKind::StorageBuffer,
-                BindingKind::StorageImage,
-            ],
+            &by_binding([
+                (slot::WORDS, BindingKind::UniformTexelBuffer),
+                (slot::FEATURES, BindingKind::StorageBuffer),
+                (slot::COLOR, BindingKind::StorageImage),
+            ])?,
             std::mem::size_of::<ShadePush>() as u32,
             SIDE,
         )?;
@@ -142,14 +143,17 @@ impl Shade {
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
-            &[
-                Resource::TexelBuffer(shader.view.handle()),
-                Resource::Buffer(features),
-                Resource::Image {
-                    view: color.view(),
-                    layout: vk::ImageLayout::GENERAL,
-                },
-            ],
+            &by_binding([
+                (slot::WORDS, Resource::TexelBuffer(shader.view.handle())),
+                (slot::FEATURES, Resource::Buffer(features)),
+                (
+                    slot::COLOR,
+                    Resource::Image {
+                        view: color.view(),
+                        layout: vk::ImageLayout::GENERAL,
+                    },
+                ),
+            ])?,
             bytemuck::bytes_of(&push),
             [cam.width.div_ceil(SIDE), cam.height.div_ceil(SIDE), 1],
         )

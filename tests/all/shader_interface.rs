@@ -226,3 +226,50 @@ imageStore(img, ivec2(i, 0), items[i].b);
     assert!(e.contains("32 bytes of push constants"), "{e}");
     assert!(reflect(&words[..3]).is_err());
 }
+
+/// Bindings are named once (`gpu::shader_set::bindings`): the shaders use the names'
+/// defines, never a literal index, and a stage's list must fill each slot exactly once.
+#[test]
+fn bindings_are_named_in_the_shaders_and_placed_once_by_the_host() {
+    let glsl = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
+    let literal = regex_free_literal_binding;
+    let mut shaders = 0;
+    for entry in std::fs::read_dir(&glsl).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            assert!(
+                !literal(line),
+                "{}:{}: a literal binding index: {line}",
+                path.display(),
+                i + 1
+            );
+        }
+        shaders += 1;
+    }
+    assert!(shaders >= 16, "{shaders} shader files read");
+    let names = vksplat::gpu::shader_set::bindings::ALL;
+    assert!(names
+        .iter()
+        .any(|(s, n)| *s == "preprocess" && n.contains(&"SPLATS")));
+    use vksplat::gpu::shader::by_binding;
+    assert_eq!(by_binding([(1, 'b'), (0, 'a')]).unwrap(), ['a', 'b']);
+    assert!(by_binding([(0, 'a'), (0, 'b')])
+        .unwrap_err()
+        .to_string()
+        .contains("twice"));
+    assert!(by_binding([(0, 'a'), (2, 'b')])
+        .unwrap_err()
+        .to_string()
+        .contains("past"));
+}
+
+/// `binding = <digits>` in a GLSL line.
+fn regex_free_literal_binding(line: &str) -> bool {
+    line.match_indices("binding").any(|(i, _)| {
+        let rest = line[i + "binding".len()..].trim_start();
+        rest.strip_prefix('=')
+            .map(|r| r.trim_start().starts_with(|c: char| c.is_ascii_digit()))
+            .unwrap_or(false)
+    })
+}
