@@ -167,8 +167,14 @@ impl Blend {
         ])?;
         // local_size_x (the full-subgroups requirement looks at the X dimension).
         let local_x = 16 / kernel.strip();
-        let pipeline =
-            ComputePipeline::from_embedded(ctx, "blend", &defines, &bindings, 8, local_x)?;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "blend",
+            &defines,
+            &bindings,
+            std::mem::size_of::<super::types::BlendPush>() as u32,
+            local_x,
+        )?;
         Ok(Blend {
             pipeline,
             kernel,
@@ -232,7 +238,10 @@ impl Blend {
                 ),
                 (slot::COUNTERS, Resource::Buffer(b.counters)),
             ])?,
-            bytemuck::cast_slice(&[u32::from(b.resume), u32::from(b.last)]),
+            bytemuck::bytes_of(&super::types::BlendPush {
+                resume: u32::from(b.resume),
+                last: u32::from(b.last),
+            }),
             [tiles.0, tiles.1, 1],
         )
     }

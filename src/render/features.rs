@@ -68,8 +68,14 @@ impl FeatureBlend {
             (slot::COUNTERS, B),
             (slot::COLOR_STATE, I),
         ])?;
-        let pipeline =
-            ComputePipeline::from_embedded(ctx, "blend_features", &defines, &bindings, 8, 16)?;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "blend_features",
+            &defines,
+            &bindings,
+            std::mem::size_of::<super::types::FeatureBlendPush>() as u32,
+            16,
+        )?;
         Ok(FeatureBlend { pipeline, texel })
     }
 
@@ -122,7 +128,10 @@ impl FeatureBlend {
                     },
                 ),
             ])?,
-            bytemuck::cast_slice(&[u32::from(b.resume), 0]),
+            bytemuck::bytes_of(&super::types::FeatureBlendPush {
+                resume: u32::from(b.resume),
+                pad: 0,
+            }),
             [size.0.div_ceil(16), size.1.div_ceil(16), 1],
         )
     }

@@ -71,7 +71,7 @@ impl Keys {
                 (slot::DEPTH_ORDER, read),
                 (slot::BIN_MASKS, read),
             ])?,
-            12,
+            std::mem::size_of::<super::types::KeysPush>() as u32,
             WORKGROUP,
         )?;
         Ok(Keys { pipeline, texel_io })
@@ -95,7 +95,11 @@ impl Keys {
             (chunk.end - chunk.first).div_ceil(WORKGROUP).max(1),
             ctx.info().max_workgroup_count[0],
         );
-        let push = [chunk.first, chunk.end, chunk.base];
+        let push = super::types::KeysPush {
+            first: chunk.first,
+            end: chunk.end,
+            base: chunk.base,
+        };
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
@@ -110,7 +114,7 @@ impl Keys {
                 (slot::DEPTH_ORDER, b.io.depth_order),
                 (slot::BIN_MASKS, b.io.bin_masks),
             ])?,
-            bytemuck::cast_slice(&push),
+            bytemuck::bytes_of(&push),
             groups,
         )
     }

@@ -26,7 +26,7 @@ impl Pack {
                 (slot::COLOR, BindingKind::StorageImage),
                 (slot::PACKED, BindingKind::StorageBuffer),
             ])?,
-            8,
+            std::mem::size_of::<super::types::PackPush>() as u32,
             SIDE,
         )?;
         Ok(Pack { pipeline })
@@ -42,7 +42,7 @@ impl Pack {
         packed: BufferSlice,
         (width, height): (u32, u32),
     ) -> GpuResult<()> {
-        let push: [u32; 2] = [width, height];
+        let push = super::types::PackPush { width, height };
         self.pipeline.dispatch_resources(
             ctx,
             cmd,

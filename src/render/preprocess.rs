@@ -96,7 +96,7 @@ impl Preprocess {
                 (b::BIN_MASKS, write),
                 (b::TOUCHED, write),
             ])?,
-            8,
+            std::mem::size_of::<super::types::WindowPush>() as u32,
             WORKGROUP,
         )?;
         Ok(Preprocess {
@@ -135,7 +135,7 @@ impl Preprocess {
             let part = |s, stride| window_slice(s, whole, first, count, stride);
             let groups =
                 dispatch_grid(count.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
-            let push = [first, count];
+            let push = super::types::WindowPush { first, count };
             let resources = match (self.texel_io, b.texels) {
                 (true, Some(t)) => by_binding([
                     (slot::PARAMS, Resource::Buffer(b.params)),
@@ -177,7 +177,7 @@ impl Preprocess {
                 ctx,
                 cmd,
                 &resources,
-                bytemuck::cast_slice(&push),
+                bytemuck::bytes_of(&push),
                 groups,
             )?;
             first += count;

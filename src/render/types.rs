@@ -195,3 +195,55 @@ mod tests {
         assert_eq!(c.pairs(), (2u64 << 32) + 5);
     }
 }
+
+/// Push constants of `glsl/preprocess.comp` (`Window`): the Gaussians one dispatch covers.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct WindowPush {
+    /// First Gaussian of the window.
+    pub first: u32,
+    /// Gaussians in the window.
+    pub count: u32,
+}
+
+/// Push constants of `glsl/keys.comp` (`Chunk`): the depth-ordered Gaussians keyed.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct KeysPush {
+    /// First Gaussian (index in depth order).
+    pub first: u32,
+    /// One past the last.
+    pub end: u32,
+    /// Scanned offset of `first`, modulo 2^32.
+    pub base: u32,
+}
+
+/// Push constants of `glsl/blend.comp` (`ChunkFlags`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct BlendPush {
+    /// Non-zero: resume each pixel from the images (a chunk after the first).
+    pub resume: u32,
+    /// Non-zero: write final pixels (the last chunk).
+    pub last: u32,
+}
+
+/// Push constants of `glsl/blend_features.comp` (`ChunkFlags`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct FeatureBlendPush {
+    /// Non-zero: resume each pixel from the previous chunk's state.
+    pub resume: u32,
+    /// Padding.
+    pub pad: u32,
+}
+
+/// Push constants of `glsl/pack.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct PackPush {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+}

@@ -146,6 +146,40 @@ fn record_strides_and_push_constants_match_the_host_structs() {
         .map(|o| o as u32)
     );
     assert_eq!(scan.push_size as usize, size_of::<ScanPush>());
+    // The stages' own push-constant structs (render/types.rs).
+    use vksplat::render::types::{BlendPush, FeatureBlendPush, KeysPush, PackPush, WindowPush};
+    let pre = interface(
+        "preprocess",
+        &[("COMPACT_GAUSSIANS", "0"), ("PREPROCESS_TEXEL_IO", "1")],
+    );
+    let want = [offset_of!(WindowPush, first), offset_of!(WindowPush, count)];
+    assert_eq!(pre.push_offsets, want.map(|o| o as u32));
+    assert_eq!(pre.push_size as usize, size_of::<WindowPush>());
+    let keys = interface("keys", &[("KEYS_TEXEL_IO", "0")]);
+    let want = [
+        offset_of!(KeysPush, first),
+        offset_of!(KeysPush, end),
+        offset_of!(KeysPush, base),
+    ];
+    assert_eq!(keys.push_offsets, want.map(|o| o as u32));
+    assert_eq!(keys.push_size as usize, size_of::<KeysPush>());
+    let want = [offset_of!(BlendPush, resume), offset_of!(BlendPush, last)];
+    assert_eq!(blend.push_offsets, want.map(|o| o as u32));
+    assert_eq!(blend.push_size as usize, size_of::<BlendPush>());
+    let features = interface(
+        "blend_features",
+        &[("SPLAT_KERNEL", "0u"), ("TEXEL_FETCH", "1")],
+    );
+    let want = [
+        offset_of!(FeatureBlendPush, resume),
+        offset_of!(FeatureBlendPush, pad),
+    ];
+    assert_eq!(features.push_offsets, want.map(|o| o as u32));
+    let pack = interface("pack", &[]);
+    let want = [offset_of!(PackPush, width), offset_of!(PackPush, height)];
+    assert_eq!(pack.push_offsets, want.map(|o| o as u32));
+    assert_eq!(pack.push_size as usize, size_of::<PackPush>());
+
     let sort = [("SORT_KEY", "uint"), ("SORT_TEXEL_IO", "0")];
     let setup = interface("sort_setup", &sort);
     assert_eq!(
