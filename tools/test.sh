@@ -9,7 +9,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
 export VKSPLAT_VALIDATE=1
+t0=$SECONDS
 cargo test --all-targets "$@"
+echo "test.sh: cargo test took $((SECONDS - t0)) s" >&2
 
 if [ "${VKSPLAT_SKIP_PYTHON:-0}" = 1 ]; then
   exit 0
@@ -20,7 +22,11 @@ venv=target/pyenv
 rm -rf "$venv"
 python3 -m venv "$venv"
 "$venv/bin/pip" install -q --upgrade pip
+t0=$SECONDS
 CARGO_TARGET_DIR="$PWD/target/python" "$venv/bin/pip" install -q "./python[notebook,test]"
+echo "test.sh: pip install ./python took $((SECONDS - t0)) s" >&2
 # The binary `cargo test` built for the integration tests (same profile: nothing to rebuild).
 cargo build -q --profile test --bin vksplat
+t0=$SECONDS
 VKSPLAT_BIN="$PWD/target/debug/vksplat" "$venv/bin/pytest" -q python/tests
+echo "test.sh: pytest took $((SECONDS - t0)) s" >&2
