@@ -593,6 +593,11 @@ fn render_gpu(
     let ctx = args.gpu.context()?;
     if args.gpu.verbose {
         note!("device: {}", ctx.info());
+        note!(
+            "memory budget: {} bytes ({})",
+            ctx.info().memory_budget,
+            ctx.info().budget_source.describe()
+        );
     }
     let mut renderer = GpuRenderer::new(ctx)?;
     renderer.set_compact(args.compact);

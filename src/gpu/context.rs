@@ -24,8 +24,9 @@ pub struct ContextOptions {
     pub validation: bool,
     /// Device memory this context may allocate, in bytes; `VKSPLAT_MEMORY_LIMIT` (e.g.
     /// `512M`, `2G`) sets it when `None`. The default is the size of the largest
-    /// device-local heap, which is also the ceiling on GPUs (on CPU devices, whose device
-    /// memory is host memory, a larger limit is honoured).
+    /// device-local heap, which is also the ceiling on GPUs; on CPU devices, whose device
+    /// memory is host memory, it is 3/4 of the host memory available when that is more,
+    /// and a larger explicit limit is honoured.
     pub memory_limit: Option<u64>,
 }
 
@@ -98,6 +99,42 @@ pub struct DeviceInfo {
     pub device_local_bytes: u64,
     /// Device memory this context allows itself (see [`ContextOptions::memory_limit`]).
     pub memory_budget: u64,
+    /// Where [`Self::memory_budget`] comes from.
+    pub budget_source: BudgetSource,
+}
+
+/// Where a context's device-memory budget comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BudgetSource {
+    /// [`ContextOptions::memory_limit`] or `VKSPLAT_MEMORY_LIMIT`.
+    Limit,
+    /// The largest device-local heap the driver advertises.
+    Heap,
+    /// Three quarters of the host memory available when the context was made (a CPU
+    /// device, whose device memory is host memory, without an explicit limit).
+    HostAvailable,
+}
+
+impl BudgetSource {
+    /// What the budget is, for `-v`.
+    pub fn describe(self) -> &'static str {
+        match self {
+            BudgetSource::Limit => "the explicit memory limit",
+            BudgetSource::Heap => "the largest device-local heap",
+            BudgetSource::HostAvailable => {
+                "3/4 of the host memory available (a CPU device's memory is host memory; \
+                 --memory-limit sets another)"
+            }
+        }
+    }
+}
+
+/// `MemAvailable` of `/proc/meminfo` in bytes (Linux), if it can be read.
+pub fn host_available_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
 }
 
 impl std::fmt::Display for DeviceInfo {
@@ -508,10 +545,18 @@ impl GpuContext {
         // only a figure (lavapipe: 2 GiB), so an explicit limit may go beyond it; on a GPU
         // the heap caps it.
         let host_memory = props[index].device_type == vk::PhysicalDeviceType::CPU;
-        let memory_budget = match limit {
-            Some(l) if host_memory => l,
-            Some(l) => l.min(device_local_bytes),
-            None => device_local_bytes,
+        let (memory_budget, budget_source) = match limit {
+            Some(l) if host_memory => (l, BudgetSource::Limit),
+            Some(l) => (l.min(device_local_bytes), BudgetSource::Limit),
+            // A CPU device's scene fits where the host's memory does: the budget follows
+            // what the host has available, not the figure the driver advertises.
+            None if host_memory => match host_available_bytes() {
+                Some(available) if available / 4 * 3 > device_local_bytes => {
+                    (available / 4 * 3, BudgetSource::HostAvailable)
+                }
+                _ => (device_local_bytes, BudgetSource::Heap),
+            },
+            None => (device_local_bytes, BudgetSource::Heap),
         };
         let info = DeviceInfo {
             index,
@@ -537,6 +582,7 @@ impl GpuContext {
             timestamp_valid_bits,
             device_local_bytes,
             memory_budget,
+            budget_source,
         };
         let needed_ops = vk::SubgroupFeatureFlags::BASIC
             | vk::SubgroupFeatureFlags::ARITHMETIC

@@ -14,7 +14,7 @@ pub mod sync;
 pub mod timing;
 
 pub use buffer::{BufferSlice, BufferView, GpuBuffer, MemoryKind};
-pub use context::{ContextOptions, DeviceInfo, FrameSlot, GpuContext};
+pub use context::{BudgetSource, ContextOptions, DeviceInfo, FrameSlot, GpuContext};
 pub use image::GpuImage;
 pub use scan::Scan;
 pub use shader::{ComputePipeline, ShaderError};
@@ -56,7 +56,7 @@ pub enum GpuError {
     },
     /// An allocation would exceed the device memory budget (or the device is out of
     /// memory).
-    #[error("out of device memory: buffer '{name}' needs {bytes} bytes, {in_use} of the {budget} bytes this renderer may use are taken (the budget is the device-local heap, or VKSPLAT_MEMORY_LIMIT); use a smaller resolution, fewer Gaussians or a larger device")]
+    #[error("out of device memory: buffer '{name}' needs {bytes} bytes, {in_use} of the {budget} bytes this renderer may use are taken (the budget is the device-local heap, on CPU devices 3/4 of the host memory available, or VKSPLAT_MEMORY_LIMIT / --memory-limit); use a smaller resolution, fewer Gaussians or a larger device")]
     OutOfMemory {
         /// Buffer or image name.
         name: String,

@@ -181,3 +181,34 @@ fn renders_are_bit_identical_across_processes() {
         assert!(a[k] == b[k], "frame {k} differs between two processes");
     }
 }
+
+/// On a CPU device (lavapipe advertises a 2 GiB heap, but its device memory is host
+/// memory) the default budget follows the host's available memory, so a scene the
+/// machine can hold renders without `--memory-limit` (issue 29: 10 M Gaussians at 1080p
+/// stopped at 2 GiB); an explicit limit still wins.
+#[test]
+fn a_cpu_devices_default_budget_follows_the_hosts_available_memory() {
+    use vksplat::gpu::context::host_available_bytes;
+    use vksplat::gpu::{BudgetSource, ContextOptions, GpuContext};
+    let ctx = GpuContext::new(&ContextOptions::default()).expect("lavapipe");
+    let info = ctx.info();
+    assert_eq!(info.device_type, ash::vk::PhysicalDeviceType::CPU, "{info}");
+    let available = host_available_bytes().expect("/proc/meminfo");
+    if available / 4 * 3 > info.device_local_bytes {
+        assert_eq!(info.budget_source, BudgetSource::HostAvailable);
+        assert!(info.memory_budget > info.device_local_bytes, "{info:?}");
+        assert!(info.memory_budget <= available, "{info:?}");
+    } else {
+        assert_eq!(info.budget_source, BudgetSource::Heap);
+        assert_eq!(info.memory_budget, info.device_local_bytes);
+    }
+    let limited = GpuContext::new(&ContextOptions {
+        memory_limit: Some(1 << 30),
+        ..Default::default()
+    })
+    .expect("lavapipe");
+    assert_eq!(
+        (limited.info().memory_budget, limited.info().budget_source),
+        (1 << 30, BudgetSource::Limit)
+    );
+}
