@@ -192,8 +192,20 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     let Some(path) = arg.scene.as_deref() else {
         bail!("no scene given; pass a .ply file, a model directory or --demo");
     };
-    let resolved = scene::resolve_scene_path_at(path, arg.iteration)?;
-    Ok((scene::load(&resolved)?, resolved.display().to_string()))
+    let loaded = scene::resolve_scene_path_at(path, arg.iteration)
+        .and_then(|resolved| Ok((scene::load(&resolved)?, resolved)));
+    match loaded {
+        Ok((scene, resolved)) => Ok((scene, resolved.display().to_string())),
+        // A camera file where the scene belongs: every command says what `info` says.
+        Err(e) => match vksplat::camera::detect_camera_format(path) {
+            Ok(format) => bail!(
+                "{} is a camera file ({format}), not a scene: give a scene and pass this file with --cameras {}",
+                path.display(),
+                path.display()
+            ),
+            Err(_) => Err(e.into()),
+        },
+    }
 }
 
 /// The `cameras.json` of a trained model directory given as the scene (one with a

@@ -770,3 +770,27 @@ fn readme_and_help_agree() {
         "options missing from the README: {undocumented:?}"
     );
 }
+
+/// A camera file where the scene belongs gets the same answer from every command: what
+/// it is and how to pass it (`info` describes it; `render` and `view` used to say "is not
+/// a recognised scene format").
+#[test]
+fn a_camera_file_given_as_the_scene_is_named_as_one_by_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams = cameras_json(dir.path());
+    let out = dir.path().join("out.png");
+    for args in [
+        vec!["render", s(&cams), "-o", s(&out)],
+        vec!["view", s(&cams), "--port", "0"],
+        vec!["bench", s(&cams), "--frames", "1"],
+    ] {
+        let e = fails(&args, Path::new("/nonexistent"));
+        assert!(
+            e.contains("is a camera file (INRIA cameras.json), not a scene")
+                && e.contains(&format!("--cameras {}", cams.display())),
+            "{args:?}: {e}"
+        );
+        assert!(!e.contains("not a recognised scene format"), "{e}");
+    }
+    assert!(!out.exists());
+}
