@@ -150,6 +150,55 @@ def test_look_at_and_camera_conventions(demo, renderer):
     assert cam.K[0, 2] == 32 and cam.K[1, 2] == 24
 
 
+def test_errors_name_python_arguments_not_cli_flags(tmp_path):
+    # Issue 29: scene.save(existing) said "pass --overwrite", filtered(sh_degree=9)
+    # "--sh-degree must be 0..3".
+    scene = vksplat.demo()
+    out = tmp_path / "scene.ply"
+    scene.save(out)
+    with pytest.raises(FileExistsError) as e:
+        scene.save(out)
+    assert "overwrite=True" in str(e.value) and "--" not in str(e.value)
+    with pytest.raises(ValueError) as e:
+        scene.filtered(sh_degree=9)
+    assert "sh_degree must be 0..3" in str(e.value) and "--" not in str(e.value)
+    cams = tmp_path / "cams.json"
+    vksplat.save_cameras(cams, vksplat.orbit(scene, frames=2, width=32, height=32))
+    with pytest.raises(FileExistsError) as e:
+        vksplat.save_cameras(cams, vksplat.orbit(scene, frames=2, width=32, height=32))
+    assert "overwrite=True" in str(e.value) and "--" not in str(e.value)
+
+
+def test_a_count_mismatch_blames_the_array_that_disagrees():
+    # Issue 29: means of (N+1, 3) with the rest (N, ...) said "quats must have shape
+    # (N+1, 4)"; the odd one out is means.
+    n = 1000
+    rest = dict(
+        quats=np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
+        scales=np.full((n, 3), 0.1, np.float32),
+        opacities=np.full(n, 0.5, np.float32),
+        colors=np.full((n, 3), 0.5, np.float32),
+    )
+    with pytest.raises(ValueError, match=r"means must have shape \(1000, 3\) .* got \(1001, 3\)"):
+        vksplat.Scene.from_arrays(np.zeros((n + 1, 3), np.float32), **rest)
+    # One other array off: that one is named, against means.
+    rest["quats"] = rest["quats"][:-1]
+    with pytest.raises(ValueError, match=r"quats must have shape \(1000, 4\), got \(999, 4\)"):
+        vksplat.Scene.from_arrays(np.zeros((n, 3), np.float32), **rest)
+
+
+def test_compare_refuses_nan_and_infinite_values():
+    # Issue 29: NaN input gave psnr nan and "100 % of pixels within 1/255".
+    nan = np.full((4, 4, 3), np.nan, dtype=np.float32)
+    zero = np.zeros((4, 4, 3), dtype=np.float32)
+    with pytest.raises(ValueError, match="reference has 48 values that are NaN or infinite"):
+        vksplat.compare(nan, zero)
+    inf = zero.copy()
+    inf[2, 1, 0] = np.inf
+    with pytest.raises(ValueError, match=r"test has 1 values .* row 2, column 1, channel 0"):
+        vksplat.compare(zero, inf)
+
+
 def test_compare_metrics(tmp_path):
     rng = np.random.default_rng(1)
     a = rng.random((32, 48, 3), dtype=np.float32) * 0.5 + 0.25

@@ -159,10 +159,25 @@ def load_cameras(
     return [Camera._from_tuple(t) for t in _native.load_cameras(os.fspath(path), frames, fps)]
 
 
+# The library's messages name the command line's flags; Python callers get their own
+# argument names.
+_FLAG_NAMES = (("pass --overwrite", "pass overwrite=True"), ("--sh-degree", "sh_degree"))
+
+
+def _python_names(e: Exception) -> Exception:
+    text = str(e)
+    for flag, argument in _FLAG_NAMES:
+        text = text.replace(flag, argument)
+    return type(e)(text)
+
+
 def save_cameras(path: PathLike, cameras: Iterable[Camera], overwrite: bool = False) -> None:
     """Writes cameras as an INRIA cameras.json (readable by ``load_cameras`` and by
     ``vksplat render --cameras``); an existing file is refused unless ``overwrite``."""
-    _native.save_cameras(os.fspath(path), [c._tuple() for c in cameras], overwrite)
+    try:
+        _native.save_cameras(os.fspath(path), [c._tuple() for c in cameras], overwrite)
+    except (FileExistsError, ValueError) as e:
+        raise _python_names(e) from None
 
 
 def look_at(
@@ -333,6 +348,19 @@ class Scene:
         if means_a.ndim != 2 or means_a.shape[1:] != (3,):
             raise ValueError(f"means must have shape (N, 3), got {tuple(means_a.shape)}")
         n = means_a.shape[0]
+        # When every other array agrees on another count, means is the one that is off.
+        counts = {}
+        others = (("quats", quats), ("scales", scales), ("opacities", opacities))
+        others += (("sh", sh), ("colors", colors), ("features", features))
+        for name, value in others:
+            if value is not None and np.ndim(value) >= 1:
+                counts[name] = np.shape(value)[0]
+        if len(set(counts.values())) == 1 and n not in counts.values():
+            agreed = next(iter(counts.values()))
+            raise ValueError(
+                f"means must have shape ({agreed}, 3) like {', '.join(counts)} "
+                f"({agreed} Gaussians), got {tuple(means_a.shape)}"
+            )
         m = _floats("means", means_a, (n, 3), strict=True)
         q = _floats("quats", quats, (n, 4), strict=True)
         s = _floats("scales", scales, (n, 3), strict=True)
@@ -373,7 +401,10 @@ class Scene:
     def save(self, path: PathLike, overwrite: bool = False) -> None:
         """Writes the scene as .ply (lossless), .splat or .spz (by extension),
         atomically; an existing file is refused unless ``overwrite``."""
-        self._s.save(os.fspath(path), overwrite)
+        try:
+            self._s.save(os.fspath(path), overwrite)
+        except (FileExistsError, ValueError) as e:
+            raise _python_names(e) from None
 
     def filtered(
         self,
@@ -383,7 +414,10 @@ class Scene:
     ) -> "Scene":
         """A new scene without the Gaussians the CLI's ``--max-scale``/``--min-opacity``
         drop, its SH cut to ``sh_degree``."""
-        return Scene(self._s.filtered(max_scale, min_opacity, sh_degree))
+        try:
+            return Scene(self._s.filtered(max_scale, min_opacity, sh_degree))
+        except ValueError as e:
+            raise _python_names(e) from None
 
 
 def load(path: PathLike, iteration: Optional[int] = None) -> Scene:
@@ -602,6 +636,15 @@ def compare(
     reference's largest value)."""
     a = _image(reference, "reference")
     b = _image(test, "test")
+    for arr, name in ((a, "reference"), (b, "test")):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            y, x, c = (int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(
+                f"{name} has {int(bad.sum())} values that are NaN or infinite "
+                f"(the first at row {y}, column {x}, channel {c}: {arr[y, x, c]}); "
+                "metrics of such images would mean nothing"
+            )
     if a.shape != b.shape:
         raise ValueError(f"the images differ in shape: reference {a.shape}, test {b.shape}")
     h, w, c = a.shape

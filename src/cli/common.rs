@@ -196,8 +196,9 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
         .and_then(|resolved| Ok((scene::load(&resolved)?, resolved)));
     match loaded {
         Ok((scene, resolved)) => Ok((scene, resolved.display().to_string())),
-        // A camera file where the scene belongs: every command says what `info` says.
-        Err(e) => match vksplat::camera::detect_camera_format(path) {
+        // A camera file where the scene belongs: every command says what `info` says. (A
+        // model directory also holds cameras, but its scene's error is the one to show.)
+        Err(e) if path.is_file() => match vksplat::camera::detect_camera_format(path) {
             Ok(format) => bail!(
                 "{} is a camera file ({format}), not a scene: give a scene and pass this file with --cameras {}",
                 path.display(),
@@ -205,6 +206,7 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
             ),
             Err(_) => Err(e.into()),
         },
+        Err(e) => Err(e.into()),
     }
 }
 
