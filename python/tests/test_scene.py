@@ -187,6 +187,25 @@ def test_a_count_mismatch_blames_the_array_that_disagrees():
         vksplat.Scene.from_arrays(np.zeros((n, 3), np.float32), **rest)
 
 
+def test_impossible_cameras_colours_and_sh_degrees_are_refused():
+    # Issue 29: look_at(eye == target) and up=(0,0,0) gave an identity camera, colours
+    # outside [0, 1] were taken, sh_degree above the scene's was accepted.
+    with pytest.raises(ValueError, match="same point"):
+        vksplat.look_at(eye=(1, 2, 3), target=(1, 2, 3))
+    with pytest.raises(ValueError, match="up must be a non-zero vector"):
+        vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, 0, 0))
+    with pytest.raises(ValueError, match="parallel"):
+        vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, 0, 2))
+    arrays = _good()
+    del arrays["sh"]
+    with pytest.raises(ValueError, match=r"colors\[1\] is \[0.5, 1.5, 0.5\]; colors must be in \[0, 1\]"):
+        vksplat.Scene.from_arrays(**arrays, colors=np.float32([[0.5] * 3, [0.5, 1.5, 0.5], [0.5] * 3]))
+    flat = vksplat.Scene.from_arrays(**arrays, colors=np.full((3, 3), 0.5, np.float32))
+    cam = vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), width=16, height=16)
+    with pytest.raises(ValueError, match="sh_degree 2 exceeds the scene's SH degree 0"):
+        vksplat.render_cpu(flat, cam, sh_degree=2)
+
+
 def test_compare_refuses_nan_and_infinite_values():
     # Issue 29: NaN input gave psnr nan and "100 % of pixels within 1/255".
     nan = np.full((4, 4, 3), np.nan, dtype=np.float32)

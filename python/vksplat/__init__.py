@@ -191,11 +191,15 @@ def look_at(
 ) -> Camera:
     """A camera at ``eye`` looking at ``target``; ``up`` is the world's up direction
     (INRIA/COLMAP scenes: -y), ``vfov`` the vertical field of view in degrees."""
-    return Camera._from_tuple(
-        _native.look_at(
-            _vec3("eye", eye), _vec3("target", target), _vec3("up", up), width, height, vfov, name
-        )
-    )
+    e, t, u = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
+    forward = np.subtract(t, e, dtype=np.float64)
+    if not np.linalg.norm(forward) > 0.0:
+        raise ValueError(f"eye and target are the same point {e}: there is no view direction")
+    if not np.linalg.norm(u) > 0.0:
+        raise ValueError("up must be a non-zero vector, got (0, 0, 0)")
+    if not np.linalg.norm(np.cross(forward, u)) > 1e-9 * np.linalg.norm(forward) * np.linalg.norm(u):
+        raise ValueError(f"up {u} is parallel to the view direction from eye to target")
+    return Camera._from_tuple(_native.look_at(e, t, u, width, height, vfov, name))
 
 
 def _vec3(name: str, v: ArrayLike) -> List[float]:
@@ -369,6 +373,13 @@ class Scene:
             raise ValueError("pass exactly one of sh (N, K, 3) and colors (N, 3)")
         if colors is not None:
             c = _floats("colors", colors, (n, 3), strict=True)
+            outside = np.argwhere(~((c >= 0.0) & (c <= 1.0)))
+            if len(outside):
+                i, ch = (int(x) for x in outside[0])
+                raise ValueError(
+                    f"colors[{i}] is {c[i].tolist()}; colors must be in [0, 1] "
+                    f"(channel {ch}; {len(outside)} values outside)"
+                )
             # The DC term whose evaluation (SH_C0 * dc + 0.5) gives the colour back.
             sh_a = ((c - 0.5) / 0.28209479177387814).astype("<f4").reshape(n, 1, 3)
         else:
@@ -480,6 +491,10 @@ def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[s
     cams, batch = _cameras(camera, kw["viewmat"], kw["K"], kw["width"], kw["height"])
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
+    if kw["sh_degree"] is not None and kw["sh_degree"] > scene.sh_degree:
+        raise ValueError(
+            f"sh_degree {kw['sh_degree']} exceeds the scene's SH degree {scene.sh_degree}"
+        )
     opts = (
         [float(x) for x in _floats("background", kw["background"], (3,))],
         kw["sh_degree"],
