@@ -206,6 +206,53 @@ def test_impossible_cameras_colours_and_sh_degrees_are_refused():
         vksplat.render_cpu(flat, cam, sh_degree=2)
 
 
+class _FakeTensor:
+    """Behaves as a torch tensor that requires grad: no direct numpy conversion."""
+
+    def __init__(self, array):
+        self._a = np.asarray(array)
+
+    def __array__(self, *args, **kwargs):
+        raise RuntimeError("Can't call numpy() on Tensor that requires grad.")
+
+    def detach(self):
+        return self
+
+    def cpu(self):
+        return self
+
+    def numpy(self):
+        return self._a
+
+
+def test_what_gsplat_users_pass_is_accepted():
+    # Issue 29: batched Ks (C, 3, 3) were refused, tensors that require grad failed in
+    # numpy's conversion, lists of Python ints raised TypeError.
+    scene = vksplat.Scene.from_arrays(
+        means=[[0, 0, 0], [0.2, 0, 0]],
+        quats=_FakeTensor(np.tile(np.float32([1, 0, 0, 0]), (2, 1))),
+        scales=[[0.1, 0.1, 0.1], [0.1, 0.1, 0.1]],
+        opacities=_FakeTensor(np.float32([0.9, 0.9])),
+        colors=[[1, 0, 0], [0, 1, 0]],
+    )
+    assert len(scene) == 2
+    view = vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), width=32, height=24)
+    viewmats = np.stack([view.viewmat, view.viewmat])
+    ks = np.stack([view.K, view.K])
+    ks[1, 0, 0] *= 2  # a longer focal length for the second view
+    ks[1, 1, 1] *= 2
+    out = vksplat.render_cpu(scene, viewmat=_FakeTensor(viewmats), K=ks, width=32, height=24)
+    assert out["rgb"].shape == (2, 24, 32, 3)
+    single = [
+        vksplat.render_cpu(scene, viewmat=viewmats[i], K=ks[i], width=32, height=24)["rgb"]
+        for i in range(2)
+    ]
+    assert np.array_equal(out["rgb"][0], single[0]) and np.array_equal(out["rgb"][1], single[1])
+    assert not np.array_equal(single[0], single[1])
+    with pytest.raises(ValueError, match=r"K must have shape \(3, 3\) or \(2, 3, 3\)"):
+        vksplat.render_cpu(scene, viewmat=viewmats, K=np.stack([view.K] * 3), width=32, height=24)
+
+
 def test_compare_refuses_nan_and_infinite_values():
     # Issue 29: NaN input gave psnr nan and "100 % of pixels within 1/255".
     nan = np.full((4, 4, 3), np.nan, dtype=np.float32)

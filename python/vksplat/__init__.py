@@ -50,13 +50,25 @@ ArrayLike = Any
 # Array helpers
 
 
+def _numpy(value: Any) -> np.ndarray:
+    """A numpy array of what gsplat users pass: numpy arrays, (nested) lists of Python
+    numbers (integers too), and torch tensors (detached and moved to the CPU first, so
+    one that requires grad works)."""
+    if all(hasattr(value, a) for a in ("detach", "cpu", "numpy")):
+        return value.detach().cpu().numpy()
+    if isinstance(value, (list, tuple)):
+        arr = np.asarray(value)
+        return arr.astype(np.float64) if arr.dtype.kind in "iu" else arr
+    return np.asarray(value)
+
+
 def _floats(
     name: str, value: ArrayLike, shape: Tuple[Optional[int], ...], strict: bool = False
 ) -> np.ndarray:
     """`value` as a C-contiguous little-endian float32 array of `shape` (None: any size).
     Strict (Gaussian arrays): floating-point dtypes only; otherwise integers are fine too
     (a background of ``(1, 1, 1)``)."""
-    arr = np.asarray(value)
+    arr = _numpy(value)
     kinds = "f" if strict else "fiu"
     if arr.dtype.kind not in kinds:
         what = "floats (float16/32/64)" if strict else "numbers"
@@ -348,7 +360,7 @@ class Scene:
         quaternions as the trainer stores them. Colour is ``sh (N, K, 3)`` with K = 1, 4,
         9 or 16, or ``colors (N, 3)`` in [0, 1] (converted to the DC term). ``features
         (N, K)``, K = 1..64, are feature channels (``mode="features"`` renders them)."""
-        means_a = np.asarray(means)
+        means_a = _numpy(means)
         if means_a.ndim != 2 or means_a.shape[1:] != (3,):
             raise ValueError(f"means must have shape (N, 3), got {tuple(means_a.shape)}")
         n = means_a.shape[0]
@@ -357,8 +369,9 @@ class Scene:
         others = (("quats", quats), ("scales", scales), ("opacities", opacities))
         others += (("sh", sh), ("colors", colors), ("features", features))
         for name, value in others:
-            if value is not None and np.ndim(value) >= 1:
-                counts[name] = np.shape(value)[0]
+            shape = None if value is None else _numpy(value).shape
+            if shape:
+                counts[name] = shape[0]
         if len(set(counts.values())) == 1 and n not in counts.values():
             agreed = next(iter(counts.values()))
             raise ValueError(
@@ -383,13 +396,13 @@ class Scene:
             # The DC term whose evaluation (SH_C0 * dc + 0.5) gives the colour back.
             sh_a = ((c - 0.5) / 0.28209479177387814).astype("<f4").reshape(n, 1, 3)
         else:
-            sh_a = np.asarray(sh)
+            sh_a = _numpy(sh)
             if sh_a.ndim != 3 or sh_a.shape[0] != n or sh_a.shape[2] != 3:
                 raise ValueError(f"sh must have shape ({n}, K, 3), got {tuple(sh_a.shape)}")
             sh_a = _floats("sh", sh_a, (n, sh_a.shape[1], 3), strict=True)
         feats = None
         if features is not None:
-            fa = np.asarray(features)
+            fa = _numpy(features)
             if fa.ndim != 2 or fa.shape[0] != n or not 1 <= fa.shape[1] <= 64:
                 raise ValueError(f"features must have shape ({n}, K) with K 1..64, got {tuple(fa.shape)}")
             feats = _floats("features", fa, (n, fa.shape[1]), strict=True)
@@ -478,10 +491,21 @@ def _cameras(
         return cams, True
     if not all(explicit):
         raise ValueError("pass a camera, or all of viewmat, K, width and height")
-    vm = np.asarray(viewmat)
+    vm = _numpy(viewmat)
     if vm.ndim == 3:
-        return [Camera(v, K, width, height, f"view {i}") for i, v in enumerate(vm)], True
-    return [Camera(vm, K, width, height)], False
+        # gsplat's batches: viewmats (C, 4, 4) with one K (3, 3) or one per view (C, 3, 3).
+        ks = _numpy(K)
+        if ks.ndim == 3 and ks.shape[0] != vm.shape[0]:
+            raise ValueError(
+                f"K must have shape (3, 3) or ({vm.shape[0]}, 3, 3) for {vm.shape[0]} "
+                f"viewmats, got {tuple(ks.shape)}"
+            )
+        per_view = [ks[i] if ks.ndim == 3 else ks for i in range(vm.shape[0])]
+        return [
+            Camera(v, k, width, height, f"view {i}") for i, (v, k) in enumerate(zip(vm, per_view))
+        ], True
+    ks = _numpy(K)
+    return [Camera(vm, ks[0] if ks.shape == (1, 3, 3) else ks, width, height)], False
 
 
 def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[str, np.ndarray]:
