@@ -5,10 +5,18 @@ renderer for the session."""
 import os
 import pathlib
 import subprocess
+import sys
 
 import pytest
 
-import vksplat
+# `cd python && python -m pytest` puts python/ first on sys.path, where the package's
+# source (without its compiled extension) would shadow the installed package the tests
+# are for: take it out, so the tests run the same from the repository root and from here.
+_SOURCE = pathlib.Path(__file__).resolve().parents[1]
+sys.path[:] = [p for p in sys.path if pathlib.Path(p or ".").resolve() != _SOURCE]
+sys.modules.pop("vksplat", None)
+
+import vksplat  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"

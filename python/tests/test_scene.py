@@ -282,3 +282,22 @@ def test_compare_metrics(tmp_path):
         vksplat.compare(a.astype(np.complex64), a)
     with pytest.raises(ValueError, match="kind"):
         vksplat.compare(a, a, kind="colours")
+
+
+def test_the_tests_run_from_the_package_folder_too():
+    # Issue 29: `cd python && python -m pytest` failed with a circular import: python/
+    # came first on sys.path and its source shadowed the installed package.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    package_folder = Path(__file__).resolve().parents[1]
+    run = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "tests/test_scene.py"],
+        cwd=package_folder,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    assert "test_the_tests_run_from_the_package_folder_too" in run.stdout

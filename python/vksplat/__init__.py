@@ -23,7 +23,14 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _native
+try:
+    from . import _native
+except ImportError as e:  # the source tree (python/vksplat) has no compiled extension
+    raise ImportError(
+        f"vksplat's compiled extension is not next to {os.path.dirname(__file__)}: this "
+        "is the package's source; install it (pip install ./python) and import the "
+        "installed package"
+    ) from e
 
 __version__ = _native.__version__
 
