@@ -972,6 +972,47 @@ fn encode_png<'py>(
     Ok(PyBytes::new(py, &out))
 }
 
+/// Writes an image file as `vksplat render` does (by extension: `.png` 8-bit, or 16-bit
+/// with `png16`; `.exr` R, G, B, A, Z as 32-bit floats), atomically; an existing file is
+/// refused unless `overwrite`.
+#[pyfunction]
+#[pyo3(signature = (path, rgb, alpha, depth, width, height, png16, overwrite))]
+#[allow(clippy::too_many_arguments)]
+fn save_image(
+    path: PathBuf,
+    rgb: &[u8],
+    alpha: Option<&[u8]>,
+    depth: Option<&[u8]>,
+    width: u32,
+    height: u32,
+    png16: bool,
+    overwrite: bool,
+) -> PyResult<()> {
+    guarded(|| {
+        let n = width as usize * height as usize;
+        let alpha = match alpha {
+            Some(a) => floats(a, "alpha", n)?,
+            None => vec![1.0; n],
+        };
+        let depth = match depth {
+            Some(d) => floats(d, "depth", n)?,
+            None => vec![f32::INFINITY; n],
+        };
+        let frame = Frame {
+            width,
+            height,
+            color: rows(&floats(rgb, "rgb", n * 3)?),
+            alpha,
+            depth,
+            feature_count: 0,
+            features: Vec::new(),
+        };
+        let format =
+            vksplat::output::ImageFormat::from_path(&path, png16).map_err(|e| py_err(e.into()))?;
+        vksplat::output::write_frame(&frame, &path, format, overwrite).map_err(|e| py_err(e.into()))
+    })
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
@@ -989,6 +1030,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(encode_png, m)?)?;
+    m.add_function(wrap_pyfunction!(save_image, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

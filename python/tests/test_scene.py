@@ -1,6 +1,7 @@
 """Scenes and cameras: loading, arrays, from_arrays round trips and its errors, saving."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -301,3 +302,36 @@ def test_the_tests_run_from_the_package_folder_too():
     )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     assert "test_the_tests_run_from_the_package_folder_too" in run.stdout
+
+
+def test_save_image_writes_what_render_writes_and_keeps_existing_files(tmp_path, demo):
+    # Issue 29: no writer for the numpy outputs.
+    cam = vksplat.look_at(eye=(0, -0.5, -3), target=(0, -0.5, 0), width=40, height=30)
+    out = vksplat.render_cpu(demo, cam)
+    png = tmp_path / "frame.png"
+    vksplat.save_image(png, out)
+    back, names = vksplat.read_image(png)
+    assert names[:3] == ["R", "G", "B"] and back.shape[:2] == (30, 40)
+    want = (np.clip(out["rgb"], 0, 1) * 255 + 0.5).astype(np.uint8) / 255.0
+    assert np.allclose(back[..., :3], want, atol=1e-6)
+    with pytest.raises(FileExistsError, match="overwrite=True"):
+        vksplat.save_image(png, out["rgb"])
+    exr = tmp_path / "frame.exr"
+    vksplat.save_image(exr, out["rgb"], alpha=out["alpha"], depth=out["depth"])
+    back, names = vksplat.read_image(exr)
+    assert names == ["R", "G", "B", "A", "Z"]
+    assert np.array_equal(back[..., :3], out["rgb"]) and np.array_equal(back[..., 3], out["alpha"])
+    with pytest.raises(ValueError, match=r"alpha must have shape \(30, 40\)"):
+        vksplat.save_image(tmp_path / "bad.exr", out["rgb"], alpha=out["alpha"][:-1])
+    assert not (tmp_path / "bad.exr").exists()
+
+
+def test_save_turntable_writes_a_png_sequence_without_a_video_writer(tmp_path, demo):
+    stem = tmp_path / "turn.png"
+    files = vksplat.save_turntable(stem, demo, frames=3, width=32, height=24)
+    assert [os.path.basename(f) for f in files] == ["turn_0000.png", "turn_0001.png", "turn_0002.png"]
+    first, _ = vksplat.read_image(files[0])
+    second, _ = vksplat.read_image(files[1])
+    assert first.shape[:2] == (24, 32) and not np.array_equal(first, second)
+    with pytest.raises(FileExistsError, match="turn_0000.png"):
+        vksplat.save_turntable(stem, demo, frames=3, width=32, height=24)
