@@ -101,3 +101,13 @@ def compare(
     reference: bytes, test: bytes, width: int, height: int, channels: int, kind: str
 ) -> Dict[str, Optional[float]]: ...
 def encode_png(rgb: bytes, width: int, height: int) -> bytes: ...
+def save_image(
+    path: str,
+    rgb: bytes,
+    alpha: Optional[bytes],
+    depth: Optional[bytes],
+    width: int,
+    height: int,
+    png16: bool,
+    overwrite: bool,
+) -> None: ...
