@@ -18,6 +18,11 @@
 #ifndef SPLAT_KERNEL
 #define SPLAT_KERNEL 0u
 #endif
+// SAVE_LAST = 1 (frames whose forward state a backward pass reads) also writes, per pixel,
+// one past the sorted-pair index of the last Gaussian composited into it (0: none).
+#ifndef SAVE_LAST
+#define SAVE_LAST 0
+#endif
 #define CHUNK_W min(4u, 16u / STRIP)
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
@@ -39,6 +44,9 @@ layout(std430, binding = BLEND_RANGES) readonly buffer RangeBuf { uvec2 ranges[]
 layout(binding = BLEND_COLOR, rgba32f) uniform image2D out_color;  // rgb + T * background, alpha = 1 - T
 layout(binding = BLEND_DEPTH, r32f) uniform image2D out_depth;     // alpha-normalised depth
 layout(std430, binding = BLEND_COUNTERS) buffer CounterBuf { Counters counters; };
+#if SAVE_LAST
+layout(std430, binding = BLEND_LAST) writeonly buffer LastBuf { uint last_contributor[]; };
+#endif
 // A frame keyed in depth-ordered chunks (src/render/mod.rs) is blended once per chunk:
 // every chunk but the first resumes each pixel from the state the previous one left in
 // the images, and every chunk but the last leaves that state instead of the final pixel.
@@ -49,7 +57,8 @@ layout(push_constant) uniform ChunkFlags { uint resume; uint last; } chunk;
 // Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
 // written without branches: SIMD implementations execute both sides of a divergent branch
 // anyway, so selects are cheaper than masked control flow. Identical results.
-void composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
+// Returns whether the Gaussian was composited (for SAVE_LAST).
+bool composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
                inout float T, inout vec3 C, inout float D, inout bool done) {
     vec2 d = mean_opacity_depth.xy - pixf;
     float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
@@ -63,6 +72,16 @@ void composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
     D += mean_opacity_depth.w * w;
     T = add ? test_t : T;
     done = done || stop;
+    return add;
+}
+
+// One past the pair index of the pixel's last composited Gaussian (a frame in one piece).
+void write_last(uvec2 pix, uint last) {
+#if SAVE_LAST
+    if (pix.x < params.image.x && pix.y < params.image.y) {
+        last_contributor[pix.y * params.image.x + pix.x] = last;
+    }
+#endif
 }
 
 // The state between chunks: colour = (C, T), with T negated once the pixel is done (T
@@ -106,6 +125,7 @@ void main() {
     float T = 1.0;
     vec3 C = vec3(0.0);
     float D = 0.0;
+    uint last = 0u;
     load_pixel(pix, T, C, D, done);
     uvec2 range = ranges[tile_id];
     uint n = range.y - range.x;
@@ -129,11 +149,14 @@ void main() {
         barrier();
         uint count = min(TILE_PIXELS, n - batch);
         for (uint j = 0u; !done && j < count; j++) {
-            composite(s_mean_opacity[j], s_conic[j].xyz, s_color[j].rgb, pixf, T, C, D, done);
+            if (composite(s_mean_opacity[j], s_conic[j].xyz, s_color[j].rgb, pixf, T, C, D, done)) {
+                last = SAVE_LAST != 0 ? range.x + batch + j + 1u : 0u;
+            }
         }
         barrier();
     }
     write_pixel(pix, T, C, D, done);
+    write_last(pix, last);
 }
 #else
 void main() {
@@ -153,7 +176,9 @@ void main() {
     vec3 C[STRIP];
     float D[STRIP];
     bool done[STRIP];
+    uint last[STRIP];
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {
+        last[p] = 0u;
         T[p] = 1.0;
         C[p] = vec3(0.0);
         D[p] = 0.0;
@@ -177,7 +202,9 @@ void main() {
         vec3 color = texelFetch(splat_texels, g + 2).rgb;
         vec4 mo = vec4(mob.xyz, cd.w);
         [[unroll]] for (uint p = 0u; p < STRIP; p++) {
-            composite(mo, cd.xyz, color, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p]);
+            if (composite(mo, cd.xyz, color, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p])) {
+                last[p] = SAVE_LAST != 0 ? k + 1u : 0u;
+            }
         }
     }
     // Cut off before the end of the list with pixels still unfinished (see LOOP_REPORT).
@@ -186,6 +213,7 @@ void main() {
     }
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {
         write_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p], done[p]);
+        write_last(pix0 + uvec2(p, 0u), last[p]);
     }
 }
 #endif

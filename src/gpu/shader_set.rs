@@ -75,7 +75,7 @@ shader_bindings! {
     order { PARAMS, DEPTH_ORDER, TOUCHED, TOUCHED_IN_ORDER }
     keys { PARAMS, SPLAT_TEXELS, RECTS, OFFSETS, KEYS, VALUES, COUNTERS, DEPTH_ORDER, BIN_MASKS }
     ranges { KEYS, RANGES, COUNTERS }
-    blend { PARAMS, SPLATS, VALUES, RANGES, COLOR, DEPTH, COUNTERS }
+    blend { PARAMS, SPLATS, VALUES, RANGES, COLOR, DEPTH, COUNTERS, LAST }
     blend_features { PARAMS, SPLATS, VALUES, RANGES, FEATURES, OUTPUT, COUNTERS, COLOR_STATE }
     pack { COLOR, PACKED }
     shade { WORDS, FEATURES, COLOR }
@@ -243,25 +243,22 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
             ));
         }
     }
-    for kernel in splat_kernels {
-        // The shared kernel (one pixel per invocation, buffers) and the texel strips.
-        out.push(v(
-            "blend",
-            &[
-                ("STRIP", "1".to_string()),
-                ("TEXEL_FETCH", bit(false)),
-                ("SPLAT_KERNEL", kernel.to_string()),
-            ],
-        ));
-        for strip in STRIPS {
-            out.push(v(
-                "blend",
-                &[
-                    ("STRIP", strip.to_string()),
-                    ("TEXEL_FETCH", bit(true)),
-                    ("SPLAT_KERNEL", kernel.to_string()),
-                ],
-            ));
+    // The shared kernel (one pixel per invocation, buffers) and the texel strips, each
+    // also saving the last contributor (frames a backward pass reads).
+    for save_last in [false, true] {
+        for kernel in splat_kernels {
+            let kernels = std::iter::once((1, false)).chain(STRIPS.map(|strip| (strip, true)));
+            for (strip, texel) in kernels {
+                out.push(v(
+                    "blend",
+                    &[
+                        ("STRIP", strip.to_string()),
+                        ("TEXEL_FETCH", bit(texel)),
+                        ("SPLAT_KERNEL", kernel.to_string()),
+                        ("SAVE_LAST", bit(save_last)),
+                    ],
+                ));
+            }
         }
     }
     out

@@ -108,6 +108,7 @@ pub struct Blend {
     pipeline: ComputePipeline,
     kernel: BlendKernel,
     splat_kernel: SplatKernel,
+    save_last: bool,
 }
 
 /// Resources the stage reads and writes.
@@ -134,14 +135,19 @@ pub struct BlendBindings<'a> {
     pub resume: bool,
     /// Write the final pixels (else the state for the next chunk).
     pub last: bool,
+    /// One u32 per pixel: one past the sorted-pair index of its last composited Gaussian
+    /// (0: none); bound by (and only by) a pipeline built with `save_last`.
+    pub last_contributor: Option<BufferSlice<'a>>,
 }
 
 impl Blend {
-    /// Compiles the shader for `kernel` with the falloff of `splat_kernel`.
+    /// Compiles the shader for `kernel` with the falloff of `splat_kernel`; `save_last`
+    /// also writes each pixel's last contributor (`SAVE_LAST`, for a backward pass).
     pub fn new(
         ctx: &GpuContext,
         kernel: BlendKernel,
         splat_kernel: SplatKernel,
+        save_last: bool,
     ) -> GpuResult<Self> {
         use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
         if !STRIPS.contains(&kernel.strip()) {
@@ -154,9 +160,10 @@ impl Blend {
             ("STRIP", kernel.strip().to_string()),
             ("TEXEL_FETCH", u32::from(kernel.texel()).to_string()),
             ("SPLAT_KERNEL", format!("{}u", splat_kernel.shader_id())),
+            ("SAVE_LAST", u32::from(save_last).to_string()),
         ];
         let read = if kernel.texel() { T } else { B };
-        let bindings = by_binding([
+        let mut bindings = by_binding([
             (slot::PARAMS, B),
             (slot::SPLATS, read),
             (slot::VALUES, read),
@@ -164,7 +171,12 @@ impl Blend {
             (slot::COLOR, I),
             (slot::DEPTH, I),
             (slot::COUNTERS, B),
-        ])?;
+            (slot::LAST, B),
+        ])?
+        .to_vec();
+        if !save_last {
+            bindings.truncate(slot::LAST as usize);
+        }
         // local_size_x (the full-subgroups requirement looks at the X dimension).
         let local_x = 16 / kernel.strip();
         let pipeline = ComputePipeline::from_embedded(
@@ -179,6 +191,7 @@ impl Blend {
             pipeline,
             kernel,
             splat_kernel,
+            save_last,
         })
     }
 
@@ -214,30 +227,48 @@ impl Blend {
                 ))
             }
         };
+        // The last-contributor buffer is bound exactly when the pipeline writes it.
+        let last = match (self.save_last, b.last_contributor) {
+            (true, Some(l)) => l,
+            (false, None) => b.counters,
+            _ => {
+                return Err(crate::gpu::GpuError::Internal(
+                    "the last-contributor buffer must be bound exactly when the blend saves it"
+                        .into(),
+                ))
+            }
+        };
+        let all = by_binding([
+            (slot::PARAMS, Resource::Buffer(b.params)),
+            (slot::SPLATS, splats),
+            (slot::VALUES, values),
+            (slot::RANGES, Resource::Buffer(b.ranges)),
+            (
+                slot::COLOR,
+                Resource::Image {
+                    view: b.color.view(),
+                    layout: vk::ImageLayout::GENERAL,
+                },
+            ),
+            (
+                slot::DEPTH,
+                Resource::Image {
+                    view: b.depth.view(),
+                    layout: vk::ImageLayout::GENERAL,
+                },
+            ),
+            (slot::COUNTERS, Resource::Buffer(b.counters)),
+            (slot::LAST, Resource::Buffer(last)),
+        ])?;
+        let resources = if self.save_last {
+            &all[..]
+        } else {
+            &all[..slot::LAST as usize]
+        };
         self.pipeline.dispatch_resources(
             ctx,
             cmd,
-            &by_binding([
-                (slot::PARAMS, Resource::Buffer(b.params)),
-                (slot::SPLATS, splats),
-                (slot::VALUES, values),
-                (slot::RANGES, Resource::Buffer(b.ranges)),
-                (
-                    slot::COLOR,
-                    Resource::Image {
-                        view: b.color.view(),
-                        layout: vk::ImageLayout::GENERAL,
-                    },
-                ),
-                (
-                    slot::DEPTH,
-                    Resource::Image {
-                        view: b.depth.view(),
-                        layout: vk::ImageLayout::GENERAL,
-                    },
-                ),
-                (slot::COUNTERS, Resource::Buffer(b.counters)),
-            ])?,
+            resources,
             bytemuck::bytes_of(&super::types::BlendPush {
                 resume: u32::from(b.resume),
                 last: u32::from(b.last),

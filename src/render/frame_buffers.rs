@@ -93,6 +93,9 @@ pub(super) struct FrameBuffers {
     /// The scanned offsets read back to plan a frame's chunks (host-visible); made on
     /// the first frame rendered in chunks.
     pub(super) chunk_offsets: Option<GpuBuffer>,
+    /// One past the sorted-pair index of each pixel's last contributor; made on the first
+    /// frame that saves its forward state.
+    pub(super) last_contributor: Option<GpuBuffer>,
 }
 
 impl FrameBuffers {
@@ -229,6 +232,7 @@ impl FrameBuffers {
                 MemoryKind::Readback,
             )?,
             chunk_offsets: None,
+            last_contributor: None,
         })
     }
 
@@ -324,6 +328,7 @@ impl FrameBuffers {
         .map(|b| b.size())
         .sum::<u64>()
             + self.packed.as_ref().map_or(0, |b| b.size())
+            + self.last_contributor.as_ref().map_or(0, |b| b.size())
             + self.color.bytes()
             + self.depth.bytes()
     }
@@ -451,6 +456,25 @@ impl GpuRenderer {
         )?;
         self.sets.push(set);
         Ok(self.sets.len() - 1)
+    }
+
+    /// Makes the last-contributor buffer of set `set`'s frame buffers.
+    pub(super) fn ensure_last_contributor(&mut self, set: usize) -> GpuResult<()> {
+        let f = self.sets[set]
+            .frame
+            .as_mut()
+            .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
+        if f.last_contributor.is_none() {
+            let bytes = (u64::from(f.width) * u64::from(f.height) * 4).max(4);
+            check_binding(&self.ctx, "last contributor per pixel", bytes)?;
+            f.last_contributor = Some(GpuBuffer::new(
+                &self.ctx,
+                "last contributor per pixel",
+                bytes,
+                MemoryKind::Device,
+            )?);
+        }
+        Ok(())
     }
 
     /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.

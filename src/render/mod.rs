@@ -111,6 +111,8 @@ pub struct GpuRenderer {
     split: SplitLimits,
     /// Upload scenes compact: fp16 SH, scales and rotations ([`Self::set_compact`]).
     compact: bool,
+    /// Frames save what a backward pass reads ([`Self::set_save_forward_state`]).
+    save_forward: bool,
     ctx: GpuContext,
 }
 
@@ -143,6 +145,7 @@ impl Ticket<'_> {
             features: self.features.is_some(),
             shade: matches!(self.features, Some((_, Some(_)))),
             pack: self.readback == Readback::Rgba8,
+            save_last: false,
         }
     }
 
@@ -173,6 +176,7 @@ impl GpuRenderer {
             large_bins: None,
             split: SplitLimits::default(),
             compact: false,
+            save_forward: false,
             ctx,
         })
     }
@@ -181,6 +185,14 @@ impl GpuRenderer {
     /// [`SplitLimits`]).
     pub fn set_split_limits(&mut self, limits: SplitLimits) {
         self.split = limits;
+    }
+
+    /// Whether the frames from now on also save each pixel's last contributor for a
+    /// backward pass ([`Self::forward_state`]); off by default, so plain renders neither
+    /// compute nor store it. Frames in one piece only: a frame rendered in chunks saves no
+    /// last contributor.
+    pub fn set_save_forward_state(&mut self, on: bool) {
+        self.save_forward = on;
     }
 
     /// Pipelines built so far (each the first time a frame needed it) and the

@@ -28,6 +28,9 @@ pub(super) struct FrameNeeds {
     pub shade: bool,
     /// Colour is packed to RGBA8 on the device.
     pub pack: bool,
+    /// The blend also saves each pixel's last contributor (a frame in one piece whose
+    /// forward state a backward pass reads).
+    pub save_last: bool,
 }
 
 /// Every pipeline the renderer may use, built on first use.
@@ -40,8 +43,8 @@ pub(super) struct Pipelines {
     keys: Option<Keys>,
     sort: Option<RadixSort>,
     ranges: Option<Ranges>,
-    /// By [`SplatKernel::shader_id`].
-    blend: [Option<Blend>; 2],
+    /// By `save_last`, then [`SplatKernel::shader_id`].
+    blend: [[Option<Blend>; 2]; 2],
     /// By [`SplatKernel::shader_id`].
     feature_blend: [Option<FeatureBlend>; 2],
     shade: Option<Shade>,
@@ -98,7 +101,7 @@ impl Pipelines {
             keys: None,
             sort: None,
             ranges: None,
-            blend: [None, None],
+            blend: [[None, None], [None, None]],
             feature_blend: [None, None],
             shade: None,
             pack: None,
@@ -149,8 +152,9 @@ impl Pipelines {
             Ranges::new(ctx, texel)
         })?;
         let id = needs.kernel.shader_id() as usize;
-        ensure(&mut self.built, &mut self.blend[id], || {
-            Blend::new(ctx, kernel, needs.kernel)
+        let save = usize::from(needs.save_last);
+        ensure(&mut self.built, &mut self.blend[save][id], || {
+            Blend::new(ctx, kernel, needs.kernel, needs.save_last)
         })?;
         if needs.features {
             ensure(&mut self.built, &mut self.feature_blend[id], || {
@@ -176,7 +180,7 @@ impl Pipelines {
             keys: built(&self.keys, "keys")?,
             sort: built(&self.sort, "sort")?,
             ranges: built(&self.ranges, "ranges")?,
-            blend: built(&self.blend[id], "blend")?,
+            blend: built(&self.blend[usize::from(needs.save_last)][id], "blend")?,
             feature_blend: match needs.features {
                 true => Some(built(&self.feature_blend[id], "feature blend")?),
                 false => None,

@@ -152,8 +152,8 @@ impl GpuRenderer {
 /// of them, and the colour image whose alpha is each pixel's `1 - T_final`. Valid until
 /// the renderer records its next frame. For a frame rendered in depth-ordered chunks the
 /// pairs and ranges are the last chunk's ([`super::FrameStats::chunks`] says how many there were).
-/// The per-pixel last contributor is not saved by the forward kernels yet (the backward
-/// pass adds it).
+/// With [`GpuRenderer::set_save_forward_state`] a frame in one piece also saves each
+/// pixel's last contributor.
 pub struct ForwardState<'a> {
     /// One [`Splat`] per Gaussian: mean2d, opacity, conic, depth, colour, radius.
     pub splats: BufferSlice<'a>,
@@ -176,6 +176,10 @@ pub struct ForwardState<'a> {
     pub depth: &'a GpuImage,
     /// The frame's constants (`FrameParams`).
     pub params: BufferSlice<'a>,
+    /// One u32 per pixel (row-major): one past the index into the sorted pairs of the
+    /// last Gaussian composited into the pixel, 0 for none. Only when the frame was
+    /// rendered with [`GpuRenderer::set_save_forward_state`] and in one piece.
+    pub last_contributor: Option<BufferSlice<'a>>,
 }
 
 impl GpuRenderer {
@@ -198,6 +202,10 @@ impl GpuRenderer {
             color: &f.color,
             depth: &f.depth,
             params: f.params.whole(),
+            last_contributor: match (self.save_forward, self.stats.chunks) {
+                (true, 1) => f.last_contributor.as_ref().map(|b| b.whole()),
+                _ => None,
+            },
         })
     }
 }

@@ -29,7 +29,9 @@ impl GpuRenderer {
         wait: bool,
         pass: Pass,
     ) -> GpuResult<()> {
-        let needs = t.needs();
+        let mut needs = t.needs();
+        // Only a frame in one piece has one list per bin to point into.
+        needs.save_last = self.save_forward && matches!(pass, Pass::Whole);
         self.pipelines.prepare(&self.ctx, needs)?;
         let window = self.preprocess_window();
         let Self {
@@ -66,6 +68,7 @@ impl GpuRenderer {
             params: frame_params(t.scene, &t.cam, &t.opts, f.capacity, *bin_size),
             bin_size: *bin_size,
             window,
+            save_last: needs.save_last,
         };
         let record = |cmd| recorder.record(cmd, pass);
         if wait {
@@ -143,6 +146,8 @@ struct FrameRecorder<'a> {
     bin_size: u32,
     /// Gaussians per preprocess window.
     window: u32,
+    /// The blend writes each pixel's last contributor.
+    save_last: bool,
 }
 
 impl FrameRecorder<'_> {
@@ -382,6 +387,15 @@ impl FrameRecorder<'_> {
             barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
         }
         let tiles = self.cam.tile_grid();
+        let last_contributor = match (self.save_last, f.last_contributor.as_ref()) {
+            (false, _) => None,
+            (true, Some(buffer)) => Some(buffer.whole()),
+            (true, None) => {
+                return Err(GpuError::Internal(
+                    "the last-contributor buffer was not made".into(),
+                ))
+            }
+        };
         self.timer.stage(ctx, cmd, Stage::Blend.name(), |cmd| {
             p.blend.record(
                 ctx,
@@ -398,6 +412,7 @@ impl FrameRecorder<'_> {
                     counters: f.counters.whole(),
                     resume,
                     last,
+                    last_contributor,
                 },
                 tiles,
             )

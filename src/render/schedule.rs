@@ -164,6 +164,9 @@ impl GpuRenderer {
         if t.readback == Readback::Rgba8 {
             self.ensure_packed(t.set)?;
         }
+        if self.save_forward && matches!(pass, Pass::Whole) {
+            self.ensure_last_contributor(t.set)?;
+        }
         if let Some((features, _)) = t.features {
             let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
             self.ensure_feature_planes(t.set, features, pixels)?;

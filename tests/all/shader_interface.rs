@@ -51,10 +51,12 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
             built += 1;
         }
     }
-    for kernel in SplatKernel::ALL {
-        for blend in BlendKernel::all() {
-            Blend::new(ctx, blend, kernel).expect("blend");
-            built += 1;
+    for save_last in [false, true] {
+        for kernel in SplatKernel::ALL {
+            for blend in BlendKernel::all() {
+                Blend::new(ctx, blend, kernel, save_last).expect("blend");
+                built += 1;
+            }
         }
     }
     Order::new(ctx).expect("order");
@@ -125,7 +127,12 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     }
     let blend = interface(
         "blend",
-        &[("STRIP", "1"), ("TEXEL_FETCH", "0"), ("SPLAT_KERNEL", "0u")],
+        &[
+            ("STRIP", "1"),
+            ("TEXEL_FETCH", "0"),
+            ("SPLAT_KERNEL", "0u"),
+            ("SAVE_LAST", "0"),
+        ],
     );
     assert!(
         blend
