@@ -354,13 +354,16 @@ pub(super) struct FrameSet {
     pub(super) bin_size: u32,
     /// The serial number of the frame submitted in this set and not finished yet.
     pub(super) pending: Option<u64>,
+    /// The frame last recorded in this set writes each pixel's last contributor (a frame
+    /// in one piece recorded while the renderer saves its forward state).
+    pub(super) saves_last: bool,
 }
 
 impl FrameSet {
     pub(super) fn new(ctx: &GpuContext, index: usize, bin_size: u32) -> GpuResult<Self> {
         Ok(FrameSet {
             slot: FrameSlot::new(ctx, &format!("frame {index}"))?,
-            // Two timestamps per stage: up to ten stages (features and shade included).
+            // Two timestamps per stage, as many stages as one submission records.
             timer: GpuTimer::new(
                 ctx,
                 &format!("frame {index} timestamps"),
@@ -370,6 +373,7 @@ impl FrameSet {
             feature_planes: None,
             bin_size,
             pending: None,
+            saves_last: false,
         })
     }
 }

@@ -137,15 +137,16 @@ pub struct Ticket<'a> {
 }
 
 impl Ticket<'_> {
-    /// What recording the frame takes: the pipelines it needs.
-    fn needs(&self) -> FrameNeeds {
+    /// What recording the frame takes: the pipelines it needs; `save_last` as its set
+    /// records it ([`FrameSet::saves_last`]).
+    fn needs(&self, save_last: bool) -> FrameNeeds {
         FrameNeeds {
             compact: self.scene.compact,
             kernel: self.opts.kernel,
             features: self.features.is_some(),
             shade: matches!(self.features, Some((_, Some(_)))),
             pack: self.readback == Readback::Rgba8,
-            save_last: false,
+            save_last,
         }
     }
 

@@ -202,9 +202,9 @@ impl GpuRenderer {
             color: &f.color,
             depth: &f.depth,
             params: f.params.whole(),
-            last_contributor: match (self.save_forward, self.stats.chunks) {
-                (true, 1) => f.last_contributor.as_ref().map(|b| b.whole()),
-                _ => None,
+            last_contributor: match set.saves_last {
+                true => f.last_contributor.as_ref().map(|b| b.whole()),
+                false => None,
             },
         })
     }

@@ -29,9 +29,11 @@ impl GpuRenderer {
         wait: bool,
         pass: Pass,
     ) -> GpuResult<()> {
-        let mut needs = t.needs();
-        // Only a frame in one piece has one list per bin to point into.
-        needs.save_last = self.save_forward && matches!(pass, Pass::Whole);
+        let set = self
+            .sets
+            .get(t.set)
+            .ok_or_else(|| GpuError::Internal(format!("no frame set {}", t.set)))?;
+        let needs = t.needs(set.saves_last);
         self.pipelines.prepare(&self.ctx, needs)?;
         let window = self.preprocess_window();
         let Self {

@@ -164,9 +164,12 @@ impl GpuRenderer {
         if t.readback == Readback::Rgba8 {
             self.ensure_packed(t.set)?;
         }
-        if self.save_forward && matches!(pass, Pass::Whole) {
+        // Only a frame in one piece has one list per bin for the index to point into.
+        let saves_last = self.save_forward && matches!(pass, Pass::Whole);
+        if saves_last {
             self.ensure_last_contributor(t.set)?;
         }
+        self.sets[t.set].saves_last = saves_last;
         if let Some((features, _)) = t.features {
             let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
             self.ensure_feature_planes(t.set, features, pixels)?;

@@ -457,6 +457,12 @@ fn check_last_contributor(r: &mut GpuRenderer) {
         .unwrap();
     r.set_save_forward_state(false);
     assert_eq!(saved, plain, "saving the state changes no pixel");
+    // What counts is how the last frame was rendered, not the switch: a frame rendered
+    // without it has no last contributor, even when the switch is turned on after it.
+    r.render(&gs, &cam, &opts).unwrap();
+    r.set_save_forward_state(true);
+    assert!(r.forward_state().unwrap().last_contributor.is_none());
+    r.set_save_forward_state(false);
     let (bins_x, bin) = (inter.bins.0, inter.bin_size);
     let (mut equal, mut covered) = (0usize, 0usize);
     for y in 0..cam.height {
