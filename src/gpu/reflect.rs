@@ -80,7 +80,7 @@ enum Type {
 /// Reads the interface of a SPIR-V module; `Err` names what is malformed.
 pub fn reflect(words: &[u32]) -> Result<Interface, String> {
     use std::collections::HashMap;
-    if words.len() < 5 || words[0] != 0x0723_0203 {
+    if words.len() < 5 || words[0] != super::shader_set::SPIRV_MAGIC {
         return Err("not a SPIR-V module".into());
     }
     let mut types: HashMap<u32, Type> = HashMap::new();

@@ -2,7 +2,7 @@
 // host, and the one GLSL -> SPIR-V compile call (Khronos' `glslc`, shaderc's command line).
 //
 // This file is compiled twice: into the library (`crate::gpu::shader_set`) and into the
-// build script (`include!`d by `build.rs`), which compiles every variant below to SPIR-V
+// build script (a `#[path]` module of `build.rs`), which compiles every variant below to SPIR-V
 // and embeds it, so no binary or test links a GLSL compiler. It therefore uses `std` only.
 // Runtime compilation exists only for shader development (`VKSPLAT_GLSL_DIR`), through the
 // same [`compile_glsl_file`].
@@ -310,6 +310,9 @@ pub fn compile_glsl_file(
     spirv_words(&bytes).ok_or_else(|| format!("{display}: glslc wrote no valid SPIR-V"))
 }
 
+/// The first word of every SPIR-V module.
+pub const SPIRV_MAGIC: u32 = 0x0723_0203;
+
 /// SPIR-V bytes as little-endian words, if they start with the SPIR-V magic number.
 pub fn spirv_words(bytes: &[u8]) -> Option<Vec<u32>> {
     if bytes.len() < 20 || bytes.len() % 4 != 0 {
@@ -319,5 +322,5 @@ pub fn spirv_words(bytes: &[u8]) -> Option<Vec<u32>> {
         .chunks_exact(4)
         .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
-    (words[0] == 0x0723_0203).then_some(words)
+    (words[0] == SPIRV_MAGIC).then_some(words)
 }

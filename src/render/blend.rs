@@ -230,6 +230,7 @@ impl Blend {
         // The last-contributor buffer is bound exactly when the pipeline writes it.
         let last = match (self.save_last, b.last_contributor) {
             (true, Some(l)) => l,
+            // Any buffer: the slot is cut off below for a pipeline without it.
             (false, None) => b.counters,
             _ => {
                 return Err(crate::gpu::GpuError::Internal(
