@@ -5,6 +5,8 @@
 //! [`preprocess`] -> [`tile_keys`] -> [`sort_pairs`] -> [`tile_ranges`] -> [`blend`].
 //! The rules are those of `shared/docs/reference-semantics.md`.
 
+pub mod backward;
+
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::model::ActivatedScene;

@@ -7,6 +7,7 @@
 //! needs another for its types. `cpu` and `scene` re-export what used to live in them
 //! (`cpu::RenderOptions`, `cpu::sh`, `scene::ActivatedScene`, ...).
 
+pub mod grad;
 pub mod sh;
 
 /// The reference's constants, defined once in [`crate::rules`] (the shaders get them from

@@ -24,6 +24,7 @@ mod gpu_frames;
 mod gpu_memory;
 mod gpu_sort;
 mod gpu_stages;
+mod gradients;
 mod limits;
 mod malformed;
 mod mlp;

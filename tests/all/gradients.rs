@@ -1,0 +1,282 @@
+//! The differentiable rasterizer's CPU reference (`cpu::backward`, f64) against central
+//! finite differences of its own forward pass, parameter group by parameter group: SH
+//! degrees 0-3, both kernels, direct (feature) channels, backgrounds, depth and alpha
+//! gradients, a Gaussian cut by the T < 1e-4 stop and one skipped at alpha < 1/255. Its
+//! forward is checked against the f32 CPU renderer, so both follow the same rules.
+//!
+//! Tolerance: the loss is smooth at the tested points (a decision flipping within +-h
+//! would show as an O(1) error, not a small one), and central
+//! differences in f64 with h = 1e-6 have truncation error ~h^2 |f'''| and rounding error
+//! ~1e-16 |L| / h ~ 1e-10 relative: a relative L2 error of 1e-6 per group leaves four
+//! orders of margin and would catch any wrong term (those are O(1) relative).
+
+use crate::common::Rng;
+use glam::Vec3;
+use vksplat::camera::Camera;
+use vksplat::cpu::backward::{backward, forward, Image64};
+use vksplat::cpu::{RenderOptions, SplatKernel};
+use vksplat::model::grad::{relative_l2, ColorParams, PixelGrads, SplatParams, GRAD_GROUPS};
+
+/// A 48x40 camera looking at the origin from about 3 units away.
+pub fn grad_camera() -> Camera {
+    Camera::look_at(
+        "grad",
+        48,
+        40,
+        0.9,
+        Vec3::new(0.4, -0.3, -3.0),
+        Vec3::ZERO,
+        Vec3::new(0.0, -1.0, 0.0),
+    )
+}
+
+/// `n` random Gaussians in view with SH colours of `degree`, or `channels` direct values.
+pub fn grad_scene(n: usize, seed: u64, colors: Option<u32>, channels: usize) -> SplatParams<f32> {
+    let mut rng = Rng(seed);
+    let mut p = SplatParams {
+        means: Vec::new(),
+        quats: Vec::new(),
+        scales: Vec::new(),
+        opacities: Vec::new(),
+        colors: ColorParams::Direct {
+            channels,
+            values: Vec::new(),
+        },
+    };
+    for _ in 0..n {
+        p.means.push([rng.range(-0.8, 0.8), rng.range(-0.6, 0.6), rng.range(-0.5, 0.5)]);
+        // Unnormalised, with a length away from 1, to test the normalisation's gradient.
+        let len = rng.range(0.5, 2.0);
+        p.quats.push([
+            len * rng.range(0.3, 1.0),
+            len * rng.range(-1.0, 1.0),
+            len * rng.range(-1.0, 1.0),
+            len * rng.range(-1.0, 1.0),
+        ]);
+        p.scales.push([rng.range(0.05, 0.3), rng.range(0.05, 0.3), rng.range(0.03, 0.2)]);
+        p.opacities.push(rng.range(0.2, 0.95));
+    }
+    p.colors = match colors {
+        Some(degree) => {
+            let k = ((degree + 1) * (degree + 1)) as usize;
+            let mut coeffs = Vec::new();
+            for _ in 0..n {
+                // A DC term that keeps most colours above the clamp, higher bands smaller.
+                for j in 0..k {
+                    for _ in 0..3 {
+                        coeffs.push(if j == 0 { rng.range(-0.5, 1.5) } else { rng.range(-0.4, 0.4) });
+                    }
+                }
+            }
+            ColorParams::Sh { degree, coeffs }
+        }
+        None => ColorParams::Direct {
+            channels,
+            values: (0..n * channels).map(|_| rng.range(-1.0, 1.0)).collect(),
+        },
+    };
+    p
+}
+
+/// Random pixel gradients for a frame of `channels`.
+pub fn pixel_grads(cam: &Camera, channels: usize, seed: u64, depth: bool) -> PixelGrads<f64> {
+    let mut rng = Rng(seed);
+    let px = (cam.width * cam.height) as usize;
+    PixelGrads {
+        color: (0..px * channels).map(|_| rng.range(-1.0, 1.0) as f64).collect(),
+        alpha: (0..px).map(|_| rng.range(-1.0, 1.0) as f64).collect(),
+        depth: if depth {
+            (0..px).map(|_| 0.3 * rng.range(-1.0, 1.0) as f64).collect()
+        } else {
+            Vec::new()
+        },
+    }
+}
+
+fn loss(img: &Image64, g: &PixelGrads<f64>) -> f64 {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    dot(&img.color, &g.color) + dot(&img.alpha, &g.alpha) + dot(&img.depth, &g.depth)
+}
+
+/// Mutable access to scalar `k` of parameter group `group`.
+fn scalar<'a>(p: &'a mut SplatParams<f64>, group: &str, k: usize) -> &'a mut f64 {
+    match group {
+        "means" => &mut p.means[k / 3][k % 3],
+        "quats" => &mut p.quats[k / 4][k % 4],
+        "scales" => &mut p.scales[k / 3][k % 3],
+        "opacities" => &mut p.opacities[k],
+        "colors" => match &mut p.colors {
+            ColorParams::Sh { coeffs, .. } => &mut coeffs[k],
+            ColorParams::Direct { values, .. } => &mut values[k],
+        },
+        _ => unreachable!("no group {group}"),
+    }
+}
+
+/// Central differences of the loss for every scalar of every parameter group.
+pub fn finite_differences(
+    p: &SplatParams<f64>,
+    cam: &Camera,
+    opts: &RenderOptions,
+    bg: &[f64],
+    g: &PixelGrads<f64>,
+) -> Vec<(&'static str, Vec<f64>)> {
+    let h = 1e-6;
+    let n = p.len();
+    let stride = p.color_stride();
+    let groups: [(&str, usize); 5] = [
+        ("means", n * 3),
+        ("quats", n * 4),
+        ("scales", n * 3),
+        ("opacities", n),
+        ("colors", n * stride),
+    ];
+    groups
+        .iter()
+        .map(|&(group, count)| {
+            let fd = (0..count)
+                .map(|k| {
+                    let mut plus = p.clone();
+                    *scalar(&mut plus, group, k) += h;
+                    let mut minus = p.clone();
+                    *scalar(&mut minus, group, k) -= h;
+                    let lp = loss(&forward(&plus, cam, opts, bg).unwrap(), g);
+                    let lm = loss(&forward(&minus, cam, opts, bg).unwrap(), g);
+                    (lp - lm) / (2.0 * h)
+                })
+                .collect();
+            (group, fd)
+        })
+        .collect()
+}
+
+/// Checks the reference backward against finite differences, group by group, and that the
+/// gradients are not trivially zero.
+fn check(p32: &SplatParams<f32>, opts: &RenderOptions, bg: &[f64], depth: bool, seed: u64) {
+    let cam = grad_camera();
+    let p = p32.to_f64();
+    let g = pixel_grads(&cam, p.channels(), seed, depth);
+    let grads = backward(&p, &cam, opts, bg, &g).unwrap();
+    for (group, fd) in finite_differences(&p, &cam, opts, bg, &g) {
+        let analytic = grads.group(group);
+        let err = relative_l2(&analytic, &fd);
+        let norm = fd.iter().map(|x| x * x).sum::<f64>().sqrt();
+        eprintln!("{group}: relative L2 error {err:.2e}, |fd| {norm:.3e}");
+        assert!(norm > 1e-3, "{group}: the finite differences are ~0 ({norm}); the scene tests nothing");
+        assert!(
+            err < 1e-6,
+            "{group}: relative L2 error {err:e} against finite differences\nanalytic {analytic:?}\nfd       {fd:?}"
+        );
+    }
+}
+
+#[test]
+fn reference_backward_matches_finite_differences_for_sh_degrees_0_to_3() {
+    for degree in 0..=3u32 {
+        let p = grad_scene(8, 100 + degree as u64, Some(degree), 3);
+        let opts = RenderOptions::default();
+        check(&p, &opts, &[0.2, 0.5, 0.9], true, 7 + degree as u64);
+    }
+}
+
+#[test]
+fn reference_backward_matches_finite_differences_with_the_power_kernel() {
+    let p = grad_scene(8, 200, Some(1), 3);
+    let opts = RenderOptions {
+        kernel: SplatKernel::Power,
+        ..Default::default()
+    };
+    check(&p, &opts, &[0.0, 0.3, 0.0], true, 21);
+}
+
+#[test]
+fn reference_backward_matches_finite_differences_for_feature_channels() {
+    let p = grad_scene(7, 300, None, 5);
+    check(&p, &RenderOptions::default(), &[0.1, 0.0, -0.2, 0.3, 0.0], false, 31);
+    let opts = RenderOptions {
+        kernel: SplatKernel::Power,
+        ..Default::default()
+    };
+    check(&p, &opts, &[0.0; 5], true, 32);
+}
+
+#[test]
+fn reference_backward_matches_finite_differences_with_options() {
+    // A scale modifier and an SH degree below the stored one.
+    let p = grad_scene(8, 400, Some(3), 3);
+    let opts = RenderOptions {
+        scale_modifier: 0.8,
+        sh_degree: Some(2),
+        ..Default::default()
+    };
+    check(&p, &opts, &[1.0, 1.0, 1.0], true, 41);
+}
+
+/// A stack of near-opaque Gaussians stops pixels at T < 1e-4 (the Gaussians behind are
+/// cut there), and a faint one (opacity below 1/255) is skipped everywhere: its gradient is
+/// exactly zero, as are its finite differences.
+#[test]
+fn reference_backward_handles_the_transmittance_stop_and_the_alpha_skip() {
+    let cam = grad_camera();
+    let mut p = grad_scene(6, 500, Some(1), 3);
+    let mut stack = |z: f32, o: f32, s: f32| {
+        p.means.push([0.05, 0.02, z]);
+        p.quats.push([1.0, 0.1, 0.0, 0.0]);
+        p.scales.push([s, s * 0.9, s]);
+        p.opacities.push(o);
+        if let ColorParams::Sh { coeffs, .. } = &mut p.colors {
+            coeffs.extend([0.8, -0.3, 0.4, 0.1, 0.2, -0.1, 0.0, 0.1, 0.2, -0.2, 0.1, 0.0]);
+        }
+    };
+    for (k, z) in [-1.2f32, -1.1, -1.0, -0.9].iter().enumerate() {
+        stack(*z, 0.985 - 0.01 * k as f32, 0.35);
+    }
+    stack(-1.3, 0.003, 0.4); // below 1/255 everywhere
+    let faint = p.len() - 1;
+    let p64 = p.to_f64();
+    let opts = RenderOptions::default();
+    // The stop happens: some pixels end with T in [1e-4 / (1 - 0.99), ...): alpha above
+    // 1 - 1e-2 after three or four of the stacked Gaussians, and the last one is cut.
+    let img = forward(&p64, &cam, &opts, &[0.0; 3]).unwrap();
+    let stopped = img.alpha.iter().filter(|&&a| 1.0 - a < 1e-3).count();
+    assert!(stopped > 10, "only {stopped} pixels end near T = 1e-4");
+    let g = pixel_grads(&cam, 3, 51, true);
+    let grads = backward(&p64, &cam, &opts, &[0.0, 0.0, 0.0], &g).unwrap();
+    assert_eq!(grads.opacities[faint], 0.0);
+    assert_eq!(grads.means[faint], [0.0; 3]);
+    check(&p, &opts, &[0.0, 0.0, 0.0], true, 51);
+}
+
+/// The f64 reference follows the f32 renderer's rules: same image up to rounding.
+#[test]
+fn reference_forward_equals_the_cpu_renderer() {
+    let cam = grad_camera();
+    let p = grad_scene(30, 600, Some(3), 3);
+    let opts = RenderOptions {
+        background: [0.1, 0.2, 0.3],
+        ..Default::default()
+    };
+    let frame = vksplat::cpu::render(&p.to_activated(), &cam, &opts);
+    let img = forward(&p.to_f64(), &cam, &opts, &[0.1, 0.2, 0.3]).unwrap();
+    let mut worst = 0.0f64;
+    for (i, c) in frame.color.iter().enumerate() {
+        for ch in 0..3 {
+            worst = worst.max((c[ch] as f64 - img.color[i * 3 + ch]).abs());
+        }
+        worst = worst.max((frame.alpha[i] as f64 - img.alpha[i]).abs());
+    }
+    assert!(worst < 1e-4, "largest difference {worst}");
+    assert!(img.alpha.iter().filter(|&&a| a > 0.5).count() > 100, "the frame is mostly empty");
+}
+
+/// Every group the comparisons walk is covered by `SplatGrads::group`.
+#[test]
+fn every_gradient_group_has_values() {
+    let p = grad_scene(3, 700, Some(0), 3).to_f64();
+    let cam = grad_camera();
+    let g = pixel_grads(&cam, 3, 71, false);
+    let grads = backward(&p, &cam, &RenderOptions::default(), &[0.0; 3], &g).unwrap();
+    for group in GRAD_GROUPS {
+        assert!(!grads.group(group).is_empty(), "{group}");
+    }
+}
