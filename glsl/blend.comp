@@ -19,7 +19,8 @@
 #define SPLAT_KERNEL 0u
 #endif
 // SAVE_LAST = 1 (frames whose forward state a backward pass reads) also writes, per pixel,
-// one past the sorted-pair index of the last Gaussian composited into it (0: none).
+// one past the sorted-pair index of the last Gaussian composited into it (0: none) and the
+// bits of its final transmittance (exact: 1 - alpha would lose its low bits).
 #ifndef SAVE_LAST
 #define SAVE_LAST 0
 #endif
@@ -45,7 +46,7 @@ layout(binding = BLEND_COLOR, rgba32f) uniform image2D out_color;  // rgb + T * 
 layout(binding = BLEND_DEPTH, r32f) uniform image2D out_depth;     // alpha-normalised depth
 layout(std430, binding = BLEND_COUNTERS) buffer CounterBuf { Counters counters; };
 #if SAVE_LAST
-layout(std430, binding = BLEND_LAST) writeonly buffer LastBuf { uint last_contributor[]; };
+layout(std430, binding = BLEND_LAST) writeonly buffer LastBuf { uvec2 last_state[]; };
 #endif
 // A frame keyed in depth-ordered chunks (src/render/mod.rs) is blended once per chunk:
 // every chunk but the first resumes each pixel from the state the previous one left in
@@ -75,11 +76,12 @@ bool composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
     return add;
 }
 
-// One past the pair index of the pixel's last composited Gaussian (a frame in one piece).
-void write_last(uvec2 pix, uint last) {
+// One past the pair index of the pixel's last composited Gaussian and the pixel's final
+// transmittance (a frame in one piece).
+void write_last(uvec2 pix, uint last, float T) {
 #if SAVE_LAST
     if (pix.x < params.image.x && pix.y < params.image.y) {
-        last_contributor[pix.y * params.image.x + pix.x] = last;
+        last_state[pix.y * params.image.x + pix.x] = uvec2(last, floatBitsToUint(T));
     }
 #endif
 }
@@ -156,7 +158,7 @@ void main() {
         barrier();
     }
     write_pixel(pix, T, C, D, done);
-    write_last(pix, last);
+    write_last(pix, last, T);
 }
 #else
 void main() {
@@ -213,7 +215,7 @@ void main() {
     }
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {
         write_pixel(pix0 + uvec2(p, 0u), T[p], C[p], D[p], done[p]);
-        write_last(pix0 + uvec2(p, 0u), last[p]);
+        write_last(pix0 + uvec2(p, 0u), last[p], T[p]);
     }
 }
 #endif

@@ -96,7 +96,9 @@ fn check(
     background: &[f64],
 ) -> Result<(), String> {
     if opts.antialiased {
-        return Err("the backward pass does not support the antialiased opacity compensation".into());
+        return Err(
+            "the backward pass does not support the antialiased opacity compensation".into(),
+        );
     }
     if background.len() != p.channels() {
         return Err(format!(
@@ -118,9 +120,21 @@ fn normalized(q: [f64; 4]) -> [f64; 4] {
 fn quat_mat(q: [f64; 4]) -> DMat3 {
     let [r, x, y, z] = q;
     DMat3::from_cols(
-        DVec3::new(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + r * z), 2.0 * (x * z - r * y)),
-        DVec3::new(2.0 * (x * y - r * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + r * x)),
-        DVec3::new(2.0 * (x * z + r * y), 2.0 * (y * z - r * x), 1.0 - 2.0 * (x * x + y * y)),
+        DVec3::new(
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y + r * z),
+            2.0 * (x * z - r * y),
+        ),
+        DVec3::new(
+            2.0 * (x * y - r * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z + r * x),
+        ),
+        DVec3::new(
+            2.0 * (x * z + r * y),
+            2.0 * (y * z - r * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ),
     )
 }
 
@@ -348,11 +362,19 @@ struct Step {
 
 /// The reference's compositing loop at pixel `(px, py)` over `ids` front to back: the
 /// Gaussians added and the final transmittance.
-fn composite(projs: &[Option<Proj>], ids: &[u32], px: f64, py: f64, kernel: SplatKernel) -> (Vec<Step>, f64) {
+fn composite(
+    projs: &[Option<Proj>],
+    ids: &[u32],
+    px: f64,
+    py: f64,
+    kernel: SplatKernel,
+) -> (Vec<Step>, f64) {
     let mut t = 1.0;
     let mut steps = Vec::new();
     for &id in ids {
-        let g = projs[id as usize].as_ref().expect("listed Gaussians are projected");
+        let g = projs[id as usize]
+            .as_ref()
+            .expect("listed Gaussians are projected");
         let dx = g.mean2d[0] - px;
         let dy = g.mean2d[1] - py;
         let [ca, cb, cc] = g.conic;
@@ -372,7 +394,15 @@ fn composite(projs: &[Option<Proj>], ids: &[u32], px: f64, py: f64, kernel: Spla
         if test_t < T_MIN as f64 {
             break;
         }
-        steps.push(Step { id, alpha, unclamped, t, power, dx, dy });
+        steps.push(Step {
+            id,
+            alpha,
+            unclamped,
+            t,
+            power,
+            dx,
+            dy,
+        });
         t = test_t;
     }
     (steps, t)
@@ -429,8 +459,13 @@ pub fn forward(
             let mut alpha = vec![0.0; w];
             let mut depth = vec![0.0; w];
             for x in 0..w {
-                let (steps, t) =
-                    composite(&r.projs, r.pixel_list(x as u32, y as u32), x as f64, y as f64, opts.kernel);
+                let (steps, t) = composite(
+                    &r.projs,
+                    r.pixel_list(x as u32, y as u32),
+                    x as f64,
+                    y as f64,
+                    opts.kernel,
+                );
                 let mut dacc = 0.0;
                 for s in &steps {
                     let g = r.projs[s.id as usize].as_ref().expect("projected");
@@ -512,11 +547,17 @@ pub fn backward(
             for x in 0..w {
                 let idx = y * w + x;
                 let (gc, ga, gd) = pixel_grad(grads, idx, d);
-                let (steps, t_final) =
-                    composite(&r.projs, r.pixel_list(x as u32, y as u32), x as f64, y as f64, opts.kernel);
+                let (steps, t_final) = composite(
+                    &r.projs,
+                    r.pixel_list(x as u32, y as u32),
+                    x as f64,
+                    y as f64,
+                    opts.kernel,
+                );
                 let mut dacc = 0.0;
                 for s in &steps {
-                    dacc += r.projs[s.id as usize].as_ref().expect("projected").depth * s.alpha * s.t;
+                    dacc +=
+                        r.projs[s.id as usize].as_ref().expect("projected").depth * s.alpha * s.t;
                 }
                 let a = 1.0 - t_final;
                 // depth = dacc / a: its gradient reaches dacc and alpha.
@@ -548,7 +589,9 @@ pub fn backward(
                     if s.unclamped < ALPHA_MAX as f64 {
                         let (da_do, da_dpower) = match opts.kernel {
                             SplatKernel::Gaussian => (s.power.exp(), s.unclamped),
-                            SplatKernel::Power => (1.0 + 2.0 * s.power / 9.0, g.opacity * 2.0 / 9.0),
+                            SplatKernel::Power => {
+                                (1.0 + 2.0 * s.power / 9.0, g.opacity * 2.0 / 9.0)
+                            }
                         };
                         e.opacity += g_a * da_do;
                         let gp = g_a * da_dpower;
@@ -669,21 +712,26 @@ fn project_backward(
     let g_m = (g_cov + g_cov.transpose()) * m;
     let rot = quat_mat(q);
     let modifier = opts.scale_modifier as f64;
-    let mut g_scale = [0.0; 3];
-    for k in 0..3 {
-        g_scale[k] = rot.col(k).dot(g_m.col(k)) * modifier;
-    }
+    let g_scale: [f64; 3] = std::array::from_fn(|k| rot.col(k).dot(g_m.col(k)) * modifier);
     let g_rot = DMat3::from_cols(g_m.col(0) * s.x, g_m.col(1) * s.y, g_m.col(2) * s.z);
     // R[row][col] = g_rot.col(col)[row].
     let gr = |row: usize, col: usize| g_rot.col(col)[row];
     let [qr, qx, qy, qz] = q;
     let gq = [
-        2.0 * (qz * (gr(1, 0) - gr(0, 1)) + qy * (gr(0, 2) - gr(2, 0)) + qx * (gr(2, 1) - gr(1, 2))),
-        2.0 * (qy * (gr(1, 0) + gr(0, 1)) + qz * (gr(2, 0) + gr(0, 2)) + qr * (gr(2, 1) - gr(1, 2))
+        2.0 * (qz * (gr(1, 0) - gr(0, 1))
+            + qy * (gr(0, 2) - gr(2, 0))
+            + qx * (gr(2, 1) - gr(1, 2))),
+        2.0 * (qy * (gr(1, 0) + gr(0, 1))
+            + qz * (gr(2, 0) + gr(0, 2))
+            + qr * (gr(2, 1) - gr(1, 2))
             - 2.0 * qx * (gr(1, 1) + gr(2, 2))),
-        2.0 * (qx * (gr(1, 0) + gr(0, 1)) + qr * (gr(0, 2) - gr(2, 0)) + qz * (gr(2, 1) + gr(1, 2))
+        2.0 * (qx * (gr(1, 0) + gr(0, 1))
+            + qr * (gr(0, 2) - gr(2, 0))
+            + qz * (gr(2, 1) + gr(1, 2))
             - 2.0 * qy * (gr(0, 0) + gr(2, 2))),
-        2.0 * (qr * (gr(1, 0) - gr(0, 1)) + qx * (gr(2, 0) + gr(0, 2)) + qy * (gr(2, 1) + gr(1, 2))
+        2.0 * (qr * (gr(1, 0) - gr(0, 1))
+            + qx * (gr(2, 0) + gr(0, 2))
+            + qy * (gr(2, 1) + gr(1, 2))
             - 2.0 * qz * (gr(0, 0) + gr(1, 1))),
     ];
     // Normalisation: q_hat = q / |q|.

@@ -101,6 +101,10 @@ pub struct DeviceInfo {
     pub memory_budget: u64,
     /// Where [`Self::memory_budget`] comes from.
     pub budget_source: BudgetSource,
+    /// Float atomic add on storage buffers (`VK_EXT_shader_atomic_float`'s
+    /// `shaderBufferFloat32AtomicAdd`), enabled when the device has it: the backward pass's
+    /// opt-in fast accumulation uses it.
+    pub float_atomic_add: bool,
 }
 
 /// Where a context's device-memory budget comes from.
@@ -558,7 +562,7 @@ impl GpuContext {
             },
             None => (device_local_bytes, BudgetSource::Heap),
         };
-        let info = DeviceInfo {
+        let mut info = DeviceInfo {
             index,
             name: names[index].clone(),
             device_type: props[index].device_type,
@@ -583,6 +587,7 @@ impl GpuContext {
             device_local_bytes,
             memory_budget,
             budget_source,
+            float_atomic_add: false,
         };
         let needed_ops = vk::SubgroupFeatureFlags::BASIC
             | vk::SubgroupFeatureFlags::ARITHMETIC
@@ -625,7 +630,20 @@ impl GpuContext {
                 info.name
             )));
         }
-        let device_ext_names = [ash::khr::push_descriptor::NAME.as_ptr()];
+        // Float atomics, where the device has them (the backward pass's fast mode).
+        let mut atomic_float = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
+        if has_ext(&device_exts, ash::ext::shader_atomic_float::NAME) {
+            let mut query = vk::PhysicalDeviceFeatures2::default().push_next(&mut atomic_float);
+            // SAFETY: valid handle, chain of valid structs.
+            unsafe { instance.get_physical_device_features2(physical_device, &mut query) };
+        }
+        info.float_atomic_add = atomic_float.shader_buffer_float32_atomic_add == vk::TRUE;
+        let mut device_ext_names = vec![ash::khr::push_descriptor::NAME.as_ptr()];
+        let mut enable_atomic_float = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default()
+            .shader_buffer_float32_atomic_add(info.float_atomic_add);
+        if info.float_atomic_add {
+            device_ext_names.push(ash::ext::shader_atomic_float::NAME.as_ptr());
+        }
         let priorities = [1.0f32];
         let queue_infos = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
@@ -636,10 +654,13 @@ impl GpuContext {
             .maintenance4(true)
             .subgroup_size_control(full_subgroups)
             .compute_full_subgroups(full_subgroups);
-        let device_info = vk::DeviceCreateInfo::default()
+        let mut device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_infos)
             .enabled_extension_names(&device_ext_names)
             .push_next(&mut enable13);
+        if info.float_atomic_add {
+            device_info = device_info.push_next(&mut enable_atomic_float);
+        }
         // SAFETY: valid physical device and create info.
         let device = unsafe { instance.create_device(physical_device, &device_info, None) }
             .vk("vkCreateDevice")?;

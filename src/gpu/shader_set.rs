@@ -24,6 +24,12 @@ pub const META_DISPATCH: u32 = 2;
 /// Pixels per blend invocation that a texel blend kernel may be built for.
 pub const STRIPS: [u32; 4] = [1, 2, 4, 8];
 
+/// Gradient fields the blend backward writes per (bin, Gaussian) pair and the accumulation
+/// sums per Gaussian: 2D mean (2), conic (3), opacity, colour (3), depth, |2D mean| (2).
+pub const GRAD_FIELDS: u32 = 12;
+/// Specialization constant id of the most subgroups a blend-backward workgroup may have.
+pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
+
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
 /// Specialization constant id of the items each sort invocation handles.
@@ -87,6 +93,9 @@ shader_bindings! {
     sort_scatter { META, KEYS_IN, VALUES_IN, OFFSETS, KEYS_OUT, VALUES_OUT }
     sort_copy { META, KEYS_IN, VALUES_IN, KEYS_OUT, VALUES_OUT }
     count64_test { COUNT }
+    blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA }
+    grad_accumulate { VALUES, PAIR_GRADS, MAXIMA, ACC }
+    preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -134,6 +143,11 @@ pub fn shared_defines() -> Vec<(String, String)> {
         (
             "SORT_SPEC_MAX_SUBGROUPS",
             SORT_SPEC_MAX_SUBGROUPS.to_string(),
+        ),
+        ("GRAD_FIELDS", format!("{GRAD_FIELDS}u")),
+        (
+            "GRAD_SPEC_MAX_SUBGROUPS",
+            GRAD_SPEC_MAX_SUBGROUPS.to_string(),
         ),
     ]
     .into_iter()
@@ -242,6 +256,29 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
                 ],
             ));
         }
+    }
+    // The backward pass: the blend's per bin size (8: CPU devices, 16: GPUs) and kernel; the
+    // accumulation in fixed point or (the fast mode) with float atomics, native or by
+    // compare-and-swap; the preprocess's reading either.
+    for bin in ["8u", "16u"] {
+        for kernel in splat_kernels {
+            out.push(v(
+                "blend_bwd",
+                &[
+                    ("BIN", bin.to_string()),
+                    ("SPLAT_KERNEL", kernel.to_string()),
+                ],
+            ));
+        }
+    }
+    for (float, cas) in [(false, false), (true, false), (true, true)] {
+        out.push(v(
+            "grad_accumulate",
+            &[("FLOAT_ATOMICS", bit(float)), ("CAS_FALLBACK", bit(cas))],
+        ));
+    }
+    for float in [false, true] {
+        out.push(v("preprocess_bwd", &[("FLOAT_ATOMICS", bit(float))]));
     }
     // The shared kernel (one pixel per invocation, buffers) and the texel strips, each
     // also saving the last contributor (frames a backward pass reads).

@@ -255,7 +255,13 @@ impl<T: Copy + Default> SplatGrads<T> {
 
 /// Parameter groups of [`SplatGrads`], for comparisons group by group.
 pub const GRAD_GROUPS: [&str; 7] = [
-    "means", "quats", "scales", "opacities", "colors", "means2d", "absgrad",
+    "means",
+    "quats",
+    "scales",
+    "opacities",
+    "colors",
+    "means2d",
+    "absgrad",
 ];
 
 impl<T: Copy + Into<f64>> SplatGrads<T> {

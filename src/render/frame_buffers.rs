@@ -469,7 +469,8 @@ impl GpuRenderer {
             .as_mut()
             .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
         if f.last_contributor.is_none() {
-            let bytes = (u64::from(f.width) * u64::from(f.height) * 4).max(4);
+            // (last contributor, final transmittance's bits) per pixel.
+            let bytes = (u64::from(f.width) * u64::from(f.height) * 8).max(8);
             check_binding(&self.ctx, "last contributor per pixel", bytes)?;
             f.last_contributor = Some(GpuBuffer::new(
                 &self.ctx,

@@ -25,13 +25,18 @@
 //! renders while frame n is read back ([`path::GpuPath`] drives camera paths this way).
 //! [`GpuRenderer::render`] is a submit followed by its finish.
 
+pub mod backward;
 pub mod blend;
+pub mod blend_bwd;
+pub mod differentiable;
 pub mod features;
+pub mod grad_accumulate;
 pub mod keys;
 pub mod order;
 pub mod pack;
 pub mod path;
 pub mod preprocess;
+pub mod preprocess_bwd;
 pub mod ranges;
 pub mod shade;
 pub mod types;
@@ -113,6 +118,10 @@ pub struct GpuRenderer {
     compact: bool,
     /// Frames save what a backward pass reads ([`Self::set_save_forward_state`]).
     save_forward: bool,
+    /// The alpha falloff of the last finished frame (its backward pass's).
+    last_kernel: crate::model::SplatKernel,
+    /// The backward pass's pipelines and buffers, made by the first pass.
+    backward: Option<backward::BackwardState>,
     ctx: GpuContext,
 }
 
@@ -178,6 +187,8 @@ impl GpuRenderer {
             split: SplitLimits::default(),
             compact: false,
             save_forward: false,
+            last_kernel: Default::default(),
+            backward: None,
             ctx,
         })
     }

@@ -176,9 +176,10 @@ pub struct ForwardState<'a> {
     pub depth: &'a GpuImage,
     /// The frame's constants (`FrameParams`).
     pub params: BufferSlice<'a>,
-    /// One u32 per pixel (row-major): one past the index into the sorted pairs of the
-    /// last Gaussian composited into the pixel, 0 for none. Only when the frame was
-    /// rendered with [`GpuRenderer::set_save_forward_state`] and in one piece.
+    /// Two u32 per pixel (row-major): one past the index into the sorted pairs of the
+    /// last Gaussian composited into the pixel (0 for none), and the bits of the pixel's
+    /// final transmittance (f32). Only when the frame was rendered with
+    /// [`GpuRenderer::set_save_forward_state`] and in one piece.
     pub last_contributor: Option<BufferSlice<'a>>,
 }
 

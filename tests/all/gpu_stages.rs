@@ -449,12 +449,18 @@ fn check_last_contributor(r: &mut GpuRenderer) {
     let (saved, inter) = r.render_with_intermediates(&gs, &cam, &opts).unwrap();
     let state = r.forward_state().unwrap();
     let pixels = (cam.width * cam.height) as usize;
-    let last: Vec<u32> = state
+    let last_state: Vec<[u32; 2]> = state
         .last_contributor
         .expect("saved")
         .buffer
         .read(r.ctx(), pixels)
         .unwrap();
+    let last: Vec<u32> = last_state.iter().map(|s| s[0]).collect();
+    // The saved final transmittance is the frame's: alpha = 1 - T exactly as the blend
+    // computed it.
+    for (s, a) in last_state.iter().zip(&saved.alpha) {
+        assert_eq!(1.0 - f32::from_bits(s[1]), *a);
+    }
     r.set_save_forward_state(false);
     assert_eq!(saved, plain, "saving the state changes no pixel");
     // What counts is how the last frame was rendered, not the switch: a frame rendered

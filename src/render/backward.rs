@@ -1,0 +1,389 @@
+//! The backward pass on the device: from the gradient of a loss with respect to each pixel
+//! of the last frame (colour, alpha, depth) to the gradient with respect to each Gaussian's
+//! parameters, reading the frame's saved forward state ([`super::ForwardState`]): no
+//! re-sort, no re-render. Three stages in one command buffer, each with its barrier and
+//! timestamp pair, like the forward's:
+//!
+//! 1. blend backward (`blend_bwd`): per bin, back to front over its pairs, the pixels'
+//!    gradients with respect to each pair's 2D mean, conic, opacity, colour and depth,
+//!    summed over the bin in a fixed order into the pair's own slot;
+//! 2. accumulation (`grad_accumulate`): each pair's sums added to its Gaussian's, in 64-bit
+//!    fixed point by default, so the result does not depend on the order the device runs
+//!    the pairs in: gradients are bit-identical run after run ([`Accumulation`]);
+//! 3. preprocess backward (`preprocess_bwd`): the chain rule through projection,
+//!    covariance and SH to centres, quaternions, scales, opacities and SH coefficients.
+//!
+//! The rules are those of the CPU reference [`crate::cpu::backward`], which the tests hold
+//! this pass to.
+
+use super::blend_bwd::BlendBwd;
+use super::grad_accumulate::{Accumulation, GradAccumulate, GradPush};
+use super::preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
+use super::{check_binding, GpuRenderer, GpuScene};
+use crate::frame::Frame;
+use crate::gpu::shader_set::GRAD_FIELDS;
+use crate::gpu::sync::{barrier, Access};
+use crate::gpu::{GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
+use crate::model::grad::{PixelGrads, SplatGrads};
+use crate::model::{sh_coeffs_for_degree, SplatKernel};
+
+/// Timestamped stages of one backward pass.
+pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_bwd"];
+
+/// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
+/// the timer of the backward pass.
+pub(super) struct BackwardState {
+    blend: Vec<((u32, SplatKernel), BlendBwd)>,
+    accumulate: Vec<(Accumulation, GradAccumulate)>,
+    preprocess: [Option<PreprocessBwd>; 2],
+    grad_color: Option<GpuBuffer>,
+    grad_depth: Option<GpuBuffer>,
+    pair_grads: Option<GpuBuffer>,
+    maxima: Option<GpuBuffer>,
+    acc: Option<GpuBuffer>,
+    grads: Option<GpuBuffer>,
+    sh_grads: Option<GpuBuffer>,
+    timer: GpuTimer,
+    timings: Vec<(String, f64)>,
+    mode: Accumulation,
+}
+
+/// A device buffer of at least `bytes`, made or grown (never shrunk) as needed.
+fn ensure<'a>(
+    ctx: &GpuContext,
+    slot: &'a mut Option<GpuBuffer>,
+    name: &str,
+    bytes: u64,
+) -> GpuResult<&'a GpuBuffer> {
+    let bytes = bytes.max(16);
+    check_binding(ctx, name, bytes)?;
+    if !matches!(slot, Some(b) if b.size() >= bytes) {
+        *slot = None;
+        *slot = Some(GpuBuffer::new(ctx, name, bytes, MemoryKind::Device)?);
+    }
+    Ok(slot.as_ref().expect("made above"))
+}
+
+impl BackwardState {
+    fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        Ok(BackwardState {
+            blend: Vec::new(),
+            accumulate: Vec::new(),
+            preprocess: [None, None],
+            grad_color: None,
+            grad_depth: None,
+            pair_grads: None,
+            maxima: None,
+            acc: None,
+            grads: None,
+            sh_grads: None,
+            timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32)?,
+            timings: Vec::new(),
+            mode: Accumulation::default(),
+        })
+    }
+
+    fn device_bytes(&self) -> u64 {
+        [
+            &self.grad_color,
+            &self.grad_depth,
+            &self.pair_grads,
+            &self.maxima,
+            &self.acc,
+            &self.grads,
+            &self.sh_grads,
+        ]
+        .iter()
+        .map(|b| b.as_ref().map_or(0, |b| b.size()))
+        .sum()
+    }
+}
+
+/// `ceil(log2(n))` for n >= 1: the bits a count of at most `n` needs.
+fn bits_for(n: u64) -> u32 {
+    64 - n.max(1).saturating_sub(1).leading_zeros()
+}
+
+impl GpuRenderer {
+    /// How the backward passes add per-pair gradients into per-Gaussian sums
+    /// ([`Accumulation::Deterministic`] by default).
+    pub fn set_gradient_accumulation(&mut self, mode: Accumulation) -> GpuResult<()> {
+        if self.backward.is_none() {
+            self.backward = Some(BackwardState::new(&self.ctx)?);
+        }
+        if let Some(b) = self.backward.as_mut() {
+            b.mode = mode;
+        }
+        Ok(())
+    }
+
+    /// Milliseconds of each stage of the last backward pass (device timestamps), in order.
+    pub fn backward_timings(&self) -> Vec<(String, f64)> {
+        self.backward
+            .as_ref()
+            .map_or_else(Vec::new, |b| b.timings.clone())
+    }
+
+    /// Device bytes the backward pass holds (its buffers, sized by the largest pass so far).
+    pub fn backward_device_bytes(&self) -> u64 {
+        self.backward.as_ref().map_or(0, |b| b.device_bytes())
+    }
+
+    /// The backward pass of the last frame: `frame` is that frame as
+    /// [`GpuRenderer::render`] returned it (its alpha and depth turn a depth gradient into
+    /// the sums the pass walks), `scene` the scene it rendered, `grads` dL/d(each pixel).
+    /// The frame must have been rendered with [`Self::set_save_forward_state`] on, in one
+    /// piece, and be the renderer's last; its options (kernel, background, scale modifier,
+    /// SH degree) are the backward's.
+    ///
+    /// Returns gradients in the layout of the uploaded scene: `quats` with respect to the
+    /// normalised quaternions it holds, `colors` with respect to its SH coefficients
+    /// (`ActivatedScene::sh` layout), `means2d` and `absgrad` in pixels.
+    pub fn backward(
+        &mut self,
+        scene: &GpuScene,
+        frame: &Frame,
+        grads: &PixelGrads<f32>,
+    ) -> GpuResult<SplatGrads<f32>> {
+        if scene.compact {
+            return Err(GpuError::InvalidArgument(
+                "the backward pass needs a full-precision upload, not a compact one".into(),
+            ));
+        }
+        let (w, h) = (frame.width as usize, frame.height as usize);
+        let pixels = w * h;
+        for (name, len, want) in [
+            ("colour", grads.color.len(), pixels * 3),
+            ("alpha", grads.alpha.len(), pixels),
+            ("depth", grads.depth.len(), pixels),
+        ] {
+            if len != 0 && len != want {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the {name} gradient has {len} values for a {w}x{h} frame (want {want})"
+                )));
+            }
+        }
+        if frame.alpha.len() != pixels || frame.depth.len() != pixels {
+            return Err(GpuError::InvalidArgument(
+                "the frame given to the backward pass has no alpha or depth".into(),
+            ));
+        }
+        // dL/d colour and dL/d alpha per pixel; the depth (D / alpha, D = sum depth * w)
+        // passes dL/dD = g / alpha and -g depth / alpha to alpha.
+        let mut grad_color = vec![[0f32; 4]; pixels];
+        let mut grad_depth = vec![0f32; pixels];
+        for i in 0..pixels {
+            let mut g = [0f32; 4];
+            if !grads.color.is_empty() {
+                g[..3].copy_from_slice(&grads.color[i * 3..i * 3 + 3]);
+            }
+            if !grads.alpha.is_empty() {
+                g[3] = grads.alpha[i];
+            }
+            if !grads.depth.is_empty() && frame.alpha[i] > 0.0 {
+                let a = frame.alpha[i];
+                grad_depth[i] = grads.depth[i] / a;
+                g[3] -= grads.depth[i] * frame.depth[i] / a;
+            }
+            grad_color[i] = g;
+        }
+        let mut state = match self.backward.take() {
+            Some(s) => s,
+            None => BackwardState::new(&self.ctx)?,
+        };
+        let result = self.run_backward(&mut state, scene, frame, &grad_color, &grad_depth);
+        self.backward = Some(state);
+        result
+    }
+
+    fn run_backward(
+        &self,
+        st: &mut BackwardState,
+        scene: &GpuScene,
+        frame: &Frame,
+        grad_color: &[[f32; 4]],
+        grad_depth: &[f32],
+    ) -> GpuResult<SplatGrads<f32>> {
+        let ctx = &self.ctx;
+        let fs = self.forward_state()?;
+        let last = fs.last_contributor.ok_or_else(|| {
+            GpuError::InvalidArgument(
+                "the last frame saved no forward state: render it with \
+                 set_save_forward_state(true), in one piece, right before the backward pass"
+                    .into(),
+            )
+        })?;
+        let set = &self.sets[self.last];
+        let fb = set
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
+        if (fb.width, fb.height) != (frame.width, frame.height) {
+            return Err(GpuError::InvalidArgument(format!(
+                "the frame given is {}x{}, the last frame rendered {}x{}",
+                frame.width, frame.height, fb.width, fb.height
+            )));
+        }
+        let kernel = self.last_kernel;
+        let n = scene.count as u64;
+        let f = u64::from(GRAD_FIELDS);
+        let pairs = u64::from(fs.pairs);
+        let bins = fs.bins;
+        let bits = bits_for(u64::from(bins.0) * u64::from(bins.1));
+        let float_sums = st.mode != Accumulation::Deterministic;
+        // Pipelines, the first time a pass needs each.
+        if !st.blend.iter().any(|(k, _)| *k == (fs.bin_size, kernel)) {
+            st.blend.push((
+                (fs.bin_size, kernel),
+                BlendBwd::new(ctx, fs.bin_size, kernel)?,
+            ));
+        }
+        if !st.accumulate.iter().any(|(m, _)| *m == st.mode) {
+            if st.mode == Accumulation::FloatAtomics && !ctx.info().float_atomic_add {
+                return Err(GpuError::InvalidArgument(format!(
+                    "{} has no float atomic add (shaderBufferFloat32AtomicAdd); use the \
+                     compare-and-swap or the deterministic accumulation",
+                    ctx.info().name
+                )));
+            }
+            st.accumulate
+                .push((st.mode, GradAccumulate::new(ctx, st.mode)?));
+        }
+        let p = usize::from(float_sums);
+        if st.preprocess[p].is_none() {
+            st.preprocess[p] = Some(PreprocessBwd::new(ctx, float_sums)?);
+        }
+        let sh_floats = u64::from(super::sh_texel_stride(scene.sh_degree)) * 4;
+        ensure(
+            ctx,
+            &mut st.grad_color,
+            "pixel colour gradients",
+            pixels_bytes(grad_color.len(), 16),
+        )?
+        .upload(ctx, grad_color)?;
+        ensure(
+            ctx,
+            &mut st.grad_depth,
+            "pixel depth gradients",
+            pixels_bytes(grad_depth.len(), 4),
+        )?
+        .upload(ctx, grad_depth)?;
+        ensure(ctx, &mut st.pair_grads, "pair gradients", pairs * f * 4)?;
+        ensure(ctx, &mut st.maxima, "gradient maxima", f * 4)?;
+        ensure(ctx, &mut st.acc, "gradient sums", n * f * 8)?;
+        ensure(
+            ctx,
+            &mut st.grads,
+            "Gaussian gradients",
+            n * GAUSSIAN_GRAD_BYTES,
+        )?;
+        ensure(ctx, &mut st.sh_grads, "SH gradients", n * sh_floats * 4)?;
+        check_binding(ctx, "Gaussians", scene.gaussians.size())?;
+        let blend = &st
+            .blend
+            .iter()
+            .find(|(k, _)| *k == (fs.bin_size, kernel))
+            .expect("built")
+            .1;
+        let accumulate = &st
+            .accumulate
+            .iter()
+            .find(|(m, _)| *m == st.mode)
+            .expect("built")
+            .1;
+        let preprocess = st.preprocess[p].as_ref().expect("built");
+        fn buf(b: &Option<GpuBuffer>) -> crate::gpu::BufferSlice<'_> {
+            b.as_ref().expect("made above").whole()
+        }
+        let (grad_color_b, grad_depth_b) = (buf(&st.grad_color), buf(&st.grad_depth));
+        let (pair_grads, maxima, acc) = (buf(&st.pair_grads), buf(&st.maxima), buf(&st.acc));
+        let (grads, sh_grads) = (buf(&st.grads), buf(&st.sh_grads));
+        let timer = &mut st.timer;
+        ctx.submit_and_wait("backward", |cmd| {
+            // The forward's writes (an earlier submission) before this pass reads them.
+            barrier(ctx, cmd, Access::Any, Access::Any);
+            timer.reset(ctx, cmd);
+            maxima.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
+            acc.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
+            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+            timer.stage(ctx, cmd, BACKWARD_STAGES[0], |cmd| {
+                blend.record(
+                    ctx,
+                    cmd,
+                    bins,
+                    fs.params,
+                    fs.splats,
+                    fs.sorted_gaussians,
+                    fs.ranges,
+                    last,
+                    grad_color_b,
+                    grad_depth_b,
+                    pair_grads,
+                    maxima,
+                )
+            })?;
+            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+            timer.stage(ctx, cmd, BACKWARD_STAGES[1], |cmd| {
+                accumulate.record(
+                    ctx,
+                    cmd,
+                    fs.sorted_gaussians,
+                    pair_grads,
+                    maxima,
+                    acc,
+                    GradPush {
+                        count: fs.pairs,
+                        bits,
+                    },
+                )
+            })?;
+            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+            timer.stage(ctx, cmd, BACKWARD_STAGES[2], |cmd| {
+                preprocess.record(
+                    ctx,
+                    cmd,
+                    fs.params,
+                    scene.gaussians.whole(),
+                    scene.sh_texels.handle(),
+                    fs.splats,
+                    maxima,
+                    acc,
+                    grads,
+                    sh_grads,
+                    GradPush {
+                        count: scene.count,
+                        bits,
+                    },
+                )
+            })?;
+            barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
+            Ok(())
+        })?;
+        st.timings = st.timer.read(ctx)?;
+        // Read back and lay out as the uploaded scene.
+        let n = n as usize;
+        let raw: Vec<[f32; 16]> = grads.buffer.read(ctx, n)?;
+        let sh_raw: Vec<f32> = sh_grads.buffer.read(ctx, n * sh_floats as usize)?;
+        let k = sh_coeffs_for_degree(scene.sh_degree) * 3;
+        let mut out = SplatGrads::zeros(n, k);
+        for (i, g) in raw.iter().enumerate() {
+            out.means[i] = [g[0], g[1], g[2]];
+            out.opacities[i] = g[3];
+            out.quats[i] = [g[4], g[5], g[6], g[7]];
+            out.scales[i] = [g[8], g[9], g[10]];
+            out.means2d[i] = [g[12], g[13]];
+            out.absgrad[i] = [g[14], g[15]];
+            let src = &sh_raw[i * sh_floats as usize..i * sh_floats as usize + k];
+            out.colors[i * k..(i + 1) * k].copy_from_slice(src);
+        }
+        Ok(out)
+    }
+}
+
+fn pixels_bytes(count: usize, each: u64) -> u64 {
+    count as u64 * each
+}
+
+fn vk_whole() -> u64 {
+    ash::vk::WHOLE_SIZE
+}

@@ -1,0 +1,153 @@
+//! Differentiable rendering on the device, for training loops: [`DiffRasterizer`] renders
+//! Gaussians given as a trainer holds them ([`SplatParams`], gsplat's conventions) and
+//! returns the gradients of a loss with respect to them. The Python package's
+//! `vksplat.torch.rasterization` is built on it.
+
+use super::types::Splat;
+use super::{GpuRenderer, GpuScene};
+use crate::camera::Camera;
+use crate::frame::Frame;
+use crate::gpu::{GpuContext, GpuError, GpuResult};
+use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
+use crate::model::RenderOptions;
+
+pub use super::grad_accumulate::Accumulation;
+
+/// The last forward pass: what its backward pass needs.
+struct Forward {
+    token: u64,
+    frame: Frame,
+    scene: GpuScene,
+}
+
+/// A renderer that keeps each frame's forward state for a backward pass.
+pub struct DiffRasterizer {
+    renderer: GpuRenderer,
+    last: Option<Forward>,
+    next_token: u64,
+}
+
+impl DiffRasterizer {
+    /// A rasterizer on `ctx`.
+    pub fn new(ctx: GpuContext) -> GpuResult<Self> {
+        Ok(Self::with_renderer(GpuRenderer::new(ctx)?))
+    }
+
+    /// A rasterizer on a renderer made by the caller (e.g. with another blend kernel).
+    pub fn with_renderer(mut renderer: GpuRenderer) -> Self {
+        renderer.set_save_forward_state(true);
+        DiffRasterizer {
+            renderer,
+            last: None,
+            next_token: 1,
+        }
+    }
+
+    /// The renderer underneath (timings, device facts, accumulation mode).
+    pub fn renderer(&mut self) -> &mut GpuRenderer {
+        &mut self.renderer
+    }
+
+    fn check(params: &SplatParams<f32>, cam: &Camera, opts: &RenderOptions) -> GpuResult<()> {
+        params.validate().map_err(GpuError::InvalidArgument)?;
+        opts.validate().map_err(GpuError::InvalidArgument)?;
+        cam.validate()
+            .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
+        if let ColorParams::Direct { channels, .. } = params.colors {
+            return Err(GpuError::InvalidArgument(format!(
+                "colours of {channels} direct channels are not differentiable on the device yet; \
+                 pass SH coefficients (degree 0 for plain RGB) or use the CPU reference"
+            )));
+        }
+        if opts.antialiased {
+            return Err(GpuError::InvalidArgument(
+                "the backward pass does not support the antialiased opacity compensation".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Renders `params` from `cam` and keeps the frame's state for [`Self::backward`].
+    /// Returns the frame and a token naming this forward pass.
+    pub fn forward(
+        &mut self,
+        params: &SplatParams<f32>,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<(Frame, u64)> {
+        Self::check(params, cam, opts)?;
+        self.last = None;
+        let scene = self.renderer.upload(&params.to_activated())?;
+        let frame = self.renderer.render(&scene, cam, opts)?;
+        if self.renderer.forward_state()?.last_contributor.is_none() {
+            return Err(GpuError::DeviceLimit {
+                limit: "maxStorageBufferRange",
+                needed: 0,
+                max: 0,
+                message: format!(
+                    "the {}x{} frame of {} Gaussians is too large to render in one piece, \
+                     which the backward pass needs; render it smaller",
+                    cam.width,
+                    cam.height,
+                    params.len()
+                ),
+            });
+        }
+        let token = self.next_token;
+        self.next_token += 1;
+        self.last = Some(Forward {
+            token,
+            frame: frame.clone(),
+            scene,
+        });
+        Ok((frame, token))
+    }
+
+    /// Per Gaussian, the last forward pass's projection: 2D mean, conic, opacity, colour,
+    /// depth and radius (0: culled).
+    pub fn projected(&self) -> GpuResult<Vec<Splat>> {
+        let last = self
+            .last
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no forward pass yet".into()))?;
+        let state = self.renderer.forward_state()?;
+        state
+            .splats
+            .buffer
+            .read(self.renderer.ctx(), last.scene.len() as usize)
+    }
+
+    /// The gradients of a loss with respect to `params` from its gradients with respect to
+    /// the frame's pixels. `token` names the forward pass of `params`, `cam` and `opts`:
+    /// when it was the last one, its saved state is used; otherwise the frame is rendered
+    /// again first (same result: the forward pass is deterministic).
+    pub fn backward(
+        &mut self,
+        params: &SplatParams<f32>,
+        cam: &Camera,
+        opts: &RenderOptions,
+        token: u64,
+        grads: &PixelGrads<f32>,
+    ) -> GpuResult<SplatGrads<f32>> {
+        if !matches!(&self.last, Some(l) if l.token == token) {
+            self.forward(params, cam, opts)?;
+        }
+        let last = self.last.as_ref().expect("a forward pass just ran");
+        if last.scene.len() as usize != params.len() {
+            return Err(GpuError::InvalidArgument(format!(
+                "the backward pass got {} Gaussians, its forward pass {}",
+                params.len(),
+                last.scene.len()
+            )));
+        }
+        let mut g = self.renderer.backward(&last.scene, &last.frame, grads)?;
+        // The device differentiates with respect to the normalised quaternions q / |q|.
+        for (gq, q) in g.quats.iter_mut().zip(&params.quats) {
+            let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+            let u = q.map(|v| v / norm);
+            let dot: f32 = gq.iter().zip(&u).map(|(a, b)| a * b).sum();
+            *gq = [0, 1, 2, 3].map(|k| (gq[k] - u[k] * dot) / norm);
+        }
+        Ok(g)
+    }
+}

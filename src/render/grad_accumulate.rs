@@ -1,0 +1,126 @@
+//! Gradient accumulation stage (`glsl/grad_accumulate.comp`): one invocation per sorted
+//! pair adds the pair's partial sums to its Gaussian's accumulators, in 64-bit fixed
+//! point (deterministic, the default: `glsl/grad_common.glsl` states range and resolution)
+//! or with float atomics (the opt-in fast mode; by compare-and-swap where the device has no
+//! float atomic add).
+
+use crate::gpu::shader::{by_binding, BindingKind};
+use crate::gpu::shader_set::bindings::grad_accumulate as slot;
+use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use ash::vk;
+
+/// How per-pair gradients are added into per-Gaussian sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Accumulation {
+    /// 64-bit fixed-point integer atomics: bit-identical gradients run after run.
+    #[default]
+    Deterministic,
+    /// Float atomic adds (`VK_EXT_shader_atomic_float` where the device has it): the
+    /// order of additions, and so the last bits of the result, vary from run to run.
+    FloatAtomics,
+    /// Float adds by a compare-and-swap loop on the float's bits: the fast mode's fallback
+    /// for devices without float atomics (forced in tests on devices that have them).
+    CompareAndSwap,
+}
+
+impl Accumulation {
+    /// The name the `bench` and the Python package use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Accumulation::Deterministic => "deterministic",
+            Accumulation::FloatAtomics => "float-atomics",
+            Accumulation::CompareAndSwap => "cas",
+        }
+    }
+}
+
+impl std::str::FromStr for Accumulation {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "deterministic" => Ok(Accumulation::Deterministic),
+            "float-atomics" => Ok(Accumulation::FloatAtomics),
+            "cas" => Ok(Accumulation::CompareAndSwap),
+            other => Err(format!(
+                "unknown gradient accumulation {other:?}; use deterministic, float-atomics or cas"
+            )),
+        }
+    }
+}
+
+/// Invocations per workgroup (`local_size_x`).
+pub const WORKGROUP: u32 = 256;
+
+/// The accumulation pipeline of one [`Accumulation`].
+pub struct GradAccumulate {
+    pipeline: ComputePipeline,
+}
+
+/// Push constants of the accumulation and the preprocess backward: the items dispatched
+/// over (pairs; Gaussians), and log2 of the most pairs one Gaussian can have.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GradPush {
+    /// Sorted pairs (accumulation) or Gaussians (preprocess backward).
+    pub count: u32,
+    /// `ceil(log2(bins))`.
+    pub bits: u32,
+}
+
+impl GradAccumulate {
+    /// Builds the pipeline for `mode`.
+    pub fn new(ctx: &GpuContext, mode: Accumulation) -> GpuResult<Self> {
+        let (float, cas) = match mode {
+            Accumulation::Deterministic => (false, false),
+            Accumulation::FloatAtomics => (true, false),
+            Accumulation::CompareAndSwap => (true, true),
+        };
+        let storage = BindingKind::StorageBuffer;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "grad_accumulate",
+            &[
+                ("FLOAT_ATOMICS", u32::from(float).to_string()),
+                ("CAS_FALLBACK", u32::from(cas).to_string()),
+            ],
+            &by_binding([
+                (slot::VALUES, storage),
+                (slot::PAIR_GRADS, storage),
+                (slot::MAXIMA, storage),
+                (slot::ACC, storage),
+            ])?,
+            std::mem::size_of::<GradPush>() as u32,
+            WORKGROUP,
+        )?;
+        Ok(GradAccumulate { pipeline })
+    }
+
+    /// Records the dispatch over `push.count` pairs.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        values: BufferSlice,
+        pair_grads: BufferSlice,
+        maxima: BufferSlice,
+        acc: BufferSlice,
+        push: GradPush,
+    ) -> GpuResult<()> {
+        if push.count == 0 {
+            return Ok(());
+        }
+        let buffers = by_binding([
+            (slot::VALUES, values),
+            (slot::PAIR_GRADS, pair_grads),
+            (slot::MAXIMA, maxima),
+            (slot::ACC, acc),
+        ])?;
+        let groups = dispatch_grid(
+            push.count.div_ceil(WORKGROUP),
+            ctx.info().max_workgroup_count[0],
+        );
+        self.pipeline
+            .dispatch(ctx, cmd, &buffers, bytemuck::bytes_of(&push), groups)
+    }
+}

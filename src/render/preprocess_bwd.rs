@@ -1,0 +1,83 @@
+//! Preprocess backward stage (`glsl/preprocess_bwd.comp`): one invocation per Gaussian
+//! turns its accumulated gradients of the projected quantities into gradients of its
+//! centre, opacity, (normalised) quaternion, scales and SH coefficients.
+
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::preprocess_bwd as slot;
+use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use ash::vk;
+
+use super::grad_accumulate::GradPush;
+
+/// Invocations per workgroup (`local_size_x`).
+pub const WORKGROUP: u32 = 256;
+
+/// Bytes of one Gaussian's gradients in the output (`GaussianGrad`: four vec4).
+pub const GAUSSIAN_GRAD_BYTES: u64 = 64;
+
+/// The preprocess-backward pipeline.
+pub struct PreprocessBwd {
+    pipeline: ComputePipeline,
+}
+
+impl PreprocessBwd {
+    /// Builds the pipeline; `float_sums` reads accumulators written with float atomics.
+    pub fn new(ctx: &GpuContext, float_sums: bool) -> GpuResult<Self> {
+        let storage = BindingKind::StorageBuffer;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "preprocess_bwd",
+            &[("FLOAT_ATOMICS", u32::from(float_sums).to_string())],
+            &by_binding([
+                (slot::PARAMS, storage),
+                (slot::GAUSSIANS, storage),
+                (slot::SH, BindingKind::UniformTexelBuffer),
+                (slot::SPLATS, storage),
+                (slot::MAXIMA, storage),
+                (slot::ACC, storage),
+                (slot::GRADS, storage),
+                (slot::SH_GRADS, storage),
+            ])?,
+            std::mem::size_of::<GradPush>() as u32,
+            WORKGROUP,
+        )?;
+        Ok(PreprocessBwd { pipeline })
+    }
+
+    /// Records the dispatch over `count` Gaussians (`push.count` holds the count).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        params: BufferSlice,
+        gaussians: BufferSlice,
+        sh_texels: vk::BufferView,
+        splats: BufferSlice,
+        maxima: BufferSlice,
+        acc: BufferSlice,
+        grads: BufferSlice,
+        sh_grads: BufferSlice,
+        push: GradPush,
+    ) -> GpuResult<()> {
+        if push.count == 0 {
+            return Ok(());
+        }
+        let resources = by_binding([
+            (slot::PARAMS, Resource::Buffer(params)),
+            (slot::GAUSSIANS, Resource::Buffer(gaussians)),
+            (slot::SH, Resource::TexelBuffer(sh_texels)),
+            (slot::SPLATS, Resource::Buffer(splats)),
+            (slot::MAXIMA, Resource::Buffer(maxima)),
+            (slot::ACC, Resource::Buffer(acc)),
+            (slot::GRADS, Resource::Buffer(grads)),
+            (slot::SH_GRADS, Resource::Buffer(sh_grads)),
+        ])?;
+        let groups = dispatch_grid(
+            push.count.div_ceil(WORKGROUP),
+            ctx.info().max_workgroup_count[0],
+        );
+        self.pipeline
+            .dispatch_resources(ctx, cmd, &resources, bytemuck::bytes_of(&push), groups)
+    }
+}
