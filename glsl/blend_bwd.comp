@@ -1,5 +1,5 @@
 #version 460
-// Blend backward: one workgroup per bin, one invocation per pixel. Walks the bin's sorted
+// Blend backward: one workgroup per bin (two layouts, see STRIP). Walks the bin's sorted
 // pairs back to front from the last pair any of its pixels composited (the forward's saved
 // last contributor; no re-sort, no re-render), undoing each pixel's transmittance from the
 // saved final T, and writes per pair the bin's sum of the pixels' gradients with respect
@@ -15,6 +15,7 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_vote : require
+#extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
 
 #ifndef BIN
@@ -23,19 +24,37 @@
 #ifndef SPLAT_KERNEL
 #define SPLAT_KERNEL 0u
 #endif
-// Gradient fields per pair (GRAD_FIELDS, src/gpu/shader_set.rs).
-#define F GRAD_FIELDS
-// Pairs staged in shared memory at a time.
-#define BATCH 16u
+// Two variants of the same arithmetic, chosen per device like the forward blend's:
+//  - STRIP == 1 (GPUs): one invocation per pixel; pairs are staged in shared memory in
+//    batches, and each pair's sum is a subgroup sum per subgroup, then the subgroups' sums
+//    in index order.
+//  - STRIP == BIN (CPU devices, 8-pixel bins, a workgroup no larger than one subgroup): one
+//    invocation per row of the bin reads each pair once through texel views for its BIN
+//    pixels; a pair's sum is one subgroup sum, with no shared memory and no barrier.
+#ifndef STRIP
+#define STRIP 1
+#endif
+// Gradient fields per pair: GRAD_FIELDS (12, src/gpu/shader_set.rs) as three vec4:
+// (mean2d.x, mean2d.y, conic A, conic B), (conic C, opacity, colour r, colour g),
+// (colour b, depth, |mean2d.x|, |mean2d.y|).
 
+#if STRIP == 1
 layout(local_size_x = BIN, local_size_y = BIN) in;
-// At least the number of subgroups of a BIN x BIN workgroup (the host passes it from the
-// device's minimum subgroup size).
-layout(constant_id = GRAD_SPEC_MAX_SUBGROUPS) const uint MAX_SUBGROUPS = 32u;
+#else
+// One row of the bin per invocation, a 1D workgroup of BIN (8) invocations: with the
+// device's minimum subgroup size >= 8 (the host checks) it is exactly one subgroup. (A
+// (1, 8) workgroup is not: llvmpipe forms subgroups along x, one invocation each.)
+layout(local_size_x = BIN, local_size_y = 1) in;
+#endif
 
 layout(std430, binding = BLEND_BWD_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
+#if STRIP == 1
 layout(std430, binding = BLEND_BWD_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = BLEND_BWD_VALUES) readonly buffer ValueBuf { uint values[]; };
+#else
+layout(binding = BLEND_BWD_SPLATS) uniform samplerBuffer splat_texels;
+layout(binding = BLEND_BWD_VALUES) uniform usamplerBuffer value_texels;
+#endif
 layout(std430, binding = BLEND_BWD_RANGES) readonly buffer RangeBuf { uvec2 ranges[]; };
 // Per pixel: one past the last composited pair, and the final transmittance's bits.
 layout(std430, binding = BLEND_BWD_LAST) readonly buffer LastBuf { uvec2 last_state[]; };
@@ -44,49 +63,109 @@ layout(std430, binding = BLEND_BWD_LAST) readonly buffer LastBuf { uvec2 last_st
 layout(std430, binding = BLEND_BWD_GRAD_COLOR) readonly buffer GradColorBuf { vec4 grad_color[]; };
 // Per pixel: dL/d (sum of depth * weight), i.e. dL/d depth / alpha.
 layout(std430, binding = BLEND_BWD_GRAD_DEPTH) readonly buffer GradDepthBuf { float grad_depth[]; };
-layout(std430, binding = BLEND_BWD_PAIR_GRADS) writeonly buffer PairGradBuf { float pair_grads[]; };
+layout(std430, binding = BLEND_BWD_PAIR_GRADS) writeonly buffer PairGradBuf { vec4 pair_grads[]; };
 // Largest |pair sum| per field, as float bits (non-negative floats order like their bits).
 layout(std430, binding = BLEND_BWD_MAXIMA) buffer MaximaBuf { uint maxima[]; };
 
+// One pixel's state for the walk back to front.
+struct Pixel {
+    uint last;       // one past the last pair composited into it
+    float T;         // transmittance behind the Gaussian being undone
+    float t_final;
+    vec4 g_ca;       // dL/d colour, dL/d alpha
+    float g_dacc;    // dL/d sum of depth * weight
+    vec3 behind;     // colour composited behind (with the background)
+    float behind_depth;
+};
+
+Pixel load_pixel(uvec2 pix) {
+    Pixel p;
+    p.last = 0u;
+    p.T = 1.0;
+    p.g_ca = vec4(0.0);
+    p.g_dacc = 0.0;
+    if (pix.x < params.image.x && pix.y < params.image.y) {
+        uint i = pix.y * params.image.x + pix.x;
+        uvec2 state = last_state[i];
+        p.last = state.x;
+        p.T = uintBitsToFloat(state.y);
+        p.g_ca = grad_color[i];
+        p.g_dacc = grad_depth[i];
+    }
+    p.t_final = p.T;
+    p.behind = p.T * params.background.rgb;
+    p.behind_depth = 0.0;
+    return p;
+}
+
+// Undoes one Gaussian (mean2d.xy, opacity, depth; conic; colour) at pixel `pixf` and adds
+// its gradients to (a0, a1, a2): the pixel loop of cpu::backward, the forward's alpha and
+// skip rule (blend.comp, composite).
+void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec2 pixf, inout Pixel px,
+                inout vec4 a0, inout vec4 a1, inout vec4 a2) {
+    vec2 d = mo.xy - pixf;
+    float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+    float unclamped = kernel_falloff(SPLAT_KERNEL, mo.z, min(power, 0.0));
+    float alpha = min(ALPHA_MAX, unclamped);
+    if (power > 0.0 || alpha < ALPHA_MIN) return;
+    float one_minus = 1.0 - alpha;
+    float t_i = px.T / one_minus;  // transmittance in front of this Gaussian
+    float w = alpha * t_i;
+    float g_a = dot(px.g_ca.rgb, col * t_i - px.behind / one_minus)
+        + px.g_dacc * (mo.w * t_i - px.behind_depth / one_minus)
+        + px.g_ca.a * px.t_final / one_minus;
+    px.behind += col * w;
+    px.behind_depth += mo.w * w;
+    px.T = t_i;
+    vec3 g_col = px.g_ca.rgb * w;
+    a1.zw += g_col.rg;
+    a2.xy += vec2(g_col.b, px.g_dacc * w);
+    if (unclamped < ALPHA_MAX) {
+        // d alpha / d opacity and d alpha / d power (a constant branch).
+        bool power_kernel = SPLAT_KERNEL == SPLAT_KERNEL_POWER;
+        float da_do = power_kernel ? 1.0 + 2.0 * power / 9.0 : exp(power);
+        float da_dp = power_kernel ? mo.z * (2.0 / 9.0) : unclamped;
+        float gp = g_a * da_dp;
+        vec2 gm = gp * -vec2(conic.x * d.x + conic.y * d.y, conic.z * d.y + conic.y * d.x);
+        a0 += vec4(gm, gp * (-0.5 * d.x * d.x), gp * (-d.x * d.y));
+        a1.xy += vec2(gp * (-0.5 * d.y * d.y), g_a * da_do);
+        a2.zw += abs(gm);
+    }
+}
+
+void store_pair(uint k, vec4 s0, vec4 s1, vec4 s2) {
+    pair_grads[3u * k] = s0;
+    pair_grads[3u * k + 1u] = s1;
+    pair_grads[3u * k + 2u] = s2;
+}
+
+#if STRIP == 1
+#define BATCH 16u
+// At least the number of subgroups of a BIN x BIN workgroup (the host passes it from the
+// device's minimum subgroup size).
+layout(constant_id = GRAD_SPEC_MAX_SUBGROUPS) const uint MAX_SUBGROUPS = 32u;
 shared vec4 s_mean_opacity[BATCH];  // mean2d.xy, opacity, depth
 shared vec4 s_conic[BATCH];
 shared vec4 s_color[BATCH];
-shared float s_part[BATCH * MAX_SUBGROUPS * F];
+shared vec4 s_part[BATCH * MAX_SUBGROUPS * 3u];
 shared uint s_last;
-shared uint s_max[F];
+shared uint s_max[12];
 
 void main() {
     uvec2 bin = gl_WorkGroupID.xy;
     uvec2 pix = bin * BIN + gl_LocalInvocationID.xy;
-    bool inside = pix.x < params.image.x && pix.y < params.image.y;
     vec2 pixf = vec2(pix);
     uvec2 range = ranges[bin.y * params.bins.y + bin.x];
-    uint last = 0u;
-    float T = 1.0;
-    vec4 g_ca = vec4(0.0);
-    float g_dacc = 0.0;
-    if (inside) {
-        uint p = pix.y * params.image.x + pix.x;
-        uvec2 state = last_state[p];
-        last = state.x;
-        T = uintBitsToFloat(state.y);
-        g_ca = grad_color[p];
-        g_dacc = grad_depth[p];
-    }
-    float t_final = T;
-    vec3 behind = t_final * params.background.rgb;
-    float behind_depth = 0.0;
+    Pixel px = load_pixel(pix);
     uint li = gl_LocalInvocationIndex;
     if (li == 0u) s_last = 0u;
-    if (li < F) s_max[li] = 0u;
+    if (li < 12u) s_max[li] = 0u;
     barrier();
-    if (last != 0u) atomicMax(s_last, last);
+    if (px.last != 0u) atomicMax(s_last, px.last);
     barrier();
     // One past the last pair any pixel of the bin composited; the pairs after it receive 0.
     uint end = max(s_last, range.x);
-    for (uint k = end + li; k < range.y; k += BIN * BIN) {
-        for (uint f = 0u; f < F; f++) pair_grads[k * F + f] = 0.0;
-    }
+    for (uint k = end + li; k < range.y; k += BIN * BIN) store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0));
     uint batch_end = end;
     while (batch_end > range.x) {
         uint count = min(BATCH, batch_end - range.x);
@@ -99,73 +178,97 @@ void main() {
         barrier();
         for (uint j = 0u; j < count; j++) {
             uint k = batch_end - 1u - j;
-            float c[F];
-            for (uint f = 0u; f < F; f++) c[f] = 0.0;
-            bool used = k < last;
-            if (used) {
-                vec4 mo = s_mean_opacity[j];
-                vec3 conic = s_conic[j].xyz;
-                vec3 col = s_color[j].rgb;
-                // The forward's alpha and skip rule (blend.comp, composite).
-                vec2 d = mo.xy - pixf;
-                float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
-                float unclamped = kernel_falloff(SPLAT_KERNEL, mo.z, min(power, 0.0));
-                float alpha = min(ALPHA_MAX, unclamped);
-                if (power <= 0.0 && alpha >= ALPHA_MIN) {
-                    float one_minus = 1.0 - alpha;
-                    float t_i = T / one_minus;  // transmittance in front of this Gaussian
-                    float w = alpha * t_i;
-                    vec3 g_col = g_ca.rgb * w;
-                    float g_a = dot(g_ca.rgb, col * t_i - behind / one_minus)
-                        + g_dacc * (mo.w * t_i - behind_depth / one_minus)
-                        + g_ca.a * t_final / one_minus;
-                    behind += col * w;
-                    behind_depth += mo.w * w;
-                    T = t_i;
-                    if (unclamped < ALPHA_MAX) {
-                        // d alpha / d opacity and d alpha / d power (a constant branch).
-                        bool power_kernel = SPLAT_KERNEL == SPLAT_KERNEL_POWER;
-                        float da_do = power_kernel ? 1.0 + 2.0 * power / 9.0 : exp(power);
-                        float da_dp = power_kernel ? mo.z * (2.0 / 9.0) : unclamped;
-                        float gp = g_a * da_dp;
-                        c[0] = gp * -(conic.x * d.x + conic.y * d.y);
-                        c[1] = gp * -(conic.z * d.y + conic.y * d.x);
-                        c[2] = gp * (-0.5 * d.x * d.x);
-                        c[3] = gp * (-d.x * d.y);
-                        c[4] = gp * (-0.5 * d.y * d.y);
-                        c[5] = g_a * da_do;
-                        c[10] = abs(c[0]);
-                        c[11] = abs(c[1]);
-                    }
-                    c[6] = g_col.r;
-                    c[7] = g_col.g;
-                    c[8] = g_col.b;
-                    c[9] = g_dacc * w;
-                }
-            }
+            vec4 a0 = vec4(0.0), a1 = vec4(0.0), a2 = vec4(0.0);
+            bool used = k < px.last;
+            if (used) pixel_grad(s_mean_opacity[j], s_conic[j].xyz, s_color[j].rgb, pixf, px, a0, a1, a2);
             // The subgroup's sum (skipped where none of its pixels composited the pair).
-            uint slot = (j * MAX_SUBGROUPS + gl_SubgroupID) * F;
+            uint slot = (j * MAX_SUBGROUPS + gl_SubgroupID) * 3u;
             if (subgroupAny(used)) {
-                for (uint f = 0u; f < F; f++) {
-                    float s = subgroupAdd(c[f]);
-                    if (subgroupElect()) s_part[slot + f] = s;
+                vec4 s0 = subgroupAdd(a0), s1 = subgroupAdd(a1), s2 = subgroupAdd(a2);
+                if (subgroupElect()) {
+                    s_part[slot] = s0;
+                    s_part[slot + 1u] = s1;
+                    s_part[slot + 2u] = s2;
                 }
             } else if (subgroupElect()) {
-                for (uint f = 0u; f < F; f++) s_part[slot + f] = 0.0;
+                s_part[slot] = vec4(0.0);
+                s_part[slot + 1u] = vec4(0.0);
+                s_part[slot + 2u] = vec4(0.0);
             }
         }
         barrier();
-        // The workgroup's sum per pair and field: subgroups in index order.
-        for (uint t = li; t < count * F; t += BIN * BIN) {
-            uint j = t / F, f = t % F;
-            float s = 0.0;
-            for (uint sg = 0u; sg < gl_NumSubgroups; sg++) s += s_part[(j * MAX_SUBGROUPS + sg) * F + f];
-            pair_grads[(batch_end - 1u - j) * F + f] = s;
-            if (s != 0.0) atomicMax(s_max[f], floatBitsToUint(abs(s)));
+        // The workgroup's sum per pair and vec4: subgroups in index order.
+        for (uint t = li; t < count * 3u; t += BIN * BIN) {
+            uint j = t / 3u, v = t % 3u;
+            vec4 s = vec4(0.0);
+            for (uint sg = 0u; sg < gl_NumSubgroups; sg++) s += s_part[(j * MAX_SUBGROUPS + sg) * 3u + v];
+            pair_grads[3u * (batch_end - 1u - j) + v] = s;
+            for (uint c = 0u; c < 4u; c++) {
+                if (s[c] != 0.0) atomicMax(s_max[4u * v + c], floatBitsToUint(abs(s[c])));
+            }
         }
         batch_end -= count;
         barrier();
     }
     barrier();
-    if (li < F && s_max[li] != 0u) atomicMax(maxima[li], s_max[li]);
+    if (li < 12u && s_max[li] != 0u) atomicMax(maxima[li], s_max[li]);
 }
+#else
+void main() {
+    uvec2 bin = gl_WorkGroupID.xy;
+    uvec2 pix0 = bin * BIN + uvec2(0u, gl_LocalInvocationID.x);
+    uvec2 range = ranges[bin.y * params.bins.y + bin.x];
+    Pixel px[STRIP];
+    uint my_last = 0u;
+    [[unroll]] for (uint p = 0u; p < STRIP; p++) {
+        px[p] = load_pixel(pix0 + uvec2(p, 0u));
+        my_last = max(my_last, px[p].last);
+    }
+    // The workgroup is one subgroup: its maximum is the bin's.
+    uint end = max(subgroupMax(my_last), range.x);
+    for (uint k = end + gl_SubgroupInvocationID; k < range.y; k += gl_SubgroupSize) {
+        store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0));
+    }
+    vec4 m0 = vec4(0.0), m1 = vec4(0.0), m2 = vec4(0.0);
+    for (uint k = end; k > range.x;) {
+        k--;
+        int g = int(texelFetch(value_texels, int(k)).x) * 3;
+        vec4 mob = texelFetch(splat_texels, g);
+        vec4 cd = texelFetch(splat_texels, g + 1);
+        vec3 col = texelFetch(splat_texels, g + 2).rgb;
+        vec4 mo = vec4(mob.xyz, cd.w);
+        vec4 a0 = vec4(0.0), a1 = vec4(0.0), a2 = vec4(0.0);
+        bool used = false;
+        [[unroll]] for (uint p = 0u; p < STRIP; p++) {
+            if (k < px[p].last) {
+                used = true;
+                Pixel q = px[p];
+                pixel_grad(mo, cd.xyz, col, vec2(pix0) + vec2(float(p), 0.0), q, a0, a1, a2);
+                px[p] = q;
+            }
+        }
+        vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0);
+        if (subgroupAny(used)) {
+            s0 = subgroupAdd(a0);
+            s1 = subgroupAdd(a1);
+            s2 = subgroupAdd(a2);
+        }
+        if (subgroupElect()) {
+            store_pair(k, s0, s1, s2);
+            m0 = max(m0, abs(s0));
+            m1 = max(m1, abs(s1));
+            m2 = max(m2, abs(s2));
+        }
+    }
+    m0 = subgroupMax(m0);
+    m1 = subgroupMax(m1);
+    m2 = subgroupMax(m2);
+    if (subgroupElect()) {
+        for (uint c = 0u; c < 4u; c++) {
+            if (m0[c] != 0.0) atomicMax(maxima[c], floatBitsToUint(m0[c]));
+            if (m1[c] != 0.0) atomicMax(maxima[4u + c], floatBitsToUint(m1[c]));
+            if (m2[c] != 0.0) atomicMax(maxima[8u + c], floatBitsToUint(m2[c]));
+        }
+    }
+}
+#endif

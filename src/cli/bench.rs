@@ -83,6 +83,21 @@ pub(crate) struct BenchArgs {
     /// reported as the `features` stage.
     #[arg(long, value_name = "FILE.npy")]
     pub(crate) features: Option<PathBuf>,
+    /// Time the differentiable rasterizer: each iteration renders the frame with its
+    /// forward state saved and runs the backward pass (pixel gradients to Gaussian
+    /// gradients), timing both passes' stages; reports device bytes per Gaussian.
+    #[arg(long, conflicts_with_all = ["cpu", "compact", "features", "csv", "plot"])]
+    pub(crate) backward: bool,
+    /// How the backward pass sums gradients: deterministic (fixed point, bit-identical run
+    /// to run), float-atomics (faster, not reproducible) or cas (float adds by
+    /// compare-and-swap, for devices without float atomics).
+    #[arg(
+        long,
+        value_name = "MODE",
+        default_value = "deterministic",
+        requires = "backward"
+    )]
+    pub(crate) accumulation: vksplat::render::grad_accumulate::Accumulation,
     #[command(flatten)]
     pub(crate) gpu: GpuArgs,
 }
@@ -211,8 +226,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     } else {
         let mut renderer = GpuRenderer::new(args.gpu.context()?)?;
         renderer.set_compact(args.compact);
+        if args.backward {
+            renderer.set_gradient_accumulation(args.accumulation)?;
+        }
         Some(renderer)
     };
+    let mut backward_reports = Vec::new();
     let points = counts.len() * resolutions.len();
     let mut reports = Vec::new();
     for count in &counts {
@@ -256,6 +275,33 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                 kernel,
                 ..Default::default()
             };
+            if let (true, Some(r)) = (args.backward, renderer.as_mut()) {
+                match vksplat::bench::bench_backward(
+                    r,
+                    &act,
+                    &name,
+                    &timed,
+                    &opts,
+                    args.frames,
+                    args.warmup,
+                ) {
+                    Ok(report) => {
+                        if !args.quiet {
+                            outln!("{}", report.to_text());
+                        }
+                        backward_reports.push(report);
+                    }
+                    Err(
+                        e @ (vksplat::gpu::GpuError::DeviceLimit { .. }
+                        | vksplat::gpu::GpuError::Input(_)
+                        | vksplat::gpu::GpuError::InvalidArgument(_)),
+                    ) if points > 1 => {
+                        note!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+                continue;
+            }
             let report = match renderer.as_mut() {
                 Some(r) => vksplat::bench::bench_gpu(
                     r,
@@ -294,6 +340,19 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                 Err(e) => return Err(e.into()),
             }
         }
+    }
+    if args.backward {
+        if backward_reports.is_empty() {
+            bail!("every point of the sweep exceeded the device's limits (see above)");
+        }
+        if let Some(r) = &renderer {
+            fail_on_validation_messages(r.ctx())?;
+        }
+        if let Some(path) = &args.json {
+            let text = vksplat::bench::backward_to_json(&backward_reports);
+            output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
+        }
+        return Ok(());
     }
     if points > 1 && !args.quiet {
         outln!("sweep summary (medians):");

@@ -260,12 +260,13 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
     // The backward pass: the blend's per bin size (8: CPU devices, 16: GPUs) and kernel; the
     // accumulation in fixed point or (the fast mode) with float atomics, native or by
     // compare-and-swap; the preprocess's reading either.
-    for bin in ["8u", "16u"] {
+    for (bin, strip) in [("8u", 1), ("16u", 1), ("8u", 8)] {
         for kernel in splat_kernels {
             out.push(v(
                 "blend_bwd",
                 &[
                     ("BIN", bin.to_string()),
+                    ("STRIP", strip.to_string()),
                     ("SPLAT_KERNEL", kernel.to_string()),
                 ],
             ));

@@ -21,6 +21,7 @@ use super::grad_accumulate::{Accumulation, GradAccumulate, GradPush};
 use super::preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
 use super::{check_binding, GpuRenderer, GpuScene};
 use crate::frame::Frame;
+use crate::gpu::shader::Resource;
 use crate::gpu::shader_set::GRAD_FIELDS;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
@@ -33,7 +34,7 @@ pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_b
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
 pub(super) struct BackwardState {
-    blend: Vec<((u32, SplatKernel), BlendBwd)>,
+    blend: Vec<((u32, bool, SplatKernel), BlendBwd)>,
     accumulate: Vec<(Accumulation, GradAccumulate)>,
     preprocess: [Option<PreprocessBwd>; 2],
     grad_color: Option<GpuBuffer>,
@@ -45,6 +46,8 @@ pub(super) struct BackwardState {
     sh_grads: Option<GpuBuffer>,
     timer: GpuTimer,
     timings: Vec<(String, f64)>,
+    /// First timestamp to last of the last pass, ms.
+    span_ms: f64,
     mode: Accumulation,
 }
 
@@ -79,6 +82,7 @@ impl BackwardState {
             sh_grads: None,
             timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32)?,
             timings: Vec::new(),
+            span_ms: 0.0,
             mode: Accumulation::default(),
         })
     }
@@ -122,6 +126,18 @@ impl GpuRenderer {
         self.backward
             .as_ref()
             .map_or_else(Vec::new, |b| b.timings.clone())
+    }
+
+    /// Milliseconds of the last backward pass on the device, first timestamp to last.
+    pub fn backward_total_ms(&self) -> f64 {
+        self.backward.as_ref().map_or(0.0, |b| b.span_ms)
+    }
+
+    /// The accumulation the backward passes use.
+    pub fn gradient_accumulation(&self) -> Accumulation {
+        self.backward
+            .as_ref()
+            .map_or_else(Accumulation::default, |b| b.mode)
     }
 
     /// Device bytes the backward pass holds (its buffers, sized by the largest pass so far).
@@ -232,11 +248,11 @@ impl GpuRenderer {
         let bits = bits_for(u64::from(bins.0) * u64::from(bins.1));
         let float_sums = st.mode != Accumulation::Deterministic;
         // Pipelines, the first time a pass needs each.
-        if !st.blend.iter().any(|(k, _)| *k == (fs.bin_size, kernel)) {
-            st.blend.push((
-                (fs.bin_size, kernel),
-                BlendBwd::new(ctx, fs.bin_size, kernel)?,
-            ));
+        let rows = BlendBwd::rows_for(ctx, fs.bin_size, fs.value_texels.is_some());
+        let blend_key = (fs.bin_size, rows, kernel);
+        if !st.blend.iter().any(|(k, _)| *k == blend_key) {
+            st.blend
+                .push((blend_key, BlendBwd::new(ctx, fs.bin_size, rows, kernel)?));
         }
         if !st.accumulate.iter().any(|(m, _)| *m == st.mode) {
             if st.mode == Accumulation::FloatAtomics && !ctx.info().float_atomic_add {
@@ -282,9 +298,19 @@ impl GpuRenderer {
         let blend = &st
             .blend
             .iter()
-            .find(|(k, _)| *k == (fs.bin_size, kernel))
+            .find(|(k, _)| *k == blend_key)
             .expect("built")
             .1;
+        let (splats_r, values_r) = match (rows, fs.value_texels) {
+            (true, Some(v)) => (
+                Resource::TexelBuffer(fs.splat_texels),
+                Resource::TexelBuffer(v),
+            ),
+            _ => (
+                Resource::Buffer(fs.splats),
+                Resource::Buffer(fs.sorted_gaussians),
+            ),
+        };
         let accumulate = &st
             .accumulate
             .iter()
@@ -312,8 +338,8 @@ impl GpuRenderer {
                     cmd,
                     bins,
                     fs.params,
-                    fs.splats,
-                    fs.sorted_gaussians,
+                    splats_r,
+                    values_r,
                     fs.ranges,
                     last,
                     grad_color_b,
@@ -360,6 +386,7 @@ impl GpuRenderer {
             Ok(())
         })?;
         st.timings = st.timer.read(ctx)?;
+        st.span_ms = st.timer.span_ms(ctx)?;
         // Read back and lay out as the uploaded scene.
         let n = n as usize;
         let raw: Vec<[f32; 16]> = grads.buffer.read(ctx, n)?;

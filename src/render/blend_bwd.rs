@@ -3,7 +3,7 @@
 //! pair, the bin's summed gradient with respect to the pair's Gaussian (2D mean, conic,
 //! opacity, colour, depth, |2D mean|), plus the largest |sum| per field.
 
-use crate::gpu::shader::{by_binding, BindingKind};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::blend_bwd as slot;
 use crate::gpu::shader_set::{GRAD_FIELDS, GRAD_SPEC_MAX_SUBGROUPS};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
@@ -13,27 +13,37 @@ use ash::vk;
 /// Pairs the shader stages in shared memory at a time (`BATCH` in the shader).
 const BATCH: u32 = 16;
 
-/// The blend-backward pipeline for one bin size and kernel.
+/// The blend-backward pipeline for one bin size, layout and kernel.
 pub struct BlendBwd {
     pipeline: ComputePipeline,
     bin: u32,
+    rows: bool,
 }
 
 impl BlendBwd {
-    /// Builds the pipeline for `bin`-pixel bins (8 or 16) and `kernel`. Its shared memory
-    /// holds one partial sum per subgroup, pair of a batch and field: the device's
-    /// smallest subgroup size decides how many subgroups a workgroup can have.
-    pub fn new(ctx: &GpuContext, bin: u32, kernel: SplatKernel) -> GpuResult<Self> {
-        if bin != 8 && bin != 16 {
+    /// Whether `ctx` runs the row layout for `bin`-pixel bins: one invocation per row of
+    /// an 8-pixel bin, reading through texel views (`texel_views`: the frame has them),
+    /// whose workgroup (8 invocations) must be a single subgroup. CPU devices.
+    pub fn rows_for(ctx: &GpuContext, bin: u32, texel_views: bool) -> bool {
+        bin == 8 && texel_views && ctx.info().min_subgroup_size >= 8
+    }
+
+    /// Builds the pipeline for `bin`-pixel bins (8 or 16) and `kernel`: with `rows`, the
+    /// row layout ([`Self::rows_for`]); otherwise one invocation per pixel, whose shared
+    /// memory holds one partial sum per subgroup, pair of a batch and field (the device's
+    /// smallest subgroup size decides how many subgroups a workgroup can have).
+    pub fn new(ctx: &GpuContext, bin: u32, rows: bool, kernel: SplatKernel) -> GpuResult<Self> {
+        if bin != 8 && bin != 16 || (rows && bin != 8) {
             return Err(GpuError::InvalidArgument(format!(
-                "the blend backward runs on 8- or 16-pixel bins, not {bin}"
+                "the blend backward runs on 8- or 16-pixel bins (rows: 8), not {bin}"
             )));
         }
         let info = ctx.info();
-        let invocations = bin * bin;
+        let strip = if rows { bin } else { 1 };
+        let invocations = bin * bin / strip;
         let max_subgroups = invocations.div_ceil(info.min_subgroup_size.max(1));
         let shared = 4 * (BATCH * 12 + BATCH * max_subgroups * GRAD_FIELDS + 1 + GRAD_FIELDS);
-        if shared > info.max_shared_memory {
+        if !rows && shared > info.max_shared_memory {
             return Err(GpuError::DeviceLimit {
                 limit: "maxComputeSharedMemorySize",
                 needed: u64::from(shared),
@@ -45,17 +55,23 @@ impl BlendBwd {
             });
         }
         let storage = BindingKind::StorageBuffer;
+        let pairs = if rows {
+            BindingKind::UniformTexelBuffer
+        } else {
+            storage
+        };
         let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "blend_bwd",
             &[
                 ("BIN", format!("{bin}u")),
+                ("STRIP", strip.to_string()),
                 ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
             ],
             &by_binding([
                 (slot::PARAMS, storage),
-                (slot::SPLATS, storage),
-                (slot::VALUES, storage),
+                (slot::SPLATS, pairs),
+                (slot::VALUES, pairs),
                 (slot::RANGES, storage),
                 (slot::LAST, storage),
                 (slot::GRAD_COLOR, storage),
@@ -65,9 +81,17 @@ impl BlendBwd {
             ])?,
             0,
             invocations,
-            &[(GRAD_SPEC_MAX_SUBGROUPS, max_subgroups)],
+            &if rows {
+                Vec::new()
+            } else {
+                vec![(GRAD_SPEC_MAX_SUBGROUPS, max_subgroups)]
+            },
         )?;
-        Ok(BlendBwd { pipeline, bin })
+        Ok(BlendBwd {
+            pipeline,
+            bin,
+            rows,
+        })
     }
 
     /// Bin side in pixels.
@@ -75,7 +99,13 @@ impl BlendBwd {
         self.bin
     }
 
-    /// Records the dispatch over the `bins` grid.
+    /// Whether this is the row layout (splats and values bound as texel views).
+    pub fn rows(&self) -> bool {
+        self.rows
+    }
+
+    /// Records the dispatch over the `bins` grid. `splats` and `values` are buffers, or
+    /// texel views for the row layout.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -83,8 +113,8 @@ impl BlendBwd {
         cmd: vk::CommandBuffer,
         bins: (u32, u32),
         params: BufferSlice,
-        splats: BufferSlice,
-        values: BufferSlice,
+        splats: Resource,
+        values: Resource,
         ranges: BufferSlice,
         last: BufferSlice,
         grad_color: BufferSlice,
@@ -93,15 +123,15 @@ impl BlendBwd {
         maxima: BufferSlice,
     ) -> GpuResult<()> {
         let buffers = by_binding([
-            (slot::PARAMS, params),
+            (slot::PARAMS, Resource::Buffer(params)),
             (slot::SPLATS, splats),
             (slot::VALUES, values),
-            (slot::RANGES, ranges),
-            (slot::LAST, last),
-            (slot::GRAD_COLOR, grad_color),
-            (slot::GRAD_DEPTH, grad_depth),
-            (slot::PAIR_GRADS, pair_grads),
-            (slot::MAXIMA, maxima),
+            (slot::RANGES, Resource::Buffer(ranges)),
+            (slot::LAST, Resource::Buffer(last)),
+            (slot::GRAD_COLOR, Resource::Buffer(grad_color)),
+            (slot::GRAD_DEPTH, Resource::Buffer(grad_depth)),
+            (slot::PAIR_GRADS, Resource::Buffer(pair_grads)),
+            (slot::MAXIMA, Resource::Buffer(maxima)),
         ])?;
         let max = ctx.info().max_workgroup_count;
         if bins.0 > max[0] || bins.1 > max[1] {
@@ -113,6 +143,6 @@ impl BlendBwd {
             });
         }
         self.pipeline
-            .dispatch(ctx, cmd, &buffers, &[], [bins.0, bins.1, 1])
+            .dispatch_resources(ctx, cmd, &buffers, &[], [bins.0, bins.1, 1])
     }
 }

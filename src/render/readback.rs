@@ -157,6 +157,11 @@ impl GpuRenderer {
 pub struct ForwardState<'a> {
     /// One [`Splat`] per Gaussian: mean2d, opacity, conic, depth, colour, radius.
     pub splats: BufferSlice<'a>,
+    /// An RGBA32F texel view of the splats (three texels each).
+    pub splat_texels: ash::vk::BufferView,
+    /// An R32UI texel view of the sorted pair values, on devices whose stages read through
+    /// texel views (CPU devices).
+    pub value_texels: Option<ash::vk::BufferView>,
     /// Sorted pair values: the Gaussian index of each (bin, Gaussian) pair, by bin and
     /// then depth; `pairs` of them.
     pub sorted_gaussians: BufferSlice<'a>,
@@ -194,6 +199,8 @@ impl GpuRenderer {
         let counters = self.read_counters(self.last)?;
         Ok(ForwardState {
             splats: f.splats.whole(),
+            splat_texels: f.splat_texels.handle(),
+            value_texels: f.value_texels.as_ref().map(|v| v.handle()),
             sorted_gaussians: f.values.whole(),
             sorted_bins: f.keys.whole(),
             pairs: counters.sort_count,
