@@ -33,7 +33,7 @@ impl BlendBwd {
     /// memory holds one partial sum per subgroup, pair of a batch and field (the device's
     /// smallest subgroup size decides how many subgroups a workgroup can have).
     pub fn new(ctx: &GpuContext, bin: u32, rows: bool, kernel: SplatKernel) -> GpuResult<Self> {
-        if bin != 8 && bin != 16 || (rows && bin != 8) {
+        if !matches!(bin, 8 | 16) || (rows && bin != 8) {
             return Err(GpuError::InvalidArgument(format!(
                 "the blend backward runs on 8- or 16-pixel bins (rows: 8), not {bin}"
             )));
