@@ -85,29 +85,21 @@ pub(super) fn read_head(stream: &mut TcpStream) -> Result<(Request, Vec<u8>, usi
             .checked_duration_since(Instant::now())
             .filter(|d| !d.is_zero())
         else {
-            return Err(unfinished(&format!(
-                "within {} s",
-                HEAD_TIMEOUT.as_secs()
-            )));
+            return Err(unfinished(&format!("within {} s", HEAD_TIMEOUT.as_secs())));
         };
         stream
             .set_read_timeout(Some(left))
             .map_err(|_| HeadError::Gone)?;
         match stream.read(&mut chunk) {
             Ok(0) if buf.is_empty() => return Err(HeadError::Gone),
-            Ok(0) => {
-                return Err(refused(
-                    "400 Bad Request",
-                    "the connection ended inside the request head (no empty line after the headers)",
-                ))
-            }
+            Ok(0) => return Err(refused(
+                "400 Bad Request",
+                "the connection ended inside the request head (no empty line after the headers)",
+            )),
             Ok(n) => buf.extend_from_slice(&chunk[..n]),
             Err(e) if e.kind() == ErrorKind::Interrupted => {}
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-                return Err(unfinished(&format!(
-                    "within {} s",
-                    HEAD_TIMEOUT.as_secs()
-                )))
+                return Err(unfinished(&format!("within {} s", HEAD_TIMEOUT.as_secs())))
             }
             Err(_) => return Err(HeadError::Gone),
         }
@@ -393,13 +385,19 @@ mod tests {
         assert_eq!(status(b"hello world\n"), "400 Bad Request");
         assert_eq!(status(b"\x16\x03\x01\x02\x00"), "400 Bad Request");
         assert_eq!(status(b"\x00\x01garbage"), "400 Bad Request");
-        assert_eq!(status(b"GET / HTTP/2.0\r\n\r\n"), "505 HTTP Version Not Supported");
+        assert_eq!(
+            status(b"GET / HTTP/2.0\r\n\r\n"),
+            "505 HTTP Version Not Supported"
+        );
         assert_eq!(
             status(b"GET / HTTP/1.1\r\nno colon here\r\n\r\n"),
             "400 Bad Request"
         );
         let parsed = parse_head(b"GET /ws?x HTTP/1.1\r\nHost:  a:1 \r\n\r\n").unwrap();
-        assert_eq!((parsed.method.as_str(), parsed.path.as_str()), ("GET", "/ws?x"));
+        assert_eq!(
+            (parsed.method.as_str(), parsed.path.as_str()),
+            ("GET", "/ws?x")
+        );
         assert_eq!(parsed.header("host"), Some("a:1"));
     }
 

@@ -226,7 +226,10 @@ mod tests {
                     ms >= 0.99 * last,
                     "{scene} Gaussians preview in {ms} ms, a smaller scene took {last} ms ({per_g}, {per_p})"
                 );
-                assert!(ms <= PREVIEW_GPU_MS * 1.05 || plan.gaussians <= 8_192.0, "{ms}");
+                assert!(
+                    ms <= PREVIEW_GPU_MS * 1.05 || plan.gaussians <= 8_192.0,
+                    "{ms}"
+                );
                 last = ms;
             }
         }
@@ -243,7 +246,13 @@ mod tests {
         assert!((ms - PREVIEW_GPU_MS).abs() < 5.0, "{ms}");
         // On a fast device every Gaussian is drawn at the largest size.
         let (plan, _) = settle(125_000, 1e-6, 1e-7);
-        assert_eq!(plan, PreviewPlan { gaussians: 125_000.0, pixels: 250_000.0 });
+        assert_eq!(
+            plan,
+            PreviewPlan {
+                gaussians: 125_000.0,
+                pixels: 250_000.0
+            }
+        );
         // A scene up to the floor is always drawn whole.
         let (plan, _) = settle(1_873, 1.0, 1e-7);
         assert_eq!(plan.gaussians, 1_873.0);
@@ -253,23 +262,47 @@ mod tests {
     fn plans_stay_in_their_limits_and_ignore_missing_timings() {
         let limits = PreviewLimits::new(500_000, 131_072, 250_000);
         let plan = limits.first_plan();
-        assert_eq!(plan, PreviewPlan { gaussians: 24_576.0, pixels: 250_000.0 });
-        let none = PreviewCost { per_gaussian_ms: f64::NAN, per_pixel_ms: 1.0 };
+        assert_eq!(
+            plan,
+            PreviewPlan {
+                gaussians: 24_576.0,
+                pixels: 250_000.0
+            }
+        );
+        let none = PreviewCost {
+            per_gaussian_ms: f64::NAN,
+            per_pixel_ms: 1.0,
+        };
         assert_eq!(next_plan(plan, 24_576.0, 250_000.0, none, &limits), plan);
         // Fast: up to the whole scene, never between the subset's size and it.
-        let fast = PreviewCost { per_gaussian_ms: 1.0, per_pixel_ms: 1.0 };
+        let fast = PreviewCost {
+            per_gaussian_ms: 1.0,
+            per_pixel_ms: 1.0,
+        };
         let mut p = plan;
         for _ in 0..20 {
             p = next_plan(p, p.gaussians, p.pixels, fast, &limits);
-            assert!(p.gaussians == 500_000.0 || p.gaussians <= 131_072.0, "{p:?}");
+            assert!(
+                p.gaussians == 500_000.0 || p.gaussians <= 131_072.0,
+                "{p:?}"
+            );
         }
         assert_eq!(p.gaussians, 500_000.0);
         // Very slow: down to the floors.
-        let slow = PreviewCost { per_gaussian_ms: 1e4, per_pixel_ms: 1e4 };
+        let slow = PreviewCost {
+            per_gaussian_ms: 1e4,
+            per_pixel_ms: 1e4,
+        };
         for _ in 0..20 {
             p = next_plan(p, p.gaussians, p.pixels, slow, &limits);
         }
-        assert_eq!(p, PreviewPlan { gaussians: 8_192.0, pixels: MIN_PREVIEW_PIXELS });
+        assert_eq!(
+            p,
+            PreviewPlan {
+                gaussians: 8_192.0,
+                pixels: MIN_PREVIEW_PIXELS
+            }
+        );
         // A small canvas rendered fast keeps the pixel budget.
         let p = next_plan(plan, 24_576.0, 10_000.0, fast, &limits);
         assert_eq!(p.pixels, 250_000.0);

@@ -882,7 +882,10 @@ fn viewer_previews_draw_the_most_important_gaussians() {
     assert_eq!(whole.gaussians as usize, scene.len());
     assert!(whole.rgba8 == full.rgba8);
     let most = src.render_preview(&cam, &settings, 124_000).unwrap();
-    assert_eq!(most.gaussians as usize, DEFAULT_PREVIEW_GAUSSIANS.min(124_000));
+    assert_eq!(
+        most.gaussians as usize,
+        DEFAULT_PREVIEW_GAUSSIANS.min(124_000)
+    );
     // Off: previews draw everything.
     src.set_preview(&scene, 0).unwrap();
     assert_eq!(src.preview_subset(), 0);

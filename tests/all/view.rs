@@ -564,14 +564,21 @@ fn bad_requests_and_oversized_messages_are_answered_with_a_reason() {
         String::from_utf8_lossy(&out).into_owned()
     };
     let garbage = ask(b"garbage\r\n\r\n", false);
-    assert!(garbage.starts_with("HTTP/1.1 400 Bad Request\r\n"), "{garbage:?}");
+    assert!(
+        garbage.starts_with("HTTP/1.1 400 Bad Request\r\n"),
+        "{garbage:?}"
+    );
     assert!(garbage.contains("not an HTTP request line"), "{garbage}");
     // A TLS hello (https:// to the viewer) is refused at once, not after a time-out.
     let start = std::time::Instant::now();
     let tls = ask(&[0x16, 0x03, 0x01, 0x00, 0xa5, 0x01, 0x00], false);
     assert!(tls.starts_with("HTTP/1.1 400"), "{tls:?}");
     assert!(tls.contains("http://, not https://"), "{tls}");
-    assert!(start.elapsed() < Duration::from_secs(3), "{:?}", start.elapsed());
+    assert!(
+        start.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        start.elapsed()
+    );
     // A head that ends early, and one that never ends.
     let early = ask(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n", true);
     assert!(early.starts_with("HTTP/1.1 400"), "{early:?}");
@@ -610,9 +617,14 @@ fn bad_requests_and_oversized_messages_are_answered_with_a_reason() {
         }
     };
     let close = close.expect("a close code");
-    assert_eq!(close.code, tungstenite::protocol::frame::coding::CloseCode::Size);
+    assert_eq!(
+        close.code,
+        tungstenite::protocol::frame::coding::CloseCode::Size
+    );
     assert!(
-        close.reason.contains("20.0 MiB is over the limit of 4.0 MiB"),
+        close
+            .reason
+            .contains("20.0 MiB is over the limit of 4.0 MiB"),
         "{}",
         close.reason
     );
@@ -645,7 +657,9 @@ fn a_scene_under_twice_the_subset_previews_a_subset() {
         let mut moved = cam.clone();
         moved["position"][0] = (cam["position"][0].as_f64().unwrap() + 0.01 * k as f64).into();
         let seq = c.send(json!({"type": "view", "camera": moved, "interactive": true}));
-        let g = c.frame(seq, false, WAIT).header["gaussians"].as_u64().unwrap();
+        let g = c.frame(seq, false, WAIT).header["gaussians"]
+            .as_u64()
+            .unwrap();
         assert!((8192..=10000).contains(&g) || g == 15000, "{g}");
     }
 }

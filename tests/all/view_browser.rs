@@ -706,7 +706,6 @@ fn the_readout_says_at_rest() {
         "{}",
         rest["readout"]
     );
-
 }
 
 /// The keyframe inputs refuse values outside their range visibly: "Seconds apart" 0
@@ -724,11 +723,7 @@ fn keyframe_inputs_refuse_values_out_of_range_visibly() {
         banner.contains("Seconds apart") && banner.contains("0.1"),
         "{banner}"
     );
-    let value = |css: &str| {
-        browser.js(&format!(
-            "return document.querySelector('{css}').value;"
-        ))
-    };
+    let value = |css: &str| browser.js(&format!("return document.querySelector('{css}').value;"));
     assert_eq!(value("#kf-spacing"), "0.1");
     let add = browser.element("#kf-add");
     browser.call("POST", &format!("/element/{add}/click"), Some(json!({})));
@@ -742,9 +737,10 @@ fn keyframe_inputs_refuse_values_out_of_range_visibly() {
     // Frames/s: 0 and text are refused the same way.
     type_into(&browser, "#kf-fps", "0", "#kf-add");
     browser.wait("fps refused", Duration::from_secs(10), |s| {
-        s["errors"]
-            .as_array()
-            .is_some_and(|e| e.iter().any(|m| m.as_str().unwrap_or("").contains("Frames/s")))
+        s["errors"].as_array().is_some_and(|e| {
+            e.iter()
+                .any(|m| m.as_str().unwrap_or("").contains("Frames/s"))
+        })
     });
     assert_eq!(value("#kf-fps"), "1");
 }
@@ -755,13 +751,10 @@ fn keyframe_inputs_refuse_values_out_of_range_visibly() {
 #[test]
 fn the_page_shows_why_the_server_closed_the_connection() {
     let (_dir, mut viewer, browser, _) = demo_page();
-    browser.js(
-        "window.vksplatViewer.send({type: 'rest', pad: 'x'.repeat(20 << 20)}); return null;",
-    );
+    browser
+        .js("window.vksplatViewer.send({type: 'rest', pad: 'x'.repeat(20 << 20)}); return null;");
     let s = browser.wait("close reason", Duration::from_secs(30), |s| {
-        s["banner"]
-            .as_str()
-            .is_some_and(|b| b.contains("too big"))
+        s["banner"].as_str().is_some_and(|b| b.contains("too big"))
     });
     let banner = s["banner"].as_str().unwrap();
     assert!(
@@ -785,15 +778,42 @@ fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
     vksplat_ok(
         d,
         &[
-            "render", "--demo", "--cpu", "--quiet", "--orbit", "3", "--width", "160",
-            "--height", "120", "--export-cameras", "cams.json", "-o", "orbit/f_{}.png",
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--orbit",
+            "3",
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--export-cameras",
+            "cams.json",
+            "-o",
+            "orbit/f_{}.png",
         ],
     );
     vksplat_ok(
         d,
-        &["gen", "5000", "--seed", "7", "--sh-degree", "0", "-o", "other.ply"],
+        &[
+            "gen",
+            "5000",
+            "--seed",
+            "7",
+            "--sh-degree",
+            "0",
+            "-o",
+            "other.ply",
+        ],
     );
-    let args = ["--cameras", "cams.json", "--max-resolution", "640x400", "--demo"];
+    let args = [
+        "--cameras",
+        "cams.json",
+        "--max-resolution",
+        "640x400",
+        "--demo",
+    ];
     let viewer = Viewer::start(d, &args);
     let port = viewer.port;
     let (browser, first) = open(&viewer);
@@ -814,24 +834,31 @@ fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
     let old = dom();
     assert_eq!(old["cameras"], 3);
     assert_eq!(old["shMax"], "2");
-    assert!(old["hist"].as_str().unwrap().contains("1,873 Gaussians"), "{old}");
+    assert!(
+        old["hist"].as_str().unwrap().contains("1,873 Gaussians"),
+        "{old}"
+    );
 
     drop(viewer);
     let other = Viewer::start_at(d, &["other.ply", "--max-resolution", "640x400"], &[], port);
     let s = browser.wait("the new scene", Duration::from_secs(60), |s| {
-        s["connected"] == true
-            && s["helloGaussians"] == 5000
-            && s["lastFrameGaussians"] == 5000
+        s["connected"] == true && s["helloGaussians"] == 5000 && s["lastFrameGaussians"] == 5000
     });
     let new = dom();
     assert_eq!(new["cameras"], 1, "{new}");
     assert_eq!(new["shMax"], "0", "{new}");
     assert_eq!(new["shValue"], "0", "{new}");
     assert_eq!(new["shOut"], "0", "{new}");
-    assert!(new["hist"].as_str().unwrap().contains("5,000 Gaussians"), "{new}");
+    assert!(
+        new["hist"].as_str().unwrap().contains("5,000 Gaussians"),
+        "{new}"
+    );
     assert_eq!(new["bars"], new["histBins"], "{new}");
     assert_eq!(new["scene"], "other.ply", "{new}");
-    assert!(new["readout"].as_str().unwrap().contains("of 5,000"), "{new}");
+    assert!(
+        new["readout"].as_str().unwrap().contains("of 5,000"),
+        "{new}"
+    );
     assert_eq!(s["cameraIndex"], 0);
     assert!(s["settings"]["sh_degree"].is_null() && s["settings"]["max_scale"].is_null());
     // At the new scene's first camera, which its list shows.
@@ -854,7 +881,9 @@ fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
     // Clicking its one camera stays on it.
     let item = browser.element("#cameras li:nth-child(1)");
     browser.call("POST", &format!("/element/{item}/click"), Some(json!({})));
-    let s = browser.wait("camera 0", Duration::from_secs(30), |s| s["cameraIndex"] == 0);
+    let s = browser.wait("camera 0", Duration::from_secs(30), |s| {
+        s["cameraIndex"] == 0
+    });
     assert!(len(sub(vec3(&s["camera"]["position"]), vec3(&want["position"]))) < 1e-4);
     drop(other);
 }
