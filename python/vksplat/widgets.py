@@ -2,12 +2,19 @@
 pipeline, turned by dragging and zoomed with the wheel, with a max-scale slider that
 re-renders as it moves and the GPU stage timings under the image.
 
+As in the browser viewer (``vksplat view``), the latest view wins: events only move the
+camera, and one render thread draws the newest pose when it is free, so a fast drag never
+queues renders. While the view moves, frames are previews at a reduced size (scaled so a
+preview takes about ``PREVIEW_MS``); once it rests (the mouse released, or ``REST_S``
+after the last move) the view is drawn at full size.
+
 Needs the notebook extra: ``pip install "./python[notebook]"`` (ipywidgets, ipyevents).
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Any, Dict, Optional
 
@@ -31,6 +38,12 @@ DRAG_RADIANS_PER_PIXEL = 0.01
 WHEEL_ZOOM = 1.15
 #: Elevation limit, radians from the up axis, so the view never flips over the pole.
 POLE_MARGIN = math.radians(2.0)
+#: A preview (a frame while the view moves) should take about this long, ms.
+PREVIEW_MS = 60.0
+#: Previews have at least this share of the full size's pixels (a side of at least half).
+MIN_PREVIEW_SHARE = 0.25
+#: The view is drawn at full size this long after the last move without a mouse-up, s.
+REST_S = 0.25
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -93,8 +106,24 @@ class Turntable:
         self.focus = eye + forward * depth
         self.offset = eye - self.focus  # eye relative to the focus
         self._drag: Optional[tuple] = None
+        #: Frames drawn (previews included) and how long the last took with encoding.
         self.frames = 0
+        self.previews = 0
         self.last_frame_ms = 0.0
+        #: The size of the last frame shown (smaller than width x height for previews).
+        self.shown_size = (self.width, self.height)
+        #: The size of the last preview (None before the first).
+        self.preview_size: Optional[tuple] = None
+        # The render thread's work: the newest request (a version number; 0 = none) and
+        # whether it is a preview; `_drawn` the version last drawn.
+        self._lock = threading.Condition()
+        self._version = 0
+        self._drawn = 0
+        self._moving = False
+        self._moved_at = 0.0
+        self._preview_share = MIN_PREVIEW_SHARE
+        self._error: Optional[BaseException] = None
+        self._thread: Optional[threading.Thread] = None
 
         largest = np.max(scene.scales, axis=1)
         largest = largest[np.isfinite(largest) & (largest > 0)]
@@ -137,27 +166,111 @@ class Turntable:
         return None if v >= self._scale_max else v
 
     def render(self) -> None:
-        """Renders the current view into the image and the timings under it."""
+        """Renders the current view at full size into the image (and the timings under
+        it) now, on the calling thread."""
+        self._draw(self.camera, preview=False)
+
+    def _draw(self, camera: Camera, preview: bool) -> None:
         start = time.perf_counter()
+        if preview:
+            share = self._preview_share
+            w = max(1, round(self.width * math.sqrt(share)))
+            h = max(1, round(self.height * math.sqrt(share)))
+            camera = camera.resized(w, h)
+        w, h = camera.width, camera.height
         out = self.renderer.render(
             self.scene,
-            self.camera,
+            camera,
             background=self.background,
             max_scale=self.max_scale,
             mode="rgb",
         )
-        self.image.value = _native.encode_png(out["rgb"].tobytes(), self.width, self.height)
+        # The image widget keeps its width and height: the browser scales a preview up.
+        self.image.value = _native.encode_png(out["rgb"].tobytes(), w, h)
         self.last_frame_ms = (time.perf_counter() - start) * 1e3
         self.frames += 1
+        self.shown_size = (w, h)
+        if preview:
+            self.previews += 1
+            self.preview_size = (w, h)
+            # Towards PREVIEW_MS, halfway (in ratio) per frame, between the floor and 1.
+            ratio = PREVIEW_MS / max(self.last_frame_ms, 1e-3)
+            share = self._preview_share * math.sqrt(min(4.0, max(0.25, ratio)))
+            self._preview_share = min(1.0, max(MIN_PREVIEW_SHARE, share))
         t = self.renderer.timings
         gpu = sum(t.values())
         stages = " &middot; ".join(f"{k} {v:.1f}" for k, v in t.items())
         kept = "all Gaussians" if self.max_scale is None else f"max scale {self.max_scale:.3g}"
+        what = "preview " if preview else ""
         self.info.value = (
-            f"<code>{self.width}x{self.height}, {kept}: GPU {gpu:.1f} ms "
+            f"<code>{what}{w}x{h}, {kept}: GPU {gpu:.1f} ms "
             f"({stages} ms), {self.last_frame_ms:.0f} ms with encoding, "
             f"on {self.renderer.device}</code>"
         )
+
+    # -- the render thread ----------------------------------------------------------------
+
+    def _request(self, moving: bool) -> None:
+        """Asks for the current view: a preview while ``moving``, else at full size. Only
+        the newest request is drawn; one not yet drawn is replaced."""
+        with self._lock:
+            if self._error is not None:
+                error, self._error = self._error, None
+                raise RuntimeError(f"the turntable's last render failed: {error}") from error
+            self._version += 1
+            self._moving = moving
+            self._moved_at = time.monotonic()
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(
+                    target=self._run, name="vksplat-turntable", daemon=True
+                )
+                self._thread.start()
+            self._lock.notify_all()
+
+    def _run(self) -> None:
+        """Draws the newest request whenever there is one; a moving view gets its full
+        frame ``REST_S`` after the last move. Ends after a while without work."""
+        while True:
+            with self._lock:
+                while True:
+                    if self._version != self._drawn:
+                        break
+                    if self._moving:
+                        due = self._moved_at + REST_S - time.monotonic()
+                        if due <= 0:
+                            self._moving = False
+                            self._version += 1
+                            break
+                        self._lock.wait(due)
+                    elif not self._lock.wait(5.0) and self._version == self._drawn:
+                        self._thread = None
+                        self._lock.notify_all()
+                        return
+                version, preview, camera = self._version, self._moving, self.camera
+            try:
+                self._draw(camera, preview)
+            except BaseException as e:  # reported by the next request and by wait()
+                with self._lock:
+                    self._error = e
+            with self._lock:
+                self._drawn = version
+                self._lock.notify_all()
+
+    def wait(self, timeout: float = 60.0) -> None:
+        """Waits until the newest view is drawn at full size (the view at rest); raises
+        TimeoutError after ``timeout`` seconds and the render's error if it failed."""
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            while self._version != self._drawn or self._moving:
+                if self._error is not None:
+                    break
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"the turntable did not come to rest within {timeout} s")
+                self._lock.wait(min(left, 0.05))
+            if self._error is not None:
+                error, self._error = self._error, None
+                raise RuntimeError(f"the turntable's last render failed: {error}") from error
 
     # -- interaction ----------------------------------------------------------------------
 
@@ -198,14 +311,16 @@ class Turntable:
             self._drag = (x, y)
             if (x, y) != (px, py):
                 self.rotate(x - px, y - py)
-                self.render()
+                self._request(moving=True)
         elif kind in ("mouseup", "mouseleave"):
+            if self._drag is not None:
+                self._request(moving=False)  # released: the full frame now
             self._drag = None
         elif kind == "wheel":
             delta = event.get("deltaY", 0)
             if delta:
                 self.zoom(delta)
-                self.render()
+                self._request(moving=True)
 
     def _on_slider(self, change: Dict[str, Any]) -> None:
-        self.render()
+        self._request(moving=True)

@@ -47,10 +47,11 @@ pub(crate) struct ViewArgs {
     /// integrated, then CPU).
     #[arg(long, value_name = "N", conflicts_with = "cpu")]
     pub(crate) device: Option<usize>,
-    /// While the camera moves, draw only the N most important Gaussians (opacity times
-    /// the area of the largest cross-section), so previews stay fluid; the view at rest
-    /// always draws all. 0 previews with the whole scene. Scenes of at most 2N
-    /// Gaussians always preview whole.
+    /// While the camera moves, previews may draw only the most important Gaussians
+    /// (opacity times the area of the largest cross-section), at most N short of the
+    /// whole scene: how many, and the preview's size, are chosen from the measured stage
+    /// times so previews stay fluid. The view at rest always draws all. 0 previews with
+    /// the whole scene; scenes of at most 8,192 (or N) Gaussians always preview whole.
     #[arg(long, value_name = "N", default_value_t = vksplat::view::source::DEFAULT_PREVIEW_GAUSSIANS, conflicts_with = "cpu")]
     pub(crate) preview_gaussians: usize,
     /// Opacity compensation for scenes trained with antialiasing (as render
@@ -128,11 +129,11 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> 
             antialiased,
             args.preview_gaussians,
         )?;
-        if src.preview_gaussians() < scene.len() as u32 {
+        if src.preview_subset() > 0 {
             note!(
-                "previews while the camera moves draw the {} most important of {} Gaussians; the view at rest draws all (--preview-gaussians N changes it)",
-                src.preview_gaussians(),
-                scene.len()
+                "previews while the camera moves may draw fewer of the {} Gaussians, the most important (up to {} short of all; as many as keep them fluid); the view at rest draws all (--preview-gaussians N changes the most)",
+                scene.len(),
+                src.preview_subset()
             );
         }
         let device = src.device_name();

@@ -276,10 +276,10 @@ impl GpuRenderer {
         features: &GpuFeatures,
         shader: Option<&shade::GpuShader>,
     ) -> GpuResult<()> {
-        if features.count != scene.count {
+        if features.count != scene.uploaded {
             return Err(GpuError::Input(format!(
                 "the features were uploaded for {} Gaussians, the scene has {}",
-                features.count, scene.count
+                features.count, scene.uploaded
             )));
         }
         if let Some(shader) = shader {

@@ -16,18 +16,31 @@ pub struct GpuScene {
     pub(super) gaussian_texels: Option<BufferView>,
     pub(super) gaussians: GpuBuffer,
     pub(super) sh: GpuBuffer,
+    /// Gaussians drawn: all uploaded, or the first of them ([`GpuScene::draw_first`]).
     pub(super) count: u32,
+    /// Gaussians uploaded.
+    pub(super) uploaded: u32,
     pub(super) sh_degree: u32,
     pub(super) sh_coeffs: u32,
     pub(super) compact: bool,
 }
 
 impl GpuScene {
+    /// Frames draw only the first `n` Gaussians uploaded (all of them when `n` is
+    /// larger); the viewer's previews draw a prefix of a scene uploaded most important
+    /// first. Every stage reads the drawn count, so nothing past it is touched.
+    pub fn draw_first(&mut self, n: u32) {
+        self.count = n.min(self.uploaded);
+    }
+    /// Gaussians uploaded (of which [`Self::len`] are drawn).
+    pub fn uploaded_len(&self) -> u32 {
+        self.uploaded
+    }
     /// Whether the scene was uploaded compact ([`GpuRenderer::set_compact`]: fp16 SH, scales and rotations).
     pub fn is_compact(&self) -> bool {
         self.compact
     }
-    /// Number of Gaussians.
+    /// Number of Gaussians drawn (all uploaded unless [`Self::draw_first`] says fewer).
     pub fn len(&self) -> u32 {
         self.count
     }
@@ -175,6 +188,7 @@ impl GpuRenderer {
             gaussians,
             sh,
             count,
+            uploaded: count,
             sh_degree: scene.sh_degree,
             sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
             compact: self.compact,

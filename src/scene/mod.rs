@@ -115,6 +115,14 @@ impl Scene {
     /// axis scales), the splats that cover the most of any view. NaN weights rank last,
     /// ties by index.
     pub fn most_important(&self, n: usize) -> Vec<usize> {
+        let mut keep = self.ranked_by_importance(n);
+        keep.sort_unstable();
+        keep
+    }
+
+    /// The indices of the `n` Gaussians that matter most (as [`Self::most_important`]),
+    /// most important first: the first `k` of them are the `k` most important.
+    pub fn ranked_by_importance(&self, n: usize) -> Vec<usize> {
         let weight = |i: usize| {
             let mut s = self.log_scales[i];
             s.sort_by(f32::total_cmp);
@@ -125,14 +133,14 @@ impl Scene {
                 w
             }
         };
+        let rank = |a: &(f32, usize), b: &(f32, usize)| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1));
         let mut order: Vec<(f32, usize)> = (0..self.len()).map(|i| (weight(i), i)).collect();
         if n < order.len() {
-            order.select_nth_unstable_by(n, |a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            order.select_nth_unstable_by(n, rank);
             order.truncate(n);
         }
-        let mut keep: Vec<usize> = order.into_iter().map(|(_, i)| i).collect();
-        keep.sort_unstable();
-        keep
+        order.sort_unstable_by(rank);
+        order.into_iter().map(|(_, i)| i).collect()
     }
 
     /// Number of Gaussians.

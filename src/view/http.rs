@@ -27,50 +27,211 @@ impl Request {
     }
 }
 
+/// Why no request came: whether and how to answer.
+#[derive(Debug, PartialEq)]
+pub(super) enum HeadError {
+    /// Nothing was sent (the client closed, the connection broke, or an idle socket
+    /// reached the deadline): there is nobody to answer.
+    Gone,
+    /// Something that is not a request this server takes: answered with `status` and
+    /// `reason` (one sentence) as plain text.
+    Refused {
+        status: &'static str,
+        reason: String,
+    },
+}
+
+fn refused(status: &'static str, reason: impl Into<String>) -> HeadError {
+    HeadError::Refused {
+        status,
+        reason: reason.into(),
+    }
+}
+
 /// Reads the request head (waiting [`HEAD_TIMEOUT`] at most): the request, every byte
-/// read (the head and any bytes past it) and the length of the head.
-pub(super) fn read_head(stream: &mut TcpStream) -> Option<(Request, Vec<u8>, usize)> {
+/// read (the head and any bytes past it) and the length of the head. What is not an
+/// HTTP/1 request head is refused as soon as that is clear (a TLS hello at once, not
+/// after the deadline); one larger than [`MAX_HEAD`] with 431.
+pub(super) fn read_head(stream: &mut TcpStream) -> Result<(Request, Vec<u8>, usize), HeadError> {
     let deadline = Instant::now() + HEAD_TIMEOUT;
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 2048];
     let end = loop {
-        if let Some(i) = buf.windows(4).position(|w| w == b"\r\n\r\n") {
-            break i + 4;
+        if let Some(end) = head_end(&buf) {
+            break end;
         }
+        check_request_line(&buf)?;
         if buf.len() > MAX_HEAD {
-            return None;
+            return Err(refused(
+                "431 Request Header Fields Too Large",
+                format!(
+                    "the request head is over {} KiB, the most this server reads",
+                    MAX_HEAD / 1024
+                ),
+            ));
         }
+        let unfinished = |why: &str| {
+            if buf.is_empty() {
+                HeadError::Gone
+            } else {
+                refused(
+                    "408 Request Timeout",
+                    format!("the request head was not complete {why}"),
+                )
+            }
+        };
         // One blocking read until the deadline (a zero time-out would mean none).
-        let left = deadline
+        let Some(left) = deadline
             .checked_duration_since(Instant::now())
-            .filter(|d| !d.is_zero())?;
-        stream.set_read_timeout(Some(left)).ok()?;
+            .filter(|d| !d.is_zero())
+        else {
+            return Err(unfinished(&format!("within {} s", HEAD_TIMEOUT.as_secs())));
+        };
+        stream
+            .set_read_timeout(Some(left))
+            .map_err(|_| HeadError::Gone)?;
         match stream.read(&mut chunk) {
-            Ok(0) => return None,
+            Ok(0) if buf.is_empty() => return Err(HeadError::Gone),
+            Ok(0) => return Err(refused(
+                "400 Bad Request",
+                "the connection ended inside the request head (no empty line after the headers)",
+            )),
             Ok(n) => buf.extend_from_slice(&chunk[..n]),
             Err(e) if e.kind() == ErrorKind::Interrupted => {}
-            // The deadline (WouldBlock or TimedOut) or a broken connection.
-            Err(_) => return None,
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                return Err(unfinished(&format!("within {} s", HEAD_TIMEOUT.as_secs())))
+            }
+            Err(_) => return Err(HeadError::Gone),
         }
     };
-    let text = std::str::from_utf8(&buf[..end]).ok()?;
-    let mut lines = text.split("\r\n");
-    let mut first = lines.next()?.split(' ');
-    let method = first.next()?.to_string();
-    let path = first.next()?.to_string();
-    let headers = lines
-        .filter_map(|l| l.split_once(':'))
-        .map(|(n, v)| (n.trim().to_string(), v.trim().to_string()))
-        .collect();
-    Some((
-        Request {
-            method,
-            path,
-            headers,
-        },
-        buf,
-        end,
-    ))
+    let request = parse_head(&buf[..end])?;
+    Ok((request, buf, end))
+}
+
+/// The end of the head (past its empty line), if it was all read. Bare `\n` line ends
+/// are taken too, as most servers do.
+fn head_end(buf: &[u8]) -> Option<usize> {
+    let crlf = buf.windows(4).position(|w| w == b"\r\n\r\n").map(|i| i + 4);
+    let lf = buf.windows(2).position(|w| w == b"\n\n").map(|i| i + 2);
+    match (crlf, lf) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// Refuses a request line that cannot become `METHOD TARGET HTTP/1.x` once read in
+/// full (bytes that are not printable ASCII; a line that is over and wrong).
+fn check_request_line(buf: &[u8]) -> Result<(), HeadError> {
+    let line_end = buf.iter().position(|&b| b == b'\n');
+    let line = &buf[..line_end.unwrap_or(buf.len())];
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    if buf.first() == Some(&0x16) {
+        return Err(refused(
+            "400 Bad Request",
+            "this is a TLS handshake, and the viewer speaks plain HTTP: open http://, not https://",
+        ));
+    }
+    if let Some(bad) = line.iter().find(|&&b| !(b' '..=b'~').contains(&b)) {
+        return Err(refused(
+            "400 Bad Request",
+            format!("not an HTTP request: byte 0x{bad:02x} in the request line"),
+        ));
+    }
+    if line_end.is_some() {
+        request_line(line)?;
+    }
+    Ok(())
+}
+
+/// `METHOD TARGET HTTP/1.x`, split.
+fn request_line(line: &[u8]) -> Result<(String, String), HeadError> {
+    let text = std::str::from_utf8(line).unwrap_or("");
+    let parts: Vec<&str> = text.split(' ').collect();
+    let shown: String = text.chars().take(60).collect();
+    match parts.as_slice() {
+        [method, target, version]
+            if !method.is_empty()
+                && method.bytes().all(|b| b.is_ascii_alphabetic())
+                && target.starts_with('/') =>
+        {
+            if version.starts_with("HTTP/1.") {
+                Ok((method.to_string(), target.to_string()))
+            } else {
+                Err(refused(
+                    "505 HTTP Version Not Supported",
+                    format!("the viewer speaks HTTP/1.1, the request is {version}"),
+                ))
+            }
+        }
+        _ => Err(refused(
+            "400 Bad Request",
+            format!("not an HTTP request line: {shown:?} (expected METHOD /path HTTP/1.1)"),
+        )),
+    }
+}
+
+fn parse_head(head: &[u8]) -> Result<Request, HeadError> {
+    let text = std::str::from_utf8(head)
+        .map_err(|_| refused("400 Bad Request", "the request head is not UTF-8 text"))?;
+    let mut lines = text.split('\n').map(|l| l.strip_suffix('\r').unwrap_or(l));
+    let (method, path) = request_line(lines.next().unwrap_or("").as_bytes())?;
+    let mut headers = Vec::new();
+    for line in lines.take_while(|l| !l.is_empty()) {
+        let Some((name, value)) = line.split_once(':') else {
+            let shown: String = line.chars().take(60).collect();
+            return Err(refused(
+                "400 Bad Request",
+                format!("a header line without a colon: {shown:?}"),
+            ));
+        };
+        headers.push((name.trim().to_string(), value.trim().to_string()));
+    }
+    Ok(Request {
+        method,
+        path,
+        headers,
+    })
+}
+
+/// Answers a refused request with `status` and its reason, and lets the client read
+/// the answer: the sending side is shut first, then what the client still sends (the
+/// rest of an oversized head) is read and dropped for a moment, since closing a socket
+/// with unread bytes resets the connection and the client would lose the answer.
+pub(super) fn refuse(stream: &mut TcpStream, status: &str, reason: &str) {
+    respond(
+        stream,
+        status,
+        "text/plain; charset=utf-8",
+        format!("{reason}\n").as_bytes(),
+    );
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+    drain(stream, LINGER);
+}
+
+/// How long [`refuse`] (and a WebSocket closed for an oversized message) reads what the
+/// client still sends before closing.
+pub(super) const LINGER: Duration = Duration::from_secs(5);
+
+/// Reads and drops what arrives on `stream` until the client closes, an error, or `for_`
+/// passed.
+pub(super) fn drain(stream: &TcpStream, for_: Duration) {
+    let deadline = Instant::now() + for_;
+    let mut sink = vec![0u8; 64 * 1024];
+    let mut reader = stream;
+    while let Some(left) = deadline
+        .checked_duration_since(Instant::now())
+        .filter(|d| !d.is_zero())
+    {
+        if reader.set_read_timeout(Some(left)).is_err() {
+            return;
+        }
+        match reader.read(&mut sink) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(_) => return,
+        }
+    }
 }
 
 /// The request is a WebSocket handshake tungstenite's `accept` takes: it checks the same
@@ -198,6 +359,46 @@ mod tests {
             ..req(&full)
         };
         assert!(!websocket_handshake(&post));
+    }
+
+    #[test]
+    fn request_heads_parse_or_are_refused_with_a_status() {
+        let status = |head: &[u8]| -> &'static str {
+            if let Err(e) = check_request_line(head) {
+                return match e {
+                    HeadError::Refused { status, .. } => status,
+                    HeadError::Gone => "gone",
+                };
+            }
+            match head_end(head).map(|end| parse_head(&head[..end])) {
+                None => "incomplete",
+                Some(Ok(_)) => "ok",
+                Some(Err(HeadError::Refused { status, .. })) => status,
+                Some(Err(HeadError::Gone)) => "gone",
+            }
+        };
+        assert_eq!(status(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n"), "ok");
+        assert_eq!(status(b"GET /viewer.js HTTP/1.0\n\n"), "ok");
+        assert_eq!(status(b"GET / HTTP/1.1\r\nHost"), "incomplete");
+        assert_eq!(status(b"GE"), "incomplete");
+        assert_eq!(status(b"garbage\r\n\r\n"), "400 Bad Request");
+        assert_eq!(status(b"hello world\n"), "400 Bad Request");
+        assert_eq!(status(b"\x16\x03\x01\x02\x00"), "400 Bad Request");
+        assert_eq!(status(b"\x00\x01garbage"), "400 Bad Request");
+        assert_eq!(
+            status(b"GET / HTTP/2.0\r\n\r\n"),
+            "505 HTTP Version Not Supported"
+        );
+        assert_eq!(
+            status(b"GET / HTTP/1.1\r\nno colon here\r\n\r\n"),
+            "400 Bad Request"
+        );
+        let parsed = parse_head(b"GET /ws?x HTTP/1.1\r\nHost:  a:1 \r\n\r\n").unwrap();
+        assert_eq!(
+            (parsed.method.as_str(), parsed.path.as_str()),
+            ("GET", "/ws?x")
+        );
+        assert_eq!(parsed.header("host"), Some("a:1"));
     }
 
     #[test]

@@ -9,12 +9,15 @@
 //!   worker; `session` is one tab's connection, `http` the little HTTP it needs, `queue`
 //!   what they share (the tunables, each tab's pending work and its channel).
 //! * [`paths`]: keyframe paths from the page (exports and the preview's frames).
+//! * [`preview`]: how many Gaussians and pixels a tab's next preview draws, from the
+//!   measured stage times.
 //! * [`page`]: the page itself (HTML, JS, CSS embedded in the binary).
 
 pub mod cpu_source;
 mod http;
 pub mod page;
 pub mod paths;
+pub mod preview;
 pub mod protocol;
 mod queue;
 pub mod server;

@@ -6,6 +6,7 @@
 //! reader and writer ([`session`](super::session)) depend on this module; the session
 //! does not import the server (which hands it each WebSocket connection).
 
+use super::preview::{PreviewLimits, PreviewPlan};
 use super::protocol::Quality;
 use super::source::{ShotFormat, ViewFrame, ViewSettings};
 use crate::camera::Camera;
@@ -55,6 +56,8 @@ pub(super) struct Shared {
     pub(super) hello_text: String,
     pub(super) cameras: Vec<Camera>,
     pub(super) sh_degree: u32,
+    /// What previews may draw (the scene's Gaussians, the preview subset, the size).
+    pub(super) preview_limits: PreviewLimits,
     pub(super) stop: Arc<AtomicBool>,
     /// Bound to a loopback address: requests must name a loopback host.
     pub(super) loopback: bool,
@@ -108,9 +111,9 @@ pub(super) struct Pending {
     pub(super) shot: Option<ShotJob>,
     /// A frame was rendered and is not yet written to the socket.
     pub(super) frame_in_flight: bool,
-    /// Pixels of this tab's previews (see `session::next_preview_budget`): set by the
+    /// What this tab's next preview draws ([`super::preview::next_plan`]): set by the
     /// tab's writer after each preview, read when a preview is requested.
-    pub(super) preview_pixels: f64,
+    pub(super) preview: PreviewPlan,
     /// To the client's writer thread.
     pub(super) tx: mpsc::Sender<Outgoing>,
 }
@@ -121,6 +124,8 @@ pub(super) struct FrameJob {
     pub(super) camera: Camera,
     pub(super) settings: ViewSettings,
     pub(super) quality: Quality,
+    /// Gaussians a preview draws (the most important; the scene's count: all).
+    pub(super) gaussians: u32,
 }
 
 pub(super) struct ShotJob {

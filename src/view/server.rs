@@ -29,8 +29,9 @@
 //! * The render worker waits on a condition variable: for work, or until the next
 //!   rest frame is due (its time-out is that moment, not a polling interval).
 
-use super::http::{loopback_host, read_head, respond, websocket_handshake};
+use super::http::{loopback_host, read_head, refuse, respond, websocket_handshake, HeadError};
 use super::page;
+use super::preview::PreviewLimits;
 use super::protocol::{Quality, ServerMessage};
 pub use super::queue::ServerConfig;
 use super::queue::{FrameJob, Outgoing, Queue, Shared, ShotJob};
@@ -126,12 +127,19 @@ impl Server {
     /// Serves until a [`Stopper`] stops it, then closes every connection and returns.
     pub fn run(self, source: Box<dyn ViewSource>, scene: ServedScene) -> anyhow::Result<()> {
         let sh_degree = scene.hello.sh_degree;
+        let gaussians = u32::try_from(scene.hello.gaussians).unwrap_or(u32::MAX);
+        let preview_limits = PreviewLimits::new(
+            gaussians,
+            source.preview_subset(),
+            self.config.preview_pixels,
+        );
         let hello_text = serde_json::to_string(&ServerMessage::Hello(Box::new(scene.hello)))?;
         let shared = Shared {
             config: self.config,
             hello_text,
             cameras: scene.cameras,
             sh_degree,
+            preview_limits,
             stop: self.stop,
             loopback: self.listener.local_addr()?.ip().is_loopback(),
             connections: Mutex::new(BTreeMap::new()),
@@ -218,7 +226,9 @@ fn render_worker(mut source: Box<dyn ViewSource>, shared: &Shared) {
         let message = match job {
             Job::Frame(job) => {
                 let result = guarded(|| match job.quality {
-                    Quality::Preview => source.render_preview(&job.camera, &job.settings),
+                    Quality::Preview => {
+                        source.render_preview(&job.camera, &job.settings, job.gaussians)
+                    }
                     Quality::Full => source.render(&job.camera, &job.settings),
                 });
                 Outgoing::Frame {
@@ -301,8 +311,13 @@ fn serve_connection(mut stream: TcpStream, shared: &Shared) {
         return;
     }
     let _ = stream.set_nodelay(true);
-    let Some((req, bytes, head_len)) = read_head(&mut stream) else {
-        return;
+    let (req, bytes, head_len) = match read_head(&mut stream) {
+        Ok(head) => head,
+        Err(HeadError::Gone) => return,
+        Err(HeadError::Refused { status, reason }) => {
+            refuse(&mut stream, status, &reason);
+            return;
+        }
     };
     let path = req.path.split('?').next().unwrap_or("");
     // The handshake's own checks (Host, Origin, the number of tabs) answer in
@@ -312,34 +327,27 @@ fn serve_connection(mut stream: TcpStream, shared: &Shared) {
         return;
     }
     if shared.loopback && !loopback_host(req.header("Host")) {
-        respond(
+        refuse(
             &mut stream,
             "403 Forbidden",
-            "text/plain",
-            b"the viewer answers only to localhost names\n",
+            "the viewer answers only to localhost names",
         );
         return;
     }
     if req.method != "GET" {
-        respond(
-            &mut stream,
-            "405 Method Not Allowed",
-            "text/plain",
-            b"only GET\n",
-        );
+        refuse(&mut stream, "405 Method Not Allowed", "only GET");
         return;
     }
     if path == "/ws" {
-        respond(
+        refuse(
             &mut stream,
             "400 Bad Request",
-            "text/plain",
-            b"expected a WebSocket upgrade\n",
+            "expected a WebSocket upgrade (GET with Upgrade: websocket, Connection: Upgrade, Sec-WebSocket-Version: 13 and a Sec-WebSocket-Key)",
         );
         return;
     }
     match page::file(path) {
         Some((content_type, body)) => respond(&mut stream, "200 OK", content_type, body),
-        None => respond(&mut stream, "404 Not Found", "text/plain", b"not found\n"),
+        None => refuse(&mut stream, "404 Not Found", "not found"),
     }
 }

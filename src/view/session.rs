@@ -26,8 +26,9 @@
 //! which ends the reader's blocked read; when the server stops it shuts the reading
 //! side of every socket, and each reader has its writer send a close message.
 
-use super::http::{loopback_host, refusal, same_origin};
+use super::http::{drain, loopback_host, refusal, same_origin, LINGER};
 use super::paths::{export_path, sample_path};
+use super::preview::{next_plan, PreviewCost};
 use super::protocol::{
     binary_message, camera_from_entry, camera_to_entry, ClientMessage, FrameHeader, KeyframeIn,
     PathFormat, Quality, ServerMessage, ShotHeader,
@@ -39,15 +40,13 @@ use std::io::{ErrorKind, Read, Write};
 use std::net::{Shutdown, TcpStream};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
+use tungstenite::error::CapacityError;
 use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::http::StatusCode;
-use tungstenite::protocol::{Role, WebSocketConfig};
+use tungstenite::protocol::frame::coding::CloseCode;
+use tungstenite::protocol::{CloseFrame, Role, WebSocketConfig};
 use tungstenite::{Message, WebSocket};
 
-/// The blend of a preview frame should take about this long (ms).
-const PREVIEW_BLEND_MS: f64 = 25.0;
-/// Previews are never smaller than this many pixels.
-const MIN_PREVIEW_PIXELS: f64 = 60_000.0;
 /// Longest WebSocket message a client may send (a long keyframe list fits).
 const MAX_MESSAGE: usize = 4 << 20;
 
@@ -133,7 +132,7 @@ fn register(shared: &Shared, tx: mpsc::Sender<Outgoing>) -> Option<u64> {
             rest: None,
             shot: None,
             frame_in_flight: false,
-            preview_pixels: shared.config.preview_pixels as f64,
+            preview: shared.preview_limits.first_plan(),
             tx,
         },
     );
@@ -237,7 +236,12 @@ impl Writer<'_> {
                 Outgoing::Pong(data) => self.send(Message::Pong(data)),
                 Outgoing::Close(frame) => {
                     let sent = self.ws.close(frame);
-                    let _ = self.retry(sent);
+                    if self.retry(sent).is_ok() {
+                        // The client reads the close and closes its side; the reader
+                        // sees that end.
+                        let _ = self.ws.get_ref().shutdown(Shutdown::Write);
+                        return;
+                    }
                     break;
                 }
                 Outgoing::End => break,
@@ -292,16 +296,14 @@ impl Writer<'_> {
         sent
     }
 
-    /// Scales the preview size so that the blend of a preview, the stage whose time
-    /// grows with the pixels, takes about [`PREVIEW_BLEND_MS`] (between
-    /// [`MIN_PREVIEW_PIXELS`] and the configured size); the per-Gaussian stages do not
-    /// shrink with the frame, so they are left out. Damped so the size does not swing.
+    /// Plans the tab's next preview (Gaussians and pixels) from this one's stage times
+    /// ([`next_plan`]).
     fn adapt_preview(&mut self, frame: &ViewFrame) {
         let pixels = frame.width as f64 * frame.height as f64;
-        let max = self.shared.config.preview_pixels as f64;
+        let cost = PreviewCost::of(&frame.timings);
+        let limits = &self.shared.preview_limits;
         if let Some(p) = self.shared.queue().clients.get_mut(&self.id) {
-            p.preview_pixels =
-                next_preview_budget(p.preview_pixels, pixels, frame.timings.blend, max);
+            p.preview = next_plan(p.preview, f64::from(frame.gaussians), pixels, cost, limits);
         }
     }
 }
@@ -356,12 +358,24 @@ impl<'s> Session<'s> {
                 Ok(_) => {}
                 Err(tungstenite::Error::Io(e)) if e.kind() == ErrorKind::Interrupted => {}
                 Err(tungstenite::Error::Capacity(e)) => {
-                    // The connection cannot resynchronise after an oversized frame.
-                    self.send_error(&format!("message refused: {e}; closing"), None);
-                    return Outgoing::Close(None);
+                    // The connection cannot resynchronise after an oversized frame: it
+                    // is closed with 1009 and why, and what the client still sends of
+                    // the message is read and dropped meanwhile (closing a socket with
+                    // unread bytes resets it, and the client would lose the close).
+                    self.send(Outgoing::Close(Some(CloseFrame {
+                        code: CloseCode::Size,
+                        reason: capacity_reason(&e).into(),
+                    })));
+                    drain(ws.get_ref().socket, LINGER);
+                    return Outgoing::End;
                 }
                 // The server stops: it shut the reading side of the socket.
-                Err(_) if self.shared.stopping() => return Outgoing::Close(None),
+                Err(_) if self.shared.stopping() => {
+                    return Outgoing::Close(Some(CloseFrame {
+                        code: CloseCode::Away,
+                        reason: "the viewer server is stopping".into(),
+                    }))
+                }
                 Err(_) => return Outgoing::End,
             }
         }
@@ -481,6 +495,7 @@ impl<'s> Session<'s> {
             } else {
                 Quality::Full
             },
+            gaussians: u32::MAX, // set from the tab's plan in submit_frame
         });
         Ok(())
     }
@@ -543,6 +558,7 @@ impl<'s> Session<'s> {
             camera: cam,
             settings,
             quality: Quality::Full,
+            gaussians: u32::MAX,
         });
         Ok(())
     }
@@ -641,12 +657,17 @@ impl<'s> Session<'s> {
                     };
                     let due = Instant::now() + config.rest_delay;
                     (
-                        cap_pixels(&capped, p.preview_pixels as u32),
+                        cap_pixels(&capped, p.preview.pixels as u32),
                         Some((due, full)),
                     )
                 }
             };
-            p.frame = Some(FrameJob { camera, ..job });
+            let gaussians = p.preview.gaussians as u32;
+            p.frame = Some(FrameJob {
+                camera,
+                gaussians,
+                ..job
+            });
             p.rest = rest;
         }
         drop(q);
@@ -705,6 +726,24 @@ fn encode_frame(job: &FrameJob, frame: &ViewFrame, jpeg_quality: u8) -> Result<V
     Ok(binary_message(&header, &bytes))
 }
 
+/// The reason of the close that refuses an oversized message (at most 123 bytes, as a
+/// close frame's reason must be).
+fn capacity_reason(e: &CapacityError) -> String {
+    match e {
+        CapacityError::MessageTooLong { size, max_size } => format!(
+            "a message of {} is over the limit of {}",
+            mib(*size),
+            mib(*max_size)
+        ),
+        other => format!("message refused: {other}"),
+    }
+}
+
+/// Bytes as MiB with one decimal.
+fn mib(bytes: usize) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1 << 20) as f64)
+}
+
 /// `1 camera`, `3 cameras`.
 fn camera_count(n: usize) -> String {
     if n == 1 {
@@ -726,22 +765,6 @@ pub(super) fn error_text(message: &str, seq: Option<u64>) -> String {
         seq,
     })
     .unwrap_or_default()
-}
-
-/// The preview budget after a preview of `pixels` whose blend took `blend_ms`.
-fn next_preview_budget(budget: f64, pixels: f64, blend_ms: f64, max: f64) -> f64 {
-    if !(blend_ms > 0.0 && pixels > 0.0) {
-        return budget;
-    }
-    let ratio = (PREVIEW_BLEND_MS / blend_ms).clamp(0.25, 4.0).sqrt();
-    let target = pixels * ratio;
-    // A fast frame smaller than the budget (a small canvas) keeps the budget.
-    let next = if ratio >= 1.0 {
-        budget.max(target)
-    } else {
-        target
-    };
-    next.clamp(MIN_PREVIEW_PIXELS.min(max), max)
 }
 
 /// `cam` scaled down (aspect kept, intrinsics scaled) to fit `max` (width, height).
@@ -771,28 +794,6 @@ fn resize_by(cam: &Camera, s: f64) -> Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn preview_budget_follows_the_blend_time() {
-        let max = 250_000.0;
-        // Slow blends shrink it (damped), down to the floor.
-        let b = next_preview_budget(max, max, 4.0 * PREVIEW_BLEND_MS, max);
-        assert_eq!(b, max / 2.0);
-        assert_eq!(next_preview_budget(b, b, 1e6, max), b / 2.0);
-        assert_eq!(
-            next_preview_budget(b / 2.0, b / 2.0, 1e6, max),
-            MIN_PREVIEW_PIXELS
-        );
-        // Fast ones grow it back up to the configured size.
-        assert_eq!(
-            next_preview_budget(100_000.0, 100_000.0, 1.0, max),
-            200_000.0
-        );
-        assert_eq!(next_preview_budget(200_000.0, 200_000.0, 1.0, max), max);
-        // A small canvas rendered fast keeps the budget; no timing keeps it too.
-        assert_eq!(next_preview_budget(max, 10_000.0, 1.0, max), max);
-        assert_eq!(next_preview_budget(123.0, 10_000.0, 0.0, max), 123.0);
-    }
 
     #[test]
     fn caps_keep_the_aspect_ratio() {

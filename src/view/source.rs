@@ -134,14 +134,24 @@ pub enum ShotFormat {
 pub trait ViewSource: Send {
     /// Renders `cam` (its size is the frame's) with `settings`.
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame>;
-    /// Renders a preview while the camera moves: by default the same as [`Self::render`];
-    /// a source may draw fewer Gaussians (see [`GpuSource::set_preview`]).
+    /// Renders a preview while the camera moves, drawing about `gaussians` of the
+    /// scene's Gaussians, the most important ones (all of them when `gaussians` is the
+    /// scene's count or more): by default the same as [`Self::render`]; a source with a
+    /// preview subset draws its first `gaussians` (see [`GpuSource::set_preview`]).
+    /// [`ViewFrame::gaussians`] says how many were drawn.
     fn render_preview(
         &mut self,
         cam: &Camera,
         settings: &ViewSettings,
+        gaussians: u32,
     ) -> anyhow::Result<ViewFrame> {
+        let _ = gaussians;
         self.render(cam, settings)
+    }
+    /// The most Gaussians a preview may draw short of the whole scene (the size of the
+    /// preview subset); 0 when previews always draw the whole scene.
+    fn preview_subset(&self) -> u32 {
+        0
     }
     /// Renders `cam` at full quality and encodes it as a file of `format`, as
     /// `vksplat render` would write it with the flags matching `settings`.
@@ -159,7 +169,8 @@ pub trait ViewSource: Send {
 pub struct GpuSource {
     // Dropped before the renderer, whose context frees them.
     scene: GpuScene,
-    /// The most important Gaussians of the scene, drawn while the camera moves.
+    /// The most important Gaussians of the scene, most important first: a preview draws
+    /// a prefix of it.
     preview: Option<GpuScene>,
     renderer: GpuRenderer,
     sh_degree: u32,
@@ -168,10 +179,16 @@ pub struct GpuSource {
     kernel: SplatKernel,
 }
 
-/// Gaussians a preview draws by default: on lavapipe a frame's per-Gaussian stages
-/// (preprocess, depth order, keys) cost about 1 ms per 1,000 Gaussians, so a preview of
-/// more would not keep the viewer near 10 updates per second.
-pub const DEFAULT_PREVIEW_GAUSSIANS: usize = 24_576;
+/// The most Gaussians a preview draws by default short of the whole scene (the size of
+/// the preview subset uploaded beside the scene; about 32 MiB at SH degree 3). How many
+/// a preview draws is chosen per tab from the measured stage times (`session`); on
+/// lavapipe the per-Gaussian stages (preprocess, depth order, keys, sort) cost about
+/// 0.5 to 1 ms per 1,000 Gaussians, so previews there draw a few tens of thousands.
+pub const DEFAULT_PREVIEW_GAUSSIANS: usize = 131_072;
+
+/// Scenes of at most this many Gaussians (or `--preview-gaussians`, if fewer) always
+/// preview whole: fewer would not make a frame much faster.
+pub const MIN_PREVIEW_GAUSSIANS: usize = 8_192;
 
 impl GpuSource {
     /// Opens device `device` (an index; `None`: the default device), builds the pipeline
@@ -211,33 +228,34 @@ impl GpuSource {
         Ok(source)
     }
 
-    /// Previews (frames while the camera moves) draw the `n` most important Gaussians of
-    /// `scene` ([`Scene::most_important`]), uploaded once beside the scene; resting frames
-    /// and screenshots always draw all of them. Scenes of at most `2 n` Gaussians, and
-    /// `n == 0`, preview with the whole scene.
+    /// Previews (frames while the camera moves) may draw fewer Gaussians: the `n` most
+    /// important of `scene` ([`Scene::ranked_by_importance`]) are uploaded once beside
+    /// the scene, most important first, and a preview draws the first of them (as many
+    /// as [`ViewSource::render_preview`] asks) or the whole scene. Resting frames and
+    /// screenshots always draw the whole scene. `n == 0`, and scenes of at most
+    /// [`MIN_PREVIEW_GAUSSIANS`] (or `n`, if fewer), preview whole.
     pub fn set_preview(&mut self, scene: &Scene, n: usize) -> anyhow::Result<()> {
         self.preview = None;
-        if n > 0 && scene.len() > 2 * n {
-            let subset = scene.select(&scene.most_important(n), scene.sh_degree);
+        if n > 0 && scene.len() > MIN_PREVIEW_GAUSSIANS.min(n) {
+            let ranked = scene.ranked_by_importance(n);
+            let subset = scene.select(&ranked, scene.sh_degree);
             self.preview = Some(self.renderer.upload(&subset.activated())?);
         }
         Ok(())
     }
 
-    /// Gaussians a preview draws.
-    pub fn preview_gaussians(&self) -> u32 {
-        self.preview.as_ref().unwrap_or(&self.scene).len()
-    }
-
     fn render_scene(
         &mut self,
-        preview: bool,
+        preview: Option<u32>,
         cam: &Camera,
         settings: &ViewSettings,
     ) -> anyhow::Result<ViewFrame> {
         let opts = self.options(settings)?;
-        let scene = match (&self.preview, preview) {
-            (Some(p), true) => p,
+        let scene = match (&mut self.preview, preview) {
+            (Some(p), Some(n)) if n < self.scene.len() => {
+                p.draw_first(n.max(1));
+                &*p
+            }
             _ => &self.scene,
         };
         let start = std::time::Instant::now();
@@ -337,15 +355,20 @@ pub fn encode_shot(
 
 impl ViewSource for GpuSource {
     fn render(&mut self, cam: &Camera, settings: &ViewSettings) -> anyhow::Result<ViewFrame> {
-        self.render_scene(false, cam, settings)
+        self.render_scene(None, cam, settings)
     }
 
     fn render_preview(
         &mut self,
         cam: &Camera,
         settings: &ViewSettings,
+        gaussians: u32,
     ) -> anyhow::Result<ViewFrame> {
-        self.render_scene(true, cam, settings)
+        self.render_scene(Some(gaussians), cam, settings)
+    }
+
+    fn preview_subset(&self) -> u32 {
+        self.preview.as_ref().map_or(0, GpuScene::uploaded_len)
     }
 
     fn screenshot(

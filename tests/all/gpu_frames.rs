@@ -814,8 +814,10 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
 }
 
 /// The viewer's previews (frames while the camera moves) draw the most important
-/// Gaussians, uploaded once: a preview equals a render of exactly that subset, the view at
-/// rest draws the whole scene, and `set_preview(0)` previews with the whole scene.
+/// Gaussians, uploaded once most important first: a preview of `k` equals a render of
+/// exactly the `k` most important (its prefix), one of the scene's count or more draws
+/// the whole scene, the view at rest draws the whole scene, and `set_preview(0)`
+/// previews with the whole scene.
 #[test]
 fn viewer_previews_draw_the_most_important_gaussians() {
     use vksplat::view::source::{GpuSource, ViewSettings, ViewSource, DEFAULT_PREVIEW_GAUSSIANS};
@@ -839,36 +841,55 @@ fn viewer_previews_draw_the_most_important_gaussians() {
         .fold(0.0, f32::max);
     assert!(lightest_kept >= heaviest_dropped);
     assert_eq!(scene.most_important(usize::MAX).len(), scene.len());
+    // Ranked: heaviest first, and its first k are the k most important.
+    let ranked = scene.ranked_by_importance(30_000);
+    assert!(ranked.windows(2).all(|w| weight(w[0]) >= weight(w[1])));
+    let mut first = ranked[..1000].to_vec();
+    first.sort_unstable();
+    assert_eq!(first, keep);
 
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 4, 320, 180);
     let settings = ViewSettings::default();
     let mut src = GpuSource::new(&scene, None, false, DEFAULT_PREVIEW_GAUSSIANS).unwrap();
-    assert_eq!(src.preview_gaussians() as usize, DEFAULT_PREVIEW_GAUSSIANS);
+    // The subset holds the whole scene, most important first (the scene is smaller).
+    assert_eq!(
+        src.preview_subset() as usize,
+        DEFAULT_PREVIEW_GAUSSIANS.min(scene.len())
+    );
     let full = src.render(&cam, &settings).unwrap();
-    let preview = src.render_preview(&cam, &settings).unwrap();
     assert_eq!(full.gaussians as usize, scene.len());
-    assert_eq!(preview.gaussians as usize, DEFAULT_PREVIEW_GAUSSIANS);
-    assert!(full.rgba8 != preview.rgba8);
-    // The preview is the render of the subset, bit for bit.
-    let subset = scene
-        .select(
-            &scene.most_important(DEFAULT_PREVIEW_GAUSSIANS),
-            scene.sh_degree,
-        )
-        .activated();
     let mut r = renderer();
-    let gs = r.upload(&subset).unwrap();
-    let want = r
-        .render_rgba8(&gs, &cam, &RenderOptions::default())
-        .unwrap();
-    assert!(
-        want.rgba == preview.rgba8,
-        "the preview is not the subset's render"
+    for k in [1000, 24_576] {
+        let preview = src.render_preview(&cam, &settings, k).unwrap();
+        assert_eq!(preview.gaussians, k);
+        assert!(full.rgba8 != preview.rgba8);
+        // The preview is the render of the k most important, bit for bit.
+        let subset = scene
+            .select(&scene.ranked_by_importance(k as usize), scene.sh_degree)
+            .activated();
+        let gs = r.upload(&subset).unwrap();
+        let want = r
+            .render_rgba8(&gs, &cam, &RenderOptions::default())
+            .unwrap();
+        assert!(
+            want.rgba == preview.rgba8,
+            "the preview of {k} is not their render"
+        );
+    }
+    // Asking for the scene's count (or more) draws the whole scene; past the subset's
+    // size short of it, the subset.
+    let whole = src.render_preview(&cam, &settings, 125_000).unwrap();
+    assert_eq!(whole.gaussians as usize, scene.len());
+    assert!(whole.rgba8 == full.rgba8);
+    let most = src.render_preview(&cam, &settings, 124_000).unwrap();
+    assert_eq!(
+        most.gaussians as usize,
+        DEFAULT_PREVIEW_GAUSSIANS.min(124_000)
     );
     // Off: previews draw everything.
     src.set_preview(&scene, 0).unwrap();
-    assert_eq!(src.preview_gaussians() as usize, scene.len());
-    assert!(src.render_preview(&cam, &settings).unwrap().rgba8 == full.rgba8);
+    assert_eq!(src.preview_subset(), 0);
+    assert!(src.render_preview(&cam, &settings, 1000).unwrap().rgba8 == full.rgba8);
     assert_validation_clean(src.renderer());
     assert_validation_clean(&r);
 }

@@ -154,6 +154,9 @@ impl Browser {
              histLabel: document.getElementById('hist-label').textContent, \
              upFlipped: V.upFlipped, \
              banner: document.getElementById('banner').hidden ? null : document.getElementById('banner').textContent, \
+             readout: document.getElementById('readout').textContent, \
+             helloGaussians: V.hello && V.hello.gaussians, \
+             lastFrameGaussians: V.lastFrame && V.lastFrame.gaussians, \
              hello: V.hello && {cameras: V.hello.cameras, size: V.hello.size}};")
     }
 
@@ -609,4 +612,278 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         var > 100.0 && mean > 5.0,
         "blank canvas: mean {mean}, variance {var}"
     );
+}
+
+/// Opens `viewer` in a new browser and waits for its first full frame.
+fn open(viewer: &Viewer) -> (Browser, Value) {
+    let browser = Browser::start();
+    browser.call("POST", "/url", Some(json!({"url": viewer.url})));
+    let first = browser.wait("first full frame", Duration::from_secs(90), |s| {
+        s["connected"] == true && s["fullFrames"].as_u64() > Some(0)
+    });
+    (browser, first)
+}
+
+/// Types `text` over the value of the input `css` (as after selecting it all), then
+/// clicks `then`, which takes the focus (the input's change event).
+fn type_into(browser: &Browser, css: &str, text: &str, then: &str) {
+    let input = browser.element(css);
+    // Emptied without an event, as typing over a selection does.
+    browser.js(&format!(
+        "document.querySelector('{css}').value = ''; return null;"
+    ));
+    browser.call(
+        "POST",
+        &format!("/element/{input}/value"),
+        Some(json!({ "text": text })),
+    );
+    let other = browser.element(then);
+    browser.call("POST", &format!("/element/{other}/click"), Some(json!({})));
+}
+
+/// The viewer of the demo scene (frames at most 640x400) in a browser, at its first
+/// full frame.
+fn demo_page() -> (tempfile::TempDir, Viewer, Browser, Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let viewer = Viewer::start(dir.path(), &["--demo", "--max-resolution", "640x400"]);
+    let (browser, first) = open(&viewer);
+    (dir, viewer, browser, first)
+}
+
+/// The canvas is the area left of the side panel (no rendered pixel hidden behind it, the
+/// subject in the middle of what is seen), and the whole window with the panel hidden
+/// (issue 29, item 4).
+#[test]
+fn the_canvas_is_the_area_beside_the_panel() {
+    let (_dir, _viewer, browser, first) = demo_page();
+    // The canvas ends where the panel starts; the frame is the canvas's size.
+    let geometry = || {
+        browser.js(
+            "const c = document.getElementById('view').getBoundingClientRect(); \
+             const p = document.getElementById('panel').getBoundingClientRect(); \
+             const v = document.getElementById('view'); \
+             return {right: c.right, left: c.left, panelLeft: p.left, window: window.innerWidth, \
+                     width: v.width, dpr: window.devicePixelRatio, camera: window.vksplatViewer.camera.width};",
+        )
+    };
+    let g = geometry();
+    let f = |k: &str| g[k].as_f64().unwrap();
+    assert_eq!(f("left"), 0.0, "{g}");
+    assert!(
+        (f("right") - f("panelLeft")).abs() <= 1.0,
+        "the canvas reaches under the panel: {g}"
+    );
+    assert!(f("panelLeft") < f("window") - 200.0, "{g}");
+    assert_eq!(f("camera"), f("width"), "{g}");
+    assert_eq!(f("width"), (f("right") * f("dpr")).round(), "{g}");
+    let frame_before = first["frames"].as_u64().unwrap();
+    // Hidden panel: the canvas takes the window, and a frame of that width follows.
+    let toggle = browser.element("#panel-toggle");
+    browser.call("POST", &format!("/element/{toggle}/click"), Some(json!({})));
+    let wide = browser.wait("wide canvas", Duration::from_secs(30), |s| {
+        s["camera"]["width"].as_f64() == Some((f("window") * f("dpr")).round())
+            && s["frames"].as_u64() > Some(frame_before)
+    });
+    assert!(wide["camera"]["width"].as_f64() > g["camera"].as_f64());
+    browser.call("POST", &format!("/element/{toggle}/click"), Some(json!({})));
+    browser.wait("narrow canvas again", Duration::from_secs(30), |s| {
+        s["camera"]["width"].as_f64() == g["camera"].as_f64()
+    });
+}
+
+/// Once frames stop, the readout says the view is at rest instead of the last moving
+/// frames/s (issue 29, item 2).
+#[test]
+fn the_readout_says_at_rest() {
+    let (_dir, _viewer, browser, _) = demo_page();
+    let rest = browser.wait("at rest", Duration::from_secs(30), |s| {
+        s["readout"]
+            .as_str()
+            .is_some_and(|r| r.starts_with("at rest"))
+    });
+    assert!(
+        rest["readout"].as_str().unwrap().contains("full"),
+        "{}",
+        rest["readout"]
+    );
+}
+
+/// The keyframe inputs refuse values outside their range visibly: "Seconds apart" 0
+/// becomes 0.1 (its minimum, not a silent 1 s) with a banner saying so; the keyframes
+/// are 0.1 s apart (issue 29, item 7).
+#[test]
+fn keyframe_inputs_refuse_values_out_of_range_visibly() {
+    let (_dir, _viewer, browser, _) = demo_page();
+    type_into(&browser, "#kf-spacing", "0", "#kf-add");
+    let s = browser.wait("spacing refused", Duration::from_secs(10), |s| {
+        s["keyframes"] == 1 && !s["banner"].is_null()
+    });
+    let banner = s["banner"].as_str().unwrap();
+    assert!(
+        banner.contains("Seconds apart") && banner.contains("0.1"),
+        "{banner}"
+    );
+    let value = |css: &str| browser.js(&format!("return document.querySelector('{css}').value;"));
+    assert_eq!(value("#kf-spacing"), "0.1");
+    let add = browser.element("#kf-add");
+    browser.call("POST", &format!("/element/{add}/click"), Some(json!({})));
+    browser.wait("second keyframe", Duration::from_secs(10), |s| {
+        s["keyframes"] == 2
+    });
+    let labels = browser.js(
+        "return [...document.querySelectorAll('#keyframes li span')].map((e) => e.textContent);",
+    );
+    assert_eq!(labels, json!(["t = 0.0 s", "t = 0.1 s"]));
+    // Frames/s: 0 and text are refused the same way.
+    type_into(&browser, "#kf-fps", "0", "#kf-add");
+    browser.wait("fps refused", Duration::from_secs(10), |s| {
+        s["errors"].as_array().is_some_and(|e| {
+            e.iter()
+                .any(|m| m.as_str().unwrap_or("").contains("Frames/s"))
+        })
+    });
+    assert_eq!(value("#kf-fps"), "1");
+}
+
+/// A message over the server's limit closes the connection with 1009 and the reason,
+/// and the page shows it (then reconnects) instead of only "disconnected" (issue 29,
+/// item 5).
+#[test]
+fn the_page_shows_why_the_server_closed_the_connection() {
+    let (_dir, mut viewer, browser, _) = demo_page();
+    browser
+        .js("window.vksplatViewer.send({type: 'rest', pad: 'x'.repeat(20 << 20)}); return null;");
+    let s = browser.wait("close reason", Duration::from_secs(30), |s| {
+        s["banner"].as_str().is_some_and(|b| b.contains("too big"))
+    });
+    let banner = s["banner"].as_str().unwrap();
+    assert!(
+        banner.contains("over the limit of 4.0 MiB") && banner.contains("1009"),
+        "{banner}"
+    );
+    let before = browser.state();
+    browser.wait("reconnected", Duration::from_secs(30), |s| {
+        s["connected"] == true && s["frames"].as_u64() > before["frames"].as_u64()
+    });
+    assert!(viewer.alive());
+}
+
+/// The server restarted on the same port with another scene: the open page sets itself
+/// up from the new scene's description (camera list, Gaussians, histogram, SH range, the
+/// view at its first camera), as a fresh page would (issue 29, item 1).
+#[test]
+fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    vksplat_ok(
+        d,
+        &[
+            "render",
+            "--demo",
+            "--cpu",
+            "--quiet",
+            "--orbit",
+            "3",
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--export-cameras",
+            "cams.json",
+            "-o",
+            "orbit/f_{}.png",
+        ],
+    );
+    vksplat_ok(
+        d,
+        &[
+            "gen",
+            "5000",
+            "--seed",
+            "7",
+            "--sh-degree",
+            "0",
+            "-o",
+            "other.ply",
+        ],
+    );
+    let args = [
+        "--cameras",
+        "cams.json",
+        "--max-resolution",
+        "640x400",
+        "--demo",
+    ];
+    let viewer = Viewer::start(d, &args);
+    let port = viewer.port;
+    let (browser, first) = open(&viewer);
+    assert_eq!(first["hello"]["cameras"].as_array().map(Vec::len), Some(3));
+    let dom = || {
+        browser.js(
+            "return {cameras: document.querySelectorAll('#cameras li').length, \
+             shMax: document.getElementById('sh').max, shValue: document.getElementById('sh').value, \
+             shOut: document.getElementById('sh-out').textContent, \
+             hist: document.getElementById('hist-label').textContent, \
+             bars: document.querySelectorAll('#hist div').length, \
+             scene: document.getElementById('scene-name').textContent, \
+             readout: document.getElementById('readout').textContent, \
+             lastGaussians: window.vksplatViewer.lastFrame && window.vksplatViewer.lastFrame.gaussians, \
+             histBins: window.vksplatViewer.hello.max_scale_histogram.counts.length};",
+        )
+    };
+    let old = dom();
+    assert_eq!(old["cameras"], 3);
+    assert_eq!(old["shMax"], "2");
+    assert!(
+        old["hist"].as_str().unwrap().contains("1,873 Gaussians"),
+        "{old}"
+    );
+
+    drop(viewer);
+    let other = Viewer::start_at(d, &["other.ply", "--max-resolution", "640x400"], &[], port);
+    let s = browser.wait("the new scene", Duration::from_secs(60), |s| {
+        s["connected"] == true && s["helloGaussians"] == 5000 && s["lastFrameGaussians"] == 5000
+    });
+    let new = dom();
+    assert_eq!(new["cameras"], 1, "{new}");
+    assert_eq!(new["shMax"], "0", "{new}");
+    assert_eq!(new["shValue"], "0", "{new}");
+    assert_eq!(new["shOut"], "0", "{new}");
+    assert!(
+        new["hist"].as_str().unwrap().contains("5,000 Gaussians"),
+        "{new}"
+    );
+    assert_eq!(new["bars"], new["histBins"], "{new}");
+    assert_eq!(new["scene"], "other.ply", "{new}");
+    assert!(
+        new["readout"].as_str().unwrap().contains("of 5,000"),
+        "{new}"
+    );
+    assert_eq!(s["cameraIndex"], 0);
+    assert!(s["settings"]["sh_degree"].is_null() && s["settings"]["max_scale"].is_null());
+    // At the new scene's first camera, which its list shows.
+    let want = &s["hello"]["cameras"][0]["camera"];
+    let got = &s["camera"];
+    assert!(len(sub(vec3(&got["position"]), vec3(&want["position"]))) < 1e-4);
+    // The page said so, and nothing it sent was refused (no settings of the old scene).
+    let banner = s["banner"].as_str().unwrap_or("");
+    assert!(banner.contains("other.ply"), "{banner}");
+    let errors: Vec<&str> = s["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    assert!(
+        errors.iter().all(|e| e.contains("reconnecting")),
+        "{errors:?}"
+    );
+    // Clicking its one camera stays on it.
+    let item = browser.element("#cameras li:nth-child(1)");
+    browser.call("POST", &format!("/element/{item}/click"), Some(json!({})));
+    let s = browser.wait("camera 0", Duration::from_secs(30), |s| {
+        s["cameraIndex"] == 0
+    });
+    assert!(len(sub(vec3(&s["camera"]["position"]), vec3(&want["position"]))) < 1e-4);
+    drop(other);
 }

@@ -32,7 +32,7 @@
     background: [0, 0, 0], mode: 'rgb',
   };
   const V = window.vksplatViewer = {
-    connected: false, hello: null, frames: 0, previewFrames: 0, fullFrames: 0, lastSeq: 0,
+    connected: false, ready: false, hello: null, scenes: 0, frames: 0, previewFrames: 0, fullFrames: 0, lastSeq: 0,
     lastFrame: null, errors: [], cameraIndex: -1, keyframes: [], screenshots: 0,
     lastExport: null, pathFrames: 0, upFlipped: false, turntable: false, sent: 0,
     get camera() { return entry(); },
@@ -45,6 +45,9 @@
   let dirtyInteractive = false;
   let movedAt = 0; // when the last interactive request went out
   let restPending = false;
+  let frameRequested = 0; // seq of the last view or rest request
+  let answered = 0; // seq of the last frame (or error) that came back
+  let lastFrameAt = 0; // when it came
   let reconnectDelay = 500;
 
   const upSign = () => (V.upFlipped ? -1 : 1);
@@ -276,7 +279,9 @@
     el.addEventListener('change', () => changed(false)); // released: full quality
   }
   $('panel-toggle').addEventListener('click', () => {
-    $('panel-toggle').textContent = $('panel').classList.toggle('collapsed') ? 'Show' : 'Hide';
+    const collapsed = $('panel').classList.toggle('collapsed');
+    document.body.classList.toggle('panel-collapsed', collapsed); // the canvas takes the width
+    $('panel-toggle').textContent = collapsed ? 'Show' : 'Hide';
   });
   $('reset').addEventListener('click', resetView);
   $('turntable').addEventListener('click', toggleTurntable);
@@ -346,9 +351,26 @@
       list.appendChild(li);
     });
   }
-  const spacing = () => Math.min(600, Math.max(0.1, Number($('kf-spacing').value) || 1));
-  const fps = () => Math.min(240, Math.max(1, Math.round(Number($('kf-fps').value) || 30)));
+  // A number input's value within its min..max (whole with step 1): a value outside, or
+  // not a number, is replaced in the input by the nearest allowed one and the banner
+  // says so; nothing is changed silently.
+  function checkedNumber(input, name) {
+    const lo = Number(input.min), hi = Number(input.max), whole = input.step === '1';
+    const raw = input.value.trim();
+    const given = raw === '' ? NaN : Number(raw);
+    let v = Number.isFinite(given) ? Math.min(hi, Math.max(lo, given)) : Number(input.defaultValue);
+    if (whole) v = Math.round(v);
+    if (v !== given) {
+      input.value = String(v);
+      showError(`${name} must be a number from ${lo} to ${hi}${whole ? ' (whole)' : ''}; ` +
+        `${raw === '' ? 'nothing' : `"${raw}"`} was given, ${v} is used`);
+    }
+    return v;
+  }
+  const spacing = () => checkedNumber($('kf-spacing'), 'Seconds apart');
+  const fps = () => checkedNumber($('kf-fps'), 'Frames/s');
   $('kf-spacing').addEventListener('change', fillKeyframes);
+  $('kf-fps').addEventListener('change', fps);
 
   // A keyframe's camera at the canvas's size.
   function keyframeEntry(k) {
@@ -413,14 +435,19 @@
 
   // ---- errors ----
   let bannerTimer = null;
-  function showError(message) {
-    V.errors.push(message);
+  function showBanner(message, notice) {
     const b = $('banner');
     b.textContent = message;
+    b.classList.toggle('notice', notice);
     b.hidden = false;
     clearTimeout(bannerTimer);
     bannerTimer = setTimeout(() => { b.hidden = true; }, 8000);
   }
+  function showError(message) {
+    V.errors.push(message);
+    showBanner(message, false);
+  }
+  const showNotice = (message) => showBanner(message, true);
   $('banner').addEventListener('click', () => { $('banner').hidden = true; });
 
   // ---- connection ----
@@ -431,13 +458,25 @@
     return true;
   }
   V.send = send; // for tests and the console
+  // Why the server closed the connection, from its close code and reason (RFC 6455).
+  function closeText(ev) {
+    const reason = ev.reason ? `: ${ev.reason}` : '';
+    if (ev.code === 1001) return `the viewer server stopped${reason}`;
+    if (ev.code === 1009) return `the server refused a message as too big${reason} (close code 1009)`;
+    if (ev.code === 1006 || ev.code === 1005) return 'disconnected from the viewer server';
+    return `the server closed the connection${reason} (close code ${ev.code})`;
+  }
   function connect() {
     ws = new WebSocket(`ws://${location.host}/ws`);
     ws.binaryType = 'arraybuffer';
     ws.onopen = () => { V.connected = true; reconnectDelay = 500; };
-    ws.onclose = () => {
-      if (V.connected) showError('disconnected from the viewer server; reconnecting…');
+    ws.onclose = (ev) => {
+      if (V.connected) {
+        V.lastClose = { code: ev.code, reason: ev.reason };
+        showError(`${closeText(ev)}; reconnecting…`);
+      }
       V.connected = false;
+      V.ready = false; // until the next server's hello
       setTimeout(connect, reconnectDelay);
       reconnectDelay = Math.min(reconnectDelay * 2, 10000);
     };
@@ -448,6 +487,7 @@
     try { m = JSON.parse(text); } catch (e) { showError(`bad message from the server: ${e}`); return; }
     if (m.type === 'hello') onHello(m);
     else if (m.type === 'error') {
+      if (typeof m.seq === 'number') answered = Math.max(answered, m.seq);
       showError(m.message);
       if (!preview) $('kf-preview').textContent = '▶ Preview';
     }
@@ -458,22 +498,47 @@
       download(new Blob([m.text], { type: 'application/json' }), m.filename);
     }
   }
+  // Everything but the device: two hellos alike describe the same scene and cameras.
+  const sceneOf = (h) => JSON.stringify({ ...h, device: null });
   function onHello(h) {
     if (h.version !== 1) { showError(`the server speaks protocol ${h.version}; reload the page`); return; }
-    const first = !V.hello;
+    const previous = V.hello;
     V.hello = h;
-    $('scene-name').textContent = h.scene.split('/').filter(Boolean).pop() || h.scene;
+    V.ready = true;
+    answered = frameRequested; // requests to the old connection are not answered
+    restPending = false;
+    if (previous && sceneOf(previous) === sceneOf(h)) {
+      changed(false); // reconnected to the same scene: render the current view again
+      return;
+    }
+    setUpScene(h);
+    if (previous) {
+      showNotice(`the server now shows ${sceneName(h)} (${h.gaussians.toLocaleString()} Gaussians, ` +
+        `${h.cameras.length} camera${h.cameras.length === 1 ? '' : 's'}): the page was set up for it` +
+        (V.keyframes.length ? '; your keyframes are kept' : ''));
+    }
+  }
+  const sceneName = (h) => h.scene.split('/').filter(Boolean).pop() || h.scene;
+  // The controls that depend on the scene, from its hello (on the first connection and
+  // whenever the server serves another scene): name, SH range, max-scale range and
+  // histogram, camera list, and the view at its first camera.
+  function setUpScene(h) {
+    V.scenes += 1;
+    V.lastFrame = null; // the readout waits for this scene's first frame
+    $('scene-name').textContent = sceneName(h);
     $('scene-name').title = h.scene;
     $('sh').max = String(h.sh_degree);
-    if (first) {
-      $('sh').value = String(h.sh_degree);
-      $('sh-out').textContent = String(h.sh_degree);
-      fillCameras();
-      drawHistogram();
-      resetView();
-    } else {
-      changed(false); // reconnected: render the current view again
-    }
+    $('sh').value = String(h.sh_degree);
+    $('sh-out').textContent = String(h.sh_degree);
+    settings.sh_degree = null;
+    maxSlider.value = maxSlider.max;
+    settings.max_scale = null;
+    $('maxscale-out').textContent = 'off';
+    $('hist').textContent = ''; // new bars
+    drawHistogram();
+    fillCameras();
+    resetView();
+    $('readout').textContent = `${sceneName(h)}: ${h.gaussians.toLocaleString()} Gaussians\n${h.device}`;
   }
   let drawToken = 0;
   const fpsTimes = [];
@@ -490,6 +555,8 @@
       return;
     }
     if (h.kind !== 'frame') return;
+    answered = Math.max(answered, h.seq);
+    lastFrameAt = performance.now();
     const token = ++drawToken;
     createImageBitmap(new Blob([payload], { type: `image/${h.encoding}` })).then((bmp) => {
       if (token === drawToken) {
@@ -504,14 +571,28 @@
       const now = performance.now();
       fpsTimes.push(now);
       while (fpsTimes.length && now - fpsTimes[0] > 1000) fpsTimes.shift();
-      readout(h);
+      readout();
     }, (e) => showError(`cannot decode a frame: ${e}`));
   }
-  function readout(h) {
+  // The readout's first words: frames/s while frames come; once none came for a second,
+  // "at rest" when every request was answered, else that the server is still rendering.
+  function rate(now) {
+    while (fpsTimes.length && now - fpsTimes[0] > 1000) fpsTimes.shift();
+    if (!V.connected) return 'disconnected';
+    if (fpsTimes.length) return `${fpsTimes.length} frames/s`;
+    if (answered < frameRequested) return `rendering… (${((now - lastFrameAt) / 1000).toFixed(0)} s)`;
+    return 'at rest';
+  }
+  let shownRate = '';
+  function readout() {
+    const h = V.lastFrame;
+    if (!h) return;
+    shownRate = rate(performance.now());
+    V.rate = shownRate;
     const t = h.timings;
     const f = (v) => v.toFixed(2).padStart(7);
     $('readout').textContent =
-      `${fpsTimes.length} frames/s   ${h.width}x${h.height} ${h.quality}\n` +
+      `${shownRate}   ${h.width}x${h.height} ${h.quality}\n` +
       `frame ${h.wall_ms.toFixed(1)} ms (encode ${h.encode_ms.toFixed(1)})\n` +
       `preprocess ${f(t.preprocess)}\norder      ${f(t.order)}\nscan       ${f(t.scan)}\n` +
       `keys       ${f(t.keys)}\nsort       ${f(t.sort)}\nranges     ${f(t.ranges)}\n` +
@@ -550,13 +631,15 @@
     }
     if (V.turntable) orbit((20 * Math.PI / 180) * dt, 0);
     if (preview) previewStep(now);
-    if (dirty && V.hello && send({ type: 'view', seq: ++seq, camera: entry(), settings, interactive: dirtyInteractive })) {
+    if (dirty && V.ready && send({ type: 'view', seq: ++seq, camera: entry(), settings, interactive: dirtyInteractive })) {
       dirty = false;
       restPending = dirtyInteractive;
       movedAt = now;
-    } else if (restPending && now - movedAt > 150 && !drag) {
-      if (send({ type: 'rest', seq: ++seq })) restPending = false;
+      frameRequested = seq;
+    } else if (restPending && V.ready && now - movedAt > 150 && !drag) {
+      if (send({ type: 'rest', seq: ++seq })) { restPending = false; frameRequested = seq; }
     }
+    if (V.lastFrame && rate(now) !== shownRate) readout();
     requestAnimationFrame(tick);
   }
   connect();

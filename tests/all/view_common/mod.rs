@@ -42,10 +42,16 @@ impl Viewer {
 
     /// As [`Viewer::start`] with environment variables (`VKSPLAT_VALIDATE=1`).
     pub fn start_with_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Viewer {
+        Self::start_at(dir, args, env, 0)
+    }
+
+    /// As [`Viewer::start_with_env`] on `port` (0: a free one).
+    pub fn start_at(dir: &Path, args: &[&str], env: &[(&str, &str)], port: u16) -> Viewer {
+        let port = port.to_string();
         let mut child = cli::command()
             .arg("view")
             .args(args)
-            .args(["--port", "0"])
+            .args(["--port", port.as_str()])
             .envs(env.iter().copied())
             .current_dir(dir)
             .stdout(Stdio::piped())
