@@ -1013,10 +1013,332 @@ fn save_image(
     })
 }
 
+// ---------------------------------------------------------------------------------------
+// Differentiable rasterization
+
+use vksplat::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
+use vksplat::render::differentiable::{Accumulation, DiffRasterizer};
+
+/// Gaussians as they cross for a gradient: N, then means, quats, scales, opacities and
+/// colours as f32 bytes; `sh_degree` Some for SH coefficients `N x (d+1)^2 x 3`, None for
+/// `channels` direct values per Gaussian.
+type ParamsTuple<'a> = (
+    usize,
+    &'a [u8],
+    &'a [u8],
+    &'a [u8],
+    &'a [u8],
+    &'a [u8],
+    Option<u32>,
+    usize,
+);
+
+fn splat_params(t: &ParamsTuple) -> PyResult<SplatParams<f32>> {
+    let (n, means, quats, scales, opacities, colors, sh_degree, channels) = *t;
+    let colors = match sh_degree {
+        Some(d) if d <= 3 => ColorParams::Sh {
+            degree: d,
+            coeffs: floats(colors, "colors", n * ((d + 1) * (d + 1)) as usize * 3)?,
+        },
+        Some(d) => return Err(value_err(format!("sh_degree must be 0..3, got {d}"))),
+        None => ColorParams::Direct {
+            channels,
+            values: floats(colors, "colors", n * channels)?,
+        },
+    };
+    let p = SplatParams {
+        means: rows(&floats(means, "means", n * 3)?),
+        quats: rows(&floats(quats, "quats", n * 4)?),
+        scales: rows(&floats(scales, "scales", n * 3)?),
+        opacities: floats(opacities, "opacities", n)?,
+        colors,
+    };
+    p.validate().map_err(value_err)?;
+    Ok(p)
+}
+
+fn diff_options(background: &[f32], kernel: &str, channels: usize) -> PyResult<RenderOptions> {
+    let kernel = kernel.parse().map_err(|e: String| value_err(e))?;
+    if !background.is_empty() && background.len() != channels {
+        return Err(value_err(format!(
+            "backgrounds must have {channels} values per camera, got {}",
+            background.len()
+        )));
+    }
+    let mut bg = [0f32; 3];
+    if channels == 3 && background.len() == 3 {
+        bg.copy_from_slice(background);
+    }
+    Ok(RenderOptions {
+        background: bg,
+        kernel,
+        ..Default::default()
+    })
+}
+
+fn pixel_grads(
+    grad_color: Option<&[u8]>,
+    grad_alpha: Option<&[u8]>,
+    grad_depth: Option<&[u8]>,
+    pixels: usize,
+    channels: usize,
+) -> PyResult<PixelGrads<f32>> {
+    let f = |b: Option<&[u8]>, what: &str, count: usize| -> PyResult<Vec<f32>> {
+        b.map_or(Ok(Vec::new()), |b| floats(b, what, count))
+    };
+    Ok(PixelGrads {
+        color: f(grad_color, "grad_colors", pixels * channels)?,
+        alpha: f(grad_alpha, "grad_alphas", pixels)?,
+        depth: f(grad_depth, "grad_depths", pixels)?,
+    })
+}
+
+fn grads_dict<'py, T: bytemuck::Pod>(py: Python<'py>, g: &SplatGrads<T>) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("means", byte_array(py, &g.means))?;
+    d.set_item("quats", byte_array(py, &g.quats))?;
+    d.set_item("scales", byte_array(py, &g.scales))?;
+    d.set_item("opacities", byte_array(py, &g.opacities))?;
+    d.set_item("colors", byte_array(py, &g.colors))?;
+    d.set_item("means2d", byte_array(py, &g.means2d))?;
+    d.set_item("absgrad", byte_array(py, &g.absgrad))?;
+    Ok(d)
+}
+
+/// The differentiable rasterizer on a Vulkan device: a forward pass that keeps its state
+/// and the backward pass that reads it.
+#[pyclass(module = "vksplat._native", name = "Rasterizer", frozen)]
+struct PyRasterizer {
+    state: Mutex<DiffRasterizer>,
+    device: String,
+    validation: bool,
+}
+
+/// What `Rasterizer.forward` returns: colour (`H x W x 3`), alpha, depth, the token of
+/// the pass, and per Gaussian the projection (12 floats: mean2d x y, opacity, -, conic
+/// A B C, depth, colour r g b, radius).
+type ForwardOut<'py> = (
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
+    u64,
+    Bound<'py, PyByteArray>,
+);
+
+#[pymethods]
+impl PyRasterizer {
+    #[new]
+    #[pyo3(signature = (device=None, validation=false))]
+    fn new(py: Python<'_>, device: Option<String>, validation: bool) -> PyResult<Self> {
+        py.detach(|| {
+            guarded(|| {
+                let ctx = GpuContext::new(&ContextOptions {
+                    device,
+                    validation,
+                    memory_limit: None,
+                })
+                .map_err(|e| py_err(e.into()))?;
+                let name = ctx.info().name.clone();
+                let validation = ctx.validation_enabled();
+                let r = DiffRasterizer::new(ctx).map_err(|e| py_err(e.into()))?;
+                Ok(PyRasterizer {
+                    state: Mutex::new(r),
+                    device: name,
+                    validation,
+                })
+            })
+        })
+    }
+
+    /// The device's name.
+    #[getter]
+    fn device(&self) -> &str {
+        &self.device
+    }
+
+    /// `deterministic` (default), `float-atomics` or `cas`.
+    fn set_accumulation(&self, mode: &str) -> PyResult<()> {
+        let mode: Accumulation = mode.parse().map_err(|e: String| value_err(e))?;
+        let mut st = self
+            .state
+            .lock()
+            .map_err(|_| PyRuntimeError::new_err("the rasterizer failed earlier; create a new one"))?;
+        st.renderer()
+            .set_gradient_accumulation(mode)
+            .map_err(|e| py_err(e.into()))
+    }
+
+    /// Device milliseconds of the last forward and backward passes' stages.
+    #[getter]
+    fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        if let Ok(mut st) = self.state.lock() {
+            let r = st.renderer();
+            for (name, ms) in r.timings().stages() {
+                d.set_item(format!("forward/{name}"), ms)?;
+            }
+            for (name, ms) in r.backward_timings() {
+                d.set_item(format!("backward/{name}"), ms)?;
+            }
+        }
+        Ok(d)
+    }
+
+    fn forward<'py>(
+        &self,
+        py: Python<'py>,
+        params: ParamsTuple,
+        camera: CamTuple,
+        background: Vec<f32>,
+        kernel: &str,
+    ) -> PyResult<ForwardOut<'py>> {
+        let p = splat_params(&params)?;
+        let cam = to_camera(&camera)?;
+        let opts = diff_options(&background, kernel, p.channels())?;
+        let (frame, token, projected) = py.detach(|| {
+            guarded(|| {
+                let mut st = self.state.lock().map_err(|_| {
+                    PyRuntimeError::new_err("the rasterizer failed earlier; create a new one")
+                })?;
+                let (frame, token) = st.forward(&p, &cam, &opts).map_err(|e| py_err(e.into()))?;
+                let projected = st.projected().map_err(|e| py_err(e.into()))?;
+                self.check_validation(&mut st)?;
+                Ok((frame, token, projected))
+            })
+        })?;
+        Ok((
+            byte_array(py, &frame.color),
+            byte_array(py, &frame.alpha),
+            byte_array(py, &frame.depth),
+            token,
+            byte_array(py, &projected),
+        ))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None))]
+    fn backward<'py>(
+        &self,
+        py: Python<'py>,
+        params: ParamsTuple,
+        camera: CamTuple,
+        background: Vec<f32>,
+        kernel: &str,
+        token: u64,
+        grad_color: Option<&[u8]>,
+        grad_alpha: Option<&[u8]>,
+        grad_depth: Option<&[u8]>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let p = splat_params(&params)?;
+        let cam = to_camera(&camera)?;
+        let opts = diff_options(&background, kernel, p.channels())?;
+        let pixels = cam.width as usize * cam.height as usize;
+        let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, p.channels())?;
+        let grads = py.detach(|| {
+            guarded(|| {
+                let mut st = self.state.lock().map_err(|_| {
+                    PyRuntimeError::new_err("the rasterizer failed earlier; create a new one")
+                })?;
+                let grads = st
+                    .backward(&p, &cam, &opts, token, &g)
+                    .map_err(|e| py_err(e.into()))?;
+                self.check_validation(&mut st)?;
+                Ok(grads)
+            })
+        })?;
+        grads_dict(py, &grads)
+    }
+}
+
+impl PyRasterizer {
+    fn check_validation(&self, st: &mut DiffRasterizer) -> PyResult<()> {
+        if self.validation {
+            let messages = st.renderer().ctx().validation_messages();
+            if !messages.is_empty() {
+                return Err(PyRuntimeError::new_err(format!(
+                    "the Vulkan validation layer reported {} message(s): {}",
+                    messages.len(),
+                    messages.join(" | ")
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The f64 CPU reference forward pass: colour (`H x W x D`), alpha and depth as f64 bytes.
+#[pyfunction]
+fn reference_forward<'py>(
+    py: Python<'py>,
+    params: ParamsTuple,
+    camera: CamTuple,
+    background: Vec<f32>,
+    kernel: &str,
+) -> PyResult<(Bound<'py, PyByteArray>, Bound<'py, PyByteArray>, Bound<'py, PyByteArray>)> {
+    let p = splat_params(&params)?;
+    let cam = to_camera(&camera)?;
+    let opts = diff_options(&background, kernel, p.channels())?;
+    let bg = reference_background(&background, p.channels());
+    let img = py.detach(|| {
+        guarded(|| {
+            vksplat::cpu::backward::forward(&p.to_f64(), &cam, &opts, &bg).map_err(value_err)
+        })
+    })?;
+    Ok((
+        byte_array(py, &img.color),
+        byte_array(py, &img.alpha),
+        byte_array(py, &img.depth),
+    ))
+}
+
+fn reference_background(background: &[f32], channels: usize) -> Vec<f64> {
+    if background.is_empty() {
+        vec![0.0; channels]
+    } else {
+        background.iter().map(|&b| b as f64).collect()
+    }
+}
+
+/// The f64 CPU reference backward pass: gradients as f64 bytes.
+#[pyfunction]
+#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_backward<'py>(
+    py: Python<'py>,
+    params: ParamsTuple,
+    camera: CamTuple,
+    background: Vec<f32>,
+    kernel: &str,
+    grad_color: Option<&[u8]>,
+    grad_alpha: Option<&[u8]>,
+    grad_depth: Option<&[u8]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let p = splat_params(&params)?;
+    let cam = to_camera(&camera)?;
+    let opts = diff_options(&background, kernel, p.channels())?;
+    let bg = reference_background(&background, p.channels());
+    let pixels = cam.width as usize * cam.height as usize;
+    let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, p.channels())?;
+    let g64 = PixelGrads {
+        color: g.color.iter().map(|&x| x as f64).collect(),
+        alpha: g.alpha.iter().map(|&x| x as f64).collect(),
+        depth: g.depth.iter().map(|&x| x as f64).collect(),
+    };
+    let grads = py.detach(|| {
+        guarded(|| {
+            vksplat::cpu::backward::backward(&p.to_f64(), &cam, &opts, &bg, &g64).map_err(value_err)
+        })
+    })?;
+    grads_dict(py, &grads)
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add_class::<PyRenderer>()?;
+    m.add_class::<PyRasterizer>()?;
+    m.add_function(wrap_pyfunction!(reference_forward, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_backward, m)?)?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(demo, m)?)?;
     m.add_function(wrap_pyfunction!(scene_from_arrays, m)?)?;

@@ -13,6 +13,25 @@ use crate::model::RenderOptions;
 
 pub use super::grad_accumulate::Accumulation;
 
+/// The parameters as the device renders them: direct RGB colours `c` become SH degree 0
+/// coefficients `(c - 0.5) / C0`, whose colour is `max(c, 0)` (to rounding): the device
+/// blends every colour through its SH path, so negative direct colours clamp at 0.
+fn device_params(params: &SplatParams<f32>) -> std::borrow::Cow<'_, SplatParams<f32>> {
+    match &params.colors {
+        ColorParams::Direct { values, .. } => {
+            let c0 = crate::model::sh::SH_C0;
+            std::borrow::Cow::Owned(SplatParams {
+                colors: ColorParams::Sh {
+                    degree: 0,
+                    coeffs: values.iter().map(|c| (c - 0.5) / c0).collect(),
+                },
+                ..params.clone()
+            })
+        }
+        ColorParams::Sh { .. } => std::borrow::Cow::Borrowed(params),
+    }
+}
+
 /// The last forward pass: what its backward pass needs.
 struct Forward {
     token: u64,
@@ -54,10 +73,12 @@ impl DiffRasterizer {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         if let ColorParams::Direct { channels, .. } = params.colors {
-            return Err(GpuError::InvalidArgument(format!(
-                "colours of {channels} direct channels are not differentiable on the device yet; \
-                 pass SH coefficients (degree 0 for plain RGB) or use the CPU reference"
-            )));
+            if channels != 3 {
+                return Err(GpuError::InvalidArgument(format!(
+                    "colours of {channels} direct channels are not differentiable on the device \
+                     yet (3 are: RGB); pass SH coefficients or use the CPU reference"
+                )));
+            }
         }
         if opts.antialiased {
             return Err(GpuError::InvalidArgument(
@@ -77,7 +98,7 @@ impl DiffRasterizer {
     ) -> GpuResult<(Frame, u64)> {
         Self::check(params, cam, opts)?;
         self.last = None;
-        let scene = self.renderer.upload(&params.to_activated())?;
+        let scene = self.renderer.upload(&device_params(params).to_activated())?;
         let frame = self.renderer.render(&scene, cam, opts)?;
         if self.renderer.forward_state()?.last_contributor.is_none() {
             return Err(GpuError::DeviceLimit {
@@ -141,6 +162,13 @@ impl DiffRasterizer {
             )));
         }
         let mut g = self.renderer.backward(&last.scene, &last.frame, grads)?;
+        if let ColorParams::Direct { .. } = params.colors {
+            // Through SH degree 0 (`device_params`): dL/dc = dL/d sh0 / C0.
+            let c0 = crate::model::sh::SH_C0;
+            for v in g.colors.iter_mut() {
+                *v /= c0;
+            }
+        }
         // The device differentiates with respect to the normalised quaternions q / |q|.
         for (gq, q) in g.quats.iter_mut().zip(&params.quats) {
             let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();
