@@ -5,6 +5,7 @@
 // floats with atomicAdd instead (VK_EXT_shader_atomic_float), or with a compare-and-swap
 // loop where the device lacks it (CAS_FALLBACK = 1): faster, not reproducible.
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
 #include "grad_common.glsl"
 #ifndef FLOAT_ATOMICS
@@ -21,7 +22,7 @@
 layout(local_size_x = 256) in;
 
 layout(std430, binding = GRAD_ACCUMULATE_VALUES) readonly buffer ValueBuf { uint values[]; };
-layout(std430, binding = GRAD_ACCUMULATE_PAIR_GRADS) readonly buffer PairGradBuf { float pair_grads[]; };
+layout(std430, binding = GRAD_ACCUMULATE_PAIR_GRADS) readonly buffer PairGradBuf { vec4 pair_grads[]; };
 layout(std430, binding = GRAD_ACCUMULATE_MAXIMA) readonly buffer MaximaBuf { uint maxima[]; };
 // Two words per Gaussian and field: (lo, hi) of the fixed-point sum, or the float sum and
 // an unused word.
@@ -33,17 +34,33 @@ layout(std430, binding = GRAD_ACCUMULATE_ACC) buffer AccBuf { uint acc[]; };
 // count: sorted pairs; bits: log2 of the most pairs one Gaussian can have, rounded up.
 layout(push_constant) uniform Push { uint count; uint bits; } pc;
 
+#if !FLOAT_ATOMICS
+// The fixed-point scale 2^s of each field as two power-of-two factors (each in float
+// range; multiplying by them is exact), computed once per workgroup.
+shared vec2 s_scale[F];
+#endif
+
 void main() {
     uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
+#if !FLOAT_ATOMICS
+    if (gl_LocalInvocationIndex < F) {
+        int sh = grad_shift(maxima[gl_LocalInvocationIndex], pc.bits);
+        s_scale[gl_LocalInvocationIndex] = vec2(ldexp(1.0, sh / 2), ldexp(1.0, sh - sh / 2));
+    }
+    barrier();
+#endif
     if (k >= pc.count) return;
     uint g = values[k];
-    for (uint f = 0u; f < F; f++) {
-        float v = pair_grads[k * F + f];
+    // The pair's 12 partial sums as three vec4 loads; the field loop is unrolled so every
+    // index is a constant (CPU implementations run indexed loads as per-lane loops).
+    vec4 p[3] = vec4[3](vec4(pair_grads[3u * k]), vec4(pair_grads[3u * k + 1u]), vec4(pair_grads[3u * k + 2u]));
+    [[unroll]] for (uint f = 0u; f < F; f++) {
+        float v = p[f / 4u][f % 4u];
         if (v == 0.0) continue;
-#if FLOAT_ATOMICS && !CAS_FALLBACK
-        atomicAdd(acc[(g * F + f) * 2u], v);
-#elif FLOAT_ATOMICS
         uint i = (g * F + f) * 2u;
+#if FLOAT_ATOMICS && !CAS_FALLBACK
+        atomicAdd(acc[i], v);
+#elif FLOAT_ATOMICS
         uint old = acc[i];
         for (;;) {
             uint seen = atomicCompSwap(acc[i], old, floatBitsToUint(uintBitsToFloat(old) + v));
@@ -51,8 +68,8 @@ void main() {
             old = seen;
         }
 #else
-        uvec2 x = to_fixed(scale_pow2(v, grad_shift(maxima[f], pc.bits)));
-        uint i = (g * F + f) * 2u;
+        vec2 m = s_scale[f];
+        uvec2 x = to_fixed(v * m.x * m.y);
         uint old = atomicAdd(acc[i], x.x);
         uint carry = old + x.x < old ? 1u : 0u;
         if (x.y + carry != 0u) atomicAdd(acc[i + 1u], x.y + carry);
