@@ -18,7 +18,7 @@ tools/setup.sh
 cargo build --release -q --bin vksplat
 bin=target/release/vksplat
 data=../shared/data
-scenes=${SCENES:-"$data/playbot_lod2_125k_sh2.ply $data/playbot_lod1_250k_sh1.ply $data/train3_sh3.ply $data/plant_113k_sh0.ply"}
+scenes=${SCENES:-"$data/playbot_lod3_31k_sh2.ply $data/playbot_lod2_125k_sh2.ply $data/playbot_lod1_250k_sh1.ply $data/plant_113k_sh0.ply"}
 resolutions=${RESOLUTIONS:-720p,1080p,4k}
 frames=${FRAMES:-10}
 out=${OUT:-target/gpu_report}

@@ -1093,7 +1093,10 @@ fn pixel_grads(
     })
 }
 
-fn grads_dict<'py, T: bytemuck::Pod>(py: Python<'py>, g: &SplatGrads<T>) -> PyResult<Bound<'py, PyDict>> {
+fn grads_dict<'py, T: bytemuck::Pod>(
+    py: Python<'py>,
+    g: &SplatGrads<T>,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("means", byte_array(py, &g.means))?;
     d.set_item("quats", byte_array(py, &g.quats))?;
@@ -1159,10 +1162,9 @@ impl PyRasterizer {
     /// `deterministic` (default), `float-atomics` or `cas`.
     fn set_accumulation(&self, mode: &str) -> PyResult<()> {
         let mode: Accumulation = mode.parse().map_err(|e: String| value_err(e))?;
-        let mut st = self
-            .state
-            .lock()
-            .map_err(|_| PyRuntimeError::new_err("the rasterizer failed earlier; create a new one"))?;
+        let mut st = self.state.lock().map_err(|_| {
+            PyRuntimeError::new_err("the rasterizer failed earlier; create a new one")
+        })?;
         st.renderer()
             .set_gradient_accumulation(mode)
             .map_err(|e| py_err(e.into()))
@@ -1274,7 +1276,11 @@ fn reference_forward<'py>(
     camera: CamTuple,
     background: Vec<f32>,
     kernel: &str,
-) -> PyResult<(Bound<'py, PyByteArray>, Bound<'py, PyByteArray>, Bound<'py, PyByteArray>)> {
+) -> PyResult<(
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
+)> {
     let p = splat_params(&params)?;
     let cam = to_camera(&camera)?;
     let opts = diff_options(&background, kernel, p.channels())?;

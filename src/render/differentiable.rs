@@ -98,7 +98,9 @@ impl DiffRasterizer {
     ) -> GpuResult<(Frame, u64)> {
         Self::check(params, cam, opts)?;
         self.last = None;
-        let scene = self.renderer.upload(&device_params(params).to_activated())?;
+        let scene = self
+            .renderer
+            .upload(&device_params(params).to_activated())?;
         let frame = self.renderer.render(&scene, cam, opts)?;
         if self.renderer.forward_state()?.last_contributor.is_none() {
             return Err(GpuError::DeviceLimit {
