@@ -111,3 +111,42 @@ def save_image(
     png16: bool,
     overwrite: bool,
 ) -> None: ...
+
+# Differentiable rasterization (vksplat.raster, vksplat.torch).
+# (N, means, quats, scales, opacities, colors as f32 bytes, sh_degree or None, channels)
+ParamsTuple = Tuple[int, bytes, bytes, bytes, bytes, bytes, Optional[int], int]
+
+class Rasterizer:
+    def __init__(self, device: Optional[str] = None, validation: bool = False) -> None: ...
+    @property
+    def device(self) -> str: ...
+    @property
+    def timings(self) -> Dict[str, float]: ...
+    def set_accumulation(self, mode: str) -> None: ...
+    def forward(
+        self, params: ParamsTuple, camera: CamTuple, background: List[float], kernel: str
+    ) -> Tuple[bytearray, bytearray, bytearray, int, bytearray]: ...
+    def backward(
+        self,
+        params: ParamsTuple,
+        camera: CamTuple,
+        background: List[float],
+        kernel: str,
+        token: int,
+        grad_color: Optional[bytes] = None,
+        grad_alpha: Optional[bytes] = None,
+        grad_depth: Optional[bytes] = None,
+    ) -> Dict[str, bytearray]: ...
+
+def reference_forward(
+    params: ParamsTuple, camera: CamTuple, background: List[float], kernel: str
+) -> Tuple[bytearray, bytearray, bytearray]: ...
+def reference_backward(
+    params: ParamsTuple,
+    camera: CamTuple,
+    background: List[float],
+    kernel: str,
+    grad_color: Optional[bytes] = None,
+    grad_alpha: Optional[bytes] = None,
+    grad_depth: Optional[bytes] = None,
+) -> Dict[str, bytearray]: ...

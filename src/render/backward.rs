@@ -179,6 +179,18 @@ impl GpuRenderer {
                 )));
             }
         }
+        for (name, v) in [
+            ("colour", &grads.color),
+            ("alpha", &grads.alpha),
+            ("depth", &grads.depth),
+        ] {
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the {name} gradient holds {} at value {i}; pixel gradients must be finite",
+                    v[i]
+                )));
+            }
+        }
         if frame.alpha.len() != pixels || frame.depth.len() != pixels {
             return Err(GpuError::InvalidArgument(
                 "the frame given to the backward pass has no alpha or depth".into(),

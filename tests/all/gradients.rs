@@ -272,6 +272,57 @@ fn reference_backward_handles_the_transmittance_stop_and_the_alpha_skip() {
     check(&p, &opts, &[0.0, 0.0, 0.0], true, 51);
 }
 
+/// Gaussians whose centres lie outside the guard band (|x/z| > 1.3 tan(fov/2)), large
+/// enough to reach into the frame: their Jacobian uses the clamped position, whose
+/// derivative moves from x to z.
+/// A few random Gaussians and two whose centres lie outside the guard band of `cam`
+/// (|x/z| > 1.3 tan(fov/2)), large enough to reach into the frame.
+fn guard_band_scene(cam: &Camera) -> SplatParams<f32> {
+    let mut p = grad_scene(4, 1000, Some(1), 3);
+    let lim_x = 1.3 * cam.tan_half_fov_x();
+    let lim_y = 1.3 * cam.tan_half_fov_y();
+    // Camera-space points beyond the band, brought to world space (at different depths:
+    // equal depths would make their order, and the loss, jump under a perturbation).
+    let to_world = |v: Vec3| cam.rotation.transpose() * (v - cam.translation);
+    for (k, v) in [
+        Vec3::new(1.25 * lim_x * 3.0, 0.1, 3.0),
+        Vec3::new(-0.2, -1.3 * lim_y * 3.4, 3.4),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        p.means.push(to_world(v).to_array());
+        p.quats.push([1.0, 0.2 * k as f32, 0.1, -0.1]);
+        p.scales.push([0.9, 0.7, 0.5]);
+        p.opacities.push(0.8);
+        if let ColorParams::Sh { coeffs, .. } = &mut p.colors {
+            coeffs.extend([
+                0.6, 0.2, -0.1, 0.1, 0.0, 0.2, -0.1, 0.1, 0.0, 0.2, 0.1, -0.2,
+            ]);
+        }
+    }
+    p
+}
+
+/// Outside the guard band the Jacobian uses the clamped position, whose derivative moves
+/// from x to z.
+#[test]
+fn reference_backward_matches_finite_differences_at_the_guard_band() {
+    let cam = grad_camera();
+    let p = guard_band_scene(&cam);
+    // Both reach the frame: their gradients are not zero.
+    let g = pixel_grads(&cam, 3, 101, true);
+    let grads = backward(&p.to_f64(), &cam, &RenderOptions::default(), &[0.0; 3], &g).unwrap();
+    let n = p.len();
+    for i in [n - 2, n - 1] {
+        assert!(
+            grads.means[i].iter().any(|&x| x != 0.0),
+            "Gaussian {i} reaches no pixel"
+        );
+    }
+    check(&p, &RenderOptions::default(), &[0.0; 3], true, 101);
+}
+
 /// The f64 reference follows the f32 renderer's rules: same image up to rounding.
 #[test]
 fn reference_forward_equals_the_cpu_renderer() {
@@ -402,6 +453,8 @@ fn gpu_backward_matches_the_reference_for_sh_degrees_and_kernels() {
             ..Default::default()
         };
         gpu_against_reference(&mut r, &p, &cam, &opts, 90);
+        let p = guard_band_scene(&cam);
+        gpu_against_reference(&mut r, &p, &cam, &RenderOptions::default(), 91);
     }
 }
 

@@ -18,11 +18,14 @@ use vksplat::gpu::sort::{
 };
 use vksplat::gpu::{RadixSort, Scan};
 use vksplat::render::blend::{Blend, BlendKernel};
+use vksplat::render::blend_bwd::BlendBwd;
 use vksplat::render::features::FeatureBlend;
+use vksplat::render::grad_accumulate::{Accumulation, GradAccumulate};
 use vksplat::render::keys::Keys;
 use vksplat::render::order::Order;
 use vksplat::render::pack::Pack;
 use vksplat::render::preprocess::Preprocess;
+use vksplat::render::preprocess_bwd::PreprocessBwd;
 use vksplat::render::ranges::Ranges;
 use vksplat::render::shade::Shade;
 use vksplat::render::types::{GpuGaussian, GpuGaussianCompact, Splat};
@@ -86,6 +89,34 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     )
     .expect("count64_test");
     built += 1;
+    // The backward pass: both blend layouts and bin sizes, every accumulation, both reads.
+    for (bin, rows) in [(8, false), (16, false), (8, true)] {
+        for kernel in SplatKernel::ALL {
+            BlendBwd::new(ctx, bin, rows, kernel).expect("blend backward");
+            built += 1;
+        }
+    }
+    for mode in [
+        Accumulation::Deterministic,
+        Accumulation::FloatAtomics,
+        Accumulation::CompareAndSwap,
+    ] {
+        // Float atomics need the device's feature (lavapipe has it).
+        if mode != Accumulation::FloatAtomics || ctx.info().float_atomic_add {
+            GradAccumulate::new(ctx, mode).expect("accumulation");
+            built += 1;
+        } else {
+            eprintln!(
+                "no float atomics on {}: that variant is not built",
+                ctx.info().name
+            );
+            built += 1;
+        }
+    }
+    for float_sums in [false, true] {
+        PreprocessBwd::new(ctx, float_sums).expect("preprocess backward");
+        built += 1;
+    }
     // Every prebuilt module was built above: none is dead weight, none unchecked.
     assert_eq!(built, prebuilt_variants().count());
     common::gpu::assert_validation_clean(&r);
