@@ -36,7 +36,19 @@
 #endif
 // Gradient fields per pair: GRAD_FIELDS (12, src/gpu/shader_set.rs) as three vec4:
 // (mean2d.x, mean2d.y, conic A, conic B), (conic C, opacity, colour r, colour g),
-// (colour b, depth, |mean2d.x|, |mean2d.y|).
+// (colour b, depth, |mean2d.x|, |mean2d.y|); then one vec4 per group of four direct
+// feature channels (FEATURE_GROUPS > 0: the Gaussians' values blended instead of their
+// SH colour, with no background; the colour fields stay 0).
+#ifndef FEATURE_GROUPS
+#define FEATURE_GROUPS 0
+#endif
+#define VECS (3u + uint(FEATURE_GROUPS))
+// Array size for the feature arrays (GLSL has no empty arrays).
+#if FEATURE_GROUPS > 0
+#define FG FEATURE_GROUPS
+#else
+#define FG 1
+#endif
 
 #if STRIP == 1
 layout(local_size_x = BIN, local_size_y = BIN) in;
@@ -64,6 +76,12 @@ layout(std430, binding = BLEND_BWD_GRAD_COLOR) readonly buffer GradColorBuf { ve
 // Per pixel: dL/d (sum of depth * weight), i.e. dL/d depth / alpha.
 layout(std430, binding = BLEND_BWD_GRAD_DEPTH) readonly buffer GradDepthBuf { float grad_depth[]; };
 layout(std430, binding = BLEND_BWD_PAIR_GRADS) writeonly buffer PairGradBuf { vec4 pair_grads[]; };
+#if FEATURE_GROUPS > 0
+// The Gaussians' feature channels (FEATURE_GROUPS vec4 each) and dL/d blended feature
+// channel per pixel (FEATURE_GROUPS vec4 each).
+layout(std430, binding = BLEND_BWD_FEATURES) readonly buffer FeatureBuf { vec4 features[]; };
+layout(std430, binding = BLEND_BWD_GRAD_FEATURES) readonly buffer GradFeatureBuf { vec4 grad_features[]; };
+#endif
 // Largest |pair sum| per field, as float bits (non-negative floats order like their bits).
 layout(std430, binding = BLEND_BWD_MAXIMA) buffer MaximaBuf { uint maxima[]; };
 
@@ -76,6 +94,8 @@ struct Pixel {
     float g_dacc;    // dL/d sum of depth * weight
     vec3 behind;     // colour composited behind (with the background)
     float behind_depth;
+    vec4 g_f[FG];    // dL/d feature channel
+    vec4 behind_f[FG];  // feature channels composited behind (no background)
 };
 
 Pixel load_pixel(uvec2 pix) {
@@ -84,6 +104,10 @@ Pixel load_pixel(uvec2 pix) {
     p.T = 1.0;
     p.g_ca = vec4(0.0);
     p.g_dacc = 0.0;
+    for (uint gi = 0u; gi < FG; gi++) {
+        p.g_f[gi] = vec4(0.0);
+        p.behind_f[gi] = vec4(0.0);
+    }
     if (pix.x < params.image.x && pix.y < params.image.y) {
         uint i = pix.y * params.image.x + pix.x;
         uvec2 state = last_state[i];
@@ -91,6 +115,9 @@ Pixel load_pixel(uvec2 pix) {
         p.T = uintBitsToFloat(state.y);
         p.g_ca = grad_color[i];
         p.g_dacc = grad_depth[i];
+#if FEATURE_GROUPS > 0
+        for (uint gi = 0u; gi < FEATURE_GROUPS; gi++) p.g_f[gi] = grad_features[i * FEATURE_GROUPS + gi];
+#endif
     }
     p.t_final = p.T;
     p.behind = p.T * params.background.rgb;
@@ -101,8 +128,8 @@ Pixel load_pixel(uvec2 pix) {
 // Undoes one Gaussian (mean2d.xy, opacity, depth; conic; colour) at pixel `pixf` and adds
 // its gradients to (a0, a1, a2): the pixel loop of cpu::backward, the forward's alpha and
 // skip rule (blend.comp, composite).
-void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec2 pixf, inout Pixel px,
-                inout vec4 a0, inout vec4 a1, inout vec4 a2) {
+void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec4 fv[FG], vec2 pixf, inout Pixel px,
+                inout vec4 a0, inout vec4 a1, inout vec4 a2, inout vec4 af[FG]) {
     vec2 d = mo.xy - pixf;
     float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
     float unclamped = kernel_falloff(SPLAT_KERNEL, mo.z, min(power, 0.0));
@@ -114,6 +141,13 @@ void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec2 pixf, inout Pixel px,
     float g_a = dot(px.g_ca.rgb, col * t_i - px.behind / one_minus)
         + px.g_dacc * (mo.w * t_i - px.behind_depth / one_minus)
         + px.g_ca.a * px.t_final / one_minus;
+#if FEATURE_GROUPS > 0
+    [[unroll]] for (uint gi = 0u; gi < FEATURE_GROUPS; gi++) {
+        af[gi] += px.g_f[gi] * w;
+        g_a += dot(px.g_f[gi], fv[gi] * t_i - px.behind_f[gi] / one_minus);
+        px.behind_f[gi] += fv[gi] * w;
+    }
+#endif
     px.behind += col * w;
     px.behind_depth += mo.w * w;
     px.T = t_i;
@@ -133,23 +167,38 @@ void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec2 pixf, inout Pixel px,
     }
 }
 
-void store_pair(uint k, vec4 s0, vec4 s1, vec4 s2) {
-    pair_grads[3u * k] = s0;
-    pair_grads[3u * k + 1u] = s1;
-    pair_grads[3u * k + 2u] = s2;
+void store_pair(uint k, vec4 s0, vec4 s1, vec4 s2, vec4 sf[FG]) {
+    pair_grads[VECS * k] = s0;
+    pair_grads[VECS * k + 1u] = s1;
+    pair_grads[VECS * k + 2u] = s2;
+    for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) pair_grads[VECS * k + 3u + gi] = sf[gi];
+}
+
+// The Gaussian's feature channels (zeros without features).
+void load_features(uint gaussian, out vec4 fv[FG]) {
+    for (uint gi = 0u; gi < FG; gi++) fv[gi] = vec4(0.0);
+#if FEATURE_GROUPS > 0
+    for (uint gi = 0u; gi < FEATURE_GROUPS; gi++) fv[gi] = features[gaussian * FEATURE_GROUPS + gi];
+#endif
+}
+
+void zero_features(out vec4 a[FG]) {
+    for (uint gi = 0u; gi < FG; gi++) a[gi] = vec4(0.0);
 }
 
 #if STRIP == 1
-#define BATCH 16u
 // At least the number of subgroups of a BIN x BIN workgroup (the host passes it from the
-// device's minimum subgroup size).
+// device's minimum subgroup size), and the pairs staged at a time: the host picks the
+// largest of 16, 8, 4, 2 whose partial sums fit the device's shared memory.
 layout(constant_id = GRAD_SPEC_MAX_SUBGROUPS) const uint MAX_SUBGROUPS = 32u;
+layout(constant_id = GRAD_SPEC_BATCH) const uint BATCH = 16u;
 shared vec4 s_mean_opacity[BATCH];  // mean2d.xy, opacity, depth
 shared vec4 s_conic[BATCH];
 shared vec4 s_color[BATCH];
-shared vec4 s_part[BATCH * MAX_SUBGROUPS * 3u];
+shared uint s_gaussian[BATCH];
+shared vec4 s_part[BATCH * MAX_SUBGROUPS * VECS];
 shared uint s_last;
-shared uint s_max[12];
+shared uint s_max[4u * VECS];
 
 void main() {
     uvec2 bin = gl_WorkGroupID.xy;
@@ -159,18 +208,22 @@ void main() {
     Pixel px = load_pixel(pix);
     uint li = gl_LocalInvocationIndex;
     if (li == 0u) s_last = 0u;
-    if (li < 12u) s_max[li] = 0u;
+    if (li < 4u * VECS) s_max[li] = 0u;
     barrier();
     if (px.last != 0u) atomicMax(s_last, px.last);
     barrier();
     // One past the last pair any pixel of the bin composited; the pairs after it receive 0.
     uint end = max(s_last, range.x);
-    for (uint k = end + li; k < range.y; k += BIN * BIN) store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0));
+    vec4 zf[FG];
+    zero_features(zf);
+    for (uint k = end + li; k < range.y; k += BIN * BIN) store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
     uint batch_end = end;
     while (batch_end > range.x) {
         uint count = min(BATCH, batch_end - range.x);
         if (li < count) {
-            Splat s = splats[values[batch_end - 1u - li]];
+            uint gaussian = values[batch_end - 1u - li];
+            Splat s = splats[gaussian];
+            s_gaussian[li] = gaussian;
             s_mean_opacity[li] = vec4(s.mean_opacity_bound.xyz, s.conic_depth.w);
             s_conic[li] = s.conic_depth;
             s_color[li] = s.color_radius;
@@ -179,30 +232,38 @@ void main() {
         for (uint j = 0u; j < count; j++) {
             uint k = batch_end - 1u - j;
             vec4 a0 = vec4(0.0), a1 = vec4(0.0), a2 = vec4(0.0);
+            vec4 af[FG];
+            zero_features(af);
             bool used = k < px.last;
-            if (used) pixel_grad(s_mean_opacity[j], s_conic[j].xyz, s_color[j].rgb, pixf, px, a0, a1, a2);
+            if (used) {
+                vec4 fv[FG];
+                load_features(s_gaussian[j], fv);
+                pixel_grad(s_mean_opacity[j], s_conic[j].xyz, s_color[j].rgb, fv, pixf, px, a0, a1, a2, af);
+            }
             // The subgroup's sum (skipped where none of its pixels composited the pair).
-            uint slot = (j * MAX_SUBGROUPS + gl_SubgroupID) * 3u;
+            uint slot = (j * MAX_SUBGROUPS + gl_SubgroupID) * VECS;
             if (subgroupAny(used)) {
                 vec4 s0 = subgroupAdd(a0), s1 = subgroupAdd(a1), s2 = subgroupAdd(a2);
+                vec4 sf[FG];
+                zero_features(sf);
+                for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroupAdd(af[gi]);
                 if (subgroupElect()) {
                     s_part[slot] = s0;
                     s_part[slot + 1u] = s1;
                     s_part[slot + 2u] = s2;
+                    for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) s_part[slot + 3u + gi] = sf[gi];
                 }
             } else if (subgroupElect()) {
-                s_part[slot] = vec4(0.0);
-                s_part[slot + 1u] = vec4(0.0);
-                s_part[slot + 2u] = vec4(0.0);
+                for (uint v = 0u; v < VECS; v++) s_part[slot + v] = vec4(0.0);
             }
         }
         barrier();
         // The workgroup's sum per pair and vec4: subgroups in index order.
-        for (uint t = li; t < count * 3u; t += BIN * BIN) {
-            uint j = t / 3u, v = t % 3u;
+        for (uint t = li; t < count * VECS; t += BIN * BIN) {
+            uint j = t / VECS, v = t % VECS;
             vec4 s = vec4(0.0);
-            for (uint sg = 0u; sg < gl_NumSubgroups; sg++) s += s_part[(j * MAX_SUBGROUPS + sg) * 3u + v];
-            pair_grads[3u * (batch_end - 1u - j) + v] = s;
+            for (uint sg = 0u; sg < gl_NumSubgroups; sg++) s += s_part[(j * MAX_SUBGROUPS + sg) * VECS + v];
+            pair_grads[VECS * (batch_end - 1u - j) + v] = s;
             for (uint c = 0u; c < 4u; c++) {
                 if (s[c] != 0.0) atomicMax(s_max[4u * v + c], floatBitsToUint(abs(s[c])));
             }
@@ -211,7 +272,7 @@ void main() {
         barrier();
     }
     barrier();
-    if (li < 12u && s_max[li] != 0u) atomicMax(maxima[li], s_max[li]);
+    if (li < 4u * VECS && s_max[li] != 0u) atomicMax(maxima[li], s_max[li]);
 }
 #else
 void main() {
@@ -226,48 +287,65 @@ void main() {
     }
     // The workgroup is one subgroup: its maximum is the bin's.
     uint end = max(subgroupMax(my_last), range.x);
+    vec4 zf[FG];
+    zero_features(zf);
     for (uint k = end + gl_SubgroupInvocationID; k < range.y; k += gl_SubgroupSize) {
-        store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0));
+        store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
     }
     vec4 m0 = vec4(0.0), m1 = vec4(0.0), m2 = vec4(0.0);
+    vec4 mf[FG];
+    zero_features(mf);
     for (uint k = end; k > range.x;) {
         k--;
-        int g = int(texelFetch(value_texels, int(k)).x) * 3;
+        uint gaussian = texelFetch(value_texels, int(k)).x;
+        int g = int(gaussian) * 3;
+        vec4 fv[FG];
+        load_features(gaussian, fv);
         vec4 mob = texelFetch(splat_texels, g);
         vec4 cd = texelFetch(splat_texels, g + 1);
         vec3 col = texelFetch(splat_texels, g + 2).rgb;
         vec4 mo = vec4(mob.xyz, cd.w);
         vec4 a0 = vec4(0.0), a1 = vec4(0.0), a2 = vec4(0.0);
+        vec4 af[FG];
+        zero_features(af);
         bool used = false;
         [[unroll]] for (uint p = 0u; p < STRIP; p++) {
             if (k < px[p].last) {
                 used = true;
                 Pixel q = px[p];
-                pixel_grad(mo, cd.xyz, col, vec2(pix0) + vec2(float(p), 0.0), q, a0, a1, a2);
+                pixel_grad(mo, cd.xyz, col, fv, vec2(pix0) + vec2(float(p), 0.0), q, a0, a1, a2, af);
                 px[p] = q;
             }
         }
         vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0);
+        vec4 sf[FG];
+        zero_features(sf);
         if (subgroupAny(used)) {
             s0 = subgroupAdd(a0);
             s1 = subgroupAdd(a1);
             s2 = subgroupAdd(a2);
+            for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroupAdd(af[gi]);
         }
         if (subgroupElect()) {
-            store_pair(k, s0, s1, s2);
+            store_pair(k, s0, s1, s2, sf);
             m0 = max(m0, abs(s0));
             m1 = max(m1, abs(s1));
             m2 = max(m2, abs(s2));
+            for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = max(mf[gi], abs(sf[gi]));
         }
     }
     m0 = subgroupMax(m0);
     m1 = subgroupMax(m1);
     m2 = subgroupMax(m2);
+    for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = subgroupMax(mf[gi]);
     if (subgroupElect()) {
         for (uint c = 0u; c < 4u; c++) {
             if (m0[c] != 0.0) atomicMax(maxima[c], floatBitsToUint(m0[c]));
             if (m1[c] != 0.0) atomicMax(maxima[4u + c], floatBitsToUint(m1[c]));
             if (m2[c] != 0.0) atomicMax(maxima[8u + c], floatBitsToUint(m2[c]));
+            for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) {
+                if (mf[gi][c] != 0.0) atomicMax(maxima[12u + 4u * gi + c], floatBitsToUint(mf[gi][c]));
+            }
         }
     }
 }

@@ -17,7 +17,8 @@
 #if FLOAT_ATOMICS && !CAS_FALLBACK
 #extension GL_EXT_shader_atomic_float : require
 #endif
-#define F GRAD_FIELDS
+// Fields per pair: GRAD_FIELDS (12: 2D mean, conic, opacity, colour, depth, |2D mean|)
+// plus 4 per group of feature channels, at most MAX_GRAD_FIELDS; `pc.vecs` vec4s.
 
 layout(local_size_x = 256) in;
 
@@ -31,19 +32,20 @@ layout(std430, binding = GRAD_ACCUMULATE_ACC) buffer AccBuf { float acc[]; };
 #else
 layout(std430, binding = GRAD_ACCUMULATE_ACC) buffer AccBuf { uint acc[]; };
 #endif
-// count: sorted pairs; bits: log2 of the most pairs one Gaussian can have, rounded up.
-layout(push_constant) uniform Push { uint count; uint bits; } pc;
+// count: sorted pairs; bits: log2 of the most pairs one Gaussian can have, rounded up;
+// vecs: vec4s of fields per pair.
+layout(push_constant) uniform Push { uint count; uint bits; uint vecs; } pc;
 
 #if !FLOAT_ATOMICS
 // The fixed-point scale 2^s of each field as two power-of-two factors (each in float
 // range; multiplying by them is exact), computed once per workgroup.
-shared vec2 s_scale[F];
+shared vec2 s_scale[MAX_GRAD_FIELDS];
 #endif
 
 void main() {
     uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
 #if !FLOAT_ATOMICS
-    if (gl_LocalInvocationIndex < F) {
+    if (gl_LocalInvocationIndex < 4u * pc.vecs) {
         int sh = grad_shift(maxima[gl_LocalInvocationIndex], pc.bits);
         s_scale[gl_LocalInvocationIndex] = vec2(ldexp(1.0, sh / 2), ldexp(1.0, sh - sh / 2));
     }
@@ -51,13 +53,16 @@ void main() {
 #endif
     if (k >= pc.count) return;
     uint g = values[k];
-    // The pair's 12 partial sums as three vec4 loads; the field loop is unrolled so every
-    // index is a constant (CPU implementations run indexed loads as per-lane loops).
-    vec4 p[3] = vec4[3](vec4(pair_grads[3u * k]), vec4(pair_grads[3u * k + 1u]), vec4(pair_grads[3u * k + 2u]));
-    [[unroll]] for (uint f = 0u; f < F; f++) {
-        float v = p[f / 4u][f % 4u];
+    uint fields = 4u * pc.vecs;
+    // The pair's partial sums a vec4 at a time; the inner loop is unrolled so its indices
+    // are constants (CPU implementations run indexed loads as per-lane loops).
+    for (uint vi = 0u; vi < pc.vecs; vi++) {
+    vec4 p = pair_grads[pc.vecs * k + vi];
+    [[unroll]] for (uint c = 0u; c < 4u; c++) {
+        uint f = 4u * vi + c;
+        float v = p[c];
         if (v == 0.0) continue;
-        uint i = (g * F + f) * 2u;
+        uint i = (g * fields + f) * 2u;
 #if FLOAT_ATOMICS && !CAS_FALLBACK
         atomicAdd(acc[i], v);
 #elif FLOAT_ATOMICS
@@ -74,5 +79,6 @@ void main() {
         uint carry = old + x.x < old ? 1u : 0u;
         if (x.y + carry != 0u) atomicAdd(acc[i + 1u], x.y + carry);
 #endif
+    }
     }
 }

@@ -14,7 +14,6 @@
 #ifndef FLOAT_ATOMICS
 #define FLOAT_ATOMICS 0
 #endif
-#define F GRAD_FIELDS
 
 layout(local_size_x = 256) in;
 
@@ -35,12 +34,14 @@ struct GaussianGrad {
 layout(std430, binding = PREPROCESS_BWD_GRADS) writeonly buffer GradBuf { GaussianGrad grads[]; };
 // dL/d SH coefficient, in the SH texels' layout (floats).
 layout(std430, binding = PREPROCESS_BWD_SH_GRADS) writeonly buffer ShGradBuf { float sh_grads[]; };
-layout(push_constant) uniform Push { uint count; uint bits; } pc;
+// dL/d feature channel (direct values), 4 per group: `pc.vecs - 3` groups.
+layout(std430, binding = PREPROCESS_BWD_FEATURE_GRADS) writeonly buffer FeatGradBuf { vec4 feature_grads[]; };
+layout(push_constant) uniform Push { uint count; uint bits; uint vecs; } pc;
 
 #include "sh_common.glsl"
 
 float field(uint g, uint f) {
-    uvec2 v = acc[g * F + f];
+    uvec2 v = acc[g * 4u * pc.vecs + f];
 #if FLOAT_ATOMICS
     return uintBitsToFloat(v.x);
 #else
@@ -96,7 +97,15 @@ void main() {
     out_g.scale = vec4(0.0);
     out_g.mean2d_abs = vec4(0.0);
     for (uint k = 0u; k < stride; k++) sh_grads[base + k] = 0.0;
-    if (splats[i].color_radius.w <= 0.0) {
+    uint groups = pc.vecs - 3u;
+    bool visible = splats[i].color_radius.w > 0.0;
+    // Direct feature channels: their sums are their gradients.
+    for (uint gi = 0u; gi < groups; gi++) {
+        uint f = 12u + 4u * gi;
+        feature_grads[i * groups + gi] = visible
+            ? vec4(field(i, f), field(i, f + 1u), field(i, f + 2u), field(i, f + 3u)) : vec4(0.0);
+    }
+    if (!visible) {
         grads[i] = out_g;
         return;
     }

@@ -1117,7 +1117,8 @@ struct PyRasterizer {
     validation: bool,
 }
 
-/// What `Rasterizer.forward` returns: colour (`H x W x 3`), alpha, depth, the token of
+/// What `Rasterizer.forward` returns: colour (`H x W x 3`, or `H x W x D` for D direct
+/// channels other than 3), alpha, depth, the token of
 /// the pass, and per Gaussian the projection (12 floats: mean2d x y, opacity, -, conic
 /// A B C, depth, colour r g b, radius).
 type ForwardOut<'py> = (
@@ -1208,8 +1209,14 @@ impl PyRasterizer {
                 Ok((frame, token, projected))
             })
         })?;
+        // Direct channels other than RGB come back as the frame's feature channels.
+        let color = if frame.feature_count > 0 {
+            byte_array(py, &frame.features)
+        } else {
+            byte_array(py, &frame.color)
+        };
         Ok((
-            byte_array(py, &frame.color),
+            color,
             byte_array(py, &frame.alpha),
             byte_array(py, &frame.depth),
             token,

@@ -148,7 +148,7 @@ def test_direct_rgb_colours_and_the_numpy_pair():
         assert rel(g[k], gr[k]) <= 1e-3, k
 
 
-def test_feature_channels_on_the_reference_backend():
+def test_feature_channels_on_the_device_equal_the_reference():
     s = scene(n=40, seed=4, degree=0)
     s["colors"] = np.random.default_rng(4).normal(size=(40, 6)).astype(np.float32)
     cam = cameras(1)[0]
@@ -156,9 +156,22 @@ def test_feature_channels_on_the_reference_backend():
     f = ref.forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H)
     assert f.colors.shape == (H, W, 6)
     g = ref.backward(f, grad_colors=np.ones((H, W, 6)))
-    assert g["colors"].shape == (40, 6) and np.abs(g["colors"]).sum() > 0
-    with pytest.raises(RuntimeError, match="direct channels"):
-        raster.Rasterizer().forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H)
+    fv = raster.Rasterizer().forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H)
+    assert np.abs(fv.colors - f.colors).max() < 1e-4
+    gv = raster.Rasterizer().backward(fv, grad_colors=np.ones((H, W, 6), np.float32))
+    assert g["colors"].shape == gv["colors"].shape == (40, 6)
+    for k in GROUPS:
+        assert rel(gv[k], g[k]) <= 1e-3, k
+    # Through torch: [N, D] colours without sh_degree.
+    t = tensors(s)
+    out, _, _ = rasterization(*[t[k] for k in GROUPS], torch.tensor(cam.viewmat)[None],
+                              torch.tensor(cam.K)[None], W, H)
+    assert out.shape == (1, H, W, 6)
+    out.sum().backward()
+    assert rel(t["colors"].grad.numpy(), g["colors"]) <= 1e-3
+    with pytest.raises(RuntimeError, match="at most 16"):
+        s17 = dict(s, colors=np.zeros((40, 17), np.float32))
+        raster.Rasterizer().forward(**s17, viewmat=cam.viewmat, K=cam.K, width=W, height=H)
 
 
 @pytest.mark.parametrize(

@@ -197,6 +197,11 @@ class Rasterizer:
         cam = Camera(viewmat, K, width, height)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
         bg = _background(background, channels)
+        if self._native is not None and channels != 3 and any(bg):
+            raise ValueError(
+                f"background: {channels} direct channels are blended without a background on "
+                "the device (the reference backend takes one)"
+            )
         if kernel not in ("gaussian", "power"):
             raise ValueError(f"kernel must be 'gaussian' or 'power', got {kernel!r}")
         f = Forward()
@@ -212,7 +217,7 @@ class Rasterizer:
             f.radii = f.means2d = f.gaussian_depths = f.conics = None
             return f
         color, alpha, depth, token, projected = self._native.forward(params, f._camera, bg, kernel)
-        f.colors = np.frombuffer(color, dtype="<f4").reshape(h, w, 3)
+        f.colors = np.frombuffer(color, dtype="<f4").reshape(h, w, channels)
         f.alphas = np.frombuffer(alpha, dtype="<f4").reshape(h, w)
         f.depths = np.frombuffer(depth, dtype="<f4").reshape(h, w)
         proj = np.frombuffer(projected, dtype="<f4").reshape(n, 12)

@@ -5,7 +5,8 @@
                                          viewmats, Ks, width, height, sh_degree=3)
 
 Differentiable with torch autograd with respect to ``means``, ``quats``, ``scales``,
-``opacities`` and ``colors`` (SH coefficients or direct RGB); ``meta["means2d"]``
+``opacities`` and ``colors`` (SH coefficients, direct RGB, or 1 to 16 direct feature
+channels, blended without a background); ``meta["means2d"]``
 receives dL/d(2D means) when it retains its gradient, and ``meta["means2d"].absgrad``
 the sum of their absolute values with ``absgrad=True`` (what densification reads).
 CPU float32 tensors in and out. Gradients are bit-identical run after run
@@ -184,7 +185,7 @@ def rasterization(
 
     ``means`` [N, 3], ``quats`` [N, 4] (w, x, y, z; normalised inside), ``scales`` [N, 3]
     (linear), ``opacities`` [N] (in [0, 1]), ``colors`` [N, K, 3] SH coefficients with
-    ``sh_degree`` or [N, 3] RGB without, ``viewmats`` [C, 4, 4] world-to-camera (OpenCV
+    ``sh_degree`` or [N, D] direct channels without (RGB, or 1 to 16 feature channels), ``viewmats`` [C, 4, 4] world-to-camera (OpenCV
     axes), ``Ks`` [C, 3, 3]. ``render_mode``: ``"RGB"``, ``"D"`` (accumulated depth),
     ``"ED"`` (expected depth), ``"RGB+D"``, ``"RGB+ED"``. ``backgrounds`` [C, 3] (or
     [C, 4] with a depth channel). vksplat's own: ``device`` (Vulkan device index or name),
@@ -223,7 +224,7 @@ def rasterization(
     _check_tensor("scales", scales, (n, 3))
     _check_tensor("opacities", opacities, (n,))
     if sh_degree is None:
-        _check_tensor("colors", colors, (n, 3))
+        _check_tensor("colors", colors, (n, None))
     else:
         _check_tensor("colors", colors, (n, None, 3))
     _check_tensor("viewmats", viewmats, (None, 4, 4))
@@ -234,6 +235,11 @@ def rasterization(
     if backgrounds is not None:
         _check_tensor("backgrounds", backgrounds, (n_cams, None))
         d = backgrounds.shape[1]
+        channels = 3 if sh_degree is not None else colors.shape[1]
+        if channels != 3:
+            raise ValueError(
+                f"backgrounds: colors of {channels} channels are blended without a background"
+            )
         want = 4 if render_mode in ("RGB+D", "RGB+ED") else 3
         if d not in (3, want) or (render_mode in ("D", "ED")):
             raise ValueError(

@@ -27,8 +27,15 @@ pub const STRIPS: [u32; 4] = [1, 2, 4, 8];
 /// Gradient fields the blend backward writes per (bin, Gaussian) pair and the accumulation
 /// sums per Gaussian: 2D mean (2), conic (3), opacity, colour (3), depth, |2D mean| (2).
 pub const GRAD_FIELDS: u32 = 12;
+/// Groups of four direct feature channels the backward pass differentiates at most (16
+/// channels).
+pub const MAX_FEATURE_GROUPS: u32 = 4;
+/// Fields per pair at most: [`GRAD_FIELDS`] and four per feature group.
+pub const MAX_GRAD_FIELDS: u32 = GRAD_FIELDS + 4 * MAX_FEATURE_GROUPS;
 /// Specialization constant id of the most subgroups a blend-backward workgroup may have.
 pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
+/// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
+pub const GRAD_SPEC_BATCH: u32 = 1;
 
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
@@ -93,9 +100,9 @@ shader_bindings! {
     sort_scatter { META, KEYS_IN, VALUES_IN, OFFSETS, KEYS_OUT, VALUES_OUT }
     sort_copy { META, KEYS_IN, VALUES_IN, KEYS_OUT, VALUES_OUT }
     count64_test { COUNT }
-    blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA }
+    blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA, FEATURES, GRAD_FEATURES }
     grad_accumulate { VALUES, PAIR_GRADS, MAXIMA, ACC }
-    preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS }
+    preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS, FEATURE_GRADS }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -145,10 +152,12 @@ pub fn shared_defines() -> Vec<(String, String)> {
             SORT_SPEC_MAX_SUBGROUPS.to_string(),
         ),
         ("GRAD_FIELDS", format!("{GRAD_FIELDS}u")),
+        ("MAX_GRAD_FIELDS", format!("{MAX_GRAD_FIELDS}u")),
         (
             "GRAD_SPEC_MAX_SUBGROUPS",
             GRAD_SPEC_MAX_SUBGROUPS.to_string(),
         ),
+        ("GRAD_SPEC_BATCH", GRAD_SPEC_BATCH.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
@@ -262,14 +271,17 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
     // compare-and-swap; the preprocess's reading either.
     for (bin, strip) in [("8u", 1), ("16u", 1), ("8u", 8)] {
         for kernel in splat_kernels {
-            out.push(v(
-                "blend_bwd",
-                &[
-                    ("BIN", bin.to_string()),
-                    ("STRIP", strip.to_string()),
-                    ("SPLAT_KERNEL", kernel.to_string()),
-                ],
-            ));
+            for groups in 0..=MAX_FEATURE_GROUPS {
+                out.push(v(
+                    "blend_bwd",
+                    &[
+                        ("BIN", bin.to_string()),
+                        ("STRIP", strip.to_string()),
+                        ("SPLAT_KERNEL", kernel.to_string()),
+                        ("FEATURE_GROUPS", groups.to_string()),
+                    ],
+                ));
+            }
         }
     }
     for (float, cas) in [(false, false), (true, false), (true, true)] {

@@ -22,7 +22,7 @@ use super::preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
 use super::{check_binding, GpuRenderer, GpuScene};
 use crate::frame::Frame;
 use crate::gpu::shader::Resource;
-use crate::gpu::shader_set::GRAD_FIELDS;
+use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
 use crate::model::grad::{PixelGrads, SplatGrads};
@@ -34,7 +34,7 @@ pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_b
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
 pub(super) struct BackwardState {
-    blend: Vec<((u32, bool, SplatKernel), BlendBwd)>,
+    blend: Vec<((u32, bool, SplatKernel, u32), BlendBwd)>,
     accumulate: Vec<(Accumulation, GradAccumulate)>,
     preprocess: [Option<PreprocessBwd>; 2],
     grad_color: Option<GpuBuffer>,
@@ -44,6 +44,9 @@ pub(super) struct BackwardState {
     acc: Option<GpuBuffer>,
     grads: Option<GpuBuffer>,
     sh_grads: Option<GpuBuffer>,
+    features: Option<GpuBuffer>,
+    grad_features: Option<GpuBuffer>,
+    feature_grads: Option<GpuBuffer>,
     timer: GpuTimer,
     timings: Vec<(String, f64)>,
     /// First timestamp to last of the last pass, ms.
@@ -80,6 +83,9 @@ impl BackwardState {
             acc: None,
             grads: None,
             sh_grads: None,
+            features: None,
+            grad_features: None,
+            feature_grads: None,
             timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32)?,
             timings: Vec::new(),
             span_ms: 0.0,
@@ -96,12 +102,19 @@ impl BackwardState {
             &self.acc,
             &self.grads,
             &self.sh_grads,
+            &self.features,
+            &self.grad_features,
+            &self.feature_grads,
         ]
         .iter()
         .map(|b| b.as_ref().map_or(0, |b| b.size()))
         .sum()
     }
 }
+
+/// A backward pass's feature channels: the Gaussians' values and the pixels' gradients,
+/// both in groups of four, and the channel count.
+type FeatureJob<'a> = (&'a [[f32; 4]], &'a [[f32; 4]], usize);
 
 /// `ceil(log2(n))` for n >= 1: the bits a count of at most `n` needs.
 fn bits_for(n: u64) -> u32 {
@@ -161,6 +174,36 @@ impl GpuRenderer {
         frame: &Frame,
         grads: &PixelGrads<f32>,
     ) -> GpuResult<SplatGrads<f32>> {
+        self.backward_with_features(scene, None, frame, grads)
+    }
+
+    /// [`Self::backward`] of a frame that blended `k` direct feature channels per
+    /// Gaussian (`features`: `(values, k)`, Gaussian-major, at most 16 channels) instead of
+    /// its SH colour, with no background: `grads.color` holds `k` channels per pixel, and
+    /// the returned `colors` are dL/d(feature values), `k` per Gaussian.
+    pub fn backward_with_features(
+        &mut self,
+        scene: &GpuScene,
+        features: Option<(&[f32], usize)>,
+        frame: &Frame,
+        grads: &PixelGrads<f32>,
+    ) -> GpuResult<SplatGrads<f32>> {
+        let channels = features.map_or(3, |(_, k)| k);
+        if let Some((values, k)) = features {
+            let max = 4 * MAX_FEATURE_GROUPS as usize;
+            if k == 0 || k > max {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the backward pass differentiates 1 to {max} feature channels, not {k}"
+                )));
+            }
+            if values.len() != scene.count as usize * k {
+                return Err(GpuError::InvalidArgument(format!(
+                    "{} feature values for {} Gaussians of {k} channels",
+                    values.len(),
+                    scene.count
+                )));
+            }
+        }
         if scene.compact {
             return Err(GpuError::InvalidArgument(
                 "the backward pass needs a full-precision upload, not a compact one".into(),
@@ -169,7 +212,7 @@ impl GpuRenderer {
         let (w, h) = (frame.width as usize, frame.height as usize);
         let pixels = w * h;
         for (name, len, want) in [
-            ("colour", grads.color.len(), pixels * 3),
+            ("colour", grads.color.len(), pixels * channels),
             ("alpha", grads.alpha.len(), pixels),
             ("depth", grads.depth.len(), pixels),
         ] {
@@ -200,10 +243,25 @@ impl GpuRenderer {
         // passes dL/dD = g / alpha and -g depth / alpha to alpha.
         let mut grad_color = vec![[0f32; 4]; pixels];
         let mut grad_depth = vec![0f32; pixels];
+        let groups = channels.div_ceil(4);
+        let mut grad_features = vec![
+            [0f32; 4];
+            if features.is_some() {
+                pixels * groups
+            } else {
+                0
+            }
+        ];
         for i in 0..pixels {
             let mut g = [0f32; 4];
             if !grads.color.is_empty() {
-                g[..3].copy_from_slice(&grads.color[i * 3..i * 3 + 3]);
+                if features.is_some() {
+                    for c in 0..channels {
+                        grad_features[i * groups + c / 4][c % 4] = grads.color[i * channels + c];
+                    }
+                } else {
+                    g[..3].copy_from_slice(&grads.color[i * 3..i * 3 + 3]);
+                }
             }
             if !grads.alpha.is_empty() {
                 g[3] = grads.alpha[i];
@@ -219,7 +277,27 @@ impl GpuRenderer {
             Some(s) => s,
             None => BackwardState::new(&self.ctx)?,
         };
-        let result = self.run_backward(&mut state, scene, frame, &grad_color, &grad_depth);
+        // The Gaussians' feature values, in groups of four.
+        let feature_values: Option<Vec<[f32; 4]>> = features.map(|(values, k)| {
+            let mut packed = vec![[0f32; 4]; scene.count as usize * groups];
+            for (i, row) in values.chunks_exact(k).enumerate() {
+                for (c, v) in row.iter().enumerate() {
+                    packed[i * groups + c / 4][c % 4] = *v;
+                }
+            }
+            packed
+        });
+        let feature_job = feature_values
+            .as_deref()
+            .map(|v| (v, &grad_features[..], channels));
+        let result = self.run_backward(
+            &mut state,
+            scene,
+            frame,
+            &grad_color,
+            &grad_depth,
+            feature_job,
+        );
         self.backward = Some(state);
         result
     }
@@ -231,8 +309,11 @@ impl GpuRenderer {
         frame: &Frame,
         grad_color: &[[f32; 4]],
         grad_depth: &[f32],
+        features: Option<FeatureJob>,
     ) -> GpuResult<SplatGrads<f32>> {
         let ctx = &self.ctx;
+        let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
+        let vecs = 3 + groups;
         let fs = self.forward_state()?;
         let last = fs.last_contributor.ok_or_else(|| {
             GpuError::InvalidArgument(
@@ -254,17 +335,19 @@ impl GpuRenderer {
         }
         let kernel = self.last_kernel;
         let n = scene.count as u64;
-        let f = u64::from(GRAD_FIELDS);
+        let f = u64::from(GRAD_FIELDS + 4 * groups);
         let pairs = u64::from(fs.pairs);
         let bins = fs.bins;
         let bits = bits_for(u64::from(bins.0) * u64::from(bins.1));
         let float_sums = st.mode != Accumulation::Deterministic;
         // Pipelines, the first time a pass needs each.
         let rows = BlendBwd::rows_for(ctx, fs.bin_size, fs.value_texels.is_some());
-        let blend_key = (fs.bin_size, rows, kernel);
+        let blend_key = (fs.bin_size, rows, kernel, groups);
         if !st.blend.iter().any(|(k, _)| *k == blend_key) {
-            st.blend
-                .push((blend_key, BlendBwd::new(ctx, fs.bin_size, rows, kernel)?));
+            st.blend.push((
+                blend_key,
+                BlendBwd::new(ctx, fs.bin_size, rows, kernel, groups)?,
+            ));
         }
         if !st.accumulate.iter().any(|(m, _)| *m == st.mode) {
             if st.mode == Accumulation::FloatAtomics && !ctx.info().float_atomic_add {
@@ -306,6 +389,21 @@ impl GpuRenderer {
             n * GAUSSIAN_GRAD_BYTES,
         )?;
         ensure(ctx, &mut st.sh_grads, "SH gradients", n * sh_floats * 4)?;
+        let g16 = u64::from(groups) * 16;
+        ensure(ctx, &mut st.feature_grads, "feature gradients", n * g16)?;
+        let feature_buf = ensure(ctx, &mut st.features, "feature values", n * g16)?;
+        if let Some((values, _, _)) = features {
+            feature_buf.upload(ctx, values)?;
+        }
+        let grad_feature_buf = ensure(
+            ctx,
+            &mut st.grad_features,
+            "pixel feature gradients",
+            grad_color.len() as u64 * g16,
+        )?;
+        if let Some((_, pixel_grads, _)) = features {
+            grad_feature_buf.upload(ctx, pixel_grads)?;
+        }
         check_binding(ctx, "Gaussians", scene.gaussians.size())?;
         let blend = &st
             .blend
@@ -336,6 +434,11 @@ impl GpuRenderer {
         let (grad_color_b, grad_depth_b) = (buf(&st.grad_color), buf(&st.grad_depth));
         let (pair_grads, maxima, acc) = (buf(&st.pair_grads), buf(&st.maxima), buf(&st.acc));
         let (grads, sh_grads) = (buf(&st.grads), buf(&st.sh_grads));
+        let (feature_b, grad_feature_b, feature_grads) = (
+            buf(&st.features),
+            buf(&st.grad_features),
+            buf(&st.feature_grads),
+        );
         let timer = &mut st.timer;
         ctx.submit_and_wait("backward", |cmd| {
             // The forward's writes (an earlier submission) before this pass reads them.
@@ -358,6 +461,8 @@ impl GpuRenderer {
                     grad_depth_b,
                     pair_grads,
                     maxima,
+                    feature_b,
+                    grad_feature_b,
                 )
             })?;
             barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
@@ -372,6 +477,7 @@ impl GpuRenderer {
                     GradPush {
                         count: fs.pairs,
                         bits,
+                        vecs,
                     },
                 )
             })?;
@@ -388,9 +494,11 @@ impl GpuRenderer {
                     acc,
                     grads,
                     sh_grads,
+                    feature_grads,
                     GradPush {
                         count: scene.count,
                         bits,
+                        vecs,
                     },
                 )
             })?;
@@ -403,8 +511,15 @@ impl GpuRenderer {
         let n = n as usize;
         let raw: Vec<[f32; 16]> = grads.buffer.read(ctx, n)?;
         let sh_raw: Vec<f32> = sh_grads.buffer.read(ctx, n * sh_floats as usize)?;
-        let k = sh_coeffs_for_degree(scene.sh_degree) * 3;
+        let k = match features {
+            Some((_, _, channels)) => channels,
+            None => sh_coeffs_for_degree(scene.sh_degree) * 3,
+        };
         let mut out = SplatGrads::zeros(n, k);
+        let feature_raw: Vec<[f32; 4]> = match features {
+            Some(_) => feature_grads.buffer.read(ctx, n * groups as usize)?,
+            None => Vec::new(),
+        };
         for (i, g) in raw.iter().enumerate() {
             out.means[i] = [g[0], g[1], g[2]];
             out.opacities[i] = g[3];
@@ -412,8 +527,14 @@ impl GpuRenderer {
             out.scales[i] = [g[8], g[9], g[10]];
             out.means2d[i] = [g[12], g[13]];
             out.absgrad[i] = [g[14], g[15]];
-            let src = &sh_raw[i * sh_floats as usize..i * sh_floats as usize + k];
-            out.colors[i * k..(i + 1) * k].copy_from_slice(src);
+            if features.is_some() {
+                for c in 0..k {
+                    out.colors[i * k + c] = feature_raw[i * groups as usize + c / 4][c % 4];
+                }
+            } else {
+                let src = &sh_raw[i * sh_floats as usize..i * sh_floats as usize + k];
+                out.colors[i * k..(i + 1) * k].copy_from_slice(src);
+            }
         }
         Ok(out)
     }

@@ -5,13 +5,12 @@
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::blend_bwd as slot;
-use crate::gpu::shader_set::{GRAD_FIELDS, GRAD_SPEC_MAX_SUBGROUPS};
+use crate::gpu::shader_set::{
+    GRAD_FIELDS, GRAD_SPEC_BATCH, GRAD_SPEC_MAX_SUBGROUPS, MAX_FEATURE_GROUPS,
+};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
 use crate::model::SplatKernel;
 use ash::vk;
-
-/// Pairs the shader stages in shared memory at a time (`BATCH` in the shader).
-const BATCH: u32 = 16;
 
 /// The blend-backward pipeline for one bin size, layout and kernel.
 pub struct BlendBwd {
@@ -32,7 +31,20 @@ impl BlendBwd {
     /// row layout ([`Self::rows_for`]); otherwise one invocation per pixel, whose shared
     /// memory holds one partial sum per subgroup, pair of a batch and field (the device's
     /// smallest subgroup size decides how many subgroups a workgroup can have).
-    pub fn new(ctx: &GpuContext, bin: u32, rows: bool, kernel: SplatKernel) -> GpuResult<Self> {
+    pub fn new(
+        ctx: &GpuContext,
+        bin: u32,
+        rows: bool,
+        kernel: SplatKernel,
+        feature_groups: u32,
+    ) -> GpuResult<Self> {
+        if feature_groups > MAX_FEATURE_GROUPS {
+            return Err(GpuError::InvalidArgument(format!(
+                "the backward pass differentiates at most {} feature channels, not {}",
+                4 * MAX_FEATURE_GROUPS,
+                4 * feature_groups
+            )));
+        }
         if !matches!(bin, 8 | 16) || (rows && bin != 8) {
             return Err(GpuError::InvalidArgument(format!(
                 "the blend backward runs on 8- or 16-pixel bins (rows: 8), not {bin}"
@@ -42,18 +54,29 @@ impl BlendBwd {
         let strip = if rows { bin } else { 1 };
         let invocations = bin * bin / strip;
         let max_subgroups = invocations.div_ceil(info.min_subgroup_size.max(1));
-        let shared = 4 * (BATCH * 12 + BATCH * max_subgroups * GRAD_FIELDS + 1 + GRAD_FIELDS);
-        if !rows && shared > info.max_shared_memory {
-            return Err(GpuError::DeviceLimit {
-                limit: "maxComputeSharedMemorySize",
-                needed: u64::from(shared),
-                max: u64::from(info.max_shared_memory),
-                message: format!(
-                    "the blend backward of {bin}-pixel bins needs {shared} bytes of shared memory \
-                     for {max_subgroups} subgroups"
-                ),
-            });
-        }
+        let fields = GRAD_FIELDS + 4 * feature_groups;
+        // Shared memory of the per-pixel layout: per staged pair its splat (13 floats) and
+        // one partial sum per subgroup and field; the max of each field, the last pair.
+        let shared = |batch: u32| 4 * (batch * 13 + batch * max_subgroups * fields + 1 + fields);
+        let batch = [16, 8, 4, 2]
+            .into_iter()
+            .find(|&b| shared(b) <= info.max_shared_memory);
+        let batch = match (rows, batch) {
+            (true, _) => 0,
+            (false, Some(b)) => b,
+            (false, None) => {
+                return Err(GpuError::DeviceLimit {
+                    limit: "maxComputeSharedMemorySize",
+                    needed: u64::from(shared(2)),
+                    max: u64::from(info.max_shared_memory),
+                    message: format!(
+                        "the blend backward of {bin}-pixel bins needs {} bytes of shared memory \
+                         for {max_subgroups} subgroups and {fields} gradient fields",
+                        shared(2)
+                    ),
+                })
+            }
+        };
         let storage = BindingKind::StorageBuffer;
         let pairs = if rows {
             BindingKind::UniformTexelBuffer
@@ -67,6 +90,7 @@ impl BlendBwd {
                 ("BIN", format!("{bin}u")),
                 ("STRIP", strip.to_string()),
                 ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
+                ("FEATURE_GROUPS", feature_groups.to_string()),
             ],
             &by_binding([
                 (slot::PARAMS, storage),
@@ -78,13 +102,18 @@ impl BlendBwd {
                 (slot::GRAD_DEPTH, storage),
                 (slot::PAIR_GRADS, storage),
                 (slot::MAXIMA, storage),
+                (slot::FEATURES, storage),
+                (slot::GRAD_FEATURES, storage),
             ])?,
             0,
             invocations,
             &if rows {
                 Vec::new()
             } else {
-                vec![(GRAD_SPEC_MAX_SUBGROUPS, max_subgroups)]
+                vec![
+                    (GRAD_SPEC_MAX_SUBGROUPS, max_subgroups),
+                    (GRAD_SPEC_BATCH, batch),
+                ]
             },
         )?;
         Ok(BlendBwd {
@@ -121,6 +150,8 @@ impl BlendBwd {
         grad_depth: BufferSlice,
         pair_grads: BufferSlice,
         maxima: BufferSlice,
+        features: BufferSlice,
+        grad_features: BufferSlice,
     ) -> GpuResult<()> {
         let buffers = by_binding([
             (slot::PARAMS, Resource::Buffer(params)),
@@ -132,6 +163,8 @@ impl BlendBwd {
             (slot::GRAD_DEPTH, Resource::Buffer(grad_depth)),
             (slot::PAIR_GRADS, Resource::Buffer(pair_grads)),
             (slot::MAXIMA, Resource::Buffer(maxima)),
+            (slot::FEATURES, Resource::Buffer(features)),
+            (slot::GRAD_FEATURES, Resource::Buffer(grad_features)),
         ])?;
         let max = ctx.info().max_workgroup_count;
         if bins.0 > max[0] || bins.1 > max[1] {

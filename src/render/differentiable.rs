@@ -13,12 +13,13 @@ use crate::model::RenderOptions;
 
 pub use super::grad_accumulate::Accumulation;
 
-/// The parameters as the device renders them: direct RGB colours `c` become SH degree 0
+/// The parameters as the device renders them: other numbers of direct channels are
+/// blended as feature channels; direct RGB colours `c` become SH degree 0
 /// coefficients `(c - 0.5) / C0`, whose colour is `max(c, 0)` (to rounding): the device
 /// blends every colour through its SH path, so negative direct colours clamp at 0.
 fn device_params(params: &SplatParams<f32>) -> std::borrow::Cow<'_, SplatParams<f32>> {
     match &params.colors {
-        ColorParams::Direct { values, .. } => {
+        ColorParams::Direct { values, channels } if *channels == 3 => {
             let c0 = crate::model::sh::SH_C0;
             std::borrow::Cow::Owned(SplatParams {
                 colors: ColorParams::Sh {
@@ -28,7 +29,7 @@ fn device_params(params: &SplatParams<f32>) -> std::borrow::Cow<'_, SplatParams<
                 ..params.clone()
             })
         }
-        ColorParams::Sh { .. } => std::borrow::Cow::Borrowed(params),
+        _ => std::borrow::Cow::Borrowed(params),
     }
 }
 
@@ -37,6 +38,16 @@ struct Forward {
     token: u64,
     frame: Frame,
     scene: GpuScene,
+}
+
+/// Whether `params` are blended as feature channels (direct values, not 3 of them).
+fn as_features(params: &SplatParams<f32>) -> Option<(&[f32], usize)> {
+    match &params.colors {
+        ColorParams::Direct { channels, values } if *channels != 3 => {
+            Some((values.as_slice(), *channels))
+        }
+        _ => None,
+    }
 }
 
 /// A renderer that keeps each frame's forward state for a backward pass.
@@ -73,10 +84,11 @@ impl DiffRasterizer {
         cam.validate()
             .map_err(|e| GpuError::InvalidArgument(e.to_string()))?;
         if let ColorParams::Direct { channels, .. } = params.colors {
-            if channels != 3 {
+            let max = 4 * crate::gpu::shader_set::MAX_FEATURE_GROUPS as usize;
+            if channels != 3 && channels > max {
                 return Err(GpuError::InvalidArgument(format!(
-                    "colours of {channels} direct channels are not differentiable on the device \
-                     yet (3 are: RGB); pass SH coefficients or use the CPU reference"
+                    "colours of {channels} direct channels: the device differentiates at most \
+                     {max}; use the CPU reference"
                 )));
             }
         }
@@ -98,10 +110,24 @@ impl DiffRasterizer {
     ) -> GpuResult<(Frame, u64)> {
         Self::check(params, cam, opts)?;
         self.last = None;
-        let scene = self
-            .renderer
-            .upload(&device_params(params).to_activated())?;
-        let frame = self.renderer.render(&scene, cam, opts)?;
+        let activated = device_params(params).to_activated();
+        let scene = self.renderer.upload(&activated)?;
+        let (frame, features) = if as_features(params).is_some() {
+            if opts.background != [0.0; 3] {
+                return Err(GpuError::InvalidArgument(
+                    "feature channels are blended without a background on the device".into(),
+                ));
+            }
+            let features = self.renderer.upload_features(&activated)?;
+            let frame = self
+                .renderer
+                .render_features(&scene, &features, cam, opts)?;
+            (frame, Some(features))
+        } else {
+            (self.renderer.render(&scene, cam, opts)?, None)
+        };
+        // The feature upload is the forward's only (the backward uploads its own values).
+        drop(features);
         if self.renderer.forward_state()?.last_contributor.is_none() {
             return Err(GpuError::DeviceLimit {
                 limit: "maxStorageBufferRange",
@@ -163,8 +189,11 @@ impl DiffRasterizer {
                 last.scene.len()
             )));
         }
-        let mut g = self.renderer.backward(&last.scene, &last.frame, grads)?;
-        if let ColorParams::Direct { .. } = params.colors {
+        let features = as_features(params);
+        let mut g =
+            self.renderer
+                .backward_with_features(&last.scene, features, &last.frame, grads)?;
+        if let (ColorParams::Direct { .. }, None) = (&params.colors, features) {
             // Through SH degree 0 (`device_params`): dL/dc = dL/d sh0 / C0.
             let c0 = crate::model::sh::SH_C0;
             for v in g.colors.iter_mut() {

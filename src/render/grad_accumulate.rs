@@ -65,6 +65,8 @@ pub struct GradPush {
     pub count: u32,
     /// `ceil(log2(bins))`.
     pub bits: u32,
+    /// vec4s of fields per pair: 3, plus one per group of four feature channels.
+    pub vecs: u32,
 }
 
 impl GradAccumulate {

@@ -37,6 +37,7 @@ impl PreprocessBwd {
                 (slot::ACC, storage),
                 (slot::GRADS, storage),
                 (slot::SH_GRADS, storage),
+                (slot::FEATURE_GRADS, storage),
             ])?,
             std::mem::size_of::<GradPush>() as u32,
             WORKGROUP,
@@ -58,6 +59,7 @@ impl PreprocessBwd {
         acc: BufferSlice,
         grads: BufferSlice,
         sh_grads: BufferSlice,
+        feature_grads: BufferSlice,
         push: GradPush,
     ) -> GpuResult<()> {
         if push.count == 0 {
@@ -72,6 +74,7 @@ impl PreprocessBwd {
             (slot::ACC, Resource::Buffer(acc)),
             (slot::GRADS, Resource::Buffer(grads)),
             (slot::SH_GRADS, Resource::Buffer(sh_grads)),
+            (slot::FEATURE_GRADS, Resource::Buffer(feature_grads)),
         ])?;
         let groups = dispatch_grid(
             push.count.div_ceil(WORKGROUP),

@@ -390,8 +390,9 @@ fn gpu_against_reference(
     opts: &RenderOptions,
     seed: u64,
 ) -> vksplat::model::grad::SplatGrads<f32> {
-    let bg: Vec<f64> = opts.background.iter().map(|&b| b as f64).collect();
-    let g = pixel_grads(cam, 3, seed, true);
+    let mut bg: Vec<f64> = opts.background.iter().map(|&b| b as f64).collect();
+    bg.resize(p.channels(), 0.0);
+    let g = pixel_grads(cam, p.channels(), seed, true);
     let (_, token) = r.forward(p, cam, opts).unwrap();
     let gpu = r.backward(p, cam, opts, token, &to_f32(&g)).unwrap();
     let cpu = backward(&p.to_f64(), cam, opts, &bg, &g).unwrap();
@@ -455,6 +456,34 @@ fn gpu_backward_matches_the_reference_for_sh_degrees_and_kernels() {
         gpu_against_reference(&mut r, &p, &cam, &opts, 90);
         let p = guard_band_scene(&cam);
         gpu_against_reference(&mut r, &p, &cam, &RenderOptions::default(), 91);
+    }
+}
+
+/// N-D feature channels (direct values, no background) on the device: 1 to 16 channels,
+/// both blend layouts and both kernels, against the reference.
+#[test]
+fn gpu_backward_matches_the_reference_for_feature_channels() {
+    let cam = gpu_camera();
+    for blend in [None, Some(BlendKernel::Shared)] {
+        let mut r = diff_rasterizer(blend);
+        for (k, kernel) in [
+            (1, SplatKernel::Gaussian),
+            (5, SplatKernel::Power),
+            (8, SplatKernel::Gaussian),
+            (16, SplatKernel::Gaussian),
+        ] {
+            let p = grad_scene(50, 1100 + k as u64, None, k);
+            let opts = RenderOptions {
+                kernel,
+                ..Default::default()
+            };
+            let gpu = gpu_against_reference(&mut r, &p, &cam, &opts, 110 + k as u64);
+            assert_eq!(gpu.colors.len(), 50 * k);
+        }
+        // More channels than the device differentiates: a clear error.
+        let p = grad_scene(5, 1200, None, 17);
+        let e = r.forward(&p, &cam, &RenderOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("at most 16"), "{e}");
     }
 }
 

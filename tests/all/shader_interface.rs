@@ -13,6 +13,7 @@ use vksplat::gpu::scan::ScanPush;
 use vksplat::gpu::shader::{
     compile_glsl, prebuilt_variants, shader_spirv, BindingKind, ComputePipeline,
 };
+use vksplat::gpu::shader_set::MAX_FEATURE_GROUPS;
 use vksplat::gpu::sort::{
     SortConfig, SortPassPush, SortSetupPush, DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
 };
@@ -92,8 +93,10 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     // The backward pass: both blend layouts and bin sizes, every accumulation, both reads.
     for (bin, rows) in [(8, false), (16, false), (8, true)] {
         for kernel in SplatKernel::ALL {
-            BlendBwd::new(ctx, bin, rows, kernel).expect("blend backward");
-            built += 1;
+            for groups in 0..=MAX_FEATURE_GROUPS {
+                BlendBwd::new(ctx, bin, rows, kernel, groups).expect("blend backward");
+                built += 1;
+            }
         }
     }
     for mode in [
