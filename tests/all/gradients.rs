@@ -135,6 +135,15 @@ pub fn finite_differences(
     bg: &[f64],
     g: &PixelGrads<f64>,
 ) -> Vec<(&'static str, Vec<f64>)> {
+    finite_differences_of(p, g, &|q| forward(q, cam, opts, bg).unwrap())
+}
+
+/// Central differences of the loss of the frames `render` makes.
+fn finite_differences_of(
+    p: &SplatParams<f64>,
+    g: &PixelGrads<f64>,
+    render: &dyn Fn(&SplatParams<f64>) -> Image64,
+) -> Vec<(&'static str, Vec<f64>)> {
     let h = 1e-6;
     let n = p.len();
     let stride = p.color_stride();
@@ -154,9 +163,7 @@ pub fn finite_differences(
                     *scalar(&mut plus, group, k) += h;
                     let mut minus = p.clone();
                     *scalar(&mut minus, group, k) -= h;
-                    let lp = loss(&forward(&plus, cam, opts, bg).unwrap(), g);
-                    let lm = loss(&forward(&minus, cam, opts, bg).unwrap(), g);
-                    (lp - lm) / (2.0 * h)
+                    (loss(&render(&plus), g) - loss(&render(&minus), g)) / (2.0 * h)
                 })
                 .collect();
             (group, fd)
@@ -321,6 +328,100 @@ fn reference_backward_matches_finite_differences_at_the_guard_band() {
         );
     }
     check(&p, &RenderOptions::default(), &[0.0; 3], true, 101);
+}
+
+/// The neural shader (`render --shader`): features blended, then an MLP per pixel (tanh,
+/// relu, sigmoid; features, view direction and alpha in), composited over a background.
+/// Its reference backward against finite differences, for the Gaussians and the MLP.
+#[test]
+fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
+    use vksplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
+    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    let cam = grad_camera();
+    let k = 4;
+    let p = grad_scene(8, 1300, None, k).to_f64();
+    let mut rng = Rng(1301);
+    let mut layer = |inputs: usize, outputs: usize, activation| Layer {
+        inputs,
+        outputs,
+        weight: (0..inputs * outputs)
+            .map(|_| rng.range(-0.8, 0.8))
+            .collect(),
+        bias: (0..outputs).map(|_| rng.range(-0.3, 0.3)).collect(),
+        activation,
+    };
+    let mlp = Mlp {
+        inputs: vec![MlpInput::Features, MlpInput::ViewDir, MlpInput::Alpha],
+        layers: vec![
+            layer(k + 4, 8, Activation::Tanh),
+            layer(8, 6, Activation::Relu),
+            layer(6, 3, Activation::Sigmoid),
+        ],
+    };
+    let w = MlpParams::of(&mlp);
+    let opts = RenderOptions::default();
+    let bg = [0.2, 0.1, 0.4];
+    // The f64 shaded frame is the f32 renderer's (`cpu::render_features` + `mlp::shade`).
+    let p32 = grad_scene(8, 1300, None, k);
+    let frame = vksplat::cpu::render_features(&p32.to_activated(), &cam, &opts);
+    let shaded = vksplat::mlp::shade(
+        &mlp,
+        &cam,
+        &frame.features,
+        k,
+        &frame.alpha,
+        [0.2, 0.1, 0.4],
+    );
+    let img = forward_shaded(&p, &cam, &opts, &mlp, &w, bg).unwrap();
+    let worst = shaded
+        .iter()
+        .flatten()
+        .zip(&img.color)
+        .map(|(a, b)| (*a as f64 - b).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-4,
+        "the f64 shaded frame differs from the renderer's by {worst}"
+    );
+    let g = pixel_grads(&cam, 3, 131, true);
+    let (grads, g_mlp) = backward_shaded(&p, &cam, &opts, &mlp, &w, bg, &g).unwrap();
+    for (group, fd) in finite_differences_of(&p, &g, &|q| {
+        forward_shaded(q, &cam, &opts, &mlp, &w, bg).unwrap()
+    }) {
+        let err = relative_l2(&grads.group(group), &fd);
+        eprintln!("shaded {group}: relative L2 error {err:.2e}");
+        assert!(err < 1e-6, "{group}: relative L2 error {err:e}");
+    }
+    // The MLP's weights and biases, layer by layer.
+    let h = 1e-6;
+    let loss_with =
+        |w: &MlpParams<f64>| loss(&forward_shaded(&p, &cam, &opts, &mlp, w, bg).unwrap(), &g);
+    for l in 0..mlp.layers.len() {
+        for (name, analytic, count) in [
+            ("weights", &g_mlp.weights[l], w.weights[l].len()),
+            ("biases", &g_mlp.biases[l], w.biases[l].len()),
+        ] {
+            let fd: Vec<f64> = (0..count)
+                .map(|j| {
+                    let (mut plus, mut minus) = (w.clone(), w.clone());
+                    let (a, b) = match name {
+                        "weights" => (&mut plus.weights[l][j], &mut minus.weights[l][j]),
+                        _ => (&mut plus.biases[l][j], &mut minus.biases[l][j]),
+                    };
+                    *a += h;
+                    *b -= h;
+                    (loss_with(&plus) - loss_with(&minus)) / (2.0 * h)
+                })
+                .collect();
+            let err = relative_l2(analytic, &fd);
+            eprintln!("shaded layer {l} {name}: relative L2 error {err:.2e}");
+            assert!(
+                fd.iter().any(|&x| x != 0.0),
+                "layer {l} {name}: zero gradient"
+            );
+            assert!(err < 1e-6, "layer {l} {name}: relative L2 error {err:e}");
+        }
+    }
 }
 
 /// The f64 reference follows the f32 renderer's rules: same image up to rounding.
