@@ -1132,6 +1132,8 @@ pub struct BackwardReport {
     pub kernel: String,
     /// How per-pair gradients are summed (`deterministic`, `float-atomics`, `cas`).
     pub accumulation: String,
+    /// Feature channels differentiated instead of the colour (0: the SH colour).
+    pub feature_channels: usize,
     /// Measured iterations (forward + backward each).
     pub iterations: usize,
     /// Discarded warm-up iterations.
@@ -1176,11 +1178,20 @@ pub fn bench_backward(
     let cam = &camera.camera;
     renderer.set_save_forward_state(true);
     let gpu_scene = renderer.upload(scene)?;
+    // A scene with feature channels differentiates those (blended without a background).
+    let k = scene.feature_count;
+    let gpu_features = if k > 0 {
+        Some(renderer.upload_features(scene)?)
+    } else {
+        None
+    };
+    let features = (k > 0).then_some((scene.features.as_slice(), k));
+    let channels = if k > 0 { k } else { 3 };
     let pixels = (cam.width * cam.height) as usize;
     let mut rng = crate::gen::Rng(7);
     let scale = 1.0 / pixels as f32;
     let grads = PixelGrads {
-        color: (0..pixels * 3)
+        color: (0..pixels * channels)
             .map(|_| scale * rng.range(-1.0, 1.0))
             .collect(),
         alpha: (0..pixels).map(|_| scale * rng.range(-1.0, 1.0)).collect(),
@@ -1191,8 +1202,13 @@ pub fn bench_backward(
     let mut peak = 0u64;
     for i in 0..warmup + iterations {
         let t = std::time::Instant::now();
-        let frame = renderer.render(&gpu_scene, cam, opts)?;
-        std::hint::black_box(renderer.backward(&gpu_scene, &frame, &grads)?);
+        let frame = match &gpu_features {
+            Some(f) => renderer.render_features(&gpu_scene, f, cam, opts)?,
+            None => renderer.render(&gpu_scene, cam, opts)?,
+        };
+        std::hint::black_box(
+            renderer.backward_with_features(&gpu_scene, features, &frame, &grads)?,
+        );
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         peak = peak.max(renderer.ctx().live_allocations().1);
         if i < warmup {
@@ -1221,6 +1237,7 @@ pub fn bench_backward(
         driver: info.driver.clone(),
         kernel: opts.kernel.to_string(),
         accumulation: renderer.gradient_accumulation().name().to_string(),
+        feature_channels: k,
         iterations,
         warmup,
         forward_stages: stage_reports(fwd_samples),
@@ -1247,7 +1264,7 @@ impl BackwardReport {
         let mut t = String::new();
         let _ = writeln!(
             t,
-            "{}: {} Gaussians, {}x{}, {} ({}), kernel {}, accumulation {}, {} iterations",
+            "{}: {} Gaussians, {}x{}, {} ({}), kernel {}, accumulation {}, {}, {} iterations",
             self.scene,
             self.gaussians,
             self.width,
@@ -1256,6 +1273,10 @@ impl BackwardReport {
             self.driver,
             self.kernel,
             self.accumulation,
+            match self.feature_channels {
+                0 => "SH colour".to_string(),
+                k => format!("{k} feature channels"),
+            },
             self.iterations
         );
         let _ = writeln!(t, "  {:<16} {:>10} {:>10}", "stage", "median ms", "p95 ms");

@@ -85,8 +85,10 @@ pub(crate) struct BenchArgs {
     pub(crate) features: Option<PathBuf>,
     /// Time the differentiable rasterizer: each iteration renders the frame with its
     /// forward state saved and runs the backward pass (pixel gradients to Gaussian
-    /// gradients), timing both passes' stages; reports device bytes per Gaussian.
-    #[arg(long, conflicts_with_all = ["cpu", "compact", "features", "csv", "plot"])]
+    /// gradients), timing both passes' stages; reports device bytes per Gaussian. A scene
+    /// with feature channels (--features, at most 16) differentiates those instead of its
+    /// colour.
+    #[arg(long, conflicts_with_all = ["cpu", "compact", "csv", "plot"])]
     pub(crate) backward: bool,
     /// How the backward pass sums gradients: deterministic (fixed point, bit-identical run
     /// to run), float-atomics (faster, not reproducible) or cas (float adds by

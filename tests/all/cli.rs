@@ -378,6 +378,58 @@ fn bench_reports_every_stage() {
     assert!(!o.status.success() && stderr(&o).contains("--frames"));
 }
 
+/// `bench --backward` times both passes, stage by stage, and reports their ratio and the
+/// memory per Gaussian; refused with --cpu.
+#[test]
+fn bench_backward_reports_both_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("backward.json");
+    let o = vksplat(&[
+        "bench",
+        "--demo",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--frames",
+        "2",
+        "--warmup",
+        "1",
+        "--backward",
+        "--accumulation",
+        "cas",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = crate::common::cli::stdout(&o);
+    for stage in [
+        "blend",
+        "blend_bwd",
+        "accumulate",
+        "preprocess_bwd",
+        "backward / forward",
+    ] {
+        assert!(text.contains(stage), "{stage} missing from:\n{text}");
+    }
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let run = &doc["backward_runs"][0];
+    assert_eq!(run["accumulation"], "cas");
+    assert_eq!(run["feature_channels"], 0);
+    let names: Vec<&str> = run["backward_stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["blend_bwd", "accumulate", "preprocess_bwd"]);
+    assert!(run["backward_ms"]["median"].as_f64().unwrap() > 0.0);
+    assert!(run["backward_over_forward"].as_f64().unwrap() > 0.0);
+    assert!(run["device_bytes_per_gaussian"].as_f64().unwrap() > 0.0);
+    let refused = vksplat(&["bench", "--demo", "--backward", "--cpu"]);
+    assert!(!refused.status.success());
+}
+
 #[test]
 fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
     let dir = tempfile::tempdir().unwrap();
