@@ -718,6 +718,35 @@ struct RendererState {
     timings: Vec<(&'static str, f64)>,
 }
 
+/// Opens `device` (VKSPLAT_VALIDATE=1 also turns the validation layer on): the context,
+/// the device's name and whether the validation layer is on.
+fn open_context(device: Option<String>, validation: bool) -> PyResult<(GpuContext, String, bool)> {
+    let ctx = GpuContext::new(&ContextOptions {
+        device,
+        validation,
+        memory_limit: None,
+    })
+    .map_err(|e| py_err(e.into()))?;
+    let name = ctx.info().name.clone();
+    let validation = ctx.validation_enabled();
+    Ok((ctx, name, validation))
+}
+
+/// With the validation layer on, any message it printed fails the call.
+fn check_validation(ctx: &GpuContext, on: bool) -> PyResult<()> {
+    if on {
+        let messages = ctx.validation_messages();
+        if !messages.is_empty() {
+            return Err(PyRuntimeError::new_err(format!(
+                "the Vulkan validation layer reported {} message(s): {}",
+                messages.len(),
+                messages.join(" | ")
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// The Vulkan renderer: pipelines and per-frame buffers, and the last scene uploaded.
 #[pyclass(module = "vksplat._native", name = "Renderer", frozen)]
 struct PyRenderer {
@@ -736,14 +765,7 @@ impl PyRenderer {
     fn new(py: Python<'_>, device: Option<String>) -> PyResult<Self> {
         py.detach(|| {
             guarded(|| {
-                let ctx = GpuContext::new(&ContextOptions {
-                    device,
-                    validation: false,
-                    memory_limit: None,
-                })
-                .map_err(|e| py_err(e.into()))?;
-                let name = ctx.info().name.clone();
-                let validation = ctx.validation_enabled();
+                let (ctx, name, validation) = open_context(device, false)?;
                 let gpu = GpuRenderer::new(ctx).map_err(|e| py_err(e.into()))?;
                 Ok(PyRenderer {
                     state: Mutex::new(RendererState {
@@ -810,16 +832,7 @@ impl PyRenderer {
                     st.frames += 1;
                 }
                 st.timings = st.gpu.timings().stages().to_vec();
-                if self.validation {
-                    let messages = st.gpu.ctx().validation_messages();
-                    if !messages.is_empty() {
-                        return Err(PyRuntimeError::new_err(format!(
-                            "the Vulkan validation layer reported {} message(s): {}",
-                            messages.len(),
-                            messages.join(" | ")
-                        )));
-                    }
-                }
+                check_validation(st.gpu.ctx(), self.validation)?;
                 Ok(frames)
             })
         })?;
@@ -1136,14 +1149,7 @@ impl PyRasterizer {
     fn new(py: Python<'_>, device: Option<String>, validation: bool) -> PyResult<Self> {
         py.detach(|| {
             guarded(|| {
-                let ctx = GpuContext::new(&ContextOptions {
-                    device,
-                    validation,
-                    memory_limit: None,
-                })
-                .map_err(|e| py_err(e.into()))?;
-                let name = ctx.info().name.clone();
-                let validation = ctx.validation_enabled();
+                let (ctx, name, validation) = open_context(device, validation)?;
                 let r = DiffRasterizer::new(ctx).map_err(|e| py_err(e.into()))?;
                 Ok(PyRasterizer {
                     state: Mutex::new(r),
@@ -1205,7 +1211,7 @@ impl PyRasterizer {
                 })?;
                 let (frame, token) = st.forward(&p, &cam, &opts).map_err(|e| py_err(e.into()))?;
                 let projected = st.projected().map_err(|e| py_err(e.into()))?;
-                self.check_validation(&mut st)?;
+                check_validation(st.renderer().ctx(), self.validation)?;
                 Ok((frame, token, projected))
             })
         })?;
@@ -1251,27 +1257,11 @@ impl PyRasterizer {
                 let grads = st
                     .backward(&p, &cam, &opts, token, &g)
                     .map_err(|e| py_err(e.into()))?;
-                self.check_validation(&mut st)?;
+                check_validation(st.renderer().ctx(), self.validation)?;
                 Ok(grads)
             })
         })?;
         grads_dict(py, &grads)
-    }
-}
-
-impl PyRasterizer {
-    fn check_validation(&self, st: &mut DiffRasterizer) -> PyResult<()> {
-        if self.validation {
-            let messages = st.renderer().ctx().validation_messages();
-            if !messages.is_empty() {
-                return Err(PyRuntimeError::new_err(format!(
-                    "the Vulkan validation layer reported {} message(s): {}",
-                    messages.len(),
-                    messages.join(" | ")
-                )));
-            }
-        }
-        Ok(())
     }
 }
 

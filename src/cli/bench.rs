@@ -170,6 +170,27 @@ pub(crate) fn parse_sweeps(sweeps: &[String]) -> Result<Sweeps> {
     })
 }
 
+/// A point's report, or (in a sweep of `points` > 1) `None` with a note when the point is
+/// beyond the device's limits or the input, so the other points still produce theirs.
+fn kept_in_sweep<T>(
+    report: vksplat::gpu::GpuResult<T>,
+    points: usize,
+    name: &str,
+    cam: &vksplat::camera::Camera,
+) -> Result<Option<T>> {
+    use vksplat::gpu::GpuError;
+    match report {
+        Ok(report) => Ok(Some(report)),
+        Err(
+            e @ (GpuError::DeviceLimit { .. } | GpuError::Input(_) | GpuError::InvalidArgument(_)),
+        ) if points > 1 => {
+            note!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     // Report files are checked (and their folders created) before the benchmark runs.
     for path in [&args.json, &args.csv, &args.plot].into_iter().flatten() {
@@ -278,7 +299,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                 ..Default::default()
             };
             if let (true, Some(r)) = (args.backward, renderer.as_mut()) {
-                match vksplat::bench::bench_backward(
+                let report = vksplat::bench::bench_backward(
                     r,
                     &act,
                     &name,
@@ -286,21 +307,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                     &opts,
                     args.frames,
                     args.warmup,
-                ) {
-                    Ok(report) => {
-                        if !args.quiet {
-                            outln!("{}", report.to_text());
-                        }
-                        backward_reports.push(report);
+                );
+                if let Some(report) = kept_in_sweep(report, points, &name, cam)? {
+                    if !args.quiet {
+                        outln!("{}", report.to_text());
                     }
-                    Err(
-                        e @ (vksplat::gpu::GpuError::DeviceLimit { .. }
-                        | vksplat::gpu::GpuError::Input(_)
-                        | vksplat::gpu::GpuError::InvalidArgument(_)),
-                    ) if points > 1 => {
-                        note!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
-                    }
-                    Err(e) => return Err(e.into()),
+                    backward_reports.push(report);
                 }
                 continue;
             }
@@ -323,23 +335,11 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                     args.warmup,
                 )),
             };
-            match report {
-                Ok(report) => {
-                    if !args.quiet {
-                        outln!("{}", report.to_text());
-                    }
-                    reports.push(report);
+            if let Some(report) = kept_in_sweep(report, points, &name, cam)? {
+                if !args.quiet {
+                    outln!("{}", report.to_text());
                 }
-                // In a sweep, a point beyond the device's limits is reported and skipped so
-                // the other points still produce their results.
-                Err(
-                    e @ (vksplat::gpu::GpuError::DeviceLimit { .. }
-                    | vksplat::gpu::GpuError::Input(_)
-                    | vksplat::gpu::GpuError::InvalidArgument(_)),
-                ) if points > 1 => {
-                    note!("skipped {name} at {}x{}: {e}", cam.width, cam.height);
-                }
-                Err(e) => return Err(e.into()),
+                reports.push(report);
             }
         }
     }

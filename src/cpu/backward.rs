@@ -430,6 +430,24 @@ impl Raster {
         let tile = (y / TILE_SIZE) * self.cam.tiles.0 + x / TILE_SIZE;
         &self.lists[tile as usize]
     }
+
+    fn proj(&self, id: u32) -> &Proj {
+        self.projs[id as usize]
+            .as_ref()
+            .expect("listed Gaussians are projected")
+    }
+
+    /// Pixel `(x, y)` composited: the Gaussians added, the final transmittance and the
+    /// sum of depth * weight.
+    fn pixel(&self, x: usize, y: usize, kernel: SplatKernel) -> (Vec<Step>, f64, f64) {
+        let list = self.pixel_list(x as u32, y as u32);
+        let (steps, t) = composite(&self.projs, list, x as f64, y as f64, kernel);
+        let dacc = steps
+            .iter()
+            .map(|s| self.proj(s.id).depth * s.alpha * s.t)
+            .sum();
+        (steps, t, dacc)
+    }
 }
 
 /// Renders a frame with the reference rules in f64: colour (with `background`, one value
@@ -459,21 +477,13 @@ pub fn forward(
             let mut alpha = vec![0.0; w];
             let mut depth = vec![0.0; w];
             for x in 0..w {
-                let (steps, t) = composite(
-                    &r.projs,
-                    r.pixel_list(x as u32, y as u32),
-                    x as f64,
-                    y as f64,
-                    opts.kernel,
-                );
-                let mut dacc = 0.0;
+                let (steps, t, dacc) = r.pixel(x, y, opts.kernel);
                 for s in &steps {
-                    let g = r.projs[s.id as usize].as_ref().expect("projected");
+                    let g = r.proj(s.id);
                     let wgt = s.alpha * s.t;
                     for ch in 0..d {
                         color[x * d + ch] += g.color[ch] * wgt;
                     }
-                    dacc += g.depth * wgt;
                 }
                 for ch in 0..d {
                     color[x * d + ch] += t * background[ch];
@@ -547,18 +557,7 @@ pub fn backward(
             for x in 0..w {
                 let idx = y * w + x;
                 let (gc, ga, gd) = pixel_grad(grads, idx, d);
-                let (steps, t_final) = composite(
-                    &r.projs,
-                    r.pixel_list(x as u32, y as u32),
-                    x as f64,
-                    y as f64,
-                    opts.kernel,
-                );
-                let mut dacc = 0.0;
-                for s in &steps {
-                    dacc +=
-                        r.projs[s.id as usize].as_ref().expect("projected").depth * s.alpha * s.t;
-                }
+                let (steps, t_final, dacc) = r.pixel(x, y, opts.kernel);
                 let a = 1.0 - t_final;
                 // depth = dacc / a: its gradient reaches dacc and alpha.
                 let (g_dacc, g_alpha) = if a > 0.0 {
@@ -569,7 +568,7 @@ pub fn backward(
                 let mut behind: Vec<f64> = background.iter().map(|b| t_final * b).collect();
                 let mut behind_depth = 0.0;
                 for s in steps.iter().rev() {
-                    let g = r.projs[s.id as usize].as_ref().expect("projected");
+                    let g = r.proj(s.id);
                     let e = acc.entry(s.id).or_insert_with(|| ProjGrad {
                         color: vec![0.0; d],
                         ..Default::default()
