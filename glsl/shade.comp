@@ -6,9 +6,6 @@
 // (alpha is kept). One invocation per pixel.
 #extension GL_GOOGLE_include_directive : require
 
-#define MAX_WIDTH 128
-#define MAX_LAYERS 8
-
 layout(local_size_x = 16, local_size_y = 16) in;
 
 // 112 bytes of push constants (src/render/shade.rs ShadePush).
@@ -26,20 +23,10 @@ layout(push_constant) uniform ShadeParams {
 // weights and biases as float bits.
 // Read through a texel view (R32_UINT): see src/render/shade.rs.
 layout(binding = SHADE_WORDS) uniform usamplerBuffer words_view;
+#include "mlp_common.glsl"
 // Feature planes: group g's vec4 of pixel i at g * plane stride + i.
 layout(std430, binding = SHADE_FEATURES) readonly buffer FeatureBuf { vec4 features[]; };
 layout(binding = SHADE_COLOR, rgba32f) uniform image2D color;  // rgb + T * background, alpha = 1 - T
-
-float weight(uint i) {
-    return uintBitsToFloat(texelFetch(words_view, int(4u * MAX_LAYERS + i)).x);
-}
-
-float activate(uint kind, float x) {
-    if (kind == 1u) return max(x, 0.0);
-    if (kind == 2u) return 1.0 / (1.0 + exp(-x));
-    if (kind == 3u) return tanh(x);
-    return x;
-}
 
 void main() {
     uvec2 pix = gl_GlobalInvocationID.xy;
@@ -59,10 +46,7 @@ void main() {
                 act[n++] = features[(k >> 2) * p.code.z + index][k & 3u];
             }
         } else if (id == 1u) {
-            vec3 d = vec3((float(pix.x) + 0.5 - p.intrinsics.z) / p.intrinsics.x,
-                          (float(pix.y) + 0.5 - p.intrinsics.w) / p.intrinsics.y, 1.0);
-            vec3 w = d.x * p.rot0.xyz + d.y * p.rot1.xyz + d.z * p.rot2.xyz;
-            w = w / length(w);
+            vec3 w = mlp_view_dir(pix, p.intrinsics, p.rot0, p.rot1, p.rot2);
             act[n++] = w.x;
             act[n++] = w.y;
             act[n++] = w.z;
@@ -73,10 +57,8 @@ void main() {
 
     uint cur = 0u;
     for (uint l = 0u; l < p.code.y; l++) {
-        uint ins = texelFetch(words_view, int(4u * l)).x;
-        uint outs = texelFetch(words_view, int(4u * l + 1u)).x;
-        uint kind = texelFetch(words_view, int(4u * l + 2u)).x;
-        uint base = texelFetch(words_view, int(4u * l + 3u)).x;
+        uvec4 h = layer_header(l);
+        uint ins = h.x, outs = h.y, kind = h.z, base = h.w;
         uint next = MAX_WIDTH - cur;
         for (uint o = 0u; o < outs; o++) {
             // Bias first, then the products in input order: the CPU reference's order.

@@ -455,6 +455,68 @@ impl Mlp {
     }
 }
 
+/// The neural shader's parameters, or their gradients, per layer: weights (row-major,
+/// `outputs x inputs`, as `crate::mlp::Layer`) and biases.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MlpParams<T> {
+    /// Weights per layer.
+    pub weights: Vec<Vec<T>>,
+    /// Biases per layer.
+    pub biases: Vec<Vec<T>>,
+}
+
+impl MlpParams<f64> {
+    /// The network's weights in f64.
+    pub fn of(mlp: &Mlp) -> Self {
+        MlpParams {
+            weights: mlp
+                .layers
+                .iter()
+                .map(|l| l.weight.iter().map(|&w| w as f64).collect())
+                .collect(),
+            biases: mlp
+                .layers
+                .iter()
+                .map(|l| l.bias.iter().map(|&b| b as f64).collect())
+                .collect(),
+        }
+    }
+
+    /// Zeros of the same shape.
+    pub fn zeros_like(&self) -> Self {
+        MlpParams {
+            weights: self.weights.iter().map(|w| vec![0.0; w.len()]).collect(),
+            biases: self.biases.iter().map(|b| vec![0.0; b.len()]).collect(),
+        }
+    }
+}
+
+impl MlpParams<f32> {
+    /// `mlp`'s parameters of the float layout of [`Mlp::gpu_words`] (after the header):
+    /// per layer the weights (row-major), then the biases.
+    pub fn from_flat(mlp: &Mlp, flat: &[f32]) -> Result<Self, String> {
+        let want: usize = mlp.layers.iter().map(|l| (l.inputs + 1) * l.outputs).sum();
+        if flat.len() != want {
+            return Err(format!(
+                "{} values for a network of {want} parameters",
+                flat.len()
+            ));
+        }
+        let mut at = 0;
+        let mut out = MlpParams {
+            weights: Vec::new(),
+            biases: Vec::new(),
+        };
+        for l in &mlp.layers {
+            let w = l.inputs * l.outputs;
+            out.weights.push(flat[at..at + w].to_vec());
+            out.biases.push(flat[at + w..at + w + l.outputs].to_vec());
+            at += w + l.outputs;
+        }
+        Ok(out)
+    }
+}
+
 /// The unit world-space direction from the camera centre through pixel `(x, y)`: pixel
 /// `(i, j)` is evaluated at image position `(i, j)` of the reference's convention, the
 /// point `((i + 0.5 - cx) / fx, (j + 0.5 - cy) / fy, 1)` in camera space.

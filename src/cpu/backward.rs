@@ -782,42 +782,8 @@ fn project_backward(
 // * background` (`crate::mlp::shade`). Its backward pass runs the MLP's per pixel, then
 // the blend's with the feature gradients it produced.
 
+pub use crate::mlp::MlpParams;
 use crate::mlp::{Activation, Mlp, MlpInput};
-
-/// The neural shader's parameters, or their gradients, per layer: weights (row-major,
-/// `outputs x inputs`, as `crate::mlp::Layer`) and biases.
-#[derive(Clone, Debug, PartialEq)]
-pub struct MlpParams<T> {
-    /// Weights per layer.
-    pub weights: Vec<Vec<T>>,
-    /// Biases per layer.
-    pub biases: Vec<Vec<T>>,
-}
-
-impl MlpParams<f64> {
-    /// The network's weights in f64.
-    pub fn of(mlp: &Mlp) -> Self {
-        MlpParams {
-            weights: mlp
-                .layers
-                .iter()
-                .map(|l| l.weight.iter().map(|&w| w as f64).collect())
-                .collect(),
-            biases: mlp
-                .layers
-                .iter()
-                .map(|l| l.bias.iter().map(|&b| b as f64).collect())
-                .collect(),
-        }
-    }
-
-    fn zeros_like(&self) -> Self {
-        MlpParams {
-            weights: self.weights.iter().map(|w| vec![0.0; w.len()]).collect(),
-            biases: self.biases.iter().map(|b| vec![0.0; b.len()]).collect(),
-        }
-    }
-}
 
 /// Value and derivative of an activation at `x`.
 fn activation64(a: Activation, x: f64) -> (f64, f64) {

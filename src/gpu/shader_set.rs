@@ -103,6 +103,8 @@ shader_bindings! {
     blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA, FEATURES, GRAD_FEATURES }
     grad_accumulate { VALUES, PAIR_GRADS, MAXIMA, ACC }
     preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS, FEATURE_GRADS }
+    shade_bwd { WORDS, FEATURES, ALPHA, GRAD_COLOR, GRAD_FEATURES, SCRATCH, PARTIALS }
+    mlp_grad_reduce { PARTIALS, GRADS }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -231,6 +233,8 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "order",
         "pack",
         "shade",
+        "shade_bwd",
+        "mlp_grad_reduce",
         "count64_test",
     ] {
         out.push(v(shader, &[]));

@@ -13,13 +13,20 @@
 //! 3. preprocess backward (`preprocess_bwd`): the chain rule through projection,
 //!    covariance and SH to centres, quaternions, scales, opacities and SH coefficients.
 //!
+//! A frame shaded by a neural shader starts with the shader's own backward pass
+//! (`shade_bwd`, [`super::shade_bwd`]), which turns the colour's gradients into the feature
+//! channels' and the network's.
+//!
 //! The rules are those of the CPU reference [`crate::cpu::backward`], which the tests hold
 //! this pass to.
 
 use super::blend_bwd::BlendBwd;
 use super::grad_accumulate::{Accumulation, GradAccumulate, GradPush};
 use super::preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
+use super::shade::GpuShader;
+use super::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
 use super::{check_binding, GpuRenderer, GpuScene};
+use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::gpu::shader::Resource;
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
@@ -30,6 +37,8 @@ use crate::model::{sh_coeffs_for_degree, SplatKernel};
 
 /// Timestamped stages of one backward pass.
 pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_bwd"];
+/// The stage before them in the backward pass of a shaded frame.
+pub const SHADE_BACKWARD_STAGE: &str = "shade_bwd";
 
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
@@ -37,6 +46,7 @@ pub(super) struct BackwardState {
     blend: Vec<((u32, bool, SplatKernel, u32), BlendBwd)>,
     accumulate: Vec<(Accumulation, GradAccumulate)>,
     preprocess: [Option<PreprocessBwd>; 2],
+    shade: Option<ShadeBwd>,
     grad_color: Option<GpuBuffer>,
     grad_depth: Option<GpuBuffer>,
     pair_grads: Option<GpuBuffer>,
@@ -47,6 +57,10 @@ pub(super) struct BackwardState {
     features: Option<GpuBuffer>,
     grad_features: Option<GpuBuffer>,
     feature_grads: Option<GpuBuffer>,
+    alpha: Option<GpuBuffer>,
+    scratch: Option<GpuBuffer>,
+    partials: Option<GpuBuffer>,
+    mlp_grads: Option<GpuBuffer>,
     timer: GpuTimer,
     timings: Vec<(String, f64)>,
     /// First timestamp to last of the last pass, ms.
@@ -76,6 +90,7 @@ impl BackwardState {
             blend: Vec::new(),
             accumulate: Vec::new(),
             preprocess: [None, None],
+            shade: None,
             grad_color: None,
             grad_depth: None,
             pair_grads: None,
@@ -86,7 +101,11 @@ impl BackwardState {
             features: None,
             grad_features: None,
             feature_grads: None,
-            timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32)?,
+            alpha: None,
+            scratch: None,
+            partials: None,
+            mlp_grads: None,
+            timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32 + 1)?,
             timings: Vec::new(),
             span_ms: 0.0,
             mode: Accumulation::default(),
@@ -105,6 +124,10 @@ impl BackwardState {
             &self.features,
             &self.grad_features,
             &self.feature_grads,
+            &self.alpha,
+            &self.scratch,
+            &self.partials,
+            &self.mlp_grads,
         ]
         .iter()
         .map(|b| b.as_ref().map_or(0, |b| b.size()))
@@ -112,9 +135,18 @@ impl BackwardState {
     }
 }
 
-/// A backward pass's feature channels: the Gaussians' values and the pixels' gradients,
-/// both in groups of four, and the channel count.
-type FeatureJob<'a> = (&'a [[f32; 4]], &'a [[f32; 4]], usize);
+/// A backward pass's feature channels: the Gaussians' values and the pixels' gradients
+/// (none when a shader's backward pass makes them), both in groups of four, and the
+/// channel count.
+type FeatureJob<'a> = (&'a [[f32; 4]], Option<&'a [[f32; 4]]>, usize);
+
+/// The neural shader of a shaded frame, its camera and background.
+#[derive(Clone, Copy)]
+struct ShadeJob<'a> {
+    shader: &'a GpuShader,
+    cam: &'a Camera,
+    background: [f32; 3],
+}
 
 /// `ceil(log2(n))` for n >= 1: the bits a count of at most `n` needs.
 fn bits_for(n: u64) -> u32 {
@@ -188,7 +220,74 @@ impl GpuRenderer {
         frame: &Frame,
         grads: &PixelGrads<f32>,
     ) -> GpuResult<SplatGrads<f32>> {
+        self.backward_inner(scene, features, None, frame, grads)
+            .map(|(g, _)| g)
+    }
+
+    /// The backward pass of the last frame, rendered by [`GpuRenderer::render_shaded`]
+    /// with `shader` from `cam` over `background` (the options' background): `features`
+    /// are the Gaussians' `(values, k)` it blended, `grads.color` dL/d(the shaded colour,
+    /// 3 channels). Returns the Gaussians' gradients (`colors`: dL/d(feature values), `k`
+    /// per Gaussian) and the network's, in the float layout of its weights
+    /// ([`crate::mlp::Mlp::gpu_words`] after the header: per layer the weights, row-major
+    /// `outputs x inputs`, then the biases).
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward_shaded(
+        &mut self,
+        scene: &GpuScene,
+        features: (&[f32], usize),
+        shader: &GpuShader,
+        cam: &Camera,
+        background: [f32; 3],
+        frame: &Frame,
+        grads: &PixelGrads<f32>,
+    ) -> GpuResult<(SplatGrads<f32>, Vec<f32>)> {
+        if shader.channels() != features.1 {
+            return Err(GpuError::InvalidArgument(format!(
+                "the shader takes {} feature channels but the Gaussians have {}",
+                shader.channels(),
+                features.1
+            )));
+        }
+        if (cam.width, cam.height) != (frame.width, frame.height) {
+            return Err(GpuError::InvalidArgument(format!(
+                "the camera is {}x{}, the frame {}x{}",
+                cam.width, cam.height, frame.width, frame.height
+            )));
+        }
+        if self.loop_limited() && shader.backward_iterations > u64::from(super::CPU_LOOP_LIMIT) {
+            return Err(GpuError::DeviceLimit {
+                limit: "llvmpipe's loop iterations per invocation",
+                needed: shader.backward_iterations,
+                max: u64::from(super::CPU_LOOP_LIMIT),
+                message: format!(
+                    "the neural shader's backward pass needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {} iterations; use narrower layers, or the CPU reference",
+                    shader.backward_iterations,
+                    self.ctx.info().name,
+                    super::CPU_LOOP_LIMIT
+                ),
+            });
+        }
+        let job = ShadeJob {
+            shader,
+            cam,
+            background,
+        };
+        let (g, mlp) = self.backward_inner(scene, Some(features), Some(job), frame, grads)?;
+        Ok((g, mlp.unwrap_or_default()))
+    }
+
+    fn backward_inner(
+        &mut self,
+        scene: &GpuScene,
+        features: Option<(&[f32], usize)>,
+        shade: Option<ShadeJob>,
+        frame: &Frame,
+        grads: &PixelGrads<f32>,
+    ) -> GpuResult<(SplatGrads<f32>, Option<Vec<f32>>)> {
         let channels = features.map_or(3, |(_, k)| k);
+        // The pixels' colour gradients: the shaded colour's 3 channels, or the blend's.
+        let pixel_channels = if shade.is_some() { 3 } else { channels };
         if let Some((values, k)) = features {
             let max = 4 * MAX_FEATURE_GROUPS as usize;
             if k == 0 || k > max {
@@ -212,7 +311,7 @@ impl GpuRenderer {
         let (w, h) = (frame.width as usize, frame.height as usize);
         let pixels = w * h;
         for (name, len, want) in [
-            ("colour", grads.color.len(), pixels * channels),
+            ("colour", grads.color.len(), pixels * pixel_channels),
             ("alpha", grads.alpha.len(), pixels),
             ("depth", grads.depth.len(), pixels),
         ] {
@@ -246,7 +345,7 @@ impl GpuRenderer {
         let groups = channels.div_ceil(4);
         let mut grad_features = vec![
             [0f32; 4];
-            if features.is_some() {
+            if features.is_some() && shade.is_none() {
                 pixels * groups
             } else {
                 0
@@ -255,7 +354,7 @@ impl GpuRenderer {
         for i in 0..pixels {
             let mut g = [0f32; 4];
             if !grads.color.is_empty() {
-                if features.is_some() {
+                if features.is_some() && shade.is_none() {
                     for c in 0..channels {
                         grad_features[i * groups + c / 4][c % 4] = grads.color[i * channels + c];
                     }
@@ -287,9 +386,10 @@ impl GpuRenderer {
             }
             packed
         });
+        let pixel_feature_grads = shade.is_none().then_some(&grad_features[..]);
         let feature_job = feature_values
             .as_deref()
-            .map(|v| (v, &grad_features[..], channels));
+            .map(|v| (v, pixel_feature_grads, channels));
         let result = self.run_backward(
             &mut state,
             scene,
@@ -297,6 +397,7 @@ impl GpuRenderer {
             &grad_color,
             &grad_depth,
             feature_job,
+            shade,
         );
         self.backward = Some(state);
         result
@@ -310,7 +411,8 @@ impl GpuRenderer {
         grad_color: &[[f32; 4]],
         grad_depth: &[f32],
         features: Option<FeatureJob>,
-    ) -> GpuResult<SplatGrads<f32>> {
+        shade: Option<ShadeJob>,
+    ) -> GpuResult<(SplatGrads<f32>, Option<Vec<f32>>)> {
         let ctx = &self.ctx;
         let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
         let vecs = 3 + groups;
@@ -401,9 +503,45 @@ impl GpuRenderer {
             "pixel feature gradients",
             grad_color.len() as u64 * g16,
         )?;
-        if let Some((_, pixel_grads, _)) = features {
+        if let Some((_, Some(pixel_grads), _)) = features {
             grad_feature_buf.upload(ctx, pixel_grads)?;
         }
+        // The shader's backward pass: the frame's alpha in, scratch and partial sums.
+        let pixels = grad_color.len() as u64;
+        let feature_planes = match shade {
+            Some(job) => {
+                if st.shade.is_none() {
+                    st.shade = Some(ShadeBwd::new(ctx)?);
+                }
+                ensure(ctx, &mut st.alpha, "pixel alpha", pixels * 4)?.upload(ctx, &frame.alpha)?;
+                ensure(
+                    ctx,
+                    &mut st.scratch,
+                    "shader activations",
+                    ShadeBwd::scratch_bytes(job.shader, pixels),
+                )?;
+                ensure(
+                    ctx,
+                    &mut st.partials,
+                    "shader gradient partial sums",
+                    ShadeBwd::partial_bytes(job.shader, pixels),
+                )?;
+                ensure(
+                    ctx,
+                    &mut st.mlp_grads,
+                    "shader gradients",
+                    u64::from(job.shader.params) * 4,
+                )?;
+                Some(fs.feature_planes.ok_or_else(|| {
+                    GpuError::InvalidArgument(
+                        "the last frame blended no feature channels: render it with render_shaded \
+                         right before the backward pass"
+                            .into(),
+                    )
+                })?)
+            }
+            None => None,
+        };
         check_binding(ctx, "Gaussians", scene.gaussians.size())?;
         let blend = &st
             .blend
@@ -439,6 +577,13 @@ impl GpuRenderer {
             buf(&st.grad_features),
             buf(&st.feature_grads),
         );
+        let shade_bwd = st.shade.as_ref();
+        let (alpha_b, scratch, partials, mlp_grads) = (
+            st.alpha.as_ref(),
+            st.scratch.as_ref(),
+            st.partials.as_ref(),
+            st.mlp_grads.as_ref(),
+        );
         let timer = &mut st.timer;
         ctx.submit_and_wait("backward", |cmd| {
             // The forward's writes (an earlier submission) before this pass reads them.
@@ -447,6 +592,25 @@ impl GpuRenderer {
             maxima.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
             acc.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
             barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+            if let (Some(job), Some(planes)) = (shade, feature_planes) {
+                let pipeline = shade_bwd.expect("built above");
+                fn need(b: Option<&GpuBuffer>) -> crate::gpu::BufferSlice<'_> {
+                    b.expect("made above").whole()
+                }
+                let bufs = ShadeBwdBuffers {
+                    features: planes,
+                    alpha: need(alpha_b),
+                    grad_color: grad_color_b,
+                    grad_features: grad_feature_b,
+                    scratch: need(scratch),
+                    partials: need(partials),
+                    grads: need(mlp_grads),
+                };
+                timer.stage(ctx, cmd, SHADE_BACKWARD_STAGE, |cmd| {
+                    pipeline.record(ctx, cmd, job.shader, &bufs, job.cam, job.background)
+                })?;
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+            }
             timer.stage(ctx, cmd, BACKWARD_STAGES[0], |cmd| {
                 blend.record(
                     ctx,
@@ -516,6 +680,10 @@ impl GpuRenderer {
             None => sh_coeffs_for_degree(scene.sh_degree) * 3,
         };
         let mut out = SplatGrads::zeros(n, k);
+        let mlp = match (shade, st.mlp_grads.as_ref()) {
+            (Some(job), Some(b)) => Some(b.read(ctx, job.shader.params as usize)?),
+            _ => None,
+        };
         let feature_raw: Vec<[f32; 4]> = match features {
             Some(_) => feature_grads.buffer.read(ctx, n * groups as usize)?,
             None => Vec::new(),
@@ -536,7 +704,7 @@ impl GpuRenderer {
                 out.colors[i * k..(i + 1) * k].copy_from_slice(src);
             }
         }
-        Ok(out)
+        Ok((out, mlp))
     }
 }
 

@@ -39,6 +39,7 @@ pub mod preprocess;
 pub mod preprocess_bwd;
 pub mod ranges;
 pub mod shade;
+pub mod shade_bwd;
 pub mod types;
 
 mod frame_buffers;

@@ -186,6 +186,9 @@ pub struct ForwardState<'a> {
     /// final transmittance (f32). Only when the frame was rendered with
     /// [`GpuRenderer::set_save_forward_state`] and in one piece.
     pub last_contributor: Option<BufferSlice<'a>>,
+    /// The blended feature channels of a features frame: one plane of vec4s per group of
+    /// four channels, and the vec4s from one plane to the next.
+    pub feature_planes: Option<(BufferSlice<'a>, u32)>,
 }
 
 impl GpuRenderer {
@@ -214,6 +217,10 @@ impl GpuRenderer {
                 true => f.last_contributor.as_ref().map(|b| b.whole()),
                 false => None,
             },
+            feature_planes: set
+                .feature_planes
+                .as_ref()
+                .map(|p| (p.buffer.whole(), (p.plane_bytes / 16) as u32)),
         })
     }
 }

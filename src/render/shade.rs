@@ -31,13 +31,23 @@ const _: () = assert!(std::mem::size_of::<ShadePush>() == 112);
 pub struct GpuShader {
     /// The words as an R32_UINT texel view: on CPU devices a loop-indexed storage-buffer
     /// load becomes a per-lane scalar loop, a texel fetch does not.
-    view: BufferView,
+    pub(crate) view: BufferView,
     words: GpuBuffer,
     channels: usize,
-    layers: u32,
-    input_code: u32,
+    pub(crate) layers: u32,
+    pub(crate) input_code: u32,
     /// Multiply-adds and loop iterations per pixel (for llvmpipe's loop limit).
     pub(crate) iterations: u64,
+    /// Loop iterations of one `shade_bwd` invocation (for llvmpipe's loop limit).
+    pub(crate) backward_iterations: u64,
+    /// Weights and biases, all layers.
+    pub(crate) params: u32,
+    /// Values a pixel's evaluation keeps: every layer's inputs and the last one's outputs.
+    pub(crate) activations: u32,
+    /// The widest layer's inputs or outputs.
+    pub(crate) widest: u32,
+    /// The layers' (inputs, outputs), to check that an update keeps the shape.
+    shape: Vec<(usize, usize)>,
 }
 
 impl GpuShader {
@@ -65,6 +75,29 @@ impl GpuShader {
             .map(|l| (l.inputs as u64 + 1) * l.outputs as u64 + 1)
             .sum::<u64>()
             + (mlp.feature_channels() + mlp.extra_inputs()) as u64;
+        let params: usize = mlp.layers.iter().map(|l| (l.inputs + 1) * l.outputs).sum();
+        let activations = mlp.layers.iter().map(|l| l.inputs).sum::<usize>()
+            + mlp.layers.last().map_or(0, |l| l.outputs);
+        let widest = mlp
+            .layers
+            .iter()
+            .map(|l| l.inputs.max(l.outputs))
+            .max()
+            .unwrap_or(0);
+        // shade_bwd: the forward, then per layer the activations' derivatives, the inputs'
+        // gradients and the owned parameters' sums over a chunk's 64 pixels.
+        let chunk = u64::from(super::shade_bwd::PIXELS);
+        let backward_iterations = iterations
+            + mlp
+                .layers
+                .iter()
+                .map(|l| {
+                    let (i, o) = (l.inputs as u64, l.outputs as u64);
+                    o + i * (o + 1) + ((i + 1) * o).div_ceil(chunk) * (chunk + 1) + 2
+                })
+                .sum::<u64>()
+            + mlp.feature_channels() as u64
+            + 8;
         Ok(GpuShader {
             view,
             words: buf,
@@ -72,7 +105,34 @@ impl GpuShader {
             layers: mlp.layers.len() as u32,
             input_code: mlp.input_code(),
             iterations,
+            backward_iterations,
+            params: params as u32,
+            activations: activations as u32,
+            widest: widest as u32,
+            shape: mlp.layers.iter().map(|l| (l.inputs, l.outputs)).collect(),
         })
+    }
+
+    /// Uploads `mlp`'s weights in place of the current ones: a network of the same layers
+    /// and inputs (a training step's update), else an error.
+    pub fn update(&mut self, ctx: &GpuContext, mlp: &Mlp) -> GpuResult<()> {
+        if !self.same_shape(mlp) {
+            return Err(crate::gpu::GpuError::InvalidArgument(
+                "the new weights are of another network (layers or inputs differ)".into(),
+            ));
+        }
+        self.words.upload(ctx, &mlp.gpu_words())
+    }
+
+    /// Whether this shader holds a network of `mlp`'s shape and inputs.
+    pub fn same_shape(&self, mlp: &Mlp) -> bool {
+        self.input_code == mlp.input_code()
+            && self.shape.len() == mlp.layers.len()
+            && self
+                .shape
+                .iter()
+                .zip(&mlp.layers)
+                .all(|(&(i, o), l)| i == l.inputs && o == l.outputs)
     }
 
     /// Feature channels the shader takes.

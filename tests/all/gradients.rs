@@ -333,14 +333,11 @@ fn reference_backward_matches_finite_differences_at_the_guard_band() {
 /// The neural shader (`render --shader`): features blended, then an MLP per pixel (tanh,
 /// relu, sigmoid; features, view direction and alpha in), composited over a background.
 /// Its reference backward against finite differences, for the Gaussians and the MLP.
-#[test]
-fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
-    use vksplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
+/// A random neural shader of `k` feature channels (and, with `extra`, the view direction
+/// and alpha as inputs): tanh, relu and sigmoid layers of `hidden` and 6 outputs.
+fn random_mlp(k: usize, extra: bool, hidden: usize, seed: u64) -> vksplat::mlp::Mlp {
     use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
-    let cam = grad_camera();
-    let k = 4;
-    let p = grad_scene(8, 1300, None, k).to_f64();
-    let mut rng = Rng(1301);
+    let mut rng = Rng(seed);
     let mut layer = |inputs: usize, outputs: usize, activation| Layer {
         inputs,
         outputs,
@@ -350,14 +347,30 @@ fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
         bias: (0..outputs).map(|_| rng.range(-0.3, 0.3)).collect(),
         activation,
     };
-    let mlp = Mlp {
-        inputs: vec![MlpInput::Features, MlpInput::ViewDir, MlpInput::Alpha],
+    let (inputs, width) = match extra {
+        true => (
+            vec![MlpInput::Features, MlpInput::ViewDir, MlpInput::Alpha],
+            k + 4,
+        ),
+        false => (vec![MlpInput::Features], k),
+    };
+    Mlp {
+        inputs,
         layers: vec![
-            layer(k + 4, 8, Activation::Tanh),
-            layer(8, 6, Activation::Relu),
+            layer(width, hidden, Activation::Tanh),
+            layer(hidden, 6, Activation::Relu),
             layer(6, 3, Activation::Sigmoid),
         ],
-    };
+    }
+}
+
+#[test]
+fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
+    use vksplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
+    let cam = grad_camera();
+    let k = 4;
+    let p = grad_scene(8, 1300, None, k).to_f64();
+    let mlp = random_mlp(k, true, 8, 1301);
     let w = MlpParams::of(&mlp);
     let opts = RenderOptions::default();
     let bg = [0.2, 0.1, 0.4];
@@ -627,4 +640,119 @@ fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
         }
     }
     assert_validation_clean(r.renderer());
+}
+
+/// A frame shaded by a neural shader on the device: its backward pass (the shader's, then
+/// the feature blend's) against the reference's, for the Gaussians and every layer of the
+/// network; bit-identical run after run. Shaders with and without the view direction and
+/// alpha as inputs, 4 and 8 channels, both kernels and blend layouts, and a frame of more
+/// chunks than partial sums (several dispatches of the shader's backward pass).
+#[test]
+fn gpu_backward_of_a_shaded_frame_matches_the_reference() {
+    use vksplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
+    let big = Camera::look_at(
+        "grad-gpu-big",
+        160,
+        120,
+        0.9,
+        Vec3::new(0.4, -0.3, -3.0),
+        Vec3::ZERO,
+        Vec3::new(0.0, -1.0, 0.0),
+    );
+    for (blend, k, extra, kernel, cam) in [
+        (None, 4, true, SplatKernel::Gaussian, gpu_camera()),
+        (
+            Some(BlendKernel::Shared),
+            8,
+            false,
+            SplatKernel::Power,
+            gpu_camera(),
+        ),
+        (None, 8, true, SplatKernel::Gaussian, big),
+    ] {
+        let mut r = diff_rasterizer(blend);
+        let p = grad_scene(40, 1400 + k as u64, None, k);
+        let mlp = random_mlp(k, extra, 16, 1401 + k as u64);
+        let opts = RenderOptions {
+            kernel,
+            background: [0.2, 0.1, 0.4],
+            ..Default::default()
+        };
+        let bg = opts.background.map(|b| b as f64);
+        let w = MlpParams::of(&mlp);
+        r.set_shader(Some(&mlp)).unwrap();
+        let (frame, token) = r.forward(&p, &cam, &opts).unwrap();
+        let img = forward_shaded(&p.to_f64(), &cam, &opts, &mlp, &w, bg).unwrap();
+        let worst = frame
+            .color
+            .iter()
+            .flatten()
+            .zip(&img.color)
+            .map(|(a, b)| (*a as f64 - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-4, "the shaded frame differs by {worst}");
+        let g = pixel_grads(&cam, 3, 1402, true);
+        let (gpu, gpu_mlp) = r
+            .backward_shaded(&p, &cam, &opts, token, &to_f32(&g))
+            .unwrap();
+        let (cpu, cpu_mlp) = backward_shaded(&p.to_f64(), &cam, &opts, &mlp, &w, bg, &g).unwrap();
+        let label = format!("{k} channels, {kernel:?}, {}x{}", cam.width, cam.height);
+        for group in GRAD_GROUPS {
+            let (a, b) = (gpu.group(group), cpu.group(group));
+            let err = relative_l2(&a, &b);
+            eprintln!("shaded GPU {label} {group}: relative L2 error {err:.2e}");
+            assert!(b.iter().any(|&x| x != 0.0), "{group}: zero reference");
+            assert!(err <= 1e-3, "{label} {group}: relative L2 error {err:e}");
+        }
+        for l in 0..mlp.layers.len() {
+            for (name, a, b) in [
+                ("weights", &gpu_mlp.weights[l], &cpu_mlp.weights[l]),
+                ("biases", &gpu_mlp.biases[l], &cpu_mlp.biases[l]),
+            ] {
+                let a: Vec<f64> = a.iter().map(|&x| x as f64).collect();
+                let err = relative_l2(&a, b);
+                eprintln!("shaded GPU {label} layer {l} {name}: relative L2 error {err:.2e}");
+                assert!(
+                    b.iter().any(|&x| x != 0.0),
+                    "layer {l} {name}: zero reference"
+                );
+                assert!(
+                    err <= 1e-3,
+                    "{label} layer {l} {name}: relative L2 error {err:e}"
+                );
+            }
+        }
+        // Bit-identical again, also after another frame (the backward renders it again).
+        let again = r
+            .backward_shaded(&p, &cam, &opts, token, &to_f32(&g))
+            .unwrap();
+        r.forward(&grad_scene(20, 1499, None, k), &cam, &opts)
+            .unwrap();
+        let third = r
+            .backward_shaded(&p, &cam, &opts, token, &to_f32(&g))
+            .unwrap();
+        let bits = |(s, m): &(vksplat::model::grad::SplatGrads<f32>, MlpParams<f32>)| {
+            let mut v: Vec<u32> = GRAD_GROUPS
+                .iter()
+                .flat_map(|gr| s.group(gr))
+                .map(|x| (x as f32).to_bits())
+                .collect();
+            v.extend(
+                m.weights
+                    .iter()
+                    .chain(&m.biases)
+                    .flatten()
+                    .map(|x| x.to_bits()),
+            );
+            v
+        };
+        let first = (gpu, gpu_mlp);
+        assert_eq!(bits(&first), bits(&again), "{label}: not deterministic");
+        assert_eq!(bits(&first), bits(&third), "{label}: not deterministic");
+        // A shaded frame's plain backward is refused; without the shader it is a features
+        // frame again.
+        let e = r.backward(&p, &cam, &opts, token, &to_f32(&g)).unwrap_err();
+        assert!(e.to_string().contains("backward_shaded"), "{e}");
+        assert_validation_clean(r.renderer());
+    }
 }

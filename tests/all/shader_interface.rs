@@ -29,6 +29,7 @@ use vksplat::render::preprocess::Preprocess;
 use vksplat::render::preprocess_bwd::PreprocessBwd;
 use vksplat::render::ranges::Ranges;
 use vksplat::render::shade::Shade;
+use vksplat::render::shade_bwd::ShadeBwd;
 use vksplat::render::types::{GpuGaussian, GpuGaussianCompact, Splat};
 
 fn interface(shader: &str, defines: &[(&str, &str)]) -> Interface {
@@ -67,7 +68,8 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     Scan::new(ctx).expect("scan");
     Pack::new(ctx).expect("pack");
     Shade::new(ctx).expect("shade");
-    built += 1 + 3 + 1 + 1;
+    ShadeBwd::new(ctx).expect("shade backward and its reduce");
+    built += 1 + 3 + 1 + 1 + 2;
     let sorts = [
         DEFAULT_SORT_CONFIG,
         SORT_CONFIG_32,

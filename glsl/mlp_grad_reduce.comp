@@ -1,0 +1,20 @@
+#version 460
+// The neural shader's parameter gradients (src/render/shade_bwd.rs): the sum of the
+// partial slots that shade_bwd.comp filled, slot after slot, one invocation per parameter.
+
+layout(local_size_x = 64) in;
+
+layout(push_constant) uniform ReduceParams {
+    uvec4 counts;  // parameters, slots, 0, 0
+} p;
+
+layout(std430, binding = MLP_GRAD_REDUCE_PARTIALS) readonly buffer PartialBuf { float partials[]; };
+layout(std430, binding = MLP_GRAD_REDUCE_GRADS) writeonly buffer GradBuf { float grads[]; };
+
+void main() {
+    uint q = gl_GlobalInvocationID.x;
+    if (q >= p.counts.x) return;
+    precise float sum = 0.0;
+    for (uint s = 0u; s < p.counts.y; s++) sum += partials[s * p.counts.x + q];
+    grads[q] = sum;
+}

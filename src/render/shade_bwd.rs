@@ -1,0 +1,190 @@
+//! Shade backward stage (`glsl/shade_bwd.comp`, then `glsl/mlp_grad_reduce.comp`): the
+//! neural shader's ([`crate::mlp`]) backward pass on the device. From dL/d(shaded colour)
+//! and dL/d(alpha) per pixel it writes dL/d(feature channels) and the shader's part of
+//! dL/d(alpha) per pixel, which the feature blend's backward then takes, and the
+//! network's weight and bias gradients.
+//!
+//! Deterministic without atomics: a workgroup takes 64 consecutive pixels (a chunk); the
+//! parameters' sums over a chunk are added, in chunk order, to one of
+//! [`PARTIAL_SLOTS`] partial sums (slot = chunk mod slots, one dispatch per round of
+//! chunks), and the reduce sums the slots in order. The rules are
+//! [`crate::cpu::backward::backward_shaded`]'s.
+
+use super::shade::GpuShader;
+use crate::camera::Camera;
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
+use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
+use crate::gpu::sync::{barrier, Access};
+use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use ash::vk;
+
+/// Pixels per chunk: one per invocation of a workgroup.
+pub const PIXELS: u32 = 64;
+/// Partial sums of the parameters' gradients: the most workgroups of one dispatch. A
+/// constant, so the order of the sums depends on the frame's size only, not the device.
+pub const PARTIAL_SLOTS: u32 = 256;
+
+/// The push constants of `glsl/shade_bwd.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ShadeBwdPush {
+    size: [u32; 4],
+    code: [u32; 4],
+    shape: [u32; 4],
+    intrinsics: [f32; 4],
+    rot: [[f32; 4]; 3],
+    background: [f32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<ShadeBwdPush>() == 128);
+
+/// The buffers of one shade backward pass.
+pub struct ShadeBwdBuffers<'a> {
+    /// The forward's feature planes and the vec4s from one plane to the next.
+    pub features: (BufferSlice<'a>, u32),
+    /// The frame's alpha per pixel (f32).
+    pub alpha: BufferSlice<'a>,
+    /// dL/d(shaded rgb), dL/d alpha per pixel (vec4): the alpha's gains the shader's part.
+    pub grad_color: BufferSlice<'a>,
+    /// Out: dL/d(feature channels) per pixel, groups of four (vec4).
+    pub grad_features: BufferSlice<'a>,
+    /// [`ShadeBwd::scratch_bytes`].
+    pub scratch: BufferSlice<'a>,
+    /// [`ShadeBwd::partial_bytes`].
+    pub partials: BufferSlice<'a>,
+    /// Out: the parameters' gradients (f32), in the layout of the shader's weight words.
+    pub grads: BufferSlice<'a>,
+}
+
+/// The shade backward pipelines.
+pub struct ShadeBwd {
+    pipeline: ComputePipeline,
+    reduce: ComputePipeline,
+}
+
+fn chunks(pixels: u64) -> u64 {
+    pixels.div_ceil(u64::from(PIXELS))
+}
+
+fn slots(pixels: u64) -> u64 {
+    chunks(pixels).clamp(1, u64::from(PARTIAL_SLOTS))
+}
+
+impl ShadeBwd {
+    /// Compiles the shaders and builds the pipelines.
+    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        let storage = BindingKind::StorageBuffer;
+        let pipeline = ComputePipeline::from_embedded(
+            ctx,
+            "shade_bwd",
+            &[],
+            &by_binding([
+                (slot::WORDS, BindingKind::UniformTexelBuffer),
+                (slot::FEATURES, storage),
+                (slot::ALPHA, storage),
+                (slot::GRAD_COLOR, storage),
+                (slot::GRAD_FEATURES, storage),
+                (slot::SCRATCH, storage),
+                (slot::PARTIALS, storage),
+            ])?,
+            std::mem::size_of::<ShadeBwdPush>() as u32,
+            PIXELS,
+        )?;
+        let reduce = ComputePipeline::from_embedded(
+            ctx,
+            "mlp_grad_reduce",
+            &[],
+            &by_binding([(rslot::PARTIALS, storage), (rslot::GRADS, storage)])?,
+            16,
+            64,
+        )?;
+        Ok(ShadeBwd { pipeline, reduce })
+    }
+
+    /// Bytes of scratch a frame of `pixels` needs: per workgroup of a dispatch, every
+    /// activation and two gradient rows of the widest layer, for each of its 64 pixels.
+    pub fn scratch_bytes(shader: &GpuShader, pixels: u64) -> u64 {
+        let per_pixel = u64::from(shader.activations + 2 * shader.widest);
+        slots(pixels) * u64::from(PIXELS) * per_pixel * 4
+    }
+
+    /// Bytes of the partial sums a frame of `pixels` needs.
+    pub fn partial_bytes(shader: &GpuShader, pixels: u64) -> u64 {
+        slots(pixels) * u64::from(shader.params) * 4
+    }
+
+    /// Records the pass over `cam`'s frame (one piece, `cam.width x cam.height`), whose
+    /// colour was shaded with `background`. Clears the partial sums itself; the caller
+    /// orders the inputs' writes before it and the outputs' reads after.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        shader: &GpuShader,
+        bufs: &ShadeBwdBuffers,
+        cam: &Camera,
+        background: [f32; 3],
+    ) -> GpuResult<()> {
+        let pixels = u64::from(cam.width) * u64::from(cam.height);
+        let (chunks, slots) = (chunks(pixels), slots(pixels));
+        let per_workgroup = u64::from(PIXELS) * u64::from(shader.activations + 2 * shader.widest);
+        let r = cam.rotation.transpose().to_cols_array_2d(); // rows of R
+        let mut push = ShadeBwdPush {
+            size: [
+                cam.width,
+                cam.height,
+                shader.channels() as u32,
+                shader.channels().div_ceil(4) as u32,
+            ],
+            code: [shader.input_code, shader.layers, bufs.features.1, 0],
+            shape: [
+                per_workgroup as u32,
+                shader.activations,
+                shader.params,
+                shader.widest,
+            ],
+            intrinsics: [cam.fx, cam.fy, cam.cx, cam.cy],
+            rot: [
+                [r[0][0], r[0][1], r[0][2], 0.0],
+                [r[1][0], r[1][1], r[1][2], 0.0],
+                [r[2][0], r[2][1], r[2][2], 0.0],
+            ],
+            background: [background[0], background[1], background[2], 0.0],
+        };
+        bufs.partials
+            .buffer
+            .fill(ctx, cmd, bufs.partials.offset, bufs.partials.size, 0);
+        barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+        let resources = by_binding([
+            (slot::WORDS, Resource::TexelBuffer(shader.view.handle())),
+            (slot::FEATURES, Resource::Buffer(bufs.features.0)),
+            (slot::ALPHA, Resource::Buffer(bufs.alpha)),
+            (slot::GRAD_COLOR, Resource::Buffer(bufs.grad_color)),
+            (slot::GRAD_FEATURES, Resource::Buffer(bufs.grad_features)),
+            (slot::SCRATCH, Resource::Buffer(bufs.scratch)),
+            (slot::PARTIALS, Resource::Buffer(bufs.partials)),
+        ])?;
+        let mut first = 0;
+        while first < chunks {
+            push.code[3] = first as u32;
+            let groups = (chunks - first).min(slots) as u32;
+            self.pipeline.dispatch_resources(
+                ctx,
+                cmd,
+                &resources,
+                bytemuck::bytes_of(&push),
+                [groups, 1, 1],
+            )?;
+            // The next round adds to the same partial sums and reuses the scratch.
+            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+            first += slots;
+        }
+        self.reduce.dispatch(
+            ctx,
+            cmd,
+            &[bufs.partials, bufs.grads],
+            bytemuck::bytes_of(&[shader.params, slots as u32, 0, 0]),
+            [shader.params.div_ceil(64), 1, 1],
+        )
+    }
+}
