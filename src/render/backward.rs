@@ -403,6 +403,7 @@ impl GpuRenderer {
         result
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn run_backward(
         &self,
         st: &mut BackwardState,
