@@ -1134,6 +1134,10 @@ pub struct BackwardReport {
     pub accumulation: String,
     /// Feature channels differentiated instead of the colour (0: the SH colour).
     pub feature_channels: usize,
+    /// The neural shader the feature channels were shaded with, as its layer widths
+    /// (e.g. "8-64-64-3"); its backward pass is the `shade_bwd` stage.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shader: Option<String>,
     /// Measured iterations (forward + backward each).
     pub iterations: usize,
     /// Discarded warm-up iterations.
@@ -1165,12 +1169,14 @@ pub struct BackwardReport {
 /// more) with fixed pseudo-random pixel gradients (those of an L1 loss have the same
 /// cost: the pass's work does not depend on the values).
 #[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments)]
 pub fn bench_backward(
     renderer: &mut GpuRenderer,
     scene: &ActivatedScene,
     name: &str,
     camera: &BenchCamera,
     opts: &RenderOptions,
+    shader: Option<&crate::mlp::Mlp>,
     iterations: usize,
     warmup: usize,
 ) -> GpuResult<BackwardReport> {
@@ -1186,7 +1192,17 @@ pub fn bench_backward(
         None
     };
     let features = (k > 0).then_some((scene.features.as_slice(), k));
-    let channels = if k > 0 { k } else { 3 };
+    // A shader turns the channels into colour: the pixels' gradients are the colour's.
+    let gpu_shader = match (shader, &gpu_features) {
+        (Some(m), Some(_)) => Some(crate::render::shade::GpuShader::new(renderer.ctx(), m)?),
+        (Some(_), None) => {
+            return Err(crate::gpu::GpuError::InvalidArgument(
+                "a shader shades feature channels, and the scene has none".into(),
+            ))
+        }
+        (None, _) => None,
+    };
+    let channels = if k > 0 && gpu_shader.is_none() { k } else { 3 };
     let pixels = (cam.width * cam.height) as usize;
     let mut rng = crate::gen::Rng(7);
     let scale = 1.0 / pixels as f32;
@@ -1202,13 +1218,30 @@ pub fn bench_backward(
     let mut peak = 0u64;
     for i in 0..warmup + iterations {
         let t = std::time::Instant::now();
-        let frame = match &gpu_features {
-            Some(f) => renderer.render_features(&gpu_scene, f, cam, opts)?,
-            None => renderer.render(&gpu_scene, cam, opts)?,
-        };
-        std::hint::black_box(
-            renderer.backward_with_features(&gpu_scene, features, &frame, &grads)?,
-        );
+        match (&gpu_features, &gpu_shader, features) {
+            (Some(f), Some(s), Some(values)) => {
+                let frame = renderer.render_shaded(&gpu_scene, f, s, cam, opts)?;
+                std::hint::black_box(renderer.backward_shaded(
+                    &gpu_scene,
+                    values,
+                    s,
+                    cam,
+                    opts.background,
+                    &frame,
+                    &grads,
+                )?);
+            }
+            (Some(f), _, _) => {
+                let frame = renderer.render_features(&gpu_scene, f, cam, opts)?;
+                std::hint::black_box(
+                    renderer.backward_with_features(&gpu_scene, features, &frame, &grads)?,
+                );
+            }
+            _ => {
+                let frame = renderer.render(&gpu_scene, cam, opts)?;
+                std::hint::black_box(renderer.backward(&gpu_scene, &frame, &grads)?);
+            }
+        }
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         peak = peak.max(renderer.ctx().live_allocations().1);
         if i < warmup {
@@ -1238,6 +1271,11 @@ pub fn bench_backward(
         kernel: opts.kernel.to_string(),
         accumulation: renderer.gradient_accumulation().name().to_string(),
         feature_channels: k,
+        shader: shader.map(|m| {
+            let mut widths = vec![m.layers[0].inputs.to_string()];
+            widths.extend(m.layers.iter().map(|l| l.outputs.to_string()));
+            widths.join("-")
+        }),
         iterations,
         warmup,
         forward_stages: stage_reports(fwd_samples),
@@ -1273,9 +1311,10 @@ impl BackwardReport {
             self.driver,
             self.kernel,
             self.accumulation,
-            match self.feature_channels {
-                0 => "SH colour".to_string(),
-                k => format!("{k} feature channels"),
+            match (self.feature_channels, &self.shader) {
+                (0, _) => "SH colour".to_string(),
+                (k, None) => format!("{k} feature channels"),
+                (k, Some(s)) => format!("{k} feature channels shaded by an MLP {s}"),
             },
             self.iterations
         );

@@ -100,6 +100,10 @@ pub(crate) struct BenchArgs {
         requires = "backward"
     )]
     pub(crate) accumulation: vksplat::render::grad_accumulate::Accumulation,
+    /// With --backward: shade the feature channels with this neural shader (as `render
+    /// --shader`) and differentiate it too: its backward pass is the `shade_bwd` stage.
+    #[arg(long, value_name = "FILE.safetensors", requires = "backward")]
+    pub(crate) shader: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) gpu: GpuArgs,
 }
@@ -208,13 +212,20 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         demo: args.demo,
         iteration: args.iteration,
     };
-    if args.features.is_some() && !counts.is_empty() {
-        bail!("--features attaches channels to a scene file; a Gaussians sweep generates its own scenes");
+    if (args.features.is_some() || args.shader.is_some()) && !counts.is_empty() {
+        bail!("--features and --shader apply to a scene file; a Gaussians sweep generates its own scenes");
     }
+    let mut shader = None;
     let file_scene = if counts.is_empty() {
         let (mut scene, name) = load_scene(&scene_arg)?;
         if let Some(file) = &args.features {
             vksplat::scene::features::attach_npy(&mut scene, file)?;
+        }
+        if let Some(path) = &args.shader {
+            let mlp = vksplat::mlp::Mlp::load(path)?;
+            mlp.check_channels(scene.feature_count)
+                .map_err(|e| anyhow::anyhow!("{}: {e} ({name})", path.display()))?;
+            shader = Some(mlp);
         }
         if filter.is_identity_for(&scene) {
             Some((scene, name))
@@ -305,6 +316,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                     &name,
                     &timed,
                     &opts,
+                    shader.as_ref(),
                     args.frames,
                     args.warmup,
                 );
