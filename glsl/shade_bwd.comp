@@ -6,9 +6,10 @@
 //
 // A workgroup takes a chunk of 64 consecutive pixels, one per invocation. Each invocation
 // evaluates the network on its pixel as shade.comp does (the same operations in the same
-// order), keeping every layer's input in the workgroup's scratch region, then walks the
-// layers back. The parameters' gradients are summed over the chunk's pixels in pixel
-// order by the invocation that owns each parameter (every 64th) and added to the
+// order), keeping every layer's input in a private array sized for the network, then walks
+// the layers back. Per layer, the chunk's inputs and output gradients are staged in the
+// workgroup's scratch region; the parameters' gradients are summed over the chunk's pixels
+// in pixel order by the invocation that owns each parameter (every 64th) and added to the
 // workgroup's partial sums; a dispatch covers as many chunks as there are partial slots,
 // the next dispatch adds the next chunks to the same slots, and mlp_grad_reduce.comp sums
 // the slots in order. No atomics: the gradients are the same bits run after run.
@@ -18,11 +19,15 @@
 
 layout(local_size_x = 64) in;
 
+// Sized for the network by the host (GpuShader::activations, widest).
+layout(constant_id = SHADE_SPEC_ACTIVATIONS) const uint ACTIVATIONS = 16u;
+layout(constant_id = SHADE_SPEC_WIDEST) const uint WIDEST = 16u;
+
 // 128 bytes of push constants (src/render/shade_bwd.rs ShadeBwdPush).
 layout(push_constant) uniform ShadeBwdParams {
     uvec4 size;        // width, height, K, groups of four channels
     uvec4 code;        // input code (Mlp::input_code), layers, plane stride in vec4s, first chunk
-    uvec4 shape;       // scratch floats per workgroup, activations per pixel, parameters, widest layer
+    uvec4 shape;       // scratch floats per workgroup, 0, parameters, 0
     vec4 intrinsics;   // fx, fy, cx, cy
     vec4 rot0;         // rows of the world-to-camera rotation
     vec4 rot1;
@@ -41,16 +46,19 @@ layout(std430, binding = SHADE_BWD_ALPHA) readonly buffer AlphaBuf { float alpha
 layout(std430, binding = SHADE_BWD_GRAD_COLOR) buffer GradColorBuf { vec4 grad_color[]; };
 // Out: dL/d(feature channels), pixel-major, groups of four.
 layout(std430, binding = SHADE_BWD_GRAD_FEATURES) writeonly buffer GradFeatureBuf { vec4 grad_features[]; };
-// Per workgroup: the activations (value j of invocation t at j * 64 + t), then two
-// gradient rows of the widest layer, each value 64 apart.
-layout(std430, binding = SHADE_BWD_SCRATCH) coherent buffer ScratchBuf { float scratch[]; };
+// Per workgroup, one layer at a time, pixel-major in rows of vec4s: each pixel's inputs
+// and a 1 (the bias's input), zero-padded to XROW vec4s, then each pixel's outputs'
+// gradients, zero-padded to GROW vec4s.
+layout(std430, binding = SHADE_BWD_SCRATCH) coherent buffer ScratchBuf { vec4 scratch[]; };
 // Per partial slot (workgroup) the parameters' sums, in the words' float layout.
 layout(std430, binding = SHADE_BWD_PARTIALS) buffer PartialBuf { float partials[]; };
 
-uint sbase;
+const uint XROW = (WIDEST + 4u) / 4u;
+const uint GROW = (WIDEST + 3u) / 4u;
 
-uint act_at(uint j, uint t) { return sbase + j * PIXELS + t; }
-uint grad_at(uint r, uint i, uint t) { return sbase + (p.shape.y + r * p.shape.w + i) * PIXELS + t; }
+float act[ACTIVATIONS];
+// Two rows of gradients, the current layer's outputs' and its inputs'.
+float grad[2u * WIDEST];
 
 // The invocations' scratch writes, visible to the workgroup.
 void sync() {
@@ -61,7 +69,8 @@ void sync() {
 void main() {
     uint t = gl_LocalInvocationID.x;
     uint wg = gl_WorkGroupID.x;
-    sbase = wg * p.shape.x;
+    uint sbase = wg * p.shape.x;
+    uint gbase = sbase + PIXELS * XROW;
     uint index = (p.code.w + wg) * PIXELS + t;
     bool live = index < p.size.x * p.size.y;
     uvec2 pix = uvec2(index % p.size.x, index / p.size.x);
@@ -74,15 +83,15 @@ void main() {
         uint id = (p.code.x >> (8u + 2u * s)) & 3u;
         if (id == 0u) {
             for (uint k = 0u; k < p.size.z; k++) {
-                scratch[act_at(n++, t)] = live ? features[(k >> 2) * p.code.z + index][k & 3u] : 0.0;
+                act[n++] = live ? features[(k >> 2) * p.code.z + index][k & 3u] : 0.0;
             }
         } else if (id == 1u) {
             vec3 w = mlp_view_dir(pix, p.intrinsics, p.rot0, p.rot1, p.rot2);
-            scratch[act_at(n++, t)] = w.x;
-            scratch[act_at(n++, t)] = w.y;
-            scratch[act_at(n++, t)] = w.z;
+            act[n++] = w.x;
+            act[n++] = w.y;
+            act[n++] = w.z;
         } else {
-            scratch[act_at(n++, t)] = alpha;
+            act[n++] = alpha;
         }
     }
 
@@ -94,13 +103,13 @@ void main() {
         for (uint o = 0u; o < outs; o++) {
             precise float acc = weight(base + outs * ins + o);
             for (uint i = 0u; i < ins; i++) {
-                acc += weight(base + o * ins + i) * scratch[act_at(at + i, t)];
+                acc += weight(base + o * ins + i) * act[at + i];
             }
-            scratch[act_at(at + ins + o, t)] = activate(kind, acc);
+            act[at + ins + o] = activate(kind, acc);
         }
         at += ins;
     }
-    vec3 c = vec3(scratch[act_at(at, t)], scratch[act_at(at + 1u, t)], scratch[act_at(at + 2u, t)]);
+    vec3 c = vec3(act[at], act[at + 1u], act[at + 2u]);
 
     // colour = alpha c + (1 - alpha) background.
     vec4 g = live ? grad_color[index] : vec4(0.0);
@@ -108,44 +117,63 @@ void main() {
     g_alpha += g.g * (c.g - p.background.g);
     g_alpha += g.b * (c.b - p.background.b);
     uint cur = 0u;
-    scratch[grad_at(cur, 0u, t)] = alpha * g.r;
-    scratch[grad_at(cur, 1u, t)] = alpha * g.g;
-    scratch[grad_at(cur, 2u, t)] = alpha * g.b;
+    grad[0] = alpha * g.r;
+    grad[1] = alpha * g.g;
+    grad[2] = alpha * g.b;
 
     // Back through the layers, last first.
     for (uint li = p.code.y; li > 0u; li--) {
         uvec4 h = layer_header(li - 1u);
         uint ins = h.x, outs = h.y, kind = h.z, base = h.w;
+        uint gc = cur * WIDEST, gn = WIDEST - gc;
         at -= ins;
-        for (uint o = 0u; o < outs; o++) {
-            float y = scratch[act_at(at + ins + o, t)];
-            scratch[grad_at(cur, o, t)] *= activate_grad(kind, y);
+        uint orow = (outs + 3u) / 4u, xrow = (ins + 4u) / 4u;
+        for (uint o = 0u; o < 4u * orow; o++) {
+            float gz = 0.0;
+            if (o < outs) {
+                gz = grad[gc + o] * activate_grad(kind, act[at + ins + o]);
+                grad[gc + o] = gz;
+            }
+            scratch[gbase + t * orow + (o >> 2)][o & 3u] = gz;
+        }
+        for (uint j = ins; j < 4u * xrow; j++) {
+            scratch[sbase + t * xrow + (j >> 2)][j & 3u] = j == ins ? 1.0 : 0.0;
         }
         for (uint j = 0u; j < ins; j++) {
+            scratch[sbase + t * xrow + (j >> 2)][j & 3u] = act[at + j];
             precise float acc = 0.0;
             for (uint o = 0u; o < outs; o++) {
-                acc += scratch[grad_at(cur, o, t)] * weight(base + o * ins + j);
+                acc += grad[gc + o] * weight(base + o * ins + j);
             }
-            scratch[grad_at(1u - cur, j, t)] = acc;
+            grad[gn + j] = acc;
         }
         sync();
-        // dL/dW[o][j] = sum over pixels of dL/dz[o] x[j], dL/db[o] = sum of dL/dz[o]:
-        // invocation t sums parameters t, t + 64, ... over the chunk's pixels in order.
-        uint weights = outs * ins;
-        for (uint q = t; q < weights + outs; q += PIXELS) {
-            precise float sum = 0.0;
-            if (q < weights) {
-                uint o = q / ins, j = q % ins;
-                for (uint u = 0u; u < PIXELS; u++) {
-                    sum += scratch[grad_at(cur, o, u)] * scratch[act_at(at + j, u)];
-                }
-            } else {
-                for (uint u = 0u; u < PIXELS; u++) {
-                    sum += scratch[grad_at(cur, q - weights, u)];
+        // dL/dW[o][j] = sum over pixels of dL/dz[o] x[j], and dL/db[o] = the same with
+        // x = 1: blocks of 4 x 4 parameters, invocation t summing blocks t, t + 64, ...
+        // over the chunk's pixels in order.
+        uint slot0 = wg * p.shape.z + base;
+        for (uint b = t; b < orow * xrow; b += PIXELS) {
+            uint ob = b / xrow, jb = b % xrow;
+            precise vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0), s3 = vec4(0.0);
+            for (uint u = 0u; u < PIXELS; u++) {
+                vec4 x = scratch[sbase + u * xrow + jb];
+                vec4 gz = scratch[gbase + u * orow + ob];
+                s0 += gz.x * x;
+                s1 += gz.y * x;
+                s2 += gz.z * x;
+                s3 += gz.w * x;
+            }
+            mat4 sums = mat4(s0, s1, s2, s3);
+            for (uint r = 0u; r < 4u; r++) {
+                uint o = 4u * ob + r;
+                for (uint c4 = 0u; c4 < 4u; c4++) {
+                    uint j = 4u * jb + c4;
+                    if (o < outs && j <= ins) {
+                        uint slot = slot0 + (j < ins ? o * ins + j : outs * ins + o);
+                        partials[slot] = partials[slot] + sums[r][c4];
+                    }
                 }
             }
-            uint slot = wg * p.shape.z + base + q;
-            partials[slot] = partials[slot] + sum;
         }
         // Every invocation has read this layer's rows before the next overwrites them.
         sync();
@@ -154,6 +182,7 @@ void main() {
     if (!live) return;
 
     // dL/d(the first layer's inputs): the features' to the feature blend, alpha's added.
+    uint gi0 = cur * WIDEST;
     n = 0u;
     for (uint s = 0u; s < slots; s++) {
         uint id = (p.code.x >> (8u + 2u * s)) & 3u;
@@ -162,7 +191,7 @@ void main() {
                 vec4 v = vec4(0.0);
                 for (uint c4 = 0u; c4 < 4u; c4++) {
                     uint k = 4u * gi + c4;
-                    if (k < p.size.z) v[c4] = scratch[grad_at(cur, n + k, t)];
+                    if (k < p.size.z) v[c4] = grad[gi0 + n + k];
                 }
                 grad_features[index * p.size.w + gi] = v;
             }
@@ -170,7 +199,7 @@ void main() {
         } else if (id == 1u) {
             n += 3u;  // the view direction has no parameter
         } else {
-            g_alpha += scratch[grad_at(cur, n, t)];
+            g_alpha += grad[gi0 + n];
             n += 1u;
         }
     }

@@ -36,6 +36,11 @@ pub const MAX_GRAD_FIELDS: u32 = GRAD_FIELDS + 4 * MAX_FEATURE_GROUPS;
 pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
 /// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
 pub const GRAD_SPEC_BATCH: u32 = 1;
+/// Specialization constant id of the values a pixel's neural-shader evaluation keeps
+/// (every layer's inputs and the last layer's outputs), the shader backward's private array.
+pub const SHADE_SPEC_ACTIVATIONS: u32 = 0;
+/// Specialization constant id of the neural shader's widest layer (inputs or outputs).
+pub const SHADE_SPEC_WIDEST: u32 = 1;
 
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
@@ -160,6 +165,8 @@ pub fn shared_defines() -> Vec<(String, String)> {
             GRAD_SPEC_MAX_SUBGROUPS.to_string(),
         ),
         ("GRAD_SPEC_BATCH", GRAD_SPEC_BATCH.to_string()),
+        ("SHADE_SPEC_ACTIVATIONS", SHADE_SPEC_ACTIVATIONS.to_string()),
+        ("SHADE_SPEC_WIDEST", SHADE_SPEC_WIDEST.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))

@@ -511,8 +511,8 @@ impl GpuRenderer {
         let pixels = grad_color.len() as u64;
         let feature_planes = match shade {
             Some(job) => {
-                if st.shade.is_none() {
-                    st.shade = Some(ShadeBwd::new(ctx)?);
+                if !st.shade.as_ref().is_some_and(|s| s.fits(job.shader)) {
+                    st.shade = Some(ShadeBwd::for_shader(ctx, job.shader)?);
                 }
                 ensure(ctx, &mut st.alpha, "pixel alpha", pixels * 4)?.upload(ctx, &frame.alpha)?;
                 ensure(

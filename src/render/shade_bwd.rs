@@ -14,6 +14,7 @@ use super::shade::GpuShader;
 use crate::camera::Camera;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
+use crate::gpu::shader_set::{SHADE_SPEC_ACTIVATIONS, SHADE_SPEC_WIDEST};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
@@ -56,10 +57,11 @@ pub struct ShadeBwdBuffers<'a> {
     pub grads: BufferSlice<'a>,
 }
 
-/// The shade backward pipelines.
+/// The shade backward pipelines for networks of one size (their per-pixel arrays).
 pub struct ShadeBwd {
     pipeline: ComputePipeline,
     reduce: ComputePipeline,
+    size: (u32, u32),
 }
 
 fn chunks(pixels: u64) -> u64 {
@@ -70,11 +72,29 @@ fn slots(pixels: u64) -> u64 {
     chunks(pixels).clamp(1, u64::from(PARTIAL_SLOTS))
 }
 
+/// Scratch vec4s of one workgroup: per pixel a row of a layer's inputs and a 1, and a
+/// row of its outputs' gradients, each padded to whole vec4s (`XROW`, `GROW` in the shader).
+fn per_workgroup(shader: &GpuShader) -> u64 {
+    let w = u64::from(shader.widest);
+    u64::from(PIXELS) * ((w + 4) / 4 + (w + 3) / 4)
+}
+
 impl ShadeBwd {
-    /// Compiles the shaders and builds the pipelines.
-    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+    /// The pipelines for `shader`'s size (`GpuShader::activations`, `widest`).
+    pub fn for_shader(ctx: &GpuContext, shader: &GpuShader) -> GpuResult<Self> {
+        Self::new(ctx, shader.activations, shader.widest)
+    }
+
+    /// Whether these pipelines are sized for `shader`.
+    pub fn fits(&self, shader: &GpuShader) -> bool {
+        self.size == (shader.activations, shader.widest)
+    }
+
+    /// Builds the pipelines for networks of `activations` values per pixel (every layer's
+    /// inputs and the last one's outputs) and layers at most `widest` wide.
+    pub fn new(ctx: &GpuContext, activations: u32, widest: u32) -> GpuResult<Self> {
         let storage = BindingKind::StorageBuffer;
-        let pipeline = ComputePipeline::from_embedded(
+        let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "shade_bwd",
             &[],
@@ -89,6 +109,10 @@ impl ShadeBwd {
             ])?,
             std::mem::size_of::<ShadeBwdPush>() as u32,
             PIXELS,
+            &[
+                (SHADE_SPEC_ACTIVATIONS, activations.max(1)),
+                (SHADE_SPEC_WIDEST, widest.max(1)),
+            ],
         )?;
         let reduce = ComputePipeline::from_embedded(
             ctx,
@@ -98,14 +122,17 @@ impl ShadeBwd {
             16,
             64,
         )?;
-        Ok(ShadeBwd { pipeline, reduce })
+        Ok(ShadeBwd {
+            pipeline,
+            reduce,
+            size: (activations, widest),
+        })
     }
 
-    /// Bytes of scratch a frame of `pixels` needs: per workgroup of a dispatch, every
-    /// activation and two gradient rows of the widest layer, for each of its 64 pixels.
+    /// Bytes of scratch a frame of `pixels` needs: per workgroup of a dispatch, a layer's
+    /// inputs and its outputs' gradients for each of its 64 pixels.
     pub fn scratch_bytes(shader: &GpuShader, pixels: u64) -> u64 {
-        let per_pixel = u64::from(shader.activations + 2 * shader.widest);
-        slots(pixels) * u64::from(PIXELS) * per_pixel * 4
+        slots(pixels) * per_workgroup(shader) * 16
     }
 
     /// Bytes of the partial sums a frame of `pixels` needs.
@@ -127,7 +154,11 @@ impl ShadeBwd {
     ) -> GpuResult<()> {
         let pixels = u64::from(cam.width) * u64::from(cam.height);
         let (chunks, slots) = (chunks(pixels), slots(pixels));
-        let per_workgroup = u64::from(PIXELS) * u64::from(shader.activations + 2 * shader.widest);
+        if !self.fits(shader) {
+            return Err(crate::gpu::GpuError::Internal(
+                "the shade backward pipelines were built for another network size".into(),
+            ));
+        }
         let r = cam.rotation.transpose().to_cols_array_2d(); // rows of R
         let mut push = ShadeBwdPush {
             size: [
@@ -137,12 +168,7 @@ impl ShadeBwd {
                 shader.channels().div_ceil(4) as u32,
             ],
             code: [shader.input_code, shader.layers, bufs.features.1, 0],
-            shape: [
-                per_workgroup as u32,
-                shader.activations,
-                shader.params,
-                shader.widest,
-            ],
+            shape: [per_workgroup(shader) as u32, 0, shader.params, 0],
             intrinsics: [cam.fx, cam.fy, cam.cx, cam.cy],
             rot: [
                 [r[0][0], r[0][1], r[0][2], 0.0],

@@ -68,7 +68,7 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     Scan::new(ctx).expect("scan");
     Pack::new(ctx).expect("pack");
     Shade::new(ctx).expect("shade");
-    ShadeBwd::new(ctx).expect("shade backward and its reduce");
+    ShadeBwd::new(ctx, 140, 64).expect("shade backward and its reduce");
     built += 1 + 3 + 1 + 1 + 2;
     let sorts = [
         DEFAULT_SORT_CONFIG,
