@@ -1169,7 +1169,6 @@ pub struct BackwardReport {
 /// more) with fixed pseudo-random pixel gradients (those of an L1 loss have the same
 /// cost: the pass's work does not depend on the values).
 #[allow(clippy::too_many_arguments)]
-#[allow(clippy::too_many_arguments)]
 pub fn bench_backward(
     renderer: &mut GpuRenderer,
     scene: &ActivatedScene,

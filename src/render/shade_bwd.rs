@@ -76,7 +76,7 @@ fn slots(pixels: u64) -> u64 {
 /// row of its outputs' gradients, each padded to whole vec4s (`XROW`, `GROW` in the shader).
 fn per_workgroup(shader: &GpuShader) -> u64 {
     let w = u64::from(shader.widest);
-    u64::from(PIXELS) * ((w + 4) / 4 + (w + 3) / 4)
+    u64::from(PIXELS) * ((w + 1).div_ceil(4) + w.div_ceil(4))
 }
 
 impl ShadeBwd {
