@@ -348,6 +348,70 @@ impl Mlp {
         Ok(mlp)
     }
 
+    /// The network as a safetensors file that [`Mlp::parse`] (and `render --shader`) reads
+    /// back to the same network: layer `i`'s tensors `i.weight` (`outputs x inputs`) and
+    /// `i.bias`, F32, and the description in the metadata.
+    pub fn to_safetensors(&self) -> Vec<u8> {
+        use safetensors::tensor::TensorView;
+        let input_names: Vec<&str> = self
+            .inputs
+            .iter()
+            .map(|i| match i {
+                MlpInput::Features => "features",
+                MlpInput::ViewDir => "view_dir",
+                MlpInput::Alpha => "alpha",
+            })
+            .collect();
+        let layers: Vec<serde_json::Value> = self
+            .layers
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                serde_json::json!({
+                    "weight": format!("{i}.weight"),
+                    "bias": format!("{i}.bias"),
+                    "activation": match l.activation {
+                        Activation::Relu => "relu",
+                        Activation::Sigmoid => "sigmoid",
+                        Activation::Tanh => "tanh",
+                        Activation::None => "none",
+                    },
+                })
+            })
+            .collect();
+        let description = serde_json::json!({ "inputs": input_names, "layers": layers });
+        let bytes: Vec<(String, Vec<usize>, Vec<u8>)> = self
+            .layers
+            .iter()
+            .enumerate()
+            .flat_map(|(i, l)| {
+                let le = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+                [
+                    (
+                        format!("{i}.weight"),
+                        vec![l.outputs, l.inputs],
+                        le(&l.weight),
+                    ),
+                    (format!("{i}.bias"), vec![l.outputs], le(&l.bias)),
+                ]
+            })
+            .collect();
+        let views = bytes.iter().map(|(name, shape, data)| {
+            let view = TensorView::new(safetensors::Dtype::F32, shape.clone(), data)
+                .expect("the shape holds the data");
+            (name.clone(), view)
+        });
+        let meta =
+            std::collections::HashMap::from([(METADATA_KEY.to_string(), description.to_string())]);
+        safetensors::serialize(views, Some(meta)).expect("F32 tensors of matching shapes")
+    }
+
+    /// Writes [`Self::to_safetensors`] to `path` (atomically; an existing file only with
+    /// `overwrite`).
+    pub fn save(&self, path: &Path, overwrite: bool) -> Result<(), crate::fsutil::WriteError> {
+        crate::fsutil::write_bytes_atomically(path, overwrite, &self.to_safetensors())
+    }
+
     /// Inputs besides the features (view direction 3, alpha 1).
     pub fn extra_inputs(&self) -> usize {
         self.inputs

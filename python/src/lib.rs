@@ -1029,8 +1029,150 @@ fn save_image(
 // ---------------------------------------------------------------------------------------
 // Differentiable rasterization
 
+use vksplat::mlp::{Mlp, MlpParams};
 use vksplat::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use vksplat::render::differentiable::{Accumulation, DiffRasterizer};
+
+/// A layer crossing to or from Python: outputs, inputs, weight and bias as f32 bytes,
+/// activation.
+type LayerTuple = (usize, usize, Vec<u8>, Vec<u8>, String);
+/// A network's inputs and layers.
+type ShaderLayers = (Vec<String>, Vec<LayerTuple>);
+
+/// A neural shader given as safetensors bytes (`Shader.to_bytes()`).
+fn shader_of(bytes: Option<&[u8]>) -> PyResult<Option<Mlp>> {
+    bytes
+        .map(|b| Mlp::parse(b, None).map_err(|e| value_err(format!("shader: {e}"))))
+        .transpose()
+}
+
+/// The channels of the image a forward pass returns: 3 when shaded.
+fn image_channels(p: &SplatParams<f32>, shader: &Option<Mlp>) -> PyResult<usize> {
+    match shader {
+        Some(mlp) => {
+            if !matches!(p.colors, ColorParams::Direct { .. }) {
+                return Err(value_err(
+                    "colors: a shader reads direct feature values (N, K), not SH coefficients",
+                ));
+            }
+            mlp.check_channels(p.channels())
+                .map_err(|e| value_err(format!("colors: {e}")))?;
+            Ok(3)
+        }
+        None => Ok(p.channels()),
+    }
+}
+
+fn shader_grads_into<'py, T: bytemuck::Pod>(
+    py: Python<'py>,
+    d: &Bound<'py, PyDict>,
+    g: &MlpParams<T>,
+) -> PyResult<()> {
+    let list = |v: &Vec<Vec<T>>| -> Vec<Bound<'py, PyByteArray>> {
+        v.iter().map(|x| byte_array(py, x)).collect()
+    };
+    d.set_item("shader_weights", list(&g.weights))?;
+    d.set_item("shader_biases", list(&g.biases))?;
+    Ok(())
+}
+
+/// A network built from its layers (weight `outputs x inputs` and bias as f32 bytes, and
+/// the activation) and inputs, checked as a shader file is: its safetensors bytes.
+#[pyfunction]
+fn shader_from_layers<'py>(
+    py: Python<'py>,
+    inputs: Vec<String>,
+    layers: Vec<LayerTuple>,
+) -> PyResult<Bound<'py, PyByteArray>> {
+    let mut parsed = Vec::new();
+    for n in &inputs {
+        parsed.push(match n.as_str() {
+            "features" => vksplat::mlp::MlpInput::Features,
+            "view_dir" => vksplat::mlp::MlpInput::ViewDir,
+            "alpha" => vksplat::mlp::MlpInput::Alpha,
+            other => {
+                return Err(value_err(format!(
+                    "inputs: unknown input {other:?}; inputs are \"features\", \"view_dir\" and \"alpha\""
+                )))
+            }
+        });
+    }
+    let mut out = Vec::new();
+    for (i, (outputs, ins, w, b, act)) in layers.iter().enumerate() {
+        let activation = match act.as_str() {
+            "relu" => vksplat::mlp::Activation::Relu,
+            "sigmoid" => vksplat::mlp::Activation::Sigmoid,
+            "tanh" => vksplat::mlp::Activation::Tanh,
+            "none" => vksplat::mlp::Activation::None,
+            other => {
+                return Err(value_err(format!(
+                    "layer {i}: unknown activation {other:?}; use relu, sigmoid, tanh or none"
+                )))
+            }
+        };
+        out.push(vksplat::mlp::Layer {
+            inputs: *ins,
+            outputs: *outputs,
+            weight: floats(w, &format!("layer {i} weight"), outputs * ins)?,
+            bias: floats(b, &format!("layer {i} bias"), *outputs)?,
+            activation,
+        });
+    }
+    let mlp = Mlp {
+        inputs: parsed,
+        layers: out,
+    };
+    // The file's checks: layer count, widths, chaining, 3 outputs, finite weights.
+    let bytes = mlp.to_safetensors();
+    Mlp::parse(&bytes, None).map_err(|e| value_err(format!("shader: {e}")))?;
+    Ok(PyByteArray::new(py, &bytes))
+}
+
+/// A shader file (`render --shader`'s, with its sidecar .json if any) as safetensors bytes
+/// with the description inside.
+#[pyfunction]
+fn shader_file<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyByteArray>> {
+    let mlp = Mlp::load(&path).map_err(|e| value_err(e.to_string()))?;
+    Ok(PyByteArray::new(py, &mlp.to_safetensors()))
+}
+
+/// The inputs and layers of shader bytes.
+#[pyfunction]
+fn shader_layers(bytes: &[u8]) -> PyResult<ShaderLayers> {
+    let mlp = Mlp::parse(bytes, None).map_err(|e| value_err(format!("shader: {e}")))?;
+    let inputs = mlp
+        .inputs
+        .iter()
+        .map(|i| {
+            match i {
+                vksplat::mlp::MlpInput::Features => "features",
+                vksplat::mlp::MlpInput::ViewDir => "view_dir",
+                vksplat::mlp::MlpInput::Alpha => "alpha",
+            }
+            .to_string()
+        })
+        .collect();
+    let layers = mlp
+        .layers
+        .iter()
+        .map(|l| {
+            (
+                l.outputs,
+                l.inputs,
+                bytemuck::cast_slice(&l.weight).to_vec(),
+                bytemuck::cast_slice(&l.bias).to_vec(),
+                match l.activation {
+                    vksplat::mlp::Activation::Relu => "relu",
+                    vksplat::mlp::Activation::Sigmoid => "sigmoid",
+                    vksplat::mlp::Activation::Tanh => "tanh",
+                    vksplat::mlp::Activation::None => "none",
+                }
+                .to_string(),
+            )
+        })
+        .collect();
+    Ok((inputs, layers))
+}
 
 /// Gaussians as they cross for a gradient: N, then means, quats, scales, opacities and
 /// colours as f32 bytes; `sh_degree` Some for SH coefficients `N x (d+1)^2 x 3`, None for
@@ -1193,6 +1335,7 @@ impl PyRasterizer {
         Ok(d)
     }
 
+    #[pyo3(signature = (params, camera, background, kernel, shader=None))]
     fn forward<'py>(
         &self,
         py: Python<'py>,
@@ -1200,15 +1343,19 @@ impl PyRasterizer {
         camera: CamTuple,
         background: Vec<f32>,
         kernel: &str,
+        shader: Option<&[u8]>,
     ) -> PyResult<ForwardOut<'py>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
-        let opts = diff_options(&background, kernel, p.channels())?;
+        let shader = shader_of(shader)?;
+        let opts = diff_options(&background, kernel, image_channels(&p, &shader)?)?;
         let (frame, token, projected) = py.detach(|| {
             guarded(|| {
                 let mut st = self.state.lock().map_err(|_| {
                     PyRuntimeError::new_err("the rasterizer failed earlier; create a new one")
                 })?;
+                st.set_shader(shader.as_ref())
+                    .map_err(|e| py_err(e.into()))?;
                 let (frame, token) = st.forward(&p, &cam, &opts).map_err(|e| py_err(e.into()))?;
                 let projected = st.projected().map_err(|e| py_err(e.into()))?;
                 check_validation(st.renderer().ctx(), self.validation)?;
@@ -1231,7 +1378,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None))]
+    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None))]
     fn backward<'py>(
         &self,
         py: Python<'py>,
@@ -1243,36 +1390,52 @@ impl PyRasterizer {
         grad_color: Option<&[u8]>,
         grad_alpha: Option<&[u8]>,
         grad_depth: Option<&[u8]>,
+        shader: Option<&[u8]>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
-        let opts = diff_options(&background, kernel, p.channels())?;
+        let shader = shader_of(shader)?;
+        let channels = image_channels(&p, &shader)?;
+        let opts = diff_options(&background, kernel, channels)?;
         let pixels = cam.width as usize * cam.height as usize;
-        let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, p.channels())?;
-        let grads = py.detach(|| {
+        let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;
+        let (grads, shader_grads) = py.detach(|| {
             guarded(|| {
                 let mut st = self.state.lock().map_err(|_| {
                     PyRuntimeError::new_err("the rasterizer failed earlier; create a new one")
                 })?;
-                let grads = st
-                    .backward(&p, &cam, &opts, token, &g)
+                st.set_shader(shader.as_ref())
                     .map_err(|e| py_err(e.into()))?;
+                let out = if shader.is_some() {
+                    st.backward_shaded(&p, &cam, &opts, token, &g)
+                        .map(|(g, m)| (g, Some(m)))
+                } else {
+                    st.backward(&p, &cam, &opts, token, &g).map(|g| (g, None))
+                }
+                .map_err(|e| py_err(e.into()))?;
                 check_validation(st.renderer().ctx(), self.validation)?;
-                Ok(grads)
+                Ok(out)
             })
         })?;
-        grads_dict(py, &grads)
+        let d = grads_dict(py, &grads)?;
+        if let Some(m) = &shader_grads {
+            shader_grads_into(py, &d, m)?;
+        }
+        Ok(d)
     }
 }
 
-/// The f64 CPU reference forward pass: colour (`H x W x D`), alpha and depth as f64 bytes.
+/// The f64 CPU reference forward pass: colour (`H x W x D`, or 3 shaded), alpha and
+/// depth as f64 bytes.
 #[pyfunction]
+#[pyo3(signature = (params, camera, background, kernel, shader=None))]
 fn reference_forward<'py>(
     py: Python<'py>,
     params: ParamsTuple,
     camera: CamTuple,
     background: Vec<f32>,
     kernel: &str,
+    shader: Option<&[u8]>,
 ) -> PyResult<(
     Bound<'py, PyByteArray>,
     Bound<'py, PyByteArray>,
@@ -1280,11 +1443,28 @@ fn reference_forward<'py>(
 )> {
     let p = splat_params(&params)?;
     let cam = to_camera(&camera)?;
-    let opts = diff_options(&background, kernel, p.channels())?;
-    let bg = reference_background(&background, p.channels());
+    let shader = shader_of(shader)?;
+    let channels = image_channels(&p, &shader)?;
+    let opts = diff_options(&background, kernel, channels)?;
+    let bg = reference_background(&background, channels);
     let img = py.detach(|| {
         guarded(|| {
-            vksplat::cpu::backward::forward(&p.to_f64(), &cam, &opts, &bg).map_err(value_err)
+            let p = p.to_f64();
+            match &shader {
+                Some(mlp) => {
+                    let bg3 = [bg[0], bg[1], bg[2]];
+                    vksplat::cpu::backward::forward_shaded(
+                        &p,
+                        &cam,
+                        &opts,
+                        mlp,
+                        &MlpParams::of(mlp),
+                        bg3,
+                    )
+                }
+                None => vksplat::cpu::backward::forward(&p, &cam, &opts, &bg),
+            }
+            .map_err(value_err)
         })
     })?;
     Ok((
@@ -1304,7 +1484,7 @@ fn reference_background(background: &[f32], channels: usize) -> Vec<f64> {
 
 /// The f64 CPU reference backward pass: gradients as f64 bytes.
 #[pyfunction]
-#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None))]
+#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None, shader=None))]
 #[allow(clippy::too_many_arguments)]
 fn reference_backward<'py>(
     py: Python<'py>,
@@ -1315,24 +1495,43 @@ fn reference_backward<'py>(
     grad_color: Option<&[u8]>,
     grad_alpha: Option<&[u8]>,
     grad_depth: Option<&[u8]>,
+    shader: Option<&[u8]>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let p = splat_params(&params)?;
     let cam = to_camera(&camera)?;
-    let opts = diff_options(&background, kernel, p.channels())?;
-    let bg = reference_background(&background, p.channels());
+    let shader = shader_of(shader)?;
+    let channels = image_channels(&p, &shader)?;
+    let opts = diff_options(&background, kernel, channels)?;
+    let bg = reference_background(&background, channels);
     let pixels = cam.width as usize * cam.height as usize;
-    let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, p.channels())?;
+    let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;
     let g64 = PixelGrads {
         color: g.color.iter().map(|&x| x as f64).collect(),
         alpha: g.alpha.iter().map(|&x| x as f64).collect(),
         depth: g.depth.iter().map(|&x| x as f64).collect(),
     };
-    let grads = py.detach(|| {
+    let (grads, shader_grads) = py.detach(|| {
         guarded(|| {
-            vksplat::cpu::backward::backward(&p.to_f64(), &cam, &opts, &bg, &g64).map_err(value_err)
+            let p = p.to_f64();
+            match &shader {
+                Some(mlp) => {
+                    let bg3 = [bg[0], bg[1], bg[2]];
+                    let w = MlpParams::of(mlp);
+                    vksplat::cpu::backward::backward_shaded(&p, &cam, &opts, mlp, &w, bg3, &g64)
+                        .map(|(g, m)| (g, Some(m)))
+                }
+                None => {
+                    vksplat::cpu::backward::backward(&p, &cam, &opts, &bg, &g64).map(|g| (g, None))
+                }
+            }
+            .map_err(value_err)
         })
     })?;
-    grads_dict(py, &grads)
+    let d = grads_dict(py, &grads)?;
+    if let Some(m) = &shader_grads {
+        shader_grads_into(py, &d, m)?;
+    }
+    Ok(d)
 }
 
 #[pymodule]
@@ -1342,6 +1541,9 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRasterizer>()?;
     m.add_function(wrap_pyfunction!(reference_forward, m)?)?;
     m.add_function(wrap_pyfunction!(reference_backward, m)?)?;
+    m.add_function(wrap_pyfunction!(shader_from_layers, m)?)?;
+    m.add_function(wrap_pyfunction!(shader_file, m)?)?;
+    m.add_function(wrap_pyfunction!(shader_layers, m)?)?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(demo, m)?)?;
     m.add_function(wrap_pyfunction!(scene_from_arrays, m)?)?;

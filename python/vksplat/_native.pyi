@@ -1,6 +1,6 @@
 """Type stubs of vksplat's compiled module (the public API is the `vksplat` package)."""
 
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float]]
 # background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
@@ -124,7 +124,12 @@ class Rasterizer:
     def timings(self) -> Dict[str, float]: ...
     def set_accumulation(self, mode: str) -> None: ...
     def forward(
-        self, params: ParamsTuple, camera: CamTuple, background: List[float], kernel: str
+        self,
+        params: ParamsTuple,
+        camera: CamTuple,
+        background: List[float],
+        kernel: str,
+        shader: Optional[bytes] = None,
     ) -> Tuple[bytearray, bytearray, bytearray, int, bytearray]: ...
     def backward(
         self,
@@ -136,10 +141,15 @@ class Rasterizer:
         grad_color: Optional[bytes] = None,
         grad_alpha: Optional[bytes] = None,
         grad_depth: Optional[bytes] = None,
-    ) -> Dict[str, bytearray]: ...
+        shader: Optional[bytes] = None,
+    ) -> Dict[str, Any]: ...
 
 def reference_forward(
-    params: ParamsTuple, camera: CamTuple, background: List[float], kernel: str
+    params: ParamsTuple,
+    camera: CamTuple,
+    background: List[float],
+    kernel: str,
+    shader: Optional[bytes] = None,
 ) -> Tuple[bytearray, bytearray, bytearray]: ...
 def reference_backward(
     params: ParamsTuple,
@@ -149,4 +159,11 @@ def reference_backward(
     grad_color: Optional[bytes] = None,
     grad_alpha: Optional[bytes] = None,
     grad_depth: Optional[bytes] = None,
-) -> Dict[str, bytearray]: ...
+    shader: Optional[bytes] = None,
+) -> Dict[str, Any]: ...
+
+LayerTuple = Tuple[int, int, bytes, bytes, str]
+
+def shader_from_layers(inputs: List[str], layers: List[LayerTuple]) -> bytearray: ...
+def shader_file(path: str) -> bytearray: ...
+def shader_layers(data: bytes) -> Tuple[List[str], List[LayerTuple]]: ...

@@ -11,6 +11,15 @@ max(SH + 0.5, 0)) or direct values (N, D) without it.
     loss_grad = 2 * (fwd.colors - target)          # dL/d(colour) of an L2 loss
     grads = r.backward(fwd, grad_colors=loss_grad)  # dict: means, quats, scales, ...
 
+With a neural ``Shader`` (the per-pixel MLP ``vksplat render --shader`` runs), ``colors``
+are (N, K) feature values, the image is the shaded colour (H, W, 3) over ``background``, and
+the backward pass also returns the network's gradients (``shader_weights``,
+``shader_biases``: one array per layer), so feature splats and their shader can be learned
+without torch:
+
+    shader = vksplat.raster.Shader([(w1, b1, "relu"), (w2, b2, "sigmoid")])
+    fwd = r.forward(means, quats, scales, opacities, features, viewmat, K, W, H, shader=shader)
+
 The rules are the original 3DGS rasterizer's (``shared/docs/reference-semantics.md``): near
 plane 0.2, 2D dilation 0.3, alpha clamp 0.99, skip below 1/255, stop at T < 1e-4; pixel
 (i, j) is evaluated at (i, j) + 0.5 in gsplat's pixel coordinates. Backends: ``"vulkan"``
@@ -118,6 +127,7 @@ class Forward:
         "_channels",
         "_k",
         "_backend",
+        "_shader",
     )
 
     def __repr__(self) -> str:
@@ -144,6 +154,90 @@ def _pixel_grad(name: str, value: Optional[ArrayLike], shape: Tuple[int, ...]) -
     if arr.shape != shape and arr.size == int(np.prod(shape)) and arr.shape[:2] == shape[:2]:
         arr = arr.reshape(shape)
     return _gaussian_array(name, arr, shape).tobytes()
+
+
+class Shader:
+    """A neural shader: a per-pixel MLP from the blended feature channels (and, as
+    ``inputs`` lists them, the pixel's unit view direction and its alpha) to a colour,
+    ``alpha * mlp(...) + (1 - alpha) * background`` (the file format and rules of
+    ``vksplat render --shader``). ``layers``: ``(weight (outputs, inputs), bias (outputs,),
+    activation)`` per layer, activation one of ``"relu"``, ``"sigmoid"``, ``"tanh"``,
+    ``"none"``; the last layer gives 3 outputs."""
+
+    __slots__ = ("inputs", "layers", "_bytes")
+
+    def __init__(self, layers: Any, inputs: Any = ("features",)) -> None:
+        if isinstance(inputs, str):
+            raise ValueError("inputs must be a list of names, e.g. ['features', 'view_dir']")
+        names = [str(i) for i in inputs]
+        parts = []
+        copies = []
+        for i, layer in enumerate(layers):
+            try:
+                w, b, act = layer
+            except (TypeError, ValueError):
+                raise ValueError(f"layer {i} must be (weight, bias, activation)") from None
+            w = np.ascontiguousarray(_numpy(w), dtype="<f4")
+            b = np.ascontiguousarray(_numpy(b), dtype="<f4").reshape(-1)
+            if w.ndim != 2:
+                raise ValueError(f"layer {i}: weight must be 2-D (outputs, inputs), got {w.shape}")
+            if b.shape[0] != w.shape[0]:
+                raise ValueError(f"layer {i}: bias has {b.shape[0]} values for {w.shape[0]} outputs")
+            parts.append((int(w.shape[0]), int(w.shape[1]), w.tobytes(), b.tobytes(), str(act)))
+            copies.append((w.copy(), b.copy(), str(act)))
+        self._bytes = bytes(_native.shader_from_layers(names, parts))
+        self.inputs = tuple(names)
+        self.layers = copies
+
+    @classmethod
+    def _from_bytes(cls, data: bytes) -> "Shader":
+        names, parts = _native.shader_layers(bytes(data))
+        layers = [
+            (
+                np.frombuffer(w, dtype="<f4").reshape(o, i).copy(),
+                np.frombuffer(b, dtype="<f4").copy(),
+                act,
+            )
+            for (o, i, w, b, act) in parts
+        ]
+        return cls(layers, names)
+
+    @classmethod
+    def load(cls, path: Any) -> "Shader":
+        """A shader file (safetensors, as ``render --shader`` reads it)."""
+        return cls._from_bytes(bytes(_native.shader_file(str(path))))
+
+    def to_bytes(self) -> bytes:
+        """The network as safetensors bytes (what ``save`` writes)."""
+        return self._bytes
+
+    def save(self, path: Any, overwrite: bool = False) -> None:
+        """Writes the shader for ``vksplat render --shader`` (atomically; an existing file
+        only with ``overwrite``)."""
+        import os
+        import tempfile
+
+        path = os.fspath(path)
+        if os.path.exists(path) and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        fd, tmp = tempfile.mkstemp(prefix=".shader.", suffix=".tmp", dir=os.path.dirname(path) or ".")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(self._bytes)
+            os.replace(tmp, path)
+        except BaseException:
+            os.unlink(tmp)
+            raise
+
+    @property
+    def feature_channels(self) -> int:
+        """The feature channels (K) the network takes."""
+        extra = {"features": 0, "view_dir": 3, "alpha": 1}
+        return self.layers[0][0].shape[1] - sum(extra[i] for i in self.inputs)
+
+    def __repr__(self) -> str:
+        widths = [self.layers[0][0].shape[1]] + [w.shape[0] for w, _, _ in self.layers]
+        return f"Shader({'-'.join(map(str, widths))}, inputs {list(self.inputs)})"
 
 
 class Rasterizer:
@@ -190,14 +284,29 @@ class Rasterizer:
         sh_degree: Optional[int] = None,
         background: Optional[ArrayLike] = None,
         kernel: str = "gaussian",
+        shader: Optional[Shader] = None,
     ) -> Forward:
         """Renders the Gaussians from one camera: ``colors`` (H, W, D) with the background,
         ``alphas`` (H, W), ``depths`` (H, W, alpha-normalised), and per Gaussian ``radii``,
-        ``means2d`` (pixels), ``gaussian_depths`` and ``conics`` (Vulkan backend)."""
+        ``means2d`` (pixels), ``gaussian_depths`` and ``conics`` (Vulkan backend). With a
+        ``shader``, ``colors`` are (N, K) feature values and the image is shaded (H, W, 3)."""
         cam = Camera(viewmat, K, width, height)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
+        shader_bytes = None
+        if shader is not None:
+            if not isinstance(shader, Shader):
+                raise TypeError("shader must be a vksplat.raster.Shader")
+            if sh_degree is not None:
+                raise ValueError("colors: a shader reads (N, K) feature values, not SH coefficients")
+            if channels != shader.feature_channels:
+                raise ValueError(
+                    f"colors: the shader takes {shader.feature_channels} feature channels, "
+                    f"colors has {channels}"
+                )
+            shader_bytes = shader.to_bytes()
+            channels = 3
         bg = _background(background, channels)
-        if self._native is not None and channels != 3 and any(bg):
+        if self._native is not None and shader is None and channels != 3 and any(bg):
             raise ValueError(
                 f"background: {channels} direct channels are blended without a background on "
                 "the device (the reference backend takes one)"
@@ -206,17 +315,21 @@ class Rasterizer:
             raise ValueError(f"kernel must be 'gaussian' or 'power', got {kernel!r}")
         f = Forward()
         f._params, f._camera, f._background, f._kernel = params, cam._tuple(), bg, kernel
-        f._channels, f._k, f._backend = channels, k, self.backend
+        f._channels, f._k, f._backend, f._shader = channels, k, self.backend, shader
         h, w, n = cam.height, cam.width, params[0]
         if self._native is None:
-            color, alpha, depth = _native.reference_forward(params, f._camera, bg, kernel)
+            color, alpha, depth = _native.reference_forward(
+                params, f._camera, bg, kernel, shader_bytes
+            )
             f.colors = np.frombuffer(color, dtype="<f8").reshape(h, w, channels)
             f.alphas = np.frombuffer(alpha, dtype="<f8").reshape(h, w)
             f.depths = np.frombuffer(depth, dtype="<f8").reshape(h, w)
             f._token = 0
             f.radii = f.means2d = f.gaussian_depths = f.conics = None
             return f
-        color, alpha, depth, token, projected = self._native.forward(params, f._camera, bg, kernel)
+        color, alpha, depth, token, projected = self._native.forward(
+            params, f._camera, bg, kernel, shader_bytes
+        )
         f.colors = np.frombuffer(color, dtype="<f4").reshape(h, w, channels)
         f.alphas = np.frombuffer(alpha, dtype="<f4").reshape(h, w)
         f.depths = np.frombuffer(depth, dtype="<f4").reshape(h, w)
@@ -240,7 +353,8 @@ class Rasterizer:
         gradients with respect to the pixels (any of them may be None: zero). Returns
         ``means`` (N, 3), ``quats`` (N, 4, the unnormalised quaternions given), ``scales``,
         ``opacities``, ``colors`` (the shape given: SH (N, K, 3) with zeros past the degree,
-        or (N, D)), ``means2d`` (N, 2, pixels) and ``absgrad`` (N, 2)."""
+        or (N, D)), ``means2d`` (N, 2, pixels) and ``absgrad`` (N, 2); for a shaded pass
+        also ``shader_weights`` and ``shader_biases``, one array per layer."""
         if not isinstance(fwd, Forward):
             raise TypeError("fwd must be what Rasterizer.forward returned")
         if fwd._backend != self.backend:
@@ -249,24 +363,43 @@ class Rasterizer:
         gc = _pixel_grad("grad_colors", grad_colors, (h, w, fwd._channels))
         ga = _pixel_grad("grad_alphas", grad_alphas, (h, w))
         gd = _pixel_grad("grad_depths", grad_depths, (h, w))
+        shader_bytes = None if fwd._shader is None else fwd._shader.to_bytes()
         if self._native is None:
             raw = _native.reference_backward(
-                fwd._params, fwd._camera, fwd._background, fwd._kernel, gc, ga, gd
+                fwd._params, fwd._camera, fwd._background, fwd._kernel, gc, ga, gd, shader_bytes
             )
             dtype = "<f8"
         else:
             raw = self._native.backward(
-                fwd._params, fwd._camera, fwd._background, fwd._kernel, fwd._token, gc, ga, gd
+                fwd._params,
+                fwd._camera,
+                fwd._background,
+                fwd._kernel,
+                fwd._token,
+                gc,
+                ga,
+                gd,
+                shader_bytes,
             )
             dtype = "<f4"
         n = fwd._params[0]
-        out: Dict[str, np.ndarray] = {}
+        direct = fwd._params[7]
+        out: Dict[str, Any] = {}
         for name, data in raw.items():
+            if name in ("shader_weights", "shader_biases"):
+                shapes = [
+                    w.shape if name == "shader_weights" else b.shape
+                    for w, b, _ in fwd._shader.layers
+                ]
+                out[name] = [
+                    np.frombuffer(d, dtype=dtype).reshape(shape) for d, shape in zip(data, shapes)
+                ]
+                continue
             arr = np.frombuffer(data, dtype=dtype)
             if name in _GRAD_SHAPES:
                 arr = arr.reshape(n, _GRAD_SHAPES[name])
             elif name == "colors":
-                arr = arr.reshape(n, fwd._k, 3) if fwd._k else arr.reshape(n, fwd._channels)
+                arr = arr.reshape(n, fwd._k, 3) if fwd._k else arr.reshape(n, direct)
             out[name] = arr
         return out
 

@@ -90,17 +90,19 @@ impl DiffRasterizer {
     /// [`Self::backward_shaded`] returns its gradients too. A training step's new weights
     /// (a network of the same shape) are uploaded in place.
     pub fn set_shader(&mut self, mlp: Option<&Mlp>) -> GpuResult<()> {
-        // The saved forward state was shaded with the old weights.
+        if self.shader.as_ref().map(|(m, _)| m) == mlp {
+            return Ok(());
+        }
+        // The saved forward state was shaded otherwise.
         self.last = None;
         match (mlp, self.shader.as_mut()) {
             (None, _) => self.shader = None,
             (Some(m), Some((held, gpu))) if gpu.same_shape(m) => {
-                if held != m {
-                    gpu.update(self.renderer.ctx(), m)?;
-                    *held = m.clone();
-                }
+                gpu.update(self.renderer.ctx(), m)?;
+                *held = m.clone();
             }
             (Some(m), _) => {
+                self.shader = None;
                 let gpu = GpuShader::new(self.renderer.ctx(), m)?;
                 self.shader = Some((m.clone(), gpu));
             }

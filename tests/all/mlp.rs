@@ -508,3 +508,29 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     );
     assert!(e.contains("choose one"), "{e}");
 }
+
+/// A network written by `Mlp::save` (what a trainer writes) reads back as the same
+/// network, and an existing file is kept unless overwriting is asked for.
+#[test]
+fn a_saved_shader_reads_back_as_the_same_network() {
+    let (tensors, description) = network(
+        &["features", "view_dir", "alpha"],
+        &[9, 7, 5, 3],
+        &["tanh", "relu", "sigmoid"],
+        21,
+    );
+    let mlp = Mlp::parse(&file_of(&tensors, Some(&description)), None).unwrap();
+    assert_eq!(Mlp::parse(&mlp.to_safetensors(), None).unwrap(), mlp);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("shader.safetensors");
+    mlp.save(&path, false).unwrap();
+    assert_eq!(Mlp::load(&path).unwrap(), mlp);
+    let before = std::fs::read(&path).unwrap();
+    let (tensors, description) = network(&["features"], &[4, 3], &["none"], 22);
+    let other = Mlp::parse(&file_of(&tensors, Some(&description)), None).unwrap();
+    let e = other.save(&path, false).unwrap_err();
+    assert!(e.to_string().contains("exists"), "{e}");
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+    other.save(&path, true).unwrap();
+    assert_eq!(Mlp::load(&path).unwrap(), other);
+}
