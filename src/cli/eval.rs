@@ -84,6 +84,10 @@ pub(crate) struct EvalArgs {
     /// Replace report files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
+    /// Do nothing when the report files (of this shard) exist: re-running a job array
+    /// whose tasks were killed finishes only what is missing.
+    #[arg(long, conflicts_with = "overwrite")]
+    pub(crate) skip_existing: bool,
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white"); photos with
     /// alpha are composited over it too.
     #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = super::values::background, allow_hyphen_values = true)]
@@ -403,6 +407,10 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("eval_report"));
     let files = report_files(&out_dir, shard);
+    if args.skip_existing && files.iter().all(|f| f.exists()) {
+        note!("{} exists; nothing to evaluate", files[0].display());
+        return Ok(());
+    }
     check_report_files(&files, args.overwrite)?;
     let cameras_file = match &args.cameras {
         Some(f) => f.clone(),
