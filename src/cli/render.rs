@@ -456,38 +456,21 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         frames_in_flight: args.frames_in_flight.unwrap_or(2),
     };
     let act = scene.activated();
+    let job = Job {
+        args,
+        scene: &act,
+        frames: &plan.frames,
+        opts: &opts,
+        run_opts: &run_opts,
+        features: render_features,
+        shader: shader.as_ref(),
+    };
     let (summary, how) = if let Some(devices) = &args.devices {
-        render_on_devices(
-            args,
-            devices,
-            &act,
-            &plan.frames,
-            &opts,
-            &run_opts,
-            render_features,
-            shader.as_ref(),
-        )?
+        render_on_devices(&job, devices)?
     } else if args.cpu {
-        render_cpu(
-            args,
-            &act,
-            &plan.frames,
-            &opts,
-            &run_opts,
-            render_features,
-            shader.as_ref(),
-        )?
+        render_cpu(&job)?
     } else {
-        render_gpu(
-            args,
-            args.gpu.context()?,
-            &act,
-            &plan.frames,
-            &opts,
-            &run_opts,
-            render_features,
-            shader.as_ref(),
-        )?
+        render_gpu(&job, args.gpu.context()?)?
     };
     if summary.interrupted {
         return Err(Interrupted(format!(
@@ -546,6 +529,20 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// What each renderer of `render` gets: the command's arguments, the scene, the frames to
+/// render and how to render and write them.
+#[derive(Clone, Copy)]
+struct Job<'a> {
+    args: &'a RenderArgs,
+    scene: &'a vksplat::scene::ActivatedScene,
+    frames: &'a [vksplat::sequence::FramePlan],
+    opts: &'a vksplat::cpu::RenderOptions,
+    run_opts: &'a vksplat::sequence::RunOptions,
+    /// Render the feature channels (`--mode features`, or for `shader`).
+    features: bool,
+    shader: Option<&'a vksplat::mlp::Mlp>,
+}
+
 /// Sums of per-stage times over the frames of a path, printed by `--timings`.
 #[derive(Default)]
 struct StageSums {
@@ -580,16 +577,9 @@ impl StageSums {
     }
 }
 
-fn render_cpu(
-    args: &RenderArgs,
-    scene: &vksplat::scene::ActivatedScene,
-    frames: &[vksplat::sequence::FramePlan],
-    opts: &vksplat::cpu::RenderOptions,
-    run_opts: &vksplat::sequence::RunOptions,
-    features: bool,
-    shader: Option<&vksplat::mlp::Mlp>,
-) -> Result<(Summary, String)> {
-    if args.gpu.verbose {
+fn render_cpu(job: &Job) -> Result<(Summary, String)> {
+    let (scene, opts, shader) = (job.scene, job.opts, job.shader);
+    if job.args.gpu.verbose {
         note!(
             "renderer: the CPU reference on {}",
             plural(rayon::current_num_threads(), "thread")
@@ -598,7 +588,7 @@ fn render_cpu(
     let mut sums = StageSums::default();
     let mut pairs = 0;
     let mut render = |cam: &Camera| {
-        let (mut frame, t) = if features || shader.is_some() {
+        let (mut frame, t) = if job.features || shader.is_some() {
             vksplat::cpu::render_features_timed(scene, cam, opts)
         } else {
             vksplat::cpu::render_timed(scene, cam, opts)
@@ -625,8 +615,8 @@ fn render_cpu(
         pairs = t.pairs;
         Ok(frame)
     };
-    let summary = vksplat::sequence::run(frames, &mut render, run_opts);
-    if args.timings {
+    let summary = vksplat::sequence::run(job.frames, &mut render, job.run_opts);
+    if job.args.timings {
         sums.print("CPU ms");
         note!("tile pairs {pairs} (last frame)");
     }
@@ -664,17 +654,8 @@ fn verify(frames: &[vksplat::sequence::FramePlan]) -> Result<()> {
 
 /// `--devices`: one renderer per device, each on its own thread with a contiguous block
 /// of the frames (the split of `--shard`); the progress is each block's summary.
-#[allow(clippy::too_many_arguments)]
-fn render_on_devices(
-    args: &RenderArgs,
-    devices: &str,
-    scene: &vksplat::scene::ActivatedScene,
-    frames: &[vksplat::sequence::FramePlan],
-    opts: &vksplat::cpu::RenderOptions,
-    run_opts: &vksplat::sequence::RunOptions,
-    features: bool,
-    shader: Option<&vksplat::mlp::Mlp>,
-) -> Result<(Summary, String)> {
+fn render_on_devices(job: &Job, devices: &str) -> Result<(Summary, String)> {
+    let Job { args, frames, .. } = *job;
     let chosen: Vec<String> = if devices.trim() == "all" {
         args.gpu
             .context()?
@@ -697,7 +678,7 @@ fn render_on_devices(
     let workers = chosen.len().min(frames.len());
     let run_opts = vksplat::sequence::RunOptions {
         progress: ProgressStyle::Quiet,
-        ..run_opts.clone()
+        ..job.run_opts.clone()
     };
     let results: Vec<Result<(Summary, String)>> = std::thread::scope(|s| {
         let handles: Vec<_> = chosen[..workers]
@@ -713,8 +694,12 @@ fn render_on_devices(
                 s.spawn(move || {
                     let ctx = args.gpu.context_on(Some(device))?;
                     let block = &frames[block];
-                    let (summary, how) =
-                        render_gpu(args, ctx, scene, block, opts, run_opts, features, shader)?;
+                    let part = Job {
+                        frames: block,
+                        run_opts,
+                        ..*job
+                    };
+                    let (summary, how) = render_gpu(&part, ctx)?;
                     note!(
                         "device {device}: {} {how} (frames {}..={})",
                         plural(summary.written, "frame"),
@@ -752,17 +737,16 @@ fn render_on_devices(
     ))
 }
 
-#[allow(clippy::too_many_arguments)]
-fn render_gpu(
-    args: &RenderArgs,
-    ctx: vksplat::gpu::GpuContext,
-    scene: &vksplat::scene::ActivatedScene,
-    frames: &[vksplat::sequence::FramePlan],
-    opts: &vksplat::cpu::RenderOptions,
-    run_opts: &vksplat::sequence::RunOptions,
-    features: bool,
-    shader: Option<&vksplat::mlp::Mlp>,
-) -> Result<(Summary, String)> {
+fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Summary, String)> {
+    let Job {
+        args,
+        scene,
+        frames,
+        opts,
+        run_opts,
+        features,
+        shader,
+    } = *job;
     let t0 = std::time::Instant::now();
     if args.gpu.verbose {
         note!("device: {}", ctx.info());

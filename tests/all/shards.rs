@@ -51,6 +51,11 @@ fn scene_and_cameras() -> (String, String) {
     )
 }
 
+/// `render SCENE --cameras CAMERAS --width 64`: the path at a small size.
+fn render_path<'a>(scene: &'a str, cams: &'a str) -> Vec<&'a str> {
+    vec!["render", scene, "--cameras", cams, "--width", "64"]
+}
+
 /// The sorted file names and contents of a folder.
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut v: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
@@ -239,21 +244,9 @@ fn shard_slurm_reads_the_array_task_and_bad_shards_are_one_sentence() {
     assert!(stderr(&o).contains("evenly spaced"), "{}", stderr(&o));
     // Shards whose outputs overlap: one file for all the frames of the path.
     let single = dir.path().join("one.png");
-    let e = fails(
-        &[
-            "render",
-            &scene,
-            "--cameras",
-            &cams,
-            "--width",
-            "64",
-            "-o",
-            s(&single),
-            "--shard",
-            "0/24",
-        ],
-        &single,
-    );
+    let mut a = render_path(&scene, &cams);
+    a.extend(["-o", s(&single), "--shard", "0/24"]);
+    let e = fails(&a, &single);
     assert!(e.contains("24 frames but the output names one file"), "{e}");
     // The same for eval and bench.
     let e = fails(
@@ -312,7 +305,7 @@ fn eval_shards_merge_into_the_report_of_one_run() {
     let dir = tempfile::tempdir().unwrap();
     let (scene, cams) = scene_and_cameras();
     let images = photos(dir.path(), &cams);
-    let eval = |out: &Path, more: &[&str]| {
+    let eval = |out: &Path, split: &str, more: &[&str]| {
         let mut a = vec![
             "eval",
             &scene,
@@ -321,7 +314,7 @@ fn eval_shards_merge_into_the_report_of_one_run() {
             "--images",
             s(&images),
             "--split",
-            "all",
+            split,
             "-q",
         ];
         a.extend(["-o", s(out)]);
@@ -329,15 +322,15 @@ fn eval_shards_merge_into_the_report_of_one_run() {
         succeeds(&a, &[])
     };
     let one = dir.path().join("one");
-    eval(&one, &[]);
+    eval(&one, "all", &[]);
     let parts = dir.path().join("parts");
     for i in 0..3 {
-        eval(&parts, &["--shard", &format!("{i}/3")]);
+        eval(&parts, "all", &["--shard", &format!("{i}/3")]);
         assert!(parts.join(format!("report.shard-{i}-of-3.json")).is_file());
     }
     assert!(!parts.join("report.json").exists());
     // A re-run of a finished shard with --skip-existing does nothing.
-    let o = eval(&parts, &["--shard", "1/3", "--skip-existing"]);
+    let o = eval(&parts, "all", &["--shard", "1/3", "--skip-existing"]);
     assert!(stderr(&o).contains("nothing to evaluate"), "{}", stderr(&o));
     // Merge into another folder; the report and CSV are those of one run, byte for byte
     // (the JSON numbers read back exactly).
@@ -371,19 +364,7 @@ fn eval_shards_merge_into_the_report_of_one_run() {
         "{e}"
     );
     let other = dir.path().join("other");
-    let mut a = vec![
-        "eval",
-        &scene,
-        "--cameras",
-        &cams,
-        "--images",
-        s(&images),
-        "--split",
-        "test",
-        "-q",
-    ];
-    a.extend(["-o", s(&other), "--shard", "1/3"]);
-    succeeds(&a, &[]);
+    eval(&other, "test", &["--shard", "1/3"]);
     std::fs::copy(
         other.join("report.shard-1-of-3.json"),
         gap.join("report.shard-1-of-3.json"),
@@ -443,17 +424,8 @@ fn devices_spread_frames_over_renderers_with_the_files_of_one() {
     let dir = tempfile::tempdir().unwrap();
     let (scene, cams) = scene_and_cameras();
     let out = |name: &str| format!("{}/{name}/f_%02d.png", s(dir.path()));
-    let base = [
-        "render",
-        &scene,
-        "--cameras",
-        &cams,
-        "--width",
-        "64",
-        "-q",
-        "--frames",
-        "0..7",
-    ];
+    let mut base = render_path(&scene, &cams);
+    base.extend(["-q", "--frames", "0..7"]);
     let one = out("one");
     let mut a = base.to_vec();
     a.extend(["-o", &one]);
