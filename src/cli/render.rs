@@ -287,8 +287,10 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         exr_background: args.exr_background,
     };
     let format = args.format.as_deref().unwrap_or("png");
+    // Shards never write the same file: the first one writes the whole path's cameras.
+    let exports_cameras = shard.map_or(true, |s| s.index == 0);
     if let Some(path) = &args.export_cameras {
-        if !args.skip_existing {
+        if !args.skip_existing && exports_cameras {
             super::common::check_output_file(path, args.overwrite)?;
         }
     }
@@ -348,8 +350,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
     if let Some(file) = &args.export_cameras {
-        // Shards never write the same file: the first one writes the whole path's cameras.
-        if shard.map_or(true, |s| s.index == 0) {
+        if exports_cameras {
             export_cameras(file, &path.cameras, args)?;
         }
     }

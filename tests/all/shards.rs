@@ -193,6 +193,20 @@ fn shard_slurm_reads_the_array_task_and_bad_shards_are_one_sentence() {
     );
     std::fs::remove_dir_all(&out).unwrap();
 
+    // --export-cameras: shard 0 writes the whole path's cameras, the others nothing (so
+    // they do not refuse the file shard 0 wrote).
+    let exported = dir.path().join("cams.json");
+    for i in [1, 0, 2] {
+        let mut a = render(&format!("{i}/3"));
+        a.extend(["--export-cameras".into(), s(&exported).into()]);
+        succeeds(&strs(&a), &[]);
+        assert_eq!(exported.exists(), i != 1, "after shard {i}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&exported).unwrap()).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 24);
+    std::fs::remove_dir_all(&out).unwrap();
+
     // More shards than frames: the extra ones have nothing to do and succeed.
     // (Blocks of 3 frames in 8 shards: shards 2, 5 and 7 take one each.)
     let mut few = render("4/8");
