@@ -207,9 +207,10 @@ for f in report.json report.csv; do
 done
 echo "slurm_test: 2. 4-shard eval array: merged report identical to one process's" >&2
 
-# --- 3. a task killed mid-run, the array re-submitted -----------------------------------
+# --- 3. tasks killed mid-run, the array re-submitted ------------------------------------
 # A heavier path (64 frames of 640x360 of the 31k scene, 16 per task) so a task is caught
-# mid-run.
+# mid-run. Task 1 is killed outright (SIGKILL, as a node failure or the OOM killer); task 2
+# is cancelled as preemption does (SIGTERM, SIGKILL KillWait seconds later).
 kill_args="--width 640"
 kill_scene=$data/playbot_lod3_31k_sh2.ply
 out=$work/kill/f_%03d.png
@@ -219,25 +220,37 @@ orbit=$work/orbit.json
 id=$(SCENE=$kill_scene CAMERAS=$orbit OUT=$out RENDER_ARGS="$kill_args" \
   submit --array=0-3 "$render_script")
 jobs+=("$id")
-# Task 1 renders frames 16..=31: kill it once it has written its first frame.
-killed=""
-for _ in $(seq 600); do
-  if [ "$(count "$work"/kill/f_01[6-9].png)" -gt 0 ]; then
-    scancel --full --signal=KILL "${id}_1" && killed=1
-    break
-  fi
-  sleep 0.05
-done
-[ -n "$killed" ] || fail "task 1 wrote no frame to kill it after"
+# Task 1 renders frames 16..=31, task 2 frames 32..=47: each is stopped once it has
+# written its first frame.
+stop_after_first_frame() { # task, its first frame's glob, scancel options
+  local task=$1 glob=$2
+  shift 2
+  for _ in $(seq 600); do
+    if [ "$(count $glob)" -gt 0 ]; then
+      scancel "$@" "${id}_$task"
+      return 0
+    fi
+    sleep 0.05
+  done
+  fail "task $task wrote no frame to stop it after"
+}
+stop_after_first_frame 1 "$work/kill/f_01[6-9].png" --full --signal=KILL
+stop_after_first_frame 2 "$work/kill/f_0[34][0-9].png"
 wait_job "$id"
-have=$(count "$work"/kill/f_0{1[6-9],2[0-9],3[01]}.png)
-[ "$have" -lt 16 ] || fail "task 1 finished all 16 frames before it was killed; nothing tested"
+have1=$(count "$work"/kill/f_0{1[6-9],2[0-9],3[01]}.png)
+have2=$(count "$work"/kill/f_0{3[2-9],4[0-7]}.png)
+[ "$have1" -lt 16 ] || fail "task 1 finished all 16 frames before it was killed; nothing tested"
+[ "$have2" -lt 16 ] || fail "task 2 finished all 16 frames before it was cancelled; nothing tested"
+grep -q "interrupted after $have2 of 16 frames; every file written is complete" \
+  "$work/logs/vksplat-render-${id}_2.out" \
+  || fail "task 2 did not stop cleanly on SIGTERM: $(cat "$work/logs/vksplat-render-${id}_2.out")"
+tmp_left=$(count "$work"/kill/.*.tmp)
 # Every file is complete or absent: --verify lists only missing frames, and fails.
 if "$bin" render "$kill_scene" --cameras "$orbit" $kill_args -o "$out" --verify \
   >"$work/verify.txt" 2>"$work/verify.err"; then
-  fail "--verify passed with task 1 killed"
+  fail "--verify passed with tasks 1 and 2 stopped"
 fi
-grep -v ': missing$' "$work/verify.txt" && fail "a killed task left an unreadable file"
+grep -v ': missing$' "$work/verify.txt" && fail "a stopped task left an unreadable file"
 missing=$(wc -l <"$work/verify.txt")
 [ "$missing" -eq $((64 - $(count "$work"/kill/*.png))) ] || fail "--verify listed $missing frames"
 id=$(SCENE=$kill_scene CAMERAS=$orbit OUT=$out RENDER_ARGS="$kill_args" \
@@ -246,12 +259,13 @@ jobs+=("$id")
 wait_job "$id"
 "$bin" render "$kill_scene" --cameras "$orbit" $kill_args -o "$out" --verify -q
 [ "$(count "$work"/kill/.*.tmp)" -eq 0 ] || fail "temporary files left: $(ls -A "$work/kill")"
-"$bin" render "$kill_scene" --cameras "$orbit" $kill_args --frames 16..32 \
+"$bin" render "$kill_scene" --cameras "$orbit" $kill_args --frames 16..48 \
   -o "$work/kill_one/f_%03d.png" -q
 for f in "$work"/kill_one/*; do
   cmp -s "$f" "$work/kill/$(basename "$f")" || fail "$(basename "$f") differs after the re-run"
 done
-echo "slurm_test: 3. task killed after $have of 16 frames ($missing missing); the re-submitted array completed" >&2
+echo "slurm_test: 3. task 1 killed after $have1 of 16 frames, task 2 cancelled after $have2" \
+  "($missing frames missing, $tmp_left temporary file(s) left); the re-submitted array completed" >&2
 
 # --- 4. --shard slurm outside an array --------------------------------------------------
 id=$(submit --output="$work/logs/not-array.out" \
