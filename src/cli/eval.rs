@@ -36,7 +36,10 @@ as the original utils/loss_utils.py; FLIP: NVIDIA's LDR-FLIP, mean over the imag
 the values as sRGB-encoded display values. PSNR of identical images is \"inf\" in the \
 table and the CSV and null in the JSON.
 
-With --shard I/N (or slurm, in a task of a Slurm job array) a process evaluates a contiguous block of the split's cameras and writes DIR/report.shard-I-of-N.json and .csv; `eval --merge DIR` then checks that every shard is there once and writes DIR/report.json and report.csv, the files one process writes.
+With --shard I/N (or slurm, in a task of a Slurm job array) a process evaluates a \
+contiguous block of the split's cameras and writes DIR/report.shard-I-of-N.json and .csv; \
+`eval --merge DIR` then checks that every shard is there once and writes DIR/report.json \
+and report.csv, the files one process writes.
 
 Examples:
   vksplat eval model/ --images dataset/images --split test
