@@ -9,7 +9,9 @@
 #   3. kills one task of a render array mid-run (SIGKILL), checks that every file left is
 #      complete and --verify lists the missing frames and fails, re-submits the same array
 #      (--skip-existing) and checks that it completes, identical to one process;
-#   4. checks that --shard slurm in a job that is not an array fails with one sentence.
+#   4. checks that --shard slurm in a job that is not an array fails with one sentence;
+#   5. runs the other examples: a folder of two models, one task each, and a bench sweep
+#      in two shards.
 # Every daemon it started is stopped by its pid on exit, also on failure.
 #
 # Needs root and Debian's slurm-wlm and munge (tools/setup.sh installs them). Without
@@ -276,4 +278,29 @@ grep -q '^error: --shard slurm: SLURM_ARRAY_TASK_ID .* not set' "$work/logs/not-
   || fail "--shard slurm outside an array: $(cat "$work/logs/not-array.out")"
 [ ! -e "$work/x.png" ] || fail "--shard slurm outside an array wrote a file"
 echo "slurm_test: 4. --shard slurm outside an array refused" >&2
+
+# --- 5. the other examples: a folder of models, a bench sweep -----------------------------
+# Two "trained models" (the LOD6 and LOD3 scenes with the orbit's cameras), one task each.
+for m in lod6:playbot_lod6_1873_sh2 lod3:playbot_lod3_31k_sh2; do
+  mkdir -p "$work/models/${m%%:*}/point_cloud/iteration_7000"
+  ln -s "$data/${m#*:}.ply" "$work/models/${m%%:*}/point_cloud/iteration_7000/point_cloud.ply"
+  ln -s "$cameras" "$work/models/${m%%:*}/cameras.json"
+done
+id=$(MODELS=$work/models IMAGES=$work/photos OUT=$work/eval_models \
+  submit --array=0-1 "$repo/examples/slurm/eval_models.sbatch")
+jobs+=("$id")
+id2=$(GAUSSIANS=1e3,2e3 RESOLUTIONS=64x64 OUT=$work/bench/sweep.json \
+  submit --array=0-1 "$repo/examples/slurm/bench_sweep.sbatch")
+jobs+=("$id2")
+wait_job "$id"
+wait_job "$id2"
+"$bin" eval "$work/models/lod3" --images "$work/photos" -o "$work/eval_lod3" -q >/dev/null 2>&1
+cmp "$work/eval_lod3/report.json" "$work/eval_models/lod3/report.json" \
+  || fail "eval_models.sbatch: lod3's report differs from one process's"
+[ -f "$work/eval_models/lod6/report.json" ] || fail "eval_models.sbatch: no report of lod6"
+for i in 0 1; do
+  f=$work/bench/sweep.shard-$i-of-2.json
+  [ "$(grep -c '"gaussians"' "$f")" = 1 ] || fail "bench_sweep.sbatch: $f does not hold one run"
+done
+echo "slurm_test: 5. eval_models.sbatch (2 models) and bench_sweep.sbatch (2 shards) ran" >&2
 echo "slurm_test: passed" >&2
