@@ -22,6 +22,7 @@ pub mod rf;
 pub mod rules;
 pub mod scene;
 pub mod sequence;
+pub mod shard;
 pub mod stats;
 #[cfg(feature = "viewer")]
 pub mod view;

@@ -346,7 +346,7 @@ pub enum SequenceError {
 /// Plans a path: frame `k` renders `cameras[k]` into `pattern.path(k, name)`. Only frames
 /// in `selection` are planned. Checks that no two frames share a file and applies
 /// `existing`; creates missing output directories and removes temporaries left by an
-/// interrupted run.
+/// interrupted run. ([`plan_frames`] then [`prepare`].)
 pub fn plan(
     cameras: &[(usize, Camera)],
     pattern: &OutputPattern,
@@ -354,6 +354,19 @@ pub fn plan(
     opts: &OutputOptions,
     existing: Existing,
 ) -> Result<Plan, SequenceError> {
+    prepare(plan_frames(cameras, pattern, selection, opts)?, existing)
+}
+
+/// The frames of `selection` and their files, touching nothing on disk: an error when the
+/// output names one file for several frames, when two frames would write the same file,
+/// or when the selection is empty. A sharded render plans every shard's frames with it,
+/// so shards that would write the same file are refused before any renders.
+pub fn plan_frames(
+    cameras: &[(usize, Camera)],
+    pattern: &OutputPattern,
+    selection: Option<&FrameSelection>,
+    opts: &OutputOptions,
+) -> Result<Vec<FramePlan>, SequenceError> {
     let chosen: Vec<&(usize, Camera)> = cameras
         .iter()
         .filter(|(k, _)| selection.map_or(true, |s| s.contains(*k)))
@@ -395,6 +408,17 @@ pub fn plan(
                 .join(", ")
         )));
     }
+    Ok(frames)
+}
+
+/// Readies planned frames for writing: creates their folders, removes temporaries an
+/// interrupted run left of their files, and applies `existing`.
+pub fn prepare(mut frames: Vec<FramePlan>, existing: Existing) -> Result<Plan, SequenceError> {
+    let seen: HashSet<PathBuf> = frames
+        .iter()
+        .flat_map(|p| &p.files)
+        .map(|f| f.path.clone())
+        .collect();
     let mut dirs = HashSet::new();
     for f in frames.iter().flat_map(|p| &p.files) {
         let dir = match f.path.parent() {
@@ -444,6 +468,49 @@ pub fn plan(
         skipped,
         removed_temporaries,
     })
+}
+
+/// A planned file that is not there as it should be: what [`verify`] reports.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Problem {
+    /// The frame's number.
+    pub frame: usize,
+    /// The file.
+    pub path: PathBuf,
+    /// Why: `missing`, or why it cannot be read.
+    pub reason: String,
+}
+
+/// Checks the files of `frames` (after a run, or after the shards of a split run): each
+/// must exist, decode as an image (or `.npy` array), and have its camera's size. Reads the
+/// files in parallel; returns the problems in frame order.
+pub fn verify(frames: &[FramePlan]) -> Vec<Problem> {
+    use rayon::prelude::*;
+    let files: Vec<(usize, &FileSpec, &Camera)> = frames
+        .iter()
+        .flat_map(|p| p.files.iter().map(move |f| (p.index, f, &p.camera)))
+        .collect();
+    files
+        .par_iter()
+        .filter_map(|&(frame, f, cam)| {
+            let problem = |reason: String| Problem {
+                frame,
+                path: f.path.clone(),
+                reason,
+            };
+            if !f.path.exists() {
+                return Some(problem("missing".into()));
+            }
+            match crate::image_file::read_image(&f.path) {
+                Err(e) => Some(problem(format!("unreadable: {e}"))),
+                Ok(p) if (p.width, p.height) != (cam.width, cam.height) => Some(problem(format!(
+                    "is {}x{}, the camera {}x{}",
+                    p.width, p.height, cam.width, cam.height
+                ))),
+                Ok(_) => None,
+            }
+        })
+        .collect()
 }
 
 /// Removes the temporary files of [`output::write_atomically`] (see

@@ -2,7 +2,8 @@
 # Installs what vksplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
 # driver (so no GPU is needed), the Khronos validation layer, the GLSL compiler `glslc`
 # that build.rs compiles the shaders with (and spirv-tools to inspect them), Chromium
-# for the viewer's browser test, and Python with venv for the Python package.
+# for the viewer's browser test, Slurm and munge for the cluster test, and Python with
+# venv for the Python package.
 # Idempotent: does nothing when everything is present. Needs root (or sudo).
 set -euo pipefail
 
@@ -11,6 +12,8 @@ packages=(
   glslc spirv-tools
   pkg-config openexr
   chromium chromium-driver
+  # A single-node Slurm cluster for tools/slurm_test.sh (README "Rendering on a cluster").
+  slurm-wlm munge
 )
 # Python (for the `vksplat` package and its tests): any python3 >= 3.9 with venv and pip;
 # Debian's when the machine has none of its own.

@@ -19,7 +19,8 @@ use vksplat::{note, out, outln};
   vksplat bench scene.ply --frames 20
   vksplat bench scene.ply --cameras cameras.json --camera 5 --width 1920 --json b.json
   vksplat bench --sweep gaussians=1e4,1e5,1e6 --sweep resolution=720p,1080p --plot sweep.svg
-  vksplat bench scene.ply --cpu")]
+  vksplat bench scene.ply --cpu
+  vksplat bench --sweep gaussians=1e5,1e6,1e7 --json b.json --shard slurm   # b.shard-I-of-N.json")]
 pub(crate) struct BenchArgs {
     /// Scene: any supported format or a model directory; not needed with
     /// --sweep gaussians=...
@@ -46,6 +47,12 @@ pub(crate) struct BenchArgs {
     /// `resolution=720p,1080p,4k,WxH`; repeat the flag for both (all combinations run).
     #[arg(long, value_name = "AXIS=V1,V2,...")]
     pub(crate) sweep: Vec<String>,
+    /// Run shard I of N (0-based) of the sweep's points (a contiguous block, in the order
+    /// Gaussian counts, then resolutions); `slurm` reads SLURM_ARRAY_TASK_ID,
+    /// SLURM_ARRAY_TASK_COUNT and SLURM_ARRAY_TASK_MIN. Report files get .shard-I-of-N
+    /// before their extension.
+    #[arg(long, value_name = "I/N|slurm", requires = "sweep")]
+    pub(crate) shard: Option<String>,
     /// Seed of the synthetic scenes of a Gaussians sweep.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
@@ -196,8 +203,19 @@ fn kept_in_sweep<T>(
 }
 
 pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
+    let shard = super::common::shard(args.shard.as_deref())?;
+    // A shard writes its own report files.
+    let shard_file = |path: &Option<PathBuf>| -> Option<PathBuf> {
+        let path = path.as_ref()?;
+        Some(shard.map_or_else(|| path.clone(), |s| s.file_name(path)))
+    };
+    let (json, csv, plot) = (
+        shard_file(&args.json),
+        shard_file(&args.csv),
+        shard_file(&args.plot),
+    );
     // Report files are checked (and their folders created) before the benchmark runs.
-    for path in [&args.json, &args.csv, &args.plot].into_iter().flatten() {
+    for path in [&json, &csv, &plot].into_iter().flatten() {
         check_output_file(path, args.overwrite)?;
     }
     let filter = args.filter.filter()?;
@@ -267,8 +285,24 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     };
     let mut backward_reports = Vec::new();
     let points = counts.len() * resolutions.len();
+    let mine = shard.map_or(0..points, |s| s.range(points));
+    if let Some(s) = shard {
+        if mine.is_empty() {
+            note!("{s}: no points (the sweep has {points}, fewer than the shards); nothing to run");
+            return Ok(());
+        }
+        note!(
+            "{s}: points {}..={} of the sweep's {points}",
+            mine.start,
+            mine.end - 1
+        );
+    }
     let mut reports = Vec::new();
-    for count in &counts {
+    for (c, count) in counts.iter().enumerate() {
+        let point = |r: usize| c * resolutions.len() + r;
+        if !(0..resolutions.len()).any(|r| mine.contains(&point(r))) {
+            continue;
+        }
         let (scene, name) = match (count, &file_scene) {
             (Some(n), _) => (
                 filter.apply(&vksplat::gen::synthetic_scene(
@@ -286,7 +320,10 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         };
         let act = scene.activated();
         let kernel = args.kernel.resolve(&scene, &name);
-        for res in &resolutions {
+        for (r, res) in resolutions.iter().enumerate() {
+            if !mine.contains(&point(r)) {
+                continue;
+            }
             // A resolution of the sweep replaces --width/--height/--scale.
             let mut view = args.view.clone();
             if let Some((w, h)) = res {
@@ -362,7 +399,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         if let Some(r) = &renderer {
             fail_on_validation_messages(r.ctx())?;
         }
-        if let Some(path) = &args.json {
+        if let Some(path) = &json {
             let text = vksplat::bench::backward_to_json(&backward_reports);
             output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
         }
@@ -382,13 +419,13 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
         Ok(())
     };
-    if let Some(path) = &args.json {
+    if let Some(path) = &json {
         write_text(path, vksplat::bench::to_json(&reports))?;
     }
-    if let Some(path) = &args.csv {
+    if let Some(path) = &csv {
         write_text(path, vksplat::bench::to_csv(&reports))?;
     }
-    if let Some(path) = &args.plot {
+    if let Some(path) = &plot {
         let svg = vksplat::bench::plot_sweep(&reports).map_err(anyhow::Error::msg)?;
         write_text(path, svg)?;
     }

@@ -70,12 +70,30 @@ pub(crate) struct GpuArgs {
 impl GpuArgs {
     /// The Vulkan context these flags ask for.
     pub(crate) fn context(&self) -> Result<GpuContext> {
+        self.context_on(self.device.as_deref())
+    }
+
+    /// The Vulkan context of `device` (index or name), with these flags' other settings.
+    pub(crate) fn context_on(&self, device: Option<&str>) -> Result<GpuContext> {
         Ok(GpuContext::new(&ContextOptions {
-            device: self.device.clone(),
+            device: device.map(str::to_string),
             validation: self.validate,
             memory_limit: self.memory_limit,
         })?)
     }
+}
+
+/// The shard `--shard` names (`I/N` or `slurm`, read from the environment), if given;
+/// a bad value or `slurm` outside a job array is one sentence.
+pub(crate) fn shard(spec: Option<&str>) -> Result<Option<vksplat::shard::Shard>> {
+    let Some(spec) = spec else {
+        return Ok(None);
+    };
+    let spec: vksplat::shard::ShardSpec = spec.parse().map_err(anyhow::Error::msg)?;
+    Ok(Some(
+        spec.resolve(|k| std::env::var(k).ok())
+            .map_err(anyhow::Error::msg)?,
+    ))
 }
 
 /// Fails when the validation layer (if enabled) reported anything; the messages were

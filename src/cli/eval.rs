@@ -8,13 +8,14 @@ use super::common::{
 use super::compare::{csv_cell, db, db_csv};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use vksplat::camera::{self, Camera};
 use vksplat::image_file::{self, Planes};
 use vksplat::metrics;
 use vksplat::output;
 use vksplat::render::GpuRenderer;
+use vksplat::shard::Shard;
 use vksplat::{note, outln};
 
 /// Every `LLFF_HOLD`-th camera (in image-name order, from the first) is a test camera when
@@ -35,19 +36,34 @@ as the original utils/loss_utils.py; FLIP: NVIDIA's LDR-FLIP, mean over the imag
 the values as sRGB-encoded display values. PSNR of identical images is \"inf\" in the \
 table and the CSV and null in the JSON.
 
+With --shard I/N (or slurm, in a task of a Slurm job array) a process evaluates a \
+contiguous block of the split's cameras and writes DIR/report.shard-I-of-N.json and .csv; \
+`eval --merge DIR` then checks that every shard is there once and writes DIR/report.json \
+and report.csv, the files one process writes.
+
 Examples:
   vksplat eval model/ --images dataset/images --split test
-  vksplat eval scene.ply --cameras cameras.json --images photos/ -o eval_report/")]
+  vksplat eval scene.ply --cameras cameras.json --images photos/ -o eval_report/
+  vksplat eval model/ --images dataset/images -o rep/ --shard slurm   # sbatch --array=0-7
+  vksplat eval --merge rep/")]
 pub(crate) struct EvalArgs {
-    #[command(flatten)]
-    pub(crate) scene: SceneArg,
+    /// Scene: INRIA .ply, compressed .ply, .splat, .spz or SOG (detected from the content),
+    /// or a trained model directory (uses point_cloud/iteration_<largest>/).
+    #[arg(required_unless_present_any = ["demo", "merge"])]
+    pub(crate) scene: Option<PathBuf>,
+    /// Use the built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
+    #[arg(long, conflicts_with = "scene")]
+    pub(crate) demo: bool,
+    /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
+    #[arg(long, value_name = "N", conflicts_with = "demo")]
+    pub(crate) iteration: Option<u64>,
     /// Camera file (INRIA cameras.json, COLMAP model, or a model directory) [default: the
     /// model directory's cameras.json].
     #[arg(long, value_name = "FILE")]
     pub(crate) cameras: Option<PathBuf>,
     /// Folder of the ground-truth photos, named after the cameras.
-    #[arg(long, value_name = "DIR")]
-    pub(crate) images: PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "merge")]
+    pub(crate) images: Option<PathBuf>,
     /// Which cameras to evaluate: test (every 8th, or the data set's test.txt), train (the
     /// others) or all.
     #[arg(long, value_name = "SPLIT", default_value = "test", value_parser = ["test", "train", "all"])]
@@ -55,12 +71,26 @@ pub(crate) struct EvalArgs {
     /// Leave out cameras without a photo (with a note) instead of stopping.
     #[arg(long)]
     pub(crate) skip_missing: bool,
-    /// Report directory: report.json and report.csv.
-    #[arg(short, long, value_name = "DIR", default_value = "eval_report")]
-    pub(crate) output: PathBuf,
+    /// Report directory: report.json and report.csv (with --shard, report.shard-I-of-N.*)
+    /// [default: eval_report; with --merge, the first DIR].
+    #[arg(short, long, value_name = "DIR")]
+    pub(crate) output: Option<PathBuf>,
+    /// Evaluate shard I of N (0-based) of the split's cameras, a contiguous block; `slurm`
+    /// reads SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT and SLURM_ARRAY_TASK_MIN.
+    #[arg(long, value_name = "I/N|slurm")]
+    pub(crate) shard: Option<String>,
+    /// Merge the shard reports (report.shard-I-of-N.json) found in DIRs (or given as
+    /// files) into one report, after checking that they are the shards of one evaluation,
+    /// each present once.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scene", "demo", "cameras", "images", "shard", "cpu"])]
+    pub(crate) merge: Vec<PathBuf>,
     /// Replace report files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
+    /// Do nothing when the report files (of this shard) exist: re-running a job array
+    /// whose tasks were killed finishes only what is missing.
+    #[arg(long, conflicts_with = "overwrite")]
+    pub(crate) skip_existing: bool,
     /// Background colour, linear R,G,B in [0, 1] (or "black" / "white"); photos with
     /// alpha are composited over it too.
     #[arg(long, value_name = "R,G,B", default_value = "0,0,0", value_parser = super::values::background, allow_hyphen_values = true)]
@@ -91,26 +121,35 @@ pub(crate) struct EvalArgs {
 }
 
 /// One evaluated image, as the reports hold it.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 struct ImageRecord {
     frame: usize,
     camera: String,
     photo: String,
     width: u32,
     height: u32,
+    #[serde(deserialize_with = "null_is_infinite")]
     psnr: f64,
     ssim: f64,
     flip: f64,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 struct Means {
+    #[serde(deserialize_with = "null_is_infinite")]
     psnr: f64,
     ssim: f64,
     flip: f64,
 }
 
-#[derive(Serialize)]
+/// Which shard of a split evaluation a report is.
+#[derive(Serialize, Deserialize, Clone, Copy)]
+struct ShardRecord {
+    index: usize,
+    count: usize,
+}
+
+#[derive(Serialize, Deserialize)]
 struct EvalReport {
     scene: String,
     cameras: String,
@@ -120,9 +159,102 @@ struct EvalReport {
     renderer: String,
     quantized: bool,
     ppd: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    shard: Option<ShardRecord>,
     results: Vec<ImageRecord>,
     skipped: Vec<String>,
     mean: Option<Means>,
+}
+
+/// A PSNR read back from a report: JSON has no infinity, so identical images' "inf" is
+/// written as null.
+fn null_is_infinite<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+}
+
+/// The means of `results`, summed in their order (a merged report sums as one run does).
+fn means(results: &[ImageRecord]) -> Option<Means> {
+    if results.is_empty() {
+        return None;
+    }
+    let n = results.len() as f64;
+    Some(Means {
+        psnr: results.iter().map(|r| r.psnr).sum::<f64>() / n,
+        ssim: results.iter().map(|r| r.ssim).sum::<f64>() / n,
+        flip: results.iter().map(|r| r.flip).sum::<f64>() / n,
+    })
+}
+
+/// The report's CSV: one row per image, then the means.
+fn report_csv(report: &EvalReport) -> String {
+    let mut csv = String::from("frame,camera,photo,width,height,psnr,ssim,flip\n");
+    for r in &report.results {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{}\n",
+            r.frame,
+            csv_cell(&r.camera),
+            csv_cell(&r.photo),
+            r.width,
+            r.height,
+            db_csv(r.psnr),
+            r.ssim,
+            r.flip
+        ));
+    }
+    if let Some(mean) = &report.mean {
+        csv.push_str(&format!(
+            "mean,,,,,{},{},{}\n",
+            db_csv(mean.psnr),
+            mean.ssim,
+            mean.flip
+        ));
+    }
+    csv
+}
+
+/// The report files in `dir`: `report.json` and `report.csv`, or a shard's.
+fn report_files(dir: &Path, shard: Option<Shard>) -> [PathBuf; 2] {
+    ["report.json", "report.csv"].map(|f| {
+        let file = dir.join(f);
+        match shard {
+            Some(s) => s.file_name(&file),
+            None => file,
+        }
+    })
+}
+
+/// Refuses to start when a report file exists and --overwrite was not given.
+fn check_report_files(files: &[PathBuf], overwrite: bool) -> Result<()> {
+    if let Some(p) = files.iter().find(|p| !overwrite && p.exists()) {
+        return Err(output::OutputError::Exists(p.clone()).into());
+    }
+    Ok(())
+}
+
+/// Writes `report` as JSON and CSV to `files` (each atomically), creating their folder.
+fn write_report(report: &EvalReport, files: &[PathBuf; 2], overwrite: bool) -> Result<()> {
+    let dir = files[0].parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
+    output::write_bytes_atomically(
+        &files[0],
+        overwrite,
+        serde_json::to_string_pretty(report)?.as_bytes(),
+    )?;
+    output::write_bytes_atomically(&files[1], overwrite, report_csv(report).as_bytes())?;
+    Ok(())
+}
+
+/// The mean line of the table printed on stdout.
+fn print_mean(count: usize, mean: &Means) {
+    outln!(
+        "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}",
+        "",
+        format!("mean of {count}"),
+        db(mean.psnr),
+        mean.ssim,
+        mean.flip
+    );
 }
 
 /// Photo file extensions tried after a camera's name, in order.
@@ -254,34 +386,46 @@ fn split_cameras(cams: Vec<Camera>, split: &str, images: &Path) -> (Vec<(usize, 
 }
 
 pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
+    if !args.merge.is_empty() {
+        return merge(args);
+    }
+    let scene_arg = SceneArg {
+        scene: args.scene.clone(),
+        demo: args.demo,
+        iteration: args.iteration,
+    };
+    let shard = super::common::shard(args.shard.as_deref())?;
     let ppd = args.ppd.unwrap_or_else(metrics::flip_default_ppd);
     if !(ppd.is_finite() && ppd > 0.0) {
         bail!("--ppd {ppd} must be a positive number");
     }
-    if !args.images.is_dir() {
-        bail!(
-            "{}: is not a folder of photos (--images)",
-            args.images.display()
-        );
+    let Some(images) = args.images.as_deref() else {
+        bail!("eval needs the folder of ground-truth photos: pass --images DIR");
+    };
+    if !images.is_dir() {
+        bail!("{}: is not a folder of photos (--images)", images.display());
     }
-    let files = [
-        args.output.join("report.json"),
-        args.output.join("report.csv"),
-    ];
-    if let Some(p) = files.iter().find(|p| !args.overwrite && p.exists()) {
-        return Err(output::OutputError::Exists(p.clone()).into());
+    let out_dir = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("eval_report"));
+    let files = report_files(&out_dir, shard);
+    if args.skip_existing && files.iter().all(|f| f.exists()) {
+        note!("{} exists; nothing to evaluate", files[0].display());
+        return Ok(());
     }
+    check_report_files(&files, args.overwrite)?;
     let cameras_file = match &args.cameras {
         Some(f) => f.clone(),
-        None => match model_cameras(&args.scene) {
+        None => match model_cameras(&scene_arg) {
             Some(f) => f,
             None => bail!("eval needs the cameras of the photos: pass --cameras FILE (a cameras.json, a COLMAP model or a model directory), or a trained model directory holding cameras.json"),
         },
     };
-    let (scene, name) = load_scene(&args.scene)?;
+    let (scene, name) = load_scene(&scene_arg)?;
     let (all, format) = camera::load_camera_file(&cameras_file, &camera::PathTiming::default())?;
     let total = all.len();
-    let (cams, rule) = split_cameras(all, &args.split, &args.images);
+    let (cams, rule) = split_cameras(all, &args.split, images);
     if cams.is_empty() {
         bail!(
             "{}: the {} split is empty ({total} camera(s); {rule})",
@@ -295,12 +439,23 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         cams.len(),
         cameras_file.display()
     );
+    // The block of a shard is chosen before photos are matched, so it does not depend on
+    // which photos exist.
+    let cams = match shard {
+        Some(s) => {
+            let all = cams.len();
+            let mine = s.take(cams);
+            note!("{s}: {} of the {all} camera(s)", mine.len());
+            mine
+        }
+        None => cams,
+    };
 
     // Match every camera with its photo before rendering anything.
     let mut jobs = Vec::new();
     let mut skipped = Vec::new();
     for (k, cam) in cams {
-        match find_photo(&args.images, &cam.name) {
+        match find_photo(images, &cam.name) {
             Ok(photo) => jobs.push((k, cam, photo)),
             Err(tried) if args.skip_missing => {
                 note!("note: camera {k} (\"{}\") has no photo ({tried}); skipped", cam.name);
@@ -312,11 +467,13 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
             ),
         }
     }
-    if jobs.is_empty() {
+    // A shard may have no cameras (more shards than cameras) or none with a photo; its
+    // empty report still tells the merge that it ran.
+    if jobs.is_empty() && shard.is_none() {
         bail!(
             "no camera of the {} split has a photo in {}",
             args.split,
-            args.images.display()
+            images.display()
         );
     }
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
@@ -327,7 +484,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         ..Default::default()
     };
     let act = scene.activated();
-    let mut gpu = if args.cpu {
+    let mut gpu = if args.cpu || jobs.is_empty() {
         None
     } else {
         let renderer = GpuRenderer::new(args.gpu.context()?)?;
@@ -421,66 +578,29 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     if let Some((r, _)) = &gpu {
         fail_on_validation_messages(r.ctx())?;
     }
-    let n = results.len() as f64;
-    let mean = Means {
-        psnr: results.iter().map(|r| r.psnr).sum::<f64>() / n,
-        ssim: results.iter().map(|r| r.ssim).sum::<f64>() / n,
-        flip: results.iter().map(|r| r.flip).sum::<f64>() / n,
-    };
-    outln!(
-        "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}",
-        "",
-        format!("mean of {}", results.len()),
-        db(mean.psnr),
-        mean.ssim,
-        mean.flip
-    );
-    let mut csv = String::from("frame,camera,photo,width,height,psnr,ssim,flip\n");
-    for r in &results {
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
-            r.frame,
-            csv_cell(&r.camera),
-            csv_cell(&r.photo),
-            r.width,
-            r.height,
-            db_csv(r.psnr),
-            r.ssim,
-            r.flip
-        ));
+    let mean = means(&results);
+    if let Some(mean) = &mean {
+        print_mean(results.len(), mean);
     }
-    csv.push_str(&format!(
-        "mean,,,,,{},{},{}\n",
-        db_csv(mean.psnr),
-        mean.ssim,
-        mean.flip
-    ));
-    // Created only now, so a run stopped by a bad photo leaves nothing behind.
-    std::fs::create_dir_all(&args.output).with_context(|| {
-        format!(
-            "{}: cannot create the report directory",
-            args.output.display()
-        )
-    })?;
     let report = EvalReport {
         scene: name.clone(),
         cameras: cameras_file.display().to_string(),
-        images: args.images.display().to_string(),
+        images: images.display().to_string(),
         split: args.split.clone(),
         split_rule: rule,
         renderer: renderer_name.clone(),
         quantized: !args.float,
         ppd,
+        shard: shard.map(|s| ShardRecord {
+            index: s.index,
+            count: s.count,
+        }),
         results,
         skipped,
-        mean: Some(mean),
+        mean,
     };
-    output::write_bytes_atomically(
-        &files[0],
-        args.overwrite,
-        serde_json::to_string_pretty(&report)?.as_bytes(),
-    )?;
-    output::write_bytes_atomically(&files[1], args.overwrite, csv.as_bytes())?;
+    // Written only now, so a run stopped by a bad photo leaves nothing behind.
+    write_report(&report, &files, args.overwrite)?;
     note!(
         "evaluated {} image(s) of {name} ({renderer_name}){}; report in {}",
         report.results.len(),
@@ -492,7 +612,141 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
                 report.skipped.len()
             )
         },
-        args.output.display()
+        files[0].display()
+    );
+    Ok(())
+}
+
+/// `eval --merge DIR...`: the shard reports of one split evaluation as one report.
+fn merge(args: &EvalArgs) -> Result<()> {
+    let out_dir = args.output.clone().unwrap_or_else(|| args.merge[0].clone());
+    let files = report_files(&out_dir, None);
+    check_report_files(&files, args.overwrite)?;
+    // The shard reports: files given, or report.shard-I-of-N.json in folders given.
+    let mut found: Vec<(Shard, PathBuf)> = Vec::new();
+    for given in &args.merge {
+        let candidates: Vec<PathBuf> = if given.is_dir() {
+            let entries = std::fs::read_dir(given)
+                .with_context(|| format!("{}: cannot list the folder", given.display()))?;
+            entries.flatten().map(|e| e.path()).collect()
+        } else if given.is_file() {
+            vec![given.clone()]
+        } else {
+            bail!("{}: no such folder or file (--merge)", given.display());
+        };
+        for path in candidates {
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+            let tag = name
+                .as_deref()
+                .and_then(|n| n.strip_prefix("report."))
+                .and_then(|n| n.strip_suffix(".json"));
+            if let Some(shard) = tag.and_then(Shard::parse_tag) {
+                found.push((shard, path));
+            }
+        }
+    }
+    let Some(count) = found.first().map(|(s, _)| s.count) else {
+        bail!(
+            "no shard reports (report.shard-I-of-N.json) in {}",
+            args.merge
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    if let Some((s, p)) = found.iter().find(|(s, _)| s.count != count) {
+        bail!(
+            "{}: is {s} but {} is a shard of {count}: reports of different splits",
+            p.display(),
+            found[0].1.display()
+        );
+    }
+    found.sort_by_key(|(s, _)| s.index);
+    if let Some(w) = found.windows(2).find(|w| w[0].0.index == w[1].0.index) {
+        bail!(
+            "{} and {}: both are {}; merge the reports of one run",
+            w[0].1.display(),
+            w[1].1.display(),
+            w[0].0
+        );
+    }
+    let missing: Vec<String> = (0..count)
+        .filter(|i| !found.iter().any(|(s, _)| s.index == *i))
+        .map(|i| i.to_string())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "{} of {count} shard report(s) missing: shard(s) {} (run them, e.g. the same array with only those task ids)",
+            missing.len(),
+            missing.join(", ")
+        );
+    }
+    let mut merged: Option<EvalReport> = None;
+    for (shard, path) in &found {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the shard report", path.display()))?;
+        let part: EvalReport = serde_json::from_str(&text)
+            .with_context(|| format!("{}: is not an eval report", path.display()))?;
+        match part.shard {
+            Some(r) if (r.index, r.count) == (shard.index, shard.count) => {}
+            _ => bail!(
+                "{}: its content is not {shard} (renamed?); merge the files eval wrote",
+                path.display()
+            ),
+        }
+        let Some(whole) = merged.as_mut() else {
+            merged = Some(part);
+            continue;
+        };
+        let differs = [
+            ("scene", &whole.scene, &part.scene),
+            ("cameras", &whole.cameras, &part.cameras),
+            ("images", &whole.images, &part.images),
+            ("split", &whole.split, &part.split),
+        ]
+        .into_iter()
+        .find(|(_, a, b)| a != b)
+        .map(|(what, a, b)| format!("{what} {a:?} vs {b:?}"))
+        .or_else(|| {
+            (whole.quantized != part.quantized || whole.ppd != part.ppd)
+                .then(|| "quantisation or --ppd".to_string())
+        });
+        if let Some(d) = differs {
+            bail!(
+                "{}: is not a shard of the same evaluation as {} ({d})",
+                path.display(),
+                found[0].1.display()
+            );
+        }
+        // Shards on different devices: the report names each device.
+        if !whole.renderer.split("; ").any(|r| r == part.renderer) {
+            whole.renderer = format!("{}; {}", whole.renderer, part.renderer);
+        }
+        whole.results.extend(part.results);
+        whole.skipped.extend(part.skipped);
+    }
+    let Some(mut report) = merged else {
+        bail!("no shard reports to merge");
+    };
+    if report.results.is_empty() {
+        bail!(
+            "no camera of the {} split had a photo in {} (every shard report is empty)",
+            report.split,
+            report.images
+        );
+    }
+    report.shard = None;
+    report.mean = means(&report.results);
+    if let Some(mean) = &report.mean {
+        print_mean(report.results.len(), mean);
+    }
+    write_report(&report, &files, args.overwrite)?;
+    note!(
+        "merged {count} shard report(s): {} image(s) of {}; report in {}",
+        report.results.len(),
+        report.scene,
+        files[0].display()
     );
     Ok(())
 }

@@ -11,11 +11,11 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use vksplat::camera::Camera;
-use vksplat::note;
 use vksplat::output::{self, FileContent};
 use vksplat::render::path::GpuPath;
 use vksplat::render::GpuRenderer;
 use vksplat::sequence::{Existing, FrameSelection, OutputPattern, ProgressStyle, Summary};
+use vksplat::{note, outln};
 
 /// Output of a single frame when `-o` is not given.
 const DEFAULT_OUTPUT: &str = "render.png";
@@ -28,7 +28,9 @@ const DEFAULT_SEQUENCE_OUTPUT: &str = "render/frame_{:05}.png";
   vksplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr
   vksplat render model_dir/ --cameras cameras.json --camera 0,8,16 -o renders/{name}.png
   vksplat render scene.spz --cameras path.json --frames 100..200 -o out/ --format exr
-  vksplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume")]
+  vksplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume
+  vksplat render scene.ply --orbit 1200 -o orbit/ --shard slurm   # a task of sbatch --array=0-7
+  vksplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?")]
 pub(crate) struct RenderArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArg,
@@ -66,6 +68,20 @@ pub(crate) struct RenderArgs {
     /// Resume: skip frames whose files exist (write only the missing files of a frame).
     #[arg(long, conflicts_with = "overwrite")]
     pub(crate) skip_existing: bool,
+    /// Render shard I of N (0-based) of the selected frames, a contiguous block of them, so
+    /// N processes together render each frame once; `slurm` reads SLURM_ARRAY_TASK_ID,
+    /// SLURM_ARRAY_TASK_COUNT and SLURM_ARRAY_TASK_MIN (a task of sbatch --array).
+    #[arg(long, value_name = "I/N|slurm")]
+    pub(crate) shard: Option<String>,
+    /// Render nothing: check that every file of the selected frames (of the shard, with
+    /// --shard) exists, decodes and has its camera's size; list the others and fail if any.
+    #[arg(long, conflicts_with_all = ["overwrite", "skip_existing", "export_cameras"])]
+    pub(crate) verify: bool,
+    /// Spread the frames over several Vulkan devices of this machine, one renderer each:
+    /// `all` (every usable device of the default device's type) or a list of indices or
+    /// names, `0,1,3` (a device named twice gets two renderers).
+    #[arg(long, value_name = "all|N,N,..", conflicts_with_all = ["cpu", "device"])]
+    pub(crate) devices: Option<String>,
     /// Replace output files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
@@ -261,6 +277,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if args.cpu {
         check_cpu_options(args)?;
     }
+    let shard = super::common::shard(args.shard.as_deref())?;
     let out_opts = output::OutputOptions {
         mode: args.mode,
         png16: args.png16,
@@ -270,8 +287,10 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         exr_background: args.exr_background,
     };
     let format = args.format.as_deref().unwrap_or("png");
+    // Shards never write the same file: the first one writes the whole path's cameras.
+    let exports_cameras = shard.map_or(true, |s| s.index == 0);
     if let Some(path) = &args.export_cameras {
-        if !args.skip_existing {
+        if !args.skip_existing && exports_cameras {
             super::common::check_output_file(path, args.overwrite)?;
         }
     }
@@ -331,7 +350,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     };
     let path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
     if let Some(file) = &args.export_cameras {
-        export_cameras(file, &path.cameras, args)?;
+        if exports_cameras {
+            export_cameras(file, &path.cameras, args)?;
+        }
     }
     if let Some(frames) = &args.frames {
         frames.check(path.len).map_err(anyhow::Error::msg)?;
@@ -368,13 +389,34 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     } else {
         Existing::Refuse
     };
-    let plan = vksplat::sequence::plan(
-        &path.cameras,
-        &pattern,
-        args.frames.as_ref(),
-        &out_opts,
-        existing,
-    )?;
+    // Every shard plans the whole selection, so shards that would write the same file
+    // are refused by each of them; then it keeps its block.
+    let frames =
+        vksplat::sequence::plan_frames(&path.cameras, &pattern, args.frames.as_ref(), &out_opts)?;
+    let frames = match shard {
+        Some(shard) => {
+            let all = frames.len();
+            let mine = shard.take(frames);
+            match (mine.first(), mine.last()) {
+                (Some(a), Some(b)) => note!(
+                    "{shard}: {} of the {all} selected, frames {}..={}",
+                    plural(mine.len(), "frame"),
+                    a.index,
+                    b.index
+                ),
+                _ => {
+                    note!("{shard}: no frames (the selection has {all}, fewer than the shards); nothing to render");
+                    return Ok(());
+                }
+            }
+            mine
+        }
+        None => frames,
+    };
+    if args.verify {
+        return verify(&frames);
+    }
+    let plan = vksplat::sequence::prepare(frames, existing)?;
     if plan.removed_temporaries > 0 {
         note!(
             "removed {} temporary file(s) left by an interrupted run",
@@ -415,26 +457,21 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         frames_in_flight: args.frames_in_flight.unwrap_or(2),
     };
     let act = scene.activated();
-    let (summary, how) = if args.cpu {
-        render_cpu(
-            args,
-            &act,
-            &plan.frames,
-            &opts,
-            &run_opts,
-            render_features,
-            shader.as_ref(),
-        )?
+    let job = Job {
+        args,
+        scene: &act,
+        frames: &plan.frames,
+        opts: &opts,
+        run_opts: &run_opts,
+        features: render_features,
+        shader: shader.as_ref(),
+    };
+    let (summary, how) = if let Some(devices) = &args.devices {
+        render_on_devices(&job, devices)?
+    } else if args.cpu {
+        render_cpu(&job)?
     } else {
-        render_gpu(
-            args,
-            &act,
-            &plan.frames,
-            &opts,
-            &run_opts,
-            render_features,
-            shader.as_ref(),
-        )?
+        render_gpu(&job, args.gpu.context()?)?
     };
     if summary.interrupted {
         return Err(Interrupted(format!(
@@ -493,6 +530,20 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// What each renderer of `render` gets: the command's arguments, the scene, the frames to
+/// render and how to render and write them.
+#[derive(Clone, Copy)]
+struct Job<'a> {
+    args: &'a RenderArgs,
+    scene: &'a vksplat::scene::ActivatedScene,
+    frames: &'a [vksplat::sequence::FramePlan],
+    opts: &'a vksplat::cpu::RenderOptions,
+    run_opts: &'a vksplat::sequence::RunOptions,
+    /// Render the feature channels (`--mode features`, or for `shader`).
+    features: bool,
+    shader: Option<&'a vksplat::mlp::Mlp>,
+}
+
 /// Sums of per-stage times over the frames of a path, printed by `--timings`.
 #[derive(Default)]
 struct StageSums {
@@ -527,16 +578,9 @@ impl StageSums {
     }
 }
 
-fn render_cpu(
-    args: &RenderArgs,
-    scene: &vksplat::scene::ActivatedScene,
-    frames: &[vksplat::sequence::FramePlan],
-    opts: &vksplat::cpu::RenderOptions,
-    run_opts: &vksplat::sequence::RunOptions,
-    features: bool,
-    shader: Option<&vksplat::mlp::Mlp>,
-) -> Result<(Summary, String)> {
-    if args.gpu.verbose {
+fn render_cpu(job: &Job) -> Result<(Summary, String)> {
+    let (scene, opts, shader) = (job.scene, job.opts, job.shader);
+    if job.args.gpu.verbose {
         note!(
             "renderer: the CPU reference on {}",
             plural(rayon::current_num_threads(), "thread")
@@ -545,7 +589,7 @@ fn render_cpu(
     let mut sums = StageSums::default();
     let mut pairs = 0;
     let mut render = |cam: &Camera| {
-        let (mut frame, t) = if features || shader.is_some() {
+        let (mut frame, t) = if job.features || shader.is_some() {
             vksplat::cpu::render_features_timed(scene, cam, opts)
         } else {
             vksplat::cpu::render_timed(scene, cam, opts)
@@ -572,25 +616,139 @@ fn render_cpu(
         pairs = t.pairs;
         Ok(frame)
     };
-    let summary = vksplat::sequence::run(frames, &mut render, run_opts);
-    if args.timings {
+    let summary = vksplat::sequence::run(job.frames, &mut render, job.run_opts);
+    if job.args.timings {
         sums.print("CPU ms");
         note!("tile pairs {pairs} (last frame)");
     }
     Ok((summary?, "on the CPU".to_string()))
 }
 
-fn render_gpu(
-    args: &RenderArgs,
-    scene: &vksplat::scene::ActivatedScene,
-    frames: &[vksplat::sequence::FramePlan],
-    opts: &vksplat::cpu::RenderOptions,
-    run_opts: &vksplat::sequence::RunOptions,
-    features: bool,
-    shader: Option<&vksplat::mlp::Mlp>,
-) -> Result<(Summary, String)> {
+/// `--verify`: lists the frames whose files are missing, unreadable or of the wrong size
+/// on stdout, and fails when there are any.
+fn verify(frames: &[vksplat::sequence::FramePlan]) -> Result<()> {
+    let files: usize = frames.iter().map(|f| f.files.len()).sum();
+    let problems = vksplat::sequence::verify(frames);
+    for p in &problems {
+        outln!("frame {}: {}: {}", p.frame, p.path.display(), p.reason);
+    }
+    if problems.is_empty() {
+        note!(
+            "verified {} ({}): all present and readable",
+            plural(frames.len(), "frame"),
+            plural(files, "file")
+        );
+        return Ok(());
+    }
+    let bad_frames = {
+        let mut f: Vec<usize> = problems.iter().map(|p| p.frame).collect();
+        f.dedup();
+        f.len()
+    };
+    let missing = problems.iter().filter(|p| p.reason == "missing").count();
+    bail!(
+        "{bad_frames} of {} incomplete: {missing} file(s) missing, {} unreadable or of the wrong size (listed above); delete unreadable ones and rerun the same command (or array) with --skip-existing",
+        plural(frames.len(), "frame"),
+        problems.len() - missing
+    )
+}
+
+/// `--devices`: one renderer per device, each on its own thread with a contiguous block
+/// of the frames (the split of `--shard`); the progress is each block's summary.
+fn render_on_devices(job: &Job, devices: &str) -> Result<(Summary, String)> {
+    let Job { args, frames, .. } = *job;
+    let chosen: Vec<String> = if devices.trim() == "all" {
+        args.gpu
+            .context()?
+            .info()
+            .same_kind_devices
+            .iter()
+            .map(|i| i.to_string())
+            .collect()
+    } else {
+        devices
+            .split(',')
+            .map(|d| d.trim().to_string())
+            .filter(|d| !d.is_empty())
+            .collect()
+    };
+    if chosen.is_empty() {
+        bail!("--devices {devices:?}: expected all or a list of device indices or names, e.g. 0,1");
+    }
     let t0 = std::time::Instant::now();
-    let ctx = args.gpu.context()?;
+    let workers = chosen.len().min(frames.len());
+    let run_opts = vksplat::sequence::RunOptions {
+        progress: ProgressStyle::Quiet,
+        ..job.run_opts.clone()
+    };
+    let results: Vec<Result<(Summary, String)>> = std::thread::scope(|s| {
+        let handles: Vec<_> = chosen[..workers]
+            .iter()
+            .enumerate()
+            .map(|(w, device)| {
+                let block = vksplat::shard::Shard {
+                    index: w,
+                    count: workers,
+                }
+                .range(frames.len());
+                let run_opts = &run_opts;
+                s.spawn(move || {
+                    let ctx = args.gpu.context_on(Some(device))?;
+                    let block = &frames[block];
+                    let part = Job {
+                        frames: block,
+                        run_opts,
+                        ..*job
+                    };
+                    let (summary, how) = render_gpu(&part, ctx)?;
+                    note!(
+                        "device {device}: {} {how} (frames {}..={})",
+                        plural(summary.written, "frame"),
+                        block[0].index,
+                        block[block.len() - 1].index
+                    );
+                    Ok((summary, how))
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(anyhow::anyhow!("a device's render thread panicked")))
+            })
+            .collect()
+    });
+    let mut total = Summary::default();
+    let mut names = Vec::new();
+    for r in results {
+        let (s, how) = r?;
+        total.written += s.written;
+        total.render_s += s.render_s;
+        total.encode_s += s.encode_s;
+        total.appeared += s.appeared;
+        total.interrupted |= s.interrupted;
+        names.push(how);
+    }
+    total.wall_s = t0.elapsed().as_secs_f64();
+    names.dedup();
+    Ok((
+        total,
+        format!("{} ({})", names.join(", "), plural(workers, "renderer")),
+    ))
+}
+
+fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Summary, String)> {
+    let Job {
+        args,
+        scene,
+        frames,
+        opts,
+        run_opts,
+        features,
+        shader,
+    } = *job;
+    let t0 = std::time::Instant::now();
     if args.gpu.verbose {
         note!("device: {}", ctx.info());
         note!(

@@ -105,6 +105,9 @@ pub struct DeviceInfo {
     /// `shaderBufferFloat32AtomicAdd`), enabled when the device has it: the backward pass's
     /// opt-in fast accumulation uses it.
     pub float_atomic_add: bool,
+    /// Indices of the usable devices (Vulkan 1.3, a compute queue) of this device's type,
+    /// this one included: the devices `render --devices all` spreads frames over.
+    pub same_kind_devices: Vec<usize>,
 }
 
 /// Where a context's device-memory budget comes from.
@@ -588,6 +591,9 @@ impl GpuContext {
             memory_budget,
             budget_source,
             float_atomic_add: false,
+            same_kind_devices: (0..names.len())
+                .filter(|&i| usable(i) && props[i].device_type == props[index].device_type)
+                .collect(),
         };
         let needed_ops = vk::SubgroupFeatureFlags::BASIC
             | vk::SubgroupFeatureFlags::ARITHMETIC

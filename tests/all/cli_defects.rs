@@ -715,6 +715,11 @@ fn readme_and_help_agree() {
         // tools/colormap_shader.py in the RF walkthrough.
         "--channel",
         "--range",
+        // sbatch in "Rendering on a cluster".
+        "--array",
+        "--parsable",
+        "--dependency",
+        "--wrap",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {

@@ -37,6 +37,7 @@ mod reference_renderer;
 mod rf_walkthrough;
 mod sequences;
 mod shader_interface;
+mod shards;
 mod transform;
 mod view;
 mod view_browser;
