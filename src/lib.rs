@@ -24,6 +24,7 @@ pub mod scene;
 pub mod sequence;
 pub mod shard;
 pub mod stats;
+pub mod train;
 #[cfg(feature = "viewer")]
 pub mod view;
 

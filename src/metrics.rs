@@ -250,7 +250,7 @@ pub const SSIM_C1: f64 = 0.01 * 0.01;
 pub const SSIM_C2: f64 = 0.03 * 0.03;
 
 /// The normalised 1D Gaussian of the SSIM window (`SSIM_WINDOW` taps, sigma `SSIM_SIGMA`).
-fn ssim_taps() -> [f64; SSIM_WINDOW] {
+pub(crate) fn ssim_taps() -> [f64; SSIM_WINDOW] {
     let half = (SSIM_WINDOW / 2) as f64;
     let mut g = [0.0; SSIM_WINDOW];
     for (i, w) in g.iter_mut().enumerate() {
@@ -367,6 +367,63 @@ pub fn ssim(reference: &[f32], test: &[f32], width: usize, height: usize, channe
             .sum::<f64>();
     }
     total / reference.len() as f64
+}
+
+/// [`ssim`] of `image` against `target` and its gradient with respect to `image` (what a
+/// trainer differentiates: the original's `ssim(rendered, gt)`), in `f64`. With the local
+/// moments `mx = E[x]`, `Exx = E[x^2]`, `Exy = E[xy]` (the Gaussian window, zero padding),
+/// `S = A1 A2 / (B1 B2)`, `A1 = 2 mx my + C1`, `A2 = 2 (Exy - mx my) + C2`,
+/// `B1 = mx^2 + my^2 + C1`, `B2 = (Exx - mx^2) + (Eyy - my^2) + C2`; the window is
+/// symmetric, so the adjoint of each filtering is the same filtering and
+/// `dS/dx(p) = F[dS/dmx](p) + 2 x(p) F[dS/dExx](p) + y(p) F[dS/dExy](p)`, over `n` values.
+pub fn ssim_with_gradient(
+    image: &[f64],
+    target: &[f64],
+    width: usize,
+    height: usize,
+    channels: usize,
+) -> (f64, Vec<f64>) {
+    assert_eq!(image.len(), target.len(), "images of different sizes");
+    assert_eq!(image.len(), width * height * channels, "size mismatch");
+    let n = image.len();
+    if n == 0 {
+        return (1.0, Vec::new());
+    }
+    let taps = ssim_taps();
+    let filter = |p: &[f64]| separable_filter(p, width, height, &taps, &taps, Padding::Zero);
+    let mut total = 0.0;
+    let mut grad = vec![0.0; n];
+    for c in 0..channels {
+        let plane =
+            |v: &[f64]| -> Vec<f64> { v.iter().skip(c).step_by(channels).copied().collect() };
+        let (x, y) = (plane(image), plane(target));
+        let mu_x = filter(&x);
+        let mu_y = filter(&y);
+        let xx = filter(&x.iter().map(|v| v * v).collect::<Vec<_>>());
+        let yy = filter(&y.iter().map(|v| v * v).collect::<Vec<_>>());
+        let xy = filter(&x.iter().zip(&y).map(|(a, b)| a * b).collect::<Vec<_>>());
+        let pixels = x.len();
+        let (mut g_m, mut g_xx, mut g_xy) =
+            (vec![0.0; pixels], vec![0.0; pixels], vec![0.0; pixels]);
+        for i in 0..pixels {
+            let (mx, my) = (mu_x[i], mu_y[i]);
+            let a1 = 2.0 * mx * my + SSIM_C1;
+            let a2 = 2.0 * (xy[i] - mx * my) + SSIM_C2;
+            let b1 = mx * mx + my * my + SSIM_C1;
+            let b2 = (xx[i] - mx * mx) + (yy[i] - my * my) + SSIM_C2;
+            let s = a1 * a2 / (b1 * b2);
+            total += s;
+            g_m[i] = 2.0 * my * a2 / (b1 * b2) - 2.0 * mx * s / b1 + 2.0 * mx * s / b2
+                - 2.0 * my * a1 / (b1 * b2);
+            g_xx[i] = -s / b2;
+            g_xy[i] = 2.0 * a1 / (b1 * b2);
+        }
+        let (f_m, f_xx, f_xy) = (filter(&g_m), filter(&g_xx), filter(&g_xy));
+        for i in 0..pixels {
+            grad[i * channels + c] = (f_m[i] + 2.0 * x[i] * f_xx[i] + y[i] * f_xy[i]) / n as f64;
+        }
+    }
+    (total / n as f64, grad)
 }
 
 /// FLIP's default observer: 0.7 m from a 0.7 m wide display of 3840 pixels, about 67.02

@@ -110,6 +110,11 @@ shader_bindings! {
     preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS, FEATURE_GRADS }
     shade_bwd { WORDS, FEATURES, ALPHA, GRAD_COLOR, GRAD_FEATURES, SCRATCH, PARTIALS }
     mlp_grad_reduce { PARTIALS, GRADS }
+    ssim_prepare { IMAGE, TARGET, PLANES }
+    ssim_filter { SRC, DST }
+    ssim_map { MOMENTS, IMAGE, TARGET, MAPS, SUMS }
+    ssim_grad { FILTERED, IMAGE, TARGET, GRAD }
+    loss_reduce { VALUES, SUMS }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -242,6 +247,11 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "shade",
         "shade_bwd",
         "mlp_grad_reduce",
+        "ssim_prepare",
+        "ssim_filter",
+        "ssim_map",
+        "ssim_grad",
+        "loss_reduce",
         "count64_test",
     ] {
         out.push(v(shader, &[]));

@@ -26,6 +26,7 @@ mod gpu_sort;
 mod gpu_stages;
 mod gradients;
 mod limits;
+mod loss;
 mod malformed;
 mod mlp;
 mod output;

@@ -69,7 +69,8 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     Pack::new(ctx).expect("pack");
     Shade::new(ctx).expect("shade");
     ShadeBwd::new(ctx, 140, 64).expect("shade backward and its reduce");
-    built += 1 + 3 + 1 + 1 + 2;
+    vksplat::train::loss::GpuLoss::new(ctx).expect("the training loss's five stages");
+    built += 1 + 3 + 1 + 1 + 2 + 5;
     let sorts = [
         DEFAULT_SORT_CONFIG,
         SORT_CONFIG_32,

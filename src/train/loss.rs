@@ -1,0 +1,437 @@
+//! The original 3DGS training loss, `L = (1 - lambda) L1 + lambda (1 - SSIM)` with
+//! `lambda = 0.2` (`train.py`: `(1.0 - opt.lambda_dssim) * Ll1 + opt.lambda_dssim * (1.0 -
+//! ssim(image, gt_image))`), and its gradient with respect to the rendered image: on the
+//! CPU in f64 ([`loss_reference`], the reference) and on the device ([`GpuLoss`]), whose
+//! per-pixel gradient feeds the backward pass without leaving the device.
+//!
+//! L1 is the mean of `|x - y|` over every pixel and channel (its derivative at `x == y`
+//! is 0, as torch's); SSIM is [`crate::metrics::ssim`] (11x11 Gaussian window, sigma 1.5,
+//! zero padding, the mean over pixels and channels), differentiated as
+//! [`crate::metrics::ssim_with_gradient`] documents.
+//!
+//! The device runs seven passes, each a dispatch with its barrier: the five quantities SSIM
+//! compares (`ssim_prepare`), the window along x and y (`ssim_filter`), SSIM and its
+//! derivatives per pixel (`ssim_map`), the window again (the adjoint), the gradient
+//! (`ssim_grad`); the sums of |x - y| and SSIM are added in a fixed order
+//! (`loss_reduce`), so the loss and its gradient are the same bits run after run, and only
+//! the two sums (8 bytes) are read back.
+
+use crate::gpu::shader::{by_binding, BindingKind};
+use crate::gpu::shader_set::bindings;
+use crate::gpu::sync::{barrier, Access};
+use crate::gpu::{
+    BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind,
+};
+
+/// The original's weight of the D-SSIM term (`lambda_dssim`).
+pub const LAMBDA_DSSIM: f32 = 0.2;
+
+/// A loss and its parts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossValue {
+    /// `(1 - lambda) l1 + lambda (1 - ssim)`.
+    pub total: f64,
+    /// Mean absolute error.
+    pub l1: f64,
+    /// Mean SSIM.
+    pub ssim: f64,
+}
+
+impl LossValue {
+    fn of(l1: f64, ssim: f64, lambda: f64) -> Self {
+        LossValue {
+            total: (1.0 - lambda) * l1 + lambda * (1.0 - ssim),
+            l1,
+            ssim,
+        }
+    }
+}
+
+/// The loss of `image` against `target` (`H x W x C`, pixel-major) and its gradient with
+/// respect to `image`, in f64.
+pub fn loss_reference(
+    image: &[f64],
+    target: &[f64],
+    width: usize,
+    height: usize,
+    channels: usize,
+    lambda: f64,
+) -> (LossValue, Vec<f64>) {
+    let n = image.len().max(1) as f64;
+    let (ssim, g_ssim) = crate::metrics::ssim_with_gradient(image, target, width, height, channels);
+    let l1 = image
+        .iter()
+        .zip(target)
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f64>()
+        / n;
+    let grad = image
+        .iter()
+        .zip(target)
+        .zip(&g_ssim)
+        .map(|((a, b), gs)| {
+            let d = a - b;
+            let sign = if d > 0.0 {
+                1.0
+            } else if d < 0.0 {
+                -1.0
+            } else {
+                0.0
+            };
+            (1.0 - lambda) * sign / n - lambda * gs
+        })
+        .collect();
+    (LossValue::of(l1, ssim, lambda), grad)
+}
+
+/// Values a `loss_reduce` workgroup sums.
+const REDUCE_SPAN: u64 = 4096;
+/// Invocations per workgroup of the per-pixel passes.
+const PIXEL_GROUP: u64 = 64;
+/// Workgroups along x of a per-pixel dispatch (the rest along y).
+const GROUPS_X: u64 = 32_768;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct FilterPush {
+    size: [u32; 4],
+    taps: [[f32; 4]; 3],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GradPush {
+    size: [u32; 4],
+    scale: [f32; 4],
+}
+
+/// The buffers of one loss evaluation: the rendered image and the target (vec4 per pixel,
+/// rgb), and the gradient written (vec4 per pixel, rgb; w 0).
+pub struct LossBuffers<'a> {
+    /// The rendered image.
+    pub image: BufferSlice<'a>,
+    /// The target image.
+    pub target: BufferSlice<'a>,
+    /// Out: dL/d(image).
+    pub grad: BufferSlice<'a>,
+}
+
+/// The loss on the device: its pipelines and work buffers (grown as images need).
+pub struct GpuLoss {
+    prepare: ComputePipeline,
+    filter: ComputePipeline,
+    map: ComputePipeline,
+    grad: ComputePipeline,
+    reduce: ComputePipeline,
+    work: Option<(u64, [GpuBuffer; 5])>,
+    io: Option<(u64, [GpuBuffer; 3])>,
+}
+
+fn pixel_groups(pixels: u64) -> [u32; 3] {
+    let groups = pixels.div_ceil(PIXEL_GROUP).max(1);
+    [
+        groups.min(GROUPS_X) as u32,
+        groups.div_ceil(GROUPS_X) as u32,
+        1,
+    ]
+}
+
+fn buffer(ctx: &GpuContext, name: &str, bytes: u64) -> GpuResult<GpuBuffer> {
+    let max = u64::from(ctx.info().max_storage_buffer_range);
+    if bytes > max {
+        return Err(GpuError::DeviceLimit {
+            limit: "maxStorageBufferRange",
+            needed: bytes,
+            max,
+            message: format!(
+                "the {name} need {bytes} bytes in one storage buffer, but this device binds at most {max} (maxStorageBufferRange); use smaller images"
+            ),
+        });
+    }
+    GpuBuffer::new(ctx, name, bytes.max(16), MemoryKind::Device)
+}
+
+impl GpuLoss {
+    /// Builds the pipelines.
+    pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        let s = BindingKind::StorageBuffer;
+        let build = |name: &str, kinds: &[BindingKind], push: usize, size: u32| {
+            ComputePipeline::from_embedded(ctx, name, &[], kinds, push as u32, size)
+        };
+        use bindings::{loss_reduce, ssim_filter, ssim_grad, ssim_map, ssim_prepare};
+        Ok(GpuLoss {
+            prepare: build(
+                "ssim_prepare",
+                &by_binding([
+                    (ssim_prepare::IMAGE, s),
+                    (ssim_prepare::TARGET, s),
+                    (ssim_prepare::PLANES, s),
+                ])?,
+                16,
+                64,
+            )?,
+            filter: build(
+                "ssim_filter",
+                &by_binding([(ssim_filter::SRC, s), (ssim_filter::DST, s)])?,
+                std::mem::size_of::<FilterPush>(),
+                64,
+            )?,
+            map: build(
+                "ssim_map",
+                &by_binding([
+                    (ssim_map::MOMENTS, s),
+                    (ssim_map::IMAGE, s),
+                    (ssim_map::TARGET, s),
+                    (ssim_map::MAPS, s),
+                    (ssim_map::SUMS, s),
+                ])?,
+                16,
+                64,
+            )?,
+            grad: build(
+                "ssim_grad",
+                &by_binding([
+                    (ssim_grad::FILTERED, s),
+                    (ssim_grad::IMAGE, s),
+                    (ssim_grad::TARGET, s),
+                    (ssim_grad::GRAD, s),
+                ])?,
+                std::mem::size_of::<GradPush>(),
+                64,
+            )?,
+            reduce: build(
+                "loss_reduce",
+                &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
+                16,
+                256,
+            )?,
+            work: None,
+            io: None,
+        })
+    }
+
+    /// Device bytes of the work buffers.
+    pub fn device_bytes(&self) -> u64 {
+        let work = self
+            .work
+            .as_ref()
+            .map_or(0, |(_, b)| b.iter().map(|b| b.size()).sum());
+        let io = self
+            .io
+            .as_ref()
+            .map_or(0, |(_, b)| b.iter().map(|b| b.size()).sum());
+        work + io
+    }
+
+    fn ensure_work(&mut self, ctx: &GpuContext, pixels: u64) -> GpuResult<()> {
+        if self.work.as_ref().is_some_and(|(p, _)| *p >= pixels) {
+            return Ok(());
+        }
+        self.work = None;
+        let sums = pixels.div_ceil(REDUCE_SPAN).max(1);
+        self.work = Some((
+            pixels,
+            [
+                buffer(ctx, "loss planes", pixels * 5 * 16)?,
+                buffer(ctx, "loss filtered planes", pixels * 5 * 16)?,
+                buffer(ctx, "loss per-pixel sums", pixels * 8)?,
+                buffer(ctx, "loss partial sums", sums * 8)?,
+                buffer(ctx, "loss partial sums (2)", sums * 8)?,
+            ],
+        ));
+        Ok(())
+    }
+
+    /// Records the loss of `bufs.image` against `bufs.target` (`width x height`) and its
+    /// gradient into `bufs.grad`; the two sums (|x - y| and SSIM over every pixel and
+    /// channel) end in the returned buffer's first 8 bytes. The caller orders the inputs'
+    /// writes before and the outputs' reads after.
+    pub fn record(
+        &mut self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        bufs: &LossBuffers,
+        width: u32,
+        height: u32,
+        lambda: f32,
+    ) -> GpuResult<&GpuBuffer> {
+        let pixels = u64::from(width) * u64::from(height);
+        if pixels == 0 {
+            return Err(GpuError::InvalidArgument(
+                "an empty image has no loss".into(),
+            ));
+        }
+        for (name, b) in [
+            ("image", &bufs.image),
+            ("target", &bufs.target),
+            ("gradient", &bufs.grad),
+        ] {
+            if b.size < pixels * 16 {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the {name} buffer holds {} bytes, a {width}x{height} image needs {}",
+                    b.size,
+                    pixels * 16
+                )));
+            }
+        }
+        self.ensure_work(ctx, pixels)?;
+        let (_, [planes, filtered, sums, part_a, part_b]) = self.work.as_ref().expect("made above");
+        let groups = pixel_groups(pixels);
+        let size = [width, height, 0, 0];
+        let taps64 = crate::metrics::ssim_taps();
+        let mut taps = [[0f32; 4]; 3];
+        for (k, t) in taps64.iter().enumerate() {
+            taps[k / 4][k % 4] = *t as f32;
+        }
+        let step = |cmd| barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+        self.prepare.dispatch(
+            ctx,
+            cmd,
+            &[bufs.image, bufs.target, planes.whole()],
+            bytemuck::bytes_of(&size),
+            groups,
+        )?;
+        step(cmd);
+        // The window over the planes, then over the derivative maps: x, then y.
+        let filter = |cmd, src: &GpuBuffer, dst: &GpuBuffer, vecs: u32| -> GpuResult<()> {
+            for (axis, (a, b)) in [(0u32, (src, dst)), (1u32, (dst, src))] {
+                let push = FilterPush {
+                    size: [width, height, vecs, axis],
+                    taps,
+                };
+                self.filter.dispatch(
+                    ctx,
+                    cmd,
+                    &[a.whole(), b.whole()],
+                    bytemuck::bytes_of(&push),
+                    groups,
+                )?;
+                step(cmd);
+            }
+            Ok(())
+        };
+        // planes -> filtered (x) -> planes (y): the moments end in `planes`.
+        filter(cmd, planes, filtered, 5)?;
+        self.map.dispatch(
+            ctx,
+            cmd,
+            &[
+                planes.whole(),
+                bufs.image,
+                bufs.target,
+                filtered.whole(),
+                sums.whole(),
+            ],
+            bytemuck::bytes_of(&size),
+            groups,
+        )?;
+        step(cmd);
+        // filtered (the maps) -> planes (x) -> filtered (y).
+        filter(cmd, filtered, planes, 3)?;
+        let n = (pixels * 3) as f32;
+        let push = GradPush {
+            size,
+            scale: [(1.0 - lambda) / n, lambda / n, 0.0, 0.0],
+        };
+        self.grad.dispatch(
+            ctx,
+            cmd,
+            &[filtered.whole(), bufs.image, bufs.target, bufs.grad],
+            bytemuck::bytes_of(&push),
+            groups,
+        )?;
+        // The sums, 4096 to one per pass.
+        let mut count = pixels;
+        let mut src = sums;
+        let mut dst = part_a;
+        loop {
+            let out = count.div_ceil(REDUCE_SPAN);
+            self.reduce.dispatch(
+                ctx,
+                cmd,
+                &[src.whole(), dst.whole()],
+                bytemuck::bytes_of(&[count as u32, 0, 0, 0]),
+                [out as u32, 1, 1],
+            )?;
+            step(cmd);
+            if out == 1 {
+                return Ok(dst);
+            }
+            count = out;
+            src = dst;
+            dst = if std::ptr::eq(dst, part_a) {
+                part_b
+            } else {
+                part_a
+            };
+        }
+    }
+
+    /// The loss of `image` against `target` (`width x height`, RGB, pixel-major; only the
+    /// first three channels of each pixel are read) and its gradient, through the device:
+    /// uploads both, runs [`Self::record`], reads back the gradient (`width * height * 3`)
+    /// and the two sums.
+    pub fn compute(
+        &mut self,
+        ctx: &GpuContext,
+        image: &[[f32; 3]],
+        target: &[[f32; 3]],
+        width: u32,
+        height: u32,
+        lambda: f32,
+    ) -> GpuResult<(LossValue, Vec<[f32; 3]>)> {
+        let pixels = u64::from(width) * u64::from(height);
+        if image.len() as u64 != pixels || target.len() as u64 != pixels {
+            return Err(GpuError::InvalidArgument(format!(
+                "the image has {} pixels and the target {}, a {width}x{height} image {pixels}",
+                image.len(),
+                target.len()
+            )));
+        }
+        if !self.io.as_ref().is_some_and(|(p, _)| *p >= pixels) {
+            self.io = None;
+            self.io = Some((
+                pixels,
+                [
+                    buffer(ctx, "loss image", pixels * 16)?,
+                    buffer(ctx, "loss target", pixels * 16)?,
+                    buffer(ctx, "loss gradient", pixels * 16)?,
+                ],
+            ));
+        }
+        let io = self.io.take().expect("made above");
+        let widen = |v: &[[f32; 3]]| -> Vec<[f32; 4]> {
+            v.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect()
+        };
+        let result = (|| {
+            let [img, tgt, grad] = &io.1;
+            img.upload(ctx, &widen(image))?;
+            tgt.upload(ctx, &widen(target))?;
+            let bufs = LossBuffers {
+                image: img.whole(),
+                target: tgt.whole(),
+                grad: grad.whole(),
+            };
+            let mut sums_buffer = None;
+            ctx.submit_and_wait("loss", |cmd| {
+                barrier(ctx, cmd, Access::Any, Access::Any);
+                let b = self.record(ctx, cmd, &bufs, width, height, lambda)?;
+                sums_buffer = Some(b.handle());
+                barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
+                Ok(())
+            })?;
+            let (_, work) = self.work.as_ref().expect("recorded");
+            let sums_buf = work
+                .iter()
+                .find(|b| Some(b.handle()) == sums_buffer)
+                .expect("one of the work buffers");
+            let sums: Vec<[f32; 2]> = sums_buf.read(ctx, 1)?;
+            let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
+            let n = (pixels * 3) as f64;
+            let value = LossValue::of(sums[0][0] as f64 / n, sums[0][1] as f64 / n, lambda as f64);
+            Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))
+        })();
+        self.io = Some(io);
+        result
+    }
+}
