@@ -45,6 +45,9 @@ enum Command {
     /// Render a model's cameras and compare them with the photos (PSNR, SSIM, FLIP).
     #[command(allow_negative_numbers = true)]
     Eval(cli::eval::EvalArgs),
+    /// Train 3DGS from photos (a COLMAP data set), as the original train.py.
+    #[command(allow_negative_numbers = true)]
+    Train(cli::train::TrainArgs),
     /// Serve an interactive viewer of a scene to a browser (orbit, fly, filters, cameras, keyframes).
     #[command(allow_negative_numbers = true)]
     View(cli::view::ViewArgs),
@@ -61,6 +64,7 @@ fn main() -> ExitCode {
         Command::Convert(args) => cli::convert::convert(args),
         Command::Compare(args) => cli::compare::compare(args),
         Command::Eval(args) => cli::eval::eval(args),
+        Command::Train(args) => cli::train::train(args),
         Command::View(args) => cli::view::view(args),
     };
     // A closed pipe (`vksplat info scene.ply | head`) is not an error; any other failure to

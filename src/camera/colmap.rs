@@ -542,3 +542,170 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 }
+
+/// A point of a COLMAP model's `points3D`: position and colour (0-255).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point3D {
+    /// World position.
+    pub position: [f64; 3],
+    /// RGB.
+    pub color: [u8; 3],
+}
+
+/// The `points3D` of the COLMAP model under `dir` (text or binary, beside the cameras
+/// [`find_model`] finds); `None` when the model has no points file.
+pub fn load_colmap_points(dir: &Path) -> Result<Option<Vec<Point3D>>, CameraError> {
+    let (model_dir, format) = find_model(dir)?;
+    let binary = format == CameraFormat::ColmapBinary;
+    let path = model_dir.join(if binary {
+        "points3D.bin"
+    } else {
+        "points3D.txt"
+    });
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let bytes = std::fs::read(&path).map_err(|source| CameraError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    let points = if binary {
+        parse_points_binary(&bytes, &path)?
+    } else {
+        let text =
+            String::from_utf8(bytes).map_err(|_| invalid(&path, "is not UTF-8 text".into()))?;
+        parse_points_text(&text, &path)?
+    };
+    Ok(Some(points))
+}
+
+/// Parses `points3D.txt`: `POINT3D_ID X Y Z R G B ERROR TRACK[]` per line.
+pub fn parse_points_text(text: &str, path: &Path) -> Result<Vec<Point3D>, CameraError> {
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let bad = |what: &str| invalid(path, format!("line {}: {what}", n + 1));
+        if f.len() < 8 {
+            return Err(bad("a point needs ID X Y Z R G B ERROR"));
+        }
+        let num = |s: &str| -> Result<f64, CameraError> {
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| bad(&format!("{s:?} is not a finite number")))
+        };
+        let byte = |s: &str| -> Result<u8, CameraError> {
+            s.parse::<u8>()
+                .map_err(|_| bad(&format!("{s:?} is not a colour value 0-255")))
+        };
+        out.push(Point3D {
+            position: [num(f[1])?, num(f[2])?, num(f[3])?],
+            color: [byte(f[4])?, byte(f[5])?, byte(f[6])?],
+        });
+    }
+    Ok(out)
+}
+
+/// Parses `points3D.bin` (COLMAP's `write_points3D_binary`).
+pub fn parse_points_binary(bytes: &[u8], path: &Path) -> Result<Vec<Point3D>, CameraError> {
+    let short = || invalid(path, "ends early: the file is truncated".into());
+    let mut at = 0usize;
+    let mut take = |n: usize| -> Result<&[u8], CameraError> {
+        let s = bytes.get(at..at + n).ok_or_else(short)?;
+        at += n;
+        Ok(s)
+    };
+    let u64_of = |b: &[u8]| u64::from_le_bytes(b.try_into().expect("8 bytes"));
+    let f64_of = |b: &[u8]| f64::from_le_bytes(b.try_into().expect("8 bytes"));
+    let count = u64_of(take(8)?);
+    if count > (bytes.len() / 43) as u64 {
+        return Err(invalid(
+            path,
+            format!("says it holds {count} points, more than its size allows"),
+        ));
+    }
+    let mut out = Vec::with_capacity(count as usize);
+    for _ in 0..count {
+        let _id = take(8)?;
+        let p = [f64_of(take(8)?), f64_of(take(8)?), f64_of(take(8)?)];
+        let c = take(3)?;
+        let _error = take(8)?;
+        let track = u64_of(take(8)?);
+        let track_bytes = usize::try_from(track)
+            .ok()
+            .and_then(|t| t.checked_mul(8))
+            .ok_or_else(short)?;
+        take(track_bytes)?;
+        if p.iter().any(|v| !v.is_finite()) {
+            return Err(invalid(path, "holds a point that is not finite".into()));
+        }
+        out.push(Point3D {
+            position: p,
+            color: [c[0], c[1], c[2]],
+        });
+    }
+    Ok(out)
+}
+
+/// A COLMAP text model of `cameras` (one PINHOLE camera each, images named by the
+/// cameras' names) and `points`: `cameras.txt`, `images.txt`, `points3D.txt`, what
+/// [`load_colmap_model`] and [`load_colmap_points`] read back.
+pub fn to_text_model(cameras: &[Camera], points: &[Point3D]) -> [(String, String); 3] {
+    use std::fmt::Write;
+    let mut cams = String::from("# Camera list: CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n");
+    let mut images = String::from(
+        "# Image list: IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME, then POINTS2D[]\n",
+    );
+    for (i, c) in cameras.iter().enumerate() {
+        let _ = writeln!(
+            cams,
+            "{} PINHOLE {} {} {} {} {} {}",
+            i + 1,
+            c.width,
+            c.height,
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy
+        );
+        let q = glam::DQuat::from_mat3(&c.rotation.as_dmat3()).normalize();
+        let t = c.translation;
+        let _ = writeln!(
+            images,
+            "{} {} {} {} {} {} {} {} {} {}\n",
+            i + 1,
+            q.w,
+            q.x,
+            q.y,
+            q.z,
+            t.x,
+            t.y,
+            t.z,
+            i + 1,
+            c.name
+        );
+    }
+    let mut pts = String::from("# 3D point list: POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[]\n");
+    for (i, p) in points.iter().enumerate() {
+        let _ = writeln!(
+            pts,
+            "{} {} {} {} {} {} {} 0",
+            i + 1,
+            p.position[0],
+            p.position[1],
+            p.position[2],
+            p.color[0],
+            p.color[1],
+            p.color[2]
+        );
+    }
+    [
+        ("cameras.txt".into(), cams),
+        ("images.txt".into(), images),
+        ("points3D.txt".into(), pts),
+    ]
+}

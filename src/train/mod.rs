@@ -3,4 +3,7 @@
 //! exist so far: the original 3DGS loss with its gradient, on the CPU (the reference) and
 //! on the device ([`loss`]).
 
+pub mod data;
 pub mod loss;
+pub mod model;
+pub mod run;

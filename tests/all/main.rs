@@ -39,6 +39,7 @@ mod rf_walkthrough;
 mod sequences;
 mod shader_interface;
 mod shards;
+mod train;
 mod transform;
 mod view;
 mod view_browser;

@@ -1,0 +1,231 @@
+//! Training data: a COLMAP data set (`images/` and `sparse/0/` text or binary, pinhole
+//! cameras; `points3D` as the initial Gaussians), its photos at the training resolution,
+//! the train/test split of the original `--eval` (every 8th image in name order is held
+//! out: the `llffhold` rule `vksplat eval` uses) and the scene extent the learning rates
+//! and densification scale with.
+
+use crate::camera::colmap::{self, Point3D};
+use crate::camera::Camera;
+use std::path::{Path, PathBuf};
+
+/// Every `LLFF_HOLD`-th image (in name order, from the first) is a test image with `--eval`.
+pub const LLFF_HOLD: usize = 8;
+
+/// One photo and its camera.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The camera (at the training resolution); its name is the image's file name.
+    pub camera: Camera,
+    /// The photo, RGB in [0, 1] as stored (8-bit values / 255), pixel-major.
+    pub image: Vec<[f32; 3]>,
+}
+
+/// A data set ready to train on.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    /// Where it was read from.
+    pub source: PathBuf,
+    /// Training views, in image-name order.
+    pub train: Vec<View>,
+    /// Held-out views (with `--eval`), in image-name order.
+    pub test: Vec<View>,
+    /// The COLMAP model's points, if it has any.
+    pub points: Option<Vec<Point3D>>,
+    /// The original's `cameras_extent`: 1.1 times the largest distance of a training
+    /// camera's centre from their mean.
+    pub extent: f32,
+}
+
+/// An error naming the file and what is wrong with it.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {message}")]
+pub struct DataError {
+    /// The file or directory.
+    pub path: PathBuf,
+    /// What is wrong, one sentence.
+    pub message: String,
+}
+
+fn data_error(path: &Path, message: impl Into<String>) -> DataError {
+    DataError {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// How the photos are scaled, as the original's `-r`: 1, 2, 4 or 8 divide the size; any
+/// other value is a width in pixels (the height follows the aspect ratio).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Resolution(pub u32);
+
+impl Resolution {
+    /// The training size of a `width x height` photo.
+    pub fn size(self, width: u32, height: u32) -> (u32, u32) {
+        match self.0 {
+            0 | 1 => (width, height),
+            d @ (2 | 4 | 8) => ((width / d).max(1), (height / d).max(1)),
+            w => {
+                let scale = w as f64 / width as f64;
+                (w, ((height as f64 * scale).round() as u32).max(1))
+            }
+        }
+    }
+}
+
+/// The camera centre in world space.
+pub fn camera_centre(c: &Camera) -> glam::Vec3 {
+    -(c.rotation.transpose() * c.translation)
+}
+
+/// Reads the COLMAP data set at `dir`: the model (`dir/sparse/0`, `dir/sparse` or `dir`),
+/// the photos in `dir/images` (PNG or JPEG, the size the model says, scaled to
+/// `resolution`), and with `eval` holds out every 8th image.
+pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dataset, DataError> {
+    let (mut cameras, _) =
+        colmap::load_colmap_model(dir).map_err(|e| data_error(dir, e.to_string()))?;
+    if cameras.is_empty() {
+        return Err(data_error(dir, "its COLMAP model registers no images"));
+    }
+    cameras.sort_by(|a, b| a.name.cmp(&b.name));
+    let points = colmap::load_colmap_points(dir).map_err(|e| data_error(dir, e.to_string()))?;
+    if let Some(p) = &points {
+        if p.is_empty() {
+            return Err(data_error(
+                &dir.join("sparse"),
+                "the COLMAP model's points3D holds no points; add points or remove the file to start from random Gaussians",
+            ));
+        }
+    }
+    let images = dir.join("images");
+    if !images.is_dir() {
+        return Err(data_error(
+            &images,
+            "is not a directory: the photos must be in DATASET/images",
+        ));
+    }
+    let views: Vec<Result<View, DataError>> = {
+        use rayon::prelude::*;
+        cameras
+            .par_iter()
+            .map(|cam| load_view(&images, cam, resolution))
+            .collect()
+    };
+    let mut train = Vec::new();
+    let mut test = Vec::new();
+    for (k, v) in views.into_iter().enumerate() {
+        let v = v?;
+        if eval && k % LLFF_HOLD == 0 {
+            test.push(v);
+        } else {
+            train.push(v);
+        }
+    }
+    if train.is_empty() {
+        return Err(data_error(
+            dir,
+            "no training image is left after holding out the test images",
+        ));
+    }
+    let centres: Vec<glam::Vec3> = train.iter().map(|v| camera_centre(&v.camera)).collect();
+    let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
+    let radius = centres
+        .iter()
+        .map(|c| c.distance(mean))
+        .fold(0.0f32, f32::max);
+    Ok(Dataset {
+        source: dir.to_path_buf(),
+        train,
+        test,
+        points,
+        extent: (radius * 1.1).max(1e-6),
+    })
+}
+
+fn load_view(images: &Path, cam: &Camera, resolution: Resolution) -> Result<View, DataError> {
+    let path = images.join(&cam.name);
+    let planes =
+        crate::image_file::read_image(&path).map_err(|e| data_error(&path, e.to_string()))?;
+    if (planes.width, planes.height) != (cam.width, cam.height) {
+        return Err(data_error(
+            &path,
+            format!(
+                "is {}x{}, but its camera in the COLMAP model is {}x{}",
+                planes.width, planes.height, cam.width, cam.height
+            ),
+        ));
+    }
+    let channel = |names: &[&str]| {
+        names
+            .iter()
+            .find_map(|n| planes.channel(n))
+            .map(|c| c.values.clone())
+    };
+    let (r, g, b) = match (
+        channel(&["R"]),
+        channel(&["G"]),
+        channel(&["B"]),
+        channel(&["Y"]),
+    ) {
+        (Some(r), Some(g), Some(b), _) => (r, g, b),
+        (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
+        _ => return Err(data_error(&path, "has no colour or grey channels")),
+    };
+    let (w, h) = resolution.size(cam.width, cam.height);
+    let full: Vec<[f32; 3]> = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
+    let image = if (w, h) == (cam.width, cam.height) {
+        full
+    } else {
+        resize(&full, cam.width, cam.height, w, h)
+    };
+    let (sx, sy) = (w as f32 / cam.width as f32, h as f32 / cam.height as f32);
+    let camera = Camera {
+        width: w,
+        height: h,
+        fx: cam.fx * sx,
+        fy: cam.fy * sy,
+        cx: cam.cx * sx,
+        cy: cam.cy * sy,
+        ..cam.clone()
+    };
+    Ok(View { camera, image })
+}
+
+/// Area-averaged downscaling (each output pixel the mean of the input pixels it covers,
+/// partially covered ones weighted).
+fn resize(src: &[[f32; 3]], sw: u32, sh: u32, dw: u32, dh: u32) -> Vec<[f32; 3]> {
+    let axis = |s: u32, d: u32| -> Vec<Vec<(usize, f32)>> {
+        let ratio = s as f64 / d as f64;
+        (0..d)
+            .map(|o| {
+                let (a, b) = (o as f64 * ratio, (o + 1) as f64 * ratio);
+                let mut taps = Vec::new();
+                let mut i = a.floor() as usize;
+                while (i as f64) < b && i < s as usize {
+                    let w = (b.min(i as f64 + 1.0) - a.max(i as f64)).max(0.0);
+                    if w > 0.0 {
+                        taps.push((i, (w / ratio) as f32));
+                    }
+                    i += 1;
+                }
+                taps
+            })
+            .collect()
+    };
+    let (xs, ys) = (axis(sw, dw), axis(sh, dh));
+    let mut out = vec![[0f32; 3]; (dw * dh) as usize];
+    for (y, ty) in ys.iter().enumerate() {
+        for (x, tx) in xs.iter().enumerate() {
+            let mut acc = [0f32; 3];
+            for &(j, wy) in ty {
+                for &(i, wx) in tx {
+                    let p = src[j * sw as usize + i];
+                    for c in 0..3 {
+                        acc[c] += wx * wy * p[c];
+                    }
+                }
+            }
+            out[y * dw as usize + x] = acc;
+        }
+    }
+    out
+}

@@ -1,0 +1,543 @@
+//! The Gaussians being trained, in the original's parameterisation (a [`Scene`]: centres,
+//! log scales, unnormalised quaternions, opacity logits, SH coefficients up to the
+//! maximum degree), its Adam optimiser with the original per-group learning rates, and the
+//! original's adaptive density control (clone, split, prune, opacity reset). Rules of the
+//! original `gaussian_model.py` and `train.py`; where they are stated in numbers, the
+//! numbers are theirs ([`Settings::default`]).
+
+use crate::camera::colmap::Point3D;
+use crate::gen::Rng;
+use crate::model::grad::{ColorParams, SplatGrads, SplatParams};
+use crate::model::sh::SH_C0;
+use crate::scene::Scene;
+
+/// The original's optimisation and densification settings (`arguments/__init__.py`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Iterations in all.
+    pub iterations: u32,
+    /// Centre learning rate at the start and the end (times the scene extent), decayed
+    /// exponentially over `position_lr_max_steps`.
+    pub position_lr_init: f32,
+    /// See `position_lr_init`.
+    pub position_lr_final: f32,
+    /// Steps of the centres' decay.
+    pub position_lr_max_steps: u32,
+    /// SH DC learning rate (the rest: a twentieth of it).
+    pub feature_lr: f32,
+    /// Opacity learning rate.
+    pub opacity_lr: f32,
+    /// Log-scale learning rate.
+    pub scaling_lr: f32,
+    /// Quaternion learning rate.
+    pub rotation_lr: f32,
+    /// Below `percent_dense * extent` a densified Gaussian is cloned, above it split.
+    pub percent_dense: f32,
+    /// Weight of D-SSIM in the loss.
+    pub lambda_dssim: f32,
+    /// Densify every this many iterations ...
+    pub densification_interval: u32,
+    /// ... from this iteration ...
+    pub densify_from_iter: u32,
+    /// ... until this one.
+    pub densify_until_iter: u32,
+    /// Average 2D-mean gradient (NDC units, as the original's) above which a Gaussian is
+    /// densified.
+    pub densify_grad_threshold: f32,
+    /// Opacities are reset to at most 0.01 every this many iterations.
+    pub opacity_reset_interval: u32,
+    /// The SH degree in use rises by one every this many iterations.
+    pub sh_increase_interval: u32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            iterations: 30_000,
+            position_lr_init: 0.00016,
+            position_lr_final: 0.0000016,
+            position_lr_max_steps: 30_000,
+            feature_lr: 0.0025,
+            opacity_lr: 0.025,
+            scaling_lr: 0.005,
+            rotation_lr: 0.001,
+            percent_dense: 0.01,
+            lambda_dssim: 0.2,
+            densification_interval: 100,
+            densify_from_iter: 500,
+            densify_until_iter: 15_000,
+            densify_grad_threshold: 0.0002,
+            opacity_reset_interval: 3000,
+            sh_increase_interval: 1000,
+        }
+    }
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+fn logit(p: f32) -> f32 {
+    (p / (1.0 - p)).ln()
+}
+
+/// Adam's moments of one parameter array.
+#[derive(Clone, Debug, Default)]
+struct Moments {
+    m: Vec<f32>,
+    v: Vec<f32>,
+}
+
+impl Moments {
+    fn zeros(n: usize) -> Self {
+        Moments {
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+        }
+    }
+
+    /// torch.optim.Adam's step (betas 0.9, 0.999, eps 1e-15 as the original sets it) with
+    /// `lr(i)` per value, at step `t` (1-based).
+    fn step(&mut self, params: &mut [f32], grads: &[f32], t: u32, lr: impl Fn(usize) -> f32) {
+        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-15f32);
+        let c1 = 1.0 - b1.powi(t as i32);
+        let c2 = (1.0 - b2.powi(t as i32)).sqrt();
+        for (i, ((p, g), (m, v))) in params
+            .iter_mut()
+            .zip(grads)
+            .zip(self.m.iter_mut().zip(self.v.iter_mut()))
+            .enumerate()
+        {
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            *p -= lr(i) / c1 * *m / (v.sqrt() / c2 + eps);
+        }
+    }
+
+    fn keep(&mut self, stride: usize, keep: &[bool]) {
+        for a in [&mut self.m, &mut self.v] {
+            *a = a
+                .chunks_exact(stride)
+                .zip(keep)
+                .filter(|(_, k)| **k)
+                .flat_map(|(c, _)| c.iter().copied())
+                .collect();
+        }
+    }
+
+    fn grow(&mut self, values: usize) {
+        self.m.resize(self.m.len() + values, 0.0);
+        self.v.resize(self.v.len() + values, 0.0);
+    }
+}
+
+/// The Gaussians, their optimiser state and their densification statistics.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// The parameters, SH up to the maximum degree.
+    pub scene: Scene,
+    /// The SH degree the renders use now.
+    pub active_sh_degree: u32,
+    moments: [Moments; 5],
+    /// Adam steps taken per group (torch keeps the count through densification).
+    steps: [u32; 5],
+    /// Per Gaussian: the sum of its 2D-mean gradient norms (NDC) and how many views saw it.
+    grad_accum: Vec<f32>,
+    denom: Vec<u32>,
+    max_radii: Vec<f32>,
+}
+
+/// The mean squared distance to the three nearest other points (the original's
+/// `distCUDA2`), through a uniform grid.
+pub fn mean_sq_dist3(points: &[[f32; 3]]) -> Vec<f32> {
+    use std::collections::HashMap;
+    let n = points.len();
+    if n < 2 {
+        return vec![0.01; n];
+    }
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for p in points {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let volume: f32 = (0..3).map(|a| (hi[a] - lo[a]).max(1e-6)).product();
+    let cell = (volume / n as f32).cbrt().max(1e-6) * 2.0;
+    let key = |p: &[f32; 3]| [0, 1, 2].map(|a| ((p[a] - lo[a]) / cell).floor() as i32);
+    let mut grid: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
+    for (i, p) in points.iter().enumerate() {
+        grid.entry(key(p)).or_default().push(i as u32);
+    }
+    use rayon::prelude::*;
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let k = key(p);
+            let mut best = [f32::MAX; 3];
+            let mut r = 1i32;
+            loop {
+                for dx in -r..=r {
+                    for dy in -r..=r {
+                        for dz in -r..=r {
+                            // Only the shell of this radius (the inside was searched).
+                            if r > 1 && dx.abs() < r && dy.abs() < r && dz.abs() < r {
+                                continue;
+                            }
+                            if let Some(list) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                                for &j in list {
+                                    if j as usize == i {
+                                        continue;
+                                    }
+                                    let q = points[j as usize];
+                                    let d = (0..3).map(|a| (p[a] - q[a]).powi(2)).sum::<f32>();
+                                    if d < best[2] {
+                                        best[2] = d;
+                                        best.sort_by(|a, b| a.total_cmp(b));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                // Done once three are found within the searched cube's inner radius.
+                let reach = (r as f32 * cell).powi(2);
+                if (best[2] < f32::MAX && best[2] <= reach) || r > 64 {
+                    break;
+                }
+                r += 1;
+            }
+            let found: Vec<f32> = best.iter().copied().filter(|d| *d < f32::MAX).collect();
+            (found.iter().sum::<f32>() / found.len().max(1) as f32).max(1e-7)
+        })
+        .collect()
+}
+
+impl Model {
+    /// Gaussians at `points` (the original's `create_from_pcd`): SH DC from the colour,
+    /// isotropic scales of the root mean squared distance to the 3 nearest points,
+    /// identity rotations, opacity 0.1.
+    pub fn from_points(points: &[Point3D], max_sh_degree: u32) -> Self {
+        let mut scene = Scene::empty(max_sh_degree);
+        let positions: Vec<[f32; 3]> = points
+            .iter()
+            .map(|p| p.position.map(|v| v as f32))
+            .collect();
+        let d2 = mean_sq_dist3(&positions);
+        let stride = scene.sh_stride();
+        for (i, p) in points.iter().enumerate() {
+            scene.positions.push(positions[i]);
+            let s = d2[i].sqrt().ln();
+            scene.log_scales.push([s; 3]);
+            scene.rotations.push([1.0, 0.0, 0.0, 0.0]);
+            scene.opacity_logits.push(logit(0.1));
+            let mut sh = vec![0.0; stride];
+            for (v, c) in sh.iter_mut().zip(p.color) {
+                *v = (c as f32 / 255.0 - 0.5) / SH_C0;
+            }
+            scene.sh.extend(sh);
+        }
+        Self::of(scene)
+    }
+
+    /// `count` random Gaussians in the cube of half side `half` around `centre`, random
+    /// colours (the original's start for data sets without points).
+    pub fn random(
+        count: usize,
+        centre: [f32; 3],
+        half: f32,
+        max_sh_degree: u32,
+        rng: &mut Rng,
+    ) -> Self {
+        let points: Vec<Point3D> = (0..count)
+            .map(|_| Point3D {
+                position: [0, 1, 2].map(|a| (centre[a] + rng.range(-half, half)) as f64),
+                color: [0, 1, 2].map(|_| (rng.unit() * 255.0) as u8),
+            })
+            .collect();
+        Self::from_points(&points, max_sh_degree)
+    }
+
+    fn of(scene: Scene) -> Self {
+        let n = scene.len();
+        let stride = scene.sh_stride();
+        Model {
+            moments: [
+                Moments::zeros(n * 3),
+                Moments::zeros(n * 3),
+                Moments::zeros(n * 4),
+                Moments::zeros(n),
+                Moments::zeros(n * stride),
+            ],
+            active_sh_degree: 0,
+            steps: [0; 5],
+            scene,
+            grad_accum: vec![0.0; n],
+            denom: vec![0; n],
+            max_radii: vec![0.0; n],
+        }
+    }
+
+    /// Gaussians in the model.
+    pub fn len(&self) -> usize {
+        self.scene.len()
+    }
+
+    /// True without Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.scene.len() == 0
+    }
+
+    /// The parameters as the rasterizer takes them (activated; SH of the active degree).
+    pub fn params(&self) -> SplatParams<f32> {
+        let s = &self.scene;
+        let stride = s.sh_stride();
+        let k = crate::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
+        SplatParams {
+            means: s.positions.clone(),
+            quats: s.rotations.clone(),
+            scales: s.log_scales.iter().map(|l| l.map(f32::exp)).collect(),
+            opacities: s.opacity_logits.iter().map(|&o| sigmoid(o)).collect(),
+            colors: ColorParams::Sh {
+                degree: self.active_sh_degree,
+                coeffs: s
+                    .sh
+                    .chunks_exact(stride)
+                    .flat_map(|c| c[..k].iter().copied())
+                    .collect(),
+            },
+        }
+    }
+
+    /// Records a view's densification statistics: per Gaussian seen (`radii > 0`) the norm
+    /// of its 2D-mean gradient in NDC (pixels times half the image size, as the original's
+    /// screen-space gradient) and its largest screen radius.
+    pub fn add_stats(&mut self, grads: &SplatGrads<f32>, radii: &[f32], width: u32, height: u32) {
+        let (hw, hh) = (width as f32 / 2.0, height as f32 / 2.0);
+        for (i, &r) in radii.iter().enumerate().take(self.len()) {
+            if r > 0.0 {
+                let g = grads.means2d[i];
+                self.grad_accum[i] += ((g[0] * hw).powi(2) + (g[1] * hh).powi(2)).sqrt();
+                self.denom[i] += 1;
+                self.max_radii[i] = self.max_radii[i].max(r);
+            }
+        }
+    }
+
+    /// One Adam step with the gradients of the activated parameters (`grads`, as the
+    /// rasterizer returns them for [`Self::params`]), the centres' learning rate
+    /// `position_lr`; `skip_opacity` leaves the opacities (just reset) alone.
+    pub fn step(
+        &mut self,
+        grads: &SplatGrads<f32>,
+        position_lr: f32,
+        settings: &Settings,
+        skip_opacity: bool,
+    ) {
+        let n = self.len();
+        for (g, t) in self.steps.iter_mut().enumerate() {
+            if !(skip_opacity && g == 3) {
+                *t += 1;
+            }
+        }
+        let t = self.steps;
+        let s = &mut self.scene;
+        let flat = |v: &[[f32; 3]]| -> Vec<f32> { v.iter().flatten().copied().collect() };
+        // Chain rule to the stored parameters: scales = exp(log), opacity = sigmoid(logit).
+        let g_log: Vec<f32> = grads
+            .scales
+            .iter()
+            .zip(&s.log_scales)
+            .flat_map(|(g, l)| [0, 1, 2].map(|a| g[a] * l[a].exp()))
+            .collect();
+        let g_logit: Vec<f32> = grads
+            .opacities
+            .iter()
+            .zip(&s.opacity_logits)
+            .map(|(g, &o)| {
+                let p = sigmoid(o);
+                g * p * (1.0 - p)
+            })
+            .collect();
+        let stride = s.sh_stride();
+        let k = crate::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
+        let mut g_sh = vec![0.0; n * stride];
+        for i in 0..n {
+            g_sh[i * stride..i * stride + k].copy_from_slice(&grads.colors[i * k..(i + 1) * k]);
+        }
+        let mut pos = flat(&s.positions);
+        self.moments[0].step(&mut pos, &flat(&grads.means), t[0], |_| position_lr);
+        for (p, c) in s.positions.iter_mut().zip(pos.chunks_exact(3)) {
+            *p = [c[0], c[1], c[2]];
+        }
+        let mut ls = flat(&s.log_scales);
+        self.moments[1].step(&mut ls, &g_log, t[1], |_| settings.scaling_lr);
+        for (p, c) in s.log_scales.iter_mut().zip(ls.chunks_exact(3)) {
+            *p = [c[0], c[1], c[2]];
+        }
+        let mut q: Vec<f32> = s.rotations.iter().flatten().copied().collect();
+        let gq: Vec<f32> = grads.quats.iter().flatten().copied().collect();
+        self.moments[2].step(&mut q, &gq, t[2], |_| settings.rotation_lr);
+        for (p, c) in s.rotations.iter_mut().zip(q.chunks_exact(4)) {
+            *p = [c[0], c[1], c[2], c[3]];
+        }
+        if !skip_opacity {
+            self.moments[3].step(&mut s.opacity_logits, &g_logit, t[3], |_| {
+                settings.opacity_lr
+            });
+        }
+        let (dc, rest) = (settings.feature_lr, settings.feature_lr / 20.0);
+        self.moments[4].step(&mut s.sh, &g_sh, t[4], |i| {
+            if i % stride < 3 {
+                dc
+            } else {
+                rest
+            }
+        });
+    }
+
+    /// The original's `reset_opacity`: every opacity to at most 0.01, its Adam state zero.
+    pub fn reset_opacity(&mut self) {
+        let cap = logit(0.01);
+        for o in &mut self.scene.opacity_logits {
+            *o = o.min(cap);
+        }
+        self.moments[3] = Moments::zeros(self.len());
+    }
+
+    /// The original's `densify_and_prune`: clone the small and split the large Gaussians
+    /// whose average 2D-mean gradient reaches the threshold, then prune the transparent
+    /// (opacity < 0.005) and, with `max_screen_size`, the too large. Returns (cloned,
+    /// split, pruned).
+    pub fn densify_and_prune(
+        &mut self,
+        settings: &Settings,
+        extent: f32,
+        max_screen_size: Option<f32>,
+        rng: &mut Rng,
+    ) -> (usize, usize, usize) {
+        let n = self.len();
+        let grads: Vec<f32> = (0..n)
+            .map(|i| {
+                if self.denom[i] > 0 {
+                    self.grad_accum[i] / self.denom[i] as f32
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let max_scale = |s: &Scene, i: usize| {
+            s.log_scales[i]
+                .iter()
+                .fold(f32::MIN, |a, &b| a.max(b))
+                .exp()
+        };
+        let threshold = settings.densify_grad_threshold;
+        let limit = settings.percent_dense * extent;
+        // Clone: copies of the small ones.
+        let clone: Vec<usize> = (0..n)
+            .filter(|&i| grads[i] >= threshold && max_scale(&self.scene, i) <= limit)
+            .collect();
+        for &i in &clone {
+            self.push_copy(i, None);
+        }
+        // Split (among the originals; clones have zero gradient): two samples each.
+        let split: Vec<usize> = (0..n)
+            .filter(|&i| grads[i] >= threshold && max_scale(&self.scene, i) > limit)
+            .collect();
+        for &i in &split {
+            let s = self.scene.log_scales[i].map(f32::exp);
+            let q = self.scene.rotations[i];
+            let rot =
+                glam::Mat3::from_quat(glam::Quat::from_xyzw(q[1], q[2], q[3], q[0]).normalize());
+            for _ in 0..2 {
+                let sample = glam::Vec3::new(
+                    rng.normal() * s[0],
+                    rng.normal() * s[1],
+                    rng.normal() * s[2],
+                );
+                let p = glam::Vec3::from(self.scene.positions[i]) + rot * sample;
+                let log = s.map(|v| (v / (0.8 * 2.0)).ln());
+                self.push_copy(i, Some((p.to_array(), log)));
+            }
+        }
+        // Prune: the split originals, the transparent and the too large.
+        let total = self.len();
+        let min_opacity = logit(0.005);
+        let mut keep = vec![true; total];
+        for &i in &split {
+            keep[i] = false;
+        }
+        for (i, k) in keep.iter_mut().enumerate() {
+            if self.scene.opacity_logits[i] < min_opacity {
+                *k = false;
+            }
+            if let Some(max) = max_screen_size {
+                let big_screen = i < n && self.max_radii[i] > max;
+                if big_screen || max_scale(&self.scene, i) > 0.1 * extent {
+                    *k = false;
+                }
+            }
+        }
+        let pruned = keep.iter().filter(|k| !**k).count() - split.len();
+        self.keep(&keep);
+        let m = self.len();
+        self.grad_accum = vec![0.0; m];
+        self.denom = vec![0; m];
+        self.max_radii = vec![0.0; m];
+        (clone.len(), split.len(), pruned)
+    }
+
+    /// Appends a copy of Gaussian `i` (at another place and scale when given), with zero
+    /// Adam moments (the original's `densification_postfix`).
+    fn push_copy(&mut self, i: usize, at: Option<([f32; 3], [f32; 3])>) {
+        let s = &mut self.scene;
+        let stride = s.sh_stride();
+        let (p, l) = at.unwrap_or((s.positions[i], s.log_scales[i]));
+        s.positions.push(p);
+        s.log_scales.push(l);
+        s.rotations.push(s.rotations[i]);
+        s.opacity_logits.push(s.opacity_logits[i]);
+        let sh: Vec<f32> = s.sh[i * stride..(i + 1) * stride].to_vec();
+        s.sh.extend(sh);
+        for (m, width) in self.moments.iter_mut().zip([3, 3, 4, 1, stride]) {
+            m.grow(width);
+        }
+        self.grad_accum.push(0.0);
+        self.denom.push(0);
+        self.max_radii.push(0.0);
+    }
+
+    fn keep(&mut self, keep: &[bool]) {
+        fn filter<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().expect("one flag per Gaussian"));
+        }
+        let s = &mut self.scene;
+        let stride = s.sh_stride();
+        filter(&mut s.positions, keep);
+        filter(&mut s.log_scales, keep);
+        filter(&mut s.rotations, keep);
+        filter(&mut s.opacity_logits, keep);
+        s.sh =
+            s.sh.chunks_exact(stride)
+                .zip(keep)
+                .filter(|(_, k)| **k)
+                .flat_map(|(c, _)| c.iter().copied())
+                .collect();
+        for (m, width) in self.moments.iter_mut().zip([3, 3, 4, 1, stride]) {
+            m.keep(width, keep);
+        }
+    }
+}
+
+/// The centres' learning rate at `step` (the original's `get_expon_lr_func`, no delay).
+pub fn position_lr(settings: &Settings, extent: f32, step: u32) -> f32 {
+    let t = (step as f32 / settings.position_lr_max_steps.max(1) as f32).clamp(0.0, 1.0);
+    let (a, b) = (
+        settings.position_lr_init * extent,
+        settings.position_lr_final * extent,
+    );
+    (a.ln() * (1.0 - t) + b.ln() * t).exp()
+}

@@ -1,0 +1,403 @@
+//! The training loop of the original method on the differentiable rasterizer: per
+//! iteration one training view, forward, the loss and its gradient on the device
+//! ([`super::loss::GpuLoss`]), backward, the densification statistics, and an Adam step
+//! ([`super::model`]); SH degree up every 1000 iterations, densification from 500 to
+//! 15000 every 100, opacity reset every 3000; the model directory as the original writes
+//! it.
+//!
+//! This first version keeps the parameters and the optimiser on the host: each iteration
+//! uploads the Gaussians and reads back their gradients (the rasterizer's API); the loss
+//! and its gradient are computed on the device. Same rules either way.
+
+use super::data::{Dataset, View};
+use super::loss::{GpuLoss, LossValue};
+use super::model::{position_lr, Model, Settings};
+use crate::camera::Camera;
+use crate::gen::Rng;
+use crate::model::grad::PixelGrads;
+use crate::model::RenderOptions;
+use crate::render::differentiable::DiffRasterizer;
+use std::path::{Path, PathBuf};
+
+/// What a training run is asked to do.
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    /// Optimisation and densification settings.
+    pub settings: Settings,
+    /// Largest SH degree (0-3).
+    pub sh_degree: u32,
+    /// White instead of black background.
+    pub white_background: bool,
+    /// Iterations after which the model is saved (the last one always is).
+    pub save_iterations: Vec<u32>,
+    /// Iterations after which the test views (or, without them, up to five training
+    /// views) are evaluated.
+    pub test_iterations: Vec<u32>,
+    /// Seed of the view order, the random start and the split samples.
+    pub seed: u64,
+    /// Random Gaussians when the data set has no points.
+    pub random_points: usize,
+    /// Replace the iterations' files that exist.
+    pub overwrite: bool,
+}
+
+/// Evaluation of a set of views.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Evaluation {
+    /// Iteration.
+    pub iteration: u32,
+    /// "test" or "train".
+    pub split: String,
+    /// Views evaluated.
+    pub views: usize,
+    /// Mean PSNR (dB) of the clamped renders.
+    pub psnr: f64,
+    /// Mean SSIM.
+    pub ssim: f64,
+    /// Mean L1.
+    pub l1: f64,
+}
+
+/// What a finished run reports.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TrainReport {
+    /// Iterations run.
+    pub iterations: u32,
+    /// Gaussians at the end.
+    pub gaussians: usize,
+    /// Evaluations at the test iterations.
+    pub evaluations: Vec<Evaluation>,
+    /// Files written.
+    pub written: Vec<PathBuf>,
+    /// Iterations per second of the whole loop (wall clock).
+    pub iterations_per_second: f64,
+}
+
+/// One iteration's figures, for a progress display.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    /// Iteration (1-based).
+    pub iteration: u32,
+    /// Of.
+    pub iterations: u32,
+    /// The loss.
+    pub loss: LossValue,
+    /// Gaussians now.
+    pub gaussians: usize,
+}
+
+/// A training error.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// The device.
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    /// Writing the model.
+    #[error(transparent)]
+    Write(#[from] crate::fsutil::WriteError),
+    /// Anything else, one sentence.
+    #[error("{0}")]
+    Other(String),
+}
+
+fn write(
+    path: &Path,
+    bytes: &[u8],
+    overwrite: bool,
+    written: &mut Vec<PathBuf>,
+) -> Result<(), TrainError> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| TrainError::Other(format!("{}: cannot create: {e}", dir.display())))?;
+    }
+    crate::fsutil::write_bytes_atomically(path, overwrite, bytes)?;
+    written.push(path.to_path_buf());
+    Ok(())
+}
+
+/// The image's name without its extension (the original's `image_name`).
+fn stem(name: &str) -> &str {
+    name.rsplit_once('.').map_or(name, |(s, _)| s)
+}
+
+/// The points as the original's `input.ply` (x y z nx ny nz red green blue).
+fn points_ply(points: &[crate::camera::colmap::Point3D]) -> Vec<u8> {
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+        points.len()
+    )
+    .into_bytes();
+    for p in points {
+        for v in p.position {
+            out.extend((v as f32).to_le_bytes());
+        }
+        out.extend([0u8; 12]);
+        out.extend(p.color);
+    }
+    out
+}
+
+/// Renders `views` and compares them with their photos.
+fn evaluate(
+    rast: &mut DiffRasterizer,
+    model: &Model,
+    views: &[&View],
+    opts: &RenderOptions,
+    iteration: u32,
+    split: &str,
+) -> Result<Evaluation, TrainError> {
+    let params = model.params();
+    let (mut psnr, mut ssim, mut l1) = (0.0, 0.0, 0.0);
+    for v in views {
+        let (frame, _) = rast.forward(&params, &v.camera, opts)?;
+        let img: Vec<f32> = frame
+            .color
+            .iter()
+            .flatten()
+            .map(|c| c.clamp(0.0, 1.0))
+            .collect();
+        let gt: Vec<f32> = v.image.iter().flatten().copied().collect();
+        let (w, h) = (v.camera.width as usize, v.camera.height as usize);
+        psnr += crate::metrics::psnr(&gt, &img, 1.0);
+        ssim += crate::metrics::ssim(&gt, &img, w, h, 3);
+        l1 += img
+            .iter()
+            .zip(&gt)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum::<f64>()
+            / img.len() as f64;
+    }
+    let n = views.len().max(1) as f64;
+    Ok(Evaluation {
+        iteration,
+        split: split.to_string(),
+        views: views.len(),
+        psnr: psnr / n,
+        ssim: ssim / n,
+        l1: l1 / n,
+    })
+}
+
+/// Trains on `data` and writes the model directory `out`. `progress` sees every
+/// iteration; `note` the one-line messages (evaluations, densification).
+pub fn train(
+    data: &Dataset,
+    out: &Path,
+    opts: &TrainOptions,
+    rast: &mut DiffRasterizer,
+    loss: &mut GpuLoss,
+    progress: &mut dyn FnMut(Progress),
+    note: &mut dyn FnMut(String),
+) -> Result<TrainReport, TrainError> {
+    let s = &opts.settings;
+    if opts.sh_degree > 3 {
+        return Err(TrainError::Other(format!(
+            "--sh-degree must be 0..3, not {}",
+            opts.sh_degree
+        )));
+    }
+    if s.iterations == 0 {
+        return Err(TrainError::Other("--iterations must be at least 1".into()));
+    }
+    let mut rng = Rng(opts.seed);
+    let mut written = Vec::new();
+    // The original's start: points3D, or random points around the cameras' centre.
+    let mut model = match &data.points {
+        Some(points) => {
+            write(
+                &out.join("input.ply"),
+                &points_ply(points),
+                opts.overwrite,
+                &mut written,
+            )?;
+            Model::from_points(points, opts.sh_degree)
+        }
+        None => {
+            let centres: Vec<glam::Vec3> = data
+                .train
+                .iter()
+                .map(|v| super::data::camera_centre(&v.camera))
+                .collect();
+            let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
+            note(format!(
+                "{} has no points3D: starting from {} random Gaussians within {:.3} of the cameras' centre",
+                data.source.display(),
+                opts.random_points,
+                data.extent
+            ));
+            Model::random(
+                opts.random_points,
+                mean.to_array(),
+                data.extent,
+                opts.sh_degree,
+                &mut rng,
+            )
+        }
+    };
+    // cameras.json: the test cameras, then the training ones (the original's order), at
+    // the photos' own size.
+    let all: Vec<(usize, Camera)> = data
+        .test
+        .iter()
+        .chain(&data.train)
+        .enumerate()
+        .map(|(i, v)| {
+            let mut c = v.camera.clone();
+            c.name = stem(&c.name).to_string();
+            (i, c)
+        })
+        .collect();
+    let json = crate::camera::inria::to_json(&all).map_err(|e| TrainError::Other(e.to_string()))?;
+    write(
+        &out.join("cameras.json"),
+        json.as_bytes(),
+        opts.overwrite,
+        &mut written,
+    )?;
+    let cfg = format!(
+        "Namespace(sh_degree={}, source_path='{}', model_path='{}', images='images', resolution=-1, white_background={}, data_device='cuda', eval={})",
+        opts.sh_degree,
+        data.source.display(),
+        out.display(),
+        if opts.white_background { "True" } else { "False" },
+        if data.test.is_empty() { "False" } else { "True" },
+    );
+    write(
+        &out.join("cfg_args"),
+        cfg.as_bytes(),
+        opts.overwrite,
+        &mut written,
+    )?;
+    let bg = if opts.white_background {
+        [1.0; 3]
+    } else {
+        [0.0; 3]
+    };
+    let render_opts = RenderOptions {
+        background: bg,
+        ..Default::default()
+    };
+    let mut evaluations = Vec::new();
+    let mut order: Vec<usize> = Vec::new();
+    let start = std::time::Instant::now();
+    for it in 1..=s.iterations {
+        if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
+            model.active_sh_degree += 1;
+        }
+        if order.is_empty() {
+            // A fresh random order of the training views (Fisher-Yates).
+            order = (0..data.train.len()).collect();
+            for i in (1..order.len()).rev() {
+                order.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
+            }
+        }
+        let view = &data.train[order.pop().expect("refilled above")];
+        let cam = &view.camera;
+        let params = model.params();
+        let (frame, token) = rast.forward(&params, cam, &render_opts)?;
+        let (value, grad) = loss.compute(
+            rast.renderer().ctx(),
+            &frame.color,
+            &view.image,
+            cam.width,
+            cam.height,
+            s.lambda_dssim,
+        )?;
+        if !value.total.is_finite() {
+            return Err(TrainError::Other(format!(
+                "training diverged at iteration {it}: the loss is {} ({} Gaussians); the last model saved is the last good one",
+                value.total,
+                model.len()
+            )));
+        }
+        let pixel_grads = PixelGrads {
+            color: grad.iter().flatten().copied().collect(),
+            alpha: Vec::new(),
+            depth: Vec::new(),
+        };
+        let grads = rast.backward(&params, cam, &render_opts, token, &pixel_grads)?;
+        let mut densified = false;
+        let mut reset = false;
+        if it < s.densify_until_iter {
+            let radii: Vec<f32> = rast
+                .projected()?
+                .iter()
+                .map(|sp| sp.color_radius[3])
+                .collect();
+            model.add_stats(&grads, &radii, cam.width, cam.height);
+            if it > s.densify_from_iter && it % s.densification_interval == 0 {
+                let screen = (it > s.opacity_reset_interval).then_some(20.0);
+                let (cloned, split, pruned) =
+                    model.densify_and_prune(s, data.extent, screen, &mut rng);
+                densified = true;
+                if model.is_empty() {
+                    return Err(TrainError::Other(format!(
+                        "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
+                    )));
+                }
+                let _ = (cloned, split, pruned);
+            }
+            if it % s.opacity_reset_interval == 0 {
+                model.reset_opacity();
+                reset = true;
+            }
+        }
+        if !densified {
+            model.step(&grads, position_lr(s, data.extent, it), s, reset);
+        }
+        progress(Progress {
+            iteration: it,
+            iterations: s.iterations,
+            loss: value,
+            gaussians: model.len(),
+        });
+        if opts.test_iterations.contains(&it) || it == s.iterations {
+            let (views, split): (Vec<&View>, &str) = if data.test.is_empty() {
+                (
+                    data.train
+                        .iter()
+                        .step_by((data.train.len() / 5).max(1))
+                        .take(5)
+                        .collect(),
+                    "train",
+                )
+            } else {
+                (data.test.iter().collect(), "test")
+            };
+            let e = evaluate(rast, &model, &views, &render_opts, it, split)?;
+            note(format!(
+                "[ITER {it}] evaluating {split} ({} views): L1 {:.5} PSNR {:.2} dB SSIM {:.4}; {} Gaussians",
+                e.views,
+                e.l1,
+                e.psnr,
+                e.ssim,
+                model.len()
+            ));
+            evaluations.push(e);
+        }
+        if opts.save_iterations.contains(&it) || it == s.iterations {
+            let path = out
+                .join("point_cloud")
+                .join(format!("iteration_{it}"))
+                .join("point_cloud.ply");
+            let bytes = crate::scene::ply::to_bytes(
+                &model.scene,
+                crate::scene::ply::PlyEncoding::BinaryLittleEndian,
+            );
+            write(&path, &bytes, opts.overwrite, &mut written)?;
+            note(format!(
+                "[ITER {it}] saved {} ({} Gaussians)",
+                path.display(),
+                model.len()
+            ));
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    Ok(TrainReport {
+        iterations: s.iterations,
+        gaussians: model.len(),
+        evaluations,
+        written,
+        iterations_per_second: s.iterations as f64 / seconds.max(1e-9),
+    })
+}
