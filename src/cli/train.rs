@@ -95,6 +95,28 @@ pub(crate) struct TrainArgs {
     /// Below this fraction of the scene extent a Gaussian is cloned, above it split.
     #[arg(long, visible_alias = "percent_dense", default_value_t = 0.01)]
     pub(crate) percent_dense: f32,
+    /// Feature splats: learn K feature channels per Gaussian and a neural shader that turns
+    /// them into colour (instead of SH colour), jointly; writes the PLY with feat_* and
+    /// shader.safetensors beside it, which `render --shader` reads.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub(crate) features: Option<u32>,
+    /// The neural shader to start from (with --features; its first layer takes K
+    /// channels). Default: a fresh K-H-H-3 network (relu, relu, sigmoid).
+    #[arg(long, value_name = "FILE.safetensors", requires = "features")]
+    pub(crate) shader: Option<PathBuf>,
+    /// Hidden width H of a fresh shader.
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=128))]
+    pub(crate) shader_hidden: u32,
+    /// Learning rate of the shader's weights.
+    #[arg(long, default_value_t = 0.001)]
+    pub(crate) shader_lr: f32,
+    /// The alpha falloff: gaussian (the original) or power.
+    #[arg(long, default_value = "gaussian")]
+    pub(crate) kernel: vksplat::model::SplatKernel,
+    /// Scale the whole gradient down to this L2 norm when it is larger (gradient-norm
+    /// clipping; off by default, as the original).
+    #[arg(long, value_name = "NORM")]
+    pub(crate) clip_grad: Option<f32>,
     /// Replace the model directory's files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
@@ -103,6 +125,33 @@ pub(crate) struct TrainArgs {
     pub(crate) quiet: bool,
     #[command(flatten)]
     pub(crate) gpu: GpuArgs,
+}
+
+/// A K-H-H-3 network (relu, relu, sigmoid), weights and biases uniform in
+/// +-1/sqrt(inputs) as torch.nn.Linear starts them, seeded.
+fn fresh_shader(k: usize, hidden: usize, seed: u64) -> vksplat::mlp::Mlp {
+    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    let mut rng = vksplat::gen::Rng(seed ^ 0x5eed_5ade_0000_0001);
+    let mut layer = |inputs: usize, outputs: usize, activation| {
+        let bound = 1.0 / (inputs as f32).sqrt();
+        Layer {
+            inputs,
+            outputs,
+            weight: (0..inputs * outputs)
+                .map(|_| rng.range(-bound, bound))
+                .collect(),
+            bias: (0..outputs).map(|_| rng.range(-bound, bound)).collect(),
+            activation,
+        }
+    };
+    Mlp {
+        inputs: vec![MlpInput::Features],
+        layers: vec![
+            layer(k, hidden, Activation::Relu),
+            layer(hidden, hidden, Activation::Relu),
+            layer(hidden, 3, Activation::Sigmoid),
+        ],
+    }
 }
 
 pub(crate) fn train(args: &TrainArgs) -> Result<()> {
@@ -121,6 +170,17 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         if !(v.is_finite() && v > 0.0) {
             bail!("{name} must be a positive number, not {v}");
         }
+    }
+    if let Some(c) = args.clip_grad {
+        if !(c.is_finite() && c > 0.0) {
+            bail!("--clip-grad must be a positive number, not {c}");
+        }
+    }
+    if !(args.shader_lr.is_finite() && args.shader_lr > 0.0) {
+        bail!(
+            "--shader-lr must be a positive number, not {}",
+            args.shader_lr
+        );
     }
     if !(0.0..=1.0).contains(&args.lambda_dssim) {
         bail!(
@@ -172,7 +232,23 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         densify_until_iter: args.densify_until_iter,
         densify_grad_threshold: args.densify_grad_threshold,
         opacity_reset_interval: args.opacity_reset_interval,
+        shader_lr: args.shader_lr,
+        clip_grad: args.clip_grad,
         ..Settings::default()
+    };
+    let shader = match (args.features, &args.shader) {
+        (Some(k), Some(path)) => {
+            let mlp = vksplat::mlp::Mlp::load(path)?;
+            mlp.check_channels(k as usize)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            Some(mlp)
+        }
+        (Some(k), None) => Some(fresh_shader(
+            k as usize,
+            args.shader_hidden as usize,
+            args.seed,
+        )),
+        (None, _) => None,
     };
     let opts = vksplat::train::run::TrainOptions {
         settings,
@@ -183,6 +259,8 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         seed: args.seed,
         random_points: args.random_points,
         overwrite: args.overwrite,
+        shader,
+        kernel: args.kernel,
     };
     let ctx = args.gpu.context()?;
     let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;

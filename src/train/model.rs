@@ -48,6 +48,11 @@ pub struct Settings {
     pub opacity_reset_interval: u32,
     /// The SH degree in use rises by one every this many iterations.
     pub sh_increase_interval: u32,
+    /// Learning rate of the neural shader's weights (feature splats).
+    pub shader_lr: f32,
+    /// Largest L2 norm of the whole gradient (all parameters, the shader's too); above it
+    /// the gradient is scaled down to it. `None`: no clipping (the original's default).
+    pub clip_grad: Option<f32>,
 }
 
 impl Default for Settings {
@@ -69,6 +74,8 @@ impl Default for Settings {
             densify_grad_threshold: 0.0002,
             opacity_reset_interval: 3000,
             sh_increase_interval: 1000,
+            shader_lr: 0.001,
+            clip_grad: None,
         }
     }
 }
@@ -138,9 +145,13 @@ pub struct Model {
     pub scene: Scene,
     /// The SH degree the renders use now.
     pub active_sh_degree: u32,
-    moments: [Moments; 5],
+    moments: [Moments; 6],
     /// Adam steps taken per group (torch keeps the count through densification).
-    steps: [u32; 5],
+    steps: [u32; 7],
+    /// A neural shader learned with the feature channels (`scene.features`), and its
+    /// moments (weights and biases flattened as `Mlp::gpu_words` orders them).
+    pub shader: Option<crate::mlp::Mlp>,
+    shader_moments: Moments,
     /// Per Gaussian: the sum of its 2D-mean gradient norms (NDC) and how many views saw it.
     grad_accum: Vec<f32>,
     denom: Vec<u32>,
@@ -269,14 +280,31 @@ impl Model {
                 Moments::zeros(n * 4),
                 Moments::zeros(n),
                 Moments::zeros(n * stride),
+                Moments::zeros(n * scene.feature_count),
             ],
             active_sh_degree: 0,
-            steps: [0; 5],
+            steps: [0; 7],
+            shader: None,
+            shader_moments: Moments::default(),
             scene,
             grad_accum: vec![0.0; n],
             denom: vec![0; n],
             max_radii: vec![0.0; n],
         }
+    }
+
+    /// Learns `k` feature channels per Gaussian (started at small seeded values) and the
+    /// neural shader `mlp`, which turns them into colour, instead of SH colour.
+    pub fn with_features(mut self, mlp: crate::mlp::Mlp, rng: &mut Rng) -> Self {
+        let k = mlp.feature_channels();
+        let n = self.len();
+        self.scene.feature_count = k;
+        self.scene.features = (0..n * k).map(|_| rng.range(-0.1, 0.1)).collect();
+        self.moments[5] = Moments::zeros(n * k);
+        let params: usize = mlp.layers.iter().map(|l| (l.inputs + 1) * l.outputs).sum();
+        self.shader_moments = Moments::zeros(params);
+        self.shader = Some(mlp);
+        self
     }
 
     /// Gaussians in the model.
@@ -299,13 +327,20 @@ impl Model {
             quats: s.rotations.clone(),
             scales: s.log_scales.iter().map(|l| l.map(f32::exp)).collect(),
             opacities: s.opacity_logits.iter().map(|&o| sigmoid(o)).collect(),
-            colors: ColorParams::Sh {
-                degree: self.active_sh_degree,
-                coeffs: s
-                    .sh
-                    .chunks_exact(stride)
-                    .flat_map(|c| c[..k].iter().copied())
-                    .collect(),
+            colors: if self.shader.is_some() {
+                ColorParams::Direct {
+                    channels: s.feature_count,
+                    values: s.features.clone(),
+                }
+            } else {
+                ColorParams::Sh {
+                    degree: self.active_sh_degree,
+                    coeffs: s
+                        .sh
+                        .chunks_exact(stride)
+                        .flat_map(|c| c[..k].iter().copied())
+                        .collect(),
+                }
             },
         }
     }
@@ -326,15 +361,19 @@ impl Model {
     }
 
     /// One Adam step with the gradients of the activated parameters (`grads`, as the
-    /// rasterizer returns them for [`Self::params`]), the centres' learning rate
-    /// `position_lr`; `skip_opacity` leaves the opacities (just reset) alone.
+    /// rasterizer returns them for [`Self::params`]) and, for feature splats, the shader's
+    /// (`shader_grads`), the centres' learning rate `position_lr`; `skip_opacity` leaves
+    /// the opacities (just reset) alone. With `settings.clip_grad`, the whole gradient of
+    /// the stored parameters is scaled to at most that L2 norm first. Returns the norm
+    /// before clipping.
     pub fn step(
         &mut self,
         grads: &SplatGrads<f32>,
+        shader_grads: Option<&crate::mlp::MlpParams<f32>>,
         position_lr: f32,
         settings: &Settings,
         skip_opacity: bool,
-    ) {
+    ) -> f32 {
         let n = self.len();
         for (g, t) in self.steps.iter_mut().enumerate() {
             if !(skip_opacity && g == 3) {
@@ -343,15 +382,17 @@ impl Model {
         }
         let t = self.steps;
         let s = &mut self.scene;
-        let flat = |v: &[[f32; 3]]| -> Vec<f32> { v.iter().flatten().copied().collect() };
+        let flat3 = |v: &[[f32; 3]]| -> Vec<f32> { v.iter().flatten().copied().collect() };
         // Chain rule to the stored parameters: scales = exp(log), opacity = sigmoid(logit).
-        let g_log: Vec<f32> = grads
+        let mut g_pos = flat3(&grads.means);
+        let mut g_log: Vec<f32> = grads
             .scales
             .iter()
             .zip(&s.log_scales)
             .flat_map(|(g, l)| [0, 1, 2].map(|a| g[a] * l[a].exp()))
             .collect();
-        let g_logit: Vec<f32> = grads
+        let mut g_rot: Vec<f32> = grads.quats.iter().flatten().copied().collect();
+        let mut g_logit: Vec<f32> = grads
             .opacities
             .iter()
             .zip(&s.opacity_logits)
@@ -361,24 +402,59 @@ impl Model {
             })
             .collect();
         let stride = s.sh_stride();
-        let k = crate::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
         let mut g_sh = vec![0.0; n * stride];
-        for i in 0..n {
-            g_sh[i * stride..i * stride + k].copy_from_slice(&grads.colors[i * k..(i + 1) * k]);
+        let mut g_feat = Vec::new();
+        if self.shader.is_some() {
+            g_feat = grads.colors.clone();
+        } else {
+            let k = crate::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
+            for i in 0..n {
+                g_sh[i * stride..i * stride + k].copy_from_slice(&grads.colors[i * k..(i + 1) * k]);
+            }
         }
-        let mut pos = flat(&s.positions);
-        self.moments[0].step(&mut pos, &flat(&grads.means), t[0], |_| position_lr);
+        let mut g_mlp: Vec<f32> = shader_grads.map_or_else(Vec::new, |m| {
+            m.weights
+                .iter()
+                .zip(&m.biases)
+                .flat_map(|(w, b)| w.iter().chain(b).copied())
+                .collect()
+        });
+        let mut groups: [&mut Vec<f32>; 7] = [
+            &mut g_pos,
+            &mut g_log,
+            &mut g_rot,
+            &mut g_logit,
+            &mut g_sh,
+            &mut g_feat,
+            &mut g_mlp,
+        ];
+        let norm = groups
+            .iter()
+            .map(|g| g.iter().map(|v| (*v as f64).powi(2)).sum::<f64>())
+            .sum::<f64>()
+            .sqrt() as f32;
+        if let Some(max) = settings.clip_grad {
+            if norm > max && norm.is_finite() {
+                let scale = max / norm;
+                for g in groups.iter_mut() {
+                    for v in g.iter_mut() {
+                        *v *= scale;
+                    }
+                }
+            }
+        }
+        let mut pos = flat3(&s.positions);
+        self.moments[0].step(&mut pos, &g_pos, t[0], |_| position_lr);
         for (p, c) in s.positions.iter_mut().zip(pos.chunks_exact(3)) {
             *p = [c[0], c[1], c[2]];
         }
-        let mut ls = flat(&s.log_scales);
+        let mut ls = flat3(&s.log_scales);
         self.moments[1].step(&mut ls, &g_log, t[1], |_| settings.scaling_lr);
         for (p, c) in s.log_scales.iter_mut().zip(ls.chunks_exact(3)) {
             *p = [c[0], c[1], c[2]];
         }
         let mut q: Vec<f32> = s.rotations.iter().flatten().copied().collect();
-        let gq: Vec<f32> = grads.quats.iter().flatten().copied().collect();
-        self.moments[2].step(&mut q, &gq, t[2], |_| settings.rotation_lr);
+        self.moments[2].step(&mut q, &g_rot, t[2], |_| settings.rotation_lr);
         for (p, c) in s.rotations.iter_mut().zip(q.chunks_exact(4)) {
             *p = [c[0], c[1], c[2], c[3]];
         }
@@ -387,14 +463,33 @@ impl Model {
                 settings.opacity_lr
             });
         }
-        let (dc, rest) = (settings.feature_lr, settings.feature_lr / 20.0);
-        self.moments[4].step(&mut s.sh, &g_sh, t[4], |i| {
-            if i % stride < 3 {
-                dc
-            } else {
-                rest
+        if let Some(mlp) = self.shader.as_mut() {
+            self.moments[5].step(&mut s.features, &g_feat, t[5], |_| settings.feature_lr);
+            let mut flat: Vec<f32> = mlp
+                .layers
+                .iter()
+                .flat_map(|l| l.weight.iter().chain(&l.bias).copied())
+                .collect();
+            self.shader_moments
+                .step(&mut flat, &g_mlp, t[6], |_| settings.shader_lr);
+            let mut at = 0;
+            for l in &mut mlp.layers {
+                let (w, b) = (l.weight.len(), l.bias.len());
+                l.weight.copy_from_slice(&flat[at..at + w]);
+                l.bias.copy_from_slice(&flat[at + w..at + w + b]);
+                at += w + b;
             }
-        });
+        } else {
+            let (dc, rest) = (settings.feature_lr, settings.feature_lr / 20.0);
+            self.moments[4].step(&mut s.sh, &g_sh, t[4], |i| {
+                if i % stride < 3 {
+                    dc
+                } else {
+                    rest
+                }
+            });
+        }
+        norm
     }
 
     /// The original's `reset_opacity`: every opacity to at most 0.01, its Adam state zero.
@@ -501,7 +596,10 @@ impl Model {
         s.opacity_logits.push(s.opacity_logits[i]);
         let sh: Vec<f32> = s.sh[i * stride..(i + 1) * stride].to_vec();
         s.sh.extend(sh);
-        for (m, width) in self.moments.iter_mut().zip([3, 3, 4, 1, stride]) {
+        let k = s.feature_count;
+        let f: Vec<f32> = s.features[i * k..(i + 1) * k].to_vec();
+        s.features.extend(f);
+        for (m, width) in self.moments.iter_mut().zip([3, 3, 4, 1, stride, k]) {
             m.grow(width);
         }
         self.grad_accum.push(0.0);
@@ -520,14 +618,23 @@ impl Model {
         filter(&mut s.log_scales, keep);
         filter(&mut s.rotations, keep);
         filter(&mut s.opacity_logits, keep);
-        s.sh =
-            s.sh.chunks_exact(stride)
+        let rows = |v: &[f32], width: usize| -> Vec<f32> {
+            if width == 0 {
+                return Vec::new();
+            }
+            v.chunks_exact(width)
                 .zip(keep)
                 .filter(|(_, k)| **k)
                 .flat_map(|(c, _)| c.iter().copied())
-                .collect();
-        for (m, width) in self.moments.iter_mut().zip([3, 3, 4, 1, stride]) {
-            m.keep(width, keep);
+                .collect()
+        };
+        s.sh = rows(&s.sh, stride);
+        let k = s.feature_count;
+        s.features = rows(&s.features, k);
+        for (m, width) in self.moments.iter_mut().zip([3, 3, 4, 1, stride, k]) {
+            if width > 0 {
+                m.keep(width, keep);
+            }
         }
     }
 }

@@ -39,6 +39,11 @@ pub struct TrainOptions {
     pub random_points: usize,
     /// Replace the iterations' files that exist.
     pub overwrite: bool,
+    /// Feature splats: the neural shader to start from; the Gaussians then learn its
+    /// feature channels (instead of SH colour) and the shader its weights, jointly.
+    pub shader: Option<crate::mlp::Mlp>,
+    /// The alpha falloff trained with (recorded in the PLY).
+    pub kernel: crate::model::SplatKernel,
 }
 
 /// Evaluation of a set of views.
@@ -147,6 +152,7 @@ fn evaluate(
     split: &str,
 ) -> Result<Evaluation, TrainError> {
     let params = model.params();
+    rast.set_shader(model.shader.as_ref())?;
     let (mut psnr, mut ssim, mut l1) = (0.0, 0.0, 0.0);
     for v in views {
         let (frame, _) = rast.forward(&params, &v.camera, opts)?;
@@ -234,6 +240,10 @@ pub fn train(
             )
         }
     };
+    model.scene.kernel = opts.kernel;
+    if let Some(mlp) = &opts.shader {
+        model = model.with_features(mlp.clone(), &mut rng);
+    }
     // cameras.json: the test cameras, then the training ones (the original's order), at
     // the photos' own size.
     let all: Vec<(usize, Camera)> = data
@@ -275,6 +285,7 @@ pub fn train(
     };
     let render_opts = RenderOptions {
         background: bg,
+        kernel: opts.kernel,
         ..Default::default()
     };
     let mut evaluations = Vec::new();
@@ -294,6 +305,7 @@ pub fn train(
         let view = &data.train[order.pop().expect("refilled above")];
         let cam = &view.camera;
         let params = model.params();
+        rast.set_shader(model.shader.as_ref())?;
         let (frame, token) = rast.forward(&params, cam, &render_opts)?;
         let (value, grad) = loss.compute(
             rast.renderer().ctx(),
@@ -315,7 +327,15 @@ pub fn train(
             alpha: Vec::new(),
             depth: Vec::new(),
         };
-        let grads = rast.backward(&params, cam, &render_opts, token, &pixel_grads)?;
+        let (grads, shader_grads) = if model.shader.is_some() {
+            let (g, m) = rast.backward_shaded(&params, cam, &render_opts, token, &pixel_grads)?;
+            (g, Some(m))
+        } else {
+            (
+                rast.backward(&params, cam, &render_opts, token, &pixel_grads)?,
+                None,
+            )
+        };
         let mut densified = false;
         let mut reset = false;
         if it < s.densify_until_iter {
@@ -343,7 +363,18 @@ pub fn train(
             }
         }
         if !densified {
-            model.step(&grads, position_lr(s, data.extent, it), s, reset);
+            let norm = model.step(
+                &grads,
+                shader_grads.as_ref(),
+                position_lr(s, data.extent, it),
+                s,
+                reset,
+            );
+            if !norm.is_finite() {
+                return Err(TrainError::Other(format!(
+                    "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
+                )));
+            }
         }
         progress(Progress {
             iteration: it,
@@ -385,6 +416,15 @@ pub fn train(
                 crate::scene::ply::PlyEncoding::BinaryLittleEndian,
             );
             write(&path, &bytes, opts.overwrite, &mut written)?;
+            if let Some(mlp) = &model.shader {
+                let shader_path = path.with_file_name("shader.safetensors");
+                write(
+                    &shader_path,
+                    &mlp.to_safetensors(),
+                    opts.overwrite,
+                    &mut written,
+                )?;
+            }
             note(format!(
                 "[ITER {it}] saved {} ({} Gaussians)",
                 path.display(),

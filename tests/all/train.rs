@@ -11,10 +11,28 @@ use vksplat::camera::orbit::{orbit, OrbitParams};
 
 /// Writes the data set into `dir`: `views` photos of `w x h` and the COLMAP model.
 pub fn make_dataset(dir: &Path, views: usize, w: u32, h: u32) {
-    let scene =
+    make_dataset_with(dir, views, w, h, None);
+}
+
+/// [`make_dataset`] whose photos are feature splats shaded by `shader` (the scene given
+/// seeded feature channels of the count the shader takes).
+pub fn make_dataset_with(
+    dir: &Path,
+    views: usize,
+    w: u32,
+    h: u32,
+    shader: Option<&vksplat::mlp::Mlp>,
+) {
+    let mut scene =
         vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
             .expect("the shared scene")
             .0;
+    if let Some(mlp) = shader {
+        let k = mlp.feature_channels();
+        let mut rng = common::Rng(77);
+        scene.feature_count = k;
+        scene.features = (0..scene.len() * k).map(|_| rng.range(-1.0, 1.0)).collect();
+    }
     let cams = orbit(
         &scene.positions,
         &OrbitParams {
@@ -33,7 +51,12 @@ pub fn make_dataset(dir: &Path, views: usize, w: u32, h: u32) {
     for (i, cam) in cams.iter().enumerate() {
         let mut cam = cam.clone();
         cam.name = format!("view_{i:03}.png");
-        let frame = vksplat::cpu::render(&act, &cam, &Default::default());
+        let mut frame = vksplat::cpu::render_features(&act, &cam, &Default::default());
+        if let Some(mlp) = shader {
+            let k = mlp.feature_channels();
+            frame.color =
+                vksplat::mlp::shade(mlp, &cam, &frame.features, k, &frame.alpha, [0.0; 3]);
+        }
         vksplat::output::write_frame(
             &frame,
             &images.join(&cam.name),
@@ -163,4 +186,87 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
             "{f} differs between two runs of the same seed"
         );
     }
+}
+
+/// Feature splats: the Gaussians' feature channels and a neural shader learned jointly
+/// from photos that a target shader made (a different network of another width): the
+/// held-out views are reproduced, and the written PLY and shader render with `render
+/// --shader`.
+#[test]
+fn train_learns_feature_splats_and_their_shader() {
+    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    let mut rng = common::Rng(5);
+    let mut layer = |i: usize, o: usize, a| Layer {
+        inputs: i,
+        outputs: o,
+        weight: (0..i * o).map(|_| rng.range(-1.0, 1.0)).collect(),
+        bias: (0..o).map(|_| rng.range(-0.3, 0.3)).collect(),
+        activation: a,
+    };
+    let target = Mlp {
+        inputs: vec![MlpInput::Features],
+        layers: vec![
+            layer(4, 8, Activation::Tanh),
+            layer(8, 3, Activation::Sigmoid),
+        ],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    make_dataset_with(&data, 24, 64, 48, Some(&target));
+    let model = dir.path().join("model");
+    let out = vksplat(&[
+        "train",
+        data.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+        "--eval",
+        "--iterations",
+        "600",
+        "--test-iterations",
+        "600",
+        "--features",
+        "4",
+        "--shader-hidden",
+        "16",
+        "--densify-from-iter",
+        "100",
+        "--opacity-reset-interval",
+        "100000",
+        "--clip-grad",
+        "10",
+        "-q",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success());
+    let psnr: f64 = text
+        .split("PSNR ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .expect("a PSNR in the summary");
+    assert!(psnr >= 24.0, "held-out PSNR {psnr} dB");
+    let dir600 = model.join("point_cloud/iteration_600");
+    let shader = dir600.join("shader.safetensors");
+    let learned = vksplat::mlp::Mlp::load(&shader).unwrap();
+    assert_eq!(learned.feature_channels(), 4);
+    let ply = dir600.join("point_cloud.ply");
+    let png = dir.path().join("view.png");
+    let render = vksplat(&[
+        "render",
+        ply.to_str().unwrap(),
+        "--shader",
+        shader.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(
+        render.status.success(),
+        "{}",
+        String::from_utf8_lossy(&render.stderr)
+    );
 }
