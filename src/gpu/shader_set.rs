@@ -37,6 +37,10 @@ pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
 /// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
 pub const GRAD_SPEC_BATCH: u32 = 1;
 
+/// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
+/// accumulator per sample).
+pub const MAX_FIELD_SAMPLES: u32 = 256;
+
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
 /// Specialization constant id of the items each sort invocation handles.
@@ -103,6 +107,7 @@ shader_bindings! {
     blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA, FEATURES, GRAD_FEATURES }
     grad_accumulate { VALUES, PAIR_GRADS, MAXIMA, ACC }
     preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS, FEATURE_GRADS }
+    field { PARAMS, GAUSSIANS, FEATURES, OUTPUT }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -158,6 +163,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
             GRAD_SPEC_MAX_SUBGROUPS.to_string(),
         ),
         ("GRAD_SPEC_BATCH", GRAD_SPEC_BATCH.to_string()),
+        ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
@@ -262,6 +268,18 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
                 &[
                     ("SPLAT_KERNEL", kernel.to_string()),
                     ("TEXEL_FETCH", bit(texel)),
+                ],
+            ));
+        }
+    }
+    // Field renders: slice, integral, maximum (cpu::field::FieldMode::shader_id) per kernel.
+    for mode in ["0", "1", "2"] {
+        for kernel in splat_kernels {
+            out.push(v(
+                "field",
+                &[
+                    ("FIELD_MODE", mode.to_string()),
+                    ("SPLAT_KERNEL", kernel.to_string()),
                 ],
             ));
         }

@@ -17,6 +17,7 @@ mod cli_defects;
 mod compact;
 mod compare;
 mod features;
+mod field_renders;
 mod fit;
 mod formats;
 mod fuzz_regressions;
