@@ -68,7 +68,10 @@ pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: 
     }
     let text_width = |text: &str| (text.chars().count() * (GLYPH_W + 1)).saturating_sub(1) * SCALE;
     let (lw, rw) = (text_width(labels[0]), text_width(labels[2]));
-    for (text, anchor) in labels.iter().zip([Anchor::Left, Anchor::Centre, Anchor::Right]) {
+    for (text, anchor) in labels
+        .iter()
+        .zip([Anchor::Left, Anchor::Centre, Anchor::Right])
+    {
         let text_w = text_width(text);
         if text_w > w {
             continue;

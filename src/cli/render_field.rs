@@ -230,7 +230,8 @@ impl Colours<'_> {
                 .iter()
                 .map(|v| if v.is_nan() { 0.0 } else { *v })
                 .collect();
-            frame.color = vksplat::mlp::shade(mlp, cam, &features, k, &frame.alpha, self.background);
+            frame.color =
+                vksplat::mlp::shade(mlp, cam, &features, k, &frame.alpha, self.background);
             return Ok(frame);
         }
         let range = match self.range {

@@ -188,7 +188,9 @@ mod tests {
 pub(crate) fn plane(s: &str) -> Result<[f32; 6], String> {
     let v = list(s, 6, "PX,PY,PZ,NX,NY,NZ")?;
     if v[3] == 0.0 && v[4] == 0.0 && v[5] == 0.0 {
-        return Err(format!("the normal NX,NY,NZ must not be 0,0,0, got \"{s}\""));
+        return Err(format!(
+            "the normal NX,NY,NZ must not be 0,0,0, got \"{s}\""
+        ));
     }
     Ok([v[0], v[1], v[2], v[3], v[4], v[5]])
 }

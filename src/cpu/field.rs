@@ -139,8 +139,11 @@ impl FieldGaussians {
             g.radius.push(reach * s[0].max(s[1]).max(s[2]));
             g.means.push(mean);
             let o = f64::from(scene.opacities[i]);
-            g.weights
-                .extend(scene.features[i * k..(i + 1) * k].iter().map(|&f| o * f64::from(f)));
+            g.weights.extend(
+                scene.features[i * k..(i + 1) * k]
+                    .iter()
+                    .map(|&f| o * f64::from(f)),
+            );
         }
         g
     }
@@ -244,7 +247,9 @@ pub fn pixel_ray(cam: &Camera, px: u32, py: u32) -> ([f64; 3], [f64; 3]) {
 pub fn slice_hit(o: [f64; 3], d: [f64; 3], point: [f32; 3], normal: [f32; 3]) -> Option<f64> {
     let n = normal.map(f64::from);
     let den = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-    let num = (0..3).map(|a| n[a] * (f64::from(point[a]) - o[a])).sum::<f64>();
+    let num = (0..3)
+        .map(|a| n[a] * (f64::from(point[a]) - o[a]))
+        .sum::<f64>();
     let t = num / den;
     (den != 0.0 && t.is_finite() && t > 0.0).then_some(t)
 }

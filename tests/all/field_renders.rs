@@ -29,10 +29,16 @@ fn field_scene(n: usize, k: usize, seed: u64, kernel: SplatKernel) -> Scene {
     let mut s = Scene::empty(0);
     s.kernel = kernel;
     for _ in 0..n {
-        s.positions
-            .push([rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)]);
-        s.log_scales
-            .push([rng.range(-2.5, -1.0), rng.range(-2.5, -1.0), rng.range(-2.5, -1.0)]);
+        s.positions.push([
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        ]);
+        s.log_scales.push([
+            rng.range(-2.5, -1.0),
+            rng.range(-2.5, -1.0),
+            rng.range(-2.5, -1.0),
+        ]);
         s.rotations.push([
             rng.range(0.1, 1.0),
             rng.range(-1.0, 1.0),
@@ -93,7 +99,10 @@ fn gpu_field_renders_match_the_reference() {
             let cpu = field::render_field(&g, &cam, &mode);
             let gpu = renderer.render(ctx, &gpu_field, &cam, &mode).unwrap();
             assert_eq!(gpu.features.len(), cpu.features.len());
-            assert_eq!(gpu.alpha, cpu.alpha, "{kernel:?} {mode:?}: the same pixels are empty");
+            assert_eq!(
+                gpu.alpha, cpu.alpha,
+                "{kernel:?} {mode:?}: the same pixels are empty"
+            );
             let peak = peaks(&cpu);
             let mut worst = 0f32;
             for (i, (a, b)) in gpu.features.iter().zip(&cpu.features).enumerate() {
@@ -103,9 +112,14 @@ fn gpu_field_renders_match_the_reference() {
                 }
                 worst = worst.max((a - b).abs() / peak[i % 5]);
             }
-            eprintln!("{kernel:?} {mode:?}: largest GPU-reference difference {worst:.2e} of the peak");
+            eprintln!(
+                "{kernel:?} {mode:?}: largest GPU-reference difference {worst:.2e} of the peak"
+            );
             assert!(worst <= 2e-5, "{kernel:?} {mode:?}: {worst}");
-            assert!(peak.iter().all(|&p| p > 0.1), "{mode:?} renders a field: {peak:?}");
+            assert!(
+                peak.iter().all(|&p| p > 0.1),
+                "{mode:?} renders a field: {peak:?}"
+            );
         }
     }
     common::gpu::assert_validation_clean(&r);
@@ -144,7 +158,10 @@ fn reference_field_renders_match_the_field_evaluated_from_the_gaussians() {
     for (n, &p) in pixels.iter().enumerate() {
         for c in 0..k {
             let (a, b) = (slice.features[p * k + c], f[n * k + c]);
-            assert!((a - b).abs() <= 1e-5 * peak[c].max(1.0), "slice pixel {p} channel {c}: {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-5 * peak[c].max(1.0),
+                "slice pixel {p} channel {c}: {a} vs {b}"
+            );
         }
     }
     // Integral and maximum: midpoint quadrature and dense sampling of the direct sum over
@@ -175,7 +192,10 @@ fn reference_field_renders_match_the_field_evaluated_from_the_gaussians() {
                 let sum: f64 = (0..n).map(|j| f64::from(f[j * k + c])).sum::<f64>() * dt;
                 let err = (sum - f64::from(integral.features[p * k + c])).abs() / f64::from(ip[c]);
                 worst_i = worst_i.max(err);
-                let dense = (0..n).step_by(n / 8192).map(|j| f[j * k + c]).fold(f32::MIN, f32::max);
+                let dense = (0..n)
+                    .step_by(n / 8192)
+                    .map(|j| f[j * k + c])
+                    .fold(f32::MIN, f32::max);
                 let err = f64::from((dense - max.features[p * k + c]).abs() / mp[c]);
                 worst_m = worst_m.max(err);
             }
@@ -216,17 +236,32 @@ fn one_gaussian_gives_the_closed_forms() {
         let r = (ro[0] + t * d[0]).hypot(ro[1] + t * d[1]);
         let expect = o * (-r * r / (2.0 * s * s)).exp();
         let got = f64::from(sf.features[sf.index(px, 32)]);
-        assert!((got - expect).abs() < 1e-6, "slice at r {r}: {got} vs {expect}");
+        assert!(
+            (got - expect).abs() < 1e-6,
+            "slice at r {r}: {got} vs {expect}"
+        );
         // Closest approach of the ray to the origin.
-        let b = (ro[0].powi(2) + ro[1].powi(2) + ro[2].powi(2) - (ro[0] * d[0] + ro[1] * d[1] + ro[2] * d[2]).powi(2)).sqrt();
+        let b = (ro[0].powi(2) + ro[1].powi(2) + ro[2].powi(2)
+            - (ro[0] * d[0] + ro[1] * d[1] + ro[2] * d[2]).powi(2))
+        .sqrt();
         let q = b * b / (s * s);
-        let expect = o * s * (2.0 * std::f64::consts::PI).sqrt() * (-q / 2.0).exp() * erf(((16.0 - q) / 2.0).sqrt());
+        let expect = o
+            * s
+            * (2.0 * std::f64::consts::PI).sqrt()
+            * (-q / 2.0).exp()
+            * erf(((16.0 - q) / 2.0).sqrt());
         let got = f64::from(inf.features[inf.index(px, 32)]);
-        assert!((got - expect).abs() < 1e-6 * expect.max(1e-3), "integral at b {b}: {got} vs {expect}");
+        assert!(
+            (got - expect).abs() < 1e-6 * expect.max(1e-3),
+            "integral at b {b}: {got} vs {expect}"
+        );
         let expect = o * (-q / 2.0).exp();
         let got = f64::from(mf.features[mf.index(px, 32)]);
         // 255 samples over the chord (2.4 long): the peak is at most half a segment away.
         let half = 2.4 / 255.0 / 2.0 / s;
-        assert!(got <= expect + 1e-6 && got >= expect * (-half * half / 2.0).exp() - 1e-6, "maximum at b {b}: {got} vs {expect}");
+        assert!(
+            got <= expect + 1e-6 && got >= expect * (-half * half / 2.0).exp() - 1e-6,
+            "maximum at b {b}: {got} vs {expect}"
+        );
     }
 }

@@ -19,6 +19,7 @@ mod compare;
 mod features;
 mod field_renders;
 mod fit;
+mod fit_inputs;
 mod formats;
 mod fuzz_regressions;
 mod gpu_frames;

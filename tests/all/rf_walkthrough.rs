@@ -126,8 +126,17 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     let n = 16;
     ok(&["gen", "--rf", "dipole", "--size", "16", s(&p("d.npy"))]);
     ok(&[
-        "fit", s(&p("d.npy")), "-o", s(&p("d.ply")), "--gaussians", "300", "--max-gaussians",
-        "800", "--steps", "600", "-q",
+        "fit",
+        s(&p("d.npy")),
+        "-o",
+        s(&p("d.ply")),
+        "--gaussians",
+        "300",
+        "--max-gaussians",
+        "800",
+        "--steps",
+        "600",
+        "-q",
     ]);
     // The analytic magnitude, normalised as gen normalises it (grid maximum 1).
     let b = RfField::Dipole.bounds();
@@ -159,8 +168,15 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     let (ply, cams) = (p("d.ply"), p("cam.json"));
     let render = |mode: &str, extra: &[&str], out: &str| {
         let mut a = vec![
-            "render", s(&ply), "--cameras", s(&cams), "--mode", mode, "-q",
-            "--overwrite", "-o",
+            "render",
+            s(&ply),
+            "--cameras",
+            s(&cams),
+            "--mode",
+            mode,
+            "-q",
+            "--overwrite",
+            "-o",
         ];
         let o = p(out);
         a.push(s(&o));
@@ -169,7 +185,8 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
         npy(&o)
     };
     let plane = "0,0,0.3,0,0,1";
-    let in_box = |x: [f64; 3]| (0..3).all(|a| x[a] >= f64::from(b[a]) && x[a] <= f64::from(b[a + 3]));
+    let in_box =
+        |x: [f64; 3]| (0..3).all(|a| x[a] >= f64::from(b[a]) && x[a] <= f64::from(b[a + 3]));
     for (mode, extra, limit) in [
         ("field-slice", vec!["--slice-plane", plane], 0.15),
         ("field-integral", vec![], 0.3),
@@ -180,7 +197,10 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
         cpu_extra.push("--cpu");
         let (_, _, _, cpu) = render(mode, &cpu_extra, "c.npy");
         assert_eq!((gw, gh, k), (w as usize, h as usize, 4));
-        let peak = cpu.iter().filter(|v| v.is_finite()).fold(0f32, |m, v| m.max(v.abs()));
+        let peak = cpu
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold(0f32, |m, v| m.max(v.abs()));
         for (a, c) in gpu.iter().zip(&cpu) {
             assert!(
                 (a.is_nan() && c.is_nan()) || (a - c).abs() <= 1e-4 * peak,
@@ -227,9 +247,22 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     }
     // A PNG with a colour bar: the image plus the bar's rows, never black above the range.
     ok(&[
-        "render", s(&p("d.ply")), "--cameras", s(&p("cam.json")), "--mode", "field-max", "-q",
-        "-o", s(&p("m.png")), "--range", "0,0.05", "--colorbar", "--channel-name", "magnitude",
-        "--units", "V/m",
+        "render",
+        s(&p("d.ply")),
+        "--cameras",
+        s(&p("cam.json")),
+        "--mode",
+        "field-max",
+        "-q",
+        "-o",
+        s(&p("m.png")),
+        "--range",
+        "0,0.05",
+        "--colorbar",
+        "--channel-name",
+        "magnitude",
+        "--units",
+        "V/m",
     ]);
     let png = image::open(p("m.png")).unwrap().to_rgb8();
     assert_eq!(png.dimensions(), (w, h + vksplat::diff_image::BAR_HEIGHT));
@@ -238,7 +271,11 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     for py in 0..h {
         for px in 0..w {
             if max[(py * w + px) as usize * 4] > 0.05 {
-                assert_eq!(png.get_pixel(px, py).0, top, "pixel {px},{py} above the range");
+                assert_eq!(
+                    png.get_pixel(px, py).0,
+                    top,
+                    "pixel {px},{py} above the range"
+                );
             }
         }
     }
