@@ -62,7 +62,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "FILE.safetensors")]
     pub(crate) shader: Option<PathBuf>,
     #[command(flatten)]
-    pub(crate) field: super::render_field::FieldArgs,
+    pub(crate) field: Box<super::render_field::FieldArgs>,
     /// Frames of the path to render, numbered in the whole path (before --camera): 7,
     /// 0,3,7, 100..200 (end exclusive), 100..=199, 100.. or ..50. File names keep the
     /// frame's number, so split runs give the files of one run.

@@ -69,7 +69,8 @@ pub fn field_cutoff(kernel: SplatKernel) -> f64 {
 
 /// The kernel's value at `d2` (0 beyond the cutoff).
 pub fn field_kernel(kernel: SplatKernel, d2: f64) -> f64 {
-    if !(d2 <= field_cutoff(kernel)) {
+    // NaN (and anything past the cutoff) is outside the support.
+    if d2.is_nan() || d2 > field_cutoff(kernel) {
         return 0.0;
     }
     match kernel {
