@@ -218,7 +218,11 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         note!("note: {n}");
     }
     let mut warnings = Vec::new();
-    if let Some(h) = outcome.holdout.as_ref().filter(|h| h.relative_l2.is_nan() || h.relative_l2 >= 1.0) {
+    if let Some(h) = outcome
+        .holdout
+        .as_ref()
+        .filter(|h| h.relative_l2.is_nan() || h.relative_l2 >= 1.0)
+    {
         warnings.push(format!(
             "the held-out relative L2 error is {:.3}: this fit is no better than predicting 0 everywhere (error 1); do not use it. More samples, more --steps or other --gaussians may help",
             h.relative_l2
