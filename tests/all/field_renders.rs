@@ -190,12 +190,19 @@ fn reference_field_renders_match_the_field_evaluated_from_the_gaussians() {
     // the longest chord (the box's diagonal) over 256.
     let b = g.bounds;
     let diag = ((b[3] - b[0]).powi(2) + (b[4] - b[1]).powi(2) + (b[5] - b[2]).powi(2)).sqrt();
-    let narrowest = scene.log_scales.iter().flatten().fold(f64::INFINITY, |m, &v| m.min(f64::from(v).exp()));
+    let narrowest = scene
+        .log_scales
+        .iter()
+        .flatten()
+        .fold(f64::INFINITY, |m, &v| m.min(f64::from(v).exp()));
     let h = 0.5 * diag / 256.0;
     let bound = 1.0 - (-(h / narrowest).powi(2) / 2.0).exp();
     eprintln!("integral vs quadrature {worst_i:.2e}, maximum (256 samples) vs dense {worst_m:.2e} of the peak (bound {bound:.2e})");
     assert!(worst_i <= 2e-6, "integral vs quadrature: {worst_i}");
-    assert!(worst_m <= bound, "maximum vs dense sampling: {worst_m} > {bound}");
+    assert!(
+        worst_m <= bound,
+        "maximum vs dense sampling: {worst_m} > {bound}"
+    );
 }
 
 #[test]
@@ -256,4 +263,103 @@ fn one_gaussian_gives_the_closed_forms() {
             "maximum at b {b}: {got} vs {expect}"
         );
     }
+}
+
+/// The field options: each refused where it does not apply, with one sentence and no file.
+#[test]
+fn field_options_are_refused_where_they_do_not_apply() {
+    use crate::common::cli::{fails, s};
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("f.ply");
+    let scene = field_scene(20, 2, 3, SplatKernel::Gaussian);
+    std::fs::write(
+        &ply,
+        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian),
+    )
+    .unwrap();
+    let png = dir.path().join("o.png");
+    let npy = dir.path().join("o.npy");
+    for (args, out, says) in [
+        (
+            vec!["--mode", "field-slice"],
+            &png,
+            "needs the plane: --slice-plane",
+        ),
+        (
+            vec!["--mode", "field-max", "--slice-plane", "0,0,0,0,0,1"],
+            &png,
+            "--slice-plane applies to --mode field-slice",
+        ),
+        (
+            vec!["--mode", "field-integral", "--max-samples", "9"],
+            &png,
+            "--max-samples applies to --mode field-max",
+        ),
+        (
+            vec!["--slice-plane", "0,0,0,0,0,1"],
+            &png,
+            "applies to the field renders",
+        ),
+        (
+            vec!["--mode", "field-max", "--range", "0,1"],
+            &npy,
+            "--range sets the colour map of a field render's PNG",
+        ),
+        (
+            vec!["--mode", "field-max", "--units", "V/m"],
+            &png,
+            "add --colorbar",
+        ),
+        (
+            vec!["--mode", "field-max", "--channel", "2"],
+            &png,
+            "--channel 2 is not a channel of the scene, which has 2",
+        ),
+        (
+            vec!["--mode", "field-max", "--compact"],
+            &png,
+            "--compact does not apply to --mode field-max",
+        ),
+    ] {
+        let mut a = vec!["render", s(&ply), "-o", s(out)];
+        a.extend(args.iter().copied());
+        let e = fails(&a, out);
+        assert!(e.contains(says), "{args:?}: {e}");
+    }
+    // Values checked while parsing the command line (clap adds its usage lines).
+    for (args, says) in [
+        (["--slice-plane", "0,0,0,0,0,0"], "must not be 0,0,0"),
+        (["--range", "1,0"], "LO must be below HI"),
+    ] {
+        let mut a = vec!["render", s(&ply), "-o", s(&png), "--mode", "field-slice"];
+        a.extend(args);
+        let o = crate::common::cli::vksplat(&a);
+        let e = crate::common::cli::stderr(&o);
+        assert!(
+            !o.status.success() && e.starts_with("error: ") && e.contains(says),
+            "{e}"
+        );
+        assert!(!e.contains("panicked") && !png.exists(), "{e}");
+    }
+    // A scene without features has no field.
+    let bare = dir.path().join("bare.ply");
+    let mut plain = scene.clone();
+    plain.set_features(0, Vec::new()).unwrap();
+    std::fs::write(
+        &bare,
+        vksplat::scene::ply::to_bytes(&plain, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian),
+    )
+    .unwrap();
+    let e = fails(
+        &[
+            "render",
+            s(&bare),
+            "-o",
+            s(&npy),
+            "--mode",
+            "field-integral",
+        ],
+        &npy,
+    );
+    assert!(e.contains("has none"), "{e}");
 }
