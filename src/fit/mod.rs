@@ -98,7 +98,8 @@ pub fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
     Ok(b)
 }
 
-fn check_bounds(b: [f32; 6]) -> Result<(), String> {
+/// Each min below its max (and no NaN).
+pub fn check_bounds(b: [f32; 6]) -> Result<(), String> {
     for (a, name) in ["x", "y", "z"].iter().enumerate() {
         if b[a].is_nan() || b[a + 3].is_nan() || b[a] >= b[a + 3] {
             return Err(format!(
