@@ -54,8 +54,13 @@ layout(std430, binding = FIELD_GAUSSIANS) readonly buffer GaussianBuf { FieldGau
 // o_i feat_i, this group's four channels: features[i * groups + group].
 layout(std430, binding = FIELD_FEATURES) readonly buffer FeatureBuf { vec4 features[]; };
 // This group's four channels per pixel: out_field[group * pixels + pixel].
-layout(std430, binding = FIELD_OUTPUT) writeonly buffer OutBuf { vec4 out_field[]; };
-layout(push_constant) uniform Group { uint group; } push;
+layout(std430, binding = FIELD_OUTPUT) buffer OutBuf { vec4 out_field[]; };
+// A pass: channel group, the Gaussians [first, first + count), and whether to add to the
+// output (every pass of a slice or an integral but the first) rather than write it.
+// llvmpipe ends an invocation whose loops run past 65,535 iterations in all, silently,
+// before it writes: the host keeps each pass below that and finds such a pixel by the
+// pattern it filled the output with (render/field.rs).
+layout(push_constant) uniform Pass { uint group; uint first; uint count; uint accumulate; } push;
 
 shared vec4 s_mean[CHUNK];
 shared vec4 s_a0[CHUNK];
@@ -127,11 +132,12 @@ void main() {
     for (uint j = 0u; j < samples; j++) sums[j] = vec4(0.0);
 #endif
 
-    for (uint base = 0u; base < n; base += CHUNK) {
+    uint end = push.first + push.count;
+    for (uint base = push.first; base < end; base += CHUNK) {
         uint g = base + li;
         bool keep = false;
         FieldGaussian gd;
-        if (li < CHUNK && g < n) {
+        if (li < CHUNK && g < end) {
             gd = gaussians[g];
             float r = gd.mean_radius.w;
             vec3 p = gd.mean_radius.xyz * rows + trans; // camera space
@@ -205,5 +211,7 @@ void main() {
 #endif
     if (!inside) return;
     float nan_value = uintBitsToFloat(0x7fc00000u);
-    out_field[push.group * width * height + pix.y * width + pix.x] = valid ? acc : vec4(nan_value);
+    uint at = push.group * width * height + pix.y * width + pix.x;
+    vec4 value = valid ? acc : vec4(nan_value);
+    out_field[at] = push.accumulate != 0u ? out_field[at] + value : value;
 }

@@ -8,10 +8,33 @@ use crate::cpu::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
 use crate::frame::Frame;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::field as slot;
+use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
 
 /// Workgroup side in pixels (16 x 16 invocations).
 const SIDE: u32 = 16;
+
+/// Gaussians per pass of a slice or an integral on a device with llvmpipe's loop limit
+/// (an invocation whose loops run 65,535 iterations in all is ended before it writes): an
+/// invocation loops at most 5 times per chunk of 128 (the chunk loop and the workgroup
+/// scan's) and once per Gaussian, 34,048 in all. The passes add up; a maximum cannot be
+/// split (each pixel keeps its samples' sums), so it is one pass, refused when a pixel
+/// was not written.
+const LOOP_LIMITED_PASS: u32 = 32_768;
+
+/// What the output is filled with before a frame: a NaN no arithmetic makes (the shader
+/// writes `0x7fc00000` for empty), so a pixel still holding it was never written.
+const UNWRITTEN: u32 = 0xFFFF_FFFF;
+
+/// The push constants of `glsl/field.comp`: one pass.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct FieldPass {
+    group: u32,
+    first: u32,
+    count: u32,
+    accumulate: u32,
+}
 
 /// The parameter block of `glsl/field.comp`.
 #[repr(C)]
@@ -153,7 +176,7 @@ impl FieldRenderer {
                     (slot::FEATURES, B),
                     (slot::OUTPUT, B),
                 ])?,
-                4,
+                std::mem::size_of::<FieldPass>() as u32,
                 SIDE * SIDE,
             )?);
         }
@@ -215,25 +238,58 @@ impl FieldRenderer {
         params_buf.upload(ctx, std::slice::from_ref(&params))?;
         let out_bytes = (pixels * field.groups as usize * 16) as u64;
         let out = GpuBuffer::new(ctx, "field output", out_bytes, MemoryKind::Device)?;
+        let pass = match mode {
+            FieldMode::Max { .. } => field.count.max(1),
+            _ if ctx.info().loop_limited() => LOOP_LIMITED_PASS,
+            _ => field.count.max(1),
+        };
         let pipeline = self.pipeline(ctx, mode.shader_id())?;
         ctx.submit_and_wait("field render", |cmd| {
-            for group in 0..field.groups {
-                pipeline.dispatch_resources(
-                    ctx,
-                    cmd,
-                    &by_binding([
-                        (slot::PARAMS, Resource::Buffer(params_buf.whole())),
-                        (slot::GAUSSIANS, Resource::Buffer(field.gaussians.whole())),
-                        (slot::FEATURES, Resource::Buffer(field.features.whole())),
-                        (slot::OUTPUT, Resource::Buffer(out.whole())),
-                    ])?,
-                    bytemuck::bytes_of(&group),
-                    [cam.width.div_ceil(SIDE), cam.height.div_ceil(SIDE), 1],
-                )?;
+            out.fill(ctx, cmd, 0, ash::vk::WHOLE_SIZE, UNWRITTEN);
+            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+            let mut first = 0;
+            loop {
+                if first > 0 {
+                    // The next pass adds to what the last one wrote.
+                    barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                }
+                for group in 0..field.groups {
+                    let push = FieldPass {
+                        group,
+                        first,
+                        count: pass.min(field.count - first),
+                        accumulate: u32::from(first > 0),
+                    };
+                    pipeline.dispatch_resources(
+                        ctx,
+                        cmd,
+                        &by_binding([
+                            (slot::PARAMS, Resource::Buffer(params_buf.whole())),
+                            (slot::GAUSSIANS, Resource::Buffer(field.gaussians.whole())),
+                            (slot::FEATURES, Resource::Buffer(field.features.whole())),
+                            (slot::OUTPUT, Resource::Buffer(out.whole())),
+                        ])?,
+                        bytemuck::bytes_of(&push),
+                        [cam.width.div_ceil(SIDE), cam.height.div_ceil(SIDE), 1],
+                    )?;
+                }
+                first += pass;
+                if first >= field.count {
+                    break;
+                }
             }
             Ok(())
         })?;
         let planes: Vec<[f32; 4]> = out.read(ctx, pixels * field.groups as usize)?;
+        if let Some(p) = planes.iter().position(|v| v[0].to_bits() == UNWRITTEN) {
+            let p = p % pixels;
+            return Err(GpuError::Input(format!(
+                "pixel ({}, {}) of this field render was not computed: {} ends a shader invocation whose loops run past 65,535 iterations (a field maximum is one pass over every Gaussian its ray meets, and each adds into the samples it covers); use fewer --max-samples, fewer Gaussians, or the CPU reference (--cpu)",
+                p % cam.width as usize,
+                p / cam.width as usize,
+                ctx.info().name
+            )));
+        }
         let k = field.k;
         let mut features = vec![0f32; pixels * k];
         for (p, px) in features.chunks_exact_mut(k).enumerate() {

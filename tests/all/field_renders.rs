@@ -363,3 +363,49 @@ fn field_options_are_refused_where_they_do_not_apply() {
     );
     assert!(e.contains("has none"), "{e}");
 }
+
+/// 40,000 Gaussians on every ray, more than llvmpipe's 65,535 loop iterations per
+/// invocation allow in one pass: a slice and an integral are split into passes that add up
+/// and still match the reference (1e-5 of the peak: f32 sums of 40,000 terms); a maximum,
+/// whose per-sample sums cannot be split, is refused on such a device instead of being
+/// returned cut short (elsewhere it matches the reference).
+#[test]
+fn many_gaussians_on_a_ray_render_in_passes_or_are_refused() {
+    let r = common::gpu::renderer();
+    let ctx = r.ctx();
+    let n = 40_000;
+    let mut rng = Rng(9);
+    let mut scene = Scene::empty(0);
+    for _ in 0..n {
+        let p = [
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        ];
+        common::push_gaussian(&mut scene, p, 0.5, 0.5, [0.5; 3]);
+    }
+    scene.set_features(1, vec![1.0; n]).unwrap();
+    let g = FieldGaussians::new(&scene.activated(), SplatKernel::Gaussian);
+    let gpu_field = vksplat::render::field::GpuField::new(ctx, &g).unwrap();
+    let mut renderer = vksplat::render::field::FieldRenderer::new(SplatKernel::Gaussian);
+    let cam = camera(8, 6);
+    for mode in [SLICE, FieldMode::Integral, FieldMode::Max { samples: 16 }] {
+        let gpu = renderer.render(ctx, &gpu_field, &cam, &mode);
+        if matches!(mode, FieldMode::Max { .. }) && ctx.info().loop_limited() {
+            // Each pixel's ray meets all 40,000 Gaussians, each adding into ~16 samples.
+            let e = gpu.err().expect("a cut-off maximum is refused").to_string();
+            assert!(e.contains("65,535") && e.contains("--cpu"), "{e}");
+            continue;
+        }
+        let gpu = gpu.unwrap();
+        let cpu = field::render_field(&g, &cam, &mode);
+        let peak = peaks(&cpu)[0];
+        for (a, b) in gpu.features.iter().zip(&cpu.features) {
+            assert!(
+                (a - b).abs() <= 1e-5 * peak,
+                "{mode:?}: GPU {a} vs reference {b}"
+            );
+        }
+    }
+    common::gpu::assert_validation_clean(&r);
+}
