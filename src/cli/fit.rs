@@ -46,6 +46,11 @@ pub(crate) struct FitArgs {
     /// to a largest magnitude of 1 first; 0: no clipping).
     #[arg(long, value_name = "G", default_value_t = 0.0, value_parser = non_negative)]
     pub(crate) clip_grad: f32,
+    /// Channels M,P hold one complex value as magnitude and phase (radians): fit it as
+    /// I = M cos P and Q = M sin P (channels M and P of the PLY then hold I and Q), so the
+    /// Gaussians add up coherently; render with --complex M,P to see |f| and its phase.
+    #[arg(long, value_name = "M,P", value_parser = channel_pair)]
+    pub(crate) complex: Option<(usize, usize)>,
     /// Optimisation steps (one mini-batch each).
     #[arg(long, value_name = "S", default_value_t = FitConfig::default().steps, value_parser = values::int_in(1usize, 10_000_000))]
     pub(crate) steps: usize,
@@ -90,6 +95,20 @@ fn holdout(s: &str) -> Result<f32, String> {
         Ok(v)
     } else {
         Err(format!("must be between 0 and 0.9, got {v}"))
+    }
+}
+
+/// `A,B`: two different channel numbers.
+pub(crate) fn channel_pair(s: &str) -> Result<(usize, usize), String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let pair = match parts[..] {
+        [a, b] => a.parse::<usize>().ok().zip(b.parse::<usize>().ok()),
+        _ => None,
+    };
+    match pair {
+        Some((a, b)) if a != b => Ok((a, b)),
+        Some(_) => Err(format!("the two channels must differ, got \"{s}\"")),
+        None => Err(format!("expected two channel numbers A,B, got \"{s}\"")),
     }
 }
 
@@ -144,8 +163,22 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             data.k - 1
         );
     }
+    if let Some((m, p)) = args.complex {
+        if args.db {
+            bail!("--complex and --db do not go together: give the magnitude linear");
+        }
+        if m.max(p) >= data.k {
+            bail!(
+                "{}: --complex {m},{p} names a channel it does not have (it has {}: 0 to {})",
+                args.input.display(),
+                data.k,
+                data.k - 1
+            );
+        }
+    }
+    let magnitude_channel = args.complex.map_or(args.magnitude_channel, |(m, _)| m);
     if !args.db {
-        vksplat::fit::check_magnitude(&data, args.magnitude_channel)
+        vksplat::fit::check_magnitude(&data, magnitude_channel)
             .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     }
     let (auto_initial, auto_max) = vksplat::fit::default_counts(data.len());
@@ -171,7 +204,8 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         steps: args.steps,
         densify_every: args.densify_every,
         min_opacity: args.min_opacity,
-        magnitude_channel: args.magnitude_channel,
+        magnitude_channel,
+        complex: args.complex,
         holdout: args.holdout,
         seed: args.seed,
         batch: args.batch,

@@ -53,6 +53,11 @@ pub(crate) struct FieldArgs {
     /// The channel's units on the colour bar (e.g. V/m).
     #[arg(long, value_name = "UNITS")]
     pub(crate) units: Option<String>,
+    /// field-slice, field-integral: channels I,Q are one complex field (what `fit --complex`
+    /// writes): two channels are appended, its magnitude |I + iQ| (K) and phase (K + 1),
+    /// and the PNG shows the magnitude unless --channel says otherwise.
+    #[arg(long, value_name = "I,Q", value_parser = super::fit::channel_pair)]
+    pub(crate) complex: Option<(usize, usize)>,
 }
 
 /// `field-slice` etc., for messages.
@@ -95,6 +100,7 @@ pub(crate) fn check_options(
         let field_only = [
             ("--slice-plane", f.slice_plane.is_some()),
             ("--max-samples", f.max_samples.is_some()),
+            ("--complex", f.complex.is_some()),
         ];
         if let Some((flag, _)) = field_only.iter().chain(&png_only).find(|(_, set)| *set) {
             bail!("{flag} applies to the field renders (--mode field-slice, field-integral or field-max)");
@@ -107,6 +113,12 @@ pub(crate) fn check_options(
     }
     if mode != RenderMode::FieldSlice && f.slice_plane.is_some() {
         bail!("--slice-plane applies to --mode field-slice, not {name}");
+    }
+    if f.complex.is_some() && args.shader.is_some() {
+        bail!("--complex colour-maps the magnitude; a --shader takes the channels themselves, so give one or the other");
+    }
+    if mode == RenderMode::FieldMax && f.complex.is_some() {
+        bail!("--complex applies to field-slice and field-integral: the maximum of |f| along a ray needs the complex sum at every sample, which field-max does not keep (it takes each channel's maximum)");
     }
     if mode != RenderMode::FieldMax && f.max_samples.is_some() {
         bail!("--max-samples applies to --mode field-max, not {name}");
@@ -157,12 +169,24 @@ pub(crate) fn render(
         },
     };
     let g = FieldGaussians::new(scene, kernel);
-    let channel = f.channel.unwrap_or(0);
-    if channel >= g.k {
+    if let Some((i, q)) = f.complex {
+        if i.max(q) >= g.k {
+            bail!(
+                "--complex {i},{q} names a channel the scene does not have (it has {}: 0 to {})",
+                g.k,
+                g.k - 1
+            );
+        }
+    }
+    // With --complex the frame has two more channels: |f| (K) and its phase (K + 1).
+    let channels = g.k + if f.complex.is_some() { 2 } else { 0 };
+    let channel = f
+        .channel
+        .unwrap_or(if f.complex.is_some() { g.k } else { 0 });
+    if channel >= channels {
         bail!(
-            "--channel {channel} is not a channel of the scene, which has {} (0 to {})",
-            g.k,
-            g.k - 1
+            "--channel {channel} is not a channel of the scene, which has {channels} (0 to {})",
+            channels - 1
         );
     }
     let colours = Colours {
@@ -181,6 +205,7 @@ pub(crate) fn render(
             }
         }),
         shader,
+        complex: f.complex,
     };
     let mut colours = colours;
     if args.cpu {
@@ -216,10 +241,15 @@ struct Colours<'a> {
     /// The colour bar's centre label, when there is a bar.
     bar: Option<String>,
     shader: Option<&'a vksplat::mlp::Mlp>,
+    /// `--complex I,Q`: magnitude and phase appended.
+    complex: Option<(usize, usize)>,
 }
 
 impl Colours<'_> {
     fn apply(&mut self, cam: &Camera, mut frame: Frame) -> Result<Frame> {
+        if let Some((i, q)) = self.complex {
+            vksplat::cpu::field::append_magnitude_phase(&mut frame, i, q);
+        }
         if !self.png {
             return Ok(frame);
         }

@@ -385,3 +385,18 @@ pub fn frame_from_channels(w: u32, h: u32, k: usize, features: Vec<f32>) -> Fram
     frame.features = features;
     frame
 }
+
+/// Appends two channels to a field frame whose channels `i` and `q` are the real and
+/// imaginary parts of one complex field: its magnitude `|I + iQ|` and phase
+/// `atan2(Q, I)` (radians), channels K and K + 1 (NaN stays NaN).
+pub fn append_magnitude_phase(frame: &mut Frame, i: usize, q: usize) {
+    let k = frame.feature_count;
+    let mut out = Vec::with_capacity(frame.features.len() / k.max(1) * (k + 2));
+    for px in frame.features.chunks_exact(k) {
+        out.extend_from_slice(px);
+        out.push(px[i].hypot(px[q]));
+        out.push(px[q].atan2(px[i]));
+    }
+    frame.features = out;
+    frame.feature_count = k + 2;
+}

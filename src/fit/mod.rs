@@ -424,6 +424,10 @@ pub struct FitConfig {
     /// Clip the gradient's norm (over every parameter, on the normalised values) to this
     /// before each Adam step (0: no clipping).
     pub clip_grad: f32,
+    /// Channels `(M, P)` hold one complex value as magnitude and phase (radians): they are
+    /// fitted as `I = M cos P` and `Q = M sin P` (which channels M and P of the output then
+    /// hold), so the Gaussians add up coherently; the weights come from M.
+    pub complex: Option<(usize, usize)>,
 }
 
 fn kernel_name<S: serde::Serializer>(k: &SplatKernel, s: S) -> Result<S::Ok, S::Error> {
@@ -454,6 +458,7 @@ impl Default for FitConfig {
             lr_final_fraction: 0.1,
             db: false,
             clip_grad: 0.0,
+            complex: None,
         }
     }
 }
@@ -588,16 +593,19 @@ pub fn check_fittable(data: &FieldData) -> Result<(), String> {
     Ok(())
 }
 
-/// The loss weight of each sample (see the module docs).
-pub fn weights(data: &FieldData, channel: usize) -> Vec<f32> {
+/// The loss weight of each sample (see the module docs): from `|value|` of `channel`, or
+/// with `complex` `(I, Q)` from the magnitude `|I + iQ|`.
+pub fn weights(data: &FieldData, channel: usize, complex: Option<(usize, usize)>) -> Vec<f32> {
     let k = data.k;
-    let max = (0..data.len())
-        .map(|n| data.values[n * k + channel].abs())
-        .fold(0f32, f32::max);
+    let magnitude = |n: usize| match complex {
+        Some((i, q)) => data.values[n * k + i].hypot(data.values[n * k + q]),
+        None => data.values[n * k + channel].abs(),
+    };
+    let max = (0..data.len()).map(magnitude).fold(0f32, f32::max);
     (0..data.len())
         .map(|n| {
             if max > 0.0 {
-                0.1 + 0.9 * data.values[n * k + channel].abs() / max
+                0.1 + 0.9 * magnitude(n) / max
             } else {
                 1.0
             }
@@ -628,6 +636,27 @@ pub fn fit(
     }
     let m = cfg.magnitude_channel;
     let mut values = data.values.clone();
+    if let Some((mc, pc)) = cfg.complex {
+        if mc == pc || mc >= k || pc >= k {
+            return Err(format!(
+                "--complex {mc},{pc} needs two different channels of the {k} (0 to {})",
+                k - 1
+            ));
+        }
+        if cfg.db {
+            return Err("--complex and --db do not go together: give the magnitude linear".into());
+        }
+        if let Some(v) = values.iter().skip(mc).step_by(k).find(|v| **v < 0.0) {
+            return Err(format!(
+                "--complex {mc},{pc}: channel {mc} is a magnitude but holds {v}; give I and Q as two plain channels instead"
+            ));
+        }
+        for row in values.chunks_exact_mut(k) {
+            let (mag, phase) = (f64::from(row[mc]), f64::from(row[pc]));
+            row[mc] = (mag * phase.cos()) as f32;
+            row[pc] = (mag * phase.sin()) as f32;
+        }
+    }
     if cfg.db {
         for v in values.iter_mut().skip(m).step_by(k) {
             *v = 10f64.powf(f64::from(*v) / 10.0) as f32;
@@ -637,7 +666,7 @@ pub fn fit(
                 "channel {m} in dB gives a linear power of {v}, beyond single precision; are these dB?"
             ));
         }
-    } else {
+    } else if cfg.complex.is_none() {
         check_magnitude(data, m)?;
     }
     let scale = values.iter().fold(0f64, |a, &v| a.max(f64::from(v).abs()));
@@ -694,7 +723,7 @@ fn fit_normalised(
     }
     let mut rng = Rng(cfg.seed ^ 0xF17_5EED_0000_0000);
     let n = data.len();
-    let w_all = weights(data, cfg.magnitude_channel);
+    let w_all = weights(data, cfg.magnitude_channel, cfg.complex);
     // Seeded shuffle (Fisher-Yates), the first share held out.
     let mut idx: Vec<usize> = (0..n).collect();
     for i in (1..n).rev() {
