@@ -142,8 +142,9 @@ impl GpuField {
     }
 }
 
-/// The field pipelines of one kernel (one per mode, built when first used) and the frame
-/// buffers, grown as needed.
+/// The field pipelines of one kernel (one per mode, built when first used). Each frame
+/// allocates its parameter and output buffers (a field render is one submission, waited
+/// for).
 pub struct FieldRenderer {
     kernel: crate::model::SplatKernel,
     pipelines: [Option<ComputePipeline>; 3],
