@@ -33,29 +33,16 @@ pub fn heatmap(width: u32, height: u32, error: &[f32], magnify: f32) -> Frame {
         .iter()
         .map(|&e| turbo(if e.is_nan() { 1.0 } else { e * magnify }))
         .collect();
-    color.resize(w * (h + BAR_HEIGHT as usize), [0.0; 3]);
-    let bar = |y: usize, x: usize| (h + y) * w + x;
-    for x in 0..w {
-        let c = turbo(x as f32 / (w.max(2) - 1) as f32);
-        for y in 3..11 {
-            color[bar(y, x)] = c;
-        }
-    }
-    let mut label = |text: &str, anchor: Anchor| {
-        let text_w = (text.len() * (GLYPH_W + 1) - 1) * SCALE;
-        if text_w > w {
-            return;
-        }
-        let x0 = match anchor {
-            Anchor::Left => 0,
-            Anchor::Centre => (w - text_w) / 2,
-            Anchor::Right => w - text_w,
-        };
-        draw_text(&mut color, w, x0, h + 13, text);
-    };
-    label("0", Anchor::Left);
-    label(&number(1.0 / magnify as f64), Anchor::Right);
-    label(&format!("x{}", number(magnify as f64)), Anchor::Centre);
+    append_colour_bar(
+        &mut color,
+        w,
+        h,
+        [
+            "0",
+            &format!("x{}", number(magnify as f64)),
+            &number(1.0 / magnify as f64),
+        ],
+    );
     Frame {
         width,
         height: height + BAR_HEIGHT,
@@ -64,6 +51,44 @@ pub fn heatmap(width: u32, height: u32, error: &[f32], magnify: f32) -> Frame {
         depth: Vec::new(),
         feature_count: 0,
         features: Vec::new(),
+    }
+}
+
+/// Appends [`BAR_HEIGHT`] rows below the `w x h` image `color`: the turbo colour map from
+/// left (0) to right (1), and under it the labels `[left, centre, right]` (a label wider
+/// than the image is left out).
+pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: [&str; 3]) {
+    color.resize(w * (h + BAR_HEIGHT as usize), [0.0; 3]);
+    let bar = |y: usize, x: usize| (h + y) * w + x;
+    for x in 0..w {
+        let c = turbo(x as f32 / (w.max(2) - 1) as f32);
+        for y in 3..11 {
+            color[bar(y, x)] = c;
+        }
+    }
+    let text_width = |text: &str| (text.chars().count() * (GLYPH_W + 1)).saturating_sub(1) * SCALE;
+    let (lw, rw) = (text_width(labels[0]), text_width(labels[2]));
+    for (text, anchor) in labels
+        .iter()
+        .zip([Anchor::Left, Anchor::Centre, Anchor::Right])
+    {
+        let text_w = text_width(text);
+        if text_w > w {
+            continue;
+        }
+        let x0 = match anchor {
+            Anchor::Left => 0,
+            Anchor::Centre => {
+                let x = (w - text_w) / 2;
+                // Only where it does not run into the end labels.
+                if x < lw + SCALE * 2 || x + text_w + rw + SCALE * 2 > w {
+                    continue;
+                }
+                x
+            }
+            Anchor::Right => w - text_w,
+        };
+        draw_text(color, w, x0, h + 13, text);
     }
 }
 
@@ -84,6 +109,16 @@ fn number(v: f64) -> String {
     }
 }
 
+/// A number for a label: plain decimals between 1e-3 and 1e5 (as [`number`]), else
+/// scientific notation with three significant digits.
+pub fn label_number(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
+        number(v)
+    } else {
+        format!("{v:.2e}")
+    }
+}
+
 const GLYPH_W: usize = 3;
 const SCALE: usize = 2;
 
@@ -101,7 +136,48 @@ fn glyph(c: char) -> [u8; 5] {
         '8' => [7, 5, 7, 5, 7],
         '9' => [7, 5, 7, 1, 7],
         '.' => [0, 0, 0, 0, 2],
-        'x' => [0, 5, 2, 5, 0],
+        '-' => [0, 0, 7, 0, 0],
+        '+' => [0, 2, 7, 2, 0],
+        '_' => [0, 0, 0, 0, 7],
+        '/' => [1, 1, 2, 4, 4],
+        '(' => [1, 2, 2, 2, 1],
+        ')' => [4, 2, 2, 2, 4],
+        ':' => [0, 2, 0, 2, 0],
+        '%' => [5, 1, 2, 4, 5],
+        'x' | 'X' => [0, 5, 2, 5, 0],
+        c if c.is_ascii_alphabetic() => letter(c.to_ascii_lowercase()),
+        _ => [0; 5],
+    }
+}
+
+/// 3x5 letters (upper case drawn as lower case).
+fn letter(c: char) -> [u8; 5] {
+    match c {
+        'a' => [2, 5, 7, 5, 5],
+        'b' => [6, 5, 6, 5, 6],
+        'c' => [3, 4, 4, 4, 3],
+        'd' => [6, 5, 5, 5, 6],
+        'e' => [7, 4, 6, 4, 7],
+        'f' => [7, 4, 6, 4, 4],
+        'g' => [3, 4, 5, 5, 3],
+        'h' => [5, 5, 7, 5, 5],
+        'i' => [7, 2, 2, 2, 7],
+        'j' => [1, 1, 1, 5, 2],
+        'k' => [5, 5, 6, 5, 5],
+        'l' => [4, 4, 4, 4, 7],
+        'm' => [5, 7, 7, 5, 5],
+        'n' => [6, 5, 5, 5, 5],
+        'o' => [2, 5, 5, 5, 2],
+        'p' => [6, 5, 6, 4, 4],
+        'q' => [2, 5, 5, 6, 3],
+        'r' => [6, 5, 6, 5, 5],
+        's' => [3, 4, 2, 1, 6],
+        't' => [7, 2, 2, 2, 2],
+        'u' => [5, 5, 5, 5, 7],
+        'v' => [5, 5, 5, 5, 2],
+        'w' => [5, 5, 7, 7, 5],
+        'y' => [5, 5, 2, 2, 2],
+        'z' => [7, 1, 2, 4, 7],
         _ => [0; 5],
     }
 }

@@ -442,12 +442,61 @@ pub fn depth_percentiles(frame: &Frame) -> Option<[f32; 2]> {
     if d.is_empty() {
         d = pick(0.0);
     }
-    if d.is_empty() {
+    quantiles(d, 0.01, 0.99)
+}
+
+/// The `lo` and `hi` quantiles (0..1, nearest rank) of `values`; `None` when empty.
+pub fn quantiles(mut values: Vec<f32>, lo: f64, hi: f64) -> Option<[f32; 2]> {
+    if values.is_empty() {
         return None;
     }
-    d.sort_unstable_by(|a, b| a.total_cmp(b));
-    let at = |p: f64| d[((d.len() - 1) as f64 * p).round() as usize];
-    Some([at(0.01), at(0.99)])
+    values.sort_unstable_by(|a, b| a.total_cmp(b));
+    let at = |p: f64| values[((values.len() - 1) as f64 * p).round() as usize];
+    Some([at(lo), at(hi)])
+}
+
+/// The colour-map range `--range auto` picks for channel `channel` of a field frame: the
+/// 1st and 99th percentiles of its values (empty pixels left out), widened to a nonzero
+/// span; `None` when every pixel is empty.
+pub fn field_auto_range(frame: &Frame, channel: usize) -> Option<[f32; 2]> {
+    let k = frame.feature_count.max(1);
+    let values: Vec<f32> = frame.features[channel..]
+        .iter()
+        .step_by(k)
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let [lo, hi] = quantiles(values, 0.01, 0.99)?;
+    Some(if hi > lo {
+        [lo, hi]
+    } else {
+        let pad = (lo.abs() * 1e-3).max(f32::MIN_POSITIVE);
+        [lo - pad, hi + pad]
+    })
+}
+
+/// Channel `channel` of a field frame through the turbo colour map over `range`: values
+/// below the range get the bottom colour, above it the top colour (clamped, never black);
+/// empty pixels (NaN) get `background`.
+pub fn field_colormap(
+    frame: &Frame,
+    channel: usize,
+    range: [f32; 2],
+    background: [f32; 3],
+) -> Vec<[f32; 3]> {
+    let k = frame.feature_count.max(1);
+    let span = range[1] - range[0];
+    frame.features[channel..]
+        .iter()
+        .step_by(k)
+        .map(|&v| {
+            if v.is_nan() {
+                background
+            } else {
+                turbo((v - range[0]) / span)
+            }
+        })
+        .collect()
 }
 
 /// The depth plane as an 8-bit colour-mapped image for looking at: near is warm, far is
@@ -513,6 +562,23 @@ pub enum RenderMode {
     /// The scene's feature channels blended with the colour rules, background 0 (EXR:
     /// `feat.0` ... `feat.{K-1}`, A, Z; `.npy`: H x W x K float32). No PNG.
     Features,
+    /// The fitted field on a plane (`cpu::field`): EXR and `.npy` as `Features`, PNG the
+    /// colour-mapped channel.
+    FieldSlice,
+    /// The line integral of the fitted field along each ray (files as `FieldSlice`).
+    FieldIntegral,
+    /// The maximum of the fitted field along each ray (files as `FieldSlice`).
+    FieldMax,
+}
+
+impl RenderMode {
+    /// One of the field renders (`field-slice`, `field-integral`, `field-max`).
+    pub fn is_field(self) -> bool {
+        matches!(
+            self,
+            RenderMode::FieldSlice | RenderMode::FieldIntegral | RenderMode::FieldMax
+        )
+    }
 }
 
 impl std::str::FromStr for RenderMode {
@@ -525,8 +591,11 @@ impl std::str::FromStr for RenderMode {
             "depth" => Ok(RenderMode::Depth),
             "rgb+depth" => Ok(RenderMode::RgbDepth),
             "features" => Ok(RenderMode::Features),
+            "field-slice" => Ok(RenderMode::FieldSlice),
+            "field-integral" => Ok(RenderMode::FieldIntegral),
+            "field-max" => Ok(RenderMode::FieldMax),
             _ => Err(format!(
-                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth, rgb+depth or features"
+                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth, rgb+depth, features, field-slice, field-integral or field-max"
             )),
         }
     }
@@ -612,12 +681,18 @@ pub fn plan_files(
     let npy = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
-    if opts.mode == Some(RenderMode::Features) {
-        let content = match ImageFormat::from_path(path, false) {
+    let field = opts.mode.is_some_and(RenderMode::is_field);
+    if opts.mode == Some(RenderMode::Features) || field {
+        let content = match ImageFormat::from_path(path, opts.png16) {
             _ if npy => FileContent::NpyFeatures,
             Ok(ImageFormat::Exr) => FileContent::ExrFeatures {
                 half: opts.exr_half,
             },
+            // The colour-mapped channel (the frame's colour).
+            Ok(_) if field => FileContent::PngColor {
+                sixteen_bit: opts.png16,
+            },
+            Err(e) if field => return Err(e),
             _ => return Err(OutputError::FeaturesFormat(path.to_path_buf())),
         };
         return Ok(vec![spec(path.to_path_buf(), content)]);
@@ -650,7 +725,10 @@ pub fn plan_files(
         range: opts.depth_range,
     };
     Ok(match opts.mode.unwrap_or(RenderMode::Rgb) {
-        RenderMode::Features => return Err(OutputError::FeaturesFormat(path.to_path_buf())),
+        RenderMode::Features
+        | RenderMode::FieldSlice
+        | RenderMode::FieldIntegral
+        | RenderMode::FieldMax => return Err(OutputError::FeaturesFormat(path.to_path_buf())),
         RenderMode::Rgb => vec![spec(path.into(), FileContent::PngColor { sixteen_bit })],
         RenderMode::Rgba => vec![spec(
             path.into(),

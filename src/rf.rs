@@ -56,7 +56,7 @@ impl RfField {
     }
 
     /// The unnormalised channels at `p`: [magnitude, cos phase, sin phase, fourth channel].
-    fn raw(self, p: [f64; 3]) -> [f64; 4] {
+    pub fn raw(self, p: [f64; 3]) -> [f64; 4] {
         let k = TAU;
         let clamp = 0.25;
         match self {

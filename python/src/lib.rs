@@ -324,6 +324,30 @@ impl PyScene {
         self.raw.feature_count
     }
 
+    /// The field the Gaussians hold, `sum_i o_i feat_i G_i(x)` (the sum `fit` fits), at `n`
+    /// points (`n x 3` float32 bytes): `n x K` float32 bytes.
+    fn evaluate_field<'py>(
+        &self,
+        py: Python<'py>,
+        points: &[u8],
+        n: usize,
+    ) -> PyResult<Bound<'py, PyByteArray>> {
+        if self.raw.feature_count == 0 {
+            return Err(value_err(format!(
+                "{} has no feature channels, so it holds no field",
+                self.source
+            )));
+        }
+        let p = floats(points, "points", n * 3)?;
+        check_finite("points", &p, 3)?;
+        let positions: Vec<[f32; 3]> = rows(&p);
+        let model = vksplat::fit::model::Model::from_scene(&self.raw);
+        let kernel = self.raw.kernel;
+        let f = py
+            .detach(|| guarded(|| Ok(vksplat::fit::model::evaluate(&model, kernel, &positions))))?;
+        Ok(byte_array(py, &f))
+    }
+
     /// The falloff the file records ("gaussian" unless a PLY says `power`).
     #[getter]
     fn kernel(&self) -> &'static str {
@@ -415,6 +439,148 @@ fn load(py: Python<'_>, path: PathBuf, iteration: Option<u64>) -> PyResult<PySce
             Ok(PyScene::new(raw, act, resolved.display().to_string()))
         })
     })
+}
+
+/// Fits Gaussians with feature channels to field samples, as `vksplat fit` does: `points`
+/// `n x 3` and `values` `n x k` float32 bytes. Returns the scene and a report: the held-out
+/// errors, the counts, what was chosen from the data (`notes`) and `warnings` (a fit no
+/// better than predicting 0).
+#[pyfunction]
+#[pyo3(signature = (points, values, n, k, gaussians=None, max_gaussians=None, steps=1500, kernel="gaussian", holdout=0.1, seed=1, bounds=None, magnitude_channel=0, db=false, clip_grad=0.0))]
+#[allow(clippy::too_many_arguments)]
+fn fit<'py>(
+    py: Python<'py>,
+    points: &[u8],
+    values: &[u8],
+    n: usize,
+    k: usize,
+    gaussians: Option<usize>,
+    max_gaussians: Option<usize>,
+    steps: usize,
+    kernel: &str,
+    holdout: f32,
+    seed: u64,
+    bounds: Option<[f32; 6]>,
+    magnitude_channel: usize,
+    db: bool,
+    clip_grad: f32,
+) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
+    use vksplat::fit::{self, FieldData, FitConfig, Layout};
+    let points = floats(points, "points", n * 3)?;
+    let values = floats(values, "values", n * k)?;
+    check_finite("points", &points, 3)?;
+    check_finite("values", &values, k.max(1))?;
+    let kernel: vksplat::cpu::SplatKernel = kernel.parse().map_err(value_err)?;
+    if k == 0 || k > scene::MAX_FEATURES {
+        return Err(value_err(format!(
+            "values: {k} channels; a Gaussian carries 1 to {} features",
+            scene::MAX_FEATURES
+        )));
+    }
+    if !(0.0..=0.9).contains(&holdout) {
+        return Err(value_err(format!(
+            "holdout must be between 0 and 0.9, got {holdout}"
+        )));
+    }
+    if steps == 0 || clip_grad.is_nan() || clip_grad < 0.0 {
+        return Err(value_err(
+            "steps must be at least 1 and clip_grad 0 or more",
+        ));
+    }
+    let positions: Vec<[f32; 3]> = rows(&points);
+    let mut data = FieldData {
+        bounds: fit::model::point_bounds(&positions),
+        positions,
+        values,
+        k,
+        layout: Layout::SamplesNpy,
+        bounds_source: "the samples' extent".into(),
+    };
+    if let Some(b) = bounds {
+        fit::check_bounds(b).map_err(|m| value_err(format!("bounds: {m}")))?;
+        if let Some(i) = data
+            .positions
+            .iter()
+            .position(|p| (0..3).any(|a| p[a] < b[a] || p[a] > b[a + 3]))
+        {
+            return Err(value_err(format!(
+                "points: point {i} lies outside the bounds"
+            )));
+        }
+        data.bounds = b;
+        data.bounds_source = "bounds".into();
+    }
+    fit::check_fittable(&data).map_err(|m| value_err(format!("points and values: {m}")))?;
+    if magnitude_channel >= k {
+        return Err(value_err(format!(
+            "magnitude_channel {magnitude_channel} is not one of the {k} channels"
+        )));
+    }
+    if !db {
+        fit::check_magnitude(&data, magnitude_channel).map_err(|m| {
+            value_err(format!(
+                "values: {}",
+                m.replace("pass --db", "pass db=True")
+            ))
+        })?;
+    }
+    let (auto_initial, auto_max) = fit::default_counts(n);
+    let initial =
+        gaussians.unwrap_or_else(|| auto_initial.min(max_gaussians.unwrap_or(usize::MAX)));
+    let max_gaussians = max_gaussians.unwrap_or(auto_max.max(initial));
+    if initial == 0 || initial > max_gaussians {
+        return Err(value_err(format!(
+            "gaussians ({initial}) must be between 1 and max_gaussians ({max_gaussians})"
+        )));
+    }
+    let cfg = FitConfig {
+        kernel,
+        initial,
+        max_gaussians,
+        steps,
+        holdout,
+        seed,
+        magnitude_channel,
+        db,
+        clip_grad,
+        ..FitConfig::default()
+    };
+    let outcome =
+        py.detach(|| guarded(|| fit::fit(&data, &cfg, &mut |_| {}).map_err(value_err)))?;
+    let raw = fit::to_scene(&outcome, kernel, magnitude_channel);
+    let act = raw.activated();
+    let report = PyDict::new(py);
+    let h = outcome.holdout.as_ref();
+    report.set_item("holdout_relative_l2", h.map(|h| h.relative_l2))?;
+    report.set_item(
+        "holdout_relative_l2_per_channel",
+        h.map(|h| h.per_channel.clone()),
+    )?;
+    report.set_item(
+        "holdout_magnitude_db_rms",
+        h.and_then(|h| h.magnitude_db_rms),
+    )?;
+    report.set_item("gaussians_initial", initial)?;
+    report.set_item("gaussians_max", max_gaussians)?;
+    report.set_item("gaussians", outcome.model.len())?;
+    report.set_item("value_scale", outcome.value_scale)?;
+    report.set_item("fit_bounds", outcome.fit_bounds.to_vec())?;
+    report.set_item("notes", outcome.notes.clone())?;
+    let warnings: Vec<String> = h
+        .filter(|h| h.relative_l2.is_nan() || h.relative_l2 >= 1.0)
+        .map(|h| {
+            format!(
+                "the held-out relative L2 error is {:.3}: this fit is no better than predicting 0 everywhere (error 1)",
+                h.relative_l2
+            )
+        })
+        .into_iter()
+        .collect();
+    report.set_item("warnings", warnings)?;
+    Ok((
+        PyScene::new(raw, act, format!("fitted to {n} samples")),
+        report,
+    ))
 }
 
 /// The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
@@ -1546,6 +1712,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shader_layers, m)?)?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(demo, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(scene_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(load_cameras, m)?)?;
     m.add_function(wrap_pyfunction!(save_cameras, m)?)?;

@@ -41,6 +41,7 @@ __all__ = [
     "compare",
     "default_camera",
     "demo",
+    "fit",
     "load",
     "load_cameras",
     "look_at",
@@ -272,10 +273,25 @@ class Scene:
     ``quats (N, 4)`` (wxyz, normalised), ``scales (N, 3)`` and ``opacities (N,)``
     (activated), ``sh (N, (d+1)^2, 3)``; ``raw()`` gives the trainer's parameters."""
 
-    __slots__ = ("_s",)
+    __slots__ = ("_s", "_report")
 
-    def __init__(self, native: Any) -> None:
+    def __init__(self, native: Any, report: Optional[Dict[str, Any]] = None) -> None:
         self._s = native
+        self._report = report
+
+    @property
+    def fit_report(self) -> Optional[Dict[str, Any]]:
+        """For a scene made by :func:`fit`: the held-out errors, the Gaussian counts, what
+        was chosen from the data (``notes``) and ``warnings``; None otherwise."""
+        return self._report
+
+    def evaluate_field(self, points: ArrayLike) -> np.ndarray:
+        """The field the Gaussians hold, ``f(x) = sum_i o_i feat_i G_i(x)`` (the plain sum
+        :func:`fit` fits and ``render --mode field-*`` shows), at ``points (N, 3)``:
+        ``(N, K)`` float32."""
+        p = _floats("points", points, (None, 3))
+        out = self._s.evaluate_field(p.tobytes(), p.shape[0])
+        return _view(out, (p.shape[0], self.feature_count))
 
     def __len__(self) -> int:
         return len(self._s)
@@ -462,6 +478,48 @@ def load(path: PathLike, iteration: Optional[int] = None) -> Scene:
 def demo() -> Scene:
     """The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0)."""
     return Scene(_native.demo())
+
+
+def fit(
+    points: ArrayLike,
+    values: ArrayLike,
+    *,
+    gaussians: Optional[int] = None,
+    max_gaussians: Optional[int] = None,
+    steps: int = 1500,
+    kernel: str = "gaussian",
+    holdout: float = 0.1,
+    seed: int = 1,
+    bounds: Optional[Sequence[float]] = None,
+    magnitude_channel: int = 0,
+    db: bool = False,
+    clip_grad: float = 0.0,
+) -> Scene:
+    """Fits Gaussians with feature channels to field samples, as ``vksplat fit`` does:
+    ``points (N, 3)`` and ``values (N, K)`` (or ``(N,)`` for one channel). The scene's
+    features hold the field (``scene.evaluate_field(x)``); ``scene.fit_report`` the
+    held-out errors. Gaussian counts default to one per 20 samples (at most one per 5);
+    ``bounds`` (xmin, ymin, zmin, xmax, ymax, zmax) is the region sampled; ``db=True``
+    takes the magnitude channel as dB and fits its linear power. A fit no better than
+    predicting 0 raises a ``UserWarning``."""
+    p = _floats("points", points, (None, 3))
+    v = _numpy(values)
+    if v.ndim == 1:
+        v = v[:, None]
+    v = _floats("values", v, (p.shape[0], None))
+    b = None if bounds is None else [float(x) for x in bounds]
+    if b is not None and len(b) != 6:
+        raise ValueError(f"bounds must be 6 numbers (xmin, ymin, zmin, xmax, ymax, zmax), got {len(b)}")
+    native, report = _native.fit(
+        p.tobytes(), v.tobytes(), p.shape[0], v.shape[1], gaussians, max_gaussians, steps,
+        kernel, holdout, seed, b, magnitude_channel, db, clip_grad,
+    )
+    report = dict(report)
+    for w in report["warnings"]:
+        import warnings
+
+        warnings.warn(w, UserWarning, stacklevel=2)
+    return Scene(native, report)
 
 
 # ---------------------------------------------------------------------------------------

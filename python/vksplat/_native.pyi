@@ -33,6 +33,7 @@ class Scene:
         min_opacity: Optional[float] = None,
         sh_degree: Optional[int] = None,
     ) -> "Scene": ...
+    def evaluate_field(self, points: bytes, n: int) -> bytearray: ...
 
 class Renderer:
     def __init__(self, device: Optional[str] = None) -> None: ...
@@ -52,6 +53,22 @@ class Renderer:
 
 def load(path: str, iteration: Optional[int] = None) -> Scene: ...
 def demo() -> Scene: ...
+def fit(
+    points: bytes,
+    values: bytes,
+    n: int,
+    k: int,
+    gaussians: Optional[int] = None,
+    max_gaussians: Optional[int] = None,
+    steps: int = 1500,
+    kernel: str = "gaussian",
+    holdout: float = 0.1,
+    seed: int = 1,
+    bounds: Optional[Sequence[float]] = None,
+    magnitude_channel: int = 0,
+    db: bool = False,
+    clip_grad: float = 0.0,
+) -> Tuple[Scene, Dict[str, object]]: ...
 def scene_from_arrays(
     n: int,
     sh_coeffs: int,

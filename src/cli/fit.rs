@@ -27,14 +27,30 @@ pub(crate) struct FitArgs {
     #[arg(short, long, value_name = "OUT.ply")]
     pub(crate) output: PathBuf,
     /// Extent of a grid input [default: from the sidecar INPUT.json that gen --rf writes, e.g. dipole.npy.json].
-    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::fit::parse_bounds)]
+    /// Scattered samples: the region they were taken in (every sample inside it; a scan on a
+    /// plane or a line gets its thickness from it).
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::fit::parse_bounds, allow_hyphen_values = true)]
     pub(crate) bounds: Option<[f32; 6]>,
-    /// Gaussians at the start.
-    #[arg(long, value_name = "N", default_value_t = 1000, value_parser = values::int_in(1usize, 10_000_000))]
-    pub(crate) gaussians: usize,
-    /// Density control never goes beyond this many Gaussians.
-    #[arg(long, value_name = "M", default_value_t = 4000, value_parser = values::int_in(1usize, 10_000_000))]
-    pub(crate) max_gaussians: usize,
+    /// Gaussians at the start [default: one per 20 samples, 8 to 1000].
+    #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 10_000_000))]
+    pub(crate) gaussians: Option<usize>,
+    /// Density control never goes beyond this many Gaussians [default: one per 5 samples,
+    /// at least --gaussians, at most 4000].
+    #[arg(long, value_name = "M", value_parser = values::int_in(1usize, 10_000_000))]
+    pub(crate) max_gaussians: Option<usize>,
+    /// The magnitude channel is in dB (10 log10 of a power, e.g. dBm): fit it as the linear
+    /// power 10^(v/10) (the PLY holds that power) and also report the held-out error in dB.
+    #[arg(long)]
+    pub(crate) db: bool,
+    /// Clip the gradient's norm to this before each Adam step (the values are normalised
+    /// to a largest magnitude of 1 first; 0: no clipping).
+    #[arg(long, value_name = "G", default_value_t = 0.0, value_parser = non_negative)]
+    pub(crate) clip_grad: f32,
+    /// Channels M,P hold one complex value as magnitude and phase (radians): fit it as
+    /// I = M cos P and Q = M sin P (channels M and P of the PLY then hold I and Q), so the
+    /// Gaussians add up coherently; render with --complex M,P to see |f| and its phase.
+    #[arg(long, value_name = "M,P", value_parser = channel_pair)]
+    pub(crate) complex: Option<(usize, usize)>,
     /// Optimisation steps (one mini-batch each).
     #[arg(long, value_name = "S", default_value_t = FitConfig::default().steps, value_parser = values::int_in(1usize, 10_000_000))]
     pub(crate) steps: usize,
@@ -82,6 +98,20 @@ fn holdout(s: &str) -> Result<f32, String> {
     }
 }
 
+/// `A,B`: two different channel numbers.
+pub(crate) fn channel_pair(s: &str) -> Result<(usize, usize), String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let pair = match parts[..] {
+        [a, b] => a.parse::<usize>().ok().zip(b.parse::<usize>().ok()),
+        _ => None,
+    };
+    match pair {
+        Some((a, b)) if a != b => Ok((a, b)),
+        Some(_) => Err(format!("the two channels must differ, got \"{s}\"")),
+        None => Err(format!("expected two channel numbers A,B, got \"{s}\"")),
+    }
+}
+
 fn non_negative(s: &str) -> Result<f32, String> {
     let v = values::any_f32(s)?;
     if v >= 0.0 {
@@ -116,14 +146,14 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     if let Some(r) = &args.report {
         check_output_file(r, args.overwrite)?;
     }
-    if args.gaussians > args.max_gaussians {
-        bail!(
-            "--gaussians {} is above --max-gaussians {}",
-            args.gaussians,
-            args.max_gaussians
-        );
+    if let (Some(g), Some(m)) = (args.gaussians, args.max_gaussians) {
+        if g > m {
+            bail!("--gaussians {g} is above --max-gaussians {m}");
+        }
     }
     let data = vksplat::fit::load(&args.input, args.bounds)?;
+    vksplat::fit::check_fittable(&data)
+        .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     if args.magnitude_channel >= data.k {
         bail!(
             "{}: --magnitude-channel {} is not one of its channels (it has {}: 0 to {})",
@@ -133,14 +163,49 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             data.k - 1
         );
     }
+    if let Some((m, p)) = args.complex {
+        if args.db {
+            bail!("--complex and --db do not go together: give the magnitude linear");
+        }
+        if m.max(p) >= data.k {
+            bail!(
+                "{}: --complex {m},{p} names a channel it does not have (it has {}: 0 to {})",
+                args.input.display(),
+                data.k,
+                data.k - 1
+            );
+        }
+    }
+    let magnitude_channel = args.complex.map_or(args.magnitude_channel, |(m, _)| m);
+    if !args.db {
+        vksplat::fit::check_magnitude(&data, magnitude_channel)
+            .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
+    }
+    let (auto_initial, auto_max) = vksplat::fit::default_counts(data.len());
+    let initial = args
+        .gaussians
+        .unwrap_or_else(|| auto_initial.min(args.max_gaussians.unwrap_or(usize::MAX)));
+    let max_gaussians = args.max_gaussians.unwrap_or(auto_max.max(initial));
+    if initial > max_gaussians {
+        bail!("--gaussians {initial} is above --max-gaussians {max_gaussians}");
+    }
+    if (args.gaussians.is_none() || args.max_gaussians.is_none()) && !args.quiet {
+        note!(
+            "chose --gaussians {initial} --max-gaussians {max_gaussians} for {} samples (one Gaussian per 20 samples at the start, at most one per 5; give either to choose)",
+            data.len()
+        );
+    }
     let cfg = FitConfig {
         kernel: args.kernel,
-        initial: args.gaussians,
-        max_gaussians: args.max_gaussians,
+        initial,
+        max_gaussians,
+        db: args.db,
+        clip_grad: args.clip_grad,
         steps: args.steps,
         densify_every: args.densify_every,
         min_opacity: args.min_opacity,
-        magnitude_channel: args.magnitude_channel,
+        magnitude_channel,
+        complex: args.complex,
         holdout: args.holdout,
         seed: args.seed,
         batch: args.batch,
@@ -183,6 +248,20 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     })
     .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     bar.finish_and_clear();
+    for n in &outcome.notes {
+        note!("note: {n}");
+    }
+    let mut warnings = Vec::new();
+    if let Some(h) = outcome
+        .holdout
+        .as_ref()
+        .filter(|h| h.relative_l2.is_nan() || h.relative_l2 >= 1.0)
+    {
+        warnings.push(format!(
+            "the held-out relative L2 error is {:.3}: this fit is no better than predicting 0 everywhere (error 1); do not use it. More samples, more --steps or other --gaussians may help",
+            h.relative_l2
+        ));
+    }
     let scene = vksplat::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
     let bytes =
         vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
@@ -209,6 +288,12 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
                 "on": "all training samples",
             },
             "holdout_relative_l2": outcome.holdout.as_ref().map(|h| h.relative_l2),
+            "holdout_magnitude_db_rms": outcome.holdout.as_ref().and_then(|h| h.magnitude_db_rms),
+            "value_scale": outcome.value_scale,
+            "fit_bounds": outcome.fit_bounds,
+            "notes": outcome.notes,
+            "warnings": warnings,
+            "clipped_steps": outcome.clipped_steps,
             "holdout_relative_l2_per_channel": outcome.holdout.as_ref().map(|h| h.per_channel.clone()),
             "gaussians": {
                 "initial": cfg.initial,
@@ -225,14 +310,17 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     }
     let error = match &outcome.holdout {
         Some(h) => format!(
-            "held-out relative L2 error {:.4} ({} samples; per channel {})",
+            "held-out relative L2 error {:.4} ({} samples; per channel {}){}",
             h.relative_l2,
             outcome.holdout_samples,
             h.per_channel
                 .iter()
                 .map(|e| format!("{e:.3}"))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", "),
+            h.magnitude_db_rms
+                .map(|d| format!("; magnitude RMS error {d:.2} dB"))
+                .unwrap_or_default()
         ),
         None => "no held-out samples (--holdout 0)".into(),
     };
@@ -244,6 +332,9 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         cfg.steps,
         outcome.final_loss.0 + outcome.final_loss.1,
     );
+    for w in &warnings {
+        note!("warning: {w}");
+    }
     if !args.quiet {
         note!("wrote {}", args.output.display());
         if let Some(r) = &args.report {

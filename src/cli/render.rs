@@ -44,11 +44,14 @@ pub(crate) struct RenderArgs {
     /// render/frame_{:05}.png for several].
     #[arg(short, long, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
-    /// What to write: rgb, rgba, alpha, depth, rgb+depth or features [default: rgb for
-    /// PNG, rgb+depth (R, G, B, A, Z) for EXR]. rgba: PNG with a transparent background
-    /// (straight colour; EXR as rgb). Depth PNGs are colour-mapped for looking at.
-    /// features: the scene's feature channels blended like colour over 0, as EXR (feat.0
-    /// ... feat.K-1, A, Z) or .npy (H x W x K float32).
+    /// What to write: rgb, rgba, alpha, depth, rgb+depth, features, field-slice,
+    /// field-integral or field-max [default: rgb for PNG, rgb+depth (R, G, B, A, Z) for
+    /// EXR]. rgba: PNG with a transparent background (straight colour; EXR as rgb). Depth
+    /// PNGs are colour-mapped for looking at. features: the scene's feature channels
+    /// blended like colour over 0, as EXR (feat.0 ... feat.K-1, A, Z) or .npy (H x W x K
+    /// float32). field-*: the fitted field itself (the sum over Gaussians `fit` models) on
+    /// the --slice-plane, integrated along each ray, or its maximum along each ray; EXR and
+    /// .npy as features, PNG the --channel through a colour map (or --shader).
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
     /// Feature channels for the scene's Gaussians: an N x K NumPy array (float32 or
@@ -60,6 +63,8 @@ pub(crate) struct RenderArgs {
     /// direction and alpha). The colour written is alpha * MLP + (1 - alpha) * background.
     #[arg(long, value_name = "FILE.safetensors")]
     pub(crate) shader: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) field: Box<super::render_field::FieldArgs>,
     /// Frames of the path to render, numbered in the whole path (before --camera): 7,
     /// 0,3,7, 100..200 (end exclusive), 100..=199, 100.. or ..50. File names keep the
     /// frame's number, so split runs give the files of one run.
@@ -319,6 +324,11 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if let Some(file) = &args.features {
         vksplat::scene::features::attach_npy(&mut scene, file)?;
     }
+    let field_mode = args.mode.filter(|m| m.is_field());
+    super::render_field::check_options(args, field_mode)?;
+    if field_mode.is_some() && scene.feature_count == 0 {
+        bail!("--mode {} renders the fitted field, its feature channels, but {name} has none; fit one with `vksplat fit` or give channels with --features FILE.npy", super::render_field::mode_name(field_mode));
+    }
     let render_features = args.mode == Some(output::RenderMode::Features);
     if render_features && scene.feature_count == 0 {
         bail!("--mode features needs feature channels, but {name} has none; give them as feat_* PLY properties or with --features FILE.npy");
@@ -327,6 +337,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         Some(path) => {
             if render_features {
                 bail!("--shader writes the shaded colour and --mode features the feature channels; choose one");
+            }
+            if field_mode.is_some() && !super::render_field::writes_png(args) {
+                bail!("--shader colours a field render's PNG; EXR and .npy outputs hold the channels themselves");
             }
             let mlp = vksplat::mlp::Mlp::load(path)?;
             mlp.check_channels(scene.feature_count)
@@ -466,7 +479,20 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         features: render_features,
         shader: shader.as_ref(),
     };
-    let (summary, how) = if let Some(devices) = &args.devices {
+    let (summary, how) = if let Some(mode) = field_mode {
+        if args.devices.is_some() {
+            bail!("--devices spreads colour and feature renders over devices; the field modes render on one (drop --devices)");
+        }
+        super::render_field::render(
+            args,
+            &act,
+            opts.kernel,
+            mode,
+            &plan.frames,
+            &run_opts,
+            shader.as_ref(),
+        )?
+    } else if let Some(devices) = &args.devices {
         render_on_devices(&job, devices)?
     } else if args.cpu {
         render_cpu(&job)?

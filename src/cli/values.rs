@@ -143,6 +143,29 @@ pub(crate) fn background(s: &str) -> Result<[f32; 3], String> {
     Ok([v[0], v[1], v[2]])
 }
 
+/// `PX,PY,PZ,NX,NY,NZ`: a plane's point and normal (six finite numbers, a nonzero normal).
+pub(crate) fn plane(s: &str) -> Result<[f32; 6], String> {
+    let v = list(s, 6, "PX,PY,PZ,NX,NY,NZ")?;
+    if v[3] == 0.0 && v[4] == 0.0 && v[5] == 0.0 {
+        return Err(format!(
+            "the normal NX,NY,NZ must not be 0,0,0, got \"{s}\""
+        ));
+    }
+    Ok([v[0], v[1], v[2], v[3], v[4], v[5]])
+}
+
+/// A colour-map range: `LO,HI` (LO below HI) or `auto` (`None`).
+pub(crate) fn colour_range(s: &str) -> Result<Option<[f32; 2]>, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(None);
+    }
+    let v = list(s, 2, "LO,HI or auto")?;
+    if v[0] >= v[1] {
+        return Err(format!("LO must be below HI, got \"{s}\""));
+    }
+    Ok(Some([v[0], v[1]]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,6 +6,7 @@
 //! The rules are those of `shared/docs/reference-semantics.md`.
 
 pub mod backward;
+pub mod field;
 
 use crate::camera::Camera;
 use crate::frame::Frame;

@@ -98,7 +98,8 @@ pub fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
     Ok(b)
 }
 
-fn check_bounds(b: [f32; 6]) -> Result<(), String> {
+/// Each min below its max (and no NaN).
+pub fn check_bounds(b: [f32; 6]) -> Result<(), String> {
     for (a, name) in ["x", "y", "z"].iter().enumerate() {
         if b[a].is_nan() || b[a + 3].is_nan() || b[a] >= b[a + 3] {
             return Err(format!(
@@ -144,12 +145,7 @@ pub fn load(path: &Path, bounds: Option<[f32; 6]>) -> Result<FieldData, InputErr
     let bytes = std::fs::read(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
     let data = match ext.as_str() {
         "npy" => load_npy(&bytes, path, bounds)?,
-        "csv" => {
-            if bounds.is_some() {
-                return Err(bad(path, "holds scattered samples, which carry their own positions; --bounds is only for a dense grid"));
-            }
-            load_csv(&bytes, path)?
-        }
+        "csv" => with_bounds(load_csv(&bytes, path)?, bounds, path)?,
         _ => {
             return Err(bad(
                 path,
@@ -234,9 +230,6 @@ fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<Field
             })
         }
         [n, cols] => {
-            if bounds.is_some() {
-                return Err(bad(path, "holds scattered samples, which carry their own positions; --bounds is only for a dense grid"));
-            }
             if cols < 4 {
                 return Err(bad(
                     path,
@@ -257,7 +250,7 @@ fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<Field
                     ),
                 ));
             }
-            Ok(samples(array.data, cols, Layout::SamplesNpy))
+            with_bounds(samples(array.data, cols, Layout::SamplesNpy), bounds, path)
         }
         _ => Err(bad(
             path,
@@ -287,6 +280,35 @@ fn samples(rows: Vec<f32>, cols: usize, layout: Layout) -> FieldData {
         layout,
         bounds_source: "the samples' extent".into(),
     }
+}
+
+/// Scattered samples inside `bounds` (`--bounds`: the region they were taken in, which
+/// also gives flat scans their thickness); every sample must lie inside.
+fn with_bounds(
+    mut data: FieldData,
+    bounds: Option<[f32; 6]>,
+    path: &Path,
+) -> Result<FieldData, InputError> {
+    let Some(b) = bounds else {
+        return Ok(data);
+    };
+    if let Some(i) = data
+        .positions
+        .iter()
+        .position(|p| (0..3).any(|a| p[a] < b[a] || p[a] > b[a + 3]))
+    {
+        let p = data.positions[i];
+        return Err(bad(
+            path,
+            format!(
+                "sample {i} at ({}, {}, {}) lies outside --bounds {},{},{},{},{},{}",
+                p[0], p[1], p[2], b[0], b[1], b[2], b[3], b[4], b[5]
+            ),
+        ));
+    }
+    data.bounds = b;
+    data.bounds_source = "--bounds".into();
+    Ok(data)
 }
 
 fn load_csv(bytes: &[u8], path: &Path) -> Result<FieldData, InputError> {
@@ -396,6 +418,16 @@ pub struct FitConfig {
     pub lr_feature: f32,
     /// Every learning rate falls exponentially to this fraction at the last step.
     pub lr_final_fraction: f32,
+    /// The magnitude channel holds decibels (`10 log10` of a power): it is fitted as the
+    /// linear power `10^(v / 10)` and the held-out error is also reported in dB.
+    pub db: bool,
+    /// Clip the gradient's norm (over every parameter, on the normalised values) to this
+    /// before each Adam step (0: no clipping).
+    pub clip_grad: f32,
+    /// Channels `(M, P)` hold one complex value as magnitude and phase (radians): they are
+    /// fitted as `I = M cos P` and `Q = M sin P` (which channels M and P of the output then
+    /// hold), so the Gaussians add up coherently; the weights come from M.
+    pub complex: Option<(usize, usize)>,
 }
 
 fn kernel_name<S: serde::Serializer>(k: &SplatKernel, s: S) -> Result<S::Ok, S::Error> {
@@ -424,6 +456,9 @@ impl Default for FitConfig {
             lr_opacity: 0.05,
             lr_feature: 0.02,
             lr_final_fraction: 0.1,
+            db: false,
+            clip_grad: 0.0,
+            complex: None,
         }
     }
 }
@@ -435,6 +470,9 @@ pub struct HoldoutError {
     pub relative_l2: f64,
     /// The same per channel.
     pub per_channel: Vec<f64>,
+    /// With [`FitConfig::db`]: the RMS error of the magnitude channel in dB (the fitted
+    /// power and the data each floored 40 dB below the data's peak).
+    pub magnitude_db_rms: Option<f64>,
 }
 
 /// A progress report after a step.
@@ -465,18 +503,109 @@ pub struct FitOutcome {
     pub holdout: Option<HoldoutError>,
     /// Min and max of the magnitude channel in the data (for the colormap).
     pub magnitude_range: (f32, f32),
+    /// The values were divided by this (their largest absolute value) for the fit and the
+    /// features multiplied back, so nothing depends on their unit.
+    pub value_scale: f64,
+    /// The box the Gaussians were kept in: the data's, with flat axes given a thickness.
+    pub fit_bounds: [f32; 6],
+    /// What was chosen from the data (thickness of a flat scan), one sentence each.
+    pub notes: Vec<String>,
+    /// Steps whose gradient norm was clipped (`--clip-grad`).
+    pub clipped_steps: usize,
 }
 
-/// The loss weight of each sample (see the module docs).
-pub fn weights(data: &FieldData, channel: usize) -> Vec<f32> {
+/// The default Gaussian counts for `samples` samples: one Gaussian per 20 samples at the
+/// start and at most one per 5, within 8..=1000 and the start..=4000 (the 64^3 grid gets
+/// 1000 -> 4000).
+pub fn default_counts(samples: usize) -> (usize, usize) {
+    let initial = (samples / 20).clamp(8, 1000);
+    let max = (samples / 5).clamp(initial, 4000);
+    (initial, max)
+}
+
+/// The box the fit keeps its Gaussians in, and a note when it differs from the data's:
+/// an axis along which the samples do not spread (below 1e-3 of the largest side: a scan
+/// on a plane or a line) gets the spacing the initial Gaussians have along the other axes
+/// as its thickness, centred on the samples.
+pub fn fit_bounds(bounds: [f32; 6], initial: usize) -> ([f32; 6], Option<String>) {
+    let ext = [0, 1, 2].map(|a| f64::from(bounds[a + 3] - bounds[a]).max(0.0));
+    let largest = ext.iter().fold(0f64, |m, &e| m.max(e));
+    let flat: Vec<usize> = (0..3).filter(|&a| ext[a] < 1e-3 * largest).collect();
+    if flat.is_empty() || flat.len() == 3 {
+        return (bounds, None);
+    }
+    let dims = 3 - flat.len();
+    let measure: f64 = (0..3)
+        .filter(|a| !flat.contains(a))
+        .map(|a| ext[a])
+        .product();
+    let thickness = (measure / initial.max(1) as f64).powf(1.0 / dims as f64);
+    let mut b = bounds;
+    for &a in &flat {
+        let mid = 0.5 * (f64::from(bounds[a]) + f64::from(bounds[a + 3]));
+        b[a] = (mid - 0.5 * thickness) as f32;
+        b[a + 3] = (mid + 0.5 * thickness) as f32;
+    }
+    let axes: Vec<&str> = flat.iter().map(|&a| ["x", "y", "z"][a]).collect();
+    let shape = if dims == 2 { "a plane" } else { "a line" };
+    (
+        b,
+        Some(format!(
+            "the samples lie on {shape} (no spread along {}); the Gaussians get a thickness of {thickness:.4} there (the spacing of the initial Gaussians; --bounds sets it)",
+            axes.join(" and ")
+        )),
+    )
+}
+
+/// Refuses a magnitude channel `m` without a positive value (dB, most likely), unless the
+/// fit takes it as dB ([`FitConfig::db`]).
+pub fn check_magnitude(data: &FieldData, m: usize) -> Result<(), String> {
+    let mags = data.values.iter().skip(m).step_by(data.k.max(1));
+    if mags.clone().all(|v| *v <= 0.0) {
+        let lowest = mags.clone().fold(f32::INFINITY, |a, &v| a.min(v));
+        let highest = mags.fold(f32::NEG_INFINITY, |a, &v| a.max(v));
+        return Err(format!(
+            "the magnitude channel {m} has no positive value ({lowest} to {highest}); if it is in dB (e.g. dBm), pass --db to fit it as linear power, or choose another --magnitude-channel"
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses inputs no field can be fitted to: one sample, every sample at one point, or
+/// every value 0 or not finite.
+pub fn check_fittable(data: &FieldData) -> Result<(), String> {
+    let n = data.len();
+    if n < 2 {
+        return Err(format!(
+            "holds {n} sample; a field needs samples spread over a line, a plane or a volume"
+        ));
+    }
+    let p0 = data.positions[0];
+    if data.positions.iter().all(|p| *p == p0) {
+        return Err(format!(
+            "all {n} samples lie at one point ({}, {}, {}); a field needs samples spread over a line, a plane or a volume",
+            p0[0], p0[1], p0[2]
+        ));
+    }
+    if data.values.iter().all(|v| *v == 0.0) {
+        return Err("every value is 0; there is no field to fit".into());
+    }
+    Ok(())
+}
+
+/// The loss weight of each sample (see the module docs): from `|value|` of `channel`, or
+/// with `complex` `(I, Q)` from the magnitude `|I + iQ|`.
+pub fn weights(data: &FieldData, channel: usize, complex: Option<(usize, usize)>) -> Vec<f32> {
     let k = data.k;
-    let max = (0..data.len())
-        .map(|n| data.values[n * k + channel].abs())
-        .fold(0f32, f32::max);
+    let magnitude = |n: usize| match complex {
+        Some((i, q)) => data.values[n * k + i].hypot(data.values[n * k + q]),
+        None => data.values[n * k + channel].abs(),
+    };
+    let max = (0..data.len()).map(magnitude).fold(0f32, f32::max);
     (0..data.len())
         .map(|n| {
             if max > 0.0 {
-                0.1 + 0.9 * data.values[n * k + channel].abs() / max
+                0.1 + 0.9 * magnitude(n) / max
             } else {
                 1.0
             }
@@ -485,11 +614,18 @@ pub fn weights(data: &FieldData, channel: usize) -> Vec<f32> {
 }
 
 /// Fits Gaussians to `data`. Deterministic for a given configuration (any thread count).
+///
+/// The values are divided by their largest absolute value first (and the fitted features
+/// multiplied back), so the result does not depend on their unit; a flat scan (samples on
+/// a plane or a line) is given a thickness ([`fit_bounds`]); inputs no field can be fitted
+/// to are refused ([`check_fittable`]). With [`FitConfig::db`] the magnitude channel is
+/// fitted as linear power.
 pub fn fit(
     data: &FieldData,
     cfg: &FitConfig,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<FitOutcome, String> {
+    check_fittable(data)?;
     let k = data.k;
     if cfg.magnitude_channel >= k {
         return Err(format!(
@@ -498,6 +634,87 @@ pub fn fit(
             k - 1
         ));
     }
+    let m = cfg.magnitude_channel;
+    let mut values = data.values.clone();
+    if let Some((mc, pc)) = cfg.complex {
+        if mc == pc || mc >= k || pc >= k {
+            return Err(format!(
+                "--complex {mc},{pc} needs two different channels of the {k} (0 to {})",
+                k - 1
+            ));
+        }
+        if cfg.db {
+            return Err("--complex and --db do not go together: give the magnitude linear".into());
+        }
+        if let Some(v) = values.iter().skip(mc).step_by(k).find(|v| **v < 0.0) {
+            return Err(format!(
+                "--complex {mc},{pc}: channel {mc} is a magnitude but holds {v}; give I and Q as two plain channels instead"
+            ));
+        }
+        for row in values.chunks_exact_mut(k) {
+            let (mag, phase) = (f64::from(row[mc]), f64::from(row[pc]));
+            row[mc] = (mag * phase.cos()) as f32;
+            row[pc] = (mag * phase.sin()) as f32;
+        }
+    }
+    if cfg.db {
+        for v in values.iter_mut().skip(m).step_by(k) {
+            *v = 10f64.powf(f64::from(*v) / 10.0) as f32;
+        }
+        if let Some(v) = values.iter().skip(m).step_by(k).find(|v| !v.is_finite()) {
+            return Err(format!(
+                "channel {m} in dB gives a linear power of {v}, beyond single precision; are these dB?"
+            ));
+        }
+    } else if cfg.complex.is_none() {
+        check_magnitude(data, m)?;
+    }
+    let scale = values.iter().fold(0f64, |a, &v| a.max(f64::from(v).abs()));
+    let (lo, hi) = values
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let (bounds, note) = fit_bounds(data.bounds, cfg.initial);
+    let normalised = FieldData {
+        positions: data.positions.clone(),
+        values: values
+            .iter()
+            .map(|&v| (f64::from(v) / scale) as f32)
+            .collect(),
+        k,
+        bounds,
+        layout: data.layout.clone(),
+        bounds_source: data.bounds_source.clone(),
+    };
+    let mut out = fit_normalised(&normalised, cfg, progress).map_err(|e| {
+        format!(
+            "{e} (the values range from {lo:e} to {hi:e}; they are fitted divided by {scale:e})"
+        )
+    })?;
+    let stride = out.model.stride();
+    for g in out.model.params.chunks_exact_mut(stride) {
+        for f in &mut g[FEAT..] {
+            *f = (f64::from(*f) * scale) as f32;
+        }
+    }
+    out.final_loss.0 *= scale * scale;
+    let mags = values.iter().skip(m).step_by(k);
+    out.magnitude_range = mags.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+        (a.min(v), b.max(v))
+    });
+    out.value_scale = scale;
+    out.fit_bounds = bounds;
+    out.notes.extend(note);
+    Ok(out)
+}
+
+fn fit_normalised(
+    data: &FieldData,
+    cfg: &FitConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<FitOutcome, String> {
+    let k = data.k;
     if cfg.initial == 0 || cfg.initial > cfg.max_gaussians {
         return Err(format!(
             "--gaussians {} must be between 1 and --max-gaussians ({})",
@@ -506,7 +723,7 @@ pub fn fit(
     }
     let mut rng = Rng(cfg.seed ^ 0xF17_5EED_0000_0000);
     let n = data.len();
-    let w_all = weights(data, cfg.magnitude_channel);
+    let w_all = weights(data, cfg.magnitude_channel, cfg.complex);
     // Seeded shuffle (Fisher-Yates), the first share held out.
     let mut idx: Vec<usize> = (0..n).collect();
     for i in (1..n).rev() {
@@ -611,13 +828,27 @@ pub fn fit(
     let mut score = vec![0f32; mdl.len()];
     let mut history = Vec::new();
     let densify_until = (cfg.steps as f64 * f64::from(cfg.densify_until)) as usize;
+    let mut clipped_steps = 0;
     for step in 1..=cfg.steps {
         let points = &batches[(step - 1) % n_batches];
-        let lg = model::loss_and_grad(&mdl, &loss_cfg, &grid, points);
+        let mut lg = model::loss_and_grad(&mdl, &loss_cfg, &grid, points);
         if !lg.total().is_finite() || lg.grad.iter().any(|g| !g.is_finite()) {
             return Err(format!(
-                "the optimisation diverged at step {step} (a non-finite loss or gradient); try other --scale-reg or --batch values"
+                "the optimisation diverged at step {step} (a non-finite loss or gradient); --clip-grad or a lower --steps may help"
             ));
+        }
+        if cfg.clip_grad > 0.0 {
+            let norm = lg
+                .grad
+                .iter()
+                .map(|g| f64::from(*g).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if norm > f64::from(cfg.clip_grad) {
+                let f = (f64::from(cfg.clip_grad) / norm) as f32;
+                lg.grad.iter_mut().for_each(|g| *g *= f);
+                clipped_steps += 1;
+            }
         }
         for (s, v) in score.iter_mut().zip(&lg.score) {
             *s += v;
@@ -698,11 +929,20 @@ pub fn fit(
             }
         }
         let total = (num.iter().sum::<f64>() / den.iter().sum::<f64>().max(1e-300)).sqrt();
+        let m = cfg.magnitude_channel;
+        // The values are normalised to a largest magnitude of 1: a floor 40 dB below it.
+        let db = |v: f32| 10.0 * f64::from(v).max(1e-4).log10();
+        let db_sq: f64 = f
+            .chunks_exact(k)
+            .zip(holdout.values.chunks_exact(k))
+            .map(|(fv, yv)| (db(fv[m]) - db(yv[m])).powi(2))
+            .sum();
         HoldoutError {
             relative_l2: total,
             per_channel: (0..k)
                 .map(|c| (num[c] / den[c].max(1e-300)).sqrt())
                 .collect(),
+            magnitude_db_rms: cfg.db.then(|| (db_sq / holdout.len().max(1) as f64).sqrt()),
         }
     });
     let m = cfg.magnitude_channel;
@@ -719,6 +959,10 @@ pub fn fit(
         final_loss: (num / den.max(1e-300), reg_only),
         holdout: holdout_error,
         magnitude_range: range,
+        value_scale: 1.0,
+        fit_bounds: data.bounds,
+        notes: Vec::new(),
+        clipped_steps,
     })
 }
 

@@ -128,6 +128,21 @@ impl Model {
         let s = self.stride();
         &self.params[i * s..(i + 1) * s]
     }
+    /// The Gaussians of a scene with feature channels (a fitted PLY): its positions, log
+    /// scales, normalised rotations, opacity logits and features, so [`evaluate`] gives
+    /// the field the scene holds.
+    pub fn from_scene(scene: &crate::scene::Scene) -> Model {
+        let k = scene.feature_count;
+        let mut params = Vec::with_capacity(scene.len() * (BASE_PARAMS + k));
+        for i in 0..scene.len() {
+            params.extend_from_slice(&scene.positions[i]);
+            params.extend_from_slice(&scene.log_scales[i]);
+            params.extend_from_slice(&crate::scene::normalize_quat(scene.rotations[i]));
+            params.push(scene.opacity_logits[i]);
+            params.extend_from_slice(&scene.features[i * k..(i + 1) * k]);
+        }
+        Model { k, params }
+    }
     /// The activated opacity of Gaussian `i`.
     pub fn opacity(&self, i: usize) -> f32 {
         sigmoid(self.gaussian(i)[LOGIT])

@@ -144,6 +144,14 @@ pub fn host_available_bytes() -> Option<u64> {
     kib.checked_mul(1024)
 }
 
+impl DeviceInfo {
+    /// Whether the device is a CPU implementation with llvmpipe's loop limit (every loop
+    /// of a shader invocation ends after 65,535 iterations in all, silently).
+    pub fn loop_limited(&self) -> bool {
+        self.device_type == vk::PhysicalDeviceType::CPU && self.name.contains("llvmpipe")
+    }
+}
+
 impl std::fmt::Display for DeviceInfo {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(

@@ -42,6 +42,10 @@ pub const SHADE_SPEC_ACTIVATIONS: u32 = 0;
 /// Specialization constant id of the neural shader's widest layer (inputs or outputs).
 pub const SHADE_SPEC_WIDEST: u32 = 1;
 
+/// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
+/// accumulator per sample).
+pub const MAX_FIELD_SAMPLES: u32 = 256;
+
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
 /// Specialization constant id of the items each sort invocation handles.
@@ -115,6 +119,7 @@ shader_bindings! {
     ssim_map { MOMENTS, IMAGE, TARGET, MAPS, SUMS }
     ssim_grad { FILTERED, IMAGE, TARGET, GRAD }
     loss_reduce { VALUES, SUMS }
+    field { PARAMS, GAUSSIANS, FEATURES, OUTPUT }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -172,6 +177,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("GRAD_SPEC_BATCH", GRAD_SPEC_BATCH.to_string()),
         ("SHADE_SPEC_ACTIVATIONS", SHADE_SPEC_ACTIVATIONS.to_string()),
         ("SHADE_SPEC_WIDEST", SHADE_SPEC_WIDEST.to_string()),
+        ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
@@ -283,6 +289,18 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
                 &[
                     ("SPLAT_KERNEL", kernel.to_string()),
                     ("TEXEL_FETCH", bit(texel)),
+                ],
+            ));
+        }
+    }
+    // Field renders: slice, integral, maximum (cpu::field::FieldMode::shader_id) per kernel.
+    for mode in ["0", "1", "2"] {
+        for kernel in splat_kernels {
+            out.push(v(
+                "field",
+                &[
+                    ("FIELD_MODE", mode.to_string()),
+                    ("SPLAT_KERNEL", kernel.to_string()),
                 ],
             ));
         }

@@ -30,6 +30,7 @@ pub mod blend;
 pub mod blend_bwd;
 pub mod differentiable;
 pub mod features;
+pub mod field;
 pub mod grad_accumulate;
 pub mod keys;
 pub mod order;

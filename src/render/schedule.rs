@@ -5,7 +5,6 @@ use super::types::{Counters, Splat};
 use crate::camera::Camera;
 use crate::gpu::{GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::model::RenderOptions;
-use ash::vk;
 
 use super::{keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};
 
@@ -88,8 +87,7 @@ impl GpuRenderer {
 
     /// Whether the device is a CPU implementation with llvmpipe's loop limit.
     pub(super) fn loop_limited(&self) -> bool {
-        let info = self.ctx.info();
-        info.device_type == vk::PhysicalDeviceType::CPU && info.name.contains("llvmpipe")
+        self.ctx.info().loop_limited()
     }
 
     pub(super) fn max_capacity(&self) -> u32 {

@@ -419,11 +419,11 @@ fn malformed_inputs_fail_clearly_without_output() {
         "--magnitude-channel 1 is not one of its channels (it has 1: 0 to 0)",
     );
     let samples = d.join("samples.npy");
-    write_npy(&samples, &[2, 4], &[0.0; 8]);
+    write_npy(&samples, &[2, 4], &[0.0, 0.0, 0.0, 1.0, 2.0, 2.0, 2.0, 1.0]);
     expect(
         fit(&samples, &["--bounds", "0,0,0,1,1,1"]),
         &samples,
-        "--bounds is only for a dense grid",
+        "sample 1 at (2, 2, 2) lies outside --bounds 0,0,0,1,1,1",
     );
     // Text inputs: each file, what it holds, and the error naming what is wrong with it.
     for (name, text, message) in [

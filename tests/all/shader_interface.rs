@@ -123,6 +123,28 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         PreprocessBwd::new(ctx, float_sums).expect("preprocess backward");
         built += 1;
     }
+    // The field renders: every mode and kernel (each pipeline is built by its first frame).
+    for kernel in SplatKernel::ALL {
+        let mut scene = vksplat::scene::Scene::empty(0);
+        common::push_gaussian(&mut scene, [0.0, 0.0, 3.0], 0.5, 0.5, [0.5; 3]);
+        scene.set_features(1, vec![1.0]).unwrap();
+        let g = vksplat::cpu::field::FieldGaussians::new(&scene.activated(), kernel);
+        let field = vksplat::render::field::GpuField::new(ctx, &g).expect("field upload");
+        let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
+        for mode in [
+            vksplat::cpu::field::FieldMode::Slice {
+                point: [0.0, 0.0, 3.0],
+                normal: [0.0, 0.0, 1.0],
+            },
+            vksplat::cpu::field::FieldMode::Integral,
+            vksplat::cpu::field::FieldMode::Max { samples: 8 },
+        ] {
+            renderer
+                .render(ctx, &field, &common::axis_camera(32.0), &mode)
+                .expect("field render");
+            built += 1;
+        }
+    }
     // Every prebuilt module was built above: none is dead weight, none unchecked.
     assert_eq!(built, prebuilt_variants().count());
     common::gpu::assert_validation_clean(&r);
@@ -177,6 +199,16 @@ fn record_strides_and_push_constants_match_the_host_structs() {
             .contains(&(1, size_of::<Splat>() as u32)),
         "{blend:?}"
     );
+
+    // The field stage: its Gaussian records (binding 1) and its four channels per record
+    // and per pixel (bindings 2 and 3, vec4).
+    for mode in ["0", "1", "2"] {
+        let field = interface("field", &[("FIELD_MODE", mode), ("SPLAT_KERNEL", "0u")]);
+        let record = size_of::<vksplat::render::field::FieldGaussian>() as u32;
+        for stride in [(1, record), (2, 16), (3, 16)] {
+            assert!(field.array_strides.contains(&stride), "{field:?}");
+        }
+    }
 
     let scan = interface("scan_block", &[]);
     assert_eq!(

@@ -1,0 +1,296 @@
+//! `render --mode field-slice | field-integral | field-max`: the fitted field itself
+//! (`vksplat::cpu::field` has the formulas), on the GPU (`render::field`) or with `--cpu`
+//! the f64 reference; EXR and `.npy` hold the channels, a PNG one channel through the
+//! turbo colour map (or the `--shader`), optionally with a labelled colour bar.
+
+use super::common::fail_on_validation_messages;
+use super::values;
+use anyhow::{bail, Result};
+use clap::Args;
+use std::path::Path;
+use vksplat::camera::Camera;
+use vksplat::cpu::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
+use vksplat::cpu::SplatKernel;
+use vksplat::frame::Frame;
+use vksplat::note;
+use vksplat::output::{self, RenderMode};
+use vksplat::sequence::{FramePlan, RunOptions, Summary};
+
+/// A colour-map range: fixed, or `None` for auto.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ColourRange(pub(crate) Option<[f32; 2]>);
+
+fn colour_range(s: &str) -> Result<ColourRange, String> {
+    values::colour_range(s).map(ColourRange)
+}
+
+/// The options of the field renders.
+#[derive(Args)]
+pub(crate) struct FieldArgs {
+    /// field-slice: the plane, a point PX,PY,PZ on it and its normal NX,NY,NZ (each pixel
+    /// shows the field where its ray meets the plane; empty where it does not).
+    #[arg(long, value_name = "PX,PY,PZ,NX,NY,NZ", value_parser = values::plane, allow_hyphen_values = true)]
+    pub(crate) slice_plane: Option<[f32; 6]>,
+    /// field-max: samples along each ray's chord through the field's box (1 to 256)
+    /// [default: 128].
+    #[arg(long, value_name = "S", value_parser = values::int_in(1u32, MAX_FIELD_SAMPLES))]
+    pub(crate) max_samples: Option<u32>,
+    /// Field render PNG: the channel shown through the colour map [default: 0].
+    #[arg(long, value_name = "C")]
+    pub(crate) channel: Option<usize>,
+    /// Field render PNG: the colour map's range LO,HI (values beyond it get the end
+    /// colours) or auto (the 1st to 99th percentile of the channel in the first frame,
+    /// printed) [default: auto].
+    #[arg(long, value_name = "LO,HI|auto", value_parser = colour_range, allow_hyphen_values = true)]
+    pub(crate) range: Option<ColourRange>,
+    /// Field render PNG: add a colour bar under the image, labelled with the range's ends
+    /// and the channel's name (and --units).
+    #[arg(long)]
+    pub(crate) colorbar: bool,
+    /// The channel's name on the colour bar [default: feat_C].
+    #[arg(long, value_name = "NAME")]
+    pub(crate) channel_name: Option<String>,
+    /// The channel's units on the colour bar (e.g. V/m).
+    #[arg(long, value_name = "UNITS")]
+    pub(crate) units: Option<String>,
+    /// field-slice, field-integral: channels I,Q are one complex field (what `fit --complex`
+    /// writes): two channels are appended, its magnitude |I + iQ| (K) and phase (K + 1),
+    /// and the PNG shows the magnitude unless --channel says otherwise.
+    #[arg(long, value_name = "I,Q", value_parser = super::fit::channel_pair)]
+    pub(crate) complex: Option<(usize, usize)>,
+}
+
+/// `field-slice` etc., for messages.
+pub(crate) fn mode_name(mode: Option<RenderMode>) -> &'static str {
+    match mode {
+        Some(RenderMode::FieldSlice) => "field-slice",
+        Some(RenderMode::FieldIntegral) => "field-integral",
+        Some(RenderMode::FieldMax) => "field-max",
+        _ => "",
+    }
+}
+
+/// Whether the output is a PNG (the default, a `.png` name, or a folder with `--format
+/// png`).
+pub(crate) fn writes_png(args: &super::render::RenderArgs) -> bool {
+    let Some(out) = &args.output else {
+        return true;
+    };
+    match Path::new(out).extension() {
+        Some(e) => e.eq_ignore_ascii_case("png"),
+        None => args.format.as_deref().unwrap_or("png") == "png",
+    }
+}
+
+/// Refuses field options without a field mode, options the mode ignores, and render
+/// options that do not apply to the field.
+pub(crate) fn check_options(
+    args: &super::render::RenderArgs,
+    mode: Option<RenderMode>,
+) -> Result<()> {
+    let f = &args.field;
+    let png_only = [
+        ("--channel", f.channel.is_some()),
+        ("--range", f.range.is_some()),
+        ("--colorbar", f.colorbar),
+        ("--channel-name", f.channel_name.is_some()),
+        ("--units", f.units.is_some()),
+    ];
+    let Some(mode) = mode else {
+        let field_only = [
+            ("--slice-plane", f.slice_plane.is_some()),
+            ("--max-samples", f.max_samples.is_some()),
+            ("--complex", f.complex.is_some()),
+        ];
+        if let Some((flag, _)) = field_only.iter().chain(&png_only).find(|(_, set)| *set) {
+            bail!("{flag} applies to the field renders (--mode field-slice, field-integral or field-max)");
+        }
+        return Ok(());
+    };
+    let name = mode_name(Some(mode));
+    if mode == RenderMode::FieldSlice && f.slice_plane.is_none() {
+        bail!("--mode field-slice needs the plane: --slice-plane PX,PY,PZ,NX,NY,NZ (a point on it and its normal, e.g. --slice-plane 0,0,0,0,0,1 for z = 0)");
+    }
+    if mode != RenderMode::FieldSlice && f.slice_plane.is_some() {
+        bail!("--slice-plane applies to --mode field-slice, not {name}");
+    }
+    if f.complex.is_some() && args.shader.is_some() {
+        bail!("--complex colour-maps the magnitude; a --shader takes the channels themselves, so give one or the other");
+    }
+    if mode == RenderMode::FieldMax && f.complex.is_some() {
+        bail!("--complex applies to field-slice and field-integral: the maximum of |f| along a ray needs the complex sum at every sample, which field-max does not keep (it takes each channel's maximum)");
+    }
+    if mode != RenderMode::FieldMax && f.max_samples.is_some() {
+        bail!("--max-samples applies to --mode field-max, not {name}");
+    }
+    if !writes_png(args) {
+        if let Some((flag, _)) = png_only.iter().find(|(_, set)| *set) {
+            bail!("{flag} sets the colour map of a field render's PNG; EXR and .npy outputs hold every channel as it is");
+        }
+    }
+    if (f.channel_name.is_some() || f.units.is_some()) && !f.colorbar {
+        bail!("--channel-name and --units label the colour bar; add --colorbar");
+    }
+    let ignored = [
+        ("--scale-modifier", args.scale_modifier != 1.0),
+        ("--antialiased", args.antialiased),
+        ("--compact", args.compact),
+        ("--exr-background", args.exr_background),
+        ("--frames-in-flight", args.frames_in_flight.is_some()),
+    ];
+    if let Some((flag, _)) = ignored.iter().find(|(_, set)| *set) {
+        bail!("{flag} does not apply to --mode {name}: the field is the fitted sum over the Gaussians as they are");
+    }
+    Ok(())
+}
+
+/// Renders `frames` of the field of `scene` under `mode` and writes them.
+pub(crate) fn render(
+    args: &super::render::RenderArgs,
+    scene: &vksplat::model::ActivatedScene,
+    kernel: SplatKernel,
+    mode: RenderMode,
+    frames: &[FramePlan],
+    run_opts: &RunOptions,
+    shader: Option<&vksplat::mlp::Mlp>,
+) -> Result<(Summary, String)> {
+    let f = &args.field;
+    let field_mode = match mode {
+        RenderMode::FieldSlice => {
+            let p = f.slice_plane.unwrap_or([0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+            FieldMode::Slice {
+                point: [p[0], p[1], p[2]],
+                normal: [p[3], p[4], p[5]],
+            }
+        }
+        RenderMode::FieldIntegral => FieldMode::Integral,
+        _ => FieldMode::Max {
+            samples: f.max_samples.unwrap_or(128),
+        },
+    };
+    let g = FieldGaussians::new(scene, kernel);
+    if let Some((i, q)) = f.complex {
+        if i.max(q) >= g.k {
+            bail!(
+                "--complex {i},{q} names a channel the scene does not have (it has {}: 0 to {})",
+                g.k,
+                g.k - 1
+            );
+        }
+    }
+    // With --complex the frame has two more channels: |f| (K) and its phase (K + 1).
+    let channels = g.k + if f.complex.is_some() { 2 } else { 0 };
+    let channel = f
+        .channel
+        .unwrap_or(if f.complex.is_some() { g.k } else { 0 });
+    if channel >= channels {
+        bail!(
+            "--channel {channel} is not a channel of the scene, which has {channels} (0 to {})",
+            channels - 1
+        );
+    }
+    let colours = Colours {
+        png: writes_png(args),
+        channel,
+        range: f.range.and_then(|r| r.0),
+        background: args.background,
+        bar: f.colorbar.then(|| {
+            let name = f
+                .channel_name
+                .clone()
+                .unwrap_or_else(|| format!("feat_{channel}"));
+            match &f.units {
+                Some(u) => format!("{name} ({u})"),
+                None => name,
+            }
+        }),
+        shader,
+        complex: f.complex,
+    };
+    let mut colours = colours;
+    if args.cpu {
+        let summary = vksplat::sequence::run(
+            frames,
+            &mut |cam| colours.apply(cam, vksplat::cpu::field::render_field(&g, cam, &field_mode)),
+            run_opts,
+        )?;
+        return Ok((summary, "on the CPU (the f64 field reference)".into()));
+    }
+    let ctx = args.gpu.context()?;
+    let gpu_field = vksplat::render::field::GpuField::new(&ctx, &g)?;
+    let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
+    let summary = vksplat::sequence::run(
+        frames,
+        &mut |cam| {
+            let frame = renderer.render(&ctx, &gpu_field, cam, &field_mode)?;
+            colours.apply(cam, frame)
+        },
+        run_opts,
+    )?;
+    fail_on_validation_messages(&ctx)?;
+    Ok((summary, format!("on {}", ctx.info().name)))
+}
+
+/// How a field frame becomes a PNG's colour.
+struct Colours<'a> {
+    png: bool,
+    channel: usize,
+    /// Fixed, or set from the first frame (auto).
+    range: Option<[f32; 2]>,
+    background: [f32; 3],
+    /// The colour bar's centre label, when there is a bar.
+    bar: Option<String>,
+    shader: Option<&'a vksplat::mlp::Mlp>,
+    /// `--complex I,Q`: magnitude and phase appended.
+    complex: Option<(usize, usize)>,
+}
+
+impl Colours<'_> {
+    fn apply(&mut self, cam: &Camera, mut frame: Frame) -> Result<Frame> {
+        if let Some((i, q)) = self.complex {
+            vksplat::cpu::field::append_magnitude_phase(&mut frame, i, q);
+        }
+        if !self.png {
+            return Ok(frame);
+        }
+        let k = frame.feature_count;
+        if let Some(mlp) = self.shader {
+            let features: Vec<f32> = frame
+                .features
+                .iter()
+                .map(|v| if v.is_nan() { 0.0 } else { *v })
+                .collect();
+            frame.color =
+                vksplat::mlp::shade(mlp, cam, &features, k, &frame.alpha, self.background);
+            return Ok(frame);
+        }
+        let range = match self.range {
+            Some(r) => r,
+            None => {
+                let r = output::field_auto_range(&frame, self.channel).unwrap_or([0.0, 1.0]);
+                note!(
+                    "colour map range {} to {} (auto: the 1st to 99th percentile of channel {} in the first frame; --range LO,HI fixes it)",
+                    r[0],
+                    r[1],
+                    self.channel
+                );
+                self.range = Some(r);
+                r
+            }
+        };
+        frame.color = output::field_colormap(&frame, self.channel, range, self.background);
+        if let Some(label) = &self.bar {
+            let (w, h) = (frame.width as usize, frame.height as usize);
+            let lo = vksplat::diff_image::label_number(f64::from(range[0]));
+            let hi = vksplat::diff_image::label_number(f64::from(range[1]));
+            vksplat::diff_image::append_colour_bar(&mut frame.color, w, h, [&lo, label, &hi]);
+            frame.height += vksplat::diff_image::BAR_HEIGHT;
+            let n = frame.color.len();
+            frame.alpha.resize(n, 1.0);
+            frame.depth.resize(n, 0.0);
+            frame.features.clear();
+            frame.feature_count = 0;
+        }
+        Ok(frame)
+    }
+}
