@@ -689,7 +689,7 @@ fn readme_and_help_agree() {
     let readme =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
     let commands = [
-        "render", "info", "bench", "gen", "fit", "convert", "compare", "eval", "view",
+        "render", "info", "bench", "gen", "fit", "convert", "compare", "eval", "train", "view",
     ];
     let helps: Vec<String> = commands
         .iter()
