@@ -304,10 +304,11 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     fail_on_validation_messages(rast.renderer().ctx())?;
     let last = report.evaluations.last();
     outln!(
-        "trained {} iterations at {:.1} it/s: {} Gaussians{} -> {}",
+        "trained {} iterations at {:.1} it/s: {} Gaussians ({:.0} device bytes per Gaussian at the peak){} -> {}",
         report.iterations,
         report.iterations_per_second,
         report.gaussians,
+        report.device_bytes_peak as f64 / report.gaussians.max(1) as f64,
         last.map_or(String::new(), |e| format!(
             "; {} PSNR {:.2} dB, SSIM {:.4}",
             e.split, e.psnr, e.ssim

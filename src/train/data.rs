@@ -229,3 +229,66 @@ fn resize(src: &[[f32; 3]], sw: u32, sh: u32, dw: u32, dh: u32) -> Vec<[f32; 3]>
     }
     out
 }
+
+/// Writes a COLMAP data set of `scene` seen by `cameras` into `dir` (what a trainer reads;
+/// a way to test one on a known scene): each camera's render by the CPU reference (the
+/// feature channels shaded by `shader`, when given) as `images/NAME.png` (`.png` added to
+/// names without it), and a text model in `sparse/0/` whose `points3D` are every
+/// `point_stride`-th Gaussian centre with its DC colour. Existing files are an error
+/// unless `overwrite`.
+pub fn write_rendered_dataset(
+    dir: &Path,
+    scene: &crate::scene::Scene,
+    cameras: &[Camera],
+    shader: Option<&crate::mlp::Mlp>,
+    point_stride: usize,
+    overwrite: bool,
+) -> Result<(), DataError> {
+    let images = dir.join("images");
+    let sparse = dir.join("sparse").join("0");
+    for d in [&images, &sparse] {
+        std::fs::create_dir_all(d).map_err(|e| data_error(d, format!("cannot create: {e}")))?;
+    }
+    let act = scene.activated();
+    let mut named = Vec::with_capacity(cameras.len());
+    for cam in cameras {
+        let mut cam = cam.clone();
+        if !cam.name.to_ascii_lowercase().ends_with(".png") {
+            cam.name = format!("{}.png", cam.name);
+        }
+        let mut frame = crate::cpu::render_features(&act, &cam, &Default::default());
+        if let Some(mlp) = shader {
+            mlp.check_channels(scene.feature_count)
+                .map_err(|m| data_error(dir, m))?;
+            frame.color = crate::mlp::shade(
+                mlp,
+                &cam,
+                &frame.features,
+                scene.feature_count,
+                &frame.alpha,
+                [0.0; 3],
+            );
+        }
+        let path = images.join(&cam.name);
+        crate::output::write_frame(&frame, &path, crate::output::ImageFormat::Png8, overwrite)
+            .map_err(|e| data_error(&path, e.to_string()))?;
+        named.push(cam);
+    }
+    let stride = scene.sh_stride();
+    let points: Vec<Point3D> = (0..scene.len())
+        .step_by(point_stride.max(1))
+        .map(|i| Point3D {
+            position: scene.positions[i].map(f64::from),
+            color: [0, 1, 2].map(|c| {
+                let v = 0.5 + crate::model::sh::SH_C0 * scene.sh[i * stride + c];
+                (v.clamp(0.0, 1.0) * 255.0).round() as u8
+            }),
+        })
+        .collect();
+    for (name, text) in colmap::to_text_model(&named, &points) {
+        let path = sparse.join(name);
+        crate::fsutil::write_bytes_atomically(&path, overwrite, text.as_bytes())
+            .map_err(|e| data_error(&path, e.to_string()))?;
+    }
+    Ok(())
+}

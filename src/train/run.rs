@@ -76,6 +76,8 @@ pub struct TrainReport {
     pub written: Vec<PathBuf>,
     /// Iterations per second of the whole loop (wall clock).
     pub iterations_per_second: f64,
+    /// Device memory at the peak (sampled every 10 iterations), bytes.
+    pub device_bytes_peak: u64,
 }
 
 /// One iteration's figures, for a progress display.
@@ -291,6 +293,7 @@ pub fn train(
     let mut evaluations = Vec::new();
     let mut order: Vec<usize> = Vec::new();
     let start = std::time::Instant::now();
+    let mut peak = 0u64;
     for it in 1..=s.iterations {
         if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
             model.active_sh_degree += 1;
@@ -376,6 +379,9 @@ pub fn train(
                 )));
             }
         }
+        if it % 10 == 1 {
+            peak = peak.max(rast.renderer().ctx().live_allocations().1);
+        }
         progress(Progress {
             iteration: it,
             iterations: s.iterations,
@@ -439,5 +445,6 @@ pub fn train(
         evaluations,
         written,
         iterations_per_second: s.iterations as f64 / seconds.max(1e-9),
+        device_bytes_peak: peak,
     })
 }

@@ -6,7 +6,7 @@
 
 use crate::common::{self, cli::vksplat, cli::vksplat_in};
 use std::path::Path;
-use vksplat::camera::colmap::{self, Point3D};
+use vksplat::camera::colmap;
 use vksplat::camera::orbit::{orbit, OrbitParams};
 
 /// Writes the data set into `dir`: `views` photos of `w x h` and the COLMAP model.
@@ -33,7 +33,7 @@ pub fn make_dataset_with(
         scene.feature_count = k;
         scene.features = (0..scene.len() * k).map(|_| rng.range(-1.0, 1.0)).collect();
     }
-    let cams = orbit(
+    let cams: Vec<_> = orbit(
         &scene.positions,
         &OrbitParams {
             frames: views,
@@ -43,45 +43,15 @@ pub fn make_dataset_with(
             ..Default::default()
         },
     )
-    .unwrap();
-    let images = dir.join("images");
-    std::fs::create_dir_all(&images).unwrap();
-    let act = scene.activated();
-    let mut named = Vec::new();
-    for (i, cam) in cams.iter().enumerate() {
-        let mut cam = cam.clone();
-        cam.name = format!("view_{i:03}.png");
-        let mut frame = vksplat::cpu::render_features(&act, &cam, &Default::default());
-        if let Some(mlp) = shader {
-            let k = mlp.feature_channels();
-            frame.color =
-                vksplat::mlp::shade(mlp, &cam, &frame.features, k, &frame.alpha, [0.0; 3]);
-        }
-        vksplat::output::write_frame(
-            &frame,
-            &images.join(&cam.name),
-            vksplat::output::ImageFormat::Png8,
-            false,
-        )
-        .unwrap();
-        named.push(cam);
-    }
-    let stride = scene.sh_stride();
-    let points: Vec<Point3D> = (0..scene.len())
-        .step_by(2)
-        .map(|i| Point3D {
-            position: scene.positions[i].map(|v| v as f64),
-            color: [0, 1, 2].map(|c| {
-                let v = 0.5 + vksplat::model::sh::SH_C0 * scene.sh[i * stride + c];
-                (v.clamp(0.0, 1.0) * 255.0).round() as u8
-            }),
-        })
-        .collect();
-    let sparse = dir.join("sparse").join("0");
-    std::fs::create_dir_all(&sparse).unwrap();
-    for (name, text) in colmap::to_text_model(&named, &points) {
-        std::fs::write(sparse.join(name), text).unwrap();
-    }
+    .unwrap()
+    .into_iter()
+    .enumerate()
+    .map(|(i, mut c)| {
+        c.name = format!("view_{i:03}.png");
+        c
+    })
+    .collect();
+    vksplat::train::data::write_rendered_dataset(dir, &scene, &cams, shader, 2, false).unwrap();
 }
 
 #[test]
