@@ -57,6 +57,9 @@ fn main() {
         overwrite: false,
         shader: None,
         kernel: Default::default(),
+        checkpoint_iterations: Vec::new(),
+        resume: None,
+        cancel: None,
     };
     let report = run::train(
         &dataset,

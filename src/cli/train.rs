@@ -117,6 +117,14 @@ pub(crate) struct TrainArgs {
     /// clipping; off by default, as the original).
     #[arg(long, value_name = "NORM")]
     pub(crate) clip_grad: Option<f32>,
+    /// Iterations after which a checkpoint (MODEL_DIR/chkpntN.safetensors) is written;
+    /// Ctrl-C also writes one.
+    #[arg(long, visible_alias = "checkpoint_iterations", value_delimiter = ',')]
+    pub(crate) checkpoint_iterations: Vec<u32>,
+    /// Continue from a checkpoint, bit for bit as if never stopped (same data set and
+    /// settings; the files it writes replace the run's own).
+    #[arg(long, value_name = "CHECKPOINT")]
+    pub(crate) resume: Option<PathBuf>,
     /// Replace the model directory's files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
@@ -261,6 +269,15 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         overwrite: args.overwrite,
         shader,
         kernel: args.kernel,
+        checkpoint_iterations: args.checkpoint_iterations.clone(),
+        resume: match &args.resume {
+            Some(path) => Some(
+                vksplat::train::checkpoint::Checkpoint::load(path)
+                    .map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?,
+            ),
+            None => None,
+        },
+        cancel: Some(super::render::interrupt_flag()),
     };
     let ctx = args.gpu.context()?;
     let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;
@@ -299,7 +316,12 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             }
         },
     )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", args.output.display()))?;
+    .map_err(|e| match e {
+        vksplat::train::run::TrainError::Interrupted { message } => {
+            anyhow::Error::new(super::render::Interrupted(message))
+        }
+        e => anyhow::anyhow!("{}: {e}", args.output.display()),
+    })?;
     bar.finish_and_clear();
     fail_on_validation_messages(rast.renderer().ctx())?;
     let last = report.evaluations.last();

@@ -3,6 +3,7 @@
 //! exist so far: the original 3DGS loss with its gradient, on the CPU (the reference) and
 //! on the device ([`loss`]).
 
+pub mod checkpoint;
 pub mod data;
 pub mod loss;
 pub mod model;

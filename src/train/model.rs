@@ -307,6 +307,123 @@ impl Model {
         self
     }
 
+    /// The whole state as named arrays and scalars (a checkpoint's content).
+    pub(crate) fn state(
+        &self,
+    ) -> (
+        Vec<(String, Vec<f32>)>,
+        serde_json::Map<String, serde_json::Value>,
+    ) {
+        let s = &self.scene;
+        let flat = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+        let mut arrays = vec![
+            ("positions".to_string(), flat(&s.positions)),
+            ("log_scales".to_string(), flat(&s.log_scales)),
+            (
+                "rotations".to_string(),
+                s.rotations.iter().flatten().copied().collect(),
+            ),
+            ("opacity_logits".to_string(), s.opacity_logits.clone()),
+            ("sh".to_string(), s.sh.clone()),
+            ("features".to_string(), s.features.clone()),
+            ("grad_accum".to_string(), self.grad_accum.clone()),
+            (
+                "denom".to_string(),
+                self.denom.iter().map(|&d| d as f32).collect(),
+            ),
+            ("max_radii".to_string(), self.max_radii.clone()),
+            ("shader_m".to_string(), self.shader_moments.m.clone()),
+            ("shader_v".to_string(), self.shader_moments.v.clone()),
+        ];
+        for (g, m) in self.moments.iter().enumerate() {
+            arrays.push((format!("m{g}"), m.m.clone()));
+            arrays.push((format!("v{g}"), m.v.clone()));
+        }
+        let mut meta = serde_json::Map::new();
+        meta.insert("gaussians".into(), serde_json::json!(s.len()));
+        meta.insert("sh_degree".into(), serde_json::json!(s.sh_degree));
+        meta.insert("feature_count".into(), serde_json::json!(s.feature_count));
+        meta.insert("kernel".into(), serde_json::json!(s.kernel.to_string()));
+        meta.insert(
+            "active_sh_degree".into(),
+            serde_json::json!(self.active_sh_degree),
+        );
+        meta.insert("steps".into(), serde_json::json!(self.steps));
+        (arrays, meta)
+    }
+
+    /// The model of [`Self::state`]'s arrays and scalars.
+    pub(crate) fn from_state(
+        mut arrays: std::collections::HashMap<String, Vec<f32>>,
+        meta: &serde_json::Map<String, serde_json::Value>,
+        shader: Option<crate::mlp::Mlp>,
+    ) -> Result<Self, String> {
+        let num = |k: &str| {
+            meta.get(k)
+                .and_then(|v| v.as_u64())
+                .ok_or(format!("has no {k}"))
+        };
+        let n = num("gaussians")? as usize;
+        let sh_degree = num("sh_degree")? as u32;
+        if sh_degree > 3 {
+            return Err(format!("has SH degree {sh_degree}"));
+        }
+        let k = num("feature_count")? as usize;
+        let mut take = |name: &str, len: usize| -> Result<Vec<f32>, String> {
+            let v = arrays.remove(name).ok_or(format!("has no {name}"))?;
+            if v.len() != len {
+                return Err(format!("{name} holds {} values, not {len}", v.len()));
+            }
+            Ok(v)
+        };
+        let mut scene = Scene::empty(sh_degree);
+        let stride = scene.sh_stride();
+        let rows3 = |v: Vec<f32>| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        scene.positions = rows3(take("positions", n * 3)?);
+        scene.log_scales = rows3(take("log_scales", n * 3)?);
+        scene.rotations = take("rotations", n * 4)?
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        scene.opacity_logits = take("opacity_logits", n)?;
+        scene.sh = take("sh", n * stride)?;
+        scene.feature_count = k;
+        scene.features = take("features", n * k)?;
+        scene.kernel = meta
+            .get("kernel")
+            .and_then(|v| v.as_str())
+            .and_then(|s| s.parse().ok())
+            .ok_or("has no kernel")?;
+        let mut model = Model::of(scene);
+        model.grad_accum = take("grad_accum", n)?;
+        model.denom = take("denom", n)?.iter().map(|&d| d as u32).collect();
+        model.max_radii = take("max_radii", n)?;
+        for (g, width) in [3, 3, 4, 1, stride, k].into_iter().enumerate() {
+            model.moments[g] = Moments {
+                m: take(&format!("m{g}"), n * width)?,
+                v: take(&format!("v{g}"), n * width)?,
+            };
+        }
+        let params = shader.as_ref().map_or(0, |m| {
+            m.layers.iter().map(|l| (l.inputs + 1) * l.outputs).sum()
+        });
+        model.shader_moments = Moments {
+            m: take("shader_m", params)?,
+            v: take("shader_v", params)?,
+        };
+        model.shader = shader;
+        model.active_sh_degree = num("active_sh_degree")? as u32;
+        let steps = meta
+            .get("steps")
+            .and_then(|v| v.as_array())
+            .filter(|a| a.len() == 7)
+            .ok_or("has no step counts")?;
+        for (t, v) in model.steps.iter_mut().zip(steps) {
+            *t = v.as_u64().ok_or("has a bad step count")? as u32;
+        }
+        Ok(model)
+    }
+
     /// Gaussians in the model.
     pub fn len(&self) -> usize {
         self.scene.len()

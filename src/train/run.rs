@@ -44,6 +44,36 @@ pub struct TrainOptions {
     pub shader: Option<crate::mlp::Mlp>,
     /// The alpha falloff trained with (recorded in the PLY).
     pub kernel: crate::model::SplatKernel,
+    /// Iterations after which a checkpoint (`chkpntN.safetensors`) is written.
+    pub checkpoint_iterations: Vec<u32>,
+    /// Continue from this checkpoint (of the same data set and settings).
+    pub resume: Option<super::checkpoint::Checkpoint>,
+    /// Set (Ctrl-C, SIGTERM): write a checkpoint after the current iteration and stop.
+    pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+}
+
+impl TrainOptions {
+    /// What a checkpoint must match to be resumed: the data set's views and the settings
+    /// that shape the run (not the output or evaluation choices).
+    fn fingerprint(&self, data: &Dataset) -> String {
+        format!(
+            "{:?}|sh {}|white {}|seed {}|points {}|kernel {}|shader {}|train {:?}",
+            Settings {
+                iterations: 0,
+                ..self.settings.clone()
+            },
+            self.sh_degree,
+            self.white_background,
+            self.seed,
+            self.random_points,
+            self.kernel,
+            self.shader.as_ref().map_or(0, |m| m.layers.len()),
+            data.train
+                .iter()
+                .map(|v| (&v.camera.name, v.camera.width, v.camera.height))
+                .collect::<Vec<_>>()
+        )
+    }
 }
 
 /// Evaluation of a set of views.
@@ -102,6 +132,12 @@ pub enum TrainError {
     /// Writing the model.
     #[error(transparent)]
     Write(#[from] crate::fsutil::WriteError),
+    /// Stopped by a signal after writing a checkpoint.
+    #[error("{message}")]
+    Interrupted {
+        /// What happened and how to resume.
+        message: String,
+    },
     /// Anything else, one sentence.
     #[error("{0}")]
     Other(String),
@@ -209,13 +245,16 @@ pub fn train(
     }
     let mut rng = Rng(opts.seed);
     let mut written = Vec::new();
+    let fingerprint = opts.fingerprint(data);
+    // A resumed run replaces the files of the run it continues.
+    let overwrite = opts.overwrite || opts.resume.is_some();
     // The original's start: points3D, or random points around the cameras' centre.
     let mut model = match &data.points {
         Some(points) => {
             write(
                 &out.join("input.ply"),
                 &points_ply(points),
-                opts.overwrite,
+                overwrite,
                 &mut written,
             )?;
             Model::from_points(points, opts.sh_degree)
@@ -246,6 +285,30 @@ pub fn train(
     if let Some(mlp) = &opts.shader {
         model = model.with_features(mlp.clone(), &mut rng);
     }
+    let mut first = 1;
+    let mut order: Vec<usize> = Vec::new();
+    if let Some(c) = &opts.resume {
+        if c.fingerprint != fingerprint {
+            return Err(TrainError::Other(
+                "the checkpoint belongs to another data set or other settings; resume with the ones it was written with".into(),
+            ));
+        }
+        if c.iteration >= s.iterations {
+            return Err(TrainError::Other(format!(
+                "the checkpoint is at iteration {}, not before --iterations {}",
+                c.iteration, s.iterations
+            )));
+        }
+        model = c.model.clone();
+        rng = Rng(c.rng);
+        order = c.order.clone();
+        first = c.iteration + 1;
+        note(format!(
+            "resuming after iteration {} ({} Gaussians)",
+            c.iteration,
+            model.len()
+        ));
+    }
     // cameras.json: the test cameras, then the training ones (the original's order), at
     // the photos' own size.
     let all: Vec<(usize, Camera)> = data
@@ -263,7 +326,7 @@ pub fn train(
     write(
         &out.join("cameras.json"),
         json.as_bytes(),
-        opts.overwrite,
+        overwrite,
         &mut written,
     )?;
     let cfg = format!(
@@ -277,7 +340,7 @@ pub fn train(
     write(
         &out.join("cfg_args"),
         cfg.as_bytes(),
-        opts.overwrite,
+        overwrite,
         &mut written,
     )?;
     let bg = if opts.white_background {
@@ -291,10 +354,25 @@ pub fn train(
         ..Default::default()
     };
     let mut evaluations = Vec::new();
-    let mut order: Vec<usize> = Vec::new();
     let start = std::time::Instant::now();
     let mut peak = 0u64;
-    for it in 1..=s.iterations {
+    let checkpoint = |it: u32,
+                      model: &Model,
+                      rng: &Rng,
+                      order: &[usize],
+                      written: &mut Vec<PathBuf>,
+                      overwrite: bool| {
+        let c = super::checkpoint::Checkpoint {
+            iteration: it,
+            rng: rng.0,
+            order: order.to_vec(),
+            model: model.clone(),
+            fingerprint: fingerprint.clone(),
+        };
+        let path = out.join(format!("chkpnt{it}.safetensors"));
+        write(&path, &c.to_bytes(), overwrite, written).map(|()| path)
+    };
+    for it in first..=s.iterations {
         if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
             model.active_sh_degree += 1;
         }
@@ -412,6 +490,24 @@ pub fn train(
             ));
             evaluations.push(e);
         }
+        if opts.checkpoint_iterations.contains(&it) {
+            let path = checkpoint(it, &model, &rng, &order, &mut written, overwrite)?;
+            note(format!("[ITER {it}] checkpoint {}", path.display()));
+        }
+        let cancelled = opts
+            .cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::SeqCst));
+        if cancelled && it < s.iterations {
+            let path = checkpoint(it, &model, &rng, &order, &mut written, true)?;
+            return Err(TrainError::Interrupted {
+                message: format!(
+                    "interrupted after iteration {it}; wrote {}; continue with the same command and --resume {}",
+                    path.display(),
+                    path.display()
+                ),
+            });
+        }
         if opts.save_iterations.contains(&it) || it == s.iterations {
             let path = out
                 .join("point_cloud")
@@ -421,15 +517,10 @@ pub fn train(
                 &model.scene,
                 crate::scene::ply::PlyEncoding::BinaryLittleEndian,
             );
-            write(&path, &bytes, opts.overwrite, &mut written)?;
+            write(&path, &bytes, overwrite, &mut written)?;
             if let Some(mlp) = &model.shader {
                 let shader_path = path.with_file_name("shader.safetensors");
-                write(
-                    &shader_path,
-                    &mlp.to_safetensors(),
-                    opts.overwrite,
-                    &mut written,
-                )?;
+                write(&shader_path, &mlp.to_safetensors(), overwrite, &mut written)?;
             }
             note(format!(
                 "[ITER {it}] saved {} ({} Gaussians)",

@@ -240,3 +240,98 @@ fn train_learns_feature_splats_and_their_shader() {
         String::from_utf8_lossy(&render.stderr)
     );
 }
+
+/// A checkpoint continues a run bit for bit: the resumed run writes the same PLY as the
+/// run that never stopped; a checkpoint of other settings is refused; Ctrl-C (SIGINT)
+/// writes a checkpoint, says how to resume and exits with 130.
+#[test]
+fn resume_continues_bit_for_bit_and_ctrl_c_writes_a_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    make_dataset(&data, 12, 48, 36);
+    let run = |out: &str, extra: &[&str]| {
+        let model = dir.path().join(out);
+        let mut args = vec![
+            "train".to_string(),
+            data.to_str().unwrap().into(),
+            "-o".into(),
+            model.to_str().unwrap().into(),
+            "--iterations".into(),
+            "300".into(),
+            "--densify-from-iter".into(),
+            "50".into(),
+            "--densification-interval".into(),
+            "50".into(),
+            "--opacity-reset-interval".into(),
+            "150".into(),
+            "--sh-degree".into(),
+            "1".into(),
+            "--save-iterations".into(),
+            "300".into(),
+            "--test-iterations".into(),
+            "300".into(),
+            "-q".into(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        (vksplat(&refs), model)
+    };
+    let (full, a) = run("a", &["--checkpoint-iterations", "140"]);
+    assert!(
+        full.status.success(),
+        "{}",
+        String::from_utf8_lossy(&full.stderr)
+    );
+    let chk = a.join("chkpnt140.safetensors");
+    assert!(chk.is_file());
+    let (resumed, b) = run("b", &["--resume", chk.to_str().unwrap()]);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let ply = "point_cloud/iteration_300/point_cloud.ply";
+    assert!(
+        std::fs::read(a.join(ply)).unwrap() == std::fs::read(b.join(ply)).unwrap(),
+        "the resumed run differs from the uninterrupted one"
+    );
+    let (other, _) = run("c", &["--resume", chk.to_str().unwrap(), "--seed", "9"]);
+    assert!(!other.status.success());
+    assert!(String::from_utf8_lossy(&other.stderr).contains("other settings"));
+    // Ctrl-C during a long run.
+    let model = dir.path().join("d");
+    let mut child = std::process::Command::new(common::cli::bin())
+        .args([
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+            "--iterations",
+            "100000",
+            "-q",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    while !model.join("cfg_args").is_file() && t.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let status = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("--resume"), "{err}");
+    let written: Vec<_> = std::fs::read_dir(&model)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().to_string())
+        .filter(|n| n.starts_with("chkpnt") && n.ends_with(".safetensors"))
+        .collect();
+    assert_eq!(written.len(), 1, "{written:?}");
+}
