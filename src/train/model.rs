@@ -138,6 +138,9 @@ impl Moments {
     }
 }
 
+/// A checkpoint's scalars (counts, degrees, step counts) by name.
+pub(crate) type Scalars = serde_json::Map<String, serde_json::Value>;
+
 /// The Gaussians, their optimiser state and their densification statistics.
 #[derive(Clone, Debug)]
 pub struct Model {
@@ -308,12 +311,7 @@ impl Model {
     }
 
     /// The whole state as named arrays and scalars (a checkpoint's content).
-    pub(crate) fn state(
-        &self,
-    ) -> (
-        Vec<(String, Vec<f32>)>,
-        serde_json::Map<String, serde_json::Value>,
-    ) {
+    pub(crate) fn state(&self) -> (Vec<(String, Vec<f32>)>, Scalars) {
         let s = &self.scene;
         let flat = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
         let mut arrays = vec![
