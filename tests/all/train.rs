@@ -300,7 +300,7 @@ fn resume_continues_bit_for_bit_and_ctrl_c_writes_a_checkpoint() {
     assert!(String::from_utf8_lossy(&other.stderr).contains("other settings"));
     // Ctrl-C during a long run.
     let model = dir.path().join("d");
-    let mut child = std::process::Command::new(common::cli::bin())
+    let child = std::process::Command::new(common::cli::bin())
         .args([
             "train",
             data.to_str().unwrap(),
