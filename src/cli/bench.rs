@@ -53,6 +53,11 @@ pub(crate) struct BenchArgs {
     /// before their extension.
     #[arg(long, value_name = "I/N|slurm", requires = "sweep")]
     pub(crate) shard: Option<String>,
+    /// Merge the JSON reports of a sharded sweep (the files `--json X --shard I/N` wrote,
+    /// X.shard-I-of-N.json, every shard once) into one report in `--json` (the points in
+    /// the sweep's order, as one process writes them); runs nothing.
+    #[arg(long, value_name = "SHARD.json", num_args = 1.., requires = "json", conflicts_with_all = ["sweep", "scene", "demo", "shard", "csv", "plot"])]
+    pub(crate) merge: Vec<PathBuf>,
     /// Seed of the synthetic scenes of a Gaussians sweep.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
@@ -202,7 +207,98 @@ fn kept_in_sweep<T>(
     }
 }
 
+/// `bench --merge`: the shards' JSON reports as one.
+fn merge(args: &BenchArgs) -> Result<()> {
+    let out = args
+        .json
+        .as_ref()
+        .expect("clap requires --json with --merge");
+    check_output_file(out, args.overwrite)?;
+    let mut parts: Vec<(vksplat::shard::Shard, serde_json::Value, &PathBuf)> = Vec::new();
+    for path in &args.merge {
+        let name = path.file_stem().and_then(|n| n.to_str()).unwrap_or("");
+        let shard = name
+            .rsplit_once('.')
+            .and_then(|(_, tag)| vksplat::shard::Shard::parse_tag(tag))
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: not a shard's report (its name must end in .shard-I-of-N.json, as bench --json --shard writes it)",
+                    path.display()
+                )
+            })?;
+        let text = std::fs::read(path)
+            .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", path.display()))?;
+        let doc: serde_json::Value = serde_json::from_slice(&text)
+            .map_err(|e| anyhow::anyhow!("{}: is not a bench JSON report: {e}", path.display()))?;
+        if let Some((other, _, p)) = parts.iter().find(|(s, _, _)| s.index == shard.index) {
+            bail!(
+                "{} and {}: both are {other}; merge the reports of one run",
+                p.display(),
+                path.display()
+            );
+        }
+        parts.push((shard, doc, path));
+    }
+    let count = parts[0].0.count;
+    if let Some((s, _, p)) = parts.iter().find(|(s, _, _)| s.count != count) {
+        bail!("{}: is {s}, the others are of {count} shards", p.display());
+    }
+    let missing: Vec<String> = (0..count)
+        .filter(|i| !parts.iter().any(|(s, _, _)| s.index == *i))
+        .map(|i| i.to_string())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "shard(s) {} of {count} are missing; pass every shard's report",
+            missing.join(", ")
+        );
+    }
+    parts.sort_by_key(|(s, _, _)| s.index);
+    let version = &parts[0].1["schema_version"];
+    let key = if parts[0].1.get("backward_runs").is_some() {
+        "backward_runs"
+    } else {
+        "runs"
+    };
+    let mut runs = Vec::new();
+    for (_, doc, path) in &parts {
+        if &doc["schema_version"] != version {
+            bail!(
+                "{}: another report version than the first shard's",
+                path.display()
+            );
+        }
+        let list = doc[key].as_array().ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: has no {key} list (all shards must be of one kind of bench)",
+                path.display()
+            )
+        })?;
+        runs.extend(list.iter().cloned());
+    }
+    let mut doc = serde_json::Map::new();
+    doc.insert("schema_version".into(), version.clone());
+    doc.insert(key.into(), serde_json::Value::Array(runs));
+    let text = serde_json::to_string_pretty(&serde_json::Value::Object(doc))? + "\n";
+    output::write_bytes_atomically(out, args.overwrite, text.as_bytes())?;
+    if !args.quiet {
+        note!(
+            "merged {} shards ({} points) into {}",
+            count,
+            parts
+                .iter()
+                .map(|(_, d, _)| d[key].as_array().map_or(0, |a| a.len()))
+                .sum::<usize>(),
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
+    if !args.merge.is_empty() {
+        return merge(args);
+    }
     let shard = super::common::shard(args.shard.as_deref())?;
     // A shard writes its own report files.
     let shard_file = |path: &Option<PathBuf>| -> Option<PathBuf> {

@@ -431,6 +431,40 @@ fn bench_sweep_shards_split_the_points() {
     }
     assert!(!json.exists(), "a shard wrote the unsharded file");
     assert_eq!(names, [32, 48, 64], "each point once, in order");
+    // The shards' reports merge into one of every point, in the sweep's order.
+    let shard = |i: usize| dir.path().join(format!("b.shard-{i}-of-2.json"));
+    let o = vksplat(&[
+        "bench",
+        "--merge",
+        s(&shard(1)),
+        s(&shard(0)),
+        "--json",
+        s(&json),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(v["schema_version"], 1);
+    let widths: Vec<u64> = v["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["width"].as_u64().unwrap())
+        .collect();
+    assert_eq!(widths, [32, 48, 64]);
+    // A missing shard, a shard twice, or a file that is no shard's: one sentence each.
+    let merged = dir.path().join("m.json");
+    for (files, says) in [
+        (vec![shard(0)], "missing"),
+        (vec![shard(0), shard(0)], "both are"),
+        (vec![json.clone()], "not a shard's report"),
+    ] {
+        let mut a = vec!["bench", "--merge"];
+        a.extend(files.iter().map(|f| s(f)));
+        a.extend(["--json", s(&merged)]);
+        let o = vksplat(&a);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains(says), "{}", stderr(&o));
+    }
 }
 
 #[test]
