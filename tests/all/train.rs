@@ -335,3 +335,63 @@ fn resume_continues_bit_for_bit_and_ctrl_c_writes_a_checkpoint() {
         .collect();
     assert_eq!(written.len(), 1, "{written:?}");
 }
+
+/// Bad data sets: each one error naming the file and what is wrong, a non-zero exit, and
+/// nothing written.
+#[test]
+fn bad_data_sets_give_one_clear_error_each() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    make_dataset(&data, 4, 32, 24);
+    let model = dir.path().join("model");
+    let train = || {
+        vksplat(&[
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+            "--iterations",
+            "5",
+            "-q",
+        ])
+    };
+    let fails_with = |what: &str, says: &[&str]| {
+        let o = train();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(!o.status.success(), "{what}: succeeded");
+        for s in says {
+            assert!(err.contains(s), "{what}: {err}");
+        }
+        assert_eq!(err.lines().count(), 1, "{what}: {err}");
+        assert!(!model.exists(), "{what}: wrote {}", model.display());
+    };
+    let photo = data.join("images/view_001.png");
+    let saved = std::fs::read(&photo).unwrap();
+    // A photo of another size than its camera.
+    let small = vksplat::frame::Frame {
+        width: 8,
+        height: 8,
+        color: vec![[0.5; 3]; 64],
+        alpha: vec![1.0; 64],
+        depth: vec![1.0; 64],
+        feature_count: 0,
+        features: Vec::new(),
+    };
+    vksplat::output::write_frame(&small, &photo, vksplat::output::ImageFormat::Png8, true).unwrap();
+    fails_with("a resized photo", &["view_001.png", "8x8", "32x24"]);
+    // A missing photo.
+    std::fs::remove_file(&photo).unwrap();
+    fails_with("a missing photo", &["view_001.png"]);
+    std::fs::write(&photo, &saved).unwrap();
+    // An empty points3D.
+    let points = data.join("sparse/0/points3D.txt");
+    let saved_points = std::fs::read(&points).unwrap();
+    std::fs::write(&points, "# no points\n").unwrap();
+    fails_with("an empty points3D", &["points3D", "no points"]);
+    std::fs::write(&points, &saved_points).unwrap();
+    // A camera model that is not a pinhole.
+    let cameras = data.join("sparse/0/cameras.txt");
+    let text = std::fs::read_to_string(&cameras).unwrap();
+    std::fs::write(&cameras, text.replacen("PINHOLE", "OPENCV_FISHEYE", 1)).unwrap();
+    fails_with("a fisheye camera", &["cameras.txt", "OPENCV_FISHEYE"]);
+}
