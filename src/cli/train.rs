@@ -14,7 +14,8 @@ use vksplat::{note, outln};
   vksplat train data/lego -o models/lego --white-background --iterations 7000")]
 pub(crate) struct TrainArgs {
     /// A COLMAP data set: images/ and sparse/0/ (text or binary; points3D starts the
-    /// Gaussians).
+    /// Gaussians), or a NeRF-synthetic (transforms_train.json, transforms_test.json) or
+    /// nerfstudio (transforms.json) one.
     pub(crate) dataset: PathBuf,
     /// The model directory to write (point_cloud/iteration_N/point_cloud.ply, cameras.json,
     /// cfg_args, input.ply), as the original train.py's --model_path.
@@ -201,15 +202,21 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     }
     if !args.dataset.is_dir() {
         bail!(
-            "{}: is not a directory (a COLMAP data set: images/ and sparse/0/)",
+            "{}: is not a directory (a COLMAP data set: images/ and sparse/0/, or a NeRF-synthetic or nerfstudio one: transforms*.json)",
             args.dataset.display()
         );
     }
-    let data = vksplat::train::data::load_colmap(
-        &args.dataset,
-        vksplat::train::data::Resolution(args.resolution),
-        args.eval,
-    )?;
+    let resolution = vksplat::train::data::Resolution(args.resolution);
+    let data = if vksplat::train::data::is_transforms(&args.dataset) {
+        let bg = if args.white_background {
+            [1.0; 3]
+        } else {
+            [0.0; 3]
+        };
+        vksplat::train::data::load_transforms(&args.dataset, resolution, args.eval, bg)?
+    } else {
+        vksplat::train::data::load_colmap(&args.dataset, resolution, args.eval)?
+    };
     if !args.quiet {
         note!(
             "{}: {} training and {} test images of {}x{}, {}, scene extent {:.3}",
@@ -332,8 +339,8 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         report.gaussians,
         report.device_bytes_peak as f64 / report.gaussians.max(1) as f64,
         last.map_or(String::new(), |e| format!(
-            "; {} PSNR {:.2} dB, SSIM {:.4}",
-            e.split, e.psnr, e.ssim
+            "; {} PSNR {:.2} dB, SSIM {:.4}, FLIP {:.4}",
+            e.split, e.psnr, e.ssim, e.flip
         )),
         args.output.display()
     );

@@ -34,6 +34,9 @@ pub struct Dataset {
     /// The original's `cameras_extent`: 1.1 times the largest distance of a training
     /// camera's centre from their mean.
     pub extent: f32,
+    /// Where random Gaussians start without points (centre, half side); `None`: around
+    /// the cameras' centre, within the extent.
+    pub random_box: Option<([f32; 3], f32)>,
 }
 
 /// An error naming the file and what is wrong with it.
@@ -138,6 +141,7 @@ pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dat
         test,
         points,
         extent: (radius * 1.1).max(1e-6),
+        random_box: None,
     })
 }
 
@@ -170,24 +174,8 @@ fn load_view(images: &Path, cam: &Camera, resolution: Resolution) -> Result<View
         (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
         _ => return Err(data_error(&path, "has no colour or grey channels")),
     };
-    let (w, h) = resolution.size(cam.width, cam.height);
     let full: Vec<[f32; 3]> = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
-    let image = if (w, h) == (cam.width, cam.height) {
-        full
-    } else {
-        resize(&full, cam.width, cam.height, w, h)
-    };
-    let (sx, sy) = (w as f32 / cam.width as f32, h as f32 / cam.height as f32);
-    let camera = Camera {
-        width: w,
-        height: h,
-        fx: cam.fx * sx,
-        fy: cam.fy * sy,
-        cx: cam.cx * sx,
-        cy: cam.cy * sy,
-        ..cam.clone()
-    };
-    Ok(View { camera, image })
+    Ok(scaled_view(cam.clone(), full, resolution))
 }
 
 /// Area-averaged downscaling (each output pixel the mean of the input pixels it covers,
@@ -291,4 +279,199 @@ pub fn write_rendered_dataset(
             .map_err(|e| data_error(&path, e.to_string()))?;
     }
     Ok(())
+}
+
+/// Whether `dir` is a NeRF-synthetic / nerfstudio data set (`transforms_train.json` or
+/// `transforms.json`) rather than a COLMAP one.
+pub fn is_transforms(dir: &Path) -> bool {
+    dir.join("transforms_train.json").is_file() || dir.join("transforms.json").is_file()
+}
+
+/// Reads a NeRF-synthetic (`transforms_train.json`, `transforms_test.json`) or nerfstudio
+/// (`transforms.json`) data set: cameras from `camera_angle_x` or `fl_x`/`fl_y`/`cx`/`cy`
+/// and each frame's camera-to-world `transform_matrix` (OpenGL axes, turned into ours as the
+/// original's `readCamerasFromTransforms`), photos at `file_path` (`.png` added when it
+/// has no extension) with their alpha composited over `background`. With `eval` the test
+/// file's frames are held out (NeRF-synthetic), or every 8th frame of a single
+/// `transforms.json`. No points: the original starts these from random Gaussians in the
+/// cube of half side 1.3 ([`Dataset::random_box`]).
+pub fn load_transforms(
+    dir: &Path,
+    resolution: Resolution,
+    eval: bool,
+    background: [f32; 3],
+) -> Result<Dataset, DataError> {
+    let split = dir.join("transforms_train.json").is_file();
+    let (train_file, test_file) = if split {
+        (
+            dir.join("transforms_train.json"),
+            Some(dir.join("transforms_test.json")),
+        )
+    } else {
+        (dir.join("transforms.json"), None)
+    };
+    let mut train = read_transforms(&train_file, dir, resolution, background)?;
+    let mut test = Vec::new();
+    match test_file {
+        Some(f) if eval => {
+            if !f.is_file() {
+                return Err(data_error(&f, "is missing; --eval holds out its frames"));
+            }
+            test = read_transforms(&f, dir, resolution, background)?;
+        }
+        None if eval => {
+            let all = std::mem::take(&mut train);
+            for (k, v) in all.into_iter().enumerate() {
+                if k % LLFF_HOLD == 0 {
+                    test.push(v);
+                } else {
+                    train.push(v);
+                }
+            }
+        }
+        _ => {}
+    }
+    if train.is_empty() {
+        return Err(data_error(&train_file, "lists no training frames"));
+    }
+    let centres: Vec<glam::Vec3> = train.iter().map(|v| camera_centre(&v.camera)).collect();
+    let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
+    let radius = centres
+        .iter()
+        .map(|c| c.distance(mean))
+        .fold(0.0f32, f32::max);
+    Ok(Dataset {
+        source: dir.to_path_buf(),
+        train,
+        test,
+        points: None,
+        extent: (radius * 1.1).max(1e-6),
+        random_box: Some(([0.0; 3], 1.3)),
+    })
+}
+
+fn read_transforms(
+    file: &Path,
+    dir: &Path,
+    resolution: Resolution,
+    background: [f32; 3],
+) -> Result<Vec<View>, DataError> {
+    let text =
+        std::fs::read_to_string(file).map_err(|e| data_error(file, format!("cannot read: {e}")))?;
+    let doc: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| data_error(file, format!("is not JSON: {e}")))?;
+    let frames = doc["frames"]
+        .as_array()
+        .ok_or_else(|| data_error(file, "has no \"frames\" list"))?;
+    let num = |v: &serde_json::Value| v.as_f64().filter(|x| x.is_finite());
+    let mut views = Vec::with_capacity(frames.len());
+    for (i, f) in frames.iter().enumerate() {
+        let bad = |m: String| data_error(file, format!("frame {i}: {m}"));
+        let rel = f["file_path"]
+            .as_str()
+            .ok_or_else(|| bad("has no file_path".into()))?;
+        let mut path = dir.join(rel);
+        if path.extension().is_none() {
+            path.set_extension("png");
+        }
+        let m = f["transform_matrix"]
+            .as_array()
+            .filter(|rows| rows.len() >= 3)
+            .ok_or_else(|| bad("has no 4x4 transform_matrix".into()))?;
+        let mut c2w = [[0f64; 4]; 3];
+        for (r, row) in m.iter().take(3).enumerate() {
+            let row = row
+                .as_array()
+                .filter(|r| r.len() == 4)
+                .ok_or_else(|| bad("transform_matrix rows must have 4 numbers".into()))?;
+            for (c, v) in row.iter().enumerate() {
+                c2w[r][c] =
+                    num(v).ok_or_else(|| bad("transform_matrix holds a non-number".into()))?;
+            }
+        }
+        let planes =
+            crate::image_file::read_image(&path).map_err(|e| data_error(&path, e.to_string()))?;
+        let (w, h) = (planes.width, planes.height);
+        // Intrinsics: per frame, else the file's; a focal length, else the field of view.
+        let key = |k: &str| num(&f[k]).or_else(|| num(&doc[k]));
+        let fx = match (key("fl_x"), key("camera_angle_x")) {
+            (Some(fl), _) => fl,
+            (None, Some(angle)) if angle > 0.0 && angle < std::f64::consts::PI => {
+                w as f64 / (2.0 * (angle / 2.0).tan())
+            }
+            _ => {
+                return Err(bad(
+                    "no fl_x or camera_angle_x gives the focal length".into()
+                ))
+            }
+        };
+        let fy = key("fl_y").unwrap_or(fx);
+        let cx = key("cx").unwrap_or(w as f64 / 2.0);
+        let cy = key("cy").unwrap_or(h as f64 / 2.0);
+        // OpenGL camera axes (y up, z back) to ours (y down, z forward), then invert.
+        let r_c2w = glam::DMat3::from_cols(
+            glam::DVec3::new(c2w[0][0], c2w[1][0], c2w[2][0]),
+            -glam::DVec3::new(c2w[0][1], c2w[1][1], c2w[2][1]),
+            -glam::DVec3::new(c2w[0][2], c2w[1][2], c2w[2][2]),
+        );
+        let centre = glam::DVec3::new(c2w[0][3], c2w[1][3], c2w[2][3]);
+        let rotation = r_c2w.transpose();
+        let name = std::path::Path::new(rel)
+            .file_name()
+            .map_or_else(|| format!("frame_{i}"), |n| n.to_string_lossy().to_string());
+        let camera = Camera {
+            name,
+            width: w,
+            height: h,
+            fx: fx as f32,
+            fy: fy as f32,
+            cx: cx as f32,
+            cy: cy as f32,
+            rotation: rotation.as_mat3(),
+            translation: (-(rotation * centre)).as_vec3(),
+        };
+        camera
+            .validate()
+            .map_err(|e| bad(format!("its camera is not valid: {e}")))?;
+        let channel = |n: &str| planes.channel(n).map(|c| c.values.clone());
+        let (r, g, b) = match (channel("R"), channel("G"), channel("B"), channel("Y")) {
+            (Some(r), Some(g), Some(b), _) => (r, g, b),
+            (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
+            _ => return Err(data_error(&path, "has no colour or grey channels")),
+        };
+        let a = channel("A").unwrap_or_else(|| vec![1.0; r.len()]);
+        let full: Vec<[f32; 3]> = (0..r.len())
+            .map(|p| {
+                let t = 1.0 - a[p];
+                [
+                    r[p] * a[p] + background[0] * t,
+                    g[p] * a[p] + background[1] * t,
+                    b[p] * a[p] + background[2] * t,
+                ]
+            })
+            .collect();
+        views.push(scaled_view(camera, full, resolution));
+    }
+    Ok(views)
+}
+
+/// `camera` and its photo at `resolution`.
+fn scaled_view(cam: Camera, full: Vec<[f32; 3]>, resolution: Resolution) -> View {
+    let (w, h) = resolution.size(cam.width, cam.height);
+    let image = if (w, h) == (cam.width, cam.height) {
+        full
+    } else {
+        resize(&full, cam.width, cam.height, w, h)
+    };
+    let (sx, sy) = (w as f32 / cam.width as f32, h as f32 / cam.height as f32);
+    let camera = Camera {
+        width: w,
+        height: h,
+        fx: cam.fx * sx,
+        fy: cam.fy * sy,
+        cx: cam.cx * sx,
+        cy: cam.cy * sy,
+        ..cam
+    };
+    View { camera, image }
 }

@@ -91,6 +91,8 @@ pub struct Evaluation {
     pub ssim: f64,
     /// Mean L1.
     pub l1: f64,
+    /// Mean FLIP (`vksplat eval`'s, the default observer).
+    pub flip: f64,
 }
 
 /// What a finished run reports.
@@ -191,7 +193,7 @@ fn evaluate(
 ) -> Result<Evaluation, TrainError> {
     let params = model.params();
     rast.set_shader(model.shader.as_ref())?;
-    let (mut psnr, mut ssim, mut l1) = (0.0, 0.0, 0.0);
+    let (mut psnr, mut ssim, mut l1, mut flip) = (0.0, 0.0, 0.0, 0.0);
     for v in views {
         let (frame, _) = rast.forward(&params, &v.camera, opts)?;
         let img: Vec<f32> = frame
@@ -204,6 +206,7 @@ fn evaluate(
         let (w, h) = (v.camera.width as usize, v.camera.height as usize);
         psnr += crate::metrics::psnr(&gt, &img, 1.0);
         ssim += crate::metrics::ssim(&gt, &img, w, h, 3);
+        flip += crate::metrics::flip(&gt, &img, w, h, crate::metrics::flip_default_ppd());
         l1 += img
             .iter()
             .zip(&gt)
@@ -219,6 +222,7 @@ fn evaluate(
         psnr: psnr / n,
         ssim: ssim / n,
         l1: l1 / n,
+        flip: flip / n,
     })
 }
 
@@ -260,25 +264,24 @@ pub fn train(
             Model::from_points(points, opts.sh_degree)
         }
         None => {
-            let centres: Vec<glam::Vec3> = data
-                .train
-                .iter()
-                .map(|v| super::data::camera_centre(&v.camera))
-                .collect();
-            let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
+            let (centre, half) = data.random_box.unwrap_or_else(|| {
+                let centres: Vec<glam::Vec3> = data
+                    .train
+                    .iter()
+                    .map(|v| super::data::camera_centre(&v.camera))
+                    .collect();
+                let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
+                (mean.to_array(), data.extent)
+            });
             note(format!(
-                "{} has no points3D: starting from {} random Gaussians within {:.3} of the cameras' centre",
+                "{} has no points: starting from {} random Gaussians in the cube of half side {half:.3} around ({:.3}, {:.3}, {:.3})",
                 data.source.display(),
                 opts.random_points,
-                data.extent
+                centre[0],
+                centre[1],
+                centre[2]
             ));
-            Model::random(
-                opts.random_points,
-                mean.to_array(),
-                data.extent,
-                opts.sh_degree,
-                &mut rng,
-            )
+            Model::random(opts.random_points, centre, half, opts.sh_degree, &mut rng)
         }
     };
     model.scene.kernel = opts.kernel;
@@ -481,11 +484,12 @@ pub fn train(
             };
             let e = evaluate(rast, &model, &views, &render_opts, it, split)?;
             note(format!(
-                "[ITER {it}] evaluating {split} ({} views): L1 {:.5} PSNR {:.2} dB SSIM {:.4}; {} Gaussians",
+                "[ITER {it}] evaluating {split} ({} views): L1 {:.5} PSNR {:.2} dB SSIM {:.4} FLIP {:.4}; {} Gaussians",
                 e.views,
                 e.l1,
                 e.psnr,
                 e.ssim,
+                e.flip,
                 model.len()
             ));
             evaluations.push(e);

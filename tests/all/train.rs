@@ -395,3 +395,114 @@ fn bad_data_sets_give_one_clear_error_each() {
     std::fs::write(&cameras, text.replacen("PINHOLE", "OPENCV_FISHEYE", 1)).unwrap();
     fails_with("a fisheye camera", &["cameras.txt", "OPENCV_FISHEYE"]);
 }
+
+/// A NeRF-synthetic data set (transforms_train.json / transforms_test.json, RGBA photos,
+/// OpenGL camera axes): the cameras read back as the ones rendered, the photos are
+/// composited over the background, and training from random Gaussians learns the views.
+#[test]
+fn a_nerf_synthetic_data_set_reads_back_and_trains() {
+    let scene =
+        vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+            .expect("the shared scene")
+            .0;
+    let cams = orbit(
+        &scene.positions,
+        &OrbitParams {
+            frames: 20,
+            width: 64,
+            height: 48,
+            elevation_deg: 20.0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let act = scene.activated();
+    let mut splits: [(String, Vec<serde_json::Value>); 2] =
+        [("train".into(), Vec::new()), ("test".into(), Vec::new())];
+    for (i, cam) in cams.iter().enumerate() {
+        let split = usize::from(i % 5 == 0);
+        let folder = data.join(&splits[split].0);
+        std::fs::create_dir_all(&folder).unwrap();
+        let frame = vksplat::cpu::render(&act, cam, &Default::default());
+        // Straight (unpremultiplied) colour in the RGBA file, as Blender writes it.
+        let rgba: Vec<u8> = frame
+            .color
+            .iter()
+            .zip(&frame.alpha)
+            .flat_map(|(c, &a)| {
+                let s = |v: f32| ((if a > 0.0 { v / a } else { 0.0 }).clamp(0.0, 1.0) * 255.0).round() as u8;
+                [s(c[0]), s(c[1]), s(c[2]), (a.clamp(0.0, 1.0) * 255.0).round() as u8]
+            })
+            .collect();
+        image::RgbaImage::from_raw(64, 48, rgba)
+            .unwrap()
+            .save(folder.join(format!("r_{i}.png")))
+            .unwrap();
+        // Camera to world in OpenGL axes: our axes with y and z negated.
+        let r = cam.rotation.transpose();
+        let c = -(r * cam.translation);
+        let (x, y, z) = (r.x_axis, -r.y_axis, -r.z_axis);
+        splits[split].1.push(serde_json::json!({
+            "file_path": format!("./{}/r_{i}", splits[split].0),
+            "transform_matrix": [
+                [x.x, y.x, z.x, c.x],
+                [x.y, y.y, z.y, c.y],
+                [x.z, y.z, z.z, c.z],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+        }));
+    }
+    let angle = 2.0 * (64.0 / (2.0 * cams[0].fx as f64)).atan();
+    for (name, frames) in &splits {
+        let doc = serde_json::json!({ "camera_angle_x": angle, "frames": frames });
+        std::fs::write(data.join(format!("transforms_{name}.json")), doc.to_string()).unwrap();
+    }
+    let set = vksplat::train::data::load_transforms(
+        &data,
+        vksplat::train::data::Resolution(1),
+        true,
+        [1.0; 3],
+    )
+    .unwrap();
+    assert_eq!((set.train.len(), set.test.len()), (16, 4));
+    let back = &set.test[0].camera;
+    assert!(back.rotation.abs_diff_eq(cams[0].rotation, 1e-5));
+    assert!((back.translation - cams[0].translation).abs().max_element() < 1e-4);
+    assert!((back.fx - cams[0].fx).abs() < 1e-3 * cams[0].fx);
+    // An empty pixel is the white background.
+    assert!(set.train[0].image.iter().any(|p| p == &[1.0, 1.0, 1.0]));
+    let model = dir.path().join("model");
+    let out = vksplat(&[
+        "train",
+        data.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+        "--eval",
+        "--white-background",
+        "--random-points",
+        "3000",
+        "--iterations",
+        "500",
+        "--test-iterations",
+        "500",
+        "--densify-from-iter",
+        "100",
+        "--opacity-reset-interval",
+        "100000",
+        "--sh-degree",
+        "0",
+        "-q",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success());
+    let psnr: f64 = text
+        .split("PSNR ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .expect("a PSNR in the summary");
+    assert!(psnr >= 20.0, "held-out PSNR {psnr} dB");
+}
