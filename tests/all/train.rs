@@ -432,8 +432,15 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
             .iter()
             .zip(&frame.alpha)
             .flat_map(|(c, &a)| {
-                let s = |v: f32| ((if a > 0.0 { v / a } else { 0.0 }).clamp(0.0, 1.0) * 255.0).round() as u8;
-                [s(c[0]), s(c[1]), s(c[2]), (a.clamp(0.0, 1.0) * 255.0).round() as u8]
+                let s = |v: f32| {
+                    ((if a > 0.0 { v / a } else { 0.0 }).clamp(0.0, 1.0) * 255.0).round() as u8
+                };
+                [
+                    s(c[0]),
+                    s(c[1]),
+                    s(c[2]),
+                    (a.clamp(0.0, 1.0) * 255.0).round() as u8,
+                ]
             })
             .collect();
         image::RgbaImage::from_raw(64, 48, rgba)
@@ -457,7 +464,11 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
     let angle = 2.0 * (64.0 / (2.0 * cams[0].fx as f64)).atan();
     for (name, frames) in &splits {
         let doc = serde_json::json!({ "camera_angle_x": angle, "frames": frames });
-        std::fs::write(data.join(format!("transforms_{name}.json")), doc.to_string()).unwrap();
+        std::fs::write(
+            data.join(format!("transforms_{name}.json")),
+            doc.to_string(),
+        )
+        .unwrap();
     }
     let set = vksplat::train::data::load_transforms(
         &data,
