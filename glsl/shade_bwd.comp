@@ -23,16 +23,17 @@ layout(local_size_x = 64) in;
 layout(constant_id = SHADE_SPEC_ACTIVATIONS) const uint ACTIVATIONS = 16u;
 layout(constant_id = SHADE_SPEC_WIDEST) const uint WIDEST = 16u;
 
-// 128 bytes of push constants (src/render/shade_bwd.rs ShadeBwdPush).
+// 128 bytes of push constants (src/render/shade_bwd.rs ShadeBwdPush): shade.comp's, then
+// the pass's shape.
 layout(push_constant) uniform ShadeBwdParams {
     uvec4 size;        // width, height, K, groups of four channels
     uvec4 code;        // input code (Mlp::input_code), layers, plane stride in vec4s, first chunk
-    uvec4 shape;       // scratch floats per workgroup, 0, parameters, 0
     vec4 intrinsics;   // fx, fy, cx, cy
     vec4 rot0;         // rows of the world-to-camera rotation
     vec4 rot1;
     vec4 rot2;
     vec4 background;
+    uvec4 shape;       // scratch vec4s per workgroup, 0, parameters, 0
 } p;
 
 layout(binding = SHADE_BWD_WORDS) uniform usamplerBuffer words_view;

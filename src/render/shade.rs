@@ -14,18 +14,49 @@ use ash::vk;
 /// Workgroup side (16 x 16 invocations).
 const SIDE: u32 = 16;
 
-/// The push constants of `glsl/shade.comp`.
+/// The push constants of `glsl/shade.comp`, and the first 112 bytes of
+/// `glsl/shade_bwd.comp`'s ([`super::shade_bwd`]).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct ShadePush {
+pub(crate) struct ShadePush {
     size: [u32; 4],
-    code: [u32; 4],
+    /// Input code, layers, plane stride (vec4s), and for the backward pass the first chunk.
+    pub(crate) code: [u32; 4],
     intrinsics: [f32; 4],
     rot: [[f32; 4]; 3],
     background: [f32; 4],
 }
 
 const _: () = assert!(std::mem::size_of::<ShadePush>() == 112);
+
+impl ShadePush {
+    /// The constants of `shader` over `cam`'s frame, whose feature planes are
+    /// `plane_stride` vec4s apart, shaded over `background`.
+    pub(crate) fn new(
+        shader: &GpuShader,
+        cam: &Camera,
+        plane_stride: u32,
+        background: [f32; 3],
+    ) -> Self {
+        let r = cam.rotation.transpose().to_cols_array_2d(); // rows of R
+        ShadePush {
+            size: [
+                cam.width,
+                cam.height,
+                shader.channels as u32,
+                shader.channels.div_ceil(4) as u32,
+            ],
+            code: [shader.input_code, shader.layers, plane_stride, 0],
+            intrinsics: [cam.fx, cam.fy, cam.cx, cam.cy],
+            rot: [
+                [r[0][0], r[0][1], r[0][2], 0.0],
+                [r[1][0], r[1][1], r[1][2], 0.0],
+                [r[2][0], r[2][1], r[2][2], 0.0],
+            ],
+            background: [background[0], background[1], background[2], 0.0],
+        }
+    }
+}
 
 /// A neural shader on the device.
 pub struct GpuShader {
@@ -183,23 +214,7 @@ impl Shade {
         cam: &Camera,
         background: [f32; 3],
     ) -> GpuResult<()> {
-        let r = cam.rotation.transpose().to_cols_array_2d(); // rows of R
-        let push = ShadePush {
-            size: [
-                cam.width,
-                cam.height,
-                shader.channels as u32,
-                shader.channels.div_ceil(4) as u32,
-            ],
-            code: [shader.input_code, shader.layers, plane_stride, 0],
-            intrinsics: [cam.fx, cam.fy, cam.cx, cam.cy],
-            rot: [
-                [r[0][0], r[0][1], r[0][2], 0.0],
-                [r[1][0], r[1][1], r[1][2], 0.0],
-                [r[2][0], r[2][1], r[2][2], 0.0],
-            ],
-            background: [background[0], background[1], background[2], 0.0],
-        };
+        let push = ShadePush::new(shader, cam, plane_stride, background);
         self.pipeline.dispatch_resources(
             ctx,
             cmd,

@@ -10,7 +10,7 @@
 //! chunks), and the reduce sums the slots in order. The rules are
 //! [`crate::cpu::backward::backward_shaded`]'s.
 
-use super::shade::GpuShader;
+use super::shade::{GpuShader, ShadePush};
 use crate::camera::Camera;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
@@ -25,16 +25,12 @@ pub const PIXELS: u32 = 64;
 /// constant, so the order of the sums depends on the frame's size only, not the device.
 pub const PARTIAL_SLOTS: u32 = 256;
 
-/// The push constants of `glsl/shade_bwd.comp`.
+/// The push constants of `glsl/shade_bwd.comp`: the forward's, then the pass's shape.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct ShadeBwdPush {
-    size: [u32; 4],
-    code: [u32; 4],
+    shade: ShadePush,
     shape: [u32; 4],
-    intrinsics: [f32; 4],
-    rot: [[f32; 4]; 3],
-    background: [f32; 4],
 }
 
 const _: () = assert!(std::mem::size_of::<ShadeBwdPush>() == 128);
@@ -159,23 +155,9 @@ impl ShadeBwd {
                 "the shade backward pipelines were built for another network size".into(),
             ));
         }
-        let r = cam.rotation.transpose().to_cols_array_2d(); // rows of R
         let mut push = ShadeBwdPush {
-            size: [
-                cam.width,
-                cam.height,
-                shader.channels() as u32,
-                shader.channels().div_ceil(4) as u32,
-            ],
-            code: [shader.input_code, shader.layers, bufs.features.1, 0],
+            shade: ShadePush::new(shader, cam, bufs.features.1, background),
             shape: [per_workgroup(shader) as u32, 0, shader.params, 0],
-            intrinsics: [cam.fx, cam.fy, cam.cx, cam.cy],
-            rot: [
-                [r[0][0], r[0][1], r[0][2], 0.0],
-                [r[1][0], r[1][1], r[1][2], 0.0],
-                [r[2][0], r[2][1], r[2][2], 0.0],
-            ],
-            background: [background[0], background[1], background[2], 0.0],
         };
         bufs.partials
             .buffer
@@ -192,7 +174,7 @@ impl ShadeBwd {
         ])?;
         let mut first = 0;
         while first < chunks {
-            push.code[3] = first as u32;
+            push.shade.code[3] = first as u32;
             let groups = (chunks - first).min(slots) as u32;
             self.pipeline.dispatch_resources(
                 ctx,
