@@ -58,13 +58,25 @@ pub enum Activation {
 }
 
 impl Activation {
-    fn parse(s: &str) -> Option<Self> {
+    /// The activation a file names (`relu`, `sigmoid`, `tanh`, `none`; `identity` and
+    /// `linear` for `none`; any case).
+    pub fn parse(s: &str) -> Option<Self> {
         match s.to_ascii_lowercase().as_str() {
             "relu" => Some(Activation::Relu),
             "sigmoid" => Some(Activation::Sigmoid),
             "tanh" => Some(Activation::Tanh),
             "none" | "identity" | "linear" => Some(Activation::None),
             _ => None,
+        }
+    }
+
+    /// The name a file gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Activation::Relu => "relu",
+            Activation::Sigmoid => "sigmoid",
+            Activation::Tanh => "tanh",
+            Activation::None => "none",
         }
     }
 
@@ -98,6 +110,27 @@ pub enum MlpInput {
     ViewDir,
     /// The pixel's alpha.
     Alpha,
+}
+
+impl MlpInput {
+    /// The input a file names (`features`, `view_dir` or `viewdir`, `alpha`).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "features" => Some(MlpInput::Features),
+            "view_dir" | "viewdir" => Some(MlpInput::ViewDir),
+            "alpha" => Some(MlpInput::Alpha),
+            _ => None,
+        }
+    }
+
+    /// The name a file gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            MlpInput::Features => "features",
+            MlpInput::ViewDir => "view_dir",
+            MlpInput::Alpha => "alpha",
+        }
+    }
 }
 
 /// A fully connected layer: `y = act(W x + b)`, `W` row-major `outputs x inputs`.
@@ -244,16 +277,9 @@ impl Mlp {
         let input_names = spec.inputs.unwrap_or_else(|| vec!["features".into()]);
         let mut inputs = Vec::new();
         for n in &input_names {
-            let i = match n.as_str() {
-                "features" => MlpInput::Features,
-                "view_dir" | "viewdir" => MlpInput::ViewDir,
-                "alpha" => MlpInput::Alpha,
-                other => {
-                    return Err(format!(
-                    "unknown input {other:?}; inputs are \"features\", \"view_dir\" and \"alpha\""
-                ))
-                }
-            };
+            let i = MlpInput::parse(n).ok_or_else(|| {
+                format!("unknown input {n:?}; inputs are \"features\", \"view_dir\" and \"alpha\"")
+            })?;
             if inputs.contains(&i) {
                 return Err(format!("input {n:?} is listed twice"));
             }
@@ -353,15 +379,7 @@ impl Mlp {
     /// `i.bias`, F32, and the description in the metadata.
     pub fn to_safetensors(&self) -> Vec<u8> {
         use safetensors::tensor::TensorView;
-        let input_names: Vec<&str> = self
-            .inputs
-            .iter()
-            .map(|i| match i {
-                MlpInput::Features => "features",
-                MlpInput::ViewDir => "view_dir",
-                MlpInput::Alpha => "alpha",
-            })
-            .collect();
+        let input_names: Vec<&str> = self.inputs.iter().map(|i| i.name()).collect();
         let layers: Vec<serde_json::Value> = self
             .layers
             .iter()
@@ -370,12 +388,7 @@ impl Mlp {
                 serde_json::json!({
                     "weight": format!("{i}.weight"),
                     "bias": format!("{i}.bias"),
-                    "activation": match l.activation {
-                        Activation::Relu => "relu",
-                        Activation::Sigmoid => "sigmoid",
-                        Activation::Tanh => "tanh",
-                        Activation::None => "none",
-                    },
+                    "activation": l.activation.name(),
                 })
             })
             .collect();

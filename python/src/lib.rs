@@ -1252,30 +1252,19 @@ fn shader_from_layers<'py>(
 ) -> PyResult<Bound<'py, PyByteArray>> {
     let mut parsed = Vec::new();
     for n in &inputs {
-        parsed.push(match n.as_str() {
-            "features" => vksplat::mlp::MlpInput::Features,
-            "view_dir" => vksplat::mlp::MlpInput::ViewDir,
-            "alpha" => vksplat::mlp::MlpInput::Alpha,
-            other => {
-                return Err(value_err(format!(
-                    "inputs: unknown input {other:?}; inputs are \"features\", \"view_dir\" and \"alpha\""
-                )))
-            }
-        });
+        parsed.push(vksplat::mlp::MlpInput::parse(n).ok_or_else(|| {
+            value_err(format!(
+                "inputs: unknown input {n:?}; inputs are \"features\", \"view_dir\" and \"alpha\""
+            ))
+        })?);
     }
     let mut out = Vec::new();
     for (i, (outputs, ins, w, b, act)) in layers.iter().enumerate() {
-        let activation = match act.as_str() {
-            "relu" => vksplat::mlp::Activation::Relu,
-            "sigmoid" => vksplat::mlp::Activation::Sigmoid,
-            "tanh" => vksplat::mlp::Activation::Tanh,
-            "none" => vksplat::mlp::Activation::None,
-            other => {
-                return Err(value_err(format!(
-                    "layer {i}: unknown activation {other:?}; use relu, sigmoid, tanh or none"
-                )))
-            }
-        };
+        let activation = vksplat::mlp::Activation::parse(act).ok_or_else(|| {
+            value_err(format!(
+                "layer {i}: unknown activation {act:?}; use relu, sigmoid, tanh or none"
+            ))
+        })?;
         out.push(vksplat::mlp::Layer {
             inputs: *ins,
             outputs: *outputs,
@@ -1306,18 +1295,7 @@ fn shader_file<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyByt
 #[pyfunction]
 fn shader_layers(bytes: &[u8]) -> PyResult<ShaderLayers> {
     let mlp = Mlp::parse(bytes, None).map_err(|e| value_err(format!("shader: {e}")))?;
-    let inputs = mlp
-        .inputs
-        .iter()
-        .map(|i| {
-            match i {
-                vksplat::mlp::MlpInput::Features => "features",
-                vksplat::mlp::MlpInput::ViewDir => "view_dir",
-                vksplat::mlp::MlpInput::Alpha => "alpha",
-            }
-            .to_string()
-        })
-        .collect();
+    let inputs = mlp.inputs.iter().map(|i| i.name().to_string()).collect();
     let layers = mlp
         .layers
         .iter()
@@ -1327,13 +1305,7 @@ fn shader_layers(bytes: &[u8]) -> PyResult<ShaderLayers> {
                 l.inputs,
                 bytemuck::cast_slice(&l.weight).to_vec(),
                 bytemuck::cast_slice(&l.bias).to_vec(),
-                match l.activation {
-                    vksplat::mlp::Activation::Relu => "relu",
-                    vksplat::mlp::Activation::Sigmoid => "sigmoid",
-                    vksplat::mlp::Activation::Tanh => "tanh",
-                    vksplat::mlp::Activation::None => "none",
-                }
-                .to_string(),
+                l.activation.name().to_string(),
             )
         })
         .collect();
