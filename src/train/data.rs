@@ -80,6 +80,33 @@ pub fn camera_centre(c: &Camera) -> glam::Vec3 {
     -(c.rotation.transpose() * c.translation)
 }
 
+/// The mean of `views`' camera centres and the original's `cameras_extent` (1.1 times the
+/// largest distance of a centre from it; at least 1e-6).
+pub fn cameras_centre_and_extent(views: &[View]) -> (glam::Vec3, f32) {
+    let centres: Vec<glam::Vec3> = views.iter().map(|v| camera_centre(&v.camera)).collect();
+    let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len().max(1) as f32;
+    let radius = centres
+        .iter()
+        .map(|c| c.distance(mean))
+        .fold(0.0f32, f32::max);
+    (mean, (radius * 1.1).max(1e-6))
+}
+
+/// A photo's R, G and B planes (a grey one's Y thrice) and its alpha (1 without one).
+fn rgba_planes(
+    planes: &crate::image_file::Planes,
+    path: &Path,
+) -> Result<[Vec<f32>; 4], DataError> {
+    let channel = |n: &str| planes.channel(n).map(|c| c.values.clone());
+    let (r, g, b) = match (channel("R"), channel("G"), channel("B"), channel("Y")) {
+        (Some(r), Some(g), Some(b), _) => (r, g, b),
+        (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
+        _ => return Err(data_error(path, "has no colour or grey channels")),
+    };
+    let a = channel("A").unwrap_or_else(|| vec![1.0; r.len()]);
+    Ok([r, g, b, a])
+}
+
 /// Reads the COLMAP data set at `dir`: the model (`dir/sparse/0`, `dir/sparse` or `dir`),
 /// the photos in `dir/images` (PNG or JPEG, the size the model says, scaled to
 /// `resolution`), and with `eval` holds out every 8th image.
@@ -129,18 +156,13 @@ pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dat
             "no training image is left after holding out the test images",
         ));
     }
-    let centres: Vec<glam::Vec3> = train.iter().map(|v| camera_centre(&v.camera)).collect();
-    let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
-    let radius = centres
-        .iter()
-        .map(|c| c.distance(mean))
-        .fold(0.0f32, f32::max);
+    let extent = cameras_centre_and_extent(&train).1;
     Ok(Dataset {
         source: dir.to_path_buf(),
         train,
         test,
         points,
-        extent: (radius * 1.1).max(1e-6),
+        extent,
         random_box: None,
     })
 }
@@ -158,22 +180,7 @@ fn load_view(images: &Path, cam: &Camera, resolution: Resolution) -> Result<View
             ),
         ));
     }
-    let channel = |names: &[&str]| {
-        names
-            .iter()
-            .find_map(|n| planes.channel(n))
-            .map(|c| c.values.clone())
-    };
-    let (r, g, b) = match (
-        channel(&["R"]),
-        channel(&["G"]),
-        channel(&["B"]),
-        channel(&["Y"]),
-    ) {
-        (Some(r), Some(g), Some(b), _) => (r, g, b),
-        (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
-        _ => return Err(data_error(&path, "has no colour or grey channels")),
-    };
+    let [r, g, b, _] = rgba_planes(&planes, &path)?;
     let full: Vec<[f32; 3]> = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
     Ok(scaled_view(cam.clone(), full, resolution))
 }
@@ -334,18 +341,13 @@ pub fn load_transforms(
     if train.is_empty() {
         return Err(data_error(&train_file, "lists no training frames"));
     }
-    let centres: Vec<glam::Vec3> = train.iter().map(|v| camera_centre(&v.camera)).collect();
-    let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
-    let radius = centres
-        .iter()
-        .map(|c| c.distance(mean))
-        .fold(0.0f32, f32::max);
+    let extent = cameras_centre_and_extent(&train).1;
     Ok(Dataset {
         source: dir.to_path_buf(),
         train,
         test,
         points: None,
-        extent: (radius * 1.1).max(1e-6),
+        extent,
         random_box: Some(([0.0; 3], 1.3)),
     })
 }
@@ -433,13 +435,7 @@ fn read_transforms(
         camera
             .validate()
             .map_err(|e| bad(format!("its camera is not valid: {e}")))?;
-        let channel = |n: &str| planes.channel(n).map(|c| c.values.clone());
-        let (r, g, b) = match (channel("R"), channel("G"), channel("B"), channel("Y")) {
-            (Some(r), Some(g), Some(b), _) => (r, g, b),
-            (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
-            _ => return Err(data_error(&path, "has no colour or grey channels")),
-        };
-        let a = channel("A").unwrap_or_else(|| vec![1.0; r.len()]);
+        let [r, g, b, a] = rgba_planes(&planes, &path)?;
         let full: Vec<[f32; 3]> = (0..r.len())
             .map(|p| {
                 let t = 1.0 - a[p];

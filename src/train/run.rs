@@ -265,13 +265,8 @@ pub fn train(
         }
         None => {
             let (centre, half) = data.random_box.unwrap_or_else(|| {
-                let centres: Vec<glam::Vec3> = data
-                    .train
-                    .iter()
-                    .map(|v| super::data::camera_centre(&v.camera))
-                    .collect();
-                let mean = centres.iter().copied().sum::<glam::Vec3>() / centres.len() as f32;
-                (mean.to_array(), data.extent)
+                let (mean, extent) = super::data::cameras_centre_and_extent(&data.train);
+                (mean.to_array(), extent)
             });
             note(format!(
                 "{} has no points: starting from {} random Gaussians in the cube of half side {half:.3} around ({:.3}, {:.3}, {:.3})",
@@ -431,15 +426,13 @@ pub fn train(
             model.add_stats(&grads, &radii, cam.width, cam.height);
             if it > s.densify_from_iter && it % s.densification_interval == 0 {
                 let screen = (it > s.opacity_reset_interval).then_some(20.0);
-                let (cloned, split, pruned) =
-                    model.densify_and_prune(s, data.extent, screen, &mut rng);
+                model.densify_and_prune(s, data.extent, screen, &mut rng);
                 densified = true;
                 if model.is_empty() {
                     return Err(TrainError::Other(format!(
                         "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
                     )));
                 }
-                let _ = (cloned, split, pruned);
             }
             if it % s.opacity_reset_interval == 0 {
                 model.reset_opacity();

@@ -54,6 +54,16 @@ pub fn make_dataset_with(
     vksplat::train::data::write_rendered_dataset(dir, &scene, &cams, shader, 2, false).unwrap();
 }
 
+/// The held-out PSNR that `train`'s summary line states.
+fn summary_psnr(stdout: &str) -> f64 {
+    stdout
+        .split("PSNR ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .expect("a PSNR in the summary")
+}
+
 #[test]
 fn a_colmap_text_model_reads_back_as_written() {
     let dir = tempfile::tempdir().unwrap();
@@ -107,12 +117,7 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
     eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
     eprintln!("train: {:.1} s", t.elapsed().as_secs_f64());
     assert!(out.status.success());
-    let psnr: f64 = text
-        .split("PSNR ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|s| s.parse().ok())
-        .expect("a PSNR in the summary");
+    let psnr = summary_psnr(&text);
     assert!(psnr >= 24.0, "held-out PSNR {psnr} dB");
     for f in [
         "cameras.json",
@@ -209,12 +214,7 @@ fn train_learns_feature_splats_and_their_shader() {
     let text = String::from_utf8_lossy(&out.stdout);
     eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success());
-    let psnr: f64 = text
-        .split("PSNR ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|s| s.parse().ok())
-        .expect("a PSNR in the summary");
+    let psnr = summary_psnr(&text);
     assert!(psnr >= 24.0, "held-out PSNR {psnr} dB");
     let dir600 = model.join("point_cloud/iteration_600");
     let shader = dir600.join("shader.safetensors");
@@ -509,11 +509,6 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
     let text = String::from_utf8_lossy(&out.stdout);
     eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success());
-    let psnr: f64 = text
-        .split("PSNR ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|s| s.parse().ok())
-        .expect("a PSNR in the summary");
+    let psnr = summary_psnr(&text);
     assert!(psnr >= 20.0, "held-out PSNR {psnr} dB");
 }
