@@ -1,7 +1,10 @@
 //! Training speed and memory: `vksplat train`'s loop ([`vksplat::train::run::train`]) on a
 //! COLMAP data set made from a shared scene (rendered from orbit cameras by the CPU
 //! reference; every 4th Gaussian centre as points3D), reporting iterations per second,
-//! the Gaussians at the end and the device bytes per Gaussian at the peak.
+//! the Gaussians at the end and the device bytes per Gaussian at the peak: first with the
+//! state on the device (the default), then with the host optimiser (each iteration uploads
+//! the Gaussians and reads their gradients back), so the two are measured side by side.
+//! `VKSPLAT_TRAIN_BENCH=device` (or `host`) runs one of them.
 //!
 //! `cargo bench --bench train` runs PLAYBOT LOD3 (31k Gaussians) at 320x240 for 500
 //! iterations (densification from 100 every 100); under `cargo test` (no `--bench`
@@ -42,7 +45,7 @@ fn main() {
     let device = ctx.info().name.clone();
     let mut loss = GpuLoss::new(&ctx).expect("loss pipelines");
     let mut rast = DiffRasterizer::new(ctx).expect("rasterizer");
-    let opts = run::TrainOptions {
+    let mut opts = run::TrainOptions {
         settings: Settings {
             iterations,
             densify_from_iter: 100,
@@ -60,32 +63,41 @@ fn main() {
         checkpoint_iterations: Vec::new(),
         resume: None,
         cancel: None,
+        host_optimizer: false,
     };
-    let report = run::train(
-        &dataset,
-        &dir.path().join("model"),
-        &opts,
-        &mut rast,
-        &mut loss,
-        &mut |_| {},
-        &mut |_| {},
-    )
-    .expect("training");
-    let peak = report.device_bytes_peak;
-    let last = report
-        .evaluations
-        .last()
-        .expect("the last iteration's evaluation");
-    println!(
-        "train: {file} ({} Gaussians as {} points), {} views of {w}x{h}, {device}: {iterations} iterations at {:.1} it/s; {} Gaussians at the end; peak device memory {:.1} MB ({:.0} bytes per Gaussian at the end, loss buffers {:.1} MB); held-out PSNR {:.2} dB",
-        scene.len(),
-        dataset.points.as_ref().map_or(0, |p| p.len()),
-        dataset.train.len(),
-        report.iterations_per_second,
-        report.gaussians,
-        peak as f64 / 1e6,
-        peak as f64 / report.gaussians.max(1) as f64,
-        loss.device_bytes() as f64 / 1e6,
-        last.psnr
-    );
+    let which = std::env::var("VKSPLAT_TRAIN_BENCH").unwrap_or_default();
+    for host in [false, true] {
+        if (which == "device" && host) || (which == "host" && !host) {
+            continue;
+        }
+        opts.host_optimizer = host;
+        let report = run::train(
+            &dataset,
+            &dir.path().join(if host { "model-host" } else { "model" }),
+            &opts,
+            &mut rast,
+            &mut loss,
+            &mut |_| {},
+            &mut |_| {},
+        )
+        .expect("training");
+        let peak = report.device_bytes_peak;
+        let last = report
+            .evaluations
+            .last()
+            .expect("the last iteration's evaluation");
+        println!(
+            "train ({}): {file} ({} Gaussians as {} points), {} views of {w}x{h}, {device}: {iterations} iterations at {:.1} it/s; {} Gaussians at the end; peak device memory {:.1} MB ({:.0} bytes per Gaussian at the end, loss buffers {:.1} MB); held-out PSNR {:.2} dB",
+            if report.on_device { "state on the device" } else { "host optimiser" },
+            scene.len(),
+            dataset.points.as_ref().map_or(0, |p| p.len()),
+            dataset.train.len(),
+            report.iterations_per_second,
+            report.gaussians,
+            peak as f64 / 1e6,
+            peak as f64 / report.gaussians.max(1) as f64,
+            loss.device_bytes() as f64 / 1e6,
+            last.psnr
+        );
+    }
 }

@@ -1,5 +1,5 @@
 #version 460
-// Training loss: sums of vec2s in a fixed order (the same bits run after run). Workgroup w
+// Training loss: sums of vec4s in a fixed order (the same bits run after run). Workgroup w
 // sums values [w * 4096, (w + 1) * 4096): invocation t its 16 values t, t + 256, ..., then
 // a tree in shared memory; the host runs it again on the workgroups' sums down to one.
 
@@ -7,15 +7,15 @@ layout(local_size_x = 256) in;
 
 layout(push_constant) uniform Params { uvec4 counts; } p;  // values
 
-layout(std430, binding = LOSS_REDUCE_VALUES) readonly buffer ValueBuf { vec2 values[]; };
-layout(std430, binding = LOSS_REDUCE_SUMS) writeonly buffer SumBuf { vec2 sums[]; };
+layout(std430, binding = LOSS_REDUCE_VALUES) readonly buffer ValueBuf { vec4 values[]; };
+layout(std430, binding = LOSS_REDUCE_SUMS) writeonly buffer SumBuf { vec4 sums[]; };
 
-shared vec2 partial[256];
+shared vec4 partial[256];
 
 void main() {
     uint t = gl_LocalInvocationID.x;
     uint base = gl_WorkGroupID.x * 4096u;
-    precise vec2 acc = vec2(0.0);
+    precise vec4 acc = vec4(0.0);
     for (uint k = 0u; k < 16u; k++) {
         uint j = base + k * 256u + t;
         if (j < p.counts.x) acc += values[j];

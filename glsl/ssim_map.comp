@@ -1,7 +1,7 @@
 #version 460
 // Training loss: per pixel and channel the SSIM value from the local moments and its
 // derivatives with respect to them (metrics::ssim_with_gradient's rules), and the pixel's
-// sums over R, G, B of |x - y| and of SSIM, which loss_reduce.comp adds up.
+// sums over R, G, B of |x - y|, of SSIM and of (x - y)^2, which loss_reduce.comp adds up.
 #extension GL_GOOGLE_include_directive : require
 #include "loss_common.glsl"
 
@@ -14,7 +14,7 @@ layout(std430, binding = SSIM_MAP_TARGET) readonly buffer TargetBuf { vec4 targe
 // dS/dE[x], dS/dE[x^2], dS/dE[xy] per pixel (vec4s, rgb).
 layout(std430, binding = SSIM_MAP_MAPS) writeonly buffer MapBuf { vec4 maps[]; };
 // Per pixel: sum of |x - y| and sum of SSIM over the channels.
-layout(std430, binding = SSIM_MAP_SUMS) writeonly buffer SumBuf { vec2 sums[]; };
+layout(std430, binding = SSIM_MAP_SUMS) writeonly buffer SumBuf { vec4 sums[]; };
 
 const float C1 = 0.01 * 0.01;
 const float C2 = 0.03 * 0.03;
@@ -36,6 +36,8 @@ void main() {
     maps[3u * i + 0u] = vec4(2.0 * my * a2 / d - 2.0 * mx * s / b1 + 2.0 * mx * s / b2 - 2.0 * my * a1 / d, 0.0);
     maps[3u * i + 1u] = vec4(-s / b2, 0.0);
     maps[3u * i + 2u] = vec4(2.0 * a1 / d, 0.0);
-    vec3 l1 = abs(image[i].rgb - target[i].rgb);
-    sums[i] = vec2(l1.r + l1.g + l1.b, s.r + s.g + s.b);
+    vec3 diff = image[i].rgb - target[i].rgb;
+    vec3 l1 = abs(diff);
+    precise vec3 sq = diff * diff;
+    sums[i] = vec4(l1.r + l1.g + l1.b, s.r + s.g + s.b, sq.r + sq.g + sq.b, 0.0);
 }

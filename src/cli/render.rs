@@ -30,7 +30,8 @@ const DEFAULT_SEQUENCE_OUTPUT: &str = "render/frame_{:05}.png";
   vksplat render scene.spz --cameras path.json --frames 100..200 -o out/ --format exr
   vksplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume
   vksplat render scene.ply --orbit 1200 -o orbit/ --shard slurm   # a task of sbatch --array=0-7
-  vksplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?")]
+  vksplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?
+  vksplat render scene.ply --orbit 48 --width 320 --height 240 --export-colmap data/   # a data set to train on")]
 pub(crate) struct RenderArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArg,
@@ -108,6 +109,13 @@ pub(crate) struct RenderArgs {
     /// cameras.json, which --cameras reads back.
     #[arg(long, value_name = "FILE.json")]
     pub(crate) export_cameras: Option<PathBuf>,
+    /// Instead of -o: write the selected frames as a COLMAP data set in DIR, for training
+    /// (or testing a trainer) on a known scene: DIR/images/NAME.png as rendered (colour
+    /// over --background), DIR/sparse/0/{cameras,images,points3D}.txt with the cameras
+    /// (PINHOLE) and every Nth Gaussian centre and its DC colour as the points (N chosen
+    /// so that at most 100,000 are written; said).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["output", "verify", "shard", "devices", "mode", "skip_existing", "export_cameras"])]
+    pub(crate) export_colmap: Option<PathBuf>,
     /// Depth range NEAR,FAR of colour-mapped depth PNGs (default: each frame's 1st-99th
     /// percentile; fix it for a steady video).
     #[arg(long, value_name = "NEAR,FAR", value_parser = values::depth_range, allow_hyphen_values = true)]
@@ -369,6 +377,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     }
     if let Some(frames) = &args.frames {
         frames.check(path.len).map_err(anyhow::Error::msg)?;
+    }
+    if let Some(dir) = &args.export_colmap {
+        return export_colmap(args, dir, &scene, &name, &path.cameras, shader.as_ref());
     }
     let selected = path
         .cameras
@@ -648,6 +659,105 @@ fn render_cpu(job: &Job) -> Result<(Summary, String)> {
         note!("tile pairs {pairs} (last frame)");
     }
     Ok((summary?, "on the CPU".to_string()))
+}
+
+/// Points3D written by `--export-colmap` at most.
+const EXPORT_COLMAP_POINTS: usize = 100_000;
+
+/// `--export-colmap DIR`: the selected cameras rendered (on the device, or the CPU
+/// reference with --cpu or --shader) into a COLMAP data set.
+fn export_colmap(
+    args: &RenderArgs,
+    dir: &Path,
+    scene: &vksplat::scene::Scene,
+    name: &str,
+    cameras: &[(usize, Camera)],
+    shader: Option<&vksplat::mlp::Mlp>,
+) -> Result<()> {
+    let cams: Vec<Camera> = cameras
+        .iter()
+        .filter(|(k, _)| args.frames.as_ref().map_or(true, |f| f.contains(*k)))
+        .map(|(_, c)| c.clone())
+        .collect();
+    if cams.is_empty() {
+        bail!("--export-colmap: no cameras selected");
+    }
+    let stride = scene.len().div_ceil(EXPORT_COLMAP_POINTS).max(1);
+    let opts = vksplat::cpu::RenderOptions {
+        background: args.background,
+        scale_modifier: args.scale_modifier,
+        kernel: args.kernel.resolve(scene, name),
+        ..Default::default()
+    };
+    let t = std::time::Instant::now();
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(cams.len() as u64)
+    };
+    let act = scene.activated();
+    let how;
+    if args.cpu || shader.is_some() {
+        how = "with the CPU reference";
+        if args.cpu {
+            vksplat::train::data::write_dataset(
+                dir,
+                scene,
+                &cams,
+                stride,
+                args.overwrite,
+                &mut |cam| {
+                    bar.inc(1);
+                    Ok(vksplat::cpu::render(&act, cam, &opts))
+                },
+            )?;
+        } else {
+            bar.set_length(0);
+            vksplat::train::data::write_rendered_dataset(
+                dir,
+                scene,
+                &cams,
+                shader,
+                stride,
+                args.overwrite,
+            )?;
+        }
+    } else {
+        how = "on the device";
+        let mut renderer = GpuRenderer::new(args.gpu.context()?)?;
+        let gpu_scene = renderer.upload(&act)?;
+        vksplat::train::data::write_dataset(
+            dir,
+            scene,
+            &cams,
+            stride,
+            args.overwrite,
+            &mut |cam| {
+                bar.inc(1);
+                renderer
+                    .render(&gpu_scene, cam, &opts)
+                    .map_err(|e| e.to_string())
+            },
+        )?;
+        drop(gpu_scene);
+        fail_on_validation_messages(renderer.ctx())?;
+    }
+    bar.finish_and_clear();
+    outln!(
+        "wrote a COLMAP data set of {name}: {} rendered {how} at {}x{} and {} ({}) in {:.2} s -> {}",
+        plural(cams.len(), "image"),
+        cams[0].width,
+        cams[0].height,
+        plural(scene.len().div_ceil(stride), "point"),
+        if stride == 1 {
+            "every Gaussian centre".to_string()
+        } else {
+            format!("one Gaussian centre in {stride}")
+        },
+        t.elapsed().as_secs_f64(),
+        dir.display()
+    );
+    Ok(())
 }
 
 /// `--verify`: lists the frames whose files are missing, unreadable or of the wrong size

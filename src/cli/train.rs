@@ -285,6 +285,7 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             None => None,
         },
         cancel: Some(super::render::interrupt_flag()),
+        host_optimizer: false,
     };
     let ctx = args.gpu.context()?;
     let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;
@@ -311,8 +312,12 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         &mut |p| {
             if p.iteration % 10 == 0 || p.iteration == p.iterations {
                 bar.set_message(format!(
-                    "loss {:.4}  L1 {:.4}  SSIM {:.3}  {} Gaussians",
-                    p.loss.total, p.loss.l1, p.loss.ssim, p.gaussians
+                    "loss {:.4}  PSNR {:.2} dB  L1 {:.4}  SSIM {:.3}  {} Gaussians",
+                    p.loss.total,
+                    p.loss.psnr(),
+                    p.loss.l1,
+                    p.loss.ssim,
+                    p.gaussians
                 ));
                 bar.set_position(u64::from(p.iteration));
             }

@@ -119,6 +119,7 @@ shader_bindings! {
     ssim_map { MOMENTS, IMAGE, TARGET, MAPS, SUMS }
     ssim_grad { FILTERED, IMAGE, TARGET, GRAD }
     loss_reduce { VALUES, SUMS }
+    train_step { STATE, M, V, GRADS, SH_GRADS, SPLATS, STATS, GAUSSIANS, SH }
     field { PARAMS, GAUSSIANS, FEATURES, OUTPUT }
 }
 
@@ -258,6 +259,7 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "ssim_map",
         "ssim_grad",
         "loss_reduce",
+        "train_step",
         "count64_test",
     ] {
         out.push(v(shader, &[]));

@@ -140,6 +140,48 @@ impl BackwardState {
 /// channel count.
 type FeatureJob<'a> = (&'a [[f32; 4]], Option<&'a [[f32; 4]]>, usize);
 
+/// The Gaussians' gradients read back, and the neural shader's when it shaded the frame.
+type HostGrads = (SplatGrads<f32>, Option<Vec<f32>>);
+
+/// Where a backward pass's pixel gradients come from.
+enum PixelInput<'a, 'f> {
+    /// Host values, uploaded: dL/d(colour, alpha) as a vec4 per pixel and dL/d(the
+    /// depth-normalised sums) per pixel.
+    Host {
+        color: &'a [[f32; 4]],
+        depth: &'a [f32],
+    },
+    /// Recorded on the device, into the colour-gradient buffer given, before the pass
+    /// (no depth gradient).
+    Device(PixelRecorder<'f>),
+}
+
+/// Records a frame's pixel gradients (a vec4 per pixel: dL/d rgb, dL/d alpha) into the
+/// buffer given, in the backward pass's command buffer; the frame's colour image (RGBA32F,
+/// a copy source) is given to read from.
+pub type PixelRecorder<'f> = &'f mut dyn FnMut(
+    &GpuContext,
+    ash::vk::CommandBuffer,
+    &crate::gpu::GpuImage,
+    crate::gpu::BufferSlice,
+) -> GpuResult<()>;
+
+/// Records work after a backward pass that reads its results on the device.
+pub type GradsRecorder<'f> =
+    &'f mut dyn FnMut(&GpuContext, ash::vk::CommandBuffer, DeviceGrads) -> GpuResult<()>;
+
+/// A backward pass's results on the device ([`GpuRenderer::backward_on_device`]).
+#[derive(Clone, Copy)]
+pub struct DeviceGrads<'a> {
+    /// Per Gaussian four vec4: (dL/d centre, dL/d opacity), dL/d normalised quaternion,
+    /// (dL/d scales, 0), (dL/d 2D mean in pixels, |dL/d 2D mean| summed per pixel).
+    pub grads: crate::gpu::BufferSlice<'a>,
+    /// dL/d SH coefficient, in the SH texels' layout (floats).
+    pub sh_grads: crate::gpu::BufferSlice<'a>,
+    /// The forward pass's projected Gaussians (`Splat`: radius in `color_radius.w`).
+    pub splats: crate::gpu::BufferSlice<'a>,
+}
+
 /// The neural shader of a shaded frame, its camera and background.
 #[derive(Clone, Copy)]
 struct ShadeJob<'a> {
@@ -393,14 +435,54 @@ impl GpuRenderer {
         let result = self.run_backward(
             &mut state,
             scene,
-            frame,
-            &grad_color,
-            &grad_depth,
+            (frame.width, frame.height),
+            &frame.alpha,
+            PixelInput::Host {
+                color: &grad_color,
+                depth: &grad_depth,
+            },
             feature_job,
             shade,
+            None,
         );
         self.backward = Some(state);
-        result
+        result.map(|r| r.expect("a host backward pass reads back"))
+    }
+
+    /// The backward pass of the last frame ([`Self::render_on_device`] or any other
+    /// render with the forward state saved) entirely on the device, in one submission:
+    /// `pixels` records the pixels' gradients (dL/d rgb and alpha, a vec4 per pixel,
+    /// `size` the frame's) into the buffer it is given; then the pass's stages; then
+    /// `after` records what reads the results ([`DeviceGrads`]). SH colour only (no
+    /// feature channels, no depth gradient). Nothing is read back.
+    pub fn backward_on_device(
+        &mut self,
+        scene: &GpuScene,
+        size: (u32, u32),
+        pixels: PixelRecorder,
+        after: GradsRecorder,
+    ) -> GpuResult<()> {
+        if scene.compact {
+            return Err(GpuError::InvalidArgument(
+                "the backward pass needs a full-precision upload, not a compact one".into(),
+            ));
+        }
+        let mut state = match self.backward.take() {
+            Some(s) => s,
+            None => BackwardState::new(&self.ctx)?,
+        };
+        let result = self.run_backward(
+            &mut state,
+            scene,
+            size,
+            &[],
+            PixelInput::Device(pixels),
+            None,
+            None,
+            Some(after),
+        );
+        self.backward = Some(state);
+        result.map(|_| ())
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -408,12 +490,13 @@ impl GpuRenderer {
         &self,
         st: &mut BackwardState,
         scene: &GpuScene,
-        frame: &Frame,
-        grad_color: &[[f32; 4]],
-        grad_depth: &[f32],
+        size: (u32, u32),
+        alpha: &[f32],
+        mut input: PixelInput,
         features: Option<FeatureJob>,
         shade: Option<ShadeJob>,
-    ) -> GpuResult<(SplatGrads<f32>, Option<Vec<f32>>)> {
+        after: Option<GradsRecorder>,
+    ) -> GpuResult<Option<HostGrads>> {
         let ctx = &self.ctx;
         let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
         let vecs = 3 + groups;
@@ -430,10 +513,10 @@ impl GpuRenderer {
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
-        if (fb.width, fb.height) != (frame.width, frame.height) {
+        if (fb.width, fb.height) != size {
             return Err(GpuError::InvalidArgument(format!(
                 "the frame given is {}x{}, the last frame rendered {}x{}",
-                frame.width, frame.height, fb.width, fb.height
+                size.0, size.1, fb.width, fb.height
             )));
         }
         let kernel = self.last_kernel;
@@ -468,20 +551,25 @@ impl GpuRenderer {
             st.preprocess[p] = Some(PreprocessBwd::new(ctx, float_sums)?);
         }
         let sh_floats = u64::from(super::sh_texel_stride(scene.sh_degree)) * 4;
-        ensure(
+        let pixels = u64::from(size.0) * u64::from(size.1);
+        let gc = ensure(
             ctx,
             &mut st.grad_color,
             "pixel colour gradients",
-            pixels_bytes(grad_color.len(), 16),
-        )?
-        .upload(ctx, grad_color)?;
-        ensure(
+            pixels_bytes(pixels as usize, 16),
+        )?;
+        if let PixelInput::Host { color, .. } = &input {
+            gc.upload(ctx, color)?;
+        }
+        let gd = ensure(
             ctx,
             &mut st.grad_depth,
             "pixel depth gradients",
-            pixels_bytes(grad_depth.len(), 4),
-        )?
-        .upload(ctx, grad_depth)?;
+            pixels_bytes(pixels as usize, 4),
+        )?;
+        if let PixelInput::Host { depth, .. } = &input {
+            gd.upload(ctx, depth)?;
+        }
         ensure(ctx, &mut st.pair_grads, "pair gradients", pairs * f * 4)?;
         ensure(ctx, &mut st.maxima, "gradient maxima", f * 4)?;
         ensure(ctx, &mut st.acc, "gradient sums", n * f * 8)?;
@@ -502,19 +590,18 @@ impl GpuRenderer {
             ctx,
             &mut st.grad_features,
             "pixel feature gradients",
-            grad_color.len() as u64 * g16,
+            pixels * g16,
         )?;
         if let Some((_, Some(pixel_grads), _)) = features {
             grad_feature_buf.upload(ctx, pixel_grads)?;
         }
         // The shader's backward pass: the frame's alpha in, scratch and partial sums.
-        let pixels = grad_color.len() as u64;
         let feature_planes = match shade {
             Some(job) => {
                 if !st.shade.as_ref().is_some_and(|s| s.fits(job.shader)) {
                     st.shade = Some(ShadeBwd::for_shader(ctx, job.shader)?);
                 }
-                ensure(ctx, &mut st.alpha, "pixel alpha", pixels * 4)?.upload(ctx, &frame.alpha)?;
+                ensure(ctx, &mut st.alpha, "pixel alpha", pixels * 4)?.upload(ctx, alpha)?;
                 ensure(
                     ctx,
                     &mut st.scratch,
@@ -589,10 +676,15 @@ impl GpuRenderer {
         ctx.submit_and_wait("backward", |cmd| {
             // The forward's writes (an earlier submission) before this pass reads them.
             barrier(ctx, cmd, Access::Any, Access::Any);
+            if let PixelInput::Device(record) = &mut input {
+                grad_depth_b.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
+                record(ctx, cmd, fs.color, grad_color_b)?;
+            }
             timer.reset(ctx, cmd);
             maxima.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
             acc.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
             barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
             if let (Some(job), Some(planes)) = (shade, feature_planes) {
                 let pipeline = shade_bwd.expect("built above");
                 fn need(b: Option<&GpuBuffer>) -> crate::gpu::BufferSlice<'_> {
@@ -667,11 +759,26 @@ impl GpuRenderer {
                     },
                 )
             })?;
+            if let Some(after) = after {
+                barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+                after(
+                    ctx,
+                    cmd,
+                    DeviceGrads {
+                        grads,
+                        sh_grads,
+                        splats: fs.splats,
+                    },
+                )?;
+            }
             barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
             Ok(())
         })?;
         st.timings = st.timer.read(ctx)?;
         st.span_ms = st.timer.span_ms(ctx)?;
+        if matches!(input, PixelInput::Device(_)) {
+            return Ok(None);
+        }
         // Read back and lay out as the uploaded scene.
         let n = n as usize;
         let raw: Vec<[f32; 16]> = grads.buffer.read(ctx, n)?;
@@ -705,7 +812,7 @@ impl GpuRenderer {
                 out.colors[i * k..(i + 1) * k].copy_from_slice(src);
             }
         }
-        Ok((out, mlp))
+        Ok(Some((out, mlp)))
     }
 }
 

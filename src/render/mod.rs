@@ -64,6 +64,12 @@ pub use timings::{FrameStats, Stage, StageTimings};
 use upload::FeatureJob;
 pub use upload::{sh_texel_stride, GpuFeatures, GpuScene};
 
+/// Refuses a storage binding of `bytes` that the device cannot bind (maxStorageBufferRange),
+/// naming `what` it is for.
+pub fn check_storage_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
+    check_binding(ctx, what, bytes)
+}
+
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::gpu::{GpuContext, GpuError, GpuResult};
@@ -78,6 +84,9 @@ pub enum Readback {
     /// Colour packed to 8-bit RGBA on the device (alpha 255), quantised as
     /// [`crate::output::to_u8`]: 4 bytes per pixel. For display.
     Rgba8,
+    /// Nothing but the frame's counters: the colour and depth images stay on the device,
+    /// ready to be copied from ([`GpuRenderer::render_on_device`]; training reads them there).
+    Counters,
 }
 
 /// A frame read back as 8-bit RGBA.
@@ -349,6 +358,18 @@ impl GpuRenderer {
         self.finish(ticket)
     }
 
+    /// Renders one frame and leaves it on the device: only its counters are read back.
+    /// The colour and depth images ([`Self::forward_state`]) are left as copy sources.
+    pub fn render_on_device(
+        &mut self,
+        scene: &GpuScene,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<()> {
+        let ticket = self.submit(scene, cam, opts, Readback::Counters)?;
+        self.complete(&ticket)
+    }
+
     /// Renders one frame and reads back only its colour, packed to 8-bit RGBA on the
     /// device (equal to [`crate::output::to_u8`] of [`Self::render`]'s colour).
     pub fn render_rgba8(
@@ -413,9 +434,10 @@ impl GpuRenderer {
         if ticket.readback != Readback::Float {
             // Still wait, so the set is free again.
             self.complete(&ticket)?;
-            return Err(GpuError::InvalidArgument(
-                "the frame was submitted with Readback::Rgba8; finish it with finish_rgba8".into(),
-            ));
+            return Err(GpuError::InvalidArgument(format!(
+                "the frame was submitted with Readback::{:?}; finish it with finish_rgba8 or discard",
+                ticket.readback
+            )));
         }
         self.complete(&ticket)?;
         let mut frame = self.read_frame(ticket.set, &ticket.cam)?;
@@ -431,9 +453,10 @@ impl GpuRenderer {
     pub fn finish_rgba8(&mut self, ticket: Ticket) -> GpuResult<Rgba8Frame> {
         self.complete(&ticket)?;
         if ticket.readback != Readback::Rgba8 {
-            return Err(GpuError::InvalidArgument(
-                "the frame was submitted with Readback::Float; finish it with finish".into(),
-            ));
+            return Err(GpuError::InvalidArgument(format!(
+                "the frame was submitted with Readback::{:?}; finish it with finish or discard",
+                ticket.readback
+            )));
         }
         self.read_rgba8(ticket.set, &ticket.cam)
     }

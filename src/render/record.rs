@@ -539,6 +539,12 @@ impl FrameRecorder<'_> {
                         device.cmd_copy_buffer(cmd, packed.handle(), f.readback.handle(), &region)
                     };
                 }
+                (Readback::Counters, _, _) => {
+                    // The images stay, as copy sources for the consumer's own passes.
+                    f.color.transition_for_copy(ctx, cmd);
+                    f.depth.transition_for_copy(ctx, cmd);
+                    barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+                }
                 (Readback::Rgba8, _, _) => {
                     return Err(GpuError::Internal(
                         "an RGBA8 frame without its packed buffer or pipeline".into(),

@@ -52,6 +52,12 @@ impl GpuScene {
     pub fn device_bytes(&self) -> u64 {
         self.gaussians.size() + self.sh.size()
     }
+    /// The records (`GpuGaussian`, 48 bytes each) and the SH coefficients (RGBA32F texels,
+    /// [`sh_texel_stride`] per Gaussian) as storage buffers, for a device pass that writes
+    /// them ([`GpuRenderer::scene_for_device_writes`]).
+    pub fn device_buffers(&self) -> (crate::gpu::BufferSlice<'_>, crate::gpu::BufferSlice<'_>) {
+        (self.gaussians.whole(), self.sh.whole())
+    }
 }
 
 /// A scene's feature channels uploaded to the device: one buffer per group of four
@@ -192,6 +198,60 @@ impl GpuRenderer {
             sh_degree: scene.sh_degree,
             sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
             compact: self.compact,
+        })
+    }
+
+    /// A scene of `count` Gaussians whose records and SH texels (degree `sh_degree`) a
+    /// device pass writes ([`GpuScene::device_buffers`]) instead of an upload: training
+    /// keeps its parameters on the device and writes the activated values there.
+    pub fn scene_for_device_writes(&self, count: u32, sh_degree: u32) -> GpuResult<GpuScene> {
+        if self.compact {
+            return Err(GpuError::InvalidArgument(
+                "a scene written on the device is full precision; turn the compact upload off"
+                    .into(),
+            ));
+        }
+        let record_bytes = (u64::from(count) * std::mem::size_of::<GpuGaussian>() as u64).max(16);
+        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
+        let texels = u64::from(count) * u64::from(sh_texel_stride(sh_degree));
+        let max_texels = u64::from(self.ctx.info().max_texel_buffer_elements);
+        if texels > max_texels {
+            return Err(GpuError::DeviceLimit {
+                limit: "maxTexelBufferElements",
+                needed: texels,
+                max: max_texels,
+                message: format!(
+                    "the SH coefficients of {count} Gaussians need {texels} texels in one texel buffer, but this device addresses at most {max_texels}; use fewer Gaussians or a lower --sh-degree"
+                ),
+            });
+        }
+        let sh_bytes = (texels * 16).max(16);
+        check_binding(&self.ctx, "sh coefficients", sh_bytes)?;
+        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
+        let sh_texels =
+            BufferView::new(&self.ctx, &sh, vk::Format::R32G32B32A32_SFLOAT, 0, sh_bytes)?;
+        let gaussian_texels = if self.pipelines.texel_io() {
+            let bytes = gaussians.size() / 16 * 16;
+            Some(BufferView::new(
+                &self.ctx,
+                &gaussians,
+                vk::Format::R32G32B32A32_UINT,
+                0,
+                bytes,
+            )?)
+        } else {
+            None
+        };
+        Ok(GpuScene {
+            sh_texels,
+            gaussian_texels,
+            gaussians,
+            sh,
+            count,
+            uploaded: count,
+            sh_degree,
+            sh_coeffs: (sh_degree + 1) * (sh_degree + 1),
+            compact: false,
         })
     }
 

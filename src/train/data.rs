@@ -239,35 +239,69 @@ pub fn write_rendered_dataset(
     point_stride: usize,
     overwrite: bool,
 ) -> Result<(), DataError> {
-    let images = dir.join("images");
-    let sparse = dir.join("sparse").join("0");
-    for d in [&images, &sparse] {
-        std::fs::create_dir_all(d).map_err(|e| data_error(d, format!("cannot create: {e}")))?;
+    if let Some(mlp) = shader {
+        mlp.check_channels(scene.feature_count)
+            .map_err(|m| data_error(dir, m))?;
     }
     let act = scene.activated();
-    let mut named = Vec::with_capacity(cameras.len());
-    for cam in cameras {
-        let mut cam = cam.clone();
-        if !cam.name.to_ascii_lowercase().ends_with(".png") {
-            cam.name = format!("{}.png", cam.name);
-        }
-        let mut frame = crate::cpu::render_features(&act, &cam, &Default::default());
+    write_dataset(dir, scene, cameras, point_stride, overwrite, &mut |cam| {
+        let mut frame = crate::cpu::render_features(&act, cam, &Default::default());
         if let Some(mlp) = shader {
-            mlp.check_channels(scene.feature_count)
-                .map_err(|m| data_error(dir, m))?;
             frame.color = crate::mlp::shade(
                 mlp,
-                &cam,
+                cam,
                 &frame.features,
                 scene.feature_count,
                 &frame.alpha,
                 [0.0; 3],
             );
         }
+        Ok(frame)
+    })
+}
+
+/// [`write_rendered_dataset`] with the frames rendered by `render` (e.g. on the device;
+/// their colour is written as 8-bit PNG). `render` sees each camera with its final name.
+pub fn write_dataset(
+    dir: &Path,
+    scene: &crate::scene::Scene,
+    cameras: &[Camera],
+    point_stride: usize,
+    overwrite: bool,
+    render: &mut dyn FnMut(&Camera) -> Result<crate::frame::Frame, String>,
+) -> Result<(), DataError> {
+    let images = dir.join("images");
+    let sparse = dir.join("sparse").join("0");
+    let mut named: Vec<Camera> = Vec::with_capacity(cameras.len());
+    let mut seen = std::collections::HashSet::new();
+    for cam in cameras {
+        let mut cam = cam.clone();
+        if !cam.name.to_ascii_lowercase().ends_with(".png") {
+            cam.name = format!("{}.png", cam.name);
+        }
+        if !seen.insert(cam.name.clone()) {
+            return Err(data_error(
+                dir,
+                format!(
+                    "two cameras are named {}; a COLMAP data set names each image once",
+                    cam.name
+                ),
+            ));
+        }
+        let path = images.join(&cam.name);
+        if path.exists() && !overwrite {
+            return Err(data_error(&path, "exists (give --overwrite to replace it)"));
+        }
+        named.push(cam);
+    }
+    for d in [&images, &sparse] {
+        std::fs::create_dir_all(d).map_err(|e| data_error(d, format!("cannot create: {e}")))?;
+    }
+    for cam in &named {
+        let frame = render(cam).map_err(|m| data_error(&images.join(&cam.name), m))?;
         let path = images.join(&cam.name);
         crate::output::write_frame(&frame, &path, crate::output::ImageFormat::Png8, overwrite)
             .map_err(|e| data_error(&path, e.to_string()))?;
-        named.push(cam);
     }
     let stride = scene.sh_stride();
     let points: Vec<Point3D> = (0..scene.len())

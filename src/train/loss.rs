@@ -35,15 +35,23 @@ pub struct LossValue {
     pub l1: f64,
     /// Mean SSIM.
     pub ssim: f64,
+    /// Mean squared error (of the render as it is, not clamped).
+    pub mse: f64,
 }
 
 impl LossValue {
-    fn of(l1: f64, ssim: f64, lambda: f64) -> Self {
+    fn of(l1: f64, ssim: f64, mse: f64, lambda: f64) -> Self {
         LossValue {
             total: (1.0 - lambda) * l1 + lambda * (1.0 - ssim),
             l1,
             ssim,
+            mse,
         }
+    }
+
+    /// PSNR in dB of [`Self::mse`] (peak 1).
+    pub fn psnr(&self) -> f64 {
+        -10.0 * self.mse.max(1e-30).log10()
     }
 }
 
@@ -65,6 +73,12 @@ pub fn loss_reference(
         .map(|(a, b)| (a - b).abs())
         .sum::<f64>()
         / n;
+    let mse = image
+        .iter()
+        .zip(target)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        / n;
     let grad = image
         .iter()
         .zip(target)
@@ -81,7 +95,7 @@ pub fn loss_reference(
             (1.0 - lambda) * sign / n - lambda * gs
         })
         .collect();
-    (LossValue::of(l1, ssim, lambda), grad)
+    (LossValue::of(l1, ssim, mse, lambda), grad)
 }
 
 /// Values a `loss_reduce` workgroup sums.
@@ -125,6 +139,9 @@ pub struct GpuLoss {
     reduce: ComputePipeline,
     work: Option<(u64, [GpuBuffer; 5])>,
     io: Option<(u64, [GpuBuffer; 3])>,
+    /// The work buffer the last [`Self::record_image`] left its sums in, and its loss's
+    /// pixel count and lambda.
+    last: Option<(ash::vk::Buffer, u64, f32)>,
 }
 
 fn pixel_groups(pixels: u64) -> [u32; 3] {
@@ -207,6 +224,7 @@ impl GpuLoss {
             )?,
             work: None,
             io: None,
+            last: None,
         })
     }
 
@@ -234,9 +252,9 @@ impl GpuLoss {
             [
                 buffer(ctx, "loss planes", pixels * 5 * 16)?,
                 buffer(ctx, "loss filtered planes", pixels * 5 * 16)?,
-                buffer(ctx, "loss per-pixel sums", pixels * 8)?,
-                buffer(ctx, "loss partial sums", sums * 8)?,
-                buffer(ctx, "loss partial sums (2)", sums * 8)?,
+                buffer(ctx, "loss per-pixel sums", pixels * 16)?,
+                buffer(ctx, "loss partial sums", sums * 16)?,
+                buffer(ctx, "loss partial sums (2)", sums * 16)?,
             ],
         ));
         Ok(())
@@ -367,6 +385,100 @@ impl GpuLoss {
         }
     }
 
+    fn ensure_io(&mut self, ctx: &GpuContext, pixels: u64) -> GpuResult<()> {
+        if !self.io.as_ref().is_some_and(|(p, _)| *p >= pixels) {
+            self.io = None;
+            self.io = Some((
+                pixels,
+                [
+                    buffer(ctx, "loss image", pixels * 16)?,
+                    buffer(ctx, "loss target", pixels * 16)?,
+                    buffer(ctx, "loss gradient", pixels * 16)?,
+                ],
+            ));
+        }
+        Ok(())
+    }
+
+    /// Uploads the target image (RGB, pixel-major) of the next [`Self::record_image`].
+    pub fn stage_target(&mut self, ctx: &GpuContext, target: &[[f32; 3]]) -> GpuResult<()> {
+        self.ensure_io(ctx, target.len() as u64)?;
+        let (_, [_, tgt, _]) = self.io.as_ref().expect("made above");
+        let wide: Vec<[f32; 4]> = target.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect();
+        tgt.upload(ctx, &wide)
+    }
+
+    /// Records the loss of a rendered colour image (RGBA32F, `width x height`, a copy
+    /// source: [`crate::render::GpuRenderer::render_on_device`]) against the target staged
+    /// by [`Self::stage_target`], its gradient into `grad` (a vec4 per pixel: rgb, alpha
+    /// 0). After the submission, [`Self::read_value`] reads the loss.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_image(
+        &mut self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        image: &crate::gpu::GpuImage,
+        grad: BufferSlice,
+        width: u32,
+        height: u32,
+        lambda: f32,
+    ) -> GpuResult<()> {
+        let pixels = u64::from(width) * u64::from(height);
+        if image.size() != (width, height) {
+            return Err(GpuError::InvalidArgument(format!(
+                "the image is {}x{}, the loss {width}x{height}",
+                image.size().0,
+                image.size().1
+            )));
+        }
+        if !self.io.as_ref().is_some_and(|(p, _)| *p >= pixels) {
+            return Err(GpuError::InvalidArgument(
+                "no target staged for this image size (stage_target)".into(),
+            ));
+        }
+        let io = self.io.take().expect("checked above");
+        let result = (|| {
+            let [img, tgt, _] = &io.1;
+            image.copy_to_buffer(ctx, cmd, img, 0);
+            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeRead);
+            let bufs = LossBuffers {
+                image: img.whole(),
+                target: tgt.whole(),
+                grad,
+            };
+            let sums = self
+                .record(ctx, cmd, &bufs, width, height, lambda)?
+                .handle();
+            self.last = Some((sums, pixels, lambda));
+            Ok(())
+        })();
+        self.io = Some(io);
+        result
+    }
+
+    /// The loss of the last [`Self::record_image`], once its submission has finished.
+    pub fn read_value(&self, ctx: &GpuContext) -> GpuResult<LossValue> {
+        let (handle, pixels, lambda) = self
+            .last
+            .ok_or_else(|| GpuError::InvalidArgument("no loss was recorded".into()))?;
+        let (_, work) = self
+            .work
+            .as_ref()
+            .ok_or_else(|| GpuError::Internal("no loss work buffers".into()))?;
+        let b = work
+            .iter()
+            .find(|b| b.handle() == handle)
+            .ok_or_else(|| GpuError::Internal("the loss sums buffer is gone".into()))?;
+        let sums: Vec<[f32; 4]> = b.read(ctx, 1)?;
+        let n = (pixels * 3) as f64;
+        Ok(LossValue::of(
+            sums[0][0] as f64 / n,
+            sums[0][1] as f64 / n,
+            sums[0][2] as f64 / n,
+            lambda as f64,
+        ))
+    }
+
     /// The loss of `image` against `target` (`width x height`, RGB, pixel-major; only the
     /// first three channels of each pixel are read) and its gradient, through the device:
     /// uploads both, runs [`Self::record`], reads back the gradient (`width * height * 3`)
@@ -388,17 +500,7 @@ impl GpuLoss {
                 target.len()
             )));
         }
-        if !self.io.as_ref().is_some_and(|(p, _)| *p >= pixels) {
-            self.io = None;
-            self.io = Some((
-                pixels,
-                [
-                    buffer(ctx, "loss image", pixels * 16)?,
-                    buffer(ctx, "loss target", pixels * 16)?,
-                    buffer(ctx, "loss gradient", pixels * 16)?,
-                ],
-            ));
-        }
+        self.ensure_io(ctx, pixels)?;
         let io = self.io.take().expect("made above");
         let widen = |v: &[[f32; 3]]| -> Vec<[f32; 4]> {
             v.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect()
@@ -425,10 +527,15 @@ impl GpuLoss {
                 .iter()
                 .find(|b| Some(b.handle()) == sums_buffer)
                 .expect("one of the work buffers");
-            let sums: Vec<[f32; 2]> = sums_buf.read(ctx, 1)?;
+            let sums: Vec<[f32; 4]> = sums_buf.read(ctx, 1)?;
             let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
             let n = (pixels * 3) as f64;
-            let value = LossValue::of(sums[0][0] as f64 / n, sums[0][1] as f64 / n, lambda as f64);
+            let value = LossValue::of(
+                sums[0][0] as f64 / n,
+                sums[0][1] as f64 / n,
+                sums[0][2] as f64 / n,
+                lambda as f64,
+            );
             Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))
         })();
         self.io = Some(io);

@@ -1,10 +1,12 @@
-//! Training from images (the `vksplat train` issue), built on the differentiable
-//! rasterizer ([`crate::render::differentiable`]). This module holds the pieces that
-//! exist so far: the original 3DGS loss with its gradient, on the CPU (the reference) and
-//! on the device ([`loss`]).
+//! Training from images (`vksplat train`): the original 3DGS method on the differentiable
+//! rasterizer. The data sets ([`data`]), the loss on the CPU (the reference) and on the
+//! device ([`loss`]), the model with its optimiser and density control ([`model`]), the
+//! model's state kept on the device between iterations ([`device`]), the loop ([`run`])
+//! and its checkpoints ([`checkpoint`]).
 
 pub mod checkpoint;
 pub mod data;
+pub mod device;
 pub mod loss;
 pub mod model;
 pub mod run;

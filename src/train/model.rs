@@ -422,6 +422,98 @@ impl Model {
         Ok(model)
     }
 
+    /// Floats of one Gaussian's record on the device ([`super::device`]): centre (3), log
+    /// scales (3), quaternion (4), opacity logit, SH coefficients up to the largest degree.
+    pub(super) fn record_floats(&self) -> usize {
+        11 + self.scene.sh_stride()
+    }
+
+    /// The parameters, Adam's moments (in the records' layout) and the densification
+    /// statistics (sum of 2D-mean gradient norms, views seen, largest radius, 0) as the
+    /// device holds them. SH colour only: feature splats train on the host.
+    pub(super) fn device_state(&self) -> [Vec<f32>; 4] {
+        let s = &self.scene;
+        let (n, r, stride) = (self.len(), self.record_floats(), s.sh_stride());
+        let mut out = [
+            vec![0f32; n * r],
+            vec![0f32; n * r],
+            vec![0f32; n * r],
+            vec![0f32; n * 4],
+        ];
+        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (4, stride, 11)] {
+            let params: Vec<f32> = match g {
+                0 => s.positions.iter().flatten().copied().collect(),
+                1 => s.log_scales.iter().flatten().copied().collect(),
+                2 => s.rotations.iter().flatten().copied().collect(),
+                3 => s.opacity_logits.clone(),
+                _ => s.sh.clone(),
+            };
+            for (a, src) in [&params, &self.moments[g].m, &self.moments[g].v]
+                .into_iter()
+                .enumerate()
+            {
+                for i in 0..n {
+                    out[a][i * r + offset..i * r + offset + width]
+                        .copy_from_slice(&src[i * width..(i + 1) * width]);
+                }
+            }
+        }
+        for i in 0..n {
+            out[3][i * 4..i * 4 + 4].copy_from_slice(&[
+                self.grad_accum[i],
+                self.denom[i] as f32,
+                self.max_radii[i],
+                0.0,
+            ]);
+        }
+        out
+    }
+
+    /// Takes the state of [`Self::device_state`]'s layout back (same Gaussians).
+    pub(super) fn set_device_state(&mut self, state: [Vec<f32>; 4]) {
+        let n = self.len();
+        let r = self.record_floats();
+        let stride = self.scene.sh_stride();
+        let [params, m, v, stats] = state;
+        let rows = |src: &[f32], offset: usize, width: usize| -> Vec<f32> {
+            (0..n)
+                .flat_map(|i| src[i * r + offset..i * r + offset + width].iter().copied())
+                .collect()
+        };
+        let s = &mut self.scene;
+        let p3 = rows(&params, 0, 3);
+        s.positions = p3.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let l3 = rows(&params, 3, 3);
+        s.log_scales = l3.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let q4 = rows(&params, 6, 4);
+        s.rotations = q4
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        s.opacity_logits = rows(&params, 10, 1);
+        s.sh = rows(&params, 11, stride);
+        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (4, stride, 11)] {
+            self.moments[g] = Moments {
+                m: rows(&m, offset, width),
+                v: rows(&v, offset, width),
+            };
+        }
+        self.grad_accum = (0..n).map(|i| stats[i * 4]).collect();
+        self.denom = (0..n).map(|i| stats[i * 4 + 1] as u32).collect();
+        self.max_radii = (0..n).map(|i| stats[i * 4 + 2]).collect();
+    }
+
+    /// Counts one Adam step of every group (not the opacities' when `skip_opacity`), as
+    /// [`Self::step`] does, and returns the counts.
+    pub(super) fn advance_steps(&mut self, skip_opacity: bool) -> [u32; 7] {
+        for (g, t) in self.steps.iter_mut().enumerate() {
+            if !(skip_opacity && g == 3) {
+                *t += 1;
+            }
+        }
+        self.steps
+    }
+
     /// Gaussians in the model.
     pub fn len(&self) -> usize {
         self.scene.len()
@@ -490,12 +582,7 @@ impl Model {
         skip_opacity: bool,
     ) -> f32 {
         let n = self.len();
-        for (g, t) in self.steps.iter_mut().enumerate() {
-            if !(skip_opacity && g == 3) {
-                *t += 1;
-            }
-        }
-        let t = self.steps;
+        let t = self.advance_steps(skip_opacity);
         let s = &mut self.scene;
         let flat3 = |v: &[[f32; 3]]| -> Vec<f32> { v.iter().flatten().copied().collect() };
         // Chain rule to the stored parameters: scales = exp(log), opacity = sigmoid(logit).

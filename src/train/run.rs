@@ -5,15 +5,22 @@
 //! 15000 every 100, opacity reset every 3000; the model directory as the original writes
 //! it.
 //!
-//! This first version keeps the parameters and the optimiser on the host: each iteration
-//! uploads the Gaussians and reads back their gradients (the rasterizer's API); the loss
-//! and its gradient are computed on the device. Same rules either way.
+//! The parameters, Adam's state and the densification statistics stay on the device
+//! ([`super::device`]): an iteration renders, computes the loss and its gradient, runs the
+//! backward pass and steps Adam without a Gaussian crossing to the host; only the loss's
+//! sums (16 bytes) are read back. The state comes down for what the host does every few
+//! hundred iterations (densification, opacity reset, evaluation, checkpoints, saving).
+//! Feature splats (a neural shader) and gradient clipping use the host optimiser
+//! ([`super::model::Model::step`], the rasterizer's upload/read-back API) for now; so does
+//! [`TrainOptions::host_optimizer`]. Same rules either way.
 
 use super::data::{Dataset, View};
+use super::device::{DeviceModel, Step};
 use super::loss::{GpuLoss, LossValue};
 use super::model::{position_lr, Model, Settings};
 use crate::camera::Camera;
 use crate::gen::Rng;
+use crate::gpu::sync::{barrier, Access};
 use crate::model::grad::PixelGrads;
 use crate::model::RenderOptions;
 use crate::render::differentiable::DiffRasterizer;
@@ -50,6 +57,9 @@ pub struct TrainOptions {
     pub resume: Option<super::checkpoint::Checkpoint>,
     /// Set (Ctrl-C, SIGTERM): write a checkpoint after the current iteration and stop.
     pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Step on the host (upload the Gaussians and read their gradients back every
+    /// iteration) even where the device could: for comparisons.
+    pub host_optimizer: bool,
 }
 
 impl TrainOptions {
@@ -110,6 +120,8 @@ pub struct TrainReport {
     pub iterations_per_second: f64,
     /// Device memory at the peak (sampled every 10 iterations), bytes.
     pub device_bytes_peak: u64,
+    /// Whether the iterations kept the state on the device ([`super::device`]).
+    pub on_device: bool,
 }
 
 /// One iteration's figures, for a progress display.
@@ -123,6 +135,8 @@ pub struct Progress {
     pub loss: LossValue,
     /// Gaussians now.
     pub gaussians: usize,
+    /// Whether the state is on the device (the iteration read nothing back but the loss).
+    pub on_device: bool,
 }
 
 /// A training error.
@@ -370,6 +384,10 @@ pub fn train(
         let path = out.join(format!("chkpnt{it}.safetensors"));
         write(&path, &c.to_bytes(), overwrite, written).map(|()| path)
     };
+    // The state on the device, unless a neural shader or gradient clipping asks for the
+    // host optimiser (or the caller does).
+    let device_path = model.shader.is_none() && s.clip_grad.is_none() && !opts.host_optimizer;
+    let mut dev: Option<DeviceModel> = None;
     for it in first..=s.iterations {
         if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
             model.active_sh_degree += 1;
@@ -383,17 +401,100 @@ pub fn train(
         }
         let view = &data.train[order.pop().expect("refilled above")];
         let cam = &view.camera;
-        let params = model.params();
-        rast.set_shader(model.shader.as_ref())?;
-        let (frame, token) = rast.forward(&params, cam, &render_opts)?;
-        let (value, grad) = loss.compute(
-            rast.renderer().ctx(),
-            &frame.color,
-            &view.image,
-            cam.width,
-            cam.height,
-            s.lambda_dssim,
-        )?;
+        let in_densify = it < s.densify_until_iter;
+        let densify_now =
+            in_densify && it > s.densify_from_iter && it % s.densification_interval == 0;
+        let reset_now = in_densify && it % s.opacity_reset_interval == 0;
+        let value;
+        if device_path {
+            if dev.is_none() {
+                dev = Some(DeviceModel::new(rast.renderer(), &model)?);
+            }
+            let d = dev.as_ref().expect("made above");
+            let it_opts = RenderOptions {
+                sh_degree: Some(model.active_sh_degree),
+                ..render_opts
+            };
+            let renderer = rast.renderer();
+            renderer.render_on_device(&d.scene, cam, &it_opts)?;
+            if renderer.forward_state()?.last_contributor.is_none() {
+                return Err(TrainError::Other(format!(
+                    "the {}x{} view {} of {} Gaussians is too large to render in one piece, which training needs; use a lower --resolution",
+                    cam.width, cam.height, cam.name, model.len()
+                )));
+            }
+            loss.stage_target(renderer.ctx(), &view.image)?;
+            let step = Step {
+                stats: in_densify,
+                adam: (!densify_now).then(|| model.advance_steps(reset_now)),
+                skip_opacity: reset_now,
+                position_lr: position_lr(s, data.extent, it),
+                size: (cam.width, cam.height),
+            };
+            let (w, h, lambda) = (cam.width, cam.height, s.lambda_dssim);
+            renderer.backward_on_device(
+                &d.scene,
+                (w, h),
+                &mut |ctx, cmd, image, grad| loss.record_image(ctx, cmd, image, grad, w, h, lambda),
+                &mut |ctx, cmd, grads| {
+                    barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                    d.record_step(ctx, cmd, grads, &step, s)
+                },
+            )?;
+            value = loss.read_value(rast.renderer().ctx())?;
+        } else {
+            let params = model.params();
+            rast.set_shader(model.shader.as_ref())?;
+            let (frame, token) = rast.forward(&params, cam, &render_opts)?;
+            let (v, grad) = loss.compute(
+                rast.renderer().ctx(),
+                &frame.color,
+                &view.image,
+                cam.width,
+                cam.height,
+                s.lambda_dssim,
+            )?;
+            value = v;
+            if value.total.is_finite() {
+                let pixel_grads = PixelGrads {
+                    color: grad.iter().flatten().copied().collect(),
+                    alpha: Vec::new(),
+                    depth: Vec::new(),
+                };
+                let (grads, shader_grads) = if model.shader.is_some() {
+                    let (g, m) =
+                        rast.backward_shaded(&params, cam, &render_opts, token, &pixel_grads)?;
+                    (g, Some(m))
+                } else {
+                    (
+                        rast.backward(&params, cam, &render_opts, token, &pixel_grads)?,
+                        None,
+                    )
+                };
+                if in_densify {
+                    let radii: Vec<f32> = rast
+                        .projected()?
+                        .iter()
+                        .map(|sp| sp.color_radius[3])
+                        .collect();
+                    model.add_stats(&grads, &radii, cam.width, cam.height);
+                }
+                if !densify_now {
+                    let norm = model.step(
+                        &grads,
+                        shader_grads.as_ref(),
+                        position_lr(s, data.extent, it),
+                        s,
+                        reset_now,
+                    );
+                    if !norm.is_finite() {
+                        return Err(TrainError::Other(format!(
+                            "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
+                        )));
+                    }
+                }
+            }
+        }
         if !value.total.is_finite() {
             return Err(TrainError::Other(format!(
                 "training diverged at iteration {it}: the loss is {} ({} Gaussians); the last model saved is the last good one",
@@ -401,57 +502,34 @@ pub fn train(
                 model.len()
             )));
         }
-        let pixel_grads = PixelGrads {
-            color: grad.iter().flatten().copied().collect(),
-            alpha: Vec::new(),
-            depth: Vec::new(),
-        };
-        let (grads, shader_grads) = if model.shader.is_some() {
-            let (g, m) = rast.backward_shaded(&params, cam, &render_opts, token, &pixel_grads)?;
-            (g, Some(m))
-        } else {
-            (
-                rast.backward(&params, cam, &render_opts, token, &pixel_grads)?,
-                None,
-            )
-        };
-        let mut densified = false;
-        let mut reset = false;
-        if it < s.densify_until_iter {
-            let radii: Vec<f32> = rast
-                .projected()?
-                .iter()
-                .map(|sp| sp.color_radius[3])
-                .collect();
-            model.add_stats(&grads, &radii, cam.width, cam.height);
-            if it > s.densify_from_iter && it % s.densification_interval == 0 {
-                let screen = (it > s.opacity_reset_interval).then_some(20.0);
-                model.densify_and_prune(s, data.extent, screen, &mut rng);
-                densified = true;
-                if model.is_empty() {
-                    return Err(TrainError::Other(format!(
-                        "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
-                    )));
-                }
+        // What the host does on the model: the device's state comes down first, and goes
+        // up again (rebuilt) at the next iteration when it changed.
+        let evaluate_now = opts.test_iterations.contains(&it) || it == s.iterations;
+        let checkpoint_now = opts.checkpoint_iterations.contains(&it);
+        let save_now = opts.save_iterations.contains(&it) || it == s.iterations;
+        let cancelled = opts
+            .cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::SeqCst));
+        if let Some(d) = &dev {
+            if densify_now || reset_now || evaluate_now || checkpoint_now || save_now || cancelled {
+                d.download(rast.renderer().ctx(), &mut model)?;
             }
-            if it % s.opacity_reset_interval == 0 {
-                model.reset_opacity();
-                reset = true;
+            if densify_now || reset_now {
+                dev = None;
             }
         }
-        if !densified {
-            let norm = model.step(
-                &grads,
-                shader_grads.as_ref(),
-                position_lr(s, data.extent, it),
-                s,
-                reset,
-            );
-            if !norm.is_finite() {
+        if densify_now {
+            let screen = (it > s.opacity_reset_interval).then_some(20.0);
+            model.densify_and_prune(s, data.extent, screen, &mut rng);
+            if model.is_empty() {
                 return Err(TrainError::Other(format!(
-                    "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
+                    "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
                 )));
             }
+        }
+        if reset_now {
+            model.reset_opacity();
         }
         if it % 10 == 1 {
             peak = peak.max(rast.renderer().ctx().live_allocations().1);
@@ -461,8 +539,9 @@ pub fn train(
             iterations: s.iterations,
             loss: value,
             gaussians: model.len(),
+            on_device: device_path,
         });
-        if opts.test_iterations.contains(&it) || it == s.iterations {
+        if evaluate_now {
             let (views, split): (Vec<&View>, &str) = if data.test.is_empty() {
                 (
                     data.train
@@ -487,14 +566,10 @@ pub fn train(
             ));
             evaluations.push(e);
         }
-        if opts.checkpoint_iterations.contains(&it) {
+        if checkpoint_now {
             let path = checkpoint(it, &model, &rng, &order, &mut written, overwrite)?;
             note(format!("[ITER {it}] checkpoint {}", path.display()));
         }
-        let cancelled = opts
-            .cancel
-            .as_ref()
-            .is_some_and(|c| c.load(std::sync::atomic::Ordering::SeqCst));
         if cancelled && it < s.iterations {
             let path = checkpoint(it, &model, &rng, &order, &mut written, true)?;
             return Err(TrainError::Interrupted {
@@ -505,7 +580,7 @@ pub fn train(
                 ),
             });
         }
-        if opts.save_iterations.contains(&it) || it == s.iterations {
+        if save_now {
             let path = out
                 .join("point_cloud")
                 .join(format!("iteration_{it}"))
@@ -532,7 +607,8 @@ pub fn train(
         gaussians: model.len(),
         evaluations,
         written,
-        iterations_per_second: s.iterations as f64 / seconds.max(1e-9),
+        iterations_per_second: (s.iterations + 1 - first) as f64 / seconds.max(1e-9),
         device_bytes_peak: peak,
+        on_device: device_path,
     })
 }

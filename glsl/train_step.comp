@@ -1,0 +1,151 @@
+#version 460
+// Training step on the device (src/train/device.rs): one invocation per Gaussian.
+//
+// The Gaussians' stored parameters (the original's: centre, log scales, unnormalised
+// quaternion, opacity logit, SH coefficients up to the largest degree) live in STATE, one
+// record of `pc.counts.y` floats each; Adam's moments in M and V, the same layout. With
+// STEP_STATS it adds the frame's densification statistics (norm of the 2D-mean gradient
+// in NDC, views seen, largest screen radius) for every Gaussian the frame drew; with
+// STEP_ADAM it takes the chain rule from the backward pass's gradients of the activated
+// values (preprocess_bwd's GaussianGrad, SH gradients in texel layout) to the stored
+// parameters and one Adam step (torch.optim.Adam: betas 0.9, 0.999, eps 1e-15, the bias
+// corrections from the host per group); always it writes the activated record (centre,
+// sigmoid opacity, exp scales, normalised quaternion) and the SH texels that the next
+// forward pass reads. Each Gaussian's values are its own: the result does not depend on
+// the order the device runs them in. The arithmetic is the host's, operation by operation
+// (src/train/model.rs: Model::step and add_stats; Model::params), `precise` so that no
+// compiler fuses it differently.
+#extension GL_GOOGLE_include_directive : require
+#define WG_SIZE 256u
+#include "common.glsl"
+
+layout(local_size_x = 256) in;
+
+struct Gaussian {
+    vec4 pos_opacity;
+    vec4 scale;
+    vec4 rotation;
+};
+struct GaussianGrad {
+    vec4 mean_opacity;
+    vec4 quat;
+    vec4 scale;
+    vec4 mean2d_abs;
+};
+struct Splat {
+    vec4 mean_opacity_bound;
+    vec4 conic_depth;
+    vec4 color_radius;
+};
+
+layout(std430, binding = TRAIN_STEP_STATE) buffer StateBuf { float state[]; };
+layout(std430, binding = TRAIN_STEP_M) buffer MBuf { float moment_m[]; };
+layout(std430, binding = TRAIN_STEP_V) buffer VBuf { float moment_v[]; };
+layout(std430, binding = TRAIN_STEP_GRADS) readonly buffer GradBuf { GaussianGrad grads[]; };
+layout(std430, binding = TRAIN_STEP_SH_GRADS) readonly buffer ShGradBuf { float sh_grads[]; };
+layout(std430, binding = TRAIN_STEP_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
+// Per Gaussian: (sum of 2D-mean gradient norms, views seen, largest radius, 0).
+layout(std430, binding = TRAIN_STEP_STATS) buffer StatsBuf { vec4 stats[]; };
+layout(std430, binding = TRAIN_STEP_GAUSSIANS) writeonly buffer GaussianBuf { Gaussian gaussians[]; };
+layout(std430, binding = TRAIN_STEP_SH) writeonly buffer ShBuf { float sh_out[]; };
+
+const uint STEP_STATS = 1u;
+const uint STEP_ADAM = 2u;
+const uint STEP_SKIP_OPACITY = 4u;
+
+layout(push_constant) uniform Push {
+    // Gaussians, floats per stored record, SH floats (3 (d + 1)^2), SH floats per Gaussian
+    // in the texels (padded to whole texels).
+    uvec4 counts;
+    // STEP_* bits; half the frame's width and height (floats).
+    uvec4 flags_size;
+    // Learning rates: centre, log scale, quaternion, opacity logit.
+    vec4 lr;
+    // SH DC and rest learning rates; bias corrections of the SH group (1 - b1^t, sqrt(1 - b2^t)).
+    vec4 lr_sh;
+    // Bias corrections 1 - b1^t of centre, log scale, quaternion, opacity.
+    vec4 c1;
+    // Bias corrections sqrt(1 - b2^t) of the same groups.
+    vec4 c2;
+} pc;
+
+float sigmoid_of(float x) {
+    precise float e = exp(-x);
+    precise float s = 1.0 / (1.0 + e);
+    return s;
+}
+
+// One Adam step of value j of the records (`g` its gradient), learning rate `lr`, bias
+// corrections `c1`, `c2`: the host's Moments::step.
+void adam(uint j, float g, float lr, float c1, float c2) {
+    precise float m = 0.9 * moment_m[j] + (1.0 - 0.9) * g;
+    precise float v = 0.999 * moment_v[j] + (1.0 - 0.999) * g * g;
+    moment_m[j] = m;
+    moment_v[j] = v;
+    precise float p = state[j] - lr / c1 * m / (sqrt(v) / c2 + 1e-15);
+    state[j] = p;
+}
+
+void main() {
+    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint count = pc.counts.x;
+    if (i >= count) return;
+    uint rec = pc.counts.y;
+    uint sh_floats = pc.counts.z;
+    uint texel_floats = pc.counts.w;
+    uint flags = pc.flags_size.x;
+    uint base = i * rec;
+    if ((flags & STEP_STATS) != 0u) {
+        float r = splats[i].color_radius.w;
+        if (r > 0.0) {
+            vec2 g = grads[i].mean2d_abs.xy;
+            vec2 half_size = uintBitsToFloat(pc.flags_size.yz);
+            precise float gx = g.x * half_size.x;
+            precise float gy = g.y * half_size.y;
+            precise float norm = sqrt(gx * gx + gy * gy);
+            vec4 s = stats[i];
+            precise float sum = s.x + norm;
+            stats[i] = vec4(sum, s.y + 1.0, max(s.z, r), 0.0);
+        }
+    }
+    if ((flags & STEP_ADAM) != 0u) {
+        GaussianGrad g = grads[i];
+        // Centre.
+        for (uint a = 0u; a < 3u; a++) adam(base + a, g.mean_opacity[a], pc.lr.x, pc.c1.x, pc.c2.x);
+        // Log scales: d/dl = g exp(l).
+        for (uint a = 0u; a < 3u; a++) {
+            precise float gl = g.scale[a] * exp(state[base + 3u + a]);
+            adam(base + 3u + a, gl, pc.lr.y, pc.c1.y, pc.c2.y);
+        }
+        // Quaternion: through q / |q|: (g - u (u . g)) / |q|.
+        vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+        precise float norm = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+        precise vec4 u = q / norm;
+        precise float dot_ = g.quat.x * u.x + g.quat.y * u.y + g.quat.z * u.z + g.quat.w * u.w;
+        for (uint a = 0u; a < 4u; a++) {
+            precise float gq = (g.quat[a] - u[a] * dot_) / norm;
+            adam(base + 6u + a, gq, pc.lr.z, pc.c1.z, pc.c2.z);
+        }
+        // Opacity logit: d/do = g p (1 - p).
+        if ((flags & STEP_SKIP_OPACITY) == 0u) {
+            float p = sigmoid_of(state[base + 10u]);
+            precise float go = g.mean_opacity.w * p * (1.0 - p);
+            adam(base + 10u, go, pc.lr.w, pc.c1.w, pc.c2.w);
+        }
+        // SH: DC at its rate, the rest at theirs.
+        for (uint k = 0u; k < sh_floats; k++) {
+            float lr = k < 3u ? pc.lr_sh.x : pc.lr_sh.y;
+            adam(base + 11u + k, sh_grads[i * texel_floats + k], lr, pc.lr_sh.z, pc.lr_sh.w);
+        }
+    }
+    // The activated record and SH texels of the next forward pass.
+    vec3 mean = vec3(state[base], state[base + 1u], state[base + 2u]);
+    vec3 scale = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
+    vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+    precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+    precise vec4 rot = q / qn;
+    gaussians[i] = Gaussian(vec4(mean, sigmoid_of(state[base + 10u])), vec4(scale, 0.0), rot);
+    for (uint k = 0u; k < texel_floats; k++) {
+        sh_out[i * texel_floats + k] = k < sh_floats ? state[base + 11u + k] : 0.0;
+    }
+}
