@@ -40,8 +40,8 @@ layout(binding = SHADE_BWD_WORDS) uniform usamplerBuffer words_view;
 #include "mlp_common.glsl"
 // The forward's feature planes: group g's vec4 of pixel i at g * plane stride + i.
 layout(std430, binding = SHADE_BWD_FEATURES) readonly buffer FeatureBuf { vec4 features[]; };
-// The frame's alpha (1 - T) per pixel.
-layout(std430, binding = SHADE_BWD_ALPHA) readonly buffer AlphaBuf { float alphas[]; };
+// The frame's colour image per pixel (a copy of it), whose alpha is 1 - T.
+layout(std430, binding = SHADE_BWD_ALPHA) readonly buffer AlphaBuf { vec4 pixel_colors[]; };
 // In: dL/d(shaded rgb) and dL/d alpha per pixel; out: dL/d alpha with the shader's part
 // added, and rgb 0 (the blend's colour is not what the shader read: only the features are).
 layout(std430, binding = SHADE_BWD_GRAD_COLOR) buffer GradColorBuf { vec4 grad_color[]; };
@@ -75,7 +75,7 @@ void main() {
     uint index = (p.code.w + wg) * PIXELS + t;
     bool live = index < p.size.x * p.size.y;
     uvec2 pix = uvec2(index % p.size.x, index / p.size.x);
-    float alpha = live ? alphas[index] : 0.0;
+    float alpha = live ? pixel_colors[index].a : 0.0;
 
     // The first layer's inputs (zeros past the image: their gradients are 0).
     uint n = 0u;

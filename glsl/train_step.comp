@@ -11,7 +11,14 @@
 // parameters and one Adam step (torch.optim.Adam: betas 0.9, 0.999, eps 1e-15, the bias
 // corrections from the host per group); always it writes the activated record (centre,
 // sigmoid opacity, exp scales, normalised quaternion) and the SH texels that the next
-// forward pass reads. Each Gaussian's values are its own: the result does not depend on
+// forward pass reads. Feature splats (STEP_FEATURES): the record's colour part holds the K
+// feature channels instead of SH, their gradients come from the feature blend's backward
+// pass, and they are written both Gaussian-major in groups of four (FEATURES, what the
+// backward pass reads) and one buffer per group (FEAT0..3, what the feature blend reads).
+// Gradient clipping: a first dispatch (STEP_NORM) writes each Gaussian's squared gradient
+// norm (the stored parameters'), which loss_reduce adds up in a fixed order into
+// NORM_TOTAL; the step (STEP_CLIP) then scales every gradient by min(1, max / norm), as
+// Model::step does. Each Gaussian's values are its own: the result does not depend on
 // the order the device runs them in. The arithmetic is the host's, operation by operation
 // (src/train/model.rs: Model::step and add_stats; Model::params), `precise` so that no
 // compiler fuses it differently.
@@ -48,25 +55,39 @@ layout(std430, binding = TRAIN_STEP_SPLATS) readonly buffer SplatBuf { Splat spl
 layout(std430, binding = TRAIN_STEP_STATS) buffer StatsBuf { vec4 stats[]; };
 layout(std430, binding = TRAIN_STEP_GAUSSIANS) writeonly buffer GaussianBuf { Gaussian gaussians[]; };
 layout(std430, binding = TRAIN_STEP_SH) writeonly buffer ShBuf { float sh_out[]; };
+layout(std430, binding = TRAIN_STEP_FEATURE_GRADS) readonly buffer FeatGradBuf { vec4 feature_grads[]; };
+layout(std430, binding = TRAIN_STEP_FEATURES) writeonly buffer FeatBuf { vec4 features_out[]; };
+layout(std430, binding = TRAIN_STEP_FEAT0) writeonly buffer Feat0Buf { vec4 feat0[]; };
+layout(std430, binding = TRAIN_STEP_FEAT1) writeonly buffer Feat1Buf { vec4 feat1[]; };
+layout(std430, binding = TRAIN_STEP_FEAT2) writeonly buffer Feat2Buf { vec4 feat2[]; };
+layout(std430, binding = TRAIN_STEP_FEAT3) writeonly buffer Feat3Buf { vec4 feat3[]; };
+layout(std430, binding = TRAIN_STEP_NORMS) writeonly buffer NormBuf { vec4 norms[]; };
+layout(std430, binding = TRAIN_STEP_NORM_TOTAL) readonly buffer NormTotalBuf { vec4 norm_total[]; };
 
 const uint STEP_STATS = 1u;
 const uint STEP_ADAM = 2u;
 const uint STEP_SKIP_OPACITY = 4u;
+const uint STEP_FEATURES = 8u;
+const uint STEP_NORM = 16u;
+const uint STEP_CLIP = 32u;
 
 layout(push_constant) uniform Push {
-    // Gaussians, floats per stored record, SH floats (3 (d + 1)^2), SH floats per Gaussian
-    // in the texels (padded to whole texels).
+    // Gaussians, floats per stored record, colour floats C (3 (d + 1)^2 SH coefficients,
+    // or K feature channels), SH floats per Gaussian in the texels (padded to whole texels).
     uvec4 counts;
-    // STEP_* bits; half the frame's width and height (floats).
+    // STEP_* bits; half the frame's width and height (floats); feature groups.
     uvec4 flags_size;
     // Learning rates: centre, log scale, quaternion, opacity logit.
     vec4 lr;
-    // SH DC and rest learning rates; bias corrections of the SH group (1 - b1^t, sqrt(1 - b2^t)).
+    // Colour learning rates (SH DC or features, SH rest) and the colour group's bias
+    // corrections (1 - b1^t, sqrt(1 - b2^t)).
     vec4 lr_sh;
     // Bias corrections 1 - b1^t of centre, log scale, quaternion, opacity.
     vec4 c1;
     // Bias corrections sqrt(1 - b2^t) of the same groups.
     vec4 c2;
+    // The largest gradient norm (STEP_CLIP).
+    vec4 clip;
 } pc;
 
 float sigmoid_of(float x) {
@@ -86,15 +107,65 @@ void adam(uint j, float g, float lr, float c1, float c2) {
     state[j] = p;
 }
 
+// The gradients of Gaussian i's stored parameters: centre, log scales, quaternion, opacity
+// logit (the chain rule through exp, q / |q| and the sigmoid); the colour part is read
+// where it is used (colour_grad).
+struct RawGrad {
+    vec3 mean;
+    vec3 log_scale;
+    vec4 quat;
+    float logit;
+};
+
+RawGrad raw_grad(uint i, uint base) {
+    GaussianGrad g = grads[i];
+    RawGrad r;
+    r.mean = g.mean_opacity.xyz;
+    for (uint a = 0u; a < 3u; a++) {
+        precise float gl = g.scale[a] * exp(state[base + 3u + a]);
+        r.log_scale[a] = gl;
+    }
+    vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+    precise float norm = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+    precise vec4 u = q / norm;
+    precise float dot_ = g.quat.x * u.x + g.quat.y * u.y + g.quat.z * u.z + g.quat.w * u.w;
+    for (uint a = 0u; a < 4u; a++) {
+        precise float gq = (g.quat[a] - u[a] * dot_) / norm;
+        r.quat[a] = gq;
+    }
+    float p = sigmoid_of(state[base + 10u]);
+    precise float go = g.mean_opacity.w * p * (1.0 - p);
+    r.logit = go;
+    return r;
+}
+
+float colour_grad(uint i, uint k, bool features) {
+    if (features) return feature_grads[i * pc.flags_size.w + k / 4u][k % 4u];
+    return sh_grads[i * pc.counts.w + k];
+}
+
 void main() {
     uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
     uint count = pc.counts.x;
     if (i >= count) return;
     uint rec = pc.counts.y;
-    uint sh_floats = pc.counts.z;
+    uint colours = pc.counts.z;
     uint texel_floats = pc.counts.w;
     uint flags = pc.flags_size.x;
+    uint groups = pc.flags_size.w;
+    bool features = (flags & STEP_FEATURES) != 0u;
     uint base = i * rec;
+    if ((flags & STEP_NORM) != 0u) {
+        RawGrad r = raw_grad(i, base);
+        precise float sq = dot(r.mean, r.mean) + dot(r.log_scale, r.log_scale)
+            + dot(r.quat, r.quat) + r.logit * r.logit;
+        for (uint k = 0u; k < colours; k++) {
+            float g = colour_grad(i, k, features);
+            sq += g * g;
+        }
+        norms[i] = vec4(sq, 0.0, 0.0, 0.0);
+        return;
+    }
     if ((flags & STEP_STATS) != 0u) {
         float r = splats[i].color_radius.w;
         if (r > 0.0) {
@@ -109,36 +180,26 @@ void main() {
         }
     }
     if ((flags & STEP_ADAM) != 0u) {
-        GaussianGrad g = grads[i];
-        // Centre.
-        for (uint a = 0u; a < 3u; a++) adam(base + a, g.mean_opacity[a], pc.lr.x, pc.c1.x, pc.c2.x);
-        // Log scales: d/dl = g exp(l).
-        for (uint a = 0u; a < 3u; a++) {
-            precise float gl = g.scale[a] * exp(state[base + 3u + a]);
-            adam(base + 3u + a, gl, pc.lr.y, pc.c1.y, pc.c2.y);
+        // Model::step: with clipping, every gradient times max / norm when the norm
+        // (finite) exceeds max.
+        float scale = 1.0;
+        if ((flags & STEP_CLIP) != 0u) {
+            float norm = sqrt(norm_total[0].x);
+            if (norm > pc.clip.x && !isinf(norm) && !isnan(norm)) scale = pc.clip.x / norm;
         }
-        // Quaternion: through q / |q|: (g - u (u . g)) / |q|.
-        vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
-        precise float norm = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
-        precise vec4 u = q / norm;
-        precise float dot_ = g.quat.x * u.x + g.quat.y * u.y + g.quat.z * u.z + g.quat.w * u.w;
-        for (uint a = 0u; a < 4u; a++) {
-            precise float gq = (g.quat[a] - u[a] * dot_) / norm;
-            adam(base + 6u + a, gq, pc.lr.z, pc.c1.z, pc.c2.z);
-        }
-        // Opacity logit: d/do = g p (1 - p).
-        if ((flags & STEP_SKIP_OPACITY) == 0u) {
-            float p = sigmoid_of(state[base + 10u]);
-            precise float go = g.mean_opacity.w * p * (1.0 - p);
-            adam(base + 10u, go, pc.lr.w, pc.c1.w, pc.c2.w);
-        }
-        // SH: DC at its rate, the rest at theirs.
-        for (uint k = 0u; k < sh_floats; k++) {
-            float lr = k < 3u ? pc.lr_sh.x : pc.lr_sh.y;
-            adam(base + 11u + k, sh_grads[i * texel_floats + k], lr, pc.lr_sh.z, pc.lr_sh.w);
+        RawGrad r = raw_grad(i, base);
+        for (uint a = 0u; a < 3u; a++) adam(base + a, r.mean[a] * scale, pc.lr.x, pc.c1.x, pc.c2.x);
+        for (uint a = 0u; a < 3u; a++) adam(base + 3u + a, r.log_scale[a] * scale, pc.lr.y, pc.c1.y, pc.c2.y);
+        for (uint a = 0u; a < 4u; a++) adam(base + 6u + a, r.quat[a] * scale, pc.lr.z, pc.c1.z, pc.c2.z);
+        if ((flags & STEP_SKIP_OPACITY) == 0u) adam(base + 10u, r.logit * scale, pc.lr.w, pc.c1.w, pc.c2.w);
+        // Colour: SH DC at its rate and the rest at theirs, or every feature channel at
+        // the first.
+        for (uint k = 0u; k < colours; k++) {
+            float lr = (features || k < 3u) ? pc.lr_sh.x : pc.lr_sh.y;
+            adam(base + 11u + k, colour_grad(i, k, features) * scale, lr, pc.lr_sh.z, pc.lr_sh.w);
         }
     }
-    // The activated record and SH texels of the next forward pass.
+    // The activated record, SH texels and feature channels of the next forward pass.
     vec3 mean = vec3(state[base], state[base + 1u], state[base + 2u]);
     vec3 scale = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
     vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
@@ -146,6 +207,20 @@ void main() {
     precise vec4 rot = q / qn;
     gaussians[i] = Gaussian(vec4(mean, sigmoid_of(state[base + 10u])), vec4(scale, 0.0), rot);
     for (uint k = 0u; k < texel_floats; k++) {
-        sh_out[i * texel_floats + k] = k < sh_floats ? state[base + 11u + k] : 0.0;
+        sh_out[i * texel_floats + k] = (!features && k < colours) ? state[base + 11u + k] : 0.0;
+    }
+    if (features) {
+        for (uint g = 0u; g < groups; g++) {
+            vec4 v = vec4(0.0);
+            for (uint c = 0u; c < 4u; c++) {
+                uint k = 4u * g + c;
+                if (k < colours) v[c] = state[base + 11u + k];
+            }
+            features_out[i * groups + g] = v;
+            if (g == 0u) feat0[i] = v;
+            else if (g == 1u) feat1[i] = v;
+            else if (g == 2u) feat2[i] = v;
+            else feat3[i] = v;
+        }
     }
 }

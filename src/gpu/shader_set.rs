@@ -119,7 +119,8 @@ shader_bindings! {
     ssim_map { MOMENTS, IMAGE, TARGET, MAPS, SUMS }
     ssim_grad { FILTERED, IMAGE, TARGET, GRAD }
     loss_reduce { VALUES, SUMS }
-    train_step { STATE, M, V, GRADS, SH_GRADS, SPLATS, STATS, GAUSSIANS, SH }
+    train_step { STATE, M, V, GRADS, SH_GRADS, SPLATS, STATS, GAUSSIANS, SH, FEATURE_GRADS, FEATURES, FEAT0, FEAT1, FEAT2, FEAT3, NORMS, NORM_TOTAL }
+    train_mlp_step { STATE, M, V, GRADS, WORDS, NORMS, NORM_TOTAL }
     field { PARAMS, GAUSSIANS, FEATURES, OUTPUT }
 }
 
@@ -260,6 +261,7 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "ssim_grad",
         "loss_reduce",
         "train_step",
+        "train_mlp_step",
         "count64_test",
     ] {
         out.push(v(shader, &[]));

@@ -138,7 +138,15 @@ impl BackwardState {
 /// A backward pass's feature channels: the Gaussians' values and the pixels' gradients
 /// (none when a shader's backward pass makes them), both in groups of four, and the
 /// channel count.
-type FeatureJob<'a> = (&'a [[f32; 4]], Option<&'a [[f32; 4]]>, usize);
+type FeatureJob<'a> = (FeatureValues<'a>, Option<&'a [[f32; 4]]>, usize);
+
+/// The Gaussians' feature values of a backward pass, in groups of four (a vec4 per group,
+/// Gaussian-major): from the host (uploaded) or already on the device.
+#[derive(Clone, Copy)]
+enum FeatureValues<'a> {
+    Host(&'a [[f32; 4]]),
+    Device(crate::gpu::BufferSlice<'a>),
+}
 
 /// The Gaussians' gradients read back, and the neural shader's when it shaded the frame.
 type HostGrads = (SplatGrads<f32>, Option<Vec<f32>>);
@@ -180,6 +188,28 @@ pub struct DeviceGrads<'a> {
     pub sh_grads: crate::gpu::BufferSlice<'a>,
     /// The forward pass's projected Gaussians (`Splat`: radius in `color_radius.w`).
     pub splats: crate::gpu::BufferSlice<'a>,
+    /// dL/d feature channel, a vec4 per group of four, Gaussian-major (feature frames).
+    pub feature_grads: crate::gpu::BufferSlice<'a>,
+    /// The neural shader's gradients in its words' float layout (shaded frames).
+    pub mlp_grads: Option<crate::gpu::BufferSlice<'a>>,
+}
+
+/// The feature channels of a frame whose backward pass runs on the device
+/// ([`GpuRenderer::backward_on_device`]): the Gaussians' values (a vec4 per group of four,
+/// Gaussian-major), their count per Gaussian, and the neural shader that shaded them with
+/// its camera and background.
+#[derive(Clone, Copy)]
+pub struct DeviceFeatures<'a> {
+    /// The values.
+    pub values: crate::gpu::BufferSlice<'a>,
+    /// Channels per Gaussian.
+    pub channels: usize,
+    /// The shader.
+    pub shader: &'a GpuShader,
+    /// The frame's camera.
+    pub cam: &'a Camera,
+    /// The frame's background.
+    pub background: [f32; 3],
 }
 
 /// The neural shader of a shaded frame, its camera and background.
@@ -431,12 +461,11 @@ impl GpuRenderer {
         let pixel_feature_grads = shade.is_none().then_some(&grad_features[..]);
         let feature_job = feature_values
             .as_deref()
-            .map(|v| (v, pixel_feature_grads, channels));
+            .map(|v| (FeatureValues::Host(v), pixel_feature_grads, channels));
         let result = self.run_backward(
             &mut state,
             scene,
             (frame.width, frame.height),
-            &frame.alpha,
             PixelInput::Host {
                 color: &grad_color,
                 depth: &grad_depth,
@@ -453,15 +482,48 @@ impl GpuRenderer {
     /// render with the forward state saved) entirely on the device, in one submission:
     /// `pixels` records the pixels' gradients (dL/d rgb and alpha, a vec4 per pixel,
     /// `size` the frame's) into the buffer it is given; then the pass's stages; then
-    /// `after` records what reads the results ([`DeviceGrads`]). SH colour only (no
-    /// feature channels, no depth gradient). Nothing is read back.
+    /// `after` records what reads the results ([`DeviceGrads`]). A frame of SH colour, or
+    /// of feature channels shaded by a neural shader ([`Self::render_shaded_on_device`],
+    /// `features`); no depth gradient. Nothing is read back.
     pub fn backward_on_device(
         &mut self,
         scene: &GpuScene,
         size: (u32, u32),
+        features: Option<DeviceFeatures>,
         pixels: PixelRecorder,
         after: GradsRecorder,
     ) -> GpuResult<()> {
+        if let Some(f) = &features {
+            let max = 4 * MAX_FEATURE_GROUPS as usize;
+            if f.channels == 0 || f.channels > max || f.shader.channels() != f.channels {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the shader takes {} feature channels, the Gaussians have {} (1 to {max})",
+                    f.shader.channels(),
+                    f.channels
+                )));
+            }
+            if (f.cam.width, f.cam.height) != size {
+                return Err(GpuError::InvalidArgument(format!(
+                    "the camera is {}x{}, the frame {}x{}",
+                    f.cam.width, f.cam.height, size.0, size.1
+                )));
+            }
+            if self.loop_limited()
+                && f.shader.backward_iterations > u64::from(super::CPU_LOOP_LIMIT)
+            {
+                return Err(GpuError::DeviceLimit {
+                    limit: "llvmpipe's loop iterations per invocation",
+                    needed: f.shader.backward_iterations,
+                    max: u64::from(super::CPU_LOOP_LIMIT),
+                    message: format!(
+                        "the neural shader's backward pass needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {} iterations; use narrower layers",
+                        f.shader.backward_iterations,
+                        self.ctx.info().name,
+                        super::CPU_LOOP_LIMIT
+                    ),
+                });
+            }
+        }
         if scene.compact {
             return Err(GpuError::InvalidArgument(
                 "the backward pass needs a full-precision upload, not a compact one".into(),
@@ -475,10 +537,13 @@ impl GpuRenderer {
             &mut state,
             scene,
             size,
-            &[],
             PixelInput::Device(pixels),
-            None,
-            None,
+            features.map(|f| (FeatureValues::Device(f.values), None, f.channels)),
+            features.map(|f| ShadeJob {
+                shader: f.shader,
+                cam: f.cam,
+                background: f.background,
+            }),
             Some(after),
         );
         self.backward = Some(state);
@@ -491,7 +556,6 @@ impl GpuRenderer {
         st: &mut BackwardState,
         scene: &GpuScene,
         size: (u32, u32),
-        alpha: &[f32],
         mut input: PixelInput,
         features: Option<FeatureJob>,
         shade: Option<ShadeJob>,
@@ -583,7 +647,7 @@ impl GpuRenderer {
         let g16 = u64::from(groups) * 16;
         ensure(ctx, &mut st.feature_grads, "feature gradients", n * g16)?;
         let feature_buf = ensure(ctx, &mut st.features, "feature values", n * g16)?;
-        if let Some((values, _, _)) = features {
+        if let Some((FeatureValues::Host(values), _, _)) = features {
             feature_buf.upload(ctx, values)?;
         }
         let grad_feature_buf = ensure(
@@ -601,7 +665,7 @@ impl GpuRenderer {
                 if !st.shade.as_ref().is_some_and(|s| s.fits(job.shader)) {
                     st.shade = Some(ShadeBwd::for_shader(ctx, job.shader)?);
                 }
-                ensure(ctx, &mut st.alpha, "pixel alpha", pixels * 4)?.upload(ctx, alpha)?;
+                ensure(ctx, &mut st.alpha, "pixel colour and alpha", pixels * 16)?;
                 ensure(
                     ctx,
                     &mut st.scratch,
@@ -661,7 +725,10 @@ impl GpuRenderer {
         let (pair_grads, maxima, acc) = (buf(&st.pair_grads), buf(&st.maxima), buf(&st.acc));
         let (grads, sh_grads) = (buf(&st.grads), buf(&st.sh_grads));
         let (feature_b, grad_feature_b, feature_grads) = (
-            buf(&st.features),
+            match features {
+                Some((FeatureValues::Device(values), _, _)) => values,
+                _ => buf(&st.features),
+            },
             buf(&st.grad_features),
             buf(&st.feature_grads),
         );
@@ -699,6 +766,11 @@ impl GpuRenderer {
                     partials: need(partials),
                     grads: need(mlp_grads),
                 };
+                // The frame's alpha: its colour image (a copy source since its forward
+                // pass) copied where the shader's backward pass reads it.
+                fs.color
+                    .copy_to_buffer(ctx, cmd, alpha_b.expect("made above"), 0);
+                barrier(ctx, cmd, Access::TransferWrite, Access::ComputeRead);
                 timer.stage(ctx, cmd, SHADE_BACKWARD_STAGE, |cmd| {
                     pipeline.record(ctx, cmd, job.shader, &bufs, job.cam, job.background)
                 })?;
@@ -768,6 +840,8 @@ impl GpuRenderer {
                         grads,
                         sh_grads,
                         splats: fs.splats,
+                        feature_grads,
+                        mlp_grads: mlp_grads.filter(|_| shade.is_some()).map(|b| b.whole()),
                     },
                 )?;
             }

@@ -279,6 +279,27 @@ impl GpuRenderer {
         self.finish(ticket)
     }
 
+    /// [`Self::render_shaded`] leaving the frame on the device, as
+    /// [`Self::render_on_device`] does.
+    pub fn render_shaded_on_device(
+        &mut self,
+        scene: &GpuScene,
+        features: &GpuFeatures,
+        shader: &shade::GpuShader,
+        cam: &Camera,
+        opts: &RenderOptions,
+    ) -> GpuResult<()> {
+        self.prepare_features(scene, features, Some(shader))?;
+        let ticket = self.submit_with(
+            scene,
+            cam,
+            opts,
+            Readback::Counters,
+            Some((features, Some(shader))),
+        )?;
+        self.complete(&ticket)
+    }
+
     /// What every features frame needs before it is recorded: features uploaded for this
     /// scene and, with a shader, a shader that takes them and fits the device's loops.
     fn prepare_features(

@@ -171,6 +171,20 @@ impl GpuShader {
         self.channels
     }
 
+    /// The words (header, then the weights and biases as f32 bits) as a storage buffer,
+    /// for a device pass that writes new weights ([`Self::WEIGHTS_OFFSET`] words in).
+    pub fn words_buffer(&self) -> crate::gpu::BufferSlice<'_> {
+        self.words.whole()
+    }
+
+    /// Words of the header before the weights ([`crate::mlp::Mlp::gpu_words`]).
+    pub const WEIGHTS_OFFSET: u32 = 4 * crate::mlp::MAX_LAYERS as u32;
+
+    /// Weights and biases, all layers.
+    pub fn param_count(&self) -> u32 {
+        self.params
+    }
+
     /// Device bytes of the weights.
     pub fn device_bytes(&self) -> u64 {
         self.words.size()

@@ -39,7 +39,7 @@ const _: () = assert!(std::mem::size_of::<ShadeBwdPush>() == 128);
 pub struct ShadeBwdBuffers<'a> {
     /// The forward's feature planes and the vec4s from one plane to the next.
     pub features: (BufferSlice<'a>, u32),
-    /// The frame's alpha per pixel (f32).
+    /// The frame's colour image (vec4 per pixel, a copy): its alpha.
     pub alpha: BufferSlice<'a>,
     /// dL/d(shaded rgb), dL/d alpha per pixel (vec4): the alpha's gains the shader's part.
     pub grad_color: BufferSlice<'a>,

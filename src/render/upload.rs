@@ -75,6 +75,15 @@ impl GpuFeatures {
     pub fn channels(&self) -> usize {
         self.channels
     }
+    /// Device bytes of the channels.
+    pub fn device_bytes(&self) -> u64 {
+        self.groups.iter().map(|b| b.size()).sum()
+    }
+    /// The groups' buffers (a vec4 per Gaussian each), for a device pass that writes them
+    /// ([`GpuRenderer::features_for_device_writes`]).
+    pub fn device_buffers(&self) -> Vec<crate::gpu::BufferSlice<'_>> {
+        self.groups.iter().map(|b| b.whole()).collect()
+    }
 }
 
 /// What a frame blends besides colour: the scene's features, and the neural shader
@@ -252,6 +261,37 @@ impl GpuRenderer {
             sh_degree,
             sh_coeffs: (sh_degree + 1) * (sh_degree + 1),
             compact: false,
+        })
+    }
+
+    /// Feature channels (`k` per Gaussian, in groups of four) for `count` Gaussians that a
+    /// device pass writes ([`GpuFeatures::device_buffers`]) instead of an upload.
+    pub fn features_for_device_writes(&self, count: u32, k: usize) -> GpuResult<GpuFeatures> {
+        if k == 0 {
+            return Err(GpuError::InvalidArgument("no feature channels".into()));
+        }
+        let (mut groups, mut views) = (Vec::new(), Vec::new());
+        for g in 0..features::groups(k) {
+            let name = format!("features {}..{}", g * 4, (g * 4 + 4).min(k));
+            let bytes = (u64::from(count) * 16).max(16);
+            check_binding(&self.ctx, &name, bytes)?;
+            let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
+            if self.pipelines.texel_io() {
+                views.push(BufferView::new(
+                    &self.ctx,
+                    &buf,
+                    vk::Format::R32G32B32A32_SFLOAT,
+                    0,
+                    bytes,
+                )?);
+            }
+            groups.push(buf);
+        }
+        Ok(GpuFeatures {
+            views,
+            groups,
+            channels: k,
+            count,
         })
     }
 

@@ -423,30 +423,83 @@ impl Model {
     }
 
     /// Floats of one Gaussian's record on the device ([`super::device`]): centre (3), log
-    /// scales (3), quaternion (4), opacity logit, SH coefficients up to the largest degree.
+    /// scales (3), quaternion (4), opacity logit, then its colour: SH coefficients up to
+    /// the largest degree, or the feature channels of feature splats.
     pub(super) fn record_floats(&self) -> usize {
-        11 + self.scene.sh_stride()
+        11 + self.colour_floats()
+    }
+
+    /// Colour values per Gaussian that training learns: SH coefficients, or feature
+    /// channels when a shader turns them into colour.
+    pub(super) fn colour_floats(&self) -> usize {
+        if self.shader.is_some() {
+            self.scene.feature_count
+        } else {
+            self.scene.sh_stride()
+        }
+    }
+
+    /// The colour's moments group: SH (4) or features (5).
+    fn colour_group(&self) -> usize {
+        if self.shader.is_some() {
+            5
+        } else {
+            4
+        }
+    }
+
+    /// The neural shader's weights and biases (flattened as `Mlp::gpu_words` orders
+    /// them) and their Adam moments, for the device.
+    pub(super) fn device_shader_state(&self) -> Option<[Vec<f32>; 3]> {
+        let mlp = self.shader.as_ref()?;
+        let flat: Vec<f32> = mlp
+            .layers
+            .iter()
+            .flat_map(|l| l.weight.iter().chain(&l.bias).copied())
+            .collect();
+        Some([
+            flat,
+            self.shader_moments.m.clone(),
+            self.shader_moments.v.clone(),
+        ])
+    }
+
+    /// Takes [`Self::device_shader_state`]'s arrays back.
+    pub(super) fn set_device_shader_state(&mut self, state: [Vec<f32>; 3]) {
+        let [flat, m, v] = state;
+        if let Some(mlp) = self.shader.as_mut() {
+            let mut at = 0;
+            for l in &mut mlp.layers {
+                let (w, b) = (l.weight.len(), l.bias.len());
+                l.weight.copy_from_slice(&flat[at..at + w]);
+                l.bias.copy_from_slice(&flat[at + w..at + w + b]);
+                at += w + b;
+            }
+            self.shader_moments = Moments { m, v };
+        }
     }
 
     /// The parameters, Adam's moments (in the records' layout) and the densification
     /// statistics (sum of 2D-mean gradient norms, views seen, largest radius, 0) as the
-    /// device holds them. SH colour only: feature splats train on the host.
+    /// device holds them.
     pub(super) fn device_state(&self) -> [Vec<f32>; 4] {
         let s = &self.scene;
-        let (n, r, stride) = (self.len(), self.record_floats(), s.sh_stride());
+        let (n, r, c) = (self.len(), self.record_floats(), self.colour_floats());
+        let colour = self.colour_group();
         let mut out = [
             vec![0f32; n * r],
             vec![0f32; n * r],
             vec![0f32; n * r],
             vec![0f32; n * 4],
         ];
-        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (4, stride, 11)] {
+        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (colour, c, 11)] {
             let params: Vec<f32> = match g {
                 0 => s.positions.iter().flatten().copied().collect(),
                 1 => s.log_scales.iter().flatten().copied().collect(),
                 2 => s.rotations.iter().flatten().copied().collect(),
                 3 => s.opacity_logits.clone(),
-                _ => s.sh.clone(),
+                4 => s.sh.clone(),
+                _ => s.features.clone(),
             };
             for (a, src) in [&params, &self.moments[g].m, &self.moments[g].v]
                 .into_iter()
@@ -473,7 +526,8 @@ impl Model {
     pub(super) fn set_device_state(&mut self, state: [Vec<f32>; 4]) {
         let n = self.len();
         let r = self.record_floats();
-        let stride = self.scene.sh_stride();
+        let c = self.colour_floats();
+        let colour = self.colour_group();
         let [params, m, v, stats] = state;
         let rows = |src: &[f32], offset: usize, width: usize| -> Vec<f32> {
             (0..n)
@@ -491,8 +545,12 @@ impl Model {
             .map(|c| [c[0], c[1], c[2], c[3]])
             .collect();
         s.opacity_logits = rows(&params, 10, 1);
-        s.sh = rows(&params, 11, stride);
-        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (4, stride, 11)] {
+        if colour == 4 {
+            s.sh = rows(&params, 11, c);
+        } else {
+            s.features = rows(&params, 11, c);
+        }
+        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (colour, c, 11)] {
             self.moments[g] = Moments {
                 m: rows(&m, offset, width),
                 v: rows(&v, offset, width),

@@ -10,12 +10,13 @@
 //! backward pass and steps Adam without a Gaussian crossing to the host; only the loss's
 //! sums (16 bytes) are read back. The state comes down for what the host does every few
 //! hundred iterations (densification, opacity reset, evaluation, checkpoints, saving).
-//! Feature splats (a neural shader) and gradient clipping use the host optimiser
-//! ([`super::model::Model::step`], the rasterizer's upload/read-back API) for now; so does
-//! [`TrainOptions::host_optimizer`]. Same rules either way.
+//! Feature splats (their channels and the neural shader's weights) and gradient clipping
+//! too. [`TrainOptions::host_optimizer`] steps on the host instead
+//! ([`super::model::Model::step`], through the rasterizer's upload/read-back API), for
+//! comparisons. Same rules either way.
 
 use super::data::{Dataset, View};
-use super::device::{DeviceModel, Step};
+use super::device::{DeviceModel, Step, StepPipelines};
 use super::loss::{GpuLoss, LossValue};
 use super::model::{position_lr, Model, Settings};
 use crate::camera::Camera;
@@ -23,6 +24,7 @@ use crate::gen::Rng;
 use crate::gpu::sync::{barrier, Access};
 use crate::model::grad::PixelGrads;
 use crate::model::RenderOptions;
+use crate::render::backward::DeviceFeatures;
 use crate::render::differentiable::DiffRasterizer;
 use std::path::{Path, PathBuf};
 
@@ -384,9 +386,9 @@ pub fn train(
         let path = out.join(format!("chkpnt{it}.safetensors"));
         write(&path, &c.to_bytes(), overwrite, written).map(|()| path)
     };
-    // The state on the device, unless a neural shader or gradient clipping asks for the
-    // host optimiser (or the caller does).
-    let device_path = model.shader.is_none() && s.clip_grad.is_none() && !opts.host_optimizer;
+    // The state on the device, unless the caller asks for the host optimiser.
+    let device_path = !opts.host_optimizer;
+    let mut pipelines: Option<StepPipelines> = None;
     let mut dev: Option<DeviceModel> = None;
     for it in first..=s.iterations {
         if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
@@ -408,7 +410,15 @@ pub fn train(
         let value;
         if device_path {
             if dev.is_none() {
-                dev = Some(DeviceModel::new(rast.renderer(), &model)?);
+                if pipelines.is_none() {
+                    pipelines = Some(StepPipelines::new(rast.renderer().ctx())?);
+                }
+                dev = Some(DeviceModel::new(
+                    rast.renderer(),
+                    pipelines.as_ref().expect("made above"),
+                    &model,
+                    s.clip_grad.is_some(),
+                )?);
             }
             let d = dev.as_ref().expect("made above");
             let it_opts = RenderOptions {
@@ -416,7 +426,12 @@ pub fn train(
                 ..render_opts
             };
             let renderer = rast.renderer();
-            renderer.render_on_device(&d.scene, cam, &it_opts)?;
+            match (&d.features, d.shader()) {
+                (Some(features), Some(shader)) => {
+                    renderer.render_shaded_on_device(&d.scene, features, shader, cam, &it_opts)?
+                }
+                _ => renderer.render_on_device(&d.scene, cam, &it_opts)?,
+            }
             if renderer.forward_state()?.last_contributor.is_none() {
                 return Err(TrainError::Other(format!(
                     "the {}x{} view {} of {} Gaussians is too large to render in one piece, which training needs; use a lower --resolution",
@@ -432,16 +447,40 @@ pub fn train(
                 size: (cam.width, cam.height),
             };
             let (w, h, lambda) = (cam.width, cam.height, s.lambda_dssim);
+            let features = match (d.feature_values(), d.shader()) {
+                (Some((values, channels)), Some(shader)) => Some(DeviceFeatures {
+                    values,
+                    channels,
+                    shader,
+                    cam,
+                    background: bg,
+                }),
+                _ => None,
+            };
+            let mut norm_buffer = None;
             renderer.backward_on_device(
                 &d.scene,
                 (w, h),
+                features,
                 &mut |ctx, cmd, image, grad| loss.record_image(ctx, cmd, image, grad, w, h, lambda),
                 &mut |ctx, cmd, grads| {
                     barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-                    d.record_step(ctx, cmd, grads, &step, s)
+                    norm_buffer = d.record_step(ctx, cmd, grads, &step, s)?;
+                    Ok(())
                 },
             )?;
-            value = loss.read_value(rast.renderer().ctx())?;
+            let ctx = rast.renderer().ctx();
+            value = loss.read_value(ctx)?;
+            if let Some(b) = norm_buffer {
+                // The squared norm of the whole gradient, clipped against (one float).
+                let sq: Vec<[f32; 4]> = b.read(ctx, 1)?;
+                let norm = sq[0][0].sqrt();
+                if !norm.is_finite() && value.total.is_finite() {
+                    return Err(TrainError::Other(format!(
+                        "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
+                    )));
+                }
+            }
         } else {
             let params = model.params();
             rast.set_shader(model.shader.as_ref())?;
