@@ -18,8 +18,11 @@
 // Gradient clipping: a first dispatch (STEP_NORM) writes each Gaussian's squared gradient
 // norm (the stored parameters'), which loss_reduce adds up in a fixed order into
 // NORM_TOTAL; the step (STEP_CLIP) then scales every gradient by min(1, max / norm), as
-// Model::step does. Each Gaussian's values are its own: the result does not depend on
-// the order the device runs them in. The arithmetic is the host's, operation by operation
+// Model::step does. The MCMC strategy (STEP_NOISE): the regularisers' gradients (mean
+// opacity, mean scale) join the loss's, and after the step each centre moves by noise
+// shaped by its covariance (Model::add_noise; the same hashed normals as the host's).
+// Each Gaussian's values are its own: the result does not depend on the order the device
+// runs them in. The arithmetic is the host's, operation by operation
 // (src/train/model.rs: Model::step and add_stats; Model::params), `precise` so that no
 // compiler fuses it differently.
 #extension GL_GOOGLE_include_directive : require
@@ -70,6 +73,7 @@ const uint STEP_SKIP_OPACITY = 4u;
 const uint STEP_FEATURES = 8u;
 const uint STEP_NORM = 16u;
 const uint STEP_CLIP = 32u;
+const uint STEP_NOISE = 64u;
 
 layout(push_constant) uniform Push {
     // Gaussians, floats per stored record, colour floats C (3 (d + 1)^2 SH coefficients,
@@ -86,9 +90,29 @@ layout(push_constant) uniform Push {
     vec4 c1;
     // Bias corrections sqrt(1 - b2^t) of the same groups.
     vec4 c2;
-    // The largest gradient norm (STEP_CLIP).
+    // The largest gradient norm (STEP_CLIP); MCMC: the noise scale, the opacity and scale
+    // regularisers' weights over n and 3 n.
     vec4 clip;
+    // MCMC: the noise key of the iteration (model::noise_key).
+    uvec4 noise;
 } pc;
+
+// model::pcg_hash, model::noise_normal.
+uint pcg_hash(uint x) {
+    uint state = x * 747796405u + 2891336453u;
+    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+float noise_normal(uint key, uint i, uint a) {
+    uint h = pcg_hash(key ^ pcg_hash(i * 4u + a));
+    uint h2 = pcg_hash(h ^ 0x9e3779b9u);
+    precise float u1 = float((h >> 8u) + 1u) / 16777216.0;
+    precise float u2 = float((h2 >> 8u) + 1u) / 16777216.0;
+    precise float r = sqrt(-2.0 * log(u1));
+    precise float n = r * cos(6.2831853071795864 * u2);
+    return n;
+}
 
 float sigmoid_of(float x) {
     precise float e = exp(-x);
@@ -136,6 +160,15 @@ RawGrad raw_grad(uint i, uint base) {
     float p = sigmoid_of(state[base + 10u]);
     precise float go = g.mean_opacity.w * p * (1.0 - p);
     r.logit = go;
+    if ((pc.flags_size.x & STEP_NOISE) != 0u) {
+        // MCMC's regularisers, as Model::step adds them.
+        precise float ro = go + pc.clip.z * p * (1.0 - p);
+        r.logit = ro;
+        for (uint a = 0u; a < 3u; a++) {
+            precise float rs = r.log_scale[a] + pc.clip.w * exp(state[base + 3u + a]);
+            r.log_scale[a] = rs;
+        }
+    }
     return r;
 }
 
@@ -197,6 +230,31 @@ void main() {
         for (uint k = 0u; k < colours; k++) {
             float lr = (features || k < 3u) ? pc.lr_sh.x : pc.lr_sh.y;
             adam(base + 11u + k, colour_grad(i, k, features) * scale, lr, pc.lr_sh.z, pc.lr_sh.w);
+        }
+        if ((flags & STEP_NOISE) != 0u) {
+            // Model::add_noise with the stepped values.
+            vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+            precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+            float w = q.x / qn, x = q.y / qn, y = q.z / qn, z = q.w / qn;
+            vec3 sc = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
+            float o = sigmoid_of(state[base + 10u]);
+            precise float gate = 1.0 / (1.0 + exp(-100.0 * ((1.0 - o) - 0.995)));
+            vec3 v;
+            for (uint a = 0u; a < 3u; a++) {
+                precise float n = noise_normal(pc.noise.x, i, a) * gate * pc.clip.y;
+                v[a] = n;
+            }
+            // rows of R
+            vec3 r0 = vec3(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y));
+            vec3 r1 = vec3(2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x));
+            vec3 r2 = vec3(2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y));
+            precise vec3 rt = r0 * v.x + r1 * v.y + r2 * v.z;
+            precise vec3 t = sc * sc * rt;
+            precise vec3 d = vec3(dot(r0, t), dot(r1, t), dot(r2, t));
+            for (uint a = 0u; a < 3u; a++) {
+                precise float p = state[base + a] + d[a];
+                state[base + a] = p;
+            }
         }
     }
     // The activated record, SH texels and feature channels of the next forward pass.

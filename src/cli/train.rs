@@ -77,9 +77,9 @@ pub(crate) struct TrainArgs {
     /// Densify from this iteration ...
     #[arg(long, visible_alias = "densify_from_iter", default_value_t = 500)]
     pub(crate) densify_from_iter: u32,
-    /// ... until this one ...
-    #[arg(long, visible_alias = "densify_until_iter", default_value_t = 15_000)]
-    pub(crate) densify_until_iter: u32,
+    /// ... until this one ... [default: 15000; 25000 with --strategy mcmc]
+    #[arg(long, visible_alias = "densify_until_iter")]
+    pub(crate) densify_until_iter: Option<u32>,
     /// ... every this many iterations.
     #[arg(long, visible_alias = "densification_interval", default_value_t = 100)]
     pub(crate) densification_interval: u32,
@@ -114,6 +114,25 @@ pub(crate) struct TrainArgs {
     /// The alpha falloff: gaussian (the original) or power.
     #[arg(long, default_value = "gaussian")]
     pub(crate) kernel: vksplat::model::SplatKernel,
+    /// How the Gaussians are added and removed: default (the original's densification:
+    /// clone, split, prune, opacity resets) or mcmc (3DGS as Markov chain Monte Carlo:
+    /// dead Gaussians relocated onto live ones, 5 % growth per refinement up to
+    /// --cap-max, noise on the centres, opacity and scale regularisers; the flags of
+    /// ubc-vision/3dgs-mcmc).
+    #[arg(long, default_value = "default", value_parser = ["default", "mcmc"])]
+    pub(crate) strategy: String,
+    /// MCMC: the most Gaussians.
+    #[arg(long, visible_alias = "cap_max", default_value_t = 1_000_000, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) cap_max: u32,
+    /// MCMC: the noise's scale (times the centres' learning rate).
+    #[arg(long, visible_alias = "noise_lr", default_value_t = 5e5)]
+    pub(crate) noise_lr: f32,
+    /// MCMC: weight of the mean opacity in the loss.
+    #[arg(long, visible_alias = "opacity_reg", default_value_t = 0.01)]
+    pub(crate) opacity_reg: f32,
+    /// MCMC: weight of the mean scale in the loss.
+    #[arg(long, visible_alias = "scale_reg", default_value_t = 0.01)]
+    pub(crate) scale_reg: f32,
     /// Scale the whole gradient down to this L2 norm when it is larger (gradient-norm
     /// clipping; off by default, as the original).
     #[arg(long, value_name = "NORM")]
@@ -197,6 +216,28 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             args.lambda_dssim
         );
     }
+    for (name, v) in [
+        ("--noise-lr", args.noise_lr),
+        ("--opacity-reg", args.opacity_reg),
+        ("--scale-reg", args.scale_reg),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{name} must be a number >= 0, not {v}");
+        }
+    }
+    let mcmc = args.strategy == "mcmc";
+    if !mcmc {
+        for (name, given) in [
+            ("--cap-max", args.cap_max != 1_000_000),
+            ("--noise-lr", args.noise_lr != 5e5),
+            ("--opacity-reg", args.opacity_reg != 0.01),
+            ("--scale-reg", args.scale_reg != 0.01),
+        ] {
+            if given {
+                bail!("{name} belongs to --strategy mcmc");
+            }
+        }
+    }
     if args.densification_interval == 0 || args.opacity_reset_interval == 0 {
         bail!("--densification-interval and --opacity-reset-interval must be at least 1");
     }
@@ -244,11 +285,18 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         lambda_dssim: args.lambda_dssim,
         densification_interval: args.densification_interval,
         densify_from_iter: args.densify_from_iter,
-        densify_until_iter: args.densify_until_iter,
+        densify_until_iter: args.densify_until_iter.unwrap_or(15_000),
         densify_grad_threshold: args.densify_grad_threshold,
         opacity_reset_interval: args.opacity_reset_interval,
         shader_lr: args.shader_lr,
         clip_grad: args.clip_grad,
+        mcmc: mcmc.then(|| vksplat::train::model::Mcmc {
+            cap_max: args.cap_max as usize,
+            noise_lr: args.noise_lr,
+            opacity_reg: args.opacity_reg,
+            scale_reg: args.scale_reg,
+            refine_until: args.densify_until_iter.unwrap_or(25_000),
+        }),
         ..Settings::default()
     };
     let shader = match (args.features, &args.shader) {

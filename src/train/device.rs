@@ -39,6 +39,7 @@ const STEP_SKIP_OPACITY: u32 = 4;
 const STEP_FEATURES: u32 = 8;
 const STEP_NORM: u32 = 16;
 const STEP_CLIP: u32 = 32;
+const STEP_NOISE: u32 = 64;
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
@@ -50,6 +51,7 @@ struct StepPush {
     c1: [f32; 4],
     c2: [f32; 4],
     clip: [f32; 4],
+    noise: [u32; 4],
 }
 
 #[repr(C)]
@@ -73,6 +75,21 @@ pub struct Step {
     pub position_lr: f32,
     /// The frame's size.
     pub size: (u32, u32),
+    /// The MCMC strategy's regularisers and noise (with the Adam step).
+    pub mcmc: Option<McmcStep>,
+}
+
+/// One iteration's MCMC terms.
+#[derive(Clone, Copy, Debug)]
+pub struct McmcStep {
+    /// Noise scale: `noise_lr` times the centres' learning rate.
+    pub noise_scale: f32,
+    /// The iteration's noise key ([`super::model::noise_key`]).
+    pub key: u32,
+    /// Weight of the mean opacity over the Gaussians' count.
+    pub opacity_reg: f32,
+    /// Weight of the mean scale over three times the count.
+    pub scale_reg: f32,
 }
 
 /// The pipelines of the step (built once per run; a [`DeviceModel`] is rebuilt after
@@ -180,6 +197,14 @@ pub struct DeviceModel<'p> {
     pub features: Option<GpuFeatures>,
 }
 
+/// The push's `clip` vector without the clipping norm: the noise scale and the
+/// regularisers' weights per value (over n and 3 n).
+fn mcmc_terms(m: Option<McmcStep>) -> [f32; 4] {
+    m.map_or([0.0; 4], |m| {
+        [0.0, m.noise_scale, m.opacity_reg, m.scale_reg]
+    })
+}
+
 fn bias(beta: f32, t: u32) -> f32 {
     1.0 - beta.powi(t as i32)
 }
@@ -283,7 +308,7 @@ impl<'p> DeviceModel<'p> {
             dm.v.upload(ctx, &v)?;
             dm.stats.upload(ctx, &stats)?;
         }
-        let push = dm.push(0, [0.0; 4], [0.0; 4], [1.0; 4], [1.0; 4], (0, 0), 0.0);
+        let push = dm.push(0, [0.0; 4], [0.0; 4], [1.0; 4], [1.0; 4], (0, 0), [0.0; 4]);
         ctx.submit_and_wait("activate", |cmd| {
             barrier(ctx, cmd, Access::Any, Access::Any);
             dm.dispatch(ctx, cmd, None, &push, None)?;
@@ -345,7 +370,7 @@ impl<'p> DeviceModel<'p> {
         c1: [f32; 4],
         c2: [f32; 4],
         size: (u32, u32),
-        clip: f32,
+        clip: [f32; 4],
     ) -> StepPush {
         let features = if self.interleaved.is_some() {
             STEP_FEATURES
@@ -364,7 +389,8 @@ impl<'p> DeviceModel<'p> {
             lr_sh,
             c1,
             c2,
-            clip: [clip, 0.0, 0.0, 0.0],
+            clip,
+            noise: [0; 4],
         }
     }
 
@@ -465,16 +491,19 @@ impl<'p> DeviceModel<'p> {
         cmd: ash::vk::CommandBuffer,
         grads: DeviceGrads,
         mlp_grads: Option<BufferSlice>,
+        mcmc: Option<McmcStep>,
     ) -> GpuResult<&'a GpuBuffer> {
         let [values, part_a, part_b] = self.norms.as_ref().expect("made with clipping");
+        // The regularisers' gradients count in the norm (STEP_NOISE adds them).
+        let flags = STEP_NORM | if mcmc.is_some() { STEP_NOISE } else { 0 };
         let push = self.push(
-            STEP_NORM,
+            flags,
             [0.0; 4],
             [0.0; 4],
             [1.0; 4],
             [1.0; 4],
             (0, 0),
-            0.0,
+            mcmc_terms(mcmc),
         );
         self.dispatch(ctx, cmd, Some(grads), &push, None)?;
         let mut count = u64::from(self.count);
@@ -550,11 +579,16 @@ impl<'p> DeviceModel<'p> {
                         "gradient clipping on a device model made without it".into(),
                     ));
                 }
-                norm_total = Some(self.record_norm(ctx, cmd, grads, grads.mlp_grads)?);
+                norm_total = Some(self.record_norm(ctx, cmd, grads, grads.mlp_grads, step.mcmc)?);
                 flags |= STEP_CLIP;
             }
         }
         let clip = settings.clip_grad.unwrap_or(0.0);
+        if step.mcmc.is_some() && step.adam.is_some() {
+            flags |= STEP_NOISE;
+        }
+        let mut terms = mcmc_terms(step.mcmc);
+        terms[0] = clip;
         let lr = [
             step.position_lr,
             settings.scaling_lr,
@@ -567,7 +601,8 @@ impl<'p> DeviceModel<'p> {
             colour_c.0,
             colour_c.1,
         ];
-        let push = self.push(flags, lr, lr_sh, c1, c2, step.size, clip);
+        let mut push = self.push(flags, lr, lr_sh, c1, c2, step.size, terms);
+        push.noise[0] = step.mcmc.map_or(0, |m| m.key);
         let total = norm_total.map(|b| b.whole());
         self.dispatch(ctx, cmd, Some(grads), &push, total)?;
         if let (Some(s), Some(g), true) = (&self.shader, grads.mlp_grads, step.adam.is_some()) {

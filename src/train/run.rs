@@ -16,8 +16,9 @@
 //! comparisons. Same rules either way.
 
 use super::data::{Dataset, View};
-use super::device::{DeviceModel, Step, StepPipelines};
+use super::device::{DeviceModel, McmcStep, Step, StepPipelines};
 use super::loss::{GpuLoss, LossValue};
+use super::model::noise_key;
 use super::model::{position_lr, Model, Settings};
 use crate::camera::Camera;
 use crate::gen::Rng;
@@ -403,10 +404,22 @@ pub fn train(
         }
         let view = &data.train[order.pop().expect("refilled above")];
         let cam = &view.camera;
-        let in_densify = it < s.densify_until_iter;
+        // The original's densification (statistics, clone/split/prune, opacity resets) or
+        // the MCMC strategy's refinement (relocation and growth).
+        let mcmc = s.mcmc.as_ref();
+        let until = mcmc.map_or(s.densify_until_iter, |m| m.refine_until);
+        let in_densify = it < until;
         let densify_now =
             in_densify && it > s.densify_from_iter && it % s.densification_interval == 0;
-        let reset_now = in_densify && it % s.opacity_reset_interval == 0;
+        let reset_now = mcmc.is_none() && in_densify && it % s.opacity_reset_interval == 0;
+        let lr_now = position_lr(s, data.extent, it);
+        let n_now = model.len().max(1);
+        let mcmc_step = mcmc.map(|m| McmcStep {
+            noise_scale: m.noise_lr * lr_now,
+            key: noise_key(opts.seed, it),
+            opacity_reg: m.opacity_reg / n_now as f32,
+            scale_reg: m.scale_reg / (3 * n_now) as f32,
+        });
         let value;
         if device_path {
             if dev.is_none() {
@@ -440,11 +453,12 @@ pub fn train(
             }
             loss.stage_target(renderer.ctx(), &view.image)?;
             let step = Step {
-                stats: in_densify,
+                stats: in_densify && mcmc.is_none(),
                 adam: (!densify_now).then(|| model.advance_steps(reset_now)),
                 skip_opacity: reset_now,
-                position_lr: position_lr(s, data.extent, it),
+                position_lr: lr_now,
                 size: (cam.width, cam.height),
+                mcmc: mcmc_step,
             };
             let (w, h, lambda) = (cam.width, cam.height, s.lambda_dssim);
             let features = match (d.feature_values(), d.shader()) {
@@ -510,7 +524,7 @@ pub fn train(
                         None,
                     )
                 };
-                if in_densify {
+                if in_densify && mcmc.is_none() {
                     let radii: Vec<f32> = rast
                         .projected()?
                         .iter()
@@ -519,17 +533,14 @@ pub fn train(
                     model.add_stats(&grads, &radii, cam.width, cam.height);
                 }
                 if !densify_now {
-                    let norm = model.step(
-                        &grads,
-                        shader_grads.as_ref(),
-                        position_lr(s, data.extent, it),
-                        s,
-                        reset_now,
-                    );
+                    let norm = model.step(&grads, shader_grads.as_ref(), lr_now, s, reset_now);
                     if !norm.is_finite() {
                         return Err(TrainError::Other(format!(
                             "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
                         )));
+                    }
+                    if let Some(m) = mcmc_step {
+                        model.add_noise(m.noise_scale, m.key);
                     }
                 }
             }
@@ -558,7 +569,14 @@ pub fn train(
                 dev = None;
             }
         }
-        if densify_now {
+        if let (true, Some(m)) = (densify_now, mcmc) {
+            // 3dgs-mcmc's order: relocate and grow, the step (skipped: the parameters are
+            // new), the noise.
+            model.mcmc_refine(m.cap_max, &mut rng);
+            if let Some(ms) = mcmc_step {
+                model.add_noise(ms.noise_scale, ms.key);
+            }
+        } else if densify_now {
             let screen = (it > s.opacity_reset_interval).then_some(20.0);
             model.densify_and_prune(s, data.extent, screen, &mut rng);
             if model.is_empty() {
