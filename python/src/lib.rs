@@ -490,6 +490,8 @@ fn fit<'py>(
     let positions: Vec<[f32; 3]> = rows(&points);
     let mut data = FieldData {
         bounds: fit::model::point_bounds(&positions),
+        times: None,
+        time_column: None,
         positions,
         values,
         k,

@@ -192,6 +192,16 @@ pub fn convert(
     if let Some(file) = &options.features {
         super::features::attach_npy(&mut scene, file)?;
     }
+    if scene.time.is_some() && output_format != OutputFormat::Ply {
+        return Err(ConvertError::Encode {
+            path: output.to_path_buf(),
+            format: output_format,
+            message: format!(
+                "{} is time-varying (t_mean, t_scale per Gaussian), which only PLY holds; write a .ply, or render a time with `vksplat render --time T`",
+                input.display()
+            ),
+        });
+    }
     let read = scene.len();
     let scene = match &options.transform {
         Some(t) => t.apply(scene).map_err(|message| ConvertError::Transform {
