@@ -68,7 +68,9 @@ impl std::str::FromStr for TimeColumn {
     fn from_str(s: &str) -> Result<Self, String> {
         let s = s.trim();
         if s.is_empty() {
-            return Err("expected a column number (0-based, e.g. 3) or a CSV header's name (e.g. t)".into());
+            return Err(
+                "expected a column number (0-based, e.g. 3) or a CSV header's name (e.g. t)".into(),
+            );
         }
         Ok(match s.parse::<usize>() {
             Ok(i) => TimeColumn::Index(i),
@@ -209,7 +211,10 @@ pub fn load(
 /// Refuses times no time-varying field can be fitted to: one value for every sample.
 pub fn check_times(times: &[f32]) -> Result<(), String> {
     if let Some(i) = times.iter().position(|v| !v.is_finite()) {
-        return Err(format!("sample {i} has the time {}, not a finite number", times[i]));
+        return Err(format!(
+            "sample {i} has the time {}, not a finite number",
+            times[i]
+        ));
     }
     if let Some(&t0) = times.first() {
         if times.iter().all(|&t| t == t0) {
@@ -231,10 +236,12 @@ fn sidecar_time_column(npy: &Path) -> Result<Option<usize>, InputError> {
         serde_json::from_str(&text).map_err(|e| bad(&side, format!("is not valid JSON: {e}")))?;
     match value.get("time_column") {
         None | Some(serde_json::Value::Null) => Ok(None),
-        Some(v) => v
-            .as_u64()
-            .map(|c| Some(c as usize))
-            .ok_or_else(|| bad(&side, format!("\"time_column\" is {v}, not a column number"))),
+        Some(v) => v.as_u64().map(|c| Some(c as usize)).ok_or_else(|| {
+            bad(
+                &side,
+                format!("\"time_column\" is {v}, not a column number"),
+            )
+        }),
     }
 }
 
@@ -249,13 +256,18 @@ fn check_time_column(c: usize, cols: usize, path: &Path) -> Result<(), InputErro
     if c >= cols {
         return Err(bad(
             path,
-            format!("--time-column {c}: the samples have {cols} columns (0 to {})", cols - 1),
+            format!(
+                "--time-column {c}: the samples have {cols} columns (0 to {})",
+                cols - 1
+            ),
         ));
     }
     if cols < 5 {
         return Err(bad(
             path,
-            format!("has {cols} columns; samples with a time are x, y, z, t and at least one value"),
+            format!(
+                "has {cols} columns; samples with a time are x, y, z, t and at least one value"
+            ),
         ));
     }
     Ok(())
@@ -855,16 +867,20 @@ pub fn fit(
     let (bounds, note) = fit_bounds(data.bounds, cfg.initial);
     // Times mapped to 0..1, so nothing depends on their unit or origin either.
     let time_range = data.times.as_ref().map(|t| {
-        t.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        })
+        t.iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            })
     });
-    let (t0, span) = time_range.map_or((0.0, 1.0), |(a, b)| (f64::from(a), f64::from(b) - f64::from(a)));
+    let (t0, span) = time_range.map_or((0.0, 1.0), |(a, b)| {
+        (f64::from(a), f64::from(b) - f64::from(a))
+    });
     let normalised = FieldData {
-        times: data
-            .times
-            .as_ref()
-            .map(|t| t.iter().map(|&v| ((f64::from(v) - t0) / span) as f32).collect()),
+        times: data.times.as_ref().map(|t| {
+            t.iter()
+                .map(|&v| ((f64::from(v) - t0) / span) as f32)
+                .collect()
+        }),
         time_column: data.time_column,
         positions: data.positions.clone(),
         values: values

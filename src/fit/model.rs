@@ -471,14 +471,7 @@ fn visit(p: &Prepared, grid: &CellGrid, points: &Points, cut: f32, mut f: impl F
                         ((-0.5 * u2).exp(), u)
                     }
                 };
-                f(Hit {
-                    n,
-                    d,
-                    v,
-                    d2,
-                    tw,
-                    u,
-                });
+                f(Hit { n, d, v, d2, tw, u });
             }
         }
     }
@@ -642,14 +635,7 @@ pub fn loss_and_grad(
             let (mut g_tau, mut g_log_st) = (0f64, 0f64);
             let inv_st = p.time.map_or(0.0, |t| f64::from(t.1));
             visit(&p, grid, points, cut, |h| {
-                let Hit {
-                    n,
-                    d,
-                    v,
-                    d2,
-                    tw,
-                    u,
-                } = h;
+                let Hit { n, d, v, d2, tw, u } = h;
                 let (g, dg) = kernel_value(cfg.kernel, d2);
                 let en = &e[n * k..(n + 1) * k];
                 let mut ea = 0f32;

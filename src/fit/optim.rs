@@ -125,9 +125,13 @@ pub fn densify(
     let t_at = model.time.then(|| model.time_offset());
     // The longest axis, 0..3 in space or 3 for time, and its log scale on the spatial scale.
     let longest = |g: &[f32]| -> (usize, f32) {
-        let mut best = (0..3)
-            .map(|a| (a, g[SCALE + a]))
-            .fold((0, f32::NEG_INFINITY), |b, (a, v)| if v > b.1 { (a, v) } else { b });
+        let mut best =
+            (0..3)
+                .map(|a| (a, g[SCALE + a]))
+                .fold(
+                    (0, f32::NEG_INFINITY),
+                    |b, (a, v)| if v > b.1 { (a, v) } else { b },
+                );
         if let Some(t) = t_at {
             let v = g[t + 1] + time_to_space;
             if v > best.1 {

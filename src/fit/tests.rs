@@ -171,8 +171,12 @@ fn model_at_a_time_equals_the_scene_at_that_time() {
     for i in 0..model.len() {
         let g = model.gaussian(i);
         scene.positions.push([g[0], g[1], g[2]]);
-        scene.log_scales.push([g[SCALE], g[SCALE + 1], g[SCALE + 2]]);
-        scene.rotations.push([g[ROT], g[ROT + 1], g[ROT + 2], g[ROT + 3]]);
+        scene
+            .log_scales
+            .push([g[SCALE], g[SCALE + 1], g[SCALE + 2]]);
+        scene
+            .rotations
+            .push([g[ROT], g[ROT + 1], g[ROT + 2], g[ROT + 3]]);
         scene.opacity_logits.push(g[LOGIT]);
         scene.sh.extend_from_slice(&[0.0; 3]);
         scene.features.extend_from_slice(model.features(i));
@@ -182,24 +186,44 @@ fn model_at_a_time_equals_the_scene_at_that_time() {
     assert_eq!(Model::from_scene(&scene).params.len(), model.params.len());
     let mut rng = Rng(3);
     let pos: Vec<[f32; 3]> = (0..300)
-        .map(|_| [rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)])
+        .map(|_| {
+            [
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            ]
+        })
         .collect();
     let mut compared = 0;
     for t in [-0.5f32, 0.0, 0.3, 0.77, 1.0, 2.5] {
-        let want = evaluate_at(&model, SplatKernel::Gaussian, &pos, Some(&vec![t; pos.len()]))
-            .unwrap();
+        let want = evaluate_at(
+            &model,
+            SplatKernel::Gaussian,
+            &pos,
+            Some(&vec![t; pos.len()]),
+        )
+        .unwrap();
         let at = Model::from_scene(&scene.at_time(t));
         assert!(!at.time);
         let got = evaluate(&at, SplatKernel::Gaussian, &pos);
         let peak = want.iter().fold(0f32, |m, v| m.max(v.abs()));
         for (a, b) in want.iter().zip(&got) {
-            assert!((a - b).abs() <= 1e-5 * peak.max(1e-3), "t = {t}: {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-5 * peak.max(1e-3),
+                "t = {t}: {a} vs {b}"
+            );
         }
         compared += usize::from(peak > 1e-3);
     }
     assert!(compared >= 4, "the times compared see the field");
     assert!(evaluate_at(&model, SplatKernel::Gaussian, &pos, None).is_err());
-    assert!(evaluate_at(&model.without_time(), SplatKernel::Gaussian, &pos, Some(&[0.0])).is_err());
+    assert!(evaluate_at(
+        &model.without_time(),
+        SplatKernel::Gaussian,
+        &pos,
+        Some(&[0.0])
+    )
+    .is_err());
 }
 
 /// The cell culling loses nothing: the binned forward pass equals a sum over every
@@ -327,12 +351,18 @@ fn density_control_splits_along_time_or_space() {
     m.params[stride + SCALE] = 0.6f32.ln();
     let before = m.clone();
     let mut adam = optim::Adam::new(m.params.len());
-    let (cloned, split) = optim::densify(&mut m, &mut adam, &[2.0, 1.0, 0.0, 0.0, 0.0, 0.0], 2, 0.0);
+    let (cloned, split) =
+        optim::densify(&mut m, &mut adam, &[2.0, 1.0, 0.0, 0.0, 0.0, 0.0], 2, 0.0);
     assert_eq!((cloned, split), (0, 2));
     let (g0, g1) = (m.gaussian(0), m.gaussian(6));
     assert_eq!(&g0[..3], &before.gaussian(0)[..3]);
     assert_eq!(&g1[..3], &before.gaussian(0)[..3]);
-    assert!((g0[t] - 0.1).abs() < 1e-6 && (g1[t] - 0.9).abs() < 1e-6, "{} {}", g0[t], g1[t]);
+    assert!(
+        (g0[t] - 0.1).abs() < 1e-6 && (g1[t] - 0.9).abs() < 1e-6,
+        "{} {}",
+        g0[t],
+        g1[t]
+    );
     assert!((g0[t + 1] - (0.4f32 / 1.6).ln()).abs() < 1e-5);
     let (h0, h1) = (m.gaussian(1), m.gaussian(7));
     assert_eq!((h0[t], h1[t]), (0.5, 0.5));
