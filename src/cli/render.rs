@@ -342,20 +342,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if let Some(file) = &args.features {
         vksplat::scene::features::attach_npy(&mut scene, file)?;
     }
-    let mut scene = scene;
-    let animate = match time_choice(args, &scene, &name)? {
-        TimeChoice::Static => None,
-        TimeChoice::At(t) => {
-            let total = scene.len();
-            scene = scene.at_time(t);
-            note!(
-                "at time {t}: {} of {total} Gaussians contribute (within 4 temporal scales)",
-                scene.len()
-            );
-            None
-        }
-        TimeChoice::Range(r) => Some(r),
-    };
+    let time = time_choice(args, &scene, &name)?;
     let field_mode = args.mode.filter(|m| m.is_field());
     super::render_field::check_options(args, field_mode)?;
     if field_mode.is_some() && scene.feature_count == 0 {
@@ -393,10 +380,25 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         );
         kept
     };
+    // The default camera frames the Gaussians of every time, so a scene looks the same
+    // from --time T as from the frame of --time-range at T.
     let mut path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
-    let animation = match animate {
-        Some(range) => Some(Animation::new(args, range, &mut path, scene.clone())?),
-        None => None,
+    let mut animation = None;
+    let scene = match time {
+        TimeChoice::Static => scene,
+        TimeChoice::At(t) => {
+            let at = scene.at_time(t);
+            note!(
+                "at time {t}: {} of {} contribute (within 4 temporal scales)",
+                at.len(),
+                plural(scene.len(), "Gaussian")
+            );
+            at
+        }
+        TimeChoice::Range(range) => {
+            animation = Some(Animation::new(args, range, &mut path, scene.clone())?);
+            scene
+        }
     };
     if let Some(file) = &args.export_cameras {
         if exports_cameras {
