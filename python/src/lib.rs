@@ -376,7 +376,11 @@ impl PyScene {
         }
         let raw = self.raw.at_time(t);
         let act = raw.activated();
-        Ok(PyScene::new(raw, act, format!("{} at t = {t}", self.source)))
+        Ok(PyScene::new(
+            raw,
+            act,
+            format!("{} at t = {t}", self.source),
+        ))
     }
 
     /// The falloff the file records ("gaussian" unless a PLY says `power`).
