@@ -110,8 +110,11 @@ pub enum ConvertError {
     },
 }
 
-/// Serialises a scene in `format`.
+/// Serialises a scene in `format` (a time-varying scene only as PLY).
 pub fn to_bytes(scene: &Scene, format: OutputFormat) -> Result<Vec<u8>, String> {
+    if scene.time.is_some() && format != OutputFormat::Ply {
+        return Err("the scene is time-varying (t_mean, t_scale per Gaussian), which only PLY holds; write a .ply, or the scene at one time".into());
+    }
     match format {
         OutputFormat::Ply => Ok(ply::to_bytes(scene, ply::PlyEncoding::BinaryLittleEndian)),
         OutputFormat::Splat => Ok(splat::to_bytes(scene)),
