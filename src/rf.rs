@@ -18,6 +18,10 @@
 //!   is the direct ray `exp(-i k r1) / r1` plus the image ray `-exp(-i k r2) / r2`.
 //!   Channels: magnitude of the sum (normalised to a maximum of 1), cos and sin of its
 //!   phase, and the direct ray's magnitude `1 / r1` (normalised to a maximum of 1).
+//!
+//! And one time-varying field, [`MovingSource`] (`moving-source`): a Gaussian blob whose
+//! centre moves along x as time goes from 0 to 1, sampled on the grid at several times and
+//! written as samples `N x 5` (x, y, z, t, magnitude) for `fit` in space and time.
 
 use std::f64::consts::{FRAC_PI_2, TAU};
 
@@ -113,6 +117,118 @@ impl std::str::FromStr for RfField {
             "two-ray" | "tworay" | "two_ray" => Ok(RfField::TwoRay),
             other => Err(format!("unknown RF field {other:?}; use dipole or two-ray")),
         }
+    }
+}
+
+/// What `gen --rf` writes: a field on a grid, or the moving source's samples in time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RfData {
+    /// A static field on a dense grid.
+    Grid(RfField),
+    /// [`MovingSource`], sampled in space and time.
+    MovingSource,
+}
+
+impl RfData {
+    /// The name `--rf` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            RfData::Grid(f) => f.name(),
+            RfData::MovingSource => "moving-source",
+        }
+    }
+}
+
+impl std::fmt::Display for RfData {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for RfData {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "moving-source" | "moving_source" | "movingsource" => Ok(RfData::MovingSource),
+            other => other.parse().map(RfData::Grid).map_err(|_| {
+                format!("unknown RF field {other:?}; use dipole, two-ray or moving-source")
+            }),
+        }
+    }
+}
+
+/// A time-varying field (`gen --rf moving-source`): a Gaussian blob of amplitude 1 and
+/// width [`MovingSource::SIGMA`] whose centre moves in a straight line at constant speed,
+/// `c(t) = (-1 + 2 t, 0, 0)` for `t` in 0..1, over the box -2..2 on every axis (lengths in
+/// wavelengths). One channel, the magnitude `exp(-|x - c(t)|^2 / (2 sigma^2))`. The tests
+/// compare the field fitted to its samples with it at several times.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MovingSource;
+
+impl MovingSource {
+    /// The blob's width (standard deviation).
+    pub const SIGMA: f64 = 0.5;
+    /// The box, `[xmin, ymin, zmin, xmax, ymax, zmax]`.
+    pub const BOUNDS: [f32; 6] = [-2.0, -2.0, -2.0, 2.0, 2.0, 2.0];
+    /// The times sampled run from the first to the second.
+    pub const TIMES: [f32; 2] = [0.0, 1.0];
+    /// The columns of its samples.
+    pub const COLUMNS: [&'static str; 5] = ["x", "y", "z", "t", "magnitude"];
+    /// The column of the time.
+    pub const TIME_COLUMN: usize = 3;
+
+    /// The centre at time `t`.
+    pub fn centre(t: f64) -> [f64; 3] {
+        [-1.0 + 2.0 * t, 0.0, 0.0]
+    }
+
+    /// The magnitude at `p` at time `t`.
+    pub fn magnitude(p: [f64; 3], t: f64) -> f64 {
+        let c = Self::centre(t);
+        let r2: f64 = (0..3).map(|a| (p[a] - c[a]).powi(2)).sum();
+        (-0.5 * r2 / (Self::SIGMA * Self::SIGMA)).exp()
+    }
+
+    /// Samples on an `n^3` grid over [`Self::BOUNDS`] at `times` equally spaced times over
+    /// [`Self::TIMES`] (both ends included): rows `x, y, z, t, magnitude`, time-major.
+    pub fn samples(n: usize, times: usize) -> Vec<f32> {
+        let b = Self::BOUNDS;
+        let mut rows = Vec::with_capacity(n * n * n * times * 5);
+        for f in 0..times {
+            let t = grid_coordinate(Self::TIMES[0], Self::TIMES[1], f, times);
+            for i in 0..n {
+                for j in 0..n {
+                    for l in 0..n {
+                        let p = [
+                            grid_coordinate(b[0], b[3], i, n),
+                            grid_coordinate(b[1], b[4], j, n),
+                            grid_coordinate(b[2], b[5], l, n),
+                        ];
+                        let v = Self::magnitude(p.map(f64::from), f64::from(t));
+                        rows.extend_from_slice(&[p[0], p[1], p[2], t, v as f32]);
+                    }
+                }
+            }
+        }
+        rows
+    }
+
+    /// The sidecar of its `.npy` samples: bounds, time range, columns and the time's column
+    /// (which `fit` reads as `--time-column`).
+    pub fn sidecar_json(n: usize, times: usize) -> String {
+        let value = serde_json::json!({
+            "field": "moving-source",
+            "bounds": Self::BOUNDS,
+            "time_range": Self::TIMES,
+            "shape": [n * n * n * times, Self::COLUMNS.len()],
+            "columns": Self::COLUMNS,
+            "time_column": Self::TIME_COLUMN,
+            "centre": "(-1 + 2 t, 0, 0)",
+            "sigma": Self::SIGMA,
+            "wavelength": 1.0,
+            "grid": "numpy.linspace(min, max, n) on each axis and over time; rows time-major",
+        });
+        serde_json::to_string_pretty(&value).unwrap_or_default() + "\n"
     }
 }
 
@@ -250,6 +366,29 @@ mod tests {
         }
         let max = g.data.chunks(4).map(|v| v[3]).fold(0.0f32, f32::max);
         assert!((max - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn moving_source_samples_follow_the_centre() {
+        let rows = MovingSource::samples(5, 3);
+        assert_eq!(rows.len(), 125 * 3 * 5);
+        // The peak of each time's samples sits at its centre: x = -1, 0, 1 (grid points).
+        for f in 0..3 {
+            let block = &rows[f * 125 * 5..(f + 1) * 125 * 5];
+            let best = block
+                .chunks(5)
+                .max_by(|a, b| a[4].total_cmp(&b[4]))
+                .unwrap();
+            assert_eq!(best[3], f as f32 * 0.5);
+            assert_eq!(&best[..3], &[-1.0 + f as f32, 0.0, 0.0]);
+            assert!((best[4] - 1.0).abs() < 1e-6);
+        }
+        assert_eq!("moving-source".parse::<RfData>(), Ok(RfData::MovingSource));
+        assert_eq!(
+            "dipole".parse::<RfData>(),
+            Ok(RfData::Grid(RfField::Dipole))
+        );
+        assert!("x".parse::<RfData>().unwrap_err().contains("moving-source"));
     }
 
     #[test]

@@ -791,6 +791,60 @@ pub fn run(
     run_pipelined(frames, &mut source, &opts)
 }
 
+/// A closure given each whole [`FramePlan`] (its number too) as a [`FrameSource`]:
+/// [`render_frames`] submits the frames in order, so the `n`-th submit is `frames[n]`.
+struct EachPlan<'r> {
+    frames: &'r [FramePlan],
+    next: usize,
+    render: &'r mut dyn FnMut(&FramePlan) -> anyhow::Result<Frame>,
+    done: VecDeque<Frame>,
+}
+
+impl FrameSource for EachPlan<'_> {
+    fn submit(&mut self, cam: &Camera) -> anyhow::Result<()> {
+        let p = self
+            .frames
+            .get(self.next)
+            .filter(|p| p.camera.name == cam.name)
+            .ok_or_else(|| anyhow::anyhow!("frames were submitted out of order"))?;
+        self.next += 1;
+        let frame = (self.render)(p)?;
+        self.done.push_back(frame);
+        Ok(())
+    }
+
+    fn finish(&mut self) -> anyhow::Result<Frame> {
+        self.done
+            .pop_front()
+            .ok_or_else(|| anyhow::anyhow!("no frame was submitted"))
+    }
+
+    fn discard(&mut self) {
+        self.done.clear();
+    }
+}
+
+/// [`run`] with a renderer given the whole [`FramePlan`] of each frame, not only its
+/// camera: for frames that differ by more than the camera (`render --time-range`, whose
+/// frame `n` shows its own time).
+pub fn run_each(
+    frames: &[FramePlan],
+    render: &mut dyn FnMut(&FramePlan) -> anyhow::Result<Frame>,
+    opts: &RunOptions,
+) -> Result<Summary, SequenceError> {
+    let mut source = EachPlan {
+        frames,
+        next: 0,
+        render,
+        done: VecDeque::new(),
+    };
+    let opts = RunOptions {
+        frames_in_flight: 1,
+        ..opts.clone()
+    };
+    run_pipelined(frames, &mut source, &opts)
+}
+
 /// [`run`] with a renderer that keeps up to [`RunOptions::frames_in_flight`] frames in
 /// flight: frame `n + 1` is submitted before frame `n` is finished (read back) and handed
 /// to the encoders. Files, errors and their frame numbers are those of [`run`]: a frame

@@ -325,12 +325,15 @@ impl PyScene {
     }
 
     /// The field the Gaussians hold, `sum_i o_i feat_i G_i(x)` (the sum `fit` fits), at `n`
-    /// points (`n x 3` float32 bytes): `n x K` float32 bytes.
+    /// points (`n x 3` float32 bytes), for a time-varying scene at `times` (`n` float32
+    /// bytes): `n x K` float32 bytes.
+    #[pyo3(signature = (points, n, times=None))]
     fn evaluate_field<'py>(
         &self,
         py: Python<'py>,
         points: &[u8],
         n: usize,
+        times: Option<&[u8]>,
     ) -> PyResult<Bound<'py, PyByteArray>> {
         if self.raw.feature_count == 0 {
             return Err(value_err(format!(
@@ -341,11 +344,43 @@ impl PyScene {
         let p = floats(points, "points", n * 3)?;
         check_finite("points", &p, 3)?;
         let positions: Vec<[f32; 3]> = rows(&p);
+        let times = times.map(|t| floats(t, "times", n)).transpose()?;
         let model = vksplat::fit::model::Model::from_scene(&self.raw);
         let kernel = self.raw.kernel;
-        let f = py
-            .detach(|| guarded(|| Ok(vksplat::fit::model::evaluate(&model, kernel, &positions))))?;
+        let f = py.detach(|| {
+            guarded(|| {
+                vksplat::fit::model::evaluate_at(&model, kernel, &positions, times.as_deref())
+                    .map_err(|m| value_err(format!("{}: {m}", self.source)))
+            })
+        })?;
         Ok(byte_array(py, &f))
+    }
+
+    /// A time-varying scene's temporal means' range `(min, max)`; None for a static one.
+    #[getter]
+    fn time_range(&self) -> Option<(f32, f32)> {
+        self.raw.time_range()
+    }
+
+    /// The static scene a time-varying one is at time `t` (each Gaussian's opacity times
+    /// its temporal factor, as `render --time` renders it).
+    fn at_time(&self, t: f32) -> PyResult<PyScene> {
+        if self.raw.time.is_none() {
+            return Err(value_err(format!(
+                "{} is static (no t_mean, t_scale); it has no time to choose",
+                self.source
+            )));
+        }
+        if !t.is_finite() {
+            return Err(value_err(format!("t must be a finite number, got {t}")));
+        }
+        let raw = self.raw.at_time(t);
+        let act = raw.activated();
+        Ok(PyScene::new(
+            raw,
+            act,
+            format!("{} at t = {t}", self.source),
+        ))
     }
 
     /// The falloff the file records ("gaussian" unless a PLY says `power`).
@@ -446,7 +481,7 @@ fn load(py: Python<'_>, path: PathBuf, iteration: Option<u64>) -> PyResult<PySce
 /// errors, the counts, what was chosen from the data (`notes`) and `warnings` (a fit no
 /// better than predicting 0).
 #[pyfunction]
-#[pyo3(signature = (points, values, n, k, gaussians=None, max_gaussians=None, steps=1500, kernel="gaussian", holdout=0.1, seed=1, bounds=None, magnitude_channel=0, db=false, clip_grad=0.0))]
+#[pyo3(signature = (points, values, n, k, gaussians=None, max_gaussians=None, steps=1500, kernel="gaussian", holdout=0.1, seed=1, bounds=None, magnitude_channel=0, db=false, clip_grad=0.0, times=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit<'py>(
     py: Python<'py>,
@@ -464,6 +499,7 @@ fn fit<'py>(
     magnitude_channel: usize,
     db: bool,
     clip_grad: f32,
+    times: Option<&[u8]>,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
     use vksplat::fit::{self, FieldData, FitConfig, Layout};
     let points = floats(points, "points", n * 3)?;
@@ -488,8 +524,14 @@ fn fit<'py>(
         ));
     }
     let positions: Vec<[f32; 3]> = rows(&points);
+    let times = times.map(|t| floats(t, "times", n)).transpose()?;
+    if let Some(t) = &times {
+        check_finite("times", t, 1)?;
+    }
     let mut data = FieldData {
         bounds: fit::model::point_bounds(&positions),
+        time_column: times.as_ref().map(|_| 3),
+        times,
         positions,
         values,
         k,
@@ -566,6 +608,7 @@ fn fit<'py>(
     report.set_item("value_scale", outcome.value_scale)?;
     report.set_item("fit_bounds", outcome.fit_bounds.to_vec())?;
     report.set_item("notes", outcome.notes.clone())?;
+    report.set_item("time_range", outcome.time_range)?;
     let warnings: Vec<String> = h
         .filter(|h| h.relative_l2.is_nan() || h.relative_l2 >= 1.0)
         .map(|h| {
@@ -846,8 +889,15 @@ fn cameras(cams: &[CamTuple]) -> PyResult<Vec<Camera>> {
     Ok(cams)
 }
 
-/// Refuses a features render of a scene without features.
+/// Refuses a features render of a scene without features, and any render of a
+/// time-varying scene (render `scene.at_time(t)`).
 fn check_features(scene: &PyScene, features: bool) -> PyResult<()> {
+    if let Some((lo, hi)) = scene.raw.time_range() {
+        return Err(value_err(format!(
+            "{} is time-varying (its Gaussians' temporal means run from {lo} to {hi}); render it at a time: scene.at_time(t)",
+            scene.source
+        )));
+    }
     if features && scene.raw.feature_count == 0 {
         return Err(value_err(format!(
             "mode 'features' needs feature channels, but {} has none (Scene.from_arrays(features=...), or feat_* PLY properties)",

@@ -285,13 +285,33 @@ class Scene:
         was chosen from the data (``notes``) and ``warnings``; None otherwise."""
         return self._report
 
-    def evaluate_field(self, points: ArrayLike) -> np.ndarray:
+    def evaluate_field(self, points: ArrayLike, time: Optional[ArrayLike] = None) -> np.ndarray:
         """The field the Gaussians hold, ``f(x) = sum_i o_i feat_i G_i(x)`` (the plain sum
         :func:`fit` fits and ``render --mode field-*`` shows), at ``points (N, 3)``:
-        ``(N, K)`` float32."""
-        p = _floats("points", points, (None, 3))
-        out = self._s.evaluate_field(p.tobytes(), p.shape[0])
+        ``(N, K)`` float32. A time-varying scene (see :attr:`time_range`) needs the time:
+        ``time`` one number or ``(N,)``, or ``points (N, 4)`` with t as the last column."""
+        p = _numpy(points)
+        if p.ndim == 2 and p.shape[1] == 4 and time is None:
+            time, p = p[:, 3], p[:, :3]
+        p = _floats("points", p, (None, 3))
+        t = None
+        if time is not None:
+            t = np.broadcast_to(np.asarray(time, dtype=np.float32), (p.shape[0],))
+            t = np.ascontiguousarray(t).tobytes()
+        out = self._s.evaluate_field(p.tobytes(), p.shape[0], t)
         return _view(out, (p.shape[0], self.feature_count))
+
+    @property
+    def time_range(self) -> Optional[Tuple[float, float]]:
+        """A time-varying scene's (``t_mean``, ``t_scale`` per Gaussian, what :func:`fit`
+        with ``times`` makes) range of temporal means; None for a static scene."""
+        return self._s.time_range
+
+    def at_time(self, t: float) -> "Scene":
+        """The static scene a time-varying one is at time ``t`` (each Gaussian's opacity
+        times ``exp(-((t - t_mean) / t_scale)^2 / 2)``), which renders as ``render --time``
+        does. A time-varying scene is rendered only this way."""
+        return Scene(self._s.at_time(float(t)))
 
     def __len__(self) -> int:
         return len(self._s)
@@ -494,13 +514,16 @@ def fit(
     magnitude_channel: int = 0,
     db: bool = False,
     clip_grad: float = 0.0,
+    times: Optional[ArrayLike] = None,
 ) -> Scene:
     """Fits Gaussians with feature channels to field samples, as ``vksplat fit`` does:
     ``points (N, 3)`` and ``values (N, K)`` (or ``(N,)`` for one channel). The scene's
     features hold the field (``scene.evaluate_field(x)``); ``scene.fit_report`` the
     held-out errors. Gaussian counts default to one per 20 samples (at most one per 5);
     ``bounds`` (xmin, ymin, zmin, xmax, ymax, zmax) is the region sampled; ``db=True``
-    takes the magnitude channel as dB and fits its linear power. A fit no better than
+    takes the magnitude channel as dB and fits its linear power. ``times (N,)`` fits the
+    field in space and time (each Gaussian gets a temporal mean and scale; evaluate it with
+    ``evaluate_field(x, time=t)``, render ``scene.at_time(t)``). A fit no better than
     predicting 0 raises a ``UserWarning``."""
     p = _floats("points", points, (None, 3))
     v = _numpy(values)
@@ -513,6 +536,7 @@ def fit(
     native, report = _native.fit(
         p.tobytes(), v.tobytes(), p.shape[0], v.shape[1], gaussians, max_gaussians, steps,
         kernel, holdout, seed, b, magnitude_channel, db, clip_grad,
+        None if times is None else _floats("times", _numpy(times).reshape(-1), (p.shape[0],)).tobytes(),
     )
     report = dict(report)
     for w in report["warnings"]:

@@ -332,6 +332,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     let mut shader = None;
     let file_scene = if counts.is_empty() {
         let (mut scene, name) = load_scene(&scene_arg)?;
+        super::common::refuse_time_varying(&scene, &name, "bench")?;
         if let Some(file) = &args.features {
             vksplat::scene::features::attach_npy(&mut scene, file)?;
         }

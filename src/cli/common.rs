@@ -228,6 +228,17 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     }
 }
 
+/// Refuses a time-varying scene (`t_mean`, `t_scale`) in a command that renders it
+/// without a time: only `render` takes `--time`.
+pub(crate) fn refuse_time_varying(scene: &Scene, name: &str, command: &str) -> Result<()> {
+    if let Some((lo, hi)) = scene.time_range() {
+        bail!(
+            "{name} is time-varying (its Gaussians' temporal means run from {lo} to {hi}), which `vksplat {command}` does not render; use `vksplat render --time T` (or --time-range T0,T1)"
+        );
+    }
+    Ok(())
+}
+
 /// The `cameras.json` of a trained model directory given as the scene (one with a
 /// `point_cloud/` folder), for commands given no camera option; prints a one-line note
 /// saying which cameras are used, or that the model has none and the default camera is.

@@ -241,6 +241,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         iteration: args.iteration,
     };
     let (scene, name) = load_scene(&scene_arg)?;
+    super::common::refuse_time_varying(&scene, &name, "compare")?;
     let path = camera_path(&args.view, &args.path, &scene_arg, &scene)?;
     if let Some(frames) = &args.frames {
         frames.check(path.len).map_err(anyhow::Error::msg)?;

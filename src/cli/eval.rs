@@ -423,6 +423,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         },
     };
     let (scene, name) = load_scene(&scene_arg)?;
+    super::common::refuse_time_varying(&scene, &name, "eval")?;
     let (all, format) = camera::load_camera_file(&cameras_file, &camera::PathTiming::default())?;
     let total = all.len();
     let (cams, rule) = split_cameras(all, &args.split, images);

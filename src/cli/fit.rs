@@ -15,11 +15,16 @@ use vksplat::{note, outln};
   vksplat gen --rf dipole dipole.npy
   vksplat fit dipole.npy -o dipole.ply --report dipole_fit.json
   vksplat fit samples.csv -o field.ply --gaussians 500 --max-gaussians 2000 --kernel power
+  vksplat gen --rf moving-source moving.npy
+  vksplat fit moving.npy -o moving.ply      (x, y, z, t, value: --time-column 3 from moving.npy.json)
 
 Inputs: a dense grid .npy (X x Y x Z x C, points spread over --bounds like numpy.linspace,
 or over the bounds of the sidecar FILE.npy.json that `gen --rf` writes), or scattered
 samples (.npy or .csv, N x (3 + C): x, y, z, then C values; a CSV may start with a header
-row and may hold # comments). The C values become the Gaussians' features feat_0..feat_{C-1}.")]
+row and may hold # comments). The C values become the Gaussians' features feat_0..feat_{C-1}.
+Samples with a time (one more column, --time-column; a CSV header's t or time column is
+found by itself) are fitted in space and time: each Gaussian gets a temporal mean and scale
+(t_mean, t_scale in the PLY); render them with `vksplat render --time T`.")]
 pub(crate) struct FitArgs {
     /// Field samples: a grid .npy (X x Y x Z x C) or samples .npy / .csv (N x (3 + C)).
     pub(crate) input: PathBuf,
@@ -31,6 +36,12 @@ pub(crate) struct FitArgs {
     /// plane or a line gets its thickness from it).
     #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::fit::parse_bounds, allow_hyphen_values = true)]
     pub(crate) bounds: Option<[f32; 6]>,
+    /// Scattered samples: the column holding each sample's time (0-based, after x, y, z: e.g.
+    /// 3 for rows x, y, z, t, values...), or a CSV header's name for it; the field is then
+    /// fitted in space and time [default: a CSV header's t or time column, or the
+    /// time_column of the sidecar INPUT.json that gen --rf moving-source writes; else none].
+    #[arg(long, value_name = "C|NAME")]
+    pub(crate) time_column: Option<vksplat::fit::TimeColumn>,
     /// Gaussians at the start [default: one per 20 samples, 8 to 1000].
     #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 10_000_000))]
     pub(crate) gaussians: Option<usize>,
@@ -151,7 +162,11 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             bail!("--gaussians {g} is above --max-gaussians {m}");
         }
     }
-    let data = vksplat::fit::load(&args.input, args.bounds)?;
+    let data = vksplat::fit::load(
+        &args.input,
+        args.bounds,
+        &args.time_column.clone().unwrap_or_default(),
+    )?;
     vksplat::fit::check_fittable(&data)
         .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     if args.magnitude_channel >= data.k {
@@ -217,9 +232,20 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         Layout::SamplesNpy => "samples (.npy)".into(),
         Layout::SamplesCsv => "samples (.csv)".into(),
     };
+    let time = match (&data.times, data.time_column) {
+        (Some(t), Some(c)) => {
+            let (lo, hi) = t
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                    (a.min(v), b.max(v))
+                });
+            format!(", with times from {lo} to {hi} (column {c})")
+        }
+        _ => String::new(),
+    };
     if !args.quiet {
         note!(
-            "fitting {} Gaussians (at most {}, {} kernel) to {} samples of {} channels from {} ({layout})",
+            "fitting {} Gaussians (at most {}, {} kernel) to {} samples of {} channels{time} from {} ({layout})",
             cfg.initial,
             cfg.max_gaussians,
             cfg.kernel,
@@ -277,6 +303,8 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             "channels": data.k,
             "bounds": data.bounds,
             "bounds_from": data.bounds_source,
+            "time_column": data.time_column,
+            "time_range": outcome.time_range.map(|(a, b)| [a, b]),
             "output": args.output.display().to_string(),
             "parameters": cfg,
             "train_samples": outcome.train_samples,

@@ -82,6 +82,12 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             plural(scene.feature_count, "channel")
         );
     }
+    if let Some((lo, hi)) = scene.time_range() {
+        let (slo, shi) = time_scales(&scene);
+        outln!(
+            "time        temporal means {lo} .. {hi}, temporal scales {slo} .. {shi} (render with --time T or --time-range T0,T1)"
+        );
+    }
     if let Some((lo, hi)) = s.bounds {
         outln!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
     }
@@ -237,6 +243,10 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
         "antialiased": scene.antialiased,
         "kernel": scene.kernel.name(),
         "feature_channels": scene.feature_count,
+        "time": scene.time_range().map(|(lo, hi)| {
+            let (slo, shi) = time_scales(scene);
+            json!({"t_mean": [lo, hi], "t_scale": [slo, shi]})
+        }),
         "features": scene::features::channel_stats(scene)
             .iter()
             .map(|[min, mean, max]| json!({"min": min, "max": max, "mean": mean}))
@@ -259,4 +269,15 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
     });
     outln!("{}", serde_json::to_string_pretty(&value)?);
     Ok(())
+}
+
+/// The smallest and largest temporal scale (`exp(t_scale)`) of a time-varying scene.
+fn time_scales(scene: &scene::Scene) -> (f32, f32) {
+    scene
+        .time
+        .iter()
+        .flatten()
+        .fold((f32::INFINITY, 0f32), |(a, b), v| {
+            (a.min(v[1].exp()), b.max(v[1].exp()))
+        })
 }

@@ -31,7 +31,13 @@ const DEFAULT_SEQUENCE_OUTPUT: &str = "render/frame_{:05}.png";
   vksplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume
   vksplat render scene.ply --orbit 1200 -o orbit/ --shard slurm   # a task of sbatch --array=0-7
   vksplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?
-  vksplat render scene.ply --orbit 48 --width 320 --height 240 --export-colmap data/   # a data set to train on")]
+  vksplat render scene.ply --orbit 48 --width 320 --height 240 --export-colmap data/   # a data set to train on
+  vksplat render moving.ply --time 0.5 --mode field-slice --slice-plane 0,0,0,0,0,1 -o t05.png
+  vksplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max -o anim/frame_%04d.png
+
+A time-varying scene (t_mean, t_scale per Gaussian, what `fit --time-column` writes) is
+rendered at a time: --time T, or --time-range T0,T1 for an animation; without either it is
+refused (there is no default time).")]
 pub(crate) struct RenderArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArg,
@@ -71,6 +77,18 @@ pub(crate) struct RenderArgs {
     /// frame's number, so split runs give the files of one run.
     #[arg(long, value_name = "SPEC")]
     pub(crate) frames: Option<FrameSelection>,
+    /// A time-varying scene (t_mean, t_scale per Gaussian: `fit --time-column`) at time T:
+    /// each Gaussian's opacity times exp(-((T - t_mean) / t_scale)^2 / 2) (0 beyond 4
+    /// temporal scales), in every mode. Such a scene needs --time or --time-range.
+    #[arg(long, value_name = "T", value_parser = values::any_f32, allow_hyphen_values = true, conflicts_with = "time_range")]
+    pub(crate) time: Option<f32>,
+    /// An animation of a time-varying scene: frame k of N at time T0 + (T1 - T0) k / (N - 1),
+    /// N the path's frames (--orbit N, a camera file) or, for one camera, --time-frames N.
+    #[arg(long, value_name = "T0,T1", value_parser = values::time_range, allow_hyphen_values = true)]
+    pub(crate) time_range: Option<[f32; 2]>,
+    /// --time-range from one camera: N frames of it, one per time.
+    #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 1_000_000), requires = "time_range")]
+    pub(crate) time_frames: Option<usize>,
     /// Resume: skip frames whose files exist (write only the missing files of a frame).
     #[arg(long, conflicts_with = "overwrite")]
     pub(crate) skip_existing: bool,
@@ -332,6 +350,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if let Some(file) = &args.features {
         vksplat::scene::features::attach_npy(&mut scene, file)?;
     }
+    let time = time_choice(args, &scene, &name)?;
     let field_mode = args.mode.filter(|m| m.is_field());
     super::render_field::check_options(args, field_mode)?;
     if field_mode.is_some() && scene.feature_count == 0 {
@@ -369,7 +388,26 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         );
         kept
     };
-    let path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
+    // The default camera frames the Gaussians of every time, so a scene looks the same
+    // from --time T as from the frame of --time-range at T.
+    let mut path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
+    let mut animation = None;
+    let scene = match time {
+        TimeChoice::Static => scene,
+        TimeChoice::At(t) => {
+            let at = scene.at_time(t);
+            note!(
+                "at time {t}: {} of {} contribute (within 4 temporal scales)",
+                at.len(),
+                plural(scene.len(), "Gaussian")
+            );
+            at
+        }
+        TimeChoice::Range(range) => {
+            animation = Some(Animation::new(args, range, &mut path, scene.clone())?);
+            scene
+        }
+    };
     if let Some(file) = &args.export_cameras {
         if exports_cameras {
             export_cameras(file, &path.cameras, args)?;
@@ -379,6 +417,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         frames.check(path.len).map_err(anyhow::Error::msg)?;
     }
     if let Some(dir) = &args.export_colmap {
+        if animation.is_some() {
+            bail!("--export-colmap writes a data set of one scene; give one --time instead of --time-range");
+        }
         return export_colmap(args, dir, &scene, &name, &path.cameras, shader.as_ref());
     }
     let selected = path
@@ -484,6 +525,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let job = Job {
         args,
         scene: &act,
+        animation: animation.as_ref(),
         frames: &plan.frames,
         opts: &opts,
         run_opts: &run_opts,
@@ -497,12 +539,15 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         super::render_field::render(
             args,
             &act,
+            animation.as_ref(),
             opts.kernel,
             mode,
             &plan.frames,
             &run_opts,
             shader.as_ref(),
         )?
+    } else if let (Some(_), Some(_)) = (&args.devices, &animation) {
+        bail!("--devices spreads a path over devices; an animation (--time-range) renders on one (drop --devices)");
     } else if let Some(devices) = &args.devices {
         render_on_devices(&job, devices)?
     } else if args.cpu {
@@ -567,12 +612,108 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// How `--time` and `--time-range` apply to the scene.
+enum TimeChoice {
+    /// A static scene.
+    Static,
+    /// One time (`--time`).
+    At(f32),
+    /// An animation (`--time-range T0,T1`).
+    Range([f32; 2]),
+}
+
+/// Checks `--time` / `--time-range` against the scene: a time-varying scene needs one, a
+/// static one takes neither.
+fn time_choice(args: &RenderArgs, scene: &vksplat::scene::Scene, name: &str) -> Result<TimeChoice> {
+    let flag = if args.time.is_some() {
+        "--time"
+    } else {
+        "--time-range"
+    };
+    match (scene.time_range(), args.time, args.time_range) {
+        (None, None, None) => Ok(TimeChoice::Static),
+        (None, _, _) if scene.time.is_some() => Ok(TimeChoice::Static), // time-varying but empty
+        (None, _, _) => bail!(
+            "{flag} applies to a time-varying scene (t_mean, t_scale per Gaussian, as `vksplat fit --time-column` writes), but {name} is static; drop {flag}"
+        ),
+        (Some((lo, hi)), None, None) => bail!(
+            "{name} is time-varying (its Gaussians' temporal means run from {lo} to {hi}); render it at a time with --time T, or as an animation with --time-range {lo},{hi} --time-frames N"
+        ),
+        (Some(_), Some(t), _) => Ok(TimeChoice::At(t)),
+        (Some(_), None, Some(r)) => Ok(TimeChoice::Range(r)),
+    }
+}
+
+/// `--time-range`: the time-varying scene (transformed and filtered) and the time of each
+/// frame of the path; frame `k` of `n` shows the scene at `t0 + (t1 - t0) k / (n - 1)`.
+pub(crate) struct Animation {
+    scene: vksplat::scene::Scene,
+    range: [f32; 2],
+    frames: usize,
+}
+
+impl Animation {
+    /// The animation over `path`'s frames, or over `--time-frames N` copies of its one
+    /// camera (which then become the path).
+    fn new(
+        args: &RenderArgs,
+        range: [f32; 2],
+        path: &mut super::common::CameraPath,
+        scene: vksplat::scene::Scene,
+    ) -> Result<Animation> {
+        let frames = match (args.time_frames, path.cameras.len()) {
+            (Some(n), 1) => {
+                let cam = path.cameras[0].1.clone();
+                path.cameras = (0..n).map(|k| (k, cam.clone())).collect();
+                path.len = n;
+                path.source = format!("{} at {}", path.source, plural(n, "time"));
+                n
+            }
+            (Some(n), m) if path.len != n || m != path.len => bail!(
+                "--time-frames {n} repeats one camera, but the path has {}; drop --time-frames to spread --time-range over the path's frames",
+                plural(path.len, "frame")
+            ),
+            (_, 1) if path.len == 1 => bail!(
+                "--time-range {},{} from one camera needs the number of frames: --time-frames N",
+                range[0],
+                range[1]
+            ),
+            _ => path.len,
+        };
+        if args.frames_in_flight.is_some() {
+            bail!("--frames-in-flight does not apply to --time-range: each frame uploads the scene at its time and renders on its own");
+        }
+        Ok(Animation {
+            scene,
+            range,
+            frames,
+        })
+    }
+
+    /// The time of frame `index`.
+    pub(crate) fn time(&self, index: usize) -> f32 {
+        if self.frames <= 1 {
+            return self.range[0];
+        }
+        let f = index as f64 / (self.frames - 1) as f64;
+        (f64::from(self.range[0]) + f * (f64::from(self.range[1]) - f64::from(self.range[0])))
+            as f32
+    }
+
+    /// The scene as frame `index` shows it ([`vksplat::scene::Scene::at_time`]), activated.
+    pub(crate) fn scene(&self, index: usize) -> vksplat::scene::ActivatedScene {
+        self.scene.at_time(self.time(index)).activated()
+    }
+}
+
 /// What each renderer of `render` gets: the command's arguments, the scene, the frames to
 /// render and how to render and write them.
 #[derive(Clone, Copy)]
 struct Job<'a> {
     args: &'a RenderArgs,
     scene: &'a vksplat::scene::ActivatedScene,
+    /// `--time-range`: each frame's scene (then `scene` is unused).
+    animation: Option<&'a Animation>,
     frames: &'a [vksplat::sequence::FramePlan],
     opts: &'a vksplat::cpu::RenderOptions,
     run_opts: &'a vksplat::sequence::RunOptions,
@@ -625,7 +766,10 @@ fn render_cpu(job: &Job) -> Result<(Summary, String)> {
     }
     let mut sums = StageSums::default();
     let mut pairs = 0;
-    let mut render = |cam: &Camera| {
+    let mut render = |p: &vksplat::sequence::FramePlan| {
+        let cam = &p.camera;
+        let at_time = job.animation.map(|a| a.scene(p.index));
+        let scene = at_time.as_ref().unwrap_or(scene);
         let (mut frame, t) = if job.features || shader.is_some() {
             vksplat::cpu::render_features_timed(scene, cam, opts)
         } else {
@@ -653,7 +797,7 @@ fn render_cpu(job: &Job) -> Result<(Summary, String)> {
         pairs = t.pairs;
         Ok(frame)
     };
-    let summary = vksplat::sequence::run(job.frames, &mut render, job.run_opts);
+    let summary = vksplat::sequence::run_each(job.frames, &mut render, job.run_opts);
     if job.args.timings {
         sums.print("CPU ms");
         note!("tile pairs {pairs} (last frame)");
@@ -878,6 +1022,7 @@ fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Summary, Stri
     let Job {
         args,
         scene,
+        animation,
         frames,
         opts,
         run_opts,
@@ -901,18 +1046,52 @@ fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Summary, Stri
             t0.elapsed().as_secs_f64() * 1e3
         );
     }
-    let gpu_scene = renderer.upload(scene)?;
-    let gpu_features = if features || shader.is_some() {
-        Some(renderer.upload_features(scene)?)
-    } else {
-        None
-    };
     let gpu_shader = match shader {
         Some(m) => Some(vksplat::render::shade::GpuShader::new(renderer.ctx(), m)?),
         None => None,
     };
     let mut sums = StageSums::default();
     let mut last_stats = None;
+    if let Some(anim) = animation {
+        // Each frame its own scene: uploaded, rendered, dropped.
+        let mut device_bytes = 0;
+        let summary = vksplat::sequence::run_each(
+            frames,
+            &mut |p| {
+                let at_time = anim.scene(p.index);
+                let gpu_scene = renderer.upload(&at_time)?;
+                device_bytes = gpu_scene.device_bytes();
+                let frame = if features || shader.is_some() {
+                    let f = renderer.upload_features(&at_time)?;
+                    match &gpu_shader {
+                        Some(s) => renderer.render_shaded(&gpu_scene, &f, s, &p.camera, opts)?,
+                        None => renderer.render_features(&gpu_scene, &f, &p.camera, opts)?,
+                    }
+                } else {
+                    renderer.render(&gpu_scene, &p.camera, opts)?
+                };
+                sums.add(&renderer.timings().stages(), renderer.timings().total);
+                Ok(frame)
+            },
+            run_opts,
+        );
+        if args.timings {
+            sums.print("GPU ms");
+        }
+        if args.gpu.verbose {
+            note!("device memory: scene {device_bytes} bytes (the last frame's)");
+        }
+        let summary = summary?;
+        fail_on_validation_messages(renderer.ctx())?;
+        let device = renderer.ctx().info().name.clone();
+        return Ok((summary, format!("on {device}")));
+    }
+    let gpu_scene = renderer.upload(scene)?;
+    let gpu_features = if features || shader.is_some() {
+        Some(renderer.upload_features(scene)?)
+    } else {
+        None
+    };
     let summary = {
         let mut source = GpuPath::new(&mut renderer, &gpu_scene, opts, run_opts.frames_in_flight)
             .on_frame(|t, stats| {

@@ -144,10 +144,13 @@ pub(crate) fn check_options(
     Ok(())
 }
 
-/// Renders `frames` of the field of `scene` under `mode` and writes them.
+/// Renders `frames` of the field of `scene` (or with `animation`, of each frame's scene at
+/// its time) under `mode` and writes them.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     args: &super::render::RenderArgs,
     scene: &vksplat::model::ActivatedScene,
+    animation: Option<&super::render::Animation>,
     kernel: SplatKernel,
     mode: RenderMode,
     frames: &[FramePlan],
@@ -208,6 +211,37 @@ pub(crate) fn render(
         complex: f.complex,
     };
     let mut colours = colours;
+    if let Some(anim) = animation {
+        // Each frame the field at its time: the CPU reference, or uploaded to the device.
+        let ctx = if args.cpu {
+            None
+        } else {
+            Some(args.gpu.context()?)
+        };
+        let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
+        let summary = vksplat::sequence::run_each(
+            frames,
+            &mut |p| {
+                let g = FieldGaussians::new(&anim.scene(p.index), kernel);
+                let frame = match &ctx {
+                    None => vksplat::cpu::field::render_field(&g, &p.camera, &field_mode),
+                    Some(ctx) => {
+                        let gpu_field = vksplat::render::field::GpuField::new(ctx, &g)?;
+                        renderer.render(ctx, &gpu_field, &p.camera, &field_mode)?
+                    }
+                };
+                colours.apply(&p.camera, frame)
+            },
+            run_opts,
+        )?;
+        return Ok(match &ctx {
+            None => (summary, "on the CPU (the f64 field reference)".into()),
+            Some(ctx) => {
+                fail_on_validation_messages(ctx)?;
+                (summary, format!("on {}", ctx.info().name))
+            }
+        });
+    }
     if args.cpu {
         let summary = vksplat::sequence::run(
             frames,

@@ -143,6 +143,12 @@ pub(crate) fn background(s: &str) -> Result<[f32; 3], String> {
     Ok([v[0], v[1], v[2]])
 }
 
+/// `T0,T1`: two finite times (either order; equal only for one time).
+pub(crate) fn time_range(s: &str) -> Result<[f32; 2], String> {
+    let v = list(s, 2, "T0,T1")?;
+    Ok([v[0], v[1]])
+}
+
 /// `PX,PY,PZ,NX,NY,NZ`: a plane's point and normal (six finite numbers, a nonzero normal).
 pub(crate) fn plane(s: &str) -> Result<[f32; 6], String> {
     let v = list(s, 6, "PX,PY,PZ,NX,NY,NZ")?;

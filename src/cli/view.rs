@@ -85,6 +85,7 @@ fn listen_address(host: &str, port: u16) -> Result<SocketAddr> {
 /// The scene, its cameras and the renderer, as the server gets them.
 fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> {
     let (mut scene, name) = load_scene(&args.scene)?;
+    super::common::refuse_time_varying(&scene, &name, "view")?;
     // The sources render with the scene's kernel.
     scene.kernel = args.kernel.resolve(&scene, &name);
     if scene.is_empty() {

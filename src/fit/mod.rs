@@ -3,7 +3,8 @@
 //! Inputs ([`load`]): a dense grid `.npy` (`X x Y x Z x C`, its points spread over
 //! `--bounds` like `numpy.linspace` on each axis, see [`crate::rf`]) or scattered samples
 //! (`.npy` or `.csv`, `N x (3 + C)`: x, y, z, then C values). The C values are the features
-//! (K = C). The model, loss and gradients are in [`model`]; Adam and the density control in
+//! (K = C). Scattered samples may carry a time in one more column ([`TimeColumn`]): the
+//! field is then fitted in space and time (see [`model`]). The model, loss and gradients are in [`model`]; Adam and the density control in
 //! [`optim`]; [`fit`] runs the optimisation.
 //!
 //! Loss weights: `w_n = 0.1 + 0.9 |y_nm| / max_n |y_nm|` (m the magnitude channel), so the
@@ -49,11 +50,44 @@ pub enum Layout {
     SamplesCsv,
 }
 
+/// Which column of scattered samples holds their time (`fit --time-column`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum TimeColumn {
+    /// A CSV header's `t` or `time` column, or the `time_column` of a `.npy`'s sidecar
+    /// (`gen --rf moving-source` writes one); else none.
+    #[default]
+    Auto,
+    /// This column (0-based among all columns; x, y, z are 0 to 2).
+    Index(usize),
+    /// The column a CSV header names so.
+    Name(String),
+}
+
+impl std::str::FromStr for TimeColumn {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Err(
+                "expected a column number (0-based, e.g. 3) or a CSV header's name (e.g. t)".into(),
+            );
+        }
+        Ok(match s.parse::<usize>() {
+            Ok(i) => TimeColumn::Index(i),
+            Err(_) => TimeColumn::Name(s.to_string()),
+        })
+    }
+}
+
 /// Field samples: positions and `k` values each.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FieldData {
     /// Sample positions.
     pub positions: Vec<[f32; 3]>,
+    /// Sample times (a time-varying field), one per sample.
+    pub times: Option<Vec<f32>>,
+    /// The input's column that held the times.
+    pub time_column: Option<usize>,
     /// `k` values per sample.
     pub values: Vec<f32>,
     /// Channels per sample.
@@ -136,16 +170,22 @@ fn sidecar_bounds(path: &Path) -> Result<[f32; 6], InputError> {
 
 /// Loads field samples from `path` (`.npy` grid or samples, or `.csv` samples). A grid
 /// takes `bounds`, else those of its sidecar `PATH.json` ([`crate::rf::sidecar_path`]);
-/// scattered samples carry their positions and take no bounds.
-pub fn load(path: &Path, bounds: Option<[f32; 6]>) -> Result<FieldData, InputError> {
+/// scattered samples carry their positions and take no bounds. `time` says which column of
+/// scattered samples is their time ([`TimeColumn`]); a time column holding one value for
+/// every sample is refused (a static field needs none).
+pub fn load(
+    path: &Path,
+    bounds: Option<[f32; 6]>,
+    time: &TimeColumn,
+) -> Result<FieldData, InputError> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let bytes = std::fs::read(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
     let data = match ext.as_str() {
-        "npy" => load_npy(&bytes, path, bounds)?,
-        "csv" => with_bounds(load_csv(&bytes, path)?, bounds, path)?,
+        "npy" => load_npy(&bytes, path, bounds, time)?,
+        "csv" => with_bounds(load_csv(&bytes, path, time)?, bounds, path)?,
         _ => {
             return Err(bad(
                 path,
@@ -162,10 +202,83 @@ pub fn load(path: &Path, bounds: Option<[f32; 6]>) -> Result<FieldData, InputErr
             ),
         ));
     }
+    if let (Some(t), Some(c)) = (&data.times, data.time_column) {
+        check_times(t).map_err(|m| bad(path, format!("column {c} (time): {m}")))?;
+    }
     Ok(data)
 }
 
-fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<FieldData, InputError> {
+/// Refuses times no time-varying field can be fitted to: one value for every sample.
+pub fn check_times(times: &[f32]) -> Result<(), String> {
+    if let Some(i) = times.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "sample {i} has the time {}, not a finite number",
+            times[i]
+        ));
+    }
+    if let Some(&t0) = times.first() {
+        if times.iter().all(|&t| t == t0) {
+            return Err(format!(
+                "every sample has the time {t0}; a field at one time is static: drop the time column (or --time-column) and fit it without time"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The `time_column` a `.npy`'s sidecar names (`gen --rf moving-source` writes one).
+fn sidecar_time_column(npy: &Path) -> Result<Option<usize>, InputError> {
+    let side = crate::rf::sidecar_path(npy);
+    let Ok(text) = std::fs::read_to_string(&side) else {
+        return Ok(None);
+    };
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(&side, format!("is not valid JSON: {e}")))?;
+    match value.get("time_column") {
+        None | Some(serde_json::Value::Null) => Ok(None),
+        Some(v) => v.as_u64().map(|c| Some(c as usize)).ok_or_else(|| {
+            bad(
+                &side,
+                format!("\"time_column\" is {v}, not a column number"),
+            )
+        }),
+    }
+}
+
+/// Checks that column `c` of `cols` can be the time: not x, y or z, and a value left.
+fn check_time_column(c: usize, cols: usize, path: &Path) -> Result<(), InputError> {
+    if c < 3 {
+        return Err(bad(
+            path,
+            format!("--time-column {c} is {} (columns 0 to 2 are x, y, z); the time is a column after them", ["x", "y", "z"][c]),
+        ));
+    }
+    if c >= cols {
+        return Err(bad(
+            path,
+            format!(
+                "--time-column {c}: the samples have {cols} columns (0 to {})",
+                cols - 1
+            ),
+        ));
+    }
+    if cols < 5 {
+        return Err(bad(
+            path,
+            format!(
+                "has {cols} columns; samples with a time are x, y, z, t and at least one value"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn load_npy(
+    bytes: &[u8],
+    path: &Path,
+    bounds: Option<[f32; 6]>,
+    time: &TimeColumn,
+) -> Result<FieldData, InputError> {
     let array = crate::image_file::parse_npy_array(bytes, path).map_err(|e| {
         let m = e.to_string();
         let prefix = format!("{}: ", path.display());
@@ -174,6 +287,12 @@ fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<Field
     let first_bad = |data: &[f32]| data.iter().position(|v| !v.is_finite());
     match array.shape[..] {
         [x, y, z, c] => {
+            if *time != TimeColumn::Auto {
+                return Err(bad(
+                    path,
+                    format!("is a dense grid ({x} x {y} x {z} x {c}), which has no time column; give time-varying fields as samples N x (4 + C): x, y, z, t and the values"),
+                ));
+            }
             if x * y * z * c == 0 {
                 return Err(bad(
                     path,
@@ -222,6 +341,8 @@ fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<Field
             }
             Ok(FieldData {
                 positions,
+                times: None,
+                time_column: None,
                 values: array.data,
                 k: c,
                 bounds,
@@ -239,18 +360,36 @@ fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<Field
             if n == 0 {
                 return Err(bad(path, "holds no samples (0 rows)"));
             }
+            let time_column = match time {
+                TimeColumn::Auto => sidecar_time_column(path)?,
+                TimeColumn::Index(c) => Some(*c),
+                TimeColumn::Name(name) => {
+                    return Err(bad(
+                        path,
+                        format!("--time-column {name}: a .npy has no column names; give the time's column number (x, y, z are 0 to 2, e.g. --time-column 3)"),
+                    ))
+                }
+            };
+            if let Some(c) = time_column {
+                check_time_column(c, cols, path)?;
+            }
             if let Some(at) = first_bad(&array.data) {
                 return Err(bad(
                     path,
                     format!(
-                        "has a non-finite value ({}) at sample {}, column {}",
+                        "has a non-finite value ({}) at sample {}, column {}{}",
                         array.data[at],
                         at / cols,
-                        at % cols
+                        at % cols,
+                        if Some(at % cols) == time_column { " (the time)" } else { "" }
                     ),
                 ));
             }
-            with_bounds(samples(array.data, cols, Layout::SamplesNpy), bounds, path)
+            with_bounds(
+                samples(array.data, cols, Layout::SamplesNpy, time_column),
+                bounds,
+                path,
+            )
         }
         _ => Err(bad(
             path,
@@ -262,18 +401,28 @@ fn load_npy(bytes: &[u8], path: &Path, bounds: Option<[f32; 6]>) -> Result<Field
     }
 }
 
-/// Scattered samples from rows of `cols` values (x, y, z, values).
-fn samples(rows: Vec<f32>, cols: usize, layout: Layout) -> FieldData {
-    let k = cols - 3;
+/// Scattered samples from rows of `cols` values (x, y, z, values; column `time_column`,
+/// if any, the time).
+fn samples(rows: Vec<f32>, cols: usize, layout: Layout, time_column: Option<usize>) -> FieldData {
+    let k = cols - 3 - usize::from(time_column.is_some());
     let n = rows.len() / cols;
     let mut positions = Vec::with_capacity(n);
     let mut values = Vec::with_capacity(n * k);
+    let mut times = Vec::with_capacity(if time_column.is_some() { n } else { 0 });
     for row in rows.chunks_exact(cols) {
         positions.push([row[0], row[1], row[2]]);
-        values.extend_from_slice(&row[3..]);
+        for (c, v) in row.iter().enumerate().skip(3) {
+            if Some(c) == time_column {
+                times.push(*v);
+            } else {
+                values.push(*v);
+            }
+        }
     }
     FieldData {
         bounds: model::point_bounds(&positions),
+        times: time_column.map(|_| times),
+        time_column,
         positions,
         values,
         k,
@@ -311,12 +460,13 @@ fn with_bounds(
     Ok(data)
 }
 
-fn load_csv(bytes: &[u8], path: &Path) -> Result<FieldData, InputError> {
+fn load_csv(bytes: &[u8], path: &Path, time: &TimeColumn) -> Result<FieldData, InputError> {
     let text =
         std::str::from_utf8(bytes).map_err(|_| bad(path, "is not a text (UTF-8) CSV file"))?;
     let mut rows = Vec::new();
     // (line number, columns) of the row that set the width (a header or the first row).
     let mut width: Option<(usize, usize)> = None;
+    let mut header: Option<Vec<String>> = None;
     let mut seen_row = false;
     for (i, line) in text.lines().enumerate() {
         let lineno = i + 1;
@@ -329,6 +479,7 @@ fn load_csv(bytes: &[u8], path: &Path) -> Result<FieldData, InputError> {
         if !seen_row && width.is_none() && parsed.iter().any(Option::is_none) {
             // A header row (column names).
             width = Some((lineno, fields.len()));
+            header = Some(fields.iter().map(|f| f.to_string()).collect());
             continue;
         }
         seen_row = true;
@@ -373,7 +524,33 @@ fn load_csv(bytes: &[u8], path: &Path) -> Result<FieldData, InputError> {
             format!("has {cols} columns; samples are rows of x, y, z and at least one value"),
         ));
     }
-    Ok(samples(rows, cols, Layout::SamplesCsv))
+    let named = |want: &dyn Fn(&str) -> bool| {
+        header
+            .as_ref()
+            .and_then(|h| h.iter().position(|n| want(n.trim_matches('"'))))
+    };
+    let time_column = match time {
+        TimeColumn::Auto => named(&|n| n.eq_ignore_ascii_case("t") || n.eq_ignore_ascii_case("time")),
+        TimeColumn::Index(c) => Some(*c),
+        TimeColumn::Name(name) => Some(named(&|n| n == name).ok_or_else(|| {
+            bad(
+                path,
+                match &header {
+                    Some(h) => format!(
+                        "--time-column {name}: its header names no such column (it has {})",
+                        h.join(", ")
+                    ),
+                    None => format!(
+                        "--time-column {name}: it has no header row to name columns; give the time's column number (x, y, z are 0 to 2, e.g. --time-column 3)"
+                    ),
+                },
+            )
+        })?),
+    };
+    if let Some(c) = time_column {
+        check_time_column(c, cols, path)?;
+    }
+    Ok(samples(rows, cols, Layout::SamplesCsv, time_column))
 }
 
 /// The fitting options.
@@ -424,6 +601,8 @@ pub struct FitConfig {
     /// Clip the gradient's norm (over every parameter, on the normalised values) to this
     /// before each Adam step (0: no clipping).
     pub clip_grad: f32,
+    /// Learning rate of the temporal means, in units of the samples' time span.
+    pub lr_time: f32,
     /// Channels `(M, P)` hold one complex value as magnitude and phase (radians): they are
     /// fitted as `I = M cos P` and `Q = M sin P` (which channels M and P of the output then
     /// hold), so the Gaussians add up coherently; the weights come from M.
@@ -459,6 +638,7 @@ impl Default for FitConfig {
             db: false,
             clip_grad: 0.0,
             complex: None,
+            lr_time: 2e-3,
         }
     }
 }
@@ -512,6 +692,9 @@ pub struct FitOutcome {
     pub notes: Vec<String>,
     /// Steps whose gradient norm was clipped (`--clip-grad`).
     pub clipped_steps: usize,
+    /// A time-varying fit: the samples' times ran from the first to the second (they were
+    /// fitted mapped to 0..1, and the temporal means and scales mapped back).
+    pub time_range: Option<(f32, f32)>,
 }
 
 /// The default Gaussian counts for `samples` samples: one Gaussian per 20 samples at the
@@ -589,6 +772,12 @@ pub fn check_fittable(data: &FieldData) -> Result<(), String> {
     }
     if data.values.iter().all(|v| *v == 0.0) {
         return Err("every value is 0; there is no field to fit".into());
+    }
+    if let Some(t) = &data.times {
+        if t.len() != n {
+            return Err(format!("{} times for {n} samples", t.len()));
+        }
+        check_times(t)?;
     }
     Ok(())
 }
@@ -676,7 +865,23 @@ pub fn fit(
             (a.min(v), b.max(v))
         });
     let (bounds, note) = fit_bounds(data.bounds, cfg.initial);
+    // Times mapped to 0..1, so nothing depends on their unit or origin either.
+    let time_range = data.times.as_ref().map(|t| {
+        t.iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            })
+    });
+    let (t0, span) = time_range.map_or((0.0, 1.0), |(a, b)| {
+        (f64::from(a), f64::from(b) - f64::from(a))
+    });
     let normalised = FieldData {
+        times: data.times.as_ref().map(|t| {
+            t.iter()
+                .map(|&v| ((f64::from(v) - t0) / span) as f32)
+                .collect()
+        }),
+        time_column: data.time_column,
         positions: data.positions.clone(),
         values: values
             .iter()
@@ -693,11 +898,17 @@ pub fn fit(
         )
     })?;
     let stride = out.model.stride();
+    let t_at = out.model.time.then(|| out.model.time_offset());
     for g in out.model.params.chunks_exact_mut(stride) {
-        for f in &mut g[FEAT..] {
+        for f in &mut g[FEAT..FEAT + k] {
             *f = (f64::from(*f) * scale) as f32;
         }
+        if let Some(t) = t_at {
+            g[t] = (t0 + f64::from(g[t]) * span) as f32;
+            g[t + 1] = (f64::from(g[t + 1]) + span.ln()) as f32;
+        }
     }
+    out.time_range = time_range;
     out.final_loss.0 *= scale * scale;
     let mags = values.iter().skip(m).step_by(k);
     out.magnitude_range = mags.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
@@ -736,7 +947,8 @@ fn fit_normalised(
         0
     };
     let (hold_idx, train_idx) = idx.split_at(n_hold);
-    let gather = |ids: &[usize]| -> (Vec<[f32; 3]>, Vec<f32>, Vec<f32>) {
+    let times = data.times.as_deref();
+    let gather = |ids: &[usize]| -> (Vec<[f32; 3]>, Vec<f32>, Vec<f32>, Vec<f32>) {
         (
             ids.iter().map(|&i| data.positions[i]).collect(),
             ids.iter()
@@ -744,6 +956,7 @@ fn fit_normalised(
                 .copied()
                 .collect(),
             ids.iter().map(|&i| w_all[i]).collect(),
+            times.map_or_else(Vec::new, |t| ids.iter().map(|&i| t[i]).collect()),
         )
     };
     let ext = model::extents(data.bounds);
@@ -762,13 +975,13 @@ fn fit_normalised(
                 b * train_idx.len() / n_batches,
                 (b + 1) * train_idx.len() / n_batches,
             );
-            let (p, v, w) = gather(&train_idx[a..z]);
-            Points::binned(&grid, &p, &v, &w, k)
+            let (p, v, w, t) = gather(&train_idx[a..z]);
+            Points::binned(&grid, &p, &v, &w, &t, k)
         })
         .collect();
     let holdout = {
-        let (p, v, w) = gather(hold_idx);
-        Points::binned(&grid, &p, &v, &w, k)
+        let (p, v, w, t) = gather(hold_idx);
+        Points::binned(&grid, &p, &v, &w, &t, k)
     };
     let y_max = data
         .values
@@ -778,20 +991,44 @@ fn fit_normalised(
 
     // Initialisation: centres drawn from the training samples with probability
     // proportional to their weight, isotropic, features so that the overlapping
-    // Gaussians add up to the sample's values.
-    let s0 = 0.5 * (volume / cfg.initial as f64).cbrt() as f32;
+    // Gaussians add up to the sample's values. With time (0..1 here), as if in
+    // `layers = N^(1/4)` layers over time, N / layers Gaussians each in space, temporal
+    // scale half a layer's spacing.
+    let layers = if times.is_some() {
+        (cfg.initial as f64).powf(0.25).round().max(1.0)
+    } else {
+        1.0
+    };
+    let s0 = 0.5 * (volume * layers / cfg.initial as f64).cbrt() as f32;
+    let st0 = (0.5 / layers) as f32;
     let kernel_integral = match cfg.kernel {
         SplatKernel::Gaussian => 15.75f32, // (2 pi)^(3/2)
         SplatKernel::Power => 45.24,       // 4 pi * 3.6
     };
-    let overlap = (cfg.initial as f32 / volume as f32 * kernel_integral * s0 * s0 * s0).max(1.0);
+    // Temporal overlap: `layers` per unit time, each integrating to sqrt(2 pi) s_t.
+    let time_overlap = if times.is_some() {
+        (layers as f32 * 2.5066 * st0).max(1.0)
+    } else {
+        1.0
+    };
+    let overlap = (cfg.initial as f32 / layers as f32 / volume as f32
+        * kernel_integral
+        * s0
+        * s0
+        * s0
+        * time_overlap)
+        .max(1.0);
     let mut cdf = Vec::with_capacity(train_idx.len());
     let mut acc = 0f64;
     for &i in train_idx {
         acc += f64::from(w_all[i]);
         cdf.push(acc);
     }
-    let mut mdl = Model::new(k);
+    let mut mdl = if times.is_some() {
+        Model::with_time(k)
+    } else {
+        Model::new(k)
+    };
     for _ in 0..cfg.initial {
         let u = f64::from(rng.unit()) * acc;
         let pick = cdf.partition_point(|&c| c <= u).min(train_idx.len() - 1);
@@ -806,6 +1043,11 @@ fn fit_normalised(
         for c in 0..k {
             mdl.params.push(data.values[i * k + c] / (0.5 * overlap));
         }
+        if let Some(t) = times {
+            mdl.params
+                .push((t[i] + rng.range(-0.5, 0.5) * st0).clamp(0.0, 1.0));
+            mdl.params.push(st0.ln());
+        }
     }
     let loss_cfg = LossConfig {
         kernel: cfg.kernel,
@@ -819,11 +1061,19 @@ fn fit_normalised(
             SCALE..=5 => cfg.lr_scale,
             ROT..=9 => cfg.lr_rotation,
             LOGIT => cfg.lr_opacity,
-            _ => cfg.lr_feature * y_max,
+            j if j < FEAT + k => cfg.lr_feature * y_max,
+            // The temporal mean and log scale (time in 0..1).
+            j if j == FEAT + k => cfg.lr_time,
+            _ => cfg.lr_scale,
         })
         .collect();
     let min_log_scale = (1e-3 * diag).ln();
     let max_log_scale = (0.5 * diag).ln();
+    // Temporal scales from 1e-3 of the time span to 10 spans (all but constant over it).
+    let (min_log_st, max_log_st) = (1e-3f32.ln(), 10f32.ln());
+    let t_at = mdl.time.then(|| mdl.time_offset());
+    // A unit of time compares to the largest side in the density control's choice of axis.
+    let time_to_space = ext.iter().fold(0f32, |m, &e| m.max(e)).ln();
     let mut adam = Adam::new(mdl.params.len());
     let mut score = vec![0f32; mdl.len()];
     let mut history = Vec::new();
@@ -872,6 +1122,10 @@ fn fit_normalised(
                 g[j] = g[j].clamp(data.bounds[j], data.bounds[j + 3]);
             }
             g[LOGIT] = g[LOGIT].clamp(-12.0, 12.0);
+            if let Some(t) = t_at {
+                g[t] = g[t].clamp(0.0, 1.0);
+                g[t + 1] = g[t + 1].clamp(min_log_st, max_log_st);
+            }
         }
         if cfg.densify_every > 0
             && step % cfg.densify_every == 0
@@ -882,7 +1136,8 @@ fn fit_normalised(
             let pruned = optim::prune(&mut mdl, &mut adam, &mut score, cfg.min_opacity);
             let room = cfg.max_gaussians.saturating_sub(mdl.len());
             let budget = room.min((mdl.len() as f32 * cfg.grow_fraction).ceil() as usize);
-            let (cloned, split) = optim::densify(&mut mdl, &mut adam, &score, budget);
+            let (cloned, split) =
+                optim::densify(&mut mdl, &mut adam, &score, budget, time_to_space);
             score = vec![0.0; mdl.len()];
             history.push(DensityStep {
                 step,
@@ -963,6 +1218,7 @@ fn fit_normalised(
         fit_bounds: data.bounds,
         notes: Vec::new(),
         clipped_steps,
+        time_range: None,
     })
 }
 
@@ -978,11 +1234,23 @@ pub fn to_scene(outcome: &FitOutcome, kernel: SplatKernel, magnitude_channel: us
             [g[0], g[1], g[2]]
         })
         .collect();
-    let f = model::evaluate(mdl, kernel, &centres);
+    // A time-varying Gaussian is coloured by the field at its centre at its temporal mean.
+    let f = match mdl.time {
+        false => model::evaluate(mdl, kernel, &centres),
+        true => {
+            let taus: Vec<f32> = (0..mdl.len())
+                .map(|i| mdl.gaussian(i)[mdl.time_offset()])
+                .collect();
+            model::evaluate_at(mdl, kernel, &centres, Some(&taus)).unwrap_or_default()
+        }
+    };
     let (lo, hi) = outcome.magnitude_range;
     let span = if hi > lo { hi - lo } else { 1.0 };
     let mut scene = Scene::empty(0);
     scene.kernel = kernel;
+    if mdl.time {
+        scene.time = Some(Vec::with_capacity(mdl.len()));
+    }
     for (i, &c) in centres.iter().enumerate() {
         let g = mdl.gaussian(i);
         scene.positions.push(c);
@@ -998,7 +1266,11 @@ pub fn to_scene(outcome: &FitOutcome, kernel: SplatKernel, magnitude_channel: us
         for v in rgb {
             scene.sh.push((v - 0.5) / crate::model::sh::SH_C0);
         }
-        scene.features.extend_from_slice(&g[FEAT..]);
+        scene.features.extend_from_slice(mdl.features(i));
+        if let Some(t) = scene.time.as_mut() {
+            let at = mdl.time_offset();
+            t.push([g[at], g[at + 1]]);
+        }
     }
     scene.feature_count = k;
     scene

@@ -7,6 +7,12 @@
 //! (`S = diag(exp(log_scale))`, `R` the rotation of the normalised quaternion, as the
 //! renderers build the covariance `R S S^T R^T`).
 //!
+//! A time-varying model ([`Model::time`], samples with a time) is separable in space and
+//! time: `f(x, t) = sum_i o_i T_i(t) G_i(x) feat_i` with the temporal factor
+//! `T_i(t) = exp(-0.5 ((t - tau_i) / s_i)^2)` truncated at 4 temporal sigma
+//! ([`crate::scene::temporal_weight`], the same function the renders at a time use), `tau_i`
+//! and `log s_i` two more parameters after the features.
+//!
 //! Samples are binned into a uniform grid of cubic cells ([`CellGrid`]); a Gaussian visits
 //! only the cells its support box (the axis-aligned box of its `d2 <= cutoff` ellipsoid)
 //! overlaps. Both passes loop over Gaussians: the forward pass in a fixed number of chunks
@@ -94,26 +100,45 @@ pub fn rotation(q: [f32; 4]) -> [[f32; 3]; 3] {
 }
 
 /// The Gaussians: `stride()` floats each, `[x y z | log s0 s1 s2 | w qx qy qz | logit |
-/// feat_0 .. feat_{K-1}]`.
+/// feat_0 .. feat_{K-1} | tau log_s_t]` (the last two only with [`Model::time`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
     /// Feature channels.
     pub k: usize,
+    /// Each Gaussian has a temporal mean and log temporal scale after its features.
+    pub time: bool,
     /// `len() * stride()` parameters.
     pub params: Vec<f32>,
 }
 
 impl Model {
-    /// An empty model with `k` channels.
+    /// An empty static model with `k` channels.
     pub fn new(k: usize) -> Model {
         Model {
             k,
+            time: false,
             params: Vec::new(),
+        }
+    }
+    /// An empty time-varying model with `k` channels.
+    pub fn with_time(k: usize) -> Model {
+        Model {
+            time: true,
+            ..Model::new(k)
         }
     }
     /// Floats per Gaussian.
     pub fn stride(&self) -> usize {
-        BASE_PARAMS + self.k
+        BASE_PARAMS + self.k + if self.time { 2 } else { 0 }
+    }
+    /// Offset of the temporal mean (the log temporal scale follows) in a Gaussian's
+    /// parameters, with [`Model::time`].
+    pub fn time_offset(&self) -> usize {
+        FEAT + self.k
+    }
+    /// Gaussian `i`'s features.
+    pub fn features(&self, i: usize) -> &[f32] {
+        &self.gaussian(i)[FEAT..FEAT + self.k]
     }
     /// Number of Gaussians.
     pub fn len(&self) -> usize {
@@ -129,19 +154,44 @@ impl Model {
         &self.params[i * s..(i + 1) * s]
     }
     /// The Gaussians of a scene with feature channels (a fitted PLY): its positions, log
-    /// scales, normalised rotations, opacity logits and features, so [`evaluate`] gives
-    /// the field the scene holds.
+    /// scales, normalised rotations, opacity logits, features and (a time-varying scene)
+    /// temporal means and log scales, so [`evaluate_at`] gives the field the scene holds.
     pub fn from_scene(scene: &crate::scene::Scene) -> Model {
         let k = scene.feature_count;
-        let mut params = Vec::with_capacity(scene.len() * (BASE_PARAMS + k));
+        let time = scene.time.as_ref();
+        let mut params = Vec::with_capacity(scene.len() * (BASE_PARAMS + k + 2));
         for i in 0..scene.len() {
             params.extend_from_slice(&scene.positions[i]);
             params.extend_from_slice(&scene.log_scales[i]);
             params.extend_from_slice(&crate::scene::normalize_quat(scene.rotations[i]));
             params.push(scene.opacity_logits[i]);
             params.extend_from_slice(&scene.features[i * k..(i + 1) * k]);
+            if let Some(t) = time {
+                params.extend_from_slice(&t[i]);
+            }
         }
-        Model { k, params }
+        Model {
+            k,
+            time: time.is_some(),
+            params,
+        }
+    }
+    /// The static model of the same Gaussians, their temporal parameters dropped.
+    pub fn without_time(&self) -> Model {
+        if !self.time {
+            return self.clone();
+        }
+        let (s, keep) = (self.stride(), BASE_PARAMS + self.k);
+        Model {
+            k: self.k,
+            time: false,
+            params: self
+                .params
+                .chunks_exact(s)
+                .flat_map(|g| &g[..keep])
+                .copied()
+                .collect(),
+        }
     }
     /// The activated opacity of Gaussian `i`.
     pub fn opacity(&self, i: usize) -> f32 {
@@ -259,6 +309,8 @@ pub struct Points {
     pub values: Vec<f32>,
     /// Loss weights, one per sample (or none).
     pub weights: Vec<f32>,
+    /// Times, sorted by cell (none for a static field).
+    pub times: Vec<f32>,
     /// The sample's index in the input order given to [`Points::binned`].
     pub order: Vec<u32>,
     /// `cell_start[c] .. cell_start[c + 1]` are cell `c`'s samples.
@@ -266,13 +318,14 @@ pub struct Points {
 }
 
 impl Points {
-    /// Bins the samples at `positions` (with `k` values each and weights, either may be
-    /// empty) into `grid`'s cells, keeping the input order within a cell.
+    /// Bins the samples at `positions` (with `k` values each, weights and times, any of
+    /// them may be empty) into `grid`'s cells, keeping the input order within a cell.
     pub fn binned(
         grid: &CellGrid,
         positions: &[[f32; 3]],
         values: &[f32],
         weights: &[f32],
+        times: &[f32],
         k: usize,
     ) -> Points {
         let cells: Vec<usize> = positions.iter().map(|&p| grid.cell_of(p)).collect();
@@ -306,6 +359,11 @@ impl Points {
             } else {
                 order.iter().map(|&i| weights[i as usize]).collect()
             },
+            times: if times.is_empty() {
+                Vec::new()
+            } else {
+                order.iter().map(|&i| times[i as usize]).collect()
+            },
             order,
             cell_start: start,
         }
@@ -328,6 +386,8 @@ struct Prepared {
     opacity: f32,
     lo: [usize; 3],
     hi: [usize; 3],
+    /// The temporal mean and the inverse temporal scale (time-varying models).
+    time: Option<(f32, f32)>,
 }
 
 fn prepare(model: &Model, i: usize, kernel: SplatKernel, grid: &CellGrid) -> Prepared {
@@ -349,24 +409,43 @@ fn prepare(model: &Model, i: usize, kernel: SplatKernel, grid: &CellGrid) -> Pre
         [0, 1, 2].map(|a| mu[a] - half[a]),
         [0, 1, 2].map(|a| mu[a] + half[a]),
     );
+    let time = model.time.then(|| {
+        let t = model.time_offset();
+        // The inverse scale as crate::scene::temporal_weight computes it, so both give the
+        // same bits.
+        (g[t], (-g[t + 1]).exp())
+    });
     Prepared {
         mu,
         m,
         opacity: sigmoid(g[LOGIT]),
         lo,
         hi,
+        time,
     }
 }
 
-/// Calls `f(n, d, v, d2)` for every sample `n` of `points` within the support of `p`.
+/// One sample within a Gaussian's support, as [`visit`] hands it over.
+#[derive(Clone, Copy)]
+struct Hit {
+    /// The sample's index in `points`.
+    n: usize,
+    /// `x - mu`.
+    d: [f32; 3],
+    /// `m (x - mu)`.
+    v: [f32; 3],
+    /// `|v|^2`.
+    d2: f32,
+    /// The temporal factor (1 for a static model).
+    tw: f32,
+    /// `(t - tau) / s_t` (0 for a static model).
+    u: f32,
+}
+
+/// Calls `f` for every sample of `points` within the support of `p` (in space and, for a
+/// time-varying model, in time: [`crate::scene::TEMPORAL_CUTOFF`]).
 #[inline]
-fn visit(
-    p: &Prepared,
-    grid: &CellGrid,
-    points: &Points,
-    cut: f32,
-    mut f: impl FnMut(usize, [f32; 3], [f32; 3], f32),
-) {
+fn visit(p: &Prepared, grid: &CellGrid, points: &Points, cut: f32, mut f: impl FnMut(Hit)) {
     for ix in p.lo[0]..=p.hi[0] {
         for iy in p.lo[1]..=p.hi[1] {
             let column = (ix * grid.dims[1] + iy) * grid.dims[2];
@@ -377,9 +456,22 @@ fn visit(
                 let d = [x[0] - p.mu[0], x[1] - p.mu[1], x[2] - p.mu[2]];
                 let v = [0, 1, 2].map(|j| p.m[j][0] * d[0] + p.m[j][1] * d[1] + p.m[j][2] * d[2]);
                 let d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-                if d2 <= cut {
-                    f(n, d, v, d2);
+                if d2 > cut {
+                    continue;
                 }
+                let (tw, u) = match p.time {
+                    None => (1.0, 0.0),
+                    Some((tau, inv_s)) => {
+                        // crate::scene::temporal_weight, with u kept for the gradient.
+                        let u = (points.times[n] - tau) * inv_s;
+                        let u2 = u * u;
+                        if u2 > crate::scene::TEMPORAL_CUTOFF {
+                            continue;
+                        }
+                        ((-0.5 * u2).exp(), u)
+                    }
+                };
+                f(Hit { n, d, v, d2, tw, u });
             }
         }
     }
@@ -400,9 +492,10 @@ pub fn forward(model: &Model, kernel: SplatKernel, grid: &CellGrid, points: &Poi
             );
             for i in a..b {
                 let p = prepare(model, i, kernel, grid);
-                let feat = &model.gaussian(i)[FEAT..];
-                visit(&p, grid, points, cut, |n, _, _, d2| {
-                    let w = p.opacity * kernel_value(kernel, d2).0;
+                let feat = model.features(i);
+                visit(&p, grid, points, cut, |h| {
+                    let w = p.opacity * kernel_value(kernel, h.d2).0 * h.tw;
+                    let n = h.n;
                     for (o, f) in acc[n * k..(n + 1) * k].iter_mut().zip(feat) {
                         *o += w * f;
                     }
@@ -530,7 +623,7 @@ pub fn loss_and_grad(
         .for_each(|(i, (gi, score_i))| {
             let p = prepare(model, i, cfg.kernel, grid);
             let params = model.gaussian(i);
-            let feat = &params[FEAT..];
+            let feat = model.features(i);
             let o = p.opacity;
             let mut g_feat = vec![0f64; k];
             let mut g_a = 0f64; // d loss / d opacity
@@ -538,16 +631,24 @@ pub fn loss_and_grad(
             let mut sv2 = [0f64; 3];
             let mut a_mat = [[0f64; 3]; 3];
             let mut sc = 0f64;
-            visit(&p, grid, points, cut, |n, d, v, d2| {
+            // d loss / d tau and d loss / d log s_t.
+            let (mut g_tau, mut g_log_st) = (0f64, 0f64);
+            let inv_st = p.time.map_or(0.0, |t| f64::from(t.1));
+            visit(&p, grid, points, cut, |h| {
+                let Hit { n, d, v, d2, tw, u } = h;
                 let (g, dg) = kernel_value(cfg.kernel, d2);
                 let en = &e[n * k..(n + 1) * k];
                 let mut ea = 0f32;
                 for c in 0..k {
                     ea += en[c] * feat[c];
-                    g_feat[c] += f64::from(en[c] * o * g);
+                    g_feat[c] += f64::from(en[c] * o * g * tw);
                 }
-                g_a += f64::from(ea * g);
-                let dd2 = f64::from(ea * o * dg);
+                g_a += f64::from(ea * g * tw);
+                // T = exp(-u^2 / 2): dT / dtau = T u / s_t, dT / dlog s_t = T u^2.
+                let d_tw = f64::from(ea * o * g * tw);
+                g_tau += d_tw * f64::from(u) * inv_st;
+                g_log_st += d_tw * f64::from(u * u);
+                let dd2 = f64::from(ea * o * dg * tw);
                 for j in 0..3 {
                     let vj = f64::from(v[j]);
                     sv[j] += dd2 * vj;
@@ -556,7 +657,7 @@ pub fn loss_and_grad(
                         row[j] += dd2 * f64::from(dk) * vj;
                     }
                 }
-                sc += f64::from(g * energy[n]);
+                sc += f64::from(g * tw * energy[n]);
             });
             *score_i = sc as f32;
             // Position: d d2 / d mu = -2 m^T v.
@@ -583,6 +684,10 @@ pub fn loss_and_grad(
             gi[LOGIT] = (g_a * f64::from(o) * (1.0 - f64::from(o))) as f32;
             for c in 0..k {
                 gi[FEAT + c] = g_feat[c] as f32;
+            }
+            if model.time {
+                gi[FEAT + k] = g_tau as f32;
+                gi[FEAT + k + 1] = g_log_st as f32;
             }
         });
     let reg = regulariser(model, cfg, Some(&mut grad));
@@ -630,13 +735,68 @@ fn quaternion_grad(q: &[f64], g_r: &[[f64; 3]; 3]) -> [f64; 4] {
     [0, 1, 2, 3].map(|c| (gn[c] - qn[c] * dot) / n)
 }
 
-/// The field at arbitrary `positions` (input order), `k` values each.
+/// The field of a static model at arbitrary `positions` (input order), `k` values each
+/// (a time-varying model: [`evaluate_at`]).
 pub fn evaluate(model: &Model, kernel: SplatKernel, positions: &[[f32; 3]]) -> Vec<f32> {
+    evaluate_points(model, kernel, positions, &[])
+}
+
+/// The field at `positions` at `times` (one per position; none for a static model): `k`
+/// values each, in input order. Refuses times for a static model, none (or a count other
+/// than the positions') for a time-varying one, and non-finite times.
+pub fn evaluate_at(
+    model: &Model,
+    kernel: SplatKernel,
+    positions: &[[f32; 3]],
+    times: Option<&[f32]>,
+) -> Result<Vec<f32>, String> {
+    match (model.time, times) {
+        (false, None) => Ok(evaluate_points(model, kernel, positions, &[])),
+        (false, Some(_)) => Err(
+            "the field is static (its Gaussians have no t_mean, t_scale); evaluate it without a time"
+                .into(),
+        ),
+        (true, None) => Err(
+            "the field is time-varying (t_mean, t_scale per Gaussian); give the time of the points"
+                .into(),
+        ),
+        (true, Some(t)) => {
+            if t.len() != positions.len() {
+                return Err(format!(
+                    "{} times for {} points; give one time per point",
+                    t.len(),
+                    positions.len()
+                ));
+            }
+            if let Some(i) = t.iter().position(|v| !v.is_finite()) {
+                return Err(format!("time {i} is {}, not a finite number", t[i]));
+            }
+            Ok(evaluate_points(model, kernel, positions, t))
+        }
+    }
+}
+
+/// The field at `positions` (at `times`, one each, for a time-varying model; a
+/// time-varying model without them is taken at its Gaussians' temporal means: weight 1).
+fn evaluate_points(
+    model: &Model,
+    kernel: SplatKernel,
+    positions: &[[f32; 3]],
+    times: &[f32],
+) -> Vec<f32> {
     if positions.is_empty() {
         return Vec::new();
     }
     let grid = CellGrid::new(point_bounds(positions), positions.len(), 8.0);
-    let points = Points::binned(&grid, positions, &[], &[], model.k);
+    let static_model;
+    let model = if model.time && times.len() != positions.len() {
+        static_model = model.without_time();
+        &static_model
+    } else {
+        model
+    };
+    let times = if model.time { times } else { &[] };
+    let points = Points::binned(&grid, positions, &[], &[], times, model.k);
     let f = forward(model, kernel, &grid, &points);
     let k = model.k;
     let mut out = vec![0f32; f.len()];

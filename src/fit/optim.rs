@@ -104,16 +104,43 @@ pub fn prune(model: &mut Model, adam: &mut Adam, score: &mut Vec<f32>, min_opaci
 /// scales divided by 1.6), any other is cloned (a copy half its largest scale along its
 /// longest axis, both halves keeping half the features, so the field barely changes).
 /// Optimiser state of every touched Gaussian restarts at zero. Returns (cloned, split).
-pub fn densify(model: &mut Model, adam: &mut Adam, score: &[f32], budget: usize) -> (usize, usize) {
+///
+/// A time-varying model has a fourth axis, time: its scale counts as `log s_t + time_to_space`
+/// (`time_to_space` = log of the spatial length one unit of time compares to), and when it
+/// is the longest, the split or clone is along time (the temporal means move, only the
+/// temporal scale shrinks); along a spatial axis both copies keep the temporal mean.
+pub fn densify(
+    model: &mut Model,
+    adam: &mut Adam,
+    score: &[f32],
+    budget: usize,
+    time_to_space: f32,
+) -> (usize, usize) {
     let n = model.len();
     if n == 0 || budget == 0 {
         return (0, 0);
     }
     let stride = model.stride();
-    let max_scale = |i: usize| {
-        let g = model.gaussian(i);
-        g[SCALE].max(g[SCALE + 1]).max(g[SCALE + 2])
+    let k = model.k;
+    let t_at = model.time.then(|| model.time_offset());
+    // The longest axis, 0..3 in space or 3 for time, and its log scale on the spatial scale.
+    let longest = |g: &[f32]| -> (usize, f32) {
+        let mut best =
+            (0..3)
+                .map(|a| (a, g[SCALE + a]))
+                .fold(
+                    (0, f32::NEG_INFINITY),
+                    |b, (a, v)| if v > b.1 { (a, v) } else { b },
+                );
+        if let Some(t) = t_at {
+            let v = g[t + 1] + time_to_space;
+            if v > best.1 {
+                best = (3, v);
+            }
+        }
+        best
     };
+    let max_scale = |i: usize| longest(model.gaussian(i)).1;
     let mut scales: Vec<f32> = (0..n).map(max_scale).collect();
     scales.sort_by(f32::total_cmp);
     let median = scales[n / 2];
@@ -124,6 +151,33 @@ pub fn densify(model: &mut Model, adam: &mut Adam, score: &[f32], budget: usize)
     let shrink = 1.6f32.ln();
     for &i in &order {
         let g: Vec<f32> = model.gaussian(i).to_vec();
+        let (axis_or_time, size) = longest(&g);
+        if let (3, Some(t)) = (axis_or_time, t_at) {
+            // Along time: split at +-1 temporal scale, or clone half a scale later.
+            let st = g[t + 1].exp();
+            let (mut a, mut b) = (g.clone(), g.clone());
+            if size > median {
+                a[t] = g[t] - st;
+                b[t] = g[t] + st;
+                a[t + 1] -= shrink;
+                b[t + 1] -= shrink;
+                split += 1;
+            } else {
+                b[t] = g[t] + 0.5 * st;
+                for c in FEAT..FEAT + k {
+                    a[c] *= 0.5;
+                    b[c] *= 0.5;
+                }
+                cloned += 1;
+            }
+            model.params[i * stride..(i + 1) * stride].copy_from_slice(&a);
+            model.params.extend_from_slice(&b);
+            for state in [&mut adam.m, &mut adam.v] {
+                state[i * stride..(i + 1) * stride].fill(0.0);
+                state.extend(std::iter::repeat(0.0).take(stride));
+            }
+            continue;
+        }
         // Longest axis: column j of R.
         let j = (0..3)
             .max_by(|&a, &b| g[SCALE + a].total_cmp(&g[SCALE + b]).then(b.cmp(&a)))
@@ -135,7 +189,7 @@ pub fn densify(model: &mut Model, adam: &mut Adam, score: &[f32], budget: usize)
         let s = g[SCALE + j].exp();
         let mut a = g.clone();
         let mut b = g.clone();
-        if g[SCALE + j] > median {
+        if size > median {
             for c in 0..3 {
                 a[c] = g[c] + s * axis[c];
                 b[c] = g[c] - s * axis[c];
@@ -147,7 +201,7 @@ pub fn densify(model: &mut Model, adam: &mut Adam, score: &[f32], budget: usize)
             for c in 0..3 {
                 b[c] = g[c] + 0.5 * s * axis[c];
             }
-            for c in FEAT..stride {
+            for c in FEAT..FEAT + k {
                 a[c] *= 0.5;
                 b[c] *= 0.5;
             }

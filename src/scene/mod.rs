@@ -64,6 +64,32 @@ pub struct Scene {
     /// `features[i * feature_count + k]` (PLY properties `feat_0 .. feat_{K-1}`, or
     /// `--features FILE.npy`).
     pub features: Vec<f32>,
+    /// A time-varying scene (a space-time field `fit --time-column` wrote): per Gaussian
+    /// its temporal mean and the natural log of its temporal scale, `[t_mean, t_scale]`
+    /// (PLY properties `t_mean`, `t_scale`; `t_scale` is a log like `scale_0..2`). Gaussian
+    /// `i` at time `T` is the 3D Gaussian with its opacity times [`temporal_weight`];
+    /// [`Scene::at_time`] gives that scene. `None` for a static scene.
+    pub time: Option<Vec<[f32; 2]>>,
+}
+
+/// `(t - t_mean) / t_scale` squared beyond which a Gaussian's temporal factor is 0: 4
+/// temporal sigma, the spatial truncation of the field's Gaussian kernel
+/// ([`crate::fit::model::GAUSSIAN_CUTOFF`]).
+pub const TEMPORAL_CUTOFF: f32 = 16.0;
+
+/// The temporal factor of a Gaussian with temporal mean `t_mean` and log temporal scale
+/// `t_log_scale` at time `t`: `exp(-0.5 u^2)`, `u = (t - t_mean) / exp(t_log_scale)`, 0
+/// where `u^2 > 16` ([`TEMPORAL_CUTOFF`]). The one definition `fit` optimises, the renders
+/// at a time apply ([`Scene::at_time`]) and field evaluation uses.
+#[inline]
+pub fn temporal_weight(t: f32, t_mean: f32, t_log_scale: f32) -> f32 {
+    let u = (t - t_mean) * (-t_log_scale).exp();
+    let u2 = u * u;
+    if u2 <= TEMPORAL_CUTOFF {
+        (-0.5 * u2).exp()
+    } else {
+        0.0
+    }
 }
 
 /// Most feature channels a Gaussian may carry.
@@ -90,6 +116,10 @@ impl Scene {
         out.antialiased = self.antialiased;
         out.kernel = self.kernel;
         out.feature_count = self.feature_count;
+        out.time = self
+            .time
+            .as_ref()
+            .map(|t| indices.iter().map(|&i| t[i]).collect());
         let in_stride = self.sh_stride();
         let out_stride = out.sh_stride();
         out.positions.reserve(indices.len());
@@ -174,10 +204,47 @@ impl Scene {
             || self.opacity_logits.len() != n
             || self.sh.len() != n * self.sh_stride()
             || self.features.len() != n * self.feature_count
+            || self.time.as_ref().is_some_and(|t| t.len() != n)
         {
             return Err("attribute arrays have inconsistent lengths".into());
         }
         Ok(())
+    }
+
+    /// The range of the temporal means `(min, max)` of a time-varying scene (`None` for a
+    /// static or an empty one).
+    pub fn time_range(&self) -> Option<(f32, f32)> {
+        let t = self.time.as_ref()?;
+        let lo = t.iter().map(|v| v[0]).fold(f32::INFINITY, f32::min);
+        let hi = t.iter().map(|v| v[0]).fold(f32::NEG_INFINITY, f32::max);
+        (lo <= hi).then_some((lo, hi))
+    }
+
+    /// The static scene a time-varying one is at time `t`: each Gaussian's opacity times its
+    /// [`temporal_weight`] (computed in f64 and stored back as a logit, so the activated
+    /// opacity is `sigmoid(logit) * weight` to a few f32 ulps), the Gaussians whose weight
+    /// is 0 (beyond 4 temporal sigma) left out, `time` cleared. Every renderer (GPU, CPU,
+    /// field) takes this scene, so they agree at a time as they do on a static scene. A
+    /// static scene comes back as it is.
+    pub fn at_time(&self, t: f32) -> Scene {
+        let Some(times) = &self.time else {
+            return self.clone();
+        };
+        let weights: Vec<f32> = times
+            .iter()
+            .map(|v| temporal_weight(t, v[0], v[1]))
+            .collect();
+        let keep: Vec<usize> = (0..self.len()).filter(|&i| weights[i] > 0.0).collect();
+        let mut out = self.select(&keep, self.sh_degree);
+        out.time = None;
+        for (logit, &i) in out.opacity_logits.iter_mut().zip(&keep) {
+            let o = 1.0 / (1.0 + (-f64::from(*logit)).exp());
+            let p = o * f64::from(weights[i]);
+            // 0 < p <= 1; the clamp keeps p = 1 (an opacity that rounds to 1 in f64) and
+            // an underflow finite.
+            *logit = (p.ln() - (-p).ln_1p()).clamp(-1e4, 1e4) as f32;
+        }
+        out
     }
 
     /// Applies the reference activations: `exp` to scales, sigmoid to opacity and

@@ -6,7 +6,9 @@
 //! `comment vksplat kernel power` records that the scene is made for the power-function
 //! kernel ([`SplatKernel`]); the writer adds it for such scenes. Float properties
 //! `feat_0 .. feat_{K-1}` (K <= 64) are the Gaussians' feature channels, written back after
-//! `rot_*`.
+//! `rot_*`. Float properties `t_mean` and `t_scale` (both or neither) make a time-varying
+//! scene ([`Scene::time`]: temporal mean and natural log of the temporal scale), written
+//! back last.
 
 use super::{sh_coeffs_for_degree, Scene, SceneError, MAX_FEATURES};
 use crate::model::SplatKernel;
@@ -275,6 +277,8 @@ struct VertexMap {
     sh_degree: u32,
     /// `feat_0 .. feat_{K-1}`.
     features: Vec<usize>,
+    /// `t_mean`, `t_scale` of a time-varying scene.
+    time: Option<[usize; 2]>,
 }
 
 fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
@@ -334,7 +338,24 @@ fn map_vertex(el: &Element, path: &Path) -> Result<VertexMap, SceneError> {
     let features = (0..n_feat)
         .map(|i| find(&format!("feat_{i}")))
         .collect::<Result<Vec<_>, _>>()?;
+    let has = |name: &str| el.properties.iter().any(|p| p.name() == name);
+    let time = match (has("t_mean"), has("t_scale")) {
+        (true, true) => Some([find("t_mean")?, find("t_scale")?]),
+        (false, false) => None,
+        (with, _) => {
+            let (present, missing) = if with {
+                ("t_mean", "t_scale")
+            } else {
+                ("t_scale", "t_mean")
+            };
+            return Err(SceneError::invalid(
+                path,
+                format!("has the vertex property \"{present}\" but not \"{missing}\"; a time-varying scene needs both (temporal mean and log temporal scale)"),
+            ));
+        }
+    };
     Ok(VertexMap {
+        time,
         xyz: [find("x")?, find("y")?, find("z")?],
         f_dc: [find("f_dc_0")?, find("f_dc_1")?, find("f_dc_2")?],
         f_rest,
@@ -483,6 +504,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let mut scene = Scene::empty(map.sh_degree);
     scene.kernel = header.kernel(path)?;
     scene.feature_count = map.features.len();
+    if map.time.is_some() {
+        scene.time = Some(Vec::new());
+    }
     for (ei, el) in header.elements.iter().enumerate() {
         body.check_fits(el)?;
         let mut row = vec![0f64; el.properties.len()];
@@ -577,6 +601,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
             for &f in &map.features {
                 scene.features.push(get(f)?);
             }
+            if let (Some([m, l]), Some(t)) = (map.time, scene.time.as_mut()) {
+                t.push([get(m)?, get(l)?]);
+            }
         }
     }
     if header.format != Format::Ascii && body.pos != bytes.len() {
@@ -622,7 +649,7 @@ pub enum PlyEncoding {
 
 /// Serialises a scene as an INRIA PLY with the trainer's property order
 /// (`x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_*`), then `feat_*` when the scene
-/// has feature channels.
+/// has feature channels, then `t_mean t_scale` when it is time-varying.
 pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     let k_rest = scene.sh_coeffs() - 1;
     let mut names: Vec<String> = [
@@ -636,6 +663,9 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     names.extend((0..3).map(|i| format!("scale_{i}")));
     names.extend((0..4).map(|i| format!("rot_{i}")));
     names.extend((0..scene.feature_count).map(|i| format!("feat_{i}")));
+    if scene.time.is_some() {
+        names.extend(["t_mean".to_string(), "t_scale".to_string()]);
+    }
     let format = match encoding {
         PlyEncoding::BinaryLittleEndian => "binary_little_endian",
         PlyEncoding::BinaryBigEndian => "binary_big_endian",
@@ -670,6 +700,9 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
         row.extend_from_slice(&scene.rotations[i]);
         let k = scene.feature_count;
         row.extend_from_slice(&scene.features[i * k..(i + 1) * k]);
+        if let Some(t) = &scene.time {
+            row.extend_from_slice(&t[i]);
+        }
         match encoding {
             PlyEncoding::BinaryLittleEndian => row
                 .iter()

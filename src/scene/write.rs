@@ -110,8 +110,11 @@ pub enum ConvertError {
     },
 }
 
-/// Serialises a scene in `format`.
+/// Serialises a scene in `format` (a time-varying scene only as PLY).
 pub fn to_bytes(scene: &Scene, format: OutputFormat) -> Result<Vec<u8>, String> {
+    if scene.time.is_some() && format != OutputFormat::Ply {
+        return Err("the scene is time-varying (t_mean, t_scale per Gaussian), which only PLY holds; write a .ply, or the scene at one time".into());
+    }
     match format {
         OutputFormat::Ply => Ok(ply::to_bytes(scene, ply::PlyEncoding::BinaryLittleEndian)),
         OutputFormat::Splat => Ok(splat::to_bytes(scene)),
@@ -191,6 +194,16 @@ pub fn convert(
     }
     if let Some(file) = &options.features {
         super::features::attach_npy(&mut scene, file)?;
+    }
+    if scene.time.is_some() && output_format != OutputFormat::Ply {
+        return Err(ConvertError::Encode {
+            path: output.to_path_buf(),
+            format: output_format,
+            message: format!(
+                "{} is time-varying (t_mean, t_scale per Gaussian), which only PLY holds; write a .ply, or render a time with `vksplat render --time T`",
+                input.display()
+            ),
+        });
     }
     let read = scene.len();
     let scene = match &options.transform {

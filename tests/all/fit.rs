@@ -471,6 +471,9 @@ fn malformed_inputs_fail_clearly_without_output() {
     );
     assert!(e.contains("name the output .npy"), "{e}");
     let o = common::cli::vksplat(&["gen", "--rf", "horn", s(&d.join("h.npy"))]);
-    assert!(!o.status.success() && common::cli::stderr(&o).contains("use dipole or two-ray"));
+    assert!(
+        !o.status.success()
+            && common::cli::stderr(&o).contains("use dipole, two-ray or moving-source")
+    );
     assert!(!d.join("h.npy").exists());
 }

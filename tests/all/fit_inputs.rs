@@ -37,6 +37,8 @@ fn samples(n: usize, dims: usize, scale: f64) -> FieldData {
         .collect();
     FieldData {
         bounds: fit::model::point_bounds(&positions),
+        times: None,
+        time_column: None,
         positions,
         values,
         k: 1,

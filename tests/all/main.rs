@@ -41,6 +41,7 @@ mod rf_walkthrough;
 mod sequences;
 mod shader_interface;
 mod shards;
+mod time_fields;
 mod train;
 mod transform;
 mod view;
