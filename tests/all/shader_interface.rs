@@ -71,6 +71,10 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     ShadeBwd::new(ctx, 140, 64).expect("shade backward and its reduce");
     vksplat::train::loss::GpuLoss::new(ctx).expect("the training loss's five stages");
     built += 1 + 3 + 1 + 1 + 2 + 5;
+    // The training step's: the Gaussians' and the shader's (its norm's reduce is the
+    // loss's, counted above).
+    vksplat::train::device::StepPipelines::new(ctx).expect("the training step's stages");
+    built += 2;
     let sorts = [
         DEFAULT_SORT_CONFIG,
         SORT_CONFIG_32,
