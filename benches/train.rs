@@ -99,5 +99,14 @@ fn main() {
             loss.device_bytes() as f64 / 1e6,
             last.psnr
         );
+        println!(
+            "  device ms per iteration: {}",
+            report
+                .stage_ms
+                .iter()
+                .map(|(n, ms)| format!("{n} {ms:.2}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
     }
 }

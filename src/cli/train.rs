@@ -148,6 +148,10 @@ pub(crate) struct TrainArgs {
     /// Replace the model directory's files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
+    /// Print the mean device time per iteration of each stage (GPU timestamps): the
+    /// forward pass's, the loss, the backward pass's and the optimiser's step.
+    #[arg(long)]
+    pub(crate) timings: bool,
     /// No progress bar.
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -397,5 +401,15 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         )),
         args.output.display()
     );
+    if args.timings {
+        let gpu: f64 = report.stage_ms.iter().map(|(_, ms)| ms).sum();
+        outln!(
+            "device time per iteration (mean): {gpu:.2} ms of {:.2} ms wall",
+            1000.0 / report.iterations_per_second.max(1e-9)
+        );
+        for (name, ms) in &report.stage_ms {
+            outln!("  {name:<15} {ms:>9.3} ms");
+        }
+    }
     Ok(())
 }

@@ -39,6 +39,12 @@ use crate::model::{sh_coeffs_for_degree, SplatKernel};
 pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_bwd"];
 /// The stage before them in the backward pass of a shaded frame.
 pub const SHADE_BACKWARD_STAGE: &str = "shade_bwd";
+/// The first stage of [`GpuRenderer::backward_on_device`]: what records the pixels'
+/// gradients (training's loss).
+pub const DEVICE_LOSS_STAGE: &str = "loss";
+/// The last stage of [`GpuRenderer::backward_on_device`]: what reads the gradients
+/// (training's step).
+pub const DEVICE_STEP_STAGE: &str = "step";
 
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
@@ -105,7 +111,8 @@ impl BackwardState {
             scratch: None,
             partials: None,
             mlp_grads: None,
-            timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32 + 1)?,
+            // The stages, the shader's backward pass, and a device pass's loss and step.
+            timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32 + 3)?,
             timings: Vec::new(),
             span_ms: 0.0,
             mode: Accumulation::default(),
@@ -743,11 +750,13 @@ impl GpuRenderer {
         ctx.submit_and_wait("backward", |cmd| {
             // The forward's writes (an earlier submission) before this pass reads them.
             barrier(ctx, cmd, Access::Any, Access::Any);
+            timer.reset(ctx, cmd);
             if let PixelInput::Device(record) = &mut input {
                 grad_depth_b.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
-                record(ctx, cmd, fs.color, grad_color_b)?;
+                timer.stage(ctx, cmd, DEVICE_LOSS_STAGE, |cmd| {
+                    record(ctx, cmd, fs.color, grad_color_b)
+                })?;
             }
-            timer.reset(ctx, cmd);
             maxima.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
             acc.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
             barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
@@ -833,17 +842,19 @@ impl GpuRenderer {
             })?;
             if let Some(after) = after {
                 barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
-                after(
-                    ctx,
-                    cmd,
-                    DeviceGrads {
-                        grads,
-                        sh_grads,
-                        splats: fs.splats,
-                        feature_grads,
-                        mlp_grads: mlp_grads.filter(|_| shade.is_some()).map(|b| b.whole()),
-                    },
-                )?;
+                timer.stage(ctx, cmd, DEVICE_STEP_STAGE, |cmd| {
+                    after(
+                        ctx,
+                        cmd,
+                        DeviceGrads {
+                            grads,
+                            sh_grads,
+                            splats: fs.splats,
+                            feature_grads,
+                            mlp_grads: mlp_grads.filter(|_| shade.is_some()).map(|b| b.whole()),
+                        },
+                    )
+                })?;
             }
             barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
             Ok(())

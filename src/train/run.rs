@@ -125,6 +125,26 @@ pub struct TrainReport {
     pub device_bytes_peak: u64,
     /// Whether the iterations kept the state on the device ([`super::device`]).
     pub on_device: bool,
+    /// Mean milliseconds per iteration of each device stage (GPU timestamps): the
+    /// forward pass's, then the loss, the backward pass's and the step (with the state on
+    /// the device; the host optimiser's loss and step are not device stages).
+    pub stage_ms: Vec<(String, f64)>,
+}
+
+/// Sums of per-stage milliseconds, in the order the stages first appear.
+#[derive(Default)]
+struct StageSums(Vec<(String, f64)>);
+
+impl StageSums {
+    fn add<S: AsRef<str>>(&mut self, stages: impl IntoIterator<Item = (S, f64)>) {
+        for (name, ms) in stages {
+            let name = name.as_ref();
+            match self.0.iter_mut().find(|(n, _)| n == name) {
+                Some((_, sum)) => *sum += ms,
+                None => self.0.push((name.to_string(), ms)),
+            }
+        }
+    }
 }
 
 /// One iteration's figures, for a progress display.
@@ -390,6 +410,7 @@ pub fn train(
     // The state on the device, unless the caller asks for the host optimiser.
     let device_path = !opts.host_optimizer;
     let mut pipelines: Option<StepPipelines> = None;
+    let mut stage_sums = StageSums::default();
     let mut dev: Option<DeviceModel> = None;
     for it in first..=s.iterations {
         if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
@@ -472,6 +493,7 @@ pub fn train(
                 _ => None,
             };
             let mut norm_buffer = None;
+            stage_sums.add(renderer.timings().stages());
             renderer.backward_on_device(
                 &d.scene,
                 (w, h),
@@ -483,6 +505,7 @@ pub fn train(
                     Ok(())
                 },
             )?;
+            stage_sums.add(rast.renderer().backward_timings());
             let ctx = rast.renderer().ctx();
             value = loss.read_value(ctx)?;
             if let Some(b) = norm_buffer {
@@ -499,6 +522,7 @@ pub fn train(
             let params = model.params();
             rast.set_shader(model.shader.as_ref())?;
             let (frame, token) = rast.forward(&params, cam, &render_opts)?;
+            stage_sums.add(rast.renderer().timings().stages());
             let (v, grad) = loss.compute(
                 rast.renderer().ctx(),
                 &frame.color,
@@ -524,6 +548,7 @@ pub fn train(
                         None,
                     )
                 };
+                stage_sums.add(rast.renderer().backward_timings());
                 if in_densify && mcmc.is_none() {
                     let radii: Vec<f32> = rast
                         .projected()?
@@ -667,5 +692,10 @@ pub fn train(
         iterations_per_second: (s.iterations + 1 - first) as f64 / seconds.max(1e-9),
         device_bytes_peak: peak,
         on_device: device_path,
+        stage_ms: stage_sums
+            .0
+            .into_iter()
+            .map(|(n, ms)| (n, ms / f64::from((s.iterations + 1 - first).max(1))))
+            .collect(),
     })
 }

@@ -635,7 +635,8 @@ fn the_state_on_the_device_steps_as_the_host_optimiser() {
 /// `render --export-colmap`: a scene's orbit rendered on the device into a COLMAP data set
 /// that `train` reads: the images are the renders (equal to `render -o`'s PNGs), the
 /// cameras read back as rendered, the points are the scene's centres; an existing data set
-/// is not overwritten without --overwrite; and training on it runs.
+/// is not overwritten without --overwrite; and training on it runs, `--timings` listing
+/// every device stage of an iteration with its time.
 #[test]
 fn render_exports_a_colmap_data_set_that_trains() {
     let dir = tempfile::tempdir().unwrap();
@@ -705,6 +706,7 @@ fn render_exports_a_colmap_data_set_that_trains() {
         model.to_str().unwrap(),
         "--iterations",
         "30",
+        "--timings",
         "-q",
     ]);
     assert!(
@@ -715,6 +717,26 @@ fn render_exports_a_colmap_data_set_that_trains() {
     assert!(model
         .join("point_cloud/iteration_30/point_cloud.ply")
         .is_file());
+    // --timings: every device stage of an iteration, each timed.
+    let text = String::from_utf8_lossy(&train.stdout);
+    for stage in [
+        "preprocess",
+        "sort",
+        "blend",
+        "loss",
+        "blend_bwd",
+        "preprocess_bwd",
+        "step",
+    ] {
+        let ms: f64 = text
+            .lines()
+            .find_map(|l| {
+                let mut w = l.split_whitespace();
+                (w.next() == Some(stage)).then(|| w.next().unwrap().parse().unwrap())
+            })
+            .unwrap_or_else(|| panic!("no {stage} in {text}"));
+        assert!(ms > 0.0, "{stage}: {ms} ms");
+    }
 }
 
 /// Feature splats and gradient clipping on the device: the feature channels, the neural
