@@ -2,6 +2,9 @@
 // Training loss: one axis of SSIM's separable 11-tap Gaussian window (sigma 1.5) over
 // `groups` vec4s per pixel, zero outside the image (PyTorch conv2d with padding 5, as the
 // original's ssim). The window is symmetric, so the same pass is also its adjoint.
+// TEXEL_FETCH (CPU devices): the source is read through an RGBA32F texel view, which
+// llvmpipe gathers in one vector load where a storage-buffer load in the tap loop is a
+// per-lane scalar loop.
 #extension GL_GOOGLE_include_directive : require
 #include "loss_common.glsl"
 
@@ -10,7 +13,16 @@ layout(push_constant) uniform Params {
     vec4 taps[3];   // the 11 normalised taps (metrics::ssim's, in f32)
 } p;
 
+#ifndef TEXEL_FETCH
+#define TEXEL_FETCH 0
+#endif
+#if TEXEL_FETCH
+layout(binding = SSIM_FILTER_SRC) uniform samplerBuffer src_texels;
+#define SRC(j) texelFetch(src_texels, int(j))
+#else
 layout(std430, binding = SSIM_FILTER_SRC) readonly buffer SrcBuf { vec4 src[]; };
+#define SRC(j) src[j]
+#endif
 layout(std430, binding = SSIM_FILTER_DST) writeonly buffer DstBuf { vec4 dst[]; };
 
 void main() {
@@ -27,7 +39,7 @@ void main() {
             int c = at + k - 5;
             if (c < 0 || c >= len) continue;
             uint j = along_x ? uint(y) * w + uint(c) : uint(c) * w + uint(x);
-            acc += p.taps[k >> 2][k & 3] * src[j * groups + g];
+            acc += p.taps[k >> 2][k & 3] * SRC(j * groups + g);
         }
         dst[i * groups + g] = acc;
     }

@@ -256,7 +256,6 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "shade_bwd",
         "mlp_grad_reduce",
         "ssim_prepare",
-        "ssim_filter",
         "ssim_map",
         "ssim_grad",
         "loss_reduce",
@@ -265,6 +264,10 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "count64_test",
     ] {
         out.push(v(shader, &[]));
+    }
+    // The loss's window: through buffers, or texel views (CPU devices).
+    for texel in [false, true] {
+        out.push(v("ssim_filter", &[("TEXEL_FETCH", bit(texel))]));
     }
     // Sort: 64-bit keys through buffers, 32-bit keys through buffers or texel views.
     for (key, texel) in [("uvec2", false), ("uint", false), ("uint", true)] {

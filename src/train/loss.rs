@@ -14,13 +14,16 @@
 //! derivatives per pixel (`ssim_map`), the window again (the adjoint), the gradient
 //! (`ssim_grad`); the sums of |x - y| and SSIM are added in a fixed order
 //! (`loss_reduce`), so the loss and its gradient are the same bits run after run, and only
-//! the two sums (8 bytes) are read back.
+//! the sums (|x - y|, SSIM, (x - y)^2: 16 bytes) are read back. On CPU devices the window
+//! reads its source through texel views (the same bits; llvmpipe runs a storage-buffer load
+//! in the tap loop as a scalar loop per lane).
 
-use crate::gpu::shader::{by_binding, BindingKind};
+use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings;
-use crate::gpu::sync::{barrier, Access};
+use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
-    BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind,
+    BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
+    MemoryKind,
 };
 
 /// The original's weight of the D-SSIM term (`lambda_dssim`).
@@ -134,6 +137,11 @@ pub struct LossBuffers<'a> {
 pub struct GpuLoss {
     prepare: ComputePipeline,
     filter: ComputePipeline,
+    /// The window reading its source through texel views (CPU devices).
+    filter_texel: Option<ComputePipeline>,
+    /// RGBA32F views of the two plane buffers (`work`'s first two) for `filter_texel`;
+    /// before `work`, so they are dropped first.
+    views: Option<[BufferView; 2]>,
     map: ComputePipeline,
     grad: ComputePipeline,
     reduce: ComputePipeline,
@@ -169,8 +177,17 @@ fn buffer(ctx: &GpuContext, name: &str, bytes: u64) -> GpuResult<GpuBuffer> {
 }
 
 impl GpuLoss {
-    /// Builds the pipelines.
+    /// Builds the pipelines; on CPU devices the window reads through texel views.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
+        Self::with_texel_fetch(
+            ctx,
+            ctx.info().device_type == ash::vk::PhysicalDeviceType::CPU,
+        )
+    }
+
+    /// [`Self::new`] with the window's texel-view reads on or off (both give the same
+    /// bits; the view is faster on llvmpipe).
+    pub fn with_texel_fetch(ctx: &GpuContext, texel: bool) -> GpuResult<Self> {
         let s = BindingKind::StorageBuffer;
         let build = |name: &str, kinds: &[BindingKind], push: usize, size: u32| {
             ComputePipeline::from_embedded(ctx, name, &[], kinds, push as u32, size)
@@ -187,12 +204,30 @@ impl GpuLoss {
                 16,
                 64,
             )?,
-            filter: build(
+            filter: ComputePipeline::from_embedded(
+                ctx,
                 "ssim_filter",
+                &[("TEXEL_FETCH", "0".into())],
                 &by_binding([(ssim_filter::SRC, s), (ssim_filter::DST, s)])?,
-                std::mem::size_of::<FilterPush>(),
+                std::mem::size_of::<FilterPush>() as u32,
                 64,
             )?,
+            filter_texel: if texel {
+                Some(ComputePipeline::from_embedded(
+                    ctx,
+                    "ssim_filter",
+                    &[("TEXEL_FETCH", "1".into())],
+                    &by_binding([
+                        (ssim_filter::SRC, BindingKind::UniformTexelBuffer),
+                        (ssim_filter::DST, s),
+                    ])?,
+                    std::mem::size_of::<FilterPush>() as u32,
+                    64,
+                )?)
+            } else {
+                None
+            },
+            views: None,
             map: build(
                 "ssim_map",
                 &by_binding([
@@ -245,6 +280,7 @@ impl GpuLoss {
         if self.work.as_ref().is_some_and(|(p, _)| *p >= pixels) {
             return Ok(());
         }
+        self.views = None;
         self.work = None;
         let sums = pixels.div_ceil(REDUCE_SPAN).max(1);
         self.work = Some((
@@ -257,6 +293,16 @@ impl GpuLoss {
                 buffer(ctx, "loss partial sums (2)", sums * 16)?,
             ],
         ));
+        // Texel views where the device addresses that many texels (else the buffers).
+        let texels = pixels * 5;
+        if self.filter_texel.is_some() && texels <= u64::from(ctx.info().max_texel_buffer_elements)
+        {
+            let (_, [planes, filtered, ..]) = self.work.as_ref().expect("made above");
+            let view = |b: &GpuBuffer| {
+                BufferView::new(ctx, b, ash::vk::Format::R32G32B32A32_SFLOAT, 0, texels * 16)
+            };
+            self.views = Some([view(planes)?, view(filtered)?]);
+        }
         Ok(())
     }
 
@@ -301,7 +347,15 @@ impl GpuLoss {
         for (k, t) in taps64.iter().enumerate() {
             taps[k / 4][k % 4] = *t as f32;
         }
-        let step = |cmd| barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
+        // Each pass's writes before the next one's reads (through buffers or texel views).
+        let step = |cmd| {
+            barrier_uses(
+                ctx,
+                cmd,
+                &[Access::ComputeWrite],
+                &[Access::ComputeRead, Access::ComputeSampledRead],
+            )
+        };
         self.prepare.dispatch(
             ctx,
             cmd,
@@ -311,19 +365,34 @@ impl GpuLoss {
         )?;
         step(cmd);
         // The window over the planes, then over the derivative maps: x, then y.
+        // The view of a plane buffer, when the window reads through views.
+        let view_of = |b: &GpuBuffer| -> Option<ash::vk::BufferView> {
+            let views = self.views.as_ref()?;
+            let i = if std::ptr::eq(b, planes) { 0 } else { 1 };
+            Some(views[i].handle())
+        };
         let filter = |cmd, src: &GpuBuffer, dst: &GpuBuffer, vecs: u32| -> GpuResult<()> {
             for (axis, (a, b)) in [(0u32, (src, dst)), (1u32, (dst, src))] {
                 let push = FilterPush {
                     size: [width, height, vecs, axis],
                     taps,
                 };
-                self.filter.dispatch(
-                    ctx,
-                    cmd,
-                    &[a.whole(), b.whole()],
-                    bytemuck::bytes_of(&push),
-                    groups,
-                )?;
+                match (&self.filter_texel, view_of(a)) {
+                    (Some(pipeline), Some(view)) => pipeline.dispatch_resources(
+                        ctx,
+                        cmd,
+                        &[Resource::TexelBuffer(view), Resource::Buffer(b.whole())],
+                        bytemuck::bytes_of(&push),
+                        groups,
+                    )?,
+                    _ => self.filter.dispatch(
+                        ctx,
+                        cmd,
+                        &[a.whole(), b.whole()],
+                        bytemuck::bytes_of(&push),
+                        groups,
+                    )?,
+                }
                 step(cmd);
             }
             Ok(())

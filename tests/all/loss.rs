@@ -81,6 +81,9 @@ fn device_loss_equals_the_reference_and_is_deterministic() {
     let r = crate::common::gpu::renderer();
     let ctx = r.ctx();
     let mut loss = GpuLoss::new(ctx).unwrap();
+    // The window through storage buffers and through texel views (CPU devices' default).
+    let mut buffers = GpuLoss::with_texel_fetch(ctx, false).unwrap();
+    let mut texels = GpuLoss::with_texel_fetch(ctx, true).unwrap();
     // Odd sizes below and above the window, and one of several reduction rounds.
     for (w, h) in [(7, 5), (37, 23), (300, 160)] {
         let (x, y) = (image(w, h, 10 + w as u64), image(w, h, 20 + h as u64));
@@ -110,6 +113,12 @@ fn device_loss_equals_the_reference_and_is_deterministic() {
             got.ssim,
             want.ssim
         );
+        assert!(
+            (got.mse - want.mse).abs() <= 1e-5 * want.mse,
+            "mse {} vs {}",
+            got.mse,
+            want.mse
+        );
         let g: Vec<f64> = grad.iter().flatten().map(|&v| v as f64).collect();
         let err = relative_l2(&g, &want_grad);
         eprintln!("{w}x{h}: gradient relative L2 error {err:.2e}");
@@ -120,6 +129,13 @@ fn device_loss_equals_the_reference_and_is_deterministic() {
         assert_eq!(again.total.to_bits(), got.total.to_bits());
         let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&grad2), bits(&grad));
+        for l in [&mut buffers, &mut texels] {
+            let (v, g) = l
+                .compute(ctx, &gx, &gy, w as u32, h as u32, LAMBDA_DSSIM)
+                .unwrap();
+            assert_eq!(v.total.to_bits(), got.total.to_bits());
+            assert_eq!(bits(&g), bits(&grad), "{w}x{h}: buffers and texel views");
+        }
     }
     // Mismatched sizes: an error, not a crash.
     let e = loss

@@ -69,8 +69,9 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     Pack::new(ctx).expect("pack");
     Shade::new(ctx).expect("shade");
     ShadeBwd::new(ctx, 140, 64).expect("shade backward and its reduce");
-    vksplat::train::loss::GpuLoss::new(ctx).expect("the training loss's five stages");
-    built += 1 + 3 + 1 + 1 + 2 + 5;
+    // The loss's five stages, its window also through texel views.
+    vksplat::train::loss::GpuLoss::with_texel_fetch(ctx, true).expect("the training loss");
+    built += 1 + 3 + 1 + 1 + 2 + 5 + 1;
     // The training step's: the Gaussians' and the shader's (its norm's reduce is the
     // loss's, counted above).
     vksplat::train::device::StepPipelines::new(ctx).expect("the training step's stages");
