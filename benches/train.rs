@@ -51,19 +51,7 @@ fn main() {
             densify_from_iter: 100,
             ..Settings::default()
         },
-        sh_degree: 3,
-        white_background: false,
-        save_iterations: Vec::new(),
-        test_iterations: Vec::new(),
-        seed: 0,
-        random_points: 0,
-        overwrite: false,
-        shader: None,
-        kernel: Default::default(),
-        checkpoint_iterations: Vec::new(),
-        resume: None,
-        cancel: None,
-        host_optimizer: false,
+        ..Default::default()
     };
     let which = std::env::var("VKSPLAT_TRAIN_BENCH").unwrap_or_default();
     for host in [false, true] {

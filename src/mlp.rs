@@ -515,6 +515,26 @@ impl Mlp {
         header
     }
 
+    /// The weights and biases in the float layout of [`Self::gpu_words`] (after the
+    /// header): per layer the weights (row-major), then the biases.
+    pub fn flat_params(&self) -> Vec<f32> {
+        self.layers
+            .iter()
+            .flat_map(|l| l.weight.iter().chain(&l.bias).copied())
+            .collect()
+    }
+
+    /// Takes the weights and biases of [`Self::flat_params`]'s layout (as many values).
+    pub fn set_flat_params(&mut self, flat: &[f32]) {
+        let mut at = 0;
+        for l in &mut self.layers {
+            let (w, b) = (l.weight.len(), l.bias.len());
+            l.weight.copy_from_slice(&flat[at..at + w]);
+            l.bias.copy_from_slice(&flat[at + w..at + w + b]);
+            at += w + b;
+        }
+    }
+
     /// Input layout flags for the shader: bit 0 view direction, bit 1 alpha, and the
     /// position of each input (bits 8.. : 2 bits per slot, in order: 0 features,
     /// 1 view_dir, 2 alpha; the count in bits 4..6).

@@ -744,31 +744,6 @@ pub trait FrameSource {
     fn discard(&mut self);
 }
 
-/// A closure rendering one frame at a time as a [`FrameSource`]: it renders in
-/// `submit` and hands the frame over in `finish`.
-struct OneAtATime<'r> {
-    render: &'r mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
-    done: VecDeque<Frame>,
-}
-
-impl FrameSource for OneAtATime<'_> {
-    fn submit(&mut self, cam: &Camera) -> anyhow::Result<()> {
-        let frame = (self.render)(cam)?;
-        self.done.push_back(frame);
-        Ok(())
-    }
-
-    fn finish(&mut self) -> anyhow::Result<Frame> {
-        self.done
-            .pop_front()
-            .ok_or_else(|| anyhow::anyhow!("no frame was submitted"))
-    }
-
-    fn discard(&mut self) {
-        self.done.clear();
-    }
-}
-
 /// Renders every planned frame with `render` and writes its files. With
 /// `encode_threads > 0`, frames are encoded and written on worker threads while the next
 /// frame renders (at most `queue_depth` rendered frames wait). The first error stops the
@@ -780,15 +755,7 @@ pub fn run(
     render: &mut dyn FnMut(&Camera) -> anyhow::Result<Frame>,
     opts: &RunOptions,
 ) -> Result<Summary, SequenceError> {
-    let mut source = OneAtATime {
-        render,
-        done: VecDeque::new(),
-    };
-    let opts = RunOptions {
-        frames_in_flight: 1,
-        ..opts.clone()
-    };
-    run_pipelined(frames, &mut source, &opts)
+    run_each(frames, &mut |p| render(&p.camera), opts)
 }
 
 /// A closure given each whole [`FramePlan`] (its number too) as a [`FrameSource`]:

@@ -146,9 +146,15 @@ fn gen_moving_source(args: &GenArgs) -> Result<()> {
             String::new()
         }
     );
-    let b = MovingSource::BOUNDS;
+    print_fit_flags(MovingSource::BOUNDS, " --time-column 3");
+    Ok(())
+}
+
+/// Prints the `fit` flags that read the generated data as generated: `--bounds`, then
+/// `extra`.
+fn print_fit_flags(b: [f32; 6], extra: &str) {
     vksplat::outln!(
-        "--bounds {},{},{},{},{},{} --time-column 3",
+        "--bounds {},{},{},{},{},{}{extra}",
         b[0],
         b[1],
         b[2],
@@ -156,7 +162,6 @@ fn gen_moving_source(args: &GenArgs) -> Result<()> {
         b[4],
         b[5]
     );
-    Ok(())
 }
 
 fn gen_rf(args: &GenArgs, field: RfField) -> Result<()> {
@@ -193,14 +198,6 @@ fn gen_rf(args: &GenArgs, field: RfField) -> Result<()> {
         sidecar.display(),
         n = size
     );
-    vksplat::outln!(
-        "--bounds {},{},{},{},{},{}",
-        b[0],
-        b[1],
-        b[2],
-        b[3],
-        b[4],
-        b[5]
-    );
+    print_fit_flags(b, "");
     Ok(())
 }

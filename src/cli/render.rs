@@ -840,49 +840,41 @@ fn export_colmap(
         indicatif::ProgressBar::new(cams.len() as u64)
     };
     let act = scene.activated();
-    let how;
-    if args.cpu || shader.is_some() {
-        how = "with the CPU reference";
-        if args.cpu {
-            vksplat::train::data::write_dataset(
-                dir,
-                scene,
-                &cams,
-                stride,
-                args.overwrite,
-                &mut |cam| {
-                    bar.inc(1);
-                    Ok(vksplat::cpu::render(&act, cam, &opts))
-                },
-            )?;
-        } else {
-            bar.set_length(0);
-            vksplat::train::data::write_rendered_dataset(
-                dir,
-                scene,
-                &cams,
-                shader,
-                stride,
-                args.overwrite,
-            )?;
-        }
+    // The device renders unless --cpu or a shader (shaded on the CPU) asks otherwise.
+    let mut gpu = if args.cpu || shader.is_some() {
+        None
     } else {
-        how = "on the device";
-        let mut renderer = GpuRenderer::new(args.gpu.context()?)?;
+        let renderer = GpuRenderer::new(args.gpu.context()?)?;
         let gpu_scene = renderer.upload(&act)?;
-        vksplat::train::data::write_dataset(
-            dir,
-            scene,
-            &cams,
-            stride,
-            args.overwrite,
-            &mut |cam| {
-                bar.inc(1);
-                renderer
-                    .render(&gpu_scene, cam, &opts)
-                    .map_err(|e| e.to_string())
-            },
-        )?;
+        Some((renderer, gpu_scene))
+    };
+    let how = if gpu.is_some() {
+        "on the device"
+    } else {
+        "with the CPU reference"
+    };
+    vksplat::train::data::write_dataset(dir, scene, &cams, stride, args.overwrite, &mut |cam| {
+        bar.inc(1);
+        match (&mut gpu, shader) {
+            (Some((renderer, gpu_scene)), _) => renderer
+                .render(gpu_scene, cam, &opts)
+                .map_err(|e| e.to_string()),
+            (None, Some(mlp)) => {
+                let mut frame = vksplat::cpu::render_features(&act, cam, &opts);
+                frame.color = vksplat::mlp::shade(
+                    mlp,
+                    cam,
+                    &frame.features,
+                    scene.feature_count,
+                    &frame.alpha,
+                    opts.background,
+                );
+                Ok(frame)
+            }
+            (None, None) => Ok(vksplat::cpu::render(&act, cam, &opts)),
+        }
+    })?;
+    if let Some((renderer, gpu_scene)) = gpu {
         drop(gpu_scene);
         fail_on_validation_messages(renderer.ctx())?;
     }

@@ -152,55 +152,46 @@ pub fn densify(
     for &i in &order {
         let g: Vec<f32> = model.gaussian(i).to_vec();
         let (axis_or_time, size) = longest(&g);
+        let (mut a, mut b) = (g.clone(), g.clone());
+        let splits = size > median;
         if let (3, Some(t)) = (axis_or_time, t_at) {
             // Along time: split at +-1 temporal scale, or clone half a scale later.
             let st = g[t + 1].exp();
-            let (mut a, mut b) = (g.clone(), g.clone());
-            if size > median {
+            if splits {
                 a[t] = g[t] - st;
                 b[t] = g[t] + st;
                 a[t + 1] -= shrink;
                 b[t + 1] -= shrink;
-                split += 1;
             } else {
                 b[t] = g[t] + 0.5 * st;
-                for c in FEAT..FEAT + k {
-                    a[c] *= 0.5;
-                    b[c] *= 0.5;
+            }
+        } else {
+            // Longest axis: column j of R.
+            let j = (0..3)
+                .max_by(|&a, &b| g[SCALE + a].total_cmp(&g[SCALE + b]).then(b.cmp(&a)))
+                .unwrap_or(0);
+            let q = &g[ROT..ROT + 4];
+            let norm = (q.iter().map(|v| v * v).sum::<f32>()).sqrt();
+            let r = rotation([q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm]);
+            let axis = [r[0][j], r[1][j], r[2][j]];
+            let s = g[SCALE + j].exp();
+            if splits {
+                for c in 0..3 {
+                    a[c] = g[c] + s * axis[c];
+                    b[c] = g[c] - s * axis[c];
+                    a[SCALE + c] -= shrink;
+                    b[SCALE + c] -= shrink;
                 }
-                cloned += 1;
+            } else {
+                for c in 0..3 {
+                    b[c] = g[c] + 0.5 * s * axis[c];
+                }
             }
-            model.params[i * stride..(i + 1) * stride].copy_from_slice(&a);
-            model.params.extend_from_slice(&b);
-            for state in [&mut adam.m, &mut adam.v] {
-                state[i * stride..(i + 1) * stride].fill(0.0);
-                state.extend(std::iter::repeat(0.0).take(stride));
-            }
-            continue;
         }
-        // Longest axis: column j of R.
-        let j = (0..3)
-            .max_by(|&a, &b| g[SCALE + a].total_cmp(&g[SCALE + b]).then(b.cmp(&a)))
-            .unwrap_or(0);
-        let q = &g[ROT..ROT + 4];
-        let norm = (q.iter().map(|v| v * v).sum::<f32>()).sqrt();
-        let r = rotation([q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm]);
-        let axis = [r[0][j], r[1][j], r[2][j]];
-        let s = g[SCALE + j].exp();
-        let mut a = g.clone();
-        let mut b = g.clone();
-        if size > median {
-            for c in 0..3 {
-                a[c] = g[c] + s * axis[c];
-                b[c] = g[c] - s * axis[c];
-                a[SCALE + c] -= shrink;
-                b[SCALE + c] -= shrink;
-            }
+        if splits {
             split += 1;
         } else {
-            for c in 0..3 {
-                b[c] = g[c] + 0.5 * s * axis[c];
-            }
+            // A clone halves the features of both copies: the sum stays.
             for c in FEAT..FEAT + k {
                 a[c] *= 0.5;
                 b[c] *= 0.5;

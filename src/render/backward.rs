@@ -321,17 +321,35 @@ impl GpuRenderer {
         frame: &Frame,
         grads: &PixelGrads<f32>,
     ) -> GpuResult<(SplatGrads<f32>, Vec<f32>)> {
-        if shader.channels() != features.1 {
+        self.check_shaded(shader, features.1, cam, (frame.width, frame.height))?;
+        let job = ShadeJob {
+            shader,
+            cam,
+            background,
+        };
+        let (g, mlp) = self.backward_inner(scene, Some(features), Some(job), frame, grads)?;
+        Ok((g, mlp.unwrap_or_default()))
+    }
+
+    /// Refuses a shaded frame's backward pass that the shader, the camera (`size` the
+    /// frame's) or the device's loop limit cannot run.
+    fn check_shaded(
+        &self,
+        shader: &GpuShader,
+        channels: usize,
+        cam: &Camera,
+        size: (u32, u32),
+    ) -> GpuResult<()> {
+        if shader.channels() != channels {
             return Err(GpuError::InvalidArgument(format!(
-                "the shader takes {} feature channels but the Gaussians have {}",
-                shader.channels(),
-                features.1
+                "the shader takes {} feature channels but the Gaussians have {channels}",
+                shader.channels()
             )));
         }
-        if (cam.width, cam.height) != (frame.width, frame.height) {
+        if (cam.width, cam.height) != size {
             return Err(GpuError::InvalidArgument(format!(
                 "the camera is {}x{}, the frame {}x{}",
-                cam.width, cam.height, frame.width, frame.height
+                cam.width, cam.height, size.0, size.1
             )));
         }
         if self.loop_limited() && shader.backward_iterations > u64::from(super::CPU_LOOP_LIMIT) {
@@ -347,13 +365,7 @@ impl GpuRenderer {
                 ),
             });
         }
-        let job = ShadeJob {
-            shader,
-            cam,
-            background,
-        };
-        let (g, mlp) = self.backward_inner(scene, Some(features), Some(job), frame, grads)?;
-        Ok((g, mlp.unwrap_or_default()))
+        Ok(())
     }
 
     fn backward_inner(
@@ -368,12 +380,7 @@ impl GpuRenderer {
         // The pixels' colour gradients: the shaded colour's 3 channels, or the blend's.
         let pixel_channels = if shade.is_some() { 3 } else { channels };
         if let Some((values, k)) = features {
-            let max = 4 * MAX_FEATURE_GROUPS as usize;
-            if k == 0 || k > max {
-                return Err(GpuError::InvalidArgument(format!(
-                    "the backward pass differentiates 1 to {max} feature channels, not {k}"
-                )));
-            }
+            check_feature_channels(k)?;
             if values.len() != scene.count as usize * k {
                 return Err(GpuError::InvalidArgument(format!(
                     "{} feature values for {} Gaussians of {k} channels",
@@ -501,35 +508,8 @@ impl GpuRenderer {
         after: GradsRecorder,
     ) -> GpuResult<()> {
         if let Some(f) = &features {
-            let max = 4 * MAX_FEATURE_GROUPS as usize;
-            if f.channels == 0 || f.channels > max || f.shader.channels() != f.channels {
-                return Err(GpuError::InvalidArgument(format!(
-                    "the shader takes {} feature channels, the Gaussians have {} (1 to {max})",
-                    f.shader.channels(),
-                    f.channels
-                )));
-            }
-            if (f.cam.width, f.cam.height) != size {
-                return Err(GpuError::InvalidArgument(format!(
-                    "the camera is {}x{}, the frame {}x{}",
-                    f.cam.width, f.cam.height, size.0, size.1
-                )));
-            }
-            if self.loop_limited()
-                && f.shader.backward_iterations > u64::from(super::CPU_LOOP_LIMIT)
-            {
-                return Err(GpuError::DeviceLimit {
-                    limit: "llvmpipe's loop iterations per invocation",
-                    needed: f.shader.backward_iterations,
-                    max: u64::from(super::CPU_LOOP_LIMIT),
-                    message: format!(
-                        "the neural shader's backward pass needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {} iterations; use narrower layers",
-                        f.shader.backward_iterations,
-                        self.ctx.info().name,
-                        super::CPU_LOOP_LIMIT
-                    ),
-                });
-            }
+            check_feature_channels(f.channels)?;
+            self.check_shaded(f.shader, f.channels, f.cam, size)?;
         }
         if scene.compact {
             return Err(GpuError::InvalidArgument(
@@ -899,6 +879,17 @@ impl GpuRenderer {
         }
         Ok(Some((out, mlp)))
     }
+}
+
+/// Refuses feature channels the backward pass cannot differentiate.
+fn check_feature_channels(k: usize) -> GpuResult<()> {
+    let max = 4 * MAX_FEATURE_GROUPS as usize;
+    if k == 0 || k > max {
+        return Err(GpuError::InvalidArgument(format!(
+            "the backward pass differentiates 1 to {max} feature channels, not {k}"
+        )));
+    }
+    Ok(())
 }
 
 fn pixels_bytes(count: usize, each: u64) -> u64 {

@@ -137,19 +137,7 @@ impl GpuRenderer {
         // Gaussian's floats padded to whole texels.
         let stride = scene.sh_stride();
         let padded = sh_texel_stride(scene.sh_degree) as usize * 4;
-        let texels = scene.len() as u64 * padded as u64 / 4;
-        let max_texels = u64::from(self.ctx.info().max_texel_buffer_elements);
-        if texels > max_texels {
-            return Err(GpuError::DeviceLimit {
-                limit: "maxTexelBufferElements",
-                needed: texels,
-                max: max_texels,
-                message: format!(
-                    "the SH coefficients of {count} Gaussians need {texels} texels ({} bytes) in one texel buffer, but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians, a lower --sh-degree or a device with a larger limit",
-                    texels * 16
-                ),
-            });
-        }
+        self.check_sh_texels(count, scene.sh_degree)?;
         // SH degrees 1 and 3 fill whole texels already and upload as they are.
         let sh_padded: std::borrow::Cow<[f32]> = if stride == padded {
             std::borrow::Cow::Borrowed(&scene.sh)
@@ -184,44 +172,12 @@ impl GpuRenderer {
             sh.upload(&self.ctx, &sh_padded)?;
             (sh, vk::Format::R32G32B32A32_SFLOAT, bytes)
         };
-        let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
-        let gaussian_texels = if self.pipelines.texel_io() {
-            let bytes = gaussians.size() / 16 * 16;
-            Some(BufferView::new(
-                &self.ctx,
-                &gaussians,
-                vk::Format::R32G32B32A32_UINT,
-                0,
-                bytes,
-            )?)
-        } else {
-            None
-        };
-        Ok(GpuScene {
-            sh_texels,
-            gaussian_texels,
-            gaussians,
-            sh,
-            count,
-            uploaded: count,
-            sh_degree: scene.sh_degree,
-            sh_coeffs: (scene.sh_degree + 1) * (scene.sh_degree + 1),
-            compact: self.compact,
-        })
+        self.scene_of(gaussians, (sh, format, sh_bytes), count, scene.sh_degree)
     }
 
-    /// A scene of `count` Gaussians whose records and SH texels (degree `sh_degree`) a
-    /// device pass writes ([`GpuScene::device_buffers`]) instead of an upload: training
-    /// keeps its parameters on the device and writes the activated values there.
-    pub fn scene_for_device_writes(&self, count: u32, sh_degree: u32) -> GpuResult<GpuScene> {
-        if self.compact {
-            return Err(GpuError::InvalidArgument(
-                "a scene written on the device is full precision; turn the compact upload off"
-                    .into(),
-            ));
-        }
-        let record_bytes = (u64::from(count) * std::mem::size_of::<GpuGaussian>() as u64).max(16);
-        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
+    /// Refuses SH coefficients of `count` Gaussians (degree `sh_degree`) that one texel
+    /// buffer of the device cannot address.
+    fn check_sh_texels(&self, count: u32, sh_degree: u32) -> GpuResult<()> {
         let texels = u64::from(count) * u64::from(sh_texel_stride(sh_degree));
         let max_texels = u64::from(self.ctx.info().max_texel_buffer_elements);
         if texels > max_texels {
@@ -230,15 +186,24 @@ impl GpuRenderer {
                 needed: texels,
                 max: max_texels,
                 message: format!(
-                    "the SH coefficients of {count} Gaussians need {texels} texels in one texel buffer, but this device addresses at most {max_texels}; use fewer Gaussians or a lower --sh-degree"
+                    "the SH coefficients of {count} Gaussians need {texels} texels ({} bytes) in one texel buffer, but this device addresses at most {max_texels} (maxTexelBufferElements); use fewer Gaussians, a lower --sh-degree or a device with a larger limit",
+                    texels * 16
                 ),
             });
         }
-        let sh_bytes = (texels * 16).max(16);
-        check_binding(&self.ctx, "sh coefficients", sh_bytes)?;
-        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
-        let sh_texels =
-            BufferView::new(&self.ctx, &sh, vk::Format::R32G32B32A32_SFLOAT, 0, sh_bytes)?;
+        Ok(())
+    }
+
+    /// The scene of `count` Gaussians in `gaussians` (records) and `sh` (the SH buffer,
+    /// its texel format and bytes), with the texel views its stages read.
+    fn scene_of(
+        &self,
+        gaussians: GpuBuffer,
+        (sh, format, sh_bytes): (GpuBuffer, vk::Format, u64),
+        count: u32,
+        sh_degree: u32,
+    ) -> GpuResult<GpuScene> {
+        let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
         let gaussian_texels = if self.pipelines.texel_io() {
             let bytes = gaussians.size() / 16 * 16;
             Some(BufferView::new(
@@ -260,12 +225,33 @@ impl GpuRenderer {
             uploaded: count,
             sh_degree,
             sh_coeffs: (sh_degree + 1) * (sh_degree + 1),
-            compact: false,
+            compact: self.compact,
         })
     }
 
-    /// Feature channels (`k` per Gaussian, in groups of four) for `count` Gaussians that a
-    /// device pass writes ([`GpuFeatures::device_buffers`]) instead of an upload.
+    /// A scene of `count` Gaussians whose records and SH texels (degree `sh_degree`) a
+    /// device pass writes ([`GpuScene::device_buffers`]) instead of an upload: training
+    /// keeps its parameters on the device and writes the activated values there.
+    pub fn scene_for_device_writes(&self, count: u32, sh_degree: u32) -> GpuResult<GpuScene> {
+        if self.compact {
+            return Err(GpuError::InvalidArgument(
+                "a scene written on the device is full precision; turn the compact upload off"
+                    .into(),
+            ));
+        }
+        let record_bytes = (u64::from(count) * std::mem::size_of::<GpuGaussian>() as u64).max(16);
+        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
+        self.check_sh_texels(count, sh_degree)?;
+        let sh_bytes = (u64::from(count) * u64::from(sh_texel_stride(sh_degree)) * 16).max(16);
+        check_binding(&self.ctx, "sh coefficients", sh_bytes)?;
+        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
+        let format = vk::Format::R32G32B32A32_SFLOAT;
+        self.scene_of(gaussians, (sh, format, sh_bytes), count, sh_degree)
+    }
+
+    /// Feature channels (`k` per Gaussian, in groups of four: a buffer of a vec4 per
+    /// Gaussian each) for `count` Gaussians, not filled: a device pass writes them
+    /// ([`GpuFeatures::device_buffers`]), or [`Self::upload_features`] uploads them.
     pub fn features_for_device_writes(&self, count: u32, k: usize) -> GpuResult<GpuFeatures> {
         if k == 0 {
             return Err(GpuError::InvalidArgument("no feature channels".into()));
@@ -321,8 +307,8 @@ impl GpuRenderer {
         let count = u32::try_from(n).map_err(|_| {
             GpuError::Input(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
         })?;
-        let (mut groups, mut views) = (Vec::new(), Vec::new());
-        for g in 0..features::groups(k) {
+        let uploaded = self.features_for_device_writes(count, k)?;
+        for (g, buf) in uploaded.groups.iter().enumerate() {
             let mut v = vec![[0f32; 4]; n.max(1)];
             for (i, dst) in v.iter_mut().enumerate().take(n) {
                 for (c, d) in dst.iter_mut().enumerate() {
@@ -332,27 +318,8 @@ impl GpuRenderer {
                     }
                 }
             }
-            let name = format!("features {}..{}", g * 4, (g * 4 + 4).min(k));
-            let bytes = (v.len() * 16) as u64;
-            check_binding(&self.ctx, &name, bytes)?;
-            let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
             buf.upload(&self.ctx, &v)?;
-            if self.pipelines.texel_io() {
-                views.push(BufferView::new(
-                    &self.ctx,
-                    &buf,
-                    vk::Format::R32G32B32A32_SFLOAT,
-                    0,
-                    bytes,
-                )?);
-            }
-            groups.push(buf);
         }
-        Ok(GpuFeatures {
-            views,
-            groups,
-            channels: k,
-            count,
-        })
+        Ok(uploaded)
     }
 }

@@ -205,16 +205,12 @@ fn mcmc_terms(m: Option<McmcStep>) -> [f32; 4] {
     })
 }
 
-fn bias(beta: f32, t: u32) -> f32 {
-    1.0 - beta.powi(t as i32)
-}
-
 /// Bias corrections of a group stepped `t` times (1 before its first step: not read).
 fn corrections(t: u32) -> (f32, f32) {
     if t == 0 {
         (1.0, 1.0)
     } else {
-        (bias(0.9, t), bias(0.999, t).sqrt())
+        super::model::adam_corrections(t)
     }
 }
 

@@ -525,7 +525,8 @@ impl GpuLoss {
         result
     }
 
-    /// The loss of the last [`Self::record_image`], once its submission has finished.
+    /// The loss of the last [`Self::record_image`] (or [`Self::compute`]), once its
+    /// submission has finished.
     pub fn read_value(&self, ctx: &GpuContext) -> GpuResult<LossValue> {
         let (handle, pixels, lambda) = self
             .last
@@ -569,42 +570,30 @@ impl GpuLoss {
                 target.len()
             )));
         }
-        self.ensure_io(ctx, pixels)?;
-        let io = self.io.take().expect("made above");
-        let widen = |v: &[[f32; 3]]| -> Vec<[f32; 4]> {
-            v.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect()
-        };
+        self.stage_target(ctx, target)?;
+        let io = self.io.take().expect("made by stage_target");
         let result = (|| {
             let [img, tgt, grad] = &io.1;
-            img.upload(ctx, &widen(image))?;
-            tgt.upload(ctx, &widen(target))?;
+            let wide: Vec<[f32; 4]> = image.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect();
+            img.upload(ctx, &wide)?;
             let bufs = LossBuffers {
                 image: img.whole(),
                 target: tgt.whole(),
                 grad: grad.whole(),
             };
-            let mut sums_buffer = None;
+            let mut sums = None;
             ctx.submit_and_wait("loss", |cmd| {
                 barrier(ctx, cmd, Access::Any, Access::Any);
-                let b = self.record(ctx, cmd, &bufs, width, height, lambda)?;
-                sums_buffer = Some(b.handle());
+                sums = Some(
+                    self.record(ctx, cmd, &bufs, width, height, lambda)?
+                        .handle(),
+                );
                 barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
                 Ok(())
             })?;
-            let (_, work) = self.work.as_ref().expect("recorded");
-            let sums_buf = work
-                .iter()
-                .find(|b| Some(b.handle()) == sums_buffer)
-                .expect("one of the work buffers");
-            let sums: Vec<[f32; 4]> = sums_buf.read(ctx, 1)?;
+            self.last = sums.map(|h| (h, pixels, lambda));
+            let value = self.read_value(ctx)?;
             let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
-            let n = (pixels * 3) as f64;
-            let value = LossValue::of(
-                sums[0][0] as f64 / n,
-                sums[0][1] as f64 / n,
-                sums[0][2] as f64 / n,
-                lambda as f64,
-            );
             Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))
         })();
         self.io = Some(io);

@@ -9,7 +9,7 @@ use crate::camera::colmap::Point3D;
 use crate::gen::Rng;
 use crate::model::grad::{ColorParams, SplatGrads, SplatParams};
 use crate::model::sh::SH_C0;
-use crate::scene::Scene;
+use crate::scene::{sigmoid, Scene};
 
 /// The original's optimisation and densification settings (`arguments/__init__.py`).
 #[derive(Clone, Debug, PartialEq)]
@@ -162,12 +162,19 @@ impl Default for Settings {
     }
 }
 
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
-
 fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
+}
+
+/// Adam's betas (torch.optim.Adam's defaults, as the original uses them).
+const ADAM_BETAS: (f32, f32) = (0.9, 0.999);
+
+/// Adam's bias corrections at step `t` (1-based): `1 - b1^t` and `sqrt(1 - b2^t)`.
+pub(super) fn adam_corrections(t: u32) -> (f32, f32) {
+    (
+        1.0 - ADAM_BETAS.0.powi(t as i32),
+        (1.0 - ADAM_BETAS.1.powi(t as i32)).sqrt(),
+    )
 }
 
 /// Adam's moments of one parameter array.
@@ -188,9 +195,8 @@ impl Moments {
     /// torch.optim.Adam's step (betas 0.9, 0.999, eps 1e-15 as the original sets it) with
     /// `lr(i)` per value, at step `t` (1-based).
     fn step(&mut self, params: &mut [f32], grads: &[f32], t: u32, lr: impl Fn(usize) -> f32) {
-        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-15f32);
-        let c1 = 1.0 - b1.powi(t as i32);
-        let c2 = (1.0 - b2.powi(t as i32)).sqrt();
+        let (b1, b2, eps) = (ADAM_BETAS.0, ADAM_BETAS.1, 1e-15f32);
+        let (c1, c2) = adam_corrections(t);
         for (i, ((p, g), (m, v))) in params
             .iter_mut()
             .zip(grads)
@@ -534,13 +540,8 @@ impl Model {
     /// them) and their Adam moments, for the device.
     pub(super) fn device_shader_state(&self) -> Option<[Vec<f32>; 3]> {
         let mlp = self.shader.as_ref()?;
-        let flat: Vec<f32> = mlp
-            .layers
-            .iter()
-            .flat_map(|l| l.weight.iter().chain(&l.bias).copied())
-            .collect();
         Some([
-            flat,
+            mlp.flat_params(),
             self.shader_moments.m.clone(),
             self.shader_moments.v.clone(),
         ])
@@ -550,13 +551,7 @@ impl Model {
     pub(super) fn set_device_shader_state(&mut self, state: [Vec<f32>; 3]) {
         let [flat, m, v] = state;
         if let Some(mlp) = self.shader.as_mut() {
-            let mut at = 0;
-            for l in &mut mlp.layers {
-                let (w, b) = (l.weight.len(), l.bias.len());
-                l.weight.copy_from_slice(&flat[at..at + w]);
-                l.bias.copy_from_slice(&flat[at + w..at + w + b]);
-                at += w + b;
-            }
+            mlp.set_flat_params(&flat);
             self.shader_moments = Moments { m, v };
         }
     }
@@ -818,20 +813,10 @@ impl Model {
         }
         if let Some(mlp) = self.shader.as_mut() {
             self.moments[5].step(&mut s.features, &g_feat, t[5], |_| settings.feature_lr);
-            let mut flat: Vec<f32> = mlp
-                .layers
-                .iter()
-                .flat_map(|l| l.weight.iter().chain(&l.bias).copied())
-                .collect();
+            let mut flat = mlp.flat_params();
             self.shader_moments
                 .step(&mut flat, &g_mlp, t[6], |_| settings.shader_lr);
-            let mut at = 0;
-            for l in &mut mlp.layers {
-                let (w, b) = (l.weight.len(), l.bias.len());
-                l.weight.copy_from_slice(&flat[at..at + w]);
-                l.bias.copy_from_slice(&flat[at + w..at + w + b]);
-                at += w + b;
-            }
+            mlp.set_flat_params(&flat);
         } else {
             let (dc, rest) = (settings.feature_lr, settings.feature_lr / 20.0);
             self.moments[4].step(&mut s.sh, &g_sh, t[4], |i| {
@@ -1115,24 +1100,7 @@ fn sample_by(from: &[usize], weight: &[f32], count: usize, rng: &mut Rng) -> Vec
 /// `s`), in f32 as the device computes it.
 fn covariance_times(q: [f32; 4], s: [f32; 3], v: [f32; 3]) -> [f32; 3] {
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let (w, x, y, z) = (q[0] / n, q[1] / n, q[2] / n, q[3] / n);
-    let r = [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ];
+    let r = crate::fit::model::rotation(q.map(|v| v / n));
     // t = S S R^T v, then R t.
     let rt = [0, 1, 2].map(|a| r[0][a] * v[0] + r[1][a] * v[1] + r[2][a] * v[2]);
     let t = [0, 1, 2].map(|a| s[a] * s[a] * rt[a]);

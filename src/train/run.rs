@@ -65,6 +65,30 @@ pub struct TrainOptions {
     pub host_optimizer: bool,
 }
 
+impl Default for TrainOptions {
+    /// The original's settings and `vksplat train`'s defaults: SH degree 3, black
+    /// background, seed 0, 100,000 random Gaussians without points, nothing saved before
+    /// the last iteration, the state on the device.
+    fn default() -> Self {
+        TrainOptions {
+            settings: Settings::default(),
+            sh_degree: 3,
+            white_background: false,
+            save_iterations: Vec::new(),
+            test_iterations: Vec::new(),
+            seed: 0,
+            random_points: 100_000,
+            overwrite: false,
+            shader: None,
+            kernel: crate::model::SplatKernel::default(),
+            checkpoint_iterations: Vec::new(),
+            resume: None,
+            cancel: None,
+            host_optimizer: false,
+        }
+    }
+}
+
 impl TrainOptions {
     /// What a checkpoint must match to be resumed: the data set's views and the settings
     /// that shape the run (not the output or evaluation choices).
@@ -158,8 +182,6 @@ pub struct Progress {
     pub loss: LossValue,
     /// Gaussians now.
     pub gaussians: usize,
-    /// Whether the state is on the device (the iteration read nothing back but the loss).
-    pub on_device: bool,
 }
 
 /// A training error.
@@ -621,7 +643,6 @@ pub fn train(
             iterations: s.iterations,
             loss: value,
             gaussians: model.len(),
-            on_device: device_path,
         });
         if evaluate_now {
             let (views, split): (Vec<&View>, &str) = if data.test.is_empty() {

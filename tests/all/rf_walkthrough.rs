@@ -3,6 +3,7 @@
 //! CPU reference (which agree to PSNR >= 55 dB per channel and for the shaded colour).
 
 use crate::common::cli::{ok, s};
+use crate::common::npy_image as npy;
 use std::path::Path;
 
 fn planes(path: &Path, names: &[&str]) -> Vec<f32> {
@@ -97,12 +98,6 @@ fn gen_fit_render_features_and_shade() {
         g.chunks(3).any(|c| (c[0] - c[2]).abs() > 0.3),
         "no colour in the shaded image"
     );
-}
-
-/// `H x W x K` float32 `.npy` as (W, H, K, values).
-fn npy(path: &Path) -> (usize, usize, usize, Vec<f32>) {
-    let a = vksplat::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
-    (a.shape[1], a.shape[0], a.shape[2], a.data)
 }
 
 /// The README's walkthrough as it is now: gen --rf -> fit -> the three field renders, on

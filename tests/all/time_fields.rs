@@ -4,18 +4,13 @@
 //! the errors for bad time inputs.
 
 use crate::common::cli::{fails, ok, s, stderr, vksplat};
+use crate::common::npy_image as npy;
 use crate::common::push_gaussian;
 use std::path::Path;
 use vksplat::cpu::field;
 use vksplat::rf::MovingSource;
 use vksplat::scene::ply::{self, PlyEncoding};
 use vksplat::scene::Scene;
-
-/// `H x W x K` float32 `.npy` as (W, H, K, values).
-fn npy(path: &Path) -> (usize, usize, usize, Vec<f32>) {
-    let a = vksplat::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
-    (a.shape[1], a.shape[0], a.shape[2], a.data)
-}
 
 /// The moving source fitted in space and time, rendered at three times (two of them
 /// between the sampled times) as a slice through z = 0 and as a maximum along each ray,

@@ -513,6 +513,127 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
     assert!(psnr >= 20.0, "held-out PSNR {psnr} dB");
 }
 
+/// The library loop of the device-versus-host tests: a data set made here, a rasterizer
+/// with the validation layer on, and the loss.
+struct Harness {
+    dir: tempfile::TempDir,
+    dataset: vksplat::train::data::Dataset,
+    rast: vksplat::render::differentiable::DiffRasterizer,
+    loss: vksplat::train::loss::GpuLoss,
+}
+
+impl Harness {
+    /// `views` photos of `w x h` ([`make_dataset_with`]), no views held out.
+    fn new(views: usize, w: u32, h: u32, shader: Option<&vksplat::mlp::Mlp>) -> Harness {
+        use vksplat::train::data;
+        let dir = tempfile::tempdir().unwrap();
+        let set = dir.path().join("data");
+        make_dataset_with(&set, views, w, h, shader);
+        let dataset = data::load_colmap(&set, data::Resolution(1), false).unwrap();
+        let renderer = crate::common::gpu::new_renderer(None);
+        let loss = vksplat::train::loss::GpuLoss::new(renderer.ctx()).unwrap();
+        let rast = vksplat::render::differentiable::DiffRasterizer::with_renderer(renderer);
+        Harness {
+            dir,
+            dataset,
+            rast,
+            loss,
+        }
+    }
+
+    /// Trains into `name` with `opts`, its state on the device or (`host`) the host
+    /// optimiser's; returns the report, each iteration's loss and the last iteration's
+    /// model folder.
+    fn train(
+        &mut self,
+        name: &str,
+        opts: &vksplat::train::run::TrainOptions,
+        host: bool,
+    ) -> (
+        vksplat::train::run::TrainReport,
+        Vec<f64>,
+        std::path::PathBuf,
+    ) {
+        let opts = vksplat::train::run::TrainOptions {
+            host_optimizer: host,
+            ..opts.clone()
+        };
+        let out = self.dir.path().join(name);
+        let mut losses = Vec::new();
+        let report = vksplat::train::run::train(
+            &self.dataset,
+            &out,
+            &opts,
+            &mut self.rast,
+            &mut self.loss,
+            &mut |p| losses.push(p.loss.total),
+            &mut |_| {},
+        )
+        .unwrap();
+        assert_eq!(report.on_device, !host);
+        let at = out
+            .join("point_cloud")
+            .join(format!("iteration_{}", opts.settings.iterations));
+        (report, losses, at)
+    }
+
+    fn assert_validation_clean(&mut self) {
+        crate::common::gpu::assert_validation_clean(self.rast.renderer());
+    }
+}
+
+/// The scene and the bytes of the PLY in a model folder.
+fn model_ply(at: &Path) -> (vksplat::scene::Scene, Vec<u8>) {
+    let ply = at.join("point_cloud.ply");
+    let scene = vksplat::scene::load_with_format(&ply).unwrap().0;
+    (scene, std::fs::read(&ply).unwrap())
+}
+
+/// `|a - b| / |b|` (L2).
+fn rel(a: &[f32], b: &[f32]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let num: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
+    let den: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
+    (num / den.max(1e-30)).sqrt()
+}
+
+fn flat<const K: usize>(v: &[[f32; K]]) -> Vec<f32> {
+    v.iter().flatten().copied().collect()
+}
+
+/// The largest relative difference of two runs' losses, iteration by iteration.
+fn worst_loss_difference(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| ((a - b) / b).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Asserts that every parameter group of `a` (centres, log scales, quaternions, opacity
+/// logits, SH, feature channels) is within `max` of `b`'s (relative L2), printing each.
+fn assert_groups_agree(a: &vksplat::scene::Scene, b: &vksplat::scene::Scene, max: f64) {
+    for (name, x, y) in [
+        ("centres", flat(&a.positions), flat(&b.positions)),
+        ("log scales", flat(&a.log_scales), flat(&b.log_scales)),
+        ("quaternions", flat(&a.rotations), flat(&b.rotations)),
+        (
+            "opacity logits",
+            a.opacity_logits.clone(),
+            b.opacity_logits.clone(),
+        ),
+        ("SH", a.sh.clone(), b.sh.clone()),
+        ("features", a.features.clone(), b.features.clone()),
+    ] {
+        if x.is_empty() && y.is_empty() {
+            continue;
+        }
+        let r = rel(&x, &y);
+        eprintln!("{name}: relative L2 difference {r:.2e}");
+        assert!(r < max, "{name}: {r}");
+    }
+}
+
 /// The state kept on the device steps as the host optimiser does (the same rules; the
 /// device's `exp` and `sqrt` round otherwise than the host's, and training amplifies such
 /// differences, so closely, not to the bit): after 30 iterations every parameter group
@@ -522,114 +643,40 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
 /// reproducible to the bit, and validation stays quiet.
 #[test]
 fn the_state_on_the_device_steps_as_the_host_optimiser() {
-    use vksplat::render::differentiable::DiffRasterizer;
-    use vksplat::train::{data, loss::GpuLoss, model::Settings, run};
-    let dir = tempfile::tempdir().unwrap();
-    let set = dir.path().join("data");
-    make_dataset(&set, 8, 64, 48);
-    let dataset = data::load_colmap(&set, data::Resolution(1), false).unwrap();
-    let renderer = crate::common::gpu::new_renderer(None);
-    let mut loss = GpuLoss::new(renderer.ctx()).unwrap();
-    let mut rast = DiffRasterizer::with_renderer(renderer);
+    use vksplat::train::{model::Settings, run};
+    let mut h = Harness::new(8, 64, 48, None);
     let mut opts = run::TrainOptions {
         settings: Settings {
-            iterations: 160,
+            iterations: 30,
             densify_from_iter: 50,
             densification_interval: 60,
             opacity_reset_interval: 150,
             ..Settings::default()
         },
         sh_degree: 1,
-        white_background: false,
-        save_iterations: Vec::new(),
-        test_iterations: Vec::new(),
         seed: 3,
-        random_points: 0,
-        overwrite: false,
-        shader: None,
-        kernel: Default::default(),
-        checkpoint_iterations: Vec::new(),
-        resume: None,
-        cancel: None,
-        host_optimizer: false,
+        ..Default::default()
     };
-    let mut run_once = |name: &str, host: bool, iterations: u32| {
-        opts.host_optimizer = host;
-        opts.settings.iterations = iterations;
-        let mut losses = Vec::new();
-        let report = run::train(
-            &dataset,
-            &dir.path().join(name),
-            &opts,
-            &mut rast,
-            &mut loss,
-            &mut |p| losses.push(p.loss.total),
-            &mut |_| {},
-        )
-        .unwrap();
-        assert_eq!(report.on_device, !host);
-        let ply = dir.path().join(name).join(format!(
-            "point_cloud/iteration_{iterations}/point_cloud.ply"
-        ));
-        let scene = vksplat::scene::load_with_format(&ply).unwrap().0;
-        (report, losses, scene, std::fs::read(&ply).unwrap())
-    };
-    let rel = |a: Vec<f32>, b: Vec<f32>| {
-        let num: f64 = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| ((x - y) as f64).powi(2))
-            .sum();
-        let den: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
-        (num / den.max(1e-30)).sqrt()
-    };
-    let flat3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-    let compare = |a: &vksplat::scene::Scene, b: &vksplat::scene::Scene, max: f64| {
-        let groups = [
-            ("centres", rel(flat3(&a.positions), flat3(&b.positions))),
-            (
-                "log scales",
-                rel(flat3(&a.log_scales), flat3(&b.log_scales)),
-            ),
-            (
-                "quaternions",
-                rel(
-                    a.rotations.iter().flatten().copied().collect(),
-                    b.rotations.iter().flatten().copied().collect(),
-                ),
-            ),
-            (
-                "opacity logits",
-                rel(a.opacity_logits.clone(), b.opacity_logits.clone()),
-            ),
-            ("SH", rel(a.sh.clone(), b.sh.clone())),
-        ];
-        for (name, r) in groups {
-            eprintln!("{name}: relative L2 difference {r:.2e}");
-            assert!(r < max, "{name}: {r}");
-        }
-    };
-    let (_, _, short_dev, _) = run_once("device-30", false, 30);
-    let (_, _, short_host, _) = run_once("host-30", true, 30);
-    compare(&short_dev, &short_host, 1e-5);
-    let (dev, dev_losses, dev_scene, dev_bytes) = run_once("device", false, 160);
-    let (host, host_losses, host_scene, _) = run_once("host", true, 160);
-    let (_, _, _, again_bytes) = run_once("device-again", false, 160);
+    let (short_dev, _) = model_ply(&h.train("device-30", &opts, false).2);
+    let (short_host, _) = model_ply(&h.train("host-30", &opts, true).2);
+    assert_groups_agree(&short_dev, &short_host, 1e-5);
+    opts.settings.iterations = 160;
+    let (dev, dev_losses, at) = h.train("device", &opts, false);
+    let (dev_scene, dev_bytes) = model_ply(&at);
+    let (host, host_losses, at) = h.train("host", &opts, true);
+    let (host_scene, _) = model_ply(&at);
+    let (_, again_bytes) = model_ply(&h.train("device-again", &opts, false).2);
     assert!(
         dev_bytes == again_bytes,
         "two device runs wrote different models"
     );
     assert_eq!(dev.gaussians, host.gaussians, "Gaussians after densifying");
     assert_ne!(dev.gaussians, short_dev.len(), "the run densified");
-    let worst_loss = dev_losses
-        .iter()
-        .zip(&host_losses)
-        .map(|(a, b)| ((a - b) / b).abs())
-        .fold(0.0, f64::max);
+    let worst_loss = worst_loss_difference(&dev_losses, &host_losses);
     eprintln!("largest relative loss difference per iteration: {worst_loss:.2e}");
     assert!(worst_loss < 1e-3, "{worst_loss}");
-    compare(&dev_scene, &host_scene, 5e-3);
-    crate::common::gpu::assert_validation_clean(rast.renderer());
+    assert_groups_agree(&dev_scene, &host_scene, 5e-3);
+    h.assert_validation_clean();
 }
 
 /// `render --export-colmap`: a scene's orbit rendered on the device into a COLMAP data set
@@ -747,8 +794,7 @@ fn render_exports_a_colmap_data_set_that_trains() {
 #[test]
 fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
     use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
-    use vksplat::render::differentiable::DiffRasterizer;
-    use vksplat::train::{data, loss::GpuLoss, model::Settings, run};
+    use vksplat::train::{model::Settings, run};
     let mut rng = common::Rng(9);
     let mut layer = |i: usize, o: usize, a| Layer {
         inputs: i,
@@ -771,14 +817,7 @@ fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
             layer(12, 3, Activation::Sigmoid),
         ],
     };
-    let start_copy = start.clone();
-    let dir = tempfile::tempdir().unwrap();
-    let set = dir.path().join("data");
-    make_dataset_with(&set, 6, 48, 36, Some(&target));
-    let dataset = data::load_colmap(&set, data::Resolution(1), false).unwrap();
-    let renderer = crate::common::gpu::new_renderer(None);
-    let mut loss = GpuLoss::new(renderer.ctx()).unwrap();
-    let mut rast = DiffRasterizer::with_renderer(renderer);
+    let mut h = Harness::new(6, 48, 36, Some(&target));
     let mut opts = run::TrainOptions {
         settings: Settings {
             iterations: 30,
@@ -786,95 +825,38 @@ fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
             ..Settings::default()
         },
         sh_degree: 0,
-        white_background: false,
-        save_iterations: Vec::new(),
-        test_iterations: Vec::new(),
         seed: 4,
-        random_points: 0,
-        overwrite: false,
         shader: Some(start.clone()),
-        kernel: Default::default(),
-        checkpoint_iterations: Vec::new(),
-        resume: None,
-        cancel: None,
-        host_optimizer: false,
+        ..Default::default()
     };
-    let mut run_once = |name: &str, host: bool, clip: Option<f32>| {
-        opts.host_optimizer = host;
-        opts.settings.clip_grad = clip;
-        let mut losses = Vec::new();
-        let report = run::train(
-            &dataset,
-            &dir.path().join(name),
-            &opts,
-            &mut rast,
-            &mut loss,
-            &mut |p| losses.push(p.loss.total),
-            &mut |_| {},
-        )
-        .unwrap();
-        assert_eq!(report.on_device, !host);
-        let at = dir.path().join(name).join("point_cloud/iteration_30");
-        let bytes = std::fs::read(at.join("point_cloud.ply")).unwrap();
-        let scene = vksplat::scene::load_with_format(&at.join("point_cloud.ply"))
-            .unwrap()
-            .0;
+    let model = |at: &Path| {
+        let (scene, bytes) = model_ply(at);
         let mlp = Mlp::load(&at.join("shader.safetensors")).unwrap();
-        (losses, scene, mlp, bytes)
+        (scene, mlp, bytes)
     };
-    let clip = Some(0.05);
-    let (dev_losses, dev, dev_mlp, dev_bytes) = run_once("device", false, clip);
-    let (host_losses, host, host_mlp, _) = run_once("host", true, clip);
-    let (_, _, again_mlp, again_bytes) = run_once("again", false, clip);
+    let (_, dev_losses, at) = h.train("device", &opts, false);
+    let (dev, dev_mlp, dev_bytes) = model(&at);
+    let (_, host_losses, at) = h.train("host", &opts, true);
+    let (host, host_mlp, _) = model(&at);
+    let (_, again_mlp, again_bytes) = model(&h.train("again", &opts, false).2);
     assert!(dev_bytes == again_bytes && dev_mlp == again_mlp);
-    let (_, unclipped, _, _) = run_once("unclipped", false, None);
-    let rel = |a: &[f32], b: &[f32]| {
-        assert_eq!(a.len(), b.len());
-        let num: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
-        let den: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
-        (num / den.max(1e-30)).sqrt()
-    };
-    let flat = |m: &Mlp| -> Vec<f32> {
-        m.layers
-            .iter()
-            .flat_map(|l| l.weight.iter().chain(&l.bias).copied())
-            .collect()
-    };
-    let start_weights = flat(&start_copy);
+    opts.settings.clip_grad = None;
+    let (unclipped, _) = model_ply(&h.train("unclipped", &opts, false).2);
     assert!(
-        rel(&flat(&dev_mlp), &start_weights) > 1e-3,
+        rel(&dev_mlp.flat_params(), &start.flat_params()) > 1e-3,
         "the shader learned"
     );
-    let loss_diff = dev_losses
-        .iter()
-        .zip(&host_losses)
-        .map(|(a, b)| ((a - b) / b).abs())
-        .fold(0.0, f64::max);
-    let flat3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
     let clipped_off = rel(&unclipped.features, &dev.features);
     eprintln!("features without clipping: relative difference {clipped_off:.2e}");
     assert!(clipped_off > 1e-3, "{clipped_off}");
-    for (name, r) in [
-        ("loss", loss_diff),
-        (
-            "centres",
-            rel(&flat3(&dev.positions), &flat3(&host.positions)),
-        ),
-        (
-            "log scales",
-            rel(&flat3(&dev.log_scales), &flat3(&host.log_scales)),
-        ),
-        (
-            "opacity logits",
-            rel(&dev.opacity_logits, &host.opacity_logits),
-        ),
-        ("features", rel(&dev.features, &host.features)),
-        ("shader", rel(&flat(&dev_mlp), &flat(&host_mlp))),
-    ] {
-        eprintln!("{name}: relative difference {r:.2e}");
-        assert!(r < 1e-4, "{name}: {r}");
-    }
-    crate::common::gpu::assert_validation_clean(rast.renderer());
+    let loss_diff = worst_loss_difference(&dev_losses, &host_losses);
+    eprintln!("loss: relative difference {loss_diff:.2e}");
+    assert!(loss_diff < 1e-4, "loss: {loss_diff}");
+    let shader_diff = rel(&dev_mlp.flat_params(), &host_mlp.flat_params());
+    eprintln!("shader: relative difference {shader_diff:.2e}");
+    assert!(shader_diff < 1e-4, "shader: {shader_diff}");
+    assert_groups_agree(&dev, &host, 1e-4);
+    h.assert_validation_clean();
 }
 
 /// The MCMC strategy on the device steps as on the host (relocation and growth on the
@@ -884,15 +866,8 @@ fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
 /// second device run.
 #[test]
 fn mcmc_steps_on_the_device_as_on_the_host() {
-    use vksplat::render::differentiable::DiffRasterizer;
-    use vksplat::train::{data, loss::GpuLoss, model, run};
-    let dir = tempfile::tempdir().unwrap();
-    let set = dir.path().join("data");
-    make_dataset(&set, 8, 64, 48);
-    let dataset = data::load_colmap(&set, data::Resolution(1), false).unwrap();
-    let renderer = crate::common::gpu::new_renderer(None);
-    let mut loss = GpuLoss::new(renderer.ctx()).unwrap();
-    let mut rast = DiffRasterizer::with_renderer(renderer);
+    use vksplat::train::{model, run};
+    let mut h = Harness::new(8, 64, 48, None);
     let mut opts = run::TrainOptions {
         settings: model::Settings {
             iterations: 40,
@@ -905,76 +880,26 @@ fn mcmc_steps_on_the_device_as_on_the_host() {
             ..model::Settings::default()
         },
         sh_degree: 1,
-        white_background: false,
-        save_iterations: Vec::new(),
-        test_iterations: Vec::new(),
         seed: 11,
-        random_points: 0,
-        overwrite: false,
-        shader: None,
-        kernel: Default::default(),
-        checkpoint_iterations: Vec::new(),
-        resume: None,
-        cancel: None,
-        host_optimizer: false,
+        ..Default::default()
     };
-    let mut run_once = |name: &str, host: bool, noise_lr: f32| {
-        opts.host_optimizer = host;
-        opts.settings.mcmc.as_mut().unwrap().noise_lr = noise_lr;
-        let report = run::train(
-            &dataset,
-            &dir.path().join(name),
-            &opts,
-            &mut rast,
-            &mut loss,
-            &mut |_| {},
-            &mut |_| {},
-        )
-        .unwrap();
-        let ply = dir
-            .path()
-            .join(name)
-            .join("point_cloud/iteration_40/point_cloud.ply");
-        let scene = vksplat::scene::load_with_format(&ply).unwrap().0;
-        (report.gaussians, scene, std::fs::read(&ply).unwrap())
-    };
-    let (dev_n, dev, dev_bytes) = run_once("device", false, 5e5);
-    let (host_n, host, _) = run_once("host", true, 5e5);
-    let (_, _, again) = run_once("again", false, 5e5);
-    let (_, quiet, _) = run_once("no-noise", false, 0.0);
+    let (report, _, at) = h.train("device", &opts, false);
+    let (dev_n, (dev, dev_bytes)) = (report.gaussians, model_ply(&at));
+    let (report, _, at) = h.train("host", &opts, true);
+    let (host_n, (host, _)) = (report.gaussians, model_ply(&at));
+    let (_, again) = model_ply(&h.train("again", &opts, false).2);
+    opts.settings.mcmc.as_mut().unwrap().noise_lr = 0.0;
+    let (quiet, _) = model_ply(&h.train("no-noise", &opts, false).2);
     assert!(dev_bytes == again, "two device runs differ");
     let start = 1873 / 2 + 1;
     eprintln!("Gaussians: {start} at the start, {dev_n} after three refinements");
     assert_eq!(dev_n, host_n);
     assert_eq!(dev_n, 1083, "5 % growth three times from {start}");
-    let rel = |a: &[f32], b: &[f32]| {
-        let num: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
-        let den: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
-        (num / den.max(1e-30)).sqrt()
-    };
-    let flat3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-    let moved = rel(&flat3(&quiet.positions), &flat3(&dev.positions));
+    let moved = rel(&flat(&quiet.positions), &flat(&dev.positions));
     eprintln!("centres without the noise: relative L2 difference {moved:.2e}");
     assert!(moved > 1e-5, "the noise moves the centres: {moved}");
-    for (name, r) in [
-        (
-            "centres",
-            rel(&flat3(&dev.positions), &flat3(&host.positions)),
-        ),
-        (
-            "log scales",
-            rel(&flat3(&dev.log_scales), &flat3(&host.log_scales)),
-        ),
-        (
-            "opacity logits",
-            rel(&dev.opacity_logits, &host.opacity_logits),
-        ),
-        ("SH", rel(&dev.sh, &host.sh)),
-    ] {
-        eprintln!("{name}: relative L2 difference {r:.2e}");
-        assert!(r < 1e-4, "{name}: {r}");
-    }
-    crate::common::gpu::assert_validation_clean(rast.renderer());
+    assert_groups_agree(&dev, &host, 1e-4);
+    h.assert_validation_clean();
 }
 
 /// `train --strategy mcmc`: the Gaussians grow 5 % per refinement up to `--cap-max` and

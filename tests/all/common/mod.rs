@@ -97,3 +97,10 @@ pub fn frame_bits(f: &vksplat::frame::Frame) -> Vec<u32> {
         .map(|v| v.to_bits())
         .collect()
 }
+
+/// An `H x W x K` float32 `.npy` image (what `render` writes for features and fields) as
+/// (W, H, K, values).
+pub fn npy_image(path: &std::path::Path) -> (usize, usize, usize, Vec<f32>) {
+    let a = vksplat::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
+    (a.shape[1], a.shape[0], a.shape[2], a.data)
+}
