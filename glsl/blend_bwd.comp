@@ -17,6 +17,7 @@
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
+#include "subgroup.glsl"
 
 #ifndef BIN
 #define BIN 16u
@@ -289,7 +290,7 @@ void main() {
     uint end = max(subgroupMax(my_last), range.x);
     vec4 zf[FG];
     zero_features(zf);
-    for (uint k = end + gl_SubgroupInvocationID; k < range.y; k += gl_SubgroupSize) {
+    for (uint k = end + gl_SubgroupInvocationID; k < range.y; k += SUBGROUP_SIZE) {
         store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
     }
     vec4 m0 = vec4(0.0), m1 = vec4(0.0), m2 = vec4(0.0);

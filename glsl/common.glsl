@@ -9,6 +9,7 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#include "subgroup.glsl"
 
 #ifdef WG_SIZE_SPEC_ID
 // The workgroup size is a specialization constant (the sort's).
@@ -31,7 +32,7 @@ uint linear_group_id() {
 shared uint wg_partials[WG_SIZE];
 
 // Exclusive prefix sum of `value` over the workgroup, in invocation order.
-// Generic over gl_SubgroupSize (8 on lavapipe, 32 NVIDIA, 64 AMD); needs full
+// Generic over SUBGROUP_SIZE (8 on lavapipe, 32 NVIDIA, 64 AMD); needs full
 // subgroups (WG_SIZE a multiple of the subgroup size). Contains two barriers, so it
 // must be reached by every invocation; call at most once between other barriers.
 uint workgroup_exclusive_scan(uint value) {
@@ -43,7 +44,7 @@ uint workgroup_exclusive_scan(uint value) {
     barrier();
     if (gl_SubgroupID == 0) {
         uint carry = 0;
-        for (uint base = 0; base < gl_NumSubgroups; base += gl_SubgroupSize) {
+        for (uint base = 0; base < gl_NumSubgroups; base += SUBGROUP_SIZE) {
             uint idx = base + gl_SubgroupInvocationID;
             uint x = idx < gl_NumSubgroups ? wg_partials[idx] : 0u;
             uint x_inclusive = subgroupInclusiveAdd(x);

@@ -4,11 +4,11 @@
 // SORT_TEXEL_IO = 1 reads and writes 32-bit keys and values through texel views.
 //
 // Element layout inside a block of SORT_BLOCK = SORT_WG * SORT_ITEMS elements:
-// subgroup s owns the contiguous chunk of gl_SubgroupSize * SORT_ITEMS elements
-// starting at s * gl_SubgroupSize * SORT_ITEMS, processed as SORT_ITEMS rows of
-// gl_SubgroupSize consecutive elements (row k, lane l -> chunk + k * size + l). So
+// subgroup s owns the contiguous chunk of SUBGROUP_SIZE * SORT_ITEMS elements
+// starting at s * SUBGROUP_SIZE * SORT_ITEMS, processed as SORT_ITEMS rows of
+// SUBGROUP_SIZE consecutive elements (row k, lane l -> chunk + k * size + l). So
 // (subgroup, row, lane) order is input order, and loads are contiguous per row.
-// Everything is generic over gl_SubgroupSize (needs full subgroups, <= 128 lanes).
+// Everything is generic over SUBGROUP_SIZE (needs full subgroups, <= 128 lanes).
 #ifndef VKSPLAT_SORT_COMMON_GLSL
 #define VKSPLAT_SORT_COMMON_GLSL
 
@@ -17,7 +17,7 @@ shared uint subgroup_counts[SORT_MAX_SUBGROUPS * SORT_RADIX];
 
 // Index of element (row) of this invocation's subgroup chunk in block `block`.
 uint sort_element_index(uint block, uint row) {
-    return block * SORT_BLOCK + (gl_SubgroupID * SORT_ITEMS + row) * gl_SubgroupSize
+    return block * SORT_BLOCK + (gl_SubgroupID * SORT_ITEMS + row) * SUBGROUP_SIZE
         + gl_SubgroupInvocationID;
 }
 
@@ -34,7 +34,7 @@ uvec4 match_digit(uint digit, bool valid) {
 }
 
 void clear_subgroup_counts() {
-    for (uint d = gl_SubgroupInvocationID; d < SORT_RADIX; d += gl_SubgroupSize) {
+    for (uint d = gl_SubgroupInvocationID; d < SORT_RADIX; d += SUBGROUP_SIZE) {
         subgroup_counts[gl_SubgroupID * SORT_RADIX + d] = 0u;
     }
     subgroupMemoryBarrierShared();

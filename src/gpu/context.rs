@@ -75,10 +75,18 @@ pub struct DeviceInfo {
     pub driver: String,
     /// Supported Vulkan API version, as "major.minor.patch".
     pub api_version: String,
-    /// Subgroup size.
+    /// Subgroup size: the lanes that run together, as measured ([`super::subgroup`]); the
+    /// driver's `subgroupSize` unless it misreports it.
     pub subgroup_size: u32,
     /// Smallest subgroup size a compute shader may run with (subgroup size control).
     pub min_subgroup_size: u32,
+    /// Largest subgroup size a compute shader may run with.
+    pub max_subgroup_size: u32,
+    /// The driver's `subgroupSize`, as reported.
+    pub reported_subgroup_size: u32,
+    /// The measured subgroup size every pipeline uses in place of `gl_SubgroupSize`
+    /// because the driver misreports it (`SUBGROUP_SIZE_SPEC`); 0 when it does not.
+    pub subgroup_size_override: u32,
     /// maxComputeWorkGroupCount.
     pub max_workgroup_count: [u32; 3],
     /// maxComputeWorkGroupInvocations.
@@ -156,7 +164,7 @@ impl std::fmt::Display for DeviceInfo {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "#{} {} ({:?}), driver {}, Vulkan {}, subgroup {}, max groups {:?}, \
+            "#{} {} ({:?}), driver {}, Vulkan {}, subgroup {}{}, max groups {:?}, \
              max invocations {}, shared {} B",
             self.index,
             self.name,
@@ -164,6 +172,14 @@ impl std::fmt::Display for DeviceInfo {
             self.driver,
             self.api_version,
             self.subgroup_size,
+            if self.subgroup_size_override != 0 {
+                format!(
+                    " (the driver says {}: measured)",
+                    self.reported_subgroup_size
+                )
+            } else {
+                String::new()
+            },
             self.max_workgroup_count,
             self.max_workgroup_invocations,
             self.max_shared_memory
@@ -587,6 +603,9 @@ impl GpuContext {
             min_subgroup_size: props13
                 .min_subgroup_size
                 .clamp(1, props11.subgroup_size.max(1)),
+            max_subgroup_size: props13.max_subgroup_size.max(props11.subgroup_size),
+            reported_subgroup_size: props11.subgroup_size,
+            subgroup_size_override: 0,
             max_workgroup_count: limits.max_compute_work_group_count,
             max_workgroup_invocations: limits.max_compute_work_group_invocations,
             max_shared_memory: limits.max_compute_shared_memory_size,
@@ -751,7 +770,7 @@ impl GpuContext {
         shared.set_name(queue, "compute queue");
         shared.set_name(command_pool, "command pool");
         shared.set_name(shared.device.handle(), "vksplat device");
-        Ok(Self {
+        let mut ctx = Self {
             shared,
             physical_device,
             queue,
@@ -761,7 +780,26 @@ impl GpuContext {
             messages,
             validation,
             full_subgroups,
-        })
+        };
+        ctx.follow_measured_subgroups()?;
+        Ok(ctx)
+    }
+
+    /// Measures the subgroup size the device runs ([`super::subgroup`]) and, where the
+    /// driver misreports it, makes every later pipeline and size decision use the measured
+    /// one; refuses a device whose subgroups are inconsistent.
+    fn follow_measured_subgroups(&mut self) -> GpuResult<()> {
+        let probe = super::subgroup::probe(self)?;
+        if let super::subgroup::SubgroupVerdict::Misreported { runs, .. } =
+            super::subgroup::size_to_use(&self.info.name, &probe)?
+        {
+            let info = &mut self.info;
+            info.subgroup_size = runs;
+            info.min_subgroup_size = info.min_subgroup_size.min(runs);
+            info.max_subgroup_size = runs.max(info.min_subgroup_size);
+            info.subgroup_size_override = runs;
+        }
+        Ok(())
     }
 
     /// The pipeline cache every pipeline is created through.

@@ -10,6 +10,7 @@ pub mod scan;
 pub mod shader;
 pub mod shader_set;
 pub mod sort;
+pub mod subgroup;
 pub mod sync;
 pub mod timing;
 

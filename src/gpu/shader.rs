@@ -22,6 +22,7 @@ const HEADERS: &[(&str, &str)] = &[
         include_str!("../../glsl/sort_common.glsl"),
     ),
     ("sort_spec.glsl", include_str!("../../glsl/sort_spec.glsl")),
+    ("subgroup.glsl", include_str!("../../glsl/subgroup.glsl")),
     (
         "splat_common.glsl",
         include_str!("../../glsl/splat_common.glsl"),
@@ -273,12 +274,16 @@ impl ComputePipeline {
             .vk("vkCreatePipelineLayout")?;
         ctx.set_name(this.layout, name);
         // Workgroup scans index subgroups by gl_SubgroupID and assume they are full.
-        let stage_flags =
-            if ctx.full_subgroups && workgroup_size % ctx.info().subgroup_size.max(1) == 0 {
-                vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
-            } else {
-                vk::PipelineShaderStageCreateFlags::empty()
-            };
+        let stage_flags = super::subgroup::full_subgroups_flag(ctx, workgroup_size);
+        // A driver that misreports its subgroup size: every shader computes with the
+        // measured one (`glsl/subgroup.glsl`).
+        let measured = ctx.info().subgroup_size_override;
+        let specialization: Vec<(u32, u32)> = specialization
+            .iter()
+            .copied()
+            .chain((measured != 0).then_some((super::shader_set::SUBGROUP_SIZE_SPEC, measured)))
+            .collect();
+        let specialization = specialization.as_slice();
         let entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
             .enumerate()

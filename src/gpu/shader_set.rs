@@ -42,6 +42,12 @@ pub const SHADE_SPEC_ACTIVATIONS: u32 = 0;
 /// Specialization constant id of the neural shader's widest layer (inputs or outputs).
 pub const SHADE_SPEC_WIDEST: u32 = 1;
 
+/// Specialization constant id of the subgroup size every shader uses in place of
+/// `gl_SubgroupSize` when the driver's differs from what runs (`common.glsl`'s
+/// `SUBGROUP_SIZE`; [`crate::gpu::subgroup`]); 0, the default, means `gl_SubgroupSize`.
+/// Far from the stages' own ids (0-3), which every pipeline may also carry.
+pub const SUBGROUP_SIZE_SPEC: u32 = 100;
+
 /// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
 /// accumulator per sample).
 pub const MAX_FIELD_SAMPLES: u32 = 256;
@@ -109,6 +115,7 @@ shader_bindings! {
     sort_scatter { META, KEYS_IN, VALUES_IN, OFFSETS, KEYS_OUT, VALUES_OUT }
     sort_copy { META, KEYS_IN, VALUES_IN, KEYS_OUT, VALUES_OUT }
     count64_test { COUNT }
+    subgroup_probe { OUT }
     blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA, FEATURES, GRAD_FEATURES }
     grad_accumulate { VALUES, PAIR_GRADS, MAXIMA, ACC }
     preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS, FEATURE_GRADS }
@@ -180,6 +187,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("SHADE_SPEC_ACTIVATIONS", SHADE_SPEC_ACTIVATIONS.to_string()),
         ("SHADE_SPEC_WIDEST", SHADE_SPEC_WIDEST.to_string()),
         ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
+        ("SUBGROUP_SIZE_SPEC", SUBGROUP_SIZE_SPEC.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
@@ -262,6 +270,7 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "train_step",
         "train_mlp_step",
         "count64_test",
+        "subgroup_probe",
     ] {
         out.push(v(shader, &[]));
     }

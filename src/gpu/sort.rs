@@ -34,7 +34,9 @@ use super::shader::{by_binding, BindingKind, Resource};
 use super::shader_set::bindings;
 use super::shader_set::{SORT_SPEC_ITEMS, SORT_SPEC_MAX_SUBGROUPS, SORT_SPEC_RADIX, SORT_SPEC_WG};
 use super::sync::{barrier, barrier_uses, Access};
-use super::{align_up, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer};
+use super::{
+    align_up, ComputePipeline, DeviceInfo, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer,
+};
 
 /// Tunables of the sort kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,6 +61,41 @@ impl SortConfig {
     /// Bytes per key.
     pub fn key_bytes(&self) -> u64 {
         u64::from(self.key_words) * 4
+    }
+
+    /// Subgroups a workgroup may have: the per-subgroup counters are sized for the
+    /// smallest subgroups the device may run.
+    pub fn max_subgroups(&self, info: &DeviceInfo) -> u32 {
+        self.workgroup_size.div_ceil(info.min_subgroup_size.max(1))
+    }
+
+    /// Shared memory of the histogram and scatter kernels: one counter per digit and
+    /// subgroup, and the workgroup scan's partials (`common.glsl`).
+    pub fn shared_bytes(&self, info: &DeviceInfo) -> u32 {
+        let radix = 1u32 << self.radix_bits.min(8);
+        (radix * self.max_subgroups(info) + self.workgroup_size) * 4
+    }
+
+    /// This configuration, or the portable variant of it the device can run: while the
+    /// counters do not fit the device's shared memory (small subgroups have many of them:
+    /// 32 KiB for 128 invocations of 4 lanes) or the workgroup is larger than the device
+    /// allows, half the invocations each take twice the rows (up to 128), so a block
+    /// keeps its elements and the scratch layout ([`RadixSort::scratch_size_with`]) holds
+    /// for the fitted configuration too. Never smaller than the device's largest subgroup.
+    /// The same order of elements: only the speed differs (BENCHMARKS.md).
+    pub fn fitted(self, info: &DeviceInfo) -> SortConfig {
+        let mut config = self;
+        let smallest = info.max_subgroup_size.max(info.subgroup_size).max(1);
+        while (config.shared_bytes(info) > info.max_shared_memory
+            || config.workgroup_size > info.max_workgroup_invocations)
+            && config.workgroup_size / 2 >= smallest
+            && config.workgroup_size % 2 == 0
+            && config.items_per_thread * 2 <= 128
+        {
+            config.workgroup_size /= 2;
+            config.items_per_thread *= 2;
+        }
+        config
     }
 }
 
@@ -270,15 +307,14 @@ impl RadixSort {
         Self::with_config(ctx, DEFAULT_SORT_CONFIG)
     }
 
-    /// Builds the sort with explicit tunables (for benchmarking).
+    /// Builds the sort with explicit tunables (for benchmarking), fitted to the device
+    /// ([`SortConfig::fitted`]): [`Self::config`] is what runs.
     pub fn with_config(ctx: &GpuContext, config: SortConfig) -> GpuResult<Self> {
         let info = ctx.info();
+        let config = config.fitted(info);
         let radix = 1u32 << config.radix_bits.min(8);
-        // Per-subgroup counters are sized for the smallest subgroups the device may use.
-        let max_subgroups = config
-            .workgroup_size
-            .div_ceil(info.min_subgroup_size.max(1));
-        let shared_bytes = (radix * max_subgroups + config.workgroup_size) * 4;
+        let max_subgroups = config.max_subgroups(info);
+        let shared_bytes = config.shared_bytes(info);
         if !(1..=8).contains(&config.radix_bits)
             || !(1..=2).contains(&config.key_words)
             || (config.texel_io && config.key_words != 1)
