@@ -941,6 +941,7 @@ fn open_context(device: Option<String>, validation: bool) -> PyResult<(GpuContex
         device,
         validation,
         memory_limit: None,
+        ..Default::default()
     })
     .map_err(|e| py_err(e.into()))?;
     let name = ctx.info().name.clone();

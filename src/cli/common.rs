@@ -79,6 +79,7 @@ impl GpuArgs {
             device: device.map(str::to_string),
             validation: self.validate,
             memory_limit: self.memory_limit,
+            ..Default::default()
         })?)
     }
 }

@@ -28,6 +28,8 @@ pub struct ContextOptions {
     /// memory is host memory, it is 3/4 of the host memory available when that is more,
     /// and a larger explicit limit is honoured.
     pub memory_limit: Option<u64>,
+    /// Device traits to pretend ([`super::emulate`]); `VKSPLAT_EMULATE` adds to them.
+    pub emulate: super::emulate::Emulation,
 }
 
 /// Parses a byte count: a number with an optional K, M, G or T suffix (powers of 1024).
@@ -113,6 +115,9 @@ pub struct DeviceInfo {
     /// `shaderBufferFloat32AtomicAdd`), enabled when the device has it: the backward pass's
     /// opt-in fast accumulation uses it.
     pub float_atomic_add: bool,
+    /// The device traits pretended ([`super::emulate`]): the limits above already
+    /// include them.
+    pub emulation: super::emulate::Emulation,
     /// Indices of the usable devices (Vulkan 1.3, a compute queue) of this device's type,
     /// this one included: the devices `render --devices all` spreads frames over.
     pub same_kind_devices: Vec<usize>,
@@ -338,6 +343,9 @@ impl GpuContext {
     /// Creates the context: instance, device selection, queue, pool and allocator.
     pub fn new(options: &ContextOptions) -> GpuResult<Self> {
         let validation = options.validation || env_flag("VKSPLAT_VALIDATE");
+        let emulation = super::emulate::Emulation::from_env()
+            .map_err(GpuError::Input)?
+            .union(&options.emulate);
         let device_choice = options.device.clone().or_else(|| {
             std::env::var("VKSPLAT_DEVICE")
                 .ok()
@@ -618,6 +626,7 @@ impl GpuContext {
             memory_budget,
             budget_source,
             float_atomic_add: false,
+            emulation: Default::default(),
             same_kind_devices: (0..names.len())
                 .filter(|&i| usable(i) && props[i].device_type == props[index].device_type)
                 .collect(),
@@ -782,6 +791,7 @@ impl GpuContext {
             full_subgroups,
         };
         ctx.follow_measured_subgroups()?;
+        emulation.apply(&mut ctx.info);
         Ok(ctx)
     }
 

@@ -3,6 +3,7 @@
 
 pub mod buffer;
 pub mod context;
+pub mod emulate;
 pub mod image;
 pub mod pipeline_cache;
 pub mod reflect;
