@@ -2,8 +2,8 @@
 // Feature blend: after the colour blend, composites four feature channels of every splat
 // (one group of a scene's K channels; dispatched once per group, without sorting again)
 // front to back over the same bin lists, with exactly the colour rules (same alpha,
-// transmittance, skip and stop; background 0). One invocation per pixel, 16x16 per
-// workgroup, each reading its own bin's list, so it works with 8- and 16-pixel bins.
+// transmittance, skip and stop; background 0). One invocation per pixel, 16x8 per
+// workgroup (128 invocations, within every device's limit), each reading its own bin's list, so it works with 8- and 16-pixel bins.
 // TEXEL_FETCH (CPU devices, as the texel blend kernel): splats, values and features are
 // read through texel-buffer views, which lavapipe compiles to gathers instead of per-lane
 // scalar loops.
@@ -16,7 +16,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 16, local_size_y = 16) in;
+layout(local_size_x = 16, local_size_y = 8) in;
 
 layout(std430, binding = BLEND_FEATURES_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #if !TEXEL_FETCH

@@ -6,16 +6,16 @@
 #define WORKGROUP_COUNT64
 #include "splat_common.glsl"
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = COUNT64_TEST_COUNT) buffer CountBuf { uint lo; uint hi; uint seed; };
 
 void main() {
-    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint i = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
     uint h = (i ^ seed) * 2654435761u;
     h ^= h >> 15;
     uint value = h & 0xFFFFFu;
-    uint sum = workgroup_sum_256(value);
+    uint sum = workgroup_sum_u32(value);
     if (gl_LocalInvocationIndex == 0u) {
         ATOMIC_ADD_U64(lo, hi, sum);
     }

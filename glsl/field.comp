@@ -3,7 +3,8 @@
 // f(x) = sum_i o_i feat_i G_i(x) itself, a plain sum (no blending, no sort), four channels
 // per dispatch. The reference and every formula: src/cpu/field.rs.
 //
-// One invocation per pixel of a 16x16 tile (WG_SIZE 256, pixel = local index). The
+// One invocation per pixel of a 16x8 tile (WG_SIZE 128, within every device's limit;
+// pixel = local index). The
 // Gaussians are read in chunks of CHUNK: each of the first CHUNK invocations tests one
 // against the tile's frustum (its support's bounding sphere against the four side planes;
 // for a slice also against the plane), a workgroup scan compacts the survivors into shared
@@ -20,7 +21,9 @@
 #ifndef SPLAT_KERNEL
 #define SPLAT_KERNEL 0u
 #endif
-#define WG_SIZE 256
+#define WG_SIZE 128
+#define TILE_W 16u
+#define TILE_H 8u
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 
@@ -94,7 +97,7 @@ float nonzero(float v) {
 void main() {
     uint li = gl_LocalInvocationIndex;
     uvec2 tile = gl_WorkGroupID.xy;
-    uvec2 pix = tile * 16u + uvec2(li % 16u, li / 16u);
+    uvec2 pix = tile * uvec2(TILE_W, TILE_H) + uvec2(li % TILE_W, li / TILE_W);
     uint width = params.size.x, height = params.size.y, n = params.size.z;
     bool inside = pix.x < width && pix.y < height;
     float cutoff = params.origin.w;
@@ -107,8 +110,8 @@ void main() {
     vec3 d = normalize(rows * dc);
 
     // The tile's frustum, as x / z and y / z ranges of camera space.
-    vec2 lo = (vec2(tile * 16u) - f.zw) / f.xy;
-    vec2 hi = (vec2(min(tile * 16u + 16u, uvec2(width, height))) - f.zw) / f.xy;
+    vec2 lo = (vec2(tile * uvec2(TILE_W, TILE_H)) - f.zw) / f.xy;
+    vec2 hi = (vec2(min(tile * uvec2(TILE_W, TILE_H) + uvec2(TILE_W, TILE_H), uvec2(width, height))) - f.zw) / f.xy;
 
     bool valid = inside;
     vec4 acc = vec4(0.0);
@@ -152,14 +155,14 @@ void main() {
 #endif
         }
         uint slot = workgroup_exclusive_scan(keep ? 1u : 0u);
-        // The last invocation's exclusive sum plus its own flag (0: li >= CHUNK) is the count.
+        // The last invocation's exclusive sum plus its own flag is the count.
         if (keep) {
             s_mean[slot] = gd.mean_radius;
             s_a0[slot] = gd.a0;
             s_a1[slot] = gd.a1;
             s_feat[slot] = features[g * params.size.w + push.group];
         }
-        if (li == WG_SIZE - 1u) wg_count = slot;
+        if (li == WG_SIZE - 1u) wg_count = slot + (keep ? 1u : 0u);
         barrier();
         uint count = wg_count;
         for (uint j = 0u; j < count && valid; j++) {

@@ -20,7 +20,7 @@
 // Fields per pair: GRAD_FIELDS (12: 2D mean, conic, opacity, colour, depth, |2D mean|)
 // plus 4 per group of feature channels, at most MAX_GRAD_FIELDS; `pc.vecs` vec4s.
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = GRAD_ACCUMULATE_VALUES) readonly buffer ValueBuf { uint values[]; };
 layout(std430, binding = GRAD_ACCUMULATE_PAIR_GRADS) readonly buffer PairGradBuf { vec4 pair_grads[]; };
@@ -43,7 +43,7 @@ shared vec2 s_scale[MAX_GRAD_FIELDS];
 #endif
 
 void main() {
-    uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint k = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
 #if !FLOAT_ATOMICS
     if (gl_LocalInvocationIndex < 4u * pc.vecs) {
         int sh = grad_shift(maxima[gl_LocalInvocationIndex], pc.bits);

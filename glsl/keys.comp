@@ -10,7 +10,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = KEYS_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 // The splats as 3 rgba32f texels each: texel buffers address more than one storage
@@ -55,10 +55,10 @@ layout(std430, binding = KEYS_BIN_MASKS) readonly buffer BinMaskBuf { uint bin_m
 layout(std430, binding = KEYS_COUNTERS) buffer CounterBuf { Counters counters; };
 layout(push_constant) uniform Chunk { uint first; uint end; uint base; } chunk;
 
-#define RANGES_WORKGROUP 256u
+#define RANGES_WORKGROUP LINEAR_WG
 
 void main() {
-    uint k = chunk.first + linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint k = chunk.first + linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
     uint n = params.counts.x;
     uint capacity = params.counts.w;
     if (k == chunk.first) {

@@ -7,7 +7,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = ORDER_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 layout(std430, binding = ORDER_DEPTH_ORDER) readonly buffer OrderBuf { uint depth_order[]; };
@@ -15,6 +15,6 @@ layout(std430, binding = ORDER_TOUCHED) readonly buffer TouchedBuf { uint touche
 layout(std430, binding = ORDER_TOUCHED_IN_ORDER) writeonly buffer TouchedInOrderBuf { uint touched_in_order[]; };
 
 void main() {
-    uint k = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint k = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
     if (k < params.counts.x) touched_in_order[k] = touched_by_index[depth_order[k]];
 }

@@ -5,7 +5,8 @@
 // multiply and the add rounded separately (`precise` forbids fusing them), so a packed
 // frame equals the PNG that `vksplat render` writes from the float frame, bit for bit.
 
-layout(local_size_x = 16, local_size_y = 16) in;
+// 16 x 8 pixels: 128 invocations, within every device's limit.
+layout(local_size_x = 16, local_size_y = 8) in;
 
 layout(binding = PACK_COLOR, rgba32f) uniform readonly image2D color;  // rgb + T * background
 layout(std430, binding = PACK_PACKED) writeonly buffer PackedBuf { uint packed[]; };

@@ -7,7 +7,7 @@
 #define WORKGROUP_COUNT64
 #include "splat_common.glsl"
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = PREPROCESS_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #ifndef COMPACT_GAUSSIANS
@@ -120,7 +120,7 @@ uint clamp_tile(float v, uint hi) {
 shared uint s_visible;
 
 void main() {
-    uint w = linear_group_id() * 256u + gl_LocalInvocationIndex;  // index in the window
+    uint w = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;  // index in the window
     uint i = window.first + w;
     uint touched = 0u;
     uint mask = 0u;
@@ -221,7 +221,7 @@ void main() {
         store_outputs(w, i, s, rect, depth_key, touched != 0u ? mask : 0u, touched);
     }
     // Exact 64-bit total of tiles touched (each term < 2^20 tiles).
-    uint sum = workgroup_sum_256(touched);
+    uint sum = workgroup_sum_u32(touched);
     uint visible = subgroupAdd(touched != 0u ? 1u : 0u);
     if (subgroupElect() && visible != 0u) atomicAdd(s_visible, visible);
     barrier();

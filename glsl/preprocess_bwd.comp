@@ -15,7 +15,7 @@
 #define FLOAT_ATOMICS 0
 #endif
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = PREPROCESS_BWD_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 layout(std430, binding = PREPROCESS_BWD_GAUSSIANS) readonly buffer GaussianBuf { Gaussian gaussians[]; };
@@ -87,7 +87,7 @@ void sh_basis(uint degree, vec3 d, out float b[16], out vec3 gb[16]) {
 }
 
 void main() {
-    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint i = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
     if (i >= pc.count) return;
     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
     uint base = i * stride;

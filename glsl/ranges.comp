@@ -4,7 +4,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 #if RANGES_TEXEL_IO
 // CPU devices: the keys through a texel view (straight per-lane loads on llvmpipe).
@@ -18,7 +18,7 @@ layout(std430, binding = RANGES_RANGES) writeonly buffer RangeBuf { uvec2 ranges
 layout(std430, binding = RANGES_COUNTERS) readonly buffer CounterBuf { Counters counters; };
 
 void main() {
-    uint i = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint i = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
     uint n = counters.sort_count;
     if (i >= n) return;
     uint tile = KEY(i);

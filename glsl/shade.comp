@@ -6,7 +6,8 @@
 // (alpha is kept). One invocation per pixel.
 #extension GL_GOOGLE_include_directive : require
 
-layout(local_size_x = 16, local_size_y = 16) in;
+// 16 x 8 pixels: 128 invocations, within every device's limit.
+layout(local_size_x = 16, local_size_y = 8) in;
 
 // 112 bytes of push constants (src/render/shade.rs ShadePush).
 layout(push_constant) uniform ShadeParams {

@@ -155,12 +155,12 @@ uint linear_group_id() {
 // (old + sum < old), so the carry is exact under any interleaving.
 shared uint s_count64[1];
 
-// Sum of `value` over a 256-invocation workgroup, valid in invocation 0. Every invocation
-// must call it (barriers); the caller keeps 256 * max(value) below 2^32 (e.g. < 2^24 each).
+// Sum of `value` over the workgroup (at most 256 invocations), valid in invocation 0. Every
+// invocation must call it (barriers); the caller keeps 256 * max(value) below 2^32.
 // One subgroup sum and one shared atomic per subgroup, for any subgroup size: two barriers
 // instead of the nine of a shared-memory tree (measured: preprocess about 15 % less CPU time
 // on lavapipe, where every barrier switches all of the workgroup's coroutines).
-uint workgroup_sum_256(uint value) {
+uint workgroup_sum_u32(uint value) {
     if (gl_LocalInvocationIndex == 0u) s_count64[0] = 0u;
     barrier();
     uint sum = subgroupAdd(value);

@@ -8,10 +8,10 @@
 // Gaussians' (NORMS, at pc.sizes.w) for the clipping norm; STEP_CLIP scales the
 // gradients as train_step.comp does. The arithmetic is Model::step's.
 #extension GL_GOOGLE_include_directive : require
-#define WG_SIZE 256u
+#define WG_SIZE LINEAR_WG
 #include "common.glsl"
 
-layout(local_size_x = 256) in;
+layout(local_size_x = LINEAR_WG) in;
 
 layout(std430, binding = TRAIN_MLP_STEP_STATE) buffer StateBuf { float state[]; };
 layout(std430, binding = TRAIN_MLP_STEP_M) buffer MBuf { float moment_m[]; };
@@ -33,7 +33,7 @@ layout(push_constant) uniform Push {
 } pc;
 
 void main() {
-    uint j = linear_group_id() * 256u + gl_LocalInvocationIndex;
+    uint j = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
     if (j >= pc.sizes.x) return;
     uint flags = pc.sizes.z;
     float g = grads[j];

@@ -7,6 +7,7 @@ pub mod camera;
 pub mod console;
 pub mod cpu;
 pub mod diff_image;
+pub mod doctor;
 pub mod fit;
 pub mod frame;
 pub mod fsutil;

@@ -51,6 +51,11 @@ enum Command {
     /// Serve an interactive viewer of a scene to a browser (orbit, fly, filters, cameras, keyframes).
     #[command(allow_negative_numbers = true)]
     View(cli::view::ViewArgs),
+    /// List the Vulkan devices and self-check each usable one against the CPU reference.
+    Doctor(cli::doctor::DoctorArgs),
+    /// Make the markdown report of a GPU bundle run's results folder (tools/gpu_bundle.sh).
+    #[command(hide = true)]
+    GpuReport(cli::doctor::GpuReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -66,6 +71,8 @@ fn main() -> ExitCode {
         Command::Eval(args) => cli::eval::eval(args),
         Command::Train(args) => cli::train::train(args),
         Command::View(args) => cli::view::view(args),
+        Command::Doctor(args) => cli::doctor::doctor(args),
+        Command::GpuReport(args) => cli::doctor::gpu_report(args),
     };
     // A closed pipe (`vksplat info scene.ply | head`) is not an error; any other failure to
     // write the command's output is.

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod common;
 pub mod compare;
 pub mod convert;
+pub mod doctor;
 pub mod eval;
 pub mod fit;
 pub mod gen;

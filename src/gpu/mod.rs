@@ -3,6 +3,7 @@
 
 pub mod buffer;
 pub mod context;
+pub mod devices;
 pub mod emulate;
 pub mod image;
 pub mod pipeline_cache;
@@ -14,6 +15,7 @@ pub mod sort;
 pub mod subgroup;
 pub mod sync;
 pub mod timing;
+pub mod workgroup;
 
 pub use buffer::{BufferSlice, BufferView, GpuBuffer, MemoryKind};
 pub use context::{BudgetSource, ContextOptions, DeviceInfo, FrameSlot, GpuContext};

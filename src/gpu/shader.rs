@@ -284,6 +284,8 @@ impl ComputePipeline {
             .chain((measured != 0).then_some((super::shader_set::SUBGROUP_SIZE_SPEC, measured)))
             .collect();
         let specialization = specialization.as_slice();
+        // The workgroup must fit the device's (or the emulated) limits.
+        super::workgroup::check_limits(name, spirv, specialization, ctx.info())?;
         let entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
             .enumerate()

@@ -7,10 +7,15 @@
 // Runtime compilation exists only for shader development (`VKSPLAT_GLSL_DIR`), through the
 // same [`compile_glsl_file`].
 
-/// Invocations per scan workgroup.
-pub const SCAN_WG: u32 = 256;
+/// Invocations of every one-dimensional kernel's workgroup (preprocess, order, keys,
+/// ranges, the backward's accumulation and preprocess, the training step): the Vulkan
+/// specification's guaranteed `maxComputeWorkGroupInvocations`, so they run on any device.
+pub const LINEAR_WG: u32 = 128;
+/// Invocations per scan workgroup (the specification's guaranteed minimum of
+/// `maxComputeWorkGroupInvocations`).
+pub const SCAN_WG: u32 = 128;
 /// Consecutive elements each scan invocation handles.
-pub const SCAN_ITEMS: u32 = 16;
+pub const SCAN_ITEMS: u32 = 32;
 /// Elements per scan workgroup (block).
 pub const SCAN_BLOCK: u32 = SCAN_WG * SCAN_ITEMS;
 
@@ -164,6 +169,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("ALPHA_MAX", glsl_float(rules::ALPHA_MAX)),
         ("ALPHA_MIN", glsl_float(rules::ALPHA_MIN)),
         ("T_MIN", glsl_float(rules::T_MIN)),
+        ("LINEAR_WG", format!("{LINEAR_WG}u")),
         ("SCAN_WG", SCAN_WG.to_string()),
         ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
         ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),

@@ -7,6 +7,10 @@ use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use crate::model::SplatKernel;
 use ash::vk;
 
+/// Shared memory of the shared kernel per pixel of a tile: one staged Gaussian's mean and
+/// opacity, conic and colour (three vec4s, `glsl/blend.comp`).
+const SHARED_KERNEL_BYTES_PER_PIXEL: u32 = 48;
+
 /// Which blend kernel to build. Both composite with the same per-pixel arithmetic.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BlendKernel {
@@ -29,8 +33,10 @@ pub use crate::gpu::shader_set::STRIPS;
 
 impl BlendKernel {
     /// The kernel for a device: [`BlendKernel::Shared`] on GPUs, texel fetches with two
-    /// pixels per invocation on CPU devices (fastest on lavapipe, see BENCHMARKS.md).
-    /// `VKSPLAT_BLEND` (`shared`, `texel` or `texel:N`) overrides.
+    /// pixels per invocation on CPU devices (fastest on lavapipe, see BENCHMARKS.md) and
+    /// on GPUs whose workgroups cannot hold a 16x16 tile (fewer than 256 invocations or
+    /// 12 KiB of shared memory: the texel kernel's 8x8 bins need 32 invocations and no
+    /// shared memory). `VKSPLAT_BLEND` (`shared`, `texel` or `texel:N`) overrides.
     pub fn for_device(ctx: &GpuContext) -> BlendKernel {
         if let Some(k) = std::env::var("VKSPLAT_BLEND")
             .ok()
@@ -38,7 +44,11 @@ impl BlendKernel {
         {
             return k;
         }
-        if ctx.info().device_type == vk::PhysicalDeviceType::CPU {
+        let info = ctx.info();
+        let tile = crate::rules::TILE_SIZE * crate::rules::TILE_SIZE;
+        let shared_fits = info.max_workgroup_invocations >= tile
+            && info.max_shared_memory >= SHARED_KERNEL_BYTES_PER_PIXEL * tile + 4;
+        if info.device_type == vk::PhysicalDeviceType::CPU || !shared_fits {
             BlendKernel::Texel { strip: 2 }
         } else {
             BlendKernel::Shared

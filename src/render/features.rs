@@ -84,7 +84,7 @@ impl FeatureBlend {
         self.texel
     }
 
-    /// Records one group's dispatch: one 16x16 workgroup per 16x16 pixel block.
+    /// Records one group's dispatch: one 16x8 workgroup per 16x8 pixel block.
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -132,7 +132,7 @@ impl FeatureBlend {
                 resume: u32::from(b.resume),
                 pad: 0,
             }),
-            [size.0.div_ceil(16), size.1.div_ceil(16), 1],
+            [size.0.div_ceil(16), size.1.div_ceil(8), 1],
         )
     }
 }

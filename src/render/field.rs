@@ -1,7 +1,7 @@
 //! Field stage (`glsl/field.comp`): renders of the fitted field itself (slice, line
 //! integral, maximum along the ray; [`crate::cpu::field`] is the reference and has every
 //! formula). No projection, sort or blend: one dispatch per group of four channels, each
-//! 16x16 workgroup summing the Gaussians whose support can reach its tile.
+//! 16x8 workgroup summing the Gaussians whose support can reach its tile.
 
 use crate::camera::Camera;
 use crate::cpu::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
@@ -11,8 +11,9 @@ use crate::gpu::shader_set::bindings::field as slot;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
 
-/// Workgroup side in pixels (16 x 16 invocations).
+/// Workgroup width and height in pixels (16 x 8 = 128 invocations, `glsl/field.comp`).
 const SIDE: u32 = 16;
+const ROWS: u32 = 8;
 
 /// Gaussians per pass of a slice or an integral on a device with llvmpipe's loop limit
 /// (an invocation whose loops run 65,535 iterations in all is ended before it writes): an
@@ -178,7 +179,7 @@ impl FieldRenderer {
                     (slot::OUTPUT, B),
                 ])?,
                 std::mem::size_of::<FieldPass>() as u32,
-                SIDE * SIDE,
+                SIDE * ROWS,
             )?);
         }
         slot_ref
@@ -271,7 +272,7 @@ impl FieldRenderer {
                             (slot::OUTPUT, Resource::Buffer(out.whole())),
                         ])?,
                         bytemuck::bytes_of(&push),
-                        [cam.width.div_ceil(SIDE), cam.height.div_ceil(SIDE), 1],
+                        [cam.width.div_ceil(SIDE), cam.height.div_ceil(ROWS), 1],
                     )?;
                 }
                 first += pass;

@@ -49,7 +49,7 @@ impl std::str::FromStr for Accumulation {
 }
 
 /// Invocations per workgroup (`local_size_x`).
-pub const WORKGROUP: u32 = 256;
+pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 
 /// The accumulation pipeline of one [`Accumulation`].
 pub struct GradAccumulate {

@@ -13,7 +13,7 @@ use crate::gpu::{
 use ash::vk;
 
 /// Invocations per workgroup of the gather (matches `local_size_x`).
-pub const WORKGROUP: u32 = 256;
+pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 
 /// Depth bits sorted: the whole float (positive, so its bits order like the values).
 pub const DEPTH_BITS: u32 = 32;

@@ -8,7 +8,9 @@ use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use ash::vk;
 
 /// Workgroup side (16 x 16 invocations).
+/// Pixels per workgroup along x and y (`glsl/pack.comp`: 128 invocations).
 const SIDE: u32 = 16;
+const ROWS: u32 = 8;
 
 /// The pack pipeline.
 pub struct Pack {
@@ -57,7 +59,7 @@ impl Pack {
                 (slot::PACKED, Resource::Buffer(packed)),
             ])?,
             bytemuck::bytes_of(&push),
-            [width.div_ceil(SIDE), height.div_ceil(SIDE), 1],
+            [width.div_ceil(SIDE), height.div_ceil(ROWS), 1],
         )
     }
 }

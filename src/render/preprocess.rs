@@ -7,7 +7,7 @@ use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuRes
 use ash::vk;
 
 /// Invocations per workgroup (matches `local_size_x`).
-pub const WORKGROUP: u32 = 256;
+pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 
 /// The preprocess pipeline.
 pub struct Preprocess {

@@ -10,7 +10,7 @@ use ash::vk;
 use super::grad_accumulate::GradPush;
 
 /// Invocations per workgroup (`local_size_x`).
-pub const WORKGROUP: u32 = 256;
+pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 
 /// Bytes of one Gaussian's gradients in the output (`GaussianGrad`: four vec4).
 pub const GAUSSIAN_GRAD_BYTES: u64 = 64;

@@ -8,7 +8,7 @@ use ash::vk;
 
 /// Invocations per workgroup (matches `local_size_x`; the keys stage computes the
 /// indirect group count with the same value).
-pub const WORKGROUP: u32 = 256;
+pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 
 /// The tile-ranges pipeline.
 pub struct Ranges {

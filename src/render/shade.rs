@@ -12,7 +12,9 @@ use crate::mlp::Mlp;
 use ash::vk;
 
 /// Workgroup side (16 x 16 invocations).
+/// Pixels per workgroup along x and y (`glsl/shade.comp`: 128 invocations).
 const SIDE: u32 = 16;
+const ROWS: u32 = 8;
 
 /// The push constants of `glsl/shade.comp`, and the first 112 bytes of
 /// `glsl/shade_bwd.comp`'s ([`super::shade_bwd`]).
@@ -244,7 +246,7 @@ impl Shade {
                 ),
             ])?,
             bytemuck::bytes_of(&push),
-            [cam.width.div_ceil(SIDE), cam.height.div_ceil(SIDE), 1],
+            [cam.width.div_ceil(SIDE), cam.height.div_ceil(ROWS), 1],
         )
     }
 }

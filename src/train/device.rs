@@ -28,7 +28,7 @@ use crate::render::shade::GpuShader;
 use crate::render::{sh_texel_stride, GpuFeatures, GpuRenderer, GpuScene};
 
 /// Invocations per workgroup.
-const WORKGROUP: u32 = 256;
+const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 /// Values a `loss_reduce` workgroup sums.
 const REDUCE_SPAN: u64 = 4096;
 
@@ -137,7 +137,7 @@ impl StepPipelines {
                 &[],
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
                 16,
-                256,
+                128,
             )?,
             mlp: ComputePipeline::from_embedded(
                 ctx,

@@ -255,7 +255,7 @@ impl GpuLoss {
                 "loss_reduce",
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
                 16,
-                256,
+                128,
             )?,
             work: None,
             io: None,

@@ -15,7 +15,7 @@ use vksplat::gpu::shader::{BindingKind, ComputePipeline};
 use vksplat::gpu::sync::{barrier, Access};
 
 /// The preprocess stage's counting (workgroup sums added to a lo/hi pair of u32 with
-/// carry) run on its own: 30,000 workgroups of 256 terms below 2^20 add up to about
+/// carry) run on its own: 60,000 workgroups of 128 terms below 2^20 add up to about
 /// 4e12, a thousand times 2^32, and the result must be exact.
 #[test]
 fn pair_counting_is_exact_far_beyond_2_pow_32() {
@@ -27,10 +27,11 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
         &[],
         &[BindingKind::StorageBuffer],
         0,
-        256,
+        vksplat::gpu::shader_set::LINEAR_WG,
     )
     .unwrap();
-    let groups = 30_000u32;
+    let wg = vksplat::gpu::shader_set::LINEAR_WG;
+    let groups = 7_680_000 / wg;
     for seed in [1u32, 0xDEAD_BEEF] {
         let buf = GpuBuffer::from_slice(ctx, "count64", &[0u32, 0, seed, 0]).unwrap();
         ctx.submit_and_wait("count64", |cmd| {
@@ -41,7 +42,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
         .unwrap();
         let out: Vec<u32> = buf.read(ctx, 2).unwrap();
         let got = (u64::from(out[1]) << 32) | u64::from(out[0]);
-        let want: u64 = (0..groups * 256)
+        let want: u64 = (0..groups * wg)
             .map(|i| {
                 let mut h = (i ^ seed).wrapping_mul(2_654_435_761);
                 h ^= h >> 15;

@@ -94,9 +94,12 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         &[],
         &[BindingKind::StorageBuffer],
         0,
-        256,
+        128,
     )
     .expect("count64_test");
+    built += 1;
+    // The subgroup self-check every context runs.
+    vksplat::gpu::subgroup::probe(ctx).expect("the subgroup probe");
     built += 1;
     // The backward pass: both blend layouts and bin sizes, every accumulation, both reads.
     for (bin, rows) in [(8, false), (16, false), (8, true)] {
@@ -164,7 +167,7 @@ fn a_stage_that_binds_other_kinds_than_its_shader_is_refused() {
         &[],
         &[BindingKind::StorageImage],
         0,
-        256,
+        128,
     )
     .err()
     .expect("a storage buffer bound as an image is refused");
@@ -387,4 +390,36 @@ fn regex_free_literal_binding(line: &str) -> bool {
             .map(|r| r.trim_start().starts_with(|c: char| c.is_ascii_digit()))
             .unwrap_or(false)
     })
+}
+
+/// Every prebuilt module's workgroup size and shared memory can be read from its SPIR-V
+/// (so `gpu::workgroup::check_limits` guards every pipeline), and the values are the
+/// ones the sources declare for a few known kernels.
+#[test]
+fn every_modules_workgroup_demand_is_readable() {
+    use vksplat::gpu::workgroup::demand;
+    for key in prebuilt_variants() {
+        let mut parts = key.split(' ');
+        let shader = parts.next().expect("a shader name");
+        let defines: Vec<(&str, String)> = parts
+            .map(|p| {
+                let (k, v) = p.split_once('=').expect("NAME=VALUE");
+                (k, v.to_string())
+            })
+            .collect();
+        let words = shader_spirv(shader, &defines).expect("prebuilt");
+        let d = demand(&words, &[]).unwrap_or_else(|e| panic!("{key}: {e}"));
+        assert!(d.invocations >= 1, "{key}: {d:?}");
+    }
+    let sort = shader_spirv(
+        "sort_scatter",
+        &[("SORT_KEY", "uint".into()), ("SORT_TEXEL_IO", "0".into())],
+    )
+    .expect("prebuilt");
+    // 64 invocations, 256 digits x 16 subgroups of counters.
+    let d = demand(&sort, &[(0, 64), (2, 256), (3, 16)]).expect("readable");
+    assert_eq!(d.invocations, 64);
+    assert!(d.shared_bytes >= 256 * 16 * 4, "{d:?}");
+    let probe = shader_spirv("subgroup_probe", &[]).expect("prebuilt");
+    assert_eq!(demand(&probe, &[]).expect("readable").invocations, 128);
 }

@@ -1,0 +1,267 @@
+//! What a compiled compute module asks of the device's workgroup limits, read from its
+//! SPIR-V with the specialization the host passes: invocations per workgroup and bytes of
+//! shared (workgroup) memory. Every pipeline is checked against the device's
+//! `maxComputeWorkGroupInvocations` and `maxComputeSharedMemorySize` before it is built
+//! ([`check_limits`]), so a kernel chosen for a larger device is an error naming the
+//! kernel and the limit, never a driver crash or a silently wrong frame. Under
+//! `VKSPLAT_EMULATE=spec-limits` those limits are the specification's minimums (128
+//! invocations, 16 KiB), and the tests run every stage there.
+
+use std::collections::HashMap;
+
+const OP_EXECUTION_MODE: u16 = 16;
+const OP_TYPE_BOOL: u16 = 20;
+const OP_TYPE_INT: u16 = 21;
+const OP_TYPE_FLOAT: u16 = 22;
+const OP_TYPE_VECTOR: u16 = 23;
+const OP_TYPE_MATRIX: u16 = 24;
+const OP_TYPE_ARRAY: u16 = 28;
+const OP_TYPE_STRUCT: u16 = 30;
+const OP_TYPE_POINTER: u16 = 32;
+const OP_CONSTANT: u16 = 43;
+const OP_CONSTANT_COMPOSITE: u16 = 44;
+const OP_SPEC_CONSTANT: u16 = 50;
+const OP_SPEC_CONSTANT_COMPOSITE: u16 = 51;
+const OP_SPEC_CONSTANT_OP: u16 = 52;
+const OP_VARIABLE: u16 = 59;
+const OP_DECORATE: u16 = 71;
+const OP_EXECUTION_MODE_ID: u16 = 331;
+
+const DECORATION_SPEC_ID: u32 = 1;
+const DECORATION_BUILT_IN: u32 = 11;
+const BUILT_IN_WORKGROUP_SIZE: u32 = 25;
+const MODE_LOCAL_SIZE: u32 = 17;
+const MODE_LOCAL_SIZE_ID: u32 = 38;
+const STORAGE_WORKGROUP: u32 = 4;
+
+/// A module's workgroup demands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WorkgroupDemand {
+    /// Invocations per workgroup (x * y * z).
+    pub invocations: u32,
+    /// Bytes of shared memory its variables take (vec3 counted as 16 bytes).
+    pub shared_bytes: u32,
+}
+
+#[derive(Clone, Debug)]
+enum Ty {
+    Scalar(u32),
+    Vector(u32, u32),
+    Matrix(u32, u32),
+    Array(u32, u32),
+    Struct(Vec<u32>),
+    Pointer(u32, u32),
+}
+
+/// Reads `words`' workgroup size and shared memory with `specialization` (`(id, value)`
+/// pairs) applied. `Err` names what cannot be evaluated.
+pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupDemand, String> {
+    if words.len() < 5 || words[0] != super::shader_set::SPIRV_MAGIC {
+        return Err("not a SPIR-V module".into());
+    }
+    let overrides: HashMap<u32, u32> = specialization.iter().copied().collect();
+    let mut types: HashMap<u32, Ty> = HashMap::new();
+    let mut values: HashMap<u32, u32> = HashMap::new();
+    let mut composites: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut spec_ids: HashMap<u32, u32> = HashMap::new();
+    let mut workgroup_size_builtin: Option<u32> = None;
+    let mut local_size: Option<[u32; 3]> = None;
+    let mut local_size_ids: Option<[u32; 3]> = None;
+    let mut shared: Vec<u32> = Vec::new();
+    let mut i = 5;
+    while i < words.len() {
+        let count = (words[i] >> 16) as usize;
+        let op = (words[i] & 0xffff) as u16;
+        if count == 0 || i + count > words.len() {
+            return Err(format!("instruction at word {i} runs past the end"));
+        }
+        let w = &words[i + 1..i + count];
+        let arg = |k: usize| w.get(k).copied().unwrap_or(0);
+        match op {
+            OP_EXECUTION_MODE if arg(1) == MODE_LOCAL_SIZE => {
+                local_size = Some([arg(2), arg(3), arg(4)]);
+            }
+            OP_EXECUTION_MODE_ID if arg(1) == MODE_LOCAL_SIZE_ID => {
+                local_size_ids = Some([arg(2), arg(3), arg(4)]);
+            }
+            OP_DECORATE if arg(1) == DECORATION_SPEC_ID => {
+                spec_ids.insert(arg(0), arg(2));
+            }
+            OP_DECORATE if arg(1) == DECORATION_BUILT_IN && arg(2) == BUILT_IN_WORKGROUP_SIZE => {
+                workgroup_size_builtin = Some(arg(0));
+            }
+            OP_TYPE_BOOL => {
+                types.insert(arg(0), Ty::Scalar(4));
+            }
+            OP_TYPE_INT | OP_TYPE_FLOAT => {
+                types.insert(arg(0), Ty::Scalar(arg(1) / 8));
+            }
+            OP_TYPE_VECTOR => {
+                types.insert(arg(0), Ty::Vector(arg(1), arg(2)));
+            }
+            OP_TYPE_MATRIX => {
+                types.insert(arg(0), Ty::Matrix(arg(1), arg(2)));
+            }
+            OP_TYPE_ARRAY => {
+                types.insert(arg(0), Ty::Array(arg(1), arg(2)));
+            }
+            OP_TYPE_STRUCT => {
+                types.insert(arg(0), Ty::Struct(w[1..].to_vec()));
+            }
+            OP_TYPE_POINTER => {
+                types.insert(arg(0), Ty::Pointer(arg(1), arg(2)));
+            }
+            OP_CONSTANT => {
+                values.insert(arg(1), arg(2));
+            }
+            OP_SPEC_CONSTANT => {
+                let id = arg(1);
+                let value = spec_ids
+                    .get(&id)
+                    .and_then(|s| overrides.get(s))
+                    .copied()
+                    .unwrap_or(arg(2));
+                values.insert(id, value);
+            }
+            OP_CONSTANT_COMPOSITE | OP_SPEC_CONSTANT_COMPOSITE => {
+                composites.insert(arg(1), w[2..].to_vec());
+            }
+            OP_SPEC_CONSTANT_OP => {
+                let operand = |k: usize| values.get(&arg(k)).copied();
+                let (a, b) = (operand(3), operand(4));
+                let both = |f: fn(u32, u32) -> Option<u32>| a.zip(b).and_then(|(a, b)| f(a, b));
+                let value =
+                    match arg(2) {
+                        128 => both(|a, b| Some(a.wrapping_add(b))),
+                        130 => both(|a, b| Some(a.wrapping_sub(b))),
+                        132 => both(|a, b| Some(a.wrapping_mul(b))),
+                        134 => both(|a, b| a.checked_div(b)),
+                        137 => both(|a, b| a.checked_rem(b)),
+                        194 => both(|a, b| Some(a.checked_shr(b).unwrap_or(0))),
+                        196 => both(|a, b| Some(a.checked_shl(b).unwrap_or(0))),
+                        197 => both(|a, b| Some(a | b)),
+                        199 => both(|a, b| Some(a & b)),
+                        // Select(condition, a, b) and the comparisons glslang folds into it.
+                        169 => values.get(&arg(3)).and_then(|&c| {
+                            if c != 0 {
+                                operand(4)
+                            } else {
+                                operand(5)
+                            }
+                        }),
+                        170 => both(|a, b| Some(u32::from(a == b))),
+                        171 => both(|a, b| Some(u32::from(a != b))),
+                        172 => both(|a, b| Some(u32::from(a > b))),
+                        174 => both(|a, b| Some(u32::from(a >= b))),
+                        176 => both(|a, b| Some(u32::from(a < b))),
+                        178 => both(|a, b| Some(u32::from(a <= b))),
+                        _ => None,
+                    };
+                if let Some(v) = value {
+                    values.insert(arg(1), v);
+                }
+            }
+            OP_VARIABLE if arg(2) == STORAGE_WORKGROUP => shared.push(arg(0)),
+            _ => {}
+        }
+        i += count;
+    }
+    let value = |id: u32| {
+        values
+            .get(&id)
+            .copied()
+            .ok_or_else(|| format!("constant %{id} cannot be evaluated"))
+    };
+    let size3 = if let Some(builtin) = workgroup_size_builtin {
+        let parts = composites
+            .get(&builtin)
+            .ok_or("the WorkgroupSize built-in is not a constant composite")?;
+        [value(parts[0])?, value(parts[1])?, value(parts[2])?]
+    } else if let Some(ids) = local_size_ids {
+        [value(ids[0])?, value(ids[1])?, value(ids[2])?]
+    } else {
+        local_size.ok_or("no LocalSize execution mode")?
+    };
+    let invocations = size3
+        .iter()
+        .try_fold(1u32, |acc, &n| acc.checked_mul(n))
+        .ok_or("the workgroup size overflows")?;
+    fn size(
+        t: u32,
+        types: &HashMap<u32, Ty>,
+        values: &HashMap<u32, u32>,
+        depth: u32,
+    ) -> Option<u64> {
+        if depth > 16 {
+            return None;
+        }
+        Some(match types.get(&t)? {
+            Ty::Scalar(bytes) => u64::from(*bytes),
+            // A vec3 takes a vec4's slot in the layouts drivers use for shared memory.
+            Ty::Vector(c, n) => {
+                size(*c, types, values, depth + 1)? * u64::from((*n).max(2).next_power_of_two())
+            }
+            Ty::Matrix(c, n) => size(*c, types, values, depth + 1)? * u64::from(*n),
+            Ty::Array(e, len) => size(*e, types, values, depth + 1)? * u64::from(*values.get(len)?),
+            Ty::Struct(members) => {
+                let mut total = 0;
+                for &m in members {
+                    total += size(m, types, values, depth + 1)?;
+                }
+                total
+            }
+            Ty::Pointer(..) => return None,
+        })
+    }
+    let mut shared_bytes = 0u64;
+    for variable_type in shared {
+        let Some(Ty::Pointer(_, pointee)) = types.get(&variable_type) else {
+            return Err(format!(
+                "shared variable of type %{variable_type} is no pointer"
+            ));
+        };
+        shared_bytes += size(*pointee, &types, &values, 0)
+            .ok_or_else(|| format!("the size of shared type %{pointee} cannot be evaluated"))?;
+    }
+    Ok(WorkgroupDemand {
+        invocations,
+        shared_bytes: u32::try_from(shared_bytes).unwrap_or(u32::MAX),
+    })
+}
+
+/// Refuses a module whose workgroup needs more invocations or shared memory than the
+/// device (or the emulated limits) allow: one sentence naming the kernel and the limit.
+pub fn check_limits(
+    name: &str,
+    words: &[u32],
+    specialization: &[(u32, u32)],
+    info: &super::DeviceInfo,
+) -> Result<WorkgroupDemand, super::GpuError> {
+    let d = demand(words, specialization)
+        .map_err(|e| super::GpuError::Internal(format!("shader {name}: {e}")))?;
+    let over = |limit: &'static str, needed: u32, max: u32| super::GpuError::DeviceLimit {
+        limit,
+        needed: u64::from(needed),
+        max: u64::from(max),
+        message: format!(
+            "the {name} kernel needs {needed} of {limit} and {} allows {max} (a bug: every \
+             stage must choose a variant within the device's limits; please report it)",
+            info.name
+        ),
+    };
+    if d.invocations > info.max_workgroup_invocations {
+        return Err(over(
+            "maxComputeWorkGroupInvocations",
+            d.invocations,
+            info.max_workgroup_invocations,
+        ));
+    }
+    if d.shared_bytes > info.max_shared_memory {
+        return Err(over(
+            "maxComputeSharedMemorySize",
+            d.shared_bytes,
+            info.max_shared_memory,
+        ));
+    }
+    Ok(d)
+}
