@@ -1,5 +1,8 @@
-//! RAII storage buffers backed by gpu-allocator, plus upload/read-back helpers.
+//! RAII storage buffers backed by gpu-allocator, plus upload/read-back helpers. The
+//! memory each buffer gets, and the flushes and invalidates its mapping needs, come from
+//! [`super::memory`].
 
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 
 use ash::vk;
@@ -7,13 +10,16 @@ use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
 use super::context::Shared;
+use super::memory::{self, MemoryPlan};
 use super::sync::{barrier, Access};
 use super::{GpuContext, GpuError, GpuResult, VkContext};
 
 /// Where a buffer's memory lives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MemoryKind {
-    /// Device-local; used by shaders.
+    /// Device-local; used by shaders. Never mapped where device memory is not
+    /// host-visible: the host reaches it through staging ([`GpuBuffer::upload`],
+    /// [`GpuBuffer::read`]).
     Device,
     /// Host-visible, written by the CPU and read by the GPU.
     Upload,
@@ -28,7 +34,11 @@ pub struct GpuBuffer {
     allocation: Option<Allocation>,
     size: u64,
     kind: MemoryKind,
+    plan: MemoryPlan,
     name: String,
+    /// Flushes and invalidates issued (see [`GpuBuffer::host_syncs`]).
+    flushes: AtomicU32,
+    invalidates: AtomicU32,
 }
 
 /// A byte range of a buffer, as bound to a shader.
@@ -68,11 +78,17 @@ impl GpuBuffer {
         let buffer = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
         // SAFETY: the buffer was just created from this device.
         let requirements = unsafe { device.get_buffer_memory_requirements(buffer) };
-        let location = match kind {
-            MemoryKind::Device => MemoryLocation::GpuOnly,
-            MemoryKind::Upload => MemoryLocation::CpuToGpu,
-            MemoryKind::Readback => MemoryLocation::GpuToCpu,
+        let plan = match memory::plan(ctx.info(), kind, requirements.memory_type_bits, name) {
+            Ok(p) => p,
+            Err(e) => {
+                // SAFETY: unused buffer with no memory bound.
+                unsafe { device.destroy_buffer(buffer, None) };
+                return Err(e);
+            }
         };
+        // The chosen type only (gpu-allocator's own choice insists on coherent memory
+        // for host access), in whole atoms where the host syncs by hand.
+        let requirements = plan.requirements(requirements);
         let allocation = GpuContext::check_budget(&ctx.shared, name, requirements.size)
             .and_then(|()| {
                 ctx.shared
@@ -85,7 +101,7 @@ impl GpuBuffer {
                     .allocate(&AllocationCreateDesc {
                         name,
                         requirements,
-                        location,
+                        location: MemoryLocation::Unknown,
                         linear: true,
                         allocation_scheme: AllocationScheme::GpuAllocatorManaged,
                     })
@@ -105,7 +121,10 @@ impl GpuBuffer {
             allocation: Some(allocation),
             size,
             kind,
+            plan,
             name: name.to_string(),
+            flushes: AtomicU32::new(0),
+            invalidates: AtomicU32::new(0),
         };
         let alloc = this
             .allocation
@@ -196,7 +215,7 @@ impl GpuBuffer {
             barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
             Ok(())
         })?;
-        let mapped = staging.mapped()?;
+        let mapped = staging.mapped_range(0, bytes)?;
         let mut out = vec![T::zeroed(); count];
         bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&mapped[..bytes as usize]);
         Ok(out)
@@ -207,33 +226,118 @@ impl GpuBuffer {
         self.read(ctx, (self.size / std::mem::size_of::<T>() as u64) as usize)
     }
 
-    /// Writes bytes into a host-visible buffer's mapping.
+    /// Writes bytes at the start of a host-visible buffer's mapping, flushed when the
+    /// memory is not coherent. The caller submits the GPU work that reads them afterwards.
     pub fn write_mapped(&mut self, bytes: &[u8]) -> GpuResult<()> {
+        self.check_mappable()?;
         let name = self.name.clone();
         let slice = self
             .allocation
             .as_mut()
             .and_then(|a| a.mapped_slice_mut())
             .ok_or_else(|| GpuError::InvalidArgument(format!("buffer '{name}' is not mapped")))?;
-        if bytes.len() > slice.len() {
+        if bytes.len() as u64 > self.size {
             return Err(GpuError::InvalidArgument(format!(
                 "writing {} bytes into mapped buffer '{name}' of {}",
                 bytes.len(),
-                slice.len()
+                self.size
             )));
         }
         slice[..bytes.len()].copy_from_slice(bytes);
-        Ok(())
+        self.sync_host(0, bytes.len() as u64, HostSync::Flush)
     }
 
-    /// The mapping of a host-visible buffer.
+    /// The whole mapping of a host-visible buffer, invalidated first when the memory is
+    /// not coherent: call it after the GPU writes it shows were waited for (a fence), as
+    /// each call reads them again.
     pub fn mapped(&self) -> GpuResult<&[u8]> {
-        self.allocation
+        self.mapped_range(0, self.size)
+    }
+
+    /// Bytes `offset..offset + len` of a host-visible buffer's mapping, invalidated first
+    /// (rounded out to whole `nonCoherentAtomSize`s) when the memory is not coherent; as
+    /// [`Self::mapped`], after the GPU's writes were waited for.
+    pub fn mapped_range(&self, offset: u64, len: u64) -> GpuResult<&[u8]> {
+        self.check_mappable()?;
+        let end = offset
+            .checked_add(len)
+            .filter(|&e| e <= self.size)
+            .ok_or_else(|| {
+                GpuError::InvalidArgument(format!(
+                    "reading bytes {offset}..+{len} of mapped buffer '{}' of {}",
+                    self.name, self.size
+                ))
+            })?;
+        self.sync_host(offset, len, HostSync::Invalidate)?;
+        let slice = self
+            .allocation
             .as_ref()
             .and_then(|a| a.mapped_slice())
             .ok_or_else(|| {
                 GpuError::InvalidArgument(format!("buffer '{}' is not mapped", self.name))
-            })
+            })?;
+        Ok(&slice[offset as usize..end as usize])
+    }
+
+    /// The one check before any mapping is touched: a device buffer on a device whose
+    /// device-local memory is not host-visible (real or emulated) is never mapped.
+    fn check_mappable(&self) -> GpuResult<()> {
+        if self.plan.mappable {
+            return Ok(());
+        }
+        Err(GpuError::Internal(format!(
+            "buffer '{}' ({:?}) is not host-visible on this device; the host reaches it through a staging buffer (GpuBuffer::upload / read)",
+            self.name, self.kind
+        )))
+    }
+
+    /// Flushes (after host writes) or invalidates (before host reads) bytes
+    /// `offset..offset + len` of the mapping when the memory needs it, rounded out to
+    /// whole atoms of the memory object ([`memory::atom_range`]).
+    fn sync_host(&self, offset: u64, len: u64, what: HostSync) -> GpuResult<()> {
+        if !self.plan.explicit_sync || len == 0 {
+            return Ok(());
+        }
+        let alloc = self
+            .allocation
+            .as_ref()
+            .ok_or_else(|| GpuError::Internal("allocation missing".into()))?;
+        let (start, size) =
+            memory::atom_range(alloc.offset(), alloc.size(), offset, len, self.plan.atom);
+        // SAFETY: the handle is only named in the range below, while the allocation lives.
+        let memory = unsafe { alloc.memory() };
+        let range = [vk::MappedMemoryRange::default()
+            .memory(memory)
+            .offset(start)
+            .size(size)];
+        let device = &self.shared.device;
+        match what {
+            HostSync::Flush => {
+                self.flushes.fetch_add(1, Ordering::Relaxed);
+                // SAFETY: the memory is mapped (gpu-allocator maps host-visible blocks
+                // whole) and the range lies inside this buffer's allocation, in atoms.
+                unsafe { device.flush_mapped_memory_ranges(&range) }.vk("vkFlushMappedMemoryRanges")
+            }
+            HostSync::Invalidate => {
+                self.invalidates.fetch_add(1, Ordering::Relaxed);
+                // SAFETY: as for the flush.
+                unsafe { device.invalidate_mapped_memory_ranges(&range) }
+                    .vk("vkInvalidateMappedMemoryRanges")
+            }
+        }
+    }
+
+    /// The memory this buffer got and what its mapping needs ([`super::memory`]).
+    pub fn memory_plan(&self) -> MemoryPlan {
+        self.plan
+    }
+
+    /// Flushes and invalidates issued on this buffer's mapping so far.
+    pub fn host_syncs(&self) -> (u32, u32) {
+        (
+            self.flushes.load(Ordering::Relaxed),
+            self.invalidates.load(Ordering::Relaxed),
+        )
     }
 
     /// Records vkCmdFillBuffer of `value` over `size` bytes from `offset` (multiples of 4,
@@ -305,6 +409,15 @@ impl Drop for GpuBuffer {
             }
         }
     }
+}
+
+/// What the host does to a mapping that is not coherent.
+#[derive(Clone, Copy)]
+enum HostSync {
+    /// After host writes, before the GPU reads.
+    Flush,
+    /// After the GPU's writes were waited for, before the host reads.
+    Invalidate,
 }
 
 /// A typed view of a buffer range for `texelFetch` (uniform texel buffer); destroyed on drop.

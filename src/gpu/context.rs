@@ -107,6 +107,11 @@ pub struct DeviceInfo {
     pub timestamp_valid_bits: u32,
     /// Size of the largest device-local memory heap, in bytes.
     pub device_local_bytes: u64,
+    /// nonCoherentAtomSize: the unit that flushes and invalidates of host memory that is
+    /// not coherent are rounded out to ([`super::memory`]).
+    pub non_coherent_atom_size: u64,
+    /// The property flags of each memory type, by index ([`super::memory`] chooses).
+    pub memory_types: Vec<vk::MemoryPropertyFlags>,
     /// Device memory this context allows itself (see [`ContextOptions::memory_limit`]).
     pub memory_budget: u64,
     /// Where [`Self::memory_budget`] comes from.
@@ -623,6 +628,11 @@ impl GpuContext {
             timestamp_period_ns: limits.timestamp_period,
             timestamp_valid_bits,
             device_local_bytes,
+            non_coherent_atom_size: limits.non_coherent_atom_size.max(1),
+            memory_types: mem.memory_types[..mem.memory_type_count as usize]
+                .iter()
+                .map(|t| t.property_flags)
+                .collect(),
             memory_budget,
             budget_source,
             float_atomic_add: false,

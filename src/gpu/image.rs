@@ -8,7 +8,7 @@ use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
 use super::context::Shared;
-use super::{GpuBuffer, GpuContext, GpuError, GpuResult, VkContext};
+use super::{memory, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind, VkContext};
 
 /// A device-local 2D image with a view, usable as a storage image and copy source.
 pub struct GpuImage {
@@ -70,6 +70,14 @@ impl GpuImage {
         };
         // SAFETY: the image was just created from this device.
         let requirements = unsafe { device.get_image_memory_requirements(image) };
+        // Device memory as for device buffers (never mapped).
+        let plan = memory::plan(
+            ctx.info(),
+            MemoryKind::Device,
+            requirements.memory_type_bits,
+            name,
+        )?;
+        let requirements = plan.requirements(requirements);
         let bytes = requirements.size;
         GpuContext::check_budget(&ctx.shared, name, bytes)?;
         let allocation = ctx
@@ -80,7 +88,7 @@ impl GpuImage {
             .allocate(&AllocationCreateDesc {
                 name,
                 requirements,
-                location: MemoryLocation::GpuOnly,
+                location: MemoryLocation::Unknown,
                 linear: false,
                 allocation_scheme: AllocationScheme::GpuAllocatorManaged,
             })

@@ -6,6 +6,8 @@ pub mod context;
 pub mod devices;
 pub mod emulate;
 pub mod image;
+pub mod limits;
+pub mod memory;
 pub mod pipeline_cache;
 pub mod reflect;
 pub mod scan;

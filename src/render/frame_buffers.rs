@@ -27,20 +27,15 @@ pub(super) struct FeaturePlanes {
     pub(super) groups: u64,
 }
 
-/// Refuses a buffer that one storage-buffer binding of the device cannot cover.
+/// Refuses a buffer that one storage-buffer binding of the device cannot cover
+/// ([`crate::gpu::limits::check_binding`]).
 pub(super) fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
-    let max = u64::from(ctx.info().max_storage_buffer_range);
-    if bytes > max {
-        return Err(GpuError::DeviceLimit {
-            limit: "maxStorageBufferRange",
-            needed: bytes,
-            max,
-            message: format!(
-                "{what} needs {bytes} bytes in one storage buffer, but this device binds at most {max} bytes (maxStorageBufferRange); use fewer Gaussians or a device with a larger limit"
-            ),
-        });
-    }
-    Ok(())
+    crate::gpu::limits::check_binding(
+        ctx.info(),
+        what,
+        bytes,
+        "use fewer Gaussians or a device with a larger limit",
+    )
 }
 
 /// Texel views the sorts, preprocess, keys and ranges read and write on CPU devices

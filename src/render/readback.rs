@@ -71,10 +71,10 @@ impl GpuRenderer {
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
         let (_, _, off) = f.readback_offsets();
-        let bytes = f.readback.mapped()?;
-        Ok(bytemuck::pod_read_unaligned(
-            &bytes[off as usize..off as usize + std::mem::size_of::<Counters>()],
-        ))
+        let bytes = f
+            .readback
+            .mapped_range(off, std::mem::size_of::<Counters>() as u64)?;
+        Ok(bytemuck::pod_read_unaligned(bytes))
     }
 
     pub(super) fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
@@ -105,13 +105,12 @@ impl GpuRenderer {
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
-        let bytes = f.readback.mapped()?;
         let len = cam.width as usize * cam.height as usize * 4;
         let (color_off, _, _) = f.readback_offsets();
         Ok(Rgba8Frame {
             width: cam.width,
             height: cam.height,
-            rgba: bytes[color_off as usize..color_off as usize + len].to_vec(),
+            rgba: f.readback.mapped_range(color_off, len as u64)?.to_vec(),
         })
     }
 

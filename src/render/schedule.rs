@@ -3,7 +3,7 @@
 
 use super::types::{Counters, Splat};
 use crate::camera::Camera;
-use crate::gpu::{GpuBuffer, GpuError, GpuResult, MemoryKind};
+use crate::gpu::{limits, GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::model::RenderOptions;
 
 use super::{keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};
@@ -75,8 +75,9 @@ impl GpuRenderer {
     /// Gaussians per preprocess window: as many as one storage binding holds of the
     /// largest per-Gaussian record (48 bytes), a multiple of the workgroup.
     pub(super) fn preprocess_window(&self) -> u32 {
-        let range = u64::from(self.ctx.info().max_storage_buffer_range);
-        let per_binding = (range / std::mem::size_of::<Splat>() as u64).min(u64::from(u32::MAX));
+        let per_binding =
+            limits::elements_per_binding(self.ctx.info(), std::mem::size_of::<Splat>() as u64)
+                .min(u64::from(u32::MAX));
         let device = (per_binding as u32 / preprocess::WORKGROUP * preprocess::WORKGROUP)
             .max(preprocess::WORKGROUP);
         match self.split.window {
@@ -92,8 +93,7 @@ impl GpuRenderer {
 
     pub(super) fn max_capacity(&self) -> u32 {
         // Keys and values are 4 bytes; one storage-buffer binding must cover them all.
-        let range = u64::from(self.ctx.info().max_storage_buffer_range);
-        (range / 4).min(u64::from(u32::MAX)) as u32
+        limits::elements_per_binding(self.ctx.info(), 4).min(u64::from(u32::MAX)) as u32
     }
 
     /// Pairs one piece of a frame may hold: one key buffer's worth, or fewer under the
@@ -328,8 +328,8 @@ impl GpuRenderer {
                 .chunk_offsets
                 .as_ref()
                 .ok_or_else(|| GpuError::Internal("chunk offsets missing".into()))?
-                .mapped()?;
-            let offsets: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..visible * 4]);
+                .mapped_range(0, visible as u64 * 4)?;
+            let offsets: Vec<u32> = bytemuck::pod_collect_to_vec(bytes);
             (
                 keys::plan_chunks(&offsets, pairs, u64::from(limit)),
                 f.capacity,

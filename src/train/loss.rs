@@ -105,8 +105,6 @@ pub fn loss_reference(
 const REDUCE_SPAN: u64 = 4096;
 /// Invocations per workgroup of the per-pixel passes.
 const PIXEL_GROUP: u64 = 64;
-/// Workgroups along x of a per-pixel dispatch (the rest along y).
-const GROUPS_X: u64 = 32_768;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -152,27 +150,17 @@ pub struct GpuLoss {
     last: Option<(ash::vk::Buffer, u64, f32)>,
 }
 
-fn pixel_groups(pixels: u64) -> [u32; 3] {
-    let groups = pixels.div_ceil(PIXEL_GROUP).max(1);
-    [
-        groups.min(GROUPS_X) as u32,
-        groups.div_ceil(GROUPS_X) as u32,
-        1,
-    ]
+fn pixel_groups(ctx: &GpuContext, pixels: u64) -> GpuResult<[u32; 3]> {
+    crate::gpu::limits::dispatch_groups(ctx.info(), "the loss", pixels.div_ceil(PIXEL_GROUP).max(1))
 }
 
 fn buffer(ctx: &GpuContext, name: &str, bytes: u64) -> GpuResult<GpuBuffer> {
-    let max = u64::from(ctx.info().max_storage_buffer_range);
-    if bytes > max {
-        return Err(GpuError::DeviceLimit {
-            limit: "maxStorageBufferRange",
-            needed: bytes,
-            max,
-            message: format!(
-                "the {name} need {bytes} bytes in one storage buffer, but this device binds at most {max} (maxStorageBufferRange); use smaller images"
-            ),
-        });
-    }
+    crate::gpu::limits::check_binding(
+        ctx.info(),
+        &format!("the {name}"),
+        bytes,
+        "use smaller images",
+    )?;
     GpuBuffer::new(ctx, name, bytes.max(16), MemoryKind::Device)
 }
 
@@ -340,7 +328,7 @@ impl GpuLoss {
         }
         self.ensure_work(ctx, pixels)?;
         let (_, [planes, filtered, sums, part_a, part_b]) = self.work.as_ref().expect("made above");
-        let groups = pixel_groups(pixels);
+        let groups = pixel_groups(ctx, pixels)?;
         let size = [width, height, 0, 0];
         let taps64 = crate::metrics::ssim_taps();
         let mut taps = [[0f32; 4]; 3];
@@ -433,6 +421,12 @@ impl GpuLoss {
         let mut dst = part_a;
         loop {
             let out = count.div_ceil(REDUCE_SPAN);
+            // One row of workgroups (the shader reads gl_WorkGroupID.x only).
+            crate::gpu::limits::check_dispatch(
+                ctx.info(),
+                "the loss's reduction",
+                [out as u32, 1, 1],
+            )?;
             self.reduce.dispatch(
                 ctx,
                 cmd,
