@@ -16,6 +16,7 @@ mod cli;
 mod cli_defects;
 mod compact;
 mod compare;
+mod discrete;
 mod doctor;
 mod features;
 mod field_renders;
