@@ -16,16 +16,19 @@ pub mod spec_minimum {
     pub const WORKGROUP_INVOCATIONS: u32 = 128;
     /// maxComputeWorkGroupCount[0..3].
     pub const WORKGROUP_COUNT: u32 = 65535;
-    /// maxStorageBufferRange (2^27).
+    /// maxStorageBufferRange (2^27; not clamped by `spec-limits`).
     pub const STORAGE_BUFFER_RANGE: u32 = 1 << 27;
-    /// maxTexelBufferElements.
+    /// maxTexelBufferElements (not clamped by `spec-limits`).
     pub const TEXEL_BUFFER_ELEMENTS: u32 = 65536;
 }
 
 /// Device traits to pretend (all off by default).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Emulation {
-    /// Clamp the compute limits to the specification's minimums ([`spec_minimum`]).
+    /// Clamp the compute limits to the specification's minimums ([`spec_minimum`]): shared
+    /// memory, invocations and workgroup counts. The buffer limits have their own traits
+    /// (`max-storage-buffer-range`): the spec's 128 MiB and 65,536 texels are far below
+    /// every GPU's, and a scene past a device's limit is refused with a sentence saying so.
     pub spec_limits: bool,
     /// Device-local memory is not host-visible: every transfer goes through staging.
     pub device_local_not_host_visible: bool,
@@ -137,10 +140,6 @@ impl Emulation {
             for c in &mut info.max_workgroup_count {
                 *c = (*c).min(m::WORKGROUP_COUNT);
             }
-            info.max_storage_buffer_range =
-                info.max_storage_buffer_range.min(m::STORAGE_BUFFER_RANGE);
-            info.max_texel_buffer_elements =
-                info.max_texel_buffer_elements.min(m::TEXEL_BUFFER_ELEMENTS);
         }
         if let Some(bits) = self.timestamp_bits {
             if info.timestamp_valid_bits != 0 {
@@ -176,7 +175,9 @@ mod tests {
                 .max_storage_buffer_range,
             Some(64 << 20)
         );
-        assert!(Emulation::parse("warp-drive").unwrap_err().contains("warp-drive"));
+        assert!(Emulation::parse("warp-drive")
+            .unwrap_err()
+            .contains("warp-drive"));
         assert!(Emulation::parse("timestamp-bits=0").is_err());
         assert!(Emulation::parse("timestamp-bits").is_err());
         assert!(!Emulation::parse("").expect("empty").any());

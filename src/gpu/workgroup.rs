@@ -50,7 +50,8 @@ enum Ty {
     Matrix(u32, u32),
     Array(u32, u32),
     Struct(Vec<u32>),
-    Pointer(u32, u32),
+    /// Pointee type.
+    Pointer(u32),
 }
 
 /// Reads `words`' workgroup size and shared memory with `specialization` (`(id, value)`
@@ -109,7 +110,7 @@ pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupD
                 types.insert(arg(0), Ty::Struct(w[1..].to_vec()));
             }
             OP_TYPE_POINTER => {
-                types.insert(arg(0), Ty::Pointer(arg(1), arg(2)));
+                types.insert(arg(0), Ty::Pointer(arg(2)));
             }
             OP_CONSTANT => {
                 values.insert(arg(1), arg(2));
@@ -210,12 +211,12 @@ pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupD
                 }
                 total
             }
-            Ty::Pointer(..) => return None,
+            Ty::Pointer(_) => return None,
         })
     }
     let mut shared_bytes = 0u64;
     for variable_type in shared {
-        let Some(Ty::Pointer(_, pointee)) = types.get(&variable_type) else {
+        let Some(Ty::Pointer(pointee)) = types.get(&variable_type) else {
             return Err(format!(
                 "shared variable of type %{variable_type} is no pointer"
             ));

@@ -45,13 +45,24 @@ impl BlendKernel {
             return k;
         }
         let info = ctx.info();
-        let tile = crate::rules::TILE_SIZE * crate::rules::TILE_SIZE;
-        let shared_fits = info.max_workgroup_invocations >= tile
-            && info.max_shared_memory >= SHARED_KERNEL_BYTES_PER_PIXEL * tile + 4;
-        if info.device_type == vk::PhysicalDeviceType::CPU || !shared_fits {
+        if info.device_type == vk::PhysicalDeviceType::CPU || !BlendKernel::Shared.fits(info) {
             BlendKernel::Texel { strip: 2 }
         } else {
             BlendKernel::Shared
+        }
+    }
+
+    /// Whether the device's workgroups can hold the kernel: a 16x16 tile for the shared
+    /// kernel (256 invocations, 12 KiB of shared memory), 16 / strip x 16 invocations for
+    /// a texel kernel.
+    pub fn fits(self, info: &crate::gpu::DeviceInfo) -> bool {
+        let tile = crate::rules::TILE_SIZE * crate::rules::TILE_SIZE;
+        match self {
+            BlendKernel::Shared => {
+                info.max_workgroup_invocations >= tile
+                    && info.max_shared_memory >= SHARED_KERNEL_BYTES_PER_PIXEL * tile + 4
+            }
+            BlendKernel::Texel { strip } => info.max_workgroup_invocations >= tile / strip,
         }
     }
 

@@ -16,18 +16,50 @@ pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
         .unwrap_or_else(|e| e.into_inner())
 }
 
-/// A fresh renderer with validation on and, if given, a fixed blend kernel.
+/// A fresh renderer with validation on and, if given, a fixed blend kernel: one the
+/// device's workgroups cannot hold (the shared kernel under `VKSPLAT_EMULATE=spec-limits`)
+/// gives way to the device's own, said on stderr, so such a run tests what a device with
+/// those limits runs.
 pub fn new_renderer(kernel: Option<BlendKernel>) -> GpuRenderer {
     let ctx = GpuContext::new(&ContextOptions {
         validation: true,
         ..Default::default()
     })
     .expect("a Vulkan device (lavapipe) with the validation layer");
+    let kernel = kernel.filter(|k| {
+        let fits = k.fits(ctx.info());
+        if !fits {
+            eprintln!(
+                "{k} does not fit {}'s workgroup limits: its own kernel runs",
+                ctx.info().name
+            );
+        }
+        fits
+    });
     match kernel {
         Some(k) => GpuRenderer::with_blend_kernel(ctx, k),
         None => GpuRenderer::new(ctx),
     }
     .expect("pipelines build")
+}
+
+/// A fresh renderer with `kernel`, or `None` (said on stderr) when the device's workgroup
+/// limits cannot hold it: under `VKSPLAT_EMULATE=spec-limits` (128 invocations) the
+/// shared kernel and the 1-pixel texel kernel are refused, as on such a device.
+pub fn renderer_if_it_fits(kernel: BlendKernel) -> Option<GpuRenderer> {
+    let ctx = GpuContext::new(&ContextOptions {
+        validation: true,
+        ..Default::default()
+    })
+    .expect("a Vulkan device (lavapipe) with the validation layer");
+    if !kernel.fits(ctx.info()) {
+        eprintln!(
+            "{kernel} does not fit {}'s workgroup limits: not run",
+            ctx.info().name
+        );
+        return None;
+    }
+    Some(GpuRenderer::with_blend_kernel(ctx, kernel).expect("pipelines build"))
 }
 
 /// Fails on any validation-layer message.
