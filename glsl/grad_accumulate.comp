@@ -20,7 +20,9 @@
 // Fields per pair: GRAD_FIELDS (12: 2D mean, conic, opacity, colour, depth, |2D mean|)
 // plus 4 per group of feature channels, at most MAX_GRAD_FIELDS; `pc.vecs` vec4s.
 
-layout(local_size_x = LINEAR_WG) in;
+// 256 invocations where the device allows them (faster on lavapipe), else 128: the host's
+// choice (gpu::workgroup::wide_linear_workgroup), as a specialization constant.
+layout(local_size_x = LINEAR_WG, local_size_x_id = WIDE_WG_SPEC) in;
 
 layout(std430, binding = GRAD_ACCUMULATE_VALUES) readonly buffer ValueBuf { uint values[]; };
 layout(std430, binding = GRAD_ACCUMULATE_PAIR_GRADS) readonly buffer PairGradBuf { vec4 pair_grads[]; };
@@ -43,7 +45,7 @@ shared vec2 s_scale[MAX_GRAD_FIELDS];
 #endif
 
 void main() {
-    uint k = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
+    uint k = linear_group_id() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
 #if !FLOAT_ATOMICS
     if (gl_LocalInvocationIndex < 4u * pc.vecs) {
         int sh = grad_shift(maxima[gl_LocalInvocationIndex], pc.bits);

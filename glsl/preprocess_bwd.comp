@@ -15,7 +15,9 @@
 #define FLOAT_ATOMICS 0
 #endif
 
-layout(local_size_x = LINEAR_WG) in;
+// 256 invocations where the device allows them (faster on lavapipe), else 128: the host's
+// choice (gpu::workgroup::wide_linear_workgroup), as a specialization constant.
+layout(local_size_x = LINEAR_WG, local_size_x_id = WIDE_WG_SPEC) in;
 
 layout(std430, binding = PREPROCESS_BWD_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 layout(std430, binding = PREPROCESS_BWD_GAUSSIANS) readonly buffer GaussianBuf { Gaussian gaussians[]; };
@@ -87,7 +89,7 @@ void sh_basis(uint degree, vec3 d, out float b[16], out vec3 gb[16]) {
 }
 
 void main() {
-    uint i = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
+    uint i = linear_group_id() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     if (i >= pc.count) return;
     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
     uint base = i * stride;

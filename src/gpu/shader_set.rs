@@ -11,6 +11,12 @@
 /// ranges, the backward's accumulation and preprocess, the training step): the Vulkan
 /// specification's guaranteed `maxComputeWorkGroupInvocations`, so they run on any device.
 pub const LINEAR_WG: u32 = 128;
+/// Invocations of the backward pass's per-pair and per-Gaussian kernels where the device
+/// allows them ([`crate::gpu::workgroup::wide_linear_workgroup`]; else [`LINEAR_WG`]):
+/// measured 20-25 % faster than 128 on lavapipe (BENCHMARKS.md).
+pub const WIDE_WG: u32 = 256;
+/// Specialization constant id of those kernels' workgroup size (`local_size_x_id`).
+pub const WIDE_WG_SPEC: u32 = 101;
 /// Invocations per scan workgroup (the specification's guaranteed minimum of
 /// `maxComputeWorkGroupInvocations`).
 pub const SCAN_WG: u32 = 128;
@@ -194,6 +200,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("SHADE_SPEC_WIDEST", SHADE_SPEC_WIDEST.to_string()),
         ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
         ("SUBGROUP_SIZE_SPEC", SUBGROUP_SIZE_SPEC.to_string()),
+        ("WIDE_WG_SPEC", WIDE_WG_SPEC.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))

@@ -266,3 +266,14 @@ pub fn check_limits(
     }
     Ok(d)
 }
+
+/// Invocations of the kernels built with `WIDE_WG_SPEC`: [`WIDE_WG`](super::shader_set::WIDE_WG)
+/// where the device allows that many, else [`LINEAR_WG`](super::shader_set::LINEAR_WG).
+pub fn wide_linear_workgroup(info: &super::DeviceInfo) -> u32 {
+    use super::shader_set::{LINEAR_WG, WIDE_WG};
+    if info.max_workgroup_invocations >= WIDE_WG {
+        WIDE_WG
+    } else {
+        LINEAR_WG
+    }
+}

@@ -48,12 +48,11 @@ impl std::str::FromStr for Accumulation {
     }
 }
 
-/// Invocations per workgroup (`local_size_x`).
-pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
-
 /// The accumulation pipeline of one [`Accumulation`].
 pub struct GradAccumulate {
     pipeline: ComputePipeline,
+    /// Invocations per workgroup ([`crate::gpu::workgroup::wide_linear_workgroup`]).
+    workgroup: u32,
 }
 
 /// Push constants of the accumulation and the preprocess backward: the items dispatched
@@ -78,7 +77,8 @@ impl GradAccumulate {
             Accumulation::CompareAndSwap => (true, true),
         };
         let storage = BindingKind::StorageBuffer;
-        let pipeline = ComputePipeline::from_embedded(
+        let workgroup = crate::gpu::workgroup::wide_linear_workgroup(ctx.info());
+        let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "grad_accumulate",
             &[
@@ -92,9 +92,13 @@ impl GradAccumulate {
                 (slot::ACC, storage),
             ])?,
             std::mem::size_of::<GradPush>() as u32,
-            WORKGROUP,
+            workgroup,
+            &[(crate::gpu::shader_set::WIDE_WG_SPEC, workgroup)],
         )?;
-        Ok(GradAccumulate { pipeline })
+        Ok(GradAccumulate {
+            pipeline,
+            workgroup,
+        })
     }
 
     /// Records the dispatch over `push.count` pairs.
@@ -119,7 +123,7 @@ impl GradAccumulate {
             (slot::ACC, acc),
         ])?;
         let groups = dispatch_grid(
-            push.count.div_ceil(WORKGROUP),
+            push.count.div_ceil(self.workgroup),
             ctx.info().max_workgroup_count[0],
         );
         self.pipeline

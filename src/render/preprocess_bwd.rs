@@ -9,22 +9,22 @@ use ash::vk;
 
 use super::grad_accumulate::GradPush;
 
-/// Invocations per workgroup (`local_size_x`).
-pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
-
 /// Bytes of one Gaussian's gradients in the output (`GaussianGrad`: four vec4).
 pub const GAUSSIAN_GRAD_BYTES: u64 = 64;
 
 /// The preprocess-backward pipeline.
 pub struct PreprocessBwd {
     pipeline: ComputePipeline,
+    /// Invocations per workgroup ([`crate::gpu::workgroup::wide_linear_workgroup`]).
+    workgroup: u32,
 }
 
 impl PreprocessBwd {
     /// Builds the pipeline; `float_sums` reads accumulators written with float atomics.
     pub fn new(ctx: &GpuContext, float_sums: bool) -> GpuResult<Self> {
         let storage = BindingKind::StorageBuffer;
-        let pipeline = ComputePipeline::from_embedded(
+        let workgroup = crate::gpu::workgroup::wide_linear_workgroup(ctx.info());
+        let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "preprocess_bwd",
             &[("FLOAT_ATOMICS", u32::from(float_sums).to_string())],
@@ -40,9 +40,13 @@ impl PreprocessBwd {
                 (slot::FEATURE_GRADS, storage),
             ])?,
             std::mem::size_of::<GradPush>() as u32,
-            WORKGROUP,
+            workgroup,
+            &[(crate::gpu::shader_set::WIDE_WG_SPEC, workgroup)],
         )?;
-        Ok(PreprocessBwd { pipeline })
+        Ok(PreprocessBwd {
+            pipeline,
+            workgroup,
+        })
     }
 
     /// Records the dispatch over `count` Gaussians (`push.count` holds the count).
@@ -77,7 +81,7 @@ impl PreprocessBwd {
             (slot::FEATURE_GRADS, Resource::Buffer(feature_grads)),
         ])?;
         let groups = dispatch_grid(
-            push.count.div_ceil(WORKGROUP),
+            push.count.div_ceil(self.workgroup),
             ctx.info().max_workgroup_count[0],
         );
         self.pipeline
