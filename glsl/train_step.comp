@@ -26,10 +26,10 @@
 // (src/train/model.rs: Model::step and add_stats; Model::params), `precise` so that no
 // compiler fuses it differently.
 #extension GL_GOOGLE_include_directive : require
-#define WG_SIZE LINEAR_WG
+// 256 invocations where the device allows them (faster on lavapipe), else 128: the host's
+// choice (gpu::workgroup::wide_linear_workgroup), as a specialization constant.
+#define WG_SIZE_SPEC_ID WIDE_WG_SPEC
 #include "common.glsl"
-
-layout(local_size_x = LINEAR_WG) in;
 
 struct Gaussian {
     vec4 pos_opacity;
@@ -178,7 +178,7 @@ float colour_grad(uint i, uint k, bool features) {
 }
 
 void main() {
-    uint i = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;
+    uint i = linear_group_id() * WG_SIZE + gl_LocalInvocationIndex;
     uint count = pc.counts.x;
     if (i >= count) return;
     uint rec = pc.counts.y;

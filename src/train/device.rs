@@ -96,6 +96,8 @@ pub struct McmcStep {
 /// each densification).
 pub struct StepPipelines {
     train: ComputePipeline,
+    /// Invocations per workgroup of `train` ([`crate::gpu::workgroup::wide_linear_workgroup`]).
+    train_workgroup: u32,
     reduce: ComputePipeline,
     mlp: ComputePipeline,
 }
@@ -104,8 +106,10 @@ impl StepPipelines {
     /// Builds them.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
         let s = BindingKind::StorageBuffer;
+        let train_workgroup = crate::gpu::workgroup::wide_linear_workgroup(ctx.info());
         Ok(StepPipelines {
-            train: ComputePipeline::from_embedded(
+            train_workgroup,
+            train: ComputePipeline::from_embedded_specialized(
                 ctx,
                 "train_step",
                 &[],
@@ -129,7 +133,8 @@ impl StepPipelines {
                     (slot::NORM_TOTAL, s),
                 ])?,
                 std::mem::size_of::<StepPush>() as u32,
-                WORKGROUP,
+                train_workgroup,
+                &[(crate::gpu::shader_set::WIDE_WG_SPEC, train_workgroup)],
             )?,
             reduce: ComputePipeline::from_embedded(
                 ctx,
@@ -412,7 +417,7 @@ impl<'p> DeviceModel<'p> {
             .map_or_else(Vec::new, |f| f.device_buffers());
         let group = |i: usize| group_bufs.get(i).copied().unwrap_or(sink);
         let groups = dispatch_grid(
-            self.count.div_ceil(WORKGROUP),
+            self.count.div_ceil(self.pipelines.train_workgroup),
             ctx.info().max_workgroup_count[0],
         );
         let norms = self.norms.as_ref().map_or(sink, |n| n[0].whole());
