@@ -196,6 +196,75 @@ pub fn synthetic_scene(n: usize, seed: u64, sh_degree: u32) -> Scene {
     scene
 }
 
+/// `n` random Gaussians in front of a camera at distance 3 or so (centres within
+/// +-0.8 x +-0.6 x +-0.5, unnormalised quaternions, scales 0.03-0.3, opacities 0.2-0.95)
+/// with SH colours of `colors` degree, or `channels` random direct values: the scenes the
+/// gradient tests and `vksplat doctor`'s backward check differentiate.
+pub fn random_splat_params(
+    n: usize,
+    seed: u64,
+    colors: Option<u32>,
+    channels: usize,
+) -> crate::model::grad::SplatParams<f32> {
+    use crate::model::grad::{ColorParams, SplatParams};
+    let mut rng = Rng(seed);
+    let mut p = SplatParams {
+        means: Vec::new(),
+        quats: Vec::new(),
+        scales: Vec::new(),
+        opacities: Vec::new(),
+        colors: ColorParams::Direct {
+            channels,
+            values: Vec::new(),
+        },
+    };
+    for _ in 0..n {
+        p.means.push([
+            rng.range(-0.8, 0.8),
+            rng.range(-0.6, 0.6),
+            rng.range(-0.5, 0.5),
+        ]);
+        // Unnormalised, with a length away from 1, to test the normalisation's gradient.
+        let len = rng.range(0.5, 2.0);
+        p.quats.push([
+            len * rng.range(0.3, 1.0),
+            len * rng.range(-1.0, 1.0),
+            len * rng.range(-1.0, 1.0),
+            len * rng.range(-1.0, 1.0),
+        ]);
+        p.scales.push([
+            rng.range(0.05, 0.3),
+            rng.range(0.05, 0.3),
+            rng.range(0.03, 0.2),
+        ]);
+        p.opacities.push(rng.range(0.2, 0.95));
+    }
+    p.colors = match colors {
+        Some(degree) => {
+            let k = ((degree + 1) * (degree + 1)) as usize;
+            let mut coeffs = Vec::new();
+            for _ in 0..n {
+                // A DC term that keeps most colours above the clamp, higher bands smaller.
+                for j in 0..k {
+                    for _ in 0..3 {
+                        coeffs.push(if j == 0 {
+                            rng.range(-0.5, 1.5)
+                        } else {
+                            rng.range(-0.4, 0.4)
+                        });
+                    }
+                }
+            }
+            ColorParams::Sh { degree, coeffs }
+        }
+        None => ColorParams::Direct {
+            channels,
+            values: (0..n * channels).map(|_| rng.range(-1.0, 1.0)).collect(),
+        },
+    };
+    p
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -24,7 +24,7 @@ use crate::gpu::sort::{
 use crate::gpu::subgroup::{self, SubgroupVerdict};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ContextOptions, GpuContext, GpuResult};
-use crate::model::grad::{relative_l2, ColorParams, PixelGrads, SplatParams, GRAD_GROUPS};
+use crate::model::grad::{relative_l2, PixelGrads, GRAD_GROUPS};
 use crate::render::blend::BlendKernel;
 use crate::render::differentiable::DiffRasterizer;
 use crate::render::GpuRenderer;
@@ -624,55 +624,6 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
     ))
 }
 
-/// `n` random Gaussians in front of [`backward_camera`], SH colours of `degree` (the
-/// gradient tests' scene).
-fn backward_scene(n: usize, degree: u32, seed: u64) -> SplatParams<f32> {
-    let mut rng = Rng(seed);
-    let mut p = SplatParams {
-        means: Vec::new(),
-        quats: Vec::new(),
-        scales: Vec::new(),
-        opacities: Vec::new(),
-        colors: ColorParams::Sh {
-            degree,
-            coeffs: Vec::new(),
-        },
-    };
-    let k = ((degree + 1) * (degree + 1)) as usize;
-    let mut coeffs = Vec::new();
-    for _ in 0..n {
-        p.means.push([
-            rng.range(-0.8, 0.8),
-            rng.range(-0.6, 0.6),
-            rng.range(-0.5, 0.5),
-        ]);
-        let len = rng.range(0.5, 2.0);
-        p.quats.push([
-            len * rng.range(0.3, 1.0),
-            len * rng.range(-1.0, 1.0),
-            len * rng.range(-1.0, 1.0),
-            len * rng.range(-1.0, 1.0),
-        ]);
-        p.scales.push([
-            rng.range(0.05, 0.3),
-            rng.range(0.05, 0.3),
-            rng.range(0.03, 0.2),
-        ]);
-        p.opacities.push(rng.range(0.2, 0.95));
-        for j in 0..k {
-            for _ in 0..3 {
-                coeffs.push(if j == 0 {
-                    rng.range(-0.5, 1.5)
-                } else {
-                    rng.range(-0.4, 0.4)
-                });
-            }
-        }
-    }
-    p.colors = ColorParams::Sh { degree, coeffs };
-    p
-}
-
 fn backward_camera() -> Camera {
     Camera::look_at(
         "doctor-backward",
@@ -687,7 +638,7 @@ fn backward_camera() -> Camera {
 
 fn check_backward(rast: &mut DiffRasterizer) -> Result<Outcome, String> {
     let cam = backward_camera();
-    let p = backward_scene(60, 2, 0xbac0);
+    let p = crate::gen::random_splat_params(60, 0xbac0, Some(2), 3);
     let opts = RenderOptions {
         background: [0.2, 0.4, 0.1],
         ..Default::default()

@@ -325,7 +325,7 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
     }
 }
 
-fn cstr_array(bytes: &[std::ffi::c_char]) -> String {
+pub(crate) fn cstr_array(bytes: &[std::ffi::c_char]) -> String {
     // Fixed-size, NUL-terminated by the driver; stop at the array end regardless.
     let bytes: Vec<u8> = bytes
         .iter()
@@ -335,7 +335,7 @@ fn cstr_array(bytes: &[std::ffi::c_char]) -> String {
     String::from_utf8_lossy(&bytes).into_owned()
 }
 
-fn version_string(v: u32) -> String {
+pub(crate) fn version_string(v: u32) -> String {
     format!(
         "{}.{}.{}",
         vk::api_version_major(v),

@@ -4,6 +4,8 @@
 use std::ffi::CStr;
 
 use ash::vk;
+
+use super::context::{cstr_array, version_string};
 use serde::Serialize;
 
 use super::{GpuError, GpuResult, VkContext};
@@ -69,24 +71,6 @@ pub struct DeviceSummary {
     pub usable: bool,
     /// What it lacks when it is not usable.
     pub missing: Vec<String>,
-}
-
-fn cstr_array(bytes: &[std::ffi::c_char]) -> String {
-    let bytes: Vec<u8> = bytes
-        .iter()
-        .take_while(|&&c| c != 0)
-        .map(|&c| c as u8)
-        .collect();
-    String::from_utf8_lossy(&bytes).into_owned()
-}
-
-fn version_string(v: u32) -> String {
-    format!(
-        "{}.{}.{}",
-        vk::api_version_major(v),
-        vk::api_version_minor(v),
-        vk::api_version_patch(v)
-    )
 }
 
 /// A device type in words.

@@ -77,6 +77,27 @@ enum Type {
     Pointer(u32),
 }
 
+/// The instructions of a SPIR-V module after its header: `(opcode, operands)` each, or
+/// an `Err` naming the word where one runs past the end.
+pub(crate) fn instructions(words: &[u32]) -> impl Iterator<Item = Result<(u16, &[u32]), String>> {
+    let mut i = 5;
+    std::iter::from_fn(move || {
+        if i >= words.len() {
+            return None;
+        }
+        let count = (words[i] >> 16) as usize;
+        let op = (words[i] & 0xffff) as u16;
+        if count == 0 || i + count > words.len() {
+            let at = i;
+            i = words.len();
+            return Some(Err(format!("instruction at word {at} runs past the end")));
+        }
+        let operands = &words[i + 1..i + count];
+        i += count;
+        Some(Ok((op, operands)))
+    })
+}
+
 /// Reads the interface of a SPIR-V module; `Err` names what is malformed.
 pub fn reflect(words: &[u32]) -> Result<Interface, String> {
     use std::collections::HashMap;
@@ -90,14 +111,8 @@ pub fn reflect(words: &[u32]) -> Result<Interface, String> {
     let mut strides: HashMap<u32, u32> = HashMap::new();
     let mut offsets: HashMap<(u32, u32), u32> = HashMap::new();
     let mut variables: Vec<(u32, u32, u32)> = Vec::new(); // (id, pointer type, storage)
-    let mut i = 5;
-    while i < words.len() {
-        let count = (words[i] >> 16) as usize;
-        let op = (words[i] & 0xffff) as u16;
-        if count == 0 || i + count > words.len() {
-            return Err(format!("instruction at word {i} runs past the end"));
-        }
-        let w = &words[i + 1..i + count];
+    for instruction in instructions(words) {
+        let (op, w) = instruction?;
         let arg = |k: usize| w.get(k).copied().unwrap_or(0);
         match op {
             OP_TYPE_INT | OP_TYPE_FLOAT => {
@@ -154,7 +169,6 @@ pub fn reflect(words: &[u32]) -> Result<Interface, String> {
             }
             _ => {}
         }
-        i += count;
     }
     let size_of = |t: u32| -> Option<u32> {
         fn size(

@@ -69,14 +69,8 @@ pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupD
     let mut local_size: Option<[u32; 3]> = None;
     let mut local_size_ids: Option<[u32; 3]> = None;
     let mut shared: Vec<u32> = Vec::new();
-    let mut i = 5;
-    while i < words.len() {
-        let count = (words[i] >> 16) as usize;
-        let op = (words[i] & 0xffff) as u16;
-        if count == 0 || i + count > words.len() {
-            return Err(format!("instruction at word {i} runs past the end"));
-        }
-        let w = &words[i + 1..i + count];
+    for instruction in super::reflect::instructions(words) {
+        let (op, w) = instruction?;
         let arg = |k: usize| w.get(k).copied().unwrap_or(0);
         match op {
             OP_EXECUTION_MODE if arg(1) == MODE_LOCAL_SIZE => {
@@ -165,7 +159,6 @@ pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupD
             OP_VARIABLE if arg(2) == STORAGE_WORKGROUP => shared.push(arg(0)),
             _ => {}
         }
-        i += count;
     }
     let value = |id: u32| {
         values

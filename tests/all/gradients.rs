@@ -30,64 +30,10 @@ pub fn grad_camera() -> Camera {
     )
 }
 
-/// `n` random Gaussians in view with SH colours of `degree`, or `channels` direct values.
+/// `n` random Gaussians in view with SH colours of `degree`, or `channels` direct values
+/// ([`vksplat::gen::random_splat_params`], which `vksplat doctor` uses too).
 pub fn grad_scene(n: usize, seed: u64, colors: Option<u32>, channels: usize) -> SplatParams<f32> {
-    let mut rng = Rng(seed);
-    let mut p = SplatParams {
-        means: Vec::new(),
-        quats: Vec::new(),
-        scales: Vec::new(),
-        opacities: Vec::new(),
-        colors: ColorParams::Direct {
-            channels,
-            values: Vec::new(),
-        },
-    };
-    for _ in 0..n {
-        p.means.push([
-            rng.range(-0.8, 0.8),
-            rng.range(-0.6, 0.6),
-            rng.range(-0.5, 0.5),
-        ]);
-        // Unnormalised, with a length away from 1, to test the normalisation's gradient.
-        let len = rng.range(0.5, 2.0);
-        p.quats.push([
-            len * rng.range(0.3, 1.0),
-            len * rng.range(-1.0, 1.0),
-            len * rng.range(-1.0, 1.0),
-            len * rng.range(-1.0, 1.0),
-        ]);
-        p.scales.push([
-            rng.range(0.05, 0.3),
-            rng.range(0.05, 0.3),
-            rng.range(0.03, 0.2),
-        ]);
-        p.opacities.push(rng.range(0.2, 0.95));
-    }
-    p.colors = match colors {
-        Some(degree) => {
-            let k = ((degree + 1) * (degree + 1)) as usize;
-            let mut coeffs = Vec::new();
-            for _ in 0..n {
-                // A DC term that keeps most colours above the clamp, higher bands smaller.
-                for j in 0..k {
-                    for _ in 0..3 {
-                        coeffs.push(if j == 0 {
-                            rng.range(-0.5, 1.5)
-                        } else {
-                            rng.range(-0.4, 0.4)
-                        });
-                    }
-                }
-            }
-            ColorParams::Sh { degree, coeffs }
-        }
-        None => ColorParams::Direct {
-            channels,
-            values: (0..n * channels).map(|_| rng.range(-1.0, 1.0)).collect(),
-        },
-    };
-    p
+    vksplat::gen::random_splat_params(n, seed, colors, channels)
 }
 
 /// Random pixel gradients for a frame of `channels`.

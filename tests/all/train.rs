@@ -634,18 +634,11 @@ fn assert_groups_agree(a: &vksplat::scene::Scene, b: &vksplat::scene::Scene, max
     }
 }
 
-/// The state kept on the device steps as the host optimiser does (the same rules; the
-/// device's `exp` and `sqrt` round otherwise than the host's, and training amplifies such
-/// differences, so closely, not to the bit): after 30 iterations every parameter group
-/// agrees to 1e-5 (measured: 3.4e-6 at most); through a densification and an opacity
-/// reset to iteration 160 the Gaussian counts are equal, each iteration's loss agrees to
-/// 1e-3 and every group to 5e-3 (measured: 6.1e-4 and 1.0e-3). The device run is
-/// reproducible to the bit, and validation stays quiet.
-#[test]
-fn the_state_on_the_device_steps_as_the_host_optimiser() {
+/// 30 iterations of SH degree 1, densifying from 50 every 60, resetting at 150 (the
+/// device-vs-host tests below).
+fn device_vs_host_options() -> vksplat::train::run::TrainOptions {
     use vksplat::train::{model::Settings, run};
-    let mut h = Harness::new(8, 64, 48, None);
-    let opts = run::TrainOptions {
+    run::TrainOptions {
         settings: Settings {
             iterations: 30,
             densify_from_iter: 50,
@@ -656,7 +649,20 @@ fn the_state_on_the_device_steps_as_the_host_optimiser() {
         sh_degree: 1,
         seed: 3,
         ..Default::default()
-    };
+    }
+}
+
+/// The state kept on the device steps as the host optimiser does (the same rules; the
+/// device's `exp` and `sqrt` round otherwise than the host's, and training amplifies such
+/// differences, so closely, not to the bit): after 30 iterations every parameter group
+/// agrees to 1e-5 (measured: 3.4e-6 at most); through a densification and an opacity
+/// reset to iteration 160 the Gaussian counts are equal, each iteration's loss agrees to
+/// 1e-3 and every group to 5e-3 (measured: 6.1e-4 and 1.0e-3). The device run is
+/// reproducible to the bit, and validation stays quiet.
+#[test]
+fn the_state_on_the_device_steps_as_the_host_optimiser() {
+    let mut h = Harness::new(8, 64, 48, None);
+    let opts = device_vs_host_options();
     let (short_dev, _) = model_ply(&h.train("device-30", &opts, false).2);
     let (short_host, _) = model_ply(&h.train("host-30", &opts, true).2);
     assert_groups_agree(&short_dev, &short_host, 1e-5);
@@ -669,20 +675,8 @@ fn the_state_on_the_device_steps_as_the_host_optimiser() {
 /// at other subgroup sizes (tools/test.sh) can take the short one alone.
 #[test]
 fn densification_and_a_reset_on_the_device_follow_the_host_optimiser() {
-    use vksplat::train::{model::Settings, run};
     let mut h = Harness::new(8, 64, 48, None);
-    let mut opts = run::TrainOptions {
-        settings: Settings {
-            iterations: 30,
-            densify_from_iter: 50,
-            densification_interval: 60,
-            opacity_reset_interval: 150,
-            ..Settings::default()
-        },
-        sh_degree: 1,
-        seed: 3,
-        ..Default::default()
-    };
+    let mut opts = device_vs_host_options();
     let (short_dev, _) = model_ply(&h.train("device-30", &opts, false).2);
     opts.settings.iterations = 160;
     let (dev, dev_losses, at) = h.train("device", &opts, false);
