@@ -273,8 +273,7 @@ impl ComputePipeline {
         this.layout = unsafe { device.create_pipeline_layout(&layout_info, None) }
             .vk("vkCreatePipelineLayout")?;
         ctx.set_name(this.layout, name);
-        // Workgroup scans index subgroups by gl_SubgroupID and assume they are full.
-        let stage_flags = super::subgroup::full_subgroups_flag(ctx, workgroup_size);
+
         // A driver that misreports its subgroup size: every shader computes with the
         // measured one (`glsl/subgroup.glsl`).
         let measured = ctx.info().subgroup_size_override;
@@ -285,7 +284,12 @@ impl ComputePipeline {
             .collect();
         let specialization = specialization.as_slice();
         // The workgroup must fit the device's (or the emulated) limits.
-        super::workgroup::check_limits(name, spirv, specialization, ctx.info())?;
+        let demand = super::workgroup::check_limits(name, spirv, specialization, ctx.info())?;
+        // Workgroup scans index subgroups by gl_SubgroupID and assume they are full: asked
+        // for where the module's x size allows it (`workgroup_size` is the caller's word
+        // for it; the module's own is what the driver checks).
+        debug_assert!(workgroup_size >= 1);
+        let stage_flags = super::subgroup::full_subgroups_flag(ctx, demand.size[0]);
         let entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
             .enumerate()

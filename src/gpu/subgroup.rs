@@ -145,13 +145,19 @@ pub fn size_to_use(device: &str, probe: &SubgroupProbe) -> GpuResult<SubgroupVer
     })
 }
 
-/// Whether `flags` of a pipeline stage may ask for full subgroups on `ctx` for a
-/// workgroup of `invocations`.
+/// Whether a pipeline stage whose workgroup is `local_size_x` wide along x may ask for
+/// full subgroups on `ctx`: x a multiple of the subgroup size that runs and of the one the
+/// driver reports (the rule the validation layer checks; they differ where the driver
+/// misreports).
 pub(crate) fn full_subgroups_flag(
     ctx: &GpuContext,
-    invocations: u32,
+    local_size_x: u32,
 ) -> vk::PipelineShaderStageCreateFlags {
-    if ctx.full_subgroups && invocations % ctx.info().subgroup_size.max(1) == 0 {
+    let info = ctx.info();
+    if ctx.full_subgroups
+        && local_size_x % info.subgroup_size.max(1) == 0
+        && local_size_x % info.reported_subgroup_size.max(1) == 0
+    {
         vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
     } else {
         vk::PipelineShaderStageCreateFlags::empty()

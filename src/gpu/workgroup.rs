@@ -37,6 +37,8 @@ const STORAGE_WORKGROUP: u32 = 4;
 /// A module's workgroup demands.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WorkgroupDemand {
+    /// Workgroup size along x, y and z.
+    pub size: [u32; 3],
     /// Invocations per workgroup (x * y * z).
     pub invocations: u32,
     /// Bytes of shared memory its variables take (vec3 counted as 16 bytes).
@@ -218,6 +220,7 @@ pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupD
             .ok_or_else(|| format!("the size of shared type %{pointee} cannot be evaluated"))?;
     }
     Ok(WorkgroupDemand {
+        size: size3,
         invocations,
         shared_bytes: u32::try_from(shared_bytes).unwrap_or(u32::MAX),
     })
