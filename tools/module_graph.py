@@ -19,6 +19,9 @@ left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
     tools/module_graph.py --layers       # the modules by layer (a cycle is one node)
     tools/module_graph.py --why a b      # the lines behind the edge a -> b
     tools/module_graph.py --src DIR      # another checkout's src/ (e.g. a git worktree)
+    tools/module_graph.py --bin --depth 2
+                                         # the binary instead: src/main.rs (`main`) and
+                                         # src/cli/ (cli::render -> cli::common, ...)
 
 Cycles are reported as the strongly connected components with more than one module,
 each with one shortest cycle through every edge of it, so a component that is a
@@ -101,7 +104,9 @@ def module_of(rel, depth):
     parts = rel[:-3].split(os.sep)
     if parts[-1] == "mod":
         parts = parts[:-1]
-    return "::".join(parts[:depth]) if parts != ["lib"] else "lib"
+    if parts in (["lib"], ["main"]):
+        return root_name()
+    return "::".join(parts[:depth])
 
 
 def group_paths(body):
@@ -174,8 +179,17 @@ def references(text, module):
     return refs
 
 
+BIN = False
+
+
+def root_name():
+    """The crate root's node: `lib` (src/lib.rs), or `main` (src/main.rs) with --bin."""
+    return "main" if BIN else "lib"
+
+
 def library_files(no_tests):
-    """(src-relative path, comment-free text) of every file of the library."""
+    """(src-relative path, comment-free text) of every file of the library (of the
+    binary with --bin: src/main.rs and src/cli/)."""
     for dirpath, dirs, files in os.walk(SRC):
         dirs.sort()
         for f in sorted(files):
@@ -183,7 +197,8 @@ def library_files(no_tests):
                 continue
             full = os.path.join(dirpath, f)
             rel = os.path.relpath(full, SRC)
-            if rel == "main.rs" or rel.startswith("cli" + os.sep):
+            in_bin = rel == "main.rs" or rel.startswith("cli" + os.sep)
+            if in_bin != BIN:
                 continue
             if no_tests and f == "tests.rs":
                 continue
@@ -202,7 +217,7 @@ def collect(depth, no_tests):
     """
     files = list(library_files(no_tests))
     modules = {module_of(rel, d) for rel, _ in files for d in range(1, depth + 1)}
-    top = {m for m in modules if "::" not in m and m != "lib"}
+    top = {m for m in modules if "::" not in m and m != root_name()}
     macros = {}
     for rel, text in files:
         for m in re.finditer(r"#\[macro_export\]\s*macro_rules!\s*(" + IDENT + ")", text):
@@ -210,8 +225,9 @@ def collect(depth, no_tests):
     edges = defaultdict(list)
     for rel, text in files:
         src = module_of(rel, depth)
-        refs = references(text, [] if rel == "lib.rs" else module_of(rel, 99).split("::"))
-        if rel == "lib.rs":
+        root = rel in ("lib.rs", "main.rs")
+        refs = references(text, [] if root else module_of(rel, 99).split("::"))
+        if root:
             # the root names its modules without `crate::`
             refs += [
                 (text.count("\n", 0, m.start()) + 1, m.group(1))
@@ -223,7 +239,7 @@ def collect(depth, no_tests):
             if parts[0] in macros and re.search(r"\b" + parts[0] + r"\s*!", text):
                 dst = macros[parts[0]]
             elif parts[0] not in top:
-                dst = "lib"
+                dst = root_name()
             else:
                 # the target is the longest module prefix, up to `depth` parts: an item
                 # like `scene::Scene` (not a submodule) falls back to `scene`
@@ -233,7 +249,7 @@ def collect(depth, no_tests):
             # a submodule using its own parent (or the reverse) is no dependency between
             # modules
             if src != dst and not dst.startswith(src + "::") and not (
-                dst != "lib" and src.startswith(dst + "::")
+                dst != root_name() and src.startswith(dst + "::")
             ):
                 edges[(src, dst)].append((os.path.join("src", rel), line, "crate::" + path))
     return sorted(modules), edges
@@ -339,7 +355,11 @@ def main():
     ap.add_argument("--layers", action="store_true")
     ap.add_argument("--why", nargs=2, metavar=("FROM", "TO"))
     ap.add_argument("--src", help="the crate's src folder (default: this checkout's)")
+    ap.add_argument("--bin", action="store_true", help="the binary (main.rs, cli/), not the library")
     args = ap.parse_args()
+    if args.bin:
+        global BIN
+        BIN = True
     if args.src:
         global SRC
         SRC = args.src
