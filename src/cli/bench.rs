@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use vksplat::bench::BenchCamera;
 use vksplat::output;
 use vksplat::render::GpuRenderer;
+use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::Scene;
 use vksplat::{note, out, outln};
 
@@ -300,23 +301,8 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         return merge(args);
     }
     let shard = super::common::shard(args.shard.as_deref())?;
-    // A shard writes its own report files.
-    let shard_file = |path: &Option<PathBuf>| -> Option<PathBuf> {
-        let path = path.as_ref()?;
-        Some(shard.map_or_else(|| path.clone(), |s| s.file_name(path)))
-    };
-    let (json, csv, plot) = (
-        shard_file(&args.json),
-        shard_file(&args.csv),
-        shard_file(&args.plot),
-    );
-    // Report files are checked (and their folders created) before the benchmark runs.
-    for path in [&json, &csv, &plot].into_iter().flatten() {
-        check_output_file(path, args.overwrite)?;
-    }
+    let files = ReportFiles::checked(args, shard)?;
     let filter = args.filter.filter()?;
-    // --sh-degree caps a file scene's degree and sets the synthetic scenes' degree.
-    let synthetic_sh_degree = args.filter.sh_degree.unwrap_or(2);
     let Sweeps {
         counts,
         resolutions,
@@ -326,12 +312,102 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         demo: args.demo,
         iteration: args.iteration,
     };
-    if (args.features.is_some() || args.shader.is_some()) && !counts.is_empty() {
+    let (file_scene, shader) = load_file_scene(args, &scene_arg, &filter, counts.is_empty())?;
+    let counts: Vec<Option<usize>> = if counts.is_empty() {
+        vec![None]
+    } else {
+        counts.into_iter().map(Some).collect()
+    };
+    let resolutions: Vec<Option<(u32, u32)>> = if resolutions.is_empty() {
+        vec![None]
+    } else {
+        resolutions.into_iter().map(Some).collect()
+    };
+    let mut renderer = bench_renderer(args)?;
+    let points = counts.len() * resolutions.len();
+    let Some(mine) = shard_points(shard, points) else {
+        return Ok(());
+    };
+    let mut runs = Runs {
+        points,
+        forward: Vec::new(),
+        backward: Vec::new(),
+    };
+    for (c, count) in counts.iter().enumerate() {
+        let point = |r: usize| c * resolutions.len() + r;
+        if !(0..resolutions.len()).any(|r| mine.contains(&point(r))) {
+            continue;
+        }
+        let (scene, name) = point_scene(args, *count, &file_scene, &filter)?;
+        let act = scene.activated();
+        let kernel = args.kernel.resolve(&scene, &name);
+        for (r, res) in resolutions.iter().enumerate() {
+            if !mine.contains(&point(r)) {
+                continue;
+            }
+            let timed = point_camera(args, *res, *count, &scene_arg, &scene)?;
+            let point = Point {
+                scene: &act,
+                name: &name,
+                timed: &timed,
+                kernel,
+                shader: shader.as_ref(),
+            };
+            runs.bench(args, renderer.as_mut(), &point)?;
+        }
+    }
+    if args.backward {
+        return write_backward_reports(args, renderer.as_ref(), &files, &runs.backward);
+    }
+    write_reports(args, renderer.as_ref(), &files, points, &runs.forward)
+}
+
+/// The report files of a run (a shard writes its own), checked (and their folders
+/// created) before the benchmark runs.
+struct ReportFiles {
+    json: Option<PathBuf>,
+    csv: Option<PathBuf>,
+    plot: Option<PathBuf>,
+}
+
+impl ReportFiles {
+    fn checked(args: &BenchArgs, shard: Option<vksplat::shard::Shard>) -> Result<ReportFiles> {
+        // A shard writes its own report files.
+        let shard_file = |path: &Option<PathBuf>| -> Option<PathBuf> {
+            let path = path.as_ref()?;
+            Some(shard.map_or_else(|| path.clone(), |s| s.file_name(path)))
+        };
+        let (json, csv, plot) = (
+            shard_file(&args.json),
+            shard_file(&args.csv),
+            shard_file(&args.plot),
+        );
+        // Report files are checked (and their folders created) before the benchmark runs.
+        for path in [&json, &csv, &plot].into_iter().flatten() {
+            check_output_file(path, args.overwrite)?;
+        }
+        Ok(ReportFiles { json, csv, plot })
+    }
+}
+
+/// A scene and its name.
+type NamedScene = (Scene, String);
+
+/// The scene file (or demo) a run without a Gaussians sweep times, with its features
+/// attached and filters applied, and the neural shader of `--shader`; `None` for a
+/// Gaussians sweep (`no_count_sweep` false), which generates its own scenes.
+fn load_file_scene(
+    args: &BenchArgs,
+    scene_arg: &SceneArg,
+    filter: &SceneFilter,
+    no_count_sweep: bool,
+) -> Result<(Option<NamedScene>, Option<vksplat::mlp::Mlp>)> {
+    if (args.features.is_some() || args.shader.is_some()) && !no_count_sweep {
         bail!("--features and --shader apply to a scene file; a Gaussians sweep generates its own scenes");
     }
     let mut shader = None;
-    let file_scene = if counts.is_empty() {
-        let (mut scene, name) = load_scene(&scene_arg)?;
+    let file_scene = if no_count_sweep {
+        let (mut scene, name) = load_scene(scene_arg)?;
         super::common::refuse_time_varying(&scene, &name, "bench")?;
         if let Some(file) = &args.features {
             vksplat::scene::features::attach_npy(&mut scene, file)?;
@@ -360,17 +436,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         }
         None
     };
-    let counts: Vec<Option<usize>> = if counts.is_empty() {
-        vec![None]
-    } else {
-        counts.into_iter().map(Some).collect()
-    };
-    let resolutions: Vec<Option<(u32, u32)>> = if resolutions.is_empty() {
-        vec![None]
-    } else {
-        resolutions.into_iter().map(Some).collect()
-    };
-    let mut renderer = if args.cpu {
+    Ok((file_scene, shader))
+}
+
+/// The GPU renderer (`None` with `--cpu`), set up as the options ask.
+fn bench_renderer(args: &BenchArgs) -> Result<Option<GpuRenderer>> {
+    Ok(if args.cpu {
         None
     } else {
         let mut renderer = GpuRenderer::new(args.gpu.context()?)?;
@@ -379,14 +450,20 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             renderer.set_gradient_accumulation(args.accumulation)?;
         }
         Some(renderer)
-    };
-    let mut backward_reports = Vec::new();
-    let points = counts.len() * resolutions.len();
+    })
+}
+
+/// The points of the sweep this process runs (all of them without `--shard`), announced
+/// for a shard; `None` when a shard has none.
+fn shard_points(
+    shard: Option<vksplat::shard::Shard>,
+    points: usize,
+) -> Option<std::ops::Range<usize>> {
     let mine = shard.map_or(0..points, |s| s.range(points));
     if let Some(s) = shard {
         if mine.is_empty() {
             note!("{s}: no points (the sweep has {points}, fewer than the shards); nothing to run");
-            return Ok(());
+            return None;
         }
         note!(
             "{s}: points {}..={} of the sweep's {points}",
@@ -394,136 +471,196 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             mine.end - 1
         );
     }
-    let mut reports = Vec::new();
-    for (c, count) in counts.iter().enumerate() {
-        let point = |r: usize| c * resolutions.len() + r;
-        if !(0..resolutions.len()).any(|r| mine.contains(&point(r))) {
-            continue;
-        }
-        let (scene, name) = match (count, &file_scene) {
-            (Some(n), _) => (
-                filter.apply(&vksplat::gen::synthetic_scene(
-                    *n,
-                    args.seed,
-                    synthetic_sh_degree,
-                )),
-                format!(
-                    "synthetic {n} (seed {}, SH {synthetic_sh_degree})",
-                    args.seed
-                ),
+    Some(mine)
+}
+
+/// The scene of a sweep's Gaussian count (a synthetic one, filtered), or the file scene.
+fn point_scene(
+    args: &BenchArgs,
+    count: Option<usize>,
+    file_scene: &Option<NamedScene>,
+    filter: &SceneFilter,
+) -> Result<(Scene, String)> {
+    // --sh-degree caps a file scene's degree and sets the synthetic scenes' degree.
+    let synthetic_sh_degree = args.filter.sh_degree.unwrap_or(2);
+    Ok(match (count, file_scene) {
+        (Some(n), _) => (
+            filter.apply(&vksplat::gen::synthetic_scene(
+                n,
+                args.seed,
+                synthetic_sh_degree,
+            )),
+            format!(
+                "synthetic {n} (seed {}, SH {synthetic_sh_degree})",
+                args.seed
             ),
-            (None, Some((s, name))) => (s.clone(), name.clone()),
-            (None, None) => bail!("no scene"),
+        ),
+        (None, Some((s, name))) => (s.clone(), name.clone()),
+        (None, None) => bail!("no scene"),
+    })
+}
+
+/// The camera timed at a point of the sweep (its resolution replacing the view's size),
+/// checked.
+fn point_camera(
+    args: &BenchArgs,
+    res: Option<(u32, u32)>,
+    count: Option<usize>,
+    scene_arg: &SceneArg,
+    scene: &Scene,
+) -> Result<BenchCamera> {
+    // A resolution of the sweep replaces --width/--height/--scale.
+    let mut view = args.view.clone();
+    if let Some((w, h)) = res {
+        (view.width, view.height, view.scale) = (Some(w), Some(h), None);
+    }
+    // Synthetic scenes are no model directory.
+    let source = match count {
+        Some(_) => SceneArg {
+            scene: None,
+            demo: false,
+            iteration: None,
+        },
+        None => scene_arg.clone(),
+    };
+    let timed = choose_camera(&view, &args.path, &source, scene)?;
+    timed.camera.validate()?;
+    Ok(timed)
+}
+
+/// One point of the sweep: what is timed.
+struct Point<'a> {
+    scene: &'a vksplat::model::ActivatedScene,
+    name: &'a str,
+    timed: &'a BenchCamera,
+    kernel: vksplat::cpu::SplatKernel,
+    shader: Option<&'a vksplat::mlp::Mlp>,
+}
+
+/// The reports of the points run so far (of `points` in the sweep).
+struct Runs {
+    points: usize,
+    forward: Vec<vksplat::bench::BenchReport>,
+    backward: Vec<vksplat::bench::BackwardReport>,
+}
+
+impl Runs {
+    /// Benchmarks one point (forward, or with `--backward` forward and backward), prints
+    /// its report and keeps it.
+    fn bench(
+        &mut self,
+        args: &BenchArgs,
+        renderer: Option<&mut GpuRenderer>,
+        point: &Point,
+    ) -> Result<()> {
+        let Point {
+            scene: act,
+            name,
+            timed,
+            kernel,
+            shader,
+        } = *point;
+        let cam = &timed.camera;
+        let opts = vksplat::cpu::RenderOptions {
+            scale_modifier: args.scale_modifier,
+            kernel,
+            ..Default::default()
         };
-        let act = scene.activated();
-        let kernel = args.kernel.resolve(&scene, &name);
-        for (r, res) in resolutions.iter().enumerate() {
-            if !mine.contains(&point(r)) {
-                continue;
-            }
-            // A resolution of the sweep replaces --width/--height/--scale.
-            let mut view = args.view.clone();
-            if let Some((w, h)) = res {
-                (view.width, view.height, view.scale) = (Some(*w), Some(*h), None);
-            }
-            // Synthetic scenes are no model directory.
-            let source = match count {
-                Some(_) => SceneArg {
-                    scene: None,
-                    demo: false,
-                    iteration: None,
-                },
-                None => scene_arg.clone(),
-            };
-            let timed = choose_camera(&view, &args.path, &source, &scene)?;
-            let cam = &timed.camera;
-            cam.validate()?;
-            let opts = vksplat::cpu::RenderOptions {
-                scale_modifier: args.scale_modifier,
-                kernel,
-                ..Default::default()
-            };
-            if let (true, Some(r)) = (args.backward, renderer.as_mut()) {
-                let report = vksplat::bench::bench_backward(
-                    r,
-                    &act,
-                    &name,
-                    &timed,
-                    &opts,
-                    shader.as_ref(),
-                    args.frames,
-                    args.warmup,
-                );
-                if let Some(report) = kept_in_sweep(report, points, &name, cam)? {
-                    if !args.quiet {
-                        outln!("{}", report.to_text());
-                    }
-                    backward_reports.push(report);
-                }
-                continue;
-            }
-            let report = match renderer.as_mut() {
-                Some(r) => vksplat::bench::bench_gpu(
-                    r,
-                    &act,
-                    &name,
-                    &timed,
-                    &opts,
-                    args.frames,
-                    args.warmup,
-                ),
-                None => Ok(vksplat::bench::bench_cpu(
-                    &act,
-                    &name,
-                    &timed,
-                    &opts,
-                    args.frames,
-                    args.warmup,
-                )),
-            };
-            if let Some(report) = kept_in_sweep(report, points, &name, cam)? {
+        let points = self.points;
+        let mut renderer = renderer;
+        if let (true, Some(r)) = (args.backward, renderer.as_deref_mut()) {
+            let report = vksplat::bench::bench_backward(
+                r,
+                act,
+                name,
+                timed,
+                &opts,
+                shader,
+                args.frames,
+                args.warmup,
+            );
+            if let Some(report) = kept_in_sweep(report, points, name, cam)? {
                 if !args.quiet {
                     outln!("{}", report.to_text());
                 }
-                reports.push(report);
+                self.backward.push(report);
             }
+            return Ok(());
         }
+        let report = match renderer {
+            Some(r) => {
+                vksplat::bench::bench_gpu(r, act, name, timed, &opts, args.frames, args.warmup)
+            }
+            None => Ok(vksplat::bench::bench_cpu(
+                act,
+                name,
+                timed,
+                &opts,
+                args.frames,
+                args.warmup,
+            )),
+        };
+        if let Some(report) = kept_in_sweep(report, points, name, cam)? {
+            if !args.quiet {
+                outln!("{}", report.to_text());
+            }
+            self.forward.push(report);
+        }
+        Ok(())
     }
-    if args.backward {
-        if backward_reports.is_empty() {
-            bail!("every point of the sweep exceeded the device's limits (see above)");
-        }
-        if let Some(r) = &renderer {
-            fail_on_validation_messages(r.ctx())?;
-        }
-        if let Some(path) = &json {
-            let text = vksplat::bench::backward_to_json(&backward_reports);
-            output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
-        }
-        return Ok(());
+}
+
+/// The end of a `--backward` run: its validation check and JSON report.
+fn write_backward_reports(
+    args: &BenchArgs,
+    renderer: Option<&GpuRenderer>,
+    files: &ReportFiles,
+    backward_reports: &[vksplat::bench::BackwardReport],
+) -> Result<()> {
+    if backward_reports.is_empty() {
+        bail!("every point of the sweep exceeded the device's limits (see above)");
     }
+    if let Some(r) = renderer {
+        fail_on_validation_messages(r.ctx())?;
+    }
+    if let Some(path) = &files.json {
+        let text = vksplat::bench::backward_to_json(backward_reports);
+        output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// The end of a forward run: the sweep's summary, the validation check and the report
+/// files (JSON, CSV, SVG plot).
+fn write_reports(
+    args: &BenchArgs,
+    renderer: Option<&GpuRenderer>,
+    files: &ReportFiles,
+    points: usize,
+    reports: &[vksplat::bench::BenchReport],
+) -> Result<()> {
     if points > 1 && !args.quiet {
         outln!("sweep summary (medians):");
-        out!("{}", vksplat::bench::summary_table(&reports));
+        out!("{}", vksplat::bench::summary_table(reports));
     }
     if reports.is_empty() {
         bail!("every point of the sweep exceeded the device's limits (see above)");
     }
-    if let Some(r) = &renderer {
+    if let Some(r) = renderer {
         fail_on_validation_messages(r.ctx())?;
     }
     let write_text = |path: &PathBuf, text: String| -> Result<()> {
         output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
         Ok(())
     };
-    if let Some(path) = &json {
-        write_text(path, vksplat::bench::to_json(&reports))?;
+    if let Some(path) = &files.json {
+        write_text(path, vksplat::bench::to_json(reports))?;
     }
-    if let Some(path) = &csv {
-        write_text(path, vksplat::bench::to_csv(&reports))?;
+    if let Some(path) = &files.csv {
+        write_text(path, vksplat::bench::to_csv(reports))?;
     }
-    if let Some(path) = &plot {
-        let svg = vksplat::bench::plot_sweep(&reports).map_err(anyhow::Error::msg)?;
+    if let Some(path) = &files.plot {
+        let svg = vksplat::bench::plot_sweep(reports).map_err(anyhow::Error::msg)?;
         write_text(path, svg)?;
     }
     Ok(())

@@ -222,19 +222,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
     if args.diff.is_some() || args.channels.is_some() {
         bail!("--diff and --channels apply to comparing two images; a scene's diff images go to the report directory (-o)");
     }
-    let perturb = match std::env::var(PERTURB_RED_ENV) {
-        Ok(v) => {
-            let d: f32 = v
-                .trim()
-                .parse()
-                .map_err(|_| anyhow!("{PERTURB_RED_ENV}={v:?} is not a number"))?;
-            note!(
-                "note: {PERTURB_RED_ENV}={d} shifts the GPU frames' red channel (a test-only knob)"
-            );
-            d
-        }
-        Err(_) => 0.0,
-    };
+    let perturb = perturb_red()?;
     let scene_arg = SceneArg {
         scene: args.inputs.first().cloned(),
         demo: args.demo,
@@ -242,32 +230,8 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
     };
     let (scene, name) = load_scene(&scene_arg)?;
     super::common::refuse_time_varying(&scene, &name, "compare")?;
-    let path = camera_path(&args.view, &args.path, &scene_arg, &scene)?;
-    if let Some(frames) = &args.frames {
-        frames.check(path.len).map_err(anyhow::Error::msg)?;
-    }
-    let source = path.source;
-    let cams: Vec<_> = path
-        .cameras
-        .into_iter()
-        .filter(|(k, _)| args.frames.as_ref().map_or(true, |r| r.contains(*k)))
-        .collect();
-    if cams.is_empty() {
-        bail!("no frames to compare: --frames selects none of the cameras of {source}");
-    }
-    for (_, c) in &cams {
-        c.validate()?;
-    }
-    let dir = args
-        .output
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_REPORT_DIR));
-    let diff_name = |k: usize| format!("diff_{k:05}.png");
-    let mut files = vec![dir.join("report.json"), dir.join("report.csv")];
-    files.extend(cams.iter().map(|(k, _)| dir.join(diff_name(*k))));
-    check_free(&files, args.overwrite)?;
-    std::fs::create_dir_all(&dir)
-        .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
+    let (source, cams) = compared_cameras(args, &scene_arg, &scene)?;
+    let dir = report_dir(args, &cams)?;
 
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
     let opts = vksplat::cpu::RenderOptions {
@@ -302,62 +266,18 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         "alpha %",
         "depth dB"
     );
+    let check = FrameComparison {
+        args,
+        gate,
+        scene: &act,
+        gpu_scene: &gpu_scene,
+        opts: &opts,
+        perturb,
+        dir: &dir,
+    };
     let mut records = Vec::new();
     for (k, cam) in &cams {
-        let mut gpu = renderer.render(&gpu_scene, cam, &opts)?;
-        if perturb != 0.0 {
-            for c in &mut gpu.color {
-                c[0] += perturb;
-            }
-        }
-        let cpu = vksplat::cpu::render(&act, cam, &opts);
-        let m = metrics::compare_frames(&cpu, &gpu);
-        let (reference, test) = (metrics::clamped_color(&cpu), metrics::clamped_color(&gpu));
-        let flip = metrics::flip(
-            &reference,
-            &test,
-            cam.width as usize,
-            cam.height as usize,
-            metrics::flip_default_ppd(),
-        );
-        let error = diff_image::per_pixel_max_abs(&reference, &test, 3);
-        let heat = diff_image::heatmap(cam.width, cam.height, &error, args.magnify);
-        output::write_frame(
-            &heat,
-            &dir.join(diff_name(*k)),
-            ImageFormat::Png8,
-            args.overwrite,
-        )?;
-        let mut failures = Vec::new();
-        gate.check("colour", &m.color, &mut failures);
-        gate.check("alpha", &m.alpha, &mut failures);
-        outln!(
-            "{k:>5}  {:<16} {:>9} {:>8.5} {:>8.5} {:>9.3} {:>8.5} {:>9} {:>9.3} {:>9}  {}",
-            short(&cam.name, 16),
-            db(m.color.psnr),
-            m.ssim,
-            flip,
-            m.color.within * 100.0,
-            m.color.max_abs,
-            db(m.alpha.psnr),
-            m.alpha.within * 100.0,
-            db(m.depth.psnr),
-            if failures.is_empty() { "ok" } else { "FAIL" }
-        );
-        records.push(FrameRecord {
-            frame: *k,
-            camera: cam.name.clone(),
-            width: cam.width,
-            height: cam.height,
-            color: m.color,
-            ssim: m.ssim,
-            flip,
-            alpha: m.alpha,
-            depth: m.depth,
-            diff: diff_name(*k),
-            pass: failures.is_empty(),
-            failures,
-        });
+        records.push(check.frame(&mut renderer, *k, cam)?);
     }
     fail_on_validation_messages(renderer.ctx())?;
 
@@ -388,7 +308,162 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         args.overwrite,
         &render_csv(&report.frames),
     )?;
+    summarise_renders(&report, &name, &source, &device, &dir)
+}
 
+/// The test-only shift of the GPU frames' red channel ([`PERTURB_RED_ENV`]; 0 when unset),
+/// announced.
+fn perturb_red() -> Result<f32> {
+    Ok(match std::env::var(PERTURB_RED_ENV) {
+        Ok(v) => {
+            let d: f32 = v
+                .trim()
+                .parse()
+                .map_err(|_| anyhow!("{PERTURB_RED_ENV}={v:?} is not a number"))?;
+            note!(
+                "note: {PERTURB_RED_ENV}={d} shifts the GPU frames' red channel (a test-only knob)"
+            );
+            d
+        }
+        Err(_) => 0.0,
+    })
+}
+
+/// The cameras of the path that `--frames` selects (checked), and where they come from.
+fn compared_cameras(
+    args: &CompareArgs,
+    scene_arg: &SceneArg,
+    scene: &vksplat::scene::Scene,
+) -> Result<(String, Vec<(usize, vksplat::camera::Camera)>)> {
+    let path = camera_path(&args.view, &args.path, scene_arg, scene)?;
+    if let Some(frames) = &args.frames {
+        frames.check(path.len).map_err(anyhow::Error::msg)?;
+    }
+    let source = path.source;
+    let cams: Vec<_> = path
+        .cameras
+        .into_iter()
+        .filter(|(k, _)| args.frames.as_ref().map_or(true, |r| r.contains(*k)))
+        .collect();
+    if cams.is_empty() {
+        bail!("no frames to compare: --frames selects none of the cameras of {source}");
+    }
+    for (_, c) in &cams {
+        c.validate()?;
+    }
+    Ok((source, cams))
+}
+
+/// The diff image of frame `k` in the report directory.
+fn diff_name(k: usize) -> String {
+    format!("diff_{k:05}.png")
+}
+
+/// The report directory (`-o`, or the default), created once none of the files the
+/// comparison of `cams` writes there is in the way.
+fn report_dir(args: &CompareArgs, cams: &[(usize, vksplat::camera::Camera)]) -> Result<PathBuf> {
+    let dir = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_REPORT_DIR));
+    let mut files = vec![dir.join("report.json"), dir.join("report.csv")];
+    files.extend(cams.iter().map(|(k, _)| dir.join(diff_name(*k))));
+    check_free(&files, args.overwrite)?;
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
+    Ok(dir)
+}
+
+/// What each frame of a scene comparison is rendered, compared and written with.
+struct FrameComparison<'a> {
+    args: &'a CompareArgs,
+    gate: Gate,
+    scene: &'a vksplat::model::ActivatedScene,
+    gpu_scene: &'a vksplat::render::GpuScene,
+    opts: &'a vksplat::cpu::RenderOptions,
+    /// Added to the GPU frame's red channel (the test-only knob).
+    perturb: f32,
+    /// The report directory, where the diff image goes.
+    dir: &'a Path,
+}
+
+impl FrameComparison<'_> {
+    /// Frame `k` rendered by both renderers and compared: its diff image written, its row
+    /// of the table printed, its record.
+    fn frame(
+        &self,
+        renderer: &mut GpuRenderer,
+        k: usize,
+        cam: &vksplat::camera::Camera,
+    ) -> Result<FrameRecord> {
+        let (args, gate, opts) = (self.args, self.gate, self.opts);
+        let mut gpu = renderer.render(self.gpu_scene, cam, opts)?;
+        if self.perturb != 0.0 {
+            for c in &mut gpu.color {
+                c[0] += self.perturb;
+            }
+        }
+        let cpu = vksplat::cpu::render(self.scene, cam, opts);
+        let m = metrics::compare_frames(&cpu, &gpu);
+        let (reference, test) = (metrics::clamped_color(&cpu), metrics::clamped_color(&gpu));
+        let flip = metrics::flip(
+            &reference,
+            &test,
+            cam.width as usize,
+            cam.height as usize,
+            metrics::flip_default_ppd(),
+        );
+        let error = diff_image::per_pixel_max_abs(&reference, &test, 3);
+        let heat = diff_image::heatmap(cam.width, cam.height, &error, args.magnify);
+        output::write_frame(
+            &heat,
+            &self.dir.join(diff_name(k)),
+            ImageFormat::Png8,
+            args.overwrite,
+        )?;
+        let mut failures = Vec::new();
+        gate.check("colour", &m.color, &mut failures);
+        gate.check("alpha", &m.alpha, &mut failures);
+        outln!(
+            "{k:>5}  {:<16} {:>9} {:>8.5} {:>8.5} {:>9.3} {:>8.5} {:>9} {:>9.3} {:>9}  {}",
+            short(&cam.name, 16),
+            db(m.color.psnr),
+            m.ssim,
+            flip,
+            m.color.within * 100.0,
+            m.color.max_abs,
+            db(m.alpha.psnr),
+            m.alpha.within * 100.0,
+            db(m.depth.psnr),
+            if failures.is_empty() { "ok" } else { "FAIL" }
+        );
+        Ok(FrameRecord {
+            frame: k,
+            camera: cam.name.clone(),
+            width: cam.width,
+            height: cam.height,
+            color: m.color,
+            ssim: m.ssim,
+            flip,
+            alpha: m.alpha,
+            depth: m.depth,
+            diff: diff_name(k),
+            pass: failures.is_empty(),
+            failures,
+        })
+    }
+}
+
+/// The closing line of a scene comparison (lowest PSNRs and shares, pass or fail), and
+/// the error naming the frames that fail.
+fn summarise_renders(
+    report: &RenderReport,
+    name: &str,
+    source: &str,
+    device: &str,
+    dir: &Path,
+) -> Result<()> {
+    let (gate, failed) = (report.thresholds, &report.failed_frames);
     let min =
         |f: &dyn Fn(&FrameRecord) -> f64| report.frames.iter().map(f).fold(f64::INFINITY, f64::min);
     outln!(
@@ -566,124 +641,13 @@ fn choose_channels(
 }
 
 fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<()> {
-    let v = &args.view;
-    let scene_only = args.iteration.is_some()
-        || args.frames.is_some()
-        || args.blend_kernel.is_some()
-        || v.cameras.is_some()
-        || v.camera.is_some()
-        || v.width.is_some()
-        || v.height.is_some()
-        || v.scale.is_some()
-        || args.scale_modifier != 1.0
-        || args.kernel.kernel.is_some()
-        || args.path.orbit.is_some();
-    if scene_only {
-        bail!("camera, resolution, --iteration, --frames, --blend-kernel, --kernel and --scale-modifier options apply to comparing a scene's renders, not two images");
-    }
-    let pa = image_file::read_image(a)?;
-    let pb = image_file::read_image(b)?;
-    if (pa.width, pa.height) != (pb.width, pb.height) {
-        bail!(
-            "the images differ in size: {} is {}x{} and {} is {}x{}",
-            a.display(),
-            pa.width,
-            pa.height,
-            b.display(),
-            pb.width,
-            pb.height
-        );
-    }
+    refuse_scene_options(args)?;
+    let (pa, pb) = read_pair(a, b)?;
     let names = choose_channels(args, a, &pa, b, &pb)?;
-    // Two single-channel images with different names compare their only channels.
-    let b_name = |n: &str| -> String {
-        if pb.channel(n).is_none() && pb.channels.len() == 1 {
-            pb.channels[0].name.clone()
-        } else {
-            n.to_string()
-        }
-    };
-    let take = |p: &Planes, ns: &[String]| -> Vec<f32> {
-        let refs: Vec<&str> = ns.iter().map(String::as_str).collect();
-        p.interleave(&refs).unwrap_or_default()
-    };
-    let mut left: Vec<String> = names.clone();
-    let mut groups: Vec<(String, Vec<String>)> = Vec::new();
-    let mut group = |label: &str, members: &[&str], left: &mut Vec<String>| {
-        if members.iter().all(|m| left.iter().any(|l| l == m)) {
-            left.retain(|l| !members.contains(&l.as_str()));
-            groups.push((
-                label.into(),
-                members.iter().map(|s| s.to_string()).collect(),
-            ));
-        }
-    };
-    group("color", &["R", "G", "B"], &mut left);
-    group("color", &["Y"], &mut left);
-    group("alpha", &["A"], &mut left);
-    group("depth", &["Z"], &mut left);
-    for rest in left.clone() {
-        group(&rest, &[rest.as_str()], &mut left);
-    }
-    let (w, h) = (pa.width as usize, pa.height as usize);
-    let mut records = Vec::new();
+    let groups = channel_groups(&names);
     let mut failures = Vec::new();
-    let mut diff: Option<(Vec<f32>, Vec<f32>, usize)> = None;
-    for (label, members) in &groups {
-        let bm: Vec<String> = members.iter().map(|m| b_name(m)).collect();
-        let (mut ra, mut rb) = (take(&pa, members), take(&pb, &bm));
-        let kind = match label.as_str() {
-            "color" => PlaneKind::Colour,
-            "alpha" => PlaneKind::Alpha,
-            _ => PlaneKind::Data,
-        };
-        let m = metrics::plane_metrics(&mut ra, &mut rb, w, h, members.len(), kind);
-        let (stats, peak) = (m.stats, m.stats.peak);
-        if kind != PlaneKind::Data {
-            let plane = if label == "color" { "colour" } else { label };
-            gate.check(plane, &stats, &mut failures);
-        }
-        if diff.is_none() || (label == "color") {
-            let scale = 1.0 / peak as f32;
-            diff = Some((
-                ra.iter().map(|v| v * scale).collect(),
-                rb.iter().map(|v| v * scale).collect(),
-                members.len(),
-            ));
-        }
-        records.push(GroupRecord {
-            group: label.clone(),
-            channels: members.clone(),
-            stats,
-            ssim: m.ssim,
-            flip: m.flip,
-        });
-    }
-    outln!(
-        "{:<8} {:<10} {:>9} {:>10} {:>10} {:>9} {:>8} {:>8}",
-        "plane",
-        "channels",
-        "PSNR dB",
-        "max err",
-        "mean err",
-        "within %",
-        "SSIM",
-        "FLIP"
-    );
-    for r in &records {
-        let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.5}"));
-        outln!(
-            "{:<8} {:<10} {:>9} {:>10.6} {:>10.6} {:>9.3} {:>8} {:>8}",
-            r.group,
-            r.channels.join(","),
-            db(r.stats.psnr),
-            r.stats.max_abs,
-            r.stats.mean_abs,
-            r.stats.within * 100.0,
-            opt(r.ssim),
-            opt(r.flip)
-        );
-    }
+    let (records, diff) = measure_groups(gate, &pa, &pb, &groups, &mut failures);
+    print_groups(&records);
     if let (Some(path), Some((ra, rb, c))) = (&args.diff, &diff) {
         let error = diff_image::per_pixel_max_abs(ra, rb, *c);
         let heat = diff_image::heatmap(pa.width, pa.height, &error, args.magnify);
@@ -700,32 +664,7 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
         failures: failures.clone(),
     };
     if let Some(dir) = &args.output {
-        let files = [dir.join("report.json"), dir.join("report.csv")];
-        check_free(&files, args.overwrite)?;
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
-        write_text(
-            &files[0],
-            args.overwrite,
-            &serde_json::to_string_pretty(&report)?,
-        )?;
-        let mut csv = String::from("plane,channels,psnr,max_abs,mean_abs,within,peak,ssim,flip\n");
-        for r in &report.groups {
-            let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
-            csv.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{}\n",
-                csv_cell(&r.group),
-                csv_cell(&r.channels.join(" ")),
-                db_csv(r.stats.psnr),
-                r.stats.max_abs,
-                r.stats.mean_abs,
-                r.stats.within,
-                r.stats.peak,
-                opt(r.ssim),
-                opt(r.flip)
-            ));
-        }
-        write_text(&files[1], args.overwrite, &csv)?;
+        write_image_report(args, dir, &report)?;
     }
     outln!(
         "{} vs {} ({}x{}): {}",
@@ -752,5 +691,189 @@ fn compare_images(args: &CompareArgs, gate: Gate, a: &Path, b: &Path) -> Result<
             failures.join(", ")
         );
     }
+    Ok(())
+}
+
+/// Refuses the options of a scene comparison when two images are compared.
+fn refuse_scene_options(args: &CompareArgs) -> Result<()> {
+    let v = &args.view;
+    let scene_only = args.iteration.is_some()
+        || args.frames.is_some()
+        || args.blend_kernel.is_some()
+        || v.cameras.is_some()
+        || v.camera.is_some()
+        || v.width.is_some()
+        || v.height.is_some()
+        || v.scale.is_some()
+        || args.scale_modifier != 1.0
+        || args.kernel.kernel.is_some()
+        || args.path.orbit.is_some();
+    if scene_only {
+        bail!("camera, resolution, --iteration, --frames, --blend-kernel, --kernel and --scale-modifier options apply to comparing a scene's renders, not two images");
+    }
+    Ok(())
+}
+
+/// The two images, which must have the same size.
+fn read_pair(a: &Path, b: &Path) -> Result<(Planes, Planes)> {
+    let pa = image_file::read_image(a)?;
+    let pb = image_file::read_image(b)?;
+    if (pa.width, pa.height) != (pb.width, pb.height) {
+        bail!(
+            "the images differ in size: {} is {}x{} and {} is {}x{}",
+            a.display(),
+            pa.width,
+            pa.height,
+            b.display(),
+            pb.width,
+            pb.height
+        );
+    }
+    Ok((pa, pb))
+}
+
+/// The compared channels in groups: colour (`R,G,B` or `Y`), alpha (`A`), depth (`Z`),
+/// then every other channel on its own.
+fn channel_groups(names: &[String]) -> Vec<(String, Vec<String>)> {
+    let mut left: Vec<String> = names.to_vec();
+    let mut groups: Vec<(String, Vec<String>)> = Vec::new();
+    let mut group = |label: &str, members: &[&str], left: &mut Vec<String>| {
+        if members.iter().all(|m| left.iter().any(|l| l == m)) {
+            left.retain(|l| !members.contains(&l.as_str()));
+            groups.push((
+                label.into(),
+                members.iter().map(|s| s.to_string()).collect(),
+            ));
+        }
+    };
+    group("color", &["R", "G", "B"], &mut left);
+    group("color", &["Y"], &mut left);
+    group("alpha", &["A"], &mut left);
+    group("depth", &["Z"], &mut left);
+    for rest in left.clone() {
+        group(&rest, &[rest.as_str()], &mut left);
+    }
+    groups
+}
+
+/// The planes of a diff image: both images' channels of one group, scaled by its peak,
+/// and their number.
+type DiffPlanes = (Vec<f32>, Vec<f32>, usize);
+
+/// Each group's metrics (the colour and alpha groups checked against `gate`, failures
+/// added to `failures`), and the planes of the diff image: the colour group's, else the
+/// first group's.
+fn measure_groups(
+    gate: Gate,
+    pa: &Planes,
+    pb: &Planes,
+    groups: &[(String, Vec<String>)],
+    failures: &mut Vec<String>,
+) -> (Vec<GroupRecord>, Option<DiffPlanes>) {
+    // Two single-channel images with different names compare their only channels.
+    let b_name = |n: &str| -> String {
+        if pb.channel(n).is_none() && pb.channels.len() == 1 {
+            pb.channels[0].name.clone()
+        } else {
+            n.to_string()
+        }
+    };
+    let take = |p: &Planes, ns: &[String]| -> Vec<f32> {
+        let refs: Vec<&str> = ns.iter().map(String::as_str).collect();
+        p.interleave(&refs).unwrap_or_default()
+    };
+    let (w, h) = (pa.width as usize, pa.height as usize);
+    let mut records = Vec::new();
+    let mut diff: Option<DiffPlanes> = None;
+    for (label, members) in groups {
+        let bm: Vec<String> = members.iter().map(|m| b_name(m)).collect();
+        let (mut ra, mut rb) = (take(pa, members), take(pb, &bm));
+        let kind = match label.as_str() {
+            "color" => PlaneKind::Colour,
+            "alpha" => PlaneKind::Alpha,
+            _ => PlaneKind::Data,
+        };
+        let m = metrics::plane_metrics(&mut ra, &mut rb, w, h, members.len(), kind);
+        let (stats, peak) = (m.stats, m.stats.peak);
+        if kind != PlaneKind::Data {
+            let plane = if label == "color" { "colour" } else { label };
+            gate.check(plane, &stats, failures);
+        }
+        if diff.is_none() || (label == "color") {
+            let scale = 1.0 / peak as f32;
+            diff = Some((
+                ra.iter().map(|v| v * scale).collect(),
+                rb.iter().map(|v| v * scale).collect(),
+                members.len(),
+            ));
+        }
+        records.push(GroupRecord {
+            group: label.clone(),
+            channels: members.clone(),
+            stats,
+            ssim: m.ssim,
+            flip: m.flip,
+        });
+    }
+    (records, diff)
+}
+
+/// The table of the groups' metrics on stdout.
+fn print_groups(records: &[GroupRecord]) {
+    outln!(
+        "{:<8} {:<10} {:>9} {:>10} {:>10} {:>9} {:>8} {:>8}",
+        "plane",
+        "channels",
+        "PSNR dB",
+        "max err",
+        "mean err",
+        "within %",
+        "SSIM",
+        "FLIP"
+    );
+    for r in records {
+        let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.5}"));
+        outln!(
+            "{:<8} {:<10} {:>9} {:>10.6} {:>10.6} {:>9.3} {:>8} {:>8}",
+            r.group,
+            r.channels.join(","),
+            db(r.stats.psnr),
+            r.stats.max_abs,
+            r.stats.mean_abs,
+            r.stats.within * 100.0,
+            opt(r.ssim),
+            opt(r.flip)
+        );
+    }
+}
+
+/// Writes the report of two images to `dir` (`-o`): report.json and report.csv.
+fn write_image_report(args: &CompareArgs, dir: &Path, report: &ImageReport) -> Result<()> {
+    let files = [dir.join("report.json"), dir.join("report.csv")];
+    check_free(&files, args.overwrite)?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the report directory", dir.display()))?;
+    write_text(
+        &files[0],
+        args.overwrite,
+        &serde_json::to_string_pretty(report)?,
+    )?;
+    let mut csv = String::from("plane,channels,psnr,max_abs,mean_abs,within,peak,ssim,flip\n");
+    for r in &report.groups {
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            csv_cell(&r.group),
+            csv_cell(&r.channels.join(" ")),
+            db_csv(r.stats.psnr),
+            r.stats.max_abs,
+            r.stats.mean_abs,
+            r.stats.within,
+            r.stats.peak,
+            opt(r.ssim),
+            opt(r.flip)
+        ));
+    }
+    write_text(&files[1], args.overwrite, &csv)?;
     Ok(())
 }

@@ -395,16 +395,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         iteration: args.iteration,
     };
     let shard = super::common::shard(args.shard.as_deref())?;
-    let ppd = args.ppd.unwrap_or_else(metrics::flip_default_ppd);
-    if !(ppd.is_finite() && ppd > 0.0) {
-        bail!("--ppd {ppd} must be a positive number");
-    }
-    let Some(images) = args.images.as_deref() else {
-        bail!("eval needs the folder of ground-truth photos: pass --images DIR");
-    };
-    if !images.is_dir() {
-        bail!("{}: is not a folder of photos (--images)", images.display());
-    }
+    let (ppd, images) = checked_ppd_and_images(args)?;
     let out_dir = args
         .output
         .clone()
@@ -415,59 +406,11 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         return Ok(());
     }
     check_report_files(&files, args.overwrite)?;
-    let cameras_file = match &args.cameras {
-        Some(f) => f.clone(),
-        None => match model_cameras(&scene_arg) {
-            Some(f) => f,
-            None => bail!("eval needs the cameras of the photos: pass --cameras FILE (a cameras.json, a COLMAP model or a model directory), or a trained model directory holding cameras.json"),
-        },
-    };
+    let cameras_file = cameras_file(args, &scene_arg)?;
     let (scene, name) = load_scene(&scene_arg)?;
     super::common::refuse_time_varying(&scene, &name, "eval")?;
-    let (all, format) = camera::load_camera_file(&cameras_file, &camera::PathTiming::default())?;
-    let total = all.len();
-    let (cams, rule) = split_cameras(all, &args.split, images);
-    if cams.is_empty() {
-        bail!(
-            "{}: the {} split is empty ({total} camera(s); {rule})",
-            cameras_file.display(),
-            args.split
-        );
-    }
-    note!(
-        "{} split: {} of {total} camera(s) of {} ({format}); {rule}",
-        args.split,
-        cams.len(),
-        cameras_file.display()
-    );
-    // The block of a shard is chosen before photos are matched, so it does not depend on
-    // which photos exist.
-    let cams = match shard {
-        Some(s) => {
-            let all = cams.len();
-            let mine = s.take(cams);
-            note!("{s}: {} of the {all} camera(s)", mine.len());
-            mine
-        }
-        None => cams,
-    };
-
-    // Match every camera with its photo before rendering anything.
-    let mut jobs = Vec::new();
-    let mut skipped = Vec::new();
-    for (k, cam) in cams {
-        match find_photo(images, &cam.name) {
-            Ok(photo) => jobs.push((k, cam, photo)),
-            Err(tried) if args.skip_missing => {
-                note!("note: camera {k} (\"{}\") has no photo ({tried}); skipped", cam.name);
-                skipped.push(cam.name.clone());
-            }
-            Err(tried) => bail!(
-                "camera {k} (\"{}\") has no photo: looked for {tried} (--skip-missing leaves such cameras out)",
-                cam.name
-            ),
-        }
-    }
+    let (cams, rule) = split_and_shard_cameras(args, &cameras_file, images, shard)?;
+    let (jobs, skipped) = match_photos(args, cams, images)?;
     // A shard may have no cameras (more shards than cameras) or none with a photo; its
     // empty report still tells the merge that it ran.
     if jobs.is_empty() && shard.is_none() {
@@ -496,86 +439,13 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         Some((r, _)) => format!("GPU pipeline on {}", r.ctx().info().name),
         None => "CPU reference renderer".into(),
     };
-
-    let bar = if args.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        let bar = indicatif::ProgressBar::new(jobs.len() as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:40.cyan/blue} {pos}/{len} images  ETA {eta}  {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        bar
+    let measure = Measure {
+        args,
+        ppd,
+        scene: &act,
+        opts: &opts,
     };
-    outln!(
-        "{:>5}  {:<24} {:>9} {:>9} {:>9}  {:>9}",
-        "frame",
-        "camera",
-        "PSNR dB",
-        "SSIM",
-        "FLIP",
-        "size"
-    );
-    let mut results = Vec::new();
-    for (k, cam, photo_path) in &jobs {
-        bar.set_message(cam.name.clone());
-        let photo = image_file::read_image(photo_path)?;
-        let (w, h) = render_size(cam.width, cam.height, photo.width, photo.height).ok_or_else(|| {
-            anyhow::anyhow!(
-                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}; a photo may only be smaller by one factor on both sides (images downscaled for training)",
-                cam.name,
-                cam.width,
-                cam.height,
-                photo_path.display(),
-                photo.width,
-                photo.height
-            )
-        })?;
-        let cam = cam.with_resolution(w, h)?;
-        cam.validate()?;
-        let truth = photo_rgb(&photo, photo_path, args.background)?;
-        let frame = match gpu.as_mut() {
-            Some((r, s)) => r.render(s, &cam, &opts)?,
-            None => vksplat::cpu::render(&act, &cam, &opts),
-        };
-        let render: Vec<f32> = metrics::clamped_color(&frame)
-            .into_iter()
-            .map(|v| {
-                if args.float {
-                    v
-                } else {
-                    output::to_u8(v) as f32 / 255.0
-                }
-            })
-            .collect();
-        let (wu, hu) = (w as usize, h as usize);
-        let record = ImageRecord {
-            frame: *k,
-            camera: cam.name.clone(),
-            photo: photo_path.display().to_string(),
-            width: w,
-            height: h,
-            psnr: metrics::psnr(&truth, &render, 1.0),
-            ssim: metrics::ssim(&truth, &render, wu, hu, 3),
-            flip: metrics::flip(&truth, &render, wu, hu, ppd),
-        };
-        bar.suspend(|| {
-            outln!(
-                "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}",
-                record.frame,
-                record.camera,
-                db(record.psnr),
-                record.ssim,
-                record.flip,
-                format!("{w}x{h}")
-            )
-        });
-        results.push(record);
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
+    let results = measure.all(&mut gpu, &jobs)?;
     if let Some((r, _)) = &gpu {
         fail_on_validation_messages(r.ctx())?;
     }
@@ -616,6 +486,208 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         files[0].display()
     );
     Ok(())
+}
+
+/// `--ppd` (checked, or FLIP's default) and the folder of photos (`--images`, checked).
+fn checked_ppd_and_images(args: &EvalArgs) -> Result<(f64, &Path)> {
+    let ppd = args.ppd.unwrap_or_else(metrics::flip_default_ppd);
+    if !(ppd.is_finite() && ppd > 0.0) {
+        bail!("--ppd {ppd} must be a positive number");
+    }
+    let Some(images) = args.images.as_deref() else {
+        bail!("eval needs the folder of ground-truth photos: pass --images DIR");
+    };
+    if !images.is_dir() {
+        bail!("{}: is not a folder of photos (--images)", images.display());
+    }
+    Ok((ppd, images))
+}
+
+/// The cameras of the photos: `--cameras`, or the model directory's cameras.json.
+fn cameras_file(args: &EvalArgs, scene_arg: &SceneArg) -> Result<PathBuf> {
+    Ok(match &args.cameras {
+        Some(f) => f.clone(),
+        None => match model_cameras(scene_arg) {
+            Some(f) => f,
+            None => bail!("eval needs the cameras of the photos: pass --cameras FILE (a cameras.json, a COLMAP model or a model directory), or a trained model directory holding cameras.json"),
+        },
+    })
+}
+
+/// The cameras of `--split` in `cameras_file` (announced, with the rule that chose them),
+/// or a shard's block of them; and the rule.
+fn split_and_shard_cameras(
+    args: &EvalArgs,
+    cameras_file: &Path,
+    images: &Path,
+    shard: Option<Shard>,
+) -> Result<(Vec<(usize, Camera)>, String)> {
+    let (all, format) = camera::load_camera_file(cameras_file, &camera::PathTiming::default())?;
+    let total = all.len();
+    let (cams, rule) = split_cameras(all, &args.split, images);
+    if cams.is_empty() {
+        bail!(
+            "{}: the {} split is empty ({total} camera(s); {rule})",
+            cameras_file.display(),
+            args.split
+        );
+    }
+    note!(
+        "{} split: {} of {total} camera(s) of {} ({format}); {rule}",
+        args.split,
+        cams.len(),
+        cameras_file.display()
+    );
+    // The block of a shard is chosen before photos are matched, so it does not depend on
+    // which photos exist.
+    let cams = match shard {
+        Some(s) => {
+            let all = cams.len();
+            let mine = s.take(cams);
+            note!("{s}: {} of the {all} camera(s)", mine.len());
+            mine
+        }
+        None => cams,
+    };
+    Ok((cams, rule))
+}
+
+/// A camera to evaluate: its index in the camera file, the camera and its photo.
+type Job = (usize, Camera, PathBuf);
+
+/// Matches every camera with its photo before rendering anything: the cameras with one,
+/// and the names of those without (skipped with `--skip-missing`, else an error).
+fn match_photos(
+    args: &EvalArgs,
+    cams: Vec<(usize, Camera)>,
+    images: &Path,
+) -> Result<(Vec<Job>, Vec<String>)> {
+    let mut jobs = Vec::new();
+    let mut skipped = Vec::new();
+    for (k, cam) in cams {
+        match find_photo(images, &cam.name) {
+            Ok(photo) => jobs.push((k, cam, photo)),
+            Err(tried) if args.skip_missing => {
+                note!("note: camera {k} (\"{}\") has no photo ({tried}); skipped", cam.name);
+                skipped.push(cam.name.clone());
+            }
+            Err(tried) => bail!(
+                "camera {k} (\"{}\") has no photo: looked for {tried} (--skip-missing leaves such cameras out)",
+                cam.name
+            ),
+        }
+    }
+    Ok((jobs, skipped))
+}
+
+/// The device renderer and the scene uploaded to it (`None`: the CPU reference renders).
+type Gpu = Option<(GpuRenderer, vksplat::render::GpuScene)>;
+
+/// What each image is rendered and measured with.
+struct Measure<'a> {
+    args: &'a EvalArgs,
+    ppd: f64,
+    scene: &'a vksplat::model::ActivatedScene,
+    opts: &'a vksplat::cpu::RenderOptions,
+}
+
+impl Measure<'_> {
+    /// Renders and measures every camera against its photo, printing the table's rows
+    /// under a progress bar.
+    fn all(&self, gpu: &mut Gpu, jobs: &[Job]) -> Result<Vec<ImageRecord>> {
+        let bar = if self.args.quiet {
+            indicatif::ProgressBar::hidden()
+        } else {
+            let bar = indicatif::ProgressBar::new(jobs.len() as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{bar:40.cyan/blue} {pos}/{len} images  ETA {eta}  {msg}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            bar
+        };
+        outln!(
+            "{:>5}  {:<24} {:>9} {:>9} {:>9}  {:>9}",
+            "frame",
+            "camera",
+            "PSNR dB",
+            "SSIM",
+            "FLIP",
+            "size"
+        );
+        let mut results = Vec::new();
+        for (k, cam, photo_path) in jobs {
+            bar.set_message(cam.name.clone());
+            let record = self.image(gpu, *k, cam, photo_path)?;
+            bar.suspend(|| {
+                outln!(
+                    "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}",
+                    record.frame,
+                    record.camera,
+                    db(record.psnr),
+                    record.ssim,
+                    record.flip,
+                    format!("{}x{}", record.width, record.height)
+                )
+            });
+            results.push(record);
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        Ok(results)
+    }
+
+    /// Camera `k` rendered at its photo's size and measured against it.
+    fn image(
+        &self,
+        gpu: &mut Gpu,
+        k: usize,
+        cam: &Camera,
+        photo_path: &Path,
+    ) -> Result<ImageRecord> {
+        let args = self.args;
+        let photo = image_file::read_image(photo_path)?;
+        let (w, h) = render_size(cam.width, cam.height, photo.width, photo.height).ok_or_else(|| {
+            anyhow::anyhow!(
+                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}; a photo may only be smaller by one factor on both sides (images downscaled for training)",
+                cam.name,
+                cam.width,
+                cam.height,
+                photo_path.display(),
+                photo.width,
+                photo.height
+            )
+        })?;
+        let cam = cam.with_resolution(w, h)?;
+        cam.validate()?;
+        let truth = photo_rgb(&photo, photo_path, args.background)?;
+        let frame = match gpu.as_mut() {
+            Some((r, s)) => r.render(s, &cam, self.opts)?,
+            None => vksplat::cpu::render(self.scene, &cam, self.opts),
+        };
+        let render: Vec<f32> = metrics::clamped_color(&frame)
+            .into_iter()
+            .map(|v| {
+                if args.float {
+                    v
+                } else {
+                    output::to_u8(v) as f32 / 255.0
+                }
+            })
+            .collect();
+        let (wu, hu) = (w as usize, h as usize);
+        Ok(ImageRecord {
+            frame: k,
+            camera: cam.name.clone(),
+            photo: photo_path.display().to_string(),
+            width: w,
+            height: h,
+            psnr: metrics::psnr(&truth, &render, 1.0),
+            ssim: metrics::ssim(&truth, &render, wu, hu, 3),
+            flip: metrics::flip(&truth, &render, wu, hu, self.ppd),
+        })
+    }
 }
 
 /// `eval --merge DIR...`: the shard reports of one split evaluation as one report.

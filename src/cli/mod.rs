@@ -10,7 +10,6 @@ pub mod fit;
 pub mod gen;
 pub mod info;
 pub mod render;
-pub mod render_field;
 pub mod train;
 pub mod transform;
 pub mod values;

@@ -224,10 +224,9 @@ pub fn self_check(
     mut on_check: impl FnMut(&Check),
 ) -> DeviceRun {
     let wanted = |name: &str| only.map_or(true, |o| o.iter().any(|n| n == name));
-    let mut checks = Vec::new();
-    let mut push = |c: Check, checks: &mut Vec<Check>| {
-        on_check(&c);
-        checks.push(c);
+    let mut checks = Checks {
+        done: Vec::new(),
+        on_check: &mut on_check,
     };
     let opened = GpuContext::new(&ContextOptions {
         device: Some(index.to_string()),
@@ -236,134 +235,15 @@ pub fn self_check(
     });
     let ctx = match opened {
         Ok(ctx) => ctx,
-        Err(e) => {
-            let c = run_check(
-                "subgroups",
-                "open the device (the subgroup probe runs as it opens)",
-                "the device opens and its subgroups are consistent",
-                None,
-                || Err(format!("the device could not be opened: {e}")),
-            );
-            push(c, &mut checks);
-            return DeviceRun {
-                device_index: index,
-                device: format!("device #{index}"),
-                driver: String::new(),
-                subgroup_size: 0,
-                reported_subgroup_size: 0,
-                validation,
-                checks,
-                passed: false,
-            };
-        }
+        Err(e) => return unopened(index, validation, e, checks),
     };
     let info = ctx.info().clone();
     let validation = ctx.validation_enabled();
     let log = validation.then(|| ctx.validation_log());
     let log = log.as_ref();
 
-    push(
-        run_check(
-            "subgroups",
-            "the subgroup size the lanes run at against the driver's",
-            "readings consistent (a misreported size is followed)",
-            log,
-            || check_subgroups(&ctx),
-        ),
-        &mut checks,
-    );
-    if wanted("sort64") {
-        push(
-            run_check(
-                "sort64",
-                &format!("radix sort of {SORT_KEYS} random 64-bit keys vs a CPU stable sort"),
-                "exact",
-                log,
-                || check_sort(&ctx, DEFAULT_SORT_CONFIG, 64, 1),
-            ),
-            &mut checks,
-        );
-    }
-    let texel = BlendKernel::for_device(&ctx).texel();
-    if wanted("sort32") {
-        push(
-            run_check(
-                "sort32",
-                &format!(
-                    "radix sort of {SORT_KEYS} random 32-bit keys{} (the renderer's) vs a CPU \
-                 stable sort",
-                    if texel { " through texel views" } else { "" }
-                ),
-                "exact",
-                log,
-                || {
-                    let config = SortConfig {
-                        texel_io: texel,
-                        ..SORT_CONFIG_32
-                    };
-                    check_sort(&ctx, config, 32, 2)
-                },
-            ),
-            &mut checks,
-        );
-    }
-    if wanted("scan") {
-        push(
-            run_check(
-                "scan",
-                &format!("exclusive prefix sum of {SCAN_ELEMENTS} u32s vs a CPU scan"),
-                "exact",
-                log,
-                || check_scan(&ctx),
-            ),
-            &mut checks,
-        );
-    }
-    let renderer = match GpuRenderer::new(ctx) {
-        _ if !wanted("render") && !wanted("backward") => None,
-        Ok(r) => Some(r),
-        Err(e) => {
-            let message = format!("the renderer's pipelines could not be built: {e}");
-            for name in ["render", "backward"].into_iter().filter(|n| wanted(n)) {
-                let m = message.clone();
-                let c = run_check(name, "build the renderer", "builds", log, || Err(m));
-                push(c, &mut checks);
-            }
-            None
-        }
-    };
-    if let Some(mut renderer) = renderer {
-        let (w, h) = RENDER_SIZE;
-        if wanted("render") {
-            push(
-                run_check(
-                    "render",
-                    &format!("the demo scene at {w}x{h} from 2 cameras, GPU vs the CPU reference"),
-                    &format!(
-                        "colour and alpha >= {MIN_PSNR_DB} dB, >= {:.1} % within 1/255",
-                        MIN_WITHIN * 100.0
-                    ),
-                    log,
-                    || check_render(&mut renderer),
-                ),
-                &mut checks,
-            );
-        }
-        let mut rast = DiffRasterizer::with_renderer(renderer);
-        if wanted("backward") {
-            push(
-            run_check(
-                "backward",
-                "backward pass of 60 random Gaussians (SH 2) at 72x56, GPU vs the f64 CPU backward",
-                &format!("relative L2 <= {MAX_GRAD_REL_L2:.0e} per parameter group"),
-                log,
-                || check_backward(&mut rast),
-            ),
-            &mut checks,
-        );
-        }
-        drop(rast);
-    }
+    primitive_checks(&ctx, &wanted, log, &mut checks);
+    renderer_checks(ctx, &wanted, log, &mut checks);
     if let Some(log) = log {
         // Everything is destroyed by now: messages at teardown (leaks) count too.
         let total = log.lock().map(|m| m.len()).unwrap_or(0);
@@ -380,8 +260,9 @@ pub fn self_check(
                 ))
             },
         );
-        push(c, &mut checks);
+        checks.push(c);
     }
+    let checks = checks.done;
     let passed = checks.iter().all(|c| c.passed);
     DeviceRun {
         device_index: info.index,
@@ -392,6 +273,150 @@ pub fn self_check(
         validation,
         checks,
         passed,
+    }
+}
+
+/// The checks of one device run so far, each shown to `on_check` as it finishes.
+struct Checks<'a> {
+    done: Vec<Check>,
+    on_check: &'a mut dyn FnMut(&Check),
+}
+
+impl Checks<'_> {
+    fn push(&mut self, c: Check) {
+        (self.on_check)(&c);
+        self.done.push(c);
+    }
+}
+
+/// The run of a device that could not be opened: its one failed check.
+fn unopened(
+    index: usize,
+    validation: bool,
+    e: crate::gpu::GpuError,
+    mut checks: Checks,
+) -> DeviceRun {
+    let c = run_check(
+        "subgroups",
+        "open the device (the subgroup probe runs as it opens)",
+        "the device opens and its subgroups are consistent",
+        None,
+        || Err(format!("the device could not be opened: {e}")),
+    );
+    checks.push(c);
+    DeviceRun {
+        device_index: index,
+        device: format!("device #{index}"),
+        driver: String::new(),
+        subgroup_size: 0,
+        reported_subgroup_size: 0,
+        validation,
+        checks: checks.done,
+        passed: false,
+    }
+}
+
+/// The checks of the compute primitives on `ctx`: subgroups, the two radix sorts and the
+/// scan (those `wanted`).
+fn primitive_checks(
+    ctx: &GpuContext,
+    wanted: &dyn Fn(&str) -> bool,
+    log: Option<&Arc<Mutex<Vec<String>>>>,
+    checks: &mut Checks,
+) {
+    checks.push(run_check(
+        "subgroups",
+        "the subgroup size the lanes run at against the driver's",
+        "readings consistent (a misreported size is followed)",
+        log,
+        || check_subgroups(ctx),
+    ));
+    if wanted("sort64") {
+        checks.push(run_check(
+            "sort64",
+            &format!("radix sort of {SORT_KEYS} random 64-bit keys vs a CPU stable sort"),
+            "exact",
+            log,
+            || check_sort(ctx, DEFAULT_SORT_CONFIG, 64, 1),
+        ));
+    }
+    let texel = BlendKernel::for_device(ctx).texel();
+    if wanted("sort32") {
+        checks.push(run_check(
+            "sort32",
+            &format!(
+                "radix sort of {SORT_KEYS} random 32-bit keys{} (the renderer's) vs a CPU \
+                 stable sort",
+                if texel { " through texel views" } else { "" }
+            ),
+            "exact",
+            log,
+            || {
+                let config = SortConfig {
+                    texel_io: texel,
+                    ..SORT_CONFIG_32
+                };
+                check_sort(ctx, config, 32, 2)
+            },
+        ));
+    }
+    if wanted("scan") {
+        checks.push(run_check(
+            "scan",
+            &format!("exclusive prefix sum of {SCAN_ELEMENTS} u32s vs a CPU scan"),
+            "exact",
+            log,
+            || check_scan(ctx),
+        ));
+    }
+}
+
+/// The checks of the renderer built on `ctx` (which it takes, and drops with everything
+/// else before returning): the forward render and the backward pass (those `wanted`).
+fn renderer_checks(
+    ctx: GpuContext,
+    wanted: &dyn Fn(&str) -> bool,
+    log: Option<&Arc<Mutex<Vec<String>>>>,
+    checks: &mut Checks,
+) {
+    let renderer = match GpuRenderer::new(ctx) {
+        _ if !wanted("render") && !wanted("backward") => None,
+        Ok(r) => Some(r),
+        Err(e) => {
+            let message = format!("the renderer's pipelines could not be built: {e}");
+            for name in ["render", "backward"].into_iter().filter(|n| wanted(n)) {
+                let m = message.clone();
+                let c = run_check(name, "build the renderer", "builds", log, || Err(m));
+                checks.push(c);
+            }
+            None
+        }
+    };
+    if let Some(mut renderer) = renderer {
+        let (w, h) = RENDER_SIZE;
+        if wanted("render") {
+            checks.push(run_check(
+                "render",
+                &format!("the demo scene at {w}x{h} from 2 cameras, GPU vs the CPU reference"),
+                &format!(
+                    "colour and alpha >= {MIN_PSNR_DB} dB, >= {:.1} % within 1/255",
+                    MIN_WITHIN * 100.0
+                ),
+                log,
+                || check_render(&mut renderer),
+            ));
+        }
+        let mut rast = DiffRasterizer::with_renderer(renderer);
+        if wanted("backward") {
+            checks.push(run_check(
+                "backward",
+                "backward pass of 60 random Gaussians (SH 2) at 72x56, GPU vs the f64 CPU backward",
+                &format!("relative L2 <= {MAX_GRAD_REL_L2:.0e} per parameter group"),
+                log,
+                || check_backward(&mut rast),
+            ));
+        }
+        drop(rast);
     }
 }
 

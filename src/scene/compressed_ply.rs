@@ -131,49 +131,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
                 .into(),
         ));
     }
-    // Lay out every element; the format only has fixed-size scalar rows.
-    let mut tables = Vec::new();
-    let mut pos = header.body_offset as u64;
-    for el in &header.elements {
-        let mut row = 0u64;
-        for p in &el.properties {
-            match p {
-                Property::Scalar { ty, .. } => row += ty.size() as u64,
-                Property::List { name, .. } => {
-                    return Err(bad(format!(
-                        "is a compressed PLY with a list property \"{name}\" in element \"{}\", which the format does not have",
-                        el.name
-                    )))
-                }
-            }
-        }
-        let end = row
-            .checked_mul(el.count)
-            .and_then(|size| pos.checked_add(size))
-            .filter(|&e| e <= bytes.len() as u64)
-            .ok_or_else(|| {
-                bad(format!(
-                    "is truncated or its header lies: it declares {} {} elements of {row} bytes but only {} bytes of data follow",
-                    el.count,
-                    el.name,
-                    (bytes.len() as u64).saturating_sub(pos)
-                ))
-            })?;
-        tables.push(Table {
-            bytes,
-            start: pos as usize,
-            row: row as usize,
-            count: el.count as usize,
-            el,
-        });
-        pos = end;
-    }
-    if pos != bytes.len() as u64 {
-        return Err(bad(format!(
-            "has {} bytes after the last element the header declares; its counts do not match the data",
-            bytes.len() as u64 - pos
-        )));
-    }
+    let tables = lay_out(bytes, &header, path)?;
     let table = |name: &str| tables.iter().find(|t| t.el.name == name);
     let (Some(chunks), Some(verts)) = (table("chunk"), table("vertex")) else {
         return Err(bad(
@@ -200,39 +158,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
             "is a compressed PLY whose packed vertex properties are {ty:?}, not uint"
         )));
     }
-
-    // Optional SH element: f_rest_* bytes, channel-major.
-    let (sh_degree, sh_cols) = match table("sh") {
-        None => (0, Vec::new()),
-        Some(t) => {
-            if t.count != n {
-                return Err(bad(format!(
-                    "has {} sh rows for {n} vertices; a compressed PLY needs one per vertex",
-                    t.count
-                )));
-            }
-            let k =
-                t.el.properties
-                    .iter()
-                    .filter(|p| p.name().starts_with("f_rest_"))
-                    .count();
-            let degree = match k {
-                0 => 0,
-                9 => 1,
-                24 => 2,
-                45 => 3,
-                k => {
-                    return Err(bad(format!(
-                        "has {k} f_rest_* properties in its sh element; 0, 9, 24 or 45 (SH degree 0 to 3) are valid"
-                    )))
-                }
-            };
-            let cols = (0..k)
-                .map(|j| t.column(&format!("f_rest_{j}"), path))
-                .collect::<Result<Vec<_>, _>>()?;
-            (degree, cols)
-        }
-    };
+    let (sh_degree, sh_cols) = sh_columns(table("sh"), n, path)?;
     let k_rest = super::sh_coeffs_for_degree(sh_degree) - 1;
 
     let mut scene = Scene::empty(sh_degree);
@@ -278,6 +204,100 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     }
     super::check_decoded(&scene, path, "compressed PLY")?;
     Ok(scene)
+}
+
+/// Lays out every element of the body; the format only has fixed-size scalar rows, and
+/// the elements must fill the file exactly.
+fn lay_out<'a>(
+    bytes: &'a [u8],
+    header: &'a Header,
+    path: &Path,
+) -> Result<Vec<Table<'a>>, SceneError> {
+    let bad = |m: String| SceneError::invalid(path, m);
+    let mut tables = Vec::new();
+    let mut pos = header.body_offset as u64;
+    for el in &header.elements {
+        let mut row = 0u64;
+        for p in &el.properties {
+            match p {
+                Property::Scalar { ty, .. } => row += ty.size() as u64,
+                Property::List { name, .. } => {
+                    return Err(bad(format!(
+                        "is a compressed PLY with a list property \"{name}\" in element \"{}\", which the format does not have",
+                        el.name
+                    )))
+                }
+            }
+        }
+        let end = row
+            .checked_mul(el.count)
+            .and_then(|size| pos.checked_add(size))
+            .filter(|&e| e <= bytes.len() as u64)
+            .ok_or_else(|| {
+                bad(format!(
+                    "is truncated or its header lies: it declares {} {} elements of {row} bytes but only {} bytes of data follow",
+                    el.count,
+                    el.name,
+                    (bytes.len() as u64).saturating_sub(pos)
+                ))
+            })?;
+        tables.push(Table {
+            bytes,
+            start: pos as usize,
+            row: row as usize,
+            count: el.count as usize,
+            el,
+        });
+        pos = end;
+    }
+    if pos != bytes.len() as u64 {
+        return Err(bad(format!(
+            "has {} bytes after the last element the header declares; its counts do not match the data",
+            bytes.len() as u64 - pos
+        )));
+    }
+    Ok(tables)
+}
+
+/// The optional SH element (`f_rest_*` bytes, channel-major, one row per vertex of `n`):
+/// its SH degree and columns (degree 0 and none without one).
+fn sh_columns(
+    sh: Option<&Table>,
+    n: usize,
+    path: &Path,
+) -> Result<(u32, Vec<(usize, ScalarType)>), SceneError> {
+    let bad = |m: String| SceneError::invalid(path, m);
+    Ok(match sh {
+        None => (0, Vec::new()),
+        Some(t) => {
+            if t.count != n {
+                return Err(bad(format!(
+                    "has {} sh rows for {n} vertices; a compressed PLY needs one per vertex",
+                    t.count
+                )));
+            }
+            let k =
+                t.el.properties
+                    .iter()
+                    .filter(|p| p.name().starts_with("f_rest_"))
+                    .count();
+            let degree = match k {
+                0 => 0,
+                9 => 1,
+                24 => 2,
+                45 => 3,
+                k => {
+                    return Err(bad(format!(
+                        "has {k} f_rest_* properties in its sh element; 0, 9, 24 or 45 (SH degree 0 to 3) are valid"
+                    )))
+                }
+            };
+            let cols = (0..k)
+                .map(|j| t.column(&format!("f_rest_{j}"), path))
+                .collect::<Result<Vec<_>, _>>()?;
+            (degree, cols)
+        }
+    })
 }
 
 #[cfg(test)]

@@ -509,104 +509,139 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     }
     for (ei, el) in header.elements.iter().enumerate() {
         body.check_fits(el)?;
-        let mut row = vec![0f64; el.properties.len()];
         if ei != vi {
             // A row without properties holds no bytes: there is nothing to read, and
             // looping over a claimed 2^64 of them would never end.
             if el.properties.is_empty() {
                 continue;
             }
+            let mut row = vec![0f64; el.properties.len()];
             for r in 0..el.count {
                 body.read_row(el, r, &mut row)?;
             }
             continue;
         }
-        // Every property of a row takes at least one byte in any encoding, so a lying
-        // count (an ASCII header may claim 2^40 vertices) cannot reserve more rows than
-        // the remaining bytes can hold.
-        let room = (bytes.len() - body.pos) / el.properties.len().max(1);
-        let n = (el.count as usize).min(room);
-        scene.positions.reserve_exact(n);
-        scene.log_scales.reserve_exact(n);
-        scene.rotations.reserve_exact(n);
-        scene.opacity_logits.reserve_exact(n);
-        scene.sh.reserve_exact(n * scene.sh_stride());
-        scene.features.reserve_exact(n * map.features.len());
-        let k_rest = sh_coeffs_for_degree(map.sh_degree) - 1;
-        let all_f32 = header.format != Format::Ascii
-            && el.properties.iter().all(|p| {
-                matches!(
-                    p,
-                    Property::Scalar {
-                        ty: ScalarType::F32,
-                        ..
-                    }
-                )
-            });
-        for r in 0..el.count {
-            if all_f32 {
-                // Fast path for the all-float layout every trainer writes.
-                let be = header.format == Format::BinaryBe;
-                for (pi, v) in row.iter_mut().enumerate() {
-                    *v = ScalarType::F32.read(&bytes[body.pos + 4 * pi..], be);
+        read_vertices(&mut body, el, &map, &mut scene)?;
+    }
+    check_end(&body, header.body_offset)?;
+    Ok(scene)
+}
+
+/// Reads the rows of the vertex element `el` into `scene`, as `map` places them.
+fn read_vertices(
+    body: &mut Body,
+    el: &Element,
+    map: &VertexMap,
+    scene: &mut Scene,
+) -> Result<(), SceneError> {
+    let bytes = body.bytes;
+    let mut row = vec![0f64; el.properties.len()];
+    // Every property of a row takes at least one byte in any encoding, so a lying
+    // count (an ASCII header may claim 2^40 vertices) cannot reserve more rows than
+    // the remaining bytes can hold.
+    let room = (bytes.len() - body.pos) / el.properties.len().max(1);
+    let n = (el.count as usize).min(room);
+    scene.positions.reserve_exact(n);
+    scene.log_scales.reserve_exact(n);
+    scene.rotations.reserve_exact(n);
+    scene.opacity_logits.reserve_exact(n);
+    scene.sh.reserve_exact(n * scene.sh_stride());
+    scene.features.reserve_exact(n * map.features.len());
+    let all_f32 = body.format != Format::Ascii
+        && el.properties.iter().all(|p| {
+            matches!(
+                p,
+                Property::Scalar {
+                    ty: ScalarType::F32,
+                    ..
                 }
-                body.pos += 4 * el.properties.len();
-            } else {
-                body.read_row(el, r, &mut row)?;
+            )
+        });
+    for r in 0..el.count {
+        if all_f32 {
+            // Fast path for the all-float layout every trainer writes.
+            let be = body.format == Format::BinaryBe;
+            for (pi, v) in row.iter_mut().enumerate() {
+                *v = ScalarType::F32.read(&bytes[body.pos + 4 * pi..], be);
             }
-            let get = |pi: usize| -> Result<f32, SceneError> {
-                let v = row[pi] as f32;
-                if v.is_finite() {
-                    Ok(v)
-                } else {
-                    Err(SceneError::invalid(
-                        path,
-                        format!(
-                            "vertex {r} has a non-finite value ({v}) in property \"{}\"",
-                            el.properties[pi].name()
-                        ),
-                    ))
-                }
-            };
-            scene
-                .positions
-                .push([get(map.xyz[0])?, get(map.xyz[1])?, get(map.xyz[2])?]);
-            scene
-                .log_scales
-                .push([get(map.scale[0])?, get(map.scale[1])?, get(map.scale[2])?]);
-            let q = [
-                get(map.rot[0])?,
-                get(map.rot[1])?,
-                get(map.rot[2])?,
-                get(map.rot[3])?,
-            ];
-            let norm2 = q.iter().map(|v| v * v).sum::<f32>();
-            if norm2 == 0.0 || !norm2.is_finite() {
-                return Err(SceneError::invalid(
-                    path,
-                    format!("vertex {r} has a zero-length rotation quaternion (rot_0..rot_3 = {q:?}), which cannot be normalised"),
-                ));
-            }
-            scene.rotations.push(q);
-            scene.opacity_logits.push(get(map.opacity)?);
-            for c in 0..3 {
-                scene.sh.push(get(map.f_dc[c])?);
-            }
-            // f_rest is channel-major in the file; store coefficient-major, channel innermost.
-            for k in 0..k_rest {
-                for c in 0..3 {
-                    scene.sh.push(get(map.f_rest[c * k_rest + k])?);
-                }
-            }
-            for &f in &map.features {
-                scene.features.push(get(f)?);
-            }
-            if let (Some([m, l]), Some(t)) = (map.time, scene.time.as_mut()) {
-                t.push([get(m)?, get(l)?]);
-            }
+            body.pos += 4 * el.properties.len();
+        } else {
+            body.read_row(el, r, &mut row)?;
+        }
+        push_vertex(&row, r, el, map, scene, body.path)?;
+    }
+    Ok(())
+}
+
+/// Appends vertex `r` (its property values `row`) to `scene`; every value it uses must
+/// be finite and its rotation of non-zero length.
+fn push_vertex(
+    row: &[f64],
+    r: u64,
+    el: &Element,
+    map: &VertexMap,
+    scene: &mut Scene,
+    path: &Path,
+) -> Result<(), SceneError> {
+    let k_rest = sh_coeffs_for_degree(map.sh_degree) - 1;
+    let get = |pi: usize| -> Result<f32, SceneError> {
+        let v = row[pi] as f32;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(SceneError::invalid(
+                path,
+                format!(
+                    "vertex {r} has a non-finite value ({v}) in property \"{}\"",
+                    el.properties[pi].name()
+                ),
+            ))
+        }
+    };
+    scene
+        .positions
+        .push([get(map.xyz[0])?, get(map.xyz[1])?, get(map.xyz[2])?]);
+    scene
+        .log_scales
+        .push([get(map.scale[0])?, get(map.scale[1])?, get(map.scale[2])?]);
+    let q = [
+        get(map.rot[0])?,
+        get(map.rot[1])?,
+        get(map.rot[2])?,
+        get(map.rot[3])?,
+    ];
+    let norm2 = q.iter().map(|v| v * v).sum::<f32>();
+    if norm2 == 0.0 || !norm2.is_finite() {
+        return Err(SceneError::invalid(
+            path,
+            format!("vertex {r} has a zero-length rotation quaternion (rot_0..rot_3 = {q:?}), which cannot be normalised"),
+        ));
+    }
+    scene.rotations.push(q);
+    scene.opacity_logits.push(get(map.opacity)?);
+    for c in 0..3 {
+        scene.sh.push(get(map.f_dc[c])?);
+    }
+    // f_rest is channel-major in the file; store coefficient-major, channel innermost.
+    for k in 0..k_rest {
+        for c in 0..3 {
+            scene.sh.push(get(map.f_rest[c * k_rest + k])?);
         }
     }
-    if header.format != Format::Ascii && body.pos != bytes.len() {
+    for &f in &map.features {
+        scene.features.push(get(f)?);
+    }
+    if let (Some([m, l]), Some(t)) = (map.time, scene.time.as_mut()) {
+        t.push([get(m)?, get(l)?]);
+    }
+    Ok(())
+}
+
+/// Checks what follows the last element: nothing in a binary file; in an ASCII one, the
+/// line break that ends the last row and nothing but white space.
+fn check_end(body: &Body, body_offset: usize) -> Result<(), SceneError> {
+    let (bytes, path) = (body.bytes, body.path);
+    if body.format != Format::Ascii && body.pos != bytes.len() {
         return Err(SceneError::invalid(
             path,
             format!(
@@ -615,8 +650,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
             ),
         ));
     }
-    if header.format == Format::Ascii
-        && body.pos > header.body_offset
+    if body.format == Format::Ascii
+        && body.pos > body_offset
         && !bytes[body.pos..].iter().any(|&b| b == b'\n' || b == b'\r')
     {
         // Every writer ends the last row with a line break; without one, a file cut
@@ -626,14 +661,13 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
             "ends inside its last value, without a line break after it; the file is truncated",
         ));
     }
-    if header.format == Format::Ascii && bytes[body.pos..].iter().any(|b| !b.is_ascii_whitespace())
-    {
+    if body.format == Format::Ascii && bytes[body.pos..].iter().any(|b| !b.is_ascii_whitespace()) {
         return Err(SceneError::invalid(
             path,
             "has more values than its header declares; its counts do not match the data",
         ));
     }
-    Ok(scene)
+    Ok(())
 }
 
 /// Encoding of a PLY body, as read or as written by [`to_bytes`].

@@ -164,6 +164,59 @@ fn parse_with(
     path: &Path,
 ) -> Result<Scene, SceneError> {
     let bad = |m: String| SceneError::invalid(path, m);
+    let meta = parse_meta(meta_bytes, path)?;
+    let n = meta.count;
+    let means_l = files.texture(&meta.means.files, 0, "means", n)?;
+    let means_u = files.texture(&meta.means.files, 1, "means", n)?;
+    let scales = files.texture(&meta.scales.files, 0, "scales", n)?;
+    let quats = files.texture(&meta.quats.files, 0, "quats", n)?;
+    let sh0 = files.texture(&meta.sh0.files, 0, "sh0", n)?;
+    // The textures are at least n pixels, so n fits in memory from here on.
+    let n = n as usize;
+
+    let sh_n = match &meta.sh_n {
+        None => None,
+        Some(s) => Some(ShPalette::load(s, files, meta.count)?),
+    };
+    let degree = sh_n.as_ref().map_or(0, |p| p.meta.bands);
+
+    let mut scene = Scene::empty(degree);
+    scene.antialiased = meta.antialias;
+    scene.positions.reserve_exact(n);
+    scene.log_scales.reserve_exact(n);
+    scene.rotations.reserve_exact(n);
+    scene.opacity_logits.reserve_exact(n);
+    scene.sh.reserve_exact(n * scene.sh_stride());
+    let (mins, maxs) = (meta.means.mins, meta.means.maxs);
+    let unlog = |v: f64| v.signum() * (v.abs().exp() - 1.0);
+    for i in 0..n {
+        let (lo, hi) = (means_l.px(i), means_u.px(i));
+        scene.positions.push(std::array::from_fn(|a| {
+            let q = (lo[a] as u32 | (hi[a] as u32) << 8) as f64 / 65535.0;
+            unlog(mins[a] + (maxs[a] - mins[a]) * q) as f32
+        }));
+        let s = scales.px(i);
+        scene
+            .log_scales
+            .push(std::array::from_fn(|a| meta.scales.codebook[s[a] as usize]));
+        scene.rotations.push(rotation(quats.px(i), i).map_err(bad)?);
+        let c = sh0.px(i);
+        scene.opacity_logits.push(logit_from_u8(c[3]));
+        scene
+            .sh
+            .extend(c[..3].iter().map(|&b| meta.sh0.codebook[b as usize]));
+        if let Some(palette) = &sh_n {
+            palette.extend(&mut scene.sh, i).map_err(bad)?;
+        }
+    }
+    super::check_decoded(&scene, path, "SOG")?;
+    Ok(scene)
+}
+
+/// Reads `meta.json` and checks what the decoding relies on: version 2, 256 finite
+/// entries in each codebook, finite means bounds.
+fn parse_meta(meta_bytes: &[u8], path: &Path) -> Result<Meta, SceneError> {
+    let bad = |m: String| SceneError::invalid(path, m);
     let meta: Meta = serde_json::from_slice(meta_bytes)
         .map_err(|e| bad(format!("has a SOG meta.json that is not valid: {e}")))?;
     match meta.version {
@@ -200,16 +253,27 @@ fn parse_with(
     {
         return Err(bad("has non-finite SOG means bounds".into()));
     }
-    let n = meta.count;
-    let file = |list: &[String], k: usize, what: &str| -> Result<String, SceneError> {
-        list.get(k).cloned().ok_or_else(|| {
+    Ok(meta)
+}
+
+impl SogFiles<'_> {
+    /// The texture named by entry `k` of a meta.json file list (`what` names the entry),
+    /// decoded from WebP; it must hold at least `n` pixels.
+    fn texture(
+        &mut self,
+        list: &[String],
+        k: usize,
+        what: &str,
+        n: u64,
+    ) -> Result<Texture, SceneError> {
+        let path = self.path;
+        let bad = |m: String| SceneError::invalid(path, m);
+        let name = list.get(k).cloned().ok_or_else(|| {
             bad(format!(
                 "has a SOG meta.json whose {what} entry lists too few files"
             ))
-        })
-    };
-    let mut texture = |name: String| -> Result<Texture, SceneError> {
-        let bytes = files.read(&name)?;
+        })?;
+        let bytes = self.read(&name)?;
         let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::WebP)
             .map_err(|e| {
                 bad(format!(
@@ -227,116 +291,103 @@ fn parse_with(
             width: w as usize,
             rgba: img.into_raw(),
         })
-    };
-    let means_l = texture(file(&meta.means.files, 0, "means")?)?;
-    let means_u = texture(file(&meta.means.files, 1, "means")?)?;
-    let scales = texture(file(&meta.scales.files, 0, "scales")?)?;
-    let quats = texture(file(&meta.quats.files, 0, "quats")?)?;
-    let sh0 = texture(file(&meta.sh0.files, 0, "sh0")?)?;
-    // The textures are at least n pixels, so n fits in memory from here on.
-    let n = n as usize;
+    }
+}
 
-    let sh_n = match &meta.sh_n {
-        None => None,
-        Some(s) => {
-            if !(1..=3).contains(&s.bands) {
-                return Err(bad(format!(
-                    "has {} SH bands in its SOG shN entry; 1 to 3 are valid",
-                    s.bands
-                )));
-            }
-            if s.codebook.len() != 256 || s.codebook.iter().any(|v| !v.is_finite()) {
-                return Err(bad(format!(
-                    "has a SOG shN codebook of {} entries; it must hold 256 finite numbers",
-                    s.codebook.len()
-                )));
-            }
-            if !(1..=65536).contains(&s.count) {
-                return Err(bad(format!(
-                    "has a SOG SH palette of {} entries; 1 to 65536 are valid",
-                    s.count
-                )));
-            }
-            let centroids = texture(file(&s.files, 0, "shN")?)?;
-            let labels = texture(file(&s.files, 1, "shN")?)?;
-            let coeffs = super::sh_coeffs_for_degree(s.bands) - 1;
-            let rows = (s.count as usize).div_ceil(64);
-            if centroids.width < 64 * coeffs || centroids.rgba.len() / 4 / centroids.width < rows {
-                return Err(bad(format!(
-                    "has a SOG shN_centroids texture too small for {} palette entries of {coeffs} coefficients",
-                    s.count
-                )));
-            }
-            Some((s, centroids, labels, coeffs))
+/// The rotation of Gaussian `i` from its pixel of the quats texture: three components and
+/// the tag of the omitted largest one, rebuilt positive. `Err`: the tag is invalid.
+fn rotation(q: &[u8], i: usize) -> Result<[f32; 4], String> {
+    let largest = match q[3] {
+        252..=255 => (q[3] - 252) as usize,
+        tag => {
+            return Err(format!(
+                "has an invalid quaternion tag {tag} for Gaussian {i} in its SOG quats texture; 252 to 255 are valid"
+            ))
         }
     };
-    let degree = sh_n.as_ref().map_or(0, |(s, ..)| s.bands);
-
-    let mut scene = Scene::empty(degree);
-    scene.antialiased = meta.antialias;
-    scene.positions.reserve_exact(n);
-    scene.log_scales.reserve_exact(n);
-    scene.rotations.reserve_exact(n);
-    scene.opacity_logits.reserve_exact(n);
-    scene.sh.reserve_exact(n * scene.sh_stride());
-    let (mins, maxs) = (meta.means.mins, meta.means.maxs);
-    let unlog = |v: f64| v.signum() * (v.abs().exp() - 1.0);
-    for i in 0..n {
-        let (lo, hi) = (means_l.px(i), means_u.px(i));
-        scene.positions.push(std::array::from_fn(|a| {
-            let q = (lo[a] as u32 | (hi[a] as u32) << 8) as f64 / 65535.0;
-            unlog(mins[a] + (maxs[a] - mins[a]) * q) as f32
-        }));
-        let s = scales.px(i);
-        scene
-            .log_scales
-            .push(std::array::from_fn(|a| meta.scales.codebook[s[a] as usize]));
-        let q = quats.px(i);
-        let largest = match q[3] {
-            252..=255 => (q[3] - 252) as usize,
-            tag => {
-                return Err(bad(format!(
-                    "has an invalid quaternion tag {tag} for Gaussian {i} in its SOG quats texture; 252 to 255 are valid"
-                )))
-            }
-        };
-        let mut rot = [0f32; 4];
-        let mut kept = q[..3]
-            .iter()
-            .map(|&b| (b as f32 / 255.0 * 2.0 - 1.0) / std::f32::consts::SQRT_2);
-        for (k, r) in rot.iter_mut().enumerate() {
-            if k != largest {
-                *r = kept.next().unwrap_or(0.0);
-            }
-        }
-        rot[largest] = (1.0 - rot.iter().map(|v| v * v).sum::<f32>())
-            .max(0.0)
-            .sqrt();
-        scene.rotations.push(rot);
-        let c = sh0.px(i);
-        scene.opacity_logits.push(logit_from_u8(c[3]));
-        scene
-            .sh
-            .extend(c[..3].iter().map(|&b| meta.sh0.codebook[b as usize]));
-        if let Some((s, centroids, labels, coeffs)) = &sh_n {
-            let l = labels.px(i);
-            let label = l[0] as usize | (l[1] as usize) << 8;
-            if label as u64 >= s.count {
-                return Err(bad(format!(
-                    "has SH palette label {label} for Gaussian {i}, beyond its {} palette entries",
-                    s.count
-                )));
-            }
-            for k in 0..*coeffs {
-                let x = (label % 64) * coeffs + k;
-                let y = label / 64;
-                let p = centroids.px(y * centroids.width + x);
-                scene
-                    .sh
-                    .extend(p[..3].iter().map(|&b| s.codebook[b as usize]));
-            }
+    let mut rot = [0f32; 4];
+    let mut kept = q[..3]
+        .iter()
+        .map(|&b| (b as f32 / 255.0 * 2.0 - 1.0) / std::f32::consts::SQRT_2);
+    for (k, r) in rot.iter_mut().enumerate() {
+        if k != largest {
+            *r = kept.next().unwrap_or(0.0);
         }
     }
-    super::check_decoded(&scene, path, "SOG")?;
-    Ok(scene)
+    rot[largest] = (1.0 - rot.iter().map(|v| v * v).sum::<f32>())
+        .max(0.0)
+        .sqrt();
+    Ok(rot)
+}
+
+/// The SH palette of the `shN` entry: its meta.json entry, the centroids (the palette)
+/// and labels (each Gaussian's entry) textures, and the coefficients per entry.
+struct ShPalette<'m> {
+    meta: &'m ShN,
+    centroids: Texture,
+    labels: Texture,
+    coeffs: usize,
+}
+
+impl<'m> ShPalette<'m> {
+    /// Checks the `shN` entry and loads its textures (the labels of `n` Gaussians).
+    fn load(s: &'m ShN, files: &mut SogFiles<'_>, n: u64) -> Result<ShPalette<'m>, SceneError> {
+        let path = files.path;
+        let bad = |m: String| SceneError::invalid(path, m);
+        if !(1..=3).contains(&s.bands) {
+            return Err(bad(format!(
+                "has {} SH bands in its SOG shN entry; 1 to 3 are valid",
+                s.bands
+            )));
+        }
+        if s.codebook.len() != 256 || s.codebook.iter().any(|v| !v.is_finite()) {
+            return Err(bad(format!(
+                "has a SOG shN codebook of {} entries; it must hold 256 finite numbers",
+                s.codebook.len()
+            )));
+        }
+        if !(1..=65536).contains(&s.count) {
+            return Err(bad(format!(
+                "has a SOG SH palette of {} entries; 1 to 65536 are valid",
+                s.count
+            )));
+        }
+        let centroids = files.texture(&s.files, 0, "shN", n)?;
+        let labels = files.texture(&s.files, 1, "shN", n)?;
+        let coeffs = super::sh_coeffs_for_degree(s.bands) - 1;
+        let rows = (s.count as usize).div_ceil(64);
+        if centroids.width < 64 * coeffs || centroids.rgba.len() / 4 / centroids.width < rows {
+            return Err(bad(format!(
+                "has a SOG shN_centroids texture too small for {} palette entries of {coeffs} coefficients",
+                s.count
+            )));
+        }
+        Ok(ShPalette {
+            meta: s,
+            centroids,
+            labels,
+            coeffs,
+        })
+    }
+
+    /// Appends the higher SH coefficients of Gaussian `i` (its palette entry's) to `sh`.
+    /// `Err`: its label is beyond the palette.
+    fn extend(&self, sh: &mut Vec<f32>, i: usize) -> Result<(), String> {
+        let (s, centroids, coeffs) = (self.meta, &self.centroids, &self.coeffs);
+        let l = self.labels.px(i);
+        let label = l[0] as usize | (l[1] as usize) << 8;
+        if label as u64 >= s.count {
+            return Err(format!(
+                "has SH palette label {label} for Gaussian {i}, beyond its {} palette entries",
+                s.count
+            ));
+        }
+        for k in 0..*coeffs {
+            let x = (label % 64) * coeffs + k;
+            let y = label / 64;
+            let p = centroids.px(y * centroids.width + x);
+            sh.extend(p[..3].iter().map(|&b| s.codebook[b as usize]));
+        }
+        Ok(())
+    }
 }

@@ -3,62 +3,18 @@
 //! the f64 reference; EXR and `.npy` hold the channels, a PNG one channel through the
 //! turbo colour map (or the `--shader`), optionally with a labelled colour bar.
 
-use super::common::fail_on_validation_messages;
-use super::values;
+use super::args::RenderArgs;
+use super::time::Animation;
+use crate::cli::common::fail_on_validation_messages;
 use anyhow::{bail, Result};
-use clap::Args;
 use std::path::Path;
 use vksplat::camera::Camera;
-use vksplat::cpu::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
+use vksplat::cpu::field::{FieldGaussians, FieldMode};
 use vksplat::cpu::SplatKernel;
 use vksplat::frame::Frame;
 use vksplat::note;
 use vksplat::output::{self, RenderMode};
 use vksplat::sequence::{FramePlan, RunOptions, Summary};
-
-/// A colour-map range: fixed, or `None` for auto.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct ColourRange(pub(crate) Option<[f32; 2]>);
-
-fn colour_range(s: &str) -> Result<ColourRange, String> {
-    values::colour_range(s).map(ColourRange)
-}
-
-/// The options of the field renders.
-#[derive(Args)]
-pub(crate) struct FieldArgs {
-    /// field-slice: the plane, a point PX,PY,PZ on it and its normal NX,NY,NZ (each pixel
-    /// shows the field where its ray meets the plane; empty where it does not).
-    #[arg(long, value_name = "PX,PY,PZ,NX,NY,NZ", value_parser = values::plane, allow_hyphen_values = true)]
-    pub(crate) slice_plane: Option<[f32; 6]>,
-    /// field-max: samples along each ray's chord through the field's box (1 to 256)
-    /// [default: 128].
-    #[arg(long, value_name = "S", value_parser = values::int_in(1u32, MAX_FIELD_SAMPLES))]
-    pub(crate) max_samples: Option<u32>,
-    /// Field render PNG: the channel shown through the colour map [default: 0].
-    #[arg(long, value_name = "C")]
-    pub(crate) channel: Option<usize>,
-    /// Field render PNG: the colour map's range LO,HI (values beyond it get the end
-    /// colours) or auto (the 1st to 99th percentile of the channel in the first frame,
-    /// printed) [default: auto].
-    #[arg(long, value_name = "LO,HI|auto", value_parser = colour_range, allow_hyphen_values = true)]
-    pub(crate) range: Option<ColourRange>,
-    /// Field render PNG: add a colour bar under the image, labelled with the range's ends
-    /// and the channel's name (and --units).
-    #[arg(long)]
-    pub(crate) colorbar: bool,
-    /// The channel's name on the colour bar [default: feat_C].
-    #[arg(long, value_name = "NAME")]
-    pub(crate) channel_name: Option<String>,
-    /// The channel's units on the colour bar (e.g. V/m).
-    #[arg(long, value_name = "UNITS")]
-    pub(crate) units: Option<String>,
-    /// field-slice, field-integral: channels I,Q are one complex field (what `fit --complex`
-    /// writes): two channels are appended, its magnitude |I + iQ| (K) and phase (K + 1),
-    /// and the PNG shows the magnitude unless --channel says otherwise.
-    #[arg(long, value_name = "I,Q", value_parser = super::fit::channel_pair)]
-    pub(crate) complex: Option<(usize, usize)>,
-}
 
 /// `field-slice` etc., for messages.
 pub(crate) fn mode_name(mode: Option<RenderMode>) -> &'static str {
@@ -72,7 +28,7 @@ pub(crate) fn mode_name(mode: Option<RenderMode>) -> &'static str {
 
 /// Whether the output is a PNG (the default, a `.png` name, or a folder with `--format
 /// png`).
-pub(crate) fn writes_png(args: &super::render::RenderArgs) -> bool {
+pub(crate) fn writes_png(args: &RenderArgs) -> bool {
     let Some(out) = &args.output else {
         return true;
     };
@@ -84,10 +40,7 @@ pub(crate) fn writes_png(args: &super::render::RenderArgs) -> bool {
 
 /// Refuses field options without a field mode, options the mode ignores, and render
 /// options that do not apply to the field.
-pub(crate) fn check_options(
-    args: &super::render::RenderArgs,
-    mode: Option<RenderMode>,
-) -> Result<()> {
+pub(crate) fn check_options(args: &RenderArgs, mode: Option<RenderMode>) -> Result<()> {
     let f = &args.field;
     let png_only = [
         ("--channel", f.channel.is_some()),
@@ -148,9 +101,9 @@ pub(crate) fn check_options(
 /// its time) under `mode` and writes them.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
-    args: &super::render::RenderArgs,
+    args: &RenderArgs,
     scene: &vksplat::model::ActivatedScene,
-    animation: Option<&super::render::Animation>,
+    animation: Option<&Animation>,
     kernel: SplatKernel,
     mode: RenderMode,
     frames: &[FramePlan],
