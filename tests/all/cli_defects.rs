@@ -682,12 +682,29 @@ fn interrupting_a_path_stops_cleanly() {
     }
 }
 
-/// Item 11: every option the README names exists, and every subcommand's help has
-/// examples.
+/// README.md and every docs/*.md, one after the other: the documentation an option may
+/// be named in.
+fn documentation() -> String {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut pages: Vec<_> = std::fs::read_dir(root.join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .collect();
+    pages.sort();
+    pages.insert(0, root.join("README.md"));
+    pages
+        .iter()
+        .map(|p| std::fs::read_to_string(p).unwrap())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Item 11: every option the README and docs/ name exists, and every subcommand's help
+/// has examples.
 #[test]
 fn readme_and_help_agree() {
-    let readme =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let readme = documentation();
     let commands = [
         "render", "info", "bench", "gen", "fit", "convert", "compare", "eval", "train", "view",
     ];
@@ -701,7 +718,7 @@ fn readme_and_help_agree() {
         })
         .collect();
     let all_help = helps.join("\n");
-    // Flags of other programs the README shows (cargo, the test script).
+    // Flags of other programs the README and docs/ show (cargo, the test script).
     let foreign = [
         "--release",
         "--all-targets",
@@ -720,6 +737,13 @@ fn readme_and_help_agree() {
         "--parsable",
         "--dependency",
         "--wrap",
+        // tools/module_graph.py in docs/module-graph.md.
+        "--no-tests",
+        "--layers",
+        "--mermaid",
+        "--why",
+        "--depth",
+        "--src",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {
@@ -745,9 +769,9 @@ fn readme_and_help_agree() {
     }
     assert!(
         missing.is_empty(),
-        "README names options no --help knows: {missing:?}"
+        "README or docs/ names options no --help knows: {missing:?}"
     );
-    // And the other way round: every option of every subcommand is in the README.
+    // And the other way round: every option of every subcommand is in the README or docs/.
     let mut undocumented = Vec::new();
     for (c, h) in commands.iter().zip(&helps) {
         for line in h.lines() {
@@ -772,7 +796,7 @@ fn readme_and_help_agree() {
     }
     assert!(
         undocumented.is_empty(),
-        "options missing from the README: {undocumented:?}"
+        "options missing from the README and docs/: {undocumented:?}"
     );
 }
 

@@ -17,6 +17,7 @@ mod cli_defects;
 mod compact;
 mod compare;
 mod discrete;
+mod doc_examples;
 mod doctor;
 mod features;
 mod field_renders;
