@@ -373,8 +373,15 @@ fn output_names_and_frame_selection() {
         .collect();
     files.sort();
     assert_eq!(files, ["camera_5.png", "front.png"]);
+    one_frame_and_frames_of_the_whole_path(dir.path());
+    frame_lists_bounds_and_hash_patterns(dir.path(), &cams);
+}
+
+/// One frame of an orbit to one file; --frames numbers frames in the whole path, whatever
+/// --camera selected.
+fn one_frame_and_frames_of_the_whole_path(dir: &Path) {
     // One frame of an orbit to one file.
-    let single = dir.path().join("single.png");
+    let single = dir.join("single.png");
     ok(&[
         "render",
         "--demo",
@@ -390,7 +397,7 @@ fn output_names_and_frame_selection() {
     ]);
     assert!(single.exists());
     // --frames numbers frames in the whole path, whatever --camera selected.
-    let out = dir.path().join("o_{}.png");
+    let out = dir.join("o_{}.png");
     let e = fails(
         &[
             "render",
@@ -405,7 +412,7 @@ fn output_names_and_frame_selection() {
             "-o",
             s(&out),
         ],
-        &dir.path().join("o_1.png"),
+        &dir.join("o_1.png"),
     );
     assert!(
         e.contains("--frames 1 selects none of the 2 frame(s) chosen (3, 5)"),
@@ -427,9 +434,14 @@ fn output_names_and_frame_selection() {
         s(&out),
         "-q",
     ]);
-    assert!(dir.path().join("o_5.png").exists() && !dir.path().join("o_3.png").exists());
+    assert!(dir.join("o_5.png").exists() && !dir.join("o_3.png").exists());
+}
+
+/// --frames lists, bounds reported in the notation the option reads, and #### patterns.
+fn frame_lists_bounds_and_hash_patterns(dir: &Path, cams: &Path) {
+    let out = dir.join("o_{}.png");
     // Lists, and bounds reported in the notation the option reads.
-    let list = dir.path().join("l_%02d.png");
+    let list = dir.join("l_%02d.png");
     ok(&[
         "render",
         "--demo",
@@ -445,9 +457,9 @@ fn output_names_and_frame_selection() {
         "-q",
     ]);
     for k in [0, 2, 7, 8] {
-        assert!(dir.path().join(format!("l_{k:02}.png")).exists(), "{k}");
+        assert!(dir.join(format!("l_{k:02}.png")).exists(), "{k}");
     }
-    assert!(!dir.path().join("l_01.png").exists());
+    assert!(!dir.join("l_01.png").exists());
     let e = fails(
         &[
             "render",
@@ -460,7 +472,7 @@ fn output_names_and_frame_selection() {
             "-o",
             s(&out),
         ],
-        &dir.path().join("o_19.png"),
+        &dir.join("o_19.png"),
     );
     assert!(e.contains("0..=9") && e.contains("use 5.."), "{e}");
     let e = fails(
@@ -475,7 +487,7 @@ fn output_names_and_frame_selection() {
             "-o",
             s(&out),
         ],
-        &dir.path().join("o_19.png"),
+        &dir.join("o_19.png"),
     );
     assert!(e.contains("0..=9") && e.contains("use 5.."), "{e}");
     let e = fails(
@@ -484,17 +496,17 @@ fn output_names_and_frame_selection() {
             "--demo",
             "--cpu",
             "--cameras",
-            s(&cams),
+            s(cams),
             "--camera",
             "7",
             "-o",
             s(&out),
         ],
-        &dir.path().join("o_7.png"),
+        &dir.join("o_7.png"),
     );
     assert!(e.contains("(0..=1)"), "{e}");
     // #### patterns.
-    let hashes = dir.path().join("h.####.png");
+    let hashes = dir.join("h.####.png");
     ok(&[
         "render",
         "--demo",
@@ -507,7 +519,7 @@ fn output_names_and_frame_selection() {
         s(&hashes),
         "-q",
     ]);
-    assert!(dir.path().join("h.0001.png").exists());
+    assert!(dir.join("h.0001.png").exists());
 }
 
 /// Item 9: with --skip-existing, a file another run writes meanwhile is kept.

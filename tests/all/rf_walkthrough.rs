@@ -114,8 +114,6 @@ fn gen_fit_render_features_and_shade() {
 /// 1e-4 of the peak.
 #[test]
 fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
-    use vksplat::cpu::field;
-    use vksplat::rf::{grid_coordinate, RfField};
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n);
     let n = 16;
@@ -134,17 +132,7 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
         "-q",
     ]);
     // The analytic magnitude, normalised as gen normalises it (grid maximum 1).
-    let b = RfField::Dipole.bounds();
-    let mut scale = 0f64;
-    for i in 0..n {
-        for j in 0..n {
-            for l in 0..n {
-                let c = |a: usize, v: usize| f64::from(grid_coordinate(b[a], b[a + 3], v, n));
-                scale = scale.max(RfField::Dipole.raw([c(0, i), c(1, j), c(2, l)])[0]);
-            }
-        }
-    }
-    let truth = |x: [f64; 3]| RfField::Dipole.raw(x)[0] / scale;
+    let scale = dipole_scale(n);
     let (w, h) = (40u32, 30u32);
     let cam = vksplat::camera::Camera::look_at(
         "walkthrough",
@@ -180,8 +168,6 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
         npy(&o)
     };
     let plane = "0,0,0.3,0,0,1";
-    let in_box =
-        |x: [f64; 3]| (0..3).all(|a| x[a] >= f64::from(b[a]) && x[a] <= f64::from(b[a + 3]));
     for (mode, extra, limit) in [
         ("field-slice", vec!["--slice-plane", plane], 0.15),
         ("field-integral", vec![], 0.3),
@@ -202,45 +188,88 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
                 "{mode}: GPU {a} vs CPU {c}"
             );
         }
-        let (mut num, mut den, mut pixels) = (0f64, 0f64, 0);
-        for py in 0..h {
-            for px in 0..w {
-                let (o, d) = field::pixel_ray(&cam, px, py);
-                let at = |t: f64| [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
-                let expect = if mode == "field-slice" {
-                    let Some(t) = field::slice_hit(o, d, [0.0, 0.0, 0.3], [0.0, 0.0, 1.0]) else {
-                        continue;
-                    };
-                    if !in_box(at(t)) {
-                        continue;
-                    }
-                    truth(at(t))
-                } else {
-                    let bb = b.map(f64::from);
-                    let Some((t0, t1)) = field::chord(o, d, bb) else {
-                        continue;
-                    };
-                    let m = 2000;
-                    let dt = (t1 - t0) / m as f64;
-                    let v = (0..m).map(|j| truth(at(t0 + (j as f64 + 0.5) * dt)));
-                    if mode == "field-integral" {
-                        v.sum::<f64>() * dt
-                    } else {
-                        v.fold(0f64, f64::max)
-                    }
-                };
-                let got = f64::from(gpu[(py * w + px) as usize * 4]);
-                num += (got - expect).powi(2);
-                den += expect * expect;
-                pixels += 1;
-            }
-        }
+        let (num, den, pixels) = error_against_the_analytic_dipole(&cam, mode, &gpu, scale);
         let err = (num / den).sqrt();
         eprintln!("{mode}: relative L2 against the analytic dipole {err:.3} over {pixels} pixels");
         assert!(pixels > 200, "{mode}: {pixels} pixels see the field");
         assert!(err <= limit, "{mode}: {err}");
     }
-    // A PNG with a colour bar: the image plus the bar's rows, never black above the range.
+    colour_bar_is_never_black_above_the_range(dir.path(), w, h);
+}
+
+/// The largest analytic magnitude of the dipole over gen's `n`^3 grid: gen normalises the
+/// field by it (grid maximum 1).
+fn dipole_scale(n: usize) -> f64 {
+    use vksplat::rf::{grid_coordinate, RfField};
+    let b = RfField::Dipole.bounds();
+    let mut scale = 0f64;
+    for i in 0..n {
+        for j in 0..n {
+            for l in 0..n {
+                let c = |a: usize, v: usize| f64::from(grid_coordinate(b[a], b[a + 3], v, n));
+                scale = scale.max(RfField::Dipole.raw([c(0, i), c(1, j), c(2, l)])[0]);
+            }
+        }
+    }
+    scale
+}
+
+/// The squared error of channel 0 of the render `gpu` against the analytic dipole
+/// (normalised by `scale`) and the squared field, summed over the `pixels` that see the
+/// field: a slice through z = 0.3, or the integral or maximum along each ray's chord
+/// through the bounds.
+fn error_against_the_analytic_dipole(
+    cam: &vksplat::camera::Camera,
+    mode: &str,
+    gpu: &[f32],
+    scale: f64,
+) -> (f64, f64, usize) {
+    use vksplat::cpu::field;
+    use vksplat::rf::RfField;
+    let (w, h) = (cam.width, cam.height);
+    let b = RfField::Dipole.bounds();
+    let truth = |x: [f64; 3]| RfField::Dipole.raw(x)[0] / scale;
+    let in_box =
+        |x: [f64; 3]| (0..3).all(|a| x[a] >= f64::from(b[a]) && x[a] <= f64::from(b[a + 3]));
+    let (mut num, mut den, mut pixels) = (0f64, 0f64, 0);
+    for py in 0..h {
+        for px in 0..w {
+            let (o, d) = field::pixel_ray(cam, px, py);
+            let at = |t: f64| [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
+            let expect = if mode == "field-slice" {
+                let Some(t) = field::slice_hit(o, d, [0.0, 0.0, 0.3], [0.0, 0.0, 1.0]) else {
+                    continue;
+                };
+                if !in_box(at(t)) {
+                    continue;
+                }
+                truth(at(t))
+            } else {
+                let bb = b.map(f64::from);
+                let Some((t0, t1)) = field::chord(o, d, bb) else {
+                    continue;
+                };
+                let m = 2000;
+                let dt = (t1 - t0) / m as f64;
+                let v = (0..m).map(|j| truth(at(t0 + (j as f64 + 0.5) * dt)));
+                if mode == "field-integral" {
+                    v.sum::<f64>() * dt
+                } else {
+                    v.fold(0f64, f64::max)
+                }
+            };
+            let got = f64::from(gpu[(py * w + px) as usize * 4]);
+            num += (got - expect).powi(2);
+            den += expect * expect;
+            pixels += 1;
+        }
+    }
+    (num, den, pixels)
+}
+
+/// A PNG with a colour bar: the image plus the bar's rows, never black above the range.
+fn colour_bar_is_never_black_above_the_range(dir: &Path, w: u32, h: u32) {
+    let p = |n: &str| dir.join(n);
     ok(&[
         "render",
         s(&p("d.ply")),

@@ -29,6 +29,84 @@ use vksplat::scene::Scene;
 fn moving_source_renders_match_the_analytic_field_at_three_times() {
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n);
+    let jump = fit_the_moving_source(dir.path());
+
+    let (w, h) = (48u32, 36u32);
+    let cam = moving_source_camera(w, h);
+    std::fs::write(
+        p("cam.json"),
+        vksplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+    )
+    .unwrap();
+    let (ply, cams) = (p("m.ply"), p("cam.json"));
+    let render = |t: f32, mode: &str, extra: &[&str], out: &str| {
+        let ts = t.to_string();
+        let o = p(out);
+        let mut a = vec![
+            "render",
+            s(&ply),
+            "--cameras",
+            s(&cams),
+            "--time",
+            &ts,
+            "--mode",
+            mode,
+            "-q",
+            "--overwrite",
+            "-o",
+            s(&o),
+        ];
+        a.extend_from_slice(extra);
+        ok(&a);
+        npy(&o)
+    };
+    let mut peaks = Vec::new();
+    for t in [0.1f32, 0.5, 0.9] {
+        for (mode, extra) in [
+            ("field-slice", vec!["--slice-plane", "0,0,0,0,0,1"]),
+            ("field-max", vec!["--max-samples", "128"]),
+        ] {
+            let (gw, gh, k, gpu) = render(t, mode, &extra, "g.npy");
+            assert_eq!((gw, gh, k), (w as usize, h as usize, 1));
+            let mut cpu_extra = extra.clone();
+            cpu_extra.push("--cpu");
+            let (_, _, _, cpu) = render(t, mode, &cpu_extra, "c.npy");
+            let peak = cpu
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(0f32, |m, v| m.max(v.abs()));
+            assert!(peak > 0.5, "{mode} at {t}: peak {peak}");
+            // A sample within f32 rounding of a Gaussian's 4-sigma cutoff counts on one side
+            // and not on the other: a jump of exp(-8) o_i feat_i (3.4e-4 of a unit Gaussian),
+            // allowed at a few pixels of the maximum (which samples the field at points).
+            gpu_matches_cpu(mode, t, &gpu, &cpu, peak, jump);
+            let (num, den, pixels, centroid, weight_sum) =
+                error_against_the_analytic_field(&cam, mode, t, &gpu, peak);
+            let err = (num / den).sqrt();
+            eprintln!("{mode} at t = {t}: relative L2 against the analytic field {err:.4} over {pixels} pixels");
+            assert!(pixels > 300, "{mode}: {pixels} pixels see the field");
+            assert!(err <= 0.08, "{mode} at t = {t}: {err}");
+            if mode == "field-slice" {
+                let at = centroid.map(|v| v / weight_sum);
+                let c = MovingSource::centre(f64::from(t));
+                let off = ((at[0] - c[0]).powi(2) + (at[1] - c[1]).powi(2)).sqrt();
+                eprintln!("slice peak at t = {t}: {at:?}, {off:.3} from the centre");
+                assert!(off <= 0.1, "t = {t}: peak at {at:?}, centre {c:?}");
+                peaks.push(at[0]);
+            }
+        }
+    }
+    assert!(
+        peaks[0] < peaks[1] && peaks[1] < peaks[2],
+        "the peak moves along +x: {peaks:?}"
+    );
+}
+
+/// Generates the moving source's samples and fits them in space and time, checking the
+/// report and the fitted time range; returns the largest jump a sample at a Gaussian's
+/// 4-sigma cutoff can make, `exp(-8) o_i |feat_i|` (with 1% to spare).
+fn fit_the_moving_source(dir: &Path) -> f32 {
+    let p = |n: &str| dir.join(n);
     ok(&[
         "gen",
         "--rf",
@@ -69,9 +147,12 @@ fn moving_source_renders_match_the_analytic_field_at_three_times() {
         * (-8f32).exp()
         * 1.01;
     assert!((0.0..=1.0).contains(&lo) && (0.0..=1.0).contains(&hi) && lo < hi);
+    jump
+}
 
-    let (w, h) = (48u32, 36u32);
-    let cam = vksplat::camera::Camera::look_at(
+/// The camera the moving source is rendered from, `w` x `h`.
+fn moving_source_camera(w: u32, h: u32) -> vksplat::camera::Camera {
+    vksplat::camera::Camera::look_at(
         "front",
         w,
         h,
@@ -79,128 +160,82 @@ fn moving_source_renders_match_the_analytic_field_at_three_times() {
         glam::Vec3::new(0.5, -1.0, -6.5),
         glam::Vec3::ZERO,
         glam::Vec3::NEG_Y,
-    );
-    std::fs::write(
-        p("cam.json"),
-        vksplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
-    .unwrap();
-    let (ply, cams) = (p("m.ply"), p("cam.json"));
-    let render = |t: f32, mode: &str, extra: &[&str], out: &str| {
-        let ts = t.to_string();
-        let o = p(out);
-        let mut a = vec![
-            "render",
-            s(&ply),
-            "--cameras",
-            s(&cams),
-            "--time",
-            &ts,
-            "--mode",
-            mode,
-            "-q",
-            "--overwrite",
-            "-o",
-            s(&o),
-        ];
-        a.extend_from_slice(extra);
-        ok(&a);
-        npy(&o)
-    };
-    let b = MovingSource::BOUNDS.map(f64::from);
-    let in_box = |x: [f64; 3]| (0..3).all(|a| x[a] >= b[a] && x[a] <= b[a + 3]);
-    let mut peaks = Vec::new();
-    for t in [0.1f32, 0.5, 0.9] {
-        let truth = |x: [f64; 3]| MovingSource::magnitude(x, f64::from(t));
-        for (mode, extra) in [
-            ("field-slice", vec!["--slice-plane", "0,0,0,0,0,1"]),
-            ("field-max", vec!["--max-samples", "128"]),
-        ] {
-            let (gw, gh, k, gpu) = render(t, mode, &extra, "g.npy");
-            assert_eq!((gw, gh, k), (w as usize, h as usize, 1));
-            let mut cpu_extra = extra.clone();
-            cpu_extra.push("--cpu");
-            let (_, _, _, cpu) = render(t, mode, &cpu_extra, "c.npy");
-            let peak = cpu
-                .iter()
-                .filter(|v| v.is_finite())
-                .fold(0f32, |m, v| m.max(v.abs()));
-            assert!(peak > 0.5, "{mode} at {t}: peak {peak}");
-            // A sample within f32 rounding of a Gaussian's 4-sigma cutoff counts on one side
-            // and not on the other: a jump of exp(-8) o_i feat_i (3.4e-4 of a unit Gaussian),
-            // allowed at a few pixels of the maximum (which samples the field at points).
-            let (mut beyond, mut worst) = (0, 0f32);
-            for (a, c) in gpu.iter().zip(&cpu) {
-                assert!(
-                    a.is_nan() == c.is_nan(),
-                    "{mode} at {t}: GPU {a} vs CPU {c}"
-                );
-                let d = (a - c).abs();
-                if d > 1e-4 * peak {
-                    beyond += 1;
-                    worst = worst.max(d);
-                }
-            }
-            assert!(
-                beyond <= gpu.len() / 50 && worst <= jump,
-                "{mode} at {t}: {beyond} pixels differ beyond 1e-4 of the peak, up to {worst}"
-            );
-            let (mut num, mut den, mut pixels, mut weight_sum) = (0f64, 0f64, 0, 0f64);
-            // The slice's bright part (above half its peak): its centroid, weighted by value.
-            let mut centroid = [0f64; 3];
-            for py in 0..h {
-                for px in 0..w {
-                    let (o, d) = field::pixel_ray(&cam, px, py);
-                    let at = |s: f64| [o[0] + s * d[0], o[1] + s * d[1], o[2] + s * d[2]];
-                    let got = f64::from(gpu[(py * w + px) as usize]);
-                    let expect = if mode == "field-slice" {
-                        let Some(s) = field::slice_hit(o, d, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
-                        else {
-                            continue;
-                        };
-                        if !in_box(at(s)) {
-                            continue;
-                        }
-                        if got > 0.5 * f64::from(peak) {
-                            for (a, c) in centroid.iter_mut().enumerate() {
-                                *c += got * at(s)[a];
-                            }
-                            weight_sum += got;
-                        }
-                        truth(at(s))
-                    } else {
-                        let Some((s0, s1)) = field::chord(o, d, b) else {
-                            continue;
-                        };
-                        let m = 2000;
-                        let ds = (s1 - s0) / m as f64;
-                        (0..m)
-                            .map(|j| truth(at(s0 + (j as f64 + 0.5) * ds)))
-                            .fold(0f64, f64::max)
-                    };
-                    num += (got - expect).powi(2);
-                    den += expect * expect;
-                    pixels += 1;
-                }
-            }
-            let err = (num / den).sqrt();
-            eprintln!("{mode} at t = {t}: relative L2 against the analytic field {err:.4} over {pixels} pixels");
-            assert!(pixels > 300, "{mode}: {pixels} pixels see the field");
-            assert!(err <= 0.08, "{mode} at t = {t}: {err}");
-            if mode == "field-slice" {
-                let at = centroid.map(|v| v / weight_sum);
-                let c = MovingSource::centre(f64::from(t));
-                let off = ((at[0] - c[0]).powi(2) + (at[1] - c[1]).powi(2)).sqrt();
-                eprintln!("slice peak at t = {t}: {at:?}, {off:.3} from the centre");
-                assert!(off <= 0.1, "t = {t}: peak at {at:?}, centre {c:?}");
-                peaks.push(at[0]);
-            }
+}
+
+/// The GPU render equals the CPU one to 1e-4 of the peak, but at a few pixels of the
+/// maximum by at most `jump`.
+fn gpu_matches_cpu(mode: &str, t: f32, gpu: &[f32], cpu: &[f32], peak: f32, jump: f32) {
+    let (mut beyond, mut worst) = (0, 0f32);
+    for (a, c) in gpu.iter().zip(cpu) {
+        assert!(
+            a.is_nan() == c.is_nan(),
+            "{mode} at {t}: GPU {a} vs CPU {c}"
+        );
+        let d = (a - c).abs();
+        if d > 1e-4 * peak {
+            beyond += 1;
+            worst = worst.max(d);
         }
     }
     assert!(
-        peaks[0] < peaks[1] && peaks[1] < peaks[2],
-        "the peak moves along +x: {peaks:?}"
+        beyond <= gpu.len() / 50 && worst <= jump,
+        "{mode} at {t}: {beyond} pixels differ beyond 1e-4 of the peak, up to {worst}"
     );
+}
+
+/// The squared error of the render `gpu` against the analytic field at time `t` and the
+/// squared field, summed over the `pixels` that see the field, with (for the slice) the
+/// value-weighted sum of the points of its bright part and their weight.
+fn error_against_the_analytic_field(
+    cam: &vksplat::camera::Camera,
+    mode: &str,
+    t: f32,
+    gpu: &[f32],
+    peak: f32,
+) -> (f64, f64, usize, [f64; 3], f64) {
+    let (w, h) = (cam.width, cam.height);
+    let b = MovingSource::BOUNDS.map(f64::from);
+    let in_box = |x: [f64; 3]| (0..3).all(|a| x[a] >= b[a] && x[a] <= b[a + 3]);
+    let truth = |x: [f64; 3]| MovingSource::magnitude(x, f64::from(t));
+    let (mut num, mut den, mut pixels, mut weight_sum) = (0f64, 0f64, 0, 0f64);
+    // The slice's bright part (above half its peak): its centroid, weighted by value.
+    let mut centroid = [0f64; 3];
+    for py in 0..h {
+        for px in 0..w {
+            let (o, d) = field::pixel_ray(cam, px, py);
+            let at = |s: f64| [o[0] + s * d[0], o[1] + s * d[1], o[2] + s * d[2]];
+            let got = f64::from(gpu[(py * w + px) as usize]);
+            let expect = if mode == "field-slice" {
+                let Some(s) = field::slice_hit(o, d, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]) else {
+                    continue;
+                };
+                if !in_box(at(s)) {
+                    continue;
+                }
+                if got > 0.5 * f64::from(peak) {
+                    for (a, c) in centroid.iter_mut().enumerate() {
+                        *c += got * at(s)[a];
+                    }
+                    weight_sum += got;
+                }
+                truth(at(s))
+            } else {
+                let Some((s0, s1)) = field::chord(o, d, b) else {
+                    continue;
+                };
+                let m = 2000;
+                let ds = (s1 - s0) / m as f64;
+                (0..m)
+                    .map(|j| truth(at(s0 + (j as f64 + 0.5) * ds)))
+                    .fold(0f64, f64::max)
+            };
+            num += (got - expect).powi(2);
+            den += expect * expect;
+            pixels += 1;
+        }
+    }
+    (num, den, pixels, centroid, weight_sum)
 }
 
 /// Three coloured Gaussians in a row, each at its own time (temporal means 0, 0.4, 1,
@@ -468,7 +503,15 @@ fn animation_writes_n_frames_that_differ_and_resumes() {
 #[test]
 fn bad_time_inputs_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let p = |n: &str| dir.path().join(n);
+    bad_time_columns_of_csv_files(dir.path());
+    bad_time_columns_of_npy_files(dir.path());
+    bad_times_to_render_and_convert(dir.path());
+}
+
+/// CSV samples: one time for all, a NaN time, a time column that is not there or is a
+/// coordinate.
+fn bad_time_columns_of_csv_files(dir: &Path) {
+    let p = |n: &str| dir.join(n);
     let out = p("o.ply");
     let csv = |name: &str, text: &str| {
         std::fs::write(p(name), text).unwrap();
@@ -522,7 +565,12 @@ fn bad_time_inputs_are_clear_errors() {
         &out,
     );
     assert!(e.contains("p.csv") && e.contains("is y"), "{e}");
-    // A .npy: a name is no column; 4 columns leave no value; a grid has no time.
+}
+
+/// A .npy: a name is no column; 4 columns leave no value; a grid has no time.
+fn bad_time_columns_of_npy_files(dir: &Path) {
+    let p = |n: &str| dir.join(n);
+    let out = p("o.ply");
     let four: Vec<f32> = (0..40).map(|i| i as f32).collect();
     std::fs::write(p("f.npy"), vksplat::image_file::npy_bytes(&[10, 4], &four)).unwrap();
     let e = fails(
@@ -565,8 +613,12 @@ fn bad_time_inputs_are_clear_errors() {
         &out,
     );
     assert!(e.contains("d.npy") && e.contains("dense grid"), "{e}");
+}
 
-    // Renders: a static scene takes no time; a time-varying one needs one.
+/// Renders: a static scene takes no time; a time-varying one needs one, and formats and
+/// commands without time refuse it.
+fn bad_times_to_render_and_convert(dir: &Path) {
+    let p = |n: &str| dir.join(n);
     std::fs::write(
         p("b.ply"),
         ply::to_bytes(&blinking_scene(), PlyEncoding::BinaryLittleEndian),

@@ -332,6 +332,17 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     assert_eq!(first["cameraIndex"], 0, "starts at the first camera");
     let size = first["hello"]["size"].as_f64().unwrap();
 
+    let s = orbit_and_fly(&browser, &first, size);
+    let before = drag_the_sliders(&browser, &s);
+    select_a_camera_from_the_list(&browser, &before, &first, size);
+    turntable_and_flip(&browser);
+    export_keyframes_and_preview_them(&browser, d, &scene_args);
+    error_banner_and_a_clean_log(&browser, &mut viewer);
+    page_screenshot_shows_a_picture(&browser);
+}
+
+/// Orbiting with a left drag and flying forward with W; returns the state after the flight.
+fn orbit_and_fly(browser: &Browser, first: &Value, size: f64) -> Value {
     // Left drag orbits: the camera moves, its distance to the focus stays.
     let before = first["camera"].clone();
     let focus = vec3(&first["focus"]);
@@ -377,7 +388,11 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         s["camera"]["rotation"], before["camera"]["rotation"],
         "W turned the camera"
     );
+    s
+}
 
+/// The scale and max-scale sliders; returns the state with the max-scale filter off.
+fn drag_the_sliders(browser: &Browser, s: &Value) -> Value {
     // The scale slider, dragged left, lowers the splat scale factor.
     let before = s.clone();
     browser.drag("#scale", -60, 0, 0);
@@ -414,10 +429,13 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     let label = s["histLabel"].as_str().unwrap();
     assert!(label.contains("% kept"), "{label}");
     browser.drag("#maxscale", 135, 0, 0);
-    let before = browser.wait("max scale off", Duration::from_secs(30), |s| {
+    browser.wait("max scale off", Duration::from_secs(30), |s| {
         s["settings"]["max_scale"].is_null()
-    });
+    })
+}
 
+/// Clicking a camera of the list snaps to it, and frames keep coming without errors.
+fn select_a_camera_from_the_list(browser: &Browser, before: &Value, first: &Value, size: f64) {
     // Clicking camera 2 of the list snaps to its pose and field of view.
     let item = browser.element("#cameras li:nth-child(3)");
     browser.call("POST", &format!("/element/{item}/click"), Some(json!({})));
@@ -442,7 +460,10 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     assert!(end["fullFrames"].as_u64() > first["fullFrames"].as_u64());
     assert_eq!(end["errors"], json!([]), "the page showed errors");
     assert!(s["frames"].as_u64() >= Some(4));
+}
 
+/// The turntable (T) and the "Flip up axis" button.
+fn turntable_and_flip(browser: &Browser) {
     // Turntable: T starts the rotation about the focus, T stops it.
     browser.hold_key("t", 50);
     let spinning = browser.wait("turntable", Duration::from_secs(30), |s| {
@@ -481,7 +502,11 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         s["upFlipped"] == false
     });
     assert!(down_y(&back) > 0.0);
+}
 
+/// Keyframes added, exported (and rendered by `render --cameras`) and previewed, and the
+/// screenshot button.
+fn export_keyframes_and_preview_them(browser: &Browser, d: &Path, scene_args: &[&str]) {
     // Three keyframes (camera 0, 1, 2 by N), exported as the keyframe JSON render reads.
     browser.hold_key("n", 30); // camera 0 (after 2, wrapping)
     let add = browser.element("#kf-add");
@@ -509,7 +534,7 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     );
     std::fs::write(d.join("keyframes.json"), text).unwrap();
     let mut render = vec!["render"];
-    render.extend(&scene_args);
+    render.extend(scene_args);
     render.extend([
         "--cpu",
         "--quiet",
@@ -551,7 +576,11 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     browser.wait("screenshot", Duration::from_secs(60), |s| {
         s["screenshots"] == 1
     });
+}
 
+/// A server error in the banner, dismissed; the viewer lives on and the validation layer
+/// found nothing.
+fn error_banner_and_a_clean_log(browser: &Browser, viewer: &mut Viewer) {
     // A server error appears in the page's banner.
     browser.js("window.vksplatViewer.send({type: 'dance'}); return null;");
     let s = browser.wait("error banner", Duration::from_secs(30), |s| {
@@ -585,7 +614,10 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
     // The validation layer (on through common::cli) found nothing in the GPU viewer.
     let log: Vec<String> = viewer.stderr.try_iter().collect();
     assert!(!log.iter().any(|l| l.contains("[vulkan")), "{log:?}");
+}
 
+/// The page screenshot shows a picture in the canvas area.
+fn page_screenshot_shows_a_picture(browser: &Browser) {
     // The page screenshot shows a picture in the canvas area (left of the panel).
     browser.js("document.getElementById('panel').scrollTop = 0; return null;");
     let png = browser.screenshot_png();
