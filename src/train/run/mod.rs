@@ -14,19 +14,29 @@
 //! too. [`TrainOptions::host_optimizer`] steps on the host instead
 //! ([`super::model::Model::step`], through the rasterizer's upload/read-back API), for
 //! comparisons. Same rules either way.
+//!
+//! The loop ([`train`]) goes through each iteration's phases in turn, carrying its state
+//! from one to the next: the view and what the schedule asks for (`schedule`), the step
+//! on the device or the host (`step`), the host's changes to the model: densification,
+//! MCMC refinement, opacity reset (`densify`), the evaluation (`evaluate`) and the files
+//! (`output`); a run starts from the data set's points or a checkpoint (`start`).
 
-use super::data::{Dataset, View};
-use super::device::{DeviceModel, McmcStep, Step, StepPipelines};
+mod densify;
+mod evaluate;
+mod output;
+mod schedule;
+mod start;
+mod step;
+
+use super::data::Dataset;
+use super::device::DeviceModel;
 use super::loss::{GpuLoss, LossValue};
-use super::model::noise_key;
-use super::model::{position_lr, Model, Settings};
-use crate::camera::Camera;
+use super::model::{Model, Settings};
 use crate::gen::Rng;
-use crate::gpu::sync::{barrier, Access};
-use crate::model::grad::PixelGrads;
 use crate::model::RenderOptions;
-use crate::render::backward::DeviceFeatures;
 use crate::render::differentiable::DiffRasterizer;
+use schedule::{Due, Plan};
+use std::cell::OnceCell;
 use std::path::{Path, PathBuf};
 
 /// What a training run is asked to do.
@@ -204,85 +214,72 @@ pub enum TrainError {
     Other(String),
 }
 
-fn write(
-    path: &Path,
-    bytes: &[u8],
+/// What a run keeps fixed: its inputs and what follows from them.
+struct Job<'a> {
+    data: &'a Dataset,
+    /// The model directory.
+    out: &'a Path,
+    opts: &'a TrainOptions,
+    /// What a checkpoint must match to be resumed ([`TrainOptions::fingerprint`]).
+    fingerprint: String,
+    /// Replace existing files: asked for, or a resumed run replacing its own.
     overwrite: bool,
-    written: &mut Vec<PathBuf>,
-) -> Result<(), TrainError> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| TrainError::Other(format!("{}: cannot create: {e}", dir.display())))?;
-    }
-    crate::fsutil::write_bytes_atomically(path, overwrite, bytes)?;
-    written.push(path.to_path_buf());
-    Ok(())
+    /// The background and kernel every render uses.
+    render_opts: RenderOptions,
 }
 
-/// The image's name without its extension (the original's `image_name`).
-fn stem(name: &str) -> &str {
-    name.rsplit_once('.').map_or(name, |(s, _)| s)
-}
-
-/// The points as the original's `input.ply` (x y z nx ny nz red green blue).
-fn points_ply(points: &[crate::camera::colmap::Point3D]) -> Vec<u8> {
-    let mut out = format!(
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
-        points.len()
-    )
-    .into_bytes();
-    for p in points {
-        for v in p.position {
-            out.extend((v as f32).to_le_bytes());
+impl<'a> Job<'a> {
+    fn new(data: &'a Dataset, out: &'a Path, opts: &'a TrainOptions) -> Self {
+        let bg = if opts.white_background {
+            [1.0; 3]
+        } else {
+            [0.0; 3]
+        };
+        Job {
+            data,
+            out,
+            opts,
+            fingerprint: opts.fingerprint(data),
+            // A resumed run replaces the files of the run it continues.
+            overwrite: opts.overwrite || opts.resume.is_some(),
+            render_opts: RenderOptions {
+                background: bg,
+                kernel: opts.kernel,
+                ..Default::default()
+            },
         }
-        out.extend([0u8; 12]);
-        out.extend(p.color);
     }
-    out
 }
 
-/// Renders `views` and compares them with their photos.
-fn evaluate(
-    rast: &mut DiffRasterizer,
-    model: &Model,
-    views: &[&View],
-    opts: &RenderOptions,
-    iteration: u32,
-    split: &str,
-) -> Result<Evaluation, TrainError> {
-    let params = model.params();
-    rast.set_shader(model.shader.as_ref())?;
-    let (mut psnr, mut ssim, mut l1, mut flip) = (0.0, 0.0, 0.0, 0.0);
-    for v in views {
-        let (frame, _) = rast.forward(&params, &v.camera, opts)?;
-        let img: Vec<f32> = frame
-            .color
-            .iter()
-            .flatten()
-            .map(|c| c.clamp(0.0, 1.0))
-            .collect();
-        let gt: Vec<f32> = v.image.iter().flatten().copied().collect();
-        let (w, h) = (v.camera.width as usize, v.camera.height as usize);
-        psnr += crate::metrics::psnr(&gt, &img, 1.0);
-        ssim += crate::metrics::ssim(&gt, &img, w, h, 3);
-        flip += crate::metrics::flip(&gt, &img, w, h, crate::metrics::flip_default_ppd());
-        l1 += img
-            .iter()
-            .zip(&gt)
-            .map(|(a, b)| (a - b).abs() as f64)
-            .sum::<f64>()
-            / img.len() as f64;
+/// What the loop carries from one iteration to the next.
+struct Run<'p> {
+    model: Model,
+    rng: Rng,
+    /// The training views still to come in this round, last first.
+    order: Vec<usize>,
+    /// The first iteration to run (after a resumed checkpoint's).
+    first: u32,
+    /// The model on the device (none on the host path, or after the host changed it).
+    dev: Option<DeviceModel<'p>>,
+    written: Vec<PathBuf>,
+    evaluations: Vec<Evaluation>,
+    /// Device memory at the peak so far, bytes.
+    peak: u64,
+    stage_sums: StageSums,
+}
+
+/// Refuses options no run can start with.
+fn check_options(opts: &TrainOptions) -> Result<(), TrainError> {
+    if opts.sh_degree > 3 {
+        return Err(TrainError::Other(format!(
+            "--sh-degree must be 0..3, not {}",
+            opts.sh_degree
+        )));
     }
-    let n = views.len().max(1) as f64;
-    Ok(Evaluation {
-        iteration,
-        split: split.to_string(),
-        views: views.len(),
-        psnr: psnr / n,
-        ssim: ssim / n,
-        l1: l1 / n,
-        flip: flip / n,
-    })
+    if opts.settings.iterations == 0 {
+        return Err(TrainError::Other("--iterations must be at least 1".into()));
+    }
+    Ok(())
 }
 
 /// Trains on `data` and writes the model directory `out`. `progress` sees every
@@ -297,384 +294,50 @@ pub fn train(
     note: &mut dyn FnMut(String),
 ) -> Result<TrainReport, TrainError> {
     let s = &opts.settings;
-    if opts.sh_degree > 3 {
-        return Err(TrainError::Other(format!(
-            "--sh-degree must be 0..3, not {}",
-            opts.sh_degree
-        )));
-    }
-    if s.iterations == 0 {
-        return Err(TrainError::Other("--iterations must be at least 1".into()));
-    }
-    let mut rng = Rng(opts.seed);
-    let mut written = Vec::new();
-    let fingerprint = opts.fingerprint(data);
-    // A resumed run replaces the files of the run it continues.
-    let overwrite = opts.overwrite || opts.resume.is_some();
-    // The original's start: points3D, or random points around the cameras' centre.
-    let mut model = match &data.points {
-        Some(points) => {
-            write(
-                &out.join("input.ply"),
-                &points_ply(points),
-                overwrite,
-                &mut written,
-            )?;
-            Model::from_points(points, opts.sh_degree)
-        }
-        None => {
-            let (centre, half) = data.random_box.unwrap_or_else(|| {
-                let (mean, extent) = super::data::cameras_centre_and_extent(&data.train);
-                (mean.to_array(), extent)
-            });
-            note(format!(
-                "{} has no points: starting from {} random Gaussians in the cube of half side {half:.3} around ({:.3}, {:.3}, {:.3})",
-                data.source.display(),
-                opts.random_points,
-                centre[0],
-                centre[1],
-                centre[2]
-            ));
-            Model::random(opts.random_points, centre, half, opts.sh_degree, &mut rng)
-        }
-    };
-    model.scene.kernel = opts.kernel;
-    if let Some(mlp) = &opts.shader {
-        model = model.with_features(mlp.clone(), &mut rng);
-    }
-    let mut first = 1;
-    let mut order: Vec<usize> = Vec::new();
-    if let Some(c) = &opts.resume {
-        if c.fingerprint != fingerprint {
-            return Err(TrainError::Other(
-                "the checkpoint belongs to another data set or other settings; resume with the ones it was written with".into(),
-            ));
-        }
-        if c.iteration >= s.iterations {
-            return Err(TrainError::Other(format!(
-                "the checkpoint is at iteration {}, not before --iterations {}",
-                c.iteration, s.iterations
-            )));
-        }
-        model = c.model.clone();
-        rng = Rng(c.rng);
-        order = c.order.clone();
-        first = c.iteration + 1;
-        note(format!(
-            "resuming after iteration {} ({} Gaussians)",
-            c.iteration,
-            model.len()
-        ));
-    }
-    // cameras.json: the test cameras, then the training ones (the original's order), at
-    // the photos' own size.
-    let all: Vec<(usize, Camera)> = data
-        .test
-        .iter()
-        .chain(&data.train)
-        .enumerate()
-        .map(|(i, v)| {
-            let mut c = v.camera.clone();
-            c.name = stem(&c.name).to_string();
-            (i, c)
-        })
-        .collect();
-    let json = crate::camera::inria::to_json(&all).map_err(|e| TrainError::Other(e.to_string()))?;
-    write(
-        &out.join("cameras.json"),
-        json.as_bytes(),
-        overwrite,
-        &mut written,
-    )?;
-    let cfg = format!(
-        "Namespace(sh_degree={}, source_path='{}', model_path='{}', images='images', resolution=-1, white_background={}, data_device='cuda', eval={})",
-        opts.sh_degree,
-        data.source.display(),
-        out.display(),
-        if opts.white_background { "True" } else { "False" },
-        if data.test.is_empty() { "False" } else { "True" },
-    );
-    write(
-        &out.join("cfg_args"),
-        cfg.as_bytes(),
-        overwrite,
-        &mut written,
-    )?;
-    let bg = if opts.white_background {
-        [1.0; 3]
-    } else {
-        [0.0; 3]
-    };
-    let render_opts = RenderOptions {
-        background: bg,
-        kernel: opts.kernel,
-        ..Default::default()
-    };
-    let mut evaluations = Vec::new();
+    check_options(opts)?;
+    let job = Job::new(data, out, opts);
+    // The step's pipelines, built at the first iteration on the device (once per run).
+    let pipelines = OnceCell::new();
+    let mut run = Run::start(&job, note)?;
+    output::write_cameras_and_cfg(&job, &mut run.written)?;
     let start = std::time::Instant::now();
-    let mut peak = 0u64;
-    let checkpoint = |it: u32,
-                      model: &Model,
-                      rng: &Rng,
-                      order: &[usize],
-                      written: &mut Vec<PathBuf>,
-                      overwrite: bool| {
-        let c = super::checkpoint::Checkpoint {
-            iteration: it,
-            rng: rng.0,
-            order: order.to_vec(),
-            model: model.clone(),
-            fingerprint: fingerprint.clone(),
-        };
-        let path = out.join(format!("chkpnt{it}.safetensors"));
-        write(&path, &c.to_bytes(), overwrite, written).map(|()| path)
-    };
     // The state on the device, unless the caller asks for the host optimiser.
     let device_path = !opts.host_optimizer;
-    let mut pipelines: Option<StepPipelines> = None;
-    let mut stage_sums = StageSums::default();
-    let mut dev: Option<DeviceModel> = None;
-    for it in first..=s.iterations {
-        if it % s.sh_increase_interval == 0 && model.active_sh_degree < opts.sh_degree {
-            model.active_sh_degree += 1;
-        }
-        if order.is_empty() {
-            // A fresh random order of the training views (Fisher-Yates).
-            order = (0..data.train.len()).collect();
-            for i in (1..order.len()).rev() {
-                order.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
-            }
-        }
-        let view = &data.train[order.pop().expect("refilled above")];
-        let cam = &view.camera;
-        // The original's densification (statistics, clone/split/prune, opacity resets) or
-        // the MCMC strategy's refinement (relocation and growth).
-        let mcmc = s.mcmc.as_ref();
-        let until = mcmc.map_or(s.densify_until_iter, |m| m.refine_until);
-        let in_densify = it < until;
-        let densify_now =
-            in_densify && it > s.densify_from_iter && it % s.densification_interval == 0;
-        let reset_now = mcmc.is_none() && in_densify && it % s.opacity_reset_interval == 0;
-        let lr_now = position_lr(s, data.extent, it);
-        let n_now = model.len().max(1);
-        let mcmc_step = mcmc.map(|m| McmcStep {
-            noise_scale: m.noise_lr * lr_now,
-            key: noise_key(opts.seed, it),
-            opacity_reg: m.opacity_reg / n_now as f32,
-            scale_reg: m.scale_reg / (3 * n_now) as f32,
-        });
-        let value;
-        if device_path {
-            if dev.is_none() {
-                if pipelines.is_none() {
-                    pipelines = Some(StepPipelines::new(rast.renderer().ctx())?);
-                }
-                dev = Some(DeviceModel::new(
-                    rast.renderer(),
-                    pipelines.as_ref().expect("made above"),
-                    &model,
-                    s.clip_grad.is_some(),
-                )?);
-            }
-            let d = dev.as_ref().expect("made above");
-            let it_opts = RenderOptions {
-                sh_degree: Some(model.active_sh_degree),
-                ..render_opts
-            };
-            let renderer = rast.renderer();
-            match (&d.features, d.shader()) {
-                (Some(features), Some(shader)) => {
-                    renderer.render_shaded_on_device(&d.scene, features, shader, cam, &it_opts)?
-                }
-                _ => renderer.render_on_device(&d.scene, cam, &it_opts)?,
-            }
-            if renderer.forward_state()?.last_contributor.is_none() {
-                return Err(TrainError::Other(format!(
-                    "the {}x{} view {} of {} Gaussians is too large to render in one piece, which training needs; use a lower --resolution",
-                    cam.width, cam.height, cam.name, model.len()
-                )));
-            }
-            loss.stage_target(renderer.ctx(), &view.image)?;
-            let step = Step {
-                stats: in_densify && mcmc.is_none(),
-                adam: (!densify_now).then(|| model.advance_steps(reset_now)),
-                skip_opacity: reset_now,
-                position_lr: lr_now,
-                size: (cam.width, cam.height),
-                mcmc: mcmc_step,
-            };
-            let (w, h, lambda) = (cam.width, cam.height, s.lambda_dssim);
-            let features = match (d.feature_values(), d.shader()) {
-                (Some((values, channels)), Some(shader)) => Some(DeviceFeatures {
-                    values,
-                    channels,
-                    shader,
-                    cam,
-                    background: bg,
-                }),
-                _ => None,
-            };
-            let mut norm_buffer = None;
-            stage_sums.add(renderer.timings().stages());
-            renderer.backward_on_device(
-                &d.scene,
-                (w, h),
-                features,
-                &mut |ctx, cmd, image, grad| loss.record_image(ctx, cmd, image, grad, w, h, lambda),
-                &mut |ctx, cmd, grads| {
-                    barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-                    norm_buffer = d.record_step(ctx, cmd, grads, &step, s)?;
-                    Ok(())
-                },
-            )?;
-            stage_sums.add(rast.renderer().backward_timings());
-            let ctx = rast.renderer().ctx();
-            value = loss.read_value(ctx)?;
-            if let Some(b) = norm_buffer {
-                // The squared norm of the whole gradient, clipped against (one float).
-                let sq: Vec<[f32; 4]> = b.read(ctx, 1)?;
-                let norm = sq[0][0].sqrt();
-                if !norm.is_finite() && value.total.is_finite() {
-                    return Err(TrainError::Other(format!(
-                        "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
-                    )));
-                }
-            }
+    for it in run.first..=s.iterations {
+        let view = run.next_view(&job, it);
+        let plan = Plan::at(&job, it, run.model.len());
+        let value = if device_path {
+            run.device_step(&job, &pipelines, rast, loss, view, &plan)?
         } else {
-            let params = model.params();
-            rast.set_shader(model.shader.as_ref())?;
-            let (frame, token) = rast.forward(&params, cam, &render_opts)?;
-            stage_sums.add(rast.renderer().timings().stages());
-            let (v, grad) = loss.compute(
-                rast.renderer().ctx(),
-                &frame.color,
-                &view.image,
-                cam.width,
-                cam.height,
-                s.lambda_dssim,
-            )?;
-            value = v;
-            if value.total.is_finite() {
-                let pixel_grads = PixelGrads {
-                    color: grad.iter().flatten().copied().collect(),
-                    alpha: Vec::new(),
-                    depth: Vec::new(),
-                };
-                let (grads, shader_grads) = if model.shader.is_some() {
-                    let (g, m) =
-                        rast.backward_shaded(&params, cam, &render_opts, token, &pixel_grads)?;
-                    (g, Some(m))
-                } else {
-                    (
-                        rast.backward(&params, cam, &render_opts, token, &pixel_grads)?,
-                        None,
-                    )
-                };
-                stage_sums.add(rast.renderer().backward_timings());
-                if in_densify && mcmc.is_none() {
-                    let radii: Vec<f32> = rast
-                        .projected()?
-                        .iter()
-                        .map(|sp| sp.color_radius[3])
-                        .collect();
-                    model.add_stats(&grads, &radii, cam.width, cam.height);
-                }
-                if !densify_now {
-                    let norm = model.step(&grads, shader_grads.as_ref(), lr_now, s, reset_now);
-                    if !norm.is_finite() {
-                        return Err(TrainError::Other(format!(
-                            "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
-                        )));
-                    }
-                    if let Some(m) = mcmc_step {
-                        model.add_noise(m.noise_scale, m.key);
-                    }
-                }
-            }
-        }
+            run.host_step(&job, rast, loss, view, &plan)?
+        };
         if !value.total.is_finite() {
             return Err(TrainError::Other(format!(
                 "training diverged at iteration {it}: the loss is {} ({} Gaussians); the last model saved is the last good one",
                 value.total,
-                model.len()
+                run.model.len()
             )));
         }
-        // What the host does on the model: the device's state comes down first, and goes
-        // up again (rebuilt) at the next iteration when it changed.
-        let evaluate_now = opts.test_iterations.contains(&it) || it == s.iterations;
-        let checkpoint_now = opts.checkpoint_iterations.contains(&it);
-        let save_now = opts.save_iterations.contains(&it) || it == s.iterations;
-        let cancelled = opts
-            .cancel
-            .as_ref()
-            .is_some_and(|c| c.load(std::sync::atomic::Ordering::SeqCst));
-        if let Some(d) = &dev {
-            if densify_now || reset_now || evaluate_now || checkpoint_now || save_now || cancelled {
-                d.download(rast.renderer().ctx(), &mut model)?;
-            }
-            if densify_now || reset_now {
-                dev = None;
-            }
-        }
-        if let (true, Some(m)) = (densify_now, mcmc) {
-            // 3dgs-mcmc's order: relocate and grow, the step (skipped: the parameters are
-            // new), the noise.
-            model.mcmc_refine(m.cap_max, &mut rng);
-            if let Some(ms) = mcmc_step {
-                model.add_noise(ms.noise_scale, ms.key);
-            }
-        } else if densify_now {
-            let screen = (it > s.opacity_reset_interval).then_some(20.0);
-            model.densify_and_prune(s, data.extent, screen, &mut rng);
-            if model.is_empty() {
-                return Err(TrainError::Other(format!(
-                    "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
-                )));
-            }
-        }
-        if reset_now {
-            model.reset_opacity();
-        }
+        let due = Due::at(&job, it);
+        run.change_model(&job, rast, &plan, &due)?;
         if it % 10 == 1 {
-            peak = peak.max(rast.renderer().ctx().live_allocations().1);
+            run.peak = run.peak.max(rast.renderer().ctx().live_allocations().1);
         }
         progress(Progress {
             iteration: it,
             iterations: s.iterations,
             loss: value,
-            gaussians: model.len(),
+            gaussians: run.model.len(),
         });
-        if evaluate_now {
-            let (views, split): (Vec<&View>, &str) = if data.test.is_empty() {
-                (
-                    data.train
-                        .iter()
-                        .step_by((data.train.len() / 5).max(1))
-                        .take(5)
-                        .collect(),
-                    "train",
-                )
-            } else {
-                (data.test.iter().collect(), "test")
-            };
-            let e = evaluate(rast, &model, &views, &render_opts, it, split)?;
-            note(format!(
-                "[ITER {it}] evaluating {split} ({} views): L1 {:.5} PSNR {:.2} dB SSIM {:.4} FLIP {:.4}; {} Gaussians",
-                e.views,
-                e.l1,
-                e.psnr,
-                e.ssim,
-                e.flip,
-                model.len()
-            ));
-            evaluations.push(e);
+        if due.evaluate {
+            run.evaluate(&job, rast, it, note)?;
         }
-        if checkpoint_now {
-            let path = checkpoint(it, &model, &rng, &order, &mut written, overwrite)?;
+        if due.checkpoint {
+            let path = run.checkpoint(&job, it, job.overwrite)?;
             note(format!("[ITER {it}] checkpoint {}", path.display()));
         }
-        if cancelled && it < s.iterations {
-            let path = checkpoint(it, &model, &rng, &order, &mut written, true)?;
+        if due.cancelled && it < s.iterations {
+            let path = run.checkpoint(&job, it, true)?;
             return Err(TrainError::Interrupted {
                 message: format!(
                     "interrupted after iteration {it}; wrote {}; continue with the same command and --resume {}",
@@ -683,37 +346,22 @@ pub fn train(
                 ),
             });
         }
-        if save_now {
-            let path = out
-                .join("point_cloud")
-                .join(format!("iteration_{it}"))
-                .join("point_cloud.ply");
-            let bytes = crate::scene::ply::to_bytes(
-                &model.scene,
-                crate::scene::ply::PlyEncoding::BinaryLittleEndian,
-            );
-            write(&path, &bytes, overwrite, &mut written)?;
-            if let Some(mlp) = &model.shader {
-                let shader_path = path.with_file_name("shader.safetensors");
-                write(&shader_path, &mlp.to_safetensors(), overwrite, &mut written)?;
-            }
-            note(format!(
-                "[ITER {it}] saved {} ({} Gaussians)",
-                path.display(),
-                model.len()
-            ));
+        if due.save {
+            run.save(&job, it, note)?;
         }
     }
     let seconds = start.elapsed().as_secs_f64();
+    let first = run.first;
     Ok(TrainReport {
         iterations: s.iterations,
-        gaussians: model.len(),
-        evaluations,
-        written,
+        gaussians: run.model.len(),
+        evaluations: run.evaluations,
+        written: run.written,
         iterations_per_second: (s.iterations + 1 - first) as f64 / seconds.max(1e-9),
-        device_bytes_peak: peak,
+        device_bytes_peak: run.peak,
         on_device: device_path,
-        stage_ms: stage_sums
+        stage_ms: run
+            .stage_sums
             .0
             .into_iter()
             .map(|(n, ms)| (n, ms / f64::from((s.iterations + 1 - first).max(1))))
