@@ -7,7 +7,7 @@ use clap::Args;
 use std::path::PathBuf;
 use std::time::Instant;
 use vksplat::cpu::SplatKernel;
-use vksplat::fit::{FitConfig, Layout};
+use vksplat::fit::{FieldData, FitConfig, FitOutcome, Layout};
 use vksplat::{note, outln};
 
 #[derive(Args)]
@@ -134,6 +134,36 @@ fn non_negative(s: &str) -> Result<f32, String> {
 
 pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     let started = Instant::now();
+    check_paths(args)?;
+    let (data, magnitude_channel) = load_input(args)?;
+    let cfg = config(args, &data, magnitude_channel)?;
+    let layout = describe(args, &data, &cfg);
+    let bar = progress_bar(args.quiet, cfg.steps);
+    let outcome = vksplat::fit::fit(&data, &cfg, &mut |p| {
+        if p.step % 10 == 0 || p.step == cfg.steps {
+            bar.set_message(format!("loss {:.3e}  {} Gaussians", p.loss, p.gaussians));
+            bar.set_position(p.step as u64);
+        }
+    })
+    .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
+    bar.finish_and_clear();
+    for n in &outcome.notes {
+        note!("note: {n}");
+    }
+    let warnings = warnings(&outcome);
+    let scene = vksplat::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
+    let bytes =
+        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
+    vksplat::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
+    let seconds = started.elapsed().as_secs_f64();
+    write_report(args, &data, &layout, &cfg, &outcome, &warnings, seconds)?;
+    print_summary(args, &cfg, &outcome, &warnings, seconds);
+    Ok(())
+}
+
+/// Refuses outputs that are not a PLY, that are the input or each other, or that exist
+/// (without `--overwrite`), and a start above the most Gaussians.
+fn check_paths(args: &FitArgs) -> Result<()> {
     let ext = args
         .output
         .extension()
@@ -162,6 +192,13 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             bail!("--gaussians {g} is above --max-gaussians {m}");
         }
     }
+    Ok(())
+}
+
+/// Loads the samples and refuses what no field can be fitted to or the options do not
+/// fit (channels it does not have, a magnitude channel without a positive value).
+/// Returns them and the channel that weights the loss.
+fn load_input(args: &FitArgs) -> Result<(FieldData, usize)> {
     let data = vksplat::fit::load(
         &args.input,
         args.bounds,
@@ -196,6 +233,12 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         vksplat::fit::check_magnitude(&data, magnitude_channel)
             .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     }
+    Ok((data, magnitude_channel))
+}
+
+/// The fitting options: the Gaussian counts (chosen from the samples' count unless given,
+/// and noted) and the arguments.
+fn config(args: &FitArgs, data: &FieldData, magnitude_channel: usize) -> Result<FitConfig> {
     let (auto_initial, auto_max) = vksplat::fit::default_counts(data.len());
     let initial = args
         .gaussians
@@ -210,7 +253,7 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             data.len()
         );
     }
-    let cfg = FitConfig {
+    Ok(FitConfig {
         kernel: args.kernel,
         initial,
         max_gaussians,
@@ -226,7 +269,11 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         batch: args.batch,
         scale_reg: args.scale_reg,
         ..FitConfig::default()
-    };
+    })
+}
+
+/// How the samples were given (for the report), noted with what is fitted to them.
+fn describe(args: &FitArgs, data: &FieldData, cfg: &FitConfig) -> String {
     let layout = match &data.layout {
         Layout::Grid(s) => format!("grid {} x {} x {} x {}", s[0], s[1], s[2], s[3]),
         Layout::SamplesNpy => "samples (.npy)".into(),
@@ -254,10 +301,15 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             args.input.display()
         );
     }
-    let bar = if args.quiet {
+    layout
+}
+
+/// The progress bar (hidden with `--quiet`).
+fn progress_bar(quiet: bool, steps: usize) -> indicatif::ProgressBar {
+    if quiet {
         indicatif::ProgressBar::hidden()
     } else {
-        let bar = indicatif::ProgressBar::new(cfg.steps as u64);
+        let bar = indicatif::ProgressBar::new(steps as u64);
         bar.set_style(
             indicatif::ProgressStyle::with_template(
                 "{bar:40.cyan/blue} step {pos}/{len}  ETA {eta}  {msg}",
@@ -265,18 +317,11 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar
-    };
-    let outcome = vksplat::fit::fit(&data, &cfg, &mut |p| {
-        if p.step % 10 == 0 || p.step == cfg.steps {
-            bar.set_message(format!("loss {:.3e}  {} Gaussians", p.loss, p.gaussians));
-            bar.set_position(p.step as u64);
-        }
-    })
-    .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
-    bar.finish_and_clear();
-    for n in &outcome.notes {
-        note!("note: {n}");
     }
+}
+
+/// A fit no better than predicting 0 everywhere, one sentence.
+fn warnings(outcome: &FitOutcome) -> Vec<String> {
     let mut warnings = Vec::new();
     if let Some(h) = outcome
         .holdout
@@ -288,54 +333,78 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             h.relative_l2
         ));
     }
-    let scene = vksplat::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
-    let bytes =
-        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
-    vksplat::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
-    let seconds = started.elapsed().as_secs_f64();
+    warnings
+}
+
+/// The JSON report (`--report`): the input, the options, the losses and errors, the
+/// density control's history, the time taken.
+fn write_report(
+    args: &FitArgs,
+    data: &FieldData,
+    layout: &str,
+    cfg: &FitConfig,
+    outcome: &FitOutcome,
+    warnings: &[String],
+    seconds: f64,
+) -> Result<()> {
+    let Some(report) = &args.report else {
+        return Ok(());
+    };
     let grown: usize = outcome.history.iter().map(|h| h.cloned + h.split).sum();
     let pruned: usize = outcome.history.iter().map(|h| h.pruned).sum();
-    if let Some(report) = &args.report {
-        let value = serde_json::json!({
-            "input": args.input.display().to_string(),
-            "layout": layout,
-            "samples": data.len(),
-            "channels": data.k,
-            "bounds": data.bounds,
-            "bounds_from": data.bounds_source,
-            "time_column": data.time_column,
-            "time_range": outcome.time_range.map(|(a, b)| [a, b]),
-            "output": args.output.display().to_string(),
-            "parameters": cfg,
-            "train_samples": outcome.train_samples,
-            "holdout_samples": outcome.holdout_samples,
-            "final_loss": {
-                "data": outcome.final_loss.0,
-                "scale_regulariser": outcome.final_loss.1,
-                "total": outcome.final_loss.0 + outcome.final_loss.1,
-                "on": "all training samples",
-            },
-            "holdout_relative_l2": outcome.holdout.as_ref().map(|h| h.relative_l2),
-            "holdout_magnitude_db_rms": outcome.holdout.as_ref().and_then(|h| h.magnitude_db_rms),
-            "value_scale": outcome.value_scale,
-            "fit_bounds": outcome.fit_bounds,
-            "notes": outcome.notes,
-            "warnings": warnings,
-            "clipped_steps": outcome.clipped_steps,
-            "holdout_relative_l2_per_channel": outcome.holdout.as_ref().map(|h| h.per_channel.clone()),
-            "gaussians": {
-                "initial": cfg.initial,
-                "final": outcome.model.len(),
-                "pruned": pruned,
-                "added": grown,
-            },
-            "density_control": outcome.history,
-            "seconds": seconds,
-            "threads": rayon::current_num_threads(),
-        });
-        let text = serde_json::to_string_pretty(&value)? + "\n";
-        vksplat::output::write_bytes_atomically(report, args.overwrite, text.as_bytes())?;
-    }
+    let value = serde_json::json!({
+        "input": args.input.display().to_string(),
+        "layout": layout,
+        "samples": data.len(),
+        "channels": data.k,
+        "bounds": data.bounds,
+        "bounds_from": data.bounds_source,
+        "time_column": data.time_column,
+        "time_range": outcome.time_range.map(|(a, b)| [a, b]),
+        "output": args.output.display().to_string(),
+        "parameters": cfg,
+        "train_samples": outcome.train_samples,
+        "holdout_samples": outcome.holdout_samples,
+        "final_loss": {
+            "data": outcome.final_loss.0,
+            "scale_regulariser": outcome.final_loss.1,
+            "total": outcome.final_loss.0 + outcome.final_loss.1,
+            "on": "all training samples",
+        },
+        "holdout_relative_l2": outcome.holdout.as_ref().map(|h| h.relative_l2),
+        "holdout_magnitude_db_rms": outcome.holdout.as_ref().and_then(|h| h.magnitude_db_rms),
+        "value_scale": outcome.value_scale,
+        "fit_bounds": outcome.fit_bounds,
+        "notes": outcome.notes,
+        "warnings": warnings,
+        "clipped_steps": outcome.clipped_steps,
+        "holdout_relative_l2_per_channel": outcome.holdout.as_ref().map(|h| h.per_channel.clone()),
+        "gaussians": {
+            "initial": cfg.initial,
+            "final": outcome.model.len(),
+            "pruned": pruned,
+            "added": grown,
+        },
+        "density_control": outcome.history,
+        "seconds": seconds,
+        "threads": rayon::current_num_threads(),
+    });
+    let text = serde_json::to_string_pretty(&value)? + "\n";
+    vksplat::output::write_bytes_atomically(report, args.overwrite, text.as_bytes())?;
+    Ok(())
+}
+
+/// The summary line (Gaussians, samples, steps, loss, held-out error), the warnings and
+/// what was written.
+fn print_summary(
+    args: &FitArgs,
+    cfg: &FitConfig,
+    outcome: &FitOutcome,
+    warnings: &[String],
+    seconds: f64,
+) {
+    let grown: usize = outcome.history.iter().map(|h| h.cloned + h.split).sum();
+    let pruned: usize = outcome.history.iter().map(|h| h.pruned).sum();
     let error = match &outcome.holdout {
         Some(h) => format!(
             "held-out relative L2 error {:.4} ({} samples; per channel {}){}",
@@ -360,7 +429,7 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         cfg.steps,
         outcome.final_loss.0 + outcome.final_loss.1,
     );
-    for w in &warnings {
+    for w in warnings {
         note!("warning: {w}");
     }
     if !args.quiet {
@@ -369,5 +438,4 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
             note!("wrote {}", r.display());
         }
     }
-    Ok(())
 }

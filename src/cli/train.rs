@@ -5,7 +5,9 @@ use super::common::{fail_on_validation_messages, GpuArgs};
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
+use vksplat::train::data::Dataset;
 use vksplat::train::model::Settings;
+use vksplat::train::run::{TrainOptions, TrainReport};
 use vksplat::{note, outln};
 
 #[derive(Args)]
@@ -187,6 +189,55 @@ fn fresh_shader(k: usize, hidden: usize, seed: u64) -> vksplat::mlp::Mlp {
 }
 
 pub(crate) fn train(args: &TrainArgs) -> Result<()> {
+    check_args(args)?;
+    let data = load_dataset(args)?;
+    let opts = options(args, settings(args))?;
+    let ctx = args.gpu.context()?;
+    let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;
+    let mut rast = vksplat::render::differentiable::DiffRasterizer::new(ctx)?;
+    let bar = progress_bar(args.quiet, args.iterations);
+    let quiet = args.quiet;
+    let report = vksplat::train::run::train(
+        &data,
+        &args.output,
+        &opts,
+        &mut rast,
+        &mut loss,
+        &mut |p| {
+            if p.iteration % 10 == 0 || p.iteration == p.iterations {
+                bar.set_message(format!(
+                    "loss {:.4}  PSNR {:.2} dB  L1 {:.4}  SSIM {:.3}  {} Gaussians",
+                    p.loss.total,
+                    p.loss.psnr(),
+                    p.loss.l1,
+                    p.loss.ssim,
+                    p.gaussians
+                ));
+                bar.set_position(u64::from(p.iteration));
+            }
+        },
+        &mut |line| {
+            if !quiet {
+                bar.suspend(|| note!("{line}"));
+            }
+        },
+    )
+    .map_err(|e| match e {
+        vksplat::train::run::TrainError::Interrupted { message } => {
+            anyhow::Error::new(super::render::Interrupted(message))
+        }
+        e => anyhow::anyhow!("{}: {e}", args.output.display()),
+    })?;
+    bar.finish_and_clear();
+    fail_on_validation_messages(rast.renderer().ctx())?;
+    print_report(args, &report);
+    Ok(())
+}
+
+/// Refuses the options no run can use: non-positive learning rates, a D-SSIM weight
+/// outside [0, 1], MCMC flags without `--strategy mcmc`, zero intervals, a data set that
+/// is not a directory.
+fn check_args(args: &TrainArgs) -> Result<()> {
     if args.iterations == 0 {
         bail!("--iterations must be at least 1");
     }
@@ -251,6 +302,12 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             args.dataset.display()
         );
     }
+    Ok(())
+}
+
+/// Loads the data set (COLMAP, or NeRF-synthetic / nerfstudio transforms) and notes
+/// what it holds.
+fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
     let resolution = vksplat::train::data::Resolution(args.resolution);
     let data = if vksplat::train::data::is_transforms(&args.dataset) {
         let bg = if args.white_background {
@@ -277,7 +334,13 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             data.extent
         );
     }
-    let settings = Settings {
+    Ok(data)
+}
+
+/// The optimisation and densification settings of the arguments.
+fn settings(args: &TrainArgs) -> Settings {
+    let mcmc = args.strategy == "mcmc";
+    Settings {
         iterations: args.iterations,
         position_lr_init: args.position_lr_init,
         position_lr_final: args.position_lr_final,
@@ -302,7 +365,12 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             refine_until: args.densify_until_iter.unwrap_or(25_000),
         }),
         ..Settings::default()
-    };
+    }
+}
+
+/// What the run is asked to do: `settings`, the shader of feature splats (loaded or
+/// fresh), the checkpoint to resume, the outputs; Ctrl-C and SIGTERM stop it.
+fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
     let shader = match (args.features, &args.shader) {
         (Some(k), Some(path)) => {
             let mlp = vksplat::mlp::Mlp::load(path)?;
@@ -317,7 +385,7 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         )),
         (None, _) => None,
     };
-    let opts = vksplat::train::run::TrainOptions {
+    Ok(TrainOptions {
         settings,
         sh_degree: args.sh_degree,
         white_background: args.white_background,
@@ -338,14 +406,15 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         },
         cancel: Some(super::render::interrupt_flag()),
         host_optimizer: false,
-    };
-    let ctx = args.gpu.context()?;
-    let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;
-    let mut rast = vksplat::render::differentiable::DiffRasterizer::new(ctx)?;
-    let bar = if args.quiet {
+    })
+}
+
+/// The progress bar (hidden with `--quiet`).
+fn progress_bar(quiet: bool, iterations: u32) -> indicatif::ProgressBar {
+    if quiet {
         indicatif::ProgressBar::hidden()
     } else {
-        let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
+        let bar = indicatif::ProgressBar::new(u64::from(iterations));
         bar.set_style(
             indicatif::ProgressStyle::with_template(
                 "{bar:40.cyan/blue} {pos}/{len} {per_sec} ETA {eta}  {msg}",
@@ -353,41 +422,11 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar
-    };
-    let quiet = args.quiet;
-    let report = vksplat::train::run::train(
-        &data,
-        &args.output,
-        &opts,
-        &mut rast,
-        &mut loss,
-        &mut |p| {
-            if p.iteration % 10 == 0 || p.iteration == p.iterations {
-                bar.set_message(format!(
-                    "loss {:.4}  PSNR {:.2} dB  L1 {:.4}  SSIM {:.3}  {} Gaussians",
-                    p.loss.total,
-                    p.loss.psnr(),
-                    p.loss.l1,
-                    p.loss.ssim,
-                    p.gaussians
-                ));
-                bar.set_position(u64::from(p.iteration));
-            }
-        },
-        &mut |line| {
-            if !quiet {
-                bar.suspend(|| note!("{line}"));
-            }
-        },
-    )
-    .map_err(|e| match e {
-        vksplat::train::run::TrainError::Interrupted { message } => {
-            anyhow::Error::new(super::render::Interrupted(message))
-        }
-        e => anyhow::anyhow!("{}: {e}", args.output.display()),
-    })?;
-    bar.finish_and_clear();
-    fail_on_validation_messages(rast.renderer().ctx())?;
+    }
+}
+
+/// The run's summary line and, with `--timings`, the device time of each stage.
+fn print_report(args: &TrainArgs, report: &TrainReport) {
     let last = report.evaluations.last();
     outln!(
         "trained {} iterations at {:.1} it/s: {} Gaussians ({:.0} device bytes per Gaussian at the peak){} -> {}",
@@ -411,5 +450,4 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
             outln!("  {name:<15} {ms:>9.3} ms");
         }
     }
-    Ok(())
 }

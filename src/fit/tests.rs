@@ -3,6 +3,7 @@
 
 use super::model::*;
 use super::*;
+use crate::gen::Rng;
 
 /// A small random model: `g` Gaussians with `k` features, anisotropic and rotated, in the
 /// box [-1, 1]^3.

@@ -1,0 +1,58 @@
+//! What the host does on the model after a step: the device's state comes down when the
+//! host needs it, then the original's densification or the MCMC strategy's refinement,
+//! and the opacity reset.
+
+use super::schedule::{Due, Plan};
+use super::{Job, Run, TrainError};
+use crate::render::differentiable::DiffRasterizer;
+
+impl Run<'_> {
+    /// Iteration `plan.it`'s changes to the model. The device's state comes down first
+    /// when the host changes the model or an output is `due`, and goes up again (rebuilt)
+    /// at the next iteration when it changed.
+    pub(super) fn change_model(
+        &mut self,
+        job: &Job,
+        rast: &mut DiffRasterizer,
+        plan: &Plan,
+        due: &Due,
+    ) -> Result<(), TrainError> {
+        let s = &job.opts.settings;
+        let (it, densify_now, reset_now) = (plan.it, plan.densify_now, plan.reset_now);
+        if let Some(d) = &self.dev {
+            if densify_now
+                || reset_now
+                || due.evaluate
+                || due.checkpoint
+                || due.save
+                || due.cancelled
+            {
+                d.download(rast.renderer().ctx(), &mut self.model)?;
+            }
+            if densify_now || reset_now {
+                self.dev = None;
+            }
+        }
+        if let (true, Some(m)) = (densify_now, s.mcmc.as_ref()) {
+            // 3dgs-mcmc's order: relocate and grow, the step (skipped: the parameters are
+            // new), the noise.
+            self.model.mcmc_refine(m.cap_max, &mut self.rng);
+            if let Some(ms) = plan.mcmc_step {
+                self.model.add_noise(ms.noise_scale, ms.key);
+            }
+        } else if densify_now {
+            let screen = (it > s.opacity_reset_interval).then_some(20.0);
+            self.model
+                .densify_and_prune(s, job.data.extent, screen, &mut self.rng);
+            if self.model.is_empty() {
+                return Err(TrainError::Other(format!(
+                    "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
+                )));
+            }
+        }
+        if reset_now {
+            self.model.reset_opacity();
+        }
+        Ok(())
+    }
+}

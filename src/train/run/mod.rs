@@ -1,0 +1,370 @@
+//! The training loop of the original method on the differentiable rasterizer: per
+//! iteration one training view, forward, the loss and its gradient on the device
+//! ([`super::loss::GpuLoss`]), backward, the densification statistics, and an Adam step
+//! ([`super::model`]); SH degree up every 1000 iterations, densification from 500 to
+//! 15000 every 100, opacity reset every 3000; the model directory as the original writes
+//! it.
+//!
+//! The parameters, Adam's state and the densification statistics stay on the device
+//! ([`super::device`]): an iteration renders, computes the loss and its gradient, runs the
+//! backward pass and steps Adam without a Gaussian crossing to the host; only the loss's
+//! sums (16 bytes) are read back. The state comes down for what the host does every few
+//! hundred iterations (densification, opacity reset, evaluation, checkpoints, saving).
+//! Feature splats (their channels and the neural shader's weights) and gradient clipping
+//! too. [`TrainOptions::host_optimizer`] steps on the host instead
+//! ([`super::model::Model::step`], through the rasterizer's upload/read-back API), for
+//! comparisons. Same rules either way.
+//!
+//! The loop ([`train`]) goes through each iteration's phases in turn, carrying its state
+//! from one to the next: the view and what the schedule asks for (`schedule`), the step
+//! on the device or the host (`step`), the host's changes to the model: densification,
+//! MCMC refinement, opacity reset (`densify`), the evaluation (`evaluate`) and the files
+//! (`output`); a run starts from the data set's points or a checkpoint (`start`).
+
+mod densify;
+mod evaluate;
+mod output;
+mod schedule;
+mod start;
+mod step;
+
+use super::data::Dataset;
+use super::device::DeviceModel;
+use super::loss::{GpuLoss, LossValue};
+use super::model::{Model, Settings};
+use crate::gen::Rng;
+use crate::model::RenderOptions;
+use crate::render::differentiable::DiffRasterizer;
+use schedule::{Due, Plan};
+use std::cell::OnceCell;
+use std::path::{Path, PathBuf};
+
+/// What a training run is asked to do.
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    /// Optimisation and densification settings.
+    pub settings: Settings,
+    /// Largest SH degree (0-3).
+    pub sh_degree: u32,
+    /// White instead of black background.
+    pub white_background: bool,
+    /// Iterations after which the model is saved (the last one always is).
+    pub save_iterations: Vec<u32>,
+    /// Iterations after which the test views (or, without them, up to five training
+    /// views) are evaluated.
+    pub test_iterations: Vec<u32>,
+    /// Seed of the view order, the random start and the split samples.
+    pub seed: u64,
+    /// Random Gaussians when the data set has no points.
+    pub random_points: usize,
+    /// Replace the iterations' files that exist.
+    pub overwrite: bool,
+    /// Feature splats: the neural shader to start from; the Gaussians then learn its
+    /// feature channels (instead of SH colour) and the shader its weights, jointly.
+    pub shader: Option<crate::mlp::Mlp>,
+    /// The alpha falloff trained with (recorded in the PLY).
+    pub kernel: crate::model::SplatKernel,
+    /// Iterations after which a checkpoint (`chkpntN.safetensors`) is written.
+    pub checkpoint_iterations: Vec<u32>,
+    /// Continue from this checkpoint (of the same data set and settings).
+    pub resume: Option<super::checkpoint::Checkpoint>,
+    /// Set (Ctrl-C, SIGTERM): write a checkpoint after the current iteration and stop.
+    pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Step on the host (upload the Gaussians and read their gradients back every
+    /// iteration) even where the device could: for comparisons.
+    pub host_optimizer: bool,
+}
+
+impl Default for TrainOptions {
+    /// The original's settings and `vksplat train`'s defaults: SH degree 3, black
+    /// background, seed 0, 100,000 random Gaussians without points, nothing saved before
+    /// the last iteration, the state on the device.
+    fn default() -> Self {
+        TrainOptions {
+            settings: Settings::default(),
+            sh_degree: 3,
+            white_background: false,
+            save_iterations: Vec::new(),
+            test_iterations: Vec::new(),
+            seed: 0,
+            random_points: 100_000,
+            overwrite: false,
+            shader: None,
+            kernel: crate::model::SplatKernel::default(),
+            checkpoint_iterations: Vec::new(),
+            resume: None,
+            cancel: None,
+            host_optimizer: false,
+        }
+    }
+}
+
+impl TrainOptions {
+    /// What a checkpoint must match to be resumed: the data set's views and the settings
+    /// that shape the run (not the output or evaluation choices).
+    fn fingerprint(&self, data: &Dataset) -> String {
+        format!(
+            "{:?}|sh {}|white {}|seed {}|points {}|kernel {}|shader {}|train {:?}",
+            Settings {
+                iterations: 0,
+                ..self.settings.clone()
+            },
+            self.sh_degree,
+            self.white_background,
+            self.seed,
+            self.random_points,
+            self.kernel,
+            self.shader.as_ref().map_or(0, |m| m.layers.len()),
+            data.train
+                .iter()
+                .map(|v| (&v.camera.name, v.camera.width, v.camera.height))
+                .collect::<Vec<_>>()
+        )
+    }
+}
+
+/// Evaluation of a set of views.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Evaluation {
+    /// Iteration.
+    pub iteration: u32,
+    /// "test" or "train".
+    pub split: String,
+    /// Views evaluated.
+    pub views: usize,
+    /// Mean PSNR (dB) of the clamped renders.
+    pub psnr: f64,
+    /// Mean SSIM.
+    pub ssim: f64,
+    /// Mean L1.
+    pub l1: f64,
+    /// Mean FLIP (`vksplat eval`'s, the default observer).
+    pub flip: f64,
+}
+
+/// What a finished run reports.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TrainReport {
+    /// Iterations run.
+    pub iterations: u32,
+    /// Gaussians at the end.
+    pub gaussians: usize,
+    /// Evaluations at the test iterations.
+    pub evaluations: Vec<Evaluation>,
+    /// Files written.
+    pub written: Vec<PathBuf>,
+    /// Iterations per second of the whole loop (wall clock).
+    pub iterations_per_second: f64,
+    /// Device memory at the peak (sampled every 10 iterations), bytes.
+    pub device_bytes_peak: u64,
+    /// Whether the iterations kept the state on the device ([`super::device`]).
+    pub on_device: bool,
+    /// Mean milliseconds per iteration of each device stage (GPU timestamps): the
+    /// forward pass's, then the loss, the backward pass's and the step (with the state on
+    /// the device; the host optimiser's loss and step are not device stages).
+    pub stage_ms: Vec<(String, f64)>,
+}
+
+/// Sums of per-stage milliseconds, in the order the stages first appear.
+#[derive(Default)]
+struct StageSums(Vec<(String, f64)>);
+
+impl StageSums {
+    fn add<S: AsRef<str>>(&mut self, stages: impl IntoIterator<Item = (S, f64)>) {
+        for (name, ms) in stages {
+            let name = name.as_ref();
+            match self.0.iter_mut().find(|(n, _)| n == name) {
+                Some((_, sum)) => *sum += ms,
+                None => self.0.push((name.to_string(), ms)),
+            }
+        }
+    }
+}
+
+/// One iteration's figures, for a progress display.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    /// Iteration (1-based).
+    pub iteration: u32,
+    /// Of.
+    pub iterations: u32,
+    /// The loss.
+    pub loss: LossValue,
+    /// Gaussians now.
+    pub gaussians: usize,
+}
+
+/// A training error.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// The device.
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    /// Writing the model.
+    #[error(transparent)]
+    Write(#[from] crate::fsutil::WriteError),
+    /// Stopped by a signal after writing a checkpoint.
+    #[error("{message}")]
+    Interrupted {
+        /// What happened and how to resume.
+        message: String,
+    },
+    /// Anything else, one sentence.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// What a run keeps fixed: its inputs and what follows from them.
+struct Job<'a> {
+    data: &'a Dataset,
+    /// The model directory.
+    out: &'a Path,
+    opts: &'a TrainOptions,
+    /// What a checkpoint must match to be resumed ([`TrainOptions::fingerprint`]).
+    fingerprint: String,
+    /// Replace existing files: asked for, or a resumed run replacing its own.
+    overwrite: bool,
+    /// The background and kernel every render uses.
+    render_opts: RenderOptions,
+}
+
+impl<'a> Job<'a> {
+    fn new(data: &'a Dataset, out: &'a Path, opts: &'a TrainOptions) -> Self {
+        let bg = if opts.white_background {
+            [1.0; 3]
+        } else {
+            [0.0; 3]
+        };
+        Job {
+            data,
+            out,
+            opts,
+            fingerprint: opts.fingerprint(data),
+            // A resumed run replaces the files of the run it continues.
+            overwrite: opts.overwrite || opts.resume.is_some(),
+            render_opts: RenderOptions {
+                background: bg,
+                kernel: opts.kernel,
+                ..Default::default()
+            },
+        }
+    }
+}
+
+/// What the loop carries from one iteration to the next.
+struct Run<'p> {
+    model: Model,
+    rng: Rng,
+    /// The training views still to come in this round, last first.
+    order: Vec<usize>,
+    /// The first iteration to run (after a resumed checkpoint's).
+    first: u32,
+    /// The model on the device (none on the host path, or after the host changed it).
+    dev: Option<DeviceModel<'p>>,
+    written: Vec<PathBuf>,
+    evaluations: Vec<Evaluation>,
+    /// Device memory at the peak so far, bytes.
+    peak: u64,
+    stage_sums: StageSums,
+}
+
+/// Refuses options no run can start with.
+fn check_options(opts: &TrainOptions) -> Result<(), TrainError> {
+    if opts.sh_degree > 3 {
+        return Err(TrainError::Other(format!(
+            "--sh-degree must be 0..3, not {}",
+            opts.sh_degree
+        )));
+    }
+    if opts.settings.iterations == 0 {
+        return Err(TrainError::Other("--iterations must be at least 1".into()));
+    }
+    Ok(())
+}
+
+/// Trains on `data` and writes the model directory `out`. `progress` sees every
+/// iteration; `note` the one-line messages (evaluations, densification).
+pub fn train(
+    data: &Dataset,
+    out: &Path,
+    opts: &TrainOptions,
+    rast: &mut DiffRasterizer,
+    loss: &mut GpuLoss,
+    progress: &mut dyn FnMut(Progress),
+    note: &mut dyn FnMut(String),
+) -> Result<TrainReport, TrainError> {
+    let s = &opts.settings;
+    check_options(opts)?;
+    let job = Job::new(data, out, opts);
+    // The step's pipelines, built at the first iteration on the device (once per run).
+    let pipelines = OnceCell::new();
+    let mut run = Run::start(&job, note)?;
+    output::write_cameras_and_cfg(&job, &mut run.written)?;
+    let start = std::time::Instant::now();
+    // The state on the device, unless the caller asks for the host optimiser.
+    let device_path = !opts.host_optimizer;
+    for it in run.first..=s.iterations {
+        let view = run.next_view(&job, it);
+        let plan = Plan::at(&job, it, run.model.len());
+        let value = if device_path {
+            run.device_step(&job, &pipelines, rast, loss, view, &plan)?
+        } else {
+            run.host_step(&job, rast, loss, view, &plan)?
+        };
+        if !value.total.is_finite() {
+            return Err(TrainError::Other(format!(
+                "training diverged at iteration {it}: the loss is {} ({} Gaussians); the last model saved is the last good one",
+                value.total,
+                run.model.len()
+            )));
+        }
+        let due = Due::at(&job, it);
+        run.change_model(&job, rast, &plan, &due)?;
+        if it % 10 == 1 {
+            run.peak = run.peak.max(rast.renderer().ctx().live_allocations().1);
+        }
+        progress(Progress {
+            iteration: it,
+            iterations: s.iterations,
+            loss: value,
+            gaussians: run.model.len(),
+        });
+        if due.evaluate {
+            run.evaluate(&job, rast, it, note)?;
+        }
+        if due.checkpoint {
+            let path = run.checkpoint(&job, it, job.overwrite)?;
+            note(format!("[ITER {it}] checkpoint {}", path.display()));
+        }
+        if due.cancelled && it < s.iterations {
+            let path = run.checkpoint(&job, it, true)?;
+            return Err(TrainError::Interrupted {
+                message: format!(
+                    "interrupted after iteration {it}; wrote {}; continue with the same command and --resume {}",
+                    path.display(),
+                    path.display()
+                ),
+            });
+        }
+        if due.save {
+            run.save(&job, it, note)?;
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let first = run.first;
+    Ok(TrainReport {
+        iterations: s.iterations,
+        gaussians: run.model.len(),
+        evaluations: run.evaluations,
+        written: run.written,
+        iterations_per_second: (s.iterations + 1 - first) as f64 / seconds.max(1e-9),
+        device_bytes_peak: run.peak,
+        on_device: device_path,
+        stage_ms: run
+            .stage_sums
+            .0
+            .into_iter()
+            .map(|(n, ms)| (n, ms / f64::from((s.iterations + 1 - first).max(1))))
+            .collect(),
+    })
+}

@@ -1,0 +1,108 @@
+//! The start of a run: the Gaussians the original starts from (the data set's points,
+//! written as `input.ply`, or random ones around the cameras), their feature channels,
+//! or the state of a checkpoint to resume.
+
+use super::output::{points_ply, write};
+use super::{Job, Run, StageSums, TrainError};
+use crate::gen::Rng;
+use crate::train::checkpoint::Checkpoint;
+use crate::train::model::Model;
+use std::path::PathBuf;
+
+impl Run<'_> {
+    /// The loop's state before its first iteration.
+    pub(super) fn start(job: &Job, note: &mut dyn FnMut(String)) -> Result<Self, TrainError> {
+        let opts = job.opts;
+        let mut rng = Rng(opts.seed);
+        let mut written = Vec::new();
+        let mut model = initial_model(job, &mut rng, &mut written, note)?;
+        model.scene.kernel = opts.kernel;
+        if let Some(mlp) = &opts.shader {
+            model = model.with_features(mlp.clone(), &mut rng);
+        }
+        let mut run = Run {
+            model,
+            rng,
+            order: Vec::new(),
+            first: 1,
+            dev: None,
+            written,
+            evaluations: Vec::new(),
+            peak: 0,
+            stage_sums: StageSums::default(),
+        };
+        if let Some(c) = &opts.resume {
+            run.resume(job, c, note)?;
+        }
+        Ok(run)
+    }
+
+    /// Takes the state of checkpoint `c` (of this data set and these settings, before
+    /// the last iteration).
+    fn resume(
+        &mut self,
+        job: &Job,
+        c: &Checkpoint,
+        note: &mut dyn FnMut(String),
+    ) -> Result<(), TrainError> {
+        let s = &job.opts.settings;
+        if c.fingerprint != job.fingerprint {
+            return Err(TrainError::Other(
+                "the checkpoint belongs to another data set or other settings; resume with the ones it was written with".into(),
+            ));
+        }
+        if c.iteration >= s.iterations {
+            return Err(TrainError::Other(format!(
+                "the checkpoint is at iteration {}, not before --iterations {}",
+                c.iteration, s.iterations
+            )));
+        }
+        self.model = c.model.clone();
+        self.rng = Rng(c.rng);
+        self.order = c.order.clone();
+        self.first = c.iteration + 1;
+        note(format!(
+            "resuming after iteration {} ({} Gaussians)",
+            c.iteration,
+            self.model.len()
+        ));
+        Ok(())
+    }
+}
+
+/// The original's start: points3D (written as `input.ply`), or random points around the
+/// cameras' centre.
+fn initial_model(
+    job: &Job,
+    rng: &mut Rng,
+    written: &mut Vec<PathBuf>,
+    note: &mut dyn FnMut(String),
+) -> Result<Model, TrainError> {
+    let (data, opts) = (job.data, job.opts);
+    Ok(match &data.points {
+        Some(points) => {
+            write(
+                &job.out.join("input.ply"),
+                &points_ply(points),
+                job.overwrite,
+                written,
+            )?;
+            Model::from_points(points, opts.sh_degree)
+        }
+        None => {
+            let (centre, half) = data.random_box.unwrap_or_else(|| {
+                let (mean, extent) = crate::train::data::cameras_centre_and_extent(&data.train);
+                (mean.to_array(), extent)
+            });
+            note(format!(
+                "{} has no points: starting from {} random Gaussians in the cube of half side {half:.3} around ({:.3}, {:.3}, {:.3})",
+                data.source.display(),
+                opts.random_points,
+                centre[0],
+                centre[1],
+                centre[2]
+            ));
+            Model::random(opts.random_points, centre, half, opts.sh_degree, rng)
+        }
+    })
+}

@@ -1,0 +1,210 @@
+//! One iteration's step: the view rendered, the loss and its gradient, the backward pass
+//! and the Adam step, with the model's state on the device ([`crate::train::device`]) or,
+//! for comparisons, on the host ([`crate::train::model::Model::step`]).
+
+use super::schedule::Plan;
+use super::{Job, Run, TrainError};
+use crate::gpu::sync::{barrier, Access};
+use crate::model::grad::PixelGrads;
+use crate::model::RenderOptions;
+use crate::render::backward::DeviceFeatures;
+use crate::render::differentiable::DiffRasterizer;
+use crate::train::data::View;
+use crate::train::device::{DeviceModel, Step, StepPipelines};
+use crate::train::loss::{GpuLoss, LossValue};
+use std::cell::OnceCell;
+
+impl<'p> Run<'p> {
+    /// The step with the state on the device: the model goes up first when it is not
+    /// there (at the start, and after the host changed it), the pipelines are built at the
+    /// first; then render, the loss and its gradient, backward and the step are recorded
+    /// without a Gaussian crossing to the host, and only the loss's sums (and, with
+    /// clipping, the gradient's norm) are read back.
+    pub(super) fn device_step(
+        &mut self,
+        job: &Job,
+        pipelines: &'p OnceCell<StepPipelines>,
+        rast: &mut DiffRasterizer,
+        loss: &mut GpuLoss,
+        view: &View,
+        plan: &Plan,
+    ) -> Result<LossValue, TrainError> {
+        let s = &job.opts.settings;
+        let render_opts = &job.render_opts;
+        let bg = render_opts.background;
+        let cam = &view.camera;
+        let mcmc = s.mcmc.as_ref();
+        let Plan {
+            it,
+            in_densify,
+            densify_now,
+            reset_now,
+            lr_now,
+            mcmc_step,
+        } = *plan;
+        let Run {
+            model,
+            dev,
+            stage_sums,
+            ..
+        } = self;
+        if dev.is_none() {
+            let pipelines = match pipelines.get() {
+                Some(p) => p,
+                None => {
+                    let made = StepPipelines::new(rast.renderer().ctx())?;
+                    pipelines.get_or_init(|| made)
+                }
+            };
+            *dev = Some(DeviceModel::new(
+                rast.renderer(),
+                pipelines,
+                model,
+                s.clip_grad.is_some(),
+            )?);
+        }
+        let d = dev.as_ref().expect("made above");
+        let it_opts = RenderOptions {
+            sh_degree: Some(model.active_sh_degree),
+            ..*render_opts
+        };
+        let renderer = rast.renderer();
+        match (&d.features, d.shader()) {
+            (Some(features), Some(shader)) => {
+                renderer.render_shaded_on_device(&d.scene, features, shader, cam, &it_opts)?
+            }
+            _ => renderer.render_on_device(&d.scene, cam, &it_opts)?,
+        }
+        if renderer.forward_state()?.last_contributor.is_none() {
+            return Err(TrainError::Other(format!(
+                "the {}x{} view {} of {} Gaussians is too large to render in one piece, which training needs; use a lower --resolution",
+                cam.width, cam.height, cam.name, model.len()
+            )));
+        }
+        loss.stage_target(renderer.ctx(), &view.image)?;
+        let step = Step {
+            stats: in_densify && mcmc.is_none(),
+            adam: (!densify_now).then(|| model.advance_steps(reset_now)),
+            skip_opacity: reset_now,
+            position_lr: lr_now,
+            size: (cam.width, cam.height),
+            mcmc: mcmc_step,
+        };
+        let (w, h, lambda) = (cam.width, cam.height, s.lambda_dssim);
+        let features = match (d.feature_values(), d.shader()) {
+            (Some((values, channels)), Some(shader)) => Some(DeviceFeatures {
+                values,
+                channels,
+                shader,
+                cam,
+                background: bg,
+            }),
+            _ => None,
+        };
+        let mut norm_buffer = None;
+        stage_sums.add(renderer.timings().stages());
+        renderer.backward_on_device(
+            &d.scene,
+            (w, h),
+            features,
+            &mut |ctx, cmd, image, grad| loss.record_image(ctx, cmd, image, grad, w, h, lambda),
+            &mut |ctx, cmd, grads| {
+                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+                norm_buffer = d.record_step(ctx, cmd, grads, &step, s)?;
+                Ok(())
+            },
+        )?;
+        stage_sums.add(rast.renderer().backward_timings());
+        let ctx = rast.renderer().ctx();
+        let value = loss.read_value(ctx)?;
+        if let Some(b) = norm_buffer {
+            // The squared norm of the whole gradient, clipped against (one float).
+            let sq: Vec<[f32; 4]> = b.read(ctx, 1)?;
+            let norm = sq[0][0].sqrt();
+            if !norm.is_finite() && value.total.is_finite() {
+                return Err(TrainError::Other(format!(
+                    "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
+                )));
+            }
+        }
+        Ok(value)
+    }
+
+    /// The step on the host: the Gaussians uploaded, rendered, the loss's gradient and
+    /// the backward pass read back, the densification statistics added and Adam stepped
+    /// on the host ([`crate::train::model::Model::step`]).
+    pub(super) fn host_step(
+        &mut self,
+        job: &Job,
+        rast: &mut DiffRasterizer,
+        loss: &mut GpuLoss,
+        view: &View,
+        plan: &Plan,
+    ) -> Result<LossValue, TrainError> {
+        let s = &job.opts.settings;
+        let render_opts = &job.render_opts;
+        let cam = &view.camera;
+        let mcmc = s.mcmc.as_ref();
+        let Plan {
+            it,
+            in_densify,
+            densify_now,
+            reset_now,
+            lr_now,
+            mcmc_step,
+        } = *plan;
+        let Run {
+            model, stage_sums, ..
+        } = self;
+        let params = model.params();
+        rast.set_shader(model.shader.as_ref())?;
+        let (frame, token) = rast.forward(&params, cam, render_opts)?;
+        stage_sums.add(rast.renderer().timings().stages());
+        let (value, grad) = loss.compute(
+            rast.renderer().ctx(),
+            &frame.color,
+            &view.image,
+            cam.width,
+            cam.height,
+            s.lambda_dssim,
+        )?;
+        if value.total.is_finite() {
+            let pixel_grads = PixelGrads {
+                color: grad.iter().flatten().copied().collect(),
+                alpha: Vec::new(),
+                depth: Vec::new(),
+            };
+            let (grads, shader_grads) = if model.shader.is_some() {
+                let (g, m) =
+                    rast.backward_shaded(&params, cam, render_opts, token, &pixel_grads)?;
+                (g, Some(m))
+            } else {
+                (
+                    rast.backward(&params, cam, render_opts, token, &pixel_grads)?,
+                    None,
+                )
+            };
+            stage_sums.add(rast.renderer().backward_timings());
+            if in_densify && mcmc.is_none() {
+                let radii: Vec<f32> = rast
+                    .projected()?
+                    .iter()
+                    .map(|sp| sp.color_radius[3])
+                    .collect();
+                model.add_stats(&grads, &radii, cam.width, cam.height);
+            }
+            if !densify_now {
+                let norm = model.step(&grads, shader_grads.as_ref(), lr_now, s, reset_now);
+                if !norm.is_finite() {
+                    return Err(TrainError::Other(format!(
+                        "training diverged at iteration {it}: the gradient's norm is {norm}; the last model saved is the last good one"
+                    )));
+                }
+                if let Some(m) = mcmc_step {
+                    model.add_noise(m.noise_scale, m.key);
+                }
+            }
+        }
+        Ok(value)
+    }
+}
