@@ -20,13 +20,12 @@
 //! Gaussian per task, each accumulating its own gradient. So every result is the same for
 //! any number of threads.
 
+// The kernel's support and value and the rotation, shared with the CPU reference's field
+// renders (`cpu::field`), live in `model::field`; their paths here are kept.
+pub use crate::model::field::{cutoff, kernel_value, rotation, GAUSSIAN_CUTOFF, POWER_CUTOFF};
 use crate::model::SplatKernel;
 use rayon::prelude::*;
 
-/// `d2` beyond which the Gaussian kernel is taken as 0 (4 sigma).
-pub const GAUSSIAN_CUTOFF: f32 = 16.0;
-/// `d2` where the power kernel ends (3 sigma).
-pub const POWER_CUTOFF: f32 = 9.0;
 /// Fixed number of Gaussian chunks in the forward pass (independent of the thread count,
 /// so the summation order, and with it every bit of the result, is too).
 pub const FORWARD_CHUNKS: usize = 16;
@@ -43,60 +42,10 @@ pub const LOGIT: usize = 10;
 /// Offset of the features.
 pub const FEAT: usize = 11;
 
-/// The support of `kernel`: `d2` above this contributes nothing.
-pub fn cutoff(kernel: SplatKernel) -> f32 {
-    match kernel {
-        SplatKernel::Gaussian => GAUSSIAN_CUTOFF,
-        SplatKernel::Power => POWER_CUTOFF,
-    }
-}
-
-/// The kernel at `d2` (within the cutoff) and its derivative with respect to `d2`.
-#[inline]
-pub fn kernel_value(kernel: SplatKernel, d2: f32) -> (f32, f32) {
-    match kernel {
-        SplatKernel::Gaussian => {
-            let g = (-0.5 * d2).exp();
-            (g, -0.5 * g)
-        }
-        SplatKernel::Power => {
-            let g = 1.0 - d2 / 9.0;
-            if g > 0.0 {
-                (g, -1.0 / 9.0)
-            } else {
-                (0.0, 0.0)
-            }
-        }
-    }
-}
-
 /// The logistic sigmoid.
 #[inline]
 pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
-}
-
-/// Rotation matrix (rows) of a normalised quaternion `w, x, y, z` (the renderers'
-/// `quat_to_mat3`).
-pub fn rotation(q: [f32; 4]) -> [[f32; 3]; 3] {
-    let [w, x, y, z] = q;
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
 }
 
 /// The Gaussians: `stride()` floats each, `[x y z | log s0 s1 s2 | w qx qy qz | logit |

@@ -7,6 +7,7 @@
 //! needs another for its types. `cpu` and `scene` re-export what used to live in them
 //! (`cpu::RenderOptions`, `cpu::sh`, `scene::ActivatedScene`, ...).
 
+pub mod field;
 pub mod grad;
 pub mod sh;
 

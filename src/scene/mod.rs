@@ -74,7 +74,7 @@ pub struct Scene {
 
 /// `(t - t_mean) / t_scale` squared beyond which a Gaussian's temporal factor is 0: 4
 /// temporal sigma, the spatial truncation of the field's Gaussian kernel
-/// ([`crate::fit::model::GAUSSIAN_CUTOFF`]).
+/// ([`crate::model::field::GAUSSIAN_CUTOFF`]).
 pub const TEMPORAL_CUTOFF: f32 = 16.0;
 
 /// The temporal factor of a Gaussian with temporal mean `t_mean` and log temporal scale

@@ -478,3 +478,74 @@ fn selection_on_loaded_cameras() {
         "{e}"
     );
 }
+
+// The orbit and the default camera on the demo scene (a test of `camera::orbit` that
+// needs the scene loader, so it lives here rather than under `camera`, which uses no
+// module above it).
+
+/// Pixel coordinates and depth of a world point seen by `cam`.
+fn project_point(cam: &vksplat::camera::Camera, p: Vec3) -> (f32, f32, f32) {
+    let v = cam.rotation * p + cam.translation;
+    (
+        cam.fx * v.x / v.z + cam.cx,
+        cam.fy * v.y / v.z + cam.cy,
+        v.z,
+    )
+}
+
+#[test]
+fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
+    let scene = vksplat::demo_scene();
+    let b = vksplat::camera::bulk_bounds(&scene.positions);
+    for (w, h) in [(1280, 720), (320, 240), (100, 70), (480, 640)] {
+        let default = vksplat::camera::default_camera(&scene.positions, w, h);
+        let frames = vksplat::camera::orbit(
+            &scene.positions,
+            &vksplat::camera::OrbitParams {
+                frames: 7,
+                width: w,
+                height: h,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(frames.len(), 7);
+        assert_eq!(frames[0].name, "orbit_00000");
+        assert_eq!(
+            vksplat::camera::Camera {
+                name: "default".into(),
+                ..frames[0].clone()
+            },
+            default
+        );
+        for cam in &frames {
+            // The box centre is the image centre.
+            let (u, v, _) = project_point(cam, b.box_centre());
+            assert!((u - cam.cx).abs() < 1e-2 && (v - cam.cy).abs() < 1e-2);
+            // Every corner is inside the image, with the 5% margin, and one corner
+            // touches that margin on some frame (the framing is tight, not loose).
+            for k in 0..8 {
+                let c = Vec3::new(
+                    if k & 1 == 0 { b.lo.x } else { b.hi.x },
+                    if k & 2 == 0 { b.lo.y } else { b.hi.y },
+                    if k & 4 == 0 { b.lo.z } else { b.hi.z },
+                );
+                let (u, v, z) = project_point(cam, c);
+                assert!(z > 0.0, "{w}x{h} {}: corner {k} behind", cam.name);
+                let (mu, mv) = (cam.cx - cam.cx / 1.05, cam.cy - cam.cy / 1.05);
+                assert!(
+                    u >= mu - 0.01 && u <= w as f32 - mu + 0.01,
+                    "{w}x{h} {}: corner {k} at u = {u}",
+                    cam.name
+                );
+                assert!(
+                    v >= mv - 0.01 && v <= h as f32 - mv + 0.01,
+                    "{w}x{h} {}: corner {k} at v = {v}",
+                    cam.name
+                );
+            }
+        }
+    }
+    // An empty scene still gets a valid camera.
+    default_camera(&[], 64, 48).validate().unwrap();
+}

@@ -176,7 +176,7 @@ fn sample_by(from: &[usize], weight: &[f32], count: usize, rng: &mut Rng) -> Vec
 /// `s`), in f32 as the device computes it.
 fn covariance_times(q: [f32; 4], s: [f32; 3], v: [f32; 3]) -> [f32; 3] {
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let r = crate::fit::model::rotation(q.map(|v| v / n));
+    let r = crate::model::field::rotation(q.map(|v| v / n));
     // t = S S R^T v, then R t.
     let rt = [0, 1, 2].map(|a| r[0][a] * v[0] + r[1][a] * v[1] + r[2][a] * v[2]);
     let t = [0, 1, 2].map(|a| s[a] * s[a] * rt[a]);
