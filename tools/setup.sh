@@ -12,7 +12,7 @@ packages=(
   glslc spirv-tools
   pkg-config openexr
   chromium chromium-driver
-  # A single-node Slurm cluster for tools/slurm_test.sh (README "Rendering on a cluster").
+  # A single-node Slurm cluster for tools/slurm_test.sh (docs/cluster.md).
   slurm-wlm munge
 )
 # Python (for the `vksplat` package and its tests): any python3 >= 3.9 with venv and pip;

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The Slurm test (README "Rendering on a cluster"): starts a single-node Slurm cluster
+# The Slurm test (docs/cluster.md): starts a single-node Slurm cluster
 # (munged, slurmctld, slurmd; as root, no systemd, everything under a temporary folder),
 # then through the sbatch scripts of examples/slurm/:
 #   1. renders a camera path of a shared scene as a 4-task array and checks that the
