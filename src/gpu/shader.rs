@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::context::Shared;
+use super::device::Shared;
 use super::shader_set;
 use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
 
@@ -289,7 +289,7 @@ impl ComputePipeline {
         // for where the module's x size allows it (`workgroup_size` is the caller's word
         // for it; the module's own is what the driver checks).
         debug_assert!(workgroup_size >= 1);
-        let stage_flags = super::subgroup::full_subgroups_flag(ctx, demand.size[0]);
+        let stage_flags = full_subgroups_flag(ctx, demand.size[0]);
         let entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
             .enumerate()
@@ -583,4 +583,20 @@ impl Drop for ComputePipeline {
 /// ([`shader_set::bindings`]), in binding order: each slot exactly once.
 pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> GpuResult<[T; N]> {
     shader_set::by_binding(items).map_err(GpuError::Internal)
+}
+
+/// Whether a pipeline stage whose workgroup is `local_size_x` wide along x may ask for
+/// full subgroups on `ctx`: x a multiple of the subgroup size that runs and of the one the
+/// driver reports (the rule the validation layer checks; they differ where the driver
+/// misreports).
+fn full_subgroups_flag(ctx: &GpuContext, local_size_x: u32) -> vk::PipelineShaderStageCreateFlags {
+    let info = ctx.info();
+    if ctx.full_subgroups
+        && local_size_x % info.subgroup_size.max(1) == 0
+        && local_size_x % info.reported_subgroup_size.max(1) == 0
+    {
+        vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
+    } else {
+        vk::PipelineShaderStageCreateFlags::empty()
+    }
 }
