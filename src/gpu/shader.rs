@@ -219,8 +219,20 @@ impl ComputePipeline {
         workgroup_size: u32,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
+        // A driver that misreports its subgroup size: every shader computes with the
+        // measured one (`glsl/subgroup.glsl`).
+        let measured = ctx.info().subgroup_size_override;
+        let specialization: Vec<(u32, u32)> = specialization
+            .iter()
+            .copied()
+            .chain((measured != 0).then_some((super::shader_set::SUBGROUP_SIZE_SPEC, measured)))
+            .collect();
+        let specialization = specialization.as_slice();
+        // One reading of the module: its interface and its workgroup's demand.
+        let (interface, demand) = read_module(spirv, specialization);
         // The module must bind what the host binds (the two sides cannot drift).
-        super::reflect::check(name, spirv, bindings, push_size).map_err(GpuError::Internal)?;
+        super::reflect::check_interface(name, interface, bindings, push_size)
+            .map_err(GpuError::Internal)?;
         let device = &ctx.shared.device;
         let mut this = Self {
             shared: ctx.shared.clone(),
@@ -274,17 +286,8 @@ impl ComputePipeline {
             .vk("vkCreatePipelineLayout")?;
         ctx.set_name(this.layout, name);
 
-        // A driver that misreports its subgroup size: every shader computes with the
-        // measured one (`glsl/subgroup.glsl`).
-        let measured = ctx.info().subgroup_size_override;
-        let specialization: Vec<(u32, u32)> = specialization
-            .iter()
-            .copied()
-            .chain((measured != 0).then_some((super::shader_set::SUBGROUP_SIZE_SPEC, measured)))
-            .collect();
-        let specialization = specialization.as_slice();
         // The workgroup must fit the device's (or the emulated) limits.
-        let demand = super::workgroup::check_limits(name, spirv, specialization, ctx.info())?;
+        let demand = super::workgroup::check_demand(name, demand, ctx.info())?;
         // Workgroup scans index subgroups by gl_SubgroupID and assume they are full: asked
         // for where the module's x size allows it (`workgroup_size` is the caller's word
         // for it; the module's own is what the driver checks).
@@ -583,6 +586,35 @@ impl Drop for ComputePipeline {
 /// ([`shader_set::bindings`]), in binding order: each slot exactly once.
 pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> GpuResult<[T; N]> {
     shader_set::by_binding(items).map_err(GpuError::Internal)
+}
+
+/// Reads `words` once, for both of what a pipeline checks: the module's interface
+/// ([`super::reflect`]) and its workgroup's demand with `specialization` applied
+/// ([`super::workgroup`]). Each `Err` names what is malformed or cannot be evaluated.
+fn read_module(
+    words: &[u32],
+    specialization: &[(u32, u32)],
+) -> (
+    Result<super::reflect::Interface, String>,
+    Result<super::workgroup::WorkgroupDemand, String>,
+) {
+    if words.len() < 5 || words[0] != super::shader_set::SPIRV_MAGIC {
+        let e = "not a SPIR-V module".to_string();
+        return (Err(e.clone()), Err(e));
+    }
+    let overrides: std::collections::HashMap<u32, u32> = specialization.iter().copied().collect();
+    let mut interface = super::reflect::Declarations::default();
+    let mut workgroup = super::workgroup::Declarations::default();
+    for instruction in super::reflect::instructions(words) {
+        match instruction {
+            Ok((op, w)) => {
+                interface.visit(op, w);
+                workgroup.visit(op, w, &overrides);
+            }
+            Err(e) => return (Err(e.clone()), Err(e)),
+        }
+    }
+    (interface.interface(), workgroup.demand())
 }
 
 /// Whether a pipeline stage whose workgroup is `local_size_x` wide along x may ask for
