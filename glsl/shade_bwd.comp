@@ -1,33 +1,32 @@
 #version 460
-// The neural shader's backward pass (src/render/shade_bwd.rs): from dL/d(shaded colour)
-// and dL/d(alpha) per pixel to dL/d(feature channels) and dL/d(alpha) per pixel, which the
-// feature blend's backward (blend_bwd) takes, and to the network's weight and bias
-// gradients. The rules of cpu::backward::backward_shaded.
+// The neural shader's backward pass: from dL/d(shaded colour) and dL/d(alpha) per pixel
+// to dL/d(feature channels) and dL/d(alpha) per pixel, which the feature blend's backward
+// (blend_bwd.comp) takes, and to the network's weight and bias gradients.
 //
-// A workgroup takes a chunk of 64 consecutive pixels, one per invocation. Each invocation
-// evaluates the network on its pixel as shade.comp does (the same operations in the same
-// order), keeping every layer's input in a private array sized for the network, then walks
-// the layers back. Per layer, the chunk's inputs and output gradients are staged in the
-// workgroup's scratch region; the parameters' gradients are summed over the chunk's pixels
-// in pixel order by the invocation that owns each parameter (every 64th) and added to the
-// workgroup's partial sums; a dispatch covers as many chunks as there are partial slots,
-// the next dispatch adds the next chunks to the same slots, and mlp_grad_reduce.comp sums
-// the slots in order. No atomics: the gradients are the same bits run after run.
+// A workgroup takes a chunk of PIXELS consecutive pixels, one per invocation. Each
+// invocation evaluates the network on its pixel as shade.comp does (the same operations in
+// the same order), keeping every layer's input in a private array sized for the network,
+// then walks the layers back. Per layer, the chunk's inputs and output gradients are staged
+// in the workgroup's scratch region; the parameters' gradients are summed over the chunk's
+// pixels in pixel order by the invocation that owns each parameter (every PIXELS-th) and
+// added to the workgroup's partial sums; a dispatch covers as many chunks as there are
+// partial slots, the next dispatch adds the next chunks to the same slots, and
+// mlp_grad_reduce.comp sums the slots in order. No atomics: the gradients are the same
+// bits run after run.
 #extension GL_GOOGLE_include_directive : require
 
-#define PIXELS 64u
+#define PIXELS SHADE_CHUNK_PIXELS
 
-layout(local_size_x = 64) in;
+layout(local_size_x = PIXELS) in;
 
-// Sized for the network by the host (GpuShader::activations, widest).
+// Sized for the network: the values a pixel's evaluation keeps, and the widest layer.
 layout(constant_id = SHADE_SPEC_ACTIVATIONS) const uint ACTIVATIONS = 16u;
 layout(constant_id = SHADE_SPEC_WIDEST) const uint WIDEST = 16u;
 
-// 128 bytes of push constants (src/render/shade_bwd.rs ShadeBwdPush): shade.comp's, then
-// the pass's shape.
+// 128 bytes of push constants: shade.comp's ShadeParams, then the pass's shape.
 layout(push_constant) uniform ShadeBwdParams {
     uvec4 size;        // width, height, K, groups of four channels
-    uvec4 code;        // input code (Mlp::input_code), layers, plane stride in vec4s, first chunk
+    uvec4 code;        // input code as in shade.comp, layers, plane stride in vec4s, first chunk
     vec4 intrinsics;   // fx, fy, cx, cy
     vec4 rot0;         // rows of the world-to-camera rotation
     vec4 rot1;

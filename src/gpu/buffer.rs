@@ -9,7 +9,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
-use super::context::Shared;
+use super::device::Shared;
 use super::memory::{self, MemoryPlan};
 use super::sync::{barrier, Access};
 use super::{GpuContext, GpuError, GpuResult, VkContext};

@@ -1,11 +1,9 @@
 //! Every Vulkan device the loader offers, described from read-only queries (no logical
 //! device is created): what `vksplat doctor` lists, and whether vksplat can run on each.
 
-use std::ffi::CStr;
-
 use ash::vk;
 
-use super::context::{cstr_array, version_string};
+use super::capabilities::{self, cstr_array, version_string};
 use serde::Serialize;
 
 use super::{GpuError, GpuResult, VkContext};
@@ -157,10 +155,7 @@ fn describe(
     let modern = props.api_version >= vk::API_VERSION_1_3;
     let exts = unsafe { instance.enumerate_device_extension_properties(pd) }
         .vk("vkEnumerateDeviceExtensionProperties")?;
-    let has_ext = |name: &CStr| {
-        exts.iter()
-            .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
-    };
+    let has_ext = |name| capabilities::has_extension(&exts, name);
     let mut props11 = vk::PhysicalDeviceVulkan11Properties::default();
     let mut props12 = vk::PhysicalDeviceVulkan12Properties::default();
     let mut props13 = vk::PhysicalDeviceVulkan13Properties::default();
@@ -207,35 +202,16 @@ fn describe(
         .iter()
         .find(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE));
 
-    let mut missing = Vec::new();
-    if !modern {
-        missing.push(format!(
-            "Vulkan 1.3 (it has {})",
-            version_string(props.api_version)
-        ));
-    }
-    if compute.is_none() {
-        missing.push("a compute queue".to_string());
-    }
-    if !has_ext(ash::khr::push_descriptor::NAME) {
-        missing.push("VK_KHR_push_descriptor".to_string());
-    }
-    if features13.synchronization2 == vk::FALSE {
-        missing.push("synchronization2".to_string());
-    }
-    if features13.maintenance4 == vk::FALSE {
-        missing.push("maintenance4".to_string());
-    }
-    let needed_ops = vk::SubgroupFeatureFlags::BASIC
-        | vk::SubgroupFeatureFlags::ARITHMETIC
-        | vk::SubgroupFeatureFlags::BALLOT;
-    if !props11.subgroup_supported_operations.contains(needed_ops)
-        || !props11
-            .subgroup_supported_stages
-            .contains(vk::ShaderStageFlags::COMPUTE)
-    {
-        missing.push("basic/arithmetic/ballot subgroup operations in compute shaders".into());
-    }
+    let missing: Vec<String> = capabilities::missing(
+        props.api_version,
+        compute.is_some(),
+        &exts,
+        &props11,
+        &features13,
+    )
+    .iter()
+    .map(|lack| lack.to_string())
+    .collect();
     let limits = props.limits;
     Ok(DeviceSummary {
         index,

@@ -2,7 +2,8 @@
 //! differently from lavapipe, so every path that depends on it runs here too.
 //!
 //! The one place each such decision is made reads [`DeviceInfo`](super::DeviceInfo), and
-//! the context applies an [`Emulation`] to that info before anything reads it: a kernel
+//! the context applies an [`Emulation`] to that info before anything reads it
+//! ([`Emulation::apply`], beside the info in [`super::device_info`]): a kernel
 //! chooser sees 16 KiB of shared memory and 128 invocations under `spec-limits`, exactly
 //! as on a device that has no more. `VKSPLAT_EMULATE` (a comma-separated list, e.g.
 //! `spec-limits,timestamp-bits=36`) or [`ContextOptions::emulate`](super::ContextOptions)
@@ -57,7 +58,7 @@ impl Emulation {
             };
             let number = |what: &str| -> Result<u32, String> {
                 let v = value.ok_or_else(|| format!("{what} needs a value ({what}=N)"))?;
-                super::context::parse_bytes(v)
+                super::budget::parse_bytes(v)
                     .ok()
                     .and_then(|n| u32::try_from(n).ok())
                     .ok_or_else(|| format!("{what}={v}: not a whole number below 2^32"))
@@ -128,31 +129,6 @@ impl Emulation {
     /// Whether any trait is on.
     pub fn any(&self) -> bool {
         *self != Emulation::default()
-    }
-
-    /// Clamps `info`'s limits to the emulated ones (never raises one).
-    pub fn apply(&self, info: &mut super::DeviceInfo) {
-        if self.spec_limits {
-            use spec_minimum as m;
-            info.max_shared_memory = info.max_shared_memory.min(m::SHARED_MEMORY);
-            info.max_workgroup_invocations =
-                info.max_workgroup_invocations.min(m::WORKGROUP_INVOCATIONS);
-            for c in &mut info.max_workgroup_count {
-                *c = (*c).min(m::WORKGROUP_COUNT);
-            }
-        }
-        if let Some(bits) = self.timestamp_bits {
-            if info.timestamp_valid_bits != 0 {
-                info.timestamp_valid_bits = info.timestamp_valid_bits.min(bits);
-            }
-        }
-        if let Some(range) = self.max_storage_buffer_range {
-            info.max_storage_buffer_range = info.max_storage_buffer_range.min(range);
-        }
-        if let Some(n) = self.max_workgroup_count_x {
-            info.max_workgroup_count[0] = info.max_workgroup_count[0].min(n);
-        }
-        info.emulation = self.clone();
     }
 }
 

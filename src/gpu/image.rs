@@ -7,7 +7,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
-use super::context::Shared;
+use super::device::Shared;
 use super::{memory, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind, VkContext};
 
 /// A device-local 2D image with a view, usable as a storage image and copy source.

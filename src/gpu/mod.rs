@@ -1,12 +1,20 @@
 //! GPU building blocks on raw Vulkan compute: context, buffers, shaders, barriers,
 //! timing, and the reusable prefix-sum and radix-sort stages.
 
+pub mod budget;
 pub mod buffer;
+pub(crate) mod capabilities;
 pub mod context;
+pub mod device;
+pub(crate) mod device_choice;
+pub mod device_info;
 pub mod devices;
 pub mod emulate;
+pub mod frame_slot;
 pub mod image;
+pub(crate) mod instance;
 pub mod limits;
+pub(crate) mod logical_device;
 pub mod memory;
 pub mod pipeline_cache;
 pub mod reflect;
@@ -19,8 +27,12 @@ pub mod sync;
 pub mod timing;
 pub mod workgroup;
 
+pub use budget::BudgetSource;
 pub use buffer::{BufferSlice, BufferView, GpuBuffer, MemoryKind};
-pub use context::{BudgetSource, ContextOptions, DeviceInfo, FrameSlot, GpuContext};
+pub use context::ContextOptions;
+pub use device::GpuContext;
+pub use device_info::DeviceInfo;
+pub use frame_slot::FrameSlot;
 pub use image::GpuImage;
 pub use scan::Scan;
 pub use shader::{ComputePipeline, ShaderError};
@@ -115,7 +127,7 @@ fn vk_hint(result: vk::Result) -> &'static str {
 impl GpuError {
     /// Maps an allocator failure: running out of memory becomes [`GpuError::OutOfMemory`].
     pub(crate) fn from_alloc(
-        shared: &context::Shared,
+        shared: &device::Shared,
         name: &str,
         bytes: u64,
         source: gpu_allocator::AllocationError,

@@ -5,6 +5,8 @@
 //! pipeline is checked when it is built, and `shader_interface_matches_the_host` builds
 //! every variant.
 
+use std::collections::HashMap;
+
 /// What a binding slot holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum BindingKind {
@@ -98,34 +100,45 @@ pub(crate) fn instructions(words: &[u32]) -> impl Iterator<Item = Result<(u16, &
     })
 }
 
-/// Reads the interface of a SPIR-V module; `Err` names what is malformed.
-pub fn reflect(words: &[u32]) -> Result<Interface, String> {
-    use std::collections::HashMap;
-    if words.len() < 5 || words[0] != super::shader_set::SPIRV_MAGIC {
-        return Err("not a SPIR-V module".into());
+/// The declarations of a module that its interface is read from, by result id.
+#[derive(Default)]
+pub(crate) struct Declarations {
+    types: HashMap<u32, Type>,
+    constants: HashMap<u32, u32>,
+    bindings: HashMap<u32, u32>,
+    sets: HashMap<u32, u32>,
+    strides: HashMap<u32, u32>,
+    offsets: HashMap<(u32, u32), u32>,
+    /// (id, pointer type, storage class) of each variable, in order.
+    variables: Vec<(u32, u32, u32)>,
+}
+
+impl Declarations {
+    /// Collects the types, constants, variables and decorations of the module.
+    fn read(words: &[u32]) -> Result<Self, String> {
+        let mut d = Declarations::default();
+        for instruction in instructions(words) {
+            let (op, w) = instruction?;
+            d.visit(op, w);
+        }
+        Ok(d)
     }
-    let mut types: HashMap<u32, Type> = HashMap::new();
-    let mut constants: HashMap<u32, u32> = HashMap::new();
-    let mut bindings: HashMap<u32, u32> = HashMap::new();
-    let mut sets: HashMap<u32, u32> = HashMap::new();
-    let mut strides: HashMap<u32, u32> = HashMap::new();
-    let mut offsets: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut variables: Vec<(u32, u32, u32)> = Vec::new(); // (id, pointer type, storage)
-    for instruction in instructions(words) {
-        let (op, w) = instruction?;
+
+    /// Takes in one instruction (`op`, operands `w`).
+    pub(crate) fn visit(&mut self, op: u16, w: &[u32]) {
         let arg = |k: usize| w.get(k).copied().unwrap_or(0);
         match op {
             OP_TYPE_INT | OP_TYPE_FLOAT => {
-                types.insert(arg(0), Type::Scalar(arg(1) / 8));
+                self.types.insert(arg(0), Type::Scalar(arg(1) / 8));
             }
             OP_TYPE_VECTOR => {
-                types.insert(arg(0), Type::Vector(arg(1), arg(2)));
+                self.types.insert(arg(0), Type::Vector(arg(1), arg(2)));
             }
             OP_TYPE_MATRIX => {
-                types.insert(arg(0), Type::Matrix(arg(1), arg(2)));
+                self.types.insert(arg(0), Type::Matrix(arg(1), arg(2)));
             }
             OP_TYPE_IMAGE => {
-                types.insert(
+                self.types.insert(
                     arg(0),
                     Type::Image {
                         dim: arg(2),
@@ -134,159 +147,177 @@ pub fn reflect(words: &[u32]) -> Result<Interface, String> {
                 );
             }
             OP_TYPE_SAMPLED_IMAGE => {
-                types.insert(arg(0), Type::SampledImage(arg(1)));
+                self.types.insert(arg(0), Type::SampledImage(arg(1)));
             }
             OP_TYPE_ARRAY => {
-                types.insert(arg(0), Type::Array(arg(2)));
+                self.types.insert(arg(0), Type::Array(arg(2)));
             }
             OP_TYPE_RUNTIME_ARRAY => {
-                types.insert(arg(0), Type::RuntimeArray);
+                self.types.insert(arg(0), Type::RuntimeArray);
             }
             OP_TYPE_STRUCT => {
-                types.insert(arg(0), Type::Struct(w[1..].to_vec()));
+                self.types.insert(arg(0), Type::Struct(w[1..].to_vec()));
             }
             OP_TYPE_POINTER => {
-                types.insert(arg(0), Type::Pointer(arg(2)));
+                self.types.insert(arg(0), Type::Pointer(arg(2)));
             }
             OP_CONSTANT => {
-                constants.insert(arg(1), arg(2));
+                self.constants.insert(arg(1), arg(2));
             }
-            OP_VARIABLE => variables.push((arg(1), arg(0), arg(2))),
+            OP_VARIABLE => self.variables.push((arg(1), arg(0), arg(2))),
             OP_DECORATE => match arg(1) {
                 DECORATION_BINDING => {
-                    bindings.insert(arg(0), arg(2));
+                    self.bindings.insert(arg(0), arg(2));
                 }
                 DECORATION_DESCRIPTOR_SET => {
-                    sets.insert(arg(0), arg(2));
+                    self.sets.insert(arg(0), arg(2));
                 }
                 DECORATION_ARRAY_STRIDE => {
-                    strides.insert(arg(0), arg(2));
+                    self.strides.insert(arg(0), arg(2));
                 }
                 _ => {}
             },
             OP_MEMBER_DECORATE if arg(2) == DECORATION_OFFSET => {
-                offsets.insert((arg(0), arg(1)), arg(3));
+                self.offsets.insert((arg(0), arg(1)), arg(3));
             }
             _ => {}
         }
     }
-    let size_of = |t: u32| -> Option<u32> {
-        fn size(
-            t: u32,
-            types: &std::collections::HashMap<u32, Type>,
-            constants: &std::collections::HashMap<u32, u32>,
-            strides: &std::collections::HashMap<u32, u32>,
-            offsets: &std::collections::HashMap<(u32, u32), u32>,
-            depth: u32,
-        ) -> Option<u32> {
-            if depth > 16 {
-                return None;
-            }
-            match types.get(&t)? {
-                Type::Scalar(bytes) => Some(*bytes),
-                Type::Vector(c, n) => {
-                    Some(size(*c, types, constants, strides, offsets, depth + 1)? * n)
-                }
-                Type::Matrix(c, n) => {
-                    Some(size(*c, types, constants, strides, offsets, depth + 1)? * n)
-                }
-                Type::Array(len) => Some(strides.get(&t)? * constants.get(len)?),
-                Type::Struct(members) => {
-                    let last = members.len().checked_sub(1)? as u32;
-                    let off = offsets.get(&(t, last))?;
-                    Some(
-                        off + size(
-                            members[last as usize],
-                            types,
-                            constants,
-                            strides,
-                            offsets,
-                            depth + 1,
-                        )?,
-                    )
-                }
-                _ => None,
-            }
+
+    /// Bytes of type `t` (a block: its last member's offset plus that member's size);
+    /// `None` for what has no size here or nests deeper than 16.
+    fn size_of(&self, t: u32) -> Option<u32> {
+        self.size(t, 0)
+    }
+
+    fn size(&self, t: u32, depth: u32) -> Option<u32> {
+        if depth > 16 {
+            return None;
         }
-        size(t, &types, &constants, &strides, &offsets, 0)
-    };
-    let mut interface = Interface::default();
-    for &(id, pointer, storage) in &variables {
-        let pointee = match types.get(&pointer) {
-            Some(Type::Pointer(pointee)) => *pointee,
-            _ => continue,
+        match self.types.get(&t)? {
+            Type::Scalar(bytes) => Some(*bytes),
+            Type::Vector(c, n) => Some(self.size(*c, depth + 1)? * n),
+            Type::Matrix(c, n) => Some(self.size(*c, depth + 1)? * n),
+            Type::Array(len) => Some(self.strides.get(&t)? * self.constants.get(len)?),
+            Type::Struct(members) => {
+                let last = members.len().checked_sub(1)? as u32;
+                let off = self.offsets.get(&(t, last))?;
+                Some(off + self.size(members[last as usize], depth + 1)?)
+            }
+            _ => None,
+        }
+    }
+
+    /// The kind of descriptor `binding` is: a variable of `storage` class pointing at
+    /// `pointee`.
+    fn binding_kind(
+        &self,
+        binding: u32,
+        storage: u32,
+        pointee: u32,
+    ) -> Result<BindingKind, String> {
+        let types = &self.types;
+        Ok(match (storage, types.get(&pointee)) {
+            (STORAGE_STORAGE_BUFFER, _) => BindingKind::StorageBuffer,
+            (_, Some(Type::SampledImage(image))) => match types.get(image) {
+                Some(Type::Image {
+                    dim: DIM_BUFFER, ..
+                }) => BindingKind::UniformTexelBuffer,
+                _ => {
+                    return Err(format!(
+                        "binding {binding}: a sampled image other than a texel buffer"
+                    ))
+                }
+            },
+            (
+                _,
+                Some(Type::Image {
+                    dim: DIM_BUFFER,
+                    sampled: 2,
+                }),
+            ) => BindingKind::StorageTexelBuffer,
+            // SPIR-V 1.6 declares a samplerBuffer as a sampled (1) buffer image.
+            (
+                _,
+                Some(Type::Image {
+                    dim: DIM_BUFFER,
+                    sampled: 1,
+                }),
+            ) => BindingKind::UniformTexelBuffer,
+            (_, Some(Type::Image { sampled: 2, .. })) => BindingKind::StorageImage,
+            _ => {
+                return Err(format!(
+                    "binding {binding}: a descriptor kind vksplat does not bind"
+                ))
+            }
+        })
+    }
+
+    /// The array stride of a storage buffer whose block (`pointee`) is one runtime array.
+    fn runtime_array_stride(&self, pointee: u32) -> Option<u32> {
+        let Some(Type::Struct(members)) = self.types.get(&pointee) else {
+            return None;
         };
-        match storage {
-            STORAGE_PUSH_CONSTANT => {
-                let Some(Type::Struct(members)) = types.get(&pointee) else {
-                    return Err("the push constants are not a block".into());
-                };
-                interface.push_offsets = (0..members.len() as u32)
-                    .map(|m| offsets.get(&(pointee, m)).copied().unwrap_or(u32::MAX))
-                    .collect();
-                interface.push_size =
-                    size_of(pointee).ok_or("the push-constant block's size cannot be computed")?;
-            }
-            STORAGE_STORAGE_BUFFER | STORAGE_UNIFORM_CONSTANT => {
-                let Some(&binding) = bindings.get(&id) else {
-                    continue;
-                };
-                if sets.get(&id).copied().unwrap_or(0) != 0 {
-                    return Err(format!("binding {binding} is not in descriptor set 0"));
-                }
-                let kind = match (storage, types.get(&pointee)) {
-                    (STORAGE_STORAGE_BUFFER, _) => BindingKind::StorageBuffer,
-                    (_, Some(Type::SampledImage(image))) => match types.get(image) {
-                        Some(Type::Image {
-                            dim: DIM_BUFFER, ..
-                        }) => BindingKind::UniformTexelBuffer,
-                        _ => {
-                            return Err(format!(
-                                "binding {binding}: a sampled image other than a texel buffer"
-                            ))
-                        }
-                    },
-                    (
-                        _,
-                        Some(Type::Image {
-                            dim: DIM_BUFFER,
-                            sampled: 2,
-                        }),
-                    ) => BindingKind::StorageTexelBuffer,
-                    // SPIR-V 1.6 declares a samplerBuffer as a sampled (1) buffer image.
-                    (
-                        _,
-                        Some(Type::Image {
-                            dim: DIM_BUFFER,
-                            sampled: 1,
-                        }),
-                    ) => BindingKind::UniformTexelBuffer,
-                    (_, Some(Type::Image { sampled: 2, .. })) => BindingKind::StorageImage,
-                    _ => {
-                        return Err(format!(
-                            "binding {binding}: a descriptor kind vksplat does not bind"
-                        ))
-                    }
-                };
-                interface.bindings.push((binding, kind));
-                if kind == BindingKind::StorageBuffer {
-                    if let Some(Type::Struct(members)) = types.get(&pointee) {
-                        if let [array] = members[..] {
-                            if let (Some(Type::RuntimeArray), Some(&stride)) =
-                                (types.get(&array), strides.get(&array))
-                            {
-                                interface.array_strides.push((binding, stride));
-                            }
-                        }
-                    }
-                }
-            }
-            _ => {}
+        let [array] = members[..] else {
+            return None;
+        };
+        match (self.types.get(&array), self.strides.get(&array)) {
+            (Some(Type::RuntimeArray), Some(&stride)) => Some(stride),
+            _ => None,
         }
     }
-    interface.bindings.sort_by_key(|&(b, _)| b);
-    interface.array_strides.sort();
-    Ok(interface)
+
+    /// The interface the declarations make up.
+    pub(crate) fn interface(&self) -> Result<Interface, String> {
+        let d = self;
+        let mut interface = Interface::default();
+        for &(id, pointer, storage) in &d.variables {
+            let pointee = match d.types.get(&pointer) {
+                Some(Type::Pointer(pointee)) => *pointee,
+                _ => continue,
+            };
+            match storage {
+                STORAGE_PUSH_CONSTANT => {
+                    let Some(Type::Struct(members)) = d.types.get(&pointee) else {
+                        return Err("the push constants are not a block".into());
+                    };
+                    interface.push_offsets = (0..members.len() as u32)
+                        .map(|m| d.offsets.get(&(pointee, m)).copied().unwrap_or(u32::MAX))
+                        .collect();
+                    interface.push_size = d
+                        .size_of(pointee)
+                        .ok_or("the push-constant block's size cannot be computed")?;
+                }
+                STORAGE_STORAGE_BUFFER | STORAGE_UNIFORM_CONSTANT => {
+                    let Some(&binding) = d.bindings.get(&id) else {
+                        continue;
+                    };
+                    if d.sets.get(&id).copied().unwrap_or(0) != 0 {
+                        return Err(format!("binding {binding} is not in descriptor set 0"));
+                    }
+                    let kind = d.binding_kind(binding, storage, pointee)?;
+                    interface.bindings.push((binding, kind));
+                    if kind == BindingKind::StorageBuffer {
+                        if let Some(stride) = d.runtime_array_stride(pointee) {
+                            interface.array_strides.push((binding, stride));
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        interface.bindings.sort_by_key(|&(b, _)| b);
+        interface.array_strides.sort();
+        Ok(interface)
+    }
+}
+
+/// Reads the interface of a SPIR-V module; `Err` names what is malformed.
+pub fn reflect(words: &[u32]) -> Result<Interface, String> {
+    if words.len() < 5 || words[0] != super::shader_set::SPIRV_MAGIC {
+        return Err("not a SPIR-V module".into());
+    }
+    Declarations::read(words)?.interface()
 }
 
 /// Checks that a module binds what the host passes: every binding the module uses is in
@@ -297,7 +328,17 @@ pub fn check(
     bindings: &[BindingKind],
     push_size: u32,
 ) -> Result<Interface, String> {
-    let interface = reflect(words).map_err(|e| format!("shader {name}: {e}"))?;
+    check_interface(name, reflect(words), bindings, push_size)
+}
+
+/// [`check`] of a module's interface as read (`Err`: what is malformed).
+pub(crate) fn check_interface(
+    name: &str,
+    interface: Result<Interface, String>,
+    bindings: &[BindingKind],
+    push_size: u32,
+) -> Result<Interface, String> {
+    let interface = interface.map_err(|e| format!("shader {name}: {e}"))?;
     for &(binding, kind) in &interface.bindings {
         match bindings.get(binding as usize) {
             Some(&host) if host == kind => {}

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::context::Shared;
+use super::device::Shared;
 use super::shader_set;
 use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
 
@@ -219,8 +219,20 @@ impl ComputePipeline {
         workgroup_size: u32,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
+        // A driver that misreports its subgroup size: every shader computes with the
+        // measured one (`glsl/subgroup.glsl`).
+        let measured = ctx.info().subgroup_size_override;
+        let specialization: Vec<(u32, u32)> = specialization
+            .iter()
+            .copied()
+            .chain((measured != 0).then_some((super::shader_set::SUBGROUP_SIZE_SPEC, measured)))
+            .collect();
+        let specialization = specialization.as_slice();
+        // One reading of the module: its interface and its workgroup's demand.
+        let (interface, demand) = read_module(spirv, specialization);
         // The module must bind what the host binds (the two sides cannot drift).
-        super::reflect::check(name, spirv, bindings, push_size).map_err(GpuError::Internal)?;
+        super::reflect::check_interface(name, interface, bindings, push_size)
+            .map_err(GpuError::Internal)?;
         let device = &ctx.shared.device;
         let mut this = Self {
             shared: ctx.shared.clone(),
@@ -274,22 +286,13 @@ impl ComputePipeline {
             .vk("vkCreatePipelineLayout")?;
         ctx.set_name(this.layout, name);
 
-        // A driver that misreports its subgroup size: every shader computes with the
-        // measured one (`glsl/subgroup.glsl`).
-        let measured = ctx.info().subgroup_size_override;
-        let specialization: Vec<(u32, u32)> = specialization
-            .iter()
-            .copied()
-            .chain((measured != 0).then_some((super::shader_set::SUBGROUP_SIZE_SPEC, measured)))
-            .collect();
-        let specialization = specialization.as_slice();
         // The workgroup must fit the device's (or the emulated) limits.
-        let demand = super::workgroup::check_limits(name, spirv, specialization, ctx.info())?;
+        let demand = super::workgroup::check_demand(name, demand, ctx.info())?;
         // Workgroup scans index subgroups by gl_SubgroupID and assume they are full: asked
         // for where the module's x size allows it (`workgroup_size` is the caller's word
         // for it; the module's own is what the driver checks).
         debug_assert!(workgroup_size >= 1);
-        let stage_flags = super::subgroup::full_subgroups_flag(ctx, demand.size[0]);
+        let stage_flags = full_subgroups_flag(ctx, demand.size[0]);
         let entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
             .enumerate()
@@ -583,4 +586,49 @@ impl Drop for ComputePipeline {
 /// ([`shader_set::bindings`]), in binding order: each slot exactly once.
 pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> GpuResult<[T; N]> {
     shader_set::by_binding(items).map_err(GpuError::Internal)
+}
+
+/// Reads `words` once, for both of what a pipeline checks: the module's interface
+/// ([`super::reflect`]) and its workgroup's demand with `specialization` applied
+/// ([`super::workgroup`]). Each `Err` names what is malformed or cannot be evaluated.
+fn read_module(
+    words: &[u32],
+    specialization: &[(u32, u32)],
+) -> (
+    Result<super::reflect::Interface, String>,
+    Result<super::workgroup::WorkgroupDemand, String>,
+) {
+    if words.len() < 5 || words[0] != super::shader_set::SPIRV_MAGIC {
+        let e = "not a SPIR-V module".to_string();
+        return (Err(e.clone()), Err(e));
+    }
+    let overrides: std::collections::HashMap<u32, u32> = specialization.iter().copied().collect();
+    let mut interface = super::reflect::Declarations::default();
+    let mut workgroup = super::workgroup::Declarations::default();
+    for instruction in super::reflect::instructions(words) {
+        match instruction {
+            Ok((op, w)) => {
+                interface.visit(op, w);
+                workgroup.visit(op, w, &overrides);
+            }
+            Err(e) => return (Err(e.clone()), Err(e)),
+        }
+    }
+    (interface.interface(), workgroup.demand())
+}
+
+/// Whether a pipeline stage whose workgroup is `local_size_x` wide along x may ask for
+/// full subgroups on `ctx`: x a multiple of the subgroup size that runs and of the one the
+/// driver reports (the rule the validation layer checks; they differ where the driver
+/// misreports).
+fn full_subgroups_flag(ctx: &GpuContext, local_size_x: u32) -> vk::PipelineShaderStageCreateFlags {
+    let info = ctx.info();
+    if ctx.full_subgroups
+        && local_size_x % info.subgroup_size.max(1) == 0
+        && local_size_x % info.reported_subgroup_size.max(1) == 0
+    {
+        vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
+    } else {
+        vk::PipelineShaderStageCreateFlags::empty()
+    }
 }

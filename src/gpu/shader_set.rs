@@ -47,6 +47,10 @@ pub const MAX_GRAD_FIELDS: u32 = GRAD_FIELDS + 4 * MAX_FEATURE_GROUPS;
 pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
 /// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
 pub const GRAD_SPEC_BATCH: u32 = 1;
+/// Pixels per chunk of the neural shader's backward pass (`glsl/shade_bwd.comp`'s
+/// `PIXELS`): one per invocation of its workgroup; the parameters' gradients are summed
+/// over a chunk.
+pub const SHADE_CHUNK_PIXELS: u32 = 64;
 /// Specialization constant id of the values a pixel's neural-shader evaluation keeps
 /// (every layer's inputs and the last layer's outputs), the shader backward's private array.
 pub const SHADE_SPEC_ACTIVATIONS: u32 = 0;
@@ -198,6 +202,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("GRAD_SPEC_BATCH", GRAD_SPEC_BATCH.to_string()),
         ("SHADE_SPEC_ACTIVATIONS", SHADE_SPEC_ACTIVATIONS.to_string()),
         ("SHADE_SPEC_WIDEST", SHADE_SPEC_WIDEST.to_string()),
+        ("SHADE_CHUNK_PIXELS", format!("{SHADE_CHUNK_PIXELS}u")),
         ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
         ("SUBGROUP_SIZE_SPEC", SUBGROUP_SIZE_SPEC.to_string()),
         ("WIDE_WG_SPEC", WIDE_WG_SPEC.to_string()),

@@ -35,7 +35,8 @@ use super::shader_set::bindings;
 use super::shader_set::{SORT_SPEC_ITEMS, SORT_SPEC_MAX_SUBGROUPS, SORT_SPEC_RADIX, SORT_SPEC_WG};
 use super::sync::{barrier, barrier_uses, Access};
 use super::{
-    align_up, ComputePipeline, DeviceInfo, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer,
+    align_up, BufferSlice, ComputePipeline, DeviceInfo, GpuBuffer, GpuContext, GpuError, GpuResult,
+    GpuTimer,
 };
 
 /// Tunables of the sort kernels.
@@ -497,13 +498,75 @@ impl RadixSort {
         job: &SortJob,
         mut timer: Option<&mut GpuTimer>,
     ) -> GpuResult<()> {
+        let Some((max_n, count_slot)) = self.check_job(job)? else {
+            return Ok(());
+        };
+        let (first_bit, end_bit) = (job.bits.start, job.bits.end);
+        let key_bits = end_bit.saturating_sub(first_bit);
+        let layout = ScratchLayout::new(&self.config, max_n);
+        self.check_sizes(job, max_n, &layout)?;
+        let views = SortViews::new(&self.config, job, max_n, &layout);
+        let mut stage =
+            |name: &str, body: &mut dyn FnMut(vk::CommandBuffer) -> GpuResult<()>| match timer
+                .as_deref_mut()
+            {
+                Some(t) => t.stage(ctx, cmd, name, body),
+                None => body(cmd),
+            };
+        self.record_setup(ctx, cmd, &views, max_n, count_slot)?;
+        let passes = key_bits.div_ceil(self.config.radix_bits);
+        for pass in 0..passes {
+            let shift = first_bit + pass * self.config.radix_bits;
+            let push = SortPassPush {
+                shift,
+                bits: self.config.radix_bits.min(end_bit - shift),
+                hist_stride: layout.hist_stride,
+                pad: 0,
+            };
+            let (src, dst) = if pass % 2 == 0 {
+                (views.user, views.tmp)
+            } else {
+                (views.tmp, views.user)
+            };
+            self.record_pass(ctx, cmd, &mut stage, (&views, &layout), &push, (src, dst))?;
+            if pass + 1 < passes || passes % 2 == 1 {
+                // The scattered pairs are the next pass's (or the copy's) input.
+                pass_barrier(ctx, cmd);
+            }
+        }
+        if passes % 2 == 1 {
+            stage("sort copy", &mut |cmd| {
+                self.copy.dispatch_indirect_resources(
+                    ctx,
+                    cmd,
+                    &by_binding([
+                        (bindings::sort_copy::META, Resource::Buffer(views.meta)),
+                        (bindings::sort_copy::KEYS_IN, views.tmp.0),
+                        (bindings::sort_copy::VALUES_IN, views.tmp.1),
+                        (bindings::sort_copy::KEYS_OUT, views.user.0),
+                        (bindings::sort_copy::VALUES_OUT, views.user.1),
+                    ])?,
+                    &[],
+                    views.dispatch_args,
+                )
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Refuses a job this sort cannot run (texel I/O that does not match, bits outside the
+    /// key, a device count outside its buffer); `None` when there is nothing to sort, else
+    /// the most elements and the device count's buffer and offset, if any.
+    #[allow(clippy::type_complexity)]
+    fn check_job<'a>(
+        &self,
+        job: &SortJob<'a>,
+    ) -> GpuResult<Option<(u32, Option<(&'a GpuBuffer, u64)>)>> {
         let SortJob {
-            keys,
-            values,
-            scratch,
             count,
             ref bits,
             texels,
+            ..
         } = *job;
         if self.config.texel_io != texels.is_some() {
             return Err(GpuError::InvalidArgument(format!(
@@ -518,13 +581,6 @@ impl RadixSort {
         }
         let (first_bit, end_bit) = (bits.start, bits.end);
         let key_bits = end_bit.saturating_sub(first_bit);
-        let mut stage =
-            |name: &str, body: &mut dyn FnMut(vk::CommandBuffer) -> GpuResult<()>| match timer
-                .as_deref_mut()
-            {
-                Some(t) => t.stage(ctx, cmd, name, body),
-                None => body(cmd),
-            };
         let width = self.config.key_words * 32;
         if end_bit > width || first_bit > end_bit {
             return Err(GpuError::InvalidArgument(format!(
@@ -549,13 +605,17 @@ impl RadixSort {
             }
         };
         if max_n == 0 || key_bits == 0 {
-            return Ok(());
+            return Ok(None);
         }
-        let layout = ScratchLayout::new(&self.config, max_n);
+        Ok(Some((max_n, count_slot)))
+    }
+
+    /// Refuses keys, values or scratch too small for `max_n` elements.
+    fn check_sizes(&self, job: &SortJob, max_n: u32, layout: &ScratchLayout) -> GpuResult<()> {
         let checks = [
-            (keys, u64::from(max_n) * self.config.key_bytes(), "keys"),
-            (values, u64::from(max_n) * 4, "values"),
-            (scratch, layout.total, "scratch"),
+            (job.keys, u64::from(max_n) * self.config.key_bytes(), "keys"),
+            (job.values, u64::from(max_n) * 4, "values"),
+            (job.scratch, layout.total, "scratch"),
         ];
         for (buffer, need, what) in checks {
             if buffer.size() < need {
@@ -567,6 +627,159 @@ impl RadixSort {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The entry barrier, the histogram cleared for a device count, and the setup
+    /// dispatch that writes the meta words (count, groups, indirect arguments).
+    fn record_setup(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        views: &SortViews,
+        max_n: u32,
+        count_slot: Option<(&GpuBuffer, u64)>,
+    ) -> GpuResult<()> {
+        // Entry barrier (see the contract above).
+        barrier_uses(
+            ctx,
+            cmd,
+            &[
+                Access::ComputeReadWrite,
+                Access::TransferWrite,
+                Access::IndirectRead,
+            ],
+            &[
+                Access::ComputeReadWrite,
+                Access::ComputeSampledRead,
+                Access::TransferWrite,
+            ],
+        );
+        let hist = views.hist;
+        if count_slot.is_some() {
+            // Blocks past the device count never write their histogram column, and the
+            // scan covers the whole capacity: those columns must read as zero.
+            hist.buffer.fill(ctx, cmd, hist.offset, hist.size, 0);
+            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+        }
+        let setup_push = SortSetupPush {
+            host_n: max_n,
+            count_index: match count_slot {
+                Some((_, offset)) => u32::try_from(offset / 4).map_err(|_| {
+                    GpuError::InvalidArgument("sort count offset beyond 16 GiB".into())
+                })?,
+                None => u32::MAX,
+            },
+            max_n,
+            max_groups_x: self.max_groups_x,
+        };
+        let count_binding = count_slot.map_or(views.meta, |(b, _)| b.whole());
+        self.setup.dispatch(
+            ctx,
+            cmd,
+            &by_binding([
+                (bindings::sort_setup::COUNT, count_binding),
+                (bindings::sort_setup::META, views.meta),
+            ])?,
+            bytemuck::bytes_of(&setup_push),
+            [1, 1, 1],
+        )?;
+        // The meta words feed both shaders and the indirect dispatches.
+        barrier_uses(
+            ctx,
+            cmd,
+            &[Access::ComputeWrite],
+            &[Access::ComputeRead, Access::IndirectRead],
+        );
+        Ok(())
+    }
+
+    /// One radix pass from `src` to `dst`: histogram, scan of the histogram, scatter,
+    /// with a barrier between each (none after the scatter: the caller places it).
+    fn record_pass(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        stage: &mut StageFn,
+        (views, layout): (&SortViews, &ScratchLayout),
+        push: &SortPassPush,
+        (src, dst): (KeysAndValues, KeysAndValues),
+    ) -> GpuResult<()> {
+        let (meta, hist, offsets) = (views.meta, views.hist, views.offsets);
+        stage("sort histogram", &mut |cmd| {
+            self.histogram.dispatch_indirect_resources(
+                ctx,
+                cmd,
+                &by_binding([
+                    (bindings::sort_histogram::META, Resource::Buffer(meta)),
+                    (bindings::sort_histogram::KEYS, src.0),
+                    (bindings::sort_histogram::HIST, Resource::Buffer(hist)),
+                ])?,
+                bytemuck::bytes_of(push),
+                views.dispatch_args,
+            )
+        })?;
+        pass_barrier(ctx, cmd);
+        stage("sort scan", &mut |cmd| {
+            self.scan.record(
+                ctx,
+                cmd,
+                hist,
+                offsets,
+                (views.scratch, layout.scan_total),
+                views.scan_scratch,
+                layout.hist_stride << self.config.radix_bits,
+            )
+        })?;
+        pass_barrier(ctx, cmd);
+        stage("sort scatter", &mut |cmd| {
+            self.scatter.dispatch_indirect_resources(
+                ctx,
+                cmd,
+                &by_binding([
+                    (bindings::sort_scatter::META, Resource::Buffer(meta)),
+                    (bindings::sort_scatter::KEYS_IN, src.0),
+                    (bindings::sort_scatter::VALUES_IN, src.1),
+                    (bindings::sort_scatter::OFFSETS, Resource::Buffer(offsets)),
+                    (bindings::sort_scatter::KEYS_OUT, dst.0),
+                    (bindings::sort_scatter::VALUES_OUT, dst.1),
+                ])?,
+                bytemuck::bytes_of(push),
+                views.dispatch_args,
+            )
+        })
+    }
+}
+
+/// Records one dispatch, in its own timer stage when the sort is timed.
+type StageFn<'s> =
+    dyn FnMut(&str, &mut dyn FnMut(vk::CommandBuffer) -> GpuResult<()>) -> GpuResult<()> + 's;
+
+/// Keys and values as a pass binds them.
+type KeysAndValues<'a> = (Resource<'a>, Resource<'a>);
+
+/// A sort's buffers as its dispatches bind them: the scratch buffer's regions, and the
+/// keys and values (the caller's and the scratch copies) as buffer slices or texel views.
+struct SortViews<'a> {
+    scratch: &'a GpuBuffer,
+    meta: BufferSlice<'a>,
+    dispatch_args: BufferSlice<'a>,
+    hist: BufferSlice<'a>,
+    offsets: BufferSlice<'a>,
+    scan_scratch: BufferSlice<'a>,
+    user: KeysAndValues<'a>,
+    tmp: KeysAndValues<'a>,
+}
+
+impl<'a> SortViews<'a> {
+    fn new(config: &SortConfig, job: &SortJob<'a>, max_n: u32, layout: &ScratchLayout) -> Self {
+        let SortJob {
+            keys,
+            values,
+            scratch,
+            texels,
+            ..
+        } = *job;
         let meta = scratch.slice(0, META_BYTES);
         let dispatch_args = scratch.slice(u64::from(META_DISPATCH) * 4, 12);
         let tmp_keys = scratch.slice(layout.keys.0, layout.keys.1);
@@ -574,7 +787,7 @@ impl RadixSort {
         let hist = scratch.slice(layout.hist.0, layout.hist.1);
         let offsets = scratch.slice(layout.offsets.0, layout.offsets.1);
         let scan_scratch = scratch.slice(layout.scan.0, layout.scan.1);
-        let user_keys = keys.slice(0, u64::from(max_n) * self.config.key_bytes());
+        let user_keys = keys.slice(0, u64::from(max_n) * config.key_bytes());
         let user_values = values.slice(0, u64::from(max_n) * 4);
         // The keys and values as bound: texel views, or buffer slices.
         let (user, tmp) = match texels {
@@ -593,136 +806,15 @@ impl RadixSort {
                 (Resource::Buffer(tmp_keys), Resource::Buffer(tmp_values)),
             ),
         };
-
-        // Entry barrier (see the contract above).
-        barrier_uses(
-            ctx,
-            cmd,
-            &[
-                Access::ComputeReadWrite,
-                Access::TransferWrite,
-                Access::IndirectRead,
-            ],
-            &[
-                Access::ComputeReadWrite,
-                Access::ComputeSampledRead,
-                Access::TransferWrite,
-            ],
-        );
-        if count_slot.is_some() {
-            // Blocks past the device count never write their histogram column, and the
-            // scan covers the whole capacity: those columns must read as zero.
-            hist.buffer.fill(ctx, cmd, hist.offset, hist.size, 0);
-            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
+        SortViews {
+            scratch,
+            meta,
+            dispatch_args,
+            hist,
+            offsets,
+            scan_scratch,
+            user,
+            tmp,
         }
-        let setup_push = SortSetupPush {
-            host_n: max_n,
-            count_index: match count_slot {
-                Some((_, offset)) => u32::try_from(offset / 4).map_err(|_| {
-                    GpuError::InvalidArgument("sort count offset beyond 16 GiB".into())
-                })?,
-                None => u32::MAX,
-            },
-            max_n,
-            max_groups_x: self.max_groups_x,
-        };
-        let count_binding = count_slot.map_or(meta, |(b, _)| b.whole());
-        self.setup.dispatch(
-            ctx,
-            cmd,
-            &by_binding([
-                (bindings::sort_setup::COUNT, count_binding),
-                (bindings::sort_setup::META, meta),
-            ])?,
-            bytemuck::bytes_of(&setup_push),
-            [1, 1, 1],
-        )?;
-        // The meta words feed both shaders and the indirect dispatches.
-        barrier_uses(
-            ctx,
-            cmd,
-            &[Access::ComputeWrite],
-            &[Access::ComputeRead, Access::IndirectRead],
-        );
-
-        let passes = key_bits.div_ceil(self.config.radix_bits);
-        for pass in 0..passes {
-            let shift = first_bit + pass * self.config.radix_bits;
-            let push = SortPassPush {
-                shift,
-                bits: self.config.radix_bits.min(end_bit - shift),
-                hist_stride: layout.hist_stride,
-                pad: 0,
-            };
-            let (src, dst) = if pass % 2 == 0 {
-                (user, tmp)
-            } else {
-                (tmp, user)
-            };
-            stage("sort histogram", &mut |cmd| {
-                self.histogram.dispatch_indirect_resources(
-                    ctx,
-                    cmd,
-                    &by_binding([
-                        (bindings::sort_histogram::META, Resource::Buffer(meta)),
-                        (bindings::sort_histogram::KEYS, src.0),
-                        (bindings::sort_histogram::HIST, Resource::Buffer(hist)),
-                    ])?,
-                    bytemuck::bytes_of(&push),
-                    dispatch_args,
-                )
-            })?;
-            pass_barrier(ctx, cmd);
-            stage("sort scan", &mut |cmd| {
-                self.scan.record(
-                    ctx,
-                    cmd,
-                    hist,
-                    offsets,
-                    (scratch, layout.scan_total),
-                    scan_scratch,
-                    layout.hist_stride << self.config.radix_bits,
-                )
-            })?;
-            pass_barrier(ctx, cmd);
-            stage("sort scatter", &mut |cmd| {
-                self.scatter.dispatch_indirect_resources(
-                    ctx,
-                    cmd,
-                    &by_binding([
-                        (bindings::sort_scatter::META, Resource::Buffer(meta)),
-                        (bindings::sort_scatter::KEYS_IN, src.0),
-                        (bindings::sort_scatter::VALUES_IN, src.1),
-                        (bindings::sort_scatter::OFFSETS, Resource::Buffer(offsets)),
-                        (bindings::sort_scatter::KEYS_OUT, dst.0),
-                        (bindings::sort_scatter::VALUES_OUT, dst.1),
-                    ])?,
-                    bytemuck::bytes_of(&push),
-                    dispatch_args,
-                )
-            })?;
-            if pass + 1 < passes || passes % 2 == 1 {
-                // The scattered pairs are the next pass's (or the copy's) input.
-                pass_barrier(ctx, cmd);
-            }
-        }
-        if passes % 2 == 1 {
-            stage("sort copy", &mut |cmd| {
-                self.copy.dispatch_indirect_resources(
-                    ctx,
-                    cmd,
-                    &by_binding([
-                        (bindings::sort_copy::META, Resource::Buffer(meta)),
-                        (bindings::sort_copy::KEYS_IN, tmp.0),
-                        (bindings::sort_copy::VALUES_IN, tmp.1),
-                        (bindings::sort_copy::KEYS_OUT, user.0),
-                        (bindings::sort_copy::VALUES_OUT, user.1),
-                    ])?,
-                    &[],
-                    dispatch_args,
-                )
-            })?;
-        }
-        Ok(())
     }
 }

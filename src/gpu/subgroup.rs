@@ -19,8 +19,6 @@
 //! `SUBGROUP_SIZE` uses in place of `gl_SubgroupSize`. When the readings are inconsistent
 //! in any other way the device is refused: no kernel could be trusted on it.
 
-use ash::vk;
-
 use super::buffer::GpuBuffer;
 use super::shader::{BindingKind, ComputePipeline};
 use super::sync::{barrier, Access};
@@ -143,25 +141,6 @@ pub fn size_to_use(device: &str, probe: &SubgroupProbe) -> GpuResult<SubgroupVer
              LP_NATIVE_VECTOR_WIDTH of 512 or less)"
         ))
     })
-}
-
-/// Whether a pipeline stage whose workgroup is `local_size_x` wide along x may ask for
-/// full subgroups on `ctx`: x a multiple of the subgroup size that runs and of the one the
-/// driver reports (the rule the validation layer checks; they differ where the driver
-/// misreports).
-pub(crate) fn full_subgroups_flag(
-    ctx: &GpuContext,
-    local_size_x: u32,
-) -> vk::PipelineShaderStageCreateFlags {
-    let info = ctx.info();
-    if ctx.full_subgroups
-        && local_size_x % info.subgroup_size.max(1) == 0
-        && local_size_x % info.reported_subgroup_size.max(1) == 0
-    {
-        vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS
-    } else {
-        vk::PipelineShaderStageCreateFlags::empty()
-    }
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use std::time::Instant;
 
 use ash::vk;
 
-use super::context::Shared;
+use super::device::Shared;
 use super::{DeviceInfo, GpuContext, GpuError, GpuResult, VkContext};
 
 /// What a device's timestamps measure: valid bits and nanoseconds per tick.

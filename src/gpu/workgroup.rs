@@ -56,6 +56,207 @@ enum Ty {
     Pointer(u32),
 }
 
+/// What a module declares that its workgroup demands are read from, with the host's
+/// specialization applied, by result id.
+#[derive(Default)]
+pub(crate) struct Declarations {
+    types: HashMap<u32, Ty>,
+    /// Scalar constants, specialized and folded where they can be.
+    values: HashMap<u32, u32>,
+    composites: HashMap<u32, Vec<u32>>,
+    spec_ids: HashMap<u32, u32>,
+    workgroup_size_builtin: Option<u32>,
+    local_size: Option<[u32; 3]>,
+    local_size_ids: Option<[u32; 3]>,
+    /// Pointer types of the shared (workgroup) variables.
+    shared: Vec<u32>,
+}
+
+impl Declarations {
+    /// Reads the module's execution modes, types, constants and shared variables.
+    fn read(words: &[u32], overrides: &HashMap<u32, u32>) -> Result<Self, String> {
+        let mut d = Declarations::default();
+        for instruction in super::reflect::instructions(words) {
+            let (op, w) = instruction?;
+            d.visit(op, w, overrides);
+        }
+        Ok(d)
+    }
+
+    /// Takes in one instruction (`op`, operands `w`), specialized by `overrides`
+    /// (specialization constant id to value).
+    pub(crate) fn visit(&mut self, op: u16, w: &[u32], overrides: &HashMap<u32, u32>) {
+        let arg = |k: usize| w.get(k).copied().unwrap_or(0);
+        match op {
+            OP_EXECUTION_MODE if arg(1) == MODE_LOCAL_SIZE => {
+                self.local_size = Some([arg(2), arg(3), arg(4)]);
+            }
+            OP_EXECUTION_MODE_ID if arg(1) == MODE_LOCAL_SIZE_ID => {
+                self.local_size_ids = Some([arg(2), arg(3), arg(4)]);
+            }
+            OP_DECORATE if arg(1) == DECORATION_SPEC_ID => {
+                self.spec_ids.insert(arg(0), arg(2));
+            }
+            OP_DECORATE if arg(1) == DECORATION_BUILT_IN && arg(2) == BUILT_IN_WORKGROUP_SIZE => {
+                self.workgroup_size_builtin = Some(arg(0));
+            }
+            OP_TYPE_BOOL => {
+                self.types.insert(arg(0), Ty::Scalar(4));
+            }
+            OP_TYPE_INT | OP_TYPE_FLOAT => {
+                self.types.insert(arg(0), Ty::Scalar(arg(1) / 8));
+            }
+            OP_TYPE_VECTOR => {
+                self.types.insert(arg(0), Ty::Vector(arg(1), arg(2)));
+            }
+            OP_TYPE_MATRIX => {
+                self.types.insert(arg(0), Ty::Matrix(arg(1), arg(2)));
+            }
+            OP_TYPE_ARRAY => {
+                self.types.insert(arg(0), Ty::Array(arg(1), arg(2)));
+            }
+            OP_TYPE_STRUCT => {
+                self.types.insert(arg(0), Ty::Struct(w[1..].to_vec()));
+            }
+            OP_TYPE_POINTER => {
+                self.types.insert(arg(0), Ty::Pointer(arg(2)));
+            }
+            OP_CONSTANT => {
+                self.values.insert(arg(1), arg(2));
+            }
+            OP_SPEC_CONSTANT => {
+                let id = arg(1);
+                let value = self
+                    .spec_ids
+                    .get(&id)
+                    .and_then(|s| overrides.get(s))
+                    .copied()
+                    .unwrap_or(arg(2));
+                self.values.insert(id, value);
+            }
+            OP_CONSTANT_COMPOSITE | OP_SPEC_CONSTANT_COMPOSITE => {
+                self.composites.insert(arg(1), w[2..].to_vec());
+            }
+            OP_SPEC_CONSTANT_OP => {
+                if let Some(v) = fold_spec_constant_op(&self.values, w) {
+                    self.values.insert(arg(1), v);
+                }
+            }
+            OP_VARIABLE if arg(2) == STORAGE_WORKGROUP => self.shared.push(arg(0)),
+            _ => {}
+        }
+    }
+
+    /// The workgroup size: the WorkgroupSize built-in's, else the LocalSizeId or the
+    /// LocalSize execution mode's.
+    fn workgroup_size(&self) -> Result<[u32; 3], String> {
+        let value = |id: u32| {
+            self.values
+                .get(&id)
+                .copied()
+                .ok_or_else(|| format!("constant %{id} cannot be evaluated"))
+        };
+        Ok(if let Some(builtin) = self.workgroup_size_builtin {
+            let parts = self
+                .composites
+                .get(&builtin)
+                .ok_or("the WorkgroupSize built-in is not a constant composite")?;
+            [value(parts[0])?, value(parts[1])?, value(parts[2])?]
+        } else if let Some(ids) = self.local_size_ids {
+            [value(ids[0])?, value(ids[1])?, value(ids[2])?]
+        } else {
+            self.local_size.ok_or("no LocalSize execution mode")?
+        })
+    }
+
+    /// Bytes of type `t` in shared memory; `None` for what has no size here or nests
+    /// deeper than 16.
+    fn size(&self, t: u32, depth: u32) -> Option<u64> {
+        if depth > 16 {
+            return None;
+        }
+        Some(match self.types.get(&t)? {
+            Ty::Scalar(bytes) => u64::from(*bytes),
+            // A vec3 takes a vec4's slot in the layouts drivers use for shared memory.
+            Ty::Vector(c, n) => {
+                self.size(*c, depth + 1)? * u64::from((*n).max(2).next_power_of_two())
+            }
+            Ty::Matrix(c, n) => self.size(*c, depth + 1)? * u64::from(*n),
+            Ty::Array(e, len) => self.size(*e, depth + 1)? * u64::from(*self.values.get(len)?),
+            Ty::Struct(members) => {
+                let mut total = 0;
+                for &m in members {
+                    total += self.size(m, depth + 1)?;
+                }
+                total
+            }
+            Ty::Pointer(_) => return None,
+        })
+    }
+
+    /// Bytes of shared memory all the shared variables take.
+    fn shared_bytes(&self) -> Result<u64, String> {
+        let mut shared_bytes = 0u64;
+        for &variable_type in &self.shared {
+            let Some(Ty::Pointer(pointee)) = self.types.get(&variable_type) else {
+                return Err(format!(
+                    "shared variable of type %{variable_type} is no pointer"
+                ));
+            };
+            shared_bytes += self
+                .size(*pointee, 0)
+                .ok_or_else(|| format!("the size of shared type %{pointee} cannot be evaluated"))?;
+        }
+        Ok(shared_bytes)
+    }
+
+    /// The workgroup demand the declarations make up.
+    pub(crate) fn demand(&self) -> Result<WorkgroupDemand, String> {
+        let size3 = self.workgroup_size()?;
+        let invocations = size3
+            .iter()
+            .try_fold(1u32, |acc, &n| acc.checked_mul(n))
+            .ok_or("the workgroup size overflows")?;
+        let shared_bytes = self.shared_bytes()?;
+        Ok(WorkgroupDemand {
+            size: size3,
+            invocations,
+            shared_bytes: u32::try_from(shared_bytes).unwrap_or(u32::MAX),
+        })
+    }
+}
+
+/// The value of an OpSpecConstantOp (operands `w`) over the constants known so far, for
+/// the integer operations glslang emits for sizes; `None` for any other.
+fn fold_spec_constant_op(values: &HashMap<u32, u32>, w: &[u32]) -> Option<u32> {
+    let arg = |k: usize| w.get(k).copied().unwrap_or(0);
+    let operand = |k: usize| values.get(&arg(k)).copied();
+    let (a, b) = (operand(3), operand(4));
+    let both = |f: fn(u32, u32) -> Option<u32>| a.zip(b).and_then(|(a, b)| f(a, b));
+    match arg(2) {
+        128 => both(|a, b| Some(a.wrapping_add(b))),
+        130 => both(|a, b| Some(a.wrapping_sub(b))),
+        132 => both(|a, b| Some(a.wrapping_mul(b))),
+        134 => both(|a, b| a.checked_div(b)),
+        137 => both(|a, b| a.checked_rem(b)),
+        194 => both(|a, b| Some(a.checked_shr(b).unwrap_or(0))),
+        196 => both(|a, b| Some(a.checked_shl(b).unwrap_or(0))),
+        197 => both(|a, b| Some(a | b)),
+        199 => both(|a, b| Some(a & b)),
+        // Select(condition, a, b) and the comparisons glslang folds into it.
+        169 => values
+            .get(&arg(3))
+            .and_then(|&c| if c != 0 { operand(4) } else { operand(5) }),
+        170 => both(|a, b| Some(u32::from(a == b))),
+        171 => both(|a, b| Some(u32::from(a != b))),
+        172 => both(|a, b| Some(u32::from(a > b))),
+        174 => both(|a, b| Some(u32::from(a >= b))),
+        176 => both(|a, b| Some(u32::from(a < b))),
+        178 => both(|a, b| Some(u32::from(a <= b))),
+        _ => None,
+    }
+}
+
 /// Reads `words`' workgroup size and shared memory with `specialization` (`(id, value)`
 /// pairs) applied. `Err` names what cannot be evaluated.
 pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupDemand, String> {
@@ -63,167 +264,7 @@ pub fn demand(words: &[u32], specialization: &[(u32, u32)]) -> Result<WorkgroupD
         return Err("not a SPIR-V module".into());
     }
     let overrides: HashMap<u32, u32> = specialization.iter().copied().collect();
-    let mut types: HashMap<u32, Ty> = HashMap::new();
-    let mut values: HashMap<u32, u32> = HashMap::new();
-    let mut composites: HashMap<u32, Vec<u32>> = HashMap::new();
-    let mut spec_ids: HashMap<u32, u32> = HashMap::new();
-    let mut workgroup_size_builtin: Option<u32> = None;
-    let mut local_size: Option<[u32; 3]> = None;
-    let mut local_size_ids: Option<[u32; 3]> = None;
-    let mut shared: Vec<u32> = Vec::new();
-    for instruction in super::reflect::instructions(words) {
-        let (op, w) = instruction?;
-        let arg = |k: usize| w.get(k).copied().unwrap_or(0);
-        match op {
-            OP_EXECUTION_MODE if arg(1) == MODE_LOCAL_SIZE => {
-                local_size = Some([arg(2), arg(3), arg(4)]);
-            }
-            OP_EXECUTION_MODE_ID if arg(1) == MODE_LOCAL_SIZE_ID => {
-                local_size_ids = Some([arg(2), arg(3), arg(4)]);
-            }
-            OP_DECORATE if arg(1) == DECORATION_SPEC_ID => {
-                spec_ids.insert(arg(0), arg(2));
-            }
-            OP_DECORATE if arg(1) == DECORATION_BUILT_IN && arg(2) == BUILT_IN_WORKGROUP_SIZE => {
-                workgroup_size_builtin = Some(arg(0));
-            }
-            OP_TYPE_BOOL => {
-                types.insert(arg(0), Ty::Scalar(4));
-            }
-            OP_TYPE_INT | OP_TYPE_FLOAT => {
-                types.insert(arg(0), Ty::Scalar(arg(1) / 8));
-            }
-            OP_TYPE_VECTOR => {
-                types.insert(arg(0), Ty::Vector(arg(1), arg(2)));
-            }
-            OP_TYPE_MATRIX => {
-                types.insert(arg(0), Ty::Matrix(arg(1), arg(2)));
-            }
-            OP_TYPE_ARRAY => {
-                types.insert(arg(0), Ty::Array(arg(1), arg(2)));
-            }
-            OP_TYPE_STRUCT => {
-                types.insert(arg(0), Ty::Struct(w[1..].to_vec()));
-            }
-            OP_TYPE_POINTER => {
-                types.insert(arg(0), Ty::Pointer(arg(2)));
-            }
-            OP_CONSTANT => {
-                values.insert(arg(1), arg(2));
-            }
-            OP_SPEC_CONSTANT => {
-                let id = arg(1);
-                let value = spec_ids
-                    .get(&id)
-                    .and_then(|s| overrides.get(s))
-                    .copied()
-                    .unwrap_or(arg(2));
-                values.insert(id, value);
-            }
-            OP_CONSTANT_COMPOSITE | OP_SPEC_CONSTANT_COMPOSITE => {
-                composites.insert(arg(1), w[2..].to_vec());
-            }
-            OP_SPEC_CONSTANT_OP => {
-                let operand = |k: usize| values.get(&arg(k)).copied();
-                let (a, b) = (operand(3), operand(4));
-                let both = |f: fn(u32, u32) -> Option<u32>| a.zip(b).and_then(|(a, b)| f(a, b));
-                let value =
-                    match arg(2) {
-                        128 => both(|a, b| Some(a.wrapping_add(b))),
-                        130 => both(|a, b| Some(a.wrapping_sub(b))),
-                        132 => both(|a, b| Some(a.wrapping_mul(b))),
-                        134 => both(|a, b| a.checked_div(b)),
-                        137 => both(|a, b| a.checked_rem(b)),
-                        194 => both(|a, b| Some(a.checked_shr(b).unwrap_or(0))),
-                        196 => both(|a, b| Some(a.checked_shl(b).unwrap_or(0))),
-                        197 => both(|a, b| Some(a | b)),
-                        199 => both(|a, b| Some(a & b)),
-                        // Select(condition, a, b) and the comparisons glslang folds into it.
-                        169 => values.get(&arg(3)).and_then(|&c| {
-                            if c != 0 {
-                                operand(4)
-                            } else {
-                                operand(5)
-                            }
-                        }),
-                        170 => both(|a, b| Some(u32::from(a == b))),
-                        171 => both(|a, b| Some(u32::from(a != b))),
-                        172 => both(|a, b| Some(u32::from(a > b))),
-                        174 => both(|a, b| Some(u32::from(a >= b))),
-                        176 => both(|a, b| Some(u32::from(a < b))),
-                        178 => both(|a, b| Some(u32::from(a <= b))),
-                        _ => None,
-                    };
-                if let Some(v) = value {
-                    values.insert(arg(1), v);
-                }
-            }
-            OP_VARIABLE if arg(2) == STORAGE_WORKGROUP => shared.push(arg(0)),
-            _ => {}
-        }
-    }
-    let value = |id: u32| {
-        values
-            .get(&id)
-            .copied()
-            .ok_or_else(|| format!("constant %{id} cannot be evaluated"))
-    };
-    let size3 = if let Some(builtin) = workgroup_size_builtin {
-        let parts = composites
-            .get(&builtin)
-            .ok_or("the WorkgroupSize built-in is not a constant composite")?;
-        [value(parts[0])?, value(parts[1])?, value(parts[2])?]
-    } else if let Some(ids) = local_size_ids {
-        [value(ids[0])?, value(ids[1])?, value(ids[2])?]
-    } else {
-        local_size.ok_or("no LocalSize execution mode")?
-    };
-    let invocations = size3
-        .iter()
-        .try_fold(1u32, |acc, &n| acc.checked_mul(n))
-        .ok_or("the workgroup size overflows")?;
-    fn size(
-        t: u32,
-        types: &HashMap<u32, Ty>,
-        values: &HashMap<u32, u32>,
-        depth: u32,
-    ) -> Option<u64> {
-        if depth > 16 {
-            return None;
-        }
-        Some(match types.get(&t)? {
-            Ty::Scalar(bytes) => u64::from(*bytes),
-            // A vec3 takes a vec4's slot in the layouts drivers use for shared memory.
-            Ty::Vector(c, n) => {
-                size(*c, types, values, depth + 1)? * u64::from((*n).max(2).next_power_of_two())
-            }
-            Ty::Matrix(c, n) => size(*c, types, values, depth + 1)? * u64::from(*n),
-            Ty::Array(e, len) => size(*e, types, values, depth + 1)? * u64::from(*values.get(len)?),
-            Ty::Struct(members) => {
-                let mut total = 0;
-                for &m in members {
-                    total += size(m, types, values, depth + 1)?;
-                }
-                total
-            }
-            Ty::Pointer(_) => return None,
-        })
-    }
-    let mut shared_bytes = 0u64;
-    for variable_type in shared {
-        let Some(Ty::Pointer(pointee)) = types.get(&variable_type) else {
-            return Err(format!(
-                "shared variable of type %{variable_type} is no pointer"
-            ));
-        };
-        shared_bytes += size(*pointee, &types, &values, 0)
-            .ok_or_else(|| format!("the size of shared type %{pointee} cannot be evaluated"))?;
-    }
-    Ok(WorkgroupDemand {
-        size: size3,
-        invocations,
-        shared_bytes: u32::try_from(shared_bytes).unwrap_or(u32::MAX),
-    })
+    Declarations::read(words, &overrides)?.demand()
 }
 
 /// Refuses a module whose workgroup needs more invocations or shared memory than the
@@ -234,8 +275,16 @@ pub fn check_limits(
     specialization: &[(u32, u32)],
     info: &super::DeviceInfo,
 ) -> Result<WorkgroupDemand, super::GpuError> {
-    let d = demand(words, specialization)
-        .map_err(|e| super::GpuError::Internal(format!("shader {name}: {e}")))?;
+    check_demand(name, demand(words, specialization), info)
+}
+
+/// [`check_limits`] of a module's demand as read (`Err`: what cannot be evaluated).
+pub(crate) fn check_demand(
+    name: &str,
+    demand: Result<WorkgroupDemand, String>,
+    info: &super::DeviceInfo,
+) -> Result<WorkgroupDemand, super::GpuError> {
+    let d = demand.map_err(|e| super::GpuError::Internal(format!("shader {name}: {e}")))?;
     let over = |limit: &'static str, needed: u32, max: u32| super::GpuError::DeviceLimit {
         limit,
         needed: u64::from(needed),

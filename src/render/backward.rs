@@ -20,20 +20,21 @@
 //! The rules are those of the CPU reference [`crate::cpu::backward`], which the tests hold
 //! this pass to.
 
+mod pass;
+
 use super::blend_bwd::BlendBwd;
-use super::grad_accumulate::{Accumulation, GradAccumulate, GradPush};
+use super::grad_accumulate::{Accumulation, GradAccumulate};
 use super::preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
 use super::shade::GpuShader;
-use super::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
-use super::{check_binding, GpuRenderer, GpuScene};
+use super::shade_bwd::ShadeBwd;
+use super::{check_binding, ForwardState, GpuRenderer, GpuScene};
 use crate::camera::Camera;
 use crate::frame::Frame;
-use crate::gpu::shader::Resource;
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
-use crate::gpu::sync::{barrier, Access};
-use crate::gpu::{GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
+use crate::gpu::{BufferSlice, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
 use crate::model::grad::{PixelGrads, SplatGrads};
 use crate::model::{sh_coeffs_for_degree, SplatKernel};
+use pass::BackwardPass;
 
 /// Timestamped stages of one backward pass.
 pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_bwd"];
@@ -46,10 +47,14 @@ pub const DEVICE_LOSS_STAGE: &str = "loss";
 /// (training's step).
 pub const DEVICE_STEP_STAGE: &str = "step";
 
+/// What tells blend backward pipelines apart: bin size, whether it reads rows of texels,
+/// the splat kernel, groups of four feature channels.
+type BlendKey = (u32, bool, SplatKernel, u32);
+
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
 pub(super) struct BackwardState {
-    blend: Vec<((u32, bool, SplatKernel, u32), BlendBwd)>,
+    blend: Vec<(BlendKey, BlendBwd)>,
     accumulate: Vec<(Accumulation, GradAccumulate)>,
     preprocess: [Option<PreprocessBwd>; 2],
     shade: Option<ShadeBwd>,
@@ -550,7 +555,39 @@ impl GpuRenderer {
     ) -> GpuResult<Option<HostGrads>> {
         let ctx = &self.ctx;
         let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
-        let vecs = 3 + groups;
+        let (fs, last) = self.saved_forward(size)?;
+        let shape = PassShape::new(scene, size, &fs, groups);
+        let (blend_key, rows) = st.build_pipelines(ctx, &fs, self.last_kernel, groups)?;
+        st.ensure_buffers(ctx, &shape, &input, features)?;
+        let feature_planes = match shade {
+            Some(job) => Some(st.ensure_shade_buffers(ctx, job, shape.pixels, &fs)?),
+            None => None,
+        };
+        check_binding(ctx, "Gaussians", scene.gaussians.size())?;
+        let (pass, timer) = BackwardPass::resolve(
+            st,
+            &fs,
+            scene,
+            last,
+            shape,
+            (blend_key, rows),
+            features,
+            shade.zip(feature_planes),
+        );
+        ctx.submit_and_wait("backward", |cmd| {
+            pass.record(ctx, cmd, timer, &mut input, after)
+        })?;
+        st.timings = st.timer.read(ctx)?;
+        st.span_ms = st.timer.span_ms(ctx)?;
+        if matches!(input, PixelInput::Device(_)) {
+            return Ok(None);
+        }
+        st.read_back(ctx, scene, &shape, features, shade).map(Some)
+    }
+
+    /// The last frame's saved forward state and its last contributors, refused when the
+    /// frame saved none or is not `size`.
+    fn saved_forward(&self, size: (u32, u32)) -> GpuResult<(ForwardState<'_>, BufferSlice<'_>)> {
         let fs = self.forward_state()?;
         let last = fs.last_contributor.ok_or_else(|| {
             GpuError::InvalidArgument(
@@ -570,295 +607,218 @@ impl GpuRenderer {
                 size.0, size.1, fb.width, fb.height
             )));
         }
-        let kernel = self.last_kernel;
-        let n = scene.count as u64;
-        let f = u64::from(GRAD_FIELDS + 4 * groups);
-        let pairs = u64::from(fs.pairs);
+        Ok((fs, last))
+    }
+}
+
+/// The sizes of one backward pass.
+#[derive(Clone, Copy)]
+struct PassShape {
+    /// Gaussians.
+    n: u64,
+    /// Groups of four feature channels (0: an SH frame).
+    groups: u32,
+    /// vec4s of gradients per pair.
+    vecs: u32,
+    /// Gradient fields per pair.
+    fields: u64,
+    /// Pairs sorted by the forward.
+    pairs: u64,
+    /// Bits of a bin index.
+    bits: u32,
+    /// Floats of SH texels per Gaussian.
+    sh_floats: u64,
+    /// Pixels of the frame.
+    pixels: u64,
+}
+
+impl PassShape {
+    fn new(scene: &GpuScene, size: (u32, u32), fs: &ForwardState, groups: u32) -> Self {
         let bins = fs.bins;
-        let bits = bits_for(u64::from(bins.0) * u64::from(bins.1));
-        let float_sums = st.mode != Accumulation::Deterministic;
+        PassShape {
+            n: scene.count as u64,
+            groups,
+            vecs: 3 + groups,
+            fields: u64::from(GRAD_FIELDS + 4 * groups),
+            pairs: u64::from(fs.pairs),
+            bits: bits_for(u64::from(bins.0) * u64::from(bins.1)),
+            sh_floats: u64::from(super::sh_texel_stride(scene.sh_degree)) * 4,
+            pixels: u64::from(size.0) * u64::from(size.1),
+        }
+    }
+}
+
+impl BackwardState {
+    /// Builds the pipelines the pass needs that no earlier pass built; returns the blend
+    /// backward's key and whether it reads rows of texels.
+    fn build_pipelines(
+        &mut self,
+        ctx: &GpuContext,
+        fs: &ForwardState,
+        kernel: SplatKernel,
+        groups: u32,
+    ) -> GpuResult<(BlendKey, bool)> {
+        let float_sums = self.mode != Accumulation::Deterministic;
         // Pipelines, the first time a pass needs each.
         let rows = BlendBwd::rows_for(ctx, fs.bin_size, fs.value_texels.is_some());
         let blend_key = (fs.bin_size, rows, kernel, groups);
-        if !st.blend.iter().any(|(k, _)| *k == blend_key) {
-            st.blend.push((
+        if !self.blend.iter().any(|(k, _)| *k == blend_key) {
+            self.blend.push((
                 blend_key,
                 BlendBwd::new(ctx, fs.bin_size, rows, kernel, groups)?,
             ));
         }
-        if !st.accumulate.iter().any(|(m, _)| *m == st.mode) {
-            if st.mode == Accumulation::FloatAtomics && !ctx.info().float_atomic_add {
+        if !self.accumulate.iter().any(|(m, _)| *m == self.mode) {
+            if self.mode == Accumulation::FloatAtomics && !ctx.info().float_atomic_add {
                 return Err(GpuError::InvalidArgument(format!(
                     "{} has no float atomic add (shaderBufferFloat32AtomicAdd); use the \
                      compare-and-swap or the deterministic accumulation",
                     ctx.info().name
                 )));
             }
-            st.accumulate
-                .push((st.mode, GradAccumulate::new(ctx, st.mode)?));
+            self.accumulate
+                .push((self.mode, GradAccumulate::new(ctx, self.mode)?));
         }
         let p = usize::from(float_sums);
-        if st.preprocess[p].is_none() {
-            st.preprocess[p] = Some(PreprocessBwd::new(ctx, float_sums)?);
+        if self.preprocess[p].is_none() {
+            self.preprocess[p] = Some(PreprocessBwd::new(ctx, float_sums)?);
         }
-        let sh_floats = u64::from(super::sh_texel_stride(scene.sh_degree)) * 4;
-        let pixels = u64::from(size.0) * u64::from(size.1);
+        Ok((blend_key, rows))
+    }
+
+    /// Makes or grows the gradient buffers for `shape` and uploads what the host gives:
+    /// the pixels' gradients, the feature values and the pixels' feature gradients.
+    fn ensure_buffers(
+        &mut self,
+        ctx: &GpuContext,
+        shape: &PassShape,
+        input: &PixelInput,
+        features: Option<FeatureJob>,
+    ) -> GpuResult<()> {
+        let PassShape {
+            n,
+            fields: f,
+            pairs,
+            sh_floats,
+            pixels,
+            ..
+        } = *shape;
         let gc = ensure(
             ctx,
-            &mut st.grad_color,
+            &mut self.grad_color,
             "pixel colour gradients",
             pixels_bytes(pixels as usize, 16),
         )?;
-        if let PixelInput::Host { color, .. } = &input {
+        if let PixelInput::Host { color, .. } = input {
             gc.upload(ctx, color)?;
         }
         let gd = ensure(
             ctx,
-            &mut st.grad_depth,
+            &mut self.grad_depth,
             "pixel depth gradients",
             pixels_bytes(pixels as usize, 4),
         )?;
-        if let PixelInput::Host { depth, .. } = &input {
+        if let PixelInput::Host { depth, .. } = input {
             gd.upload(ctx, depth)?;
         }
-        ensure(ctx, &mut st.pair_grads, "pair gradients", pairs * f * 4)?;
-        ensure(ctx, &mut st.maxima, "gradient maxima", f * 4)?;
-        ensure(ctx, &mut st.acc, "gradient sums", n * f * 8)?;
+        ensure(ctx, &mut self.pair_grads, "pair gradients", pairs * f * 4)?;
+        ensure(ctx, &mut self.maxima, "gradient maxima", f * 4)?;
+        ensure(ctx, &mut self.acc, "gradient sums", n * f * 8)?;
         ensure(
             ctx,
-            &mut st.grads,
+            &mut self.grads,
             "Gaussian gradients",
             n * GAUSSIAN_GRAD_BYTES,
         )?;
-        ensure(ctx, &mut st.sh_grads, "SH gradients", n * sh_floats * 4)?;
-        let g16 = u64::from(groups) * 16;
-        ensure(ctx, &mut st.feature_grads, "feature gradients", n * g16)?;
-        let feature_buf = ensure(ctx, &mut st.features, "feature values", n * g16)?;
+        ensure(ctx, &mut self.sh_grads, "SH gradients", n * sh_floats * 4)?;
+        let g16 = u64::from(shape.groups) * 16;
+        ensure(ctx, &mut self.feature_grads, "feature gradients", n * g16)?;
+        let feature_buf = ensure(ctx, &mut self.features, "feature values", n * g16)?;
         if let Some((FeatureValues::Host(values), _, _)) = features {
             feature_buf.upload(ctx, values)?;
         }
         let grad_feature_buf = ensure(
             ctx,
-            &mut st.grad_features,
+            &mut self.grad_features,
             "pixel feature gradients",
             pixels * g16,
         )?;
         if let Some((_, Some(pixel_grads), _)) = features {
             grad_feature_buf.upload(ctx, pixel_grads)?;
         }
-        // The shader's backward pass: the frame's alpha in, scratch and partial sums.
-        let feature_planes = match shade {
-            Some(job) => {
-                if !st.shade.as_ref().is_some_and(|s| s.fits(job.shader)) {
-                    st.shade = Some(ShadeBwd::for_shader(ctx, job.shader)?);
-                }
-                ensure(ctx, &mut st.alpha, "pixel colour and alpha", pixels * 16)?;
-                ensure(
-                    ctx,
-                    &mut st.scratch,
-                    "shader activations",
-                    ShadeBwd::scratch_bytes(job.shader, pixels),
-                )?;
-                ensure(
-                    ctx,
-                    &mut st.partials,
-                    "shader gradient partial sums",
-                    ShadeBwd::partial_bytes(job.shader, pixels),
-                )?;
-                ensure(
-                    ctx,
-                    &mut st.mlp_grads,
-                    "shader gradients",
-                    u64::from(job.shader.params) * 4,
-                )?;
-                Some(fs.feature_planes.ok_or_else(|| {
-                    GpuError::InvalidArgument(
-                        "the last frame blended no feature channels: render it with render_shaded \
-                         right before the backward pass"
-                            .into(),
-                    )
-                })?)
-            }
-            None => None,
-        };
-        check_binding(ctx, "Gaussians", scene.gaussians.size())?;
-        let blend = &st
-            .blend
-            .iter()
-            .find(|(k, _)| *k == blend_key)
-            .expect("built")
-            .1;
-        let (splats_r, values_r) = match (rows, fs.value_texels) {
-            (true, Some(v)) => (
-                Resource::TexelBuffer(fs.splat_texels),
-                Resource::TexelBuffer(v),
-            ),
-            _ => (
-                Resource::Buffer(fs.splats),
-                Resource::Buffer(fs.sorted_gaussians),
-            ),
-        };
-        let accumulate = &st
-            .accumulate
-            .iter()
-            .find(|(m, _)| *m == st.mode)
-            .expect("built")
-            .1;
-        let preprocess = st.preprocess[p].as_ref().expect("built");
-        fn buf(b: &Option<GpuBuffer>) -> crate::gpu::BufferSlice<'_> {
-            b.as_ref().expect("made above").whole()
+        Ok(())
+    }
+
+    /// The shader's backward pass: its pipeline, the frame's alpha in, scratch and partial
+    /// sums; returns the forward's feature planes it reads.
+    fn ensure_shade_buffers<'f>(
+        &mut self,
+        ctx: &GpuContext,
+        job: ShadeJob,
+        pixels: u64,
+        fs: &ForwardState<'f>,
+    ) -> GpuResult<(BufferSlice<'f>, u32)> {
+        if !self.shade.as_ref().is_some_and(|s| s.fits(job.shader)) {
+            self.shade = Some(ShadeBwd::for_shader(ctx, job.shader)?);
         }
-        let (grad_color_b, grad_depth_b) = (buf(&st.grad_color), buf(&st.grad_depth));
-        let (pair_grads, maxima, acc) = (buf(&st.pair_grads), buf(&st.maxima), buf(&st.acc));
-        let (grads, sh_grads) = (buf(&st.grads), buf(&st.sh_grads));
-        let (feature_b, grad_feature_b, feature_grads) = (
-            match features {
-                Some((FeatureValues::Device(values), _, _)) => values,
-                _ => buf(&st.features),
-            },
-            buf(&st.grad_features),
-            buf(&st.feature_grads),
+        ensure(ctx, &mut self.alpha, "pixel colour and alpha", pixels * 16)?;
+        ensure(
+            ctx,
+            &mut self.scratch,
+            "shader activations",
+            ShadeBwd::scratch_bytes(job.shader, pixels),
+        )?;
+        ensure(
+            ctx,
+            &mut self.partials,
+            "shader gradient partial sums",
+            ShadeBwd::partial_bytes(job.shader, pixels),
+        )?;
+        ensure(
+            ctx,
+            &mut self.mlp_grads,
+            "shader gradients",
+            u64::from(job.shader.params) * 4,
+        )?;
+        fs.feature_planes.ok_or_else(|| {
+            GpuError::InvalidArgument(
+                "the last frame blended no feature channels: render it with render_shaded \
+                 right before the backward pass"
+                    .into(),
+            )
+        })
+    }
+
+    /// Reads the pass's gradients back and lays them out as the uploaded scene.
+    fn read_back(
+        &self,
+        ctx: &GpuContext,
+        scene: &GpuScene,
+        shape: &PassShape,
+        features: Option<FeatureJob>,
+        shade: Option<ShadeJob>,
+    ) -> GpuResult<HostGrads> {
+        let (groups, sh_floats) = (shape.groups, shape.sh_floats);
+        let (grads, sh_grads, feature_grads) = (
+            self.grads.as_ref().expect("made above"),
+            self.sh_grads.as_ref().expect("made above"),
+            self.feature_grads.as_ref().expect("made above"),
         );
-        let shade_bwd = st.shade.as_ref();
-        let (alpha_b, scratch, partials, mlp_grads) = (
-            st.alpha.as_ref(),
-            st.scratch.as_ref(),
-            st.partials.as_ref(),
-            st.mlp_grads.as_ref(),
-        );
-        let timer = &mut st.timer;
-        ctx.submit_and_wait("backward", |cmd| {
-            // The forward's writes (an earlier submission) before this pass reads them.
-            barrier(ctx, cmd, Access::Any, Access::Any);
-            timer.reset(ctx, cmd);
-            if let PixelInput::Device(record) = &mut input {
-                grad_depth_b.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
-                timer.stage(ctx, cmd, DEVICE_LOSS_STAGE, |cmd| {
-                    record(ctx, cmd, fs.color, grad_color_b)
-                })?;
-            }
-            maxima.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
-            acc.buffer.fill(ctx, cmd, 0, vk_whole(), 0);
-            barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
-            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
-            if let (Some(job), Some(planes)) = (shade, feature_planes) {
-                let pipeline = shade_bwd.expect("built above");
-                fn need(b: Option<&GpuBuffer>) -> crate::gpu::BufferSlice<'_> {
-                    b.expect("made above").whole()
-                }
-                let bufs = ShadeBwdBuffers {
-                    features: planes,
-                    alpha: need(alpha_b),
-                    grad_color: grad_color_b,
-                    grad_features: grad_feature_b,
-                    scratch: need(scratch),
-                    partials: need(partials),
-                    grads: need(mlp_grads),
-                };
-                // The frame's alpha: its colour image (a copy source since its forward
-                // pass) copied where the shader's backward pass reads it.
-                fs.color
-                    .copy_to_buffer(ctx, cmd, alpha_b.expect("made above"), 0);
-                barrier(ctx, cmd, Access::TransferWrite, Access::ComputeRead);
-                timer.stage(ctx, cmd, SHADE_BACKWARD_STAGE, |cmd| {
-                    pipeline.record(ctx, cmd, job.shader, &bufs, job.cam, job.background)
-                })?;
-                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-            }
-            timer.stage(ctx, cmd, BACKWARD_STAGES[0], |cmd| {
-                blend.record(
-                    ctx,
-                    cmd,
-                    bins,
-                    fs.params,
-                    splats_r,
-                    values_r,
-                    fs.ranges,
-                    last,
-                    grad_color_b,
-                    grad_depth_b,
-                    pair_grads,
-                    maxima,
-                    feature_b,
-                    grad_feature_b,
-                )
-            })?;
-            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-            timer.stage(ctx, cmd, BACKWARD_STAGES[1], |cmd| {
-                accumulate.record(
-                    ctx,
-                    cmd,
-                    fs.sorted_gaussians,
-                    pair_grads,
-                    maxima,
-                    acc,
-                    GradPush {
-                        count: fs.pairs,
-                        bits,
-                        vecs,
-                    },
-                )
-            })?;
-            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-            timer.stage(ctx, cmd, BACKWARD_STAGES[2], |cmd| {
-                preprocess.record(
-                    ctx,
-                    cmd,
-                    fs.params,
-                    scene.gaussians.whole(),
-                    scene.sh_texels.handle(),
-                    fs.splats,
-                    maxima,
-                    acc,
-                    grads,
-                    sh_grads,
-                    feature_grads,
-                    GradPush {
-                        count: scene.count,
-                        bits,
-                        vecs,
-                    },
-                )
-            })?;
-            if let Some(after) = after {
-                barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
-                timer.stage(ctx, cmd, DEVICE_STEP_STAGE, |cmd| {
-                    after(
-                        ctx,
-                        cmd,
-                        DeviceGrads {
-                            grads,
-                            sh_grads,
-                            splats: fs.splats,
-                            feature_grads,
-                            mlp_grads: mlp_grads.filter(|_| shade.is_some()).map(|b| b.whole()),
-                        },
-                    )
-                })?;
-            }
-            barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
-            Ok(())
-        })?;
-        st.timings = st.timer.read(ctx)?;
-        st.span_ms = st.timer.span_ms(ctx)?;
-        if matches!(input, PixelInput::Device(_)) {
-            return Ok(None);
-        }
         // Read back and lay out as the uploaded scene.
-        let n = n as usize;
-        let raw: Vec<[f32; 16]> = grads.buffer.read(ctx, n)?;
-        let sh_raw: Vec<f32> = sh_grads.buffer.read(ctx, n * sh_floats as usize)?;
+        let n = shape.n as usize;
+        let raw: Vec<[f32; 16]> = grads.read(ctx, n)?;
+        let sh_raw: Vec<f32> = sh_grads.read(ctx, n * sh_floats as usize)?;
         let k = match features {
             Some((_, _, channels)) => channels,
             None => sh_coeffs_for_degree(scene.sh_degree) * 3,
         };
         let mut out = SplatGrads::zeros(n, k);
-        let mlp = match (shade, st.mlp_grads.as_ref()) {
+        let mlp = match (shade, self.mlp_grads.as_ref()) {
             (Some(job), Some(b)) => Some(b.read(ctx, job.shader.params as usize)?),
             _ => None,
         };
         let feature_raw: Vec<[f32; 4]> = match features {
-            Some(_) => feature_grads.buffer.read(ctx, n * groups as usize)?,
+            Some(_) => feature_grads.read(ctx, n * groups as usize)?,
             None => Vec::new(),
         };
         for (i, g) in raw.iter().enumerate() {
@@ -877,7 +837,7 @@ impl GpuRenderer {
                 out.colors[i * k..(i + 1) * k].copy_from_slice(src);
             }
         }
-        Ok(Some((out, mlp)))
+        Ok((out, mlp))
     }
 }
 
@@ -894,8 +854,4 @@ fn check_feature_channels(k: usize) -> GpuResult<()> {
 
 fn pixels_bytes(count: usize, each: u64) -> u64 {
     count as u64 * each
-}
-
-fn vk_whole() -> u64 {
-    ash::vk::WHOLE_SIZE
 }

@@ -119,7 +119,7 @@ impl GpuShader {
             .unwrap_or(0);
         // shade_bwd: the forward, then per layer the activations' derivatives, the inputs'
         // gradients and the owned parameters' sums over a chunk's 64 pixels.
-        let chunk = u64::from(super::shade_bwd::PIXELS);
+        let chunk = u64::from(crate::gpu::shader_set::SHADE_CHUNK_PIXELS);
         let backward_iterations = iterations
             + mlp
                 .layers

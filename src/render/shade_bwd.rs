@@ -14,13 +14,13 @@ use super::shade::{GpuShader, ShadePush};
 use crate::camera::Camera;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
-use crate::gpu::shader_set::{SHADE_SPEC_ACTIVATIONS, SHADE_SPEC_WIDEST};
+use crate::gpu::shader_set::{SHADE_CHUNK_PIXELS, SHADE_SPEC_ACTIVATIONS, SHADE_SPEC_WIDEST};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
 /// Pixels per chunk: one per invocation of a workgroup.
-pub const PIXELS: u32 = 64;
+pub const PIXELS: u32 = SHADE_CHUNK_PIXELS;
 /// Partial sums of the parameters' gradients: the most workgroups of one dispatch. A
 /// constant, so the order of the sums depends on the frame's size only, not the device.
 pub const PARTIAL_SLOTS: u32 = 256;
