@@ -1,6 +1,8 @@
 //! The reference rasterizer's constants (`shared/docs/reference-semantics.md`), defined
 //! once: the CPU reference uses them from here, and `build.rs` passes them to every shader
 //! as `#define`s (see `gpu::shader_set::shared_defines`). Std only: build.rs includes it.
+//! Also the one limit the two renderers of the fitted field share
+//! ([`MAX_FIELD_SAMPLES`]).
 
 /// Tile side in pixels.
 pub const TILE_SIZE: u32 = 16;
@@ -16,3 +18,7 @@ pub const ALPHA_MAX: f32 = 0.99;
 pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 /// A pixel is finished before its transmittance would drop below this.
 pub const T_MIN: f32 = 0.0001;
+
+/// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
+/// accumulator per sample; the CPU reference, `cpu::field`, takes the same range).
+pub const MAX_FIELD_SAMPLES: u32 = 256;

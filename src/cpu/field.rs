@@ -30,7 +30,7 @@ use crate::frame::Frame;
 use crate::model::{ActivatedScene, SplatKernel};
 use rayon::prelude::*;
 
-pub use crate::gpu::shader_set::MAX_FIELD_SAMPLES;
+pub use crate::rules::MAX_FIELD_SAMPLES;
 
 /// What a field render shows.
 #[derive(Clone, Copy, Debug, PartialEq)]

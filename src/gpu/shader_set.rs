@@ -63,9 +63,7 @@ pub const SHADE_SPEC_WIDEST: u32 = 1;
 /// Far from the stages' own ids (0-3), which every pipeline may also carry.
 pub const SUBGROUP_SIZE_SPEC: u32 = 100;
 
-/// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
-/// accumulator per sample).
-pub const MAX_FIELD_SAMPLES: u32 = 256;
+pub use crate::rules::MAX_FIELD_SAMPLES;
 
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
