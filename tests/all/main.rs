@@ -30,6 +30,7 @@ mod gpu_memory;
 mod gpu_sort;
 mod gpu_stages;
 mod gradients;
+mod house;
 mod limits;
 mod loss;
 mod malformed;
