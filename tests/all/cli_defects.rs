@@ -756,6 +756,7 @@ fn readme_and_help_agree() {
         "--why",
         "--depth",
         "--src",
+        "--bin",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {
