@@ -698,16 +698,9 @@ fn interrupting_a_path_stops_cleanly() {
 /// be named in.
 fn documentation() -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut pages: Vec<_> = std::fs::read_dir(root.join("docs"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "md"))
-        .collect();
-    pages.sort();
-    pages.insert(0, root.join("README.md"));
-    pages
+    crate::common::doc_pages()
         .iter()
-        .map(|p| std::fs::read_to_string(p).unwrap())
+        .map(|p| std::fs::read_to_string(root.join(p)).unwrap())
         .collect::<Vec<_>>()
         .join("\n")
 }

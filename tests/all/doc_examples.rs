@@ -10,7 +10,7 @@
 //! options that make them small here.
 
 use crate::common::cli::{bin, stderr, stdout};
-use crate::common::shared_data;
+use crate::common::{doc_pages, shared_data};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Instant;
@@ -205,20 +205,6 @@ const HELPERS: &[(&str, &str)] = &[(
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// README.md and every docs/*.md, in name order.
-fn pages() -> Vec<String> {
-    let mut docs: Vec<String> = std::fs::read_dir(repo().join("docs"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".md"))
-        .map(|n| format!("docs/{n}"))
-        .collect();
-    docs.sort();
-    let mut all = vec!["README.md".to_string()];
-    all.extend(docs);
-    all
 }
 
 /// The line without a trailing `# comment` (a `#` after a space, outside quotes).
@@ -424,7 +410,7 @@ fn run_page(page: &Page) -> Vec<String> {
 /// [`NOT_RUN`] and [`CAPS`] still matches an example.
 #[test]
 fn every_page_with_examples_is_listed() {
-    let all: Vec<Example> = pages().iter().flat_map(|p| examples(p)).collect();
+    let all: Vec<Example> = doc_pages().iter().flat_map(|p| examples(p)).collect();
     for e in &all {
         assert!(
             not_run(e) || PAGES.iter().any(|p| p.file == e.page),
@@ -448,7 +434,7 @@ fn every_page_with_examples_is_listed() {
     }
     for page in PAGES {
         assert!(
-            pages().iter().any(|p| p == page.file),
+            doc_pages().iter().any(|p| p == page.file),
             "PAGES lists {}, which is not there",
             page.file
         );

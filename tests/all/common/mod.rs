@@ -21,6 +21,22 @@ pub fn shared_data() -> PathBuf {
     dir
 }
 
+/// The documentation a user reads, as paths relative to the repository: README.md, then
+/// every docs/*.md in name order (the pages whose options and examples tests check).
+pub fn doc_pages() -> Vec<String> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut docs: Vec<String> = std::fs::read_dir(root.join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".md"))
+        .map(|n| format!("docs/{n}"))
+        .collect();
+    docs.sort();
+    let mut all = vec!["README.md".to_string()];
+    all.extend(docs);
+    all
+}
+
 /// Inverse sigmoid, to store a wanted opacity.
 pub fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
