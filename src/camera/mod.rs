@@ -14,9 +14,10 @@ mod select;
 pub use inria::{load_cameras_json, parse_cameras_json};
 pub use keyframes::{keyframes_to_json, KeyframePath, MAX_FRAMES as MAX_PATH_FRAMES};
 pub use load::{detect_camera_format, load_camera_file, CameraFormat, PathTiming};
-pub use orbit::{orbit, OrbitParams};
+pub use orbit::{orbit, up_and_centre_of, OrbitParams};
 pub use select::{
-    index_span, parse_index_range, select_camera, select_camera_indices, select_cameras,
+    describe_selection, index_span, parse_index_range, select_camera, select_camera_indices,
+    select_cameras,
 };
 
 use glam::{DMat3, DVec3, Mat3, Vec3};

@@ -129,6 +129,45 @@ pub fn orbit(positions: &[[f32; 3]], p: &OrbitParams) -> Result<Vec<Camera>, Cam
         .collect())
 }
 
+/// What a set of cameras (a capture's, a trained model's `cameras.json`) says about the
+/// scene's orientation: the world's up, the mean of the cameras' up directions (their
+/// -y axes), and the point their optical axes pass closest to (least squares), which
+/// captures that circle an object look at. `None` where the cameras do not tell: ups
+/// that cancel out, or optical axes too close to parallel (a forward-facing capture)
+/// or meeting behind the cameras.
+pub fn up_and_centre_of(cams: &[Camera]) -> (Option<Vec3>, Option<Vec3>) {
+    use glam::{DMat3, DVec3};
+    if cams.is_empty() {
+        return (None, None);
+    }
+    let n = cams.len() as f64;
+    let mut up = DVec3::ZERO;
+    let (mut a, mut b) = (DMat3::ZERO, DVec3::ZERO);
+    let mut rays = Vec::with_capacity(cams.len());
+    for c in cams {
+        let to_world = c.rotation.as_dmat3().transpose();
+        up -= to_world.y_axis;
+        let d = to_world.z_axis.normalize();
+        let centre = c.position().as_dvec3();
+        // The projection onto the plane across the optical axis.
+        let p = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += p;
+        b += p * centre;
+        rays.push((centre, d));
+    }
+    let up = (up.length() > 0.5 * n).then(|| up.normalize().as_vec3());
+    // Each projection has eigenvalues 1, 1, 0; the sum's smallest eigenvalue (at most
+    // n) is small when the axes are nearly parallel. det(A/n) bounds it from below by
+    // det / (largest eigenvalue)^2 >= det / 4.
+    let a_n = a * (1.0 / n);
+    let centre = (a_n.determinant() > 0.02)
+        .then(|| a.inverse() * b)
+        .filter(|p| {
+            p.is_finite() && rays.iter().map(|(c, d)| (*p - *c).dot(*d)).sum::<f64>() > 0.0
+        });
+    (up, centre.map(|p| p.as_vec3()))
+}
+
 /// Distance at which a sphere of `radius` fits the narrower of the two fields of view
 /// (with a 5% margin); `vfov` in radians.
 pub(crate) fn framing_distance(radius: f32, width: u32, height: u32, vfov: f32) -> f32 {
@@ -275,6 +314,35 @@ mod tests {
                 "{p:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_capture_s_cameras_give_its_up_and_centre() {
+        // An orbit with z up around (1, 2, 3): its cameras give that up and centre back.
+        let p = OrbitParams {
+            frames: 12,
+            up: Vec3::Z,
+            centre: Some(Vec3::new(1.0, 2.0, 3.0)),
+            radius: Some(4.0),
+            elevation_deg: 25.0,
+            ..Default::default()
+        };
+        let cams = orbit(&[], &p).unwrap();
+        let (up, centre) = up_and_centre_of(&cams);
+        assert!(up.unwrap().abs_diff_eq(Vec3::Z, 1e-4), "{up:?}");
+        assert!(
+            centre.unwrap().abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-3),
+            "{centre:?}"
+        );
+        // Parallel optical axes (a forward-facing capture) give no centre.
+        let mut forward = cams[0].clone();
+        let mut shifted = forward.clone();
+        shifted.translation += Vec3::X;
+        forward.name = "a".into();
+        let (up, centre) = up_and_centre_of(&[forward, shifted]);
+        assert!(up.is_some());
+        assert_eq!(centre, None);
+        assert_eq!(up_and_centre_of(&[]), (None, None));
     }
 
     #[test]

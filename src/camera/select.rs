@@ -4,9 +4,13 @@
 use super::{Camera, CameraError};
 use std::path::Path;
 
-/// Picks one camera by list index (`"3"`) or by `img_name`.
+/// Picks one camera by list index (`"3"`, or `"#3"`, which is always an index) or by
+/// `img_name`; a number that is also a camera's name (`"0002"`) picks that camera.
 pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera, CameraError> {
-    if let Ok(i) = which.parse::<usize>() {
+    if let Some(c) = named_number(cams, which) {
+        return Ok(c.clone());
+    }
+    if let Some(i) = explicit_index(which).or_else(|| which.parse::<usize>().ok()) {
         return cams.get(i).cloned().ok_or_else(|| CameraError::NotFound {
             path: path.to_path_buf(),
             message: format!(
@@ -36,8 +40,10 @@ pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera
 /// (`0,3,7`), end-exclusive ranges (`10..20`, `10..`, `..5`), inclusive ranges
 /// (`10..=20`) and names, mixed freely (`0,5..8,IMG_0042.jpg`). Cameras come back in the
 /// order the spec names them; an item that parses as an index or range is one, anything
-/// else is a name. A name matches a camera's name exactly or, failing that, its file
-/// stem (`IMG_0042` matches `IMG_0042.jpg`, for COLMAP names).
+/// else is a name, except that a number which is also a camera's name (`0002` of photos
+/// named `0002.jpg`) picks that camera; `#N` is always index N. A name matches a
+/// camera's name exactly or, failing that, its file stem (`IMG_0042` matches
+/// `IMG_0042.jpg`, for COLMAP names).
 pub fn select_cameras(
     cams: &[Camera],
     spec: &str,
@@ -78,7 +84,9 @@ pub fn select_camera_indices(
                 "camera selection \"{spec}\" has an empty item (two commas in a row or a trailing comma)"
             )));
         }
-        if let Ok(i) = item.parse::<usize>() {
+        if let Some(c) = named_number(cams, item) {
+            picked.extend(cams.iter().position(|k| std::ptr::eq(k, c)));
+        } else if let Some(i) = explicit_index(item).or_else(|| item.parse::<usize>().ok()) {
             index(cams, i, path)?;
             picked.push(i);
         } else if let Some(range) = parse_index_range(item) {
@@ -108,6 +116,31 @@ pub fn select_camera_indices(
         }
     }
     Ok(picked)
+}
+
+/// `#N`: index N, whatever the cameras are named.
+fn explicit_index(item: &str) -> Option<usize> {
+    item.strip_prefix('#')?.trim().parse().ok()
+}
+
+/// The camera a number names (`0002` of a camera named `0002` or `0002.jpg`): such a
+/// name wins over the index the number would be.
+fn named_number<'a>(cams: &'a [Camera], item: &str) -> Option<&'a Camera> {
+    item.parse::<usize>().ok()?;
+    by_name(cams, item, Path::new("")).ok()
+}
+
+/// How `--camera SPEC` was read, for a summary: the cameras picked at `indices` by name
+/// and index (up to four), or their count.
+pub fn describe_selection(cams: &[Camera], spec: &str, indices: &[usize]) -> String {
+    if indices.len() > 4 {
+        return format!("--camera {spec}: {} cameras", indices.len());
+    }
+    let picked: Vec<String> = indices
+        .iter()
+        .map(|&i| format!("\"{}\" (index {i})", cams[i].name))
+        .collect();
+    format!("--camera {spec}: {}", picked.join(", "))
 }
 
 fn index<'a>(cams: &'a [Camera], i: usize, path: &Path) -> Result<&'a Camera, CameraError> {
@@ -283,6 +316,37 @@ mod tests {
         assert!(e.contains("no cameras"), "{e}");
         let e = names("..", 0).unwrap_err();
         assert!(e.contains("is empty"), "{e}");
+    }
+
+    #[test]
+    fn a_number_that_is_a_name_picks_that_camera() {
+        let mut all = cams(12);
+        for (i, c) in all.iter_mut().enumerate() {
+            c.name = format!("{:04}.jpg", i + 1);
+        }
+        // "0002" is the photo 0002.jpg (index 1), not index 2; "#2" is index 2; a number
+        // that names no camera is an index.
+        let pick = |spec: &str| {
+            select_camera_indices(&all, spec, Path::new("c")).map_err(|e| e.to_string())
+        };
+        assert_eq!(pick("0002").unwrap(), vec![1]);
+        assert_eq!(pick("0002.jpg").unwrap(), vec![1]);
+        assert_eq!(pick("#2").unwrap(), vec![2]);
+        assert_eq!(pick("2").unwrap(), vec![2]);
+        assert_eq!(pick("0012,#0,3").unwrap(), vec![11, 0, 3]);
+        assert!(pick("#12").unwrap_err().contains("out of range"));
+        assert_eq!(
+            select_camera(&all, "0002", Path::new("c")).unwrap().name,
+            "0002.jpg"
+        );
+        assert_eq!(
+            select_camera(&all, "#2", Path::new("c")).unwrap().name,
+            "0003.jpg"
+        );
+        assert_eq!(
+            describe_selection(&all, "0002", &pick("0002").unwrap()),
+            "--camera 0002: \"0002.jpg\" (index 1)"
+        );
     }
 
     #[test]

@@ -20,7 +20,8 @@ pub(crate) struct CameraArgs {
     #[arg(long, value_name = "FILE")]
     pub(crate) cameras: Option<PathBuf>,
     /// Cameras to use: all, an index, a list 0,3,7, a range 10..20 (end exclusive),
-    /// 10..=20 or 10.., or img_names [default: all].
+    /// 10..=20 or 10.., or img_names (a number that is a camera's name, 0002, picks
+    /// that camera; #2 is always index 2) [default: all].
     #[arg(long, value_name = "SPEC")]
     pub(crate) camera: Option<String>,
     /// Output width in pixels (alone: keeps the aspect ratio).
@@ -129,9 +130,10 @@ pub(crate) struct PathArgs {
     /// Orbit start angle, degrees (0: the default camera's view, from -z).
     #[arg(long, value_name = "DEG", default_value_t = 0.0, value_parser = values::any_f32, requires = "orbit")]
     pub(crate) orbit_start: f32,
-    /// World up axis of the orbit X,Y,Z (INRIA/COLMAP scenes: 0,-1,0).
-    #[arg(long, value_name = "X,Y,Z", value_parser = values::vec3, allow_hyphen_values = true, default_value = "0,-1,0", requires = "orbit")]
-    pub(crate) orbit_up: [f32; 3],
+    /// World up axis of the orbit X,Y,Z [default: a trained model's cameras' up (and
+    /// their centre of view as --orbit-centre), else 0,-1,0 (INRIA/COLMAP scenes)].
+    #[arg(long, value_name = "X,Y,Z", value_parser = values::vec3, allow_hyphen_values = true, requires = "orbit")]
+    pub(crate) orbit_up: Option<[f32; 3]>,
     /// Vertical field of view of generated cameras (orbit, default camera), degrees
     /// [default: 50]. Camera files bring their own intrinsics.
     #[arg(long, value_name = "DEG", value_parser = values::fov_deg)]
@@ -264,6 +266,44 @@ pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
     }
 }
 
+/// The orbit's up and centre: `--orbit-up` and `--orbit-centre`, else, for a trained
+/// model directory with a `cameras.json`, what its cameras say ([`camera::up_and_centre_of`],
+/// with a note), else -y and the scene's robust centre.
+fn orbit_frame(p: &PathArgs, scene_arg: &SceneArg) -> Result<(glam::Vec3, Option<glam::Vec3>)> {
+    let given_up = p.orbit_up.map(glam::Vec3::from);
+    let given_centre = p.orbit_centre.map(glam::Vec3::from);
+    let file = scene_arg
+        .scene
+        .as_deref()
+        .filter(|d| !scene_arg.demo && d.join("point_cloud").is_dir())
+        .map(|d| d.join("cameras.json"))
+        .filter(|f| f.is_file());
+    let (Some(file), true) = (file, given_up.is_none() || given_centre.is_none()) else {
+        return Ok((given_up.unwrap_or(glam::Vec3::NEG_Y), given_centre));
+    };
+    let (cams, _) = camera::load_camera_file(&file, &Default::default())?;
+    let (up, centre) = camera::up_and_centre_of(&cams);
+    let mut took = Vec::new();
+    if let (None, Some(u)) = (given_up, up) {
+        took.push(format!("up {:.3},{:.3},{:.3}", u.x, u.y, u.z));
+    }
+    if let (None, Some(c)) = (given_centre, centre) {
+        took.push(format!("centre {:.3},{:.3},{:.3}", c.x, c.y, c.z));
+    }
+    if !took.is_empty() {
+        vksplat::note!(
+            "note: the orbit's {} from the model's {} ({}; --orbit-up and --orbit-centre choose others)",
+            took.join(" and "),
+            super::plural(cams.len(), "camera"),
+            file.display()
+        );
+    }
+    Ok((
+        given_up.or(up).unwrap_or(glam::Vec3::NEG_Y),
+        given_centre.or(centre),
+    ))
+}
+
 /// Checks, before any work starts, that `path` can be written: an existing file is
 /// refused without `overwrite`, missing folders are created, and the folder must accept a
 /// new file (so an unwritable destination is reported now, not after minutes of work).
@@ -337,12 +377,13 @@ pub(crate) fn camera_path(
         if sampling {
             bail!("{sampling_flags} set the sampling of a keyframe path (--cameras KEYFRAMES.json); an orbit's frame count is --orbit FRAMES");
         }
+        let (up, centre) = orbit_frame(p, scene_arg)?;
         let params = camera::OrbitParams {
             frames,
-            centre: p.orbit_centre.map(glam::Vec3::from),
+            centre,
             radius: p.orbit_radius,
             elevation_deg: p.orbit_elevation,
-            up: glam::Vec3::from(p.orbit_up),
+            up,
             start_deg: p.orbit_start,
             vfov_deg: vfov,
             width,
@@ -397,9 +438,13 @@ pub(crate) fn camera_path(
             "the default camera".into(),
         )
     };
-    let chosen: Vec<usize> = match &view.camera {
-        Some(spec) => camera::select_camera_indices(&all, spec, &label)?,
-        None => (0..all.len()).collect(),
+    let (chosen, source): (Vec<usize>, String) = match &view.camera {
+        Some(spec) => {
+            let chosen = camera::select_camera_indices(&all, spec, &label)?;
+            let how = camera::describe_selection(&all, spec, &chosen);
+            (chosen, format!("{source}, {how}"))
+        }
+        None => ((0..all.len()).collect(), source),
     };
     let cameras = chosen
         .into_iter()

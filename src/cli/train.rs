@@ -197,6 +197,7 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     let mut rast = vksplat::render::differentiable::DiffRasterizer::new(ctx)?;
     let bar = progress_bar(args.quiet, args.iterations);
     let quiet = args.quiet;
+    let mut lines = LogLines::new(args.quiet, args.iterations);
     let report = vksplat::train::run::train(
         &data,
         &args.output,
@@ -204,6 +205,7 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         &mut rast,
         &mut loss,
         &mut |p| {
+            lines.iteration(&p);
             if p.iteration % 10 == 0 || p.iteration == p.iterations {
                 bar.set_message(format!(
                     "loss {:.4}  PSNR {:.2} dB  L1 {:.4}  SSIM {:.3}  {} Gaussians",
@@ -422,6 +424,60 @@ fn progress_bar(quiet: bool, iterations: u32) -> indicatif::ProgressBar {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar
+    }
+}
+
+/// Progress as plain lines where there is no terminal to draw a bar on (a log file, a
+/// Slurm job): a line at every 5 % of the iterations and at least every 30 s.
+struct LogLines {
+    on: bool,
+    iterations: u32,
+    start: std::time::Instant,
+    last_line: std::time::Instant,
+    last_step: u32,
+    /// The first iteration of this run (after a resumed checkpoint's), for the rate.
+    first: Option<u32>,
+}
+
+impl LogLines {
+    fn new(quiet: bool, iterations: u32) -> Self {
+        use std::io::IsTerminal;
+        LogLines {
+            on: !quiet && !std::io::stderr().is_terminal(),
+            iterations,
+            start: std::time::Instant::now(),
+            last_line: std::time::Instant::now(),
+            last_step: 0,
+            first: None,
+        }
+    }
+
+    fn iteration(&mut self, p: &vksplat::train::run::Progress) {
+        if !self.on {
+            return;
+        }
+        let first = *self.first.get_or_insert(p.iteration);
+        let step = (u64::from(p.iteration) * 20 / u64::from(p.iterations.max(1))) as u32;
+        let due = step > self.last_step
+            || self.last_line.elapsed() >= std::time::Duration::from_secs(30)
+            || p.iteration == p.iterations;
+        if !due {
+            return;
+        }
+        self.last_step = step;
+        self.last_line = std::time::Instant::now();
+        let rate =
+            f64::from(p.iteration + 1 - first) / self.start.elapsed().as_secs_f64().max(1e-9);
+        note!(
+            "iteration {}/{} ({:.0} %): loss {:.4}, PSNR {:.2} dB, {} Gaussians; {rate:.2} it/s, ETA {:.0} s",
+            p.iteration,
+            self.iterations,
+            100.0 * f64::from(p.iteration) / f64::from(self.iterations.max(1)),
+            p.loss.total,
+            p.loss.psnr(),
+            p.gaussians,
+            f64::from(self.iterations - p.iteration) / rate.max(1e-9)
+        );
     }
 }
 

@@ -47,6 +47,7 @@ mod shader_interface;
 mod shards;
 mod time_fields;
 mod train;
+mod train_captures;
 mod transform;
 mod view;
 mod view_browser;

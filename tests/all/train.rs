@@ -511,6 +511,21 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
     assert!(out.status.success());
     let psnr = summary_psnr(&text);
     assert!(psnr >= 20.0, "held-out PSNR {psnr} dB");
+    // The random start is the model's input.ply, as the original writes it.
+    let input = std::fs::read(model.join("input.ply")).expect("input.ply of the random start");
+    let end = b"end_header\n";
+    let body = input.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    let header = String::from_utf8_lossy(&input[..body]);
+    assert!(header.contains("element vertex 3000\n"), "{header}");
+    // x y z nx ny nz (floats) and red green blue (bytes) each, inside the cube of half
+    // side 1.3.
+    assert_eq!(input.len() - body, 3000 * 27);
+    for v in input[body..].chunks(27) {
+        for a in 0..3 {
+            let x = f32::from_le_bytes(v[4 * a..4 * a + 4].try_into().unwrap());
+            assert!(x.abs() <= 1.3, "{x}");
+        }
+    }
 }
 
 /// The library loop of the device-versus-host tests: a data set made here, a rasterizer

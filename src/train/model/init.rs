@@ -112,13 +112,7 @@ impl Model {
         max_sh_degree: u32,
         rng: &mut Rng,
     ) -> Self {
-        let points: Vec<Point3D> = (0..count)
-            .map(|_| Point3D {
-                position: [0, 1, 2].map(|a| (centre[a] + rng.range(-half, half)) as f64),
-                color: [0, 1, 2].map(|_| (rng.unit() * 255.0) as u8),
-            })
-            .collect();
-        Self::from_points(&points, max_sh_degree)
+        Self::from_points(&random_points(count, centre, half, rng), max_sh_degree)
     }
 
     pub(super) fn of(scene: Scene) -> Self {
@@ -157,4 +151,16 @@ impl Model {
         self.shader = Some(mlp);
         self
     }
+}
+
+/// `count` random points in the cube of half side `half` around `centre` with random
+/// colours: the original's start for data sets without points (which it also writes as
+/// the model's `input.ply`).
+pub fn random_points(count: usize, centre: [f32; 3], half: f32, rng: &mut Rng) -> Vec<Point3D> {
+    (0..count)
+        .map(|_| Point3D {
+            position: [0, 1, 2].map(|a| (centre[a] + rng.range(-half, half)) as f64),
+            color: [0, 1, 2].map(|_| (rng.unit() * 255.0) as u8),
+        })
+        .collect()
 }

@@ -18,7 +18,7 @@ pub mod settings;
 pub mod state;
 
 pub(super) use adam::adam_corrections;
-pub use init::mean_sq_dist3;
+pub use init::{mean_sq_dist3, random_points};
 pub use mcmc::{noise_key, noise_normal, pcg_hash, relocation};
 pub use settings::{position_lr, Mcmc, Settings};
 

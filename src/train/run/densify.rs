@@ -1,38 +1,41 @@
 //! What the host does on the model after a step: the device's state comes down when the
-//! host needs it, then the original's densification or the MCMC strategy's refinement,
-//! and the opacity reset.
+//! host needs it; then, after the outputs the original writes first (evaluation, save),
+//! the original's densification or the MCMC strategy's refinement, and the opacity
+//! reset.
 
 use super::schedule::{Due, Plan};
 use super::{Job, Run, TrainError};
 use crate::render::differentiable::DiffRasterizer;
 
 impl Run<'_> {
-    /// Iteration `plan.it`'s changes to the model. The device's state comes down first
-    /// when the host changes the model or an output is `due`, and goes up again (rebuilt)
-    /// at the next iteration when it changed.
-    pub(super) fn change_model(
+    /// Brings the device's state down when the host changes the model after iteration
+    /// `plan.it` or an output is `due`; it goes up again (rebuilt) at the next iteration
+    /// when the host changed it.
+    pub(super) fn bring_down(
         &mut self,
-        job: &Job,
         rast: &mut DiffRasterizer,
         plan: &Plan,
         due: &Due,
     ) -> Result<(), TrainError> {
-        let s = &job.opts.settings;
-        let (it, densify_now, reset_now) = (plan.it, plan.densify_now, plan.reset_now);
+        let changes = plan.densify_now || plan.reset_now;
         if let Some(d) = &self.dev {
-            if densify_now
-                || reset_now
-                || due.evaluate
-                || due.checkpoint
-                || due.save
-                || due.cancelled
-            {
+            if changes || due.evaluate || due.checkpoint || due.save || due.cancelled {
                 d.download(rast.renderer().ctx(), &mut self.model)?;
             }
-            if densify_now || reset_now {
+            if changes {
                 self.dev = None;
             }
         }
+        Ok(())
+    }
+
+    /// Iteration `plan.it`'s changes to the model on the host (after
+    /// [`Run::bring_down`], and after the iteration's evaluation and save, as the
+    /// original: a model saved or evaluated at an iteration is the one before that
+    /// iteration's densification and opacity reset).
+    pub(super) fn change_model(&mut self, job: &Job, plan: &Plan) -> Result<(), TrainError> {
+        let s = &job.opts.settings;
+        let (it, densify_now, reset_now) = (plan.it, plan.densify_now, plan.reset_now);
         if let (true, Some(m)) = (densify_now, s.mcmc.as_ref()) {
             // 3dgs-mcmc's order: relocate and grow, the step (skipped: the parameters are
             // new), the noise.

@@ -319,19 +319,26 @@ pub fn train(
             )));
         }
         let due = Due::at(&job, it);
-        run.change_model(&job, rast, &plan, &due)?;
+        run.bring_down(rast, &plan, &due)?;
         if it % 10 == 1 {
             run.peak = run.peak.max(rast.renderer().ctx().live_allocations().1);
         }
+        // The original's order: the evaluation and the save see the model before this
+        // iteration's densification and opacity reset; a checkpoint (what a resumed run
+        // continues from) the model after them.
+        if due.evaluate {
+            run.evaluate(&job, rast, it, note)?;
+        }
+        if due.save {
+            run.save(&job, it, note)?;
+        }
+        run.change_model(&job, &plan)?;
         progress(Progress {
             iteration: it,
             iterations: s.iterations,
             loss: value,
             gaussians: run.model.len(),
         });
-        if due.evaluate {
-            run.evaluate(&job, rast, it, note)?;
-        }
         if due.checkpoint {
             let path = run.checkpoint(&job, it, job.overwrite)?;
             note(format!("[ITER {it}] checkpoint {}", path.display()));
@@ -345,9 +352,6 @@ pub fn train(
                     path.display()
                 ),
             });
-        }
-        if due.save {
-            run.save(&job, it, note)?;
         }
     }
     let seconds = start.elapsed().as_secs_f64();

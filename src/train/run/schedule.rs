@@ -36,7 +36,12 @@ impl Plan {
         let in_densify = it < until;
         let densify_now =
             in_densify && it > s.densify_from_iter && it % s.densification_interval == 0;
-        let reset_now = mcmc.is_none() && in_densify && it % s.opacity_reset_interval == 0;
+        // The original also resets at the start of the densification on a white
+        // background.
+        let reset_now = mcmc.is_none()
+            && in_densify
+            && (it % s.opacity_reset_interval == 0
+                || (job.opts.white_background && it == s.densify_from_iter));
         let lr_now = position_lr(s, job.data.extent, it);
         let n_now = gaussians.max(1);
         let mcmc_step = mcmc.map(|m| McmcStep {

@@ -1,12 +1,12 @@
-//! The start of a run: the Gaussians the original starts from (the data set's points,
-//! written as `input.ply`, or random ones around the cameras), their feature channels,
+//! The start of a run: the Gaussians the original starts from (the data set's points
+//! or random ones around the cameras, written as `input.ply`), their feature channels,
 //! or the state of a checkpoint to resume.
 
 use super::output::{points_ply, write};
 use super::{Job, Run, StageSums, TrainError};
 use crate::gen::Rng;
 use crate::train::checkpoint::Checkpoint;
-use crate::train::model::Model;
+use crate::train::model::{random_points, Model};
 use std::path::PathBuf;
 
 impl Run<'_> {
@@ -70,8 +70,9 @@ impl Run<'_> {
     }
 }
 
-/// The original's start: points3D (written as `input.ply`), or random points around the
-/// cameras' centre.
+/// The original's start: points3D, or random points around the cameras' centre (the
+/// original's `points3d.ply` of a data set without points); either is written as
+/// `input.ply`.
 fn initial_model(
     job: &Job,
     rng: &mut Rng,
@@ -79,16 +80,9 @@ fn initial_model(
     note: &mut dyn FnMut(String),
 ) -> Result<Model, TrainError> {
     let (data, opts) = (job.data, job.opts);
-    Ok(match &data.points {
-        Some(points) => {
-            write(
-                &job.out.join("input.ply"),
-                &points_ply(points),
-                job.overwrite,
-                written,
-            )?;
-            Model::from_points(points, opts.sh_degree)
-        }
+    let random;
+    let points = match &data.points {
+        Some(points) => points,
         None => {
             let (centre, half) = data.random_box.unwrap_or_else(|| {
                 let (mean, extent) = crate::train::data::cameras_centre_and_extent(&data.train);
@@ -102,7 +96,15 @@ fn initial_model(
                 centre[1],
                 centre[2]
             ));
-            Model::random(opts.random_points, centre, half, opts.sh_degree, rng)
+            random = random_points(opts.random_points, centre, half, rng);
+            &random
         }
-    })
+    };
+    write(
+        &job.out.join("input.ply"),
+        &points_ply(points),
+        job.overwrite,
+        written,
+    )?;
+    Ok(Model::from_points(points, opts.sh_degree))
 }
