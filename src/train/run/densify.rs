@@ -8,9 +8,21 @@ use super::{Job, Run, TrainError};
 use crate::render::differentiable::DiffRasterizer;
 
 impl Run<'_> {
-    /// Brings the device's state down when the host changes the model after iteration
-    /// `plan.it` or an output is `due`; it goes up again (rebuilt) at the next iteration
-    /// when the host changed it.
+    /// Brings the device's state down for the evaluation and the save, which see the
+    /// model before the iteration's step; the device keeps it.
+    pub(super) fn bring_down_for_outputs(
+        &mut self,
+        rast: &mut DiffRasterizer,
+    ) -> Result<(), TrainError> {
+        if let Some(d) = &self.dev {
+            d.download(rast.renderer().ctx(), &mut self.model)?;
+        }
+        Ok(())
+    }
+
+    /// Brings the device's state down after iteration `plan.it`'s step when the host
+    /// changes the model or writes a checkpoint; it goes up again (rebuilt) at the next
+    /// iteration when the host changed it.
     pub(super) fn bring_down(
         &mut self,
         rast: &mut DiffRasterizer,
@@ -19,7 +31,7 @@ impl Run<'_> {
     ) -> Result<(), TrainError> {
         let changes = plan.densify_now || plan.reset_now;
         if let Some(d) = &self.dev {
-            if changes || due.evaluate || due.checkpoint || due.save || due.cancelled {
+            if changes || due.checkpoint || due.cancelled {
                 d.download(rast.renderer().ctx(), &mut self.model)?;
             }
             if changes {
@@ -30,9 +42,8 @@ impl Run<'_> {
     }
 
     /// Iteration `plan.it`'s changes to the model on the host (after
-    /// [`Run::bring_down`], and after the iteration's evaluation and save, as the
-    /// original: a model saved or evaluated at an iteration is the one before that
-    /// iteration's densification and opacity reset).
+    /// [`Run::bring_down`]; the iteration's evaluation and save came before its step, as
+    /// the original's).
     pub(super) fn change_model(&mut self, job: &Job, plan: &Plan) -> Result<(), TrainError> {
         let s = &job.opts.settings;
         let (it, densify_now, reset_now) = (plan.it, plan.densify_now, plan.reset_now);

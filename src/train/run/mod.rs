@@ -306,6 +306,20 @@ pub fn train(
     for it in run.first..=s.iterations {
         let view = run.next_view(&job, it);
         let plan = Plan::at(&job, it, run.model.len());
+        let due = Due::at(&job, it);
+        // The original's order: the evaluation and the save at an iteration see the model
+        // before its step, densification and opacity reset (and the last iteration's step
+        // and changes are in no output); a checkpoint (what a resumed run continues from)
+        // sees the model after them.
+        if due.evaluate || due.save {
+            run.bring_down_for_outputs(rast)?;
+            if due.evaluate {
+                run.evaluate(&job, rast, it, note)?;
+            }
+            if due.save {
+                run.save(&job, it, note)?;
+            }
+        }
         let value = if device_path {
             run.device_step(&job, &pipelines, rast, loss, view, &plan)?
         } else {
@@ -318,21 +332,13 @@ pub fn train(
                 run.model.len()
             )));
         }
-        let due = Due::at(&job, it);
         run.bring_down(rast, &plan, &due)?;
+        if it < s.iterations {
+            run.change_model(&job, &plan)?;
+        }
         if it % 10 == 1 {
             run.peak = run.peak.max(rast.renderer().ctx().live_allocations().1);
         }
-        // The original's order: the evaluation and the save see the model before this
-        // iteration's densification and opacity reset; a checkpoint (what a resumed run
-        // continues from) the model after them.
-        if due.evaluate {
-            run.evaluate(&job, rast, it, note)?;
-        }
-        if due.save {
-            run.save(&job, it, note)?;
-        }
-        run.change_model(&job, &plan)?;
         progress(Progress {
             iteration: it,
             iterations: s.iterations,
