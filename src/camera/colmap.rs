@@ -411,7 +411,10 @@ fn pinhole(
     distorted: bool,
 ) -> Result<Intrinsics, String> {
     let (focal, principal, coefficients): ([f64; 2], [f64; 2], &[f64]) = match model.name {
-        "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" | "SIMPLE_RADIAL_FISHEYE"
+        "SIMPLE_PINHOLE"
+        | "SIMPLE_RADIAL"
+        | "RADIAL"
+        | "SIMPLE_RADIAL_FISHEYE"
         | "RADIAL_FISHEYE" => ([p[0], p[0]], [p[1], p[2]], &p[3..]),
         _ => ([p[0], p[1]], [p[2], p[3]], &p[4..]),
     };

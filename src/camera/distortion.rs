@@ -56,7 +56,10 @@ impl Distortion {
 
     /// Whether every coefficient is finite.
     pub fn is_finite(&self) -> bool {
-        self.radial.iter().chain(&self.tangential).all(|k| k.is_finite())
+        self.radial
+            .iter()
+            .chain(&self.tangential)
+            .all(|k| k.is_finite())
     }
 
     /// The distorted normalised coordinates of the ray through pinhole coordinates
@@ -136,7 +139,8 @@ impl Distortion {
         for _ in 0..100 {
             let t2 = t * t;
             let f = t * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - td;
-            let df = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + 9.0 * t2 * k[3])));
+            let df =
+                1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + 9.0 * t2 * k[3])));
             if !df.is_finite() || df.abs() < 1e-12 {
                 return None;
             }
@@ -148,7 +152,8 @@ impl Distortion {
         }
         let t2 = t * t;
         let err = t * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - td;
-        if !(t.is_finite() && err.abs() < 1e-9 && t > 0.0 && t < std::f64::consts::FRAC_PI_2 - 1e-6) {
+        if !(t.is_finite() && err.abs() < 1e-9 && t > 0.0 && t < std::f64::consts::FRAC_PI_2 - 1e-6)
+        {
             return None;
         }
         let s = t.tan() / td;
@@ -166,7 +171,11 @@ pub fn from_colmap(model: &str, p: &[f64]) -> Result<Option<Distortion>, String>
         "SIMPLE_RADIAL" | "RADIAL" => {
             Distortion::opencv(model, [get(0), get(1), 0.0, 0.0, 0.0, 0.0], [0.0; 2])
         }
-        "OPENCV" => Distortion::opencv(model, [get(0), get(1), 0.0, 0.0, 0.0, 0.0], [get(2), get(3)]),
+        "OPENCV" => Distortion::opencv(
+            model,
+            [get(0), get(1), 0.0, 0.0, 0.0, 0.0],
+            [get(2), get(3)],
+        ),
         "FULL_OPENCV" => Distortion::opencv(
             model,
             [get(0), get(1), get(4), get(5), get(6), get(7)],
@@ -185,7 +194,9 @@ pub fn from_colmap(model: &str, p: &[f64]) -> Result<Option<Distortion>, String>
         }
     };
     if !d.is_finite() {
-        return Err(format!("the {model} model has a non-finite distortion parameter"));
+        return Err(format!(
+            "the {model} model has a non-finite distortion parameter"
+        ));
     }
     Ok((!d.is_pinhole()).then_some(d))
 }
@@ -223,8 +234,9 @@ pub fn from_transforms<'a>(
             .ok_or_else(|| "\"camera_model\" is not a string".to_string())?
             .to_string(),
     };
-    let nonzero =
-        |names: &[&'static str]| -> Option<&'static str> { names.iter().copied().find(|n| c[n] != 0.0) };
+    let nonzero = |names: &[&'static str]| -> Option<&'static str> {
+        names.iter().copied().find(|n| c[n] != 0.0)
+    };
     let refuse = |n: &str, why: &str| {
         Err(format!(
             "\"{n}\" is {} but the {model} camera model {why}; it cannot be ignored",
@@ -232,12 +244,18 @@ pub fn from_transforms<'a>(
         ))
     };
     if let Some(n) = nonzero(&["k5", "k6"]) {
-        return refuse(n, "has no such coefficient (transforms.json has k1..k4, p1, p2)");
+        return refuse(
+            n,
+            "has no such coefficient (transforms.json has k1..k4, p1, p2)",
+        );
     }
     let d = match model.as_str() {
         "OPENCV" | "PINHOLE" | "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" if !fisheye_flag => {
             if let Some(n) = nonzero(&["k4"]) {
-                return refuse(n, "is undistorted with k1, k2, k3, p1, p2 only (as nerfstudio)");
+                return refuse(
+                    n,
+                    "is undistorted with k1, k2, k3, p1, p2 only (as nerfstudio)",
+                );
             }
             Distortion::opencv(
                 &model,
@@ -253,8 +271,8 @@ pub fn from_transforms<'a>(
         }
         other if fisheye_flag => {
             return Err(format!(
-                "\"is_fisheye\" is true but \"camera_model\" is {other}; a fisheye is OPENCV_FISHEYE"
-            ))
+            "\"is_fisheye\" is true but \"camera_model\" is {other}; a fisheye is OPENCV_FISHEYE"
+        ))
         }
         other => {
             return Err(format!(
@@ -274,14 +292,21 @@ mod tests {
     fn undistort_inverts_distort() {
         let models = [
             Distortion::opencv("OPENCV", [-0.2, 0.05, 0.0, 0.0, 0.0, 0.0], [0.001, -0.002]),
-            Distortion::opencv("FULL_OPENCV", [0.1, -0.03, 0.01, 0.05, 0.0, 0.001], [0.0, 0.003]),
+            Distortion::opencv(
+                "FULL_OPENCV",
+                [0.1, -0.03, 0.01, 0.05, 0.0, 0.001],
+                [0.0, 0.003],
+            ),
             Distortion::fisheye("OPENCV_FISHEYE", [0.05, -0.01, 0.002, 0.0]),
         ];
         for d in &models {
             for &(x, y) in &[(0.0, 0.0), (0.3, -0.2), (-0.6, 0.4), (0.01, 0.5)] {
                 let (xd, yd) = d.distort(x, y);
                 let (u, v) = d.undistort(xd, yd).expect("converges");
-                assert!((u - x).abs() < 1e-9 && (v - y).abs() < 1e-9, "{d:?}: {x},{y} -> {u},{v}");
+                assert!(
+                    (u - x).abs() < 1e-9 && (v - y).abs() < 1e-9,
+                    "{d:?}: {x},{y} -> {u},{v}"
+                );
             }
         }
         // Zero coefficients: the identity; a fisheye with zero k is still equidistant.
@@ -298,7 +323,9 @@ mod tests {
     #[test]
     fn colmap_and_transforms_models_name_what_they_refuse() {
         assert_eq!(from_colmap("OPENCV", &[0.0; 4]), Ok(None));
-        let d = from_colmap("OPENCV", &[0.1, 0.0, 0.0, 0.01]).unwrap().unwrap();
+        let d = from_colmap("OPENCV", &[0.1, 0.0, 0.0, 0.01])
+            .unwrap()
+            .unwrap();
         assert_eq!((d.radial[0], d.tangential), (0.1, [0.0, 0.01]));
         let e = from_colmap("THIN_PRISM_FISHEYE", &[0.0; 8]).unwrap_err();
         assert!(e.contains("THIN_PRISM_FISHEYE"), "{e}");
@@ -309,7 +336,9 @@ mod tests {
         assert!(e.contains("\"k4\"") && e.contains("OPENCV"), "{e}");
         let json = serde_json::json!({"camera_model": "EQUIRECTANGULAR"});
         let key = |k: &str| json.get(k);
-        assert!(from_transforms(&key).unwrap_err().contains("EQUIRECTANGULAR"));
+        assert!(from_transforms(&key)
+            .unwrap_err()
+            .contains("EQUIRECTANGULAR"));
         let json = serde_json::json!({"is_fisheye": true, "k1": 0.0});
         let key = |k: &str| json.get(k);
         assert!(from_transforms(&key).unwrap().unwrap().fisheye);

@@ -64,6 +64,11 @@ pub(crate) struct EvalArgs {
     /// Folder of the ground-truth photos, named after the cameras.
     #[arg(long, value_name = "DIR", required_unless_present = "merge")]
     pub(crate) images: Option<PathBuf>,
+    /// Scale the photos as `train -r` did: 1, 2, 4 or 8 divide the size, another number
+    /// is a width in pixels [default: the model directory's cfg_args resolution; without
+    /// one, photos larger than their camera by one factor are scaled to its size].
+    #[arg(short = 'r', long, value_name = "N")]
+    pub(crate) resolution: Option<u32>,
     /// Which cameras to evaluate: test (every 8th, or the data set's test.txt), train (the
     /// others) or all.
     #[arg(long, value_name = "SPLIT", default_value = "test", value_parser = ["test", "train", "all"])]
@@ -82,7 +87,7 @@ pub(crate) struct EvalArgs {
     /// Merge the shard reports (report.shard-I-of-N.json) found in DIRs (or given as
     /// files) into one report, after checking that they are the shards of one evaluation,
     /// each present once.
-    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scene", "demo", "cameras", "images", "shard", "cpu"])]
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scene", "demo", "cameras", "images", "shard", "cpu", "resolution"])]
     pub(crate) merge: Vec<PathBuf>,
     /// Replace report files that exist.
     #[arg(long)]
@@ -441,6 +446,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     };
     let measure = Measure {
         args,
+        prep: super::eval_photo::PhotoPrep::new(args.resolution, scene_arg.scene.as_deref())?,
         ppd,
         scene: &act,
         opts: &opts,
@@ -586,6 +592,7 @@ type Gpu = Option<(GpuRenderer, vksplat::render::GpuScene)>;
 /// What each image is rendered and measured with.
 struct Measure<'a> {
     args: &'a EvalArgs,
+    prep: super::eval_photo::PhotoPrep,
     ppd: f64,
     scene: &'a vksplat::model::ActivatedScene,
     opts: &'a vksplat::cpu::RenderOptions,
@@ -648,20 +655,26 @@ impl Measure<'_> {
     ) -> Result<ImageRecord> {
         let args = self.args;
         let photo = image_file::read_image(photo_path)?;
-        let (w, h) = render_size(cam.width, cam.height, photo.width, photo.height).ok_or_else(|| {
+        let truth = photo_rgb(&photo, photo_path, args.background)?;
+        let (truth, pw, ph) = self.prep.prepare(cam, truth, (photo.width, photo.height));
+        let (w, h) = render_size(cam.width, cam.height, pw, ph).ok_or_else(|| {
             anyhow::anyhow!(
-                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}; a photo may only be smaller by one factor on both sides (images downscaled for training)",
+                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}{}; a photo may only be smaller by one factor on both sides (images downscaled for training; -r scales photos as train -r did)",
                 cam.name,
                 cam.width,
                 cam.height,
                 photo_path.display(),
                 photo.width,
-                photo.height
+                photo.height,
+                if (pw, ph) == (photo.width, photo.height) {
+                    String::new()
+                } else {
+                    format!(" ({pw}x{ph} as prepared)")
+                }
             )
         })?;
         let cam = cam.with_resolution(w, h)?;
         cam.validate()?;
-        let truth = photo_rgb(&photo, photo_path, args.background)?;
         let frame = match gpu.as_mut() {
             Some((r, s)) => r.render(s, &cam, self.opts)?,
             None => vksplat::cpu::render(self.scene, &cam, self.opts),

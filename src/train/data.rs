@@ -216,7 +216,10 @@ fn undistorted_view(
     };
     let plan = Undistortion::plan(&cam, d).map_err(|m| data_error(path, m))?;
     let image = plan.apply(&full);
-    Ok((scaled_view(plan.camera(&cam), image, resolution), Some(plan)))
+    Ok((
+        scaled_view(plan.camera(&cam), image, resolution),
+        Some(plan),
+    ))
 }
 
 /// Area-averaged downscaling of a `sw x sh` image to `dw x dh` (each output pixel the
@@ -509,8 +512,8 @@ fn read_transforms(
         camera
             .validate()
             .map_err(|e| bad(format!("its camera is not valid: {e}")))?;
-        let lens = distortion::from_transforms(&|k: &str| f.get(k).or_else(|| doc.get(k)))
-            .map_err(bad)?;
+        let lens =
+            distortion::from_transforms(&|k: &str| f.get(k).or_else(|| doc.get(k))).map_err(bad)?;
         let [r, g, b, a] = rgba_planes(&planes, &path)?;
         let full: Vec<[f32; 3]> = (0..r.len())
             .map(|p| {

@@ -74,8 +74,10 @@ fn inner_rectangle(photo: &Intrinsics, d: &Distortion) -> Option<[f64; 4]> {
     let norm = |u: f64, v: f64| d.undistort((u - photo.cx) / photo.fx, (v - photo.cy) / photo.fy);
     let (lo_u, hi_u, lo_v, hi_v) = (0.5, w - 0.5, 0.5, h - 0.5);
     let steps = |n: u32| (0..=n.max(2)).map(move |i| i as f64 / n.max(2) as f64);
-    let along_v = |u: f64| steps(photo.height).filter_map(move |t| norm(u, lo_v + t * (hi_v - lo_v)));
-    let along_u = |v: f64| steps(photo.width).filter_map(move |t| norm(lo_u + t * (hi_u - lo_u), v));
+    let along_v =
+        |u: f64| steps(photo.height).filter_map(move |t| norm(u, lo_v + t * (hi_v - lo_v)));
+    let along_u =
+        |v: f64| steps(photo.width).filter_map(move |t| norm(lo_u + t * (hi_u - lo_u), v));
     let max = |it: &mut dyn Iterator<Item = f64>| it.fold(f64::NEG_INFINITY, f64::max);
     let min = |it: &mut dyn Iterator<Item = f64>| it.fold(f64::INFINITY, f64::min);
     let x0 = max(&mut along_v(lo_u).map(|p| p.0));
@@ -96,7 +98,11 @@ impl Undistortion {
         let fail = || {
             format!(
                 "its {} lens distortion ({:?} {:?}) leaves no pinhole image inside the {}x{} photo",
-                distortion.model, distortion.radial, distortion.tangential, photo.width, photo.height
+                distortion.model,
+                distortion.radial,
+                distortion.tangential,
+                photo.width,
+                photo.height
             )
         };
         let [x0, x1, y0, y1] = inner_rectangle(&photo, distortion).ok_or_else(fail)?;

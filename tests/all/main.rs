@@ -48,5 +48,6 @@ mod shards;
 mod time_fields;
 mod train;
 mod transform;
+mod undistort;
 mod view;
 mod view_browser;
