@@ -15,6 +15,8 @@ use vksplat::train::undistort::{self, Undistortion};
 pub(crate) struct PhotoPrep {
     /// The `-r` of the photos (given, or the model's `cfg_args`), if any.
     resolution: Option<u32>,
+    /// Whether `resolution` was given (`-r`), not read from `cfg_args`.
+    given: bool,
     /// The undistortion of each distorted camera, by image name without extension.
     undistortions: HashMap<String, Undistortion>,
 }
@@ -64,6 +66,7 @@ impl PhotoPrep {
         let dir = model_dir(scene);
         let mut prep = PhotoPrep {
             resolution,
+            given: resolution.is_some(),
             undistortions: HashMap::new(),
         };
         let Some(dir) = dir else {
@@ -100,9 +103,10 @@ impl PhotoPrep {
 
     /// Photo `rgb` (`w x h`, interleaved RGB) of camera `cam`, prepared:
     /// undistorted when the model records the camera's lens and the photo has the size it
-    /// was taken at; then scaled to `-r` (given or the model's) with the trainer's area
-    /// average or, without one, down to the camera's size when it is smaller by one
-    /// factor on both sides. Returns the image and its size.
+    /// was taken at; then scaled with the trainer's area average to the given `-r`, or,
+    /// unless it already has the camera's size (photos scaled beforehand, `images_4/`),
+    /// to the model's `-r` or, without one, down to the camera's size when that is
+    /// smaller by one factor on both sides. Returns the image and its size.
     pub(crate) fn prepare(
         &self,
         cam: &Camera,
@@ -118,11 +122,9 @@ impl PhotoPrep {
             }
         }
         let (tw, th) = match self.resolution {
+            _ if (w, h) == (cam.width, cam.height) && !self.given => (w, h),
             Some(r) => Resolution(r).size(w, h),
-            None => match super::eval::render_size(w, h, cam.width, cam.height) {
-                Some(size) => size,
-                None => (w, h),
-            },
+            None => super::eval::render_size(w, h, cam.width, cam.height).unwrap_or((w, h)),
         };
         if (tw, th) != (w, h) {
             px = resize(&px, w, h, tw, th);
@@ -143,5 +145,28 @@ mod tests {
         assert_eq!(cfg_resolution("Namespace(resolution=-1, eval=True)"), None);
         assert_eq!(cfg_resolution("Namespace(resolution=1600)"), Some(1600));
         assert_eq!(cfg_resolution("Namespace(eval=True)"), None);
+    }
+
+    #[test]
+    fn photos_are_scaled_as_trained_unless_already_at_the_cameras_size() {
+        let mut cam = vksplat::camera::default_camera(&[[0.0; 3]], 10, 8);
+        cam.name = "a".into();
+        let prep = |r: Option<u32>, given: bool| PhotoPrep {
+            resolution: r,
+            given,
+            undistortions: HashMap::new(),
+        };
+        let size = |p: &PhotoPrep, w: u32, h: u32| {
+            let (img, w, h) = p.prepare(&cam, vec![0.5; (w * h * 3) as usize], (w, h));
+            assert_eq!(img.len(), (w * h * 3) as usize);
+            (w, h)
+        };
+        // The model's -r 4: full photos are scaled, photos of the camera's size kept.
+        assert_eq!(size(&prep(Some(4), false), 40, 32), (10, 8));
+        assert_eq!(size(&prep(Some(4), false), 10, 8), (10, 8));
+        // A given -r applies as given; without any, down to the camera's size.
+        assert_eq!(size(&prep(Some(2), true), 40, 32), (20, 16));
+        assert_eq!(size(&prep(None, false), 40, 32), (10, 8));
+        assert_eq!(size(&prep(None, false), 40, 20), (40, 20));
     }
 }
