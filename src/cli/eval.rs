@@ -6,6 +6,7 @@ use super::common::{
     fail_on_validation_messages, load_scene, model_cameras, GpuArgs, KernelArg, SceneArg,
 };
 use super::compare::{csv_cell, db, db_csv};
+use super::eval_photo::render_size;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::{Deserialize, Serialize};
@@ -297,18 +298,6 @@ fn find_photo(dir: &Path, name: &str) -> std::result::Result<PathBuf, String> {
         dir.join(&stem).display(),
         PHOTO_EXTENSIONS[..6].join(",")
     ))
-}
-
-/// The resolution to render a camera at for a photo of `(pw, ph)`: the camera's own, or
-/// the photo's when it is smaller by one factor on both sides, up to the rounding of each
-/// side to whole pixels (`|pw * ch - ph * cw| <= (cw + ch) / 2`).
-pub(crate) fn render_size(cw: u32, ch: u32, pw: u32, ph: u32) -> Option<(u32, u32)> {
-    if (pw, ph) == (cw, ch) {
-        return Some((cw, ch));
-    }
-    let (cw64, ch64, pw64, ph64) = (cw as u64, ch as u64, pw as u64, ph as u64);
-    let uniform = 2 * (pw64 * ch64).abs_diff(ph64 * cw64) <= cw64 + ch64;
-    (pw <= cw && ph <= ch && pw > 0 && ph > 0 && uniform).then_some((pw, ph))
 }
 
 /// A photo as `H x W x 3` colour in [0, 1]: grey is spread to RGB, and alpha composites

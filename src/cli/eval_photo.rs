@@ -124,7 +124,7 @@ impl PhotoPrep {
         let (tw, th) = match self.resolution {
             _ if (w, h) == (cam.width, cam.height) && !self.given => (w, h),
             Some(r) => Resolution(r).size(w, h),
-            None => super::eval::render_size(w, h, cam.width, cam.height).unwrap_or((w, h)),
+            None => render_size(w, h, cam.width, cam.height).unwrap_or((w, h)),
         };
         if (tw, th) != (w, h) {
             px = resize(&px, w, h, tw, th);
@@ -132,6 +132,18 @@ impl PhotoPrep {
         }
         (px.into_iter().flatten().collect(), w, h)
     }
+}
+
+/// The resolution to render a camera at for a photo of `(pw, ph)`: the camera's own, or
+/// the photo's when it is smaller by one factor on both sides, up to the rounding of each
+/// side to whole pixels (`|pw * ch - ph * cw| <= (cw + ch) / 2`).
+pub(crate) fn render_size(cw: u32, ch: u32, pw: u32, ph: u32) -> Option<(u32, u32)> {
+    if (pw, ph) == (cw, ch) {
+        return Some((cw, ch));
+    }
+    let (cw64, ch64, pw64, ph64) = (cw as u64, ch as u64, pw as u64, ph as u64);
+    let uniform = 2 * (pw64 * ch64).abs_diff(ph64 * cw64) <= cw64 + ch64;
+    (pw <= cw && ph <= ch && pw > 0 && ph > 0 && uniform).then_some((pw, ph))
 }
 
 #[cfg(test)]
