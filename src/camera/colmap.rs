@@ -84,6 +84,9 @@ const MODELS: &[Model] = &[
     },
 ];
 
+/// A camera (its pinhole part) and its lens distortion (`None`: none).
+pub type LensCamera = (Camera, Option<Distortion>);
+
 /// Intrinsics of one COLMAP camera: the pinhole part and the lens distortion.
 #[derive(Clone, Debug)]
 struct Intrinsics {
@@ -152,14 +155,11 @@ pub fn load_colmap_model(dir: &Path) -> Result<(Vec<Camera>, CameraFormat), Came
 /// handles: each camera (its pinhole part) with its distortion (`None`: none).
 pub fn load_colmap_model_distorted(
     dir: &Path,
-) -> Result<(Vec<(Camera, Option<Distortion>)>, CameraFormat), CameraError> {
+) -> Result<(Vec<LensCamera>, CameraFormat), CameraError> {
     load_model(dir, true)
 }
 
-fn load_model(
-    dir: &Path,
-    distorted: bool,
-) -> Result<(Vec<(Camera, Option<Distortion>)>, CameraFormat), CameraError> {
+fn load_model(dir: &Path, distorted: bool) -> Result<(Vec<LensCamera>, CameraFormat), CameraError> {
     let (model_dir, format) = find_model(dir)?;
     let ext = if format == CameraFormat::ColmapBinary {
         "bin"
@@ -216,7 +216,7 @@ fn parse_text(
     images_txt: &str,
     images_path: &Path,
     distorted: bool,
-) -> Result<Vec<(Camera, Option<Distortion>)>, CameraError> {
+) -> Result<Vec<LensCamera>, CameraError> {
     let mut intrinsics = HashMap::new();
     for (n, line) in cameras_txt.lines().enumerate() {
         let line = line.trim();
@@ -330,7 +330,7 @@ fn parse_binary(
     images_bin: &[u8],
     images_path: &Path,
     distorted: bool,
-) -> Result<Vec<(Camera, Option<Distortion>)>, CameraError> {
+) -> Result<Vec<LensCamera>, CameraError> {
     let mut r = Reader::new(cameras_bin, cameras_path);
     // camera_id i32, model_id i32, width u64, height u64, then the parameters.
     let count = r.count("cameras", 24)?;
@@ -469,7 +469,7 @@ fn assemble(
     mut images: Vec<Image>,
     intrinsics: &HashMap<u64, Intrinsics>,
     images_path: &Path,
-) -> Result<Vec<(Camera, Option<Distortion>)>, CameraError> {
+) -> Result<Vec<LensCamera>, CameraError> {
     images.sort_by(|a, b| a.name.cmp(&b.name).then(a.id.cmp(&b.id)));
     let mut cams = Vec::with_capacity(images.len());
     for im in images {
