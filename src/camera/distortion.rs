@@ -243,6 +243,16 @@ pub fn from_transforms<'a>(
             c[n]
         ))
     };
+    // instant-ngp's f-theta lens: a model of its own, not Brown-Conrady.
+    if let Some(n) = (0..5)
+        .map(|i| format!("ftheta_p{i}"))
+        .find(|n| key(n).and_then(|v| v.as_f64()).is_some_and(|v| v != 0.0))
+    {
+        return Err(format!(
+            "\"{n}\" gives instant-ngp's f-theta lens, which is not supported; undistort the \
+             photos to a pinhole camera first"
+        ));
+    }
     if let Some(n) = nonzero(&["k5", "k6"]) {
         return refuse(
             n,

@@ -514,6 +514,17 @@ fn read_transforms(
             .map_err(|e| bad(format!("its camera is not valid: {e}")))?;
         let lens =
             distortion::from_transforms(&|k: &str| f.get(k).or_else(|| doc.get(k))).map_err(bad)?;
+        // A lens's coefficients hold for the size the intrinsics were given at.
+        let size = (key("w"), key("h"));
+        if lens.is_some() && size != (None, None) && size != (Some(w as f64), Some(h as f64)) {
+            return Err(bad(format!(
+                "its photo {} is {w}x{h} but \"w\" and \"h\" say {}x{}; the lens \
+                 distortion is given for the size the intrinsics are",
+                path.display(),
+                size.0.map_or("?".into(), |v| v.to_string()),
+                size.1.map_or("?".into(), |v| v.to_string())
+            )));
+        }
         let [r, g, b, a] = rgba_planes(&planes, &path)?;
         let full: Vec<[f32; 3]> = (0..r.len())
             .map(|p| {

@@ -397,6 +397,7 @@ fn lenses_that_cannot_be_undistorted_are_refused_by_name() {
             "\"p1\"",
         ),
         ("\"k5\": 0.01", "\"k5\""),
+        ("\"ftheta_p1\": 0.5", "f-theta"),
         ("\"k1\": \"x\"", "\"k1\" is not a finite number"),
     ]
     .into_iter()
@@ -412,6 +413,16 @@ fn lenses_that_cannot_be_undistorted_are_refused_by_name() {
             "{lens}: {e}"
         );
     }
+    // A lens given for another size than the photo's.
+    let d = dir.path().join("wh");
+    write_transforms(&d, &cams, &photos, "\"k1\": 0.1");
+    let file = d.join("transforms.json");
+    let text = std::fs::read_to_string(&file).unwrap();
+    std::fs::write(&file, text.replace("\"w\": 32", "\"w\": 64")).unwrap();
+    let e = data::load_transforms(&d, Resolution(1), false, [0.0; 3])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("32x24") && e.contains("64x24"), "{e}");
     // The command line says it in one line, without writing a model.
     let d = dir.path().join("t0");
     let model = dir.path().join("model");
