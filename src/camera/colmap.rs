@@ -3,10 +3,13 @@
 //! (`R = qvec2rotmat(qvec)`, `t = tvec`), exactly our [`Camera`] convention, and its
 //! principal point uses the same pixel convention as ours (pixel centres at `+0.5`), so
 //! `cx`, `cy` are kept as written. Images come back sorted by name, as the 3DGS
-//! loaders sort them. Only pinhole cameras are accepted: `SIMPLE_PINHOLE`, `PINHOLE`, and
-//! the distorted models (`SIMPLE_RADIAL`, `RADIAL`, `OPENCV`, `FULL_OPENCV`, `FOV`) when
-//! every distortion parameter is exactly zero.
+//! loaders sort them. As camera files (to render from) only pinhole cameras are accepted:
+//! `SIMPLE_PINHOLE`, `PINHOLE`, and the distorted models (`SIMPLE_RADIAL`, `RADIAL`,
+//! `OPENCV`, `FULL_OPENCV`, `FOV`) when every distortion parameter is exactly zero. The
+//! trainer also reads the distorted models [`super::distortion`] knows
+//! ([`load_colmap_model_distorted`]) and undistorts their photos.
 
+use super::distortion::{self, Distortion};
 use super::{quat_wxyz_to_mat, Camera, CameraError, CameraFormat, MAX_IMAGE_SIDE};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -81,8 +84,11 @@ const MODELS: &[Model] = &[
     },
 ];
 
-/// Pinhole intrinsics of one COLMAP camera.
-#[derive(Clone, Copy, Debug)]
+/// A camera (its pinhole part) and its lens distortion (`None`: none).
+pub type LensCamera = (Camera, Option<Distortion>);
+
+/// Intrinsics of one COLMAP camera: the pinhole part and the lens distortion.
+#[derive(Clone, Debug)]
 struct Intrinsics {
     width: u32,
     height: u32,
@@ -90,6 +96,7 @@ struct Intrinsics {
     fy: f64,
     cx: f64,
     cy: f64,
+    distortion: Option<Distortion>,
 }
 
 /// One registered image: pose (world-to-camera) and the camera it was taken with.
@@ -137,8 +144,22 @@ pub fn find_model(dir: &Path) -> Result<(PathBuf, CameraFormat), CameraError> {
     })
 }
 
-/// Loads every registered image of the COLMAP model under `dir` as a camera, sorted by name.
+/// Loads every registered image of the COLMAP model under `dir` as a camera, sorted by
+/// name; a camera with lens distortion is refused.
 pub fn load_colmap_model(dir: &Path) -> Result<(Vec<Camera>, CameraFormat), CameraError> {
+    let (cams, format) = load_model(dir, false)?;
+    Ok((cams.into_iter().map(|(c, _)| c).collect(), format))
+}
+
+/// [`load_colmap_model`] that also reads the distorted models [`distortion::from_colmap`]
+/// handles: each camera (its pinhole part) with its distortion (`None`: none).
+pub fn load_colmap_model_distorted(
+    dir: &Path,
+) -> Result<(Vec<LensCamera>, CameraFormat), CameraError> {
+    load_model(dir, true)
+}
+
+fn load_model(dir: &Path, distorted: bool) -> Result<(Vec<LensCamera>, CameraFormat), CameraError> {
     let (model_dir, format) = find_model(dir)?;
     let ext = if format == CameraFormat::ColmapBinary {
         "bin"
@@ -155,16 +176,23 @@ pub fn load_colmap_model(dir: &Path) -> Result<(Vec<Camera>, CameraFormat), Came
     };
     let (cams_bytes, images_bytes) = (read(&cameras_path)?, read(&images_path)?);
     let cams = if format == CameraFormat::ColmapBinary {
-        parse_colmap_binary(&cams_bytes, &cameras_path, &images_bytes, &images_path)?
+        parse_binary(
+            &cams_bytes,
+            &cameras_path,
+            &images_bytes,
+            &images_path,
+            distorted,
+        )?
     } else {
         let text = |b: Vec<u8>, p: &Path| {
             String::from_utf8(b).map_err(|_| invalid(p, "is not UTF-8 text".into()))
         };
-        parse_colmap_text(
+        parse_text(
             &text(cams_bytes, &cameras_path)?,
             &cameras_path,
             &text(images_bytes, &images_path)?,
             &images_path,
+            distorted,
         )?
     };
     Ok((cams, format))
@@ -177,6 +205,18 @@ pub fn parse_colmap_text(
     images_txt: &str,
     images_path: &Path,
 ) -> Result<Vec<Camera>, CameraError> {
+    let cams = parse_text(cameras_txt, cameras_path, images_txt, images_path, false)?;
+    Ok(cams.into_iter().map(|(c, _)| c).collect())
+}
+
+/// [`parse_colmap_text`], with the distortion of each camera when `distorted`.
+fn parse_text(
+    cameras_txt: &str,
+    cameras_path: &Path,
+    images_txt: &str,
+    images_path: &Path,
+    distorted: bool,
+) -> Result<Vec<LensCamera>, CameraError> {
     let mut intrinsics = HashMap::new();
     for (n, line) in cameras_txt.lines().enumerate() {
         let line = line.trim();
@@ -226,7 +266,8 @@ pub fn parse_colmap_text(
                 params.len()
             )));
         }
-        let k = pinhole(id, model, width, height, &params).map_err(|m| invalid(cameras_path, m))?;
+        let k = pinhole(id, model, width, height, &params, distorted)
+            .map_err(|m| invalid(cameras_path, m))?;
         if intrinsics.insert(id, k).is_some() {
             return Err(bad(format!("camera id {id} appears twice")));
         }
@@ -278,6 +319,18 @@ pub fn parse_colmap_binary(
     images_bin: &[u8],
     images_path: &Path,
 ) -> Result<Vec<Camera>, CameraError> {
+    let cams = parse_binary(cameras_bin, cameras_path, images_bin, images_path, false)?;
+    Ok(cams.into_iter().map(|(c, _)| c).collect())
+}
+
+/// [`parse_colmap_binary`], with the distortion of each camera when `distorted`.
+fn parse_binary(
+    cameras_bin: &[u8],
+    cameras_path: &Path,
+    images_bin: &[u8],
+    images_path: &Path,
+    distorted: bool,
+) -> Result<Vec<LensCamera>, CameraError> {
     let mut r = Reader::new(cameras_bin, cameras_path);
     // camera_id i32, model_id i32, width u64, height u64, then the parameters.
     let count = r.count("cameras", 24)?;
@@ -297,7 +350,8 @@ pub fn parse_colmap_binary(
         for _ in 0..model.params {
             params.push(r.f64("camera parameter")?);
         }
-        let k = pinhole(id, model, width, height, &params).map_err(|m| invalid(cameras_path, m))?;
+        let k = pinhole(id, model, width, height, &params, distorted)
+            .map_err(|m| invalid(cameras_path, m))?;
         if intrinsics.insert(id, k).is_some() {
             return Err(invalid(
                 cameras_path,
@@ -346,33 +400,46 @@ pub fn parse_colmap_binary(
     assemble(images, &intrinsics, images_path)
 }
 
-/// Pinhole intrinsics of a COLMAP camera, or why it cannot be rendered as a pinhole.
+/// Intrinsics of a COLMAP camera, or why they cannot be used: a distorted camera is
+/// refused unless `distorted` (and then only models [`distortion::from_colmap`] handles).
 fn pinhole(
     id: u64,
     model: &Model,
     width: u64,
     height: u64,
     p: &[f64],
+    distorted: bool,
 ) -> Result<Intrinsics, String> {
-    let (focal, principal, distortion): ([f64; 2], [f64; 2], &[f64]) = match model.name {
-        "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" => ([p[0], p[0]], [p[1], p[2]], &p[3..]),
-        "PINHOLE" | "OPENCV" | "FULL_OPENCV" | "FOV" => ([p[0], p[1]], [p[2], p[3]], &p[4..]),
-        fisheye => {
-            return Err(format!(
-                "camera {id} uses the {fisheye} model, a fisheye projection that a pinhole \
-                 renderer cannot reproduce; undistort the images first (`colmap image_undistorter` \
-                 writes PINHOLE cameras)"
-            ))
-        }
+    let (focal, principal, coefficients): ([f64; 2], [f64; 2], &[f64]) = match model.name {
+        "SIMPLE_PINHOLE"
+        | "SIMPLE_RADIAL"
+        | "RADIAL"
+        | "SIMPLE_RADIAL_FISHEYE"
+        | "RADIAL_FISHEYE" => ([p[0], p[0]], [p[1], p[2]], &p[3..]),
+        _ => ([p[0], p[1]], [p[2], p[3]], &p[4..]),
     };
-    if let Some(k) = distortion.iter().find(|&&k| k != 0.0) {
-        return Err(format!(
-            "camera {id} uses the {} model with non-zero distortion (parameter {k}); only \
-             undistorted pinhole cameras are supported: undistort the images first \
-             (`colmap image_undistorter` writes PINHOLE cameras)",
-            model.name
-        ));
+    let fisheye = model.name.contains("FISHEYE");
+    if !distorted {
+        if fisheye {
+            return Err(format!(
+                "camera {id} uses the {} model, a fisheye projection that a pinhole \
+                 renderer cannot reproduce; undistort the images first (`colmap image_undistorter` \
+                 writes PINHOLE cameras; `vksplat train` undistorts OPENCV_FISHEYE data sets itself)",
+                model.name
+            ));
+        }
+        if let Some(k) = coefficients.iter().find(|&&k| k != 0.0) {
+            return Err(format!(
+                "camera {id} uses the {} model with non-zero distortion (parameter {k}); only \
+                 undistorted pinhole cameras are supported here: undistort the images first \
+                 (`colmap image_undistorter` writes PINHOLE cameras; `vksplat train` undistorts \
+                 such data sets itself, and its model's cameras.json holds the pinhole cameras)",
+                model.name
+            ));
+        }
     }
+    let distortion = distortion::from_colmap(model.name, coefficients)
+        .map_err(|m| format!("camera {id}: {m}"))?;
     let max = MAX_IMAGE_SIDE as u64;
     if width == 0 || height == 0 || width > max || height > max {
         return Err(format!(
@@ -393,15 +460,16 @@ fn pinhole(
         fy: focal[1],
         cx: principal[0],
         cy: principal[1],
+        distortion: distortion.filter(|_| distorted),
     })
 }
 
-/// Cameras of the registered images, sorted by name (then id).
+/// Cameras of the registered images with their distortion, sorted by name (then id).
 fn assemble(
     mut images: Vec<Image>,
     intrinsics: &HashMap<u64, Intrinsics>,
     images_path: &Path,
-) -> Result<Vec<Camera>, CameraError> {
+) -> Result<Vec<LensCamera>, CameraError> {
     images.sort_by(|a, b| a.name.cmp(&b.name).then(a.id.cmp(&b.id)));
     let mut cams = Vec::with_capacity(images.len());
     for im in images {
@@ -439,7 +507,7 @@ fn assemble(
             translation: t.as_vec3(),
         };
         cam.validate().map_err(|e| bad(e.to_string()))?;
-        cams.push(cam);
+        cams.push((cam, k.distortion.clone()));
     }
     Ok(cams)
 }

@@ -4,6 +4,7 @@
 //! overrides. `docs/cameras.md` writes down every convention and conversion.
 
 pub mod colmap;
+pub mod distortion;
 pub mod inria;
 pub mod keyframes;
 mod load;

@@ -6,6 +6,7 @@ use super::common::{
     fail_on_validation_messages, load_scene, model_cameras, GpuArgs, KernelArg, SceneArg,
 };
 use super::compare::{csv_cell, db, db_csv};
+use super::eval_photo::render_size;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::{Deserialize, Serialize};
@@ -64,6 +65,11 @@ pub(crate) struct EvalArgs {
     /// Folder of the ground-truth photos, named after the cameras.
     #[arg(long, value_name = "DIR", required_unless_present = "merge")]
     pub(crate) images: Option<PathBuf>,
+    /// Scale the photos as `train -r` did: 1, 2, 4 or 8 divide the size, another number
+    /// is a width in pixels [default: the model directory's cfg_args resolution; without
+    /// one, photos larger than their camera by one factor are scaled to its size].
+    #[arg(short = 'r', long, value_name = "N")]
+    pub(crate) resolution: Option<u32>,
     /// Which cameras to evaluate: test (every 8th, or the data set's test.txt), train (the
     /// others) or all.
     #[arg(long, value_name = "SPLIT", default_value = "test", value_parser = ["test", "train", "all"])]
@@ -82,7 +88,7 @@ pub(crate) struct EvalArgs {
     /// Merge the shard reports (report.shard-I-of-N.json) found in DIRs (or given as
     /// files) into one report, after checking that they are the shards of one evaluation,
     /// each present once.
-    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scene", "demo", "cameras", "images", "shard", "cpu"])]
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scene", "demo", "cameras", "images", "shard", "cpu", "resolution"])]
     pub(crate) merge: Vec<PathBuf>,
     /// Replace report files that exist.
     #[arg(long)]
@@ -294,18 +300,6 @@ fn find_photo(dir: &Path, name: &str) -> std::result::Result<PathBuf, String> {
     ))
 }
 
-/// The resolution to render a camera at for a photo of `(pw, ph)`: the camera's own, or
-/// the photo's when it is smaller by one factor on both sides, up to the rounding of each
-/// side to whole pixels (`|pw * ch - ph * cw| <= (cw + ch) / 2`).
-pub(crate) fn render_size(cw: u32, ch: u32, pw: u32, ph: u32) -> Option<(u32, u32)> {
-    if (pw, ph) == (cw, ch) {
-        return Some((cw, ch));
-    }
-    let (cw64, ch64, pw64, ph64) = (cw as u64, ch as u64, pw as u64, ph as u64);
-    let uniform = 2 * (pw64 * ch64).abs_diff(ph64 * cw64) <= cw64 + ch64;
-    (pw <= cw && ph <= ch && pw > 0 && ph > 0 && uniform).then_some((pw, ph))
-}
-
 /// A photo as `H x W x 3` colour in [0, 1]: grey is spread to RGB, and alpha composites
 /// the colour over `background`.
 fn photo_rgb(p: &Planes, path: &Path, background: [f32; 3]) -> Result<Vec<f32>> {
@@ -441,6 +435,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     };
     let measure = Measure {
         args,
+        prep: super::eval_photo::PhotoPrep::new(args.resolution, scene_arg.scene.as_deref())?,
         ppd,
         scene: &act,
         opts: &opts,
@@ -586,6 +581,7 @@ type Gpu = Option<(GpuRenderer, vksplat::render::GpuScene)>;
 /// What each image is rendered and measured with.
 struct Measure<'a> {
     args: &'a EvalArgs,
+    prep: super::eval_photo::PhotoPrep,
     ppd: f64,
     scene: &'a vksplat::model::ActivatedScene,
     opts: &'a vksplat::cpu::RenderOptions,
@@ -648,20 +644,26 @@ impl Measure<'_> {
     ) -> Result<ImageRecord> {
         let args = self.args;
         let photo = image_file::read_image(photo_path)?;
-        let (w, h) = render_size(cam.width, cam.height, photo.width, photo.height).ok_or_else(|| {
+        let truth = photo_rgb(&photo, photo_path, args.background)?;
+        let (truth, pw, ph) = self.prep.prepare(cam, truth, (photo.width, photo.height));
+        let (w, h) = render_size(cam.width, cam.height, pw, ph).ok_or_else(|| {
             anyhow::anyhow!(
-                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}; a photo may only be smaller by one factor on both sides (images downscaled for training)",
+                "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}{}; a photo may only be smaller by one factor on both sides (images downscaled for training; -r scales photos as train -r did)",
                 cam.name,
                 cam.width,
                 cam.height,
                 photo_path.display(),
                 photo.width,
-                photo.height
+                photo.height,
+                if (pw, ph) == (photo.width, photo.height) {
+                    String::new()
+                } else {
+                    format!(" ({pw}x{ph} as prepared)")
+                }
             )
         })?;
         let cam = cam.with_resolution(w, h)?;
         cam.validate()?;
-        let truth = photo_rgb(&photo, photo_path, args.background)?;
         let frame = match gpu.as_mut() {
             Some((r, s)) => r.render(s, &cam, self.opts)?,
             None => vksplat::cpu::render(self.scene, &cam, self.opts),

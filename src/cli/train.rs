@@ -34,9 +34,10 @@ pub(crate) struct TrainArgs {
     /// Hold out every 8th image (name order) for evaluation (the original's llffhold).
     #[arg(long)]
     pub(crate) eval: bool,
-    /// Photo scale: 1, 2, 4 or 8 divide the size, another number is a width in pixels.
-    #[arg(short = 'r', long, default_value_t = 1)]
-    pub(crate) resolution: u32,
+    /// Photo scale: 1, 2, 4 or 8 divide the size, another number is a width in pixels
+    /// [default: 1, the photos' size].
+    #[arg(short = 'r', long)]
+    pub(crate) resolution: Option<u32>,
     /// Largest SH degree (0-3).
     #[arg(long, visible_alias = "sh_degree", default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=3))]
     pub(crate) sh_degree: u32,
@@ -310,7 +311,7 @@ fn check_args(args: &TrainArgs) -> Result<()> {
 /// Loads the data set (COLMAP, or NeRF-synthetic / nerfstudio transforms) and notes
 /// what it holds.
 fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
-    let resolution = vksplat::train::data::Resolution(args.resolution);
+    let resolution = vksplat::train::data::Resolution(args.resolution.unwrap_or(1));
     let data = if vksplat::train::data::is_transforms(&args.dataset) {
         let bg = if args.white_background {
             [1.0; 3]
@@ -335,6 +336,18 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
             },
             data.extent
         );
+        if let Some(u) = data.undistorted.first() {
+            note!(
+                "undistorted {} photo(s) ({} lens) to pinhole cameras, e.g. {}x{} -> {}x{} (recorded in the model's {})",
+                data.undistorted.len(),
+                u.distortion.model,
+                u.photo.width,
+                u.photo.height,
+                u.pinhole.width,
+                u.pinhole.height,
+                vksplat::train::undistort::UNDISTORTION_FILE
+            );
+        }
     }
     Ok(data)
 }
@@ -408,6 +421,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         },
         cancel: Some(super::render::interrupt_flag()),
         host_optimizer: false,
+        resolution: args.resolution,
     })
 }
 

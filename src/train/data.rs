@@ -1,10 +1,13 @@
-//! Training data: a COLMAP data set (`images/` and `sparse/0/` text or binary, pinhole
-//! cameras; `points3D` as the initial Gaussians), its photos at the training resolution,
+//! Training data: a COLMAP data set (`images/` and `sparse/0/` text or binary; `points3D`
+//! as the initial Gaussians) or a transforms one, its photos undistorted to pinhole
+//! cameras where the lens is distorted ([`super::undistort`]) and at the training resolution,
 //! the train/test split of the original `--eval` (every 8th image in name order is held
 //! out: the `llffhold` rule `vksplat eval` uses) and the scene extent the learning rates
 //! and densification scale with.
 
+use super::undistort::Undistortion;
 use crate::camera::colmap::{self, Point3D};
+use crate::camera::distortion::{self, Distortion};
 use crate::camera::Camera;
 use std::path::{Path, PathBuf};
 
@@ -37,6 +40,9 @@ pub struct Dataset {
     /// Where random Gaussians start without points (centre, half side); `None`: around
     /// the cameras' centre, within the extent.
     pub random_box: Option<([f32; 3], f32)>,
+    /// How the photos of distorted cameras were undistorted (by image name; none for
+    /// pinhole cameras), for the model directory's `undistortion.json`.
+    pub undistorted: Vec<Undistortion>,
 }
 
 /// An error naming the file and what is wrong with it.
@@ -108,15 +114,16 @@ fn rgba_planes(
 }
 
 /// Reads the COLMAP data set at `dir`: the model (`dir/sparse/0`, `dir/sparse` or `dir`),
-/// the photos in `dir/images` (PNG or JPEG, the size the model says, scaled to
-/// `resolution`), and with `eval` holds out every 8th image.
+/// the photos in `dir/images` (PNG or JPEG, the size the model says, undistorted where the
+/// camera model is distorted, scaled to `resolution`), and with `eval` holds out every
+/// 8th image.
 pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dataset, DataError> {
     let (mut cameras, _) =
-        colmap::load_colmap_model(dir).map_err(|e| data_error(dir, e.to_string()))?;
+        colmap::load_colmap_model_distorted(dir).map_err(|e| data_error(dir, e.to_string()))?;
     if cameras.is_empty() {
         return Err(data_error(dir, "its COLMAP model registers no images"));
     }
-    cameras.sort_by(|a, b| a.name.cmp(&b.name));
+    cameras.sort_by(|a, b| a.0.name.cmp(&b.0.name));
     let points = colmap::load_colmap_points(dir).map_err(|e| data_error(dir, e.to_string()))?;
     if let Some(p) = &points {
         if p.is_empty() {
@@ -133,17 +140,19 @@ pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dat
             "is not a directory: the photos must be in DATASET/images",
         ));
     }
-    let views: Vec<Result<View, DataError>> = {
+    let views: Vec<Result<(View, Option<Undistortion>), DataError>> = {
         use rayon::prelude::*;
         cameras
             .par_iter()
-            .map(|cam| load_view(&images, cam, resolution))
+            .map(|(cam, d)| load_view(&images, cam, d.as_ref(), resolution))
             .collect()
     };
     let mut train = Vec::new();
     let mut test = Vec::new();
+    let mut undistorted = Vec::new();
     for (k, v) in views.into_iter().enumerate() {
-        let v = v?;
+        let (v, u) = v?;
+        undistorted.extend(u);
         if eval && k % LLFF_HOLD == 0 {
             test.push(v);
         } else {
@@ -164,10 +173,18 @@ pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dat
         points,
         extent,
         random_box: None,
+        undistorted,
     })
 }
 
-fn load_view(images: &Path, cam: &Camera, resolution: Resolution) -> Result<View, DataError> {
+/// The photo of `cam` in `images` as a view (undistorted through `distortion`, with how),
+/// at `resolution`.
+fn load_view(
+    images: &Path,
+    cam: &Camera,
+    distortion: Option<&Distortion>,
+    resolution: Resolution,
+) -> Result<(View, Option<Undistortion>), DataError> {
     let path = images.join(&cam.name);
     let planes =
         crate::image_file::read_image(&path).map_err(|e| data_error(&path, e.to_string()))?;
@@ -182,12 +199,33 @@ fn load_view(images: &Path, cam: &Camera, resolution: Resolution) -> Result<View
     }
     let [r, g, b, _] = rgba_planes(&planes, &path)?;
     let full: Vec<[f32; 3]> = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
-    Ok(scaled_view(cam.clone(), full, resolution))
+    undistorted_view(cam.clone(), full, distortion, resolution, &path)
 }
 
-/// Area-averaged downscaling (each output pixel the mean of the input pixels it covers,
-/// partially covered ones weighted).
-fn resize(src: &[[f32; 3]], sw: u32, sh: u32, dw: u32, dh: u32) -> Vec<[f32; 3]> {
+/// `cam` and its photo `full` undistorted through `distortion` (when given; `path` names
+/// the photo in errors) and scaled to `resolution`, with how it was undistorted.
+fn undistorted_view(
+    cam: Camera,
+    full: Vec<[f32; 3]>,
+    distortion: Option<&Distortion>,
+    resolution: Resolution,
+    path: &Path,
+) -> Result<(View, Option<Undistortion>), DataError> {
+    let Some(d) = distortion else {
+        return Ok((scaled_view(cam, full, resolution), None));
+    };
+    let plan = Undistortion::plan(&cam, d).map_err(|m| data_error(path, m))?;
+    let image = plan.apply(&full);
+    Ok((
+        scaled_view(plan.camera(&cam), image, resolution),
+        Some(plan),
+    ))
+}
+
+/// Area-averaged downscaling of a `sw x sh` image to `dw x dh` (each output pixel the
+/// mean of the input pixels it covers, partially covered ones weighted): how the trainer
+/// scales photos to `-r`, and `eval` the same photos.
+pub fn resize(src: &[[f32; 3]], sw: u32, sh: u32, dw: u32, dh: u32) -> Vec<[f32; 3]> {
     let axis = |s: u32, d: u32| -> Vec<Vec<(usize, f32)>> {
         let ratio = s as f64 / d as f64;
         (0..d)
@@ -351,14 +389,15 @@ pub fn load_transforms(
     } else {
         (dir.join("transforms.json"), None)
     };
-    let mut train = read_transforms(&train_file, dir, resolution, background)?;
+    let mut undistorted = Vec::new();
+    let mut train = read_transforms(&train_file, dir, resolution, background, &mut undistorted)?;
     let mut test = Vec::new();
     match test_file {
         Some(f) if eval => {
             if !f.is_file() {
                 return Err(data_error(&f, "is missing; --eval holds out its frames"));
             }
-            test = read_transforms(&f, dir, resolution, background)?;
+            test = read_transforms(&f, dir, resolution, background, &mut undistorted)?;
         }
         None if eval => {
             let all = std::mem::take(&mut train);
@@ -383,14 +422,18 @@ pub fn load_transforms(
         points: None,
         extent,
         random_box: Some(([0.0; 3], 1.3)),
+        undistorted,
     })
 }
 
+/// The views of the transforms file `file` of data set `dir`, their photos undistorted
+/// where the lens is (how, appended to `undistorted`).
 fn read_transforms(
     file: &Path,
     dir: &Path,
     resolution: Resolution,
     background: [f32; 3],
+    undistorted: &mut Vec<Undistortion>,
 ) -> Result<Vec<View>, DataError> {
     let text =
         std::fs::read_to_string(file).map_err(|e| data_error(file, format!("cannot read: {e}")))?;
@@ -469,6 +512,19 @@ fn read_transforms(
         camera
             .validate()
             .map_err(|e| bad(format!("its camera is not valid: {e}")))?;
+        let lens =
+            distortion::from_transforms(&|k: &str| f.get(k).or_else(|| doc.get(k))).map_err(bad)?;
+        // A lens's coefficients hold for the size the intrinsics were given at.
+        let size = (key("w"), key("h"));
+        if lens.is_some() && size != (None, None) && size != (Some(w as f64), Some(h as f64)) {
+            return Err(bad(format!(
+                "its photo {} is {w}x{h} but \"w\" and \"h\" say {}x{}; the lens \
+                 distortion is given for the size the intrinsics are",
+                path.display(),
+                size.0.map_or("?".into(), |v| v.to_string()),
+                size.1.map_or("?".into(), |v| v.to_string())
+            )));
+        }
         let [r, g, b, a] = rgba_planes(&planes, &path)?;
         let full: Vec<[f32; 3]> = (0..r.len())
             .map(|p| {
@@ -480,7 +536,9 @@ fn read_transforms(
                 ]
             })
             .collect();
-        views.push(scaled_view(camera, full, resolution));
+        let (view, how) = undistorted_view(camera, full, lens.as_ref(), resolution, &path)?;
+        views.push(view);
+        undistorted.extend(how);
     }
     Ok(views)
 }

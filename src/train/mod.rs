@@ -10,3 +10,4 @@ pub mod device;
 pub mod loss;
 pub mod model;
 pub mod run;
+pub mod undistort;

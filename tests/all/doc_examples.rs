@@ -91,11 +91,10 @@ const PAGES: &[Page] = &[
     Page {
         file: "docs/training.md",
         inputs: &[Input::Copy("scene.ply", PLAYBOT_LOD6)],
-        // A COLMAP data set with a known answer, and its photos at a quarter of their size
-        // (as Mip-NeRF 360 ships them) for `eval` after `train -r 4`.
+        // A COLMAP data set with a known answer; `eval` after `train -r 4` scales its
+        // photos as the trainer did.
         prepare: &[
             "vksplat render scene.ply --orbit 24 --width 320 --height 240 --export-colmap data/garden",
-            "vksplat render scene.ply --orbit 24 --width 80 --height 60 -o data/garden/images_4/{name}.png",
         ],
     },
     Page {

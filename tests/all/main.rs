@@ -49,5 +49,6 @@ mod time_fields;
 mod train;
 mod train_captures;
 mod transform;
+mod undistort;
 mod view;
 mod view_browser;

@@ -73,6 +73,9 @@ pub struct TrainOptions {
     /// Step on the host (upload the Gaussians and read their gradients back every
     /// iteration) even where the device could: for comparisons.
     pub host_optimizer: bool,
+    /// The `-r` the photos were loaded at, for `cfg_args` (`None`: not given, written as
+    /// the original's -1).
+    pub resolution: Option<u32>,
 }
 
 impl Default for TrainOptions {
@@ -95,6 +98,7 @@ impl Default for TrainOptions {
             resume: None,
             cancel: None,
             host_optimizer: false,
+            resolution: None,
         }
     }
 }

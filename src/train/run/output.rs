@@ -45,7 +45,8 @@ pub(super) fn points_ply(points: &[crate::camera::colmap::Point3D]) -> Vec<u8> {
 }
 
 /// `cameras.json` (the test cameras, then the training ones, the original's order, at the
-/// photos' own size) and `cfg_args` (the original's arguments, as its readers parse them).
+/// photos' own size), `cfg_args` (the original's arguments, as its readers parse them) and,
+/// when photos were undistorted, `undistortion.json` (how, for `vksplat eval`).
 pub(super) fn write_cameras_and_cfg(
     job: &Job,
     written: &mut Vec<PathBuf>,
@@ -72,14 +73,29 @@ pub(super) fn write_cameras_and_cfg(
         written,
     )?;
     let cfg = format!(
-        "Namespace(sh_degree={}, source_path='{}', model_path='{}', images='images', resolution=-1, white_background={}, data_device='cuda', eval={})",
+        "Namespace(sh_degree={}, source_path='{}', model_path='{}', images='images', resolution={}, white_background={}, data_device='cuda', eval={})",
         opts.sh_degree,
         data.source.display(),
         out.display(),
+        opts.resolution.map_or(-1, i64::from),
         if opts.white_background { "True" } else { "False" },
         if data.test.is_empty() { "False" } else { "True" },
     );
-    write(&out.join("cfg_args"), cfg.as_bytes(), overwrite, written)
+    write(&out.join("cfg_args"), cfg.as_bytes(), overwrite, written)?;
+    if !data.undistorted.is_empty() {
+        let named: Vec<_> = data
+            .undistorted
+            .iter()
+            .map(|u| crate::train::undistort::Undistortion {
+                name: stem(&u.name).to_string(),
+                ..u.clone()
+            })
+            .collect();
+        let json = crate::train::undistort::to_json(&named);
+        let path = out.join(crate::train::undistort::UNDISTORTION_FILE);
+        write(&path, json.as_bytes(), overwrite, written)?;
+    }
+    Ok(())
 }
 
 impl Run<'_> {

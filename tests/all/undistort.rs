@@ -1,0 +1,517 @@
+//! Distorted photos (issue 37): a scene rendered through a pinhole camera and distorted
+//! synthetically with known coefficients (each photo pixel's ray found by undistorting
+//! its position, the pinhole render sampled there, 3x3 samples a pixel) is written as a
+//! COLMAP or transforms.json data set; loading it must give back the pinhole view over the
+//! cropped region, with the photo's focal lengths. Models that cannot be handled are
+//! refused by name; zero coefficients load exactly as a pinhole camera; `eval` of a model
+//! trained at `-r 2` on distorted photos compares with the photos the trainer used.
+
+use crate::common::{self, cli::vksplat};
+use std::path::Path;
+use vksplat::camera::distortion::Distortion;
+use vksplat::camera::Camera;
+use vksplat::train::data::{self, Resolution};
+
+/// The shared scene (PLAYBOT LOD6, CC BY 4.0), activated.
+fn scene() -> vksplat::model::ActivatedScene {
+    vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+        .expect("the shared scene")
+        .0
+        .activated()
+}
+
+/// `cam` rendered by the CPU reference at 3x and area-averaged down (what a photo of
+/// it is, up to 8-bit quantisation).
+fn render(scene: &vksplat::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3]> {
+    let big = cam.with_resolution(cam.width * 3, cam.height * 3).unwrap();
+    let f = vksplat::cpu::render(scene, &big, &Default::default());
+    let c: Vec<[f32; 3]> = f
+        .color
+        .iter()
+        .map(|p| p.map(|v| v.clamp(0.0, 1.0)))
+        .collect();
+    data::resize(&c, big.width, big.height, cam.width, cam.height)
+}
+
+/// The photo that camera `cam` with lens `d` takes of the scene: each pixel the mean of
+/// 3x3 rays, each ray's colour bilinearly sampled from a pinhole render 3x as dense with
+/// a 1.8x wider field.
+fn distorted_photo(
+    scene: &vksplat::model::ActivatedScene,
+    cam: &Camera,
+    d: &Distortion,
+) -> Vec<[f32; 3]> {
+    let (s, m) = (3.0f64, 1.8f64);
+    let (bw, bh) = (
+        (cam.width as f64 * s * m) as u32,
+        (cam.height as f64 * s * m) as u32,
+    );
+    let wide = Camera {
+        width: bw,
+        height: bh,
+        fx: (cam.fx as f64 * s) as f32,
+        fy: (cam.fy as f64 * s) as f32,
+        cx: (cam.cx as f64 * s + (m - 1.0) * s * cam.width as f64 / 2.0) as f32,
+        cy: (cam.cy as f64 * s + (m - 1.0) * s * cam.height as f64 / 2.0) as f32,
+        ..cam.clone()
+    };
+    let frame = vksplat::cpu::render(scene, &wide, &Default::default());
+    let at = |u: f64, v: f64| -> [f32; 3] {
+        let u = u.clamp(0.0, bw as f64 - 1.0);
+        let v = v.clamp(0.0, bh as f64 - 1.0);
+        let (i0, j0) = (u.floor() as usize, v.floor() as usize);
+        let (i1, j1) = ((i0 + 1).min(bw as usize - 1), (j0 + 1).min(bh as usize - 1));
+        let (a, b) = ((u - i0 as f64) as f32, (v - j0 as f64) as f32);
+        let p = |i: usize, j: usize| frame.color[j * bw as usize + i].map(|c| c.clamp(0.0, 1.0));
+        let mut out = [0f32; 3];
+        for (c, o) in out.iter_mut().enumerate() {
+            let top = p(i0, j0)[c] * (1.0 - a) + p(i1, j0)[c] * a;
+            let bottom = p(i0, j1)[c] * (1.0 - a) + p(i1, j1)[c] * a;
+            *o = top * (1.0 - b) + bottom * b;
+        }
+        out
+    };
+    let mut img = Vec::with_capacity((cam.width * cam.height) as usize);
+    for j in 0..cam.height {
+        for i in 0..cam.width {
+            let mut acc = [0f32; 3];
+            for sj in 0..3 {
+                for si in 0..3 {
+                    let u = i as f64 + (si as f64 + 0.5) / 3.0;
+                    let v = j as f64 + (sj as f64 + 0.5) / 3.0;
+                    let xd = (u - cam.cx as f64) / cam.fx as f64;
+                    let yd = (v - cam.cy as f64) / cam.fy as f64;
+                    let (x, y) = d.undistort(xd, yd).expect("the photo's rays undistort");
+                    let c = at(
+                        x * wide.fx as f64 + wide.cx as f64 - 0.5,
+                        y * wide.fy as f64 + wide.cy as f64 - 0.5,
+                    );
+                    for k in 0..3 {
+                        acc[k] += c[k] / 9.0;
+                    }
+                }
+            }
+            img.push(acc);
+        }
+    }
+    img
+}
+
+/// Writes `photo` (of `cam`'s size) as an 8-bit PNG.
+fn write_png(path: &Path, cam: &Camera, photo: &[[f32; 3]]) {
+    let n = photo.len();
+    let frame = vksplat::frame::Frame {
+        width: cam.width,
+        height: cam.height,
+        color: photo.to_vec(),
+        alpha: vec![1.0; n],
+        depth: vec![1.0; n],
+        feature_count: 0,
+        features: Vec::new(),
+    };
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    vksplat::output::write_frame(&frame, path, vksplat::output::ImageFormat::Png8, true).unwrap();
+}
+
+/// A COLMAP text data set in `dir` of `cams` (one shared camera of `model` with
+/// `params` after the focal length and principal point) and their `photos`.
+fn write_colmap(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], model: &str, params: &str) {
+    for (c, p) in cams.iter().zip(photos) {
+        write_png(&dir.join("images").join(&c.name), c, p);
+    }
+    let c = &cams[0];
+    let focal = if model.starts_with("SIMPLE") || model.starts_with("RADIAL") {
+        format!("{}", c.fx)
+    } else {
+        format!("{} {}", c.fx, c.fy)
+    };
+    let sparse = dir.join("sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    std::fs::write(
+        sparse.join("cameras.txt"),
+        format!(
+            "1 {model} {} {} {focal} {} {} {params}\n",
+            c.width, c.height, c.cx, c.cy
+        ),
+    )
+    .unwrap();
+    // Every image on camera 1.
+    let [_, (_, images), _] = vksplat::camera::colmap::to_text_model(cams, &[]);
+    let images: String = images
+        .lines()
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(' ').collect();
+            if f.len() >= 10 && !l.starts_with('#') {
+                f[8] = "1";
+            }
+            f.join(" ") + "\n"
+        })
+        .collect();
+    std::fs::write(sparse.join("images.txt"), images).unwrap();
+}
+
+/// A nerfstudio `transforms.json` data set in `dir` of `cams` and their `photos`, with
+/// the file-level keys `lens` (a JSON object's members, e.g. `"k1": 0.1`).
+fn write_transforms(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], lens: &str) {
+    let mut frames = Vec::new();
+    for (c, p) in cams.iter().zip(photos) {
+        write_png(&dir.join("images").join(&c.name), c, p);
+        // Camera-to-world in OpenGL axes: our x, -y, -z columns and the centre.
+        let r = c.rotation.transpose();
+        let o = c.position();
+        let cols = [r.x_axis, -r.y_axis, -r.z_axis];
+        let row = |k: usize| format!("[{}, {}, {}, {}]", cols[0][k], cols[1][k], cols[2][k], o[k]);
+        frames.push(format!(
+            "{{\"file_path\": \"images/{}\", \"transform_matrix\": [{}, {}, {}, [0, 0, 0, 1]]}}",
+            c.name,
+            row(0),
+            row(1),
+            row(2)
+        ));
+    }
+    let c = &cams[0];
+    let sep = if lens.is_empty() { "" } else { ", " };
+    std::fs::write(
+        dir.join("transforms.json"),
+        format!(
+            "{{\"fl_x\": {}, \"fl_y\": {}, \"cx\": {}, \"cy\": {}, \"w\": {}, \"h\": {}{sep}{lens}, \"frames\": [{}]}}",
+            c.fx,
+            c.fy,
+            c.cx,
+            c.cy,
+            c.width,
+            c.height,
+            frames.join(", ")
+        ),
+    )
+    .unwrap();
+}
+
+/// `n` orbit cameras of `w x h` around the scene, named `view_NNN.png`, with the
+/// principal point a little off centre.
+fn cameras(n: usize, w: u32, h: u32) -> Vec<Camera> {
+    let positions =
+        vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+            .unwrap()
+            .0
+            .positions;
+    let params = vksplat::camera::OrbitParams {
+        frames: n,
+        width: w,
+        height: h,
+        elevation_deg: 15.0,
+        ..Default::default()
+    };
+    vksplat::camera::orbit(&positions, &params)
+        .unwrap()
+        .into_iter()
+        .enumerate()
+        .map(|(i, mut c)| {
+            c.name = format!("view_{i:03}.png");
+            c.cx += 1.5;
+            c.cy -= 1.0;
+            c
+        })
+        .collect()
+}
+
+fn psnr(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
+    let flat = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+    vksplat::metrics::psnr(&flat(a), &flat(b), 1.0)
+}
+
+/// The loaded view of a distorted data set matches a pinhole render of its camera, far
+/// better than the photo taken for a pinhole (what loading without the lens gave); the
+/// camera keeps the photo's focal lengths and pose. Returns the loaded camera.
+fn check_loaded(set: &data::Dataset, cam: &Camera, photo: &[[f32; 3]], what: &str) -> Camera {
+    let scene = scene();
+    assert_eq!(set.undistorted.len(), 1, "{what}");
+    let v = &set.train[0];
+    let c = &v.camera;
+    assert_eq!((c.fx, c.fy), (cam.fx, cam.fy), "{what}: focal lengths kept");
+    assert!(
+        c.rotation.abs_diff_eq(cam.rotation, 1e-6),
+        "{what}: the pose is kept"
+    );
+    assert!(
+        c.translation.abs_diff_eq(cam.translation, 1e-5),
+        "{what}: the pose is kept"
+    );
+    let truth = render(&scene, c);
+    let got = psnr(&v.image, &truth);
+    let ignored = psnr(photo, &render(&scene, cam));
+    eprintln!(
+        "{what}: {}x{} -> {}x{} (cx {} cy {}), PSNR {got:.2} dB undistorted, {ignored:.2} dB with the lens ignored",
+        cam.width, cam.height, c.width, c.height, c.cx, c.cy
+    );
+    assert!(got >= 34.0, "{what}: PSNR {got:.2} dB");
+    assert!(got >= ignored + 2.0, "{what}: {got:.2} vs {ignored:.2} dB");
+    c.clone()
+}
+
+#[test]
+fn distorted_colmap_and_transforms_photos_load_as_their_pinhole_views() {
+    let scene = scene();
+    let cam = cameras(1, 160, 120).remove(0);
+    let cases = [
+        (
+            "OPENCV",
+            "-0.25 0.06 0.002 -0.001",
+            Distortion::opencv("OPENCV", [-0.25, 0.06, 0.0, 0.0, 0.0, 0.0], [0.002, -0.001]),
+            "\"k1\": -0.25, \"k2\": 0.06, \"p1\": 0.002, \"p2\": -0.001",
+        ),
+        (
+            "RADIAL",
+            "0.15 -0.01",
+            Distortion::opencv("RADIAL", [0.15, -0.01, 0.0, 0.0, 0.0, 0.0], [0.0; 2]),
+            "\"k1\": 0.15, \"k2\": -0.01",
+        ),
+        (
+            "OPENCV_FISHEYE",
+            "0.03 -0.01 0.002 0",
+            Distortion::fisheye("OPENCV_FISHEYE", [0.03, -0.01, 0.002, 0.0]),
+            "\"camera_model\": \"OPENCV_FISHEYE\", \"k1\": 0.03, \"k2\": -0.01, \"k3\": 0.002",
+        ),
+    ];
+    for (model, params, lens, keys) in cases {
+        let mut c = cam.clone();
+        if model == "RADIAL" {
+            c.fy = c.fx;
+        }
+        let photo = distorted_photo(&scene, &c, &lens);
+        let dir = tempfile::tempdir().unwrap();
+        let colmap = dir.path().join("colmap");
+        write_colmap(
+            &colmap,
+            std::slice::from_ref(&c),
+            std::slice::from_ref(&photo),
+            model,
+            params,
+        );
+        let set = data::load_colmap(&colmap, Resolution(1), false).unwrap();
+        let a = check_loaded(&set, &c, &photo, &format!("COLMAP {model}"));
+        assert_eq!(set.undistorted[0].distortion, lens);
+        // The pinhole size: the inner rectangle of the photo's undistorted border, whose
+        // sides (for these lenses) touch an edge's middle or its corners.
+        let edge = |u: f64, v: f64| {
+            lens.undistort(
+                (u - c.cx as f64) / c.fx as f64,
+                (v - c.cy as f64) / c.fy as f64,
+            )
+            .unwrap()
+        };
+        let (r, b) = (c.width as f64 - 0.5, c.height as f64 - 0.5);
+        let side = |u: f64| [c.cy as f64, 0.5, b].map(|v| edge(u, v).0);
+        let left = side(0.5).into_iter().fold(f64::MIN, f64::max);
+        let right = side(r).into_iter().fold(f64::MAX, f64::min);
+        let width = (right - left) * c.fx as f64;
+        assert!(
+            (a.width as f64 - width).abs() <= 4.0,
+            "{model}: width {} vs {width:.1}",
+            a.width
+        );
+        let ts = dir.path().join("transforms");
+        write_transforms(
+            &ts,
+            std::slice::from_ref(&c),
+            std::slice::from_ref(&photo),
+            keys,
+        );
+        let set = data::load_transforms(&ts, Resolution(1), false, [0.0; 3]).unwrap();
+        let b = check_loaded(&set, &c, &photo, &format!("transforms.json {model}"));
+        assert_eq!(
+            (a.width, a.height, a.cx, a.cy),
+            (b.width, b.height, b.cx, b.cy),
+            "{model}"
+        );
+    }
+}
+
+#[test]
+fn zero_coefficients_load_exactly_as_a_pinhole_camera() {
+    let scene = scene();
+    let cams = cameras(2, 48, 36);
+    let photos: Vec<_> = cams.iter().map(|c| render(&scene, c)).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let load = |name: &str, model: &str, params: &str| {
+        let d = dir.path().join(name);
+        write_colmap(&d, &cams, &photos, model, params);
+        data::load_colmap(&d, Resolution(2), false).unwrap()
+    };
+    let pinhole = load("pinhole", "PINHOLE", "");
+    for (name, model, params) in [
+        ("opencv", "OPENCV", "0 0 0 0"),
+        ("full", "FULL_OPENCV", "0 0 0 0 0 0 0 0"),
+    ] {
+        let other = load(name, model, params);
+        assert!(other.undistorted.is_empty());
+        for (a, b) in pinhole.train.iter().zip(&other.train) {
+            assert_eq!(a.camera, b.camera, "{model}");
+            assert!(a.image == b.image, "{model}: the photos differ");
+        }
+    }
+    let ts = |name: &str, lens: &str| {
+        let d = dir.path().join(name);
+        write_transforms(&d, &cams, &photos, lens);
+        data::load_transforms(&d, Resolution(1), false, [0.0; 3]).unwrap()
+    };
+    let (a, b) = (
+        ts("ts", ""),
+        ts("ts0", "\"k1\": 0, \"k2\": 0.0, \"p1\": 0, \"p2\": 0"),
+    );
+    assert!(b.undistorted.is_empty());
+    for (a, b) in a.train.iter().zip(&b.train) {
+        assert!(a.camera == b.camera && a.image == b.image);
+    }
+}
+
+#[test]
+fn lenses_that_cannot_be_undistorted_are_refused_by_name() {
+    let scene = scene();
+    let cams = cameras(1, 32, 24);
+    let photos = vec![render(&scene, &cams[0])];
+    let dir = tempfile::tempdir().unwrap();
+    for (i, (model, params)) in [
+        ("FOV", "0.2"),
+        ("THIN_PRISM_FISHEYE", "0 0 0 0 0 0 0 0"),
+        ("RAD_TAN_THIN_PRISM_FISHEYE", "0 0 0 0 0 0 0 0 0 0 0 0"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let d = dir.path().join(format!("c{i}"));
+        write_colmap(&d, &cams, &photos, model, params);
+        let e = data::load_colmap(&d, Resolution(1), false)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(model) && e.contains("cameras.txt") && e.contains("camera 1"),
+            "{e}"
+        );
+    }
+    for (i, (lens, says)) in [
+        ("\"camera_model\": \"EQUIRECTANGULAR\"", "EQUIRECTANGULAR"),
+        ("\"k1\": 0.1, \"k4\": 0.01", "\"k4\""),
+        (
+            "\"camera_model\": \"OPENCV_FISHEYE\", \"p1\": 0.01",
+            "\"p1\"",
+        ),
+        ("\"k5\": 0.01", "\"k5\""),
+        ("\"ftheta_p1\": 0.5", "f-theta"),
+        ("\"k1\": \"x\"", "\"k1\" is not a finite number"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let d = dir.path().join(format!("t{i}"));
+        write_transforms(&d, &cams, &photos, lens);
+        let e = data::load_transforms(&d, Resolution(1), false, [0.0; 3])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(says) && e.contains("transforms.json"),
+            "{lens}: {e}"
+        );
+    }
+    // A lens given for another size than the photo's.
+    let d = dir.path().join("wh");
+    write_transforms(&d, &cams, &photos, "\"k1\": 0.1");
+    let file = d.join("transforms.json");
+    let text = std::fs::read_to_string(&file).unwrap();
+    std::fs::write(&file, text.replace("\"w\": 32", "\"w\": 64")).unwrap();
+    let e = data::load_transforms(&d, Resolution(1), false, [0.0; 3])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("32x24") && e.contains("64x24"), "{e}");
+    // The command line says it in one line, without writing a model.
+    let d = dir.path().join("t0");
+    let model = dir.path().join("model");
+    let o = vksplat(&[
+        "train",
+        d.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+        "-q",
+    ]);
+    let err = common::cli::stderr(&o);
+    assert!(
+        !o.status.success() && err.contains("EQUIRECTANGULAR"),
+        "{err}"
+    );
+    assert!(!model.exists());
+}
+
+/// `train -r 2` on distorted photos, then `eval` with no other flag: the photos are
+/// undistorted and scaled as the trainer did (`cfg_args` says `resolution=2`,
+/// `undistortion.json` how), so eval's held-out PSNR is the trainer's; `-r` overrides.
+#[test]
+fn eval_of_a_model_trained_at_r_2_on_distorted_photos_uses_the_trainers_photos() {
+    let scene = scene();
+    let lens = Distortion::opencv("OPENCV", [-0.1, 0.01, 0.0, 0.0, 0.0, 0.0], [0.001, 0.0]);
+    let cams = cameras(9, 64, 48);
+    let photos: Vec<_> = cams
+        .iter()
+        .map(|c| distorted_photo(&scene, c, &lens))
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("data");
+    write_colmap(&set, &cams, &photos, "OPENCV", "-0.1 0.01 0.001 0");
+    let model = dir.path().join("model");
+    let out = vksplat(&[
+        "train",
+        set.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+        "-r",
+        "2",
+        "--eval",
+        "--iterations",
+        "40",
+        "--test-iterations",
+        "40",
+        "--random-points",
+        "2000",
+        "--sh-degree",
+        "0",
+        "-q",
+    ]);
+    let text = common::cli::stdout(&out);
+    assert!(out.status.success(), "{}", common::cli::stderr(&out));
+    let trained: f64 = text
+        .split("PSNR ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .expect("a PSNR in the summary");
+    let cfg = std::fs::read_to_string(model.join("cfg_args")).unwrap();
+    assert!(cfg.contains("resolution=2,"), "{cfg}");
+    assert!(model.join("undistortion.json").is_file());
+    let images = set.join("images");
+    let eval = |extra: &[&str], report: &str| -> serde_json::Value {
+        let rep = dir.path().join(report);
+        let mut args = vec![
+            "eval",
+            model.to_str().unwrap(),
+            "--images",
+            images.to_str().unwrap(),
+            "--float",
+            "-q",
+            "-o",
+            rep.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = vksplat(&args);
+        assert!(o.status.success(), "{}", common::cli::stderr(&o));
+        serde_json::from_slice(&std::fs::read(rep.join("report.json")).unwrap()).unwrap()
+    };
+    let r = eval(&[], "rep");
+    let psnr = r["mean"]["psnr"].as_f64().unwrap();
+    assert!(
+        (psnr - trained).abs() < 0.05,
+        "eval {psnr} dB, train {trained} dB"
+    );
+    let w0 = r["results"][0]["width"].as_u64().unwrap();
+    // -r 4 overrides the model's 2: half the size.
+    let r4 = eval(&["-r", "4"], "rep4");
+    assert_eq!(r4["results"][0]["width"].as_u64().unwrap(), w0 / 2);
+}
