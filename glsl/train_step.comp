@@ -3,7 +3,11 @@
 //
 // The Gaussians' stored parameters (the original's: centre, log scales, unnormalised
 // quaternion, opacity logit, SH coefficients up to the largest degree) live in STATE, one
-// record of `pc.counts.y` floats each; Adam's moments in M and V, the same layout. With
+// record of `pc.counts.y` floats each (a multiple of 4; the colour from float COLOUR_OFFSET,
+// Model::record_floats); Adam's moments in M and V, the same layout. The SH part is
+// stepped and copied a vec4 at a time (STATE4, M4, V4, SH_GRADS4, SH4 alias the same
+// buffers; no float is accessed through both): a CPU device runs each buffer access with a
+// per-invocation index as a loop over its lanes, and a vec4 costs what a float does. With
 // STEP_STATS it adds the frame's densification statistics (norm of the 2D-mean gradient
 // in NDC, views seen, largest screen radius) for every Gaussian the frame drew; with
 // STEP_ADAM it takes the chain rule from the backward pass's gradients of the activated
@@ -58,6 +62,11 @@ layout(std430, binding = TRAIN_STEP_SPLATS) readonly buffer SplatBuf { Splat spl
 layout(std430, binding = TRAIN_STEP_STATS) buffer StatsBuf { vec4 stats[]; };
 layout(std430, binding = TRAIN_STEP_GAUSSIANS) writeonly buffer GaussianBuf { Gaussian gaussians[]; };
 layout(std430, binding = TRAIN_STEP_SH) writeonly buffer ShBuf { float sh_out[]; };
+layout(std430, binding = TRAIN_STEP_STATE) buffer State4Buf { vec4 state4[]; };
+layout(std430, binding = TRAIN_STEP_M) buffer M4Buf { vec4 moment_m4[]; };
+layout(std430, binding = TRAIN_STEP_V) buffer V4Buf { vec4 moment_v4[]; };
+layout(std430, binding = TRAIN_STEP_SH_GRADS) readonly buffer ShGrad4Buf { vec4 sh_grads4[]; };
+layout(std430, binding = TRAIN_STEP_SH) writeonly buffer Sh4Buf { vec4 sh_out4[]; };
 layout(std430, binding = TRAIN_STEP_FEATURE_GRADS) readonly buffer FeatGradBuf { vec4 feature_grads[]; };
 layout(std430, binding = TRAIN_STEP_FEATURES) writeonly buffer FeatBuf { vec4 features_out[]; };
 layout(std430, binding = TRAIN_STEP_FEAT0) writeonly buffer Feat0Buf { vec4 feat0[]; };
@@ -66,6 +75,9 @@ layout(std430, binding = TRAIN_STEP_FEAT2) writeonly buffer Feat2Buf { vec4 feat
 layout(std430, binding = TRAIN_STEP_FEAT3) writeonly buffer Feat3Buf { vec4 feat3[]; };
 layout(std430, binding = TRAIN_STEP_NORMS) writeonly buffer NormBuf { vec4 norms[]; };
 layout(std430, binding = TRAIN_STEP_NORM_TOTAL) readonly buffer NormTotalBuf { vec4 norm_total[]; };
+
+// Where the colour starts in a record (train::model::state::COLOUR_OFFSET, a multiple of 4).
+const uint COLOUR_OFFSET = 12u;
 
 const uint STEP_STATS = 1u;
 const uint STEP_ADAM = 2u;
@@ -129,6 +141,39 @@ void adam(uint j, float g, float lr, float c1, float c2) {
     moment_v[j] = v;
     precise float p = state[j] - lr / c1 * m / (sqrt(v) / c2 + 1e-15);
     state[j] = p;
+}
+
+// adam for the four values of vec4 j4 of the records, learning rates `lr`: the same
+// operations per component.
+vec4 adam4(uint j4, vec4 g, vec4 lr, float c1, float c2) {
+    precise vec4 m = 0.9 * moment_m4[j4] + (1.0 - 0.9) * g;
+    precise vec4 v = 0.999 * moment_v4[j4] + (1.0 - 0.999) * g * g;
+    moment_m4[j4] = m;
+    moment_v4[j4] = v;
+    precise vec4 p = state4[j4] - lr / c1 * m / (sqrt(v) / c2 + 1e-15);
+    state4[j4] = p;
+    return p;
+}
+
+// The SH coefficients of Gaussian i (record from float `base`): with `adam`, one Adam step
+// of each (DC at the first colour rate, the rest at the second; gradients times `scale`),
+// then their texels for the next forward pass (0 past the coefficients), a vec4 at a time.
+void sh_step(uint i, uint base, bool adam, float scale) {
+    uint texel_vecs = pc.counts.w / 4u;
+    uint colours = pc.counts.z;
+    uint at = (base + COLOUR_OFFSET) / 4u;
+    for (uint t = 0u; t < texel_vecs; t++) {
+        bvec4 valid = lessThan(uvec4(4u * t) + uvec4(0u, 1u, 2u, 3u), uvec4(colours));
+        vec4 p;
+        if (adam) {
+            vec4 g = mix(vec4(0.0), sh_grads4[i * texel_vecs + t], valid);
+            vec4 lr = t == 0u ? vec4(pc.lr_sh.xxx, pc.lr_sh.y) : vec4(pc.lr_sh.y);
+            p = adam4(at + t, g * scale, lr, pc.lr_sh.z, pc.lr_sh.w);
+        } else {
+            p = state4[at + t];
+        }
+        sh_out4[i * texel_vecs + t] = mix(vec4(0.0), p, valid);
+    }
 }
 
 // The gradients of Gaussian i's stored parameters: centre, log scales, quaternion, opacity
@@ -212,24 +257,22 @@ void main() {
             stats[i] = vec4(sum, s.y + 1.0, max(s.z, r), 0.0);
         }
     }
+    // Model::step: with clipping, every gradient times max / norm when the norm (finite)
+    // exceeds max.
+    float scale = 1.0;
+    if ((flags & (STEP_ADAM | STEP_CLIP)) == (STEP_ADAM | STEP_CLIP)) {
+        float norm = sqrt(norm_total[0].x);
+        if (norm > pc.clip.x && !isinf(norm) && !isnan(norm)) scale = pc.clip.x / norm;
+    }
     if ((flags & STEP_ADAM) != 0u) {
-        // Model::step: with clipping, every gradient times max / norm when the norm
-        // (finite) exceeds max.
-        float scale = 1.0;
-        if ((flags & STEP_CLIP) != 0u) {
-            float norm = sqrt(norm_total[0].x);
-            if (norm > pc.clip.x && !isinf(norm) && !isnan(norm)) scale = pc.clip.x / norm;
-        }
         RawGrad r = raw_grad(i, base);
         for (uint a = 0u; a < 3u; a++) adam(base + a, r.mean[a] * scale, pc.lr.x, pc.c1.x, pc.c2.x);
         for (uint a = 0u; a < 3u; a++) adam(base + 3u + a, r.log_scale[a] * scale, pc.lr.y, pc.c1.y, pc.c2.y);
         for (uint a = 0u; a < 4u; a++) adam(base + 6u + a, r.quat[a] * scale, pc.lr.z, pc.c1.z, pc.c2.z);
         if ((flags & STEP_SKIP_OPACITY) == 0u) adam(base + 10u, r.logit * scale, pc.lr.w, pc.c1.w, pc.c2.w);
-        // Colour: SH DC at its rate and the rest at theirs, or every feature channel at
-        // the first.
-        for (uint k = 0u; k < colours; k++) {
-            float lr = (features || k < 3u) ? pc.lr_sh.x : pc.lr_sh.y;
-            adam(base + 11u + k, colour_grad(i, k, features) * scale, lr, pc.lr_sh.z, pc.lr_sh.w);
+        // Feature channels at the first colour rate (SH: sh_step below).
+        for (uint k = 0u; features && k < colours; k++) {
+            adam(base + COLOUR_OFFSET + k, colour_grad(i, k, true) * scale, pc.lr_sh.x, pc.lr_sh.z, pc.lr_sh.w);
         }
         if ((flags & STEP_NOISE) != 0u) {
             // Model::add_noise with the stepped values.
@@ -259,26 +302,26 @@ void main() {
     }
     // The activated record, SH texels and feature channels of the next forward pass.
     vec3 mean = vec3(state[base], state[base + 1u], state[base + 2u]);
-    vec3 scale = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
+    vec3 sizes = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
     vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
     precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
     precise vec4 rot = q / qn;
-    gaussians[i] = Gaussian(vec4(mean, sigmoid_of(state[base + 10u])), vec4(scale, 0.0), rot);
-    for (uint k = 0u; k < texel_floats; k++) {
-        sh_out[i * texel_floats + k] = (!features && k < colours) ? state[base + 11u + k] : 0.0;
+    gaussians[i] = Gaussian(vec4(mean, sigmoid_of(state[base + 10u])), vec4(sizes, 0.0), rot);
+    if (!features) {
+        sh_step(i, base, (flags & STEP_ADAM) != 0u, scale);
+        return;
     }
-    if (features) {
-        for (uint g = 0u; g < groups; g++) {
-            vec4 v = vec4(0.0);
-            for (uint c = 0u; c < 4u; c++) {
-                uint k = 4u * g + c;
-                if (k < colours) v[c] = state[base + 11u + k];
-            }
-            features_out[i * groups + g] = v;
-            if (g == 0u) feat0[i] = v;
-            else if (g == 1u) feat1[i] = v;
-            else if (g == 2u) feat2[i] = v;
-            else feat3[i] = v;
+    for (uint k = 0u; k < texel_floats; k++) sh_out[i * texel_floats + k] = 0.0;
+    for (uint g = 0u; g < groups; g++) {
+        vec4 v = vec4(0.0);
+        for (uint c = 0u; c < 4u; c++) {
+            uint k = 4u * g + c;
+            if (k < colours) v[c] = state[base + COLOUR_OFFSET + k];
         }
+        features_out[i * groups + g] = v;
+        if (g == 0u) feat0[i] = v;
+        else if (g == 1u) feat1[i] = v;
+        else if (g == 2u) feat2[i] = v;
+        else feat3[i] = v;
     }
 }
