@@ -143,16 +143,20 @@ void adam(uint j, float g, float lr, float c1, float c2) {
     state[j] = p;
 }
 
-// adam for the four values of vec4 j4 of the records, learning rates `lr`: the same
-// operations per component.
-vec4 adam4(uint j4, vec4 g, vec4 lr, float c1, float c2) {
-    precise vec4 m = 0.9 * moment_m4[j4] + (1.0 - 0.9) * g;
-    precise vec4 v = 0.999 * moment_v4[j4] + (1.0 - 0.999) * g * g;
-    moment_m4[j4] = m;
-    moment_v4[j4] = v;
-    precise vec4 p = state4[j4] - lr / c1 * m / (sqrt(v) / c2 + 1e-15);
-    state4[j4] = p;
-    return p;
+// adam for the values of vec4 j4 of the records (`s` its parameters) where `on` is true,
+// each with its own learning rate and bias corrections: the same operations per component;
+// the others (padding, a skipped opacity) keep their bits. Returns the parameters.
+vec4 adam4(uint j4, vec4 s, vec4 g, vec4 lr, vec4 c1, vec4 c2, bvec4 on) {
+    vec4 m0 = moment_m4[j4];
+    vec4 v0 = moment_v4[j4];
+    precise vec4 m = 0.9 * m0 + (1.0 - 0.9) * g;
+    precise vec4 v = 0.999 * v0 + (1.0 - 0.999) * g * g;
+    precise vec4 p = s - lr / c1 * m / (sqrt(v) / c2 + 1e-15);
+    moment_m4[j4] = mix(m0, m, on);
+    moment_v4[j4] = mix(v0, v, on);
+    vec4 stepped = mix(s, p, on);
+    state4[j4] = stepped;
+    return stepped;
 }
 
 // The SH coefficients of Gaussian i (record from float `base`): with `adam`, one Adam step
@@ -164,13 +168,11 @@ void sh_step(uint i, uint base, bool adam, float scale) {
     uint at = (base + COLOUR_OFFSET) / 4u;
     for (uint t = 0u; t < texel_vecs; t++) {
         bvec4 valid = lessThan(uvec4(4u * t) + uvec4(0u, 1u, 2u, 3u), uvec4(colours));
-        vec4 p;
+        vec4 p = state4[at + t];
         if (adam) {
-            vec4 g = mix(vec4(0.0), sh_grads4[i * texel_vecs + t], valid);
+            vec4 g = sh_grads4[i * texel_vecs + t] * scale;
             vec4 lr = t == 0u ? vec4(pc.lr_sh.xxx, pc.lr_sh.y) : vec4(pc.lr_sh.y);
-            p = adam4(at + t, g * scale, lr, pc.lr_sh.z, pc.lr_sh.w);
-        } else {
-            p = state4[at + t];
+            p = adam4(at + t, p, g, lr, vec4(pc.lr_sh.z), vec4(pc.lr_sh.w), valid);
         }
         sh_out4[i * texel_vecs + t] = mix(vec4(0.0), p, valid);
     }
@@ -186,15 +188,16 @@ struct RawGrad {
     float logit;
 };
 
-RawGrad raw_grad(uint i, uint base) {
+RawGrad raw_grad(uint i, vec4 s0, vec4 s1, vec4 s2) {
+    vec3 log_scale = vec3(s0.w, s1.xy);
     GaussianGrad g = grads[i];
     RawGrad r;
     r.mean = g.mean_opacity.xyz;
     for (uint a = 0u; a < 3u; a++) {
-        precise float gl = g.scale[a] * exp(state[base + 3u + a]);
+        precise float gl = g.scale[a] * exp(log_scale[a]);
         r.log_scale[a] = gl;
     }
-    vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+    vec4 q = vec4(s1.zw, s2.xy);
     precise float norm = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
     precise vec4 u = q / norm;
     precise float dot_ = g.quat.x * u.x + g.quat.y * u.y + g.quat.z * u.z + g.quat.w * u.w;
@@ -202,7 +205,7 @@ RawGrad raw_grad(uint i, uint base) {
         precise float gq = (g.quat[a] - u[a] * dot_) / norm;
         r.quat[a] = gq;
     }
-    float p = sigmoid_of(state[base + 10u]);
+    float p = sigmoid_of(s2.z);
     precise float go = g.mean_opacity.w * p * (1.0 - p);
     r.logit = go;
     if ((pc.flags_size.x & STEP_NOISE) != 0u) {
@@ -210,7 +213,7 @@ RawGrad raw_grad(uint i, uint base) {
         precise float ro = go + pc.clip.z * p * (1.0 - p);
         r.logit = ro;
         for (uint a = 0u; a < 3u; a++) {
-            precise float rs = r.log_scale[a] + pc.clip.w * exp(state[base + 3u + a]);
+            precise float rs = r.log_scale[a] + pc.clip.w * exp(log_scale[a]);
             r.log_scale[a] = rs;
         }
     }
@@ -233,8 +236,12 @@ void main() {
     uint groups = pc.flags_size.w;
     bool features = (flags & STEP_FEATURES) != 0u;
     uint base = i * rec;
+    // The record's first three vec4s: centre and log scales (s0, s1.xy), quaternion
+    // (s1.zw, s2.xy), opacity logit (s2.z), an unused float.
+    uint b4 = base / 4u;
+    vec4 s0 = state4[b4], s1 = state4[b4 + 1u], s2 = state4[b4 + 2u];
     if ((flags & STEP_NORM) != 0u) {
-        RawGrad r = raw_grad(i, base);
+        RawGrad r = raw_grad(i, s0, s1, s2);
         precise float sq = dot(r.mean, r.mean) + dot(r.log_scale, r.log_scale)
             + dot(r.quat, r.quat) + r.logit * r.logit;
         for (uint k = 0u; k < colours; k++) {
@@ -265,22 +272,25 @@ void main() {
         if (norm > pc.clip.x && !isinf(norm) && !isnan(norm)) scale = pc.clip.x / norm;
     }
     if ((flags & STEP_ADAM) != 0u) {
-        RawGrad r = raw_grad(i, base);
-        for (uint a = 0u; a < 3u; a++) adam(base + a, r.mean[a] * scale, pc.lr.x, pc.c1.x, pc.c2.x);
-        for (uint a = 0u; a < 3u; a++) adam(base + 3u + a, r.log_scale[a] * scale, pc.lr.y, pc.c1.y, pc.c2.y);
-        for (uint a = 0u; a < 4u; a++) adam(base + 6u + a, r.quat[a] * scale, pc.lr.z, pc.c1.z, pc.c2.z);
-        if ((flags & STEP_SKIP_OPACITY) == 0u) adam(base + 10u, r.logit * scale, pc.lr.w, pc.c1.w, pc.c2.w);
+        RawGrad r = raw_grad(i, s0, s1, s2);
+        // Per float: centre (lr.x), log scale (lr.y), quaternion (lr.z), opacity (lr.w).
+        vec4 lr = pc.lr, c1 = pc.c1, c2 = pc.c2;
+        bool opacity = (flags & STEP_SKIP_OPACITY) == 0u;
+        s0 = adam4(b4, s0, vec4(r.mean, r.log_scale.x) * scale, lr.xxxy, c1.xxxy, c2.xxxy, bvec4(true));
+        s1 = adam4(b4 + 1u, s1, vec4(r.log_scale.yz, r.quat.xy) * scale, lr.yyzz, c1.yyzz, c2.yyzz, bvec4(true));
+        s2 = adam4(b4 + 2u, s2, vec4(r.quat.zw, r.logit, 0.0) * scale, lr.zzww, c1.zzww, c2.zzww,
+            bvec4(true, true, opacity, false));
         // Feature channels at the first colour rate (SH: sh_step below).
         for (uint k = 0u; features && k < colours; k++) {
             adam(base + COLOUR_OFFSET + k, colour_grad(i, k, true) * scale, pc.lr_sh.x, pc.lr_sh.z, pc.lr_sh.w);
         }
         if ((flags & STEP_NOISE) != 0u) {
             // Model::add_noise with the stepped values.
-            vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+            vec4 q = vec4(s1.zw, s2.xy);
             precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
             float w = q.x / qn, x = q.y / qn, y = q.z / qn, z = q.w / qn;
-            vec3 sc = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
-            float o = sigmoid_of(state[base + 10u]);
+            vec3 sc = vec3(exp(s0.w), exp(s1.x), exp(s1.y));
+            float o = sigmoid_of(s2.z);
             precise float gate = 1.0 / (1.0 + exp(-100.0 * ((1.0 - o) - 0.995)));
             vec3 v;
             for (uint a = 0u; a < 3u; a++) {
@@ -294,19 +304,17 @@ void main() {
             precise vec3 rt = r0 * v.x + r1 * v.y + r2 * v.z;
             precise vec3 t = sc * sc * rt;
             precise vec3 d = vec3(dot(r0, t), dot(r1, t), dot(r2, t));
-            for (uint a = 0u; a < 3u; a++) {
-                precise float p = state[base + a] + d[a];
-                state[base + a] = p;
-            }
+            precise vec3 moved = s0.xyz + d;
+            s0.xyz = moved;
+            state4[b4] = s0;
         }
     }
     // The activated record, SH texels and feature channels of the next forward pass.
-    vec3 mean = vec3(state[base], state[base + 1u], state[base + 2u]);
-    vec3 sizes = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
-    vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+    vec3 sizes = vec3(exp(s0.w), exp(s1.x), exp(s1.y));
+    vec4 q = vec4(s1.zw, s2.xy);
     precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
     precise vec4 rot = q / qn;
-    gaussians[i] = Gaussian(vec4(mean, sigmoid_of(state[base + 10u])), vec4(sizes, 0.0), rot);
+    gaussians[i] = Gaussian(vec4(s0.xyz, sigmoid_of(s2.z)), vec4(sizes, 0.0), rot);
     if (!features) {
         sh_step(i, base, (flags & STEP_ADAM) != 0u, scale);
         return;
