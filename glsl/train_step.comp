@@ -3,7 +3,11 @@
 //
 // The Gaussians' stored parameters (the original's: centre, log scales, unnormalised
 // quaternion, opacity logit, SH coefficients up to the largest degree) live in STATE, one
-// record of `pc.counts.y` floats each; Adam's moments in M and V, the same layout. With
+// record of `pc.counts.y` floats each (a multiple of 4; the colour from float COLOUR_OFFSET,
+// Model::record_floats); Adam's moments in M and V, the same layout. The SH part is
+// stepped and copied a vec4 at a time (STATE4, M4, V4, SH_GRADS4, SH4 alias the same
+// buffers; no float is accessed through both): a CPU device runs each buffer access with a
+// per-invocation index as a loop over its lanes, and a vec4 costs what a float does. With
 // STEP_STATS it adds the frame's densification statistics (norm of the 2D-mean gradient
 // in NDC, views seen, largest screen radius) for every Gaussian the frame drew; with
 // STEP_ADAM it takes the chain rule from the backward pass's gradients of the activated
@@ -58,6 +62,11 @@ layout(std430, binding = TRAIN_STEP_SPLATS) readonly buffer SplatBuf { Splat spl
 layout(std430, binding = TRAIN_STEP_STATS) buffer StatsBuf { vec4 stats[]; };
 layout(std430, binding = TRAIN_STEP_GAUSSIANS) writeonly buffer GaussianBuf { Gaussian gaussians[]; };
 layout(std430, binding = TRAIN_STEP_SH) writeonly buffer ShBuf { float sh_out[]; };
+layout(std430, binding = TRAIN_STEP_STATE) buffer State4Buf { vec4 state4[]; };
+layout(std430, binding = TRAIN_STEP_M) buffer M4Buf { vec4 moment_m4[]; };
+layout(std430, binding = TRAIN_STEP_V) buffer V4Buf { vec4 moment_v4[]; };
+layout(std430, binding = TRAIN_STEP_SH_GRADS) readonly buffer ShGrad4Buf { vec4 sh_grads4[]; };
+layout(std430, binding = TRAIN_STEP_SH) writeonly buffer Sh4Buf { vec4 sh_out4[]; };
 layout(std430, binding = TRAIN_STEP_FEATURE_GRADS) readonly buffer FeatGradBuf { vec4 feature_grads[]; };
 layout(std430, binding = TRAIN_STEP_FEATURES) writeonly buffer FeatBuf { vec4 features_out[]; };
 layout(std430, binding = TRAIN_STEP_FEAT0) writeonly buffer Feat0Buf { vec4 feat0[]; };
@@ -66,6 +75,9 @@ layout(std430, binding = TRAIN_STEP_FEAT2) writeonly buffer Feat2Buf { vec4 feat
 layout(std430, binding = TRAIN_STEP_FEAT3) writeonly buffer Feat3Buf { vec4 feat3[]; };
 layout(std430, binding = TRAIN_STEP_NORMS) writeonly buffer NormBuf { vec4 norms[]; };
 layout(std430, binding = TRAIN_STEP_NORM_TOTAL) readonly buffer NormTotalBuf { vec4 norm_total[]; };
+
+// Where the colour starts in a record (train::model::state::COLOUR_OFFSET, a multiple of 4).
+const uint COLOUR_OFFSET = 12u;
 
 const uint STEP_STATS = 1u;
 const uint STEP_ADAM = 2u;
@@ -131,6 +143,41 @@ void adam(uint j, float g, float lr, float c1, float c2) {
     state[j] = p;
 }
 
+// adam for the values of vec4 j4 of the records (`s` its parameters) where `on` is true,
+// each with its own learning rate and bias corrections: the same operations per component;
+// the others (padding, a skipped opacity) keep their bits. Returns the parameters.
+vec4 adam4(uint j4, vec4 s, vec4 g, vec4 lr, vec4 c1, vec4 c2, bvec4 on) {
+    vec4 m0 = moment_m4[j4];
+    vec4 v0 = moment_v4[j4];
+    precise vec4 m = 0.9 * m0 + (1.0 - 0.9) * g;
+    precise vec4 v = 0.999 * v0 + (1.0 - 0.999) * g * g;
+    precise vec4 p = s - lr / c1 * m / (sqrt(v) / c2 + 1e-15);
+    moment_m4[j4] = mix(m0, m, on);
+    moment_v4[j4] = mix(v0, v, on);
+    vec4 stepped = mix(s, p, on);
+    state4[j4] = stepped;
+    return stepped;
+}
+
+// The SH coefficients of Gaussian i (record from float `base`): with `adam`, one Adam step
+// of each (DC at the first colour rate, the rest at the second; gradients times `scale`),
+// then their texels for the next forward pass (0 past the coefficients), a vec4 at a time.
+void sh_step(uint i, uint base, bool adam, float scale) {
+    uint texel_vecs = pc.counts.w / 4u;
+    uint colours = pc.counts.z;
+    uint at = (base + COLOUR_OFFSET) / 4u;
+    for (uint t = 0u; t < texel_vecs; t++) {
+        bvec4 valid = lessThan(uvec4(4u * t) + uvec4(0u, 1u, 2u, 3u), uvec4(colours));
+        vec4 p = state4[at + t];
+        if (adam) {
+            vec4 g = sh_grads4[i * texel_vecs + t] * scale;
+            vec4 lr = t == 0u ? vec4(pc.lr_sh.xxx, pc.lr_sh.y) : vec4(pc.lr_sh.y);
+            p = adam4(at + t, p, g, lr, vec4(pc.lr_sh.z), vec4(pc.lr_sh.w), valid);
+        }
+        sh_out4[i * texel_vecs + t] = mix(vec4(0.0), p, valid);
+    }
+}
+
 // The gradients of Gaussian i's stored parameters: centre, log scales, quaternion, opacity
 // logit (the chain rule through exp, q / |q| and the sigmoid); the colour part is read
 // where it is used (colour_grad).
@@ -141,15 +188,16 @@ struct RawGrad {
     float logit;
 };
 
-RawGrad raw_grad(uint i, uint base) {
+RawGrad raw_grad(uint i, vec4 s0, vec4 s1, vec4 s2) {
+    vec3 log_scale = vec3(s0.w, s1.xy);
     GaussianGrad g = grads[i];
     RawGrad r;
     r.mean = g.mean_opacity.xyz;
     for (uint a = 0u; a < 3u; a++) {
-        precise float gl = g.scale[a] * exp(state[base + 3u + a]);
+        precise float gl = g.scale[a] * exp(log_scale[a]);
         r.log_scale[a] = gl;
     }
-    vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+    vec4 q = vec4(s1.zw, s2.xy);
     precise float norm = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
     precise vec4 u = q / norm;
     precise float dot_ = g.quat.x * u.x + g.quat.y * u.y + g.quat.z * u.z + g.quat.w * u.w;
@@ -157,7 +205,7 @@ RawGrad raw_grad(uint i, uint base) {
         precise float gq = (g.quat[a] - u[a] * dot_) / norm;
         r.quat[a] = gq;
     }
-    float p = sigmoid_of(state[base + 10u]);
+    float p = sigmoid_of(s2.z);
     precise float go = g.mean_opacity.w * p * (1.0 - p);
     r.logit = go;
     if ((pc.flags_size.x & STEP_NOISE) != 0u) {
@@ -165,7 +213,7 @@ RawGrad raw_grad(uint i, uint base) {
         precise float ro = go + pc.clip.z * p * (1.0 - p);
         r.logit = ro;
         for (uint a = 0u; a < 3u; a++) {
-            precise float rs = r.log_scale[a] + pc.clip.w * exp(state[base + 3u + a]);
+            precise float rs = r.log_scale[a] + pc.clip.w * exp(log_scale[a]);
             r.log_scale[a] = rs;
         }
     }
@@ -188,8 +236,12 @@ void main() {
     uint groups = pc.flags_size.w;
     bool features = (flags & STEP_FEATURES) != 0u;
     uint base = i * rec;
+    // The record's first three vec4s: centre and log scales (s0, s1.xy), quaternion
+    // (s1.zw, s2.xy), opacity logit (s2.z), an unused float.
+    uint b4 = base / 4u;
+    vec4 s0 = state4[b4], s1 = state4[b4 + 1u], s2 = state4[b4 + 2u];
     if ((flags & STEP_NORM) != 0u) {
-        RawGrad r = raw_grad(i, base);
+        RawGrad r = raw_grad(i, s0, s1, s2);
         precise float sq = dot(r.mean, r.mean) + dot(r.log_scale, r.log_scale)
             + dot(r.quat, r.quat) + r.logit * r.logit;
         for (uint k = 0u; k < colours; k++) {
@@ -212,32 +264,33 @@ void main() {
             stats[i] = vec4(sum, s.y + 1.0, max(s.z, r), 0.0);
         }
     }
+    // Model::step: with clipping, every gradient times max / norm when the norm (finite)
+    // exceeds max.
+    float scale = 1.0;
+    if ((flags & (STEP_ADAM | STEP_CLIP)) == (STEP_ADAM | STEP_CLIP)) {
+        float norm = sqrt(norm_total[0].x);
+        if (norm > pc.clip.x && !isinf(norm) && !isnan(norm)) scale = pc.clip.x / norm;
+    }
     if ((flags & STEP_ADAM) != 0u) {
-        // Model::step: with clipping, every gradient times max / norm when the norm
-        // (finite) exceeds max.
-        float scale = 1.0;
-        if ((flags & STEP_CLIP) != 0u) {
-            float norm = sqrt(norm_total[0].x);
-            if (norm > pc.clip.x && !isinf(norm) && !isnan(norm)) scale = pc.clip.x / norm;
-        }
-        RawGrad r = raw_grad(i, base);
-        for (uint a = 0u; a < 3u; a++) adam(base + a, r.mean[a] * scale, pc.lr.x, pc.c1.x, pc.c2.x);
-        for (uint a = 0u; a < 3u; a++) adam(base + 3u + a, r.log_scale[a] * scale, pc.lr.y, pc.c1.y, pc.c2.y);
-        for (uint a = 0u; a < 4u; a++) adam(base + 6u + a, r.quat[a] * scale, pc.lr.z, pc.c1.z, pc.c2.z);
-        if ((flags & STEP_SKIP_OPACITY) == 0u) adam(base + 10u, r.logit * scale, pc.lr.w, pc.c1.w, pc.c2.w);
-        // Colour: SH DC at its rate and the rest at theirs, or every feature channel at
-        // the first.
-        for (uint k = 0u; k < colours; k++) {
-            float lr = (features || k < 3u) ? pc.lr_sh.x : pc.lr_sh.y;
-            adam(base + 11u + k, colour_grad(i, k, features) * scale, lr, pc.lr_sh.z, pc.lr_sh.w);
+        RawGrad r = raw_grad(i, s0, s1, s2);
+        // Per float: centre (lr.x), log scale (lr.y), quaternion (lr.z), opacity (lr.w).
+        vec4 lr = pc.lr, c1 = pc.c1, c2 = pc.c2;
+        bool opacity = (flags & STEP_SKIP_OPACITY) == 0u;
+        s0 = adam4(b4, s0, vec4(r.mean, r.log_scale.x) * scale, lr.xxxy, c1.xxxy, c2.xxxy, bvec4(true));
+        s1 = adam4(b4 + 1u, s1, vec4(r.log_scale.yz, r.quat.xy) * scale, lr.yyzz, c1.yyzz, c2.yyzz, bvec4(true));
+        s2 = adam4(b4 + 2u, s2, vec4(r.quat.zw, r.logit, 0.0) * scale, lr.zzww, c1.zzww, c2.zzww,
+            bvec4(true, true, opacity, false));
+        // Feature channels at the first colour rate (SH: sh_step below).
+        for (uint k = 0u; features && k < colours; k++) {
+            adam(base + COLOUR_OFFSET + k, colour_grad(i, k, true) * scale, pc.lr_sh.x, pc.lr_sh.z, pc.lr_sh.w);
         }
         if ((flags & STEP_NOISE) != 0u) {
             // Model::add_noise with the stepped values.
-            vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+            vec4 q = vec4(s1.zw, s2.xy);
             precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
             float w = q.x / qn, x = q.y / qn, y = q.z / qn, z = q.w / qn;
-            vec3 sc = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
-            float o = sigmoid_of(state[base + 10u]);
+            vec3 sc = vec3(exp(s0.w), exp(s1.x), exp(s1.y));
+            float o = sigmoid_of(s2.z);
             precise float gate = 1.0 / (1.0 + exp(-100.0 * ((1.0 - o) - 0.995)));
             vec3 v;
             for (uint a = 0u; a < 3u; a++) {
@@ -251,34 +304,32 @@ void main() {
             precise vec3 rt = r0 * v.x + r1 * v.y + r2 * v.z;
             precise vec3 t = sc * sc * rt;
             precise vec3 d = vec3(dot(r0, t), dot(r1, t), dot(r2, t));
-            for (uint a = 0u; a < 3u; a++) {
-                precise float p = state[base + a] + d[a];
-                state[base + a] = p;
-            }
+            precise vec3 moved = s0.xyz + d;
+            s0.xyz = moved;
+            state4[b4] = s0;
         }
     }
     // The activated record, SH texels and feature channels of the next forward pass.
-    vec3 mean = vec3(state[base], state[base + 1u], state[base + 2u]);
-    vec3 scale = vec3(exp(state[base + 3u]), exp(state[base + 4u]), exp(state[base + 5u]));
-    vec4 q = vec4(state[base + 6u], state[base + 7u], state[base + 8u], state[base + 9u]);
+    vec3 sizes = vec3(exp(s0.w), exp(s1.x), exp(s1.y));
+    vec4 q = vec4(s1.zw, s2.xy);
     precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
     precise vec4 rot = q / qn;
-    gaussians[i] = Gaussian(vec4(mean, sigmoid_of(state[base + 10u])), vec4(scale, 0.0), rot);
-    for (uint k = 0u; k < texel_floats; k++) {
-        sh_out[i * texel_floats + k] = (!features && k < colours) ? state[base + 11u + k] : 0.0;
+    gaussians[i] = Gaussian(vec4(s0.xyz, sigmoid_of(s2.z)), vec4(sizes, 0.0), rot);
+    if (!features) {
+        sh_step(i, base, (flags & STEP_ADAM) != 0u, scale);
+        return;
     }
-    if (features) {
-        for (uint g = 0u; g < groups; g++) {
-            vec4 v = vec4(0.0);
-            for (uint c = 0u; c < 4u; c++) {
-                uint k = 4u * g + c;
-                if (k < colours) v[c] = state[base + 11u + k];
-            }
-            features_out[i * groups + g] = v;
-            if (g == 0u) feat0[i] = v;
-            else if (g == 1u) feat1[i] = v;
-            else if (g == 2u) feat2[i] = v;
-            else feat3[i] = v;
+    for (uint k = 0u; k < texel_floats; k++) sh_out[i * texel_floats + k] = 0.0;
+    for (uint g = 0u; g < groups; g++) {
+        vec4 v = vec4(0.0);
+        for (uint c = 0u; c < 4u; c++) {
+            uint k = 4u * g + c;
+            if (k < colours) v[c] = state[base + COLOUR_OFFSET + k];
         }
+        features_out[i * groups + g] = v;
+        if (g == 0u) feat0[i] = v;
+        else if (g == 1u) feat1[i] = v;
+        else if (g == 2u) feat2[i] = v;
+        else feat3[i] = v;
     }
 }

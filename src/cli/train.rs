@@ -53,9 +53,10 @@ pub(crate) struct TrainArgs {
     /// Seed of the view order, the random start and the split samples.
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u64,
-    /// Random Gaussians when the data set has no points3D.
-    #[arg(long, default_value_t = 100_000)]
-    pub(crate) random_points: usize,
+    /// Random Gaussians when the data set has no points3D [default: 100,000; 10,000 on a
+    /// CPU device]
+    #[arg(long)]
+    pub(crate) random_points: Option<usize>,
     /// Learning rate of the centres at the start (times the scene extent).
     #[arg(long, visible_alias = "position_lr_init", default_value_t = 0.00016)]
     pub(crate) position_lr_init: f32,
@@ -192,8 +193,9 @@ fn fresh_shader(k: usize, hidden: usize, seed: u64) -> vksplat::mlp::Mlp {
 pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     check_args(args)?;
     let data = load_dataset(args)?;
-    let opts = options(args, settings(args))?;
+    let mut opts = options(args, settings(args))?;
     let ctx = args.gpu.context()?;
+    opts.random_points = random_points(args, &data, ctx.info());
     let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;
     let mut rast = vksplat::render::differentiable::DiffRasterizer::new(ctx)?;
     let bar = progress_bar(args.quiet, args.iterations);
@@ -235,6 +237,30 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     fail_on_validation_messages(rast.renderer().ctx())?;
     print_report(args, &report);
     Ok(())
+}
+
+/// The random start of a data set without points3D (the original's, INRIA's).
+const RANDOM_POINTS: usize = 100_000;
+/// The random start on a CPU device (lavapipe), where an iteration from 100,000 takes
+/// seconds (BENCHMARKS.md, 2026-11-27); densification adds Gaussians where they help.
+const CPU_RANDOM_POINTS: usize = 10_000;
+
+/// `--random-points`, or the default that fits the device: fewer Gaussians on a CPU
+/// device, said when the data set has no points (so that the start is random).
+fn random_points(args: &TrainArgs, data: &Dataset, info: &vksplat::gpu::DeviceInfo) -> usize {
+    if let Some(n) = args.random_points {
+        return n;
+    }
+    if info.device_type != ash::vk::PhysicalDeviceType::CPU {
+        return RANDOM_POINTS;
+    }
+    if data.points.is_none() && args.resume.is_none() && !args.quiet {
+        note!(
+            "{} is a CPU device: starting from {CPU_RANDOM_POINTS} random Gaussians instead of {RANDOM_POINTS} (--random-points N to choose)",
+            info.name
+        );
+    }
+    CPU_RANDOM_POINTS
 }
 
 /// Refuses the options no run can use: non-positive learning rates, a D-SSIM weight
@@ -407,7 +433,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         save_iterations: args.save_iterations.clone(),
         test_iterations: args.test_iterations.clone(),
         seed: args.seed,
-        random_points: args.random_points,
+        random_points: args.random_points.unwrap_or(RANDOM_POINTS),
         overwrite: args.overwrite,
         shader,
         kernel: args.kernel,

@@ -817,6 +817,26 @@ fn render_exports_a_colmap_data_set_that_trains() {
             .unwrap_or_else(|| panic!("no {stage} in {text}"));
         assert!(ms > 0.0, "{stage}: {ms} ms");
     }
+    // Without points3D the start is random: 10,000 Gaussians on a CPU device (said, with
+    // the flag that chooses), the original's 100,000 elsewhere.
+    std::fs::remove_file(data.join("sparse/0/points3D.txt")).unwrap();
+    let random = vksplat(&[
+        "train",
+        data.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+        "--iterations",
+        "1",
+        "--overwrite",
+    ]);
+    let err = String::from_utf8_lossy(&random.stderr);
+    assert!(random.status.success(), "{err}");
+    let cpu = err.contains("is a CPU device: starting from 10000 random Gaussians instead of 100000 (--random-points N to choose)");
+    let n = if cpu { 10_000 } else { 100_000 };
+    assert!(
+        err.contains(&format!("starting from {n} random Gaussians in the cube")),
+        "{err}"
+    );
 }
 
 /// Feature splats and gradient clipping on the device: the feature channels, the neural

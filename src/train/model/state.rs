@@ -7,6 +7,10 @@ use super::Model;
 use crate::scene::Scene;
 
 /// A checkpoint's scalars (counts, degrees, step counts) by name.
+/// Where a Gaussian's colour starts in its device record ([`Model::record_floats`]): a
+/// whole vec4 from the record's start.
+pub(in crate::train) const COLOUR_OFFSET: usize = 12;
+
 pub(crate) type Scalars = serde_json::Map<String, serde_json::Value>;
 
 impl Model {
@@ -123,10 +127,13 @@ impl Model {
     }
 
     /// Floats of one Gaussian's record on the device ([`crate::train::device`]): centre (3), log
-    /// scales (3), quaternion (4), opacity logit, then its colour: SH coefficients up to
-    /// the largest degree, or the feature channels of feature splats.
+    /// scales (3), quaternion (4), opacity logit, one unused float, then from
+    /// [`COLOUR_OFFSET`] its colour (SH coefficients up to the largest degree, or the
+    /// feature channels of feature splats), padded to whole vec4s: the step loads and
+    /// stores the colour a vec4 at a time (on a CPU device each buffer access is a loop
+    /// over the lanes, a vec4 costs one).
     pub(in crate::train) fn record_floats(&self) -> usize {
-        11 + self.colour_floats()
+        (COLOUR_OFFSET + self.colour_floats()).next_multiple_of(4)
     }
 
     /// Colour values per Gaussian that training learns: SH coefficients, or feature
@@ -181,7 +188,13 @@ impl Model {
             vec![0f32; n * r],
             vec![0f32; n * 4],
         ];
-        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (colour, c, 11)] {
+        for (g, width, offset) in [
+            (0, 3, 0),
+            (1, 3, 3),
+            (2, 4, 6),
+            (3, 1, 10),
+            (colour, c, COLOUR_OFFSET),
+        ] {
             let params: Vec<f32> = match g {
                 0 => s.positions.iter().flatten().copied().collect(),
                 1 => s.log_scales.iter().flatten().copied().collect(),
@@ -235,11 +248,17 @@ impl Model {
             .collect();
         s.opacity_logits = rows(&params, 10, 1);
         if colour == 4 {
-            s.sh = rows(&params, 11, c);
+            s.sh = rows(&params, COLOUR_OFFSET, c);
         } else {
-            s.features = rows(&params, 11, c);
+            s.features = rows(&params, COLOUR_OFFSET, c);
         }
-        for (g, width, offset) in [(0, 3, 0), (1, 3, 3), (2, 4, 6), (3, 1, 10), (colour, c, 11)] {
+        for (g, width, offset) in [
+            (0, 3, 0),
+            (1, 3, 3),
+            (2, 4, 6),
+            (3, 1, 10),
+            (colour, c, COLOUR_OFFSET),
+        ] {
             self.moments[g] = Moments {
                 m: rows(&m, offset, width),
                 v: rows(&v, offset, width),
