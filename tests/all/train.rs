@@ -65,25 +65,6 @@ fn summary_psnr(stdout: &str) -> f64 {
 }
 
 #[test]
-fn a_colmap_text_model_reads_back_as_written() {
-    let dir = tempfile::tempdir().unwrap();
-    make_dataset(dir.path(), 5, 40, 30);
-    let (cams, _) = colmap::load_colmap_model(dir.path()).unwrap();
-    assert_eq!(cams.len(), 5);
-    let points = colmap::load_colmap_points(dir.path()).unwrap().unwrap();
-    assert_eq!(points.len(), 1873_usize.div_ceil(2));
-    let data =
-        vksplat::train::data::load_colmap(dir.path(), vksplat::train::data::Resolution(2), true)
-            .unwrap();
-    // Every 8th (the first of 5) is held out; photos halved with the cameras.
-    assert_eq!((data.train.len(), data.test.len()), (4, 1));
-    let v = &data.train[0];
-    assert_eq!((v.camera.width, v.camera.height), (20, 15));
-    assert_eq!(v.image.len(), 20 * 15);
-    assert!(data.extent > 0.0);
-}
-
-#[test]
 fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
@@ -914,7 +895,8 @@ fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
 
 /// The MCMC strategy on the device steps as on the host (relocation and growth on the
 /// host at each refinement, the regularisers' gradients and the covariance-shaped noise in
-/// the step): the same Gaussian count after three refinements, every parameter group
+/// the step): the same Gaussian count after two refinements (at 20 and 30; the last
+/// iteration's, at 40, reaches no output, as the original's), every parameter group
 /// within 1e-4 after 40 iterations (measured: see the printout), the same bytes from a
 /// second device run.
 #[test]
@@ -945,9 +927,9 @@ fn mcmc_steps_on_the_device_as_on_the_host() {
     let (quiet, _) = model_ply(&h.train("no-noise", &opts, false).2);
     assert!(dev_bytes == again, "two device runs differ");
     let start = 1873 / 2 + 1;
-    eprintln!("Gaussians: {start} at the start, {dev_n} after three refinements");
+    eprintln!("Gaussians: {start} at the start, {dev_n} after two refinements");
     assert_eq!(dev_n, host_n);
-    assert_eq!(dev_n, 1083, "5 % growth three times from {start}");
+    assert_eq!(dev_n, 1032, "5 % growth twice from {start}");
     let moved = rel(&flat(&quiet.positions), &flat(&dev.positions));
     eprintln!("centres without the noise: relative L2 difference {moved:.2e}");
     assert!(moved > 1e-5, "the noise moves the centres: {moved}");

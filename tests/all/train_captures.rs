@@ -195,3 +195,26 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
     let (up, _) = vksplat::camera::up_and_centre_of(&cams);
     assert!(up.unwrap().abs_diff_eq(glam::Vec3::NEG_Y, 1e-3), "{up:?}");
 }
+
+/// The data set the training tests make reads back: cameras, points, the held-out split
+/// and the downscaled photos.
+#[test]
+fn a_colmap_text_model_reads_back_as_written() {
+    let dir = tempfile::tempdir().unwrap();
+    make_dataset(dir.path(), 5, 40, 30);
+    let (cams, _) = vksplat::camera::colmap::load_colmap_model(dir.path()).unwrap();
+    assert_eq!(cams.len(), 5);
+    let points = vksplat::camera::colmap::load_colmap_points(dir.path())
+        .unwrap()
+        .unwrap();
+    assert_eq!(points.len(), 1873_usize.div_ceil(2));
+    let data =
+        vksplat::train::data::load_colmap(dir.path(), vksplat::train::data::Resolution(2), true)
+            .unwrap();
+    // Every 8th (the first of 5) is held out; photos halved with the cameras.
+    assert_eq!((data.train.len(), data.test.len()), (4, 1));
+    let v = &data.train[0];
+    assert_eq!((v.camera.width, v.camera.height), (20, 15));
+    assert_eq!(v.image.len(), 20 * 15);
+    assert!(data.extent > 0.0);
+}
