@@ -246,10 +246,7 @@ pub(crate) fn refuse_time_varying(scene: &Scene, name: &str, command: &str) -> R
 /// `point_cloud/` folder), for commands given no camera option; prints a one-line note
 /// saying which cameras are used, or that the model has none and the default camera is.
 pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
-    let dir = scene.scene.as_deref().filter(|_| !scene.demo)?;
-    if !dir.join("point_cloud").is_dir() {
-        return None;
-    }
+    let dir = model_dir(scene)?;
     let file = dir.join("cameras.json");
     if file.is_file() {
         vksplat::note!(
@@ -266,16 +263,19 @@ pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
     }
 }
 
+/// The scene argument when it is a trained model directory (one with `point_cloud/`).
+fn model_dir(scene: &SceneArg) -> Option<&Path> {
+    let dir = scene.scene.as_deref().filter(|_| !scene.demo)?;
+    dir.join("point_cloud").is_dir().then_some(dir)
+}
+
 /// The orbit's up and centre: `--orbit-up` and `--orbit-centre`, else, for a trained
 /// model directory with a `cameras.json`, what its cameras say ([`camera::up_and_centre_of`],
 /// with a note), else -y and the scene's robust centre.
 fn orbit_frame(p: &PathArgs, scene_arg: &SceneArg) -> Result<(glam::Vec3, Option<glam::Vec3>)> {
     let given_up = p.orbit_up.map(glam::Vec3::from);
     let given_centre = p.orbit_centre.map(glam::Vec3::from);
-    let file = scene_arg
-        .scene
-        .as_deref()
-        .filter(|d| !scene_arg.demo && d.join("point_cloud").is_dir())
+    let file = model_dir(scene_arg)
         .map(|d| d.join("cameras.json"))
         .filter(|f| f.is_file());
     let (Some(file), true) = (file, given_up.is_none() || given_centre.is_none()) else {

@@ -155,6 +155,18 @@ impl Model {
         }
     }
 
+    /// Where each moments group sits in a device record: (group, floats per Gaussian,
+    /// offset in the record).
+    fn record_groups(&self) -> [(usize, usize, usize); 5] {
+        [
+            (0, 3, 0),
+            (1, 3, 3),
+            (2, 4, 6),
+            (3, 1, 10),
+            (self.colour_group(), self.colour_floats(), COLOUR_OFFSET),
+        ]
+    }
+
     /// The neural shader's weights and biases (flattened as `Mlp::gpu_words` orders
     /// them) and their Adam moments, for the device.
     pub(in crate::train) fn device_shader_state(&self) -> Option<[Vec<f32>; 3]> {
@@ -180,21 +192,14 @@ impl Model {
     /// device holds them.
     pub(in crate::train) fn device_state(&self) -> [Vec<f32>; 4] {
         let s = &self.scene;
-        let (n, r, c) = (self.len(), self.record_floats(), self.colour_floats());
-        let colour = self.colour_group();
+        let (n, r) = (self.len(), self.record_floats());
         let mut out = [
             vec![0f32; n * r],
             vec![0f32; n * r],
             vec![0f32; n * r],
             vec![0f32; n * 4],
         ];
-        for (g, width, offset) in [
-            (0, 3, 0),
-            (1, 3, 3),
-            (2, 4, 6),
-            (3, 1, 10),
-            (colour, c, COLOUR_OFFSET),
-        ] {
+        for (g, width, offset) in self.record_groups() {
             let params: Vec<f32> = match g {
                 0 => s.positions.iter().flatten().copied().collect(),
                 1 => s.log_scales.iter().flatten().copied().collect(),
@@ -252,13 +257,7 @@ impl Model {
         } else {
             s.features = rows(&params, COLOUR_OFFSET, c);
         }
-        for (g, width, offset) in [
-            (0, 3, 0),
-            (1, 3, 3),
-            (2, 4, 6),
-            (3, 1, 10),
-            (colour, c, COLOUR_OFFSET),
-        ] {
+        for (g, width, offset) in self.record_groups() {
             self.moments[g] = Moments {
                 m: rows(&m, offset, width),
                 v: rows(&v, offset, width),
