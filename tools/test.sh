@@ -24,9 +24,11 @@ if [ "$python" = 1 ]; then
     python3 -m venv "$venv"
     "$venv/bin/pip" install -q --upgrade pip
     # torch (the `torch` extra, for vksplat.torch): PyPI's Linux wheel (torch runs on the
-    # CPU here).
-    "$venv/bin/pip" install -q "torch>=2"
-    echo "test.sh: the virtualenv and pip install torch took $((SECONDS - t0)) s (in the background)"
+    # CPU here). gsplat (a pure wheel; its CUDA kernels are compiled on first use, which
+    # the tests never ask for): its strategies drive densification through vksplat.torch
+    # in python/tests/test_gsplat_dropin.py.
+    "$venv/bin/pip" install -q "torch>=2" "gsplat==1.5.3"
+    echo "test.sh: the virtualenv and pip install torch gsplat took $((SECONDS - t0)) s (in the background)"
   ) >target/pyenv.log 2>&1 &
   venv_job=$!
   # Stopped with the script if a test fails first.

@@ -95,7 +95,7 @@ def test_means2d_gradient_and_absgrad_for_densification():
     out, alphas, meta = rasterization(
         t["means"], t["quats"], t["scales"], t["opacities"], t["colors"],
         torch.tensor(cam.viewmat)[None], torch.tensor(cam.K)[None], W, H, sh_degree=3,
-        absgrad=True,
+        absgrad=True, packed=False,
     )
     meta["means2d"].retain_grad()
     (out ** 2).sum().backward()

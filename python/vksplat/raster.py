@@ -4,7 +4,7 @@ Gaussians are given as a training loop holds them (gsplat's conventions): ``mean
 (N, 3), ``quats`` (N, 4) as (w, x, y, z) of any non-zero length (normalised inside),
 ``scales`` (N, 3) linear, ``opacities`` (N,) in [0, 1], and ``colors`` either SH
 coefficients (N, K, 3) with ``sh_degree`` (K >= (sh_degree + 1)^2; colour =
-max(SH + 0.5, 0)) or direct values (N, D) without it.
+max(SH + 0.5, 0)) or direct values (N, D) without it (blended as given, never clamped).
 
     r = vksplat.raster.Rasterizer()
     fwd = r.forward(means, quats, scales, opacities, colors, viewmat, K, W, H, sh_degree=3)

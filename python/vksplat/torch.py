@@ -4,25 +4,34 @@
     colors, alphas, meta = rasterization(means, quats, scales, opacities, colors,
                                          viewmats, Ks, width, height, sh_degree=3)
 
-Differentiable with torch autograd with respect to ``means``, ``quats``, ``scales``,
-``opacities`` and ``colors`` (SH coefficients, direct RGB, or 1 to 16 direct feature
-channels, blended without a background); ``meta["means2d"]``
-receives dL/d(2D means) when it retains its gradient, and ``meta["means2d"].absgrad``
-the sum of their absolute values with ``absgrad=True`` (what densification reads).
-CPU float32 tensors in and out. Gradients are bit-identical run after run
-(deterministic accumulation; ``accumulation="float-atomics"`` trades that for speed).
+Differentiable with torch autograd with respect to ``means``, ``quats``, ``scales`` (of
+either sign: the covariance is built from their squares, as gsplat's), ``opacities``,
+``colors`` (SH coefficients, or any number of direct channels, shared by the cameras or
+per camera) and ``backgrounds``; ``meta["means2d"]`` receives dL/d(2D means) when it
+retains its gradient, and ``meta["means2d"].absgrad`` the sum of their absolute values
+with ``absgrad=True`` (what densification reads), in gsplat's packed layout (``packed=True``,
+its default: one row per visible camera-Gaussian pair, ``gaussian_ids``, ``camera_ids``)
+or not ([C, N]). Leading batch dimensions are taken as gsplat takes them. CPU float32
+tensors in and out. Gradients are bit-identical run after run (deterministic
+accumulation; ``accumulation="float-atomics"`` trades that for speed).
 
 Where the rules differ from gsplat's defaults, vksplat keeps the original 3DGS
 rasterizer's (the rules scenes trained with the INRIA code need): near plane 0.2 (gsplat
 0.01), alpha clamp 0.99 (gsplat 0.999), a screen-space radius of 3 sigma of the larger
 axis (gsplat 3.33 per axis), no far plane. ``near_plane`` therefore defaults to 0.2 and
 other values are refused, as are options vksplat does not implement (``rasterize_mode=
-"antialiased"``, ``radius_clip``, other camera models, ``covars``); those needing them keep
-gsplat. Direct RGB colours are blended through the SH path: negative values clamp at 0.
+"antialiased"``, ``radius_clip``, other camera models and lens coefficients, ``covars``,
+``with_ut=True``, ``with_eval3d=True``); those needing them keep gsplat. The argument
+table of ``docs/pytorch.md`` says, for each of gsplat's arguments and meta keys, whether
+it is supported, supported with a difference, or refused.
+
+The colour rule is one rule, gsplat's: SH coefficients give ``max(SH + 0.5, 0)``; direct
+values (any number of channels) are blended as given, never clamped.
 """
 
 from __future__ import annotations
 
+import numbers
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
@@ -31,6 +40,11 @@ import torch
 from . import raster as _raster
 
 __all__ = ["rasterization"]
+
+# Direct channels per native pass: more are blended in chunks of this many.
+_CHUNK = 16
+# vksplat's tiles (meta["tile_size"]; gsplat's tile_size is a speed setting).
+_TILE = 16
 
 _RASTERIZERS: Dict[Tuple[Any, str], "_raster.Rasterizer"] = {}
 
@@ -64,6 +78,82 @@ def _np(t: torch.Tensor) -> np.ndarray:
     return t.detach().cpu().numpy()
 
 
+def _size(name: str, v: Any) -> int:
+    """A positive integer size (Python or numpy integer, or an integral 0-d tensor)."""
+    if isinstance(v, torch.Tensor) and v.dim() == 0 and not v.dtype.is_floating_point:
+        v = int(v)
+    if isinstance(v, bool) or not isinstance(v, numbers.Integral) or int(v) <= 0:
+        raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    return int(v)
+
+
+class _Layout:
+    """How the arguments' shapes map onto native passes: B Gaussian sets (the leading batch
+    dimensions ``batch`` flattened), C cameras each, N Gaussians; colours shared by the
+    cameras or per camera; SH of ``sh_degree`` or D direct channels, in chunks."""
+
+    def __init__(self, means, colors, viewmats, sh_degree, packed):
+        if not isinstance(means, torch.Tensor) or means.dim() < 2:
+            _check_tensor("means", means, (None, 3))
+        self.batch = tuple(means.shape[:-2])
+        self.B = int(np.prod(self.batch)) if self.batch else 1
+        self.N = means.shape[-2]
+        if not isinstance(viewmats, torch.Tensor) or viewmats.dim() != len(self.batch) + 3:
+            _check_tensor("viewmats", viewmats, self.batch + (None, 4, 4))
+        self.C = viewmats.shape[-3]
+        self.sh_degree = sh_degree
+        tail = 2 if sh_degree is not None else 1  # (K, 3) or (D,)
+        if not isinstance(colors, torch.Tensor):
+            _check_tensor("colors", colors, ())
+        self.per_camera = colors.dim() == len(self.batch) + 2 + tail
+        self.D = 3 if sh_degree is not None else (colors.shape[-1] if colors.dim() else 0)
+        self.chunks = (
+            [slice(0, 3)]
+            if sh_degree is not None
+            else [slice(i, min(i + _CHUNK, self.D)) for i in range(0, self.D, _CHUNK)]
+        )
+        self.packed = packed
+
+    def pairs(self) -> List[Tuple[int, int]]:
+        return [(b, c) for b in range(self.B) for c in range(self.C)]
+
+    def colour_shape(self) -> Tuple[Optional[int], ...]:
+        lead = self.batch + ((self.C,) if self.per_camera else ()) + (self.N,)
+        return lead + ((None, 3) if self.sh_degree is not None else (None,))
+
+
+def _native_passes(r, layout: _Layout, arrays, cams, width, height, kernel):
+    """The forward passes, per (set, camera) pair a list of one per colour chunk."""
+    means, quats, scales, opacities, colors = arrays
+    fwds: Dict[Tuple[int, int], list] = {}
+    for b, c in layout.pairs():
+        col = colors[b, c] if layout.per_camera else colors[b]
+        viewmat, K = cams[b][c]
+        fwds[(b, c)] = [
+            r.forward(
+                means[b],
+                quats[b],
+                scales[b],
+                opacities[b],
+                col if layout.sh_degree is not None else np.ascontiguousarray(col[:, ch]),
+                viewmat,
+                K,
+                width,
+                height,
+                sh_degree=layout.sh_degree,
+                kernel=kernel,
+            )
+            for ch in layout.chunks
+        ]
+    return fwds
+
+
+def _stack(layout: _Layout, fwds, get) -> np.ndarray:
+    """`get(forward)` of each pair's first chunk, as [B, C, ...]."""
+    rows = [np.stack([get(fwds[(b, c)][0]) for c in range(layout.C)]) for b in range(layout.B)]
+    return np.stack(rows)
+
+
 class _Project(torch.autograd.Function):
     """Runs the forward passes; returns the 2D means (an input of _Rasterize, so that
     ``meta["means2d"].grad`` is dL/d(2D means) as in gsplat). Its own backward passes
@@ -71,82 +161,251 @@ class _Project(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, colors, state):  # type: ignore[override]
-        r, cams, sh_degree, bgs, kernel = state["args"]
-        fwds = []
-        for c, (viewmat, K) in enumerate(cams):
-            fwds.append(
-                r.forward(
-                    _np(means),
-                    _np(quats),
-                    _np(scales),
-                    _np(opacities),
-                    _np(colors),
-                    viewmat,
-                    K,
-                    state["width"],
-                    state["height"],
-                    sh_degree=sh_degree,
-                    background=None if bgs is None else bgs[c],
-                    kernel=kernel,
-                )
-            )
+        layout: _Layout = state["layout"]
+        B, N = layout.B, layout.N
+        arrays = (
+            _np(means).reshape(B, N, 3),
+            _np(quats).reshape(B, N, 4),
+            _np(scales).reshape(B, N, 3),
+            _np(opacities).reshape(B, N),
+            _np(colors).reshape((B,) + tuple(colors.shape[len(layout.batch) :])),
+        )
+        fwds = _native_passes(
+            state["rasterizer"], layout, arrays, state["cams"], state["width"], state["height"],
+            state["kernel"],
+        )
         state["fwds"] = fwds
-        return torch.from_numpy(np.stack([f.means2d for f in fwds]).astype(np.float32))
+        full = _stack(layout, fwds, lambda f: f.means2d).astype(np.float32)  # [B, C, N, 2]
+        radii = _stack(layout, fwds, lambda f: f.radii)  # [B, C, N]
+        state["radii"] = radii
+        if layout.packed:
+            ids = np.nonzero(radii > 0)
+            state["ids"] = ids
+            return torch.from_numpy(np.ascontiguousarray(full[ids]))
+        return torch.from_numpy(full.reshape(layout.batch + (layout.C, N, 2)))
 
     @staticmethod
     def backward(ctx, grad_means2d):  # type: ignore[override]
         return None, None, None, None, None, None
 
 
+def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout):
+    """One pair's gradients from its pixel gradients, summed over its colour chunks (the
+    alpha and depth gradients go with the first chunk); colours joined along channels."""
+    total: Dict[str, np.ndarray] = {}
+    colour_parts: List[np.ndarray] = [None] * len(fwds)  # type: ignore[list-item]
+    # The last chunk's state is still on the device: its backward goes first.
+    for j in reversed(range(len(fwds))):
+        ch = layout.chunks[j]
+        g = r.backward(
+            fwds[j],
+            grad_colors=None if g_colors is None else np.ascontiguousarray(g_colors[..., ch]),
+            grad_alphas=g_alphas if j == 0 else None,
+            grad_depths=g_depths if j == 0 else None,
+        )
+        for name in ("means", "quats", "scales", "opacities", "means2d", "absgrad"):
+            total[name] = g[name] if name not in total else total[name] + g[name]
+        colour_parts[j] = g["colors"]
+    total["colors"] = colour_parts[0] if len(fwds) == 1 else np.concatenate(colour_parts, axis=1)
+    return total
+
+
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, means, quats, scales, opacities, colors, state):  # type: ignore[override]
+        layout: _Layout = state["layout"]
         fwds = state["fwds"]
         ctx.state = state
         ctx.means2d = means2d
-        ctx.color_shape = tuple(colors.shape)
-        colors_out = torch.from_numpy(np.stack([np.array(f.colors) for f in fwds]))
-        alphas = torch.from_numpy(np.stack([np.array(f.alphas) for f in fwds]))[..., None]
-        depths = torch.from_numpy(np.stack([np.array(f.depths) for f in fwds]))[..., None]
+        ctx.shapes = [tuple(t.shape) for t in (means, quats, scales, opacities, colors)]
+
+        def image(get):
+            rows = [
+                np.stack([get(fwds[(b, c)]) for c in range(layout.C)]) for b in range(layout.B)
+            ]
+            out = torch.from_numpy(np.ascontiguousarray(np.stack(rows)))
+            return out.reshape(layout.batch + tuple(out.shape[1:]))
+
+        colors_out = image(lambda fs: np.concatenate([np.array(f.colors) for f in fs], axis=-1))
+        alphas = image(lambda fs: np.array(fs[0].alphas))[..., None]
+        depths = image(lambda fs: np.array(fs[0].depths))[..., None]
         return colors_out, alphas, depths
 
     @staticmethod
     def backward(ctx, g_colors, g_alphas, g_depths):  # type: ignore[override]
         state = ctx.state
-        r = state["args"][0]
-        fwds = state["fwds"]
-        totals: Dict[str, np.ndarray] = {}
-        means2d_grads: List[Optional[np.ndarray]] = [None] * len(fwds)
-        abs_grads: List[Optional[np.ndarray]] = [None] * len(fwds)
-        # The last camera's state is still on the device: its backward goes first.
-        for c in reversed(range(len(fwds))):
-            g = r.backward(
-                fwds[c],
-                grad_colors=None if g_colors is None else _np(g_colors[c]),
-                grad_alphas=None if g_alphas is None else _np(g_alphas[c, ..., 0]),
-                grad_depths=None if g_depths is None else _np(g_depths[c, ..., 0]),
+        layout: _Layout = state["layout"]
+        B, C, N = layout.B, layout.C, layout.N
+        flat = lambda g: None if g is None else _np(g).reshape((B, C) + tuple(g.shape[-3:]))  # noqa: E731
+        g_colors, g_alphas, g_depths = flat(g_colors), flat(g_alphas), flat(g_depths)
+        sums: Dict[str, np.ndarray] = {}
+        full2d = np.zeros((B, C, N, 2), np.float32)
+        abs2d = np.zeros((B, C, N, 2), np.float32)
+        per_camera_colours: Dict[Tuple[int, int], np.ndarray] = {}
+        # The last pair's state is still on the device: its backward goes first.
+        for b, c in reversed(layout.pairs()):
+            g = _pair_backward(
+                state["rasterizer"],
+                state["fwds"][(b, c)],
+                None if g_colors is None else g_colors[b, c],
+                None if g_alphas is None else g_alphas[b, c, ..., 0],
+                None if g_depths is None else g_depths[b, c, ..., 0],
+                layout,
             )
+            full2d[b, c], abs2d[b, c] = g["means2d"], g["absgrad"]
+            per_camera_colours[(b, c)] = g["colors"]
             for name in ("means", "quats", "scales", "opacities", "colors"):
-                totals[name] = g[name] if name not in totals else totals[name] + g[name]
-            means2d_grads[c] = g["means2d"]
-            abs_grads[c] = g["absgrad"]
-        if state["absgrad"]:
-            ctx.means2d.absgrad = torch.from_numpy(np.stack(abs_grads).astype(np.float32))
-        colors = totals["colors"]
-        if colors.ndim == 3 and colors.shape[1] < ctx.color_shape[1]:
-            # SH coefficients past the degree rendered receive zero.
-            pad = np.zeros((colors.shape[0], ctx.color_shape[1] - colors.shape[1], 3), colors.dtype)
-            colors = np.concatenate([colors, pad], axis=1)
+                key = (name, b)
+                sums[key] = g[name] if key not in sums else sums[key] + g[name]
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
-        return (
-            t(np.stack(means2d_grads)),
-            t(totals["means"]),
-            t(totals["quats"]),
-            t(totals["scales"]),
-            t(totals["opacities"]),
-            t(colors).reshape(ctx.color_shape),
-            None,
+        shapes = ctx.shapes
+        groups = [
+            t(np.stack([sums[(name, b)] for b in range(B)])).reshape(shape)
+            for name, shape in zip(("means", "quats", "scales", "opacities"), shapes)
+        ]
+        if layout.per_camera:
+            colours = [[per_camera_colours[(b, c)] for c in range(C)] for b in range(B)]
+            colour_grad = np.stack([np.stack(row) for row in colours])
+        else:
+            colour_grad = np.stack([sums[("colors", b)] for b in range(B)])
+        if layout.sh_degree is not None:
+            colour_grad = _pad_sh(colour_grad, shapes[4])
+        if layout.packed:
+            ids = state["ids"]
+            g2d, a2d = full2d[ids], abs2d[ids]
+        else:
+            g2d = full2d.reshape(layout.batch + (C, N, 2))
+            a2d = abs2d.reshape(g2d.shape)
+        if state["absgrad"]:
+            ctx.means2d.absgrad = t(a2d)
+        return (t(g2d), *groups, t(colour_grad).reshape(shapes[4]), None)
+
+
+def _pad_sh(grad: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
+    """SH coefficients past the degree rendered receive zero."""
+    if grad.shape[-2] < shape[-2]:
+        pad = np.zeros(grad.shape[:-2] + (shape[-2] - grad.shape[-2], 3), grad.dtype)
+        grad = np.concatenate([grad, pad], axis=-2)
+    return grad
+
+
+# gsplat's keywords that vksplat takes only at the value that turns them off.
+_OFF_KEYWORDS = {
+    "with_ut": False,
+    "with_eval3d": False,
+    "radial_coeffs": None,
+    "tangential_coeffs": None,
+    "thin_prism_coeffs": None,
+    "ftheta_coeffs": None,
+    "viewmats_rs": None,
+}
+
+
+def _refuse(near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
+            distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw):
+    """ValueError for the first argument vksplat does not implement."""
+    shutter = getattr(rolling_shutter, "name", rolling_shutter)
+    refusals = [
+        (near_plane != 0.2, f"near_plane={near_plane}: vksplat culls at the original rasterizer's 0.2"),
+        (far_plane < 1e10, f"far_plane={far_plane}: vksplat has no far plane"),
+        (radius_clip != 0.0, "radius_clip is not supported"),
+        (eps2d != 0.3, f"eps2d={eps2d}: vksplat dilates 2D covariances by the original 0.3"),
+        (rasterize_mode != "classic", f"rasterize_mode={rasterize_mode!r}: only 'classic' has a backward pass"),
+        (camera_model != "pinhole", f"camera_model={camera_model!r}: only 'pinhole' is supported"),
+        (covars is not None, "covars are not supported: pass quats and scales"),
+        (distributed, "distributed rendering is not supported"),
+        (sparse_grad, "sparse_grad is not supported"),
+        (segmented, "segmented is not supported"),
+        (shutter not in (None, "GLOBAL"), f"rolling_shutter={rolling_shutter!r}: only a global shutter"),
+        (
+            isinstance(channel_chunk, bool) or not isinstance(channel_chunk, numbers.Integral)
+            or channel_chunk <= 0,
+            f"channel_chunk must be a positive integer, got {channel_chunk!r}",
+        ),
+    ]
+    for name, value in gsplat_kw.items():
+        off = _OFF_KEYWORDS[name]
+        bad = value is not None if off is None else bool(value)
+        refusals.append((bad, f"{name} is not supported: only {off!r} (got {value!r})"))
+    for bad, why in refusals:
+        if bad:
+            raise ValueError(why)
+
+
+def _check_arguments(layout: _Layout, means, quats, scales, opacities, colors, Ks, sh_degree):
+    bs, n = layout.batch, layout.N
+    _check_tensor("means", means, bs + (n, 3))
+    _check_tensor("quats", quats, bs + (n, 4))
+    _check_tensor("scales", scales, bs + (n, 3))
+    _check_tensor("opacities", opacities, bs + (n,))
+    _check_tensor("colors", colors, layout.colour_shape())
+    if sh_degree is not None:
+        if isinstance(sh_degree, bool) or not isinstance(sh_degree, numbers.Integral):
+            raise ValueError(f"sh_degree must be an integer 0..3 or None, got {sh_degree!r}")
+    elif layout.D == 0:
+        raise ValueError("colors must have at least one channel")
+    _check_tensor("Ks", Ks, bs + (layout.C, 3, 3))
+
+
+def _backgrounds(layout: _Layout, backgrounds, render_mode):
+    """(colour background [B..., C, 1, 1, D] or None, depth background or None); gsplat
+    ignores backgrounds for the depth-only modes, and so does this."""
+    if backgrounds is None or render_mode in ("D", "ED"):
+        return None, None
+    d = layout.D
+    plus_depth = render_mode in ("RGB+D", "RGB+ED")
+    _check_tensor("backgrounds", backgrounds, layout.batch + (layout.C, None))
+    got = backgrounds.shape[-1]
+    if got != d and not (plus_depth and got == d + 1):
+        want = f"{d}" + (f" (or {d + 1} with a depth background)" if plus_depth else "")
+        raise ValueError(
+            f"backgrounds must have {want} values per camera for colors of {d} channels and "
+            f"render_mode {render_mode!r}, got shape {tuple(backgrounds.shape)}"
         )
+    colour = backgrounds[..., :d][..., None, None, :]
+    depth = backgrounds[..., d][..., None, None, None] if got == d + 1 else None
+    return colour, depth
+
+
+def _meta(layout: _Layout, state, means2d, opacities, width, height) -> Dict[str, Any]:
+    fwds = state["fwds"]
+    radii = state["radii"].astype(np.int32)
+    depths = _stack(layout, fwds, lambda f: f.gaussian_depths).astype(np.float32)
+    conics = _stack(layout, fwds, lambda f: f.conics).astype(np.float32)
+    bs, C, N = layout.batch, layout.C, layout.N
+    ops = opacities.reshape(layout.B, 1, N).expand(layout.B, C, N)
+    meta: Dict[str, Any] = {
+        "means2d": means2d,
+        "width": width,
+        "height": height,
+        "tile_size": _TILE,
+        "n_batches": layout.B,
+        "n_cameras": C,
+    }
+    if layout.packed:
+        b_ids, c_ids, g_ids = state["ids"]
+        r = torch.from_numpy(radii[b_ids, c_ids, g_ids])
+        meta.update(
+            batch_ids=torch.from_numpy(b_ids.astype(np.int64)),
+            camera_ids=torch.from_numpy(c_ids.astype(np.int64)),
+            gaussian_ids=torch.from_numpy(g_ids.astype(np.int64)),
+            radii=torch.stack([r, r], dim=-1),
+            depths=torch.from_numpy(depths[b_ids, c_ids, g_ids]),
+            conics=torch.from_numpy(conics[b_ids, c_ids, g_ids]),
+            opacities=ops[torch.from_numpy(b_ids), torch.from_numpy(c_ids), torch.from_numpy(g_ids)],
+        )
+    else:
+        r = torch.from_numpy(radii.reshape(bs + (C, N)))
+        meta.update(
+            batch_ids=None,
+            camera_ids=None,
+            gaussian_ids=None,
+            radii=torch.stack([r, r], dim=-1),
+            depths=torch.from_numpy(depths.reshape(bs + (C, N))),
+            conics=torch.from_numpy(conics.reshape(bs + (C, N, 3))),
+            opacities=ops.reshape(bs + (C, N)),
+        )
+    return meta
 
 
 def rasterization(
@@ -176,6 +435,14 @@ def rasterization(
     camera_model: str = "pinhole",
     segmented: bool = False,
     covars: Optional[torch.Tensor] = None,
+    with_ut: bool = False,
+    with_eval3d: bool = False,
+    radial_coeffs: Optional[torch.Tensor] = None,
+    tangential_coeffs: Optional[torch.Tensor] = None,
+    thin_prism_coeffs: Optional[torch.Tensor] = None,
+    ftheta_coeffs: Any = None,
+    rolling_shutter: Any = None,
+    viewmats_rs: Optional[torch.Tensor] = None,
     device: Any = None,
     accumulation: str = "deterministic",
     kernel: str = "gaussian",
@@ -183,107 +450,77 @@ def rasterization(
 ) -> Tuple[torch.Tensor, torch.Tensor, Dict[str, Any]]:
     """gsplat's ``rasterization`` (see the module's docstring for where the rules differ).
 
-    ``means`` [N, 3], ``quats`` [N, 4] (w, x, y, z; normalised inside), ``scales`` [N, 3]
-    (linear), ``opacities`` [N] (in [0, 1]), ``colors`` [N, K, 3] SH coefficients with
-    ``sh_degree`` or [N, D] direct channels without (RGB, or 1 to 16 feature channels), ``viewmats`` [C, 4, 4] world-to-camera (OpenCV
-    axes), ``Ks`` [C, 3, 3]. ``render_mode``: ``"RGB"``, ``"D"`` (accumulated depth),
-    ``"ED"`` (expected depth), ``"RGB+D"``, ``"RGB+ED"``. ``backgrounds`` [C, 3] (or
-    [C, 4] with a depth channel). vksplat's own: ``device`` (Vulkan device index or name),
-    ``accumulation`` and ``kernel`` (``"power"``: the power-function falloff).
+    ``means`` [..., N, 3], ``quats`` [..., N, 4] (w, x, y, z; normalised inside),
+    ``scales`` [..., N, 3] (linear, either sign), ``opacities`` [..., N] (in [0, 1]),
+    ``colors`` [..., (C,) N, K, 3] SH coefficients with ``sh_degree`` or [..., (C,) N, D]
+    direct channels without (any D; more than 16 are blended 16 at a time), ``viewmats``
+    [..., C, 4, 4] world-to-camera (OpenCV axes), ``Ks`` [..., C, 3, 3]; ``...`` are
+    leading batch dimensions, the same for all. ``render_mode``: ``"RGB"``, ``"D"``
+    (accumulated depth), ``"ED"`` (expected depth), ``"RGB+D"``, ``"RGB+ED"``.
+    ``backgrounds`` [..., C, D] (or [..., C, D + 1] with a depth background for the
+    ``+D`` modes; ignored by the depth-only modes, as gsplat does). ``tile_size`` and
+    ``channel_chunk`` are gsplat's speed settings: accepted, vksplat uses its own.
+    vksplat's own: ``device`` (Vulkan device index or name), ``accumulation`` and
+    ``kernel`` (``"power"``: the power-function falloff).
 
-    Returns ``(render_colors [C, H, W, D], render_alphas [C, H, W, 1], meta)`` with meta
-    ``radii`` [C, N, 2] (int32, 0 where culled), ``means2d`` [C, N, 2], ``depths`` [C, N],
-    ``conics`` [C, N, 3], ``opacities`` [C, N], ``width``, ``height``, ``tile_size``,
-    ``n_cameras``, ``camera_ids`` and ``gaussian_ids`` (None: not packed).
+    Returns ``(render_colors [..., C, H, W, D], render_alphas [..., C, H, W, 1], meta)``.
+    meta, packed (the default): ``batch_ids``, ``camera_ids``, ``gaussian_ids`` [nnz]
+    (int64: the visible pairs), ``radii`` [nnz, 2] (int32), ``means2d`` [nnz, 2],
+    ``depths`` [nnz], ``conics`` [nnz, 3], ``opacities`` [nnz]; not packed: the same as
+    [..., C, N, ...] (``radii`` 0 where culled) and the ids None. Also ``width``,
+    ``height``, ``tile_size`` (vksplat's: 16), ``n_batches``, ``n_cameras``.
     """
     if unsupported:
         raise ValueError(f"vksplat.torch.rasterization does not support {sorted(unsupported)}")
-    refusals = [
-        (near_plane != 0.2, f"near_plane={near_plane}: vksplat culls at the original rasterizer's 0.2"),
-        (far_plane < 1e10, f"far_plane={far_plane}: vksplat has no far plane"),
-        (radius_clip != 0.0, "radius_clip is not supported"),
-        (eps2d != 0.3, f"eps2d={eps2d}: vksplat dilates 2D covariances by the original 0.3"),
-        (rasterize_mode != "classic", f"rasterize_mode={rasterize_mode!r}: only 'classic' has a backward pass"),
-        (camera_model != "pinhole", f"camera_model={camera_model!r}: only 'pinhole' is supported"),
-        (covars is not None, "covars are not supported: pass quats and scales"),
-        (distributed, "distributed rendering is not supported"),
-        (sparse_grad, "sparse_grad is not supported"),
-        (segmented, "segmented is not supported"),
-    ]
-    for bad, why in refusals:
-        if bad:
-            raise ValueError(why)
+    gsplat_kw = dict(
+        with_ut=with_ut, with_eval3d=with_eval3d, radial_coeffs=radial_coeffs,
+        tangential_coeffs=tangential_coeffs, thin_prism_coeffs=thin_prism_coeffs,
+        ftheta_coeffs=ftheta_coeffs, viewmats_rs=viewmats_rs,
+    )
+    _refuse(near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
+            distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw)
+    _size("tile_size", tile_size)
     modes = {"RGB", "D", "ED", "RGB+D", "RGB+ED"}
     if render_mode not in modes:
         raise ValueError(f"render_mode must be one of {sorted(modes)}, got {render_mode!r}")
-    if not (isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0):
-        raise ValueError(f"width and height must be positive integers, got {width!r}, {height!r}")
-    _check_tensor("means", means, (None, 3))
-    n = means.shape[0]
-    _check_tensor("quats", quats, (n, 4))
-    _check_tensor("scales", scales, (n, 3))
-    _check_tensor("opacities", opacities, (n,))
-    if sh_degree is None:
-        _check_tensor("colors", colors, (n, None))
-    else:
-        _check_tensor("colors", colors, (n, None, 3))
-    _check_tensor("viewmats", viewmats, (None, 4, 4))
-    n_cams = viewmats.shape[0]
-    _check_tensor("Ks", Ks, (n_cams, 3, 3))
-    bgs = None
-    depth_bg = None
-    if backgrounds is not None:
-        _check_tensor("backgrounds", backgrounds, (n_cams, None))
-        d = backgrounds.shape[1]
-        channels = 3 if sh_degree is not None else colors.shape[1]
-        if channels != 3:
+    width, height = _size("width", width), _size("height", height)
+    for name, t in (("viewmats", viewmats), ("Ks", Ks)):
+        if isinstance(t, torch.Tensor) and t.requires_grad and torch.is_grad_enabled():
             raise ValueError(
-                f"backgrounds: colors of {channels} channels are blended without a background"
+                f"{name} requires a gradient, which vksplat does not compute yet (a camera "
+                f"pose would learn nothing): pass {name}.detach()"
             )
-        want = 4 if render_mode in ("RGB+D", "RGB+ED") else 3
-        if d not in (3, want) or (render_mode in ("D", "ED")):
-            raise ValueError(
-                f"backgrounds must have shape ({n_cams}, {want}) for render_mode {render_mode!r}, "
-                f"got {tuple(backgrounds.shape)}"
-            )
-        bgs = [_np(backgrounds[c, :3]).astype(np.float64) for c in range(n_cams)]
-        if d == 4:
-            depth_bg = backgrounds[:, 3]
-    cams = [(_np(viewmats[c]), _np(Ks[c])) for c in range(n_cams)]
-    r = _rasterizer(device, accumulation)
+    layout = _Layout(means, colors, viewmats, sh_degree, bool(packed))
+    _check_arguments(layout, means, quats, scales, opacities, colors, Ks, sh_degree)
+    sh_degree = None if sh_degree is None else int(sh_degree)
+    layout.sh_degree = sh_degree
+    bg_colour, bg_depth = _backgrounds(layout, backgrounds, render_mode)
+    vm = _np(viewmats).reshape(layout.B, layout.C, 4, 4)
+    ks = _np(Ks).reshape(layout.B, layout.C, 3, 3)
+    cams = [[(vm[b, c], ks[b, c]) for c in range(layout.C)] for b in range(layout.B)]
     state: Dict[str, Any] = {
-        "args": (r, cams, sh_degree, bgs, kernel),
+        "rasterizer": _rasterizer(device, accumulation),
+        "layout": layout,
+        "cams": cams,
         "width": width,
         "height": height,
+        "kernel": kernel,
         "absgrad": absgrad,
     }
-    means2d = _Project.apply(means, quats, scales, opacities, colors, state)
-    rgb, alphas, expected = _Rasterize.apply(means2d, means, quats, scales, opacities, colors, state)
-    fwds = state["fwds"]
-    if render_mode in ("D", "RGB+D"):
-        depth = expected * alphas
-    else:
-        depth = expected
-    if depth_bg is not None:
-        depth = depth + (1.0 - alphas) * depth_bg[:, None, None, None]
+    # gsplat builds the covariance from the scales' squares: the sign is the gradient's.
+    # A zero scale is the smallest normal float (its gradient is 0, as gsplat's is).
+    unsigned = scales.abs().clamp_min(torch.finfo(torch.float32).tiny)
+    means2d = _Project.apply(means, quats, unsigned, opacities, colors, state)
+    rgb, alphas, expected = _Rasterize.apply(means2d, means, quats, unsigned, opacities, colors, state)
+    if bg_colour is not None:
+        rgb = rgb + (1.0 - alphas) * bg_colour
+    depth = expected * alphas if render_mode in ("D", "RGB+D") else expected
+    if bg_depth is not None:
+        depth = depth + (1.0 - alphas) * bg_depth
     if render_mode == "RGB":
         out = rgb
     elif render_mode in ("D", "ED"):
         out = depth
     else:
         out = torch.cat([rgb, depth], dim=-1)
-    radii = torch.from_numpy(np.stack([f.radii for f in fwds]))
-    meta: Dict[str, Any] = {
-        "radii": torch.stack([radii, radii], dim=-1),
-        "means2d": means2d,
-        "depths": torch.from_numpy(np.stack([f.gaussian_depths for f in fwds])),
-        "conics": torch.from_numpy(np.stack([f.conics for f in fwds])),
-        "opacities": opacities.detach().expand(n_cams, n).clone(),
-        "width": width,
-        "height": height,
-        "tile_size": tile_size,
-        "n_cameras": n_cams,
-        "camera_ids": None,
-        "gaussian_ids": None,
-    }
-    return out, alphas, meta
+    return out, alphas, _meta(layout, state, means2d, opacities, width, height)

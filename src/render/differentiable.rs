@@ -17,24 +17,43 @@ use crate::model::RenderOptions;
 
 pub use super::grad_accumulate::Accumulation;
 
-/// The parameters as the device renders them: other numbers of direct channels are
-/// blended as feature channels; direct RGB colours `c` become SH degree 0
-/// coefficients `(c - 0.5) / C0`, whose colour is `max(c, 0)` (to rounding): the device
-/// blends every colour through its SH path, so negative direct colours clamp at 0.
-fn device_params(params: &SplatParams<f32>) -> std::borrow::Cow<'_, SplatParams<f32>> {
-    match &params.colors {
-        ColorParams::Direct { values, channels } if *channels == 3 => {
-            let c0 = crate::model::sh::SH_C0;
-            std::borrow::Cow::Owned(SplatParams {
-                colors: ColorParams::Sh {
-                    degree: 0,
-                    coeffs: values.iter().map(|c| (c - 0.5) / c0).collect(),
-                },
-                ..params.clone()
-            })
-        }
-        _ => std::borrow::Cow::Borrowed(params),
+/// `frame`'s blended feature channels over `background` (`c + (1 - alpha) * bg`, what the
+/// device's colour path does): direct values are blended as feature channels, whatever
+/// their count, so that they are never clamped (the CPU reference's and gsplat's rule).
+fn over_background(frame: &mut Frame, background: [f32; 3]) {
+    if background == [0.0; 3] || frame.feature_count != 3 {
+        return;
     }
+    for (px, a) in frame.features.chunks_exact_mut(3).zip(&frame.alpha) {
+        for (c, bg) in px.iter_mut().zip(background) {
+            *c += (1.0 - a) * bg;
+        }
+    }
+}
+
+/// The pixel gradients of blended feature channels from those of the same channels over
+/// `background` ([`over_background`]): d/d(alpha) gains `-sum(dL/dc * bg)`.
+fn behind_background<'a>(
+    grads: &'a PixelGrads<f32>,
+    features: Option<(&[f32], usize)>,
+    background: [f32; 3],
+) -> std::borrow::Cow<'a, PixelGrads<f32>> {
+    if features.is_none() || background == [0.0; 3] || grads.color.is_empty() {
+        return std::borrow::Cow::Borrowed(grads);
+    }
+    let pixels = grads.color.len() / 3;
+    let mut alpha = if grads.alpha.is_empty() {
+        vec![0.0; pixels]
+    } else {
+        grads.alpha.clone()
+    };
+    for (a, c) in alpha.iter_mut().zip(grads.color.chunks_exact(3)) {
+        *a -= c.iter().zip(background).map(|(g, bg)| g * bg).sum::<f32>();
+    }
+    std::borrow::Cow::Owned(PixelGrads {
+        alpha,
+        ..grads.clone()
+    })
 }
 
 /// The last forward pass: what its backward pass needs.
@@ -44,14 +63,12 @@ struct Forward {
     scene: GpuScene,
 }
 
-/// Whether `params` are blended as feature channels: direct values, not 3 of them unless
-/// a shader reads them (`shaded`).
-fn as_features(params: &SplatParams<f32>, shaded: bool) -> Option<(&[f32], usize)> {
+/// The direct values of `params`, blended as feature channels (any number of them, RGB
+/// too: never clamped), or None for SH coefficients.
+fn as_features(params: &SplatParams<f32>) -> Option<(&[f32], usize)> {
     match &params.colors {
-        ColorParams::Direct { channels, values } if *channels != 3 || shaded => {
-            Some((values.as_slice(), *channels))
-        }
-        _ => None,
+        ColorParams::Direct { channels, values } => Some((values.as_slice(), *channels)),
+        ColorParams::Sh { .. } => None,
     }
 }
 
@@ -139,7 +156,7 @@ impl DiffRasterizer {
         }
         if let ColorParams::Direct { channels, .. } = params.colors {
             let max = 4 * crate::gpu::shader_set::MAX_FEATURE_GROUPS as usize;
-            if channels > max && (channels != 3 || shader.is_some()) {
+            if channels > max {
                 return Err(GpuError::InvalidArgument(format!(
                     "colours of {channels} direct channels: the device differentiates at most \
                      {max}; use the CPU reference"
@@ -164,12 +181,7 @@ impl DiffRasterizer {
     ) -> GpuResult<(Frame, u64)> {
         Self::check(params, cam, opts, self.shader())?;
         self.last = None;
-        let shaded = self.shader.is_some();
-        let activated = if shaded {
-            params.to_activated()
-        } else {
-            device_params(params).to_activated()
-        };
+        let activated = params.to_activated();
         let scene = self.renderer.upload(&activated)?;
         let (frame, features) = if let Some((_, gpu)) = &self.shader {
             let features = self.renderer.upload_features(&activated)?;
@@ -177,16 +189,20 @@ impl DiffRasterizer {
                 .renderer
                 .render_shaded(&scene, &features, gpu, cam, opts)?;
             (frame, Some(features))
-        } else if as_features(params, false).is_some() {
-            if opts.background != [0.0; 3] {
-                return Err(GpuError::InvalidArgument(
-                    "feature channels are blended without a background on the device".into(),
-                ));
+        } else if let Some((_, channels)) = as_features(params) {
+            if opts.background != [0.0; 3] && channels != 3 {
+                return Err(GpuError::InvalidArgument(format!(
+                    "{channels} feature channels are blended without a background on the device"
+                )));
             }
             let features = self.renderer.upload_features(&activated)?;
+            let bare = RenderOptions {
+                background: [0.0; 3],
+                ..opts.clone()
+            };
             let frame = self
                 .renderer
-                .render_features(&scene, &features, cam, opts)?;
+                .render_features(&scene, &features, cam, &bare)?;
             (frame, Some(features))
         } else {
             (self.renderer.render(&scene, cam, opts)?, None)
@@ -214,6 +230,10 @@ impl DiffRasterizer {
             frame: frame.clone(),
             scene,
         });
+        let mut frame = frame;
+        if self.shader.is_none() {
+            over_background(&mut frame, opts.background);
+        }
         Ok((frame, token))
     }
 
@@ -295,7 +315,7 @@ impl DiffRasterizer {
                 last.scene.len()
             )));
         }
-        let features = as_features(params, self.shader.is_some());
+        let features = as_features(params);
         let (mut g, mlp_grads) = match (&self.shader, features) {
             (Some((mlp, gpu)), Some(features)) => {
                 let (g, flat) = self.renderer.backward_shaded(
@@ -310,19 +330,17 @@ impl DiffRasterizer {
                 let m = MlpParams::from_flat(mlp, &flat).map_err(GpuError::Internal)?;
                 (g, Some(m))
             }
-            _ => (
-                self.renderer
-                    .backward_with_features(&last.scene, features, &last.frame, grads)?,
-                None,
-            ),
-        };
-        if let (ColorParams::Direct { .. }, None) = (&params.colors, features) {
-            // Through SH degree 0 (`device_params`): dL/dc = dL/d sh0 / C0.
-            let c0 = crate::model::sh::SH_C0;
-            for v in g.colors.iter_mut() {
-                *v /= c0;
+            _ => {
+                let grads = behind_background(grads, features, opts.background);
+                let g = self.renderer.backward_with_features(
+                    &last.scene,
+                    features,
+                    &last.frame,
+                    &grads,
+                )?;
+                (g, None)
             }
-        }
+        };
         // The device differentiates with respect to the normalised quaternions q / |q|.
         for (gq, q) in g.quats.iter_mut().zip(&params.quats) {
             let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();

@@ -547,6 +547,39 @@ fn gpu_backward_matches_the_reference_for_feature_channels() {
     }
 }
 
+/// Direct RGB values (negative ones included) over a background on the device: blended as
+/// given, never clamped, as the reference and gsplat do; image and gradients equal the
+/// reference's.
+#[test]
+fn gpu_direct_rgb_is_not_clamped_and_matches_the_reference() {
+    let cam = gpu_camera();
+    let mut r = diff_rasterizer(None);
+    let p = grad_scene(60, 1300, None, 3);
+    let ColorParams::Direct { values, .. } = &p.colors else {
+        unreachable!("direct values were asked for")
+    };
+    assert!(values.iter().filter(|&&v| v < -0.2).count() > 20);
+    let opts = RenderOptions {
+        background: [0.2, 0.4, 0.1],
+        ..Default::default()
+    };
+    let (frame, _) = r.forward(&p, &cam, &opts).unwrap();
+    let img = forward(&p.to_f64(), &cam, &opts, &[0.2, 0.4, 0.1]).unwrap();
+    assert_eq!(frame.feature_count, 3);
+    let worst = frame
+        .features
+        .iter()
+        .zip(&img.color)
+        .map(|(a, b)| (*a as f64 - b).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-4, "largest difference {worst}");
+    assert!(
+        img.color.iter().filter(|&&c| c < -0.05).count() > 50,
+        "the reference frame has no negative colours: the scene tests nothing"
+    );
+    gpu_against_reference(&mut r, &p, &cam, &opts, 130);
+}
+
 /// The deterministic accumulation gives bit-identical gradients run after run, also when
 /// the backward pass renders its frame again; the float-atomic fast mode and its
 /// compare-and-swap fallback agree with it to rounding.

@@ -1,0 +1,391 @@
+"""vksplat.torch.rasterization as a drop-in for gsplat's (issue 38): what gsplat's own
+examples and strategies pass to it. gsplat (1.5.3, its pure-torch strategy code; CI
+installs it without its CUDA build) drives densification through vksplat, packed and
+not; the two CUDA kernels its MCMC strategy calls are replaced by torch equivalents
+written here (gsplat's CUDA build is not installed)."""
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+from vksplat import raster
+
+if os.environ.get("VKSPLAT_REQUIRE_TORCH") == "1":
+    import torch  # CI installs the torch extra and gsplat: these tests must run there
+    import gsplat.strategy as gs_strategy
+else:
+    torch = pytest.importorskip("torch")
+    gs_strategy = pytest.importorskip("gsplat.strategy")
+
+from vksplat.torch import rasterization  # noqa: E402
+
+from test_torch import GROUPS, H, W, cameras, rel, scene, tensors  # noqa: E402
+
+
+def cam_tensors(cams):
+    return (torch.tensor(np.stack([c.viewmat for c in cams])),
+            torch.tensor(np.stack([c.K for c in cams])))
+
+
+def render(t, cams, **kw):
+    vm, Ks = cam_tensors(cams)
+    return rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, **kw)
+
+
+def grads_of(s, cams, loss_fn, **kw):
+    t = tensors(s)
+    out, alphas, meta = render(t, cams, **kw)
+    loss_fn(out, alphas, meta).backward()
+    return {k: t[k].grad.numpy().copy() for k in GROUPS}, out.detach(), meta
+
+
+def weighted(seed):
+    def loss(out, alphas, meta):
+        g = torch.Generator().manual_seed(seed)
+        return (out * torch.randn(out.shape, generator=g)).sum() + (
+            alphas * torch.randn(alphas.shape, generator=g)).sum()
+    return loss
+
+
+# 1. Signed scales: the covariance is built from their squares, as gsplat's.
+def test_signed_scales_render_as_their_magnitudes_with_signed_gradients():
+    s = scene(n=80, seed=10)
+    cams = cameras(1)
+    flip = np.random.default_rng(10).random(s["scales"].shape) < 0.5
+    signed = dict(s, scales=np.where(flip, -s["scales"], s["scales"]).astype(np.float32))
+    g_pos, img_pos, _ = grads_of(s, cams, weighted(1), sh_degree=3)
+    g_sig, img_sig, _ = grads_of(signed, cams, weighted(1), sh_degree=3)
+    assert torch.equal(img_pos, img_sig)
+    np.testing.assert_array_equal(g_sig["scales"], np.where(flip, -1, 1) * g_pos["scales"])
+    for k in ("means", "quats", "opacities", "colors"):
+        np.testing.assert_array_equal(g_sig[k], g_pos[k])
+    # A zero scale renders (dilated to a pixel-sized splat) and has a zero gradient.
+    zero = dict(s, scales=s["scales"].copy())
+    zero["scales"][:5, 0] = 0.0
+    g0, img0, _ = grads_of(zero, cams, weighted(1), sh_degree=3)
+    assert torch.isfinite(img0).all() and (g0["scales"][:5, 0] == 0).all()
+
+
+def fit_image_like_gsplats_example(iterations, packed):
+    """gsplat's examples/image_fitting.py (v1.5.3), its training loop as written there with
+    only the import changed (and the device: CPU tensors); 64x64 and 500 points."""
+    torch.manual_seed(0)
+    h = w = 64
+    ys, xs = torch.meshgrid(torch.linspace(0, 1, h), torch.linspace(0, 1, w), indexing="ij")
+    gt_image = torch.stack([xs, ys, (xs - 0.5) ** 2 * 4], -1)
+    num_points = 500
+    fov_x = math.pi / 2.0
+    focal = 0.5 * float(w) / math.tan(0.5 * fov_x)
+    bd = 2
+    means = bd * (torch.rand(num_points, 3) - 0.5)
+    scales = torch.rand(num_points, 3)
+    rgbs = torch.rand(num_points, 3)
+    u, v, x = torch.rand(num_points, 1), torch.rand(num_points, 1), torch.rand(num_points, 1)
+    quats = torch.cat([
+        torch.sqrt(1.0 - u) * torch.sin(2.0 * math.pi * v),
+        torch.sqrt(1.0 - u) * torch.cos(2.0 * math.pi * v),
+        torch.sqrt(u) * torch.sin(2.0 * math.pi * x),
+        torch.sqrt(u) * torch.cos(2.0 * math.pi * x),
+    ], -1)
+    opacities = torch.ones(num_points)
+    viewmat = torch.tensor([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 8.0], [0, 0, 0, 1.0]])
+    for p in (means, scales, quats, rgbs, opacities):
+        p.requires_grad = True
+    optimizer = torch.optim.Adam([rgbs, means, scales, opacities, quats], 0.01)
+    mse_loss = torch.nn.MSELoss()
+    K = torch.tensor([[focal, 0, w / 2], [0, focal, h / 2], [0, 0, 1]])
+    losses = []
+    for _ in range(iterations):
+        renders = rasterization(
+            means, quats / quats.norm(dim=-1, keepdim=True), scales, torch.sigmoid(opacities),
+            torch.sigmoid(rgbs), viewmat[None], K[None], w, h, packed=packed,
+        )[0]
+        loss = mse_loss(renders[0], gt_image)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    return losses, scales
+
+
+def test_gsplats_image_fitting_loop_runs_with_raw_signed_scales():
+    losses, scales = fit_image_like_gsplats_example(40, packed=False)
+    # The loop drives raw scales through zero: negative ones are rendered, not refused.
+    assert (scales < 0).any()
+    # Measured: 0.285 -> 0.232 in 40 steps (gsplat's example runs 1,000).
+    assert losses[-1] < 0.9 * losses[0], losses
+
+
+# 6. gsplat's keyword defaults are accepted at the values that mean "off".
+def test_gsplats_off_keywords_are_accepted_and_on_values_refused():
+    s = scene(n=30, seed=11)
+    t = tensors(s, grad=False)
+    cams = cameras(1)
+    base, _, _ = render(t, cams, sh_degree=3)
+    shutter = pytest.importorskip("gsplat.cuda._wrapper").RollingShutterType.GLOBAL
+    out, _, _ = render(t, cams, sh_degree=3, with_ut=False, with_eval3d=False,
+                       radial_coeffs=None, rolling_shutter=shutter, tile_size=32,
+                       channel_chunk=8)
+    assert torch.equal(base, out)
+    for kw, match in [({"with_ut": True}, "with_ut is not supported"),
+                      ({"with_eval3d": True}, "with_eval3d is not supported"),
+                      ({"radial_coeffs": torch.zeros(1, 6)}, "radial_coeffs is not supported"),
+                      ({"tile_size": 0}, "tile_size must be a positive integer"),
+                      ({"channel_chunk": 0}, "channel_chunk must be a positive integer")]:
+        with pytest.raises(ValueError, match=match):
+            render(t, cams, sh_degree=3, **kw)
+    # A camera pose that would learn nothing in silence is refused.
+    vm, Ks = cam_tensors(cams)
+    for name, a in (("viewmats", vm.requires_grad_()), ("Ks", Ks.requires_grad_())):
+        args = dict(viewmats=vm.detach(), Ks=Ks.detach())
+        args[name] = a
+        with pytest.raises(ValueError, match=f"{name} requires a gradient"):
+            rasterization(*[t[k] for k in GROUPS], args["viewmats"], args["Ks"], W, H)
+
+
+# 2. The packed layout: one row per visible (camera, Gaussian) pair.
+def test_packed_meta_is_the_unpacked_meta_at_the_visible_pairs():
+    s = scene(n=120, seed=12)
+    cams = cameras(2)
+    t = tensors(s)
+    out_u, _, mu = render(t, cams, sh_degree=3, packed=False, absgrad=True)
+    mu["means2d"].retain_grad()
+    (out_u ** 2).sum().backward()
+    tp = tensors(s)
+    out_p, _, mp = render(tp, cams, sh_degree=3, absgrad=True)  # packed: gsplat's default
+    mp["means2d"].retain_grad()
+    (out_p ** 2).sum().backward()
+    assert torch.equal(out_u, out_p)
+    c, g = mp["camera_ids"], mp["gaussian_ids"]
+    visible = mu["radii"][..., 0] > 0
+    assert len(g) == int(visible.sum()) > 100 and c.dtype == torch.int64
+    assert torch.equal(visible[c, g], torch.ones(len(g), dtype=torch.bool))
+    assert (mp["batch_ids"] == 0).all() and mu["gaussian_ids"] is None
+    for key in ("radii", "depths", "conics", "opacities"):
+        assert torch.equal(mp[key], mu[key][c, g]), key
+    assert torch.equal(mp["means2d"].detach(), mu["means2d"].detach()[c, g])
+    assert torch.equal(mp["means2d"].grad, mu["means2d"].grad[c, g])
+    assert torch.equal(mp["means2d"].absgrad, mu["means2d"].absgrad[c, g])
+    for k in GROUPS:
+        assert torch.equal(tp[k].grad, t[k].grad), k
+    assert mp["tile_size"] == 16 and mp["n_cameras"] == 2 and mp["n_batches"] == 1
+
+
+def relocation_in_torch(opacities, scales, ratios, binoms):
+    """gsplat's `compute_relocation` (its CUDA kernel, Equation 9 of the 3DGS-MCMC paper)."""
+    n_max = binoms.shape[0]
+    n = ratios.clamp(1, n_max).int()
+    new_opacities = 1.0 - (1.0 - opacities) ** (1.0 / n)
+    denom = torch.zeros_like(opacities)
+    for i in range(1, n_max + 1):
+        for k in range(i):
+            term = binoms[i - 1, k] * (-1.0) ** k / math.sqrt(k + 1) * new_opacities ** (k + 1)
+            denom = denom + torch.where(i <= n, term, torch.zeros_like(term))
+    return new_opacities, (opacities / denom)[:, None] * scales
+
+
+@pytest.fixture
+def torch_mcmc_kernels(monkeypatch):
+    from gsplat.cuda import _torch_impl
+    import gsplat.strategy.ops as ops
+
+    calls = {"relocation": 0}
+
+    def relocation(**kwargs):
+        calls["relocation"] += 1
+        return relocation_in_torch(**kwargs)
+
+    monkeypatch.setattr(ops, "compute_relocation", relocation)
+    monkeypatch.setattr(ops, "quat_scale_to_covar_preci", _torch_impl._quat_scale_to_covar_preci)
+    return calls
+
+
+def train_with_strategy(strategy, packed, steps=40, n=200):
+    """A small 3DGS training loop as gsplat's simple_trainer.py runs one: log scales,
+    logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps."""
+    s = scene(n=n, seed=13, degree=1)
+    cams = cameras(2)
+    target_t = tensors(scene(n=n, seed=14, degree=1), grad=False)
+    targets, _, _ = render(target_t, cams, sh_degree=1)
+    params = torch.nn.ParameterDict({
+        "means": torch.nn.Parameter(torch.tensor(s["means"])),
+        "scales": torch.nn.Parameter(torch.log(torch.tensor(s["scales"]))),
+        "quats": torch.nn.Parameter(torch.tensor(s["quats"])),
+        "opacities": torch.nn.Parameter(torch.logit(torch.tensor(s["opacities"]))),
+        "sh0": torch.nn.Parameter(torch.tensor(s["colors"][:, :1])),
+        "shN": torch.nn.Parameter(torch.tensor(s["colors"][:, 1:])),
+    })
+    optimizers = {k: torch.optim.Adam([params[k]], lr=0.01) for k in params}
+    strategy.check_sanity(params, optimizers)
+    state = strategy.initialize_state()
+    vm, Ks = cam_tensors(cams)
+    losses = []
+    for step in range(steps):
+        colors = torch.cat([params["sh0"], params["shN"]], 1)
+        out, _, info = rasterization(
+            params["means"], params["quats"], torch.exp(params["scales"]),
+            torch.sigmoid(params["opacities"]), colors, vm, Ks, W, H, sh_degree=1,
+            packed=packed, absgrad=getattr(strategy, "absgrad", False),
+        )
+        loss = (out - targets).abs().mean()
+        strategy.step_pre_backward(params, optimizers, state, step, info)
+        loss.backward()
+        for opt in optimizers.values():
+            opt.step()
+            opt.zero_grad(set_to_none=True)
+        if isinstance(strategy, gs_strategy.MCMCStrategy):
+            strategy.step_post_backward(params, optimizers, state, step, info, lr=0.01)
+        else:
+            strategy.step_post_backward(params, optimizers, state, step, info, packed=packed)
+        losses.append(loss.item())
+    return params, losses
+
+
+@pytest.mark.parametrize("packed", [True, False])
+def test_gsplats_default_strategy_densifies_through_vksplat(packed):
+    strategy = gs_strategy.DefaultStrategy(
+        refine_start_iter=10, refine_every=10, reset_every=1000, grow_grad2d=2e-5,
+        refine_scale2d_stop_iter=30,
+    )
+    params, losses = train_with_strategy(strategy, packed)
+    assert len(params["means"]) > 200, "nothing was duplicated or split"
+    assert losses[-1] < losses[0], losses
+
+
+def test_gsplats_default_strategy_is_the_same_packed_or_not():
+    runs = []
+    for packed in (True, False):
+        strategy = gs_strategy.DefaultStrategy(
+            refine_start_iter=10, refine_every=10, reset_every=1000, grow_grad2d=2e-5,
+            refine_scale2d_stop_iter=30,
+        )
+        torch.manual_seed(3)  # the strategy's split samples
+        params, _ = train_with_strategy(strategy, packed, steps=25)
+        runs.append({k: v.detach().clone() for k, v in params.items()})
+    for k in runs[0]:
+        assert torch.equal(runs[0][k], runs[1][k]), k
+
+
+@pytest.mark.parametrize("packed", [True, False])
+def test_gsplats_mcmc_strategy_relocates_and_adds_through_vksplat(torch_mcmc_kernels, packed):
+    torch.manual_seed(4)
+    strategy = gs_strategy.MCMCStrategy(cap_max=260, refine_start_iter=10, refine_every=10,
+                                        min_opacity=0.05)
+    params, losses = train_with_strategy(strategy, packed, steps=31)
+    # Refinements at steps 20 and 30 each add 5 % (gsplat's rule): 200 -> 210 -> 220.
+    assert len(params["means"]) == 220, len(params["means"])
+    assert torch_mcmc_kernels["relocation"] >= 2
+    assert losses[-1] < losses[0], losses
+
+
+def test_relocation_in_torch_keeps_a_single_gaussian():
+    binoms = torch.tensor([[math.comb(i, k) for k in range(10)] for i in range(10)],
+                          dtype=torch.float32)
+    o, s = torch.tensor([0.3, 0.6]), torch.ones(2, 3)
+    new_o, new_s = relocation_in_torch(o, s, torch.tensor([1.0, 1.0]), binoms)
+    assert torch.allclose(new_o, o) and torch.allclose(new_s, s)
+    # Two copies of opacity 1 - (1 - o)^(1/2) each composite to o.
+    new_o, _ = relocation_in_torch(o, s, torch.tensor([2.0, 2.0]), binoms)
+    assert torch.allclose(1 - (1 - new_o) ** 2, o)
+
+
+# 8. Per-camera colours, batch dimensions, many channels, numpy sizes, backgrounds.
+def test_per_camera_colours_equal_one_camera_at_a_time():
+    s = scene(n=60, seed=15, degree=0)
+    rng = np.random.default_rng(15)
+    per_cam = rng.uniform(-0.2, 1.0, (2, 60, 3)).astype(np.float32)
+    cams = cameras(2)
+    t = tensors(dict(s, colors=per_cam))
+    out, _, _ = render(t, cams)
+    weighted(2)(out, torch.zeros(1), None).backward()
+    g = torch.Generator().manual_seed(2)
+    w = torch.randn(out.shape, generator=g)
+    for c in range(2):
+        tc = tensors(dict(s, colors=per_cam[c]))
+        oc, _, _ = render(tc, [cams[c]])
+        assert torch.equal(oc[0], out[c].detach())
+        (oc * w[c:c + 1]).sum().backward()
+        np.testing.assert_allclose(t["colors"].grad[c].numpy(), tc["colors"].grad.numpy(),
+                                   rtol=0, atol=0)
+
+
+def test_leading_batch_dimensions_equal_separate_calls():
+    sets = [scene(n=40, seed=16 + b) for b in range(2)]
+    batched = {k: np.stack([s[k] for s in sets]) for k in GROUPS}
+    cams = cameras(2)
+    vm, Ks = cam_tensors(cams)
+    t = tensors(batched)
+    out, alphas, meta = rasterization(*[t[k] for k in GROUPS], vm[None].repeat(2, 1, 1, 1),
+                                      Ks[None].repeat(2, 1, 1, 1), W, H, sh_degree=3,
+                                      packed=False)
+    assert out.shape == (2, 2, H, W, 3) and meta["radii"].shape == (2, 2, 40, 2)
+    weighted(3)(out, alphas, meta).backward()
+    g = torch.Generator().manual_seed(3)
+    wc, wa = torch.randn(out.shape, generator=g), torch.randn(alphas.shape, generator=g)
+    for b in range(2):
+        tb = tensors(sets[b])
+        ob, ab, _ = render(tb, cams, sh_degree=3)
+        assert torch.equal(ob, out[b].detach())
+        ((ob * wc[b]).sum() + (ab * wa[b]).sum()).backward()
+        for k in GROUPS:
+            assert rel(t[k].grad[b].numpy(), tb[k].grad.numpy()) < 1e-6, k
+    _, _, mp = rasterization(*[t[k] for k in GROUPS], vm[None].repeat(2, 1, 1, 1),
+                             Ks[None].repeat(2, 1, 1, 1), W, H, sh_degree=3)
+    assert set(mp["batch_ids"].tolist()) == {0, 1}
+    visible = meta["radii"][..., 0] > 0
+    assert len(mp["gaussian_ids"]) == int(visible.sum())
+
+
+def test_more_than_16_channels_equal_the_reference():
+    s = scene(n=40, seed=17, degree=0)
+    s["colors"] = np.random.default_rng(17).normal(size=(40, 21)).astype(np.float32)
+    cam = cameras(1)[0]
+    t = tensors(s)
+    out, alphas, _ = render(t, [cam])
+    assert out.shape == (1, H, W, 21)
+    rng = np.random.default_rng(18)
+    wc = rng.normal(size=(H, W, 21)).astype(np.float32)
+    wa = rng.normal(size=(H, W)).astype(np.float32)
+    ((out[0] * torch.tensor(wc)).sum() + (alphas[0, ..., 0] * torch.tensor(wa)).sum()).backward()
+    ref = raster.Rasterizer(backend="reference")
+    f = ref.forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H)
+    assert np.abs(f.colors - out[0].detach().numpy()).max() < 1e-4
+    gr = ref.backward(f, grad_colors=wc, grad_alphas=wa)
+    for k in GROUPS:
+        assert rel(t[k].grad.numpy(), gr[k]) <= 1e-3, k
+
+
+# 9. Direct colours are blended as given, never clamped, whatever their count.
+@pytest.mark.parametrize("channels", [3, 5])
+def test_direct_colours_are_not_clamped(channels):
+    s = scene(n=50, seed=19, degree=0)
+    s["colors"] = np.random.default_rng(19).uniform(-1, 1, (50, channels)).astype(np.float32)
+    cam = cameras(1)[0]
+    out, _, _ = render(tensors(s, grad=False), [cam])
+    ref = raster.Rasterizer(backend="reference").forward(
+        **s, viewmat=cam.viewmat, K=cam.K, width=W, height=H)
+    assert (ref.colors < -0.05).sum() > 50
+    assert np.abs(ref.colors - out[0].numpy()).max() < 1e-4
+
+
+def test_numpy_sizes_and_backgrounds_in_depth_only_modes():
+    s = scene(n=30, seed=20)
+    cams = cameras(2)
+    t = tensors(s, grad=False)
+    vm, Ks = cam_tensors(cams)
+    args = [t[k] for k in GROUPS] + [vm, Ks]
+    base, _, _ = rasterization(*args, W, H, sh_degree=3, render_mode="ED")
+    out, _, _ = rasterization(*args, np.int64(W), np.int32(H), sh_degree=np.int64(3),
+                              render_mode="ED", backgrounds=torch.ones(2, 3))
+    assert torch.equal(base, out)
+    # A background for direct feature channels is blended in (1 - alpha) * background.
+    f = dict(s, colors=np.random.default_rng(20).normal(size=(30, 5)).astype(np.float32))
+    tf = tensors(f, grad=False)
+    plain, alphas, _ = render(tf, cams)
+    bg = torch.tensor(np.random.default_rng(21).normal(size=(2, 5)).astype(np.float32))
+    over, _, _ = render(tf, cams, backgrounds=bg)
+    assert torch.allclose(over, plain + (1 - alphas) * bg[:, None, None, :], atol=1e-6)
+    with pytest.raises(ValueError, match="width must be a positive integer"):
+        rasterization(*args, 2.5, H, sh_degree=3)
