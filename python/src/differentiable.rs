@@ -136,6 +136,7 @@ pub(crate) fn grads_dict<'py, T: bytemuck::Pod>(
     d.set_item("colors", byte_array(py, &g.colors))?;
     d.set_item("means2d", byte_array(py, &g.means2d))?;
     d.set_item("absgrad", byte_array(py, &g.absgrad))?;
+    d.set_item("screen", byte_array(py, &g.screen))?;
     Ok(d)
 }
 
@@ -254,7 +255,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None))]
+    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false))]
     fn backward<'py>(
         &self,
         py: Python<'py>,
@@ -267,6 +268,7 @@ impl PyRasterizer {
         grad_alpha: Option<&[u8]>,
         grad_depth: Option<&[u8]>,
         shader: Option<&[u8]>,
+        screen: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
@@ -281,6 +283,9 @@ impl PyRasterizer {
                     PyRuntimeError::new_err("the rasterizer failed earlier; create a new one")
                 })?;
                 st.set_shader(shader.as_ref())
+                    .map_err(|e| py_err(e.into()))?;
+                st.renderer()
+                    .set_screen_grads(screen)
                     .map_err(|e| py_err(e.into()))?;
                 let out = if shader.is_some() {
                     st.backward_shaded(&p, &cam, &opts, token, &g)

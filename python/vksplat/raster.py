@@ -44,6 +44,7 @@ _GRAD_SHAPES = {
     "scales": 3,
     "means2d": 2,
     "absgrad": 2,
+    "screen": 8,
 }
 
 
@@ -348,13 +349,17 @@ class Rasterizer:
         grad_colors: Optional[ArrayLike] = None,
         grad_alphas: Optional[ArrayLike] = None,
         grad_depths: Optional[ArrayLike] = None,
+        screen: bool = False,
     ) -> Dict[str, np.ndarray]:
         """The gradients of a loss with respect to the forward pass's Gaussians, from its
         gradients with respect to the pixels (any of them may be None: zero). Returns
         ``means`` (N, 3), ``quats`` (N, 4, the unnormalised quaternions given), ``scales``,
         ``opacities``, ``colors`` (the shape given: SH (N, K, 3) with zeros past the degree,
         or (N, D)), ``means2d`` (N, 2, pixels) and ``absgrad`` (N, 2); for a shaded pass
-        also ``shader_weights`` and ``shader_biases``, one array per layer."""
+        also ``shader_weights`` and ``shader_biases``, one array per layer. With
+        ``screen`` (always from the reference backend) also ``screen`` (N, 8): dL/d(conic
+        A, B, C), dL/d(the view's SH colour, 0 for direct values), dL/d(view depth), 0:
+        the projected quantities' gradients, from which a camera's follows."""
         if not isinstance(fwd, Forward):
             raise TypeError("fwd must be what Rasterizer.forward returned")
         if fwd._backend != self.backend:
@@ -380,7 +385,10 @@ class Rasterizer:
                 ga,
                 gd,
                 shader_bytes,
+                bool(screen),
             )
+            if not screen:
+                raw.pop("screen", None)
             dtype = "<f4"
         n = fwd._params[0]
         direct = fwd._params[7]

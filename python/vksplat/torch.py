@@ -7,8 +7,10 @@
 Differentiable with torch autograd with respect to ``means``, ``quats``, ``scales`` (of
 either sign: the covariance is built from their squares, as gsplat's), ``opacities``,
 ``colors`` (SH coefficients, or any number of direct channels, shared by the cameras or
-per camera) and ``backgrounds``; ``meta["means2d"]`` receives dL/d(2D means) when it
-retains its gradient, and ``meta["means2d"].absgrad`` the sum of their absolute values
+per camera), ``backgrounds``, ``viewmats`` and ``Ks`` (a camera pose is learned
+through it); ``meta["means2d"]``, ``meta["depths"]`` and ``meta["conics"]`` are graph
+tensors (a loss on them reaches the Gaussians and the cameras); ``meta["means2d"]``
+receives dL/d(2D means) when it retains its gradient, and ``meta["means2d"].absgrad`` the sum of their absolute values
 with ``absgrad=True`` (what densification reads), in gsplat's packed layout (``packed=True``,
 its default: one row per visible camera-Gaussian pair, ``gaussian_ids``, ``camera_ids``)
 or not ([C, N]). Leading batch dimensions are taken as gsplat takes them. CPU float32
@@ -37,6 +39,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 import torch
 
+from . import _projection
 from . import raster as _raster
 
 __all__ = ["rasterization"]
@@ -156,11 +159,12 @@ def _stack(layout: _Layout, fwds, get) -> np.ndarray:
 
 class _Project(torch.autograd.Function):
     """Runs the forward passes; returns the 2D means (an input of _Rasterize, so that
-    ``meta["means2d"].grad`` is dL/d(2D means) as in gsplat). Its own backward passes
-    nothing on: _Rasterize's gradients already include the path through the 2D means."""
+    ``meta["means2d"].grad`` is dL/d(2D means) as in gsplat), the depths and the conics.
+    Its backward passes on what losses on these meta tensors add (the image's own
+    gradients, which already include the path through the 2D means, are _Rasterize's)."""
 
     @staticmethod
-    def forward(ctx, means, quats, scales, opacities, colors, state):  # type: ignore[override]
+    def forward(ctx, means, quats, scales, opacities, colors, viewmats, Ks, state):  # type: ignore[override]
         layout: _Layout = state["layout"]
         B, N = layout.B, layout.N
         arrays = (
@@ -175,25 +179,102 @@ class _Project(torch.autograd.Function):
             state["kernel"],
         )
         state["fwds"] = fwds
-        full = _stack(layout, fwds, lambda f: f.means2d).astype(np.float32)  # [B, C, N, 2]
+        ctx.state = state
+        ctx.inputs = [t.detach() for t in (means, quats, scales, viewmats, Ks)]
         radii = _stack(layout, fwds, lambda f: f.radii)  # [B, C, N]
         state["radii"] = radii
         if layout.packed:
-            ids = np.nonzero(radii > 0)
-            state["ids"] = ids
-            return torch.from_numpy(np.ascontiguousarray(full[ids]))
-        return torch.from_numpy(full.reshape(layout.batch + (layout.C, N, 2)))
+            state["ids"] = np.nonzero(radii > 0)
+        outs = (
+            _stack(layout, fwds, lambda f: f.means2d),
+            _stack(layout, fwds, lambda f: f.gaussian_depths),
+            _stack(layout, fwds, lambda f: f.conics),
+        )
+        return tuple(torch.from_numpy(_to_layout(layout, state, o)) for o in outs)
 
     @staticmethod
-    def backward(ctx, grad_means2d):  # type: ignore[override]
-        return None, None, None, None, None, None
+    def backward(ctx, g_means2d, g_depths, g_conics):  # type: ignore[override]
+        state = ctx.state
+        layout: _Layout = state["layout"]
+        image = state.pop("image_g2d", None)
+        if g_means2d is not None and image is not None:
+            g_means2d = g_means2d - image
+        grads = [_from_layout(layout, state, g) for g in (g_means2d, g_depths, g_conics)]
+        wanted = [ctx.needs_input_grad[i] for i in (0, 1, 2, 5, 6)]
+        out = _meta_vjp(layout, state, ctx.inputs, grads, wanted)
+        return out[0], out[1], out[2], None, None, out[3], out[4], None
 
 
-def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout):
+def _to_layout(layout: _Layout, state, full: np.ndarray) -> np.ndarray:
+    """[B, C, N, ...] as meta holds it: packed rows of the visible pairs, or [..., C, N, ...]."""
+    full = np.ascontiguousarray(full, dtype=np.float32)
+    if layout.packed:
+        return np.ascontiguousarray(full[state["ids"]])
+    return full.reshape(layout.batch + (layout.C, layout.N) + full.shape[3:])
+
+
+def _from_layout(layout: _Layout, state, g: Optional[torch.Tensor]) -> Optional[np.ndarray]:
+    """A meta tensor's gradient as [B, C, N, ...] (None: none)."""
+    if g is None:
+        return None
+    g = _np(g).astype(np.float32)
+    tail = g.shape[1:] if layout.packed else g.shape[len(layout.batch) + 2 :]
+    full = np.zeros((layout.B, layout.C, layout.N) + tuple(tail), np.float32)
+    if layout.packed:
+        full[state["ids"]] = g
+    else:
+        full[...] = g.reshape(full.shape)
+    return full if full.any() else None
+
+
+def _meta_vjp(layout: _Layout, state, inputs, grads, wanted):
+    """dL/d(means, quats, scales, viewmats, Ks) of losses on the meta 2D means, depths and
+    conics (`grads`, [B, C, N, ...] or None), through the torch projection, pair by pair."""
+    g2d, gdepth, gconic = grads
+    if all(g is None for g in grads) or not any(wanted):
+        return [None] * 5
+    means, quats, scales, viewmats, Ks = inputs
+    B, C, N = layout.B, layout.C, layout.N
+    flat = [means.reshape(B, N, 3), quats.reshape(B, N, 4), scales.reshape(B, N, 3),
+            viewmats.reshape(B, C, 4, 4), Ks.reshape(B, C, 3, 3)]
+    totals = [torch.zeros_like(t) if w else None for t, w in zip(flat, wanted)]
+    with torch.enable_grad():
+        for b, c in layout.pairs():
+            vis = torch.from_numpy(state["radii"][b, c] > 0)
+            if not bool(vis.any()):
+                continue
+            leaves = [flat[0][b][vis], flat[1][b][vis], flat[2][b][vis], flat[3][b, c], flat[4][b, c]]
+            leaves = [t.clone().requires_grad_(w) for t, w in zip(leaves, wanted)]
+            m2d, conic, depth, _ = _projection.project(
+                *leaves, state["width"], state["height"])
+            loss = torch.zeros(())
+            for g, out in ((g2d, m2d), (gdepth, depth), (gconic, conic)):
+                if g is not None:
+                    loss = loss + (torch.from_numpy(g[b, c][vis.numpy()]) * out).sum()
+            need = [t for t, w in zip(leaves, wanted) if w]
+            got = iter(torch.autograd.grad(loss, need, allow_unused=True))
+            for i, w in enumerate(wanted):
+                if not w:
+                    continue
+                g = next(got)
+                if g is None:
+                    continue
+                if i < 3:
+                    totals[i][b][vis] += g
+                else:
+                    totals[i][b, c] += g
+    shapes = [t.shape for t in inputs]
+    return [None if t is None else t.reshape(shape) for t, shape in zip(totals, shapes)]
+
+
+def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout, screen: bool):
     """One pair's gradients from its pixel gradients, summed over its colour chunks (the
-    alpha and depth gradients go with the first chunk); colours joined along channels."""
+    alpha and depth gradients go with the first chunk); colours joined along channels.
+    With `screen` also the projected quantities' (``raster.Rasterizer.backward``)."""
     total: Dict[str, np.ndarray] = {}
     colour_parts: List[np.ndarray] = [None] * len(fwds)  # type: ignore[list-item]
+    names = ("means", "quats", "scales", "opacities", "means2d", "absgrad")
+    names += ("screen",) if screen else ()
     # The last chunk's state is still on the device: its backward goes first.
     for j in reversed(range(len(fwds))):
         ch = layout.chunks[j]
@@ -202,22 +283,54 @@ def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout):
             grad_colors=None if g_colors is None else np.ascontiguousarray(g_colors[..., ch]),
             grad_alphas=g_alphas if j == 0 else None,
             grad_depths=g_depths if j == 0 else None,
+            screen=screen,
         )
-        for name in ("means", "quats", "scales", "opacities", "means2d", "absgrad"):
+        for name in names:
             total[name] = g[name] if name not in total else total[name] + g[name]
         colour_parts[j] = g["colors"]
     total["colors"] = colour_parts[0] if len(fwds) == 1 else np.concatenate(colour_parts, axis=1)
     return total
 
 
+def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
+    """dL/d(viewmat, K) of pair (b, c) from its projected quantities' gradients (the
+    device's), through the torch projection; zeros where the pair has nothing visible."""
+    means, quats, scales, colors, viewmats, Ks = inputs
+    B, C, N = layout.B, layout.C, layout.N
+    vm = viewmats.reshape(B, C, 4, 4)[b, c].clone().requires_grad_()
+    K = Ks.reshape(B, C, 3, 3)[b, c].clone().requires_grad_()
+    vis = torch.from_numpy(state["radii"][b, c] > 0)
+    if not bool(vis.any()):
+        return torch.zeros(4, 4), torch.zeros(3, 3)
+    v = vis.numpy()
+    sh = None
+    if layout.sh_degree is not None:
+        col = colors.reshape((B,) + tuple(colors.shape[len(layout.batch) :]))[b]
+        sh = (col[c] if layout.per_camera else col)[vis]
+    with torch.enable_grad():
+        m2d, conic, depth, rgb = _projection.project(
+            means.reshape(B, N, 3)[b][vis], quats.reshape(B, N, 4)[b][vis],
+            scales.reshape(B, N, 3)[b][vis], vm, K, state["width"], state["height"],
+            sh, layout.sh_degree,
+        )
+        gs = torch.from_numpy(np.ascontiguousarray(screen[v]))
+        loss = (torch.from_numpy(np.ascontiguousarray(g2d[v])) * m2d).sum()
+        loss = loss + (gs[:, 0:3] * conic).sum() + (gs[:, 6] * depth).sum()
+        if rgb is not None:
+            loss = loss + (gs[:, 3:6] * rgb).sum()
+        g_vm, g_K = torch.autograd.grad(loss, [vm, K])
+    return g_vm, g_K
+
+
 class _Rasterize(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means2d, means, quats, scales, opacities, colors, state):  # type: ignore[override]
+    def forward(ctx, means2d, means, quats, scales, opacities, colors, viewmats, Ks, state):  # type: ignore[override]
         layout: _Layout = state["layout"]
         fwds = state["fwds"]
         ctx.state = state
         ctx.means2d = means2d
         ctx.shapes = [tuple(t.shape) for t in (means, quats, scales, opacities, colors)]
+        ctx.inputs = [t.detach() for t in (means, quats, scales, colors, viewmats, Ks)]
 
         def image(get):
             rows = [
@@ -236,12 +349,15 @@ class _Rasterize(torch.autograd.Function):
         state = ctx.state
         layout: _Layout = state["layout"]
         B, C, N = layout.B, layout.C, layout.N
+        camera = ctx.needs_input_grad[6] or ctx.needs_input_grad[7]
         flat = lambda g: None if g is None else _np(g).reshape((B, C) + tuple(g.shape[-3:]))  # noqa: E731
         g_colors, g_alphas, g_depths = flat(g_colors), flat(g_alphas), flat(g_depths)
         sums: Dict[str, np.ndarray] = {}
         full2d = np.zeros((B, C, N, 2), np.float32)
         abs2d = np.zeros((B, C, N, 2), np.float32)
         per_camera_colours: Dict[Tuple[int, int], np.ndarray] = {}
+        g_vm = torch.zeros(B, C, 4, 4)
+        g_K = torch.zeros(B, C, 3, 3)
         # The last pair's state is still on the device: its backward goes first.
         for b, c in reversed(layout.pairs()):
             g = _pair_backward(
@@ -251,12 +367,16 @@ class _Rasterize(torch.autograd.Function):
                 None if g_alphas is None else g_alphas[b, c, ..., 0],
                 None if g_depths is None else g_depths[b, c, ..., 0],
                 layout,
+                camera,
             )
             full2d[b, c], abs2d[b, c] = g["means2d"], g["absgrad"]
             per_camera_colours[(b, c)] = g["colors"]
             for name in ("means", "quats", "scales", "opacities", "colors"):
                 key = (name, b)
                 sums[key] = g[name] if key not in sums else sums[key] + g[name]
+            if camera:
+                g_vm[b, c], g_K[b, c] = _camera_vjp(
+                    layout, state, ctx.inputs, b, c, g["means2d"], g["screen"])
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
         shapes = ctx.shapes
         groups = [
@@ -270,15 +390,15 @@ class _Rasterize(torch.autograd.Function):
             colour_grad = np.stack([sums[("colors", b)] for b in range(B)])
         if layout.sh_degree is not None:
             colour_grad = _pad_sh(colour_grad, shapes[4])
-        if layout.packed:
-            ids = state["ids"]
-            g2d, a2d = full2d[ids], abs2d[ids]
-        else:
-            g2d = full2d.reshape(layout.batch + (C, N, 2))
-            a2d = abs2d.reshape(g2d.shape)
+        g2d = t(_to_layout(layout, state, full2d))
+        # What _Project's backward takes out of its 2D means' gradient: the image's part.
+        state["image_g2d"] = g2d
         if state["absgrad"]:
-            ctx.means2d.absgrad = t(a2d)
-        return (t(g2d), *groups, t(colour_grad).reshape(shapes[4]), None)
+            ctx.means2d.absgrad = t(_to_layout(layout, state, abs2d))
+        cams = [None, None]
+        if camera:
+            cams = [g_vm.reshape(ctx.inputs[4].shape), g_K.reshape(ctx.inputs[5].shape)]
+        return (g2d, *groups, t(colour_grad).reshape(shapes[4]), *cams, None)
 
 
 def _pad_sh(grad: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
@@ -367,15 +487,15 @@ def _backgrounds(layout: _Layout, backgrounds, render_mode):
     return colour, depth
 
 
-def _meta(layout: _Layout, state, means2d, opacities, width, height) -> Dict[str, Any]:
-    fwds = state["fwds"]
+def _meta(layout: _Layout, state, projected, opacities, width, height) -> Dict[str, Any]:
+    means2d, depths, conics = projected
     radii = state["radii"].astype(np.int32)
-    depths = _stack(layout, fwds, lambda f: f.gaussian_depths).astype(np.float32)
-    conics = _stack(layout, fwds, lambda f: f.conics).astype(np.float32)
     bs, C, N = layout.batch, layout.C, layout.N
     ops = opacities.reshape(layout.B, 1, N).expand(layout.B, C, N)
     meta: Dict[str, Any] = {
         "means2d": means2d,
+        "depths": depths,
+        "conics": conics,
         "width": width,
         "height": height,
         "tile_size": _TILE,
@@ -383,16 +503,14 @@ def _meta(layout: _Layout, state, means2d, opacities, width, height) -> Dict[str
         "n_cameras": C,
     }
     if layout.packed:
-        b_ids, c_ids, g_ids = state["ids"]
-        r = torch.from_numpy(radii[b_ids, c_ids, g_ids])
+        ids = [torch.from_numpy(i.astype(np.int64)) for i in state["ids"]]
+        r = torch.from_numpy(radii[state["ids"]])
         meta.update(
-            batch_ids=torch.from_numpy(b_ids.astype(np.int64)),
-            camera_ids=torch.from_numpy(c_ids.astype(np.int64)),
-            gaussian_ids=torch.from_numpy(g_ids.astype(np.int64)),
+            batch_ids=ids[0],
+            camera_ids=ids[1],
+            gaussian_ids=ids[2],
             radii=torch.stack([r, r], dim=-1),
-            depths=torch.from_numpy(depths[b_ids, c_ids, g_ids]),
-            conics=torch.from_numpy(conics[b_ids, c_ids, g_ids]),
-            opacities=ops[torch.from_numpy(b_ids), torch.from_numpy(c_ids), torch.from_numpy(g_ids)],
+            opacities=ops[ids[0], ids[1], ids[2]],
         )
     else:
         r = torch.from_numpy(radii.reshape(bs + (C, N)))
@@ -401,8 +519,6 @@ def _meta(layout: _Layout, state, means2d, opacities, width, height) -> Dict[str
             camera_ids=None,
             gaussian_ids=None,
             radii=torch.stack([r, r], dim=-1),
-            depths=torch.from_numpy(depths.reshape(bs + (C, N))),
-            conics=torch.from_numpy(conics.reshape(bs + (C, N, 3))),
             opacities=ops.reshape(bs + (C, N)),
         )
     return meta
@@ -484,12 +600,6 @@ def rasterization(
     if render_mode not in modes:
         raise ValueError(f"render_mode must be one of {sorted(modes)}, got {render_mode!r}")
     width, height = _size("width", width), _size("height", height)
-    for name, t in (("viewmats", viewmats), ("Ks", Ks)):
-        if isinstance(t, torch.Tensor) and t.requires_grad and torch.is_grad_enabled():
-            raise ValueError(
-                f"{name} requires a gradient, which vksplat does not compute yet (a camera "
-                f"pose would learn nothing): pass {name}.detach()"
-            )
     layout = _Layout(means, colors, viewmats, sh_degree, bool(packed))
     _check_arguments(layout, means, quats, scales, opacities, colors, Ks, sh_degree)
     sh_degree = None if sh_degree is None else int(sh_degree)
@@ -510,8 +620,10 @@ def rasterization(
     # gsplat builds the covariance from the scales' squares: the sign is the gradient's.
     # A zero scale is the smallest normal float (its gradient is 0, as gsplat's is).
     unsigned = scales.abs().clamp_min(torch.finfo(torch.float32).tiny)
-    means2d = _Project.apply(means, quats, unsigned, opacities, colors, state)
-    rgb, alphas, expected = _Rasterize.apply(means2d, means, quats, unsigned, opacities, colors, state)
+    means2d, depths, conics = _Project.apply(
+        means, quats, unsigned, opacities, colors, viewmats, Ks, state)
+    rgb, alphas, expected = _Rasterize.apply(
+        means2d, means, quats, unsigned, opacities, colors, viewmats, Ks, state)
     if bg_colour is not None:
         rgb = rgb + (1.0 - alphas) * bg_colour
     depth = expected * alphas if render_mode in ("D", "RGB+D") else expected
@@ -523,4 +635,4 @@ def rasterization(
         out = depth
     else:
         out = torch.cat([rgb, depth], dim=-1)
-    return out, alphas, _meta(layout, state, means2d, opacities, width, height)
+    return out, alphas, _meta(layout, state, (means2d, depths, conics), opacities, width, height)

@@ -654,6 +654,12 @@ fn project_backward(
     out.means2d[i] = g.mean2d;
     out.absgrad[i] = g.absgrad;
     out.opacities[i] = g.opacity;
+    let rgb = match p.colors {
+        ColorParams::Sh { .. } => [g.color[0], g.color[1], g.color[2]],
+        ColorParams::Direct { .. } => [0.0; 3],
+    };
+    let [ca, cb, cc] = g.conic;
+    out.screen[i] = [ca, cb, cc, rgb[0], rgb[1], rgb[2], g.depth, 0.0];
     let mean = DVec3::from(p.means[i]);
     let v = cam.r * mean + cam.t;
     let z = v.z;

@@ -685,6 +685,8 @@ fn check_backward(rast: &mut DiffRasterizer) -> Result<Outcome, String> {
         alpha: to_f32(&grads.alpha),
         depth: to_f32(&grads.depth),
     };
+    // The projected quantities' gradients too (what a camera's gradient is made of).
+    gpu(rast.renderer().set_screen_grads(true))?;
     let (_, token) = gpu(rast.forward(&p, &cam, &opts))?;
     let device = gpu(rast.backward(&p, &cam, &opts, token, &grads32))?;
     let bg: Vec<f64> = opts.background.iter().map(|&b| f64::from(b)).collect();

@@ -235,6 +235,12 @@ pub struct SplatGrads<T> {
     pub means2d: Vec<[T; 2]>,
     /// Sum over pixels of |dL/d(2D mean)| per axis (gsplat's `absgrad`), for densification.
     pub absgrad: Vec<[T; 2]>,
+    /// The gradients of the projected quantities (gsplat's `v_conics`, `v_colors`,
+    /// `v_depths`): dL/d(conic A, B, C), dL/d(the view's SH colour r, g, b: SH frames
+    /// only, 0 for direct values), dL/d(view-space depth), and a 0. The reference fills
+    /// them always; the device when asked ([`crate::render::GpuRenderer::set_screen_grads`]),
+    /// else zeros. A camera's gradient is the chain rule from them.
+    pub screen: Vec<[T; 8]>,
 }
 
 impl<T: Copy + Default> SplatGrads<T> {
@@ -249,12 +255,13 @@ impl<T: Copy + Default> SplatGrads<T> {
             colors: vec![z; n * stride],
             means2d: vec![[z; 2]; n],
             absgrad: vec![[z; 2]; n],
+            screen: vec![[z; 8]; n],
         }
     }
 }
 
 /// Parameter groups of [`SplatGrads`], for comparisons group by group.
-pub const GRAD_GROUPS: [&str; 7] = [
+pub const GRAD_GROUPS: [&str; 8] = [
     "means",
     "quats",
     "scales",
@@ -262,6 +269,7 @@ pub const GRAD_GROUPS: [&str; 7] = [
     "colors",
     "means2d",
     "absgrad",
+    "screen",
 ];
 
 impl<T: Copy + Into<f64>> SplatGrads<T> {
@@ -278,6 +286,7 @@ impl<T: Copy + Into<f64>> SplatGrads<T> {
             "colors" => self.colors.iter().map(|&x| x.into()).collect(),
             "means2d" => flat(&self.means2d),
             "absgrad" => flat(&self.absgrad),
+            "screen" => flat(&self.screen),
             _ => Vec::new(),
         }
     }

@@ -77,6 +77,8 @@ pub(super) struct BackwardState {
     /// First timestamp to last of the last pass, ms.
     span_ms: f64,
     mode: Accumulation,
+    /// Whether read-backs decode [`SplatGrads::screen`] from the per-Gaussian sums.
+    screen: bool,
 }
 
 /// A device buffer of at least `bytes`, made or grown (never shrunk) as needed.
@@ -121,6 +123,7 @@ impl BackwardState {
             timings: Vec::new(),
             span_ms: 0.0,
             mode: Accumulation::default(),
+            screen: false,
         })
     }
 
@@ -246,6 +249,19 @@ impl GpuRenderer {
         }
         if let Some(b) = self.backward.as_mut() {
             b.mode = mode;
+        }
+        Ok(())
+    }
+
+    /// Whether the backward passes that read their gradients back also return the
+    /// projected quantities' ([`SplatGrads::screen`], what a camera's gradient needs;
+    /// off by default: it reads every Gaussian's sums back).
+    pub fn set_screen_grads(&mut self, on: bool) -> GpuResult<()> {
+        if self.backward.is_none() {
+            self.backward = Some(BackwardState::new(&self.ctx)?);
+        }
+        if let Some(b) = self.backward.as_mut() {
+            b.screen = on;
         }
         Ok(())
     }
@@ -821,6 +837,9 @@ impl BackwardState {
             Some(_) => feature_grads.read(ctx, n * groups as usize)?,
             None => Vec::new(),
         };
+        if self.screen {
+            self.read_screen(ctx, shape, features.is_none(), &mut out.screen)?;
+        }
         for (i, g) in raw.iter().enumerate() {
             out.means[i] = [g[0], g[1], g[2]];
             out.opacities[i] = g[3];
@@ -839,6 +858,68 @@ impl BackwardState {
         }
         Ok((out, mlp))
     }
+}
+
+impl BackwardState {
+    /// [`SplatGrads::screen`] from the per-Gaussian sums of the pass (as
+    /// `preprocess_bwd.comp`'s `field` decodes them): conic (fields 2-4), colour (6-8, an
+    /// SH frame's only) and depth (9).
+    fn read_screen(
+        &self,
+        ctx: &GpuContext,
+        shape: &PassShape,
+        sh_frame: bool,
+        out: &mut [[f32; 8]],
+    ) -> GpuResult<()> {
+        let (maxima, acc) = (
+            self.maxima.as_ref().expect("made by the pass"),
+            self.acc.as_ref().expect("made by the pass"),
+        );
+        let fields = shape.fields as usize;
+        let maxima: Vec<u32> = maxima.read(ctx, fields)?;
+        let acc: Vec<[u32; 2]> = acc.read(ctx, shape.n as usize * fields)?;
+        let float_sums = self.mode != Accumulation::Deterministic;
+        let field = |g: usize, f: usize| -> f32 {
+            let [lo, hi] = acc[g * fields + f];
+            if float_sums {
+                return f32::from_bits(lo);
+            }
+            fixed_to_f32(lo, hi, grad_shift(maxima[f], shape.bits))
+        };
+        let colour = |g: usize, f: usize| if sh_frame { field(g, f) } else { 0.0 };
+        for (g, o) in out.iter_mut().enumerate() {
+            *o = [
+                field(g, 2),
+                field(g, 3),
+                field(g, 4),
+                colour(g, 6),
+                colour(g, 7),
+                colour(g, 8),
+                field(g, 9),
+                0.0,
+            ];
+        }
+        Ok(())
+    }
+}
+
+/// `grad_common.glsl`'s `grad_shift`: the scale exponent of a field whose largest
+/// |partial| has the float bits `max_bits`.
+fn grad_shift(max_bits: u32, bits: u32) -> i32 {
+    let m = f32::from_bits(max_bits);
+    // frexp's exponent: |m| < 2^e (0 for 0).
+    let e = if m == 0.0 {
+        0
+    } else {
+        ((m.to_bits() >> 23) & 0xff) as i32 - 126
+    };
+    (62 - bits as i32 - e).clamp(-200, 250)
+}
+
+/// `grad_common.glsl`'s `from_fixed`: the (lo, hi) two's-complement pair times 2^-s.
+fn fixed_to_f32(lo: u32, hi: u32, s: i32) -> f32 {
+    let v = ((u64::from(hi) << 32) | u64::from(lo)) as i64;
+    (v as f64 * 2f64.powi(-s)) as f32
 }
 
 /// Refuses feature channels the backward pass cannot differentiate.

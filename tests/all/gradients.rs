@@ -476,8 +476,12 @@ fn gpu_against_reference(
     gpu
 }
 
+/// A rasterizer whose backward passes also read the projected quantities' gradients
+/// back (`SplatGrads::screen`, compared with the reference's like every group).
 fn diff_rasterizer(kernel: Option<BlendKernel>) -> DiffRasterizer {
-    DiffRasterizer::with_renderer(new_renderer(kernel))
+    let mut r = DiffRasterizer::with_renderer(new_renderer(kernel));
+    r.renderer().set_screen_grads(true).unwrap();
+    r
 }
 
 fn gpu_camera() -> Camera {

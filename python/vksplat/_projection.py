@@ -1,0 +1,96 @@
+"""The renderer's projection in torch, for the gradients the device does not chain itself:
+a camera's (``viewmats``, ``Ks``) and those of losses on ``meta`` (2D means, depths,
+conics). It follows ``preprocess.comp`` and ``cpu::backward`` rule for rule (the original
+3DGS rasterizer's): view-space mean ``v = R p + t``, the Jacobian at the position clamped
+to 1.3 times the half field of view (``tan = W / (2 fx)``), 2D covariance ``T Sigma T^T``
+with ``T = J R`` dilated by 0.3, conic its inverse, 2D mean ``f v / z + c`` (gsplat's pixel
+convention), depth ``z``, and the SH colour ``max(SH(dir) + 0.5, 0)`` with ``dir`` from
+the camera centre ``-R^T t`` to the mean. Only used for the gradient: the values rendered
+are the device's."""
+
+from __future__ import annotations
+
+from typing import Optional, Tuple
+
+import torch
+
+C0 = 0.28209479177387814
+C1 = 0.4886025119029199
+C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
+      0.5462742152960396)
+C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+
+
+def sh_basis(dirs: torch.Tensor, degree: int) -> torch.Tensor:
+    """The real SH basis of the original code at unit directions [n, 3]: [n, (d + 1)^2]."""
+    x, y, z = dirs.unbind(-1)
+    b = [torch.full_like(x, C0)]
+    if degree > 0:
+        b += [-C1 * y, C1 * z, -C1 * x]
+    if degree > 1:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        b += [C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)]
+        if degree > 2:
+            b += [
+                C3[0] * y * (3 * xx - yy),
+                C3[1] * xy * z,
+                C3[2] * y * (4 * zz - xx - yy),
+                C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
+                C3[4] * x * (4 * zz - xx - yy),
+                C3[5] * z * (xx - yy),
+                C3[6] * x * (xx - 3 * yy),
+            ]
+    return torch.stack(b, -1)
+
+
+def _rotations(quats: torch.Tensor) -> torch.Tensor:
+    w, x, y, z = (quats / quats.norm(dim=-1, keepdim=True)).unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ], -1).reshape(quats.shape[:-1] + (3, 3))
+
+
+def project(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    viewmat: torch.Tensor,
+    K: torch.Tensor,
+    width: int,
+    height: int,
+    sh: Optional[torch.Tensor] = None,
+    sh_degree: Optional[int] = None,
+) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+    """2D means [n, 2], conics [n, 3], depths [n] and (with SH) colours [n, 3] of the
+    Gaussians (all in front of the near plane: the caller passes the visible ones)."""
+    R, t = viewmat[:3, :3], viewmat[:3, 3]
+    v = means @ R.T + t
+    z = v[:, 2]
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    limx, limy = 1.3 * width / (2 * fx), 1.3 * height / (2 * fy)
+    tx = torch.minimum(torch.maximum(v[:, 0] / z, -limx), limx) * z
+    ty = torch.minimum(torch.maximum(v[:, 1] / z, -limy), limy) * z
+    zero = torch.zeros_like(z)
+    j0 = torch.stack([fx / z, zero, -fx * tx / (z * z)], -1)
+    j1 = torch.stack([zero, fy / z, -fy * ty / (z * z)], -1)
+    t0, t1 = j0 @ R, j1 @ R  # R^T j, as rows
+    m = _rotations(quats) * scales[:, None, :]
+    cov = m @ m.transpose(1, 2)
+    a = torch.einsum("ni,nij,nj->n", t0, cov, t0) + 0.3
+    b = torch.einsum("ni,nij,nj->n", t0, cov, t1)
+    c = torch.einsum("ni,nij,nj->n", t1, cov, t1) + 0.3
+    det = a * c - b * b
+    conics = torch.stack([c, -b, a], -1) / det[:, None]
+    means2d = torch.stack([fx * v[:, 0] / z + cx, fy * v[:, 1] / z + cy], -1)
+    colours = None
+    if sh is not None and sh_degree is not None:
+        centre = -(t @ R)  # -R^T t
+        d = means - centre
+        dirs = d / d.norm(dim=-1, keepdim=True)
+        k = (sh_degree + 1) ** 2
+        raw = (sh[:, :k, :] * sh_basis(dirs, sh_degree)[:, :, None]).sum(1)
+        colours = torch.clamp_min(raw + 0.5, 0.0)
+    return means2d, conics, z, colours
