@@ -151,6 +151,20 @@ void main() {
     float g_c = g_conic.x * (1.0 / det - a * c / det2) + g_conic.y * (b * a / det2) + g_conic.z * (-a * a / det2);
     float g_b = g_conic.x * (2.0 * b * c / det2) + g_conic.y * (-1.0 / det - 2.0 * b * b / det2)
         + g_conic.z * (2.0 * a * b / det2);
+    if (params.cam_pos.w != 0.0) {
+        // Antialiased: the blended opacity is opacity * sqrt(max(r, ANTIALIAS_MIN_RATIO)),
+        // r = det(cov2d) / det(cov2d + dilation) (cpu::backward::compensation).
+        float det0 = (a - COV2D_DILATION) * (c - COV2D_DILATION) - b * b;
+        float r = det0 / det;
+        float comp = sqrt(max(ANTIALIAS_MIN_RATIO, r));
+        out_g.mean_opacity.w = g_opacity * comp;
+        if (r > ANTIALIAS_MIN_RATIO) {
+            float k = g_opacity * g.pos_opacity.w * 0.5 / comp / det2;
+            g_a += k * ((c - COV2D_DILATION) * det - det0 * c);
+            g_c += k * ((a - COV2D_DILATION) * det - det0 * a);
+            g_b += k * (2.0 * b * det0 - 2.0 * b * det);
+        }
+    }
     // a = t0' S t0, b = t0' S t1, c = t1' S t1 (S symmetric).
     mat3 g_cov = mat3(g_a * t0 * t0.x + g_b * t0 * t1.x + g_c * t1 * t1.x,
                       g_a * t0 * t0.y + g_b * t0 * t1.y + g_c * t1 * t1.y,

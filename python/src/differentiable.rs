@@ -89,6 +89,12 @@ pub(crate) fn diff_options(
     kernel: &str,
     channels: usize,
 ) -> PyResult<RenderOptions> {
+    // "KERNEL+antialiased": with the antialiased opacity compensation (raster.py's
+    // `antialiased`).
+    let (kernel, antialiased) = match kernel.strip_suffix("+antialiased") {
+        Some(k) => (k, true),
+        None => (kernel, false),
+    };
     let kernel = kernel.parse().map_err(|e: String| value_err(e))?;
     if !background.is_empty() && background.len() != channels {
         return Err(value_err(format!(
@@ -103,6 +109,7 @@ pub(crate) fn diff_options(
     Ok(RenderOptions {
         background: bg,
         kernel,
+        antialiased,
         ..Default::default()
     })
 }

@@ -386,23 +386,27 @@ def test_numpy_sizes_and_backgrounds_in_depth_only_modes():
 
 # 3. Camera-pose (and intrinsics) gradients, against finite differences of the f64
 # reference renderer.
-def reference_loss(s, cams, vms, Ks, wc, wa):
+def reference_loss(s, cams, vms, Ks, wc, wa, antialiased=False):
     ref = raster.Rasterizer(backend="reference")
     total = 0.0
     for c in range(len(cams)):
-        f = ref.forward(**s, viewmat=vms[c], K=Ks[c], width=W, height=H, sh_degree=2)
+        f = ref.forward(**s, viewmat=vms[c], K=Ks[c], width=W, height=H, sh_degree=2,
+                        antialiased=antialiased)
         total += float((f.colors * wc[c]).sum() + (f.alphas * wa[c]).sum())
     return total
 
 
-def test_camera_gradients_equal_finite_differences_of_the_reference():
+@pytest.mark.parametrize("mode", ["classic", "antialiased"])
+def test_camera_gradients_equal_finite_differences_of_the_reference(mode):
+    aa = mode == "antialiased"
     s = scene(n=80, seed=22, degree=2)
     cams = cameras(2)
     vm, Ks = cam_tensors(cams)
     vm.requires_grad_()
     Ks.requires_grad_()
     t = tensors(s)
-    out, alphas, _ = rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=2)
+    out, alphas, _ = rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=2,
+                                   rasterize_mode=mode)
     rng = np.random.default_rng(22)
     wc = rng.normal(size=out.shape)
     wa = rng.normal(size=alphas.shape[:-1])
@@ -426,8 +430,8 @@ def test_camera_gradients_equal_finite_differences_of_the_reference():
             # The renderer takes f32 cameras: divide by the step they hold.
             hi[c, i, j], lo[c, i, j] = np.float32(x + eps), np.float32(x - eps)
             step = float(np.float32(x + eps)) - float(np.float32(x - eps))
-            f_hi = reference_loss(s, cams, *((hi, ks) if which == "vm" else (vms, hi)), wc, wa)
-            f_lo = reference_loss(s, cams, *((lo, ks) if which == "vm" else (vms, lo)), wc, wa)
+            f_hi = reference_loss(s, cams, *((hi, ks) if which == "vm" else (vms, hi)), wc, wa, aa)
+            f_lo = reference_loss(s, cams, *((lo, ks) if which == "vm" else (vms, lo)), wc, wa, aa)
             estimates.append((f_hi - f_lo) / step)
         numeric.append(float(np.median(estimates)))
         grad = vm.grad if which == "vm" else Ks.grad
@@ -471,43 +475,47 @@ def test_a_camera_pose_is_learned_through_vksplat():
 
 
 # 4. Losses on meta's 2D means, depths and conics reach the Gaussians (and the camera).
-def meta_loss(meta, packed=True):
-    m2d, d, con = meta["means2d"], meta["depths"], meta["conics"]
-    return 1e-3 * (m2d ** 2).sum() + d.sum() + 10 * con.sum()
+def meta_loss(meta):
+    m2d, d, con, o = meta["means2d"], meta["depths"], meta["conics"], meta["opacities"]
+    return 1e-3 * (m2d ** 2).sum() + d.sum() + 10 * con.sum() + 5 * (o ** 2).sum()
 
 
-def native_meta_loss(s, cams, visible):
+def native_meta_loss(s, cams, visible, antialiased):
     r = raster.Rasterizer()
     total = 0.0
     for c, cam in enumerate(cams):
-        f = r.forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H, sh_degree=3)
+        f = r.forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H, sh_degree=3,
+                      antialiased=antialiased)
         v = visible[c]
         total += (1e-3 * (f.means2d[v].astype(np.float64) ** 2).sum()
                   + f.gaussian_depths[v].astype(np.float64).sum()
-                  + 10 * f.conics[v].astype(np.float64).sum())
+                  + 10 * f.conics[v].astype(np.float64).sum()
+                  + 5 * (f.opacities[v].astype(np.float64) ** 2).sum())
     return total
 
 
-@pytest.mark.parametrize("packed", [True, False])
-def test_losses_on_meta_reach_the_gaussians(packed):
+@pytest.mark.parametrize("packed, mode", [(True, "classic"), (False, "classic"),
+                                          (True, "antialiased")])
+def test_losses_on_meta_reach_the_gaussians(packed, mode):
+    aa = mode == "antialiased"
     s = scene(n=60, seed=24)
     cams = cameras(2)
     t = tensors(s)
-    _, _, meta = render(t, cams, sh_degree=3, packed=packed)
-    meta_loss(meta, packed).backward()
+    _, _, meta = render(t, cams, sh_degree=3, packed=packed, rasterize_mode=mode)
+    meta_loss(meta).backward()
     visible = [(np.asarray(r) > 0) for r in (render(tensors(s, grad=False), cams, sh_degree=3,
                                                      packed=False)[2]["radii"][..., 0])]
     assert t["means"].grad is not None and t["means"].grad.abs().sum() > 0
     rng = np.random.default_rng(24)
-    for k in ("means", "quats", "scales"):
+    for k in ("means", "quats", "scales", "opacities"):
         analytic, numeric = [], []
         for _ in range(3):
             d = rng.normal(size=s[k].shape).astype(np.float64)
             eps = 1e-3
             hi = dict(s, **{k: (s[k] + eps * d).astype(np.float32)})
             lo = dict(s, **{k: (s[k] - eps * d).astype(np.float32)})
-            numeric.append((native_meta_loss(hi, cams, visible)
-                            - native_meta_loss(lo, cams, visible)) / (2 * eps))
+            numeric.append((native_meta_loss(hi, cams, visible, aa)
+                            - native_meta_loss(lo, cams, visible, aa)) / (2 * eps))
             analytic.append(float((t[k].grad.numpy().astype(np.float64) * d).sum()))
         err = rel(analytic, numeric)
         # Measured: 1.3e-4, 9e-5, 3.8e-4 (central differences of the f32 device forward).
@@ -523,8 +531,8 @@ def test_an_image_loss_and_a_meta_loss_add():
         t = tensors(s)
         out, _, meta = render(t, cams, sh_degree=3)
         meta["means2d"].retain_grad()
-        loss = {"image": lambda: (out ** 2).sum(), "meta": lambda: meta_loss(meta, True),
-                "both": lambda: (out ** 2).sum() + meta_loss(meta, True)}[which]()
+        loss = {"image": lambda: (out ** 2).sum(), "meta": lambda: meta_loss(meta),
+                "both": lambda: (out ** 2).sum() + meta_loss(meta)}[which]()
         loss.backward()
         grads.append({k: t[k].grad.clone() for k in ("means", "quats", "scales")})
         if which == "image":
@@ -535,3 +543,30 @@ def test_an_image_loss_and_a_meta_loss_add():
                                   rtol=1e-5, atol=1e-6)
     for k in grads[0]:
         assert torch.allclose(grads[2][k], grads[0][k] + grads[1][k], rtol=1e-4, atol=1e-5), k
+
+
+# 5. The antialiased mode's backward pass: the device against the f64 reference.
+def test_antialiased_gradients_equal_the_reference():
+    s = scene(n=120, seed=26)
+    cams = cameras(2)
+    t = tensors(s)
+    out, alphas, meta = render(t, cams, sh_degree=3, rasterize_mode="antialiased")
+    weighted(26)(out, alphas, meta).backward()
+    g = torch.Generator().manual_seed(26)
+    wc, wa = torch.randn(out.shape, generator=g), torch.randn(alphas.shape, generator=g)
+    ref = raster.Rasterizer(backend="reference")
+    total = {k: 0.0 for k in GROUPS}
+    classic, _, _ = render(tensors(s, grad=False), cams, sh_degree=3)
+    for c, cam in enumerate(cams):
+        f = ref.forward(**s, viewmat=cam.viewmat, K=cam.K, width=W, height=H, sh_degree=3,
+                        antialiased=True)
+        assert np.abs(f.colors - out[c].detach().numpy()).max() < 1e-4
+        gr = ref.backward(f, grad_colors=wc[c].numpy(), grad_alphas=wa[c, ..., 0].numpy())
+        for k in GROUPS:
+            total[k] = total[k] + gr[k]
+    assert (classic - out.detach()).abs().max() > 0.01, "the compensation changed nothing"
+    for k in GROUPS:
+        err = rel(t[k].grad.numpy(), total[k])
+        assert err <= 1e-3, f"{k}: relative L2 error {err:.2e} against the reference"
+    # meta's opacities are the compensated ones, as gsplat's.
+    assert (meta["opacities"] < t["opacities"][meta["gaussian_ids"]]).all()

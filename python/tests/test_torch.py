@@ -184,7 +184,7 @@ def test_feature_channels_on_the_device_equal_the_reference():
         (lambda a: a.update(Ks=a["Ks"][:, :2]), r"Ks must have shape"),
         (lambda a: a.update(near_plane=0.01), "near_plane=0.01"),
         (lambda a: a.update(render_mode="RGB+X"), "render_mode must be"),
-        (lambda a: a.update(rasterize_mode="antialiased"), "only 'classic'"),
+        (lambda a: a.update(rasterize_mode="mip"), "rasterize_mode must be 'classic' or"),
     ],
 )
 def test_bad_arguments_are_value_errors_naming_them(change, match):

@@ -14,6 +14,8 @@ from typing import Optional, Tuple
 
 import torch
 
+# src/rules.rs: the smallest opacity compensation ratio.
+ANTIALIAS_MIN_RATIO = 0.000025
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
 C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
@@ -63,9 +65,12 @@ def project(
     height: int,
     sh: Optional[torch.Tensor] = None,
     sh_degree: Optional[int] = None,
-) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
-    """2D means [n, 2], conics [n, 3], depths [n] and (with SH) colours [n, 3] of the
-    Gaussians (all in front of the near plane: the caller passes the visible ones)."""
+    antialiased: bool = False,
+) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor], torch.Tensor]:
+    """2D means [n, 2], conics [n, 3], depths [n], (with SH) colours [n, 3] and the
+    opacity compensation [n] (``antialiased``: sqrt(max(det(cov2d) / det(cov2d + 0.3 I),
+    2.5e-5)), else 1) of the Gaussians (all in front of the near plane: the caller passes
+    the visible ones)."""
     R, t = viewmat[:3, :3], viewmat[:3, 3]
     v = means @ R.T + t
     z = v[:, 2]
@@ -84,6 +89,10 @@ def project(
     c = torch.einsum("ni,nij,nj->n", t1, cov, t1) + 0.3
     det = a * c - b * b
     conics = torch.stack([c, -b, a], -1) / det[:, None]
+    comp = torch.ones_like(det)
+    if antialiased:
+        det0 = (a - 0.3) * (c - 0.3) - b * b
+        comp = torch.sqrt(torch.clamp_min(det0 / det, ANTIALIAS_MIN_RATIO))
     means2d = torch.stack([fx * v[:, 0] / z + cx, fy * v[:, 1] / z + cy], -1)
     colours = None
     if sh is not None and sh_degree is not None:
@@ -93,4 +102,4 @@ def project(
         k = (sh_degree + 1) ** 2
         raw = (sh[:, :k, :] * sh_basis(dirs, sh_degree)[:, :, None]).sum(1)
         colours = torch.clamp_min(raw + 0.5, 0.0)
-    return means2d, conics, z, colours
+    return means2d, conics, z, colours, comp

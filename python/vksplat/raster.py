@@ -120,6 +120,7 @@ class Forward:
         "means2d",
         "gaussian_depths",
         "conics",
+        "opacities",
         "_params",
         "_camera",
         "_background",
@@ -286,10 +287,14 @@ class Rasterizer:
         background: Optional[ArrayLike] = None,
         kernel: str = "gaussian",
         shader: Optional[Shader] = None,
+        antialiased: bool = False,
     ) -> Forward:
         """Renders the Gaussians from one camera: ``colors`` (H, W, D) with the background,
         ``alphas`` (H, W), ``depths`` (H, W, alpha-normalised), and per Gaussian ``radii``,
-        ``means2d`` (pixels), ``gaussian_depths`` and ``conics`` (Vulkan backend). With a
+        ``means2d`` (pixels), ``gaussian_depths``, ``conics`` and ``opacities`` (the
+        blended ones: compensated with ``antialiased``, gsplat's ``rasterize_mode=
+        "antialiased"``, opacity times sqrt(det(cov2d) / det(cov2d + 0.3 I))) (Vulkan
+        backend). With a
         ``shader``, ``colors`` are (N, K) feature values and the image is shaded (H, W, 3)."""
         cam = Camera(viewmat, K, width, height)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
@@ -314,6 +319,9 @@ class Rasterizer:
             )
         if kernel not in ("gaussian", "power"):
             raise ValueError(f"kernel must be 'gaussian' or 'power', got {kernel!r}")
+        if antialiased:
+            # The native options' spelling (python/src/differentiable.rs, diff_options).
+            kernel = f"{kernel}+antialiased"
         f = Forward()
         f._params, f._camera, f._background, f._kernel = params, cam._tuple(), bg, kernel
         f._channels, f._k, f._backend, f._shader = channels, k, self.backend, shader
@@ -326,7 +334,7 @@ class Rasterizer:
             f.alphas = np.frombuffer(alpha, dtype="<f8").reshape(h, w)
             f.depths = np.frombuffer(depth, dtype="<f8").reshape(h, w)
             f._token = 0
-            f.radii = f.means2d = f.gaussian_depths = f.conics = None
+            f.radii = f.means2d = f.gaussian_depths = f.conics = f.opacities = None
             return f
         color, alpha, depth, token, projected = self._native.forward(
             params, f._camera, bg, kernel, shader_bytes
@@ -341,6 +349,7 @@ class Rasterizer:
         f.means2d = proj[:, 0:2] + 0.5
         f.gaussian_depths = proj[:, 7].copy()
         f.conics = proj[:, 4:7].copy()
+        f.opacities = proj[:, 2].copy()
         return f
 
     def backward(

@@ -21,9 +21,11 @@ Where the rules differ from gsplat's defaults, vksplat keeps the original 3DGS
 rasterizer's (the rules scenes trained with the INRIA code need): near plane 0.2 (gsplat
 0.01), alpha clamp 0.99 (gsplat 0.999), a screen-space radius of 3 sigma of the larger
 axis (gsplat 3.33 per axis), no far plane. ``near_plane`` therefore defaults to 0.2 and
-other values are refused, as are options vksplat does not implement (``rasterize_mode=
-"antialiased"``, ``radius_clip``, other camera models and lens coefficients, ``covars``,
-``with_ut=True``, ``with_eval3d=True``); those needing them keep gsplat. The argument
+other values are refused, as are options vksplat does not implement (``radius_clip``,
+other camera models and lens coefficients, ``covars``, ``with_ut=True``,
+``with_eval3d=True``); those needing them keep gsplat. ``rasterize_mode="antialiased"``
+(opacities times sqrt(det(cov2d) / det(cov2d + 0.3 I)), Mip-Splatting's compensation) is
+differentiable as the classic mode is. The argument
 table of ``docs/pytorch.md`` says, for each of gsplat's arguments and meta keys, whether
 it is supported, supported with a difference, or refused.
 
@@ -125,9 +127,10 @@ class _Layout:
         return lead + ((None, 3) if self.sh_degree is not None else (None,))
 
 
-def _native_passes(r, layout: _Layout, arrays, cams, width, height, kernel):
+def _native_passes(r, layout: _Layout, arrays, state):
     """The forward passes, per (set, camera) pair a list of one per colour chunk."""
     means, quats, scales, opacities, colors = arrays
+    cams, width, height = state["cams"], state["width"], state["height"]
     fwds: Dict[Tuple[int, int], list] = {}
     for b, c in layout.pairs():
         col = colors[b, c] if layout.per_camera else colors[b]
@@ -144,7 +147,8 @@ def _native_passes(r, layout: _Layout, arrays, cams, width, height, kernel):
                 width,
                 height,
                 sh_degree=layout.sh_degree,
-                kernel=kernel,
+                kernel=state["kernel"],
+                antialiased=state["antialiased"],
             )
             for ch in layout.chunks
         ]
@@ -174,13 +178,10 @@ class _Project(torch.autograd.Function):
             _np(opacities).reshape(B, N),
             _np(colors).reshape((B,) + tuple(colors.shape[len(layout.batch) :])),
         )
-        fwds = _native_passes(
-            state["rasterizer"], layout, arrays, state["cams"], state["width"], state["height"],
-            state["kernel"],
-        )
+        fwds = _native_passes(state["rasterizer"], layout, arrays, state)
         state["fwds"] = fwds
         ctx.state = state
-        ctx.inputs = [t.detach() for t in (means, quats, scales, viewmats, Ks)]
+        ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, viewmats, Ks)]
         radii = _stack(layout, fwds, lambda f: f.radii)  # [B, C, N]
         state["radii"] = radii
         if layout.packed:
@@ -189,20 +190,23 @@ class _Project(torch.autograd.Function):
             _stack(layout, fwds, lambda f: f.means2d),
             _stack(layout, fwds, lambda f: f.gaussian_depths),
             _stack(layout, fwds, lambda f: f.conics),
+            _stack(layout, fwds, lambda f: f.opacities),
         )
         return tuple(torch.from_numpy(_to_layout(layout, state, o)) for o in outs)
 
     @staticmethod
-    def backward(ctx, g_means2d, g_depths, g_conics):  # type: ignore[override]
+    def backward(ctx, g_means2d, g_depths, g_conics, g_opacities):  # type: ignore[override]
         state = ctx.state
         layout: _Layout = state["layout"]
         image = state.pop("image_g2d", None)
         if g_means2d is not None and image is not None:
             g_means2d = g_means2d - image
-        grads = [_from_layout(layout, state, g) for g in (g_means2d, g_depths, g_conics)]
-        wanted = [ctx.needs_input_grad[i] for i in (0, 1, 2, 5, 6)]
+        grads = [
+            _from_layout(layout, state, g) for g in (g_means2d, g_depths, g_conics, g_opacities)
+        ]
+        wanted = [ctx.needs_input_grad[i] for i in (0, 1, 2, 3, 5, 6)]
         out = _meta_vjp(layout, state, ctx.inputs, grads, wanted)
-        return out[0], out[1], out[2], None, None, out[3], out[4], None
+        return out[0], out[1], out[2], out[3], None, out[4], out[5], None
 
 
 def _to_layout(layout: _Layout, state, full: np.ndarray) -> np.ndarray:
@@ -228,43 +232,41 @@ def _from_layout(layout: _Layout, state, g: Optional[torch.Tensor]) -> Optional[
 
 
 def _meta_vjp(layout: _Layout, state, inputs, grads, wanted):
-    """dL/d(means, quats, scales, viewmats, Ks) of losses on the meta 2D means, depths and
-    conics (`grads`, [B, C, N, ...] or None), through the torch projection, pair by pair."""
-    g2d, gdepth, gconic = grads
+    """dL/d(means, quats, scales, opacities, viewmats, Ks) of losses on the meta 2D means,
+    depths, conics and opacities (`grads`, [B, C, N, ...] or None), through the torch
+    projection, pair by pair."""
     if all(g is None for g in grads) or not any(wanted):
-        return [None] * 5
-    means, quats, scales, viewmats, Ks = inputs
+        return [None] * 6
     B, C, N = layout.B, layout.C, layout.N
-    flat = [means.reshape(B, N, 3), quats.reshape(B, N, 4), scales.reshape(B, N, 3),
-            viewmats.reshape(B, C, 4, 4), Ks.reshape(B, C, 3, 3)]
+    shapes = [(B, N, 3), (B, N, 4), (B, N, 3), (B, N), (B, C, 4, 4), (B, C, 3, 3)]
+    flat = [t.reshape(shape) for t, shape in zip(inputs, shapes)]
     totals = [torch.zeros_like(t) if w else None for t, w in zip(flat, wanted)]
     with torch.enable_grad():
         for b, c in layout.pairs():
             vis = torch.from_numpy(state["radii"][b, c] > 0)
             if not bool(vis.any()):
                 continue
-            leaves = [flat[0][b][vis], flat[1][b][vis], flat[2][b][vis], flat[3][b, c], flat[4][b, c]]
+            leaves = [t[b][vis] for t in flat[:4]] + [flat[4][b, c], flat[5][b, c]]
             leaves = [t.clone().requires_grad_(w) for t, w in zip(leaves, wanted)]
-            m2d, conic, depth, _ = _projection.project(
-                *leaves, state["width"], state["height"])
+            p, q, s, o, vm, K = leaves
+            m2d, conic, depth, _, comp = _projection.project(
+                p, q, s, vm, K, state["width"], state["height"],
+                antialiased=state["antialiased"])
             loss = torch.zeros(())
-            for g, out in ((g2d, m2d), (gdepth, depth), (gconic, conic)):
+            for g, out in zip(grads, (m2d, depth, conic, o * comp)):
                 if g is not None:
                     loss = loss + (torch.from_numpy(g[b, c][vis.numpy()]) * out).sum()
             need = [t for t, w in zip(leaves, wanted) if w]
             got = iter(torch.autograd.grad(loss, need, allow_unused=True))
             for i, w in enumerate(wanted):
-                if not w:
-                    continue
-                g = next(got)
+                g = next(got) if w else None
                 if g is None:
                     continue
-                if i < 3:
+                if i < 4:
                     totals[i][b][vis] += g
                 else:
                     totals[i][b, c] += g
-    shapes = [t.shape for t in inputs]
-    return [None if t is None else t.reshape(shape) for t, shape in zip(totals, shapes)]
+    return [None if t is None else t.reshape(i.shape) for t, i in zip(totals, inputs)]
 
 
 def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout, screen: bool):
@@ -295,7 +297,7 @@ def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout, scree
 def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
     """dL/d(viewmat, K) of pair (b, c) from its projected quantities' gradients (the
     device's), through the torch projection; zeros where the pair has nothing visible."""
-    means, quats, scales, colors, viewmats, Ks = inputs
+    means, quats, scales, opacities, colors, viewmats, Ks = inputs
     B, C, N = layout.B, layout.C, layout.N
     vm = viewmats.reshape(B, C, 4, 4)[b, c].clone().requires_grad_()
     K = Ks.reshape(B, C, 3, 3)[b, c].clone().requires_grad_()
@@ -308,16 +310,19 @@ def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
         col = colors.reshape((B,) + tuple(colors.shape[len(layout.batch) :]))[b]
         sh = (col[c] if layout.per_camera else col)[vis]
     with torch.enable_grad():
-        m2d, conic, depth, rgb = _projection.project(
+        m2d, conic, depth, rgb, comp = _projection.project(
             means.reshape(B, N, 3)[b][vis], quats.reshape(B, N, 4)[b][vis],
             scales.reshape(B, N, 3)[b][vis], vm, K, state["width"], state["height"],
-            sh, layout.sh_degree,
+            sh, layout.sh_degree, state["antialiased"],
         )
         gs = torch.from_numpy(np.ascontiguousarray(screen[v]))
         loss = (torch.from_numpy(np.ascontiguousarray(g2d[v])) * m2d).sum()
         loss = loss + (gs[:, 0:3] * conic).sum() + (gs[:, 6] * depth).sum()
         if rgb is not None:
             loss = loss + (gs[:, 3:6] * rgb).sum()
+        if state["antialiased"]:
+            # The blended opacity, opacity times the compensation, depends on the camera.
+            loss = loss + (gs[:, 7] * opacities.reshape(B, N)[b][vis] * comp).sum()
         g_vm, g_K = torch.autograd.grad(loss, [vm, K])
     return g_vm, g_K
 
@@ -330,7 +335,7 @@ class _Rasterize(torch.autograd.Function):
         ctx.state = state
         ctx.means2d = means2d
         ctx.shapes = [tuple(t.shape) for t in (means, quats, scales, opacities, colors)]
-        ctx.inputs = [t.detach() for t in (means, quats, scales, colors, viewmats, Ks)]
+        ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, colors, viewmats, Ks)]
 
         def image(get):
             rows = [
@@ -397,7 +402,7 @@ class _Rasterize(torch.autograd.Function):
             ctx.means2d.absgrad = t(_to_layout(layout, state, abs2d))
         cams = [None, None]
         if camera:
-            cams = [g_vm.reshape(ctx.inputs[4].shape), g_K.reshape(ctx.inputs[5].shape)]
+            cams = [g_vm.reshape(ctx.inputs[5].shape), g_K.reshape(ctx.inputs[6].shape)]
         return (g2d, *groups, t(colour_grad).reshape(shapes[4]), *cams, None)
 
 
@@ -430,7 +435,10 @@ def _refuse(near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_mo
         (far_plane < 1e10, f"far_plane={far_plane}: vksplat has no far plane"),
         (radius_clip != 0.0, "radius_clip is not supported"),
         (eps2d != 0.3, f"eps2d={eps2d}: vksplat dilates 2D covariances by the original 0.3"),
-        (rasterize_mode != "classic", f"rasterize_mode={rasterize_mode!r}: only 'classic' has a backward pass"),
+        (
+            rasterize_mode not in ("classic", "antialiased"),
+            f"rasterize_mode must be 'classic' or 'antialiased', got {rasterize_mode!r}",
+        ),
         (camera_model != "pinhole", f"camera_model={camera_model!r}: only 'pinhole' is supported"),
         (covars is not None, "covars are not supported: pass quats and scales"),
         (distributed, "distributed rendering is not supported"),
@@ -487,15 +495,15 @@ def _backgrounds(layout: _Layout, backgrounds, render_mode):
     return colour, depth
 
 
-def _meta(layout: _Layout, state, projected, opacities, width, height) -> Dict[str, Any]:
-    means2d, depths, conics = projected
+def _meta(layout: _Layout, state, projected, width, height) -> Dict[str, Any]:
+    means2d, depths, conics, opacities = projected
     radii = state["radii"].astype(np.int32)
     bs, C, N = layout.batch, layout.C, layout.N
-    ops = opacities.reshape(layout.B, 1, N).expand(layout.B, C, N)
     meta: Dict[str, Any] = {
         "means2d": means2d,
         "depths": depths,
         "conics": conics,
+        "opacities": opacities,
         "width": width,
         "height": height,
         "tile_size": _TILE,
@@ -505,22 +513,11 @@ def _meta(layout: _Layout, state, projected, opacities, width, height) -> Dict[s
     if layout.packed:
         ids = [torch.from_numpy(i.astype(np.int64)) for i in state["ids"]]
         r = torch.from_numpy(radii[state["ids"]])
-        meta.update(
-            batch_ids=ids[0],
-            camera_ids=ids[1],
-            gaussian_ids=ids[2],
-            radii=torch.stack([r, r], dim=-1),
-            opacities=ops[ids[0], ids[1], ids[2]],
-        )
+        meta.update(batch_ids=ids[0], camera_ids=ids[1], gaussian_ids=ids[2])
     else:
         r = torch.from_numpy(radii.reshape(bs + (C, N)))
-        meta.update(
-            batch_ids=None,
-            camera_ids=None,
-            gaussian_ids=None,
-            radii=torch.stack([r, r], dim=-1),
-            opacities=ops.reshape(bs + (C, N)),
-        )
+        meta.update(batch_ids=None, camera_ids=None, gaussian_ids=None)
+    meta["radii"] = torch.stack([r, r], dim=-1)
     return meta
 
 
@@ -615,12 +612,13 @@ def rasterization(
         "width": width,
         "height": height,
         "kernel": kernel,
+        "antialiased": rasterize_mode == "antialiased",
         "absgrad": absgrad,
     }
     # gsplat builds the covariance from the scales' squares: the sign is the gradient's.
     # A zero scale is the smallest normal float (its gradient is 0, as gsplat's is).
     unsigned = scales.abs().clamp_min(torch.finfo(torch.float32).tiny)
-    means2d, depths, conics = _Project.apply(
+    means2d, depths, conics, blended = _Project.apply(
         means, quats, unsigned, opacities, colors, viewmats, Ks, state)
     rgb, alphas, expected = _Rasterize.apply(
         means2d, means, quats, unsigned, opacities, colors, viewmats, Ks, state)
@@ -635,4 +633,4 @@ def rasterization(
         out = depth
     else:
         out = torch.cat([rgb, depth], dim=-1)
-    return out, alphas, _meta(layout, state, (means2d, depths, conics), opacities, width, height)
+    return out, alphas, _meta(layout, state, (means2d, depths, conics, blended), width, height)

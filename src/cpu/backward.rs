@@ -19,8 +19,8 @@
 use crate::camera::Camera;
 use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use crate::model::{
-    sh_coeffs_for_degree, RenderOptions, SplatKernel, ALPHA_MAX, ALPHA_MIN, COV2D_DILATION,
-    NEAR_PLANE, TILE_SIZE, T_MIN,
+    sh_coeffs_for_degree, RenderOptions, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO,
+    COV2D_DILATION, NEAR_PLANE, TILE_SIZE, T_MIN,
 };
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -88,18 +88,8 @@ struct Proj {
     rect_max: [u32; 2],
 }
 
-/// Checks what the reference backward supports and the background's length.
-fn check(
-    p: &SplatParams<f64>,
-    cam: &Camera,
-    opts: &RenderOptions,
-    background: &[f64],
-) -> Result<(), String> {
-    if opts.antialiased {
-        return Err(
-            "the backward pass does not support the antialiased opacity compensation".into(),
-        );
-    }
+/// Checks the background's length and the camera.
+fn check(p: &SplatParams<f64>, cam: &Camera, background: &[f64]) -> Result<(), String> {
     if background.len() != p.channels() {
         return Err(format!(
             "the background has {} channels for colours of {}",
@@ -318,7 +308,11 @@ fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) ->
         mean2d,
         conic,
         depth: v.z,
-        opacity: p.opacities[i],
+        opacity: if opts.antialiased {
+            p.opacities[i] * compensation(a, b, c).0
+        } else {
+            p.opacities[i]
+        },
         color,
         rect_min,
         rect_max,
@@ -458,7 +452,7 @@ pub fn forward(
     opts: &RenderOptions,
     background: &[f64],
 ) -> Result<Image64, String> {
-    check(p, cam, opts, background)?;
+    check(p, cam, background)?;
     let r = rasterize(p, cam, opts);
     let (w, h) = (cam.width as usize, cam.height as usize);
     let d = p.channels();
@@ -532,7 +526,7 @@ pub fn backward(
     background: &[f64],
     grads: &PixelGrads<f64>,
 ) -> Result<SplatGrads<f64>, String> {
-    check(p, cam, opts, background)?;
+    check(p, cam, background)?;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let d = p.channels();
     let lens = [
@@ -641,6 +635,27 @@ pub fn backward(
     Ok(out)
 }
 
+/// The antialiased opacity compensation `sqrt(max(r, ANTIALIAS_MIN_RATIO))`, `r =
+/// det(cov2d) / det(cov2d + dilation)`, of the dilated 2D covariance `(a, b; b, c)`, and
+/// its derivatives with respect to a, b and c (0 where the ratio is clamped).
+fn compensation(a: f64, b: f64, c: f64) -> (f64, [f64; 3]) {
+    let dil = COV2D_DILATION as f64;
+    let det = a * c - b * b;
+    let det0 = (a - dil) * (c - dil) - b * b;
+    let r = det0 / det;
+    let min = ANTIALIAS_MIN_RATIO as f64;
+    if r <= min {
+        return (min.sqrt(), [0.0; 3]);
+    }
+    let comp = r.sqrt();
+    // dr/dx = (det0' det - det0 det') / det^2; dcomp/dr = 1 / (2 comp).
+    let k = 0.5 / comp / (det * det);
+    let ga = k * ((c - dil) * det - det0 * c);
+    let gc = k * ((a - dil) * det - det0 * a);
+    let gb = k * (-2.0 * b * det + det0 * 2.0 * b);
+    (comp, [ga, gb, gc])
+}
+
 /// Chain rule through the preprocess of Gaussian `i`: from its projected quantities'
 /// gradients to its parameters'.
 fn project_backward(
@@ -659,7 +674,7 @@ fn project_backward(
         ColorParams::Direct { .. } => [0.0; 3],
     };
     let [ca, cb, cc] = g.conic;
-    out.screen[i] = [ca, cb, cc, rgb[0], rgb[1], rgb[2], g.depth, 0.0];
+    out.screen[i] = [ca, cb, cc, rgb[0], rgb[1], rgb[2], g.depth, g.opacity];
     let mean = DVec3::from(p.means[i]);
     let v = cam.r * mean + cam.t;
     let z = v.z;
@@ -674,11 +689,20 @@ fn project_backward(
     let det2 = det * det;
     // conic (A, B, C) = (c, -b, a) / det.
     let [ga_, gb_, gc_] = g.conic;
-    let g_a = ga_ * (-c * c / det2) + gb_ * (b * c / det2) + gc_ * (1.0 / det - a * c / det2);
-    let g_c = ga_ * (1.0 / det - a * c / det2) + gb_ * (b * a / det2) + gc_ * (-a * a / det2);
-    let g_b = ga_ * (2.0 * b * c / det2)
+    let mut g_a = ga_ * (-c * c / det2) + gb_ * (b * c / det2) + gc_ * (1.0 / det - a * c / det2);
+    let mut g_c = ga_ * (1.0 / det - a * c / det2) + gb_ * (b * a / det2) + gc_ * (-a * a / det2);
+    let mut g_b = ga_ * (2.0 * b * c / det2)
         + gb_ * (-1.0 / det - 2.0 * b * b / det2)
         + gc_ * (2.0 * a * b / det2);
+    if opts.antialiased {
+        // The blended opacity is opacity * comp(a, b, c).
+        let (comp, [da, db, dc]) = compensation(a, b, c);
+        out.opacities[i] = g.opacity * comp;
+        let g_comp = g.opacity * p.opacities[i];
+        g_a += g_comp * da;
+        g_b += g_comp * db;
+        g_c += g_comp * dc;
+    }
     // a = t0' S t0, b = t0' S t1, c = t1' S t1.
     let g_cov = DMat3::from_cols(
         g_a * t0 * t0.x + g_b * t0 * t1.x + g_c * t1 * t1.x,

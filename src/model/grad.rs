@@ -237,7 +237,8 @@ pub struct SplatGrads<T> {
     pub absgrad: Vec<[T; 2]>,
     /// The gradients of the projected quantities (gsplat's `v_conics`, `v_colors`,
     /// `v_depths`): dL/d(conic A, B, C), dL/d(the view's SH colour r, g, b: SH frames
-    /// only, 0 for direct values), dL/d(view-space depth), and a 0. The reference fills
+    /// only, 0 for direct values), dL/d(view-space depth) and dL/d(the opacity blended:
+    /// the compensated one when antialiased). The reference fills
     /// them always; the device when asked ([`crate::render::GpuRenderer::set_screen_grads`]),
     /// else zeros. A camera's gradient is the chain rule from them.
     pub screen: Vec<[T; 8]>,

@@ -863,7 +863,7 @@ impl BackwardState {
 impl BackwardState {
     /// [`SplatGrads::screen`] from the per-Gaussian sums of the pass (as
     /// `preprocess_bwd.comp`'s `field` decodes them): conic (fields 2-4), colour (6-8, an
-    /// SH frame's only) and depth (9).
+    /// SH frame's only), depth (9) and the blended opacity (5).
     fn read_screen(
         &self,
         ctx: &GpuContext,
@@ -896,7 +896,7 @@ impl BackwardState {
                 colour(g, 7),
                 colour(g, 8),
                 field(g, 9),
-                0.0,
+                field(g, 5),
             ];
         }
         Ok(())

@@ -163,11 +163,6 @@ impl DiffRasterizer {
                 )));
             }
         }
-        if opts.antialiased {
-            return Err(GpuError::InvalidArgument(
-                "the backward pass does not support the antialiased opacity compensation".into(),
-            ));
-        }
         Ok(())
     }
 

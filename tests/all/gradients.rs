@@ -186,6 +186,12 @@ fn reference_backward_matches_finite_differences_with_options() {
         ..Default::default()
     };
     check(&p, &opts, &[1.0, 1.0, 1.0], true, 41);
+    // The antialiased opacity compensation (gsplat's rasterize_mode="antialiased").
+    let opts = RenderOptions {
+        antialiased: true,
+        ..Default::default()
+    };
+    check(&p, &opts, &[0.2, 0.1, 0.0], true, 42);
 }
 
 /// A stack of near-opaque Gaussians stops pixels at T < 1e-4 (the Gaussians behind are
@@ -520,6 +526,13 @@ fn gpu_backward_matches_the_reference_for_sh_degrees_and_kernels() {
         gpu_against_reference(&mut r, &p, &cam, &opts, 90);
         let p = guard_band_scene(&cam);
         gpu_against_reference(&mut r, &p, &cam, &RenderOptions::default(), 91);
+        let p = grad_scene(60, 811, Some(3), 3);
+        let opts = RenderOptions {
+            antialiased: true,
+            background: [0.1, 0.1, 0.3],
+            ..Default::default()
+        };
+        gpu_against_reference(&mut r, &p, &cam, &opts, 92);
     }
 }
 
