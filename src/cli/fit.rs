@@ -20,8 +20,11 @@ use vksplat::{note, outln};
 
 Inputs: a dense grid .npy (X x Y x Z x C, points spread over --bounds like numpy.linspace,
 or over the bounds of the sidecar FILE.npy.json that `gen --rf` writes), or scattered
-samples (.npy or .csv, N x (3 + C): x, y, z, then C values; a CSV may start with a header
-row and may hold # comments). The C values become the Gaussians' features feat_0..feat_{C-1}.
+samples (.npy or .csv, N x (3 + C): x, y, z, then C values; a CSV may hold # comments and
+start with a header row, whose x, y, z (and t or time) columns are found by name in any
+order, the notes saying which column plays which role). The C values become the Gaussians'
+features feat_0..feat_{C-1}. Fewer than 45 samples (20 to fit, 5 held out at the default
+--holdout 0.1) need --force.
 Samples with a time (one more column, --time-column; a CSV header's t or time column is
 found by itself) are fitted in space and time: each Gaussian gets a temporal mean and scale
 (t_mean, t_scale in the PLY); render them with `vksplat render --time T`.")]

@@ -23,6 +23,15 @@ fn field_ply(dir: &Path) -> std::path::PathBuf {
     path
 }
 
+/// A CPU slice render of the field through z = 0.
+const SLICE: [&str; 5] = [
+    "--cpu",
+    "--mode",
+    "field-slice",
+    "--slice-plane",
+    "0,0,0,0,0,1",
+];
+
 /// Item 1: `mW` is not drawn as `MW`, nor `V/m` as `V/M`; a character the font cannot draw
 /// is refused, naming it.
 #[test]
@@ -34,29 +43,28 @@ fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
             .path()
             .join(format!("bar_{}.png", units.len() + name.len() * 7));
         let _ = std::fs::remove_file(&out);
+        let base = ["render", s(&ply)];
         ok(&[
-            "render",
-            s(&ply),
-            "--cpu",
-            "--mode",
-            "field-slice",
-            "--slice-plane",
-            "0,0,0,0,0,1",
-            "--width",
-            "480",
-            "--height",
-            "40",
-            "--range",
-            "0,1",
-            "--colorbar",
-            "--units",
-            units,
-            "--channel-name",
-            name,
-            "-o",
-            s(&out),
-            "-q",
-        ]);
+            &base[..],
+            &SLICE,
+            &[
+                "--width",
+                "480",
+                "--height",
+                "40",
+                "--range",
+                "0,1",
+                "--colorbar",
+                "--units",
+                units,
+                "--channel-name",
+                name,
+                "-o",
+                s(&out),
+                "-q",
+            ],
+        ]
+        .concat());
         image::open(&out).unwrap().to_rgb8()
     };
     let h = 40;
@@ -84,24 +92,23 @@ fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
         ("--units", "Vж", "'ж' (U+0436)"),
         ("--channel-name", "Φ", "'Φ'"),
     ] {
+        let base = ["render", s(&ply)];
         let e = fails(
             &[
-                "render",
-                s(&ply),
-                "--cpu",
-                "--mode",
-                "field-slice",
-                "--slice-plane",
-                "0,0,0,0,0,1",
-                "--width",
-                "64",
-                "--colorbar",
-                flag,
-                label,
-                "-o",
-                s(&out),
-                "-q",
-            ],
+                &base[..],
+                &SLICE,
+                &[
+                    "--width",
+                    "64",
+                    "--colorbar",
+                    flag,
+                    label,
+                    "-o",
+                    s(&out),
+                    "-q",
+                ],
+            ]
+            .concat(),
             &out,
         );
         assert!(
