@@ -1,11 +1,12 @@
 //! Diff heat maps: a per-pixel absolute error, magnified by a stated factor and coloured
 //! with turbo, above a colour bar labelled with the error its ends stand for.
 
+use crate::font::text_width;
 use crate::frame::Frame;
 use crate::output::turbo;
 
 /// Height of the colour bar band below the image, in pixels.
-pub const BAR_HEIGHT: u32 = 24;
+pub const BAR_HEIGHT: u32 = 32;
 
 /// The largest absolute difference over the channels of each pixel of two `H x W x C`
 /// sample slices.
@@ -66,13 +67,21 @@ pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: 
             color[bar(y, x)] = c;
         }
     }
-    let text_width = |text: &str| (text.chars().count() * (GLYPH_W + 1)).saturating_sub(1) * SCALE;
-    let (lw, rw) = (text_width(labels[0]), text_width(labels[2]));
+    // Font pixels twice the size where the labels fit so, else once.
+    let fits = |scale: usize| {
+        labels
+            .iter()
+            .map(|t| text_width(t, scale) + 2 * scale)
+            .sum::<usize>()
+            <= w
+    };
+    let scale = if fits(2) { 2 } else { 1 };
+    let (lw, rw) = (text_width(labels[0], scale), text_width(labels[2], scale));
     for (text, anchor) in labels
         .iter()
         .zip([Anchor::Left, Anchor::Centre, Anchor::Right])
     {
-        let text_w = text_width(text);
+        let text_w = text_width(text, scale);
         if text_w > w {
             continue;
         }
@@ -81,14 +90,14 @@ pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: 
             Anchor::Centre => {
                 let x = (w - text_w) / 2;
                 // Only where it does not run into the end labels.
-                if x < lw + SCALE * 2 || x + text_w + rw + SCALE * 2 > w {
+                if x < lw + scale * 2 || x + text_w + rw + scale * 2 > w {
                     continue;
                 }
                 x
             }
             Anchor::Right => w - text_w,
         };
-        draw_text(color, w, x0, h + 13, text);
+        crate::font::draw(color, w, (x0, h + 13), text, scale);
     }
 }
 
@@ -119,92 +128,6 @@ pub fn label_number(v: f64) -> String {
     }
 }
 
-const GLYPH_W: usize = 3;
-const SCALE: usize = 2;
-
-/// 3x5 pixel glyphs, one row per 3-bit number (most significant bit on the left).
-fn glyph(c: char) -> [u8; 5] {
-    match c {
-        '0' => [7, 5, 5, 5, 7],
-        '1' => [2, 6, 2, 2, 7],
-        '2' => [7, 1, 7, 4, 7],
-        '3' => [7, 1, 7, 1, 7],
-        '4' => [5, 5, 7, 1, 1],
-        '5' => [7, 4, 7, 1, 7],
-        '6' => [7, 4, 7, 5, 7],
-        '7' => [7, 1, 1, 1, 1],
-        '8' => [7, 5, 7, 5, 7],
-        '9' => [7, 5, 7, 1, 7],
-        '.' => [0, 0, 0, 0, 2],
-        '-' => [0, 0, 7, 0, 0],
-        '+' => [0, 2, 7, 2, 0],
-        '_' => [0, 0, 0, 0, 7],
-        '/' => [1, 1, 2, 4, 4],
-        '(' => [1, 2, 2, 2, 1],
-        ')' => [4, 2, 2, 2, 4],
-        ':' => [0, 2, 0, 2, 0],
-        '%' => [5, 1, 2, 4, 5],
-        'x' | 'X' => [0, 5, 2, 5, 0],
-        c if c.is_ascii_alphabetic() => letter(c.to_ascii_lowercase()),
-        _ => [0; 5],
-    }
-}
-
-/// 3x5 letters (upper case drawn as lower case).
-fn letter(c: char) -> [u8; 5] {
-    match c {
-        'a' => [2, 5, 7, 5, 5],
-        'b' => [6, 5, 6, 5, 6],
-        'c' => [3, 4, 4, 4, 3],
-        'd' => [6, 5, 5, 5, 6],
-        'e' => [7, 4, 6, 4, 7],
-        'f' => [7, 4, 6, 4, 4],
-        'g' => [3, 4, 5, 5, 3],
-        'h' => [5, 5, 7, 5, 5],
-        'i' => [7, 2, 2, 2, 7],
-        'j' => [1, 1, 1, 5, 2],
-        'k' => [5, 5, 6, 5, 5],
-        'l' => [4, 4, 4, 4, 7],
-        'm' => [5, 7, 7, 5, 5],
-        'n' => [6, 5, 5, 5, 5],
-        'o' => [2, 5, 5, 5, 2],
-        'p' => [6, 5, 6, 4, 4],
-        'q' => [2, 5, 5, 6, 3],
-        'r' => [6, 5, 6, 5, 5],
-        's' => [3, 4, 2, 1, 6],
-        't' => [7, 2, 2, 2, 2],
-        'u' => [5, 5, 5, 5, 7],
-        'v' => [5, 5, 5, 5, 2],
-        'w' => [5, 5, 7, 7, 5],
-        'y' => [5, 5, 2, 2, 2],
-        'z' => [7, 1, 2, 4, 7],
-        _ => [0; 5],
-    }
-}
-
-/// Draws `text` in white, its top-left corner at pixel `(x0, y0)`.
-fn draw_text(color: &mut [[f32; 3]], width: usize, x0: usize, y0: usize, text: &str) {
-    for (k, c) in text.chars().enumerate() {
-        let rows = glyph(c);
-        let gx = x0 + k * (GLYPH_W + 1) * SCALE;
-        for (ry, bits) in rows.iter().enumerate() {
-            for rx in 0..GLYPH_W {
-                if bits & (4 >> rx) == 0 {
-                    continue;
-                }
-                for dy in 0..SCALE {
-                    for dx in 0..SCALE {
-                        let (x, y) = (gx + rx * SCALE + dx, y0 + ry * SCALE + dy);
-                        if let Some(p) = color.get_mut(y * width + x).filter(|_| x < width) {
-                            *p = [1.0; 3];
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -224,14 +147,15 @@ mod tests {
         let row = (h as usize + 5) * w as usize;
         assert_eq!(map.color[row], turbo(0.0));
         assert_eq!(map.color[row + w as usize - 1], turbo(1.0));
-        // Labels are drawn in white below the bar: "0" at the left edge.
-        let label_rows = (h as usize + 13)..(h as usize + 23);
+        // Labels are drawn in white below the bar: "0" at the left edge, "0.1" at the
+        // right (its 1 a pixel short of the edge).
+        let label_rows = (h as usize + 13)..(h as usize + BAR_HEIGHT as usize);
         assert!(label_rows
             .clone()
             .any(|y| map.color[y * w as usize] == [1.0; 3]));
         assert!(label_rows
             .clone()
-            .any(|y| map.color[y * w as usize + w as usize - 1] == [1.0; 3]));
+            .any(|y| (1..4).any(|dx| map.color[y * w as usize + w as usize - 1 - dx] == [1.0; 3])));
         assert_eq!(number(0.1), "0.1");
         assert_eq!(number(10.0), "10");
         assert_eq!(number(1.0 / 3.0), "0.3333");

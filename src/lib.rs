@@ -9,6 +9,7 @@ pub mod cpu;
 pub mod diff_image;
 pub mod doctor;
 pub mod fit;
+pub mod font;
 pub mod frame;
 pub mod fsutil;
 pub mod gen;

@@ -134,8 +134,14 @@ pub(crate) struct PathArgs {
     /// their centre of view as --orbit-centre), else 0,-1,0 (INRIA/COLMAP scenes)].
     #[arg(long, value_name = "X,Y,Z", value_parser = values::vec3, allow_hyphen_values = true, requires = "orbit")]
     pub(crate) orbit_up: Option<[f32; 3]>,
-    /// Vertical field of view of generated cameras (orbit, default camera), degrees
-    /// [default: 50]. Camera files bring their own intrinsics.
+    /// One camera at the eye EX,EY,EZ looking at the target TX,TY,TZ, with UX,UY,UZ the
+    /// world's up (the image's up is the up made perpendicular to the line of sight),
+    /// e.g. --look-at 4,0,0,0,0,0,0,0,1 (from +x towards the origin, z up); --width,
+    /// --height and --vfov as for the default camera.
+    #[arg(long, value_name = "EX,EY,EZ,TX,TY,TZ,UX,UY,UZ", value_parser = values::look_at, allow_hyphen_values = true, conflicts_with_all = ["cameras", "orbit", "camera"])]
+    pub(crate) look_at: Option<[f32; 9]>,
+    /// Vertical field of view of generated cameras (orbit, --look-at, default camera),
+    /// degrees [default: 50]. Camera files bring their own intrinsics.
     #[arg(long, value_name = "DEG", value_parser = values::fov_deg)]
     pub(crate) vfov: Option<f32>,
     /// Frames per second of a keyframe path (default: the file's).
@@ -357,7 +363,7 @@ pub(crate) fn camera_path(
     scene_arg: &SceneArg,
     scene: &Scene,
 ) -> Result<CameraPath> {
-    let camera_file = match (&view.cameras, p.orbit) {
+    let camera_file = match (&view.cameras, p.orbit.or(p.look_at.map(|_| 0))) {
         (Some(file), _) => Some(file.clone()),
         (None, None) => model_cameras(scene_arg),
         (None, Some(_)) => None,
@@ -418,6 +424,25 @@ pub(crate) fn camera_path(
             super::plural(cams.len(), "camera")
         );
         (cams, path.clone(), source)
+    } else if let Some(l) = p.look_at {
+        if sampling {
+            bail!("{sampling_flags} set the sampling of a keyframe path; --look-at is one camera");
+        }
+        let v = |i: usize| glam::Vec3::new(l[i], l[i + 1], l[i + 2]);
+        let cam = Camera::look_at(
+            "look_at",
+            width,
+            height,
+            vfov.to_radians(),
+            v(0),
+            v(3),
+            v(6),
+        );
+        (
+            vec![cam],
+            PathBuf::from("--look-at"),
+            "the --look-at camera".into(),
+        )
     } else {
         if sampling {
             bail!("{sampling_flags} set the sampling of a keyframe path; pass it with --cameras KEYFRAMES.json");

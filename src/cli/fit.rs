@@ -7,7 +7,7 @@ use clap::Args;
 use std::path::PathBuf;
 use std::time::Instant;
 use vksplat::cpu::SplatKernel;
-use vksplat::fit::{FieldData, FitConfig, FitOutcome, Layout};
+use vksplat::fit::{Columns, FieldData, FitConfig, FitOutcome, Layout};
 use vksplat::{note, outln};
 
 #[derive(Args)]
@@ -20,8 +20,11 @@ use vksplat::{note, outln};
 
 Inputs: a dense grid .npy (X x Y x Z x C, points spread over --bounds like numpy.linspace,
 or over the bounds of the sidecar FILE.npy.json that `gen --rf` writes), or scattered
-samples (.npy or .csv, N x (3 + C): x, y, z, then C values; a CSV may start with a header
-row and may hold # comments). The C values become the Gaussians' features feat_0..feat_{C-1}.
+samples (.npy or .csv, N x (3 + C): x, y, z, then C values; a CSV may hold # comments and
+start with a header row, whose x, y, z (and t or time) columns are found by name in any
+order, the notes saying which column plays which role). The C values become the Gaussians'
+features feat_0..feat_{C-1}. Fewer than 45 samples (20 to fit, 5 held out at the default
+--holdout 0.1) need --force.
 Samples with a time (one more column, --time-column; a CSV header's t or time column is
 found by itself) are fitted in space and time: each Gaussian gets a temporal mean and scale
 (t_mean, t_scale in the PLY); render them with `vksplat render --time T`.")]
@@ -92,6 +95,10 @@ pub(crate) struct FitArgs {
     /// Also write a JSON report (inputs, parameters, losses, held-out error, counts, time).
     #[arg(long, value_name = "FILE.json")]
     pub(crate) report: Option<PathBuf>,
+    /// Fit samples too few to fit and hold out (fewer than 20 to fit on, or, with
+    /// --holdout above 0, fewer than 5 held out), which is refused otherwise.
+    #[arg(long)]
+    pub(crate) force: bool,
     /// Replace output files that exist.
     #[arg(long)]
     pub(crate) overwrite: bool,
@@ -135,9 +142,9 @@ fn non_negative(s: &str) -> Result<f32, String> {
 pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     let started = Instant::now();
     check_paths(args)?;
-    let (data, magnitude_channel) = load_input(args)?;
+    let (data, columns, magnitude_channel) = load_input(args)?;
     let cfg = config(args, &data, magnitude_channel)?;
-    let layout = describe(args, &data, &cfg);
+    let layout = describe(args, &data, columns.as_ref(), &cfg);
     let bar = progress_bar(args.quiet, cfg.steps);
     let outcome = vksplat::fit::fit(&data, &cfg, &mut |p| {
         if p.step % 10 == 0 || p.step == cfg.steps {
@@ -156,7 +163,12 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
     vksplat::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
     let seconds = started.elapsed().as_secs_f64();
-    write_report(args, &data, &layout, &cfg, &outcome, &warnings, seconds)?;
+    let input = Input {
+        data: &data,
+        columns: columns.as_ref(),
+        layout: &layout,
+    };
+    write_report(args, &input, &cfg, &outcome, &warnings, seconds)?;
     print_summary(args, &cfg, &outcome, &warnings, seconds);
     Ok(())
 }
@@ -197,13 +209,16 @@ fn check_paths(args: &FitArgs) -> Result<()> {
 
 /// Loads the samples and refuses what no field can be fitted to or the options do not
 /// fit (channels it does not have, a magnitude channel without a positive value).
-/// Returns them and the channel that weights the loss.
-fn load_input(args: &FitArgs) -> Result<(FieldData, usize)> {
-    let data = vksplat::fit::load(
+/// Returns them, the roles of their columns and the channel that weights the loss.
+fn load_input(args: &FitArgs) -> Result<(FieldData, Option<Columns>, usize)> {
+    let (data, columns) = vksplat::fit::load_with_columns(
         &args.input,
         args.bounds,
         &args.time_column.clone().unwrap_or_default(),
     )?;
+    for n in columns.iter().flat_map(|c| &c.notes) {
+        note!("note: {}: {n}", args.input.display());
+    }
     vksplat::fit::check_fittable(&data)
         .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     if args.magnitude_channel >= data.k {
@@ -233,7 +248,11 @@ fn load_input(args: &FitArgs) -> Result<(FieldData, usize)> {
         vksplat::fit::check_magnitude(&data, magnitude_channel)
             .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     }
-    Ok((data, magnitude_channel))
+    if !args.force {
+        vksplat::fit::check_enough(data.len(), args.holdout)
+            .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
+    }
+    Ok((data, columns, magnitude_channel))
 }
 
 /// The fitting options: the Gaussian counts (chosen from the samples' count unless given,
@@ -272,8 +291,14 @@ fn config(args: &FitArgs, data: &FieldData, magnitude_channel: usize) -> Result<
     })
 }
 
-/// How the samples were given (for the report), noted with what is fitted to them.
-fn describe(args: &FitArgs, data: &FieldData, cfg: &FitConfig) -> String {
+/// How the samples were given (for the report), noted with what is fitted to them and
+/// which column plays which role.
+fn describe(
+    args: &FitArgs,
+    data: &FieldData,
+    columns: Option<&Columns>,
+    cfg: &FitConfig,
+) -> String {
     let layout = match &data.layout {
         Layout::Grid(s) => format!("grid {} x {} x {} x {}", s[0], s[1], s[2], s[3]),
         Layout::SamplesNpy => "samples (.npy)".into(),
@@ -292,14 +317,17 @@ fn describe(args: &FitArgs, data: &FieldData, cfg: &FitConfig) -> String {
     };
     if !args.quiet {
         note!(
-            "fitting {} Gaussians (at most {}, {} kernel) to {} samples of {} channels{time} from {} ({layout})",
+            "fitting {} Gaussians (at most {}, {} kernel) to {} of {}{time} from {} ({layout})",
             cfg.initial,
             cfg.max_gaussians,
             cfg.kernel,
-            data.len(),
-            data.k,
+            super::plural(data.len(), "sample"),
+            super::plural(data.k, "channel"),
             args.input.display()
         );
+        if let Some(c) = columns {
+            note!("columns of {}: {}", args.input.display(), c.describe());
+        }
     }
     layout
 }
@@ -338,10 +366,16 @@ fn warnings(outcome: &FitOutcome) -> Vec<String> {
 
 /// The JSON report (`--report`): the input, the options, the losses and errors, the
 /// density control's history, the time taken.
+/// The input as the report describes it.
+struct Input<'a> {
+    data: &'a FieldData,
+    columns: Option<&'a Columns>,
+    layout: &'a str,
+}
+
 fn write_report(
     args: &FitArgs,
-    data: &FieldData,
-    layout: &str,
+    input: &Input,
     cfg: &FitConfig,
     outcome: &FitOutcome,
     warnings: &[String],
@@ -352,9 +386,11 @@ fn write_report(
     };
     let grown: usize = outcome.history.iter().map(|h| h.cloned + h.split).sum();
     let pruned: usize = outcome.history.iter().map(|h| h.pruned).sum();
+    let (data, layout) = (input.data, input.layout);
     let value = serde_json::json!({
         "input": args.input.display().to_string(),
         "layout": layout,
+        "columns": input.columns,
         "samples": data.len(),
         "channels": data.k,
         "bounds": data.bounds,

@@ -118,6 +118,31 @@ pub(crate) fn vec3(s: &str) -> Result<[f32; 3], String> {
     Ok([v[0], v[1], v[2]])
 }
 
+/// `EX,EY,EZ,TX,TY,TZ,UX,UY,UZ`: an eye, a target and an up direction (`--look-at`); the
+/// eye not at the target, the up not zero nor along the line of sight.
+pub(crate) fn look_at(s: &str) -> Result<[f32; 9], String> {
+    let v = list(s, 9, "EX,EY,EZ,TX,TY,TZ,UX,UY,UZ (eye, target, up)")?;
+    let eye = glam::Vec3::new(v[0], v[1], v[2]);
+    let target = glam::Vec3::new(v[3], v[4], v[5]);
+    let up = glam::Vec3::new(v[6], v[7], v[8]);
+    if (target - eye).length() <= 1e-6 * eye.length().max(1.0) {
+        return Err(format!(
+            "the eye and the target are the same point in \"{s}\""
+        ));
+    }
+    if up.length() == 0.0 {
+        return Err(format!("the up direction is 0,0,0 in \"{s}\""));
+    }
+    if (target - eye).normalize().cross(up.normalize()).length() < 1e-4 {
+        return Err(format!(
+            "the up direction lies along the line of sight in \"{s}\"; give an up across it"
+        ));
+    }
+    let mut out = [0f32; 9];
+    out.copy_from_slice(&v[..9]);
+    Ok(out)
+}
+
 /// `NEAR,FAR`: two different finite numbers.
 pub(crate) fn depth_range(s: &str) -> Result<[f32; 2], String> {
     let v = list(s, 2, "NEAR,FAR")?;

@@ -2,6 +2,8 @@
 //! given or from its sidecar) or scattered samples (`.npy` or `.csv`, with an optional
 //! time column), checked value by value, and the bounds and time columns they come with.
 
+use super::columns::Columns;
+pub use super::columns::TimeColumn;
 use super::model;
 use crate::scene::MAX_FEATURES;
 use std::path::{Path, PathBuf};
@@ -32,35 +34,6 @@ pub enum Layout {
     SamplesNpy,
     /// Scattered samples from a `.csv`.
     SamplesCsv,
-}
-
-/// Which column of scattered samples holds their time (`fit --time-column`).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub enum TimeColumn {
-    /// A CSV header's `t` or `time` column, or the `time_column` of a `.npy`'s sidecar
-    /// (`gen --rf moving-source` writes one); else none.
-    #[default]
-    Auto,
-    /// This column (0-based among all columns; x, y, z are 0 to 2).
-    Index(usize),
-    /// The column a CSV header names so.
-    Name(String),
-}
-
-impl std::str::FromStr for TimeColumn {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let s = s.trim();
-        if s.is_empty() {
-            return Err(
-                "expected a column number (0-based, e.g. 3) or a CSV header's name (e.g. t)".into(),
-            );
-        }
-        Ok(match s.parse::<usize>() {
-            Ok(i) => TimeColumn::Index(i),
-            Err(_) => TimeColumn::Name(s.to_string()),
-        })
-    }
 }
 
 /// Field samples: positions and `k` values each.
@@ -162,14 +135,27 @@ pub fn load(
     bounds: Option<[f32; 6]>,
     time: &TimeColumn,
 ) -> Result<FieldData, InputError> {
+    Ok(load_with_columns(path, bounds, time)?.0)
+}
+
+/// [`load`], and for scattered samples which column plays which role ([`Columns`]: by
+/// name from a CSV header, else x, y, z first).
+pub fn load_with_columns(
+    path: &Path,
+    bounds: Option<[f32; 6]>,
+    time: &TimeColumn,
+) -> Result<(FieldData, Option<Columns>), InputError> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let bytes = std::fs::read(path).map_err(|e| bad(path, format!("cannot read: {e}")))?;
-    let data = match ext.as_str() {
+    let (data, columns) = match ext.as_str() {
         "npy" => load_npy(&bytes, path, bounds, time)?,
-        "csv" => with_bounds(load_csv(&bytes, path, time)?, bounds, path)?,
+        "csv" => {
+            let (data, columns) = load_csv(&bytes, path, time)?;
+            (with_bounds(data, bounds, path)?, Some(columns))
+        }
         _ => {
             return Err(bad(
                 path,
@@ -189,7 +175,7 @@ pub fn load(
     if let (Some(t), Some(c)) = (&data.times, data.time_column) {
         check_times(t).map_err(|m| bad(path, format!("column {c} (time): {m}")))?;
     }
-    Ok(data)
+    Ok((data, columns))
 }
 
 /// Refuses times no time-varying field can be fitted to: one value for every sample.
@@ -262,7 +248,7 @@ fn load_npy(
     path: &Path,
     bounds: Option<[f32; 6]>,
     time: &TimeColumn,
-) -> Result<FieldData, InputError> {
+) -> Result<(FieldData, Option<Columns>), InputError> {
     let array = crate::image_file::parse_npy_array(bytes, path).map_err(|e| {
         let m = e.to_string();
         let prefix = format!("{}: ", path.display());
@@ -323,7 +309,7 @@ fn load_npy(
                     }
                 }
             }
-            Ok(FieldData {
+            let data = FieldData {
                 positions,
                 times: None,
                 time_column: None,
@@ -332,7 +318,8 @@ fn load_npy(
                 bounds,
                 layout: Layout::Grid([x, y, z, c]),
                 bounds_source: source,
-            })
+            };
+            Ok((data, None))
         }
         [n, cols] => {
             if cols < 4 {
@@ -344,9 +331,13 @@ fn load_npy(
             if n == 0 {
                 return Err(bad(path, "holds no samples (0 rows)"));
             }
-            let time_column = match time {
-                TimeColumn::Auto => sidecar_time_column(path)?,
-                TimeColumn::Index(c) => Some(*c),
+            let (time_column, time_from) = match time {
+                TimeColumn::Auto => {
+                    let c = sidecar_time_column(path)?;
+                    let from = format!("the sidecar {}", crate::rf::sidecar_path(path).display());
+                    (c, c.map(|_| from))
+                }
+                TimeColumn::Index(c) => (Some(*c), Some(format!("--time-column {c}"))),
                 TimeColumn::Name(name) => {
                     return Err(bad(
                         path,
@@ -369,11 +360,9 @@ fn load_npy(
                     ),
                 ));
             }
-            with_bounds(
-                samples(array.data, cols, Layout::SamplesNpy, time_column),
-                bounds,
-                path,
-            )
+            let columns = Columns::positional(cols, time_column, time_from);
+            let data = samples(array.data, cols, Layout::SamplesNpy, &columns);
+            Ok((with_bounds(data, bounds, path)?, Some(columns)))
         }
         _ => Err(bad(
             path,
@@ -385,28 +374,25 @@ fn load_npy(
     }
 }
 
-/// Scattered samples from rows of `cols` values (x, y, z, values; column `time_column`,
-/// if any, the time).
-fn samples(rows: Vec<f32>, cols: usize, layout: Layout, time_column: Option<usize>) -> FieldData {
-    let k = cols - 3 - usize::from(time_column.is_some());
+/// Scattered samples from rows of `cols` values, the columns read in the roles `columns`
+/// gives them.
+fn samples(rows: Vec<f32>, cols: usize, layout: Layout, columns: &Columns) -> FieldData {
+    let k = columns.values.len();
     let n = rows.len() / cols;
     let mut positions = Vec::with_capacity(n);
     let mut values = Vec::with_capacity(n * k);
-    let mut times = Vec::with_capacity(if time_column.is_some() { n } else { 0 });
+    let mut times = Vec::with_capacity(if columns.time.is_some() { n } else { 0 });
     for row in rows.chunks_exact(cols) {
-        positions.push([row[0], row[1], row[2]]);
-        for (c, v) in row.iter().enumerate().skip(3) {
-            if Some(c) == time_column {
-                times.push(*v);
-            } else {
-                values.push(*v);
-            }
+        positions.push(columns.xyz.map(|c| row[c]));
+        values.extend(columns.values.iter().map(|&c| row[c]));
+        if let Some(c) = columns.time {
+            times.push(row[c]);
         }
     }
     FieldData {
         bounds: model::point_bounds(&positions),
-        times: time_column.map(|_| times),
-        time_column,
+        times: columns.time.map(|_| times),
+        time_column: columns.time,
         positions,
         values,
         k,
@@ -444,7 +430,11 @@ fn with_bounds(
     Ok(data)
 }
 
-fn load_csv(bytes: &[u8], path: &Path, time: &TimeColumn) -> Result<FieldData, InputError> {
+fn load_csv(
+    bytes: &[u8],
+    path: &Path,
+    time: &TimeColumn,
+) -> Result<(FieldData, Columns), InputError> {
     let text =
         std::str::from_utf8(bytes).map_err(|_| bad(path, "is not a text (UTF-8) CSV file"))?;
     let mut rows = Vec::new();
@@ -508,31 +498,23 @@ fn load_csv(bytes: &[u8], path: &Path, time: &TimeColumn) -> Result<FieldData, I
             format!("has {cols} columns; samples are rows of x, y, z and at least one value"),
         ));
     }
-    let named = |want: &dyn Fn(&str) -> bool| {
-        header
-            .as_ref()
-            .and_then(|h| h.iter().position(|n| want(n.trim_matches('"'))))
+    let columns = match &header {
+        Some(names) => Columns::from_header(names, time).map_err(|m| bad(path, m))?,
+        None => {
+            let c = match time {
+                TimeColumn::Auto => None,
+                TimeColumn::Index(c) => Some(*c),
+                TimeColumn::Name(name) => return Err(bad(
+                    path,
+                    format!("--time-column {name}: it has no header row to name columns; give the time's column number (x, y, z are 0 to 2, e.g. --time-column 3)"),
+                )),
+            };
+            if let Some(c) = c {
+                check_time_column(c, cols, path)?;
+            }
+            Columns::positional(cols, c, c.map(|c| format!("--time-column {c}")))
+        }
     };
-    let time_column = match time {
-        TimeColumn::Auto => named(&|n| n.eq_ignore_ascii_case("t") || n.eq_ignore_ascii_case("time")),
-        TimeColumn::Index(c) => Some(*c),
-        TimeColumn::Name(name) => Some(named(&|n| n == name).ok_or_else(|| {
-            bad(
-                path,
-                match &header {
-                    Some(h) => format!(
-                        "--time-column {name}: its header names no such column (it has {})",
-                        h.join(", ")
-                    ),
-                    None => format!(
-                        "--time-column {name}: it has no header row to name columns; give the time's column number (x, y, z are 0 to 2, e.g. --time-column 3)"
-                    ),
-                },
-            )
-        })?),
-    };
-    if let Some(c) = time_column {
-        check_time_column(c, cols, path)?;
-    }
-    Ok(samples(rows, cols, Layout::SamplesCsv, time_column))
+    let data = samples(rows, cols, Layout::SamplesCsv, &columns);
+    Ok((data, columns))
 }

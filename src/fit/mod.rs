@@ -16,6 +16,7 @@
 //! (refusals, normalisation, the result mapped back: [`normalise`]), the optimisation
 //! ([`run`]) and its scores at the end ([`evaluate`]).
 
+pub mod columns;
 pub mod evaluate;
 pub mod input;
 pub mod model;
@@ -23,11 +24,16 @@ pub mod normalise;
 pub mod optim;
 pub mod run;
 
+pub use columns::Columns;
 pub use input::{
-    check_bounds, check_times, load, parse_bounds, FieldData, InputError, Layout, TimeColumn,
+    check_bounds, check_times, load, load_with_columns, parse_bounds, FieldData, InputError,
+    Layout, TimeColumn,
 };
-pub use normalise::{check_fittable, check_magnitude, default_counts, fit, fit_bounds};
-pub use run::weights;
+pub use normalise::{
+    check_enough, check_fittable, check_magnitude, default_counts, fit, fit_bounds, min_samples,
+    MIN_HOLDOUT_SAMPLES, MIN_TRAIN_SAMPLES,
+};
+pub use run::{holdout_count, weights};
 
 use crate::model::SplatKernel;
 use crate::scene::Scene;

@@ -5,7 +5,7 @@
 
 use super::input::{check_times, FieldData};
 use super::model::FEAT;
-use super::run::fit_normalised;
+use super::run::{fit_normalised, holdout_count};
 use super::{FitConfig, FitOutcome, Progress};
 
 /// The default Gaussian counts for `samples` samples: one Gaussian per 20 samples at the
@@ -91,6 +91,44 @@ pub fn check_fittable(data: &FieldData) -> Result<(), String> {
         check_times(t)?;
     }
     Ok(())
+}
+
+/// The fewest samples a fit trains on unless forced (`fit --force`).
+pub const MIN_TRAIN_SAMPLES: usize = 20;
+/// The fewest samples it holds out to measure the error (with a hold-out share above 0)
+/// unless forced.
+pub const MIN_HOLDOUT_SAMPLES: usize = 5;
+
+/// The fewest samples that leave [`MIN_TRAIN_SAMPLES`] to train on and, with a hold-out
+/// share above 0, [`MIN_HOLDOUT_SAMPLES`] held out.
+pub fn min_samples(holdout: f32) -> usize {
+    (MIN_TRAIN_SAMPLES..)
+        .find(|&n| {
+            let held = holdout_count(n, holdout);
+            n - held >= MIN_TRAIN_SAMPLES && (holdout <= 0.0 || held >= MIN_HOLDOUT_SAMPLES)
+        })
+        .unwrap_or(usize::MAX)
+}
+
+/// Refuses `n` samples too few to fit and to measure the fit on held-out samples, saying
+/// how many it needs.
+pub fn check_enough(n: usize, holdout: f32) -> Result<(), String> {
+    let need = min_samples(holdout);
+    if n >= need {
+        return Ok(());
+    }
+    let held = holdout_count(need, holdout);
+    let split = if held > 0 {
+        format!(
+            "with --holdout {holdout}, at least {need} ({} to fit and {held} held out to measure the error)",
+            need - held
+        )
+    } else {
+        format!("at least {need} to fit")
+    };
+    Err(format!(
+        "holds {n} samples, too few to fit a field and measure it: it needs {split}; give more samples, or --force to fit these anyway"
+    ))
 }
 
 /// Fits Gaussians to `data`. Deterministic for a given configuration (any thread count).

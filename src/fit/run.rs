@@ -54,6 +54,16 @@ struct Extent {
     diag: f32,
 }
 
+/// How many of `n` samples the share `holdout` holds out (at least 1 and at most `n - 1`
+/// of 2 or more, where the share is above 0).
+pub fn holdout_count(n: usize, holdout: f32) -> usize {
+    if holdout > 0.0 && n >= 2 {
+        ((n as f64 * f64::from(holdout)).round() as usize).clamp(1, n - 1)
+    } else {
+        0
+    }
+}
+
 /// A seeded shuffle (Fisher-Yates) of the samples, the first share held out, and the
 /// rest in batches, binned into cells about the size of the Gaussians at the largest
 /// count.
@@ -67,11 +77,7 @@ fn split_samples(data: &FieldData, cfg: &FitConfig, extent: &Extent, rng: &mut R
         let j = (rng.next_u64() % (i as u64 + 1)) as usize;
         idx.swap(i, j);
     }
-    let n_hold = if cfg.holdout > 0.0 && n >= 2 {
-        ((n as f64 * f64::from(cfg.holdout)).round() as usize).clamp(1, n - 1)
-    } else {
-        0
-    };
+    let n_hold = holdout_count(n, cfg.holdout);
     let (hold_idx, train_idx) = idx.split_at(n_hold);
     let times = data.times.as_deref();
     let gather = |ids: &[usize]| -> (Vec<[f32; 3]>, Vec<f32>, Vec<f32>, Vec<f32>) {

@@ -742,6 +742,8 @@ fn readme_and_help_agree() {
         "--parsable",
         "--dependency",
         "--wrap",
+        "--gres",
+        "--gpus-per-task",
         // tools/module_graph.py in docs/module-graph.md.
         "--no-tests",
         "--layers",

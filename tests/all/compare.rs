@@ -107,7 +107,11 @@ fn compare_passes_on_every_real_scene_with_the_defaults() {
             let diff = report.join(f["diff"].as_str().unwrap());
             let img = image::open(&diff).unwrap();
             // The heat map plus its colour bar.
-            assert_eq!((img.width(), img.height()), (320, 180 + 24), "{scene}");
+            assert_eq!(
+                (img.width(), img.height()),
+                (320, 180 + vksplat::diff_image::BAR_HEIGHT),
+                "{scene}"
+            );
         }
         let csv = std::fs::read_to_string(report.join("report.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + frames.len(), "{csv}");
@@ -249,7 +253,10 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     assert!(json["groups"][1]["psnr"].is_null(), "alpha is unchanged");
     assert_eq!(json["groups"][2]["group"], "depth");
     let img = image::open(&diff).unwrap();
-    assert_eq!((img.width(), img.height()), (64, 36 + 24));
+    assert_eq!(
+        (img.width(), img.height()),
+        (64, 36 + vksplat::diff_image::BAR_HEIGHT)
+    );
 
     // Channel and size mismatches.
     let rgb = dir.path().join("rgb.npy");

@@ -163,7 +163,7 @@ const CAPS: &[Cap] = &[
         "1280x720",
     ),
     (
-        "vksplat render dipole.ply --mode field-max -o max.png --range 0,0.5 --colorbar",
+        "vksplat render dipole.ply --mode field-max -o max.png --range 0,0.5 --colorbar --width 320",
         &[("--width", "160")],
         "1280x720",
     ),
@@ -188,7 +188,7 @@ const CAPS: &[Cap] = &[
         "1280x720",
     ),
     (
-        "vksplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max --range 0,1 -o anim/frame_%04d.png",
+        "vksplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max --range 0,1 --width 320 -o anim/frame_%04d.png",
         &[("--frames", "0..3"), ("--width", "160")],
         "30 frames at 1280x720",
     ),

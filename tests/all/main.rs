@@ -41,6 +41,7 @@ mod pipelined;
 mod ply_loader;
 mod real_scenes;
 mod reference_renderer;
+mod rf_usability;
 mod rf_walkthrough;
 mod sequences;
 mod shader_interface;

@@ -84,6 +84,16 @@ pub(crate) fn check_options(args: &RenderArgs, mode: Option<RenderMode>) -> Resu
     if (f.channel_name.is_some() || f.units.is_some()) && !f.colorbar {
         bail!("--channel-name and --units label the colour bar; add --colorbar");
     }
+    for (flag, label) in [("--channel-name", &f.channel_name), ("--units", &f.units)] {
+        let Some(label) = label else { continue };
+        if let Some(c) = vksplat::font::undrawable(label) {
+            bail!(
+                "{flag} \"{label}\": the colour bar's font cannot draw '{c}' (U+{:04X}); it draws printable ASCII and {}",
+                u32::from(c),
+                vksplat::font::SYMBOLS
+            );
+        }
+    }
     let ignored = [
         ("--scale-modifier", args.scale_modifier != 1.0),
         ("--antialiased", args.antialiased),
