@@ -794,8 +794,13 @@ fn merge(args: &EvalArgs) -> Result<()> {
                 found[0].1.display()
             );
         }
-        // Shards on different devices: the report names each device.
-        if !whole.renderer.split("; ").any(|r| r == part.renderer) {
+        // Shards on different devices: the report names each device. A shard with no
+        // image rendered nothing: it names no renderer.
+        if whole.results.is_empty() {
+            whole.renderer = part.renderer.clone();
+        } else if !part.results.is_empty()
+            && !whole.renderer.split("; ").any(|r| r == part.renderer)
+        {
             whole.renderer = format!("{}; {}", whole.renderer, part.renderer);
         }
         whole.results.extend(part.results);

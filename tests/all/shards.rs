@@ -399,6 +399,24 @@ fn eval_shards_merge_into_the_report_of_one_run() {
         &gap.join("x"),
     );
     assert!(e.contains("both are shard 1/3"), "{e}");
+
+    // More shards than the 3 test views: the empty shard renders nothing and names no
+    // renderer, so the merge is still one run's report, byte for byte.
+    let one_test = dir.path().join("one-test");
+    eval(&one_test, "test", &[]);
+    let thin = dir.path().join("thin");
+    for i in 0..4 {
+        eval(&thin, "test", &["--shard", &format!("{i}/4")]);
+    }
+    let merged_thin = dir.path().join("merged-thin");
+    succeeds(&["eval", "--merge", s(&thin), "-o", s(&merged_thin)], &[]);
+    for f in ["report.json", "report.csv"] {
+        let (a, b) = (
+            std::fs::read_to_string(one_test.join(f)).unwrap(),
+            std::fs::read_to_string(merged_thin.join(f)).unwrap(),
+        );
+        assert!(a == b, "{f} differs:\n{a}\n---\n{b}");
+    }
 }
 
 #[test]
