@@ -12,7 +12,7 @@ use vksplat::scene;
 /// errors, the counts, what was chosen from the data (`notes`) and `warnings` (a fit no
 /// better than predicting 0).
 #[pyfunction]
-#[pyo3(signature = (points, values, n, k, gaussians=None, max_gaussians=None, steps=1500, kernel="gaussian", holdout=0.1, seed=1, bounds=None, magnitude_channel=0, db=false, clip_grad=0.0, times=None))]
+#[pyo3(signature = (points, values, n, k, gaussians=None, max_gaussians=None, steps=1500, kernel="gaussian", holdout=0.1, seed=1, bounds=None, magnitude_channel=0, db=false, clip_grad=0.0, times=None, force=false))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fit<'py>(
     py: Python<'py>,
@@ -31,6 +31,7 @@ pub(crate) fn fit<'py>(
     db: bool,
     clip_grad: f32,
     times: Option<&[u8]>,
+    force: bool,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
     use vksplat::fit::{self, FieldData, FitConfig, Layout};
     let points = floats(points, "points", n * 3)?;
@@ -48,6 +49,16 @@ pub(crate) fn fit<'py>(
         return Err(value_err(format!(
             "holdout must be between 0 and 0.9, got {holdout}"
         )));
+    }
+    if !force {
+        // The command line's rule (`vksplat fit --force`), in the function's words.
+        fit::check_enough(n, holdout).map_err(|m| {
+            value_err(format!(
+                "points {}",
+                m.replace("--holdout ", "holdout=")
+                    .replace("--force", "force=True")
+            ))
+        })?;
     }
     if steps == 0 || clip_grad.is_nan() || clip_grad < 0.0 {
         return Err(value_err(

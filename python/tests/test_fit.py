@@ -52,7 +52,11 @@ def test_units_do_not_matter_and_bad_inputs_are_refused():
     assert abs(small.fit_report["holdout_relative_l2"] - base) < 5e-3
     assert np.abs(small.features).max() < 1e-7  # the features carry the unit
     with pytest.raises(ValueError, match="lie at one point"):
-        vksplat.fit(np.zeros((10, 3)), np.ones(10))
+        vksplat.fit(np.zeros((10, 3)), np.ones(10), force=True)
+    # Too few to fit and hold out (as `vksplat fit`): refused unless forced.
+    with pytest.raises(ValueError, match=r"holds 44 samples, too few .* at least 45 .*force=True"):
+        vksplat.fit(p[:44], v[:44], steps=5)
+    assert vksplat.fit(p[:44], v[:44], steps=5, force=True).fit_report is not None
     with pytest.raises(ValueError, match="pass db=True"):
         vksplat.fit(p, -np.abs(v[:, 0]) - 50)
     with pytest.raises(ValueError, match="shape"):

@@ -515,6 +515,7 @@ def fit(
     db: bool = False,
     clip_grad: float = 0.0,
     times: Optional[ArrayLike] = None,
+    force: bool = False,
 ) -> Scene:
     """Fits Gaussians with feature channels to field samples, as ``vksplat fit`` does:
     ``points (N, 3)`` and ``values (N, K)`` (or ``(N,)`` for one channel). The scene's
@@ -524,7 +525,9 @@ def fit(
     takes the magnitude channel as dB and fits its linear power. ``times (N,)`` fits the
     field in space and time (each Gaussian gets a temporal mean and scale; evaluate it with
     ``evaluate_field(x, time=t)``, render ``scene.at_time(t)``). A fit no better than
-    predicting 0 raises a ``UserWarning``."""
+    predicting 0 raises a ``UserWarning``. Too few samples to fit and hold out (fewer than
+    20 to fit on, or 5 held out with ``holdout`` above 0: 45 at the default 0.1) raise a
+    ``ValueError`` unless ``force=True``."""
     p = _floats("points", points, (None, 3))
     v = _numpy(values)
     if v.ndim == 1:
@@ -537,6 +540,7 @@ def fit(
         p.tobytes(), v.tobytes(), p.shape[0], v.shape[1], gaussians, max_gaussians, steps,
         kernel, holdout, seed, b, magnitude_channel, db, clip_grad,
         None if times is None else _floats("times", _numpy(times).reshape(-1), (p.shape[0],)).tobytes(),
+        bool(force),
     )
     report = dict(report)
     for w in report["warnings"]:
