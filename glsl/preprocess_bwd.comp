@@ -9,6 +9,7 @@
 // normalisation's Jacobian), scales and SH coefficients. Mirrors cpu::backward's
 // project_backward line by line (in f32).
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
 #include "grad_common.glsl"
 #ifndef FLOAT_ATOMICS
@@ -24,7 +25,8 @@ layout(std430, binding = PREPROCESS_BWD_GAUSSIANS) readonly buffer GaussianBuf {
 layout(binding = PREPROCESS_BWD_SH) uniform samplerBuffer sh_texels;
 layout(std430, binding = PREPROCESS_BWD_SPLATS) readonly buffer SplatBuf { Splat splats[]; };
 layout(std430, binding = PREPROCESS_BWD_MAXIMA) readonly buffer MaximaBuf { uint maxima[]; };
-layout(std430, binding = PREPROCESS_BWD_ACC) readonly buffer AccBuf { uvec2 acc[]; };
+// Two fields' (lo, hi) sums per uvec4: a Gaussian's 4 * pc.vecs fields are whole uvec4s.
+layout(std430, binding = PREPROCESS_BWD_ACC) readonly buffer AccBuf { uvec4 acc[]; };
 // Per Gaussian: (dmean xyz, dopacity), dquat (w, x, y, z), (dscale xyz, 0),
 // (dmean2d xy, absgrad xy).
 struct GaussianGrad {
@@ -34,22 +36,32 @@ struct GaussianGrad {
     vec4 mean2d_abs;
 };
 layout(std430, binding = PREPROCESS_BWD_GRADS) writeonly buffer GradBuf { GaussianGrad grads[]; };
-// dL/d SH coefficient, in the SH texels' layout (floats).
-layout(std430, binding = PREPROCESS_BWD_SH_GRADS) writeonly buffer ShGradBuf { float sh_grads[]; };
+// dL/d SH coefficient, in the SH texels' layout (a vec4 per texel: on CPU devices each
+// storage access costs a loop over the lanes, whatever its width).
+layout(std430, binding = PREPROCESS_BWD_SH_GRADS) writeonly buffer ShGradBuf { vec4 sh_grads[]; };
 // dL/d feature channel (direct values), 4 per group: `pc.vecs - 3` groups.
 layout(std430, binding = PREPROCESS_BWD_FEATURE_GRADS) writeonly buffer FeatGradBuf { vec4 feature_grads[]; };
 layout(push_constant) uniform Push { uint count; uint bits; uint vecs; } pc;
 
 #include "sh_common.glsl"
 
-float field(uint g, uint f) {
-    uvec2 v = acc[g * 4u * pc.vecs + f];
+// Texels of the most SH coefficients (degree 3: 16 per channel, 48 floats).
+#define SH_TEXELS 12u
+
+// The float sum of field f from its (lo, hi) fixed-point pair.
+float field_value(uvec2 v, uint f) {
 #if FLOAT_ATOMICS
     return uintBitsToFloat(v.x);
 #else
     if (v == uvec2(0u)) return 0.0;
     return from_fixed(v, grad_shift(maxima[f], pc.bits));
 #endif
+}
+
+// Fields f and f + 1 (f even) of Gaussian g: one load for two fields.
+vec2 field_pair(uint g, uint f) {
+    uvec4 v = acc[(g * 4u * pc.vecs + f) / 2u];
+    return vec2(field_value(v.xy, f), field_value(v.zw, f + 1u));
 }
 
 // SH basis Y_k(dir) and its gradient (cpu::backward::sh_basis, sh_basis_grad).
@@ -92,31 +104,32 @@ void main() {
     uint i = linear_group_id() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     if (i >= pc.count) return;
     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
-    uint base = i * stride;
     GaussianGrad out_g;
     out_g.mean_opacity = vec4(0.0);
     out_g.quat = vec4(0.0);
     out_g.scale = vec4(0.0);
     out_g.mean2d_abs = vec4(0.0);
-    for (uint k = 0u; k < stride; k++) sh_grads[base + k] = 0.0;
+    uint texels = stride / 4u;
     uint groups = pc.vecs - 3u;
     bool visible = splats[i].color_radius.w > 0.0;
     // Direct feature channels: their sums are their gradients.
     for (uint gi = 0u; gi < groups; gi++) {
         uint f = 12u + 4u * gi;
-        feature_grads[i * groups + gi] = visible
-            ? vec4(field(i, f), field(i, f + 1u), field(i, f + 2u), field(i, f + 3u)) : vec4(0.0);
+        feature_grads[i * groups + gi] = visible ? vec4(field_pair(i, f), field_pair(i, f + 2u)) : vec4(0.0);
     }
     if (!visible) {
         grads[i] = out_g;
+        for (uint q = 0u; q < texels; q++) sh_grads[i * texels + q] = vec4(0.0);
         return;
     }
-    vec2 g_mean2d = vec2(field(i, 0u), field(i, 1u));
-    vec3 g_conic = vec3(field(i, 2u), field(i, 3u), field(i, 4u));
-    float g_opacity = field(i, 5u);
-    vec3 g_color = vec3(field(i, 6u), field(i, 7u), field(i, 8u));
-    float g_depth = field(i, 9u);
-    out_g.mean2d_abs = vec4(g_mean2d, field(i, 10u), field(i, 11u));
+    vec2 f01 = field_pair(i, 0u), f23 = field_pair(i, 2u), f45 = field_pair(i, 4u);
+    vec2 f67 = field_pair(i, 6u), f89 = field_pair(i, 8u), f1011 = field_pair(i, 10u);
+    vec2 g_mean2d = f01;
+    vec3 g_conic = vec3(f23, f45.x);
+    float g_opacity = f45.y;
+    vec3 g_color = vec3(f67, f89.x);
+    float g_depth = f89.y;
+    out_g.mean2d_abs = vec4(g_mean2d, f1011);
     out_g.mean_opacity.w = g_opacity;
 
     Gaussian g = gaussians[i];
@@ -211,19 +224,34 @@ void main() {
     float basis[16];
     vec3 basis_grad[16];
     sh_basis(degree, dir, basis, basis_grad);
+    // The used coefficients' texels, each fetched once (unrolled: constant indices).
+    vec4 sh[SH_TEXELS];
+    [[unroll]] for (uint q = 0u; q < SH_TEXELS; q++) {
+        sh[q] = 4u * q < 3u * used ? texelFetch(sh_texels, int(i * texels + q)) : vec4(0.0);
+    }
+#define SH_COEFF(k) vec3(sh[(3u * (k)) / 4u][(3u * (k)) % 4u], sh[(3u * (k) + 1u) / 4u][(3u * (k) + 1u) % 4u], \
+                         sh[(3u * (k) + 2u) / 4u][(3u * (k) + 2u) % 4u])
     vec3 raw = vec3(0.0);
-    for (uint k = 0u; k < used; k++) raw += coeff(base, k) * basis[k];
+    [[unroll]] for (uint k = 0u; k < 16u; k++) {
+        if (k < used) raw += SH_COEFF(k) * basis[k];
+    }
     vec3 g_raw = vec3(raw.x + 0.5 < 0.0 ? 0.0 : g_color.x,
                       raw.y + 0.5 < 0.0 ? 0.0 : g_color.y,
                       raw.z + 0.5 < 0.0 ? 0.0 : g_color.z);
     vec3 g_dir = vec3(0.0);
-    for (uint k = 0u; k < used; k++) {
-        vec3 gk = basis[k] * g_raw;
-        sh_grads[base + 3u * k] = gk.x;
-        sh_grads[base + 3u * k + 1u] = gk.y;
-        sh_grads[base + 3u * k + 2u] = gk.z;
-        g_dir += basis_grad[k] * dot(coeff(base, k), g_raw);
+    [[unroll]] for (uint k = 0u; k < 16u; k++) {
+        if (k < used) g_dir += basis_grad[k] * dot(SH_COEFF(k), g_raw);
     }
+    // dL/d coefficient k, channel c = basis[k] * g_raw[c], at float 3k + c; 0 past the used.
+    [[unroll]] for (uint q = 0u; q < SH_TEXELS; q++) {
+        vec4 t = vec4(0.0);
+        [[unroll]] for (uint c = 0u; c < 4u; c++) {
+            uint k = (4u * q + c) / 3u;
+            if (k < used) t[c] = (basis[k] * g_raw)[(4u * q + c) % 3u];
+        }
+        if (q < texels) sh_grads[i * texels + q] = t;
+    }
+    for (uint q = SH_TEXELS; q < texels; q++) sh_grads[i * texels + q] = vec4(0.0);
     g_mean += (g_dir - dir * dot(dir, g_dir)) / len;
     out_g.mean_opacity.xyz = g_mean;
     grads[i] = out_g;
