@@ -100,6 +100,26 @@ void sh_basis(uint degree, vec3 d, out float b[16], out vec3 gb[16]) {
     }
 }
 
+// Antialiased: the blended opacity is opacity * sqrt(max(r, ANTIALIAS_MIN_RATIO)),
+// r = det(cov2d) / det(cov2d + dilation) (cpu::backward::compensation), of the dilated
+// 2D covariance abc. Adds the compensation's gradient to g_a, g_b, g_c; returns
+// dL/d(opacity) from dL/d(blended opacity) `g_blended`.
+float compensation_grads(vec3 abc, float g_blended, float opacity,
+                         inout float g_a, inout float g_b, inout float g_c) {
+    float a = abc.x, b = abc.y, c = abc.z;
+    float det = a * c - b * b;
+    float det0 = (a - COV2D_DILATION) * (c - COV2D_DILATION) - b * b;
+    float r = det0 / det;
+    float comp = sqrt(max(ANTIALIAS_MIN_RATIO, r));
+    if (r > ANTIALIAS_MIN_RATIO) {
+        float k = g_blended * opacity * 0.5 / comp / (det * det);
+        g_a += k * ((c - COV2D_DILATION) * det - det0 * c);
+        g_c += k * ((a - COV2D_DILATION) * det - det0 * a);
+        g_b += k * (2.0 * b * det0 - 2.0 * b * det);
+    }
+    return g_blended * comp;
+}
+
 void main() {
     uint i = linear_group_id() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     if (i >= pc.count) return;
@@ -165,18 +185,7 @@ void main() {
     float g_b = g_conic.x * (2.0 * b * c / det2) + g_conic.y * (-1.0 / det - 2.0 * b * b / det2)
         + g_conic.z * (2.0 * a * b / det2);
     if (params.cam_pos.w != 0.0) {
-        // Antialiased: the blended opacity is opacity * sqrt(max(r, ANTIALIAS_MIN_RATIO)),
-        // r = det(cov2d) / det(cov2d + dilation) (cpu::backward::compensation).
-        float det0 = (a - COV2D_DILATION) * (c - COV2D_DILATION) - b * b;
-        float r = det0 / det;
-        float comp = sqrt(max(ANTIALIAS_MIN_RATIO, r));
-        out_g.mean_opacity.w = g_opacity * comp;
-        if (r > ANTIALIAS_MIN_RATIO) {
-            float k = g_opacity * g.pos_opacity.w * 0.5 / comp / det2;
-            g_a += k * ((c - COV2D_DILATION) * det - det0 * c);
-            g_c += k * ((a - COV2D_DILATION) * det - det0 * a);
-            g_b += k * (2.0 * b * det0 - 2.0 * b * det);
-        }
+        out_g.mean_opacity.w = compensation_grads(vec3(a, b, c), g_opacity, g.pos_opacity.w, g_a, g_b, g_c);
     }
     // a = t0' S t0, b = t0' S t1, c = t1' S t1 (S symmetric).
     mat3 g_cov = mat3(g_a * t0 * t0.x + g_b * t0 * t1.x + g_c * t1 * t1.x,

@@ -7,6 +7,45 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vksplat::scene;
 
+/// The counts and options `fit` takes before it reads anything else: channels, the
+/// held-out share, enough samples (unless `force`), steps and the gradient clip.
+fn check_sizes(
+    n: usize,
+    k: usize,
+    holdout: f32,
+    steps: usize,
+    clip_grad: f32,
+    force: bool,
+) -> PyResult<()> {
+    if k == 0 || k > scene::MAX_FEATURES {
+        return Err(value_err(format!(
+            "values: {k} channels; a Gaussian carries 1 to {} features",
+            scene::MAX_FEATURES
+        )));
+    }
+    if !(0.0..=0.9).contains(&holdout) {
+        return Err(value_err(format!(
+            "holdout must be between 0 and 0.9, got {holdout}"
+        )));
+    }
+    if !force {
+        // The command line's rule (`vksplat fit --force`), in the function's words.
+        vksplat::fit::check_enough(n, holdout).map_err(|m| {
+            value_err(format!(
+                "points {}",
+                m.replace("--holdout ", "holdout=")
+                    .replace("--force", "force=True")
+            ))
+        })?;
+    }
+    if steps == 0 || clip_grad.is_nan() || clip_grad < 0.0 {
+        return Err(value_err(
+            "steps must be at least 1 and clip_grad 0 or more",
+        ));
+    }
+    Ok(())
+}
+
 /// Fits Gaussians with feature channels to field samples, as `vksplat fit` does: `points`
 /// `n x 3` and `values` `n x k` float32 bytes. Returns the scene and a report: the held-out
 /// errors, the counts, what was chosen from the data (`notes`) and `warnings` (a fit no
@@ -39,32 +78,7 @@ pub(crate) fn fit<'py>(
     check_finite("points", &points, 3)?;
     check_finite("values", &values, k.max(1))?;
     let kernel: vksplat::cpu::SplatKernel = kernel.parse().map_err(value_err)?;
-    if k == 0 || k > scene::MAX_FEATURES {
-        return Err(value_err(format!(
-            "values: {k} channels; a Gaussian carries 1 to {} features",
-            scene::MAX_FEATURES
-        )));
-    }
-    if !(0.0..=0.9).contains(&holdout) {
-        return Err(value_err(format!(
-            "holdout must be between 0 and 0.9, got {holdout}"
-        )));
-    }
-    if !force {
-        // The command line's rule (`vksplat fit --force`), in the function's words.
-        fit::check_enough(n, holdout).map_err(|m| {
-            value_err(format!(
-                "points {}",
-                m.replace("--holdout ", "holdout=")
-                    .replace("--force", "force=True")
-            ))
-        })?;
-    }
-    if steps == 0 || clip_grad.is_nan() || clip_grad < 0.0 {
-        return Err(value_err(
-            "steps must be at least 1 and clip_grad 0 or more",
-        ));
-    }
+    check_sizes(n, k, holdout, steps, clip_grad, force)?;
     let positions: Vec<[f32; 3]> = rows(&points);
     let times = times.map(|t| floats(t, "times", n)).transpose()?;
     if let Some(t) = &times {
