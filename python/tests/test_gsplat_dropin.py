@@ -195,7 +195,7 @@ def torch_mcmc_kernels(monkeypatch):
     return calls
 
 
-def train_with_strategy(strategy, packed, steps=40, n=200):
+def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
     """A small 3DGS training loop as gsplat's simple_trainer.py runs one: log scales,
     logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps."""
     s = scene(n=n, seed=13, degree=1)
@@ -220,7 +220,7 @@ def train_with_strategy(strategy, packed, steps=40, n=200):
         out, _, info = rasterization(
             params["means"], params["quats"], torch.exp(params["scales"]),
             torch.sigmoid(params["opacities"]), colors, vm, Ks, W, H, sh_degree=1,
-            packed=packed, absgrad=getattr(strategy, "absgrad", False),
+            packed=packed, absgrad=getattr(strategy, "absgrad", False), rasterize_mode=mode,
         )
         loss = (out - targets).abs().mean()
         strategy.step_pre_backward(params, optimizers, state, step, info)
@@ -236,13 +236,14 @@ def train_with_strategy(strategy, packed, steps=40, n=200):
     return params, losses
 
 
-@pytest.mark.parametrize("packed", [True, False])
-def test_gsplats_default_strategy_densifies_through_vksplat(packed):
+@pytest.mark.parametrize("packed, mode", [(True, "classic"), (False, "classic"),
+                                          (True, "antialiased")])
+def test_gsplats_default_strategy_densifies_through_vksplat(packed, mode):
     strategy = gs_strategy.DefaultStrategy(
         refine_start_iter=10, refine_every=10, reset_every=1000, grow_grad2d=2e-5,
         refine_scale2d_stop_iter=30,
     )
-    params, losses = train_with_strategy(strategy, packed)
+    params, losses = train_with_strategy(strategy, packed, mode=mode)
     assert len(params["means"]) > 200, "nothing was duplicated or split"
     assert losses[-1] < losses[0], losses
 
