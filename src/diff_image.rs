@@ -56,9 +56,10 @@ pub fn heatmap(width: u32, height: u32, error: &[f32], magnify: f32) -> Frame {
 }
 
 /// Appends [`BAR_HEIGHT`] rows below the `w x h` image `color`: the turbo colour map from
-/// left (0) to right (1), and under it the labels `[left, centre, right]` (a label wider
-/// than the image is left out).
-pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: [&str; 3]) {
+/// left (0) to right (1), and under it the labels `[left, centre, right]`: the centre one
+/// between the ends, at the font's single size if its double does not fit there. Returns
+/// false when a label did not fit the width and was left out.
+pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: [&str; 3]) -> bool {
     color.resize(w * (h + BAR_HEIGHT as usize), [0.0; 3]);
     let bar = |y: usize, x: usize| (h + y) * w + x;
     for x in 0..w {
@@ -77,28 +78,32 @@ pub fn append_colour_bar(color: &mut Vec<[f32; 3]>, w: usize, h: usize, labels: 
     };
     let scale = if fits(2) { 2 } else { 1 };
     let (lw, rw) = (text_width(labels[0], scale), text_width(labels[2], scale));
+    let mut all = true;
     for (text, anchor) in labels
         .iter()
         .zip([Anchor::Left, Anchor::Centre, Anchor::Right])
     {
-        let text_w = text_width(text, scale);
-        if text_w > w {
-            continue;
-        }
+        let mut scale = scale;
         let x0 = match anchor {
-            Anchor::Left => 0,
+            Anchor::Left | Anchor::Right if text_width(text, scale) > w => None,
+            Anchor::Left => Some(0),
+            Anchor::Right => Some(w - text_width(text, scale)),
+            // Centred in the room the end labels leave, so as not to run into them.
             Anchor::Centre => {
-                let x = (w - text_w) / 2;
-                // Only where it does not run into the end labels.
-                if x < lw + scale * 2 || x + text_w + rw + scale * 2 > w {
-                    continue;
+                let room = w.saturating_sub(lw + rw + 4 * scale);
+                if text_width(text, scale) > room {
+                    scale = 1;
                 }
-                x
+                let text_w = text_width(text, scale);
+                (text_w <= room).then(|| lw + 2 * scale + (room - text_w) / 2)
             }
-            Anchor::Right => w - text_w,
         };
-        crate::font::draw(color, w, (x0, h + 13), text, scale);
+        match x0 {
+            Some(x0) => crate::font::draw(color, w, (x0, h + 13), text, scale),
+            None => all = false,
+        }
     }
+    all
 }
 
 enum Anchor {

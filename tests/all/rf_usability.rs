@@ -38,10 +38,10 @@ const SLICE: [&str; 5] = [
 fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
     let dir = tempfile::tempdir().unwrap();
     let ply = field_ply(dir.path());
-    let render = |units: &str, name: &str| {
+    let render_at = |units: &str, name: &str, width: &str, range: &str| {
         let out = dir
             .path()
-            .join(format!("bar_{}.png", units.len() + name.len() * 7));
+            .join(format!("bar_{}_{width}.png", units.len() + name.len() * 7));
         let _ = std::fs::remove_file(&out);
         let base = ["render", s(&ply)];
         ok(&[
@@ -49,11 +49,11 @@ fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
             &SLICE,
             &[
                 "--width",
-                "480",
+                width,
                 "--height",
                 "40",
                 "--range",
-                "0,1",
+                range,
                 "--colorbar",
                 "--units",
                 units,
@@ -67,6 +67,7 @@ fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
         .concat());
         image::open(&out).unwrap().to_rgb8()
     };
+    let render = |units: &str, name: &str| render_at(units, name, "480", "0,1");
     let h = 40;
     let bar = |img: &image::RgbImage| -> Vec<u8> {
         let mut v = Vec::new();
@@ -87,6 +88,14 @@ fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
     assert_ne!(bar(&render("V/m", "power")), bar(&render("V/M", "power")));
     assert_ne!(bar(&render("V/m", "e")), bar(&render("V/m", "E")));
     render("dBµV/m", "|E| at 20 °C");
+    // A long label between long end labels at 320 wide (the walkthrough's side view): drawn
+    // between them (at the font's single size), not left out.
+    let narrow = |units: &str| bar(&render_at(units, "magnitude µ", "320", "0,0.5979"));
+    assert_ne!(
+        narrow("mW"),
+        narrow("MW"),
+        "the narrow bar left its label out"
+    );
     let out = dir.path().join("refused.png");
     for (flag, label, c) in [
         ("--units", "Vж", "'ж' (U+0436)"),

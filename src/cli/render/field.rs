@@ -170,6 +170,7 @@ pub(crate) fn render(
                 None => name,
             }
         }),
+        bar_noted: false,
         shader,
         complex: f.complex,
     };
@@ -237,6 +238,8 @@ struct Colours<'a> {
     background: [f32; 3],
     /// The colour bar's centre label, when there is a bar.
     bar: Option<String>,
+    /// Whether a label too wide for the bar was noted.
+    bar_noted: bool,
     shader: Option<&'a vksplat::mlp::Mlp>,
     /// `--complex I,Q`: magnitude and phase appended.
     complex: Option<(usize, usize)>,
@@ -280,7 +283,14 @@ impl Colours<'_> {
             let (w, h) = (frame.width as usize, frame.height as usize);
             let lo = vksplat::diff_image::label_number(f64::from(range[0]));
             let hi = vksplat::diff_image::label_number(f64::from(range[1]));
-            vksplat::diff_image::append_colour_bar(&mut frame.color, w, h, [&lo, label, &hi]);
+            let drawn =
+                vksplat::diff_image::append_colour_bar(&mut frame.color, w, h, [&lo, label, &hi]);
+            if !drawn && !self.bar_noted {
+                note!(
+                    "the colour bar's label \"{label}\" does not fit the {w}-pixel-wide image and is left out; render it wider (--width)"
+                );
+                self.bar_noted = true;
+            }
             frame.height += vksplat::diff_image::BAR_HEIGHT;
             let n = frame.color.len();
             frame.alpha.resize(n, 1.0);
