@@ -244,25 +244,23 @@ impl GpuRenderer {
     /// How the backward passes add per-pair gradients into per-Gaussian sums
     /// ([`Accumulation::Deterministic`] by default).
     pub fn set_gradient_accumulation(&mut self, mode: Accumulation) -> GpuResult<()> {
+        self.backward_state()?.mode = mode;
+        Ok(())
+    }
+
+    /// The backward pass's state, made the first time it is asked for.
+    fn backward_state(&mut self) -> GpuResult<&mut BackwardState> {
         if self.backward.is_none() {
             self.backward = Some(BackwardState::new(&self.ctx)?);
         }
-        if let Some(b) = self.backward.as_mut() {
-            b.mode = mode;
-        }
-        Ok(())
+        Ok(self.backward.as_mut().expect("made above"))
     }
 
     /// Whether the backward passes that read their gradients back also return the
     /// projected quantities' ([`SplatGrads::screen`], what a camera's gradient needs;
     /// off by default: it reads every Gaussian's sums back).
     pub fn set_screen_grads(&mut self, on: bool) -> GpuResult<()> {
-        if self.backward.is_none() {
-            self.backward = Some(BackwardState::new(&self.ctx)?);
-        }
-        if let Some(b) = self.backward.as_mut() {
-            b.screen = on;
-        }
+        self.backward_state()?.screen = on;
         Ok(())
     }
 

@@ -38,7 +38,8 @@ fn behind_background<'a>(
     features: Option<(&[f32], usize)>,
     background: [f32; 3],
 ) -> std::borrow::Cow<'a, PixelGrads<f32>> {
-    if features.is_none() || background == [0.0; 3] || grads.color.is_empty() {
+    // Only 3 channels are blended over a background (`DiffRasterizer::forward`).
+    if features.map(|(_, k)| k) != Some(3) || background == [0.0; 3] || grads.color.is_empty() {
         return std::borrow::Cow::Borrowed(grads);
     }
     let pixels = grads.color.len() / 3;
