@@ -87,14 +87,9 @@ pub(crate) fn splat_params(t: &ParamsTuple) -> PyResult<SplatParams<f32>> {
 pub(crate) fn diff_options(
     background: &[f32],
     kernel: &str,
+    antialiased: bool,
     channels: usize,
 ) -> PyResult<RenderOptions> {
-    // "KERNEL+antialiased": with the antialiased opacity compensation (raster.py's
-    // `antialiased`).
-    let (kernel, antialiased) = match kernel.strip_suffix("+antialiased") {
-        Some(k) => (k, true),
-        None => (kernel, false),
-    };
     let kernel = kernel.parse().map_err(|e: String| value_err(e))?;
     if !background.is_empty() && background.len() != channels {
         return Err(value_err(format!(
@@ -219,7 +214,8 @@ impl PyRasterizer {
         Ok(d)
     }
 
-    #[pyo3(signature = (params, camera, background, kernel, shader=None))]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false))]
     fn forward<'py>(
         &self,
         py: Python<'py>,
@@ -228,11 +224,17 @@ impl PyRasterizer {
         background: Vec<f32>,
         kernel: &str,
         shader: Option<&[u8]>,
+        antialiased: bool,
     ) -> PyResult<ForwardOut<'py>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
         let shader = shader_of(shader)?;
-        let opts = diff_options(&background, kernel, image_channels(&p, &shader)?)?;
+        let opts = diff_options(
+            &background,
+            kernel,
+            antialiased,
+            image_channels(&p, &shader)?,
+        )?;
         let (frame, token, projected) = py.detach(|| {
             guarded(|| {
                 let mut st = self.state.lock().map_err(|_| {
@@ -262,7 +264,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false))]
+    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false, antialiased=false))]
     fn backward<'py>(
         &self,
         py: Python<'py>,
@@ -276,12 +278,13 @@ impl PyRasterizer {
         grad_depth: Option<&[u8]>,
         shader: Option<&[u8]>,
         screen: bool,
+        antialiased: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
         let shader = shader_of(shader)?;
         let channels = image_channels(&p, &shader)?;
-        let opts = diff_options(&background, kernel, channels)?;
+        let opts = diff_options(&background, kernel, antialiased, channels)?;
         let pixels = cam.width as usize * cam.height as usize;
         let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;
         let (grads, shader_grads) = py.detach(|| {

@@ -16,7 +16,7 @@ use vksplat::model::grad::PixelGrads;
 /// The f64 CPU reference forward pass: colour (`H x W x D`, or 3 shaded), alpha and
 /// depth as f64 bytes.
 #[pyfunction]
-#[pyo3(signature = (params, camera, background, kernel, shader=None))]
+#[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false))]
 pub(crate) fn reference_forward<'py>(
     py: Python<'py>,
     params: ParamsTuple,
@@ -24,6 +24,7 @@ pub(crate) fn reference_forward<'py>(
     background: Vec<f32>,
     kernel: &str,
     shader: Option<&[u8]>,
+    antialiased: bool,
 ) -> PyResult<(
     Bound<'py, PyByteArray>,
     Bound<'py, PyByteArray>,
@@ -33,7 +34,7 @@ pub(crate) fn reference_forward<'py>(
     let cam = to_camera(&camera)?;
     let shader = shader_of(shader)?;
     let channels = image_channels(&p, &shader)?;
-    let opts = diff_options(&background, kernel, channels)?;
+    let opts = diff_options(&background, kernel, antialiased, channels)?;
     let bg = reference_background(&background, channels);
     let img = py.detach(|| {
         guarded(|| {
@@ -72,7 +73,7 @@ fn reference_background(background: &[f32], channels: usize) -> Vec<f64> {
 
 /// The f64 CPU reference backward pass: gradients as f64 bytes.
 #[pyfunction]
-#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None, shader=None))]
+#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, antialiased=false))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reference_backward<'py>(
     py: Python<'py>,
@@ -84,12 +85,13 @@ pub(crate) fn reference_backward<'py>(
     grad_alpha: Option<&[u8]>,
     grad_depth: Option<&[u8]>,
     shader: Option<&[u8]>,
+    antialiased: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let p = splat_params(&params)?;
     let cam = to_camera(&camera)?;
     let shader = shader_of(shader)?;
     let channels = image_channels(&p, &shader)?;
-    let opts = diff_options(&background, kernel, channels)?;
+    let opts = diff_options(&background, kernel, antialiased, channels)?;
     let bg = reference_background(&background, channels);
     let pixels = cam.width as usize * cam.height as usize;
     let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;

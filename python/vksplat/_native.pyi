@@ -151,6 +151,7 @@ class Rasterizer:
         background: List[float],
         kernel: str,
         shader: Optional[bytes] = None,
+        antialiased: bool = False,
     ) -> Tuple[bytearray, bytearray, bytearray, int, bytearray]: ...
     def backward(
         self,
@@ -163,6 +164,8 @@ class Rasterizer:
         grad_alpha: Optional[bytes] = None,
         grad_depth: Optional[bytes] = None,
         shader: Optional[bytes] = None,
+        screen: bool = False,
+        antialiased: bool = False,
     ) -> Dict[str, Any]: ...
 
 def reference_forward(
@@ -171,6 +174,7 @@ def reference_forward(
     background: List[float],
     kernel: str,
     shader: Optional[bytes] = None,
+    antialiased: bool = False,
 ) -> Tuple[bytearray, bytearray, bytearray]: ...
 def reference_backward(
     params: ParamsTuple,
@@ -181,6 +185,7 @@ def reference_backward(
     grad_alpha: Optional[bytes] = None,
     grad_depth: Optional[bytes] = None,
     shader: Optional[bytes] = None,
+    antialiased: bool = False,
 ) -> Dict[str, Any]: ...
 
 LayerTuple = Tuple[int, int, bytes, bytes, str]

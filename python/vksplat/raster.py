@@ -125,6 +125,7 @@ class Forward:
         "_camera",
         "_background",
         "_kernel",
+        "_antialiased",
         "_token",
         "_channels",
         "_k",
@@ -319,16 +320,14 @@ class Rasterizer:
             )
         if kernel not in ("gaussian", "power"):
             raise ValueError(f"kernel must be 'gaussian' or 'power', got {kernel!r}")
-        if antialiased:
-            # The native options' spelling (python/src/differentiable.rs, diff_options).
-            kernel = f"{kernel}+antialiased"
         f = Forward()
         f._params, f._camera, f._background, f._kernel = params, cam._tuple(), bg, kernel
+        f._antialiased = bool(antialiased)
         f._channels, f._k, f._backend, f._shader = channels, k, self.backend, shader
         h, w, n = cam.height, cam.width, params[0]
         if self._native is None:
             color, alpha, depth = _native.reference_forward(
-                params, f._camera, bg, kernel, shader_bytes
+                params, f._camera, bg, kernel, shader_bytes, f._antialiased
             )
             f.colors = np.frombuffer(color, dtype="<f8").reshape(h, w, channels)
             f.alphas = np.frombuffer(alpha, dtype="<f8").reshape(h, w)
@@ -337,7 +336,7 @@ class Rasterizer:
             f.radii = f.means2d = f.gaussian_depths = f.conics = f.opacities = None
             return f
         color, alpha, depth, token, projected = self._native.forward(
-            params, f._camera, bg, kernel, shader_bytes
+            params, f._camera, bg, kernel, shader_bytes, f._antialiased
         )
         f.colors = np.frombuffer(color, dtype="<f4").reshape(h, w, channels)
         f.alphas = np.frombuffer(alpha, dtype="<f4").reshape(h, w)
@@ -380,7 +379,15 @@ class Rasterizer:
         shader_bytes = None if fwd._shader is None else fwd._shader.to_bytes()
         if self._native is None:
             raw = _native.reference_backward(
-                fwd._params, fwd._camera, fwd._background, fwd._kernel, gc, ga, gd, shader_bytes
+                fwd._params,
+                fwd._camera,
+                fwd._background,
+                fwd._kernel,
+                gc,
+                ga,
+                gd,
+                shader_bytes,
+                fwd._antialiased,
             )
             dtype = "<f8"
         else:
@@ -395,6 +402,7 @@ class Rasterizer:
                 gd,
                 shader_bytes,
                 bool(screen),
+                fwd._antialiased,
             )
             if not screen:
                 raw.pop("screen", None)

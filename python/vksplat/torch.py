@@ -156,8 +156,9 @@ def _native_passes(r, layout: _Layout, arrays, state):
 
 
 def _stack(layout: _Layout, fwds, get) -> np.ndarray:
-    """`get(forward)` of each pair's first chunk, as [B, C, ...]."""
-    rows = [np.stack([get(fwds[(b, c)][0]) for c in range(layout.C)]) for b in range(layout.B)]
+    """`get(forwards)` of each pair (its list of one forward pass per colour chunk), as
+    [B, C, ...]."""
+    rows = [np.stack([get(fwds[(b, c)]) for c in range(layout.C)]) for b in range(layout.B)]
     return np.stack(rows)
 
 
@@ -182,15 +183,15 @@ class _Project(torch.autograd.Function):
         state["fwds"] = fwds
         ctx.state = state
         ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, viewmats, Ks)]
-        radii = _stack(layout, fwds, lambda f: f.radii)  # [B, C, N]
+        radii = _stack(layout, fwds, lambda fs: fs[0].radii)  # [B, C, N]
         state["radii"] = radii
         if layout.packed:
             state["ids"] = np.nonzero(radii > 0)
         outs = (
-            _stack(layout, fwds, lambda f: f.means2d),
-            _stack(layout, fwds, lambda f: f.gaussian_depths),
-            _stack(layout, fwds, lambda f: f.conics),
-            _stack(layout, fwds, lambda f: f.opacities),
+            _stack(layout, fwds, lambda fs: fs[0].means2d),
+            _stack(layout, fwds, lambda fs: fs[0].gaussian_depths),
+            _stack(layout, fwds, lambda fs: fs[0].conics),
+            _stack(layout, fwds, lambda fs: fs[0].opacities),
         )
         return tuple(torch.from_numpy(_to_layout(layout, state, o)) for o in outs)
 
@@ -338,10 +339,7 @@ class _Rasterize(torch.autograd.Function):
         ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, colors, viewmats, Ks)]
 
         def image(get):
-            rows = [
-                np.stack([get(fwds[(b, c)]) for c in range(layout.C)]) for b in range(layout.B)
-            ]
-            out = torch.from_numpy(np.ascontiguousarray(np.stack(rows)))
+            out = torch.from_numpy(np.ascontiguousarray(_stack(layout, fwds, get)))
             return out.reshape(layout.batch + tuple(out.shape[1:]))
 
         colors_out = image(lambda fs: np.concatenate([np.array(f.colors) for f in fs], axis=-1))
