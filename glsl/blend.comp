@@ -58,15 +58,18 @@ layout(push_constant) uniform ChunkFlags { uint resume; uint last; } chunk;
 // Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
 // written without branches: SIMD implementations execute both sides of a divergent branch
 // anyway, so selects are cheaper than masked control flow. Identical results.
-// Returns whether the Gaussian was composited (for SAVE_LAST).
+// Returns whether the Gaussian was composited (for SAVE_LAST). The rules' alpha clamp and
+// stop (FrameParams.rules.yz), read once per invocation by main().
+float alpha_max;
+float t_stop;
 bool composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
                inout float T, inout vec3 C, inout float D, inout bool done) {
     vec2 d = mean_opacity_depth.xy - pixf;
     float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
-    float alpha = min(ALPHA_MAX, kernel_falloff(SPLAT_KERNEL, mean_opacity_depth.z, min(power, 0.0)));
+    float alpha = min(alpha_max, kernel_falloff(SPLAT_KERNEL, mean_opacity_depth.z, min(power, 0.0)));
     bool take = !done && power <= 0.0 && alpha >= ALPHA_MIN;
     float test_t = T * (1.0 - alpha);
-    bool stop = take && test_t < T_MIN;
+    bool stop = take && test_t < t_stop;
     bool add = take && !stop;
     float w = add ? alpha * T : 0.0;
     C += color * w;
@@ -87,7 +90,7 @@ void write_last(uvec2 pix, uint last, float T) {
 }
 
 // The state between chunks: colour = (C, T), with T negated once the pixel is done (T
-// stays above T_MIN > 0, so the sign carries the flag exactly); depth = D.
+// stays above the stop > 0, so the sign carries the flag exactly); depth = D.
 void load_pixel(uvec2 pix, inout float T, inout vec3 C, inout float D, inout bool done) {
     if (chunk.resume != 0u && pix.x < params.image.x && pix.y < params.image.y) {
         vec4 state = imageLoad(out_color, ivec2(pix));
@@ -118,6 +121,8 @@ shared vec4 s_color[TILE_PIXELS];
 shared uint s_done;
 
 void main() {
+    alpha_max = params.rules.y;
+    t_stop = params.rules.z;
     uvec2 tile = gl_WorkGroupID.xy;
     uint tile_id = tile.y * params.bins.y + tile.x;  // this kernel runs with 16-pixel bins
     uvec2 pix = tile * TILE_SIZE + gl_LocalInvocationID.xy;
@@ -162,6 +167,8 @@ void main() {
 }
 #else
 void main() {
+    alpha_max = params.rules.y;
+    t_stop = params.rules.z;
     uvec2 tile = gl_WorkGroupID.xy;
     // Each run of 8 consecutive invocations (what lavapipe executes as one SIMD vector)
     // covers a compact block of CHUNK_W strips by 8 / CHUNK_W rows instead of one long row:

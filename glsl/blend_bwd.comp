@@ -134,7 +134,7 @@ void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec4 fv[FG], vec2 pixf, inout Pix
     vec2 d = mo.xy - pixf;
     float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
     float unclamped = kernel_falloff(SPLAT_KERNEL, mo.z, min(power, 0.0));
-    float alpha = min(ALPHA_MAX, unclamped);
+    float alpha = min(params.rules.y, unclamped);
     if (power > 0.0 || alpha < ALPHA_MIN) return;
     float one_minus = 1.0 - alpha;
     float t_i = px.T / one_minus;  // transmittance in front of this Gaussian
@@ -155,7 +155,7 @@ void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec4 fv[FG], vec2 pixf, inout Pix
     vec3 g_col = px.g_ca.rgb * w;
     a1.zw += g_col.rg;
     a2.xy += vec2(g_col.b, px.g_dacc * w);
-    if (unclamped < ALPHA_MAX) {
+    if (unclamped < params.rules.y) {
         // d alpha / d opacity and d alpha / d power (a constant branch).
         bool power_kernel = SPLAT_KERNEL == SPLAT_KERNEL_POWER;
         float da_do = power_kernel ? 1.0 + 2.0 * power / 9.0 : exp(power);

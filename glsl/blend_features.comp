@@ -61,6 +61,7 @@ void main() {
         done = state < 0.0;
         F = out_features[o];
     }
+    float alpha_max = params.rules.y, t_stop = params.rules.z;
     uint k = range.x;
     // The colour blend's composite(), with features in place of colour and no depth.
     for (; k < range.y && !done; k++) {
@@ -77,10 +78,10 @@ void main() {
 #endif
         vec2 d = mob.xy - pixf;
         float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
-        float alpha = min(ALPHA_MAX, kernel_falloff(SPLAT_KERNEL, mob.z, min(power, 0.0)));
+        float alpha = min(alpha_max, kernel_falloff(SPLAT_KERNEL, mob.z, min(power, 0.0)));
         bool take = power <= 0.0 && alpha >= ALPHA_MIN;
         float test_t = T * (1.0 - alpha);
-        bool stop = take && test_t < T_MIN;
+        bool stop = take && test_t < t_stop;
         bool add = take && !stop;
         F += feature * (add ? alpha * T : 0.0);
         T = add ? test_t : T;

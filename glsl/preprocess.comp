@@ -141,16 +141,17 @@ void main() {
         float max_scale = params.filters.y, min_opacity = params.filters.z;
         bool kept = (max_scale < 0.0 || max(max(g.scale.x, g.scale.y), g.scale.z) <= max_scale)
             && (min_opacity < 0.0 || g.pos_opacity.w >= min_opacity);
-        if (kept && view.z > NEAR_PLANE) {
+        bool gsplat = params.modes.x == RULES_GSPLAT;
+        if (kept && view.z > params.rules.x) {
             // The reference's scaling_modifier: S = modifier * scale.
             float sm = params.filters.x;
             mat3 m = quat_to_mat3(g.rotation) * mat3(sm * g.scale.x, 0.0, 0.0, 0.0, sm * g.scale.y, 0.0, 0.0, 0.0, sm * g.scale.z);
             mat3 cov3d = m * transpose(m);
             float fx = params.focal.x, fy = params.focal.y;
-            float limx = 1.3 * params.tan_fov.x, limy = 1.3 * params.tan_fov.y;
+            vec4 lim = params.limits;
             float z = view.z;
-            float tx = clamp(view.x / z, -limx, limx) * z;
-            float ty = clamp(view.y / z, -limy, limy) * z;
+            float tx = clamp(view.x / z, -lim.x, lim.y) * z;
+            float ty = clamp(view.y / z, -lim.z, lim.w) * z;
             vec3 j0 = vec3(fx / z, 0.0, -(fx * tx) / (z * z));
             vec3 j1 = vec3(0.0, fy / z, -(fy * ty) / (z * z));
             // Rows of T = J W, with W the world-to-camera rotation: t_i = W^T j_i. GLSL's
@@ -167,25 +168,45 @@ void main() {
             a += COV2D_DILATION;
             c += COV2D_DILATION;
             float det = a * c - b * b;
-            if (det != 0.0) {
+            if (gsplat ? det > 0.0 : det != 0.0) {
                 // Optional antialiasing compensation (cam_pos.w = 1), as cpu::preprocess_one.
                 float opacity = g.pos_opacity.w;
                 if (params.cam_pos.w != 0.0) {
-                    opacity *= sqrt(max(ANTIALIAS_MIN_RATIO, det_before / det));
+                    opacity *= sqrt(max(params.rules.w, det_before / det));
                 }
                 float det_inv = 1.0 / det;
                 vec3 conic = vec3(c * det_inv, -b * det_inv, a * det_inv);
-                float mid = 0.5 * (a + c);
-                float disc = sqrt(max(mid * mid - det, 0.1));
-                float radius = ceil(3.0 * sqrt(max(mid + disc, mid - disc)));
                 float inv_z = 1.0 / z;
                 vec2 mean2d = vec2(fx * view.x * inv_z + params.focal.z - 0.5,
                                    fy * view.y * inv_z + params.focal.w - 0.5);
                 uint gx = params.image.z, gy = params.image.w;
-                uvec2 rmin = uvec2(clamp_tile((mean2d.x - radius) / 16.0, gx),
-                                   clamp_tile((mean2d.y - radius) / 16.0, gy));
-                uvec2 rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
-                                   clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
+                float radius;
+                uvec2 rmin, rmax;
+                // gsplat's: culled below 1/255 and off the image, so `shown` says whether
+                // the record is written even where no bin receives the splat (its radii).
+                bool shown = true;
+                if (gsplat) {
+                    // model::Rules::extent: a per-axis box of e sigmas, e opacity-aware.
+                    float extend = min(GSPLAT_EXTEND, sqrt(2.0 * log(opacity / ALPHA_MIN)));
+                    vec2 r = ceil(extend * sqrt(vec2(a, c)));
+                    vec2 p = mean2d + 0.5;  // gsplat's pixel centres are at +0.5
+                    vec2 size = vec2(params.image.xy);
+                    shown = opacity >= ALPHA_MIN && (r.x > 0.0 || r.y > 0.0)
+                        && all(greaterThan(p + r, vec2(0.0))) && all(lessThan(p - r, size));
+                    radius = max(r.x, r.y);
+                    vec2 lo = floor((p - r) / 16.0), hi = ceil((p + r) / 16.0);
+                    rmin = uvec2(clamp_tile(lo.x, gx), clamp_tile(lo.y, gy));
+                    rmax = uvec2(clamp_tile(hi.x, gx), clamp_tile(hi.y, gy));
+                    if (!shown) rmax = rmin;
+                } else {
+                    float mid = 0.5 * (a + c);
+                    float disc = sqrt(max(mid * mid - det, 0.1));
+                    radius = ceil(3.0 * sqrt(max(mid + disc, mid - disc)));
+                    rmin = uvec2(clamp_tile((mean2d.x - radius) / 16.0, gx),
+                                 clamp_tile((mean2d.y - radius) / 16.0, gy));
+                    rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
+                                 clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
+                }
                 // Count the bins of the reference rectangle that receive anything.
                 float bound = alpha_bound(opacity, uint(params.filters.w));
                 uvec2 bmin = rmin * params.bins.w;
@@ -205,7 +226,9 @@ void main() {
                 if (by < bmax.y || bx < bmax.x) {
                     REPORT_LOOP(counters.max_bins_loop, (bmax.x - bmin.x + 1u) * (bmax.y - bmin.y) + 16u);
                 }
-                if (touched != 0u) {
+                // gsplat's radii count a splat that reaches no pixel but whose box meets the
+                // image as shown; only bins that receive it are keyed either way.
+                if (gsplat ? shown : touched != 0u) {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);
                     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);

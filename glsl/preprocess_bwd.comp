@@ -100,7 +100,8 @@ void sh_basis(uint degree, vec3 d, out float b[16], out vec3 gb[16]) {
     }
 }
 
-// Antialiased: the blended opacity is opacity * sqrt(max(r, ANTIALIAS_MIN_RATIO)),
+// Antialiased: the blended opacity is opacity * sqrt(max(r, min_ratio)) (the rules' floor,
+// FrameParams.rules.w),
 // r = det(cov2d) / det(cov2d + dilation) (cpu::backward::compensation), of the dilated
 // 2D covariance abc. Adds the compensation's gradient to g_a, g_b, g_c; returns
 // dL/d(opacity) from dL/d(blended opacity) `g_blended`.
@@ -110,8 +111,9 @@ float compensation_grads(vec3 abc, float g_blended, float opacity,
     float det = a * c - b * b;
     float det0 = (a - COV2D_DILATION) * (c - COV2D_DILATION) - b * b;
     float r = det0 / det;
-    float comp = sqrt(max(ANTIALIAS_MIN_RATIO, r));
-    if (r > ANTIALIAS_MIN_RATIO) {
+    float min_ratio = params.rules.w;
+    float comp = sqrt(max(min_ratio, r));
+    if (r > min_ratio) {
         float k = g_blended * opacity * 0.5 / comp / (det * det);
         g_a += k * ((c - COV2D_DILATION) * det - det0 * c);
         g_c += k * ((a - COV2D_DILATION) * det - det0 * a);
@@ -164,10 +166,10 @@ void main() {
     mat3 m = rot * mat3(s.x, 0.0, 0.0, 0.0, s.y, 0.0, 0.0, 0.0, s.z);
     mat3 cov3d = m * transpose(m);
     float fx = params.focal.x, fy = params.focal.y;
-    float limx = 1.3 * params.tan_fov.x, limy = 1.3 * params.tan_fov.y;
+    vec4 lim = params.limits;
     float z = v.z;
-    float tx = clamp(v.x / z, -limx, limx) * z;
-    float ty = clamp(v.y / z, -limy, limy) * z;
+    float tx = clamp(v.x / z, -lim.x, lim.y) * z;
+    float ty = clamp(v.y / z, -lim.z, lim.w) * z;
     vec3 j0 = vec3(fx / z, 0.0, -(fx * tx) / (z * z));
     vec3 j1 = vec3(0.0, fy / z, -(fy * ty) / (z * z));
     vec3 t0 = w_t * j0;
@@ -203,8 +205,9 @@ void main() {
     float g_tx = g_j0.z * (-fx / z2);
     float g_ty = g_j1.z * (-fy / z2);
     // tx = clamp(x / z, -lim, lim) z: x passes where unclamped, z carries the bound where clamped.
-    if (abs(v.x / z) <= limx) g_v.x += g_tx; else g_v.z += g_tx * tx / z;
-    if (abs(v.y / z) <= limy) g_v.y += g_ty; else g_v.z += g_ty * ty / z;
+    float ux = v.x / z, uy = v.y / z;
+    if (ux >= -lim.x && ux <= lim.y) g_v.x += g_tx; else g_v.z += g_tx * tx / z;
+    if (uy >= -lim.z && uy <= lim.w) g_v.y += g_ty; else g_v.z += g_ty * ty / z;
     // mean2d = f * v.xy / z + c - 0.5; depth = z.
     g_v.x += g_mean2d.x * fx / z;
     g_v.y += g_mean2d.y * fy / z;

@@ -5,8 +5,10 @@
 #define SPLAT_COMMON_GLSL
 
 // Reference rules (shared/docs/reference-semantics.md): TILE_SIZE, TILE_PIXELS,
-// NEAR_PLANE, COV2D_DILATION, ANTIALIAS_MIN_RATIO, ALPHA_MAX, ALPHA_MIN and T_MIN are
-// #defines from the host, defined once in src/rules.rs.
+// COV2D_DILATION, ALPHA_MIN, GSPLAT_EXTEND and T_MIN are #defines from the host, defined
+// once in src/rules.rs. What differs between the original rules and gsplat's (the near
+// plane, the guard band, the alpha clamp, the stop, the antialiased ratio's floor and the
+// screen extent) comes per frame in FrameParams.rules, .limits and .modes.
 #ifndef T_MIN
 #error "the reference's constants come from the host (src/rules.rs); compile through build.rs"
 #endif
@@ -18,20 +20,26 @@ struct FrameParams {
     vec4 w2c_row2;      // row 2; w = translation.z
     vec4 cam_pos;       // camera centre (xyz)
     vec4 focal;         // fx, fy, cx, cy
-    vec4 tan_fov;       // tan(fovx/2), tan(fovy/2) as W/(2 fx), H/(2 fy)
+    vec4 limits;        // guard band: x/z clamped to [-x, y], y/z to [-z, w] (model::Rules)
     vec4 background;    // rgb
     uvec4 image;        // width, height, tiles_x, tiles_y
     uvec4 counts;       // gaussians, active SH degree, stored SH coefficients per channel, key capacity
     uvec4 bins;         // bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size
     vec4 filters;       // scale modifier, max scale (< 0: none), min opacity (< 0: none), kernel (SPLAT_KERNEL_*)
+    vec4 rules;         // kept above depth x, alpha clamp, a pixel ends before T < z, antialias min ratio
+    uvec4 modes;        // screen extent: RULES_ORIGINAL or RULES_GSPLAT; 0, 0, 0
 };
+
+// The rasterizer's rules (model::Rules): the original 3DGS rasterizer's, or gsplat's.
+#define RULES_ORIGINAL 0u
+#define RULES_GSPLAT 1u
 
 // Alpha falloff with the squared Mahalanobis distance d2 = -2 power (cpu::SplatKernel):
 // Gaussian opacity * exp(-d2 / 2), the reference; power opacity * max(0, 1 - d2 / 9).
 #define SPLAT_KERNEL_GAUSSIAN 0u
 #define SPLAT_KERNEL_POWER 1u
 
-// Alpha before the 0.99 clamp where the reference's exponent is `power` (<= 0). The blend
+// Alpha before the clamp (0.99, gsplat's 0.999) where the reference's exponent is `power` (<= 0). The blend
 // passes its compile-time SPLAT_KERNEL, so each blend pipeline holds one formula only.
 float kernel_falloff(uint kernel, float opacity, float power) {
     if (kernel == SPLAT_KERNEL_POWER) {

@@ -19,6 +19,13 @@ pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 /// A pixel is finished before its transmittance would drop below this.
 pub const T_MIN: f32 = 0.0001;
 
+/// gsplat's rules (`--rules gsplat`, `model::Rules`): its default near plane ...
+pub const GSPLAT_NEAR_PLANE: f32 = 0.01;
+/// ... its alpha clamp ...
+pub const GSPLAT_ALPHA_MAX: f32 = 0.999;
+/// ... and the most sigmas its screen box extends along each axis.
+pub const GSPLAT_EXTEND: f32 = 3.33;
+
 /// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
 /// accumulator per sample; the CPU reference, `cpu::field`, takes the same range).
 pub const MAX_FIELD_SAMPLES: u32 = 256;

@@ -64,7 +64,7 @@ pub fn bench_gpu(
             })
             .collect();
         let (bins_x, size) = (inter.bins.0, inter.bin_size);
-        cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
+        cpu::count_evaluations(&projected, cam, opts.kernel, opts.rules, |x, y| {
             let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
             &inter.values[a as usize..b as usize]
         })
@@ -141,7 +141,7 @@ pub fn bench_cpu(
     let (sorted_keys, sorted_values) = cpu::sort_pairs(&keys, &values);
     let (tx, ty) = cam.tile_grid();
     let ranges = cpu::tile_ranges(&sorted_keys, (tx * ty) as usize);
-    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, |x, y| {
+    let evaluations = cpu::count_evaluations(&projected, cam, opts.kernel, opts.rules, |x, y| {
         let [a, b] = ranges[((y / 16) * tx + x / 16) as usize];
         &sorted_values[a as usize..b as usize]
     });

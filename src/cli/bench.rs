@@ -341,6 +341,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         let (scene, name) = point_scene(args, *count, &file_scene, &filter)?;
         let act = scene.activated();
         let kernel = args.kernel.resolve(&scene, &name);
+        let rules = args.kernel.resolve_rules(&scene, &name);
         for (r, res) in resolutions.iter().enumerate() {
             if !mine.contains(&point(r)) {
                 continue;
@@ -351,6 +352,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
                 name: &name,
                 timed: &timed,
                 kernel,
+                rules,
                 shader: shader.as_ref(),
             };
             runs.bench(args, renderer.as_mut(), &point)?;
@@ -534,6 +536,7 @@ struct Point<'a> {
     name: &'a str,
     timed: &'a BenchCamera,
     kernel: vksplat::cpu::SplatKernel,
+    rules: vksplat::cpu::Rules,
     shader: Option<&'a vksplat::mlp::Mlp>,
 }
 
@@ -558,12 +561,14 @@ impl Runs {
             name,
             timed,
             kernel,
+            rules,
             shader,
         } = *point;
         let cam = &timed.camera;
         let opts = vksplat::cpu::RenderOptions {
             scale_modifier: args.scale_modifier,
             kernel,
+            rules,
             ..Default::default()
         };
         let points = self.points;

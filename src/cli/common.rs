@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use vksplat::camera::{self, Camera, CameraFormat};
-use vksplat::cpu::SplatKernel;
+use vksplat::cpu::{Rules, SplatKernel};
 use vksplat::gpu::{ContextOptions, GpuContext};
 use vksplat::scene::filter::SceneFilter;
 use vksplat::scene::{self, Scene};
@@ -152,7 +152,7 @@ pub(crate) struct PathArgs {
     pub(crate) path_frames: Option<usize>,
 }
 
-/// The alpha falloff (`--kernel`).
+/// The alpha falloff (`--kernel`) and the rasterizer's rules (`--rules`).
 #[derive(Args, Clone, Default)]
 pub(crate) struct KernelArg {
     /// Alpha falloff of the splats: gaussian (the reference: opacity * exp(-d2/2)) or power
@@ -160,6 +160,11 @@ pub(crate) struct KernelArg {
     /// [default: the kernel the scene file records, else gaussian].
     #[arg(long, value_name = "gaussian|power")]
     pub(crate) kernel: Option<SplatKernel>,
+    /// The rasterizer's rules: original (the 3DGS rasterizer's) or gsplat (near plane 0.01,
+    /// alpha clamp 0.999, a per-axis 3.33-sigma screen box; for scenes trained with gsplat)
+    /// [default: the rules the scene file records, else original].
+    #[arg(long, value_name = "original|gsplat")]
+    pub(crate) rules: Option<Rules>,
 }
 
 impl KernelArg {
@@ -176,6 +181,21 @@ impl KernelArg {
             );
         }
         scene.kernel
+    }
+
+    /// The rules to render `scene` with: `--rules`, else the ones the file records (with a
+    /// note when those are not the default).
+    pub(crate) fn resolve_rules(&self, scene: &Scene, name: &str) -> Rules {
+        if let Some(r) = self.rules {
+            return r;
+        }
+        if scene.rules != Rules::Original {
+            vksplat::note!(
+                "note: {name} records that it was trained with {}'s rules; rendering with them (--rules original overrides)",
+                scene.rules
+            );
+        }
+        scene.rules
     }
 }
 

@@ -239,6 +239,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         antialiased,
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(&scene, &name),
+        rules: args.kernel.resolve_rules(&scene, &name),
         ..Default::default()
     };
     let ctx = args.gpu.context()?;
@@ -707,9 +708,10 @@ fn refuse_scene_options(args: &CompareArgs) -> Result<()> {
         || v.scale.is_some()
         || args.scale_modifier != 1.0
         || args.kernel.kernel.is_some()
+        || args.kernel.rules.is_some()
         || args.path.orbit.is_some();
     if scene_only {
-        bail!("camera, resolution, --iteration, --frames, --blend-kernel, --kernel and --scale-modifier options apply to comparing a scene's renders, not two images");
+        bail!("camera, resolution, --iteration, --frames, --blend-kernel, --kernel, --rules and --scale-modifier options apply to comparing a scene's renders, not two images");
     }
     Ok(())
 }

@@ -90,6 +90,13 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
             args.input.display()
         );
     }
+    if let Some(rules) = r.rules_lost {
+        note!(
+            "note: {} records that the scene was trained with {rules}'s rules; {} cannot record that, so render the output with --rules {rules}",
+            args.input.display(),
+            r.output_format
+        );
+    }
     if let Some(kernel) = r.kernel_lost {
         note!(
             "note: {} records that the scene is made for the {kernel} kernel; {} cannot record that, so render the output with --kernel {kernel}",

@@ -419,6 +419,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         background: args.background,
         antialiased,
         kernel: args.kernel.resolve(&scene, &name),
+        rules: args.kernel.resolve_rules(&scene, &name),
         ..Default::default()
     };
     let act = scene.activated();

@@ -118,6 +118,11 @@ pub(crate) struct TrainArgs {
     /// The alpha falloff: gaussian (the original) or power.
     #[arg(long, default_value = "gaussian")]
     pub(crate) kernel: vksplat::model::SplatKernel,
+    /// The rasterizer's rules: original (the 3DGS rasterizer's) or gsplat (near plane 0.01,
+    /// alpha clamp 0.999, a per-axis 3.33-sigma screen box), as gsplat trains. The model
+    /// records them, so `render` and `eval` use them too.
+    #[arg(long, default_value = "original", value_name = "original|gsplat")]
+    pub(crate) rules: vksplat::model::Rules,
     /// How the Gaussians are added and removed: default (the original's densification:
     /// clone, split, prune, opacity resets) or mcmc (3DGS as Markov chain Monte Carlo:
     /// dead Gaussians relocated onto live ones, 5 % growth per refinement up to
@@ -437,6 +442,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         overwrite: args.overwrite,
         shader,
         kernel: args.kernel,
+        rules: args.rules,
         checkpoint_iterations: args.checkpoint_iterations.clone(),
         resume: match &args.resume {
             Some(path) => Some(

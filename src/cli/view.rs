@@ -88,6 +88,7 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> 
     super::common::refuse_time_varying(&scene, &name, "view")?;
     // The sources render with the scene's kernel.
     scene.kernel = args.kernel.resolve(&scene, &name);
+    scene.rules = args.kernel.resolve_rules(&scene, &name);
     if scene.is_empty() {
         bail!("{name} holds no Gaussians; there is nothing to view");
     }

@@ -7,7 +7,7 @@
 //! It is the yardstick of the Vulkan backward pass and is itself checked against central
 //! finite differences of [`forward`] (tests in `tests/all/gradients.rs`). Derivatives are
 //! those of the function the forward computes, piece by piece: where alpha is clamped at
-//! 0.99, where a colour is clamped at 0, and where the view direction is clamped to the
+//! the rules' clamp (0.99; gsplat's 0.999), where a colour is clamped at 0, and where the view direction is clamped to the
 //! guard band, the clamped quantity has zero derivative (as gsplat; the original CUDA
 //! backward ignores the 0.99 clamp). Culling, tile rectangles, the 1/255 skip and the
 //! 1e-4 stop are decisions, constant under a small change of the parameters.
@@ -19,8 +19,7 @@
 use crate::camera::Camera;
 use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use crate::model::{
-    sh_coeffs_for_degree, RenderOptions, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO,
-    COV2D_DILATION, NEAR_PLANE, TILE_SIZE, T_MIN,
+    sh_coeffs_for_degree, RenderOptions, Rules, SplatKernel, ALPHA_MIN, COV2D_DILATION, TILE_SIZE,
 };
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -51,26 +50,31 @@ struct Cam64 {
     fy: f64,
     cx: f64,
     cy: f64,
-    limx: f64,
-    limy: f64,
+    /// The guard band ([`Rules::clamp_limits`]).
+    lim: [f64; 4],
+    rules: Rules,
+    size: (u32, u32),
     tiles: (u32, u32),
 }
 
 impl Cam64 {
-    fn new(cam: &Camera) -> Self {
+    fn new(cam: &Camera, rules: Rules) -> Self {
         let r = cam.rotation.as_dmat3();
         let t = cam.translation.as_dvec3();
         let (fx, fy) = (cam.fx as f64, cam.fy as f64);
+        let (w, h) = (cam.width as f64, cam.height as f64);
+        let (cx, cy) = (cam.cx as f64, cam.cy as f64);
         Cam64 {
             r,
             t,
             pos: -(r.transpose() * t),
             fx,
             fy,
-            cx: cam.cx as f64,
-            cy: cam.cy as f64,
-            limx: 1.3 * (cam.width as f64 / (2.0 * fx)),
-            limy: 1.3 * (cam.height as f64 / (2.0 * fy)),
+            cx,
+            cy,
+            lim: rules.clamp_limits(w, h, fx, fy, cx, cy),
+            rules,
+            size: (cam.width, cam.height),
             tiles: cam.tile_grid(),
         }
     }
@@ -236,8 +240,8 @@ fn cov_factor(p: &SplatParams<f64>, i: usize, opts: &RenderOptions) -> (DMat3, [
 /// Rows of `T = J W` and the clamped `tx`, `ty` for the view-space centre `v`.
 fn jacobian_rows(v: DVec3, cam: &Cam64) -> (DVec3, DVec3, f64, f64) {
     let z = v.z;
-    let tx = (v.x / z).clamp(-cam.limx, cam.limx) * z;
-    let ty = (v.y / z).clamp(-cam.limy, cam.limy) * z;
+    let tx = (v.x / z).clamp(-cam.lim[0], cam.lim[1]) * z;
+    let ty = (v.y / z).clamp(-cam.lim[2], cam.lim[3]) * z;
     let j0 = DVec3::new(cam.fx / z, 0.0, -(cam.fx * tx) / (z * z));
     let j1 = DVec3::new(0.0, cam.fy / z, -(cam.fy * ty) / (z * z));
     let w_t = cam.r.transpose();
@@ -250,7 +254,7 @@ fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) ->
     }
     let mean = DVec3::from(p.means[i]);
     let v = cam.r * mean + cam.t;
-    if v.z <= NEAR_PLANE as f64 {
+    if !cam.rules.in_front(v.z, opts.near() as f64) {
         return None;
     }
     let (m, _, _) = cov_factor(p, i, opts);
@@ -261,30 +265,22 @@ fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) ->
     let b = t0.dot(cov3d * t1);
     let c = t1.dot(cov3d * t1) + dil;
     let det = a * c - b * b;
-    if det == 0.0 {
+    if !cam.rules.keeps_det(det) {
         return None;
     }
     let conic = [c / det, -b / det, a / det];
-    let mid = 0.5 * (a + c);
-    let disc = (mid * mid - det).max(0.1).sqrt();
-    let radius = (3.0 * (mid + disc).max(mid - disc).sqrt()).ceil();
     let mean2d = [
         cam.fx * v.x / v.z + cam.cx - 0.5,
         cam.fy * v.y / v.z + cam.cy - 0.5,
     ];
-    let tile = TILE_SIZE as f64;
-    let clamp = |x: f64, hi: u32| -> u32 { (x as i64).clamp(0, hi as i64) as u32 };
-    let rect_min = [
-        clamp((mean2d[0] - radius) / tile, cam.tiles.0),
-        clamp((mean2d[1] - radius) / tile, cam.tiles.1),
-    ];
-    let rect_max = [
-        clamp((mean2d[0] + radius + tile - 1.0) / tile, cam.tiles.0),
-        clamp((mean2d[1] + radius + tile - 1.0) / tile, cam.tiles.1),
-    ];
-    if (rect_max[0] - rect_min[0]) * (rect_max[1] - rect_min[1]) == 0 {
-        return None;
-    }
+    let opacity = if opts.antialiased {
+        p.opacities[i] * compensation(a, b, c, cam.rules).0
+    } else {
+        p.opacities[i]
+    };
+    let e = cam
+        .rules
+        .extent([a, b, c], det, opacity, mean2d, cam.size, cam.tiles)?;
     let color = match &p.colors {
         ColorParams::Sh { coeffs, .. } => {
             let (active, k) = sh_degrees(p, opts);
@@ -308,14 +304,10 @@ fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) ->
         mean2d,
         conic,
         depth: v.z,
-        opacity: if opts.antialiased {
-            p.opacities[i] * compensation(a, b, c).0
-        } else {
-            p.opacities[i]
-        },
+        opacity,
         color,
-        rect_min,
-        rect_max,
+        rect_min: e.rect_min,
+        rect_max: e.rect_max,
     })
 }
 
@@ -345,7 +337,7 @@ fn tile_lists(projs: &[Option<Proj>], cam: &Cam64) -> Vec<Vec<u32>> {
 struct Step {
     id: u32,
     alpha: f64,
-    /// Alpha before the 0.99 clamp.
+    /// Alpha before the clamp.
     unclamped: f64,
     /// Transmittance before this Gaussian.
     t: f64,
@@ -362,6 +354,7 @@ fn composite(
     px: f64,
     py: f64,
     kernel: SplatKernel,
+    rules: Rules,
 ) -> (Vec<Step>, f64) {
     let mut t = 1.0;
     let mut steps = Vec::new();
@@ -380,12 +373,12 @@ fn composite(
             SplatKernel::Gaussian => g.opacity * power.exp(),
             SplatKernel::Power => g.opacity * (1.0 - (-2.0 * power) / 9.0).max(0.0),
         };
-        let alpha = unclamped.min(ALPHA_MAX as f64);
+        let alpha = unclamped.min(rules.alpha_max() as f64);
         if alpha < ALPHA_MIN as f64 {
             continue;
         }
         let test_t = t * (1.0 - alpha);
-        if test_t < T_MIN as f64 {
+        if rules.stops(test_t) {
             break;
         }
         steps.push(Step {
@@ -410,7 +403,7 @@ struct Raster {
 }
 
 fn rasterize(p: &SplatParams<f64>, cam: &Camera, opts: &RenderOptions) -> Raster {
-    let cam = Cam64::new(cam);
+    let cam = Cam64::new(cam, opts.rules);
     let projs: Vec<Option<Proj>> = (0..p.len())
         .into_par_iter()
         .map(|i| project(p, i, &cam, opts))
@@ -435,7 +428,8 @@ impl Raster {
     /// sum of depth * weight.
     fn pixel(&self, x: usize, y: usize, kernel: SplatKernel) -> (Vec<Step>, f64, f64) {
         let list = self.pixel_list(x as u32, y as u32);
-        let (steps, t) = composite(&self.projs, list, x as f64, y as f64, kernel);
+        let (px, py) = (x as f64, y as f64);
+        let (steps, t) = composite(&self.projs, list, px, py, kernel, self.cam.rules);
         let dacc = steps
             .iter()
             .map(|s| self.proj(s.id).depth * s.alpha * s.t)
@@ -579,7 +573,7 @@ pub fn backward(
                     g_a += g_dacc * (g.depth * s.t - behind_depth / one_minus);
                     behind_depth += g.depth * wgt;
                     g_a += g_alpha * t_final / one_minus;
-                    if s.unclamped < ALPHA_MAX as f64 {
+                    if s.unclamped < opts.rules.alpha_max() as f64 {
                         let (da_do, da_dpower) = match opts.kernel {
                             SplatKernel::Gaussian => (s.power.exp(), s.unclamped),
                             SplatKernel::Power => {
@@ -635,15 +629,15 @@ pub fn backward(
     Ok(out)
 }
 
-/// The antialiased opacity compensation `sqrt(max(r, ANTIALIAS_MIN_RATIO))`, `r =
+/// The antialiased opacity compensation `sqrt(max(r, floor))` (the rules' floor), `r =
 /// det(cov2d) / det(cov2d + dilation)`, of the dilated 2D covariance `(a, b; b, c)`, and
 /// its derivatives with respect to a, b and c (0 where the ratio is clamped).
-fn compensation(a: f64, b: f64, c: f64) -> (f64, [f64; 3]) {
+fn compensation(a: f64, b: f64, c: f64, rules: Rules) -> (f64, [f64; 3]) {
     let dil = COV2D_DILATION as f64;
     let det = a * c - b * b;
     let det0 = (a - dil) * (c - dil) - b * b;
     let r = det0 / det;
-    let min = ANTIALIAS_MIN_RATIO as f64;
+    let min = rules.antialias_min_ratio() as f64;
     if r <= min {
         return (min.sqrt(), [0.0; 3]);
     }
@@ -696,7 +690,7 @@ fn project_backward(
         + gc_ * (2.0 * a * b / det2);
     if opts.antialiased {
         // The blended opacity is opacity * comp(a, b, c).
-        let (comp, [da, db, dc]) = compensation(a, b, c);
+        let (comp, [da, db, dc]) = compensation(a, b, c, cam.rules);
         out.opacities[i] = g.opacity * comp;
         let g_comp = g.opacity * p.opacities[i];
         g_a += g_comp * da;
@@ -721,12 +715,13 @@ fn project_backward(
     let g_tx = g_j0.z * (-fx / (z * z));
     let g_ty = g_j1.z * (-fy / (z * z));
     // tx = clamp(x / z, -lim, lim) z: x passes where unclamped, z carries the bound where clamped.
-    if (v.x / z).abs() <= cam.limx {
+    let (ux, uy) = (v.x / z, v.y / z);
+    if ux >= -cam.lim[0] && ux <= cam.lim[1] {
         g_v.x += g_tx;
     } else {
         g_v.z += g_tx * tx / z;
     }
-    if (v.y / z).abs() <= cam.limy {
+    if uy >= -cam.lim[2] && uy <= cam.lim[3] {
         g_v.y += g_ty;
     } else {
         g_v.z += g_ty * ty / z;

@@ -14,7 +14,7 @@ use crate::model::ActivatedScene;
 // The model's types, constants and SH, re-exported where they used to live.
 pub use crate::model::sh;
 pub use crate::model::{
-    RenderOptions, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO, COV2D_DILATION,
+    RenderOptions, Rules, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO, COV2D_DILATION,
     NEAR_PLANE, TILE_SIZE, T_MIN,
 };
 use glam::{Mat3, Vec3};
@@ -34,7 +34,8 @@ pub struct Projected {
     pub opacity: f32,
     /// RGB from SH.
     pub color: [f32; 3],
-    /// Screen-space radius in pixels (0 when culled).
+    /// Screen-space radius in pixels, the larger of the two axes' under gsplat's rules (0
+    /// when culled).
     pub radius: i32,
     /// First tile (x, y) touched, inclusive.
     pub rect_min: [u32; 2],
@@ -80,14 +81,20 @@ pub fn covariance_3d(scale: [f32; 3], rotation: [f32; 4]) -> Mat3 {
     m * m.transpose()
 }
 
+/// The guard band of `rules` for `cam` ([`Rules::clamp_limits`]), as the GPU receives it.
+pub fn clamp_limits(cam: &Camera, rules: Rules) -> [f32; 4] {
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    rules.clamp_limits(w, h, cam.fx, cam.fy, cam.cx, cam.cy)
+}
+
 /// 2D covariance `(a, b, c)` = xx, xy, yy of `J W Sigma W^T J^T`, before the dilation.
-/// `view` is the view-space centre; `x/z` and `y/z` are clamped to 1.3 tan(fov/2).
-pub fn covariance_2d(view: Vec3, cov3d: Mat3, cam: &Camera) -> [f32; 3] {
-    let limx = 1.3 * cam.tan_half_fov_x();
-    let limy = 1.3 * cam.tan_half_fov_y();
+/// `view` is the view-space centre; `x/z` and `y/z` are clamped to the guard band of
+/// `rules` (the original's 1.3 tan(fov/2)).
+pub fn covariance_2d(view: Vec3, cov3d: Mat3, cam: &Camera, rules: Rules) -> [f32; 3] {
+    let [xn, xp, yn, yp] = clamp_limits(cam, rules);
     let z = view.z;
-    let tx = (view.x / z).clamp(-limx, limx) * z;
-    let ty = (view.y / z).clamp(-limy, limy) * z;
+    let tx = (view.x / z).clamp(-xn, xp) * z;
+    let ty = (view.y / z).clamp(-yn, yp) * z;
     // Rows of J (the third row is zero).
     let j0 = Vec3::new(cam.fx / z, 0.0, -(cam.fx * tx) / (z * z));
     let j1 = Vec3::new(0.0, cam.fy / z, -(cam.fy * ty) / (z * z));
@@ -114,39 +121,36 @@ pub fn preprocess_one(
     }
     let mean = Vec3::from(scene.positions[i]);
     let view = cam.rotation * mean + cam.translation;
-    if view.z <= NEAR_PLANE {
+    let rules = opts.rules;
+    if !rules.in_front(view.z, opts.near()) {
         return culled;
     }
     let m = opts.scale_modifier;
     let s = scene.scales[i];
     let cov3d = covariance_3d([m * s[0], m * s[1], m * s[2]], scene.rotations[i]);
-    let [a, b, c] = covariance_2d(view, cov3d, cam);
+    let [a, b, c] = covariance_2d(view, cov3d, cam, rules);
     let det_before = a * c - b * b;
     let (a, c) = (a + COV2D_DILATION, c + COV2D_DILATION);
     let det = a * c - b * b;
-    if det == 0.0 {
+    if !rules.keeps_det(det) {
         return culled;
     }
     let opacity = if opts.antialiased {
-        scene.opacities[i] * (det_before / det).max(ANTIALIAS_MIN_RATIO).sqrt()
+        scene.opacities[i] * (det_before / det).max(rules.antialias_min_ratio()).sqrt()
     } else {
         scene.opacities[i]
     };
     let det_inv = 1.0 / det;
     let conic = [c * det_inv, -b * det_inv, a * det_inv];
-    let mid = 0.5 * (a + c);
-    let disc = (mid * mid - det).max(0.1).sqrt();
-    let (lambda1, lambda2) = (mid + disc, mid - disc);
-    let radius = (3.0 * lambda1.max(lambda2).sqrt()).ceil();
     let inv_z = 1.0 / view.z;
     let mean2d = [
         cam.fx * view.x * inv_z + cam.cx - 0.5,
         cam.fy * view.y * inv_z + cam.cy - 0.5,
     ];
-    let (rect_min, rect_max) = tile_rect(mean2d, radius, cam.tile_grid());
-    if (rect_max[0] - rect_min[0]) * (rect_max[1] - rect_min[1]) == 0 {
+    let size = (cam.width, cam.height);
+    let Some(e) = rules.extent([a, b, c], det, opacity, mean2d, size, cam.tile_grid()) else {
         return culled;
-    }
+    };
     let dir = (mean - cam.position()).normalize();
     let stride = scene.sh_stride();
     let color = sh::eval_sh(
@@ -160,9 +164,9 @@ pub fn preprocess_one(
         conic,
         opacity,
         color,
-        radius: radius as i32,
-        rect_min,
-        rect_max,
+        radius: e.radius[0].max(e.radius[1]),
+        rect_min: e.rect_min,
+        rect_max: e.rect_max,
     }
 }
 
@@ -321,9 +325,10 @@ pub fn blend_pixel(
     px: f32,
     py: f32,
     kernel: SplatKernel,
+    rules: Rules,
 ) -> PixelResult {
     let mut color = [0.0f32; 3];
-    let mut r = blend_pixel_with(projected, ids, px, py, kernel, |id, w| {
+    let mut r = blend_pixel_with(projected, ids, px, py, kernel, rules, |id, w| {
         for (c, gc) in color.iter_mut().zip(projected[id as usize].color) {
             *c += gc * w;
         }
@@ -343,8 +348,10 @@ pub fn blend_pixel_with(
     px: f32,
     py: f32,
     kernel: SplatKernel,
+    rules: Rules,
     mut add: impl FnMut(u32, f32),
 ) -> PixelResult {
+    let (alpha_max, t_stop) = (rules.alpha_max(), rules.t_stop());
     let mut t = 1.0f32;
     let mut depth = 0.0f32;
     let mut evaluated = 0u32;
@@ -358,12 +365,12 @@ pub fn blend_pixel_with(
         if power > 0.0 {
             continue;
         }
-        let alpha = ALPHA_MAX.min(kernel.falloff(g.opacity, power));
+        let alpha = alpha_max.min(kernel.falloff(g.opacity, power));
         if alpha < ALPHA_MIN {
             continue;
         }
         let test_t = t * (1.0 - alpha);
-        if test_t < T_MIN {
+        if test_t < t_stop {
             break;
         }
         let w = alpha * t;
@@ -388,12 +395,13 @@ pub fn blend_features_pixel(
     px: f32,
     py: f32,
     kernel: SplatKernel,
+    rules: Rules,
     features: &[f32],
     k: usize,
     out: &mut [f32],
 ) {
     out.fill(0.0);
-    blend_pixel_with(projected, ids, px, py, kernel, |id, w| {
+    blend_pixel_with(projected, ids, px, py, kernel, rules, |id, w| {
         let f = &features[id as usize * k..(id as usize + 1) * k];
         for (o, v) in out.iter_mut().zip(f) {
             *o += v * w;
@@ -404,12 +412,14 @@ pub fn blend_features_pixel(
 /// Blends the `k` feature channels per Gaussian (`features`, Gaussian-major) of every
 /// tile front to back, with exactly the colour rules (same alpha, transmittance, skip and
 /// stop; background 0): `width * height * k` floats, pixel-major, row by row.
+#[allow(clippy::too_many_arguments)]
 pub fn blend_features(
     projected: &[Projected],
     sorted_values: &[u32],
     ranges: &[[u32; 2]],
     cam: &Camera,
     kernel: SplatKernel,
+    rules: Rules,
     features: &[f32],
     k: usize,
 ) -> Vec<f32> {
@@ -424,7 +434,8 @@ pub fn blend_features(
             let tile = (y as u32 / TILE_SIZE) * tiles_x + x as u32 / TILE_SIZE;
             let [start, end] = ranges[tile as usize];
             let ids = &sorted_values[start as usize..end as usize];
-            blend_features_pixel(projected, ids, x as f32, y as f32, kernel, features, k, px);
+            let (x, y) = (x as f32, y as f32);
+            blend_features_pixel(projected, ids, x, y, kernel, rules, features, k, px);
         }
     });
     out
@@ -444,6 +455,7 @@ pub fn blend(
     cam: &Camera,
     background: [f32; 3],
     kernel: SplatKernel,
+    rules: Rules,
 ) -> Frame {
     let (tiles_x, tiles_y) = cam.tile_grid();
     let (w, h) = (cam.width, cam.height);
@@ -456,7 +468,7 @@ pub fn blend(
             let mut out = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
             for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(h) {
                 for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(w) {
-                    let r = blend_pixel(projected, ids, x as f32, y as f32, kernel);
+                    let r = blend_pixel(projected, ids, x as f32, y as f32, kernel, rules);
                     out.push((y as usize * w as usize + x as usize, r));
                 }
             }
@@ -573,6 +585,7 @@ fn render_timed_with(
         cam,
         opts.background,
         opts.kernel,
+        opts.rules,
     );
     take(&mut t.blend);
     if features {
@@ -582,6 +595,7 @@ fn render_timed_with(
             &ranges,
             cam,
             opts.kernel,
+            opts.rules,
             &scene.features,
             scene.feature_count,
         );
@@ -600,6 +614,7 @@ pub fn count_evaluations<'a>(
     projected: &[Projected],
     cam: &Camera,
     kernel: SplatKernel,
+    rules: Rules,
     list: impl Fn(u32, u32) -> &'a [u32] + Sync,
 ) -> u64 {
     (0..cam.height)
@@ -607,9 +622,8 @@ pub fn count_evaluations<'a>(
         .map(|y| {
             (0..cam.width)
                 .map(|x| {
-                    u64::from(
-                        blend_pixel(projected, list(x, y), x as f32, y as f32, kernel).evaluated,
-                    )
+                    let (px, py) = (x as f32, y as f32);
+                    u64::from(blend_pixel(projected, list(x, y), px, py, kernel, rules).evaluated)
                 })
                 .sum::<u64>()
         })

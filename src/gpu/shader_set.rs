@@ -168,14 +168,11 @@ pub fn shared_defines() -> Vec<(String, String)> {
             "TILE_PIXELS",
             format!("{}u", rules::TILE_SIZE * rules::TILE_SIZE),
         ),
-        ("NEAR_PLANE", glsl_float(rules::NEAR_PLANE)),
+        // The near plane, the alpha clamp and the antialiased ratio's floor differ between
+        // the rules and come per frame (FrameParams.rules).
         ("COV2D_DILATION", glsl_float(rules::COV2D_DILATION)),
-        (
-            "ANTIALIAS_MIN_RATIO",
-            glsl_float(rules::ANTIALIAS_MIN_RATIO),
-        ),
-        ("ALPHA_MAX", glsl_float(rules::ALPHA_MAX)),
         ("ALPHA_MIN", glsl_float(rules::ALPHA_MIN)),
+        ("GSPLAT_EXTEND", glsl_float(rules::GSPLAT_EXTEND)),
         ("T_MIN", glsl_float(rules::T_MIN)),
         ("LINEAR_WG", format!("{LINEAR_WG}u")),
         ("SCAN_WG", SCAN_WG.to_string()),

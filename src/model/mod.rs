@@ -9,7 +9,10 @@
 
 pub mod field;
 pub mod grad;
+pub mod rules;
 pub mod sh;
+
+pub use rules::Rules;
 
 /// The reference's constants, defined once in [`crate::rules`] (the shaders get them from
 /// there too).
@@ -122,6 +125,11 @@ pub struct RenderOptions {
     pub sh_degree: Option<u32>,
     /// Alpha falloff of every splat ([`SplatKernel::Gaussian`] by default, the reference).
     pub kernel: SplatKernel,
+    /// Which rasterizer's rules ([`Rules::Original`] by default).
+    pub rules: Rules,
+    /// Gaussians nearer than this view depth are culled; `None`: the rules' default (0.2,
+    /// gsplat's 0.01). Must be positive.
+    pub near_plane: Option<f32>,
 }
 
 impl Default for RenderOptions {
@@ -134,11 +142,18 @@ impl Default for RenderOptions {
             min_opacity: None,
             sh_degree: None,
             kernel: SplatKernel::Gaussian,
+            rules: Rules::Original,
+            near_plane: None,
         }
     }
 }
 
 impl RenderOptions {
+    /// The near plane in use ([`Self::near_plane`] or the rules' default).
+    pub fn near(&self) -> f32 {
+        self.near_plane.unwrap_or(self.rules.default_near_plane())
+    }
+
     /// The SH degree evaluated for a scene of degree `scene_degree`.
     pub fn active_sh_degree(&self, scene_degree: u32) -> u32 {
         self.sh_degree.map_or(scene_degree, |d| d.min(scene_degree))
@@ -180,6 +195,12 @@ impl RenderOptions {
         if let Some(o) = self.min_opacity {
             if !(0.0..=1.0).contains(&o) {
                 return Err(format!("the min opacity must be in [0, 1], got {o}"));
+            }
+        }
+        if let Some(n) = self.near_plane {
+            // Depth keys order as unsigned bits only for positive depths.
+            if !(n.is_finite() && n > 0.0) {
+                return Err(format!("the near plane must be a positive number, got {n}"));
             }
         }
         if !self.background.iter().all(|c| c.is_finite()) {

@@ -105,7 +105,7 @@ fn frame_params(
             if opts.antialiased { 1.0 } else { 0.0 },
         ],
         focal: [cam.fx, cam.fy, cam.cx, cam.cy],
-        tan_fov: [cam.tan_half_fov_x(), cam.tan_half_fov_y(), 0.0, 0.0],
+        limits: crate::cpu::clamp_limits(cam, opts.rules),
         background: [
             opts.background[0],
             opts.background[1],
@@ -126,6 +126,13 @@ fn frame_params(
             opts.min_opacity.unwrap_or(-1.0),
             opts.kernel.shader_id() as f32,
         ],
+        rules: [
+            opts.rules.near_cull_f32(opts.near()),
+            opts.rules.alpha_max(),
+            opts.rules.t_stop(),
+            opts.rules.antialias_min_ratio(),
+        ],
+        modes: [opts.rules.shader_id(), 0, 0, 0],
     }
 }
 

@@ -17,8 +17,9 @@ pub struct FrameParams {
     pub cam_pos: [f32; 4],
     /// fx, fy, cx, cy.
     pub focal: [f32; 4],
-    /// tan(fovx/2), tan(fovy/2).
-    pub tan_fov: [f32; 4],
+    /// The guard band of the 2D covariance (`model::Rules::clamp_limits`): `x/z` is clamped
+    /// to `[-x, y]`, `y/z` to `[-z, w]`.
+    pub limits: [f32; 4],
     /// Background rgb.
     pub background: [f32; 4],
     /// width, height, tiles_x, tiles_y.
@@ -32,6 +33,12 @@ pub struct FrameParams {
     /// `cpu::RenderOptions`, applied by preprocess (the falloff also picks the blend
     /// pipeline).
     pub filters: [f32; 4],
+    /// The rules' numbers (`model::Rules`): a centre is kept when its depth is above `x`
+    /// (the near plane, or the float below gsplat's), alpha clamp, a pixel ends before its
+    /// transmittance would drop below `z`, the antialiased compensation's lowest ratio.
+    pub rules: [f32; 4],
+    /// `Rules::shader_id` (the screen extent's rule) and three zeros.
+    pub modes: [u32; 4],
 }
 
 /// One uploaded Gaussian (`Gaussian` in GLSL), activated.
@@ -144,18 +151,20 @@ mod tests {
 
     #[test]
     fn layouts_match_the_glsl_header() {
-        assert_eq!(size_of::<FrameParams>(), 176);
+        assert_eq!(size_of::<FrameParams>(), 208);
         assert_eq!(offset_of!(FrameParams, w2c_row0), 0);
         assert_eq!(offset_of!(FrameParams, w2c_row1), 16);
         assert_eq!(offset_of!(FrameParams, w2c_row2), 32);
         assert_eq!(offset_of!(FrameParams, cam_pos), 48);
         assert_eq!(offset_of!(FrameParams, focal), 64);
-        assert_eq!(offset_of!(FrameParams, tan_fov), 80);
+        assert_eq!(offset_of!(FrameParams, limits), 80);
         assert_eq!(offset_of!(FrameParams, background), 96);
         assert_eq!(offset_of!(FrameParams, image), 112);
         assert_eq!(offset_of!(FrameParams, counts), 128);
         assert_eq!(offset_of!(FrameParams, bins), 144);
         assert_eq!(offset_of!(FrameParams, filters), 160);
+        assert_eq!(offset_of!(FrameParams, rules), 176);
+        assert_eq!(offset_of!(FrameParams, modes), 192);
 
         assert_eq!(size_of::<GpuGaussian>(), 48);
         assert_eq!(offset_of!(GpuGaussian, pos_opacity), 0);

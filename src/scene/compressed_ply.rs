@@ -163,6 +163,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
 
     let mut scene = Scene::empty(sh_degree);
     scene.kernel = header.kernel(path)?;
+    scene.rules = header.rules(path)?;
     scene.positions.reserve_exact(n);
     scene.log_scales.reserve_exact(n);
     scene.rotations.reserve_exact(n);

@@ -58,6 +58,10 @@ pub struct Scene {
     /// records it (INRIA PLY: a `comment vksplat kernel power` header line); Gaussian when
     /// it records none. `render` uses it unless `--kernel` says otherwise.
     pub kernel: crate::model::SplatKernel,
+    /// The rasterizer's rules the scene was trained with ([`crate::model::Rules`]), as the
+    /// file records it (INRIA PLY: a `comment vksplat rules gsplat` header line); the
+    /// original's when it records none. `render` uses them unless `--rules` says otherwise.
+    pub rules: crate::model::Rules,
     /// Feature channels per Gaussian (0 without features, else 1..=[`MAX_FEATURES`]).
     pub feature_count: usize,
     /// `feature_count` floats per Gaussian, Gaussian-major: channel `k` of Gaussian `i` is
@@ -115,6 +119,7 @@ impl Scene {
         let mut out = Scene::empty(sh_degree.min(self.sh_degree));
         out.antialiased = self.antialiased;
         out.kernel = self.kernel;
+        out.rules = self.rules;
         out.feature_count = self.feature_count;
         out.time = self
             .time

@@ -118,6 +118,8 @@ pub(crate) struct Header {
 
 /// The header comment that records a scene's alpha falloff: `comment vksplat kernel NAME`.
 pub const KERNEL_COMMENT: &str = "vksplat kernel";
+/// The header comment that records a scene's rasterizer rules: `comment vksplat rules NAME`.
+pub const RULES_COMMENT: &str = "vksplat rules";
 
 impl Header {
     /// The element called `name`, if the header declares one.
@@ -128,17 +130,31 @@ impl Header {
     /// The alpha falloff a `comment vksplat kernel NAME` line records (Gaussian without
     /// one); an unknown name is an error naming the line.
     pub(crate) fn kernel(&self, path: &Path) -> Result<SplatKernel, SceneError> {
-        let mut kernel = SplatKernel::Gaussian;
+        self.recorded(path, KERNEL_COMMENT)
+    }
+
+    /// The rules a `comment vksplat rules NAME` line records (the original's without one).
+    pub(crate) fn rules(&self, path: &Path) -> Result<crate::model::Rules, SceneError> {
+        self.recorded(path, RULES_COMMENT)
+    }
+
+    /// The value the last `comment PREFIX VALUE` line records (the default without one).
+    fn recorded<T: Default + std::str::FromStr<Err = String>>(
+        &self,
+        path: &Path,
+        prefix: &str,
+    ) -> Result<T, SceneError> {
+        let mut value = T::default();
         for (line, text) in &self.comments {
             let words: Vec<&str> = text.split_whitespace().collect();
-            if words.len() < 2 || words[..2].join(" ") != KERNEL_COMMENT {
+            if words.len() < 2 || words[..2].join(" ") != prefix {
                 continue;
             }
-            kernel = words[2..].join(" ").parse().map_err(|e: String| {
+            value = words[2..].join(" ").parse().map_err(|e: String| {
                 SceneError::invalid(path, format!("header line {line}: \"comment {text}\": {e}"))
             })?;
         }
-        Ok(kernel)
+        Ok(value)
     }
 
     /// The body encoding as the public enum.
@@ -503,6 +519,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     };
     let mut scene = Scene::empty(map.sh_degree);
     scene.kernel = header.kernel(path)?;
+    scene.rules = header.rules(path)?;
     scene.feature_count = map.features.len();
     if map.time.is_some() {
         scene.time = Some(Vec::new());
@@ -709,6 +726,9 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     // Only a non-default kernel is recorded, so Gaussian scenes keep the trainer's header.
     if scene.kernel != SplatKernel::Gaussian {
         out.push_str(&format!("comment {KERNEL_COMMENT} {}\n", scene.kernel));
+    }
+    if scene.rules != crate::model::Rules::Original {
+        out.push_str(&format!("comment {RULES_COMMENT} {}\n", scene.rules));
     }
     out.push_str(&format!("element vertex {}\n", scene.len()));
     for n in &names {

@@ -163,6 +163,9 @@ pub struct ConvertReport {
     /// The input records a non-Gaussian kernel (`cpu::SplatKernel`) that the output format
     /// cannot record (only PLY can).
     pub kernel_lost: Option<crate::model::SplatKernel>,
+    /// The input records gsplat's rules (`model::Rules`), which the output format cannot
+    /// record (only PLY can).
+    pub rules_lost: Option<crate::model::Rules>,
     /// Feature channels per Gaussian that the output format cannot hold and dropped (only
     /// PLY keeps `feat_*`); 0 when none were lost.
     pub features_dropped: usize,
@@ -233,6 +236,9 @@ pub fn convert(
         kernel_lost: (scene.kernel != crate::model::SplatKernel::Gaussian
             && output_format != OutputFormat::Ply)
             .then_some(scene.kernel),
+        rules_lost: (scene.rules != crate::model::Rules::Original
+            && output_format != OutputFormat::Ply)
+            .then_some(scene.rules),
         features_dropped: if output_format == OutputFormat::Ply {
             0
         } else {

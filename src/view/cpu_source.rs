@@ -19,6 +19,7 @@ pub struct CpuSource {
     sh_degree: u32,
     antialiased: bool,
     kernel: cpu::SplatKernel,
+    rules: cpu::Rules,
 }
 
 impl CpuSource {
@@ -30,6 +31,7 @@ impl CpuSource {
             sh_degree: scene.sh_degree,
             antialiased,
             kernel: scene.kernel,
+            rules: scene.rules,
         }
     }
 
@@ -52,7 +54,7 @@ impl CpuSource {
             .validate(self.sh_degree)
             .map_err(anyhow::Error::msg)?;
         cam.validate()?;
-        let opts = render_options(settings, self.antialiased, self.kernel);
+        let opts = render_options(settings, self.antialiased, self.kernel, self.rules);
         let start = std::time::Instant::now();
         let mut lap = start;
         let mut take = || {
@@ -77,6 +79,7 @@ impl CpuSource {
             cam,
             opts.background,
             opts.kernel,
+            opts.rules,
         );
         t.blend = take();
         t.total = start.elapsed().as_secs_f64() * 1e3;
@@ -138,7 +141,7 @@ mod tests {
             let want = cpu::render(
                 &act,
                 &cam,
-                &render_options(&settings, false, Default::default()),
+                &render_options(&settings, false, Default::default(), Default::default()),
             );
             assert_eq!(got.rgba8, frame_rgba8(&want, settings.mode));
             assert!(got.stats.visible > 0 && got.stats.pairs > 0);

@@ -177,6 +177,8 @@ pub struct GpuSource {
     antialiased: bool,
     /// The alpha falloff (the scene's [`Scene::kernel`]).
     kernel: SplatKernel,
+    /// The rasterizer's rules (the scene's [`Scene::rules`]).
+    rules: crate::model::Rules,
 }
 
 /// The most Gaussians a preview draws by default short of the whole scene (the size of
@@ -223,6 +225,7 @@ impl GpuSource {
             sh_degree: scene.sh_degree,
             antialiased,
             kernel: scene.kernel,
+            rules: scene.rules,
         };
         source.set_preview(scene, preview_gaussians)?;
         Ok(source)
@@ -286,7 +289,7 @@ impl GpuSource {
 
     fn options(&self, s: &ViewSettings) -> anyhow::Result<RenderOptions> {
         s.validate(self.sh_degree).map_err(anyhow::Error::msg)?;
-        Ok(render_options(s, self.antialiased, self.kernel))
+        Ok(render_options(s, self.antialiased, self.kernel, self.rules))
     }
 }
 
@@ -295,6 +298,7 @@ pub fn render_options(
     settings: &ViewSettings,
     antialiased: bool,
     kernel: SplatKernel,
+    rules: crate::model::Rules,
 ) -> RenderOptions {
     RenderOptions {
         background: settings.background,
@@ -304,6 +308,8 @@ pub fn render_options(
         min_opacity: (settings.min_opacity > 0.0).then_some(settings.min_opacity),
         sh_degree: settings.sh_degree,
         kernel,
+        rules,
+        near_plane: None,
     }
 }
 

@@ -212,9 +212,18 @@ fn gpu_feature_blend_storage_buffer_variant_matches_the_reference() {
 }
 
 /// Scene file, K, orbit camera, width, height, kernel.
-type Case = (&'static str, usize, usize, u32, u32, SplatKernel);
+pub(crate) type Case = (&'static str, usize, usize, u32, u32, SplatKernel);
 
 fn check_gpu_cases(r: &mut vksplat::render::GpuRenderer, cases: &[Case]) {
+    check_gpu_cases_with(r, cases, vksplat::cpu::Rules::Original);
+}
+
+/// [`check_gpu_cases`] under `rules`.
+pub(crate) fn check_gpu_cases_with(
+    r: &mut vksplat::render::GpuRenderer,
+    cases: &[Case],
+    rules: vksplat::cpu::Rules,
+) {
     for &(file, k, cam_index, w, h, kernel) in cases {
         let mut s = scene::load(&common::shared_data().join(file)).unwrap();
         random_features(&mut s, k, k as u64);
@@ -231,6 +240,7 @@ fn check_gpu_cases(r: &mut vksplat::render::GpuRenderer, cases: &[Case]) {
         };
         let opts = RenderOptions {
             kernel,
+            rules,
             background: [0.3, 0.3, 0.3],
             ..Default::default()
         };

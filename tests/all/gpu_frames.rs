@@ -19,16 +19,16 @@ use vksplat::cpu::{self, RenderOptions};
 use vksplat::render::GpuRenderer;
 use vksplat::scene::{self, ActivatedScene, Scene};
 
-fn load(name: &str) -> Scene {
+pub(crate) fn load(name: &str) -> Scene {
     scene::load(&common::shared_data().join(name)).unwrap()
 }
 
-fn orbit(name: &str, i: usize, w: u32, h: u32) -> Camera {
+pub(crate) fn orbit(name: &str, i: usize, w: u32, h: u32) -> Camera {
     let cams = camera::load_cameras_json(&common::shared_data().join(name)).unwrap();
     cams[i].with_resolution(w, h).unwrap()
 }
 
-fn check_frame(
+pub(crate) fn check_frame(
     r: &mut GpuRenderer,
     label: &str,
     s: &ActivatedScene,

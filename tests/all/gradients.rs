@@ -120,7 +120,19 @@ fn finite_differences_of(
 /// Checks the reference backward against finite differences, group by group, and that the
 /// gradients are not trivially zero.
 fn check(p32: &SplatParams<f32>, opts: &RenderOptions, bg: &[f64], depth: bool, seed: u64) {
-    let cam = grad_camera();
+    check_on(&grad_camera(), p32, opts, bg, depth, seed);
+}
+
+/// [`check`] from `cam`.
+pub(crate) fn check_on(
+    cam: &Camera,
+    p32: &SplatParams<f32>,
+    opts: &RenderOptions,
+    bg: &[f64],
+    depth: bool,
+    seed: u64,
+) {
+    let cam = cam.clone();
     let p = p32.to_f64();
     let g = pixel_grads(&cam, p.channels(), seed, depth);
     let grads = backward(&p, &cam, opts, bg, &g).unwrap();
@@ -236,7 +248,7 @@ fn reference_backward_handles_the_transmittance_stop_and_the_alpha_skip() {
 /// derivative moves from x to z.
 /// A few random Gaussians and two whose centres lie outside the guard band of `cam`
 /// (|x/z| > 1.3 tan(fov/2)), large enough to reach into the frame.
-fn guard_band_scene(cam: &Camera) -> SplatParams<f32> {
+pub(crate) fn guard_band_scene(cam: &Camera) -> SplatParams<f32> {
     let mut p = grad_scene(4, 1000, Some(1), 3);
     let lim_x = 1.3 * cam.tan_half_fov_x();
     let lim_y = 1.3 * cam.tan_half_fov_y();
@@ -449,7 +461,7 @@ fn to_f32(g: &PixelGrads<f64>) -> PixelGrads<f32> {
 }
 
 /// GPU gradients and the reference's for one scene; returns the GPU's.
-fn gpu_against_reference(
+pub(crate) fn gpu_against_reference(
     r: &mut DiffRasterizer,
     p: &SplatParams<f32>,
     cam: &Camera,
@@ -484,13 +496,13 @@ fn gpu_against_reference(
 
 /// A rasterizer whose backward passes also read the projected quantities' gradients
 /// back (`SplatGrads::screen`, compared with the reference's like every group).
-fn diff_rasterizer(kernel: Option<BlendKernel>) -> DiffRasterizer {
+pub(crate) fn diff_rasterizer(kernel: Option<BlendKernel>) -> DiffRasterizer {
     let mut r = DiffRasterizer::with_renderer(new_renderer(kernel));
     r.renderer().set_screen_grads(true).unwrap();
     r
 }
 
-fn gpu_camera() -> Camera {
+pub(crate) fn gpu_camera() -> Camera {
     Camera::look_at(
         "grad-gpu",
         72,

@@ -30,6 +30,7 @@ mod gpu_memory;
 mod gpu_sort;
 mod gpu_stages;
 mod gradients;
+mod gsplat_rules;
 mod house;
 mod limits;
 mod loss;

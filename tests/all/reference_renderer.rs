@@ -606,7 +606,15 @@ fn tile_culled_render_equals_the_reference_render_bit_for_bit() {
                 .unzip();
             let (sk, sv) = cpu::sort_pairs(&keys, &values);
             let ranges = cpu::tile_ranges(&sk, (tx * ty) as usize);
-            let culled = cpu::blend(&projected, &sv, &ranges, cam, opts.background, kernel);
+            let culled = cpu::blend(
+                &projected,
+                &sv,
+                &ranges,
+                cam,
+                opts.background,
+                kernel,
+                opts.rules,
+            );
             let all: usize = projected.iter().map(|p| p.tiles_touched() as usize).sum();
             eprintln!("{} {kernel}: {} of {all} pairs kept", cam.name, sk.len());
             assert!(sk.len() < all, "some pairs are culled");

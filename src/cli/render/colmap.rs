@@ -36,6 +36,7 @@ pub(super) fn export_colmap(
         background: args.background,
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(scene, name),
+        rules: args.kernel.resolve_rules(scene, name),
         ..Default::default()
     };
     let t = std::time::Instant::now();

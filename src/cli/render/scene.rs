@@ -142,6 +142,7 @@ pub(super) fn render_options(
         antialiased,
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(scene, name),
+        rules: args.kernel.resolve_rules(scene, name),
         ..Default::default()
     }
 }

@@ -46,6 +46,7 @@ impl Model {
         meta.insert("sh_degree".into(), serde_json::json!(s.sh_degree));
         meta.insert("feature_count".into(), serde_json::json!(s.feature_count));
         meta.insert("kernel".into(), serde_json::json!(s.kernel.to_string()));
+        meta.insert("rules".into(), serde_json::json!(s.rules.to_string()));
         meta.insert(
             "active_sh_degree".into(),
             serde_json::json!(self.active_sh_degree),
@@ -96,6 +97,11 @@ impl Model {
             .and_then(|v| v.as_str())
             .and_then(|s| s.parse().ok())
             .ok_or("has no kernel")?;
+        // Checkpoints from before the rules were recorded were trained with the original's.
+        scene.rules = match meta.get("rules").and_then(|v| v.as_str()) {
+            Some(r) => r.parse()?,
+            None => Default::default(),
+        };
         let mut model = Model::of(scene);
         model.grad_accum = take("grad_accum", n)?;
         model.denom = take("denom", n)?.iter().map(|&d| d as u32).collect();

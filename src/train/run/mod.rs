@@ -64,6 +64,8 @@ pub struct TrainOptions {
     pub shader: Option<crate::mlp::Mlp>,
     /// The alpha falloff trained with (recorded in the PLY).
     pub kernel: crate::model::SplatKernel,
+    /// The rasterizer's rules (`--rules`), recorded in the model.
+    pub rules: crate::model::Rules,
     /// Iterations after which a checkpoint (`chkpntN.safetensors`) is written.
     pub checkpoint_iterations: Vec<u32>,
     /// Continue from this checkpoint (of the same data set and settings).
@@ -94,6 +96,7 @@ impl Default for TrainOptions {
             overwrite: false,
             shader: None,
             kernel: crate::model::SplatKernel::default(),
+            rules: crate::model::Rules::default(),
             checkpoint_iterations: Vec::new(),
             resume: None,
             cancel: None,
@@ -123,7 +126,11 @@ impl TrainOptions {
                 .iter()
                 .map(|v| (&v.camera.name, v.camera.width, v.camera.height))
                 .collect::<Vec<_>>()
-        )
+        ) + match self.rules {
+            // The original's leave the fingerprints of earlier checkpoints as they were.
+            crate::model::Rules::Original => "",
+            crate::model::Rules::Gsplat => "|rules gsplat",
+        }
     }
 }
 
@@ -249,6 +256,7 @@ impl<'a> Job<'a> {
             render_opts: RenderOptions {
                 background: bg,
                 kernel: opts.kernel,
+                rules: opts.rules,
                 ..Default::default()
             },
         }

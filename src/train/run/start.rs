@@ -17,6 +17,7 @@ impl Run<'_> {
         let mut written = Vec::new();
         let mut model = initial_model(job, &mut rng, &mut written, note)?;
         model.scene.kernel = opts.kernel;
+        model.scene.rules = opts.rules;
         if let Some(mlp) = &opts.shader {
             model = model.with_features(mlp.clone(), &mut rng);
         }
