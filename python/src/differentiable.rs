@@ -84,13 +84,19 @@ pub(crate) fn splat_params(t: &ParamsTuple) -> PyResult<SplatParams<f32>> {
     Ok(p)
 }
 
+/// The rasterizer's rules as the Python side names them (`"original"`, `"gsplat"`) and
+/// the near plane (None: the rules' default).
+pub(crate) type RulesArg<'a> = (&'a str, Option<f32>);
+
 pub(crate) fn diff_options(
     background: &[f32],
     kernel: &str,
     antialiased: bool,
     channels: usize,
+    (rules, near_plane): RulesArg,
 ) -> PyResult<RenderOptions> {
     let kernel = kernel.parse().map_err(|e: String| value_err(e))?;
+    let rules = rules.parse().map_err(|e: String| value_err(e))?;
     if !background.is_empty() && background.len() != channels {
         return Err(value_err(format!(
             "backgrounds must have {channels} values per camera, got {}",
@@ -101,12 +107,16 @@ pub(crate) fn diff_options(
     if channels == 3 && background.len() == 3 {
         bg.copy_from_slice(background);
     }
-    Ok(RenderOptions {
+    let opts = RenderOptions {
         background: bg,
         kernel,
         antialiased,
+        rules,
+        near_plane,
         ..Default::default()
-    })
+    };
+    opts.validate().map_err(value_err)?;
+    Ok(opts)
 }
 
 pub(crate) fn pixel_grads(
@@ -215,7 +225,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false))]
+    #[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false, rules="original", near_plane=None))]
     fn forward<'py>(
         &self,
         py: Python<'py>,
@@ -225,6 +235,8 @@ impl PyRasterizer {
         kernel: &str,
         shader: Option<&[u8]>,
         antialiased: bool,
+        rules: &str,
+        near_plane: Option<f32>,
     ) -> PyResult<ForwardOut<'py>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
@@ -234,6 +246,7 @@ impl PyRasterizer {
             kernel,
             antialiased,
             image_channels(&p, &shader)?,
+            (rules, near_plane),
         )?;
         let (frame, token, projected) = py.detach(|| {
             guarded(|| {
@@ -264,7 +277,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false, antialiased=false))]
+    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false, antialiased=false, rules="original", near_plane=None))]
     fn backward<'py>(
         &self,
         py: Python<'py>,
@@ -279,12 +292,20 @@ impl PyRasterizer {
         shader: Option<&[u8]>,
         screen: bool,
         antialiased: bool,
+        rules: &str,
+        near_plane: Option<f32>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let p = splat_params(&params)?;
         let cam = to_camera(&camera)?;
         let shader = shader_of(shader)?;
         let channels = image_channels(&p, &shader)?;
-        let opts = diff_options(&background, kernel, antialiased, channels)?;
+        let opts = diff_options(
+            &background,
+            kernel,
+            antialiased,
+            channels,
+            (rules, near_plane),
+        )?;
         let pixels = cam.width as usize * cam.height as usize;
         let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;
         let (grads, shader_grads) = py.detach(|| {

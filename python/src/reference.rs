@@ -16,7 +16,8 @@ use vksplat::model::grad::PixelGrads;
 /// The f64 CPU reference forward pass: colour (`H x W x D`, or 3 shaded), alpha and
 /// depth as f64 bytes.
 #[pyfunction]
-#[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false))]
+#[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false, rules="original", near_plane=None))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn reference_forward<'py>(
     py: Python<'py>,
     params: ParamsTuple,
@@ -25,6 +26,8 @@ pub(crate) fn reference_forward<'py>(
     kernel: &str,
     shader: Option<&[u8]>,
     antialiased: bool,
+    rules: &str,
+    near_plane: Option<f32>,
 ) -> PyResult<(
     Bound<'py, PyByteArray>,
     Bound<'py, PyByteArray>,
@@ -34,7 +37,13 @@ pub(crate) fn reference_forward<'py>(
     let cam = to_camera(&camera)?;
     let shader = shader_of(shader)?;
     let channels = image_channels(&p, &shader)?;
-    let opts = diff_options(&background, kernel, antialiased, channels)?;
+    let opts = diff_options(
+        &background,
+        kernel,
+        antialiased,
+        channels,
+        (rules, near_plane),
+    )?;
     let bg = reference_background(&background, channels);
     let img = py.detach(|| {
         guarded(|| {
@@ -73,7 +82,7 @@ fn reference_background(background: &[f32], channels: usize) -> Vec<f64> {
 
 /// The f64 CPU reference backward pass: gradients as f64 bytes.
 #[pyfunction]
-#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, antialiased=false))]
+#[pyo3(signature = (params, camera, background, kernel, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, antialiased=false, rules="original", near_plane=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reference_backward<'py>(
     py: Python<'py>,
@@ -86,12 +95,20 @@ pub(crate) fn reference_backward<'py>(
     grad_depth: Option<&[u8]>,
     shader: Option<&[u8]>,
     antialiased: bool,
+    rules: &str,
+    near_plane: Option<f32>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let p = splat_params(&params)?;
     let cam = to_camera(&camera)?;
     let shader = shader_of(shader)?;
     let channels = image_channels(&p, &shader)?;
-    let opts = diff_options(&background, kernel, antialiased, channels)?;
+    let opts = diff_options(
+        &background,
+        kernel,
+        antialiased,
+        channels,
+        (rules, near_plane),
+    )?;
     let bg = reference_background(&background, channels);
     let pixels = cam.width as usize * cam.height as usize;
     let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;

@@ -34,7 +34,7 @@ struct Want {
 
 /// Per-frame options as the Python side passes them: background, SH degree, scale
 /// modifier, max scale, min opacity, antialiased (None: the scene's flag), kernel (None:
-/// the scene's).
+/// the scene's), rules (None: the scene's) and near plane (None: the rules' default).
 type OptTuple = (
     [f32; 3],
     Option<u32>,
@@ -43,6 +43,8 @@ type OptTuple = (
     Option<f32>,
     Option<bool>,
     Option<String>,
+    Option<String>,
+    Option<f32>,
 );
 
 /// The planes wanted: rgb, alpha, depth, features.
@@ -62,8 +64,17 @@ fn request(
     options: OptTuple,
     want: WantTuple,
 ) -> PyResult<Request> {
-    let (background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel) =
-        options;
+    let (
+        background,
+        sh_degree,
+        scale_modifier,
+        max_scale,
+        min_opacity,
+        antialiased,
+        kernel,
+        rules,
+        near_plane,
+    ) = options;
     if let Some(d) = sh_degree {
         if d > 3 {
             return Err(value_err(format!("sh_degree must be 0 to 3, got {d}")));
@@ -73,6 +84,10 @@ fn request(
         Some(k) => k.parse::<vksplat::cpu::SplatKernel>().map_err(value_err)?,
         None => scene.raw.kernel,
     };
+    let rules = match rules {
+        Some(r) => r.parse::<vksplat::cpu::Rules>().map_err(value_err)?,
+        None => scene.raw.rules,
+    };
     let opts = RenderOptions {
         background,
         antialiased: antialiased.unwrap_or(scene.raw.antialiased),
@@ -81,6 +96,8 @@ fn request(
         min_opacity,
         sh_degree,
         kernel,
+        rules,
+        near_plane,
     };
     opts.validate().map_err(value_err)?;
     let (rgb, alpha, depth, features) = want;

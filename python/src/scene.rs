@@ -122,6 +122,12 @@ impl PyScene {
         self.raw.kernel.name()
     }
 
+    /// The rasterizer's rules the file records ("original" unless a PLY says `gsplat`).
+    #[getter]
+    fn rules(&self) -> &'static str {
+        self.raw.rules.name()
+    }
+
     /// Where the scene came from.
     #[getter]
     fn source(&self) -> &str {

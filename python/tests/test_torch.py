@@ -182,7 +182,7 @@ def test_feature_channels_on_the_device_equal_the_reference():
         (lambda a: a["scales"].data.__setitem__((3, 1), float("nan")), "scales holds NaN"),
         (lambda a: a.update(means=torch.empty(150, 3, device="meta")), "means is on meta"),
         (lambda a: a.update(Ks=a["Ks"][:, :2]), r"Ks must have shape"),
-        (lambda a: a.update(near_plane=0.01), "near_plane=0.01"),
+        (lambda a: a.update(near_plane=0.0), "near_plane must be a positive number"),
         (lambda a: a.update(render_mode="RGB+X"), "render_mode must be"),
         (lambda a: a.update(rasterize_mode="mip"), "rasterize_mode must be 'classic' or"),
     ],

@@ -344,6 +344,12 @@ class Scene:
         return self._s.kernel
 
     @property
+    def rules(self) -> str:
+        """The rasterizer's rules the file records: "original" (the 3DGS rasterizer's) or
+        "gsplat" (a model trained with ``vksplat train --rules gsplat``)."""
+        return self._s.rules
+
+    @property
     def features(self) -> Optional[np.ndarray]:
         """The feature channels ``(N, K)``, or None when the scene has none."""
         k = self.feature_count
@@ -622,6 +628,8 @@ def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[s
         None if kw["min_opacity"] is None else float(kw["min_opacity"]),
         kw["antialiased"],
         kw["kernel"],
+        kw["rules"],
+        None if kw["near_plane"] is None else float(kw["near_plane"]),
     )
     planes = native_render(scene._s, [c._tuple() for c in cams], opts, want)
     return _outputs(planes, cams, batch, want, scene.feature_count)
@@ -682,6 +690,8 @@ class Renderer:
         min_opacity: Optional[float] = None,
         antialiased: Optional[bool] = None,
         kernel: Optional[str] = None,
+        rules: Optional[str] = None,
+        near_plane: Optional[float] = None,
         mode: str = "rgb+alpha+depth",
     ) -> Dict[str, np.ndarray]:
         """Renders ``scene`` from ``camera`` (or ``viewmat``/``K``/``width``/``height``).
@@ -692,7 +702,9 @@ class Renderer:
         ``'rgb+depth'``, ``'features'``: the scene's K feature channels blended with the
         colour rules over 0, ``(H, W, K)``). ``kernel``: ``"gaussian"`` (the reference's
         falloff) or ``"power"`` (``opacity * max(0, 1 - d2/9)``); default the scene's
-        recorded kernel. A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
+        recorded kernel. ``rules``: ``"original"`` (the 3DGS rasterizer's) or ``"gsplat"``
+        (near plane 0.01, alpha clamp 0.999, a per-axis 3.33-sigma box); default the
+        scene's recorded rules; ``near_plane`` overrides the rules' near plane. A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
         batch: arrays gain a leading ``B``. ``max_scale``/``min_opacity`` drop
         Gaussians for this frame only, exactly as ``--max-scale``/``--min-opacity``.
         The GIL is released while rendering."""
@@ -715,6 +727,8 @@ def render_cpu(
     min_opacity: Optional[float] = None,
     antialiased: Optional[bool] = None,
     kernel: Optional[str] = None,
+    rules: Optional[str] = None,
+    near_plane: Optional[float] = None,
     mode: str = "rgb+alpha+depth",
 ) -> Dict[str, np.ndarray]:
     """``Renderer.render`` on the CPU reference renderer (the original 3DGS rasterizer's

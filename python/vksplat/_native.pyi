@@ -3,9 +3,11 @@
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float]]
-# background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel
+# background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rules,
+# near plane
 Options = Tuple[
-    Sequence[float], Optional[int], float, Optional[float], Optional[float], Optional[bool], Optional[str]
+    Sequence[float], Optional[int], float, Optional[float], Optional[float], Optional[bool],
+    Optional[str], Optional[str], Optional[float],
 ]
 Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray], Optional[bytearray]]
 
@@ -23,6 +25,8 @@ class Scene:
     def feature_count(self) -> int: ...
     @property
     def kernel(self) -> str: ...
+    @property
+    def rules(self) -> str: ...
     @property
     def id(self) -> int: ...
     def array(self, name: str) -> bytes: ...
@@ -152,6 +156,8 @@ class Rasterizer:
         kernel: str,
         shader: Optional[bytes] = None,
         antialiased: bool = False,
+        rules: str = "original",
+        near_plane: Optional[float] = None,
     ) -> Tuple[bytearray, bytearray, bytearray, int, bytearray]: ...
     def backward(
         self,
@@ -166,6 +172,8 @@ class Rasterizer:
         shader: Optional[bytes] = None,
         screen: bool = False,
         antialiased: bool = False,
+        rules: str = "original",
+        near_plane: Optional[float] = None,
     ) -> Dict[str, Any]: ...
 
 def reference_forward(
@@ -175,6 +183,8 @@ def reference_forward(
     kernel: str,
     shader: Optional[bytes] = None,
     antialiased: bool = False,
+    rules: str = "original",
+    near_plane: Optional[float] = None,
 ) -> Tuple[bytearray, bytearray, bytearray]: ...
 def reference_backward(
     params: ParamsTuple,
@@ -186,6 +196,8 @@ def reference_backward(
     grad_depth: Optional[bytes] = None,
     shader: Optional[bytes] = None,
     antialiased: bool = False,
+    rules: str = "original",
+    near_plane: Optional[float] = None,
 ) -> Dict[str, Any]: ...
 
 LayerTuple = Tuple[int, int, bytes, bytes, str]

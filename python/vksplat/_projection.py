@@ -5,7 +5,9 @@ conics). It follows ``preprocess.comp`` and ``cpu::backward`` rule for rule (the
 to 1.3 times the half field of view (``tan = W / (2 fx)``), 2D covariance ``T Sigma T^T``
 with ``T = J R`` dilated by 0.3, conic its inverse, 2D mean ``f v / z + c`` (gsplat's pixel
 convention), depth ``z``, and the SH colour ``max(SH(dir) + 0.5, 0)`` with ``dir`` from
-the camera centre ``-R^T t`` to the mean. Only used for the gradient: the values rendered
+the camera centre ``-R^T t`` to the mean. Under gsplat's rules (``rules="gsplat"``) the
+clamp runs from ``-(cx / fx + 0.3 tan)`` to ``(W - cx) / fx + 0.3 tan`` and the antialiased
+compensation's floor is 0. Only used for the gradient: the values rendered
 are the device's."""
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ def project(
     sh: Optional[torch.Tensor] = None,
     sh_degree: Optional[int] = None,
     antialiased: bool = False,
+    rules: str = "original",
 ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, Optional[torch.Tensor], torch.Tensor]:
     """2D means [n, 2], conics [n, 3], depths [n], (with SH) colours [n, 3] and the
     opacity compensation [n] (``antialiased``: sqrt(max(det(cov2d) / det(cov2d + 0.3 I),
@@ -75,9 +78,15 @@ def project(
     v = means @ R.T + t
     z = v[:, 2]
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    limx, limy = 1.3 * width / (2 * fx), 1.3 * height / (2 * fy)
-    tx = torch.minimum(torch.maximum(v[:, 0] / z, -limx), limx) * z
-    ty = torch.minimum(torch.maximum(v[:, 1] / z, -limy), limy) * z
+    if rules == "gsplat":
+        bx, by = 0.3 * (0.5 * width / fx), 0.3 * (0.5 * height / fy)
+        xn, xp = cx / fx + bx, (width - cx) / fx + bx
+        yn, yp = cy / fy + by, (height - cy) / fy + by
+    else:
+        xp = xn = 1.3 * width / (2 * fx)
+        yp = yn = 1.3 * height / (2 * fy)
+    tx = torch.minimum(torch.maximum(v[:, 0] / z, -xn), xp) * z
+    ty = torch.minimum(torch.maximum(v[:, 1] / z, -yn), yp) * z
     zero = torch.zeros_like(z)
     j0 = torch.stack([fx / z, zero, -fx * tx / (z * z)], -1)
     j1 = torch.stack([zero, fy / z, -fy * ty / (z * z)], -1)
@@ -92,7 +101,8 @@ def project(
     comp = torch.ones_like(det)
     if antialiased:
         det0 = (a - 0.3) * (c - 0.3) - b * b
-        comp = torch.sqrt(torch.clamp_min(det0 / det, ANTIALIAS_MIN_RATIO))
+        floor = 0.0 if rules == "gsplat" else ANTIALIAS_MIN_RATIO
+        comp = torch.sqrt(torch.clamp_min(det0 / det, floor))
     means2d = torch.stack([fx * v[:, 0] / z + cx, fy * v[:, 1] / z + cy], -1)
     colours = None
     if sh is not None and sh_degree is not None:

@@ -22,7 +22,10 @@ without torch:
 
 The rules are the original 3DGS rasterizer's (``shared/docs/reference-semantics.md``): near
 plane 0.2, 2D dilation 0.3, alpha clamp 0.99, skip below 1/255, stop at T < 1e-4; pixel
-(i, j) is evaluated at (i, j) + 0.5 in gsplat's pixel coordinates. Backends: ``"vulkan"``
+(i, j) is evaluated at (i, j) + 0.5 in gsplat's pixel coordinates. ``rules="gsplat"`` takes
+gsplat's instead (near plane 0.01, alpha clamp 0.999, stop at T <= 1e-4, a per-axis
+opacity-aware 3.33-sigma screen box, the guard band around the principal point, the
+antialiased compensation's floor 0), for models trained with gsplat. Backends: ``"vulkan"``
 (the device's backward pass; deterministic by default) and ``"reference"`` (the f64 CPU
 reference, exact and slow, for checks; also N-D direct channels).
 """
@@ -108,6 +111,28 @@ def _params(means, quats, scales, opacities, colors, sh_degree) -> Tuple[tuple, 
     return params, channels, k
 
 
+def _radii_xy(radii: np.ndarray, conics: np.ndarray, opacities: np.ndarray, rules: str) -> np.ndarray:
+    """Per-axis radii (N, 2). gsplat's box is ``ceil(e sqrt(cov_xx))`` by ``ceil(e sqrt(cov_yy))``
+    with ``e = min(3.33, sqrt(2 ln(255 opacity)))``; the device keeps the larger, so the
+    other is found again from the conic (the 2D covariance's inverse) and never exceeds it.
+    The original's disc has one radius."""
+    r = radii.astype(np.int32)
+    if rules != "gsplat":
+        return np.stack([r, r], axis=-1)
+    a, b, c = (conics[:, k].astype(np.float64) for k in range(3))
+    det = a * c - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cov = np.stack([c / det, a / det], axis=-1)
+        e = np.minimum(3.33, np.sqrt(2.0 * np.log(np.maximum(opacities, 1e-30) * 255.0)))
+        xy = np.ceil(e[:, None] * np.sqrt(np.maximum(cov, 0.0)))
+    xy = np.where(np.isfinite(xy), xy, 0.0)
+    larger = np.argmax(xy, axis=-1)
+    out = np.minimum(xy, r[:, None]).astype(np.int32)
+    out[np.arange(len(r)), larger] = r
+    out[r == 0] = 0
+    return out
+
+
 class Forward:
     """What a forward pass returns: the image planes, the per-Gaussian projection and what
     its backward pass needs."""
@@ -117,6 +142,7 @@ class Forward:
         "alphas",
         "depths",
         "radii",
+        "radii_xy",
         "means2d",
         "gaussian_depths",
         "conics",
@@ -126,6 +152,7 @@ class Forward:
         "_background",
         "_kernel",
         "_antialiased",
+        "_rules",
         "_token",
         "_channels",
         "_k",
@@ -289,13 +316,18 @@ class Rasterizer:
         kernel: str = "gaussian",
         shader: Optional[Shader] = None,
         antialiased: bool = False,
+        rules: str = "original",
+        near_plane: Optional[float] = None,
     ) -> Forward:
         """Renders the Gaussians from one camera: ``colors`` (H, W, D) with the background,
         ``alphas`` (H, W), ``depths`` (H, W, alpha-normalised), and per Gaussian ``radii``,
+        ``radii_xy`` (N, 2: per axis under gsplat's rules, else the radius twice),
         ``means2d`` (pixels), ``gaussian_depths``, ``conics`` and ``opacities`` (the
         blended ones: compensated with ``antialiased``, gsplat's ``rasterize_mode=
         "antialiased"``, opacity times sqrt(det(cov2d) / det(cov2d + 0.3 I))) (Vulkan
-        backend). With a
+        backend). ``rules``: ``"original"`` (the 3DGS rasterizer's, the default) or
+        ``"gsplat"`` (see the module's docstring); ``near_plane`` (None: the rules' 0.2 or
+        0.01) culls the Gaussians nearer than it. With a
         ``shader``, ``colors`` are (N, K) feature values and the image is shaded (H, W, 3)."""
         cam = Camera(viewmat, K, width, height)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
@@ -320,23 +352,31 @@ class Rasterizer:
             )
         if kernel not in ("gaussian", "power"):
             raise ValueError(f"kernel must be 'gaussian' or 'power', got {kernel!r}")
+        if rules not in ("original", "gsplat"):
+            raise ValueError(f"rules must be 'original' or 'gsplat', got {rules!r}")
+        if near_plane is not None:
+            near_plane = float(near_plane)
+            if not (np.isfinite(near_plane) and near_plane > 0.0):
+                raise ValueError(f"near_plane must be a positive number, got {near_plane}")
         f = Forward()
         f._params, f._camera, f._background, f._kernel = params, cam._tuple(), bg, kernel
         f._antialiased = bool(antialiased)
+        f._rules = (rules, near_plane)
         f._channels, f._k, f._backend, f._shader = channels, k, self.backend, shader
         h, w, n = cam.height, cam.width, params[0]
         if self._native is None:
             color, alpha, depth = _native.reference_forward(
-                params, f._camera, bg, kernel, shader_bytes, f._antialiased
+                params, f._camera, bg, kernel, shader_bytes, f._antialiased, rules, near_plane
             )
             f.colors = np.frombuffer(color, dtype="<f8").reshape(h, w, channels)
             f.alphas = np.frombuffer(alpha, dtype="<f8").reshape(h, w)
             f.depths = np.frombuffer(depth, dtype="<f8").reshape(h, w)
             f._token = 0
-            f.radii = f.means2d = f.gaussian_depths = f.conics = f.opacities = None
+            f.radii = f.radii_xy = f.means2d = f.gaussian_depths = f.conics = None
+            f.opacities = None
             return f
         color, alpha, depth, token, projected = self._native.forward(
-            params, f._camera, bg, kernel, shader_bytes, f._antialiased
+            params, f._camera, bg, kernel, shader_bytes, f._antialiased, rules, near_plane
         )
         f.colors = np.frombuffer(color, dtype="<f4").reshape(h, w, channels)
         f.alphas = np.frombuffer(alpha, dtype="<f4").reshape(h, w)
@@ -349,6 +389,7 @@ class Rasterizer:
         f.gaussian_depths = proj[:, 7].copy()
         f.conics = proj[:, 4:7].copy()
         f.opacities = proj[:, 2].copy()
+        f.radii_xy = _radii_xy(f.radii, f.conics, f.opacities, rules)
         return f
 
     def backward(
@@ -388,6 +429,7 @@ class Rasterizer:
                 gd,
                 shader_bytes,
                 fwd._antialiased,
+                *fwd._rules,
             )
             dtype = "<f8"
         else:
@@ -403,6 +445,7 @@ class Rasterizer:
                 shader_bytes,
                 bool(screen),
                 fwd._antialiased,
+                *fwd._rules,
             )
             if not screen:
                 raw.pop("screen", None)

@@ -17,17 +17,23 @@ or not ([C, N]). Leading batch dimensions are taken as gsplat takes them. CPU fl
 tensors in and out. Gradients are bit-identical run after run (deterministic
 accumulation; ``accumulation="float-atomics"`` trades that for speed).
 
-Where the rules differ from gsplat's defaults, vksplat keeps the original 3DGS
-rasterizer's (the rules scenes trained with the INRIA code need): near plane 0.2 (gsplat
-0.01), alpha clamp 0.99 (gsplat 0.999), a screen-space radius of 3 sigma of the larger
-axis (gsplat 3.33 per axis), no far plane. ``near_plane`` therefore defaults to 0.2 and
-other values are refused, as are options vksplat does not implement (``radius_clip``,
-other camera models and lens coefficients, ``covars``, ``with_ut=True``,
-``with_eval3d=True``); those needing them keep gsplat. ``rasterize_mode="antialiased"``
-(opacities times sqrt(det(cov2d) / det(cov2d + 0.3 I)), Mip-Splatting's compensation) is
-differentiable as the classic mode is. The argument
-table of ``docs/pytorch.md`` says, for each of gsplat's arguments and meta keys, whether
-it is supported, supported with a difference, or refused.
+The rasterizer's rules are an option, ``rules``. The default, ``"original"``, keeps the
+original 3DGS rasterizer's (what scenes trained with the INRIA code need): near plane 0.2,
+alpha clamp 0.99, a screen-space radius of 3 sigma of the larger axis, the guard band
+symmetric about the image centre. ``rules="gsplat"`` takes gsplat's, so that a gsplat model
+trains and renders the same here: near plane 0.01 (``near_plane`` when given), alpha clamp
+0.999, a pixel ending at T <= 1e-4, a per-axis box of min(3.33, sqrt(2 ln(255 opacity)))
+sigmas (no tail of a splat cut at a tile edge; ``meta["radii"]`` per axis), the guard band
+around the principal point, the antialiased compensation's floor 0.
+``vksplat.gsplat.rasterization`` is this function with ``rules="gsplat"``: with it, gsplat
+code runs with only the import changed. ``near_plane`` may be any positive depth under
+either rules. Neither has a far plane (gsplat's default 1e10 is accepted). Options vksplat
+does not implement are refused (``radius_clip``, other camera models and lens
+coefficients, ``covars``, ``with_ut=True``, ``with_eval3d=True``); those needing them keep
+gsplat. ``rasterize_mode="antialiased"`` (opacities times sqrt(det(cov2d) / det(cov2d +
+0.3 I)), Mip-Splatting's compensation) is differentiable as the classic mode is. The
+argument table of ``docs/pytorch.md`` says, for each of gsplat's arguments and meta keys,
+whether it is supported, supported with a difference, or refused.
 
 The colour rule is one rule, gsplat's: SH coefficients give ``max(SH + 0.5, 0)``; direct
 values (any number of channels) are blended as given, never clamped.
@@ -149,6 +155,8 @@ def _native_passes(r, layout: _Layout, arrays, state):
                 sh_degree=layout.sh_degree,
                 kernel=state["kernel"],
                 antialiased=state["antialiased"],
+                rules=state["rules"],
+                near_plane=state["near_plane"],
             )
             for ch in layout.chunks
         ]
@@ -185,6 +193,7 @@ class _Project(torch.autograd.Function):
         ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, viewmats, Ks)]
         radii = _stack(layout, fwds, lambda fs: fs[0].radii)  # [B, C, N]
         state["radii"] = radii
+        state["radii_xy"] = _stack(layout, fwds, lambda fs: fs[0].radii_xy)  # [B, C, N, 2]
         if layout.packed:
             state["ids"] = np.nonzero(radii > 0)
         outs = (
@@ -252,7 +261,7 @@ def _meta_vjp(layout: _Layout, state, inputs, grads, wanted):
             p, q, s, o, vm, K = leaves
             m2d, conic, depth, _, comp = _projection.project(
                 p, q, s, vm, K, state["width"], state["height"],
-                antialiased=state["antialiased"])
+                antialiased=state["antialiased"], rules=state["rules"])
             loss = torch.zeros(())
             for g, out in zip(grads, (m2d, depth, conic, o * comp)):
                 if g is not None:
@@ -314,7 +323,7 @@ def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
         m2d, conic, depth, rgb, comp = _projection.project(
             means.reshape(B, N, 3)[b][vis], quats.reshape(B, N, 4)[b][vis],
             scales.reshape(B, N, 3)[b][vis], vm, K, state["width"], state["height"],
-            sh, layout.sh_degree, state["antialiased"],
+            sh, layout.sh_degree, state["antialiased"], state["rules"],
         )
         gs = torch.from_numpy(np.ascontiguousarray(screen[v]))
         loss = (torch.from_numpy(np.ascontiguousarray(g2d[v])) * m2d).sum()
@@ -424,12 +433,17 @@ _OFF_KEYWORDS = {
 }
 
 
-def _refuse(near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
+def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
             distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw):
     """ValueError for the first argument vksplat does not implement."""
     shutter = getattr(rolling_shutter, "name", rolling_shutter)
     refusals = [
-        (near_plane != 0.2, f"near_plane={near_plane}: vksplat culls at the original rasterizer's 0.2"),
+        (
+            isinstance(near_plane, bool) or not isinstance(near_plane, numbers.Real)
+            or not (0.0 < float(near_plane) < float("inf")),
+            f"near_plane must be a positive number, got {near_plane!r}",
+        ),
+        (rules not in ("original", "gsplat"), f"rules must be 'original' or 'gsplat', got {rules!r}"),
         (far_plane < 1e10, f"far_plane={far_plane}: vksplat has no far plane"),
         (radius_clip != 0.0, "radius_clip is not supported"),
         (eps2d != 0.3, f"eps2d={eps2d}: vksplat dilates 2D covariances by the original 0.3"),
@@ -495,7 +509,7 @@ def _backgrounds(layout: _Layout, backgrounds, render_mode):
 
 def _meta(layout: _Layout, state, projected, width, height) -> Dict[str, Any]:
     means2d, depths, conics, opacities = projected
-    radii = state["radii"].astype(np.int32)
+    radii = state["radii_xy"].astype(np.int32)
     bs, C, N = layout.batch, layout.C, layout.N
     meta: Dict[str, Any] = {
         "means2d": means2d,
@@ -513,9 +527,9 @@ def _meta(layout: _Layout, state, projected, width, height) -> Dict[str, Any]:
         r = torch.from_numpy(radii[state["ids"]])
         meta.update(batch_ids=ids[0], camera_ids=ids[1], gaussian_ids=ids[2])
     else:
-        r = torch.from_numpy(radii.reshape(bs + (C, N)))
+        r = torch.from_numpy(radii.reshape(bs + (C, N, 2)))
         meta.update(batch_ids=None, camera_ids=None, gaussian_ids=None)
-    meta["radii"] = torch.stack([r, r], dim=-1)
+    meta["radii"] = r
     return meta
 
 
@@ -529,7 +543,7 @@ def rasterization(
     Ks: torch.Tensor,
     width: int,
     height: int,
-    near_plane: float = 0.2,
+    near_plane: Optional[float] = None,
     far_plane: float = 1e10,
     radius_clip: float = 0.0,
     eps2d: float = 0.3,
@@ -557,6 +571,7 @@ def rasterization(
     device: Any = None,
     accumulation: str = "deterministic",
     kernel: str = "gaussian",
+    rules: str = "original",
     **unsupported: Any,
 ) -> Tuple[torch.Tensor, torch.Tensor, Dict[str, Any]]:
     """gsplat's ``rasterization`` (see the module's docstring for where the rules differ).
@@ -571,12 +586,15 @@ def rasterization(
     ``backgrounds`` [..., C, D] (or [..., C, D + 1] with a depth background for the
     ``+D`` modes; ignored by the depth-only modes, as gsplat does). ``tile_size`` and
     ``channel_chunk`` are gsplat's speed settings: accepted, vksplat uses its own.
-    vksplat's own: ``device`` (Vulkan device index or name), ``accumulation`` and
-    ``kernel`` (``"power"``: the power-function falloff).
+    vksplat's own: ``device`` (Vulkan device index or name), ``accumulation``,
+    ``kernel`` (``"power"``: the power-function falloff) and ``rules`` (``"original"``,
+    the 3DGS rasterizer's, the default; ``"gsplat"``, gsplat's: see the module's
+    docstring). ``near_plane``: None is the rules' (0.2; gsplat's 0.01).
 
     Returns ``(render_colors [..., C, H, W, D], render_alphas [..., C, H, W, 1], meta)``.
     meta, packed (the default): ``batch_ids``, ``camera_ids``, ``gaussian_ids`` [nnz]
-    (int64: the visible pairs), ``radii`` [nnz, 2] (int32), ``means2d`` [nnz, 2],
+    (int64: the visible pairs), ``radii`` [nnz, 2] (int32; per axis under gsplat's
+    rules, else the one radius twice), ``means2d`` [nnz, 2],
     ``depths`` [nnz], ``conics`` [nnz, 3], ``opacities`` [nnz]; not packed: the same as
     [..., C, N, ...] (``radii`` 0 where culled) and the ids None. Also ``width``,
     ``height``, ``tile_size`` (vksplat's: 16), ``n_batches``, ``n_cameras``.
@@ -588,7 +606,9 @@ def rasterization(
         tangential_coeffs=tangential_coeffs, thin_prism_coeffs=thin_prism_coeffs,
         ftheta_coeffs=ftheta_coeffs, viewmats_rs=viewmats_rs,
     )
-    _refuse(near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
+    if near_plane is None:
+        near_plane = 0.01 if rules == "gsplat" else 0.2
+    _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
             distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw)
     _size("tile_size", tile_size)
     modes = {"RGB", "D", "ED", "RGB+D", "RGB+ED"}
@@ -610,6 +630,8 @@ def rasterization(
         "width": width,
         "height": height,
         "kernel": kernel,
+        "rules": rules,
+        "near_plane": float(near_plane),
         "antialiased": rasterize_mode == "antialiased",
         "absgrad": absgrad,
     }

@@ -70,6 +70,12 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             scene.kernel
         );
     }
+    if scene.rules != vksplat::cpu::Rules::Original {
+        outln!(
+            "rules       {}: the file records that it was trained with them (rendered with them by default; --rules overrides)",
+            scene.rules
+        );
+    }
     outln!("gaussians   {}", s.count);
     outln!(
         "sh degree   {} ({} per channel)",
@@ -242,6 +248,7 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
         "format": format,
         "antialiased": scene.antialiased,
         "kernel": scene.kernel.name(),
+        "rules": scene.rules.name(),
         "feature_channels": scene.feature_count,
         "time": scene.time_range().map(|(lo, hi)| {
             let (slo, shi) = time_scales(scene);
