@@ -58,7 +58,8 @@ width_tests=(
   gpu_frames::per_frame_options gpu_frames::rgba8 gpu_frames::playbot_lods
   gpu_frames::power_kernel chunked_frames::tiny_chunks pipelined::pipelined_frames_match
   train::the_state_on_the_device train::feature_splats_and_clipping doctor::doctor_passes
-  limits::pair
+  limits::pair gsplat_rules::gsplat_rules_match gsplat_rules::gsplat_rules_blend
+  gsplat_rules::gsplats_near gsplat_rules::gpu_backward
 )
 misreport_tests=(
   gpu_sort:: gpu_stages::stages_match_on_playbot_lod3 gpu_stages::forward_state
@@ -67,6 +68,7 @@ misreport_tests=(
   gpu_frames::every_blend_kernel_matches_the_reference gpu_frames::antialiased
   chunked_frames::tiny_chunks pipelined::pipelined_frames_match
   train::the_state_on_the_device doctor::doctor_passes limits::pair
+  gsplat_rules::gsplats_near gsplat_rules::gpu_backward
   --skip every_blend_kernel_matches_the_reference_with_the_power_kernel
 )
 widths=${VKSPLAT_WIDTHS-128 512 1024 2048}
