@@ -182,8 +182,10 @@ void main() {
                 uint gx = params.image.z, gy = params.image.w;
                 float radius;
                 uvec2 rmin, rmax;
-                // gsplat's: culled below 1/255 and off the image, so `shown` says whether
-                // the record is written even where no bin receives the splat (its radii).
+                // Whether the rules count the splat as seen (its radius, the trainer's and
+                // gsplat's visibility): the original's when its tile rectangle is not
+                // empty, gsplat's unless below 1/255 or off the image; either way also
+                // where no bin receives it, as in those rasterizers.
                 bool shown = true;
                 if (gsplat) {
                     // model::Rules::extent: a per-axis box of e sigmas, e opacity-aware.
@@ -226,15 +228,17 @@ void main() {
                 if (by < bmax.y || bx < bmax.x) {
                     REPORT_LOOP(counters.max_bins_loop, (bmax.x - bmin.x + 1u) * (bmax.y - bmin.y) + 16u);
                 }
-                // gsplat's radii count a splat that reaches no pixel but whose box meets the
-                // image as shown; only bins that receive it are keyed either way.
-                if (gsplat ? shown : touched != 0u) {
+                // The record says what the rules see (the radius); only a splat some bin
+                // receives is keyed (its rectangle, for the keys stage).
+                if (shown && rmax.x > rmin.x && rmax.y > rmin.y) {
                     vec3 dir = normalize(mean - params.cam_pos.xyz);
                     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);
                     s.mean_opacity_bound = vec4(mean2d, opacity, bound);
                     s.conic_depth = vec4(conic, z);
                     s.color_radius = vec4(color, radius);
+                }
+                if (touched != 0u) {
                     rect = uvec2(pack_tile(rmin.x, rmin.y), pack_tile(rmax.x, rmax.y));
                 }
             }

@@ -47,26 +47,27 @@ fn check_preprocess(
     kernel: SplatKernel,
 ) {
     let n = cpu_p.len();
-    let mut gpu_visible = 0u32;
+    let (mut gpu_visible, mut gpu_keyed) = (0u32, 0u32);
+    // Whether every tile of the CPU's rectangle receives less than 1/255 from `c` (so exact
+    // tile culling keys none of them).
+    let all_empty = |c: &Projected| {
+        (c.rect_min[1]..c.rect_max[1]).all(|y| {
+            (c.rect_min[0]..c.rect_max[0]).all(|x| {
+                cpu::max_alpha_in_tile(c, kernel, [x, y], 16, cam.width, cam.height)
+                    < 1.0 / 255.0 * 1.001
+            })
+        })
+    };
     for (i, (c, g)) in cpu_p.iter().zip(&inter.splats).enumerate() {
         let g_radius = g.color_radius[3];
         if g_radius == 0.0 {
-            // Culled on the GPU: either culled on the CPU too, or every tile of its CPU
-            // rectangle receives less than 1/255 (exact tile culling), or it sits on the
-            // near plane within rounding.
-            if c.tiles_touched() > 0 {
-                let near = (c.depth - cpu::NEAR_PLANE).abs() < 1e-5;
-                let all_empty = (c.rect_min[1]..c.rect_max[1]).all(|y| {
-                    (c.rect_min[0]..c.rect_max[0]).all(|x| {
-                        cpu::max_alpha_in_tile(c, kernel, [x, y], 16, cam.width, cam.height)
-                            < 1.0 / 255.0 * 1.001
-                    })
-                });
-                assert!(
-                    near || all_empty,
-                    "{label}: Gaussian {i} culled on the GPU but visible on the CPU: {c:?}"
-                );
-            }
+            // Culled on the GPU: culled on the CPU too, or it sits on the near plane within
+            // rounding.
+            let near = (c.depth - cpu::NEAR_PLANE).abs() < 1e-5;
+            assert!(
+                c.tiles_touched() == 0 || near,
+                "{label}: Gaussian {i} culled on the GPU but visible on the CPU: {c:?}"
+            );
             continue;
         }
         gpu_visible += 1;
@@ -117,9 +118,18 @@ fn check_preprocess(
             );
         }
         // The packed rectangle agrees with the CPU's, up to one tile where the radius or
-        // centre rounding moved an edge.
+        // centre rounding moved an edge; it is empty (the splat not keyed) only where
+        // every tile of the CPU's receives less than 1/255 (exact tile culling).
         let [lo, hi] = inter.rects[i];
         let (lo, hi) = (unpack_tile(lo), unpack_tile(hi));
+        if hi[0] <= lo[0] || hi[1] <= lo[1] {
+            assert!(
+                all_empty(c),
+                "{label}: Gaussian {i} seen but not keyed: {c:?}"
+            );
+            continue;
+        }
+        gpu_keyed += 1;
         for a in 0..2 {
             assert!(
                 lo[a].abs_diff(c.rect_min[a]) <= 1 && hi[a].abs_diff(c.rect_max[a]) <= 1,
@@ -128,9 +138,10 @@ fn check_preprocess(
         }
     }
     assert_eq!(
-        inter.counters.visible, gpu_visible,
+        inter.counters.visible, gpu_keyed,
         "{label}: visible counter"
     );
+    assert!(gpu_visible >= gpu_keyed);
     assert_eq!(inter.splats.len(), n);
 }
 
@@ -143,11 +154,17 @@ fn check_scan_keys_sort_ranges(label: &str, inter: &Intermediates) {
         "{label}: capacity sufficed"
     );
     assert_eq!(inter.keys.len() as u64, pairs);
-    // Depth order: a permutation of the Gaussians, visible ones by (depth, index), culled
-    // ones after them in index order (a stable sort of (depth bits or !0) keys).
+    // Depth order: a permutation of the Gaussians, keyed ones (a bin receives them: their
+    // rectangle is written) by (depth, index), the others after them in index order (a
+    // stable sort of (depth bits or !0) keys).
+    let keyed = |i: u32| {
+        let [lo, hi] = inter.rects[i as usize];
+        let (lo, hi) = (unpack_tile(lo), unpack_tile(hi));
+        hi[0] > lo[0] && hi[1] > lo[1]
+    };
     let sort_key = |i: u32| {
         let sp = &inter.splats[i as usize];
-        let depth_bits = if sp.color_radius[3] > 0.0 {
+        let depth_bits = if keyed(i) {
             sp.conic_depth[3].to_bits()
         } else {
             u32::MAX
