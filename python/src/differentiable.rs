@@ -88,7 +88,41 @@ pub(crate) fn splat_params(t: &ParamsTuple) -> PyResult<SplatParams<f32>> {
 /// the near plane (None: the rules' default).
 pub(crate) type RulesArg<'a> = (&'a str, Option<f32>);
 
-pub(crate) fn diff_options(
+/// What every differentiable entry point reads from its arguments: the Gaussians, the
+/// camera, the shader, the image's channels and the render options.
+pub(crate) struct DiffInputs {
+    pub(crate) p: SplatParams<f32>,
+    pub(crate) cam: vksplat::camera::Camera,
+    pub(crate) shader: Option<Mlp>,
+    pub(crate) channels: usize,
+    pub(crate) opts: RenderOptions,
+}
+
+/// Checks and converts the arguments every differentiable entry point takes.
+pub(crate) fn diff_inputs(
+    params: &ParamsTuple,
+    camera: &CamTuple,
+    shader: Option<&[u8]>,
+    background: &[f32],
+    kernel: &str,
+    antialiased: bool,
+    rules: RulesArg,
+) -> PyResult<DiffInputs> {
+    let p = splat_params(params)?;
+    let cam = to_camera(camera)?;
+    let shader = shader_of(shader)?;
+    let channels = image_channels(&p, &shader)?;
+    let opts = diff_options(background, kernel, antialiased, channels, rules)?;
+    Ok(DiffInputs {
+        p,
+        cam,
+        shader,
+        channels,
+        opts,
+    })
+}
+
+fn diff_options(
     background: &[f32],
     kernel: &str,
     antialiased: bool,
@@ -238,14 +272,19 @@ impl PyRasterizer {
         rules: &str,
         near_plane: Option<f32>,
     ) -> PyResult<ForwardOut<'py>> {
-        let p = splat_params(&params)?;
-        let cam = to_camera(&camera)?;
-        let shader = shader_of(shader)?;
-        let opts = diff_options(
+        let DiffInputs {
+            p,
+            cam,
+            shader,
+            opts,
+            ..
+        } = diff_inputs(
+            &params,
+            &camera,
+            shader,
             &background,
             kernel,
             antialiased,
-            image_channels(&p, &shader)?,
             (rules, near_plane),
         )?;
         let (frame, token, projected) = py.detach(|| {
@@ -295,15 +334,19 @@ impl PyRasterizer {
         rules: &str,
         near_plane: Option<f32>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let p = splat_params(&params)?;
-        let cam = to_camera(&camera)?;
-        let shader = shader_of(shader)?;
-        let channels = image_channels(&p, &shader)?;
-        let opts = diff_options(
+        let DiffInputs {
+            p,
+            cam,
+            shader,
+            channels,
+            opts,
+        } = diff_inputs(
+            &params,
+            &camera,
+            shader,
             &background,
             kernel,
             antialiased,
-            channels,
             (rules, near_plane),
         )?;
         let pixels = cam.width as usize * cam.height as usize;

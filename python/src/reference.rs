@@ -1,13 +1,11 @@
 //! The f64 CPU reference forward and backward passes of the differentiable rasterizer.
 
 use crate::arrays::byte_array;
-use crate::cameras::{to_camera, CamTuple};
+use crate::cameras::CamTuple;
 use crate::differentiable::{
-    diff_options, grads_dict, image_channels, pixel_grads, shader_grads_into, splat_params,
-    ParamsTuple,
+    diff_inputs, grads_dict, pixel_grads, shader_grads_into, DiffInputs, ParamsTuple,
 };
 use crate::errors::{guarded, value_err};
-use crate::shader::shader_of;
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
 use vksplat::mlp::MlpParams;
@@ -33,15 +31,19 @@ pub(crate) fn reference_forward<'py>(
     Bound<'py, PyByteArray>,
     Bound<'py, PyByteArray>,
 )> {
-    let p = splat_params(&params)?;
-    let cam = to_camera(&camera)?;
-    let shader = shader_of(shader)?;
-    let channels = image_channels(&p, &shader)?;
-    let opts = diff_options(
+    let DiffInputs {
+        p,
+        cam,
+        shader,
+        channels,
+        opts,
+    } = diff_inputs(
+        &params,
+        &camera,
+        shader,
         &background,
         kernel,
         antialiased,
-        channels,
         (rules, near_plane),
     )?;
     let bg = reference_background(&background, channels);
@@ -98,15 +100,19 @@ pub(crate) fn reference_backward<'py>(
     rules: &str,
     near_plane: Option<f32>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let p = splat_params(&params)?;
-    let cam = to_camera(&camera)?;
-    let shader = shader_of(shader)?;
-    let channels = image_channels(&p, &shader)?;
-    let opts = diff_options(
+    let DiffInputs {
+        p,
+        cam,
+        shader,
+        channels,
+        opts,
+    } = diff_inputs(
+        &params,
+        &camera,
+        shader,
         &background,
         kernel,
         antialiased,
-        channels,
         (rules, near_plane),
     )?;
     let bg = reference_background(&background, channels);

@@ -195,14 +195,10 @@ def torch_mcmc_kernels(monkeypatch):
     return calls
 
 
-def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
-    """A small 3DGS training loop as gsplat's simple_trainer.py runs one: log scales,
-    logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps."""
-    s = scene(n=n, seed=13, degree=1)
-    cams = cameras(2)
-    target_t = tensors(scene(n=n, seed=14, degree=1), grad=False)
-    targets, _, _ = render(target_t, cams, sh_degree=1)
-    params = torch.nn.ParameterDict({
+def splat_parameters(s):
+    """simple_trainer.py's parameters of scene `s`: log scales, logit opacities, SH split
+    into sh0 and shN."""
+    return torch.nn.ParameterDict({
         "means": torch.nn.Parameter(torch.tensor(s["means"])),
         "scales": torch.nn.Parameter(torch.log(torch.tensor(s["scales"]))),
         "quats": torch.nn.Parameter(torch.tensor(s["quats"])),
@@ -210,6 +206,16 @@ def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
         "sh0": torch.nn.Parameter(torch.tensor(s["colors"][:, :1])),
         "shN": torch.nn.Parameter(torch.tensor(s["colors"][:, 1:])),
     })
+
+
+def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
+    """A small 3DGS training loop as gsplat's simple_trainer.py runs one: log scales,
+    logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps."""
+    s = scene(n=n, seed=13, degree=1)
+    cams = cameras(2)
+    target_t = tensors(scene(n=n, seed=14, degree=1), grad=False)
+    targets, _, _ = render(target_t, cams, sh_degree=1)
+    params = splat_parameters(s)
     optimizers = {k: torch.optim.Adam([params[k]], lr=0.01) for k in params}
     strategy.check_sanity(params, optimizers)
     state = strategy.initialize_state()

@@ -31,6 +31,7 @@ else:
 import vksplat.gsplat  # noqa: E402
 from vksplat.torch import rasterization  # noqa: E402
 
+from test_gsplat_dropin import splat_parameters  # noqa: E402
 from test_torch import GROUPS, H, W, rel, scene  # noqa: E402
 
 C0 = 0.28209479177387814
@@ -238,14 +239,7 @@ def test_gsplats_simple_trainer_loop_runs_with_only_the_import_changed():
     camtoworlds = torch.linalg.inv(torch.tensor(np.stack([c.viewmat for c in cams])))
     targets, _, _ = vksplat.gsplat.rasterization(
         *[tt[k] for k in GROUPS], torch.linalg.inv(camtoworlds), Ks, W, H, sh_degree=1)
-    splats = torch.nn.ParameterDict({
-        "means": torch.nn.Parameter(torch.tensor(s["means"])),
-        "scales": torch.nn.Parameter(torch.log(torch.tensor(s["scales"]))),
-        "quats": torch.nn.Parameter(torch.tensor(s["quats"])),
-        "opacities": torch.nn.Parameter(torch.logit(torch.tensor(s["opacities"]))),
-        "sh0": torch.nn.Parameter(torch.tensor(s["colors"][:, :1])),
-        "shN": torch.nn.Parameter(torch.tensor(s["colors"][:, 1:])),
-    })
+    splats = splat_parameters(s)
     optimizers = {k: torch.optim.Adam([v], lr=0.01) for k, v in splats.items()}
     strategy = gs_strategy.DefaultStrategy(refine_start_iter=10, refine_every=10, reset_every=1000,
                                            verbose=False)

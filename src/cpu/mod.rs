@@ -173,18 +173,7 @@ pub fn preprocess_one(
 /// Tile rectangle `[min, max)` of a disc of radius `radius` around `p`, clamped to the grid
 /// (the reference's `getRect`, with C's truncating float-to-int conversion).
 pub fn tile_rect(p: [f32; 2], radius: f32, grid: (u32, u32)) -> ([u32; 2], [u32; 2]) {
-    let t = TILE_SIZE as f32;
-    let clamp = |v: f32, hi: u32| -> u32 { (v as i32).max(0).min(hi as i32) as u32 };
-    (
-        [
-            clamp((p[0] - radius) / t, grid.0),
-            clamp((p[1] - radius) / t, grid.1),
-        ],
-        [
-            clamp((p[0] + radius + t - 1.0) / t, grid.0),
-            clamp((p[1] + radius + t - 1.0) / t, grid.1),
-        ],
-    )
+    crate::model::rules::get_rect(p, radius, grid)
 }
 
 /// Preprocesses every Gaussian (in parallel), as [`preprocess_one`].

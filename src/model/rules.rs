@@ -226,16 +226,11 @@ impl Rules {
                 let disc = (if d > T::of(0.1) { d } else { T::of(0.1) }).sqrt();
                 let (l1, l2) = (mid + disc, mid - disc);
                 let r = (T::of(3.0) * (if l1 > l2 { l1 } else { l2 }).sqrt()).ceil();
+                let (rect_min, rect_max) = get_rect(mean2d, r, grid);
                 Extent {
                     radius: [r.to_i64() as i32; 2],
-                    rect_min: [
-                        clamp((mean2d[0] - r) / tile, grid.0),
-                        clamp((mean2d[1] - r) / tile, grid.1),
-                    ],
-                    rect_max: [
-                        clamp((mean2d[0] + r + tile - T::of(1.0)) / tile, grid.0),
-                        clamp((mean2d[1] + r + tile - T::of(1.0)) / tile, grid.1),
-                    ],
+                    rect_min,
+                    rect_max,
                 }
             }
             Rules::Gsplat => {
@@ -286,6 +281,24 @@ impl Rules {
     }
 }
 
+/// Tile rectangle `[min, max)` of a disc of radius `r` around `p`, clamped to the `grid`
+/// (the original rasterizer's `getRect`, with C's truncating float-to-int conversion).
+pub fn get_rect<T: Real>(p: [T; 2], r: T, grid: (u32, u32)) -> ([u32; 2], [u32; 2]) {
+    let tile = T::of(TILE_SIZE as f64);
+    let clamp = |v: T, hi: u32| -> u32 { v.to_i64().clamp(0, hi as i64) as u32 };
+    let last = tile - T::of(1.0);
+    (
+        [
+            clamp((p[0] - r) / tile, grid.0),
+            clamp((p[1] - r) / tile, grid.1),
+        ],
+        [
+            clamp((p[0] + r + last) / tile, grid.0),
+            clamp((p[1] + r + last) / tile, grid.1),
+        ],
+    )
+}
+
 impl std::fmt::Display for Rules {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
@@ -331,64 +344,28 @@ mod tests {
 
     #[test]
     fn gsplats_box_is_per_axis_and_opacity_aware() {
-        // cov xx 4 (sigma 2), yy 1 (sigma 1), opaque: e = 3.33 -> radii 7 and 4.
-        let e = Rules::Gsplat
-            .extent(
+        // cov xx 4 (sigma 2), yy 1 (sigma 1) on a 100x100 image of 7x7 tiles.
+        let extent = |rules: Rules, opacity: f32, x: f32| {
+            rules.extent(
                 [4.0f32, 0.0, 1.0],
                 4.0,
-                1.0,
-                [40.0, 40.0],
+                opacity,
+                [x, 40.0],
                 (100, 100),
                 (7, 7),
             )
-            .unwrap();
+        };
+        // Opaque: e = 3.33 -> radii 7 and 4.
+        let e = extent(Rules::Gsplat, 1.0, 40.0).unwrap();
         assert_eq!(e.radius, [7, 4]);
         // x: (40.5 - 7) / 16 = 2.09 -> 2, (40.5 + 7) / 16 = 2.97 -> 3.
         assert_eq!((e.rect_min, e.rect_max), ([2, 2], [3, 3]));
         // opacity 0.05: e = sqrt(2 ln(12.75)) = 2.26 -> radius x ceil(4.51) = 5.
-        let e = Rules::Gsplat
-            .extent(
-                [4.0f32, 0.0, 1.0],
-                4.0,
-                0.05,
-                [40.0, 40.0],
-                (100, 100),
-                (7, 7),
-            )
-            .unwrap();
-        assert_eq!(e.radius, [5, 3]);
-        assert!(Rules::Gsplat
-            .extent(
-                [4.0f32, 0.0, 1.0],
-                4.0,
-                0.003,
-                [40.0, 40.0],
-                (100, 100),
-                (7, 7)
-            )
-            .is_none());
+        assert_eq!(extent(Rules::Gsplat, 0.05, 40.0).unwrap().radius, [5, 3]);
+        assert!(extent(Rules::Gsplat, 0.003, 40.0).is_none());
         // A box that ends at the image's left edge is culled.
-        assert!(Rules::Gsplat
-            .extent(
-                [4.0f32, 0.0, 1.0],
-                4.0,
-                1.0,
-                [-7.5, 40.0],
-                (100, 100),
-                (7, 7)
-            )
-            .is_none());
+        assert!(extent(Rules::Gsplat, 1.0, -7.5).is_none());
         // The original's disc: radius ceil(3 * 2) = 6 on both axes.
-        let o = Rules::Original
-            .extent(
-                [4.0f32, 0.0, 1.0],
-                4.0,
-                1.0,
-                [40.0, 40.0],
-                (100, 100),
-                (7, 7),
-            )
-            .unwrap();
-        assert_eq!(o.radius, [6, 6]);
+        assert_eq!(extent(Rules::Original, 1.0, 40.0).unwrap().radius, [6, 6]);
     }
 }

@@ -188,28 +188,29 @@ fn gpu_feature_blend_matches_the_reference_for_every_channel_count() {
 #[test]
 fn gpu_feature_blend_storage_buffer_variant_matches_the_reference() {
     let mut r = common::gpu::new_renderer(Some(vksplat::render::blend::BlendKernel::Shared));
-    check_gpu_cases(
-        &mut r,
-        &[
-            (
-                "playbot_lod3_31k_sh2.ply",
-                5,
-                3,
-                320,
-                180,
-                SplatKernel::Gaussian,
-            ),
-            (
-                "playbot_lod6_1873_sh2.ply",
-                17,
-                11,
-                256,
-                144,
-                SplatKernel::Power,
-            ),
-        ],
-    );
+    check_gpu_cases(&mut r, &TWO_SCENES_BOTH_KERNELS);
 }
+
+/// Two scenes, one per kernel, at two channel counts (the storage-buffer variant's cases,
+/// and gsplat's rules' in `gsplat_rules`).
+pub(crate) const TWO_SCENES_BOTH_KERNELS: [Case; 2] = [
+    (
+        "playbot_lod3_31k_sh2.ply",
+        5,
+        3,
+        320,
+        180,
+        SplatKernel::Gaussian,
+    ),
+    (
+        "playbot_lod6_1873_sh2.ply",
+        17,
+        11,
+        256,
+        144,
+        SplatKernel::Power,
+    ),
+];
 
 /// Scene file, K, orbit camera, width, height, kernel.
 pub(crate) type Case = (&'static str, usize, usize, u32, u32, SplatKernel);

@@ -252,16 +252,25 @@ pub(crate) fn guard_band_scene(cam: &Camera) -> SplatParams<f32> {
     let mut p = grad_scene(4, 1000, Some(1), 3);
     let lim_x = 1.3 * cam.tan_half_fov_x();
     let lim_y = 1.3 * cam.tan_half_fov_y();
-    // Camera-space points beyond the band, brought to world space (at different depths:
-    // equal depths would make their order, and the loss, jump under a perturbation).
-    let to_world = |v: Vec3| cam.rotation.transpose() * (v - cam.translation);
-    for (k, v) in [
+    // At different depths: equal depths would make their order, and the loss, jump under
+    // a perturbation.
+    let beyond = [
         Vec3::new(1.25 * lim_x * 3.0, 0.1, 3.0),
         Vec3::new(-0.2, -1.3 * lim_y * 3.4, 3.4),
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    ];
+    push_large_gaussians(&mut p, cam, beyond);
+    p
+}
+
+/// Adds to `p` a large Gaussian (SH degree 1) at each camera-space point of `cam` in
+/// `centres`.
+pub(crate) fn push_large_gaussians<const N: usize>(
+    p: &mut SplatParams<f32>,
+    cam: &Camera,
+    centres: [Vec3; N],
+) {
+    let to_world = |v: Vec3| cam.rotation.transpose() * (v - cam.translation);
+    for (k, v) in centres.into_iter().enumerate() {
         p.means.push(to_world(v).to_array());
         p.quats.push([1.0, 0.2 * k as f32, 0.1, -0.1]);
         p.scales.push([0.9, 0.7, 0.5]);
@@ -272,7 +281,6 @@ pub(crate) fn guard_band_scene(cam: &Camera) -> SplatParams<f32> {
             ]);
         }
     }
-    p
 }
 
 /// Outside the guard band the Jacobian uses the clamped position, whose derivative moves

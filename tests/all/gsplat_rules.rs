@@ -11,11 +11,13 @@
 use crate::common;
 use crate::common::gpu::{assert_validation_clean, compare, move_towards, renderer};
 use crate::gpu_frames::{check_frame, load, orbit};
-use crate::gradients::{check_on, diff_rasterizer, gpu_against_reference, gpu_camera, grad_scene};
+use crate::gradients::{
+    check_on, diff_rasterizer, gpu_against_reference, gpu_camera, grad_scene, push_large_gaussians,
+};
 use glam::Vec3;
 use vksplat::camera::Camera;
 use vksplat::cpu::{self, RenderOptions, Rules, SplatKernel};
-use vksplat::model::grad::{ColorParams, SplatParams};
+use vksplat::model::grad::SplatParams;
 use vksplat::scene::ActivatedScene;
 
 fn gsplat(opts: RenderOptions) -> RenderOptions {
@@ -254,24 +256,7 @@ fn gsplat_rules_match_the_reference_on_real_scenes() {
 #[test]
 fn gsplat_rules_blend_feature_channels_like_the_reference() {
     let mut r = renderer();
-    let cases = [
-        (
-            "playbot_lod3_31k_sh2.ply",
-            5,
-            3,
-            320,
-            180,
-            SplatKernel::Gaussian,
-        ),
-        (
-            "playbot_lod6_1873_sh2.ply",
-            17,
-            11,
-            256,
-            144,
-            SplatKernel::Power,
-        ),
-    ];
+    let cases = crate::features::TWO_SCENES_BOTH_KERNELS;
     crate::features::check_gpu_cases_with(&mut r, &cases, Rules::Gsplat);
 }
 
@@ -281,26 +266,13 @@ fn gsplat_rules_blend_feature_channels_like_the_reference() {
 fn off_centre_band_scene(cam: &Camera) -> SplatParams<f32> {
     let mut p = grad_scene(5, 1200, Some(1), 3);
     let [xn, _, _, yp] = cpu::clamp_limits(cam, Rules::Gsplat);
-    let to_world = |v: Vec3| cam.rotation.transpose() * (v - cam.translation);
     // (Placed where no pixel's alpha lies within a step of 1/255: a Gaussian crossing the
     // skip there would make the loss jump.)
-    for (k, v) in [
+    let beyond = [
         Vec3::new(-1.2 * xn * 3.0, 0.1, 3.0),
         Vec3::new(-0.2, 1.2 * yp * 3.4, 3.4),
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        p.means.push(to_world(v).to_array());
-        p.quats.push([1.0, 0.2 * k as f32, 0.1, -0.1]);
-        p.scales.push([0.9, 0.7, 0.5]);
-        p.opacities.push(0.8);
-        if let ColorParams::Sh { coeffs, .. } = &mut p.colors {
-            coeffs.extend([
-                0.6, 0.2, -0.1, 0.1, 0.0, 0.2, -0.1, 0.1, 0.0, 0.2, 0.1, -0.2,
-            ]);
-        }
-    }
+    ];
+    push_large_gaussians(&mut p, cam, beyond);
     p
 }
 
