@@ -169,7 +169,7 @@ void main() {
 void main() {
     alpha_max = params.rules.y;
     t_stop = params.rules.z;
-    uvec2 tile = gl_WorkGroupID.xy;
+    uvec2 tile = spread_workgroup();
     // Each run of 8 consecutive invocations (what lavapipe executes as one SIMD vector)
     // covers a compact block of CHUNK_W strips by 8 / CHUNK_W rows instead of one long row:
     // neighbouring pixels see the same Gaussians and finish together (measured: 8x2 pixel

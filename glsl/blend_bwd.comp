@@ -277,7 +277,7 @@ void main() {
 }
 #else
 void main() {
-    uvec2 bin = gl_WorkGroupID.xy;
+    uvec2 bin = spread_workgroup();
     uvec2 pix0 = bin * BIN + uvec2(0u, gl_LocalInvocationID.x);
     uvec2 range = ranges[bin.y * params.bins.y + bin.x];
     Pixel px[STRIP];

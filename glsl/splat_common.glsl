@@ -150,6 +150,26 @@ bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size) {
 // those bins without testing them again; larger rectangles are tested again there.
 #define BIN_MASK_BINS 32u
 
+// The tile or bin of a workgroup of a 2D grid over the image, for the CPU-device kernels.
+// lavapipe hands each of its T threads one contiguous T-th of a dispatch's workgroups
+// (Mesa's lp_cs_tpool: iter_per_thread = groups / threads), so tiles taken in row-major
+// order leave one thread the image's busy half while the other idles (measured: blend_bwd
+// no faster on two threads than on one). Here the workgroups' row-major index runs through
+// a transpose of 32 bands of the tiles, so any contiguous run of workgroups takes tiles
+// from all over the image. A bijection on the grid: every tile is still one workgroup, and
+// what each computes is unchanged.
+uvec2 spread_workgroup() {
+    const uint K = 32u;
+    uint gx = gl_NumWorkGroups.x, n = gx * gl_NumWorkGroups.y;
+    uint l = gl_WorkGroupID.y * gx + gl_WorkGroupID.x;
+    uint m = (n + K - 1u) / K;      // tiles of the longest bands
+    uint full = K - (m * K - n);    // bands of m tiles; the rest have m - 1
+    // l = q K + r: the q-th tile of band r (in the last row q = m - 1, r < full).
+    uint q = l / K, r = l % K;
+    uint b = r * m - (r > full ? r - full : 0u) + q;
+    return uvec2(b % gx, b / gx);
+}
+
 // Linear workgroup id of a (possibly 2D) dispatch grid, see gpu::dispatch_grid.
 uint linear_group_id() {
     return gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;

@@ -105,6 +105,8 @@ pub fn loss_reference(
 const REDUCE_SPAN: u64 = 4096;
 /// Invocations per workgroup of the per-pixel passes.
 const PIXEL_GROUP: u64 = 64;
+/// Pixels one `ssim_filter` invocation filters, consecutive along its axis (`RUN` there).
+const FILTER_RUN: u64 = 8;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -359,8 +361,15 @@ impl GpuLoss {
             let i = if std::ptr::eq(b, planes) { 0 } else { 1 };
             Some(views[i].handle())
         };
+        // The window's invocations: runs of FILTER_RUN pixels along x, then along y.
+        let (w, h) = (u64::from(width), u64::from(height));
+        let filter_groups = [
+            pixel_groups(ctx, w.div_ceil(FILTER_RUN) * h)?,
+            pixel_groups(ctx, h.div_ceil(FILTER_RUN) * w)?,
+        ];
         let filter = |cmd, src: &GpuBuffer, dst: &GpuBuffer, vecs: u32| -> GpuResult<()> {
             for (axis, (a, b)) in [(0u32, (src, dst)), (1u32, (dst, src))] {
+                let groups = filter_groups[axis as usize];
                 let push = FilterPush {
                     size: [width, height, vecs, axis],
                     taps,
