@@ -329,7 +329,7 @@ impl GpuLoss {
             }
         }
         self.ensure_work(ctx, pixels)?;
-        let (_, [planes, filtered, sums, part_a, part_b]) = self.work.as_ref().expect("made above");
+        let (_, [planes, filtered, sums, _, _]) = self.work.as_ref().expect("made above");
         let groups = pixel_groups(ctx, pixels)?;
         let size = [width, height, 0, 0];
         let taps64 = crate::metrics::ssim_taps();
@@ -424,7 +424,18 @@ impl GpuLoss {
             bytemuck::bytes_of(&push),
             groups,
         )?;
-        // The sums, 4096 to one per pass.
+        self.record_sums(ctx, cmd, pixels)
+    }
+
+    /// The per-pixel sums added up, 4096 to one per pass, into one vec4 of the buffer
+    /// returned; each pass's writes before the next one's reads.
+    fn record_sums(
+        &self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        pixels: u64,
+    ) -> GpuResult<&GpuBuffer> {
+        let (_, [_, _, sums, part_a, part_b]) = self.work.as_ref().expect("made by record");
         let mut count = pixels;
         let mut src = sums;
         let mut dst = part_a;
@@ -443,7 +454,12 @@ impl GpuLoss {
                 bytemuck::bytes_of(&[count as u32, 0, 0, 0]),
                 [out as u32, 1, 1],
             )?;
-            step(cmd);
+            barrier_uses(
+                ctx,
+                cmd,
+                &[Access::ComputeWrite],
+                &[Access::ComputeRead, Access::ComputeSampledRead],
+            );
             if out == 1 {
                 return Ok(dst);
             }
