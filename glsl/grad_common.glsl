@@ -10,8 +10,9 @@
 // largest |partial| of the field (maxima[f]) and 2^bits the number of pairs a Gaussian can
 // have (the bins of the frame): no sum can overflow, and the resolution is 2^-(62 - bits)
 // of the largest partial (2^-48 for a 1280x720 frame of 8x8 bins), far below f32's 2^-24.
-// The 64-bit integers are (lo, hi) pairs of u32 added with 32-bit atomics and an explicit
-// carry, so no 64-bit atomics are needed.
+// The 64-bit integers are (lo, hi) pairs of u32: added with one 64-bit atomic where the
+// device has them (grad_accumulate.comp's INT64_ATOMICS), else with 32-bit atomics and an
+// explicit carry, so no 64-bit atomics are needed.
 #ifndef GRAD_COMMON_GLSL
 #define GRAD_COMMON_GLSL
 

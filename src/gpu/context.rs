@@ -73,6 +73,7 @@ impl GpuContext {
         let mut info = DeviceInfo::from_properties(&chosen, &properties, budget);
         let features = logical_device::check_features(instance, &chosen, &properties, &info.name)?;
         info.float_atomic_add = features.float_atomic_add;
+        info.int64_atomics = features.int64_atomics;
         let device = logical_device::create_device(instance, &chosen, &features)?;
         let memory = logical_device::allocator_and_cache(instance, &device, &chosen)?;
 

@@ -66,6 +66,12 @@ pub struct DeviceInfo {
     /// `shaderBufferFloat32AtomicAdd`), enabled when the device has it: the backward pass's
     /// opt-in fast accumulation uses it.
     pub float_atomic_add: bool,
+    /// 64-bit integer atomics on storage buffers (`shaderBufferInt64Atomics` with
+    /// `shaderInt64`), enabled when the device has them: the deterministic gradient
+    /// accumulation adds its 64-bit fixed-point sums with one atomic each instead of two
+    /// 32-bit halves and a carry (the same sums). Off under `spec-limits`, which the
+    /// specification does not require.
+    pub int64_atomics: bool,
     /// The device traits pretended ([`super::emulate`]): the limits above already
     /// include them.
     pub emulation: Emulation,
@@ -202,6 +208,7 @@ impl DeviceInfo {
             memory_budget,
             budget_source,
             float_atomic_add: false,
+            int64_atomics: false,
             emulation: Default::default(),
             same_kind_devices: chosen.same_kind_devices.clone(),
         }
@@ -219,6 +226,10 @@ impl Emulation {
             for c in &mut info.max_workgroup_count {
                 *c = (*c).min(m::WORKGROUP_COUNT);
             }
+        }
+        if self.spec_limits || self.no_int64_atomics {
+            // An optional feature: the 32-bit fallback runs instead.
+            info.int64_atomics = false;
         }
         if let Some(bits) = self.timestamp_bits {
             if info.timestamp_valid_bits != 0 {

@@ -42,13 +42,17 @@ pub struct Emulation {
     pub max_storage_buffer_range: Option<u32>,
     /// maxComputeWorkGroupCount[0].
     pub max_workgroup_count_x: Option<u32>,
+    /// No 64-bit integer atomics (`shaderBufferInt64Atomics`, optional in the
+    /// specification; also off under `spec-limits`): the gradient accumulation adds
+    /// 32-bit halves with a carry.
+    pub no_int64_atomics: bool,
 }
 
 impl Emulation {
     /// Parses a `VKSPLAT_EMULATE` list: `spec-limits`, `discrete` (device-local memory not
     /// host-visible and host memory not coherent), `no-host-visible-device`,
     /// `non-coherent`, `timestamp-bits=N`, `max-storage-buffer-range=BYTES`,
-    /// `max-workgroup-count=N`.
+    /// `max-workgroup-count=N`, `no-int64-atomics`.
     pub fn parse(text: &str) -> Result<Emulation, String> {
         let mut e = Emulation::default();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -71,6 +75,7 @@ impl Emulation {
                 }
                 "no-host-visible-device" => e.device_local_not_host_visible = true,
                 "non-coherent" => e.non_coherent = true,
+                "no-int64-atomics" => e.no_int64_atomics = true,
                 "timestamp-bits" => {
                     let bits = number(name)?;
                     if !(1..=64).contains(&bits) {
@@ -90,7 +95,8 @@ impl Emulation {
                     return Err(format!(
                         "unknown trait '{other}' (spec-limits, discrete, \
                          no-host-visible-device, non-coherent, timestamp-bits=N, \
-                         max-storage-buffer-range=BYTES, max-workgroup-count=N)"
+                         max-storage-buffer-range=BYTES, max-workgroup-count=N, \
+                         no-int64-atomics)"
                     ))
                 }
             }
@@ -123,6 +129,7 @@ impl Emulation {
                 other.max_storage_buffer_range,
             ),
             max_workgroup_count_x: min(self.max_workgroup_count_x, other.max_workgroup_count_x),
+            no_int64_atomics: self.no_int64_atomics || other.no_int64_atomics,
         }
     }
 

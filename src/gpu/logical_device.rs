@@ -1,7 +1,7 @@
 //! Opening the chosen physical device: refusing it when it lacks what vksplat needs
-//! ([`super::capabilities`]), the features and extensions enabled (float atomics where
-//! the device has them), the one compute queue, and the allocator and pipeline cache
-//! created on the new device.
+//! ([`super::capabilities`]), the features and extensions enabled (float and 64-bit
+//! integer atomics where the device has them), the one compute queue, and the allocator
+//! and pipeline cache created on the new device.
 
 use std::path::PathBuf;
 
@@ -20,6 +20,9 @@ pub(crate) struct EnabledFeatures {
     pub(crate) full_subgroups: bool,
     /// `shaderBufferFloat32AtomicAdd` (VK_EXT_shader_atomic_float).
     pub(crate) float_atomic_add: bool,
+    /// `shaderBufferInt64Atomics` and `shaderInt64` (the gradient accumulation's 64-bit
+    /// fixed-point adds).
+    pub(crate) int64_atomics: bool,
 }
 
 /// Refuses the device when it lacks a needed feature or extension (naming the first of
@@ -32,10 +35,14 @@ pub(crate) fn check_features(
     name: &str,
 ) -> GpuResult<EnabledFeatures> {
     let physical_device = chosen.physical_device;
+    let mut features12 = vk::PhysicalDeviceVulkan12Features::default();
     let mut features13 = vk::PhysicalDeviceVulkan13Features::default();
-    let mut features2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut features13);
+    let mut features2 = vk::PhysicalDeviceFeatures2::default()
+        .push_next(&mut features12)
+        .push_next(&mut features13);
     // SAFETY: valid handle, chain of valid structs.
     unsafe { instance.get_physical_device_features2(physical_device, &mut features2) };
+    let shader_int64 = features2.features.shader_int64 == vk::TRUE;
     // SAFETY: plain query.
     let device_exts = unsafe { instance.enumerate_device_extension_properties(physical_device) }
         .vk("vkEnumerateDeviceExtensionProperties")?;
@@ -46,6 +53,7 @@ pub(crate) fn check_features(
         &properties.props11,
         &features13,
     );
+    let int64_atomics = shader_int64 && features12.shader_buffer_int64_atomics == vk::TRUE;
     let first_lack = [
         Lack::SubgroupOperations,
         Lack::Synchronization2,
@@ -67,6 +75,7 @@ pub(crate) fn check_features(
     Ok(EnabledFeatures {
         full_subgroups: features13.compute_full_subgroups == vk::TRUE,
         float_atomic_add: atomic_float.shader_buffer_float32_atomic_add == vk::TRUE,
+        int64_atomics,
     })
 }
 
@@ -94,9 +103,14 @@ pub(crate) fn create_device(
         .maintenance4(true)
         .subgroup_size_control(full_subgroups)
         .compute_full_subgroups(full_subgroups);
+    let enable10 = vk::PhysicalDeviceFeatures::default().shader_int64(features.int64_atomics);
+    let mut enable12 = vk::PhysicalDeviceVulkan12Features::default()
+        .shader_buffer_int64_atomics(features.int64_atomics);
     let mut device_info = vk::DeviceCreateInfo::default()
         .queue_create_infos(&queue_infos)
         .enabled_extension_names(&device_ext_names)
+        .enabled_features(&enable10)
+        .push_next(&mut enable12)
         .push_next(&mut enable13);
     if features.float_atomic_add {
         device_info = device_info.push_next(&mut enable_atomic_float);

@@ -352,10 +352,19 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
             }
         }
     }
-    for (float, cas) in [(false, false), (true, false), (true, true)] {
+    for (float, cas, int64) in [
+        (false, false, false),
+        (false, false, true),
+        (true, false, false),
+        (true, true, false),
+    ] {
         out.push(v(
             "grad_accumulate",
-            &[("FLOAT_ATOMICS", bit(float)), ("CAS_FALLBACK", bit(cas))],
+            &[
+                ("FLOAT_ATOMICS", bit(float)),
+                ("CAS_FALLBACK", bit(cas)),
+                ("INT64_ATOMICS", bit(int64)),
+            ],
         ));
     }
     for float in [false, true] {

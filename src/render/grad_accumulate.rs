@@ -1,6 +1,7 @@
 //! Gradient accumulation stage (`glsl/grad_accumulate.comp`): one invocation per sorted
 //! pair adds the pair's partial sums to its Gaussian's accumulators, in 64-bit fixed
-//! point (deterministic, the default: `glsl/grad_common.glsl` states range and resolution)
+//! point (deterministic, the default: `glsl/grad_common.glsl` states range and resolution;
+//! one 64-bit atomic per value where the device has them, else two 32-bit halves)
 //! or with float atomics (the opt-in fast mode; by compare-and-swap where the device has no
 //! float atomic add).
 
@@ -77,6 +78,7 @@ impl GradAccumulate {
             Accumulation::CompareAndSwap => (true, true),
         };
         let storage = BindingKind::StorageBuffer;
+        let int64 = !float && ctx.info().int64_atomics;
         let workgroup = crate::gpu::workgroup::wide_linear_workgroup(ctx.info());
         let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
@@ -84,6 +86,7 @@ impl GradAccumulate {
             &[
                 ("FLOAT_ATOMICS", u32::from(float).to_string()),
                 ("CAS_FALLBACK", u32::from(cas).to_string()),
+                ("INT64_ATOMICS", u32::from(int64).to_string()),
             ],
             &by_binding([
                 (slot::VALUES, storage),

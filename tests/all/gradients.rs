@@ -618,7 +618,9 @@ fn gpu_direct_rgb_is_not_clamped_and_matches_the_reference() {
 }
 
 /// The deterministic accumulation gives bit-identical gradients run after run, also when
-/// the backward pass renders its frame again; the float-atomic fast mode and its
+/// the backward pass renders its frame again, and the same bits whether it adds its 64-bit
+/// fixed-point values with 64-bit atomics or as 32-bit halves with a carry (a device
+/// without `shaderBufferInt64Atomics`); the float-atomic fast mode and its
 /// compare-and-swap fallback agree with it to rounding.
 #[test]
 fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
@@ -643,6 +645,23 @@ fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
     };
     assert_eq!(bits(&first), bits(&second));
     assert_eq!(bits(&first), bits(&third));
+    let ctx32 = vksplat::gpu::GpuContext::new(&vksplat::gpu::ContextOptions {
+        validation: true,
+        emulate: vksplat::gpu::emulate::Emulation::parse("no-int64-atomics").unwrap(),
+        ..Default::default()
+    })
+    .unwrap();
+    assert!(!ctx32.info().int64_atomics);
+    let mut r32 = DiffRasterizer::new(ctx32).unwrap();
+    r32.renderer().set_screen_grads(true).unwrap();
+    let (_, token32) = r32.forward(&p, &cam, &opts).unwrap();
+    let halves = r32.backward(&p, &cam, &opts, token32, &g).unwrap();
+    eprintln!(
+        "64-bit atomics on the first device: {}",
+        r.renderer().ctx().info().int64_atomics
+    );
+    assert_eq!(bits(&first), bits(&halves));
+    assert_validation_clean(r32.renderer());
     for mode in [Accumulation::FloatAtomics, Accumulation::CompareAndSwap] {
         if mode == Accumulation::FloatAtomics && !r.renderer().ctx().info().float_atomic_add {
             eprintln!("no float atomics on this device: the fast mode is refused");
