@@ -127,6 +127,24 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
             built += 1;
         }
     }
+    // The deterministic sums by 64-bit atomics (above, where the device has them) and by
+    // 32-bit halves with a carry (a context without them).
+    if !ctx.info().int64_atomics {
+        eprintln!(
+            "no 64-bit atomics on {}: that variant is not built",
+            ctx.info().name
+        );
+    }
+    let ctx32 = vksplat::gpu::GpuContext::new(&vksplat::gpu::ContextOptions {
+        validation: true,
+        emulate: vksplat::gpu::emulate::Emulation::parse("no-int64-atomics").unwrap(),
+        ..Default::default()
+    })
+    .expect("a second context");
+    GradAccumulate::new(&ctx32, Accumulation::Deterministic).expect("32-bit accumulation");
+    built += 1;
+    let msgs = ctx32.validation_messages();
+    assert!(msgs.is_empty(), "validation messages:\n{}", msgs.join("\n"));
     for float_sums in [false, true] {
         PreprocessBwd::new(ctx, float_sums).expect("preprocess backward");
         built += 1;
