@@ -5,7 +5,8 @@ use super::{Camera, CameraError};
 use std::path::Path;
 
 /// Picks one camera by list index (`"3"`, or `"#3"`, which is always an index) or by
-/// `img_name`; a number that is also a camera's name (`"0002"`) picks that camera.
+/// name, as [`select_cameras`] matches names (exactly, or failing that the file stem);
+/// a number that is also a camera's name (`"0002"`) picks that camera.
 pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera, CameraError> {
     if let Some(c) = named_number(cams, which) {
         return Ok(c.clone());
@@ -20,20 +21,7 @@ pub fn select_camera(cams: &[Camera], which: &str, path: &Path) -> Result<Camera
             ),
         });
     }
-    cams.iter()
-        .find(|c| c.name == which)
-        .cloned()
-        .ok_or_else(|| {
-            let names: Vec<&str> = cams.iter().take(5).map(|c| c.name.as_str()).collect();
-            CameraError::NotFound {
-                path: path.to_path_buf(),
-                message: format!(
-                    "has no camera named \"{which}\" (names include {}{})",
-                    names.join(", "),
-                    if cams.len() > 5 { ", ..." } else { "" }
-                ),
-            }
-        })
+    by_name(cams, which, path).cloned()
 }
 
 /// Picks cameras by a selection spec: `all`, an index (`3`), a comma-separated list
@@ -342,6 +330,18 @@ mod tests {
         assert_eq!(
             select_camera(&all, "#2", Path::new("c")).unwrap().name,
             "0003.jpg"
+        );
+        // A name by its stem, as in a list; one that names no camera is refused.
+        let mut named = all.clone();
+        named[4].name = "IMG_7.jpg".into();
+        assert_eq!(
+            select_camera(&named, "IMG_7", Path::new("c")).unwrap().name,
+            "IMG_7.jpg"
+        );
+        let e = select_camera(&named, "IMG_8", Path::new("c")).unwrap_err();
+        assert!(
+            e.to_string().contains("has no camera named \"IMG_8\""),
+            "{e}"
         );
         assert_eq!(
             describe_selection(&all, "0002", &pick("0002").unwrap()),
