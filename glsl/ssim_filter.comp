@@ -31,8 +31,8 @@ layout(std430, binding = SSIM_FILTER_SRC) readonly buffer SrcBuf { vec4 src[]; }
 #endif
 layout(std430, binding = SSIM_FILTER_DST) writeonly buffer DstBuf { vec4 dst[]; };
 
-// Outputs per invocation (FILTER_RUN in src/train/loss.rs).
-#define RUN 8
+// Outputs per invocation (gpu::shader_set::SSIM_FILTER_RUN, a define from the host).
+#define RUN SSIM_FILTER_RUN
 
 void main() {
     uint w = p.size.x, h = p.size.y, groups = p.size.z;

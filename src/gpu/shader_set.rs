@@ -17,6 +17,9 @@ pub const LINEAR_WG: u32 = 128;
 pub const WIDE_WG: u32 = 256;
 /// Specialization constant id of those kernels' workgroup size (`local_size_x_id`).
 pub const WIDE_WG_SPEC: u32 = 101;
+/// Pixels one invocation of the loss's SSIM window (`ssim_filter`) filters, consecutive
+/// along its axis.
+pub const SSIM_FILTER_RUN: u32 = 8;
 /// Invocations per scan workgroup (the specification's guaranteed minimum of
 /// `maxComputeWorkGroupInvocations`).
 pub const SCAN_WG: u32 = 128;
@@ -201,6 +204,7 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
         ("SUBGROUP_SIZE_SPEC", SUBGROUP_SIZE_SPEC.to_string()),
         ("WIDE_WG_SPEC", WIDE_WG_SPEC.to_string()),
+        ("SSIM_FILTER_RUN", SSIM_FILTER_RUN.to_string()),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))

@@ -105,8 +105,8 @@ pub fn loss_reference(
 const REDUCE_SPAN: u64 = 4096;
 /// Invocations per workgroup of the per-pixel passes.
 const PIXEL_GROUP: u64 = 64;
-/// Pixels one `ssim_filter` invocation filters, consecutive along its axis (`RUN` there).
-const FILTER_RUN: u64 = 8;
+/// Pixels one `ssim_filter` invocation filters, consecutive along its axis.
+const FILTER_RUN: u64 = crate::gpu::shader_set::SSIM_FILTER_RUN as u64;
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -150,6 +150,16 @@ pub struct GpuLoss {
     /// The work buffer the last [`Self::record_image`] left its sums in, and its loss's
     /// pixel count and lambda.
     last: Option<(ash::vk::Buffer, u64, f32)>,
+}
+
+/// A pass's writes before the next one's reads (through buffers or texel views).
+fn after_pass(ctx: &GpuContext, cmd: ash::vk::CommandBuffer) {
+    barrier_uses(
+        ctx,
+        cmd,
+        &[Access::ComputeWrite],
+        &[Access::ComputeRead, Access::ComputeSampledRead],
+    );
 }
 
 fn pixel_groups(ctx: &GpuContext, pixels: u64) -> GpuResult<[u32; 3]> {
@@ -337,15 +347,6 @@ impl GpuLoss {
         for (k, t) in taps64.iter().enumerate() {
             taps[k / 4][k % 4] = *t as f32;
         }
-        // Each pass's writes before the next one's reads (through buffers or texel views).
-        let step = |cmd| {
-            barrier_uses(
-                ctx,
-                cmd,
-                &[Access::ComputeWrite],
-                &[Access::ComputeRead, Access::ComputeSampledRead],
-            )
-        };
         self.prepare.dispatch(
             ctx,
             cmd,
@@ -353,7 +354,7 @@ impl GpuLoss {
             bytemuck::bytes_of(&size),
             groups,
         )?;
-        step(cmd);
+        after_pass(ctx, cmd);
         // The window over the planes, then over the derivative maps: x, then y.
         // The view of a plane buffer, when the window reads through views.
         let view_of = |b: &GpuBuffer| -> Option<ash::vk::BufferView> {
@@ -390,7 +391,7 @@ impl GpuLoss {
                         groups,
                     )?,
                 }
-                step(cmd);
+                after_pass(ctx, cmd);
             }
             Ok(())
         };
@@ -409,7 +410,7 @@ impl GpuLoss {
             bytemuck::bytes_of(&size),
             groups,
         )?;
-        step(cmd);
+        after_pass(ctx, cmd);
         // filtered (the maps) -> planes (x) -> filtered (y).
         filter(cmd, filtered, planes, 3)?;
         let n = (pixels * 3) as f32;
@@ -454,12 +455,7 @@ impl GpuLoss {
                 bytemuck::bytes_of(&[count as u32, 0, 0, 0]),
                 [out as u32, 1, 1],
             )?;
-            barrier_uses(
-                ctx,
-                cmd,
-                &[Access::ComputeWrite],
-                &[Access::ComputeRead, Access::ComputeSampledRead],
-            );
+            after_pass(ctx, cmd);
             if out == 1 {
                 return Ok(dst);
             }
