@@ -9,7 +9,8 @@
 #   scp -r DIR gpu-host: && ssh gpu-host DIR/run.sh     # then read DIR/report.md
 #
 # DIR gets: bin/vksplat, lib/libvulkan.so.1 (Debian's libvulkan1, used only when the target
-# has no loader), scenes/*.spz (the shared scenes, converted to SPZ to stay small; their
+# has no loader), lib/glvnd/libGLdispatch.so.0 (Debian's libglvnd0, which NVIDIA's driver
+# needs; used only when the target has none), scenes/*.spz (the shared scenes, converted to SPZ to stay small; their
 # licences in scenes/LICENSES.md), cameras/*.json, run.sh and README.txt. At most 60 MiB.
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/.." && pwd)
@@ -51,6 +52,21 @@ done
 cp "$loader" "$dir/lib/libvulkan.so.1"
 if [ -e /usr/share/doc/libvulkan1/copyright ]; then
   cp /usr/share/doc/libvulkan1/copyright "$dir/lib/libvulkan1.copyright"
+fi
+# glvnd's dispatch library (Debian's libglvnd0): NVIDIA's Vulkan driver (libGLX_nvidia.so.0)
+# needs it, and a CUDA-only image may lack it (the first H200 run, 2026-11-28: without it
+# the loader found no driver, ERROR_INCOMPATIBLE_DRIVER). run.sh uses it only when the
+# system has none.
+dispatch=""
+for cand in $(/sbin/ldconfig -p 2>/dev/null | awk '$1 == "libGLdispatch.so.0" { print $NF }') \
+  /usr/lib/x86_64-linux-gnu/libGLdispatch.so.0; do
+  if [ -e "$cand" ]; then dispatch=$(readlink -f "$cand"); break; fi
+done
+[ -n "$dispatch" ] || { echo "gpu_bundle: no libGLdispatch.so.0 (apt-get install libglvnd0)" >&2; exit 1; }
+mkdir -p "$dir/lib/glvnd"
+cp "$dispatch" "$dir/lib/glvnd/libGLdispatch.so.0"
+if [ -e /usr/share/doc/libglvnd0/copyright ]; then
+  cp /usr/share/doc/libglvnd0/copyright "$dir/lib/glvnd/libglvnd0.copyright"
 fi
 
 # The shared scenes as SPZ (about a tenth of the PLY's bytes; lossy: positions to 1/4096

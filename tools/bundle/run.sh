@@ -8,6 +8,7 @@
 #   QUICK=1 ./run.sh            # 720p only, the small scenes, 2 frames, a short training run
 #   SMOKE=1 ./run.sh            # doctor, one comparison, one bench frame (a CI smoke test)
 #   DEVICE=1 ./run.sh           # another Vulkan device (index or part of its name)
+#   GENERATED=1e6 COMPARE_SCENES= ./run.sh   # a part's list overridden (see "Steps")
 #
 # Steps: `vksplat doctor` (self-check against the CPU reference), `vksplat compare` (GPU vs
 # CPU renders of the scenes), `vksplat bench` forward and backward at 720p, 1080p and 4K
@@ -62,6 +63,16 @@ else
   LD_LIBRARY_PATH=$here/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
   export LD_LIBRARY_PATH
   loader_note="bundled ($here/lib/libvulkan.so.1, Debian libvulkan1)"
+fi
+
+# glvnd's dispatch library, which NVIDIA's Vulkan driver (libGLX_nvidia.so.0) loads: the
+# system's, else the bundled one (CUDA-only images often lack it).
+if has_lib libGLdispatch.so.0 >/dev/null; then
+  glvnd_note="system"
+else
+  LD_LIBRARY_PATH=$here/lib/glvnd${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+  export LD_LIBRARY_PATH
+  glvnd_note="bundled ($here/lib/glvnd/libGLdispatch.so.0, Debian libglvnd0)"
 fi
 
 # ---- The driver's ICD JSON: the loader's standard folders, else a written NVIDIA one ----
@@ -152,6 +163,18 @@ case $mode in
     ;;
 esac
 
+# Each list can be overridden from the environment, for a run that must fit a time limit:
+# COMPARE_SCENES, COMPARE_ARGS, BENCH_SCENES, RES, FRAMES, WARMUP, GENERATED, TRAIN_ARGS
+# (an empty value skips that part, e.g. COMPARE_SCENES= GENERATED=1e6).
+compare_scenes=${COMPARE_SCENES-$compare_scenes}
+compare_args=${COMPARE_ARGS-$compare_args}
+bench_scenes=${BENCH_SCENES-$bench_scenes}
+res=${RES-$res}
+frames=${FRAMES-$frames}
+warmup=${WARMUP-$warmup}
+generated=${GENERATED-$generated}
+train_args=${TRAIN_ARGS-$train_args}
+
 # shellcheck disable=SC2086 # dev_args and the mode's argument lists are word lists
 step doctor "$results/doctor.txt" "$bin" doctor $dev_args --json "$results/doctor.json"
 doctor_rc=$?
@@ -205,6 +228,19 @@ fi
   fi
   echo "Vulkan loader: $loader_note"
   echo "Vulkan driver (ICD): $icd_note"
+  echo "glvnd (libGLdispatch.so.0): $glvnd_note"
+  # What the drivers' libraries cannot find, the usual reason a driver is not loaded.
+  for f in $icds ${VK_DRIVER_FILES:-} ${VK_ICD_FILENAMES:-}; do
+    [ -r "$f" ] || continue
+    lib=$(sed -n 's/.*"library_path"[^"]*"\([^"]*\)".*/\1/p' "$f" | head -n 1)
+    [ -n "$lib" ] || continue
+    case $lib in /*) path=$lib ;; *) path=$(has_lib "$lib") || path="" ;; esac
+    if [ -z "$path" ]; then
+      echo "driver library $lib (from $f): not found"
+    elif command -v ldd >/dev/null 2>&1 && missing=$(ldd "$path" 2>/dev/null | grep 'not found'); then
+      echo "driver library $path: missing $(echo "$missing" | awk '{ print $1 }' | tr '\n' ' ')"
+    fi
+  done
 } >"$results/info.txt"
 if ! "$bin" gpu-report "$results" -o "$report" 2>"$results/report.log"; then
   # The binary could not make it: a plain report with the steps and logs' tails.
