@@ -7,15 +7,15 @@
 //! `--bench` argument) it runs one small size of each, as a smoke test.
 
 use std::time::Instant;
-use vksplat::camera;
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::gen::{synthetic_scene, tile_depth_keys, Rng};
-use vksplat::gpu::sort::SortJob;
-use vksplat::gpu::sync::{barrier, Access};
-use vksplat::gpu::{
+use verisplat::camera;
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::gen::{synthetic_scene, tile_depth_keys, Rng};
+use verisplat::gpu::sort::SortJob;
+use verisplat::gpu::sync::{barrier, Access};
+use verisplat::gpu::{
     ContextOptions, Count, GpuBuffer, GpuContext, GpuTimer, MemoryKind, RadixSort, Scan,
 };
-use vksplat::render::GpuRenderer;
+use verisplat::render::GpuRenderer;
 
 fn stats(mut v: Vec<f64>) -> String {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -33,7 +33,7 @@ fn time_gpu(
     ctx: &GpuContext,
     runs: usize,
     warmup: usize,
-    mut record: impl FnMut(ash::vk::CommandBuffer) -> vksplat::gpu::GpuResult<()>,
+    mut record: impl FnMut(ash::vk::CommandBuffer) -> verisplat::gpu::GpuResult<()>,
     reset: impl Fn(),
 ) -> Vec<f64> {
     let mut timer = GpuTimer::new(ctx, "bench", 4).expect("timer");

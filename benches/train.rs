@@ -1,19 +1,19 @@
-//! Training speed and memory: `vksplat train`'s loop ([`vksplat::train::run::train`]) on a
+//! Training speed and memory: `verisplat train`'s loop ([`verisplat::train::run::train`]) on a
 //! COLMAP data set made from a shared scene (rendered from orbit cameras by the CPU
 //! reference; every 4th Gaussian centre as points3D), reporting iterations per second,
 //! the Gaussians at the end and the device bytes per Gaussian at the peak: first with the
 //! state on the device (the default), then with the host optimiser (each iteration uploads
 //! the Gaussians and reads their gradients back), so the two are measured side by side.
-//! `VKSPLAT_TRAIN_BENCH=device` (or `host`) runs one of them.
+//! `VERISPLAT_TRAIN_BENCH=device` (or `host`) runs one of them.
 //!
 //! `cargo bench --bench train` runs PLAYBOT LOD3 (31k Gaussians) at 320x240 for 500
 //! iterations (densification from 100 every 100); under `cargo test` (no `--bench`
 //! argument) LOD6 at 40x30 for 20 iterations, as a smoke test.
 
-use vksplat::camera::orbit::{orbit, OrbitParams};
-use vksplat::gpu::{ContextOptions, GpuContext};
-use vksplat::render::differentiable::DiffRasterizer;
-use vksplat::train::{data, loss::GpuLoss, model::Settings, run};
+use verisplat::camera::orbit::{orbit, OrbitParams};
+use verisplat::gpu::{ContextOptions, GpuContext};
+use verisplat::render::differentiable::DiffRasterizer;
+use verisplat::train::{data, loss::GpuLoss, model::Settings, run};
 
 fn main() {
     let full = std::env::args().any(|a| a == "--bench");
@@ -23,7 +23,7 @@ fn main() {
     } else {
         ("playbot_lod6_1873_sh2.ply", 40, 30, 20)
     };
-    let scene = vksplat::scene::load_with_format(&shared.join(file))
+    let scene = verisplat::scene::load_with_format(&shared.join(file))
         .expect("a shared scene")
         .0;
     let cams = orbit(
@@ -53,7 +53,7 @@ fn main() {
         },
         ..Default::default()
     };
-    let which = std::env::var("VKSPLAT_TRAIN_BENCH").unwrap_or_default();
+    let which = std::env::var("VERISPLAT_TRAIN_BENCH").unwrap_or_default();
     for host in [false, true] {
         if (which == "device" && host) || (which == "host" && !host) {
             continue;

@@ -7,19 +7,19 @@
 //!   runs per case. Why the sort and the blend read and write through texel views.
 //! - `sort_and_scan`: the 2^20-pair radix sort (44 key bits, tile|depth keys) and the
 //!   2^20-element prefix sum, 8 runs of which the first 2 are discarded; median, min and
-//!   max. `VKSPLAT_SORT_CONFIG=radix_bits,workgroup_size,items` overrides the sort's tuning;
-//!   `VKSPLAT_SORT_PROFILE=1` adds the per-stage totals of 3 timed sorts.
+//!   max. `VERISPLAT_SORT_CONFIG=radix_bits,workgroup_size,items` overrides the sort's tuning;
+//!   `VERISPLAT_SORT_PROFILE=1` adds the per-stage totals of 3 timed sorts.
 //!
 //! `cargo bench --bench tuning` runs both; `cargo bench --bench tuning -- store_paths` (or
 //! `sort_and_scan`) one of them. Under `cargo test` (no `--bench` argument) each runs once
 //! at a small size, as a smoke test.
 
 use ash::vk;
-use vksplat::gen::{tile_depth_keys, Rng};
-use vksplat::gpu::shader::{compile_glsl, BindingKind, Resource};
-use vksplat::gpu::sort::{SortConfig, SortJob};
-use vksplat::gpu::sync::{barrier, Access};
-use vksplat::gpu::{
+use verisplat::gen::{tile_depth_keys, Rng};
+use verisplat::gpu::shader::{compile_glsl, BindingKind, Resource};
+use verisplat::gpu::sort::{SortConfig, SortJob};
+use verisplat::gpu::sync::{barrier, Access};
+use verisplat::gpu::{
     BufferView, ComputePipeline, ContextOptions, Count, GpuBuffer, GpuContext, GpuImage, GpuTimer,
     MemoryKind, RadixSort, Scan,
 };
@@ -100,7 +100,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// The sort of `n` pairs (44 key bits) and the scan of `n` elements, `iterations` runs of
 /// which the first 2 are discarded.
 fn sort_and_scan(ctx: &GpuContext, n: u32, iterations: usize) {
-    let config = std::env::var("VKSPLAT_SORT_CONFIG").ok().and_then(|s| {
+    let config = std::env::var("VERISPLAT_SORT_CONFIG").ok().and_then(|s| {
         let v: Vec<u32> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
         (v.len() == 3).then(|| SortConfig {
             radix_bits: v[0],
@@ -138,7 +138,7 @@ fn sort_and_scan(ctx: &GpuContext, n: u32, iterations: usize) {
     )
     .expect("s");
     let mut timer = GpuTimer::new(ctx, "bench timer", 4).expect("timer");
-    if std::env::var_os("VKSPLAT_SORT_PROFILE").is_some() {
+    if std::env::var_os("VERISPLAT_SORT_PROFILE").is_some() {
         let mut stage_timer = GpuTimer::new(ctx, "profile timer", 64).expect("timer");
         for _ in 0..3 {
             key_buf.upload(ctx, &keys).expect("reset keys");

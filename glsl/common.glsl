@@ -1,10 +1,10 @@
-// Shared header for all vksplat compute shaders.
+// Shared header for all verisplat compute shaders.
 //
 // Constants shared with the host are defined once, in Rust (src/gpu/shader_set.rs), and
 // passed in as #defines; the sort's tunables are specialization constants
 // (sort_spec.glsl). This header provides the helpers every stage uses.
-#ifndef VKSPLAT_COMMON_GLSL
-#define VKSPLAT_COMMON_GLSL
+#ifndef VERISPLAT_COMMON_GLSL
+#define VERISPLAT_COMMON_GLSL
 
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require

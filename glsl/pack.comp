@@ -3,7 +3,7 @@
 // viewer), so a quarter of the colour plane's bytes leaves the device. Quantised exactly as
 // output::to_u8 on the host: clamp(v * 255 + 0.5, 0, 255) truncated, NaN to 0, with the
 // multiply and the add rounded separately (`precise` forbids fusing them), so a packed
-// frame equals the PNG that `vksplat render` writes from the float frame, bit for bit.
+// frame equals the PNG that `verisplat render` writes from the float frame, bit for bit.
 
 // 16 x 8 pixels: 128 invocations, within every device's limit.
 layout(local_size_x = 16, local_size_y = 8) in;

@@ -9,8 +9,8 @@
 // SUBGROUP_SIZE consecutive elements (row k, lane l -> chunk + k * size + l). So
 // (subgroup, row, lane) order is input order, and loads are contiguous per row.
 // Everything is generic over SUBGROUP_SIZE (needs full subgroups, <= 128 lanes).
-#ifndef VKSPLAT_SORT_COMMON_GLSL
-#define VKSPLAT_SORT_COMMON_GLSL
+#ifndef VERISPLAT_SORT_COMMON_GLSL
+#define VERISPLAT_SORT_COMMON_GLSL
 
 // Per-subgroup digit counters: subgroup_counts[subgroup * SORT_RADIX + digit].
 shared uint subgroup_counts[SORT_MAX_SUBGROUPS * SORT_RADIX];

@@ -2,8 +2,8 @@
 // so one compiled module serves every configuration the device allows. The ids are
 // SORT_SPEC_* (host constants, src/gpu/shader_set.rs). Shaders whose workgroup is the
 // sort's define WG_SIZE_SPEC_ID before including common.glsl, then include this.
-#ifndef VKSPLAT_SORT_SPEC_GLSL
-#define VKSPLAT_SORT_SPEC_GLSL
+#ifndef VERISPLAT_SORT_SPEC_GLSL
+#define VERISPLAT_SORT_SPEC_GLSL
 
 #ifdef WG_SIZE_SPEC_ID
 #define SORT_WG WG_SIZE

@@ -1,6 +1,6 @@
 //! Console output that never panics.
 //!
-//! `println!`/`eprintln!` panic when the stream is closed (`vksplat info scene.ply | head`
+//! `println!`/`eprintln!` panic when the stream is closed (`verisplat info scene.ply | head`
 //! closes stdout after ten lines). A closed pipe is normal use of a command-line tool, so
 //! [`outln!`] stops writing to stdout quietly and lets the command finish its work (a
 //! `bench --json` piped into `head` still writes its JSON). Any other stdout error (a full

@@ -134,7 +134,7 @@ mod tests {
 
     #[test]
     fn writes_replace_only_when_asked_and_leave_no_temporary() {
-        let dir = std::env::temp_dir().join(format!("vksplat-fsutil-{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("verisplat-fsutil-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("a.txt");

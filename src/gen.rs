@@ -199,7 +199,7 @@ pub fn synthetic_scene(n: usize, seed: u64, sh_degree: u32) -> Scene {
 /// `n` random Gaussians in front of a camera at distance 3 or so (centres within
 /// +-0.8 x +-0.6 x +-0.5, unnormalised quaternions, scales 0.03-0.3, opacities 0.2-0.95)
 /// with SH colours of `colors` degree, or `channels` random direct values: the scenes the
-/// gradient tests and `vksplat doctor`'s backward check differentiate.
+/// gradient tests and `verisplat doctor`'s backward check differentiate.
 pub fn random_splat_params(
     n: usize,
     seed: u64,

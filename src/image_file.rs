@@ -297,7 +297,7 @@ pub fn parse_npy_array(bytes: &[u8], path: &Path) -> Result<NpyArray, ImageError
             return Err(invalid(
                 path,
                 format!(
-                    "holds dtype '{other}'; vksplat reads little-endian float32, float16 or float64 arrays (<f4, <f2, <f8)"
+                    "holds dtype '{other}'; verisplat reads little-endian float32, float16 or float64 arrays (<f4, <f2, <f8)"
                 ),
             ))
         }

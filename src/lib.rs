@@ -1,4 +1,4 @@
-//! vksplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
+//! verisplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
 //! reference renderer that the GPU is checked against.
 
 #[cfg(feature = "cli")]
@@ -10,6 +10,7 @@ pub mod diff_image;
 pub mod doctor;
 pub mod fit;
 pub mod font;
+pub mod former_name;
 pub mod frame;
 pub mod fsutil;
 pub mod gen;

@@ -1,14 +1,14 @@
-//! The `vksplat` command line. Each subcommand lives in its own file under `src/cli/`.
+//! The `verisplat` command line. Each subcommand lives in its own file under `src/cli/`.
 
 mod cli;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
-use vksplat::note;
+use verisplat::note;
 
 #[derive(Parser)]
 #[command(
-    name = "vksplat",
+    name = "verisplat",
     version,
     about = "3D Gaussian Splatting renderer (Vulkan compute + exact CPU reference)"
 )]
@@ -74,9 +74,9 @@ fn main() -> ExitCode {
         Command::Doctor(args) => cli::doctor::doctor(args),
         Command::GpuReport(args) => cli::doctor::gpu_report(args),
     };
-    // A closed pipe (`vksplat info scene.ply | head`) is not an error; any other failure to
+    // A closed pipe (`verisplat info scene.ply | head`) is not an error; any other failure to
     // write the command's output is.
-    let result = result.and_then(|()| match vksplat::console::stdout_error() {
+    let result = result.and_then(|()| match verisplat::console::stdout_error() {
         Some(e) => Err(anyhow::anyhow!("writing to standard output failed: {e}")),
         None => Ok(()),
     });
@@ -88,7 +88,7 @@ fn main() -> ExitCode {
                 ExitCode::from(130)
             }
             None => {
-                note!("error: {}", vksplat::console::error_sentence(&e));
+                note!("error: {}", verisplat::console::error_sentence(&e));
                 ExitCode::FAILURE
             }
         },

@@ -1,4 +1,4 @@
-//! Image comparison metrics, the one place in vksplat that computes them: PSNR, error
+//! Image comparison metrics, the one place in verisplat that computes them: PSNR, error
 //! statistics (largest and mean absolute error, share of 8-bit values within one step),
 //! SSIM as the original 3DGS evaluation computes it, and NVIDIA's LDR-FLIP.
 //!
@@ -132,7 +132,7 @@ pub struct PlaneMetrics {
 }
 
 /// Compares `test` with `reference`, `width x height x channels` samples each, by the
-/// rules of `kind` (the rules of `vksplat compare A B`). Colour and alpha samples are
+/// rules of `kind` (the rules of `verisplat compare A B`). Colour and alpha samples are
 /// clamped to [0, 1] in place, so a caller can draw a difference map of exactly what was
 /// compared (divided by the returned peak).
 pub fn plane_metrics(

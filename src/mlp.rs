@@ -4,7 +4,7 @@
 //! # File format
 //! A [safetensors](https://huggingface.co/docs/safetensors) file, as PyTorch users export
 //! one: each layer's weight (`out x in`, as `torch.nn.Linear` stores it) and bias (`out`)
-//! are tensors (F32, F16, BF16 or F64), and the metadata entry `vksplat_mlp` holds a JSON
+//! are tensors (F32, F16, BF16 or F64), and the metadata entry `verisplat_mlp` holds a JSON
 //! object listing the inputs and the layers in order:
 //!
 //! ```json
@@ -32,7 +32,7 @@ pub const MAX_WIDTH: usize = 128;
 /// Most layers in one shader.
 pub const MAX_LAYERS: usize = 8;
 /// The metadata key that describes the network.
-pub const METADATA_KEY: &str = "vksplat_mlp";
+pub const METADATA_KEY: &str = "verisplat_mlp";
 
 /// An error in a shader file, naming it.
 #[derive(Debug, thiserror::Error)]
@@ -259,10 +259,11 @@ impl Mlp {
             .map_err(|e| format!("is not a safetensors file: {e}"))?;
         let (_, meta) = safetensors::SafeTensors::read_metadata(bytes)
             .map_err(|e| format!("is not a safetensors file: {e}"))?;
-        let from_meta = meta
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get(METADATA_KEY).cloned());
+        let from_meta = meta.metadata().as_ref().and_then(|m| {
+            m.iter()
+                .find(|(k, _)| crate::former_name::matches_key(k, METADATA_KEY))
+                .map(|(_, v)| v.clone())
+        });
         let text = match (from_meta, sidecar) {
             (Some(t), _) => t,
             (None, Some(s)) => s.to_string(),

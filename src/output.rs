@@ -873,7 +873,7 @@ fn write_exr_layer(
     path: &Path,
 ) -> Result<(), OutputError> {
     use exr::prelude::*;
-    let mut attributes = LayerAttributes::named("vksplat");
+    let mut attributes = LayerAttributes::named("verisplat");
     if let Some(cam) = camera {
         attributes.world_to_camera = Some(exr_world_to_camera(cam));
         attributes.world_to_normalized_device = Some(exr_world_to_ndc(cam));

@@ -1,5 +1,5 @@
-//! Synthetic radio-frequency fields on a dense grid (`vksplat gen --rf`), so the fitting
-//! flow (`vksplat fit`) can be tried without measured data.
+//! Synthetic radio-frequency fields on a dense grid (`verisplat gen --rf`), so the fitting
+//! flow (`verisplat fit`) can be tried without measured data.
 //!
 //! Lengths are in wavelengths (lambda = 1, wavenumber k = 2 pi). A grid of `n` points per
 //! axis samples its bounds like `numpy.linspace(min, max, n)` on each axis (the first and
@@ -25,7 +25,7 @@
 
 use std::f64::consts::{FRAC_PI_2, TAU};
 
-/// A synthetic field `vksplat gen --rf` writes.
+/// A synthetic field `verisplat gen --rf` writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RfField {
     /// A half-wave dipole's radiation pattern.

@@ -1,4 +1,4 @@
-//! Scene statistics for `vksplat info`: what a user checks before choosing filters.
+//! Scene statistics for `verisplat info`: what a user checks before choosing filters.
 
 use crate::camera::{bulk_bounds, BulkBounds};
 use crate::scene::Scene;
@@ -46,7 +46,7 @@ impl Summary {
     }
 }
 
-/// Everything `vksplat info` prints.
+/// Everything `verisplat info` prints.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneStats {
     /// Number of Gaussians.

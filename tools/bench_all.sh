@@ -4,7 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -q
-B=target/release/vksplat
+B=target/release/verisplat
 D=../shared/data
 PC=$D/playbot_orbit_cameras.synthetic.json
 mkdir -p docs/benchmarks
@@ -25,7 +25,7 @@ done
 rm -rf "$J"
 echo "## blend kernels, playbot_lod2_125k_sh2 1280x720"
 for k in shared texel texel:2 texel:4 texel:8; do
-  echo "### VKSPLAT_BLEND=$k"; VKSPLAT_BLEND=$k $B bench $D/playbot_lod2_125k_sh2.ply --cameras $PC --frames 5 --warmup 1 | grep -E "blend kernel|^blend|wall"
+  echo "### VERISPLAT_BLEND=$k"; VERISPLAT_BLEND=$k $B bench $D/playbot_lod2_125k_sh2.ply --cameras $PC --frames 5 --warmup 1 | grep -E "blend kernel|^blend|wall"
 done
 echo "## where llvmpipe spends the LOD2 frame (perf samples per shader block)"
 if command -v perf >/dev/null; then
@@ -40,14 +40,14 @@ $B bench --sweep gaussians=1e3,1e4,1e5,1e6 --sweep resolution=720p,1080p,4k --fr
   --csv docs/benchmarks/scaling.csv --json docs/benchmarks/scaling.json --plot docs/benchmarks/scaling.svg --overwrite \
   | grep -E "^scene|^frame|^blend |^sort |^wall|evaluations"
 echo "## scaling sweep to 10 M Gaussians at 1080p (chunked frames; lavapipe's 2 GiB heap is raised)"
-VKSPLAT_MEMORY_LIMIT=16G $B bench --sweep gaussians=3e6,1e7 --sweep resolution=1080p --frames 1 --warmup 0 \
+VERISPLAT_MEMORY_LIMIT=16G $B bench --sweep gaussians=3e6,1e7 --sweep resolution=1080p --frames 1 --warmup 0 \
   --csv docs/benchmarks/scaling_10m.csv --json docs/benchmarks/scaling_10m.json --plot docs/benchmarks/scaling_10m.svg --overwrite \
   | grep -E "^scene|^frame|^blend |^sort |^wall|chunks|device memory"
 echo "## --compact against the exact render, every scene at 1280x720"
 tools/bench_compact.sh $B
 echo "## 10 M Gaussians at SH 3, 1920x1080: gen, exact and --compact (bench; render to EXR and compare)"
 T=$(mktemp -d)
-export VKSPLAT_MEMORY_LIMIT=16G
+export VERISPLAT_MEMORY_LIMIT=16G
 /usr/bin/time -f "gen: wall %e s, peak RSS %M KB" $B gen 10000000 -o $T/big.ply --sh-degree 3
 for c in "" "--compact"; do
   echo "### bench $c"
@@ -56,9 +56,9 @@ for c in "" "--compact"; do
   $B render $T/big.ply --width 1920 --height 1080 -o $T/big$c.exr -q $c >/dev/null 2>&1
 done
 $B compare $T/big--compact.exr $T/big.exr
-unset VKSPLAT_MEMORY_LIMIT
+unset VERISPLAT_MEMORY_LIMIT
 rm -rf "$T"
-echo "## start-up (render --demo, 1280x720, -v): empty caches (Mesa's and vksplat's), then warm"
+echo "## start-up (render --demo, 1280x720, -v): empty caches (Mesa's and verisplat's), then warm"
 C=$(mktemp -d)
 for run in first second third; do
   /usr/bin/time -f "$run run: %e s wall" env XDG_CACHE_HOME="$C" MESA_SHADER_CACHE_DIR="$C/mesa" \

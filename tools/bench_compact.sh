@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # --compact against the exact render on every bundled scene at 1280x720: colour and alpha
-# PSNR (`vksplat compare` of the two EXRs) and the peak device bytes of `vksplat bench`
+# PSNR (`verisplat compare` of the two EXRs) and the peak device bytes of `verisplat bench`
 # with and without --compact. Usage: tools/bench_compact.sh [BINARY] (default: release).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-B=${1:-target/release/vksplat}
+B=${1:-target/release/verisplat}
 D=../shared/data
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT

@@ -6,13 +6,13 @@
 #             each.
 #   inflight: the same orbit to PNG and EXR with --frames-in-flight 1 and 2, runs
 #             alternating between the two (RUNS each, default 5), so that load from
-#             other processes falls on both alike; then `vksplat bench` on the orbit's
+#             other processes falls on both alike; then `verisplat bench` on the orbit's
 #             orbit for the GPU frame time.
 # Each run prints its summary line.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -q
-B=target/release/vksplat
+B=target/release/verisplat
 S=../shared/data/playbot_lod2_125k_sh2.ply
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
@@ -45,6 +45,6 @@ if [ "$WHAT" = inflight ] || [ "$WHAT" = all ]; then
     done
   done
   # The GPU frame time of the same scene and orbit.
-  echo "## vksplat bench"
+  echo "## verisplat bench"
   $B bench "$S" --orbit "$FRAMES" --frames 5 --warmup 1 2>&1 | tail -25
 fi

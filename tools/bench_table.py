@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Markdown rows of the "Every scene" tables of BENCHMARKS.md from `vksplat bench --json`
+"""Markdown rows of the "Every scene" tables of BENCHMARKS.md from `verisplat bench --json`
 reports, one row per report, in the order given:
 
     tools/bench_table.py a.json b.json ...

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes a neural shader (safetensors, the format `vksplat render --shader` reads) that
+"""Writes a neural shader (safetensors, the format `verisplat render --shader` reads) that
 maps one feature channel through a colour map: an exact piecewise-linear MLP, no
 training needed, so the gen -> fit -> render -> shade walkthrough works without PyTorch.
 
@@ -80,7 +80,7 @@ def main():
     data = safetensors_bytes(
         [("0.weight", [n, a.channels], w1), ("0.bias", [n], b1),
          ("1.weight", [3, n], w2), ("1.bias", [3], b2)],
-        {"vksplat_mlp": json.dumps(description)},
+        {"verisplat_mlp": json.dumps(description)},
     )
     with open(a.output, "wb") as f:
         f.write(data)

@@ -4,11 +4,11 @@
 # and run DIR/run.sh; it writes one markdown report (doctor, GPU-vs-CPU comparisons,
 # forward/backward benches, training). See BENCHMARKS.md, "Real GPU: how to measure one".
 #
-#   tools/gpu_bundle.sh DIR                  # builds vksplat (release) and fills DIR
-#   tools/gpu_bundle.sh DIR --bin PATH       # uses an already-built vksplat binary
+#   tools/gpu_bundle.sh DIR                  # builds verisplat (release) and fills DIR
+#   tools/gpu_bundle.sh DIR --bin PATH       # uses an already-built verisplat binary
 #   scp -r DIR gpu-host: && ssh gpu-host DIR/run.sh     # then read DIR/report.md
 #
-# DIR gets: bin/vksplat, lib/libvulkan.so.1 (Debian's libvulkan1, used only when the target
+# DIR gets: bin/verisplat, lib/libvulkan.so.1 (Debian's libvulkan1, used only when the target
 # has no loader), lib/glvnd/libGLdispatch.so.0 (Debian's libglvnd0, which NVIDIA's driver
 # needs; used only when the target has none), scenes/*.spz (the shared scenes, converted to SPZ to stay small; their
 # licences in scenes/LICENSES.md), cameras/*.json, run.sh and README.txt. At most 60 MiB.
@@ -31,16 +31,16 @@ max_bytes=$((60 << 20))
 
 if [ -z "$bin" ]; then
   "$repo/tools/setup.sh"
-  (cd "$repo" && cargo build --release -q --bin vksplat)
-  bin=$repo/target/release/vksplat
+  (cd "$repo" && cargo build --release -q --bin verisplat)
+  bin=$repo/target/release/verisplat
 fi
 [ -x "$bin" ] || { echo "gpu_bundle: $bin is not an executable" >&2; exit 1; }
 
 rm -rf "$dir"
 mkdir -p "$dir"/{bin,lib,scenes,cameras}
-cp "$bin" "$dir/bin/vksplat"
+cp "$bin" "$dir/bin/verisplat"
 # Debug information is most of a binary's size and none of its use on the target.
-if command -v strip >/dev/null; then strip "$dir/bin/vksplat"; fi
+if command -v strip >/dev/null; then strip "$dir/bin/verisplat"; fi
 
 # The Vulkan loader, the real file (libvulkan.so.1 is a symbolic link), and its copyright.
 loader=""
@@ -73,15 +73,15 @@ fi
 # of a unit, colours and SH quantised, which matters to neither the timings nor the GPU-vs-
 # CPU comparison, as both sides read the same file).
 for s in playbot_lod3_31k_sh2 playbot_lod2_125k_sh2 playbot_lod1_250k_sh1 plant_113k_sh0; do
-  "$dir/bin/vksplat" convert "$data/$s.ply" "$dir/scenes/$s.spz" >/dev/null
+  "$dir/bin/verisplat" convert "$data/$s.ply" "$dir/scenes/$s.spz" >/dev/null
 done
 cp "$data/playbot_orbit_cameras.synthetic.json" "$data/plant_orbit_cameras.synthetic.json" \
   "$dir/cameras/"
 {
   echo "# Scenes of this bundle and their licences"
   echo
-  echo "The scenes are the vksplat repository's shared test data, converted from INRIA PLY to"
-  echo "SPZ by \`vksplat convert\` (a format change, lossy as SPZ is). The cameras are"
+  echo "The scenes are the verisplat repository's shared test data, converted from INRIA PLY to"
+  echo "SPZ by \`verisplat convert\` (a format change, lossy as SPZ is). The cameras are"
   echo "synthetic orbits (CC0). From the data's README:"
   echo
   sed -n '/^## Licences and attribution/,$p' "$data/README.md"
@@ -90,13 +90,13 @@ cp "$data/playbot_orbit_cameras.synthetic.json" "$data/plant_orbit_cameras.synth
 } >"$dir/scenes/LICENSES.md"
 
 cp "$repo/tools/bundle/run.sh" "$dir/run.sh"
-chmod +x "$dir/run.sh" "$dir/bin/vksplat"
+chmod +x "$dir/run.sh" "$dir/bin/verisplat"
 cat >"$dir/README.txt" <<EOF
-vksplat GPU bundle ($("$dir/bin/vksplat" --version), made $(date -u '+%Y-%m-%d') by tools/gpu_bundle.sh)
+verisplat GPU bundle ($("$dir/bin/verisplat" --version), made $(date -u '+%Y-%m-%d') by tools/gpu_bundle.sh)
 
 Run ./run.sh on a Linux x86-64 machine with a Vulkan driver; it writes report.md.
 QUICK=1 ./run.sh is a few-minute version, SMOKE=1 ./run.sh a smoke test; DEVICE=N picks
-another Vulkan device. bin/vksplat is the whole renderer (vksplat --help); the scenes'
+another Vulkan device. bin/verisplat is the whole renderer (verisplat --help); the scenes'
 licences are in scenes/LICENSES.md, the Vulkan loader's in lib/libvulkan1.copyright.
 EOF
 

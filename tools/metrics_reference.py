@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Independent reference values for the pinned metric tests in src/metrics.rs.
 
-Not a dependency of vksplat: run once, by hand, to recompute the pinned numbers.
+Not a dependency of verisplat: run once, by hand, to recompute the pinned numbers.
     python3 -m venv /tmp/metricsenv
     /tmp/metricsenv/bin/pip install numpy scipy flip-evaluator
     /tmp/metricsenv/bin/python tools/metrics_reference.py

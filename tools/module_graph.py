@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Prints the module-level dependency graph of the vksplat library and its cycles.
+"""Prints the module-level dependency graph of the verisplat library and its cycles.
 
 An edge `a -> b` means some file of module `a` (src/a.rs or src/a/...) names
 `crate::b` (in a `use` line, a `use crate::{b, ...}` group, or a path in the code;
@@ -8,7 +8,7 @@ An edge `a -> b` means some file of module `a` (src/a.rs or src/a/...) names
 (`crate::note!`) counts as a use of the module defining it. Comments and strings are
 ignored; code under `#[cfg(test)]` counts like any other code, except with
 --no-tests, which drops `#[cfg(test)] mod ... { ... }` blocks and files named
-tests.rs. The binary (src/main.rs, src/cli/) uses the library as `vksplat::` and is
+tests.rs. The binary (src/main.rs, src/cli/) uses the library as `verisplat::` and is
 left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
 
     tools/module_graph.py                # top-level modules: edges, then cycles

@@ -1,14 +1,14 @@
 #!/usr/bin/env python3
 """Where llvmpipe spends a frame's CPU time, shader by shader (BENCHMARKS.md, "Profile").
 
-Runs `vksplat bench` under `perf record` and sorts the samples into:
+Runs `verisplat bench` under `perf record` and sorts the samples into:
   - shader code: llvmpipe JIT-compiles each compute pipeline into its own block of
     anonymous executable memory, which perf reports as `[unknown]` or `/tmp/perf-PID.map`
     (this Mesa writes no perf map, so the blocks carry no names). Samples are grouped into
     blocks by address (a gap of more than --gap bytes starts a new block) and the blocks
     are listed in the order the frame first runs them, with the time window they ran in;
   - the Vulkan driver (libvulkan_lvp: command processing, descriptor set-up), libm, libc,
-    the kernel (page faults, thread wake-ups) and vksplat's own host code.
+    the kernel (page faults, thread wake-ups) and verisplat's own host code.
 
 Usage (release build, an otherwise idle machine):
   tools/profile_stages.py [--frames N] [--gap BYTES] [--keep perf.data] -- BENCH ARGS...
@@ -32,7 +32,7 @@ import tempfile
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--binary", default="target/release/vksplat")
+    ap.add_argument("--binary", default="target/release/verisplat")
     ap.add_argument("--frames", type=int, default=5)
     ap.add_argument("--gap", type=int, default=4096, help="address gap between shader blocks")
     ap.add_argument("--keep", help="keep perf.data here")

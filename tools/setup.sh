@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs what vksplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
+# Installs what verisplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
 # driver (so no GPU is needed), the Khronos validation layer, the GLSL compiler `glslc`
 # that build.rs compiles the shaders with (and spirv-tools to inspect them), Chromium
 # for the viewer's browser test, Slurm and munge for the cluster test, and Python with
@@ -17,7 +17,7 @@ packages=(
   # A single-node Slurm cluster for tools/slurm_test.sh (docs/cluster.md).
   slurm-wlm munge
 )
-# Python (for the `vksplat` package and its tests): any python3 >= 3.9 with venv and pip;
+# Python (for the `verisplat` package and its tests): any python3 >= 3.9 with venv and pip;
 # Debian's when the machine has none of its own.
 venv_probe=$(mktemp -d)
 if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 9))' 2>/dev/null \

@@ -2,8 +2,8 @@
 # docs/cluster.md's example, run as a user types them. They are read from the page (the
 # first ```sh block; continuation lines joined, comments dropped), so the page and the
 # test cannot drift apart. They run in a folder holding examples/ (a link to the
-# repository's), the inputs the lines name and a bin/ with vksplat that goes first on
-# PATH; nothing is added to their options. Then the block's vksplat lines run, and what
+# repository's), the inputs the lines name and a bin/ with verisplat that goes first on
+# PATH; nothing is added to their options. Then the block's verisplat lines run, and what
 # the jobs wrote is checked against one process.
 # Uses: repo, work, bin, data, scene, cameras, jobs, fail, count, wait_all.
 
@@ -17,7 +17,7 @@ doc_commands() {
 docs=$work/docs
 mkdir -p "$docs/bin"
 ln -s "$repo/examples" "$docs/examples"
-ln -s "$bin" "$docs/bin/vksplat"
+ln -s "$bin" "$docs/bin/verisplat"
 cp "$scene" "$docs/scene.ply"
 # path.json: an orbit of 32 cameras at 160x90 (32, so that each of the 4 eval shards
 # gets one of the 4 test cameras, every 8th).
@@ -37,7 +37,7 @@ model_dir "$docs/models/lod3" "$data/playbot_lod3_31k_sh2.ply"
   -o "$docs/data/images/{name}.png" -q
 
 commands=$(doc_commands "$repo/docs/cluster.md")
-submits=$(grep -v '^vksplat ' <<<"$commands")
+submits=$(grep -v '^verisplat ' <<<"$commands")
 [ "$(grep -c 'sbatch .*examples/slurm/' <<<"$submits")" -ge 4 ] \
   || fail "docs/cluster.md's example submits fewer than 4 scripts: $submits"
 echo "slurm_test: 0. the sbatch lines of docs/cluster.md, as written:" >&2
@@ -50,11 +50,11 @@ while read -r id; do
   jobs+=("$id")
 done < <(sed -n 's/^Submitted batch job \([0-9]*\).*/\1/p' "$work/docs.out")
 wait_all
-# The example's vksplat lines (the --verify after the array).
+# The example's verisplat lines (the --verify after the array).
 while read -r line; do
   (cd "$docs" && PATH=$docs/bin:$PATH bash -euo pipefail -c "$line") \
     || fail "docs/cluster.md: '$line' failed after the jobs; their logs: $(tail -n 5 "$docs"/*.out)"
-done < <(grep '^vksplat ' <<<"$commands")
+done < <(grep '^verisplat ' <<<"$commands")
 "$bin" render "$docs/scene.ply" --cameras "$docs/path.json" -o "$work/docs-one/frame_%05d.png" -q
 [ "$(count "$docs"/renders/*.png)" = 32 ] || fail "the docs' render array wrote $(count "$docs"/renders/*.png) of 32 frames"
 for f in "$work"/docs-one/*; do

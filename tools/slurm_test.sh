@@ -4,8 +4,8 @@
 # then
 #   0. runs the sbatch lines of docs/cluster.md's example as written there (read from
 #      the page, so the two cannot drift apart; in a folder holding examples/ and the
-#      inputs they name, vksplat on PATH, nothing added to their options), waits for the
-#      jobs, runs the example's vksplat line, and checks what they wrote: the frames
+#      inputs they name, verisplat on PATH, nothing added to their options), waits for the
+#      jobs, runs the example's verisplat line, and checks what they wrote: the frames
 #      byte-identical to one process's, the merged evaluation equal to one process's, a
 #      folder of models evaluated one per task, a bench sweep in two shards;
 # and through the sbatch scripts of examples/slurm/, submitted without resource options:
@@ -24,7 +24,7 @@
 #
 # Needs root and Debian's slurm-wlm and munge (tools/setup.sh installs them). Without
 # them it skips with a message, except in CI (CI=true), where that is a failure.
-# VKSPLAT_BIN names the binary [default: target/debug/vksplat, built by cargo test].
+# VERISPLAT_BIN names the binary [default: target/debug/verisplat, built by cargo test].
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$PWD
@@ -43,13 +43,13 @@ for tool in munged mungekey slurmctld slurmd sbatch squeue scancel scontrol; do
   command -v "$tool" >/dev/null || skip "$tool missing (tools/setup.sh installs slurm-wlm and munge)"
 done
 
-bin=${VKSPLAT_BIN:-$repo/target/debug/vksplat}
+bin=${VERISPLAT_BIN:-$repo/target/debug/verisplat}
 [ -x "$bin" ] || { echo "slurm_test: $bin missing; build it first (cargo build)" >&2; exit 1; }
 data=$repo/../shared/data
 scene=$data/playbot_lod6_1873_sh2.ply
 cameras=$data/playbot_orbit_cameras.synthetic.json
 
-work=$(mktemp -d /tmp/vksplat-slurm.XXXXXX)
+work=$(mktemp -d /tmp/verisplat-slurm.XXXXXX)
 chmod 755 "$work"
 pids=()  # daemons, in start order
 jobs=()  # submitted job ids
@@ -80,7 +80,7 @@ cleanup() {
     echo "slurm_test: FAILED (exit $rc); daemon logs:" >&2
     tail -n 30 "$work"/*.log "$work"/logs/* >&2 2>/dev/null
   fi
-  [ -n "${VKSPLAT_SLURM_KEEP:-}" ] || rm -rf "$work"
+  [ -n "${VERISPLAT_SLURM_KEEP:-}" ] || rm -rf "$work"
   echo "slurm_test: took $((SECONDS - t0)) s" >&2
   exit $rc
 }
@@ -115,7 +115,7 @@ pids+=($!)
 port=$((20000 + RANDOM % 20000))
 host=$(hostname -s)
 cat >"$work/slurm.conf" <<EOF
-ClusterName=vksplat-test
+ClusterName=verisplat-test
 SlurmctldHost=$host(127.0.0.1)
 SlurmUser=root
 SlurmdUser=root
@@ -190,9 +190,9 @@ wait_all() {
   fail "the jobs did not finish in 300 s: $(squeue 2>&1)"
 }
 
-export VKSPLAT_VALIDATE=1
+export VERISPLAT_VALIDATE=1
 source "$repo/tools/slurm_docs_test.sh"
-export VKSPLAT=$bin
+export VERISPLAT=$bin
 # The examples' scripts are submitted as users submit them; the lines a user edits come
 # from the environment.
 render_script=$repo/examples/slurm/render_path.sbatch
@@ -211,8 +211,8 @@ for f in "$work"/one/*; do
   cmp -s "$f" "$work/arr/$(basename "$f")" || fail "$(basename "$f") differs from one process's"
 done
 for k in 0 1 2 3; do
-  grep -q "shard $k/4: 6 frames of the 24 selected" "$work/logs/vksplat-render-${id}_$k.out" \
-    || fail "task $k did not render shard $k/4: $(cat "$work/logs/vksplat-render-${id}_$k.out")"
+  grep -q "shard $k/4: 6 frames of the 24 selected" "$work/logs/verisplat-render-${id}_$k.out" \
+    || fail "task $k did not render shard $k/4: $(cat "$work/logs/verisplat-render-${id}_$k.out")"
 done
 "$bin" render "$scene" --cameras "$cameras" --width 160 -o "$work/arr/f_%03d.png" --verify -q
 echo "slurm_test: 1. 4-shard render array: 24 frames byte-identical to one process" >&2
@@ -268,8 +268,8 @@ have2=$(count "$work"/kill/f_0{3[2-9],4[0-7]}.png)
 [ "$have1" -lt 16 ] || fail "task 1 finished all 16 frames before it was killed; nothing tested"
 [ "$have2" -lt 16 ] || fail "task 2 finished all 16 frames before it was cancelled; nothing tested"
 grep -q "interrupted after $have2 of 16 frames; every file written is complete" \
-  "$work/logs/vksplat-render-${id}_2.out" \
-  || fail "task 2 did not stop cleanly on SIGTERM: $(cat "$work/logs/vksplat-render-${id}_2.out")"
+  "$work/logs/verisplat-render-${id}_2.out" \
+  || fail "task 2 did not stop cleanly on SIGTERM: $(cat "$work/logs/verisplat-render-${id}_2.out")"
 tmp_left=$(count "$work"/kill/.*.tmp)
 # Every file is complete or absent: --verify lists only missing frames, and fails.
 if "$bin" render "$kill_scene" --cameras "$orbit" $kill_args -o "$out" --verify \

@@ -4,18 +4,18 @@
 # message fails the GPU tests): the Rust tests, the GPU tests again at lavapipe's other
 # subgroup sizes (below), the Slurm job-array test (tools/slurm_test.sh), then the Python
 # package built with pip in a fresh virtualenv (target/pyenv) and its pytest suite.
-# Arguments go to `cargo test` (e.g. a test name); VKSPLAT_SKIP_PYTHON=1 skips the Python
+# Arguments go to `cargo test` (e.g. a test name); VERISPLAT_SKIP_PYTHON=1 skips the Python
 # part. Each part prints its time ("test.sh: ... took"; BENCHMARKS.md, "CI time").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
-export VKSPLAT_VALIDATE=1
+export VERISPLAT_VALIDATE=1
 
 # The Python part's download (torch with its CUDA libraries, about 5 GB from PyPI, into a
 # virtualenv made anew) needs the network and the disk, not the CPUs: it goes on in the
 # background while the Rust tests build and run.
 venv=target/pyenv
-python=$([ "${VKSPLAT_SKIP_PYTHON:-0}" = 1 ] && echo 0 || echo 1)
+python=$([ "${VERISPLAT_SKIP_PYTHON:-0}" = 1 ] && echo 0 || echo 1)
 if [ "$python" = 1 ]; then
   mkdir -p target
   (
@@ -23,9 +23,9 @@ if [ "$python" = 1 ]; then
     rm -rf "$venv"
     python3 -m venv "$venv"
     "$venv/bin/pip" install -q --upgrade pip
-    # torch (the `torch` extra, for vksplat.torch): PyPI's Linux wheel (torch runs on the
+    # torch (the `torch` extra, for verisplat.torch): PyPI's Linux wheel (torch runs on the
     # CPU here). gsplat (a pure wheel; its CUDA kernels are compiled on first use, which
-    # the tests never ask for): its strategies drive densification through vksplat.torch
+    # the tests never ask for): its strategies drive densification through verisplat.torch
     # in python/tests/test_gsplat_dropin.py.
     "$venv/bin/pip" install -q "torch>=2" "gsplat==1.5.3"
     echo "test.sh: the virtualenv and pip install torch gsplat took $((SECONDS - t0)) s (in the background)"
@@ -41,16 +41,16 @@ echo "test.sh: cargo test took $((SECONDS - t0)) s" >&2
 
 # The GPU tests at the other subgroup sizes lavapipe runs (docs/portability.md):
 # LP_NATIVE_VECTOR_WIDTH=128 gives 4 lanes, 512 16, 1024 and 2048 say 32 and 64 lanes but
-# run 16 (vksplat measures and follows that).
+# run 16 (verisplat measures and follows that).
 # - At 128 and 512: every GPU-vs-CPU, sort, scan, gradient, loss, training-step and doctor
 #   test; the 4-lane run also under the Vulkan spec's minimum workgroup limits
-#   (VKSPLAT_EMULATE=spec-limits: 128 invocations, 16 KiB shared memory).
+#   (VERISPLAT_EMULATE=spec-limits: 128 invocations, 16 KiB shared memory).
 # - At 1024 and 2048 the kernels run the 16 lanes of the 512 run; what differs is the
 #   misreport (the probe's override, the specialization constants, which pipelines may
 #   ask for full subgroups). So every pipeline is built and checked against the CPU once
 #   there (sort, scan, each stage and blend kernel, the backward passes, loss, training
 #   step, features, shader, fields, doctor), without the 512 run's larger scenes again.
-# VKSPLAT_WIDTHS="" skips them (a test name given to this script skips them too).
+# VERISPLAT_WIDTHS="" skips them (a test name given to this script skips them too).
 width_tests=(
   gpu_sort:: gpu_stages:: gradients::gpu_ loss::device_loss features::gpu_ mlp::gpu_shade
   field_renders::gpu_field time_fields::gpu_equals compact::compact_scenes
@@ -71,7 +71,7 @@ misreport_tests=(
   gsplat_rules::gsplats_near gsplat_rules::gpu_backward
   --skip every_blend_kernel_matches_the_reference_with_the_power_kernel
 )
-widths=${VKSPLAT_WIDTHS-128 512 1024 2048}
+widths=${VERISPLAT_WIDTHS-128 512 1024 2048}
 if [ $# -gt 0 ]; then
   widths=""
 fi
@@ -83,18 +83,18 @@ for width in $widths; do
     128) emulate=spec-limits ;;
     1024 | 2048) tests=("${misreport_tests[@]}") ;;
   esac
-  LP_NATIVE_VECTOR_WIDTH=$width VKSPLAT_EMULATE=$emulate \
+  LP_NATIVE_VECTOR_WIDTH=$width VERISPLAT_EMULATE=$emulate \
     cargo test -q --test all -- "${tests[@]}"
   echo "test.sh: GPU tests at LP_NATIVE_VECTOR_WIDTH=$width${emulate:+ with $emulate} took $((SECONDS - t0)) s" >&2
 done
 
 # The binary `cargo test` built for the integration tests (same profile: nothing to rebuild),
 # used by the Slurm test and the Python tests below.
-cargo build -q --profile test --bin vksplat
+cargo build -q --profile test --bin verisplat
 # Job arrays on a single-node Slurm cluster it starts and stops (skipped, loudly, only when
 # not root or without Slurm, and never with CI=true).
 t0=$SECONDS
-VKSPLAT_BIN="$PWD/target/debug/vksplat" tools/slurm_test.sh
+VERISPLAT_BIN="$PWD/target/debug/verisplat" tools/slurm_test.sh
 echo "test.sh: slurm_test.sh took $((SECONDS - t0)) s" >&2
 
 if [ "$python" = 0 ]; then
@@ -117,5 +117,5 @@ MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install -q "./python[noteboo
 echo "test.sh: pip install ./python took $((SECONDS - t0)) s" >&2
 t0=$SECONDS
 # The torch tests must run here, not skip.
-VKSPLAT_REQUIRE_TORCH=1 VKSPLAT_BIN="$PWD/target/debug/vksplat" "$venv/bin/pytest" -q python/tests
+VERISPLAT_REQUIRE_TORCH=1 VERISPLAT_BIN="$PWD/target/debug/verisplat" "$venv/bin/pytest" -q python/tests
 echo "test.sh: pytest took $((SECONDS - t0)) s" >&2

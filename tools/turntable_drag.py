@@ -3,11 +3,11 @@ moves at 60 Hz on the 31k robot at 512x512, then a mouse-up. Needs the notebook 
 import pathlib
 import time
 
-import vksplat
-from vksplat import widgets
+import verisplat
+from verisplat import widgets
 DATA = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data"
-scene = vksplat.load(DATA / "playbot_lod3_31k_sh2.ply")
-r = vksplat.Renderer()
+scene = verisplat.load(DATA / "playbot_lod3_31k_sh2.ply")
+r = verisplat.Renderer()
 tt = widgets.Turntable(scene, width=512, height=512, renderer=r)
 tt.render(); t0=time.perf_counter(); tt.render(); one=time.perf_counter()-t0
 f0 = tt.frames

@@ -5,8 +5,8 @@ use libfuzzer_sys::fuzz_target;
 use std::path::Path;
 
 fuzz_target!(|data: &[u8]| {
-    let (cams, images) = vksplat_fuzz::split_len_prefixed(data);
-    let _ = vksplat::camera::colmap::parse_colmap_binary(
+    let (cams, images) = verisplat_fuzz::split_len_prefixed(data);
+    let _ = verisplat::camera::colmap::parse_colmap_binary(
         cams,
         Path::new("cameras.bin"),
         images,

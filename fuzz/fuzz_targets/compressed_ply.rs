@@ -4,5 +4,5 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     let _ =
-        vksplat::scene::compressed_ply::parse(data, std::path::Path::new("fuzz.compressed.ply"));
+        verisplat::scene::compressed_ply::parse(data, std::path::Path::new("fuzz.compressed.ply"));
 });

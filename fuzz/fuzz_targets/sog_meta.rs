@@ -4,6 +4,6 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let bundle = vksplat_fuzz::sog_zip(data);
-    let _ = vksplat::scene::sog::parse_zip(&bundle, std::path::Path::new("fuzz.sog"));
+    let bundle = verisplat_fuzz::sog_zip(data);
+    let _ = verisplat::scene::sog::parse_zip(&bundle, std::path::Path::new("fuzz.sog"));
 });

@@ -6,7 +6,7 @@ use crate::scene::PyScene;
 use glam::{Mat3, Vec3};
 use pyo3::prelude::*;
 use std::path::PathBuf;
-use vksplat::camera::{self, Camera};
+use verisplat::camera::{self, Camera};
 
 /// A camera as it crosses the boundary: name, width, height, `[fx, fy, cx, cy]` and the
 /// world-to-camera matrix, row-major 4x4 (OpenCV axes).
@@ -47,7 +47,7 @@ fn from_camera(c: &Camera) -> CamTuple {
 }
 
 /// Every camera of a camera file (INRIA cameras.json, COLMAP model, nerfstudio path,
-/// vksplat keyframes; a trained model directory stands for its cameras.json).
+/// verisplat keyframes; a trained model directory stands for its cameras.json).
 #[pyfunction]
 #[pyo3(signature = (path, frames=None, fps=None))]
 pub(crate) fn load_cameras(
@@ -78,12 +78,12 @@ pub(crate) fn save_cameras(path: PathBuf, cameras: Vec<CamTuple>, overwrite: boo
             .collect::<PyResult<Vec<_>>>()?;
         let numbered: Vec<(usize, Camera)> = cams.into_iter().enumerate().collect();
         let text = camera::inria::to_json(&numbered).map_err(|e| py_err(e.into()))?;
-        vksplat::output::write_bytes_atomically(&path, overwrite, text.as_bytes())
+        verisplat::output::write_bytes_atomically(&path, overwrite, text.as_bytes())
             .map_err(|e| py_err(e.into()))
     })
 }
 
-/// A turntable orbit around the scene's bulk (see `vksplat render --orbit`).
+/// A turntable orbit around the scene's bulk (see `verisplat render --orbit`).
 #[pyfunction]
 #[pyo3(signature = (scene, frames, width, height, vfov, elevation, start, up, centre=None, radius=None))]
 #[allow(clippy::too_many_arguments)]
@@ -116,7 +116,7 @@ pub(crate) fn orbit(
     })
 }
 
-/// The camera `vksplat render` uses when given none.
+/// The camera `verisplat render` uses when given none.
 #[pyfunction]
 pub(crate) fn default_camera(scene: &PyScene, width: u32, height: u32) -> PyResult<CamTuple> {
     guarded(|| {

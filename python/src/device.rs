@@ -4,9 +4,9 @@
 use crate::errors::py_err;
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
-use vksplat::gpu::{ContextOptions, GpuContext};
+use verisplat::gpu::{ContextOptions, GpuContext};
 
-/// Opens `device` (VKSPLAT_VALIDATE=1 also turns the validation layer on): the context,
+/// Opens `device` (VERISPLAT_VALIDATE=1 also turns the validation layer on): the context,
 /// the device's name and whether the validation layer is on.
 pub(crate) fn open_context(
     device: Option<String>,

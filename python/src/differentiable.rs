@@ -11,10 +11,10 @@ use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
 use std::sync::Mutex;
-use vksplat::cpu::RenderOptions;
-use vksplat::mlp::{Mlp, MlpParams};
-use vksplat::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
-use vksplat::render::differentiable::{Accumulation, DiffRasterizer};
+use verisplat::cpu::RenderOptions;
+use verisplat::mlp::{Mlp, MlpParams};
+use verisplat::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
+use verisplat::render::differentiable::{Accumulation, DiffRasterizer};
 
 /// The channels of the image a forward pass returns: 3 when shaded.
 pub(crate) fn image_channels(p: &SplatParams<f32>, shader: &Option<Mlp>) -> PyResult<usize> {
@@ -92,7 +92,7 @@ pub(crate) type RulesArg<'a> = (&'a str, Option<f32>);
 /// camera, the shader, the image's channels and the render options.
 pub(crate) struct DiffInputs {
     pub(crate) p: SplatParams<f32>,
-    pub(crate) cam: vksplat::camera::Camera,
+    pub(crate) cam: verisplat::camera::Camera,
     pub(crate) shader: Option<Mlp>,
     pub(crate) channels: usize,
     pub(crate) opts: RenderOptions,
@@ -188,7 +188,7 @@ pub(crate) fn grads_dict<'py, T: bytemuck::Pod>(
 
 /// The differentiable rasterizer on a Vulkan device: a forward pass that keeps its state
 /// and the backward pass that reads it.
-#[pyclass(module = "vksplat._native", name = "Rasterizer", frozen)]
+#[pyclass(module = "verisplat._native", name = "Rasterizer", frozen)]
 pub(crate) struct PyRasterizer {
     state: Mutex<DiffRasterizer>,
     device: String,

@@ -3,24 +3,24 @@
 
 use pyo3::exceptions::{PyFileExistsError, PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use vksplat::gpu::GpuError;
+use verisplat::gpu::GpuError;
 
 /// An error as a Python exception: a missing file is `FileNotFoundError`, an output that
 /// exists (without `overwrite`) `FileExistsError`, a device
 /// failure `RuntimeError`, anything else (bad input) `ValueError`; the message is the
 /// command line's sentence.
 pub(crate) fn py_err(e: anyhow::Error) -> PyErr {
-    let sentence = vksplat::console::error_sentence(&e);
+    let sentence = verisplat::console::error_sentence(&e);
     for cause in e.chain() {
         if let Some(io) = cause.downcast_ref::<std::io::Error>() {
             if io.kind() == std::io::ErrorKind::NotFound {
                 return PyFileNotFoundError::new_err(sentence);
             }
         }
-        if let Some(vksplat::output::OutputError::Exists(_)) = cause.downcast_ref() {
+        if let Some(verisplat::output::OutputError::Exists(_)) = cause.downcast_ref() {
             return PyFileExistsError::new_err(sentence);
         }
-        if let Some(vksplat::fsutil::WriteError::Exists(_)) = cause.downcast_ref() {
+        if let Some(verisplat::fsutil::WriteError::Exists(_)) = cause.downcast_ref() {
             return PyFileExistsError::new_err(sentence);
         }
         if cause.downcast_ref::<GpuError>().is_some() {
@@ -45,7 +45,7 @@ pub(crate) fn guarded<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".into());
             Err(PyRuntimeError::new_err(format!(
-                "internal error in vksplat (please report it): {what}"
+                "internal error in verisplat (please report it): {what}"
             )))
         }
     }

@@ -1,11 +1,11 @@
-//! Fitting Gaussians with feature channels to field samples (`vksplat fit`).
+//! Fitting Gaussians with feature channels to field samples (`verisplat fit`).
 
 use crate::arrays::{check_finite, floats, rows};
 use crate::errors::{guarded, value_err};
 use crate::scene::PyScene;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vksplat::scene;
+use verisplat::scene;
 
 /// The counts and options `fit` takes before it reads anything else: channels, the
 /// held-out share, enough samples (unless `force`), steps and the gradient clip.
@@ -29,8 +29,8 @@ fn check_sizes(
         )));
     }
     if !force {
-        // The command line's rule (`vksplat fit --force`), in the function's words.
-        vksplat::fit::check_enough(n, holdout).map_err(|m| {
+        // The command line's rule (`verisplat fit --force`), in the function's words.
+        verisplat::fit::check_enough(n, holdout).map_err(|m| {
             value_err(format!(
                 "points {}",
                 m.replace("--holdout ", "holdout=")
@@ -46,7 +46,7 @@ fn check_sizes(
     Ok(())
 }
 
-/// Fits Gaussians with feature channels to field samples, as `vksplat fit` does: `points`
+/// Fits Gaussians with feature channels to field samples, as `verisplat fit` does: `points`
 /// `n x 3` and `values` `n x k` float32 bytes. Returns the scene and a report: the held-out
 /// errors, the counts, what was chosen from the data (`notes`) and `warnings` (a fit no
 /// better than predicting 0).
@@ -72,12 +72,12 @@ pub(crate) fn fit<'py>(
     times: Option<&[u8]>,
     force: bool,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
-    use vksplat::fit::{self, FieldData, FitConfig, Layout};
+    use verisplat::fit::{self, FieldData, FitConfig, Layout};
     let points = floats(points, "points", n * 3)?;
     let values = floats(values, "values", n * k)?;
     check_finite("points", &points, 3)?;
     check_finite("values", &values, k.max(1))?;
-    let kernel: vksplat::cpu::SplatKernel = kernel.parse().map_err(value_err)?;
+    let kernel: verisplat::cpu::SplatKernel = kernel.parse().map_err(value_err)?;
     check_sizes(n, k, holdout, steps, clip_grad, force)?;
     let positions: Vec<[f32; 3]> = rows(&points);
     let times = times.map(|t| floats(t, "times", n)).transpose()?;

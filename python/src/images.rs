@@ -1,4 +1,4 @@
-//! Images and metrics: reading image files, the metrics of `vksplat compare`, PNG
+//! Images and metrics: reading image files, the metrics of `verisplat compare`, PNG
 //! encoding and writing image files.
 
 use crate::arrays::{byte_array, floats, rows};
@@ -6,8 +6,8 @@ use crate::errors::{guarded, py_err, value_err};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes, PyDict};
 use std::path::{Path, PathBuf};
-use vksplat::frame::Frame;
-use vksplat::metrics::{self, PlaneKind};
+use verisplat::frame::Frame;
+use verisplat::metrics::{self, PlaneKind};
 
 /// Reads an image (PNG 8/16-bit, JPEG, WebP, OpenEXR, .npy): width, height, channel names
 /// and the samples interleaved per pixel as f32 bytes (8/16-bit scaled to [0, 1]).
@@ -17,7 +17,7 @@ pub(crate) fn read_image<'py>(
     path: PathBuf,
 ) -> PyResult<(u32, u32, Vec<String>, Bound<'py, PyByteArray>)> {
     let planes = py.detach(|| {
-        guarded(|| vksplat::image_file::read_image(&path).map_err(|e| py_err(e.into())))
+        guarded(|| verisplat::image_file::read_image(&path).map_err(|e| py_err(e.into())))
     })?;
     let names: Vec<String> = planes.channels.iter().map(|c| c.name.clone()).collect();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
@@ -25,7 +25,7 @@ pub(crate) fn read_image<'py>(
     Ok((planes.width, planes.height, names, byte_array(py, &samples)))
 }
 
-/// The metrics of `vksplat compare A B` for one plane: `kind` is "color", "alpha" or
+/// The metrics of `verisplat compare A B` for one plane: `kind` is "color", "alpha" or
 /// "data".
 #[pyfunction]
 pub(crate) fn compare<'py>(
@@ -68,7 +68,7 @@ pub(crate) fn compare<'py>(
     Ok(d)
 }
 
-/// PNG bytes of an `H x W x 3` float colour image (8-bit, as `vksplat render` writes).
+/// PNG bytes of an `H x W x 3` float colour image (8-bit, as `verisplat render` writes).
 #[pyfunction]
 pub(crate) fn encode_png<'py>(
     py: Python<'py>,
@@ -88,12 +88,12 @@ pub(crate) fn encode_png<'py>(
         features: Vec::new(),
     };
     let mut out = Vec::new();
-    vksplat::output::encode_png(&frame, false, &mut out, Path::new("<memory>"))
+    verisplat::output::encode_png(&frame, false, &mut out, Path::new("<memory>"))
         .map_err(|e| py_err(e.into()))?;
     Ok(PyBytes::new(py, &out))
 }
 
-/// Writes an image file as `vksplat render` does (by extension: `.png` 8-bit, or 16-bit
+/// Writes an image file as `verisplat render` does (by extension: `.png` 8-bit, or 16-bit
 /// with `png16`; `.exr` R, G, B, A, Z as 32-bit floats), atomically; an existing file is
 /// refused unless `overwrite`.
 #[pyfunction]
@@ -128,8 +128,9 @@ pub(crate) fn save_image(
             feature_count: 0,
             features: Vec::new(),
         };
-        let format =
-            vksplat::output::ImageFormat::from_path(&path, png16).map_err(|e| py_err(e.into()))?;
-        vksplat::output::write_frame(&frame, &path, format, overwrite).map_err(|e| py_err(e.into()))
+        let format = verisplat::output::ImageFormat::from_path(&path, png16)
+            .map_err(|e| py_err(e.into()))?;
+        verisplat::output::write_frame(&frame, &path, format, overwrite)
+            .map_err(|e| py_err(e.into()))
     })
 }

@@ -8,8 +8,8 @@ use crate::differentiable::{
 use crate::errors::{guarded, value_err};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
-use vksplat::mlp::MlpParams;
-use vksplat::model::grad::PixelGrads;
+use verisplat::mlp::MlpParams;
+use verisplat::model::grad::PixelGrads;
 
 /// The f64 CPU reference forward pass: colour (`H x W x D`, or 3 shaded), alpha and
 /// depth as f64 bytes.
@@ -53,7 +53,7 @@ pub(crate) fn reference_forward<'py>(
             match &shader {
                 Some(mlp) => {
                     let bg3 = [bg[0], bg[1], bg[2]];
-                    vksplat::cpu::backward::forward_shaded(
+                    verisplat::cpu::backward::forward_shaded(
                         &p,
                         &cam,
                         &opts,
@@ -62,7 +62,7 @@ pub(crate) fn reference_forward<'py>(
                         bg3,
                     )
                 }
-                None => vksplat::cpu::backward::forward(&p, &cam, &opts, &bg),
+                None => verisplat::cpu::backward::forward(&p, &cam, &opts, &bg),
             }
             .map_err(value_err)
         })
@@ -130,12 +130,11 @@ pub(crate) fn reference_backward<'py>(
                 Some(mlp) => {
                     let bg3 = [bg[0], bg[1], bg[2]];
                     let w = MlpParams::of(mlp);
-                    vksplat::cpu::backward::backward_shaded(&p, &cam, &opts, mlp, &w, bg3, &g64)
+                    verisplat::cpu::backward::backward_shaded(&p, &cam, &opts, mlp, &w, bg3, &g64)
                         .map(|(g, m)| (g, Some(m)))
                 }
-                None => {
-                    vksplat::cpu::backward::backward(&p, &cam, &opts, &bg, &g64).map(|g| (g, None))
-                }
+                None => verisplat::cpu::backward::backward(&p, &cam, &opts, &bg, &g64)
+                    .map(|g| (g, None)),
             }
             .map_err(value_err)
         })

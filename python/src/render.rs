@@ -10,10 +10,10 @@ use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
 use std::sync::Mutex;
-use vksplat::camera::Camera;
-use vksplat::cpu::RenderOptions;
-use vksplat::frame::Frame;
-use vksplat::render::{GpuRenderer, GpuScene};
+use verisplat::camera::Camera;
+use verisplat::cpu::RenderOptions;
+use verisplat::frame::Frame;
+use verisplat::render::{GpuRenderer, GpuScene};
 
 /// The planes a render returns: colour `B x H x W x 3`, alpha and depth `B x H x W`,
 /// features `B x H x W x K`, each as `f32` bytes, `None` where not asked for.
@@ -81,11 +81,13 @@ fn request(
         }
     }
     let kernel = match kernel {
-        Some(k) => k.parse::<vksplat::cpu::SplatKernel>().map_err(value_err)?,
+        Some(k) => k
+            .parse::<verisplat::cpu::SplatKernel>()
+            .map_err(value_err)?,
         None => scene.raw.kernel,
     };
     let rules = match rules {
-        Some(r) => r.parse::<vksplat::cpu::Rules>().map_err(value_err)?,
+        Some(r) => r.parse::<verisplat::cpu::Rules>().map_err(value_err)?,
         None => scene.raw.rules,
     };
     let opts = RenderOptions {
@@ -169,7 +171,7 @@ fn planes<'py>(py: Python<'py>, frames: &[Frame], want: &Want) -> Planes<'py> {
 /// State behind a renderer's lock. The uploaded scene is declared first so it is freed
 /// before the renderer (and its device).
 struct RendererState {
-    features: Option<(u64, vksplat::render::GpuFeatures)>,
+    features: Option<(u64, verisplat::render::GpuFeatures)>,
     scene: Option<(u64, GpuScene)>,
     gpu: GpuRenderer,
     uploads: u64,
@@ -178,7 +180,7 @@ struct RendererState {
 }
 
 /// The Vulkan renderer: pipelines and per-frame buffers, and the last scene uploaded.
-#[pyclass(module = "vksplat._native", name = "Renderer", frozen)]
+#[pyclass(module = "verisplat._native", name = "Renderer", frozen)]
 pub(crate) struct PyRenderer {
     state: Mutex<RendererState>,
     device: String,
@@ -188,7 +190,7 @@ pub(crate) struct PyRenderer {
 #[pymethods]
 impl PyRenderer {
     /// Opens `device` (index or part of its name; default: discrete, then integrated,
-    /// then CPU; also VKSPLAT_DEVICE). VKSPLAT_VALIDATE=1 turns the validation layer on,
+    /// then CPU; also VERISPLAT_DEVICE). VERISPLAT_VALIDATE=1 turns the validation layer on,
     /// and any message it prints fails the render.
     #[new]
     #[pyo3(signature = (device=None))]
@@ -317,9 +319,9 @@ pub(crate) fn render_cpu<'py>(
                 .iter()
                 .map(|cam| {
                     if features {
-                        vksplat::cpu::render_features(&scene.act, cam, &opts)
+                        verisplat::cpu::render_features(&scene.act, cam, &opts)
                     } else {
-                        vksplat::cpu::render(&scene.act, cam, &opts)
+                        verisplat::cpu::render(&scene.act, cam, &opts)
                     }
                 })
                 .collect::<Vec<_>>())

@@ -7,13 +7,13 @@ use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
-use vksplat::scene::{self, ActivatedScene, Scene};
+use verisplat::scene::{self, ActivatedScene, Scene};
 
 static NEXT_SCENE_ID: AtomicU64 = AtomicU64::new(1);
 
 /// A scene: the trainer's parameters as stored and the activated arrays the renderers
 /// read. Immutable, so a renderer can keep its upload for as long as it sees the same id.
-#[pyclass(module = "vksplat._native", name = "Scene", frozen)]
+#[pyclass(module = "verisplat._native", name = "Scene", frozen)]
 pub(crate) struct PyScene {
     pub(crate) raw: Scene,
     pub(crate) act: ActivatedScene,
@@ -78,11 +78,11 @@ impl PyScene {
         check_finite("points", &p, 3)?;
         let positions: Vec<[f32; 3]> = rows(&p);
         let times = times.map(|t| floats(t, "times", n)).transpose()?;
-        let model = vksplat::fit::model::Model::from_scene(&self.raw);
+        let model = verisplat::fit::model::Model::from_scene(&self.raw);
         let kernel = self.raw.kernel;
         let f = py.detach(|| {
             guarded(|| {
-                vksplat::fit::model::evaluate_at(&model, kernel, &positions, times.as_deref())
+                verisplat::fit::model::evaluate_at(&model, kernel, &positions, times.as_deref())
                     .map_err(|m| value_err(format!("{}: {m}", self.source)))
             })
         })?;
@@ -169,7 +169,7 @@ impl PyScene {
                     scene::write::OutputFormat::from_path(&path).map_err(|e| py_err(e.into()))?;
                 let bytes = scene::write::to_bytes(&self.raw, format)
                     .map_err(|m| value_err(format!("{}: {m}", path.display())))?;
-                vksplat::output::write_bytes_atomically(&path, overwrite, &bytes)
+                verisplat::output::write_bytes_atomically(&path, overwrite, &bytes)
                     .map_err(|e| py_err(e.into()))
             })
         })
@@ -218,7 +218,7 @@ pub(crate) fn load(py: Python<'_>, path: PathBuf, iteration: Option<u64>) -> PyR
 /// The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
 #[pyfunction]
 pub(crate) fn demo() -> PyScene {
-    let raw = vksplat::demo_scene();
+    let raw = verisplat::demo_scene();
     let act = raw.activated();
     PyScene::new(raw, act, "built-in demo scene (PLAYBOT)".into())
 }

@@ -1,5 +1,5 @@
-"""Shared fixtures: the real scenes of ../shared/data, the `vksplat` command-line binary
-(VKSPLAT_BIN, or the repository's target/debug or target/release build) and one GPU
+"""Shared fixtures: the real scenes of ../shared/data, the `verisplat` command-line binary
+(VERISPLAT_BIN, or the repository's target/debug or target/release build) and one GPU
 renderer for the session."""
 
 import os
@@ -14,9 +14,9 @@ import pytest
 # are for: take it out, so the tests run the same from the repository root and from here.
 _SOURCE = pathlib.Path(__file__).resolve().parents[1]
 sys.path[:] = [p for p in sys.path if pathlib.Path(p or ".").resolve() != _SOURCE]
-sys.modules.pop("vksplat", None)
+sys.modules.pop("verisplat", None)
 
-import vksplat  # noqa: E402
+import verisplat  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"
@@ -31,16 +31,16 @@ def data(name: str) -> pathlib.Path:
 
 @pytest.fixture(scope="session")
 def cli() -> pathlib.Path:
-    env = os.environ.get("VKSPLAT_BIN")
+    env = os.environ.get("VERISPLAT_BIN")
     candidates = [pathlib.Path(env)] if env else [
-        REPO / "target" / "debug" / "vksplat",
-        REPO / "target" / "release" / "vksplat",
+        REPO / "target" / "debug" / "verisplat",
+        REPO / "target" / "release" / "verisplat",
     ]
     for c in candidates:
         if c.is_file():
             return c
     pytest.fail(
-        "the vksplat binary was not found (build it with `cargo build`, or set VKSPLAT_BIN); "
+        "the verisplat binary was not found (build it with `cargo build`, or set VERISPLAT_BIN); "
         f"looked at {', '.join(map(str, candidates))}"
     )
 
@@ -48,20 +48,20 @@ def cli() -> pathlib.Path:
 def run_cli(binary: pathlib.Path, *args: str) -> subprocess.CompletedProcess:
     proc = subprocess.run([str(binary), *map(str, args)], capture_output=True, text=True)
     if proc.returncode != 0:
-        raise AssertionError(f"vksplat {' '.join(map(str, args))} failed:\n{proc.stderr}")
+        raise AssertionError(f"verisplat {' '.join(map(str, args))} failed:\n{proc.stderr}")
     return proc
 
 
 @pytest.fixture(scope="session")
-def renderer() -> vksplat.Renderer:
-    return vksplat.Renderer()
+def renderer() -> verisplat.Renderer:
+    return verisplat.Renderer()
 
 
 @pytest.fixture(scope="session")
-def lod3() -> vksplat.Scene:
-    return vksplat.load(data("playbot_lod3_31k_sh2.ply"))
+def lod3() -> verisplat.Scene:
+    return verisplat.load(data("playbot_lod3_31k_sh2.ply"))
 
 
 @pytest.fixture(scope="session")
-def demo() -> vksplat.Scene:
-    return vksplat.demo()
+def demo() -> verisplat.Scene:
+    return verisplat.demo()

@@ -1,6 +1,6 @@
-"""vksplat.torch.rasterization as a drop-in for gsplat's (issue 38): what gsplat's own
+"""verisplat.torch.rasterization as a drop-in for gsplat's (issue 38): what gsplat's own
 examples and strategies pass to it. gsplat (1.5.3, its pure-torch strategy code; CI
-installs it without its CUDA build) drives densification through vksplat, packed and
+installs it without its CUDA build) drives densification through verisplat, packed and
 not; the two CUDA kernels its MCMC strategy calls are replaced by torch equivalents
 written here (gsplat's CUDA build is not installed)."""
 
@@ -10,16 +10,16 @@ import os
 import numpy as np
 import pytest
 
-from vksplat import raster
+from verisplat import raster
 
-if os.environ.get("VKSPLAT_REQUIRE_TORCH") == "1":
+if os.environ.get("VERISPLAT_REQUIRE_TORCH") == "1":
     import torch  # CI installs the torch extra and gsplat: these tests must run there
     import gsplat.strategy as gs_strategy
 else:
     torch = pytest.importorskip("torch")
     gs_strategy = pytest.importorskip("gsplat.strategy")
 
-from vksplat.torch import rasterization  # noqa: E402
+from verisplat.torch import rasterization  # noqa: E402
 
 from test_torch import GROUPS, H, W, cameras, rel, scene, tensors  # noqa: E402
 
@@ -244,7 +244,7 @@ def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
 
 @pytest.mark.parametrize("packed, mode", [(True, "classic"), (False, "classic"),
                                           (True, "antialiased")])
-def test_gsplats_default_strategy_densifies_through_vksplat(packed, mode):
+def test_gsplats_default_strategy_densifies_through_verisplat(packed, mode):
     strategy = gs_strategy.DefaultStrategy(
         refine_start_iter=10, refine_every=10, reset_every=1000, grow_grad2d=2e-5,
         refine_scale2d_stop_iter=30,
@@ -269,7 +269,7 @@ def test_gsplats_default_strategy_is_the_same_packed_or_not():
 
 
 @pytest.mark.parametrize("packed", [True, False])
-def test_gsplats_mcmc_strategy_relocates_and_adds_through_vksplat(torch_mcmc_kernels, packed):
+def test_gsplats_mcmc_strategy_relocates_and_adds_through_verisplat(torch_mcmc_kernels, packed):
     torch.manual_seed(4)
     strategy = gs_strategy.MCMCStrategy(cap_max=260, refine_start_iter=10, refine_every=10,
                                         min_opacity=0.05)
@@ -449,7 +449,7 @@ def test_camera_gradients_equal_finite_differences_of_the_reference(mode):
     assert np.abs(numeric).max() > 1.0
 
 
-def test_a_camera_pose_is_learned_through_vksplat():
+def test_a_camera_pose_is_learned_through_verisplat():
     # gsplat's simple_trainer.py --pose_opt in small: a learned correction of a camera's
     # translation and rotation (axis-angle) brings a displaced camera back to its image.
     s = scene(n=150, seed=23, degree=1)

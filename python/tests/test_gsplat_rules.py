@@ -1,5 +1,5 @@
 """gsplat's rules as an option (issue 38, item 7): ``rules="gsplat"`` and
-``vksplat.gsplat.rasterization``.
+``verisplat.gsplat.rasterization``.
 
 The yardstick is a dense rasterizer written here in torch (float64) from gsplat 1.5.3's
 CUDA code, rule for rule: ``ProjectionEWA3DGSFused.cu`` (cull at ``z < near_plane``; the
@@ -18,18 +18,18 @@ import os
 import numpy as np
 import pytest
 
-import vksplat
-from vksplat import raster
+import verisplat
+from verisplat import raster
 
-if os.environ.get("VKSPLAT_REQUIRE_TORCH") == "1":
+if os.environ.get("VERISPLAT_REQUIRE_TORCH") == "1":
     import torch  # CI installs the torch extra: these tests must run there
     import gsplat.strategy as gs_strategy
 else:
     torch = pytest.importorskip("torch")
     gs_strategy = pytest.importorskip("gsplat.strategy")
 
-import vksplat.gsplat  # noqa: E402
-from vksplat.torch import rasterization  # noqa: E402
+import verisplat.gsplat  # noqa: E402
+from verisplat.torch import rasterization  # noqa: E402
 
 from test_gsplat_dropin import splat_parameters  # noqa: E402
 from test_torch import GROUPS, H, W, rel, scene  # noqa: E402
@@ -39,7 +39,7 @@ ALPHA_THRESHOLD = 1.0 / 255.0
 
 
 def sh_colours(sh, dirs, degree):
-    from vksplat._projection import sh_basis
+    from verisplat._projection import sh_basis
 
     k = (degree + 1) ** 2
     raw = (sh[:, :k, :] * sh_basis(dirs, degree)[:, :, None]).sum(1)
@@ -143,7 +143,7 @@ def near_scene(cam, n=150, seed=31):
 
 
 def off_centre_camera():
-    cam = vksplat.look_at(eye=(0.3, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
+    cam = verisplat.look_at(eye=(0.3, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
     K = cam.K.copy()
     K[0, 2] += 9.0
     K[1, 2] -= 6.0
@@ -162,7 +162,7 @@ def test_gsplat_rules_equal_gsplats_code_dense_in_torch(mode):
     s = near_scene(_Cam(viewmat, K))
     t = {k: torch.tensor(v, requires_grad=True) for k, v in s.items()}
     vm, Ks = torch.tensor(viewmat)[None], torch.tensor(K)[None]
-    out, alphas, meta = vksplat.gsplat.rasterization(
+    out, alphas, meta = verisplat.gsplat.rasterization(
         *[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=2, packed=False, rasterize_mode=mode)
     rng = np.random.default_rng(7)
     wc = torch.tensor(rng.normal(size=out.shape).astype(np.float32))
@@ -209,13 +209,13 @@ def test_the_f64_reference_takes_the_rules_too():
 
 def test_rules_and_near_plane_arguments():
     s = scene(n=40, seed=3, degree=1)
-    cam = vksplat.look_at(eye=(0.3, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
+    cam = verisplat.look_at(eye=(0.3, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
     t = {k: torch.tensor(v) for k, v in s.items()}
     args = [t[k] for k in GROUPS] + [torch.tensor(cam.viewmat)[None], torch.tensor(cam.K)[None], W, H]
     # gsplat's simple_trainer passes near_plane=0.01: accepted under either rules.
     a, _, _ = rasterization(*args, sh_degree=1, near_plane=0.01)
     b, _, _ = rasterization(*args, sh_degree=1, near_plane=0.01, rules="gsplat")
-    c, _, _ = vksplat.gsplat.rasterization(*args, sh_degree=1)
+    c, _, _ = verisplat.gsplat.rasterization(*args, sh_degree=1)
     assert torch.equal(b, c)
     assert not torch.equal(a, b)
     for bad, match in [(dict(rules="inria2"), "rules"), (dict(near_plane=0.0), "near_plane"),
@@ -229,15 +229,15 @@ def test_rules_and_near_plane_arguments():
 
 def test_gsplats_simple_trainer_loop_runs_with_only_the_import_changed():
     # simple_trainer.py's rasterize_splats call and its DefaultStrategy, through
-    # vksplat.gsplat.rasterization: log scales, logit opacities, sh0/shN, near_plane=0.01.
+    # verisplat.gsplat.rasterization: log scales, logit opacities, sh0/shN, near_plane=0.01.
     s = scene(n=300, seed=41, degree=1)
-    cams = [vksplat.look_at(eye=(0.4 * i - 0.4, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
+    cams = [verisplat.look_at(eye=(0.4 * i - 0.4, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
             for i in range(3)]
     target_scene = scene(n=300, seed=42, degree=1)
     tt = {k: torch.tensor(v) for k, v in target_scene.items()}
     Ks = torch.tensor(np.stack([c.K for c in cams]))
     camtoworlds = torch.linalg.inv(torch.tensor(np.stack([c.viewmat for c in cams])))
-    targets, _, _ = vksplat.gsplat.rasterization(
+    targets, _, _ = verisplat.gsplat.rasterization(
         *[tt[k] for k in GROUPS], torch.linalg.inv(camtoworlds), Ks, W, H, sh_degree=1)
     splats = splat_parameters(s)
     optimizers = {k: torch.optim.Adam([v], lr=0.01) for k, v in splats.items()}
@@ -248,7 +248,7 @@ def test_gsplats_simple_trainer_loop_runs_with_only_the_import_changed():
     losses = []
     for step in range(40):
         i = step % 3
-        colors, alphas, info = vksplat.gsplat.rasterization(
+        colors, alphas, info = verisplat.gsplat.rasterization(
             means=splats["means"], quats=splats["quats"], scales=torch.exp(splats["scales"]),
             opacities=torch.sigmoid(splats["opacities"]),
             colors=torch.cat([splats["sh0"], splats["shN"]], 1),

@@ -8,12 +8,12 @@ import time
 import numpy as np
 import pytest
 
-import vksplat
+import verisplat
 from conftest import data, run_cli
 
 
 def exr_planes(path):
-    arr, names = vksplat.read_image(path)
+    arr, names = verisplat.read_image(path)
     return {n: arr[..., i] for i, n in enumerate(names)}
 
 
@@ -21,15 +21,15 @@ def exr_planes(path):
 def cameras_file(tmp_path_factory, lod3):
     # Cameras both sides parse from one file, so they are the same bit for bit.
     path = tmp_path_factory.mktemp("cams") / "cameras.json"
-    vksplat.save_cameras(path, vksplat.orbit(lod3, frames=4, width=160, height=120))
+    verisplat.save_cameras(path, verisplat.orbit(lod3, frames=4, width=160, height=120))
     return path
 
 
 @pytest.mark.parametrize("cpu", [False, True], ids=["gpu", "cpu"])
 def test_render_equals_cli_bit_for_bit(cpu, tmp_path, lod3, renderer, cli, cameras_file):
-    cam = vksplat.load_cameras(cameras_file)[1]
+    cam = verisplat.load_cameras(cameras_file)[1]
     if cpu:
-        out = vksplat.render_cpu(lod3, cam)
+        out = verisplat.render_cpu(lod3, cam)
     else:
         out = renderer.render(lod3, cam)
     exr = tmp_path / "cli.exr"
@@ -48,20 +48,20 @@ def test_render_equals_cli_bit_for_bit(cpu, tmp_path, lod3, renderer, cli, camer
 
 
 def test_png_from_cli_matches_gpu_and_cpu(tmp_path, lod3, renderer, cli, cameras_file):
-    cam = vksplat.load_cameras(cameras_file)[2]
+    cam = verisplat.load_cameras(cameras_file)[2]
     png = tmp_path / "cli.png"
     run_cli(cli, "render", data("playbot_lod3_31k_sh2.ply"), "--cameras", cameras_file,
             "--camera", "2", "-o", png, "-q")
     gpu = renderer.render(lod3, cam, mode="rgb")["rgb"]
-    cpu = vksplat.render_cpu(lod3, cam, mode="rgb")["rgb"]
-    m = vksplat.compare(png, gpu)
+    cpu = verisplat.render_cpu(lod3, cam, mode="rgb")["rgb"]
+    m = verisplat.compare(png, gpu)
     assert m["within"] == 1.0 and m["max_abs"] <= 0.5 / 255 + 1e-7
-    m = vksplat.compare(cpu, gpu)
+    m = verisplat.compare(cpu, gpu)
     assert m["psnr"] >= 55 and m["within"] >= 0.999
 
 
 def test_modes_and_options(lod3, renderer, cameras_file):
-    cam = vksplat.load_cameras(cameras_file)[0]
+    cam = verisplat.load_cameras(cameras_file)[0]
     assert set(renderer.render(lod3, cam, mode="rgb")) == {"rgb"}
     assert set(renderer.render(lod3, cam, mode="rgba")) == {"rgb", "alpha"}
     assert set(renderer.render(lod3, cam, mode="rgb+depth")) == {"rgb", "depth"}
@@ -85,7 +85,7 @@ def test_modes_and_options(lod3, renderer, cameras_file):
 
 
 def test_max_scale_equals_filtered_scene(lod3, renderer, cameras_file):
-    cam = vksplat.load_cameras(cameras_file)[3]
+    cam = verisplat.load_cameras(cameras_file)[3]
     cut = float(np.quantile(lod3.scales.max(axis=1), 0.5))
     per_frame = renderer.render(lod3, cam, max_scale=cut)
     filtered = lod3.filtered(max_scale=cut)
@@ -94,8 +94,8 @@ def test_max_scale_equals_filtered_scene(lod3, renderer, cameras_file):
 
 
 def test_batch_equals_one_by_one_and_uploads_once(lod3, cameras_file):
-    r = vksplat.Renderer()
-    cams = vksplat.load_cameras(cameras_file)
+    r = verisplat.Renderer()
+    cams = verisplat.load_cameras(cameras_file)
     batch = r.render(lod3, cams)
     assert batch["rgb"].shape == (4, 120, 160, 3) and batch["depth"].shape == (4, 120, 160)
     assert r.counters["uploads"] == 1 and r.counters["frames"] == 4
@@ -110,7 +110,7 @@ def test_batch_equals_one_by_one_and_uploads_once(lod3, cameras_file):
     again = r.render(lod3, viewmat=vm, K=cams[0].K, width=160, height=120, mode="rgb")
     assert np.array_equal(again["rgb"], batch["rgb"])
     # Another scene is uploaded once, and coming back uploads the first again.
-    other = vksplat.demo()
+    other = verisplat.demo()
     r.render(other, cams[0])
     r.render(other, cams[1])
     assert r.counters["uploads"] == 2
@@ -121,14 +121,14 @@ def test_batch_equals_one_by_one_and_uploads_once(lod3, cameras_file):
 
 
 def test_cpu_batch(demo):
-    cams = vksplat.orbit(demo, frames=2, width=64, height=48)
-    batch = vksplat.render_cpu(demo, cams)
+    cams = verisplat.orbit(demo, frames=2, width=64, height=48)
+    batch = verisplat.render_cpu(demo, cams)
     assert batch["rgb"].shape == (2, 48, 64, 3)
-    assert np.array_equal(batch["rgb"][1], vksplat.render_cpu(demo, cams[1])["rgb"])
+    assert np.array_equal(batch["rgb"][1], verisplat.render_cpu(demo, cams[1])["rgb"])
 
 
 def test_timings_and_device(lod3, renderer, cameras_file):
-    renderer.render(lod3, vksplat.load_cameras(cameras_file)[0])
+    renderer.render(lod3, verisplat.load_cameras(cameras_file)[0])
     t = renderer.timings
     assert list(t) == ["preprocess", "order", "scan", "keys", "sort", "ranges", "blend", "readback"]
     assert all(v >= 0 for v in t.values()) and sum(t.values()) > 0
@@ -140,8 +140,8 @@ def test_gil_is_released_while_rendering(lod3):
     # in which it did not run. A render that holds the GIL stops this thread for the whole
     # frame (but for at most a switch interval at either end, while the other thread is
     # still in Python); one that releases it leaves only the pauses of the OS scheduler.
-    r = vksplat.Renderer()
-    cam = vksplat.default_camera(lod3, 1280, 720)
+    r = verisplat.Renderer()
+    cam = verisplat.default_camera(lod3, 1280, 720)
     r.render(lod3, cam)  # upload and warm up
     done = threading.Event()
     frames = []  # (start, end) of each render, timed by the rendering thread
@@ -188,8 +188,8 @@ def _rss_bytes():
 
 
 def test_memory_stays_flat_over_200_frames(demo):
-    r = vksplat.Renderer()
-    cams = vksplat.orbit(demo, frames=8, width=128, height=96)
+    r = verisplat.Renderer()
+    cams = verisplat.orbit(demo, frames=8, width=128, height=96)
     for i in range(20):
         out = r.render(demo, cams[i % 8])
     before = _rss_bytes()
@@ -204,17 +204,17 @@ def test_memory_stays_flat_over_200_frames(demo):
 
 def test_device_errors():
     with pytest.raises(RuntimeError, match="no-such-device"):
-        vksplat.Renderer(device="no-such-device")
+        verisplat.Renderer(device="no-such-device")
 
 
 def test_features_and_power_kernel_equal_the_cli(tmp_path, cli, cameras_file, renderer):
-    base = vksplat.load(data("playbot_lod3_31k_sh2.ply"))
+    base = verisplat.load(data("playbot_lod3_31k_sh2.ply"))
     n, k = len(base), 5
     feats = np.random.default_rng(4).uniform(-1, 2, (n, k)).astype(np.float32)
-    scene = vksplat.Scene.from_arrays(**base.raw(), activated=False, features=feats)
+    scene = verisplat.Scene.from_arrays(**base.raw(), activated=False, features=feats)
     assert scene.feature_count == k and np.array_equal(scene.features, feats)
     assert base.features is None and base.kernel == "gaussian"
-    cam = vksplat.load_cameras(cameras_file)[1]
+    cam = verisplat.load_cameras(cameras_file)[1]
     npy = tmp_path / "f.npy"
     np.save(npy, feats)
     for kernel in ("gaussian", "power"):
@@ -225,9 +225,9 @@ def test_features_and_power_kernel_equal_the_cli(tmp_path, cli, cameras_file, re
         gpu = renderer.render(scene, cam, mode="features+alpha", kernel=kernel)
         assert gpu["features"].shape == (120, 160, k)
         assert np.array_equal(gpu["features"], np.load(out)), kernel
-        cpu = vksplat.render_cpu(scene, cam, mode="features", kernel=kernel)
+        cpu = verisplat.render_cpu(scene, cam, mode="features", kernel=kernel)
         for c in range(k):
-            m = vksplat.compare(cpu["features"][..., c], gpu["features"][..., c], kind="data")
+            m = verisplat.compare(cpu["features"][..., c], gpu["features"][..., c], kind="data")
             assert m["psnr"] >= 55, (kernel, c, m)
     g = renderer.render(scene, cam, mode="rgb")["rgb"]
     p = renderer.render(scene, cam, mode="rgb", kernel="power")["rgb"]

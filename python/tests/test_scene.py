@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 
-import vksplat
+import verisplat
 from conftest import data
 
 
@@ -33,23 +33,23 @@ def test_from_arrays_renders_identically(activated, lod3, renderer):
              opacities=lod3.opacities, sh=lod3.sh)
         if activated else lod3.raw()
     )
-    built = vksplat.Scene.from_arrays(**arrays, activated=activated)
+    built = verisplat.Scene.from_arrays(**arrays, activated=activated)
     assert len(built) == len(lod3) and built.sh_degree == lod3.sh_degree
-    cam = vksplat.default_camera(lod3, 160, 120)
+    cam = verisplat.default_camera(lod3, 160, 120)
     a, b = renderer.render(lod3, cam), renderer.render(built, cam)
     for k in a:
         assert np.array_equal(a[k], b[k]), k
-    assert np.array_equal(vksplat.render_cpu(lod3, cam)["rgb"], vksplat.render_cpu(built, cam)["rgb"])
+    assert np.array_equal(verisplat.render_cpu(lod3, cam)["rgb"], verisplat.render_cpu(built, cam)["rgb"])
 
 
 def test_from_arrays_float64_and_colors(demo, renderer):
     n = len(demo)
-    s = vksplat.Scene.from_arrays(
+    s = verisplat.Scene.from_arrays(
         demo.means.astype(np.float64), demo.quats, demo.scales, demo.opacities,
         colors=np.full((n, 3), 0.25),
     )
     assert s.sh_degree == 0 and s.sh.shape == (n, 1, 3)
-    cam = vksplat.default_camera(s, 64, 48)
+    cam = verisplat.default_camera(s, 64, 48)
     out = renderer.render(s, cam, mode="rgba")
     covered = out["alpha"] > 0.5
     # Colour 0.25 everywhere: the premultiplied colour is 0.25 * alpha.
@@ -88,19 +88,19 @@ def _good(n=3):
 def test_from_arrays_errors(change, error, message):
     arrays = {**_good(), **change}
     with pytest.raises(error, match=message):
-        vksplat.Scene.from_arrays(**arrays)
+        verisplat.Scene.from_arrays(**arrays)
 
 
 def test_from_arrays_needs_one_colour_source():
     arrays = _good()
     with pytest.raises(ValueError, match="exactly one of sh"):
-        vksplat.Scene.from_arrays(**arrays, colors=np.zeros((3, 3)))
+        verisplat.Scene.from_arrays(**arrays, colors=np.zeros((3, 3)))
 
 
 def test_save_and_load_round_trip(tmp_path, demo):
     path = tmp_path / "out.ply"
     demo.save(path)
-    back = vksplat.load(path)
+    back = verisplat.load(path)
     for k in ("means", "quats", "scales", "opacities", "sh"):
         assert np.array_equal(getattr(back, k), getattr(demo, k)), k
     with pytest.raises(FileExistsError, match="out.ply"):
@@ -112,38 +112,38 @@ def test_save_and_load_round_trip(tmp_path, demo):
 
 def test_load_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match="missing.ply"):
-        vksplat.load(tmp_path / "missing.ply")
+        verisplat.load(tmp_path / "missing.ply")
     bad = tmp_path / "bad.ply"
     bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 2\nend_header\n")
     with pytest.raises(ValueError, match="bad.ply"):
-        vksplat.load(bad)
+        verisplat.load(bad)
 
 
 def test_cameras_round_trip_and_errors(tmp_path, lod3):
-    cams = vksplat.orbit(lod3, frames=3, width=100, height=80)
+    cams = verisplat.orbit(lod3, frames=3, width=100, height=80)
     assert [c.name for c in cams] == ["orbit_00000", "orbit_00001", "orbit_00002"]
     path = tmp_path / "cams.json"
-    vksplat.save_cameras(path, cams)
-    back = vksplat.load_cameras(path)
+    verisplat.save_cameras(path, cams)
+    back = verisplat.load_cameras(path)
     for a, b in zip(cams, back):
         assert np.array_equal(a.K, b.K) and (a.width, a.height) == (b.width, b.height)
         assert np.allclose(a.viewmat, b.viewmat, atol=1e-6)
     assert len(json.loads(path.read_text())) == 3
-    real = vksplat.load_cameras(data("playbot_orbit_cameras.synthetic.json"))
+    real = verisplat.load_cameras(data("playbot_orbit_cameras.synthetic.json"))
     assert len(real) > 1 and real[0].viewmat.shape == (4, 4)
     with pytest.raises(FileExistsError):
-        vksplat.save_cameras(path, cams)
+        verisplat.save_cameras(path, cams)
     with pytest.raises(FileNotFoundError):
-        vksplat.load_cameras(tmp_path / "none.json")
+        verisplat.load_cameras(tmp_path / "none.json")
     (tmp_path / "broken.json").write_text("{")
     with pytest.raises(ValueError, match="broken.json"):
-        vksplat.load_cameras(tmp_path / "broken.json")
+        verisplat.load_cameras(tmp_path / "broken.json")
     with pytest.raises(ValueError, match="K must be"):
-        vksplat.Camera(np.eye(4), np.eye(3) * 2, 10, 10)
+        verisplat.Camera(np.eye(4), np.eye(3) * 2, 10, 10)
 
 
 def test_look_at_and_camera_conventions(demo, renderer):
-    cam = vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, -1, 0), width=64, height=48)
+    cam = verisplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, -1, 0), width=64, height=48)
     assert np.allclose(cam.position, [0, 0, -3], atol=1e-6)
     # OpenCV axes: the camera looks along +z of its frame; the target is straight ahead.
     p = cam.viewmat @ np.array([0, 0, 0, 1.0])
@@ -154,7 +154,7 @@ def test_look_at_and_camera_conventions(demo, renderer):
 def test_errors_name_python_arguments_not_cli_flags(tmp_path):
     # Issue 29: scene.save(existing) said "pass --overwrite", filtered(sh_degree=9)
     # "--sh-degree must be 0..3".
-    scene = vksplat.demo()
+    scene = verisplat.demo()
     out = tmp_path / "scene.ply"
     scene.save(out)
     with pytest.raises(FileExistsError) as e:
@@ -164,9 +164,9 @@ def test_errors_name_python_arguments_not_cli_flags(tmp_path):
         scene.filtered(sh_degree=9)
     assert "sh_degree must be 0..3" in str(e.value) and "--" not in str(e.value)
     cams = tmp_path / "cams.json"
-    vksplat.save_cameras(cams, vksplat.orbit(scene, frames=2, width=32, height=32))
+    verisplat.save_cameras(cams, verisplat.orbit(scene, frames=2, width=32, height=32))
     with pytest.raises(FileExistsError) as e:
-        vksplat.save_cameras(cams, vksplat.orbit(scene, frames=2, width=32, height=32))
+        verisplat.save_cameras(cams, verisplat.orbit(scene, frames=2, width=32, height=32))
     assert "overwrite=True" in str(e.value) and "--" not in str(e.value)
 
 
@@ -181,30 +181,30 @@ def test_a_count_mismatch_blames_the_array_that_disagrees():
         colors=np.full((n, 3), 0.5, np.float32),
     )
     with pytest.raises(ValueError, match=r"means must have shape \(1000, 3\) .* got \(1001, 3\)"):
-        vksplat.Scene.from_arrays(np.zeros((n + 1, 3), np.float32), **rest)
+        verisplat.Scene.from_arrays(np.zeros((n + 1, 3), np.float32), **rest)
     # One other array off: that one is named, against means.
     rest["quats"] = rest["quats"][:-1]
     with pytest.raises(ValueError, match=r"quats must have shape \(1000, 4\), got \(999, 4\)"):
-        vksplat.Scene.from_arrays(np.zeros((n, 3), np.float32), **rest)
+        verisplat.Scene.from_arrays(np.zeros((n, 3), np.float32), **rest)
 
 
 def test_impossible_cameras_colours_and_sh_degrees_are_refused():
     # Issue 29: look_at(eye == target) and up=(0,0,0) gave an identity camera, colours
     # outside [0, 1] were taken, sh_degree above the scene's was accepted.
     with pytest.raises(ValueError, match="same point"):
-        vksplat.look_at(eye=(1, 2, 3), target=(1, 2, 3))
+        verisplat.look_at(eye=(1, 2, 3), target=(1, 2, 3))
     with pytest.raises(ValueError, match="up must be a non-zero vector"):
-        vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, 0, 0))
+        verisplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, 0, 0))
     with pytest.raises(ValueError, match="parallel"):
-        vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, 0, 2))
+        verisplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), up=(0, 0, 2))
     arrays = _good()
     del arrays["sh"]
     with pytest.raises(ValueError, match=r"colors\[1\] is \[0.5, 1.5, 0.5\]; colors must be in \[0, 1\]"):
-        vksplat.Scene.from_arrays(**arrays, colors=np.float32([[0.5] * 3, [0.5, 1.5, 0.5], [0.5] * 3]))
-    flat = vksplat.Scene.from_arrays(**arrays, colors=np.full((3, 3), 0.5, np.float32))
-    cam = vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), width=16, height=16)
+        verisplat.Scene.from_arrays(**arrays, colors=np.float32([[0.5] * 3, [0.5, 1.5, 0.5], [0.5] * 3]))
+    flat = verisplat.Scene.from_arrays(**arrays, colors=np.full((3, 3), 0.5, np.float32))
+    cam = verisplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), width=16, height=16)
     with pytest.raises(ValueError, match="sh_degree 2 exceeds the scene's SH degree 0"):
-        vksplat.render_cpu(flat, cam, sh_degree=2)
+        verisplat.render_cpu(flat, cam, sh_degree=2)
 
 
 class _FakeTensor:
@@ -229,7 +229,7 @@ class _FakeTensor:
 def test_what_gsplat_users_pass_is_accepted():
     # Issue 29: batched Ks (C, 3, 3) were refused, tensors that require grad failed in
     # numpy's conversion, lists of Python ints raised TypeError.
-    scene = vksplat.Scene.from_arrays(
+    scene = verisplat.Scene.from_arrays(
         means=[[0, 0, 0], [0.2, 0, 0]],
         quats=_FakeTensor(np.tile(np.float32([1, 0, 0, 0]), (2, 1))),
         scales=[[0.1, 0.1, 0.1], [0.1, 0.1, 0.1]],
@@ -237,21 +237,21 @@ def test_what_gsplat_users_pass_is_accepted():
         colors=[[1, 0, 0], [0, 1, 0]],
     )
     assert len(scene) == 2
-    view = vksplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), width=32, height=24)
+    view = verisplat.look_at(eye=(0, 0, -3), target=(0, 0, 0), width=32, height=24)
     viewmats = np.stack([view.viewmat, view.viewmat])
     ks = np.stack([view.K, view.K])
     ks[1, 0, 0] *= 2  # a longer focal length for the second view
     ks[1, 1, 1] *= 2
-    out = vksplat.render_cpu(scene, viewmat=_FakeTensor(viewmats), K=ks, width=32, height=24)
+    out = verisplat.render_cpu(scene, viewmat=_FakeTensor(viewmats), K=ks, width=32, height=24)
     assert out["rgb"].shape == (2, 24, 32, 3)
     single = [
-        vksplat.render_cpu(scene, viewmat=viewmats[i], K=ks[i], width=32, height=24)["rgb"]
+        verisplat.render_cpu(scene, viewmat=viewmats[i], K=ks[i], width=32, height=24)["rgb"]
         for i in range(2)
     ]
     assert np.array_equal(out["rgb"][0], single[0]) and np.array_equal(out["rgb"][1], single[1])
     assert not np.array_equal(single[0], single[1])
     with pytest.raises(ValueError, match=r"K must have shape \(3, 3\) or \(2, 3, 3\)"):
-        vksplat.render_cpu(scene, viewmat=viewmats, K=np.stack([view.K] * 3), width=32, height=24)
+        verisplat.render_cpu(scene, viewmat=viewmats, K=np.stack([view.K] * 3), width=32, height=24)
 
 
 def test_compare_refuses_nan_and_infinite_values():
@@ -259,30 +259,30 @@ def test_compare_refuses_nan_and_infinite_values():
     nan = np.full((4, 4, 3), np.nan, dtype=np.float32)
     zero = np.zeros((4, 4, 3), dtype=np.float32)
     with pytest.raises(ValueError, match="reference has 48 values that are NaN or infinite"):
-        vksplat.compare(nan, zero)
+        verisplat.compare(nan, zero)
     inf = zero.copy()
     inf[2, 1, 0] = np.inf
     with pytest.raises(ValueError, match=r"test has 1 values .* row 2, column 1, channel 0"):
-        vksplat.compare(zero, inf)
+        verisplat.compare(zero, inf)
 
 
 def test_compare_metrics(tmp_path):
     rng = np.random.default_rng(1)
     a = rng.random((32, 48, 3), dtype=np.float32) * 0.5 + 0.25
-    same = vksplat.compare(a, a)
+    same = verisplat.compare(a, a)
     assert same["psnr"] == float("inf") and same["ssim"] == pytest.approx(1.0) and same["flip"] == 0
-    shifted = vksplat.compare(a, a + np.float32(0.01))
+    shifted = verisplat.compare(a, a + np.float32(0.01))
     # A constant offset d has PSNR -20 log10(d).
     assert shifted["psnr"] == pytest.approx(40.0, abs=1e-3)
     assert shifted["max_abs"] == pytest.approx(0.01, abs=1e-6)
     u8 = (a * 255).round().astype(np.uint8)
-    assert vksplat.compare(u8, u8)["psnr"] == float("inf")
+    assert verisplat.compare(u8, u8)["psnr"] == float("inf")
     with pytest.raises(ValueError, match="differ in shape"):
-        vksplat.compare(a, a[:10])
+        verisplat.compare(a, a[:10])
     with pytest.raises(TypeError, match="dtype"):
-        vksplat.compare(a.astype(np.complex64), a)
+        verisplat.compare(a.astype(np.complex64), a)
     with pytest.raises(ValueError, match="kind"):
-        vksplat.compare(a, a, kind="colours")
+        verisplat.compare(a, a, kind="colours")
 
 
 def test_the_tests_run_from_the_package_folder_too():
@@ -306,32 +306,32 @@ def test_the_tests_run_from_the_package_folder_too():
 
 def test_save_image_writes_what_render_writes_and_keeps_existing_files(tmp_path, demo):
     # Issue 29: no writer for the numpy outputs.
-    cam = vksplat.look_at(eye=(0, -0.5, -3), target=(0, -0.5, 0), width=40, height=30)
-    out = vksplat.render_cpu(demo, cam)
+    cam = verisplat.look_at(eye=(0, -0.5, -3), target=(0, -0.5, 0), width=40, height=30)
+    out = verisplat.render_cpu(demo, cam)
     png = tmp_path / "frame.png"
-    vksplat.save_image(png, out)
-    back, names = vksplat.read_image(png)
+    verisplat.save_image(png, out)
+    back, names = verisplat.read_image(png)
     assert names[:3] == ["R", "G", "B"] and back.shape[:2] == (30, 40)
     want = (np.clip(out["rgb"], 0, 1) * 255 + 0.5).astype(np.uint8) / 255.0
     assert np.allclose(back[..., :3], want, atol=1e-6)
     with pytest.raises(FileExistsError, match="overwrite=True"):
-        vksplat.save_image(png, out["rgb"])
+        verisplat.save_image(png, out["rgb"])
     exr = tmp_path / "frame.exr"
-    vksplat.save_image(exr, out["rgb"], alpha=out["alpha"], depth=out["depth"])
-    back, names = vksplat.read_image(exr)
+    verisplat.save_image(exr, out["rgb"], alpha=out["alpha"], depth=out["depth"])
+    back, names = verisplat.read_image(exr)
     assert names == ["R", "G", "B", "A", "Z"]
     assert np.array_equal(back[..., :3], out["rgb"]) and np.array_equal(back[..., 3], out["alpha"])
     with pytest.raises(ValueError, match=r"alpha must have shape \(30, 40\)"):
-        vksplat.save_image(tmp_path / "bad.exr", out["rgb"], alpha=out["alpha"][:-1])
+        verisplat.save_image(tmp_path / "bad.exr", out["rgb"], alpha=out["alpha"][:-1])
     assert not (tmp_path / "bad.exr").exists()
 
 
 def test_save_turntable_writes_a_png_sequence_without_a_video_writer(tmp_path, demo):
     stem = tmp_path / "turn.png"
-    files = vksplat.save_turntable(stem, demo, frames=3, width=32, height=24)
+    files = verisplat.save_turntable(stem, demo, frames=3, width=32, height=24)
     assert [os.path.basename(f) for f in files] == ["turn_0000.png", "turn_0001.png", "turn_0002.png"]
-    first, _ = vksplat.read_image(files[0])
-    second, _ = vksplat.read_image(files[1])
+    first, _ = verisplat.read_image(files[0])
+    second, _ = verisplat.read_image(files[1])
     assert first.shape[:2] == (24, 32) and not np.array_equal(first, second)
     with pytest.raises(FileExistsError, match="turn_0000.png"):
-        vksplat.save_turntable(stem, demo, frames=3, width=32, height=24)
+        verisplat.save_turntable(stem, demo, frames=3, width=32, height=24)

@@ -1,4 +1,4 @@
-"""A neural shader (vksplat.raster.Shader) through the numpy-level differentiable
+"""A neural shader (verisplat.raster.Shader) through the numpy-level differentiable
 rasterizer: the device's gradients (Gaussians and every layer of the network) against the
 f64 CPU reference, bit-identical run after run, files written and read back, clear errors,
 and a shader learned from images. No torch needed."""
@@ -6,8 +6,8 @@ and a shader learned from images. No torch needed."""
 import numpy as np
 import pytest
 
-import vksplat
-from vksplat import raster
+import verisplat
+from verisplat import raster
 
 W, H = 64, 48
 K = 6
@@ -37,7 +37,7 @@ def network(seed=1, k=K, inputs=("features", "view_dir", "alpha"), hidden=12):
 
 
 def camera():
-    return vksplat.look_at(eye=(0.3, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
+    return verisplat.look_at(eye=(0.3, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
 
 
 def rel(a, b):

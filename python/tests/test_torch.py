@@ -1,5 +1,5 @@
-"""vksplat.torch.rasterization (gsplat's signature) and the numpy-level pair
-vksplat.raster: gradients against the f64 CPU reference (itself checked against finite
+"""verisplat.torch.rasterization (gsplat's signature) and the numpy-level pair
+verisplat.raster: gradients against the f64 CPU reference (itself checked against finite
 differences in the Rust tests), determinism, meta, refusals, and a small fit.
 
 Tolerance: relative L2 error <= 1e-3 per parameter group between the Vulkan backward
@@ -12,15 +12,15 @@ import sys
 import numpy as np
 import pytest
 
-import vksplat
-from vksplat import raster
+import verisplat
+from verisplat import raster
 
-if os.environ.get("VKSPLAT_REQUIRE_TORCH") == "1":
+if os.environ.get("VERISPLAT_REQUIRE_TORCH") == "1":
     import torch  # CI installs the torch extra: these tests must run there
 else:
     torch = pytest.importorskip("torch")
 
-from vksplat.torch import rasterization  # noqa: E402
+from verisplat.torch import rasterization  # noqa: E402
 
 W, H = 80, 56
 GROUPS = ["means", "quats", "scales", "opacities", "colors"]
@@ -40,7 +40,7 @@ def scene(n=150, seed=0, degree=3):
 
 def cameras(count=2):
     cams = [
-        vksplat.look_at(eye=(0.3 * i, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
+        verisplat.look_at(eye=(0.3 * i, -0.2, -4.0), target=(0, 0, 0), width=W, height=H)
         for i in range(count)
     ]
     return cams
@@ -201,8 +201,8 @@ def test_bad_arguments_are_value_errors_naming_them(change, match):
 def test_the_package_imports_without_torch(tmp_path):
     code = (
         "import sys; sys.modules['torch'] = None\n"
-        "import vksplat, vksplat.raster\n"
-        "try:\n    import vksplat.torch\nexcept ImportError:\n    print('no torch: ok')\n"
+        "import verisplat, verisplat.raster\n"
+        "try:\n    import verisplat.torch\nexcept ImportError:\n    print('no torch: ok')\n"
     )
     # From a folder where the source tree cannot shadow the installed package.
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-import vksplat
+import verisplat
 from conftest import data, run_cli
 
-from vksplat import widgets  # the notebook extra: pip install "./python[notebook,test]"
+from verisplat import widgets  # the notebook extra: pip install "./python[notebook,test]"
 
 
 def shown(tt, tmp_path, name="shown.png"):
@@ -14,7 +14,7 @@ def shown(tt, tmp_path, name="shown.png"):
     tt.wait()
     path = tmp_path / name
     path.write_bytes(tt.image.value)
-    return vksplat.read_image(path)[0]
+    return verisplat.read_image(path)[0]
 
 
 def test_drag_turns_the_view_and_the_image(lod3, renderer, tmp_path):
@@ -33,10 +33,10 @@ def test_drag_turns_the_view_and_the_image(lod3, renderer, tmp_path):
     ahead = cam1.viewmat @ np.append(tt.focus, 1.0)
     assert abs(ahead[0]) < 1e-3 * radius and abs(ahead[1]) < 1e-3 * radius and ahead[2] > 0
     turned = shown(tt, tmp_path)
-    assert vksplat.compare(first, turned)["psnr"] < 40
+    assert verisplat.compare(first, turned)["psnr"] < 40
     # What it shows is the renderer's image of its camera.
     direct = renderer.render(lod3, cam1, mode="rgb")["rgb"]
-    assert vksplat.compare(direct, turned)["within"] == 1.0
+    assert verisplat.compare(direct, turned)["within"] == 1.0
     # Moving without a button pressed does nothing.
     tt._handle_event({"type": "mousemove", "relativeX": 90, "relativeY": 10, "buttons": 0})
     assert np.array_equal(tt.camera.viewmat, cam1.viewmat)
@@ -61,23 +61,23 @@ def test_slider_filters_like_render_max_scale(lod3, renderer, tmp_path, cli):
     tt.slider.value = cut  # observers re-render
     assert tt.max_scale == pytest.approx(cut, rel=1e-6)
     filtered = shown(tt, tmp_path, "filtered.png")
-    assert vksplat.compare(all_shown, filtered)["psnr"] < 40
+    assert verisplat.compare(all_shown, filtered)["psnr"] < 40
     cams = tmp_path / "cams.json"
-    vksplat.save_cameras(cams, [tt.camera])
+    verisplat.save_cameras(cams, [tt.camera])
     png = tmp_path / "cli.png"
     run_cli(cli, "render", data("playbot_lod3_31k_sh2.ply"), "--cameras", cams,
             "--max-scale", repr(tt.max_scale), "-o", png, "-q")
-    cli_img = vksplat.read_image(png)[0]
-    m = vksplat.compare(cli_img, filtered)
+    cli_img = verisplat.read_image(png)[0]
+    m = verisplat.compare(cli_img, filtered)
     assert m["within"] == 1.0, m
 
 
 def test_given_camera_is_the_first_view(lod3, renderer, tmp_path):
-    cam = vksplat.orbit(lod3, frames=4, width=80, height=60)[1]
+    cam = verisplat.orbit(lod3, frames=4, width=80, height=60)[1]
     tt = widgets.Turntable(lod3, camera=cam, width=80, height=60, renderer=renderer)
     assert np.array_equal(tt.camera.viewmat, cam.viewmat)
     direct = renderer.render(lod3, cam, mode="rgb")["rgb"]
-    assert vksplat.compare(direct, shown(tt, tmp_path))["within"] == 1.0
+    assert verisplat.compare(direct, shown(tt, tmp_path))["within"] == 1.0
 
 
 def test_example_notebook_runs():
@@ -92,7 +92,7 @@ def test_example_notebook_runs():
     for src in code:
         exec(compile(src, "turntable.ipynb", "exec"), ns)
     assert isinstance(ns["tt"], widgets.Turntable) and ns["tt"].image.value[:4] == b"\x89PNG"
-    assert vksplat.compare(ns["ref"]["rgb"], ns["out"]["rgb"])["psnr"] >= 55
+    assert verisplat.compare(ns["ref"]["rgb"], ns["out"]["rgb"])["psnr"] >= 55
 
 
 def test_a_fast_drag_draws_the_latest_pose_only_with_previews(lod3, renderer, tmp_path):
@@ -128,10 +128,10 @@ def test_a_fast_drag_draws_the_latest_pose_only_with_previews(lod3, renderer, tm
     # At rest: the full size, and the renderer's image of the last pose.
     assert tt.shown_size == (192, 144)
     direct = renderer.render(lod3, last, mode="rgb")["rgb"]
-    assert vksplat.compare(direct, shown(tt, tmp_path))["within"] == 1.0
+    assert verisplat.compare(direct, shown(tt, tmp_path))["within"] == 1.0
     # Without a mouse-up (a wheel turn), the full frame follows by itself.
     tt._handle_event({"type": "wheel", "deltaY": 100})
     tt.wait()
     assert tt.shown_size == (192, 144)
     direct = renderer.render(lod3, tt.camera, mode="rgb")["rgb"]
-    assert vksplat.compare(direct, shown(tt, tmp_path, "wheel.png"))["within"] == 1.0
+    assert verisplat.compare(direct, shown(tt, tmp_path, "wheel.png"))["within"] == 1.0

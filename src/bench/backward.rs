@@ -1,4 +1,4 @@
-//! The backward benchmark (`vksplat bench --backward`): forward and backward timings of the
+//! The backward benchmark (`verisplat bench --backward`): forward and backward timings of the
 //! differentiable rasterizer on one camera, its report and that report's text and JSON.
 
 use super::camera::{BenchCamera, CameraReport};
@@ -9,7 +9,7 @@ use crate::render::GpuRenderer;
 use serde::Serialize;
 
 /// Forward and backward timings of the differentiable rasterizer on one camera
-/// (`vksplat bench --backward`).
+/// (`verisplat bench --backward`).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BackwardReport {
     /// Scene name.

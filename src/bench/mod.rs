@@ -1,5 +1,5 @@
 //! Benchmarks: per-stage timing reports (GPU timestamps or CPU wall clock), scaling sweeps,
-//! CSV/JSON output and SVG plots. Used by `vksplat bench`; warm-up frames are discarded and
+//! CSV/JSON output and SVG plots. Used by `verisplat bench`; warm-up frames are discarded and
 //! every figure is measured.
 //!
 //! This module holds the timing summaries shared by every benchmark ([`Stat`],

@@ -26,7 +26,7 @@ pub struct BenchReport {
     pub driver: String,
     /// Vulkan version of the device.
     pub vulkan: String,
-    /// Blend kernel as `VKSPLAT_BLEND` names it (`shared`, `texel:2`; GPU only).
+    /// Blend kernel as `VERISPLAT_BLEND` names it (`shared`, `texel:2`; GPU only).
     pub blend_kernel: Option<String>,
     /// The alpha falloff rendered (`gaussian` or `power`, `--kernel`).
     pub kernel: String,

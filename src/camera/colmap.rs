@@ -424,7 +424,7 @@ fn pinhole(
             return Err(format!(
                 "camera {id} uses the {} model, a fisheye projection that a pinhole \
                  renderer cannot reproduce; undistort the images first (`colmap image_undistorter` \
-                 writes PINHOLE cameras; `vksplat train` undistorts OPENCV_FISHEYE data sets itself)",
+                 writes PINHOLE cameras; `verisplat train` undistorts OPENCV_FISHEYE data sets itself)",
                 model.name
             ));
         }
@@ -432,7 +432,7 @@ fn pinhole(
             return Err(format!(
                 "camera {id} uses the {} model with non-zero distortion (parameter {k}); only \
                  undistorted pinhole cameras are supported here: undistort the images first \
-                 (`colmap image_undistorter` writes PINHOLE cameras; `vksplat train` undistorts \
+                 (`colmap image_undistorter` writes PINHOLE cameras; `verisplat train` undistorts \
                  such data sets itself, and its model's cameras.json holds the pinhole cameras)",
                 model.name
             ));

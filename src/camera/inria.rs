@@ -2,7 +2,7 @@
 //! `{id, img_name, width, height, position, rotation, fx, fy}` where `position` is the
 //! camera centre and `rotation` the camera-to-world rotation, stored row by row (so its
 //! columns are the camera's right, down and forward axes in world space). Optional `cx`
-//! and `cy` (pixels) give a principal point other than the image centre; vksplat writes
+//! and `cy` (pixels) give a principal point other than the image centre; verisplat writes
 //! them only for such cameras, and other readers ignore them.
 
 use super::{Camera, CameraError};

@@ -27,7 +27,7 @@ impl fmt::Display for CameraFormat {
             CameraFormat::ColmapText => "COLMAP sparse model (text)",
             CameraFormat::ColmapBinary => "COLMAP sparse model (binary)",
             CameraFormat::NerfstudioPath => "nerfstudio camera path",
-            CameraFormat::Keyframes => "vksplat keyframe path",
+            CameraFormat::Keyframes => "verisplat keyframe path",
         })
     }
 }

@@ -1,4 +1,4 @@
-//! `vksplat bench`: per-stage GPU (or CPU reference) timings of one camera, and sweeps.
+//! `verisplat bench`: per-stage GPU (or CPU reference) timings of one camera, and sweeps.
 
 use super::common::{
     camera_path, check_output_file, fail_on_validation_messages, load_scene, CameraArgs,
@@ -8,20 +8,20 @@ use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::bench::BenchCamera;
-use vksplat::output;
-use vksplat::render::GpuRenderer;
-use vksplat::scene::filter::SceneFilter;
-use vksplat::scene::Scene;
-use vksplat::{note, out, outln};
+use verisplat::bench::BenchCamera;
+use verisplat::output;
+use verisplat::render::GpuRenderer;
+use verisplat::scene::filter::SceneFilter;
+use verisplat::scene::Scene;
+use verisplat::{note, out, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat bench scene.ply --frames 20
-  vksplat bench scene.ply --cameras cameras.json --camera 5 --width 1920 --json b.json
-  vksplat bench --sweep gaussians=1e4,1e5,1e6 --sweep resolution=720p,1080p --plot sweep.svg
-  vksplat bench scene.ply --cpu
-  vksplat bench --sweep gaussians=1e5,1e6,1e7 --json b.json --shard slurm   # b.shard-I-of-N.json")]
+  verisplat bench scene.ply --frames 20
+  verisplat bench scene.ply --cameras cameras.json --camera 5 --width 1920 --json b.json
+  verisplat bench --sweep gaussians=1e4,1e5,1e6 --sweep resolution=720p,1080p --plot sweep.svg
+  verisplat bench scene.ply --cpu
+  verisplat bench --sweep gaussians=1e5,1e6,1e7 --json b.json --shard slurm   # b.shard-I-of-N.json")]
 pub(crate) struct BenchArgs {
     /// Scene: any supported format or a model directory; not needed with
     /// --sweep gaussians=...
@@ -44,7 +44,7 @@ pub(crate) struct BenchArgs {
     pub(crate) scale_modifier: f32,
     #[command(flatten)]
     pub(crate) kernel: KernelArg,
-    /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `vksplat gen`) and/or
+    /// Sweep: `gaussians=1e4,1e5,...` (synthetic scenes from `verisplat gen`) and/or
     /// `resolution=720p,1080p,4k,WxH`; repeat the flag for both (all combinations run).
     #[arg(long, value_name = "AXIS=V1,V2,...")]
     pub(crate) sweep: Vec<String>,
@@ -112,7 +112,7 @@ pub(crate) struct BenchArgs {
         default_value = "deterministic",
         requires = "backward"
     )]
-    pub(crate) accumulation: vksplat::render::grad_accumulate::Accumulation,
+    pub(crate) accumulation: verisplat::render::grad_accumulate::Accumulation,
     /// With --backward: shade the feature channels with this neural shader (as `render
     /// --shader`) and differentiate it too: its backward pass is the `shade_bwd` stage.
     #[arg(long, value_name = "FILE.safetensors", requires = "backward")]
@@ -131,7 +131,7 @@ pub(crate) fn choose_camera(
 ) -> Result<BenchCamera> {
     let camera = view.camera.is_some();
     let path = camera_path(view, path, scene_arg, scene)?;
-    let timed = |(k, cam): &(usize, vksplat::camera::Camera)| BenchCamera {
+    let timed = |(k, cam): &(usize, verisplat::camera::Camera)| BenchCamera {
         camera: cam.clone(),
         // The default camera is no camera of a file.
         index: (path.source != "the default camera").then_some(*k),
@@ -171,10 +171,10 @@ pub(crate) fn parse_sweeps(sweeps: &[String]) -> Result<Sweeps> {
         for v in values.split(',').filter(|v| !v.trim().is_empty()) {
             match axis.trim() {
                 "gaussians" => {
-                    counts.push(vksplat::bench::parse_count(v).map_err(anyhow::Error::msg)?)
+                    counts.push(verisplat::bench::parse_count(v).map_err(anyhow::Error::msg)?)
                 }
                 "resolution" => resolutions
-                    .push(vksplat::bench::parse_resolution(v).map_err(anyhow::Error::msg)?),
+                    .push(verisplat::bench::parse_resolution(v).map_err(anyhow::Error::msg)?),
                 other => {
                     bail!("--sweep {sweep:?}: unknown axis {other:?}; use gaussians or resolution")
                 }
@@ -190,12 +190,12 @@ pub(crate) fn parse_sweeps(sweeps: &[String]) -> Result<Sweeps> {
 /// A point's report, or (in a sweep of `points` > 1) `None` with a note when the point is
 /// beyond the device's limits or the input, so the other points still produce theirs.
 fn kept_in_sweep<T>(
-    report: vksplat::gpu::GpuResult<T>,
+    report: verisplat::gpu::GpuResult<T>,
     points: usize,
     name: &str,
-    cam: &vksplat::camera::Camera,
+    cam: &verisplat::camera::Camera,
 ) -> Result<Option<T>> {
-    use vksplat::gpu::GpuError;
+    use verisplat::gpu::GpuError;
     match report {
         Ok(report) => Ok(Some(report)),
         Err(
@@ -215,12 +215,12 @@ fn merge(args: &BenchArgs) -> Result<()> {
         .as_ref()
         .expect("clap requires --json with --merge");
     check_output_file(out, args.overwrite)?;
-    let mut parts: Vec<(vksplat::shard::Shard, serde_json::Value, &PathBuf)> = Vec::new();
+    let mut parts: Vec<(verisplat::shard::Shard, serde_json::Value, &PathBuf)> = Vec::new();
     for path in &args.merge {
         let name = path.file_stem().and_then(|n| n.to_str()).unwrap_or("");
         let shard = name
             .rsplit_once('.')
-            .and_then(|(_, tag)| vksplat::shard::Shard::parse_tag(tag))
+            .and_then(|(_, tag)| verisplat::shard::Shard::parse_tag(tag))
             .ok_or_else(|| {
                 anyhow::anyhow!(
                     "{}: not a shard's report (its name must end in .shard-I-of-N.json, as bench --json --shard writes it)",
@@ -373,7 +373,7 @@ struct ReportFiles {
 }
 
 impl ReportFiles {
-    fn checked(args: &BenchArgs, shard: Option<vksplat::shard::Shard>) -> Result<ReportFiles> {
+    fn checked(args: &BenchArgs, shard: Option<verisplat::shard::Shard>) -> Result<ReportFiles> {
         // A shard writes its own report files.
         let shard_file = |path: &Option<PathBuf>| -> Option<PathBuf> {
             let path = path.as_ref()?;
@@ -403,7 +403,7 @@ fn load_file_scene(
     scene_arg: &SceneArg,
     filter: &SceneFilter,
     no_count_sweep: bool,
-) -> Result<(Option<NamedScene>, Option<vksplat::mlp::Mlp>)> {
+) -> Result<(Option<NamedScene>, Option<verisplat::mlp::Mlp>)> {
     if (args.features.is_some() || args.shader.is_some()) && !no_count_sweep {
         bail!("--features and --shader apply to a scene file; a Gaussians sweep generates its own scenes");
     }
@@ -412,10 +412,10 @@ fn load_file_scene(
         let (mut scene, name) = load_scene(scene_arg)?;
         super::common::refuse_time_varying(&scene, &name, "bench")?;
         if let Some(file) = &args.features {
-            vksplat::scene::features::attach_npy(&mut scene, file)?;
+            verisplat::scene::features::attach_npy(&mut scene, file)?;
         }
         if let Some(path) = &args.shader {
-            let mlp = vksplat::mlp::Mlp::load(path)?;
+            let mlp = verisplat::mlp::Mlp::load(path)?;
             mlp.check_channels(scene.feature_count)
                 .map_err(|e| anyhow::anyhow!("{}: {e} ({name})", path.display()))?;
             shader = Some(mlp);
@@ -458,7 +458,7 @@ fn bench_renderer(args: &BenchArgs) -> Result<Option<GpuRenderer>> {
 /// The points of the sweep this process runs (all of them without `--shard`), announced
 /// for a shard; `None` when a shard has none.
 fn shard_points(
-    shard: Option<vksplat::shard::Shard>,
+    shard: Option<verisplat::shard::Shard>,
     points: usize,
 ) -> Option<std::ops::Range<usize>> {
     let mine = shard.map_or(0..points, |s| s.range(points));
@@ -487,7 +487,7 @@ fn point_scene(
     let synthetic_sh_degree = args.filter.sh_degree.unwrap_or(2);
     Ok(match (count, file_scene) {
         (Some(n), _) => (
-            filter.apply(&vksplat::gen::synthetic_scene(
+            filter.apply(&verisplat::gen::synthetic_scene(
                 n,
                 args.seed,
                 synthetic_sh_degree,
@@ -532,19 +532,19 @@ fn point_camera(
 
 /// One point of the sweep: what is timed.
 struct Point<'a> {
-    scene: &'a vksplat::model::ActivatedScene,
+    scene: &'a verisplat::model::ActivatedScene,
     name: &'a str,
     timed: &'a BenchCamera,
-    kernel: vksplat::cpu::SplatKernel,
-    rules: vksplat::cpu::Rules,
-    shader: Option<&'a vksplat::mlp::Mlp>,
+    kernel: verisplat::cpu::SplatKernel,
+    rules: verisplat::cpu::Rules,
+    shader: Option<&'a verisplat::mlp::Mlp>,
 }
 
 /// The reports of the points run so far (of `points` in the sweep).
 struct Runs {
     points: usize,
-    forward: Vec<vksplat::bench::BenchReport>,
-    backward: Vec<vksplat::bench::BackwardReport>,
+    forward: Vec<verisplat::bench::BenchReport>,
+    backward: Vec<verisplat::bench::BackwardReport>,
 }
 
 impl Runs {
@@ -565,7 +565,7 @@ impl Runs {
             shader,
         } = *point;
         let cam = &timed.camera;
-        let opts = vksplat::cpu::RenderOptions {
+        let opts = verisplat::cpu::RenderOptions {
             scale_modifier: args.scale_modifier,
             kernel,
             rules,
@@ -574,7 +574,7 @@ impl Runs {
         let points = self.points;
         let mut renderer = renderer;
         if let (true, Some(r)) = (args.backward, renderer.as_deref_mut()) {
-            let report = vksplat::bench::bench_backward(
+            let report = verisplat::bench::bench_backward(
                 r,
                 act,
                 name,
@@ -594,9 +594,9 @@ impl Runs {
         }
         let report = match renderer {
             Some(r) => {
-                vksplat::bench::bench_gpu(r, act, name, timed, &opts, args.frames, args.warmup)
+                verisplat::bench::bench_gpu(r, act, name, timed, &opts, args.frames, args.warmup)
             }
-            None => Ok(vksplat::bench::bench_cpu(
+            None => Ok(verisplat::bench::bench_cpu(
                 act,
                 name,
                 timed,
@@ -620,7 +620,7 @@ fn write_backward_reports(
     args: &BenchArgs,
     renderer: Option<&GpuRenderer>,
     files: &ReportFiles,
-    backward_reports: &[vksplat::bench::BackwardReport],
+    backward_reports: &[verisplat::bench::BackwardReport],
 ) -> Result<()> {
     if backward_reports.is_empty() {
         bail!("every point of the sweep exceeded the device's limits (see above)");
@@ -629,7 +629,7 @@ fn write_backward_reports(
         fail_on_validation_messages(r.ctx())?;
     }
     if let Some(path) = &files.json {
-        let text = vksplat::bench::backward_to_json(backward_reports);
+        let text = verisplat::bench::backward_to_json(backward_reports);
         output::write_bytes_atomically(path, args.overwrite, text.as_bytes())?;
     }
     Ok(())
@@ -642,11 +642,11 @@ fn write_reports(
     renderer: Option<&GpuRenderer>,
     files: &ReportFiles,
     points: usize,
-    reports: &[vksplat::bench::BenchReport],
+    reports: &[verisplat::bench::BenchReport],
 ) -> Result<()> {
     if points > 1 && !args.quiet {
         outln!("sweep summary (medians):");
-        out!("{}", vksplat::bench::summary_table(reports));
+        out!("{}", verisplat::bench::summary_table(reports));
     }
     if reports.is_empty() {
         bail!("every point of the sweep exceeded the device's limits (see above)");
@@ -659,13 +659,13 @@ fn write_reports(
         Ok(())
     };
     if let Some(path) = &files.json {
-        write_text(path, vksplat::bench::to_json(reports))?;
+        write_text(path, verisplat::bench::to_json(reports))?;
     }
     if let Some(path) = &files.csv {
-        write_text(path, vksplat::bench::to_csv(reports))?;
+        write_text(path, verisplat::bench::to_csv(reports))?;
     }
     if let Some(path) = &files.plot {
-        let svg = vksplat::bench::plot_sweep(reports).map_err(anyhow::Error::msg)?;
+        let svg = verisplat::bench::plot_sweep(reports).map_err(anyhow::Error::msg)?;
         write_text(path, svg)?;
     }
     Ok(())

@@ -5,17 +5,17 @@ use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use vksplat::camera::{self, Camera, CameraFormat};
-use vksplat::cpu::{Rules, SplatKernel};
-use vksplat::gpu::{ContextOptions, GpuContext};
-use vksplat::scene::filter::SceneFilter;
-use vksplat::scene::{self, Scene};
+use verisplat::camera::{self, Camera, CameraFormat};
+use verisplat::cpu::{Rules, SplatKernel};
+use verisplat::gpu::{ContextOptions, GpuContext};
+use verisplat::scene::filter::SceneFilter;
+use verisplat::scene::{self, Scene};
 
 /// Where the camera comes from and at which resolution.
 #[derive(Args, Clone)]
 pub(crate) struct CameraArgs {
     /// Camera file: INRIA cameras.json, a COLMAP sparse model (folder, or cameras/images
-    /// .txt/.bin), a nerfstudio camera_path.json or a vksplat keyframe JSON (see
+    /// .txt/.bin), a nerfstudio camera_path.json or a verisplat keyframe JSON (see
     /// docs/cameras.md); the format is detected from the content.
     #[arg(long, value_name = "FILE")]
     pub(crate) cameras: Option<PathBuf>,
@@ -52,10 +52,10 @@ pub(crate) struct SceneArg {
 #[derive(Args)]
 pub(crate) struct GpuArgs {
     /// Vulkan device: index or part of its name (default: discrete, then integrated,
-    /// then CPU; also VKSPLAT_DEVICE).
+    /// then CPU; also VERISPLAT_DEVICE).
     #[arg(long, value_name = "N|NAME")]
     pub(crate) device: Option<String>,
-    /// Enable the Khronos validation layer (also VKSPLAT_VALIDATE=1); any message it
+    /// Enable the Khronos validation layer (also VERISPLAT_VALIDATE=1); any message it
     /// prints makes the command fail.
     #[arg(long)]
     pub(crate) validate: bool,
@@ -63,8 +63,8 @@ pub(crate) struct GpuArgs {
     #[arg(short, long)]
     pub(crate) verbose: bool,
     /// Device memory the renderer may use, in bytes (K/M/G suffixes; also
-    /// VKSPLAT_MEMORY_LIMIT); default: the device-local heap.
-    #[arg(long, value_name = "BYTES", value_parser = vksplat::gpu::context::parse_bytes)]
+    /// VERISPLAT_MEMORY_LIMIT); default: the device-local heap.
+    #[arg(long, value_name = "BYTES", value_parser = verisplat::gpu::context::parse_bytes)]
     pub(crate) memory_limit: Option<u64>,
 }
 
@@ -87,11 +87,11 @@ impl GpuArgs {
 
 /// The shard `--shard` names (`I/N` or `slurm`, read from the environment), if given;
 /// a bad value or `slurm` outside a job array is one sentence.
-pub(crate) fn shard(spec: Option<&str>) -> Result<Option<vksplat::shard::Shard>> {
+pub(crate) fn shard(spec: Option<&str>) -> Result<Option<verisplat::shard::Shard>> {
     let Some(spec) = spec else {
         return Ok(None);
     };
-    let spec: vksplat::shard::ShardSpec = spec.parse().map_err(anyhow::Error::msg)?;
+    let spec: verisplat::shard::ShardSpec = spec.parse().map_err(anyhow::Error::msg)?;
     Ok(Some(
         spec.resolve(|k| std::env::var(k).ok())
             .map_err(anyhow::Error::msg)?,
@@ -111,7 +111,7 @@ pub(crate) fn fail_on_validation_messages(ctx: &GpuContext) -> Result<()> {
     Ok(())
 }
 
-/// Camera paths generated or interpolated by vksplat.
+/// Camera paths generated or interpolated by verisplat.
 #[derive(Args)]
 pub(crate) struct PathArgs {
     /// Render a turntable orbit of FRAMES frames around the scene's bulk (world up -y).
@@ -175,7 +175,7 @@ impl KernelArg {
             return k;
         }
         if scene.kernel != SplatKernel::Gaussian {
-            vksplat::note!(
+            verisplat::note!(
                 "note: {name} records the {} kernel; rendering with it (--kernel gaussian overrides)",
                 scene.kernel
             );
@@ -190,7 +190,7 @@ impl KernelArg {
             return r;
         }
         if scene.rules != Rules::Original {
-            vksplat::note!(
+            verisplat::note!(
                 "note: {name} records that it was trained with {}'s rules; rendering with them (--rules original overrides)",
                 scene.rules
             );
@@ -212,7 +212,7 @@ pub(crate) struct FilterArgs {
     #[arg(long, value_name = "O", value_parser = values::unit_f32)]
     pub(crate) min_opacity: Option<f32>,
     /// Keep only Gaussians whose centre is inside the box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX.
-    #[arg(long, value_name = "BOX", value_parser = vksplat::scene::filter::parse_crop, allow_hyphen_values = true)]
+    #[arg(long, value_name = "BOX", value_parser = verisplat::scene::filter::parse_crop, allow_hyphen_values = true)]
     pub(crate) crop: Option<[[f32; 3]; 2]>,
 }
 
@@ -232,7 +232,7 @@ impl FilterArgs {
 pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     if arg.demo {
         return Ok((
-            vksplat::demo_scene(),
+            verisplat::demo_scene(),
             "built-in demo scene (PLAYBOT)".into(),
         ));
     }
@@ -245,7 +245,7 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
         Ok((scene, resolved)) => Ok((scene, resolved.display().to_string())),
         // A camera file where the scene belongs: every command says what `info` says. (A
         // model directory also holds cameras, but its scene's error is the one to show.)
-        Err(e) if path.is_file() => match vksplat::camera::detect_camera_format(path) {
+        Err(e) if path.is_file() => match verisplat::camera::detect_camera_format(path) {
             Ok(format) => bail!(
                 "{} is a camera file ({format}), not a scene: give a scene and pass this file with --cameras {}",
                 path.display(),
@@ -262,7 +262,7 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
 pub(crate) fn refuse_time_varying(scene: &Scene, name: &str, command: &str) -> Result<()> {
     if let Some((lo, hi)) = scene.time_range() {
         bail!(
-            "{name} is time-varying (its Gaussians' temporal means run from {lo} to {hi}), which `vksplat {command}` does not render; use `vksplat render --time T` (or --time-range T0,T1)"
+            "{name} is time-varying (its Gaussians' temporal means run from {lo} to {hi}), which `verisplat {command}` does not render; use `verisplat render --time T` (or --time-range T0,T1)"
         );
     }
     Ok(())
@@ -275,13 +275,13 @@ pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
     let dir = model_dir(scene)?;
     let file = dir.join("cameras.json");
     if file.is_file() {
-        vksplat::note!(
+        verisplat::note!(
             "note: using the model's cameras, {} (--cameras or --orbit choose others)",
             file.display()
         );
         Some(file)
     } else {
-        vksplat::note!(
+        verisplat::note!(
             "note: model directory {} has no cameras.json; using the default camera",
             dir.display()
         );
@@ -317,7 +317,7 @@ fn orbit_frame(p: &PathArgs, scene_arg: &SceneArg) -> Result<(glam::Vec3, Option
         took.push(format!("centre {:.3},{:.3},{:.3}", c.x, c.y, c.z));
     }
     if !took.is_empty() {
-        vksplat::note!(
+        verisplat::note!(
             "note: the orbit's {} from the model's {} ({}; --orbit-up and --orbit-centre choose others)",
             took.join(" and "),
             super::plural(cams.len(), "camera"),
@@ -335,7 +335,7 @@ fn orbit_frame(p: &PathArgs, scene_arg: &SceneArg) -> Result<(glam::Vec3, Option
 /// new file (so an unwritable destination is reported now, not after minutes of work).
 pub(crate) fn check_output_file(path: &Path, overwrite: bool) -> Result<()> {
     if !overwrite && path.exists() {
-        return Err(vksplat::output::OutputError::Exists(path.to_path_buf()).into());
+        return Err(verisplat::output::OutputError::Exists(path.to_path_buf()).into());
     }
     if path.is_dir() {
         bail!("{}: is a directory; give a file name", path.display());
@@ -351,7 +351,7 @@ pub(crate) fn check_output_file(path: &Path, overwrite: bool) -> Result<()> {
 pub(crate) fn check_output_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir)
         .map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", dir.display()))?;
-    let probe = dir.join(format!(".vksplat-probe.{}.tmp", std::process::id()));
+    let probe = dir.join(format!(".verisplat-probe.{}.tmp", std::process::id()));
     std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)

@@ -1,5 +1,5 @@
-//! `vksplat compare`: a scene's GPU renders against the CPU reference renderer, frame by
-//! frame, or two images against each other. The figures come from `vksplat::metrics`;
+//! `verisplat compare`: a scene's GPU renders against the CPU reference renderer, frame by
+//! frame, or two images against each other. The figures come from `verisplat::metrics`;
 //! the command adds diff heat maps, `report.json` + `report.csv`, a table, and an exit
 //! status CI can gate on.
 
@@ -11,19 +11,19 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use vksplat::diff_image;
-use vksplat::image_file::{self, Planes};
-use vksplat::metrics::{self, ErrorStats, PlaneKind};
-use vksplat::output::{self, ImageFormat};
-use vksplat::render::blend::BlendKernel;
-use vksplat::render::GpuRenderer;
-use vksplat::sequence::FrameSelection;
-use vksplat::{note, outln};
+use verisplat::diff_image;
+use verisplat::image_file::{self, Planes};
+use verisplat::metrics::{self, ErrorStats, PlaneKind};
+use verisplat::output::{self, ImageFormat};
+use verisplat::render::blend::BlendKernel;
+use verisplat::render::GpuRenderer;
+use verisplat::sequence::FrameSelection;
+use verisplat::{note, outln};
 
-/// Test-only knob: `VKSPLAT_TEST_PERTURB_RED=D` adds `D` to the red channel of every GPU
+/// Test-only knob: `VERISPLAT_TEST_PERTURB_RED=D` adds `D` to the red channel of every GPU
 /// frame before it is compared, standing in for a broken blend so the tests can check that
 /// `compare` fails. Read by this command only; not meant for users.
-pub(crate) const PERTURB_RED_ENV: &str = "VKSPLAT_TEST_PERTURB_RED";
+pub(crate) const PERTURB_RED_ENV: &str = "VERISPLAT_TEST_PERTURB_RED";
 
 /// Report directory of a scene comparison when `-o` is not given.
 const DEFAULT_REPORT_DIR: &str = "compare_report";
@@ -39,9 +39,9 @@ Exit status: 0 when every frame's colour and alpha meet --min-psnr and --min-wit
 when one does not (the failing frames are named) or on an error.
 
 Examples:
-  vksplat compare scene.ply --cameras cameras.json -o report/
-  vksplat compare scene.ply --orbit 8 --width 640 --blend-kernel texel:4
-  vksplat compare reference.exr test.npy --diff diff.png")]
+  verisplat compare scene.ply --cameras cameras.json -o report/
+  verisplat compare scene.ply --orbit 8 --width 640 --blend-kernel texel:4
+  verisplat compare reference.exr test.npy --diff diff.png")]
 pub(crate) struct CompareArgs {
     /// A scene (or trained model directory), or two images A B: PNG (8/16-bit), JPEG,
     /// WebP, OpenEXR (channels R, G, B, A, Z by name) or NumPy .npy (H x W x C or H x W,
@@ -234,7 +234,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
     let dir = report_dir(args, &cams)?;
 
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
-    let opts = vksplat::cpu::RenderOptions {
+    let opts = verisplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
         scale_modifier: args.scale_modifier,
@@ -334,8 +334,8 @@ fn perturb_red() -> Result<f32> {
 fn compared_cameras(
     args: &CompareArgs,
     scene_arg: &SceneArg,
-    scene: &vksplat::scene::Scene,
-) -> Result<(String, Vec<(usize, vksplat::camera::Camera)>)> {
+    scene: &verisplat::scene::Scene,
+) -> Result<(String, Vec<(usize, verisplat::camera::Camera)>)> {
     let path = camera_path(&args.view, &args.path, scene_arg, scene)?;
     if let Some(frames) = &args.frames {
         frames.check(path.len).map_err(anyhow::Error::msg)?;
@@ -362,7 +362,7 @@ fn diff_name(k: usize) -> String {
 
 /// The report directory (`-o`, or the default), created once none of the files the
 /// comparison of `cams` writes there is in the way.
-fn report_dir(args: &CompareArgs, cams: &[(usize, vksplat::camera::Camera)]) -> Result<PathBuf> {
+fn report_dir(args: &CompareArgs, cams: &[(usize, verisplat::camera::Camera)]) -> Result<PathBuf> {
     let dir = args
         .output
         .clone()
@@ -379,9 +379,9 @@ fn report_dir(args: &CompareArgs, cams: &[(usize, vksplat::camera::Camera)]) -> 
 struct FrameComparison<'a> {
     args: &'a CompareArgs,
     gate: Gate,
-    scene: &'a vksplat::model::ActivatedScene,
-    gpu_scene: &'a vksplat::render::GpuScene,
-    opts: &'a vksplat::cpu::RenderOptions,
+    scene: &'a verisplat::model::ActivatedScene,
+    gpu_scene: &'a verisplat::render::GpuScene,
+    opts: &'a verisplat::cpu::RenderOptions,
     /// Added to the GPU frame's red channel (the test-only knob).
     perturb: f32,
     /// The report directory, where the diff image goes.
@@ -395,7 +395,7 @@ impl FrameComparison<'_> {
         &self,
         renderer: &mut GpuRenderer,
         k: usize,
-        cam: &vksplat::camera::Camera,
+        cam: &verisplat::camera::Camera,
     ) -> Result<FrameRecord> {
         let (args, gate, opts) = (self.args, self.gate, self.opts);
         let mut gpu = renderer.render(self.gpu_scene, cam, opts)?;
@@ -404,7 +404,7 @@ impl FrameComparison<'_> {
                 c[0] += self.perturb;
             }
         }
-        let cpu = vksplat::cpu::render(self.scene, cam, opts);
+        let cpu = verisplat::cpu::render(self.scene, cam, opts);
         let m = metrics::compare_frames(&cpu, &gpu);
         let (reference, test) = (metrics::clamped_color(&cpu), metrics::clamped_color(&gpu));
         let flip = metrics::flip(

@@ -1,18 +1,18 @@
-//! `vksplat convert`: any readable scene format to PLY, .splat or SPZ.
+//! `verisplat convert`: any readable scene format to PLY, .splat or SPZ.
 
 use super::common::{check_output_file, FilterArgs};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::note;
-use vksplat::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
+use verisplat::note;
+use verisplat::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat convert scene.ply scene.spz
-  vksplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
-  vksplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
-  vksplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel")]
+  verisplat convert scene.ply scene.spz
+  verisplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
+  verisplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
+  verisplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel")]
 pub(crate) struct ConvertArgs {
     /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
     pub(crate) input: PathBuf,
@@ -28,7 +28,7 @@ pub(crate) struct ConvertArgs {
     /// Record this alpha falloff in the output (gaussian or power; a PLY header comment,
     /// which `render` follows) [default: the input's].
     #[arg(long, value_name = "gaussian|power")]
-    pub(crate) kernel: Option<vksplat::cpu::SplatKernel>,
+    pub(crate) kernel: Option<verisplat::cpu::SplatKernel>,
     /// Attach feature channels from an N x K NumPy array (float32 or float16; written as
     /// feat_* PLY properties; other formats drop them with a note).
     #[arg(long, value_name = "FILE.npy")]

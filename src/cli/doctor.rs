@@ -1,14 +1,14 @@
-//! `vksplat doctor`: lists every Vulkan device and runs the self-check
-//! ([`vksplat::doctor`]) on the usable ones; and the hidden `vksplat gpu-report`, which
+//! `verisplat doctor`: lists every Vulkan device and runs the self-check
+//! ([`verisplat::doctor`]) on the usable ones; and the hidden `verisplat gpu-report`, which
 //! turns a GPU bundle run's results into one markdown report.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
 use std::path::PathBuf;
-use vksplat::doctor::{self, DeviceRun};
-use vksplat::gpu::devices::{self, DeviceSummary};
-use vksplat::{note, outln};
+use verisplat::doctor::{self, DeviceRun};
+use verisplat::gpu::devices::{self, DeviceSummary};
+use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "\
@@ -18,9 +18,9 @@ backward pass) and prints its figure and PASS or FAIL. Exit status: 0 when every
 every checked device passes, 1 otherwise.
 
 Examples:
-  vksplat doctor
-  vksplat doctor --device 1 --json doctor.json
-  vksplat doctor --validate -q")]
+  verisplat doctor
+  verisplat doctor --device 1 --json doctor.json
+  verisplat doctor --validate -q")]
 pub(crate) struct DoctorArgs {
     /// Check only this device: index or part of its name (default: every usable device).
     #[arg(long, value_name = "N|NAME")]
@@ -30,7 +30,7 @@ pub(crate) struct DoctorArgs {
     /// (the text then goes to standard error).
     #[arg(long, value_name = "FILE|-")]
     json: Option<PathBuf>,
-    /// Enable the Khronos validation layer (also VKSPLAT_VALIDATE=1): any message fails.
+    /// Enable the Khronos validation layer (also VERISPLAT_VALIDATE=1): any message fails.
     #[arg(long)]
     validate: bool,
     /// Run only these checks (comma-separated: subgroups, sort64, sort32, scan, render,
@@ -46,7 +46,7 @@ pub(crate) struct DoctorArgs {
 #[derive(Serialize)]
 struct Report<'a> {
     schema_version: u32,
-    vksplat_version: &'static str,
+    verisplat_version: &'static str,
     devices: &'a [DeviceSummary],
     runs: &'a [DeviceRun],
     passed: bool,
@@ -128,8 +128,9 @@ pub(crate) fn doctor(args: &DoctorArgs) -> Result<()> {
             outln!("{line}");
         }
     };
-    let validation =
-        args.validate || std::env::var("VKSPLAT_VALIDATE").is_ok_and(|v| !v.is_empty() && v != "0");
+    let validation = args.validate
+        || verisplat::former_name::env_var("VERISPLAT_VALIDATE")
+            .is_some_and(|v| !v.is_empty() && v != "0");
     if let Some(unknown) = args
         .checks
         .iter()
@@ -153,7 +154,7 @@ pub(crate) fn doctor(args: &DoctorArgs) -> Result<()> {
     let chosen: Vec<usize> = match &args.device {
         Some(choice) => {
             let names: Vec<String> = list.iter().map(|d| d.name.clone()).collect();
-            match vksplat::gpu::context::select_device(choice, &names) {
+            match verisplat::gpu::context::select_device(choice, &names) {
                 Some(i) => vec![i],
                 None => bail!(
                     "no device matches --device {choice}; available: {}",
@@ -168,7 +169,7 @@ pub(crate) fn doctor(args: &DoctorArgs) -> Result<()> {
     };
     if chosen.is_empty() {
         bail!(
-            "no usable Vulkan device (vksplat needs Vulkan 1.3 with a compute queue, push \
+            "no usable Vulkan device (verisplat needs Vulkan 1.3 with a compute queue, push \
              descriptors, synchronization2 and maintenance4): {}",
             if list.is_empty() {
                 "the Vulkan loader reports no devices (is a driver installed? VK_DRIVER_FILES \
@@ -203,14 +204,14 @@ pub(crate) fn doctor(args: &DoctorArgs) -> Result<()> {
     if let Some(path) = &args.json {
         let report = Report {
             schema_version: 1,
-            vksplat_version: env!("CARGO_PKG_VERSION"),
+            verisplat_version: env!("CARGO_PKG_VERSION"),
             devices: &list,
             runs: &runs,
             passed,
         };
         let text = serde_json::to_string_pretty(&report)? + "\n";
         if json_to_stdout {
-            vksplat::out!("{text}");
+            verisplat::out!("{text}");
         } else {
             std::fs::write(path, text)
                 .with_context(|| format!("{}: cannot write the report", path.display()))?;
@@ -249,7 +250,7 @@ pub(crate) fn gpu_report(args: &GpuReportArgs) -> Result<()> {
     match &args.output {
         Some(path) => std::fs::write(path, md)
             .with_context(|| format!("{}: cannot write the report", path.display()))?,
-        None => vksplat::out!("{md}"),
+        None => verisplat::out!("{md}"),
     }
     Ok(())
 }

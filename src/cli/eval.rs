@@ -1,4 +1,4 @@
-//! `vksplat eval`: renders the cameras of a trained model and compares each render with
+//! `verisplat eval`: renders the cameras of a trained model and compares each render with
 //! the ground-truth photo of the same name, as the original 3DGS `render.py` +
 //! `metrics.py` do: PSNR, SSIM and LDR-FLIP per image and on average.
 
@@ -11,13 +11,13 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use vksplat::camera::{self, Camera};
-use vksplat::image_file::{self, Planes};
-use vksplat::metrics;
-use vksplat::output;
-use vksplat::render::GpuRenderer;
-use vksplat::shard::Shard;
-use vksplat::{note, outln};
+use verisplat::camera::{self, Camera};
+use verisplat::image_file::{self, Planes};
+use verisplat::metrics;
+use verisplat::output;
+use verisplat::render::GpuRenderer;
+use verisplat::shard::Shard;
+use verisplat::{note, outln};
 
 /// Every `LLFF_HOLD`-th camera (in image-name order, from the first) is a test camera when
 /// the data set names no split: the original code's `llffhold`.
@@ -43,10 +43,10 @@ contiguous block of the split's cameras and writes DIR/report.shard-I-of-N.json 
 and report.csv, the files one process writes.
 
 Examples:
-  vksplat eval model/ --images dataset/images --split test
-  vksplat eval scene.ply --cameras cameras.json --images photos/ -o eval_report/
-  vksplat eval model/ --images dataset/images -o rep/ --shard slurm   # sbatch --array=0-7
-  vksplat eval --merge rep/")]
+  verisplat eval model/ --images dataset/images --split test
+  verisplat eval scene.ply --cameras cameras.json --images photos/ -o eval_report/
+  verisplat eval model/ --images dataset/images -o rep/ --shard slurm   # sbatch --array=0-7
+  verisplat eval --merge rep/")]
 pub(crate) struct EvalArgs {
     /// Scene: INRIA .ply, compressed .ply, .splat, .spz or SOG (detected from the content),
     /// or a trained model directory (uses point_cloud/iteration_<largest>/).
@@ -415,7 +415,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         );
     }
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
-    let opts = vksplat::cpu::RenderOptions {
+    let opts = verisplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
         kernel: args.kernel.resolve(&scene, &name),
@@ -577,15 +577,15 @@ fn match_photos(
 }
 
 /// The device renderer and the scene uploaded to it (`None`: the CPU reference renders).
-type Gpu = Option<(GpuRenderer, vksplat::render::GpuScene)>;
+type Gpu = Option<(GpuRenderer, verisplat::render::GpuScene)>;
 
 /// What each image is rendered and measured with.
 struct Measure<'a> {
     args: &'a EvalArgs,
     prep: super::eval_photo::PhotoPrep,
     ppd: f64,
-    scene: &'a vksplat::model::ActivatedScene,
-    opts: &'a vksplat::cpu::RenderOptions,
+    scene: &'a verisplat::model::ActivatedScene,
+    opts: &'a verisplat::cpu::RenderOptions,
 }
 
 impl Measure<'_> {
@@ -667,7 +667,7 @@ impl Measure<'_> {
         cam.validate()?;
         let frame = match gpu.as_mut() {
             Some((r, s)) => r.render(s, &cam, self.opts)?,
-            None => vksplat::cpu::render(self.scene, &cam, self.opts),
+            None => verisplat::cpu::render(self.scene, &cam, self.opts),
         };
         let render: Vec<f32> = metrics::clamped_color(&frame)
             .into_iter()

@@ -1,4 +1,4 @@
-//! The ground-truth photos of `vksplat eval`, prepared as `vksplat train` prepared them:
+//! The ground-truth photos of `verisplat eval`, prepared as `verisplat train` prepared them:
 //! undistorted to the pinhole cameras the model's `undistortion.json` records, then
 //! area-averaged down to the training resolution (`-r`, or the model's `cfg_args`), so
 //! that eval compares with the photos the model was trained and tested on.
@@ -6,10 +6,10 @@
 use anyhow::Result;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use vksplat::camera::Camera;
-use vksplat::note;
-use vksplat::train::data::{resize, Resolution};
-use vksplat::train::undistort::{self, Undistortion};
+use verisplat::camera::Camera;
+use verisplat::note;
+use verisplat::train::data::{resize, Resolution};
+use verisplat::train::undistort::{self, Undistortion};
 
 /// How each photo is prepared before it is compared.
 pub(crate) struct PhotoPrep {
@@ -51,7 +51,7 @@ fn cfg_resolution(text: &str) -> Option<u32> {
 fn stem(name: &str) -> &str {
     match name.rsplit_once('.') {
         Some((s, e))
-            if vksplat::image_file::EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()) =>
+            if verisplat::image_file::EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()) =>
         {
             s
         }
@@ -161,7 +161,7 @@ mod tests {
 
     #[test]
     fn photos_are_scaled_as_trained_unless_already_at_the_cameras_size() {
-        let mut cam = vksplat::camera::default_camera(&[[0.0; 3]], 10, 8);
+        let mut cam = verisplat::camera::default_camera(&[[0.0; 3]], 10, 8);
         cam.name = "a".into();
         let prep = |r: Option<u32>, given: bool| PhotoPrep {
             resolution: r,

@@ -1,4 +1,4 @@
-//! `vksplat fit`: Gaussians with feature channels fitted to RF field samples.
+//! `verisplat fit`: Gaussians with feature channels fitted to RF field samples.
 
 use super::common::check_output_file;
 use super::values;
@@ -6,17 +6,17 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 use std::time::Instant;
-use vksplat::cpu::SplatKernel;
-use vksplat::fit::{Columns, FieldData, FitConfig, FitOutcome, Layout};
-use vksplat::{note, outln};
+use verisplat::cpu::SplatKernel;
+use verisplat::fit::{Columns, FieldData, FitConfig, FitOutcome, Layout};
+use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat gen --rf dipole dipole.npy
-  vksplat fit dipole.npy -o dipole.ply --report dipole_fit.json
-  vksplat fit samples.csv -o field.ply --gaussians 500 --max-gaussians 2000 --kernel power
-  vksplat gen --rf moving-source moving.npy
-  vksplat fit moving.npy -o moving.ply      (x, y, z, t, value: --time-column 3 from moving.npy.json)
+  verisplat gen --rf dipole dipole.npy
+  verisplat fit dipole.npy -o dipole.ply --report dipole_fit.json
+  verisplat fit samples.csv -o field.ply --gaussians 500 --max-gaussians 2000 --kernel power
+  verisplat gen --rf moving-source moving.npy
+  verisplat fit moving.npy -o moving.ply      (x, y, z, t, value: --time-column 3 from moving.npy.json)
 
 Inputs: a dense grid .npy (X x Y x Z x C, points spread over --bounds like numpy.linspace,
 or over the bounds of the sidecar FILE.npy.json that `gen --rf` writes), or scattered
@@ -27,7 +27,7 @@ features feat_0..feat_{C-1}. Fewer than 45 samples (20 to fit, 5 held out at the
 --holdout 0.1) need --force.
 Samples with a time (one more column, --time-column; a CSV header's t or time column is
 found by itself) are fitted in space and time: each Gaussian gets a temporal mean and scale
-(t_mean, t_scale in the PLY); render them with `vksplat render --time T`.")]
+(t_mean, t_scale in the PLY); render them with `verisplat render --time T`.")]
 pub(crate) struct FitArgs {
     /// Field samples: a grid .npy (X x Y x Z x C) or samples .npy / .csv (N x (3 + C)).
     pub(crate) input: PathBuf,
@@ -37,14 +37,14 @@ pub(crate) struct FitArgs {
     /// Extent of a grid input [default: from the sidecar INPUT.json that gen --rf writes, e.g. dipole.npy.json].
     /// Scattered samples: the region they were taken in (every sample inside it; a scan on a
     /// plane or a line gets its thickness from it).
-    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = vksplat::fit::parse_bounds, allow_hyphen_values = true)]
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", value_parser = verisplat::fit::parse_bounds, allow_hyphen_values = true)]
     pub(crate) bounds: Option<[f32; 6]>,
     /// Scattered samples: the column holding each sample's time (0-based, after x, y, z: e.g.
     /// 3 for rows x, y, z, t, values...), or a CSV header's name for it; the field is then
     /// fitted in space and time [default: a CSV header's t or time column, or the
     /// time_column of the sidecar INPUT.json that gen --rf moving-source writes; else none].
     #[arg(long, value_name = "C|NAME")]
-    pub(crate) time_column: Option<vksplat::fit::TimeColumn>,
+    pub(crate) time_column: Option<verisplat::fit::TimeColumn>,
     /// Gaussians at the start [default: one per 20 samples, 8 to 1000].
     #[arg(long, value_name = "N", value_parser = values::int_in(1usize, 10_000_000))]
     pub(crate) gaussians: Option<usize>,
@@ -146,7 +146,7 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     let cfg = config(args, &data, magnitude_channel)?;
     let layout = describe(args, &data, columns.as_ref(), &cfg);
     let bar = progress_bar(args.quiet, cfg.steps);
-    let outcome = vksplat::fit::fit(&data, &cfg, &mut |p| {
+    let outcome = verisplat::fit::fit(&data, &cfg, &mut |p| {
         if p.step % 10 == 0 || p.step == cfg.steps {
             bar.set_message(format!("loss {:.3e}  {} Gaussians", p.loss, p.gaussians));
             bar.set_position(p.step as u64);
@@ -158,10 +158,12 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
         note!("note: {n}");
     }
     let warnings = warnings(&outcome);
-    let scene = vksplat::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
-    let bytes =
-        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian);
-    vksplat::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
+    let scene = verisplat::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
+    let bytes = verisplat::scene::ply::to_bytes(
+        &scene,
+        verisplat::scene::ply::PlyEncoding::BinaryLittleEndian,
+    );
+    verisplat::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
     let seconds = started.elapsed().as_secs_f64();
     let input = Input {
         data: &data,
@@ -211,7 +213,7 @@ fn check_paths(args: &FitArgs) -> Result<()> {
 /// fit (channels it does not have, a magnitude channel without a positive value).
 /// Returns them, the roles of their columns and the channel that weights the loss.
 fn load_input(args: &FitArgs) -> Result<(FieldData, Option<Columns>, usize)> {
-    let (data, columns) = vksplat::fit::load_with_columns(
+    let (data, columns) = verisplat::fit::load_with_columns(
         &args.input,
         args.bounds,
         &args.time_column.clone().unwrap_or_default(),
@@ -219,7 +221,7 @@ fn load_input(args: &FitArgs) -> Result<(FieldData, Option<Columns>, usize)> {
     for n in columns.iter().flat_map(|c| &c.notes) {
         note!("note: {}: {n}", args.input.display());
     }
-    vksplat::fit::check_fittable(&data)
+    verisplat::fit::check_fittable(&data)
         .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     if args.magnitude_channel >= data.k {
         bail!(
@@ -245,11 +247,11 @@ fn load_input(args: &FitArgs) -> Result<(FieldData, Option<Columns>, usize)> {
     }
     let magnitude_channel = args.complex.map_or(args.magnitude_channel, |(m, _)| m);
     if !args.db {
-        vksplat::fit::check_magnitude(&data, magnitude_channel)
+        verisplat::fit::check_magnitude(&data, magnitude_channel)
             .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     }
     if !args.force {
-        vksplat::fit::check_enough(data.len(), args.holdout)
+        verisplat::fit::check_enough(data.len(), args.holdout)
             .map_err(|m| anyhow::anyhow!("{}: {m}", args.input.display()))?;
     }
     Ok((data, columns, magnitude_channel))
@@ -258,7 +260,7 @@ fn load_input(args: &FitArgs) -> Result<(FieldData, Option<Columns>, usize)> {
 /// The fitting options: the Gaussian counts (chosen from the samples' count unless given,
 /// and noted) and the arguments.
 fn config(args: &FitArgs, data: &FieldData, magnitude_channel: usize) -> Result<FitConfig> {
-    let (auto_initial, auto_max) = vksplat::fit::default_counts(data.len());
+    let (auto_initial, auto_max) = verisplat::fit::default_counts(data.len());
     let initial = args
         .gaussians
         .unwrap_or_else(|| auto_initial.min(args.max_gaussians.unwrap_or(usize::MAX)));
@@ -426,7 +428,7 @@ fn write_report(
         "threads": rayon::current_num_threads(),
     });
     let text = serde_json::to_string_pretty(&value)? + "\n";
-    vksplat::output::write_bytes_atomically(report, args.overwrite, text.as_bytes())?;
+    verisplat::output::write_bytes_atomically(report, args.overwrite, text.as_bytes())?;
     Ok(())
 }
 

@@ -1,30 +1,30 @@
-//! `vksplat gen`: a seeded synthetic scene, written in the format its name asks for; or,
-//! with `--rf`, a synthetic RF field on a dense grid (`.npy`) for `vksplat fit`.
+//! `verisplat gen`: a seeded synthetic scene, written in the format its name asks for; or,
+//! with `--rf`, a synthetic RF field on a dense grid (`.npy`) for `verisplat fit`.
 
 use super::common::check_output_file;
 use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::note;
-use vksplat::rf::{MovingSource, RfData, RfField};
-use vksplat::scene::write::{to_bytes, OutputFormat};
+use verisplat::note;
+use verisplat::rf::{MovingSource, RfData, RfField};
+use verisplat::scene::write::{to_bytes, OutputFormat};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat gen 1e6 -o synthetic_1m.ply
-  vksplat gen 100000 --seed 7 --sh-degree 3 -o s.spz
-  vksplat gen --rf dipole dipole.npy            (64 x 64 x 64 x 4, plus dipole.npy.json)
-  vksplat gen --rf two-ray tworay.npy --size 32
-  vksplat gen --rf moving-source moving.npy     (16^3 points x 9 times: 36864 x 5, plus moving.npy.json)
-  vksplat gen --rf moving-source moving.csv --size 12 --times 5
+  verisplat gen 1e6 -o synthetic_1m.ply
+  verisplat gen 100000 --seed 7 --sh-degree 3 -o s.spz
+  verisplat gen --rf dipole dipole.npy            (64 x 64 x 64 x 4, plus dipole.npy.json)
+  verisplat gen --rf two-ray tworay.npy --size 32
+  verisplat gen --rf moving-source moving.npy     (16^3 points x 9 times: 36864 x 5, plus moving.npy.json)
+  verisplat gen --rf moving-source moving.csv --size 12 --times 5
 
 With --rf the field is written as a float32 .npy of shape N x N x N x 4 (points spread over
 the field's bounds like numpy.linspace), with a sidecar OUT.npy.json holding the bounds and
-channel names; `vksplat fit OUT.npy` reads the bounds from it. moving-source is a Gaussian blob
+channel names; `verisplat fit OUT.npy` reads the bounds from it. moving-source is a Gaussian blob
 (sigma 0.5) whose centre moves from (-1, 0, 0) at t = 0 to (1, 0, 0) at t = 1, sampled on
 the grid at --times times: samples x, y, z, t, magnitude as a float32 .npy (N x 5, its
-sidecar naming column 3 the time) or a .csv with the header x,y,z,t,magnitude; `vksplat fit`
+sidecar naming column 3 the time) or a .csv with the header x,y,z,t,magnitude; `verisplat fit`
 fits them in space and time.")]
 pub(crate) struct GenArgs {
     /// Number of Gaussians (e.g. 100000 or 1e5); with --rf, the output .npy instead.
@@ -62,23 +62,23 @@ pub(crate) fn gen(args: &GenArgs) -> Result<()> {
         None => {}
     }
     let Some(count) = &args.count else {
-        bail!("gen needs the number of Gaussians (e.g. `vksplat gen 1e5 -o scene.ply`), or --rf dipole|two-ray|moving-source OUT.npy");
+        bail!("gen needs the number of Gaussians (e.g. `verisplat gen 1e5 -o scene.ply`), or --rf dipole|two-ray|moving-source OUT.npy");
     };
-    let count = vksplat::bench::parse_count(count)
+    let count = verisplat::bench::parse_count(count)
         .map_err(|m| anyhow::anyhow!("invalid value for N: {m}"))?;
     let Some(output) = &args.output else {
         bail!("gen needs an output file: -o scene.ply|scene.splat|scene.spz");
     };
     let format = OutputFormat::from_path(output)?;
     check_output_file(output, args.overwrite)?;
-    let scene = vksplat::gen::synthetic_scene(count, args.seed, args.sh_degree);
+    let scene = verisplat::gen::synthetic_scene(count, args.seed, args.sh_degree);
     let bytes = to_bytes(&scene, format).map_err(|message| {
         anyhow::anyhow!(
             "{}: cannot be written as {format}: {message}",
             output.display()
         )
     })?;
-    vksplat::output::write_bytes_atomically(output, args.overwrite, &bytes)?;
+    verisplat::output::write_bytes_atomically(output, args.overwrite, &bytes)?;
     note!(
         "wrote {} synthetic Gaussians (seed {}, SH degree {}) to {} ({format})",
         scene.len(),
@@ -95,7 +95,7 @@ fn rf_output(args: &GenArgs, field: RfData) -> Result<PathBuf> {
         (Some(_), Some(_)) => bail!("give the output .npy once: as OUT.npy or as -o OUT.npy"),
         (Some(p), None) => PathBuf::from(p),
         (None, Some(p)) => p.clone(),
-        (None, None) => bail!("gen --rf needs an output file: vksplat gen --rf {field} OUT.npy"),
+        (None, None) => bail!("gen --rf needs an output file: verisplat gen --rf {field} OUT.npy"),
     })
 }
 
@@ -117,12 +117,12 @@ fn gen_moving_source(args: &GenArgs) -> Result<()> {
     let rows = MovingSource::samples(n, times);
     let count = n * n * n * times;
     check_output_file(&out, args.overwrite)?;
-    let sidecar = vksplat::rf::sidecar_path(&out);
+    let sidecar = verisplat::rf::sidecar_path(&out);
     if ext == "npy" {
         check_output_file(&sidecar, args.overwrite)?;
-        let bytes = vksplat::image_file::npy_bytes(&[count, 5], &rows);
-        vksplat::output::write_bytes_atomically(&out, args.overwrite, &bytes)?;
-        vksplat::output::write_bytes_atomically(
+        let bytes = verisplat::image_file::npy_bytes(&[count, 5], &rows);
+        verisplat::output::write_bytes_atomically(&out, args.overwrite, &bytes)?;
+        verisplat::output::write_bytes_atomically(
             &sidecar,
             args.overwrite,
             MovingSource::sidecar_json(n, times).as_bytes(),
@@ -134,7 +134,7 @@ fn gen_moving_source(args: &GenArgs) -> Result<()> {
             text.push_str(&line.join(","));
             text.push('\n');
         }
-        vksplat::output::write_bytes_atomically(&out, args.overwrite, text.as_bytes())?;
+        verisplat::output::write_bytes_atomically(&out, args.overwrite, text.as_bytes())?;
     }
     note!(
         "wrote the moving source (centre (-1 + 2 t, 0, 0), sigma {}), {count} samples x, y, z, t, magnitude ({n}^3 points at {times} times over 0..1), to {}{}",
@@ -153,7 +153,7 @@ fn gen_moving_source(args: &GenArgs) -> Result<()> {
 /// Prints the `fit` flags that read the generated data as generated: `--bounds`, then
 /// `extra`.
 fn print_fit_flags(b: [f32; 6], extra: &str) {
-    vksplat::outln!(
+    verisplat::outln!(
         "--bounds {},{},{},{},{},{}{extra}",
         b[0],
         b[1],
@@ -178,17 +178,17 @@ fn gen_rf(args: &GenArgs, field: RfField) -> Result<()> {
             out.display()
         );
     }
-    let sidecar = vksplat::rf::sidecar_path(&out);
+    let sidecar = verisplat::rf::sidecar_path(&out);
     check_output_file(&out, args.overwrite)?;
     check_output_file(&sidecar, args.overwrite)?;
     let size = args.size.unwrap_or(64);
-    let grid = vksplat::rf::generate(field, size);
-    let bytes = vksplat::image_file::npy_bytes(&grid.shape(), &grid.data);
-    vksplat::output::write_bytes_atomically(&out, args.overwrite, &bytes)?;
-    vksplat::output::write_bytes_atomically(
+    let grid = verisplat::rf::generate(field, size);
+    let bytes = verisplat::image_file::npy_bytes(&grid.shape(), &grid.data);
+    verisplat::output::write_bytes_atomically(&out, args.overwrite, &bytes)?;
+    verisplat::output::write_bytes_atomically(
         &sidecar,
         args.overwrite,
-        vksplat::rf::sidecar_json(&grid).as_bytes(),
+        verisplat::rf::sidecar_json(&grid).as_bytes(),
     )?;
     let b = grid.bounds;
     note!(

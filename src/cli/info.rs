@@ -1,4 +1,4 @@
-//! `vksplat info`: a scene's size, bounds and parameter statistics (or what a camera
+//! `verisplat info`: a scene's size, bounds and parameter statistics (or what a camera
 //! file holds), as text or JSON.
 
 use super::common::{load_scene, SceneArg};
@@ -6,14 +6,14 @@ use super::plural;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use vksplat::outln;
-use vksplat::scene;
+use verisplat::outln;
+use verisplat::scene;
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat info scene.ply
-  vksplat info model_dir/ --json > stats.json
-  vksplat info cameras.json")]
+  verisplat info scene.ply
+  verisplat info model_dir/ --json > stats.json
+  verisplat info cameras.json")]
 pub(crate) struct InfoArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArg,
@@ -37,7 +37,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
         {
             Ok(((scene, format), file)) => (scene, file.display().to_string(), Some(format)),
             // A camera file given where a scene belongs: say what it holds.
-            Err(e) => match vksplat::camera::detect_camera_format(path) {
+            Err(e) => match verisplat::camera::detect_camera_format(path) {
                 Ok(_) => return camera_file_info(path, args.json),
                 Err(_) => return Err(e.into()),
             },
@@ -54,7 +54,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
     if args.json {
         return print_json(&scene, &name, format.map(|f| f.to_string()));
     }
-    let s = vksplat::stats::scene_stats(&scene);
+    let s = verisplat::stats::scene_stats(&scene);
     outln!("scene       {name}");
     if let Some(format) = format {
         outln!("format      {format}");
@@ -62,7 +62,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             outln!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
         }
     }
-    if scene.kernel == vksplat::cpu::SplatKernel::Gaussian {
+    if scene.kernel == verisplat::cpu::SplatKernel::Gaussian {
         outln!("kernel      gaussian");
     } else {
         outln!(
@@ -70,7 +70,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             scene.kernel
         );
     }
-    if scene.rules != vksplat::cpu::Rules::Original {
+    if scene.rules != verisplat::cpu::Rules::Original {
         outln!(
             "rules       {}: the file records that it was trained with them (rendered with them by default; --rules overrides)",
             scene.rules
@@ -159,7 +159,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
 
 /// Prints a log-binned histogram as text bars with the share a threshold at each bin
 /// edge keeps (below the bin's end for `upper`, from the bin's start otherwise).
-pub(crate) fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper: bool) {
+pub(crate) fn print_histogram(title: &str, h: &verisplat::stats::Histogram, upper: bool) {
     outln!();
     outln!("{title}");
     if h.counts.is_empty() {
@@ -190,7 +190,7 @@ pub(crate) fn print_histogram(title: &str, h: &vksplat::stats::Histogram, upper:
 /// the first names.
 fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
     let (cams, format) =
-        vksplat::camera::load_camera_file(path, &vksplat::camera::PathTiming::default())?;
+        verisplat::camera::load_camera_file(path, &verisplat::camera::PathTiming::default())?;
     let mut sizes: Vec<(u32, u32)> = cams.iter().map(|c| (c.width, c.height)).collect();
     sizes.sort_unstable();
     sizes.dedup();
@@ -238,9 +238,9 @@ fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
 
 /// The statistics as one JSON object (`schema_version` 1).
 fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Result<()> {
-    let s = vksplat::stats::scene_stats(scene);
-    let summary = |v: vksplat::stats::Summary| json!({"min": v.min, "max": v.max, "mean": v.mean, "std": v.std});
-    let histogram = |h: &vksplat::stats::Histogram| json!({"edges": h.edges, "counts": h.counts, "outside": h.outside, "total": h.total});
+    let s = verisplat::stats::scene_stats(scene);
+    let summary = |v: verisplat::stats::Summary| json!({"min": v.min, "max": v.max, "mean": v.mean, "std": v.std});
+    let histogram = |h: &verisplat::stats::Histogram| json!({"edges": h.edges, "counts": h.counts, "outside": h.outside, "total": h.total});
     let v3 = |v: glam::Vec3| [v.x, v.y, v.z];
     let value = json!({
         "schema_version": 1,

@@ -1,4 +1,4 @@
-//! The subcommands of the `vksplat` binary, one file each, and the arguments they share.
+//! The subcommands of the `verisplat` binary, one file each, and the arguments they share.
 
 pub mod bench;
 pub mod common;

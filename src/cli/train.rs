@@ -1,19 +1,19 @@
-//! `vksplat train`: the original 3DGS training on the differentiable rasterizer
-//! ([`vksplat::train`]).
+//! `verisplat train`: the original 3DGS training on the differentiable rasterizer
+//! ([`verisplat::train`]).
 
 use super::common::{fail_on_validation_messages, GpuArgs};
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::train::data::Dataset;
-use vksplat::train::model::Settings;
-use vksplat::train::run::{TrainOptions, TrainReport};
-use vksplat::{note, outln};
+use verisplat::train::data::Dataset;
+use verisplat::train::model::Settings;
+use verisplat::train::run::{TrainOptions, TrainReport};
+use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat train data/garden -o models/garden --eval -r 4
-  vksplat train data/lego -o models/lego --white-background --iterations 7000")]
+  verisplat train data/garden -o models/garden --eval -r 4
+  verisplat train data/lego -o models/lego --white-background --iterations 7000")]
 pub(crate) struct TrainArgs {
     /// A COLMAP data set: images/ and sparse/0/ (text or binary; points3D starts the
     /// Gaussians), or a NeRF-synthetic (transforms_train.json, transforms_test.json) or
@@ -117,12 +117,12 @@ pub(crate) struct TrainArgs {
     pub(crate) shader_lr: f32,
     /// The alpha falloff: gaussian (the original) or power.
     #[arg(long, default_value = "gaussian")]
-    pub(crate) kernel: vksplat::model::SplatKernel,
+    pub(crate) kernel: verisplat::model::SplatKernel,
     /// The rasterizer's rules: original (the 3DGS rasterizer's) or gsplat (near plane 0.01,
     /// alpha clamp 0.999, a per-axis 3.33-sigma screen box), as gsplat trains. The model
     /// records them, so `render` and `eval` use them too.
     #[arg(long, default_value = "original", value_name = "original|gsplat")]
-    pub(crate) rules: vksplat::model::Rules,
+    pub(crate) rules: verisplat::model::Rules,
     /// How the Gaussians are added and removed: default (the original's densification:
     /// clone, split, prune, opacity resets) or mcmc (3DGS as Markov chain Monte Carlo:
     /// dead Gaussians relocated onto live ones, 5 % growth per refinement up to
@@ -170,9 +170,9 @@ pub(crate) struct TrainArgs {
 
 /// A K-H-H-3 network (relu, relu, sigmoid), weights and biases uniform in
 /// +-1/sqrt(inputs) as torch.nn.Linear starts them, seeded.
-fn fresh_shader(k: usize, hidden: usize, seed: u64) -> vksplat::mlp::Mlp {
-    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
-    let mut rng = vksplat::gen::Rng(seed ^ 0x5eed_5ade_0000_0001);
+fn fresh_shader(k: usize, hidden: usize, seed: u64) -> verisplat::mlp::Mlp {
+    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    let mut rng = verisplat::gen::Rng(seed ^ 0x5eed_5ade_0000_0001);
     let mut layer = |inputs: usize, outputs: usize, activation| {
         let bound = 1.0 / (inputs as f32).sqrt();
         Layer {
@@ -201,12 +201,12 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     let mut opts = options(args, settings(args))?;
     let ctx = args.gpu.context()?;
     opts.random_points = random_points(args, &data, ctx.info());
-    let mut loss = vksplat::train::loss::GpuLoss::new(&ctx)?;
-    let mut rast = vksplat::render::differentiable::DiffRasterizer::new(ctx)?;
+    let mut loss = verisplat::train::loss::GpuLoss::new(&ctx)?;
+    let mut rast = verisplat::render::differentiable::DiffRasterizer::new(ctx)?;
     let bar = progress_bar(args.quiet, args.iterations);
     let quiet = args.quiet;
     let mut lines = LogLines::new(args.quiet, args.iterations);
-    let report = vksplat::train::run::train(
+    let report = verisplat::train::run::train(
         &data,
         &args.output,
         &opts,
@@ -233,7 +233,7 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         },
     )
     .map_err(|e| match e {
-        vksplat::train::run::TrainError::Interrupted { message } => {
+        verisplat::train::run::TrainError::Interrupted { message } => {
             anyhow::Error::new(super::render::Interrupted(message))
         }
         e => anyhow::anyhow!("{}: {e}", args.output.display()),
@@ -252,7 +252,7 @@ const CPU_RANDOM_POINTS: usize = 10_000;
 
 /// `--random-points`, or the default that fits the device: fewer Gaussians on a CPU
 /// device, said when the data set has no points (so that the start is random).
-fn random_points(args: &TrainArgs, data: &Dataset, info: &vksplat::gpu::DeviceInfo) -> usize {
+fn random_points(args: &TrainArgs, data: &Dataset, info: &verisplat::gpu::DeviceInfo) -> usize {
     if let Some(n) = args.random_points {
         return n;
     }
@@ -342,16 +342,16 @@ fn check_args(args: &TrainArgs) -> Result<()> {
 /// Loads the data set (COLMAP, or NeRF-synthetic / nerfstudio transforms) and notes
 /// what it holds.
 fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
-    let resolution = vksplat::train::data::Resolution(args.resolution.unwrap_or(1));
-    let data = if vksplat::train::data::is_transforms(&args.dataset) {
+    let resolution = verisplat::train::data::Resolution(args.resolution.unwrap_or(1));
+    let data = if verisplat::train::data::is_transforms(&args.dataset) {
         let bg = if args.white_background {
             [1.0; 3]
         } else {
             [0.0; 3]
         };
-        vksplat::train::data::load_transforms(&args.dataset, resolution, args.eval, bg)?
+        verisplat::train::data::load_transforms(&args.dataset, resolution, args.eval, bg)?
     } else {
-        vksplat::train::data::load_colmap(&args.dataset, resolution, args.eval)?
+        verisplat::train::data::load_colmap(&args.dataset, resolution, args.eval)?
     };
     if !args.quiet {
         note!(
@@ -376,7 +376,7 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
                 u.photo.height,
                 u.pinhole.width,
                 u.pinhole.height,
-                vksplat::train::undistort::UNDISTORTION_FILE
+                verisplat::train::undistort::UNDISTORTION_FILE
             );
         }
     }
@@ -403,7 +403,7 @@ fn settings(args: &TrainArgs) -> Settings {
         opacity_reset_interval: args.opacity_reset_interval,
         shader_lr: args.shader_lr,
         clip_grad: args.clip_grad,
-        mcmc: mcmc.then(|| vksplat::train::model::Mcmc {
+        mcmc: mcmc.then(|| verisplat::train::model::Mcmc {
             cap_max: args.cap_max as usize,
             noise_lr: args.noise_lr,
             opacity_reg: args.opacity_reg,
@@ -419,7 +419,7 @@ fn settings(args: &TrainArgs) -> Settings {
 fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
     let shader = match (args.features, &args.shader) {
         (Some(k), Some(path)) => {
-            let mlp = vksplat::mlp::Mlp::load(path)?;
+            let mlp = verisplat::mlp::Mlp::load(path)?;
             mlp.check_channels(k as usize)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             Some(mlp)
@@ -446,7 +446,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         checkpoint_iterations: args.checkpoint_iterations.clone(),
         resume: match &args.resume {
             Some(path) => Some(
-                vksplat::train::checkpoint::Checkpoint::load(path)
+                verisplat::train::checkpoint::Checkpoint::load(path)
                     .map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?,
             ),
             None => None,
@@ -498,7 +498,7 @@ impl LogLines {
         }
     }
 
-    fn iteration(&mut self, p: &vksplat::train::run::Progress) {
+    fn iteration(&mut self, p: &verisplat::train::run::Progress) {
         if !self.on {
             return;
         }

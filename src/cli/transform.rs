@@ -8,8 +8,8 @@
 
 use anyhow::{anyhow, Result};
 use clap::Args;
-use vksplat::scene::transform::SceneTransform;
-use vksplat::scene::Scene;
+use verisplat::scene::transform::SceneTransform;
+use verisplat::scene::Scene;
 
 /// Moves, turns, mirrors or scales the scene before it is rendered or written.
 #[derive(Args)]
@@ -94,7 +94,7 @@ pub(crate) fn apply(transform: Option<&SceneTransform>, scene: Scene) -> Result<
     };
     let n = scene.len();
     let out = t.apply(scene).map_err(anyhow::Error::msg)?;
-    vksplat::note!("transformed: {} by {t}", super::plural(n, "Gaussian"));
+    verisplat::note!("transformed: {} by {t}", super::plural(n, "Gaussian"));
     Ok(out)
 }
 

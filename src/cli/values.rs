@@ -50,7 +50,7 @@ pub(crate) fn size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("expected WIDTHxHEIGHT such as 1920x1080, got \"{s}\""))?;
-    let side = int_in(1u32, vksplat::camera::MAX_IMAGE_SIDE);
+    let side = int_in(1u32, verisplat::camera::MAX_IMAGE_SIDE);
     Ok((side(w)?, side(h)?))
 }
 

@@ -1,24 +1,24 @@
-//! `vksplat view`: serve an interactive viewer of a scene to a browser.
+//! `verisplat view`: serve an interactive viewer of a scene to a browser.
 
 use super::common::{camera_path, load_scene, CameraArgs, KernelArg, PathArgs, SceneArg};
 use super::{plural, values};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::net::{SocketAddr, ToSocketAddrs};
-use vksplat::view::protocol::{
+use verisplat::view::protocol::{
     camera_to_entry, Hello, NamedCamera, ScaleHistogram, PROTOCOL_VERSION,
 };
-use vksplat::view::server::{ServedScene, Server, ServerConfig, Stopper};
-use vksplat::view::source::ViewSource;
-use vksplat::{note, outln};
+use verisplat::view::server::{ServedScene, Server, ServerConfig, Stopper};
+use verisplat::view::source::ViewSource;
+use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat view ../shared/data/playbot_lod2_125k_sh2.ply --open
-  vksplat view model_dir/                  # the model's cameras.json in the camera list
-  vksplat view scene.spz --cameras cameras.json --port 9000
-  vksplat view --demo --cpu --port 0       # CPU reference renderer, any free port
-  ssh -L 8080:localhost:8080 gpu-box 'vksplat view scene.ply'   # then open http://localhost:8080/")]
+  verisplat view ../shared/data/playbot_lod2_125k_sh2.ply --open
+  verisplat view model_dir/                  # the model's cameras.json in the camera list
+  verisplat view scene.spz --cameras cameras.json --port 9000
+  verisplat view --demo --cpu --port 0       # CPU reference renderer, any free port
+  ssh -L 8080:localhost:8080 gpu-box 'verisplat view scene.ply'   # then open http://localhost:8080/")]
 pub(crate) struct ViewArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArg,
@@ -52,7 +52,7 @@ pub(crate) struct ViewArgs {
     /// whole scene: how many, and the preview's size, are chosen from the measured stage
     /// times so previews stay fluid. The view at rest always draws all. 0 previews with
     /// the whole scene; scenes of at most 8,192 (or N) Gaussians always preview whole.
-    #[arg(long, value_name = "N", default_value_t = vksplat::view::source::DEFAULT_PREVIEW_GAUSSIANS, conflicts_with = "cpu")]
+    #[arg(long, value_name = "N", default_value_t = verisplat::view::source::DEFAULT_PREVIEW_GAUSSIANS, conflicts_with = "cpu")]
     pub(crate) preview_gaussians: usize,
     /// Opacity compensation for scenes trained with antialiasing (as render
     /// --antialiased); on by default when the file records it.
@@ -93,14 +93,15 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> 
         bail!("{name} holds no Gaussians; there is nothing to view");
     }
     let path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
-    let stats = vksplat::stats::scene_stats(&scene);
+    let stats = verisplat::stats::scene_stats(&scene);
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
     if scene.antialiased && !args.antialiased && !args.no_antialiased {
         note!(
             "note: {name} records that it was trained with antialiasing; rendering with its opacity compensation (--no-antialiased turns it off)"
         );
     }
-    let cameras: Vec<vksplat::camera::Camera> = path.cameras.into_iter().map(|(_, c)| c).collect();
+    let cameras: Vec<verisplat::camera::Camera> =
+        path.cameras.into_iter().map(|(_, c)| c).collect();
     let named = cameras
         .iter()
         .enumerate()
@@ -121,11 +122,11 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> 
         _ => [stats.max_scale.min.max(1e-6), stats.max_scale.max.max(1e-5)],
     };
     let (source, device): (Box<dyn ViewSource>, String) = if args.cpu {
-        let src = vksplat::view::cpu_source::CpuSource::new(&scene, antialiased);
+        let src = verisplat::view::cpu_source::CpuSource::new(&scene, antialiased);
         let device = src.device_name();
         (Box::new(src), device)
     } else {
-        let src = vksplat::view::source::GpuSource::new(
+        let src = verisplat::view::source::GpuSource::new(
             &scene,
             args.device,
             antialiased,
@@ -195,7 +196,7 @@ pub(crate) fn view(args: &ViewArgs) -> Result<()> {
         bound
     };
     let url = format!("http://{shown}/");
-    outln!("vksplat view: {url}  (Ctrl-C stops)");
+    outln!("verisplat view: {url}  (Ctrl-C stops)");
     if args.open {
         open_browser(&url);
     }

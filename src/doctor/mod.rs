@@ -1,4 +1,4 @@
-//! `vksplat doctor`: a self-check of a few seconds on a Vulkan device, each building block
+//! `verisplat doctor`: a self-check of a few seconds on a Vulkan device, each building block
 //! against its CPU reference (subgroups, the demo scene's render, the radix sort, the
 //! prefix sum, the backward pass), so a new GPU or driver is trusted only after it has
 //! shown the same answers as the CPU. [`report`] turns a bundle run's results into one
@@ -213,7 +213,7 @@ pub const CHECKS: [&str; 7] = [
 ];
 
 /// The self-check of device `index` (every check, a few seconds on lavapipe).
-/// `validation` turns the Khronos validation layer on (`VKSPLAT_VALIDATE=1` does too):
+/// `validation` turns the Khronos validation layer on (`VERISPLAT_VALIDATE=1` does too):
 /// any message it prints fails the check that caused it. `on_check` sees each check as it
 /// finishes (to print progress). `only`, when given, names the checks to run (of
 /// [`CHECKS`]; `subgroups` always runs, as the device opens).
@@ -443,7 +443,7 @@ fn check_subgroups(ctx: &GpuContext) -> Result<Outcome, String> {
             passed: true,
             warning: Some(format!(
                 "the driver reports {reported} lanes per subgroup but {runs} run together; \
-                 vksplat follows the measured {runs}"
+                 verisplat follows the measured {runs}"
             )),
         },
         Err(e) => Outcome::new(format!("inconsistent: {e}"), None, false),

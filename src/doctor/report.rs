@@ -1,12 +1,12 @@
 //! One markdown report from the results folder of a GPU bundle run (`tools/bundle/run.sh`):
 //! the device, what `doctor` said, GPU-vs-CPU comparisons, forward and backward benches
-//! and training, with every step's outcome. Made by the `vksplat` binary itself because
+//! and training, with every step's outcome. Made by the `verisplat` binary itself because
 //! the target machine may have no Python.
 //!
 //! The folder holds what `run.sh` wrote: `info.txt` (`key: value` lines), `steps.tsv`
 //! (step, status, seconds, command; tab-separated), `doctor.json`, `compare_<name>/report.json`,
-//! `forward_<name>.json` and `backward_<name>.json` (`vksplat bench --json`), and
-//! `train.txt` (`vksplat train --timings` output). Anything missing is reported as missing.
+//! `forward_<name>.json` and `backward_<name>.json` (`verisplat bench --json`), and
+//! `train.txt` (`verisplat train --timings` output). Anything missing is reported as missing.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -91,7 +91,7 @@ pub fn markdown(dir: &Path) -> String {
     let device = run.map_or("unknown device".to_string(), |r| {
         text(r, "device").to_string()
     });
-    let _ = writeln!(md, "# vksplat on {device}\n");
+    let _ = writeln!(md, "# verisplat on {device}\n");
     if let Ok(info) = std::fs::read_to_string(dir.join("info.txt")) {
         for line in info.lines().filter(|l| !l.trim().is_empty()) {
             let _ = writeln!(md, "- {line}");
@@ -110,7 +110,7 @@ pub fn markdown(dir: &Path) -> String {
 }
 
 fn doctor_section(md: &mut String, doctor: Option<&Value>) {
-    let _ = writeln!(md, "## Doctor (`vksplat doctor`)\n");
+    let _ = writeln!(md, "## Doctor (`verisplat doctor`)\n");
     let Some(d) = doctor else {
         let _ = writeln!(
             md,
@@ -250,7 +250,7 @@ fn compare_section(md: &mut String, dir: &Path) {
     if reports.is_empty() {
         return;
     }
-    let _ = writeln!(md, "## GPU vs CPU reference (`vksplat compare`)\n");
+    let _ = writeln!(md, "## GPU vs CPU reference (`verisplat compare`)\n");
     let _ = writeln!(
         md,
         "| scene | frames | resolution | lowest colour dB | lowest SSIM | lowest within 1/255 % | lowest alpha dB | blend kernel | result |"
@@ -331,7 +331,7 @@ fn bench_section(md: &mut String, dir: &Path) {
     if forward.is_empty() && backward.is_empty() {
         return;
     }
-    let _ = writeln!(md, "## Forward and backward passes (`vksplat bench`)\n");
+    let _ = writeln!(md, "## Forward and backward passes (`verisplat bench`)\n");
     let _ = writeln!(
         md,
         "| scene | Gaussians | resolution | forward ms | frames/s | forward ms (saving state) | backward ms | backward / forward | blend_bwd ms | device bytes / Gaussian (training) |"
@@ -395,7 +395,7 @@ fn train_section(md: &mut String, dir: &Path) {
     let Ok(out) = std::fs::read_to_string(dir.join("train.txt")) else {
         return;
     };
-    let _ = writeln!(md, "## Training (`vksplat train --timings`)\n");
+    let _ = writeln!(md, "## Training (`verisplat train --timings`)\n");
     if let Some(line) = out.lines().find(|l| l.starts_with("trained ")) {
         let _ = writeln!(md, "{line}\n");
     }
@@ -465,7 +465,7 @@ mod tests {
 
     #[test]
     fn an_empty_folder_makes_a_report_that_says_what_is_missing() {
-        let dir = std::env::temp_dir().join(format!("vksplat-report-{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("verisplat-report-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let md = markdown(&dir);
         assert!(md.contains("doctor.json is missing"), "{md}");

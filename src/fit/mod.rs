@@ -1,4 +1,4 @@
-//! `vksplat fit`: Gaussians with feature channels fitted to field samples (RF fields).
+//! `verisplat fit`: Gaussians with feature channels fitted to field samples (RF fields).
 //!
 //! Inputs ([`load`]): a dense grid `.npy` (`X x Y x Z x C`, its points spread over
 //! `--bounds` like `numpy.linspace` on each axis, see [`crate::rf`]) or scattered samples

@@ -1,5 +1,5 @@
 //! How much device memory a context allows itself: byte counts as users write them
-//! (`512M`, `2G`), the explicit limit (`--memory-limit`, `VKSPLAT_MEMORY_LIMIT`), the host
+//! (`512M`, `2G`), the explicit limit (`--memory-limit`, `VERISPLAT_MEMORY_LIMIT`), the host
 //! memory available, and the budget that follows from them ([`BudgetSource`]).
 
 use super::{GpuError, GpuResult};
@@ -25,7 +25,7 @@ pub fn parse_bytes(text: &str) -> Result<u64, String> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BudgetSource {
     /// [`ContextOptions::memory_limit`](super::ContextOptions::memory_limit) or
-    /// `VKSPLAT_MEMORY_LIMIT`.
+    /// `VERISPLAT_MEMORY_LIMIT`.
     Limit,
     /// The largest device-local heap the driver advertises.
     Heap,
@@ -56,14 +56,14 @@ pub fn host_available_bytes() -> Option<u64> {
     kib.checked_mul(1024)
 }
 
-/// The explicit limit: `option` when given, else `VKSPLAT_MEMORY_LIMIT` when set.
+/// The explicit limit: `option` when given, else `VERISPLAT_MEMORY_LIMIT` when set.
 pub(crate) fn explicit_limit(option: Option<u64>) -> GpuResult<Option<u64>> {
     Ok(match option {
         Some(l) => Some(l),
-        None => match std::env::var("VKSPLAT_MEMORY_LIMIT") {
-            Ok(v) if !v.trim().is_empty() => Some(
+        None => match crate::former_name::env_var("VERISPLAT_MEMORY_LIMIT") {
+            Some(v) if !v.trim().is_empty() => Some(
                 parse_bytes(&v)
-                    .map_err(|e| GpuError::Input(format!("VKSPLAT_MEMORY_LIMIT: {e}")))?,
+                    .map_err(|e| GpuError::Input(format!("VERISPLAT_MEMORY_LIMIT: {e}")))?,
             ),
             _ => None,
         },

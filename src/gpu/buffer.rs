@@ -404,7 +404,7 @@ impl Drop for GpuBuffer {
         if let Some(allocation) = self.allocation.take() {
             if let Ok(mut alloc) = self.shared.allocator.lock() {
                 if let Err(e) = alloc.free(allocation) {
-                    crate::note!("vksplat: freeing buffer '{}' failed: {e}", self.name);
+                    crate::note!("verisplat: freeing buffer '{}' failed: {e}", self.name);
                 }
             }
         }

@@ -1,7 +1,7 @@
-//! What vksplat needs of a device (Vulkan 1.3, a compute queue, push descriptors,
+//! What verisplat needs of a device (Vulkan 1.3, a compute queue, push descriptors,
 //! synchronization2, maintenance4, basic/arithmetic/ballot subgroup operations) and the
 //! one function that lists what a device lacks of it, for the context that refuses a
-//! device and for `vksplat doctor`'s listing ([`super::devices`]); plus the helpers both
+//! device and for `verisplat doctor`'s listing ([`super::devices`]); plus the helpers both
 //! read driver strings and extension lists with.
 
 use std::ffi::CStr;
@@ -15,7 +15,7 @@ pub(crate) const NEEDED_SUBGROUP_OPS: vk::SubgroupFeatureFlags = vk::SubgroupFea
         | vk::SubgroupFeatureFlags::BALLOT.as_raw(),
 );
 
-/// One thing vksplat needs that a device lacks; `Display` names it.
+/// One thing verisplat needs that a device lacks; `Display` names it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Lack {
     /// Vulkan 1.3 (the device's version).
@@ -47,7 +47,7 @@ impl std::fmt::Display for Lack {
     }
 }
 
-/// Everything vksplat needs that a device lacks, in the order `vksplat doctor` lists them:
+/// Everything verisplat needs that a device lacks, in the order `verisplat doctor` lists them:
 /// from its Vulkan version, whether it has a compute queue, its extensions, its
 /// Vulkan 1.1 properties and its Vulkan 1.3 features (as queried; default when the device
 /// is too old to report them).

@@ -30,38 +30,37 @@ use super::{GpuError, GpuResult, VkContext};
 /// How to create a [`GpuContext`].
 #[derive(Clone, Debug, Default)]
 pub struct ContextOptions {
-    /// Device index or case-insensitive substring of its name; `VKSPLAT_DEVICE` overrides
+    /// Device index or case-insensitive substring of its name; `VERISPLAT_DEVICE` overrides
     /// when this is `None`.
     pub device: Option<String>,
     /// Enable VK_LAYER_KHRONOS_validation (with synchronization validation when
-    /// available); `VKSPLAT_VALIDATE=1` also turns it on.
+    /// available); `VERISPLAT_VALIDATE=1` also turns it on.
     pub validation: bool,
-    /// Device memory this context may allocate, in bytes; `VKSPLAT_MEMORY_LIMIT` (e.g.
+    /// Device memory this context may allocate, in bytes; `VERISPLAT_MEMORY_LIMIT` (e.g.
     /// `512M`, `2G`) sets it when `None`. The default is the size of the largest
     /// device-local heap, which is also the ceiling on GPUs; on CPU devices, whose device
     /// memory is host memory, it is 3/4 of the host memory available when that is more,
     /// and a larger explicit limit is honoured.
     pub memory_limit: Option<u64>,
-    /// Device traits to pretend ([`super::emulate`]); `VKSPLAT_EMULATE` adds to them.
+    /// Device traits to pretend ([`super::emulate`]); `VERISPLAT_EMULATE` adds to them.
     pub emulate: Emulation,
 }
 
 fn env_flag(name: &str) -> bool {
-    std::env::var(name).is_ok_and(|v| !v.is_empty() && v != "0")
+    crate::former_name::env_var(name).is_some_and(|v| !v.is_empty() && v != "0")
 }
 
 impl GpuContext {
     /// Creates the context: instance, device selection, queue, pool and allocator.
     pub fn new(options: &ContextOptions) -> GpuResult<Self> {
-        let validation = options.validation || env_flag("VKSPLAT_VALIDATE");
+        let validation = options.validation || env_flag("VERISPLAT_VALIDATE");
         let emulation = Emulation::from_env()
             .map_err(GpuError::Input)?
             .union(&options.emulate);
-        let device_choice = options.device.clone().or_else(|| {
-            std::env::var("VKSPLAT_DEVICE")
-                .ok()
-                .filter(|s| !s.is_empty())
-        });
+        let device_choice = options
+            .device
+            .clone()
+            .or_else(|| crate::former_name::env_var("VERISPLAT_DEVICE").filter(|s| !s.is_empty()));
 
         let mut vulkan = instance::create(validation)?;
         let instance = &vulkan.instance;
@@ -146,6 +145,6 @@ fn queue_and_pool(shared: &Shared, queue_family: u32) -> GpuResult<(vk::Queue, v
         unsafe { shared.device.create_command_pool(&pool_info, None) }.vk("vkCreateCommandPool")?;
     shared.set_name(queue, "compute queue");
     shared.set_name(command_pool, "command pool");
-    shared.set_name(shared.device.handle(), "vksplat device");
+    shared.set_name(shared.device.handle(), "verisplat device");
     Ok((queue, command_pool))
 }

@@ -1,4 +1,4 @@
-//! Which physical device a context opens: the one `--device` / `VKSPLAT_DEVICE` names
+//! Which physical device a context opens: the one `--device` / `VERISPLAT_DEVICE` names
 //! (an index or part of a name), else the usable one of the best type (discrete, then
 //! integrated, virtual, CPU); usable means Vulkan 1.3 and a compute queue.
 

@@ -1,5 +1,5 @@
 //! Every Vulkan device the loader offers, described from read-only queries (no logical
-//! device is created): what `vksplat doctor` lists, and whether vksplat can run on each.
+//! device is created): what `verisplat doctor` lists, and whether verisplat can run on each.
 
 use ash::vk;
 
@@ -64,7 +64,7 @@ pub struct DeviceSummary {
     pub heaps: Vec<HeapSummary>,
     /// VK_EXT_memory_budget is supported (the heaps' budgets are filled in).
     pub memory_budget_ext: bool,
-    /// Whether vksplat can run on it: Vulkan 1.3, a compute queue, push descriptors,
+    /// Whether verisplat can run on it: Vulkan 1.3, a compute queue, push descriptors,
     /// synchronization2, maintenance4 and basic/arithmetic/ballot subgroup operations.
     pub usable: bool,
     /// What it lacks when it is not usable.
@@ -118,8 +118,8 @@ pub fn enumerate() -> GpuResult<Vec<DeviceSummary>> {
         vk::API_VERSION_1_1.min(version)
     };
     let app = vk::ApplicationInfo::default()
-        .application_name(c"vksplat doctor")
-        .engine_name(c"vksplat")
+        .application_name(c"verisplat doctor")
+        .engine_name(c"verisplat")
         .api_version(api);
     let info = vk::InstanceCreateInfo::default().application_info(&app);
     // SAFETY: the create info and what it points at live until the call returns.

@@ -5,7 +5,7 @@
 //! the context applies an [`Emulation`] to that info before anything reads it
 //! ([`Emulation::apply`], beside the info in [`super::device_info`]): a kernel
 //! chooser sees 16 KiB of shared memory and 128 invocations under `spec-limits`, exactly
-//! as on a device that has no more. `VKSPLAT_EMULATE` (a comma-separated list, e.g.
+//! as on a device that has no more. `VERISPLAT_EMULATE` (a comma-separated list, e.g.
 //! `spec-limits,timestamp-bits=36`) or [`ContextOptions::emulate`](super::ContextOptions)
 //! turn them on; the GPU tests force each one.
 
@@ -49,7 +49,7 @@ pub struct Emulation {
 }
 
 impl Emulation {
-    /// Parses a `VKSPLAT_EMULATE` list: `spec-limits`, `discrete` (device-local memory not
+    /// Parses a `VERISPLAT_EMULATE` list: `spec-limits`, `discrete` (device-local memory not
     /// host-visible and host memory not coherent), `no-host-visible-device`,
     /// `non-coherent`, `timestamp-bits=N`, `max-storage-buffer-range=BYTES`,
     /// `max-workgroup-count=N`, `no-int64-atomics`.
@@ -104,11 +104,11 @@ impl Emulation {
         Ok(e)
     }
 
-    /// `VKSPLAT_EMULATE`, parsed (empty when unset).
+    /// `VERISPLAT_EMULATE`, parsed (empty when unset).
     pub fn from_env() -> Result<Emulation, String> {
-        match std::env::var("VKSPLAT_EMULATE") {
-            Ok(v) => Emulation::parse(&v).map_err(|e| format!("VKSPLAT_EMULATE: {e}")),
-            Err(_) => Ok(Emulation::default()),
+        match crate::former_name::env_var("VERISPLAT_EMULATE") {
+            Some(v) => Emulation::parse(&v).map_err(|e| format!("VERISPLAT_EMULATE: {e}")),
+            None => Ok(Emulation::default()),
         }
     }
 

@@ -198,8 +198,8 @@ pub(crate) fn create(validation: bool) -> GpuResult<VulkanInstance> {
         vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_features);
 
     let app = vk::ApplicationInfo::default()
-        .application_name(c"vksplat")
-        .engine_name(c"vksplat")
+        .application_name(c"verisplat")
+        .engine_name(c"verisplat")
         .api_version(vk::API_VERSION_1_3);
     let mut instance_info = vk::InstanceCreateInfo::default()
         .application_info(&app)

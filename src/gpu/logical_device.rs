@@ -1,4 +1,4 @@
-//! Opening the chosen physical device: refusing it when it lacks what vksplat needs
+//! Opening the chosen physical device: refusing it when it lacks what verisplat needs
 //! ([`super::capabilities`]), the features and extensions enabled (float and 64-bit
 //! integer atomics where the device has them), the one compute queue, and the allocator
 //! and pipeline cache created on the new device.

@@ -74,7 +74,7 @@ pub enum GpuError {
     },
     /// An allocation would exceed the device memory budget (or the device is out of
     /// memory).
-    #[error("out of device memory: buffer '{name}' needs {bytes} bytes, {in_use} of the {budget} bytes this renderer may use are taken (the budget is the device-local heap, on CPU devices 3/4 of the host memory available, or VKSPLAT_MEMORY_LIMIT / --memory-limit); use a smaller resolution, fewer Gaussians or a larger device")]
+    #[error("out of device memory: buffer '{name}' needs {bytes} bytes, {in_use} of the {budget} bytes this renderer may use are taken (the budget is the device-local heap, on CPU devices 3/4 of the host memory available, or VERISPLAT_MEMORY_LIMIT / --memory-limit); use a smaller resolution, fewer Gaussians or a larger device")]
     OutOfMemory {
         /// Buffer or image name.
         name: String,
@@ -108,9 +108,9 @@ pub enum GpuError {
         /// The whole sentence, with what to do about it.
         message: String,
     },
-    /// An invariant of vksplat itself does not hold: a bug, not a problem of the input
+    /// An invariant of verisplat itself does not hold: a bug, not a problem of the input
     /// or the device.
-    #[error("internal error (a bug in vksplat; please report it): {0}")]
+    #[error("internal error (a bug in verisplat; please report it): {0}")]
     Internal(String),
 }
 

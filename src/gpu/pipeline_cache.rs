@@ -1,8 +1,8 @@
 //! The `VkPipelineCache` kept on disk between runs, one file per driver build.
 //!
-//! The file is `<dir>/<pipelineCacheUUID>.bin` (dir: `$VKSPLAT_PIPELINE_CACHE`, else
-//! `$XDG_CACHE_HOME/vksplat/pipelines`, else `~/.cache/vksplat/pipelines`;
-//! `VKSPLAT_NO_PIPELINE_CACHE=1` turns it off). A file whose header does not name this
+//! The file is `<dir>/<pipelineCacheUUID>.bin` (dir: `$VERISPLAT_PIPELINE_CACHE`, else
+//! `$XDG_CACHE_HOME/verisplat/pipelines`, else `~/.cache/verisplat/pipelines`;
+//! `VERISPLAT_NO_PIPELINE_CACHE=1` turns it off). A file whose header does not name this
 //! device and driver (vendor, device id, cache UUID), or that is damaged, is ignored with a
 //! note and replaced. The cache is written back, atomically ([`crate::fsutil`]),
 //! when the context goes and the driver's data grew. Whether it saves time depends on the
@@ -16,16 +16,16 @@ const HEADER_BYTES: usize = 32;
 
 /// Where pipeline caches are kept, or `None` (no disk cache).
 pub fn cache_dir() -> Option<PathBuf> {
-    if std::env::var_os("VKSPLAT_NO_PIPELINE_CACHE").is_some() {
+    if crate::former_name::env_var_os("VERISPLAT_NO_PIPELINE_CACHE").is_some() {
         return None;
     }
-    if let Some(dir) = std::env::var_os("VKSPLAT_PIPELINE_CACHE") {
+    if let Some(dir) = crate::former_name::env_var_os("VERISPLAT_PIPELINE_CACHE") {
         return Some(PathBuf::from(dir));
     }
     let base = std::env::var_os("XDG_CACHE_HOME")
         .map(PathBuf::from)
         .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
-    Some(base.join("vksplat").join("pipelines"))
+    Some(base.join("verisplat").join("pipelines"))
 }
 
 /// The identity a cache file must carry: `VkPipelineCacheHeaderVersionOne`'s fields.
@@ -74,7 +74,7 @@ pub fn load(dir: &Path, identity: &CacheIdentity) -> Option<Vec<u8>> {
         Ok(()) => Some(data),
         Err(why) => {
             crate::note!(
-                "vksplat: ignoring pipeline cache {} ({why}); it will be rewritten",
+                "verisplat: ignoring pipeline cache {} ({why}); it will be rewritten",
                 path.display()
             );
             None
@@ -113,7 +113,8 @@ mod tests {
 
     #[test]
     fn cache_files_round_trip_and_foreign_or_damaged_ones_are_ignored() {
-        let dir = std::env::temp_dir().join(format!("vksplat-pcache-test-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("verisplat-pcache-test-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let ours = CacheIdentity {
             vendor_id: 0x10005,

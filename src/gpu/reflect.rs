@@ -247,7 +247,7 @@ impl Declarations {
             (_, Some(Type::Image { sampled: 2, .. })) => BindingKind::StorageImage,
             _ => {
                 return Err(format!(
-                    "binding {binding}: a descriptor kind vksplat does not bind"
+                    "binding {binding}: a descriptor kind verisplat does not bind"
                 ))
             }
         })

@@ -49,7 +49,7 @@ pub enum ShaderError {
 }
 
 fn glsl_dir() -> Option<std::path::PathBuf> {
-    std::env::var_os("VKSPLAT_GLSL_DIR").map(std::path::PathBuf::from)
+    crate::former_name::env_var_os("VERISPLAT_GLSL_DIR").map(std::path::PathBuf::from)
 }
 
 /// A scratch directory for one run-time compile, removed on drop.
@@ -59,7 +59,7 @@ impl ScratchDir {
     fn new() -> Result<Self, String> {
         static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
         let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let dir = std::env::temp_dir().join(format!("vksplat-glsl-{}-{n}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("verisplat-glsl-{}-{n}", std::process::id()));
         std::fs::create_dir_all(dir.join("glsl")).map_err(|e| format!("{}: {e}", dir.display()))?;
         Ok(ScratchDir(dir))
     }
@@ -134,8 +134,8 @@ fn run_glslc(
 }
 
 /// The SPIR-V of `glsl/<name>.comp` with `defines`: the module compiled at build time, or,
-/// when `VKSPLAT_GLSL_DIR` is set (shader development: edit and re-run without
-/// rebuilding), `$VKSPLAT_GLSL_DIR/<name>.comp` compiled now with `glslc`.
+/// when `VERISPLAT_GLSL_DIR` is set (shader development: edit and re-run without
+/// rebuilding), `$VERISPLAT_GLSL_DIR/<name>.comp` compiled now with `glslc`.
 pub fn shader_spirv(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, ShaderError> {
     if let Some(dir) = glsl_dir() {
         let scratch = ScratchDir::new().map_err(|message| ShaderError::Compile {

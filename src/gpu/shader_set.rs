@@ -1,10 +1,10 @@
-// Every compute shader variant vksplat ships, the constants the shaders share with the
+// Every compute shader variant verisplat ships, the constants the shaders share with the
 // host, and the one GLSL -> SPIR-V compile call (Khronos' `glslc`, shaderc's command line).
 //
 // This file is compiled twice: into the library (`crate::gpu::shader_set`) and into the
 // build script (a `#[path]` module of `build.rs`), which compiles every variant below to SPIR-V
 // and embeds it, so no binary or test links a GLSL compiler. It therefore uses `std` only.
-// Runtime compilation exists only for shader development (`VKSPLAT_GLSL_DIR`), through the
+// Runtime compilation exists only for shader development (`VERISPLAT_GLSL_DIR`), through the
 // same [`compile_glsl_file`].
 
 /// Invocations of every one-dimensional kernel's workgroup (preprocess, order, keys,

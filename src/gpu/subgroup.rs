@@ -136,7 +136,7 @@ pub fn probe(ctx: &GpuContext) -> GpuResult<SubgroupProbe> {
 pub fn size_to_use(device: &str, probe: &SubgroupProbe) -> GpuResult<SubgroupVerdict> {
     probe.verdict().map_err(|why| {
         GpuError::Missing(format!(
-            "{device} fails vksplat's subgroup self-check: {why}; no kernel can be trusted \
+            "{device} fails verisplat's subgroup self-check: {why}; no kernel can be trusted \
              on it (a driver bug: try another driver or, on llvmpipe, \
              LP_NATIVE_VECTOR_WIDTH of 512 or less)"
         ))

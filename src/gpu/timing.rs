@@ -8,7 +8,7 @@
 //! reset while recording to the read after the fence) take less than one wrap period;
 //! otherwise the timer reports [`Untimed::WrapTooShort`] and its stages as untimed,
 //! never a wrong number. Without timestamps (0 valid bits) it reports
-//! [`Untimed::NoTimestamps`]. Under `VKSPLAT_EMULATE=timestamp-bits=N` the counter also
+//! [`Untimed::NoTimestamps`]. Under `VERISPLAT_EMULATE=timestamp-bits=N` the counter also
 //! starts at the worst phase: it wraps in the middle of each reading's span, so the
 //! wrap-around path runs in every emulated reading.
 
@@ -313,7 +313,7 @@ impl GpuTimer {
             Err(untimed) => {
                 static SAID: AtomicBool = AtomicBool::new(false);
                 if !SAID.swap(true, Ordering::Relaxed) {
-                    crate::note!("vksplat: {untimed}");
+                    crate::note!("verisplat: {untimed}");
                 }
                 Ok(None)
             }

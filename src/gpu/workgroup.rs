@@ -4,7 +4,7 @@
 //! `maxComputeWorkGroupInvocations` and `maxComputeSharedMemorySize` before it is built
 //! ([`check_limits`]), so a kernel chosen for a larger device is an error naming the
 //! kernel and the limit, never a driver crash or a silently wrong frame. Under
-//! `VKSPLAT_EMULATE=spec-limits` those limits are the specification's minimums (128
+//! `VERISPLAT_EMULATE=spec-limits` those limits are the specification's minimums (128
 //! invocations, 16 KiB), and the tests run every stage there.
 
 use std::collections::HashMap;

@@ -36,11 +36,9 @@ impl BlendKernel {
     /// pixels per invocation on CPU devices (fastest on lavapipe, see BENCHMARKS.md) and
     /// on GPUs whose workgroups cannot hold a 16x16 tile (fewer than 256 invocations or
     /// 12 KiB of shared memory: the texel kernel's 8x8 bins need 32 invocations and no
-    /// shared memory). `VKSPLAT_BLEND` (`shared`, `texel` or `texel:N`) overrides.
+    /// shared memory). `VERISPLAT_BLEND` (`shared`, `texel` or `texel:N`) overrides.
     pub fn for_device(ctx: &GpuContext) -> BlendKernel {
-        if let Some(k) = std::env::var("VKSPLAT_BLEND")
-            .ok()
-            .and_then(|v| v.parse().ok())
+        if let Some(k) = crate::former_name::env_var("VERISPLAT_BLEND").and_then(|v| v.parse().ok())
         {
             return k;
         }
@@ -97,7 +95,7 @@ impl BlendKernel {
     }
 }
 
-/// The kernel as `VKSPLAT_BLEND` names it: `shared` or `texel:N`.
+/// The kernel as `VERISPLAT_BLEND` names it: `shared` or `texel:N`.
 impl std::fmt::Display for BlendKernel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {

@@ -1,7 +1,7 @@
 //! Differentiable rendering on the device, for training loops: [`DiffRasterizer`] renders
 //! Gaussians given as a trainer holds them ([`SplatParams`], gsplat's conventions) and
 //! returns the gradients of a loss with respect to them. The Python package's
-//! `vksplat.torch.rasterization` is built on it. With a neural shader
+//! `verisplat.torch.rasterization` is built on it. With a neural shader
 //! ([`DiffRasterizer::set_shader`]) the Gaussians' direct values are feature channels that
 //! the shader turns into colour, and the backward pass also returns the shader's gradients.
 

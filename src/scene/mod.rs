@@ -55,11 +55,11 @@ pub struct Scene {
     /// cannot record it.
     pub antialiased: bool,
     /// The alpha falloff the scene is made for ([`crate::model::SplatKernel`]), as the file
-    /// records it (INRIA PLY: a `comment vksplat kernel power` header line); Gaussian when
+    /// records it (INRIA PLY: a `comment verisplat kernel power` header line); Gaussian when
     /// it records none. `render` uses it unless `--kernel` says otherwise.
     pub kernel: crate::model::SplatKernel,
     /// The rasterizer's rules the scene was trained with ([`crate::model::Rules`]), as the
-    /// file records it (INRIA PLY: a `comment vksplat rules gsplat` header line); the
+    /// file records it (INRIA PLY: a `comment verisplat rules gsplat` header line); the
     /// original's when it records none. `render` uses them unless `--rules` says otherwise.
     pub rules: crate::model::Rules,
     /// Feature channels per Gaussian (0 without features, else 1..=[`MAX_FEATURES`]).

@@ -3,7 +3,7 @@
 //! Accepts `binary_little_endian`, `binary_big_endian` and `ascii` files. Vertex
 //! properties are looked up by name, so extra or reordered properties are fine. Other
 //! elements (e.g. faces) are parsed past and ignored. A header line
-//! `comment vksplat kernel power` records that the scene is made for the power-function
+//! `comment verisplat kernel power` records that the scene is made for the power-function
 //! kernel ([`SplatKernel`]); the writer adds it for such scenes. Float properties
 //! `feat_0 .. feat_{K-1}` (K <= 64) are the Gaussians' feature channels, written back after
 //! `rot_*`. Float properties `t_mean` and `t_scale` (both or neither) make a time-varying
@@ -116,10 +116,10 @@ pub(crate) struct Header {
     pub(crate) comments: Vec<(usize, String)>,
 }
 
-/// The header comment that records a scene's alpha falloff: `comment vksplat kernel NAME`.
-pub const KERNEL_COMMENT: &str = "vksplat kernel";
-/// The header comment that records a scene's rasterizer rules: `comment vksplat rules NAME`.
-pub const RULES_COMMENT: &str = "vksplat rules";
+/// The header comment that records a scene's alpha falloff: `comment verisplat kernel NAME`.
+pub const KERNEL_COMMENT: &str = "verisplat kernel";
+/// The header comment that records a scene's rasterizer rules: `comment verisplat rules NAME`.
+pub const RULES_COMMENT: &str = "verisplat rules";
 
 impl Header {
     /// The element called `name`, if the header declares one.
@@ -127,18 +127,19 @@ impl Header {
         self.elements.iter().find(|e| e.name == name)
     }
 
-    /// The alpha falloff a `comment vksplat kernel NAME` line records (Gaussian without
+    /// The alpha falloff a `comment verisplat kernel NAME` line records (Gaussian without
     /// one); an unknown name is an error naming the line.
     pub(crate) fn kernel(&self, path: &Path) -> Result<SplatKernel, SceneError> {
         self.recorded(path, KERNEL_COMMENT)
     }
 
-    /// The rules a `comment vksplat rules NAME` line records (the original's without one).
+    /// The rules a `comment verisplat rules NAME` line records (the original's without one).
     pub(crate) fn rules(&self, path: &Path) -> Result<crate::model::Rules, SceneError> {
         self.recorded(path, RULES_COMMENT)
     }
 
-    /// The value the last `comment PREFIX VALUE` line records (the default without one).
+    /// The value the last `comment PREFIX VALUE` line records (the default without one); a
+    /// file written under the former name has that name in the prefix ([`crate::former_name`]).
     fn recorded<T: Default + std::str::FromStr<Err = String>>(
         &self,
         path: &Path,
@@ -147,7 +148,7 @@ impl Header {
         let mut value = T::default();
         for (line, text) in &self.comments {
             let words: Vec<&str> = text.split_whitespace().collect();
-            if words.len() < 2 || words[..2].join(" ") != prefix {
+            if words.len() < 2 || !crate::former_name::matches_key(&words[..2].join(" "), prefix) {
                 continue;
             }
             value = words[2..].join(" ").parse().map_err(|e: String| {

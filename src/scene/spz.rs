@@ -143,7 +143,7 @@ impl Header {
         if h.flags & FLAG_EXTENSIONS != 0 {
             return Err(SceneError::invalid(
                 path,
-                "uses SPZ extensions (header flag 0x2), which vksplat does not read",
+                "uses SPZ extensions (header flag 0x2), which verisplat does not read",
             ));
         }
         Ok(h)

@@ -1,4 +1,4 @@
-//! Scene writers and `vksplat convert`: load any format, transform, filter, write INRIA
+//! Scene writers and `verisplat convert`: load any format, transform, filter, write INRIA
 //! PLY, `.splat` or SPZ v3 chosen by the output's extension, atomically.
 
 use super::filter::SceneFilter;
@@ -203,7 +203,7 @@ pub fn convert(
             path: output.to_path_buf(),
             format: output_format,
             message: format!(
-                "{} is time-varying (t_mean, t_scale per Gaussian), which only PLY holds; write a .ply, or render a time with `vksplat render --time T`",
+                "{} is time-varying (t_mean, t_scale per Gaussian), which only PLY holds; write a .ply, or render a time with `verisplat render --time T`",
                 input.display()
             ),
         });

@@ -23,7 +23,7 @@ pub struct Checkpoint {
     pub fingerprint: String,
 }
 
-const META: &str = "vksplat_checkpoint";
+const META: &str = "verisplat_checkpoint";
 
 impl Checkpoint {
     /// The file's bytes.
@@ -72,8 +72,12 @@ impl Checkpoint {
         let text = header
             .metadata()
             .as_ref()
-            .and_then(|m| m.get(META).cloned())
-            .ok_or("is not a vksplat training checkpoint (no description)")?;
+            .and_then(|m| {
+                m.iter()
+                    .find(|(k, _)| crate::former_name::matches_key(k, META))
+                    .map(|(_, v)| v.clone())
+            })
+            .ok_or("is not a verisplat training checkpoint (no description)")?;
         let meta: serde_json::Map<String, serde_json::Value> =
             serde_json::from_str(&text).map_err(|e| format!("has a broken description: {e}"))?;
         let mut arrays = HashMap::new();

@@ -2,7 +2,7 @@
 //! as the initial Gaussians) or a transforms one, its photos undistorted to pinhole
 //! cameras where the lens is distorted ([`super::undistort`]) and at the training resolution,
 //! the train/test split of the original `--eval` (every 8th image in name order is held
-//! out: the `llffhold` rule `vksplat eval` uses) and the scene extent the learning rates
+//! out: the `llffhold` rule `verisplat eval` uses) and the scene extent the learning rates
 //! and densification scale with.
 
 use super::undistort::Undistortion;

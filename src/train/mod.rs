@@ -1,4 +1,4 @@
-//! Training from images (`vksplat train`): the original 3DGS method on the differentiable
+//! Training from images (`verisplat train`): the original 3DGS method on the differentiable
 //! rasterizer. The data sets ([`data`]), the loss on the CPU (the reference) and on the
 //! device ([`loss`]), the model with its optimiser and density control ([`model`]), the
 //! model's state kept on the device between iterations ([`device`]), the loop ([`run`])

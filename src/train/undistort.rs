@@ -1,4 +1,4 @@
-//! Undistorting photos to pinhole cameras at load time (`vksplat train`, and `vksplat eval`
+//! Undistorting photos to pinhole cameras at load time (`verisplat train`, and `verisplat eval`
 //! on the photos of a model trained from them): each pixel of the pinhole image is a ray
 //! whose distorted position in the photo ([`Distortion::distort`]) is sampled
 //! bilinearly. The pinhole camera keeps the photo's focal lengths (so the centre keeps its
@@ -214,8 +214,8 @@ impl Undistortion {
 /// `undistortion.json`: the undistortions of a model's photos, as [`read`] reads them.
 pub fn to_json(images: &[Undistortion]) -> String {
     let record = Record {
-        about: "How vksplat train undistorted these photos to the pinhole cameras of \
-                cameras.json (before any -r scaling); vksplat eval applies the same to the photos."
+        about: "How verisplat train undistorted these photos to the pinhole cameras of \
+                cameras.json (before any -r scaling); verisplat eval applies the same to the photos."
             .into(),
         images: images.to_vec(),
     };
@@ -226,6 +226,6 @@ pub fn to_json(images: &[Undistortion]) -> String {
 pub fn read(path: &std::path::Path) -> Result<Vec<Undistortion>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read: {e}"))?;
     let record: Record = serde_json::from_str(&text)
-        .map_err(|e| format!("is not a vksplat undistortion record: {e}"))?;
+        .map_err(|e| format!("is not a verisplat undistortion record: {e}"))?;
     Ok(record.images)
 }

@@ -1,4 +1,4 @@
-//! [`CpuSource`]: the viewer's frames from the CPU reference renderer (`vksplat view
+//! [`CpuSource`]: the viewer's frames from the CPU reference renderer (`verisplat view
 //! --cpu`), for machines without a Vulkan device and as the exact reference the GPU
 //! frames are checked against.
 

@@ -1,4 +1,4 @@
-//! `vksplat view`: an interactive viewer in the browser. The scene is rendered on the
+//! `verisplat view`: an interactive viewer in the browser. The scene is rendered on the
 //! machine that holds it; frames go to the page over a WebSocket.
 //!
 //! * [`source`]: what the server asks of a renderer (one frame for a camera and the

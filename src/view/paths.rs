@@ -21,7 +21,7 @@ pub fn export_path(
         .map(|(i, k)| path.sample(k.time, format!("keyframe_{i}")))
         .collect();
     match format {
-        PathFormat::Vksplat => Ok((text, at_keys)),
+        PathFormat::Verisplat => Ok((text, at_keys)),
         PathFormat::Nerfstudio => {
             let frames = path
                 .cameras(&PathTiming::default())

@@ -99,7 +99,7 @@ pub struct KeyframeIn {
 #[serde(rename_all = "lowercase")]
 pub enum PathFormat {
     /// Our keyframe JSON (`render --cameras` reads it; docs/cameras.md).
-    Vksplat,
+    Verisplat,
     /// nerfstudio's `camera_path.json`, the path sampled at its fps.
     Nerfstudio,
 }

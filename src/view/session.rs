@@ -220,7 +220,7 @@ impl Writer<'_> {
                             seq,
                             format,
                             filename: format!(
-                                "vksplat_{}.{}",
+                                "verisplat_{}.{}",
                                 unix_seconds(),
                                 match format {
                                     ShotFormat::Png => "png",
@@ -610,7 +610,7 @@ impl<'s> Session<'s> {
             seq,
             format,
             filename: match format {
-                PathFormat::Vksplat => "keyframes.json".into(),
+                PathFormat::Verisplat => "keyframes.json".into(),
                 PathFormat::Nerfstudio => "camera_path.json".into(),
             },
             text,

@@ -119,7 +119,7 @@ pub struct ViewFrame {
     pub gaussians: u32,
 }
 
-/// Screenshot formats: written by the same code as `vksplat render`.
+/// Screenshot formats: written by the same code as `verisplat render`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ShotFormat {
@@ -154,7 +154,7 @@ pub trait ViewSource: Send {
         0
     }
     /// Renders `cam` at full quality and encodes it as a file of `format`, as
-    /// `vksplat render` would write it with the flags matching `settings`.
+    /// `verisplat render` would write it with the flags matching `settings`.
     fn screenshot(
         &mut self,
         cam: &Camera,
@@ -334,7 +334,7 @@ pub fn frame_rgba8(frame: &Frame, mode: ViewMode) -> Vec<u8> {
     }
 }
 
-/// Encodes `frame` as `vksplat render` writes it with the matching `--mode`: PNG of the
+/// Encodes `frame` as `verisplat render` writes it with the matching `--mode`: PNG of the
 /// mode, or EXR with R, G, B, A and Z (premultiplied, the camera in the header).
 pub fn encode_shot(
     frame: &Frame,

@@ -8,7 +8,7 @@ mod keyframes;
 use crate::common;
 use glam::{DMat3, Mat3, Vec2, Vec3};
 use std::path::{Path, PathBuf};
-use vksplat::camera::{
+use verisplat::camera::{
     self, default_camera, load_camera_file, orbit, select_cameras, Camera, CameraFormat,
     OrbitParams, PathTiming,
 };
@@ -360,7 +360,7 @@ fn orbit_front_view_and_invariants() {
         cams[1].position()
     );
 
-    let scene = vksplat::demo_scene();
+    let scene = verisplat::demo_scene();
     let p = OrbitParams {
         frames: 36,
         start_deg: 0.0,
@@ -484,7 +484,7 @@ fn selection_on_loaded_cameras() {
 // module above it).
 
 /// Pixel coordinates and depth of a world point seen by `cam`.
-fn project_point(cam: &vksplat::camera::Camera, p: Vec3) -> (f32, f32, f32) {
+fn project_point(cam: &verisplat::camera::Camera, p: Vec3) -> (f32, f32, f32) {
     let v = cam.rotation * p + cam.translation;
     (
         cam.fx * v.x / v.z + cam.cx,
@@ -495,13 +495,13 @@ fn project_point(cam: &vksplat::camera::Camera, p: Vec3) -> (f32, f32, f32) {
 
 #[test]
 fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
-    let scene = vksplat::demo_scene();
-    let b = vksplat::camera::bulk_bounds(&scene.positions);
+    let scene = verisplat::demo_scene();
+    let b = verisplat::camera::bulk_bounds(&scene.positions);
     for (w, h) in [(1280, 720), (320, 240), (100, 70), (480, 640)] {
-        let default = vksplat::camera::default_camera(&scene.positions, w, h);
-        let frames = vksplat::camera::orbit(
+        let default = verisplat::camera::default_camera(&scene.positions, w, h);
+        let frames = verisplat::camera::orbit(
             &scene.positions,
-            &vksplat::camera::OrbitParams {
+            &verisplat::camera::OrbitParams {
                 frames: 7,
                 width: w,
                 height: h,
@@ -512,7 +512,7 @@ fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
         assert_eq!(frames.len(), 7);
         assert_eq!(frames[0].name, "orbit_00000");
         assert_eq!(
-            vksplat::camera::Camera {
+            verisplat::camera::Camera {
                 name: "default".into(),
                 ..frames[0].clone()
             },

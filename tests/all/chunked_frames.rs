@@ -12,12 +12,12 @@
 
 use crate::common;
 use crate::common::gpu::{assert_validation_clean, compare, dump_failure, new_renderer, renderer};
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions, SplatKernel};
-use vksplat::frame::Frame;
-use vksplat::render::blend::BlendKernel;
-use vksplat::render::{GpuRenderer, SplitLimits};
-use vksplat::scene::{self, ActivatedScene};
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions, SplatKernel};
+use verisplat::frame::Frame;
+use verisplat::render::blend::BlendKernel;
+use verisplat::render::{GpuRenderer, SplitLimits};
+use verisplat::scene::{self, ActivatedScene};
 
 fn orbit(file: &str, i: usize, w: u32, h: u32) -> Camera {
     let cams = camera::load_cameras_json(&common::shared_data().join(file)).unwrap();

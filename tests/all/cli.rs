@@ -1,18 +1,18 @@
-//! The `vksplat` binary: the README's demo command, `info`, and one clear error (non-zero
+//! The `verisplat` binary: the README's demo command, `info`, and one clear error (non-zero
 //! exit, no panic, no output file) for each bad input.
 
 use crate::common;
-use crate::common::cli::{fails, stderr, vksplat};
+use crate::common::cli::{fails, stderr, verisplat};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vksplat::scene::ply;
+use verisplat::scene::ply;
 
 #[test]
 fn demo_render_writes_a_picture_of_the_robot() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo.png");
-    let o = vksplat(&["render", "--demo", "-o", out.to_str().unwrap(), "--cpu"]);
+    let o = verisplat(&["render", "--demo", "-o", out.to_str().unwrap(), "--cpu"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let img = image::open(&out).unwrap().to_rgb8();
     assert_eq!(img.dimensions(), (1280, 720));
@@ -31,7 +31,7 @@ fn demo_render_writes_a_picture_of_the_robot() {
         e.contains("already exists") && e.contains("--overwrite"),
         "{e}"
     );
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "-o",
@@ -50,7 +50,7 @@ fn demo_render_writes_a_picture_of_the_robot() {
 fn exr_render_with_background_and_scale() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("d.exr");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "--cpu",
@@ -85,7 +85,7 @@ fn exr_render_with_background_and_scale() {
 
 #[test]
 fn info_prints_the_statistics() {
-    let o = vksplat(&["info", "--demo"]);
+    let o = verisplat(&["info", "--demo"]);
     assert!(o.status.success());
     let s = String::from_utf8_lossy(&o.stdout);
     for needle in [
@@ -214,7 +214,7 @@ fn bad_inputs_give_one_clear_error_each() {
     ] {
         let mut all = vec!["render", s, "-o", o];
         all.extend(args);
-        let bad = vksplat(&all);
+        let bad = verisplat(&all);
         assert!(
             !bad.status.success() && stderr(&bad).contains(needle),
             "{all:?}"
@@ -229,7 +229,7 @@ fn cameras_json_camera_selected_by_name_renders() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cam.png");
     let data = common::shared_data();
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         data.join("playbot_lod6_1873_sh2.ply").to_str().unwrap(),
         "--cameras",
@@ -254,7 +254,7 @@ fn gpu_is_the_default_and_matches_cpu_output() {
     let dir = tempfile::tempdir().unwrap();
     let gpu = dir.path().join("gpu.png");
     let cpu = dir.path().join("cpu.png");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "--width",
@@ -283,7 +283,7 @@ fn gpu_is_the_default_and_matches_cpu_output() {
         assert!(e.contains(needle), "missing {needle:?} in\n{e}");
     }
     assert!(!e.contains("on the CPU"), "{e}");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "--width",
@@ -312,7 +312,7 @@ fn gpu_is_the_default_and_matches_cpu_output() {
         "{close} pixels within 1/255"
     );
     // A device that does not exist is one clear error.
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "-o",
@@ -330,7 +330,7 @@ fn gpu_is_the_default_and_matches_cpu_output() {
 
 #[test]
 fn bench_reports_every_stage() {
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench", "--demo", "--width", "320", "--frames", "3", "--warmup", "1",
     ]);
     let out = String::from_utf8_lossy(&o.stdout);
@@ -372,9 +372,9 @@ fn bench_reports_every_stage() {
         out.contains("tile pairs") && out.contains("B per Gaussian"),
         "{out}"
     );
-    let o = vksplat(&["bench", "--demo", "--frames", "2", "--cpu"]);
+    let o = verisplat(&["bench", "--demo", "--frames", "2", "--cpu"]);
     assert!(o.status.success() && String::from_utf8_lossy(&o.stdout).contains("CPU reference"));
-    let o = vksplat(&["bench", "--demo", "--frames", "0"]);
+    let o = verisplat(&["bench", "--demo", "--frames", "0"]);
     assert!(!o.status.success() && stderr(&o).contains("--frames"));
 }
 
@@ -384,7 +384,7 @@ fn bench_reports_every_stage() {
 fn bench_backward_reports_both_passes() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("backward.json");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench",
         "--demo",
         "--width",
@@ -426,7 +426,7 @@ fn bench_backward_reports_both_passes() {
     assert!(run["backward_ms"]["median"].as_f64().unwrap() > 0.0);
     assert!(run["backward_over_forward"].as_f64().unwrap() > 0.0);
     assert!(run["device_bytes_per_gaussian"].as_f64().unwrap() > 0.0);
-    let refused = vksplat(&["bench", "--demo", "--backward", "--cpu"]);
+    let refused = verisplat(&["bench", "--demo", "--backward", "--cpu"]);
     assert!(!refused.status.success());
 }
 
@@ -434,7 +434,7 @@ fn bench_backward_reports_both_passes() {
 fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("report.json");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench",
         "--demo",
         "--width",
@@ -498,7 +498,7 @@ fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
         "stages {sum} ms vs frame {frame} ms"
     );
     // Existing outputs are not overwritten unasked.
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench",
         "--demo",
         "--frames",
@@ -509,7 +509,7 @@ fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
     assert!(!o.status.success() && stderr(&o).contains("--overwrite"));
 
     let (csv, svg) = (dir.path().join("sweep.csv"), dir.path().join("sweep.svg"));
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench",
         "--sweep",
         "gaussians=500,2e3",
@@ -547,9 +547,9 @@ fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
         .to_string_lossy()
         .ends_with(".tmp")));
     // Bad sweeps are one clear error.
-    let o = vksplat(&["bench", "--sweep", "colours=3"]);
+    let o = verisplat(&["bench", "--sweep", "colours=3"]);
     assert!(!o.status.success() && stderr(&o).contains("unknown axis"));
-    let o = vksplat(&["bench", "--sweep", "gaussians=lots"]);
+    let o = verisplat(&["bench", "--sweep", "gaussians=lots"]);
     assert!(!o.status.success() && stderr(&o).contains("not a number of Gaussians"));
 }
 
@@ -557,7 +557,7 @@ fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
 fn gen_writes_a_loadable_synthetic_scene() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("synthetic.ply");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "gen",
         "2e3",
         "--seed",
@@ -568,16 +568,16 @@ fn gen_writes_a_loadable_synthetic_scene() {
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s = vksplat::scene::load(&out).unwrap();
+    let s = verisplat::scene::load(&out).unwrap();
     assert_eq!((s.len(), s.sh_degree), (2000, 1));
-    assert_eq!(s, vksplat::gen::synthetic_scene(2000, 5, 1));
-    let o = vksplat(&["gen", "10", "-o", out.to_str().unwrap()]);
+    assert_eq!(s, verisplat::gen::synthetic_scene(2000, 5, 1));
+    let o = verisplat(&["gen", "10", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("already exists"));
 }
 
 #[test]
 fn info_prints_log_binned_histograms_that_count_every_gaussian() {
-    let o = vksplat(&["info", "--demo"]);
+    let o = verisplat(&["info", "--demo"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     for title in ["largest scale per Gaussian", "opacity (after the sigmoid)"] {
@@ -608,7 +608,7 @@ fn info_prints_log_binned_histograms_that_count_every_gaussian() {
 }
 
 /// `--kernel power` on render, bench and compare; a PLY that records the kernel (header
-/// `comment vksplat kernel power`, written by `convert --kernel`) renders with it, with a
+/// `comment verisplat kernel power`, written by `convert --kernel`) renders with it, with a
 /// note, unless `--kernel` overrides; `info` prints it; `convert` keeps it in PLY and says
 /// when a format cannot; a bad kernel name is one clear error.
 #[test]
@@ -622,12 +622,12 @@ fn kernel_flag_and_the_ply_kernel_comment() {
     let bytes = std::fs::read(&power).unwrap();
     let header = String::from_utf8_lossy(&bytes[..400]);
     assert!(
-        header.contains("\ncomment vksplat kernel power\n"),
+        header.contains("\ncomment verisplat kernel power\n"),
         "{header}"
     );
     assert_eq!(
-        vksplat::scene::load(&power).unwrap().kernel,
-        vksplat::cpu::SplatKernel::Power
+        verisplat::scene::load(&power).unwrap().kernel,
+        verisplat::cpu::SplatKernel::Power
     );
     // A Gaussian scene's PLY stays as the trainer writes it (no comment).
     let back = d.join("back.ply");
@@ -704,7 +704,7 @@ fn kernel_flag_and_the_ply_kernel_comment() {
     assert!(stdout(&o).contains("power kernel"), "{}", stdout(&o));
 
     // Bad names: the flag, and the header comment (one sentence naming the line).
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "--kernel",

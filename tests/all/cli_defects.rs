@@ -2,7 +2,7 @@
 //! every command, so each stays fixed. Renders use the CPU reference at small sizes (fast
 //! and device-independent) unless the item is about the GPU path.
 
-use crate::common::cli::{bin, fails, ok, s, stderr, stdout, vksplat, vksplat_in};
+use crate::common::cli::{bin, fails, ok, s, stderr, stdout, verisplat, verisplat_in};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 /// A clap usage error: non-zero exit, no panic, the message contains `needle`.
 fn usage_error(args: &[&str], needle: &str) {
-    let o = vksplat(args);
+    let o = verisplat(args);
     let e = stderr(&o);
     assert!(!o.status.success(), "{args:?} must fail");
     assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
@@ -334,7 +334,7 @@ fn convert_and_gen_are_honest_about_formats() {
     let copy = dir.path().join("copy.ply");
     std::fs::copy(&src, &copy).unwrap();
     let same = dir.path().join("./copy.ply");
-    let o = vksplat(&["convert", s(&copy), s(&same), "--overwrite"]);
+    let o = verisplat(&["convert", s(&copy), s(&same), "--overwrite"]);
     assert!(
         !o.status.success() && stderr(&o).contains("is the input file"),
         "{}",
@@ -525,12 +525,12 @@ fn frame_lists_bounds_and_hash_patterns(dir: &Path, cams: &Path) {
 /// Item 9: with --skip-existing, a file another run writes meanwhile is kept.
 #[test]
 fn skip_existing_keeps_a_file_that_appears_during_the_run() {
-    use vksplat::sequence::{self, Existing, OutputPattern, RunOptions};
+    use verisplat::sequence::{self, Existing, OutputPattern, RunOptions};
     let dir = tempfile::tempdir().unwrap();
-    let scene = vksplat::demo_scene().activated();
-    let cams: Vec<(usize, vksplat::camera::Camera)> = vksplat::camera::orbit(
+    let scene = verisplat::demo_scene().activated();
+    let cams: Vec<(usize, verisplat::camera::Camera)> = verisplat::camera::orbit(
         &scene.positions,
-        &vksplat::camera::OrbitParams {
+        &verisplat::camera::OrbitParams {
             frames: 3,
             width: 32,
             height: 24,
@@ -548,14 +548,14 @@ fn skip_existing_keeps_a_file_that_appears_during_the_run() {
     for threads in [0, 2] {
         std::fs::remove_file(&late).ok();
         let mut rendered = 0;
-        let mut render = |cam: &vksplat::camera::Camera| {
+        let mut render = |cam: &verisplat::camera::Camera| {
             rendered += 1;
             if rendered == 1 {
                 // Another process of a split run writes frame 2 while this one renders
                 // frame 0.
                 std::fs::write(&late, b"written by the other run").unwrap();
             }
-            Ok(vksplat::cpu::render(&scene, cam, &Default::default()))
+            Ok(verisplat::cpu::render(&scene, cam, &Default::default()))
         };
         let opts = RunOptions {
             skip_existing: true,
@@ -626,7 +626,7 @@ fn output_polish() {
         + v["opacity_histogram"]["outside"].as_u64().unwrap();
     assert_eq!(counts, 1873);
     // A path without -o goes to a pattern, not to one file.
-    let o = vksplat_in(
+    let o = verisplat_in(
         dir.path(),
         &[
             "render", "--demo", "--cpu", "--orbit", "2", "--width", "32", "-q",

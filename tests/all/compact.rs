@@ -7,9 +7,9 @@
 
 use crate::common;
 use crate::common::gpu::{assert_validation_clean, compare, renderer};
-use vksplat::camera;
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::scene;
+use verisplat::camera;
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::scene;
 
 #[test]
 fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
@@ -42,7 +42,7 @@ fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
         );
         let exact = r.render(&exact_scene, &cam, &opts).unwrap();
         let compact = r.render(&compact_scene, &cam, &opts).unwrap();
-        let alpha_depth = |f: &vksplat::frame::Frame| -> Vec<u32> {
+        let alpha_depth = |f: &verisplat::frame::Frame| -> Vec<u32> {
             f.alpha
                 .iter()
                 .chain(&f.depth)

@@ -1,19 +1,19 @@
-//! `vksplat compare` and `vksplat eval` through the binary: GPU vs CPU reference on every
+//! `verisplat compare` and `verisplat eval` through the binary: GPU vs CPU reference on every
 //! real scene, a perturbed blend failing, image comparisons, evaluation against photos
 //! made here (CPU reference renders with seeded noise), and trained model directories.
 
 use crate::common;
-use crate::common::cli::{s, stderr, stdout, vksplat, vksplat_env};
+use crate::common::cli::{s, stderr, stdout, verisplat, verisplat_env};
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-use vksplat::camera::Camera;
-use vksplat::metrics;
+use verisplat::camera::Camera;
+use verisplat::metrics;
 
 /// Runs a command that must succeed and returns its stdout.
 fn succeeds(args: &[&str]) -> String {
-    let o = vksplat(args);
+    let o = verisplat(args);
     assert!(o.status.success(), "{args:?}: {}", stderr(&o));
     stdout(&o)
 }
@@ -21,7 +21,7 @@ fn succeeds(args: &[&str]) -> String {
 /// Runs a command that must fail: returns its one-line error, checking there was no panic
 /// and no output file.
 fn fails(args: &[&str], out: &Path) -> String {
-    let o = vksplat(args);
+    let o = verisplat(args);
     let e = stderr(&o);
     assert!(!o.status.success(), "{args:?} must fail");
     assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
@@ -109,7 +109,7 @@ fn compare_passes_on_every_real_scene_with_the_defaults() {
             // The heat map plus its colour bar.
             assert_eq!(
                 (img.width(), img.height()),
-                (320, 180 + vksplat::diff_image::BAR_HEIGHT),
+                (320, 180 + verisplat::diff_image::BAR_HEIGHT),
                 "{scene}"
             );
         }
@@ -137,7 +137,7 @@ fn a_perturbed_blend_fails_with_exit_1_naming_the_frames() {
         s(&report),
     ];
     // 0.01 on red alone: MSE 1e-4 / 3 over the colour samples, PSNR 44.8 dB < 55.
-    let o = vksplat_env(&args, &[(vksplat_perturb_env(), "0.01")]);
+    let o = verisplat_env(&args, &[(verisplat_perturb_env(), "0.01")]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     let e = stderr(&o);
     assert!(!e.contains("panicked"), "{e}");
@@ -174,8 +174,8 @@ fn a_perturbed_blend_fails_with_exit_1_naming_the_frames() {
     );
 }
 
-fn vksplat_perturb_env() -> &'static str {
-    "VKSPLAT_TEST_PERTURB_RED"
+fn verisplat_perturb_env() -> &'static str {
+    "VERISPLAT_TEST_PERTURB_RED"
 }
 
 /// Renders the demo scene on the CPU at 64x36 into `path` (PNG or EXR).
@@ -199,7 +199,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("a.exr");
     demo_render(&a, &[]);
-    let pa = vksplat::image_file::read_image(&a).unwrap();
+    let pa = verisplat::image_file::read_image(&a).unwrap();
     assert_eq!(pa.names(), ["R", "G", "B", "A", "Z"]);
     // Identical images: infinite PSNR, written as null in the JSON and "inf" in the table.
     let rep = dir.path().join("rep");
@@ -221,9 +221,9 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     }
     let b = dir.path().join("b.npy");
     let (w, h) = (pa.width as usize, pa.height as usize);
-    std::fs::write(&b, vksplat::image_file::npy_bytes(&[h, w, 5], &samples)).unwrap();
+    std::fs::write(&b, verisplat::image_file::npy_bytes(&[h, w, 5], &samples)).unwrap();
     let diff = dir.path().join("diff.png");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "compare",
         s(&a),
         s(&b),
@@ -255,7 +255,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let img = image::open(&diff).unwrap();
     assert_eq!(
         (img.width(), img.height()),
-        (64, 36 + vksplat::diff_image::BAR_HEIGHT)
+        (64, 36 + verisplat::diff_image::BAR_HEIGHT)
     );
 
     // Channel and size mismatches.
@@ -263,7 +263,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let rgb_samples: Vec<f32> = samples.chunks(5).flat_map(|p| p[..3].to_vec()).collect();
     std::fs::write(
         &rgb,
-        vksplat::image_file::npy_bytes(&[h, w, 3], &rgb_samples),
+        verisplat::image_file::npy_bytes(&[h, w, 3], &rgb_samples),
     )
     .unwrap();
     let e = fails(&["compare", s(&a), s(&rgb)], Path::new("/nonexistent"));
@@ -271,7 +271,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
         e.contains("different channels") && e.contains("R, G, B, A, Z") && e.contains("--channels"),
         "{e}"
     );
-    let o = vksplat(&[
+    let o = verisplat(&[
         "compare",
         s(&a),
         s(&rgb),
@@ -342,22 +342,22 @@ fn model_dir(root: &Path, n: usize) -> (PathBuf, Vec<Camera>) {
     }
     let path = model.join("cameras.json");
     std::fs::write(&path, serde_json::to_string(&entries).unwrap()).unwrap();
-    let cams = vksplat::camera::load_cameras_json(&path).unwrap();
+    let cams = verisplat::camera::load_cameras_json(&path).unwrap();
     (model, cams)
 }
 
 /// The CPU reference render of `cam` (at `w x h`) with seeded Gaussian noise, quantised to
 /// 8 bits: the "photo" of that camera, as `H x W x 3` values in [0, 1].
 fn noisy_photo(cam: &Camera, w: u32, h: u32, seed: u64) -> Vec<f32> {
-    let scene = vksplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+    let scene = verisplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
         .unwrap()
         .activated();
     let cam = cam.with_resolution(w, h).unwrap();
-    let frame = vksplat::cpu::render(&scene, &cam, &Default::default());
+    let frame = verisplat::cpu::render(&scene, &cam, &Default::default());
     let mut rng = common::Rng(seed);
     metrics::clamped_color(&frame)
         .into_iter()
-        .map(|v| vksplat::output::to_u8(v + 0.03 * rng.normal()) as f32 / 255.0)
+        .map(|v| verisplat::output::to_u8(v + 0.03 * rng.normal()) as f32 / 255.0)
         .collect()
 }
 
@@ -372,17 +372,17 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: &[f32]) {
 /// What eval computes for a photo, done here with the metrics module: the CPU reference
 /// render quantised to 8 bits against the photo.
 fn own_psnr(cam: &Camera, w: u32, h: u32, photo: &[f32]) -> f64 {
-    let scene = vksplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+    let scene = verisplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
         .unwrap()
         .activated();
-    let frame = vksplat::cpu::render(
+    let frame = verisplat::cpu::render(
         &scene,
         &cam.with_resolution(w, h).unwrap(),
         &Default::default(),
     );
     let render: Vec<f32> = metrics::clamped_color(&frame)
         .into_iter()
-        .map(|v| vksplat::output::to_u8(v) as f32 / 255.0)
+        .map(|v| verisplat::output::to_u8(v) as f32 / 255.0)
         .collect();
     metrics::psnr(photo, &render, 1.0)
 }
@@ -400,7 +400,7 @@ fn eval_reports_per_image_psnr_of_the_test_split() {
         own.push(own_psnr(cam, 96, 54, &photo));
     }
     let rep = dir.path().join("rep");
-    let o = vksplat(&["eval", s(&model), "--images", s(&images), "-o", s(&rep)]);
+    let o = verisplat(&["eval", s(&model), "--images", s(&images), "-o", s(&rep)]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains("note: using the model's cameras"),
@@ -438,7 +438,7 @@ fn eval_reports_per_image_psnr_of_the_test_split() {
 
     // The train split is the other 14 cameras; --cpu renders with the reference, so the
     // PSNR is exactly the test's own.
-    let o = vksplat(&[
+    let o = verisplat(&[
         "eval",
         s(&model),
         "--images",
@@ -475,7 +475,7 @@ fn eval_renders_at_the_size_of_downscaled_photos_and_names_problems() {
         own.push(own_psnr(cam, 48, 27, &photo));
     }
     let rep = dir.path().join("rep");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "eval",
         s(&model),
         "--images",
@@ -518,7 +518,7 @@ fn eval_renders_at_the_size_of_downscaled_photos_and_names_problems() {
             && e.contains("--skip-missing"),
         "{e}"
     );
-    let o = vksplat(&[
+    let o = verisplat(&[
         "eval",
         s(&model),
         "--images",
@@ -565,7 +565,7 @@ fn model_directories_cameras_and_iterations() {
     let (model, _) = model_dir(dir.path(), 9);
     // The model's cameras.json is picked up by render (9 frames, named after it).
     let frames = dir.path().join("frames");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         s(&model),
         "--cpu",
@@ -586,7 +586,7 @@ fn model_directories_cameras_and_iterations() {
         96
     );
     // ... and by bench and compare.
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench",
         s(&model),
         "--cpu",
@@ -616,7 +616,7 @@ fn model_directories_cameras_and_iterations() {
         "{info}"
     );
     let one = dir.path().join("one.png");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         s(&model),
         "--iteration",
@@ -658,7 +658,7 @@ fn model_directories_cameras_and_iterations() {
 
     // --cameras MODEL_DIR reads that directory's cameras.json.
     let frames2 = dir.path().join("frames2");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         s(&common::shared_data().join("playbot_lod6_1873_sh2.ply")),
         "--cameras",
@@ -675,7 +675,7 @@ fn model_directories_cameras_and_iterations() {
     // Without cameras.json the default camera is used, with a note.
     std::fs::remove_file(model.join("cameras.json")).unwrap();
     let two = dir.path().join("two.png");
-    let o = vksplat(&["render", s(&model), "--cpu", "--width", "64", "-o", s(&two)]);
+    let o = verisplat(&["render", s(&model), "--cpu", "--width", "64", "-o", s(&two)]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains("has no cameras.json; using the default camera"),
@@ -734,7 +734,7 @@ fn scale_modifier_renders_match_the_reference_and_change_the_image() {
     assert!(changed > 1000, "only {changed} pixels changed");
     let never = dir.path().join("never.png");
     for bad in ["0", "-1", "nan"] {
-        let o = vksplat(&["render", "--demo", "--scale-modifier", bad, "-o", s(&never)]);
+        let o = verisplat(&["render", "--demo", "--scale-modifier", bad, "-o", s(&never)]);
         let e = stderr(&o);
         assert_eq!(o.status.code(), Some(2), "{bad}: {e}");
         assert!(

@@ -11,17 +11,19 @@
 use std::time::Instant;
 
 use crate::common;
-use crate::common::cli::{ok, s, stderr, vksplat_env};
+use crate::common::cli::{ok, s, stderr, verisplat_env};
 use crate::common::gpu::{assert_validation_clean, compare, dump_failure, renderer};
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::frame::Frame;
-use vksplat::gpu::emulate::Emulation;
-use vksplat::gpu::sync::{barrier, Access};
-use vksplat::gpu::timing::Untimed;
-use vksplat::gpu::{limits, ContextOptions, GpuBuffer, GpuContext, GpuError, GpuTimer, MemoryKind};
-use vksplat::render::{GpuRenderer, Intermediates, SplitLimits};
-use vksplat::scene::{self, ActivatedScene};
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::frame::Frame;
+use verisplat::gpu::emulate::Emulation;
+use verisplat::gpu::sync::{barrier, Access};
+use verisplat::gpu::timing::Untimed;
+use verisplat::gpu::{
+    limits, ContextOptions, GpuBuffer, GpuContext, GpuError, GpuTimer, MemoryKind,
+};
+use verisplat::render::{GpuRenderer, Intermediates, SplitLimits};
+use verisplat::scene::{self, ActivatedScene};
 
 fn context(emulate: &str) -> GpuContext {
     GpuContext::new(&ContextOptions {
@@ -399,9 +401,9 @@ fn cli_render_on_an_emulated_discrete_device_matches_the_cpu() {
         a.into_iter().map(String::from).collect::<Vec<_>>()
     };
     let gpu_args = args(&gpu, false);
-    let o = vksplat_env(
+    let o = verisplat_env(
         &gpu_args.iter().map(String::as_str).collect::<Vec<_>>(),
-        &[("VKSPLAT_EMULATE", "discrete")],
+        &[("VERISPLAT_EMULATE", "discrete")],
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let cpu_args = args(&cpu, true);

@@ -1,5 +1,5 @@
 //! The command examples of README.md and docs/*.md, run. Every line that starts with
-//! `vksplat ` inside a fenced `sh`, `bash` or `console` block (joined with the lines its
+//! `verisplat ` inside a fenced `sh`, `bash` or `console` block (joined with the lines its
 //! backslashes continue) is an example. Each page's examples run in document order in a
 //! temporary folder of their own, prepared with the input files the page names (copies
 //! of the small shared scenes in `../shared/data`, see [`PAGES`]), so an example can use
@@ -72,7 +72,7 @@ const PAGES: &[Page] = &[
             Input::SmallCameras("path.json"),
         ],
         // What the Slurm array of the page's first example writes.
-        prepare: &["vksplat render scene.ply --cameras path.json -o 'renders/frame_%05d.png'"],
+        prepare: &["verisplat render scene.ply --cameras path.json -o 'renders/frame_%05d.png'"],
     },
     Page {
         file: "docs/compare-eval.md",
@@ -86,7 +86,7 @@ const PAGES: &[Page] = &[
             Input::SmallCameras("output/garden/cameras.json"),
         ],
         // The model's photos: its own renders, named after its cameras.
-        prepare: &["vksplat render scene.ply --cameras cameras.json -o data/garden/images_4/{name}.png"],
+        prepare: &["verisplat render scene.ply --cameras cameras.json -o data/garden/images_4/{name}.png"],
     },
     Page {
         file: "docs/training.md",
@@ -94,7 +94,7 @@ const PAGES: &[Page] = &[
         // A COLMAP data set with a known answer; `eval` after `train -r 4` scales its
         // photos as the trainer did.
         prepare: &[
-            "vksplat render scene.ply --orbit 24 --width 320 --height 240 --export-colmap data/garden",
+            "verisplat render scene.ply --orbit 24 --width 320 --height 240 --export-colmap data/garden",
         ],
     },
     Page {
@@ -115,12 +115,12 @@ const PAGES: &[Page] = &[
 /// Examples that cannot run in a test, each with the reason.
 const NOT_RUN: &[(&str, &str)] = &[
     // The viewer serves until it is stopped (tests/all/view.rs and view_browser.rs test it).
-    ("vksplat view scene.ply --open", "serves forever"),
+    ("verisplat view scene.ply --open", "serves forever"),
     (
-        "vksplat view ../shared/data/playbot_lod2_125k_sh2.ply --open",
+        "verisplat view ../shared/data/playbot_lod2_125k_sh2.ply --open",
         "serves forever",
     ),
-    ("vksplat view output/garden", "serves forever"),
+    ("verisplat view output/garden", "serves forever"),
 ];
 
 /// Long user commands made small here, keeping their text in the docs: (the example,
@@ -133,73 +133,73 @@ type Cap = (
 );
 const CAPS: &[Cap] = &[
     (
-        "vksplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr",
+        "verisplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr",
         &[("--frames", "0..2"), ("--width", "160")],
         "120 frames at 1280x720",
     ),
     (
-        "vksplat train data/garden -o models/garden --eval -r 4",
+        "verisplat train data/garden -o models/garden --eval -r 4",
         &[("--iterations", "50")],
         "30,000 iterations",
     ),
     (
-        "vksplat gen --rf dipole dipole.npy",
+        "verisplat gen --rf dipole dipole.npy",
         &[("--size", "16")],
         "a 64^3 grid",
     ),
     (
-        "vksplat fit dipole.npy -o dipole.ply --report dipole_fit.json",
+        "verisplat fit dipole.npy -o dipole.ply --report dipole_fit.json",
         &[("--steps", "50")],
         "1,500 steps",
     ),
     (
-        "vksplat render dipole.ply --mode field-slice --slice-plane 0,0,0.3,0,0,1 -o slice.png --colorbar --channel-name magnitude --units V/m",
+        "verisplat render dipole.ply --mode field-slice --slice-plane 0,0,0.3,0,0,1 -o slice.png --colorbar --channel-name magnitude --units V/m",
         &[("--width", "160")],
         "1280x720",
     ),
     (
-        "vksplat render dipole.ply --mode field-integral -o integral.npy",
+        "verisplat render dipole.ply --mode field-integral -o integral.npy",
         &[("--width", "160")],
         "1280x720",
     ),
     (
-        "vksplat render dipole.ply --mode field-max -o max.png --range 0,0.5 --colorbar --width 320",
+        "verisplat render dipole.ply --mode field-max -o max.png --range 0,0.5 --colorbar --width 320",
         &[("--width", "160")],
         "1280x720",
     ),
     (
-        "vksplat render dipole.ply --mode field-slice --slice-plane 0,0,0,0,0,1 --shader shader.safetensors -o shaded.png",
+        "verisplat render dipole.ply --mode field-slice --slice-plane 0,0,0,0,0,1 --shader shader.safetensors -o shaded.png",
         &[("--width", "160")],
         "1280x720",
     ),
     (
-        "vksplat gen --rf moving-source moving.npy",
+        "verisplat gen --rf moving-source moving.npy",
         &[("--size", "8"), ("--times", "5")],
         "16^3 points at 9 times",
     ),
     (
-        "vksplat fit moving.npy -o moving.ply --gaussians 300 --max-gaussians 1000 --steps 800",
+        "verisplat fit moving.npy -o moving.ply --gaussians 300 --max-gaussians 1000 --steps 800",
         &[("--steps", "50")],
         "800 steps",
     ),
     (
-        "vksplat render moving.ply --time 0.25 --mode field-slice --slice-plane 0,0,0,0,0,1 -o t025.png",
+        "verisplat render moving.ply --time 0.25 --mode field-slice --slice-plane 0,0,0,0,0,1 -o t025.png",
         &[("--width", "160")],
         "1280x720",
     ),
     (
-        "vksplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max --range 0,1 --width 320 -o anim/frame_%04d.png",
+        "verisplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max --range 0,1 --width 320 -o anim/frame_%04d.png",
         &[("--frames", "0..3"), ("--width", "160")],
         "30 frames at 1280x720",
     ),
 ];
 
-/// Other programs the examples run between `vksplat` lines, that later examples need
+/// Other programs the examples run between `verisplat` lines, that later examples need
 /// (the colour-map shader of the RF walkthrough): (the line's start, the command that
 /// runs it).
 const HELPERS: &[(&str, &str)] = &[(
     "tools/colormap_shader.py ",
-    "python3 \"$VKSPLAT_REPO/tools/colormap_shader.py\" ",
+    "python3 \"$VERISPLAT_REPO/tools/colormap_shader.py\" ",
 )];
 
 fn repo() -> PathBuf {
@@ -260,9 +260,9 @@ fn read(page: &str) -> String {
     std::fs::read_to_string(repo().join(page)).unwrap()
 }
 
-/// The `vksplat` examples of a page.
+/// The `verisplat` examples of a page.
 fn examples(page: &str) -> Vec<Example> {
-    commands(page, &read(page), &["vksplat "])
+    commands(page, &read(page), &["verisplat "])
 }
 
 fn not_run(e: &Example) -> bool {
@@ -289,11 +289,11 @@ fn capped(command: &str) -> String {
     c
 }
 
-/// Runs a command line of the docs in `dir` through `sh`, `vksplat` being the binary
+/// Runs a command line of the docs in `dir` through `sh`, `verisplat` being the binary
 /// under test (with the validation layer on) and helpers run as [`HELPERS`] says.
 fn run(dir: &Path, command: &str) -> Output {
-    let line = match command.strip_prefix("vksplat ") {
-        Some(rest) => format!("\"$VKSPLAT\" {rest}"),
+    let line = match command.strip_prefix("verisplat ") {
+        Some(rest) => format!("\"$VERISPLAT\" {rest}"),
         None => {
             let (start, runner) = HELPERS
                 .iter()
@@ -306,9 +306,9 @@ fn run(dir: &Path, command: &str) -> Output {
         .arg("-c")
         .arg(line)
         .current_dir(dir)
-        .env("VKSPLAT", bin())
-        .env("VKSPLAT_REPO", repo())
-        .env("VKSPLAT_VALIDATE", "1")
+        .env("VERISPLAT", bin())
+        .env("VERISPLAT_REPO", repo())
+        .env("VERISPLAT_VALIDATE", "1")
         .output()
         .expect("sh runs")
 }
@@ -375,7 +375,7 @@ fn run_page(page: &Page) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
     prepare(dir.path(), page);
     let helpers: Vec<&str> = HELPERS.iter().map(|(s, _)| *s).collect();
-    let mut prefixes = vec!["vksplat "];
+    let mut prefixes = vec!["verisplat "];
     prefixes.extend(helpers);
     let mut failures = Vec::new();
     for e in commands(page.file, &read(page.file), &prefixes) {
@@ -453,20 +453,23 @@ fn every_example_of_the_docs_runs() {
 /// The extraction itself: continuations, comments, fences.
 #[test]
 fn examples_are_read_as_the_shell_reads_them() {
-    let text = "```sh\n# a comment\nvksplat render a.ply \\\n    --orbit 3 -o 'x #1.png'   # note\nsbatch x\n```\n\n```python\nvksplat render not.ply\n```\nvksplat render outside.ply\n";
-    let e = commands("t.md", text, &["vksplat "]);
+    let text = "```sh\n# a comment\nverisplat render a.ply \\\n    --orbit 3 -o 'x #1.png'   # note\nsbatch x\n```\n\n```python\nverisplat render not.ply\n```\nverisplat render outside.ply\n";
+    let e = commands("t.md", text, &["verisplat "]);
     assert_eq!(e.len(), 1, "{e:?}");
     assert_eq!(e[0].line, 3);
-    assert_eq!(e[0].command, "vksplat render a.ply --orbit 3 -o 'x #1.png'");
+    assert_eq!(
+        e[0].command,
+        "verisplat render a.ply --orbit 3 -o 'x #1.png'"
+    );
     // A cap replaces the value of an option the example has, and appends one it lacks.
     assert_eq!(
-        capped("vksplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr"),
-        "vksplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr --frames 0..2 --width 160"
+        capped("verisplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr"),
+        "verisplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr --frames 0..2 --width 160"
     );
     assert_eq!(
         capped(
-            "vksplat fit moving.npy -o moving.ply --gaussians 300 --max-gaussians 1000 --steps 800"
+            "verisplat fit moving.npy -o moving.ply --gaussians 300 --max-gaussians 1000 --steps 800"
         ),
-        "vksplat fit moving.npy -o moving.ply --gaussians 300 --max-gaussians 1000 --steps 50"
+        "verisplat fit moving.npy -o moving.ply --gaussians 300 --max-gaussians 1000 --steps 50"
     );
 }

@@ -1,7 +1,7 @@
-//! `vksplat doctor`: it passes on this device (lavapipe in CI) with its JSON report saying
+//! `verisplat doctor`: it passes on this device (lavapipe in CI) with its JSON report saying
 //! so, and it fails loudly (non-zero exit, a FAIL line naming the check) when a kernel is
 //! broken: the shaders are compiled at run time from a copy of `glsl/` with one line
-//! changed (`VKSPLAT_GLSL_DIR`).
+//! changed (`VERISPLAT_GLSL_DIR`).
 
 use crate::common::cli::{command, s, stderr, stdout};
 use std::path::Path;
@@ -31,7 +31,7 @@ fn doctor(args: &[&str], glsl_dir: Option<&Path>) -> Output {
     let mut c = command();
     c.arg("doctor").args(args);
     if let Some(dir) = glsl_dir {
-        c.env("VKSPLAT_GLSL_DIR", dir);
+        c.env("VERISPLAT_GLSL_DIR", dir);
     }
     c.output().expect("the binary runs")
 }
@@ -164,7 +164,7 @@ fn the_gpu_bundle_runs_in_a_clean_environment() {
     let md = std::fs::read_to_string(&report).unwrap_or_default();
     assert!(run.status.success(), "run.sh: {}\n{md}", stderr(&run));
     for needed in [
-        "# vksplat on ",
+        "# verisplat on ",
         "**Doctor: every check passed.**",
         "| playbot_lod3_31k_sh2.spz | 1 |",
         "Every step succeeded.",

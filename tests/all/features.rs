@@ -9,9 +9,9 @@
 use crate::common;
 use crate::common::{axis_camera, push_gaussian};
 use std::path::Path;
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions, SplatKernel};
-use vksplat::scene::{self, Scene};
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions, SplatKernel};
+use verisplat::scene::{self, Scene};
 
 /// Random features in [-2, 3) for every Gaussian.
 fn random_features(s: &mut Scene, k: usize, seed: u64) {
@@ -187,7 +187,7 @@ fn gpu_feature_blend_matches_the_reference_for_every_channel_count() {
 /// The storage-buffer variant (GPUs; lavapipe uses texel fetches) on 16-pixel bins.
 #[test]
 fn gpu_feature_blend_storage_buffer_variant_matches_the_reference() {
-    let mut r = common::gpu::new_renderer(Some(vksplat::render::blend::BlendKernel::Shared));
+    let mut r = common::gpu::new_renderer(Some(verisplat::render::blend::BlendKernel::Shared));
     check_gpu_cases(&mut r, &TWO_SCENES_BOTH_KERNELS);
 }
 
@@ -215,15 +215,15 @@ pub(crate) const TWO_SCENES_BOTH_KERNELS: [Case; 2] = [
 /// Scene file, K, orbit camera, width, height, kernel.
 pub(crate) type Case = (&'static str, usize, usize, u32, u32, SplatKernel);
 
-fn check_gpu_cases(r: &mut vksplat::render::GpuRenderer, cases: &[Case]) {
-    check_gpu_cases_with(r, cases, vksplat::cpu::Rules::Original);
+fn check_gpu_cases(r: &mut verisplat::render::GpuRenderer, cases: &[Case]) {
+    check_gpu_cases_with(r, cases, verisplat::cpu::Rules::Original);
 }
 
 /// [`check_gpu_cases`] under `rules`.
 pub(crate) fn check_gpu_cases_with(
-    r: &mut vksplat::render::GpuRenderer,
+    r: &mut verisplat::render::GpuRenderer,
     cases: &[Case],
-    rules: vksplat::cpu::Rules,
+    rules: verisplat::cpu::Rules,
 ) {
     for &(file, k, cam_index, w, h, kernel) in cases {
         let mut s = scene::load(&common::shared_data().join(file)).unwrap();
@@ -258,7 +258,7 @@ pub(crate) fn check_gpu_cases_with(
         assert_eq!(gfeat.len(), (w * h) as usize * k);
         // The colour frame is the plain render's.
         assert_eq!(gframe, r.render(&gs, &cam, &opts).unwrap());
-        let m = vksplat::metrics::compare_frames(&cframe, &gframe);
+        let m = verisplat::metrics::compare_frames(&cframe, &gframe);
         assert!(m.color.psnr >= 55.0, "{file} colour {}", m.color.psnr);
         let worst = (0..k)
             .map(|c| channel_psnr(&gfeat, cfeat, k, c))
@@ -273,7 +273,7 @@ pub(crate) fn check_gpu_cases_with(
 
 /// A float16 `.npy` of `shape` (NumPy's `<f2`).
 fn npy_f16(shape: &[usize], values: &[f32]) -> Vec<u8> {
-    let f32_file = vksplat::image_file::npy_bytes(shape, values);
+    let f32_file = verisplat::image_file::npy_bytes(shape, values);
     let data_at = f32_file.len() - values.len() * 4;
     let mut out = f32_file[..data_at].to_vec();
     let at = out.windows(3).position(|w| w == b"<f4").unwrap();
@@ -299,7 +299,11 @@ fn features_through_the_cli() {
     let mut rng = common::Rng(5);
     let values: Vec<f32> = (0..n * k).map(|_| rng.range(-1.0, 2.0)).collect();
     let f32_file = d.join("f32.npy");
-    std::fs::write(&f32_file, vksplat::image_file::npy_bytes(&[n, k], &values)).unwrap();
+    std::fs::write(
+        &f32_file,
+        verisplat::image_file::npy_bytes(&[n, k], &values),
+    )
+    .unwrap();
     let f16_file = d.join("f16.npy");
     std::fs::write(&f16_file, npy_f16(&[n, k], &values)).unwrap();
 
@@ -323,7 +327,7 @@ fn features_through_the_cli() {
     );
     // float16 features load to the float16 values.
     let mut h = scene::load(&plain).unwrap();
-    vksplat::scene::features::attach_npy(&mut h, &f16_file).unwrap();
+    verisplat::scene::features::attach_npy(&mut h, &f16_file).unwrap();
     assert_eq!(h.feature_count, k);
     for (a, b) in h.features.iter().zip(&values) {
         assert!((a - b).abs() <= 2e-3, "{a} vs {b}");
@@ -369,8 +373,11 @@ fn features_through_the_cli() {
     render(&with, "cpu.npy", &["--cpu"]);
     render(&plain, "flag.npy", &["--cpu", "--features", s(&f32_file)]);
     let read_npy = |name: &str| {
-        vksplat::image_file::parse_npy_array(&std::fs::read(d.join(name)).unwrap(), Path::new(name))
-            .unwrap()
+        verisplat::image_file::parse_npy_array(
+            &std::fs::read(d.join(name)).unwrap(),
+            Path::new(name),
+        )
+        .unwrap()
     };
     let (g, c) = (read_npy("gpu.npy"), read_npy("cpu.npy"));
     assert_eq!(g.shape, vec![113, 200, k]);
@@ -380,7 +387,7 @@ fn features_through_the_cli() {
         let psnr = channel_psnr(&g.data, &c.data, k, ch);
         assert!(psnr >= 55.0, "channel {ch}: {psnr}");
     }
-    let exr = vksplat::image_file::read_image(&d.join("gpu.exr")).unwrap();
+    let exr = verisplat::image_file::read_image(&d.join("gpu.exr")).unwrap();
     let mut names: Vec<&str> = exr.names();
     names.sort();
     assert_eq!(
@@ -415,7 +422,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
         (
             write(
                 "short.npy",
-                vksplat::image_file::npy_bytes(&[n - 1, 3], &vec![0.0; (n - 1) * 3]),
+                verisplat::image_file::npy_bytes(&[n - 1, 3], &vec![0.0; (n - 1) * 3]),
             ),
             format!(
                 "has {} rows of features, but the scene has {n} Gaussians",
@@ -423,7 +430,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
             ),
         ),
         (
-            write("nan.npy", vksplat::image_file::npy_bytes(&[n, 3], &nan)),
+            write("nan.npy", verisplat::image_file::npy_bytes(&[n, 3], &nan)),
             "non-finite feature (NaN) at row 10, channel 1".to_string(),
         ),
         (
@@ -437,19 +444,19 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
         (
             write(
                 "cube.npy",
-                vksplat::image_file::npy_bytes(&[n, 2, 2], &vec![0.0; n * 4]),
+                verisplat::image_file::npy_bytes(&[n, 2, 2], &vec![0.0; n * 4]),
             ),
             "features are an N x K array".to_string(),
         ),
         (
             write(
                 "wide.npy",
-                vksplat::image_file::npy_bytes(&[n, 65], &vec![0.0; n * 65]),
+                verisplat::image_file::npy_bytes(&[n, 65], &vec![0.0; n * 65]),
             ),
             "1 to 64 are supported".to_string(),
         ),
         (
-            write("empty.npy", vksplat::image_file::npy_bytes(&[n, 0], &[])),
+            write("empty.npy", verisplat::image_file::npy_bytes(&[n, 0], &[])),
             "1 to 64 are supported".to_string(),
         ),
         (
@@ -491,7 +498,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
     assert!(e.contains("needs feature channels"), "{e}");
     let good = write(
         "good.npy",
-        vksplat::image_file::npy_bytes(&[n, 1], &vec![1.0; n]),
+        verisplat::image_file::npy_bytes(&[n, 1], &vec![1.0; n]),
     );
     let out = d.join("o.png");
     let e = fails(
@@ -532,7 +539,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
 /// each Gaussian's features with it, and `select` carries them.
 #[test]
 fn ply_features_round_trip_and_follow_the_gaussians() {
-    use vksplat::scene::ply::{parse, to_bytes, PlyEncoding};
+    use verisplat::scene::ply::{parse, to_bytes, PlyEncoding};
     let mut s = common::random_scene(50, 1, 9);
     random_features(&mut s, 9, 3);
     for enc in [
@@ -546,7 +553,7 @@ fn ply_features_round_trip_and_follow_the_gaussians() {
     let picked = s.select(&[7, 3, 40], 0);
     assert_eq!(picked.feature_count, 9);
     assert_eq!(&picked.features[9..18], &s.features[27..36]);
-    let filter = vksplat::scene::filter::SceneFilter {
+    let filter = verisplat::scene::filter::SceneFilter {
         min_opacity: Some(0.5),
         ..Default::default()
     };

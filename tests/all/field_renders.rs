@@ -15,11 +15,11 @@
 //!   within what half a segment can lose at the peak of the narrowest Gaussian (computed
 //!   in the test; measured 1.7e-2 of the channel's peak with scales down to 0.03).
 
-use vksplat::camera::Camera;
-use vksplat::cpu::field::{self, FieldGaussians, FieldMode};
-use vksplat::cpu::SplatKernel;
-use vksplat::fit::model::{evaluate, Model};
-use vksplat::scene::Scene;
+use verisplat::camera::Camera;
+use verisplat::cpu::field::{self, FieldGaussians, FieldMode};
+use verisplat::cpu::SplatKernel;
+use verisplat::fit::model::{evaluate, Model};
+use verisplat::scene::Scene;
 
 use crate::common::{self, Rng};
 
@@ -55,7 +55,7 @@ const SLICE: FieldMode = FieldMode::Slice {
 };
 
 /// The largest |value| of each channel (NaN skipped).
-fn peaks(frame: &vksplat::frame::Frame) -> Vec<f32> {
+fn peaks(frame: &verisplat::frame::Frame) -> Vec<f32> {
     let k = frame.feature_count;
     (0..k)
         .map(|c| {
@@ -76,8 +76,8 @@ fn gpu_field_renders_match_the_reference() {
         // 5 channels: two groups of four, the second padded.
         let scene = field_scene(300, 5, 7, kernel);
         let g = FieldGaussians::new(&scene.activated(), kernel);
-        let gpu_field = vksplat::render::field::GpuField::new(ctx, &g).unwrap();
-        let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
+        let gpu_field = verisplat::render::field::GpuField::new(ctx, &g).unwrap();
+        let mut renderer = verisplat::render::field::FieldRenderer::new(kernel);
         let cam = camera(45, 37);
         for mode in [SLICE, FieldMode::Integral, FieldMode::Max { samples: 96 }] {
             let cpu = field::render_field(&g, &cam, &mode);
@@ -274,7 +274,10 @@ fn field_options_are_refused_where_they_do_not_apply() {
     let scene = field_scene(20, 2, 3, SplatKernel::Gaussian);
     std::fs::write(
         &ply,
-        vksplat::scene::ply::to_bytes(&scene, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian),
+        verisplat::scene::ply::to_bytes(
+            &scene,
+            verisplat::scene::ply::PlyEncoding::BinaryLittleEndian,
+        ),
     )
     .unwrap();
     let png = dir.path().join("o.png");
@@ -333,7 +336,7 @@ fn field_options_are_refused_where_they_do_not_apply() {
     ] {
         let mut a = vec!["render", s(&ply), "-o", s(&png), "--mode", "field-slice"];
         a.extend(args);
-        let o = crate::common::cli::vksplat(&a);
+        let o = crate::common::cli::verisplat(&a);
         let e = crate::common::cli::stderr(&o);
         assert!(
             !o.status.success() && e.starts_with("error: ") && e.contains(says),
@@ -347,7 +350,10 @@ fn field_options_are_refused_where_they_do_not_apply() {
     plain.set_features(0, Vec::new()).unwrap();
     std::fs::write(
         &bare,
-        vksplat::scene::ply::to_bytes(&plain, vksplat::scene::ply::PlyEncoding::BinaryLittleEndian),
+        verisplat::scene::ply::to_bytes(
+            &plain,
+            verisplat::scene::ply::PlyEncoding::BinaryLittleEndian,
+        ),
     )
     .unwrap();
     let e = fails(
@@ -386,8 +392,8 @@ fn many_gaussians_on_a_ray_render_in_passes_or_are_refused() {
     }
     scene.set_features(1, vec![1.0; n]).unwrap();
     let g = FieldGaussians::new(&scene.activated(), SplatKernel::Gaussian);
-    let gpu_field = vksplat::render::field::GpuField::new(ctx, &g).unwrap();
-    let mut renderer = vksplat::render::field::FieldRenderer::new(SplatKernel::Gaussian);
+    let gpu_field = verisplat::render::field::GpuField::new(ctx, &g).unwrap();
+    let mut renderer = verisplat::render::field::FieldRenderer::new(SplatKernel::Gaussian);
     let cam = camera(8, 6);
     for mode in [SLICE, FieldMode::Integral, FieldMode::Max { samples: 16 }] {
         let gpu = renderer.render(ctx, &gpu_field, &cam, &mode);

@@ -1,4 +1,4 @@
-//! `vksplat fit` and `vksplat gen --rf` (issue 14, item 5), through the binary: the
+//! `verisplat fit` and `verisplat gen --rf` (issue 14, item 5), through the binary: the
 //! held-out error on small synthetic fields, determinism, density control, and one clear
 //! error (and no output file) for each malformed input. Gradients are checked against
 //! finite differences in the unit tests of `src/fit/tests.rs`.
@@ -6,8 +6,8 @@
 use crate::common;
 use crate::common::cli::{fails, ok, s, stdout};
 use std::path::{Path, PathBuf};
-use vksplat::gen::Rng;
-use vksplat::image_file::npy_bytes;
+use verisplat::gen::Rng;
+use verisplat::image_file::npy_bytes;
 
 fn write_npy(path: &Path, shape: &[usize], data: &[f32]) {
     std::fs::write(path, npy_bytes(shape, data)).unwrap();
@@ -98,13 +98,13 @@ fn fit_recovers_a_sum_of_gaussians_from_scattered_samples() {
     );
     assert_eq!(r["holdout_samples"], 600);
     // The PLY loads, with the features and opacities of the fit.
-    let scene = vksplat::scene::load(&out).unwrap();
+    let scene = verisplat::scene::load(&out).unwrap();
     assert_eq!(scene.feature_count, 2);
     assert_eq!(
         scene.len() as u64,
         r["gaussians"]["final"].as_u64().unwrap()
     );
-    assert_eq!(scene.kernel, vksplat::cpu::SplatKernel::Gaussian);
+    assert_eq!(scene.kernel, verisplat::cpu::SplatKernel::Gaussian);
 }
 
 /// The whole flow on a generated dipole: `gen --rf` writes the grid and its sidecar, fit
@@ -121,7 +121,7 @@ fn gen_rf_dipole_then_fit_with_the_power_kernel() {
     let side = dir.path().join("dipole.npy.json");
     assert!(side.exists());
     let array =
-        vksplat::image_file::parse_npy_array(&std::fs::read(&grid).unwrap(), &grid).unwrap();
+        verisplat::image_file::parse_npy_array(&std::fs::read(&grid).unwrap(), &grid).unwrap();
     assert_eq!(array.shape, vec![20, 20, 20, 4]);
     let out = dir.path().join("dipole.ply");
     let rep = dir.path().join("dipole.json");
@@ -149,11 +149,11 @@ fn gen_rf_dipole_then_fit_with_the_power_kernel() {
     eprintln!("dipole 20^3, power kernel: held-out relative L2 error {err}");
     assert!(err < 0.35, "held-out relative L2 error {err}");
     assert_eq!(r["bounds_from"], s(&side));
-    let scene = vksplat::scene::load(&out).unwrap();
-    assert_eq!(scene.kernel, vksplat::cpu::SplatKernel::Power);
+    let scene = verisplat::scene::load(&out).unwrap();
+    assert_eq!(scene.kernel, verisplat::cpu::SplatKernel::Power);
     assert_eq!(scene.feature_count, 4);
     // The two-ray field and --overwrite; the sidecar is refused without it.
-    let o = common::cli::vksplat(&["gen", "--rf", "two-ray", s(&grid), "--size", "8"]);
+    let o = common::cli::verisplat(&["gen", "--rf", "two-ray", s(&grid), "--size", "8"]);
     assert!(!o.status.success());
     ok(&[
         "gen",
@@ -204,7 +204,7 @@ fn same_seed_same_bytes() {
     assert_ne!(a, run("c.ply", "4"), "another seed, another fit");
     // One worker thread gives the same bytes as the default pool.
     let one = dir.path().join("one.ply");
-    let o = common::cli::vksplat_env(
+    let o = common::cli::verisplat_env(
         &[
             "fit",
             s(&input),
@@ -331,7 +331,7 @@ fn csv_samples_with_a_header() {
         "-q",
     ]);
     assert!(stdout(&o).contains("to 360 samples"), "{}", stdout(&o));
-    assert_eq!(vksplat::scene::load(&out).unwrap().feature_count, 2);
+    assert_eq!(verisplat::scene::load(&out).unwrap().feature_count, 2);
 }
 
 /// Each malformed input: one error sentence naming the file and the fault, no output.
@@ -402,7 +402,7 @@ fn malformed_inputs_fail_clearly_without_output() {
         ("0,0,0,1,1", "expected 6 numbers"),
         ("0,0,0,1,inf,1", "\"inf\" is not a finite number"),
     ] {
-        let o = common::cli::vksplat(&["fit", s(&grid), "-o", s(&out), "--bounds", bounds]);
+        let o = common::cli::verisplat(&["fit", s(&grid), "-o", s(&out), "--bounds", bounds]);
         let e = common::cli::stderr(&o);
         assert!(
             !o.status.success() && e.starts_with("error: ") && e.contains(needle),
@@ -470,7 +470,7 @@ fn malformed_inputs_fail_clearly_without_output() {
         &d.join("x.ply"),
     );
     assert!(e.contains("name the output .npy"), "{e}");
-    let o = common::cli::vksplat(&["gen", "--rf", "horn", s(&d.join("h.npy"))]);
+    let o = common::cli::verisplat(&["gen", "--rf", "horn", s(&d.join("h.npy"))]);
     assert!(
         !o.status.success()
             && common::cli::stderr(&o).contains("use dipole, two-ray or moving-source")

@@ -3,8 +3,8 @@
 //! better than 0, dB magnitudes, the bounds `gen --rf` prints, and gradient clipping.
 
 use crate::common::cli::{fails, ok, s, stderr};
-use vksplat::fit::{self, FieldData, FitConfig, Layout};
-use vksplat::gen::Rng;
+use verisplat::fit::{self, FieldData, FitConfig, Layout};
+use verisplat::gen::Rng;
 
 /// Two clamped dipole-like sources (magnitude `sin(theta) / r`, `r >= 0.25`), the field
 /// the CSV held.
@@ -299,7 +299,7 @@ fn gradient_clipping() {
 /// envelope is above 0.3 (measured 0.025).
 #[test]
 fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
-    use vksplat::cpu::field;
+    use verisplat::cpu::field;
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n);
     let k = std::f64::consts::TAU / 0.8;
@@ -342,7 +342,7 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
     eprintln!("held-out error: as I/Q {iq:.4}, as magnitude and phase {plain:.4}");
     assert!(iq < 0.1, "{iq}");
     assert!(plain > 1.5 * iq, "{plain} vs {iq}");
-    let cam = vksplat::camera::Camera::look_at(
+    let cam = verisplat::camera::Camera::look_at(
         "wave",
         48,
         36,
@@ -353,7 +353,7 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
     );
     std::fs::write(
         p("cam.json"),
-        vksplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let npy = p("slice.npy");
@@ -372,7 +372,7 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
         s(&npy),
         "-q",
     ]);
-    let a = vksplat::image_file::parse_npy_array(&std::fs::read(&npy).unwrap(), &npy).unwrap();
+    let a = verisplat::image_file::parse_npy_array(&std::fs::read(&npy).unwrap(), &npy).unwrap();
     assert_eq!(a.shape, vec![36, 48, 4]);
     let (mut num, mut den, mut phase_sq, mut phased) = (0f64, 0f64, 0f64, 0);
     for py in 0..36u32 {

@@ -6,13 +6,13 @@
 use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vksplat::camera;
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::scene::spz::SpzCompression;
-use vksplat::scene::write::{self, OutputFormat};
-use vksplat::scene::{self, ply, sigmoid, Scene, SceneFormat};
+use verisplat::camera;
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::scene::spz::SpzCompression;
+use verisplat::scene::write::{self, OutputFormat};
+use verisplat::scene::{self, ply, sigmoid, Scene, SceneFormat};
 
-const SH_C0: f32 = vksplat::cpu::sh::SH_C0;
+const SH_C0: f32 = verisplat::cpu::sh::SH_C0;
 /// Slack for f32 evaluation differences between two decoders of the same bytes.
 const F32_SLACK: f32 = 1e-5;
 
@@ -698,8 +698,8 @@ fn detection_uses_content_not_extension() {
     assert!(e.contains("end_header"), "{e}");
 }
 
-fn vksplat(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_vksplat"))
+fn verisplat(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_verisplat"))
         .args(args)
         .output()
         .expect("the binary runs")
@@ -712,28 +712,28 @@ fn cli_convert_and_info() {
     let src = data("playbot_lod6_1873_sh2.ply");
     let src = src.to_str().unwrap();
     // PLY -> SPZ, then info reports the detected format.
-    let o = vksplat(&["convert", src, &d("a.spz")]);
+    let o = verisplat(&["convert", src, &d("a.spz")]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = vksplat(&["info", &d("a.spz")]);
+    let o = verisplat(&["info", &d("a.spz")]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
         o.status.success() && out.contains("format      SPZ v3 (gzip)"),
         "{out}"
     );
     assert!(out.contains("gaussians   1873"), "{out}");
-    let o = vksplat(&["info", data("playbot_lod3_31k_sh2_sog").to_str().unwrap()]);
+    let o = verisplat(&["info", data("playbot_lod3_31k_sh2_sog").to_str().unwrap()]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("PlayCanvas SOG v2 (directory)"), "{out}");
     // An existing output is refused without --overwrite and left untouched.
     let before = std::fs::read(d("a.spz")).unwrap();
-    let o = vksplat(&["convert", src, &d("a.spz"), "--sh-degree", "0"]);
+    let o = verisplat(&["convert", src, &d("a.spz"), "--sh-degree", "0"]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
         !o.status.success() && e.contains("already exists") && e.contains("--overwrite"),
         "{e}"
     );
     assert_eq!(std::fs::read(d("a.spz")).unwrap(), before);
-    let o = vksplat(&[
+    let o = verisplat(&[
         "convert",
         src,
         &d("a.spz"),
@@ -745,7 +745,7 @@ fn cli_convert_and_info() {
     assert_eq!(scene::load(Path::new(&d("a.spz"))).unwrap().sh_degree, 0);
     // Filters: the same selection SceneFilter makes in the library.
     let full = scene::load(Path::new(src)).unwrap();
-    let o = vksplat(&[
+    let o = verisplat(&[
         "convert",
         src,
         &d("f.ply"),
@@ -769,19 +769,19 @@ fn cli_convert_and_info() {
     assert!(expected.len() > 100 && expected.len() < full.len());
     assert_eq!(scene::load(Path::new(&d("f.ply"))).unwrap(), expected);
     // .splat output; unknown extensions and bad filters are one clear error, no file.
-    let o = vksplat(&["convert", src, &d("b.splat")]);
+    let o = verisplat(&["convert", src, &d("b.splat")]);
     assert!(o.status.success());
     assert_eq!(std::fs::metadata(d("b.splat")).unwrap().len(), 32 * 1873);
-    let o = vksplat(&["convert", src, &d("c.xyz")]);
+    let o = verisplat(&["convert", src, &d("c.xyz")]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
         !o.status.success() && e.contains("unknown output format"),
         "{e}"
     );
-    let o = vksplat(&["convert", src, &d("c.ply"), "--min-opacity", "2"]);
+    let o = verisplat(&["convert", src, &d("c.ply"), "--min-opacity", "2"]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("--min-opacity"), "{e}");
-    let o = vksplat(&["convert", "/nonexistent.spz", &d("c.ply")]);
+    let o = verisplat(&["convert", "/nonexistent.spz", &d("c.ply")]);
     assert!(!o.status.success());
     assert!(!Path::new(&d("c.xyz")).exists() && !Path::new(&d("c.ply")).exists());
     // Atomic writes leave no temporary files behind.
@@ -840,23 +840,23 @@ fn mutated_files_never_panic() {
 fn antialiased_training_flag_is_read_written_and_honoured() {
     let dir = tempfile::tempdir().unwrap();
     let mut scene =
-        vksplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+        verisplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     scene.antialiased = true;
     let spz = dir.path().join("aa.spz");
-    std::fs::write(&spz, vksplat::scene::spz::to_bytes_v3(&scene).unwrap()).unwrap();
-    let back = vksplat::scene::load(&spz).unwrap();
+    std::fs::write(&spz, verisplat::scene::spz::to_bytes_v3(&scene).unwrap()).unwrap();
+    let back = verisplat::scene::load(&spz).unwrap();
     assert!(back.antialiased);
     scene.antialiased = false;
-    let plain = vksplat::scene::spz::to_bytes_v3(&scene).unwrap();
+    let plain = verisplat::scene::spz::to_bytes_v3(&scene).unwrap();
     assert!(
-        !vksplat::scene::parse_bytes(&plain, Path::new("plain.spz"))
+        !verisplat::scene::parse_bytes(&plain, Path::new("plain.spz"))
             .unwrap()
             .0
             .antialiased
     );
 
     let run = |out: &str, extra: &[&str]| -> String {
-        let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+        let o = Command::new(env!("CARGO_BIN_EXE_verisplat"))
             .arg("render")
             .arg(&spz)
             .args(["--width", "160", "--cpu", "-o"])
@@ -884,16 +884,16 @@ fn antialiased_training_flag_is_read_written_and_honoured() {
         let e = e.unwrap();
         std::fs::copy(e.path(), sog.join(e.file_name())).unwrap();
     }
-    assert!(!vksplat::scene::load(&sog).unwrap().antialiased);
+    assert!(!verisplat::scene::load(&sog).unwrap().antialiased);
     let meta = sog.join("meta.json");
     let mut json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&meta).unwrap()).unwrap();
     json["antialias"] = true.into();
     std::fs::write(&meta, json.to_string()).unwrap();
-    assert!(vksplat::scene::load(&sog).unwrap().antialiased);
+    assert!(verisplat::scene::load(&sog).unwrap().antialiased);
 
     // PLY cannot record the flag: convert says so.
-    let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+    let o = Command::new(env!("CARGO_BIN_EXE_verisplat"))
         .arg("convert")
         .arg(&spz)
         .arg(dir.path().join("aa.ply"))

@@ -14,10 +14,10 @@ use crate::common::gpu::{
     assert_validation_clean, compare, dump_failure, move_towards, new_renderer, renderer,
 };
 use glam::Vec3;
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::render::GpuRenderer;
-use vksplat::scene::{self, ActivatedScene, Scene};
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::render::GpuRenderer;
+use verisplat::scene::{self, ActivatedScene, Scene};
 
 pub(crate) fn load(name: &str) -> Scene {
     scene::load(&common::shared_data().join(name)).unwrap()
@@ -147,7 +147,7 @@ fn plant_and_train_match() {
         &camera::default_camera(&train.positions, 320, 240),
         &RenderOptions::default(),
     );
-    let demo = vksplat::demo_scene().activated();
+    let demo = verisplat::demo_scene().activated();
     check_frame(
         &mut r,
         "demo default",
@@ -270,7 +270,7 @@ fn every_blend_kernel_matches_the_reference_with_the_power_kernel() {
         ..Default::default()
     };
     let mut frames = Vec::new();
-    for kernel in vksplat::render::blend::BlendKernel::all() {
+    for kernel in verisplat::render::blend::BlendKernel::all() {
         let Some(mut r) = common::gpu::renderer_if_it_fits(kernel) else {
             continue;
         };
@@ -289,7 +289,7 @@ fn every_blend_kernel_matches_the_reference_with_the_power_kernel() {
         let want: Vec<u8> = p
             .color
             .iter()
-            .flat_map(|c| c.map(vksplat::output::to_u8).into_iter().chain([255]))
+            .flat_map(|c| c.map(verisplat::output::to_u8).into_iter().chain([255]))
             .collect();
         assert!(packed.rgba == want, "{kernel:?}: rgba8 readback");
         assert_validation_clean(&r);
@@ -307,7 +307,7 @@ fn every_blend_kernel_matches_the_reference() {
     let s = load("playbot_lod3_31k_sh2.ply").activated();
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 11, 400, 300);
     let mut frames = Vec::new();
-    for kernel in vksplat::render::blend::BlendKernel::all() {
+    for kernel in verisplat::render::blend::BlendKernel::all() {
         let Some(mut r) = common::gpu::renderer_if_it_fits(kernel) else {
             continue;
         };
@@ -436,7 +436,7 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
     let gs = r.upload(&act).unwrap();
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
     assert_eq!(r.stats().regrows, 1);
-    let (bx, by) = vksplat::render::bin_grid(r.blend_kernel().bin_size(), 1280, 720);
+    let (bx, by) = verisplat::render::bin_grid(r.blend_kernel().bin_size(), 1280, 720);
     assert_eq!(
         r.stats().pairs,
         64 * u64::from(bx * by),
@@ -538,7 +538,7 @@ fn sh3_coefficients_beyond_one_storage_binding_render_through_the_texel_buffer()
         n < 3_000_000,
         "sized for lavapipe-like limits (range {range})"
     );
-    let mut s = vksplat::gen::synthetic_scene(n, 7, 3);
+    let mut s = verisplat::gen::synthetic_scene(n, 7, 3);
     // The generator's SH bands above DC are small; make the view-dependent part visible.
     let stride = s.sh_stride();
     for (i, v) in s.sh.iter_mut().enumerate() {
@@ -579,10 +579,10 @@ fn texel_kernel_falls_back_to_16_pixel_bins_past_its_pair_limit() {
     let cam = common::axis_camera(50.0)
         .with_resolution(1280, 720)
         .unwrap();
-    let mut r = new_renderer(Some(vksplat::render::blend::BlendKernel::Texel {
+    let mut r = new_renderer(Some(verisplat::render::blend::BlendKernel::Texel {
         strip: 2,
     }));
-    let limit = u64::from(vksplat::render::SMALL_BIN_MAX_PAIRS);
+    let limit = u64::from(verisplat::render::SMALL_BIN_MAX_PAIRS);
     assert!((1200 * 3_600..1200 * 14_400).contains(&limit));
     let gs = r.upload(&act).unwrap();
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
@@ -625,7 +625,7 @@ fn lavapipe_loop_limit_means_larger_bins_or_a_clear_refusal() {
     let cam = common::axis_camera(50.0)
         .with_resolution(3840, 2160)
         .unwrap();
-    let mut r = new_renderer(Some(vksplat::render::blend::BlendKernel::Texel {
+    let mut r = new_renderer(Some(verisplat::render::blend::BlendKernel::Texel {
         strip: 2,
     }));
     let limited = r.ctx().info().name.contains("llvmpipe");
@@ -719,7 +719,7 @@ fn per_frame_options_match_the_reference_and_the_load_filters() {
     }
 
     // Per-frame filters == filters on load, bit for bit, GPU and CPU.
-    let filter = vksplat::scene::filter::SceneFilter {
+    let filter = verisplat::scene::filter::SceneFilter {
         max_scale: Some(median_scale),
         min_opacity: Some(0.3),
         sh_degree: Some(1),
@@ -797,9 +797,9 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
             .iter()
             .flat_map(|c| {
                 [
-                    vksplat::output::to_u8(c[0]),
-                    vksplat::output::to_u8(c[1]),
-                    vksplat::output::to_u8(c[2]),
+                    verisplat::output::to_u8(c[0]),
+                    verisplat::output::to_u8(c[1]),
+                    verisplat::output::to_u8(c[2]),
                     255,
                 ]
             })
@@ -824,13 +824,13 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
 /// previews with the whole scene.
 #[test]
 fn viewer_previews_draw_the_most_important_gaussians() {
-    use vksplat::view::source::{GpuSource, ViewSettings, ViewSource, DEFAULT_PREVIEW_GAUSSIANS};
+    use verisplat::view::source::{GpuSource, ViewSettings, ViewSource, DEFAULT_PREVIEW_GAUSSIANS};
     let scene = load("playbot_lod2_125k_sh2.ply");
     // The ranking: every kept Gaussian weighs at least as much as every dropped one.
     let weight = |i: usize| {
         let mut s = scene.log_scales[i];
         s.sort_by(f32::total_cmp);
-        vksplat::scene::sigmoid(scene.opacity_logits[i]) * (s[1] + s[2]).exp()
+        verisplat::scene::sigmoid(scene.opacity_logits[i]) * (s[1] + s[2]).exp()
     };
     let keep = scene.most_important(1000);
     assert_eq!(keep.len(), 1000);

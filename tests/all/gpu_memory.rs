@@ -6,10 +6,10 @@
 use crate::common;
 use std::path::Path;
 use std::process::Command;
-use vksplat::camera::{self, OrbitParams};
-use vksplat::cpu::RenderOptions;
-use vksplat::output::OutputOptions;
-use vksplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
+use verisplat::camera::{self, OrbitParams};
+use verisplat::cpu::RenderOptions;
+use verisplat::output::OutputOptions;
+use verisplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
 
 fn resident_bytes() -> u64 {
     let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
@@ -22,7 +22,7 @@ fn resident_bytes() -> u64 {
 }
 
 /// Set for the process the test starts: there it measures.
-const CHILD: &str = "VKSPLAT_MEMORY_TEST_CHILD";
+const CHILD: &str = "VERISPLAT_MEMORY_TEST_CHILD";
 
 #[test]
 fn a_thousand_frame_path_keeps_memory_flat_and_matches_one_frame_per_process() {
@@ -54,14 +54,14 @@ fn a_thousand_frame_path_keeps_memory_flat_and_matches_one_frame_per_process() {
 }
 
 fn thousand_frame_path() {
-    let frames: usize = std::env::var("VKSPLAT_MEMORY_TEST_FRAMES")
+    let frames: usize = std::env::var("VERISPLAT_MEMORY_TEST_FRAMES")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1000);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("long");
-    let scene = vksplat::demo_scene();
-    // The path `vksplat render --demo --orbit N --width 64` renders.
+    let scene = verisplat::demo_scene();
+    // The path `verisplat render --demo --orbit N --width 64` renders.
     let cams: Vec<(usize, camera::Camera)> = camera::orbit(
         &scene.positions,
         &OrbitParams {
@@ -130,7 +130,7 @@ fn thousand_frame_path() {
     let single = dir.path().join("single");
     let n = frames.to_string();
     for k in [0, frames / 2, frames - 1] {
-        let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+        let o = Command::new(env!("CARGO_BIN_EXE_verisplat"))
             .args(["render", "--demo", "--orbit", &n, "--width", "64", "-q"])
             .args(["--frames", &k.to_string(), "-o"])
             .arg(single.join("{:04}.png"))

@@ -1,17 +1,17 @@
 //! GPU prefix sum and radix sort against CPU references, on whatever Vulkan device is
 //! available (lavapipe in CI), with validation on: any validation message fails.
 
-use vksplat::gen::{tile_depth_keys, Rng};
-use vksplat::gpu::buffer::BufferView;
-use vksplat::gpu::buffer::{GpuBuffer, MemoryKind};
-use vksplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};
-use vksplat::gpu::shader::compile_glsl;
-use vksplat::gpu::sort::{
+use verisplat::gen::{tile_depth_keys, Rng};
+use verisplat::gpu::buffer::BufferView;
+use verisplat::gpu::buffer::{GpuBuffer, MemoryKind};
+use verisplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};
+use verisplat::gpu::shader::compile_glsl;
+use verisplat::gpu::sort::{
     Count, RadixSort, SortConfig, SortJob, SortPassPush, SortSetupPush, SortTexels,
     DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
 };
-use vksplat::gpu::sync::{barrier, Access};
-use vksplat::gpu::{ContextOptions, GpuContext, GpuTimer};
+use verisplat::gpu::sync::{barrier, Access};
+use verisplat::gpu::{ContextOptions, GpuContext, GpuTimer};
 
 fn context() -> GpuContext {
     let ctx = GpuContext::new(&ContextOptions {
@@ -623,11 +623,11 @@ fn radix_sort_of_a_bit_range_keeps_lower_bits_in_arrival_order() {
             let job = SortJob::new(&key_buf, &value_buf, &scratch, Count::Host(n as u32), 0)
                 .bits(bits.clone());
             sort.record(&ctx, cmd, &job)?;
-            vksplat::gpu::sync::barrier(
+            verisplat::gpu::sync::barrier(
                 &ctx,
                 cmd,
-                vksplat::gpu::Access::ComputeWrite,
-                vksplat::gpu::Access::TransferRead,
+                verisplat::gpu::Access::ComputeWrite,
+                verisplat::gpu::Access::TransferRead,
             );
             Ok(())
         })

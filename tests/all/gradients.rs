@@ -12,10 +12,10 @@
 
 use crate::common::Rng;
 use glam::Vec3;
-use vksplat::camera::Camera;
-use vksplat::cpu::backward::{backward, forward, Image64};
-use vksplat::cpu::{RenderOptions, SplatKernel};
-use vksplat::model::grad::{relative_l2, ColorParams, PixelGrads, SplatParams, GRAD_GROUPS};
+use verisplat::camera::Camera;
+use verisplat::cpu::backward::{backward, forward, Image64};
+use verisplat::cpu::{RenderOptions, SplatKernel};
+use verisplat::model::grad::{relative_l2, ColorParams, PixelGrads, SplatParams, GRAD_GROUPS};
 
 /// A 48x40 camera looking at the origin from about 3 units away.
 pub fn grad_camera() -> Camera {
@@ -31,9 +31,9 @@ pub fn grad_camera() -> Camera {
 }
 
 /// `n` random Gaussians in view with SH colours of `degree`, or `channels` direct values
-/// ([`vksplat::gen::random_splat_params`], which `vksplat doctor` uses too).
+/// ([`verisplat::gen::random_splat_params`], which `verisplat doctor` uses too).
 pub fn grad_scene(n: usize, seed: u64, colors: Option<u32>, channels: usize) -> SplatParams<f32> {
-    vksplat::gen::random_splat_params(n, seed, colors, channels)
+    verisplat::gen::random_splat_params(n, seed, colors, channels)
 }
 
 /// Random pixel gradients for a frame of `channels`.
@@ -307,8 +307,8 @@ fn reference_backward_matches_finite_differences_at_the_guard_band() {
 /// Its reference backward against finite differences, for the Gaussians and the MLP.
 /// A random neural shader of `k` feature channels (and, with `extra`, the view direction
 /// and alpha as inputs): tanh, relu and sigmoid layers of `hidden` and 6 outputs.
-fn random_mlp(k: usize, extra: bool, hidden: usize, seed: u64) -> vksplat::mlp::Mlp {
-    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
+fn random_mlp(k: usize, extra: bool, hidden: usize, seed: u64) -> verisplat::mlp::Mlp {
+    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
     let mut rng = Rng(seed);
     let mut layer = |inputs: usize, outputs: usize, activation| Layer {
         inputs,
@@ -338,7 +338,7 @@ fn random_mlp(k: usize, extra: bool, hidden: usize, seed: u64) -> vksplat::mlp::
 
 #[test]
 fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
-    use vksplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
+    use verisplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
     let cam = grad_camera();
     let k = 4;
     let p = grad_scene(8, 1300, None, k).to_f64();
@@ -348,8 +348,8 @@ fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
     let bg = [0.2, 0.1, 0.4];
     // The f64 shaded frame is the f32 renderer's (`cpu::render_features` + `mlp::shade`).
     let p32 = grad_scene(8, 1300, None, k);
-    let frame = vksplat::cpu::render_features(&p32.to_activated(), &cam, &opts);
-    let shaded = vksplat::mlp::shade(
+    let frame = verisplat::cpu::render_features(&p32.to_activated(), &cam, &opts);
+    let shaded = verisplat::mlp::shade(
         &mlp,
         &cam,
         &frame.features,
@@ -418,7 +418,7 @@ fn reference_forward_equals_the_cpu_renderer() {
         background: [0.1, 0.2, 0.3],
         ..Default::default()
     };
-    let frame = vksplat::cpu::render(&p.to_activated(), &cam, &opts);
+    let frame = verisplat::cpu::render(&p.to_activated(), &cam, &opts);
     let img = forward(&p.to_f64(), &cam, &opts, &[0.1, 0.2, 0.3]).unwrap();
     let mut worst = 0.0f64;
     for (i, c) in frame.color.iter().enumerate() {
@@ -456,8 +456,8 @@ fn every_gradient_group_has_values() {
 // alpha, 0.4 %, on one pixel of thousands. Any wrong term is an O(1) error.
 
 use crate::common::gpu::{assert_validation_clean, new_renderer};
-use vksplat::render::blend::BlendKernel;
-use vksplat::render::differentiable::{Accumulation, DiffRasterizer};
+use verisplat::render::blend::BlendKernel;
+use verisplat::render::differentiable::{Accumulation, DiffRasterizer};
 
 fn to_f32(g: &PixelGrads<f64>) -> PixelGrads<f32> {
     let f = |v: &Vec<f64>| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
@@ -475,7 +475,7 @@ pub(crate) fn gpu_against_reference(
     cam: &Camera,
     opts: &RenderOptions,
     seed: u64,
-) -> vksplat::model::grad::SplatGrads<f32> {
+) -> verisplat::model::grad::SplatGrads<f32> {
     let mut bg: Vec<f64> = opts.background.iter().map(|&b| b as f64).collect();
     bg.resize(p.channels(), 0.0);
     let g = pixel_grads(cam, p.channels(), seed, true);
@@ -636,7 +636,7 @@ fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
     let other = grad_scene(40, 901, Some(3), 3);
     r.forward(&other, &cam, &opts).unwrap();
     let third = r.backward(&p, &cam, &opts, token, &g).unwrap();
-    let bits = |s: &vksplat::model::grad::SplatGrads<f32>| -> Vec<u64> {
+    let bits = |s: &verisplat::model::grad::SplatGrads<f32>| -> Vec<u64> {
         GRAD_GROUPS
             .iter()
             .flat_map(|gr| s.group(gr))
@@ -645,9 +645,9 @@ fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
     };
     assert_eq!(bits(&first), bits(&second));
     assert_eq!(bits(&first), bits(&third));
-    let ctx32 = vksplat::gpu::GpuContext::new(&vksplat::gpu::ContextOptions {
+    let ctx32 = verisplat::gpu::GpuContext::new(&verisplat::gpu::ContextOptions {
         validation: true,
-        emulate: vksplat::gpu::emulate::Emulation::parse("no-int64-atomics").unwrap(),
+        emulate: verisplat::gpu::emulate::Emulation::parse("no-int64-atomics").unwrap(),
         ..Default::default()
     })
     .unwrap();
@@ -684,7 +684,7 @@ fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
 /// chunks than partial sums (several dispatches of the shader's backward pass).
 #[test]
 fn gpu_backward_of_a_shaded_frame_matches_the_reference() {
-    use vksplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
+    use verisplat::cpu::backward::{backward_shaded, forward_shaded, MlpParams};
     let big = Camera::look_at(
         "grad-gpu-big",
         160,
@@ -766,7 +766,7 @@ fn gpu_backward_of_a_shaded_frame_matches_the_reference() {
         let third = r
             .backward_shaded(&p, &cam, &opts, token, &to_f32(&g))
             .unwrap();
-        let bits = |(s, m): &(vksplat::model::grad::SplatGrads<f32>, MlpParams<f32>)| {
+        let bits = |(s, m): &(verisplat::model::grad::SplatGrads<f32>, MlpParams<f32>)| {
             let mut v: Vec<u32> = GRAD_GROUPS
                 .iter()
                 .flat_map(|gr| s.group(gr))

@@ -15,10 +15,10 @@ use crate::gradients::{
     check_on, diff_rasterizer, gpu_against_reference, gpu_camera, grad_scene, push_large_gaussians,
 };
 use glam::Vec3;
-use vksplat::camera::Camera;
-use vksplat::cpu::{self, RenderOptions, Rules, SplatKernel};
-use vksplat::model::grad::SplatParams;
-use vksplat::scene::ActivatedScene;
+use verisplat::camera::Camera;
+use verisplat::cpu::{self, RenderOptions, Rules, SplatKernel};
+use verisplat::model::grad::SplatParams;
+use verisplat::scene::ActivatedScene;
 
 fn gsplat(opts: RenderOptions) -> RenderOptions {
     RenderOptions {
@@ -112,7 +112,7 @@ fn one_splat(z: f32, scale: f32, opacity: f32) -> (ActivatedScene, Camera) {
     (s, cam)
 }
 
-fn centre_alpha(frame: &vksplat::frame::Frame, cam: &Camera) -> f32 {
+fn centre_alpha(frame: &verisplat::frame::Frame, cam: &Camera) -> f32 {
     frame.alpha[(cam.height / 2 * cam.width + cam.width / 2) as usize]
 }
 
@@ -121,7 +121,7 @@ fn centre_alpha(frame: &vksplat::frame::Frame, cam: &Camera) -> f32 {
 #[test]
 fn gsplats_near_plane_and_alpha_clamp() {
     let mut r = renderer();
-    let both = |r: &mut vksplat::render::GpuRenderer,
+    let both = |r: &mut verisplat::render::GpuRenderer,
                 s: &ActivatedScene,
                 cam: &Camera,
                 o: &RenderOptions| {
@@ -239,7 +239,7 @@ fn gsplat_rules_match_the_reference_on_real_scenes() {
             );
         }
     }
-    for kernel in vksplat::render::blend::BlendKernel::all() {
+    for kernel in verisplat::render::blend::BlendKernel::all() {
         if let Some(mut r) = common::gpu::renderer_if_it_fits(kernel) {
             check_frame(
                 &mut r,
@@ -315,7 +315,7 @@ fn reference_backward_matches_finite_differences_under_gsplats_rules() {
 fn gpu_backward_matches_the_reference_under_gsplats_rules() {
     let cam = gpu_camera();
     let shifted = off_centre(&cam, 12.0, -9.0);
-    for blend in [None, Some(vksplat::render::blend::BlendKernel::Shared)] {
+    for blend in [None, Some(verisplat::render::blend::BlendKernel::Shared)] {
         let mut r = diff_rasterizer(blend);
         let p = grad_scene(60, 1300, Some(3), 3);
         let plain = gsplat(RenderOptions {
@@ -343,7 +343,7 @@ fn a_model_trained_with_gsplats_rules_records_and_renders_with_them() {
     crate::train::make_dataset(&data, 8, 48, 36);
     let model = dir.path().join("model");
     let run = |args: &[&str]| {
-        let out = common::cli::vksplat(args);
+        let out = common::cli::verisplat(args);
         let err = String::from_utf8_lossy(&out.stderr).to_string();
         assert!(out.status.success(), "{args:?}: {err}");
         err
@@ -363,11 +363,11 @@ fn a_model_trained_with_gsplats_rules_records_and_renders_with_them() {
         "-q",
     ]);
     let ply = model.join("point_cloud/iteration_60/point_cloud.ply");
-    let (scene, _) = vksplat::scene::load_with_format(&ply).unwrap();
+    let (scene, _) = verisplat::scene::load_with_format(&ply).unwrap();
     assert_eq!(scene.rules, Rules::Gsplat);
     let head = std::fs::read(&ply).unwrap();
     let head = String::from_utf8_lossy(&head[..400]);
-    assert!(head.contains("comment vksplat rules gsplat"), "{head}");
+    assert!(head.contains("comment verisplat rules gsplat"), "{head}");
     let png = dir.path().join("a.png");
     let p = ply.to_str().unwrap();
     let err = run(&[
@@ -412,5 +412,5 @@ fn a_model_trained_with_gsplats_rules_records_and_renders_with_them() {
         "-q",
     ]);
     let ply2 = model2.join("point_cloud/iteration_20/point_cloud.ply");
-    assert!(!String::from_utf8_lossy(&std::fs::read(ply2).unwrap()).contains("vksplat rules"));
+    assert!(!String::from_utf8_lossy(&std::fs::read(ply2).unwrap()).contains("verisplat rules"));
 }

@@ -8,11 +8,11 @@ use crate::common::cli::s;
 use crate::common::gpu::{assert_validation_clean, compare, renderer};
 
 use std::process::Command;
-use vksplat::camera;
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::gpu::buffer::GpuBuffer;
-use vksplat::gpu::shader::{BindingKind, ComputePipeline};
-use vksplat::gpu::sync::{barrier, Access};
+use verisplat::camera;
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::gpu::buffer::GpuBuffer;
+use verisplat::gpu::shader::{BindingKind, ComputePipeline};
+use verisplat::gpu::sync::{barrier, Access};
 
 /// The preprocess stage's counting (workgroup sums added to a lo/hi pair of u32 with
 /// carry) run on its own: 60,000 workgroups of 128 terms below 2^20 add up to about
@@ -27,10 +27,10 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
         &[],
         &[BindingKind::StorageBuffer],
         0,
-        vksplat::gpu::shader_set::LINEAR_WG,
+        verisplat::gpu::shader_set::LINEAR_WG,
     )
     .unwrap();
-    let wg = vksplat::gpu::shader_set::LINEAR_WG;
+    let wg = verisplat::gpu::shader_set::LINEAR_WG;
     let groups = 7_680_000 / wg;
     for seed in [1u32, 0xDEAD_BEEF] {
         let buf = GpuBuffer::from_slice(ctx, "count64", &[0u32, 0, seed, 0]).unwrap();
@@ -56,7 +56,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
         assert_eq!(got, want, "seed {seed:#x}");
     }
     // The host side composes the two words without truncation.
-    let c = vksplat::render::types::Counters {
+    let c = verisplat::render::types::Counters {
         touched_lo: 7,
         touched_hi: 3,
         ..Default::default()
@@ -67,7 +67,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
 
 fn check(label: &str, w: u32, h: u32) {
     let mut r = renderer();
-    let s = vksplat::demo_scene().activated();
+    let s = verisplat::demo_scene().activated();
     let cam = camera::default_camera(&s.positions, w, h);
     let gs = r.upload(&s).unwrap();
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
@@ -116,7 +116,7 @@ fn running_out_of_device_memory_mid_path_keeps_finished_frames() {
     let path = dir.path().join("cams.json");
     std::fs::write(&path, serde_json::to_string(&cams).unwrap()).unwrap();
     let out = dir.path().join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+    let o = Command::new(env!("CARGO_BIN_EXE_verisplat"))
         .args([
             "render",
             "--demo",
@@ -129,7 +129,7 @@ fn running_out_of_device_memory_mid_path_keeps_finished_frames() {
             "--encode-threads",
             "1",
         ])
-        .env("VKSPLAT_VALIDATE", "1")
+        .env("VERISPLAT_VALIDATE", "1")
         .output()
         .unwrap();
     let last = common::cli::failure_last_line(&o);
@@ -157,7 +157,7 @@ fn renders_are_bit_identical_across_processes() {
     let scene = common::shared_data().join("playbot_lod3_31k_sh2.ply");
     let run = |name: &str| {
         let out = dir.path().join(name);
-        let o = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+        let o = Command::new(env!("CARGO_BIN_EXE_verisplat"))
             .args([
                 "render",
                 s(&scene),
@@ -189,8 +189,8 @@ fn renders_are_bit_identical_across_processes() {
 /// stopped at 2 GiB); an explicit limit still wins.
 #[test]
 fn a_cpu_devices_default_budget_follows_the_hosts_available_memory() {
-    use vksplat::gpu::context::host_available_bytes;
-    use vksplat::gpu::{BudgetSource, ContextOptions, GpuContext};
+    use verisplat::gpu::context::host_available_bytes;
+    use verisplat::gpu::{BudgetSource, ContextOptions, GpuContext};
     let ctx = GpuContext::new(&ContextOptions::default()).expect("lavapipe");
     let info = ctx.info();
     assert_eq!(info.device_type, ash::vk::PhysicalDeviceType::CPU, "{info}");

@@ -1,4 +1,4 @@
-//! The training loss `L = 0.8 L1 + 0.2 (1 - SSIM)` (`vksplat::train::loss`): the f64
+//! The training loss `L = 0.8 L1 + 0.2 (1 - SSIM)` (`verisplat::train::loss`): the f64
 //! reference's gradient against central finite differences, its SSIM against the eval
 //! metric, and the device's loss and gradient against the reference, bit-identical run
 //! after run.
@@ -9,8 +9,8 @@
 //! 1e-3 relative L2 for the gradient, as the backward pass's other checks.
 
 use crate::common::{gpu::assert_validation_clean, Rng};
-use vksplat::model::grad::relative_l2;
-use vksplat::train::loss::{loss_reference, GpuLoss, LAMBDA_DSSIM};
+use verisplat::model::grad::relative_l2;
+use verisplat::train::loss::{loss_reference, GpuLoss, LAMBDA_DSSIM};
 
 fn image(width: usize, height: usize, seed: u64) -> Vec<f64> {
     let mut rng = Rng(seed);
@@ -34,7 +34,7 @@ fn reference_loss_gradient_matches_finite_differences() {
     let (value, grad) = loss_reference(&x, &y, w, h, 3, lambda);
     // Its SSIM is the eval metric's (symmetric in its images).
     let f32s = |v: &[f64]| v.iter().map(|&a| a as f32).collect::<Vec<f32>>();
-    let metric = vksplat::metrics::ssim(&f32s(&y), &f32s(&x), w, h, 3);
+    let metric = verisplat::metrics::ssim(&f32s(&y), &f32s(&x), w, h, 3);
     assert!(
         (value.ssim - metric).abs() < 1e-6,
         "{} vs {metric}",

@@ -24,6 +24,7 @@ mod field_renders;
 mod fit;
 mod fit_inputs;
 mod formats;
+mod former_name;
 mod fuzz_regressions;
 mod gpu_frames;
 mod gpu_memory;

@@ -6,7 +6,7 @@
 //! * through the library (`scene::load`, `camera::load_camera_file`): an error is one
 //!   sentence that names the file and contains the expected fragment; a usable file decodes
 //!   to the stated number of Gaussians and renders correctly on the CPU reference;
-//! * through the `vksplat` binary (with `VKSPLAT_VALIDATE=1`, under a timeout): a bad file
+//! * through the `verisplat` binary (with `VERISPLAT_VALIDATE=1`, under a timeout): a bad file
 //!   gives one `error:` line with the same fragment, a non-zero exit, no panic and nothing
 //!   in the output folder (no partial or temporary file); a usable one renders a PNG.
 //!
@@ -38,10 +38,10 @@ use spz::spz_v4;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use vksplat::camera::{self, Camera, PathTiming};
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::scene::compressed_ply::CHUNK_PROPS;
-use vksplat::scene::{self, Scene};
+use verisplat::camera::{self, Camera, PathTiming};
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::scene::compressed_ply::CHUNK_PROPS;
+use verisplat::scene::{self, Scene};
 
 /// The longest a CLI run on a tiny file may take before it counts as a hang.
 const CLI_TIMEOUT: Duration = Duration::from_secs(120);
@@ -208,9 +208,9 @@ fn library_check(case: &Case, path: &Path) {
 /// Runs the binary with a timeout; returns (success, stderr).
 fn run_cli(args: &[&std::ffi::OsStr], stderr_file: &Path) -> (bool, String) {
     let err = std::fs::File::create(stderr_file).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_vksplat"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_verisplat"))
         .args(args)
-        .env("VKSPLAT_VALIDATE", "1")
+        .env("VERISPLAT_VALIDATE", "1")
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(err)
@@ -224,7 +224,7 @@ fn run_cli(args: &[&std::ffi::OsStr], stderr_file: &Path) -> (bool, String) {
         if start.elapsed() > CLI_TIMEOUT {
             child.kill().unwrap();
             child.wait().unwrap();
-            panic!("vksplat {args:?} hung (killed after {CLI_TIMEOUT:?})");
+            panic!("verisplat {args:?} hung (killed after {CLI_TIMEOUT:?})");
         }
         std::thread::sleep(Duration::from_millis(20));
     };

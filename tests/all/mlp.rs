@@ -3,12 +3,12 @@
 //! reference on a real scene (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255).
 
 use crate::common;
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions, SplatKernel};
-use vksplat::mlp::{self, Activation, Mlp, MlpInput};
-use vksplat::scene;
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions, SplatKernel};
+use verisplat::mlp::{self, Activation, Mlp, MlpInput};
+use verisplat::scene;
 
-/// A safetensors file: F32 tensors and an optional `vksplat_mlp` description.
+/// A safetensors file: F32 tensors and an optional `verisplat_mlp` description.
 fn safetensors(tensors: &[(&str, Vec<usize>, Vec<f32>)], description: Option<&str>) -> Vec<u8> {
     let mut header = serde_json::Map::new();
     let mut data = Vec::new();
@@ -25,7 +25,7 @@ fn safetensors(tensors: &[(&str, Vec<usize>, Vec<f32>)], description: Option<&st
     if let Some(d) = description {
         header.insert(
             "__metadata__".into(),
-            serde_json::json!({ "vksplat_mlp": d }),
+            serde_json::json!({ "verisplat_mlp": d }),
         );
     }
     let mut text = serde_json::to_string(&header).unwrap().into_bytes();
@@ -230,7 +230,7 @@ fn malformed_shader_files_give_one_clear_error_each() {
     ));
     assert!(e.contains("must give 3 (R, G, B)"), "{e}");
     let e = err(file_of(&tensors, None));
-    assert!(e.contains("vksplat_mlp"), "{e}");
+    assert!(e.contains("verisplat_mlp"), "{e}");
     let e = err(b"not a safetensors file at all".to_vec());
     assert!(e.contains("is not a safetensors file"), "{e}");
     let e = err(file_of(
@@ -344,7 +344,7 @@ fn gpu_shade_stage_matches_the_reference() {
         want.color = mlp::shade(&m, &cam, &frame.features, k, &frame.alpha, bg);
         let gs = r.upload(&act).unwrap();
         let gf = r.upload_features(&act).unwrap();
-        let shader = vksplat::render::shade::GpuShader::new(r.ctx(), &m).unwrap();
+        let shader = verisplat::render::shade::GpuShader::new(r.ctx(), &m).unwrap();
         let got = r.render_shaded(&gs, &gf, &shader, &cam, &opts).unwrap();
         let c = common::gpu::compare(&got, &want);
         assert!(
@@ -361,7 +361,7 @@ fn gpu_shade_stage_matches_the_reference() {
         // K mismatch is refused.
         let (t2, d2) = network(&["features"], &[k + 1, 4, 3], &["relu", "sigmoid"], 2);
         let wrong = Mlp::parse(&file_of(&t2, Some(&d2)), None).unwrap();
-        let wrong = vksplat::render::shade::GpuShader::new(r.ctx(), &wrong).unwrap();
+        let wrong = verisplat::render::shade::GpuShader::new(r.ctx(), &wrong).unwrap();
         let e = r
             .render_shaded(&gs, &gf, &wrong, &cam, &opts)
             .unwrap_err()
@@ -381,7 +381,7 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     let mut rng = common::Rng(9);
     let feats: Vec<f32> = (0..n * k).map(|_| rng.range(0.0, 1.0)).collect();
     let npy = dir.path().join("f.npy");
-    std::fs::write(&npy, vksplat::image_file::npy_bytes(&[n, k], &feats)).unwrap();
+    std::fs::write(&npy, verisplat::image_file::npy_bytes(&[n, k], &feats)).unwrap();
     let (tensors, d) = network(
         &["features", "view_dir"],
         &[k + 3, 8, 3],
@@ -423,11 +423,11 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     run(&out("cpu.exr"), &["--cpu"]);
     let o = run(&out("gpu.png"), &[]);
     assert!(o.status.success());
-    let gpu = vksplat::image_file::read_image(&out("gpu.exr")).unwrap();
-    let cpu = vksplat::image_file::read_image(&out("cpu.exr")).unwrap();
-    let rgb = |p: &vksplat::image_file::Planes| p.interleave(&["R", "G", "B"]).unwrap();
+    let gpu = verisplat::image_file::read_image(&out("gpu.exr")).unwrap();
+    let cpu = verisplat::image_file::read_image(&out("cpu.exr")).unwrap();
+    let rgb = |p: &verisplat::image_file::Planes| p.interleave(&["R", "G", "B"]).unwrap();
     let (g, c) = (rgb(&gpu), rgb(&cpu));
-    let psnr = vksplat::metrics::psnr(&c, &g, 1.0);
+    let psnr = verisplat::metrics::psnr(&c, &g, 1.0);
     assert!(psnr >= 55.0, "GPU vs CPU shaded: {psnr} dB");
     // Not the plain colour render: the shader's output shows.
     let mut a = vec!["render".to_string()];
@@ -438,8 +438,8 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     );
     let refs: Vec<&str> = a.iter().map(String::as_str).collect();
     ok(&refs);
-    let plain = vksplat::image_file::read_image(&out("plain2.exr")).unwrap();
-    assert!(vksplat::metrics::psnr(&rgb(&plain), &g, 1.0) < 40.0);
+    let plain = verisplat::image_file::read_image(&out("plain2.exr")).unwrap();
+    assert!(verisplat::metrics::psnr(&rgb(&plain), &g, 1.0) < 40.0);
 
     // Errors: K mismatch, no features, a broken file, with --mode features.
     let (t2, d2) = network(&["features"], &[k + 1, 4, 3], &["relu", "sigmoid"], 2);

@@ -1,8 +1,8 @@
 //! PNG and EXR writers: values read back equal the frame; writes are atomic and never
 //! replace an existing file unasked.
 
-use vksplat::frame::Frame;
-use vksplat::output::{self, ImageFormat, OutputError};
+use verisplat::frame::Frame;
+use verisplat::output::{self, ImageFormat, OutputError};
 
 fn test_frame() -> Frame {
     let (w, h) = (37u32, 21u32);

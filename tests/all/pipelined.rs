@@ -12,24 +12,24 @@ use crate::common::gpu::{assert_validation_clean, compare, new_renderer};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::output::{self, OutputOptions};
-use vksplat::render::path::GpuPath;
-use vksplat::render::GpuRenderer;
-use vksplat::scene::{self, Scene};
-use vksplat::sequence::{self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions};
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::output::{self, OutputOptions};
+use verisplat::render::path::GpuPath;
+use verisplat::render::GpuRenderer;
+use verisplat::scene::{self, Scene};
+use verisplat::sequence::{self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions};
 
-fn vksplat(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_vksplat"))
+fn verisplat(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_verisplat"))
         .args(args)
-        .env("VKSPLAT_VALIDATE", "1")
+        .env("VERISPLAT_VALIDATE", "1")
         .output()
         .expect("the binary runs")
 }
 
 fn ok(args: &[&str]) -> String {
-    let o = vksplat(args);
+    let o = verisplat(args);
     let e = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(o.status.success(), "{args:?} failed: {e}");
     assert!(!e.contains("panicked"), "{e}");
@@ -121,7 +121,7 @@ fn two_frames_in_flight_write_the_files_of_one_at_a_time() {
         );
     }
     // The option is the Vulkan pipeline's.
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "--cpu",
@@ -135,7 +135,7 @@ fn two_frames_in_flight_write_the_files_of_one_at_a_time() {
         !o.status.success() && e.contains("--frames-in-flight applies to the Vulkan pipeline"),
         "{e}"
     );
-    let o = vksplat(&["render", "--demo", "--frames-in-flight", "3"]);
+    let o = verisplat(&["render", "--demo", "--frames-in-flight", "3"]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
         !o.status.success() && e.contains("must be between 1 and 2"),
@@ -184,7 +184,7 @@ fn crowd_path() -> Vec<(usize, Camera)> {
 /// flight; returns each frame's regrow count.
 fn run_path(
     r: &mut GpuRenderer,
-    gs: &vksplat::render::GpuScene,
+    gs: &verisplat::render::GpuScene,
     cams: &[(usize, Camera)],
     dir: &Path,
     ext: &str,
@@ -384,7 +384,7 @@ fn an_error_mid_path_names_its_frame_and_leaves_only_complete_files() {
     std::fs::write(&json, camera::inria::to_json(&cams).unwrap()).unwrap();
     for depth in ["1", "2"] {
         let out = dir.path().join(format!("out{depth}"));
-        let o = vksplat(&[
+        let o = verisplat(&[
             "render",
             s(&ply),
             "--cameras",

@@ -1,9 +1,9 @@
 //! Every real INRIA scene in `../shared/data/` loads and renders a recognisable image.
 
 use crate::common;
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::scene;
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::scene;
 
 fn orbit_camera(name: &str, index: usize) -> Camera {
     let path = common::shared_data().join(name);

@@ -1,4 +1,4 @@
-//! Rendering camera paths to image sequences with the `vksplat` binary: split runs equal
+//! Rendering camera paths to image sequences with the `verisplat` binary: split runs equal
 //! one run, an interrupted run resumes to the same files and never leaves a truncated
 //! frame, outputs read back equal to the in-memory render, render modes and filters.
 
@@ -9,22 +9,22 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use vksplat::cpu::{self, RenderOptions};
-use vksplat::scene::filter::SceneFilter;
-use vksplat::scene::{self, ply};
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::scene::filter::SceneFilter;
+use verisplat::scene::{self, ply};
 
 fn cmd() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_vksplat"));
-    c.env("VKSPLAT_VALIDATE", "1");
+    let mut c = Command::new(env!("CARGO_BIN_EXE_verisplat"));
+    c.env("VERISPLAT_VALIDATE", "1");
     c
 }
 
-fn vksplat(args: &[&str]) -> Output {
+fn verisplat(args: &[&str]) -> Output {
     cmd().args(args).output().expect("the binary runs")
 }
 
 fn ok(args: &[&str]) -> String {
-    let o = vksplat(args);
+    let o = verisplat(args);
     let e = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(o.status.success(), "{args:?} failed: {e}");
     assert!(!e.contains("panicked"), "{e}");
@@ -210,11 +210,11 @@ fn a_killed_run_resumes_to_the_files_of_an_uninterrupted_run() {
 #[test]
 fn exr_and_png16_hold_the_in_memory_render() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = vksplat::demo_scene();
+    let scene = verisplat::demo_scene();
     // The CLI makes the default camera at the requested size (it frames the scene for
     // that aspect ratio), not a 1280x720 camera scaled down.
-    let (w, h) = vksplat::camera::resized_dims((1280, 720), Some(200), None, None).unwrap();
-    let cam = vksplat::camera::default_camera(&scene.positions, w, h);
+    let (w, h) = verisplat::camera::resized_dims((1280, 720), Some(200), None, None).unwrap();
+    let cam = verisplat::camera::default_camera(&scene.positions, w, h);
     let frame = cpu::render(
         &scene.activated(),
         &cam,
@@ -261,7 +261,7 @@ fn exr_and_png16_hold_the_in_memory_render() {
     let plane =
         |c: &AnyChannel<FlatSamples>| -> Vec<f32> { c.sample_data.values_as_f32().collect() };
     // EXR colour is premultiplied (the background term removed); Z is +inf where empty.
-    let premultiplied = vksplat::output::premultiplied_color(&frame, [0.1, 0.2, 0.3]);
+    let premultiplied = verisplat::output::premultiplied_color(&frame, [0.1, 0.2, 0.3]);
     let colour = |ch: usize| -> Vec<f32> { premultiplied.iter().map(|p| p[ch]).collect() };
     let z: Vec<f32> = (frame.depth.iter().zip(&frame.alpha))
         .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
@@ -284,14 +284,14 @@ fn exr_and_png16_hold_the_in_memory_render() {
     // 16-bit PNG: exactly the quantised colour; the alpha PNG is grey.
     let png = image::open(&png_path).unwrap().to_rgb16();
     for (i, p) in png.pixels().enumerate() {
-        let want = frame.color[i].map(vksplat::output::to_u16);
+        let want = frame.color[i].map(verisplat::output::to_u16);
         assert_eq!(p.0, want, "pixel {i}");
     }
     let alpha = image::open(&alpha_path).unwrap();
     assert_eq!(alpha.color(), image::ColorType::L16);
     let alpha = alpha.to_luma16();
     for (i, p) in alpha.pixels().enumerate() {
-        assert_eq!(p.0[0], vksplat::output::to_u16(frame.alpha[i]));
+        assert_eq!(p.0[0], verisplat::output::to_u16(frame.alpha[i]));
     }
 }
 
@@ -406,7 +406,7 @@ fn sequence_errors_are_clear() {
     let dir = tempfile::tempdir().unwrap();
     let one = dir.path().join("one.png");
     let fails = |args: &[&str]| -> String {
-        let o = vksplat(args);
+        let o = verisplat(args);
         let e = String::from_utf8_lossy(&o.stderr).into_owned();
         assert!(!o.status.success(), "{args:?} must fail");
         assert!(!e.contains("panicked"), "{e}");
@@ -520,12 +520,12 @@ fn every_camera_file_format_renders_from_the_command_line() {
 /// finished before it is complete on disk, with and without encoder threads.
 #[test]
 fn a_device_lost_mid_path_stops_cleanly_with_finished_frames_intact() {
-    use vksplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
-    let scene = vksplat::demo_scene();
+    use verisplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
+    let scene = verisplat::demo_scene();
     let act = scene.activated();
-    let cams: Vec<(usize, vksplat::camera::Camera)> = vksplat::camera::orbit(
+    let cams: Vec<(usize, verisplat::camera::Camera)> = verisplat::camera::orbit(
         &scene.positions,
-        &vksplat::camera::OrbitParams {
+        &verisplat::camera::OrbitParams {
             frames: 6,
             width: 64,
             height: 36,
@@ -543,22 +543,23 @@ fn a_device_lost_mid_path_stops_cleanly_with_finished_frames_intact() {
             &cams,
             &pattern,
             None,
-            &vksplat::output::OutputOptions::default(),
+            &verisplat::output::OutputOptions::default(),
             Existing::Refuse,
         )
         .unwrap();
         let mut k = 0;
-        let mut render = |cam: &vksplat::camera::Camera| -> anyhow::Result<vksplat::frame::Frame> {
-            k += 1;
-            if k == 4 {
-                return Err(vksplat::gpu::GpuError::Vk {
-                    call: "vkQueueSubmit",
-                    result: ash::vk::Result::ERROR_DEVICE_LOST,
+        let mut render =
+            |cam: &verisplat::camera::Camera| -> anyhow::Result<verisplat::frame::Frame> {
+                k += 1;
+                if k == 4 {
+                    return Err(verisplat::gpu::GpuError::Vk {
+                        call: "vkQueueSubmit",
+                        result: ash::vk::Result::ERROR_DEVICE_LOST,
+                    }
+                    .into());
                 }
-                .into());
-            }
-            Ok(cpu::render(&act, cam, &RenderOptions::default()))
-        };
+                Ok(cpu::render(&act, cam, &RenderOptions::default()))
+            };
         let e = sequence::run(
             &plan.frames,
             &mut render,

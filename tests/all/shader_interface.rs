@@ -7,30 +7,30 @@
 use crate::common;
 
 use std::mem::{offset_of, size_of};
-use vksplat::cpu::SplatKernel;
-use vksplat::gpu::reflect::{check, reflect, Interface};
-use vksplat::gpu::scan::ScanPush;
-use vksplat::gpu::shader::{
+use verisplat::cpu::SplatKernel;
+use verisplat::gpu::reflect::{check, reflect, Interface};
+use verisplat::gpu::scan::ScanPush;
+use verisplat::gpu::shader::{
     compile_glsl, prebuilt_variants, shader_spirv, BindingKind, ComputePipeline,
 };
-use vksplat::gpu::shader_set::MAX_FEATURE_GROUPS;
-use vksplat::gpu::sort::{
+use verisplat::gpu::shader_set::MAX_FEATURE_GROUPS;
+use verisplat::gpu::sort::{
     SortConfig, SortPassPush, SortSetupPush, DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
 };
-use vksplat::gpu::{RadixSort, Scan};
-use vksplat::render::blend::{Blend, BlendKernel};
-use vksplat::render::blend_bwd::BlendBwd;
-use vksplat::render::features::FeatureBlend;
-use vksplat::render::grad_accumulate::{Accumulation, GradAccumulate};
-use vksplat::render::keys::Keys;
-use vksplat::render::order::Order;
-use vksplat::render::pack::Pack;
-use vksplat::render::preprocess::Preprocess;
-use vksplat::render::preprocess_bwd::PreprocessBwd;
-use vksplat::render::ranges::Ranges;
-use vksplat::render::shade::Shade;
-use vksplat::render::shade_bwd::ShadeBwd;
-use vksplat::render::types::{GpuGaussian, GpuGaussianCompact, Splat};
+use verisplat::gpu::{RadixSort, Scan};
+use verisplat::render::blend::{Blend, BlendKernel};
+use verisplat::render::blend_bwd::BlendBwd;
+use verisplat::render::features::FeatureBlend;
+use verisplat::render::grad_accumulate::{Accumulation, GradAccumulate};
+use verisplat::render::keys::Keys;
+use verisplat::render::order::Order;
+use verisplat::render::pack::Pack;
+use verisplat::render::preprocess::Preprocess;
+use verisplat::render::preprocess_bwd::PreprocessBwd;
+use verisplat::render::ranges::Ranges;
+use verisplat::render::shade::Shade;
+use verisplat::render::shade_bwd::ShadeBwd;
+use verisplat::render::types::{GpuGaussian, GpuGaussianCompact, Splat};
 
 fn interface(shader: &str, defines: &[(&str, &str)]) -> Interface {
     let defines: Vec<(&str, String)> = defines.iter().map(|&(k, v)| (k, v.to_string())).collect();
@@ -70,11 +70,11 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     Shade::new(ctx).expect("shade");
     ShadeBwd::new(ctx, 140, 64).expect("shade backward and its reduce");
     // The loss's five stages, its window also through texel views.
-    vksplat::train::loss::GpuLoss::with_texel_fetch(ctx, true).expect("the training loss");
+    verisplat::train::loss::GpuLoss::with_texel_fetch(ctx, true).expect("the training loss");
     built += 1 + 3 + 1 + 1 + 2 + 5 + 1;
     // The training step's: the Gaussians' and the shader's (its norm's reduce is the
     // loss's, counted above).
-    vksplat::train::device::StepPipelines::new(ctx).expect("the training step's stages");
+    verisplat::train::device::StepPipelines::new(ctx).expect("the training step's stages");
     built += 2;
     let sorts = [
         DEFAULT_SORT_CONFIG,
@@ -99,7 +99,7 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     .expect("count64_test");
     built += 1;
     // The subgroup self-check every context runs.
-    vksplat::gpu::subgroup::probe(ctx).expect("the subgroup probe");
+    verisplat::gpu::subgroup::probe(ctx).expect("the subgroup probe");
     built += 1;
     // The backward pass: both blend layouts and bin sizes, every accumulation, both reads.
     for (bin, rows) in [(8, false), (16, false), (8, true)] {
@@ -135,9 +135,9 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
             ctx.info().name
         );
     }
-    let ctx32 = vksplat::gpu::GpuContext::new(&vksplat::gpu::ContextOptions {
+    let ctx32 = verisplat::gpu::GpuContext::new(&verisplat::gpu::ContextOptions {
         validation: true,
-        emulate: vksplat::gpu::emulate::Emulation::parse("no-int64-atomics").unwrap(),
+        emulate: verisplat::gpu::emulate::Emulation::parse("no-int64-atomics").unwrap(),
         ..Default::default()
     })
     .expect("a second context");
@@ -151,19 +151,19 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     }
     // The field renders: every mode and kernel (each pipeline is built by its first frame).
     for kernel in SplatKernel::ALL {
-        let mut scene = vksplat::scene::Scene::empty(0);
+        let mut scene = verisplat::scene::Scene::empty(0);
         common::push_gaussian(&mut scene, [0.0, 0.0, 3.0], 0.5, 0.5, [0.5; 3]);
         scene.set_features(1, vec![1.0]).unwrap();
-        let g = vksplat::cpu::field::FieldGaussians::new(&scene.activated(), kernel);
-        let field = vksplat::render::field::GpuField::new(ctx, &g).expect("field upload");
-        let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
+        let g = verisplat::cpu::field::FieldGaussians::new(&scene.activated(), kernel);
+        let field = verisplat::render::field::GpuField::new(ctx, &g).expect("field upload");
+        let mut renderer = verisplat::render::field::FieldRenderer::new(kernel);
         for mode in [
-            vksplat::cpu::field::FieldMode::Slice {
+            verisplat::cpu::field::FieldMode::Slice {
                 point: [0.0, 0.0, 3.0],
                 normal: [0.0, 0.0, 1.0],
             },
-            vksplat::cpu::field::FieldMode::Integral,
-            vksplat::cpu::field::FieldMode::Max { samples: 8 },
+            verisplat::cpu::field::FieldMode::Integral,
+            verisplat::cpu::field::FieldMode::Max { samples: 8 },
         ] {
             renderer
                 .render(ctx, &field, &common::axis_camera(32.0), &mode)
@@ -230,7 +230,7 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     // and per pixel (bindings 2 and 3, vec4).
     for mode in ["0", "1", "2"] {
         let field = interface("field", &[("FIELD_MODE", mode), ("SPLAT_KERNEL", "0u")]);
-        let record = size_of::<vksplat::render::field::FieldGaussian>() as u32;
+        let record = size_of::<verisplat::render::field::FieldGaussian>() as u32;
         for stride in [(1, record), (2, 16), (3, 16)] {
             assert!(field.array_strides.contains(&stride), "{field:?}");
         }
@@ -249,7 +249,7 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     );
     assert_eq!(scan.push_size as usize, size_of::<ScanPush>());
     // The stages' own push-constant structs (render/types.rs).
-    use vksplat::render::types::{BlendPush, FeatureBlendPush, KeysPush, PackPush, WindowPush};
+    use verisplat::render::types::{BlendPush, FeatureBlendPush, KeysPush, PackPush, WindowPush};
     let pre = interface(
         "preprocess",
         &[("COMPACT_GAUSSIANS", "0"), ("PREPROCESS_TEXEL_IO", "1")],
@@ -384,11 +384,11 @@ fn bindings_are_named_in_the_shaders_and_placed_once_by_the_host() {
         shaders += 1;
     }
     assert!(shaders >= 16, "{shaders} shader files read");
-    let names = vksplat::gpu::shader_set::bindings::ALL;
+    let names = verisplat::gpu::shader_set::bindings::ALL;
     assert!(names
         .iter()
         .any(|(s, n)| *s == "preprocess" && n.contains(&"SPLATS")));
-    use vksplat::gpu::shader::by_binding;
+    use verisplat::gpu::shader::by_binding;
     assert_eq!(by_binding([(1, 'b'), (0, 'a')]).unwrap(), ['a', 'b']);
     assert!(by_binding([(0, 'a'), (0, 'b')])
         .unwrap_err()
@@ -415,7 +415,7 @@ fn regex_free_literal_binding(line: &str) -> bool {
 /// ones the sources declare for a few known kernels.
 #[test]
 fn every_modules_workgroup_demand_is_readable() {
-    use vksplat::gpu::workgroup::demand;
+    use verisplat::gpu::workgroup::demand;
     for key in prebuilt_variants() {
         let mut parts = key.split(' ');
         let shader = parts.next().expect("a shader name");

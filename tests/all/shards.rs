@@ -4,7 +4,7 @@
 //! frames over renderers, and bad input is one sentence. (The same under a real Slurm
 //! cluster: tools/slurm_test.sh.)
 
-use crate::common::cli::{command, fails, s, stderr, stdout, vksplat, vksplat_env};
+use crate::common::cli::{command, fails, s, stderr, stdout, verisplat, verisplat_env};
 use crate::common::shared_data;
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -277,7 +277,7 @@ fn shard_slurm_reads_the_array_task_and_bad_shards_are_one_sentence() {
         &dir.path().join("eval_report"),
     );
     assert!(e.contains("shard 3 does not exist"), "{e}");
-    let o = vksplat_env(
+    let o = verisplat_env(
         &[
             "bench",
             "--demo",
@@ -425,7 +425,7 @@ fn bench_sweep_shards_split_the_points() {
     let json = dir.path().join("b.json");
     let mut names = Vec::new();
     for i in 0..2 {
-        let o = vksplat(&[
+        let o = verisplat(&[
             "bench",
             "--demo",
             "--sweep",
@@ -451,7 +451,7 @@ fn bench_sweep_shards_split_the_points() {
     assert_eq!(names, [32, 48, 64], "each point once, in order");
     // The shards' reports merge into one of every point, in the sweep's order.
     let shard = |i: usize| dir.path().join(format!("b.shard-{i}-of-2.json"));
-    let o = vksplat(&[
+    let o = verisplat(&[
         "bench",
         "--merge",
         s(&shard(1)),
@@ -479,7 +479,7 @@ fn bench_sweep_shards_split_the_points() {
         let mut a = vec!["bench", "--merge"];
         a.extend(files.iter().map(|f| s(f)));
         a.extend(["--json", s(&merged)]);
-        let o = vksplat(&a);
+        let o = verisplat(&a);
         assert!(!o.status.success());
         assert!(stderr(&o).contains(says), "{}", stderr(&o));
     }

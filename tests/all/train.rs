@@ -1,13 +1,13 @@
-//! `vksplat train` on a data set made here: a shared scene (PLAYBOT LOD6, CC BY 4.0)
+//! `verisplat train` on a data set made here: a shared scene (PLAYBOT LOD6, CC BY 4.0)
 //! rendered from orbit cameras into a COLMAP data set (PNG photos, text model with every
 //! other Gaussian centre as points3D). Training must reach a stated held-out PSNR, write
-//! the original's model directory (which `vksplat eval` reads), and two runs with the same
+//! the original's model directory (which `verisplat eval` reads), and two runs with the same
 //! seed must write the same bytes.
 
-use crate::common::{self, cli::vksplat, cli::vksplat_in};
+use crate::common::{self, cli::verisplat, cli::verisplat_in};
 use std::path::Path;
-use vksplat::camera::colmap;
-use vksplat::camera::orbit::{orbit, OrbitParams};
+use verisplat::camera::colmap;
+use verisplat::camera::orbit::{orbit, OrbitParams};
 
 /// Writes the data set into `dir`: `views` photos of `w x h` and the COLMAP model.
 pub fn make_dataset(dir: &Path, views: usize, w: u32, h: u32) {
@@ -21,12 +21,13 @@ pub fn make_dataset_with(
     views: usize,
     w: u32,
     h: u32,
-    shader: Option<&vksplat::mlp::Mlp>,
+    shader: Option<&verisplat::mlp::Mlp>,
 ) {
-    let mut scene =
-        vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-            .expect("the shared scene")
-            .0;
+    let mut scene = verisplat::scene::load_with_format(
+        &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
+    )
+    .expect("the shared scene")
+    .0;
     if let Some(mlp) = shader {
         let k = mlp.feature_channels();
         let mut rng = common::Rng(77);
@@ -51,7 +52,7 @@ pub fn make_dataset_with(
         c
     })
     .collect();
-    vksplat::train::data::write_rendered_dataset(dir, &scene, &cams, shader, 2, false).unwrap();
+    verisplat::train::data::write_rendered_dataset(dir, &scene, &cams, shader, 2, false).unwrap();
 }
 
 /// The held-out PSNR that `train`'s summary line states.
@@ -93,7 +94,7 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
         "-q",
     ];
     let t = std::time::Instant::now();
-    let out = vksplat(&args);
+    let out = verisplat(&args);
     let text = String::from_utf8_lossy(&out.stdout);
     eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
     eprintln!("train: {:.1} s", t.elapsed().as_secs_f64());
@@ -110,7 +111,7 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
         assert!(model.join(f).is_file(), "{f} missing");
     }
     // The result renders (every viewer reads the PLY) and evaluates with no other flag.
-    let eval = vksplat_in(
+    let eval = verisplat_in(
         dir.path(),
         &[
             "eval",
@@ -125,14 +126,14 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
         String::from_utf8_lossy(&eval.stderr)
     );
     // The same run again: an existing model is not overwritten without asking.
-    let again = vksplat(&args);
+    let again = verisplat(&args);
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("exists"));
     // Reproducible: the same data, settings and seed write the same bytes.
     let model2 = dir.path().join("model2");
     let mut args2 = args.to_vec();
     args2[3] = model2.to_str().unwrap();
-    assert!(vksplat(&args2).status.success());
+    assert!(verisplat(&args2).status.success());
     for f in [
         "point_cloud/iteration_300/point_cloud.ply",
         "point_cloud/iteration_600/point_cloud.ply",
@@ -150,7 +151,7 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
 /// --shader`.
 #[test]
 fn train_learns_feature_splats_and_their_shader() {
-    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
     let mut rng = common::Rng(5);
     let mut layer = |i: usize, o: usize, a| Layer {
         inputs: i,
@@ -170,7 +171,7 @@ fn train_learns_feature_splats_and_their_shader() {
     let data = dir.path().join("data");
     make_dataset_with(&data, 24, 64, 48, Some(&target));
     let model = dir.path().join("model");
-    let out = vksplat(&[
+    let out = verisplat(&[
         "train",
         data.to_str().unwrap(),
         "-o",
@@ -199,11 +200,11 @@ fn train_learns_feature_splats_and_their_shader() {
     assert!(psnr >= 24.0, "held-out PSNR {psnr} dB");
     let dir600 = model.join("point_cloud/iteration_600");
     let shader = dir600.join("shader.safetensors");
-    let learned = vksplat::mlp::Mlp::load(&shader).unwrap();
+    let learned = verisplat::mlp::Mlp::load(&shader).unwrap();
     assert_eq!(learned.feature_channels(), 4);
     let ply = dir600.join("point_cloud.ply");
     let png = dir.path().join("view.png");
-    let render = vksplat(&[
+    let render = verisplat(&[
         "render",
         ply.to_str().unwrap(),
         "--shader",
@@ -255,7 +256,7 @@ fn resume_continues_bit_for_bit_and_ctrl_c_writes_a_checkpoint() {
         ];
         args.extend(extra.iter().map(|s| s.to_string()));
         let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-        (vksplat(&refs), model)
+        (verisplat(&refs), model)
     };
     let (full, a) = run("a", &["--checkpoint-iterations", "140"]);
     assert!(
@@ -326,7 +327,7 @@ fn bad_data_sets_give_one_clear_error_each() {
     make_dataset(&data, 4, 32, 24);
     let model = dir.path().join("model");
     let train = || {
-        vksplat(&[
+        verisplat(&[
             "train",
             data.to_str().unwrap(),
             "-o",
@@ -349,7 +350,7 @@ fn bad_data_sets_give_one_clear_error_each() {
     let photo = data.join("images/view_001.png");
     let saved = std::fs::read(&photo).unwrap();
     // A photo of another size than its camera.
-    let small = vksplat::frame::Frame {
+    let small = verisplat::frame::Frame {
         width: 8,
         height: 8,
         color: vec![[0.5; 3]; 64],
@@ -358,7 +359,8 @@ fn bad_data_sets_give_one_clear_error_each() {
         feature_count: 0,
         features: Vec::new(),
     };
-    vksplat::output::write_frame(&small, &photo, vksplat::output::ImageFormat::Png8, true).unwrap();
+    verisplat::output::write_frame(&small, &photo, verisplat::output::ImageFormat::Png8, true)
+        .unwrap();
     fails_with("a resized photo", &["view_001.png", "8x8", "32x24"]);
     // A missing photo.
     std::fs::remove_file(&photo).unwrap();
@@ -382,10 +384,11 @@ fn bad_data_sets_give_one_clear_error_each() {
 /// composited over the background, and training from random Gaussians learns the views.
 #[test]
 fn a_nerf_synthetic_data_set_reads_back_and_trains() {
-    let scene =
-        vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-            .expect("the shared scene")
-            .0;
+    let scene = verisplat::scene::load_with_format(
+        &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
+    )
+    .expect("the shared scene")
+    .0;
     let cams = orbit(
         &scene.positions,
         &OrbitParams {
@@ -406,7 +409,7 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
         let split = usize::from(i % 5 == 0);
         let folder = data.join(&splits[split].0);
         std::fs::create_dir_all(&folder).unwrap();
-        let frame = vksplat::cpu::render(&act, cam, &Default::default());
+        let frame = verisplat::cpu::render(&act, cam, &Default::default());
         // Straight (unpremultiplied) colour in the RGBA file, as Blender writes it.
         let rgba: Vec<u8> = frame
             .color
@@ -451,9 +454,9 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
         )
         .unwrap();
     }
-    let set = vksplat::train::data::load_transforms(
+    let set = verisplat::train::data::load_transforms(
         &data,
-        vksplat::train::data::Resolution(1),
+        verisplat::train::data::Resolution(1),
         true,
         [1.0; 3],
     )
@@ -466,7 +469,7 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
     // An empty pixel is the white background.
     assert!(set.train[0].image.iter().any(|p| p == &[1.0, 1.0, 1.0]));
     let model = dir.path().join("model");
-    let out = vksplat(&[
+    let out = verisplat(&[
         "train",
         data.to_str().unwrap(),
         "-o",
@@ -513,22 +516,22 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
 /// with the validation layer on, and the loss.
 struct Harness {
     dir: tempfile::TempDir,
-    dataset: vksplat::train::data::Dataset,
-    rast: vksplat::render::differentiable::DiffRasterizer,
-    loss: vksplat::train::loss::GpuLoss,
+    dataset: verisplat::train::data::Dataset,
+    rast: verisplat::render::differentiable::DiffRasterizer,
+    loss: verisplat::train::loss::GpuLoss,
 }
 
 impl Harness {
     /// `views` photos of `w x h` ([`make_dataset_with`]), no views held out.
-    fn new(views: usize, w: u32, h: u32, shader: Option<&vksplat::mlp::Mlp>) -> Harness {
-        use vksplat::train::data;
+    fn new(views: usize, w: u32, h: u32, shader: Option<&verisplat::mlp::Mlp>) -> Harness {
+        use verisplat::train::data;
         let dir = tempfile::tempdir().unwrap();
         let set = dir.path().join("data");
         make_dataset_with(&set, views, w, h, shader);
         let dataset = data::load_colmap(&set, data::Resolution(1), false).unwrap();
         let renderer = crate::common::gpu::new_renderer(None);
-        let loss = vksplat::train::loss::GpuLoss::new(renderer.ctx()).unwrap();
-        let rast = vksplat::render::differentiable::DiffRasterizer::with_renderer(renderer);
+        let loss = verisplat::train::loss::GpuLoss::new(renderer.ctx()).unwrap();
+        let rast = verisplat::render::differentiable::DiffRasterizer::with_renderer(renderer);
         Harness {
             dir,
             dataset,
@@ -543,20 +546,20 @@ impl Harness {
     fn train(
         &mut self,
         name: &str,
-        opts: &vksplat::train::run::TrainOptions,
+        opts: &verisplat::train::run::TrainOptions,
         host: bool,
     ) -> (
-        vksplat::train::run::TrainReport,
+        verisplat::train::run::TrainReport,
         Vec<f64>,
         std::path::PathBuf,
     ) {
-        let opts = vksplat::train::run::TrainOptions {
+        let opts = verisplat::train::run::TrainOptions {
             host_optimizer: host,
             ..opts.clone()
         };
         let out = self.dir.path().join(name);
         let mut losses = Vec::new();
-        let report = vksplat::train::run::train(
+        let report = verisplat::train::run::train(
             &self.dataset,
             &out,
             &opts,
@@ -579,9 +582,9 @@ impl Harness {
 }
 
 /// The scene and the bytes of the PLY in a model folder.
-fn model_ply(at: &Path) -> (vksplat::scene::Scene, Vec<u8>) {
+fn model_ply(at: &Path) -> (verisplat::scene::Scene, Vec<u8>) {
     let ply = at.join("point_cloud.ply");
-    let scene = vksplat::scene::load_with_format(&ply).unwrap().0;
+    let scene = verisplat::scene::load_with_format(&ply).unwrap().0;
     (scene, std::fs::read(&ply).unwrap())
 }
 
@@ -608,7 +611,7 @@ fn worst_loss_difference(a: &[f64], b: &[f64]) -> f64 {
 
 /// Asserts that every parameter group of `a` (centres, log scales, quaternions, opacity
 /// logits, SH, feature channels) is within `max` of `b`'s (relative L2), printing each.
-fn assert_groups_agree(a: &vksplat::scene::Scene, b: &vksplat::scene::Scene, max: f64) {
+fn assert_groups_agree(a: &verisplat::scene::Scene, b: &verisplat::scene::Scene, max: f64) {
     for (name, x, y) in [
         ("centres", flat(&a.positions), flat(&b.positions)),
         ("log scales", flat(&a.log_scales), flat(&b.log_scales)),
@@ -632,8 +635,8 @@ fn assert_groups_agree(a: &vksplat::scene::Scene, b: &vksplat::scene::Scene, max
 
 /// 30 iterations of SH degree 1, densifying from 50 every 60, resetting at 150 (the
 /// device-vs-host tests below).
-fn device_vs_host_options() -> vksplat::train::run::TrainOptions {
-    use vksplat::train::{model::Settings, run};
+fn device_vs_host_options() -> verisplat::train::run::TrainOptions {
+    use verisplat::train::{model::Settings, run};
     run::TrainOptions {
         settings: Settings {
             iterations: 30,
@@ -716,7 +719,7 @@ fn render_exports_a_colmap_data_set_that_trains() {
         data.to_str().unwrap(),
         "-q",
     ];
-    let out = vksplat(&args);
+    let out = verisplat(&args);
     let text = String::from_utf8_lossy(&out.stdout);
     eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success());
@@ -730,7 +733,7 @@ fn render_exports_a_colmap_data_set_that_trains() {
     assert_eq!(points.len(), 1873);
     // The images are the renders `render -o` writes.
     let frames = dir.path().join("frames");
-    let plain = vksplat(&[
+    let plain = verisplat(&[
         "render",
         ply.to_str().unwrap(),
         "--orbit",
@@ -753,14 +756,14 @@ fn render_exports_a_colmap_data_set_that_trains() {
         assert!(a == b, "{name} differs from render -o's");
     }
     // Not overwritten without asking.
-    let again = vksplat(&args);
+    let again = verisplat(&args);
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("exists"));
     let mut forced = args.to_vec();
     forced.push("--overwrite");
-    assert!(vksplat(&forced).status.success());
+    assert!(verisplat(&forced).status.success());
     let model = dir.path().join("model");
-    let train = vksplat(&[
+    let train = verisplat(&[
         "train",
         data.to_str().unwrap(),
         "-o",
@@ -801,7 +804,7 @@ fn render_exports_a_colmap_data_set_that_trains() {
     // Without points3D the start is random: 10,000 Gaussians on a CPU device (said, with
     // the flag that chooses), the original's 100,000 elsewhere.
     std::fs::remove_file(data.join("sparse/0/points3D.txt")).unwrap();
-    let random = vksplat(&[
+    let random = verisplat(&[
         "train",
         data.to_str().unwrap(),
         "-o",
@@ -827,8 +830,8 @@ fn render_exports_a_colmap_data_set_that_trains() {
 /// without it ends elsewhere).
 #[test]
 fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
-    use vksplat::mlp::{Activation, Layer, Mlp, MlpInput};
-    use vksplat::train::{model::Settings, run};
+    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    use verisplat::train::{model::Settings, run};
     let mut rng = common::Rng(9);
     let mut layer = |i: usize, o: usize, a| Layer {
         inputs: i,
@@ -901,7 +904,7 @@ fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
 /// second device run.
 #[test]
 fn mcmc_steps_on_the_device_as_on_the_host() {
-    use vksplat::train::{model, run};
+    use verisplat::train::{model, run};
     let mut h = Harness::new(8, 64, 48, None);
     let mut opts = run::TrainOptions {
         settings: model::Settings {
@@ -946,7 +949,7 @@ fn train_with_the_mcmc_strategy_stays_within_its_cap() {
     let data = dir.path().join("data");
     make_dataset(&data, 24, 80, 60);
     let model = dir.path().join("model");
-    let out = vksplat(&[
+    let out = verisplat(&[
         "train",
         data.to_str().unwrap(),
         "-o",
@@ -970,11 +973,11 @@ fn train_with_the_mcmc_strategy_stays_within_its_cap() {
     let psnr = summary_psnr(&text);
     assert!(psnr >= 30.0, "held-out PSNR {psnr} dB (measured 32.45)");
     let ply = model.join("point_cloud/iteration_600/point_cloud.ply");
-    let n = vksplat::scene::load_with_format(&ply).unwrap().0.len();
+    let n = verisplat::scene::load_with_format(&ply).unwrap().0.len();
     // 937 points, refinements at 200, 300, ..., 600: 983, 1032, 1083, then 1137 and 1193
     // held to the cap.
     assert_eq!(n, 1100, "937 points grow by 5 % per refinement to the cap");
-    let refused = vksplat(&[
+    let refused = verisplat(&[
         "train",
         data.to_str().unwrap(),
         "-o",

@@ -5,14 +5,14 @@
 //! values in one sentence.
 
 use crate::common;
-use crate::common::cli::{fails, stderr, vksplat};
+use crate::common::cli::{fails, stderr, verisplat};
 
 use glam::{DMat3, DQuat, DVec3, Mat3, Vec3};
 
-use vksplat::camera::{self, Camera};
-use vksplat::cpu::sh::eval_sh;
-use vksplat::scene::transform::SceneTransform;
-use vksplat::scene::{self, Scene};
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::sh::eval_sh;
+use verisplat::scene::transform::SceneTransform;
+use verisplat::scene::{self, Scene};
 
 fn random_unit(rng: &mut common::Rng) -> DVec3 {
     loop {
@@ -223,8 +223,8 @@ fn a_transformed_scene_seen_by_the_transformed_camera_renders_the_same_image() {
     .remove(0)
     .with_resolution(320, 180)
     .unwrap();
-    let opts = vksplat::cpu::RenderOptions::default();
-    let original = vksplat::cpu::render(&scene.activated(), &cam, &opts);
+    let opts = verisplat::cpu::RenderOptions::default();
+    let original = verisplat::cpu::render(&scene.activated(), &cam, &opts);
     let covered = original.alpha.iter().filter(|&&a| a > 0.5).count();
     assert!(
         covered > original.alpha.len() / 20,
@@ -261,12 +261,14 @@ fn a_transformed_scene_seen_by_the_transformed_camera_renders_the_same_image() {
         let s = t.scale() as f32;
         let crossing = depths
             .iter()
-            .filter(|&&z| (z <= vksplat::cpu::NEAR_PLANE) != (z * s <= vksplat::cpu::NEAR_PLANE))
+            .filter(|&&z| {
+                (z <= verisplat::cpu::NEAR_PLANE) != (z * s <= verisplat::cpu::NEAR_PLANE)
+            })
             .count();
         assert_eq!(crossing, 0, "{name}: Gaussians crossing the near plane");
         let moved = t.apply(scene.clone()).unwrap();
         let cam2 = transformed_camera(&cam, &t);
-        let frame = vksplat::cpu::render(&moved.activated(), &cam2, &opts);
+        let frame = verisplat::cpu::render(&moved.activated(), &cam2, &opts);
         // Only rounding differs (positions, quaternions, SH and the camera rounded to f32
         // in another frame), which moves values by ~1e-6 and rarely tips a 1/255 or
         // tile-rectangle decision; 55 dB is the project's bar for "the same image".
@@ -300,8 +302,8 @@ fn flip_y_seen_by_a_proper_camera_is_the_mirror_image() {
     .remove(0)
     .with_resolution(320, 176)
     .unwrap();
-    let opts = vksplat::cpu::RenderOptions::default();
-    let original = vksplat::cpu::render(&scene.activated(), &cam, &opts);
+    let opts = verisplat::cpu::RenderOptions::default();
+    let original = verisplat::cpu::render(&scene.activated(), &cam, &opts);
     let flip = SceneTransform::flip_axes(false, true, false);
     let mirrored_view = transformed_camera(&cam, &flip);
     let view_flip = Mat3::from_diagonal(Vec3::new(1.0, -1.0, 1.0));
@@ -311,7 +313,7 @@ fn flip_y_seen_by_a_proper_camera_is_the_mirror_image() {
         ..mirrored_view
     };
     assert!(cam2.rotation.determinant() > 0.0);
-    let frame = vksplat::cpu::render(&flip.apply(scene).unwrap().activated(), &cam2, &opts);
+    let frame = verisplat::cpu::render(&flip.apply(scene).unwrap().activated(), &cam2, &opts);
     let (w, h) = (frame.width, frame.height);
     let mut upside_down = frame.clone();
     for y in 0..h {
@@ -342,7 +344,7 @@ fn flip_y_seen_by_a_proper_camera_is_the_mirror_image() {
 fn render_and_convert_apply_the_flags() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("r.png");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "render",
         "--demo",
         "--cpu",
@@ -373,7 +375,7 @@ fn render_and_convert_apply_the_flags() {
     let input = common::shared_data().join("playbot_lod6_1873_sh2.ply");
     let original = scene::load(&input).unwrap();
     let ply = dir.path().join("t.ply");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "convert",
         input.to_str().unwrap(),
         ply.to_str().unwrap(),
@@ -399,7 +401,7 @@ fn render_and_convert_apply_the_flags() {
         assert_eq!(q[1], (p[0] as f64 - 2.0) as f32);
     }
     let cropped = dir.path().join("c.ply");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "convert",
         input.to_str().unwrap(),
         cropped.to_str().unwrap(),
@@ -462,7 +464,7 @@ fn bad_transform_values_are_one_sentence_and_write_nothing() {
 
 #[test]
 fn rotate_x_180_fixes_an_spz_written_without_its_axis_conversion() {
-    use vksplat::scene::write::{to_bytes, OutputFormat};
+    use verisplat::scene::write::{to_bytes, OutputFormat};
     let dir = tempfile::tempdir().unwrap();
     let original = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     // A writer that skipped the RDF -> RUB conversion stores the RDF numbers as they are;
@@ -476,7 +478,7 @@ fn rotate_x_180_fixes_an_spz_written_without_its_axis_conversion() {
     .unwrap();
     std::fs::write(&bad, bytes).unwrap();
     let fixed = dir.path().join("fixed.ply");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "convert",
         bad.to_str().unwrap(),
         fixed.to_str().unwrap(),

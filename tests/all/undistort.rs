@@ -6,15 +6,15 @@
 //! refused by name; zero coefficients load exactly as a pinhole camera; `eval` of a model
 //! trained at `-r 2` on distorted photos compares with the photos the trainer used.
 
-use crate::common::{self, cli::vksplat};
+use crate::common::{self, cli::verisplat};
 use std::path::Path;
-use vksplat::camera::distortion::Distortion;
-use vksplat::camera::Camera;
-use vksplat::train::data::{self, Resolution};
+use verisplat::camera::distortion::Distortion;
+use verisplat::camera::Camera;
+use verisplat::train::data::{self, Resolution};
 
 /// The shared scene (PLAYBOT LOD6, CC BY 4.0), activated.
-fn scene() -> vksplat::model::ActivatedScene {
-    vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+fn scene() -> verisplat::model::ActivatedScene {
+    verisplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
         .expect("the shared scene")
         .0
         .activated()
@@ -22,9 +22,9 @@ fn scene() -> vksplat::model::ActivatedScene {
 
 /// `cam` rendered by the CPU reference at 3x and area-averaged down (what a photo of
 /// it is, up to 8-bit quantisation).
-fn render(scene: &vksplat::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3]> {
+fn render(scene: &verisplat::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3]> {
     let big = cam.with_resolution(cam.width * 3, cam.height * 3).unwrap();
-    let f = vksplat::cpu::render(scene, &big, &Default::default());
+    let f = verisplat::cpu::render(scene, &big, &Default::default());
     let c: Vec<[f32; 3]> = f
         .color
         .iter()
@@ -37,7 +37,7 @@ fn render(scene: &vksplat::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3]>
 /// 3x3 rays, each ray's colour bilinearly sampled from a pinhole render 3x as dense with
 /// a 1.8x wider field.
 fn distorted_photo(
-    scene: &vksplat::model::ActivatedScene,
+    scene: &verisplat::model::ActivatedScene,
     cam: &Camera,
     d: &Distortion,
 ) -> Vec<[f32; 3]> {
@@ -55,7 +55,7 @@ fn distorted_photo(
         cy: (cam.cy as f64 * s + (m - 1.0) * s * cam.height as f64 / 2.0) as f32,
         ..cam.clone()
     };
-    let frame = vksplat::cpu::render(scene, &wide, &Default::default());
+    let frame = verisplat::cpu::render(scene, &wide, &Default::default());
     let at = |u: f64, v: f64| -> [f32; 3] {
         let u = u.clamp(0.0, bw as f64 - 1.0);
         let v = v.clamp(0.0, bh as f64 - 1.0);
@@ -100,7 +100,7 @@ fn distorted_photo(
 /// Writes `photo` (of `cam`'s size) as an 8-bit PNG.
 fn write_png(path: &Path, cam: &Camera, photo: &[[f32; 3]]) {
     let n = photo.len();
-    let frame = vksplat::frame::Frame {
+    let frame = verisplat::frame::Frame {
         width: cam.width,
         height: cam.height,
         color: photo.to_vec(),
@@ -110,7 +110,8 @@ fn write_png(path: &Path, cam: &Camera, photo: &[[f32; 3]]) {
         features: Vec::new(),
     };
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    vksplat::output::write_frame(&frame, path, vksplat::output::ImageFormat::Png8, true).unwrap();
+    verisplat::output::write_frame(&frame, path, verisplat::output::ImageFormat::Png8, true)
+        .unwrap();
 }
 
 /// A COLMAP text data set in `dir` of `cams` (one shared camera of `model` with
@@ -136,7 +137,7 @@ fn write_colmap(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], model: &s
     )
     .unwrap();
     // Every image on camera 1.
-    let [_, (_, images), _] = vksplat::camera::colmap::to_text_model(cams, &[]);
+    let [_, (_, images), _] = verisplat::camera::colmap::to_text_model(cams, &[]);
     let images: String = images
         .lines()
         .map(|l| {
@@ -190,19 +191,20 @@ fn write_transforms(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], lens:
 /// `n` orbit cameras of `w x h` around the scene, named `view_NNN.png`, with the
 /// principal point a little off centre.
 fn cameras(n: usize, w: u32, h: u32) -> Vec<Camera> {
-    let positions =
-        vksplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-            .unwrap()
-            .0
-            .positions;
-    let params = vksplat::camera::OrbitParams {
+    let positions = verisplat::scene::load_with_format(
+        &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
+    )
+    .unwrap()
+    .0
+    .positions;
+    let params = verisplat::camera::OrbitParams {
         frames: n,
         width: w,
         height: h,
         elevation_deg: 15.0,
         ..Default::default()
     };
-    vksplat::camera::orbit(&positions, &params)
+    verisplat::camera::orbit(&positions, &params)
         .unwrap()
         .into_iter()
         .enumerate()
@@ -217,7 +219,7 @@ fn cameras(n: usize, w: u32, h: u32) -> Vec<Camera> {
 
 fn psnr(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
     let flat = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-    vksplat::metrics::psnr(&flat(a), &flat(b), 1.0)
+    verisplat::metrics::psnr(&flat(a), &flat(b), 1.0)
 }
 
 /// The loaded view of a distorted data set matches a pinhole render of its camera, far
@@ -426,7 +428,7 @@ fn lenses_that_cannot_be_undistorted_are_refused_by_name() {
     // The command line says it in one line, without writing a model.
     let d = dir.path().join("t0");
     let model = dir.path().join("model");
-    let o = vksplat(&[
+    let o = verisplat(&[
         "train",
         d.to_str().unwrap(),
         "-o",
@@ -457,7 +459,7 @@ fn eval_of_a_model_trained_at_r_2_on_distorted_photos_uses_the_trainers_photos()
     let set = dir.path().join("data");
     write_colmap(&set, &cams, &photos, "OPENCV", "-0.1 0.01 0.001 0");
     let model = dir.path().join("model");
-    let out = vksplat(&[
+    let out = verisplat(&[
         "train",
         set.to_str().unwrap(),
         "-o",
@@ -500,7 +502,7 @@ fn eval_of_a_model_trained_at_r_2_on_distorted_photos_uses_the_trainers_photos()
             rep.to_str().unwrap(),
         ];
         args.extend_from_slice(extra);
-        let o = vksplat(&args);
+        let o = verisplat(&args);
         assert!(o.status.success(), "{}", common::cli::stderr(&o));
         serde_json::from_slice(&std::fs::read(rep.join("report.json")).unwrap()).unwrap()
     };

@@ -1,4 +1,4 @@
-//! `vksplat view` over its WebSocket, as a page uses it: frames equal `vksplat render` of
+//! `verisplat view` over its WebSocket, as a page uses it: frames equal `verisplat render` of
 //! the same camera and settings bit for bit; every bad message is refused with an error
 //! to its sender while the server and other tabs go on; keyframes exported by the viewer
 //! render with `render --cameras` to the frames the viewer shows at them.
@@ -10,7 +10,7 @@
 mod refusals;
 
 use crate::common;
-use crate::view_common::{diff, read_rgb, vksplat_ok, Client, Incoming, Viewer};
+use crate::view_common::{diff, read_rgb, verisplat_ok, Client, Incoming, Viewer};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -20,7 +20,7 @@ const WAIT: Duration = Duration::from_secs(60);
 /// Three cameras of an orbit around the demo robot at 96x64, as an INRIA cameras.json.
 fn cameras(dir: &Path) -> PathBuf {
     let file = dir.join("cams.json");
-    vksplat_ok(
+    verisplat_ok(
         dir,
         &[
             "render",
@@ -42,12 +42,12 @@ fn cameras(dir: &Path) -> PathBuf {
     file
 }
 
-/// `vksplat render --demo --cpu --cameras cams.json --camera K EXTRA` as RGB.
+/// `verisplat render --demo --cpu --cameras cams.json --camera K EXTRA` as RGB.
 fn render_camera(dir: &Path, k: usize, extra: &[&str], name: &str) -> image::RgbImage {
     render_camera_on(dir, &["--cpu"], k, extra, name)
 }
 
-/// `vksplat render --demo BACKEND --cameras cams.json --camera K EXTRA` as RGB.
+/// `verisplat render --demo BACKEND --cameras cams.json --camera K EXTRA` as RGB.
 fn render_camera_on(
     dir: &Path,
     backend: &[&str],
@@ -71,7 +71,7 @@ fn render_camera_on(
     ];
     args.extend_from_slice(backend);
     args.extend_from_slice(extra);
-    vksplat_ok(dir, &args);
+    verisplat_ok(dir, &args);
     read_rgb(&dir.join(out))
 }
 
@@ -79,7 +79,7 @@ fn assert_same(got: &image::RgbImage, want: &image::RgbImage, what: &str) {
     let (n, max) = diff(got, want);
     assert_eq!(
         n, 0,
-        "{what}: {n} pixels differ (by up to {max}) from vksplat render"
+        "{what}: {n} pixels differ (by up to {max}) from verisplat render"
     );
     // Not a blank picture that would equal another blank picture.
     assert!(
@@ -210,8 +210,8 @@ fn selected_camera_and_screenshots_equal_render(c: &mut Client, d: &Path, backen
         "ref.exr",
     ];
     exr.extend_from_slice(backend);
-    vksplat_ok(d, &exr);
-    let o = vksplat_ok(d, &["compare", "shot.exr", "ref.exr"]);
+    verisplat_ok(d, &exr);
+    let o = verisplat_ok(d, &["compare", "shot.exr", "ref.exr"]);
     let report = String::from_utf8_lossy(&o.stdout);
     assert!(report.contains("inf"), "identical EXRs: {report}");
 }
@@ -393,7 +393,7 @@ fn closed_tabs_free_their_state_and_http_serves_the_page() {
     let index = get("/");
     assert!(index.starts_with("HTTP/1.1 200"), "{index}");
     assert!(index.contains("viewer.js"));
-    assert!(get("/viewer.js").contains("vksplatViewer"));
+    assert!(get("/viewer.js").contains("verisplatViewer"));
     assert!(get("/viewer.css").contains("text/css"));
     assert!(get("/etc/passwd").starts_with("HTTP/1.1 404"));
     assert!(get("/../Cargo.toml").starts_with("HTTP/1.1 404"));
@@ -434,7 +434,7 @@ fn closed_tabs_free_their_state_and_http_serves_the_page() {
 fn a_scene_under_twice_the_subset_previews_a_subset() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    vksplat_ok(d, &["gen", "15000", "--seed", "3", "-o", "scene.ply"]);
+    verisplat_ok(d, &["gen", "15000", "--seed", "3", "-o", "scene.ply"]);
     let viewer = Viewer::start(d, &["scene.ply", "--preview-gaussians", "10000"]);
     let mut c = viewer.connect();
     let cam = c.hello["initial_camera"].clone();
@@ -684,13 +684,13 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
         .map(|k| json!({"time": k as f64, "camera": c.camera(k)}))
         .collect();
     c.send(
-        json!({"type": "export_keyframes", "format": "vksplat", "fps": 2, "keyframes": keyframes}),
+        json!({"type": "export_keyframes", "format": "verisplat", "fps": 2, "keyframes": keyframes}),
     );
     let export = c.text("export", WAIT);
     assert_eq!(export["filename"], "keyframes.json");
     std::fs::write(d.join("keyframes.json"), export["text"].as_str().unwrap()).unwrap();
     // fps 2: keyframes at 0, 1, 2 s are frames 0, 2, 4.
-    vksplat_ok(
+    verisplat_ok(
         d,
         &[
             "render",
@@ -738,7 +738,7 @@ fn exported_keyframes_render_to_what_the_viewer_shows() {
     let ns = c.text("export", WAIT);
     assert_eq!(ns["filename"], "camera_path.json");
     std::fs::write(d.join("camera_path.json"), ns["text"].as_str().unwrap()).unwrap();
-    vksplat_ok(
+    verisplat_ok(
         d,
         &[
             "render",
@@ -793,7 +793,7 @@ fn preview_rate(scene: &str, backend: &[&str]) -> f64 {
     let dir = tempfile::tempdir().unwrap();
     let mut args = vec![scene.to_str().unwrap()];
     args.extend_from_slice(backend);
-    let viewer = Viewer::start_with_env(dir.path(), &args, &[("VKSPLAT_VALIDATE", "0")]);
+    let viewer = Viewer::start_with_env(dir.path(), &args, &[("VERISPLAT_VALIDATE", "0")]);
     let mut c = viewer.connect();
     let mut cam = c.hello["initial_camera"].clone();
     let scale = 1280.0 / cam["width"].as_f64().unwrap();

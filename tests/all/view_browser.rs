@@ -1,14 +1,14 @@
 //! The viewer in a real browser: headless Chromium driven through WebDriver (Debian's
 //! `chromium` and `chromium-driver`, installed by `tools/setup.sh`). The page is opened,
 //! dragged, flown with W, its scale slider moved and a camera selected; the page's state
-//! (`window.vksplatViewer`) must change as each control says, frames must keep coming,
+//! (`window.verisplatViewer`) must change as each control says, frames must keep coming,
 //! and a screenshot of the page must show a rendered scene.
 //!
-//! `VKSPLAT_VIEWER_SCREENSHOT=path.png` also saves the page screenshot (the README's
-//! docs/viewer.png is made so, with `VKSPLAT_VIEWER_SCENE=/absolute/path/scene.ply`: the
+//! `VERISPLAT_VIEWER_SCREENSHOT=path.png` also saves the page screenshot (the README's
+//! docs/viewer.png is made so, with `VERISPLAT_VIEWER_SCENE=/absolute/path/scene.ply`: the
 //! test runs in a temporary directory).
 
-use crate::view_common::{vksplat_ok, Viewer};
+use crate::view_common::{verisplat_ok, Viewer};
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -145,7 +145,7 @@ impl Browser {
 
     /// The page's state.
     fn state(&self) -> Value {
-        self.js("const V = window.vksplatViewer; if (!V) return null; \
+        self.js("const V = window.verisplatViewer; if (!V) return null; \
              return {camera: V.camera, settings: V.settings, frames: V.frames, \
              fullFrames: V.fullFrames, lastSeq: V.lastSeq, errors: V.errors, \
              cameraIndex: V.cameraIndex, connected: V.connected, focus: V.focus, \
@@ -291,7 +291,7 @@ fn axis(cam: &Value, k: usize) -> [f64; 3] {
 fn the_page_drives_the_viewer_in_headless_chromium() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scene = std::env::var("VKSPLAT_VIEWER_SCENE").ok();
+    let scene = std::env::var("VERISPLAT_VIEWER_SCENE").ok();
     let scene_args: Vec<&str> = match &scene {
         Some(s) => vec![s.as_str()],
         None => vec!["--demo"],
@@ -312,11 +312,11 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         "-o",
         "orbit/f_{}.png",
     ]);
-    vksplat_ok(d, &render);
+    verisplat_ok(d, &render);
     let mut args = scene_args.clone();
     let max_resolution =
-        std::env::var("VKSPLAT_VIEWER_MAX_RESOLUTION").unwrap_or_else(|_| "640x400".into());
-    // The Vulkan pipeline (lavapipe in CI), as `vksplat view` runs by default.
+        std::env::var("VERISPLAT_VIEWER_MAX_RESOLUTION").unwrap_or_else(|_| "640x400".into());
+    // The Vulkan pipeline (lavapipe in CI), as `verisplat view` runs by default.
     args.extend([
         "--cameras",
         "cams.json",
@@ -547,7 +547,7 @@ fn export_keyframes_and_preview_them(browser: &Browser, d: &Path, scene_args: &[
         "-o",
         "kf.png",
     ]);
-    vksplat_ok(d, &render);
+    verisplat_ok(d, &render);
 
     // Preview plays the path the server sampled: 3 keys 2 s apart at 30 frames/s, 121 frames.
     let preview = browser.element("#kf-preview");
@@ -582,7 +582,7 @@ fn export_keyframes_and_preview_them(browser: &Browser, d: &Path, scene_args: &[
 /// found nothing.
 fn error_banner_and_a_clean_log(browser: &Browser, viewer: &mut Viewer) {
     // A server error appears in the page's banner.
-    browser.js("window.vksplatViewer.send({type: 'dance'}); return null;");
+    browser.js("window.verisplatViewer.send({type: 'dance'}); return null;");
     let s = browser.wait("error banner", Duration::from_secs(30), |s| {
         !s["banner"].is_null()
     });
@@ -621,7 +621,7 @@ fn page_screenshot_shows_a_picture(browser: &Browser) {
     // The page screenshot shows a picture in the canvas area (left of the panel).
     browser.js("document.getElementById('panel').scrollTop = 0; return null;");
     let png = browser.screenshot_png();
-    if let Ok(path) = std::env::var("VKSPLAT_VIEWER_SCREENSHOT") {
+    if let Ok(path) = std::env::var("VERISPLAT_VIEWER_SCREENSHOT") {
         std::fs::write(&path, &png).unwrap();
     }
     let img = image::load_from_memory(&png).expect("a PNG").to_rgb8();
@@ -695,7 +695,7 @@ fn the_canvas_is_the_area_beside_the_panel() {
              const p = document.getElementById('panel').getBoundingClientRect(); \
              const v = document.getElementById('view'); \
              return {right: c.right, left: c.left, panelLeft: p.left, window: window.innerWidth, \
-                     width: v.width, dpr: window.devicePixelRatio, camera: window.vksplatViewer.camera.width};",
+                     width: v.width, dpr: window.devicePixelRatio, camera: window.verisplatViewer.camera.width};",
         )
     };
     let g = geometry();
@@ -784,7 +784,7 @@ fn keyframe_inputs_refuse_values_out_of_range_visibly() {
 fn the_page_shows_why_the_server_closed_the_connection() {
     let (_dir, mut viewer, browser, _) = demo_page();
     browser
-        .js("window.vksplatViewer.send({type: 'rest', pad: 'x'.repeat(20 << 20)}); return null;");
+        .js("window.verisplatViewer.send({type: 'rest', pad: 'x'.repeat(20 << 20)}); return null;");
     let s = browser.wait("close reason", Duration::from_secs(30), |s| {
         s["banner"].as_str().is_some_and(|b| b.contains("too big"))
     });
@@ -807,7 +807,7 @@ fn the_page_shows_why_the_server_closed_the_connection() {
 fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    vksplat_ok(
+    verisplat_ok(
         d,
         &[
             "render",
@@ -826,7 +826,7 @@ fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
             "orbit/f_{}.png",
         ],
     );
-    vksplat_ok(
+    verisplat_ok(
         d,
         &[
             "gen",
@@ -859,8 +859,8 @@ fn a_restarted_server_with_another_scene_sets_the_page_up_anew() {
              bars: document.querySelectorAll('#hist div').length, \
              scene: document.getElementById('scene-name').textContent, \
              readout: document.getElementById('readout').textContent, \
-             lastGaussians: window.vksplatViewer.lastFrame && window.vksplatViewer.lastFrame.gaussians, \
-             histBins: window.vksplatViewer.hello.max_scale_histogram.counts.length};",
+             lastGaussians: window.verisplatViewer.lastFrame && window.verisplatViewer.lastFrame.gaussians, \
+             histBins: window.verisplatViewer.hello.max_scale_histogram.counts.length};",
         )
     };
     let old = dom();

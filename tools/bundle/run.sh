@@ -1,7 +1,7 @@
 #!/bin/sh
-# vksplat GPU bundle: measures this machine's Vulkan device and writes ONE markdown report.
+# verisplat GPU bundle: measures this machine's Vulkan device and writes ONE markdown report.
 # Needs only a Vulkan driver: no Rust, no compiler, no Python, no network. Made by
-# tools/gpu_bundle.sh in the vksplat repository.
+# tools/gpu_bundle.sh in the verisplat repository.
 #
 #   ./run.sh                    # everything (tens of minutes on a GPU) -> ./report.md
 #   ./run.sh /tmp/gpu.md        # the report elsewhere
@@ -10,17 +10,17 @@
 #   DEVICE=1 ./run.sh           # another Vulkan device (index or part of its name)
 #   GENERATED=1e6 COMPARE_SCENES= ./run.sh   # a part's list overridden (see "Steps")
 #
-# Steps: `vksplat doctor` (self-check against the CPU reference), `vksplat compare` (GPU vs
-# CPU renders of the scenes), `vksplat bench` forward and backward at 720p, 1080p and 4K
+# Steps: `verisplat doctor` (self-check against the CPU reference), `verisplat compare` (GPU vs
+# CPU renders of the scenes), `verisplat bench` forward and backward at 720p, 1080p and 4K
 # (PLAYBOT LOD2 and LOD1, plant, generated 1M and 10M Gaussian scenes), and a training run
-# (`vksplat train --timings` on a data set rendered from PLAYBOT LOD3). A step that fails
+# (`verisplat train --timings` on a data set rendered from PLAYBOT LOD3). A step that fails
 # is recorded in the report and the run goes on. Exit status: non-zero when doctor failed.
 # Raw results (JSON reports, logs) stay in results/ (RESULTS=DIR to choose).
 set -u
 here=$(cd "$(dirname "$0")" && pwd)
 report=${1:-$here/report.md}
 results=${RESULTS:-$here/results}
-bin=$here/bin/vksplat
+bin=$here/bin/verisplat
 scenes=$here/scenes
 cams=$here/cameras
 
@@ -219,7 +219,7 @@ fi
 # ---- The report ------------------------------------------------------------------------
 {
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-  echo "vksplat: $("$bin" --version 2>&1)"
+  echo "verisplat: $("$bin" --version 2>&1)"
   echo "mode: $mode ($(($(date +%s) - start)) s)"
   echo "host: $(uname -srm), $(getconf _NPROCESSORS_ONLN 2>/dev/null || echo '?') CPU threads"
   if command -v nvidia-smi >/dev/null 2>&1; then
@@ -245,7 +245,7 @@ fi
 if ! "$bin" gpu-report "$results" -o "$report" 2>"$results/report.log"; then
   # The binary could not make it: a plain report with the steps and logs' tails.
   {
-    echo "# vksplat GPU report (the report step failed: $(cat "$results/report.log"))"
+    echo "# verisplat GPU report (the report step failed: $(cat "$results/report.log"))"
     echo
     sed 's/^/- /' "$results/info.txt"
     echo

@@ -1,4 +1,4 @@
-//! The arguments of `vksplat render` ([`RenderArgs`], with the field renders' own
+//! The arguments of `verisplat render` ([`RenderArgs`], with the field renders' own
 //! [`FieldArgs`]) and the check of the options `--cpu` cannot honour.
 
 use crate::cli::common::{CameraArgs, FilterArgs, GpuArgs, KernelArg, PathArgs, SceneArg};
@@ -6,22 +6,22 @@ use crate::cli::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use vksplat::cpu::field::MAX_FIELD_SAMPLES;
-use vksplat::output;
-use vksplat::sequence::FrameSelection;
+use verisplat::cpu::field::MAX_FIELD_SAMPLES;
+use verisplat::output;
+use verisplat::sequence::FrameSelection;
 
 #[derive(Args)]
 #[command(after_help = "Examples:
-  vksplat render scene.ply -o view.png
-  vksplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr
-  vksplat render model_dir/ --cameras cameras.json --camera 0,8,16 -o renders/{name}.png
-  vksplat render scene.spz --cameras path.json --frames 100..200 -o out/ --format exr
-  vksplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume
-  vksplat render scene.ply --orbit 1200 -o orbit/ --shard slurm   # a task of sbatch --array=0-7
-  vksplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?
-  vksplat render scene.ply --orbit 48 --width 320 --height 240 --export-colmap data/   # a data set to train on
-  vksplat render moving.ply --time 0.5 --mode field-slice --slice-plane 0,0,0,0,0,1 -o t05.png
-  vksplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max -o anim/frame_%04d.png
+  verisplat render scene.ply -o view.png
+  verisplat render scene.ply --orbit 120 -o orbit/frame_{:05}.exr
+  verisplat render model_dir/ --cameras cameras.json --camera 0,8,16 -o renders/{name}.png
+  verisplat render scene.spz --cameras path.json --frames 100..200 -o out/ --format exr
+  verisplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume
+  verisplat render scene.ply --orbit 1200 -o orbit/ --shard slurm   # a task of sbatch --array=0-7
+  verisplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?
+  verisplat render scene.ply --orbit 48 --width 320 --height 240 --export-colmap data/   # a data set to train on
+  verisplat render moving.ply --time 0.5 --mode field-slice --slice-plane 0,0,0,0,0,1 -o t05.png
+  verisplat render moving.ply --time-range 0,1 --time-frames 30 --mode field-max -o anim/frame_%04d.png
 
 A time-varying scene (t_mean, t_scale per Gaussian, what `fit --time-column` writes) is
 rendered at a time: --time T, or --time-range T0,T1 for an animation; without either it is
@@ -53,7 +53,7 @@ pub(crate) struct RenderArgs {
     /// float16, N the scene's Gaussian count, K 1..64), replacing any feat_* of the file.
     #[arg(long, value_name = "FILE.npy")]
     pub(crate) features: Option<PathBuf>,
-    /// Neural shader: a per-pixel MLP (safetensors with a vksplat_mlp description; README
+    /// Neural shader: a per-pixel MLP (safetensors with a verisplat_mlp description; README
     /// "Neural shader") applied to the blended feature channels (and optionally the view
     /// direction and alpha). The colour written is alpha * MLP + (1 - alpha) * background.
     #[arg(long, value_name = "FILE.safetensors")]
@@ -157,7 +157,7 @@ pub(crate) struct RenderArgs {
     pub(crate) timings: bool,
     /// Threads that encode and write images while the next frame renders (0: encode on
     /// the rendering thread; at most 64).
-    #[arg(long, value_name = "N", default_value_t = vksplat::sequence::default_encode_threads(), value_parser = values::int_in(0usize, 64))]
+    #[arg(long, value_name = "N", default_value_t = verisplat::sequence::default_encode_threads(), value_parser = values::int_in(0usize, 64))]
     pub(crate) encode_threads: usize,
     /// Frames of a path in flight on the device: 2 records and submits frame n+1 before
     /// frame n is read back and encoded (two sets of per-frame buffers); 1 renders one

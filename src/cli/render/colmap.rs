@@ -6,9 +6,9 @@ use crate::cli::common::fail_on_validation_messages;
 use crate::cli::plural;
 use anyhow::{bail, Result};
 use std::path::Path;
-use vksplat::camera::Camera;
-use vksplat::outln;
-use vksplat::render::GpuRenderer;
+use verisplat::camera::Camera;
+use verisplat::outln;
+use verisplat::render::GpuRenderer;
 
 /// Points3D written by `--export-colmap` at most.
 const EXPORT_COLMAP_POINTS: usize = 100_000;
@@ -18,10 +18,10 @@ const EXPORT_COLMAP_POINTS: usize = 100_000;
 pub(super) fn export_colmap(
     args: &RenderArgs,
     dir: &Path,
-    scene: &vksplat::scene::Scene,
+    scene: &verisplat::scene::Scene,
     name: &str,
     cameras: &[(usize, Camera)],
-    shader: Option<&vksplat::mlp::Mlp>,
+    shader: Option<&verisplat::mlp::Mlp>,
 ) -> Result<()> {
     let cams: Vec<Camera> = cameras
         .iter()
@@ -32,7 +32,7 @@ pub(super) fn export_colmap(
         bail!("--export-colmap: no cameras selected");
     }
     let stride = scene.len().div_ceil(EXPORT_COLMAP_POINTS).max(1);
-    let opts = vksplat::cpu::RenderOptions {
+    let opts = verisplat::cpu::RenderOptions {
         background: args.background,
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(scene, name),
@@ -59,15 +59,15 @@ pub(super) fn export_colmap(
     } else {
         "with the CPU reference"
     };
-    vksplat::train::data::write_dataset(dir, scene, &cams, stride, args.overwrite, &mut |cam| {
+    verisplat::train::data::write_dataset(dir, scene, &cams, stride, args.overwrite, &mut |cam| {
         bar.inc(1);
         match (&mut gpu, shader) {
             (Some((renderer, gpu_scene)), _) => renderer
                 .render(gpu_scene, cam, &opts)
                 .map_err(|e| e.to_string()),
             (None, Some(mlp)) => {
-                let mut frame = vksplat::cpu::render_features(&act, cam, &opts);
-                frame.color = vksplat::mlp::shade(
+                let mut frame = verisplat::cpu::render_features(&act, cam, &opts);
+                frame.color = verisplat::mlp::shade(
                     mlp,
                     cam,
                     &frame.features,
@@ -77,7 +77,7 @@ pub(super) fn export_colmap(
                 );
                 Ok(frame)
             }
-            (None, None) => Ok(vksplat::cpu::render(&act, cam, &opts)),
+            (None, None) => Ok(verisplat::cpu::render(&act, cam, &opts)),
         }
     })?;
     if let Some((renderer, gpu_scene)) = gpu {

@@ -1,5 +1,5 @@
 //! `render --mode field-slice | field-integral | field-max`: the fitted field itself
-//! (`vksplat::cpu::field` has the formulas), on the GPU (`render::field`) or with `--cpu`
+//! (`verisplat::cpu::field` has the formulas), on the GPU (`render::field`) or with `--cpu`
 //! the f64 reference; EXR and `.npy` hold the channels, a PNG one channel through the
 //! turbo colour map (or the `--shader`), optionally with a labelled colour bar.
 
@@ -8,13 +8,13 @@ use super::time::Animation;
 use crate::cli::common::fail_on_validation_messages;
 use anyhow::{bail, Result};
 use std::path::Path;
-use vksplat::camera::Camera;
-use vksplat::cpu::field::{FieldGaussians, FieldMode};
-use vksplat::cpu::SplatKernel;
-use vksplat::frame::Frame;
-use vksplat::note;
-use vksplat::output::{self, RenderMode};
-use vksplat::sequence::{FramePlan, RunOptions, Summary};
+use verisplat::camera::Camera;
+use verisplat::cpu::field::{FieldGaussians, FieldMode};
+use verisplat::cpu::SplatKernel;
+use verisplat::frame::Frame;
+use verisplat::note;
+use verisplat::output::{self, RenderMode};
+use verisplat::sequence::{FramePlan, RunOptions, Summary};
 
 /// `field-slice` etc., for messages.
 pub(crate) fn mode_name(mode: Option<RenderMode>) -> &'static str {
@@ -86,11 +86,11 @@ pub(crate) fn check_options(args: &RenderArgs, mode: Option<RenderMode>) -> Resu
     }
     for (flag, label) in [("--channel-name", &f.channel_name), ("--units", &f.units)] {
         let Some(label) = label else { continue };
-        if let Some(c) = vksplat::font::undrawable(label) {
+        if let Some(c) = verisplat::font::undrawable(label) {
             bail!(
                 "{flag} \"{label}\": the colour bar's font cannot draw '{c}' (U+{:04X}); it draws printable ASCII and {}",
                 u32::from(c),
-                vksplat::font::SYMBOLS
+                verisplat::font::SYMBOLS
             );
         }
     }
@@ -112,13 +112,13 @@ pub(crate) fn check_options(args: &RenderArgs, mode: Option<RenderMode>) -> Resu
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render(
     args: &RenderArgs,
-    scene: &vksplat::model::ActivatedScene,
+    scene: &verisplat::model::ActivatedScene,
     animation: Option<&Animation>,
     kernel: SplatKernel,
     mode: RenderMode,
     frames: &[FramePlan],
     run_opts: &RunOptions,
-    shader: Option<&vksplat::mlp::Mlp>,
+    shader: Option<&verisplat::mlp::Mlp>,
 ) -> Result<(Summary, String)> {
     let f = &args.field;
     let field_mode = match mode {
@@ -182,15 +182,15 @@ pub(crate) fn render(
         } else {
             Some(args.gpu.context()?)
         };
-        let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
-        let summary = vksplat::sequence::run_each(
+        let mut renderer = verisplat::render::field::FieldRenderer::new(kernel);
+        let summary = verisplat::sequence::run_each(
             frames,
             &mut |p| {
                 let g = FieldGaussians::new(&anim.scene(p.index), kernel);
                 let frame = match &ctx {
-                    None => vksplat::cpu::field::render_field(&g, &p.camera, &field_mode),
+                    None => verisplat::cpu::field::render_field(&g, &p.camera, &field_mode),
                     Some(ctx) => {
-                        let gpu_field = vksplat::render::field::GpuField::new(ctx, &g)?;
+                        let gpu_field = verisplat::render::field::GpuField::new(ctx, &g)?;
                         renderer.render(ctx, &gpu_field, &p.camera, &field_mode)?
                     }
                 };
@@ -207,17 +207,22 @@ pub(crate) fn render(
         });
     }
     if args.cpu {
-        let summary = vksplat::sequence::run(
+        let summary = verisplat::sequence::run(
             frames,
-            &mut |cam| colours.apply(cam, vksplat::cpu::field::render_field(&g, cam, &field_mode)),
+            &mut |cam| {
+                colours.apply(
+                    cam,
+                    verisplat::cpu::field::render_field(&g, cam, &field_mode),
+                )
+            },
             run_opts,
         )?;
         return Ok((summary, "on the CPU (the f64 field reference)".into()));
     }
     let ctx = args.gpu.context()?;
-    let gpu_field = vksplat::render::field::GpuField::new(&ctx, &g)?;
-    let mut renderer = vksplat::render::field::FieldRenderer::new(kernel);
-    let summary = vksplat::sequence::run(
+    let gpu_field = verisplat::render::field::GpuField::new(&ctx, &g)?;
+    let mut renderer = verisplat::render::field::FieldRenderer::new(kernel);
+    let summary = verisplat::sequence::run(
         frames,
         &mut |cam| {
             let frame = renderer.render(&ctx, &gpu_field, cam, &field_mode)?;
@@ -240,7 +245,7 @@ struct Colours<'a> {
     bar: Option<String>,
     /// Whether a label too wide for the bar was noted.
     bar_noted: bool,
-    shader: Option<&'a vksplat::mlp::Mlp>,
+    shader: Option<&'a verisplat::mlp::Mlp>,
     /// `--complex I,Q`: magnitude and phase appended.
     complex: Option<(usize, usize)>,
 }
@@ -248,7 +253,7 @@ struct Colours<'a> {
 impl Colours<'_> {
     fn apply(&mut self, cam: &Camera, mut frame: Frame) -> Result<Frame> {
         if let Some((i, q)) = self.complex {
-            vksplat::cpu::field::append_magnitude_phase(&mut frame, i, q);
+            verisplat::cpu::field::append_magnitude_phase(&mut frame, i, q);
         }
         if !self.png {
             return Ok(frame);
@@ -261,7 +266,7 @@ impl Colours<'_> {
                 .map(|v| if v.is_nan() { 0.0 } else { *v })
                 .collect();
             frame.color =
-                vksplat::mlp::shade(mlp, cam, &features, k, &frame.alpha, self.background);
+                verisplat::mlp::shade(mlp, cam, &features, k, &frame.alpha, self.background);
             return Ok(frame);
         }
         let range = match self.range {
@@ -281,17 +286,17 @@ impl Colours<'_> {
         frame.color = output::field_colormap(&frame, self.channel, range, self.background);
         if let Some(label) = &self.bar {
             let (w, h) = (frame.width as usize, frame.height as usize);
-            let lo = vksplat::diff_image::label_number(f64::from(range[0]));
-            let hi = vksplat::diff_image::label_number(f64::from(range[1]));
+            let lo = verisplat::diff_image::label_number(f64::from(range[0]));
+            let hi = verisplat::diff_image::label_number(f64::from(range[1]));
             let drawn =
-                vksplat::diff_image::append_colour_bar(&mut frame.color, w, h, [&lo, label, &hi]);
+                verisplat::diff_image::append_colour_bar(&mut frame.color, w, h, [&lo, label, &hi]);
             if !drawn && !self.bar_noted {
                 note!(
                     "the colour bar's label \"{label}\" does not fit the {w}-pixel-wide image and is left out; render it wider (--width)"
                 );
                 self.bar_noted = true;
             }
-            frame.height += vksplat::diff_image::BAR_HEIGHT;
+            frame.height += verisplat::diff_image::BAR_HEIGHT;
             let n = frame.color.len();
             frame.alpha.resize(n, 1.0);
             frame.depth.resize(n, 0.0);

@@ -1,4 +1,4 @@
-//! `vksplat render`: one camera or a camera path to PNG/EXR files.
+//! `verisplat render`: one camera or a camera path to PNG/EXR files.
 //!
 //! [`render`] runs the command's phases in order; the rooms below hold them: the
 //! arguments (`args`), the scene and its time (`scene`, `time`), where the frames go
@@ -23,9 +23,9 @@ use anyhow::{bail, Result};
 use outputs::Outputs;
 use splat::Job;
 use std::path::Path;
-use vksplat::note;
-use vksplat::output::RenderMode;
-use vksplat::sequence::{Plan, Summary};
+use verisplat::note;
+use verisplat::output::RenderMode;
+use verisplat::sequence::{Plan, Summary};
 
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if args.cpu {

@@ -1,4 +1,4 @@
-//! Where `vksplat render` writes: the output name pattern (given, or the default for one
+//! Where `verisplat render` writes: the output name pattern (given, or the default for one
 //! frame or a path), the checks of the output options against it, the frames of a shard,
 //! the plan on disk (`--skip-existing`, `--overwrite`), `--export-cameras` and `--verify`.
 
@@ -8,10 +8,10 @@ use crate::cli::common::check_output_dir;
 use crate::cli::plural;
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
-use vksplat::camera::Camera;
-use vksplat::output::{self, FileContent};
-use vksplat::sequence::{Existing, FramePlan, OutputPattern, Plan, ProgressStyle, RunOptions};
-use vksplat::{note, outln};
+use verisplat::camera::Camera;
+use verisplat::output::{self, FileContent};
+use verisplat::sequence::{Existing, FramePlan, OutputPattern, Plan, ProgressStyle, RunOptions};
+use verisplat::{note, outln};
 
 /// Output of a single frame when `-o` is not given.
 pub(super) const DEFAULT_OUTPUT: &str = "render.png";
@@ -25,7 +25,7 @@ pub(super) fn check_output_options(
     pattern: &OutputPattern,
     opts: &output::OutputOptions,
 ) -> Result<()> {
-    if args.format.is_some() && !vksplat::sequence::names_directory(output) {
+    if args.format.is_some() && !verisplat::sequence::names_directory(output) {
         bail!(
             "--format sets the image format of a directory output (-o out/); {} names its format by its extension",
             output.display()
@@ -82,7 +82,7 @@ pub(super) fn export_cameras(
     cams: &[(usize, Camera)],
     args: &RenderArgs,
 ) -> Result<()> {
-    let json = vksplat::camera::inria::to_json(cams)?;
+    let json = verisplat::camera::inria::to_json(cams)?;
     if !args.overwrite && args.skip_existing && path.exists() {
         if std::fs::read(path).ok().as_deref() == Some(json.as_bytes()) {
             return Ok(());
@@ -98,9 +98,9 @@ pub(super) fn export_cameras(
 
 /// `--verify`: lists the frames whose files are missing, unreadable or of the wrong size
 /// on stdout, and fails when there are any.
-pub(super) fn verify(frames: &[vksplat::sequence::FramePlan]) -> Result<()> {
+pub(super) fn verify(frames: &[verisplat::sequence::FramePlan]) -> Result<()> {
     let files: usize = frames.iter().map(|f| f.files.len()).sum();
-    let problems = vksplat::sequence::verify(frames);
+    let problems = verisplat::sequence::verify(frames);
     for p in &problems {
         outln!("frame {}: {}: {}", p.frame, p.path.display(), p.reason);
     }
@@ -142,7 +142,7 @@ impl Outputs<'_> {
     /// before anything is loaded.
     pub(super) fn checked(
         args: &RenderArgs,
-        shard: Option<vksplat::shard::Shard>,
+        shard: Option<verisplat::shard::Shard>,
     ) -> Result<Outputs<'_>> {
         let out_opts = output::OutputOptions {
             mode: args.mode,
@@ -226,14 +226,15 @@ impl Outputs<'_> {
 /// announced, when a shard has none).
 pub(super) fn planned_frames(
     args: &RenderArgs,
-    shard: Option<vksplat::shard::Shard>,
+    shard: Option<verisplat::shard::Shard>,
     cameras: &[(usize, Camera)],
     pattern: &OutputPattern,
     out_opts: &output::OutputOptions,
 ) -> Result<Option<Vec<FramePlan>>> {
     // Every shard plans the whole selection, so shards that would write the same file
     // are refused by each of them; then it keeps its block.
-    let frames = vksplat::sequence::plan_frames(cameras, pattern, args.frames.as_ref(), out_opts)?;
+    let frames =
+        verisplat::sequence::plan_frames(cameras, pattern, args.frames.as_ref(), out_opts)?;
     Ok(Some(match shard {
         Some(shard) => {
             let all = frames.len();
@@ -266,7 +267,7 @@ pub(super) fn prepare(args: &RenderArgs, frames: Vec<FramePlan>) -> Result<Optio
     } else {
         Existing::Refuse
     };
-    let plan = vksplat::sequence::prepare(frames, existing)?;
+    let plan = verisplat::sequence::prepare(frames, existing)?;
     if plan.removed_temporaries > 0 {
         note!(
             "removed {} temporary file(s) left by an interrupted run",

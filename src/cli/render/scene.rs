@@ -1,4 +1,4 @@
-//! The scene `vksplat render` draws: loaded with its feature channels, checked against the
+//! The scene `verisplat render` draws: loaded with its feature channels, checked against the
 //! render mode and `--shader`, transformed and filtered, shown at `--time` (or animated
 //! over `--time-range`), and the render options it implies.
 
@@ -8,9 +8,9 @@ use super::time::{time_choice, Animation, TimeChoice};
 use crate::cli::common::{load_scene, CameraPath};
 use crate::cli::plural;
 use anyhow::{bail, Result};
-use vksplat::note;
-use vksplat::output::{self, RenderMode};
-use vksplat::scene::Scene;
+use verisplat::note;
+use verisplat::output::{self, RenderMode};
+use verisplat::scene::Scene;
 
 /// The loaded scene and what the options ask of it.
 pub(super) struct Loaded {
@@ -25,7 +25,7 @@ pub(super) struct Loaded {
     /// `--mode features`: the feature channels are written.
     pub(super) render_features: bool,
     /// `--shader`: the neural shader colouring the feature channels.
-    pub(super) shader: Option<vksplat::mlp::Mlp>,
+    pub(super) shader: Option<verisplat::mlp::Mlp>,
 }
 
 /// Loads the scene (with `--features`), checks the mode, time and shader options against
@@ -35,13 +35,13 @@ pub(super) fn load(args: &RenderArgs) -> Result<Loaded> {
     let transform = args.transform.transform()?;
     let (mut scene, name) = load_scene(&args.scene)?;
     if let Some(file) = &args.features {
-        vksplat::scene::features::attach_npy(&mut scene, file)?;
+        verisplat::scene::features::attach_npy(&mut scene, file)?;
     }
     let time = time_choice(args, &scene, &name)?;
     let field_mode = args.mode.filter(|m| m.is_field());
     field::check_options(args, field_mode)?;
     if field_mode.is_some() && scene.feature_count == 0 {
-        bail!("--mode {} renders the fitted field, its feature channels, but {name} has none; fit one with `vksplat fit` or give channels with --features FILE.npy", field::mode_name(field_mode));
+        bail!("--mode {} renders the fitted field, its feature channels, but {name} has none; fit one with `verisplat fit` or give channels with --features FILE.npy", field::mode_name(field_mode));
     }
     let render_features = args.mode == Some(output::RenderMode::Features);
     if render_features && scene.feature_count == 0 {
@@ -78,7 +78,7 @@ fn load_shader(
     name: &str,
     render_features: bool,
     field_mode: Option<RenderMode>,
-) -> Result<Option<vksplat::mlp::Mlp>> {
+) -> Result<Option<verisplat::mlp::Mlp>> {
     Ok(match &args.shader {
         Some(path) => {
             if render_features {
@@ -87,7 +87,7 @@ fn load_shader(
             if field_mode.is_some() && !field::writes_png(args) {
                 bail!("--shader colours a field render's PNG; EXR and .npy outputs hold the channels themselves");
             }
-            let mlp = vksplat::mlp::Mlp::load(path)?;
+            let mlp = verisplat::mlp::Mlp::load(path)?;
             mlp.check_channels(scene.feature_count)
                 .map_err(|e| anyhow::anyhow!("{}: {e} ({name})", path.display()))?;
             Some(mlp)
@@ -130,14 +130,14 @@ pub(super) fn render_options(
     args: &RenderArgs,
     scene: &Scene,
     name: &str,
-) -> vksplat::cpu::RenderOptions {
+) -> verisplat::cpu::RenderOptions {
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);
     if scene.antialiased && !args.antialiased && !args.no_antialiased {
         note!(
             "note: {name} records that it was trained with antialiasing; rendering with its opacity compensation (--no-antialiased turns it off)"
         );
     }
-    vksplat::cpu::RenderOptions {
+    verisplat::cpu::RenderOptions {
         background: args.background,
         antialiased,
         scale_modifier: args.scale_modifier,

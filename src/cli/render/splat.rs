@@ -7,25 +7,25 @@ use super::time::Animation;
 use crate::cli::common::fail_on_validation_messages;
 use crate::cli::plural;
 use anyhow::{bail, Result};
-use vksplat::note;
-use vksplat::render::path::GpuPath;
-use vksplat::render::GpuRenderer;
-use vksplat::sequence::{ProgressStyle, Summary};
+use verisplat::note;
+use verisplat::render::path::GpuPath;
+use verisplat::render::GpuRenderer;
+use verisplat::sequence::{ProgressStyle, Summary};
 
 /// What each renderer of `render` gets: the command's arguments, the scene, the frames to
 /// render and how to render and write them.
 #[derive(Clone, Copy)]
 pub(super) struct Job<'a> {
     pub(super) args: &'a RenderArgs,
-    pub(super) scene: &'a vksplat::scene::ActivatedScene,
+    pub(super) scene: &'a verisplat::scene::ActivatedScene,
     /// `--time-range`: each frame's scene (then `scene` is unused).
     pub(super) animation: Option<&'a Animation>,
-    pub(super) frames: &'a [vksplat::sequence::FramePlan],
-    pub(super) opts: &'a vksplat::cpu::RenderOptions,
-    pub(super) run_opts: &'a vksplat::sequence::RunOptions,
+    pub(super) frames: &'a [verisplat::sequence::FramePlan],
+    pub(super) opts: &'a verisplat::cpu::RenderOptions,
+    pub(super) run_opts: &'a verisplat::sequence::RunOptions,
     /// Render the feature channels (`--mode features`, or for `shader`).
     pub(super) features: bool,
-    pub(super) shader: Option<&'a vksplat::mlp::Mlp>,
+    pub(super) shader: Option<&'a verisplat::mlp::Mlp>,
 }
 
 /// Sums of per-stage times over the frames of a path, printed by `--timings`.
@@ -72,20 +72,20 @@ pub(super) fn render_cpu(job: &Job) -> Result<(Summary, String)> {
     }
     let mut sums = StageSums::default();
     let mut pairs = 0;
-    let mut render = |p: &vksplat::sequence::FramePlan| {
+    let mut render = |p: &verisplat::sequence::FramePlan| {
         let cam = &p.camera;
         let at_time = job.animation.map(|a| a.scene(p.index));
         let scene = at_time.as_ref().unwrap_or(scene);
         let (mut frame, t) = if job.features || shader.is_some() {
-            vksplat::cpu::render_features_timed(scene, cam, opts)
+            verisplat::cpu::render_features_timed(scene, cam, opts)
         } else {
-            vksplat::cpu::render_timed(scene, cam, opts)
+            verisplat::cpu::render_timed(scene, cam, opts)
         };
         let mut stages = t.stages().to_vec();
         let mut total = t.total;
         if let Some(mlp) = shader {
             let start = std::time::Instant::now();
-            frame.color = vksplat::mlp::shade(
+            frame.color = verisplat::mlp::shade(
                 mlp,
                 cam,
                 &frame.features,
@@ -103,7 +103,7 @@ pub(super) fn render_cpu(job: &Job) -> Result<(Summary, String)> {
         pairs = t.pairs;
         Ok(frame)
     };
-    let summary = vksplat::sequence::run_each(job.frames, &mut render, job.run_opts);
+    let summary = verisplat::sequence::run_each(job.frames, &mut render, job.run_opts);
     if job.args.timings {
         sums.print("CPU ms");
         note!("tile pairs {pairs} (last frame)");
@@ -135,7 +135,7 @@ pub(super) fn render_on_devices(job: &Job, devices: &str) -> Result<(Summary, St
     }
     let t0 = std::time::Instant::now();
     let workers = chosen.len().min(frames.len());
-    let run_opts = vksplat::sequence::RunOptions {
+    let run_opts = verisplat::sequence::RunOptions {
         progress: ProgressStyle::Quiet,
         ..job.run_opts.clone()
     };
@@ -144,7 +144,7 @@ pub(super) fn render_on_devices(job: &Job, devices: &str) -> Result<(Summary, St
             .iter()
             .enumerate()
             .map(|(w, device)| {
-                let block = vksplat::shard::Shard {
+                let block = verisplat::shard::Shard {
                     index: w,
                     count: workers,
                 }
@@ -196,7 +196,7 @@ pub(super) fn render_on_devices(job: &Job, devices: &str) -> Result<(Summary, St
     ))
 }
 
-pub(super) fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Summary, String)> {
+pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(Summary, String)> {
     let Job {
         args,
         scene,
@@ -225,7 +225,7 @@ pub(super) fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Su
         );
     }
     let gpu_shader = match shader {
-        Some(m) => Some(vksplat::render::shade::GpuShader::new(renderer.ctx(), m)?),
+        Some(m) => Some(verisplat::render::shade::GpuShader::new(renderer.ctx(), m)?),
         None => None,
     };
     let mut sums = StageSums::default();
@@ -233,7 +233,7 @@ pub(super) fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Su
     if let Some(anim) = animation {
         // Each frame its own scene: uploaded, rendered, dropped.
         let mut device_bytes = 0;
-        let summary = vksplat::sequence::run_each(
+        let summary = verisplat::sequence::run_each(
             frames,
             &mut |p| {
                 let at_time = anim.scene(p.index);
@@ -279,7 +279,7 @@ pub(super) fn render_gpu(job: &Job, ctx: vksplat::gpu::GpuContext) -> Result<(Su
         if let Some(f) = &gpu_features {
             source = source.with_features(f, gpu_shader.as_ref());
         }
-        vksplat::sequence::run_pipelined(frames, &mut source, run_opts)
+        verisplat::sequence::run_pipelined(frames, &mut source, run_opts)
     };
     if args.timings {
         sums.print("GPU ms");

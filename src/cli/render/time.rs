@@ -19,7 +19,7 @@ pub(super) enum TimeChoice {
 /// static one takes neither.
 pub(super) fn time_choice(
     args: &RenderArgs,
-    scene: &vksplat::scene::Scene,
+    scene: &verisplat::scene::Scene,
     name: &str,
 ) -> Result<TimeChoice> {
     let flag = if args.time.is_some() {
@@ -31,7 +31,7 @@ pub(super) fn time_choice(
         (None, None, None) => Ok(TimeChoice::Static),
         (None, _, _) if scene.time.is_some() => Ok(TimeChoice::Static), // time-varying but empty
         (None, _, _) => bail!(
-            "{flag} applies to a time-varying scene (t_mean, t_scale per Gaussian, as `vksplat fit --time-column` writes), but {name} is static; drop {flag}"
+            "{flag} applies to a time-varying scene (t_mean, t_scale per Gaussian, as `verisplat fit --time-column` writes), but {name} is static; drop {flag}"
         ),
         (Some((lo, hi)), None, None) => bail!(
             "{name} is time-varying (its Gaussians' temporal means run from {lo} to {hi}); render it at a time with --time T, or as an animation with --time-range {lo},{hi} --time-frames N"
@@ -44,7 +44,7 @@ pub(super) fn time_choice(
 /// `--time-range`: the time-varying scene (transformed and filtered) and the time of each
 /// frame of the path; frame `k` of `n` shows the scene at `t0 + (t1 - t0) k / (n - 1)`.
 pub(crate) struct Animation {
-    scene: vksplat::scene::Scene,
+    scene: verisplat::scene::Scene,
     range: [f32; 2],
     frames: usize,
 }
@@ -56,7 +56,7 @@ impl Animation {
         args: &RenderArgs,
         range: [f32; 2],
         path: &mut crate::cli::common::CameraPath,
-        scene: vksplat::scene::Scene,
+        scene: verisplat::scene::Scene,
     ) -> Result<Animation> {
         let frames = match (args.time_frames, path.cameras.len()) {
             (Some(n), 1) => {
@@ -97,8 +97,8 @@ impl Animation {
             as f32
     }
 
-    /// The scene as frame `index` shows it ([`vksplat::scene::Scene::at_time`]), activated.
-    pub(crate) fn scene(&self, index: usize) -> vksplat::scene::ActivatedScene {
+    /// The scene as frame `index` shows it ([`verisplat::scene::Scene::at_time`]), activated.
+    pub(crate) fn scene(&self, index: usize) -> verisplat::scene::ActivatedScene {
         self.scene.at_time(self.time(index)).activated()
     }
 }

@@ -81,7 +81,7 @@ pub struct TrainOptions {
 }
 
 impl Default for TrainOptions {
-    /// The original's settings and `vksplat train`'s defaults: SH degree 3, black
+    /// The original's settings and `verisplat train`'s defaults: SH degree 3, black
     /// background, seed 0, 100,000 random Gaussians without points, nothing saved before
     /// the last iteration, the state on the device.
     fn default() -> Self {
@@ -149,7 +149,7 @@ pub struct Evaluation {
     pub ssim: f64,
     /// Mean L1.
     pub l1: f64,
-    /// Mean FLIP (`vksplat eval`'s, the default observer).
+    /// Mean FLIP (`verisplat eval`'s, the default observer).
     pub flip: f64,
 }
 

@@ -46,7 +46,7 @@ pub(super) fn points_ply(points: &[crate::camera::colmap::Point3D]) -> Vec<u8> {
 
 /// `cameras.json` (the test cameras, then the training ones, the original's order, at the
 /// photos' own size), `cfg_args` (the original's arguments, as its readers parse them) and,
-/// when photos were undistorted, `undistortion.json` (how, for `vksplat eval`).
+/// when photos were undistorted, `undistortion.json` (how, for `verisplat eval`).
 pub(super) fn write_cameras_and_cfg(
     job: &Job,
     written: &mut Vec<PathBuf>,

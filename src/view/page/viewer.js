@@ -1,4 +1,4 @@
-// vksplat view: the page. The server renders; this file keeps the camera and the
+// verisplat view: the page. The server renders; this file keeps the camera and the
 // settings, turns mouse and keys into camera moves, sends view requests over the
 // WebSocket and draws the frames that come back. Protocol: src/view/protocol.rs.
 'use strict';
@@ -31,7 +31,7 @@
     scale_modifier: 1, max_scale: null, min_opacity: 0, sh_degree: null,
     background: [0, 0, 0], mode: 'rgb',
   };
-  const V = window.vksplatViewer = {
+  const V = window.verisplatViewer = {
     connected: false, ready: false, hello: null, scenes: 0, frames: 0, previewFrames: 0, fullFrames: 0, lastSeq: 0,
     lastFrame: null, errors: [], cameraIndex: -1, keyframes: [], screenshots: 0,
     lastExport: null, pathFrames: 0, upFlipped: false, turntable: false, sent: 0,
@@ -289,7 +289,7 @@
   $('shot-exr').addEventListener('click', () => screenshot('exr'));
   $('kf-add').addEventListener('click', addKeyframe);
   $('kf-preview').addEventListener('click', togglePreview);
-  $('kf-export').addEventListener('click', () => exportKeyframes('vksplat'));
+  $('kf-export').addEventListener('click', () => exportKeyframes('verisplat'));
   $('kf-export-ns').addEventListener('click', () => exportKeyframes('nerfstudio'));
 
   function resetView() {

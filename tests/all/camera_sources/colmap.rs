@@ -7,7 +7,7 @@ use super::{
 };
 use glam::{DQuat, Vec2, Vec3};
 use std::path::Path;
-use vksplat::camera::{self, Camera, CameraError, CameraFormat};
+use verisplat::camera::{self, Camera, CameraError, CameraFormat};
 
 /// `cameras` with id i + 1 as PINHOLE and images named by camera name, as COLMAP text.
 fn colmap_text(cams: &[Camera]) -> (String, String) {

@@ -1,22 +1,22 @@
-//! Running the `vksplat` binary from the integration tests, with the validation layer on.
+//! Running the `verisplat` binary from the integration tests, with the validation layer on.
 
 use std::path::Path;
 use std::process::{Command, Output};
 
 /// The binary under test.
 pub fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_vksplat")
+    env!("CARGO_BIN_EXE_verisplat")
 }
 
-/// A command for the binary with `VKSPLAT_VALIDATE=1` (any validation message fails it).
+/// A command for the binary with `VERISPLAT_VALIDATE=1` (any validation message fails it).
 pub fn command() -> Command {
     let mut c = Command::new(bin());
-    c.env("VKSPLAT_VALIDATE", "1");
+    c.env("VERISPLAT_VALIDATE", "1");
     c
 }
 
 /// Runs the binary in `dir` with `env` added.
-pub fn vksplat_in_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+pub fn verisplat_in_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
     let mut c = command();
     c.args(args).current_dir(dir);
     for (k, v) in env {
@@ -26,18 +26,18 @@ pub fn vksplat_in_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Output
 }
 
 /// Runs the binary in `dir`.
-pub fn vksplat_in(dir: &Path, args: &[&str]) -> Output {
-    vksplat_in_env(dir, args, &[])
+pub fn verisplat_in(dir: &Path, args: &[&str]) -> Output {
+    verisplat_in_env(dir, args, &[])
 }
 
 /// Runs the binary with `env` added.
-pub fn vksplat_env(args: &[&str], env: &[(&str, &str)]) -> Output {
-    vksplat_in_env(Path::new("."), args, env)
+pub fn verisplat_env(args: &[&str], env: &[(&str, &str)]) -> Output {
+    verisplat_in_env(Path::new("."), args, env)
 }
 
 /// Runs the binary.
-pub fn vksplat(args: &[&str]) -> Output {
-    vksplat_env(args, &[])
+pub fn verisplat(args: &[&str]) -> Output {
+    verisplat_env(args, &[])
 }
 
 /// Its standard error, lossily decoded.
@@ -52,7 +52,7 @@ pub fn stdout(o: &Output) -> String {
 
 /// Runs a command that must succeed (and not panic); returns its output.
 pub fn ok(args: &[&str]) -> Output {
-    let o = vksplat(args);
+    let o = verisplat(args);
     let e = stderr(&o);
     assert!(o.status.success(), "{args:?} failed: {e}");
     assert!(!e.contains("panicked"), "{args:?} panicked: {e}");
@@ -62,7 +62,7 @@ pub fn ok(args: &[&str]) -> Output {
 /// Runs a command that must fail with one `error:` sentence (no panic) and leave `out`
 /// absent; returns the sentence.
 pub fn fails(args: &[&str], out: &Path) -> String {
-    let o = vksplat(args);
+    let o = verisplat(args);
     let e = stderr(&o);
     assert!(!o.status.success(), "{args:?} must fail");
     assert!(!e.contains("panicked"), "{args:?} panicked: {e}");

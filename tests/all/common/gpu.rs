@@ -2,11 +2,11 @@
 #![allow(dead_code)]
 
 use std::sync::{Mutex, MutexGuard, OnceLock};
-use vksplat::camera::Camera;
-use vksplat::frame::Frame;
-use vksplat::gpu::{ContextOptions, GpuContext};
-use vksplat::render::blend::BlendKernel;
-use vksplat::render::GpuRenderer;
+use verisplat::camera::Camera;
+use verisplat::frame::Frame;
+use verisplat::gpu::{ContextOptions, GpuContext};
+use verisplat::render::blend::BlendKernel;
+use verisplat::render::GpuRenderer;
 
 /// The shared renderer (validation layer on; the blend variant for the device).
 pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
@@ -17,7 +17,7 @@ pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
 }
 
 /// A fresh renderer with validation on and, if given, a fixed blend kernel: one the
-/// device's workgroups cannot hold (the shared kernel under `VKSPLAT_EMULATE=spec-limits`)
+/// device's workgroups cannot hold (the shared kernel under `VERISPLAT_EMULATE=spec-limits`)
 /// gives way to the device's own, said on stderr, so such a run tests what a device with
 /// those limits runs.
 pub fn new_renderer(kernel: Option<BlendKernel>) -> GpuRenderer {
@@ -44,7 +44,7 @@ pub fn new_renderer(kernel: Option<BlendKernel>) -> GpuRenderer {
 }
 
 /// A fresh renderer with `kernel`, or `None` (said on stderr) when the device's workgroup
-/// limits cannot hold it: under `VKSPLAT_EMULATE=spec-limits` (128 invocations) the
+/// limits cannot hold it: under `VERISPLAT_EMULATE=spec-limits` (128 invocations) the
 /// shared kernel and the 1-pixel texel kernel are refused, as on such a device.
 pub fn renderer_if_it_fits(kernel: BlendKernel) -> Option<GpuRenderer> {
     let ctx = GpuContext::new(&ContextOptions {
@@ -84,10 +84,10 @@ pub struct Comparison {
 }
 
 /// Compares a GPU frame with the CPU reference frame: colour and alpha figures from
-/// `vksplat::metrics`, plus the relative depth error where both alphas exceed 0.5.
+/// `verisplat::metrics`, plus the relative depth error where both alphas exceed 0.5.
 pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
     assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
-    let m = vksplat::metrics::compare_frames(cpu, gpu);
+    let m = verisplat::metrics::compare_frames(cpu, gpu);
     let (mut depth_rel, mut covered, mut depth_ok) = (0.0f64, 0usize, 0usize);
     for i in 0..gpu.alpha.len() {
         if gpu.alpha[i] > 0.5 && cpu.alpha[i] > 0.5 {
@@ -113,7 +113,7 @@ pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
 /// Writes `actual`, `expected` and `diff` PNGs for a failed golden comparison and returns
 /// where they went.
 pub fn dump_failure(name: &str, gpu: &Frame, cpu: &Frame) -> String {
-    let dir = std::env::temp_dir().join("vksplat-test-failures");
+    let dir = std::env::temp_dir().join("verisplat-test-failures");
     let _ = std::fs::create_dir_all(&dir);
     let mut diff = cpu.clone();
     for i in 0..diff.color.len() {
@@ -121,7 +121,7 @@ pub fn dump_failure(name: &str, gpu: &Frame, cpu: &Frame) -> String {
             diff.color[i][ch] = ((gpu.color[i][ch] - cpu.color[i][ch]).abs() * 10.0).min(1.0);
         }
     }
-    use vksplat::output::{write_frame, ImageFormat};
+    use verisplat::output::{write_frame, ImageFormat};
     let _ = write_frame(
         gpu,
         &dir.join(format!("{name}.actual.png")),

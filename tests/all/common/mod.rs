@@ -6,8 +6,8 @@ pub mod gpu;
 
 use glam::{Mat3, Vec3};
 use std::path::PathBuf;
-use vksplat::camera::Camera;
-use vksplat::scene::Scene;
+use verisplat::camera::Camera;
+use verisplat::scene::Scene;
 
 /// `../shared/data`, the read-only real scenes. They are always there (in CI too), so a
 /// test that needs them fails without them instead of skipping.
@@ -42,7 +42,7 @@ pub fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
 }
 
-pub use vksplat::gen::Rng;
+pub use verisplat::gen::Rng;
 
 /// A random scene of `n` Gaussians with SH degree `deg`, every field distinct.
 pub fn random_scene(n: usize, deg: u32, seed: u64) -> Scene {
@@ -80,7 +80,7 @@ pub fn push_gaussian(s: &mut Scene, pos: [f32; 3], scale: f32, opacity: f32, rgb
     s.log_scales.push([scale.ln(); 3]);
     s.rotations.push([1.0, 0.0, 0.0, 0.0]);
     s.opacity_logits.push(logit(opacity));
-    let c0 = vksplat::cpu::sh::SH_C0;
+    let c0 = verisplat::cpu::sh::SH_C0;
     s.sh.extend(rgb.iter().map(|c| (c - 0.5) / c0));
     s.sh.extend(std::iter::repeat(0.0).take(s.sh_stride() - 3));
 }
@@ -104,7 +104,7 @@ pub fn axis_camera(f: f32) -> Camera {
 
 /// The bits of a frame's colour, alpha and depth, in that order: equal bits mean a
 /// bit-identical frame (NaN-safe, unlike comparing the floats).
-pub fn frame_bits(f: &vksplat::frame::Frame) -> Vec<u32> {
+pub fn frame_bits(f: &verisplat::frame::Frame) -> Vec<u32> {
     f.color
         .iter()
         .flatten()
@@ -117,6 +117,6 @@ pub fn frame_bits(f: &vksplat::frame::Frame) -> Vec<u32> {
 /// An `H x W x K` float32 `.npy` image (what `render` writes for features and fields) as
 /// (W, H, K, values).
 pub fn npy_image(path: &std::path::Path) -> (usize, usize, usize, Vec<f32>) {
-    let a = vksplat::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
+    let a = verisplat::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
     (a.shape[1], a.shape[0], a.shape[2], a.data)
 }

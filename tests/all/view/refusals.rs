@@ -70,8 +70,8 @@ fn bad_messages_are_refused_and_other_tabs_go_on() {
         ("unknown mode", json!({"type": "settings", "settings": {"mode": "x-ray"}}).to_string(), "not understood"),
         ("rest before a view", json!({"type": "rest"}).to_string(), "rest before any view"),
         ("camera index 99", json!({"type": "select_camera", "index": 99}).to_string(), "camera 99 does not exist"),
-        ("no keyframes", json!({"type": "export_keyframes", "format": "vksplat", "fps": 30, "keyframes": []}).to_string(), "no keyframes"),
-        ("keyframe fps 0", json!({"type": "export_keyframes", "format": "vksplat", "fps": 0, "keyframes": [{"time": 0, "camera": entry}]}).to_string(), "fps"),
+        ("no keyframes", json!({"type": "export_keyframes", "format": "verisplat", "fps": 30, "keyframes": []}).to_string(), "no keyframes"),
+        ("keyframe fps 0", json!({"type": "export_keyframes", "format": "verisplat", "fps": 0, "keyframes": [{"time": 0, "camera": entry}]}).to_string(), "fps"),
         ("wrong field type", json!({"type": "select_camera", "index": "one"}).to_string(), "not understood"),
     ];
     for (what, text, needle) in &cases {
@@ -121,7 +121,7 @@ fn render_errors_go_to_the_tab_that_asked() {
     let mut viewer = Viewer::start_with_env(
         dir.path(),
         &["--demo", "--width", "96", "--max-resolution", "8000x8000"],
-        &[("VKSPLAT_MEMORY_LIMIT", "24M")],
+        &[("VERISPLAT_MEMORY_LIMIT", "24M")],
     );
     let mut a = viewer.connect();
     let mut b = viewer.connect();

@@ -1,4 +1,4 @@
-//! Helpers of the viewer tests: a `vksplat view` process on a free loopback port and a
+//! Helpers of the viewer tests: a `verisplat view` process on a free loopback port and a
 //! WebSocket client with deadlines on every wait. The binary runs through
 //! `common::cli` (validation layer on).
 #![allow(dead_code)]
@@ -13,18 +13,18 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tungstenite::{Message, WebSocket};
 
-/// Runs `vksplat` to completion; panics with its stderr on failure.
-pub fn vksplat_ok(dir: &Path, args: &[&str]) -> Output {
-    let o = cli::vksplat_in(dir, args);
+/// Runs `verisplat` to completion; panics with its stderr on failure.
+pub fn verisplat_ok(dir: &Path, args: &[&str]) -> Output {
+    let o = cli::verisplat_in(dir, args);
     assert!(
         o.status.success(),
-        "vksplat {args:?}: {}",
+        "verisplat {args:?}: {}",
         String::from_utf8_lossy(&o.stderr)
     );
     o
 }
 
-/// A running `vksplat view`, killed when dropped.
+/// A running `verisplat view`, killed when dropped.
 pub struct Viewer {
     pub child: Child,
     /// `http://127.0.0.1:PORT/`
@@ -35,12 +35,12 @@ pub struct Viewer {
 }
 
 impl Viewer {
-    /// Starts `vksplat view ARGS --port 0` in `dir` and waits (60 s at most) for the URL.
+    /// Starts `verisplat view ARGS --port 0` in `dir` and waits (60 s at most) for the URL.
     pub fn start(dir: &Path, args: &[&str]) -> Viewer {
         Self::start_with_env(dir, args, &[])
     }
 
-    /// As [`Viewer::start`] with environment variables (`VKSPLAT_VALIDATE=1`).
+    /// As [`Viewer::start`] with environment variables (`VERISPLAT_VALIDATE=1`).
     pub fn start_with_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Viewer {
         Self::start_at(dir, args, env, 0)
     }
@@ -78,7 +78,7 @@ impl Viewer {
                 let _ = child.kill();
                 let _ = child.wait();
                 let err: Vec<String> = erx.try_iter().collect();
-                panic!("vksplat view printed no URL: {}", err.join("\n"));
+                panic!("verisplat view printed no URL: {}", err.join("\n"));
             }
         };
         let url = line
@@ -186,7 +186,7 @@ impl Client {
                 }
                 Ok(Message::Binary(b)) => {
                     let (header, payload) =
-                        vksplat::view::protocol::split_binary(&b).expect("a framed binary");
+                        verisplat::view::protocol::split_binary(&b).expect("a framed binary");
                     return Some(Incoming::Frame(Frame {
                         header,
                         payload: payload.to_vec(),

@@ -1,14 +1,14 @@
-"""vksplat: 3D Gaussian Splatting on raw Vulkan compute, with an exact CPU reference.
+"""verisplat: 3D Gaussian Splatting on raw Vulkan compute, with an exact CPU reference.
 
 Load a scene, render it on the GPU (``Renderer``) or on the CPU reference
 (``render_cpu``), compare images (``compare``), all with numpy arrays in gsplat's
 conventions: OpenCV camera axes (x right, y down, z forward), a world-to-camera 4x4
 ``viewmat``, 3x3 intrinsics ``K``, float32 arrays, channels last.
 
-    import vksplat
-    scene = vksplat.load("point_cloud.ply")
-    cam = vksplat.default_camera(scene, 640, 480)
-    out = vksplat.Renderer().render(scene, cam)
+    import verisplat
+    scene = verisplat.load("point_cloud.ply")
+    cam = verisplat.default_camera(scene, 640, 480)
+    out = verisplat.Renderer().render(scene, cam)
     out["rgb"].shape  # (480, 640, 3)
 
 Errors are Python exceptions carrying the sentence the command line prints:
@@ -25,9 +25,9 @@ import numpy as np
 
 try:
     from . import _native
-except ImportError as e:  # the source tree (python/vksplat) has no compiled extension
+except ImportError as e:  # the source tree (python/verisplat) has no compiled extension
     raise ImportError(
-        f"vksplat's compiled extension is not next to {os.path.dirname(__file__)}: this "
+        f"verisplat's compiled extension is not next to {os.path.dirname(__file__)}: this "
         "is the package's source; install it (pip install ./python) and import the "
         "installed package"
     ) from e
@@ -175,7 +175,7 @@ def load_cameras(
     path: PathLike, frames: Optional[int] = None, fps: Optional[float] = None
 ) -> List[Camera]:
     """Every camera of a camera file: INRIA cameras.json, a COLMAP sparse model (folder or
-    cameras/images .txt/.bin), a nerfstudio camera_path.json or a vksplat keyframe JSON
+    cameras/images .txt/.bin), a nerfstudio camera_path.json or a verisplat keyframe JSON
     (``frames``/``fps`` resample a keyframe path); a trained model directory stands for
     its cameras.json."""
     return [Camera._from_tuple(t) for t in _native.load_cameras(os.fspath(path), frames, fps)]
@@ -195,7 +195,7 @@ def _python_names(e: Exception) -> Exception:
 
 def save_cameras(path: PathLike, cameras: Iterable[Camera], overwrite: bool = False) -> None:
     """Writes cameras as an INRIA cameras.json (readable by ``load_cameras`` and by
-    ``vksplat render --cameras``); an existing file is refused unless ``overwrite``."""
+    ``verisplat render --cameras``); an existing file is refused unless ``overwrite``."""
     try:
         _native.save_cameras(os.fspath(path), [c._tuple() for c in cameras], overwrite)
     except (FileExistsError, ValueError) as e:
@@ -229,7 +229,7 @@ def _vec3(name: str, v: ArrayLike) -> List[float]:
 
 
 def default_camera(scene: "Scene", width: int = 1280, height: int = 720) -> Camera:
-    """The camera ``vksplat render`` uses when given none: it frames the scene's bulk."""
+    """The camera ``verisplat render`` uses when given none: it frames the scene's bulk."""
     return Camera._from_tuple(_native.default_camera(scene._s, width, height))
 
 
@@ -246,7 +246,7 @@ def orbit(
     radius: Optional[float] = None,
 ) -> List[Camera]:
     """A turntable orbit of ``frames`` cameras around the scene's bulk, as
-    ``vksplat render --orbit``."""
+    ``verisplat render --orbit``."""
     return [
         Camera._from_tuple(t)
         for t in _native.orbit(
@@ -346,7 +346,7 @@ class Scene:
     @property
     def rules(self) -> str:
         """The rasterizer's rules the file records: "original" (the 3DGS rasterizer's) or
-        "gsplat" (a model trained with ``vksplat train --rules gsplat``)."""
+        "gsplat" (a model trained with ``verisplat train --rules gsplat``)."""
         return self._s.rules
 
     @property
@@ -523,7 +523,7 @@ def fit(
     times: Optional[ArrayLike] = None,
     force: bool = False,
 ) -> Scene:
-    """Fits Gaussians with feature channels to field samples, as ``vksplat fit`` does:
+    """Fits Gaussians with feature channels to field samples, as ``verisplat fit`` does:
     ``points (N, 3)`` and ``values (N, K)`` (or ``(N,)`` for one channel). The scene's
     features hold the field (``scene.evaluate_field(x)``); ``scene.fit_report`` the
     held-out errors. Gaussian counts default to one per 20 samples (at most one per 5);
@@ -615,7 +615,7 @@ def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[s
     want = _mode(kw["mode"])
     cams, batch = _cameras(camera, kw["viewmat"], kw["K"], kw["width"], kw["height"])
     if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
+        raise TypeError(f"scene must be a verisplat.Scene, got {type(scene).__name__}")
     if kw["sh_degree"] is not None and kw["sh_degree"] > scene.sh_degree:
         raise ValueError(
             f"sh_degree {kw['sh_degree']} exceeds the scene's SH degree {scene.sh_degree}"
@@ -649,7 +649,7 @@ def _outputs(planes, cams: List[Camera], batch: bool, want, k: int) -> Dict[str,
 
 class Renderer:
     """The Vulkan renderer. ``device``: index or part of a device name (default:
-    discrete GPU, then integrated, then CPU, e.g. lavapipe; also VKSPLAT_DEVICE).
+    discrete GPU, then integrated, then CPU, e.g. lavapipe; also VERISPLAT_DEVICE).
 
     The last scene rendered stays on the device: rendering it again (another camera,
     a batch) does not upload it again (see ``counters``)."""
@@ -774,7 +774,7 @@ def compare(
     test: Union[ArrayLike, PathLike],
     kind: str = "color",
 ) -> Dict[str, Optional[float]]:
-    """The metrics of ``vksplat compare``: PSNR (dB, ``inf`` when equal), SSIM (the 3DGS
+    """The metrics of ``verisplat compare``: PSNR (dB, ``inf`` when equal), SSIM (the 3DGS
     evaluation's), LDR-FLIP (3-channel colour), largest and mean absolute error, the share
     of pixels whose 8-bit values are within 1/255, and the peak.
 
@@ -811,7 +811,7 @@ def save_image(
     overwrite: bool = False,
     png16: bool = False,
 ) -> None:
-    """Writes an image as ``vksplat render`` does, atomically: ``.png`` (8-bit colour, or
+    """Writes an image as ``verisplat render`` does, atomically: ``.png`` (8-bit colour, or
     16-bit with ``png16``; clamped to [0, 1], rounded) or ``.exr`` (R, G, B, A, Z as 32-bit
     floats; alpha 1 and depth +inf where not given). ``rgb`` is ``(H, W, 3)`` (float, or
     uint8 scaled to [0, 1]) or a render's output dict (its ``rgb``, ``alpha`` and

@@ -1,8 +1,8 @@
-"""A notebook turntable: ``Turntable(scene)`` shows the scene rendered by vksplat's Vulkan
+"""A notebook turntable: ``Turntable(scene)`` shows the scene rendered by verisplat's Vulkan
 pipeline, turned by dragging and zoomed with the wheel, with a max-scale slider that
 re-renders as it moves and the GPU stage timings under the image.
 
-As in the browser viewer (``vksplat view``), the latest view wins: events only move the
+As in the browser viewer (``verisplat view``), the latest view wins: events only move the
 camera, and one render thread draws the newest pose when it is free, so a fast drag never
 queues renders. While the view moves, frames are previews at a reduced size (scaled so a
 preview takes about ``PREVIEW_MS``); once it rests (the mouse released, or ``REST_S``
@@ -27,7 +27,7 @@ try:
     from ipyevents import Event as _Event
 except ImportError as e:  # pragma: no cover - depends on the environment
     raise ImportError(
-        'vksplat.widgets needs ipywidgets and ipyevents: pip install "./python[notebook]"'
+        'verisplat.widgets needs ipywidgets and ipyevents: pip install "./python[notebook]"'
     ) from e
 
 __all__ = ["Turntable"]
@@ -63,10 +63,10 @@ class Turntable:
     Drag with the mouse to turn the view around the focus point (the centre of the
     scene's bulk, or the point the given ``camera`` looks at), use the wheel to move
     closer or further, and the ``max scale`` slider to hide Gaussians larger than its
-    value (as ``vksplat render --max-scale``; the slider's right end keeps them all).
+    value (as ``verisplat render --max-scale``; the slider's right end keeps them all).
     The GPU stage timings of the last frame are shown under the image.
 
-    ``camera``: the first view (default: the camera ``vksplat render`` uses); it is shown
+    ``camera``: the first view (default: the camera ``verisplat render`` uses); it is shown
     at ``width`` x ``height``. ``up``: the world's up direction (INRIA/COLMAP: -y).
     Display it by making it the last expression of a cell, or ``display(tt.widget)``.
     """
@@ -82,7 +82,7 @@ class Turntable:
         background: Any = (0.0, 0.0, 0.0),
     ) -> None:
         if not isinstance(scene, Scene):
-            raise TypeError(f"scene must be a vksplat.Scene, got {type(scene).__name__}")
+            raise TypeError(f"scene must be a verisplat.Scene, got {type(scene).__name__}")
         if len(scene) == 0:
             raise ValueError("the scene has no Gaussians to show")
         self.scene = scene
@@ -222,7 +222,7 @@ class Turntable:
             self._moved_at = time.monotonic()
             if self._thread is None or not self._thread.is_alive():
                 self._thread = threading.Thread(
-                    target=self._run, name="vksplat-turntable", daemon=True
+                    target=self._run, name="verisplat-turntable", daemon=True
                 )
                 self._thread.start()
             self._lock.notify_all()

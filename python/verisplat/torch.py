@@ -1,6 +1,6 @@
-"""``vksplat.torch.rasterization``: gsplat's ``rasterization`` on any Vulkan device.
+"""``verisplat.torch.rasterization``: gsplat's ``rasterization`` on any Vulkan device.
 
-    from vksplat.torch import rasterization   # instead of: from gsplat import rasterization
+    from verisplat.torch import rasterization   # instead of: from gsplat import rasterization
     colors, alphas, meta = rasterization(means, quats, scales, opacities, colors,
                                          viewmats, Ks, width, height, sh_degree=3)
 
@@ -25,9 +25,9 @@ trains and renders the same here: near plane 0.01 (``near_plane`` when given), a
 0.999, a pixel ending at T <= 1e-4, a per-axis box of min(3.33, sqrt(2 ln(255 opacity)))
 sigmas (no tail of a splat cut at a tile edge; ``meta["radii"]`` per axis), the guard band
 around the principal point, the antialiased compensation's floor 0.
-``vksplat.gsplat.rasterization`` is this function with ``rules="gsplat"``: with it, gsplat
+``verisplat.gsplat.rasterization`` is this function with ``rules="gsplat"``: with it, gsplat
 code runs with only the import changed. ``near_plane`` may be any positive depth under
-either rules. Neither has a far plane (gsplat's default 1e10 is accepted). Options vksplat
+either rules. Neither has a far plane (gsplat's default 1e10 is accepted). Options verisplat
 does not implement are refused (``radius_clip``, other camera models and lens
 coefficients, ``covars``, ``with_ut=True``, ``with_eval3d=True``); those needing them keep
 gsplat. ``rasterize_mode="antialiased"`` (opacities times sqrt(det(cov2d) / det(cov2d +
@@ -54,7 +54,7 @@ __all__ = ["rasterization"]
 
 # Direct channels per native pass: more are blended in chunks of this many.
 _CHUNK = 16
-# vksplat's tiles (meta["tile_size"]; gsplat's tile_size is a speed setting).
+# verisplat's tiles (meta["tile_size"]; gsplat's tile_size is a speed setting).
 _TILE = 16
 
 _RASTERIZERS: Dict[Tuple[Any, str], "_raster.Rasterizer"] = {}
@@ -72,7 +72,7 @@ def _check_tensor(name: str, t: Any, shape: Tuple[Optional[int], ...]) -> torch.
         raise ValueError(f"{name} must be a torch.Tensor, got {type(t).__name__}")
     if t.device.type != "cpu":
         raise ValueError(
-            f"{name} is on {t.device}; vksplat.torch takes CPU tensors (the Vulkan device is "
+            f"{name} is on {t.device}; verisplat.torch takes CPU tensors (the Vulkan device is "
             "its own): pass {name}.cpu()".replace("{name}", name)
         )
     if t.dtype != torch.float32:
@@ -421,7 +421,7 @@ def _pad_sh(grad: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
     return grad
 
 
-# gsplat's keywords that vksplat takes only at the value that turns them off.
+# gsplat's keywords that verisplat takes only at the value that turns them off.
 _OFF_KEYWORDS = {
     "with_ut": False,
     "with_eval3d": False,
@@ -435,7 +435,7 @@ _OFF_KEYWORDS = {
 
 def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
             distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw):
-    """ValueError for the first argument vksplat does not implement."""
+    """ValueError for the first argument verisplat does not implement."""
     shutter = getattr(rolling_shutter, "name", rolling_shutter)
     refusals = [
         (
@@ -444,9 +444,9 @@ def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, ca
             f"near_plane must be a positive number, got {near_plane!r}",
         ),
         (rules not in ("original", "gsplat"), f"rules must be 'original' or 'gsplat', got {rules!r}"),
-        (far_plane < 1e10, f"far_plane={far_plane}: vksplat has no far plane"),
+        (far_plane < 1e10, f"far_plane={far_plane}: verisplat has no far plane"),
         (radius_clip != 0.0, "radius_clip is not supported"),
-        (eps2d != 0.3, f"eps2d={eps2d}: vksplat dilates 2D covariances by the original 0.3"),
+        (eps2d != 0.3, f"eps2d={eps2d}: verisplat dilates 2D covariances by the original 0.3"),
         (
             rasterize_mode not in ("classic", "antialiased"),
             f"rasterize_mode must be 'classic' or 'antialiased', got {rasterize_mode!r}",
@@ -585,8 +585,8 @@ def rasterization(
     (accumulated depth), ``"ED"`` (expected depth), ``"RGB+D"``, ``"RGB+ED"``.
     ``backgrounds`` [..., C, D] (or [..., C, D + 1] with a depth background for the
     ``+D`` modes; ignored by the depth-only modes, as gsplat does). ``tile_size`` and
-    ``channel_chunk`` are gsplat's speed settings: accepted, vksplat uses its own.
-    vksplat's own: ``device`` (Vulkan device index or name), ``accumulation``,
+    ``channel_chunk`` are gsplat's speed settings: accepted, verisplat uses its own.
+    verisplat's own: ``device`` (Vulkan device index or name), ``accumulation``,
     ``kernel`` (``"power"``: the power-function falloff) and ``rules`` (``"original"``,
     the 3DGS rasterizer's, the default; ``"gsplat"``, gsplat's: see the module's
     docstring). ``near_plane``: None is the rules' (0.2; gsplat's 0.01).
@@ -597,10 +597,10 @@ def rasterization(
     rules, else the one radius twice), ``means2d`` [nnz, 2],
     ``depths`` [nnz], ``conics`` [nnz, 3], ``opacities`` [nnz]; not packed: the same as
     [..., C, N, ...] (``radii`` 0 where culled) and the ids None. Also ``width``,
-    ``height``, ``tile_size`` (vksplat's: 16), ``n_batches``, ``n_cameras``.
+    ``height``, ``tile_size`` (verisplat's: 16), ``n_batches``, ``n_cameras``.
     """
     if unsupported:
-        raise ValueError(f"vksplat.torch.rasterization does not support {sorted(unsupported)}")
+        raise ValueError(f"verisplat.torch.rasterization does not support {sorted(unsupported)}")
     gsplat_kw = dict(
         with_ut=with_ut, with_eval3d=with_eval3d, radial_coeffs=radial_coeffs,
         tangential_coeffs=tangential_coeffs, thin_prism_coeffs=thin_prism_coeffs,

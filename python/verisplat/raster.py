@@ -6,18 +6,18 @@ Gaussians are given as a training loop holds them (gsplat's conventions): ``mean
 coefficients (N, K, 3) with ``sh_degree`` (K >= (sh_degree + 1)^2; colour =
 max(SH + 0.5, 0)) or direct values (N, D) without it (blended as given, never clamped).
 
-    r = vksplat.raster.Rasterizer()
+    r = verisplat.raster.Rasterizer()
     fwd = r.forward(means, quats, scales, opacities, colors, viewmat, K, W, H, sh_degree=3)
     loss_grad = 2 * (fwd.colors - target)          # dL/d(colour) of an L2 loss
     grads = r.backward(fwd, grad_colors=loss_grad)  # dict: means, quats, scales, ...
 
-With a neural ``Shader`` (the per-pixel MLP ``vksplat render --shader`` runs), ``colors``
+With a neural ``Shader`` (the per-pixel MLP ``verisplat render --shader`` runs), ``colors``
 are (N, K) feature values, the image is the shaded colour (H, W, 3) over ``background``, and
 the backward pass also returns the network's gradients (``shader_weights``,
 ``shader_biases``: one array per layer), so feature splats and their shader can be learned
 without torch:
 
-    shader = vksplat.raster.Shader([(w1, b1, "relu"), (w2, b2, "sigmoid")])
+    shader = verisplat.raster.Shader([(w1, b1, "relu"), (w2, b2, "sigmoid")])
     fwd = r.forward(means, quats, scales, opacities, features, viewmat, K, W, H, shader=shader)
 
 The rules are the original 3DGS rasterizer's (``shared/docs/reference-semantics.md``): near
@@ -190,7 +190,7 @@ class Shader:
     """A neural shader: a per-pixel MLP from the blended feature channels (and, as
     ``inputs`` lists them, the pixel's unit view direction and its alpha) to a colour,
     ``alpha * mlp(...) + (1 - alpha) * background`` (the file format and rules of
-    ``vksplat render --shader``). ``layers``: ``(weight (outputs, inputs), bias (outputs,),
+    ``verisplat render --shader``). ``layers``: ``(weight (outputs, inputs), bias (outputs,),
     activation)`` per layer, activation one of ``"relu"``, ``"sigmoid"``, ``"tanh"``,
     ``"none"``; the last layer gives 3 outputs."""
 
@@ -242,7 +242,7 @@ class Shader:
         return self._bytes
 
     def save(self, path: Any, overwrite: bool = False) -> None:
-        """Writes the shader for ``vksplat render --shader`` (atomically; an existing file
+        """Writes the shader for ``verisplat render --shader`` (atomically; an existing file
         only with ``overwrite``)."""
         import os
         import tempfile
@@ -334,7 +334,7 @@ class Rasterizer:
         shader_bytes = None
         if shader is not None:
             if not isinstance(shader, Shader):
-                raise TypeError("shader must be a vksplat.raster.Shader")
+                raise TypeError("shader must be a verisplat.raster.Shader")
             if sh_degree is not None:
                 raise ValueError("colors: a shader reads (N, K) feature values, not SH coefficients")
             if channels != shader.feature_channels:

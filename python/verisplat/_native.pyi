@@ -1,4 +1,4 @@
-"""Type stubs of vksplat's compiled module (the public API is the `vksplat` package)."""
+"""Type stubs of verisplat's compiled module (the public API is the `verisplat` package)."""
 
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -137,7 +137,7 @@ def save_image(
     overwrite: bool,
 ) -> None: ...
 
-# Differentiable rasterization (vksplat.raster, vksplat.torch).
+# Differentiable rasterization (verisplat.raster, verisplat.torch).
 # (N, means, quats, scales, opacities, colors as f32 bytes, sh_degree or None, channels)
 ParamsTuple = Tuple[int, bytes, bytes, bytes, bytes, bytes, Optional[int], int]
 
