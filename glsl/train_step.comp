@@ -26,8 +26,8 @@
 // opacity, mean scale) join the loss's, and after the step each centre moves by noise
 // shaped by its covariance (Model::add_noise; the same hashed normals as the host's).
 // Each Gaussian's values are its own: the result does not depend on the order the device
-// runs them in. The arithmetic is the host's, operation by operation
-// (src/train/model.rs: Model::step and add_stats; Model::params), `precise` so that no
+// runs them in. The arithmetic is the host's, operation by operation (the host
+// optimiser's Model::step, Model::add_stats and Model::params), `precise` so that no
 // compiler fuses it differently.
 #extension GL_GOOGLE_include_directive : require
 // 256 invocations where the device allows them (faster on lavapipe), else 128: the host's

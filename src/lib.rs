@@ -20,6 +20,7 @@ pub mod metrics;
 pub mod mlp;
 pub mod model;
 pub mod output;
+pub mod quat;
 pub mod render;
 pub mod rf;
 pub mod rules;

@@ -341,25 +341,8 @@ pub(crate) fn quat_wxyz_to_mat(q: [f64; 4]) -> Option<DMat3> {
     if !n.is_finite() || n < 1e-12 {
         return None;
     }
-    let [w, x, y, z] = q.map(|v| v / n);
-    // COLMAP's qvec2rotmat, row by row.
-    Some(DMat3::from_cols_array_2d(&[
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y + w * z),
-            2.0 * (x * z - w * y),
-        ],
-        [
-            2.0 * (x * y - w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z + w * x),
-        ],
-        [
-            2.0 * (x * z + w * y),
-            2.0 * (y * z - w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]))
+    // COLMAP's qvec2rotmat.
+    Some(crate::quat::quat_to_dmat3(q.map(|v| v / n)))
 }
 
 /// Largest deviation of `r` from a proper rotation: `max |R^T R - I|` and `|det R - 1|`.

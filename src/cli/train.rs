@@ -551,5 +551,22 @@ fn print_report(args: &TrainArgs, report: &TrainReport) {
         for (name, ms) in &report.stage_ms {
             outln!("  {name:<15} {ms:>9.3} ms");
         }
+        let host: f64 = report.host_ms.iter().map(|(_, ms)| ms).sum();
+        outln!("host time per iteration (mean): {host:.2} ms");
+        for (name, ms) in &report.host_ms {
+            if name == "step" {
+                let c = &report.step_device_calls;
+                outln!(
+                    "  {name:<15} {ms:>9.3} ms: recording {:.3}, vkQueueSubmit {:.3}, waiting {:.3} ({} submissions), the host's own work {:.3}",
+                    c.record_ms,
+                    c.submit_ms,
+                    c.wait_ms,
+                    c.submissions,
+                    ms - c.record_ms - c.submit_ms - c.wait_ms
+                );
+            } else {
+                outln!("  {name:<15} {ms:>9.3} ms");
+            }
+        }
     }
 }

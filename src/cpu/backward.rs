@@ -110,28 +110,6 @@ fn normalized(q: [f64; 4]) -> [f64; 4] {
     q.map(|v| v / n)
 }
 
-/// Rotation matrix of a unit quaternion `(w, x, y, z)` (columns as `cpu::quat_to_mat3`).
-fn quat_mat(q: [f64; 4]) -> DMat3 {
-    let [r, x, y, z] = q;
-    DMat3::from_cols(
-        DVec3::new(
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y + r * z),
-            2.0 * (x * z - r * y),
-        ),
-        DVec3::new(
-            2.0 * (x * y - r * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z + r * x),
-        ),
-        DVec3::new(
-            2.0 * (x * z + r * y),
-            2.0 * (y * z - r * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ),
-    )
-}
-
 /// SH basis values `Y_k(dir)` for `k < (degree + 1)^2`, with the reference's signs and
 /// constants (`model::sh::eval_sh`).
 pub fn sh_basis(degree: u32, d: DVec3) -> [f64; 16] {
@@ -234,7 +212,11 @@ fn cov_factor(p: &SplatParams<f64>, i: usize, opts: &RenderOptions) -> (DMat3, [
     let q = normalized(p.quats[i]);
     let m = opts.scale_modifier as f64;
     let s = DVec3::from(p.scales[i]) * m;
-    (quat_mat(q) * DMat3::from_diagonal(s), q, s)
+    (
+        crate::quat::quat_to_dmat3(q) * DMat3::from_diagonal(s),
+        q,
+        s,
+    )
 }
 
 /// Rows of `T = J W` and the clamped `tx`, `ty` for the view-space centre `v`.
@@ -734,7 +716,7 @@ fn project_backward(
     let mut g_mean = cam.r.transpose() * g_v;
     // Sigma = M M^T with M = R S.
     let g_m = (g_cov + g_cov.transpose()) * m;
-    let rot = quat_mat(q);
+    let rot = crate::quat::quat_to_dmat3(q);
     let modifier = opts.scale_modifier as f64;
     let g_scale: [f64; 3] = std::array::from_fn(|k| rot.col(k).dot(g_m.col(k)) * modifier);
     let g_rot = DMat3::from_cols(g_m.col(0) * s.x, g_m.col(1) * s.y, g_m.col(2) * s.z);

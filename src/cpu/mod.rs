@@ -14,9 +14,10 @@ use crate::model::ActivatedScene;
 // The model's types, constants and SH, re-exported where they used to live.
 pub use crate::model::sh;
 pub use crate::model::{
-    RenderOptions, Rules, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO, COV2D_DILATION,
-    NEAR_PLANE, TILE_SIZE, T_MIN,
+    clamp_limits, RenderOptions, Rules, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO,
+    COV2D_DILATION, NEAR_PLANE, TILE_SIZE, T_MIN,
 };
+pub use crate::quat::quat_to_mat3;
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
@@ -53,38 +54,10 @@ impl Projected {
     }
 }
 
-/// Rotation matrix of a unit quaternion `(w, x, y, z)`.
-pub fn quat_to_mat3(q: [f32; 4]) -> Mat3 {
-    let [r, x, y, z] = q;
-    Mat3::from_cols(
-        Vec3::new(
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y + r * z),
-            2.0 * (x * z - r * y),
-        ),
-        Vec3::new(
-            2.0 * (x * y - r * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z + r * x),
-        ),
-        Vec3::new(
-            2.0 * (x * z + r * y),
-            2.0 * (y * z - r * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ),
-    )
-}
-
 /// 3D covariance `R S S^T R^T` (symmetric, full matrix).
 pub fn covariance_3d(scale: [f32; 3], rotation: [f32; 4]) -> Mat3 {
     let m = quat_to_mat3(rotation) * Mat3::from_diagonal(Vec3::from(scale));
     m * m.transpose()
-}
-
-/// The guard band of `rules` for `cam` ([`Rules::clamp_limits`]), as the GPU receives it.
-pub fn clamp_limits(cam: &Camera, rules: Rules) -> [f32; 4] {
-    let (w, h) = (cam.width as f32, cam.height as f32);
-    rules.clamp_limits(w, h, cam.fx, cam.fy, cam.cx, cam.cy)
 }
 
 /// 2D covariance `(a, b, c)` = xx, xy, yy of `J W Sigma W^T J^T`, before the dilation.

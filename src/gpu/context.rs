@@ -108,6 +108,7 @@ impl GpuContext {
             messages: vulkan.messages,
             validation,
             full_subgroups: features.full_subgroups,
+            host_clock: Default::default(),
         };
         ctx.follow_measured_subgroups()?;
         emulation.apply(&mut ctx.info);

@@ -96,12 +96,20 @@ pub struct GpuContext {
     pub(super) validation: bool,
     /// computeFullSubgroups is enabled: pipelines may require full subgroups.
     pub(crate) full_subgroups: bool,
+    /// The host's time recording, submitting and waiting ([`Self::host_time`]).
+    pub(crate) host_clock: super::host_time::HostClock,
 }
 
 impl GpuContext {
     /// The pipeline cache every pipeline is created through.
     pub fn pipeline_cache(&self) -> vk::PipelineCache {
         self.shared.pipeline_cache
+    }
+
+    /// The host's totals so far of recording, submitting and waiting for this context's
+    /// command buffers ([`super::host_time`]).
+    pub fn host_time(&self) -> super::HostTime {
+        self.host_clock.now()
     }
 
     /// The raw ash device.
@@ -216,17 +224,23 @@ impl GpuContext {
         let run = || -> GpuResult<R> {
             let begin = vk::CommandBufferBeginInfo::default()
                 .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+            let t = std::time::Instant::now();
             // SAFETY: freshly allocated command buffer.
             unsafe { device.begin_command_buffer(cmd, &begin) }.vk("vkBeginCommandBuffer")?;
             let out = record(cmd)?;
             // SAFETY: recording started above.
             unsafe { device.end_command_buffer(cmd) }.vk("vkEndCommandBuffer")?;
+            self.host_clock.recorded(t);
             let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
             let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
+            let t = std::time::Instant::now();
             // SAFETY: the queue is only used from here while the pool mutex is held.
             unsafe { device.queue_submit2(self.queue, &submit, fence) }.vk("vkQueueSubmit2")?;
+            self.host_clock.submitted(t);
+            let t = std::time::Instant::now();
             // SAFETY: the fence was submitted above.
             unsafe { device.wait_for_fences(&[fence], true, u64::MAX) }.vk("vkWaitForFences")?;
+            self.host_clock.waited(t);
             Ok(out)
         };
         let result = run();

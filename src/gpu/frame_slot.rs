@@ -97,6 +97,7 @@ impl GpuContext {
             .lock()
             .map_err(|_| GpuError::Internal("command pool mutex poisoned".into()))?;
         let run = |slot: &mut FrameSlot| -> GpuResult<R> {
+            let t = std::time::Instant::now();
             // SAFETY: the previous submission of this slot completed (waited for above),
             // so the pool and fence can be reset.
             unsafe {
@@ -118,9 +119,12 @@ impl GpuContext {
                 device
                     .end_command_buffer(slot.cmd)
                     .vk("vkEndCommandBuffer")?;
+                self.host_clock.recorded(t);
+                let t = std::time::Instant::now();
                 device
                     .queue_submit2(self.queue, &submit, slot.fence)
                     .vk("vkQueueSubmit2")?;
+                self.host_clock.submitted(t);
             }
             slot.pending = true;
             Ok(out)
@@ -141,9 +145,11 @@ impl GpuContext {
             return Ok(());
         }
         let device = &self.shared.device;
+        let t = std::time::Instant::now();
         // SAFETY: the fence was submitted with the slot's command buffer.
         let waited =
             unsafe { device.wait_for_fences(&[slot.fence], true, u64::MAX) }.vk("vkWaitForFences");
+        self.host_clock.waited(t);
         if waited.is_err() {
             // The queue is externally synchronised by the context's pool mutex.
             if let Ok(_queue) = self.command_pool.lock() {

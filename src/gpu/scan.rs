@@ -56,7 +56,6 @@ impl Scan {
                     (bindings::scan_reduce::BLOCK_SUMS, storage),
                 ])?,
                 push,
-                SCAN_WG,
             )?,
             block: ComputePipeline::from_embedded(
                 ctx,
@@ -68,7 +67,6 @@ impl Scan {
                     (bindings::scan_block::TOTALS, storage),
                 ])?,
                 push,
-                SCAN_WG,
             )?,
             add: ComputePipeline::from_embedded(
                 ctx,
@@ -80,7 +78,6 @@ impl Scan {
                     (bindings::scan_add::DATA_OUT, storage),
                 ])?,
                 push,
-                SCAN_WG,
             )?,
             max_groups_x: ctx.info().max_workgroup_count[0],
         })

@@ -196,17 +196,16 @@ pub struct ComputePipeline {
 }
 
 impl ComputePipeline {
-    /// Builds a pipeline from SPIR-V; binding `i` of set 0 is `bindings[i]`.
-    /// `workgroup_size` (local_size_x) decides whether full subgroups can be required.
+    /// Builds a pipeline from SPIR-V; binding `i` of set 0 is `bindings[i]`. The module's
+    /// own workgroup size decides whether full subgroups can be required.
     pub fn new(
         ctx: &GpuContext,
         name: &str,
         spirv: &[u32],
         bindings: &[BindingKind],
         push_size: u32,
-        workgroup_size: u32,
     ) -> GpuResult<Self> {
-        Self::new_specialized(ctx, name, spirv, bindings, push_size, workgroup_size, &[])
+        Self::new_specialized(ctx, name, spirv, bindings, push_size, &[])
     }
 
     /// [`Self::new`] with specialization constants: `(constant_id, u32 value)` pairs.
@@ -216,7 +215,6 @@ impl ComputePipeline {
         spirv: &[u32],
         bindings: &[BindingKind],
         push_size: u32,
-        workgroup_size: u32,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
         // A driver that misreports its subgroup size: every shader computes with the
@@ -289,9 +287,8 @@ impl ComputePipeline {
         // The workgroup must fit the device's (or the emulated) limits.
         let demand = super::workgroup::check_demand(name, demand, ctx.info())?;
         // Workgroup scans index subgroups by gl_SubgroupID and assume they are full: asked
-        // for where the module's x size allows it (`workgroup_size` is the caller's word
-        // for it; the module's own is what the driver checks).
-        debug_assert!(workgroup_size >= 1);
+        // for where the module's x size allows it (the module's own size, which the driver
+        // checks).
         let stage_flags = full_subgroups_flag(ctx, demand.size[0]);
         let entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
@@ -338,17 +335,8 @@ impl ComputePipeline {
         defines: &[(&str, String)],
         bindings: &[BindingKind],
         push_size: u32,
-        workgroup_size: u32,
     ) -> GpuResult<Self> {
-        Self::from_embedded_specialized(
-            ctx,
-            shader,
-            defines,
-            bindings,
-            push_size,
-            workgroup_size,
-            &[],
-        )
+        Self::from_embedded_specialized(ctx, shader, defines, bindings, push_size, &[])
     }
 
     /// [`Self::from_embedded`] with specialization constants (`(constant_id, value)`).
@@ -359,19 +347,10 @@ impl ComputePipeline {
         defines: &[(&str, String)],
         bindings: &[BindingKind],
         push_size: u32,
-        workgroup_size: u32,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
         let spirv = shader_spirv(shader, defines)?;
-        Self::new_specialized(
-            ctx,
-            shader,
-            &spirv,
-            bindings,
-            push_size,
-            workgroup_size,
-            specialization,
-        )
+        Self::new_specialized(ctx, shader, &spirv, bindings, push_size, specialization)
     }
 
     /// Binds the pipeline, pushes the buffer descriptors (binding i = `buffers[i]`) and

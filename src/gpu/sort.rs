@@ -370,7 +370,6 @@ impl RadixSort {
                     (bindings::sort_setup::META, storage),
                 ])?,
                 setup_push,
-                1,
                 &spec,
             )?,
             histogram: ComputePipeline::from_embedded_specialized(
@@ -383,7 +382,6 @@ impl RadixSort {
                     (bindings::sort_histogram::HIST, storage),
                 ])?,
                 pass_push,
-                config.workgroup_size,
                 &spec,
             )?,
             scatter: ComputePipeline::from_embedded_specialized(
@@ -399,7 +397,6 @@ impl RadixSort {
                     (bindings::sort_scatter::VALUES_OUT, write),
                 ])?,
                 pass_push,
-                config.workgroup_size,
                 &spec,
             )?,
             copy: ComputePipeline::from_embedded_specialized(
@@ -414,7 +411,6 @@ impl RadixSort {
                     (bindings::sort_copy::VALUES_OUT, write),
                 ])?,
                 0,
-                config.workgroup_size,
                 &spec,
             )?,
             scan: Scan::new(ctx)?,

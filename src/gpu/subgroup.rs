@@ -110,7 +110,6 @@ pub fn probe(ctx: &GpuContext) -> GpuResult<SubgroupProbe> {
         &[],
         &[BindingKind::StorageBuffer],
         0,
-        PROBE_INVOCATIONS,
     )?;
     debug_assert_eq!(slot::OUT, 0);
     let init = [0, u32::MAX, 0, u32::MAX, 0, u32::MAX, 0, 0, 0];

@@ -3,7 +3,7 @@
 
 use ash::vk;
 
-use super::{BufferSlice, GpuContext};
+use super::GpuContext;
 
 /// One way a command uses memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,16 +63,6 @@ fn combine(uses: &[Access]) -> (vk::PipelineStageFlags2, vk::AccessFlags2) {
     )
 }
 
-/// A buffer range moving from one set of uses to another.
-pub struct BufferTransition<'a> {
-    /// The range.
-    pub slice: BufferSlice<'a>,
-    /// Uses before the barrier.
-    pub from: &'a [Access],
-    /// Uses after the barrier.
-    pub to: &'a [Access],
-}
-
 /// Global memory barrier: all memory goes from uses `from` to uses `to`.
 pub fn barrier_uses(ctx: &GpuContext, cmd: vk::CommandBuffer, from: &[Access], to: &[Access]) {
     let (src_stage, src_access) = combine(from);
@@ -90,47 +80,4 @@ pub fn barrier_uses(ctx: &GpuContext, cmd: vk::CommandBuffer, from: &[Access], t
 /// Global memory barrier for a single use on each side.
 pub fn barrier(ctx: &GpuContext, cmd: vk::CommandBuffer, from: Access, to: Access) {
     barrier_uses(ctx, cmd, &[from], &[to]);
-}
-
-/// Buffer memory barriers, batched into one vkCmdPipelineBarrier2.
-pub fn buffer_barriers(ctx: &GpuContext, cmd: vk::CommandBuffer, transitions: &[BufferTransition]) {
-    let barriers: Vec<vk::BufferMemoryBarrier2> = transitions
-        .iter()
-        .map(|t| {
-            let (src_stage, src_access) = combine(t.from);
-            let (dst_stage, dst_access) = combine(t.to);
-            vk::BufferMemoryBarrier2::default()
-                .src_stage_mask(src_stage)
-                .src_access_mask(src_access)
-                .dst_stage_mask(dst_stage)
-                .dst_access_mask(dst_access)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .buffer(t.slice.buffer.handle())
-                .offset(t.slice.offset)
-                .size(t.slice.size)
-        })
-        .collect();
-    let dep = vk::DependencyInfo::default().buffer_memory_barriers(&barriers);
-    // SAFETY: cmd is recording; the buffers are alive for the call.
-    unsafe { ctx.device().cmd_pipeline_barrier2(cmd, &dep) };
-}
-
-/// One buffer going from `from` to `to`.
-pub fn buffer_barrier(
-    ctx: &GpuContext,
-    cmd: vk::CommandBuffer,
-    slice: BufferSlice,
-    from: Access,
-    to: Access,
-) {
-    buffer_barriers(
-        ctx,
-        cmd,
-        &[BufferTransition {
-            slice,
-            from: &[from],
-            to: &[to],
-        }],
-    );
 }

@@ -12,7 +12,7 @@ pub mod grad;
 pub mod rules;
 pub mod sh;
 
-pub use rules::Rules;
+pub use rules::{clamp_limits, Rules};
 
 /// The reference's constants, defined once in [`crate::rules`] (the shaders get them from
 /// there too).

@@ -196,15 +196,12 @@ impl Blend {
         if !save_last {
             bindings.truncate(slot::LAST as usize);
         }
-        // local_size_x (the full-subgroups requirement looks at the X dimension).
-        let local_x = 16 / kernel.strip();
         let pipeline = ComputePipeline::from_embedded(
             ctx,
             "blend",
             &defines,
             &bindings,
             std::mem::size_of::<super::types::BlendPush>() as u32,
-            local_x,
         )?;
         Ok(Blend {
             pipeline,

@@ -106,7 +106,6 @@ impl BlendBwd {
                 (slot::GRAD_FEATURES, storage),
             ])?,
             0,
-            invocations,
             &if rows {
                 Vec::new()
             } else {

@@ -74,7 +74,6 @@ impl FeatureBlend {
             &defines,
             &bindings,
             std::mem::size_of::<super::types::FeatureBlendPush>() as u32,
-            16,
         )?;
         Ok(FeatureBlend { pipeline, texel })
     }

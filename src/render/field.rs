@@ -4,12 +4,12 @@
 //! 16x8 workgroup summing the Gaussians whose support can reach its tile.
 
 use crate::camera::Camera;
-use crate::cpu::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
 use crate::frame::Frame;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::field as slot;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
+use crate::model::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
 
 /// Workgroup width and height in pixels (16 x 8 = 128 invocations, `glsl/field.comp`).
 const SIDE: u32 = 16;
@@ -137,7 +137,7 @@ impl GpuField {
             count: g.len() as u32,
             k: g.k,
             groups: groups as u32,
-            cutoff: crate::cpu::field::field_cutoff(g.kernel) as f32,
+            cutoff: crate::model::field::field_cutoff(g.kernel) as f32,
             bounds: g.bounds,
         })
     }
@@ -179,7 +179,6 @@ impl FieldRenderer {
                     (slot::OUTPUT, B),
                 ])?,
                 std::mem::size_of::<FieldPass>() as u32,
-                SIDE * ROWS,
             )?);
         }
         slot_ref
@@ -299,7 +298,7 @@ impl FieldRenderer {
                 *v = planes[(c / 4) * pixels + p][c % 4];
             }
         }
-        Ok(crate::cpu::field::frame_from_channels(
+        Ok(crate::model::field::frame_from_channels(
             cam.width, cam.height, k, features,
         ))
     }

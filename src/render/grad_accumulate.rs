@@ -95,7 +95,6 @@ impl GradAccumulate {
                 (slot::ACC, storage),
             ])?,
             std::mem::size_of::<GradPush>() as u32,
-            workgroup,
             &[(crate::gpu::shader_set::WIDE_WG_SPEC, workgroup)],
         )?;
         Ok(GradAccumulate {

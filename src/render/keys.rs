@@ -72,7 +72,6 @@ impl Keys {
                 (slot::BIN_MASKS, read),
             ])?,
             std::mem::size_of::<super::types::KeysPush>() as u32,
-            WORKGROUP,
         )?;
         Ok(Keys { pipeline, texel_io })
     }

@@ -40,7 +40,6 @@ impl Order {
                 (slot::TOUCHED_IN_ORDER, BindingKind::StorageBuffer),
             ])?,
             0,
-            WORKGROUP,
         )?;
         Ok(Order { pipeline })
     }

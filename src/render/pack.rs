@@ -29,7 +29,6 @@ impl Pack {
                 (slot::PACKED, BindingKind::StorageBuffer),
             ])?,
             std::mem::size_of::<super::types::PackPush>() as u32,
-            SIDE,
         )?;
         Ok(Pack { pipeline })
     }

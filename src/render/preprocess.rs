@@ -97,7 +97,6 @@ impl Preprocess {
                 (b::TOUCHED, write),
             ])?,
             std::mem::size_of::<super::types::WindowPush>() as u32,
-            WORKGROUP,
         )?;
         Ok(Preprocess {
             pipeline,

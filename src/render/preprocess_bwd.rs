@@ -40,7 +40,6 @@ impl PreprocessBwd {
                 (slot::FEATURE_GRADS, storage),
             ])?,
             std::mem::size_of::<GradPush>() as u32,
-            workgroup,
             &[(crate::gpu::shader_set::WIDE_WG_SPEC, workgroup)],
         )?;
         Ok(PreprocessBwd {

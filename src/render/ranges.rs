@@ -35,7 +35,6 @@ impl Ranges {
                 (slot::COUNTERS, BindingKind::StorageBuffer),
             ])?,
             0,
-            WORKGROUP,
         )?;
         Ok(Ranges { pipeline, texel_io })
     }

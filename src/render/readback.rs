@@ -89,12 +89,25 @@ impl GpuRenderer {
             bytemuck::cast_slice(&bytes[color_off as usize..color_off as usize + pixels * 16]);
         let depth: &[f32] =
             bytemuck::cast_slice(&bytes[depth_off as usize..depth_off as usize + pixels * 4]);
+        // In parallel: at 4K the three copies (and the page faults of their fresh
+        // allocations) took about 100 ms of one host thread on the H200 machine, 20x the
+        // frame's device time (BENCHMARKS.md, 2026-11-28).
+        use rayon::prelude::*;
+        let (color, (alpha, depth)) = rayon::join(
+            || rgba.par_iter().map(|p| [p[0], p[1], p[2]]).collect(),
+            || {
+                rayon::join(
+                    || rgba.par_iter().map(|p| p[3]).collect(),
+                    || depth.par_iter().copied().collect(),
+                )
+            },
+        );
         Ok(Frame {
             width: cam.width,
             height: cam.height,
-            color: rgba.iter().map(|p| [p[0], p[1], p[2]]).collect(),
-            alpha: rgba.iter().map(|p| p[3]).collect(),
-            depth: depth.to_vec(),
+            color,
+            alpha,
+            depth,
             feature_count: 0,
             features: Vec::new(),
         })

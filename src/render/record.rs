@@ -58,8 +58,8 @@ impl GpuRenderer {
         let mut recorder = FrameRecorder {
             ctx,
             timer,
-            f,
-            p: pipelines.frame(needs)?,
+            buffers: f,
+            pipelines: pipelines.frame(needs)?,
             scene: t.scene,
             cam: &t.cam,
             opts: &t.opts,
@@ -105,7 +105,7 @@ fn frame_params(
             if opts.antialiased { 1.0 } else { 0.0 },
         ],
         focal: [cam.fx, cam.fy, cam.cx, cam.cy],
-        limits: crate::cpu::clamp_limits(cam, opts.rules),
+        limits: crate::model::clamp_limits(cam, opts.rules),
         background: [
             opts.background[0],
             opts.background[1],
@@ -140,8 +140,8 @@ fn frame_params(
 struct FrameRecorder<'a> {
     ctx: &'a GpuContext,
     timer: &'a mut GpuTimer,
-    f: &'a FrameBuffers,
-    p: FramePipelines<'a>,
+    buffers: &'a FrameBuffers,
+    pipelines: FramePipelines<'a>,
     scene: &'a GpuScene,
     cam: &'a Camera,
     opts: &'a RenderOptions,
@@ -204,7 +204,7 @@ impl FrameRecorder<'_> {
 
     /// Frame constants in, counters and bin ranges zeroed, images to GENERAL.
     fn clear(&self, cmd: vk::CommandBuffer) {
-        let (ctx, f) = (self.ctx, self.f);
+        let (ctx, f) = (self.ctx, self.buffers);
         let device = ctx.device();
         // SAFETY: cmd is recording; the buffers are alive and large enough.
         unsafe {
@@ -220,7 +220,7 @@ impl FrameRecorder<'_> {
 
     /// Per Gaussian: preprocess, the depth order and the scan of tiles touched.
     fn front(&mut self, cmd: vk::CommandBuffer) -> GpuResult<()> {
-        let (ctx, f, p, scene) = (self.ctx, self.f, self.p, self.scene);
+        let (ctx, f, p, scene) = (self.ctx, self.buffers, self.pipelines, self.scene);
         let n = scene.count;
         let window = self.window;
         self.timer
@@ -291,7 +291,7 @@ impl FrameRecorder<'_> {
 
     /// The counters and the scanned offsets to host-visible memory, for chunk planning.
     fn copy_for_planning(&self, cmd: vk::CommandBuffer) -> GpuResult<()> {
-        let (ctx, f) = (self.ctx, self.f);
+        let (ctx, f) = (self.ctx, self.buffers);
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::TransferRead);
         let planning = f
             .chunk_offsets
@@ -322,7 +322,7 @@ impl FrameRecorder<'_> {
         resume: bool,
         last: bool,
     ) -> GpuResult<()> {
-        let (ctx, f, p) = (self.ctx, self.f, self.p);
+        let (ctx, f, p) = (self.ctx, self.buffers, self.pipelines);
         if resume {
             f.ranges.fill(ctx, cmd, 0, vk::WHOLE_SIZE, 0);
             // Cleared ranges -> the ranges stage.
@@ -431,16 +431,19 @@ impl FrameRecorder<'_> {
     /// The chunk's feature channels, before its colour blend: a resumed chunk reads the
     /// pixels' transmittance as the previous chunk left it in the colour image.
     fn blend_features(&mut self, cmd: vk::CommandBuffer, resume: bool) -> GpuResult<()> {
-        let (ctx, f) = (self.ctx, self.f);
-        let (features, pipeline, planes) =
-            match (self.features, self.p.feature_blend, self.feature_planes) {
-                (Some(features), Some(pipeline), Some(planes)) => (features, pipeline, planes),
-                _ => {
-                    return Err(GpuError::Internal(
-                        "a features frame without its pipeline or images".into(),
-                    ))
-                }
-            };
+        let (ctx, f) = (self.ctx, self.buffers);
+        let (features, pipeline, planes) = match (
+            self.features,
+            self.pipelines.feature_blend,
+            self.feature_planes,
+        ) {
+            (Some(features), Some(pipeline), Some(planes)) => (features, pipeline, planes),
+            _ => {
+                return Err(GpuError::Internal(
+                    "a features frame without its pipeline or images".into(),
+                ))
+            }
+        };
         let size = (self.cam.width, self.cam.height);
         self.timer.stage(ctx, cmd, Stage::Features.name(), |cmd| {
             for (g, input) in features.groups.iter().enumerate() {
@@ -487,8 +490,8 @@ impl FrameRecorder<'_> {
 
     /// The neural shader over the blended feature planes, into the colour image.
     fn shade(&mut self, cmd: vk::CommandBuffer, shader: &GpuShader) -> GpuResult<()> {
-        let (ctx, f, cam) = (self.ctx, self.f, self.cam);
-        let (planes, pipeline) = match (self.feature_planes, self.p.shade) {
+        let (ctx, f, cam) = (self.ctx, self.buffers, self.cam);
+        let (planes, pipeline) = match (self.feature_planes, self.pipelines.shade) {
             (Some(planes), Some(pipeline)) => (planes, pipeline),
             _ => {
                 return Err(GpuError::Internal(
@@ -517,7 +520,7 @@ impl FrameRecorder<'_> {
     /// sources. Rgba8: the colour image is packed by a compute pass (timed with the
     /// readback) and only the packed buffer is copied. The counters always follow.
     fn read_back(&mut self, cmd: vk::CommandBuffer) -> GpuResult<()> {
-        let (ctx, f, p, readback) = (self.ctx, self.f, self.p, self.readback);
+        let (ctx, f, p, readback) = (self.ctx, self.buffers, self.pipelines, self.readback);
         self.timer.stage(ctx, cmd, Stage::Readback.name(), |cmd| {
             let device = ctx.device();
             let (color_off, depth_off, counters_off) = f.readback_offsets();

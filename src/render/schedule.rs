@@ -71,6 +71,88 @@ pub const CPU_LOOP_LIMIT: u32 = 65_535;
 /// of 8-pixel bins and 3.41 s with 9.0 M of 16-pixel bins; BENCHMARKS.md, "Scaling").
 pub const SMALL_BIN_MAX_PAIRS: u32 = 1 << 24;
 
+/// Bin side (pixels) a frame falls back to when its preferred bins do not do.
+pub(super) const LARGE_BIN: u32 = 16;
+
+/// The bin-size rule, in one place: 16-pixel bins when smaller ones are in use and either
+/// the pairs exceed what small bins may key or a shader loop would be cut.
+pub(super) fn wants_large_bins(bin_size: u32, too_many_pairs: bool, loop_cut: bool) -> bool {
+    bin_size < LARGE_BIN && (too_many_pairs || loop_cut)
+}
+
+/// Pairs past which a frame does not use small bins (`max`: one key buffer's pairs).
+pub(super) fn small_bin_limit(max: u32) -> u64 {
+    u64::from(max.min(SMALL_BIN_MAX_PAIRS))
+}
+
+/// What a frame's counters, read after a submission, say about its buffers and bins.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Reading {
+    /// Pairs the frame needs.
+    pub pairs: u64,
+    /// Pairs its key buffers hold.
+    pub capacity: u32,
+    /// Pairs one key buffer can hold on this device.
+    pub max: u32,
+    /// Bin side it was keyed with, and the blend kernel's preferred one.
+    pub bin_size: u32,
+    pub preferred_bin: u32,
+    /// It was rendered in chunks (then its pairs are complete whatever the capacity).
+    pub chunked: bool,
+    /// Its longest loops: bins of one Gaussian, Gaussians in one bin.
+    pub bins_loop: u32,
+    pub list_loop: u32,
+    /// The device ends shader loops after [`CPU_LOOP_LIMIT`] iterations.
+    pub loop_limited: bool,
+}
+
+/// What to do after a submission ([`next_attempt`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Next {
+    /// The frame is complete; `large_bins_stick`: the next frame of the same scene and
+    /// size starts with [`LARGE_BIN`] bins (its pairs say the preferred ones would not do).
+    Done { large_bins_stick: bool },
+    /// Again, in one piece, with [`LARGE_BIN`] bins.
+    LargerBins,
+    /// Again in chunks: more pairs than one key buffer holds.
+    Chunks,
+    /// Again with key buffers of this many pairs.
+    Grow(u32),
+    /// Refused: a shader loop of this many iterations, past the device's limit.
+    LoopLimit(u32),
+}
+
+/// The growth decision, pure: complete frames are done (or, on a loop-limited device,
+/// rendered again with larger bins, or refused); incomplete ones try larger bins first,
+/// then chunks, then larger key buffers with a quarter's headroom so that a camera path
+/// does not regrow every few frames.
+pub(super) fn next_attempt(r: &Reading) -> Next {
+    let complete = r.chunked || r.pairs <= u64::from(r.capacity);
+    if complete && r.loop_limited {
+        // Four times fewer bins per Gaussian with 16-pixel bins.
+        if !r.chunked && wants_large_bins(r.bin_size, false, r.bins_loop > CPU_LOOP_LIMIT) {
+            return Next::LargerBins;
+        }
+        let worst = r.bins_loop.max(r.list_loop);
+        if worst > CPU_LOOP_LIMIT {
+            return Next::LoopLimit(worst);
+        }
+    }
+    if complete {
+        // An 8-pixel bin frame has at most 4 times the pairs of a 16-pixel one.
+        let large_bins_stick = r.bin_size > r.preferred_bin && r.pairs * 4 > small_bin_limit(r.max);
+        return Next::Done { large_bins_stick };
+    }
+    // Fewer, larger bins need fewer pairs; the texel kernel blends either.
+    if wants_large_bins(r.bin_size, r.pairs > small_bin_limit(r.max), false) {
+        return Next::LargerBins;
+    }
+    if r.pairs > u64::from(r.max) {
+        return Next::Chunks;
+    }
+    Next::Grow((r.pairs + r.pairs / 4).min(u64::from(r.max)) as u32)
+}
+
 impl GpuRenderer {
     /// Gaussians per preprocess window: as many as one storage binding holds of the
     /// largest per-Gaussian record (48 bytes), a multiple of the workgroup.
@@ -125,7 +207,7 @@ impl GpuRenderer {
         self.ensure_frame(set, scene, cam, initial)?;
         let preferred = self.pipelines.kernel().bin_size();
         self.sets[set].bin_size = if self.large_bins == Some((scene.count, cam.width, cam.height)) {
-            16
+            LARGE_BIN
         } else {
             preferred
         };
@@ -213,69 +295,63 @@ impl GpuRenderer {
             let set = &self.sets[t.set];
             let capacity = set.frame.as_ref().map_or(0, |f| f.capacity);
             let bin_size = set.bin_size;
-            let complete = chunked || pairs <= u64::from(capacity);
-            if complete && self.loop_limited() {
-                let bins_loop = counters.max_bins_loop;
-                if !chunked && bins_loop > CPU_LOOP_LIMIT && bin_size < 16 {
-                    // Four times fewer iterations per Gaussian with 16-pixel bins.
-                    self.sets[t.set].bin_size = 16;
-                    regrows += 1;
-                    self.record_ticket(t, true, Pass::Whole)?;
-                    continue;
+            let reading = Reading {
+                pairs,
+                capacity,
+                max,
+                bin_size,
+                preferred_bin: self.pipelines.kernel().bin_size(),
+                chunked,
+                bins_loop: counters.max_bins_loop,
+                list_loop: counters.max_list_loop,
+                loop_limited: self.loop_limited(),
+            };
+            match next_attempt(&reading) {
+                Next::Done { large_bins_stick } => {
+                    self.large_bins =
+                        large_bins_stick.then_some((t.scene.count, cam.width, cam.height));
+                    let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
+                    self.stats = FrameStats {
+                        visible: counters.visible,
+                        pairs,
+                        key_bits: key_bits(bx * by),
+                        regrows,
+                        bin_size,
+                        chunks,
+                    };
+                    self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
+                    break;
                 }
-                let worst = bins_loop.max(counters.max_list_loop);
-                if worst > CPU_LOOP_LIMIT {
+                Next::LoopLimit(worst) => {
                     return Err(GpuError::DeviceLimit {
                         limit: "llvmpipe's loop iterations per invocation",
                         needed: u64::from(worst),
                         max: u64::from(CPU_LOOP_LIMIT),
                         message: format!(
                         "this frame needs a shader loop of {worst} iterations ({} bins of one Gaussian, {} Gaussians in one bin), but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations in total, which would silently drop Gaussians; render at a lower resolution, or on another device",
-                        bins_loop,
+                        counters.max_bins_loop,
                         counters.max_list_loop,
                         self.ctx.info().name
                     ),
                     });
                 }
+                Next::LargerBins => {
+                    regrows += 1;
+                    self.sets[t.set].bin_size = LARGE_BIN;
+                    self.record_ticket(t, true, Pass::Whole)?;
+                }
+                Next::Chunks => {
+                    // This frame and the next in chunks.
+                    regrows += 1;
+                    self.chunked = true;
+                    chunked = true;
+                }
+                Next::Grow(grown) => {
+                    regrows += 1;
+                    self.ensure_frame(t.set, t.scene, cam, grown)?;
+                    self.record_ticket(t, true, Pass::Whole)?;
+                }
             }
-            if complete {
-                // Larger bins stick while the pairs say the preferred ones would not do: an
-                // 8-pixel bin frame has at most 4 times the pairs of a 16-pixel one.
-                let preferred = self.pipelines.kernel().bin_size();
-                let sticky =
-                    bin_size > preferred && pairs * 4 > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
-                self.large_bins = sticky.then_some((t.scene.count, cam.width, cam.height));
-                let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
-                self.stats = FrameStats {
-                    visible: counters.visible,
-                    pairs,
-                    key_bits: key_bits(bx * by),
-                    regrows,
-                    bin_size,
-                    chunks,
-                };
-                self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
-                break;
-            }
-            if pairs > u64::from(max.min(SMALL_BIN_MAX_PAIRS)) && bin_size < 16 {
-                // Fewer, larger bins need fewer pairs; the texel kernel blends either.
-                self.sets[t.set].bin_size = 16;
-                regrows += 1;
-                self.record_ticket(t, true, Pass::Whole)?;
-                continue;
-            }
-            if pairs > u64::from(max) {
-                // Too many pairs for one key buffer: this frame and the next in chunks.
-                self.chunked = true;
-                chunked = true;
-                regrows += 1;
-                continue;
-            }
-            // Grow with headroom so a camera path does not regrow every few frames.
-            let grown = (pairs + pairs / 4).min(u64::from(max)) as u32;
-            self.ensure_frame(t.set, t.scene, cam, grown)?;
-            regrows += 1;
-            self.record_ticket(t, true, Pass::Whole)?;
         }
         if !chunked {
             self.timings = self.read_timings(t.set)?;
@@ -311,10 +387,10 @@ impl GpuRenderer {
         let front = self.read_counters(t.set)?;
         let pairs = front.pairs();
         let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
-        let too_many = pairs > u64::from(max.min(SMALL_BIN_MAX_PAIRS));
-        if (bins_cut || too_many) && self.sets[t.set].bin_size < 16 {
+        let too_many = pairs > small_bin_limit(max);
+        if wants_large_bins(self.sets[t.set].bin_size, too_many, bins_cut) {
             // As in one piece: 16-pixel bins first (fewer pairs and bin-loop iterations).
-            self.sets[t.set].bin_size = 16;
+            self.sets[t.set].bin_size = LARGE_BIN;
             return Ok(None);
         }
         let limit = self.pairs_per_piece();
@@ -365,5 +441,133 @@ impl GpuRenderer {
         // Copied after the last chunk: the front's totals, the chunks' loop lengths.
         let counters = self.read_counters(t.set)?;
         Ok(Some((counters, chunks.len() as u32)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A complete one-piece frame of `pairs` in buffers of 1 M pairs, 8-pixel bins
+    /// preferred and used, on a GPU (no loop limit).
+    fn reading(pairs: u64) -> Reading {
+        Reading {
+            pairs,
+            capacity: 1 << 20,
+            max: 1 << 26,
+            bin_size: 8,
+            preferred_bin: 8,
+            chunked: false,
+            bins_loop: 10,
+            list_loop: 10,
+            loop_limited: false,
+        }
+    }
+
+    #[test]
+    fn frames_that_fit_are_done() {
+        let r = reading(1000);
+        assert_eq!(
+            next_attempt(&r),
+            Next::Done {
+                large_bins_stick: false
+            }
+        );
+        // Larger bins stick while the pairs say the preferred ones would not fit.
+        let large = Reading {
+            bin_size: 16,
+            pairs: (1 << 22) + 1,
+            capacity: 1 << 23,
+            ..r
+        };
+        assert_eq!(
+            next_attempt(&large),
+            Next::Done {
+                large_bins_stick: true
+            }
+        );
+        let few = Reading {
+            pairs: 1 << 22,
+            ..large
+        };
+        assert_eq!(
+            next_attempt(&few),
+            Next::Done {
+                large_bins_stick: false
+            }
+        );
+        // A chunked frame is complete whatever its buffers hold.
+        let chunked = Reading {
+            chunked: true,
+            pairs: 1 << 30,
+            ..r
+        };
+        assert!(matches!(next_attempt(&chunked), Next::Done { .. }));
+    }
+
+    #[test]
+    fn frames_that_do_not_fit_try_bins_then_chunks_then_growth() {
+        // Past small bins' limit: 16-pixel bins first, then chunks past one key buffer.
+        let many = Reading {
+            pairs: u64::from(SMALL_BIN_MAX_PAIRS) + 1,
+            ..reading(0)
+        };
+        assert_eq!(next_attempt(&many), Next::LargerBins);
+        let large = Reading {
+            bin_size: 16,
+            ..many
+        };
+        assert_eq!(
+            next_attempt(&large),
+            Next::Grow((many.pairs + many.pairs / 4) as u32)
+        );
+        let huge = Reading {
+            pairs: (1 << 26) + 1,
+            ..large
+        };
+        assert_eq!(next_attempt(&huge), Next::Chunks);
+        // A small device's key buffer is also the small bins' limit.
+        let small = Reading {
+            max: 1 << 21,
+            pairs: (1 << 21) + 1,
+            ..reading(0)
+        };
+        assert_eq!(next_attempt(&small), Next::LargerBins);
+        // Otherwise the buffers grow by a quarter, capped at one key buffer.
+        assert_eq!(next_attempt(&reading(2_000_000)), Next::Grow(2_500_000));
+        let capped = Reading {
+            max: 2_100_000,
+            ..reading(2_000_000)
+        };
+        assert_eq!(next_attempt(&capped), Next::Grow(2_100_000));
+    }
+
+    #[test]
+    fn loop_limited_devices_take_larger_bins_or_refuse() {
+        let cpu = Reading {
+            loop_limited: true,
+            bins_loop: CPU_LOOP_LIMIT + 1,
+            ..reading(1000)
+        };
+        assert_eq!(next_attempt(&cpu), Next::LargerBins);
+        let large = Reading {
+            bin_size: 16,
+            ..cpu
+        };
+        assert_eq!(next_attempt(&large), Next::LoopLimit(CPU_LOOP_LIMIT + 1));
+        let list = Reading {
+            bins_loop: 1,
+            list_loop: CPU_LOOP_LIMIT + 7,
+            ..cpu
+        };
+        assert_eq!(next_attempt(&list), Next::LoopLimit(CPU_LOOP_LIMIT + 7));
+        // A GPU runs any loop.
+        let gpu = Reading {
+            loop_limited: false,
+            ..list
+        };
+        assert!(matches!(next_attempt(&gpu), Next::Done { .. }));
+        assert!(wants_large_bins(8, true, false) && wants_large_bins(8, false, true));
+        assert!(!wants_large_bins(16, true, true) && !wants_large_bins(8, false, false));
     }
 }

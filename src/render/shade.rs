@@ -211,7 +211,6 @@ impl Shade {
                 (slot::COLOR, BindingKind::StorageImage),
             ])?,
             std::mem::size_of::<ShadePush>() as u32,
-            SIDE,
         )?;
         Ok(Shade { pipeline })
     }

@@ -104,7 +104,6 @@ impl ShadeBwd {
                 (slot::PARTIALS, storage),
             ])?,
             std::mem::size_of::<ShadeBwdPush>() as u32,
-            PIXELS,
             &[
                 (SHADE_SPEC_ACTIVATIONS, activations.max(1)),
                 (SHADE_SPEC_WIDEST, widest.max(1)),
@@ -116,7 +115,6 @@ impl ShadeBwd {
             &[],
             &by_binding([(rslot::PARTIALS, storage), (rslot::GRADS, storage)])?,
             16,
-            64,
         )?;
         Ok(ShadeBwd {
             pipeline,

@@ -133,7 +133,6 @@ impl StepPipelines {
                     (slot::NORM_TOTAL, s),
                 ])?,
                 std::mem::size_of::<StepPush>() as u32,
-                train_workgroup,
                 &[(crate::gpu::shader_set::WIDE_WG_SPEC, train_workgroup)],
             )?,
             reduce: ComputePipeline::from_embedded(
@@ -142,7 +141,6 @@ impl StepPipelines {
                 &[],
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
                 16,
-                128,
             )?,
             mlp: ComputePipeline::from_embedded(
                 ctx,
@@ -158,7 +156,6 @@ impl StepPipelines {
                     (mslot::NORM_TOTAL, s),
                 ])?,
                 std::mem::size_of::<MlpPush>() as u32,
-                WORKGROUP,
             )?,
         })
     }

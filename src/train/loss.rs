@@ -189,8 +189,8 @@ impl GpuLoss {
     /// bits; the view is faster on llvmpipe).
     pub fn with_texel_fetch(ctx: &GpuContext, texel: bool) -> GpuResult<Self> {
         let s = BindingKind::StorageBuffer;
-        let build = |name: &str, kinds: &[BindingKind], push: usize, size: u32| {
-            ComputePipeline::from_embedded(ctx, name, &[], kinds, push as u32, size)
+        let build = |name: &str, kinds: &[BindingKind], push: usize| {
+            ComputePipeline::from_embedded(ctx, name, &[], kinds, push as u32)
         };
         use bindings::{loss_reduce, ssim_filter, ssim_grad, ssim_map, ssim_prepare};
         Ok(GpuLoss {
@@ -202,7 +202,6 @@ impl GpuLoss {
                     (ssim_prepare::PLANES, s),
                 ])?,
                 16,
-                64,
             )?,
             filter: ComputePipeline::from_embedded(
                 ctx,
@@ -210,7 +209,6 @@ impl GpuLoss {
                 &[("TEXEL_FETCH", "0".into())],
                 &by_binding([(ssim_filter::SRC, s), (ssim_filter::DST, s)])?,
                 std::mem::size_of::<FilterPush>() as u32,
-                64,
             )?,
             filter_texel: if texel {
                 Some(ComputePipeline::from_embedded(
@@ -222,7 +220,6 @@ impl GpuLoss {
                         (ssim_filter::DST, s),
                     ])?,
                     std::mem::size_of::<FilterPush>() as u32,
-                    64,
                 )?)
             } else {
                 None
@@ -238,7 +235,6 @@ impl GpuLoss {
                     (ssim_map::SUMS, s),
                 ])?,
                 16,
-                64,
             )?,
             grad: build(
                 "ssim_grad",
@@ -249,13 +245,11 @@ impl GpuLoss {
                     (ssim_grad::GRAD, s),
                 ])?,
                 std::mem::size_of::<GradPush>(),
-                64,
             )?,
             reduce: build(
                 "loss_reduce",
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
                 16,
-                128,
             )?,
             work: None,
             io: None,

@@ -88,15 +88,8 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         RadixSort::with_config(ctx, config).expect("sort");
         built += 4;
     }
-    ComputePipeline::from_embedded(
-        ctx,
-        "count64_test",
-        &[],
-        &[BindingKind::StorageBuffer],
-        0,
-        128,
-    )
-    .expect("count64_test");
+    ComputePipeline::from_embedded(ctx, "count64_test", &[], &[BindingKind::StorageBuffer], 0)
+        .expect("count64_test");
     built += 1;
     // The subgroup self-check every context runs.
     verisplat::gpu::subgroup::probe(ctx).expect("the subgroup probe");
@@ -185,7 +178,6 @@ fn a_stage_that_binds_other_kinds_than_its_shader_is_refused() {
         &[],
         &[BindingKind::StorageImage],
         0,
-        128,
     )
     .err()
     .expect("a storage buffer bound as an image is refused");

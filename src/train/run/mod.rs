@@ -174,6 +174,13 @@ pub struct TrainReport {
     /// forward pass's, then the loss, the backward pass's and the step (with the state on
     /// the device; the host optimiser's loss and step are not device stages).
     pub stage_ms: Vec<(String, f64)>,
+    /// Mean milliseconds per iteration of the host's wall clock in each part of the loop
+    /// (`step`, `model changes`, `outputs`, `checkpoints`, and `other`: the rest).
+    pub host_ms: Vec<(String, f64)>,
+    /// Mean per iteration of the step's device calls: command buffers submitted and the
+    /// host's milliseconds recording, submitting and waiting for them
+    /// ([`crate::gpu::host_time`]); the step's other time is the host's own work.
+    pub step_device_calls: crate::gpu::HostTime,
 }
 
 /// Sums of per-stage milliseconds, in the order the stages first appear.
@@ -313,9 +320,16 @@ pub fn train(
     let mut run = Run::start(&job, note)?;
     output::write_cameras_and_cfg(&job, &mut run.written)?;
     let start = std::time::Instant::now();
+    // The host's wall clock in each part of the loop, and the step's device calls.
+    let mut host = StageSums::default();
+    let mut calls = crate::gpu::HostTime::default();
+    let timed = |host: &mut StageSums, name: &str, t: std::time::Instant| {
+        host.add([(name, t.elapsed().as_secs_f64() * 1e3)]);
+    };
     // The state on the device, unless the caller asks for the host optimiser.
     let device_path = !opts.host_optimizer;
     for it in run.first..=s.iterations {
+        let t = std::time::Instant::now();
         let view = run.next_view(&job, it);
         let plan = Plan::at(&job, it, run.model.len());
         let due = Due::at(&job, it);
@@ -332,11 +346,23 @@ pub fn train(
                 run.save(&job, it, note)?;
             }
         }
+        timed(&mut host, "outputs", t);
+        let t = std::time::Instant::now();
+        let before = rast.renderer().ctx().host_time();
         let value = if device_path {
             run.device_step(&job, &pipelines, rast, loss, view, &plan)?
         } else {
             run.host_step(&job, rast, loss, view, &plan)?
         };
+        let d = rast.renderer().ctx().host_time().since(&before);
+        calls = crate::gpu::HostTime {
+            submissions: calls.submissions + d.submissions,
+            record_ms: calls.record_ms + d.record_ms,
+            submit_ms: calls.submit_ms + d.submit_ms,
+            wait_ms: calls.wait_ms + d.wait_ms,
+        };
+        timed(&mut host, "step", t);
+        let t = std::time::Instant::now();
         if !value.total.is_finite() {
             return Err(TrainError::Other(format!(
                 "training diverged at iteration {it}: the loss is {} ({} Gaussians); the last model saved is the last good one",
@@ -348,6 +374,8 @@ pub fn train(
         if it < s.iterations {
             run.change_model(&job, &plan)?;
         }
+        timed(&mut host, "model changes", t);
+        let t = std::time::Instant::now();
         if it % 10 == 1 {
             run.peak = run.peak.max(rast.renderer().ctx().live_allocations().1);
         }
@@ -357,10 +385,13 @@ pub fn train(
             loss: value,
             gaussians: run.model.len(),
         });
+        timed(&mut host, "other", t);
+        let t = std::time::Instant::now();
         if due.checkpoint {
             let path = run.checkpoint(&job, it, job.overwrite)?;
             note(format!("[ITER {it}] checkpoint {}", path.display()));
         }
+        timed(&mut host, "checkpoints", t);
         if due.cancelled && it < s.iterations {
             let path = run.checkpoint(&job, it, true)?;
             return Err(TrainError::Interrupted {
@@ -374,6 +405,7 @@ pub fn train(
     }
     let seconds = start.elapsed().as_secs_f64();
     let first = run.first;
+    let iterations = (s.iterations + 1 - first).max(1);
     Ok(TrainReport {
         iterations: s.iterations,
         gaussians: run.model.len(),
@@ -386,7 +418,13 @@ pub fn train(
             .stage_sums
             .0
             .into_iter()
-            .map(|(n, ms)| (n, ms / f64::from((s.iterations + 1 - first).max(1))))
+            .map(|(n, ms)| (n, ms / f64::from(iterations)))
             .collect(),
+        host_ms: host
+            .0
+            .into_iter()
+            .map(|(n, ms)| (n, ms / f64::from(iterations)))
+            .collect(),
+        step_device_calls: calls.per(u64::from(iterations)),
     })
 }
