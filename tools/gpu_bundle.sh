@@ -9,8 +9,8 @@
 #   scp -r DIR gpu-host: && ssh gpu-host DIR/run.sh     # then read DIR/report.md
 #
 # DIR gets: bin/verisplat, lib/libvulkan.so.1 (Debian's libvulkan1, used only when the target
-# has no loader), lib/glvnd/libGLdispatch.so.0 (Debian's libglvnd0, which NVIDIA's driver
-# needs; used only when the target has none), scenes/*.spz (the shared scenes, converted to SPZ to stay small; their
+# has no loader), lib/glvnd/ (glvnd's libGLdispatch.so.0 and libEGL.so.1, Debian's
+# libglvnd0 and libegl1, which NVIDIA's driver needs; used only when the target lacks them), scenes/*.spz (the shared scenes, converted to SPZ to stay small; their
 # licences in scenes/LICENSES.md), cameras/*.json, run.sh and README.txt. At most 60 MiB.
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/.." && pwd)
@@ -53,21 +53,27 @@ cp "$loader" "$dir/lib/libvulkan.so.1"
 if [ -e /usr/share/doc/libvulkan1/copyright ]; then
   cp /usr/share/doc/libvulkan1/copyright "$dir/lib/libvulkan1.copyright"
 fi
-# glvnd's dispatch library (Debian's libglvnd0): NVIDIA's Vulkan driver (libGLX_nvidia.so.0)
-# needs it, and a CUDA-only image may lack it (the first H200 run, 2026-11-28: without it
-# the loader found no driver, ERROR_INCOMPATIBLE_DRIVER). run.sh uses it only when the
-# system has none.
-dispatch=""
-for cand in $(/sbin/ldconfig -p 2>/dev/null | awk '$1 == "libGLdispatch.so.0" { print $NF }') \
-  /usr/lib/x86_64-linux-gnu/libGLdispatch.so.0; do
-  if [ -e "$cand" ]; then dispatch=$(readlink -f "$cand"); break; fi
-done
-[ -n "$dispatch" ] || { echo "gpu_bundle: no libGLdispatch.so.0 (apt-get install libglvnd0)" >&2; exit 1; }
+# glvnd's dispatch library and EGL (Debian's libglvnd0 and libegl1): NVIDIA's Vulkan driver
+# (libGLX_nvidia.so.0) links the first and loads the second when an instance is made, and a
+# CUDA-only image may lack both. On the first H200 runs (2026-11-28) the loader found no
+# driver without them ("Could not get 'vkCreateInstance' via 'vk_icdGetInstanceProcAddr'",
+# ERROR_INCOMPATIBLE_DRIVER); glvnd's libGLdispatch.so.0 with libEGL.so.1 was the least
+# that made it work. run.sh uses them only when the system has none.
 mkdir -p "$dir/lib/glvnd"
-cp "$dispatch" "$dir/lib/glvnd/libGLdispatch.so.0"
-if [ -e /usr/share/doc/libglvnd0/copyright ]; then
-  cp /usr/share/doc/libglvnd0/copyright "$dir/lib/glvnd/libglvnd0.copyright"
-fi
+for pair in libGLdispatch.so.0:libglvnd0 libEGL.so.1:libegl1; do
+  name=${pair%%:*}
+  package=${pair##*:}
+  found=""
+  for cand in $(/sbin/ldconfig -p 2>/dev/null | awk -v n="$name" '$1 == n { print $NF }') \
+    "/usr/lib/x86_64-linux-gnu/$name"; do
+    if [ -e "$cand" ]; then found=$(readlink -f "$cand"); break; fi
+  done
+  [ -n "$found" ] || { echo "gpu_bundle: no $name (apt-get install $package)" >&2; exit 1; }
+  cp "$found" "$dir/lib/glvnd/$name"
+  if [ -e "/usr/share/doc/$package/copyright" ]; then
+    cp "/usr/share/doc/$package/copyright" "$dir/lib/glvnd/$package.copyright"
+  fi
+done
 
 # The shared scenes as SPZ (about a tenth of the PLY's bytes; lossy: positions to 1/4096
 # of a unit, colours and SH quantised, which matters to neither the timings nor the GPU-vs-

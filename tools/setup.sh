@@ -9,8 +9,8 @@ set -euo pipefail
 
 packages=(
   libvulkan1 libvulkan-dev mesa-vulkan-drivers vulkan-tools vulkan-validationlayers
-  # glvnd's dispatch library, which tools/gpu_bundle.sh ships for NVIDIA's Vulkan driver.
-  libglvnd0
+  # glvnd's dispatch library and EGL, which tools/gpu_bundle.sh ships for NVIDIA's driver.
+  libglvnd0 libegl1
   glslc spirv-tools
   pkg-config openexr
   chromium chromium-driver

@@ -65,14 +65,14 @@ else
   loader_note="bundled ($here/lib/libvulkan.so.1, Debian libvulkan1)"
 fi
 
-# glvnd's dispatch library, which NVIDIA's Vulkan driver (libGLX_nvidia.so.0) loads: the
-# system's, else the bundled one (CUDA-only images often lack it).
-if has_lib libGLdispatch.so.0 >/dev/null; then
+# glvnd's dispatch library and EGL, which NVIDIA's Vulkan driver (libGLX_nvidia.so.0) needs:
+# the system's, else the bundled ones (CUDA-only images often lack them).
+if has_lib libGLdispatch.so.0 >/dev/null && has_lib libEGL.so.1 >/dev/null; then
   glvnd_note="system"
 else
   LD_LIBRARY_PATH=$here/lib/glvnd${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
   export LD_LIBRARY_PATH
-  glvnd_note="bundled ($here/lib/glvnd/libGLdispatch.so.0, Debian libglvnd0)"
+  glvnd_note="bundled ($here/lib/glvnd: libGLdispatch.so.0, libEGL.so.1 of Debian's libglvnd0, libegl1)"
 fi
 
 # ---- The driver's ICD JSON: the loader's standard folders, else a written NVIDIA one ----
@@ -228,7 +228,7 @@ fi
   fi
   echo "Vulkan loader: $loader_note"
   echo "Vulkan driver (ICD): $icd_note"
-  echo "glvnd (libGLdispatch.so.0): $glvnd_note"
+  echo "glvnd (libGLdispatch.so.0, libEGL.so.1): $glvnd_note"
   # What the drivers' libraries cannot find, the usual reason a driver is not loaded.
   for f in $icds ${VK_DRIVER_FILES:-} ${VK_ICD_FILENAMES:-}; do
     [ -r "$f" ] || continue
