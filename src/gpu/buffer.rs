@@ -247,6 +247,27 @@ impl GpuBuffer {
         self.sync_host(0, bytes.len() as u64, HostSync::Flush)
     }
 
+    /// Lets `fill` write the first `len` bytes of a host-visible buffer's mapping in place
+    /// (no intermediate copy), then flushes them when the memory is not coherent. The
+    /// caller submits the GPU work that reads them afterwards.
+    pub fn write_mapped_with(&mut self, len: u64, fill: impl FnOnce(&mut [u8])) -> GpuResult<()> {
+        self.check_mappable()?;
+        let name = self.name.clone();
+        if len > self.size {
+            return Err(GpuError::InvalidArgument(format!(
+                "writing {len} bytes into mapped buffer '{name}' of {}",
+                self.size
+            )));
+        }
+        let slice = self
+            .allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or_else(|| GpuError::InvalidArgument(format!("buffer '{name}' is not mapped")))?;
+        fill(&mut slice[..len as usize]);
+        self.sync_host(0, len, HostSync::Flush)
+    }
+
     /// The whole mapping of a host-visible buffer, invalidated first when the memory is
     /// not coherent: call it after the GPU writes it shows were waited for (a fence), as
     /// each call reads them again.

@@ -147,6 +147,17 @@ pub struct GpuLoss {
     reduce: ComputePipeline,
     work: Option<(u64, [GpuBuffer; 5])>,
     io: Option<(u64, [GpuBuffer; 3])>,
+    /// The next target as the loss reads it (a vec4 per pixel), written by the host into
+    /// this upload buffer by [`Self::stage_target`] and copied to the device-local target
+    /// by the submission that computes the loss (no submission of its own); kept from
+    /// iteration to iteration.
+    target_staging: Option<GpuBuffer>,
+    /// Bytes of `target_staging` staged and not yet copied.
+    target_pending: Option<u64>,
+    /// The last [`Self::record_image`]'s sums, copied by its own submission (so that
+    /// [`Self::read_value`] needs none), and whether they are there.
+    sums_readback: Option<GpuBuffer>,
+    sums_copied: bool,
     /// The work buffer the last [`Self::record_image`] left its sums in, and its loss's
     /// pixel count and lambda.
     last: Option<(ash::vk::Buffer, u64, f32)>,
@@ -253,6 +264,10 @@ impl GpuLoss {
             )?,
             work: None,
             io: None,
+            target_staging: None,
+            target_pending: None,
+            sums_readback: None,
+            sums_copied: false,
             last: None,
         })
     }
@@ -478,12 +493,58 @@ impl GpuLoss {
         Ok(())
     }
 
-    /// Uploads the target image (RGB, pixel-major) of the next [`Self::record_image`].
+    /// Stages the target image (RGB, pixel-major) of the next [`Self::record_image`] (or
+    /// [`Self::compute`]): written as vec4s straight into a kept upload buffer; the
+    /// submission that computes the loss copies it to the device first. (Each iteration
+    /// had allocated a staging buffer, converted into a vector, copied that and waited for
+    /// a submission of its own.)
     pub fn stage_target(&mut self, ctx: &GpuContext, target: &[[f32; 3]]) -> GpuResult<()> {
-        self.ensure_io(ctx, target.len() as u64)?;
-        let (_, [_, tgt, _]) = self.io.as_ref().expect("made above");
-        let wide: Vec<[f32; 4]> = target.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect();
-        tgt.upload(ctx, &wide)
+        let pixels = target.len() as u64;
+        self.ensure_io(ctx, pixels)?;
+        let bytes = pixels * 16;
+        if !self
+            .target_staging
+            .as_ref()
+            .is_some_and(|b| b.size() >= bytes)
+        {
+            self.target_staging = None;
+            self.target_staging = Some(GpuBuffer::new(
+                ctx,
+                "loss target (staging)",
+                bytes.max(16),
+                crate::gpu::MemoryKind::Upload,
+            )?);
+        }
+        let staging = self.target_staging.as_mut().expect("made above");
+        staging.write_mapped_with(bytes, |dst| {
+            let dst: &mut [[f32; 4]] = bytemuck::cast_slice_mut(dst);
+            for (d, c) in dst.iter_mut().zip(target) {
+                *d = [c[0], c[1], c[2], 0.0];
+            }
+        })?;
+        self.target_pending = Some(bytes);
+        Ok(())
+    }
+
+    /// Records the copy of the staged target into the device's target buffer `tgt` (if
+    /// one is pending); the caller's barrier makes it visible to the loss's passes.
+    fn record_target_copy(
+        &mut self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        tgt: &GpuBuffer,
+    ) {
+        let (Some(bytes), Some(staging)) = (self.target_pending.take(), &self.target_staging)
+        else {
+            return;
+        };
+        let region = [ash::vk::BufferCopy::default().size(bytes)];
+        // SAFETY: both buffers are alive and hold `bytes`; the host's writes to the staging
+        // buffer are visible to the device from the submission on.
+        unsafe {
+            ctx.device()
+                .cmd_copy_buffer(cmd, staging.handle(), tgt.handle(), &region)
+        };
     }
 
     /// Records the loss of a rendered colour image (RGBA32F, `width x height`, a copy
@@ -518,6 +579,7 @@ impl GpuLoss {
         let result = (|| {
             let [img, tgt, _] = &io.1;
             image.copy_to_buffer(ctx, cmd, img, 0);
+            self.record_target_copy(ctx, cmd, tgt);
             barrier(ctx, cmd, Access::TransferWrite, Access::ComputeRead);
             let bufs = LossBuffers {
                 image: img.whole(),
@@ -528,6 +590,25 @@ impl GpuLoss {
                 .record(ctx, cmd, &bufs, width, height, lambda)?
                 .handle();
             self.last = Some((sums, pixels, lambda));
+            // The sums to host-visible memory in this submission (16 bytes).
+            if self.sums_readback.is_none() {
+                self.sums_readback = Some(GpuBuffer::new(
+                    ctx,
+                    "loss sums (read-back)",
+                    16,
+                    crate::gpu::MemoryKind::Readback,
+                )?);
+            }
+            let readback = self.sums_readback.as_ref().expect("made above");
+            barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
+            let region = [ash::vk::BufferCopy::default().size(16)];
+            // SAFETY: both buffers are alive; the sums are the first 16 bytes of theirs.
+            unsafe {
+                ctx.device()
+                    .cmd_copy_buffer(cmd, sums, readback.handle(), &region)
+            };
+            barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
+            self.sums_copied = true;
             Ok(())
         })();
         self.io = Some(io);
@@ -548,7 +629,11 @@ impl GpuLoss {
             .iter()
             .find(|b| b.handle() == handle)
             .ok_or_else(|| GpuError::Internal("the loss sums buffer is gone".into()))?;
-        let sums: Vec<[f32; 4]> = b.read(ctx, 1)?;
+        let sums: Vec<[f32; 4]> = match (&self.sums_readback, self.sums_copied) {
+            // Copied by the submission that computed them (record_image).
+            (Some(r), true) => bytemuck::pod_collect_to_vec(r.mapped_range(0, 16)?),
+            _ => b.read(ctx, 1)?,
+        };
         let n = (pixels * 3) as f64;
         Ok(LossValue::of(
             sums[0][0] as f64 / n,
@@ -592,6 +677,7 @@ impl GpuLoss {
             };
             let mut sums = None;
             ctx.submit_and_wait("loss", |cmd| {
+                self.record_target_copy(ctx, cmd, tgt);
                 barrier(ctx, cmd, Access::Any, Access::Any);
                 sums = Some(
                     self.record(ctx, cmd, &bufs, width, height, lambda)?
@@ -601,6 +687,7 @@ impl GpuLoss {
                 Ok(())
             })?;
             self.last = sums.map(|h| (h, pixels, lambda));
+            self.sums_copied = false;
             let value = self.read_value(ctx)?;
             let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
             Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))
