@@ -316,6 +316,12 @@ impl std::str::FromStr for Rules {
     }
 }
 
+/// The guard band of `rules` for `cam` ([`Rules::clamp_limits`]), as the GPU receives it.
+pub fn clamp_limits(cam: &crate::camera::Camera, rules: Rules) -> [f32; 4] {
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    rules.clamp_limits(w, h, cam.fx, cam.fy, cam.cx, cam.cy)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -368,10 +374,4 @@ mod tests {
         // The original's disc: radius ceil(3 * 2) = 6 on both axes.
         assert_eq!(extent(Rules::Original, 1.0, 40.0).unwrap().radius, [6, 6]);
     }
-}
-
-/// The guard band of `rules` for `cam` ([`Rules::clamp_limits`]), as the GPU receives it.
-pub fn clamp_limits(cam: &crate::camera::Camera, rules: Rules) -> [f32; 4] {
-    let (w, h) = (cam.width as f32, cam.height as f32);
-    rules.clamp_limits(w, h, cam.fx, cam.fy, cam.cx, cam.cy)
 }
