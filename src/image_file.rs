@@ -2,34 +2,13 @@
 //! (half or float channels, by name) and NumPy `.npy` float arrays (`H x W x C` or
 //! `H x W`, as PyTorch users dump renders). Every image becomes named planes of `f32`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// Error raised while reading an image.
-#[derive(Debug, thiserror::Error)]
-pub enum ImageError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// File involved.
-        path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
-    },
-    /// The file is not an image this module reads.
-    #[error("{path}: {message}")]
-    Invalid {
-        /// File involved.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
-}
+/// Error raised while reading an image (the readers' one file error).
+pub type ImageError = crate::file_error::FileError;
 
 fn invalid(path: &Path, message: impl Into<String>) -> ImageError {
-    ImageError::Invalid {
-        path: path.to_path_buf(),
-        message: message.into(),
-    }
+    ImageError::invalid(path, message)
 }
 
 /// One named channel of an image, row-major.

@@ -8,6 +8,7 @@ pub mod console;
 pub mod cpu;
 pub mod diff_image;
 pub mod doctor;
+pub mod file_error;
 pub mod fit;
 pub mod font;
 pub mod former_name;

@@ -293,35 +293,8 @@ pub fn normalize_quat(q: [f32; 4]) -> [f32; 4] {
     [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
 }
 
-/// Error raised while loading a scene.
-#[derive(Debug, thiserror::Error)]
-pub enum SceneError {
-    /// The file could not be opened or read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// File involved.
-        path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
-    },
-    /// The file's contents are not a valid scene.
-    #[error("{path}: {message}")]
-    Invalid {
-        /// File involved.
-        path: PathBuf,
-        /// What is wrong, as one sentence.
-        message: String,
-    },
-}
-
-impl SceneError {
-    pub(crate) fn invalid(path: &Path, message: impl Into<String>) -> Self {
-        SceneError::Invalid {
-            path: path.to_path_buf(),
-            message: message.into(),
-        }
-    }
-}
+/// Error raised while loading a scene (the readers' one file error).
+pub type SceneError = crate::file_error::FileError;
 
 /// Resolves a scene path: a file is used as is; an unbundled SOG directory resolves to its
 /// `meta.json`; a trained model directory resolves to
