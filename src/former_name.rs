@@ -7,7 +7,7 @@
 //! still honoured, with a deprecation note, when its `VERISPLAT_*` name is not set. Nothing
 //! is written under the old name. This module is the one place in the sources that spells it.
 
-use std::collections::HashSet;
+use std::collections::BTreeSet;
 use std::ffi::OsString;
 use std::sync::Mutex;
 
@@ -48,10 +48,10 @@ pub fn env_var_os(name: &str) -> Option<OsString> {
     }
     let old = former_env(name)?;
     let v = std::env::var_os(&old)?;
-    static NOTED: Mutex<Option<HashSet<String>>> = Mutex::new(None);
+    static NOTED: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
     let first = NOTED
         .lock()
-        .map(|mut set| set.get_or_insert_with(HashSet::new).insert(old.clone()))
+        .map(|mut set| set.insert(old.clone()))
         .unwrap_or(false);
     if first {
         crate::note!(
@@ -64,6 +64,11 @@ pub fn env_var_os(name: &str) -> Option<OsString> {
 /// [`env_var_os`] as a string; None when unset or not valid Unicode.
 pub fn env_var(name: &str) -> Option<String> {
     env_var_os(name).and_then(|v| v.into_string().ok())
+}
+
+/// A flag variable ([`env_var`]): set, and neither empty nor `0`.
+pub fn env_flag(name: &str) -> bool {
+    env_var(name).is_some_and(|v| !v.is_empty() && v != "0")
 }
 
 #[cfg(test)]

@@ -128,9 +128,7 @@ pub(crate) fn doctor(args: &DoctorArgs) -> Result<()> {
             outln!("{line}");
         }
     };
-    let validation = args.validate
-        || verisplat::former_name::env_var("VERISPLAT_VALIDATE")
-            .is_some_and(|v| !v.is_empty() && v != "0");
+    let validation = args.validate || verisplat::former_name::env_flag("VERISPLAT_VALIDATE");
     if let Some(unknown) = args
         .checks
         .iter()

@@ -229,22 +229,7 @@ impl GpuBuffer {
     /// Writes bytes at the start of a host-visible buffer's mapping, flushed when the
     /// memory is not coherent. The caller submits the GPU work that reads them afterwards.
     pub fn write_mapped(&mut self, bytes: &[u8]) -> GpuResult<()> {
-        self.check_mappable()?;
-        let name = self.name.clone();
-        let slice = self
-            .allocation
-            .as_mut()
-            .and_then(|a| a.mapped_slice_mut())
-            .ok_or_else(|| GpuError::InvalidArgument(format!("buffer '{name}' is not mapped")))?;
-        if bytes.len() as u64 > self.size {
-            return Err(GpuError::InvalidArgument(format!(
-                "writing {} bytes into mapped buffer '{name}' of {}",
-                bytes.len(),
-                self.size
-            )));
-        }
-        slice[..bytes.len()].copy_from_slice(bytes);
-        self.sync_host(0, bytes.len() as u64, HostSync::Flush)
+        self.write_mapped_with(bytes.len() as u64, |dst| dst.copy_from_slice(bytes))
     }
 
     /// Lets `fill` write the first `len` bytes of a host-visible buffer's mapping in place

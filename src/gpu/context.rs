@@ -46,14 +46,10 @@ pub struct ContextOptions {
     pub emulate: Emulation,
 }
 
-fn env_flag(name: &str) -> bool {
-    crate::former_name::env_var(name).is_some_and(|v| !v.is_empty() && v != "0")
-}
-
 impl GpuContext {
     /// Creates the context: instance, device selection, queue, pool and allocator.
     pub fn new(options: &ContextOptions) -> GpuResult<Self> {
-        let validation = options.validation || env_flag("VERISPLAT_VALIDATE");
+        let validation = options.validation || crate::former_name::env_flag("VERISPLAT_VALIDATE");
         let emulation = Emulation::from_env()
             .map_err(GpuError::Input)?
             .union(&options.emulate);

@@ -65,6 +65,15 @@ impl HostClock {
     }
 }
 
+impl std::ops::AddAssign for HostTime {
+    fn add_assign(&mut self, d: HostTime) {
+        self.submissions += d.submissions;
+        self.record_ms += d.record_ms;
+        self.submit_ms += d.submit_ms;
+        self.wait_ms += d.wait_ms;
+    }
+}
+
 impl HostTime {
     /// The interval from `earlier` to `self`.
     pub fn since(&self, earlier: &HostTime) -> HostTime {

@@ -82,7 +82,7 @@ impl FieldMode {
 
 /// `d2` where `kernel`'s field support ends ([`cutoff`]).
 pub fn field_cutoff(kernel: SplatKernel) -> f64 {
-    f64::from(crate::model::field::cutoff(kernel))
+    f64::from(cutoff(kernel))
 }
 
 /// The kernel's value at `d2` (0 beyond the cutoff).
@@ -143,7 +143,7 @@ impl FieldGaussians {
             let mean = scene.positions[i].map(f64::from);
             let s = scene.scales[i].map(f64::from);
             let q = scene.rotations[i];
-            let r = crate::model::field::rotation(q).map(|row| row.map(f64::from));
+            let r = rotation(q).map(|row| row.map(f64::from));
             let inv_s2 = s.map(|v| 1.0 / (v * v));
             let a = |x: usize, y: usize| (0..3).map(|j| r[x][j] * inv_s2[j] * r[y][j]).sum();
             g.inv_cov

@@ -154,13 +154,12 @@ pub struct GpuLoss {
     target_staging: Option<GpuBuffer>,
     /// Bytes of `target_staging` staged and not yet copied.
     target_pending: Option<u64>,
-    /// The last [`Self::record_image`]'s sums, copied by its own submission (so that
-    /// [`Self::read_value`] needs none), and whether they are there.
+    /// Where [`Self::record_image`]'s submission copies its sums, so that
+    /// [`Self::read_value`] needs no submission of its own.
     sums_readback: Option<GpuBuffer>,
-    sums_copied: bool,
-    /// The work buffer the last [`Self::record_image`] left its sums in, and its loss's
-    /// pixel count and lambda.
-    last: Option<(ash::vk::Buffer, u64, f32)>,
+    /// The work buffer the last loss left its sums in, its pixel count and lambda, and
+    /// whether its submission also copied them to `sums_readback`.
+    last: Option<(ash::vk::Buffer, u64, f32, bool)>,
 }
 
 /// A pass's writes before the next one's reads (through buffers or texel views).
@@ -267,7 +266,6 @@ impl GpuLoss {
             target_staging: None,
             target_pending: None,
             sums_readback: None,
-            sums_copied: false,
             last: None,
         })
     }
@@ -589,7 +587,6 @@ impl GpuLoss {
             let sums = self
                 .record(ctx, cmd, &bufs, width, height, lambda)?
                 .handle();
-            self.last = Some((sums, pixels, lambda));
             // The sums to host-visible memory in this submission (16 bytes).
             if self.sums_readback.is_none() {
                 self.sums_readback = Some(GpuBuffer::new(
@@ -608,7 +605,7 @@ impl GpuLoss {
                     .cmd_copy_buffer(cmd, sums, readback.handle(), &region)
             };
             barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
-            self.sums_copied = true;
+            self.last = Some((sums, pixels, lambda, true));
             Ok(())
         })();
         self.io = Some(io);
@@ -618,7 +615,7 @@ impl GpuLoss {
     /// The loss of the last [`Self::record_image`] (or [`Self::compute`]), once its
     /// submission has finished.
     pub fn read_value(&self, ctx: &GpuContext) -> GpuResult<LossValue> {
-        let (handle, pixels, lambda) = self
+        let (handle, pixels, lambda, copied) = self
             .last
             .ok_or_else(|| GpuError::InvalidArgument("no loss was recorded".into()))?;
         let (_, work) = self
@@ -629,7 +626,7 @@ impl GpuLoss {
             .iter()
             .find(|b| b.handle() == handle)
             .ok_or_else(|| GpuError::Internal("the loss sums buffer is gone".into()))?;
-        let sums: Vec<[f32; 4]> = match (&self.sums_readback, self.sums_copied) {
+        let sums: Vec<[f32; 4]> = match (&self.sums_readback, copied) {
             // Copied by the submission that computed them (record_image).
             (Some(r), true) => bytemuck::pod_collect_to_vec(r.mapped_range(0, 16)?),
             _ => b.read(ctx, 1)?,
@@ -686,8 +683,7 @@ impl GpuLoss {
                 barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
                 Ok(())
             })?;
-            self.last = sums.map(|h| (h, pixels, lambda));
-            self.sums_copied = false;
+            self.last = sums.map(|h| (h, pixels, lambda, false));
             let value = self.read_value(ctx)?;
             let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
             Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))

@@ -323,13 +323,15 @@ pub fn train(
     // The host's wall clock in each part of the loop, and the step's device calls.
     let mut host = StageSums::default();
     let mut calls = crate::gpu::HostTime::default();
-    let timed = |host: &mut StageSums, name: &str, t: std::time::Instant| {
+    // Adds the time since `t` to part `name` and restarts `t`.
+    let lap = |host: &mut StageSums, name: &str, t: &mut std::time::Instant| {
         host.add([(name, t.elapsed().as_secs_f64() * 1e3)]);
+        *t = std::time::Instant::now();
     };
     // The state on the device, unless the caller asks for the host optimiser.
     let device_path = !opts.host_optimizer;
     for it in run.first..=s.iterations {
-        let t = std::time::Instant::now();
+        let mut t = std::time::Instant::now();
         let view = run.next_view(&job, it);
         let plan = Plan::at(&job, it, run.model.len());
         let due = Due::at(&job, it);
@@ -346,23 +348,15 @@ pub fn train(
                 run.save(&job, it, note)?;
             }
         }
-        timed(&mut host, "outputs", t);
-        let t = std::time::Instant::now();
+        lap(&mut host, "outputs", &mut t);
         let before = rast.renderer().ctx().host_time();
         let value = if device_path {
             run.device_step(&job, &pipelines, rast, loss, view, &plan)?
         } else {
             run.host_step(&job, rast, loss, view, &plan)?
         };
-        let d = rast.renderer().ctx().host_time().since(&before);
-        calls = crate::gpu::HostTime {
-            submissions: calls.submissions + d.submissions,
-            record_ms: calls.record_ms + d.record_ms,
-            submit_ms: calls.submit_ms + d.submit_ms,
-            wait_ms: calls.wait_ms + d.wait_ms,
-        };
-        timed(&mut host, "step", t);
-        let t = std::time::Instant::now();
+        calls += rast.renderer().ctx().host_time().since(&before);
+        lap(&mut host, "step", &mut t);
         if !value.total.is_finite() {
             return Err(TrainError::Other(format!(
                 "training diverged at iteration {it}: the loss is {} ({} Gaussians); the last model saved is the last good one",
@@ -374,8 +368,7 @@ pub fn train(
         if it < s.iterations {
             run.change_model(&job, &plan)?;
         }
-        timed(&mut host, "model changes", t);
-        let t = std::time::Instant::now();
+        lap(&mut host, "model changes", &mut t);
         if it % 10 == 1 {
             run.peak = run.peak.max(rast.renderer().ctx().live_allocations().1);
         }
@@ -385,13 +378,12 @@ pub fn train(
             loss: value,
             gaussians: run.model.len(),
         });
-        timed(&mut host, "other", t);
-        let t = std::time::Instant::now();
+        lap(&mut host, "other", &mut t);
         if due.checkpoint {
             let path = run.checkpoint(&job, it, job.overwrite)?;
             note(format!("[ITER {it}] checkpoint {}", path.display()));
         }
-        timed(&mut host, "checkpoints", t);
+        lap(&mut host, "checkpoints", &mut t);
         if due.cancelled && it < s.iterations {
             let path = run.checkpoint(&job, it, true)?;
             return Err(TrainError::Interrupted {
