@@ -12,7 +12,7 @@
 
 use verisplat::camera::orbit::{orbit, OrbitParams};
 use verisplat::gpu::{ContextOptions, GpuContext};
-use verisplat::render::differentiable::DiffRasterizer;
+use verisplat::render::backward::differentiable::DiffRasterizer;
 use verisplat::train::{data, loss::GpuLoss, model::Settings, run};
 
 fn main() {

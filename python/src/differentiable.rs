@@ -14,7 +14,7 @@ use std::sync::Mutex;
 use verisplat::cpu::RenderOptions;
 use verisplat::mlp::{Mlp, MlpParams};
 use verisplat::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
-use verisplat::render::differentiable::{Accumulation, DiffRasterizer};
+use verisplat::render::backward::differentiable::{Accumulation, DiffRasterizer};
 
 /// The channels of the image a forward pass returns: 3 when shaded.
 pub(crate) fn image_channels(p: &SplatParams<f32>, shader: &Option<Mlp>) -> PyResult<usize> {

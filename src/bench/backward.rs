@@ -91,7 +91,10 @@ pub fn bench_backward(
     let features = (k > 0).then_some((scene.features.as_slice(), k));
     // A shader turns the channels into colour: the pixels' gradients are the colour's.
     let gpu_shader = match (shader, &gpu_features) {
-        (Some(m), Some(_)) => Some(crate::render::shade::GpuShader::new(renderer.ctx(), m)?),
+        (Some(m), Some(_)) => Some(crate::render::forward::shade::GpuShader::new(
+            renderer.ctx(),
+            m,
+        )?),
         (Some(_), None) => {
             return Err(crate::gpu::GpuError::InvalidArgument(
                 "a shader shades feature channels, and the scene has none".into(),

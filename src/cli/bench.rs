@@ -112,7 +112,7 @@ pub(crate) struct BenchArgs {
         default_value = "deterministic",
         requires = "backward"
     )]
-    pub(crate) accumulation: verisplat::render::grad_accumulate::Accumulation,
+    pub(crate) accumulation: verisplat::render::backward::grad_accumulate::Accumulation,
     /// With --backward: shade the feature channels with this neural shader (as `render
     /// --shader`) and differentiate it too: its backward pass is the `shade_bwd` stage.
     #[arg(long, value_name = "FILE.safetensors", requires = "backward")]

@@ -15,7 +15,7 @@ use verisplat::diff_image;
 use verisplat::image_file::{self, Planes};
 use verisplat::metrics::{self, ErrorStats, PlaneKind};
 use verisplat::output::{self, ImageFormat};
-use verisplat::render::blend::BlendKernel;
+use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
 use verisplat::sequence::FrameSelection;
 use verisplat::{note, outln};

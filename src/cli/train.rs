@@ -202,7 +202,7 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
     let ctx = args.gpu.context()?;
     opts.random_points = random_points(args, &data, ctx.info());
     let mut loss = verisplat::train::loss::GpuLoss::new(&ctx)?;
-    let mut rast = verisplat::render::differentiable::DiffRasterizer::new(ctx)?;
+    let mut rast = verisplat::render::backward::differentiable::DiffRasterizer::new(ctx)?;
     let bar = progress_bar(args.quiet, args.iterations);
     let quiet = args.quiet;
     let mut lines = LogLines::new(args.quiet, args.iterations);

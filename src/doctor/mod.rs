@@ -25,8 +25,8 @@ use crate::gpu::subgroup::{self, SubgroupVerdict};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ContextOptions, GpuContext, GpuResult};
 use crate::model::grad::{relative_l2, PixelGrads, GRAD_GROUPS};
-use crate::render::blend::BlendKernel;
-use crate::render::differentiable::DiffRasterizer;
+use crate::render::backward::differentiable::DiffRasterizer;
+use crate::render::forward::blend::BlendKernel;
 use crate::render::GpuRenderer;
 
 /// Smallest PSNR (dB) of the demo scene's GPU colour and alpha against the CPU's (the

@@ -26,43 +26,24 @@
 //! [`GpuRenderer::render`] is a submit followed by its finish.
 
 pub mod backward;
-pub mod blend;
-pub mod blend_bwd;
-pub mod differentiable;
-pub mod features;
 pub mod field;
-pub mod grad_accumulate;
-pub mod keys;
-pub mod order;
-pub mod pack;
-pub mod path;
-pub mod preprocess;
-pub mod preprocess_bwd;
-pub mod ranges;
-pub mod shade;
-pub mod shade_bwd;
-pub mod types;
+pub mod forward;
+pub mod frame;
 
-mod frame_buffers;
-mod pipelines;
-mod readback;
-mod record;
-mod schedule;
-mod timings;
-mod upload;
+use forward::{blend, shade};
 
-use frame_buffers::{check_binding, FrameBuffers, FrameSet};
-use pipelines::{FrameNeeds, Pipelines};
-pub use readback::{ForwardState, Intermediates};
-use schedule::Pass;
-use schedule::CHUNKS_PER_SUBMIT;
-pub use schedule::{
+use frame::buffers::{check_binding, FrameBuffers, FrameSet};
+use frame::pipelines::{FrameNeeds, Pipelines};
+pub use frame::readback::{ForwardState, Intermediates};
+use frame::schedule::Pass;
+use frame::schedule::CHUNKS_PER_SUBMIT;
+pub use frame::schedule::{
     bin_grid, key_bits, tile_bits, SplitLimits, CPU_LOOP_LIMIT, SMALL_BIN_MAX_PAIRS,
 };
-use timings::MAX_STAGES_PER_SUBMIT;
-pub use timings::{FrameStats, Stage, StageTimings};
-use upload::FeatureJob;
-pub use upload::{sh_texel_stride, GpuFeatures, GpuScene};
+use frame::timings::MAX_STAGES_PER_SUBMIT;
+pub use frame::timings::{FrameStats, Stage, StageTimings};
+use frame::upload::FeatureJob;
+pub use frame::upload::{sh_texel_stride, GpuFeatures, GpuScene};
 
 /// Refuses a storage binding of `bytes` that the device cannot bind (maxStorageBufferRange),
 /// naming `what` it is for.

@@ -24,7 +24,7 @@ use crate::gpu::{
     MemoryKind,
 };
 use crate::render::backward::DeviceGrads;
-use crate::render::shade::GpuShader;
+use crate::render::forward::shade::GpuShader;
 use crate::render::{sh_texel_stride, GpuFeatures, GpuRenderer, GpuScene};
 
 /// Invocations per workgroup.

@@ -15,7 +15,7 @@ use crate::common::gpu::{assert_validation_clean, compare, dump_failure, new_ren
 use verisplat::camera::{self, Camera};
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
 use verisplat::frame::Frame;
-use verisplat::render::blend::BlendKernel;
+use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::{GpuRenderer, SplitLimits};
 use verisplat::scene::{self, ActivatedScene};
 

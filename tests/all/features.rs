@@ -187,7 +187,8 @@ fn gpu_feature_blend_matches_the_reference_for_every_channel_count() {
 /// The storage-buffer variant (GPUs; lavapipe uses texel fetches) on 16-pixel bins.
 #[test]
 fn gpu_feature_blend_storage_buffer_variant_matches_the_reference() {
-    let mut r = common::gpu::new_renderer(Some(verisplat::render::blend::BlendKernel::Shared));
+    let mut r =
+        common::gpu::new_renderer(Some(verisplat::render::forward::blend::BlendKernel::Shared));
     check_gpu_cases(&mut r, &TWO_SCENES_BOTH_KERNELS);
 }
 

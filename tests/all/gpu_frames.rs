@@ -270,7 +270,7 @@ fn every_blend_kernel_matches_the_reference_with_the_power_kernel() {
         ..Default::default()
     };
     let mut frames = Vec::new();
-    for kernel in verisplat::render::blend::BlendKernel::all() {
+    for kernel in verisplat::render::forward::blend::BlendKernel::all() {
         let Some(mut r) = common::gpu::renderer_if_it_fits(kernel) else {
             continue;
         };
@@ -307,7 +307,7 @@ fn every_blend_kernel_matches_the_reference() {
     let s = load("playbot_lod3_31k_sh2.ply").activated();
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 11, 400, 300);
     let mut frames = Vec::new();
-    for kernel in verisplat::render::blend::BlendKernel::all() {
+    for kernel in verisplat::render::forward::blend::BlendKernel::all() {
         let Some(mut r) = common::gpu::renderer_if_it_fits(kernel) else {
             continue;
         };
@@ -579,9 +579,9 @@ fn texel_kernel_falls_back_to_16_pixel_bins_past_its_pair_limit() {
     let cam = common::axis_camera(50.0)
         .with_resolution(1280, 720)
         .unwrap();
-    let mut r = new_renderer(Some(verisplat::render::blend::BlendKernel::Texel {
-        strip: 2,
-    }));
+    let mut r = new_renderer(Some(
+        verisplat::render::forward::blend::BlendKernel::Texel { strip: 2 },
+    ));
     let limit = u64::from(verisplat::render::SMALL_BIN_MAX_PAIRS);
     assert!((1200 * 3_600..1200 * 14_400).contains(&limit));
     let gs = r.upload(&act).unwrap();
@@ -625,9 +625,9 @@ fn lavapipe_loop_limit_means_larger_bins_or_a_clear_refusal() {
     let cam = common::axis_camera(50.0)
         .with_resolution(3840, 2160)
         .unwrap();
-    let mut r = new_renderer(Some(verisplat::render::blend::BlendKernel::Texel {
-        strip: 2,
-    }));
+    let mut r = new_renderer(Some(
+        verisplat::render::forward::blend::BlendKernel::Texel { strip: 2 },
+    ));
     let limited = r.ctx().info().name.contains("llvmpipe");
     let gs = r.upload(&act).unwrap();
     let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();

@@ -23,8 +23,8 @@ use crate::common::gpu::{assert_validation_clean, move_towards, new_renderer, re
 use std::collections::{BTreeMap, HashSet};
 use verisplat::camera::{self, Camera};
 use verisplat::cpu::{self, Projected, RenderOptions, SplatKernel};
-use verisplat::render::blend::BlendKernel;
-use verisplat::render::types::unpack_tile;
+use verisplat::render::forward::blend::BlendKernel;
+use verisplat::render::forward::types::unpack_tile;
 use verisplat::render::{GpuRenderer, Intermediates};
 use verisplat::scene::{self, ActivatedScene};
 
@@ -435,7 +435,7 @@ fn forward_state_is_the_finished_frames_pairs_ranges_and_transmittance() {
         .read(ctx, inter.keys.len())
         .unwrap();
     let ranges: Vec<[u32; 2]> = state.ranges.buffer.read(ctx, inter.ranges.len()).unwrap();
-    let splats: Vec<verisplat::render::types::Splat> =
+    let splats: Vec<verisplat::render::forward::types::Splat> =
         state.splats.buffer.read(ctx, inter.splats.len()).unwrap();
     assert_eq!((values, keys), (inter.values.clone(), inter.keys.clone()));
     assert_eq!(ranges, inter.ranges);
@@ -457,7 +457,7 @@ fn the_last_contributor_is_the_last_gaussian_each_pixel_composited() {
 }
 
 fn check_last_contributor(r: &mut GpuRenderer) {
-    use verisplat::render::types::Splat;
+    use verisplat::render::forward::types::Splat;
     let s = load("playbot_lod3_31k_sh2.ply");
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 160, 96);
     let gs = r.upload(&s).unwrap();

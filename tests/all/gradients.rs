@@ -456,8 +456,8 @@ fn every_gradient_group_has_values() {
 // alpha, 0.4 %, on one pixel of thousands. Any wrong term is an O(1) error.
 
 use crate::common::gpu::{assert_validation_clean, new_renderer};
-use verisplat::render::blend::BlendKernel;
-use verisplat::render::differentiable::{Accumulation, DiffRasterizer};
+use verisplat::render::backward::differentiable::{Accumulation, DiffRasterizer};
+use verisplat::render::forward::blend::BlendKernel;
 
 fn to_f32(g: &PixelGrads<f64>) -> PixelGrads<f32> {
     let f = |v: &Vec<f64>| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();

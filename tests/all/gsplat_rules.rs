@@ -239,7 +239,7 @@ fn gsplat_rules_match_the_reference_on_real_scenes() {
             );
         }
     }
-    for kernel in verisplat::render::blend::BlendKernel::all() {
+    for kernel in verisplat::render::forward::blend::BlendKernel::all() {
         if let Some(mut r) = common::gpu::renderer_if_it_fits(kernel) {
             check_frame(
                 &mut r,
@@ -315,7 +315,10 @@ fn reference_backward_matches_finite_differences_under_gsplats_rules() {
 fn gpu_backward_matches_the_reference_under_gsplats_rules() {
     let cam = gpu_camera();
     let shifted = off_centre(&cam, 12.0, -9.0);
-    for blend in [None, Some(verisplat::render::blend::BlendKernel::Shared)] {
+    for blend in [
+        None,
+        Some(verisplat::render::forward::blend::BlendKernel::Shared),
+    ] {
         let mut r = diff_rasterizer(blend);
         let p = grad_scene(60, 1300, Some(3), 3);
         let plain = gsplat(RenderOptions {

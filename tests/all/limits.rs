@@ -50,7 +50,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
         assert_eq!(got, want, "seed {seed:#x}");
     }
     // The host side composes the two words without truncation.
-    let c = verisplat::render::types::Counters {
+    let c = verisplat::render::forward::types::Counters {
         touched_lo: 7,
         touched_hi: 3,
         ..Default::default()

@@ -344,7 +344,7 @@ fn gpu_shade_stage_matches_the_reference() {
         want.color = mlp::shade(&m, &cam, &frame.features, k, &frame.alpha, bg);
         let gs = r.upload(&act).unwrap();
         let gf = r.upload_features(&act).unwrap();
-        let shader = verisplat::render::shade::GpuShader::new(r.ctx(), &m).unwrap();
+        let shader = verisplat::render::forward::shade::GpuShader::new(r.ctx(), &m).unwrap();
         let got = r.render_shaded(&gs, &gf, &shader, &cam, &opts).unwrap();
         let c = common::gpu::compare(&got, &want);
         assert!(
@@ -361,7 +361,7 @@ fn gpu_shade_stage_matches_the_reference() {
         // K mismatch is refused.
         let (t2, d2) = network(&["features"], &[k + 1, 4, 3], &["relu", "sigmoid"], 2);
         let wrong = Mlp::parse(&file_of(&t2, Some(&d2)), None).unwrap();
-        let wrong = verisplat::render::shade::GpuShader::new(r.ctx(), &wrong).unwrap();
+        let wrong = verisplat::render::forward::shade::GpuShader::new(r.ctx(), &wrong).unwrap();
         let e = r
             .render_shaded(&gs, &gf, &wrong, &cam, &opts)
             .unwrap_err()

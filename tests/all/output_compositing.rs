@@ -492,7 +492,7 @@ fn bench_json_has_one_schema_and_names_the_timed_camera() {
         "{kernel}"
     );
     assert!(kernel
-        .parse::<verisplat::render::blend::BlendKernel>()
+        .parse::<verisplat::render::forward::blend::BlendKernel>()
         .is_ok());
 
     // A camera of a file: its name, index and the file.

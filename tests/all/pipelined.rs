@@ -15,7 +15,7 @@ use std::process::Command;
 use verisplat::camera::{self, Camera};
 use verisplat::cpu::{self, RenderOptions};
 use verisplat::output::{self, OutputOptions};
-use verisplat::render::path::GpuPath;
+use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
 use verisplat::scene::{self, Scene};
 use verisplat::sequence::{self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions};

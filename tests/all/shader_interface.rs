@@ -18,19 +18,19 @@ use verisplat::gpu::sort::{
     SortConfig, SortPassPush, SortSetupPush, DEFAULT_SORT_CONFIG, SORT_CONFIG_32,
 };
 use verisplat::gpu::{RadixSort, Scan};
-use verisplat::render::blend::{Blend, BlendKernel};
-use verisplat::render::blend_bwd::BlendBwd;
-use verisplat::render::features::FeatureBlend;
-use verisplat::render::grad_accumulate::{Accumulation, GradAccumulate};
-use verisplat::render::keys::Keys;
-use verisplat::render::order::Order;
-use verisplat::render::pack::Pack;
-use verisplat::render::preprocess::Preprocess;
-use verisplat::render::preprocess_bwd::PreprocessBwd;
-use verisplat::render::ranges::Ranges;
-use verisplat::render::shade::Shade;
-use verisplat::render::shade_bwd::ShadeBwd;
-use verisplat::render::types::{GpuGaussian, GpuGaussianCompact, Splat};
+use verisplat::render::backward::blend_bwd::BlendBwd;
+use verisplat::render::backward::grad_accumulate::{Accumulation, GradAccumulate};
+use verisplat::render::backward::preprocess_bwd::PreprocessBwd;
+use verisplat::render::backward::shade_bwd::ShadeBwd;
+use verisplat::render::forward::blend::{Blend, BlendKernel};
+use verisplat::render::forward::features::FeatureBlend;
+use verisplat::render::forward::keys::Keys;
+use verisplat::render::forward::order::Order;
+use verisplat::render::forward::pack::Pack;
+use verisplat::render::forward::preprocess::Preprocess;
+use verisplat::render::forward::ranges::Ranges;
+use verisplat::render::forward::shade::Shade;
+use verisplat::render::forward::types::{GpuGaussian, GpuGaussianCompact, Splat};
 
 fn interface(shader: &str, defines: &[(&str, &str)]) -> Interface {
     let defines: Vec<(&str, String)> = defines.iter().map(|&(k, v)| (k, v.to_string())).collect();
@@ -241,7 +241,9 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     );
     assert_eq!(scan.push_size as usize, size_of::<ScanPush>());
     // The stages' own push-constant structs (render/types.rs).
-    use verisplat::render::types::{BlendPush, FeatureBlendPush, KeysPush, PackPush, WindowPush};
+    use verisplat::render::forward::types::{
+        BlendPush, FeatureBlendPush, KeysPush, PackPush, WindowPush,
+    };
     let pre = interface(
         "preprocess",
         &[("COMPACT_GAUSSIANS", "0"), ("PREPROCESS_TEXEL_IO", "1")],

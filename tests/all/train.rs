@@ -517,7 +517,7 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
 struct Harness {
     dir: tempfile::TempDir,
     dataset: verisplat::train::data::Dataset,
-    rast: verisplat::render::differentiable::DiffRasterizer,
+    rast: verisplat::render::backward::differentiable::DiffRasterizer,
     loss: verisplat::train::loss::GpuLoss,
 }
 
@@ -531,7 +531,8 @@ impl Harness {
         let dataset = data::load_colmap(&set, data::Resolution(1), false).unwrap();
         let renderer = crate::common::gpu::new_renderer(None);
         let loss = verisplat::train::loss::GpuLoss::new(renderer.ctx()).unwrap();
-        let rast = verisplat::render::differentiable::DiffRasterizer::with_renderer(renderer);
+        let rast =
+            verisplat::render::backward::differentiable::DiffRasterizer::with_renderer(renderer);
         Harness {
             dir,
             dataset,

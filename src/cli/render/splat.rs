@@ -8,7 +8,7 @@ use crate::cli::common::fail_on_validation_messages;
 use crate::cli::plural;
 use anyhow::{bail, Result};
 use verisplat::note;
-use verisplat::render::path::GpuPath;
+use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
 use verisplat::sequence::{ProgressStyle, Summary};
 
@@ -225,7 +225,10 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
         );
     }
     let gpu_shader = match shader {
-        Some(m) => Some(verisplat::render::shade::GpuShader::new(renderer.ctx(), m)?),
+        Some(m) => Some(verisplat::render::forward::shade::GpuShader::new(
+            renderer.ctx(),
+            m,
+        )?),
         None => None,
     };
     let mut sums = StageSums::default();

@@ -10,10 +10,10 @@ use super::{
 use crate::gpu::shader::Resource;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, GpuBuffer, GpuContext, GpuResult, GpuTimer};
-use crate::render::blend_bwd::BlendBwd;
-use crate::render::grad_accumulate::{GradAccumulate, GradPush};
-use crate::render::preprocess_bwd::PreprocessBwd;
-use crate::render::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
+use crate::render::backward::blend_bwd::BlendBwd;
+use crate::render::backward::grad_accumulate::{GradAccumulate, GradPush};
+use crate::render::backward::preprocess_bwd::PreprocessBwd;
+use crate::render::backward::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
 use crate::render::{ForwardState, GpuScene};
 
 /// The shader's backward pass of a shaded frame, resolved.
@@ -95,7 +95,8 @@ impl<'a> BackwardPass<'a> {
         } = st;
         let (shade_bwd, alpha, scratch, partials, mlp_grads) =
             (&*shade_bwd, &*alpha, &*scratch, &*partials, &*mlp_grads);
-        let float_sums = *mode != crate::render::grad_accumulate::Accumulation::Deterministic;
+        let float_sums =
+            *mode != crate::render::backward::grad_accumulate::Accumulation::Deterministic;
         let blend = &blend
             .iter()
             .find(|(k, _)| *k == blend_key)

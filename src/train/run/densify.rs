@@ -5,7 +5,7 @@
 
 use super::schedule::{Due, Plan};
 use super::{Job, Run, TrainError};
-use crate::render::differentiable::DiffRasterizer;
+use crate::render::backward::differentiable::DiffRasterizer;
 
 impl Run<'_> {
     /// Brings the device's state down for the evaluation and the save, which see the

@@ -3,7 +3,7 @@
 
 use super::{Evaluation, Job, Run, TrainError};
 use crate::model::RenderOptions;
-use crate::render::differentiable::DiffRasterizer;
+use crate::render::backward::differentiable::DiffRasterizer;
 use crate::train::data::View;
 use crate::train::model::Model;
 

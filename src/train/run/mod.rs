@@ -34,7 +34,7 @@ use super::loss::{GpuLoss, LossValue};
 use super::model::{Model, Settings};
 use crate::gen::Rng;
 use crate::model::RenderOptions;
-use crate::render::differentiable::DiffRasterizer;
+use crate::render::backward::differentiable::DiffRasterizer;
 use schedule::{Due, Plan};
 use std::cell::OnceCell;
 use std::path::{Path, PathBuf};

@@ -5,7 +5,7 @@ use std::sync::{Mutex, MutexGuard, OnceLock};
 use verisplat::camera::Camera;
 use verisplat::frame::Frame;
 use verisplat::gpu::{ContextOptions, GpuContext};
-use verisplat::render::blend::BlendKernel;
+use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
 
 /// The shared renderer (validation layer on; the blend variant for the device).

@@ -73,7 +73,7 @@ impl FeatureBlend {
             "blend_features",
             &defines,
             &bindings,
-            std::mem::size_of::<super::types::FeatureBlendPush>() as u32,
+            std::mem::size_of::<crate::render::forward::types::FeatureBlendPush>() as u32,
         )?;
         Ok(FeatureBlend { pipeline, texel })
     }
@@ -127,7 +127,7 @@ impl FeatureBlend {
                     },
                 ),
             ])?,
-            bytemuck::bytes_of(&super::types::FeatureBlendPush {
+            bytemuck::bytes_of(&crate::render::forward::types::FeatureBlendPush {
                 resume: u32::from(b.resume),
                 pad: 0,
             }),

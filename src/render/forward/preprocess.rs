@@ -96,7 +96,7 @@ impl Preprocess {
                 (b::BIN_MASKS, write),
                 (b::TOUCHED, write),
             ])?,
-            std::mem::size_of::<super::types::WindowPush>() as u32,
+            std::mem::size_of::<crate::render::forward::types::WindowPush>() as u32,
         )?;
         Ok(Preprocess {
             pipeline,
@@ -134,7 +134,7 @@ impl Preprocess {
             let part = |s, stride| window_slice(s, whole, first, count, stride);
             let groups =
                 dispatch_grid(count.div_ceil(WORKGROUP), ctx.info().max_workgroup_count[0]);
-            let push = super::types::WindowPush { first, count };
+            let push = crate::render::forward::types::WindowPush { first, count };
             let resources = match (self.texel_io, b.texels) {
                 (true, Some(t)) => by_binding([
                     (slot::PARAMS, Resource::Buffer(b.params)),

@@ -19,7 +19,8 @@ pub const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 pub const DEPTH_BITS: u32 = 32;
 
 /// Byte offset of `FrameParams::counts` (`x`: the Gaussian count) in the params buffer.
-const COUNTS_OFFSET: u64 = std::mem::offset_of!(super::types::FrameParams, counts) as u64;
+const COUNTS_OFFSET: u64 =
+    std::mem::offset_of!(crate::render::forward::types::FrameParams, counts) as u64;
 
 /// The gather pipeline of the depth order stage.
 pub struct Order {

@@ -28,7 +28,7 @@ impl Pack {
                 (slot::COLOR, BindingKind::StorageImage),
                 (slot::PACKED, BindingKind::StorageBuffer),
             ])?,
-            std::mem::size_of::<super::types::PackPush>() as u32,
+            std::mem::size_of::<crate::render::forward::types::PackPush>() as u32,
         )?;
         Ok(Pack { pipeline })
     }
@@ -43,7 +43,7 @@ impl Pack {
         packed: BufferSlice,
         (width, height): (u32, u32),
     ) -> GpuResult<()> {
-        let push = super::types::PackPush { width, height };
+        let push = crate::render::forward::types::PackPush { width, height };
         self.pipeline.dispatch_resources(
             ctx,
             cmd,

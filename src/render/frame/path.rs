@@ -3,11 +3,12 @@
 //! flight, frame `n + 1` is recorded and submitted before frame `n` is waited for, read
 //! back and handed to the encoders, so the device renders while the CPU reads back.
 
-use super::{shade::GpuShader, FrameStats, GpuFeatures, GpuRenderer, GpuScene, Readback};
-use super::{StageTimings, Ticket, MAX_FRAMES_IN_FLIGHT};
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::model::RenderOptions;
+use crate::render::forward::shade::GpuShader;
+use crate::render::{FrameStats, GpuFeatures, GpuRenderer, GpuScene, Readback};
+use crate::render::{StageTimings, Ticket, MAX_FRAMES_IN_FLIGHT};
 use crate::sequence::FrameSource;
 use std::collections::VecDeque;
 

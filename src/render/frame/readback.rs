@@ -1,12 +1,13 @@
 //! Reading a finished frame back to the host: pixels, counters, feature planes and the
 //! intermediate buffers the tests compare with the CPU reference.
 
-use super::types::{Counters, Splat};
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::gpu::{BufferSlice, GpuError, GpuImage, GpuResult};
+use crate::render::forward::types::{Counters, Splat};
 
-use super::{bin_grid, features, GpuRenderer, GpuScene, Rgba8Frame};
+use crate::render::forward::features;
+use crate::render::{bin_grid, GpuRenderer, GpuScene, Rgba8Frame};
 
 /// Intermediate buffers of a frame, read back for tests against the CPU reference.
 #[derive(Clone, Debug, Default)]
@@ -37,7 +38,7 @@ pub struct Intermediates {
 
 impl GpuRenderer {
     /// The `k` blended channels of set `set`'s last features frame, pixel-major.
-    pub(super) fn read_feature_planes(
+    pub(crate) fn read_feature_planes(
         &self,
         set: usize,
         k: usize,
@@ -65,7 +66,7 @@ impl GpuRenderer {
         Ok(out)
     }
 
-    pub(super) fn read_counters(&self, set: usize) -> GpuResult<Counters> {
+    pub(crate) fn read_counters(&self, set: usize) -> GpuResult<Counters> {
         let f = self.sets[set]
             .frame
             .as_ref()
@@ -77,7 +78,7 @@ impl GpuRenderer {
         Ok(bytemuck::pod_read_unaligned(bytes))
     }
 
-    pub(super) fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
+    pub(crate) fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
         let f = self.sets[set]
             .frame
             .as_ref()
@@ -113,7 +114,7 @@ impl GpuRenderer {
         })
     }
 
-    pub(super) fn read_rgba8(&self, set: usize, cam: &Camera) -> GpuResult<Rgba8Frame> {
+    pub(crate) fn read_rgba8(&self, set: usize, cam: &Camera) -> GpuResult<Rgba8Frame> {
         let f = self.sets[set]
             .frame
             .as_ref()
@@ -128,7 +129,7 @@ impl GpuRenderer {
     }
 
     /// The intermediate buffers of the last frame finished.
-    pub(super) fn read_intermediates(
+    pub(crate) fn read_intermediates(
         &self,
         scene: &GpuScene,
         cam: &Camera,
@@ -163,7 +164,7 @@ impl GpuRenderer {
 /// one handle: the projected Gaussians, the sorted (bin, Gaussian) pairs, each bin's range
 /// of them, and the colour image whose alpha is each pixel's `1 - T_final`. Valid until
 /// the renderer records its next frame. For a frame rendered in depth-ordered chunks the
-/// pairs and ranges are the last chunk's ([`super::FrameStats::chunks`] says how many there were).
+/// pairs and ranges are the last chunk's ([`crate::render::FrameStats::chunks`] says how many there were).
 /// With [`GpuRenderer::set_save_forward_state`] a frame in one piece also saves each
 /// pixel's last contributor.
 pub struct ForwardState<'a> {

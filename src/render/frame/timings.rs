@@ -2,7 +2,7 @@
 
 use crate::gpu::{GpuError, GpuResult};
 
-use super::{GpuRenderer, CHUNKS_PER_SUBMIT};
+use crate::render::{GpuRenderer, CHUNKS_PER_SUBMIT};
 
 /// The timed stages of a frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,15 +67,15 @@ impl Stage {
 }
 
 /// Stages the front of a frame records (preprocess, order, scan).
-pub(super) const FRONT_STAGES: u32 = 3;
+pub(crate) const FRONT_STAGES: u32 = 3;
 /// Stages each chunk records (keys, sort, ranges, features, blend).
-pub(super) const CHUNK_STAGES: u32 = 5;
+pub(crate) const CHUNK_STAGES: u32 = 5;
 /// Stages after the last chunk (shade, readback).
-pub(super) const FINAL_STAGES: u32 = 2;
+pub(crate) const FINAL_STAGES: u32 = 2;
 
 /// Timed stages one submission records at most: a whole frame, or a batch of
 /// [`CHUNKS_PER_SUBMIT`] chunks with the frame's end; the frame timers hold this many.
-pub(super) const MAX_STAGES_PER_SUBMIT: u32 = {
+pub(crate) const MAX_STAGES_PER_SUBMIT: u32 = {
     let whole = FRONT_STAGES + CHUNK_STAGES + FINAL_STAGES;
     let chunks = CHUNKS_PER_SUBMIT as u32 * CHUNK_STAGES + FINAL_STAGES;
     if whole > chunks {
@@ -145,7 +145,7 @@ impl StageTimings {
     }
 
     /// Adds another submission's times of the same frame (a frame in chunks).
-    pub(super) fn add(&mut self, other: &StageTimings) {
+    pub(crate) fn add(&mut self, other: &StageTimings) {
         for stage in Stage::ALL {
             *self.slot(stage) += other.get(stage);
         }
@@ -184,7 +184,7 @@ pub struct FrameStats {
 }
 
 impl GpuRenderer {
-    pub(super) fn read_timings(&self, set: usize) -> GpuResult<StageTimings> {
+    pub(crate) fn read_timings(&self, set: usize) -> GpuResult<StageTimings> {
         let timer = &self.sets[set].timer;
         let stages = timer.read(&self.ctx)?;
         let mut t = StageTimings::default();

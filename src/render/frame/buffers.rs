@@ -1,7 +1,6 @@
 //! Per-frame device resources: the frame buffers sized by the scene, the resolution and
 //! the key capacity, the feature planes, and the set of them each frame in flight owns.
 
-use super::types::{Counters, FrameParams, Splat};
 use crate::camera::Camera;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::{SortTexels, SORT_CONFIG_32};
@@ -9,27 +8,28 @@ use crate::gpu::{
     BufferView, FrameSlot, GpuBuffer, GpuContext, GpuError, GpuImage, GpuResult, GpuTimer,
     MemoryKind, RadixSort, Scan,
 };
+use crate::render::forward::types::{Counters, FrameParams, Splat};
 use ash::vk;
 
-use super::{
-    bin_grid, keys, preprocess, GpuFeatures, GpuRenderer, GpuScene, MAX_FRAMES_IN_FLIGHT,
-    MAX_STAGES_PER_SUBMIT,
+use crate::render::forward::{keys, preprocess};
+use crate::render::{
+    bin_grid, GpuFeatures, GpuRenderer, GpuScene, MAX_FRAMES_IN_FLIGHT, MAX_STAGES_PER_SUBMIT,
 };
 
 /// The feature images of a frame: one plane per group of four channels.
-pub(super) struct FeaturePlanes {
-    pub(super) buffer: GpuBuffer,
+pub(crate) struct FeaturePlanes {
+    pub(crate) buffer: GpuBuffer,
     /// Bytes from one plane to the next.
-    pub(super) plane_bytes: u64,
+    pub(crate) plane_bytes: u64,
     /// Bytes of one plane's pixels.
-    pub(super) pixel_bytes: u64,
+    pub(crate) pixel_bytes: u64,
     /// Planes held.
-    pub(super) groups: u64,
+    pub(crate) groups: u64,
 }
 
 /// Refuses a buffer that one storage-buffer binding of the device cannot cover
 /// ([`crate::gpu::limits::check_binding`]).
-pub(super) fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
+pub(crate) fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResult<()> {
     crate::gpu::limits::check_binding(
         ctx.info(),
         what,
@@ -43,58 +43,58 @@ pub(super) fn check_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuResu
 /// R32_UINT unless noted: the depth order's keys, values and scratch halves, the pair
 /// sort's (its values are viewed by [`FrameBuffers::value_texels`], the splats by
 /// [`FrameBuffers::splat_texels`]), and the other per-Gaussian arrays.
-pub(super) struct SortViews {
-    pub(super) depth_keys: BufferView,
-    pub(super) depth_values: BufferView,
-    pub(super) depth_scratch: [BufferView; 2],
-    pub(super) keys: BufferView,
-    pub(super) pair_scratch: [BufferView; 2],
+pub(crate) struct SortViews {
+    pub(crate) depth_keys: BufferView,
+    pub(crate) depth_values: BufferView,
+    pub(crate) depth_scratch: [BufferView; 2],
+    pub(crate) keys: BufferView,
+    pub(crate) pair_scratch: [BufferView; 2],
     /// R32G32_UINT.
-    pub(super) rects: BufferView,
-    pub(super) offsets: BufferView,
-    pub(super) bin_masks: BufferView,
-    pub(super) touched: BufferView,
+    pub(crate) rects: BufferView,
+    pub(crate) offsets: BufferView,
+    pub(crate) bin_masks: BufferView,
+    pub(crate) touched: BufferView,
 }
 
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
 /// (Fields drop in order: the texel views go before the buffers they view.)
-pub(super) struct FrameBuffers {
-    pub(super) sort_views: Option<SortViews>,
-    pub(super) splat_texels: BufferView,
-    pub(super) value_texels: Option<BufferView>,
-    pub(super) gaussians: u32,
-    pub(super) width: u32,
-    pub(super) height: u32,
-    pub(super) capacity: u32,
-    pub(super) params: GpuBuffer,
-    pub(super) counters: GpuBuffer,
-    pub(super) splats: GpuBuffer,
-    pub(super) rects: GpuBuffer,
-    pub(super) offsets: GpuBuffer,
-    pub(super) depth_keys: GpuBuffer,
-    pub(super) touched: GpuBuffer,
-    pub(super) depth_values: GpuBuffer,
-    pub(super) bin_masks: GpuBuffer,
-    pub(super) scan_scratch: GpuBuffer,
-    pub(super) keys: GpuBuffer,
-    pub(super) values: GpuBuffer,
-    pub(super) sort_scratch: GpuBuffer,
-    pub(super) ranges: GpuBuffer,
-    pub(super) color: GpuImage,
-    pub(super) depth: GpuImage,
+pub(crate) struct FrameBuffers {
+    pub(crate) sort_views: Option<SortViews>,
+    pub(crate) splat_texels: BufferView,
+    pub(crate) value_texels: Option<BufferView>,
+    pub(crate) gaussians: u32,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) capacity: u32,
+    pub(crate) params: GpuBuffer,
+    pub(crate) counters: GpuBuffer,
+    pub(crate) splats: GpuBuffer,
+    pub(crate) rects: GpuBuffer,
+    pub(crate) offsets: GpuBuffer,
+    pub(crate) depth_keys: GpuBuffer,
+    pub(crate) touched: GpuBuffer,
+    pub(crate) depth_values: GpuBuffer,
+    pub(crate) bin_masks: GpuBuffer,
+    pub(crate) scan_scratch: GpuBuffer,
+    pub(crate) keys: GpuBuffer,
+    pub(crate) values: GpuBuffer,
+    pub(crate) sort_scratch: GpuBuffer,
+    pub(crate) ranges: GpuBuffer,
+    pub(crate) color: GpuImage,
+    pub(crate) depth: GpuImage,
     /// 8-bit RGBA of the colour image; made on the first [`Readback::Rgba8`] frame.
-    pub(super) packed: Option<GpuBuffer>,
-    pub(super) readback: GpuBuffer,
+    pub(crate) packed: Option<GpuBuffer>,
+    pub(crate) readback: GpuBuffer,
     /// The scanned offsets read back to plan a frame's chunks (host-visible); made on
     /// the first frame rendered in chunks.
-    pub(super) chunk_offsets: Option<GpuBuffer>,
+    pub(crate) chunk_offsets: Option<GpuBuffer>,
     /// One past the sorted-pair index of each pixel's last contributor; made on the first
     /// frame that saves its forward state.
-    pub(super) last_contributor: Option<GpuBuffer>,
+    pub(crate) last_contributor: Option<GpuBuffer>,
 }
 
 impl FrameBuffers {
-    pub(super) fn new(
+    pub(crate) fn new(
         ctx: &GpuContext,
         gaussians: u32,
         width: u32,
@@ -232,7 +232,7 @@ impl FrameBuffers {
     }
 
     /// The depth order's sort views, when the sorts read through texel views.
-    pub(super) fn depth_sort_texels(&self) -> Option<SortTexels> {
+    pub(crate) fn depth_sort_texels(&self) -> Option<SortTexels> {
         self.sort_views.as_ref().map(|v| SortTexels {
             keys: v.depth_keys.handle(),
             values: v.depth_values.handle(),
@@ -243,7 +243,7 @@ impl FrameBuffers {
 
     /// The views of the texel-I/O preprocess, over this frame's buffers and `scene`'s
     /// records.
-    pub(super) fn preprocess_texels(
+    pub(crate) fn preprocess_texels(
         &self,
         scene: &GpuScene,
     ) -> GpuResult<preprocess::PreprocessTexels> {
@@ -264,7 +264,7 @@ impl FrameBuffers {
     }
 
     /// What the keys stage reads and writes, as its pipeline binds them.
-    pub(super) fn keys_io(&self, texel_io: bool) -> GpuResult<keys::KeysIo<'_>> {
+    pub(crate) fn keys_io(&self, texel_io: bool) -> GpuResult<keys::KeysIo<'_>> {
         let views = (self.sort_views.as_ref(), self.value_texels.as_ref());
         Ok(match (texel_io, views) {
             (false, _) => keys::KeysIo {
@@ -292,7 +292,7 @@ impl FrameBuffers {
     }
 
     /// The pair sort's views, when the sorts read through texel views.
-    pub(super) fn pair_sort_texels(&self) -> Option<SortTexels> {
+    pub(crate) fn pair_sort_texels(&self) -> Option<SortTexels> {
         let v = self.sort_views.as_ref()?;
         Some(SortTexels {
             keys: v.keys.handle(),
@@ -302,7 +302,7 @@ impl FrameBuffers {
         })
     }
 
-    pub(super) fn device_bytes(&self) -> u64 {
+    pub(crate) fn device_bytes(&self) -> u64 {
         [
             &self.params,
             &self.counters,
@@ -328,7 +328,7 @@ impl FrameBuffers {
             + self.depth.bytes()
     }
 
-    pub(super) fn readback_offsets(&self) -> (u64, u64, u64) {
+    pub(crate) fn readback_offsets(&self) -> (u64, u64, u64) {
         let pixels = u64::from(self.width) * u64::from(self.height);
         (0, pixels * 16, pixels * 20)
     }
@@ -337,25 +337,25 @@ impl FrameBuffers {
 /// The resources of one frame in flight: command buffer and fence, timestamp queries,
 /// frame buffers and feature images. (Fields drop in order: the slot goes first and waits
 /// for a submission still pending, before the buffers it uses go.)
-pub(super) struct FrameSet {
-    pub(super) slot: FrameSlot,
-    pub(super) timer: GpuTimer,
-    pub(super) frame: Option<FrameBuffers>,
+pub(crate) struct FrameSet {
+    pub(crate) slot: FrameSlot,
+    pub(crate) timer: GpuTimer,
+    pub(crate) frame: Option<FrameBuffers>,
     /// The feature images of this set's last features frame, one plane per group of four
     /// channels (vec4 per pixel) in one buffer, planes `plane_bytes` apart (a multiple of
     /// the storage-buffer offset alignment); kept across frames of the same size.
-    pub(super) feature_planes: Option<FeaturePlanes>,
+    pub(crate) feature_planes: Option<FeaturePlanes>,
     /// Bin size of the frame recorded in this set (see [`FrameStats::bin_size`]).
-    pub(super) bin_size: u32,
+    pub(crate) bin_size: u32,
     /// The serial number of the frame submitted in this set and not finished yet.
-    pub(super) pending: Option<u64>,
+    pub(crate) pending: Option<u64>,
     /// The frame last recorded in this set writes each pixel's last contributor (a frame
     /// in one piece recorded while the renderer saves its forward state).
-    pub(super) saves_last: bool,
+    pub(crate) saves_last: bool,
 }
 
 impl FrameSet {
-    pub(super) fn new(ctx: &GpuContext, index: usize, bin_size: u32) -> GpuResult<Self> {
+    pub(crate) fn new(ctx: &GpuContext, index: usize, bin_size: u32) -> GpuResult<Self> {
         Ok(FrameSet {
             slot: FrameSlot::new(ctx, &format!("frame {index}"))?,
             // Two timestamps per stage, as many stages as one submission records.
@@ -375,7 +375,7 @@ impl FrameSet {
 
 impl GpuRenderer {
     /// Makes set `set`'s feature planes hold `features`' groups for `pixels` pixels.
-    pub(super) fn ensure_feature_planes(
+    pub(crate) fn ensure_feature_planes(
         &mut self,
         set: usize,
         features: &GpuFeatures,
@@ -407,7 +407,7 @@ impl GpuRenderer {
     }
 
     /// Makes set `set`'s frame buffers fit the scene, the camera and `capacity` pairs.
-    pub(super) fn ensure_frame(
+    pub(crate) fn ensure_frame(
         &mut self,
         set: usize,
         scene: &GpuScene,
@@ -439,7 +439,7 @@ impl GpuRenderer {
     }
 
     /// A set with no frame in flight (made when every set made so far is busy).
-    pub(super) fn free_set(&mut self) -> GpuResult<usize> {
+    pub(crate) fn free_set(&mut self) -> GpuResult<usize> {
         if let Some(i) = self.sets.iter().position(|s| s.pending.is_none()) {
             return Ok(i);
         }
@@ -458,7 +458,7 @@ impl GpuRenderer {
     }
 
     /// Makes the last-contributor buffer of set `set`'s frame buffers.
-    pub(super) fn ensure_last_contributor(&mut self, set: usize) -> GpuResult<()> {
+    pub(crate) fn ensure_last_contributor(&mut self, set: usize) -> GpuResult<()> {
         let f = self.sets[set]
             .frame
             .as_mut()
@@ -478,7 +478,7 @@ impl GpuRenderer {
     }
 
     /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.
-    pub(super) fn ensure_packed(&mut self, set: usize) -> GpuResult<()> {
+    pub(crate) fn ensure_packed(&mut self, set: usize) -> GpuResult<()> {
         let f = self.sets[set]
             .frame
             .as_mut()

@@ -17,7 +17,7 @@ const SIDE: u32 = 16;
 const ROWS: u32 = 8;
 
 /// The push constants of `glsl/shade.comp`, and the first 112 bytes of
-/// `glsl/shade_bwd.comp`'s ([`super::shade_bwd`]).
+/// `glsl/shade_bwd.comp`'s ([`crate::render::backward::shade_bwd`]).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct ShadePush {

@@ -201,7 +201,7 @@ impl Blend {
             "blend",
             &defines,
             &bindings,
-            std::mem::size_of::<super::types::BlendPush>() as u32,
+            std::mem::size_of::<crate::render::forward::types::BlendPush>() as u32,
         )?;
         Ok(Blend {
             pipeline,
@@ -286,7 +286,7 @@ impl Blend {
             ctx,
             cmd,
             resources,
-            bytemuck::bytes_of(&super::types::BlendPush {
+            bytemuck::bytes_of(&crate::render::forward::types::BlendPush {
                 resume: u32::from(b.resume),
                 last: u32::from(b.last),
             }),

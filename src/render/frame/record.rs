@@ -3,27 +3,28 @@
 //! ranges -> features -> blend) -> shade -> readback, one short function per phase, each
 //! stage inside its timestamp pair ([`Stage`]) and each barrier saying what it orders.
 
-use super::features::FeatureBindings;
-use super::frame_buffers::FeaturePlanes;
-use super::pipelines::FramePipelines;
-use super::types::{self, Counters, FrameParams};
-use super::{
-    bin_grid, blend, keys, preprocess, tile_bits, FrameBuffers, FrameSet, GpuFeatures, GpuRenderer,
-    GpuScene, Pass, Readback, Stage, Ticket,
-};
 use crate::camera::Camera;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::SortJob;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::model::RenderOptions;
-use crate::render::shade::GpuShader;
+use crate::render::forward::features::FeatureBindings;
+use crate::render::forward::shade::GpuShader;
+use crate::render::forward::types::{self, Counters, FrameParams};
+use crate::render::forward::{blend, keys, preprocess};
+use crate::render::frame::buffers::FeaturePlanes;
+use crate::render::frame::pipelines::FramePipelines;
+use crate::render::{
+    bin_grid, tile_bits, FrameBuffers, FrameSet, GpuFeatures, GpuRenderer, GpuScene, Pass,
+    Readback, Stage, Ticket,
+};
 use ash::vk;
 
 impl GpuRenderer {
     /// Builds the pipelines the ticket's frame needs, records `pass` of it into its set's
     /// command buffer and submits it; waits for it when `wait`.
-    pub(super) fn record_and_submit(
+    pub(crate) fn record_and_submit(
         &mut self,
         t: &Ticket,
         wait: bool,

@@ -6,18 +6,18 @@ use crate::gpu::sort::{SortConfig, SORT_CONFIG_32};
 use crate::gpu::{GpuContext, GpuError, GpuResult, RadixSort, Scan};
 use crate::model::SplatKernel;
 
-use super::blend::{Blend, BlendKernel};
-use super::features::FeatureBlend;
-use super::keys::Keys;
-use super::order::Order;
-use super::pack::Pack;
-use super::preprocess::Preprocess;
-use super::ranges::Ranges;
-use super::shade::Shade;
+use crate::render::forward::blend::{Blend, BlendKernel};
+use crate::render::forward::features::FeatureBlend;
+use crate::render::forward::keys::Keys;
+use crate::render::forward::order::Order;
+use crate::render::forward::pack::Pack;
+use crate::render::forward::preprocess::Preprocess;
+use crate::render::forward::ranges::Ranges;
+use crate::render::forward::shade::Shade;
 
 /// What one frame records, so what it needs built.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct FrameNeeds {
+pub(crate) struct FrameNeeds {
     /// 32-byte compact records (the compact preprocess variant).
     pub compact: bool,
     /// The alpha falloff (a blend variant each).
@@ -34,7 +34,7 @@ pub(super) struct FrameNeeds {
 }
 
 /// Every pipeline the renderer may use, built on first use.
-pub(super) struct Pipelines {
+pub(crate) struct Pipelines {
     kernel: BlendKernel,
     /// By [`FrameNeeds::compact`].
     preprocess: [Option<Preprocess>; 2],
@@ -55,7 +55,7 @@ pub(super) struct Pipelines {
 
 /// The pipelines one frame records with.
 #[derive(Clone, Copy)]
-pub(super) struct FramePipelines<'a> {
+pub(crate) struct FramePipelines<'a> {
     pub preprocess: &'a Preprocess,
     pub order: &'a Order,
     pub scan: &'a Scan,

@@ -5,17 +5,17 @@
 //! ([`DiffRasterizer::set_shader`]) the Gaussians' direct values are feature channels that
 //! the shader turns into colour, and the backward pass also returns the shader's gradients.
 
-use super::shade::GpuShader;
-use super::types::Splat;
-use super::{GpuRenderer, GpuScene};
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::gpu::{GpuContext, GpuError, GpuResult};
 use crate::mlp::{Mlp, MlpParams};
 use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use crate::model::RenderOptions;
+use crate::render::forward::shade::GpuShader;
+use crate::render::forward::types::Splat;
+use crate::render::{GpuRenderer, GpuScene};
 
-pub use super::grad_accumulate::Accumulation;
+pub use crate::render::backward::grad_accumulate::Accumulation;
 
 /// `frame`'s blended feature channels over `background` (`c + (1 - alpha) * bg`, what the
 /// device's colour path does): direct values are blended as feature channels, whatever

@@ -7,7 +7,7 @@ use crate::gpu::shader_set::bindings::preprocess_bwd as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use ash::vk;
 
-use super::grad_accumulate::GradPush;
+use crate::render::backward::grad_accumulate::GradPush;
 
 /// Bytes of one Gaussian's gradients in the output (`GaussianGrad`: four vec4).
 pub const GAUSSIAN_GRAD_BYTES: u64 = 64;

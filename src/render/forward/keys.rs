@@ -71,7 +71,7 @@ impl Keys {
                 (slot::DEPTH_ORDER, read),
                 (slot::BIN_MASKS, read),
             ])?,
-            std::mem::size_of::<super::types::KeysPush>() as u32,
+            std::mem::size_of::<crate::render::forward::types::KeysPush>() as u32,
         )?;
         Ok(Keys { pipeline, texel_io })
     }
@@ -94,7 +94,7 @@ impl Keys {
             (chunk.end - chunk.first).div_ceil(WORKGROUP).max(1),
             ctx.info().max_workgroup_count[0],
         );
-        let push = super::types::KeysPush {
+        let push = crate::render::forward::types::KeysPush {
             first: chunk.first,
             end: chunk.end,
             base: chunk.base,

@@ -1,12 +1,13 @@
 //! Scheduling a frame: the capacity and bin-size policy, regrowing, and depth-ordered
 //! chunks for frames whose pairs exceed one key buffer.
 
-use super::types::{Counters, Splat};
 use crate::camera::Camera;
 use crate::gpu::{limits, GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::model::RenderOptions;
+use crate::render::forward::types::{Counters, Splat};
 
-use super::{keys, preprocess, FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};
+use crate::render::forward::{keys, preprocess};
+use crate::render::{FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};
 
 /// Key bits that order the pairs for `num_tiles` bins: 32 depth bits plus the bin id's.
 pub fn key_bits(num_tiles: u32) -> u32 {
@@ -37,11 +38,11 @@ pub struct SplitLimits {
 
 /// Chunks recorded per submission of a chunked frame (four timed stages each, within the
 /// frame timer's capacity).
-pub(super) const CHUNKS_PER_SUBMIT: usize = 6;
+pub(crate) const CHUNKS_PER_SUBMIT: usize = 6;
 
 /// What one submission of a frame records.
 #[derive(Clone, Copy)]
-pub(super) enum Pass<'a> {
+pub(crate) enum Pass<'a> {
     /// The whole frame: preprocess to readback, every Gaussian in one chunk.
     Whole,
     /// Preprocess, depth order and scan, then the counters and the scanned offsets to
@@ -57,7 +58,7 @@ pub(super) enum Pass<'a> {
 }
 
 /// Smallest key capacity allocated.
-pub(super) const MIN_CAPACITY: u32 = 1 << 16;
+pub(crate) const MIN_CAPACITY: u32 = 1 << 16;
 
 /// llvmpipe (lavapipe) ends all loops of a shader invocation after this many iterations in
 /// total (gallivm's `LP_MAX_TGSI_LOOP_ITERATIONS`), silently. The shaders report their
@@ -72,22 +73,22 @@ pub const CPU_LOOP_LIMIT: u32 = 65_535;
 pub const SMALL_BIN_MAX_PAIRS: u32 = 1 << 24;
 
 /// Bin side (pixels) a frame falls back to when its preferred bins do not do.
-pub(super) const LARGE_BIN: u32 = 16;
+pub(crate) const LARGE_BIN: u32 = 16;
 
 /// The bin-size rule, in one place: 16-pixel bins when smaller ones are in use and either
 /// the pairs exceed what small bins may key or a shader loop would be cut.
-pub(super) fn wants_large_bins(bin_size: u32, too_many_pairs: bool, loop_cut: bool) -> bool {
+pub(crate) fn wants_large_bins(bin_size: u32, too_many_pairs: bool, loop_cut: bool) -> bool {
     bin_size < LARGE_BIN && (too_many_pairs || loop_cut)
 }
 
 /// Pairs past which a frame does not use small bins (`max`: one key buffer's pairs).
-pub(super) fn small_bin_limit(max: u32) -> u64 {
+pub(crate) fn small_bin_limit(max: u32) -> u64 {
     u64::from(max.min(SMALL_BIN_MAX_PAIRS))
 }
 
 /// What a frame's counters, read after a submission, say about its buffers and bins.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) struct Reading {
+pub(crate) struct Reading {
     /// Pairs the frame needs.
     pub pairs: u64,
     /// Pairs its key buffers hold.
@@ -108,7 +109,7 @@ pub(super) struct Reading {
 
 /// What to do after a submission ([`next_attempt`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Next {
+pub(crate) enum Next {
     /// The frame is complete; `large_bins_stick`: the next frame of the same scene and
     /// size starts with [`LARGE_BIN`] bins (its pairs say the preferred ones would not do).
     Done { large_bins_stick: bool },
@@ -126,7 +127,7 @@ pub(super) enum Next {
 /// rendered again with larger bins, or refused); incomplete ones try larger bins first,
 /// then chunks, then larger key buffers with a quarter's headroom so that a camera path
 /// does not regrow every few frames.
-pub(super) fn next_attempt(r: &Reading) -> Next {
+pub(crate) fn next_attempt(r: &Reading) -> Next {
     let complete = r.chunked || r.pairs <= u64::from(r.capacity);
     if complete && r.loop_limited {
         // Four times fewer bins per Gaussian with 16-pixel bins.
@@ -156,7 +157,7 @@ pub(super) fn next_attempt(r: &Reading) -> Next {
 impl GpuRenderer {
     /// Gaussians per preprocess window: as many as one storage binding holds of the
     /// largest per-Gaussian record (48 bytes), a multiple of the workgroup.
-    pub(super) fn preprocess_window(&self) -> u32 {
+    pub(crate) fn preprocess_window(&self) -> u32 {
         let per_binding =
             limits::elements_per_binding(self.ctx.info(), std::mem::size_of::<Splat>() as u64)
                 .min(u64::from(u32::MAX));
@@ -169,18 +170,18 @@ impl GpuRenderer {
     }
 
     /// Whether the device is a CPU implementation with llvmpipe's loop limit.
-    pub(super) fn loop_limited(&self) -> bool {
+    pub(crate) fn loop_limited(&self) -> bool {
         self.ctx.info().loop_limited()
     }
 
-    pub(super) fn max_capacity(&self) -> u32 {
+    pub(crate) fn max_capacity(&self) -> u32 {
         // Keys and values are 4 bytes; one storage-buffer binding must cover them all.
         limits::elements_per_binding(self.ctx.info(), 4).min(u64::from(u32::MAX)) as u32
     }
 
     /// Pairs one piece of a frame may hold: one key buffer's worth, or fewer under the
     /// split limits of tests ([`SplitLimits::chunk_pairs`]).
-    pub(super) fn pairs_per_piece(&self) -> u32 {
+    pub(crate) fn pairs_per_piece(&self) -> u32 {
         let max = self.max_capacity();
         match self.split.chunk_pairs {
             0 => max,
@@ -189,7 +190,7 @@ impl GpuRenderer {
     }
 
     /// Checks a frame, makes its resources in a free set, and records and submits it.
-    pub(super) fn submit_with<'a>(
+    pub(crate) fn submit_with<'a>(
         &mut self,
         scene: &'a GpuScene,
         cam: &Camera,
@@ -240,7 +241,7 @@ impl GpuRenderer {
 
     /// Makes what the ticket's readback and features need in its set, then records and
     /// submits `pass` of the frame (and waits for it when `wait`).
-    pub(super) fn record_ticket(&mut self, t: &Ticket, wait: bool, pass: Pass) -> GpuResult<()> {
+    pub(crate) fn record_ticket(&mut self, t: &Ticket, wait: bool, pass: Pass) -> GpuResult<()> {
         if t.readback == Readback::Rgba8 {
             self.ensure_packed(t.set)?;
         }
@@ -262,7 +263,7 @@ impl GpuRenderer {
     /// buffers or bins and waited for, until it is complete; when it needs more pairs than
     /// one key buffer holds, it is rendered in chunks. Then the timings and counts are the
     /// frame's.
-    pub(super) fn complete(&mut self, t: &Ticket) -> GpuResult<()> {
+    pub(crate) fn complete(&mut self, t: &Ticket) -> GpuResult<()> {
         let set = self.sets.get_mut(t.set).ok_or_else(|| {
             GpuError::InvalidArgument("the ticket is not from this renderer".into())
         })?;
@@ -368,7 +369,7 @@ impl GpuRenderer {
     /// consecutive runs of the one-piece frame's lists, so the image is bit-identical.
     /// Returns the frame's counters and its number of chunks, or None when the frame must
     /// be planned again (larger bins, or key buffers grown for its largest chunk).
-    pub(super) fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<(Counters, u32)>> {
+    pub(crate) fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<(Counters, u32)>> {
         let max = self.max_capacity();
         let f = self.sets[t.set]
             .frame

@@ -10,13 +10,13 @@
 //! chunks), and the reduce sums the slots in order. The rules are
 //! [`crate::cpu::backward::backward_shaded`]'s.
 
-use super::shade::{GpuShader, ShadePush};
 use crate::camera::Camera;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
 use crate::gpu::shader_set::{SHADE_CHUNK_PIXELS, SHADE_SPEC_ACTIVATIONS, SHADE_SPEC_WIDEST};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use crate::render::forward::shade::{GpuShader, ShadePush};
 use ash::vk;
 
 /// Pixels per chunk: one per invocation of a workgroup.

@@ -1,6 +1,6 @@
 //! The backward pass on the device: from the gradient of a loss with respect to each pixel
 //! of the last frame (colour, alpha, depth) to the gradient with respect to each Gaussian's
-//! parameters, reading the frame's saved forward state ([`super::ForwardState`]): no
+//! parameters, reading the frame's saved forward state ([`crate::render::ForwardState`]): no
 //! re-sort, no re-render. Three stages in one command buffer, each with its barrier and
 //! timestamp pair, like the forward's:
 //!
@@ -14,27 +14,32 @@
 //!    covariance and SH to centres, quaternions, scales, opacities and SH coefficients.
 //!
 //! A frame shaded by a neural shader starts with the shader's own backward pass
-//! (`shade_bwd`, [`super::shade_bwd`]), which turns the colour's gradients into the feature
+//! ([`shade_bwd`]), which turns the colour's gradients into the feature
 //! channels' and the network's.
 //!
 //! The rules are those of the CPU reference [`crate::cpu::backward`], which the tests hold
 //! this pass to.
 
+pub mod blend_bwd;
+pub mod differentiable;
+pub mod grad_accumulate;
 mod pass;
+pub mod preprocess_bwd;
+pub mod shade_bwd;
 
-use super::blend_bwd::BlendBwd;
-use super::grad_accumulate::{Accumulation, GradAccumulate};
-use super::preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
-use super::shade::GpuShader;
-use super::shade_bwd::ShadeBwd;
-use super::{check_binding, ForwardState, GpuRenderer, GpuScene};
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
 use crate::gpu::{BufferSlice, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
 use crate::model::grad::{PixelGrads, SplatGrads};
 use crate::model::{sh_coeffs_for_degree, SplatKernel};
+use crate::render::forward::shade::GpuShader;
+use crate::render::{check_binding, ForwardState, GpuRenderer, GpuScene};
+use blend_bwd::BlendBwd;
+use grad_accumulate::{Accumulation, GradAccumulate};
 use pass::BackwardPass;
+use preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
+use shade_bwd::ShadeBwd;
 
 /// Timestamped stages of one backward pass.
 pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_bwd"];
@@ -371,16 +376,18 @@ impl GpuRenderer {
                 cam.width, cam.height, size.0, size.1
             )));
         }
-        if self.loop_limited() && shader.backward_iterations > u64::from(super::CPU_LOOP_LIMIT) {
+        if self.loop_limited()
+            && shader.backward_iterations > u64::from(crate::render::CPU_LOOP_LIMIT)
+        {
             return Err(GpuError::DeviceLimit {
                 limit: "llvmpipe's loop iterations per invocation",
                 needed: shader.backward_iterations,
-                max: u64::from(super::CPU_LOOP_LIMIT),
+                max: u64::from(crate::render::CPU_LOOP_LIMIT),
                 message: format!(
                     "the neural shader's backward pass needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {} iterations; use narrower layers, or the CPU reference",
                     shader.backward_iterations,
                     self.ctx.info().name,
-                    super::CPU_LOOP_LIMIT
+                    crate::render::CPU_LOOP_LIMIT
                 ),
             });
         }
@@ -656,7 +663,7 @@ impl PassShape {
             fields: u64::from(GRAD_FIELDS + 4 * groups),
             pairs: u64::from(fs.pairs),
             bits: bits_for(u64::from(bins.0) * u64::from(bins.1)),
-            sh_floats: u64::from(super::sh_texel_stride(scene.sh_degree)) * 4,
+            sh_floats: u64::from(crate::render::sh_texel_stride(scene.sh_degree)) * 4,
             pixels: u64::from(size.0) * u64::from(size.1),
         }
     }

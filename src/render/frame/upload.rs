@@ -1,28 +1,29 @@
 //! Scene upload: the Gaussians' records, their SH coefficients and feature channels on
 //! the device ([`GpuScene`], [`GpuFeatures`]).
 
-use super::types::{GpuGaussian, GpuGaussianCompact};
 use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::model::ActivatedScene;
+use crate::render::forward::types::{GpuGaussian, GpuGaussianCompact};
 use ash::vk;
 
-use super::{check_binding, features, shade, GpuRenderer};
+use crate::render::forward::{features, shade};
+use crate::render::{check_binding, GpuRenderer};
 
 /// A scene uploaded to the device.
 pub struct GpuScene {
     // The views go before the buffers they view.
-    pub(super) sh_texels: BufferView,
+    pub(crate) sh_texels: BufferView,
     /// RGBA32UI view of the records, for the texel-I/O preprocess (CPU devices).
-    pub(super) gaussian_texels: Option<BufferView>,
-    pub(super) gaussians: GpuBuffer,
-    pub(super) sh: GpuBuffer,
+    pub(crate) gaussian_texels: Option<BufferView>,
+    pub(crate) gaussians: GpuBuffer,
+    pub(crate) sh: GpuBuffer,
     /// Gaussians drawn: all uploaded, or the first of them ([`GpuScene::draw_first`]).
-    pub(super) count: u32,
+    pub(crate) count: u32,
     /// Gaussians uploaded.
-    pub(super) uploaded: u32,
-    pub(super) sh_degree: u32,
-    pub(super) sh_coeffs: u32,
-    pub(super) compact: bool,
+    pub(crate) uploaded: u32,
+    pub(crate) sh_degree: u32,
+    pub(crate) sh_coeffs: u32,
+    pub(crate) compact: bool,
 }
 
 impl GpuScene {
@@ -64,10 +65,10 @@ impl GpuScene {
 /// channels, a vec4 per Gaussian (zero past the last channel).
 pub struct GpuFeatures {
     // The views go before the buffers they view.
-    pub(super) views: Vec<BufferView>,
-    pub(super) groups: Vec<GpuBuffer>,
-    pub(super) channels: usize,
-    pub(super) count: u32,
+    pub(crate) views: Vec<BufferView>,
+    pub(crate) groups: Vec<GpuBuffer>,
+    pub(crate) channels: usize,
+    pub(crate) count: u32,
 }
 
 impl GpuFeatures {
@@ -88,7 +89,7 @@ impl GpuFeatures {
 
 /// What a frame blends besides colour: the scene's features, and the neural shader
 /// applied to them.
-pub(super) type FeatureJob<'a> = (&'a GpuFeatures, Option<&'a shade::GpuShader>);
+pub(crate) type FeatureJob<'a> = (&'a GpuFeatures, Option<&'a shade::GpuShader>);
 
 /// RGBA32F texels of SH per Gaussian: the `3 (d + 1)^2` floats rounded up to whole texels
 /// (`glsl/preprocess.comp` computes the same stride).
@@ -282,7 +283,7 @@ impl GpuRenderer {
     }
 
     /// A device buffer holding `records`.
-    pub(super) fn upload_records<T: bytemuck::Pod>(
+    pub(crate) fn upload_records<T: bytemuck::Pod>(
         &self,
         name: &str,
         records: &[T],
