@@ -7,6 +7,9 @@
 #[path = "src/rules.rs"]
 #[allow(dead_code)]
 mod rules;
+#[path = "src/shader_interface.rs"]
+#[allow(dead_code)]
+mod shader_interface;
 #[path = "src/gpu/shader_set.rs"]
 #[allow(dead_code)]
 mod shader_set;
@@ -20,11 +23,20 @@ fn main() {
     println!("cargo:rerun-if-changed=glsl");
     println!("cargo:rerun-if-changed=src/gpu/shader_set.rs");
     println!("cargo:rerun-if-changed=src/rules.rs");
+    println!("cargo:rerun-if-changed=src/shader_interface.rs");
     println!("cargo:rerun-if-env-changed=GLSLC");
     let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("OUT_DIR"));
     let spirv_dir = out.join("spirv");
     std::fs::create_dir_all(&spirv_dir).expect("create OUT_DIR/spirv");
+
+    // The records, push blocks and flags the shaders include (`interface.glsl`), from
+    // their one declaration in Rust.
+    let interface_dir = out.join("glsl");
+    std::fs::create_dir_all(&interface_dir).expect("create OUT_DIR/glsl");
+    let interface = shader_interface::glsl_declarations()
+        .unwrap_or_else(|e| panic!("src/shader_interface.rs is not std430: {e}"));
+    std::fs::write(interface_dir.join("interface.glsl"), interface).expect("write interface.glsl");
 
     let variants = shader_set::shader_variants();
     let shared = shader_set::shared_defines();
@@ -50,7 +62,7 @@ fn main() {
                 if let Err(e) = shader_set::compile_glsl_file(
                     &root,
                     &file,
-                    &[Path::new("glsl")],
+                    &[Path::new("glsl"), &interface_dir],
                     &defines,
                     &output,
                 ) {

@@ -70,7 +70,14 @@ fn store_paths(ctx: &GpuContext, n: u32, runs: usize) {
     let mut timer = GpuTimer::new(ctx, "t", 8).unwrap();
     for (name, body, kinds, res) in cases {
         let spirv = compile_glsl(name, &format!("{HEAD}{body}"), &[]).unwrap();
-        let p = ComputePipeline::new(ctx, "case", &spirv, &kinds, 0).unwrap();
+        let p = ComputePipeline::new(
+            ctx,
+            "case",
+            &spirv,
+            &kinds,
+            &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+        )
+        .unwrap();
         let mut ms = Vec::new();
         for _ in 0..runs {
             ctx.submit_and_wait("mb", |cmd| {

@@ -48,12 +48,12 @@ layout(std430, binding = BLEND_COUNTERS) buffer CounterBuf { Counters counters; 
 #if SAVE_LAST
 layout(std430, binding = BLEND_LAST) writeonly buffer LastBuf { uvec2 last_state[]; };
 #endif
-// A frame keyed in depth-ordered chunks (src/render/mod.rs) is blended once per chunk:
+// A frame keyed in depth-ordered chunks (the host's split of a large frame) is blended once per chunk:
 // every chunk but the first resumes each pixel from the state the previous one left in
 // the images, and every chunk but the last leaves that state instead of the final pixel.
 // Compositing is sequential per pixel, so the result equals one pass bit for bit. A frame
 // in one piece is (resume 0, last 1).
-layout(push_constant) uniform ChunkFlags { uint resume; uint last; } chunk;
+layout(push_constant) uniform BlendBlock { BlendPush chunk; };
 
 // Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
 // written without branches: SIMD implementations execute both sides of a divergent branch

@@ -35,7 +35,7 @@
 #ifndef STRIP
 #define STRIP 1
 #endif
-// Gradient fields per pair: GRAD_FIELDS (12, src/gpu/shader_set.rs) as three vec4:
+// Gradient fields per pair: GRAD_FIELDS (12, a host constant) as three vec4:
 // (mean2d.x, mean2d.y, conic A, conic B), (conic C, opacity, colour r, colour g),
 // (colour b, depth, |mean2d.x|, |mean2d.y|); then one vec4 per group of four direct
 // feature channels (FEATURE_GROUPS > 0: the Gaussians' values blended instead of their
@@ -72,7 +72,7 @@ layout(std430, binding = BLEND_BWD_RANGES) readonly buffer RangeBuf { uvec2 rang
 // Per pixel: one past the last composited pair, and the final transmittance's bits.
 layout(std430, binding = BLEND_BWD_LAST) readonly buffer LastBuf { uvec2 last_state[]; };
 // Per pixel: dL/d colour (rgb, with the background) and dL/d alpha, the latter including
-// what the alpha-normalised depth passes on to it (src/render/backward.rs).
+// what the alpha-normalised depth passes on to it (the backward pass's depth rule).
 layout(std430, binding = BLEND_BWD_GRAD_COLOR) readonly buffer GradColorBuf { vec4 grad_color[]; };
 // Per pixel: dL/d (sum of depth * weight), i.e. dL/d depth / alpha.
 layout(std430, binding = BLEND_BWD_GRAD_DEPTH) readonly buffer GradDepthBuf { float grad_depth[]; };

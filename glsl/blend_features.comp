@@ -43,7 +43,7 @@ layout(std430, binding = BLEND_FEATURES_COUNTERS) buffer CounterBuf { Counters c
 // chunk left. Compositing is sequential per pixel, so the channels equal one pass bit for
 // bit. A frame in one piece is resume 0.
 layout(binding = BLEND_FEATURES_COLOR_STATE, rgba32f) uniform readonly image2D color_state;
-layout(push_constant) uniform ChunkFlags { uint resume; uint pad; } chunk;
+layout(push_constant) uniform FeatureBlendBlock { FeatureBlendPush chunk; };
 
 void main() {
     uvec2 pix = gl_GlobalInvocationID.xy;

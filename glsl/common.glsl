@@ -1,7 +1,8 @@
 // Shared header for all verisplat compute shaders.
 //
-// Constants shared with the host are defined once, in Rust (src/gpu/shader_set.rs), and
-// passed in as #defines; the sort's tunables are specialization constants
+// Constants shared with the host are defined once, on the host, and passed in as
+// #defines; the records, push blocks and flags come from interface.glsl, which the build
+// writes from their one declaration on the host; the sort's tunables are specialization constants
 // (sort_spec.glsl). This header provides the helpers every stage uses.
 #ifndef VERISPLAT_COMMON_GLSL
 #define VERISPLAT_COMMON_GLSL
@@ -10,6 +11,7 @@
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
 #include "subgroup.glsl"
+#include "interface.glsl"
 
 #ifdef WG_SIZE_SPEC_ID
 // The workgroup size is a specialization constant (the sort's).

@@ -1,7 +1,7 @@
 #version 460
 // Test kernel for the exact 64-bit counting of preprocess (WORKGROUP_COUNT64 in
 // splat_common.glsl): every invocation contributes a pseudo-random term below 2^20, and
-// the total, far beyond 2^32, must come out exact. Used by tests/all/limits.rs only.
+// the total, far beyond 2^32, must come out exact. Used by the tests only.
 #extension GL_GOOGLE_include_directive : require
 #define WORKGROUP_COUNT64
 #include "splat_common.glsl"

@@ -1,7 +1,7 @@
 #version 460
 // Field renders (render --mode field-slice | field-integral | field-max): the fitted field
 // f(x) = sum_i o_i feat_i G_i(x) itself, a plain sum (no blending, no sort), four channels
-// per dispatch. The reference and every formula: src/cpu/field.rs.
+// per dispatch. The CPU reference's field renders have every formula.
 //
 // One invocation per pixel of a 16x8 tile (WG_SIZE 128, within every device's limit;
 // pixel = local index). The
@@ -28,30 +28,6 @@
 #include "common.glsl"
 
 #define CHUNK 128u
-#define KERNEL_POWER 1u
-
-// Host mirror: render::field::FieldParams (size pinned there).
-struct FieldParams {
-    uvec4 size;         // width, height, gaussians, channel groups
-    uvec4 mode;         // samples (max), -, -, -
-    vec4 w2c_row0;      // world-to-camera rotation row 0; w = translation.x
-    vec4 w2c_row1;      // row 1; w = translation.y
-    vec4 w2c_row2;      // row 2; w = translation.z
-    vec4 origin;        // camera centre; w = the kernel's cutoff d2
-    vec4 focal;         // fx, fy, cx, cy
-    vec4 plane_point;   // slice plane point
-    vec4 plane_normal;  // slice plane normal (unit)
-    vec4 bounds_min;    // the field's box (max)
-    vec4 bounds_max;
-};
-
-// Per Gaussian: centre and support radius, then the inverse covariance A.
-struct FieldGaussian {
-    vec4 mean_radius;
-    vec4 a0;            // xx, xy, xz, yy
-    vec4 a1;            // yz, zz, -, -
-};
-
 layout(std430, binding = FIELD_PARAMS) readonly buffer ParamsBuf { FieldParams params; };
 layout(std430, binding = FIELD_GAUSSIANS) readonly buffer GaussianBuf { FieldGaussian gaussians[]; };
 // o_i feat_i, this group's four channels: features[i * groups + group].
@@ -62,8 +38,8 @@ layout(std430, binding = FIELD_OUTPUT) buffer OutBuf { vec4 out_field[]; };
 // output (every pass of a slice or an integral but the first) rather than write it.
 // llvmpipe ends an invocation whose loops run past 65,535 iterations in all, silently,
 // before it writes: the host keeps each pass below that and finds such a pixel by the
-// pattern it filled the output with (render/field.rs).
-layout(push_constant) uniform Pass { uint group; uint first; uint count; uint accumulate; } push;
+// pattern it filled the output with.
+layout(push_constant) uniform FieldBlock { FieldPush push; };
 
 shared vec4 s_mean[CHUNK];
 shared vec4 s_a0[CHUNK];
@@ -79,7 +55,7 @@ float form(vec4 a0, vec4 a1, vec3 v, vec3 w) {
 
 float field_kernel(float d2, float cutoff) {
     if (!(d2 <= cutoff)) return 0.0;
-    return SPLAT_KERNEL == KERNEL_POWER ? max(0.0, 1.0 - d2 / 9.0) : exp(-0.5 * d2);
+    return SPLAT_KERNEL == SPLAT_KERNEL_POWER ? max(0.0, 1.0 - d2 / 9.0) : exp(-0.5 * d2);
 }
 
 // Abramowitz and Stegun 7.1.26 (absolute error below 1.5e-7), as cpu::field::erf.
@@ -101,8 +77,8 @@ void main() {
     uint width = params.size.x, height = params.size.y, n = params.size.z;
     bool inside = pix.x < width && pix.y < height;
     float cutoff = params.origin.w;
-    mat3 rows = mat3(params.w2c_row0.xyz, params.w2c_row1.xyz, params.w2c_row2.xyz); // columns = rows of R
-    vec3 trans = vec3(params.w2c_row0.w, params.w2c_row1.w, params.w2c_row2.w);
+    mat3 rows = mat3(params.w2c[0].xyz, params.w2c[1].xyz, params.w2c[2].xyz); // columns = rows of R
+    vec3 trans = vec3(params.w2c[0].w, params.w2c[1].w, params.w2c[2].w);
     vec4 f = params.focal;
     vec3 o = params.origin.xyz;
     // The pixel's unit ray: R^T (x, y, 1).
@@ -184,7 +160,7 @@ void main() {
             float s_hi = half_len;
             if (s_hi <= s_lo) continue;
             float v;
-            if (SPLAT_KERNEL == KERNEL_POWER) {
+            if (SPLAT_KERNEL == SPLAT_KERNEL_POWER) {
                 v = (1.0 - m / 9.0) * (s_hi - s_lo) - a * (s_hi * s_hi * s_hi - s_lo * s_lo * s_lo) / 27.0;
             } else {
                 float c = sqrt(0.5 * a);

@@ -48,7 +48,7 @@ layout(std430, binding = GRAD_ACCUMULATE_ACC) buffer AccBuf { uint acc[]; };
 #endif
 // count: sorted pairs; bits: log2 of the most pairs one Gaussian can have, rounded up;
 // vecs: vec4s of fields per pair.
-layout(push_constant) uniform Push { uint count; uint bits; uint vecs; } pc;
+layout(push_constant) uniform GradBlock { GradPush pc; };
 
 #if !FLOAT_ATOMICS
 // The fixed-point scale 2^s of each field as two power-of-two factors (each in float

@@ -23,7 +23,7 @@ layout(binding = KEYS_SPLAT_TEXELS) uniform samplerBuffer splat_texels;
 #if KEYS_TEXEL_IO
 // CPU devices: the per-Gaussian arrays through texel views, the pairs written with
 // imageStore (straight per-lane code on llvmpipe, where storage-buffer accesses are a
-// guarded loop per component; see benches/tuning.rs).
+// guarded loop per component; the tuning bench measures both).
 layout(binding = KEYS_RECTS) uniform usamplerBuffer rects_tex;
 layout(binding = KEYS_OFFSETS) uniform usamplerBuffer offsets_tex;
 layout(binding = KEYS_KEYS, r32ui) uniform writeonly uimageBuffer keys_img;
@@ -53,7 +53,7 @@ layout(std430, binding = KEYS_BIN_MASKS) readonly buffer BinMaskBuf { uint bin_m
     values[off] = value
 #endif
 layout(std430, binding = KEYS_COUNTERS) buffer CounterBuf { Counters counters; };
-layout(push_constant) uniform Chunk { uint first; uint end; uint base; } chunk;
+layout(push_constant) uniform KeysBlock { KeysPush chunk; };
 
 #define RANGES_WORKGROUP LINEAR_WG
 
@@ -70,9 +70,9 @@ void main() {
         counters.sort_count = total;
         // A 2D grid beyond 65535 groups (the minimum maxComputeWorkGroupCount[0]).
         uint groups = (total + RANGES_WORKGROUP - 1u) / RANGES_WORKGROUP;
-        counters.ranges_groups_x = min(groups, 65535u);
-        counters.ranges_groups_y = (groups + 65534u) / 65535u;
-        counters.ranges_groups_z = 1u;
+        counters.ranges_groups[0] = min(groups, 65535u);
+        counters.ranges_groups[1] = (groups + 65534u) / 65535u;
+        counters.ranges_groups[2] = 1u;
     }
     if (k >= chunk.end) return;
     uint i = ORDER(k);

@@ -1,5 +1,7 @@
-// The training loss's per-pixel stages (src/train/loss.rs): one invocation per pixel,
+// The training loss's per-pixel stages: one invocation per pixel,
 // workgroups of 64 laid out in two dimensions so that any image fits the dispatch limits.
+
+#include "interface.glsl"
 
 layout(local_size_x = 64) in;
 

@@ -1,11 +1,14 @@
 #version 460
+#extension GL_GOOGLE_include_directive : require
 // Training loss: sums of vec4s in a fixed order (the same bits run after run). Workgroup w
 // sums values [w * 4096, (w + 1) * 4096): invocation t its 32 values t, t + 128, ..., then
 // a tree in shared memory; the host runs it again on the workgroups' sums down to one.
 
 layout(local_size_x = 128) in;
 
-layout(push_constant) uniform Params { uvec4 counts; } p;  // values
+#include "interface.glsl"
+
+layout(push_constant) uniform CountsBlock { CountsPush p; };  // values
 
 layout(std430, binding = LOSS_REDUCE_VALUES) readonly buffer ValueBuf { vec4 values[]; };
 layout(std430, binding = LOSS_REDUCE_SUMS) writeonly buffer SumBuf { vec4 sums[]; };

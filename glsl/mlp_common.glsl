@@ -1,10 +1,9 @@
 // The neural shader's evaluation, shared by its forward (shade.comp) and backward
 // (shade_bwd.comp) so both run the same f32 operations in the same order as the CPU
-// reference (src/mlp.rs). The including shader declares `words_view` (the network's
+// reference. The including shader declares `words_view` (the network's
 // words: 4 * MAX_LAYERS header words, then weights and biases as float bits).
 
-#define MAX_WIDTH 128
-#define MAX_LAYERS 8
+// MAX_WIDTH and MAX_LAYERS come from interface.glsl.
 
 float weight(uint i) {
     return uintBitsToFloat(texelFetch(words_view, int(4u * MAX_LAYERS + i)).x);

@@ -1,12 +1,14 @@
 #version 460
-// The neural shader's parameter gradients (src/render/shade_bwd.rs): the sum of the
+#extension GL_GOOGLE_include_directive : require
+// The neural shader's parameter gradients (its backward pass): the sum of the
 // partial slots that shade_bwd.comp filled, slot after slot, one invocation per parameter.
 
 layout(local_size_x = 64) in;
 
-layout(push_constant) uniform ReduceParams {
-    uvec4 counts;  // parameters, slots, 0, 0
-} p;
+#include "interface.glsl"
+
+// Counts: parameters, slots, 0, 0.
+layout(push_constant) uniform CountsBlock { CountsPush p; };
 
 layout(std430, binding = MLP_GRAD_REDUCE_PARTIALS) readonly buffer PartialBuf { float partials[]; };
 layout(std430, binding = MLP_GRAD_REDUCE_GRADS) writeonly buffer GradBuf { float grads[]; };

@@ -1,4 +1,5 @@
 #version 460
+#extension GL_GOOGLE_include_directive : require
 // Pack: the frame's colour as 8-bit RGBA (alpha 255) for consumers that show it (the
 // viewer), so a quarter of the colour plane's bytes leaves the device. Quantised exactly as
 // output::to_u8 on the host: clamp(v * 255 + 0.5, 0, 255) truncated, NaN to 0, with the
@@ -11,7 +12,9 @@ layout(local_size_x = 16, local_size_y = 8) in;
 layout(binding = PACK_COLOR, rgba32f) uniform readonly image2D color;  // rgb + T * background
 layout(std430, binding = PACK_PACKED) writeonly buffer PackedBuf { uint packed[]; };
 
-layout(push_constant) uniform Push { uint width; uint height; };
+#include "interface.glsl"
+
+layout(push_constant) uniform PackBlock { PackPush size; };
 
 uint to_u8(float v) {
     precise float x = v * 255.0;
@@ -23,7 +26,7 @@ uint to_u8(float v) {
 
 void main() {
     uvec2 p = gl_GlobalInvocationID.xy;
-    if (p.x >= width || p.y >= height) return;
+    if (p.x >= size.width || p.y >= size.height) return;
     vec4 c = imageLoad(color, ivec2(p));
-    packed[p.y * width + p.x] = to_u8(c.r) | (to_u8(c.g) << 8) | (to_u8(c.b) << 16) | (255u << 24);
+    packed[p.y * size.width + p.x] = to_u8(c.r) | (to_u8(c.g) << 8) | (to_u8(c.b) << 16) | (255u << 24);
 }

@@ -16,12 +16,7 @@ layout(std430, binding = PREPROCESS_PARAMS) readonly buffer ParamsBuf { FramePar
 #ifndef PREPROCESS_TEXEL_IO
 #define PREPROCESS_TEXEL_IO 0
 #endif
-// A compact upload (--compact): centre and opacity in f32, the axis scales and the rotation
-// as fp16 pairs (GpuGaussianCompact in src/render/types.rs); unpacking is exact.
-struct GaussianCompact {
-    vec4 pos_opacity;
-    uvec4 shape;  // (scale x, y), (scale z, rotation w), (rotation x, y), (rotation z, 0)
-};
+// A compact upload (--compact, GaussianCompact): unpacking is exact.
 Gaussian unpack_compact(GaussianCompact c) {
     vec2 sxy = unpackHalf2x16(c.shape.x), szw = unpackHalf2x16(c.shape.y);
     vec2 rxy = unpackHalf2x16(c.shape.z), rz = unpackHalf2x16(c.shape.w);
@@ -35,7 +30,7 @@ Gaussian unpack_compact(GaussianCompact c) {
 // CPU devices: the records through an RGBA32UI texel view and every output written with
 // imageStore, all by the global index (the views cover whole buffers, so windows only
 // bound the dispatch): llvmpipe turns these into straight per-lane code, storage-buffer
-// accesses into a guarded loop per component (benches/tuning.rs).
+// accesses into a guarded loop per component (the tuning bench measures both).
 layout(binding = PREPROCESS_GAUSSIANS) uniform usamplerBuffer gaussian_texels;
 #if COMPACT_GAUSSIANS
 Gaussian load_gaussian(uint w, uint i) {
@@ -61,7 +56,7 @@ layout(std430, binding = PREPROCESS_GAUSSIANS) readonly buffer GaussianBuf { Gau
 Gaussian load_gaussian(uint w, uint i) { return gaussians[w]; }
 #endif
 // SH coefficients, coefficient-major with the colour channel innermost, each Gaussian's
-// floats padded to whole RGBA32F texels (sh_texel_stride in src/render/mod.rs). Read as a
+// floats padded to whole RGBA32F texels (the host's sh_texel_stride). Read as a
 // texel buffer, which addresses far more than one storage binding on some devices.
 layout(binding = PREPROCESS_SH) uniform samplerBuffer sh_texels;
 layout(std430, binding = PREPROCESS_COUNTERS) buffer CounterBuf { Counters counters; };
@@ -108,7 +103,7 @@ void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mas
 // Gaussian `first` (one storage binding may not cover a large scene, so the host
 // dispatches once per window); the SH texels and the indices written are global (and so
 // is every binding of the texel-I/O variant).
-layout(push_constant) uniform Window { uint first; uint count; } window;
+layout(push_constant) uniform WindowBlock { WindowPush window; };
 
 #include "sh_common.glsl"
 

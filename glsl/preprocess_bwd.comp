@@ -27,21 +27,14 @@ layout(std430, binding = PREPROCESS_BWD_SPLATS) readonly buffer SplatBuf { Splat
 layout(std430, binding = PREPROCESS_BWD_MAXIMA) readonly buffer MaximaBuf { uint maxima[]; };
 // Two fields' (lo, hi) sums per uvec4: a Gaussian's 4 * pc.vecs fields are whole uvec4s.
 layout(std430, binding = PREPROCESS_BWD_ACC) readonly buffer AccBuf { uvec4 acc[]; };
-// Per Gaussian: (dmean xyz, dopacity), dquat (w, x, y, z), (dscale xyz, 0),
-// (dmean2d xy, absgrad xy).
-struct GaussianGrad {
-    vec4 mean_opacity;
-    vec4 quat;
-    vec4 scale;
-    vec4 mean2d_abs;
-};
+// Per Gaussian: its GaussianGrad.
 layout(std430, binding = PREPROCESS_BWD_GRADS) writeonly buffer GradBuf { GaussianGrad grads[]; };
 // dL/d SH coefficient, in the SH texels' layout (a vec4 per texel: on CPU devices each
 // storage access costs a loop over the lanes, whatever its width).
 layout(std430, binding = PREPROCESS_BWD_SH_GRADS) writeonly buffer ShGradBuf { vec4 sh_grads[]; };
 // dL/d feature channel (direct values), 4 per group: `pc.vecs - 3` groups.
 layout(std430, binding = PREPROCESS_BWD_FEATURE_GRADS) writeonly buffer FeatGradBuf { vec4 feature_grads[]; };
-layout(push_constant) uniform Push { uint count; uint bits; uint vecs; } pc;
+layout(push_constant) uniform GradBlock { GradPush pc; };
 
 #include "sh_common.glsl"
 

@@ -4,12 +4,7 @@
 #define WG_SIZE SCAN_WG
 #include "common.glsl"
 
-layout(push_constant) uniform Push {
-    uint n;
-    uint write_total;
-    uint total_index;
-    uint pad;
-} pc;
+layout(push_constant) uniform ScanBlock { ScanPush pc; };
 
 layout(std430, binding = SCAN_ADD_DATA_IN) buffer Input { uint data_in[]; };
 layout(std430, binding = SCAN_ADD_BLOCK_OFFSETS) readonly buffer BlockOffsets { uint block_offsets[]; };

@@ -3,12 +3,7 @@
 #define WG_SIZE SCAN_WG
 #include "common.glsl"
 
-layout(push_constant) uniform Push {
-    uint n;
-    uint write_total;
-    uint total_index;
-    uint pad;
-} pc;
+layout(push_constant) uniform ScanBlock { ScanPush pc; };
 
 layout(std430, binding = SCAN_REDUCE_DATA_IN) readonly buffer Input { uint data_in[]; };
 layout(std430, binding = SCAN_REDUCE_BLOCK_SUMS) writeonly buffer BlockSums { uint block_sums[]; };

@@ -1,7 +1,7 @@
 // Spherical harmonics and the rotation matrix, shared by preprocess.comp (forward) and
 // preprocess_bwd.comp (backward). The includer declares `sh_texels`, the SH coefficients
 // as RGBA32F texels (coefficient-major, colour channel innermost, each Gaussian's floats
-// padded to whole texels: src/render/upload.rs, sh_texel_stride).
+// padded to whole texels: the host's sh_texel_stride).
 #ifndef SH_COMMON_GLSL
 #define SH_COMMON_GLSL
 

@@ -1,28 +1,20 @@
 #version 460
-// Neural shader: a per-pixel MLP over the blended feature image (src/mlp.rs documents the
-// file format and the evaluation order, which the CPU reference shares). Reads the feature
+// Neural shader: a per-pixel MLP over the blended feature image (the MLP's file format
+// documents the evaluation order, which the CPU reference shares). Reads the feature
 // channels (K, in groups of four), optionally the pixel's view direction and alpha, runs
 // the layers, and writes alpha * mlp + (1 - alpha) * background into the colour image
 // (alpha is kept). One invocation per pixel.
 #extension GL_GOOGLE_include_directive : require
+#include "interface.glsl"
 
 // 16 x 8 pixels: 128 invocations, within every device's limit.
 layout(local_size_x = 16, local_size_y = 8) in;
 
-// 112 bytes of push constants (src/render/shade.rs ShadePush).
-layout(push_constant) uniform ShadeParams {
-    uvec4 size;        // width, height, K, groups of four channels
-    uvec4 code;        // input code (Mlp::input_code), layers, plane stride in vec4s, 0
-    vec4 intrinsics;   // fx, fy, cx, cy
-    vec4 rot0;         // rows of the world-to-camera rotation
-    vec4 rot1;
-    vec4 rot2;
-    vec4 background;
-} p;
+layout(push_constant) uniform ShadeBlock { ShadePush p; };
 
 // 4 * MAX_LAYERS header words (inputs, outputs, activation, float offset), then the
 // weights and biases as float bits.
-// Read through a texel view (R32_UINT): see src/render/shade.rs.
+// Read through a texel view (R32_UINT).
 layout(binding = SHADE_WORDS) uniform usamplerBuffer words_view;
 #include "mlp_common.glsl"
 // Feature planes: group g's vec4 of pixel i at g * plane stride + i.
@@ -47,7 +39,7 @@ void main() {
                 act[n++] = features[(k >> 2) * p.code.z + index][k & 3u];
             }
         } else if (id == 1u) {
-            vec3 w = mlp_view_dir(pix, p.intrinsics, p.rot0, p.rot1, p.rot2);
+            vec3 w = mlp_view_dir(pix, p.intrinsics, p.rot[0], p.rot[1], p.rot[2]);
             act[n++] = w.x;
             act[n++] = w.y;
             act[n++] = w.z;

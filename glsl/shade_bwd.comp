@@ -14,6 +14,7 @@
 // mlp_grad_reduce.comp sums the slots in order. No atomics: the gradients are the same
 // bits run after run.
 #extension GL_GOOGLE_include_directive : require
+#include "interface.glsl"
 
 #define PIXELS SHADE_CHUNK_PIXELS
 
@@ -23,17 +24,9 @@ layout(local_size_x = PIXELS) in;
 layout(constant_id = SHADE_SPEC_ACTIVATIONS) const uint ACTIVATIONS = 16u;
 layout(constant_id = SHADE_SPEC_WIDEST) const uint WIDEST = 16u;
 
-// 128 bytes of push constants: shade.comp's ShadeParams, then the pass's shape.
-layout(push_constant) uniform ShadeBwdParams {
-    uvec4 size;        // width, height, K, groups of four channels
-    uvec4 code;        // input code as in shade.comp, layers, plane stride in vec4s, first chunk
-    vec4 intrinsics;   // fx, fy, cx, cy
-    vec4 rot0;         // rows of the world-to-camera rotation
-    vec4 rot1;
-    vec4 rot2;
-    vec4 background;
-    uvec4 shape;       // scratch vec4s per workgroup, 0, parameters, 0
-} p;
+// shade.comp's constants, then the pass's shape (scratch vec4s per workgroup, 0,
+// parameters, 0).
+layout(push_constant) uniform ShadeBwdBlock { ShadeBwdPush bwd; };
 
 layout(binding = SHADE_BWD_WORDS) uniform usamplerBuffer words_view;
 #include "mlp_common.glsl"
@@ -69,24 +62,24 @@ void sync() {
 void main() {
     uint t = gl_LocalInvocationID.x;
     uint wg = gl_WorkGroupID.x;
-    uint sbase = wg * p.shape.x;
+    uint sbase = wg * bwd.shape.x;
     uint gbase = sbase + PIXELS * XROW;
-    uint index = (p.code.w + wg) * PIXELS + t;
-    bool live = index < p.size.x * p.size.y;
-    uvec2 pix = uvec2(index % p.size.x, index / p.size.x);
+    uint index = (bwd.shade.code.w + wg) * PIXELS + t;
+    bool live = index < bwd.shade.size.x * bwd.shade.size.y;
+    uvec2 pix = uvec2(index % bwd.shade.size.x, index / bwd.shade.size.x);
     float alpha = live ? pixel_colors[index].a : 0.0;
 
     // The first layer's inputs (zeros past the image: their gradients are 0).
     uint n = 0u;
-    uint slots = (p.code.x >> 4) & 3u;
+    uint slots = (bwd.shade.code.x >> 4) & 3u;
     for (uint s = 0u; s < slots; s++) {
-        uint id = (p.code.x >> (8u + 2u * s)) & 3u;
+        uint id = (bwd.shade.code.x >> (8u + 2u * s)) & 3u;
         if (id == 0u) {
-            for (uint k = 0u; k < p.size.z; k++) {
-                act[n++] = live ? features[(k >> 2) * p.code.z + index][k & 3u] : 0.0;
+            for (uint k = 0u; k < bwd.shade.size.z; k++) {
+                act[n++] = live ? features[(k >> 2) * bwd.shade.code.z + index][k & 3u] : 0.0;
             }
         } else if (id == 1u) {
-            vec3 w = mlp_view_dir(pix, p.intrinsics, p.rot0, p.rot1, p.rot2);
+            vec3 w = mlp_view_dir(pix, bwd.shade.intrinsics, bwd.shade.rot[0], bwd.shade.rot[1], bwd.shade.rot[2]);
             act[n++] = w.x;
             act[n++] = w.y;
             act[n++] = w.z;
@@ -97,7 +90,7 @@ void main() {
 
     // Forward, as shade.comp: each layer's outputs follow its inputs.
     uint at = 0u;
-    for (uint l = 0u; l < p.code.y; l++) {
+    for (uint l = 0u; l < bwd.shade.code.y; l++) {
         uvec4 h = layer_header(l);
         uint ins = h.x, outs = h.y, kind = h.z, base = h.w;
         for (uint o = 0u; o < outs; o++) {
@@ -113,16 +106,16 @@ void main() {
 
     // colour = alpha c + (1 - alpha) background.
     vec4 g = live ? grad_color[index] : vec4(0.0);
-    precise float g_alpha = g.r * (c.r - p.background.r);
-    g_alpha += g.g * (c.g - p.background.g);
-    g_alpha += g.b * (c.b - p.background.b);
+    precise float g_alpha = g.r * (c.r - bwd.shade.background.r);
+    g_alpha += g.g * (c.g - bwd.shade.background.g);
+    g_alpha += g.b * (c.b - bwd.shade.background.b);
     uint cur = 0u;
     grad[0] = alpha * g.r;
     grad[1] = alpha * g.g;
     grad[2] = alpha * g.b;
 
     // Back through the layers, last first.
-    for (uint li = p.code.y; li > 0u; li--) {
+    for (uint li = bwd.shade.code.y; li > 0u; li--) {
         uvec4 h = layer_header(li - 1u);
         uint ins = h.x, outs = h.y, kind = h.z, base = h.w;
         uint gc = cur * WIDEST, gn = WIDEST - gc;
@@ -151,7 +144,7 @@ void main() {
         // dL/dW[o][j] = sum over pixels of dL/dz[o] x[j], and dL/db[o] = the same with
         // x = 1: blocks of 4 x 4 parameters, invocation t summing blocks t, t + 64, ...
         // over the chunk's pixels in order.
-        uint slot0 = wg * p.shape.z + base;
+        uint slot0 = wg * bwd.shape.z + base;
         for (uint b = t; b < orow * xrow; b += PIXELS) {
             uint ob = b / xrow, jb = b % xrow;
             precise vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0), s3 = vec4(0.0);
@@ -185,17 +178,17 @@ void main() {
     uint gi0 = cur * WIDEST;
     n = 0u;
     for (uint s = 0u; s < slots; s++) {
-        uint id = (p.code.x >> (8u + 2u * s)) & 3u;
+        uint id = (bwd.shade.code.x >> (8u + 2u * s)) & 3u;
         if (id == 0u) {
-            for (uint gi = 0u; gi < p.size.w; gi++) {
+            for (uint gi = 0u; gi < bwd.shade.size.w; gi++) {
                 vec4 v = vec4(0.0);
                 for (uint c4 = 0u; c4 < 4u; c4++) {
                     uint k = 4u * gi + c4;
-                    if (k < p.size.z) v[c4] = grad[gi0 + n + k];
+                    if (k < bwd.shade.size.z) v[c4] = grad[gi0 + n + k];
                 }
-                grad_features[index * p.size.w + gi] = v;
+                grad_features[index * bwd.shade.size.w + gi] = v;
             }
-            n += p.size.z;
+            n += bwd.shade.size.z;
         } else if (id == 1u) {
             n += 3u;  // the view direction has no parameter
         } else {

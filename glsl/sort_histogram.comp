@@ -6,12 +6,7 @@
 #include "common.glsl"
 #include "sort_spec.glsl"
 
-layout(push_constant) uniform Push {
-    uint shift;
-    uint bits;
-    uint hist_stride;
-    uint pad;
-} pc;
+layout(push_constant) uniform SortPassBlock { SortPassPush pc; };
 
 layout(std430, binding = SORT_HISTOGRAM_META) readonly buffer Meta { uint meta[]; };
 #if SORT_TEXEL_IO

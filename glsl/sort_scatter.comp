@@ -7,12 +7,7 @@
 #include "common.glsl"
 #include "sort_spec.glsl"
 
-layout(push_constant) uniform Push {
-    uint shift;
-    uint bits;
-    uint hist_stride;
-    uint pad;
-} pc;
+layout(push_constant) uniform SortPassBlock { SortPassPush pc; };
 
 layout(std430, binding = SORT_SCATTER_META) readonly buffer Meta { uint meta[]; };
 layout(std430, binding = SORT_SCATTER_OFFSETS) readonly buffer Offsets { uint offsets[]; };

@@ -6,12 +6,8 @@
 #include "common.glsl"
 #include "sort_spec.glsl"
 
-layout(push_constant) uniform Push {
-    uint host_n;
-    uint count_index;  // 0xFFFFFFFF: use host_n
-    uint max_n;
-    uint max_groups_x;
-} pc;
+// count_index 0xFFFFFFFF: use host_n.
+layout(push_constant) uniform SortSetupBlock { SortSetupPush pc; };
 
 layout(std430, binding = SORT_SETUP_COUNT) readonly buffer Count { uint counts[]; };
 layout(std430, binding = SORT_SETUP_META) writeonly buffer Meta { uint meta[]; };

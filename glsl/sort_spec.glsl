@@ -1,6 +1,6 @@
-// The radix sort's tunables (src/gpu/sort.rs, SortConfig) as specialization constants,
+// The radix sort's tunables (the host's SortConfig) as specialization constants,
 // so one compiled module serves every configuration the device allows. The ids are
-// SORT_SPEC_* (host constants, src/gpu/shader_set.rs). Shaders whose workgroup is the
+// SORT_SPEC_* (host constants). Shaders whose workgroup is the
 // sort's define WG_SIZE_SPEC_ID before including common.glsl, then include this.
 #ifndef VERISPLAT_SORT_SPEC_GLSL
 #define VERISPLAT_SORT_SPEC_GLSL

@@ -1,44 +1,22 @@
-// Shared interface of the splatting stages: constants, the per-frame parameter block, the
-// per-Gaussian records and the key layout. Host mirrors live in src/render/types.rs, whose
-// tests pin every size and offset.
+// Shared helpers of the splatting stages: the rules' constants, the alpha falloff, the tile
+// and key layout. The records (FrameParams, Gaussian, Splat, Counters) and the flags
+// (RULES_*, SPLAT_KERNEL_*) are declared once on the host and written into interface.glsl.
 #ifndef SPLAT_COMMON_GLSL
 #define SPLAT_COMMON_GLSL
 
+#include "interface.glsl"
+
 // Reference rules (shared/docs/reference-semantics.md): TILE_SIZE, TILE_PIXELS,
-// COV2D_DILATION, ALPHA_MIN, GSPLAT_EXTEND and T_MIN are #defines from the host, defined
-// once in src/rules.rs. What differs between the original rules and gsplat's (the near
+// COV2D_DILATION, ALPHA_MIN, GSPLAT_EXTEND and T_MIN are #defines from the host, which
+// defines each once. What differs between the original rules and gsplat's (the near
 // plane, the guard band, the alpha clamp, the stop, the antialiased ratio's floor and the
 // screen extent) comes per frame in FrameParams.rules, .limits and .modes.
 #ifndef T_MIN
-#error "the reference's constants come from the host (src/rules.rs); compile through build.rs"
+#error "the reference's constants come from the host: compile the shaders through the crate's build"
 #endif
 
-// Per-frame parameters (one record, written with vkCmdUpdateBuffer).
-struct FrameParams {
-    vec4 w2c_row0;      // world-to-camera rotation row 0; w = translation.x
-    vec4 w2c_row1;      // row 1; w = translation.y
-    vec4 w2c_row2;      // row 2; w = translation.z
-    vec4 cam_pos;       // camera centre (xyz)
-    vec4 focal;         // fx, fy, cx, cy
-    vec4 limits;        // guard band: x/z clamped to [-x, y], y/z to [-z, w] (model::Rules)
-    vec4 background;    // rgb
-    uvec4 image;        // width, height, tiles_x, tiles_y
-    uvec4 counts;       // gaussians, active SH degree, stored SH coefficients per channel, key capacity
-    uvec4 bins;         // bin size in pixels (16 or 8), bins_x, bins_y, 16 / bin size
-    vec4 filters;       // scale modifier, max scale (< 0: none), min opacity (< 0: none), kernel (SPLAT_KERNEL_*)
-    vec4 rules;         // kept above depth x, alpha clamp, a pixel ends before T < z, antialias min ratio
-    uvec4 modes;        // screen extent: RULES_ORIGINAL or RULES_GSPLAT; 0, 0, 0
-};
-
-// The rasterizer's rules (model::Rules): the original 3DGS rasterizer's, or gsplat's.
-#define RULES_ORIGINAL 0u
-#define RULES_GSPLAT 1u
-
-// Alpha falloff with the squared Mahalanobis distance d2 = -2 power (cpu::SplatKernel):
+// Alpha falloff with the squared Mahalanobis distance d2 = -2 power (the splat kernel):
 // Gaussian opacity * exp(-d2 / 2), the reference; power opacity * max(0, 1 - d2 / 9).
-#define SPLAT_KERNEL_GAUSSIAN 0u
-#define SPLAT_KERNEL_POWER 1u
-
 // Alpha before the clamp (0.99, gsplat's 0.999) where the reference's exponent is `power` (<= 0). The blend
 // passes its compile-time SPLAT_KERNEL, so each blend pipeline holds one formula only.
 float kernel_falloff(uint kernel, float opacity, float power) {
@@ -53,37 +31,6 @@ float kernel_falloff(uint kernel, float opacity, float power) {
 // devices, where a shorter list per pixel block is worth more pairs). Either way only bins
 // inside the Gaussian's reference tile rectangle are candidates, so the reference's
 // clipping at that rectangle is kept exactly.
-
-// A Gaussian as uploaded (activated values).
-struct Gaussian {
-    vec4 pos_opacity;   // xyz centre, w = opacity (sigmoid applied)
-    vec4 scale;         // xyz axis scales (exp applied)
-    vec4 rotation;      // normalised quaternion (w, x, y, z)
-};
-
-// A projected Gaussian, written by preprocess, read by keys and blend. The first two
-// vec4s hold everything needed to tell whether it reaches a pixel (see alpha_bound).
-struct Splat {
-    vec4 mean_opacity_bound;  // mean2d.xy, opacity, alpha_bound(opacity)
-    vec4 conic_depth;         // conic A, B, C, view depth
-    vec4 color_radius;        // rgb from SH, radius (pixels; 0 when culled)
-};
-
-// Frame counters (one record, cleared at the start of each frame).
-struct Counters {
-    uint scan_total;     // sum of tiles touched mod 2^32 (written by the scan)
-    uint sort_count;     // min(scan_total, key capacity): number of keys sorted
-    uint touched_lo;     // exact 64-bit sum of tiles touched (low word) ...
-    uint touched_hi;     // ... and high word, so overflow past 2^32 is detected
-    uint ranges_groups_x;  // VkDispatchIndirectCommand of the ranges stage
-    uint ranges_groups_y;
-    uint ranges_groups_z;
-    uint visible;        // Gaussians that touch at least one tile
-    uint max_bins_loop;  // largest bin loop of one Gaussian (preprocess, keys) ...
-    uint max_list_loop;  // ... and list loop of one bin (blend), recorded past LOOP_REPORT
-    uint pad0;
-    uint pad1;
-};
 
 // CPU implementations may end every loop of an invocation after a fixed total number of
 // iterations (llvmpipe: 65,535, shared by all loops), silently. A long loop that stopped

@@ -14,10 +14,7 @@
 #extension GL_EXT_control_flow_attributes : require
 #include "loss_common.glsl"
 
-layout(push_constant) uniform Params {
-    uvec4 size;     // width, height, vec4s per pixel, axis (0: x, 1: y)
-    vec4 taps[3];   // the 11 normalised taps (metrics::ssim's, in f32)
-} p;
+layout(push_constant) uniform FilterBlock { FilterPush p; };
 
 #ifndef TEXEL_FETCH
 #define TEXEL_FETCH 0

@@ -4,10 +4,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "loss_common.glsl"
 
-layout(push_constant) uniform Params {
-    uvec4 size;   // width, height
-    vec4 scale;   // (1 - lambda) / n, lambda / n
-} p;
+layout(push_constant) uniform LossGradBlock { LossGradPush p; };
 
 layout(std430, binding = SSIM_GRAD_FILTERED) readonly buffer FilteredBuf { vec4 filtered[]; };
 layout(std430, binding = SSIM_GRAD_IMAGE) readonly buffer ImageBuf { vec4 image[]; };

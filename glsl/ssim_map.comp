@@ -5,7 +5,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "loss_common.glsl"
 
-layout(push_constant) uniform Params { uvec4 size; } p;  // width, height
+layout(push_constant) uniform SizeBlock { SizePush p; };
 
 // E[x], E[y], E[x^2], E[y^2], E[xy] per pixel (vec4s, rgb).
 layout(std430, binding = SSIM_MAP_MOMENTS) readonly buffer MomentBuf { vec4 moments[]; };

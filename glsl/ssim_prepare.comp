@@ -1,11 +1,11 @@
 #version 460
-// Training loss, stage 1 (src/train/loss.rs): per pixel the five quantities whose local
+// Training loss, stage 1: per pixel the five quantities whose local
 // means SSIM compares, for R, G and B: x, y, x^2, y^2, xy (x the rendered image, y the
 // target), as five vec4s (rgb, w unused).
 #extension GL_GOOGLE_include_directive : require
 #include "loss_common.glsl"
 
-layout(push_constant) uniform Params { uvec4 size; } p;  // width, height
+layout(push_constant) uniform SizeBlock { SizePush p; };
 
 layout(std430, binding = SSIM_PREPARE_IMAGE) readonly buffer ImageBuf { vec4 image[]; };
 layout(std430, binding = SSIM_PREPARE_TARGET) readonly buffer TargetBuf { vec4 target[]; };

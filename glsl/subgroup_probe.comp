@@ -1,6 +1,6 @@
 #version 460
 // What a subgroup really is on this device, measured rather than taken from the driver
-// (src/gpu/subgroup.rs): one workgroup of 128 invocations records, per invocation, the
+// (the host's subgroup probe): one workgroup of 128 invocations records, per invocation, the
 // gl_SubgroupSize it is told and the lanes that actually run together (a ballot of
 // every active lane, and a subgroup sum of ones). On a conformant device they agree;
 // llvmpipe configured wider than 512 bits reports 32 or 64 lanes but runs 16.

@@ -1,6 +1,6 @@
 #version 460
 // Training step of the neural shader's weights and biases on the device (feature splats,
-// src/train/device.rs): one invocation per value, flattened as Mlp::gpu_words lays them
+// the training step): one invocation per value, flattened as Mlp::gpu_words lays them
 // out after its header (per layer the weights, row-major, then the biases). MLP_STATE
 // holds the values, MLP_M and MLP_V Adam's moments, MLP_GRADS the shader backward's
 // gradients; the new values go into the shader's words (WORDS, after the header) that the
@@ -21,16 +21,7 @@ layout(std430, binding = TRAIN_MLP_STEP_WORDS) writeonly buffer WordBuf { uint w
 layout(std430, binding = TRAIN_MLP_STEP_NORMS) writeonly buffer NormBuf { vec4 norms[]; };
 layout(std430, binding = TRAIN_MLP_STEP_NORM_TOTAL) readonly buffer NormTotalBuf { vec4 norm_total[]; };
 
-const uint STEP_ADAM = 2u;
-const uint STEP_NORM = 16u;
-const uint STEP_CLIP = 32u;
-
-layout(push_constant) uniform Push {
-    // Values, words of the header before them, STEP_* bits, first NORMS entry.
-    uvec4 sizes;
-    // Learning rate, bias corrections (1 - b1^t, sqrt(1 - b2^t)), the largest norm.
-    vec4 lr_c;
-} pc;
+layout(push_constant) uniform MlpBlock { MlpPush pc; };
 
 void main() {
     uint j = linear_group_id() * LINEAR_WG + gl_LocalInvocationIndex;

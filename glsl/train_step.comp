@@ -1,5 +1,5 @@
 #version 460
-// Training step on the device (src/train/device.rs): one invocation per Gaussian.
+// Training step on the device: one invocation per Gaussian.
 //
 // The Gaussians' stored parameters (the original's: centre, log scales, unnormalised
 // quaternion, opacity logit, SH coefficients up to the largest degree) live in STATE, one
@@ -35,23 +35,6 @@
 #define WG_SIZE_SPEC_ID WIDE_WG_SPEC
 #include "common.glsl"
 
-struct Gaussian {
-    vec4 pos_opacity;
-    vec4 scale;
-    vec4 rotation;
-};
-struct GaussianGrad {
-    vec4 mean_opacity;
-    vec4 quat;
-    vec4 scale;
-    vec4 mean2d_abs;
-};
-struct Splat {
-    vec4 mean_opacity_bound;
-    vec4 conic_depth;
-    vec4 color_radius;
-};
-
 layout(std430, binding = TRAIN_STEP_STATE) buffer StateBuf { float state[]; };
 layout(std430, binding = TRAIN_STEP_M) buffer MBuf { float moment_m[]; };
 layout(std430, binding = TRAIN_STEP_V) buffer VBuf { float moment_v[]; };
@@ -76,38 +59,7 @@ layout(std430, binding = TRAIN_STEP_FEAT3) writeonly buffer Feat3Buf { vec4 feat
 layout(std430, binding = TRAIN_STEP_NORMS) writeonly buffer NormBuf { vec4 norms[]; };
 layout(std430, binding = TRAIN_STEP_NORM_TOTAL) readonly buffer NormTotalBuf { vec4 norm_total[]; };
 
-// Where the colour starts in a record (train::model::state::COLOUR_OFFSET, a multiple of 4).
-const uint COLOUR_OFFSET = 12u;
-
-const uint STEP_STATS = 1u;
-const uint STEP_ADAM = 2u;
-const uint STEP_SKIP_OPACITY = 4u;
-const uint STEP_FEATURES = 8u;
-const uint STEP_NORM = 16u;
-const uint STEP_CLIP = 32u;
-const uint STEP_NOISE = 64u;
-
-layout(push_constant) uniform Push {
-    // Gaussians, floats per stored record, colour floats C (3 (d + 1)^2 SH coefficients,
-    // or K feature channels), SH floats per Gaussian in the texels (padded to whole texels).
-    uvec4 counts;
-    // STEP_* bits; half the frame's width and height (floats); feature groups.
-    uvec4 flags_size;
-    // Learning rates: centre, log scale, quaternion, opacity logit.
-    vec4 lr;
-    // Colour learning rates (SH DC or features, SH rest) and the colour group's bias
-    // corrections (1 - b1^t, sqrt(1 - b2^t)).
-    vec4 lr_sh;
-    // Bias corrections 1 - b1^t of centre, log scale, quaternion, opacity.
-    vec4 c1;
-    // Bias corrections sqrt(1 - b2^t) of the same groups.
-    vec4 c2;
-    // The largest gradient norm (STEP_CLIP); MCMC: the noise scale, the opacity and scale
-    // regularisers' weights over n and 3 n.
-    vec4 clip;
-    // MCMC: the noise key of the iteration (model::noise_key).
-    uvec4 noise;
-} pc;
+layout(push_constant) uniform StepBlock { StepPush pc; };
 
 // model::pcg_hash, model::noise_normal.
 uint pcg_hash(uint x) {

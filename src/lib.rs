@@ -27,6 +27,7 @@ pub mod rf;
 pub mod rules;
 pub mod scene;
 pub mod sequence;
+pub mod shader_interface;
 pub mod shard;
 pub mod stats;
 pub mod train;

@@ -28,9 +28,9 @@ use crate::camera::Camera;
 use std::path::{Path, PathBuf};
 
 /// Largest width (inputs or outputs) of any layer, what the GPU shader holds per pixel.
-pub const MAX_WIDTH: usize = 128;
+pub const MAX_WIDTH: usize = crate::shader_interface::MAX_WIDTH as usize;
 /// Most layers in one shader.
-pub const MAX_LAYERS: usize = 8;
+pub const MAX_LAYERS: usize = crate::shader_interface::MAX_LAYERS as usize;
 /// The metadata key that describes the network.
 pub const METADATA_KEY: &str = "verisplat_mlp";
 

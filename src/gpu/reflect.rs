@@ -7,6 +7,8 @@
 
 use std::collections::HashMap;
 
+use crate::shader_interface::RecordLayout;
+
 /// What a binding slot holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum BindingKind {
@@ -26,8 +28,12 @@ pub struct Interface {
     /// `(binding, kind)` of every descriptor of set 0 the module still uses (the optimiser
     /// removes unused ones), sorted by binding.
     pub bindings: Vec<(u32, BindingKind)>,
-    /// Member offsets of the push-constant block, in member order.
+    /// Member offsets of the push constants' record, in member order: of the block's one
+    /// member when it is a struct (how the shaders declare a record of
+    /// [`crate::shader_interface`]), else of the block's own members.
     pub push_offsets: Vec<u32>,
+    /// The push-constant block is one member of a struct type (a record).
+    pub push_is_record: bool,
     /// Bytes of the push-constant block (last member's offset plus its size).
     pub push_size: u32,
     /// `(binding, stride)` of storage buffers whose block is one runtime array of
@@ -281,8 +287,17 @@ impl Declarations {
                     let Some(Type::Struct(members)) = d.types.get(&pointee) else {
                         return Err("the push constants are not a block".into());
                     };
+                    // A block of one struct member: the record's members.
+                    let (record, members) = match members[..] {
+                        [member] => match d.types.get(&member) {
+                            Some(Type::Struct(inner)) => (member, inner),
+                            _ => (pointee, members),
+                        },
+                        _ => (pointee, members),
+                    };
+                    interface.push_is_record = record != pointee;
                     interface.push_offsets = (0..members.len() as u32)
-                        .map(|m| d.offsets.get(&(pointee, m)).copied().unwrap_or(u32::MAX))
+                        .map(|m| d.offsets.get(&(record, m)).copied().unwrap_or(u32::MAX))
                         .collect();
                     interface.push_size = d
                         .size_of(pointee)
@@ -321,14 +336,15 @@ pub fn reflect(words: &[u32]) -> Result<Interface, String> {
 }
 
 /// Checks that a module binds what the host passes: every binding the module uses is in
-/// `bindings` with the same kind, and its push-constant block is `push_size` bytes.
+/// `bindings` with the same kind, and its push-constant block is the record `push`, member
+/// by member.
 pub fn check(
     name: &str,
     words: &[u32],
     bindings: &[BindingKind],
-    push_size: u32,
+    push: &RecordLayout,
 ) -> Result<Interface, String> {
-    check_interface(name, reflect(words), bindings, push_size)
+    check_interface(name, reflect(words), bindings, push)
 }
 
 /// [`check`] of a module's interface as read (`Err`: what is malformed).
@@ -336,9 +352,10 @@ pub(crate) fn check_interface(
     name: &str,
     interface: Result<Interface, String>,
     bindings: &[BindingKind],
-    push_size: u32,
+    push: &RecordLayout,
 ) -> Result<Interface, String> {
     let interface = interface.map_err(|e| format!("shader {name}: {e}"))?;
+    let push_size = push.size as u32;
     for &(binding, kind) in &interface.bindings {
         match bindings.get(binding as usize) {
             Some(&host) if host == kind => {}
@@ -361,6 +378,23 @@ pub(crate) fn check_interface(
             "shader {name} has {} bytes of push constants, the host pushes {push_size}",
             interface.push_size
         ));
+    }
+    if !interface.push_offsets.is_empty() {
+        if !interface.push_is_record {
+            return Err(format!(
+                "shader {name} declares its push constants member by member: declare them as \
+                 one member of type {} (interface.glsl, from src/shader_interface.rs)",
+                push.glsl
+            ));
+        }
+        let host: Vec<u32> = push.fields.iter().map(|f| f.offset as u32).collect();
+        if interface.push_offsets != host {
+            return Err(format!(
+                "shader {name}: the push constants' members are at bytes {:?}, {} has them \
+                 at {host:?}",
+                interface.push_offsets, push.rust
+            ));
+        }
     }
     Ok(interface)
 }

@@ -4,6 +4,7 @@
 //! Sums are computed modulo 2^32: a total >= 2^32 wraps, and refusing such inputs is
 //! the caller's job (the renderer bounds its counts).
 
+pub use crate::shader_interface::ScanPush;
 use ash::vk;
 
 use super::shader::{by_binding, BindingKind};
@@ -18,20 +19,6 @@ pub use super::shader_set::{SCAN_BLOCK, SCAN_ITEMS, SCAN_WG};
 /// minStorageBufferOffsetAlignment Vulkan allows).
 pub const SCRATCH_ALIGN: u64 = 256;
 
-/// Push constants of `scan_reduce`, `scan_block` and `scan_add`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct ScanPush {
-    /// Number of elements.
-    pub n: u32,
-    /// Non-zero: write the grand total to `totals[total_index]` (scan_block only).
-    pub write_total: u32,
-    /// u32 index of the total in the total buffer.
-    pub total_index: u32,
-    /// Padding to 16 bytes.
-    pub pad: u32,
-}
-
 /// The prefix-sum pipelines.
 pub struct Scan {
     reduce: ComputePipeline,
@@ -44,7 +31,7 @@ impl Scan {
     /// Compiles the scan shaders and builds their pipelines.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
         let defines = [];
-        let push = std::mem::size_of::<ScanPush>() as u32;
+        let push = &ScanPush::LAYOUT;
         let storage = BindingKind::StorageBuffer;
         Ok(Self {
             reduce: ComputePipeline::from_embedded(

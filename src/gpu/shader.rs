@@ -8,6 +8,7 @@ use ash::vk;
 use super::device::Shared;
 use super::shader_set;
 use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
+use crate::shader_interface::RecordLayout;
 
 /// SPIR-V compiled at build time (build.rs), by [`shader_set::ShaderVariant::key`].
 mod prebuilt {
@@ -17,6 +18,11 @@ mod prebuilt {
 /// The GLSL headers, for compiling other sources at run time ([`compile_glsl`]).
 const HEADERS: &[(&str, &str)] = &[
     ("common.glsl", include_str!("../../glsl/common.glsl")),
+    // Written by build.rs from crate::shader_interface.
+    (
+        "interface.glsl",
+        include_str!(concat!(env!("OUT_DIR"), "/glsl/interface.glsl")),
+    ),
     (
         "sort_common.glsl",
         include_str!("../../glsl/sort_common.glsl"),
@@ -106,7 +112,7 @@ pub fn compile_glsl(
     run_glslc(
         &scratch.0,
         &file,
-        &glsl,
+        &[&glsl],
         defines,
         &scratch.0.join("out.spv"),
     )
@@ -115,7 +121,7 @@ pub fn compile_glsl(
 fn run_glslc(
     cwd: &std::path::Path,
     file: &str,
-    include: &std::path::Path,
+    include: &[&std::path::Path],
     defines: &[(&str, String)],
     output: &std::path::Path,
 ) -> Result<Vec<u32>, ShaderError> {
@@ -125,7 +131,7 @@ fn run_glslc(
         .map(|(k, v)| (k.as_str(), v.as_str()))
         .chain(defines.iter().map(|(k, v)| (*k, v.as_str())))
         .collect();
-    shader_set::compile_glsl_file(cwd, file, &[include], &all, output).map_err(|message| {
+    shader_set::compile_glsl_file(cwd, file, include, &all, output).map_err(|message| {
         ShaderError::Compile {
             file: file.to_string(),
             message,
@@ -143,10 +149,22 @@ pub fn shader_spirv(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, 
             message,
         })?;
         let file = dir.join(format!("{name}.comp"));
+        // The records' declarations, as build.rs writes them, beside the edited headers.
+        let interface = HEADERS
+            .iter()
+            .find(|(header, _)| *header == "interface.glsl")
+            .map(|(_, text)| *text)
+            .expect("interface.glsl is a header");
+        std::fs::write(scratch.0.join("interface.glsl"), interface).map_err(|e| {
+            ShaderError::Compile {
+                file: format!("{name}.comp"),
+                message: e.to_string(),
+            }
+        })?;
         return run_glslc(
             &scratch.0,
             &file.display().to_string(),
-            &dir,
+            &[&dir, &scratch.0],
             defines,
             &scratch.0.join("out.spv"),
         );
@@ -203,9 +221,9 @@ impl ComputePipeline {
         name: &str,
         spirv: &[u32],
         bindings: &[BindingKind],
-        push_size: u32,
+        push: &RecordLayout,
     ) -> GpuResult<Self> {
-        Self::new_specialized(ctx, name, spirv, bindings, push_size, &[])
+        Self::new_specialized(ctx, name, spirv, bindings, push, &[])
     }
 
     /// [`Self::new`] with specialization constants: `(constant_id, u32 value)` pairs.
@@ -214,7 +232,7 @@ impl ComputePipeline {
         name: &str,
         spirv: &[u32],
         bindings: &[BindingKind],
-        push_size: u32,
+        push: &RecordLayout,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
         // A driver that misreports its subgroup size: every shader computes with the
@@ -229,7 +247,7 @@ impl ComputePipeline {
         // One reading of the module: its interface and its workgroup's demand.
         let (interface, demand) = read_module(spirv, specialization);
         // The module must bind what the host binds (the two sides cannot drift).
-        super::reflect::check_interface(name, interface, bindings, push_size)
+        super::reflect::check_interface(name, interface, bindings, push)
             .map_err(GpuError::Internal)?;
         let device = &ctx.shared.device;
         let mut this = Self {
@@ -240,7 +258,7 @@ impl ComputePipeline {
             layout: vk::PipelineLayout::null(),
             pipeline: vk::Pipeline::null(),
             bindings: bindings.to_vec(),
-            push_size,
+            push_size: push.size as u32,
         };
         let module_info = vk::ShaderModuleCreateInfo::default().code(spirv);
         // SAFETY: SPIR-V from shaderc; every handle below is destroyed by Drop (null ones
@@ -273,10 +291,10 @@ impl ComputePipeline {
         ctx.set_name(this.set_layout, name);
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            .size(push_size)];
+            .size(this.push_size)];
         let set_layouts = [this.set_layout];
         let mut layout_info = vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts);
-        if push_size > 0 {
+        if this.push_size > 0 {
             layout_info = layout_info.push_constant_ranges(&ranges);
         }
         // SAFETY: valid create info.
@@ -334,9 +352,9 @@ impl ComputePipeline {
         shader: &str,
         defines: &[(&str, String)],
         bindings: &[BindingKind],
-        push_size: u32,
+        push: &RecordLayout,
     ) -> GpuResult<Self> {
-        Self::from_embedded_specialized(ctx, shader, defines, bindings, push_size, &[])
+        Self::from_embedded_specialized(ctx, shader, defines, bindings, push, &[])
     }
 
     /// [`Self::from_embedded`] with specialization constants (`(constant_id, value)`).
@@ -346,11 +364,11 @@ impl ComputePipeline {
         shader: &str,
         defines: &[(&str, String)],
         bindings: &[BindingKind],
-        push_size: u32,
+        push: &RecordLayout,
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
         let spirv = shader_spirv(shader, defines)?;
-        Self::new_specialized(ctx, shader, &spirv, bindings, push_size, specialization)
+        Self::new_specialized(ctx, shader, &spirv, bindings, push, specialization)
     }
 
     /// Binds the pipeline, pushes the buffer descriptors (binding i = `buffers[i]`) and

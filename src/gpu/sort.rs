@@ -27,6 +27,7 @@
 //! `sort_setup` dispatch reads it and writes the indirect dispatch arguments, so the
 //! CPU never waits mid-frame.
 
+pub use crate::shader_interface::{SortPassPush, SortSetupPush};
 use ash::vk;
 
 use super::scan::{Scan, SCRATCH_ALIGN};
@@ -138,34 +139,6 @@ pub struct SortTexels {
 pub use super::shader_set::{META_BLOCKS, META_DISPATCH, META_N};
 /// Bytes reserved for the meta words.
 pub const META_BYTES: u64 = 32;
-
-/// Push constants of `sort_setup`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct SortSetupPush {
-    /// Element count when given by the host.
-    pub host_n: u32,
-    /// u32 index of the count in the count buffer, or `u32::MAX` for `host_n`.
-    pub count_index: u32,
-    /// Capacity: the count is clamped to this.
-    pub max_n: u32,
-    /// maxComputeWorkGroupCount[0].
-    pub max_groups_x: u32,
-}
-
-/// Push constants of `sort_histogram` and `sort_scatter`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct SortPassPush {
-    /// First key bit of this pass's digit.
-    pub shift: u32,
-    /// Digit width of this pass (the last pass may be narrower).
-    pub bits: u32,
-    /// Row length of the digit-major histogram table (blocks at capacity).
-    pub hist_stride: u32,
-    /// Padding to 16 bytes.
-    pub pad: u32,
-}
 
 /// How many elements to sort.
 #[derive(Clone, Copy)]
@@ -357,8 +330,8 @@ impl RadixSort {
             (BindingKind::StorageBuffer, BindingKind::StorageBuffer)
         };
         let storage = BindingKind::StorageBuffer;
-        let setup_push = std::mem::size_of::<SortSetupPush>() as u32;
-        let pass_push = std::mem::size_of::<SortPassPush>() as u32;
+        let setup_push = &SortSetupPush::LAYOUT;
+        let pass_push = &SortPassPush::LAYOUT;
         Ok(Self {
             config,
             setup: ComputePipeline::from_embedded_specialized(
@@ -410,7 +383,7 @@ impl RadixSort {
                     (bindings::sort_copy::KEYS_OUT, write),
                     (bindings::sort_copy::VALUES_OUT, write),
                 ])?,
-                0,
+                &crate::shader_interface::NO_PUSH_CONSTANTS,
                 &spec,
             )?,
             scan: Scan::new(ctx)?,

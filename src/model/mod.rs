@@ -79,8 +79,8 @@ impl SplatKernel {
     /// The value the shaders receive (`FrameParams.filters.w`, `SPLAT_KERNEL`).
     pub fn shader_id(self) -> u32 {
         match self {
-            SplatKernel::Gaussian => 0,
-            SplatKernel::Power => 1,
+            SplatKernel::Gaussian => crate::shader_interface::SPLAT_KERNEL_GAUSSIAN,
+            SplatKernel::Power => crate::shader_interface::SPLAT_KERNEL_POWER,
         }
     }
 }

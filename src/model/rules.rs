@@ -275,8 +275,8 @@ impl Rules {
     /// The value the shaders receive (`FrameParams.modes.x`).
     pub fn shader_id(self) -> u32 {
         match self {
-            Rules::Original => 0,
-            Rules::Gsplat => 1,
+            Rules::Original => crate::shader_interface::RULES_ORIGINAL,
+            Rules::Gsplat => crate::shader_interface::RULES_GSPLAT,
         }
     }
 }

@@ -26,40 +26,15 @@ use crate::gpu::{
 use crate::render::backward::DeviceGrads;
 use crate::render::forward::shade::GpuShader;
 use crate::render::{sh_texel_stride, GpuFeatures, GpuRenderer, GpuScene};
+use crate::shader_interface::{
+    MlpPush, StepPush, STEP_ADAM, STEP_CLIP, STEP_FEATURES, STEP_NOISE, STEP_NORM,
+    STEP_SKIP_OPACITY, STEP_STATS,
+};
 
 /// Invocations per workgroup.
 const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 /// Values a `loss_reduce` workgroup sums.
 const REDUCE_SPAN: u64 = 4096;
-
-/// `STEP_*` bits of the shaders.
-const STEP_STATS: u32 = 1;
-const STEP_ADAM: u32 = 2;
-const STEP_SKIP_OPACITY: u32 = 4;
-const STEP_FEATURES: u32 = 8;
-const STEP_NORM: u32 = 16;
-const STEP_CLIP: u32 = 32;
-const STEP_NOISE: u32 = 64;
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct StepPush {
-    counts: [u32; 4],
-    flags_size: [u32; 4],
-    lr: [f32; 4],
-    lr_sh: [f32; 4],
-    c1: [f32; 4],
-    c2: [f32; 4],
-    clip: [f32; 4],
-    noise: [u32; 4],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct MlpPush {
-    sizes: [u32; 4],
-    lr_c: [f32; 4],
-}
 
 /// What one iteration's step does.
 #[derive(Clone, Copy, Debug)]
@@ -132,7 +107,7 @@ impl StepPipelines {
                     (slot::NORMS, s),
                     (slot::NORM_TOTAL, s),
                 ])?,
-                std::mem::size_of::<StepPush>() as u32,
+                &StepPush::LAYOUT,
                 &[(crate::gpu::shader_set::WIDE_WG_SPEC, train_workgroup)],
             )?,
             reduce: ComputePipeline::from_embedded(
@@ -140,7 +115,7 @@ impl StepPipelines {
                 "loss_reduce",
                 &[],
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
-                16,
+                &crate::shader_interface::CountsPush::LAYOUT,
             )?,
             mlp: ComputePipeline::from_embedded(
                 ctx,
@@ -155,7 +130,7 @@ impl StepPipelines {
                     (mslot::NORMS, s),
                     (mslot::NORM_TOTAL, s),
                 ])?,
-                std::mem::size_of::<MlpPush>() as u32,
+                &MlpPush::LAYOUT,
             )?,
         })
     }

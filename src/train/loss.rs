@@ -25,6 +25,7 @@ use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
     MemoryKind,
 };
+use crate::shader_interface::{CountsPush, FilterPush, LossGradPush, RecordLayout, SizePush};
 
 /// The original's weight of the D-SSIM term (`lambda_dssim`).
 pub const LAMBDA_DSSIM: f32 = 0.2;
@@ -108,20 +109,6 @@ const PIXEL_GROUP: u64 = 64;
 /// Pixels one `ssim_filter` invocation filters, consecutive along its axis.
 const FILTER_RUN: u64 = crate::gpu::shader_set::SSIM_FILTER_RUN as u64;
 
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct FilterPush {
-    size: [u32; 4],
-    taps: [[f32; 4]; 3],
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct GradPush {
-    size: [u32; 4],
-    scale: [f32; 4],
-}
-
 /// The buffers of one loss evaluation: the rendered image and the target (vec4 per pixel,
 /// rgb), and the gradient written (vec4 per pixel, rgb; w 0).
 pub struct LossBuffers<'a> {
@@ -199,8 +186,8 @@ impl GpuLoss {
     /// bits; the view is faster on llvmpipe).
     pub fn with_texel_fetch(ctx: &GpuContext, texel: bool) -> GpuResult<Self> {
         let s = BindingKind::StorageBuffer;
-        let build = |name: &str, kinds: &[BindingKind], push: usize| {
-            ComputePipeline::from_embedded(ctx, name, &[], kinds, push as u32)
+        let build = |name: &str, kinds: &[BindingKind], push: &RecordLayout| {
+            ComputePipeline::from_embedded(ctx, name, &[], kinds, push)
         };
         use bindings::{loss_reduce, ssim_filter, ssim_grad, ssim_map, ssim_prepare};
         Ok(GpuLoss {
@@ -211,14 +198,14 @@ impl GpuLoss {
                     (ssim_prepare::TARGET, s),
                     (ssim_prepare::PLANES, s),
                 ])?,
-                16,
+                &SizePush::LAYOUT,
             )?,
             filter: ComputePipeline::from_embedded(
                 ctx,
                 "ssim_filter",
                 &[("TEXEL_FETCH", "0".into())],
                 &by_binding([(ssim_filter::SRC, s), (ssim_filter::DST, s)])?,
-                std::mem::size_of::<FilterPush>() as u32,
+                &FilterPush::LAYOUT,
             )?,
             filter_texel: if texel {
                 Some(ComputePipeline::from_embedded(
@@ -229,7 +216,7 @@ impl GpuLoss {
                         (ssim_filter::SRC, BindingKind::UniformTexelBuffer),
                         (ssim_filter::DST, s),
                     ])?,
-                    std::mem::size_of::<FilterPush>() as u32,
+                    &FilterPush::LAYOUT,
                 )?)
             } else {
                 None
@@ -244,7 +231,7 @@ impl GpuLoss {
                     (ssim_map::MAPS, s),
                     (ssim_map::SUMS, s),
                 ])?,
-                16,
+                &SizePush::LAYOUT,
             )?,
             grad: build(
                 "ssim_grad",
@@ -254,12 +241,12 @@ impl GpuLoss {
                     (ssim_grad::TARGET, s),
                     (ssim_grad::GRAD, s),
                 ])?,
-                std::mem::size_of::<GradPush>(),
+                &LossGradPush::LAYOUT,
             )?,
             reduce: build(
                 "loss_reduce",
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
-                16,
+                &CountsPush::LAYOUT,
             )?,
             work: None,
             io: None,
@@ -421,7 +408,7 @@ impl GpuLoss {
         // filtered (the maps) -> planes (x) -> filtered (y).
         filter(cmd, filtered, planes, 3)?;
         let n = (pixels * 3) as f32;
-        let push = GradPush {
+        let push = LossGradPush {
             size,
             scale: [(1.0 - lambda) / n, lambda / n, 0.0, 0.0],
         };

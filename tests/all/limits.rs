@@ -21,9 +21,14 @@ use verisplat::gpu::sync::{barrier, Access};
 fn pair_counting_is_exact_far_beyond_2_pow_32() {
     let r = renderer();
     let ctx = r.ctx();
-    let pipeline =
-        ComputePipeline::from_embedded(ctx, "count64_test", &[], &[BindingKind::StorageBuffer], 0)
-            .unwrap();
+    let pipeline = ComputePipeline::from_embedded(
+        ctx,
+        "count64_test",
+        &[],
+        &[BindingKind::StorageBuffer],
+        &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+    )
+    .unwrap();
     let wg = verisplat::gpu::shader_set::LINEAR_WG;
     let groups = 7_680_000 / wg;
     for seed in [1u32, 0xDEAD_BEEF] {

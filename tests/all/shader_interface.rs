@@ -88,8 +88,14 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         RadixSort::with_config(ctx, config).expect("sort");
         built += 4;
     }
-    ComputePipeline::from_embedded(ctx, "count64_test", &[], &[BindingKind::StorageBuffer], 0)
-        .expect("count64_test");
+    ComputePipeline::from_embedded(
+        ctx,
+        "count64_test",
+        &[],
+        &[BindingKind::StorageBuffer],
+        &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+    )
+    .expect("count64_test");
     built += 1;
     // The subgroup self-check every context runs.
     verisplat::gpu::subgroup::probe(ctx).expect("the subgroup probe");
@@ -177,7 +183,7 @@ fn a_stage_that_binds_other_kinds_than_its_shader_is_refused() {
         "count64_test",
         &[],
         &[BindingKind::StorageImage],
-        0,
+        &verisplat::shader_interface::NO_PUSH_CONSTANTS,
     )
     .err()
     .expect("a storage buffer bound as an image is refused");
@@ -307,7 +313,8 @@ fn reflection_reads_bindings_push_constants_and_strides_and_catches_drift() {
     let source = "#version 460
 layout(local_size_x = 64) in;
 struct S { vec4 a; vec4 b; float c; };
-layout(push_constant) uniform P { uint n; uint pad; vec4 v; } pc;
+struct P { uint n; uint pad; vec4 v; };
+layout(push_constant) uniform PBlock { P pc; };
 layout(std430, binding = 0) buffer A { S items[]; };
 layout(binding = 1) uniform usamplerBuffer t;
 layout(binding = 2, r32ui) uniform writeonly uimageBuffer o;
@@ -340,7 +347,28 @@ imageStore(img, ivec2(i, 0), items[i].b);
         StorageTexelBuffer,
         StorageImage,
     ];
-    assert!(check("t", &words, &host, 32).is_ok());
+    use verisplat::shader_interface::{FieldLayout, RecordLayout};
+    const fn field(name: &'static str, ty: &'static str, offset: usize) -> FieldLayout {
+        FieldLayout { name, ty, offset }
+    }
+    const FIELDS: &[FieldLayout] = &[
+        field("n", "uint", 0),
+        field("pad", "uint", 4),
+        field("v", "vec4", 16),
+    ];
+    const MOVED: &[FieldLayout] = &[
+        field("n", "uint", 0),
+        field("pad", "uint", 8),
+        field("v", "vec4", 16),
+    ];
+    let p = RecordLayout {
+        rust: "P",
+        glsl: "P",
+        size: 32,
+        fields: FIELDS,
+    };
+    assert!(found.push_is_record);
+    assert!(check("t", &words, &host, &p).is_ok());
     // Every kind of drift is caught.
     let wrong_kind = [
         StorageBuffer,
@@ -348,12 +376,25 @@ imageStore(img, ivec2(i, 0), items[i].b);
         StorageTexelBuffer,
         StorageImage,
     ];
-    let e = check("t", &words, &wrong_kind, 32).unwrap_err();
+    let e = check("t", &words, &wrong_kind, &p).unwrap_err();
     assert!(e.contains("binding 1"), "{e}");
-    let e = check("t", &words, &host[..3], 32).unwrap_err();
+    let e = check("t", &words, &host[..3], &p).unwrap_err();
     assert!(e.contains("binding 3"), "{e}");
-    let e = check("t", &words, &host, 16).unwrap_err();
+    let short = RecordLayout { size: 16, ..p };
+    let e = check("t", &words, &host, &short).unwrap_err();
     assert!(e.contains("32 bytes of push constants"), "{e}");
+    // A member the host places elsewhere (same size).
+    let e = check("t", &words, &host, &RecordLayout { fields: MOVED, ..p }).unwrap_err();
+    assert!(e.contains("members are at bytes [0, 4, 16]"), "{e}");
+    // A block declared member by member instead of as the record.
+    let flat = source.replace(
+        "struct P { uint n; uint pad; vec4 v; };\nlayout(push_constant) uniform PBlock { P pc; };",
+        "layout(push_constant) uniform PBlock { uint n; uint pad; vec4 v; } pc;",
+    );
+    assert_ne!(flat, source);
+    let flat_words = compile_glsl("reflect_flat", &flat, &[]).expect("compiles");
+    let e = check("t", &flat_words, &host, &p).unwrap_err();
+    assert!(e.contains("member by member"), "{e}");
     assert!(reflect(&words[..3]).is_err());
 }
 

@@ -105,7 +105,7 @@ impl BlendBwd {
                 (slot::FEATURES, storage),
                 (slot::GRAD_FEATURES, storage),
             ])?,
-            0,
+            &crate::shader_interface::NO_PUSH_CONSTANTS,
             &if rows {
                 Vec::new()
             } else {

@@ -8,6 +8,7 @@
 use crate::gpu::shader::{by_binding, BindingKind};
 use crate::gpu::shader_set::bindings::grad_accumulate as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
+pub use crate::shader_interface::GradPush;
 use ash::vk;
 
 /// How per-pair gradients are added into per-Gaussian sums.
@@ -56,19 +57,6 @@ pub struct GradAccumulate {
     workgroup: u32,
 }
 
-/// Push constants of the accumulation and the preprocess backward: the items dispatched
-/// over (pairs; Gaussians), and log2 of the most pairs one Gaussian can have.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct GradPush {
-    /// Sorted pairs (accumulation) or Gaussians (preprocess backward).
-    pub count: u32,
-    /// `ceil(log2(bins))`.
-    pub bits: u32,
-    /// vec4s of fields per pair: 3, plus one per group of four feature channels.
-    pub vecs: u32,
-}
-
 impl GradAccumulate {
     /// Builds the pipeline for `mode`.
     pub fn new(ctx: &GpuContext, mode: Accumulation) -> GpuResult<Self> {
@@ -94,7 +82,7 @@ impl GradAccumulate {
                 (slot::MAXIMA, storage),
                 (slot::ACC, storage),
             ])?,
-            std::mem::size_of::<GradPush>() as u32,
+            &GradPush::LAYOUT,
             &[(crate::gpu::shader_set::WIDE_WG_SPEC, workgroup)],
         )?;
         Ok(GradAccumulate {

@@ -10,7 +10,8 @@ use ash::vk;
 use crate::render::backward::grad_accumulate::GradPush;
 
 /// Bytes of one Gaussian's gradients in the output (`GaussianGrad`: four vec4).
-pub const GAUSSIAN_GRAD_BYTES: u64 = 64;
+pub const GAUSSIAN_GRAD_BYTES: u64 =
+    std::mem::size_of::<crate::shader_interface::GaussianGrad>() as u64;
 
 /// The preprocess-backward pipeline.
 pub struct PreprocessBwd {
@@ -39,7 +40,7 @@ impl PreprocessBwd {
                 (slot::SH_GRADS, storage),
                 (slot::FEATURE_GRADS, storage),
             ])?,
-            std::mem::size_of::<GradPush>() as u32,
+            &GradPush::LAYOUT,
             &[(crate::gpu::shader_set::WIDE_WG_SPEC, workgroup)],
         )?;
         Ok(PreprocessBwd {

@@ -17,6 +17,7 @@ use crate::gpu::shader_set::{SHADE_CHUNK_PIXELS, SHADE_SPEC_ACTIVATIONS, SHADE_S
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use crate::render::forward::shade::{GpuShader, ShadePush};
+use crate::shader_interface::ShadeBwdPush;
 use ash::vk;
 
 /// Pixels per chunk: one per invocation of a workgroup.
@@ -24,14 +25,6 @@ pub const PIXELS: u32 = SHADE_CHUNK_PIXELS;
 /// Partial sums of the parameters' gradients: the most workgroups of one dispatch. A
 /// constant, so the order of the sums depends on the frame's size only, not the device.
 pub const PARTIAL_SLOTS: u32 = 256;
-
-/// The push constants of `glsl/shade_bwd.comp`: the forward's, then the pass's shape.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct ShadeBwdPush {
-    shade: ShadePush,
-    shape: [u32; 4],
-}
 
 const _: () = assert!(std::mem::size_of::<ShadeBwdPush>() == 128);
 
@@ -103,7 +96,7 @@ impl ShadeBwd {
                 (slot::SCRATCH, storage),
                 (slot::PARTIALS, storage),
             ])?,
-            std::mem::size_of::<ShadeBwdPush>() as u32,
+            &ShadeBwdPush::LAYOUT,
             &[
                 (SHADE_SPEC_ACTIVATIONS, activations.max(1)),
                 (SHADE_SPEC_WIDEST, widest.max(1)),
@@ -114,7 +107,7 @@ impl ShadeBwd {
             "mlp_grad_reduce",
             &[],
             &by_binding([(rslot::PARTIALS, storage), (rslot::GRADS, storage)])?,
-            16,
+            &crate::shader_interface::CountsPush::LAYOUT,
         )?;
         Ok(ShadeBwd {
             pipeline,

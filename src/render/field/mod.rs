@@ -10,6 +10,8 @@ use crate::gpu::shader_set::bindings::field as slot;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
 use crate::model::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
+use crate::shader_interface::FieldPush;
+pub use crate::shader_interface::{FieldGaussian, FieldParams};
 
 /// Workgroup width and height in pixels (16 x 8 = 128 invocations, `glsl/field.comp`).
 const SIDE: u32 = 16;
@@ -27,53 +29,7 @@ const LOOP_LIMITED_PASS: u32 = 32_768;
 /// writes `0x7fc00000` for empty), so a pixel still holding it was never written.
 const UNWRITTEN: u32 = 0xFFFF_FFFF;
 
-/// The push constants of `glsl/field.comp`: one pass.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct FieldPass {
-    group: u32,
-    first: u32,
-    count: u32,
-    accumulate: u32,
-}
-
-/// The parameter block of `glsl/field.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct FieldParams {
-    /// Width, height, Gaussians, channel groups.
-    pub size: [u32; 4],
-    /// Samples along the ray (maximum).
-    pub mode: [u32; 4],
-    /// World-to-camera rotation rows, translation in `w`.
-    pub w2c: [[f32; 4]; 3],
-    /// Camera centre; `w` the kernel's cutoff `d2`.
-    pub origin: [f32; 4],
-    /// fx, fy, cx, cy.
-    pub focal: [f32; 4],
-    /// The slice plane's point.
-    pub plane_point: [f32; 4],
-    /// The slice plane's unit normal.
-    pub plane_normal: [f32; 4],
-    /// The field's box, lower corner.
-    pub bounds_min: [f32; 4],
-    /// Upper corner.
-    pub bounds_max: [f32; 4],
-}
-
 const _: () = assert!(std::mem::size_of::<FieldParams>() == 176);
-
-/// One Gaussian as the shader reads it: centre and support radius, inverse covariance.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct FieldGaussian {
-    /// Centre, and the radius of the support's bounding sphere.
-    pub mean_radius: [f32; 4],
-    /// A: xx, xy, xz, yy.
-    pub a0: [f32; 4],
-    /// A: yz, zz, 0, 0.
-    pub a1: [f32; 4],
-}
 
 const _: () = assert!(std::mem::size_of::<FieldGaussian>() == 48);
 
@@ -178,7 +134,7 @@ impl FieldRenderer {
                     (slot::FEATURES, B),
                     (slot::OUTPUT, B),
                 ])?,
-                std::mem::size_of::<FieldPass>() as u32,
+                &FieldPush::LAYOUT,
             )?);
         }
         slot_ref
@@ -255,7 +211,7 @@ impl FieldRenderer {
                     barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
                 }
                 for group in 0..field.groups {
-                    let push = FieldPass {
+                    let push = FieldPush {
                         group,
                         first,
                         count: pass.min(field.count - first),

@@ -201,7 +201,7 @@ impl Blend {
             "blend",
             &defines,
             &bindings,
-            std::mem::size_of::<crate::render::forward::types::BlendPush>() as u32,
+            &crate::render::forward::types::BlendPush::LAYOUT,
         )?;
         Ok(Blend {
             pipeline,

@@ -73,7 +73,7 @@ impl FeatureBlend {
             "blend_features",
             &defines,
             &bindings,
-            std::mem::size_of::<crate::render::forward::types::FeatureBlendPush>() as u32,
+            &crate::render::forward::types::FeatureBlendPush::LAYOUT,
         )?;
         Ok(FeatureBlend { pipeline, texel })
     }

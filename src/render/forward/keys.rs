@@ -71,7 +71,7 @@ impl Keys {
                 (slot::DEPTH_ORDER, read),
                 (slot::BIN_MASKS, read),
             ])?,
-            std::mem::size_of::<crate::render::forward::types::KeysPush>() as u32,
+            &crate::render::forward::types::KeysPush::LAYOUT,
         )?;
         Ok(Keys { pipeline, texel_io })
     }

@@ -40,7 +40,7 @@ impl Order {
                 (slot::TOUCHED, BindingKind::StorageBuffer),
                 (slot::TOUCHED_IN_ORDER, BindingKind::StorageBuffer),
             ])?,
-            0,
+            &crate::shader_interface::NO_PUSH_CONSTANTS,
         )?;
         Ok(Order { pipeline })
     }

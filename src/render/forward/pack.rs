@@ -28,7 +28,7 @@ impl Pack {
                 (slot::COLOR, BindingKind::StorageImage),
                 (slot::PACKED, BindingKind::StorageBuffer),
             ])?,
-            std::mem::size_of::<crate::render::forward::types::PackPush>() as u32,
+            &crate::render::forward::types::PackPush::LAYOUT,
         )?;
         Ok(Pack { pipeline })
     }

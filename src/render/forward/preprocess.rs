@@ -96,7 +96,7 @@ impl Preprocess {
                 (b::BIN_MASKS, write),
                 (b::TOUCHED, write),
             ])?,
-            std::mem::size_of::<crate::render::forward::types::WindowPush>() as u32,
+            &crate::render::forward::types::WindowPush::LAYOUT,
         )?;
         Ok(Preprocess {
             pipeline,

@@ -34,7 +34,7 @@ impl Ranges {
                 (slot::RANGES, BindingKind::StorageBuffer),
                 (slot::COUNTERS, BindingKind::StorageBuffer),
             ])?,
-            0,
+            &crate::shader_interface::NO_PUSH_CONSTANTS,
         )?;
         Ok(Ranges { pipeline, texel_io })
     }

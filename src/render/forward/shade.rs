@@ -9,25 +9,13 @@ use crate::gpu::{
     MemoryKind,
 };
 use crate::mlp::Mlp;
+pub(crate) use crate::shader_interface::ShadePush;
 use ash::vk;
 
 /// Workgroup side (16 x 16 invocations).
 /// Pixels per workgroup along x and y (`glsl/shade.comp`: 128 invocations).
 const SIDE: u32 = 16;
 const ROWS: u32 = 8;
-
-/// The push constants of `glsl/shade.comp`, and the first 112 bytes of
-/// `glsl/shade_bwd.comp`'s ([`crate::render::backward::shade_bwd`]).
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct ShadePush {
-    size: [u32; 4],
-    /// Input code, layers, plane stride (vec4s), and for the backward pass the first chunk.
-    pub(crate) code: [u32; 4],
-    intrinsics: [f32; 4],
-    rot: [[f32; 4]; 3],
-    background: [f32; 4],
-}
 
 const _: () = assert!(std::mem::size_of::<ShadePush>() == 112);
 
@@ -210,7 +198,7 @@ impl Shade {
                 (slot::FEATURES, BindingKind::StorageBuffer),
                 (slot::COLOR, BindingKind::StorageImage),
             ])?,
-            std::mem::size_of::<ShadePush>() as u32,
+            &ShadePush::LAYOUT,
         )?;
         Ok(Shade { pipeline })
     }

@@ -6,11 +6,11 @@ use super::adam::Moments;
 use super::Model;
 use crate::scene::Scene;
 
-/// A checkpoint's scalars (counts, degrees, step counts) by name.
 /// Where a Gaussian's colour starts in its device record ([`Model::record_floats`]): a
 /// whole vec4 from the record's start.
-pub(in crate::train) const COLOUR_OFFSET: usize = 12;
+pub(in crate::train) const COLOUR_OFFSET: usize = crate::shader_interface::COLOUR_OFFSET as usize;
 
+/// A checkpoint's scalars (counts, degrees, step counts) by name.
 pub(crate) type Scalars = serde_json::Map<String, serde_json::Value>;
 
 impl Model {
