@@ -131,6 +131,9 @@ pub struct GpuTimer {
     /// When the current recording began ([`Self::reset`]): the host's bound on how long
     /// its work took.
     recorded_at: Option<Instant>,
+    /// The stage [`Self::begin`] opened and [`Self::end`] has not closed: its name and
+    /// whether it writes timestamps.
+    open: Option<(String, bool)>,
 }
 
 impl GpuTimer {
@@ -149,6 +152,7 @@ impl GpuTimer {
             pool,
             capacity,
             stages: Vec::new(),
+            open: None,
             clock: TimestampClock::of(ctx.info()),
             worst_phase: ctx.info().emulation.timestamp_bits.is_some(),
             recorded_at: None,
@@ -158,6 +162,7 @@ impl GpuTimer {
     /// Starts a new recording: forgets old stages and resets the pool inside `cmd`.
     pub fn reset(&mut self, ctx: &GpuContext, cmd: vk::CommandBuffer) {
         self.stages.clear();
+        self.open = None;
         self.recorded_at = Some(Instant::now());
         // SAFETY: cmd is recording outside a render pass; the range is within the pool.
         unsafe {
@@ -176,6 +181,20 @@ impl GpuTimer {
         name: &str,
         body: impl FnOnce(vk::CommandBuffer) -> GpuResult<R>,
     ) -> GpuResult<R> {
+        self.begin(ctx, cmd, name)?;
+        let result = body(cmd);
+        self.end(ctx, cmd)?;
+        result
+    }
+
+    /// Opens stage `name` in `cmd`: its debug label and first timestamp. What is recorded
+    /// until [`Self::end`] is the stage ([`Self::stage`] around a body).
+    pub fn begin(&mut self, ctx: &GpuContext, cmd: vk::CommandBuffer, name: &str) -> GpuResult<()> {
+        if let Some((open, _)) = &self.open {
+            return Err(GpuError::Internal(format!(
+                "stage {name} begun inside stage {open}"
+            )));
+        }
         let label = CString::new(name)
             .map_err(|_| GpuError::InvalidArgument(format!("stage name {name:?} has a NUL")))?;
         let index = self.stages.len() as u32 * 2;
@@ -188,8 +207,7 @@ impl GpuTimer {
                 self.stages.len() + 1
             )));
         }
-        let debug = self.shared.debug_device.as_ref();
-        if let Some(debug) = debug {
+        if let Some(debug) = self.shared.debug_device.as_ref() {
             let info = vk::DebugUtilsLabelEXT::default().label_name(&label);
             // SAFETY: cmd is recording; the label outlives the call.
             unsafe { debug.cmd_begin_debug_utils_label(cmd, &info) };
@@ -206,9 +224,19 @@ impl GpuTimer {
                 )
             };
         }
-        let result = body(cmd);
+        self.open = Some((name.to_string(), timed));
+        Ok(())
+    }
+
+    /// Closes the stage [`Self::begin`] opened: its second timestamp and the label's end.
+    pub fn end(&mut self, ctx: &GpuContext, cmd: vk::CommandBuffer) -> GpuResult<()> {
+        let (name, timed) = self
+            .open
+            .take()
+            .ok_or_else(|| GpuError::Internal("a stage ended that was not begun".into()))?;
+        let index = self.stages.len() as u32 * 2;
         if timed {
-            // SAFETY: as above for query `index + 1`.
+            // SAFETY: as in `begin` for query `index + 1`.
             unsafe {
                 ctx.device().cmd_write_timestamp2(
                     cmd,
@@ -218,12 +246,12 @@ impl GpuTimer {
                 )
             };
         }
-        self.stages.push(name.to_string());
-        if let Some(debug) = debug {
-            // SAFETY: matches the begin above.
+        self.stages.push(name);
+        if let Some(debug) = self.shared.debug_device.as_ref() {
+            // SAFETY: matches the label `begin` opened.
             unsafe { debug.cmd_end_debug_utils_label(cmd) };
         }
-        result
+        Ok(())
     }
 
     /// The device's timestamp clock.

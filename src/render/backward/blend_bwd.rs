@@ -19,6 +19,34 @@ pub struct BlendBwd {
     rows: bool,
 }
 
+/// What the blend backward binds: the forward's frame (`splats` and `values` are buffers,
+/// or texel views for the row layout), the pixels' gradients and the pass's outputs.
+#[derive(Clone, Copy)]
+pub struct BlendBwdBindings<'a> {
+    /// The frame's parameters.
+    pub params: BufferSlice<'a>,
+    /// The frame's splats.
+    pub splats: Resource<'a>,
+    /// The sorted pairs' Gaussian indices.
+    pub values: Resource<'a>,
+    /// Each bin's range of pairs.
+    pub ranges: BufferSlice<'a>,
+    /// Each pixel's last contributor and final transmittance.
+    pub last: BufferSlice<'a>,
+    /// dL/d(colour, alpha) per pixel.
+    pub grad_color: BufferSlice<'a>,
+    /// dL/d depth per pixel.
+    pub grad_depth: BufferSlice<'a>,
+    /// Out: each pair's gradient fields.
+    pub pair_grads: BufferSlice<'a>,
+    /// Out: each field's largest magnitude.
+    pub maxima: BufferSlice<'a>,
+    /// The Gaussians' feature values (groups of four).
+    pub features: BufferSlice<'a>,
+    /// dL/d feature channel per pixel.
+    pub grad_features: BufferSlice<'a>,
+}
+
 impl BlendBwd {
     /// Whether `ctx` runs the row layout for `bin`-pixel bins: one invocation per row of
     /// an 8-pixel bin, reading through texel views (`texel_views`: the frame has them),
@@ -132,26 +160,27 @@ impl BlendBwd {
         self.rows
     }
 
-    /// Records the dispatch over the `bins` grid. `splats` and `values` are buffers, or
-    /// texel views for the row layout.
-    #[allow(clippy::too_many_arguments)]
+    /// Records the dispatch over the `bins` grid.
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
         bins: (u32, u32),
-        params: BufferSlice,
-        splats: Resource,
-        values: Resource,
-        ranges: BufferSlice,
-        last: BufferSlice,
-        grad_color: BufferSlice,
-        grad_depth: BufferSlice,
-        pair_grads: BufferSlice,
-        maxima: BufferSlice,
-        features: BufferSlice,
-        grad_features: BufferSlice,
+        b: &BlendBwdBindings,
     ) -> GpuResult<()> {
+        let BlendBwdBindings {
+            params,
+            splats,
+            values,
+            ranges,
+            last,
+            grad_color,
+            grad_depth,
+            pair_grads,
+            maxima,
+            features,
+            grad_features,
+        } = *b;
         let buffers = by_binding([
             (slot::PARAMS, Resource::Buffer(params)),
             (slot::SPLATS, splats),

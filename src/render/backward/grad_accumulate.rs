@@ -57,6 +57,20 @@ pub struct GradAccumulate {
     workgroup: u32,
 }
 
+/// What the accumulation binds: the sorted pairs' Gaussian indices, the pairs' gradient
+/// fields and their maxima, and the Gaussians' sums it adds to.
+#[derive(Clone, Copy)]
+pub struct AccumulateBindings<'a> {
+    /// The sorted pairs' Gaussian indices.
+    pub values: BufferSlice<'a>,
+    /// Each pair's gradient fields.
+    pub pair_grads: BufferSlice<'a>,
+    /// Each field's largest magnitude.
+    pub maxima: BufferSlice<'a>,
+    /// Out: each Gaussian's sums.
+    pub acc: BufferSlice<'a>,
+}
+
 impl GradAccumulate {
     /// Builds the pipeline for `mode`.
     pub fn new(ctx: &GpuContext, mode: Accumulation) -> GpuResult<Self> {
@@ -97,15 +111,18 @@ impl GradAccumulate {
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        values: BufferSlice,
-        pair_grads: BufferSlice,
-        maxima: BufferSlice,
-        acc: BufferSlice,
+        b: &AccumulateBindings,
         push: GradPush,
     ) -> GpuResult<()> {
         if push.count == 0 {
             return Ok(());
         }
+        let AccumulateBindings {
+            values,
+            pair_grads,
+            maxima,
+            acc,
+        } = *b;
         let buffers = by_binding([
             (slot::VALUES, values),
             (slot::PAIR_GRADS, pair_grads),

@@ -21,6 +21,8 @@
 //! this pass to.
 
 pub mod blend_bwd;
+mod buffers;
+mod device;
 pub mod differentiable;
 pub mod grad_accumulate;
 mod pass;
@@ -30,27 +32,24 @@ pub mod shade_bwd;
 use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
-use crate::gpu::{BufferSlice, GpuBuffer, GpuContext, GpuError, GpuResult, GpuTimer, MemoryKind};
+use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::model::grad::{PixelGrads, SplatGrads};
 use crate::model::{sh_coeffs_for_degree, SplatKernel};
 use crate::render::forward::shade::GpuShader;
-use crate::render::{check_binding, ForwardState, GpuRenderer, GpuScene};
+use crate::render::frame::buffers::FrameSet;
+use crate::render::{check_binding, ForwardState, GpuRenderer, GpuScene, Stage};
 use blend_bwd::BlendBwd;
+use buffers::BackwardBuffers;
+pub use device::DeviceBackward;
 use grad_accumulate::{Accumulation, GradAccumulate};
 use pass::BackwardPass;
-use preprocess_bwd::{PreprocessBwd, GAUSSIAN_GRAD_BYTES};
+use preprocess_bwd::PreprocessBwd;
 use shade_bwd::ShadeBwd;
 
-/// Timestamped stages of one backward pass.
-pub const BACKWARD_STAGES: [&str; 3] = ["blend_bwd", "accumulate", "preprocess_bwd"];
-/// The stage before them in the backward pass of a shaded frame.
-pub const SHADE_BACKWARD_STAGE: &str = "shade_bwd";
-/// The first stage of [`GpuRenderer::backward_on_device`]: what records the pixels'
-/// gradients (training's loss).
-pub const DEVICE_LOSS_STAGE: &str = "loss";
-/// The last stage of [`GpuRenderer::backward_on_device`]: what reads the gradients
-/// (training's step).
-pub const DEVICE_STEP_STAGE: &str = "step";
+/// Timestamped stages of every backward pass (a shaded frame's starts with
+/// [`Stage::ShadeBwd`]; a device pass's starts with [`Stage::Loss`] and ends with
+/// [`Stage::Step`]).
+pub const BACKWARD_STAGES: [Stage; 3] = [Stage::BlendBwd, Stage::Accumulate, Stage::PreprocessBwd];
 
 /// What tells blend backward pipelines apart: bin size, whether it reads rows of texels,
 /// the splat kernel, groups of four feature channels.
@@ -63,43 +62,29 @@ pub(super) struct BackwardState {
     accumulate: Vec<(Accumulation, GradAccumulate)>,
     preprocess: [Option<PreprocessBwd>; 2],
     shade: Option<ShadeBwd>,
-    grad_color: Option<GpuBuffer>,
-    grad_depth: Option<GpuBuffer>,
-    pair_grads: Option<GpuBuffer>,
-    maxima: Option<GpuBuffer>,
-    acc: Option<GpuBuffer>,
-    grads: Option<GpuBuffer>,
-    sh_grads: Option<GpuBuffer>,
-    features: Option<GpuBuffer>,
-    grad_features: Option<GpuBuffer>,
-    feature_grads: Option<GpuBuffer>,
-    alpha: Option<GpuBuffer>,
-    scratch: Option<GpuBuffer>,
-    partials: Option<GpuBuffer>,
-    mlp_grads: Option<GpuBuffer>,
-    timer: GpuTimer,
-    timings: Vec<(String, f64)>,
-    /// First timestamp to last of the last pass, ms.
-    span_ms: f64,
+    /// The pass's buffers, grown to each pass's shape.
+    buffers: BackwardBuffers,
+    clock: BackwardClock,
     mode: Accumulation,
     /// Whether read-backs decode [`SplatGrads::screen`] from the per-Gaussian sums.
     screen: bool,
 }
 
-/// A device buffer of at least `bytes`, made or grown (never shrunk) as needed.
-fn ensure<'a>(
-    ctx: &GpuContext,
-    slot: &'a mut Option<GpuBuffer>,
-    name: &str,
-    bytes: u64,
-) -> GpuResult<&'a GpuBuffer> {
-    let bytes = bytes.max(16);
-    check_binding(ctx, name, bytes)?;
-    if !matches!(slot, Some(b) if b.size() >= bytes) {
-        *slot = None;
-        *slot = Some(GpuBuffer::new(ctx, name, bytes, MemoryKind::Device)?);
+/// The backward pass's timer and what it read after the last pass.
+pub(super) struct BackwardClock {
+    timer: GpuTimer,
+    timings: Vec<(String, f64)>,
+    /// First timestamp to last of the last pass, ms.
+    span_ms: f64,
+}
+
+impl BackwardClock {
+    /// Reads the finished pass's stage times.
+    fn read(&mut self, ctx: &GpuContext) -> GpuResult<()> {
+        self.timings = self.timer.read(ctx)?;
+        self.span_ms = self.timer.span_ms(ctx)?;
+        Ok(())
     }
-    Ok(slot.as_ref().expect("made above"))
 }
 
 impl BackwardState {
@@ -109,49 +94,20 @@ impl BackwardState {
             accumulate: Vec::new(),
             preprocess: [None, None],
             shade: None,
-            grad_color: None,
-            grad_depth: None,
-            pair_grads: None,
-            maxima: None,
-            acc: None,
-            grads: None,
-            sh_grads: None,
-            features: None,
-            grad_features: None,
-            feature_grads: None,
-            alpha: None,
-            scratch: None,
-            partials: None,
-            mlp_grads: None,
-            // The stages, the shader's backward pass, and a device pass's loss and step.
-            timer: GpuTimer::new(ctx, "backward", BACKWARD_STAGES.len() as u32 + 3)?,
-            timings: Vec::new(),
-            span_ms: 0.0,
+            buffers: BackwardBuffers::default(),
+            clock: BackwardClock {
+                // The stages, the shader's backward pass, and a device pass's loss and step.
+                timer: GpuTimer::new(ctx, "backward", Stage::BACKWARD.len() as u32)?,
+                timings: Vec::new(),
+                span_ms: 0.0,
+            },
             mode: Accumulation::default(),
             screen: false,
         })
     }
 
     fn device_bytes(&self) -> u64 {
-        [
-            &self.grad_color,
-            &self.grad_depth,
-            &self.pair_grads,
-            &self.maxima,
-            &self.acc,
-            &self.grads,
-            &self.sh_grads,
-            &self.features,
-            &self.grad_features,
-            &self.feature_grads,
-            &self.alpha,
-            &self.scratch,
-            &self.partials,
-            &self.mlp_grads,
-        ]
-        .iter()
-        .map(|b| b.as_ref().map_or(0, |b| b.size()))
-        .sum()
+        self.buffers.device_bytes()
     }
 }
 
@@ -171,34 +127,15 @@ enum FeatureValues<'a> {
 /// The Gaussians' gradients read back, and the neural shader's when it shaded the frame.
 type HostGrads = (SplatGrads<f32>, Option<Vec<f32>>);
 
-/// Where a backward pass's pixel gradients come from.
-enum PixelInput<'a, 'f> {
-    /// Host values, uploaded: dL/d(colour, alpha) as a vec4 per pixel and dL/d(the
-    /// depth-normalised sums) per pixel.
-    Host {
-        color: &'a [[f32; 4]],
-        depth: &'a [f32],
-    },
-    /// Recorded on the device, into the colour-gradient buffer given, before the pass
-    /// (no depth gradient).
-    Device(PixelRecorder<'f>),
+/// A backward pass's pixel gradients from the host, uploaded: dL/d(colour, alpha) as a
+/// vec4 per pixel and dL/d(the depth-normalised sums) per pixel.
+#[derive(Clone, Copy)]
+struct HostPixels<'a> {
+    color: &'a [[f32; 4]],
+    depth: &'a [f32],
 }
 
-/// Records a frame's pixel gradients (a vec4 per pixel: dL/d rgb, dL/d alpha) into the
-/// buffer given, in the backward pass's command buffer; the frame's colour image (RGBA32F,
-/// a copy source) is given to read from.
-pub type PixelRecorder<'f> = &'f mut dyn FnMut(
-    &GpuContext,
-    ash::vk::CommandBuffer,
-    &crate::gpu::GpuImage,
-    crate::gpu::BufferSlice,
-) -> GpuResult<()>;
-
-/// Records work after a backward pass that reads its results on the device.
-pub type GradsRecorder<'f> =
-    &'f mut dyn FnMut(&GpuContext, ash::vk::CommandBuffer, DeviceGrads) -> GpuResult<()>;
-
-/// A backward pass's results on the device ([`GpuRenderer::backward_on_device`]).
+/// A backward pass's results on the device ([`GpuRenderer::device_backward`]).
 #[derive(Clone, Copy)]
 pub struct DeviceGrads<'a> {
     /// Per Gaussian four vec4: (dL/d centre, dL/d opacity), dL/d normalised quaternion,
@@ -215,7 +152,7 @@ pub struct DeviceGrads<'a> {
 }
 
 /// The feature channels of a frame whose backward pass runs on the device
-/// ([`GpuRenderer::backward_on_device`]): the Gaussians' values (a vec4 per group of four,
+/// ([`GpuRenderer::device_backward`]): the Gaussians' values (a vec4 per group of four,
 /// Gaussian-major), their count per Gaussian, and the neural shader that shaded them with
 /// its camera and background.
 #[derive(Clone, Copy)]
@@ -273,12 +210,12 @@ impl GpuRenderer {
     pub fn backward_timings(&self) -> Vec<(String, f64)> {
         self.backward
             .as_ref()
-            .map_or_else(Vec::new, |b| b.timings.clone())
+            .map_or_else(Vec::new, |b| b.clock.timings.clone())
     }
 
     /// Milliseconds of the last backward pass on the device, first timestamp to last.
     pub fn backward_total_ms(&self) -> f64 {
-        self.backward.as_ref().map_or(0.0, |b| b.span_ms)
+        self.backward.as_ref().map_or(0.0, |b| b.clock.span_ms)
     }
 
     /// The accumulation the backward passes use.
@@ -506,33 +443,29 @@ impl GpuRenderer {
             &mut state,
             scene,
             (frame.width, frame.height),
-            PixelInput::Host {
+            HostPixels {
                 color: &grad_color,
                 depth: &grad_depth,
             },
             feature_job,
             shade,
-            None,
         );
         self.backward = Some(state);
-        result.map(|r| r.expect("a host backward pass reads back"))
+        result
     }
 
     /// The backward pass of the last frame ([`Self::render_on_device`] or any other
-    /// render with the forward state saved) entirely on the device, in one submission:
-    /// `pixels` records the pixels' gradients (dL/d rgb and alpha, a vec4 per pixel,
-    /// `size` the frame's) into the buffer it is given; then the pass's stages; then
-    /// `after` records what reads the results ([`DeviceGrads`]). A frame of SH colour, or
-    /// of feature channels shaded by a neural shader ([`Self::render_shaded_on_device`],
-    /// `features`); no depth gradient. Nothing is read back.
-    pub fn backward_on_device(
-        &mut self,
-        scene: &GpuScene,
+    /// render with the forward state saved) entirely on the device, recorded by the caller
+    /// in one submission with what makes the pixels' gradients and what reads the results
+    /// ([`DeviceBackward`]). A frame of SH colour, or of feature channels shaded by a
+    /// neural shader ([`Self::render_shaded_on_device`], `features`); `size` the frame's;
+    /// no depth gradient. Nothing is read back.
+    pub fn device_backward<'r>(
+        &'r mut self,
+        scene: &'r GpuScene,
         size: (u32, u32),
-        features: Option<DeviceFeatures>,
-        pixels: PixelRecorder,
-        after: GradsRecorder,
-    ) -> GpuResult<()> {
+        features: Option<DeviceFeatures<'r>>,
+    ) -> GpuResult<DeviceBackward<'r>> {
         if let Some(f) = &features {
             check_feature_channels(f.channels)?;
             self.check_shaded(f.shader, f.channels, f.cam, size)?;
@@ -542,94 +475,126 @@ impl GpuRenderer {
                 "the backward pass needs a full-precision upload, not a compact one".into(),
             ));
         }
-        let mut state = match self.backward.take() {
-            Some(s) => s,
-            None => BackwardState::new(&self.ctx)?,
-        };
-        let result = self.run_backward(
-            &mut state,
+        self.backward_state()?;
+        let GpuRenderer {
+            ctx,
+            sets,
+            last,
+            backward,
+            last_kernel,
+            ..
+        } = self;
+        let (pass, clock, _) = prepare(
+            ctx,
+            backward.as_mut().expect("made above"),
+            (&sets[*last], *last_kernel),
             scene,
             size,
-            PixelInput::Device(pixels),
+            None,
             features.map(|f| (FeatureValues::Device(f.values), None, f.channels)),
             features.map(|f| ShadeJob {
                 shader: f.shader,
                 cam: f.cam,
                 background: f.background,
             }),
-            Some(after),
-        );
-        self.backward = Some(state);
-        result.map(|_| ())
+        )?;
+        Ok(DeviceBackward::new(ctx, pass, clock))
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// A backward pass with the pixels' gradients from the host, read back.
     fn run_backward(
         &self,
         st: &mut BackwardState,
         scene: &GpuScene,
         size: (u32, u32),
-        mut input: PixelInput,
+        pixels: HostPixels,
         features: Option<FeatureJob>,
         shade: Option<ShadeJob>,
-        after: Option<GradsRecorder>,
-    ) -> GpuResult<Option<HostGrads>> {
+    ) -> GpuResult<HostGrads> {
         let ctx = &self.ctx;
-        let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
-        let (fs, last) = self.saved_forward(size)?;
-        let shape = PassShape::new(scene, size, &fs, groups);
-        let (blend_key, rows) = st.build_pipelines(ctx, &fs, self.last_kernel, groups)?;
-        st.ensure_buffers(ctx, &shape, &input, features)?;
-        let feature_planes = match shade {
-            Some(job) => Some(st.ensure_shade_buffers(ctx, job, shape.pixels, &fs)?),
-            None => None,
-        };
-        check_binding(ctx, "Gaussians", scene.gaussians.size())?;
-        let (pass, timer) = BackwardPass::resolve(
+        let (pass, clock, shape) = prepare(
+            ctx,
             st,
-            &fs,
+            (&self.sets[self.last], self.last_kernel),
             scene,
-            last,
-            shape,
-            (blend_key, rows),
+            size,
+            Some(pixels),
             features,
-            shade.zip(feature_planes),
-        );
+            shade,
+        )?;
         ctx.submit_and_wait("backward", |cmd| {
-            pass.record(ctx, cmd, timer, &mut input, after)
+            pass.open(ctx, cmd, &mut clock.timer);
+            pass.record_stages(ctx, cmd, &mut clock.timer)?;
+            pass.close(ctx, cmd);
+            Ok(())
         })?;
-        st.timings = st.timer.read(ctx)?;
-        st.span_ms = st.timer.span_ms(ctx)?;
-        if matches!(input, PixelInput::Device(_)) {
-            return Ok(None);
-        }
-        st.read_back(ctx, scene, &shape, features, shade).map(Some)
+        clock.read(ctx)?;
+        st.read_back(ctx, scene, &shape, features, shade)
     }
+}
 
-    /// The last frame's saved forward state and its last contributors, refused when the
-    /// frame saved none or is not `size`.
-    fn saved_forward(&self, size: (u32, u32)) -> GpuResult<(ForwardState<'_>, BufferSlice<'_>)> {
-        let fs = self.forward_state()?;
-        let last = fs.last_contributor.ok_or_else(|| {
-            GpuError::InvalidArgument(
-                "the last frame saved no forward state: render it with \
-                 set_save_forward_state(true), in one piece, right before the backward pass"
-                    .into(),
-            )
-        })?;
-        let set = &self.sets[self.last];
-        let fb = set
-            .frame
-            .as_ref()
-            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
-        if (fb.width, fb.height) != size {
-            return Err(GpuError::InvalidArgument(format!(
-                "the frame given is {}x{}, the last frame rendered {}x{}",
-                size.0, size.1, fb.width, fb.height
-            )));
-        }
-        Ok((fs, last))
+/// A pass over the last frame of `set` (rendered with `kernel`): the pipelines and buffers
+/// it needs made in `st` (the pixels' gradients uploaded when the host gives them), and
+/// resolved for recording, with `st`'s clock and the pass's shape.
+#[allow(clippy::too_many_arguments)]
+fn prepare<'a>(
+    ctx: &'a GpuContext,
+    st: &'a mut BackwardState,
+    (set, kernel): (&'a FrameSet, SplatKernel),
+    scene: &'a GpuScene,
+    size: (u32, u32),
+    pixels: Option<HostPixels>,
+    features: Option<FeatureJob<'a>>,
+    shade: Option<ShadeJob<'a>>,
+) -> GpuResult<(BackwardPass<'a>, &'a mut BackwardClock, PassShape)> {
+    let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
+    let (fs, last) = saved_forward(set, size)?;
+    let shape = PassShape::new(scene, size, &fs, groups);
+    let (blend_key, rows) = st.build_pipelines(ctx, &fs, kernel, groups)?;
+    st.ensure_buffers(ctx, &shape, pixels, features)?;
+    let feature_planes = match shade {
+        Some(job) => Some(st.ensure_shade_buffers(ctx, job, shape.pixels, &fs)?),
+        None => None,
+    };
+    check_binding(ctx, "Gaussians", scene.gaussians.size())?;
+    let (pass, clock) = BackwardPass::resolve(
+        st,
+        fs,
+        scene,
+        last,
+        shape,
+        (blend_key, rows),
+        features,
+        shade.zip(feature_planes),
+    );
+    Ok((pass, clock, shape))
+}
+
+/// The saved forward state of `set`'s last frame and its last contributors, refused when
+/// the frame saved none or is not `size`.
+fn saved_forward(
+    set: &FrameSet,
+    size: (u32, u32),
+) -> GpuResult<(ForwardState<'_>, BufferSlice<'_>)> {
+    let fs = set.forward_state()?;
+    let last = fs.last_contributor.ok_or_else(|| {
+        GpuError::InvalidArgument(
+            "the last frame saved no forward state: render it with \
+             set_save_forward_state(true), in one piece, right before the backward pass"
+                .into(),
+        )
+    })?;
+    let fb = set
+        .frame
+        .as_ref()
+        .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
+    if (fb.width, fb.height) != size {
+        return Err(GpuError::InvalidArgument(format!(
+            "the frame given is {}x{}, the last frame rendered {}x{}",
+            size.0, size.1, fb.width, fb.height
+        )));
     }
+    Ok((fs, last))
 }
 
 /// The sizes of one backward pass.
@@ -713,59 +678,30 @@ impl BackwardState {
         &mut self,
         ctx: &GpuContext,
         shape: &PassShape,
-        input: &PixelInput,
+        pixels: Option<HostPixels>,
         features: Option<FeatureJob>,
     ) -> GpuResult<()> {
-        let PassShape {
-            n,
-            fields: f,
-            pairs,
-            sh_floats,
-            pixels,
-            ..
-        } = *shape;
-        let gc = ensure(
-            ctx,
-            &mut self.grad_color,
-            "pixel colour gradients",
-            pixels_bytes(pixels as usize, 16),
-        )?;
-        if let PixelInput::Host { color, .. } = input {
-            gc.upload(ctx, color)?;
+        self.buffers.ensure(ctx, shape)?;
+        let b = &self.buffers;
+        if let Some(HostPixels { color, depth }) = pixels {
+            b.grad_color
+                .as_ref()
+                .expect("made above")
+                .upload(ctx, color)?;
+            b.grad_depth
+                .as_ref()
+                .expect("made above")
+                .upload(ctx, depth)?;
         }
-        let gd = ensure(
-            ctx,
-            &mut self.grad_depth,
-            "pixel depth gradients",
-            pixels_bytes(pixels as usize, 4),
-        )?;
-        if let PixelInput::Host { depth, .. } = input {
-            gd.upload(ctx, depth)?;
-        }
-        ensure(ctx, &mut self.pair_grads, "pair gradients", pairs * f * 4)?;
-        ensure(ctx, &mut self.maxima, "gradient maxima", f * 4)?;
-        ensure(ctx, &mut self.acc, "gradient sums", n * f * 8)?;
-        ensure(
-            ctx,
-            &mut self.grads,
-            "Gaussian gradients",
-            n * GAUSSIAN_GRAD_BYTES,
-        )?;
-        ensure(ctx, &mut self.sh_grads, "SH gradients", n * sh_floats * 4)?;
-        let g16 = u64::from(shape.groups) * 16;
-        ensure(ctx, &mut self.feature_grads, "feature gradients", n * g16)?;
-        let feature_buf = ensure(ctx, &mut self.features, "feature values", n * g16)?;
         if let Some((FeatureValues::Host(values), _, _)) = features {
-            feature_buf.upload(ctx, values)?;
+            b.features
+                .as_ref()
+                .expect("made above")
+                .upload(ctx, values)?;
         }
-        let grad_feature_buf = ensure(
-            ctx,
-            &mut self.grad_features,
-            "pixel feature gradients",
-            pixels * g16,
-        )?;
         if let Some((_, Some(pixel_grads), _)) = features {
-            grad_feature_buf.upload(ctx, pixel_grads)?;
+            let grad_features = b.grad_features.as_ref().expect("made above");
+            grad_features.upload(ctx, pixel_grads)?;
         }
         Ok(())
     }
@@ -782,25 +718,7 @@ impl BackwardState {
         if !self.shade.as_ref().is_some_and(|s| s.fits(job.shader)) {
             self.shade = Some(ShadeBwd::for_shader(ctx, job.shader)?);
         }
-        ensure(ctx, &mut self.alpha, "pixel colour and alpha", pixels * 16)?;
-        ensure(
-            ctx,
-            &mut self.scratch,
-            "shader activations",
-            ShadeBwd::scratch_bytes(job.shader, pixels),
-        )?;
-        ensure(
-            ctx,
-            &mut self.partials,
-            "shader gradient partial sums",
-            ShadeBwd::partial_bytes(job.shader, pixels),
-        )?;
-        ensure(
-            ctx,
-            &mut self.mlp_grads,
-            "shader gradients",
-            u64::from(job.shader.params) * 4,
-        )?;
+        self.buffers.ensure_shader(ctx, job.shader, pixels)?;
         fs.feature_planes.ok_or_else(|| {
             GpuError::InvalidArgument(
                 "the last frame blended no feature channels: render it with render_shaded \
@@ -821,9 +739,9 @@ impl BackwardState {
     ) -> GpuResult<HostGrads> {
         let (groups, sh_floats) = (shape.groups, shape.sh_floats);
         let (grads, sh_grads, feature_grads) = (
-            self.grads.as_ref().expect("made above"),
-            self.sh_grads.as_ref().expect("made above"),
-            self.feature_grads.as_ref().expect("made above"),
+            self.buffers.grads.as_ref().expect("made above"),
+            self.buffers.sh_grads.as_ref().expect("made above"),
+            self.buffers.feature_grads.as_ref().expect("made above"),
         );
         // Read back and lay out as the uploaded scene.
         let n = shape.n as usize;
@@ -834,7 +752,7 @@ impl BackwardState {
             None => sh_coeffs_for_degree(scene.sh_degree) * 3,
         };
         let mut out = SplatGrads::zeros(n, k);
-        let mlp = match (shade, self.mlp_grads.as_ref()) {
+        let mlp = match (shade, self.buffers.mlp_grads.as_ref()) {
             (Some(job), Some(b)) => Some(b.read(ctx, job.shader.params as usize)?),
             _ => None,
         };
@@ -877,8 +795,8 @@ impl BackwardState {
         out: &mut [[f32; 8]],
     ) -> GpuResult<()> {
         let (maxima, acc) = (
-            self.maxima.as_ref().expect("made by the pass"),
-            self.acc.as_ref().expect("made by the pass"),
+            self.buffers.maxima.as_ref().expect("made by the pass"),
+            self.buffers.acc.as_ref().expect("made by the pass"),
         );
         let fields = shape.fields as usize;
         let maxima: Vec<u32> = maxima.read(ctx, fields)?;
@@ -938,6 +856,6 @@ fn check_feature_channels(k: usize) -> GpuResult<()> {
     Ok(())
 }
 
-fn pixels_bytes(count: usize, each: u64) -> u64 {
+pub(crate) fn pixels_bytes(count: usize, each: u64) -> u64 {
     count as u64 * each
 }

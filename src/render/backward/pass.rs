@@ -2,18 +2,19 @@
 //! ([`BackwardPass`]), and the commands it records, in order: the pixels' gradients, the
 //! shader's backward pass of a shaded frame, the three stages, and what reads the results.
 
+use super::buffers::BackwardBuffers;
 use super::{
-    BackwardState, BlendKey, DeviceGrads, FeatureJob, FeatureValues, GradsRecorder, PassShape,
-    PixelInput, ShadeJob, BACKWARD_STAGES, DEVICE_LOSS_STAGE, DEVICE_STEP_STAGE,
-    SHADE_BACKWARD_STAGE,
+    BackwardClock, BackwardState, BlendKey, DeviceGrads, FeatureJob, FeatureValues, PassShape,
+    ShadeJob, BACKWARD_STAGES,
 };
 use crate::gpu::shader::Resource;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, GpuBuffer, GpuContext, GpuResult, GpuTimer};
-use crate::render::backward::blend_bwd::BlendBwd;
-use crate::render::backward::grad_accumulate::{GradAccumulate, GradPush};
-use crate::render::backward::preprocess_bwd::PreprocessBwd;
+use crate::render::backward::blend_bwd::{BlendBwd, BlendBwdBindings};
+use crate::render::backward::grad_accumulate::{AccumulateBindings, GradAccumulate, GradPush};
+use crate::render::backward::preprocess_bwd::{PreprocessBwd, PreprocessBwdBindings};
 use crate::render::backward::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
+use crate::render::Stage;
 use crate::render::{ForwardState, GpuScene};
 
 /// The shader's backward pass of a shaded frame, resolved.
@@ -27,7 +28,7 @@ struct ShadePass<'a> {
 
 /// Everything one backward submission records with.
 pub(super) struct BackwardPass<'a> {
-    fs: &'a ForwardState<'a>,
+    fs: ForwardState<'a>,
     scene: &'a GpuScene,
     last: BufferSlice<'a>,
     shape: PassShape,
@@ -62,34 +63,37 @@ impl<'a> BackwardPass<'a> {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn resolve(
         st: &'a mut BackwardState,
-        fs: &'a ForwardState<'a>,
+        fs: ForwardState<'a>,
         scene: &'a GpuScene,
         last: BufferSlice<'a>,
         shape: PassShape,
         (blend_key, rows): (BlendKey, bool),
         features: Option<FeatureJob<'a>>,
         shade: Option<(ShadeJob<'a>, (BufferSlice<'a>, u32))>,
-    ) -> (Self, &'a mut GpuTimer) {
+    ) -> (Self, &'a mut BackwardClock) {
         let BackwardState {
             blend,
             accumulate,
             preprocess,
             shade: shade_bwd,
-            grad_color,
-            grad_depth,
-            pair_grads,
-            maxima,
-            acc,
-            grads,
-            sh_grads,
-            features: feature_values,
-            grad_features,
-            feature_grads,
-            alpha,
-            scratch,
-            partials,
-            mlp_grads,
-            timer,
+            buffers:
+                BackwardBuffers {
+                    grad_color,
+                    grad_depth,
+                    pair_grads,
+                    maxima,
+                    acc,
+                    grads,
+                    sh_grads,
+                    features: feature_values,
+                    grad_features,
+                    feature_grads,
+                    alpha,
+                    scratch,
+                    partials,
+                    mlp_grads,
+                },
+            clock,
             mode,
             ..
         } = st;
@@ -165,30 +169,38 @@ impl<'a> BackwardPass<'a> {
                 .map(|b| b.whole()),
             shade,
         };
-        (pass, timer)
+        (pass, clock)
     }
 
-    /// Records the whole pass into `cmd`: `input`'s pixel gradients when the device makes
-    /// them, the shader's backward pass, the three stages, then `after`.
-    pub(super) fn record(
+    /// Starts the pass in `cmd`: the forward's writes (an earlier submission) before the
+    /// pass reads them, and the timer reset.
+    pub(super) fn open(&self, ctx: &GpuContext, cmd: ash::vk::CommandBuffer, timer: &mut GpuTimer) {
+        barrier(ctx, cmd, Access::Any, Access::Any);
+        timer.reset(ctx, cmd);
+    }
+
+    /// A pass whose pixels' gradients are recorded on the device: no depth gradient.
+    pub(super) fn clear_depth_gradients(&self, ctx: &GpuContext, cmd: ash::vk::CommandBuffer) {
+        self.grad_depth
+            .buffer
+            .fill(ctx, cmd, 0, ash::vk::WHOLE_SIZE, 0);
+    }
+
+    /// The frame's colour image (what the loss reads) and the buffer the pixels'
+    /// gradients go into (dL/d rgb, dL/d alpha, a vec4 per pixel).
+    pub(super) fn pixel_target(&self) -> (&'a crate::gpu::GpuImage, BufferSlice<'a>) {
+        (self.fs.color, self.grad_color)
+    }
+
+    /// Records the pass's stages after the pixels' gradients: the sums cleared, the
+    /// shader's backward pass of a shaded frame, then blend backward, accumulation and
+    /// preprocess backward.
+    pub(super) fn record_stages(
         &self,
         ctx: &GpuContext,
         cmd: ash::vk::CommandBuffer,
         timer: &mut GpuTimer,
-        input: &mut PixelInput,
-        after: Option<GradsRecorder>,
     ) -> GpuResult<()> {
-        // The forward's writes (an earlier submission) before this pass reads them.
-        barrier(ctx, cmd, Access::Any, Access::Any);
-        timer.reset(ctx, cmd);
-        if let PixelInput::Device(record) = input {
-            self.grad_depth
-                .buffer
-                .fill(ctx, cmd, 0, ash::vk::WHOLE_SIZE, 0);
-            timer.stage(ctx, cmd, DEVICE_LOSS_STAGE, |cmd| {
-                record(ctx, cmd, self.fs.color, self.grad_color)
-            })?;
-        }
         self.maxima.buffer.fill(ctx, cmd, 0, ash::vk::WHOLE_SIZE, 0);
         self.acc.buffer.fill(ctx, cmd, 0, ash::vk::WHOLE_SIZE, 0);
         barrier(ctx, cmd, Access::TransferWrite, Access::ComputeReadWrite);
@@ -196,25 +208,23 @@ impl<'a> BackwardPass<'a> {
         if let Some(shade) = &self.shade {
             self.record_shade(ctx, cmd, timer, shade)?;
         }
-        self.record_stages(ctx, cmd, timer)?;
-        if let Some(after) = after {
-            barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
-            timer.stage(ctx, cmd, DEVICE_STEP_STAGE, |cmd| {
-                after(
-                    ctx,
-                    cmd,
-                    DeviceGrads {
-                        grads: self.grads,
-                        sh_grads: self.sh_grads,
-                        splats: self.fs.splats,
-                        feature_grads: self.feature_grads,
-                        mlp_grads: self.mlp_grads,
-                    },
-                )
-            })?;
+        self.record_gaussian_stages(ctx, cmd, timer)
+    }
+
+    /// The pass's results on the device, for what reads them in the same submission.
+    pub(super) fn results(&self) -> DeviceGrads<'a> {
+        DeviceGrads {
+            grads: self.grads,
+            sh_grads: self.sh_grads,
+            splats: self.fs.splats,
+            feature_grads: self.feature_grads,
+            mlp_grads: self.mlp_grads,
         }
+    }
+
+    /// Ends the pass: its writes before whatever comes next.
+    pub(super) fn close(&self, ctx: &GpuContext, cmd: ash::vk::CommandBuffer) {
         barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
-        Ok(())
     }
 
     /// The shader's backward pass: the frame's alpha (its colour image, a copy source
@@ -236,7 +246,7 @@ impl<'a> BackwardPass<'a> {
         // pass) copied where the shader's backward pass reads it.
         self.fs.color.copy_to_buffer(ctx, cmd, alpha, 0);
         barrier(ctx, cmd, Access::TransferWrite, Access::ComputeRead);
-        timer.stage(ctx, cmd, SHADE_BACKWARD_STAGE, |cmd| {
+        timer.stage(ctx, cmd, Stage::ShadeBwd.name(), |cmd| {
             pipeline.record(ctx, cmd, job.shader, buffers, job.cam, job.background)
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
@@ -245,40 +255,41 @@ impl<'a> BackwardPass<'a> {
 
     /// Blend backward, accumulation and preprocess backward, each after a barrier on the
     /// one before.
-    fn record_stages(
+    fn record_gaussian_stages(
         &self,
         ctx: &GpuContext,
         cmd: ash::vk::CommandBuffer,
         timer: &mut GpuTimer,
     ) -> GpuResult<()> {
         let (fs, shape) = (self.fs, &self.shape);
-        timer.stage(ctx, cmd, BACKWARD_STAGES[0], |cmd| {
-            self.blend.record(
-                ctx,
-                cmd,
-                fs.bins,
-                fs.params,
-                self.splats,
-                self.values,
-                fs.ranges,
-                self.last,
-                self.grad_color,
-                self.grad_depth,
-                self.pair_grads,
-                self.maxima,
-                self.features,
-                self.grad_features,
-            )
+        timer.stage(ctx, cmd, BACKWARD_STAGES[0].name(), |cmd| {
+            let bindings = BlendBwdBindings {
+                params: fs.params,
+                splats: self.splats,
+                values: self.values,
+                ranges: fs.ranges,
+                last: self.last,
+                grad_color: self.grad_color,
+                grad_depth: self.grad_depth,
+                pair_grads: self.pair_grads,
+                maxima: self.maxima,
+                features: self.features,
+                grad_features: self.grad_features,
+            };
+            self.blend.record(ctx, cmd, fs.bins, &bindings)
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-        timer.stage(ctx, cmd, BACKWARD_STAGES[1], |cmd| {
+        timer.stage(ctx, cmd, BACKWARD_STAGES[1].name(), |cmd| {
+            let bindings = AccumulateBindings {
+                values: fs.sorted_gaussians,
+                pair_grads: self.pair_grads,
+                maxima: self.maxima,
+                acc: self.acc,
+            };
             self.accumulate.record(
                 ctx,
                 cmd,
-                fs.sorted_gaussians,
-                self.pair_grads,
-                self.maxima,
-                self.acc,
+                &bindings,
                 GradPush {
                     count: fs.pairs,
                     bits: shape.bits,
@@ -287,19 +298,22 @@ impl<'a> BackwardPass<'a> {
             )
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-        timer.stage(ctx, cmd, BACKWARD_STAGES[2], |cmd| {
+        timer.stage(ctx, cmd, BACKWARD_STAGES[2].name(), |cmd| {
+            let bindings = PreprocessBwdBindings {
+                params: fs.params,
+                gaussians: self.scene.gaussians.whole(),
+                sh_texels: self.scene.sh_texels.handle(),
+                splats: fs.splats,
+                maxima: self.maxima,
+                acc: self.acc,
+                grads: self.grads,
+                sh_grads: self.sh_grads,
+                feature_grads: self.feature_grads,
+            };
             self.preprocess.record(
                 ctx,
                 cmd,
-                fs.params,
-                self.scene.gaussians.whole(),
-                self.scene.sh_texels.handle(),
-                fs.splats,
-                self.maxima,
-                self.acc,
-                self.grads,
-                self.sh_grads,
-                self.feature_grads,
+                &bindings,
                 GradPush {
                     count: self.scene.count,
                     bits: shape.bits,

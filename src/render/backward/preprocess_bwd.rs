@@ -13,6 +13,30 @@ use crate::render::backward::grad_accumulate::GradPush;
 pub const GAUSSIAN_GRAD_BYTES: u64 =
     std::mem::size_of::<crate::shader_interface::GaussianGrad>() as u64;
 
+/// What the preprocess backward binds: the frame's parameters and the scene, the forward's
+/// splats, the accumulated sums, and the Gaussians' gradients it writes.
+#[derive(Clone, Copy)]
+pub struct PreprocessBwdBindings<'a> {
+    /// The frame's parameters.
+    pub params: BufferSlice<'a>,
+    /// The uploaded Gaussians.
+    pub gaussians: BufferSlice<'a>,
+    /// The SH coefficients' texel view.
+    pub sh_texels: vk::BufferView,
+    /// The forward's splats.
+    pub splats: BufferSlice<'a>,
+    /// Each field's largest magnitude (the fixed-point scale).
+    pub maxima: BufferSlice<'a>,
+    /// Each Gaussian's accumulated sums.
+    pub acc: BufferSlice<'a>,
+    /// Out: each Gaussian's gradients.
+    pub grads: BufferSlice<'a>,
+    /// Out: dL/d SH coefficient.
+    pub sh_grads: BufferSlice<'a>,
+    /// Out: dL/d feature channel.
+    pub feature_grads: BufferSlice<'a>,
+}
+
 /// The preprocess-backward pipeline.
 pub struct PreprocessBwd {
     pipeline: ComputePipeline,
@@ -50,25 +74,27 @@ impl PreprocessBwd {
     }
 
     /// Records the dispatch over `count` Gaussians (`push.count` holds the count).
-    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        params: BufferSlice,
-        gaussians: BufferSlice,
-        sh_texels: vk::BufferView,
-        splats: BufferSlice,
-        maxima: BufferSlice,
-        acc: BufferSlice,
-        grads: BufferSlice,
-        sh_grads: BufferSlice,
-        feature_grads: BufferSlice,
+        b: &PreprocessBwdBindings,
         push: GradPush,
     ) -> GpuResult<()> {
         if push.count == 0 {
             return Ok(());
         }
+        let PreprocessBwdBindings {
+            params,
+            gaussians,
+            sh_texels,
+            splats,
+            maxima,
+            acc,
+            grads,
+            sh_grads,
+            feature_grads,
+        } = *b;
         let resources = by_binding([
             (slot::PARAMS, Resource::Buffer(params)),
             (slot::GAUSSIANS, Resource::Buffer(gaussians)),

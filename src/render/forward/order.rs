@@ -27,6 +27,26 @@ pub struct Order {
     pipeline: ComputePipeline,
 }
 
+/// What the order stage binds: the frame's parameters (the count), the depth sort's keys,
+/// values and scratch (and its texel views), and the tiles-touched counts it gathers.
+#[derive(Clone, Copy)]
+pub struct OrderBindings<'a> {
+    /// The frame's parameters: the Gaussian count the sort reads.
+    pub params: &'a GpuBuffer,
+    /// The depth keys, sorted in place.
+    pub depth_keys: &'a GpuBuffer,
+    /// The Gaussian indices, sorted with them (the depth order).
+    pub depth_values: &'a GpuBuffer,
+    /// The sort's scratch.
+    pub scratch: &'a GpuBuffer,
+    /// The sort's texel views, where it reads through them.
+    pub texels: Option<&'a SortTexels>,
+    /// Tiles touched, by Gaussian index.
+    pub touched: BufferSlice<'a>,
+    /// Out: tiles touched in depth order.
+    pub touched_in_order: BufferSlice<'a>,
+}
+
 impl Order {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
@@ -51,21 +71,23 @@ impl Order {
     /// as `texels` are when the sort reads through texel views) and the gather of their
     /// tiles-touched counts (`touched`, by Gaussian index) into `touched_in_order`. The
     /// caller places the barrier after (compute write -> read).
-    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
         sort: &RadixSort,
-        params: &GpuBuffer,
-        depth_keys: &GpuBuffer,
-        depth_values: &GpuBuffer,
-        scratch: &GpuBuffer,
-        texels: Option<&SortTexels>,
-        touched: BufferSlice,
-        touched_in_order: BufferSlice,
+        b: &OrderBindings,
         (n, max_n): (u32, u32),
     ) -> GpuResult<()> {
+        let OrderBindings {
+            params,
+            depth_keys,
+            depth_values,
+            scratch,
+            texels,
+            touched,
+            touched_in_order,
+        } = *b;
         let count = Count::Device {
             buffer: params,
             offset: COUNTS_OFFSET,

@@ -7,6 +7,7 @@ use crate::gpu::{BufferSlice, GpuError, GpuImage, GpuResult};
 use crate::render::forward::types::{Counters, Splat};
 
 use crate::render::forward::features;
+use crate::render::frame::buffers::FrameSet;
 use crate::render::{bin_grid, GpuRenderer, GpuScene, Rgba8Frame};
 
 /// Intermediate buffers of a frame, read back for tests against the CPU reference.
@@ -67,15 +68,7 @@ impl GpuRenderer {
     }
 
     pub(crate) fn read_counters(&self, set: usize) -> GpuResult<Counters> {
-        let f = self.sets[set]
-            .frame
-            .as_ref()
-            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
-        let (_, _, off) = f.readback_offsets();
-        let bytes = f
-            .readback
-            .mapped_range(off, std::mem::size_of::<Counters>() as u64)?;
-        Ok(bytemuck::pod_read_unaligned(bytes))
+        self.sets[set].counters()
     }
 
     pub(crate) fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
@@ -167,6 +160,7 @@ impl GpuRenderer {
 /// pairs and ranges are the last chunk's ([`crate::render::FrameStats::chunks`] says how many there were).
 /// With [`GpuRenderer::set_save_forward_state`] a frame in one piece also saves each
 /// pixel's last contributor.
+#[derive(Clone, Copy)]
 pub struct ForwardState<'a> {
     /// One [`Splat`] per Gaussian: mean2d, opacity, conic, depth, colour, radius.
     pub splats: BufferSlice<'a>,
@@ -207,12 +201,32 @@ pub struct ForwardState<'a> {
 impl GpuRenderer {
     /// The saved state of the last finished frame ([`ForwardState`]).
     pub fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
-        let set = &self.sets[self.last];
+        self.sets[self.last].forward_state()
+    }
+}
+
+impl FrameSet {
+    /// The counters of the set's last finished frame.
+    pub(crate) fn counters(&self) -> GpuResult<Counters> {
+        let f = self
+            .frame
+            .as_ref()
+            .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
+        let (_, _, off) = f.readback_offsets();
+        let bytes = f
+            .readback
+            .mapped_range(off, std::mem::size_of::<Counters>() as u64)?;
+        Ok(bytemuck::pod_read_unaligned(bytes))
+    }
+
+    /// What the set's last finished frame left for a backward pass.
+    pub(crate) fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
+        let set = self;
         let f = set
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no frame was rendered yet".into()))?;
-        let counters = self.read_counters(self.last)?;
+        let counters = set.counters()?;
         Ok(ForwardState {
             splats: f.splats.whole(),
             splat_texels: f.splat_texels.handle(),

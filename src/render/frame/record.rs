@@ -10,6 +10,7 @@ use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::model::RenderOptions;
 use crate::render::forward::features::FeatureBindings;
+use crate::render::forward::order::OrderBindings;
 use crate::render::forward::shade::GpuShader;
 use crate::render::forward::types::{self, Counters, FrameParams};
 use crate::render::forward::{blend, keys, preprocess};
@@ -252,19 +253,18 @@ impl FrameRecorder<'_> {
             })?;
         // The depth sort opens with its own barrier from compute writes (its contract).
         self.timer.stage(ctx, cmd, Stage::Order.name(), |cmd| {
-            p.order.record(
-                ctx,
-                cmd,
-                p.sort,
-                &f.params,
-                &f.depth_keys,
-                &f.depth_values,
-                &f.sort_scratch,
-                f.depth_sort_texels().as_ref(),
-                f.touched.whole(),
-                f.offsets.whole(),
-                (n, f.gaussians.max(1)),
-            )
+            let texels = f.depth_sort_texels();
+            let bindings = OrderBindings {
+                params: &f.params,
+                depth_keys: &f.depth_keys,
+                depth_values: &f.depth_values,
+                scratch: &f.sort_scratch,
+                texels: texels.as_ref(),
+                touched: f.touched.whole(),
+                touched_in_order: f.offsets.whole(),
+            };
+            p.order
+                .record(ctx, cmd, p.sort, &bindings, (n, f.gaussians.max(1)))
         })?;
         // Tiles touched in depth order -> scan; depth order and counters -> keys.
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);

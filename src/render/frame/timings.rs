@@ -4,7 +4,8 @@ use crate::gpu::{GpuError, GpuResult};
 
 use crate::render::{GpuRenderer, CHUNKS_PER_SUBMIT};
 
-/// The timed stages of a frame.
+/// The timed stages of a frame and of its backward pass: each stage's timestamp pair and
+/// debug label are named by it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
     /// Cull, project, covariance, SH colour, tile rectangles.
@@ -27,12 +28,24 @@ pub enum Stage {
     Shade,
     /// Copies (and packing) to host-visible memory.
     Readback,
+    /// Training's loss, recorded before a device backward pass (its pixels' gradients).
+    Loss,
+    /// The neural shader's backward pass.
+    ShadeBwd,
+    /// Blend backward: per bin, back to front, each pair's gradients.
+    BlendBwd,
+    /// Each pair's sums added to its Gaussian's.
+    Accumulate,
+    /// The chain rule through projection, covariance and SH.
+    PreprocessBwd,
+    /// Training's optimiser step, recorded after a device backward pass.
+    Step,
 }
 
 impl Stage {
-    /// Every stage, in the order reports list them (a chunk records its features before
-    /// its blend).
-    pub const ALL: [Stage; 10] = [
+    /// Every forward stage, in the order reports list them (a chunk records its features
+    /// before its blend).
+    pub const FORWARD: [Stage; 10] = [
         Stage::Preprocess,
         Stage::Order,
         Stage::Scan,
@@ -43,6 +56,17 @@ impl Stage {
         Stage::Features,
         Stage::Shade,
         Stage::Readback,
+    ];
+
+    /// The backward pass's stages, in the order a pass records them (the shader's and the
+    /// loss and step only where there are).
+    pub const BACKWARD: [Stage; 6] = [
+        Stage::Loss,
+        Stage::ShadeBwd,
+        Stage::BlendBwd,
+        Stage::Accumulate,
+        Stage::PreprocessBwd,
+        Stage::Step,
     ];
 
     /// The stage's name in timings, debug labels and reports.
@@ -58,11 +82,17 @@ impl Stage {
             Stage::Blend => "blend",
             Stage::Shade => "shade",
             Stage::Readback => "readback",
+            Stage::Loss => "loss",
+            Stage::ShadeBwd => "shade_bwd",
+            Stage::BlendBwd => "blend_bwd",
+            Stage::Accumulate => "accumulate",
+            Stage::PreprocessBwd => "preprocess_bwd",
+            Stage::Step => "step",
         }
     }
 
     fn from_name(name: &str) -> Option<Stage> {
-        Stage::ALL.into_iter().find(|s| s.name() == name)
+        Stage::FORWARD.into_iter().find(|s| s.name() == name)
     }
 }
 
@@ -113,8 +143,9 @@ pub struct StageTimings {
 }
 
 impl StageTimings {
-    fn slot(&mut self, stage: Stage) -> &mut f64 {
-        match stage {
+    /// The slot of a forward stage (a frame's timings hold no backward stage).
+    fn slot(&mut self, stage: Stage) -> Option<&mut f64> {
+        Some(match stage {
             Stage::Preprocess => &mut self.preprocess,
             Stage::Order => &mut self.order,
             Stage::Scan => &mut self.scan,
@@ -125,10 +156,17 @@ impl StageTimings {
             Stage::Blend => &mut self.blend,
             Stage::Shade => &mut self.shade,
             Stage::Readback => &mut self.readback,
-        }
+            Stage::Loss
+            | Stage::ShadeBwd
+            | Stage::BlendBwd
+            | Stage::Accumulate
+            | Stage::PreprocessBwd
+            | Stage::Step => return None,
+        })
     }
 
-    /// Milliseconds of `stage`.
+    /// Milliseconds of `stage` (0 for a backward stage: the backward pass reports its own,
+    /// `GpuRenderer::backward_timings`).
     pub fn get(&self, stage: Stage) -> f64 {
         match stage {
             Stage::Preprocess => self.preprocess,
@@ -141,13 +179,21 @@ impl StageTimings {
             Stage::Blend => self.blend,
             Stage::Shade => self.shade,
             Stage::Readback => self.readback,
+            Stage::Loss
+            | Stage::ShadeBwd
+            | Stage::BlendBwd
+            | Stage::Accumulate
+            | Stage::PreprocessBwd
+            | Stage::Step => 0.0,
         }
     }
 
     /// Adds another submission's times of the same frame (a frame in chunks).
     pub(crate) fn add(&mut self, other: &StageTimings) {
-        for stage in Stage::ALL {
-            *self.slot(stage) += other.get(stage);
+        for stage in Stage::FORWARD {
+            if let Some(slot) = self.slot(stage) {
+                *slot += other.get(stage);
+            }
         }
         self.total += other.total;
     }
@@ -155,7 +201,7 @@ impl StageTimings {
     /// The stages in pipeline order with their names; `features` and `shade` only when the
     /// frame had them.
     pub fn stages(&self) -> Vec<(&'static str, f64)> {
-        Stage::ALL
+        Stage::FORWARD
             .into_iter()
             .filter(|&s| !matches!(s, Stage::Features | Stage::Shade) || self.get(s) > 0.0)
             .map(|s| (s.name(), self.get(s)))
@@ -189,11 +235,11 @@ impl GpuRenderer {
         let stages = timer.read(&self.ctx)?;
         let mut t = StageTimings::default();
         for (name, ms) in &stages {
-            let stage = Stage::from_name(name).ok_or_else(|| {
-                GpuError::Internal(format!("the frame timed an unknown stage {name:?}"))
-            })?;
             // Chunks time their stages once each.
-            *t.slot(stage) += *ms;
+            let slot = Stage::from_name(name).and_then(|stage| t.slot(stage));
+            *slot.ok_or_else(|| {
+                GpuError::Internal(format!("the frame timed an unknown stage {name:?}"))
+            })? += *ms;
         }
         t.total = timer.span_ms(&self.ctx)?;
         Ok(t)

@@ -101,19 +101,21 @@ impl<'p> Run<'p> {
             }),
             _ => None,
         };
-        let mut norm_buffer = None;
         stage_sums.add(renderer.timings().stages());
-        renderer.backward_on_device(
-            &d.scene,
-            (w, h),
-            features,
-            &mut |ctx, cmd, image, grad| loss.record_image(ctx, cmd, image, grad, w, h, lambda),
-            &mut |ctx, cmd, grads| {
-                barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-                norm_buffer = d.record_step(ctx, cmd, grads, &step, s)?;
-                Ok(())
-            },
-        )?;
+        // One submission, top to bottom: the loss writes the pixels' gradients, the
+        // backward pass turns them into the Gaussians', the step reads those.
+        let mut pass = renderer.device_backward(&d.scene, (w, h), features)?;
+        let ctx = pass.ctx();
+        let mut norm_buffer = None;
+        ctx.submit_and_wait("backward", |cmd| {
+            let (image, pixel_grads) = pass.begin(cmd)?;
+            loss.record_image(ctx, cmd, image, pixel_grads, w, h, lambda)?;
+            let grads = pass.record(cmd)?;
+            barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
+            norm_buffer = d.record_step(ctx, cmd, grads, &step, s)?;
+            pass.end(cmd)
+        })?;
+        pass.finish()?;
         stage_sums.add(rast.renderer().backward_timings());
         let ctx = rast.renderer().ctx();
         let value = loss.read_value(ctx)?;
