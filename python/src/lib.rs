@@ -1,8 +1,8 @@
 //! `verisplat._native`: the Rust side of the Python package.
 //!
-//! The public API is the Python package `verisplat` (python/verisplat/__init__.py), which
-//! turns numpy arrays into the little-endian `f32` bytes this module takes and wraps the
-//! bytes it returns as arrays. Arrays cross as bytes so the module needs nothing beyond
+//! The public API is the Python package `verisplat` (python/verisplat/), which turns numpy
+//! arrays into the little-endian `f32` bytes this module takes and wraps the bytes it
+//! returns as arrays. Arrays cross as bytes so the module needs nothing beyond
 //! the stable ABI (one wheel for every CPython >= 3.9). Everything long-running releases
 //! the GIL; every error becomes a Python exception carrying the sentence the command line
 //! prints; a panic is caught and raised as `RuntimeError`, never unwound into Python.

@@ -37,7 +37,8 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 
 from . import _native
-from . import Camera, _numpy
+from ._cameras import Camera
+from ._common import _numpy
 
 ArrayLike = Any
 
