@@ -16,6 +16,7 @@ mod fit;
 mod images;
 mod reference;
 mod render;
+mod rules;
 mod scene;
 mod shader;
 
@@ -47,5 +48,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(images::encode_png, m)?)?;
     m.add_function(wrap_pyfunction!(images::save_image, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    rules::add_constants(m)?;
     Ok(())
 }

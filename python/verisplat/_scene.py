@@ -188,7 +188,7 @@ class Scene:
                     f"(channel {ch}; {len(outside)} values outside)"
                 )
             # The DC term whose evaluation (SH_C0 * dc + 0.5) gives the colour back.
-            sh_a = ((c - 0.5) / 0.28209479177387814).astype("<f4").reshape(n, 1, 3)
+            sh_a = ((c - 0.5) / _native.SH_C0).astype("<f4").reshape(n, 1, 3)
         else:
             sh_a = _numpy(sh)
             if sh_a.ndim != 3 or sh_a.shape[0] != n or sh_a.shape[2] != 3:
@@ -197,8 +197,9 @@ class Scene:
         feats = None
         if features is not None:
             fa = _numpy(features)
-            if fa.ndim != 2 or fa.shape[0] != n or not 1 <= fa.shape[1] <= 64:
-                raise ValueError(f"features must have shape ({n}, K) with K 1..64, got {tuple(fa.shape)}")
+            most = _native.MAX_FEATURES
+            if fa.ndim != 2 or fa.shape[0] != n or not 1 <= fa.shape[1] <= most:
+                raise ValueError(f"features must have shape ({n}, K) with K 1..{most}, got {tuple(fa.shape)}")
             feats = _floats("features", fa, (n, fa.shape[1]), strict=True)
         return cls(
             _native.scene_from_arrays(

@@ -48,15 +48,16 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 import torch
 
-from . import _projection
+from . import _native, _projection
 from . import raster as _raster
 
 __all__ = ["rasterization"]
 
-# Direct channels per native pass: more are blended in chunks of this many.
-_CHUNK = 16
+# Direct channels per native pass (the most the device's backward pass takes): more are
+# blended in chunks of this many.
+_CHUNK = _native.BACKWARD_CHANNELS
 # verisplat's tiles (meta["tile_size"]; gsplat's tile_size is a speed setting).
-_TILE = 16
+_TILE = _native.TILE_SIZE
 
 _RASTERIZERS: Dict[Tuple[Any, str], "_raster.Rasterizer"] = {}
 
@@ -496,7 +497,10 @@ def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, ca
         (rules not in ("original", "gsplat"), f"rules must be 'original' or 'gsplat', got {rules!r}"),
         (far_plane < 1e10, f"far_plane={far_plane}: verisplat has no far plane"),
         (radius_clip != 0.0, "radius_clip is not supported"),
-        (eps2d != 0.3, f"eps2d={eps2d}: verisplat dilates 2D covariances by the original 0.3"),
+        (
+            eps2d != _native.COV2D_DILATION,
+            f"eps2d={eps2d}: verisplat dilates 2D covariances by the original {_native.COV2D_DILATION}",
+        ),
         (
             rasterize_mode not in ("classic", "antialiased"),
             f"rasterize_mode must be 'classic' or 'antialiased', got {rasterize_mode!r}",
@@ -598,7 +602,7 @@ def rasterization(
     near_plane: Optional[float] = None,
     far_plane: float = 1e10,
     radius_clip: float = 0.0,
-    eps2d: float = 0.3,
+    eps2d: float = _native.COV2D_DILATION,
     sh_degree: Optional[int] = None,
     packed: bool = True,
     tile_size: int = 16,
@@ -659,7 +663,7 @@ def rasterization(
         ftheta_coeffs=ftheta_coeffs, viewmats_rs=viewmats_rs,
     )
     if near_plane is None:
-        near_plane = 0.01 if rules == "gsplat" else 0.2
+        near_plane = _native.GSPLAT_NEAR_PLANE if rules == "gsplat" else _native.NEAR_PLANE
     _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
             distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw)
     _size("tile_size", tile_size)
