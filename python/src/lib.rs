@@ -1,8 +1,8 @@
 //! `verisplat._native`: the Rust side of the Python package.
 //!
-//! The public API is the Python package `verisplat` (python/verisplat/__init__.py), which
-//! turns numpy arrays into the little-endian `f32` bytes this module takes and wraps the
-//! bytes it returns as arrays. Arrays cross as bytes so the module needs nothing beyond
+//! The public API is the Python package `verisplat` (python/verisplat/), which turns numpy
+//! arrays into the little-endian `f32` bytes this module takes and wraps the bytes it
+//! returns as arrays. Arrays cross as bytes so the module needs nothing beyond
 //! the stable ABI (one wheel for every CPython >= 3.9). Everything long-running releases
 //! the GIL; every error becomes a Python exception carrying the sentence the command line
 //! prints; a panic is caught and raised as `RuntimeError`, never unwound into Python.
@@ -16,6 +16,7 @@ mod fit;
 mod images;
 mod reference;
 mod render;
+mod rules;
 mod scene;
 mod shader;
 
@@ -47,5 +48,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(images::encode_png, m)?)?;
     m.add_function(wrap_pyfunction!(images::save_image, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    rules::add_constants(m)?;
     Ok(())
 }

@@ -13,6 +13,25 @@ Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray], Op
 
 __version__: str
 
+# The renderer's rule constants (python/src/rules.rs: src/rules.rs, src/model/sh.rs); each
+# float the shortest decimal of the crate's f32.
+NEAR_PLANE: float
+COV2D_DILATION: float
+ANTIALIAS_MIN_RATIO: float
+ALPHA_MAX: float
+ALPHA_MIN: float
+T_MIN: float
+GSPLAT_NEAR_PLANE: float
+GSPLAT_ALPHA_MAX: float
+GSPLAT_EXTEND: float
+SH_C0: float
+SH_C1: float
+SH_C2: Tuple[float, float, float, float, float]
+SH_C3: Tuple[float, float, float, float, float, float, float]
+TILE_SIZE: int
+BACKWARD_CHANNELS: int
+MAX_FEATURES: int
+
 class Scene:
     def __len__(self) -> int: ...
     @property

@@ -16,14 +16,13 @@ from typing import Optional, Tuple
 
 import torch
 
-# src/rules.rs: the smallest opacity compensation ratio.
-ANTIALIAS_MIN_RATIO = 0.000025
-C0 = 0.28209479177387814
-C1 = 0.4886025119029199
-C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
-      0.5462742152960396)
-C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+# The renderer's own constants (src/rules.rs, src/model/sh.rs), from the extension: the
+# smallest opacity compensation ratio, the 2D covariance's dilation, the SH bands'.
+from ._native import ANTIALIAS_MIN_RATIO, COV2D_DILATION
+from ._native import SH_C0 as C0
+from ._native import SH_C1 as C1
+from ._native import SH_C2 as C2
+from ._native import SH_C3 as C3
 
 
 def sh_basis(dirs: torch.Tensor, degree: int) -> torch.Tensor:
@@ -78,6 +77,7 @@ def project(
     v = means @ R.T + t
     z = v[:, 2]
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    # The guard band (Rules::clamp_limits, whose factors are literals there too).
     if rules == "gsplat":
         bx, by = 0.3 * (0.5 * width / fx), 0.3 * (0.5 * height / fy)
         xn, xp = cx / fx + bx, (width - cx) / fx + bx
@@ -93,14 +93,14 @@ def project(
     t0, t1 = j0 @ R, j1 @ R  # R^T j, as rows
     m = _rotations(quats) * scales[:, None, :]
     cov = m @ m.transpose(1, 2)
-    a = torch.einsum("ni,nij,nj->n", t0, cov, t0) + 0.3
+    a = torch.einsum("ni,nij,nj->n", t0, cov, t0) + COV2D_DILATION
     b = torch.einsum("ni,nij,nj->n", t0, cov, t1)
-    c = torch.einsum("ni,nij,nj->n", t1, cov, t1) + 0.3
+    c = torch.einsum("ni,nij,nj->n", t1, cov, t1) + COV2D_DILATION
     det = a * c - b * b
     conics = torch.stack([c, -b, a], -1) / det[:, None]
     comp = torch.ones_like(det)
     if antialiased:
-        det0 = (a - 0.3) * (c - 0.3) - b * b
+        det0 = (a - COV2D_DILATION) * (c - COV2D_DILATION) - b * b
         floor = 0.0 if rules == "gsplat" else ANTIALIAS_MIN_RATIO
         comp = torch.sqrt(torch.clamp_min(det0 / det, floor))
     means2d = torch.stack([fx * v[:, 0] / z + cx, fy * v[:, 1] / z + cy], -1)

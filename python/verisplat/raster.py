@@ -37,9 +37,13 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 
 from . import _native
-from . import Camera, _numpy
+from ._cameras import Camera
+from ._common import _numpy
 
 ArrayLike = Any
+
+# gsplat's box ends where a splat's alpha falls to ALPHA_MIN (1/255): opacity times its inverse.
+_ALPHA_MIN_INVERSE = float(round(1.0 / _native.ALPHA_MIN))
 
 _GRAD_SHAPES = {
     "means": 3,
@@ -123,7 +127,10 @@ def _radii_xy(radii: np.ndarray, conics: np.ndarray, opacities: np.ndarray, rule
     det = a * c - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
         cov = np.stack([c / det, a / det], axis=-1)
-        e = np.minimum(3.33, np.sqrt(2.0 * np.log(np.maximum(opacities, 1e-30) * 255.0)))
+        e = np.minimum(
+            _native.GSPLAT_EXTEND,
+            np.sqrt(2.0 * np.log(np.maximum(opacities, 1e-30) * _ALPHA_MIN_INVERSE)),
+        )
         xy = np.ceil(e[:, None] * np.sqrt(np.maximum(cov, 0.0)))
     xy = np.where(np.isfinite(xy), xy, 0.0)
     larger = np.argmax(xy, axis=-1)

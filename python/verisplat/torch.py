@@ -42,20 +42,22 @@ values (any number of channels) are blended as given, never clamped.
 from __future__ import annotations
 
 import numbers
+from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
 
-from . import _projection
+from . import _native, _projection
 from . import raster as _raster
 
 __all__ = ["rasterization"]
 
-# Direct channels per native pass: more are blended in chunks of this many.
-_CHUNK = 16
+# Direct channels per native pass (the most the device's backward pass takes): more are
+# blended in chunks of this many.
+_CHUNK = _native.BACKWARD_CHANNELS
 # verisplat's tiles (meta["tile_size"]; gsplat's tile_size is a speed setting).
-_TILE = 16
+_TILE = _native.TILE_SIZE
 
 _RASTERIZERS: Dict[Tuple[Any, str], "_raster.Rasterizer"] = {}
 
@@ -133,10 +135,43 @@ class _Layout:
         return lead + ((None, 3) if self.sh_degree is not None else (None,))
 
 
-def _native_passes(r, layout: _Layout, arrays, state):
+@dataclass(frozen=True)
+class _Call:
+    """What one ``rasterization`` call asks for, beyond the tensors: the rasterizer, the
+    shapes, the cameras (per set, per camera: viewmat and K as numpy) and the options."""
+
+    rasterizer: "_raster.Rasterizer"
+    layout: _Layout
+    cams: List[List[Tuple[np.ndarray, np.ndarray]]]
+    width: int
+    height: int
+    kernel: str
+    rules: str
+    near_plane: float
+    antialiased: bool
+    absgrad: bool
+
+
+@dataclass(frozen=True)
+class _Passes:
+    """The handle the two autograd Functions share, made by ``_Project``'s forward (one of
+    its outputs, an input of ``_Rasterize``) and kept on each one's ``ctx``: the call, its
+    native forward passes (per (set, camera) pair, one per colour chunk), the radii
+    ([B, C, N] and per axis [B, C, N, 2]) and, packed, the visible (set, camera, Gaussian)
+    triples. Nothing in it changes after the forward pass."""
+
+    call: _Call
+    fwds: Dict[Tuple[int, int], list]
+    radii: np.ndarray
+    radii_xy: np.ndarray
+    ids: Optional[Tuple[np.ndarray, ...]]
+
+
+def _native_passes(call: _Call, arrays) -> Dict[Tuple[int, int], list]:
     """The forward passes, per (set, camera) pair a list of one per colour chunk."""
     means, quats, scales, opacities, colors = arrays
-    cams, width, height = state["cams"], state["width"], state["height"]
+    r, layout = call.rasterizer, call.layout
+    cams, width, height = call.cams, call.width, call.height
     fwds: Dict[Tuple[int, int], list] = {}
     for b, c in layout.pairs():
         col = colors[b, c] if layout.per_camera else colors[b]
@@ -153,10 +188,10 @@ def _native_passes(r, layout: _Layout, arrays, state):
                 width,
                 height,
                 sh_degree=layout.sh_degree,
-                kernel=state["kernel"],
-                antialiased=state["antialiased"],
-                rules=state["rules"],
-                near_plane=state["near_plane"],
+                kernel=call.kernel,
+                antialiased=call.antialiased,
+                rules=call.rules,
+                near_plane=call.near_plane,
             )
             for ch in layout.chunks
         ]
@@ -172,13 +207,17 @@ def _stack(layout: _Layout, fwds, get) -> np.ndarray:
 
 class _Project(torch.autograd.Function):
     """Runs the forward passes; returns the 2D means (an input of _Rasterize, so that
-    ``meta["means2d"].grad`` is dL/d(2D means) as in gsplat), the depths and the conics.
-    Its backward passes on what losses on these meta tensors add (the image's own
-    gradients, which already include the path through the 2D means, are _Rasterize's)."""
+    ``meta["means2d"].grad`` is dL/d(2D means) as in gsplat), the depths, the conics and
+    the blended opacities, then ``link`` and the ``_Passes`` handle, both only for
+    _Rasterize. Its backward passes on what losses on the meta tensors add: the image's own
+    gradients, which already include the path through the 2D means, are _Rasterize's, so
+    the 2D means' gradient it receives less the image's part is what it chains. That part
+    comes back through ``link`` (zeros, of the 2D means' shape), for which _Rasterize's
+    backward returns minus it: the two gradients sum to the meta losses' alone."""
 
     @staticmethod
-    def forward(ctx, means, quats, scales, opacities, colors, viewmats, Ks, state):  # type: ignore[override]
-        layout: _Layout = state["layout"]
+    def forward(ctx, means, quats, scales, opacities, colors, viewmats, Ks, call: _Call):  # type: ignore[override]
+        layout = call.layout
         B, N = layout.B, layout.N
         arrays = (
             _np(means).reshape(B, N, 3),
@@ -187,81 +226,86 @@ class _Project(torch.autograd.Function):
             _np(opacities).reshape(B, N),
             _np(colors).reshape((B,) + tuple(colors.shape[len(layout.batch) :])),
         )
-        fwds = _native_passes(state["rasterizer"], layout, arrays, state)
-        state["fwds"] = fwds
-        ctx.state = state
-        ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, viewmats, Ks)]
+        fwds = _native_passes(call, arrays)
         radii = _stack(layout, fwds, lambda fs: fs[0].radii)  # [B, C, N]
-        state["radii"] = radii
-        state["radii_xy"] = _stack(layout, fwds, lambda fs: fs[0].radii_xy)  # [B, C, N, 2]
-        if layout.packed:
-            state["ids"] = np.nonzero(radii > 0)
+        passes = _Passes(
+            call=call,
+            fwds=fwds,
+            radii=radii,
+            radii_xy=_stack(layout, fwds, lambda fs: fs[0].radii_xy),  # [B, C, N, 2]
+            ids=np.nonzero(radii > 0) if layout.packed else None,
+        )
+        ctx.passes = passes
+        ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, viewmats, Ks)]
+        # An output without a gradient (link when the image is not in the loss) is None.
+        ctx.set_materialize_grads(False)
         outs = (
             _stack(layout, fwds, lambda fs: fs[0].means2d),
             _stack(layout, fwds, lambda fs: fs[0].gaussian_depths),
             _stack(layout, fwds, lambda fs: fs[0].conics),
             _stack(layout, fwds, lambda fs: fs[0].opacities),
         )
-        return tuple(torch.from_numpy(_to_layout(layout, state, o)) for o in outs)
+        means2d, depths, conics, blended = (torch.from_numpy(_to_layout(passes, o)) for o in outs)
+        return means2d, depths, conics, blended, torch.zeros_like(means2d), passes
 
     @staticmethod
-    def backward(ctx, g_means2d, g_depths, g_conics, g_opacities):  # type: ignore[override]
-        state = ctx.state
-        layout: _Layout = state["layout"]
-        image = state.pop("image_g2d", None)
-        if g_means2d is not None and image is not None:
-            g_means2d = g_means2d - image
-        grads = [
-            _from_layout(layout, state, g) for g in (g_means2d, g_depths, g_conics, g_opacities)
-        ]
+    def backward(ctx, g_means2d, g_depths, g_conics, g_opacities, g_link, _g_passes):  # type: ignore[override]
+        passes: _Passes = ctx.passes
+        if g_means2d is not None and g_link is not None:
+            g_means2d = g_means2d + g_link  # g_link: minus the image's part
+        grads = [_from_layout(passes, g) for g in (g_means2d, g_depths, g_conics, g_opacities)]
         wanted = [ctx.needs_input_grad[i] for i in (0, 1, 2, 3, 5, 6)]
-        out = _meta_vjp(layout, state, ctx.inputs, grads, wanted)
+        out = _meta_vjp(passes, ctx.inputs, grads, wanted)
         return out[0], out[1], out[2], out[3], None, out[4], out[5], None
 
 
-def _to_layout(layout: _Layout, state, full: np.ndarray) -> np.ndarray:
+def _to_layout(passes: _Passes, full: np.ndarray) -> np.ndarray:
     """[B, C, N, ...] as meta holds it: packed rows of the visible pairs, or [..., C, N, ...]."""
+    layout = passes.call.layout
     full = np.ascontiguousarray(full, dtype=np.float32)
     if layout.packed:
-        return np.ascontiguousarray(full[state["ids"]])
+        return np.ascontiguousarray(full[passes.ids])
     return full.reshape(layout.batch + (layout.C, layout.N) + full.shape[3:])
 
 
-def _from_layout(layout: _Layout, state, g: Optional[torch.Tensor]) -> Optional[np.ndarray]:
+def _from_layout(passes: _Passes, g: Optional[torch.Tensor]) -> Optional[np.ndarray]:
     """A meta tensor's gradient as [B, C, N, ...] (None: none)."""
     if g is None:
         return None
+    layout = passes.call.layout
     g = _np(g).astype(np.float32)
     tail = g.shape[1:] if layout.packed else g.shape[len(layout.batch) + 2 :]
     full = np.zeros((layout.B, layout.C, layout.N) + tuple(tail), np.float32)
     if layout.packed:
-        full[state["ids"]] = g
+        full[passes.ids] = g
     else:
         full[...] = g.reshape(full.shape)
     return full if full.any() else None
 
 
-def _meta_vjp(layout: _Layout, state, inputs, grads, wanted):
+def _meta_vjp(passes: _Passes, inputs, grads, wanted):
     """dL/d(means, quats, scales, opacities, viewmats, Ks) of losses on the meta 2D means,
     depths, conics and opacities (`grads`, [B, C, N, ...] or None), through the torch
     projection, pair by pair."""
     if all(g is None for g in grads) or not any(wanted):
         return [None] * 6
+    call = passes.call
+    layout = call.layout
     B, C, N = layout.B, layout.C, layout.N
     shapes = [(B, N, 3), (B, N, 4), (B, N, 3), (B, N), (B, C, 4, 4), (B, C, 3, 3)]
     flat = [t.reshape(shape) for t, shape in zip(inputs, shapes)]
     totals = [torch.zeros_like(t) if w else None for t, w in zip(flat, wanted)]
     with torch.enable_grad():
         for b, c in layout.pairs():
-            vis = torch.from_numpy(state["radii"][b, c] > 0)
+            vis = torch.from_numpy(passes.radii[b, c] > 0)
             if not bool(vis.any()):
                 continue
             leaves = [t[b][vis] for t in flat[:4]] + [flat[4][b, c], flat[5][b, c]]
             leaves = [t.clone().requires_grad_(w) for t, w in zip(leaves, wanted)]
             p, q, s, o, vm, K = leaves
             m2d, conic, depth, _, comp = _projection.project(
-                p, q, s, vm, K, state["width"], state["height"],
-                antialiased=state["antialiased"], rules=state["rules"])
+                p, q, s, vm, K, call.width, call.height,
+                antialiased=call.antialiased, rules=call.rules)
             loss = torch.zeros(())
             for g, out in zip(grads, (m2d, depth, conic, o * comp)):
                 if g is not None:
@@ -304,14 +348,16 @@ def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout, scree
     return total
 
 
-def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
+def _camera_vjp(passes: _Passes, inputs, b, c, g2d, screen):
     """dL/d(viewmat, K) of pair (b, c) from its projected quantities' gradients (the
     device's), through the torch projection; zeros where the pair has nothing visible."""
     means, quats, scales, opacities, colors, viewmats, Ks = inputs
+    call = passes.call
+    layout = call.layout
     B, C, N = layout.B, layout.C, layout.N
     vm = viewmats.reshape(B, C, 4, 4)[b, c].clone().requires_grad_()
     K = Ks.reshape(B, C, 3, 3)[b, c].clone().requires_grad_()
-    vis = torch.from_numpy(state["radii"][b, c] > 0)
+    vis = torch.from_numpy(passes.radii[b, c] > 0)
     if not bool(vis.any()):
         return torch.zeros(4, 4), torch.zeros(3, 3)
     v = vis.numpy()
@@ -322,15 +368,15 @@ def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
     with torch.enable_grad():
         m2d, conic, depth, rgb, comp = _projection.project(
             means.reshape(B, N, 3)[b][vis], quats.reshape(B, N, 4)[b][vis],
-            scales.reshape(B, N, 3)[b][vis], vm, K, state["width"], state["height"],
-            sh, layout.sh_degree, state["antialiased"], state["rules"],
+            scales.reshape(B, N, 3)[b][vis], vm, K, call.width, call.height,
+            sh, layout.sh_degree, call.antialiased, call.rules,
         )
         gs = torch.from_numpy(np.ascontiguousarray(screen[v]))
         loss = (torch.from_numpy(np.ascontiguousarray(g2d[v])) * m2d).sum()
         loss = loss + (gs[:, 0:3] * conic).sum() + (gs[:, 6] * depth).sum()
         if rgb is not None:
             loss = loss + (gs[:, 3:6] * rgb).sum()
-        if state["antialiased"]:
+        if call.antialiased:
             # The blended opacity, opacity times the compensation, depends on the camera.
             loss = loss + (gs[:, 7] * opacities.reshape(B, N)[b][vis] * comp).sum()
         g_vm, g_K = torch.autograd.grad(loss, [vm, K])
@@ -338,11 +384,17 @@ def _camera_vjp(layout: _Layout, state, inputs, b, c, g2d, screen):
 
 
 class _Rasterize(torch.autograd.Function):
+    """The image of _Project's forward passes (``passes``, the handle it returned): colours,
+    alphas and expected depths. Its backward is the device's, for every input: the 2D means
+    receive the image's part of their gradient, and ``link`` minus it (see _Project)."""
+
     @staticmethod
-    def forward(ctx, means2d, means, quats, scales, opacities, colors, viewmats, Ks, state):  # type: ignore[override]
-        layout: _Layout = state["layout"]
-        fwds = state["fwds"]
-        ctx.state = state
+    def forward(  # type: ignore[override]
+        ctx, means2d, link, means, quats, scales, opacities, colors, viewmats, Ks, passes: _Passes
+    ):
+        layout = passes.call.layout
+        fwds = passes.fwds
+        ctx.passes = passes
         ctx.means2d = means2d
         ctx.shapes = [tuple(t.shape) for t in (means, quats, scales, opacities, colors)]
         ctx.inputs = [t.detach() for t in (means, quats, scales, opacities, colors, viewmats, Ks)]
@@ -358,10 +410,10 @@ class _Rasterize(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, g_colors, g_alphas, g_depths):  # type: ignore[override]
-        state = ctx.state
-        layout: _Layout = state["layout"]
+        passes: _Passes = ctx.passes
+        layout = passes.call.layout
         B, C, N = layout.B, layout.C, layout.N
-        camera = ctx.needs_input_grad[6] or ctx.needs_input_grad[7]
+        camera = ctx.needs_input_grad[7] or ctx.needs_input_grad[8]
         flat = lambda g: None if g is None else _np(g).reshape((B, C) + tuple(g.shape[-3:]))  # noqa: E731
         g_colors, g_alphas, g_depths = flat(g_colors), flat(g_alphas), flat(g_depths)
         sums: Dict[str, np.ndarray] = {}
@@ -373,8 +425,8 @@ class _Rasterize(torch.autograd.Function):
         # The last pair's state is still on the device: its backward goes first.
         for b, c in reversed(layout.pairs()):
             g = _pair_backward(
-                state["rasterizer"],
-                state["fwds"][(b, c)],
+                passes.call.rasterizer,
+                passes.fwds[(b, c)],
                 None if g_colors is None else g_colors[b, c],
                 None if g_alphas is None else g_alphas[b, c, ..., 0],
                 None if g_depths is None else g_depths[b, c, ..., 0],
@@ -388,7 +440,7 @@ class _Rasterize(torch.autograd.Function):
                 sums[key] = g[name] if key not in sums else sums[key] + g[name]
             if camera:
                 g_vm[b, c], g_K[b, c] = _camera_vjp(
-                    layout, state, ctx.inputs, b, c, g["means2d"], g["screen"])
+                    passes, ctx.inputs, b, c, g["means2d"], g["screen"])
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
         shapes = ctx.shapes
         groups = [
@@ -402,15 +454,14 @@ class _Rasterize(torch.autograd.Function):
             colour_grad = np.stack([sums[("colors", b)] for b in range(B)])
         if layout.sh_degree is not None:
             colour_grad = _pad_sh(colour_grad, shapes[4])
-        g2d = t(_to_layout(layout, state, full2d))
-        # What _Project's backward takes out of its 2D means' gradient: the image's part.
-        state["image_g2d"] = g2d
-        if state["absgrad"]:
-            ctx.means2d.absgrad = t(_to_layout(layout, state, abs2d))
+        g2d = t(_to_layout(passes, full2d))
+        if passes.call.absgrad:
+            ctx.means2d.absgrad = t(_to_layout(passes, abs2d))
         cams = [None, None]
         if camera:
             cams = [g_vm.reshape(ctx.inputs[5].shape), g_K.reshape(ctx.inputs[6].shape)]
-        return (g2d, *groups, t(colour_grad).reshape(shapes[4]), *cams, None)
+        # link: what _Project's backward takes out of its 2D means' gradient, the image's part.
+        return (g2d, -g2d, *groups, t(colour_grad).reshape(shapes[4]), *cams, None)
 
 
 def _pad_sh(grad: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
@@ -446,7 +497,10 @@ def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, ca
         (rules not in ("original", "gsplat"), f"rules must be 'original' or 'gsplat', got {rules!r}"),
         (far_plane < 1e10, f"far_plane={far_plane}: verisplat has no far plane"),
         (radius_clip != 0.0, "radius_clip is not supported"),
-        (eps2d != 0.3, f"eps2d={eps2d}: verisplat dilates 2D covariances by the original 0.3"),
+        (
+            eps2d != _native.COV2D_DILATION,
+            f"eps2d={eps2d}: verisplat dilates 2D covariances by the original {_native.COV2D_DILATION}",
+        ),
         (
             rasterize_mode not in ("classic", "antialiased"),
             f"rasterize_mode must be 'classic' or 'antialiased', got {rasterize_mode!r}",
@@ -507,9 +561,11 @@ def _backgrounds(layout: _Layout, backgrounds, render_mode):
     return colour, depth
 
 
-def _meta(layout: _Layout, state, projected, width, height) -> Dict[str, Any]:
+def _meta(passes: _Passes, projected) -> Dict[str, Any]:
     means2d, depths, conics, opacities = projected
-    radii = state["radii_xy"].astype(np.int32)
+    call = passes.call
+    layout, width, height = call.layout, call.width, call.height
+    radii = passes.radii_xy.astype(np.int32)
     bs, C, N = layout.batch, layout.C, layout.N
     meta: Dict[str, Any] = {
         "means2d": means2d,
@@ -523,8 +579,8 @@ def _meta(layout: _Layout, state, projected, width, height) -> Dict[str, Any]:
         "n_cameras": C,
     }
     if layout.packed:
-        ids = [torch.from_numpy(i.astype(np.int64)) for i in state["ids"]]
-        r = torch.from_numpy(radii[state["ids"]])
+        ids = [torch.from_numpy(i.astype(np.int64)) for i in passes.ids]
+        r = torch.from_numpy(radii[passes.ids])
         meta.update(batch_ids=ids[0], camera_ids=ids[1], gaussian_ids=ids[2])
     else:
         r = torch.from_numpy(radii.reshape(bs + (C, N, 2)))
@@ -546,7 +602,7 @@ def rasterization(
     near_plane: Optional[float] = None,
     far_plane: float = 1e10,
     radius_clip: float = 0.0,
-    eps2d: float = 0.3,
+    eps2d: float = _native.COV2D_DILATION,
     sh_degree: Optional[int] = None,
     packed: bool = True,
     tile_size: int = 16,
@@ -607,7 +663,7 @@ def rasterization(
         ftheta_coeffs=ftheta_coeffs, viewmats_rs=viewmats_rs,
     )
     if near_plane is None:
-        near_plane = 0.01 if rules == "gsplat" else 0.2
+        near_plane = _native.GSPLAT_NEAR_PLANE if rules == "gsplat" else _native.NEAR_PLANE
     _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
             distributed, sparse_grad, segmented, rolling_shutter, channel_chunk, gsplat_kw)
     _size("tile_size", tile_size)
@@ -623,25 +679,25 @@ def rasterization(
     vm = _np(viewmats).reshape(layout.B, layout.C, 4, 4)
     ks = _np(Ks).reshape(layout.B, layout.C, 3, 3)
     cams = [[(vm[b, c], ks[b, c]) for c in range(layout.C)] for b in range(layout.B)]
-    state: Dict[str, Any] = {
-        "rasterizer": _rasterizer(device, accumulation),
-        "layout": layout,
-        "cams": cams,
-        "width": width,
-        "height": height,
-        "kernel": kernel,
-        "rules": rules,
-        "near_plane": float(near_plane),
-        "antialiased": rasterize_mode == "antialiased",
-        "absgrad": absgrad,
-    }
+    call = _Call(
+        rasterizer=_rasterizer(device, accumulation),
+        layout=layout,
+        cams=cams,
+        width=width,
+        height=height,
+        kernel=kernel,
+        rules=rules,
+        near_plane=float(near_plane),
+        antialiased=rasterize_mode == "antialiased",
+        absgrad=absgrad,
+    )
     # gsplat builds the covariance from the scales' squares: the sign is the gradient's.
     # A zero scale is the smallest normal float (its gradient is 0, as gsplat's is).
     unsigned = scales.abs().clamp_min(torch.finfo(torch.float32).tiny)
-    means2d, depths, conics, blended = _Project.apply(
-        means, quats, unsigned, opacities, colors, viewmats, Ks, state)
+    means2d, depths, conics, blended, link, passes = _Project.apply(
+        means, quats, unsigned, opacities, colors, viewmats, Ks, call)
     rgb, alphas, expected = _Rasterize.apply(
-        means2d, means, quats, unsigned, opacities, colors, viewmats, Ks, state)
+        means2d, link, means, quats, unsigned, opacities, colors, viewmats, Ks, passes)
     if bg_colour is not None:
         rgb = rgb + (1.0 - alphas) * bg_colour
     depth = expected * alphas if render_mode in ("D", "RGB+D") else expected
@@ -653,4 +709,4 @@ def rasterization(
         out = depth
     else:
         out = torch.cat([rgb, depth], dim=-1)
-    return out, alphas, _meta(layout, state, (means2d, depths, conics, blended), width, height)
+    return out, alphas, _meta(passes, (means2d, depths, conics, blended))
