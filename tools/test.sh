@@ -52,23 +52,28 @@ echo "test.sh: cargo test took $((SECONDS - t0)) s" >&2
 #   step, features, shader, fields, doctor), without the 512 run's larger scenes again.
 # VERISPLAT_WIDTHS="" skips them (a test name given to this script skips them too).
 width_tests=(
-  gpu_sort:: gpu_stages:: gradients::gpu_ loss::device_loss features::gpu_ mlp::gpu_shade
-  field_renders::gpu_field time_fields::gpu_equals compact::compact_scenes
-  gpu_frames::every_blend_kernel gpu_frames::antialiased gpu_frames::plant_and_train
-  gpu_frames::per_frame_options gpu_frames::rgba8 gpu_frames::playbot_lods
-  gpu_frames::power_kernel chunked_frames::tiny_chunks pipelined::pipelined_frames_match
-  train::the_state_on_the_device train::feature_splats_and_clipping doctor::doctor_passes
-  limits::pair gsplat_rules::gsplat_rules_match gsplat_rules::gsplat_rules_blend
-  gsplat_rules::gsplats_near gsplat_rules::gpu_backward
+  gpu::primitives:: render::stages:: train::gradients::gpu_ train::loss::device_loss
+  render::features::gpu_ fields::mlp::gpu_shade fields::field_renders::gpu_field
+  fields::time_fields::gpu_equals render::compact::compact_scenes
+  render::frames::every_blend_kernel render::frames::antialiased
+  render::frames::plant_and_train render::frames::per_frame_options render::frames::rgba8
+  render::frames::playbot_lods render::frames::power_kernel
+  render::chunked_frames::tiny_chunks render::pipelined::pipelined_frames_match
+  train::training::the_state_on_the_device train::training::feature_splats_and_clipping
+  app::doctor::doctor_passes gpu::limits::pair render::gsplat_rules::gsplat_rules_match
+  render::gsplat_rules::gsplat_rules_blend render::gsplat_rules::gsplats_near
+  train::gsplat_rules::gpu_backward
 )
 misreport_tests=(
-  gpu_sort:: gpu_stages::stages_match_on_playbot_lod3 gpu_stages::forward_state
-  gradients::gpu_ loss::device_loss features::gpu_feature_blend_matches mlp::gpu_shade
-  field_renders::gpu_field time_fields::gpu_equals compact::compact_scenes
-  gpu_frames::every_blend_kernel_matches_the_reference gpu_frames::antialiased
-  chunked_frames::tiny_chunks pipelined::pipelined_frames_match
-  train::the_state_on_the_device doctor::doctor_passes limits::pair
-  gsplat_rules::gsplats_near gsplat_rules::gpu_backward
+  gpu::primitives:: render::stages::stages_match_on_playbot_lod3
+  render::stages::forward_state train::gradients::gpu_ train::loss::device_loss
+  render::features::gpu_feature_blend_matches fields::mlp::gpu_shade
+  fields::field_renders::gpu_field fields::time_fields::gpu_equals
+  render::compact::compact_scenes render::frames::every_blend_kernel_matches_the_reference
+  render::frames::antialiased render::chunked_frames::tiny_chunks
+  render::pipelined::pipelined_frames_match train::training::the_state_on_the_device
+  app::doctor::doctor_passes gpu::limits::pair render::gsplat_rules::gsplats_near
+  train::gsplat_rules::gpu_backward
   --skip every_blend_kernel_matches_the_reference_with_the_power_kernel
 )
 widths=${VERISPLAT_WIDTHS-128 512 1024 2048}

@@ -46,7 +46,7 @@ pub(crate) fn add_constants(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let groups = verisplat::gpu::shader_set::MAX_FEATURE_GROUPS as usize;
     m.add(
         "BACKWARD_CHANNELS",
-        groups * verisplat::render::features::CHANNELS_PER_GROUP,
+        groups * verisplat::render::forward::features::CHANNELS_PER_GROUP,
     )?;
     m.add("MAX_FEATURES", verisplat::scene::MAX_FEATURES)?;
     Ok(())

@@ -59,6 +59,11 @@ pub fn ok(args: &[&str]) -> Output {
     o
 }
 
+/// Runs a command that must succeed (and not panic); returns its standard error.
+pub fn ok_stderr(args: &[&str]) -> String {
+    stderr(&ok(args))
+}
+
 /// Runs a command that must fail with one `error:` sentence (no panic) and leave `out`
 /// absent; returns the sentence.
 pub fn fails(args: &[&str], out: &Path) -> String {

@@ -3,10 +3,12 @@
 
 use std::sync::{Mutex, MutexGuard, OnceLock};
 use verisplat::camera::Camera;
+use verisplat::cpu::{self, RenderOptions};
 use verisplat::frame::Frame;
 use verisplat::gpu::{ContextOptions, GpuContext};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
+use verisplat::scene::ActivatedScene;
 
 /// The shared renderer (validation layer on; the blend variant for the device).
 pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
@@ -83,6 +85,58 @@ pub struct Comparison {
     pub depth_within: f64,
 }
 
+/// The project's GPU-vs-CPU bar: PSNR >= 55 dB (colour clamped to [0, 1]; alpha too where
+/// checked).
+pub const MIN_PSNR: f64 = 55.0;
+/// The project's GPU-vs-CPU bar: at least 99.9 % of 8-bit pixels within 1/255 (and of
+/// depths within 1e-3 relative where checked).
+pub const MIN_WITHIN: f64 = 0.999;
+
+/// Which figures of a [`Comparison`] a check holds to which bound (`None`: not checked).
+/// The constants are the project's thresholds; a check with other bounds states them.
+#[derive(Clone, Copy, Debug)]
+pub struct Thresholds {
+    /// Least colour PSNR, dB.
+    pub psnr: f64,
+    /// Least share of 8-bit pixels within 1/255.
+    pub within: Option<f64>,
+    /// Least alpha PSNR, dB.
+    pub alpha_psnr: Option<f64>,
+    /// Least share of covered pixels whose depth is within 1e-3 relative.
+    pub depth_within: Option<f64>,
+    /// Largest relative depth difference where both alphas exceed 0.5.
+    pub depth_rel: Option<f64>,
+}
+
+impl Thresholds {
+    /// Colour PSNR >= 55 dB, nothing else.
+    pub const PSNR: Thresholds = Thresholds {
+        psnr: MIN_PSNR,
+        within: None,
+        alpha_psnr: None,
+        depth_within: None,
+        depth_rel: None,
+    };
+    /// Colour: PSNR >= 55 dB and >= 99.9 % of 8-bit pixels within 1/255.
+    pub const COLOUR: Thresholds = Thresholds {
+        within: Some(MIN_WITHIN),
+        ..Thresholds::PSNR
+    };
+    /// [`Thresholds::COLOUR`] and an alpha PSNR >= 55 dB.
+    pub const COLOUR_AND_ALPHA: Thresholds = Thresholds {
+        alpha_psnr: Some(MIN_PSNR),
+        ..Thresholds::COLOUR
+    };
+    /// A whole frame: [`Thresholds::COLOUR_AND_ALPHA`], and depth where both alphas exceed
+    /// 0.5: >= 99.9 % of those pixels within 1e-3 relative, none beyond 2 %
+    /// (`render::frames` says why a tail exists).
+    pub const FRAME: Thresholds = Thresholds {
+        depth_within: Some(MIN_WITHIN),
+        depth_rel: Some(0.02),
+        ..Thresholds::COLOUR_AND_ALPHA
+    };
+}
+
 /// Compares a GPU frame with the CPU reference frame: colour and alpha figures from
 /// `verisplat::metrics`, plus the relative depth error where both alphas exceed 0.5.
 pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
@@ -108,6 +162,55 @@ pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
             depth_ok as f64 / covered as f64
         },
     }
+}
+
+impl Comparison {
+    /// Whether these figures meet every bound of `t`.
+    pub fn meets(&self, t: &Thresholds) -> bool {
+        let at_least = |v: f64, bound: Option<f64>| bound.map_or(true, |b| v >= b);
+        self.psnr >= t.psnr
+            && at_least(self.within, t.within)
+            && at_least(self.alpha_psnr, t.alpha_psnr)
+            && at_least(self.depth_within, t.depth_within)
+            && t.depth_rel.map_or(true, |b| self.depth_rel <= b)
+    }
+
+    /// Panics with `{label}: {figures} (images in DIR)` unless these figures of `gpu`
+    /// against `cpu` meet `t`, having written the frames there ([`dump_failure`]).
+    pub fn assert_meets_or_dump(&self, t: &Thresholds, label: &str, gpu: &Frame, cpu: &Frame) {
+        if !self.meets(t) {
+            let dir = dump_failure(&label.replace(' ', "_"), gpu, cpu);
+            panic!("{label}: {self:?} (images in {dir})");
+        }
+    }
+}
+
+/// Holds the GPU frame `g` of `s` from `cam` (default options) to the CPU reference frame
+/// with [`Thresholds::COLOUR_AND_ALPHA`] (said on stderr; the images written on failure).
+pub fn check_against_reference(label: &str, g: &Frame, s: &ActivatedScene, cam: &Camera) {
+    let c = cpu::render(s, cam, &RenderOptions::default());
+    let cmp = compare(g, &c);
+    eprintln!("{label} vs the CPU reference: {cmp:?}");
+    cmp.assert_meets_or_dump(&Thresholds::COLOUR_AND_ALPHA, label, g, &c);
+}
+
+/// Renders `s` from `cam` with `opts` on `r` and on the CPU reference and holds the frames
+/// to [`Thresholds::FRAME`] (said on stderr with the pair count; the images written on
+/// failure); then no validation message.
+pub fn check_frame(
+    r: &mut GpuRenderer,
+    label: &str,
+    s: &ActivatedScene,
+    cam: &Camera,
+    opts: &RenderOptions,
+) {
+    let gs = r.upload(s).unwrap();
+    let g = r.render(&gs, cam, opts).unwrap();
+    let c = cpu::render(s, cam, opts);
+    let cmp = compare(&g, &c);
+    eprintln!("{label}: {cmp:?}, pairs {}", r.stats().pairs);
+    cmp.assert_meets_or_dump(&Thresholds::FRAME, label, &g, &c);
+    assert_validation_clean(r);
 }
 
 /// Writes `actual`, `expected` and `diff` PNGs for a failed golden comparison and returns

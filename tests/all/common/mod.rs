@@ -1,13 +1,19 @@
-//! Helpers shared by the integration tests: hand-built scenes and cameras.
+//! Helpers shared by the integration tests: the shared scenes and their orbit cameras,
+//! hand-built scenes and cameras. `cli` runs the binary, `gpu` holds the shared renderer
+//! and the GPU-vs-CPU thresholds, `dataset` makes training data sets, `viewer` drives
+//! `verisplat view`.
 #![allow(dead_code)]
 
 pub mod cli;
+pub mod dataset;
 pub mod gpu;
+pub mod viewer;
 
 use glam::{Mat3, Vec3};
 use std::path::PathBuf;
-use verisplat::camera::Camera;
-use verisplat::scene::Scene;
+use verisplat::camera::{self, Camera};
+use verisplat::cpu::{RenderOptions, Rules};
+use verisplat::scene::{self, Scene};
 
 /// `../shared/data`, the read-only real scenes. They are always there (in CI too), so a
 /// test that needs them fails without them instead of skipping.
@@ -19,6 +25,53 @@ pub fn shared_data() -> PathBuf {
         dir.display()
     );
     dir
+}
+
+/// A scene of `../shared/data` (see [`shared_data`]), loaded.
+pub fn shared_scene(name: &str) -> Scene {
+    scene::load(&shared_data().join(name)).unwrap()
+}
+
+/// The 24 cameras of the shared PLAYBOT orbit (an INRIA cameras.json in `../shared/data`).
+pub const PLAYBOT_ORBIT: &str = "playbot_orbit_cameras.synthetic.json";
+
+/// The cameras of an orbit file of `../shared/data` (an INRIA cameras.json, e.g.
+/// [`PLAYBOT_ORBIT`] or `plant_orbit_cameras.synthetic.json`) at the file's resolution.
+pub fn orbit_cameras(file: &str) -> Vec<Camera> {
+    camera::load_cameras_json(&shared_data().join(file)).unwrap()
+}
+
+/// Camera `i` of the orbit file `file` of `../shared/data` at `w x h` (the same view:
+/// `Camera::with_resolution` scales focal lengths and principal point).
+pub fn orbit(file: &str, i: usize, w: u32, h: u32) -> Camera {
+    orbit_cameras(file)[i].with_resolution(w, h).unwrap()
+}
+
+/// The first `frames` cameras of the orbit file `file` at `w x h`: a camera path.
+pub fn orbit_path(file: &str, frames: usize, w: u32, h: u32) -> Vec<Camera> {
+    orbit_cameras(file)
+        .iter()
+        .take(frames)
+        .map(|c| c.with_resolution(w, h).unwrap())
+        .collect()
+}
+
+/// `opts` under gsplat's rules (`Rules::Gsplat`).
+pub fn gsplat(opts: RenderOptions) -> RenderOptions {
+    RenderOptions {
+        rules: Rules::Gsplat,
+        ..opts
+    }
+}
+
+/// A camera whose principal point is off centre by `(dx, dy)` pixels, where gsplat's guard
+/// band differs from the original's.
+pub fn off_centre(cam: &Camera, dx: f32, dy: f32) -> Camera {
+    let mut c = cam.clone();
+    c.cx += dx;
+    c.cy += dy;
+    c.name = format!("{} off centre", cam.name);
+    c
 }
 
 /// The documentation a user reads, as paths relative to the repository: README.md, then

@@ -1,0 +1,144 @@
+//! The repository's layout rules (the house rules of issue 36): rooms a newcomer can read
+//! in one sitting. No source file over 1,000 lines, no function over 150, and no import
+//! circle among the library's modules or the command line's (`tools/module_graph.py`, down
+//! to submodules).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const MAX_FILE_LINES: usize = 1000;
+const MAX_FN_LINES: usize = 150;
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Every file under `dir` (relative to the repository) whose name ends in one of `exts`.
+fn files(dir: &str, exts: &[&str]) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![root().join(dir)];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap_or_else(|e| panic!("{}: {e}", d.display())) {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if exts.iter().any(|e| path.to_string_lossy().ends_with(e)) {
+                out.push(path);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+fn sources() -> Vec<PathBuf> {
+    let mut all = Vec::new();
+    for dir in ["src", "python/src", "tests", "benches"] {
+        all.extend(files(dir, &[".rs"]));
+    }
+    all.push(root().join("build.rs"));
+    all.extend(files("glsl", &[".comp", ".glsl"]));
+    all
+}
+
+fn rel(p: &Path) -> String {
+    p.strip_prefix(root()).unwrap_or(p).display().to_string()
+}
+
+/// The name of the function a line opens (`pub(crate) async fn name(`...), if any.
+fn fn_name(line: &str) -> Option<&str> {
+    let mut rest = line.trim_start();
+    for prefix in [
+        "pub(crate) ",
+        "pub(super) ",
+        "pub ",
+        "const ",
+        "async ",
+        "unsafe ",
+    ] {
+        rest = rest.strip_prefix(prefix).unwrap_or(rest);
+    }
+    let rest = rest.strip_prefix("extern \"C\" ").unwrap_or(rest);
+    let name = rest.strip_prefix("fn ")?;
+    let end = name.find(|c: char| !(c.is_alphanumeric() || c == '_'))?;
+    Some(&name[..end])
+}
+
+/// (name, first line, length) of every function body over `MAX_FN_LINES` lines in rustfmt
+/// layout: from the `fn` line to the `}` at the same indentation.
+fn long_functions(text: &str) -> Vec<(String, usize, usize)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let Some(name) = fn_name(line) else { continue };
+        if line.trim_end().ends_with(';') {
+            continue; // a declaration without a body (a trait's)
+        }
+        let indent = &line[..line.len() - line.trim_start().len()];
+        let close = lines[i..]
+            .iter()
+            .position(|l| l.starts_with(indent) && l[indent.len()..].starts_with('}'));
+        if let Some(k) = close {
+            if k + 1 > MAX_FN_LINES {
+                out.push((name.to_string(), i + 1, k + 1));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_function_finder_measures_what_it_should() {
+    let body = |n: usize| "    let x = 1;\n".repeat(n);
+    let text = format!(
+        "pub(crate) fn short() {{\n{}}}\n\nimpl A {{\n    pub fn long(\n        a: u32,\n    ) -> u32 {{\n    {}    }}\n    fn decl(&self);\n}}\n",
+        body(3),
+        body(MAX_FN_LINES)
+    );
+    let found = long_functions(&text);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_eq!(found[0].0, "long");
+    assert_eq!(found[0].1, 8);
+    assert_eq!(found[0].2, MAX_FN_LINES + 4);
+}
+
+#[test]
+fn no_file_over_1000_lines_and_no_function_over_150() {
+    let mut faults = Vec::new();
+    for path in sources() {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let n = text.lines().count();
+        if n > MAX_FILE_LINES {
+            faults.push(format!("{}: {n} lines", rel(&path)));
+        }
+        if path.extension().is_some_and(|e| e == "rs") {
+            for (name, line, len) in long_functions(&text) {
+                faults.push(format!("{}:{line}: fn {name} is {len} lines", rel(&path)));
+            }
+        }
+    }
+    assert!(
+        faults.is_empty(),
+        "over the house limits ({MAX_FILE_LINES} lines a file, {MAX_FN_LINES} a function):\n{}",
+        faults.join("\n")
+    );
+}
+
+#[test]
+fn no_import_circle_in_the_library_or_the_command_line() {
+    for args in [&["--depth", "2"][..], &["--bin", "--depth", "2"]] {
+        let out = Command::new("python3")
+            .arg(root().join("tools/module_graph.py"))
+            .args(args)
+            .output()
+            .expect("python3 runs tools/module_graph.py");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && text.contains("cycles: none"),
+            "tools/module_graph.py {}: {}\n{text}{}",
+            args.join(" "),
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

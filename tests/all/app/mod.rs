@@ -1,0 +1,16 @@
+//! The `verisplat` binary as a user runs it: commands and their errors, the viewer (over
+//! its WebSocket and in a browser), `doctor`, `compare` and `eval`, image sequences,
+//! shards, the docs' examples, the former name, and the repository's layout rules.
+
+mod cli;
+mod cli_usability;
+mod compare;
+mod doc_examples;
+mod doctor;
+mod former_name;
+mod layout_rules;
+mod sequences;
+mod shards;
+mod transform_flags;
+mod view;
+mod view_browser;

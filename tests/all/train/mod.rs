@@ -1,0 +1,10 @@
+//! Training: the backward pass against finite differences and on the device, the loss,
+//! `verisplat train` on data sets made here and from real captures, distorted photos, and
+//! training under gsplat's rules.
+
+mod captures;
+mod gradients;
+mod gsplat_rules;
+mod loss;
+mod training;
+mod undistort;
