@@ -5,7 +5,7 @@
 //! centre, quaternion, scale, opacity and colour (SH coefficients or direct channels).
 //!
 //! It is the yardstick of the Vulkan backward pass and is itself checked against central
-//! finite differences of [`forward`] (tests in `tests/all/gradients.rs`). Derivatives are
+//! finite differences of [`forward`] (tests in `tests/all/train/gradients.rs`). Derivatives are
 //! those of the function the forward computes, piece by piece: where alpha is clamped at
 //! the rules' clamp (0.99; gsplat's 0.999), where a colour is clamped at 0, and where the view direction is clamped to the
 //! guard band, the clamped quantity has zero derivative (as gsplat; the original CUDA

@@ -35,7 +35,7 @@ pub const MIN_PSNR_DB: f64 = 55.0;
 /// Smallest share of pixels whose 8-bit colour and alpha are within 1/255 (`compare`'s).
 pub const MIN_WITHIN: f64 = 0.999;
 /// Largest relative L2 error of a gradient group, GPU against the f64 CPU backward
-/// (`tests/all/gradients.rs` explains the margin: f32 sums reach ~1e-5).
+/// (`tests/all/train/gradients.rs` explains the margin: f32 sums reach ~1e-5).
 pub const MAX_GRAD_REL_L2: f64 = 1e-3;
 /// Keys of each sort check.
 pub const SORT_KEYS: usize = 100_000;
