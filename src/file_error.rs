@@ -2,7 +2,7 @@
 //! could not be read, or it is not what it should be. One type for the readers that had
 //! each their own identical copy ([`crate::scene::SceneError`] and
 //! [`crate::image_file::ImageError`] are this type); the camera readers' error
-//! ([`crate::camera::CameraError`]) adds the variants only cameras have.
+//! ([`crate::camera::CameraError`]) is this one or one of the variants only cameras have.
 
 use std::path::{Path, PathBuf};
 

@@ -11,6 +11,7 @@
 
 use super::distortion::{self, Distortion};
 use super::{quat_wxyz_to_mat, Camera, CameraError, CameraFormat, MAX_IMAGE_SIDE};
+use crate::file_error::FileError;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -109,10 +110,10 @@ struct Image {
 }
 
 fn invalid(path: &Path, message: String) -> CameraError {
-    CameraError::Invalid {
+    CameraError::File(FileError::Invalid {
         path: path.to_path_buf(),
         message,
-    }
+    })
 }
 
 /// Finds the model files under `dir` (itself, `sparse/0`, or `sparse`): the directory
@@ -169,9 +170,11 @@ fn load_model(dir: &Path, distorted: bool) -> Result<(Vec<LensCamera>, CameraFor
     let cameras_path = model_dir.join(format!("cameras.{ext}"));
     let images_path = model_dir.join(format!("images.{ext}"));
     let read = |p: &Path| {
-        std::fs::read(p).map_err(|source| CameraError::Io {
-            path: p.to_path_buf(),
-            source,
+        std::fs::read(p).map_err(|source| {
+            CameraError::File(FileError::Io {
+                path: p.to_path_buf(),
+                source,
+            })
         })
     };
     let (cams_bytes, images_bytes) = (read(&cameras_path)?, read(&images_path)?);
@@ -633,9 +636,11 @@ pub fn load_colmap_points(dir: &Path) -> Result<Option<Vec<Point3D>>, CameraErro
     if !path.is_file() {
         return Ok(None);
     }
-    let bytes = std::fs::read(&path).map_err(|source| CameraError::Io {
-        path: path.clone(),
-        source,
+    let bytes = std::fs::read(&path).map_err(|source| {
+        CameraError::File(FileError::Io {
+            path: path.clone(),
+            source,
+        })
     })?;
     let points = if binary {
         parse_points_binary(&bytes, &path)?

@@ -6,6 +6,7 @@
 //! them only for such cameras, and other readers ignore them.
 
 use super::{Camera, CameraError};
+use crate::file_error::FileError;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -72,18 +73,22 @@ pub fn to_json(cameras: &[(usize, Camera)]) -> Result<String, CameraError> {
 
 /// Loads every camera of an INRIA `cameras.json`.
 pub fn load_cameras_json(path: &Path) -> Result<Vec<Camera>, CameraError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CameraError::Io {
-        path: path.to_path_buf(),
-        source,
+    let text = std::fs::read_to_string(path).map_err(|source| {
+        CameraError::File(FileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
     })?;
     parse_cameras_json(&text, path)
 }
 
 /// Parses an INRIA `cameras.json` held in memory; `path` names it in errors.
 pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, CameraError> {
-    let invalid = |message: String| CameraError::Invalid {
-        path: path.to_path_buf(),
-        message,
+    let invalid = |message: String| {
+        CameraError::File(FileError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        })
     };
     let entries: Vec<JsonCamera> = serde_json::from_str(text).map_err(|e| {
         invalid(format!(

@@ -8,6 +8,7 @@ use super::{
     camera_from_c2w, check_resolution, quat_wxyz_to_mat, rotation_error, Camera, CameraError,
     PathTiming,
 };
+use crate::file_error::FileError;
 use glam::{DMat3, DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -97,9 +98,11 @@ impl KeyframePath {
 
     /// Parses and validates a keyframe file held in memory (`path` names it in errors).
     pub fn parse(text: &str, path: &Path) -> Result<Self, CameraError> {
-        let invalid = |message: String| CameraError::Invalid {
-            path: path.to_path_buf(),
-            message,
+        let invalid = |message: String| {
+            CameraError::File(FileError::Invalid {
+                path: path.to_path_buf(),
+                message,
+            })
         };
         let file: FileJson = serde_json::from_str(text).map_err(|e| {
             invalid(format!(

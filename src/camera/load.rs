@@ -2,6 +2,7 @@
 //! sparse model is a directory or its `images`/`cameras` file) or from the JSON content.
 
 use super::{colmap, inria, keyframes, nerfstudio, Camera, CameraError};
+use crate::file_error::FileError;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -74,10 +75,10 @@ pub fn load_camera_file(
                     // a degenerate camera) is the file's own, so it names the file.
                     .map_err(|e| match e {
                         CameraError::BadParameter(message) if *timing == PathTiming::default() => {
-                            CameraError::Invalid {
+                            CameraError::File(FileError::Invalid {
                                 path: path.to_path_buf(),
                                 message,
-                            }
+                            })
                         }
                         other => other,
                     })?,
@@ -86,10 +87,10 @@ pub fn load_camera_file(
         }
     };
     if cams.is_empty() {
-        return Err(CameraError::Invalid {
+        return Err(CameraError::File(FileError::Invalid {
             path: path.to_path_buf(),
             message: format!("holds no cameras ({format})"),
-        });
+        }));
     }
     Ok((cams, format))
 }
@@ -120,9 +121,11 @@ impl JsonKind {
 }
 
 fn locate(path: &Path) -> Result<Source, CameraError> {
-    let io = |source| CameraError::Io {
-        path: path.to_path_buf(),
-        source,
+    let io = |source| {
+        CameraError::File(FileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
     };
     let meta = std::fs::metadata(path).map_err(io)?;
     let model_cameras = path.join("cameras.json");
@@ -144,19 +147,24 @@ fn locate(path: &Path) -> Result<Source, CameraError> {
         return Ok(Source::Colmap(dir));
     }
     let bytes = std::fs::read(path).map_err(io)?;
-    let text = String::from_utf8(bytes).map_err(|_| CameraError::Invalid {
-        path: path.to_path_buf(),
-        message: "is not a camera file: it is not UTF-8 text (JSON), and a COLMAP model must be \
+    let text = String::from_utf8(bytes).map_err(|_| {
+        CameraError::File(FileError::Invalid {
+            path: path.to_path_buf(),
+            message:
+                "is not a camera file: it is not UTF-8 text (JSON), and a COLMAP model must be \
                   given as its directory or as its images.bin/images.txt"
-            .into(),
+                    .into(),
+        })
     })?;
     Ok(Source::Json(text, path.to_path_buf()))
 }
 
 fn detect_json(text: &str, path: &Path) -> Result<JsonKind, CameraError> {
-    let invalid = |message: String| CameraError::Invalid {
-        path: path.to_path_buf(),
-        message,
+    let invalid = |message: String| {
+        CameraError::File(FileError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        })
     };
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| {
         invalid(format!(

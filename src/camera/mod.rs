@@ -21,6 +21,7 @@ pub use select::{
     select_cameras,
 };
 
+use crate::file_error::FileError;
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use std::path::PathBuf;
 
@@ -55,22 +56,10 @@ pub struct Camera {
 /// Error raised while building or loading cameras.
 #[derive(Debug, thiserror::Error)]
 pub enum CameraError {
-    /// The camera file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// File involved.
-        path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
-    },
-    /// The camera file is not what it should be.
-    #[error("{path}: {message}")]
-    Invalid {
-        /// File involved.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
+    /// The camera file could not be read, or is not what it should be (the readers' one
+    /// file error).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A requested camera does not exist.
     #[error("{path}: {message}")]
     NotFound {

@@ -13,6 +13,7 @@
 //! `docs/cameras.md`).
 
 use super::{camera_from_c2w, check_resolution, rotation_error, Camera, CameraError};
+use crate::file_error::FileError;
 use glam::{DMat3, DVec3};
 use serde::Deserialize;
 use std::path::Path;
@@ -38,9 +39,11 @@ struct PathEntry {
 /// Parses a nerfstudio camera path held in memory (`path` names it in errors): one
 /// camera per entry, named `path_00000`, `path_00001`, ...
 pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraError> {
-    let invalid = |message: String| CameraError::Invalid {
-        path: path.to_path_buf(),
-        message,
+    let invalid = |message: String| {
+        CameraError::File(FileError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        })
     };
     let file: PathFile = serde_json::from_str(text).map_err(|e| {
         invalid(format!(

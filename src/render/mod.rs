@@ -70,6 +70,24 @@ pub enum Readback {
     Counters,
 }
 
+/// A frame left on the device ([`GpuRenderer::render_on_device`],
+/// [`GpuRenderer::render_shaded_on_device`]): the handle of its forward state, which a
+/// backward pass of it takes ([`GpuRenderer::device_backward`]). The renderer refuses it
+/// once it has finished another frame, whose state replaced this one's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ForwardHandle {
+    serial: u64,
+    width: u32,
+    height: u32,
+}
+
+impl ForwardHandle {
+    /// The frame's width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+}
+
 /// A frame read back as 8-bit RGBA.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Rgba8Frame {
@@ -91,6 +109,8 @@ pub struct GpuRenderer {
     pipelines: Pipelines,
     /// The set of the last finished frame (what [`Self::render_with_intermediates`] reads).
     last: usize,
+    /// The serial of the last finished frame ([`ForwardHandle`]s name it).
+    last_serial: u64,
     /// Key capacity the frames have needed so far (the largest set's); a new or resized
     /// set starts with it.
     capacity: Option<u32>,
@@ -170,6 +190,7 @@ impl GpuRenderer {
             pipelines: Pipelines::new(kernel),
             sets: vec![FrameSet::new(&ctx, 0, kernel.bin_size())?],
             last: 0,
+            last_serial: u64::MAX,
             capacity: None,
             serial: 0,
             timings: StageTimings::default(),
@@ -269,7 +290,7 @@ impl GpuRenderer {
         shader: &shade::GpuShader,
         cam: &Camera,
         opts: &RenderOptions,
-    ) -> GpuResult<()> {
+    ) -> GpuResult<ForwardHandle> {
         self.prepare_features(scene, features, Some(shader))?;
         let ticket = self.submit_with(
             scene,
@@ -278,7 +299,17 @@ impl GpuRenderer {
             Readback::Counters,
             Some((features, Some(shader))),
         )?;
-        self.complete(&ticket)
+        self.complete(&ticket)?;
+        Ok(self.forward_handle(cam))
+    }
+
+    /// The handle of the frame just finished, rendered from `cam`.
+    fn forward_handle(&self, cam: &Camera) -> ForwardHandle {
+        ForwardHandle {
+            serial: self.last_serial,
+            width: cam.width,
+            height: cam.height,
+        }
     }
 
     /// What every features frame needs before it is recorded: features uploaded for this
@@ -361,15 +392,17 @@ impl GpuRenderer {
     }
 
     /// Renders one frame and leaves it on the device: only its counters are read back.
-    /// The colour and depth images ([`Self::forward_state`]) are left as copy sources.
+    /// The colour and depth images ([`Self::forward_state`]) are left as copy sources;
+    /// the handle is what a backward pass of the frame takes.
     pub fn render_on_device(
         &mut self,
         scene: &GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
-    ) -> GpuResult<()> {
+    ) -> GpuResult<ForwardHandle> {
         let ticket = self.submit(scene, cam, opts, Readback::Counters)?;
-        self.complete(&ticket)
+        self.complete(&ticket)?;
+        Ok(self.forward_handle(cam))
     }
 
     /// Renders one frame and reads back only its colour, packed to 8-bit RGBA on the

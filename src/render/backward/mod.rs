@@ -37,7 +37,7 @@ use crate::model::grad::{PixelGrads, SplatGrads};
 use crate::model::{sh_coeffs_for_degree, SplatKernel};
 use crate::render::forward::shade::GpuShader;
 use crate::render::frame::buffers::FrameSet;
-use crate::render::{check_binding, ForwardState, GpuRenderer, GpuScene, Stage};
+use crate::render::{check_binding, ForwardHandle, ForwardState, GpuRenderer, GpuScene, Stage};
 use blend_bwd::BlendBwd;
 use buffers::BackwardBuffers;
 pub use device::DeviceBackward;
@@ -454,18 +454,26 @@ impl GpuRenderer {
         result
     }
 
-    /// The backward pass of the last frame ([`Self::render_on_device`] or any other
-    /// render with the forward state saved) entirely on the device, recorded by the caller
-    /// in one submission with what makes the pixels' gradients and what reads the results
+    /// The backward pass of the frame `forward` names ([`Self::render_on_device`], with
+    /// the forward state saved) entirely on the device, recorded by the caller in one
+    /// submission with what makes the pixels' gradients and what reads the results
     /// ([`DeviceBackward`]). A frame of SH colour, or of feature channels shaded by a
-    /// neural shader ([`Self::render_shaded_on_device`], `features`); `size` the frame's;
-    /// no depth gradient. Nothing is read back.
+    /// neural shader ([`Self::render_shaded_on_device`], `features`); no depth gradient.
+    /// Nothing is read back. Refused when the renderer has finished another frame since.
     pub fn device_backward<'r>(
         &'r mut self,
+        forward: &ForwardHandle,
         scene: &'r GpuScene,
-        size: (u32, u32),
         features: Option<DeviceFeatures<'r>>,
     ) -> GpuResult<DeviceBackward<'r>> {
+        if forward.serial != self.last_serial {
+            return Err(GpuError::InvalidArgument(
+                "the frame of this forward handle is no longer the renderer's last: its state \
+                 was replaced by a later frame's"
+                    .into(),
+            ));
+        }
+        let size = forward.size();
         if let Some(f) = &features {
             check_feature_channels(f.channels)?;
             self.check_shaded(f.shader, f.channels, f.cam, size)?;

@@ -358,6 +358,7 @@ impl GpuRenderer {
             self.timings = self.read_timings(t.set)?;
         }
         self.last = t.set;
+        self.last_serial = t.serial;
         self.last_kernel = t.opts.kernel;
         Ok(())
     }

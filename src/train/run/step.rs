@@ -69,12 +69,12 @@ impl<'p> Run<'p> {
             ..*render_opts
         };
         let renderer = rast.renderer();
-        match (&d.features, d.shader()) {
+        let forward = match (&d.features, d.shader()) {
             (Some(features), Some(shader)) => {
                 renderer.render_shaded_on_device(&d.scene, features, shader, cam, &it_opts)?
             }
             _ => renderer.render_on_device(&d.scene, cam, &it_opts)?,
-        }
+        };
         if renderer.forward_state()?.last_contributor.is_none() {
             return Err(TrainError::Other(format!(
                 "the {}x{} view {} of {} Gaussians is too large to render in one piece, which training needs; use a lower --resolution",
@@ -104,7 +104,7 @@ impl<'p> Run<'p> {
         stage_sums.add(renderer.timings().stages());
         // One submission, top to bottom: the loss writes the pixels' gradients, the
         // backward pass turns them into the Gaussians', the step reads those.
-        let mut pass = renderer.device_backward(&d.scene, (w, h), features)?;
+        let mut pass = renderer.device_backward(&forward, &d.scene, features)?;
         let ctx = pass.ctx();
         let mut norm_buffer = None;
         ctx.submit_and_wait("backward", |cmd| {

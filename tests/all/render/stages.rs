@@ -452,6 +452,35 @@ fn the_last_contributor_is_the_last_gaussian_each_pixel_composited() {
     check_last_contributor(&mut shared);
 }
 
+/// A device backward pass takes the forward handle of the frame it differentiates, and
+/// the renderer refuses a handle once it has finished a later frame (whose state replaced
+/// the first's).
+#[test]
+fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
+    let mut r = renderer();
+    let s = load("playbot_lod3_31k_sh2.ply");
+    let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 64, 48);
+    let gs = r.upload(&s).unwrap();
+    let opts = RenderOptions::default();
+    r.set_save_forward_state(true);
+    let first = r.render_on_device(&gs, &cam, &opts).unwrap();
+    let second = r.render_on_device(&gs, &cam, &opts).unwrap();
+    r.set_save_forward_state(false);
+    assert_ne!(first, second);
+    assert_eq!(second.size(), (64, 48));
+    let e = r
+        .device_backward(&first, &gs, None)
+        .err()
+        .expect("an old handle is refused");
+    assert!(
+        e.to_string().contains("no longer the renderer's last"),
+        "{e}"
+    );
+    r.device_backward(&second, &gs, None)
+        .expect("the last frame's handle");
+    assert_validation_clean(&r);
+}
+
 fn check_last_contributor(r: &mut GpuRenderer) {
     use verisplat::render::forward::types::Splat;
     let s = load("playbot_lod3_31k_sh2.ply");

@@ -8,6 +8,7 @@ use super::{
 use glam::{DQuat, Vec2, Vec3};
 use std::path::Path;
 use verisplat::camera::{self, Camera, CameraError, CameraFormat};
+use verisplat::file_error::FileError;
 
 /// `cameras` with id i + 1 as PINHOLE and images named by camera name, as COLMAP text.
 fn colmap_text(cams: &[Camera]) -> (String, String) {
@@ -343,14 +344,14 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
     for cut in 0..c.len() {
         let r = camera::colmap::parse_colmap_binary(&c[..cut], path, &im, path);
         assert!(
-            matches!(r, Err(CameraError::Invalid { .. })),
+            matches!(r, Err(CameraError::File(FileError::Invalid { .. }))),
             "cameras.bin cut at {cut}"
         );
     }
     for cut in 0..im.len() {
         let r = camera::colmap::parse_colmap_binary(&c, path, &im[..cut], path);
         assert!(
-            matches!(r, Err(CameraError::Invalid { .. })),
+            matches!(r, Err(CameraError::File(FileError::Invalid { .. }))),
             "images.bin cut at {cut}"
         );
     }
