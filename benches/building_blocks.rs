@@ -16,6 +16,7 @@ use verisplat::gpu::{
     ContextOptions, Count, GpuBuffer, GpuContext, GpuTimer, MemoryKind, RadixSort, Scan,
 };
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 
 fn stats(mut v: Vec<f64>) -> String {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -161,7 +162,8 @@ fn main() {
         let (mut pre, mut blend) = (Vec::new(), Vec::new());
         for i in 0..warmup + runs {
             renderer
-                .render(&gs, &cam, &RenderOptions::default())
+                .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+                .and_then(Rendered::into_frame)
                 .expect("render");
             if i >= warmup {
                 pre.push(renderer.timings().preprocess);

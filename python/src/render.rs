@@ -13,6 +13,7 @@ use std::sync::Mutex;
 use verisplat::camera::Camera;
 use verisplat::cpu::RenderOptions;
 use verisplat::frame::Frame;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::render::{GpuRenderer, GpuScene};
 
 /// The planes a render returns: colour `B x H x W x 3`, alpha and depth `B x H x W`,
@@ -257,8 +258,14 @@ impl PyRenderer {
                 let mut frames = Vec::with_capacity(cams.len());
                 for cam in &cams {
                     let frame = match (&st.features, features) {
-                        (Some((_, f)), true) => st.gpu.render_features(gpu_scene, f, cam, &opts),
-                        _ => st.gpu.render(gpu_scene, cam, &opts),
+                        (Some((_, f)), true) => st
+                            .gpu
+                            .render(&FrameRequest::new(gpu_scene, cam, &opts).features(f))
+                            .and_then(Rendered::into_frame),
+                        _ => st
+                            .gpu
+                            .render(&FrameRequest::new(gpu_scene, cam, &opts))
+                            .and_then(Rendered::into_frame),
                     };
                     frames.push(frame.map_err(|e| py_err(e.into()))?);
                     st.frames += 1;

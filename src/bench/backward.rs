@@ -6,6 +6,7 @@ use super::{push_stage_samples, stage_reports, StageReport, Stat, JSON_SCHEMA_VE
 use crate::gpu::GpuResult;
 use crate::model::{ActivatedScene, RenderOptions};
 use crate::render::GpuRenderer;
+use crate::render::{FrameRequest, Rendered};
 use serde::Serialize;
 
 /// Forward and backward timings of the differentiable rasterizer on one camera
@@ -120,7 +121,9 @@ pub fn bench_backward(
         let t = std::time::Instant::now();
         match (&gpu_features, &gpu_shader, features) {
             (Some(f), Some(s), Some(values)) => {
-                let frame = renderer.render_shaded(&gpu_scene, f, s, cam, opts)?;
+                let frame = renderer
+                    .render(&FrameRequest::new(&gpu_scene, cam, opts).shaded(f, s))
+                    .and_then(Rendered::into_frame)?;
                 std::hint::black_box(renderer.backward_shaded(
                     &gpu_scene,
                     values,
@@ -132,13 +135,17 @@ pub fn bench_backward(
                 )?);
             }
             (Some(f), _, _) => {
-                let frame = renderer.render_features(&gpu_scene, f, cam, opts)?;
+                let frame = renderer
+                    .render(&FrameRequest::new(&gpu_scene, cam, opts).features(f))
+                    .and_then(Rendered::into_frame)?;
                 std::hint::black_box(
                     renderer.backward_with_features(&gpu_scene, features, &frame, &grads)?,
                 );
             }
             _ => {
-                let frame = renderer.render(&gpu_scene, cam, opts)?;
+                let frame = renderer
+                    .render(&FrameRequest::new(&gpu_scene, cam, opts))
+                    .and_then(Rendered::into_frame)?;
                 std::hint::black_box(renderer.backward(&gpu_scene, &frame, &grads)?);
             }
         }

@@ -8,6 +8,8 @@ use crate::cpu::{self, Projected};
 use crate::gpu::GpuResult;
 use crate::model::{ActivatedScene, RenderOptions};
 use crate::render::GpuRenderer;
+use crate::render::Readback;
+use crate::render::{FrameRequest, Rendered};
 
 /// Benchmarks the GPU renderer: `warmup` discarded frames, then `frames` measured ones,
 /// then one untimed frame whose intermediates give the blend's evaluation count.
@@ -34,8 +36,16 @@ pub fn bench_gpu(
     for i in 0..warmup + frames {
         let t = std::time::Instant::now();
         match &gpu_features {
-            Some(f) => std::hint::black_box(renderer.render_features(&gpu_scene, f, cam, opts)?),
-            None => std::hint::black_box(renderer.render(&gpu_scene, cam, opts)?),
+            Some(f) => std::hint::black_box(
+                renderer
+                    .render(&FrameRequest::new(&gpu_scene, cam, opts).features(f))
+                    .and_then(Rendered::into_frame)?,
+            ),
+            None => std::hint::black_box(
+                renderer
+                    .render(&FrameRequest::new(&gpu_scene, cam, opts))
+                    .and_then(Rendered::into_frame)?,
+            ),
         };
         let elapsed = t.elapsed().as_secs_f64() * 1e3;
         peak = peak.max(renderer.ctx().live_allocations().1);
@@ -52,7 +62,9 @@ pub fn bench_gpu(
     let evaluations = if stats.chunks > 1 {
         0
     } else {
-        let (_, inter) = renderer.render_with_intermediates(&gpu_scene, cam, opts)?;
+        let (_, inter) = renderer
+            .render(&FrameRequest::new(&gpu_scene, cam, opts).readback(Readback::Intermediates))
+            .and_then(Rendered::into_intermediates)?;
         let projected: Vec<Projected> = inter
             .splats
             .iter()

@@ -17,6 +17,7 @@ use verisplat::metrics::{self, ErrorStats, PlaneKind};
 use verisplat::output::{self, ImageFormat};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::sequence::FrameSelection;
 use verisplat::{note, outln};
 
@@ -398,7 +399,9 @@ impl FrameComparison<'_> {
         cam: &verisplat::camera::Camera,
     ) -> Result<FrameRecord> {
         let (args, gate, opts) = (self.args, self.gate, self.opts);
-        let mut gpu = renderer.render(self.gpu_scene, cam, opts)?;
+        let mut gpu = renderer
+            .render(&FrameRequest::new(self.gpu_scene, cam, opts))
+            .and_then(Rendered::into_frame)?;
         if self.perturb != 0.0 {
             for c in &mut gpu.color {
                 c[0] += self.perturb;

@@ -16,6 +16,7 @@ use verisplat::image_file::{self, Planes};
 use verisplat::metrics;
 use verisplat::output;
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::shard::Shard;
 use verisplat::{note, outln};
 
@@ -666,7 +667,9 @@ impl Measure<'_> {
         let cam = cam.with_resolution(w, h)?;
         cam.validate()?;
         let frame = match gpu.as_mut() {
-            Some((r, s)) => r.render(s, &cam, self.opts)?,
+            Some((r, s)) => r
+                .render(&FrameRequest::new(s, &cam, self.opts))
+                .and_then(Rendered::into_frame)?,
             None => verisplat::cpu::render(self.scene, &cam, self.opts),
         };
         let render: Vec<f32> = metrics::clamped_color(&frame)

@@ -6,6 +6,7 @@
 
 pub mod report;
 
+use crate::render::{FrameRequest, Rendered};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -620,7 +621,9 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
     let gpu_scene = gpu(renderer.upload(&act))?;
     let (mut colour, mut alpha, mut within) = (f64::INFINITY, f64::INFINITY, 1.0f64);
     for cam in &cams {
-        let frame = gpu(renderer.render(&gpu_scene, cam, &opts))?;
+        let frame = gpu(renderer
+            .render(&FrameRequest::new(&gpu_scene, cam, &opts))
+            .and_then(Rendered::into_frame))?;
         let reference = crate::cpu::render(&act, cam, &opts);
         let m = crate::metrics::compare_frames(&reference, &frame);
         // NaN (a frame of NaNs) must fail: `min` would drop it.

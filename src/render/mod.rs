@@ -66,12 +66,14 @@ pub enum Readback {
     /// [`crate::output::to_u8`]: 4 bytes per pixel. For display.
     Rgba8,
     /// Nothing but the frame's counters: the colour and depth images stay on the device,
-    /// ready to be copied from ([`GpuRenderer::render_on_device`]; training reads them there).
+    /// ready to be copied from (the frame's [`ForwardHandle`]; training reads them there).
     Counters,
+    /// [`Readback::Float`] and every intermediate buffer of the frame ([`Intermediates`]:
+    /// the splats, the sorted pairs, the bin ranges), for tests and the stage checks.
+    Intermediates,
 }
 
-/// A frame left on the device ([`GpuRenderer::render_on_device`],
-/// [`GpuRenderer::render_shaded_on_device`]): the handle of its forward state, which a
+/// A frame left on the device ([`Readback::Counters`]): the handle of its forward state, which a
 /// backward pass of it takes ([`GpuRenderer::device_backward`]). The renderer refuses it
 /// once it has finished another frame, whose state replaced this one's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,6 +87,126 @@ impl ForwardHandle {
     /// The frame's width and height in pixels.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
+    }
+}
+
+/// What a frame renders and what it reads back: the one request every kind of frame is
+/// rendered from ([`GpuRenderer::render`], [`GpuRenderer::submit`]).
+/// The scene, features and shader (`'a`) are borrowed by a submitted frame until it is
+/// finished; the camera and options (`'c`) are copied.
+#[derive(Clone, Copy)]
+pub struct FrameRequest<'a, 'c> {
+    /// The uploaded scene.
+    pub scene: &'a GpuScene,
+    /// The camera.
+    pub camera: &'c Camera,
+    /// The per-frame options.
+    pub options: &'c RenderOptions,
+    /// Feature channels blended over the same sorted lists with the colour rules
+    /// (background 0), timed as the `features` stage.
+    pub features: Option<&'a GpuFeatures>,
+    /// A neural shader ([`crate::mlp`]) that turns the feature channels into the frame's
+    /// colour (`alpha * mlp(...) + (1 - alpha) * background`), as its own `shade` stage.
+    pub shader: Option<&'a shade::GpuShader>,
+    /// What is read back.
+    pub readback: Readback,
+}
+
+impl<'a, 'c> FrameRequest<'a, 'c> {
+    /// A frame of `scene` from `camera`, read back as floats.
+    pub fn new(scene: &'a GpuScene, camera: &'c Camera, options: &'c RenderOptions) -> Self {
+        FrameRequest {
+            scene,
+            camera,
+            options,
+            features: None,
+            shader: None,
+            readback: Readback::Float,
+        }
+    }
+
+    /// The frame also blends `features` (read back in [`Frame::features`]).
+    pub fn features(self, features: &'a GpuFeatures) -> Self {
+        FrameRequest {
+            features: Some(features),
+            ..self
+        }
+    }
+
+    /// The frame blends `features` and shades them with `shader`.
+    pub fn shaded(self, features: &'a GpuFeatures, shader: &'a shade::GpuShader) -> Self {
+        FrameRequest {
+            features: Some(features),
+            shader: Some(shader),
+            ..self
+        }
+    }
+
+    /// The frame's shader, if any (with [`Self::features`]).
+    pub fn shader(self, shader: Option<&'a shade::GpuShader>) -> Self {
+        FrameRequest { shader, ..self }
+    }
+
+    /// What the frame reads back.
+    pub fn readback(self, readback: Readback) -> Self {
+        FrameRequest { readback, ..self }
+    }
+}
+
+/// A finished frame, as its request's [`Readback`] asked.
+#[derive(Clone, Debug)]
+pub enum Rendered {
+    /// [`Readback::Float`]: colour, alpha, depth (and feature channels).
+    Frame(Frame),
+    /// [`Readback::Rgba8`].
+    Rgba8(Rgba8Frame),
+    /// [`Readback::Counters`]: the frame is left on the device.
+    OnDevice(ForwardHandle),
+    /// [`Readback::Intermediates`]: the float frame and its intermediate buffers.
+    Intermediates(Box<(Frame, Intermediates)>),
+}
+
+impl Rendered {
+    fn wrong(&self, want: &str) -> GpuError {
+        let got = match self {
+            Rendered::Frame(_) => "Readback::Float",
+            Rendered::Rgba8(_) => "Readback::Rgba8",
+            Rendered::OnDevice(_) => "Readback::Counters",
+            Rendered::Intermediates(..) => "Readback::Intermediates",
+        };
+        GpuError::InvalidArgument(format!("the frame was requested with {got}, not {want}"))
+    }
+
+    /// The float frame.
+    pub fn into_frame(self) -> GpuResult<Frame> {
+        match self {
+            Rendered::Frame(f) => Ok(f),
+            other => Err(other.wrong("Readback::Float")),
+        }
+    }
+
+    /// The 8-bit frame.
+    pub fn into_rgba8(self) -> GpuResult<Rgba8Frame> {
+        match self {
+            Rendered::Rgba8(f) => Ok(f),
+            other => Err(other.wrong("Readback::Rgba8")),
+        }
+    }
+
+    /// The float frame and its intermediate buffers.
+    pub fn into_intermediates(self) -> GpuResult<(Frame, Intermediates)> {
+        match self {
+            Rendered::Intermediates(both) => Ok(*both),
+            other => Err(other.wrong("Readback::Intermediates")),
+        }
+    }
+
+    /// The handle of a frame left on the device.
+    pub fn into_forward(self) -> GpuResult<ForwardHandle> {
+        match self {
+            Rendered::OnDevice(h) => Ok(h),
+            other => Err(other.wrong("Readback::Counters")),
+        }
     }
 }
 
@@ -107,7 +229,7 @@ pub struct GpuRenderer {
     sets: Vec<FrameSet>,
     /// Built the first time a frame needs each.
     pipelines: Pipelines,
-    /// The set of the last finished frame (what [`Self::render_with_intermediates`] reads).
+    /// The set of the last finished frame (what [`Readback::Intermediates`] reads).
     last: usize,
     /// The serial of the last finished frame ([`ForwardHandle`]s name it).
     last_serial: u64,
@@ -140,8 +262,8 @@ pub struct GpuRenderer {
 /// Frames one renderer keeps in flight at most ([`GpuRenderer::submit`]).
 pub const MAX_FRAMES_IN_FLIGHT: usize = 2;
 
-/// A frame submitted by [`GpuRenderer::submit`] (or [`GpuRenderer::submit_features`]),
-/// still being rendered; [`GpuRenderer::finish`] (or [`GpuRenderer::finish_rgba8`]) waits
+/// A frame submitted by [`GpuRenderer::submit`], still being rendered;
+/// [`GpuRenderer::finish`] waits
 /// for it and reads it back. It borrows the scene (and features) the frame reads, so they
 /// outlive the work on the device.
 #[must_use = "a submitted frame is read back (and its resources freed for the next) by GpuRenderer::finish"]
@@ -252,57 +374,6 @@ impl GpuRenderer {
         self.compact = on;
     }
 
-    /// Renders one frame and blends the uploaded feature channels over the same sorted
-    /// lists with the colour rules (background 0), timed as the `features` stage: the frame
-    /// with [`Frame::features`] (`width * height * K` floats, pixel-major).
-    pub fn render_features(
-        &mut self,
-        scene: &GpuScene,
-        features: &GpuFeatures,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<Frame> {
-        let ticket = self.submit_features(scene, features, None, cam, opts)?;
-        self.finish(ticket)
-    }
-
-    /// Renders one frame, blends the uploaded feature channels and shades them with the
-    /// neural shader ([`crate::mlp`]) as its own `shade` stage: the frame's colour is
-    /// `alpha * mlp(...) + (1 - alpha) * background`; alpha and depth are the frame's.
-    pub fn render_shaded(
-        &mut self,
-        scene: &GpuScene,
-        features: &GpuFeatures,
-        shader: &shade::GpuShader,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<Frame> {
-        let ticket = self.submit_features(scene, features, Some(shader), cam, opts)?;
-        self.finish(ticket)
-    }
-
-    /// [`Self::render_shaded`] leaving the frame on the device, as
-    /// [`Self::render_on_device`] does.
-    pub fn render_shaded_on_device(
-        &mut self,
-        scene: &GpuScene,
-        features: &GpuFeatures,
-        shader: &shade::GpuShader,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<ForwardHandle> {
-        self.prepare_features(scene, features, Some(shader))?;
-        let ticket = self.submit_with(
-            scene,
-            cam,
-            opts,
-            Readback::Counters,
-            Some((features, Some(shader))),
-        )?;
-        self.complete(&ticket)?;
-        Ok(self.forward_handle(cam))
-    }
-
     /// The handle of the frame just finished, rendered from `cam`.
     fn forward_handle(&self, cam: &Camera) -> ForwardHandle {
         ForwardHandle {
@@ -380,120 +451,72 @@ impl GpuRenderer {
         self.sets.iter().filter(|s| s.pending.is_some()).count()
     }
 
-    /// Renders one frame.
-    pub fn render(
-        &mut self,
-        scene: &GpuScene,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<Frame> {
-        let ticket = self.submit(scene, cam, opts, Readback::Float)?;
+    /// Renders the frame `request` asks for: [`Self::submit`] and [`Self::finish`].
+    pub fn render(&mut self, request: &FrameRequest) -> GpuResult<Rendered> {
+        let ticket = self.submit(request)?;
         self.finish(ticket)
     }
 
-    /// Renders one frame and leaves it on the device: only its counters are read back.
-    /// The colour and depth images ([`Self::forward_state`]) are left as copy sources;
-    /// the handle is what a backward pass of the frame takes.
-    pub fn render_on_device(
-        &mut self,
-        scene: &GpuScene,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<ForwardHandle> {
-        let ticket = self.submit(scene, cam, opts, Readback::Counters)?;
-        self.complete(&ticket)?;
-        Ok(self.forward_handle(cam))
+    /// Records the frame `request` asks for and submits it to the device without waiting
+    /// for it: the CPU can submit the next frame (up to [`MAX_FRAMES_IN_FLIGHT`] in flight,
+    /// each with its own command buffer, fence, timestamps and frame buffers) while this
+    /// one renders, and read it back with [`Self::finish`]. Frames may be finished in any
+    /// order. The second set of per-frame resources is made the first time two frames are
+    /// in flight (doubling the device memory of [`Self::frame_device_bytes`]).
+    pub fn submit<'a>(&mut self, request: &FrameRequest<'a, '_>) -> GpuResult<Ticket<'a>> {
+        let features = match request.features {
+            Some(features) => {
+                self.prepare_features(request.scene, features, request.shader)?;
+                Some((features, request.shader))
+            }
+            None if request.shader.is_some() => {
+                return Err(GpuError::InvalidArgument(
+                    "a neural shader shades feature channels: the request has none".into(),
+                ))
+            }
+            None => None,
+        };
+        let readback = request.readback;
+        if features.is_some() && matches!(readback, Readback::Rgba8 | Readback::Intermediates) {
+            return Err(GpuError::InvalidArgument(format!(
+                "a frame of feature channels reads back floats or nothing, not Readback::{readback:?}"
+            )));
+        }
+        self.submit_with(
+            request.scene,
+            request.camera,
+            request.options,
+            readback,
+            features,
+        )
     }
 
-    /// Renders one frame and reads back only its colour, packed to 8-bit RGBA on the
-    /// device (equal to [`crate::output::to_u8`] of [`Self::render`]'s colour).
-    pub fn render_rgba8(
-        &mut self,
-        scene: &GpuScene,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<Rgba8Frame> {
-        let ticket = self.submit(scene, cam, opts, Readback::Rgba8)?;
-        self.finish_rgba8(ticket)
-    }
-
-    /// Renders one frame and reads back every intermediate buffer (for tests).
-    pub fn render_with_intermediates(
-        &mut self,
-        scene: &GpuScene,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<(Frame, Intermediates)> {
-        let frame = self.render(scene, cam, opts)?;
-        Ok((frame, self.read_intermediates(scene, cam)?))
-    }
-
-    /// Records frame `cam` and submits it to the device without waiting for it: the CPU
-    /// can submit the next frame (up to [`MAX_FRAMES_IN_FLIGHT`] in flight, each with its
-    /// own command buffer, fence, timestamps and frame buffers) while this one renders,
-    /// and read it back with [`Self::finish`] (or [`Self::finish_rgba8`] for
-    /// [`Readback::Rgba8`]). Frames may be finished in any order. The second set of
-    /// per-frame resources is made the first time two frames are in flight (doubling the
-    /// device memory of [`Self::frame_device_bytes`]).
-    pub fn submit<'a>(
-        &mut self,
-        scene: &'a GpuScene,
-        cam: &Camera,
-        opts: &RenderOptions,
-        readback: Readback,
-    ) -> GpuResult<Ticket<'a>> {
-        self.submit_with(scene, cam, opts, readback, None)
-    }
-
-    /// [`Self::submit`] for a frame that also blends the uploaded feature channels
-    /// ([`Self::render_features`]) and, with a shader, shades them
-    /// ([`Self::render_shaded`]); [`Self::finish`] reads it back.
-    pub fn submit_features<'a>(
-        &mut self,
-        scene: &'a GpuScene,
-        features: &'a GpuFeatures,
-        shader: Option<&'a shade::GpuShader>,
-        cam: &Camera,
-        opts: &RenderOptions,
-    ) -> GpuResult<Ticket<'a>> {
-        self.prepare_features(scene, features, shader)?;
-        self.submit_with(scene, cam, opts, Readback::Float, Some((features, shader)))
-    }
-
-    /// Waits for a frame submitted with [`Readback::Float`] and reads it back (with its
-    /// feature channels when it was submitted with features and no shader). When the
+    /// Waits for a submitted frame and reads back what its request asked for: the float
+    /// frame (with its feature channels when it blended features and no shader), the
+    /// 8-bit frame, or, for a frame left on the device, its [`ForwardHandle`]. When the
     /// frame needed more tile/Gaussian pairs than its buffers hold, or larger bins, it is
-    /// recorded again (and waited for) here, as [`Self::render`] does. The timings and
-    /// counts ([`Self::timings`], [`Self::stats`]) become this frame's.
-    pub fn finish(&mut self, ticket: Ticket) -> GpuResult<Frame> {
-        if ticket.readback != Readback::Float {
-            // Still wait, so the set is free again.
-            self.complete(&ticket)?;
-            return Err(GpuError::InvalidArgument(format!(
-                "the frame was submitted with Readback::{:?}; finish it with finish_rgba8 or discard",
-                ticket.readback
-            )));
-        }
+    /// recorded again (and waited for) here. The timings and counts ([`Self::timings`],
+    /// [`Self::stats`]) become this frame's.
+    pub fn finish(&mut self, ticket: Ticket) -> GpuResult<Rendered> {
         self.complete(&ticket)?;
-        let mut frame = self.read_frame(ticket.set, &ticket.cam)?;
-        if let Some((features, None)) = ticket.features {
-            let pixels = ticket.cam.width as usize * ticket.cam.height as usize;
-            frame.feature_count = features.channels;
-            frame.features = self.read_feature_planes(ticket.set, features.channels, pixels)?;
-        }
-        Ok(frame)
-    }
-
-    /// [`Self::finish`] for a frame submitted with [`Readback::Rgba8`].
-    pub fn finish_rgba8(&mut self, ticket: Ticket) -> GpuResult<Rgba8Frame> {
-        self.complete(&ticket)?;
-        if ticket.readback != Readback::Rgba8 {
-            return Err(GpuError::InvalidArgument(format!(
-                "the frame was submitted with Readback::{:?}; finish it with finish or discard",
-                ticket.readback
-            )));
-        }
-        self.read_rgba8(ticket.set, &ticket.cam)
+        Ok(match ticket.readback {
+            Readback::Float => {
+                let mut frame = self.read_frame(ticket.set, &ticket.cam)?;
+                if let Some((features, None)) = ticket.features {
+                    let pixels = ticket.cam.width as usize * ticket.cam.height as usize;
+                    frame.feature_count = features.channels;
+                    frame.features =
+                        self.read_feature_planes(ticket.set, features.channels, pixels)?;
+                }
+                Rendered::Frame(frame)
+            }
+            Readback::Rgba8 => Rendered::Rgba8(self.read_rgba8(ticket.set, &ticket.cam)?),
+            Readback::Counters => Rendered::OnDevice(self.forward_handle(&ticket.cam)),
+            Readback::Intermediates => Rendered::Intermediates(Box::new((
+                self.read_frame(ticket.set, &ticket.cam)?,
+                self.read_intermediates(ticket.scene, &ticket.cam)?,
+            ))),
+        })
     }
 
     /// Waits for a submitted frame without reading it back, freeing its resources for the

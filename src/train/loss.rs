@@ -533,7 +533,7 @@ impl GpuLoss {
     }
 
     /// Records the loss of a rendered colour image (RGBA32F, `width x height`, a copy
-    /// source: [`crate::render::GpuRenderer::render_on_device`]) against the target staged
+    /// source: a frame rendered with [`crate::render::Readback::Counters`]) against the target staged
     /// by [`Self::stage_target`], its gradient into `grad` (a vec4 per pixel: rgb, alpha
     /// 0). After the submission, [`Self::read_value`] reads the loss.
     #[allow(clippy::too_many_arguments)]

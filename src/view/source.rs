@@ -9,6 +9,7 @@ use crate::frame::Frame;
 use crate::gpu::{ContextOptions, GpuContext};
 use crate::model::{RenderOptions, SplatKernel};
 use crate::output::{depth_colormap, encode_file, plan_files, to_u8, OutputOptions, RenderMode};
+use crate::render::{FrameRequest, Readback, Rendered};
 use crate::render::{FrameStats, GpuRenderer, GpuScene, StageTimings};
 use crate::scene::Scene;
 
@@ -263,8 +264,19 @@ impl GpuSource {
         };
         let start = std::time::Instant::now();
         let rgba8 = match settings.mode {
-            ViewMode::Rgb => self.renderer.render_rgba8(scene, cam, &opts)?.rgba,
-            mode => frame_rgba8(&self.renderer.render(scene, cam, &opts)?, mode),
+            ViewMode::Rgb => {
+                self.renderer
+                    .render(&FrameRequest::new(scene, cam, &opts).readback(Readback::Rgba8))
+                    .and_then(Rendered::into_rgba8)?
+                    .rgba
+            }
+            mode => frame_rgba8(
+                &self
+                    .renderer
+                    .render(&FrameRequest::new(scene, cam, &opts))
+                    .and_then(Rendered::into_frame)?,
+                mode,
+            ),
         };
         Ok(ViewFrame {
             width: cam.width,
@@ -384,7 +396,10 @@ impl ViewSource for GpuSource {
         format: ShotFormat,
     ) -> anyhow::Result<Vec<u8>> {
         let opts = self.options(settings)?;
-        let frame = self.renderer.render(&self.scene, cam, &opts)?;
+        let frame = self
+            .renderer
+            .render(&FrameRequest::new(&self.scene, cam, &opts))
+            .and_then(Rendered::into_frame)?;
         encode_shot(&frame, cam, settings, format)
     }
 }

@@ -9,6 +9,7 @@ use std::path::Path;
 use verisplat::camera::Camera;
 use verisplat::outln;
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 
 /// Points3D written by `--export-colmap` at most.
 const EXPORT_COLMAP_POINTS: usize = 100_000;
@@ -63,7 +64,8 @@ pub(super) fn export_colmap(
         bar.inc(1);
         match (&mut gpu, shader) {
             (Some((renderer, gpu_scene)), _) => renderer
-                .render(gpu_scene, cam, &opts)
+                .render(&FrameRequest::new(gpu_scene, cam, &opts))
+                .and_then(Rendered::into_frame)
                 .map_err(|e| e.to_string()),
             (None, Some(mlp)) => {
                 let mut frame = verisplat::cpu::render_features(&act, cam, &opts);

@@ -10,6 +10,7 @@ use anyhow::{bail, Result};
 use verisplat::note;
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::sequence::{ProgressStyle, Summary};
 
 /// What each renderer of `render` gets: the command's arguments, the scene, the frames to
@@ -245,11 +246,17 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
                 let frame = if features || shader.is_some() {
                     let f = renderer.upload_features(&at_time)?;
                     match &gpu_shader {
-                        Some(s) => renderer.render_shaded(&gpu_scene, &f, s, &p.camera, opts)?,
-                        None => renderer.render_features(&gpu_scene, &f, &p.camera, opts)?,
+                        Some(s) => renderer
+                            .render(&FrameRequest::new(&gpu_scene, &p.camera, opts).shaded(&f, s))
+                            .and_then(Rendered::into_frame)?,
+                        None => renderer
+                            .render(&FrameRequest::new(&gpu_scene, &p.camera, opts).features(&f))
+                            .and_then(Rendered::into_frame)?,
                     }
                 } else {
-                    renderer.render(&gpu_scene, &p.camera, opts)?
+                    renderer
+                        .render(&FrameRequest::new(&gpu_scene, &p.camera, opts))
+                        .and_then(Rendered::into_frame)?
                 };
                 sums.add(&renderer.timings().stages(), renderer.timings().total);
                 Ok(frame)

@@ -13,6 +13,7 @@ use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use crate::model::RenderOptions;
 use crate::render::forward::shade::GpuShader;
 use crate::render::forward::types::Splat;
+use crate::render::{FrameRequest, Rendered};
 use crate::render::{GpuRenderer, GpuScene};
 
 pub use crate::render::backward::grad_accumulate::Accumulation;
@@ -183,7 +184,8 @@ impl DiffRasterizer {
             let features = self.renderer.upload_features(&activated)?;
             let frame = self
                 .renderer
-                .render_shaded(&scene, &features, gpu, cam, opts)?;
+                .render(&FrameRequest::new(&scene, cam, opts).shaded(&features, gpu))
+                .and_then(Rendered::into_frame)?;
             (frame, Some(features))
         } else if let Some((_, channels)) = as_features(params) {
             if opts.background != [0.0; 3] && channels != 3 {
@@ -198,10 +200,16 @@ impl DiffRasterizer {
             };
             let frame = self
                 .renderer
-                .render_features(&scene, &features, cam, &bare)?;
+                .render(&FrameRequest::new(&scene, cam, &bare).features(&features))
+                .and_then(Rendered::into_frame)?;
             (frame, Some(features))
         } else {
-            (self.renderer.render(&scene, cam, opts)?, None)
+            (
+                self.renderer
+                    .render(&FrameRequest::new(&scene, cam, opts))
+                    .and_then(Rendered::into_frame)?,
+                None,
+            )
         };
         // The feature upload is the forward's only (the backward uploads its own values).
         drop(features);

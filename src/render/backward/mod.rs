@@ -264,7 +264,7 @@ impl GpuRenderer {
             .map(|(g, _)| g)
     }
 
-    /// The backward pass of the last frame, rendered by [`GpuRenderer::render_shaded`]
+    /// The backward pass of the last frame, rendered with a shader ([`crate::render::FrameRequest::shaded`])
     /// with `shader` from `cam` over `background` (the options' background): `features`
     /// are the Gaussians' `(values, k)` it blended, `grads.color` dL/d(the shaded colour,
     /// 3 channels). Returns the Gaussians' gradients (`colors`: dL/d(feature values), `k`
@@ -454,11 +454,11 @@ impl GpuRenderer {
         result
     }
 
-    /// The backward pass of the frame `forward` names ([`Self::render_on_device`], with
+    /// The backward pass of the frame `forward` names (rendered with [`Readback::Counters`](crate::render::Readback), with
     /// the forward state saved) entirely on the device, recorded by the caller in one
     /// submission with what makes the pixels' gradients and what reads the results
     /// ([`DeviceBackward`]). A frame of SH colour, or of feature channels shaded by a
-    /// neural shader ([`Self::render_shaded_on_device`], `features`); no depth gradient.
+    /// neural shader ([`crate::render::FrameRequest::shaded`], `features`); no depth gradient.
     /// Nothing is read back. Refused when the renderer has finished another frame since.
     pub fn device_backward<'r>(
         &'r mut self,
@@ -729,7 +729,7 @@ impl BackwardState {
         self.buffers.ensure_shader(ctx, job.shader, pixels)?;
         fs.feature_planes.ok_or_else(|| {
             GpuError::InvalidArgument(
-                "the last frame blended no feature channels: render it with render_shaded \
+                "the last frame blended no feature channels: render it with a shader (FrameRequest::shaded) \
                  right before the backward pass"
                     .into(),
             )

@@ -7,7 +7,8 @@ use crate::camera::Camera;
 use crate::frame::Frame;
 use crate::model::RenderOptions;
 use crate::render::forward::shade::GpuShader;
-use crate::render::{FrameStats, GpuFeatures, GpuRenderer, GpuScene, Readback};
+use crate::render::FrameRequest;
+use crate::render::{FrameStats, GpuFeatures, GpuRenderer, GpuScene};
 use crate::render::{StageTimings, Ticket, MAX_FRAMES_IN_FLIGHT};
 use crate::sequence::FrameSource;
 use std::collections::VecDeque;
@@ -17,7 +18,7 @@ type FrameHook<'a> = Box<dyn FnMut(&StageTimings, &FrameStats) + 'a>;
 
 /// Renders the frames of a path with up to `frames_in_flight` frames in flight: colour,
 /// alpha and depth ([`GpuRenderer::render`]), or with features
-/// ([`GpuRenderer::render_features`], [`GpuRenderer::render_shaded`]). Each frame's
+/// ([`FrameRequest::features`], [`FrameRequest::shaded`]). Each frame's
 /// files equal those of the frame rendered on its own.
 pub struct GpuPath<'a> {
     renderer: &'a mut GpuRenderer,
@@ -81,12 +82,14 @@ impl FrameSource for GpuPath<'_> {
             );
         }
         let ticket = match self.features {
-            Some((f, shader)) => self
-                .renderer
-                .submit_features(self.scene, f, shader, cam, &self.opts)?,
+            Some((f, shader)) => self.renderer.submit(
+                &FrameRequest::new(self.scene, cam, &self.opts)
+                    .features(f)
+                    .shader(shader),
+            )?,
             None => self
                 .renderer
-                .submit(self.scene, cam, &self.opts, Readback::Float)?,
+                .submit(&FrameRequest::new(self.scene, cam, &self.opts))?,
         };
         self.tickets.push_back(ticket);
         Ok(())
@@ -97,7 +100,7 @@ impl FrameSource for GpuPath<'_> {
             .tickets
             .pop_front()
             .ok_or_else(|| anyhow::anyhow!("no frame is in flight"))?;
-        let frame = self.renderer.finish(ticket)?;
+        let frame = self.renderer.finish(ticket)?.into_frame()?;
         if let Some(hook) = &mut self.on_frame {
             hook(self.renderer.timings(), self.renderer.stats());
         }

@@ -526,7 +526,7 @@ impl FrameRecorder<'_> {
             let device = ctx.device();
             let (color_off, depth_off, counters_off) = f.readback_offsets();
             match (readback, f.packed.as_ref(), p.pack) {
-                (Readback::Float, _, _) => {
+                (Readback::Float | Readback::Intermediates, _, _) => {
                     // Images -> copy sources; counters (written by compute) -> copy.
                     f.color.transition_for_copy(ctx, cmd);
                     f.depth.transition_for_copy(ctx, cmd);

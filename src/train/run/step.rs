@@ -9,6 +9,7 @@ use crate::model::grad::PixelGrads;
 use crate::model::RenderOptions;
 use crate::render::backward::differentiable::DiffRasterizer;
 use crate::render::backward::DeviceFeatures;
+use crate::render::{FrameRequest, Readback, Rendered};
 use crate::train::data::View;
 use crate::train::device::{DeviceModel, Step, StepPipelines};
 use crate::train::loss::{GpuLoss, LossValue};
@@ -70,10 +71,16 @@ impl<'p> Run<'p> {
         };
         let renderer = rast.renderer();
         let forward = match (&d.features, d.shader()) {
-            (Some(features), Some(shader)) => {
-                renderer.render_shaded_on_device(&d.scene, features, shader, cam, &it_opts)?
-            }
-            _ => renderer.render_on_device(&d.scene, cam, &it_opts)?,
+            (Some(features), Some(shader)) => renderer
+                .render(
+                    &FrameRequest::new(&d.scene, cam, &it_opts)
+                        .shaded(features, shader)
+                        .readback(Readback::Counters),
+                )
+                .and_then(Rendered::into_forward)?,
+            _ => renderer
+                .render(&FrameRequest::new(&d.scene, cam, &it_opts).readback(Readback::Counters))
+                .and_then(Rendered::into_forward)?,
         };
         if renderer.forward_state()?.last_contributor.is_none() {
             return Err(TrainError::Other(format!(

@@ -8,6 +8,7 @@ use verisplat::frame::Frame;
 use verisplat::gpu::{ContextOptions, GpuContext};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::scene::ActivatedScene;
 
 /// The shared renderer (validation layer on; the blend variant for the device).
@@ -205,7 +206,10 @@ pub fn check_frame(
     opts: &RenderOptions,
 ) {
     let gs = r.upload(s).unwrap();
-    let g = r.render(&gs, cam, opts).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, cam, opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let c = cpu::render(s, cam, opts);
     let cmp = compare(&g, &c);
     eprintln!("{label}: {cmp:?}, pairs {}", r.stats().pairs);

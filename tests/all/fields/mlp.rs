@@ -5,6 +5,7 @@
 use crate::common;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
 use verisplat::mlp::{self, Activation, Mlp, MlpInput};
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::scene;
 
 /// A safetensors file: F32 tensors and an optional `verisplat_mlp` description.
@@ -335,7 +336,10 @@ fn gpu_shade_stage_matches_the_reference() {
         let gs = r.upload(&act).unwrap();
         let gf = r.upload_features(&act).unwrap();
         let shader = verisplat::render::forward::shade::GpuShader::new(r.ctx(), &m).unwrap();
-        let got = r.render_shaded(&gs, &gf, &shader, &cam, &opts).unwrap();
+        let got = r
+            .render(&FrameRequest::new(&gs, &cam, &opts).shaded(&gf, &shader))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         let c = common::gpu::compare(&got, &want);
         assert!(
             c.meets(&common::gpu::Thresholds::COLOUR),
@@ -353,7 +357,8 @@ fn gpu_shade_stage_matches_the_reference() {
         let wrong = Mlp::parse(&file_of(&t2, Some(&d2)), None).unwrap();
         let wrong = verisplat::render::forward::shade::GpuShader::new(r.ctx(), &wrong).unwrap();
         let e = r
-            .render_shaded(&gs, &gf, &wrong, &cam, &opts)
+            .render(&FrameRequest::new(&gs, &cam, &opts).shaded(&gf, &wrong))
+            .and_then(Rendered::into_frame)
             .unwrap_err()
             .to_string();
         assert!(e.contains("feature channels"), "{e}");

@@ -9,6 +9,7 @@
 //! frame and every intermediate buffer must equal the plain device's bit for bit.
 
 use std::time::Instant;
+use verisplat::render::{FrameRequest, Readback, Rendered};
 
 use crate::common;
 use crate::common::cli::{ok, s, stderr, verisplat_env};
@@ -50,7 +51,11 @@ fn plain_frame(s: &ActivatedScene, cam: &Camera) -> (Frame, Intermediates) {
     let mut r = renderer();
     let gs = r.upload(s).unwrap();
     let out = r
-        .render_with_intermediates(&gs, cam, &RenderOptions::default())
+        .render(
+            &FrameRequest::new(&gs, cam, &RenderOptions::default())
+                .readback(Readback::Intermediates),
+        )
+        .and_then(Rendered::into_intermediates)
         .unwrap();
     assert_validation_clean(&r);
     out
@@ -106,7 +111,11 @@ fn discrete_memory_renders_match_the_reference_and_the_plain_device() {
     let cam = orbit(PLAYBOT_ORBIT, 5, 320, 180);
     let gs = r.upload(&s).unwrap();
     let (g, inter) = r
-        .render_with_intermediates(&gs, &cam, &RenderOptions::default())
+        .render(
+            &FrameRequest::new(&gs, &cam, &RenderOptions::default())
+                .readback(Readback::Intermediates),
+        )
+        .and_then(Rendered::into_intermediates)
         .unwrap();
     check_against_reference("discrete memory", &g, &s, &cam);
     let (plain, plain_inter) = plain_frame(&s, &cam);
@@ -114,13 +123,17 @@ fn discrete_memory_renders_match_the_reference_and_the_plain_device() {
     assert_same_intermediates("discrete memory", &inter, &plain_inter);
     // The 8-bit frame reads a range of the read-back buffer (invalidated in atoms).
     let packed = r
-        .render_rgba8(&gs, &cam, &RenderOptions::default())
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()).readback(Readback::Rgba8))
+        .and_then(Rendered::into_rgba8)
         .unwrap();
     let plain_packed = {
         let mut p = renderer();
         let pgs = p.upload(&s).unwrap();
-        p.render_rgba8(&pgs, &cam, &RenderOptions::default())
-            .unwrap()
+        p.render(
+            &FrameRequest::new(&pgs, &cam, &RenderOptions::default()).readback(Readback::Rgba8),
+        )
+        .and_then(Rendered::into_rgba8)
+        .unwrap()
     };
     assert_eq!(packed.rgba, plain_packed.rgba, "8-bit frames");
     // A frame in depth-ordered chunks reads the scanned offsets back to plan them.
@@ -128,7 +141,10 @@ fn discrete_memory_renders_match_the_reference_and_the_plain_device() {
         window: 0,
         chunk_pairs: 20_000,
     });
-    let chunked = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let chunked = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert!(r.stats().chunks > 1, "{:?}", r.stats());
     assert_same_bits("discrete memory, in chunks", &chunked, &plain);
     assert_validation_clean(&r);
@@ -207,7 +223,9 @@ fn timed_frames(r: &mut GpuRenderer, s: &ActivatedScene, cam: &Camera, frames: u
     let mut totals = Vec::new();
     for _ in 0..frames {
         let start = Instant::now();
-        r.render(&gs, cam, &RenderOptions::default()).unwrap();
+        r.render(&FrameRequest::new(&gs, cam, &RenderOptions::default()))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let t = r.timings().clone();
         let stages: f64 = t.stages().iter().map(|(_, ms)| *ms).sum();
@@ -278,7 +296,10 @@ fn timestamps_of_8_bits_are_refused_not_misreported() {
     let s = lod3();
     let cam = orbit(PLAYBOT_ORBIT, 2, 256, 144);
     let gs = r.upload(&s).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     check_against_reference("8-bit timestamps", &g, &s, &cam);
     let t = r.timings();
     assert!(
@@ -322,7 +343,11 @@ fn a_workgroup_count_of_64_lays_dispatches_out_in_two_dimensions() {
     let cam = orbit(PLAYBOT_ORBIT, 5, 320, 180);
     let gs = r.upload(&s).unwrap();
     let (g, inter) = r
-        .render_with_intermediates(&gs, &cam, &RenderOptions::default())
+        .render(
+            &FrameRequest::new(&gs, &cam, &RenderOptions::default())
+                .readback(Readback::Intermediates),
+        )
+        .and_then(Rendered::into_intermediates)
         .unwrap();
     check_against_reference("64 workgroups", &g, &s, &cam);
     let (plain, plain_inter) = plain_frame(&s, &cam);
@@ -342,7 +367,10 @@ fn a_small_storage_binding_splits_the_frame_or_refuses_it() {
     let s = lod3();
     let cam = orbit(PLAYBOT_ORBIT, 5, 960, 540);
     let gs = r.upload(&s).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     eprintln!("256 KiB bindings: {:?}", r.stats());
     assert!(r.stats().chunks > 1, "{:?}", r.stats());
     check_against_reference("256 KiB bindings", &g, &s, &cam);
@@ -352,9 +380,11 @@ fn a_small_storage_binding_splits_the_frame_or_refuses_it() {
     drop(r);
     // 64 KiB: one array of 31k words does not fit one binding; refused, clearly.
     let mut r = emulated_renderer("max-storage-buffer-range=64K");
-    let e = r
-        .upload(&s)
-        .and_then(|gs| r.render(&gs, &cam, &RenderOptions::default()).map(|_| ()));
+    let e = r.upload(&s).and_then(|gs| {
+        r.render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+            .and_then(Rendered::into_frame)
+            .map(|_| ())
+    });
     match e {
         Err(GpuError::DeviceLimit {
             limit,

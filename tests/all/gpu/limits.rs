@@ -4,6 +4,7 @@
 
 use crate::common;
 use crate::common::cli::s;
+use verisplat::render::{FrameRequest, Rendered};
 
 use crate::common::gpu::{assert_validation_clean, compare, renderer, Thresholds};
 
@@ -69,7 +70,10 @@ fn check(label: &str, w: u32, h: u32) {
     let s = verisplat::demo_scene().activated();
     let cam = camera::default_camera(&s.positions, w, h);
     let gs = r.upload(&s).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let c = cpu::render(&s, &cam, &RenderOptions::default());
     assert_eq!((g.width, g.height), (w, h));
     let cmp = compare(&g, &c);

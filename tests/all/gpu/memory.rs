@@ -9,6 +9,7 @@ use std::process::Command;
 use verisplat::camera::{self, OrbitParams};
 use verisplat::cpu::RenderOptions;
 use verisplat::output::OutputOptions;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
 
 fn resident_bytes() -> u64 {
@@ -88,7 +89,9 @@ fn thousand_frame_path() {
     let mut samples = Vec::new();
     let mut rendered = 0usize;
     let mut render = |cam: &camera::Camera| {
-        let f = r.render(&gs, cam, &RenderOptions::default())?;
+        let f = r
+            .render(&FrameRequest::new(&gs, cam, &RenderOptions::default()))
+            .and_then(Rendered::into_frame)?;
         rendered += 1;
         if rendered % 100 == 0 {
             samples.push((

@@ -19,6 +19,7 @@ use verisplat::camera::Camera;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
 use verisplat::frame::Frame;
 use verisplat::render::forward::blend::BlendKernel;
+use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::render::{GpuRenderer, SplitLimits};
 use verisplat::scene::{self, ActivatedScene};
 
@@ -48,18 +49,30 @@ fn split_equals_whole(
 ) -> Frame {
     let gs = r.upload(s).unwrap();
     r.set_split_limits(SplitLimits::default());
-    let whole = r.render(&gs, cam, opts).unwrap();
-    let whole_rgba = r.render_rgba8(&gs, cam, opts).unwrap();
+    let whole = r
+        .render(&FrameRequest::new(&gs, cam, opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
+    let whole_rgba = r
+        .render(&FrameRequest::new(&gs, cam, opts).readback(Readback::Rgba8))
+        .and_then(Rendered::into_rgba8)
+        .unwrap();
     assert_eq!(
         r.stats().chunks,
         1,
         "{label}: the unforced frame fits at once"
     );
     r.set_split_limits(limits);
-    let split = r.render(&gs, cam, opts).unwrap();
+    let split = r
+        .render(&FrameRequest::new(&gs, cam, opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let stats = r.stats().clone();
     let timings = r.timings().clone();
-    let split_rgba = r.render_rgba8(&gs, cam, opts).unwrap();
+    let split_rgba = r
+        .render(&FrameRequest::new(&gs, cam, opts).readback(Readback::Rgba8))
+        .and_then(Rendered::into_rgba8)
+        .unwrap();
     r.set_split_limits(SplitLimits::default());
     eprintln!(
         "{label}: {} pairs in {} chunks (limit {}), bins {}, keys {:.1} ms, blend {:.1} ms",
@@ -160,13 +173,19 @@ fn features_frames_in_chunks_equal_one_piece_and_the_reference() {
     let opts = RenderOptions::default();
     let gs = r.upload(&s).unwrap();
     let gf = r.upload_features(&s).unwrap();
-    let whole = r.render_features(&gs, &gf, &cam, &opts).unwrap();
+    let whole = r
+        .render(&FrameRequest::new(&gs, &cam, &opts).features(&gf))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!(r.stats().chunks, 1);
     r.set_split_limits(SplitLimits {
         window: 4096,
         chunk_pairs: 4_000,
     });
-    let split = r.render_features(&gs, &gf, &cam, &opts).unwrap();
+    let split = r
+        .render(&FrameRequest::new(&gs, &cam, &opts).features(&gf))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let chunks = r.stats().chunks;
     r.set_split_limits(SplitLimits::default());
     assert!(chunks >= 4, "{chunks} chunks");

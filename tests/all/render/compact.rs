@@ -9,6 +9,7 @@ use crate::common;
 use crate::common::gpu::{assert_validation_clean, compare, renderer, Thresholds, MIN_WITHIN};
 use verisplat::camera;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::scene;
 
 #[test]
@@ -38,8 +39,14 @@ fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
             n * (16 + sh_floats * 2),
             "{file}: 32-byte records and fp16 SH (2 bytes per float)"
         );
-        let exact = r.render(&exact_scene, &cam, &opts).unwrap();
-        let compact = r.render(&compact_scene, &cam, &opts).unwrap();
+        let exact = r
+            .render(&FrameRequest::new(&exact_scene, &cam, &opts))
+            .and_then(Rendered::into_frame)
+            .unwrap();
+        let compact = r
+            .render(&FrameRequest::new(&compact_scene, &cam, &opts))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         let alpha_depth = |f: &verisplat::frame::Frame| -> Vec<u32> {
             f.alpha
                 .iter()
@@ -56,7 +63,10 @@ fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
         // The compact upload holds exactly the rounded values, and unpacking them is exact.
         let rounded = s.compact_rounded();
         let rounded_scene = r.upload(&rounded).unwrap();
-        let rounded_exact = r.render(&rounded_scene, &cam, &opts).unwrap();
+        let rounded_exact = r
+            .render(&FrameRequest::new(&rounded_scene, &cam, &opts))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         assert!(
             common::frame_bits(&rounded_exact) == common::frame_bits(&compact),
             "{file}: a compact frame is the exact render of the rounded scene, bit for bit"

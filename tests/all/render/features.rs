@@ -11,6 +11,7 @@ use crate::common::gpu::MIN_PSNR;
 use crate::common::{axis_camera, orbit, push_gaussian, PLAYBOT_ORBIT};
 use std::path::Path;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::scene::{self, Scene};
 
 /// Random features in [-2, 3) for every Gaussian.
@@ -235,7 +236,10 @@ pub(crate) fn check_gpu_cases_with(
         };
         let gs = r.upload(&act).unwrap();
         let gf = r.upload_features(&act).unwrap();
-        let mut gframe = r.render_features(&gs, &gf, &cam, &opts).unwrap();
+        let mut gframe = r
+            .render(&FrameRequest::new(&gs, &cam, &opts).features(&gf))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         let gfeat = std::mem::take(&mut gframe.features);
         assert_eq!(gframe.feature_count, k);
         gframe.feature_count = 0;
@@ -245,7 +249,12 @@ pub(crate) fn check_gpu_cases_with(
         let cfeat = &cframe.features;
         assert_eq!(gfeat.len(), (w * h) as usize * k);
         // The colour frame is the plain render's.
-        assert_eq!(gframe, r.render(&gs, &cam, &opts).unwrap());
+        assert_eq!(
+            gframe,
+            r.render(&FrameRequest::new(&gs, &cam, &opts))
+                .and_then(Rendered::into_frame)
+                .unwrap()
+        );
         let m = verisplat::metrics::compare_frames(&cframe, &gframe);
         assert!(m.color.psnr >= MIN_PSNR, "{file} colour {}", m.color.psnr);
         let worst = (0..k)

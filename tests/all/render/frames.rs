@@ -17,6 +17,7 @@ use crate::common::{orbit, shared_scene};
 use glam::Vec3;
 use verisplat::camera::{self, Camera};
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::scene::Scene;
 
 #[test]
@@ -136,8 +137,14 @@ fn antialiased_mode_matches_the_reference() {
     check_frame(&mut r, "antialiased", &s, &cam, &opts);
     // And it is not the plain render: compensation lowers the opacity of small splats.
     let gs = r.upload(&s).unwrap();
-    let aa = r.render(&gs, &cam, &opts).unwrap();
-    let plain = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let aa = r
+        .render(&FrameRequest::new(&gs, &cam, &opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
+    let plain = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let lowered = (0..aa.alpha.len())
         .filter(|&i| aa.alpha[i] + 1e-3 < plain.alpha[i])
         .count();
@@ -218,9 +225,17 @@ fn power_kernel_matches_the_reference_on_real_scenes() {
     check_frame(&mut r, "plant power, options", &plant, &plant_cam, &opts);
     // Not the Gaussian render.
     let gs = r.upload(&plant).unwrap();
-    let p = r.render(&gs, &plant_cam, &power([0.0; 3])).unwrap();
+    let p = r
+        .render(&FrameRequest::new(&gs, &plant_cam, &power([0.0; 3])))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let g = r
-        .render(&gs, &plant_cam, &RenderOptions::default())
+        .render(&FrameRequest::new(
+            &gs,
+            &plant_cam,
+            &RenderOptions::default(),
+        ))
+        .and_then(Rendered::into_frame)
         .unwrap();
     assert!(compare(&p, &g).psnr < 40.0);
     assert_validation_clean(&r);
@@ -243,16 +258,27 @@ fn every_blend_kernel_matches_the_reference_with_the_power_kernel() {
         };
         check_frame(&mut r, &format!("power {kernel:?}"), &s, &cam, &power);
         let gs = r.upload(&s).unwrap();
-        let p = r.render(&gs, &cam, &power).unwrap();
-        let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+        let p = r
+            .render(&FrameRequest::new(&gs, &cam, &power))
+            .and_then(Rendered::into_frame)
+            .unwrap();
+        let g = r
+            .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         assert_eq!(
-            r.render(&gs, &cam, &power).unwrap(),
+            r.render(&FrameRequest::new(&gs, &cam, &power))
+                .and_then(Rendered::into_frame)
+                .unwrap(),
             p,
             "{kernel:?}: power again"
         );
         assert_ne!(g, p);
         // The RGBA8 readback (the viewer's) packs the same frame.
-        let packed = r.render_rgba8(&gs, &cam, &power).unwrap();
+        let packed = r
+            .render(&FrameRequest::new(&gs, &cam, &power).readback(Readback::Rgba8))
+            .and_then(Rendered::into_rgba8)
+            .unwrap();
         let want: Vec<u8> = p
             .color
             .iter()
@@ -287,7 +313,11 @@ fn every_blend_kernel_matches_the_reference() {
             &RenderOptions::default(),
         );
         let gs = r.upload(&s).unwrap();
-        frames.push(r.render(&gs, &cam, &RenderOptions::default()).unwrap());
+        frames.push(
+            r.render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+                .and_then(Rendered::into_frame)
+                .unwrap(),
+        );
     }
     // Same arithmetic per pixel in every variant.
     for f in &frames[1..] {
@@ -302,7 +332,10 @@ fn gaussians_outside_the_view_change_no_pixel() {
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 0, 320, 180);
     let opts = RenderOptions::default();
     let gs = r.upload(&base.activated()).unwrap();
-    let reference = r.render(&gs, &cam, &opts).unwrap();
+    let reference = r
+        .render(&FrameRequest::new(&gs, &cam, &opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let visible = r.stats().visible;
     let mut more = base.clone();
     let eye = cam.position();
@@ -334,7 +367,10 @@ fn gaussians_outside_the_view_change_no_pixel() {
         );
     }
     let gs = r.upload(&more.activated()).unwrap();
-    let with_more = r.render(&gs, &cam, &opts).unwrap();
+    let with_more = r
+        .render(&FrameRequest::new(&gs, &cam, &opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!(
         with_more, reference,
         "invisible Gaussians changed the image"
@@ -354,22 +390,29 @@ fn empty_scene_renders_the_background_and_renders_are_deterministic() {
     let cam = camera::default_camera(&[], 100, 70);
     let gs = r.upload(&empty).unwrap();
     let f = r
-        .render(
+        .render(&FrameRequest::new(
             &gs,
             &cam,
             &RenderOptions {
                 background: [0.25, 0.5, 0.75],
                 ..Default::default()
             },
-        )
+        ))
+        .and_then(Rendered::into_frame)
         .unwrap();
     assert!(f.color.iter().all(|c| *c == [0.25, 0.5, 0.75]));
     assert!(f.alpha.iter().all(|&a| a == 0.0) && f.depth.iter().all(|&d| d == 0.0));
     let s = shared_scene("playbot_lod3_31k_sh2.ply").activated();
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 8, 500, 280);
     let gs = r.upload(&s).unwrap();
-    let a = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
-    let b = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let a = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
+    let b = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert!(a
         .color
         .iter()
@@ -401,7 +444,10 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
         .unwrap();
     let mut r = new_renderer(None);
     let gs = r.upload(&act).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!(r.stats().regrows, 1);
     let (bx, by) = verisplat::render::bin_grid(r.blend_kernel().bin_size(), 1280, 720);
     assert_eq!(
@@ -413,7 +459,9 @@ fn key_buffers_grow_when_a_frame_needs_more_pairs() {
     let cmp = compare(&g, &c);
     assert!(cmp.meets(&Thresholds::COLOUR), "{cmp:?}");
     // The next frame fits without regrowing.
-    r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    r.render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!(r.stats().regrows, 0);
     assert_validation_clean(&r);
 }
@@ -425,7 +473,9 @@ fn teardown_leaves_no_allocation_and_no_validation_message() {
     let s = shared_scene("playbot_lod6_1873_sh2.ply").activated();
     let gs = r.upload(&s).unwrap();
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 3, 200, 120);
-    r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    r.render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert!(r.ctx().live_allocations().0 > 0);
     drop(gs);
     let ctx = r.into_context();
@@ -483,7 +533,10 @@ fn a_scene_beyond_one_storage_binding_renders_in_preprocess_windows() {
     let s = s.activated();
     let cam = Camera::look_at("front", 200, 160, 0.9, Vec3::ZERO, Vec3::Z, Vec3::NEG_Y);
     let gs = r.upload(&s).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     let c = cpu::render(&s, &cam, &RenderOptions::default());
     let cmp = compare(&g, &c);
     eprintln!("{n} Gaussians: {cmp:?}, {:?}", r.stats());
@@ -552,7 +605,10 @@ fn texel_kernel_falls_back_to_16_pixel_bins_past_its_pair_limit() {
     let limit = u64::from(verisplat::render::SMALL_BIN_MAX_PAIRS);
     assert!((1200 * 3_600..1200 * 14_400).contains(&limit));
     let gs = r.upload(&act).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!(r.stats().bin_size, 16);
     assert_eq!(r.stats().pairs, 1200 * 3600);
     assert!(r.stats().regrows >= 1, "the first frame tried 8-pixel bins");
@@ -561,13 +617,18 @@ fn texel_kernel_falls_back_to_16_pixel_bins_past_its_pair_limit() {
     assert!(cmp.meets(&Thresholds::COLOUR), "{cmp:?}");
     // The next frame of the same size starts with 16-pixel bins (no attempt dropped), and
     // gives the same image.
-    let again = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let again = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!((r.stats().bin_size, r.stats().regrows), (16, 0));
     assert!(common::frame_bits(&again) == common::frame_bits(&g));
     // Another size starts with the kernel's 8-pixel bins again (and keeps them: its pairs
     // fit under the limit).
     let small = cam.with_resolution(320, 180).unwrap();
-    r.render(&gs, &small, &RenderOptions::default()).unwrap();
+    r.render(&FrameRequest::new(&gs, &small, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!((r.stats().bin_size, r.stats().regrows), (8, 0));
     assert_validation_clean(&r);
 }
@@ -597,7 +658,10 @@ fn lavapipe_loop_limit_means_larger_bins_or_a_clear_refusal() {
     ));
     let limited = r.ctx().info().name.contains("llvmpipe");
     let gs = r.upload(&act).unwrap();
-    let g = r.render(&gs, &cam, &RenderOptions::default()).unwrap();
+    let g = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     if limited {
         assert_eq!(r.stats().bin_size, 16, "fell back to 16-pixel bins");
     }
@@ -620,7 +684,10 @@ fn lavapipe_loop_limit_means_larger_bins_or_a_clear_refusal() {
     let act = s.activated();
     let cam = common::axis_camera(50.0);
     let gs = r.upload(&act).unwrap();
-    match r.render(&gs, &cam, &RenderOptions::default()) {
+    match r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+    {
         Err(e) if limited => {
             let e = e.to_string();
             assert!(
@@ -708,14 +775,23 @@ fn per_frame_options_match_the_reference_and_the_load_filters() {
     );
     let full = r.upload(&s).unwrap();
     let part = r.upload(&filtered).unwrap();
-    let gpu_loaded = r.render(&part, &cam, &RenderOptions::default()).unwrap();
-    let gpu_frame = r.render(&full, &cam, &per_frame).unwrap();
+    let gpu_loaded = r
+        .render(&FrameRequest::new(&part, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
+    let gpu_frame = r
+        .render(&FrameRequest::new(&full, &cam, &per_frame))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert!(
         gpu_loaded == gpu_frame,
         "GPU: per-frame filters differ from load filters"
     );
     // And the filters do something.
-    let plain = r.render(&full, &cam, &RenderOptions::default()).unwrap();
+    let plain = r
+        .render(&FrameRequest::new(&full, &cam, &RenderOptions::default()))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert!(plain != gpu_frame);
     // Bad values are refused, not rendered.
     for bad in [
@@ -732,7 +808,11 @@ fn per_frame_options_match_the_reference_and_the_load_filters() {
             ..Default::default()
         },
     ] {
-        let e = r.render(&full, &cam, &bad).unwrap_err().to_string();
+        let e = r
+            .render(&FrameRequest::new(&full, &cam, &bad))
+            .and_then(Rendered::into_frame)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("scale") || e.contains("opacity"), "{e}");
     }
     assert_validation_clean(&r);
@@ -755,8 +835,14 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
             ..Default::default()
         };
         let gs = r.upload(&s).unwrap();
-        let float = r.render(&gs, &cam, &opts).unwrap();
-        let packed = r.render_rgba8(&gs, &cam, &opts).unwrap();
+        let float = r
+            .render(&FrameRequest::new(&gs, &cam, &opts))
+            .and_then(Rendered::into_frame)
+            .unwrap();
+        let packed = r
+            .render(&FrameRequest::new(&gs, &cam, &opts).readback(Readback::Rgba8))
+            .and_then(Rendered::into_rgba8)
+            .unwrap();
         assert_eq!((packed.width, packed.height), (w, h));
         assert_eq!(packed.rgba.len(), (w * h * 4) as usize);
         let want: Vec<u8> = float
@@ -778,7 +864,10 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
             diff.map(|i| (i, want[i], packed.rgba[i]))
         );
         // Frames alternate freely between the two readbacks.
-        let again = r.render(&gs, &cam, &opts).unwrap();
+        let again = r
+            .render(&FrameRequest::new(&gs, &cam, &opts))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         assert!(again == float);
     }
     assert_validation_clean(&r);
@@ -840,7 +929,10 @@ fn viewer_previews_draw_the_most_important_gaussians() {
             .activated();
         let gs = r.upload(&subset).unwrap();
         let want = r
-            .render_rgba8(&gs, &cam, &RenderOptions::default())
+            .render(
+                &FrameRequest::new(&gs, &cam, &RenderOptions::default()).readback(Readback::Rgba8),
+            )
+            .and_then(Rendered::into_rgba8)
             .unwrap();
         assert!(
             want.rgba == preview.rgba8,

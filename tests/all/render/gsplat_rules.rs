@@ -12,6 +12,7 @@ use crate::common::{gsplat, off_centre, orbit, shared_scene, PLAYBOT_ORBIT};
 use glam::Vec3;
 use verisplat::camera::Camera;
 use verisplat::cpu::{self, RenderOptions, Rules, SplatKernel};
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::scene::ActivatedScene;
 
 /// One splat of `opacity` and axis scale `scale` at view depth `z` on the optical axis of
@@ -45,7 +46,10 @@ fn gsplats_near_plane_and_alpha_clamp() {
                 o: &RenderOptions| {
         let c = cpu::render(s, cam, o);
         let gs = r.upload(s).unwrap();
-        let g = r.render(&gs, cam, o).unwrap();
+        let g = r
+            .render(&FrameRequest::new(&gs, cam, o))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         (centre_alpha(&c, cam), centre_alpha(&g, cam))
     };
     // At depth 0.1: behind the original's plane (0.2), in front of gsplat's (0.01).
@@ -128,16 +132,20 @@ fn gsplat_rules_match_the_reference_on_real_scenes() {
         check_frame(&mut r, "gsplat antialiased power", &s, &close, &aa);
         let gs = r.upload(&s).unwrap();
         for cam in [&inside, &shifted] {
-            let g = r.render(&gs, cam, &plain).unwrap();
+            let g = r
+                .render(&FrameRequest::new(&gs, cam, &plain))
+                .and_then(Rendered::into_frame)
+                .unwrap();
             let o = r
-                .render(
+                .render(&FrameRequest::new(
                     &gs,
                     cam,
                     &RenderOptions {
                         rules: Rules::Original,
                         ..plain.clone()
                     },
-                )
+                ))
+                .and_then(Rendered::into_frame)
                 .unwrap();
             eprintln!("{}: gsplat vs original {:?}", cam.name, compare(&g, &o));
             assert!(

@@ -17,6 +17,7 @@ use verisplat::cpu::{self, RenderOptions};
 use verisplat::output::{self, OutputOptions};
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
+use verisplat::render::{FrameRequest, Rendered};
 use verisplat::scene::{self, Scene};
 use verisplat::sequence::{self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions};
 
@@ -229,7 +230,10 @@ fn a_frame_that_regrows_while_another_is_in_flight_gives_the_same_files() {
     for (k, cam) in &cams {
         let mut r = new_renderer(None);
         let gs = r.upload(&act).unwrap();
-        let frame = r.render(&gs, cam, &RenderOptions::default()).unwrap();
+        let frame = r
+            .render(&FrameRequest::new(&gs, cam, &RenderOptions::default()))
+            .and_then(Rendered::into_frame)
+            .unwrap();
         for ext in ["png", "exr"] {
             let path = single.join(format!("{k}.{ext}"));
             for spec in output::plan_files(&path, Some(cam), &OutputOptions::default()).unwrap() {
@@ -281,7 +285,10 @@ fn pipelined_frames_match_the_cpu_reference() {
         );
     }
     // The single-frame API still works after pipelined frames, and agrees bit for bit.
-    let again = r.render(&gs, &cams[2], &opts).unwrap();
+    let again = r
+        .render(&FrameRequest::new(&gs, &cams[2], &opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert_eq!(again, frames[2]);
     assert_validation_clean(&r);
 }
@@ -304,7 +311,11 @@ fn pipelined_feature_frames_equal_unpipelined_ones() {
     let gf = r.upload_features(&act).unwrap();
     let single: Vec<_> = cams
         .iter()
-        .map(|c| r.render_features(&gs, &gf, c, &opts).unwrap())
+        .map(|c| {
+            r.render(&FrameRequest::new(&gs, c, &opts).features(&gf))
+                .and_then(Rendered::into_frame)
+                .unwrap()
+        })
         .collect();
     let mut piped = Vec::new();
     {

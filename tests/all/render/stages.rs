@@ -26,6 +26,7 @@ use verisplat::camera::{self, Camera};
 use verisplat::cpu::{self, Projected, RenderOptions, SplatKernel};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::forward::types::unpack_tile;
+use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::render::{GpuRenderer, Intermediates};
 use verisplat::scene::{self, ActivatedScene};
 
@@ -312,7 +313,10 @@ fn run_case_with(
     opts: &RenderOptions,
 ) -> Intermediates {
     let gs = r.upload(scene).unwrap();
-    let (_, inter) = r.render_with_intermediates(&gs, cam, opts).unwrap();
+    let (_, inter) = r
+        .render(&FrameRequest::new(&gs, cam, opts).readback(Readback::Intermediates))
+        .and_then(Rendered::into_intermediates)
+        .unwrap();
     let cpu_p = cpu::preprocess(scene, cam, opts);
     check_preprocess(label, &cpu_p, &inter, cam, opts.kernel);
     check_scan_keys_sort_ranges(label, &inter);
@@ -391,7 +395,11 @@ fn stages_match_with_the_power_kernel_and_its_tile_culling() {
             let p = run_case_with(&mut r, &label, &s, cam, &power);
             let gs = r.upload(&s).unwrap();
             let (_, g) = r
-                .render_with_intermediates(&gs, cam, &RenderOptions::default())
+                .render(
+                    &FrameRequest::new(&gs, cam, &RenderOptions::default())
+                        .readback(Readback::Intermediates),
+                )
+                .and_then(Rendered::into_intermediates)
                 .unwrap();
             assert!(
                 p.counters.pairs() < g.counters.pairs(),
@@ -413,7 +421,11 @@ fn forward_state_is_the_finished_frames_pairs_ranges_and_transmittance() {
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 320, 180);
     let gs = r.upload(&s).unwrap();
     let (frame, inter) = r
-        .render_with_intermediates(&gs, &cam, &RenderOptions::default())
+        .render(
+            &FrameRequest::new(&gs, &cam, &RenderOptions::default())
+                .readback(Readback::Intermediates),
+        )
+        .and_then(Rendered::into_intermediates)
         .unwrap();
     let state = r.forward_state().unwrap();
     let ctx = r.ctx();
@@ -463,8 +475,14 @@ fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
     let gs = r.upload(&s).unwrap();
     let opts = RenderOptions::default();
     r.set_save_forward_state(true);
-    let first = r.render_on_device(&gs, &cam, &opts).unwrap();
-    let second = r.render_on_device(&gs, &cam, &opts).unwrap();
+    let first = r
+        .render(&FrameRequest::new(&gs, &cam, &opts).readback(Readback::Counters))
+        .and_then(Rendered::into_forward)
+        .unwrap();
+    let second = r
+        .render(&FrameRequest::new(&gs, &cam, &opts).readback(Readback::Counters))
+        .and_then(Rendered::into_forward)
+        .unwrap();
     r.set_save_forward_state(false);
     assert_ne!(first, second);
     assert_eq!(second.size(), (64, 48));
@@ -487,10 +505,16 @@ fn check_last_contributor(r: &mut GpuRenderer) {
     let cam = orbit("playbot_orbit_cameras.synthetic.json", 2, 160, 96);
     let gs = r.upload(&s).unwrap();
     let opts = RenderOptions::default();
-    let plain = r.render(&gs, &cam, &opts).unwrap();
+    let plain = r
+        .render(&FrameRequest::new(&gs, &cam, &opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     assert!(r.forward_state().unwrap().last_contributor.is_none());
     r.set_save_forward_state(true);
-    let (saved, inter) = r.render_with_intermediates(&gs, &cam, &opts).unwrap();
+    let (saved, inter) = r
+        .render(&FrameRequest::new(&gs, &cam, &opts).readback(Readback::Intermediates))
+        .and_then(Rendered::into_intermediates)
+        .unwrap();
     let state = r.forward_state().unwrap();
     let pixels = (cam.width * cam.height) as usize;
     let last_state: Vec<[u32; 2]> = state
@@ -509,7 +533,9 @@ fn check_last_contributor(r: &mut GpuRenderer) {
     assert_eq!(saved, plain, "saving the state changes no pixel");
     // What counts is how the last frame was rendered, not the switch: a frame rendered
     // without it has no last contributor, even when the switch is turned on after it.
-    r.render(&gs, &cam, &opts).unwrap();
+    r.render(&FrameRequest::new(&gs, &cam, &opts))
+        .and_then(Rendered::into_frame)
+        .unwrap();
     r.set_save_forward_state(true);
     assert!(r.forward_state().unwrap().last_contributor.is_none());
     r.set_save_forward_state(false);
