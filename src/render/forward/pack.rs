@@ -17,6 +17,15 @@ pub struct Pack {
     pipeline: ComputePipeline,
 }
 
+/// What the pack stage binds.
+#[derive(Clone, Copy)]
+pub struct PackBindings<'a> {
+    /// The frame's colour (GENERAL layout, written by the blend).
+    pub color: &'a GpuImage,
+    /// Out: `width * height` u32, row-major, top row first.
+    pub packed: BufferSlice<'a>,
+}
+
 impl Pack {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
@@ -33,16 +42,16 @@ impl Pack {
         Ok(Pack { pipeline })
     }
 
-    /// Records the packing of `color` (GENERAL layout, written by the blend) into
-    /// `packed` (`width * height` u32, row-major, top row first).
+    /// Records the packing of the frame's colour into 8-bit RGBA, `(width, height)` its
+    /// size.
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        color: &GpuImage,
-        packed: BufferSlice,
+        b: &PackBindings,
         (width, height): (u32, u32),
     ) -> GpuResult<()> {
+        let PackBindings { color, packed } = *b;
         let push = crate::render::forward::types::PackPush { width, height };
         self.pipeline.dispatch_resources(
             ctx,

@@ -16,6 +16,19 @@ pub struct Ranges {
     texel_io: bool,
 }
 
+/// What the ranges stage binds.
+#[derive(Clone, Copy)]
+pub struct RangesBindings<'a> {
+    /// The sorted keys: a buffer slice, or their texel view for the texel-I/O pipeline.
+    pub sorted_keys: Resource<'a>,
+    /// Out: each bin's range of the sorted pairs.
+    pub ranges: BufferSlice<'a>,
+    /// The frame's counters.
+    pub counters: BufferSlice<'a>,
+    /// The VkDispatchIndirectCommand the keys stage wrote.
+    pub args: BufferSlice<'a>,
+}
+
 impl Ranges {
     /// Compiles the shader and builds the pipeline: reading the sorted keys from a
     /// storage buffer or (`texel_io`, for CPU devices) an R32_UINT texel view.
@@ -44,17 +57,19 @@ impl Ranges {
         self.texel_io
     }
 
-    /// Records the indirect dispatch; `args` holds the VkDispatchIndirectCommand.
-    /// `sorted_keys` is a buffer slice, or the keys' texel view for the texel-I/O pipeline.
+    /// Records the indirect dispatch.
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
-        sorted_keys: Resource,
-        ranges: BufferSlice,
-        counters: BufferSlice,
-        args: BufferSlice,
+        b: &RangesBindings,
     ) -> GpuResult<()> {
+        let RangesBindings {
+            sorted_keys,
+            ranges,
+            counters,
+            args,
+        } = *b;
         let resources = by_binding([
             (slot::KEYS, sorted_keys),
             (slot::RANGES, Resource::Buffer(ranges)),

@@ -186,6 +186,17 @@ pub struct Shade {
     pipeline: ComputePipeline,
 }
 
+/// What the shade stage binds (and the shader's words, which the shader holds).
+#[derive(Clone, Copy)]
+pub struct ShadeBindings<'a> {
+    /// The feature planes.
+    pub features: BufferSlice<'a>,
+    /// vec4s from one plane to the next.
+    pub plane_stride: u32,
+    /// The frame's colour (GENERAL layout, written by the blend), shaded in place.
+    pub color: &'a GpuImage,
+}
+
 impl Shade {
     /// Compiles the shader and builds the pipeline.
     pub fn new(ctx: &GpuContext) -> GpuResult<Self> {
@@ -203,20 +214,22 @@ impl Shade {
         Ok(Shade { pipeline })
     }
 
-    /// Records the shading of `color` (GENERAL layout, written by the blend) from the
-    /// feature planes `features` (`plane_stride` vec4s apart).
-    #[allow(clippy::too_many_arguments)]
+    /// Records the shading of the frame's colour by `shader`, from `cam` over
+    /// `background`.
     pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,
         shader: &GpuShader,
-        features: BufferSlice,
-        plane_stride: u32,
-        color: &GpuImage,
+        b: &ShadeBindings,
         cam: &Camera,
         background: [f32; 3],
     ) -> GpuResult<()> {
+        let ShadeBindings {
+            features,
+            plane_stride,
+            color,
+        } = *b;
         let push = ShadePush::new(shader, cam, plane_stride, background);
         self.pipeline.dispatch_resources(
             ctx,

@@ -11,7 +11,10 @@ use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::model::RenderOptions;
 use crate::render::forward::features::FeatureBindings;
 use crate::render::forward::order::OrderBindings;
+use crate::render::forward::pack::PackBindings;
+use crate::render::forward::ranges::RangesBindings;
 use crate::render::forward::shade::GpuShader;
+use crate::render::forward::shade::ShadeBindings;
 use crate::render::forward::types::{self, Counters, FrameParams};
 use crate::render::forward::{blend, keys, preprocess};
 use crate::render::frame::buffers::FeaturePlanes;
@@ -374,14 +377,13 @@ impl FrameRecorder<'_> {
                 (true, Some(v)) => Resource::TexelBuffer(v.keys.handle()),
                 _ => Resource::Buffer(f.keys.whole()),
             };
-            p.ranges.record(
-                ctx,
-                cmd,
+            let bindings = RangesBindings {
                 sorted_keys,
-                f.ranges.whole(),
-                f.counters.whole(),
-                f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
-            )
+                ranges: f.ranges.whole(),
+                counters: f.counters.whole(),
+                args: f.counters.slice(types::COUNTER_RANGES_GROUPS, 12),
+            };
+            p.ranges.record(ctx, cmd, &bindings)
         })?;
         // Ranges, sorted values and splats -> blend and feature blend (storage reads, or
         // texel fetches in the texel kernels); counters -> their loop-length atomics.
@@ -504,16 +506,12 @@ impl FrameRecorder<'_> {
         barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
         let background = self.opts.background;
         self.timer.stage(ctx, cmd, Stage::Shade.name(), |cmd| {
-            pipeline.record(
-                ctx,
-                cmd,
-                shader,
-                planes.buffer.whole(),
-                (planes.plane_bytes / 16) as u32,
-                &f.color,
-                cam,
-                background,
-            )
+            let bindings = ShadeBindings {
+                features: planes.buffer.whole(),
+                plane_stride: (planes.plane_bytes / 16) as u32,
+                color: &f.color,
+            };
+            pipeline.record(ctx, cmd, shader, &bindings, cam, background)
         })
     }
 
@@ -537,7 +535,11 @@ impl FrameRecorder<'_> {
                 (Readback::Rgba8, Some(packed), Some(pack)) => {
                     // The blend's image writes -> the pack's image reads.
                     barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);
-                    pack.record(ctx, cmd, &f.color, packed.whole(), (f.width, f.height))?;
+                    let bindings = PackBindings {
+                        color: &f.color,
+                        packed: packed.whole(),
+                    };
+                    pack.record(ctx, cmd, &bindings, (f.width, f.height))?;
                     // Packed pixels and counters (written by compute) -> copy.
                     barrier(ctx, cmd, Access::ComputeWrite, Access::TransferRead);
                     let region = [vk::BufferCopy::default()
