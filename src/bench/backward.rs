@@ -5,8 +5,8 @@ use super::camera::{BenchCamera, CameraReport};
 use super::{push_stage_samples, stage_reports, StageReport, Stat, JSON_SCHEMA_VERSION};
 use crate::gpu::GpuResult;
 use crate::model::{ActivatedScene, RenderOptions};
+use crate::render::FrameRequest;
 use crate::render::GpuRenderer;
-use crate::render::{FrameRequest, Rendered};
 use serde::Serialize;
 
 /// Forward and backward timings of the differentiable rasterizer on one camera
@@ -121,10 +121,12 @@ pub fn bench_backward(
         let t = std::time::Instant::now();
         match (&gpu_features, &gpu_shader, features) {
             (Some(f), Some(s), Some(values)) => {
-                let frame = renderer
-                    .render(&FrameRequest::new(&gpu_scene, cam, opts).shaded(f, s))
-                    .and_then(Rendered::into_frame)?;
+                let rendered =
+                    renderer.render(&FrameRequest::new(&gpu_scene, cam, opts).shaded(f, s))?;
+                let forward = rendered.forward();
+                let frame = rendered.into_frame()?;
                 std::hint::black_box(renderer.backward_shaded(
+                    &forward,
                     &gpu_scene,
                     values,
                     s,
@@ -135,18 +137,20 @@ pub fn bench_backward(
                 )?);
             }
             (Some(f), _, _) => {
-                let frame = renderer
-                    .render(&FrameRequest::new(&gpu_scene, cam, opts).features(f))
-                    .and_then(Rendered::into_frame)?;
+                let rendered =
+                    renderer.render(&FrameRequest::new(&gpu_scene, cam, opts).features(f))?;
+                let forward = rendered.forward();
+                let frame = rendered.into_frame()?;
                 std::hint::black_box(
-                    renderer.backward_with_features(&gpu_scene, features, &frame, &grads)?,
+                    renderer
+                        .backward_with_features(&forward, &gpu_scene, features, &frame, &grads)?,
                 );
             }
             _ => {
-                let frame = renderer
-                    .render(&FrameRequest::new(&gpu_scene, cam, opts))
-                    .and_then(Rendered::into_frame)?;
-                std::hint::black_box(renderer.backward(&gpu_scene, &frame, &grads)?);
+                let rendered = renderer.render(&FrameRequest::new(&gpu_scene, cam, opts))?;
+                let forward = rendered.forward();
+                let frame = rendered.into_frame()?;
+                std::hint::black_box(renderer.backward(&forward, &gpu_scene, &frame, &grads)?);
             }
         }
         let elapsed = t.elapsed().as_secs_f64() * 1e3;

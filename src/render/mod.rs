@@ -73,9 +73,10 @@ pub enum Readback {
     Intermediates,
 }
 
-/// A frame left on the device ([`Readback::Counters`]): the handle of its forward state, which a
-/// backward pass of it takes ([`GpuRenderer::device_backward`]). The renderer refuses it
-/// once it has finished another frame, whose state replaced this one's.
+/// The handle of a finished frame's forward state on the device ([`Rendered::forward`]),
+/// which a backward pass of the frame takes ([`GpuRenderer::device_backward`],
+/// [`GpuRenderer::backward`]). The renderer refuses it once it has finished another
+/// frame, whose state replaced this one's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ForwardHandle {
     serial: u64,
@@ -153,59 +154,72 @@ impl<'a, 'c> FrameRequest<'a, 'c> {
     }
 }
 
-/// A finished frame, as its request's [`Readback`] asked.
+/// A finished frame: what its request's [`Readback`] asked for, and the handle of its
+/// state on the device, which a backward pass of it takes.
 #[derive(Clone, Debug)]
-pub enum Rendered {
+pub struct Rendered {
+    forward: ForwardHandle,
+    output: Output,
+}
+
+/// What a finished frame read back.
+#[derive(Clone, Debug)]
+enum Output {
     /// [`Readback::Float`]: colour, alpha, depth (and feature channels).
     Frame(Frame),
     /// [`Readback::Rgba8`].
     Rgba8(Rgba8Frame),
     /// [`Readback::Counters`]: the frame is left on the device.
-    OnDevice(ForwardHandle),
+    OnDevice,
     /// [`Readback::Intermediates`]: the float frame and its intermediate buffers.
     Intermediates(Box<(Frame, Intermediates)>),
 }
 
 impl Rendered {
     fn wrong(&self, want: &str) -> GpuError {
-        let got = match self {
-            Rendered::Frame(_) => "Readback::Float",
-            Rendered::Rgba8(_) => "Readback::Rgba8",
-            Rendered::OnDevice(_) => "Readback::Counters",
-            Rendered::Intermediates(..) => "Readback::Intermediates",
+        let got = match self.output {
+            Output::Frame(_) => "Readback::Float",
+            Output::Rgba8(_) => "Readback::Rgba8",
+            Output::OnDevice => "Readback::Counters",
+            Output::Intermediates(..) => "Readback::Intermediates",
         };
         GpuError::InvalidArgument(format!("the frame was requested with {got}, not {want}"))
     }
 
+    /// The handle of the frame's state on the device (what a backward pass of it takes).
+    pub fn forward(&self) -> ForwardHandle {
+        self.forward
+    }
+
     /// The float frame.
     pub fn into_frame(self) -> GpuResult<Frame> {
-        match self {
-            Rendered::Frame(f) => Ok(f),
-            other => Err(other.wrong("Readback::Float")),
+        match self.output {
+            Output::Frame(f) => Ok(f),
+            _ => Err(self.wrong("Readback::Float")),
         }
     }
 
     /// The 8-bit frame.
     pub fn into_rgba8(self) -> GpuResult<Rgba8Frame> {
-        match self {
-            Rendered::Rgba8(f) => Ok(f),
-            other => Err(other.wrong("Readback::Rgba8")),
+        match self.output {
+            Output::Rgba8(f) => Ok(f),
+            _ => Err(self.wrong("Readback::Rgba8")),
         }
     }
 
     /// The float frame and its intermediate buffers.
     pub fn into_intermediates(self) -> GpuResult<(Frame, Intermediates)> {
-        match self {
-            Rendered::Intermediates(both) => Ok(*both),
-            other => Err(other.wrong("Readback::Intermediates")),
+        match self.output {
+            Output::Intermediates(both) => Ok(*both),
+            _ => Err(self.wrong("Readback::Intermediates")),
         }
     }
 
-    /// The handle of a frame left on the device.
+    /// The handle of a frame left on the device ([`Readback::Counters`]).
     pub fn into_forward(self) -> GpuResult<ForwardHandle> {
-        match self {
-            Rendered::OnDevice(h) => Ok(h),
-            other => Err(other.wrong("Readback::Counters")),
+        match self.output {
+            Output::OnDevice => Ok(self.forward),
+            _ => Err(self.wrong("Readback::Counters")),
         }
     }
 }
@@ -499,7 +513,7 @@ impl GpuRenderer {
     /// [`Self::stats`]) become this frame's.
     pub fn finish(&mut self, ticket: Ticket) -> GpuResult<Rendered> {
         self.complete(&ticket)?;
-        Ok(match ticket.readback {
+        let output = match ticket.readback {
             Readback::Float => {
                 let mut frame = self.read_frame(ticket.set, &ticket.cam)?;
                 if let Some((features, None)) = ticket.features {
@@ -508,14 +522,18 @@ impl GpuRenderer {
                     frame.features =
                         self.read_feature_planes(ticket.set, features.channels, pixels)?;
                 }
-                Rendered::Frame(frame)
+                Output::Frame(frame)
             }
-            Readback::Rgba8 => Rendered::Rgba8(self.read_rgba8(ticket.set, &ticket.cam)?),
-            Readback::Counters => Rendered::OnDevice(self.forward_handle(&ticket.cam)),
-            Readback::Intermediates => Rendered::Intermediates(Box::new((
+            Readback::Rgba8 => Output::Rgba8(self.read_rgba8(ticket.set, &ticket.cam)?),
+            Readback::Counters => Output::OnDevice,
+            Readback::Intermediates => Output::Intermediates(Box::new((
                 self.read_frame(ticket.set, &ticket.cam)?,
                 self.read_intermediates(ticket.scene, &ticket.cam)?,
             ))),
+        };
+        Ok(Rendered {
+            forward: self.forward_handle(&ticket.cam),
+            output,
         })
     }
 

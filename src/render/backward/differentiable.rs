@@ -13,7 +13,7 @@ use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use crate::model::RenderOptions;
 use crate::render::forward::shade::GpuShader;
 use crate::render::forward::types::Splat;
-use crate::render::{FrameRequest, Rendered};
+use crate::render::{ForwardHandle, FrameRequest};
 use crate::render::{GpuRenderer, GpuScene};
 
 pub use crate::render::backward::grad_accumulate::Accumulation;
@@ -61,6 +61,8 @@ fn behind_background<'a>(
 /// The last forward pass: what its backward pass needs.
 struct Forward {
     token: u64,
+    /// The frame's state on the device.
+    handle: ForwardHandle,
     frame: Frame,
     scene: GpuScene,
 }
@@ -180,13 +182,12 @@ impl DiffRasterizer {
         self.last = None;
         let activated = params.to_activated();
         let scene = self.renderer.upload(&activated)?;
-        let (frame, features) = if let Some((_, gpu)) = &self.shader {
+        let (rendered, features) = if let Some((_, gpu)) = &self.shader {
             let features = self.renderer.upload_features(&activated)?;
-            let frame = self
+            let rendered = self
                 .renderer
-                .render(&FrameRequest::new(&scene, cam, opts).shaded(&features, gpu))
-                .and_then(Rendered::into_frame)?;
-            (frame, Some(features))
+                .render(&FrameRequest::new(&scene, cam, opts).shaded(&features, gpu))?;
+            (rendered, Some(features))
         } else if let Some((_, channels)) = as_features(params) {
             if opts.background != [0.0; 3] && channels != 3 {
                 return Err(GpuError::InvalidArgument(format!(
@@ -198,19 +199,19 @@ impl DiffRasterizer {
                 background: [0.0; 3],
                 ..opts.clone()
             };
-            let frame = self
+            let rendered = self
                 .renderer
-                .render(&FrameRequest::new(&scene, cam, &bare).features(&features))
-                .and_then(Rendered::into_frame)?;
-            (frame, Some(features))
+                .render(&FrameRequest::new(&scene, cam, &bare).features(&features))?;
+            (rendered, Some(features))
         } else {
             (
                 self.renderer
-                    .render(&FrameRequest::new(&scene, cam, opts))
-                    .and_then(Rendered::into_frame)?,
+                    .render(&FrameRequest::new(&scene, cam, opts))?,
                 None,
             )
         };
+        let handle = rendered.forward();
+        let frame = rendered.into_frame()?;
         // The feature upload is the forward's only (the backward uploads its own values).
         drop(features);
         if self.renderer.forward_state()?.last_contributor.is_none() {
@@ -231,6 +232,7 @@ impl DiffRasterizer {
         self.next_token += 1;
         self.last = Some(Forward {
             token,
+            handle,
             frame: frame.clone(),
             scene,
         });
@@ -323,6 +325,7 @@ impl DiffRasterizer {
         let (mut g, mlp_grads) = match (&self.shader, features) {
             (Some((mlp, gpu)), Some(features)) => {
                 let (g, flat) = self.renderer.backward_shaded(
+                    &last.handle,
                     &last.scene,
                     features,
                     gpu,
@@ -337,6 +340,7 @@ impl DiffRasterizer {
             _ => {
                 let grads = behind_background(grads, features, opts.background);
                 let g = self.renderer.backward_with_features(
+                    &last.handle,
                     &last.scene,
                     features,
                     &last.frame,

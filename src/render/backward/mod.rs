@@ -233,8 +233,9 @@ impl GpuRenderer {
     /// The backward pass of the last frame: `frame` is that frame as
     /// [`GpuRenderer::render`] returned it (its alpha and depth turn a depth gradient into
     /// the sums the pass walks), `scene` the scene it rendered, `grads` dL/d(each pixel).
-    /// The frame must have been rendered with [`Self::set_save_forward_state`] on, in one
-    /// piece, and be the renderer's last; its options (kernel, background, scale modifier,
+    /// `forward` is the frame's handle ([`crate::render::Rendered::forward`]). The frame
+    /// must have been rendered with [`Self::set_save_forward_state`] on, in one piece, and
+    /// be the renderer's last (an older handle is refused); its options (kernel, background, scale modifier,
     /// SH degree) are the backward's.
     ///
     /// Returns gradients in the layout of the uploaded scene: `quats` with respect to the
@@ -242,11 +243,12 @@ impl GpuRenderer {
     /// (`ActivatedScene::sh` layout), `means2d` and `absgrad` in pixels.
     pub fn backward(
         &mut self,
+        forward: &ForwardHandle,
         scene: &GpuScene,
         frame: &Frame,
         grads: &PixelGrads<f32>,
     ) -> GpuResult<SplatGrads<f32>> {
-        self.backward_with_features(scene, None, frame, grads)
+        self.backward_with_features(forward, scene, None, frame, grads)
     }
 
     /// [`Self::backward`] of a frame that blended `k` direct feature channels per
@@ -255,13 +257,34 @@ impl GpuRenderer {
     /// the returned `colors` are dL/d(feature values), `k` per Gaussian.
     pub fn backward_with_features(
         &mut self,
+        forward: &ForwardHandle,
         scene: &GpuScene,
         features: Option<(&[f32], usize)>,
         frame: &Frame,
         grads: &PixelGrads<f32>,
     ) -> GpuResult<SplatGrads<f32>> {
+        self.check_forward(forward, (frame.width, frame.height))?;
         self.backward_inner(scene, features, None, frame, grads)
             .map(|(g, _)| g)
+    }
+
+    /// Refuses a forward handle that is not the renderer's last finished frame (a later
+    /// frame replaced its state) or is not `size`.
+    fn check_forward(&self, forward: &ForwardHandle, size: (u32, u32)) -> GpuResult<()> {
+        if forward.serial != self.last_serial {
+            return Err(GpuError::InvalidArgument(
+                "the frame of this forward handle is no longer the renderer's last: its state \
+                 was replaced by a later frame's"
+                    .into(),
+            ));
+        }
+        if forward.size() != size {
+            return Err(GpuError::InvalidArgument(format!(
+                "the forward handle's frame is {}x{}, the frame given {}x{}",
+                forward.width, forward.height, size.0, size.1
+            )));
+        }
+        Ok(())
     }
 
     /// The backward pass of the last frame, rendered with a shader ([`crate::render::FrameRequest::shaded`])
@@ -274,6 +297,7 @@ impl GpuRenderer {
     #[allow(clippy::too_many_arguments)]
     pub fn backward_shaded(
         &mut self,
+        forward: &ForwardHandle,
         scene: &GpuScene,
         features: (&[f32], usize),
         shader: &GpuShader,
@@ -282,6 +306,7 @@ impl GpuRenderer {
         frame: &Frame,
         grads: &PixelGrads<f32>,
     ) -> GpuResult<(SplatGrads<f32>, Vec<f32>)> {
+        self.check_forward(forward, (frame.width, frame.height))?;
         self.check_shaded(shader, features.1, cam, (frame.width, frame.height))?;
         let job = ShadeJob {
             shader,
@@ -466,14 +491,8 @@ impl GpuRenderer {
         scene: &'r GpuScene,
         features: Option<DeviceFeatures<'r>>,
     ) -> GpuResult<DeviceBackward<'r>> {
-        if forward.serial != self.last_serial {
-            return Err(GpuError::InvalidArgument(
-                "the frame of this forward handle is no longer the renderer's last: its state \
-                 was replaced by a later frame's"
-                    .into(),
-            ));
-        }
         let size = forward.size();
+        self.check_forward(forward, size)?;
         if let Some(f) = &features {
             check_feature_channels(f.channels)?;
             self.check_shaded(f.shader, f.channels, f.cam, size)?;

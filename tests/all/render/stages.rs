@@ -483,18 +483,31 @@ fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
         .render(&FrameRequest::new(&gs, &cam, &opts).readback(Readback::Counters))
         .and_then(Rendered::into_forward)
         .unwrap();
+    // A frame read back as floats has its handle too; the host backward takes it.
+    let float = r.render(&FrameRequest::new(&gs, &cam, &opts)).unwrap();
+    let third = float.forward();
+    let frame = float.into_frame().unwrap();
     r.set_save_forward_state(false);
+    let grads = verisplat::model::grad::PixelGrads::<f32>::default();
+    let e = r.backward(&second, &gs, &frame, &grads).unwrap_err();
+    assert!(
+        e.to_string().contains("no longer the renderer's last"),
+        "{e}"
+    );
+    let small = verisplat::frame::Frame::background(32, 24, [0.0; 3]);
+    let e = r.backward(&third, &gs, &small, &grads).unwrap_err();
+    assert!(e.to_string().contains("the frame given 32x24"), "{e}");
     assert_ne!(first, second);
     assert_eq!(second.size(), (64, 48));
     let e = r
-        .device_backward(&first, &gs, None)
+        .device_backward(&second, &gs, None)
         .err()
         .expect("an old handle is refused");
     assert!(
         e.to_string().contains("no longer the renderer's last"),
         "{e}"
     );
-    r.device_backward(&second, &gs, None)
+    r.device_backward(&third, &gs, None)
         .expect("the last frame's handle");
     assert_validation_clean(&r);
 }
