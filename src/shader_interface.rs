@@ -504,8 +504,7 @@ fn std430(ty: &str, records: &[RecordLayout]) -> Option<(usize, usize)> {
         "uvec4" | "ivec4" | "vec4" => (16, 16),
         _ => {
             let record = records.iter().find(|r| r.rust == ty || r.glsl == ty)?;
-            let (align, size) = record_std430(record, records).ok()?;
-            (align, size)
+            record_std430(record, records).ok()?
         }
     })
 }

@@ -11,8 +11,9 @@
 # exported from a scene, a 200-iteration training run on it (densification included), and a
 # field fit and its render. Exit status 1 if any file differs or one side failed; the table names each.
 set -euo pipefail
-old=${1:?old binary}
-new=${2:?new binary}
+# Absolute, since each command runs in its own directory.
+old=$(realpath "${1:?old binary}")
+new=$(realpath "${2:?new binary}")
 work=${3:-$(mktemp -d)}
 data="$(cd "$(dirname "$0")/.." && pwd)/../shared/data"
 mkdir -p "$work"

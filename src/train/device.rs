@@ -499,7 +499,9 @@ impl<'p> DeviceModel<'p> {
                 ctx,
                 cmd,
                 &[src.whole(), dst.whole()],
-                bytemuck::bytes_of(&[count as u32, 0, 0, 0]),
+                bytemuck::bytes_of(&crate::shader_interface::CountsPush {
+                    counts: [count as u32, 0, 0, 0],
+                }),
                 [out as u32, 1, 1],
             )?;
             barrier(ctx, cmd, Access::ComputeWrite, Access::ComputeRead);

@@ -335,7 +335,9 @@ impl GpuLoss {
         self.ensure_work(ctx, pixels)?;
         let (_, [planes, filtered, sums, _, _]) = self.work.as_ref().expect("made above");
         let groups = pixel_groups(ctx, pixels)?;
-        let size = [width, height, 0, 0];
+        let size = SizePush {
+            size: [width, height, 0, 0],
+        };
         let taps64 = crate::metrics::ssim_taps();
         let mut taps = [[0f32; 4]; 3];
         for (k, t) in taps64.iter().enumerate() {
@@ -409,7 +411,7 @@ impl GpuLoss {
         filter(cmd, filtered, planes, 3)?;
         let n = (pixels * 3) as f32;
         let push = LossGradPush {
-            size,
+            size: size.size,
             scale: [(1.0 - lambda) / n, lambda / n, 0.0, 0.0],
         };
         self.grad.dispatch(
@@ -446,7 +448,9 @@ impl GpuLoss {
                 ctx,
                 cmd,
                 &[src.whole(), dst.whole()],
-                bytemuck::bytes_of(&[count as u32, 0, 0, 0]),
+                bytemuck::bytes_of(&CountsPush {
+                    counts: [count as u32, 0, 0, 0],
+                }),
                 [out as u32, 1, 1],
             )?;
             after_pass(ctx, cmd);

@@ -46,11 +46,6 @@ use pass::BackwardPass;
 use preprocess_bwd::PreprocessBwd;
 use shade_bwd::ShadeBwd;
 
-/// Timestamped stages of every backward pass (a shaded frame's starts with
-/// [`Stage::ShadeBwd`]; a device pass's starts with [`Stage::Loss`] and ends with
-/// [`Stage::Step`]).
-pub const BACKWARD_STAGES: [Stage; 3] = [Stage::BlendBwd, Stage::Accumulate, Stage::PreprocessBwd];
-
 /// What tells blend backward pipelines apart: bin size, whether it reads rows of texels,
 /// the splat kernel, groups of four feature channels.
 type BlendKey = (u32, bool, SplatKernel, u32);

@@ -5,7 +5,7 @@
 use super::buffers::BackwardBuffers;
 use super::{
     BackwardClock, BackwardState, BlendKey, DeviceGrads, FeatureJob, FeatureValues, PassShape,
-    ShadeJob, BACKWARD_STAGES,
+    ShadeJob,
 };
 use crate::gpu::shader::Resource;
 use crate::gpu::sync::{barrier, Access};
@@ -262,7 +262,7 @@ impl<'a> BackwardPass<'a> {
         timer: &mut GpuTimer,
     ) -> GpuResult<()> {
         let (fs, shape) = (self.fs, &self.shape);
-        timer.stage(ctx, cmd, BACKWARD_STAGES[0].name(), |cmd| {
+        timer.stage(ctx, cmd, Stage::BlendBwd.name(), |cmd| {
             let bindings = BlendBwdBindings {
                 params: fs.params,
                 splats: self.splats,
@@ -279,7 +279,7 @@ impl<'a> BackwardPass<'a> {
             self.blend.record(ctx, cmd, fs.bins, &bindings)
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-        timer.stage(ctx, cmd, BACKWARD_STAGES[1].name(), |cmd| {
+        timer.stage(ctx, cmd, Stage::Accumulate.name(), |cmd| {
             let bindings = AccumulateBindings {
                 values: fs.sorted_gaussians,
                 pair_grads: self.pair_grads,
@@ -298,7 +298,7 @@ impl<'a> BackwardPass<'a> {
             )
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
-        timer.stage(ctx, cmd, BACKWARD_STAGES[2].name(), |cmd| {
+        timer.stage(ctx, cmd, Stage::PreprocessBwd.name(), |cmd| {
             let bindings = PreprocessBwdBindings {
                 params: fs.params,
                 gaussians: self.scene.gaussians.whole(),

@@ -182,7 +182,9 @@ impl ShadeBwd {
             ctx,
             cmd,
             &[bufs.partials, bufs.grads],
-            bytemuck::bytes_of(&[shader.params, slots as u32, 0, 0]),
+            bytemuck::bytes_of(&crate::shader_interface::CountsPush {
+                counts: [shader.params, slots as u32, 0, 0],
+            }),
             [shader.params.div_ceil(64), 1, 1],
         )
     }

@@ -221,12 +221,11 @@ impl FrameSet {
 
     /// What the set's last finished frame left for a backward pass.
     pub(crate) fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
-        let set = self;
-        let f = set
+        let f = self
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no frame was rendered yet".into()))?;
-        let counters = set.counters()?;
+        let counters = self.counters()?;
         Ok(ForwardState {
             splats: f.splats.whole(),
             splat_texels: f.splat_texels.handle(),
@@ -235,16 +234,16 @@ impl FrameSet {
             sorted_bins: f.keys.whole(),
             pairs: counters.sort_count,
             ranges: f.ranges.whole(),
-            bin_size: set.bin_size,
-            bins: bin_grid(set.bin_size, f.width, f.height),
+            bin_size: self.bin_size,
+            bins: bin_grid(self.bin_size, f.width, f.height),
             color: &f.color,
             depth: &f.depth,
             params: f.params.whole(),
-            last_contributor: match set.saves_last {
+            last_contributor: match self.saves_last {
                 true => f.last_contributor.as_ref().map(|b| b.whole()),
                 false => None,
             },
-            feature_planes: set
+            feature_planes: self
                 .feature_planes
                 .as_ref()
                 .map(|p| (p.buffer.whole(), (p.plane_bytes / 16) as u32)),
