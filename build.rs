@@ -4,15 +4,19 @@
 //! A GLSL error fails the build with glslc's `glsl/<file>:<line>: error: ...` message.
 //! `GLSLC` names another compiler executable.
 
-#[path = "src/rules.rs"]
+#[path = "src/core/rules.rs"]
 #[allow(dead_code)]
 mod rules;
-#[path = "src/shader_interface.rs"]
+#[path = "src/core/shader_interface.rs"]
 #[allow(dead_code)]
 mod shader_interface;
 #[path = "src/gpu/shader_set.rs"]
 #[allow(dead_code)]
 mod shader_set;
+/// The library's path to `rules` (`crate::core::rules`), which `shader_set` names.
+mod core {
+    pub(crate) use super::rules;
+}
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -22,8 +26,8 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=glsl");
     println!("cargo:rerun-if-changed=src/gpu/shader_set.rs");
-    println!("cargo:rerun-if-changed=src/rules.rs");
-    println!("cargo:rerun-if-changed=src/shader_interface.rs");
+    println!("cargo:rerun-if-changed=src/core/rules.rs");
+    println!("cargo:rerun-if-changed=src/core/shader_interface.rs");
     println!("cargo:rerun-if-env-changed=GLSLC");
     let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("OUT_DIR"));
@@ -35,7 +39,7 @@ fn main() {
     let interface_dir = out.join("glsl");
     std::fs::create_dir_all(&interface_dir).expect("create OUT_DIR/glsl");
     let interface = shader_interface::glsl_declarations()
-        .unwrap_or_else(|e| panic!("src/shader_interface.rs is not std430: {e}"));
+        .unwrap_or_else(|e| panic!("src/core/shader_interface.rs is not std430: {e}"));
     std::fs::write(interface_dir.join("interface.glsl"), interface).expect("write interface.glsl");
 
     let variants = shader_set::shader_variants();

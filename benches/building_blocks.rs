@@ -7,9 +7,9 @@
 //! `--bench` argument) it runs one small size of each, as a smoke test.
 
 use std::time::Instant;
-use verisplat::camera;
+use verisplat::core::camera;
+use verisplat::core::gen::{synthetic_scene, tile_depth_keys, Rng};
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::gen::{synthetic_scene, tile_depth_keys, Rng};
 use verisplat::gpu::sort::SortJob;
 use verisplat::gpu::sync::{barrier, Access};
 use verisplat::gpu::{

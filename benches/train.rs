@@ -10,7 +10,7 @@
 //! iterations (densification from 100 every 100); under `cargo test` (no `--bench`
 //! argument) LOD6 at 40x30 for 20 iterations, as a smoke test.
 
-use verisplat::camera::orbit::{orbit, OrbitParams};
+use verisplat::core::camera::orbit::{orbit, OrbitParams};
 use verisplat::gpu::{ContextOptions, GpuContext};
 use verisplat::render::backward::differentiable::DiffRasterizer;
 use verisplat::train::{data, loss::GpuLoss, model::Settings, run};
@@ -23,7 +23,7 @@ fn main() {
     } else {
         ("playbot_lod6_1873_sh2.ply", 40, 30, 20)
     };
-    let scene = verisplat::scene::load_with_format(&shared.join(file))
+    let scene = verisplat::core::scene::load_with_format(&shared.join(file))
         .expect("a shared scene")
         .0;
     let cams = orbit(

@@ -15,7 +15,7 @@
 //! at a small size, as a smoke test.
 
 use ash::vk;
-use verisplat::gen::{tile_depth_keys, Rng};
+use verisplat::core::gen::{tile_depth_keys, Rng};
 use verisplat::gpu::shader::{compile_glsl, BindingKind, Resource};
 use verisplat::gpu::sort::{SortConfig, SortJob};
 use verisplat::gpu::sync::{barrier, Access};
@@ -75,7 +75,7 @@ fn store_paths(ctx: &GpuContext, n: u32, runs: usize) {
             "case",
             &spirv,
             &kinds,
-            &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+            &verisplat::core::shader_interface::NO_PUSH_CONSTANTS,
         )
         .unwrap();
         let mut ms = Vec::new();

@@ -1,47 +1,41 @@
 //! verisplat: a 3D Gaussian Splatting renderer on raw Vulkan compute, with an exact CPU
 //! reference renderer that the GPU is checked against.
+//!
+//! The crate in wings, each using only the wings before it (`tools/module_graph.py
+//! --wings` checks it; docs/module-graph.md):
+//! [`core`] (the splat model, rules, cameras, scenes, frames, the shader interface) <
+//! [`io`] (image files in and out, outputs, image metrics) < [`fields`] (feature fields,
+//! RF fits, the MLP) < [`cpu`] (the CPU reference) < [`gpu`] (Vulkan building blocks) <
+//! [`render`] (the GPU splatting pipeline) < [`train`] < [`app`] (bench, doctor, viewer,
+//! sequences, shards; the command line is the binary's `app/cli/`).
 
-#[cfg(feature = "cli")]
-pub mod bench;
-pub mod camera;
-pub mod console;
+pub mod app;
+pub mod core;
 pub mod cpu;
-pub mod diff_image;
-pub mod doctor;
-pub mod file_error;
-pub mod fit;
-pub mod font;
-pub mod former_name;
-pub mod frame;
-pub mod fsutil;
-pub mod gen;
+pub mod fields;
 pub mod gpu;
-pub mod image_file;
-pub mod metrics;
-pub mod mlp;
-pub mod model;
-pub mod output;
-pub mod quat;
+pub mod io;
 pub mod render;
-pub mod rf;
-pub mod rules;
-pub mod scene;
-pub mod sequence;
-pub mod shader_interface;
-pub mod shard;
-pub mod stats;
 pub mod train;
+
+// The modules' paths before the wings (`verisplat::camera`, ...), kept for one release so
+// that code written against them builds unchanged; new code names the wing.
+#[cfg(feature = "cli")]
+#[doc(hidden)]
+pub use self::app::bench;
 #[cfg(feature = "viewer")]
-pub mod view;
-
-/// The built-in demo scene (PLAYBOT LOD6, CC BY 4.0, see `assets/README.md`).
-pub const DEMO_SCENE_PLY: &[u8] = include_bytes!("../assets/playbot_lod6_1873_sh2.ply");
-
-/// Loads the built-in demo scene.
-pub fn demo_scene() -> scene::Scene {
-    scene::ply::parse(
-        DEMO_SCENE_PLY,
-        std::path::Path::new("<built-in demo scene>"),
-    )
-    .expect("the embedded demo scene is a valid PLY")
-}
+#[doc(hidden)]
+pub use self::app::view;
+#[doc(hidden)]
+pub use self::app::{doctor, sequence, shard, stats};
+#[doc(hidden)]
+pub use self::core::demo::{demo_scene, DEMO_SCENE_PLY};
+#[doc(hidden)]
+pub use self::core::{
+    camera, console, file_error, former_name, frame, fsutil, gen, model, quat, rules, scene,
+    shader_interface,
+};
+#[doc(hidden)]
+pub use self::fields::{fit, mlp, rf};
+#[doc(hidden)]
+pub use self::io::{diff_image, font, image_file, metrics, output};

@@ -1,5 +1,6 @@
-//! The `verisplat` command line. Each subcommand lives in its own file under `src/cli/`.
+//! The `verisplat` command line. Each subcommand lives in its own file under `src/app/cli/`.
 
+#[path = "app/cli/mod.rs"]
 mod cli;
 
 use clap::{Parser, Subcommand};
@@ -76,7 +77,7 @@ fn main() -> ExitCode {
     };
     // A closed pipe (`verisplat info scene.ply | head`) is not an error; any other failure to
     // write the command's output is.
-    let result = result.and_then(|()| match verisplat::console::stdout_error() {
+    let result = result.and_then(|()| match verisplat::core::console::stdout_error() {
         Some(e) => Err(anyhow::anyhow!("writing to standard output failed: {e}")),
         None => Ok(()),
     });
@@ -88,7 +89,7 @@ fn main() -> ExitCode {
                 ExitCode::from(130)
             }
             None => {
-                note!("error: {}", verisplat::console::error_sentence(&e));
+                note!("error: {}", verisplat::core::console::error_sentence(&e));
                 ExitCode::FAILURE
             }
         },

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent reference values for the pinned metric tests in src/metrics.rs.
+"""Independent reference values for the pinned metric tests in src/io/metrics.rs.
 
 Not a dependency of verisplat: run once, by hand, to recompute the pinned numbers.
     python3 -m venv /tmp/metricsenv

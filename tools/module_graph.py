@@ -4,24 +4,28 @@
 An edge `a -> b` means some file of module `a` (src/a.rs or src/a/...) names
 `crate::b` (in a `use` line, a `use crate::{b, ...}` group, or a path in the code;
 `self::` and `super::` paths are resolved to theirs). `lib` is the crate root
-(src/lib.rs and its items, e.g. `crate::demo_scene`); an exported macro
+(src/lib.rs: the wings and the former paths' re-exports); an exported macro
 (`crate::note!`) counts as a use of the module defining it. Comments and strings are
 ignored; code under `#[cfg(test)]` counts like any other code, except with
 --no-tests, which drops `#[cfg(test)] mod ... { ... }` blocks and files named
-tests.rs. The binary (src/main.rs, src/cli/) uses the library as `verisplat::` and is
+tests.rs. The binary (src/main.rs, src/app/cli/) uses the library as `verisplat::` and is
 left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
 
-    tools/module_graph.py                # top-level modules: edges, then cycles
-    tools/module_graph.py --depth 2      # submodules as nodes (scene::write -> fsutil,
-                                         # ...); edges between a module and its own
-                                         # submodules are left out
+    tools/module_graph.py                # the wings (core, io, ...): edges, then cycles
+    tools/module_graph.py --wings        # checks that every arrow between wings runs
+                                         # down core < io < fields < cpu < gpu < render
+                                         # < train < app (exit status 1 if one runs up)
+    tools/module_graph.py --depth 2      # the wings' modules as nodes (core::scene ->
+                                         # core::fsutil, ...; --depth 3 their
+                                         # submodules); edges between a module and its
+                                         # own submodules are left out
     tools/module_graph.py --mermaid      # the edges as a mermaid flowchart
     tools/module_graph.py --layers       # the modules by layer (a cycle is one node)
     tools/module_graph.py --why a b      # the lines behind the edge a -> b
     tools/module_graph.py --src DIR      # another checkout's src/ (e.g. a git worktree)
     tools/module_graph.py --bin --depth 2
                                          # the binary instead: src/main.rs (`main`) and
-                                         # src/cli/ (cli::render -> cli::common, ...)
+                                         # src/app/cli/ (cli::render -> cli::common, ...)
 
 Cycles are reported as the strongly connected components with more than one module,
 each with one shortest cycle through every edge of it, so a component that is a
@@ -35,6 +39,10 @@ import sys
 from collections import defaultdict
 
 SRC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
+# The binary's command-line modules (src/main.rs names them `cli` with a `#[path]`).
+BIN_DIR = os.path.join("app", "cli")
+# The library's wings, each using only the wings before it (checked with --wings).
+WINGS = ["core", "io", "fields", "cpu", "gpu", "render", "train", "app"]
 IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
 
 
@@ -189,7 +197,7 @@ def root_name():
 
 def library_files(no_tests):
     """(src-relative path, comment-free text) of every file of the library (of the
-    binary with --bin: src/main.rs and src/cli/)."""
+    binary with --bin: src/main.rs and src/app/cli/)."""
     for dirpath, dirs, files in os.walk(SRC):
         dirs.sort()
         for f in sorted(files):
@@ -197,9 +205,12 @@ def library_files(no_tests):
                 continue
             full = os.path.join(dirpath, f)
             rel = os.path.relpath(full, SRC)
-            in_bin = rel == "main.rs" or rel.startswith("cli" + os.sep)
+            in_bin = rel == "main.rs" or rel.startswith(BIN_DIR + os.sep)
             if in_bin != BIN:
                 continue
+            if in_bin and rel != "main.rs":
+                # the binary's modules are `cli::...` (main.rs: `#[path] mod cli;`)
+                rel = os.path.relpath(full, os.path.join(SRC, os.path.dirname(BIN_DIR)))
             if no_tests and f == "tests.rs":
                 continue
             with open(full, encoding="utf-8") as fh:
@@ -212,7 +223,7 @@ def library_files(no_tests):
 def collect(depth, no_tests):
     """Modules and {(from, to): [(file, line, path)]} over the library's files.
 
-    `lib` is the crate root (src/lib.rs and its items, e.g. `crate::demo_scene`); an
+    `lib` is the crate root (src/lib.rs and its items); an
     exported macro (`crate::note!`) counts as a use of the module that defines it.
     """
     files = list(library_files(no_tests))
@@ -251,7 +262,8 @@ def collect(depth, no_tests):
             if src != dst and not dst.startswith(src + "::") and not (
                 dst != root_name() and src.startswith(dst + "::")
             ):
-                edges[(src, dst)].append((os.path.join("src", rel), line, "crate::" + path))
+                shown = os.path.join("src", os.path.dirname(BIN_DIR), rel) if BIN and rel != "main.rs" else os.path.join("src", rel)
+                edges[(src, dst)].append((shown, line, "crate::" + path))
     return sorted(modules), edges
 
 
@@ -347,6 +359,34 @@ def print_layers(nodes, edges):
         print(f"layer {n}: {', '.join(names)}")
 
 
+def check_wings(nodes, edges):
+    """Every edge between two wings runs down WINGS (to a wing listed earlier); prints
+    the wings' edges and each edge that runs up, with the lines behind it. The crate
+    root (`lib`: the demo scene and the former paths' re-exports) is left out."""
+    wing = {w: i for i, w in enumerate(WINGS)}
+    extra = sorted(n for n in nodes if "::" not in n and n != root_name() and n not in wing)
+    bad = []
+    down = defaultdict(set)
+    for (a, b), sites in sorted(edges.items()):
+        wa, wb = a.split("::")[0], b.split("::")[0]
+        if root_name() in (wa, wb) or wa == wb:
+            continue
+        down[wa].add(wb)
+        if wa in wing and wb in wing and wing[wb] >= wing[wa]:
+            bad.append((a, b, sites[0]))
+    for w in WINGS:
+        print(f"{w:<7} -> {', '.join(sorted(down[w], key=wing.get)) or '(nothing)'}")
+    print()
+    if extra:
+        print(f"modules outside the wings: {', '.join(extra)}")
+    for a, b, (f, line, path) in bad:
+        print(f"arrow up: {a} -> {b} ({f}:{line}: {path})")
+    if not extra and not bad:
+        print("wings: every arrow runs down " + " < ".join(WINGS))
+        return 0
+    return 1
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--depth", type=int, default=1)
@@ -355,7 +395,8 @@ def main():
     ap.add_argument("--layers", action="store_true")
     ap.add_argument("--why", nargs=2, metavar=("FROM", "TO"))
     ap.add_argument("--src", help="the crate's src folder (default: this checkout's)")
-    ap.add_argument("--bin", action="store_true", help="the binary (main.rs, cli/), not the library")
+    ap.add_argument("--bin", action="store_true", help="the binary (main.rs, app/cli/), not the library")
+    ap.add_argument("--wings", action="store_true", help="check that every arrow between wings runs down")
     args = ap.parse_args()
     if args.bin:
         global BIN
@@ -365,6 +406,9 @@ def main():
         SRC = args.src
     nodes, edges = collect(args.depth, args.no_tests)
 
+    if args.wings:
+        # the wings' edges are the edges of every module, cut to their first part
+        return check_wings(nodes, collect(99, args.no_tests)[1]) | (1 if cycles(nodes, edges) else 0)
     if args.why:
         for f, line, path in edges.get(tuple(args.why), []):
             print(f"{f}:{line}: {path}")

@@ -6,7 +6,7 @@ use crate::scene::PyScene;
 use glam::{Mat3, Vec3};
 use pyo3::prelude::*;
 use std::path::PathBuf;
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
 
 /// A camera as it crosses the boundary: name, width, height, `[fx, fy, cx, cy]` and the
 /// world-to-camera matrix, row-major 4x4 (OpenCV axes).
@@ -78,7 +78,7 @@ pub(crate) fn save_cameras(path: PathBuf, cameras: Vec<CamTuple>, overwrite: boo
             .collect::<PyResult<Vec<_>>>()?;
         let numbered: Vec<(usize, Camera)> = cams.into_iter().enumerate().collect();
         let text = camera::inria::to_json(&numbered).map_err(|e| py_err(e.into()))?;
-        verisplat::output::write_bytes_atomically(&path, overwrite, text.as_bytes())
+        verisplat::io::output::write_bytes_atomically(&path, overwrite, text.as_bytes())
             .map_err(|e| py_err(e.into()))
     })
 }

@@ -11,9 +11,9 @@ use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
 use std::sync::Mutex;
+use verisplat::core::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use verisplat::cpu::RenderOptions;
-use verisplat::mlp::{Mlp, MlpParams};
-use verisplat::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
+use verisplat::fields::mlp::{Mlp, MlpParams};
 use verisplat::render::backward::differentiable::{Accumulation, DiffRasterizer};
 
 /// The channels of the image a forward pass returns: 3 when shaded.
@@ -92,7 +92,7 @@ pub(crate) type RulesArg<'a> = (&'a str, Option<f32>);
 /// camera, the shader, the image's channels and the render options.
 pub(crate) struct DiffInputs {
     pub(crate) p: SplatParams<f32>,
-    pub(crate) cam: verisplat::camera::Camera,
+    pub(crate) cam: verisplat::core::camera::Camera,
     pub(crate) shader: Option<Mlp>,
     pub(crate) channels: usize,
     pub(crate) opts: RenderOptions,

@@ -10,17 +10,17 @@ use verisplat::gpu::GpuError;
 /// failure `RuntimeError`, anything else (bad input) `ValueError`; the message is the
 /// command line's sentence.
 pub(crate) fn py_err(e: anyhow::Error) -> PyErr {
-    let sentence = verisplat::console::error_sentence(&e);
+    let sentence = verisplat::core::console::error_sentence(&e);
     for cause in e.chain() {
         if let Some(io) = cause.downcast_ref::<std::io::Error>() {
             if io.kind() == std::io::ErrorKind::NotFound {
                 return PyFileNotFoundError::new_err(sentence);
             }
         }
-        if let Some(verisplat::output::OutputError::Exists(_)) = cause.downcast_ref() {
+        if let Some(verisplat::io::output::OutputError::Exists(_)) = cause.downcast_ref() {
             return PyFileExistsError::new_err(sentence);
         }
-        if let Some(verisplat::fsutil::WriteError::Exists(_)) = cause.downcast_ref() {
+        if let Some(verisplat::core::fsutil::WriteError::Exists(_)) = cause.downcast_ref() {
             return PyFileExistsError::new_err(sentence);
         }
         if cause.downcast_ref::<GpuError>().is_some() {

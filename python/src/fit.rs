@@ -5,7 +5,7 @@ use crate::errors::{guarded, value_err};
 use crate::scene::PyScene;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use verisplat::scene;
+use verisplat::core::scene;
 
 /// The counts and options `fit` takes before it reads anything else: channels, the
 /// held-out share, enough samples (unless `force`), steps and the gradient clip.
@@ -30,7 +30,7 @@ fn check_sizes(
     }
     if !force {
         // The command line's rule (`verisplat fit --force`), in the function's words.
-        verisplat::fit::check_enough(n, holdout).map_err(|m| {
+        verisplat::fields::fit::check_enough(n, holdout).map_err(|m| {
             value_err(format!(
                 "points {}",
                 m.replace("--holdout ", "holdout=")
@@ -72,7 +72,7 @@ pub(crate) fn fit<'py>(
     times: Option<&[u8]>,
     force: bool,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
-    use verisplat::fit::{self, FieldData, FitConfig, Layout};
+    use verisplat::fields::fit::{self, FieldData, FitConfig, Layout};
     let points = floats(points, "points", n * 3)?;
     let values = floats(values, "values", n * k)?;
     check_finite("points", &points, 3)?;

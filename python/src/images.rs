@@ -6,8 +6,8 @@ use crate::errors::{guarded, py_err, value_err};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes, PyDict};
 use std::path::{Path, PathBuf};
-use verisplat::frame::Frame;
-use verisplat::metrics::{self, PlaneKind};
+use verisplat::core::frame::Frame;
+use verisplat::io::metrics::{self, PlaneKind};
 
 /// Reads an image (PNG 8/16-bit, JPEG, WebP, OpenEXR, .npy): width, height, channel names
 /// and the samples interleaved per pixel as f32 bytes (8/16-bit scaled to [0, 1]).
@@ -17,7 +17,7 @@ pub(crate) fn read_image<'py>(
     path: PathBuf,
 ) -> PyResult<(u32, u32, Vec<String>, Bound<'py, PyByteArray>)> {
     let planes = py.detach(|| {
-        guarded(|| verisplat::image_file::read_image(&path).map_err(|e| py_err(e.into())))
+        guarded(|| verisplat::io::image_file::read_image(&path).map_err(|e| py_err(e.into())))
     })?;
     let names: Vec<String> = planes.channels.iter().map(|c| c.name.clone()).collect();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
@@ -88,7 +88,7 @@ pub(crate) fn encode_png<'py>(
         features: Vec::new(),
     };
     let mut out = Vec::new();
-    verisplat::output::encode_png(&frame, false, &mut out, Path::new("<memory>"))
+    verisplat::io::output::encode_png(&frame, false, &mut out, Path::new("<memory>"))
         .map_err(|e| py_err(e.into()))?;
     Ok(PyBytes::new(py, &out))
 }
@@ -128,9 +128,9 @@ pub(crate) fn save_image(
             feature_count: 0,
             features: Vec::new(),
         };
-        let format = verisplat::output::ImageFormat::from_path(&path, png16)
+        let format = verisplat::io::output::ImageFormat::from_path(&path, png16)
             .map_err(|e| py_err(e.into()))?;
-        verisplat::output::write_frame(&frame, &path, format, overwrite)
+        verisplat::io::output::write_frame(&frame, &path, format, overwrite)
             .map_err(|e| py_err(e.into()))
     })
 }

@@ -8,8 +8,8 @@ use crate::differentiable::{
 use crate::errors::{guarded, value_err};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
-use verisplat::mlp::MlpParams;
-use verisplat::model::grad::PixelGrads;
+use verisplat::core::model::grad::PixelGrads;
+use verisplat::fields::mlp::MlpParams;
 
 /// The f64 CPU reference forward pass: colour (`H x W x D`, or 3 shaded), alpha and
 /// depth as f64 bytes.

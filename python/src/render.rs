@@ -10,9 +10,9 @@ use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyDict};
 use std::sync::Mutex;
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::frame::Frame;
 use verisplat::cpu::RenderOptions;
-use verisplat::frame::Frame;
 use verisplat::render::{FrameRequest, Rendered};
 use verisplat::render::{GpuRenderer, GpuScene};
 

@@ -9,8 +9,8 @@
 
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use verisplat::model::sh::{SH_C0, SH_C1, SH_C2, SH_C3};
-use verisplat::rules::{
+use verisplat::core::model::sh::{SH_C0, SH_C1, SH_C2, SH_C3};
+use verisplat::core::rules::{
     ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO, COV2D_DILATION, GSPLAT_ALPHA_MAX, GSPLAT_EXTEND,
     GSPLAT_NEAR_PLANE, NEAR_PLANE, TILE_SIZE, T_MIN,
 };
@@ -48,6 +48,6 @@ pub(crate) fn add_constants(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "BACKWARD_CHANNELS",
         groups * verisplat::render::forward::features::CHANNELS_PER_GROUP,
     )?;
-    m.add("MAX_FEATURES", verisplat::scene::MAX_FEATURES)?;
+    m.add("MAX_FEATURES", verisplat::core::scene::MAX_FEATURES)?;
     Ok(())
 }

@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
-use verisplat::scene::{self, ActivatedScene, Scene};
+use verisplat::core::scene::{self, ActivatedScene, Scene};
 
 static NEXT_SCENE_ID: AtomicU64 = AtomicU64::new(1);
 
@@ -78,12 +78,17 @@ impl PyScene {
         check_finite("points", &p, 3)?;
         let positions: Vec<[f32; 3]> = rows(&p);
         let times = times.map(|t| floats(t, "times", n)).transpose()?;
-        let model = verisplat::fit::model::Model::from_scene(&self.raw);
+        let model = verisplat::fields::fit::model::Model::from_scene(&self.raw);
         let kernel = self.raw.kernel;
         let f = py.detach(|| {
             guarded(|| {
-                verisplat::fit::model::evaluate_at(&model, kernel, &positions, times.as_deref())
-                    .map_err(|m| value_err(format!("{}: {m}", self.source)))
+                verisplat::fields::fit::model::evaluate_at(
+                    &model,
+                    kernel,
+                    &positions,
+                    times.as_deref(),
+                )
+                .map_err(|m| value_err(format!("{}: {m}", self.source)))
             })
         })?;
         Ok(byte_array(py, &f))
@@ -169,7 +174,7 @@ impl PyScene {
                     scene::write::OutputFormat::from_path(&path).map_err(|e| py_err(e.into()))?;
                 let bytes = scene::write::to_bytes(&self.raw, format)
                     .map_err(|m| value_err(format!("{}: {m}", path.display())))?;
-                verisplat::output::write_bytes_atomically(&path, overwrite, &bytes)
+                verisplat::io::output::write_bytes_atomically(&path, overwrite, &bytes)
                     .map_err(|e| py_err(e.into()))
             })
         })
@@ -218,7 +223,7 @@ pub(crate) fn load(py: Python<'_>, path: PathBuf, iteration: Option<u64>) -> PyR
 /// The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
 #[pyfunction]
 pub(crate) fn demo() -> PyScene {
-    let raw = verisplat::demo_scene();
+    let raw = verisplat::core::demo::demo_scene();
     let act = raw.activated();
     PyScene::new(raw, act, "built-in demo scene (PLAYBOT)".into())
 }

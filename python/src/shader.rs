@@ -6,7 +6,7 @@ use crate::errors::value_err;
 use pyo3::prelude::*;
 use pyo3::types::PyByteArray;
 use std::path::PathBuf;
-use verisplat::mlp::Mlp;
+use verisplat::fields::mlp::Mlp;
 
 /// A layer crossing to or from Python: outputs, inputs, weight and bias as f32 bytes,
 /// activation.
@@ -31,7 +31,7 @@ pub(crate) fn shader_from_layers<'py>(
 ) -> PyResult<Bound<'py, PyByteArray>> {
     let mut parsed = Vec::new();
     for n in &inputs {
-        parsed.push(verisplat::mlp::MlpInput::parse(n).ok_or_else(|| {
+        parsed.push(verisplat::fields::mlp::MlpInput::parse(n).ok_or_else(|| {
             value_err(format!(
                 "inputs: unknown input {n:?}; inputs are \"features\", \"view_dir\" and \"alpha\""
             ))
@@ -39,12 +39,12 @@ pub(crate) fn shader_from_layers<'py>(
     }
     let mut out = Vec::new();
     for (i, (outputs, ins, w, b, act)) in layers.iter().enumerate() {
-        let activation = verisplat::mlp::Activation::parse(act).ok_or_else(|| {
+        let activation = verisplat::fields::mlp::Activation::parse(act).ok_or_else(|| {
             value_err(format!(
                 "layer {i}: unknown activation {act:?}; use relu, sigmoid, tanh or none"
             ))
         })?;
-        out.push(verisplat::mlp::Layer {
+        out.push(verisplat::fields::mlp::Layer {
             inputs: *ins,
             outputs: *outputs,
             weight: floats(w, &format!("layer {i} weight"), outputs * ins)?,

@@ -16,7 +16,7 @@ from typing import Optional, Tuple
 
 import torch
 
-# The renderer's own constants (src/rules.rs, src/model/sh.rs), from the extension: the
+# The renderer's own constants (src/core/rules.rs, src/core/model/sh.rs), from the extension: the
 # smallest opacity compensation ratio, the 2D covariance's dilation, the SH bands'.
 from ._native import ANTIALIAS_MIN_RATIO, COV2D_DILATION
 from ._native import SH_C0 as C0

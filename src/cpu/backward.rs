@@ -16,9 +16,9 @@
 //! [`SplatGrads::means2d`] is gsplat's `means2d.grad` with the reference's half-pixel
 //! convention.
 
-use crate::camera::Camera;
-use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
-use crate::model::{
+use crate::core::camera::Camera;
+use crate::core::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
+use crate::core::model::{
     sh_coeffs_for_degree, RenderOptions, Rules, SplatKernel, ALPHA_MIN, COV2D_DILATION, TILE_SIZE,
 };
 use glam::{DMat3, DVec3};
@@ -113,7 +113,7 @@ fn normalized(q: [f64; 4]) -> [f64; 4] {
 /// SH basis values `Y_k(dir)` for `k < (degree + 1)^2`, with the reference's signs and
 /// constants (`model::sh::eval_sh`).
 pub fn sh_basis(degree: u32, d: DVec3) -> [f64; 16] {
-    use crate::model::sh::{SH_C0, SH_C1, SH_C2, SH_C3};
+    use crate::core::model::sh::{SH_C0, SH_C1, SH_C2, SH_C3};
     let (c0, c1) = (SH_C0 as f64, SH_C1 as f64);
     let c2 = SH_C2.map(f64::from);
     let c3 = SH_C3.map(f64::from);
@@ -147,7 +147,7 @@ pub fn sh_basis(degree: u32, d: DVec3) -> [f64; 16] {
 
 /// Gradients `dY_k/d(dir)` of [`sh_basis`] (the direction taken as free, not unit).
 pub fn sh_basis_grad(degree: u32, d: DVec3) -> [DVec3; 16] {
-    use crate::model::sh::{SH_C1, SH_C2, SH_C3};
+    use crate::core::model::sh::{SH_C1, SH_C2, SH_C3};
     let c1 = SH_C1 as f64;
     let c2 = SH_C2.map(f64::from);
     let c3 = SH_C3.map(f64::from);
@@ -213,7 +213,7 @@ fn cov_factor(p: &SplatParams<f64>, i: usize, opts: &RenderOptions) -> (DMat3, [
     let m = opts.scale_modifier as f64;
     let s = DVec3::from(p.scales[i]) * m;
     (
-        crate::quat::quat_to_dmat3(q) * DMat3::from_diagonal(s),
+        crate::core::quat::quat_to_dmat3(q) * DMat3::from_diagonal(s),
         q,
         s,
     )
@@ -716,7 +716,7 @@ fn project_backward(
     let mut g_mean = cam.r.transpose() * g_v;
     // Sigma = M M^T with M = R S.
     let g_m = (g_cov + g_cov.transpose()) * m;
-    let rot = crate::quat::quat_to_dmat3(q);
+    let rot = crate::core::quat::quat_to_dmat3(q);
     let modifier = opts.scale_modifier as f64;
     let g_scale: [f64; 3] = std::array::from_fn(|k| rot.col(k).dot(g_m.col(k)) * modifier);
     let g_rot = DMat3::from_cols(g_m.col(0) * s.x, g_m.col(1) * s.y, g_m.col(2) * s.z);
@@ -786,11 +786,11 @@ fn project_backward(
 // A shaded frame (`render --shader`): the Gaussians' direct feature channels are blended
 // (no background), then per pixel the MLP turns the features (with the view direction and
 // alpha, as its inputs list) into a colour `c`, and the pixel is `alpha * c + (1 - alpha)
-// * background` (`crate::mlp::shade`). Its backward pass runs the MLP's per pixel, then
+// * background` (`crate::fields::mlp::shade`). Its backward pass runs the MLP's per pixel, then
 // the blend's with the feature gradients it produced.
 
-pub use crate::mlp::MlpParams;
-use crate::mlp::{Activation, Mlp, MlpInput};
+pub use crate::fields::mlp::MlpParams;
+use crate::fields::mlp::{Activation, Mlp, MlpInput};
 
 /// Value and derivative of an activation at `x`.
 fn activation64(a: Activation, x: f64) -> (f64, f64) {
@@ -898,7 +898,7 @@ pub fn forward_shaded(
     let width = cam.width as usize;
     let mut color = vec![0.0; feats.alpha.len() * 3];
     for (i, &a) in feats.alpha.iter().enumerate() {
-        let dir = crate::mlp::view_dir(cam, (i % width) as u32, (i / width) as u32);
+        let dir = crate::fields::mlp::view_dir(cam, (i % width) as u32, (i / width) as u32);
         let x = mlp_input64(mlp, &feats.color[i * k..(i + 1) * k], dir, a);
         let (_, _, c) = mlp_forward64(mlp, w, &x);
         for ch in 0..3 {
@@ -940,7 +940,7 @@ pub fn backward_shaded(
     if !grads.color.is_empty() {
         for i in 0..pixels {
             let a = feats.alpha[i];
-            let dir = crate::mlp::view_dir(cam, (i % width) as u32, (i / width) as u32);
+            let dir = crate::fields::mlp::view_dir(cam, (i % width) as u32, (i / width) as u32);
             let x = mlp_input64(mlp, &feats.color[i * k..(i + 1) * k], dir, a);
             let (inputs, derivs, c) = mlp_forward64(mlp, w, &x);
             let gy = &grads.color[i * 3..i * 3 + 3];

@@ -1,7 +1,7 @@
 //! Renders of the fitted field itself (`render --mode field-slice | field-integral |
 //! field-max`): the reference, in f64, one pixel at a time over every Gaussian.
 //!
-//! The field is the one `fit` models ([`crate::fit::model`]): `f(x) = sum_i o_i feat_i
+//! The field is the one `fit` models ([`crate::fields::fit::model`]): `f(x) = sum_i o_i feat_i
 //! G_i(x)`, `G_i` the unnormalised Gaussian `exp(-d2 / 2)` truncated at `d2 <= 16` or the
 //! power kernel `max(0, 1 - d2 / 9)`, `d2 = (x - mu_i)^T A_i (x - mu_i)` with
 //! `A_i = R_i S_i^-2 R_i^T` (the inverse of the renderers' covariance). It is a plain sum,
@@ -25,12 +25,12 @@
 //!   device; the error against the true maximum falls with the segment length (the test
 //!   `field_renders::max_converges_with_samples` measures it).
 
-use crate::camera::Camera;
-use crate::frame::Frame;
-use crate::model::SplatKernel;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::model::SplatKernel;
 use rayon::prelude::*;
 
-pub use crate::model::field::{
+pub use crate::core::model::field::{
     field_cutoff, field_kernel, frame_from_channels, FieldGaussians, FieldMode, MAX_FIELD_SAMPLES,
 };
 

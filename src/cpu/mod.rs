@@ -8,16 +8,16 @@
 pub mod backward;
 pub mod field;
 
-use crate::camera::Camera;
-use crate::frame::Frame;
-use crate::model::ActivatedScene;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::model::ActivatedScene;
 // The model's types, constants and SH, re-exported where they used to live.
-pub use crate::model::sh;
-pub use crate::model::{
+pub use crate::core::model::sh;
+pub use crate::core::model::{
     clamp_limits, RenderOptions, Rules, SplatKernel, ALPHA_MAX, ALPHA_MIN, ANTIALIAS_MIN_RATIO,
     COV2D_DILATION, NEAR_PLANE, TILE_SIZE, T_MIN,
 };
-pub use crate::quat::quat_to_mat3;
+pub use crate::core::quat::quat_to_mat3;
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
@@ -146,7 +146,7 @@ pub fn preprocess_one(
 /// Tile rectangle `[min, max)` of a disc of radius `radius` around `p`, clamped to the grid
 /// (the reference's `getRect`, with C's truncating float-to-int conversion).
 pub fn tile_rect(p: [f32; 2], radius: f32, grid: (u32, u32)) -> ([u32; 2], [u32; 2]) {
-    crate::model::rules::get_rect(p, radius, grid)
+    crate::core::model::rules::get_rect(p, radius, grid)
 }
 
 /// Preprocesses every Gaussian (in parallel), as [`preprocess_one`].

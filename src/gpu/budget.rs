@@ -60,7 +60,7 @@ pub fn host_available_bytes() -> Option<u64> {
 pub(crate) fn explicit_limit(option: Option<u64>) -> GpuResult<Option<u64>> {
     Ok(match option {
         Some(l) => Some(l),
-        None => match crate::former_name::env_var("VERISPLAT_MEMORY_LIMIT") {
+        None => match crate::core::former_name::env_var("VERISPLAT_MEMORY_LIMIT") {
             Some(v) if !v.trim().is_empty() => Some(
                 parse_bytes(&v)
                     .map_err(|e| GpuError::Input(format!("VERISPLAT_MEMORY_LIMIT: {e}")))?,

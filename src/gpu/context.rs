@@ -49,14 +49,14 @@ pub struct ContextOptions {
 impl GpuContext {
     /// Creates the context: instance, device selection, queue, pool and allocator.
     pub fn new(options: &ContextOptions) -> GpuResult<Self> {
-        let validation = options.validation || crate::former_name::env_flag("VERISPLAT_VALIDATE");
+        let validation =
+            options.validation || crate::core::former_name::env_flag("VERISPLAT_VALIDATE");
         let emulation = Emulation::from_env()
             .map_err(GpuError::Input)?
             .union(&options.emulate);
-        let device_choice = options
-            .device
-            .clone()
-            .or_else(|| crate::former_name::env_var("VERISPLAT_DEVICE").filter(|s| !s.is_empty()));
+        let device_choice = options.device.clone().or_else(|| {
+            crate::core::former_name::env_var("VERISPLAT_DEVICE").filter(|s| !s.is_empty())
+        });
 
         let mut vulkan = instance::create(validation)?;
         let instance = &vulkan.instance;

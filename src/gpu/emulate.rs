@@ -40,7 +40,7 @@ pub struct Emulation {
     pub timestamp_bits: Option<u32>,
     /// maxStorageBufferRange in bytes.
     pub max_storage_buffer_range: Option<u32>,
-    /// maxComputeWorkGroupCount[0].
+    /// `maxComputeWorkGroupCount[0]`.
     pub max_workgroup_count_x: Option<u32>,
     /// No 64-bit integer atomics (`shaderBufferInt64Atomics`, optional in the
     /// specification; also off under `spec-limits`): the gradient accumulation adds
@@ -106,7 +106,7 @@ impl Emulation {
 
     /// `VERISPLAT_EMULATE`, parsed (empty when unset).
     pub fn from_env() -> Result<Emulation, String> {
-        match crate::former_name::env_var("VERISPLAT_EMULATE") {
+        match crate::core::former_name::env_var("VERISPLAT_EMULATE") {
             Some(v) => Emulation::parse(&v).map_err(|e| format!("VERISPLAT_EMULATE: {e}")),
             None => Ok(Emulation::default()),
         }

@@ -169,7 +169,7 @@ impl<T> VkContext<T> for Result<T, vk::Result> {
 }
 
 /// Splits `groups` workgroups into an x/y grid that respects `max_x`
-/// (maxComputeWorkGroupCount[0]); shaders recover the linear id as `x + y * num_x`
+/// (`maxComputeWorkGroupCount[0]`); shaders recover the linear id as `x + y * num_x`
 /// and ignore ids past the end.
 pub fn dispatch_grid(groups: u32, max_x: u32) -> [u32; 3] {
     if groups <= max_x {

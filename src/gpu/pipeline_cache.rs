@@ -4,7 +4,7 @@
 //! `$XDG_CACHE_HOME/verisplat/pipelines`, else `~/.cache/verisplat/pipelines`;
 //! `VERISPLAT_NO_PIPELINE_CACHE=1` turns it off). A file whose header does not name this
 //! device and driver (vendor, device id, cache UUID), or that is damaged, is ignored with a
-//! note and replaced. The cache is written back, atomically ([`crate::fsutil`]),
+//! note and replaced. The cache is written back, atomically ([`crate::core::fsutil`]),
 //! when the context goes and the driver's data grew. Whether it saves time depends on the
 //! driver: Mesa's lavapipe keeps its own disk cache of compiled shaders and returns only a
 //! header here (BENCHMARKS.md, "Start-up").
@@ -16,10 +16,10 @@ const HEADER_BYTES: usize = 32;
 
 /// Where pipeline caches are kept, or `None` (no disk cache).
 pub fn cache_dir() -> Option<PathBuf> {
-    if crate::former_name::env_var_os("VERISPLAT_NO_PIPELINE_CACHE").is_some() {
+    if crate::core::former_name::env_var_os("VERISPLAT_NO_PIPELINE_CACHE").is_some() {
         return None;
     }
-    if let Some(dir) = crate::former_name::env_var_os("VERISPLAT_PIPELINE_CACHE") {
+    if let Some(dir) = crate::core::former_name::env_var_os("VERISPLAT_PIPELINE_CACHE") {
         return Some(PathBuf::from(dir));
     }
     let base = std::env::var_os("XDG_CACHE_HOME")
@@ -90,7 +90,7 @@ pub fn store(dir: &Path, identity: &CacheIdentity, data: &[u8]) {
     }
     // The temporary file is unique per process and call, so concurrent writers never
     // share one.
-    let _ = crate::fsutil::write_bytes_atomically(&identity.file(dir), true, data);
+    let _ = crate::core::fsutil::write_bytes_atomically(&identity.file(dir), true, data);
 }
 
 #[cfg(test)]

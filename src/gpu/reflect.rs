@@ -7,7 +7,7 @@
 
 use std::collections::HashMap;
 
-use crate::shader_interface::RecordLayout;
+use crate::core::shader_interface::RecordLayout;
 
 /// What a binding slot holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -30,7 +30,7 @@ pub struct Interface {
     pub bindings: Vec<(u32, BindingKind)>,
     /// Member offsets of the push constants' record, in member order: of the block's one
     /// member when it is a struct (how the shaders declare a record of
-    /// [`crate::shader_interface`]), else of the block's own members.
+    /// [`crate::core::shader_interface`]), else of the block's own members.
     pub push_offsets: Vec<u32>,
     /// The push-constant block is one member of a struct type (a record).
     pub push_is_record: bool,
@@ -383,7 +383,7 @@ pub(crate) fn check_interface(
         if !interface.push_is_record {
             return Err(format!(
                 "shader {name} declares its push constants member by member: declare them as \
-                 one member of type {} (interface.glsl, from src/shader_interface.rs)",
+                 one member of type {} (interface.glsl, from src/core/shader_interface.rs)",
                 push.glsl
             ));
         }

@@ -4,7 +4,7 @@
 //! Sums are computed modulo 2^32: a total >= 2^32 wraps, and refusing such inputs is
 //! the caller's job (the renderer bounds its counts).
 
-pub use crate::shader_interface::ScanPush;
+pub use crate::core::shader_interface::ScanPush;
 use ash::vk;
 
 use super::shader::{by_binding, BindingKind};
@@ -70,7 +70,7 @@ impl Scan {
         })
     }
 
-    /// Pretends maxComputeWorkGroupCount[0] is `max_x` (at most the real limit), so
+    /// Pretends `maxComputeWorkGroupCount[0]` is `max_x` (at most the real limit), so
     /// tests can exercise the 2D dispatch grid with small inputs.
     pub fn with_dispatch_limit(mut self, max_x: u32) -> Self {
         self.max_groups_x = self.max_groups_x.min(max_x.max(1));

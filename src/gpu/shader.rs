@@ -8,7 +8,7 @@ use ash::vk;
 use super::device::Shared;
 use super::shader_set;
 use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
-use crate::shader_interface::RecordLayout;
+use crate::core::shader_interface::RecordLayout;
 
 /// SPIR-V compiled at build time (build.rs), by [`shader_set::ShaderVariant::key`].
 mod prebuilt {
@@ -18,7 +18,7 @@ mod prebuilt {
 /// The GLSL headers, for compiling other sources at run time ([`compile_glsl`]).
 const HEADERS: &[(&str, &str)] = &[
     ("common.glsl", include_str!("../../glsl/common.glsl")),
-    // Written by build.rs from crate::shader_interface.
+    // Written by build.rs from crate::core::shader_interface.
     (
         "interface.glsl",
         include_str!(concat!(env!("OUT_DIR"), "/glsl/interface.glsl")),
@@ -55,7 +55,7 @@ pub enum ShaderError {
 }
 
 fn glsl_dir() -> Option<std::path::PathBuf> {
-    crate::former_name::env_var_os("VERISPLAT_GLSL_DIR").map(std::path::PathBuf::from)
+    crate::core::former_name::env_var_os("VERISPLAT_GLSL_DIR").map(std::path::PathBuf::from)
 }
 
 /// A scratch directory for one run-time compile, removed on drop.

@@ -66,7 +66,7 @@ pub const SHADE_SPEC_WIDEST: u32 = 1;
 /// Far from the stages' own ids (0-3), which every pipeline may also carry.
 pub const SUBGROUP_SIZE_SPEC: u32 = 100;
 
-pub use crate::rules::MAX_FIELD_SAMPLES;
+pub use crate::core::rules::MAX_FIELD_SAMPLES;
 
 /// Specialization constant ids of the radix sort's tunables (`sort_common.glsl`).
 pub const SORT_SPEC_WG: u32 = 0;
@@ -162,9 +162,9 @@ pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> Result<[T; N
 }
 
 /// The `#define`s every shader is compiled with: the constants above and the reference's
-/// rules (`crate::rules`), so that the host (Rust) is their one source.
+/// rules (`crate::core::rules`), so that the host (Rust) is their one source.
 pub fn shared_defines() -> Vec<(String, String)> {
-    use crate::rules;
+    use crate::core::rules;
     [
         ("TILE_SIZE", format!("{}u", rules::TILE_SIZE)),
         (

@@ -27,7 +27,7 @@
 //! `sort_setup` dispatch reads it and writes the indirect dispatch arguments, so the
 //! CPU never waits mid-frame.
 
-pub use crate::shader_interface::{SortPassPush, SortSetupPush};
+pub use crate::core::shader_interface::{SortPassPush, SortSetupPush};
 use ash::vk;
 
 use super::scan::{Scan, SCRATCH_ALIGN};
@@ -383,7 +383,7 @@ impl RadixSort {
                     (bindings::sort_copy::KEYS_OUT, write),
                     (bindings::sort_copy::VALUES_OUT, write),
                 ])?,
-                &crate::shader_interface::NO_PUSH_CONSTANTS,
+                &crate::core::shader_interface::NO_PUSH_CONSTANTS,
                 &spec,
             )?,
             scan: Scan::new(ctx)?,
@@ -391,7 +391,7 @@ impl RadixSort {
         })
     }
 
-    /// Pretends maxComputeWorkGroupCount[0] is `max_x` (at most the real limit), so
+    /// Pretends `maxComputeWorkGroupCount[0]` is `max_x` (at most the real limit), so
     /// tests can exercise the 2D dispatch grid with small inputs.
     pub fn with_dispatch_limit(mut self, max_x: u32) -> Self {
         self.max_groups_x = self.max_groups_x.min(max_x.max(1));

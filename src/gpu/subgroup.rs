@@ -109,7 +109,7 @@ pub fn probe(ctx: &GpuContext) -> GpuResult<SubgroupProbe> {
         "subgroup_probe",
         &[],
         &[BindingKind::StorageBuffer],
-        &crate::shader_interface::NO_PUSH_CONSTANTS,
+        &crate::core::shader_interface::NO_PUSH_CONSTANTS,
     )?;
     debug_assert_eq!(slot::OUT, 0);
     let init = [0, u32::MAX, 0, u32::MAX, 0, u32::MAX, 0, 0, 0];

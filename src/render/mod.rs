@@ -22,7 +22,7 @@
 //! [`Ticket`]; [`GpuRenderer::finish`] waits for it, checks its counters (recording it
 //! again when it needs more), and reads it back. Each of the (at most two) frames in flight
 //! has its own command buffer, fence, timestamp queries and frame buffers, so frame n+1
-//! renders while frame n is read back ([`path::GpuPath`] drives camera paths this way).
+//! renders while frame n is read back ([`frame::path::GpuPath`] drives camera paths this way).
 //! [`GpuRenderer::render`] is a submit followed by its finish.
 
 pub mod backward;
@@ -51,10 +51,10 @@ pub fn check_storage_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuRes
     check_binding(ctx, what, bytes)
 }
 
-use crate::camera::Camera;
-use crate::frame::Frame;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::model::RenderOptions;
 use crate::gpu::{GpuContext, GpuError, GpuResult};
-use crate::model::RenderOptions;
 
 /// What a frame reads back to the host after it is rendered.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -63,7 +63,7 @@ pub enum Readback {
     #[default]
     Float,
     /// Colour packed to 8-bit RGBA on the device (alpha 255), quantised as
-    /// [`crate::output::to_u8`]: 4 bytes per pixel. For display.
+    /// [`crate::io::output::to_u8`]: 4 bytes per pixel. For display.
     Rgba8,
     /// Nothing but the frame's counters: the colour and depth images stay on the device,
     /// ready to be copied from (the frame's [`ForwardHandle`]; training reads them there).
@@ -106,7 +106,7 @@ pub struct FrameRequest<'a, 'c> {
     /// Feature channels blended over the same sorted lists with the colour rules
     /// (background 0), timed as the `features` stage.
     pub features: Option<&'a GpuFeatures>,
-    /// A neural shader ([`crate::mlp`]) that turns the feature channels into the frame's
+    /// A neural shader ([`crate::fields::mlp`]) that turns the feature channels into the frame's
     /// colour (`alpha * mlp(...) + (1 - alpha) * background`), as its own `shade` stage.
     pub shader: Option<&'a shade::GpuShader>,
     /// What is read back.
@@ -267,7 +267,7 @@ pub struct GpuRenderer {
     /// Frames save what a backward pass reads ([`Self::set_save_forward_state`]).
     save_forward: bool,
     /// The alpha falloff of the last finished frame (its backward pass's).
-    last_kernel: crate::model::SplatKernel,
+    last_kernel: crate::core::model::SplatKernel,
     /// The backward pass's pipelines and buffers, made by the first pass.
     backward: Option<backward::BackwardState>,
     ctx: GpuContext,
@@ -382,7 +382,7 @@ impl GpuRenderer {
     /// bytes of the largest per-Gaussian array: 96 instead of 192 at SH degree 3), read
     /// through an RGBA16F texel view, and 32-byte records instead of 48 (axis scales and
     /// rotation as fp16; centre and opacity stay f32), unpacked by a preprocess variant.
-    /// Not exact: frames equal the exact render of [`ActivatedScene::compact_rounded`],
+    /// Not exact: frames equal the exact render of [`ActivatedScene::compact_rounded`](crate::core::model::ActivatedScene::compact_rounded),
     /// which differs from the scene by fp16's rounding (BENCHMARKS.md measures the PSNR).
     pub fn set_compact(&mut self, on: bool) {
         self.compact = on;

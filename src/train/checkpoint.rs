@@ -74,7 +74,7 @@ impl Checkpoint {
             .as_ref()
             .and_then(|m| {
                 m.iter()
-                    .find(|(k, _)| crate::former_name::matches_key(k, META))
+                    .find(|(k, _)| crate::core::former_name::matches_key(k, META))
                     .map(|(_, v)| v.clone())
             })
             .ok_or("is not a verisplat training checkpoint (no description)")?;
@@ -97,7 +97,7 @@ impl Checkpoint {
         }
         let shader = match tensors.tensor("shader_file") {
             Ok(view) => Some(
-                crate::mlp::Mlp::parse(view.data(), None)
+                crate::fields::mlp::Mlp::parse(view.data(), None)
                     .map_err(|e| format!("its shader: {e}"))?,
             ),
             Err(_) => None,

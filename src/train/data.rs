@@ -6,9 +6,9 @@
 //! and densification scale with.
 
 use super::undistort::Undistortion;
-use crate::camera::colmap::{self, Point3D};
-use crate::camera::distortion::{self, Distortion};
-use crate::camera::Camera;
+use crate::core::camera::colmap::{self, Point3D};
+use crate::core::camera::distortion::{self, Distortion};
+use crate::core::camera::Camera;
 use std::path::{Path, PathBuf};
 
 /// Every `LLFF_HOLD`-th image (in name order, from the first) is a test image with `--eval`.
@@ -100,7 +100,7 @@ pub fn cameras_centre_and_extent(views: &[View]) -> (glam::Vec3, f32) {
 
 /// A photo's R, G and B planes (a grey one's Y thrice) and its alpha (1 without one).
 fn rgba_planes(
-    planes: &crate::image_file::Planes,
+    planes: &crate::io::image_file::Planes,
     path: &Path,
 ) -> Result<[Vec<f32>; 4], DataError> {
     let channel = |n: &str| planes.channel(n).map(|c| c.values.clone());
@@ -187,7 +187,7 @@ fn load_view(
 ) -> Result<(View, Option<Undistortion>), DataError> {
     let path = images.join(&cam.name);
     let planes =
-        crate::image_file::read_image(&path).map_err(|e| data_error(&path, e.to_string()))?;
+        crate::io::image_file::read_image(&path).map_err(|e| data_error(&path, e.to_string()))?;
     if (planes.width, planes.height) != (cam.width, cam.height) {
         return Err(data_error(
             &path,
@@ -271,9 +271,9 @@ pub fn resize(src: &[[f32; 3]], sw: u32, sh: u32, dw: u32, dh: u32) -> Vec<[f32;
 /// unless `overwrite`.
 pub fn write_rendered_dataset(
     dir: &Path,
-    scene: &crate::scene::Scene,
+    scene: &crate::core::scene::Scene,
     cameras: &[Camera],
-    shader: Option<&crate::mlp::Mlp>,
+    shader: Option<&crate::fields::mlp::Mlp>,
     point_stride: usize,
     overwrite: bool,
 ) -> Result<(), DataError> {
@@ -285,7 +285,7 @@ pub fn write_rendered_dataset(
     write_dataset(dir, scene, cameras, point_stride, overwrite, &mut |cam| {
         let mut frame = crate::cpu::render_features(&act, cam, &Default::default());
         if let Some(mlp) = shader {
-            frame.color = crate::mlp::shade(
+            frame.color = crate::fields::mlp::shade(
                 mlp,
                 cam,
                 &frame.features,
@@ -302,11 +302,11 @@ pub fn write_rendered_dataset(
 /// their colour is written as 8-bit PNG). `render` sees each camera with its final name.
 pub fn write_dataset(
     dir: &Path,
-    scene: &crate::scene::Scene,
+    scene: &crate::core::scene::Scene,
     cameras: &[Camera],
     point_stride: usize,
     overwrite: bool,
-    render: &mut dyn FnMut(&Camera) -> Result<crate::frame::Frame, String>,
+    render: &mut dyn FnMut(&Camera) -> Result<crate::core::frame::Frame, String>,
 ) -> Result<(), DataError> {
     let images = dir.join("images");
     let sparse = dir.join("sparse").join("0");
@@ -338,8 +338,13 @@ pub fn write_dataset(
     for cam in &named {
         let frame = render(cam).map_err(|m| data_error(&images.join(&cam.name), m))?;
         let path = images.join(&cam.name);
-        crate::output::write_frame(&frame, &path, crate::output::ImageFormat::Png8, overwrite)
-            .map_err(|e| data_error(&path, e.to_string()))?;
+        crate::io::output::write_frame(
+            &frame,
+            &path,
+            crate::io::output::ImageFormat::Png8,
+            overwrite,
+        )
+        .map_err(|e| data_error(&path, e.to_string()))?;
     }
     let stride = scene.sh_stride();
     let points: Vec<Point3D> = (0..scene.len())
@@ -347,14 +352,14 @@ pub fn write_dataset(
         .map(|i| Point3D {
             position: scene.positions[i].map(f64::from),
             color: [0, 1, 2].map(|c| {
-                let v = 0.5 + crate::model::sh::SH_C0 * scene.sh[i * stride + c];
+                let v = 0.5 + crate::core::model::sh::SH_C0 * scene.sh[i * stride + c];
                 (v.clamp(0.0, 1.0) * 255.0).round() as u8
             }),
         })
         .collect();
     for (name, text) in colmap::to_text_model(&named, &points) {
         let path = sparse.join(name);
-        crate::fsutil::write_bytes_atomically(&path, overwrite, text.as_bytes())
+        crate::core::fsutil::write_bytes_atomically(&path, overwrite, text.as_bytes())
             .map_err(|e| data_error(&path, e.to_string()))?;
     }
     Ok(())
@@ -468,8 +473,8 @@ fn read_transforms(
                     num(v).ok_or_else(|| bad("transform_matrix holds a non-number".into()))?;
             }
         }
-        let planes =
-            crate::image_file::read_image(&path).map_err(|e| data_error(&path, e.to_string()))?;
+        let planes = crate::io::image_file::read_image(&path)
+            .map_err(|e| data_error(&path, e.to_string()))?;
         let (w, h) = (planes.width, planes.height);
         // Intrinsics: per frame, else the file's; a focal length, else the field of view.
         let key = |k: &str| num(&f[k]).or_else(|| num(&doc[k]));

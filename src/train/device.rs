@@ -16,6 +16,10 @@
 //! the norm's sum has a fixed order.
 
 use super::model::{Model, Settings};
+use crate::core::shader_interface::{
+    MlpPush, StepPush, STEP_ADAM, STEP_CLIP, STEP_FEATURES, STEP_NOISE, STEP_NORM,
+    STEP_SKIP_OPACITY, STEP_STATS,
+};
 use crate::gpu::shader::{by_binding, BindingKind};
 use crate::gpu::shader_set::bindings::{loss_reduce, train_mlp_step as mslot, train_step as slot};
 use crate::gpu::sync::{barrier, Access};
@@ -26,10 +30,6 @@ use crate::gpu::{
 use crate::render::backward::DeviceGrads;
 use crate::render::forward::shade::GpuShader;
 use crate::render::{sh_texel_stride, GpuFeatures, GpuRenderer, GpuScene};
-use crate::shader_interface::{
-    MlpPush, StepPush, STEP_ADAM, STEP_CLIP, STEP_FEATURES, STEP_NOISE, STEP_NORM,
-    STEP_SKIP_OPACITY, STEP_STATS,
-};
 
 /// Invocations per workgroup.
 const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
@@ -115,7 +115,7 @@ impl StepPipelines {
                 "loss_reduce",
                 &[],
                 &by_binding([(loss_reduce::VALUES, s), (loss_reduce::SUMS, s)])?,
-                &crate::shader_interface::CountsPush::LAYOUT,
+                &crate::core::shader_interface::CountsPush::LAYOUT,
             )?,
             mlp: ComputePipeline::from_embedded(
                 ctx,
@@ -499,7 +499,7 @@ impl<'p> DeviceModel<'p> {
                 ctx,
                 cmd,
                 &[src.whole(), dst.whole()],
-                bytemuck::bytes_of(&crate::shader_interface::CountsPush {
+                bytemuck::bytes_of(&crate::core::shader_interface::CountsPush {
                     counts: [count as u32, 0, 0, 0],
                 }),
                 [out as u32, 1, 1],

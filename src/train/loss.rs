@@ -5,9 +5,9 @@
 //! per-pixel gradient feeds the backward pass without leaving the device.
 //!
 //! L1 is the mean of `|x - y|` over every pixel and channel (its derivative at `x == y`
-//! is 0, as torch's); SSIM is [`crate::metrics::ssim`] (11x11 Gaussian window, sigma 1.5,
+//! is 0, as torch's); SSIM is [`crate::io::metrics::ssim`] (11x11 Gaussian window, sigma 1.5,
 //! zero padding, the mean over pixels and channels), differentiated as
-//! [`crate::metrics::ssim_with_gradient`] documents.
+//! [`crate::io::metrics::ssim_with_gradient`] documents.
 //!
 //! The device runs seven passes, each a dispatch with its barrier: the five quantities SSIM
 //! compares (`ssim_prepare`), the window along x and y (`ssim_filter`), SSIM and its
@@ -18,6 +18,7 @@
 //! reads its source through texel views (the same bits; llvmpipe runs a storage-buffer load
 //! in the tap loop as a scalar loop per lane).
 
+use crate::core::shader_interface::{CountsPush, FilterPush, LossGradPush, RecordLayout, SizePush};
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
@@ -25,7 +26,6 @@ use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
     MemoryKind,
 };
-use crate::shader_interface::{CountsPush, FilterPush, LossGradPush, RecordLayout, SizePush};
 
 /// The original's weight of the D-SSIM term (`lambda_dssim`).
 pub const LAMBDA_DSSIM: f32 = 0.2;
@@ -70,7 +70,8 @@ pub fn loss_reference(
     lambda: f64,
 ) -> (LossValue, Vec<f64>) {
     let n = image.len().max(1) as f64;
-    let (ssim, g_ssim) = crate::metrics::ssim_with_gradient(image, target, width, height, channels);
+    let (ssim, g_ssim) =
+        crate::io::metrics::ssim_with_gradient(image, target, width, height, channels);
     let l1 = image
         .iter()
         .zip(target)
@@ -338,7 +339,7 @@ impl GpuLoss {
         let size = SizePush {
             size: [width, height, 0, 0],
         };
-        let taps64 = crate::metrics::ssim_taps();
+        let taps64 = crate::io::metrics::ssim_taps();
         let mut taps = [[0f32; 4]; 3];
         for (k, t) in taps64.iter().enumerate() {
             taps[k / 4][k % 4] = *t as f32;

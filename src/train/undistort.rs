@@ -7,8 +7,8 @@
 //! its valid region). The trainer records each [`Undistortion`] in the model directory's
 //! `undistortion.json` ([`UNDISTORTION_FILE`]), which `eval` applies to the same photos.
 
-use crate::camera::distortion::Distortion;
-use crate::camera::{Camera, MAX_IMAGE_SIDE};
+use crate::core::camera::distortion::Distortion;
+use crate::core::camera::{Camera, MAX_IMAGE_SIDE};
 use serde::{Deserialize, Serialize};
 
 /// The file of a model directory recording how its photos were undistorted.

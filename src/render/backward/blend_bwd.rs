@@ -3,13 +3,13 @@
 //! pair, the bin's summed gradient with respect to the pair's Gaussian (2D mean, conic,
 //! opacity, colour, depth, |2D mean|), plus the largest |sum| per field.
 
+use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::blend_bwd as slot;
 use crate::gpu::shader_set::{
     GRAD_FIELDS, GRAD_SPEC_BATCH, GRAD_SPEC_MAX_SUBGROUPS, MAX_FEATURE_GROUPS,
 };
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
-use crate::model::SplatKernel;
 use ash::vk;
 
 /// The blend-backward pipeline for one bin size, layout and kernel.
@@ -133,7 +133,7 @@ impl BlendBwd {
                 (slot::FEATURES, storage),
                 (slot::GRAD_FEATURES, storage),
             ])?,
-            &crate::shader_interface::NO_PUSH_CONSTANTS,
+            &crate::core::shader_interface::NO_PUSH_CONSTANTS,
             &if rows {
                 Vec::new()
             } else {

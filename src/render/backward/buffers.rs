@@ -22,7 +22,7 @@ pub(super) struct BackwardBuffers {
     pub(super) maxima: Option<GpuBuffer>,
     /// Each Gaussian's sums, 64-bit fixed point (or float).
     pub(super) acc: Option<GpuBuffer>,
-    /// Each Gaussian's [`crate::shader_interface::GaussianGrad`].
+    /// Each Gaussian's [`crate::core::shader_interface::GaussianGrad`].
     pub(super) grads: Option<GpuBuffer>,
     /// dL/d SH coefficient, in the SH texels' layout.
     pub(super) sh_grads: Option<GpuBuffer>,

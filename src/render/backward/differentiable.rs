@@ -5,12 +5,12 @@
 //! ([`DiffRasterizer::set_shader`]) the Gaussians' direct values are feature channels that
 //! the shader turns into colour, and the backward pass also returns the shader's gradients.
 
-use crate::camera::Camera;
-use crate::frame::Frame;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
+use crate::core::model::RenderOptions;
+use crate::fields::mlp::{Mlp, MlpParams};
 use crate::gpu::{GpuContext, GpuError, GpuResult};
-use crate::mlp::{Mlp, MlpParams};
-use crate::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
-use crate::model::RenderOptions;
 use crate::render::forward::shade::GpuShader;
 use crate::render::forward::types::Splat;
 use crate::render::{ForwardHandle, FrameRequest};
@@ -106,7 +106,7 @@ impl DiffRasterizer {
         &mut self.renderer
     }
 
-    /// Shades the frames with `mlp` (a neural shader, [`crate::mlp`]) from now on, or not
+    /// Shades the frames with `mlp` (a neural shader, [`crate::fields::mlp`]) from now on, or not
     /// (`None`). The Gaussians' direct values are then its feature channels and
     /// [`Self::backward_shaded`] returns its gradients too. A training step's new weights
     /// (a network of the same shape) are uploaded in place.

@@ -5,10 +5,10 @@
 //! or with float atomics (the opt-in fast mode; by compare-and-swap where the device has no
 //! float atomic add).
 
+pub use crate::core::shader_interface::GradPush;
 use crate::gpu::shader::{by_binding, BindingKind};
 use crate::gpu::shader_set::bindings::grad_accumulate as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
-pub use crate::shader_interface::GradPush;
 use ash::vk;
 
 /// How per-pair gradients are added into per-Gaussian sums.

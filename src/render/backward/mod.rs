@@ -29,12 +29,12 @@ mod pass;
 pub mod preprocess_bwd;
 pub mod shade_bwd;
 
-use crate::camera::Camera;
-use crate::frame::Frame;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::model::grad::{PixelGrads, SplatGrads};
+use crate::core::model::{sh_coeffs_for_degree, SplatKernel};
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
 use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuResult, GpuTimer};
-use crate::model::grad::{PixelGrads, SplatGrads};
-use crate::model::{sh_coeffs_for_degree, SplatKernel};
 use crate::render::forward::shade::GpuShader;
 use crate::render::frame::buffers::FrameSet;
 use crate::render::{check_binding, ForwardHandle, ForwardState, GpuRenderer, GpuScene, Stage};
@@ -287,7 +287,7 @@ impl GpuRenderer {
     /// are the Gaussians' `(values, k)` it blended, `grads.color` dL/d(the shaded colour,
     /// 3 channels). Returns the Gaussians' gradients (`colors`: dL/d(feature values), `k`
     /// per Gaussian) and the network's, in the float layout of its weights
-    /// ([`crate::mlp::Mlp::gpu_words`] after the header: per layer the weights, row-major
+    /// ([`crate::fields::mlp::Mlp::gpu_words`] after the header: per layer the weights, row-major
     /// `outputs x inputs`, then the biases).
     #[allow(clippy::too_many_arguments)]
     pub fn backward_shaded(

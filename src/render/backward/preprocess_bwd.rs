@@ -11,7 +11,7 @@ use crate::render::backward::grad_accumulate::GradPush;
 
 /// Bytes of one Gaussian's gradients in the output (`GaussianGrad`: four vec4).
 pub const GAUSSIAN_GRAD_BYTES: u64 =
-    std::mem::size_of::<crate::shader_interface::GaussianGrad>() as u64;
+    std::mem::size_of::<crate::core::shader_interface::GaussianGrad>() as u64;
 
 /// What the preprocess backward binds: the frame's parameters and the scene, the forward's
 /// splats, the accumulated sums, and the Gaussians' gradients it writes.

@@ -1,5 +1,5 @@
 //! Shade backward stage (`glsl/shade_bwd.comp`, then `glsl/mlp_grad_reduce.comp`): the
-//! neural shader's ([`crate::mlp`]) backward pass on the device. From dL/d(shaded colour)
+//! neural shader's ([`crate::fields::mlp`]) backward pass on the device. From dL/d(shaded colour)
 //! and dL/d(alpha) per pixel it writes dL/d(feature channels) and the shader's part of
 //! dL/d(alpha) per pixel, which the feature blend's backward then takes, and the
 //! network's weight and bias gradients.
@@ -10,14 +10,14 @@
 //! chunks), and the reduce sums the slots in order. The rules are
 //! [`crate::cpu::backward::backward_shaded`]'s.
 
-use crate::camera::Camera;
+use crate::core::camera::Camera;
+use crate::core::shader_interface::ShadeBwdPush;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
 use crate::gpu::shader_set::{SHADE_CHUNK_PIXELS, SHADE_SPEC_ACTIVATIONS, SHADE_SPEC_WIDEST};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use crate::render::forward::shade::{GpuShader, ShadePush};
-use crate::shader_interface::ShadeBwdPush;
 use ash::vk;
 
 /// Pixels per chunk: one per invocation of a workgroup.
@@ -107,7 +107,7 @@ impl ShadeBwd {
             "mlp_grad_reduce",
             &[],
             &by_binding([(rslot::PARTIALS, storage), (rslot::GRADS, storage)])?,
-            &crate::shader_interface::CountsPush::LAYOUT,
+            &crate::core::shader_interface::CountsPush::LAYOUT,
         )?;
         Ok(ShadeBwd {
             pipeline,
@@ -182,7 +182,7 @@ impl ShadeBwd {
             ctx,
             cmd,
             &[bufs.partials, bufs.grads],
-            bytemuck::bytes_of(&crate::shader_interface::CountsPush {
+            bytemuck::bytes_of(&crate::core::shader_interface::CountsPush {
                 counts: [shader.params, slots as u32, 0, 0],
             }),
             [shader.params.div_ceil(64), 1, 1],

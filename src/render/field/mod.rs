@@ -3,15 +3,15 @@
 //! formula). No projection, sort or blend: one dispatch per group of four channels, each
 //! 16x8 workgroup summing the Gaussians whose support can reach its tile.
 
-use crate::camera::Camera;
-use crate::frame::Frame;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::model::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
+use crate::core::shader_interface::FieldPush;
+pub use crate::core::shader_interface::{FieldGaussian, FieldParams};
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::field as slot;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
-use crate::model::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
-use crate::shader_interface::FieldPush;
-pub use crate::shader_interface::{FieldGaussian, FieldParams};
 
 /// Workgroup width and height in pixels (16 x 8 = 128 invocations, `glsl/field.comp`).
 const SIDE: u32 = 16;
@@ -93,7 +93,7 @@ impl GpuField {
             count: g.len() as u32,
             k: g.k,
             groups: groups as u32,
-            cutoff: crate::model::field::field_cutoff(g.kernel) as f32,
+            cutoff: crate::core::model::field::field_cutoff(g.kernel) as f32,
             bounds: g.bounds,
         })
     }
@@ -103,13 +103,13 @@ impl GpuField {
 /// allocates its parameter and output buffers (a field render is one submission, waited
 /// for).
 pub struct FieldRenderer {
-    kernel: crate::model::SplatKernel,
+    kernel: crate::core::model::SplatKernel,
     pipelines: [Option<ComputePipeline>; 3],
 }
 
 impl FieldRenderer {
     /// A renderer for fields with `kernel`'s falloff.
-    pub fn new(kernel: crate::model::SplatKernel) -> Self {
+    pub fn new(kernel: crate::core::model::SplatKernel) -> Self {
         FieldRenderer {
             kernel,
             pipelines: [None, None, None],
@@ -254,7 +254,7 @@ impl FieldRenderer {
                 *v = planes[(c / 4) * pixels + p][c % 4];
             }
         }
-        Ok(crate::model::field::frame_from_channels(
+        Ok(crate::core::model::field::frame_from_channels(
             cam.width, cam.height, k, features,
         ))
     }

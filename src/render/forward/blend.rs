@@ -1,10 +1,10 @@
 //! Blend stage (`glsl/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
+use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::blend as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
-use crate::model::SplatKernel;
 use ash::vk;
 
 /// Shared memory of the shared kernel per pixel of a tile: one staged Gaussian's mean and
@@ -38,7 +38,8 @@ impl BlendKernel {
     /// 12 KiB of shared memory: the texel kernel's 8x8 bins need 32 invocations and no
     /// shared memory). `VERISPLAT_BLEND` (`shared`, `texel` or `texel:N`) overrides.
     pub fn for_device(ctx: &GpuContext) -> BlendKernel {
-        if let Some(k) = crate::former_name::env_var("VERISPLAT_BLEND").and_then(|v| v.parse().ok())
+        if let Some(k) =
+            crate::core::former_name::env_var("VERISPLAT_BLEND").and_then(|v| v.parse().ok())
         {
             return k;
         }
@@ -54,7 +55,7 @@ impl BlendKernel {
     /// kernel (256 invocations, 12 KiB of shared memory), 16 / strip x 16 invocations for
     /// a texel kernel.
     pub fn fits(self, info: &crate::gpu::DeviceInfo) -> bool {
-        let tile = crate::rules::TILE_SIZE * crate::rules::TILE_SIZE;
+        let tile = crate::core::rules::TILE_SIZE * crate::core::rules::TILE_SIZE;
         match self {
             BlendKernel::Shared => {
                 info.max_workgroup_invocations >= tile

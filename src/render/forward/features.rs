@@ -2,10 +2,10 @@
 //! scene's K feature channels over the same sorted bin lists, four channels per dispatch
 //! (one dispatch per group of four), with the colour rules and background 0.
 
+use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::blend_features as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuImage, GpuResult};
-use crate::model::SplatKernel;
 use ash::vk;
 
 /// Channels blended per dispatch (one vec4 per Gaussian and per pixel).

@@ -60,7 +60,7 @@ impl Order {
                 (slot::TOUCHED, BindingKind::StorageBuffer),
                 (slot::TOUCHED_IN_ORDER, BindingKind::StorageBuffer),
             ])?,
-            &crate::shader_interface::NO_PUSH_CONSTANTS,
+            &crate::core::shader_interface::NO_PUSH_CONSTANTS,
         )?;
         Ok(Order { pipeline })
     }

@@ -1,5 +1,5 @@
 //! Pack stage (`glsl/pack.comp`): the colour image as 8-bit RGBA on the device, quantised
-//! as [`crate::output::to_u8`], so a consumer that only shows the frame reads back a
+//! as [`crate::io::output::to_u8`], so a consumer that only shows the frame reads back a
 //! quarter of the colour plane's bytes and no alpha or depth.
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};

@@ -47,7 +47,7 @@ impl Ranges {
                 (slot::RANGES, BindingKind::StorageBuffer),
                 (slot::COUNTERS, BindingKind::StorageBuffer),
             ])?,
-            &crate::shader_interface::NO_PUSH_CONSTANTS,
+            &crate::core::shader_interface::NO_PUSH_CONSTANTS,
         )?;
         Ok(Ranges { pipeline, texel_io })
     }

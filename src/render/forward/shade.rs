@@ -1,15 +1,15 @@
-//! Shade stage (`glsl/shade.comp`): the neural shader ([`crate::mlp`]) over the blended
+//! Shade stage (`glsl/shade.comp`): the neural shader ([`crate::fields::mlp`]) over the blended
 //! feature image, after the blend and the feature blend, writing the colour image.
 
-use crate::camera::Camera;
+use crate::core::camera::Camera;
+pub(crate) use crate::core::shader_interface::ShadePush;
+use crate::fields::mlp::Mlp;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::bindings::shade as slot;
 use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuImage, GpuResult,
     MemoryKind,
 };
-use crate::mlp::Mlp;
-pub(crate) use crate::shader_interface::ShadePush;
 use ash::vk;
 
 /// Workgroup side (16 x 16 invocations).
@@ -167,8 +167,8 @@ impl GpuShader {
         self.words.whole()
     }
 
-    /// Words of the header before the weights ([`crate::mlp::Mlp::gpu_words`]).
-    pub const WEIGHTS_OFFSET: u32 = 4 * crate::mlp::MAX_LAYERS as u32;
+    /// Words of the header before the weights ([`crate::fields::mlp::Mlp::gpu_words`]).
+    pub const WEIGHTS_OFFSET: u32 = 4 * crate::fields::mlp::MAX_LAYERS as u32;
 
     /// Weights and biases, all layers.
     pub fn param_count(&self) -> u32 {

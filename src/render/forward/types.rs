@@ -1,8 +1,8 @@
 //! The records the forward stages share with their shaders, declared once in
-//! [`crate::shader_interface`] (which writes their GLSL), and what the host does with them.
+//! [`crate::core::shader_interface`] (which writes their GLSL), and what the host does with them.
 //! The tests pin every size and offset the host relies on.
 
-pub use crate::shader_interface::{
+pub use crate::core::shader_interface::{
     BlendPush, Counters, FeatureBlendPush, FrameParams, GpuGaussian, GpuGaussianCompact, KeysPush,
     PackPush, Splat, WindowPush,
 };

@@ -1,7 +1,7 @@
 //! Per-frame device resources: the frame buffers sized by the scene, the resolution and
 //! the key capacity, the feature planes, and the set of them each frame in flight owns.
 
-use crate::camera::Camera;
+use crate::core::camera::Camera;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::{SortTexels, SORT_CONFIG_32};
 use crate::gpu::{

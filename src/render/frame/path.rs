@@ -1,16 +1,16 @@
 //! Camera paths on the device with frames in flight: [`GpuPath`] is the
-//! [`FrameSource`] that [`crate::sequence::run_pipelined`] drives. With two frames in
+//! [`FrameSource`] that `crate::app::sequence::run_pipelined` drives. With two frames in
 //! flight, frame `n + 1` is recorded and submitted before frame `n` is waited for, read
 //! back and handed to the encoders, so the device renders while the CPU reads back.
 
-use crate::camera::Camera;
-use crate::frame::Frame;
-use crate::model::RenderOptions;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
+use crate::core::frame::FrameSource;
+use crate::core::model::RenderOptions;
 use crate::render::forward::shade::GpuShader;
 use crate::render::FrameRequest;
 use crate::render::{FrameStats, GpuFeatures, GpuRenderer, GpuScene};
 use crate::render::{StageTimings, Ticket, MAX_FRAMES_IN_FLIGHT};
-use crate::sequence::FrameSource;
 use std::collections::VecDeque;
 
 /// Called with each finished frame's timings and counts.
@@ -32,8 +32,8 @@ pub struct GpuPath<'a> {
 
 impl<'a> GpuPath<'a> {
     /// Frames of `scene` rendered with `opts`, up to `frames_in_flight` (1 or 2) in
-    /// flight: the frames a [`crate::sequence::run_pipelined`] with the same
-    /// [`crate::sequence::RunOptions::frames_in_flight`] submits.
+    /// flight: the frames a `crate::app::sequence::run_pipelined` with the same
+    /// [`crate::app::sequence::RunOptions::frames_in_flight`] submits.
     pub fn new(
         renderer: &'a mut GpuRenderer,
         scene: &'a GpuScene,

@@ -2,9 +2,9 @@
 //! never renders features builds no feature blend, a command that only uploads builds no
 //! pipeline at all, and the compact and power-kernel variants cost nothing until used.
 
+use crate::core::model::SplatKernel;
 use crate::gpu::sort::{SortConfig, SORT_CONFIG_32};
 use crate::gpu::{GpuContext, GpuError, GpuResult, RadixSort, Scan};
-use crate::model::SplatKernel;
 
 use crate::render::forward::blend::{Blend, BlendKernel};
 use crate::render::forward::features::FeatureBlend;

@@ -1,8 +1,8 @@
 //! Reading a finished frame back to the host: pixels, counters, feature planes and the
 //! intermediate buffers the tests compare with the CPU reference.
 
-use crate::camera::Camera;
-use crate::frame::Frame;
+use crate::core::camera::Camera;
+use crate::core::frame::Frame;
 use crate::gpu::{BufferSlice, GpuError, GpuImage, GpuResult};
 use crate::render::forward::types::{Counters, Splat};
 

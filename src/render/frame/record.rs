@@ -1,14 +1,14 @@
-//! Recording a frame's command buffer. [`FrameRecorder::record`] reads top to bottom as
+//! Recording a frame's command buffer. `FrameRecorder::record` reads top to bottom as
 //! the pipeline: clear -> preprocess -> order -> scan -> (per chunk: keys -> sort ->
 //! ranges -> features -> blend) -> shade -> readback, one short function per phase, each
 //! stage inside its timestamp pair ([`Stage`]) and each barrier saying what it orders.
 
-use crate::camera::Camera;
+use crate::core::camera::Camera;
+use crate::core::model::RenderOptions;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::SortJob;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
-use crate::model::RenderOptions;
 use crate::render::forward::features::FeatureBindings;
 use crate::render::forward::order::OrderBindings;
 use crate::render::forward::pack::PackBindings;
@@ -110,7 +110,7 @@ fn frame_params(
             if opts.antialiased { 1.0 } else { 0.0 },
         ],
         focal: [cam.fx, cam.fy, cam.cx, cam.cy],
-        limits: crate::model::clamp_limits(cam, opts.rules),
+        limits: crate::core::model::clamp_limits(cam, opts.rules),
         background: [
             opts.background[0],
             opts.background[1],

@@ -1,9 +1,9 @@
 //! Scheduling a frame: the capacity and bin-size policy, regrowing, and depth-ordered
 //! chunks for frames whose pairs exceed one key buffer.
 
-use crate::camera::Camera;
+use crate::core::camera::Camera;
+use crate::core::model::RenderOptions;
 use crate::gpu::{limits, GpuBuffer, GpuError, GpuResult, MemoryKind};
-use crate::model::RenderOptions;
 use crate::render::forward::types::{Counters, Splat};
 
 use crate::render::forward::{keys, preprocess};

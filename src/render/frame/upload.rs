@@ -1,8 +1,8 @@
 //! Scene upload: the Gaussians' records, their SH coefficients and feature channels on
 //! the device ([`GpuScene`], [`GpuFeatures`]).
 
+use crate::core::model::ActivatedScene;
 use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
-use crate::model::ActivatedScene;
 use crate::render::forward::types::{GpuGaussian, GpuGaussianCompact};
 use ash::vk;
 

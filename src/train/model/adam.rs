@@ -3,8 +3,8 @@
 //! learning rates and optional gradient-norm clipping.
 
 use super::{Model, Settings};
-use crate::model::grad::SplatGrads;
-use crate::scene::sigmoid;
+use crate::core::model::grad::SplatGrads;
+use crate::core::scene::sigmoid;
 
 /// Adam's betas (torch.optim.Adam's defaults, as the original uses them).
 const ADAM_BETAS: (f32, f32) = (0.9, 0.999);
@@ -93,7 +93,7 @@ impl Model {
     pub fn step(
         &mut self,
         grads: &SplatGrads<f32>,
-        shader_grads: Option<&crate::mlp::MlpParams<f32>>,
+        shader_grads: Option<&crate::fields::mlp::MlpParams<f32>>,
         position_lr: f32,
         settings: &Settings,
         skip_opacity: bool,
@@ -137,7 +137,7 @@ impl Model {
         if self.shader.is_some() {
             g_feat = grads.colors.clone();
         } else {
-            let k = crate::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
+            let k = crate::core::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
             for i in 0..n {
                 g_sh[i * stride..i * stride + k].copy_from_slice(&grads.colors[i * k..(i + 1) * k]);
             }

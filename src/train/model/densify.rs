@@ -4,8 +4,8 @@
 
 use super::adam::Moments;
 use super::{logit, Model, Settings};
-use crate::gen::Rng;
-use crate::scene::Scene;
+use crate::core::gen::Rng;
+use crate::core::scene::Scene;
 
 impl Model {
     /// The original's `reset_opacity`: every opacity to at most 0.01, its Adam state zero.

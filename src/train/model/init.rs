@@ -4,10 +4,10 @@
 
 use super::adam::Moments;
 use super::{logit, Model};
-use crate::camera::colmap::Point3D;
-use crate::gen::Rng;
-use crate::model::sh::SH_C0;
-use crate::scene::Scene;
+use crate::core::camera::colmap::Point3D;
+use crate::core::gen::Rng;
+use crate::core::model::sh::SH_C0;
+use crate::core::scene::Scene;
 
 /// The mean squared distance to the three nearest other points (the original's
 /// `distCUDA2`), through a uniform grid.
@@ -140,7 +140,7 @@ impl Model {
 
     /// Learns `k` feature channels per Gaussian (started at small seeded values) and the
     /// neural shader `mlp`, which turns them into colour, instead of SH colour.
-    pub fn with_features(mut self, mlp: crate::mlp::Mlp, rng: &mut Rng) -> Self {
+    pub fn with_features(mut self, mlp: crate::fields::mlp::Mlp, rng: &mut Rng) -> Self {
         let k = mlp.feature_channels();
         let n = self.len();
         self.scene.feature_count = k;

@@ -3,8 +3,8 @@
 //! refinement (relocate the dead, grow by 5 %).
 
 use super::{logit, Model};
-use crate::gen::Rng;
-use crate::scene::sigmoid;
+use crate::core::gen::Rng;
+use crate::core::scene::sigmoid;
 
 /// The counter-based random numbers of the MCMC noise, the same on the host and the
 /// device (`glsl/train_step.comp`): a PCG hash.
@@ -176,7 +176,7 @@ fn sample_by(from: &[usize], weight: &[f32], count: usize, rng: &mut Rng) -> Vec
 /// `s`), in f32 as the device computes it.
 fn covariance_times(q: [f32; 4], s: [f32; 3], v: [f32; 3]) -> [f32; 3] {
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let r = crate::model::field::rotation(q.map(|v| v / n));
+    let r = crate::core::model::field::rotation(q.map(|v| v / n));
     // t = S S R^T v, then R t.
     let rt = [0, 1, 2].map(|a| r[0][a] * v[0] + r[1][a] * v[1] + r[2][a] * v[2]);
     let t = [0, 1, 2].map(|a| s[a] * s[a] * rt[a]);
@@ -186,7 +186,7 @@ fn covariance_times(q: [f32; 4], s: [f32; 3], v: [f32; 3]) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::colmap::Point3D;
+    use crate::core::camera::colmap::Point3D;
 
     /// The MCMC relocation keeps what a pixel sees: `n` copies of the new opacity
     /// composite to the old one (`1 - (1 - o')^n = o`), one copy changes nothing, and the

@@ -22,8 +22,8 @@ pub use init::{mean_sq_dist3, random_points};
 pub use mcmc::{noise_key, noise_normal, pcg_hash, relocation};
 pub use settings::{position_lr, Mcmc, Settings};
 
-use crate::model::grad::{ColorParams, SplatGrads, SplatParams};
-use crate::scene::{sigmoid, Scene};
+use crate::core::model::grad::{ColorParams, SplatGrads, SplatParams};
+use crate::core::scene::{sigmoid, Scene};
 use adam::Moments;
 
 /// The logit (inverse sigmoid) of the probability `p`.
@@ -43,7 +43,7 @@ pub struct Model {
     steps: [u32; 7],
     /// A neural shader learned with the feature channels (`scene.features`), and its
     /// moments (weights and biases flattened as `Mlp::gpu_words` orders them).
-    pub shader: Option<crate::mlp::Mlp>,
+    pub shader: Option<crate::fields::mlp::Mlp>,
     shader_moments: Moments,
     /// Per Gaussian: the sum of its 2D-mean gradient norms (NDC) and how many views saw it.
     grad_accum: Vec<f32>,
@@ -66,7 +66,7 @@ impl Model {
     pub fn params(&self) -> SplatParams<f32> {
         let s = &self.scene;
         let stride = s.sh_stride();
-        let k = crate::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
+        let k = crate::core::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
         SplatParams {
             means: s.positions.clone(),
             quats: s.rotations.clone(),

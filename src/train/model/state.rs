@@ -4,11 +4,12 @@
 
 use super::adam::Moments;
 use super::Model;
-use crate::scene::Scene;
+use crate::core::scene::Scene;
 
 /// Where a Gaussian's colour starts in its device record ([`Model::record_floats`]): a
 /// whole vec4 from the record's start.
-pub(in crate::train) const COLOUR_OFFSET: usize = crate::shader_interface::COLOUR_OFFSET as usize;
+pub(in crate::train) const COLOUR_OFFSET: usize =
+    crate::core::shader_interface::COLOUR_OFFSET as usize;
 
 /// A checkpoint's scalars (counts, degrees, step counts) by name.
 pub(crate) type Scalars = serde_json::Map<String, serde_json::Value>;
@@ -59,7 +60,7 @@ impl Model {
     pub(crate) fn from_state(
         mut arrays: std::collections::HashMap<String, Vec<f32>>,
         meta: &serde_json::Map<String, serde_json::Value>,
-        shader: Option<crate::mlp::Mlp>,
+        shader: Option<crate::fields::mlp::Mlp>,
     ) -> Result<Self, String> {
         let num = |k: &str| {
             meta.get(k)

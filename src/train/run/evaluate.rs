@@ -2,7 +2,7 @@
 //! training views) rendered and compared with their photos (PSNR, SSIM, L1, FLIP).
 
 use super::{Evaluation, Job, Run, TrainError};
-use crate::model::RenderOptions;
+use crate::core::model::RenderOptions;
 use crate::render::backward::differentiable::DiffRasterizer;
 use crate::train::data::View;
 use crate::train::model::Model;
@@ -66,9 +66,9 @@ fn evaluate_views(
             .collect();
         let gt: Vec<f32> = v.image.iter().flatten().copied().collect();
         let (w, h) = (v.camera.width as usize, v.camera.height as usize);
-        psnr += crate::metrics::psnr(&gt, &img, 1.0);
-        ssim += crate::metrics::ssim(&gt, &img, w, h, 3);
-        flip += crate::metrics::flip(&gt, &img, w, h, crate::metrics::flip_default_ppd());
+        psnr += crate::io::metrics::psnr(&gt, &img, 1.0);
+        ssim += crate::io::metrics::ssim(&gt, &img, w, h, 3);
+        flip += crate::io::metrics::flip(&gt, &img, w, h, crate::io::metrics::flip_default_ppd());
         l1 += img
             .iter()
             .zip(&gt)

@@ -32,8 +32,8 @@ use super::data::Dataset;
 use super::device::DeviceModel;
 use super::loss::{GpuLoss, LossValue};
 use super::model::{Model, Settings};
-use crate::gen::Rng;
-use crate::model::RenderOptions;
+use crate::core::gen::Rng;
+use crate::core::model::RenderOptions;
 use crate::render::backward::differentiable::DiffRasterizer;
 use schedule::{Due, Plan};
 use std::cell::OnceCell;
@@ -61,11 +61,11 @@ pub struct TrainOptions {
     pub overwrite: bool,
     /// Feature splats: the neural shader to start from; the Gaussians then learn its
     /// feature channels (instead of SH colour) and the shader its weights, jointly.
-    pub shader: Option<crate::mlp::Mlp>,
+    pub shader: Option<crate::fields::mlp::Mlp>,
     /// The alpha falloff trained with (recorded in the PLY).
-    pub kernel: crate::model::SplatKernel,
+    pub kernel: crate::core::model::SplatKernel,
     /// The rasterizer's rules (`--rules`), recorded in the model.
-    pub rules: crate::model::Rules,
+    pub rules: crate::core::model::Rules,
     /// Iterations after which a checkpoint (`chkpntN.safetensors`) is written.
     pub checkpoint_iterations: Vec<u32>,
     /// Continue from this checkpoint (of the same data set and settings).
@@ -95,8 +95,8 @@ impl Default for TrainOptions {
             random_points: 100_000,
             overwrite: false,
             shader: None,
-            kernel: crate::model::SplatKernel::default(),
-            rules: crate::model::Rules::default(),
+            kernel: crate::core::model::SplatKernel::default(),
+            rules: crate::core::model::Rules::default(),
             checkpoint_iterations: Vec::new(),
             resume: None,
             cancel: None,
@@ -128,8 +128,8 @@ impl TrainOptions {
                 .collect::<Vec<_>>()
         ) + match self.rules {
             // The original's leave the fingerprints of earlier checkpoints as they were.
-            crate::model::Rules::Original => "",
-            crate::model::Rules::Gsplat => "|rules gsplat",
+            crate::core::model::Rules::Original => "",
+            crate::core::model::Rules::Gsplat => "|rules gsplat",
         }
     }
 }
@@ -220,7 +220,7 @@ pub enum TrainError {
     Gpu(#[from] crate::gpu::GpuError),
     /// Writing the model.
     #[error(transparent)]
-    Write(#[from] crate::fsutil::WriteError),
+    Write(#[from] crate::core::fsutil::WriteError),
     /// Stopped by a signal after writing a checkpoint.
     #[error("{message}")]
     Interrupted {

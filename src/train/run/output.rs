@@ -3,7 +3,7 @@
 //! shader of feature splats beside it), and the checkpoints (`chkpntN.safetensors`).
 
 use super::{Job, Run, TrainError};
-use crate::camera::Camera;
+use crate::core::camera::Camera;
 use std::path::{Path, PathBuf};
 
 /// Writes `bytes` to `path` (its directory made first) and records it in `written`.
@@ -17,7 +17,7 @@ pub(super) fn write(
         std::fs::create_dir_all(dir)
             .map_err(|e| TrainError::Other(format!("{}: cannot create: {e}", dir.display())))?;
     }
-    crate::fsutil::write_bytes_atomically(path, overwrite, bytes)?;
+    crate::core::fsutil::write_bytes_atomically(path, overwrite, bytes)?;
     written.push(path.to_path_buf());
     Ok(())
 }
@@ -28,7 +28,7 @@ fn stem(name: &str) -> &str {
 }
 
 /// The points as the original's `input.ply` (x y z nx ny nz red green blue).
-pub(super) fn points_ply(points: &[crate::camera::colmap::Point3D]) -> Vec<u8> {
+pub(super) fn points_ply(points: &[crate::core::camera::colmap::Point3D]) -> Vec<u8> {
     let mut out = format!(
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
         points.len()
@@ -65,7 +65,8 @@ pub(super) fn write_cameras_and_cfg(
             (i, c)
         })
         .collect();
-    let json = crate::camera::inria::to_json(&all).map_err(|e| TrainError::Other(e.to_string()))?;
+    let json =
+        crate::core::camera::inria::to_json(&all).map_err(|e| TrainError::Other(e.to_string()))?;
     write(
         &out.join("cameras.json"),
         json.as_bytes(),
@@ -132,9 +133,9 @@ impl Run<'_> {
             .join("point_cloud")
             .join(format!("iteration_{it}"))
             .join("point_cloud.ply");
-        let bytes = crate::scene::ply::to_bytes(
+        let bytes = crate::core::scene::ply::to_bytes(
             &model.scene,
-            crate::scene::ply::PlyEncoding::BinaryLittleEndian,
+            crate::core::scene::ply::PlyEncoding::BinaryLittleEndian,
         );
         write(&path, &bytes, overwrite, &mut self.written)?;
         if let Some(mlp) = &model.shader {

@@ -4,7 +4,7 @@
 
 use super::output::{points_ply, write};
 use super::{Job, Run, StageSums, TrainError};
-use crate::gen::Rng;
+use crate::core::gen::Rng;
 use crate::train::checkpoint::Checkpoint;
 use crate::train::model::{random_points, Model};
 use std::path::PathBuf;

@@ -4,9 +4,9 @@
 
 use super::schedule::Plan;
 use super::{Job, Run, TrainError};
+use crate::core::model::grad::PixelGrads;
+use crate::core::model::RenderOptions;
 use crate::gpu::sync::{barrier, Access};
-use crate::model::grad::PixelGrads;
-use crate::model::RenderOptions;
 use crate::render::backward::differentiable::DiffRasterizer;
 use crate::render::backward::DeviceFeatures;
 use crate::render::{FrameRequest, Readback, Rendered};

@@ -6,7 +6,7 @@ use crate::common::cli::{fails, stderr, verisplat};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use verisplat::scene::ply;
+use verisplat::core::scene::ply;
 
 #[test]
 fn demo_render_writes_a_picture_of_the_robot() {
@@ -568,9 +568,9 @@ fn gen_writes_a_loadable_synthetic_scene() {
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s = verisplat::scene::load(&out).unwrap();
+    let s = verisplat::core::scene::load(&out).unwrap();
     assert_eq!((s.len(), s.sh_degree), (2000, 1));
-    assert_eq!(s, verisplat::gen::synthetic_scene(2000, 5, 1));
+    assert_eq!(s, verisplat::core::gen::synthetic_scene(2000, 5, 1));
     let o = verisplat(&["gen", "10", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && stderr(&o).contains("already exists"));
 }
@@ -626,7 +626,7 @@ fn kernel_flag_and_the_ply_kernel_comment() {
         "{header}"
     );
     assert_eq!(
-        verisplat::scene::load(&power).unwrap().kernel,
+        verisplat::core::scene::load(&power).unwrap().kernel,
         verisplat::cpu::SplatKernel::Power
     );
     // A Gaussian scene's PLY stays as the trainer writes it (no comment).

@@ -525,12 +525,12 @@ fn frame_lists_bounds_and_hash_patterns(dir: &Path, cams: &Path) {
 /// Item 9: with --skip-existing, a file another run writes meanwhile is kept.
 #[test]
 fn skip_existing_keeps_a_file_that_appears_during_the_run() {
-    use verisplat::sequence::{self, Existing, OutputPattern, RunOptions};
+    use verisplat::app::sequence::{self, Existing, OutputPattern, RunOptions};
     let dir = tempfile::tempdir().unwrap();
-    let scene = verisplat::demo_scene().activated();
-    let cams: Vec<(usize, verisplat::camera::Camera)> = verisplat::camera::orbit(
+    let scene = verisplat::core::demo::demo_scene().activated();
+    let cams: Vec<(usize, verisplat::core::camera::Camera)> = verisplat::core::camera::orbit(
         &scene.positions,
-        &verisplat::camera::OrbitParams {
+        &verisplat::core::camera::OrbitParams {
             frames: 3,
             width: 32,
             height: 24,
@@ -548,7 +548,7 @@ fn skip_existing_keeps_a_file_that_appears_during_the_run() {
     for threads in [0, 2] {
         std::fs::remove_file(&late).ok();
         let mut rendered = 0;
-        let mut render = |cam: &verisplat::camera::Camera| {
+        let mut render = |cam: &verisplat::core::camera::Camera| {
             rendered += 1;
             if rendered == 1 {
                 // Another process of a split run writes frame 2 while this one renders
@@ -752,6 +752,7 @@ fn readme_and_help_agree() {
         "--depth",
         "--src",
         "--bin",
+        "--wings",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {

@@ -9,8 +9,8 @@ use crate::common::gpu::{MIN_PSNR, MIN_WITHIN};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-use verisplat::camera::Camera;
-use verisplat::metrics;
+use verisplat::core::camera::Camera;
+use verisplat::io::metrics;
 
 /// Runs a command that must succeed and returns its stdout.
 fn succeeds(args: &[&str]) -> String {
@@ -112,7 +112,7 @@ fn compare_passes_on_every_real_scene_with_the_defaults() {
             // The heat map plus its colour bar.
             assert_eq!(
                 (img.width(), img.height()),
-                (320, 180 + verisplat::diff_image::BAR_HEIGHT),
+                (320, 180 + verisplat::io::diff_image::BAR_HEIGHT),
                 "{scene}"
             );
         }
@@ -202,7 +202,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("a.exr");
     demo_render(&a, &[]);
-    let pa = verisplat::image_file::read_image(&a).unwrap();
+    let pa = verisplat::io::image_file::read_image(&a).unwrap();
     assert_eq!(pa.names(), ["R", "G", "B", "A", "Z"]);
     // Identical images: infinite PSNR, written as null in the JSON and "inf" in the table.
     let rep = dir.path().join("rep");
@@ -224,7 +224,11 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     }
     let b = dir.path().join("b.npy");
     let (w, h) = (pa.width as usize, pa.height as usize);
-    std::fs::write(&b, verisplat::image_file::npy_bytes(&[h, w, 5], &samples)).unwrap();
+    std::fs::write(
+        &b,
+        verisplat::io::image_file::npy_bytes(&[h, w, 5], &samples),
+    )
+    .unwrap();
     let diff = dir.path().join("diff.png");
     let o = verisplat(&[
         "compare",
@@ -258,7 +262,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let img = image::open(&diff).unwrap();
     assert_eq!(
         (img.width(), img.height()),
-        (64, 36 + verisplat::diff_image::BAR_HEIGHT)
+        (64, 36 + verisplat::io::diff_image::BAR_HEIGHT)
     );
 
     // Channel and size mismatches.
@@ -266,7 +270,7 @@ fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let rgb_samples: Vec<f32> = samples.chunks(5).flat_map(|p| p[..3].to_vec()).collect();
     std::fs::write(
         &rgb,
-        verisplat::image_file::npy_bytes(&[h, w, 3], &rgb_samples),
+        verisplat::io::image_file::npy_bytes(&[h, w, 3], &rgb_samples),
     )
     .unwrap();
     let e = fails(&["compare", s(&a), s(&rgb)], Path::new("/nonexistent"));
@@ -345,22 +349,23 @@ fn model_dir(root: &Path, n: usize) -> (PathBuf, Vec<Camera>) {
     }
     let path = model.join("cameras.json");
     std::fs::write(&path, serde_json::to_string(&entries).unwrap()).unwrap();
-    let cams = verisplat::camera::load_cameras_json(&path).unwrap();
+    let cams = verisplat::core::camera::load_cameras_json(&path).unwrap();
     (model, cams)
 }
 
 /// The CPU reference render of `cam` (at `w x h`) with seeded Gaussian noise, quantised to
 /// 8 bits: the "photo" of that camera, as `H x W x 3` values in [0, 1].
 fn noisy_photo(cam: &Camera, w: u32, h: u32, seed: u64) -> Vec<f32> {
-    let scene = verisplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-        .unwrap()
-        .activated();
+    let scene =
+        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+            .unwrap()
+            .activated();
     let cam = cam.with_resolution(w, h).unwrap();
     let frame = verisplat::cpu::render(&scene, &cam, &Default::default());
     let mut rng = common::Rng(seed);
     metrics::clamped_color(&frame)
         .into_iter()
-        .map(|v| verisplat::output::to_u8(v + 0.03 * rng.normal()) as f32 / 255.0)
+        .map(|v| verisplat::io::output::to_u8(v + 0.03 * rng.normal()) as f32 / 255.0)
         .collect()
 }
 
@@ -375,9 +380,10 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: &[f32]) {
 /// What eval computes for a photo, done here with the metrics module: the CPU reference
 /// render quantised to 8 bits against the photo.
 fn own_psnr(cam: &Camera, w: u32, h: u32, photo: &[f32]) -> f64 {
-    let scene = verisplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-        .unwrap()
-        .activated();
+    let scene =
+        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+            .unwrap()
+            .activated();
     let frame = verisplat::cpu::render(
         &scene,
         &cam.with_resolution(w, h).unwrap(),
@@ -385,7 +391,7 @@ fn own_psnr(cam: &Camera, w: u32, h: u32, photo: &[f32]) -> f64 {
     );
     let render: Vec<f32> = metrics::clamped_color(&frame)
         .into_iter()
-        .map(|v| verisplat::output::to_u8(v) as f32 / 255.0)
+        .map(|v| verisplat::io::output::to_u8(v) as f32 / 255.0)
         .collect();
     metrics::psnr(photo, &render, 1.0)
 }

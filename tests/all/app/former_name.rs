@@ -1,7 +1,7 @@
 //! The project was called vksplat until 2026-11-28 (README). What was written under that
 //! name still reads (PLY header comments, the neural shader's and the checkpoint's
 //! safetensors metadata), old `VKSPLAT_*` variables still work with a deprecation note,
-//! and no other file of the repository spells the old name. This file, `src/former_name.rs`,
+//! and no other file of the repository spells the old name. This file, `src/core/former_name.rs`,
 //! the README's one sentence and BENCHMARKS.md's history are the only places that do.
 
 use crate::common;
@@ -29,8 +29,9 @@ fn replace(bytes: &[u8], from: &str, to: &str) -> Vec<u8> {
 }
 
 /// The scene as a binary PLY.
-fn ply_bytes(scene: &verisplat::scene::Scene) -> Vec<u8> {
-    verisplat::scene::write::to_bytes(scene, verisplat::scene::write::OutputFormat::Ply).unwrap()
+fn ply_bytes(scene: &verisplat::core::scene::Scene) -> Vec<u8> {
+    verisplat::core::scene::write::to_bytes(scene, verisplat::core::scene::write::OutputFormat::Ply)
+        .unwrap()
 }
 
 /// A PLY written under the former name (`comment vksplat kernel power`, `comment vksplat
@@ -42,8 +43,8 @@ fn a_ply_with_the_former_header_comments_keeps_its_kernel_and_rules() {
     let plain = common::shared_data().join("playbot_lod6_1873_sh2.ply");
     let power = d.join("power.ply");
     ok(&["convert", s(&plain), s(&power), "--kernel", "power"]);
-    let mut scene = verisplat::scene::load(&power).unwrap();
-    scene.rules = verisplat::model::Rules::Gsplat;
+    let mut scene = verisplat::core::scene::load(&power).unwrap();
+    scene.rules = verisplat::core::model::Rules::Gsplat;
     let both = d.join("both.ply");
     let current = ply_bytes(&scene);
     std::fs::write(&both, &current).unwrap();
@@ -51,11 +52,11 @@ fn a_ply_with_the_former_header_comments_keeps_its_kernel_and_rules() {
     let old_path = d.join("old.ply");
     std::fs::write(&old_path, &old).unwrap();
     let (new_scene, old_scene) = (
-        verisplat::scene::load(&both).unwrap(),
-        verisplat::scene::load(&old_path).unwrap(),
+        verisplat::core::scene::load(&both).unwrap(),
+        verisplat::core::scene::load(&old_path).unwrap(),
     );
     assert_eq!(new_scene.kernel, verisplat::cpu::SplatKernel::Power);
-    assert_eq!(new_scene.rules, verisplat::model::Rules::Gsplat);
+    assert_eq!(new_scene.rules, verisplat::core::model::Rules::Gsplat);
     assert_eq!(old_scene.kernel, new_scene.kernel);
     assert_eq!(old_scene.rules, new_scene.rules);
     assert_eq!(old_scene.positions, new_scene.positions);
@@ -90,12 +91,12 @@ fn a_shader_file_with_the_former_metadata_key_parses() {
         let meta = std::collections::HashMap::from([(key.to_string(), description.clone())]);
         safetensors::serialize(views.clone(), Some(meta)).unwrap()
     };
-    let current = verisplat::mlp::Mlp::parse(&file("verisplat_mlp"), None).unwrap();
-    let old = verisplat::mlp::Mlp::parse(&file("vksplat_mlp"), None).unwrap();
+    let current = verisplat::fields::mlp::Mlp::parse(&file("verisplat_mlp"), None).unwrap();
+    let old = verisplat::fields::mlp::Mlp::parse(&file("vksplat_mlp"), None).unwrap();
     assert_eq!(current.feature_channels(), 2);
     assert_eq!(old.to_safetensors(), current.to_safetensors());
     // Another key is still no description.
-    let e = verisplat::mlp::Mlp::parse(&file("other_mlp"), None).unwrap_err();
+    let e = verisplat::fields::mlp::Mlp::parse(&file("other_mlp"), None).unwrap_err();
     assert!(e.contains("verisplat_mlp"), "{e}");
 }
 
@@ -173,7 +174,7 @@ fn a_former_environment_variable_works_with_a_deprecation_note() {
 }
 
 /// No tracked file spells the former name except the ones that must: this file,
-/// `src/former_name.rs`, the README's sentence and BENCHMARKS.md (history as written).
+/// `src/core/former_name.rs`, the README's sentence and BENCHMARKS.md (history as written).
 #[test]
 fn the_former_name_is_spelt_only_where_old_files_are_read() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -193,7 +194,7 @@ fn the_former_name_is_spelt_only_where_old_files_are_read() {
     assert!(files.len() > 100, "git ls-files listed {}", files.len());
     let allowed = [
         "tests/all/app/former_name.rs",
-        "src/former_name.rs",
+        "src/core/former_name.rs",
         "BENCHMARKS.md",
     ];
     let mut offenders = Vec::new();

@@ -1,7 +1,7 @@
 //! The repository's layout rules (the house rules of issue 36): rooms a newcomer can read
 //! in one sitting. No source file over 1,000 lines, no function over 150, and no import
 //! circle among the library's modules or the command line's (`tools/module_graph.py`, down
-//! to submodules).
+//! to submodules), and no arrow back up between the library's wings (`--wings`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -126,19 +126,35 @@ fn no_file_over_1000_lines_and_no_function_over_150() {
 
 #[test]
 fn no_import_circle_in_the_library_or_the_command_line() {
-    for args in [&["--depth", "2"][..], &["--bin", "--depth", "2"]] {
-        let out = Command::new("python3")
-            .arg(root().join("tools/module_graph.py"))
-            .args(args)
-            .output()
-            .expect("python3 runs tools/module_graph.py");
-        let text = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success() && text.contains("cycles: none"),
-            "tools/module_graph.py {}: {}\n{text}{}",
-            args.join(" "),
-            out.status,
-            String::from_utf8_lossy(&out.stderr)
-        );
+    for args in [&["--depth", "3"][..], &["--bin", "--depth", "2"]] {
+        let (ok, text) = module_graph(args);
+        assert!(ok && text.contains("cycles: none"), "{text}");
     }
+}
+
+#[test]
+fn every_arrow_between_the_wings_runs_down() {
+    let (ok, text) = module_graph(&["--wings"]);
+    assert!(
+        ok && text.contains("wings: every arrow runs down core < io < fields < cpu"),
+        "{text}"
+    );
+}
+
+/// Runs tools/module_graph.py with `args`: whether it exited 0, and what it printed
+/// (its arguments, its exit status, its stdout and stderr, for a failure's message).
+fn module_graph(args: &[&str]) -> (bool, String) {
+    let out = Command::new("python3")
+        .arg(root().join("tools/module_graph.py"))
+        .args(args)
+        .output()
+        .expect("python3 runs tools/module_graph.py");
+    let text = format!(
+        "tools/module_graph.py {}: {}\n{}{}",
+        args.join(" "),
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
 }

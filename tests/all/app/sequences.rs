@@ -9,9 +9,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
+use verisplat::core::scene::filter::SceneFilter;
+use verisplat::core::scene::{self, ply};
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::scene::filter::SceneFilter;
-use verisplat::scene::{self, ply};
 
 /// Every file of a directory (recursively) with its bytes, by relative path.
 fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
@@ -192,11 +192,11 @@ fn a_killed_run_resumes_to_the_files_of_an_uninterrupted_run() {
 #[test]
 fn exr_and_png16_hold_the_in_memory_render() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = verisplat::demo_scene();
+    let scene = verisplat::core::demo::demo_scene();
     // The CLI makes the default camera at the requested size (it frames the scene for
     // that aspect ratio), not a 1280x720 camera scaled down.
-    let (w, h) = verisplat::camera::resized_dims((1280, 720), Some(200), None, None).unwrap();
-    let cam = verisplat::camera::default_camera(&scene.positions, w, h);
+    let (w, h) = verisplat::core::camera::resized_dims((1280, 720), Some(200), None, None).unwrap();
+    let cam = verisplat::core::camera::default_camera(&scene.positions, w, h);
     let frame = cpu::render(
         &scene.activated(),
         &cam,
@@ -243,7 +243,7 @@ fn exr_and_png16_hold_the_in_memory_render() {
     let plane =
         |c: &AnyChannel<FlatSamples>| -> Vec<f32> { c.sample_data.values_as_f32().collect() };
     // EXR colour is premultiplied (the background term removed); Z is +inf where empty.
-    let premultiplied = verisplat::output::premultiplied_color(&frame, [0.1, 0.2, 0.3]);
+    let premultiplied = verisplat::io::output::premultiplied_color(&frame, [0.1, 0.2, 0.3]);
     let colour = |ch: usize| -> Vec<f32> { premultiplied.iter().map(|p| p[ch]).collect() };
     let z: Vec<f32> = (frame.depth.iter().zip(&frame.alpha))
         .map(|(&d, &a)| if a > 0.0 { d } else { f32::INFINITY })
@@ -266,14 +266,14 @@ fn exr_and_png16_hold_the_in_memory_render() {
     // 16-bit PNG: exactly the quantised colour; the alpha PNG is grey.
     let png = image::open(&png_path).unwrap().to_rgb16();
     for (i, p) in png.pixels().enumerate() {
-        let want = frame.color[i].map(verisplat::output::to_u16);
+        let want = frame.color[i].map(verisplat::io::output::to_u16);
         assert_eq!(p.0, want, "pixel {i}");
     }
     let alpha = image::open(&alpha_path).unwrap();
     assert_eq!(alpha.color(), image::ColorType::L16);
     let alpha = alpha.to_luma16();
     for (i, p) in alpha.pixels().enumerate() {
-        assert_eq!(p.0[0], verisplat::output::to_u16(frame.alpha[i]));
+        assert_eq!(p.0[0], verisplat::io::output::to_u16(frame.alpha[i]));
     }
 }
 
@@ -502,12 +502,12 @@ fn every_camera_file_format_renders_from_the_command_line() {
 /// finished before it is complete on disk, with and without encoder threads.
 #[test]
 fn a_device_lost_mid_path_stops_cleanly_with_finished_frames_intact() {
-    use verisplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
-    let scene = verisplat::demo_scene();
+    use verisplat::app::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
+    let scene = verisplat::core::demo::demo_scene();
     let act = scene.activated();
-    let cams: Vec<(usize, verisplat::camera::Camera)> = verisplat::camera::orbit(
+    let cams: Vec<(usize, verisplat::core::camera::Camera)> = verisplat::core::camera::orbit(
         &scene.positions,
-        &verisplat::camera::OrbitParams {
+        &verisplat::core::camera::OrbitParams {
             frames: 6,
             width: 64,
             height: 36,
@@ -525,13 +525,13 @@ fn a_device_lost_mid_path_stops_cleanly_with_finished_frames_intact() {
             &cams,
             &pattern,
             None,
-            &verisplat::output::OutputOptions::default(),
+            &verisplat::io::output::OutputOptions::default(),
             Existing::Refuse,
         )
         .unwrap();
         let mut k = 0;
         let mut render =
-            |cam: &verisplat::camera::Camera| -> anyhow::Result<verisplat::frame::Frame> {
+            |cam: &verisplat::core::camera::Camera| -> anyhow::Result<verisplat::core::frame::Frame> {
                 k += 1;
                 if k == 4 {
                     return Err(verisplat::gpu::GpuError::Vk {

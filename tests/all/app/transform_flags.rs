@@ -6,8 +6,8 @@
 use crate::common;
 use crate::common::cli::{fails, stderr, verisplat};
 
-use verisplat::scene;
-use verisplat::scene::transform::SceneTransform;
+use verisplat::core::scene;
+use verisplat::core::scene::transform::SceneTransform;
 
 #[test]
 fn render_and_convert_apply_the_flags() {
@@ -133,7 +133,7 @@ fn bad_transform_values_are_one_sentence_and_write_nothing() {
 
 #[test]
 fn rotate_x_180_fixes_an_spz_written_without_its_axis_conversion() {
-    use verisplat::scene::write::{to_bytes, OutputFormat};
+    use verisplat::core::scene::write::{to_bytes, OutputFormat};
     let dir = tempfile::tempdir().unwrap();
     let original = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     // A writer that skipped the RDF -> RUB conversion stores the RDF numbers as they are;

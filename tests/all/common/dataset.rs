@@ -4,7 +4,7 @@
 
 use crate::common;
 use std::path::Path;
-use verisplat::camera::orbit::{orbit, OrbitParams};
+use verisplat::core::camera::orbit::{orbit, OrbitParams};
 
 /// Writes the data set into `dir`: `views` photos of `w x h` and the COLMAP model.
 pub fn make_dataset(dir: &Path, views: usize, w: u32, h: u32) {
@@ -18,9 +18,9 @@ pub fn make_dataset_with(
     views: usize,
     w: u32,
     h: u32,
-    shader: Option<&verisplat::mlp::Mlp>,
+    shader: Option<&verisplat::fields::mlp::Mlp>,
 ) {
-    let mut scene = verisplat::scene::load_with_format(
+    let mut scene = verisplat::core::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .expect("the shared scene")

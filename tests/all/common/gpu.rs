@@ -2,14 +2,14 @@
 #![allow(dead_code)]
 
 use std::sync::{Mutex, MutexGuard, OnceLock};
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::frame::Frame;
+use verisplat::core::scene::ActivatedScene;
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::frame::Frame;
 use verisplat::gpu::{ContextOptions, GpuContext};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::scene::ActivatedScene;
 
 /// The shared renderer (validation layer on; the blend variant for the device).
 pub fn renderer() -> MutexGuard<'static, GpuRenderer> {
@@ -139,10 +139,10 @@ impl Thresholds {
 }
 
 /// Compares a GPU frame with the CPU reference frame: colour and alpha figures from
-/// `verisplat::metrics`, plus the relative depth error where both alphas exceed 0.5.
+/// `verisplat::io::metrics`, plus the relative depth error where both alphas exceed 0.5.
 pub fn compare(gpu: &Frame, cpu: &Frame) -> Comparison {
     assert_eq!((gpu.width, gpu.height), (cpu.width, cpu.height));
-    let m = verisplat::metrics::compare_frames(cpu, gpu);
+    let m = verisplat::io::metrics::compare_frames(cpu, gpu);
     let (mut depth_rel, mut covered, mut depth_ok) = (0.0f64, 0usize, 0usize);
     for i in 0..gpu.alpha.len() {
         if gpu.alpha[i] > 0.5 && cpu.alpha[i] > 0.5 {
@@ -228,7 +228,7 @@ pub fn dump_failure(name: &str, gpu: &Frame, cpu: &Frame) -> String {
             diff.color[i][ch] = ((gpu.color[i][ch] - cpu.color[i][ch]).abs() * 10.0).min(1.0);
         }
     }
-    use verisplat::output::{write_frame, ImageFormat};
+    use verisplat::io::output::{write_frame, ImageFormat};
     let _ = write_frame(
         gpu,
         &dir.join(format!("{name}.actual.png")),

@@ -11,9 +11,9 @@ pub mod viewer;
 
 use glam::{Mat3, Vec3};
 use std::path::PathBuf;
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::scene::{self, Scene};
 use verisplat::cpu::{RenderOptions, Rules};
-use verisplat::scene::{self, Scene};
 
 /// `../shared/data`, the read-only real scenes. They are always there (in CI too), so a
 /// test that needs them fails without them instead of skipping.
@@ -95,7 +95,7 @@ pub fn logit(p: f32) -> f32 {
     (p / (1.0 - p)).ln()
 }
 
-pub use verisplat::gen::Rng;
+pub use verisplat::core::gen::Rng;
 
 /// A random scene of `n` Gaussians with SH degree `deg`, every field distinct.
 pub fn random_scene(n: usize, deg: u32, seed: u64) -> Scene {
@@ -157,7 +157,7 @@ pub fn axis_camera(f: f32) -> Camera {
 
 /// The bits of a frame's colour, alpha and depth, in that order: equal bits mean a
 /// bit-identical frame (NaN-safe, unlike comparing the floats).
-pub fn frame_bits(f: &verisplat::frame::Frame) -> Vec<u32> {
+pub fn frame_bits(f: &verisplat::core::frame::Frame) -> Vec<u32> {
     f.color
         .iter()
         .flatten()
@@ -170,6 +170,7 @@ pub fn frame_bits(f: &verisplat::frame::Frame) -> Vec<u32> {
 /// An `H x W x K` float32 `.npy` image (what `render` writes for features and fields) as
 /// (W, H, K, values).
 pub fn npy_image(path: &std::path::Path) -> (usize, usize, usize, Vec<f32>) {
-    let a = verisplat::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
+    let a =
+        verisplat::io::image_file::parse_npy_array(&std::fs::read(path).unwrap(), path).unwrap();
     (a.shape[1], a.shape[0], a.shape[2], a.data)
 }

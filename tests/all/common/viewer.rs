@@ -186,7 +186,7 @@ impl Client {
                 }
                 Ok(Message::Binary(b)) => {
                     let (header, payload) =
-                        verisplat::view::protocol::split_binary(&b).expect("a framed binary");
+                        verisplat::app::view::protocol::split_binary(&b).expect("a framed binary");
                     return Some(Incoming::Frame(Frame {
                         header,
                         payload: payload.to_vec(),

@@ -1,15 +1,15 @@
 //! The default camera (`camera::default_camera`): it frames a scene's robust box, centred
 //! and with a tight margin, as frame 0 of the default orbit, and one stray Gaussian far
 //! away does not move it. (They need a scene, the demo's or a shared one, so they live
-//! here rather than in `src/camera`, which uses no module above it.)
+//! here rather than in `src/core/camera`, which uses no module above it.)
 
 use crate::common;
 use glam::Vec3;
-use verisplat::camera::{self, default_camera};
-use verisplat::scene;
+use verisplat::core::camera::{self, default_camera};
+use verisplat::core::scene;
 
 /// Pixel coordinates and depth of a world point seen by `cam`.
-fn project_point(cam: &verisplat::camera::Camera, p: Vec3) -> (f32, f32, f32) {
+fn project_point(cam: &verisplat::core::camera::Camera, p: Vec3) -> (f32, f32, f32) {
     let v = cam.rotation * p + cam.translation;
     (
         cam.fx * v.x / v.z + cam.cx,
@@ -20,13 +20,13 @@ fn project_point(cam: &verisplat::camera::Camera, p: Vec3) -> (f32, f32, f32) {
 
 #[test]
 fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
-    let scene = verisplat::demo_scene();
-    let b = verisplat::camera::bulk_bounds(&scene.positions);
+    let scene = verisplat::core::demo::demo_scene();
+    let b = verisplat::core::camera::bulk_bounds(&scene.positions);
     for (w, h) in [(1280, 720), (320, 240), (100, 70), (480, 640)] {
-        let default = verisplat::camera::default_camera(&scene.positions, w, h);
-        let frames = verisplat::camera::orbit(
+        let default = verisplat::core::camera::default_camera(&scene.positions, w, h);
+        let frames = verisplat::core::camera::orbit(
             &scene.positions,
-            &verisplat::camera::OrbitParams {
+            &verisplat::core::camera::OrbitParams {
                 frames: 7,
                 width: w,
                 height: h,
@@ -37,7 +37,7 @@ fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
         assert_eq!(frames.len(), 7);
         assert_eq!(frames[0].name, "orbit_00000");
         assert_eq!(
-            verisplat::camera::Camera {
+            verisplat::core::camera::Camera {
                 name: "default".into(),
                 ..frames[0].clone()
             },

@@ -1,4 +1,4 @@
-//! Scene transforms (`src/scene/transform.rs`): SH bands transform exactly, transforms
+//! Scene transforms (`src/core/scene/transform.rs`): SH bands transform exactly, transforms
 //! compose, a transformed scene seen by the correspondingly transformed camera renders the
 //! original image, and a flip twice is the identity. The binary's flags for them are
 //! `app::transform_flags`.
@@ -8,10 +8,10 @@ use crate::common::gpu::Thresholds;
 
 use glam::{DMat3, DQuat, DVec3, Mat3, Vec3};
 
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::scene::transform::SceneTransform;
+use verisplat::core::scene::{self, Scene};
 use verisplat::cpu::sh::eval_sh;
-use verisplat::scene::transform::SceneTransform;
-use verisplat::scene::{self, Scene};
 
 /// The project's bar for "the same image", 55 dB, on colour and on alpha (these tests do
 /// not hold the share of 8-bit pixels within 1/255).

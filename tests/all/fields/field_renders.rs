@@ -15,11 +15,11 @@
 //!   within what half a segment can lose at the peak of the narrowest Gaussian (computed
 //!   in the test; measured 1.7e-2 of the channel's peak with scales down to 0.03).
 
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::scene::Scene;
 use verisplat::cpu::field::{self, FieldGaussians, FieldMode};
 use verisplat::cpu::SplatKernel;
-use verisplat::fit::model::{evaluate, Model};
-use verisplat::scene::Scene;
+use verisplat::fields::fit::model::{evaluate, Model};
 
 use crate::common::{self, Rng};
 
@@ -55,7 +55,7 @@ const SLICE: FieldMode = FieldMode::Slice {
 };
 
 /// The largest |value| of each channel (NaN skipped).
-fn peaks(frame: &verisplat::frame::Frame) -> Vec<f32> {
+fn peaks(frame: &verisplat::core::frame::Frame) -> Vec<f32> {
     let k = frame.feature_count;
     (0..k)
         .map(|c| {
@@ -274,9 +274,9 @@ fn field_options_are_refused_where_they_do_not_apply() {
     let scene = field_scene(20, 2, 3, SplatKernel::Gaussian);
     std::fs::write(
         &ply,
-        verisplat::scene::ply::to_bytes(
+        verisplat::core::scene::ply::to_bytes(
             &scene,
-            verisplat::scene::ply::PlyEncoding::BinaryLittleEndian,
+            verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
         ),
     )
     .unwrap();
@@ -350,9 +350,9 @@ fn field_options_are_refused_where_they_do_not_apply() {
     plain.set_features(0, Vec::new()).unwrap();
     std::fs::write(
         &bare,
-        verisplat::scene::ply::to_bytes(
+        verisplat::core::scene::ply::to_bytes(
             &plain,
-            verisplat::scene::ply::PlyEncoding::BinaryLittleEndian,
+            verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
         ),
     )
     .unwrap();

@@ -1,13 +1,13 @@
 //! `verisplat fit` and `verisplat gen --rf` (issue 14, item 5), through the binary: the
 //! held-out error on small synthetic fields, determinism, density control, and one clear
 //! error (and no output file) for each malformed input. Gradients are checked against
-//! finite differences in the unit tests of `src/fit/tests.rs`.
+//! finite differences in the unit tests of `src/fields/fit/tests.rs`.
 
 use crate::common;
 use crate::common::cli::{fails, ok, s, stdout};
 use std::path::{Path, PathBuf};
-use verisplat::gen::Rng;
-use verisplat::image_file::npy_bytes;
+use verisplat::core::gen::Rng;
+use verisplat::io::image_file::npy_bytes;
 
 fn write_npy(path: &Path, shape: &[usize], data: &[f32]) {
     std::fs::write(path, npy_bytes(shape, data)).unwrap();
@@ -98,7 +98,7 @@ fn fit_recovers_a_sum_of_gaussians_from_scattered_samples() {
     );
     assert_eq!(r["holdout_samples"], 600);
     // The PLY loads, with the features and opacities of the fit.
-    let scene = verisplat::scene::load(&out).unwrap();
+    let scene = verisplat::core::scene::load(&out).unwrap();
     assert_eq!(scene.feature_count, 2);
     assert_eq!(
         scene.len() as u64,
@@ -121,7 +121,7 @@ fn gen_rf_dipole_then_fit_with_the_power_kernel() {
     let side = dir.path().join("dipole.npy.json");
     assert!(side.exists());
     let array =
-        verisplat::image_file::parse_npy_array(&std::fs::read(&grid).unwrap(), &grid).unwrap();
+        verisplat::io::image_file::parse_npy_array(&std::fs::read(&grid).unwrap(), &grid).unwrap();
     assert_eq!(array.shape, vec![20, 20, 20, 4]);
     let out = dir.path().join("dipole.ply");
     let rep = dir.path().join("dipole.json");
@@ -149,7 +149,7 @@ fn gen_rf_dipole_then_fit_with_the_power_kernel() {
     eprintln!("dipole 20^3, power kernel: held-out relative L2 error {err}");
     assert!(err < 0.35, "held-out relative L2 error {err}");
     assert_eq!(r["bounds_from"], s(&side));
-    let scene = verisplat::scene::load(&out).unwrap();
+    let scene = verisplat::core::scene::load(&out).unwrap();
     assert_eq!(scene.kernel, verisplat::cpu::SplatKernel::Power);
     assert_eq!(scene.feature_count, 4);
     // The two-ray field and --overwrite; the sidecar is refused without it.
@@ -331,7 +331,7 @@ fn csv_samples_with_a_header() {
         "-q",
     ]);
     assert!(stdout(&o).contains("to 360 samples"), "{}", stdout(&o));
-    assert_eq!(verisplat::scene::load(&out).unwrap().feature_count, 2);
+    assert_eq!(verisplat::core::scene::load(&out).unwrap().feature_count, 2);
 }
 
 /// Each malformed input: one error sentence naming the file and the fault, no output.

@@ -3,8 +3,8 @@
 //! better than 0, dB magnitudes, the bounds `gen --rf` prints, and gradient clipping.
 
 use crate::common::cli::{fails, ok, s, stderr};
-use verisplat::fit::{self, FieldData, FitConfig, Layout};
-use verisplat::gen::Rng;
+use verisplat::core::gen::Rng;
+use verisplat::fields::fit::{self, FieldData, FitConfig, Layout};
 
 /// Two clamped dipole-like sources (magnitude `sin(theta) / r`, `r >= 0.25`), the field
 /// the CSV held.
@@ -342,7 +342,7 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
     eprintln!("held-out error: as I/Q {iq:.4}, as magnitude and phase {plain:.4}");
     assert!(iq < 0.1, "{iq}");
     assert!(plain > 1.5 * iq, "{plain} vs {iq}");
-    let cam = verisplat::camera::Camera::look_at(
+    let cam = verisplat::core::camera::Camera::look_at(
         "wave",
         48,
         36,
@@ -353,7 +353,7 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
     );
     std::fs::write(
         p("cam.json"),
-        verisplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::core::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let npy = p("slice.npy");
@@ -372,7 +372,8 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
         s(&npy),
         "-q",
     ]);
-    let a = verisplat::image_file::parse_npy_array(&std::fs::read(&npy).unwrap(), &npy).unwrap();
+    let a =
+        verisplat::io::image_file::parse_npy_array(&std::fs::read(&npy).unwrap(), &npy).unwrap();
     assert_eq!(a.shape, vec![36, 48, 4]);
     let (mut num, mut den, mut phase_sq, mut phased) = (0f64, 0f64, 0f64, 0);
     for py in 0..36u32 {

@@ -3,10 +3,10 @@
 //! reference on a real scene (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255).
 
 use crate::common;
+use verisplat::core::scene;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
-use verisplat::mlp::{self, Activation, Mlp, MlpInput};
+use verisplat::fields::mlp::{self, Activation, Mlp, MlpInput};
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::scene;
 
 /// A safetensors file: F32 tensors and an optional `verisplat_mlp` description.
 fn safetensors(tensors: &[(&str, Vec<usize>, Vec<f32>)], description: Option<&str>) -> Vec<u8> {
@@ -376,7 +376,7 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     let mut rng = common::Rng(9);
     let feats: Vec<f32> = (0..n * k).map(|_| rng.range(0.0, 1.0)).collect();
     let npy = dir.path().join("f.npy");
-    std::fs::write(&npy, verisplat::image_file::npy_bytes(&[n, k], &feats)).unwrap();
+    std::fs::write(&npy, verisplat::io::image_file::npy_bytes(&[n, k], &feats)).unwrap();
     let (tensors, d) = network(
         &["features", "view_dir"],
         &[k + 3, 8, 3],
@@ -418,11 +418,11 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     run(&out("cpu.exr"), &["--cpu"]);
     let o = run(&out("gpu.png"), &[]);
     assert!(o.status.success());
-    let gpu = verisplat::image_file::read_image(&out("gpu.exr")).unwrap();
-    let cpu = verisplat::image_file::read_image(&out("cpu.exr")).unwrap();
-    let rgb = |p: &verisplat::image_file::Planes| p.interleave(&["R", "G", "B"]).unwrap();
+    let gpu = verisplat::io::image_file::read_image(&out("gpu.exr")).unwrap();
+    let cpu = verisplat::io::image_file::read_image(&out("cpu.exr")).unwrap();
+    let rgb = |p: &verisplat::io::image_file::Planes| p.interleave(&["R", "G", "B"]).unwrap();
     let (g, c) = (rgb(&gpu), rgb(&cpu));
-    let psnr = verisplat::metrics::psnr(&c, &g, 1.0);
+    let psnr = verisplat::io::metrics::psnr(&c, &g, 1.0);
     assert!(
         psnr >= common::gpu::MIN_PSNR,
         "GPU vs CPU shaded: {psnr} dB"
@@ -436,8 +436,8 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     );
     let refs: Vec<&str> = a.iter().map(String::as_str).collect();
     ok(&refs);
-    let plain = verisplat::image_file::read_image(&out("plain2.exr")).unwrap();
-    assert!(verisplat::metrics::psnr(&rgb(&plain), &g, 1.0) < 40.0);
+    let plain = verisplat::io::image_file::read_image(&out("plain2.exr")).unwrap();
+    assert!(verisplat::io::metrics::psnr(&rgb(&plain), &g, 1.0) < 40.0);
 
     // Errors: K mismatch, no features, a broken file, with --mode features.
     let (t2, d2) = network(&["features"], &[k + 1, 4, 3], &["relu", "sigmoid"], 2);

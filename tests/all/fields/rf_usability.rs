@@ -17,9 +17,9 @@ fn field_ply(dir: &Path) -> std::path::PathBuf {
     let feats = (0..60).map(|_| rng.range(0.0, 1.0)).collect();
     scene.set_features(2, feats).unwrap();
     let path = dir.join("rf_field.ply");
-    let bytes = verisplat::scene::ply::to_bytes(
+    let bytes = verisplat::core::scene::ply::to_bytes(
         &scene,
-        verisplat::scene::ply::PlyEncoding::BinaryLittleEndian,
+        verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
     );
     std::fs::write(&path, bytes).unwrap();
     path
@@ -84,7 +84,7 @@ fn colour_bar_labels_keep_their_case_and_refuse_what_the_font_cannot_draw() {
     let mega = render("MW", "power");
     assert_eq!(
         milli.dimensions(),
-        (480, h + verisplat::diff_image::BAR_HEIGHT)
+        (480, h + verisplat::io::diff_image::BAR_HEIGHT)
     );
     assert_ne!(bar(&milli), bar(&mega), "mW and MW drew the same label");
     assert_ne!(bar(&render("V/m", "power")), bar(&render("V/M", "power")));
@@ -247,8 +247,8 @@ fn a_time_column_spelled_almost_right_gets_a_note() {
 /// needed, unless forced.
 #[test]
 fn too_few_samples_are_refused_unless_forced() {
-    assert_eq!(verisplat::fit::min_samples(0.1), 45);
-    assert_eq!(verisplat::fit::min_samples(0.0), 20);
+    assert_eq!(verisplat::fields::fit::min_samples(0.1), 45);
+    assert_eq!(verisplat::fields::fit::min_samples(0.0), 20);
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("three.csv");
     std::fs::write(&csv, "x,y,z,v\n0,0,0,1\n1,0,0,2\n0,1,0,3\n").unwrap();
@@ -322,7 +322,7 @@ fn look_at_is_one_camera_from_an_eye_to_a_target() {
     a.extend(common_args);
     ok(&a);
     let (cams, _) =
-        verisplat::camera::load_camera_file(&p("cam.json"), &Default::default()).unwrap();
+        verisplat::core::camera::load_camera_file(&p("cam.json"), &Default::default()).unwrap();
     assert_eq!(cams.len(), 1);
     let c = &cams[0];
     assert!(

@@ -8,7 +8,7 @@ use crate::common::npy_image as npy;
 use std::path::Path;
 
 fn planes(path: &Path, names: &[&str]) -> Vec<f32> {
-    verisplat::image_file::read_image(path)
+    verisplat::io::image_file::read_image(path)
         .unwrap()
         .interleave(names)
         .unwrap()
@@ -63,7 +63,7 @@ fn gen_fit_render_features_and_shade() {
         let (g, cpu) = (planes(&p("g.exr"), &[c]), planes(&p("c.exr"), &[c]));
         let peak = cpu.iter().fold(0f32, |m, v| m.max(v.abs())) as f64;
         assert!(peak > 0.0, "{c} is empty");
-        let psnr = verisplat::metrics::psnr(&cpu, &g, peak);
+        let psnr = verisplat::io::metrics::psnr(&cpu, &g, peak);
         assert!(psnr >= MIN_PSNR, "{c}: {psnr} dB");
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/colormap_shader.py");
@@ -92,7 +92,7 @@ fn gen_fit_render_features_and_shade() {
     ));
     let rgb = ["R", "G", "B"];
     let (g, cpu) = (planes(&p("gs.exr"), &rgb), planes(&p("cs.exr"), &rgb));
-    let psnr = verisplat::metrics::psnr(&cpu, &g, 1.0);
+    let psnr = verisplat::io::metrics::psnr(&cpu, &g, 1.0);
     assert!(psnr >= MIN_PSNR, "shaded: {psnr} dB");
     // The colour map shows: some pixel is far from grey.
     assert!(
@@ -135,7 +135,7 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     // The analytic magnitude, normalised as gen normalises it (grid maximum 1).
     let scale = dipole_scale(n);
     let (w, h) = (40u32, 30u32);
-    let cam = verisplat::camera::Camera::look_at(
+    let cam = verisplat::core::camera::Camera::look_at(
         "walkthrough",
         w,
         h,
@@ -146,7 +146,7 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     );
     std::fs::write(
         p("cam.json"),
-        verisplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::core::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let (ply, cams) = (p("d.ply"), p("cam.json"));
@@ -201,7 +201,7 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
 /// The largest analytic magnitude of the dipole over gen's `n`^3 grid: gen normalises the
 /// field by it (grid maximum 1).
 fn dipole_scale(n: usize) -> f64 {
-    use verisplat::rf::{grid_coordinate, RfField};
+    use verisplat::fields::rf::{grid_coordinate, RfField};
     let b = RfField::Dipole.bounds();
     let mut scale = 0f64;
     for i in 0..n {
@@ -220,13 +220,13 @@ fn dipole_scale(n: usize) -> f64 {
 /// field: a slice through z = 0.3, or the integral or maximum along each ray's chord
 /// through the bounds.
 fn error_against_the_analytic_dipole(
-    cam: &verisplat::camera::Camera,
+    cam: &verisplat::core::camera::Camera,
     mode: &str,
     gpu: &[f32],
     scale: f64,
 ) -> (f64, f64, usize) {
     use verisplat::cpu::field;
-    use verisplat::rf::RfField;
+    use verisplat::fields::rf::RfField;
     let (w, h) = (cam.width, cam.height);
     let b = RfField::Dipole.bounds();
     let truth = |x: [f64; 3]| RfField::Dipole.raw(x)[0] / scale;
@@ -290,9 +290,12 @@ fn colour_bar_is_never_black_above_the_range(dir: &Path, w: u32, h: u32) {
         "V/m",
     ]);
     let png = image::open(p("m.png")).unwrap().to_rgb8();
-    assert_eq!(png.dimensions(), (w, h + verisplat::diff_image::BAR_HEIGHT));
+    assert_eq!(
+        png.dimensions(),
+        (w, h + verisplat::io::diff_image::BAR_HEIGHT)
+    );
     let (_, _, _, max) = npy(&p("g.npy"));
-    let top = verisplat::output::turbo(1.0).map(verisplat::output::to_u8);
+    let top = verisplat::io::output::turbo(1.0).map(verisplat::io::output::to_u8);
     for py in 0..h {
         for px in 0..w {
             if max[(py * w + px) as usize * 4] > 0.05 {

@@ -7,10 +7,10 @@ use crate::common::cli::{fails, ok, s, stderr, verisplat};
 use crate::common::npy_image as npy;
 use crate::common::push_gaussian;
 use std::path::Path;
+use verisplat::core::scene::ply::{self, PlyEncoding};
+use verisplat::core::scene::Scene;
 use verisplat::cpu::field;
-use verisplat::rf::MovingSource;
-use verisplat::scene::ply::{self, PlyEncoding};
-use verisplat::scene::Scene;
+use verisplat::fields::rf::MovingSource;
 
 /// The moving source fitted in space and time, rendered at three times (two of them
 /// between the sampled times) as a slice through z = 0 and as a maximum along each ray,
@@ -35,7 +35,7 @@ fn moving_source_renders_match_the_analytic_field_at_three_times() {
     let cam = moving_source_camera(w, h);
     std::fs::write(
         p("cam.json"),
-        verisplat::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::core::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let (ply, cams) = (p("m.ply"), p("cam.json"));
@@ -139,10 +139,10 @@ fn fit_the_moving_source(dir: &Path) -> f32 {
     assert!(holdout < 0.06, "held-out error {holdout}");
     assert_eq!(report["time_column"], 3);
     assert_eq!(report["time_range"], serde_json::json!([0.0, 1.0]));
-    let scene = verisplat::scene::load(&p("m.ply")).unwrap();
+    let scene = verisplat::core::scene::load(&p("m.ply")).unwrap();
     let (lo, hi) = scene.time_range().unwrap();
     let jump = (0..scene.len())
-        .map(|i| verisplat::scene::sigmoid(scene.opacity_logits[i]) * scene.features[i].abs())
+        .map(|i| verisplat::core::scene::sigmoid(scene.opacity_logits[i]) * scene.features[i].abs())
         .fold(0f32, f32::max)
         * (-8f32).exp()
         * 1.01;
@@ -151,8 +151,8 @@ fn fit_the_moving_source(dir: &Path) -> f32 {
 }
 
 /// The camera the moving source is rendered from, `w` x `h`.
-fn moving_source_camera(w: u32, h: u32) -> verisplat::camera::Camera {
-    verisplat::camera::Camera::look_at(
+fn moving_source_camera(w: u32, h: u32) -> verisplat::core::camera::Camera {
+    verisplat::core::camera::Camera::look_at(
         "front",
         w,
         h,
@@ -188,7 +188,7 @@ fn gpu_matches_cpu(mode: &str, t: f32, gpu: &[f32], cpu: &[f32], peak: f32, jump
 /// squared field, summed over the `pixels` that see the field, with (for the slice) the
 /// value-weighted sum of the points of its bright part and their weight.
 fn error_against_the_analytic_field(
-    cam: &verisplat::camera::Camera,
+    cam: &verisplat::core::camera::Camera,
     mode: &str,
     t: f32,
     gpu: &[f32],
@@ -258,7 +258,7 @@ fn blinking_scene() -> Scene {
 
 /// A camera file (`cam.json` in `dir`) looking at the blinking scene from the front.
 fn front_camera(dir: &Path) -> std::path::PathBuf {
-    let cam = verisplat::camera::Camera::look_at(
+    let cam = verisplat::core::camera::Camera::look_at(
         "front",
         64,
         48,
@@ -270,7 +270,7 @@ fn front_camera(dir: &Path) -> std::path::PathBuf {
     let path = dir.join("cam.json");
     std::fs::write(
         &path,
-        verisplat::camera::inria::to_json(&[(0, cam)]).unwrap(),
+        verisplat::core::camera::inria::to_json(&[(0, cam)]).unwrap(),
     )
     .unwrap();
     path
@@ -289,18 +289,18 @@ fn ply_round_trips_t_mean_and_t_scale() {
         let bytes = ply::to_bytes(&sc, enc);
         let text = String::from_utf8_lossy(&bytes).to_string();
         assert!(text.contains("property float t_mean\nproperty float t_scale\n"));
-        let (back, _) = verisplat::scene::parse_bytes(&bytes, Path::new("b.ply")).unwrap();
+        let (back, _) = verisplat::core::scene::parse_bytes(&bytes, Path::new("b.ply")).unwrap();
         assert_eq!(back, sc, "{enc:?}");
     }
     let mut static_scene = sc.clone();
     static_scene.time = None;
     let bytes = ply::to_bytes(&static_scene, PlyEncoding::Ascii);
     assert!(!String::from_utf8_lossy(&bytes).contains("t_mean"));
-    let (back, _) = verisplat::scene::parse_bytes(&bytes, Path::new("s.ply")).unwrap();
+    let (back, _) = verisplat::core::scene::parse_bytes(&bytes, Path::new("s.ply")).unwrap();
     assert_eq!(back.time, None);
     let half = String::from_utf8_lossy(&ply::to_bytes(&sc, PlyEncoding::Ascii))
         .replace("property float t_scale\n", "property float other\n");
-    let e = verisplat::scene::parse_bytes(half.as_bytes(), Path::new("half.ply"))
+    let e = verisplat::core::scene::parse_bytes(half.as_bytes(), Path::new("half.ply"))
         .unwrap_err()
         .to_string();
     assert!(e.contains("half.ply") && e.contains("\"t_scale\""), "{e}");
@@ -318,7 +318,7 @@ fn at_time_scales_the_opacity_by_the_temporal_factor() {
     for (j, i) in [1usize, 2].iter().enumerate() {
         let mean = [0.0, 0.4, 1.0][*i];
         let want = 0.9 * (-0.5 * ((0.65f64 - mean) / 0.15).powi(2)).exp();
-        let got = f64::from(verisplat::scene::sigmoid(at.opacity_logits[j]));
+        let got = f64::from(verisplat::core::scene::sigmoid(at.opacity_logits[j]));
         assert!(
             (got - want).abs() <= 1e-6 * want.max(1e-3),
             "{got} vs {want}"
@@ -368,7 +368,7 @@ fn gpu_equals_cpu_reference_at_a_time() {
     base(&p("b.ply"), &p("c.exr"), &[t[0], t[1], "--cpu"]);
     base(&p("b03.ply"), &p("s.exr"), &[]);
     let rgb = |f: &Path| {
-        verisplat::image_file::read_image(f)
+        verisplat::io::image_file::read_image(f)
             .unwrap()
             .interleave(&["R", "G", "B"])
             .unwrap()
@@ -380,7 +380,7 @@ fn gpu_equals_cpu_reference_at_a_time() {
         "the frame shows the Gaussians: {brightest}, {} values",
         g.len()
     );
-    let psnr = verisplat::metrics::psnr(&c, &g, 1.0);
+    let psnr = verisplat::io::metrics::psnr(&c, &g, 1.0);
     assert!(psnr >= 50.0, "GPU vs CPU at a time: {psnr} dB");
     assert_eq!(g, st, "--time 0.3 renders Scene::at_time(0.3)");
     for (mode, extra) in [
@@ -446,7 +446,7 @@ fn animation_writes_n_frames_that_differ_and_resumes() {
     anim("a/f_%04d.png", &[]);
     let names: Vec<String> = (0..4).map(|k| format!("a/f_{k:04}.png")).collect();
     let read = |n: &str| {
-        verisplat::image_file::read_image(&p(n))
+        verisplat::io::image_file::read_image(&p(n))
             .unwrap()
             .interleave(&["R", "G", "B"])
             .unwrap()
@@ -489,7 +489,7 @@ fn animation_writes_n_frames_that_differ_and_resumes() {
     anim("c/f_%04d.png", &["--cpu"]);
     for (k, g) in frames.iter().enumerate() {
         let c = read(&format!("c/f_{k:04}.png"));
-        let psnr = verisplat::metrics::psnr(&c, g, 1.0);
+        let psnr = verisplat::io::metrics::psnr(&c, g, 1.0);
         assert!(psnr >= 40.0, "frame {k}: GPU vs CPU {psnr} dB");
     }
     // The field modes animate too: frames differ.
@@ -578,7 +578,7 @@ fn bad_time_columns_of_npy_files(dir: &Path) {
     let four: Vec<f32> = (0..40).map(|i| i as f32).collect();
     std::fs::write(
         p("f.npy"),
-        verisplat::image_file::npy_bytes(&[10, 4], &four),
+        verisplat::io::image_file::npy_bytes(&[10, 4], &four),
     )
     .unwrap();
     let e = fails(

@@ -15,9 +15,10 @@ use crate::common;
 use crate::common::cli::{ok, s, stderr, verisplat_env};
 use crate::common::gpu::{assert_validation_clean, check_against_reference, renderer};
 use crate::common::{orbit, PLAYBOT_ORBIT};
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::frame::Frame;
+use verisplat::core::scene::{self, ActivatedScene};
 use verisplat::cpu::RenderOptions;
-use verisplat::frame::Frame;
 use verisplat::gpu::emulate::Emulation;
 use verisplat::gpu::sync::{barrier, Access};
 use verisplat::gpu::timing::Untimed;
@@ -25,7 +26,6 @@ use verisplat::gpu::{
     limits, ContextOptions, GpuBuffer, GpuContext, GpuError, GpuTimer, MemoryKind,
 };
 use verisplat::render::{GpuRenderer, Intermediates, SplitLimits};
-use verisplat::scene::{self, ActivatedScene};
 
 fn context(emulate: &str) -> GpuContext {
     GpuContext::new(&ContextOptions {

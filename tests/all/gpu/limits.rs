@@ -9,7 +9,7 @@ use verisplat::render::{FrameRequest, Rendered};
 use crate::common::gpu::{assert_validation_clean, compare, renderer, Thresholds};
 
 use std::process::Command;
-use verisplat::camera;
+use verisplat::core::camera;
 use verisplat::cpu::{self, RenderOptions};
 use verisplat::gpu::buffer::GpuBuffer;
 use verisplat::gpu::shader::{BindingKind, ComputePipeline};
@@ -27,7 +27,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
         "count64_test",
         &[],
         &[BindingKind::StorageBuffer],
-        &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+        &verisplat::core::shader_interface::NO_PUSH_CONSTANTS,
     )
     .unwrap();
     let wg = verisplat::gpu::shader_set::LINEAR_WG;
@@ -67,7 +67,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
 
 fn check(label: &str, w: u32, h: u32) {
     let mut r = renderer();
-    let s = verisplat::demo_scene().activated();
+    let s = verisplat::core::demo::demo_scene().activated();
     let cam = camera::default_camera(&s.positions, w, h);
     let gs = r.upload(&s).unwrap();
     let g = r

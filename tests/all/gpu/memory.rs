@@ -6,11 +6,11 @@
 use crate::common;
 use std::path::Path;
 use std::process::Command;
-use verisplat::camera::{self, OrbitParams};
+use verisplat::app::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
+use verisplat::core::camera::{self, OrbitParams};
 use verisplat::cpu::RenderOptions;
-use verisplat::output::OutputOptions;
+use verisplat::io::output::OutputOptions;
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
 
 fn resident_bytes() -> u64 {
     let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
@@ -61,7 +61,7 @@ fn thousand_frame_path() {
         .unwrap_or(1000);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("long");
-    let scene = verisplat::demo_scene();
+    let scene = verisplat::core::demo::demo_scene();
     // The path `verisplat render --demo --orbit N --width 64` renders.
     let cams: Vec<(usize, camera::Camera)> = camera::orbit(
         &scene.positions,

@@ -1,7 +1,7 @@
 //! GPU prefix sum and radix sort against CPU references, on whatever Vulkan device is
 //! available (lavapipe in CI), with validation on: any validation message fails.
 
-use verisplat::gen::{tile_depth_keys, Rng};
+use verisplat::core::gen::{tile_depth_keys, Rng};
 use verisplat::gpu::buffer::BufferView;
 use verisplat::gpu::buffer::{GpuBuffer, MemoryKind};
 use verisplat::gpu::scan::{Scan, ScanPush, SCAN_BLOCK};

@@ -93,7 +93,7 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         "count64_test",
         &[],
         &[BindingKind::StorageBuffer],
-        &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+        &verisplat::core::shader_interface::NO_PUSH_CONSTANTS,
     )
     .expect("count64_test");
     built += 1;
@@ -150,7 +150,7 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     }
     // The field renders: every mode and kernel (each pipeline is built by its first frame).
     for kernel in SplatKernel::ALL {
-        let mut scene = verisplat::scene::Scene::empty(0);
+        let mut scene = verisplat::core::scene::Scene::empty(0);
         common::push_gaussian(&mut scene, [0.0, 0.0, 3.0], 0.5, 0.5, [0.5; 3]);
         scene.set_features(1, vec![1.0]).unwrap();
         let g = verisplat::cpu::field::FieldGaussians::new(&scene.activated(), kernel);
@@ -183,7 +183,7 @@ fn a_stage_that_binds_other_kinds_than_its_shader_is_refused() {
         "count64_test",
         &[],
         &[BindingKind::StorageImage],
-        &verisplat::shader_interface::NO_PUSH_CONSTANTS,
+        &verisplat::core::shader_interface::NO_PUSH_CONSTANTS,
     )
     .err()
     .expect("a storage buffer bound as an image is refused");
@@ -347,7 +347,7 @@ imageStore(img, ivec2(i, 0), items[i].b);
         StorageTexelBuffer,
         StorageImage,
     ];
-    use verisplat::shader_interface::{FieldLayout, RecordLayout};
+    use verisplat::core::shader_interface::{FieldLayout, RecordLayout};
     const fn field(name: &'static str, ty: &'static str, offset: usize) -> FieldLayout {
         FieldLayout { name, ty, offset }
     }

@@ -8,7 +8,7 @@ mod keyframes;
 use crate::common;
 use glam::{DMat3, Mat3, Vec2, Vec3};
 use std::path::{Path, PathBuf};
-use verisplat::camera::{
+use verisplat::core::camera::{
     self, default_camera, load_camera_file, orbit, select_cameras, Camera, CameraFormat,
     OrbitParams, PathTiming,
 };
@@ -360,7 +360,7 @@ fn orbit_front_view_and_invariants() {
         cams[1].position()
     );
 
-    let scene = verisplat::demo_scene();
+    let scene = verisplat::core::demo::demo_scene();
     let p = OrbitParams {
         frames: 36,
         start_deg: 0.0,

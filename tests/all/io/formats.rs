@@ -6,11 +6,11 @@
 use crate::common;
 use crate::common::cli::{s, stderr, verisplat};
 use std::path::{Path, PathBuf};
-use verisplat::camera;
+use verisplat::core::camera;
+use verisplat::core::scene::spz::SpzCompression;
+use verisplat::core::scene::write::{self, OutputFormat};
+use verisplat::core::scene::{self, ply, sigmoid, Scene, SceneFormat};
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::scene::spz::SpzCompression;
-use verisplat::scene::write::{self, OutputFormat};
-use verisplat::scene::{self, ply, sigmoid, Scene, SceneFormat};
 
 const SH_C0: f32 = verisplat::cpu::sh::SH_C0;
 /// Slack for f32 evaluation differences between two decoders of the same bytes.
@@ -828,16 +828,21 @@ fn mutated_files_never_panic() {
 fn antialiased_training_flag_is_read_written_and_honoured() {
     let dir = tempfile::tempdir().unwrap();
     let mut scene =
-        verisplat::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+            .unwrap();
     scene.antialiased = true;
     let spz = dir.path().join("aa.spz");
-    std::fs::write(&spz, verisplat::scene::spz::to_bytes_v3(&scene).unwrap()).unwrap();
-    let back = verisplat::scene::load(&spz).unwrap();
+    std::fs::write(
+        &spz,
+        verisplat::core::scene::spz::to_bytes_v3(&scene).unwrap(),
+    )
+    .unwrap();
+    let back = verisplat::core::scene::load(&spz).unwrap();
     assert!(back.antialiased);
     scene.antialiased = false;
-    let plain = verisplat::scene::spz::to_bytes_v3(&scene).unwrap();
+    let plain = verisplat::core::scene::spz::to_bytes_v3(&scene).unwrap();
     assert!(
-        !verisplat::scene::parse_bytes(&plain, Path::new("plain.spz"))
+        !verisplat::core::scene::parse_bytes(&plain, Path::new("plain.spz"))
             .unwrap()
             .0
             .antialiased
@@ -868,13 +873,13 @@ fn antialiased_training_flag_is_read_written_and_honoured() {
         let e = e.unwrap();
         std::fs::copy(e.path(), sog.join(e.file_name())).unwrap();
     }
-    assert!(!verisplat::scene::load(&sog).unwrap().antialiased);
+    assert!(!verisplat::core::scene::load(&sog).unwrap().antialiased);
     let meta = sog.join("meta.json");
     let mut json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&meta).unwrap()).unwrap();
     json["antialias"] = true.into();
     std::fs::write(&meta, json.to_string()).unwrap();
-    assert!(verisplat::scene::load(&sog).unwrap().antialiased);
+    assert!(verisplat::core::scene::load(&sog).unwrap().antialiased);
 
     // PLY cannot record the flag: convert says so.
     let o = verisplat(&["convert", s(&spz), s(&dir.path().join("aa.ply"))]);

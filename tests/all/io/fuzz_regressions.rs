@@ -5,8 +5,8 @@
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use verisplat::camera::{self, KeyframePath, PathTiming};
-use verisplat::scene;
+use verisplat::core::camera::{self, KeyframePath, PathTiming};
+use verisplat::core::scene;
 
 /// A found input runs in well under this (they are small); more means a hang came back.
 const PER_INPUT: Duration = Duration::from_secs(10);

@@ -38,10 +38,10 @@ use spz::spz_v4;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use verisplat::camera::{self, Camera, PathTiming};
+use verisplat::core::camera::{self, Camera, PathTiming};
+use verisplat::core::scene::compressed_ply::CHUNK_PROPS;
+use verisplat::core::scene::{self, Scene};
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::scene::compressed_ply::CHUNK_PROPS;
-use verisplat::scene::{self, Scene};
 
 /// The longest a CLI run on a tiny file may take before it counts as a hang.
 const CLI_TIMEOUT: Duration = Duration::from_secs(120);

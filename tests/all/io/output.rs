@@ -1,8 +1,8 @@
 //! PNG and EXR writers: values read back equal the frame; writes are atomic and never
 //! replace an existing file unasked.
 
-use verisplat::frame::Frame;
-use verisplat::output::{self, ImageFormat, OutputError};
+use verisplat::core::frame::Frame;
+use verisplat::io::output::{self, ImageFormat, OutputError};
 
 fn test_frame() -> Frame {
     let (w, h) = (37u32, 21u32);

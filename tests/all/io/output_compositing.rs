@@ -8,15 +8,15 @@ use crate::common::cli::{fails, ok, s};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::frame::Frame;
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::frame::Frame;
-use verisplat::output;
+use verisplat::io::output;
 
 /// The demo scene's default camera at 200x113, written as a cameras.json for the binary;
 /// returns the file and the camera as read back (what the binary renders).
 fn demo_camera(dir: &Path) -> (PathBuf, Camera) {
-    let scene = verisplat::demo_scene();
+    let scene = verisplat::core::demo::demo_scene();
     let cam = camera::default_camera(&scene.positions, 1280, 720)
         .resized(Some(200), None, None)
         .unwrap();
@@ -28,7 +28,7 @@ fn demo_camera(dir: &Path) -> (PathBuf, Camera) {
 
 fn cpu_render(cam: &Camera, background: [f32; 3]) -> Frame {
     cpu::render(
-        &verisplat::demo_scene().activated(),
+        &verisplat::core::demo::demo_scene().activated(),
         cam,
         &RenderOptions {
             background,
@@ -342,7 +342,7 @@ fn an_exported_orbit_renders_the_same_files_as_the_orbit() {
         );
     }
     // The INRIA layout: id, img_name, size, centre, camera-to-world rows, focal lengths.
-    let scene = verisplat::demo_scene();
+    let scene = verisplat::core::demo::demo_scene();
     let cams = camera::orbit(
         &scene.positions,
         &camera::OrbitParams {

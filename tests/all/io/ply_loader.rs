@@ -4,7 +4,7 @@
 use crate::common;
 use crate::common::random_scene;
 use std::path::Path;
-use verisplat::scene::{self, ply, Scene, SceneError};
+use verisplat::core::scene::{self, ply, Scene, SceneError};
 
 fn parse(bytes: &[u8]) -> Result<Scene, SceneError> {
     ply::parse(bytes, Path::new("test.ply"))

@@ -2,9 +2,9 @@
 //! the orbit cameras.json beside them follows the documented convention.
 
 use crate::common;
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::scene;
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::scene;
 
 /// Camera `index` of an orbit file of the shared scenes at 320x180; the file holds the 24
 /// cameras of its orbit.

@@ -3,9 +3,9 @@
 use crate::common;
 use crate::common::{axis_camera, push_gaussian};
 use glam::Vec3;
+use verisplat::core::frame::Frame;
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, sh, RenderOptions};
-use verisplat::frame::Frame;
-use verisplat::scene::Scene;
 
 fn render(s: &Scene, background: [f32; 3]) -> Frame {
     cpu::render(
@@ -567,10 +567,11 @@ fn tile_culling_is_exact_for_each_kernel() {
 /// scene from an orbit and a close-up, for both kernels.
 #[test]
 fn tile_culled_render_equals_the_reference_render_bit_for_bit() {
-    let scene = verisplat::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
-        .unwrap()
-        .activated();
-    let cams = verisplat::camera::load_cameras_json(
+    let scene =
+        verisplat::core::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
+            .unwrap()
+            .activated();
+    let cams = verisplat::core::camera::load_cameras_json(
         &common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
     )
     .unwrap();

@@ -15,13 +15,13 @@ use crate::common::gpu::{
     assert_validation_clean, check_against_reference, new_renderer, renderer,
 };
 use crate::common::orbit;
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::frame::Frame;
+use verisplat::core::scene::{self, ActivatedScene};
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
-use verisplat::frame::Frame;
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::render::{GpuRenderer, SplitLimits};
-use verisplat::scene::{self, ActivatedScene};
 
 fn load(name: &str) -> ActivatedScene {
     scene::load(&common::shared_data().join(name))

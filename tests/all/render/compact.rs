@@ -7,10 +7,10 @@
 
 use crate::common;
 use crate::common::gpu::{assert_validation_clean, compare, renderer, Thresholds, MIN_WITHIN};
-use verisplat::camera;
+use verisplat::core::camera;
+use verisplat::core::scene;
 use verisplat::cpu::{self, RenderOptions};
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::scene;
 
 #[test]
 fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
@@ -47,7 +47,7 @@ fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
             .render(&FrameRequest::new(&compact_scene, &cam, &opts))
             .and_then(Rendered::into_frame)
             .unwrap();
-        let alpha_depth = |f: &verisplat::frame::Frame| -> Vec<u32> {
+        let alpha_depth = |f: &verisplat::core::frame::Frame| -> Vec<u32> {
             f.alpha
                 .iter()
                 .chain(&f.depth)

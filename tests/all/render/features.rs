@@ -10,9 +10,9 @@ use crate::common;
 use crate::common::gpu::MIN_PSNR;
 use crate::common::{axis_camera, orbit, push_gaussian, PLAYBOT_ORBIT};
 use std::path::Path;
+use verisplat::core::scene::{self, Scene};
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::scene::{self, Scene};
 
 /// Random features in [-2, 3) for every Gaussian.
 fn random_features(s: &mut Scene, k: usize, seed: u64) {
@@ -255,7 +255,7 @@ pub(crate) fn check_gpu_cases_with(
                 .and_then(Rendered::into_frame)
                 .unwrap()
         );
-        let m = verisplat::metrics::compare_frames(&cframe, &gframe);
+        let m = verisplat::io::metrics::compare_frames(&cframe, &gframe);
         assert!(m.color.psnr >= MIN_PSNR, "{file} colour {}", m.color.psnr);
         let worst = (0..k)
             .map(|c| channel_psnr(&gfeat, cfeat, k, c))
@@ -270,7 +270,7 @@ pub(crate) fn check_gpu_cases_with(
 
 /// A float16 `.npy` of `shape` (NumPy's `<f2`).
 fn npy_f16(shape: &[usize], values: &[f32]) -> Vec<u8> {
-    let f32_file = verisplat::image_file::npy_bytes(shape, values);
+    let f32_file = verisplat::io::image_file::npy_bytes(shape, values);
     let data_at = f32_file.len() - values.len() * 4;
     let mut out = f32_file[..data_at].to_vec();
     let at = out.windows(3).position(|w| w == b"<f4").unwrap();
@@ -298,7 +298,7 @@ fn features_through_the_cli() {
     let f32_file = d.join("f32.npy");
     std::fs::write(
         &f32_file,
-        verisplat::image_file::npy_bytes(&[n, k], &values),
+        verisplat::io::image_file::npy_bytes(&[n, k], &values),
     )
     .unwrap();
     let f16_file = d.join("f16.npy");
@@ -324,7 +324,7 @@ fn features_through_the_cli() {
     );
     // float16 features load to the float16 values.
     let mut h = scene::load(&plain).unwrap();
-    verisplat::scene::features::attach_npy(&mut h, &f16_file).unwrap();
+    verisplat::core::scene::features::attach_npy(&mut h, &f16_file).unwrap();
     assert_eq!(h.feature_count, k);
     for (a, b) in h.features.iter().zip(&values) {
         assert!((a - b).abs() <= 2e-3, "{a} vs {b}");
@@ -370,7 +370,7 @@ fn features_through_the_cli() {
     render(&with, "cpu.npy", &["--cpu"]);
     render(&plain, "flag.npy", &["--cpu", "--features", s(&f32_file)]);
     let read_npy = |name: &str| {
-        verisplat::image_file::parse_npy_array(
+        verisplat::io::image_file::parse_npy_array(
             &std::fs::read(d.join(name)).unwrap(),
             Path::new(name),
         )
@@ -384,7 +384,7 @@ fn features_through_the_cli() {
         let psnr = channel_psnr(&g.data, &c.data, k, ch);
         assert!(psnr >= MIN_PSNR, "channel {ch}: {psnr}");
     }
-    let exr = verisplat::image_file::read_image(&d.join("gpu.exr")).unwrap();
+    let exr = verisplat::io::image_file::read_image(&d.join("gpu.exr")).unwrap();
     let mut names: Vec<&str> = exr.names();
     names.sort();
     assert_eq!(
@@ -419,7 +419,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
         (
             write(
                 "short.npy",
-                verisplat::image_file::npy_bytes(&[n - 1, 3], &vec![0.0; (n - 1) * 3]),
+                verisplat::io::image_file::npy_bytes(&[n - 1, 3], &vec![0.0; (n - 1) * 3]),
             ),
             format!(
                 "has {} rows of features, but the scene has {n} Gaussians",
@@ -427,7 +427,10 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
             ),
         ),
         (
-            write("nan.npy", verisplat::image_file::npy_bytes(&[n, 3], &nan)),
+            write(
+                "nan.npy",
+                verisplat::io::image_file::npy_bytes(&[n, 3], &nan),
+            ),
             "non-finite feature (NaN) at row 10, channel 1".to_string(),
         ),
         (
@@ -441,19 +444,22 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
         (
             write(
                 "cube.npy",
-                verisplat::image_file::npy_bytes(&[n, 2, 2], &vec![0.0; n * 4]),
+                verisplat::io::image_file::npy_bytes(&[n, 2, 2], &vec![0.0; n * 4]),
             ),
             "features are an N x K array".to_string(),
         ),
         (
             write(
                 "wide.npy",
-                verisplat::image_file::npy_bytes(&[n, 65], &vec![0.0; n * 65]),
+                verisplat::io::image_file::npy_bytes(&[n, 65], &vec![0.0; n * 65]),
             ),
             "1 to 64 are supported".to_string(),
         ),
         (
-            write("empty.npy", verisplat::image_file::npy_bytes(&[n, 0], &[])),
+            write(
+                "empty.npy",
+                verisplat::io::image_file::npy_bytes(&[n, 0], &[]),
+            ),
             "1 to 64 are supported".to_string(),
         ),
         (
@@ -495,7 +501,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
     assert!(e.contains("needs feature channels"), "{e}");
     let good = write(
         "good.npy",
-        verisplat::image_file::npy_bytes(&[n, 1], &vec![1.0; n]),
+        verisplat::io::image_file::npy_bytes(&[n, 1], &vec![1.0; n]),
     );
     let out = d.join("o.png");
     let e = fails(
@@ -536,7 +542,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
 /// each Gaussian's features with it, and `select` carries them.
 #[test]
 fn ply_features_round_trip_and_follow_the_gaussians() {
-    use verisplat::scene::ply::{parse, to_bytes, PlyEncoding};
+    use verisplat::core::scene::ply::{parse, to_bytes, PlyEncoding};
     let mut s = common::random_scene(50, 1, 9);
     random_features(&mut s, 9, 3);
     for enc in [
@@ -550,7 +556,7 @@ fn ply_features_round_trip_and_follow_the_gaussians() {
     let picked = s.select(&[7, 3, 40], 0);
     assert_eq!(picked.feature_count, 9);
     assert_eq!(&picked.features[9..18], &s.features[27..36]);
-    let filter = verisplat::scene::filter::SceneFilter {
+    let filter = verisplat::core::scene::filter::SceneFilter {
         min_opacity: Some(0.5),
         ..Default::default()
     };

@@ -15,10 +15,10 @@ use crate::common::gpu::{
 };
 use crate::common::{orbit, shared_scene};
 use glam::Vec3;
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, RenderOptions};
 use verisplat::render::{FrameRequest, Readback, Rendered};
-use verisplat::scene::Scene;
 
 #[test]
 fn playbot_lods_match_from_orbit_close_and_inside() {
@@ -115,7 +115,7 @@ fn plant_and_train_match() {
         &camera::default_camera(&train.positions, 320, 240),
         &RenderOptions::default(),
     );
-    let demo = verisplat::demo_scene().activated();
+    let demo = verisplat::core::demo::demo_scene().activated();
     check_frame(
         &mut r,
         "demo default",
@@ -282,7 +282,7 @@ fn every_blend_kernel_matches_the_reference_with_the_power_kernel() {
         let want: Vec<u8> = p
             .color
             .iter()
-            .flat_map(|c| c.map(verisplat::output::to_u8).into_iter().chain([255]))
+            .flat_map(|c| c.map(verisplat::io::output::to_u8).into_iter().chain([255]))
             .collect();
         assert!(packed.rgba == want, "{kernel:?}: rgba8 readback");
         assert_validation_clean(&r);
@@ -558,7 +558,7 @@ fn sh3_coefficients_beyond_one_storage_binding_render_through_the_texel_buffer()
         n < 3_000_000,
         "sized for lavapipe-like limits (range {range})"
     );
-    let mut s = verisplat::gen::synthetic_scene(n, 7, 3);
+    let mut s = verisplat::core::gen::synthetic_scene(n, 7, 3);
     // The generator's SH bands above DC are small; make the view-dependent part visible.
     let stride = s.sh_stride();
     for (i, v) in s.sh.iter_mut().enumerate() {
@@ -753,7 +753,7 @@ fn per_frame_options_match_the_reference_and_the_load_filters() {
     }
 
     // Per-frame filters == filters on load, bit for bit, GPU and CPU.
-    let filter = verisplat::scene::filter::SceneFilter {
+    let filter = verisplat::core::scene::filter::SceneFilter {
         max_scale: Some(median_scale),
         min_opacity: Some(0.3),
         sh_degree: Some(1),
@@ -850,9 +850,9 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
             .iter()
             .flat_map(|c| {
                 [
-                    verisplat::output::to_u8(c[0]),
-                    verisplat::output::to_u8(c[1]),
-                    verisplat::output::to_u8(c[2]),
+                    verisplat::io::output::to_u8(c[0]),
+                    verisplat::io::output::to_u8(c[1]),
+                    verisplat::io::output::to_u8(c[2]),
                     255,
                 ]
             })
@@ -880,13 +880,15 @@ fn rgba8_readback_equals_the_quantised_float_frame() {
 /// previews with the whole scene.
 #[test]
 fn viewer_previews_draw_the_most_important_gaussians() {
-    use verisplat::view::source::{GpuSource, ViewSettings, ViewSource, DEFAULT_PREVIEW_GAUSSIANS};
+    use verisplat::app::view::source::{
+        GpuSource, ViewSettings, ViewSource, DEFAULT_PREVIEW_GAUSSIANS,
+    };
     let scene = shared_scene("playbot_lod2_125k_sh2.ply");
     // The ranking: every kept Gaussian weighs at least as much as every dropped one.
     let weight = |i: usize| {
         let mut s = scene.log_scales[i];
         s.sort_by(f32::total_cmp);
-        verisplat::scene::sigmoid(scene.opacity_logits[i]) * (s[1] + s[2]).exp()
+        verisplat::core::scene::sigmoid(scene.opacity_logits[i]) * (s[1] + s[2]).exp()
     };
     let keep = scene.most_important(1000);
     assert_eq!(keep.len(), 1000);

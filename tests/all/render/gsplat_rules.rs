@@ -10,10 +10,10 @@ use crate::common;
 use crate::common::gpu::{assert_validation_clean, check_frame, compare, move_towards, renderer};
 use crate::common::{gsplat, off_centre, orbit, shared_scene, PLAYBOT_ORBIT};
 use glam::Vec3;
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::scene::ActivatedScene;
 use verisplat::cpu::{self, RenderOptions, Rules, SplatKernel};
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::scene::ActivatedScene;
 
 /// One splat of `opacity` and axis scale `scale` at view depth `z` on the optical axis of
 /// a camera at the origin looking down +z, red.
@@ -31,7 +31,7 @@ fn one_splat(z: f32, scale: f32, opacity: f32) -> (ActivatedScene, Camera) {
     (s, cam)
 }
 
-fn centre_alpha(frame: &verisplat::frame::Frame, cam: &Camera) -> f32 {
+fn centre_alpha(frame: &verisplat::core::frame::Frame, cam: &Camera) -> f32 {
     frame.alpha[(cam.height / 2 * cam.width + cam.width / 2) as usize]
 }
 

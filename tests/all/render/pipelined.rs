@@ -12,14 +12,16 @@ use crate::common::gpu::{assert_validation_clean, compare, new_renderer, Thresho
 use crate::common::{orbit_path, PLAYBOT_ORBIT};
 use std::collections::BTreeMap;
 use std::path::Path;
-use verisplat::camera::{self, Camera};
+use verisplat::app::sequence::{
+    self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions,
+};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::scene::{self, Scene};
 use verisplat::cpu::{self, RenderOptions};
-use verisplat::output::{self, OutputOptions};
+use verisplat::io::output::{self, OutputOptions};
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::scene::{self, Scene};
-use verisplat::sequence::{self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions};
 
 /// Every file of a directory with its bytes, by name.
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {

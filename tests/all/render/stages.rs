@@ -22,13 +22,13 @@ use crate::common;
 use crate::common::gpu::{assert_validation_clean, move_towards, new_renderer, renderer};
 use crate::common::orbit;
 use std::collections::{BTreeMap, HashSet};
-use verisplat::camera::{self, Camera};
+use verisplat::core::camera::{self, Camera};
+use verisplat::core::scene::{self, ActivatedScene};
 use verisplat::cpu::{self, Projected, RenderOptions, SplatKernel};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::forward::types::unpack_tile;
 use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::render::{GpuRenderer, Intermediates};
-use verisplat::scene::{self, ActivatedScene};
 
 fn load(name: &str) -> ActivatedScene {
     scene::load(&common::shared_data().join(name))
@@ -488,13 +488,13 @@ fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
     let third = float.forward();
     let frame = float.into_frame().unwrap();
     r.set_save_forward_state(false);
-    let grads = verisplat::model::grad::PixelGrads::<f32>::default();
+    let grads = verisplat::core::model::grad::PixelGrads::<f32>::default();
     let e = r.backward(&second, &gs, &frame, &grads).unwrap_err();
     assert!(
         e.to_string().contains("no longer the renderer's last"),
         "{e}"
     );
-    let small = verisplat::frame::Frame::background(32, 24, [0.0; 3]);
+    let small = verisplat::core::frame::Frame::background(32, 24, [0.0; 3]);
     let e = r.backward(&third, &gs, &small, &grads).unwrap_err();
     assert!(e.to_string().contains("the frame given 32x24"), "{e}");
     assert_ne!(first, second);

@@ -5,7 +5,7 @@
 use crate::common::dataset::make_dataset;
 use crate::common::{self, cli::verisplat};
 use std::path::Path;
-use verisplat::camera::orbit::{orbit, OrbitParams};
+use verisplat::core::camera::orbit::{orbit, OrbitParams};
 
 fn text(out: &std::process::Output) -> String {
     format!(
@@ -18,13 +18,13 @@ fn text(out: &std::process::Output) -> String {
 /// The largest opacity of the model saved at `iteration`.
 fn max_opacity(model: &Path, iteration: u32) -> f32 {
     let ply = model.join(format!("point_cloud/iteration_{iteration}/point_cloud.ply"));
-    let scene = verisplat::scene::load_with_format(&ply)
+    let scene = verisplat::core::scene::load_with_format(&ply)
         .expect("the saved model")
         .0;
     scene
         .opacity_logits
         .iter()
-        .map(|&l| verisplat::scene::sigmoid(l))
+        .map(|&l| verisplat::core::scene::sigmoid(l))
         .fold(0.0, f32::max)
 }
 
@@ -121,7 +121,7 @@ fn z_up_model(dir: &Path) -> std::path::PathBuf {
         height: 30,
         ..Default::default()
     };
-    let cams: Vec<(usize, verisplat::camera::Camera)> = orbit(&[], &params)
+    let cams: Vec<(usize, verisplat::core::camera::Camera)> = orbit(&[], &params)
         .unwrap()
         .into_iter()
         .enumerate()
@@ -132,7 +132,7 @@ fn z_up_model(dir: &Path) -> std::path::PathBuf {
         .collect();
     std::fs::write(
         model.join("cameras.json"),
-        verisplat::camera::inria::to_json(&cams).unwrap(),
+        verisplat::core::camera::inria::to_json(&cams).unwrap(),
     )
     .unwrap();
     model
@@ -155,7 +155,7 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
         all.push(json.to_str().unwrap());
         let out = verisplat(&all);
         assert!(out.status.success(), "{}", text(&out));
-        let cams = verisplat::camera::inria::load_cameras_json(&json).unwrap();
+        let cams = verisplat::core::camera::inria::load_cameras_json(&json).unwrap();
         (cams, text(&out))
     };
     let (cams, log) = exported(&["--camera", "0002"], "by_name");
@@ -170,7 +170,7 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
         "orbit",
     );
     assert!(log.contains("from the model's 12 cameras"), "{log}");
-    let (up, centre) = verisplat::camera::up_and_centre_of(&cams);
+    let (up, centre) = verisplat::core::camera::up_and_centre_of(&cams);
     assert!(up.unwrap().abs_diff_eq(glam::Vec3::Z, 1e-3), "{up:?}");
     assert!(
         centre
@@ -192,7 +192,7 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
         ],
         "orbit_y",
     );
-    let (up, _) = verisplat::camera::up_and_centre_of(&cams);
+    let (up, _) = verisplat::core::camera::up_and_centre_of(&cams);
     assert!(up.unwrap().abs_diff_eq(glam::Vec3::NEG_Y, 1e-3), "{up:?}");
 }
 
@@ -202,9 +202,9 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
 fn a_colmap_text_model_reads_back_as_written() {
     let dir = tempfile::tempdir().unwrap();
     make_dataset(dir.path(), 5, 40, 30);
-    let (cams, _) = verisplat::camera::colmap::load_colmap_model(dir.path()).unwrap();
+    let (cams, _) = verisplat::core::camera::colmap::load_colmap_model(dir.path()).unwrap();
     assert_eq!(cams.len(), 5);
-    let points = verisplat::camera::colmap::load_colmap_points(dir.path())
+    let points = verisplat::core::camera::colmap::load_colmap_points(dir.path())
         .unwrap()
         .unwrap();
     assert_eq!(points.len(), 1873_usize.div_ceil(2));

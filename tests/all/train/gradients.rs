@@ -12,10 +12,12 @@
 
 use crate::common::Rng;
 use glam::Vec3;
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::model::grad::{
+    relative_l2, ColorParams, PixelGrads, SplatParams, GRAD_GROUPS,
+};
 use verisplat::cpu::backward::{backward, forward, Image64};
 use verisplat::cpu::{RenderOptions, SplatKernel};
-use verisplat::model::grad::{relative_l2, ColorParams, PixelGrads, SplatParams, GRAD_GROUPS};
 
 /// A 48x40 camera looking at the origin from about 3 units away.
 pub fn grad_camera() -> Camera {
@@ -31,9 +33,9 @@ pub fn grad_camera() -> Camera {
 }
 
 /// `n` random Gaussians in view with SH colours of `degree`, or `channels` direct values
-/// ([`verisplat::gen::random_splat_params`], which `verisplat doctor` uses too).
+/// ([`verisplat::core::gen::random_splat_params`], which `verisplat doctor` uses too).
 pub fn grad_scene(n: usize, seed: u64, colors: Option<u32>, channels: usize) -> SplatParams<f32> {
-    verisplat::gen::random_splat_params(n, seed, colors, channels)
+    verisplat::core::gen::random_splat_params(n, seed, colors, channels)
 }
 
 /// Random pixel gradients for a frame of `channels`.
@@ -307,8 +309,8 @@ fn reference_backward_matches_finite_differences_at_the_guard_band() {
 /// Its reference backward against finite differences, for the Gaussians and the MLP.
 /// A random neural shader of `k` feature channels (and, with `extra`, the view direction
 /// and alpha as inputs): tanh, relu and sigmoid layers of `hidden` and 6 outputs.
-fn random_mlp(k: usize, extra: bool, hidden: usize, seed: u64) -> verisplat::mlp::Mlp {
-    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
+fn random_mlp(k: usize, extra: bool, hidden: usize, seed: u64) -> verisplat::fields::mlp::Mlp {
+    use verisplat::fields::mlp::{Activation, Layer, Mlp, MlpInput};
     let mut rng = Rng(seed);
     let mut layer = |inputs: usize, outputs: usize, activation| Layer {
         inputs,
@@ -349,7 +351,7 @@ fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
     // The f64 shaded frame is the f32 renderer's (`cpu::render_features` + `mlp::shade`).
     let p32 = grad_scene(8, 1300, None, k);
     let frame = verisplat::cpu::render_features(&p32.to_activated(), &cam, &opts);
-    let shaded = verisplat::mlp::shade(
+    let shaded = verisplat::fields::mlp::shade(
         &mlp,
         &cam,
         &frame.features,
@@ -475,7 +477,7 @@ pub(crate) fn gpu_against_reference(
     cam: &Camera,
     opts: &RenderOptions,
     seed: u64,
-) -> verisplat::model::grad::SplatGrads<f32> {
+) -> verisplat::core::model::grad::SplatGrads<f32> {
     let mut bg: Vec<f64> = opts.background.iter().map(|&b| b as f64).collect();
     bg.resize(p.channels(), 0.0);
     let g = pixel_grads(cam, p.channels(), seed, true);
@@ -636,7 +638,7 @@ fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
     let other = grad_scene(40, 901, Some(3), 3);
     r.forward(&other, &cam, &opts).unwrap();
     let third = r.backward(&p, &cam, &opts, token, &g).unwrap();
-    let bits = |s: &verisplat::model::grad::SplatGrads<f32>| -> Vec<u64> {
+    let bits = |s: &verisplat::core::model::grad::SplatGrads<f32>| -> Vec<u64> {
         GRAD_GROUPS
             .iter()
             .flat_map(|gr| s.group(gr))
@@ -766,7 +768,10 @@ fn gpu_backward_of_a_shaded_frame_matches_the_reference() {
         let third = r
             .backward_shaded(&p, &cam, &opts, token, &to_f32(&g))
             .unwrap();
-        let bits = |(s, m): &(verisplat::model::grad::SplatGrads<f32>, MlpParams<f32>)| {
+        let bits = |(s, m): &(
+            verisplat::core::model::grad::SplatGrads<f32>,
+            MlpParams<f32>,
+        )| {
             let mut v: Vec<u32> = GRAD_GROUPS
                 .iter()
                 .flat_map(|gr| s.group(gr))

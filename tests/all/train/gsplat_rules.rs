@@ -11,9 +11,9 @@ use super::gradients::{
 use crate::common;
 use crate::common::{gsplat, off_centre};
 use glam::Vec3;
-use verisplat::camera::Camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::model::grad::SplatParams;
 use verisplat::cpu::{self, RenderOptions, Rules, SplatKernel};
-use verisplat::model::grad::SplatParams;
 
 /// Two Gaussians whose centres lie beyond the sides of gsplat's guard band of an
 /// off-centre camera (left of -(cx/fx + 0.3 tan), below (H - cy)/fy + 0.3 tan), large
@@ -121,7 +121,7 @@ fn a_model_trained_with_gsplats_rules_records_and_renders_with_them() {
         "-q",
     ]);
     let ply = model.join("point_cloud/iteration_60/point_cloud.ply");
-    let (scene, _) = verisplat::scene::load_with_format(&ply).unwrap();
+    let (scene, _) = verisplat::core::scene::load_with_format(&ply).unwrap();
     assert_eq!(scene.rules, Rules::Gsplat);
     let head = std::fs::read(&ply).unwrap();
     let head = String::from_utf8_lossy(&head[..400]);

@@ -9,7 +9,7 @@
 //! 1e-3 relative L2 for the gradient, as the backward pass's other checks.
 
 use crate::common::{gpu::assert_validation_clean, Rng};
-use verisplat::model::grad::relative_l2;
+use verisplat::core::model::grad::relative_l2;
 use verisplat::train::loss::{loss_reference, GpuLoss, LAMBDA_DSSIM};
 
 fn image(width: usize, height: usize, seed: u64) -> Vec<f64> {
@@ -34,7 +34,7 @@ fn reference_loss_gradient_matches_finite_differences() {
     let (value, grad) = loss_reference(&x, &y, w, h, 3, lambda);
     // Its SSIM is the eval metric's (symmetric in its images).
     let f32s = |v: &[f64]| v.iter().map(|&a| a as f32).collect::<Vec<f32>>();
-    let metric = verisplat::metrics::ssim(&f32s(&y), &f32s(&x), w, h, 3);
+    let metric = verisplat::io::metrics::ssim(&f32s(&y), &f32s(&x), w, h, 3);
     assert!(
         (value.ssim - metric).abs() < 1e-6,
         "{} vs {metric}",

@@ -6,8 +6,8 @@
 use crate::common::dataset::{make_dataset, make_dataset_with};
 use crate::common::{self, cli::verisplat, cli::verisplat_in};
 use std::path::Path;
-use verisplat::camera::colmap;
-use verisplat::camera::orbit::{orbit, OrbitParams};
+use verisplat::core::camera::colmap;
+use verisplat::core::camera::orbit::{orbit, OrbitParams};
 
 /// The held-out PSNR that `train`'s summary line states.
 fn summary_psnr(stdout: &str) -> f64 {
@@ -105,7 +105,7 @@ fn train_reaches_the_stated_psnr_and_writes_the_model_directory() {
 /// --shader`.
 #[test]
 fn train_learns_feature_splats_and_their_shader() {
-    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    use verisplat::fields::mlp::{Activation, Layer, Mlp, MlpInput};
     let mut rng = common::Rng(5);
     let mut layer = |i: usize, o: usize, a| Layer {
         inputs: i,
@@ -154,7 +154,7 @@ fn train_learns_feature_splats_and_their_shader() {
     assert!(psnr >= 24.0, "held-out PSNR {psnr} dB");
     let dir600 = model.join("point_cloud/iteration_600");
     let shader = dir600.join("shader.safetensors");
-    let learned = verisplat::mlp::Mlp::load(&shader).unwrap();
+    let learned = verisplat::fields::mlp::Mlp::load(&shader).unwrap();
     assert_eq!(learned.feature_channels(), 4);
     let ply = dir600.join("point_cloud.ply");
     let png = dir.path().join("view.png");
@@ -304,7 +304,7 @@ fn bad_data_sets_give_one_clear_error_each() {
     let photo = data.join("images/view_001.png");
     let saved = std::fs::read(&photo).unwrap();
     // A photo of another size than its camera.
-    let small = verisplat::frame::Frame {
+    let small = verisplat::core::frame::Frame {
         width: 8,
         height: 8,
         color: vec![[0.5; 3]; 64],
@@ -313,8 +313,13 @@ fn bad_data_sets_give_one_clear_error_each() {
         feature_count: 0,
         features: Vec::new(),
     };
-    verisplat::output::write_frame(&small, &photo, verisplat::output::ImageFormat::Png8, true)
-        .unwrap();
+    verisplat::io::output::write_frame(
+        &small,
+        &photo,
+        verisplat::io::output::ImageFormat::Png8,
+        true,
+    )
+    .unwrap();
     fails_with("a resized photo", &["view_001.png", "8x8", "32x24"]);
     // A missing photo.
     std::fs::remove_file(&photo).unwrap();
@@ -338,7 +343,7 @@ fn bad_data_sets_give_one_clear_error_each() {
 /// composited over the background, and training from random Gaussians learns the views.
 #[test]
 fn a_nerf_synthetic_data_set_reads_back_and_trains() {
-    let scene = verisplat::scene::load_with_format(
+    let scene = verisplat::core::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .expect("the shared scene")
@@ -477,7 +482,7 @@ struct Harness {
 
 impl Harness {
     /// `views` photos of `w x h` ([`make_dataset_with`]), no views held out.
-    fn new(views: usize, w: u32, h: u32, shader: Option<&verisplat::mlp::Mlp>) -> Harness {
+    fn new(views: usize, w: u32, h: u32, shader: Option<&verisplat::fields::mlp::Mlp>) -> Harness {
         use verisplat::train::data;
         let dir = tempfile::tempdir().unwrap();
         let set = dir.path().join("data");
@@ -537,9 +542,9 @@ impl Harness {
 }
 
 /// The scene and the bytes of the PLY in a model folder.
-fn model_ply(at: &Path) -> (verisplat::scene::Scene, Vec<u8>) {
+fn model_ply(at: &Path) -> (verisplat::core::scene::Scene, Vec<u8>) {
     let ply = at.join("point_cloud.ply");
-    let scene = verisplat::scene::load_with_format(&ply).unwrap().0;
+    let scene = verisplat::core::scene::load_with_format(&ply).unwrap().0;
     (scene, std::fs::read(&ply).unwrap())
 }
 
@@ -566,7 +571,11 @@ fn worst_loss_difference(a: &[f64], b: &[f64]) -> f64 {
 
 /// Asserts that every parameter group of `a` (centres, log scales, quaternions, opacity
 /// logits, SH, feature channels) is within `max` of `b`'s (relative L2), printing each.
-fn assert_groups_agree(a: &verisplat::scene::Scene, b: &verisplat::scene::Scene, max: f64) {
+fn assert_groups_agree(
+    a: &verisplat::core::scene::Scene,
+    b: &verisplat::core::scene::Scene,
+    max: f64,
+) {
     for (name, x, y) in [
         ("centres", flat(&a.positions), flat(&b.positions)),
         ("log scales", flat(&a.log_scales), flat(&b.log_scales)),
@@ -785,7 +794,7 @@ fn render_exports_a_colmap_data_set_that_trains() {
 /// without it ends elsewhere).
 #[test]
 fn feature_splats_and_clipping_step_on_the_device_as_on_the_host() {
-    use verisplat::mlp::{Activation, Layer, Mlp, MlpInput};
+    use verisplat::fields::mlp::{Activation, Layer, Mlp, MlpInput};
     use verisplat::train::{model::Settings, run};
     let mut rng = common::Rng(9);
     let mut layer = |i: usize, o: usize, a| Layer {
@@ -928,7 +937,10 @@ fn train_with_the_mcmc_strategy_stays_within_its_cap() {
     let psnr = summary_psnr(&text);
     assert!(psnr >= 30.0, "held-out PSNR {psnr} dB (measured 32.45)");
     let ply = model.join("point_cloud/iteration_600/point_cloud.ply");
-    let n = verisplat::scene::load_with_format(&ply).unwrap().0.len();
+    let n = verisplat::core::scene::load_with_format(&ply)
+        .unwrap()
+        .0
+        .len();
     // 937 points, refinements at 200, 300, ..., 600: 983, 1032, 1083, then 1137 and 1193
     // held to the cap.
     assert_eq!(n, 1100, "937 points grow by 5 % per refinement to the cap");

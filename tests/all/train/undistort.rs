@@ -8,21 +8,23 @@
 
 use crate::common::{self, cli::verisplat};
 use std::path::Path;
-use verisplat::camera::distortion::Distortion;
-use verisplat::camera::Camera;
+use verisplat::core::camera::distortion::Distortion;
+use verisplat::core::camera::Camera;
 use verisplat::train::data::{self, Resolution};
 
 /// The shared scene (PLAYBOT LOD6, CC BY 4.0), activated.
-fn scene() -> verisplat::model::ActivatedScene {
-    verisplat::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-        .expect("the shared scene")
-        .0
-        .activated()
+fn scene() -> verisplat::core::model::ActivatedScene {
+    verisplat::core::scene::load_with_format(
+        &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
+    )
+    .expect("the shared scene")
+    .0
+    .activated()
 }
 
 /// `cam` rendered by the CPU reference at 3x and area-averaged down (what a photo of
 /// it is, up to 8-bit quantisation).
-fn render(scene: &verisplat::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3]> {
+fn render(scene: &verisplat::core::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3]> {
     let big = cam.with_resolution(cam.width * 3, cam.height * 3).unwrap();
     let f = verisplat::cpu::render(scene, &big, &Default::default());
     let c: Vec<[f32; 3]> = f
@@ -37,7 +39,7 @@ fn render(scene: &verisplat::model::ActivatedScene, cam: &Camera) -> Vec<[f32; 3
 /// 3x3 rays, each ray's colour bilinearly sampled from a pinhole render 3x as dense with
 /// a 1.8x wider field.
 fn distorted_photo(
-    scene: &verisplat::model::ActivatedScene,
+    scene: &verisplat::core::model::ActivatedScene,
     cam: &Camera,
     d: &Distortion,
 ) -> Vec<[f32; 3]> {
@@ -100,7 +102,7 @@ fn distorted_photo(
 /// Writes `photo` (of `cam`'s size) as an 8-bit PNG.
 fn write_png(path: &Path, cam: &Camera, photo: &[[f32; 3]]) {
     let n = photo.len();
-    let frame = verisplat::frame::Frame {
+    let frame = verisplat::core::frame::Frame {
         width: cam.width,
         height: cam.height,
         color: photo.to_vec(),
@@ -110,8 +112,13 @@ fn write_png(path: &Path, cam: &Camera, photo: &[[f32; 3]]) {
         features: Vec::new(),
     };
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    verisplat::output::write_frame(&frame, path, verisplat::output::ImageFormat::Png8, true)
-        .unwrap();
+    verisplat::io::output::write_frame(
+        &frame,
+        path,
+        verisplat::io::output::ImageFormat::Png8,
+        true,
+    )
+    .unwrap();
 }
 
 /// A COLMAP text data set in `dir` of `cams` (one shared camera of `model` with
@@ -137,7 +144,7 @@ fn write_colmap(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], model: &s
     )
     .unwrap();
     // Every image on camera 1.
-    let [_, (_, images), _] = verisplat::camera::colmap::to_text_model(cams, &[]);
+    let [_, (_, images), _] = verisplat::core::camera::colmap::to_text_model(cams, &[]);
     let images: String = images
         .lines()
         .map(|l| {
@@ -191,20 +198,20 @@ fn write_transforms(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], lens:
 /// `n` orbit cameras of `w x h` around the scene, named `view_NNN.png`, with the
 /// principal point a little off centre.
 fn cameras(n: usize, w: u32, h: u32) -> Vec<Camera> {
-    let positions = verisplat::scene::load_with_format(
+    let positions = verisplat::core::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .unwrap()
     .0
     .positions;
-    let params = verisplat::camera::OrbitParams {
+    let params = verisplat::core::camera::OrbitParams {
         frames: n,
         width: w,
         height: h,
         elevation_deg: 15.0,
         ..Default::default()
     };
-    verisplat::camera::orbit(&positions, &params)
+    verisplat::core::camera::orbit(&positions, &params)
         .unwrap()
         .into_iter()
         .enumerate()
@@ -219,7 +226,7 @@ fn cameras(n: usize, w: u32, h: u32) -> Vec<Camera> {
 
 fn psnr(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
     let flat = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-    verisplat::metrics::psnr(&flat(a), &flat(b), 1.0)
+    verisplat::io::metrics::psnr(&flat(a), &flat(b), 1.0)
 }
 
 /// The loaded view of a distorted data set matches a pinhole render of its camera, far

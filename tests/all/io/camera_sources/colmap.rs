@@ -7,8 +7,8 @@ use super::{
 };
 use glam::{DQuat, Vec2, Vec3};
 use std::path::Path;
-use verisplat::camera::{self, Camera, CameraError, CameraFormat};
-use verisplat::file_error::FileError;
+use verisplat::core::camera::{self, Camera, CameraError, CameraFormat};
+use verisplat::core::file_error::FileError;
 
 /// `cameras` with id i + 1 as PINHOLE and images named by camera name, as COLMAP text.
 fn colmap_text(cams: &[Camera]) -> (String, String) {

@@ -7,7 +7,7 @@ use super::{
 };
 use glam::{Mat3, Vec2, Vec3};
 use std::path::Path;
-use verisplat::camera::{
+use verisplat::core::camera::{
     keyframes_to_json, load_camera_file, orbit, Camera, CameraError, CameraFormat, KeyframePath,
     OrbitParams, PathTiming,
 };

@@ -1,0 +1,108 @@
+//! `verisplat convert`: any readable scene format to PLY, .splat or SPZ.
+
+use super::common::{check_output_file, FilterArgs};
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+use verisplat::core::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
+use verisplat::note;
+
+#[derive(Args)]
+#[command(after_help = "Examples:
+  verisplat convert scene.ply scene.spz
+  verisplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
+  verisplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
+  verisplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel")]
+pub(crate) struct ConvertArgs {
+    /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
+    pub(crate) input: PathBuf,
+    /// Output file: .ply (INRIA, lossless), .splat (DC colour only) or .spz (SPZ v3, gzip).
+    pub(crate) output: PathBuf,
+    #[command(flatten)]
+    pub(crate) filter: FilterArgs,
+    /// Replace the output file if it exists.
+    #[arg(long)]
+    pub(crate) overwrite: bool,
+    #[command(flatten)]
+    pub(crate) transform: super::transform::TransformArgs,
+    /// Record this alpha falloff in the output (gaussian or power; a PLY header comment,
+    /// which `render` follows) [default: the input's].
+    #[arg(long, value_name = "gaussian|power")]
+    pub(crate) kernel: Option<verisplat::cpu::SplatKernel>,
+    /// Attach feature channels from an N x K NumPy array (float32 or float16; written as
+    /// feat_* PLY properties; other formats drop them with a note).
+    #[arg(long, value_name = "FILE.npy")]
+    pub(crate) features: Option<PathBuf>,
+}
+
+pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
+    // Name, folder and existing-file problems are reported before the input is read.
+    OutputFormat::from_path(&args.output)?;
+    check_output_file(&args.output, args.overwrite)?;
+    let options = ConvertOptions {
+        transform: args.transform.transform()?,
+        filter: args.filter.filter()?,
+        overwrite: args.overwrite,
+        kernel: args.kernel,
+        features: args.features.clone(),
+    };
+    let r = convert_scene(&args.input, &args.output, &options)?;
+    if let Some(t) = &options.transform {
+        note!("transformed: {} by {t}", super::plural(r.read, "Gaussian"));
+    }
+    note!(
+        "converted {} ({}, {}) -> {} ({}, {}, SH degree {}, {} bytes)",
+        args.input.display(),
+        r.input_format,
+        super::plural(r.read, "Gaussian"),
+        args.output.display(),
+        r.output_format,
+        super::plural(r.written, "Gaussian"),
+        r.sh_degree,
+        r.bytes
+    );
+    if let Some(from) = r.sh_dropped_from {
+        note!(
+            "note: {} stores no SH bands beyond the DC colour; the scene's SH degree {from} was reduced to {}",
+            r.output_format,
+            r.sh_degree
+        );
+    }
+    if r.written == 0 && r.read > 0 {
+        note!(
+            "note: the filters removed all {} Gaussians; {} holds an empty scene",
+            r.read,
+            args.output.display()
+        );
+    }
+    if r.antialiased_flag_lost {
+        note!(
+            "note: {} records that the scene was trained with antialiasing; {} cannot record that, so render the output with --antialiased",
+            args.input.display(),
+            r.output_format
+        );
+    }
+    if r.features_dropped > 0 {
+        note!(
+            "note: {} stores no feature channels; the {} of {} were dropped (PLY keeps them as feat_*)",
+            r.output_format,
+            super::plural(r.features_dropped, "channel"),
+            args.input.display()
+        );
+    }
+    if let Some(rules) = r.rules_lost {
+        note!(
+            "note: {} records that the scene was trained with {rules}'s rules; {} cannot record that, so render the output with --rules {rules}",
+            args.input.display(),
+            r.output_format
+        );
+    }
+    if let Some(kernel) = r.kernel_lost {
+        note!(
+            "note: {} records that the scene is made for the {kernel} kernel; {} cannot record that, so render the output with --kernel {kernel}",
+            args.input.display(),
+            r.output_format
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,55 @@
+//! A rendered frame: colour, alpha and depth planes, shared by both renderers and the writers.
+
+use crate::core::camera::Camera;
+
+/// The result of rendering one camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB including the background term `T * background`, row-major, unclamped.
+    pub color: Vec<[f32; 3]>,
+    /// Opacity `1 - T_final` per pixel.
+    pub alpha: Vec<f32>,
+    /// Alpha-weighted view-space depth normalised by alpha; 0 where alpha is 0.
+    pub depth: Vec<f32>,
+    /// Feature channels per pixel in [`Self::features`] (0 unless features were rendered).
+    pub feature_count: usize,
+    /// Blended feature channels (background 0), `feature_count` per pixel, row-major.
+    pub features: Vec<f32>,
+}
+
+impl Frame {
+    /// A frame filled with `background`, alpha 0 and depth 0.
+    pub fn background(width: u32, height: u32, background: [f32; 3]) -> Frame {
+        let n = width as usize * height as usize;
+        Frame {
+            width,
+            height,
+            color: vec![background; n],
+            alpha: vec![0.0; n],
+            depth: vec![0.0; n],
+            feature_count: 0,
+            features: Vec::new(),
+        }
+    }
+
+    /// Row-major pixel index.
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.width as usize + x as usize
+    }
+}
+
+/// A renderer that may keep several frames in flight: `app::sequence::run_pipelined`
+/// submits frame
+/// `n + 1` before it finishes frame `n` (the GPU renderer's path is one).
+pub trait FrameSource {
+    /// Starts rendering `cam` (recorded and submitted; not waited for).
+    fn submit(&mut self, cam: &Camera) -> anyhow::Result<()>;
+    /// Waits for the oldest frame submitted and not finished yet, and reads it back.
+    fn finish(&mut self) -> anyhow::Result<Frame>;
+    /// Drops the frames submitted and not finished (after an error stopped the run).
+    fn discard(&mut self);
+}
