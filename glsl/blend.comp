@@ -24,12 +24,12 @@
 #ifndef SAVE_LAST
 #define SAVE_LAST 0
 #endif
-#define CHUNK_W min(4u, 16u / STRIP)
+#define CHUNK_W min(4u, TILE_SIZE / STRIP)
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 16 / STRIP, local_size_y = 16) in;
+layout(local_size_x = TILE_SIZE / STRIP, local_size_y = TILE_SIZE) in;
 
 layout(std430, binding = BLEND_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #if !TEXEL_FETCH
@@ -177,7 +177,7 @@ void main() {
     // subgroup size.
     uint li = gl_LocalInvocationIndex;
     uint chunk = li / 8u, lane = li % 8u;
-    uint chunks_x = (16u / STRIP) / CHUNK_W;
+    uint chunks_x = (TILE_SIZE / STRIP) / CHUNK_W;
     uvec2 strip_xy = uvec2((chunk % chunks_x) * CHUNK_W + lane % CHUNK_W,
                            (chunk / chunks_x) * (8u / CHUNK_W) + lane / CHUNK_W);
     uvec2 pix0 = tile * TILE_SIZE + uvec2(strip_xy.x * STRIP, strip_xy.y);

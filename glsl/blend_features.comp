@@ -16,7 +16,7 @@
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
-layout(local_size_x = 16, local_size_y = 8) in;
+layout(local_size_x = PIXEL_WG_X, local_size_y = PIXEL_WG_Y) in;
 
 layout(std430, binding = BLEND_FEATURES_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
 #if !TEXEL_FETCH

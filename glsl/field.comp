@@ -3,7 +3,8 @@
 // f(x) = sum_i o_i feat_i G_i(x) itself, a plain sum (no blending, no sort), four channels
 // per dispatch. The CPU reference's field renders have every formula.
 //
-// One invocation per pixel of a 16x8 tile (WG_SIZE 128, within every device's limit;
+// One invocation per pixel of a PIXEL_WG_X x PIXEL_WG_Y (16x8) tile (WG_SIZE 128, within
+// every device's limit;
 // pixel = local index). The
 // Gaussians are read in chunks of CHUNK: each of the first CHUNK invocations tests one
 // against the tile's frustum (its support's bounding sphere against the four side planes;
@@ -21,13 +22,13 @@
 #ifndef SPLAT_KERNEL
 #define SPLAT_KERNEL 0u
 #endif
-#define WG_SIZE 128
-#define TILE_W 16u
-#define TILE_H 8u
+#define WG_SIZE (PIXEL_WG_X * PIXEL_WG_Y)
+#define TILE_W PIXEL_WG_X
+#define TILE_H PIXEL_WG_Y
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 
-#define CHUNK 128u
+#define CHUNK WG_SIZE
 layout(std430, binding = FIELD_PARAMS) readonly buffer ParamsBuf { FieldParams params; };
 layout(std430, binding = FIELD_GAUSSIANS) readonly buffer GaussianBuf { FieldGaussian gaussians[]; };
 // o_i feat_i, this group's four channels: features[i * groups + group].

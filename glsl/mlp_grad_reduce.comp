@@ -3,7 +3,7 @@
 // The neural shader's parameter gradients (its backward pass): the sum of the
 // partial slots that shade_bwd.comp filled, slot after slot, one invocation per parameter.
 
-layout(local_size_x = 64) in;
+layout(local_size_x = MLP_REDUCE_WG) in;
 
 #include "interface.glsl"
 

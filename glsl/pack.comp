@@ -6,8 +6,8 @@
 // multiply and the add rounded separately (`precise` forbids fusing them), so a packed
 // frame equals the PNG that `verisplat render` writes from the float frame, bit for bit.
 
-// 16 x 8 pixels: 128 invocations, within every device's limit.
-layout(local_size_x = 16, local_size_y = 8) in;
+// PIXEL_WG_X x PIXEL_WG_Y (16 x 8) pixels: 128 invocations, within every device's limit.
+layout(local_size_x = PIXEL_WG_X, local_size_y = PIXEL_WG_Y) in;
 
 layout(binding = PACK_COLOR, rgba32f) uniform readonly image2D color;  // rgb + T * background
 layout(std430, binding = PACK_PACKED) writeonly buffer PackedBuf { uint packed[]; };

@@ -7,8 +7,8 @@
 #extension GL_GOOGLE_include_directive : require
 #include "interface.glsl"
 
-// 16 x 8 pixels: 128 invocations, within every device's limit.
-layout(local_size_x = 16, local_size_y = 8) in;
+// PIXEL_WG_X x PIXEL_WG_Y (16 x 8) pixels: 128 invocations, within every device's limit.
+layout(local_size_x = PIXEL_WG_X, local_size_y = PIXEL_WG_Y) in;
 
 layout(push_constant) uniform ShadeBlock { ShadePush p; };
 

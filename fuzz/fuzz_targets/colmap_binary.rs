@@ -6,7 +6,7 @@ use std::path::Path;
 
 fuzz_target!(|data: &[u8]| {
     let (cams, images) = verisplat_fuzz::split_len_prefixed(data);
-    let _ = verisplat::camera::colmap::parse_colmap_binary(
+    let _ = verisplat::core::camera::colmap::parse_colmap_binary(
         cams,
         Path::new("cameras.bin"),
         images,

@@ -3,6 +3,8 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ =
-        verisplat::scene::compressed_ply::parse(data, std::path::Path::new("fuzz.compressed.ply"));
+    let _ = verisplat::core::scene::compressed_ply::parse(
+        data,
+        std::path::Path::new("fuzz.compressed.ply"),
+    );
 });

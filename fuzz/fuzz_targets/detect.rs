@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = verisplat::scene::parse_bytes(data, std::path::Path::new("fuzz.bin"));
+    let _ = verisplat::core::scene::parse_bytes(data, std::path::Path::new("fuzz.bin"));
 });

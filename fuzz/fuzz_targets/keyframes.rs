@@ -2,7 +2,7 @@
 //! Keyframe path JSON: parse, then sample it at a small frame count (the file's own frame
 //! count or fps could ask for a million frames, which is allowed but slow to fuzz).
 use libfuzzer_sys::fuzz_target;
-use verisplat::camera::{KeyframePath, PathTiming};
+use verisplat::core::camera::{KeyframePath, PathTiming};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

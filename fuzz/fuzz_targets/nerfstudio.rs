@@ -4,7 +4,7 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {
-        let _ = verisplat::camera::nerfstudio::parse_camera_path(
+        let _ = verisplat::core::camera::nerfstudio::parse_camera_path(
             text,
             std::path::Path::new("camera_path.json"),
         );

@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = verisplat::image_file::parse_image(data, std::path::Path::new("image.npy"));
+    let _ = verisplat::io::image_file::parse_image(data, std::path::Path::new("image.npy"));
 });

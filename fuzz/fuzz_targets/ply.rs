@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = verisplat::scene::ply::parse(data, std::path::Path::new("fuzz.ply"));
+    let _ = verisplat::core::scene::ply::parse(data, std::path::Path::new("fuzz.ply"));
 });

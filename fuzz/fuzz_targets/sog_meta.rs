@@ -5,5 +5,5 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     let bundle = verisplat_fuzz::sog_zip(data);
-    let _ = verisplat::scene::sog::parse_zip(&bundle, std::path::Path::new("fuzz.sog"));
+    let _ = verisplat::core::scene::sog::parse_zip(&bundle, std::path::Path::new("fuzz.sog"));
 });

@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = verisplat::scene::sog::parse_zip(data, std::path::Path::new("fuzz.sog"));
+    let _ = verisplat::core::scene::sog::parse_zip(data, std::path::Path::new("fuzz.sog"));
 });

@@ -3,6 +3,6 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = verisplat::scene::splat::parse(data, std::path::Path::new("fuzz.splat"));
-    let _ = verisplat::scene::splat::is_plausible(data);
+    let _ = verisplat::core::scene::splat::parse(data, std::path::Path::new("fuzz.splat"));
+    let _ = verisplat::core::scene::splat::is_plausible(data);
 });

@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = verisplat::scene::spz::parse(data, std::path::Path::new("fuzz.spz"));
+    let _ = verisplat::core::scene::spz::parse(data, std::path::Path::new("fuzz.spz"));
 });

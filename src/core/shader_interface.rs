@@ -591,7 +591,8 @@ mod tests {
     }
 
     /// The shaders declare none of the records or constants themselves, each push block
-    /// is one record, and no shader comment names a Rust file.
+    /// is one record, no workgroup size is a literal, and no shader comment names a Rust
+    /// file.
     #[test]
     fn the_shaders_take_every_record_and_flag_from_the_interface() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
@@ -626,6 +627,20 @@ mod tests {
                     !(line.contains("src/") || line.contains(".rs)") || line.contains(".rs ")),
                     "{at} names a Rust file: {line}"
                 );
+                // Workgroup sizes are host constants (gpu::shader_set), never literals (but
+                // the 1 of a dimension a workgroup does not use).
+                for (i, _) in line.match_indices("local_size_") {
+                    let value = line[i..].split_once('=').map(|(_, v)| v.trim_start());
+                    let literal = value.map(|v| {
+                        v.chars()
+                            .take_while(char::is_ascii_digit)
+                            .collect::<String>()
+                    });
+                    assert!(
+                        literal.as_deref().is_none_or(|n| n.is_empty() || n == "1"),
+                        "{at} types a workgroup size: {line}"
+                    );
+                }
                 let Some(rest) = line.trim().strip_prefix("layout(push_constant) uniform ") else {
                     continue;
                 };

@@ -20,6 +20,25 @@ pub const WIDE_WG_SPEC: u32 = 101;
 /// Pixels one invocation of the loss's SSIM window (`ssim_filter`) filters, consecutive
 /// along its axis.
 pub const SSIM_FILTER_RUN: u32 = 8;
+/// Width of the image-grid workgroup of the per-pixel stages (`pack`, `shade`,
+/// `blend_features`, the field renders): one invocation per pixel of a
+/// [`PIXEL_WG_X`] x [`PIXEL_WG_Y`] block.
+pub const PIXEL_WG_X: u32 = 16;
+/// Height of the per-pixel stages' workgroup ([`PIXEL_WG_X`] x 8 = 128 invocations, the
+/// specification's guaranteed minimum of `maxComputeWorkGroupInvocations`).
+pub const PIXEL_WG_Y: u32 = 8;
+/// Invocations per workgroup of the training loss's per-pixel passes (`loss_common.glsl`),
+/// one per pixel, the workgroups laid out in two dimensions.
+pub const LOSS_WG: u32 = 64;
+/// Invocations per workgroup of the loss's fixed-order sum (`loss_reduce`).
+pub const REDUCE_WG: u32 = 128;
+/// Values each `loss_reduce` invocation adds, strided by [`REDUCE_WG`].
+pub const REDUCE_ITEMS: u32 = 32;
+/// Values one `loss_reduce` workgroup sums.
+pub const REDUCE_SPAN: u32 = REDUCE_WG * REDUCE_ITEMS;
+/// Invocations per workgroup of the neural shader's gradient sum (`mlp_grad_reduce`), one
+/// per parameter.
+pub const MLP_REDUCE_WG: u32 = 64;
 /// Invocations per scan workgroup (the specification's guaranteed minimum of
 /// `maxComputeWorkGroupInvocations`).
 pub const SCAN_WG: u32 = 128;
@@ -178,6 +197,13 @@ pub fn shared_defines() -> Vec<(String, String)> {
         ("GSPLAT_EXTEND", glsl_float(rules::GSPLAT_EXTEND)),
         ("T_MIN", glsl_float(rules::T_MIN)),
         ("LINEAR_WG", format!("{LINEAR_WG}u")),
+        ("PIXEL_WG_X", format!("{PIXEL_WG_X}u")),
+        ("PIXEL_WG_Y", format!("{PIXEL_WG_Y}u")),
+        ("LOSS_WG", format!("{LOSS_WG}u")),
+        ("REDUCE_WG", format!("{REDUCE_WG}u")),
+        ("REDUCE_ITEMS", format!("{REDUCE_ITEMS}u")),
+        ("REDUCE_SPAN", format!("{REDUCE_SPAN}u")),
+        ("MLP_REDUCE_WG", format!("{MLP_REDUCE_WG}u")),
         ("SCAN_WG", SCAN_WG.to_string()),
         ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
         ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),

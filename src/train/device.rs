@@ -34,7 +34,7 @@ use crate::render::{sh_texel_stride, GpuFeatures, GpuRenderer, GpuScene};
 /// Invocations per workgroup.
 const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;
 /// Values a `loss_reduce` workgroup sums.
-const REDUCE_SPAN: u64 = 4096;
+const REDUCE_SPAN: u64 = crate::gpu::shader_set::REDUCE_SPAN as u64;
 
 /// What one iteration's step does.
 #[derive(Clone, Copy, Debug)]

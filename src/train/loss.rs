@@ -104,9 +104,9 @@ pub fn loss_reference(
 }
 
 /// Values a `loss_reduce` workgroup sums.
-const REDUCE_SPAN: u64 = 4096;
+const REDUCE_SPAN: u64 = crate::gpu::shader_set::REDUCE_SPAN as u64;
 /// Invocations per workgroup of the per-pixel passes.
-const PIXEL_GROUP: u64 = 64;
+const PIXEL_GROUP: u64 = crate::gpu::shader_set::LOSS_WG as u64;
 /// Pixels one `ssim_filter` invocation filters, consecutive along its axis.
 const FILTER_RUN: u64 = crate::gpu::shader_set::SSIM_FILTER_RUN as u64;
 

@@ -185,7 +185,11 @@ impl ShadeBwd {
             bytemuck::bytes_of(&crate::core::shader_interface::CountsPush {
                 counts: [shader.params, slots as u32, 0, 0],
             }),
-            [shader.params.div_ceil(64), 1, 1],
+            [
+                shader.params.div_ceil(crate::gpu::shader_set::MLP_REDUCE_WG),
+                1,
+                1,
+            ],
         )
     }
 }

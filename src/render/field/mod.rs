@@ -13,9 +13,7 @@ use crate::gpu::shader_set::bindings::field as slot;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
 
-/// Workgroup width and height in pixels (16 x 8 = 128 invocations, `glsl/field.comp`).
-const SIDE: u32 = 16;
-const ROWS: u32 = 8;
+use crate::gpu::shader_set::{PIXEL_WG_X as SIDE, PIXEL_WG_Y as ROWS};
 
 /// Gaussians per pass of a slice or an integral on a device with llvmpipe's loop limit
 /// (an invocation whose loops run 65,535 iterations in all is ended before it writes): an

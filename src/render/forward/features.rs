@@ -131,7 +131,11 @@ impl FeatureBlend {
                 resume: u32::from(b.resume),
                 pad: 0,
             }),
-            [size.0.div_ceil(16), size.1.div_ceil(8), 1],
+            [
+                size.0.div_ceil(crate::gpu::shader_set::PIXEL_WG_X),
+                size.1.div_ceil(crate::gpu::shader_set::PIXEL_WG_Y),
+                1,
+            ],
         )
     }
 }

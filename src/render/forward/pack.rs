@@ -7,10 +7,7 @@ use crate::gpu::shader_set::bindings::pack as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
 use ash::vk;
 
-/// Workgroup side (16 x 16 invocations).
-/// Pixels per workgroup along x and y (`glsl/pack.comp`: 128 invocations).
-const SIDE: u32 = 16;
-const ROWS: u32 = 8;
+use crate::gpu::shader_set::{PIXEL_WG_X as SIDE, PIXEL_WG_Y as ROWS};
 
 /// The pack pipeline.
 pub struct Pack {

@@ -12,10 +12,7 @@ use crate::gpu::{
 };
 use ash::vk;
 
-/// Workgroup side (16 x 16 invocations).
-/// Pixels per workgroup along x and y (`glsl/shade.comp`: 128 invocations).
-const SIDE: u32 = 16;
-const ROWS: u32 = 8;
+use crate::gpu::shader_set::{PIXEL_WG_X as SIDE, PIXEL_WG_Y as ROWS};
 
 const _: () = assert!(std::mem::size_of::<ShadePush>() == 112);
 
