@@ -186,7 +186,9 @@ impl ShadeBwd {
                 counts: [shader.params, slots as u32, 0, 0],
             }),
             [
-                shader.params.div_ceil(crate::gpu::shader_set::MLP_REDUCE_WG),
+                shader
+                    .params
+                    .div_ceil(crate::gpu::shader_set::MLP_REDUCE_WG),
                 1,
                 1,
             ],
