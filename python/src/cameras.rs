@@ -26,6 +26,7 @@ pub(crate) fn to_camera(t: &CamTuple) -> PyResult<Camera> {
         cy: k[3],
         rotation,
         translation: Vec3::new(m[3], m[7], m[11]),
+        lens: verisplat::core::camera::Lens::Pinhole,
     };
     cam.validate()
         .map_err(|e| value_err(format!("camera \"{name}\": {e}")))?;

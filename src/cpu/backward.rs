@@ -102,6 +102,13 @@ fn check(p: &SplatParams<f64>, cam: &Camera, background: &[f64]) -> Result<(), S
         ));
     }
     cam.validate().map_err(|e| e.to_string())?;
+    if !cam.lens.is_pinhole() {
+        return Err(format!(
+            "camera \"{}\" has a {} lens; the differentiable reference is a pinhole's so far",
+            cam.name,
+            cam.lens.name()
+        ));
+    }
     Ok(())
 }
 

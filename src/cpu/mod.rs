@@ -95,13 +95,27 @@ pub fn preprocess_one(
     let mean = Vec3::from(scene.positions[i]);
     let view = cam.rotation * mean + cam.translation;
     let rules = opts.rules;
-    if !rules.in_front(view.z, opts.near()) {
-        return culled;
-    }
     let m = opts.scale_modifier;
     let s = scene.scales[i];
-    let cov3d = covariance_3d([m * s[0], m * s[1], m * s[2]], scene.rotations[i]);
-    let [a, b, c] = covariance_2d(view, cov3d, cam, rules);
+    let scale = [m * s[0], m * s[1], m * s[2]];
+    let (cov2d, mean2d, depth) = if cam.lens.is_pinhole() {
+        if !rules.in_front(view.z, opts.near()) {
+            return culled;
+        }
+        let cov3d = covariance_3d(scale, scene.rotations[i]);
+        let inv_z = 1.0 / view.z;
+        let mean2d = [
+            cam.fx * view.x * inv_z + cam.cx - 0.5,
+            cam.fy * view.y * inv_z + cam.cy - 0.5,
+        ];
+        (covariance_2d(view, cov3d, cam, rules), mean2d, view.z)
+    } else {
+        match through_lens(view, scale, scene.rotations[i], cam, opts) {
+            Some(p) => p,
+            None => return culled,
+        }
+    };
+    let [a, b, c] = cov2d;
     let det_before = a * c - b * b;
     let (a, c) = (a + COV2D_DILATION, c + COV2D_DILATION);
     let det = a * c - b * b;
@@ -115,11 +129,6 @@ pub fn preprocess_one(
     };
     let det_inv = 1.0 / det;
     let conic = [c * det_inv, -b * det_inv, a * det_inv];
-    let inv_z = 1.0 / view.z;
-    let mean2d = [
-        cam.fx * view.x * inv_z + cam.cx - 0.5,
-        cam.fy * view.y * inv_z + cam.cy - 0.5,
-    ];
     let size = (cam.width, cam.height);
     let Some(e) = rules.extent([a, b, c], det, opacity, mean2d, size, cam.tile_grid()) else {
         return culled;
@@ -133,7 +142,7 @@ pub fn preprocess_one(
     );
     Projected {
         mean2d,
-        depth: view.z,
+        depth,
         conic,
         opacity,
         color,
@@ -141,6 +150,38 @@ pub fn preprocess_one(
         rect_min: e.rect_min,
         rect_max: e.rect_max,
     }
+}
+
+/// The 2D covariance (before the dilation), centre (pixel `(i, j)` at `(i, j)`) and depth
+/// of a Gaussian seen through a lens other than the pinhole, by the unscented transform
+/// ([`crate::core::model::unscented`]), or `None` when it is culled: nearer than the near
+/// plane (along the axis for the distorted and orthographic lenses, as the distance from
+/// the camera for the fisheye and equirectangular ones, which see behind their image
+/// plane), or not imaged. The depth sorted by is that same `z` or distance.
+fn through_lens(
+    view: Vec3,
+    scale: [f32; 3],
+    rotation: [f32; 4],
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> Option<([f32; 3], [f32; 2], f32)> {
+    use crate::core::camera::Lens;
+    use crate::core::model::unscented;
+    let depth = match cam.lens {
+        Lens::Fisheye { .. } | Lens::Equirectangular { .. } => view.length(),
+        _ => view.z,
+    };
+    if !opts.rules.in_front(depth, opts.near()) {
+        return None;
+    }
+    let axes =
+        (cam.rotation * quat_to_mat3(rotation) * Mat3::from_diagonal(Vec3::from(scale))).as_dmat3();
+    let params = unscented::UnscentedParams::default();
+    let p =
+        unscented::project(&cam.lens, &cam.intrinsics(), view.as_dvec3(), axes, &params).ok()?;
+    let cov = p.cov.as_mat2();
+    let mean2d = [p.mean.x as f32 - 0.5, p.mean.y as f32 - 0.5];
+    Some(([cov.x_axis.x, cov.y_axis.x, cov.y_axis.y], mean2d, depth))
 }
 
 /// Tile rectangle `[min, max)` of a disc of radius `radius` around `p`, clamped to the grid

@@ -513,6 +513,7 @@ fn read_transforms(
             cy: cy as f32,
             rotation: rotation.as_mat3(),
             translation: (-(rotation * centre)).as_vec3(),
+            lens: crate::core::camera::Lens::Pinhole,
         };
         camera
             .validate()

@@ -144,6 +144,13 @@ pub(crate) struct PathArgs {
     /// degrees [default: 50]. Camera files bring their own intrinsics.
     #[arg(long, value_name = "DEG", value_parser = values::fov_deg)]
     pub(crate) vfov: Option<f32>,
+    /// Lens of generated cameras (orbit, --look-at, default camera): pinhole,
+    /// fisheye[:fov=DEG] (default 180, filling the shorter side), equirect[:lon=A..B,lat=C..D]
+    /// (degrees; the whole sphere by default) or ortho[:width=W] (world units across;
+    /// default: what --vfov shows at the scene's centre). Lenses other than the pinhole are
+    /// drawn by the CPU reference (--cpu) so far. docs/cameras.md, "Lenses".
+    #[arg(long, value_name = "LENS", value_parser = values::lens)]
+    pub(crate) lens: Option<camera::LensSpec>,
     /// Frames per second of a keyframe path (default: the file's).
     #[arg(long, value_name = "FPS", value_parser = values::positive_f32)]
     pub(crate) fps: Option<f32>,
@@ -374,6 +381,32 @@ pub(crate) struct CameraPath {
     pub(crate) source: String,
 }
 
+/// Refuses a `--lens` other than the pinhole where only pinhole cameras work so far (every
+/// lens is drawn by the CPU reference, `render --cpu`): `why` says so, after the lens.
+pub(crate) fn refuse_lens(p: &PathArgs, why: &str) -> Result<()> {
+    match &p.lens {
+        Some(spec) if *spec != camera::LensSpec::Pinhole => {
+            bail!("--lens {}: {why}", spec.lens().name())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// [`refuse_lens`]'s reason for a command that draws: `what` draws pinhole cameras only.
+pub(crate) fn draws_pinholes_only(what: &str) -> String {
+    format!("{what} draws pinhole cameras only so far; the CPU reference draws every lens (render --cpu)")
+}
+
+/// Gives a generated pinhole camera the lens of `spec` (`--lens`), its focal lengths made
+/// from the pinhole's and the distance to the scene's `centre`.
+fn with_lens(cam: &mut Camera, spec: &camera::LensSpec, centre: glam::Vec3) {
+    let distance = f64::from((cam.position() - centre).length()).max(1e-6);
+    let (lens, fx, fy, cx, cy) = spec.apply(cam.width, cam.height, f64::from(cam.fy), distance);
+    cam.lens = lens;
+    (cam.fx, cam.fy) = (fx as f32, fy as f32);
+    (cam.cx, cam.cy) = (cx as f32, cy as f32);
+}
+
 /// Builds the camera path of `--orbit`, `--cameras`, a model directory's own
 /// cameras.json ([`model_cameras`]) or the default camera, applies `--camera` and the
 /// resolution options, and refuses options the source ignores.
@@ -421,6 +454,12 @@ pub(crate) fn camera_path(
             format!("an orbit of {}", super::plural(frames, "frame")),
         )
     } else if let Some(path) = &camera_file {
+        if p.lens.is_some() {
+            bail!(
+                "--lens sets the lens of generated cameras (--orbit, --look-at, the default camera); {} brings its own",
+                path.display()
+            );
+        }
         if p.vfov.is_some() {
             bail!(
                 "--vfov sets the field of view of generated cameras (--orbit, the default camera); {} brings its own intrinsics",
@@ -491,11 +530,19 @@ pub(crate) fn camera_path(
         }
         None => ((0..all.len()).collect(), source),
     };
+    let centre = p
+        .lens
+        .as_ref()
+        .map(|_| camera::bulk_bounds(&scene.positions).box_centre());
     let cameras = chosen
         .into_iter()
         .map(|i| {
             Ok(if generated {
-                (i, all[i].clone())
+                let mut cam = all[i].clone();
+                if let (Some(spec), Some(centre)) = (&p.lens, centre) {
+                    with_lens(&mut cam, spec, centre);
+                }
+                (i, cam)
             } else {
                 (i, all[i].resized(view.width, view.height, view.scale)?)
             })

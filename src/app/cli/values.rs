@@ -54,6 +54,11 @@ pub(crate) fn size(s: &str) -> Result<(u32, u32), String> {
     Ok((side(w)?, side(h)?))
 }
 
+/// A lens for generated cameras (`--lens`): `verisplat::core::camera::LensSpec`'s forms.
+pub(crate) fn lens(s: &str) -> Result<verisplat::core::camera::LensSpec, String> {
+    s.parse()
+}
+
 /// A field of view in degrees, strictly between 0 and 180.
 pub(crate) fn fov_deg(s: &str) -> Result<f32, String> {
     let v = finite(s)?;

@@ -508,6 +508,7 @@ fn assemble(
             cy: k.cy as f32,
             rotation: rotation.as_mat3(),
             translation: t.as_vec3(),
+            lens: crate::core::camera::Lens::Pinhole,
         };
         cam.validate().map_err(|e| bad(e.to_string()))?;
         cams.push((cam, k.distortion.clone()));

@@ -116,6 +116,7 @@ pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, Camera
             cy: e.cy.map_or(e.height as f32 / 2.0, |c| c as f32),
             rotation: w2c.as_mat3(),
             translation: t.as_vec3(),
+            lens: crate::core::camera::Lens::Pinhole,
         };
         cam.validate()
             .map_err(|err| invalid(format!("entry {i} (\"{}\"): {err}", cam.name)))?;

@@ -7,6 +7,7 @@ pub mod colmap;
 pub mod distortion;
 pub mod inria;
 pub mod keyframes;
+pub mod lens;
 mod load;
 pub mod nerfstudio;
 pub mod orbit;
@@ -23,6 +24,7 @@ pub use select::{
 
 use crate::core::file_error::FileError;
 use glam::{DMat3, DVec3, Mat3, Vec3};
+pub use lens::{Intrinsics, Lens, LensSpec};
 use std::path::PathBuf;
 
 /// Largest accepted image side, in pixels (the common `maxImageDimension2D`).
@@ -51,6 +53,11 @@ pub struct Camera {
     pub rotation: Mat3,
     /// World-to-camera translation: `p_cam = rotation * p_world + translation`.
     pub translation: Vec3,
+    /// The lens: how camera-space points map to pixels ([`Lens::Pinhole`] for the
+    /// reference's cameras; [`lens`] has the rest). Its pixel coordinates put pixel
+    /// centres at `i + 0.5`; the renderers evaluate pixel `(i, j)` at `(i, j)`, half a
+    /// pixel less.
+    pub lens: Lens,
 }
 
 /// Error raised while building or loading cameras.
@@ -107,6 +114,19 @@ impl Camera {
             cy: height as f32 / 2.0,
             rotation,
             translation: -(rotation * eye),
+            lens: Lens::Pinhole,
+        }
+    }
+
+    /// The focal lengths, principal point and image size, for [`Lens`]'s maps.
+    pub fn intrinsics(&self) -> Intrinsics {
+        Intrinsics {
+            fx: self.fx as f64,
+            fy: self.fy as f64,
+            cx: self.cx as f64,
+            cy: self.cy as f64,
+            width: self.width,
+            height: self.height,
         }
     }
 
@@ -174,7 +194,9 @@ impl Camera {
                 self.name, self.fx, self.fy
             )));
         }
-        Ok(())
+        self.lens
+            .check()
+            .map_err(|e| CameraError::BadParameter(format!("camera \"{}\": {e}", self.name)))
     }
 }
 
@@ -370,5 +392,6 @@ pub(crate) fn camera_from_c2w(
         cy: principal[1] as f32,
         rotation: w2c.as_mat3(),
         translation: (-(w2c * centre)).as_vec3(),
+        lens: Lens::Pinhole,
     }
 }

@@ -240,6 +240,7 @@ mod tests {
                 cy: 4.0,
                 rotation: Mat3::IDENTITY,
                 translation: Vec3::new(i as f32, 0.0, 0.0),
+                lens: crate::core::camera::Lens::Pinhole,
             })
             .collect()
     }

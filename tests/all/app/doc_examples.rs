@@ -106,6 +106,11 @@ const PAGES: &[Page] = &[
         prepare: &[],
     },
     Page {
+        file: "docs/cameras.md",
+        inputs: &[Input::Copy("scene.ply", PLAYBOT_LOD6)],
+        prepare: &[],
+    },
+    Page {
         file: "docs/rf-fields.md",
         inputs: &[],
         prepare: &[],

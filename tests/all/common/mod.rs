@@ -152,6 +152,7 @@ pub fn axis_camera(f: f32) -> Camera {
         cy: 32.5,
         rotation: Mat3::IDENTITY,
         translation: Vec3::ZERO,
+        lens: verisplat::core::camera::Lens::Pinhole,
     }
 }
 

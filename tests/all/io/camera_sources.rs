@@ -114,6 +114,7 @@ fn front_camera() -> Camera {
         cy: 240.0,
         rotation: Mat3::IDENTITY,
         translation: Vec3::new(0.0, 0.0, 5.0),
+        lens: verisplat::core::camera::Lens::Pinhole,
     }
 }
 

@@ -1,5 +1,6 @@
 //! The CPU reference renderer (`verisplat::cpu`) on its own: closed-form values of its
-//! rules, and gsplat's rules on the CPU.
+//! rules, gsplat's rules on the CPU, and lenses other than the pinhole.
 
 mod closed_forms;
 mod gsplat_rules;
+mod lenses;

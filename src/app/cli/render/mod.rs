@@ -17,7 +17,7 @@ mod time;
 pub(crate) use args::RenderArgs;
 pub(crate) use interrupt::{interrupt_flag, Interrupted};
 
-use crate::cli::common::camera_path;
+use crate::cli::common::{camera_path, draws_pinholes_only, refuse_lens};
 use crate::cli::plural;
 use anyhow::{bail, Result};
 use outputs::Outputs;
@@ -30,6 +30,14 @@ use verisplat::note;
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if args.cpu {
         args::check_cpu_options(args)?;
+    } else {
+        refuse_lens(&args.path, &draws_pinholes_only("the GPU renderer"))?;
+    }
+    if args.export_colmap.is_some() || args.export_cameras.is_some() {
+        refuse_lens(
+            &args.path,
+            "--export-colmap and --export-cameras write pinhole cameras only so far",
+        )?;
     }
     let shard = crate::cli::common::shard(args.shard.as_deref())?;
     let outputs = Outputs::checked(args, shard)?;
@@ -43,6 +51,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     } = scene::load(args)?;
     // The default camera frames the Gaussians of every time, so a scene looks the same
     // from --time T as from the frame of --time-range at T.
+    if field_mode.is_some() {
+        refuse_lens(&args.path, &draws_pinholes_only("a field render"))?;
+    }
     let mut path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
     let (scene, animation) = scene::at_time(args, time, scene, &mut path)?;
     if let Some(file) = &args.export_cameras {

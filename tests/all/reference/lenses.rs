@@ -1,0 +1,254 @@
+//! The CPU reference through lenses other than the pinhole (issue 49, its first part): a
+//! Gaussian is drawn where the lens's exact map puts it, with the spread the unscented
+//! transform gives, including where a pinhole sees nothing; and the renderers that do
+//! not draw a lens yet say so instead of drawing a pinhole.
+
+use crate::common::{axis_camera, push_gaussian};
+use glam::Vec3;
+use std::f64::consts::{FRAC_PI_2, PI};
+use verisplat::core::camera::{Camera, Lens};
+use verisplat::core::frame::Frame;
+use verisplat::core::scene::Scene;
+use verisplat::cpu::{self, RenderOptions};
+
+fn render(s: &Scene, cam: &Camera) -> Frame {
+    cpu::render(&s.activated(), cam, &RenderOptions::default())
+}
+
+/// The pixel (as the renderers index it) where `lens` puts camera-space point `p`.
+fn pixel_of(cam: &Camera, p: [f32; 3]) -> (u32, u32) {
+    let px = cam
+        .lens
+        .project(&cam.intrinsics(), Vec3::from(p).as_dvec3())
+        .expect("the lens images the point");
+    ((px.x - 0.5).round() as u32, (px.y - 0.5).round() as u32)
+}
+
+fn with_lens(lens: Lens, f: f32, size: u32) -> Camera {
+    Camera {
+        width: size,
+        height: size,
+        cx: size as f32 / 2.0,
+        cy: size as f32 / 2.0,
+        lens,
+        ..axis_camera(f)
+    }
+}
+
+#[test]
+fn a_fisheye_draws_a_gaussian_behind_its_image_plane_where_its_map_puts_it() {
+    // 100 degrees from the axis, behind the plane z = 0, to the right and a little up.
+    let t = 100f32.to_radians();
+    let p = [3.0 * t.sin() * 0.9, -3.0 * t.sin() * 0.3, 3.0 * t.cos()];
+    let mut s = Scene::empty(0);
+    push_gaussian(&mut s, p, 0.05, 0.9, [1.0, 0.5, 0.2]);
+    let fisheye = with_lens(
+        Lens::Fisheye {
+            k: [0.0; 4],
+            max_theta: 110f64.to_radians(),
+        },
+        40.0,
+        160,
+    );
+    let frame = render(&s, &fisheye);
+    let (x, y) = pixel_of(&fisheye, p);
+    let peak = frame.alpha[frame.index(x, y)];
+    assert!(peak > 0.5, "alpha {peak} at ({x}, {y})");
+    // Its footprint is small and around that pixel: nothing lit 10 pixels away.
+    let lit: Vec<(u32, u32)> = (0..160)
+        .flat_map(|j| (0..160).map(move |i| (i, j)))
+        .filter(|&(i, j)| frame.alpha[frame.index(i, j)] > 0.0)
+        .collect();
+    assert!(!lit.is_empty());
+    for (i, j) in &lit {
+        assert!(i.abs_diff(x) < 10 && j.abs_diff(y) < 10, "({i}, {j}) lit");
+    }
+    // A pinhole of the same focal length sees nothing of it.
+    let pinhole = with_lens(Lens::Pinhole, 40.0, 160);
+    assert!(render(&s, &pinhole).alpha.iter().all(|&a| a == 0.0));
+}
+
+#[test]
+fn an_equirectangular_camera_sees_every_direction() {
+    let dirs = [
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 0.0, -1.0],
+        [0.6, -0.8, 0.0],
+        [0.0, 0.8, 0.6],
+    ];
+    let mut s = Scene::empty(0);
+    for d in dirs {
+        push_gaussian(&mut s, d.map(|v| 4.0 * v), 0.15, 0.9, [0.9, 0.9, 0.9]);
+    }
+    let cam = Camera {
+        width: 256,
+        height: 128,
+        lens: Lens::FULL_SPHERE,
+        ..axis_camera(1.0)
+    };
+    let frame = render(&s, &cam);
+    for d in dirs {
+        let p = d.map(|v| 4.0 * v);
+        let (x, y) = pixel_of(&cam, p);
+        // Straight behind lands on the seam, the right edge: its left neighbour is lit.
+        let x = x.min(cam.width - 1);
+        let a = frame.alpha[frame.index(x, y)];
+        assert!(a > 0.5, "{d:?}: alpha {a} at ({x}, {y})");
+    }
+    // The image between them is empty: most of the sphere holds no Gaussian.
+    let empty = frame.alpha.iter().filter(|&&a| a == 0.0).count();
+    assert!(empty > frame.alpha.len() * 3 / 4, "{empty} empty pixels");
+}
+
+#[test]
+fn an_orthographic_gaussian_keeps_its_size_at_any_distance() {
+    let footprint = |z: f32| {
+        let mut s = Scene::empty(0);
+        push_gaussian(&mut s, [0.2, -0.1, z], 0.1, 0.9, [1.0; 3]);
+        let cam = with_lens(Lens::Orthographic, 40.0, 64);
+        let f = render(&s, &cam);
+        let (x, y) = pixel_of(&cam, [0.2, -0.1, z]);
+        (
+            f.alpha.iter().filter(|&&a| a > 0.05).count(),
+            f.alpha[f.index(x, y)],
+        )
+    };
+    let (near, near_peak) = footprint(2.0);
+    let (far, far_peak) = footprint(20.0);
+    // sd 0.1 units at 40 px per unit: 4 px, a footprint of about pi (2.4 sd)^2.
+    assert!(near > 100 && near < 400, "{near} pixels");
+    assert_eq!(near, far);
+    assert!(
+        near_peak > 0.85 && near_peak == far_peak,
+        "{near_peak} {far_peak}"
+    );
+}
+
+#[test]
+fn a_distorted_camera_draws_where_its_distortion_puts_a_gaussian() {
+    let p = [1.2f32, 0.8, 3.0];
+    let mut s = Scene::empty(0);
+    push_gaussian(&mut s, p, 0.02, 0.9, [1.0; 3]);
+    let lens = Lens::RadialTangential {
+        radial: [-0.3, 0.08, 0.0, 0.0, 0.0, 0.0],
+        tangential: [0.002, -0.001],
+    };
+    let cam = with_lens(lens, 60.0, 96);
+    let frame = render(&s, &cam);
+    let (x, y) = pixel_of(&cam, p);
+    assert!(frame.alpha[frame.index(x, y)] > 0.5);
+    // Barrel distortion pulls it towards the centre from where a pinhole draws it.
+    let pin = with_lens(Lens::Pinhole, 60.0, 96);
+    let (px, py) = pixel_of(&pin, p);
+    assert!(x < px && y < py, "({x}, {y}) vs the pinhole's ({px}, {py})");
+}
+
+#[test]
+fn a_lens_with_impossible_parameters_is_refused_by_name() {
+    let mut cam = with_lens(
+        Lens::Fisheye {
+            k: [0.0; 4],
+            max_theta: 4.0,
+        },
+        40.0,
+        64,
+    );
+    let e = cam.validate().unwrap_err().to_string();
+    assert!(e.contains("field of view") && e.contains("axis"), "{e}");
+    cam.lens = Lens::Equirectangular {
+        longitude: [0.0, 0.0],
+        latitude: [FRAC_PI_2, -FRAC_PI_2],
+    };
+    assert!(cam
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("longitude"));
+    cam.lens = Lens::Equirectangular {
+        longitude: [-PI, PI],
+        latitude: [2.0, -1.0],
+    };
+    assert!(cam
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("latitudes"));
+}
+
+#[test]
+fn the_gpu_renderer_refuses_a_lens_it_does_not_draw_yet() {
+    use verisplat::render::FrameRequest;
+    let mut s = Scene::empty(0);
+    push_gaussian(&mut s, [0.0, 0.0, 3.0], 0.1, 0.9, [1.0; 3]);
+    let cam = with_lens(
+        Lens::Fisheye {
+            k: [0.0; 4],
+            max_theta: FRAC_PI_2,
+        },
+        40.0,
+        64,
+    );
+    let mut r = crate::common::gpu::renderer();
+    let gs = r.upload(&s.activated()).unwrap();
+    let Err(e) = r.render(&FrameRequest::new(&gs, &cam, &RenderOptions::default())) else {
+        panic!("the GPU drew a fisheye camera");
+    };
+    let e = e.to_string();
+    assert!(e.contains("fisheye lens") && e.contains("--cpu"), "{e}");
+    // The differentiable reference refuses it too.
+    let p = verisplat::core::gen::random_splat_params(4, 1, Some(0), 0).to_f64();
+    let e = verisplat::cpu::backward::forward(&p, &cam, &RenderOptions::default(), &[0.0; 3])
+        .unwrap_err();
+    assert!(e.contains("fisheye lens"), "{e}");
+}
+
+#[test]
+fn render_takes_a_lens_for_generated_cameras_and_refuses_what_cannot_draw_it() {
+    use crate::common::cli::{stderr, verisplat_in};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = crate::common::shared_data().join("playbot_lod6_1873_sh2.ply");
+    let scene = scene.to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "render", scene, "--orbit", "1", "--width", "96", "--height", "64",
+        ];
+        args.extend_from_slice(extra);
+        verisplat_in(dir.path(), &args)
+    };
+    // The CPU reference draws the fisheye; its 200 degrees show the scene smaller than
+    // the pinhole's 50 from the same place.
+    let lit = |lens: &str| {
+        let o = run(&["--cpu", "--lens", lens, "-o", "lens.png"]);
+        assert!(o.status.success(), "{lens}: {}", stderr(&o));
+        let img = image::open(dir.path().join("lens.png")).unwrap().to_rgb8();
+        std::fs::remove_file(dir.path().join("lens.png")).unwrap();
+        img.pixels().filter(|p| p.0 != [0, 0, 0]).count()
+    };
+    let (fisheye, pinhole) = (lit("fisheye:fov=200"), lit("pinhole"));
+    assert!(fisheye > 20 && pinhole > 4 * fisheye, "{fisheye} {pinhole}");
+    // The GPU renderer refuses it before writing anything; so does an export.
+    for (extra, says) in [
+        (
+            &["--lens", "fisheye", "-o", "gpu.png"][..],
+            "the GPU renderer draws pinhole cameras",
+        ),
+        (
+            &["--cpu", "--lens", "equirect", "--export-colmap", "data"][..],
+            "--export-colmap and --export-cameras write pinhole cameras",
+        ),
+        (
+            &["--cpu", "--lens", "fisheye:fov=400", "-o", "x.png"][..],
+            "at most 360",
+        ),
+    ] {
+        let o = run(extra);
+        assert!(
+            !o.status.success() && stderr(&o).contains(says),
+            "{extra:?}: {}",
+            stderr(&o)
+        );
+    }
+    assert!(!dir.path().join("gpu.png").exists() && !dir.path().join("data").exists());
+}
