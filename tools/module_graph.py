@@ -14,7 +14,9 @@ left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
     tools/module_graph.py                # the wings (core, io, ...): edges, then cycles
     tools/module_graph.py --wings        # checks that every arrow between wings runs
                                          # down core < io < fields < cpu < gpu < render
-                                         # < train < app (exit status 1 if one runs up)
+                                         # < train < app, and between render's floors
+                                         # forward < frame < backward (exit status 1 if
+                                         # one runs up)
     tools/module_graph.py --depth 2      # the wings' modules as nodes (core::scene ->
                                          # core::fsutil, ...; --depth 3 their
                                          # submodules); edges between a module and its
@@ -43,6 +45,8 @@ SRC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
 BIN_DIR = os.path.join("app", "cli")
 # The library's wings, each using only the wings before it (checked with --wings).
 WINGS = ["core", "io", "fields", "cpu", "gpu", "render", "train", "app"]
+# Floors inside a wing, each using only the floors before it (checked with --wings too).
+FLOORS = {"render": ["forward", "frame", "backward"]}
 IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
 
 
@@ -360,9 +364,10 @@ def print_layers(nodes, edges):
 
 
 def check_wings(nodes, edges):
-    """Every edge between two wings runs down WINGS (to a wing listed earlier); prints
-    the wings' edges and each edge that runs up, with the lines behind it. The crate
-    root (`lib`: the demo scene and the former paths' re-exports) is left out."""
+    """Every edge between two wings runs down WINGS (to a wing listed earlier), and every
+    edge between two floors of a wing down its FLOORS; prints the wings' edges and each
+    edge that runs up, with the lines behind it. The crate root (`lib`: the former paths'
+    re-exports) is left out."""
     wing = {w: i for i, w in enumerate(WINGS)}
     extra = sorted(n for n in nodes if "::" not in n and n != root_name() and n not in wing)
     bad = []
@@ -379,6 +384,14 @@ def check_wings(nodes, edges):
     print()
     if extra:
         print(f"modules outside the wings: {', '.join(extra)}")
+    for wing_name, floors in FLOORS.items():
+        level = {f"{wing_name}::{f}": i for i, f in enumerate(floors)}
+        floor_of = lambda m: next((x for x in level if m == x or m.startswith(x + "::")), None)
+        for (a, b), sites in sorted(edges.items()):
+            fa, fb = floor_of(a), floor_of(b)
+            if fa and fb and fa != fb and level[fb] > level[fa]:
+                bad.append((a, b, sites[0]))
+        print(f"{wing_name} floors: {' < '.join(floors)}")
     for a, b, (f, line, path) in bad:
         print(f"arrow up: {a} -> {b} ({f}:{line}: {path})")
     if not extra and not bad:
