@@ -27,7 +27,8 @@ use rayon::prelude::*;
 pub struct Projected {
     /// Projected centre in pixel coordinates (pixel `(i, j)` is evaluated at `(i, j)`).
     pub mean2d: [f32; 2],
-    /// View-space depth `z`.
+    /// View-space depth `z` (through a fisheye or equirectangular lens, the distance from
+    /// the camera: what the Gaussians are sorted by, and what the depth output blends).
     pub depth: f32,
     /// Inverse 2D covariance `(A, B, C)`: `power = -0.5 (A dx^2 + C dy^2) - B dx dy`.
     pub conic: [f32; 3],
