@@ -65,27 +65,15 @@ impl Distortion {
     /// The distorted normalised coordinates of the ray through pinhole coordinates
     /// `(x, y)`.
     pub fn distort(&self, x: f64, y: f64) -> (f64, f64) {
-        let k = &self.radial;
         if self.fisheye {
             let r = (x * x + y * y).sqrt();
             if r < 1e-12 {
                 return (x, y);
             }
-            let t = r.atan();
-            let t2 = t * t;
-            let td = t * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))));
-            let s = td / r;
+            let s = equidistant(&self.radial, r.atan()) / r;
             return (x * s, y * s);
         }
-        let [p1, p2] = self.tangential;
-        let r2 = x * x + y * y;
-        let num = 1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k[2]));
-        let den = 1.0 + r2 * (k[3] + r2 * (k[4] + r2 * k[5]));
-        let radial = num / den;
-        (
-            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-        )
+        brown_conrady(&self.radial, &self.tangential, x, y)
     }
 
     /// The pinhole coordinates whose ray is distorted to `(xd, yd)`, found by Newton's
@@ -96,35 +84,7 @@ impl Distortion {
         if self.fisheye {
             return self.undistort_fisheye(xd, yd);
         }
-        let (mut x, mut y) = (xd, yd);
-        for _ in 0..100 {
-            let (fx, fy) = self.distort(x, y);
-            let (ex, ey) = (fx - xd, fy - yd);
-            let h = 1e-7 * (1.0 + x.abs().max(y.abs()));
-            let (ax, ay) = self.distort(x + h, y);
-            let (bx, by) = self.distort(x - h, y);
-            let (cx, cy) = self.distort(x, y + h);
-            let (dx, dy) = self.distort(x, y - h);
-            let (j00, j10) = ((ax - bx) / (2.0 * h), (ay - by) / (2.0 * h));
-            let (j01, j11) = ((cx - dx) / (2.0 * h), (cy - dy) / (2.0 * h));
-            let det = j00 * j11 - j01 * j10;
-            if !det.is_finite() || det.abs() < 1e-12 {
-                return None;
-            }
-            let sx = (j11 * ex - j01 * ey) / det;
-            let sy = (j00 * ey - j10 * ex) / det;
-            x -= sx;
-            y -= sy;
-            if !(x.is_finite() && y.is_finite()) {
-                return None;
-            }
-            if sx.abs().max(sy.abs()) < 1e-13 * (1.0 + x.abs().max(y.abs())) {
-                break;
-            }
-        }
-        let (fx, fy) = self.distort(x, y);
-        let err = (fx - xd).abs().max((fy - yd).abs());
-        (err < 1e-9 * (1.0 + xd.abs().max(yd.abs()))).then_some((x, y))
+        invert_brown_conrady(&self.radial, &self.tangential, xd, yd)
     }
 
     /// The fisheye's inverse: the angle `theta` of `theta_d = |(xd, yd)|` by Newton's
@@ -137,10 +97,8 @@ impl Distortion {
         let k = &self.radial;
         let mut t = td;
         for _ in 0..100 {
-            let t2 = t * t;
-            let f = t * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - td;
-            let df =
-                1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + 9.0 * t2 * k[3])));
+            let f = equidistant(k, t) - td;
+            let df = equidistant_slope(k, t);
             if !df.is_finite() || df.abs() < 1e-12 {
                 return None;
             }
@@ -150,8 +108,7 @@ impl Distortion {
                 break;
             }
         }
-        let t2 = t * t;
-        let err = t * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - td;
+        let err = equidistant(k, t) - td;
         if !(t.is_finite() && err.abs() < 1e-9 && t > 0.0 && t < std::f64::consts::FRAC_PI_2 - 1e-6)
         {
             return None;
@@ -159,6 +116,75 @@ impl Distortion {
         let s = t.tan() / td;
         Some((xd * s, yd * s))
     }
+}
+
+/// The equidistant fisheye's normalised radius at angle `theta` from the axis:
+/// `theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)` (`k`: at least 4).
+pub fn equidistant(k: &[f64], theta: f64) -> f64 {
+    let t2 = theta * theta;
+    theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))))
+}
+
+/// d/dtheta of [`equidistant`].
+pub fn equidistant_slope(k: &[f64], theta: f64) -> f64 {
+    let t2 = theta * theta;
+    1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + 9.0 * t2 * k[3])))
+}
+
+/// Brown-Conrady distortion of pinhole coordinates `(x, y)`: the rational radial factor of
+/// `radial` (`k1..k6`) and the tangential terms of `tangential` (`p1, p2`).
+pub fn brown_conrady(radial: &[f64; 6], tangential: &[f64; 2], x: f64, y: f64) -> (f64, f64) {
+    let k = radial;
+    let [p1, p2] = *tangential;
+    let r2 = x * x + y * y;
+    let num = 1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k[2]));
+    let den = 1.0 + r2 * (k[3] + r2 * (k[4] + r2 * k[5]));
+    let radial = num / den;
+    (
+        x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+    )
+}
+
+/// The pinhole coordinates that [`brown_conrady`] distorts to `(xd, yd)`, by Newton's
+/// method from `(xd, yd)` (as COLMAP's iterative undistortion); `None` where it does not
+/// converge.
+pub fn invert_brown_conrady(
+    radial: &[f64; 6],
+    tangential: &[f64; 2],
+    xd: f64,
+    yd: f64,
+) -> Option<(f64, f64)> {
+    let distort = |x: f64, y: f64| brown_conrady(radial, tangential, x, y);
+    let (mut x, mut y) = (xd, yd);
+    for _ in 0..100 {
+        let (fx, fy) = distort(x, y);
+        let (ex, ey) = (fx - xd, fy - yd);
+        let h = 1e-7 * (1.0 + x.abs().max(y.abs()));
+        let (ax, ay) = distort(x + h, y);
+        let (bx, by) = distort(x - h, y);
+        let (cx, cy) = distort(x, y + h);
+        let (dx, dy) = distort(x, y - h);
+        let (j00, j10) = ((ax - bx) / (2.0 * h), (ay - by) / (2.0 * h));
+        let (j01, j11) = ((cx - dx) / (2.0 * h), (cy - dy) / (2.0 * h));
+        let det = j00 * j11 - j01 * j10;
+        if !det.is_finite() || det.abs() < 1e-12 {
+            return None;
+        }
+        let sx = (j11 * ex - j01 * ey) / det;
+        let sy = (j00 * ey - j10 * ex) / det;
+        x -= sx;
+        y -= sy;
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        if sx.abs().max(sy.abs()) < 1e-13 * (1.0 + x.abs().max(y.abs())) {
+            break;
+        }
+    }
+    let (fx, fy) = distort(x, y);
+    let err = (fx - xd).abs().max((fy - yd).abs());
+    (err < 1e-9 * (1.0 + xd.abs().max(yd.abs()))).then_some((x, y))
 }
 
 /// The distortion of a COLMAP camera model given its parameters after the focal length

@@ -16,7 +16,9 @@
 //! pixel with no ray (outside a fisheye's image circle, outside the equirectangular
 //! window) has none.
 
-use super::distortion::Distortion;
+use super::distortion::{
+    brown_conrady, equidistant, equidistant_slope, invert_brown_conrady, Distortion,
+};
 use glam::{DVec2, DVec3};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -96,9 +98,10 @@ impl Lens {
     /// The lens of a data set's or camera file's distortion model.
     pub fn from_distortion(d: &Distortion) -> Lens {
         if d.fisheye {
+            let k = [d.radial[0], d.radial[1], d.radial[2], d.radial[3]];
             Lens::Fisheye {
-                k: [d.radial[0], d.radial[1], d.radial[2], d.radial[3]],
-                max_theta: fisheye_max_theta(&[d.radial[0], d.radial[1], d.radial[2], d.radial[3]]),
+                k,
+                max_theta: fisheye_max_theta(&k),
             }
         } else if d.is_pinhole() {
             Lens::Pinhole
@@ -188,11 +191,11 @@ impl Lens {
         let pixel = |u: f64, v: f64| DVec2::new(k.fx * u + k.cx, k.fy * v + k.cy);
         match self {
             Lens::Pinhole => (p.z > 0.0).then(|| pixel(p.x / p.z, p.y / p.z)),
-            Lens::RadialTangential { .. } => {
+            Lens::RadialTangential { radial, tangential } => {
                 if p.z <= 0.0 {
                     return None;
                 }
-                let (u, v) = brown_conrady(self, p.x / p.z, p.y / p.z);
+                let (u, v) = brown_conrady(radial, tangential, p.x / p.z, p.y / p.z);
                 Some(pixel(u, v))
             }
             Lens::Fisheye { k: c, max_theta } => {
@@ -240,8 +243,8 @@ impl Lens {
         };
         match self {
             Lens::Pinhole => Some(through(DVec3::new(u, v, 1.0))),
-            Lens::RadialTangential { .. } => {
-                let (x, y) = invert_brown_conrady(self, u, v)?;
+            Lens::RadialTangential { radial, tangential } => {
+                let (x, y) = invert_brown_conrady(radial, tangential, u, v)?;
                 Some(through(DVec3::new(x, y, 1.0)))
             }
             Lens::Fisheye { k: c, max_theta } => {
@@ -447,18 +450,6 @@ fn wrap_angle(a: f64) -> f64 {
     }
 }
 
-/// The equidistant fisheye's radius at angle `theta`.
-fn equidistant(k: &[f64; 4], theta: f64) -> f64 {
-    let t2 = theta * theta;
-    theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))))
-}
-
-/// d/dtheta of [`equidistant`].
-fn equidistant_slope(k: &[f64; 4], theta: f64) -> f64 {
-    let t2 = theta * theta;
-    1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + 9.0 * t2 * k[3])))
-}
-
 /// The largest angle (at most `PI`) up to which the fisheye's radius grows with the angle:
 /// past it two rays would share a pixel, so the lens images no ray beyond it.
 pub fn fisheye_max_theta(k: &[f64; 4]) -> f64 {
@@ -489,22 +480,6 @@ fn invert_equidistant(k: &[f64; 4], rd: f64, max_theta: f64) -> Option<f64> {
         }
     }
     ((equidistant(k, t) - rd).abs() <= 1e-10 * (1.0 + rd)).then_some(t)
-}
-
-/// Brown-Conrady distortion of pinhole coordinates `(x, y)`.
-fn brown_conrady(lens: &Lens, x: f64, y: f64) -> (f64, f64) {
-    let Lens::RadialTangential { radial, tangential } = lens else {
-        return (x, y);
-    };
-    Distortion::opencv("", *radial, *tangential).distort(x, y)
-}
-
-/// The pinhole coordinates that Brown-Conrady distorts to `(u, v)`.
-fn invert_brown_conrady(lens: &Lens, u: f64, v: f64) -> Option<(f64, f64)> {
-    let Lens::RadialTangential { radial, tangential } = lens else {
-        return Some((u, v));
-    };
-    Distortion::opencv("", *radial, *tangential).undistort(u, v)
 }
 
 #[cfg(test)]
