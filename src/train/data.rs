@@ -313,6 +313,8 @@ pub fn write_dataset(
     let mut named: Vec<Camera> = Vec::with_capacity(cameras.len());
     let mut seen = std::collections::HashSet::new();
     for cam in cameras {
+        // A lens COLMAP has no model for is refused before anything is written.
+        colmap::colmap_model(cam).map_err(|m| data_error(dir, m))?;
         let mut cam = cam.clone();
         if !cam.name.to_ascii_lowercase().ends_with(".png") {
             cam.name = format!("{}.png", cam.name);
@@ -357,7 +359,9 @@ pub fn write_dataset(
             }),
         })
         .collect();
-    for (name, text) in colmap::to_text_model(&named, &points) {
+    let model =
+        colmap::to_text_model(&named, &points).map_err(|e| data_error(dir, e.to_string()))?;
+    for (name, text) in model {
         let path = sparse.join(name);
         crate::core::fsutil::write_bytes_atomically(&path, overwrite, text.as_bytes())
             .map_err(|e| data_error(&path, e.to_string()))?;

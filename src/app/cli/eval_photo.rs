@@ -102,8 +102,9 @@ impl PhotoPrep {
     }
 
     /// Photo `rgb` (`w x h`, interleaved RGB) of camera `cam`, prepared:
-    /// undistorted when the model records the camera's lens and the photo has the size it
-    /// was taken at; then scaled with the trainer's area average to the given `-r`, or,
+    /// undistorted when the model records the camera's lens, the camera is a pinhole and
+    /// the photo has the size it was taken at; then scaled with the trainer's area average
+    /// to the given `-r`, or,
     /// unless it already has the camera's size (photos scaled beforehand, `images_4/`),
     /// to the model's `-r` or, without one, down to the camera's size when that is
     /// smaller by one factor on both sides. Returns the image and its size.
@@ -115,7 +116,12 @@ impl PhotoPrep {
     ) -> (Vec<f32>, u32, u32) {
         let mut px: Vec<[f32; 3]> = rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         let (mut w, mut h) = (w, h);
-        if let Some(u) = self.undistortions.get(stem(&cam.name)) {
+        // A camera that carries its lens (a distorted COLMAP model) is rendered through
+        // it, so its photo stays as taken.
+        let undistortion = Some(cam)
+            .filter(|c| c.lens.is_pinhole())
+            .and_then(|c| self.undistortions.get(stem(&c.name)));
+        if let Some(u) = undistortion {
             if (w, h) == (u.photo.width, u.photo.height) {
                 px = u.apply(&px);
                 (w, h) = (u.pinhole.width, u.pinhole.height);

@@ -197,6 +197,15 @@ fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
     sizes.sort_unstable();
     sizes.dedup();
     let names: Vec<&str> = cams.iter().take(5).map(|c| c.name.as_str()).collect();
+    let lenses: Vec<String> = cams.iter().map(|c| lens_model(&c.lens)).collect();
+    // Each model once, in the order of first appearance, with its count.
+    let mut models: Vec<(&str, usize)> = Vec::new();
+    for l in &lenses {
+        match models.iter_mut().find(|(m, _)| m == l) {
+            Some((_, n)) => *n += 1,
+            None => models.push((l, 1)),
+        }
+    }
     if json {
         outln!(
             "{}",
@@ -207,6 +216,7 @@ fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
                 "cameras": cams.len(),
                 "resolutions": sizes.iter().map(|(w, h)| [w, h]).collect::<Vec<_>>(),
                 "names": cams.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(),
+                "lenses": lenses,
             }))?
         );
         return Ok(());
@@ -227,6 +237,18 @@ fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
             .join(", ")
     );
     outln!(
+        "lens        {}",
+        models
+            .iter()
+            .map(|(m, n)| if models.len() == 1 {
+                m.to_string()
+            } else {
+                format!("{m} ({n})")
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    outln!(
         "names       {}{}",
         names.join(", "),
         if cams.len() > names.len() {
@@ -236,6 +258,36 @@ fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
         }
     );
     Ok(())
+}
+
+/// A camera's lens as `info` names it: `pinhole`, `distorted (OPENCV)` or `distorted
+/// (FULL_OPENCV)` (the COLMAP model that holds its coefficients), `fisheye` (with its field
+/// of view when it stops short of 360 degrees), `orthographic`, `equirectangular` (with
+/// its window when it is not the whole sphere).
+fn lens_model(lens: &verisplat::core::camera::Lens) -> String {
+    use verisplat::core::camera::Lens;
+    // Degrees to 4 decimals, without trailing zeros.
+    let deg = |r: f64| ((r.to_degrees() * 1e4).round() / 1e4 + 0.0).to_string();
+    match lens {
+        Lens::RadialTangential { radial, .. } if radial[2..].iter().all(|&k| k == 0.0) => {
+            "distorted (OPENCV)".into()
+        }
+        Lens::RadialTangential { .. } => "distorted (FULL_OPENCV)".into(),
+        Lens::Fisheye { max_theta, .. } if *max_theta < std::f64::consts::PI => {
+            format!("fisheye ({} degrees)", deg(2.0 * max_theta))
+        }
+        Lens::Equirectangular {
+            longitude,
+            latitude,
+        } if *lens != Lens::FULL_SPHERE => format!(
+            "equirectangular (longitude {}..{}, latitude {}..{} degrees)",
+            deg(longitude[0]),
+            deg(longitude[1]),
+            deg(latitude[0]),
+            deg(latitude[1])
+        ),
+        other => other.name().into(),
+    }
 }
 
 /// The statistics as one JSON object (`schema_version` 1).

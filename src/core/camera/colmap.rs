@@ -3,14 +3,17 @@
 //! (`R = qvec2rotmat(qvec)`, `t = tvec`), exactly our [`Camera`] convention, and its
 //! principal point uses the same pixel convention as ours (pixel centres at `+0.5`), so
 //! `cx`, `cy` are kept as written. Images come back sorted by name, as the 3DGS
-//! loaders sort them. As camera files (to render from) only pinhole cameras are accepted:
-//! `SIMPLE_PINHOLE`, `PINHOLE`, and the distorted models (`SIMPLE_RADIAL`, `RADIAL`,
-//! `OPENCV`, `FULL_OPENCV`, `FOV`) when every distortion parameter is exactly zero. The
-//! trainer also reads the distorted models [`super::distortion`] knows
-//! ([`load_colmap_model_distorted`]) and undistorts their photos.
+//! loaders sort them. Each camera carries the lens of its model ([`Camera::lens`]):
+//! `SIMPLE_PINHOLE`, `PINHOLE` (and a distorted model whose coefficients are all zero) are
+//! the pinhole; `SIMPLE_RADIAL`, `RADIAL`, `OPENCV`, `FULL_OPENCV` are
+//! [`Lens::RadialTangential`]; `OPENCV_FISHEYE`, `SIMPLE_RADIAL_FISHEYE`, `RADIAL_FISHEYE`
+//! are [`Lens::Fisheye`]. The models verisplat has no lens for (`FOV` with a non-zero
+//! `omega`, the thin-prism fisheyes) are refused by name. The trainer reads the same models
+//! as pinhole cameras with their distortion ([`load_colmap_model_distorted`]) and
+//! undistorts their photos.
 
 use super::distortion::{self, Distortion};
-use super::{quat_wxyz_to_mat, Camera, CameraError, CameraFormat, MAX_IMAGE_SIDE};
+use super::{quat_wxyz_to_mat, Camera, CameraError, CameraFormat, Lens, MAX_IMAGE_SIDE};
 use crate::core::file_error::FileError;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -146,14 +149,15 @@ pub fn find_model(dir: &Path) -> Result<(PathBuf, CameraFormat), CameraError> {
 }
 
 /// Loads every registered image of the COLMAP model under `dir` as a camera, sorted by
-/// name; a camera with lens distortion is refused.
+/// name, each with the lens of its camera model.
 pub fn load_colmap_model(dir: &Path) -> Result<(Vec<Camera>, CameraFormat), CameraError> {
     let (cams, format) = load_model(dir, false)?;
     Ok((cams.into_iter().map(|(c, _)| c).collect(), format))
 }
 
-/// [`load_colmap_model`] that also reads the distorted models [`distortion::from_colmap`]
-/// handles: each camera (its pinhole part) with its distortion (`None`: none).
+/// The cameras of [`load_colmap_model`] as the trainer wants them: each camera's pinhole
+/// part ([`Lens::Pinhole`]) with its distortion (`None`: none), for the photos to be
+/// undistorted.
 pub fn load_colmap_model_distorted(
     dir: &Path,
 ) -> Result<(Vec<LensCamera>, CameraFormat), CameraError> {
@@ -212,7 +216,8 @@ pub fn parse_colmap_text(
     Ok(cams.into_iter().map(|(c, _)| c).collect())
 }
 
-/// [`parse_colmap_text`], with the distortion of each camera when `distorted`.
+/// [`parse_colmap_text`]; when `distorted`, each camera is its pinhole part with its
+/// distortion beside it, else it carries its lens.
 fn parse_text(
     cameras_txt: &str,
     cameras_path: &Path,
@@ -269,7 +274,7 @@ fn parse_text(
                 params.len()
             )));
         }
-        let k = pinhole(id, model, width, height, &params, distorted)
+        let k = intrinsics_of(id, model, width, height, &params)
             .map_err(|m| invalid(cameras_path, m))?;
         if intrinsics.insert(id, k).is_some() {
             return Err(bad(format!("camera id {id} appears twice")));
@@ -310,7 +315,7 @@ fn parse_text(
         // Every image line is followed by its 2D points line (possibly empty): skip it.
         lines.next();
     }
-    assemble(images, &intrinsics, images_path)
+    assemble(images, &intrinsics, images_path, distorted)
 }
 
 /// Parses `cameras.bin` and `images.bin` held in memory (the paths name them in errors).
@@ -326,7 +331,7 @@ pub fn parse_colmap_binary(
     Ok(cams.into_iter().map(|(c, _)| c).collect())
 }
 
-/// [`parse_colmap_binary`], with the distortion of each camera when `distorted`.
+/// [`parse_colmap_binary`]; `distorted` as in [`parse_text`].
 fn parse_binary(
     cameras_bin: &[u8],
     cameras_path: &Path,
@@ -353,7 +358,7 @@ fn parse_binary(
         for _ in 0..model.params {
             params.push(r.f64("camera parameter")?);
         }
-        let k = pinhole(id, model, width, height, &params, distorted)
+        let k = intrinsics_of(id, model, width, height, &params)
             .map_err(|m| invalid(cameras_path, m))?;
         if intrinsics.insert(id, k).is_some() {
             return Err(invalid(
@@ -400,18 +405,17 @@ fn parse_binary(
         });
     }
     r.finish()?;
-    assemble(images, &intrinsics, images_path)
+    assemble(images, &intrinsics, images_path, distorted)
 }
 
-/// Intrinsics of a COLMAP camera, or why they cannot be used: a distorted camera is
-/// refused unless `distorted` (and then only models [`distortion::from_colmap`] handles).
-fn pinhole(
+/// Intrinsics of a COLMAP camera with its distortion, or why they cannot be used: a model
+/// [`distortion::from_colmap`] has no lens for, or unusable values.
+fn intrinsics_of(
     id: u64,
     model: &Model,
     width: u64,
     height: u64,
     p: &[f64],
-    distorted: bool,
 ) -> Result<Intrinsics, String> {
     let (focal, principal, coefficients): ([f64; 2], [f64; 2], &[f64]) = match model.name {
         "SIMPLE_PINHOLE"
@@ -421,26 +425,6 @@ fn pinhole(
         | "RADIAL_FISHEYE" => ([p[0], p[0]], [p[1], p[2]], &p[3..]),
         _ => ([p[0], p[1]], [p[2], p[3]], &p[4..]),
     };
-    let fisheye = model.name.contains("FISHEYE");
-    if !distorted {
-        if fisheye {
-            return Err(format!(
-                "camera {id} uses the {} model, a fisheye projection that a pinhole \
-                 renderer cannot reproduce; undistort the images first (`colmap image_undistorter` \
-                 writes PINHOLE cameras; `verisplat train` undistorts OPENCV_FISHEYE data sets itself)",
-                model.name
-            ));
-        }
-        if let Some(k) = coefficients.iter().find(|&&k| k != 0.0) {
-            return Err(format!(
-                "camera {id} uses the {} model with non-zero distortion (parameter {k}); only \
-                 undistorted pinhole cameras are supported here: undistort the images first \
-                 (`colmap image_undistorter` writes PINHOLE cameras; `verisplat train` undistorts \
-                 such data sets itself, and its model's cameras.json holds the pinhole cameras)",
-                model.name
-            ));
-        }
-    }
     let distortion = distortion::from_colmap(model.name, coefficients)
         .map_err(|m| format!("camera {id}: {m}"))?;
     let max = MAX_IMAGE_SIDE as u64;
@@ -463,15 +447,17 @@ fn pinhole(
         fy: focal[1],
         cx: principal[0],
         cy: principal[1],
-        distortion: distortion.filter(|_| distorted),
+        distortion,
     })
 }
 
-/// Cameras of the registered images with their distortion, sorted by name (then id).
+/// Cameras of the registered images, sorted by name (then id): with their lens, or when
+/// `distorted` as pinhole cameras with their distortion beside them.
 fn assemble(
     mut images: Vec<Image>,
     intrinsics: &HashMap<u64, Intrinsics>,
     images_path: &Path,
+    distorted: bool,
 ) -> Result<Vec<LensCamera>, CameraError> {
     images.sort_by(|a, b| a.name.cmp(&b.name).then(a.id.cmp(&b.id)));
     let mut cams = Vec::with_capacity(images.len());
@@ -508,10 +494,13 @@ fn assemble(
             cy: k.cy as f32,
             rotation: rotation.as_mat3(),
             translation: t.as_vec3(),
-            lens: crate::core::camera::Lens::Pinhole,
+            lens: match (&k.distortion, distorted) {
+                (Some(d), false) => Lens::from_distortion(d),
+                _ => Lens::Pinhole,
+            },
         };
         cam.validate().map_err(|e| bad(e.to_string()))?;
-        cams.push((cam, k.distortion.clone()));
+        cams.push((cam, k.distortion.clone().filter(|_| distorted)));
     }
     Ok(cams)
 }
@@ -725,27 +714,69 @@ pub fn parse_points_binary(bytes: &[u8], path: &Path) -> Result<Vec<Point3D>, Ca
     Ok(out)
 }
 
-/// A COLMAP text model of `cameras` (one PINHOLE camera each, images named by the
-/// cameras' names) and `points`: `cameras.txt`, `images.txt`, `points3D.txt`, what
-/// [`load_colmap_model`] and [`load_colmap_points`] read back.
-pub fn to_text_model(cameras: &[Camera], points: &[Point3D]) -> [(String, String); 3] {
+/// The COLMAP camera model that holds `cam`'s lens, and the model's parameters: `PINHOLE`
+/// (`fx, fy, cx, cy`), `OPENCV` (`..., k1, k2, p1, p2`) for a Brown-Conrady lens with
+/// radial `k1`, `k2` only, `FULL_OPENCV` (`..., k1, k2, p1, p2, k3, k4, k5, k6`) for the
+/// others, `OPENCV_FISHEYE` (`..., k1, k2, k3, k4`) for a fisheye (COLMAP has no field of
+/// view: read back, it images every ray its polynomial can). COLMAP has no orthographic or
+/// equirectangular model: those are refused, naming the camera.
+pub fn colmap_model(cam: &Camera) -> Result<(&'static str, Vec<f64>), String> {
+    let mut p: Vec<f64> = [cam.fx, cam.fy, cam.cx, cam.cy]
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let name = match &cam.lens {
+        Lens::Pinhole => "PINHOLE",
+        Lens::RadialTangential { radial, tangential } => {
+            p.extend([radial[0], radial[1], tangential[0], tangential[1]]);
+            if radial[2..].iter().all(|&k| k == 0.0) {
+                "OPENCV"
+            } else {
+                p.extend(&radial[2..]);
+                "FULL_OPENCV"
+            }
+        }
+        Lens::Fisheye { k, .. } => {
+            p.extend(k);
+            "OPENCV_FISHEYE"
+        }
+        other => {
+            return Err(format!(
+                "camera \"{}\" has an {} lens, which COLMAP has no camera model for (it has \
+                 PINHOLE, OPENCV, FULL_OPENCV and OPENCV_FISHEYE)",
+                cam.name,
+                other.name()
+            ))
+        }
+    };
+    Ok((name, p))
+}
+
+/// A COLMAP text model of `cameras` (one camera each, of the model [`colmap_model`] gives
+/// its lens; images named by the cameras' names) and `points`: `cameras.txt`,
+/// `images.txt`, `points3D.txt`, what [`load_colmap_model`] and [`load_colmap_points`] read
+/// back. A lens COLMAP has no model for is refused.
+pub fn to_text_model(
+    cameras: &[Camera],
+    points: &[Point3D],
+) -> Result<[(String, String); 3], CameraError> {
     use std::fmt::Write;
     let mut cams = String::from("# Camera list: CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n");
     let mut images = String::from(
         "# Image list: IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME, then POINTS2D[]\n",
     );
     for (i, c) in cameras.iter().enumerate() {
-        let _ = writeln!(
-            cams,
-            "{} PINHOLE {} {} {} {} {} {}",
-            i + 1,
-            c.width,
-            c.height,
-            c.fx,
-            c.fy,
-            c.cx,
-            c.cy
-        );
+        let (model, params) = colmap_model(c).map_err(CameraError::BadParameter)?;
+        let _ = write!(cams, "{} {model} {} {}", i + 1, c.width, c.height);
+        for (j, v) in params.into_iter().enumerate() {
+            // The intrinsics are the camera's f32 values, written as such.
+            if j < 4 {
+                let _ = write!(cams, " {}", v as f32);
+            } else {
+                let _ = write!(cams, " {v}");
+            }
+        }
+        cams.push('\n');
         let q = glam::DQuat::from_mat3(&c.rotation.as_dmat3()).normalize();
         let t = c.translation;
         let _ = writeln!(
@@ -777,9 +808,9 @@ pub fn to_text_model(cameras: &[Camera], points: &[Point3D]) -> [(String, String
             p.color[2]
         );
     }
-    [
+    Ok([
         ("cameras.txt".into(), cams),
         ("images.txt".into(), images),
         ("points3D.txt".into(), pts),
-    ]
+    ])
 }

@@ -214,7 +214,7 @@ pub fn from_colmap(model: &str, p: &[f64]) -> Result<Option<Distortion>, String>
         "FOV" if p.iter().all(|&w| w == 0.0) => return Ok(None),
         other => {
             return Err(format!(
-                "the {other} model is not supported (its lens cannot be undistorted here); \
+                "the {other} model is not supported (verisplat has no lens for it); \
                  undistort the images first (`colmap image_undistorter` writes PINHOLE cameras)"
             ))
         }
@@ -310,10 +310,19 @@ pub fn from_transforms<'a>(
             "\"is_fisheye\" is true but \"camera_model\" is {other}; a fisheye is OPENCV_FISHEYE"
         ))
         }
+        "EQUIRECTANGULAR" => {
+            return Err(
+                "camera_model \"EQUIRECTANGULAR\" is a 360-degree camera, which has no pinhole \
+                 image to undistort to; it can be rendered from (render --cpu --cameras \
+                 transforms.json), not trained on"
+                    .into(),
+            )
+        }
         other => {
             return Err(format!(
-                "camera_model \"{other}\" is not supported (supported: OPENCV, OPENCV_FISHEYE and \
-                 the pinhole models); undistort the photos to a pinhole camera first"
+                "camera_model \"{other}\" is not supported (supported: OPENCV, OPENCV_FISHEYE, \
+                 the pinhole models and, to render from, EQUIRECTANGULAR); undistort the photos \
+                 to a pinhole camera first"
             ))
         }
     };
@@ -370,11 +379,16 @@ mod tests {
         let key = |k: &str| json.get(k);
         let e = from_transforms(&key).unwrap_err();
         assert!(e.contains("\"k4\"") && e.contains("OPENCV"), "{e}");
+        // A 360-degree camera has no distortion to undistort a photo by: the trainer
+        // refuses it (a camera file renders from it: transforms::lens_from_transforms,
+        // tested there).
         let json = serde_json::json!({"camera_model": "EQUIRECTANGULAR"});
         let key = |k: &str| json.get(k);
-        assert!(from_transforms(&key)
-            .unwrap_err()
-            .contains("EQUIRECTANGULAR"));
+        let e = from_transforms(&key).unwrap_err();
+        assert!(
+            e.contains("EQUIRECTANGULAR") && e.contains("not trained on"),
+            "{e}"
+        );
         let json = serde_json::json!({"is_fisheye": true, "k1": 0.0});
         let key = |k: &str| json.get(k);
         assert!(from_transforms(&key).unwrap().unwrap().fisheye);

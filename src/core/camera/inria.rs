@@ -2,10 +2,14 @@
 //! `{id, img_name, width, height, position, rotation, fx, fy}` where `position` is the
 //! camera centre and `rotation` the camera-to-world rotation, stored row by row (so its
 //! columns are the camera's right, down and forward axes in world space). Optional `cx`
-//! and `cy` (pixels) give a principal point other than the image centre; verisplat writes
-//! them only for such cameras, and other readers ignore them.
+//! and `cy` (pixels) give a principal point other than the image centre, and an optional
+//! `lens` a lens other than the pinhole (`{"kind": "distorted", "radial": [k1..k6],
+//! "tangential": [p1, p2]}`, `{"kind": "fisheye", "k": [k1..k4], "max_theta": RADIANS}`,
+//! `{"kind": "orthographic"}`, `{"kind": "equirectangular", "longitude": [A, B],
+//! "latitude": [C, D]}` in radians); verisplat writes them only for such cameras, and
+//! other readers ignore them.
 
-use super::{Camera, CameraError};
+use super::{Camera, CameraError, Lens};
 use crate::core::file_error::FileError;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -26,11 +30,72 @@ struct JsonCamera {
     cx: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cy: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    lens: Option<JsonLens>,
+}
+
+/// A camera's [`Lens`] in a `cameras.json` entry, named by [`Lens::name`].
+#[derive(Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+enum JsonLens {
+    Pinhole,
+    Distorted {
+        radial: [f64; 6],
+        tangential: [f64; 2],
+    },
+    Fisheye {
+        k: [f64; 4],
+        max_theta: f64,
+    },
+    Orthographic,
+    Equirectangular {
+        longitude: [f64; 2],
+        latitude: [f64; 2],
+    },
+}
+
+impl JsonLens {
+    /// The entry of `lens`: none for the pinhole, the INRIA layout's own.
+    fn of(lens: &Lens) -> Option<JsonLens> {
+        Some(match lens.clone() {
+            Lens::Pinhole => return None,
+            Lens::RadialTangential { radial, tangential } => {
+                JsonLens::Distorted { radial, tangential }
+            }
+            Lens::Fisheye { k, max_theta } => JsonLens::Fisheye { k, max_theta },
+            Lens::Orthographic => JsonLens::Orthographic,
+            Lens::Equirectangular {
+                longitude,
+                latitude,
+            } => JsonLens::Equirectangular {
+                longitude,
+                latitude,
+            },
+        })
+    }
+
+    fn lens(self) -> Lens {
+        match self {
+            JsonLens::Pinhole => Lens::Pinhole,
+            JsonLens::Distorted { radial, tangential } => {
+                Lens::RadialTangential { radial, tangential }
+            }
+            JsonLens::Fisheye { k, max_theta } => Lens::Fisheye { k, max_theta },
+            JsonLens::Orthographic => Lens::Orthographic,
+            JsonLens::Equirectangular {
+                longitude,
+                latitude,
+            } => Lens::Equirectangular {
+                longitude,
+                latitude,
+            },
+        }
+    }
 }
 
 /// Writes cameras as an INRIA `cameras.json`, one camera per line: `id` is the given
 /// number (the camera's frame in its path), `img_name` the camera's name. The file reads
-/// back ([`parse_cameras_json`]) as the same cameras: rotation, focal lengths and
+/// back ([`parse_cameras_json`]) as the same cameras: rotation, focal lengths, lens and
 /// resolution exactly; `position` is computed in double precision so that the
 /// translation read back is the camera's to within 1e-15 of its size.
 pub fn to_json(cameras: &[(usize, Camera)]) -> Result<String, CameraError> {
@@ -63,6 +128,7 @@ pub fn to_json(cameras: &[(usize, Camera)]) -> Result<String, CameraError> {
             fx: cam.fx as f64,
             cx: centred(cam.cx, cam.width),
             cy: centred(cam.cy, cam.height),
+            lens: JsonLens::of(&cam.lens),
         };
         lines.push(serde_json::to_string(&entry).map_err(|e| {
             CameraError::BadParameter(format!("cannot write camera \"{}\": {e}", cam.name))
@@ -90,13 +156,13 @@ pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, Camera
             message,
         })
     };
-    let entries: Vec<JsonCamera> = serde_json::from_str(text).map_err(|e| {
+    let mut entries: Vec<JsonCamera> = serde_json::from_str(text).map_err(|e| {
         invalid(format!(
             "is not an INRIA cameras.json (a list of {{id, img_name, width, height, position, rotation, fx, fy}}): {e}"
         ))
     })?;
     let mut cams = Vec::with_capacity(entries.len());
-    for (i, e) in entries.iter().enumerate() {
+    for (i, e) in entries.iter_mut().enumerate() {
         let name = e.img_name.clone().unwrap_or_else(|| match &e.id {
             Some(id) => format!("camera_{id}"),
             None => format!("camera_{i}"),
@@ -116,7 +182,7 @@ pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, Camera
             cy: e.cy.map_or(e.height as f32 / 2.0, |c| c as f32),
             rotation: w2c.as_mat3(),
             translation: t.as_vec3(),
-            lens: crate::core::camera::Lens::Pinhole,
+            lens: e.lens.take().map_or(Lens::Pinhole, JsonLens::lens),
         };
         cam.validate()
             .map_err(|err| invalid(format!("entry {i} (\"{}\"): {err}", cam.name)))?;
@@ -130,4 +196,60 @@ pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, Camera
         cams.push(cam);
     }
     Ok(cams)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_lens_reads_back_as_written() {
+        let lenses = [
+            Lens::Pinhole,
+            Lens::RadialTangential {
+                radial: [-0.28, 0.07, 0.001, 0.05, -0.01, 0.002],
+                tangential: [0.001, -0.0005],
+            },
+            Lens::Fisheye {
+                k: [0.02, -0.005, 0.001, 1e-5],
+                max_theta: 100f64.to_radians(),
+            },
+            Lens::Orthographic,
+            Lens::FULL_SPHERE,
+            Lens::Equirectangular {
+                longitude: [2.0, 4.5],
+                latitude: [0.3, -0.7],
+            },
+        ];
+        let cams: Vec<(usize, Camera)> = lenses
+            .iter()
+            .enumerate()
+            .map(|(i, lens)| {
+                let mut c = crate::core::camera::default_camera(
+                    &[[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]],
+                    64,
+                    48,
+                );
+                c.name = format!("c{i}");
+                c.lens = lens.clone();
+                (i, c)
+            })
+            .collect();
+        let text = to_json(&cams).unwrap();
+        // The pinhole keeps the INRIA layout: no "lens" key.
+        assert_eq!(text.matches("\"lens\"").count(), lenses.len() - 1, "{text}");
+        let back = parse_cameras_json(&text, Path::new("cameras.json")).unwrap();
+        for ((_, a), b) in cams.iter().zip(&back) {
+            assert_eq!(a.lens, b.lens);
+        }
+        // A lens with a misspelt key or impossible parameters is refused, naming the entry.
+        let bad = text.replace("\"max_theta\"", "\"max_thet\"");
+        let e = parse_cameras_json(&bad, Path::new("cameras.json")).unwrap_err();
+        assert!(e.to_string().contains("max_thet"), "{e}");
+        let bad = r#"[{"id":0,"img_name":"a","width":64,"height":48,"position":[0,0,-3],"rotation":[[1,0,0],[0,1,0],[0,0,1]],"fx":50,"fy":50,"lens":{"kind":"fisheye","k":[0,0,0,0],"max_theta":4}}]"#;
+        let e = parse_cameras_json(bad, Path::new("cameras.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("entry 0") && e.contains("field of view"), "{e}");
+    }
 }

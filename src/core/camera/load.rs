@@ -1,7 +1,7 @@
 //! One entry point for camera files: the format is recognised from the path (a COLMAP
 //! sparse model is a directory or its `images`/`cameras` file) or from the JSON content.
 
-use super::{colmap, inria, keyframes, nerfstudio, Camera, CameraError};
+use super::{colmap, inria, keyframes, nerfstudio, transforms, Camera, CameraError};
 use crate::core::file_error::FileError;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -19,6 +19,9 @@ pub enum CameraFormat {
     NerfstudioPath,
     /// Our keyframe path (a JSON object with `keyframes`, see `docs/cameras.md`).
     Keyframes,
+    /// nerfstudio / instant-ngp / NeRF-synthetic `transforms.json` (a JSON object with a
+    /// `frames` list).
+    Transforms,
 }
 
 impl fmt::Display for CameraFormat {
@@ -29,6 +32,7 @@ impl fmt::Display for CameraFormat {
             CameraFormat::ColmapBinary => "COLMAP sparse model (binary)",
             CameraFormat::NerfstudioPath => "nerfstudio camera path",
             CameraFormat::Keyframes => "verisplat keyframe path",
+            CameraFormat::Transforms => "transforms.json",
         })
     }
 }
@@ -56,7 +60,7 @@ enum Source {
 /// a COLMAP model is given as its directory (holding `cameras`+`images` `.bin` or `.txt`,
 /// directly or under `sparse/0/` or `sparse/`) or as the path of one of those files;
 /// anything else must be JSON: a list (INRIA), or an object with `camera_path`
-/// (nerfstudio) or `keyframes` (ours).
+/// (nerfstudio), `keyframes` (ours) or a `frames` list (`transforms.json`).
 pub fn load_camera_file(
     path: &Path,
     timing: &PathTiming,
@@ -69,6 +73,7 @@ pub fn load_camera_file(
             let cams = match kind {
                 JsonKind::Inria => inria::parse_cameras_json(&text, path)?,
                 JsonKind::Nerfstudio => nerfstudio::parse_camera_path(&text, path)?,
+                JsonKind::Transforms => transforms::parse_transforms(&text, path)?,
                 JsonKind::Keyframes => keyframes::KeyframePath::parse(&text, path)?
                     .cameras(timing)
                     // Without --frames/--fps overrides, a sampling error (too many frames,
@@ -108,6 +113,7 @@ enum JsonKind {
     Inria,
     Nerfstudio,
     Keyframes,
+    Transforms,
 }
 
 impl JsonKind {
@@ -116,6 +122,7 @@ impl JsonKind {
             JsonKind::Inria => CameraFormat::InriaJson,
             JsonKind::Nerfstudio => CameraFormat::NerfstudioPath,
             JsonKind::Keyframes => CameraFormat::Keyframes,
+            JsonKind::Transforms => CameraFormat::Transforms,
         }
     }
 }
@@ -178,9 +185,12 @@ fn detect_json(text: &str, path: &Path) -> Result<JsonKind, CameraError> {
             Ok(JsonKind::Nerfstudio)
         }
         serde_json::Value::Object(map) if map.contains_key("keyframes") => Ok(JsonKind::Keyframes),
+        serde_json::Value::Object(map) if map.get("frames").is_some_and(|f| f.is_array()) => {
+            Ok(JsonKind::Transforms)
+        }
         serde_json::Value::Object(map) => Err(invalid(format!(
-            "is a JSON object with neither \"camera_path\" (nerfstudio) nor \"keyframes\" \
-             (keyframe path); its keys are: {}",
+            "is a JSON object with no \"camera_path\" (nerfstudio), \"keyframes\" (keyframe \
+             path) or \"frames\" list (transforms.json); its keys are: {}",
             map.keys().take(8).cloned().collect::<Vec<_>>().join(", ")
         ))),
         _ => Err(invalid(

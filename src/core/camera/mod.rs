@@ -1,7 +1,8 @@
-//! Pinhole cameras in OpenCV axes (x right, y down, z forward), where they come from
-//! (INRIA `cameras.json`, COLMAP sparse models, nerfstudio camera paths, our keyframe
-//! paths, a built-in orbit), a default camera that frames a scene's bulk, and resolution
-//! overrides. `docs/cameras.md` writes down every convention and conversion.
+//! Cameras in OpenCV axes (x right, y down, z forward) with their lens, where they come
+//! from (INRIA `cameras.json`, COLMAP sparse models, nerfstudio camera paths and
+//! `transforms.json`, our keyframe paths, a built-in orbit), a default camera that frames
+//! a scene's bulk, and resolution overrides. `docs/cameras.md` writes down every
+//! convention and conversion.
 
 pub mod colmap;
 pub mod distortion;
@@ -12,6 +13,7 @@ mod load;
 pub mod nerfstudio;
 pub mod orbit;
 mod select;
+pub mod transforms;
 
 pub use inria::{load_cameras_json, parse_cameras_json};
 pub use keyframes::{keyframes_to_json, KeyframePath, MAX_FRAMES as MAX_PATH_FRAMES};

@@ -3,6 +3,14 @@
 //! the frames were made), optional `camera_type`, and `camera_path`, one entry per frame
 //! with `camera_to_world` (16 numbers, a row-major 4x4) and `fov` (vertical, degrees).
 //!
+//! `camera_type` is read as nerfstudio's `get_path_from_json` reads it:
+//! - `"perspective"` (or none): the pinhole, focal length `H / (2 tan(fov / 2))`;
+//! - `"fisheye"`: nerfstudio's fisheye, equidistant without distortion, with the same
+//!   focal length as the perspective camera of that `fov` (so the `fov` is not the
+//!   fisheye's field of view: the top edge sees `tan(fov / 2)` radians off the axis), and
+//!   every ray up to 180 degrees from the axis imaged;
+//! - `"equirectangular"`: the whole sphere across the image (the `fov` is not used).
+//!
 //! `camera_to_world` uses OpenGL camera axes (x right, y up, z backwards); ours are
 //! OpenCV (x right, y down, z forward), so the camera's y and z axes are negated. The
 //! matrices are taken as they are, in the world frame of the file. nerfstudio's world
@@ -12,7 +20,7 @@
 //! for a scene in INRIA/COLMAP coordinates, make the path in that frame (see
 //! `docs/cameras.md`).
 
-use super::{camera_from_c2w, check_resolution, rotation_error, Camera, CameraError};
+use super::{camera_from_c2w, check_resolution, rotation_error, Camera, CameraError, Lens};
 use crate::core::file_error::FileError;
 use glam::{DMat3, DVec3};
 use serde::Deserialize;
@@ -36,6 +44,39 @@ struct PathEntry {
     fov: Option<f64>,
 }
 
+/// The `camera_type`s nerfstudio renders a path with that verisplat reads.
+#[derive(Clone, Copy, PartialEq)]
+enum Kind {
+    Perspective,
+    Fisheye,
+    Equirectangular,
+}
+
+impl Kind {
+    /// The lens: nerfstudio's fisheye images rays up to 180 degrees from the axis.
+    fn lens(self) -> Lens {
+        match self {
+            Kind::Perspective => Lens::Pinhole,
+            Kind::Fisheye => Lens::Fisheye {
+                k: [0.0; 4],
+                max_theta: std::f64::consts::PI,
+            },
+            Kind::Equirectangular => Lens::FULL_SPHERE,
+        }
+    }
+
+    /// Its `camera_type`, and the kind of `lens` (`None`: nerfstudio has no such camera).
+    fn of(lens: &Lens) -> Option<(Kind, &'static str)> {
+        [
+            (Kind::Perspective, "perspective"),
+            (Kind::Fisheye, "fisheye"),
+            (Kind::Equirectangular, "equirectangular"),
+        ]
+        .into_iter()
+        .find(|(k, _)| k.lens() == *lens)
+    }
+}
+
 /// Parses a nerfstudio camera path held in memory (`path` names it in errors): one
 /// camera per entry, named `path_00000`, `path_00001`, ...
 pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraError> {
@@ -51,13 +92,16 @@ pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraE
              [{{camera_to_world, fov}}]): {e}"
         ))
     })?;
-    if let Some(kind) = file.camera_type.as_deref() {
-        if kind != "perspective" {
+    let kind = match file.camera_type.as_deref() {
+        None | Some("perspective") => Kind::Perspective,
+        Some("fisheye") => Kind::Fisheye,
+        Some("equirectangular") => Kind::Equirectangular,
+        Some(other) => {
             return Err(invalid(format!(
-                "camera_type \"{kind}\" is not supported; only \"perspective\" paths can be rendered"
-            )));
+                "camera_type \"{other}\" is not supported; it must be \"perspective\", \"fisheye\" or \"equirectangular\""
+            )))
         }
-    }
+    };
     let (width, height) = (file.render_width, file.render_height);
     check_resolution(width, height).map_err(|e| invalid(e.to_string()))?;
     // OpenGL camera axes to OpenCV: negate the camera's y and z columns.
@@ -83,24 +127,32 @@ pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraE
                  non-finite values)"
             )));
         }
-        let fov = e
-            .fov
-            .or(file.default_fov)
-            .ok_or_else(|| bad("has no \"fov\" (and the file no \"default_fov\")".into()))?;
-        if !(fov.is_finite() && fov > 0.0 && fov < 180.0) {
-            return Err(bad(format!("fov {fov} degrees must be between 0 and 180")));
-        }
-        // nerfstudio: focal = H / (2 tan(fov/2)), square pixels, centred principal point.
-        let focal = height as f64 / (2.0 * (fov.to_radians() * 0.5).tan());
-        let cam = camera_from_c2w(
+        // nerfstudio: an equirectangular camera has fx = W / 2, fy = H (its lens spans the
+        // image whatever they are); the others focal = H / (2 tan(fov/2)), square pixels.
+        // The principal point is the centre.
+        let focal = if kind == Kind::Equirectangular {
+            [width as f64 / 2.0, height as f64]
+        } else {
+            let fov = e
+                .fov
+                .or(file.default_fov)
+                .ok_or_else(|| bad("has no \"fov\" (and the file no \"default_fov\")".into()))?;
+            if !(fov.is_finite() && fov > 0.0 && fov < 180.0) {
+                return Err(bad(format!("fov {fov} degrees must be between 0 and 180")));
+            }
+            let f = height as f64 / (2.0 * (fov.to_radians() * 0.5).tan());
+            [f, f]
+        };
+        let mut cam = camera_from_c2w(
             format!("path_{i:05}"),
             width,
             height,
-            [focal, focal],
+            focal,
             [width as f64 / 2.0, height as f64 / 2.0],
             c2w_gl * gl_to_cv,
             centre,
         );
+        cam.lens = kind.lens();
         cam.validate().map_err(|e| bad(e.to_string()))?;
         cams.push(cam);
     }
@@ -111,7 +163,8 @@ pub fn parse_camera_path(text: &str, path: &Path) -> Result<Vec<Camera>, CameraE
 /// `ns-render camera-path` renders them), which [`parse_camera_path`] reads back as the
 /// same poses. nerfstudio cameras have square pixels and a centred principal point, so
 /// each camera's `fy` is kept (as the vertical `fov`) and `fx`, `cx`, `cy` are not; the
-/// cameras must share a resolution.
+/// cameras must share a resolution and a lens that is a nerfstudio `camera_type` (the
+/// pinhole, the undistorted 360-degree fisheye, the whole-sphere equirectangular).
 pub fn to_camera_path_json(cams: &[Camera], fps: f64) -> Result<String, CameraError> {
     let bad = |m: String| Err(CameraError::BadParameter(m));
     let Some(first) = cams.first() else {
@@ -120,10 +173,25 @@ pub fn to_camera_path_json(cams: &[Camera], fps: f64) -> Result<String, CameraEr
     if !(fps.is_finite() && fps > 0.0) {
         return bad(format!("fps {fps} must be a positive number"));
     }
+    let Some((_, camera_type)) = Kind::of(&first.lens) else {
+        return bad(format!(
+            "camera \"{}\" has a lens ({}) that nerfstudio has no camera_type for (perspective, fisheye of 360 degrees without distortion, equirectangular of the whole sphere)",
+            first.name,
+            first.lens.name()
+        ));
+    };
     let gl_to_cv = DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0));
     let mut entries = Vec::with_capacity(cams.len());
     for c in cams {
         c.validate()?;
+        if c.lens != first.lens {
+            return bad(format!(
+                "camera \"{}\" has another lens ({}) than the first ({}); a camera path has one camera_type",
+                c.name,
+                c.lens.name(),
+                first.lens.name()
+            ));
+        }
         if (c.width, c.height) != (first.width, first.height) {
             return bad(format!(
                 "camera \"{}\" is {}x{} but the first is {}x{}; a camera path has one resolution",
@@ -150,7 +218,7 @@ pub fn to_camera_path_json(cams: &[Camera], fps: f64) -> Result<String, CameraEr
         }));
     }
     let file = serde_json::json!({
-        "camera_type": "perspective",
+        "camera_type": camera_type,
         "render_width": first.width,
         "render_height": first.height,
         "fps": fps,
@@ -187,6 +255,26 @@ mod tests {
             assert!(a.rotation.abs_diff_eq(b.rotation, 1e-6));
             assert!((a.fy - b.fy).abs() < 1e-3, "{} {}", a.fy, b.fy);
         }
+        // nerfstudio's fisheye and equirectangular cameras read back with their lens.
+        for lens in [Lens::FULL_SPHERE, Kind::Fisheye.lens()] {
+            let with: Vec<Camera> = cams
+                .iter()
+                .map(|c| Camera {
+                    lens: lens.clone(),
+                    ..c.clone()
+                })
+                .collect();
+            let text = to_camera_path_json(&with, 24.0).unwrap();
+            let back = parse_camera_path(&text, Path::new("p.json")).unwrap();
+            assert!(back.iter().all(|c| c.lens == lens), "{text}");
+        }
+        let mut odd = cams[0].clone();
+        odd.lens = Lens::Orthographic;
+        let e = to_camera_path_json(&[odd], 24.0).unwrap_err().to_string();
+        assert!(
+            e.contains("orthographic") && e.contains("camera_type"),
+            "{e}"
+        );
         let mut other = cams[1].clone();
         other.width = 81;
         assert!(to_camera_path_json(&[cams[0].clone(), other], 24.0).is_err());

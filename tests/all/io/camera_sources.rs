@@ -4,6 +4,7 @@
 
 mod colmap;
 mod keyframes;
+mod lenses;
 
 use crate::common;
 use glam::{DMat3, Mat3, Vec2, Vec3};
@@ -281,10 +282,10 @@ fn nerfstudio_malformed() {
     let cases = [
         (
             file(
-                r#", "camera_type": "fisheye""#,
+                r#", "camera_type": "orthophoto""#,
                 &format!(r#"{{"camera_to_world": {m}, "fov": 50}}"#),
             ),
-            "camera_type \"fisheye\" is not supported",
+            "camera_type \"orthophoto\" is not supported; it must be \"perspective\", \"fisheye\" or \"equirectangular\"",
         ),
         (
             file("", r#"{"camera_to_world": [1, 0, 0], "fov": 50}"#),
@@ -427,7 +428,7 @@ fn format_detection_and_bad_files() {
         (
             "a.json",
             b"{\"foo\": 1}",
-            "neither \"camera_path\" (nerfstudio) nor \"keyframes\"",
+            "no \"camera_path\" (nerfstudio), \"keyframes\" (keyframe path) or \"frames\" list",
         ),
         ("b.json", b"\"just a string\"", "not a camera file"),
         ("c.json", b"[1, 2]", "not an INRIA cameras.json"),

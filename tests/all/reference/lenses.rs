@@ -236,7 +236,7 @@ fn render_takes_a_lens_for_generated_cameras_and_refuses_what_cannot_draw_it() {
         ),
         (
             &["--cpu", "--lens", "equirect", "--export-colmap", "data"][..],
-            "--export-colmap and --export-cameras write pinhole cameras",
+            "which COLMAP has no camera model for",
         ),
         (
             &["--cpu", "--lens", "fisheye:fov=400", "-o", "x.png"][..],

@@ -144,7 +144,7 @@ fn write_colmap(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], model: &s
     )
     .unwrap();
     // Every image on camera 1.
-    let [_, (_, images), _] = verisplat::core::camera::colmap::to_text_model(cams, &[]);
+    let [_, (_, images), _] = verisplat::core::camera::colmap::to_text_model(cams, &[]).unwrap();
     let images: String = images
         .lines()
         .map(|l| {

@@ -112,14 +112,16 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     pub(crate) exr_background: bool,
     /// Also write the rendered cameras (after --camera and resizing) as an INRIA
-    /// cameras.json, which --cameras reads back.
+    /// cameras.json, with the lens of each camera that is not a pinhole, which --cameras
+    /// reads back.
     #[arg(long, value_name = "FILE.json")]
     pub(crate) export_cameras: Option<PathBuf>,
     /// Instead of -o: write the selected frames as a COLMAP data set in DIR, for training
     /// (or testing a trainer) on a known scene: DIR/images/NAME.png as rendered (colour
     /// over --background), DIR/sparse/0/{cameras,images,points3D}.txt with the cameras
-    /// (PINHOLE) and every Nth Gaussian centre and its DC colour as the points (N chosen
-    /// so that at most 100,000 are written; said).
+    /// (PINHOLE, or OPENCV, FULL_OPENCV, OPENCV_FISHEYE for those lenses; COLMAP has no
+    /// orthographic or equirectangular model) and every Nth Gaussian centre and its DC
+    /// colour as the points (N chosen so that at most 100,000 are written; said).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["output", "verify", "shard", "devices", "mode", "skip_existing", "export_cameras"])]
     pub(crate) export_colmap: Option<PathBuf>,
     /// Depth range NEAR,FAR of colour-mapped depth PNGs (default: each frame's 1st-99th

@@ -33,12 +33,6 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     } else {
         refuse_lens(&args.path, &draws_pinholes_only("the GPU renderer"))?;
     }
-    if args.export_colmap.is_some() || args.export_cameras.is_some() {
-        refuse_lens(
-            &args.path,
-            "--export-colmap and --export-cameras write pinhole cameras only so far",
-        )?;
-    }
     let shard = crate::cli::common::shard(args.shard.as_deref())?;
     let outputs = Outputs::checked(args, shard)?;
     let scene::Loaded {

@@ -7,7 +7,7 @@ use super::{
 };
 use glam::{DQuat, Vec2, Vec3};
 use std::path::Path;
-use verisplat::core::camera::{self, Camera, CameraError, CameraFormat};
+use verisplat::core::camera::{self, Camera, CameraError, CameraFormat, Lens};
 use verisplat::core::file_error::FileError;
 
 /// `cameras` with id i + 1 as PINHOLE and images named by camera name, as COLMAP text.
@@ -208,72 +208,151 @@ fn colmap_binary_front_camera() {
     assert_front_view(&cams[0]);
 }
 
+/// `Lens::RadialTangential` with radial `k` (k1..k6) and tangential `p`.
+fn brown(k: [f64; 6], p: [f64; 2]) -> Lens {
+    Lens::RadialTangential {
+        radial: k,
+        tangential: p,
+    }
+}
+
+/// The equidistant fisheye `k1..k4`, imaging as far as its polynomial grows.
+fn fisheye(k: [f64; 4]) -> Lens {
+    Lens::Fisheye {
+        k,
+        max_theta: camera::lens::fisheye_max_theta(&k),
+    }
+}
+
 #[test]
-fn colmap_models_with_zero_distortion_are_accepted_others_refused() {
+fn colmap_models_carry_their_lens_and_unmappable_ones_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let images = "1 1 0 0 0 0 0 5 1 a.png\n\n";
-    let cases = [
-        ("SIMPLE_RADIAL 640 480 500 320 240 0", None),
-        ("RADIAL 640 480 500 320 240 0 0", None),
-        ("OPENCV 640 480 500 500 320 240 0 0 0 0", None),
-        ("FULL_OPENCV 640 480 500 500 320 240 0 0 0 0 0 0 0 0", None),
+    let z = 0.0;
+    let cases: Vec<(&str, Result<Lens, &str>)> = vec![
+        ("SIMPLE_PINHOLE 640 480 500 320 240", Ok(Lens::Pinhole)),
+        ("SIMPLE_RADIAL 640 480 500 320 240 0", Ok(Lens::Pinhole)),
+        ("RADIAL 640 480 500 320 240 0 0", Ok(Lens::Pinhole)),
+        ("OPENCV 640 480 500 500 320 240 0 0 0 0", Ok(Lens::Pinhole)),
+        (
+            "FULL_OPENCV 640 480 500 500 320 240 0 0 0 0 0 0 0 0",
+            Ok(Lens::Pinhole),
+        ),
+        ("FOV 640 480 500 500 320 240 0", Ok(Lens::Pinhole)),
         (
             "SIMPLE_RADIAL 640 480 500 320 240 0.01",
-            Some("SIMPLE_RADIAL model with non-zero distortion"),
+            Ok(brown([0.01, z, z, z, z, z], [z, z])),
         ),
         (
-            "OPENCV 640 480 500 500 320 240 0 0 0.001 0",
-            Some("OPENCV model with non-zero distortion"),
+            "RADIAL 640 480 500 320 240 0.01 -0.002",
+            Ok(brown([0.01, -0.002, z, z, z, z], [z, z])),
+        ),
+        (
+            "OPENCV 640 480 500 500 320 240 -0.2 0.05 0.001 -0.0005",
+            Ok(brown([-0.2, 0.05, z, z, z, z], [0.001, -0.0005])),
+        ),
+        (
+            "FULL_OPENCV 640 480 500 500 320 240 0.1 -0.03 0.001 0.002 0.01 0.05 0.003 0.0004",
+            Ok(brown(
+                [0.1, -0.03, 0.01, 0.05, 0.003, 0.0004],
+                [0.001, 0.002],
+            )),
         ),
         (
             "OPENCV_FISHEYE 640 480 500 500 320 240 0 0 0 0",
-            Some("OPENCV_FISHEYE model, a fisheye"),
+            Ok(fisheye([z; 4])),
         ),
-        ("WEIRD 640 480 500", Some("unknown camera model \"WEIRD\"")),
+        (
+            "OPENCV_FISHEYE 640 480 500 500 320 240 0.05 -0.01 0.002 -0.0003",
+            Ok(fisheye([0.05, -0.01, 0.002, -0.0003])),
+        ),
+        (
+            "SIMPLE_RADIAL_FISHEYE 640 480 500 320 240 -0.2",
+            Ok(fisheye([-0.2, z, z, z])),
+        ),
+        (
+            "RADIAL_FISHEYE 640 480 500 320 240 0.02 0.001",
+            Ok(fisheye([0.02, 0.001, z, z])),
+        ),
+        (
+            "FOV 640 480 500 500 320 240 0.9",
+            Err("the FOV model is not supported"),
+        ),
+        (
+            "THIN_PRISM_FISHEYE 640 480 500 500 320 240 0 0 0 0 0 0 0 0",
+            Err("the THIN_PRISM_FISHEYE model is not supported"),
+        ),
+        (
+            "RAD_TAN_THIN_PRISM_FISHEYE 640 480 500 500 320 240 0 0 0 0 0 0 0 0 0 0 0 0",
+            Err("the RAD_TAN_THIN_PRISM_FISHEYE model is not supported"),
+        ),
+        (
+            "OPENCV 640 480 500 500 320 240 nan 0 0 0",
+            Err("non-finite distortion parameter"),
+        ),
+        ("WEIRD 640 480 500", Err("unknown camera model \"WEIRD\"")),
         (
             "PINHOLE 640 480 500 500 320",
-            Some("PINHOLE takes 4 parameters, the line has 3"),
+            Err("PINHOLE takes 4 parameters, the line has 3"),
         ),
         (
             "PINHOLE 640 480 nan 500 320 240",
-            Some("non-finite or non-positive intrinsics"),
+            Err("non-finite or non-positive intrinsics"),
         ),
         (
             "PINHOLE 640 480 -500 500 320 240",
-            Some("non-finite or non-positive intrinsics"),
+            Err("non-finite or non-positive intrinsics"),
         ),
         (
             "PINHOLE 0 480 500 500 320 240",
-            Some("resolution 0x480 is not usable"),
+            Err("resolution 0x480 is not usable"),
         ),
-        (
-            "PINHOLE 99999999999 480 500 500 320 240",
-            Some("not usable"),
-        ),
+        ("PINHOLE 99999999999 480 500 500 320 240", Err("not usable")),
     ];
     for (line, want) in cases {
         write(dir.path(), "cameras.txt", format!("1 {line}\n"));
         write(dir.path(), "images.txt", images);
         match want {
-            None => assert_front_view(&{
+            Ok(lens) => {
                 let mut c = load(dir.path()).0.remove(0);
+                assert_eq!(c.lens, lens, "{line}");
+                // The pose and the pinhole part as the model writes them.
+                assert_eq!((c.fx, c.fy, c.cx, c.cy), (500.0, 500.0, 320.0, 240.0));
+                c.lens = Lens::Pinhole;
                 c.name = line.into();
-                c
-            }),
-            Some(msg) => {
+                assert_front_view(&c);
+                // The trainer's reading: the pinhole part, the distortion beside it.
+                let (cams, _) = camera::colmap::load_colmap_model_distorted(dir.path()).unwrap();
+                assert_eq!(cams[0].0.lens, Lens::Pinhole, "{line}");
+                assert_eq!(cams[0].1.is_some(), lens != Lens::Pinhole, "{line}");
+            }
+            Err(msg) => {
                 let e = load_err(dir.path());
                 assert!(e.contains(msg) && e.contains("camera 1"), "{line}: {e}");
                 assert!(e.contains("cameras.txt"), "{e}");
             }
         }
     }
-    // Binary: an unknown model id and a refused model, both naming the camera.
-    for (model, params, msg) in [
-        (99, vec![], "unknown camera model id 99"),
+    // Binary: an unknown model id and a refused model, both naming the camera; a
+    // distorted model read with its lens.
+    for (model, params, want) in [
+        (99, vec![], Err("unknown camera model id 99")),
+        (
+            10,
+            vec![
+                500.0, 500.0, 320.0, 240.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            ],
+            Err("the THIN_PRISM_FISHEYE model is not supported"),
+        ),
         (
             2,
             vec![500.0, 320.0, 240.0, 0.2],
-            "SIMPLE_RADIAL model with non-zero",
+            Ok(brown([0.2, z, z, z, z, z], [z, z])),
+        ),
+        (
+            5,
+            vec![500.0, 500.0, 320.0, 240.0, 0.1, 0.0, 0.0, 0.0],
+            Ok(fisheye([0.1, z, z, z])),
         ),
     ] {
         let mut c = 1u64.to_le_bytes().to_vec();
@@ -283,8 +362,13 @@ fn colmap_models_with_zero_distortion_are_accepted_others_refused() {
         let d = tempfile::tempdir().unwrap();
         write(d.path(), "cameras.bin", c);
         write(d.path(), "images.bin", im);
-        let e = load_err(d.path());
-        assert!(e.contains(msg) && e.contains("camera 3"), "{e}");
+        match want {
+            Ok(lens) => assert_eq!(load(d.path()).0[0].lens, lens),
+            Err(msg) => {
+                let e = load_err(d.path());
+                assert!(e.contains(msg) && e.contains("camera 3"), "{e}");
+            }
+        }
     }
 }
 

@@ -1,7 +1,7 @@
 //! Camera-file cases: builders for INRIA cameras.json, nerfstudio paths, keyframe paths
 //! and COLMAP models (text and binary), and their cases.
 
-use super::case::{camera_case, colmap_case, Case, Expect, Kind};
+use super::case::{camera_case, colmap_case, colmap_model_case, Case, Expect, Kind};
 
 // Cameras.
 
@@ -144,7 +144,13 @@ pub(super) fn nerfstudio_camera_cases() -> Vec<Case> {
             "ns_fisheye",
             "camera_path.json",
             &nerfstudio("fisheye", C2W, "50"),
-            Error("camera_type \"fisheye\" is not supported"),
+            Expect::Renders(1),
+        ),
+        camera_case(
+            "ns_vr180",
+            "camera_path.json",
+            &nerfstudio("vr180", C2W, "50"),
+            Error("camera_type \"vr180\" is not supported; it must be"),
         ),
         camera_case(
             "ns_fifteen_numbers",
@@ -281,19 +287,31 @@ pub(super) fn colmap_text_cases() -> Vec<Case> {
             false,
             "unknown camera model \"PINHOLEX\"",
         ),
-        colmap_case(
+        colmap_model_case(
             "colmap_fisheye",
             b"1 OPENCV_FISHEYE 64 48 50 50 32 24 0 0 0 0\n".to_vec(),
             COLMAP_IMAGES.into(),
-            false,
-            "a fisheye projection",
+            Expect::Renders(1),
         ),
-        colmap_case(
+        colmap_model_case(
             "colmap_distortion",
             b"1 SIMPLE_RADIAL 64 48 50 32 24 0.1\n".to_vec(),
             COLMAP_IMAGES.into(),
+            Expect::Renders(1),
+        ),
+        colmap_case(
+            "colmap_thin_prism",
+            b"1 THIN_PRISM_FISHEYE 64 48 50 50 32 24 0.1 0 0 0 0 0 0 0\n".to_vec(),
+            COLMAP_IMAGES.into(),
             false,
-            "non-zero distortion (parameter 0.1)",
+            "camera 1: the THIN_PRISM_FISHEYE model is not supported",
+        ),
+        colmap_case(
+            "colmap_fov",
+            b"1 FOV 64 48 50 50 32 24 0.5\n".to_vec(),
+            COLMAP_IMAGES.into(),
+            false,
+            "camera 1: the FOV model is not supported",
         ),
         colmap_case(
             "colmap_too_few_params",

@@ -58,6 +58,7 @@ pub(super) fn camera_case(
     }
 }
 
+/// A COLMAP text model that must fail with `fragment`, or (bin) a binary one.
 pub(super) fn colmap_case(
     name: &'static str,
     cams: Vec<u8>,
@@ -65,16 +66,36 @@ pub(super) fn colmap_case(
     bin: bool,
     fragment: &'static str,
 ) -> Case {
-    let (c, i) = if bin {
-        ("model/cameras.bin", "model/images.bin")
-    } else {
-        ("model/cameras.txt", "model/images.txt")
-    };
+    Case {
+        expect: Expect::Error(fragment),
+        ..colmap_model_case(name, cams, images, Expect::Renders(0))
+    }
+    .binary(bin)
+}
+
+/// A COLMAP text model and what it must do.
+pub(super) fn colmap_model_case(
+    name: &'static str,
+    cams: Vec<u8>,
+    images: Vec<u8>,
+    expect: Expect,
+) -> Case {
     Case {
         name,
         kind: Kind::Cameras,
-        files: vec![(c, cams), (i, images)],
+        files: vec![("model/cameras.txt", cams), ("model/images.txt", images)],
         arg: "model",
-        expect: Expect::Error(fragment),
+        expect,
+    }
+}
+
+impl Case {
+    /// The same COLMAP model's files named as a binary model's, when `bin`.
+    fn binary(mut self, bin: bool) -> Case {
+        if bin {
+            self.files[0].0 = "model/cameras.bin";
+            self.files[1].0 = "model/images.bin";
+        }
+        self
     }
 }
