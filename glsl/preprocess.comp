@@ -1,5 +1,6 @@
 #version 460
-// Preprocess: per Gaussian, cull at the near plane, project, 2D covariance with the 0.3
+// Preprocess: per Gaussian, cull at the near plane, project (a pinhole by the EWA rule,
+// every other lens by the unscented transform of lens.glsl), 2D covariance with the 0.3
 // dilation, conic, radius, tile rectangle, SH colour, depth and tiles touched. One thread
 // per Gaussian; mirrors cpu::preprocess_one line by line. Also writes each Gaussian's depth
 // sort key (depth bits), index and tiles touched, for the depth order stage.
@@ -15,6 +16,12 @@ layout(std430, binding = PREPROCESS_PARAMS) readonly buffer ParamsBuf { FramePar
 #endif
 #ifndef PREPROCESS_TEXEL_IO
 #define PREPROCESS_TEXEL_IO 0
+#endif
+// Every lens (FrameParams::modes.y), or the pinhole alone: a variant of its own, so that
+// a pinhole frame runs exactly the code it ran before lenses (the same floats, bit for
+// bit, on every driver).
+#ifndef LENSES
+#define LENSES 0
 #endif
 // A compact upload (--compact, GaussianCompact): unpacking is exact.
 Gaussian unpack_compact(GaussianCompact c) {
@@ -106,6 +113,7 @@ void store_outputs(uint w, uint i, Splat s, uvec2 rect, uint depth_key, uint mas
 layout(push_constant) uniform WindowBlock { WindowPush window; };
 
 #include "sh_common.glsl"
+#include "lens.glsl"
 
 // C's truncating float-to-int conversion, clamped to [0, hi].
 uint clamp_tile(float v, uint hi) {
@@ -137,33 +145,58 @@ void main() {
         bool kept = (max_scale < 0.0 || max(max(g.scale.x, g.scale.y), g.scale.z) <= max_scale)
             && (min_opacity < 0.0 || g.pos_opacity.w >= min_opacity);
         bool gsplat = params.modes.x == RULES_GSPLAT;
-        if (kept && view.z > params.rules.x) {
+        // The depth sorted by and culled at the near plane, as cpu::preprocess_one: the
+        // distance from the camera for the lenses that see behind their image plane,
+        // else z.
+#if LENSES
+        uint lens = params.modes.y;
+#else
+        // The pinhole variant: the lens is known, and the code is the EWA path alone.
+        uint lens = LENS_PINHOLE;
+#endif
+        bool by_distance = lens == LENS_FISHEYE || lens == LENS_EQUIRECTANGULAR;
+        float depth = by_distance ? sqrt(dot(view, view)) : view.z;
+        if (kept && depth > params.rules.x) {
             // The reference's scaling_modifier: S = modifier * scale.
             float sm = params.filters.x;
             mat3 m = quat_to_mat3(g.rotation) * mat3(sm * g.scale.x, 0.0, 0.0, 0.0, sm * g.scale.y, 0.0, 0.0, 0.0, sm * g.scale.z);
-            mat3 cov3d = m * transpose(m);
             float fx = params.focal.x, fy = params.focal.y;
-            vec4 lim = params.limits;
-            float z = view.z;
-            float tx = clamp(view.x / z, -lim.x, lim.y) * z;
-            float ty = clamp(view.y / z, -lim.z, lim.w) * z;
-            vec3 j0 = vec3(fx / z, 0.0, -(fx * tx) / (z * z));
-            vec3 j1 = vec3(0.0, fy / z, -(fy * ty) / (z * z));
-            // Rows of T = J W, with W the world-to-camera rotation: t_i = W^T j_i. GLSL's
-            // mat3(a, b, c) takes columns, so the rows of W as columns give W^T.
+            float a, b, c;
+            vec2 mean2d;
+            bool projected = true;
+            // GLSL's mat3(a, b, c) takes columns, so the rows of W as columns give W^T.
             mat3 w_t = mat3(params.w2c_row0.xyz, params.w2c_row1.xyz, params.w2c_row2.xyz);
-            vec3 t0 = w_t * j0;
-            vec3 t1 = w_t * j1;
-            vec3 s0 = cov3d * t0;
-            vec3 s1 = cov3d * t1;
-            float a = dot(t0, s0);
-            float b = dot(t0, s1);
-            float c = dot(t1, s1);
+            if (lens == LENS_PINHOLE) {
+                mat3 cov3d = m * transpose(m);
+                vec4 lim = params.limits;
+                float z = view.z;
+                float tx = clamp(view.x / z, -lim.x, lim.y) * z;
+                float ty = clamp(view.y / z, -lim.z, lim.w) * z;
+                vec3 j0 = vec3(fx / z, 0.0, -(fx * tx) / (z * z));
+                vec3 j1 = vec3(0.0, fy / z, -(fy * ty) / (z * z));
+                // Rows of T = J W, with W the world-to-camera rotation: t_i = W^T j_i.
+                vec3 t0 = w_t * j0;
+                vec3 t1 = w_t * j1;
+                vec3 s0 = cov3d * t0;
+                vec3 s1 = cov3d * t1;
+                a = dot(t0, s0);
+                b = dot(t0, s1);
+                c = dot(t1, s1);
+            } else {
+                // Through the lens: the unscented transform of the camera-space Gaussian.
+                vec2 mean_px;
+                vec3 cov;
+                projected = lens_unscented(view, transpose(w_t) * m, mean_px, cov);
+                a = cov.x;
+                b = cov.y;
+                c = cov.z;
+                mean2d = mean_px - 0.5;
+            }
             float det_before = a * c - b * b;
             a += COV2D_DILATION;
             c += COV2D_DILATION;
             float det = a * c - b * b;
-            if (gsplat ? det > 0.0 : det != 0.0) {
+            if (projected && (gsplat ? det > 0.0 : det != 0.0)) {
                 // Optional antialiasing compensation (cam_pos.w = 1), as cpu::preprocess_one.
                 float opacity = g.pos_opacity.w;
                 if (params.cam_pos.w != 0.0) {
@@ -171,9 +204,11 @@ void main() {
                 }
                 float det_inv = 1.0 / det;
                 vec3 conic = vec3(c * det_inv, -b * det_inv, a * det_inv);
-                float inv_z = 1.0 / z;
-                vec2 mean2d = vec2(fx * view.x * inv_z + params.focal.z - 0.5,
-                                   fy * view.y * inv_z + params.focal.w - 0.5);
+                if (lens == LENS_PINHOLE) {
+                    float inv_z = 1.0 / view.z;
+                    mean2d = vec2(fx * view.x * inv_z + params.focal.z - 0.5,
+                                  fy * view.y * inv_z + params.focal.w - 0.5);
+                }
                 uint gx = params.image.z, gy = params.image.w;
                 float radius;
                 uvec2 rmin, rmax;
@@ -230,7 +265,7 @@ void main() {
                     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);
                     s.mean_opacity_bound = vec4(mean2d, opacity, bound);
-                    s.conic_depth = vec4(conic, z);
+                    s.conic_depth = vec4(conic, depth);
                     s.color_radius = vec4(color, radius);
                 }
                 if (touched != 0u) {
@@ -239,7 +274,7 @@ void main() {
             }
         }
         // Culled Gaussians sort after every visible one.
-        uint depth_key = touched != 0u ? floatBitsToUint(view.z) : 0xFFFFFFFFu;
+        uint depth_key = touched != 0u ? floatBitsToUint(depth) : 0xFFFFFFFFu;
         store_outputs(w, i, s, rect, depth_key, touched != 0u ? mask : 0u, touched);
     }
     // Exact 64-bit total of tiles touched (each term < 2^20 tiles).

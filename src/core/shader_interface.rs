@@ -143,6 +143,20 @@ constants! {
     pub const RULES_ORIGINAL: u32 = 0;
     /// gsplat's.
     pub const RULES_GSPLAT: u32 = 1;
+    /// `FrameParams::modes.y`, the camera's lens (`camera::Lens`): the pinhole, projected
+    /// by the EWA rule; every other lens by the unscented transform.
+    pub const LENS_PINHOLE: u32 = 0;
+    /// Brown-Conrady radial-tangential distortion (`lens_a` = k1..k4, `lens_b` = k5, k6,
+    /// p1, p2).
+    pub const LENS_RADIAL_TANGENTIAL: u32 = 1;
+    /// The equidistant fisheye (`lens_a` = k1..k4, `lens_b.x` = the largest angle from
+    /// the axis imaged).
+    pub const LENS_FISHEYE: u32 = 2;
+    /// Orthographic.
+    pub const LENS_ORTHOGRAPHIC: u32 = 3;
+    /// Equirectangular (`lens_a` = the window's left and right longitudes, top and
+    /// bottom latitudes).
+    pub const LENS_EQUIRECTANGULAR: u32 = 4;
     /// `StepPush::flags_size.x`: add the frame's densification statistics.
     pub const STEP_STATS: u32 = 1;
     /// Take an Adam step.
@@ -200,8 +214,22 @@ records! {
         /// before its transmittance would drop below `z`, the antialiased compensation's
         /// lowest ratio.
         pub rules: vec4,
-        /// `RULES_*` (the screen extent's rule) and three zeros.
+        /// `RULES_*` (the screen extent's rule), `LENS_*` (the camera's lens) and two
+        /// zeros.
         pub modes: uvec4,
+        /// The lens's first four coefficients (see the `LENS_*` constants).
+        pub lens_a: vec4,
+        /// Its next four.
+        pub lens_b: vec4,
+        /// The unscented transform (`model::unscented`): the sigma points' spread, the
+        /// centre's mean weight, every other point's weight, the centre's covariance
+        /// weight.
+        pub unscented: vec4,
+        /// How far outside the image a sigma point still counts as in view, as a
+        /// fraction of its width and height; a distorted lens's fold, the squared radius
+        /// of `(x / z, y / z)` from which it images nothing (`camera::lens::radial_fold`);
+        /// two zeros.
+        pub lens_c: vec4,
     }
 
     /// One uploaded Gaussian, activated.
@@ -698,7 +726,7 @@ mod tests {
             (0, 4, 16)
         );
         assert_eq!(c.size, 48);
-        assert_eq!(FrameParams::LAYOUT.size, 208);
+        assert_eq!(FrameParams::LAYOUT.size, 272);
         assert_eq!(GaussianGrad::LAYOUT.size, 64);
     }
 }

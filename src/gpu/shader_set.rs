@@ -332,13 +332,16 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
     }
     for texel in [false, true] {
         for compact in [false, true] {
-            out.push(v(
-                "preprocess",
-                &[
-                    ("COMPACT_GAUSSIANS", bit(compact)),
-                    ("PREPROCESS_TEXEL_IO", bit(texel)),
-                ],
-            ));
+            for lenses in [false, true] {
+                out.push(v(
+                    "preprocess",
+                    &[
+                        ("COMPACT_GAUSSIANS", bit(compact)),
+                        ("PREPROCESS_TEXEL_IO", bit(texel)),
+                        ("LENSES", bit(lenses)),
+                    ],
+                ));
+            }
         }
         out.push(v("keys", &[("KEYS_TEXEL_IO", bit(texel))]));
         out.push(v("ranges", &[("RANGES_TEXEL_IO", bit(texel))]));

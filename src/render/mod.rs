@@ -82,6 +82,9 @@ pub struct ForwardHandle {
     serial: u64,
     width: u32,
     height: u32,
+    /// The camera's lens ([`crate::core::camera::Lens::name`]): the backward pass is a
+    /// pinhole's so far.
+    lens: &'static str,
 }
 
 impl ForwardHandle {
@@ -299,6 +302,7 @@ impl Ticket<'_> {
     fn needs(&self, save_last: bool) -> FrameNeeds {
         FrameNeeds {
             compact: self.scene.compact,
+            lens: !self.cam.lens.is_pinhole(),
             kernel: self.opts.kernel,
             features: self.features.is_some(),
             shade: matches!(self.features, Some((_, Some(_)))),
@@ -394,6 +398,7 @@ impl GpuRenderer {
             serial: self.last_serial,
             width: cam.width,
             height: cam.height,
+            lens: cam.lens.name(),
         }
     }
 

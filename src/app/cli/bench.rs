@@ -130,10 +130,6 @@ pub(crate) fn choose_camera(
     scene: &Scene,
 ) -> Result<BenchCamera> {
     let camera = view.camera.is_some();
-    super::common::refuse_lens(
-        path,
-        "bench times the GPU renderer, which draws pinhole cameras only so far",
-    )?;
     let path = camera_path(view, path, scene_arg, scene)?;
     let timed = |(k, cam): &(usize, verisplat::core::camera::Camera)| BenchCamera {
         camera: cam.clone(),

@@ -381,8 +381,9 @@ pub(crate) struct CameraPath {
     pub(crate) source: String,
 }
 
-/// Refuses a `--lens` other than the pinhole where only pinhole cameras work so far (every
-/// lens is drawn by the CPU reference, `render --cpu`): `why` says so, after the lens.
+/// Refuses a `--lens` other than the pinhole where only pinhole cameras work so far (both
+/// renderers draw every lens; the viewer and field renders do not yet): `why` says so,
+/// after the lens.
 pub(crate) fn refuse_lens(p: &PathArgs, why: &str) -> Result<()> {
     match &p.lens {
         Some(spec) if *spec != camera::LensSpec::Pinhole => {
@@ -394,7 +395,7 @@ pub(crate) fn refuse_lens(p: &PathArgs, why: &str) -> Result<()> {
 
 /// [`refuse_lens`]'s reason for a command that draws: `what` draws pinhole cameras only.
 pub(crate) fn draws_pinholes_only(what: &str) -> String {
-    format!("{what} draws pinhole cameras only so far; the CPU reference draws every lens (render --cpu)")
+    format!("{what} draws pinhole cameras only so far; `render` draws every lens")
 }
 
 /// Gives a generated pinhole camera the lens of `spec` (`--lens`), its focal lengths made

@@ -337,10 +337,6 @@ fn compared_cameras(
     scene_arg: &SceneArg,
     scene: &verisplat::core::scene::Scene,
 ) -> Result<(String, Vec<(usize, verisplat::core::camera::Camera)>)> {
-    super::common::refuse_lens(
-        &args.path,
-        "compare checks the GPU renderer, which draws pinhole cameras only so far",
-    )?;
     let path = camera_path(&args.view, &args.path, scene_arg, scene)?;
     if let Some(frames) = &args.frames {
         frames.check(path.len).map_err(anyhow::Error::msg)?;

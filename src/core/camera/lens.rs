@@ -177,6 +177,36 @@ impl Lens {
         }
     }
 
+    /// The lens as the shaders take it (`FrameParams`): its `LENS_*` constant, its
+    /// coefficients `lens_a`, `lens_b`, and for a distorted lens the squared radius of
+    /// its fold ([`radial_fold`]; `f32::MAX` for none), in f32.
+    pub fn shader_params(&self) -> (u32, [f32; 4], [f32; 4], f32) {
+        use crate::core::shader_interface as si;
+        let f = |v: &[f64]| -> [f32; 4] {
+            std::array::from_fn(|i| v.get(i).map_or(0.0, |x| *x as f32))
+        };
+        match self {
+            Lens::Pinhole => (si::LENS_PINHOLE, [0.0; 4], [0.0; 4], 0.0),
+            Lens::RadialTangential { radial, tangential } => (
+                si::LENS_RADIAL_TANGENTIAL,
+                f(&radial[..4]),
+                f(&[radial[4], radial[5], tangential[0], tangential[1]]),
+                radial_fold(radial, f64::INFINITY).map_or(f32::MAX, |r| (r * r) as f32),
+            ),
+            Lens::Fisheye { k, max_theta } => (si::LENS_FISHEYE, f(k), f(&[*max_theta]), 0.0),
+            Lens::Orthographic => (si::LENS_ORTHOGRAPHIC, [0.0; 4], [0.0; 4], 0.0),
+            Lens::Equirectangular {
+                longitude,
+                latitude,
+            } => (
+                si::LENS_EQUIRECTANGULAR,
+                f(&[longitude[0], longitude[1], latitude[0], latitude[1]]),
+                [0.0; 4],
+                0.0,
+            ),
+        }
+    }
+
     /// Whether this is the ideal pinhole (the renderers' EWA projection applies).
     pub fn is_pinhole(&self) -> bool {
         matches!(self, Lens::Pinhole)
@@ -195,7 +225,11 @@ impl Lens {
                 if p.z <= 0.0 {
                     return None;
                 }
-                let (u, v) = brown_conrady(radial, tangential, p.x / p.z, p.y / p.z);
+                let (x, y) = (p.x / p.z, p.y / p.z);
+                if radial_fold(radial, x.hypot(y)).is_some() {
+                    return None;
+                }
+                let (u, v) = brown_conrady(radial, tangential, x, y);
                 Some(pixel(u, v))
             }
             Lens::Fisheye { k: c, max_theta } => {
@@ -441,6 +475,32 @@ impl LensSpec {
 }
 
 /// `a` turned into `(-PI, PI]`.
+/// Where Brown-Conrady's radial factor folds the image back: the first radius `r` (of
+/// the pinhole coordinates `(x / z, y / z)`), on a grid of `1 / 64` out to `r = 64`
+/// (89 degrees), at or below `up_to` where `r R(r^2)` stops growing or the rational
+/// factor's denominator stops being positive; `None` where there is none. A lens images
+/// no point at or past its fold (the polynomial sends those points back inside the
+/// picture, where the real lens does not put them): points further out than the lens
+/// sees. The grid makes the CPU's test of one point (scan to its radius) and the GPU's
+/// (compare with the fold found once) the same test.
+pub fn radial_fold(radial: &[f64; 6], up_to: f64) -> Option<f64> {
+    const STEP: f64 = 1.0 / 64.0;
+    const STEPS: u32 = 64 * 64;
+    let k = radial;
+    (1..=STEPS)
+        .map(|i| i as f64 * STEP)
+        .take_while(|&r| r <= up_to)
+        .find(|&r| {
+            let q = r * r;
+            let n = 1.0 + q * (k[0] + q * (k[1] + q * k[2]));
+            let d = 1.0 + q * (k[3] + q * (k[4] + q * k[5]));
+            let dn = k[0] + q * (2.0 * k[1] + q * 3.0 * k[2]);
+            let dd = k[3] + q * (2.0 * k[4] + q * 3.0 * k[5]);
+            // d/dr (r n / d) = (n d + 2 q (n' d - n d')) / d^2: the sign of its numerator.
+            d <= 0.0 || n * d + 2.0 * q * (dn * d - n * dd) <= 0.0
+        })
+}
+
 fn wrap_angle(a: f64) -> f64 {
     let t = a.rem_euclid(2.0 * PI);
     if t > PI {
@@ -650,6 +710,33 @@ mod tests {
         );
         let none = Distortion::opencv("OPENCV", [0.0; 6], [0.0; 2]);
         assert_eq!(Lens::from_distortion(&none), Lens::Pinhole);
+    }
+
+    #[test]
+    fn a_distorted_lens_images_nothing_past_its_fold() {
+        // r (1 - 0.25 r^2) grows until r = sqrt(4 / 3) = 1.1547, the grid's 74 / 64.
+        let radial = [-0.25, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(radial_fold(&radial, f64::INFINITY), Some(74.0 / 64.0));
+        assert_eq!(radial_fold(&radial, 1.15), None);
+        let lens = Lens::RadialTangential {
+            radial,
+            tangential: [0.0; 2],
+        };
+        assert!(lens.project(&K, DVec3::new(1.15, 0.0, 1.0)).is_some());
+        // Past the fold the polynomial would put this point on the axis.
+        let far = DVec3::new(2.0, 0.0, 1.0);
+        assert!((brown_conrady(&radial, &[0.0; 2], 2.0, 0.0).0 - 0.0).abs() < 1e-12);
+        assert_eq!(lens.project(&K, far), None);
+        // A rational factor whose denominator reaches zero folds there; a monotonic one
+        // never.
+        assert_eq!(
+            radial_fold(&[0.0, 0.0, 0.0, -1.0, 0.0, 0.0], f64::INFINITY),
+            Some(1.0)
+        );
+        assert_eq!(
+            radial_fold(&[0.1, 0.01, 0.0, 0.0, 0.0, 0.0], f64::INFINITY),
+            None
+        );
     }
 
     #[test]

@@ -63,6 +63,22 @@ pub enum Culled {
     OutOfView,
 }
 
+impl UnscentedParams {
+    /// The sigma points' spread `sqrt(n + lambda)`, the centre's mean weight, every other
+    /// point's weight (mean and covariance alike), and the centre's covariance weight.
+    pub fn weights(&self) -> [f64; 4] {
+        const N: f64 = 3.0;
+        let lambda = self.alpha * self.alpha * (N + self.kappa) - N;
+        let centre = lambda / (N + lambda);
+        [
+            (N + lambda).sqrt(),
+            centre,
+            1.0 / (2.0 * (N + lambda)),
+            centre + (1.0 - self.alpha * self.alpha + self.beta),
+        ]
+    }
+}
+
 /// The sigma points of the 3D Gaussian with mean `mean` and covariance `R S S^T R^T`
 /// (`axes = R S`: its scaled axes as columns), and their mean and covariance weights.
 pub fn sigma_points(
@@ -70,26 +86,26 @@ pub fn sigma_points(
     axes: DMat3,
     params: &UnscentedParams,
 ) -> ([DVec3; 7], [f64; 7], [f64; 7]) {
-    const N: f64 = 3.0;
-    let lambda = params.alpha * params.alpha * (N + params.kappa) - N;
-    let spread = (N + lambda).sqrt();
+    let [spread, centre, side, centre_cov] = params.weights();
     let mut points = [mean; 7];
     for i in 0..3 {
         let d = spread * axes.col(i);
         points[1 + 2 * i] = mean + d;
         points[2 + 2 * i] = mean - d;
     }
-    let side = 1.0 / (2.0 * (N + lambda));
-    let centre = lambda / (N + lambda);
     let mut wm = [side; 7];
     let mut wc = [side; 7];
     wm[0] = centre;
-    wc[0] = centre + (1.0 - params.alpha * params.alpha + params.beta);
+    wc[0] = centre_cov;
     (points, wm, wc)
 }
 
 /// Projects the camera-space Gaussian with mean `mean` and scaled axes `axes` (`R S`,
 /// camera space) through `lens` by the unscented transform.
+///
+/// The sums are taken relative to the centre's pixel (the weights sum to one), as the GPU
+/// does in f32, where the points' pixels nearly cancel: the mean is `p0 + m` with
+/// `m = sum_i w_i (p_i - p0)`, and the covariance `sum_i w'_i (p_i - p0 - m)(...)^T`.
 pub fn project(
     lens: &Lens,
     k: &Intrinsics,
@@ -102,32 +118,41 @@ pub fn project(
     for (pixel, p) in pixels.iter_mut().zip(points) {
         *pixel = lens.project(k, p).ok_or(Culled::SigmaPointNotImaged)?;
     }
+    let centre = pixels[0];
+    let mut offsets = pixels.map(|p| p - centre);
     if let Lens::Equirectangular { longitude, .. } = lens {
         // Sigma points across the seam: each on the turn nearest the mean's pixel.
         let turn = k.width as f64 * std::f64::consts::TAU / (longitude[1] - longitude[0]).abs();
-        let centre = pixels[0].x;
-        for pixel in &mut pixels[1..] {
-            pixel.x -= turn * ((pixel.x - centre) / turn).round();
+        for d in &mut offsets[1..] {
+            d.x -= turn * (d.x / turn).round();
         }
     }
     let (w, h) = (k.width as f64, k.height as f64);
     let margin = params.in_image_margin;
-    let in_view = |p: &DVec2| {
+    let in_view = |d: &DVec2| {
+        let p = centre + *d;
         p.x >= -margin * w
             && p.x <= (1.0 + margin) * w
             && p.y >= -margin * h
             && p.y <= (1.0 + margin) * h
     };
-    if !pixels.iter().any(in_view) {
+    if !offsets.iter().any(in_view) {
         return Err(Culled::OutOfView);
     }
-    let mean2 = pixels.iter().zip(wm).map(|(p, w)| w * *p).sum::<DVec2>();
+    let shift = offsets[1..]
+        .iter()
+        .zip(&wm[1..])
+        .map(|(d, w)| *w * *d)
+        .sum::<DVec2>();
     let mut cov = DMat2::ZERO;
-    for (p, w) in pixels.iter().zip(wc) {
-        let d = *p - mean2;
-        cov += w * DMat2::from_cols(d * d.x, d * d.y);
+    for (d, w) in offsets.iter().zip(wc) {
+        let e = *d - shift;
+        cov += w * DMat2::from_cols(e * e.x, e * e.y);
     }
-    Ok(Projected { mean: mean2, cov })
+    Ok(Projected {
+        mean: centre + shift,
+        cov,
+    })
 }
 
 #[cfg(test)]

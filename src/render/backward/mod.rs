@@ -279,6 +279,12 @@ impl GpuRenderer {
                 forward.width, forward.height, size.0, size.1
             )));
         }
+        if forward.lens != "pinhole" {
+            return Err(GpuError::InvalidArgument(format!(
+                "the frame was rendered through a {} lens; the backward pass is a pinhole's so far",
+                forward.lens
+            )));
+        }
         Ok(())
     }
 

@@ -68,8 +68,8 @@ pub struct PreprocessBindings<'a> {
 impl Preprocess {
     /// Compiles the shader and builds the pipeline, for 48-byte records or (`compact`)
     /// 32-byte ones, reading and writing storage buffers or (`texel_io`, for CPU devices)
-    /// texel views.
-    pub fn new(ctx: &GpuContext, compact: bool, texel_io: bool) -> GpuResult<Self> {
+    /// texel views, for pinhole cameras or (`lenses`) every lens.
+    pub fn new(ctx: &GpuContext, compact: bool, texel_io: bool, lenses: bool) -> GpuResult<Self> {
         use crate::gpu::shader_set::bindings::preprocess as b;
         use BindingKind::*;
         let (read, write) = if texel_io {
@@ -83,6 +83,7 @@ impl Preprocess {
             &[
                 ("COMPACT_GAUSSIANS", u32::from(compact).to_string()),
                 ("PREPROCESS_TEXEL_IO", u32::from(texel_io).to_string()),
+                ("LENSES", u32::from(lenses).to_string()),
             ],
             &by_binding([
                 (b::PARAMS, StorageBuffer),

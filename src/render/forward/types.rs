@@ -54,7 +54,7 @@ mod tests {
 
     #[test]
     fn layouts_match_the_glsl_header() {
-        assert_eq!(size_of::<FrameParams>(), 208);
+        assert_eq!(size_of::<FrameParams>(), 272);
         assert_eq!(offset_of!(FrameParams, w2c_row0), 0);
         assert_eq!(offset_of!(FrameParams, w2c_row1), 16);
         assert_eq!(offset_of!(FrameParams, w2c_row2), 32);
@@ -68,6 +68,8 @@ mod tests {
         assert_eq!(offset_of!(FrameParams, filters), 160);
         assert_eq!(offset_of!(FrameParams, rules), 176);
         assert_eq!(offset_of!(FrameParams, modes), 192);
+        assert_eq!(offset_of!(FrameParams, lens_a), 208);
+        assert_eq!(offset_of!(FrameParams, lens_c), 256);
 
         assert_eq!(size_of::<GpuGaussian>(), 48);
         assert_eq!(offset_of!(GpuGaussian, pos_opacity), 0);

@@ -20,6 +20,8 @@ use crate::render::forward::shade::Shade;
 pub(crate) struct FrameNeeds {
     /// 32-byte compact records (the compact preprocess variant).
     pub compact: bool,
+    /// A lens other than the pinhole (the preprocess variant of every lens).
+    pub lens: bool,
     /// The alpha falloff (a blend variant each).
     pub kernel: SplatKernel,
     /// Feature channels are blended.
@@ -33,11 +35,18 @@ pub(crate) struct FrameNeeds {
     pub save_last: bool,
 }
 
+impl FrameNeeds {
+    /// The index of its preprocess variant.
+    fn preprocess_variant(&self) -> usize {
+        usize::from(self.compact) + 2 * usize::from(self.lens)
+    }
+}
+
 /// Every pipeline the renderer may use, built on first use.
 pub(crate) struct Pipelines {
     kernel: BlendKernel,
-    /// By [`FrameNeeds::compact`].
-    preprocess: [Option<Preprocess>; 2],
+    /// By [`FrameNeeds::compact`] and [`FrameNeeds::lens`] (`compact + 2 lens`).
+    preprocess: [Option<Preprocess>; 4],
     order: Option<Order>,
     scan: Option<Scan>,
     keys: Option<Keys>,
@@ -95,7 +104,7 @@ impl Pipelines {
     pub fn new(kernel: BlendKernel) -> Self {
         Pipelines {
             kernel,
-            preprocess: [None, None],
+            preprocess: [None, None, None, None],
             order: None,
             scan: None,
             keys: None,
@@ -129,11 +138,11 @@ impl Pipelines {
     pub fn prepare(&mut self, ctx: &GpuContext, needs: FrameNeeds) -> GpuResult<()> {
         let texel = self.texel_io();
         let kernel = self.kernel;
-        let compact = needs.compact;
+        let (compact, lens) = (needs.compact, needs.lens);
         ensure(
             &mut self.built,
-            &mut self.preprocess[usize::from(compact)],
-            || Preprocess::new(ctx, compact, texel),
+            &mut self.preprocess[needs.preprocess_variant()],
+            || Preprocess::new(ctx, compact, texel, lens),
         )?;
         ensure(&mut self.built, &mut self.order, || Order::new(ctx))?;
         ensure(&mut self.built, &mut self.scan, || Scan::new(ctx))?;
@@ -174,7 +183,7 @@ impl Pipelines {
     pub fn frame(&self, needs: FrameNeeds) -> GpuResult<FramePipelines<'_>> {
         let id = needs.kernel.shader_id() as usize;
         Ok(FramePipelines {
-            preprocess: built(&self.preprocess[usize::from(needs.compact)], "preprocess")?,
+            preprocess: built(&self.preprocess[needs.preprocess_variant()], "preprocess")?,
             order: built(&self.order, "depth order")?,
             scan: built(&self.scan, "scan")?,
             keys: built(&self.keys, "keys")?,

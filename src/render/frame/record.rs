@@ -99,6 +99,8 @@ fn frame_params(
     let pos = cam.position();
     let r = cam.rotation;
     let t = cam.translation;
+    let (lens, lens_a, lens_b, fold) = cam.lens.shader_params();
+    let unscented = crate::core::model::unscented::UnscentedParams::default();
     FrameParams {
         w2c_row0: [r.x_axis.x, r.y_axis.x, r.z_axis.x, t.x],
         w2c_row1: [r.x_axis.y, r.y_axis.y, r.z_axis.y, t.y],
@@ -137,7 +139,11 @@ fn frame_params(
             opts.rules.t_stop(),
             opts.rules.antialias_min_ratio(),
         ],
-        modes: [opts.rules.shader_id(), 0, 0, 0],
+        modes: [opts.rules.shader_id(), lens, 0, 0],
+        lens_a,
+        lens_b,
+        unscented: unscented.weights().map(|w| w as f32),
+        lens_c: [unscented.in_image_margin as f32, fold, 0.0, 0.0],
     }
 }
 

@@ -200,13 +200,6 @@ impl GpuRenderer {
     ) -> GpuResult<Ticket<'a>> {
         cam.validate().map_err(|e| GpuError::Input(e.to_string()))?;
         opts.validate().map_err(GpuError::Input)?;
-        if !cam.lens.is_pinhole() {
-            return Err(GpuError::Input(format!(
-                "camera \"{}\" has a {} lens; the GPU renderer draws pinhole cameras only so far (the CPU reference, --cpu, draws every lens)",
-                cam.name,
-                cam.lens.name()
-            )));
-        }
         let set = self.free_set()?;
         let initial = self
             .capacity

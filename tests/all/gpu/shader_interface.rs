@@ -45,8 +45,10 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     let mut built = 0;
     for texel in [false, true] {
         for compact in [false, true] {
-            Preprocess::new(ctx, compact, texel).expect("preprocess");
-            built += 1;
+            for lenses in [false, true] {
+                Preprocess::new(ctx, compact, texel, lenses).expect("preprocess");
+                built += 1;
+            }
         }
         Keys::new(ctx, texel).expect("keys");
         Ranges::new(ctx, texel).expect("ranges");
@@ -195,7 +197,11 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     for compact in ["0", "1"] {
         let i = interface(
             "preprocess",
-            &[("COMPACT_GAUSSIANS", compact), ("PREPROCESS_TEXEL_IO", "0")],
+            &[
+                ("COMPACT_GAUSSIANS", compact),
+                ("PREPROCESS_TEXEL_IO", "0"),
+                ("LENSES", "1"),
+            ],
         );
         let record = match compact {
             "0" => size_of::<GpuGaussian>(),
@@ -252,7 +258,11 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     };
     let pre = interface(
         "preprocess",
-        &[("COMPACT_GAUSSIANS", "0"), ("PREPROCESS_TEXEL_IO", "1")],
+        &[
+            ("COMPACT_GAUSSIANS", "0"),
+            ("PREPROCESS_TEXEL_IO", "1"),
+            ("LENSES", "0"),
+        ],
     );
     let want = [offset_of!(WindowPush, first), offset_of!(WindowPush, count)];
     assert_eq!(pre.push_offsets, want.map(|o| o as u32));
