@@ -3,4 +3,5 @@
 
 mod closed_forms;
 mod gsplat_rules;
+mod lens_resample;
 mod lenses;
