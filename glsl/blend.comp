@@ -149,7 +149,8 @@ void main() {
         uint k = batch + gl_LocalInvocationIndex;
         if (k < n) {
             Splat s = splats[values[range.x + k]];
-            s_mean_opacity[gl_LocalInvocationIndex] = vec4(s.mean_opacity_bound.xyz, s.conic_depth.w);
+            vec2 mean = wrapped_mean(s.mean_opacity_bound.xy, tile.x * TILE_SIZE, params.modes.z, params.image.x);
+            s_mean_opacity[gl_LocalInvocationIndex] = vec4(mean, s.mean_opacity_bound.z, s.conic_depth.w);
             s_conic[gl_LocalInvocationIndex] = s.conic_depth;
             s_color[gl_LocalInvocationIndex] = s.color_radius;
         }
@@ -209,7 +210,8 @@ void main() {
         vec4 mob = texelFetch(splat_texels, g);
         vec4 cd = texelFetch(splat_texels, g + 1);
         vec3 color = texelFetch(splat_texels, g + 2).rgb;
-        vec4 mo = vec4(mob.xyz, cd.w);
+        vec2 mean = wrapped_mean(mob.xy, pix0.x / TILE_SIZE * TILE_SIZE, params.modes.z, params.image.x);
+        vec4 mo = vec4(mean, mob.z, cd.w);
         [[unroll]] for (uint p = 0u; p < STRIP; p++) {
             if (composite(mo, cd.xyz, color, vec2(pix0) + vec2(float(p), 0.0), T[p], C[p], D[p], done[p])) {
                 last[p] = SAVE_LAST != 0 ? k + 1u : 0u;

@@ -76,7 +76,7 @@ void main() {
         vec3 conic = texelFetch(splat_texels, g * 3 + 1).xyz;
         vec4 feature = texelFetch(feature_texels, g);
 #endif
-        vec2 d = mob.xy - pixf;
+        vec2 d = wrapped_mean(mob.xy, pix.x / TILE_SIZE * TILE_SIZE, params.modes.z, params.image.x) - pixf;
         float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
         float alpha = min(alpha_max, kernel_falloff(SPLAT_KERNEL, mob.z, min(power, 0.0)));
         bool take = power <= 0.0 && alpha >= ALPHA_MIN;

@@ -210,6 +210,22 @@ void main() {
                                   fy * view.y * inv_z + params.focal.w - 0.5);
                 }
                 uint gx = params.image.z, gy = params.image.w;
+                // Where the rectangle is found: the centre, on an image of `size` pixels
+                // and `bins_x` bins across.
+                vec2 at = mean2d;
+                vec2 size = vec2(params.image.xy);
+                uint bins_x = params.bins.y;
+#if LENSES
+                // An image that wraps around (wrapped_mean): the rectangle in the tiles of
+                // three turns side by side, the image the middle one, as cpu::preprocess_one.
+                bool wraps = params.modes.z != 0u;
+                if (wraps) {
+                    at.x += float(params.image.x);
+                    size.x *= 3.0;
+                    gx *= 3u;
+                    bins_x *= 3u;
+                }
+#endif
                 float radius;
                 uvec2 rmin, rmax;
                 // Whether the rules count the splat as seen (its radius, the trainer's and
@@ -221,8 +237,7 @@ void main() {
                     // model::Rules::extent: a per-axis box of e sigmas, e opacity-aware.
                     float extend = min(GSPLAT_EXTEND, sqrt(2.0 * log(opacity / ALPHA_MIN)));
                     vec2 r = ceil(extend * sqrt(vec2(a, c)));
-                    vec2 p = mean2d + 0.5;  // gsplat's pixel centres are at +0.5
-                    vec2 size = vec2(params.image.xy);
+                    vec2 p = at + 0.5;  // gsplat's pixel centres are at +0.5
                     shown = opacity >= ALPHA_MIN && (r.x > 0.0 || r.y > 0.0)
                         && all(greaterThan(p + r, vec2(0.0))) && all(lessThan(p - r, size));
                     radius = max(r.x, r.y);
@@ -234,21 +249,31 @@ void main() {
                     float mid = 0.5 * (a + c);
                     float disc = sqrt(max(mid * mid - det, 0.1));
                     radius = ceil(3.0 * sqrt(max(mid + disc, mid - disc)));
-                    rmin = uvec2(clamp_tile((mean2d.x - radius) / 16.0, gx),
-                                 clamp_tile((mean2d.y - radius) / 16.0, gy));
-                    rmax = uvec2(clamp_tile((mean2d.x + radius + 15.0) / 16.0, gx),
-                                 clamp_tile((mean2d.y + radius + 15.0) / 16.0, gy));
+                    rmin = uvec2(clamp_tile((at.x - radius) / 16.0, gx),
+                                 clamp_tile((at.y - radius) / 16.0, gy));
+                    rmax = uvec2(clamp_tile((at.x + radius + 15.0) / 16.0, gx),
+                                 clamp_tile((at.y + radius + 15.0) / 16.0, gy));
                 }
+#if LENSES
+                // At most one turn wide.
+                if (wraps) rmax.x = min(rmax.x, rmin.x + params.image.z);
+#endif
                 // Count the bins of the reference rectangle that receive anything.
                 float bound = alpha_bound(opacity, uint(params.filters.w));
                 uvec2 bmin = rmin * params.bins.w;
-                uvec2 bmax = min(rmax * params.bins.w, params.bins.yz);
+                uvec2 bmax = min(rmax * params.bins.w, uvec2(bins_x, params.bins.z));
                 uint by = bmin.y;
                 uint bx = bmax.x;
                 uint bit = 1u;  // bit of bin (bx, by) in row-major order; 0 past the 32nd
                 for (; by < bmax.y; by++) {
                     for (bx = bmin.x; bx < bmax.x; bx++) {
-                        bool receives = tile_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x);
+#if LENSES
+                        bool receives = wraps
+                            ? wrapped_bin_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x, params.bins.y, params.image.x)
+                            : tile_receives(at, conic, bound, uvec2(bx, by), params.bins.x);
+#else
+                        bool receives = tile_receives(at, conic, bound, uvec2(bx, by), params.bins.x);
+#endif
                         touched += receives ? 1u : 0u;
                         mask |= receives ? bit : 0u;
                         bit <<= 1u;

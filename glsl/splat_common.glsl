@@ -81,6 +81,16 @@ float edge_min(float a, float lo, float hi, float A, float B, float C) {
     return q;
 }
 
+// A splat's centre in an image that wraps around (FrameParams::modes.z, a full turn of
+// an equirectangular lens: camera::Lens::wraps): moved by whole turns (the image's width)
+// to the copy nearest the 16-pixel tile starting at column x0, as cpu::wrapped_for_tile.
+vec2 wrapped_mean(vec2 mean, uint x0, uint wraps, uint width) {
+    if (wraps == 0u) return mean;
+    float w = float(width);
+    float turns = floor((float(x0 + TILE_SIZE / 2u) - mean.x) / w + 0.5);
+    return vec2(mean.x + turns * w, mean.y);
+}
+
 bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size) {
     // Pixel positions of the bin are bin * size + {0..size-1}; use the continuous square.
     precise vec2 lo = vec2(bin * size) - mean2d;
@@ -90,6 +100,15 @@ bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size) {
     float m = min(min(edge_min(lo.x, lo.y, hi.y, A, B, C), edge_min(hi.x, lo.y, hi.y, A, B, C)),
                   min(edge_min(lo.y, lo.x, hi.x, C, B, A), edge_min(hi.y, lo.x, hi.x, C, B, A)));
     return m <= bound;
+}
+
+// tile_receives of bin `bin` of the bins of three turns side by side (the image the
+// middle one) of an image that wraps around: the bin taken back to the image, and the copy
+// of the splat the blend draws there (wrapped_mean). `bins_x` is the image's bins across.
+bool wrapped_bin_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size, uint bins_x, uint width) {
+    uvec2 real = uvec2(bin.x % bins_x, bin.y);
+    vec2 mean = wrapped_mean(mean2d, real.x * size / TILE_SIZE * TILE_SIZE, 1u, width);
+    return tile_receives(mean, conic, bound, real, size);
 }
 
 // Preprocess records, for a tile rectangle of at most BIN_MASK_BINS bins, which of them

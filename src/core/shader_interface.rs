@@ -214,8 +214,9 @@ records! {
         /// before its transmittance would drop below `z`, the antialiased compensation's
         /// lowest ratio.
         pub rules: vec4,
-        /// `RULES_*` (the screen extent's rule), `LENS_*` (the camera's lens) and two
-        /// zeros.
+        /// `RULES_*` (the screen extent's rule), `LENS_*` (the camera's lens), 1 where
+        /// the image wraps around (`camera::Lens::wraps`: a splat across the seam is drawn
+        /// on both sides) and a zero.
         pub modes: uvec4,
         /// The lens's first four coefficients (see the `LENS_*` constants).
         pub lens_a: vec4,

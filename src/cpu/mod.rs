@@ -131,7 +131,23 @@ pub fn preprocess_one(
     let det_inv = 1.0 / det;
     let conic = [c * det_inv, -b * det_inv, a * det_inv];
     let size = (cam.width, cam.height);
-    let Some(e) = rules.extent([a, b, c], det, opacity, mean2d, size, cam.tile_grid()) else {
+    let grid = cam.tile_grid();
+    let e = if cam.lens.wraps(cam.width) {
+        // An image that wraps around: the rectangle in the tiles of three turns side by
+        // side (the image the middle one), at most one turn wide; the keys take each tile
+        // back to the image, and the blend draws the copy of the splat nearest the tile.
+        let moved = [mean2d[0] + cam.width as f32, mean2d[1]];
+        let turns = (3 * cam.width, cam.height);
+        rules
+            .extent([a, b, c], det, opacity, moved, turns, (3 * grid.0, grid.1))
+            .map(|mut e| {
+                e.rect_max[0] = e.rect_max[0].min(e.rect_min[0] + grid.0);
+                e
+            })
+    } else {
+        rules.extent([a, b, c], det, opacity, mean2d, size, grid)
+    };
+    let Some(e) = e else {
         return culled;
     };
     let dir = (mean - cam.position()).normalize();
@@ -269,6 +285,8 @@ pub fn tile_key(tile_id: u32, depth: f32) -> u64 {
 /// within a Gaussian, row by row over its tile rectangle.
 pub fn tile_keys(projected: &[Projected], cam: &Camera) -> (Vec<u64>, Vec<u32>) {
     let (tiles_x, _) = cam.tile_grid();
+    // A wrapping image's rectangles are in the tiles of three turns ([`preprocess_one`]).
+    let wraps = cam.lens.wraps(cam.width);
     let total: usize = projected.iter().map(|p| p.tiles_touched() as usize).sum();
     let mut keys = Vec::with_capacity(total);
     let mut values = Vec::with_capacity(total);
@@ -278,6 +296,7 @@ pub fn tile_keys(projected: &[Projected], cam: &Camera) -> (Vec<u64>, Vec<u32>) 
         }
         for y in p.rect_min[1]..p.rect_max[1] {
             for x in p.rect_min[0]..p.rect_max[0] {
+                let x = if wraps { x % tiles_x } else { x };
                 keys.push(tile_key(y * tiles_x + x, p.depth));
                 values.push(i as u32);
             }
@@ -438,17 +457,57 @@ pub fn blend_features(
             let tile = (y as u32 / TILE_SIZE) * tiles_x + x as u32 / TILE_SIZE;
             let [start, end] = ranges[tile as usize];
             let ids = &sorted_values[start as usize..end as usize];
+            let x0 = x as u32 / TILE_SIZE * TILE_SIZE;
             let (x, y) = (x as f32, y as f32);
-            blend_features_pixel(projected, ids, x, y, kernel, rules, features, k, px);
+            if cam.lens.wraps(cam.width) {
+                let (moved, ids) = wrapped_for_tile(projected, ids, x0, cam.width);
+                let features: Vec<f32> =
+                    ids_features(&sorted_values[start as usize..end as usize], features, k);
+                blend_features_pixel(&moved, &ids, x, y, kernel, rules, &features, k, px);
+            } else {
+                blend_features_pixel(projected, ids, x, y, kernel, rules, features, k, px);
+            }
         }
     });
     out
+}
+
+/// The `k` feature channels of each of `ids`, in that order.
+fn ids_features(ids: &[u32], features: &[f32], k: usize) -> Vec<f32> {
+    ids.iter()
+        .flat_map(|&id| &features[id as usize * k..(id as usize + 1) * k])
+        .copied()
+        .collect()
 }
 
 /// Renders a frame with the scene's feature channels ([`blend_features`] into
 /// [`Frame::features`]) on the CPU.
 pub fn render_features(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) -> Frame {
     render_features_timed(scene, cam, opts).0
+}
+
+/// A wrapping image's ([`Lens::wraps`](crate::core::camera::Lens::wraps)) splats of the
+/// tile starting at pixel column `x0`, each with its centre moved by whole turns (the
+/// image's width) to the copy nearest the tile's middle, and their ids in that list; as
+/// `glsl/splat_common.glsl`'s `wrapped_mean`.
+pub fn wrapped_for_tile(
+    projected: &[Projected],
+    ids: &[u32],
+    x0: u32,
+    width: u32,
+) -> (Vec<Projected>, Vec<u32>) {
+    let middle = (x0 + TILE_SIZE / 2) as f32;
+    let w = width as f32;
+    let moved = ids
+        .iter()
+        .map(|&id| {
+            let mut p = projected[id as usize];
+            let turns = ((middle - p.mean2d[0]) / w + 0.5).floor();
+            p.mean2d[0] += turns * w;
+            p
+        })
+        .collect();
+    (moved, (0..ids.len() as u32).collect())
 }
 
 /// Blends every tile (in parallel) into a frame, with the alpha falloff of `kernel`.
@@ -463,12 +522,18 @@ pub fn blend(
 ) -> Frame {
     let (tiles_x, tiles_y) = cam.tile_grid();
     let (w, h) = (cam.width, cam.height);
+    let wraps = cam.lens.wraps(w);
     let tiles: Vec<Vec<(usize, PixelResult)>> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
             let [start, end] = ranges[tile as usize];
             let ids = &sorted_values[start as usize..end as usize];
             let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+            let moved = wraps.then(|| wrapped_for_tile(projected, ids, tx * TILE_SIZE, w));
+            let (projected, ids) = match &moved {
+                Some((p, i)) => (&p[..], &i[..]),
+                None => (projected, ids),
+            };
             let mut out = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
             for y in ty * TILE_SIZE..((ty + 1) * TILE_SIZE).min(h) {
                 for x in tx * TILE_SIZE..((tx + 1) * TILE_SIZE).min(w) {

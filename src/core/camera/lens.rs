@@ -207,6 +207,20 @@ impl Lens {
         }
     }
 
+    /// Whether an image `width` pixels wide through this lens wraps around: a full turn of
+    /// longitude whose width is whole tiles, so that its left edge continues its right
+    /// one tile for tile. The renderers then draw a Gaussian across the seam on both
+    /// sides; at other widths the seam cuts it (drawn on its mean's side).
+    pub fn wraps(&self, width: u32) -> bool {
+        match self {
+            Lens::Equirectangular { longitude, .. } => {
+                (longitude[1] - longitude[0]).abs() == 2.0 * PI
+                    && width % crate::core::rules::TILE_SIZE == 0
+            }
+            _ => false,
+        }
+    }
+
     /// Whether this is the ideal pinhole (the renderers' EWA projection applies).
     pub fn is_pinhole(&self) -> bool {
         matches!(self, Lens::Pinhole)

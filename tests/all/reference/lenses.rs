@@ -103,6 +103,55 @@ fn an_equirectangular_camera_sees_every_direction() {
 }
 
 #[test]
+fn a_gaussian_across_the_seam_is_drawn_on_both_sides_where_the_image_wraps() {
+    // Straight behind the camera, on the seam of a full-sphere image, a little to its left
+    // as the camera looks (its mean on the left edge).
+    let mut s = Scene::empty(0);
+    push_gaussian(&mut s, [-0.05, 0.0, -4.0], 0.15, 0.9, [0.9, 0.9, 0.9]);
+    let cam = |width: u32| Camera {
+        width,
+        height: 128,
+        lens: Lens::FULL_SPHERE,
+        ..axis_camera(1.0)
+    };
+    // 256 is whole tiles: the image wraps, and both edges see the same Gaussian the same
+    // way, mirrored about the seam through its centre.
+    let wide = cam(256);
+    assert!(wide.lens.wraps(256) && !wide.lens.wraps(250));
+    let frame = render(&s, &wide);
+    let row = 64;
+    let (left, right) = (
+        frame.alpha[frame.index(0, row)],
+        frame.alpha[frame.index(255, row)],
+    );
+    assert!(left > 0.3 && right > 0.3, "edges {left} {right}");
+    let px = wide
+        .lens
+        .project(&wide.intrinsics(), glam::DVec3::new(-0.05, 0.0, -4.0))
+        .unwrap();
+    assert!(px.x < 6.0, "{px}");
+    // Pixel centres i + 0.5: the alpha falls off with the distance across the seam.
+    for i in 0..8u32 {
+        let x = (i + 250) % 256;
+        let d = ((x as f64 + 0.5 - px.x + 128.0).rem_euclid(256.0) - 128.0).abs();
+        let next = (x + 1) % 256;
+        let dn = ((next as f64 + 0.5 - px.x + 128.0).rem_euclid(256.0) - 128.0).abs();
+        let (a, an) = (
+            frame.alpha[frame.index(x, row)],
+            frame.alpha[frame.index(next, row)],
+        );
+        assert!(
+            (d < dn) == (a > an) || (a - an).abs() < 1e-6,
+            "({x}: {a} at {d}) ({next}: {an} at {dn})"
+        );
+    }
+    // 250 is not whole tiles: the seam cuts the Gaussian, drawn on its mean's side only.
+    let cut = render(&s, &cam(250));
+    assert!(cut.alpha[cut.index(0, row)] > 0.3);
+    assert_eq!(cut.alpha[cut.index(249, row)], 0.0);
+}
+
+#[test]
 fn an_orthographic_gaussian_keeps_its_size_at_any_distance() {
     let footprint = |z: f32| {
         let mut s = Scene::empty(0);
@@ -178,7 +227,7 @@ fn a_lens_with_impossible_parameters_is_refused_by_name() {
 }
 
 #[test]
-fn the_gpu_renderer_refuses_a_lens_it_does_not_draw_yet() {
+fn the_backward_passes_refuse_a_lens_they_do_not_differentiate_yet() {
     use verisplat::render::FrameRequest;
     let mut s = Scene::empty(0);
     push_gaussian(&mut s, [0.0, 0.0, 3.0], 0.1, 0.9, [1.0; 3]);
@@ -190,13 +239,26 @@ fn the_gpu_renderer_refuses_a_lens_it_does_not_draw_yet() {
         40.0,
         64,
     );
+    // The GPU draws it; its backward pass refuses the frame.
     let mut r = crate::common::gpu::renderer();
+    r.set_save_forward_state(true);
     let gs = r.upload(&s.activated()).unwrap();
-    let Err(e) = r.render(&FrameRequest::new(&gs, &cam, &RenderOptions::default())) else {
-        panic!("the GPU drew a fisheye camera");
+    let rendered = r
+        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
+        .unwrap();
+    let handle = rendered.forward();
+    let frame = rendered.into_frame().unwrap();
+    assert!(frame.alpha[frame.index(32, 32)] > 0.5);
+    let grads = verisplat::core::model::grad::PixelGrads {
+        color: vec![0.0; 64 * 64 * 3],
+        alpha: vec![0.0; 64 * 64],
+        depth: vec![0.0; 64 * 64],
+    };
+    let Err(e) = r.backward(&handle, &gs, &frame, &grads) else {
+        panic!("the GPU differentiated a fisheye frame");
     };
     let e = e.to_string();
-    assert!(e.contains("fisheye lens") && e.contains("--cpu"), "{e}");
+    assert!(e.contains("fisheye lens"), "{e}");
     // The differentiable reference refuses it too.
     let p = verisplat::core::gen::random_splat_params(4, 1, Some(0), 0).to_f64();
     let e = verisplat::cpu::backward::forward(&p, &cam, &RenderOptions::default(), &[0.0; 3])
@@ -228,12 +290,21 @@ fn render_takes_a_lens_for_generated_cameras_and_refuses_what_cannot_draw_it() {
     };
     let (fisheye, pinhole) = (lit("fisheye:fov=200"), lit("pinhole"));
     assert!(fisheye > 20 && pinhole > 4 * fisheye, "{fisheye} {pinhole}");
-    // The GPU renderer refuses it before writing anything; so does an export.
+    // The GPU renderer draws it too (tests/all/render/lenses.rs checks it against the
+    // reference); the viewer refuses it before opening anything; so does an export.
+    let o = run(&["--lens", "fisheye:fov=200", "-o", "gpu.png"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("gpu.png").exists());
+    let o = verisplat_in(
+        dir.path(),
+        &["view", scene, "--lens", "fisheye", "--port", "0"],
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("the viewer draws pinhole cameras only"),
+        "{}",
+        stderr(&o)
+    );
     for (extra, says) in [
-        (
-            &["--lens", "fisheye", "-o", "gpu.png"][..],
-            "the GPU renderer draws pinhole cameras",
-        ),
         (
             &["--cpu", "--lens", "equirect", "--export-colmap", "data"][..],
             "which COLMAP has no camera model for",
@@ -250,5 +321,5 @@ fn render_takes_a_lens_for_generated_cameras_and_refuses_what_cannot_draw_it() {
             stderr(&o)
         );
     }
-    assert!(!dir.path().join("gpu.png").exists() && !dir.path().join("data").exists());
+    assert!(!dir.path().join("x.png").exists() && !dir.path().join("data").exists());
 }

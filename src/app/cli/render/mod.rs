@@ -30,8 +30,6 @@ use verisplat::note;
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if args.cpu {
         args::check_cpu_options(args)?;
-    } else {
-        refuse_lens(&args.path, &draws_pinholes_only("the GPU renderer"))?;
     }
     let shard = crate::cli::common::shard(args.shard.as_deref())?;
     let outputs = Outputs::checked(args, shard)?;
