@@ -92,10 +92,6 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> 
     if scene.is_empty() {
         bail!("{name} holds no Gaussians; there is nothing to view");
     }
-    super::common::refuse_lens(
-        &args.path,
-        &super::common::draws_pinholes_only("the viewer"),
-    )?;
     let path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
     let stats = verisplat::app::stats::scene_stats(&scene);
     let antialiased = args.antialiased || (scene.antialiased && !args.no_antialiased);

@@ -319,6 +319,29 @@ mod tests {
     }
 
     #[test]
+    fn a_cameras_lens_survives_the_page() {
+        // The page keeps an entry's "lens" and sends it back with its moves.
+        let cam = Camera {
+            lens: crate::core::camera::Lens::Fisheye {
+                k: [0.01, 0.0, 0.0, 0.0],
+                max_theta: 1.6,
+            },
+            ..Camera::look_at(
+                "fish",
+                64,
+                48,
+                1.0,
+                glam::Vec3::ZERO,
+                glam::Vec3::Z,
+                glam::Vec3::NEG_Y,
+            )
+        };
+        let entry = camera_to_entry(&cam, 0).unwrap();
+        assert!(entry.get("lens").is_some(), "{entry}");
+        assert_eq!(camera_from_entry(&entry).unwrap().lens, cam.lens);
+    }
+
+    #[test]
     fn messages_parse_and_refuse() {
         let m: ClientMessage = serde_json::from_str(r#"{"type":"rest","seq":4}"#).unwrap();
         assert!(matches!(m, ClientMessage::Rest { seq: 4 }));

@@ -26,6 +26,7 @@
     pos: [0, 0, -5], right: [1, 0, 0], down: [0, 1, 0], fwd: [0, 0, 1],
     focus: [0, 0, 0], vfov: 50, aspect: 1, // aspect: fx / fy
     principal: [0.5, 0.5], // cx / width, cy / height
+    lens: null, // a cameras.json "lens" other than the pinhole, kept as it came
   };
   const settings = {
     scale_modifier: 1, max_scale: null, min_opacity: 0, sh_degree: null,
@@ -80,6 +81,9 @@
       e.cx = cam.principal[0] * w;
       e.cy = cam.principal[1] * h;
     }
+    // The lens of the camera last snapped to (a fisheye, a panorama): the view moves
+    // and zooms through it.
+    if (cam.lens) e.lens = cam.lens;
     return e;
   }
 
@@ -95,6 +99,7 @@
       typeof e.cx === 'number' ? e.cx / e.width : 0.5,
       typeof e.cy === 'number' ? e.cy / e.height : 0.5,
     ];
+    cam.lens = e.lens || null;
     const centre = V.hello ? V.hello.centre : [0, 0, 0];
     const depth = dot(sub(centre, cam.pos), cam.fwd);
     cam.focus = add(cam.pos, mul(cam.fwd, depth > 1e-3 * size() ? depth : size()));
