@@ -278,6 +278,79 @@ impl Lens {
         }
     }
 
+    /// The Jacobian of [`Self::project`] at `p`: the derivatives of the pixel along x, y
+    /// and z of the camera-space point (the columns), where the lens images `p`; for the
+    /// backward pass through the unscented transform's sigma points.
+    pub fn jacobian(&self, k: &Intrinsics, p: DVec3) -> Option<[DVec2; 3]> {
+        self.project(k, p)?;
+        let f = DVec2::new(k.fx, k.fy);
+        let cols = |d: [[f64; 3]; 2]| -> [DVec2; 3] {
+            std::array::from_fn(|i| DVec2::new(d[0][i], d[1][i]))
+        };
+        Some(match self {
+            Lens::Pinhole | Lens::RadialTangential { .. } => {
+                let (x, y, z) = (p.x / p.z, p.y / p.z, p.z);
+                // d(x / z, y / z) / d(x, y, z).
+                let dn = [[1.0 / z, 0.0, -x / z], [0.0, 1.0 / z, -y / z]];
+                let m = match self {
+                    Lens::RadialTangential { radial, tangential } => {
+                        brown_conrady_jacobian(radial, tangential, x, y)
+                    }
+                    _ => [[1.0, 0.0], [0.0, 1.0]],
+                };
+                let mut d = [[0.0; 3]; 2];
+                for (r, row) in d.iter_mut().enumerate() {
+                    for (c, v) in row.iter_mut().enumerate() {
+                        *v = f[r] * (m[r][0] * dn[0][c] + m[r][1] * dn[1][c]);
+                    }
+                }
+                cols(d)
+            }
+            Lens::Orthographic => cols([[k.fx, 0.0, 0.0], [0.0, k.fy, 0.0]]),
+            Lens::Fisheye { k: c, .. } => {
+                let r = p.x.hypot(p.y);
+                if r == 0.0 {
+                    // On the axis: theta = r / z to first order, and g'(0) = 1.
+                    let z = p.z;
+                    return Some(cols([[k.fx / z, 0.0, 0.0], [0.0, k.fy / z, 0.0]]));
+                }
+                let rho2 = r * r + p.z * p.z;
+                let theta = r.atan2(p.z);
+                let g = equidistant(c, theta);
+                let dg = equidistant_slope(c, theta);
+                // theta's derivatives along x, y, z; then s = g / r's.
+                let dtheta = [p.z * p.x / (r * rho2), p.z * p.y / (r * rho2), -r / rho2];
+                let dr = [p.x / r, p.y / r, 0.0];
+                let s = g / r;
+                let ds: [f64; 3] =
+                    std::array::from_fn(|i| (dg * dtheta[i] * r - g * dr[i]) / (r * r));
+                // pixel = f (x s, y s) + c.
+                let mut d = [[0.0; 3]; 2];
+                for (row, (q, fq)) in [(p.x, k.fx), (p.y, k.fy)].into_iter().enumerate() {
+                    for (i, v) in d[row].iter_mut().enumerate() {
+                        let own = if i == row { s } else { 0.0 };
+                        *v = fq * (own + q * ds[i]);
+                    }
+                }
+                cols(d)
+            }
+            Lens::Equirectangular {
+                longitude,
+                latitude,
+            } => {
+                let xz = p.x * p.x + p.z * p.z;
+                let h = xz.sqrt();
+                let l2 = p.y * p.y + xz;
+                let dlon = [p.z / xz, 0.0, -p.x / xz];
+                // lat = atan2(-y, h): d/dy = -h / l2, d/dh = y / l2, dh = (x, z) / h.
+                let dlat = [p.y / l2 * p.x / h, -h / l2, p.y / l2 * p.z / h];
+                let su = k.width as f64 / (longitude[1] - longitude[0]);
+                let sv = k.height as f64 / (latitude[1] - latitude[0]);
+                cols([dlon.map(|v| su * v), dlat.map(|v| sv * v)])
+            }
+        })
+    }
+
     /// The ray through pixel position `px` (pixel centres at `i + 0.5`), or `None` where
     /// no ray lands there (outside a fisheye's image circle, past the poles or half a
     /// turn from the middle of an equirectangular window, or where the distortion cannot
@@ -489,6 +562,36 @@ impl LensSpec {
 }
 
 /// `a` turned into `(-PI, PI]`.
+/// The Jacobian of [`brown_conrady`] at `(x, y)`: rows the distorted x and y, columns
+/// the derivatives along x and y.
+pub fn brown_conrady_jacobian(
+    radial: &[f64; 6],
+    tangential: &[f64; 2],
+    x: f64,
+    y: f64,
+) -> [[f64; 2]; 2] {
+    let k = radial;
+    let [p1, p2] = *tangential;
+    let q = x * x + y * y;
+    let n = 1.0 + q * (k[0] + q * (k[1] + q * k[2]));
+    let d = 1.0 + q * (k[3] + q * (k[4] + q * k[5]));
+    let dn = k[0] + q * (2.0 * k[1] + q * 3.0 * k[2]);
+    let dd = k[3] + q * (2.0 * k[4] + q * 3.0 * k[5]);
+    let r = n / d;
+    // dR / d(r^2).
+    let dr = (dn * d - n * dd) / (d * d);
+    [
+        [
+            r + 2.0 * x * x * dr + 2.0 * p1 * y + 6.0 * p2 * x,
+            2.0 * x * y * dr + 2.0 * p1 * x + 2.0 * p2 * y,
+        ],
+        [
+            2.0 * x * y * dr + 2.0 * p1 * x + 2.0 * p2 * y,
+            r + 2.0 * y * y * dr + 6.0 * p1 * y + 2.0 * p2 * x,
+        ],
+    ]
+}
+
 /// Where Brown-Conrady's radial factor folds the image back: the first radius `r` (of
 /// the pinhole coordinates `(x / z, y / z)`), on a grid of `1 / 64` out to `r = 64`
 /// (89 degrees), at or below `up_to` where `r R(r^2)` stops growing or the rational
@@ -751,6 +854,53 @@ mod tests {
             radial_fold(&[0.1, 0.01, 0.0, 0.0, 0.0, 0.0], f64::INFINITY),
             None
         );
+    }
+
+    #[test]
+    fn every_lens_jacobian_is_its_maps_derivative() {
+        let lenses = [
+            Lens::Pinhole,
+            Lens::RadialTangential {
+                radial: [-0.2, 0.05, -0.01, 0.02, 0.001, 0.0],
+                tangential: [0.002, -0.001],
+            },
+            Lens::Fisheye {
+                k: [0.05, -0.01, 0.002, 0.0005],
+                max_theta: 1.7,
+            },
+            Lens::Orthographic,
+            Lens::FULL_SPHERE,
+        ];
+        let points = [
+            DVec3::new(0.3, -0.2, 2.0),
+            DVec3::new(-0.7, 0.4, 1.1),
+            DVec3::new(1.5, 0.9, 0.4),
+            DVec3::new(0.8, -0.3, -0.5),
+            DVec3::new(0.0, 0.0, 3.0),
+        ];
+        let h = 1e-6;
+        for lens in &lenses {
+            for p in points {
+                let Some(j) = lens.jacobian(&K, p) else {
+                    assert!(lens.project(&K, p).is_none(), "{lens:?} {p}");
+                    continue;
+                };
+                for (i, col) in j.iter().enumerate() {
+                    let mut e = DVec3::ZERO;
+                    e[i] = h;
+                    let (Some(a), Some(b)) = (lens.project(&K, p + e), lens.project(&K, p - e))
+                    else {
+                        continue;
+                    };
+                    let fd = (a - b) / (2.0 * h);
+                    let err = (fd - *col).length();
+                    assert!(
+                        err <= 1e-5 * fd.length().max(1.0),
+                        "{lens:?} at {p}, column {i}: {col} vs {fd}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
