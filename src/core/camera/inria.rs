@@ -31,66 +31,8 @@ struct JsonCamera {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cy: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    lens: Option<JsonLens>,
-}
-
-/// A camera's [`Lens`] in a `cameras.json` entry, named by [`Lens::name`].
-#[derive(Deserialize, Serialize)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
-enum JsonLens {
-    Pinhole,
-    Distorted {
-        radial: [f64; 6],
-        tangential: [f64; 2],
-    },
-    Fisheye {
-        k: [f64; 4],
-        max_theta: f64,
-    },
-    Orthographic,
-    Equirectangular {
-        longitude: [f64; 2],
-        latitude: [f64; 2],
-    },
-}
-
-impl JsonLens {
-    /// The entry of `lens`: none for the pinhole, the INRIA layout's own.
-    fn of(lens: &Lens) -> Option<JsonLens> {
-        Some(match lens.clone() {
-            Lens::Pinhole => return None,
-            Lens::RadialTangential { radial, tangential } => {
-                JsonLens::Distorted { radial, tangential }
-            }
-            Lens::Fisheye { k, max_theta } => JsonLens::Fisheye { k, max_theta },
-            Lens::Orthographic => JsonLens::Orthographic,
-            Lens::Equirectangular {
-                longitude,
-                latitude,
-            } => JsonLens::Equirectangular {
-                longitude,
-                latitude,
-            },
-        })
-    }
-
-    fn lens(self) -> Lens {
-        match self {
-            JsonLens::Pinhole => Lens::Pinhole,
-            JsonLens::Distorted { radial, tangential } => {
-                Lens::RadialTangential { radial, tangential }
-            }
-            JsonLens::Fisheye { k, max_theta } => Lens::Fisheye { k, max_theta },
-            JsonLens::Orthographic => Lens::Orthographic,
-            JsonLens::Equirectangular {
-                longitude,
-                latitude,
-            } => Lens::Equirectangular {
-                longitude,
-                latitude,
-            },
-        }
-    }
+    /// A lens other than the pinhole (`Lens`'s own serde form, named by [`Lens::name`]).
+    lens: Option<Lens>,
 }
 
 /// Writes cameras as an INRIA `cameras.json`, one camera per line: `id` is the given
@@ -128,7 +70,7 @@ pub fn to_json(cameras: &[(usize, Camera)]) -> Result<String, CameraError> {
             fx: cam.fx as f64,
             cx: centred(cam.cx, cam.width),
             cy: centred(cam.cy, cam.height),
-            lens: JsonLens::of(&cam.lens),
+            lens: (!cam.lens.is_pinhole()).then(|| cam.lens.clone()),
         };
         lines.push(serde_json::to_string(&entry).map_err(|e| {
             CameraError::BadParameter(format!("cannot write camera \"{}\": {e}", cam.name))
@@ -182,7 +124,7 @@ pub fn parse_cameras_json(text: &str, path: &Path) -> Result<Vec<Camera>, Camera
             cy: e.cy.map_or(e.height as f32 / 2.0, |c| c as f32),
             rotation: w2c.as_mat3(),
             translation: t.as_vec3(),
-            lens: e.lens.take().map_or(Lens::Pinhole, JsonLens::lens),
+            lens: e.lens.take().unwrap_or(Lens::Pinhole),
         };
         cam.validate()
             .map_err(|err| invalid(format!("entry {i} (\"{}\"): {err}", cam.name)))?;

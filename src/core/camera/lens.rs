@@ -24,13 +24,19 @@ use std::f64::consts::{FRAC_PI_2, PI};
 
 /// A lens: how a camera maps rays to pixels, beside its focal lengths and principal point
 /// ([`Intrinsics`]).
-#[derive(Clone, Debug, PartialEq)]
+///
+/// In a `cameras.json` entry (`inria`) a lens is an object tagged by its
+/// [`name`](Lens::name) (`{"kind": "fisheye", "k": [...], "max_theta": ...}`), unknown keys
+/// refused.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 pub enum Lens {
     /// The ideal pinhole.
     Pinhole,
     /// A pinhole with Brown-Conrady distortion: radial `k1..k6` (the rational factor
     /// `(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)`) and tangential
     /// `p1, p2`, as COLMAP's and OpenCV's `OPENCV` and `FULL_OPENCV` models.
+    #[serde(rename = "distorted")]
     RadialTangential {
         /// `k1..k6`.
         radial: [f64; 6],
