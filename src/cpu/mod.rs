@@ -452,20 +452,26 @@ pub fn blend_features(
     if k == 0 {
         return out;
     }
+    let wraps = cam.lens.wraps(cam.width);
     out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
-        for (x, px) in row.chunks_exact_mut(k).enumerate() {
-            let tile = (y as u32 / TILE_SIZE) * tiles_x + x as u32 / TILE_SIZE;
-            let [start, end] = ranges[tile as usize];
+        // One tile's pixels of the row at a time: its list (a wrapping image's moved
+        // splats and their features) is made once for them.
+        let tile_row = (y as u32 / TILE_SIZE) * tiles_x;
+        for (tx, pixels) in row.chunks_mut(TILE_SIZE as usize * k).enumerate() {
+            let [start, end] = ranges[(tile_row + tx as u32) as usize];
             let ids = &sorted_values[start as usize..end as usize];
-            let x0 = x as u32 / TILE_SIZE * TILE_SIZE;
-            let (x, y) = (x as f32, y as f32);
-            if cam.lens.wraps(cam.width) {
-                let (moved, ids) = wrapped_for_tile(projected, ids, x0, cam.width);
-                let features: Vec<f32> =
-                    ids_features(&sorted_values[start as usize..end as usize], features, k);
-                blend_features_pixel(&moved, &ids, x, y, kernel, rules, &features, k, px);
-            } else {
-                blend_features_pixel(projected, ids, x, y, kernel, rules, features, k, px);
+            let x0 = tx as u32 * TILE_SIZE;
+            let moved = wraps.then(|| {
+                let (moved, local) = wrapped_for_tile(projected, ids, x0, cam.width);
+                (moved, local, ids_features(ids, features, k))
+            });
+            let (projected, ids, features) = match &moved {
+                Some((p, i, f)) => (&p[..], &i[..], &f[..]),
+                None => (projected, ids, features),
+            };
+            for (i, px) in pixels.chunks_exact_mut(k).enumerate() {
+                let x = (x0 + i as u32) as f32;
+                blend_features_pixel(projected, ids, x, y as f32, kernel, rules, features, k, px);
             }
         }
     });
