@@ -6,14 +6,104 @@ use crate::scene::PyScene;
 use glam::{Mat3, Vec3};
 use pyo3::prelude::*;
 use std::path::PathBuf;
-use verisplat::core::camera::{self, Camera};
+use verisplat::core::camera::{self, lens, Camera, Lens};
 
-/// A camera as it crosses the boundary: name, width, height, `[fx, fy, cx, cy]` and the
-/// world-to-camera matrix, row-major 4x4 (OpenCV axes).
-pub(crate) type CamTuple = (String, u32, u32, [f32; 4], [f32; 16]);
+/// A camera as it crosses the boundary: name, width, height, `[fx, fy, cx, cy]`, the
+/// world-to-camera matrix, row-major 4x4 (OpenCV axes), and the lens ([`LensTuple`]).
+pub(crate) type CamTuple = (String, u32, u32, [f32; 4], [f32; 16], LensTuple);
+
+/// A lens as it crosses the boundary: its kind (`Lens::name`) and its numbers:
+/// `pinhole` and `orthographic` none, `distorted` `k1..k6, p1, p2`, `fisheye` `k1..k4`
+/// and optionally `max_theta` (radians; without it, as far as the polynomial grows),
+/// `equirectangular` the longitudes of the left and right edges and the latitudes of the
+/// top and bottom ones (radians).
+pub(crate) type LensTuple = (String, Vec<f64>);
+
+/// The lens of a [`LensTuple`], checked ([`Lens::check`]).
+pub(crate) fn to_lens((kind, v): &LensTuple) -> PyResult<Lens> {
+    let want = |n: &str| {
+        value_err(format!(
+            "a {kind} lens takes {n}, got {} number{}",
+            v.len(),
+            if v.len() == 1 { "" } else { "s" }
+        ))
+    };
+    let lens = match kind.as_str() {
+        "pinhole" | "orthographic" if !v.is_empty() => return Err(want("no numbers")),
+        "pinhole" => Lens::Pinhole,
+        "orthographic" => Lens::Orthographic,
+        "distorted" => match v.as_slice() {
+            [k1, k2, k3, k4, k5, k6, p1, p2] => Lens::RadialTangential {
+                radial: [*k1, *k2, *k3, *k4, *k5, *k6],
+                tangential: [*p1, *p2],
+            },
+            _ => return Err(want("8 numbers (k1..k6, p1, p2)")),
+        },
+        "fisheye" => match v.as_slice() {
+            [k1, k2, k3, k4] => {
+                let k = [*k1, *k2, *k3, *k4];
+                Lens::Fisheye {
+                    k,
+                    max_theta: lens::fisheye_max_theta(&k),
+                }
+            }
+            [k1, k2, k3, k4, max_theta] => Lens::Fisheye {
+                k: [*k1, *k2, *k3, *k4],
+                max_theta: *max_theta,
+            },
+            _ => return Err(want("4 or 5 numbers (k1..k4, and max_theta)")),
+        },
+        "equirectangular" => match v.as_slice() {
+            [] => Lens::FULL_SPHERE,
+            [l0, l1, t0, t1] => Lens::Equirectangular {
+                longitude: [*l0, *l1],
+                latitude: [*t0, *t1],
+            },
+            _ => return Err(want("none (the whole sphere) or 4 numbers (two longitudes, two latitudes)")),
+        },
+        other => {
+            return Err(value_err(format!(
+                "unknown lens kind \"{other}\"; the kinds are pinhole, distorted, fisheye, orthographic and equirectangular"
+            )))
+        }
+    };
+    lens.check()
+        .map_err(|e| value_err(format!("the {kind} lens: {e}")))?;
+    Ok(lens)
+}
+
+/// The [`LensTuple`] of a lens.
+pub(crate) fn from_lens(lens: &Lens) -> LensTuple {
+    let v = match lens {
+        Lens::Pinhole | Lens::Orthographic => vec![],
+        Lens::RadialTangential { radial, tangential } => {
+            radial.iter().chain(tangential).copied().collect()
+        }
+        Lens::Fisheye { k, max_theta } => k.iter().chain([max_theta]).copied().collect(),
+        Lens::Equirectangular {
+            longitude,
+            latitude,
+        } => longitude.iter().chain(latitude).copied().collect(),
+    };
+    (lens.name().to_string(), v)
+}
+
+/// Checks a lens ([`to_lens`]): ValueError with the reason.
+#[pyfunction]
+pub(crate) fn check_lens(lens: LensTuple) -> PyResult<()> {
+    to_lens(&lens).map(|_| ())
+}
+
+/// The largest angle from the axis a fisheye with coefficients `k1..k4` images: where its
+/// radius stops growing (at most 180 degrees), the lens's default `max_theta`.
+#[pyfunction]
+pub(crate) fn fisheye_max_theta(k: [f64; 4]) -> f64 {
+    lens::fisheye_max_theta(&k)
+}
 
 pub(crate) fn to_camera(t: &CamTuple) -> PyResult<Camera> {
-    let (name, width, height, k, m) = t;
+    let (name, width, height, k, m, lens) = t;
+    let lens = to_lens(lens).map_err(|e| value_err(format!("camera \"{name}\": {e}")))?;
     // Row-major [R t; 0 1]: glam takes columns, so R's rows become the transpose's columns.
     let rotation = Mat3::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]]);
     let cam = Camera {
@@ -26,7 +116,7 @@ pub(crate) fn to_camera(t: &CamTuple) -> PyResult<Camera> {
         cy: k[3],
         rotation,
         translation: Vec3::new(m[3], m[7], m[11]),
-        lens: verisplat::core::camera::Lens::Pinhole,
+        lens,
     };
     cam.validate()
         .map_err(|e| value_err(format!("camera \"{name}\": {e}")))?;
@@ -44,6 +134,7 @@ fn from_camera(c: &Camera) -> CamTuple {
         [
             r[0], r[1], r[2], t.x, r[3], r[4], r[5], t.y, r[6], r[7], r[8], t.z, 0.0, 0.0, 0.0, 1.0,
         ],
+        from_lens(&c.lens),
     )
 }
 

@@ -42,6 +42,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cameras::default_camera, m)?)?;
     m.add_function(wrap_pyfunction!(cameras::look_at, m)?)?;
     m.add_function(wrap_pyfunction!(cameras::bulk_centre, m)?)?;
+    m.add_function(wrap_pyfunction!(cameras::fisheye_max_theta, m)?)?;
+    m.add_function(wrap_pyfunction!(cameras::check_lens, m)?)?;
     m.add_function(wrap_pyfunction!(render::render_cpu, m)?)?;
     m.add_function(wrap_pyfunction!(images::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(images::compare, m)?)?;

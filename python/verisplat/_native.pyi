@@ -2,7 +2,9 @@
 
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float]]
+# A lens: its kind (pinhole, distorted, fisheye, orthographic, equirectangular) and numbers.
+LensTuple = Tuple[str, Sequence[float]]
+CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float], LensTuple]
 # background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rules,
 # near plane
 Options = Tuple[
@@ -124,6 +126,8 @@ def orbit(
     radius: Optional[float] = None,
 ) -> List[CamTuple]: ...
 def default_camera(scene: Scene, width: int, height: int) -> CamTuple: ...
+def check_lens(lens: LensTuple) -> None: ...
+def fisheye_max_theta(k: Sequence[float]) -> float: ...
 def look_at(
     eye: Sequence[float],
     target: Sequence[float],

@@ -325,6 +325,7 @@ class Rasterizer:
         antialiased: bool = False,
         rules: str = "original",
         near_plane: Optional[float] = None,
+        lens: Any = None,
     ) -> Forward:
         """Renders the Gaussians from one camera: ``colors`` (H, W, D) with the background,
         ``alphas`` (H, W), ``depths`` (H, W, alpha-normalised), and per Gaussian ``radii``,
@@ -335,8 +336,15 @@ class Rasterizer:
         backend). ``rules``: ``"original"`` (the 3DGS rasterizer's, the default) or
         ``"gsplat"`` (see the module's docstring); ``near_plane`` (None: the rules' 0.2 or
         0.01) culls the Gaussians nearer than it. With a
-        ``shader``, ``colors`` are (N, K) feature values and the image is shaded (H, W, 3)."""
-        cam = Camera(viewmat, K, width, height)
+        ``shader``, ``colors`` are (N, K) feature values and the image is shaded (H, W, 3).
+        ``lens`` (None: the pinhole) is another lens, as ``verisplat.Camera`` takes it
+        (e.g. ``{"kind": "fisheye", "k": [k1, k2, k3, k4]}``, ``"orthographic"``): each
+        Gaussian is then projected by the unscented transform through the lens's exact map
+        (``means2d`` its mean, ``conics`` its covariance's inverse; ``gaussian_depths`` and
+        ``depths`` the distance from the camera through a fisheye or equirectangular lens,
+        else ``z``). The backward pass through a lens comes with issue 49's backward pass
+        through the sigma points: a backend without it yet refuses a lens frame by name."""
+        cam = Camera(viewmat, K, width, height, lens=lens)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
         shader_bytes = None
         if shader is not None:
