@@ -3,6 +3,9 @@
 //! and its backward pass ([`backward`]): from the gradient of a loss with respect to each
 //! output pixel (colour, alpha, depth) to the gradient with respect to every Gaussian's
 //! centre, quaternion, scale, opacity and colour (SH coefficients or direct channels).
+//! A pinhole camera projects by the EWA rule; every other lens by the unscented
+//! transform, differentiated through its sigma points ([`lens`]); a panorama that wraps
+//! around draws each Gaussian at the copy nearest each tile, as the renderers do.
 //!
 //! It is the yardstick of the Vulkan backward pass and is itself checked against central
 //! finite differences of [`forward`] (tests in `tests/all/train/gradients.rs`). Derivatives are
@@ -16,6 +19,7 @@
 //! [`SplatGrads::means2d`] is gsplat's `means2d.grad` with the reference's half-pixel
 //! convention.
 
+use crate::core::camera::lens::{Intrinsics, Lens};
 use crate::core::camera::Camera;
 use crate::core::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams};
 use crate::core::model::{
@@ -23,6 +27,11 @@ use crate::core::model::{
 };
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
+
+mod lens;
+mod shaded;
+
+pub use shaded::{backward_shaded, forward_shaded, MlpParams};
 
 /// A frame of the f64 reference.
 #[derive(Clone, Debug, PartialEq)]
@@ -55,6 +64,10 @@ struct Cam64 {
     rules: Rules,
     size: (u32, u32),
     tiles: (u32, u32),
+    lens: Lens,
+    k: Intrinsics,
+    /// Whether the image wraps around ([`Lens::wraps`]).
+    wraps: bool,
 }
 
 impl Cam64 {
@@ -76,6 +89,9 @@ impl Cam64 {
             rules,
             size: (cam.width, cam.height),
             tiles: cam.tile_grid(),
+            lens: cam.lens.clone(),
+            k: cam.intrinsics(),
+            wraps: cam.lens.wraps(cam.width),
         }
     }
 }
@@ -101,15 +117,7 @@ fn check(p: &SplatParams<f64>, cam: &Camera, background: &[f64]) -> Result<(), S
             p.channels()
         ));
     }
-    cam.validate().map_err(|e| e.to_string())?;
-    if !cam.lens.is_pinhole() {
-        return Err(format!(
-            "camera \"{}\" has a {} lens; the differentiable reference is a pinhole's so far",
-            cam.name,
-            cam.lens.name()
-        ));
-    }
-    Ok(())
+    cam.validate().map_err(|e| e.to_string())
 }
 
 fn normalized(q: [f64; 4]) -> [f64; 4] {
@@ -237,39 +245,73 @@ fn jacobian_rows(v: DVec3, cam: &Cam64) -> (DVec3, DVec3, f64, f64) {
     (w_t * j0, w_t * j1, tx, ty)
 }
 
+/// Gaussian `i`'s 2D mean (pixel `(i, j)` at `(i, j)`), its 2D covariance `[xx, xy, yy]`
+/// before the dilation, and its depth; `None` where it is nearer than the near plane or
+/// (through a lens) culled. A pinhole projects by the EWA rule with the guard band, every
+/// other lens by the unscented transform ([`lens`]).
+fn screen(
+    p: &SplatParams<f64>,
+    i: usize,
+    cam: &Cam64,
+    opts: &RenderOptions,
+) -> Option<([f64; 2], [f64; 3], f64)> {
+    let mean = DVec3::from(p.means[i]);
+    let v = cam.r * mean + cam.t;
+    let (m, _, _) = cov_factor(p, i, opts);
+    if !cam.lens.is_pinhole() {
+        let depth = lens::depth(&cam.lens, v);
+        if !cam.rules.in_front(depth, opts.near() as f64) {
+            return None;
+        }
+        let (mean2d, cov) = lens::project(&cam.lens, &cam.k, v, cam.r * m)?;
+        return Some((mean2d, cov, depth));
+    }
+    if !cam.rules.in_front(v.z, opts.near() as f64) {
+        return None;
+    }
+    let cov3d = m * m.transpose();
+    let (t0, t1, _, _) = jacobian_rows(v, cam);
+    let cov = [t0.dot(cov3d * t0), t0.dot(cov3d * t1), t1.dot(cov3d * t1)];
+    let mean2d = [
+        cam.fx * v.x / v.z + cam.cx - 0.5,
+        cam.fy * v.y / v.z + cam.cy - 0.5,
+    ];
+    Some((mean2d, cov, v.z))
+}
+
 fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) -> Option<Proj> {
     if !keeps(p, i, opts) {
         return None;
     }
     let mean = DVec3::from(p.means[i]);
-    let v = cam.r * mean + cam.t;
-    if !cam.rules.in_front(v.z, opts.near() as f64) {
-        return None;
-    }
-    let (m, _, _) = cov_factor(p, i, opts);
-    let cov3d = m * m.transpose();
-    let (t0, t1, _, _) = jacobian_rows(v, cam);
+    let (mean2d, [a, b, c], depth) = screen(p, i, cam, opts)?;
     let dil = COV2D_DILATION as f64;
-    let a = t0.dot(cov3d * t0) + dil;
-    let b = t0.dot(cov3d * t1);
-    let c = t1.dot(cov3d * t1) + dil;
+    let (a, c) = (a + dil, c + dil);
     let det = a * c - b * b;
     if !cam.rules.keeps_det(det) {
         return None;
     }
     let conic = [c / det, -b / det, a / det];
-    let mean2d = [
-        cam.fx * v.x / v.z + cam.cx - 0.5,
-        cam.fy * v.y / v.z + cam.cy - 0.5,
-    ];
     let opacity = if opts.antialiased {
         p.opacities[i] * compensation(a, b, c, cam.rules).0
     } else {
         p.opacities[i]
     };
-    let e = cam
-        .rules
-        .extent([a, b, c], det, opacity, mean2d, cam.size, cam.tiles)?;
+    let e = if cam.wraps {
+        // An image that wraps around: the rectangle in the tiles of three turns side by
+        // side, at most one turn wide (as `cpu::preprocess_one`).
+        let (w, h) = cam.size;
+        let moved = [mean2d[0] + w as f64, mean2d[1]];
+        let grid = (3 * cam.tiles.0, cam.tiles.1);
+        let mut e = cam
+            .rules
+            .extent([a, b, c], det, opacity, moved, (3 * w, h), grid)?;
+        e.rect_max[0] = e.rect_max[0].min(e.rect_min[0] + cam.tiles.0);
+        e
+    } else {
+        cam.rules
+            .extent([a, b, c], det, opacity, mean2d, cam.size, cam.tiles)?
+    };
     let color = match &p.colors {
         ColorParams::Sh { coeffs, .. } => {
             let (active, k) = sh_degrees(p, opts);
@@ -292,7 +334,7 @@ fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) ->
     Some(Proj {
         mean2d,
         conic,
-        depth: v.z,
+        depth,
         opacity,
         color,
         rect_min: e.rect_min,
@@ -308,6 +350,7 @@ fn tile_lists(projs: &[Option<Proj>], cam: &Cam64) -> Vec<Vec<u32>> {
         if let Some(pr) = pr {
             for y in pr.rect_min[1]..pr.rect_max[1] {
                 for x in pr.rect_min[0]..pr.rect_max[0] {
+                    let x = if cam.wraps { x % tx } else { x };
                     lists[(y * tx + x) as usize].push((pr.depth, i as u32));
                 }
             }
@@ -336,12 +379,15 @@ struct Step {
 }
 
 /// The reference's compositing loop at pixel `(px, py)` over `ids` front to back: the
-/// Gaussians added and the final transmittance.
+/// Gaussians added and the final transmittance. In an image that wraps around, `wrap` is
+/// the pixel's tile's middle column and the image's width: each Gaussian is drawn at the
+/// copy of its centre (moved by whole turns) nearest that middle, as
+/// `cpu::wrapped_for_tile`.
 fn composite(
     projs: &[Option<Proj>],
     ids: &[u32],
-    px: f64,
-    py: f64,
+    (px, py): (f64, f64),
+    wrap: Option<(f64, f64)>,
     kernel: SplatKernel,
     rules: Rules,
 ) -> (Vec<Step>, f64) {
@@ -351,7 +397,11 @@ fn composite(
         let g = projs[id as usize]
             .as_ref()
             .expect("listed Gaussians are projected");
-        let dx = g.mean2d[0] - px;
+        let mx = match wrap {
+            Some((middle, w)) => g.mean2d[0] + ((middle - g.mean2d[0]) / w + 0.5).floor() * w,
+            None => g.mean2d[0],
+        };
+        let dx = mx - px;
         let dy = g.mean2d[1] - py;
         let [ca, cb, cc] = g.conic;
         let power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
@@ -417,8 +467,12 @@ impl Raster {
     /// sum of depth * weight.
     fn pixel(&self, x: usize, y: usize, kernel: SplatKernel) -> (Vec<Step>, f64, f64) {
         let list = self.pixel_list(x as u32, y as u32);
-        let (px, py) = (x as f64, y as f64);
-        let (steps, t) = composite(&self.projs, list, px, py, kernel, self.cam.rules);
+        let wrap = self.cam.wraps.then(|| {
+            let middle = (x as u32 / TILE_SIZE * TILE_SIZE + TILE_SIZE / 2) as f64;
+            (middle, self.cam.size.0 as f64)
+        });
+        let pixel = (x as f64, y as f64);
+        let (steps, t) = composite(&self.projs, list, pixel, wrap, kernel, self.cam.rules);
         let dacc = steps
             .iter()
             .map(|s| self.proj(s.id).depth * s.alpha * s.t)
@@ -660,14 +714,10 @@ fn project_backward(
     out.screen[i] = [ca, cb, cc, rgb[0], rgb[1], rgb[2], g.depth, g.opacity];
     let mean = DVec3::from(p.means[i]);
     let v = cam.r * mean + cam.t;
-    let z = v.z;
     let (m, q, s) = cov_factor(p, i, opts);
-    let cov3d = m * m.transpose();
-    let (t0, t1, tx, ty) = jacobian_rows(v, cam);
+    let (_, [a, b, c], _) = screen(p, i, cam, opts).expect("a listed Gaussian is projected");
     let dil = COV2D_DILATION as f64;
-    let a = t0.dot(cov3d * t0) + dil;
-    let b = t0.dot(cov3d * t1);
-    let c = t1.dot(cov3d * t1) + dil;
+    let (a, c) = (a + dil, c + dil);
     let det = a * c - b * b;
     let det2 = det * det;
     // conic (A, B, C) = (c, -b, a) / det.
@@ -686,43 +736,22 @@ fn project_backward(
         g_b += g_comp * db;
         g_c += g_comp * dc;
     }
-    // a = t0' S t0, b = t0' S t1, c = t1' S t1.
-    let g_cov = DMat3::from_cols(
-        g_a * t0 * t0.x + g_b * t0 * t1.x + g_c * t1 * t1.x,
-        g_a * t0 * t0.y + g_b * t0 * t1.y + g_c * t1 * t1.y,
-        g_a * t0 * t0.z + g_b * t0 * t1.z + g_c * t1 * t1.z,
-    );
-    let g_t0 = 2.0 * g_a * (cov3d * t0) + g_b * (cov3d * t1);
-    let g_t1 = 2.0 * g_c * (cov3d * t1) + g_b * (cov3d * t0);
-    // t_k = W^T j_k.
-    let g_j0 = cam.r * g_t0;
-    let g_j1 = cam.r * g_t1;
-    let (fx, fy) = (cam.fx, cam.fy);
-    let mut g_v = DVec3::ZERO;
-    g_v.z += g_j0.x * (-fx / (z * z)) + g_j0.z * (2.0 * fx * tx / (z * z * z));
-    g_v.z += g_j1.y * (-fy / (z * z)) + g_j1.z * (2.0 * fy * ty / (z * z * z));
-    let g_tx = g_j0.z * (-fx / (z * z));
-    let g_ty = g_j1.z * (-fy / (z * z));
-    // tx = clamp(x / z, -lim, lim) z: x passes where unclamped, z carries the bound where clamped.
-    let (ux, uy) = (v.x / z, v.y / z);
-    if ux >= -cam.lim[0] && ux <= cam.lim[1] {
-        g_v.x += g_tx;
+    let (g_v, g_m) = if cam.lens.is_pinhole() {
+        pinhole_backward(v, m, cam, g, [g_a, g_b, g_c])
     } else {
-        g_v.z += g_tx * tx / z;
-    }
-    if uy >= -cam.lim[2] && uy <= cam.lim[3] {
-        g_v.y += g_ty;
-    } else {
-        g_v.z += g_ty * ty / z;
-    }
-    // mean2d = f * v.xy / z + c - 0.5; depth = z.
-    g_v.x += g.mean2d[0] * fx / z;
-    g_v.y += g.mean2d[1] * fy / z;
-    g_v.z -= (g.mean2d[0] * fx * v.x + g.mean2d[1] * fy * v.y) / (z * z);
-    g_v.z += g.depth;
+        // Through the lens: camera-space axes W M, so dL/dM = W^T dL/d(W M).
+        let (g_v, g_axes) = lens::project_backward(
+            &cam.lens,
+            &cam.k,
+            v,
+            cam.r * m,
+            g.mean2d,
+            [g_a, g_b, g_c],
+            g.depth,
+        );
+        (g_v, cam.r.transpose() * g_axes)
+    };
     let mut g_mean = cam.r.transpose() * g_v;
-    // Sigma = M M^T with M = R S.
-    let g_m = (g_cov + g_cov.transpose()) * m;
     let rot = crate::core::quat::quat_to_dmat3(q);
     let modifier = opts.scale_modifier as f64;
     let g_scale: [f64; 3] = std::array::from_fn(|k| rot.col(k).dot(g_m.col(k)) * modifier);
@@ -788,197 +817,53 @@ fn project_backward(
     out.means[i] = g_mean.to_array();
 }
 
-// ---- The neural shader ------------------------------------------------------------------
-//
-// A shaded frame (`render --shader`): the Gaussians' direct feature channels are blended
-// (no background), then per pixel the MLP turns the features (with the view direction and
-// alpha, as its inputs list) into a colour `c`, and the pixel is `alpha * c + (1 - alpha)
-// * background` (`crate::fields::mlp::shade`). Its backward pass runs the MLP's per pixel, then
-// the blend's with the feature gradients it produced.
-
-pub use crate::fields::mlp::MlpParams;
-use crate::fields::mlp::{Activation, Mlp, MlpInput};
-
-/// Value and derivative of an activation at `x`.
-fn activation64(a: Activation, x: f64) -> (f64, f64) {
-    match a {
-        Activation::Relu => (x.max(0.0), if x > 0.0 { 1.0 } else { 0.0 }),
-        Activation::Sigmoid => {
-            let s = 1.0 / (1.0 + (-x).exp());
-            (s, s * (1.0 - s))
-        }
-        Activation::Tanh => {
-            let t = x.tanh();
-            (t, 1.0 - t * t)
-        }
-        Activation::None => (x, 1.0),
-    }
-}
-
-/// The MLP on `x`: each layer's input and its activations' derivatives, and the output.
-fn mlp_forward64(
-    mlp: &Mlp,
-    w: &MlpParams<f64>,
-    x: &[f64],
-) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<f64>) {
-    let mut inputs = Vec::with_capacity(mlp.layers.len());
-    let mut derivs = Vec::with_capacity(mlp.layers.len());
-    let mut cur = x.to_vec();
-    for (i, l) in mlp.layers.iter().enumerate() {
-        let mut next = Vec::with_capacity(l.outputs);
-        let mut d = Vec::with_capacity(l.outputs);
-        for o in 0..l.outputs {
-            let row = &w.weights[i][o * l.inputs..(o + 1) * l.inputs];
-            let z = w.biases[i][o] + row.iter().zip(&cur).map(|(a, b)| a * b).sum::<f64>();
-            let (v, dv) = activation64(l.activation, z);
-            next.push(v);
-            d.push(dv);
-        }
-        inputs.push(std::mem::replace(&mut cur, next));
-        derivs.push(d);
-    }
-    (inputs, derivs, cur)
-}
-
-/// Back through the MLP: adds the parameters' gradients to `g` and returns dL/d(input).
-fn mlp_backward64(
-    mlp: &Mlp,
-    w: &MlpParams<f64>,
-    inputs: &[Vec<f64>],
-    derivs: &[Vec<f64>],
-    g_out: &[f64],
-    g: &mut MlpParams<f64>,
-) -> Vec<f64> {
-    let mut g_cur = g_out.to_vec();
-    for (i, l) in mlp.layers.iter().enumerate().rev() {
-        let mut g_in = vec![0.0; l.inputs];
-        for o in 0..l.outputs {
-            let gz = g_cur[o] * derivs[i][o];
-            g.biases[i][o] += gz;
-            for j in 0..l.inputs {
-                g.weights[i][o * l.inputs + j] += gz * inputs[i][j];
-                g_in[j] += gz * w.weights[i][o * l.inputs + j];
-            }
-        }
-        g_cur = g_in;
-    }
-    g_cur
-}
-
-/// The MLP's input vector of one pixel (`Mlp::input_vector` in f64).
-fn mlp_input64(mlp: &Mlp, features: &[f64], view_dir: [f32; 3], alpha: f64) -> Vec<f64> {
-    let mut x = Vec::new();
-    for i in &mlp.inputs {
-        match i {
-            MlpInput::Features => x.extend_from_slice(features),
-            MlpInput::ViewDir => x.extend(view_dir.iter().map(|&v| v as f64)),
-            MlpInput::Alpha => x.push(alpha),
-        }
-    }
-    x
-}
-
-fn check_shaded(p: &SplatParams<f64>, mlp: &Mlp) -> Result<usize, String> {
-    match &p.colors {
-        ColorParams::Direct { channels, .. } => {
-            mlp.check_channels(*channels)?;
-            Ok(*channels)
-        }
-        ColorParams::Sh { .. } => {
-            Err("a shaded frame blends direct feature channels, not SH".into())
-        }
-    }
-}
-
-/// A frame shaded by `mlp` (with the parameters `w`), in f64: colour (3 channels,
-/// `alpha * mlp + (1 - alpha) * background`), alpha and depth.
-pub fn forward_shaded(
-    p: &SplatParams<f64>,
-    cam: &Camera,
-    opts: &RenderOptions,
-    mlp: &Mlp,
-    w: &MlpParams<f64>,
-    background: [f64; 3],
-) -> Result<Image64, String> {
-    let k = check_shaded(p, mlp)?;
-    let feats = forward(p, cam, opts, &vec![0.0; k])?;
-    let width = cam.width as usize;
-    let mut color = vec![0.0; feats.alpha.len() * 3];
-    for (i, &a) in feats.alpha.iter().enumerate() {
-        let dir = crate::fields::mlp::view_dir(cam, (i % width) as u32, (i / width) as u32);
-        let x = mlp_input64(mlp, &feats.color[i * k..(i + 1) * k], dir, a);
-        let (_, _, c) = mlp_forward64(mlp, w, &x);
-        for ch in 0..3 {
-            color[i * 3 + ch] = a * c[ch] + (1.0 - a) * background[ch];
-        }
-    }
-    Ok(Image64 {
-        width: cam.width,
-        height: cam.height,
-        channels: 3,
-        color,
-        alpha: feats.alpha,
-        depth: feats.depth,
-    })
-}
-
-/// The backward pass of [`forward_shaded`]: the Gaussians' gradients (their `colors` are
-/// dL/d feature values) and the MLP's.
-pub fn backward_shaded(
-    p: &SplatParams<f64>,
-    cam: &Camera,
-    opts: &RenderOptions,
-    mlp: &Mlp,
-    w: &MlpParams<f64>,
-    background: [f64; 3],
-    grads: &PixelGrads<f64>,
-) -> Result<(SplatGrads<f64>, MlpParams<f64>), String> {
-    let k = check_shaded(p, mlp)?;
-    let feats = forward(p, cam, opts, &vec![0.0; k])?;
-    let pixels = feats.alpha.len();
-    let width = cam.width as usize;
-    let mut g_mlp = w.zeros_like();
-    let mut g_feat = vec![0.0; pixels * k];
-    let mut g_alpha: Vec<f64> = if grads.alpha.is_empty() {
-        vec![0.0; pixels]
+/// The pinhole's EWA projection backward (with the guard band's clamp): from the
+/// gradients of the 2D mean, depth and 2D covariance `[a, b, c]` of the Gaussian with
+/// view-space centre `v` and covariance factor `m`, to `dL/dv` (view space) and `dL/dM`.
+fn pinhole_backward(
+    v: DVec3,
+    m: DMat3,
+    cam: &Cam64,
+    g: &ProjGrad,
+    [g_a, g_b, g_c]: [f64; 3],
+) -> (DVec3, DMat3) {
+    let z = v.z;
+    let cov3d = m * m.transpose();
+    let (t0, t1, tx, ty) = jacobian_rows(v, cam);
+    // a = t0' S t0, b = t0' S t1, c = t1' S t1.
+    let g_cov = DMat3::from_cols(
+        g_a * t0 * t0.x + g_b * t0 * t1.x + g_c * t1 * t1.x,
+        g_a * t0 * t0.y + g_b * t0 * t1.y + g_c * t1 * t1.y,
+        g_a * t0 * t0.z + g_b * t0 * t1.z + g_c * t1 * t1.z,
+    );
+    let g_t0 = 2.0 * g_a * (cov3d * t0) + g_b * (cov3d * t1);
+    let g_t1 = 2.0 * g_c * (cov3d * t1) + g_b * (cov3d * t0);
+    // t_k = W^T j_k.
+    let g_j0 = cam.r * g_t0;
+    let g_j1 = cam.r * g_t1;
+    let (fx, fy) = (cam.fx, cam.fy);
+    let mut g_v = DVec3::ZERO;
+    g_v.z += g_j0.x * (-fx / (z * z)) + g_j0.z * (2.0 * fx * tx / (z * z * z));
+    g_v.z += g_j1.y * (-fy / (z * z)) + g_j1.z * (2.0 * fy * ty / (z * z * z));
+    let g_tx = g_j0.z * (-fx / (z * z));
+    let g_ty = g_j1.z * (-fy / (z * z));
+    // tx = clamp(x / z, -lim, lim) z: x passes where unclamped, z carries the bound where clamped.
+    let (ux, uy) = (v.x / z, v.y / z);
+    if ux >= -cam.lim[0] && ux <= cam.lim[1] {
+        g_v.x += g_tx;
     } else {
-        grads.alpha.clone()
-    };
-    if !grads.color.is_empty() {
-        for i in 0..pixels {
-            let a = feats.alpha[i];
-            let dir = crate::fields::mlp::view_dir(cam, (i % width) as u32, (i / width) as u32);
-            let x = mlp_input64(mlp, &feats.color[i * k..(i + 1) * k], dir, a);
-            let (inputs, derivs, c) = mlp_forward64(mlp, w, &x);
-            let gy = &grads.color[i * 3..i * 3 + 3];
-            // colour = a c + (1 - a) background.
-            let g_c: Vec<f64> = gy.iter().map(|g| a * g).collect();
-            g_alpha[i] += (0..3)
-                .map(|ch| gy[ch] * (c[ch] - background[ch]))
-                .sum::<f64>();
-            let g_x = mlp_backward64(mlp, w, &inputs, &derivs, &g_c, &mut g_mlp);
-            // Split dL/d(input) by the inputs' order; the view direction has no parameter.
-            let mut at = 0;
-            for input in &mlp.inputs {
-                match input {
-                    MlpInput::Features => {
-                        g_feat[i * k..(i + 1) * k].copy_from_slice(&g_x[at..at + k]);
-                        at += k;
-                    }
-                    MlpInput::ViewDir => at += 3,
-                    MlpInput::Alpha => {
-                        g_alpha[i] += g_x[at];
-                        at += 1;
-                    }
-                }
-            }
-        }
+        g_v.z += g_tx * tx / z;
     }
-    let blend_grads = PixelGrads {
-        color: g_feat,
-        alpha: g_alpha,
-        depth: grads.depth.clone(),
-    };
-    let g = backward(p, cam, opts, &vec![0.0; k], &blend_grads)?;
-    Ok((g, g_mlp))
+    if uy >= -cam.lim[2] && uy <= cam.lim[3] {
+        g_v.y += g_ty;
+    } else {
+        g_v.z += g_ty * ty / z;
+    }
+    // mean2d = f * v.xy / z + c - 0.5; depth = z.
+    g_v.x += g.mean2d[0] * fx / z;
+    g_v.y += g.mean2d[1] * fy / z;
+    g_v.z -= (g.mean2d[0] * fx * v.x + g.mean2d[1] * fy * v.y) / (z * z);
+    g_v.z += g.depth;
+    // Sigma = M M^T.
+    (g_v, (g_cov + g_cov.transpose()) * m)
 }

@@ -5,6 +5,7 @@
 mod captures;
 mod gradients;
 mod gsplat_rules;
+mod lens_gradients;
 mod loss;
 mod training;
 mod undistort;
