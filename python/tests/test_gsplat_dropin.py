@@ -129,9 +129,9 @@ def test_gsplats_off_keywords_are_accepted_and_on_values_refused():
                        radial_coeffs=None, rolling_shutter=shutter, tile_size=32,
                        channel_chunk=8)
     assert torch.equal(base, out)
-    for kw, match in [({"with_ut": True}, "with_ut is not supported"),
-                      ({"with_eval3d": True}, "with_eval3d is not supported"),
-                      ({"radial_coeffs": torch.zeros(1, 6)}, "radial_coeffs is not supported"),
+    # with_ut and the lens coefficients: test_lenses.py.
+    for kw, match in [({"with_eval3d": True}, "with_eval3d is not supported"),
+                      ({"radial_coeffs": torch.zeros(1, 6)}, "radial_coeffs need with_ut=True"),
                       ({"tile_size": 0}, "tile_size must be a positive integer"),
                       ({"channel_chunk": 0}, "channel_chunk must be a positive integer")]:
         with pytest.raises(ValueError, match=match):

@@ -27,10 +27,14 @@ sigmas (no tail of a splat cut at a tile edge; ``meta["radii"]`` per axis), the 
 around the principal point, the antialiased compensation's floor 0.
 ``verisplat.gsplat.rasterization`` is this function with ``rules="gsplat"``: with it, gsplat
 code runs with only the import changed. ``near_plane`` may be any positive depth under
-either rules. Neither has a far plane (gsplat's default 1e10 is accepted). Options verisplat
-does not implement are refused (``radius_clip``, other camera models and lens
-coefficients, ``covars``, ``with_ut=True``, ``with_eval3d=True``); those needing them keep
-gsplat. ``rasterize_mode="antialiased"`` (opacities times sqrt(det(cov2d) / det(cov2d +
+either rules. Neither has a far plane (gsplat's default 1e10 is accepted). gsplat's lenses
+are taken as gsplat takes them: ``camera_model`` ``"pinhole"``, ``"ortho"`` or ``"fisheye"``,
+``with_ut=True`` (the unscented transform through the exact lens, with ``radial_coeffs``
+and ``tangential_coeffs``), ``"ortho"`` by either rule (the unscented transform is exact
+for it); docs/pytorch.md says where they differ. Options verisplat does not implement are
+refused (``radius_clip``, ``camera_model="ftheta"``, the fisheye's EWA rule
+(``with_ut=False``), ``thin_prism_coeffs``, ``covars``, ``with_eval3d=True``); those
+needing them keep gsplat. ``rasterize_mode="antialiased"`` (opacities times sqrt(det(cov2d) / det(cov2d +
 0.3 I)), Mip-Splatting's compensation) is differentiable as the classic mode is. The
 argument table of ``docs/pytorch.md`` says, for each of gsplat's arguments and meta keys,
 whether it is supported, supported with a difference, or refused.
@@ -41,6 +45,7 @@ values (any number of channels) are blended as given, never clamped.
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
@@ -143,6 +148,7 @@ class _Call:
     rasterizer: "_raster.Rasterizer"
     layout: _Layout
     cams: List[List[Tuple[np.ndarray, np.ndarray]]]
+    lenses: List[List[Optional[Dict[str, Any]]]]
     width: int
     height: int
     kernel: str
@@ -171,6 +177,7 @@ def _native_passes(call: _Call, arrays) -> Dict[Tuple[int, int], list]:
     """The forward passes, per (set, camera) pair a list of one per colour chunk."""
     means, quats, scales, opacities, colors = arrays
     r, layout = call.rasterizer, call.layout
+    lenses = call.lenses
     cams, width, height = call.cams, call.width, call.height
     fwds: Dict[Tuple[int, int], list] = {}
     for b, c in layout.pairs():
@@ -192,6 +199,7 @@ def _native_passes(call: _Call, arrays) -> Dict[Tuple[int, int], list]:
                 antialiased=call.antialiased,
                 rules=call.rules,
                 near_plane=call.near_plane,
+                lens=lenses[b][c],
             )
             for ch in layout.chunks
         ]
@@ -305,7 +313,7 @@ def _meta_vjp(passes: _Passes, inputs, grads, wanted):
             p, q, s, o, vm, K = leaves
             m2d, conic, depth, _, comp = _projection.project(
                 p, q, s, vm, K, call.width, call.height,
-                antialiased=call.antialiased, rules=call.rules)
+                antialiased=call.antialiased, rules=call.rules, lens=call.lenses[b][c])
             loss = torch.zeros(())
             for g, out in zip(grads, (m2d, depth, conic, o * comp)):
                 if g is not None:
@@ -369,7 +377,7 @@ def _camera_vjp(passes: _Passes, inputs, b, c, g2d, screen):
         m2d, conic, depth, rgb, comp = _projection.project(
             means.reshape(B, N, 3)[b][vis], quats.reshape(B, N, 4)[b][vis],
             scales.reshape(B, N, 3)[b][vis], vm, K, call.width, call.height,
-            sh, layout.sh_degree, call.antialiased, call.rules,
+            sh, layout.sh_degree, call.antialiased, call.rules, call.lenses[b][c],
         )
         gs = torch.from_numpy(np.ascontiguousarray(screen[v]))
         loss = (torch.from_numpy(np.ascontiguousarray(g2d[v])) * m2d).sum()
@@ -474,14 +482,13 @@ def _pad_sh(grad: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
 
 # gsplat's keywords that verisplat takes only at the value that turns them off.
 _OFF_KEYWORDS = {
-    "with_ut": False,
     "with_eval3d": False,
-    "radial_coeffs": None,
-    "tangential_coeffs": None,
-    "thin_prism_coeffs": None,
     "ftheta_coeffs": None,
     "viewmats_rs": None,
 }
+
+# gsplat's camera models verisplat draws (gsplat's "ftheta" is refused).
+_CAMERA_MODELS = ("pinhole", "ortho", "fisheye")
 
 
 def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
@@ -505,7 +512,15 @@ def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, ca
             rasterize_mode not in ("classic", "antialiased"),
             f"rasterize_mode must be 'classic' or 'antialiased', got {rasterize_mode!r}",
         ),
-        (camera_model != "pinhole", f"camera_model={camera_model!r}: only 'pinhole' is supported"),
+        (
+            camera_model == "ftheta",
+            "camera_model='ftheta' is not supported: verisplat has no f-theta lens; the models "
+            "are 'pinhole', 'ortho' and 'fisheye'",
+        ),
+        (
+            camera_model not in _CAMERA_MODELS + ("ftheta",),
+            f"camera_model must be 'pinhole', 'ortho' or 'fisheye', got {camera_model!r}",
+        ),
         (covars is not None, "covars are not supported: pass quats and scales"),
         (distributed, "distributed rendering is not supported"),
         (sparse_grad, "sparse_grad is not supported"),
@@ -524,6 +539,77 @@ def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, ca
     for bad, why in refusals:
         if bad:
             raise ValueError(why)
+
+
+def _gsplat_fisheye_max_theta(k: np.ndarray) -> float:
+    """Half the field of view of gsplat's fisheye (``OpenCVFisheyeCameraModel``): where the
+    radius ``theta (1 + k1 theta^2 + ... + k4 theta^8)`` first stops growing, and in front
+    of the camera (gsplat's UT images no sigma point at ``z <= 0``). A Gaussian with a sigma
+    point past it is culled (gsplat moves such a point back to the edge of its field of
+    view)."""
+    k1, k2, k3, k4 = (float(v) for v in k)
+    # d/dtheta of the radius, a polynomial in x = theta^2: 1 + 3 k1 x + 5 k2 x^2 + ...
+    slope = np.trim_zeros(np.array([9 * k4, 7 * k3, 5 * k2, 3 * k1, 1.0]), "f")
+    roots = np.roots(slope) if len(slope) > 1 else np.array([])
+    x = [r.real for r in roots if abs(r.imag) <= 1e-12 * max(1.0, abs(r)) and r.real > 0]
+    return min(math.sqrt(min(x)) if x else math.inf, math.pi / 2)
+
+
+def _lenses(layout: _Layout, camera_model, with_ut, radial, tangential):
+    """Each camera's lens ([B][C], None: the pinhole's EWA projection) from gsplat's camera
+    model, ``with_ut`` and distortion coefficients; ValueError for a combination gsplat
+    does not draw or verisplat cannot."""
+    given = [n for n, v in (("radial_coeffs", radial), ("tangential_coeffs", tangential))
+             if v is not None]
+    if given and camera_model == "ortho":
+        raise ValueError(f"camera_model='ortho' has no distortion: {' and '.join(given)} must be None")
+    if given and not with_ut:
+        raise ValueError(
+            f"{' and '.join(given)} need with_ut=True: as in gsplat, a distorted lens is "
+            "projected by the unscented transform (the EWA rule has no distortion)"
+        )
+    if camera_model == "fisheye" and not with_ut:
+        raise ValueError(
+            "camera_model='fisheye' with with_ut=False: verisplat has no linearised (EWA) "
+            "fisheye projection; pass with_ut=True, which projects through the same fisheye "
+            "by the unscented transform (gsplat's 3DGUT)"
+        )
+    if camera_model == "fisheye" and tangential is not None:
+        raise ValueError(
+            "tangential_coeffs: gsplat's fisheye (OpenCV's) has no tangential distortion and "
+            "ignores them; pass None"
+        )
+    lead = layout.batch + (layout.C,)
+    if radial is not None:
+        want = 4 if camera_model == "fisheye" else 6
+        _check_tensor("radial_coeffs", radial, lead + (None,))
+        if radial.shape[-1] != want:
+            names = "k1..k4" if want == 4 else "k1..k6"
+            raise ValueError(
+                f"radial_coeffs of camera_model={camera_model!r} must have shape "
+                f"{lead + (want,)} ({names}), got {tuple(radial.shape)}"
+            )
+        radial = _np(radial).reshape(layout.B, layout.C, want).astype(np.float64)
+    if tangential is not None:
+        _check_tensor("tangential_coeffs", tangential, lead + (2,))
+        tangential = _np(tangential).reshape(layout.B, layout.C, 2).astype(np.float64)
+
+    def lens(b: int, c: int) -> Optional[Dict[str, Any]]:
+        if camera_model == "ortho":
+            return {"kind": "orthographic"}
+        if camera_model == "fisheye":
+            k = np.zeros(4) if radial is None else radial[b, c]
+            return {"kind": "fisheye", "k": k.tolist(),
+                    "max_theta": _gsplat_fisheye_max_theta(k)}
+        if not with_ut:
+            return None
+        # The pinhole through the unscented transform, distorted or not (gsplat's UT with
+        # its OpenCV or perfect pinhole model): the distorted lens, its coefficients 0 or not.
+        return {"kind": "distorted",
+                "radial": (np.zeros(6) if radial is None else radial[b, c]).tolist(),
+                "tangential": (np.zeros(2) if tangential is None else tangential[b, c]).tolist()}
+
+    return [[lens(b, c) for c in range(layout.C)] for b in range(layout.B)]
 
 
 def _check_arguments(layout: _Layout, means, quats, scales, opacities, colors, Ks, sh_degree):
@@ -646,6 +732,10 @@ def rasterization(
     ``kernel`` (``"power"``: the power-function falloff) and ``rules`` (``"original"``,
     the 3DGS rasterizer's, the default; ``"gsplat"``, gsplat's: see the module's
     docstring). ``near_plane``: None is the rules' (0.2; gsplat's 0.01).
+    ``camera_model`` (``"pinhole"``, ``"ortho"``, ``"fisheye"``), ``with_ut``,
+    ``radial_coeffs`` ([..., C, 6] for the pinhole, [..., C, 4] for the fisheye) and
+    ``tangential_coeffs`` ([..., C, 2], the pinhole's): gsplat's lenses (the module's
+    docstring).
 
     Returns ``(render_colors [..., C, H, W, D], render_alphas [..., C, H, W, 1], meta)``.
     meta, packed (the default): ``batch_ids``, ``camera_ids``, ``gaussian_ids`` [nnz]
@@ -657,11 +747,12 @@ def rasterization(
     """
     if unsupported:
         raise ValueError(f"verisplat.torch.rasterization does not support {sorted(unsupported)}")
-    gsplat_kw = dict(
-        with_ut=with_ut, with_eval3d=with_eval3d, radial_coeffs=radial_coeffs,
-        tangential_coeffs=tangential_coeffs, thin_prism_coeffs=thin_prism_coeffs,
-        ftheta_coeffs=ftheta_coeffs, viewmats_rs=viewmats_rs,
-    )
+    gsplat_kw = dict(with_eval3d=with_eval3d, ftheta_coeffs=ftheta_coeffs, viewmats_rs=viewmats_rs)
+    if thin_prism_coeffs is not None:
+        raise ValueError(
+            "thin_prism_coeffs are not supported: verisplat's distorted lens is OpenCV's radial "
+            "and tangential model without the thin-prism terms (s1..s4); pass None"
+        )
     if near_plane is None:
         near_plane = _native.GSPLAT_NEAR_PLANE if rules == "gsplat" else _native.NEAR_PLANE
     _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, camera_model, covars,
@@ -679,10 +770,12 @@ def rasterization(
     vm = _np(viewmats).reshape(layout.B, layout.C, 4, 4)
     ks = _np(Ks).reshape(layout.B, layout.C, 3, 3)
     cams = [[(vm[b, c], ks[b, c]) for c in range(layout.C)] for b in range(layout.B)]
+    lenses = _lenses(layout, camera_model, bool(with_ut), radial_coeffs, tangential_coeffs)
     call = _Call(
         rasterizer=_rasterizer(device, accumulation),
         layout=layout,
         cams=cams,
+        lenses=lenses,
         width=width,
         height=height,
         kernel=kernel,
