@@ -1,15 +1,45 @@
 //! Training data: a COLMAP data set (`images/` and `sparse/0/` text or binary; `points3D`
-//! as the initial Gaussians) or a transforms one, its photos undistorted to pinhole
-//! cameras where the lens is distorted ([`super::undistort`]) and at the training resolution,
-//! the train/test split of the original `--eval` (every 8th image in name order is held
+//! as the initial Gaussians) or a transforms one, its photos as taken with their cameras
+//! carrying the lens (distorted, fisheye, equirectangular: trained through the lens), or
+//! with [`LensMode::Undistort`] undistorted to pinhole cameras where the lens is distorted
+//! ([`super::undistort`]), at the training resolution, the train/test split of the original `--eval` (every 8th image in name order is held
 //! out: the `llffhold` rule `verisplat eval` uses) and the scene extent the learning rates
 //! and densification scale with.
 
 use super::undistort::Undistortion;
 use crate::core::camera::colmap::{self, Point3D};
 use crate::core::camera::distortion::{self, Distortion};
-use crate::core::camera::Camera;
+use crate::core::camera::{Camera, Lens};
 use std::path::{Path, PathBuf};
+
+/// What the trainer does with a lens other than the pinhole (`verisplat train
+/// --undistort`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LensMode {
+    /// The photos as taken, each camera carrying its lens (Brown-Conrady, fisheye,
+    /// equirectangular): the renders and the backward pass go through the lens. The
+    /// default.
+    #[default]
+    Through,
+    /// The photos of distorted and fisheye cameras undistorted to pinhole views at load
+    /// time, cropped to the largest rectangle inside the photo ([`super::undistort`]);
+    /// a lens that cannot be undistorted (equirectangular) is refused.
+    Undistort,
+}
+
+impl LensMode {
+    /// `through` or `undistort`, as the model directory's [`LENS_FILE`] says it.
+    pub fn name(self) -> &'static str {
+        match self {
+            LensMode::Through => "through",
+            LensMode::Undistort => "undistort",
+        }
+    }
+}
+
+/// The file of a model directory that records how the cameras' lenses were trained with
+/// (written when a data set camera has a lens other than the pinhole).
+pub const LENS_FILE: &str = "lenses.json";
 
 /// Every `LLFF_HOLD`-th image (in name order, from the first) is a test image with `--eval`.
 pub const LLFF_HOLD: usize = 8;
@@ -41,8 +71,62 @@ pub struct Dataset {
     /// the cameras' centre, within the extent.
     pub random_box: Option<([f32; 3], f32)>,
     /// How the photos of distorted cameras were undistorted (by image name; none for
-    /// pinhole cameras), for the model directory's `undistortion.json`.
+    /// pinhole cameras, and none through the lens), for the model directory's
+    /// `undistortion.json`.
     pub undistorted: Vec<Undistortion>,
+    /// What was done with the lenses.
+    pub lenses: LensMode,
+}
+
+impl Dataset {
+    /// Every view, the held-out ones first (the order of the model's `cameras.json`).
+    pub fn views(&self) -> impl Iterator<Item = &View> {
+        self.test.iter().chain(&self.train)
+    }
+
+    /// How many photos were taken through each lens other than the pinhole (by
+    /// [`Lens::name`]), in name order: the lenses of the cameras trained through, and
+    /// with [`LensMode::Undistort`] those the undistorted photos were taken with.
+    pub fn lens_counts(&self) -> Vec<(&'static str, usize)> {
+        let mut counts = std::collections::BTreeMap::new();
+        let lenses = self.views().map(|v| v.camera.lens.clone()).chain(
+            self.undistorted
+                .iter()
+                .map(|u| Lens::from_distortion(&u.distortion)),
+        );
+        for lens in lenses.filter(|l| !l.is_pinhole()) {
+            *counts.entry(lens.name()).or_insert(0) += 1;
+        }
+        counts.into_iter().collect()
+    }
+
+    /// The model directory's [`LENS_FILE`]: how the lenses were trained with and the photos
+    /// of each lens; `None` when every photo is a pinhole camera's.
+    pub fn lens_record(&self) -> Option<String> {
+        let counts = self.lens_counts();
+        if counts.is_empty() {
+            return None;
+        }
+        let about = match self.lenses {
+            LensMode::Through => {
+                "verisplat train trained through each camera's lens: the photos as taken, \
+                 every render and its backward pass through the lens of cameras.json"
+            }
+            LensMode::Undistort => {
+                "verisplat train --undistort undistorted the photos of distorted cameras to \
+                 the pinhole cameras of cameras.json, as undistortion.json records"
+            }
+        };
+        let record = serde_json::json!({
+            "about": about,
+            "lenses": self.lenses.name(),
+            "photos": counts
+                .iter()
+                .map(|(name, n)| (name.to_string(), serde_json::json!(n)))
+                .collect::<serde_json::Map<_, _>>(),
+        });
+        serde_json::to_string_pretty(&record).ok()
+    }
 }
 
 /// An error naming the file and what is wrong with it.
@@ -114,10 +198,21 @@ fn rgba_planes(
 }
 
 /// Reads the COLMAP data set at `dir`: the model (`dir/sparse/0`, `dir/sparse` or `dir`),
-/// the photos in `dir/images` (PNG or JPEG, the size the model says, undistorted where the
-/// camera model is distorted, scaled to `resolution`), and with `eval` holds out every
-/// 8th image.
+/// the photos in `dir/images` (PNG or JPEG, the size the model says, as taken, each camera
+/// with the lens of its model, scaled to `resolution`), and with `eval` holds out every
+/// 8th image. [`load_colmap_with`] undistorts them instead.
 pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dataset, DataError> {
+    load_colmap_with(dir, resolution, eval, LensMode::Through)
+}
+
+/// [`load_colmap`] with the lenses as `lenses` says: through them, or the photos of
+/// distorted camera models undistorted to pinhole cameras ([`LensMode::Undistort`]).
+pub fn load_colmap_with(
+    dir: &Path,
+    resolution: Resolution,
+    eval: bool,
+    lenses: LensMode,
+) -> Result<Dataset, DataError> {
     let (mut cameras, _) =
         colmap::load_colmap_model_distorted(dir).map_err(|e| data_error(dir, e.to_string()))?;
     if cameras.is_empty() {
@@ -144,7 +239,7 @@ pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dat
         use rayon::prelude::*;
         cameras
             .par_iter()
-            .map(|(cam, d)| load_view(&images, cam, d.as_ref(), resolution))
+            .map(|(cam, d)| load_view(&images, cam, d.as_ref(), resolution, lenses))
             .collect()
     };
     let mut train = Vec::new();
@@ -174,16 +269,18 @@ pub fn load_colmap(dir: &Path, resolution: Resolution, eval: bool) -> Result<Dat
         extent,
         random_box: None,
         undistorted,
+        lenses,
     })
 }
 
-/// The photo of `cam` in `images` as a view (undistorted through `distortion`, with how),
-/// at `resolution`.
+/// The photo of `cam` in `images` as a view at `resolution`: taken through the lens of
+/// `distortion`, or with [`LensMode::Undistort`] undistorted through it (with how).
 fn load_view(
     images: &Path,
     cam: &Camera,
     distortion: Option<&Distortion>,
     resolution: Resolution,
+    lenses: LensMode,
 ) -> Result<(View, Option<Undistortion>), DataError> {
     let path = images.join(&cam.name);
     let planes =
@@ -199,7 +296,16 @@ fn load_view(
     }
     let [r, g, b, _] = rgba_planes(&planes, &path)?;
     let full: Vec<[f32; 3]> = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
-    undistorted_view(cam.clone(), full, distortion, resolution, &path)
+    match (distortion, lenses) {
+        (Some(d), LensMode::Through) => {
+            let cam = Camera {
+                lens: Lens::from_distortion(d),
+                ..cam.clone()
+            };
+            undistorted_view(cam, full, None, resolution, &path)
+        }
+        (d, _) => undistorted_view(cam.clone(), full, d, resolution, &path),
+    }
 }
 
 /// `cam` and its photo `full` undistorted through `distortion` (when given; `path` names
@@ -382,12 +488,28 @@ pub fn is_transforms(dir: &Path) -> bool {
 /// has no extension) with their alpha composited over `background`. With `eval` the test
 /// file's frames are held out (NeRF-synthetic), or every 8th frame of a single
 /// `transforms.json`. No points: the original starts these from random Gaussians in the
-/// cube of half side 1.3 ([`Dataset::random_box`]).
+/// cube of half side 1.3 ([`Dataset::random_box`]). The photos are as taken, each camera
+/// with the lens its `camera_model` and distortion keys give
+/// ([`crate::core::camera::transforms::lens_from_transforms`]); [`load_transforms_with`]
+/// undistorts them instead.
 pub fn load_transforms(
     dir: &Path,
     resolution: Resolution,
     eval: bool,
     background: [f32; 3],
+) -> Result<Dataset, DataError> {
+    load_transforms_with(dir, resolution, eval, background, LensMode::Through)
+}
+
+/// [`load_transforms`] with the lenses as `lenses` says: through them, or the photos of
+/// distorted frames undistorted to pinhole cameras ([`LensMode::Undistort`]; an
+/// `EQUIRECTANGULAR` camera is then refused).
+pub fn load_transforms_with(
+    dir: &Path,
+    resolution: Resolution,
+    eval: bool,
+    background: [f32; 3],
+    lenses: LensMode,
 ) -> Result<Dataset, DataError> {
     let split = dir.join("transforms_train.json").is_file();
     let (train_file, test_file) = if split {
@@ -399,14 +521,17 @@ pub fn load_transforms(
         (dir.join("transforms.json"), None)
     };
     let mut undistorted = Vec::new();
-    let mut train = read_transforms(&train_file, dir, resolution, background, &mut undistorted)?;
+    let read = |file: &Path, undistorted: &mut Vec<Undistortion>| {
+        read_transforms(file, dir, resolution, background, lenses, undistorted)
+    };
+    let mut train = read(&train_file, &mut undistorted)?;
     let mut test = Vec::new();
     match test_file {
         Some(f) if eval => {
             if !f.is_file() {
                 return Err(data_error(&f, "is missing; --eval holds out its frames"));
             }
-            test = read_transforms(&f, dir, resolution, background, &mut undistorted)?;
+            test = read(&f, &mut undistorted)?;
         }
         None if eval => {
             let all = std::mem::take(&mut train);
@@ -432,16 +557,19 @@ pub fn load_transforms(
         extent,
         random_box: Some(([0.0; 3], 1.3)),
         undistorted,
+        lenses,
     })
 }
 
-/// The views of the transforms file `file` of data set `dir`, their photos undistorted
-/// where the lens is (how, appended to `undistorted`).
+/// The views of the transforms file `file` of data set `dir`, their cameras with their
+/// lens or, with [`LensMode::Undistort`], their photos undistorted where the lens is
+/// distorted (how, appended to `undistorted`).
 fn read_transforms(
     file: &Path,
     dir: &Path,
     resolution: Resolution,
     background: [f32; 3],
+    lenses: LensMode,
     undistorted: &mut Vec<Undistortion>,
 ) -> Result<Vec<View>, DataError> {
     let text =
@@ -480,20 +608,39 @@ fn read_transforms(
         let planes = crate::io::image_file::read_image(&path)
             .map_err(|e| data_error(&path, e.to_string()))?;
         let (w, h) = (planes.width, planes.height);
-        // Intrinsics: per frame, else the file's; a focal length, else the field of view.
+        // The lens: the camera's own, or (undistorting) the distortion of its photo.
+        let value = |k: &str| f.get(k).or_else(|| doc.get(k));
+        let (lens, distortion) = match lenses {
+            LensMode::Through => (
+                crate::core::camera::transforms::lens_from_transforms(&value).map_err(bad)?,
+                None,
+            ),
+            LensMode::Undistort => (
+                Lens::Pinhole,
+                distortion::from_transforms(&value).map_err(bad)?,
+            ),
+        };
+        let sphere = lens == Lens::FULL_SPHERE;
+        // Intrinsics: per frame, else the file's; a focal length, else the field of view
+        // (nerfstudio's equirectangular camera needs neither: fx = W / 2, fy = H).
         let key = |k: &str| num(&f[k]).or_else(|| num(&doc[k]));
         let fx = match (key("fl_x"), key("camera_angle_x")) {
             (Some(fl), _) => fl,
             (None, Some(angle)) if angle > 0.0 && angle < std::f64::consts::PI => {
                 w as f64 / (2.0 * (angle / 2.0).tan())
             }
+            (None, None) if sphere => w as f64 / 2.0,
             _ => {
                 return Err(bad(
                     "no fl_x or camera_angle_x gives the focal length".into()
                 ))
             }
         };
-        let fy = key("fl_y").unwrap_or(fx);
+        let fy = match key("fl_y") {
+            Some(fl) => fl,
+            None if sphere && key("fl_x").is_none() => h as f64,
+            None => fx,
+        };
         let cx = key("cx").unwrap_or(w as f64 / 2.0);
         let cy = key("cy").unwrap_or(h as f64 / 2.0);
         // OpenGL camera axes (y up, z back) to ours (y down, z forward), then invert.
@@ -517,16 +664,19 @@ fn read_transforms(
             cy: cy as f32,
             rotation: rotation.as_mat3(),
             translation: (-(rotation * centre)).as_vec3(),
-            lens: crate::core::camera::Lens::Pinhole,
+            lens,
         };
         camera
             .validate()
             .map_err(|e| bad(format!("its camera is not valid: {e}")))?;
-        let lens =
-            distortion::from_transforms(&|k: &str| f.get(k).or_else(|| doc.get(k))).map_err(bad)?;
         // A lens's coefficients hold for the size the intrinsics were given at.
         let size = (key("w"), key("h"));
-        if lens.is_some() && size != (None, None) && size != (Some(w as f64), Some(h as f64)) {
+        let distorted = distortion.is_some()
+            || matches!(
+                camera.lens,
+                Lens::RadialTangential { .. } | Lens::Fisheye { .. }
+            );
+        if distorted && size != (None, None) && size != (Some(w as f64), Some(h as f64)) {
             return Err(bad(format!(
                 "its photo {} is {w}x{h} but \"w\" and \"h\" say {}x{}; the lens \
                  distortion is given for the size the intrinsics are",
@@ -546,14 +696,16 @@ fn read_transforms(
                 ]
             })
             .collect();
-        let (view, how) = undistorted_view(camera, full, lens.as_ref(), resolution, &path)?;
+        let (view, how) = undistorted_view(camera, full, distortion.as_ref(), resolution, &path)?;
         views.push(view);
         undistorted.extend(how);
     }
     Ok(views)
 }
 
-/// `camera` and its photo at `resolution`.
+/// `camera` and its photo at `resolution`: the focal lengths and principal point scale with
+/// the image (as [`Camera::with_resolution`]); a lens's coefficients are in normalised
+/// coordinates (Brown-Conrady, fisheye) or angles (equirectangular), so the lens is kept.
 fn scaled_view(cam: Camera, full: Vec<[f32; 3]>, resolution: Resolution) -> View {
     let (w, h) = resolution.size(cam.width, cam.height);
     let image = if (w, h) == (cam.width, cam.height) {

@@ -13,7 +13,9 @@ use verisplat::{note, outln};
 #[derive(Args)]
 #[command(after_help = "Examples:
   verisplat train data/garden -o models/garden --eval -r 4
-  verisplat train data/lego -o models/lego --white-background --iterations 7000")]
+  verisplat train data/lego -o models/lego --white-background --iterations 7000
+  verisplat train data/fisheye -o models/fisheye --eval -r 2          # through the lens
+  verisplat train data/fisheye -o models/fisheye-pinhole --undistort  # undistorted photos")]
 pub(crate) struct TrainArgs {
     /// A COLMAP data set: images/ and sparse/0/ (text or binary; points3D starts the
     /// Gaussians), or a NeRF-synthetic (transforms_train.json, transforms_test.json) or
@@ -38,6 +40,12 @@ pub(crate) struct TrainArgs {
     /// [default: 1, the photos' size].
     #[arg(short = 'r', long)]
     pub(crate) resolution: Option<u32>,
+    /// Undistort the photos of distorted and fisheye cameras (COLMAP OPENCV, OPENCV_FISHEYE,
+    /// ...; transforms.json k1.., p1, p2) to pinhole views at load time, cropped to the
+    /// largest rectangle inside the photo (recorded in MODEL_DIR/undistortion.json),
+    /// instead of training through the lens on the photos as taken (the default).
+    #[arg(long)]
+    pub(crate) undistort: bool,
     /// Largest SH degree (0-3).
     #[arg(long, visible_alias = "sh_degree", default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=3))]
     pub(crate) sh_degree: u32,
@@ -236,6 +244,16 @@ pub(crate) fn train(args: &TrainArgs) -> Result<()> {
         verisplat::train::run::TrainError::Interrupted { message } => {
             anyhow::Error::new(super::render::Interrupted(message))
         }
+        // A device that cannot take a lens's backward pass: the other way to train.
+        e @ verisplat::train::run::TrainError::Gpu(_)
+            if e.to_string().contains(" lens")
+                && data.views().any(|v| !v.camera.lens.is_pinhole()) =>
+        {
+            anyhow::anyhow!(
+                "{}: {e} (--undistort trains on pinhole views undistorted from the photos)",
+                args.output.display()
+            )
+        }
         e => anyhow::anyhow!("{}: {e}", args.output.display()),
     })?;
     bar.finish_and_clear();
@@ -342,16 +360,22 @@ fn check_args(args: &TrainArgs) -> Result<()> {
 /// Loads the data set (COLMAP, or NeRF-synthetic / nerfstudio transforms) and notes
 /// what it holds.
 fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
-    let resolution = verisplat::train::data::Resolution(args.resolution.unwrap_or(1));
-    let data = if verisplat::train::data::is_transforms(&args.dataset) {
+    use verisplat::train::data::{self as sets, LensMode};
+    let resolution = sets::Resolution(args.resolution.unwrap_or(1));
+    let lenses = if args.undistort {
+        LensMode::Undistort
+    } else {
+        LensMode::Through
+    };
+    let data = if sets::is_transforms(&args.dataset) {
         let bg = if args.white_background {
             [1.0; 3]
         } else {
             [0.0; 3]
         };
-        verisplat::train::data::load_transforms(&args.dataset, resolution, args.eval, bg)?
+        sets::load_transforms_with(&args.dataset, resolution, args.eval, bg, lenses)?
     } else {
-        verisplat::train::data::load_colmap(&args.dataset, resolution, args.eval)?
+        sets::load_colmap_with(&args.dataset, resolution, args.eval, lenses)?
     };
     if !args.quiet {
         note!(
@@ -367,6 +391,21 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
             },
             data.extent
         );
+        let through: Vec<String> = match data.lenses {
+            LensMode::Through => data
+                .lens_counts()
+                .iter()
+                .map(|(lens, n)| format!("{n} {lens}"))
+                .collect(),
+            LensMode::Undistort => Vec::new(),
+        };
+        if !through.is_empty() {
+            note!(
+                "training through the lens on the photos as taken ({} camera(s); recorded in the model's {}); --undistort trains on pinhole views undistorted from them instead",
+                through.join(", "),
+                sets::LENS_FILE
+            );
+        }
         if let Some(u) = data.undistorted.first() {
             note!(
                 "undistorted {} photo(s) ({} lens) to pinhole cameras, e.g. {}x{} -> {}x{} (recorded in the model's {})",

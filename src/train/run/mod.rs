@@ -130,8 +130,19 @@ impl TrainOptions {
             // The original's leave the fingerprints of earlier checkpoints as they were.
             crate::core::model::Rules::Original => "",
             crate::core::model::Rules::Gsplat => "|rules gsplat",
-        }
+        } + &lens_fingerprint(data)
     }
+}
+
+/// The training cameras' lenses when one is not the pinhole (a run through a lens resumes
+/// only from a checkpoint of the same lenses); empty otherwise, so that the fingerprints of
+/// pinhole data sets, and of undistorted ones, stay those of earlier checkpoints.
+fn lens_fingerprint(data: &Dataset) -> String {
+    if data.train.iter().all(|v| v.camera.lens.is_pinhole()) {
+        return String::new();
+    }
+    let lenses: Vec<_> = data.train.iter().map(|v| &v.camera.lens).collect();
+    format!("|lenses {lenses:?}")
 }
 
 /// Evaluation of a set of views.

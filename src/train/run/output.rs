@@ -45,8 +45,10 @@ pub(super) fn points_ply(points: &[crate::core::camera::colmap::Point3D]) -> Vec
 }
 
 /// `cameras.json` (the test cameras, then the training ones, the original's order, at the
-/// photos' own size), `cfg_args` (the original's arguments, as its readers parse them) and,
-/// when photos were undistorted, `undistortion.json` (how, for `verisplat eval`).
+/// photos' own size, each with its lens), `cfg_args` (the original's arguments, as its
+/// readers parse them), when a photo's lens is not the pinhole `lenses.json` (trained
+/// through the lens or undistorted, [`crate::train::data::Dataset::lens_record`]) and, when
+/// photos were undistorted, `undistortion.json` (how, for `verisplat eval`).
 pub(super) fn write_cameras_and_cfg(
     job: &Job,
     written: &mut Vec<PathBuf>,
@@ -83,6 +85,10 @@ pub(super) fn write_cameras_and_cfg(
         if data.test.is_empty() { "False" } else { "True" },
     );
     write(&out.join("cfg_args"), cfg.as_bytes(), overwrite, written)?;
+    if let Some(record) = data.lens_record() {
+        let path = out.join(crate::train::data::LENS_FILE);
+        write(&path, record.as_bytes(), overwrite, written)?;
+    }
     if !data.undistorted.is_empty() {
         let named: Vec<_> = data
             .undistorted
