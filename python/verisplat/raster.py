@@ -342,8 +342,9 @@ class Rasterizer:
         Gaussian is then projected by the unscented transform through the lens's exact map
         (``means2d`` its mean, ``conics`` its covariance's inverse; ``gaussian_depths`` and
         ``depths`` the distance from the camera through a fisheye or equirectangular lens,
-        else ``z``). The backward pass through a lens comes with issue 49's backward pass
-        through the sigma points: a backend without it yet refuses a lens frame by name."""
+        else ``z``). The reference backend's backward pass differentiates through the lens
+        (the chain rule through the sigma points); the device refuses a lens frame by name
+        until its own lands (issue 49)."""
         cam = Camera(viewmat, K, width, height, lens=lens)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
         shader_bytes = None
