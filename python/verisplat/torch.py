@@ -535,7 +535,11 @@ def _refuse(rules, near_plane, far_plane, radius_clip, eps2d, rasterize_mode, ca
     for name, value in gsplat_kw.items():
         off = _OFF_KEYWORDS[name]
         bad = value is not None if off is None else bool(value)
-        refusals.append((bad, f"{name} is not supported: only {off!r} (got {value!r})"))
+        why = f"{name} is not supported: only {off!r} (got {value!r})"
+        if name == "with_eval3d":
+            why += ("; verisplat blends each Gaussian in 2D after its projection (gsplat's 3DGUT "
+                    "pairs with_eval3d with with_ut=True, which is supported without it)")
+        refusals.append((bad, why))
     for bad, why in refusals:
         if bad:
             raise ValueError(why)
