@@ -55,6 +55,7 @@ def lens_kwargs(case, C):
     return {
         "ortho": dict(camera_model="ortho"),
         "ortho-ut": dict(camera_model="ortho", with_ut=True),
+        "fisheye": dict(camera_model="fisheye"),
         "pinhole-ut": dict(with_ut=True),
         "opencv-ut": dict(with_ut=True, radial_coeffs=rep(RADIAL), tangential_coeffs=rep(TANGENTIAL)),
         "fisheye-ut": dict(camera_model="fisheye", with_ut=True),
@@ -193,18 +194,21 @@ def ours(s, cams, case, degree=1, ortho=False):
                          rules="gsplat", **lens_kwargs(case, len(cams)))
 
 
-# 1. Orthographic (with_ut False: gsplat's EWA rule, exact for a linear map; with_ut True:
-# the unscented transform, exact too) against gsplat's torch projection and its blend.
-@pytest.mark.parametrize("case", ["ortho", "ortho-ut"])
-def test_orthographic_equals_gsplats_torch_projection_and_its_picture(case):
+# 1. gsplat's EWA rule (with_ut=False) through the orthographic lens (exact for a linear
+# map, as the unscented transform with with_ut=True) and the fisheye (gsplat's linearised
+# _fisheye_proj, drawn as given), against gsplat's torch projection and its blend.
+@pytest.mark.parametrize("case", ["ortho", "ortho-ut", "fisheye"])
+def test_ewa_lenses_equal_gsplats_torch_projection_and_its_picture(case):
     s = scene(n=120, seed=40, degree=1)
     cams = cameras(2)
-    out, alphas, meta = ours(s, cams, case, ortho=True)
-    vm, Ks = cam_tensors(cams, ortho=True)
+    ortho = case.startswith("ortho")
+    model = "ortho" if ortho else "fisheye"
+    out, alphas, meta = ours(s, cams, case, ortho=ortho)
+    vm, Ks = cam_tensors(cams, ortho=ortho)
     means, quats, scales, opac = f64(s, "means", "quats", "scales", "opacities")
     covars, _ = gs_torch._quat_scale_to_covar_preci(quats, scales, True, False, triu=False)
     radii, m2d, depths, conics, _ = gs_torch._fully_fused_projection(
-        means, covars, vm.double(), Ks.double(), W, H, camera_model="ortho")
+        means, covars, vm.double(), Ks.double(), W, H, camera_model=model)
     worst = {"means2d": 0.0, "conics": 0.0, "image": 0.0}
     for c in range(2):
         vis = (meta["radii"][c, :, 0] > 0) & (radii[c, :, 0] > 0)
@@ -212,16 +216,37 @@ def test_orthographic_equals_gsplats_torch_projection_and_its_picture(case):
         worst["means2d"] = max(worst["means2d"], float((meta["means2d"][c, vis].double() - m2d[c, vis]).abs().max()))
         worst["conics"] = max(worst["conics"], rel(meta["conics"][c, vis], conics[c, vis]))
         assert torch.allclose(meta["depths"][c, vis].double(), depths[c, vis], rtol=1e-6)
-        # gsplat's ortho projection's covariance, its culls and box (the EWA path's), blended.
-        _, cov2d = gs_torch._ortho_proj(*(x[None] for x in (
+        # gsplat's projection's covariance, its culls and box (the EWA path's), blended.
+        proj = gs_torch._ortho_proj if ortho else gs_torch._fisheye_proj
+        _, cov2d = proj(*(x[None] for x in (
             (means @ vm[c, :3, :3].double().T + vm[c, :3, 3].double()),
             vm[c, :3, :3].double() @ covars @ vm[c, :3, :3].double().T, Ks[c].double())), W, H)
         conic, _, keep = gsplat_finish(m2d[c], cov2d[0], depths[c], opac, W, H, ut=False)
         rgb, alpha = dense_blend(m2d[c], conic, opac, sh_rgb(s, vm[c].double(), 1), depths[c], keep, W, H)
         worst["image"] = max(worst["image"], float((out[c].double() - rgb).abs().max()),
                              float((alphas[c, ..., 0].double() - alpha).abs().max()))
-    # Measured: means2d 3.3e-6 px, conics 2.1e-7 (relative L2), image 4.8e-7.
+    # Measured: means2d 3.3e-6 px, conics 2.1e-7 (relative L2), image 4.8e-7 (orthographic);
+    # 3.4e-6 px, 2.3e-7, 7.8e-7 (fisheye).
     assert worst["means2d"] <= 1e-4 and worst["conics"] <= 1e-5 and worst["image"] <= 1e-4, worst
+
+
+def test_linearised_fisheye_meta_packed_or_not_and_its_losses():
+    s = scene(n=80, seed=51, degree=1)
+    cams = cameras(2)
+    vm, Ks = cam_tensors(cams)
+    t = tensors(s)
+    out_u, _, mu = rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=1,
+                                 camera_model="fisheye", packed=False)
+    out_p, _, mp = rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=1,
+                                 camera_model="fisheye")
+    assert torch.equal(out_u, out_p)
+    c, g = mp["camera_ids"], mp["gaussian_ids"]
+    assert len(g) == int((mu["radii"][..., 0] > 0).sum()) > 100
+    for key in ("means2d", "depths", "conics", "opacities", "radii"):
+        assert torch.equal(mp[key].detach(), mu[key].detach()[c, g]), key
+    # A loss on meta reaches the Gaussians through gsplat's projection in torch.
+    (mp["means2d"].sum() + mp["depths"].sum() + mp["conics"].sum()).backward()
+    assert t["means"].grad.abs().sum() > 0 and t["scales"].grad.abs().sum() > 0
 
 
 # 2. The unscented transform through gsplat's camera models, and the picture.
@@ -401,7 +426,7 @@ def test_the_renderer_draws_a_cameras_lens_as_the_cpu_reference(demo, renderer):
 
 # 7. Refusals: a sentence, never a wrong picture.
 @pytest.mark.parametrize("kw, match", [
-    (dict(camera_model="fisheye"), "with_ut=False: verisplat has no linearised"),
+    (dict(camera_model="fisheye", radial_coeffs=torch.zeros(2, 4)), "radial_coeffs need with_ut=True"),
     (dict(camera_model="ftheta", with_ut=True), "camera_model='ftheta' is not supported"),
     (dict(camera_model="spherical"), "camera_model must be 'pinhole', 'ortho' or 'fisheye'"),
     (dict(radial_coeffs=torch.zeros(2, 6)), "radial_coeffs need with_ut=True"),
@@ -524,6 +549,60 @@ def test_torch_gradients_through_a_lens_equal_the_reference_and_finite_differenc
     err = rel(analytic, numeric)
     assert err <= 1e-3, f"camera gradients: relative L2 error {err:.2e} against finite differences"
     assert np.abs(numeric).max() > 1.0
+
+
+@WAITS
+@pytest.mark.parametrize("mode", ["classic", "antialiased"])
+def test_linearised_fisheye_gradients_equal_autograd_of_gsplats_picture(mode):
+    # gsplat's linearised fisheye (with_ut=False): its picture written in torch (float64,
+    # _fisheye_proj, the EWA culls and box, the dense blend) differentiated by autograd,
+    # against verisplat's (the device's backward pass of the 2D Gaussians it draws, chained
+    # in torch through the same projection), for the Gaussians and the cameras.
+    aa = mode == "antialiased"
+    s = scene(n=60, seed=50, degree=1)
+    cams = cameras(2)
+    vm, Ks = cam_tensors(cams)
+    vm.requires_grad_()
+    Ks.requires_grad_()
+    t = tensors(s)
+    out, alphas, _ = rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=1,
+                                   camera_model="fisheye", rules="gsplat", rasterize_mode=mode)
+    g = torch.Generator().manual_seed(50)
+    wc = torch.randn(out.shape, generator=g, dtype=torch.float64)
+    wa = torch.randn(alphas.shape[:-1], generator=g, dtype=torch.float64)
+    ((out * wc).sum() + (alphas[..., 0] * wa).sum()).backward()
+    leaves = {k: torch.tensor(s[k], dtype=torch.float64, requires_grad=True) for k in GROUPS}
+    vm64 = vm.detach().double().requires_grad_()
+    K64 = Ks.detach().double().requires_grad_()
+    from verisplat._projection import sh_basis
+
+    total = 0.0
+    for c in range(2):
+        R, tr = vm64[c, :3, :3], vm64[c, :3, 3]
+        covars, _ = gs_torch._quat_scale_to_covar_preci(leaves["quats"], leaves["scales"], True,
+                                                        False, triu=False)
+        mean_c = leaves["means"] @ R.T + tr
+        m2d, cov2d = gs_torch._fisheye_proj(mean_c[None], (R @ covars @ R.T)[None], K64[c:c + 1], W, H)
+        opac = leaves["opacities"]
+        if aa:
+            cv = cov2d[0]
+            det0 = cv[:, 0, 0] * cv[:, 1, 1] - cv[:, 0, 1] ** 2
+            det = (cv[:, 0, 0] + 0.3) * (cv[:, 1, 1] + 0.3) - cv[:, 0, 1] ** 2
+            opac = opac * torch.sqrt(torch.clamp_min(det0 / det, 0.0))
+        conic, _, keep = gsplat_finish(m2d[0], cov2d[0], mean_c[:, 2], opac, W, H, ut=False)
+        d = leaves["means"] + tr @ R
+        dirs = d / d.norm(dim=-1, keepdim=True)
+        rgb = torch.clamp_min((leaves["colors"][:, :4] * sh_basis(dirs, 1)[:, :, None]).sum(1) + 0.5, 0.0)
+        img, alpha = dense_blend(m2d[0], conic, opac, rgb, mean_c[:, 2], keep, W, H)
+        total = total + (img * wc[c]).sum() + (alpha * wa[c]).sum()
+    total.backward()
+    for k in GROUPS:
+        err = rel(t[k].grad.numpy(), leaves[k].grad.numpy())
+        assert err <= 1e-3, f"{k}: relative L2 error {err:.2e} against autograd of gsplat's picture"
+    for name, ours_g, ref_g in (("viewmats", vm.grad, vm64.grad), ("Ks", Ks.grad, K64.grad)):
+        mask = ref_g != 0
+        err = rel(ours_g[mask].numpy(), ref_g[mask].numpy())
+        assert err <= 1e-3, f"{name}: relative L2 error {err:.2e} against autograd of gsplat's picture"
 
 
 # 9. The chain rule the torch function applies through a lens (camera gradients, and meta

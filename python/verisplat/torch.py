@@ -31,9 +31,10 @@ either rules. Neither has a far plane (gsplat's default 1e10 is accepted). gspla
 are taken as gsplat takes them: ``camera_model`` ``"pinhole"``, ``"ortho"`` or ``"fisheye"``,
 ``with_ut=True`` (the unscented transform through the exact lens, with ``radial_coeffs``
 and ``tangential_coeffs``), ``"ortho"`` by either rule (the unscented transform is exact
-for it); docs/pytorch.md says where they differ. Options verisplat does not implement are
-refused (``radius_clip``, ``camera_model="ftheta"``, the fisheye's EWA rule
-(``with_ut=False``), ``thin_prism_coeffs``, ``covars``, ``with_eval3d=True``); those
+for it), the fisheye with ``with_ut=False`` by gsplat's linearised rule (projected in
+torch, the 2D Gaussians drawn as given: ``_carried``); docs/pytorch.md says where they
+differ. Options verisplat does not implement are refused (``radius_clip``,
+``camera_model="ftheta"``, ``thin_prism_coeffs``, ``covars``, ``with_eval3d=True``); those
 needing them keep gsplat. ``rasterize_mode="antialiased"`` (opacities times sqrt(det(cov2d) / det(cov2d +
 0.3 I)), Mip-Splatting's compensation) is differentiable as the classic mode is. The
 argument table of ``docs/pytorch.md`` says, for each of gsplat's arguments and meta keys,
@@ -560,9 +561,10 @@ def _gsplat_fisheye_max_theta(k: np.ndarray) -> float:
 
 
 def _lenses(layout: _Layout, camera_model, with_ut, radial, tangential):
-    """Each camera's lens ([B][C], None: the pinhole's EWA projection) from gsplat's camera
-    model, ``with_ut`` and distortion coefficients; ValueError for a combination gsplat
-    does not draw or verisplat cannot."""
+    """Each camera's lens ([B][C], None: the pinhole's EWA projection, or the linearised
+    fisheye's, which ``_carried`` draws) from gsplat's camera model, ``with_ut`` and
+    distortion coefficients; ValueError for a combination gsplat does not draw or
+    verisplat cannot."""
     given = [n for n, v in (("radial_coeffs", radial), ("tangential_coeffs", tangential))
              if v is not None]
     if given and camera_model == "ortho":
@@ -571,12 +573,6 @@ def _lenses(layout: _Layout, camera_model, with_ut, radial, tangential):
         raise ValueError(
             f"{' and '.join(given)} need with_ut=True: as in gsplat, a distorted lens is "
             "projected by the unscented transform (the EWA rule has no distortion)"
-        )
-    if camera_model == "fisheye" and not with_ut:
-        raise ValueError(
-            "camera_model='fisheye' with with_ut=False: verisplat has no linearised (EWA) "
-            "fisheye projection; pass with_ut=True, which projects through the same fisheye "
-            "by the unscented transform (gsplat's 3DGUT)"
         )
     if camera_model == "fisheye" and tangential is not None:
         raise ValueError(
@@ -599,6 +595,8 @@ def _lenses(layout: _Layout, camera_model, with_ut, radial, tangential):
         tangential = _np(tangential).reshape(layout.B, layout.C, 2).astype(np.float64)
 
     def lens(b: int, c: int) -> Optional[Dict[str, Any]]:
+        if camera_model == "fisheye" and not with_ut:
+            return None  # gsplat's linearised fisheye, projected in torch (_carried)
         if camera_model == "ortho":
             return {"kind": "orthographic"}
         if camera_model == "fisheye":
@@ -791,10 +789,17 @@ def rasterization(
     # gsplat builds the covariance from the scales' squares: the sign is the gradient's.
     # A zero scale is the smallest normal float (its gradient is 0, as gsplat's is).
     unsigned = scales.abs().clamp_min(torch.finfo(torch.float32).tiny)
-    means2d, depths, conics, blended, link, passes = _Project.apply(
-        means, quats, unsigned, opacities, colors, viewmats, Ks, call)
-    rgb, alphas, expected = _Rasterize.apply(
-        means2d, link, means, quats, unsigned, opacities, colors, viewmats, Ks, passes)
+    if camera_model == "fisheye" and not with_ut:
+        from . import _carried
+
+        rgb, alphas, expected, meta = _carried.rasterize(
+            call, means, quats, unsigned, opacities, colors, viewmats, Ks)
+    else:
+        means2d, depths, conics, blended, link, passes = _Project.apply(
+            means, quats, unsigned, opacities, colors, viewmats, Ks, call)
+        rgb, alphas, expected = _Rasterize.apply(
+            means2d, link, means, quats, unsigned, opacities, colors, viewmats, Ks, passes)
+        meta = _meta(passes, (means2d, depths, conics, blended))
     if bg_colour is not None:
         rgb = rgb + (1.0 - alphas) * bg_colour
     depth = expected * alphas if render_mode in ("D", "RGB+D") else expected
@@ -806,4 +811,4 @@ def rasterization(
         out = depth
     else:
         out = torch.cat([rgb, depth], dim=-1)
-    return out, alphas, _meta(passes, (means2d, depths, conics, blended))
+    return out, alphas, meta
