@@ -39,11 +39,16 @@ _IDENTITY = np.eye(4, dtype=np.float32)
 _UNIT_K = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32)
 
 
-def fisheye_ewa(means, quats, scales, viewmat, K):
+def fisheye_ewa(means, quats, scales, viewmat, K, near_plane=None):
     """gsplat 1.5.3's ``_fisheye_proj`` (and ``_world_to_cam``) of one camera, formula for
-    formula: 2D means [N, 2], covariances (xx, xy, yy) [N, 3] before eps2d, depths z [N]."""
+    formula: 2D means [N, 2], covariances (xx, xy, yy) [N, 3] before eps2d, depths z [N].
+    A Gaussian at or behind ``near_plane`` (culled) is projected from a point in front
+    instead, so that its values and derivatives stay finite (its gradient is 0)."""
     R, t = viewmat[:3, :3], viewmat[:3, 3]
     v = means @ R.T + t
+    if near_plane is not None:
+        gone = (v[:, 2] <= near_plane).detach()[:, None]
+        v = torch.where(gone, torch.tensor([0.0, 0.0, 1.0], dtype=v.dtype), v)
     m = _projection._rotations(quats) * scales[:, None, :]
     cov = R @ (m @ m.transpose(1, 2)) @ R.T
     x, y, z = v.unbind(-1)
@@ -66,7 +71,8 @@ def fisheye_ewa(means, quats, scales, viewmat, K):
     c00 = torch.einsum("ni,nij,nj->n", j0, cov, j0)
     c01 = torch.einsum("ni,nij,nj->n", j0, cov, j1)
     c11 = torch.einsum("ni,nij,nj->n", j1, cov, j1)
-    return means2d, torch.stack([c00, c01, c11], -1), z
+    depth = z if near_plane is None else (means @ R.T + t)[:, 2]
+    return means2d, torch.stack([c00, c01, c11], -1), depth
 
 
 def conics_of(cov, antialiased: bool, rules: str):
@@ -115,7 +121,8 @@ def project_all(call, means, quats, scales, colors, viewmats, Ks):
     cols = colors.reshape((B,) + tuple(colors.shape[len(layout.batch):]))
     m2d, cov, depth, rgb = [], [], [], []
     for b in range(B):
-        row = [fisheye_ewa(means[b], quats[b], scales[b], vms[b, c], ks[b, c]) for c in range(C)]
+        row = [fisheye_ewa(means[b], quats[b], scales[b], vms[b, c], ks[b, c], call.near_plane)
+               for c in range(C)]
         m2d.append(torch.stack([r[0] for r in row]))
         cov.append(torch.stack([r[1] for r in row]))
         depth.append(torch.stack([r[2] for r in row]))
@@ -125,7 +132,8 @@ def project_all(call, means, quats, scales, colors, viewmats, Ks):
             if layout.sh_degree is not None:
                 R, t = vms[b, c, :3, :3], vms[b, c, :3, 3]
                 d = means[b] + t @ R  # means - (-R^T t)
-                dirs = d / d.norm(dim=-1, keepdim=True)
+                # (A Gaussian at the camera's centre is culled: its direction is any.)
+                dirs = d / d.norm(dim=-1, keepdim=True).clamp_min(1e-30)
                 k = (layout.sh_degree + 1) ** 2
                 raw = (col[:, :k, :] * _projection.sh_basis(dirs, layout.sh_degree)[:, :, None]).sum(1)
                 col = torch.clamp_min(raw + 0.5, 0.0)
@@ -140,7 +148,13 @@ def native_passes(call, m2d, cov, depth, opacities, colours):
     r = call.rasterizer
     fwds: Dict[Tuple[int, int], list] = {}
     for b, c in layout.pairs():
-        means, quats, scales = carriers(m2d[b, c], cov[b, c], depth[b, c])
+        # A Gaussian behind the near plane (whose projection may not be finite: at the
+        # camera's centre) is culled there: its carrier is put behind the camera.
+        gone = ~((depth[b, c] > call.near_plane) & np.isfinite(m2d[b, c]).all(-1)
+                 & np.isfinite(cov[b, c]).all(-1))
+        m, v, z = m2d[b, c].copy(), cov[b, c].copy(), depth[b, c].copy()
+        m[gone], v[gone], z[gone] = 0.0, (1.0, 0.0, 1.0), -1.0
+        means, quats, scales = carriers(m, v, z)
         fwds[(b, c)] = [
             r.forward(means, quats, scales, opacities[b],
                       np.ascontiguousarray(colours[b, c][:, ch]), _IDENTITY, _UNIT_K,
