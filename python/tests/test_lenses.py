@@ -249,6 +249,21 @@ def test_linearised_fisheye_meta_packed_or_not_and_its_losses():
     assert t["means"].grad.abs().sum() > 0 and t["scales"].grad.abs().sum() > 0
 
 
+def test_linearised_fisheye_culls_gaussians_at_and_behind_the_camera():
+    s = scene(n=40, seed=52, degree=1)
+    cams = cameras(1)
+    vm, Ks = cam_tensors(cams)
+    centre = -(vm[0, :3, :3].T @ vm[0, :3, 3])
+    s["means"][0] = centre.numpy()
+    s["means"][1] = (centre - vm[0, 2, :3]).numpy()  # one unit behind
+    t = tensors(s)
+    _, _, meta = rasterization(*[t[k] for k in GROUPS], vm, Ks, W, H, sh_degree=1,
+                               camera_model="fisheye", packed=False)
+    assert (meta["radii"][0, :2] == 0).all() and (meta["radii"][0, 2:, 0] > 0).sum() > 20
+    (meta["means2d"].sum() + meta["conics"].sum() + meta["depths"].sum()).backward()
+    assert all(bool(torch.isfinite(t[k].grad).all()) for k in ("means", "quats", "scales"))
+
+
 # 2. The unscented transform through gsplat's camera models, and the picture.
 @pytest.mark.parametrize("case", ["pinhole-ut", "opencv-ut", "fisheye-ut", "fisheye-k-ut"])
 def test_unscented_transform_equals_gsplats_and_its_picture(case):
