@@ -225,7 +225,10 @@ void main() {
             uint gaussian = values[batch_end - 1u - li];
             Splat s = splats[gaussian];
             s_gaussian[li] = gaussian;
-            s_mean_opacity[li] = vec4(s.mean_opacity_bound.xyz, s.conic_depth.w);
+            // In a panorama that wraps around, the copy the blend drew in this bin's tile.
+            vec2 mean = wrapped_mean(s.mean_opacity_bound.xy, bin.x * BIN / TILE_SIZE * TILE_SIZE,
+                                     params.modes.z, params.image.x);
+            s_mean_opacity[li] = vec4(mean, s.mean_opacity_bound.z, s.conic_depth.w);
             s_conic[li] = s.conic_depth;
             s_color[li] = s.color_radius;
         }
@@ -305,7 +308,9 @@ void main() {
         vec4 mob = texelFetch(splat_texels, g);
         vec4 cd = texelFetch(splat_texels, g + 1);
         vec3 col = texelFetch(splat_texels, g + 2).rgb;
-        vec4 mo = vec4(mob.xyz, cd.w);
+        // In a panorama that wraps around, the copy the blend drew in this bin's tile.
+        vec2 mean = wrapped_mean(mob.xy, pix0.x / TILE_SIZE * TILE_SIZE, params.modes.z, params.image.x);
+        vec4 mo = vec4(mean, mob.z, cd.w);
         vec4 a0 = vec4(0.0), a1 = vec4(0.0), a2 = vec4(0.0);
         vec4 af[FG];
         zero_features(af);

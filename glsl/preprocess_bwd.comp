@@ -15,6 +15,11 @@
 #ifndef FLOAT_ATOMICS
 #define FLOAT_ATOMICS 0
 #endif
+// 1: the variant for frames through a lens other than the pinhole (the unscented
+// transform's chain rule, lens.glsl); 0: the pinhole's EWA alone.
+#ifndef LENSES
+#define LENSES 0
+#endif
 
 // 256 invocations where the device allows them (faster on lavapipe), else 128: the host's
 // choice (gpu::workgroup::wide_linear_workgroup), as a specialization constant.
@@ -37,6 +42,9 @@ layout(std430, binding = PREPROCESS_BWD_FEATURE_GRADS) writeonly buffer FeatGrad
 layout(push_constant) uniform GradBlock { GradPush pc; };
 
 #include "sh_common.glsl"
+#if LENSES
+#include "lens.glsl"
+#endif
 
 // Texels of the most SH coefficients (degree 3: 16 per channel, 48 floats).
 #define SH_TEXELS 12u
@@ -158,6 +166,42 @@ void main() {
     mat3 rot = quat_to_mat3(g.rotation);
     mat3 m = rot * mat3(s.x, 0.0, 0.0, 0.0, s.y, 0.0, 0.0, 0.0, s.z);
     mat3 cov3d = m * transpose(m);
+#if LENSES
+    // Through the lens (cpu::backward's lens module): the covariance as the forward's
+    // unscented transform made it, the conic's and the compensation's chain rule as the
+    // pinhole's, then the sigma points' back to the camera-space mean and axes W M.
+    vec3 g_mean;
+    mat3 g_m;
+    {
+        mat3 axes = transpose(w_t) * m;
+        vec2 mean_px;
+        vec3 cov;
+        lens_unscented(v, axes, mean_px, cov);
+        float a = cov.x + COV2D_DILATION;
+        float b = cov.y;
+        float c = cov.z + COV2D_DILATION;
+        float det = a * c - b * b;
+        float det2 = det * det;
+        float g_a = g_conic.x * (-c * c / det2) + g_conic.y * (b * c / det2) + g_conic.z * (1.0 / det - a * c / det2);
+        float g_c = g_conic.x * (1.0 / det - a * c / det2) + g_conic.y * (b * a / det2) + g_conic.z * (-a * a / det2);
+        float g_b = g_conic.x * (2.0 * b * c / det2) + g_conic.y * (-1.0 / det - 2.0 * b * b / det2)
+            + g_conic.z * (2.0 * a * b / det2);
+        if (params.cam_pos.w != 0.0) {
+            out_g.mean_opacity.w = compensation_grads(vec3(a, b, c), g_opacity, g.pos_opacity.w, g_a, g_b, g_c);
+        }
+        vec3 g_v;
+        mat3 g_axes;
+        lens_unscented_backward(v, axes, g_mean2d, vec3(g_a, g_b, g_c), g_v, g_axes);
+        // The depth: the distance from the camera for the lenses that see behind their
+        // image plane, else z (as preprocess).
+        uint lens = params.modes.y;
+        bool by_distance = lens == LENS_FISHEYE || lens == LENS_EQUIRECTANGULAR;
+        g_v += g_depth * (by_distance ? v / length(v) : vec3(0.0, 0.0, 1.0));
+        g_mean = w_t * g_v;
+        // axes = W M: dL/dM = W^T dL/d axes.
+        g_m = w_t * g_axes;
+    }
+#else
     float fx = params.focal.x, fy = params.focal.y;
     vec4 lim = params.limits;
     float z = v.z;
@@ -209,6 +253,7 @@ void main() {
     vec3 g_mean = w_t * g_v;
     // Sigma = M M^T with M = R S.
     mat3 g_m = (g_cov + transpose(g_cov)) * m;
+#endif
     out_g.scale = vec4(dot(rot[0], g_m[0]) * sm, dot(rot[1], g_m[1]) * sm, dot(rot[2], g_m[2]) * sm, 0.0);
     mat3 g_rot = mat3(g_m[0] * s.x, g_m[1] * s.y, g_m[2] * s.z);
     // gr(row, col) = g_rot[col][row].

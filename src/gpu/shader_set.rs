@@ -401,7 +401,12 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         ));
     }
     for float in [false, true] {
-        out.push(v("preprocess_bwd", &[("FLOAT_ATOMICS", bit(float))]));
+        for lenses in [false, true] {
+            out.push(v(
+                "preprocess_bwd",
+                &[("FLOAT_ATOMICS", bit(float)), ("LENSES", bit(lenses))],
+            ));
+        }
     }
     // The shared kernel (one pixel per invocation, buffers) and the texel strips, each
     // also saving the last contributor (frames a backward pass reads).

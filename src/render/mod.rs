@@ -82,9 +82,6 @@ pub struct ForwardHandle {
     serial: u64,
     width: u32,
     height: u32,
-    /// The camera's lens ([`crate::core::camera::Lens::name`]): the backward pass is a
-    /// pinhole's so far.
-    lens: &'static str,
 }
 
 impl ForwardHandle {
@@ -271,6 +268,9 @@ pub struct GpuRenderer {
     save_forward: bool,
     /// The alpha falloff of the last finished frame (its backward pass's).
     last_kernel: crate::core::model::SplatKernel,
+    /// Whether the last finished frame was drawn through a lens other than the pinhole
+    /// (its backward pass differentiates the unscented transform).
+    last_lens: bool,
     /// The backward pass's pipelines and buffers, made by the first pass.
     backward: Option<backward::BackwardState>,
     ctx: GpuContext,
@@ -341,6 +341,7 @@ impl GpuRenderer {
             compact: false,
             save_forward: false,
             last_kernel: Default::default(),
+            last_lens: false,
             backward: None,
             ctx,
         })
@@ -398,7 +399,6 @@ impl GpuRenderer {
             serial: self.last_serial,
             width: cam.width,
             height: cam.height,
-            lens: cam.lens.name(),
         }
     }
 

@@ -55,7 +55,8 @@ type BlendKey = (u32, bool, SplatKernel, u32);
 pub(super) struct BackwardState {
     blend: Vec<(BlendKey, BlendBwd)>,
     accumulate: Vec<(Accumulation, GradAccumulate)>,
-    preprocess: [Option<PreprocessBwd>; 2],
+    /// By `float_sums + 2 lens` ([`PreprocessBwd::new`]).
+    preprocess: [Option<PreprocessBwd>; 4],
     shade: Option<ShadeBwd>,
     /// The pass's buffers, grown to each pass's shape.
     buffers: BackwardBuffers,
@@ -87,7 +88,7 @@ impl BackwardState {
         Ok(BackwardState {
             blend: Vec::new(),
             accumulate: Vec::new(),
-            preprocess: [None, None],
+            preprocess: Default::default(),
             shade: None,
             buffers: BackwardBuffers::default(),
             clock: BackwardClock {
@@ -277,12 +278,6 @@ impl GpuRenderer {
             return Err(GpuError::InvalidArgument(format!(
                 "the forward handle's frame is {}x{}, the frame given {}x{}",
                 forward.width, forward.height, size.0, size.1
-            )));
-        }
-        if forward.lens != "pinhole" {
-            return Err(GpuError::InvalidArgument(format!(
-                "the frame was rendered through a {} lens; the backward pass is a pinhole's so far",
-                forward.lens
             )));
         }
         Ok(())
@@ -510,12 +505,13 @@ impl GpuRenderer {
             last,
             backward,
             last_kernel,
+            last_lens,
             ..
         } = self;
         let (pass, clock, _) = prepare(
             ctx,
             backward.as_mut().expect("made above"),
-            (&sets[*last], *last_kernel),
+            (&sets[*last], *last_kernel, *last_lens),
             scene,
             size,
             None,
@@ -543,7 +539,7 @@ impl GpuRenderer {
         let (pass, clock, shape) = prepare(
             ctx,
             st,
-            (&self.sets[self.last], self.last_kernel),
+            (&self.sets[self.last], self.last_kernel, self.last_lens),
             scene,
             size,
             Some(pixels),
@@ -568,7 +564,7 @@ impl GpuRenderer {
 fn prepare<'a>(
     ctx: &'a GpuContext,
     st: &'a mut BackwardState,
-    (set, kernel): (&'a FrameSet, SplatKernel),
+    (set, kernel, lens): (&'a FrameSet, SplatKernel, bool),
     scene: &'a GpuScene,
     size: (u32, u32),
     pixels: Option<HostPixels>,
@@ -578,7 +574,7 @@ fn prepare<'a>(
     let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
     let (fs, last) = saved_forward(set, size)?;
     let shape = PassShape::new(scene, size, &fs, groups);
-    let (blend_key, rows) = st.build_pipelines(ctx, &fs, kernel, groups)?;
+    let pipelines = st.build_pipelines(ctx, &fs, (kernel, lens), groups)?;
     st.ensure_buffers(ctx, &shape, pixels, features)?;
     let feature_planes = match shade {
         Some(job) => Some(st.ensure_shade_buffers(ctx, job, shape.pixels, &fs)?),
@@ -591,7 +587,7 @@ fn prepare<'a>(
         scene,
         last,
         shape,
-        (blend_key, rows),
+        pipelines,
         features,
         shade.zip(feature_planes),
     );
@@ -663,15 +659,16 @@ impl PassShape {
 }
 
 impl BackwardState {
-    /// Builds the pipelines the pass needs that no earlier pass built; returns the blend
-    /// backward's key and whether it reads rows of texels.
+    /// Builds the pipelines the pass needs that no earlier pass built (`lens`: the frame
+    /// was drawn through a lens other than the pinhole); returns the blend backward's key,
+    /// whether it reads rows of texels, and the preprocess backward's index.
     fn build_pipelines(
         &mut self,
         ctx: &GpuContext,
         fs: &ForwardState,
-        kernel: SplatKernel,
+        (kernel, lens): (SplatKernel, bool),
         groups: u32,
-    ) -> GpuResult<(BlendKey, bool)> {
+    ) -> GpuResult<(BlendKey, bool, usize)> {
         let float_sums = self.mode != Accumulation::Deterministic;
         // Pipelines, the first time a pass needs each.
         let rows = BlendBwd::rows_for(ctx, fs.bin_size, fs.value_texels.is_some());
@@ -693,11 +690,11 @@ impl BackwardState {
             self.accumulate
                 .push((self.mode, GradAccumulate::new(ctx, self.mode)?));
         }
-        let p = usize::from(float_sums);
+        let p = usize::from(float_sums) + 2 * usize::from(lens);
         if self.preprocess[p].is_none() {
-            self.preprocess[p] = Some(PreprocessBwd::new(ctx, float_sums)?);
+            self.preprocess[p] = Some(PreprocessBwd::new(ctx, float_sums, lens)?);
         }
-        Ok((blend_key, rows))
+        Ok((blend_key, rows, p))
     }
 
     /// Makes or grows the gradient buffers for `shape` and uploads what the host gives:

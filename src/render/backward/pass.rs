@@ -67,7 +67,7 @@ impl<'a> BackwardPass<'a> {
         scene: &'a GpuScene,
         last: BufferSlice<'a>,
         shape: PassShape,
-        (blend_key, rows): (BlendKey, bool),
+        (blend_key, rows, p): (BlendKey, bool, usize),
         features: Option<FeatureJob<'a>>,
         shade: Option<(ShadeJob<'a>, (BufferSlice<'a>, u32))>,
     ) -> (Self, &'a mut BackwardClock) {
@@ -99,8 +99,6 @@ impl<'a> BackwardPass<'a> {
         } = st;
         let (shade_bwd, alpha, scratch, partials, mlp_grads) =
             (&*shade_bwd, &*alpha, &*scratch, &*partials, &*mlp_grads);
-        let float_sums =
-            *mode != crate::render::backward::grad_accumulate::Accumulation::Deterministic;
         let blend = &blend
             .iter()
             .find(|(k, _)| *k == blend_key)
@@ -121,7 +119,7 @@ impl<'a> BackwardPass<'a> {
             .find(|(m, _)| *m == *mode)
             .expect("built")
             .1;
-        let preprocess = preprocess[usize::from(float_sums)].as_ref().expect("built");
+        let preprocess = preprocess[p].as_ref().expect("built");
         let (grad_color, grad_features) = (buf(grad_color), buf(grad_features));
         fn need(b: &Option<GpuBuffer>) -> BufferSlice<'_> {
             b.as_ref().expect("made above").whole()

@@ -45,14 +45,19 @@ pub struct PreprocessBwd {
 }
 
 impl PreprocessBwd {
-    /// Builds the pipeline; `float_sums` reads accumulators written with float atomics.
-    pub fn new(ctx: &GpuContext, float_sums: bool) -> GpuResult<Self> {
+    /// Builds the pipeline; `float_sums` reads accumulators written with float atomics,
+    /// `lenses` differentiates frames through a lens other than the pinhole (the unscented
+    /// transform's sigma points; the pinhole's variant is the EWA rule alone).
+    pub fn new(ctx: &GpuContext, float_sums: bool, lenses: bool) -> GpuResult<Self> {
         let storage = BindingKind::StorageBuffer;
         let workgroup = crate::gpu::workgroup::wide_linear_workgroup(ctx.info());
         let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "preprocess_bwd",
-            &[("FLOAT_ATOMICS", u32::from(float_sums).to_string())],
+            &[
+                ("FLOAT_ATOMICS", u32::from(float_sums).to_string()),
+                ("LENSES", u32::from(lenses).to_string()),
+            ],
             &by_binding([
                 (slot::PARAMS, storage),
                 (slot::GAUSSIANS, storage),

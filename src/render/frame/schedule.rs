@@ -360,6 +360,7 @@ impl GpuRenderer {
         self.last = t.set;
         self.last_serial = t.serial;
         self.last_kernel = t.opts.kernel;
+        self.last_lens = !cam.lens.is_pinhole();
         Ok(())
     }
 

@@ -147,8 +147,10 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     let msgs = ctx32.validation_messages();
     assert!(msgs.is_empty(), "validation messages:\n{}", msgs.join("\n"));
     for float_sums in [false, true] {
-        PreprocessBwd::new(ctx, float_sums).expect("preprocess backward");
-        built += 1;
+        for lenses in [false, true] {
+            PreprocessBwd::new(ctx, float_sums, lenses).expect("preprocess backward");
+            built += 1;
+        }
     }
     // The field renders: every mode and kernel (each pipeline is built by its first frame).
     for kernel in SplatKernel::ALL {

@@ -227,41 +227,6 @@ fn a_lens_with_impossible_parameters_is_refused_by_name() {
 }
 
 #[test]
-fn the_gpu_backward_pass_refuses_a_lens_it_does_not_differentiate_yet() {
-    use verisplat::render::FrameRequest;
-    let mut s = Scene::empty(0);
-    push_gaussian(&mut s, [0.0, 0.0, 3.0], 0.1, 0.9, [1.0; 3]);
-    let cam = with_lens(
-        Lens::Fisheye {
-            k: [0.0; 4],
-            max_theta: FRAC_PI_2,
-        },
-        40.0,
-        64,
-    );
-    // The GPU draws it; its backward pass refuses the frame.
-    let mut r = crate::common::gpu::renderer();
-    r.set_save_forward_state(true);
-    let gs = r.upload(&s.activated()).unwrap();
-    let rendered = r
-        .render(&FrameRequest::new(&gs, &cam, &RenderOptions::default()))
-        .unwrap();
-    let handle = rendered.forward();
-    let frame = rendered.into_frame().unwrap();
-    assert!(frame.alpha[frame.index(32, 32)] > 0.5);
-    let grads = verisplat::core::model::grad::PixelGrads {
-        color: vec![0.0; 64 * 64 * 3],
-        alpha: vec![0.0; 64 * 64],
-        depth: vec![0.0; 64 * 64],
-    };
-    let Err(e) = r.backward(&handle, &gs, &frame, &grads) else {
-        panic!("the GPU differentiated a fisheye frame");
-    };
-    let e = e.to_string();
-    assert!(e.contains("fisheye lens"), "{e}");
-}
-
-#[test]
 fn render_takes_a_lens_for_generated_cameras_and_refuses_what_cannot_draw_it() {
     use crate::common::cli::{stderr, verisplat_in};
     let dir = tempfile::tempdir().unwrap();
