@@ -190,7 +190,24 @@ fn gpu_backward_through_every_lens_matches_the_reference() {
     for (k, (name, cam)) in lens_cameras().into_iter().enumerate() {
         eprintln!("{name}:");
         let p = grad_scene(40, 1000 + k as u64, Some(3), 3);
-        gpu_against_reference(&mut r, &p, &cam, &RenderOptions::default(), 100 + k as u64);
+        let first =
+            gpu_against_reference(&mut r, &p, &cam, &RenderOptions::default(), 100 + k as u64);
+        // Deterministic: the same bits run to run.
+        let again =
+            gpu_against_reference(&mut r, &p, &cam, &RenderOptions::default(), 100 + k as u64);
+        for group in verisplat::core::model::grad::GRAD_GROUPS {
+            let bits = |g: &verisplat::core::model::grad::SplatGrads<f32>| {
+                g.group(group)
+                    .iter()
+                    .map(|x| x.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(
+                bits(&first),
+                bits(&again),
+                "{name}: {group} changed run to run"
+            );
+        }
     }
     // The shared blend kernel (16-pixel bins), antialiased under gsplat's rules.
     let mut r = diff_rasterizer(Some(BlendKernel::Shared));
