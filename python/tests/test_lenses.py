@@ -482,16 +482,9 @@ def test_bad_camera_lenses_are_sentences(lens, match):
         verisplat.Camera(base.viewmat, base.K, W, H, lens=lens)
 
 
-# 8. Gradients through the unscented transform (with_ut=True): the device's backward pass
-# against the f64 reference's, and torch's against central finite differences of the
-# reference, for the Gaussians and the cameras.
-WAITS = pytest.mark.xfail(
-    raises=RuntimeError, strict=True,
-    reason="waits for the device's backward pass through a lens (issue 49): it refuses a lens "
-           "frame so far; remove this mark when it lands")
-
-
-@WAITS
+# 8. Gradients through a lens: the device's backward pass against the f64 reference's, and
+# torch's against the reference's backward pass (Gaussians) and its central differences
+# (cameras); the linearised fisheye's against autograd of gsplat's picture.
 @pytest.mark.parametrize("case", ["opencv-ut", "fisheye-k-ut", "ortho"])
 def test_device_gradients_through_a_lens_equal_the_reference(case):
     s = scene(n=100, seed=47, degree=2)
@@ -511,10 +504,10 @@ def test_device_gradients_through_a_lens_equal_the_reference(case):
         grads[backend] = r.backward(f, grad_colors=wc, grad_alphas=wa)
     for k in GROUPS:
         err = rel(grads["vulkan"][k], grads["reference"][k])
+        # Measured: <= 1.3e-5 (OPENCV means), 6e-7 to 4e-6 elsewhere.
         assert err <= 1e-3, f"{k}: relative L2 error {err:.2e} against the reference"
 
 
-@WAITS
 @pytest.mark.parametrize("case", ["opencv-ut", "fisheye-k-ut"])
 def test_torch_gradients_through_a_lens_equal_the_reference_and_finite_differences(case):
     s = scene(n=60, seed=48, degree=1)
@@ -543,6 +536,7 @@ def test_torch_gradients_through_a_lens_equal_the_reference_and_finite_differenc
     grads = ref.backward(loss(vms, ks)[1], grad_colors=wc, grad_alphas=wa)
     for k in GROUPS:
         err = rel(t[k].grad.numpy(), grads[k])
+        # Measured: <= 2.4e-6.
         assert err <= 1e-3, f"{k}: relative L2 error {err:.2e} against the reference"
     # The camera: against central differences of the reference (as test_gsplat_dropin's).
     analytic, numeric = [], []
@@ -562,11 +556,11 @@ def test_torch_gradients_through_a_lens_equal_the_reference_and_finite_differenc
         numeric.append(float(np.median(estimates)))
         analytic.append(float((vm.grad if which == "vm" else Ks.grad)[0, i, j]))
     err = rel(analytic, numeric)
+    # Measured: <= 2.4e-6.
     assert err <= 1e-3, f"camera gradients: relative L2 error {err:.2e} against finite differences"
     assert np.abs(numeric).max() > 1.0
 
 
-@WAITS
 @pytest.mark.parametrize("mode", ["classic", "antialiased"])
 def test_linearised_fisheye_gradients_equal_autograd_of_gsplats_picture(mode):
     # gsplat's linearised fisheye (with_ut=False): its picture written in torch (float64,
@@ -611,6 +605,7 @@ def test_linearised_fisheye_gradients_equal_autograd_of_gsplats_picture(mode):
         img, alpha = dense_blend(m2d[0], conic, opac, rgb, mean_c[:, 2], keep, W, H)
         total = total + (img * wc[c]).sum() + (alpha * wa[c]).sum()
     total.backward()
+    # Measured: <= 1.1e-6 (Gaussians and cameras, both modes).
     for k in GROUPS:
         err = rel(t[k].grad.numpy(), leaves[k].grad.numpy())
         assert err <= 1e-3, f"{k}: relative L2 error {err:.2e} against autograd of gsplat's picture"

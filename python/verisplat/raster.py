@@ -342,9 +342,8 @@ class Rasterizer:
         Gaussian is then projected by the unscented transform through the lens's exact map
         (``means2d`` its mean, ``conics`` its covariance's inverse; ``gaussian_depths`` and
         ``depths`` the distance from the camera through a fisheye or equirectangular lens,
-        else ``z``). The reference backend's backward pass differentiates through the lens
-        (the chain rule through the sigma points); the device refuses a lens frame by name
-        until its own lands (issue 49)."""
+        else ``z``). The backward pass differentiates through the lens on both backends
+        (the chain rule through the sigma points)."""
         cam = Camera(viewmat, K, width, height, lens=lens)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
         shader_bytes = None
