@@ -6,7 +6,8 @@
 //!
 //! `VERISPLAT_VIEWER_SCREENSHOT=path.png` also saves the page screenshot (the README's
 //! docs/viewer.png is made so, with `VERISPLAT_VIEWER_SCENE=/absolute/path/scene.ply`: the
-//! test runs in a temporary directory).
+//! test runs in a temporary directory); `VERISPLAT_VIEWER_LENS=fisheye:fov=190` shows the
+//! cameras through that lens.
 
 use crate::common::viewer::{verisplat_ok, Viewer};
 use serde_json::{json, Value};
@@ -312,6 +313,11 @@ fn the_page_drives_the_viewer_in_headless_chromium() {
         "-o",
         "orbit/f_{}.png",
     ]);
+    // VERISPLAT_VIEWER_LENS=SPEC: the cameras (and so the viewer) through that lens.
+    let lens = std::env::var("VERISPLAT_VIEWER_LENS").ok();
+    if let Some(spec) = &lens {
+        render.extend(["--lens", spec.as_str()]);
+    }
     verisplat_ok(d, &render);
     let mut args = scene_args.clone();
     let max_resolution =
