@@ -80,6 +80,22 @@ def test_given_camera_is_the_first_view(lod3, renderer, tmp_path):
     assert verisplat.compare(direct, shown(tt, tmp_path))["within"] == 1.0
 
 
+def test_a_lens_stays_through_drags_and_zooms(lod3, renderer, tmp_path):
+    cam = verisplat.orbit(lod3, frames=4, width=80, height=60)[1]
+    K = cam.K.copy()
+    K[0, 0] = K[1, 1] = 60 / np.radians(190)  # 190 degrees across the shorter side
+    fish = verisplat.Camera(cam.viewmat, K, 80, 60, "fish", {"kind": "fisheye", "k": [0, 0, 0, 0]})
+    tt = widgets.Turntable(lod3, camera=fish, width=80, height=60, renderer=renderer)
+    tt._handle_event({"type": "mousedown", "relativeX": 10, "relativeY": 30, "buttons": 1})
+    tt._handle_event({"type": "mousemove", "relativeX": 35, "relativeY": 35, "buttons": 1})
+    tt._handle_event({"type": "mouseup", "relativeX": 35, "relativeY": 35})
+    tt._handle_event({"type": "wheel", "deltaY": 120})
+    assert tt.camera.lens == fish.lens and np.array_equal(tt.camera.K, K)
+    assert not np.allclose(tt.camera.viewmat, fish.viewmat)
+    direct = renderer.render(lod3, tt.camera, mode="rgb")["rgb"]
+    assert verisplat.compare(direct, shown(tt, tmp_path))["within"] == 1.0
+
+
 def test_example_notebook_runs():
     """python/examples/turntable.ipynb's code cells run in order, headless."""
     import json

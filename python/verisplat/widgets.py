@@ -95,6 +95,9 @@ class Turntable:
         elif (camera.width, camera.height) != (self.width, self.height):
             camera = camera.resized(self.width, self.height)
         self.camera: Camera = camera
+        # The first camera's lens (None: a pinhole) and intrinsics, which moves keep.
+        self._lens = camera.lens
+        self._K = camera.K.copy()
         self.vfov = math.degrees(2.0 * math.atan(self.height / (2.0 * float(camera.K[1, 1]))))
         # The focus: on the camera's axis, as far as the bulk's centre is along it.
         eye = camera.position.astype(np.float64)
@@ -276,9 +279,13 @@ class Turntable:
 
     def _set_view(self) -> None:
         eye = self.focus + self.offset
-        self.camera = look_at(
+        view = look_at(
             eye, self.focus, self.up, self.width, self.height, self.vfov, name="turntable"
         )
+        if self._lens is not None:
+            # A camera through a lens keeps its lens and intrinsics as it moves.
+            view = Camera(view.viewmat, self._K, self.width, self.height, "turntable", self._lens)
+        self.camera = view
 
     def rotate(self, dx: float, dy: float) -> None:
         """Turns the view as a drag of ``dx``, ``dy`` pixels does: ``dx`` around the up
