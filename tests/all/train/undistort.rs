@@ -745,7 +745,8 @@ fn noted_evaluation(log: &str, it: u32) -> (f64, f64) {
 /// Training through a lens (issue 49), the default: a fisheye COLMAP data set (180
 /// degrees across the shorter side, corners 150 degrees off the axis, which no pinhole
 /// view holds) is trained on with its photos as taken, each render and the backward pass
-/// through the lens. The held-out L1 falls and the PSNR rises from the start's; the model
+/// through the lens. The held-out L1 falls and the PSNR rises from the start's (to 30 dB in
+/// 120 iterations); the model
 /// directory's cameras carry the fisheye lens, `lenses.json` says the run went through
 /// it, there is no `undistortion.json`, and `eval` (rendering through the lens, the photos
 /// as taken) gives the trainer's figure. `--undistort` refuses these photos by name.
@@ -781,8 +782,9 @@ fn train_through_a_fisheye_lens_learns_and_records_it() {
     assert!(out.status.success(), "{log}");
     let (l1_start, psnr_start) = noted_evaluation(&log, 1);
     let (l1_end, psnr_end) = noted_evaluation(&log, 120);
+    // Measured: L1 0.0141 -> 0.0061, PSNR 25.75 -> 32.15 dB.
     assert!(
-        l1_end < 0.8 * l1_start && psnr_end > psnr_start + 1.0,
+        l1_end < 0.6 * l1_start && psnr_end > psnr_start + 4.0 && psnr_end >= 30.0,
         "held-out L1 {l1_start} -> {l1_end}, PSNR {psnr_start} -> {psnr_end} dB"
     );
     // The model directory records the lens.
