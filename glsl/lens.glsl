@@ -127,6 +127,26 @@ bool lens_project(vec3 p, out vec2 pixel) {
     }
 }
 
+// Whether the lens images camera-space point p: lens_project's test alone, without the
+// pixel (the unscented transform asks it of every sigma point).
+bool lens_images(vec3 p) {
+    switch (params.modes.y) {
+    case LENS_RADIAL_TANGENTIAL: {
+        if (p.z <= 0.0) return false;
+        vec2 u = p.xy / p.z;
+        return dot(u, u) < params.lens_c.y;
+    }
+    case LENS_FISHEYE:
+        return dot(p, p) != 0.0 && lens_atan(length(p.xy), p.z) <= params.lens_b.x;
+    case LENS_ORTHOGRAPHIC:
+        return p.z > 0.0;
+    case LENS_EQUIRECTANGULAR:
+        return dot(p, p) != 0.0;
+    default:
+        return false;
+    }
+}
+
 // The pixel of p0 + step minus the pixel of p0 (both imaged), in a form without the
 // cancellation of subtracting the two pixels: the angles are differenced by atan of a
 // cross and a dot product, the distortion by lens_brown_conrady_offset, the radii by (r1^2 - r0^2) / (r1 + r0), the fisheye's
@@ -207,8 +227,7 @@ bool lens_unscented(vec3 mean, mat3 axes, out vec2 mean_px, out vec3 cov) {
     bool imaged = true;
     for (int i = 0; i < 3; i++) {
         vec3 step = ut.x * axes[i];
-        vec2 unused;
-        imaged = imaged && lens_project(mean + step, unused) && lens_project(mean - step, unused);
+        imaged = imaged && lens_images(mean + step) && lens_images(mean - step);
         d[2 * i] = lens_offset(mean, step);
         d[2 * i + 1] = lens_offset(mean, -step);
     }
