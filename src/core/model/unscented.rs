@@ -100,6 +100,30 @@ pub fn sigma_points(
     (points, wm, wc)
 }
 
+/// The pixel of the first of `points` (the centre) and every point's pixel less it, each
+/// on the turn nearest the centre's where an equirectangular image's seam falls between
+/// them; or [`Culled::SigmaPointNotImaged`].
+pub fn pixel_offsets(
+    lens: &Lens,
+    k: &Intrinsics,
+    points: &[DVec3; 7],
+) -> Result<(DVec2, [DVec2; 7]), Culled> {
+    let mut pixels = [DVec2::ZERO; 7];
+    for (pixel, p) in pixels.iter_mut().zip(points) {
+        *pixel = lens.project(k, *p).ok_or(Culled::SigmaPointNotImaged)?;
+    }
+    let centre = pixels[0];
+    let mut offsets = pixels.map(|p| p - centre);
+    if let Lens::Equirectangular { longitude, .. } = lens {
+        // Sigma points across the seam: each on the turn nearest the mean's pixel.
+        let turn = k.width as f64 * std::f64::consts::TAU / (longitude[1] - longitude[0]).abs();
+        for d in &mut offsets[1..] {
+            d.x -= turn * (d.x / turn).round();
+        }
+    }
+    Ok((centre, offsets))
+}
+
 /// Projects the camera-space Gaussian with mean `mean` and scaled axes `axes` (`R S`,
 /// camera space) through `lens` by the unscented transform.
 ///
@@ -114,19 +138,7 @@ pub fn project(
     params: &UnscentedParams,
 ) -> Result<Projected, Culled> {
     let (points, wm, wc) = sigma_points(mean, axes, params);
-    let mut pixels = [DVec2::ZERO; 7];
-    for (pixel, p) in pixels.iter_mut().zip(points) {
-        *pixel = lens.project(k, p).ok_or(Culled::SigmaPointNotImaged)?;
-    }
-    let centre = pixels[0];
-    let mut offsets = pixels.map(|p| p - centre);
-    if let Lens::Equirectangular { longitude, .. } = lens {
-        // Sigma points across the seam: each on the turn nearest the mean's pixel.
-        let turn = k.width as f64 * std::f64::consts::TAU / (longitude[1] - longitude[0]).abs();
-        for d in &mut offsets[1..] {
-            d.x -= turn * (d.x / turn).round();
-        }
-    }
+    let (centre, offsets) = pixel_offsets(lens, k, &points)?;
     let (w, h) = (k.width as f64, k.height as f64);
     let margin = params.in_image_margin;
     let in_view = |d: &DVec2| {

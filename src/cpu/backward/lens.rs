@@ -77,14 +77,8 @@ pub(super) fn project_backward(
             .expect("every sigma point of a projected Gaussian is imaged")
     });
     // The pixels relative to the centre's, on the centre's turn (as the forward).
-    let centre = lens.project(k, v).expect("the centre is imaged");
-    let mut d = points.map(|p| lens.project(k, p).expect("imaged") - centre);
-    if let Lens::Equirectangular { longitude, .. } = lens {
-        let turn = k.width as f64 * std::f64::consts::TAU / (longitude[1] - longitude[0]).abs();
-        for o in &mut d[1..] {
-            o.x -= turn * (o.x / turn).round();
-        }
-    }
+    let (_, d) = unscented::pixel_offsets(lens, k, &points)
+        .expect("every sigma point of a projected Gaussian is imaged");
     let shift: DVec2 = d.iter().zip(wm).map(|(o, w)| w * *o).sum();
     let [ga, gb, gc] = g_cov;
     // dL/de = wc (G + G^T) e with G = [[ga, gb / 2], [gb / 2, gc]] (xy counted once).
