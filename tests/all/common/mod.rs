@@ -74,6 +74,21 @@ pub fn off_centre(cam: &Camera, dx: f32, dy: f32) -> Camera {
     c
 }
 
+/// `cam` through the lens `spec` names (`--lens`'s form), with the focal lengths and
+/// principal point it gives a camera `distance` from what it looks at.
+pub fn through_lens(cam: &Camera, spec: &str, distance: f64) -> Camera {
+    let spec: verisplat::core::camera::LensSpec = spec.parse().unwrap();
+    let (lens, fx, fy, cx, cy) = spec.apply(cam.width, cam.height, cam.fx as f64, distance);
+    Camera {
+        lens,
+        fx: fx as f32,
+        fy: fy as f32,
+        cx: cx as f32,
+        cy: cy as f32,
+        ..cam.clone()
+    }
+}
+
 /// The documentation a user reads, as paths relative to the repository: README.md, then
 /// every docs/*.md in name order (the pages whose options and examples tests check).
 pub fn doc_pages() -> Vec<String> {

@@ -6,23 +6,14 @@
 use crate::common::gpu::{check_frame, renderer};
 use crate::common::{orbit, shared_scene};
 use glam::Vec3;
-use verisplat::core::camera::{Camera, Lens, LensSpec};
+use verisplat::core::camera::{Camera, Lens};
 use verisplat::core::model::Rules;
 use verisplat::cpu::RenderOptions;
 
-/// `cam` through the lens `spec` names, with its focal lengths and principal point.
+/// `cam` through the lens `spec` names, for its distance from the scenes' middle.
 fn through(cam: &Camera, spec: &str) -> Camera {
-    let spec: LensSpec = spec.parse().unwrap();
     let distance = (cam.position() - Vec3::new(0.0, -0.5, 0.0)).length() as f64;
-    let (lens, fx, fy, cx, cy) = spec.apply(cam.width, cam.height, cam.fx as f64, distance);
-    Camera {
-        lens,
-        fx: fx as f32,
-        fy: fy as f32,
-        cx: cx as f32,
-        cy: cy as f32,
-        ..cam.clone()
-    }
+    crate::common::through_lens(cam, spec, distance)
 }
 
 /// Every lens kind: the generated ones, OPENCV-style distortion with tangential terms

@@ -411,6 +411,19 @@ fn reference_backward_of_a_shaded_frame_matches_finite_differences() {
     }
 }
 
+/// The largest difference of any colour channel or alpha between the f32 renderer's
+/// frame and the f64 reference's (3 channels).
+pub(crate) fn largest_difference(frame: &verisplat::core::frame::Frame, img: &Image64) -> f64 {
+    let mut worst = 0.0f64;
+    for (i, c) in frame.color.iter().enumerate() {
+        for (ch, v) in c.iter().enumerate() {
+            worst = worst.max((*v as f64 - img.color[i * 3 + ch]).abs());
+        }
+        worst = worst.max((frame.alpha[i] as f64 - img.alpha[i]).abs());
+    }
+    worst
+}
+
 /// The f64 reference follows the f32 renderer's rules: same image up to rounding.
 #[test]
 fn reference_forward_equals_the_cpu_renderer() {
@@ -422,13 +435,7 @@ fn reference_forward_equals_the_cpu_renderer() {
     };
     let frame = verisplat::cpu::render(&p.to_activated(), &cam, &opts);
     let img = forward(&p.to_f64(), &cam, &opts, &[0.1, 0.2, 0.3]).unwrap();
-    let mut worst = 0.0f64;
-    for (i, c) in frame.color.iter().enumerate() {
-        for (ch, v) in c.iter().enumerate() {
-            worst = worst.max((*v as f64 - img.color[i * 3 + ch]).abs());
-        }
-        worst = worst.max((frame.alpha[i] as f64 - img.alpha[i]).abs());
-    }
+    let worst = largest_difference(&frame, &img);
     assert!(worst < 1e-4, "largest difference {worst}");
     assert!(
         img.alpha.iter().filter(|&&a| a > 0.5).count() > 100,

@@ -6,25 +6,12 @@
 //! its seam). The tolerance is `gradients.rs`'s: relative L2 error < 1e-6 per group.
 
 use super::gradients::{check_on, grad_camera, grad_scene};
+use crate::common::through_lens as through;
 use glam::Vec3;
-use verisplat::core::camera::{Camera, Lens, LensSpec};
+use verisplat::core::camera::{Camera, Lens};
 use verisplat::core::model::Rules;
 use verisplat::cpu::backward::forward;
 use verisplat::cpu::RenderOptions;
-
-/// `cam` through the lens `spec` names (focal lengths for `distance` to what it sees).
-pub(crate) fn through(cam: &Camera, spec: &str, distance: f64) -> Camera {
-    let spec: LensSpec = spec.parse().unwrap();
-    let (lens, fx, fy, cx, cy) = spec.apply(cam.width, cam.height, cam.fx as f64, distance);
-    Camera {
-        lens,
-        fx: fx as f32,
-        fy: fy as f32,
-        cx: cx as f32,
-        cy: cy as f32,
-        ..cam.clone()
-    }
-}
 
 /// A `width` x `height` camera at `eye` looking at the origin.
 fn camera_at(width: u32, height: u32, eye: Vec3) -> Camera {
@@ -157,13 +144,7 @@ fn reference_forward_through_every_lens_equals_the_cpu_renderer() {
         };
         let frame = verisplat::cpu::render(&p.to_activated(), &cam, &opts);
         let img = forward(&p.to_f64(), &cam, &opts, &[0.1, 0.2, 0.3]).unwrap();
-        let mut worst = 0.0f64;
-        for (i, c) in frame.color.iter().enumerate() {
-            for (ch, v) in c.iter().enumerate() {
-                worst = worst.max((*v as f64 - img.color[i * 3 + ch]).abs());
-            }
-            worst = worst.max((frame.alpha[i] as f64 - img.alpha[i]).abs());
-        }
+        let worst = super::gradients::largest_difference(&frame, &img);
         let covered = img.alpha.iter().filter(|&&a| a > 0.5).count();
         eprintln!("{name}: largest difference {worst:.1e}, {covered} pixels covered");
         assert!(worst < 1e-4, "{name}: largest difference {worst}");
