@@ -13,6 +13,14 @@
 #ifndef TEXEL_FETCH
 #define TEXEL_FETCH 0
 #endif
+// SURFACE = 1, the surface pass (core::model::surface, cpu::surface): the one group's
+// channels per Gaussian are its axis (n, n . mean) in world space, flipped per Gaussian to
+// face the camera (n . mean - n . centre > 0 gives -n) and blended into .xyz; .w is the
+// median depth, the depth of the Gaussian that takes the pixel's transmittance from
+// above 0.5 to 0.5 or below (0 while none has). Chunks resume it like the channels.
+#ifndef SURFACE
+#define SURFACE 0
+#endif
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 
@@ -62,20 +70,24 @@ void main() {
         F = out_features[o];
     }
     float alpha_max = params.rules.y, t_stop = params.rules.z;
+#if SURFACE
+    vec3 centre = params.cam_pos.xyz;
+#endif
     uint k = range.x;
     // The colour blend's composite(), with features in place of colour and no depth.
     for (; k < range.y && !done; k++) {
 #if !TEXEL_FETCH
         uint g = values[k];
         vec4 mob = splats[g].mean_opacity_bound;
-        vec3 conic = splats[g].conic_depth.xyz;
+        vec4 conic_depth = splats[g].conic_depth;
         vec4 feature = features[g];
 #else
         int g = int(texelFetch(value_texels, int(k)).x);
         vec4 mob = texelFetch(splat_texels, g * 3);
-        vec3 conic = texelFetch(splat_texels, g * 3 + 1).xyz;
+        vec4 conic_depth = texelFetch(splat_texels, g * 3 + 1);
         vec4 feature = texelFetch(feature_texels, g);
 #endif
+        vec3 conic = conic_depth.xyz;
         vec2 d = wrapped_mean(mob.xy, pix.x / TILE_SIZE * TILE_SIZE, params.modes.z, params.image.x) - pixf;
         float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
         float alpha = min(alpha_max, kernel_falloff(SPLAT_KERNEL, mob.z, min(power, 0.0)));
@@ -83,7 +95,16 @@ void main() {
         float test_t = T * (1.0 - alpha);
         bool stop = take && test_t < t_stop;
         bool add = take && !stop;
+#if SURFACE
+        // facing_normal: the sums in this order, no fused multiply-add.
+        precise float nc = feature.x * centre.x + feature.y * centre.y + feature.z * centre.z;
+        precise float facing = feature.w - nc;
+        vec3 n = facing > 0.0 ? -feature.xyz : feature.xyz;
+        F.xyz += n * (add ? alpha * T : 0.0);
+        F.w = add && T > 0.5 && test_t <= 0.5 ? conic_depth.w : F.w;
+#else
         F += feature * (add ? alpha * T : 0.0);
+#endif
         T = add ? test_t : T;
         done = stop;
     }

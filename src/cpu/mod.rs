@@ -7,6 +7,7 @@
 
 pub mod backward;
 pub mod field;
+pub mod surface;
 
 use crate::core::camera::Camera;
 use crate::core::frame::Frame;
@@ -374,6 +375,20 @@ pub fn blend_pixel_with(
     rules: Rules,
     mut add: impl FnMut(u32, f32),
 ) -> PixelResult {
+    blend_pixel_steps(projected, ids, px, py, kernel, rules, |id, w, _| add(id, w))
+}
+
+/// [`blend_pixel_with`], calling `add(id, alpha * T, T')` with the transmittance `T'`
+/// after each Gaussian added too (the surface pass's median depth reads it).
+pub fn blend_pixel_steps(
+    projected: &[Projected],
+    ids: &[u32],
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+    rules: Rules,
+    mut add: impl FnMut(u32, f32, f32),
+) -> PixelResult {
     let (alpha_max, t_stop) = (rules.alpha_max(), rules.t_stop());
     let mut t = 1.0f32;
     let mut depth = 0.0f32;
@@ -397,7 +412,7 @@ pub fn blend_pixel_with(
             break;
         }
         let w = alpha * t;
-        add(id, w);
+        add(id, w, test_t);
         depth += g.depth * w;
         t = test_t;
     }

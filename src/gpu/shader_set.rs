@@ -346,13 +346,17 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         out.push(v("keys", &[("KEYS_TEXEL_IO", bit(texel))]));
         out.push(v("ranges", &[("RANGES_TEXEL_IO", bit(texel))]));
         for kernel in splat_kernels {
-            out.push(v(
-                "blend_features",
-                &[
-                    ("SPLAT_KERNEL", kernel.to_string()),
-                    ("TEXEL_FETCH", bit(texel)),
-                ],
-            ));
+            // The feature channels, or the surface pass (normals and median depth).
+            for surface in [false, true] {
+                out.push(v(
+                    "blend_features",
+                    &[
+                        ("SPLAT_KERNEL", kernel.to_string()),
+                        ("TEXEL_FETCH", bit(texel)),
+                        ("SURFACE", bit(surface)),
+                    ],
+                ));
+            }
         }
     }
     // Field renders: slice, integral, maximum (cpu::field::FieldMode::shader_id) per kernel.

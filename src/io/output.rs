@@ -13,8 +13,15 @@
 use crate::core::camera::Camera;
 use crate::core::frame::Frame;
 use crate::core::fsutil::{self, WriteError};
+use crate::core::model::surface::NormalSpace;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+mod surface;
+pub use surface::{
+    encode_exr_median_depth, encode_exr_normal, encode_png_median_depth, encode_png_normal,
+    frame_surface, normal_color,
+};
 
 /// Error raised while writing an image.
 #[derive(Debug, thiserror::Error)]
@@ -569,6 +576,13 @@ pub enum RenderMode {
     FieldIntegral,
     /// The maximum of the fitted field along each ray (files as `FieldSlice`).
     FieldMax,
+    /// Unit normals of the Gaussians' smallest axes, facing the camera, blended like colour
+    /// ([`crate::core::model::surface`]; EXR: `N.x`, `N.y`, `N.z`, `A`; PNG: the normals
+    /// as colour, [`normal_color`]).
+    Normal,
+    /// The depth where the transmittance first reaches 0.5 (EXR: `Z`; PNG: colour-mapped
+    /// as depth).
+    MedianDepth,
 }
 
 impl RenderMode {
@@ -578,6 +592,11 @@ impl RenderMode {
             self,
             RenderMode::FieldSlice | RenderMode::FieldIntegral | RenderMode::FieldMax
         )
+    }
+
+    /// One of the surface passes (`normal`, `median-depth`).
+    pub fn is_surface(self) -> bool {
+        matches!(self, RenderMode::Normal | RenderMode::MedianDepth)
     }
 }
 
@@ -594,8 +613,10 @@ impl std::str::FromStr for RenderMode {
             "field-slice" => Ok(RenderMode::FieldSlice),
             "field-integral" => Ok(RenderMode::FieldIntegral),
             "field-max" => Ok(RenderMode::FieldMax),
+            "normal" => Ok(RenderMode::Normal),
+            "median-depth" => Ok(RenderMode::MedianDepth),
             _ => Err(format!(
-                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth, rgb+depth, features, field-slice, field-integral or field-max"
+                "unknown mode \"{s}\"; use rgb, rgba, alpha, depth, rgb+depth, features, normal, median-depth, field-slice, field-integral or field-max"
             )),
         }
     }
@@ -618,6 +639,8 @@ pub struct OutputOptions {
     /// Keep the background in EXR R, G, B (the reference's image, as in RGB PNGs) instead
     /// of premultiplied colour over transparent black.
     pub exr_background: bool,
+    /// The space `RenderMode::Normal` writes normals in.
+    pub normal_space: NormalSpace,
 }
 
 /// One file of a frame and what it holds.
@@ -654,6 +677,27 @@ pub enum FileContent {
     },
     /// NumPy `.npy` of the feature channels, H x W x K float32.
     NpyFeatures,
+    /// RGB PNG of the surface pass's normals ([`normal_color`]).
+    PngNormal {
+        /// 16 bits per sample.
+        sixteen_bit: bool,
+        /// The normals' space.
+        space: NormalSpace,
+    },
+    /// OpenEXR of the surface pass's normals: `N.x`, `N.y`, `N.z`, `A`.
+    ExrNormal {
+        /// 16-bit half floats.
+        half: bool,
+        /// The normals' space.
+        space: NormalSpace,
+    },
+    /// 8-bit PNG of the colour-mapped median depth.
+    PngMedianDepth {
+        /// Fixed `[near, far]`, or per-frame percentiles.
+        range: Option<[f32; 2]>,
+    },
+    /// OpenEXR of the median depth: `Z` (32-bit).
+    ExrMedianDepth,
 }
 
 /// A file to write for a frame.
@@ -701,6 +745,23 @@ pub fn plan_files(
         return Err(OutputError::NpyNeedsFeatures(path.to_path_buf()));
     }
     let format = ImageFormat::from_path(path, opts.png16)?;
+    let exr = format == ImageFormat::Exr;
+    let (sixteen_bit, space) = (opts.png16, opts.normal_space);
+    let surface = match opts.mode {
+        Some(RenderMode::Normal) if exr => Some(FileContent::ExrNormal {
+            half: opts.exr_half,
+            space,
+        }),
+        Some(RenderMode::Normal) => Some(FileContent::PngNormal { sixteen_bit, space }),
+        Some(RenderMode::MedianDepth) if exr => Some(FileContent::ExrMedianDepth),
+        Some(RenderMode::MedianDepth) => Some(FileContent::PngMedianDepth {
+            range: opts.depth_range,
+        }),
+        _ => None,
+    };
+    if let Some(content) = surface {
+        return Ok(vec![spec(path.to_path_buf(), content)]);
+    }
     if format == ImageFormat::Exr {
         let mode = opts.mode.unwrap_or(RenderMode::RgbDepth);
         let colour = matches!(
@@ -725,6 +786,8 @@ pub fn plan_files(
         range: opts.depth_range,
     };
     Ok(match opts.mode.unwrap_or(RenderMode::Rgb) {
+        // Planned above.
+        RenderMode::Normal | RenderMode::MedianDepth => Vec::new(),
         RenderMode::Features
         | RenderMode::FieldSlice
         | RenderMode::FieldIntegral
@@ -798,6 +861,16 @@ pub fn encode_file(
         }
         FileContent::ExrFeatures { half } => {
             encode_exr_features(frame, file.camera.as_ref(), *half, w, path)
+        }
+        FileContent::PngNormal { sixteen_bit, space } => {
+            encode_png_normal(frame, file.camera.as_ref(), *space, *sixteen_bit, w, path)
+        }
+        FileContent::ExrNormal { half, space } => {
+            encode_exr_normal(frame, file.camera.as_ref(), *space, *half, w, path)
+        }
+        FileContent::PngMedianDepth { range } => encode_png_median_depth(frame, *range, w, path),
+        FileContent::ExrMedianDepth => {
+            encode_exr_median_depth(frame, file.camera.as_ref(), w, path)
         }
         FileContent::NpyFeatures => {
             if frame.feature_count == 0 {

@@ -305,6 +305,7 @@ impl Ticket<'_> {
             lens: !self.cam.lens.is_pinhole(),
             kernel: self.opts.kernel,
             features: self.features.is_some(),
+            surface: matches!(self.features, Some((f, _)) if f.surface),
             shade: matches!(self.features, Some((_, Some(_)))),
             pack: self.readback == Readback::Rgba8,
             save_last,

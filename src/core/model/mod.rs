@@ -11,6 +11,7 @@ pub mod field;
 pub mod grad;
 pub mod rules;
 pub mod sh;
+pub mod surface;
 pub mod unscented;
 
 pub use rules::{clamp_limits, Rules};

@@ -50,12 +50,20 @@ pub struct FeatureBindings<'a> {
 
 impl FeatureBlend {
     /// Compiles the shader with the falloff of `kernel`; `texel` reads the splats, values
-    /// and features through texel-buffer views (for CPU devices, as the texel blend).
-    pub fn new(ctx: &GpuContext, kernel: SplatKernel, texel: bool) -> GpuResult<Self> {
+    /// and features through texel-buffer views (for CPU devices, as the texel blend);
+    /// `surface` blends the surface pass's facing normals and median depth
+    /// ([`crate::core::model::surface`]) instead of the channels as they are.
+    pub fn new(
+        ctx: &GpuContext,
+        kernel: SplatKernel,
+        texel: bool,
+        surface: bool,
+    ) -> GpuResult<Self> {
         use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
         let defines = [
             ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
             ("TEXEL_FETCH", u32::from(texel).to_string()),
+            ("SURFACE", u32::from(surface).to_string()),
         ];
         let read = if texel { T } else { B };
         let bindings = by_binding([

@@ -26,6 +26,8 @@ pub(crate) struct FrameNeeds {
     pub kernel: SplatKernel,
     /// Feature channels are blended.
     pub features: bool,
+    /// The features are the surface pass's axes (the feature blend's surface variant).
+    pub surface: bool,
     /// The neural shader runs.
     pub shade: bool,
     /// Colour is packed to RGBA8 on the device.
@@ -54,8 +56,8 @@ pub(crate) struct Pipelines {
     ranges: Option<Ranges>,
     /// By `save_last`, then [`SplatKernel::shader_id`].
     blend: [[Option<Blend>; 2]; 2],
-    /// By [`SplatKernel::shader_id`].
-    feature_blend: [Option<FeatureBlend>; 2],
+    /// By [`FrameNeeds::surface`], then [`SplatKernel::shader_id`].
+    feature_blend: [[Option<FeatureBlend>; 2]; 2],
     shade: Option<Shade>,
     pack: Option<Pack>,
     /// Pipelines built so far, and the milliseconds it took.
@@ -111,7 +113,7 @@ impl Pipelines {
             sort: None,
             ranges: None,
             blend: [[None, None], [None, None]],
-            feature_blend: [None, None],
+            feature_blend: [[None, None], [None, None]],
             shade: None,
             pack: None,
             built: (0, 0.0),
@@ -166,9 +168,12 @@ impl Pipelines {
             Blend::new(ctx, kernel, needs.kernel, needs.save_last)
         })?;
         if needs.features {
-            ensure(&mut self.built, &mut self.feature_blend[id], || {
-                FeatureBlend::new(ctx, needs.kernel, texel)
-            })?;
+            let surface = needs.surface;
+            ensure(
+                &mut self.built,
+                &mut self.feature_blend[usize::from(surface)][id],
+                || FeatureBlend::new(ctx, needs.kernel, texel, surface),
+            )?;
         }
         if needs.shade {
             ensure(&mut self.built, &mut self.shade, || Shade::new(ctx))?;
@@ -191,7 +196,10 @@ impl Pipelines {
             ranges: built(&self.ranges, "ranges")?,
             blend: built(&self.blend[usize::from(needs.save_last)][id], "blend")?,
             feature_blend: match needs.features {
-                true => Some(built(&self.feature_blend[id], "feature blend")?),
+                true => Some(built(
+                    &self.feature_blend[usize::from(needs.surface)][id],
+                    "feature blend",
+                )?),
                 false => None,
             },
             shade: match needs.shade {

@@ -1,6 +1,7 @@
 //! Scene upload: the Gaussians' records, their SH coefficients and feature channels on
 //! the device ([`GpuScene`], [`GpuFeatures`]).
 
+use crate::core::model::surface::{surface_axes, SURFACE_CHANNELS};
 use crate::core::model::ActivatedScene;
 use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::render::forward::types::{GpuGaussian, GpuGaussianCompact};
@@ -69,12 +70,20 @@ pub struct GpuFeatures {
     pub(crate) groups: Vec<GpuBuffer>,
     pub(crate) channels: usize,
     pub(crate) count: u32,
+    /// The surface pass's axes ([`GpuRenderer::upload_surface`]), blended by the feature
+    /// blend's surface variant.
+    pub(crate) surface: bool,
 }
 
 impl GpuFeatures {
     /// Channels per Gaussian (K).
     pub fn channels(&self) -> usize {
         self.channels
+    }
+    /// Whether these are the surface pass's axes ([`GpuRenderer::upload_surface`]): frames
+    /// blended with them hold facing normals and the median depth.
+    pub fn is_surface(&self) -> bool {
+        self.surface
     }
     /// Device bytes of the channels.
     pub fn device_bytes(&self) -> u64 {
@@ -279,6 +288,7 @@ impl GpuRenderer {
             groups,
             channels: k,
             count,
+            surface: false,
         })
     }
 
@@ -321,6 +331,26 @@ impl GpuRenderer {
             }
             buf.upload(&self.ctx, &v)?;
         }
+        Ok(uploaded)
+    }
+
+    /// Uploads the surface pass's axes of `scene` ([`surface_axes`]: each Gaussian's unit
+    /// smallest-scale axis and its dot product with the centre, one group of four): frames
+    /// blended with them ([`crate::render::FrameRequest::features`]) hold, per pixel, the
+    /// blended facing normals and the median depth
+    /// ([`crate::core::model::surface::surface_planes`] reads them).
+    pub fn upload_surface(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+        let n = scene.len();
+        let count = u32::try_from(n).map_err(|_| {
+            GpuError::Input(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
+        })?;
+        let mut uploaded = self.features_for_device_writes(count, SURFACE_CHANNELS)?;
+        let mut axes = surface_axes(scene);
+        if axes.is_empty() {
+            axes.push([0.0; 4]);
+        }
+        uploaded.groups[0].upload(&self.ctx, &axes)?;
+        uploaded.surface = true;
         Ok(uploaded)
     }
 }

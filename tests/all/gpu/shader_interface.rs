@@ -54,8 +54,10 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         Ranges::new(ctx, texel).expect("ranges");
         built += 2;
         for kernel in SplatKernel::ALL {
-            FeatureBlend::new(ctx, kernel, texel).expect("feature blend");
-            built += 1;
+            for surface in [false, true] {
+                FeatureBlend::new(ctx, kernel, texel, surface).expect("feature blend");
+                built += 1;
+            }
         }
     }
     for save_last in [false, true] {

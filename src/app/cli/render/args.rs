@@ -39,16 +39,25 @@ pub(crate) struct RenderArgs {
     /// render/frame_{:05}.png for several].
     #[arg(short, long, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
-    /// What to write: rgb, rgba, alpha, depth, rgb+depth, features, field-slice,
-    /// field-integral or field-max [default: rgb for PNG, rgb+depth (R, G, B, A, Z) for
-    /// EXR]. rgba: PNG with a transparent background (straight colour; EXR as rgb). Depth
-    /// PNGs are colour-mapped for looking at. features: the scene's feature channels
-    /// blended like colour over 0, as EXR (feat.0 ... feat.K-1, A, Z) or .npy (H x W x K
-    /// float32). field-*: the fitted field itself (the sum over Gaussians `fit` models) on
-    /// the --slice-plane, integrated along each ray, or its maximum along each ray; EXR and
+    /// What to write: rgb, rgba, alpha, depth, rgb+depth, features, normal, median-depth,
+    /// field-slice, field-integral or field-max [default: rgb for PNG, rgb+depth (R, G, B,
+    /// A, Z) for EXR]. rgba: PNG with a transparent background (straight colour; EXR as
+    /// rgb). Depth PNGs are colour-mapped for looking at. features: the scene's feature
+    /// channels blended like colour over 0, as EXR (feat.0 ... feat.K-1, A, Z) or .npy (H x
+    /// W x K float32). normal: each Gaussian's shortest axis facing the camera, blended
+    /// like colour and normalised (EXR: N.x, N.y, N.z, A; PNG: 0.5 + 0.5 n, black where
+    /// nothing is hit; --normal-space). median-depth: the depth where the transmittance
+    /// first reaches 0.5 (EXR: Z, +inf where it never does; PNG colour-mapped as depth).
+    /// field-*: the fitted field itself (the sum over Gaussians `fit` models) on the
+    /// --slice-plane, integrated along each ray, or its maximum along each ray; EXR and
     /// .npy as features, PNG the --channel through a colour map (or --shader).
     #[arg(long, value_name = "MODE")]
     pub(crate) mode: Option<output::RenderMode>,
+    /// The space --mode normal writes normals in: camera (the renderer's: x right, y down,
+    /// z the direction of view; a surface facing the camera is (0, 0, -1)) or world
+    /// [default: camera].
+    #[arg(long, value_name = "SPACE")]
+    pub(crate) normal_space: Option<verisplat::core::model::surface::NormalSpace>,
     /// Feature channels for the scene's Gaussians: an N x K NumPy array (float32 or
     /// float16, N the scene's Gaussian count, K 1..64), replacing any feat_* of the file.
     #[arg(long, value_name = "FILE.npy")]

@@ -42,6 +42,7 @@ pub(super) fn check_output_options(
                 FileContent::PngColor { .. }
                     | FileContent::PngRgba { .. }
                     | FileContent::PngAlpha { .. }
+                    | FileContent::PngNormal { .. }
             )
         })
     {
@@ -51,7 +52,14 @@ pub(super) fn check_output_options(
         );
     }
     if args.exr_half
-        && !writes(|c| matches!(c, FileContent::Exr(_) | FileContent::ExrFeatures { .. }))
+        && !writes(|c| {
+            matches!(
+                c,
+                FileContent::Exr(_)
+                    | FileContent::ExrFeatures { .. }
+                    | FileContent::ExrNormal { .. }
+            )
+        })
     {
         bail!(
             "--exr-half applies to EXR output; {} is not an EXR file",
@@ -67,7 +75,17 @@ pub(super) fn check_output_options(
             output.display()
         );
     }
-    if args.depth_range.is_some() && !writes(|c| matches!(c, FileContent::PngDepth { .. })) {
+    if args.normal_space.is_some() && args.mode != Some(output::RenderMode::Normal) {
+        bail!("--normal-space sets the space of --mode normal's normals; add --mode normal");
+    }
+    if args.depth_range.is_some()
+        && !writes(|c| {
+            matches!(
+                c,
+                FileContent::PngDepth { .. } | FileContent::PngMedianDepth { .. }
+            )
+        })
+    {
         bail!(
             "--depth-range sets the colour map of depth PNGs; {} writes none (use --mode depth or rgb+depth with a .png output; EXR stores depth as it is)",
             output.display()
@@ -153,6 +171,7 @@ impl Outputs<'_> {
             depth_range: args.depth_range,
             background: args.background,
             exr_background: args.exr_background,
+            normal_space: args.normal_space.unwrap_or_default(),
         };
         let format = args.format.as_deref().unwrap_or("png");
         // Shards never write the same file: the first one writes the whole path's cameras.

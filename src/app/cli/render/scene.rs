@@ -84,6 +84,14 @@ fn load_shader(
             if render_features {
                 bail!("--shader writes the shaded colour and --mode features the feature channels; choose one");
             }
+            if let Some(mode) = args.mode.filter(|m| m.is_surface()) {
+                let name = if mode == RenderMode::Normal {
+                    "normal"
+                } else {
+                    "median-depth"
+                };
+                bail!("--shader writes the shaded colour and --mode {name} the surface pass; choose one");
+            }
             if field_mode.is_some() && !field::writes_png(args) {
                 bail!("--shader colours a field render's PNG; EXR and .npy outputs hold the channels themselves");
             }

@@ -29,6 +29,12 @@ pub(super) struct Job<'a> {
     pub(super) shader: Option<&'a verisplat::fields::mlp::Mlp>,
 }
 
+/// `--mode normal` or `median-depth`: the frames are rendered with the surface pass
+/// (`core::model::surface`).
+fn surface(job: &Job) -> bool {
+    job.args.mode.is_some_and(|m| m.is_surface())
+}
+
 /// Sums of per-stage times over the frames of a path, printed by `--timings`.
 #[derive(Default)]
 struct StageSums {
@@ -77,7 +83,16 @@ pub(super) fn render_cpu(job: &Job) -> Result<(Summary, String)> {
         let cam = &p.camera;
         let at_time = job.animation.map(|a| a.scene(p.index));
         let scene = at_time.as_ref().unwrap_or(scene);
-        let (mut frame, t) = if job.features || shader.is_some() {
+        let (mut frame, t) = if surface(job) {
+            let start = std::time::Instant::now();
+            let frame = verisplat::cpu::surface::render_surface(scene, cam, opts);
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            let t = verisplat::cpu::CpuTimings {
+                total: ms,
+                ..Default::default()
+            };
+            (frame, t)
+        } else if job.features || shader.is_some() {
             verisplat::cpu::render_features_timed(scene, cam, opts)
         } else {
             verisplat::cpu::render_timed(scene, cam, opts)
@@ -243,7 +258,12 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
                 let at_time = anim.scene(p.index);
                 let gpu_scene = renderer.upload(&at_time)?;
                 device_bytes = gpu_scene.device_bytes();
-                let frame = if features || shader.is_some() {
+                let frame = if surface(job) {
+                    let f = renderer.upload_surface(&at_time)?;
+                    renderer
+                        .render(&FrameRequest::new(&gpu_scene, &p.camera, opts).features(&f))
+                        .and_then(Rendered::into_frame)?
+                } else if features || shader.is_some() {
                     let f = renderer.upload_features(&at_time)?;
                     match &gpu_shader {
                         Some(s) => renderer
@@ -275,7 +295,9 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
         return Ok((summary, format!("on {device}")));
     }
     let gpu_scene = renderer.upload(scene)?;
-    let gpu_features = if features || shader.is_some() {
+    let gpu_features = if surface(job) {
+        Some(renderer.upload_surface(scene)?)
+    } else if features || shader.is_some() {
         Some(renderer.upload_features(scene)?)
     } else {
         None
