@@ -4,13 +4,14 @@
 //! Order: a directory is an unbundled SOG (has `meta.json`) or a trained model folder;
 //! `ply` starts a PLY, compressed when it has a `chunk` element and packed vertices;
 //! `1f 8b` is gzip (SPZ v2/v3 inside); `NGSP` is SPZ (v4, or an unwrapped v2/v3);
-//! `PK\x03\x04` is a zip (a SOG bundle); a JSON object is a SOG `meta.json` (its directory
-//! is loaded). `.splat` has no magic: it is accepted last, for a non-empty multiple of 32
-//! bytes with the `.splat` extension, or without it when every record is plausible.
+//! `PK\x03\x04` is a zip (a SOG bundle); `glTF` is a GLB; a JSON object is a glTF document
+//! when it has `asset.version`, else a SOG `meta.json` (its directory is loaded). `.splat`
+//! has no magic: it is accepted last, for a non-empty multiple of 32 bytes with the
+//! `.splat` extension, or without it when every record is plausible.
 
 use super::ply::PlyEncoding;
 use super::spz::SpzCompression;
-use super::{compressed_ply, ply, sog, splat, spz, Scene, SceneError};
+use super::{compressed_ply, gltf, ply, sog, splat, spz, Scene, SceneError};
 use std::path::Path;
 
 /// A scene file format, with its version or variant where it has one.
@@ -29,6 +30,8 @@ pub enum SceneFormat {
         /// How the payload is wrapped.
         compression: SpzCompression,
     },
+    /// glTF 2.0 with `KHR_gaussian_splatting` (several splat primitives merged).
+    Gltf(super::gltf::GltfInfo),
     /// PlayCanvas SOG.
     Sog {
         /// `meta.json` version (2).
@@ -56,6 +59,24 @@ impl std::fmt::Display for SceneFormat {
                 version,
                 compression,
             } => write!(f, "SPZ v{version} ({compression})"),
+            SceneFormat::Gltf(info) => {
+                write!(
+                    f,
+                    "glTF 2.0 KHR_gaussian_splatting ({}",
+                    if info.binary {
+                        "binary .glb"
+                    } else {
+                        "JSON .gltf"
+                    }
+                )?;
+                if info.primitives > 1 {
+                    write!(f, ", {} splat primitives merged", info.primitives)?;
+                }
+                if info.spz_compressed > 0 {
+                    write!(f, ", SPZ-compressed")?;
+                }
+                f.write_str(")")
+            }
             SceneFormat::Sog { version, bundled } => write!(
                 f,
                 "PlayCanvas SOG v{version} ({})",
@@ -70,12 +91,16 @@ impl std::fmt::Display for SceneFormat {
 pub fn load_with_format(path: &Path) -> Result<(Scene, SceneFormat), SceneError> {
     let file = super::resolve_scene_path(path)?;
     let bytes = super::read_file(&file)?;
+    let dir = match file.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if gltf::is_glb(&bytes) || (looks_like_json(&bytes) && gltf::is_gltf_json(&bytes)) {
+        let (scene, info) = gltf::parse(&bytes, &file, Some(dir))?;
+        return Ok((scene, SceneFormat::Gltf(info)));
+    }
     if looks_like_json(&bytes) {
         // A SOG meta.json: its textures lie beside it.
-        let dir = match file.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
         let scene = sog::parse(sog::Source::Directory(dir), &file)?;
         return Ok((
             scene,
@@ -130,6 +155,10 @@ pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<(Scene, SceneFormat), Sc
             },
         ));
     }
+    if gltf::is_glb(bytes) || (looks_like_json(bytes) && gltf::is_gltf_json(bytes)) {
+        let (scene, info) = gltf::parse(bytes, path, None)?;
+        return Ok((scene, SceneFormat::Gltf(info)));
+    }
     if looks_like_json(bytes) {
         return Err(SceneError::invalid(
             path,
@@ -148,7 +177,7 @@ pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<(Scene, SceneFormat), Sc
     Err(SceneError::invalid(
         path,
         format!(
-            "is not a recognised scene format: it is not a PLY, SPZ (gzip or NGSP), SOG (zip or meta.json) or .splat file (first bytes {})",
+            "is not a recognised scene format: it is not a PLY, SPZ (gzip or NGSP), SOG (zip or meta.json), glTF (.glb or .gltf) or .splat file (first bytes {})",
             bytes
                 .iter()
                 .take(8)

@@ -20,6 +20,8 @@ pub mod compressed_ply;
 pub mod detect;
 pub mod features;
 pub mod filter;
+pub mod gltf;
+pub mod gltf_write;
 pub mod ply;
 pub mod sog;
 pub mod splat;

@@ -4,6 +4,7 @@
 mod camera_sources;
 mod formats;
 mod fuzz_regressions;
+mod gltf;
 mod malformed;
 mod output;
 mod output_compositing;
