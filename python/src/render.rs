@@ -12,6 +12,7 @@ use pyo3::types::{PyByteArray, PyDict};
 use std::sync::Mutex;
 use verisplat::core::camera::Camera;
 use verisplat::core::frame::Frame;
+use verisplat::core::model::surface::{surface_planes, NormalSpace};
 use verisplat::cpu::RenderOptions;
 use verisplat::render::{FrameRequest, Rendered};
 use verisplat::render::{GpuRenderer, GpuScene};
@@ -31,6 +32,9 @@ struct Want {
     alpha: bool,
     depth: bool,
     features: bool,
+    /// The surface pass (normals in this space and the median depth), returned in the
+    /// features plane as four channels per pixel: the unit normal and the median depth.
+    surface: Option<NormalSpace>,
 }
 
 /// Per-frame options as the Python side passes them: background, SH degree, scale
@@ -48,8 +52,9 @@ type OptTuple = (
     Option<f32>,
 );
 
-/// The planes wanted: rgb, alpha, depth, features.
-type WantTuple = (bool, bool, bool, bool);
+/// The planes wanted: rgb, alpha, depth, features, and the surface pass's normal space
+/// (`"camera"` or `"world"`; None: no surface pass).
+type WantTuple = (bool, bool, bool, bool, Option<String>);
 
 /// A checked render request.
 struct Request {
@@ -103,7 +108,15 @@ fn request(
         near_plane,
     };
     opts.validate().map_err(value_err)?;
-    let (rgb, alpha, depth, features) = want;
+    let (rgb, alpha, depth, features, surface) = want;
+    let surface = surface
+        .map(|s| s.parse::<NormalSpace>().map_err(value_err))
+        .transpose()?;
+    if features && surface.is_some() {
+        return Err(value_err(
+            "mode 'features' and the surface pass (normal, median-depth) are separate renders; ask for one",
+        ));
+    }
     check_features(scene, features)?;
     Ok(Request {
         opts,
@@ -113,8 +126,24 @@ fn request(
             alpha,
             depth,
             features,
+            surface,
         },
     })
+}
+
+/// A surface frame's features turned into what the Python side reads: per pixel the unit
+/// normal in `space` (0 where alpha is 0) and the median depth (0 where the
+/// transmittance never reaches 0.5).
+fn finish_surface(mut frame: Frame, cam: &Camera, space: NormalSpace) -> Frame {
+    let camera = (space == NormalSpace::Camera).then_some(cam);
+    let planes = surface_planes(&frame.features, &frame.alpha, camera);
+    frame.features = planes
+        .normals
+        .iter()
+        .zip(&planes.median_depth)
+        .flat_map(|(n, &d)| [n[0], n[1], n[2], d])
+        .collect();
+    frame
 }
 
 fn cameras(cams: &[CamTuple]) -> PyResult<Vec<Camera>> {
@@ -163,8 +192,7 @@ fn planes<'py>(py: Python<'py>, frames: &[Frame], want: &Want) -> Planes<'py> {
         .then(|| byte_array(py, &gather(&|f| bytemuck::cast_slice(&f.color))));
     let alpha = want.alpha.then(|| byte_array(py, &gather(&|f| &f.alpha)));
     let depth = want.depth.then(|| byte_array(py, &gather(&|f| &f.depth)));
-    let features = want
-        .features
+    let features = (want.features || want.surface.is_some())
         .then(|| byte_array(py, &gather(&|f| &f.features)));
     (rgb, alpha, depth, features)
 }
@@ -173,6 +201,8 @@ fn planes<'py>(py: Python<'py>, frames: &[Frame], want: &Want) -> Planes<'py> {
 /// before the renderer (and its device).
 struct RendererState {
     features: Option<(u64, verisplat::render::GpuFeatures)>,
+    /// The surface pass's axes of the last scene that rendered one.
+    surface: Option<(u64, verisplat::render::GpuFeatures)>,
     scene: Option<(u64, GpuScene)>,
     gpu: GpuRenderer,
     uploads: u64,
@@ -203,6 +233,7 @@ impl PyRenderer {
                 Ok(PyRenderer {
                     state: Mutex::new(RendererState {
                         features: None,
+                        surface: None,
                         scene: None,
                         gpu,
                         uploads: 0,
@@ -234,6 +265,7 @@ impl PyRenderer {
     ) -> PyResult<Planes<'py>> {
         let Request { opts, cams, want } = request(scene, &cameras, options, want)?;
         let features = want.features;
+        let surface = want.surface;
         let frames = py.detach(|| {
             guarded(|| {
                 let mut guard = self.state.lock().map_err(|_| {
@@ -254,11 +286,24 @@ impl PyRenderer {
                         .map_err(|e| py_err(e.into()))?;
                     st.features = Some((scene.id, uploaded));
                 }
+                if surface.is_some() && st.surface.as_ref().map(|(id, _)| *id) != Some(scene.id) {
+                    st.surface = None;
+                    let uploaded = st
+                        .gpu
+                        .upload_surface(&scene.act)
+                        .map_err(|e| py_err(e.into()))?;
+                    st.surface = Some((scene.id, uploaded));
+                }
                 let gpu_scene = &st.scene.as_ref().expect("uploaded above").1;
                 let mut frames = Vec::with_capacity(cams.len());
                 for cam in &cams {
-                    let frame = match (&st.features, features) {
-                        (Some((_, f)), true) => st
+                    let frame = match (&st.features, features, &st.surface, surface) {
+                        (_, _, Some((_, f)), Some(space)) => st
+                            .gpu
+                            .render(&FrameRequest::new(gpu_scene, cam, &opts).features(f))
+                            .and_then(Rendered::into_frame)
+                            .map(|frame| finish_surface(frame, cam, space)),
+                        (Some((_, f)), true, _, _) => st
                             .gpu
                             .render(&FrameRequest::new(gpu_scene, cam, &opts).features(f))
                             .and_then(Rendered::into_frame),
@@ -320,12 +365,16 @@ pub(crate) fn render_cpu<'py>(
 ) -> PyResult<Planes<'py>> {
     let Request { opts, cams, want } = request(scene, &cameras, options, want)?;
     let features = want.features;
+    let surface = want.surface;
     let frames = py.detach(|| {
         guarded(|| {
             Ok(cams
                 .iter()
                 .map(|cam| {
-                    if features {
+                    if let Some(space) = surface {
+                        let frame = verisplat::cpu::surface::render_surface(&scene.act, cam, &opts);
+                        finish_surface(frame, cam, space)
+                    } else if features {
                         verisplat::cpu::render_features(&scene.act, cam, &opts)
                     } else {
                         verisplat::cpu::render(&scene.act, cam, &opts)

@@ -236,3 +236,51 @@ def test_features_and_power_kernel_equal_the_cli(tmp_path, cli, cameras_file, re
         renderer.render(base, cam, mode="features")
     with pytest.raises(ValueError, match="kernel"):
         renderer.render(base, cam, kernel="cubic")
+
+
+@pytest.mark.parametrize("cpu", [False, True], ids=["gpu", "cpu"])
+def test_normal_and_median_depth_equal_the_cli(cpu, tmp_path, lod3, renderer, cli, cameras_file):
+    cam = verisplat.load_cameras(cameras_file)[1]
+    render = verisplat.render_cpu if cpu else renderer.render
+    out = render(lod3, cam, mode="normal+median-depth+alpha")
+    assert set(out) == {"normal", "median_depth", "alpha"}
+    assert out["normal"].shape == (120, 160, 3) and out["median_depth"].shape == (120, 160)
+    scene = data("playbot_lod3_31k_sh2.ply")
+    flags = ["--cameras", cameras_file, "--camera", "1", "-q", *(["--cpu"] if cpu else [])]
+    run_cli(cli, "render", scene, "--mode", "normal", "-o", tmp_path / "n.exr", *flags)
+    run_cli(cli, "render", scene, "--mode", "median-depth", "-o", tmp_path / "m.exr", *flags)
+    n, m = exr_planes(tmp_path / "n.exr"), exr_planes(tmp_path / "m.exr")
+    assert set(n) == {"N.x", "N.y", "N.z", "A"} and set(m) == {"Z"}
+    assert np.array_equal(out["normal"], np.stack([n["N.x"], n["N.y"], n["N.z"]], axis=-1))
+    assert np.array_equal(out["alpha"], n["A"])
+    hit = out["median_depth"] > 0
+    assert 0.2 < hit.mean() < out["alpha"].astype(bool).mean() + 1e-9
+    assert np.array_equal(out["median_depth"][hit], m["Z"][hit])
+    assert np.all(np.isinf(m["Z"][~hit]))
+    # Unit normals where anything is hit, 0 elsewhere; mostly facing the camera (-z).
+    covered = out["alpha"] > 0
+    length = np.linalg.norm(out["normal"], axis=-1)
+    assert np.allclose(length[covered], 1, atol=1e-5) and np.all(length[~covered] == 0)
+    assert (out["normal"][..., 2][out["alpha"] > 0.5] < 0).mean() > 0.9
+    # World space is camera space turned back by the camera's rotation.
+    world = render(lod3, cam, mode="normal", normal_space="world")["normal"]
+    rotation = np.asarray(cam.viewmat, dtype=np.float64)[:3, :3]
+    assert np.abs(world @ rotation.T - out["normal"]).max() < 1e-5
+
+
+def test_normal_and_median_depth_gpu_against_cpu_and_refusals(lod3, renderer, cameras_file):
+    cam = verisplat.load_cameras(cameras_file)[2]
+    gpu = renderer.render(lod3, cam, mode="normal+median-depth")
+    cpu = verisplat.render_cpu(lod3, cam, mode="normal+median-depth")
+    for c in range(3):
+        m = verisplat.compare(cpu["normal"][..., c], gpu["normal"][..., c], kind="data")
+        assert m["psnr"] >= 55, (c, m)
+    agree = np.isclose(gpu["median_depth"], cpu["median_depth"], rtol=1e-4, atol=0)
+    assert agree.mean() >= 0.999
+    # The colour planes of a surface render are the plain render's.
+    both = renderer.render(lod3, cam, mode="rgb+normal")
+    assert np.array_equal(both["rgb"], renderer.render(lod3, cam, mode="rgb")["rgb"])
+    with pytest.raises(ValueError, match="separate"):
+        renderer.render(lod3, cam, mode="features+normal")
+    with pytest.raises(ValueError, match="normal_space"):
+        renderer.render(lod3, cam, mode="normal", normal_space="view")

@@ -76,7 +76,7 @@ class Renderer:
         scene: Scene,
         cameras: List[CamTuple],
         options: Options,
-        want: Tuple[bool, bool, bool, bool],
+        want: Tuple[bool, bool, bool, bool, Optional[str]],
     ) -> Planes: ...
 
 def load(path: str, iteration: Optional[int] = None) -> Scene: ...
@@ -142,7 +142,7 @@ def render_cpu(
     scene: Scene,
     cameras: List[CamTuple],
     options: Options,
-    want: Tuple[bool, bool, bool, bool],
+    want: Tuple[bool, bool, bool, bool, Optional[str]],
 ) -> Planes: ...
 def read_image(path: str) -> Tuple[int, int, List[str], bytearray]: ...
 def compare(

@@ -13,17 +13,27 @@ from ._common import ArrayLike, _floats, _numpy, _view
 from ._scene import Scene
 
 _PLANES = ("rgb", "alpha", "depth", "features")
+# The surface pass's planes (docs/rendering.md, "Normals and median depth"): returned as
+# "normal" (H, W, 3) and "median_depth" (H, W).
+_SURFACE = ("normal", "median-depth")
+_NORMAL_SPACES = ("camera", "world")
 
 
-def _mode(mode: str) -> Tuple[bool, bool, bool, bool]:
+def _mode(mode: str) -> Tuple[bool, bool, bool, bool, bool, bool]:
     parts = set(mode.replace("rgba", "rgb+alpha").split("+"))
-    unknown = parts - set(_PLANES)
+    unknown = parts - set(_PLANES) - set(_SURFACE)
     if unknown or not parts:
         raise ValueError(
-            f"mode must join rgb, alpha, depth and features with '+' (e.g. 'rgb', 'rgba', "
-            f"'rgb+depth', 'rgb+alpha+depth', 'features+alpha'), got {mode!r}"
+            f"mode must join rgb, alpha, depth, features, normal and median-depth with '+' "
+            f"(e.g. 'rgb', 'rgba', 'rgb+depth', 'rgb+alpha+depth', 'features+alpha', "
+            f"'normal', 'normal+median-depth+alpha'), got {mode!r}"
         )
-    return tuple(p in parts for p in _PLANES)  # type: ignore[return-value]
+    if "features" in parts and parts & set(_SURFACE):
+        raise ValueError(
+            f"mode 'features' and the surface planes (normal, median-depth) are separate "
+            f"renders; ask for one, got {mode!r}"
+        )
+    return tuple(p in parts for p in _PLANES + _SURFACE)  # type: ignore[return-value]
 
 
 def _camera_list(
@@ -66,6 +76,10 @@ def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[s
     """The shared body of ``Renderer.render`` and ``render_cpu``: checks the arguments,
     calls the native renderer and wraps its planes as arrays."""
     want = _mode(kw["mode"])
+    space = kw["normal_space"]
+    if space not in _NORMAL_SPACES:
+        raise ValueError(f"normal_space must be 'camera' or 'world', got {space!r}")
+    surface = want[4] or want[5]
     cams, batch = _camera_list(camera, kw["viewmat"], kw["K"], kw["width"], kw["height"])
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a verisplat.Scene, got {type(scene).__name__}")
@@ -84,7 +98,8 @@ def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[s
         kw["rules"],
         None if kw["near_plane"] is None else float(kw["near_plane"]),
     )
-    planes = native_render(scene._s, [c._tuple() for c in cams], opts, want)
+    native_want = (*want[:4], space if surface else None)
+    planes = native_render(scene._s, [c._tuple() for c in cams], opts, native_want)
     return _outputs(planes, cams, batch, want, scene.feature_count)
 
 
@@ -97,6 +112,15 @@ def _outputs(planes, cams: List[Camera], batch: bool, want, k: int) -> Dict[str,
         shape = {"rgb": (b, h, w, 3), "features": (b, h, w, k)}.get(name, (b, h, w))
         arr = _view(data, shape)
         out[name] = arr if batch else arr[0]
+    if want[4] or want[5]:
+        # The features plane holds the surface pass: unit normal, median depth.
+        surface = _view(planes[3], (b, h, w, 4))
+        if want[4]:
+            normal = np.ascontiguousarray(surface[..., :3])
+            out["normal"] = normal if batch else normal[0]
+        if want[5]:
+            median = np.ascontiguousarray(surface[..., 3])
+            out["median_depth"] = median if batch else median[0]
     return out
 
 
@@ -146,6 +170,7 @@ class Renderer:
         rules: Optional[str] = None,
         near_plane: Optional[float] = None,
         mode: str = "rgb+alpha+depth",
+        normal_space: str = "camera",
     ) -> Dict[str, np.ndarray]:
         """Renders ``scene`` from ``camera`` (or ``viewmat``/``K``/``width``/``height``).
 
@@ -157,7 +182,14 @@ class Renderer:
         falloff) or ``"power"`` (``opacity * max(0, 1 - d2/9)``); default the scene's
         recorded kernel. ``rules``: ``"original"`` (the 3DGS rasterizer's) or ``"gsplat"``
         (near plane 0.01, alpha clamp 0.999, a per-axis 3.33-sigma box); default the
-        scene's recorded rules; ``near_plane`` overrides the rules' near plane. A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
+        scene's recorded rules; ``near_plane`` overrides the rules' near plane.
+        ``'normal'`` and ``'median-depth'`` (joinable with rgb, alpha and depth, not
+        features) run the surface pass: ``normal (H, W, 3)``, each Gaussian's shortest axis
+        turned to face the camera, blended with the colour weights and normalised (0 where
+        alpha is 0), in ``normal_space`` ``"camera"`` (x right, y down, z the direction of
+        view: a surface facing the camera is ``(0, 0, -1)``) or ``"world"``; and
+        ``median_depth (H, W)``, the depth of the Gaussian at which the transmittance first
+        drops to 0.5 or below (0 where it never does). A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
         batch: arrays gain a leading ``B``. ``max_scale``/``min_opacity`` drop
         Gaussians for this frame only, exactly as ``--max-scale``/``--min-opacity``.
         The GIL is released while rendering."""
@@ -183,6 +215,7 @@ def render_cpu(
     rules: Optional[str] = None,
     near_plane: Optional[float] = None,
     mode: str = "rgb+alpha+depth",
+    normal_space: str = "camera",
 ) -> Dict[str, np.ndarray]:
     """``Renderer.render`` on the CPU reference renderer (the original 3DGS rasterizer's
     rules in f32, multithreaded): the yardstick the GPU is checked against."""

@@ -288,3 +288,88 @@ fn gpu_surface_pass_in_chunks_equals_one_piece() {
     );
     assert_validation_clean(&r);
 }
+
+/// The channels of the EXR file at `path`, by name.
+fn exr_channels(path: &std::path::Path) -> Vec<(String, Vec<f32>)> {
+    let mut image = exr::prelude::read_all_flat_layers_from_file(path).unwrap();
+    let layer = image.layer_data.remove(0);
+    layer
+        .channel_data
+        .list
+        .into_iter()
+        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+        .collect()
+}
+
+#[test]
+fn surface_files_hold_the_named_channels_and_the_normal_map_colours() {
+    use verisplat::core::model::surface::NormalSpace;
+    use verisplat::io::output::{self, OutputOptions, RenderMode};
+    let s = shared_scene("playbot_lod6_1873_sh2.ply").activated();
+    let cam = orbit(PLAYBOT_ORBIT, 2, 96, 64);
+    let frame = cpu::surface::render_surface(&s, &cam, &RenderOptions::default());
+    let planes = surface_planes(&frame.features, &frame.alpha, Some(&cam));
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, mode: RenderMode, space: NormalSpace| {
+        let opts = OutputOptions {
+            mode: Some(mode),
+            normal_space: space,
+            ..Default::default()
+        };
+        let path = dir.path().join(name);
+        let files = output::plan_files(&path, Some(&cam), &opts).unwrap();
+        assert_eq!(files.len(), 1, "{name}: one file");
+        output::write_file(&frame, &files[0], false).unwrap();
+        path
+    };
+    // EXR: N.x, N.y, N.z, A; the median depth as Z alone, +inf where there is none.
+    let n = exr_channels(&write("n.exr", RenderMode::Normal, NormalSpace::Camera));
+    let names: Vec<&str> = n.iter().map(|(name, _)| name.as_str()).collect();
+    assert_eq!(names, ["A", "N.x", "N.y", "N.z"]);
+    for (c, (_, plane)) in n[1..].iter().enumerate() {
+        assert!(plane.iter().zip(&planes.normals).all(|(v, p)| *v == p[c]));
+    }
+    assert_eq!(n[0].1, frame.alpha);
+    let m = exr_channels(&write(
+        "m.exr",
+        RenderMode::MedianDepth,
+        NormalSpace::Camera,
+    ));
+    assert_eq!(m.len(), 1);
+    assert_eq!(m[0].0, "Z");
+    for (z, d) in m[0].1.iter().zip(&planes.median_depth) {
+        assert!(if *d > 0.0 { z == d } else { z.is_infinite() });
+    }
+    assert!(planes.median_depth.iter().any(|d| *d > 0.0));
+    // PNG: 0.5 + 0.5 (x, -y, -z) of camera-space normals, black where alpha is 0.
+    let png = image::open(write("n.png", RenderMode::Normal, NormalSpace::Camera))
+        .unwrap()
+        .to_rgb8();
+    let (mut covered, mut facing) = (0, 0);
+    for (i, px) in png.pixels().enumerate() {
+        let n = planes.normals[i];
+        if frame.alpha[i] == 0.0 {
+            assert_eq!(px.0, [0, 0, 0]);
+            continue;
+        }
+        covered += 1;
+        let want = [n[0], -n[1], -n[2]].map(|v| verisplat::io::output::to_u8(0.5 + 0.5 * v));
+        assert_eq!(px.0, want, "pixel {i}");
+        facing += usize::from(px.0[2] > 128);
+    }
+    assert!(
+        covered > 100 && facing * 10 > covered * 9,
+        "{facing} of {covered} face the camera"
+    );
+    // Bad requests: a surface mode as .npy, a frame without the pass.
+    let opts = OutputOptions {
+        mode: Some(RenderMode::Normal),
+        ..Default::default()
+    };
+    assert!(output::plan_files(&dir.path().join("n.npy"), None, &opts).is_err());
+    let plain = cpu::render(&s, &cam, &RenderOptions::default());
+    let files = output::plan_files(&dir.path().join("p.exr"), Some(&cam), &opts).unwrap();
+    let err = output::write_file(&plain, &files[0], false).unwrap_err();
+    assert!(err.to_string().contains("surface pass"), "{err}");
+    assert!(!dir.path().join("p.exr").exists());
+}
