@@ -2,8 +2,8 @@
 # Installs what verisplat needs on Debian/Ubuntu: the Vulkan loader, Mesa's lavapipe CPU
 # driver (so no GPU is needed), the Khronos validation layer, the GLSL compiler `glslc`
 # that build.rs compiles the shaders with (and spirv-tools to inspect them), Chromium
-# for the viewer's browser test, Slurm and munge for the cluster test, and Python with
-# venv for the Python package.
+# for the viewer's browser test, Slurm and munge for the cluster test, ffmpeg for video
+# output (render -o out.mp4) and its tests, and Python with venv for the Python package.
 # Idempotent: does nothing when everything is present. Needs root (or sudo).
 set -euo pipefail
 
@@ -14,6 +14,9 @@ packages=(
   glslc spirv-tools
   pkg-config openexr
   chromium chromium-driver
+  # `render -o out.mp4/.webm/.gif` streams frames to the system ffmpeg (libx264, libvpx-vp9);
+  # tests/all/app/video.rs checks the videos with ffmpeg and ffprobe.
+  ffmpeg
   # A single-node Slurm cluster for tools/slurm_test.sh (docs/cluster.md).
   slurm-wlm munge
 )

@@ -25,8 +25,9 @@ pub enum WriteError {
     Exists(PathBuf),
 }
 
-/// The temporary file [`write_atomically`] writes before renaming it to `path`.
-fn temporary_path(path: &Path) -> PathBuf {
+/// The temporary file [`write_atomically`] writes before renaming it to `path` (also
+/// the one [`crate::io::video`] has ffmpeg write).
+pub fn temporary_path(path: &Path) -> PathBuf {
     static WRITES: AtomicU64 = AtomicU64::new(0);
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),

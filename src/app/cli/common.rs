@@ -112,7 +112,7 @@ pub(crate) fn fail_on_validation_messages(ctx: &GpuContext) -> Result<()> {
 }
 
 /// Camera paths generated or interpolated by verisplat.
-#[derive(Args)]
+#[derive(Args, Clone)]
 pub(crate) struct PathArgs {
     /// Render a turntable orbit of FRAMES frames around the scene's bulk (world up -y).
     #[arg(long, value_name = "FRAMES", conflicts_with = "cameras", value_parser = values::int_in(1usize, camera::MAX_PATH_FRAMES))]
@@ -151,7 +151,9 @@ pub(crate) struct PathArgs {
     /// drawn by the CPU reference (--cpu) so far. docs/cameras.md, "Lenses".
     #[arg(long, value_name = "LENS", value_parser = values::lens)]
     pub(crate) lens: Option<camera::LensSpec>,
-    /// Frames per second of a keyframe path (default: the file's).
+    /// Frames per second of a keyframe path (default: the file's); with `render -o
+    /// out.mp4` (.webm, .gif) also the video's frame rate, for any path (default: a
+    /// keyframe path's own, else 30).
     #[arg(long, value_name = "FPS", value_parser = values::positive_f32)]
     pub(crate) fps: Option<f32>,
     /// Total frames of a keyframe path (default: from its fps and duration).

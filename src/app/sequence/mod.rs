@@ -22,8 +22,11 @@ mod selection;
 pub use crate::core::frame::FrameSource;
 pub use pattern::{file_safe_name, names_directory, OutputPattern};
 pub use plan::{
-    plan, plan_frames, prepare, verify, Existing, FramePlan, Plan, Problem, SequenceError,
+    plan, plan_frames, prepare, remove_stale_temporaries_of, verify, Existing, FramePlan, Plan,
+    Problem, SequenceError,
 };
 pub use progress::ProgressStyle;
-pub use run::{default_encode_threads, run, run_each, run_pipelined, RunOptions, Summary};
+pub use run::{
+    default_encode_threads, run, run_each, run_pipelined, FrameSink, RunOptions, Summary,
+};
 pub use selection::FrameSelection;

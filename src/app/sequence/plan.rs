@@ -235,6 +235,16 @@ pub fn verify(frames: &[FramePlan]) -> Vec<Problem> {
         .collect()
 }
 
+/// Removes the temporary files that processes now gone left of `path` (a video, written
+/// through a temporary file as images are); how many.
+pub fn remove_stale_temporaries_of(path: &Path) -> usize {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    remove_stale_temporaries(&HashSet::from([dir]), &HashSet::from([path.to_path_buf()]))
+}
+
 /// Removes the temporary files of [`output::write_atomically`] (see
 /// [`fsutil::temporary_owner`]) of planned outputs whose writer process is gone.
 fn remove_stale_temporaries(dirs: &HashSet<PathBuf>, planned: &HashSet<PathBuf>) -> usize {

@@ -32,6 +32,22 @@ pub struct RunOptions {
     /// Frames in flight with [`run_pipelined`]: 2 submits frame `n + 1` before frame `n`
     /// is read back; 1 renders one frame at a time. [`run`] always renders one at a time.
     pub frames_in_flight: usize,
+    /// Instead of their files, frames go to this sink (a video encoder): in path order,
+    /// on the rendering thread ([`RunOptions::encode_threads`] does not apply).
+    pub sink: Option<Arc<dyn FrameSink>>,
+}
+
+/// Takes a run's frames in path order instead of writing each to its files
+/// ([`RunOptions::sink`]): [`crate::io::video::VideoWriter`].
+pub trait FrameSink: Send + Sync + std::fmt::Debug {
+    /// Takes the next frame.
+    fn write(&self, frame: &Frame) -> Result<(), output::OutputError>;
+}
+
+impl FrameSink for crate::io::video::VideoWriter {
+    fn write(&self, frame: &Frame) -> Result<(), output::OutputError> {
+        crate::io::video::VideoWriter::write(self, frame)
+    }
 }
 
 impl Default for RunOptions {
@@ -44,6 +60,7 @@ impl Default for RunOptions {
             skip_existing: false,
             cancel: None,
             frames_in_flight: 1,
+            sink: None,
         }
     }
 }
@@ -167,6 +184,9 @@ pub fn run_pipelined(
     let write_all = |frame: &Frame, files: &[FileSpec]| -> Written {
         let t = Instant::now();
         let mut appeared = 0;
+        if let Some(sink) = &opts.sink {
+            sink.write(frame)?;
+        }
         for f in files {
             match output::write_file(frame, f, overwrite) {
                 // Another process (a parallel run of the same path) wrote it meanwhile.
@@ -193,7 +213,8 @@ pub fn run_pipelined(
         }
     };
     let depth = opts.frames_in_flight.max(1);
-    if opts.encode_threads == 0 {
+    // A sink takes the frames in order: they are handed over on this thread.
+    if opts.encode_threads == 0 || opts.sink.is_some() {
         render_frames(
             frames,
             opts.cancel.as_deref(),

@@ -1,6 +1,7 @@
 //! The `verisplat` binary as a user runs it: commands and their errors, the viewer (over
 //! its WebSocket and in a browser), `doctor`, `compare` and `eval`, image sequences,
-//! shards, the docs' examples, the former name, and the repository's layout rules.
+//! shards, videos through ffmpeg, the docs' examples, the former name, and the
+//! repository's layout rules.
 
 mod cli;
 mod cli_usability;
@@ -12,5 +13,6 @@ mod layout_rules;
 mod sequences;
 mod shards;
 mod transform_flags;
+mod video;
 mod view;
 mod view_browser;

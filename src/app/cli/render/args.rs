@@ -17,6 +17,7 @@ use verisplat::io::output;
   verisplat render model_dir/ --cameras cameras.json --camera 0,8,16 -o renders/{name}.png
   verisplat render scene.spz --cameras path.json --frames 100..200 -o out/ --format exr
   verisplat render scene.ply --orbit 120 -o orbit/f_%04d.png --skip-existing   # resume
+  verisplat render scene.ply --cameras path.json -o turn.mp4 --fps 24   # a video (ffmpeg)
   verisplat render scene.ply --orbit 1200 -o orbit/ --shard slurm   # a task of sbatch --array=0-7
   verisplat render scene.ply --orbit 1200 -o orbit/ --verify        # after the array: all there?
   verisplat render scene.ply --orbit 48 --width 320 --height 240 --export-colmap data/   # a data set to train on
@@ -36,7 +37,8 @@ pub(crate) struct RenderArgs {
     /// Output: a file (.png or .exr), a pattern with {} / {:05} / %05d / ##### (frame
     /// number) or {name} (camera name), e.g. out/frame_{:05}.exr, or a directory (out/
     /// gives out/frame_00000.png, ...) [default: render.png for one frame,
-    /// render/frame_{:05}.png for several].
+    /// render/frame_{:05}.png for several]; or a video, out.mp4 (H.264), out.webm (VP9)
+    /// or out.gif, encoded by the system ffmpeg at --fps (default 30) and --quality.
     #[arg(short, long, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
     /// What to write: rgb, rgba, alpha, depth, rgb+depth, features, normal, median-depth,
@@ -109,6 +111,11 @@ pub(crate) struct RenderArgs {
     /// Image format of a directory output (-o out/): png or exr [default: png].
     #[arg(long, value_name = "EXT", value_parser = ["png", "exr"])]
     pub(crate) format: Option<String>,
+    /// Video output (-o out.mp4, .webm): the codec's constant-quality factor (CRF),
+    /// lower is better and larger: H.264 0-51 [default: 18], VP9 0-63 [default: 24]. A
+    /// GIF has none (refused): its quality is a 256-colour palette made from the clip.
+    #[arg(long, value_name = "CRF", value_parser = values::int_in(0u32, 63))]
+    pub(crate) quality: Option<u32>,
     /// Write 16-bit PNG (colour and alpha) instead of 8-bit.
     #[arg(long)]
     pub(crate) png16: bool,

@@ -1,9 +1,10 @@
-//! `verisplat render`: one camera or a camera path to PNG/EXR files.
+//! `verisplat render`: one camera or a camera path to PNG/EXR files, or to a video.
 //!
 //! [`render`] runs the command's phases in order; the rooms below hold them: the
 //! arguments (`args`), the scene and its time (`scene`, `time`), where the frames go
 //! (`outputs`), the splat renderers (`splat`), the field renders (`field`), the COLMAP
-//! export (`colmap`) and stopping on Ctrl-C (`interrupt`).
+//! export (`colmap`), videos through ffmpeg (`video`) and stopping on Ctrl-C
+//! (`interrupt`).
 
 mod args;
 mod colmap;
@@ -13,6 +14,7 @@ mod outputs;
 mod scene;
 mod splat;
 mod time;
+mod video;
 
 pub(crate) use args::RenderArgs;
 pub(crate) use interrupt::{interrupt_flag, Interrupted};
@@ -32,7 +34,8 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         args::check_cpu_options(args)?;
     }
     let shard = crate::cli::common::shard(args.shard.as_deref())?;
-    let outputs = Outputs::checked(args, shard)?;
+    let video = video::checked(args)?;
+    let outputs = Outputs::checked(args, shard, video.is_some())?;
     let scene::Loaded {
         scene,
         name,
@@ -46,7 +49,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if field_mode.is_some() {
         refuse_lens(&args.path, &draws_pinholes_only("a field render"))?;
     }
-    let mut path = camera_path(&args.view, &args.path, &args.scene, &scene)?;
+    let mut path = camera_path(&args.view, &video::path_args(args)?, &args.scene, &scene)?;
     let (scene, animation) = scene::at_time(args, time, scene, &mut path)?;
     if let Some(file) = &args.export_cameras {
         if outputs.exports_cameras {
@@ -62,20 +65,35 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         }
         return colmap::export_colmap(args, dir, &scene, &name, &path.cameras, shader.as_ref());
     }
-    let (output_name, pattern) = outputs.pattern(args, &path.cameras)?;
-    let Some(frames) =
-        outputs::planned_frames(args, shard, &path.cameras, &pattern, &outputs.opts)?
-    else {
-        return Ok(());
-    };
-    if args.verify {
-        return outputs::verify(&frames);
-    }
-    let Some(plan) = outputs::prepare(args, frames)? else {
-        return Ok(());
+    let (output_name, plan, started) = if let Some(out) = &video {
+        let frames = video::frames(args, out, &path.cameras)?;
+        let started = video::start(args, out, &frames)?;
+        let plan = Plan {
+            frames,
+            skipped: 0,
+            removed_temporaries: 0,
+        };
+        (out.path.clone(), plan, Some(started))
+    } else {
+        let (output_name, pattern) = outputs.pattern(args, &path.cameras)?;
+        let Some(frames) =
+            outputs::planned_frames(args, shard, &path.cameras, &pattern, &outputs.opts)?
+        else {
+            return Ok(());
+        };
+        if args.verify {
+            return outputs::verify(&frames);
+        }
+        let Some(plan) = outputs::prepare(args, frames)? else {
+            return Ok(());
+        };
+        (output_name, plan, None)
     };
     let opts = scene::render_options(args, &scene, &name);
-    let run_opts = outputs::run_options(args);
+    let mut run_opts = outputs::run_options(args);
+    if let Some(s) = &started {
+        run_opts.sink = Some(s.writer.clone());
+    }
     let act = scene.activated();
     let job = Job {
         args,
@@ -88,6 +106,18 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         shader: shader.as_ref(),
     };
     let (summary, how) = render_frames(&job, field_mode)?;
+    if let Some(s) = &started {
+        if summary.interrupted {
+            s.writer.abort();
+            return Err(Interrupted(format!(
+                "interrupted after {} of {}; no video written (its temporary file is removed)",
+                summary.written,
+                plural(plan.frames.len(), "frame")
+            ))
+            .into());
+        }
+        s.writer.finish()?;
+    }
     if summary.interrupted {
         return Err(Interrupted(format!(
             "interrupted after {} of {}; every file written is complete; run the same command with --skip-existing to finish",
@@ -96,7 +126,10 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         ))
         .into());
     }
-    let what = describe_frames(&plan, &summary, &path.source, &output_name);
+    let mut what = describe_frames(&plan, &summary, &path.source, &output_name);
+    if let Some(s) = &started {
+        what = format!("{what} ({})", s.description);
+    }
     note!(
         "rendered {name} ({}) {what} {how} in {:.2} s: {:.2} frames/s; rendering {:.2} s, encoding {:.2} s on {}",
         plural(scene.len(), "Gaussian"),
@@ -104,9 +137,10 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         summary.frames_per_s(),
         summary.render_s,
         summary.encode_s,
-        match args.encode_threads {
-            0 => "the rendering thread".to_string(),
-            n => format!("{}, overlapped", plural(n, "thread")),
+        match (&started, args.encode_threads) {
+            (Some(_), _) => "the rendering thread, ffmpeg encoding meanwhile".to_string(),
+            (None, 0) => "the rendering thread".to_string(),
+            (None, n) => format!("{}, overlapped", plural(n, "thread")),
         }
     );
     if summary.appeared > 0 {
@@ -152,7 +186,8 @@ fn render_frames(job: &Job, field_mode: Option<RenderMode>) -> Result<(Summary, 
 /// the frames of the path (and those skipped) to the output.
 fn describe_frames(plan: &Plan, summary: &Summary, source: &str, output_name: &Path) -> String {
     let first = &plan.frames[0];
-    if plan.frames.len() == 1 && plan.skipped == 0 {
+    // A video's frames have no files of their own.
+    if plan.frames.len() == 1 && plan.skipped == 0 && !first.files.is_empty() {
         let from = if source == "the default camera" {
             "from the default camera".to_string()
         } else {

@@ -159,10 +159,12 @@ pub(super) struct Outputs<'a> {
 
 impl Outputs<'_> {
     /// Checks the output options and names: bad names and unwritable folders are reported
-    /// before anything is loaded.
+    /// before anything is loaded. A `video` output (checked by `super::video`) has no
+    /// image names.
     pub(super) fn checked(
         args: &RenderArgs,
         shard: Option<verisplat::app::shard::Shard>,
+        video: bool,
     ) -> Result<Outputs<'_>> {
         let out_opts = output::OutputOptions {
             mode: args.mode,
@@ -183,6 +185,7 @@ impl Outputs<'_> {
         }
         // Bad names and unwritable folders are reported before anything is loaded.
         let explicit = match &args.output {
+            Some(_) if video => None,
             Some(out) => {
                 let pattern = OutputPattern::parse(out, format).map_err(anyhow::Error::msg)?;
                 check_output_options(args, out, &pattern, &out_opts)?;
@@ -320,5 +323,6 @@ pub(super) fn run_options(args: &RenderArgs) -> RunOptions {
         skip_existing: args.skip_existing,
         cancel: Some(interrupt_flag()),
         frames_in_flight: args.frames_in_flight.unwrap_or(2),
+        sink: None,
     }
 }
