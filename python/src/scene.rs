@@ -165,15 +165,25 @@ impl PyScene {
     }
 
     /// Writes the scene in the format `path`'s extension names (.ply, .splat, .spz),
-    /// atomically; an existing file is refused unless `overwrite`.
-    #[pyo3(signature = (path, overwrite=false))]
-    fn save(&self, py: Python<'_>, path: PathBuf, overwrite: bool) -> PyResult<()> {
+    /// atomically; an existing file is refused unless `overwrite`. `spz_axes` ("spec" or
+    /// "raw") is the frame of an SPZ output (`spz::SpzAxes`).
+    #[pyo3(signature = (path, overwrite=false, spz_axes="spec"))]
+    fn save(&self, py: Python<'_>, path: PathBuf, overwrite: bool, spz_axes: &str) -> PyResult<()> {
+        let axes: scene::spz::SpzAxes = spz_axes.parse().map_err(value_err)?;
         py.detach(|| {
             guarded(|| {
                 let format =
                     scene::write::OutputFormat::from_path(&path).map_err(|e| py_err(e.into()))?;
-                let bytes = scene::write::to_bytes(&self.raw, format)
-                    .map_err(|m| value_err(format!("{}: {m}", path.display())))?;
+                let bytes = match (format, axes) {
+                    (scene::write::OutputFormat::Spz, axes) => {
+                        scene::spz::to_bytes_v3_with_axes(&self.raw, axes)
+                    }
+                    (_, scene::spz::SpzAxes::Raw) => {
+                        Err("is not an .spz file: spz_axes=\"raw\" applies to SPZ only".to_string())
+                    }
+                    (format, _) => scene::write::to_bytes(&self.raw, format),
+                }
+                .map_err(|m| value_err(format!("{}: {m}", path.display())))?;
                 verisplat::io::output::write_bytes_atomically(&path, overwrite, &bytes)
                     .map_err(|e| py_err(e.into()))
             })
@@ -205,15 +215,23 @@ impl PyScene {
 }
 
 /// Loads a scene from any supported file, a SOG directory or a trained model directory
-/// (`iteration` picks point_cloud/iteration_N; default the largest).
+/// (`iteration` picks point_cloud/iteration_N; default the largest); an SPZ file in
+/// `spz_axes` ("spec" or "raw", `spz::SpzAxes`).
 #[pyfunction]
-#[pyo3(signature = (path, iteration=None))]
-pub(crate) fn load(py: Python<'_>, path: PathBuf, iteration: Option<u64>) -> PyResult<PyScene> {
+#[pyo3(signature = (path, iteration=None, spz_axes="spec"))]
+pub(crate) fn load(
+    py: Python<'_>,
+    path: PathBuf,
+    iteration: Option<u64>,
+    spz_axes: &str,
+) -> PyResult<PyScene> {
+    let axes: scene::spz::SpzAxes = spz_axes.parse().map_err(value_err)?;
     py.detach(|| {
         guarded(|| {
             let resolved =
                 scene::resolve_scene_path_at(&path, iteration).map_err(|e| py_err(e.into()))?;
-            let raw = scene::load(&resolved).map_err(|e| py_err(e.into()))?;
+            let (raw, _) =
+                scene::spz::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
             let act = raw.activated();
             Ok(PyScene::new(raw, act, resolved.display().to_string()))
         })

@@ -1,8 +1,8 @@
 """verisplat.torch.rasterization as a drop-in for gsplat's (issue 38): what gsplat's own
 examples and strategies pass to it. gsplat (1.5.3, its pure-torch strategy code; CI
 installs it without its CUDA build) drives densification through verisplat, packed and
-not; the two CUDA kernels its MCMC strategy calls are replaced by torch equivalents
-written here (gsplat's CUDA build is not installed)."""
+not; its MCMC strategy through verisplat.gsplat.MCMCStrategy, whose relocation and
+position noise use verisplat's torch kernels (gsplat's CUDA build is not installed)."""
 
 import math
 import os
@@ -166,32 +166,33 @@ def test_packed_meta_is_the_unpacked_meta_at_the_visible_pairs():
     assert mp["tile_size"] == 16 and mp["n_cameras"] == 2 and mp["n_batches"] == 1
 
 
-def relocation_in_torch(opacities, scales, ratios, binoms):
-    """gsplat's `compute_relocation` (its CUDA kernel, Equation 9 of the 3DGS-MCMC paper)."""
-    n_max = binoms.shape[0]
-    n = ratios.clamp(1, n_max).int()
-    new_opacities = 1.0 - (1.0 - opacities) ** (1.0 / n)
-    denom = torch.zeros_like(opacities)
-    for i in range(1, n_max + 1):
-        for k in range(i):
-            term = binoms[i - 1, k] * (-1.0) ** k / math.sqrt(k + 1) * new_opacities ** (k + 1)
-            denom = denom + torch.where(i <= n, term, torch.zeros_like(term))
-    return new_opacities, (opacities / denom)[:, None] * scales
-
-
 @pytest.fixture
-def torch_mcmc_kernels(monkeypatch):
-    from gsplat.cuda import _torch_impl
-    import gsplat.strategy.ops as ops
+def mcmc_calls(monkeypatch):
+    """Counts what gsplat's MCMCStrategy does: its `relocate` and `sample_add` steps (with
+    the Gaussians each moves or adds) and the calls of verisplat's relocation kernel (the
+    one verisplat.gsplat.MCMCStrategy hands to gsplat's ops while it runs)."""
+    import gsplat.strategy.mcmc as mcmc
+    from verisplat import _gsplat_kernels
 
-    calls = {"relocation": 0}
+    calls = {"kernel": 0, "relocated": [], "added": []}
+    kernel = _gsplat_kernels.compute_relocation
 
-    def relocation(**kwargs):
-        calls["relocation"] += 1
-        return relocation_in_torch(**kwargs)
+    def counted(**kwargs):
+        calls["kernel"] += 1
+        return kernel(**kwargs)
 
-    monkeypatch.setattr(ops, "compute_relocation", relocation)
-    monkeypatch.setattr(ops, "quat_scale_to_covar_preci", _torch_impl._quat_scale_to_covar_preci)
+    def spy(name, key, count):
+        real = getattr(mcmc, name)
+
+        def wrapped(*args, **kwargs):
+            calls[key].append(count(args, kwargs))
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(mcmc, name, wrapped)
+
+    spy("relocate", "relocated", lambda a, k: int(k["mask"].sum()))
+    spy("sample_add", "added", lambda a, k: int(k["n"]))
+    monkeypatch.setattr(_gsplat_kernels, "compute_relocation", counted)
     return calls
 
 
@@ -208,9 +209,11 @@ def splat_parameters(s):
     })
 
 
-def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
+def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic", raster=None):
     """A small 3DGS training loop as gsplat's simple_trainer.py runs one: log scales,
-    logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps."""
+    logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps.
+    `raster`: the rasterization called (verisplat.torch's unless given)."""
+    raster = raster or rasterization
     s = scene(n=n, seed=13, degree=1)
     cams = cameras(2)
     target_t = tensors(scene(n=n, seed=14, degree=1), grad=False)
@@ -223,7 +226,7 @@ def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic"):
     losses = []
     for step in range(steps):
         colors = torch.cat([params["sh0"], params["shN"]], 1)
-        out, _, info = rasterization(
+        out, _, info = raster(
             params["means"], params["quats"], torch.exp(params["scales"]),
             torch.sigmoid(params["opacities"]), colors, vm, Ks, W, H, sh_degree=1,
             packed=packed, absgrad=getattr(strategy, "absgrad", False), rasterize_mode=mode,
@@ -268,27 +271,64 @@ def test_gsplats_default_strategy_is_the_same_packed_or_not():
         assert torch.equal(runs[0][k], runs[1][k]), k
 
 
+MIN_OPACITY = 0.2  # high enough that some of the scene's Gaussians are dead at step 20
+
+
 @pytest.mark.parametrize("packed", [True, False])
-def test_gsplats_mcmc_strategy_relocates_and_adds_through_verisplat(torch_mcmc_kernels, packed):
+def test_gsplats_mcmc_strategy_relocates_and_adds_through_verisplat(mcmc_calls, packed):
+    """simple_trainer.py's MCMC path with only the import lines changed:
+    `from verisplat.gsplat import MCMCStrategy, rasterization`."""
+    from verisplat.gsplat import MCMCStrategy
+    from verisplat.gsplat import rasterization as gs_rasterization
+    import gsplat.strategy.ops as ops
+
+    cuda_ones = (ops.compute_relocation, ops.quat_scale_to_covar_preci)
     torch.manual_seed(4)
-    strategy = gs_strategy.MCMCStrategy(cap_max=260, refine_start_iter=10, refine_every=10,
-                                        min_opacity=0.05)
-    params, losses = train_with_strategy(strategy, packed, steps=31)
-    # Refinements at steps 20 and 30 each add 5 % (gsplat's rule): 200 -> 210 -> 220.
+    strategy = MCMCStrategy(cap_max=260, refine_start_iter=10, refine_every=10,
+                            min_opacity=MIN_OPACITY)
+    assert isinstance(strategy, gs_strategy.MCMCStrategy)
+    params, losses = train_with_strategy(strategy, packed, steps=31, raster=gs_rasterization)
+    # Refinements at steps 20 and 30 each relocate the dead Gaussians (when there are
+    # any), then add 5 % more (gsplat's rule): 200 -> 210 -> 220; one kernel call per
+    # relocation and per addition.
+    assert mcmc_calls["added"] == [10, 10], mcmc_calls
+    assert sum(mcmc_calls["relocated"]) > 0, mcmc_calls
+    assert mcmc_calls["kernel"] == len(mcmc_calls["relocated"]) + 2, mcmc_calls
     assert len(params["means"]) == 220, len(params["means"])
-    assert torch_mcmc_kernels["relocation"] >= 2
     assert losses[-1] < losses[0], losses
+    # The swap lasted only while the strategy ran.
+    assert (ops.compute_relocation, ops.quat_scale_to_covar_preci) == cuda_ones
 
 
-def test_relocation_in_torch_keeps_a_single_gaussian():
-    binoms = torch.tensor([[math.comb(i, k) for k in range(10)] for i in range(10)],
-                          dtype=torch.float32)
-    o, s = torch.tensor([0.3, 0.6]), torch.ones(2, 3)
-    new_o, new_s = relocation_in_torch(o, s, torch.tensor([1.0, 1.0]), binoms)
-    assert torch.allclose(new_o, o) and torch.allclose(new_s, s)
-    # Two copies of opacity 1 - (1 - o)^(1/2) each composite to o.
-    new_o, _ = relocation_in_torch(o, s, torch.tensor([2.0, 2.0]), binoms)
-    assert torch.allclose(1 - (1 - new_o) ** 2, o)
+def test_gsplats_own_kernels_cannot_run_here():
+    """What verisplat.gsplat's MCMCStrategy replaces: gsplat's CUDA relocation fails
+    on a machine without gsplat's CUDA build (skipped where it has one)."""
+    from gsplat.cuda import _backend
+    from gsplat.relocation import compute_relocation
+
+    if _backend._C is not None:
+        pytest.skip("gsplat's CUDA build loads on this machine")
+    o, s = torch.tensor([0.5]), torch.ones(1, 3)
+    with pytest.raises(AttributeError, match="relocation"):  # gsplat's _C is None
+        compute_relocation(o, s, torch.tensor([2]), torch.ones(4, 4))
+
+
+def test_torch_kernels_context_is_scoped_and_nests():
+    from verisplat import _gsplat_kernels
+    from verisplat.gsplat import torch_kernels
+    import gsplat.strategy.ops as ops
+
+    before = ops.compute_relocation
+    with torch_kernels():
+        assert ops.compute_relocation is _gsplat_kernels.compute_relocation
+        with torch_kernels():
+            assert ops.quat_scale_to_covar_preci is _gsplat_kernels.quat_scale_to_covar_preci
+        assert ops.compute_relocation is _gsplat_kernels.compute_relocation
+    assert ops.compute_relocation is before
+    with pytest.raises(RuntimeError):
+        with torch_kernels():
+            raise RuntimeError("inside")
+    assert ops.compute_relocation is before
 
 
 # 8. Per-camera colours, batch dimensions, many channels, numpy sizes, backgrounds.

@@ -110,6 +110,28 @@ def test_save_and_load_round_trip(tmp_path, demo):
         demo.save(tmp_path / "out.xyz")
 
 
+def test_spz_axes_raw_is_the_spec_turned_about_x(tmp_path, demo):
+    spec, raw = tmp_path / "spec.spz", tmp_path / "raw.spz"
+    demo.save(spec)
+    demo.save(raw, spz_axes="raw")
+    assert spec.read_bytes() != raw.read_bytes()
+    # Read in the axes it was written in: the scene, within SPZ's 1/4096 position step.
+    for path, axes in ((spec, "spec"), (raw, "raw")):
+        back = verisplat.load(path, spz_axes=axes)
+        assert np.abs(back.means - demo.means).max() <= 0.5 / 4096 + 1e-6, axes
+    # Read in the other axes: exactly the 180-degree turn about x (y and z negated).
+    as_spec = verisplat.load(raw)
+    as_raw = verisplat.load(raw, spz_axes="raw")
+    assert np.array_equal(as_spec.means * np.array([1, -1, -1], np.float32), as_raw.means)
+    assert np.array_equal(as_spec.quats * np.array([1, 1, -1, -1], np.float32), as_raw.quats)
+    with pytest.raises(ValueError, match="unknown SPZ axes"):
+        verisplat.load(raw, spz_axes="rub")
+    with pytest.raises(ValueError, match="not SPZ"):
+        verisplat.load(data("playbot_lod6_1873_sh2.ply"), spz_axes="raw")
+    with pytest.raises(ValueError, match="applies to SPZ only"):
+        demo.save(tmp_path / "x.ply", spz_axes="raw")
+
+
 def test_load_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match="missing.ply"):
         verisplat.load(tmp_path / "missing.ply")

@@ -217,11 +217,13 @@ class Scene:
             )
         )
 
-    def save(self, path: PathLike, overwrite: bool = False) -> None:
+    def save(self, path: PathLike, overwrite: bool = False, spz_axes: str = "spec") -> None:
         """Writes the scene as .ply (lossless), .splat or .spz (by extension),
-        atomically; an existing file is refused unless ``overwrite``."""
+        atomically; an existing file is refused unless ``overwrite``. ``spz_axes`` is the
+        frame of a .spz: ``"spec"`` (the SPZ spec's RUB axes) or ``"raw"`` (PLY axes as
+        they are, what PlayCanvas's splat-transform reads); docs/formats.md, "SPZ"."""
         try:
-            self._s.save(os.fspath(path), overwrite)
+            self._s.save(os.fspath(path), overwrite, spz_axes)
         except (FileExistsError, ValueError) as e:
             raise _python_names(e) from None
 
@@ -239,10 +241,13 @@ class Scene:
             raise _python_names(e) from None
 
 
-def load(path: PathLike, iteration: Optional[int] = None) -> Scene:
+def load(path: PathLike, iteration: Optional[int] = None, spz_axes: str = "spec") -> Scene:
     """Loads a scene: INRIA .ply, compressed .ply, .splat, .spz, SOG, or a trained model
-    directory (``iteration`` picks point_cloud/iteration_N, default the largest)."""
-    return Scene(_native.load(os.fspath(path), iteration))
+    directory (``iteration`` picks point_cloud/iteration_N, default the largest).
+    ``spz_axes`` is the frame of a .spz file, which the file does not record: ``"spec"``
+    (the SPZ spec's RUB axes: Niantic's spz library, verisplat) or ``"raw"`` (PLY axes as
+    they are: PlayCanvas's splat-transform); docs/formats.md, "SPZ"."""
+    return Scene(_native.load(os.fspath(path), iteration, spz_axes))
 
 
 def demo() -> Scene:

@@ -33,6 +33,8 @@ pub(crate) struct BenchArgs {
     #[arg(long, value_name = "N", conflicts_with = "demo")]
     pub(crate) iteration: Option<u64>,
     #[command(flatten)]
+    pub(crate) spz: super::common::SpzAxesArg,
+    #[command(flatten)]
     pub(crate) view: CameraArgs,
     #[command(flatten)]
     pub(crate) path: PathArgs,
@@ -311,6 +313,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         scene: args.scene.clone(),
         demo: args.demo,
         iteration: args.iteration,
+        spz: args.spz,
     };
     let (file_scene, shader) = load_file_scene(args, &scene_arg, &filter, counts.is_empty())?;
     let counts: Vec<Option<usize>> = if counts.is_empty() {
@@ -525,6 +528,7 @@ fn point_camera(
             scene: None,
             demo: false,
             iteration: None,
+            spz: Default::default(),
         },
         None => scene_arg.clone(),
     };

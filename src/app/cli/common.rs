@@ -7,6 +7,7 @@ use clap::Args;
 use std::path::{Path, PathBuf};
 use verisplat::core::camera::{self, Camera, CameraFormat};
 use verisplat::core::scene::filter::SceneFilter;
+use verisplat::core::scene::spz::SpzAxes;
 use verisplat::core::scene::{self, Scene};
 use verisplat::cpu::{Rules, SplatKernel};
 use verisplat::gpu::{ContextOptions, GpuContext};
@@ -47,6 +48,19 @@ pub(crate) struct SceneArg {
     /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
     #[arg(long, value_name = "N", conflicts_with = "demo")]
     pub(crate) iteration: Option<u64>,
+    #[command(flatten)]
+    pub(crate) spz: SpzAxesArg,
+}
+
+/// `--spz-axes`: the frame an SPZ scene file is in (a file does not say).
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub(crate) struct SpzAxesArg {
+    /// Axes of an SPZ scene: spec (the SPZ spec's RUB, converted to PLY axes: Niantic's
+    /// spz library, Scaniverse, verisplat) or raw (PLY axes as they are: PlayCanvas
+    /// splat-transform). A file read in the wrong one is upside down and mirrored front
+    /// to back (turned 180 degrees about x) [default: spec].
+    #[arg(long = "spz-axes", value_name = "spec|raw", default_value_t = SpzAxes::Spec)]
+    pub(crate) axes: SpzAxes,
 }
 
 #[derive(Args)]
@@ -248,8 +262,10 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     let Some(path) = arg.scene.as_deref() else {
         bail!("no scene given; pass a .ply file, a model directory or --demo");
     };
-    let loaded = scene::resolve_scene_path_at(path, arg.iteration)
-        .and_then(|resolved| Ok((scene::load(&resolved)?, resolved)));
+    let loaded = scene::resolve_scene_path_at(path, arg.iteration).and_then(|resolved| {
+        let (scene, _) = scene::spz::load_with_axes(&resolved, arg.spz.axes)?;
+        Ok((scene, resolved))
+    });
     match loaded {
         Ok((scene, resolved)) => Ok((scene, resolved.display().to_string())),
         // A camera file where the scene belongs: every command says what `info` says. (A

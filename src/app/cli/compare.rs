@@ -56,6 +56,8 @@ pub(crate) struct CompareArgs {
     #[arg(long, value_name = "N")]
     pub(crate) iteration: Option<u64>,
     #[command(flatten)]
+    pub(crate) spz: super::common::SpzAxesArg,
+    #[command(flatten)]
     pub(crate) view: CameraArgs,
     #[command(flatten)]
     pub(crate) path: PathArgs,
@@ -228,6 +230,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         scene: args.inputs.first().cloned(),
         demo: args.demo,
         iteration: args.iteration,
+        spz: args.spz,
     };
     let (scene, name) = load_scene(&scene_arg)?;
     super::common::refuse_time_varying(&scene, &name, "compare")?;

@@ -12,7 +12,8 @@ use verisplat::note;
   verisplat convert scene.ply scene.spz
   verisplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
   verisplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
-  verisplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel")]
+  verisplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel
+  verisplat convert scene.ply for_playcanvas.spz --spz-axes raw   # splat-transform's axes")]
 pub(crate) struct ConvertArgs {
     /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
     pub(crate) input: PathBuf,
@@ -33,6 +34,12 @@ pub(crate) struct ConvertArgs {
     /// feat_* PLY properties; other formats drop them with a note).
     #[arg(long, value_name = "FILE.npy")]
     pub(crate) features: Option<PathBuf>,
+    /// Axes of the SPZ input and of the SPZ output, whichever are SPZ: spec (the SPZ spec's
+    /// RUB: Niantic's spz library, Scaniverse) or raw (PLY axes as they are: PlayCanvas
+    /// splat-transform) [default: spec]. To change a file's axes, convert it to PLY with
+    /// one and back with the other.
+    #[arg(long, value_name = "spec|raw", default_value_t = verisplat::core::scene::spz::SpzAxes::Spec)]
+    pub(crate) spz_axes: verisplat::core::scene::spz::SpzAxes,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
@@ -45,6 +52,7 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
         overwrite: args.overwrite,
         kernel: args.kernel,
         features: args.features.clone(),
+        spz_axes: args.spz_axes,
     };
     let r = convert_scene(&args.input, &args.output, &options)?;
     if let Some(t) = &options.transform {

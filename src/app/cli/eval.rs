@@ -59,6 +59,8 @@ pub(crate) struct EvalArgs {
     /// Iteration of a trained model directory: point_cloud/iteration_N (default: the largest).
     #[arg(long, value_name = "N", conflicts_with = "demo")]
     pub(crate) iteration: Option<u64>,
+    #[command(flatten)]
+    pub(crate) spz: super::common::SpzAxesArg,
     /// Camera file (INRIA cameras.json, COLMAP model, or a model directory) [default: the
     /// model directory's cameras.json].
     #[arg(long, value_name = "FILE")]
@@ -388,6 +390,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         scene: args.scene.clone(),
         demo: args.demo,
         iteration: args.iteration,
+        spz: args.spz,
     };
     let shard = super::common::shard(args.shard.as_deref())?;
     let (ppd, images) = checked_ppd_and_images(args)?;

@@ -24,6 +24,12 @@
 //! positions to `(x, -y, -z)`, quaternions `(w, x, y, z)` to `(w, x, -y, -z)` (conjugation by
 //! the 180 degree turn about x) and negates the SH coefficients whose basis function is odd
 //! in `y` and `z` together ([`RUB_SH_SIGN`]). Encoding applies the same involution.
+//!
+//! That is the spec ([`SpzAxes::Spec`], what Niantic's library and Scaniverse write), but a
+//! file's bytes do not say which frame its writer used: PlayCanvas's splat-transform writes
+//! PLY axes as they are ([`SpzAxes::Raw`]). Reading or writing with `Raw` skips the
+//! involution, which is the `Spec` result turned 180 degrees about x ([`flip_rub`]):
+//! exactly, as the involution only changes signs.
 
 use super::{logit_from_u8, sigmoid, Scene, SceneError};
 use std::io::Read;
@@ -49,6 +55,60 @@ pub const RUB_SH_SIGN: [f32; 15] = [
 const FLAG_EXTENSIONS: u8 = 0x2;
 /// Header flag: the scene was trained with antialiasing.
 const FLAG_ANTIALIASED: u8 = 0x1;
+
+/// The frame an SPZ file's coordinates are in (a file does not record it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum SpzAxes {
+    /// The SPZ spec's RUB axes, `(x, y, z)_spz = (x, -y, -z)_ply`: Niantic's spz library,
+    /// Scaniverse, and verisplat by default.
+    #[default]
+    Spec,
+    /// PLY axes as they are, with no conversion: PlayCanvas's splat-transform.
+    Raw,
+}
+
+impl std::fmt::Display for SpzAxes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SpzAxes::Spec => "spec",
+            SpzAxes::Raw => "raw",
+        })
+    }
+}
+
+impl std::str::FromStr for SpzAxes {
+    type Err = String;
+    fn from_str(s: &str) -> Result<SpzAxes, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "spec" => Ok(SpzAxes::Spec),
+            "raw" => Ok(SpzAxes::Raw),
+            _ => Err(format!(
+                "unknown SPZ axes \"{s}\"; use spec (the SPZ spec's RUB axes: Niantic's spz library, Scaniverse) or raw (PLY axes, no conversion: PlayCanvas splat-transform)"
+            )),
+        }
+    }
+}
+
+/// Turns a scene 180 degrees about x, the difference between reading an SPZ file with
+/// [`SpzAxes::Spec`] and with [`SpzAxes::Raw`]: positions `(x, y, z) -> (x, -y, -z)`,
+/// quaternions `(w, x, y, z) -> (w, x, -y, -z)` and the SH coefficients by
+/// [`RUB_SH_SIGN`]. Only signs change, so applying it twice gives the scene back exactly.
+pub fn flip_rub(scene: &mut Scene) {
+    for p in &mut scene.positions {
+        p[1] = -p[1];
+        p[2] = -p[2];
+    }
+    for q in &mut scene.rotations {
+        q[2] = -q[2];
+        q[3] = -q[3];
+    }
+    let stride = scene.sh_stride();
+    for g in scene.sh.chunks_exact_mut(stride) {
+        for (j, v) in g[3..].iter_mut().enumerate() {
+            *v *= RUB_SH_SIGN[j / 3];
+        }
+    }
+}
 
 /// How an SPZ payload is wrapped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -212,6 +272,40 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<(Scene, u32, SpzCompression), 
         let scene = decode_flat(&h, &bytes[16..], path)?;
         Ok((scene, h.version, SpzCompression::None))
     }
+}
+
+/// [`parse`] of a file written in `axes`: [`SpzAxes::Raw`] gives the scene as its writer
+/// had it in PLY axes (the spec's result turned by [`flip_rub`]).
+pub fn parse_with_axes(
+    bytes: &[u8],
+    path: &Path,
+    axes: SpzAxes,
+) -> Result<(Scene, u32, SpzCompression), SceneError> {
+    let (mut scene, version, compression) = parse(bytes, path)?;
+    if axes == SpzAxes::Raw {
+        flip_rub(&mut scene);
+    }
+    Ok((scene, version, compression))
+}
+
+/// Loads a scene as [`super::detect::load_with_format`] does (any format, a model
+/// directory), an SPZ file read in `axes`. [`SpzAxes::Raw`] for a file that is not SPZ is
+/// an error: the option would do nothing.
+pub fn load_with_axes(
+    path: &Path,
+    axes: SpzAxes,
+) -> Result<(Scene, super::detect::SceneFormat), SceneError> {
+    let (mut scene, format) = super::detect::load_with_format(path)?;
+    if axes == SpzAxes::Raw {
+        if !matches!(format, super::detect::SceneFormat::Spz { .. }) {
+            return Err(SceneError::invalid(
+                path,
+                format!("is {format}, not SPZ: raw SPZ axes (--spz-axes raw, spz_axes=\"raw\") apply to .spz files only"),
+            ));
+        }
+        flip_rub(&mut scene);
+    }
+    Ok((scene, format))
 }
 
 /// Decompresses a gzip-wrapped v2/v3 file, reading no more than its header says exists.
@@ -486,6 +580,19 @@ pub fn fractional_bits_for(scene: &Scene) -> Option<u8> {
         .find(|&fb| (max as f64 * (1u64 << fb) as f64).round() <= ((1 << 23) - 1) as f64)
 }
 
+/// [`to_bytes_v3`] in `axes`: [`SpzAxes::Raw`] writes the PLY axes as they are (what
+/// PlayCanvas's splat-transform reads and writes).
+pub fn to_bytes_v3_with_axes(scene: &Scene, axes: SpzAxes) -> Result<Vec<u8>, String> {
+    match axes {
+        SpzAxes::Spec => to_bytes_v3(scene),
+        SpzAxes::Raw => {
+            let mut turned = scene.clone();
+            flip_rub(&mut turned);
+            to_bytes_v3(&turned)
+        }
+    }
+}
+
 /// Serialises a scene as SPZ v3 (gzip, RUB axes, Niantic's default quantisation: 12
 /// fractional bits unless the scene is too large for them, 5-bit band-1 SH, 4-bit higher
 /// bands). Fails when a position is too far from the origin for 24-bit fixed point.
@@ -582,6 +689,91 @@ mod tests {
         assert_eq!(quantize_sh(0.5, 16), 192);
         assert_eq!(quantize_sh(-2.0, 8), 0);
         assert_eq!(quantize_sh(2.0, 16), 255);
+    }
+
+    /// A small scene with every field set and SH degree 3, made of distinct values.
+    fn scene_of_every_field() -> Scene {
+        let mut scene = Scene::empty(3);
+        for i in 0..5 {
+            let f = i as f32;
+            scene.positions.push([0.5 + f, -1.25 * f, 2.0 - f]);
+            scene.log_scales.push([-2.0, -1.5 - 0.1 * f, -3.0]);
+            scene.rotations.push(super::super::normalize_quat([
+                0.9,
+                0.1 * f,
+                -0.3,
+                0.2 + 0.05 * f,
+            ]));
+            scene.opacity_logits.push(0.5 - 0.2 * f);
+            scene
+                .sh
+                .extend((0..48).map(|k| 0.4 * ((k as f32 + f) * 0.7).sin()));
+        }
+        scene
+    }
+
+    #[test]
+    fn raw_axes_are_the_spec_turned_about_x() {
+        let scene = scene_of_every_field();
+        let path = Path::new("t.spz");
+        for axes in [SpzAxes::Spec, SpzAxes::Raw] {
+            // Written and read in the same axes: the scene within SPZ's quantisation.
+            let bytes = to_bytes_v3_with_axes(&scene, axes).unwrap();
+            let (back, _, _) = parse_with_axes(&bytes, path, axes).unwrap();
+            for (a, b) in scene.positions.iter().zip(&back.positions) {
+                for k in 0..3 {
+                    assert!(
+                        (a[k] - b[k]).abs() <= 0.5 / 4096.0 + 1e-6,
+                        "{axes}: {a:?} {b:?}"
+                    );
+                }
+            }
+            // Read in the other axes: exactly the turn about x of the same-axes read.
+            let other = if axes == SpzAxes::Spec {
+                SpzAxes::Raw
+            } else {
+                SpzAxes::Spec
+            };
+            let (mut turned, _, _) = parse_with_axes(&bytes, path, other).unwrap();
+            assert_ne!(turned.positions, back.positions);
+            flip_rub(&mut turned);
+            assert_eq!(turned.positions, back.positions, "{axes}");
+            assert_eq!(turned.rotations, back.rotations, "{axes}");
+            assert_eq!(turned.sh, back.sh, "{axes}");
+            assert_eq!(turned.log_scales, back.log_scales, "{axes}");
+            assert_eq!(turned.opacity_logits, back.opacity_logits, "{axes}");
+        }
+        // Raw bytes hold the PLY's axes: y of a raw file is y of the scene, the spec's -y.
+        let raw = to_bytes_v3_with_axes(&scene, SpzAxes::Raw).unwrap();
+        let spec = to_bytes_v3(&scene).unwrap();
+        assert_ne!(raw, spec);
+        let (as_spec, _, _) = parse(&raw, path).unwrap();
+        assert!(
+            (as_spec.positions[1][1] - 1.25).abs() < 1e-3,
+            "{:?}",
+            as_spec.positions[1]
+        );
+        // The spec read of the raw file draws the same Gaussians seen turned: each one's
+        // SH, evaluated at the turned direction, gives the colour of the original.
+        let d = glam::Vec3::new(0.3, -0.5, 0.81).normalize();
+        let f = glam::Vec3::new(d.x, -d.y, -d.z);
+        let (raw_read, _, _) = parse_with_axes(&raw, path, SpzAxes::Raw).unwrap();
+        let a = crate::core::model::sh::eval_sh(3, &raw_read.sh[48..96], d)[0];
+        let b = crate::core::model::sh::eval_sh(3, &as_spec.sh[48..96], f)[0];
+        assert!((a - b).abs() < 1e-5, "{a} {b}");
+    }
+
+    #[test]
+    fn axes_parse_and_name_themselves() {
+        assert_eq!("spec".parse::<SpzAxes>(), Ok(SpzAxes::Spec));
+        assert_eq!("RAW".parse::<SpzAxes>(), Ok(SpzAxes::Raw));
+        assert_eq!(SpzAxes::default(), SpzAxes::Spec);
+        assert_eq!(SpzAxes::Raw.to_string(), "raw");
+        let e = "rub".parse::<SpzAxes>().unwrap_err();
+        assert!(
+            e.contains("unknown SPZ axes \"rub\"") && e.contains("splat-transform"),
+            "{e}"
+        );
     }
 
     #[test]

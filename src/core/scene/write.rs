@@ -138,6 +138,9 @@ pub struct ConvertOptions {
     /// Feature channels to attach to the input first: an N x K NumPy array
     /// ([`super::features::attach_npy`]); only PLY keeps them.
     pub features: Option<std::path::PathBuf>,
+    /// The frame of the SPZ input and of the SPZ output, whichever are SPZ
+    /// ([`spz::SpzAxes`]); `Raw` is an error when neither is.
+    pub spz_axes: spz::SpzAxes,
 }
 
 /// What [`convert`] did.
@@ -192,6 +195,17 @@ pub fn convert(
         return Err(WriteError::Exists(output.to_path_buf()).into());
     }
     let (mut scene, input_format) = super::load_with_format(input)?;
+    let spz_in = matches!(input_format, SceneFormat::Spz { .. });
+    let raw = options.spz_axes == spz::SpzAxes::Raw;
+    if raw && !spz_in && output_format != OutputFormat::Spz {
+        return Err(ConvertError::Unsupported {
+            path: input.to_path_buf(),
+            message: format!("is {input_format} and the output is not SPZ: raw SPZ axes (--spz-axes raw) apply to an SPZ input or output"),
+        });
+    }
+    if raw && spz_in {
+        spz::flip_rub(&mut scene);
+    }
     if let Some(kernel) = options.kernel {
         scene.kernel = kernel;
     }
@@ -217,7 +231,14 @@ pub fn convert(
         None => scene,
     };
     let filtered = options.filter.apply(&scene);
-    let bytes = to_bytes(&filtered, output_format).map_err(|message| ConvertError::Encode {
+    let bytes = if raw && output_format == OutputFormat::Spz {
+        let mut turned = filtered.clone();
+        spz::flip_rub(&mut turned);
+        to_bytes(&turned, output_format)
+    } else {
+        to_bytes(&filtered, output_format)
+    };
+    let bytes = bytes.map_err(|message| ConvertError::Encode {
         path: output.to_path_buf(),
         format: output_format,
         message,

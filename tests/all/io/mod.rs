@@ -10,3 +10,4 @@ mod output;
 mod output_compositing;
 mod ply_loader;
 mod real_scenes;
+mod spz_axes;
