@@ -40,7 +40,7 @@ else:
     import gsplat.strategy as gs_strategy
     import torch
 
-    import cpu_reference
+    from gsplat_suite import cpu_reference
     import verisplat.gsplat
     import verisplat.torch
 

@@ -14,7 +14,7 @@ else:
     torch = pytest.importorskip("torch")
     gs_impl = pytest.importorskip("gsplat.cuda._torch_impl")
 
-import cpu_reference  # noqa: E402
+from gsplat_suite import cpu_reference  # noqa: E402
 
 W, H, TILE = 26, 19, 4
 
