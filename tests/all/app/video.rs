@@ -371,9 +371,13 @@ fn interrupting_a_video_leaves_no_file() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // ffmpeg opens its (temporary) output once it has the first frame.
+    // ffmpeg opens its (temporary) output once it has the first frame (the folder's
+    // write probe, `.verisplat-probe.*.tmp`, comes earlier: before Ctrl-C is handled).
     let start = Instant::now();
-    while !names(dir.path()).iter().any(|n| n.ends_with(".tmp")) {
+    while !names(dir.path())
+        .iter()
+        .any(|n| n.starts_with(".long.mp4.") && n.ends_with(".tmp"))
+    {
         assert!(
             start.elapsed() < Duration::from_secs(120),
             "no temporary file"
