@@ -209,10 +209,12 @@ def splat_parameters(s):
     })
 
 
-def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic", raster=None):
+def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic", raster=None,
+                        ssim=None):
     """A small 3DGS training loop as gsplat's simple_trainer.py runs one: log scales,
     logit opacities, SH, one Adam per group, the strategy's pre- and post-backward steps.
-    `raster`: the rasterization called (verisplat.torch's unless given)."""
+    `raster`: the rasterization called (verisplat.torch's unless given); `ssim`: a
+    fused_ssim for simple_trainer.py's loss, 0.8 L1 + 0.2 (1 - SSIM) (L1 alone if None)."""
     raster = raster or rasterization
     s = scene(n=n, seed=13, degree=1)
     cams = cameras(2)
@@ -232,6 +234,10 @@ def train_with_strategy(strategy, packed, steps=40, n=200, mode="classic", raste
             packed=packed, absgrad=getattr(strategy, "absgrad", False), rasterize_mode=mode,
         )
         loss = (out - targets).abs().mean()
+        if ssim is not None:
+            ssim_loss = 1.0 - ssim(out.permute(0, 3, 1, 2), targets.permute(0, 3, 1, 2),
+                                   padding="valid")
+            loss = 0.8 * loss + 0.2 * ssim_loss
         strategy.step_pre_backward(params, optimizers, state, step, info)
         loss.backward()
         for opt in optimizers.values():
@@ -276,9 +282,9 @@ MIN_OPACITY = 0.2  # high enough that some of the scene's Gaussians are dead at 
 
 @pytest.mark.parametrize("packed", [True, False])
 def test_gsplats_mcmc_strategy_relocates_and_adds_through_verisplat(mcmc_calls, packed):
-    """simple_trainer.py's MCMC path with only the import lines changed:
-    `from verisplat.gsplat import MCMCStrategy, rasterization`."""
-    from verisplat.gsplat import MCMCStrategy
+    """simple_trainer.py's MCMC path (its L1 + SSIM loss) with only the import lines
+    changed: `from verisplat.gsplat import MCMCStrategy, fused_ssim, rasterization`."""
+    from verisplat.gsplat import MCMCStrategy, fused_ssim
     from verisplat.gsplat import rasterization as gs_rasterization
     import gsplat.strategy.ops as ops
 
@@ -287,7 +293,8 @@ def test_gsplats_mcmc_strategy_relocates_and_adds_through_verisplat(mcmc_calls, 
     strategy = MCMCStrategy(cap_max=260, refine_start_iter=10, refine_every=10,
                             min_opacity=MIN_OPACITY)
     assert isinstance(strategy, gs_strategy.MCMCStrategy)
-    params, losses = train_with_strategy(strategy, packed, steps=31, raster=gs_rasterization)
+    params, losses = train_with_strategy(strategy, packed, steps=31, raster=gs_rasterization,
+                                         ssim=fused_ssim)
     # Refinements at steps 20 and 30 each relocate the dead Gaussians (when there are
     # any), then add 5 % more (gsplat's rule): 200 -> 210 -> 220; one kernel call per
     # relocation and per addition.

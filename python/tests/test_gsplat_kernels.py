@@ -148,3 +148,59 @@ def test_triu_cotangents_are_gsplats_halved_symmetric_ones():
     covar, _ = kernels.quat_scale_to_covar_preci(quats, scales, compute_preci=False)
     hq, hs = torch.autograd.grad((covar * sym).sum(), (quats, scales))
     assert torch.allclose(gq, hq) and torch.allclose(gs, hs)
+
+
+def ssim_by_windows(img1, img2, padding):
+    """SSIM pixel by pixel: each pixel's 11x11 neighbourhood (zeros outside the image)
+    weighted by the outer product of the 1-D Gaussian of sigma 1.5, in float64."""
+    g = torch.tensor([math.exp(-(x * x) / 4.5) for x in range(-5, 6)], dtype=torch.float64)
+    w = torch.outer(g / g.sum(), g / g.sum())
+    a = torch.nn.functional.pad(img1.double(), (5, 5, 5, 5))
+    b = torch.nn.functional.pad(img2.double(), (5, 5, 5, 5))
+    _, _, h, wd = img1.shape
+    values = torch.zeros(img1.shape, dtype=torch.float64)
+    for i in range(h):
+        for j in range(wd):
+            pa, pb = a[:, :, i:i + 11, j:j + 11], b[:, :, i:i + 11, j:j + 11]
+            m1, m2 = (pa * w).sum((-1, -2)), (pb * w).sum((-1, -2))
+            s1 = ((pa * pa * w).sum((-1, -2)) - m1 * m1).clamp(min=0)
+            s2 = ((pb * pb * w).sum((-1, -2)) - m2 * m2).clamp(min=0)
+            s12 = (pa * pb * w).sum((-1, -2)) - m1 * m2
+            c1, c2 = 0.01 ** 2, 0.03 ** 2
+            values[:, :, i, j] = ((2 * m1 * m2 + c1) * (2 * s12 + c2)) / (
+                (m1 * m1 + m2 * m2 + c1) * (s1 + s2 + c2))
+    values = values.clamp(-1, 1)
+    if padding == "valid":
+        values = values[:, :, 5:-5, 5:-5]
+    return values.mean()
+
+
+@pytest.mark.parametrize("padding", ["same", "valid"])
+def test_fused_ssim_is_the_windowed_ssim(padding):
+    g = torch.Generator().manual_seed(5)
+    img2 = torch.rand(2, 3, 16, 19, generator=g)
+    img1 = (img2 + 0.2 * torch.randn(2, 3, 16, 19, generator=g)).clamp(0, 1)
+    got = kernels.fused_ssim(img1, img2, padding=padding)
+    want = ssim_by_windows(img1, img2, padding)
+    assert got.item() == pytest.approx(want.item(), abs=2e-6)
+    assert 0.2 < want.item() < 0.95, "a pair neither equal nor unrelated"
+    assert kernels.fused_ssim(img2, img2, padding=padding).item() == pytest.approx(1.0, abs=1e-5)
+
+
+def test_fused_ssim_window_is_the_packages_table():
+    # The first entries of fused-ssim's cGauss (ssim.cu).
+    w = kernels._ssim_window(torch.float64, torch.device("cpu"))
+    assert w[:4].tolist() == pytest.approx(
+        [0.001028380123898387, 0.0075987582094967365, 0.036000773310661316,
+         0.10936068743467331], rel=1e-7)
+
+
+def test_fused_ssim_gradients_reach_the_render_only():
+    g = torch.Generator().manual_seed(6)
+    img1 = torch.rand(1, 2, 12, 13, generator=g, dtype=torch.float64, requires_grad=True)
+    img2 = torch.rand(1, 2, 12, 13, generator=g, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda a: kernels.fused_ssim(a, img2, "valid"), (img1,))
+    kernels.fused_ssim(img1, img2).backward()
+    assert img1.grad.abs().sum() > 0 and img2.grad is None
+    with pytest.raises(ValueError, match="padding"):
+        kernels.fused_ssim(img1, img2, padding="full")

@@ -11,7 +11,8 @@ operations: they run on any device torch runs on, and their gradients come from 
 the off-diagonal cotangents, which is what autograd of the symmetric packing gives).
 
 ``gsplat.strategy.ops`` never calls any other kernel: ``DefaultStrategy`` (``duplicate``,
-``split``, ``remove``, ``reset_opa``) is pure torch.
+``split``, ``remove``, ``reset_opa``) is pure torch. ``fused_ssim``: the SSIM kernel of the
+separate ``fused_ssim`` package, which ``simple_trainer.py``'s default loss imports.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import Optional, Tuple
 import torch
 from torch import Tensor
 
-__all__ = ["compute_relocation", "quat_scale_to_covar_preci", "quat_to_rotmat"]
+__all__ = ["compute_relocation", "fused_ssim", "quat_scale_to_covar_preci", "quat_to_rotmat"]
 
 # The row and column of each entry of gsplat's upper-triangle packing, in its order
 # (QuatScaleToCovarCUDA.cu writes covar[0][0], [0][1], [0][2], [1][1], [1][2], [2][2]).
@@ -105,3 +106,48 @@ def quat_scale_to_covar_preci(
     covars = product(scales) if compute_covar else None
     precis = product(1.0 / scales) if compute_preci else None
     return covars, precis
+
+
+def _ssim_window(dtype: torch.dtype, device: torch.device) -> Tensor:
+    x = torch.arange(11, dtype=torch.float64) - 5
+    g = torch.exp(-(x**2) / (2 * 1.5**2))
+    g = g / g.sum()
+    return g.to(dtype=dtype, device=device)
+
+
+def fused_ssim(img1: Tensor, img2: Tensor, padding: str = "same", train: bool = True) -> Tensor:
+    """The ``fused_ssim`` package's SSIM (the CUDA/MPS/XPU kernel gsplat's
+    ``simple_trainer.py`` imports for its SSIM loss) in torch, for machines it does not
+    load on: images ``[B, C, H, W]``; per channel the 11x11 Gaussian window of sigma 1.5
+    with zeros outside the image, ``C1 = 0.01^2``, ``C2 = 0.03^2``, the variances floored
+    at 0, each pixel's SSIM clamped to [-1, 1]; the mean over the map (``"valid"``: without
+    its 5-pixel border). The gradient flows to ``img1`` only, as the package's
+    (``img2`` is the target). ``train`` is accepted and changes nothing here."""
+    if padding not in ("same", "valid"):
+        raise ValueError(f"padding must be 'same' or 'valid', got {padding!r}")
+    if img1.dim() != 4 or img1.shape != img2.shape:
+        raise ValueError(
+            f"img1 and img2 must be [B, C, H, W] of one shape, got {tuple(img1.shape)} "
+            f"and {tuple(img2.shape)}")
+    del train
+    img2 = img2.detach()
+    channels = img1.shape[1]
+    g = _ssim_window(img1.dtype, img1.device)
+    rows = g.view(1, 1, 11, 1).expand(channels, 1, 11, 1)
+    cols = g.view(1, 1, 1, 11).expand(channels, 1, 1, 11)
+
+    def blur(x: Tensor) -> Tensor:
+        x = torch.nn.functional.conv2d(x, rows, padding=(5, 0), groups=channels)
+        return torch.nn.functional.conv2d(x, cols, padding=(0, 5), groups=channels)
+
+    mu1, mu2 = blur(img1), blur(img2)
+    sigma1 = (blur(img1 * img1) - mu1 * mu1).clamp(min=0)
+    sigma2 = (blur(img2 * img2) - mu2 * mu2).clamp(min=0)
+    sigma12 = blur(img1 * img2) - mu1 * mu2
+    c1, c2 = 0.01**2, 0.03**2
+    ssim = ((2 * mu1 * mu2 + c1) * (2 * sigma12 + c2)) / (
+        (mu1 * mu1 + mu2 * mu2 + c1) * (sigma1 + sigma2 + c2))
+    ssim = ssim.clamp(-1.0, 1.0)
+    if padding == "valid":
+        ssim = ssim[:, :, 5:-5, 5:-5]
+    return ssim.mean()

@@ -18,6 +18,10 @@ on CUDA tensors too, so one training script behaves the same with and without CU
 replacement lasts only while one of its methods runs (``torch_kernels()``, below, for
 calling gsplat's ``ops`` directly). ``DefaultStrategy`` is gsplat's own class: it calls no
 CUDA kernel.
+
+    from verisplat.gsplat import fused_ssim   # instead of: from fused_ssim import fused_ssim
+
+the SSIM of the ``fused_ssim`` package (simple_trainer.py's SSIM loss) in torch.
 """
 
 from __future__ import annotations
@@ -28,8 +32,9 @@ import threading
 from typing import Any, Iterator
 
 from . import torch as _torch
+from ._gsplat_kernels import fused_ssim
 
-__all__ = ["rasterization", "MCMCStrategy", "DefaultStrategy", "torch_kernels"]
+__all__ = ["rasterization", "MCMCStrategy", "DefaultStrategy", "torch_kernels", "fused_ssim"]
 
 
 def rasterization(*args: Any, rules: str = "gsplat", **kwargs: Any) -> Any:
