@@ -268,3 +268,57 @@ fn percent_encode(name: &str) -> String {
         })
         .collect()
 }
+
+/// A `.gltf` whose buffer is embedded as a base64 `data:` URI: one self-contained file
+/// (a third larger than the buffer), for writers that produce one file's bytes.
+pub fn to_gltf_embedded(scene: &Scene) -> Result<Vec<u8>, String> {
+    let (mut doc, bin) = document(scene, None)?;
+    doc["buffers"][0]["uri"] = json!(format!(
+        "data:application/octet-stream;base64,{}",
+        data_encoding::BASE64.encode(&bin)
+    ));
+    serde_json::to_vec_pretty(&doc).map_err(|e| e.to_string())
+}
+
+/// The buffer file a `.gltf` at `path` is written with: its stem plus `.bin`, beside it.
+pub fn bin_path(path: &std::path::Path) -> std::path::PathBuf {
+    path.with_extension("bin")
+}
+
+/// Writes `path` (`.gltf`) and its buffer [`bin_path`] beside it, each to a temporary
+/// file renamed into place, the buffer first, so the `.gltf` never names a missing or
+/// half-written buffer. With `overwrite == false` either file existing is an error and
+/// nothing is written. Returns the bytes written.
+pub fn write_gltf_files(
+    scene: &Scene,
+    path: &std::path::Path,
+    overwrite: bool,
+) -> Result<usize, GltfWriteError> {
+    let bin_file = bin_path(path);
+    let bin_name = bin_file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene.bin".into());
+    let (json, bin) = to_gltf(scene, &bin_name).map_err(GltfWriteError::Encode)?;
+    if !overwrite {
+        if let Some(existing) = [path, bin_file.as_path()].into_iter().find(|p| p.exists()) {
+            return Err(GltfWriteError::Write(
+                crate::core::fsutil::WriteError::Exists(existing.to_path_buf()),
+            ));
+        }
+    }
+    crate::core::fsutil::write_bytes_atomically(&bin_file, overwrite, &bin)
+        .map_err(GltfWriteError::Write)?;
+    crate::core::fsutil::write_bytes_atomically(path, overwrite, &json)
+        .map_err(GltfWriteError::Write)?;
+    Ok(json.len() + bin.len())
+}
+
+/// Why [`write_gltf_files`] failed.
+#[derive(Debug)]
+pub enum GltfWriteError {
+    /// The scene cannot be written as glTF.
+    Encode(String),
+    /// A file could not be written.
+    Write(crate::core::fsutil::WriteError),
+}
