@@ -37,7 +37,7 @@ enum Command {
     /// Fit Gaussians with feature channels to field samples (a grid .npy, or samples .npy/.csv).
     #[command(allow_negative_numbers = true)]
     Fit(cli::fit::FitArgs),
-    /// Convert a scene (any readable format) to .ply, .splat or .spz, chosen by OUT's extension.
+    /// Convert a scene (any readable format) to .ply, .splat, .spz, .compressed.ply or .sog, chosen by OUT's name.
     #[command(allow_negative_numbers = true)]
     Convert(cli::convert::ConvertArgs),
     /// Compare a scene's GPU renders with the CPU reference, or two images (PSNR, SSIM, errors).

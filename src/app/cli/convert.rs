@@ -1,4 +1,5 @@
-//! `verisplat convert`: any readable scene format to PLY, .splat or SPZ.
+//! `verisplat convert`: any readable scene format to PLY, .splat, SPZ, PlayCanvas compressed
+//! PLY or SOG.
 
 use super::common::{check_output_file, FilterArgs};
 use anyhow::Result;
@@ -10,6 +11,9 @@ use verisplat::note;
 #[derive(Args)]
 #[command(after_help = "Examples:
   verisplat convert scene.ply scene.spz
+  verisplat convert scene.ply scene.sog                 # PlayCanvas SOG bundle
+  verisplat convert scene.ply scene_sog/meta.json       # unbundled SOG: textures beside meta.json
+  verisplat convert scene.ply scene.compressed.ply      # PlayCanvas / SuperSplat compressed PLY
   verisplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
   verisplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
   verisplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel
@@ -17,7 +21,9 @@ use verisplat::note;
 pub(crate) struct ConvertArgs {
     /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
     pub(crate) input: PathBuf,
-    /// Output file: .ply (INRIA, lossless), .splat (DC colour only) or .spz (SPZ v3, gzip).
+    /// Output file: .ply (INRIA, lossless), .splat (DC colour only), .spz (SPZ v3, gzip),
+    /// .compressed.ply (PlayCanvas compressed PLY), .sog (PlayCanvas SOG bundle) or
+    /// DIR/meta.json (an unbundled SOG, its WebP textures beside meta.json).
     pub(crate) output: PathBuf,
     #[command(flatten)]
     pub(crate) filter: FilterArgs,

@@ -8,10 +8,14 @@
 //!   square root, and the three others are `(v / 1023 - 0.5) * sqrt(2)`; `packed_color` is
 //!   8-8-8-8 RGBA, colour lerped between the chunk bounds and alpha the opacity.
 //! * `sh` (optional): one `uchar` per `f_rest_*` (channel-major as in INRIA PLYs), decoded
-//!   as `(b / 256 - 0.5) * 8`.
+//!   as PlayCanvas's engine and splat-transform decode it: `((b + 0.5) / 256 - 0.5) * 8`,
+//!   the middle of the byte's step, with 0 and 255 standing for -4 and 4.
 //!
 //! Axes are the PLY's. An alpha byte of 0 or 255 is clamped half a step inwards so the
-//! opacity logit stays finite (SuperSplat writes 255 for fully opaque splats).
+//! opacity logit stays finite (SuperSplat writes 255 for fully opaque splats). A header
+//! comment `SplatRenderMode: mip` (Brush, splat-transform) or `antialiased 1` (Postshot)
+//! records antialiased training; the verisplat kernel and rules comments are read as in
+//! INRIA PLYs. The writer is [`super::compressed_ply_write`].
 
 use super::ply::{parse_header, Element, Format, Header, Property, ScalarType};
 use super::{dc_from_color, logit_from_u8, Scene, SceneError};
@@ -121,6 +125,37 @@ fn unpack_rotation(v: u32) -> [f32; 4] {
     }
 }
 
+/// An SH byte's value: the middle of its step, `((b + 0.5) / 256 - 0.5) * 8`, with 0 and
+/// 255 standing for the ends of the range, -4 and 4.
+pub(crate) fn sh_from_byte(b: u8) -> f32 {
+    let t = match b {
+        0 => 0.0,
+        255 => 1.0,
+        b => (b as f32 + 0.5) / 256.0,
+    };
+    (t - 0.5) * 8.0
+}
+
+/// True when the header's comments record antialiased training: the last of
+/// `SplatRenderMode: mip|default|2dgs` (Brush, splat-transform) or `antialiased 1|0`
+/// (Postshot) decides, as in splat-transform.
+fn antialiased(header: &Header) -> bool {
+    let mut aa = false;
+    for (_, text) in &header.comments {
+        let lower = text.trim().to_ascii_lowercase();
+        if let Some(mode) = lower.strip_prefix("splatrendermode:") {
+            aa = mode.trim() == "mip";
+        } else if let Some(v) = lower.strip_prefix("antialiased ") {
+            match v.trim() {
+                "1" => aa = true,
+                "0" => aa = false,
+                _ => {}
+            }
+        }
+    }
+    aa
+}
+
 /// Parses a compressed PLY held in memory. `path` is used in error messages only.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let header = parse_header(bytes, path)?;
@@ -164,6 +199,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let mut scene = Scene::empty(sh_degree);
     scene.kernel = header.kernel(path)?;
     scene.rules = header.rules(path)?;
+    scene.antialiased = antialiased(&header);
     scene.positions.reserve_exact(n);
     scene.log_scales.reserve_exact(n);
     scene.rotations.reserve_exact(n);
@@ -197,8 +233,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         if let Some(t) = sh_table {
             for k in 0..k_rest {
                 for c in 0..3 {
-                    let b = t.get(i, sh_cols[c * k_rest + k]) as f32;
-                    scene.sh.push((b / 256.0 - 0.5) * 8.0);
+                    let b = t.get(i, sh_cols[c * k_rest + k]) as u8;
+                    scene.sh.push(sh_from_byte(b));
                 }
             }
         }

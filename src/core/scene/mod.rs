@@ -17,13 +17,16 @@
 //!   `k >= 1` is `f_rest[c * K + (k - 1)]` of the PLY with `K = sh_coeffs() - 1`.
 
 pub mod compressed_ply;
+pub mod compressed_ply_write;
 pub mod detect;
 pub mod features;
 pub mod filter;
 pub mod gltf;
 pub mod gltf_write;
 pub mod ply;
+pub mod quantize;
 pub mod sog;
+pub mod sog_write;
 pub mod splat;
 pub mod spz;
 pub mod transform;

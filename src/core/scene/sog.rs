@@ -14,6 +14,9 @@
 //!
 //! Axes: the files written by splat-transform keep the source PLY's axes, so no
 //! conversion is applied (the spec's "y up" describes the viewer, not the data).
+//!
+//! Antialiased training is `"antialias": true` or splat-transform's
+//! `"model": "antialiased"`. The writer is [`super::sog_write`].
 
 use super::{logit_from_u8, Scene, SceneError};
 use serde::Deserialize;
@@ -31,6 +34,10 @@ struct Meta {
     /// The scene was trained with antialiasing.
     #[serde(default)]
     antialias: bool,
+    /// splat-transform's record of the splat model: `"antialiased"` also means
+    /// antialiased training.
+    #[serde(default)]
+    model: Option<String>,
     means: Means,
     scales: Codebooked,
     quats: Files,
@@ -181,7 +188,7 @@ fn parse_with(
     let degree = sh_n.as_ref().map_or(0, |p| p.meta.bands);
 
     let mut scene = Scene::empty(degree);
-    scene.antialiased = meta.antialias;
+    scene.antialiased = meta.antialias || meta.model.as_deref() == Some("antialiased");
     scene.positions.reserve_exact(n);
     scene.log_scales.reserve_exact(n);
     scene.rotations.reserve_exact(n);

@@ -1,9 +1,10 @@
 //! Scene writers and `verisplat convert`: load any format, transform, filter, write INRIA
-//! PLY, `.splat` or SPZ v3 chosen by the output's extension, atomically.
+//! PLY, `.splat`, SPZ v3, PlayCanvas compressed PLY or SOG chosen by the output's name,
+//! atomically.
 
 use super::filter::SceneFilter;
 use super::transform::SceneTransform;
-use super::{ply, splat, spz, Scene, SceneError, SceneFormat};
+use super::{compressed_ply_write, ply, sog_write, splat, spz, Scene, SceneError, SceneFormat};
 use crate::core::fsutil::{self, WriteError};
 use std::path::{Path, PathBuf};
 
@@ -16,22 +17,32 @@ pub enum OutputFormat {
     Splat,
     /// Niantic SPZ v3, gzip, RUB axes.
     Spz,
+    /// PlayCanvas / SuperSplat compressed PLY (chunked, quantised; `.compressed.ply`).
+    CompressedPly,
+    /// PlayCanvas SOG v2: a `.sog` zip bundle, or the files of an unbundled SOG beside an
+    /// output named `meta.json`.
+    Sog,
+    /// glTF 2.0 binary (`.glb`) with `KHR_gaussian_splatting`, 32-bit floats.
+    Glb,
+    /// glTF 2.0 JSON (`.gltf`) with `KHR_gaussian_splatting`; its buffer is written as
+    /// `<stem>.bin` beside it (by [`write_scene`]; [`to_bytes`] embeds it as a `data:` URI).
+    Gltf,
 }
 
 impl OutputFormat {
-    /// Chooses the writer from a file name's extension (`.ply`, `.splat`, `.spz`). A
-    /// `.compressed.ply` name is refused rather than silently written as INRIA PLY: there
-    /// is no compressed-PLY writer.
+    /// Chooses the writer from a file name: `.compressed.ply` (PlayCanvas compressed PLY)
+    /// before `.ply` (INRIA), `.splat`, `.spz`, `.sog` (a SOG bundle), and `meta.json`
+    /// (an unbundled SOG: its textures are written beside it).
     pub fn from_path(path: &Path) -> Result<OutputFormat, ConvertError> {
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().to_ascii_lowercase())
             .unwrap_or_default();
         if name.ends_with(".compressed.ply") {
-            return Err(ConvertError::Unsupported {
-                path: path.to_path_buf(),
-                message: "writing PlayCanvas compressed PLY is not supported; name the output .ply (INRIA, lossless), .splat or .spz".into(),
-            });
+            return Ok(OutputFormat::CompressedPly);
+        }
+        if name == "meta.json" {
+            return Ok(OutputFormat::Sog);
         }
         match path
             .extension()
@@ -42,6 +53,9 @@ impl OutputFormat {
             Some("ply") => Ok(OutputFormat::Ply),
             Some("splat") => Ok(OutputFormat::Splat),
             Some("spz") => Ok(OutputFormat::Spz),
+            Some("sog") => Ok(OutputFormat::Sog),
+            Some("glb") => Ok(OutputFormat::Glb),
+            Some("gltf") => Ok(OutputFormat::Gltf),
             _ => Err(ConvertError::UnknownFormat(path.to_path_buf())),
         }
     }
@@ -51,9 +65,41 @@ impl OutputFormat {
     /// The highest SH degree the format stores (`.splat` keeps only the DC colour).
     pub fn max_sh_degree(self) -> u32 {
         match self {
-            OutputFormat::Ply | OutputFormat::Spz => 3,
+            OutputFormat::Ply
+            | OutputFormat::Spz
+            | OutputFormat::CompressedPly
+            | OutputFormat::Sog
+            | OutputFormat::Glb
+            | OutputFormat::Gltf => 3,
             OutputFormat::Splat => 0,
         }
+    }
+}
+
+impl OutputFormat {
+    /// The format records antialiased training (SPZ's flag, SOG's `antialias`, the
+    /// compressed PLY's `SplatRenderMode: mip` comment).
+    pub fn records_antialiasing(self) -> bool {
+        matches!(
+            self,
+            OutputFormat::Spz
+                | OutputFormat::Sog
+                | OutputFormat::CompressedPly
+                | OutputFormat::Glb
+                | OutputFormat::Gltf
+        )
+    }
+
+    /// The format records a non-Gaussian kernel and gsplat's rules (PLY header comments,
+    /// in the INRIA and the compressed PLY).
+    pub fn records_kernel_and_rules(self) -> bool {
+        matches!(
+            self,
+            OutputFormat::Ply
+                | OutputFormat::CompressedPly
+                | OutputFormat::Glb
+                | OutputFormat::Gltf
+        )
     }
 }
 
@@ -63,6 +109,10 @@ impl std::fmt::Display for OutputFormat {
             OutputFormat::Ply => "INRIA PLY (binary little-endian)",
             OutputFormat::Splat => "antimatter15 .splat",
             OutputFormat::Spz => "SPZ v3 (gzip)",
+            OutputFormat::CompressedPly => "PlayCanvas compressed PLY",
+            OutputFormat::Sog => "PlayCanvas SOG v2",
+            OutputFormat::Glb => "glTF 2.0 binary (KHR_gaussian_splatting)",
+            OutputFormat::Gltf => "glTF 2.0 JSON + .bin (KHR_gaussian_splatting)",
         })
     }
 }
@@ -77,7 +127,7 @@ pub enum ConvertError {
     #[error(transparent)]
     Write(#[from] WriteError),
     /// The output's extension names no writer.
-    #[error("{0}: unknown output format; use a .ply, .splat or .spz file name")]
+    #[error("{0}: unknown output format; use a .ply, .compressed.ply, .splat, .spz, .sog, .glb or .gltf file name, or DIR/meta.json for an unbundled SOG")]
     UnknownFormat(PathBuf),
     /// The output names a format or a destination that cannot be written.
     #[error("{path}: {message}")]
@@ -119,7 +169,75 @@ pub fn to_bytes(scene: &Scene, format: OutputFormat) -> Result<Vec<u8>, String> 
         OutputFormat::Ply => Ok(ply::to_bytes(scene, ply::PlyEncoding::BinaryLittleEndian)),
         OutputFormat::Splat => Ok(splat::to_bytes(scene)),
         OutputFormat::Spz => spz::to_bytes_v3(scene),
+        OutputFormat::CompressedPly => compressed_ply_write::to_bytes(scene),
+        OutputFormat::Sog => sog_write::encode(scene)?.to_zip(),
+        OutputFormat::Glb => super::gltf_write::to_glb(scene),
+        OutputFormat::Gltf => super::gltf_write::to_gltf_embedded(scene),
     }
+}
+
+/// True when `path` names an unbundled SOG's `meta.json` (its textures go beside it).
+fn is_sog_directory(path: &Path) -> bool {
+    path.file_name()
+        .is_some_and(|n| n.eq_ignore_ascii_case("meta.json"))
+}
+
+/// Writes `scene` to `path` in `format`, atomically, and returns the bytes written. An
+/// unbundled SOG (`format` SOG, `path` named `meta.json`) writes its textures beside
+/// `meta.json`, creating the folder if needed, each file atomically and `meta.json`
+/// last; with `overwrite == false` any of its files existing is an error, and nothing is
+/// written.
+pub fn write_scene(
+    scene: &Scene,
+    path: &Path,
+    format: OutputFormat,
+    overwrite: bool,
+) -> Result<usize, ConvertError> {
+    let encode = |message| ConvertError::Encode {
+        path: path.to_path_buf(),
+        format,
+        message,
+    };
+    if format == OutputFormat::Sog && is_sog_directory(path) {
+        if scene.time.is_some() {
+            return Err(encode(to_bytes(scene, format).unwrap_err()));
+        }
+        let files = sog_write::encode(scene).map_err(encode)?;
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let targets: Vec<PathBuf> = files.textures.iter().map(|(n, _)| dir.join(n)).collect();
+        if !overwrite {
+            if let Some(t) = std::iter::once(path)
+                .chain(targets.iter().map(PathBuf::as_path))
+                .find(|t| t.exists())
+            {
+                return Err(WriteError::Exists(t.to_path_buf()).into());
+            }
+        }
+        std::fs::create_dir_all(&dir).map_err(|source| WriteError::Io {
+            path: dir.clone(),
+            source,
+        })?;
+        for ((_, bytes), target) in files.textures.iter().zip(&targets) {
+            fsutil::write_bytes_atomically(target, overwrite, bytes)?;
+        }
+        fsutil::write_bytes_atomically(path, overwrite, &files.meta)?;
+        return Ok(files.len());
+    }
+    if format == OutputFormat::Gltf {
+        if scene.time.is_some() {
+            return Err(encode(to_bytes(scene, format).unwrap_err()));
+        }
+        return super::gltf_write::write_gltf_files(scene, path, overwrite).map_err(|e| match e {
+            super::gltf_write::GltfWriteError::Encode(m) => encode(m),
+            super::gltf_write::GltfWriteError::Write(w) => w.into(),
+        });
+    }
+    let bytes = to_bytes(scene, format).map_err(encode)?;
+    fsutil::write_bytes_atomically(path, overwrite, &bytes)?;
+    Ok(bytes.len())
 }
 
 /// Options of [`convert`].
@@ -159,7 +277,7 @@ pub struct ConvertReport {
     /// SH degree of the scene before writing, when the output format stores fewer bands
     /// (`.splat`: DC only) and higher bands were dropped.
     pub sh_dropped_from: Option<u32>,
-    /// Bytes written.
+    /// Bytes written (all the files of an unbundled SOG).
     pub bytes: usize,
     /// The input records antialiased training but the output format cannot say so.
     pub antialiased_flag_lost: bool,
@@ -231,19 +349,37 @@ pub fn convert(
         None => scene,
     };
     let filtered = options.filter.apply(&scene);
+    if filtered.is_empty()
+        && matches!(
+            output_format,
+            OutputFormat::Sog
+                | OutputFormat::CompressedPly
+                | OutputFormat::Glb
+                | OutputFormat::Gltf
+        )
+    {
+        return Err(ConvertError::Encode {
+            path: output.to_path_buf(),
+            format: output_format,
+            message: if read > 0 {
+                format!(
+                    "the filters removed all {read} Gaussians, and it cannot hold an empty scene"
+                )
+            } else {
+                format!(
+                    "{} holds no Gaussians, and it cannot hold an empty scene",
+                    input.display()
+                )
+            },
+        });
+    }
     let bytes = if raw && output_format == OutputFormat::Spz {
         let mut turned = filtered.clone();
         spz::flip_rub(&mut turned);
-        to_bytes(&turned, output_format)
+        write_scene(&turned, output, output_format, options.overwrite)?
     } else {
-        to_bytes(&filtered, output_format)
+        write_scene(&filtered, output, output_format, options.overwrite)?
     };
-    let bytes = bytes.map_err(|message| ConvertError::Encode {
-        path: output.to_path_buf(),
-        format: output_format,
-        message,
-    })?;
-    fsutil::write_bytes_atomically(output, options.overwrite, &bytes)?;
     Ok(ConvertReport {
         input_format,
         output_format,
@@ -252,14 +388,14 @@ pub fn convert(
         sh_degree: filtered.sh_degree.min(output_format.max_sh_degree()),
         sh_dropped_from: (filtered.sh_degree > output_format.max_sh_degree())
             .then_some(filtered.sh_degree),
-        bytes: bytes.len(),
-        antialiased_flag_lost: scene.antialiased && output_format != OutputFormat::Spz,
+        bytes,
+        antialiased_flag_lost: scene.antialiased && !output_format.records_antialiasing(),
         kernel_lost: (scene.kernel != crate::core::model::SplatKernel::Gaussian
-            && output_format != OutputFormat::Ply)
-            .then_some(scene.kernel),
+            && !output_format.records_kernel_and_rules())
+        .then_some(scene.kernel),
         rules_lost: (scene.rules != crate::core::model::Rules::Original
-            && output_format != OutputFormat::Ply)
-            .then_some(scene.rules),
+            && !output_format.records_kernel_and_rules())
+        .then_some(scene.rules),
         features_dropped: if output_format == OutputFormat::Ply {
             0
         } else {

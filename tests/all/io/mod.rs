@@ -11,3 +11,4 @@ mod output_compositing;
 mod ply_loader;
 mod real_scenes;
 mod spz_axes;
+mod writers;
