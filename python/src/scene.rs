@@ -164,8 +164,8 @@ impl PyScene {
         Ok(PyBytes::new(py, bytes))
     }
 
-    /// Writes the scene in the format `path`'s extension names (.ply, .splat, .spz),
-    /// atomically; an existing file is refused unless `overwrite`. `spz_axes` ("spec" or
+    /// Writes the scene in the format `path`'s name says (.ply, .splat, .spz,
+    /// .compressed.ply, .sog, or DIR/meta.json for an unbundled SOG's files), atomically; an existing file is refused unless `overwrite`. `spz_axes` ("spec" or
     /// "raw") is the frame of an SPZ output (`spz::SpzAxes`).
     #[pyo3(signature = (path, overwrite=false, spz_axes="spec"))]
     fn save(&self, py: Python<'_>, path: PathBuf, overwrite: bool, spz_axes: &str) -> PyResult<()> {
@@ -174,6 +174,16 @@ impl PyScene {
             guarded(|| {
                 let format =
                     scene::write::OutputFormat::from_path(&path).map_err(|e| py_err(e.into()))?;
+                if format == scene::write::OutputFormat::Sog && axes == scene::spz::SpzAxes::Spec {
+                    // A SOG bundle, or an unbundled SOG's several files.
+                    return match scene::write::write_scene(&self.raw, &path, format, overwrite) {
+                        Ok(_) => Ok(()),
+                        Err(scene::write::ConvertError::Encode { message, .. }) => {
+                            Err(value_err(format!("{}: {message}", path.display())))
+                        }
+                        Err(e) => Err(py_err(e.into())),
+                    };
+                }
                 let bytes = match (format, axes) {
                     (scene::write::OutputFormat::Spz, axes) => {
                         scene::spz::to_bytes_v3_with_axes(&self.raw, axes)
@@ -231,7 +241,7 @@ pub(crate) fn load(
             let resolved =
                 scene::resolve_scene_path_at(&path, iteration).map_err(|e| py_err(e.into()))?;
             let (raw, _) =
-                scene::spz::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
+                scene::detect::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
             let act = raw.activated();
             Ok(PyScene::new(raw, act, resolved.display().to_string()))
         })

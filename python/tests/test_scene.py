@@ -357,3 +357,21 @@ def test_save_turntable_writes_a_png_sequence_without_a_video_writer(tmp_path, d
     assert first.shape[:2] == (24, 32) and not np.array_equal(first, second)
     with pytest.raises(FileExistsError, match="turn_0000.png"):
         verisplat.save_turntable(stem, demo, frames=3, width=32, height=24)
+
+
+def test_save_compressed_ply_and_sog(tmp_path, demo):
+    # Both PlayCanvas formats by name, read back within their quantisation: positions
+    # within half an 11-bit step of a chunk's box (compressed PLY) or of the 16-bit
+    # log-transformed range (SOG); the writers reorder the Gaussians (Morton order).
+    for name in ("d.compressed.ply", "d.sog", "d_sog/meta.json"):
+        demo.save(tmp_path / name)
+        back = verisplat.load(tmp_path / name)
+        assert len(back) == len(demo) and back.sh_degree == demo.sh_degree, name
+        got = np.sort(back.means, axis=0)
+        want = np.sort(demo.means, axis=0)
+        assert np.abs(got - want).max() < 2e-3, name
+        with pytest.raises(FileExistsError):
+            demo.save(tmp_path / name)
+    assert (tmp_path / "d_sog" / "quats.webp").is_file()
+    with pytest.raises(ValueError, match="holds no Gaussians"):
+        demo.filtered(min_opacity=1.0).save(tmp_path / "empty.sog")
