@@ -181,6 +181,8 @@ impl PyScene {
                         Err(scene::write::ConvertError::Encode { message, .. }) => {
                             Err(value_err(format!("{}: {message}", path.display())))
                         }
+                        // The write error itself, so an existing file is FileExistsError.
+                        Err(scene::write::ConvertError::Write(e)) => Err(py_err(e.into())),
                         Err(e) => Err(py_err(e.into())),
                     };
                 }
