@@ -243,7 +243,7 @@ pub(crate) fn load(
             let resolved =
                 scene::resolve_scene_path_at(&path, iteration).map_err(|e| py_err(e.into()))?;
             let (raw, _) =
-                scene::spz::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
+                scene::detect::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
             let act = raw.activated();
             Ok(PyScene::new(raw, act, resolved.display().to_string()))
         })

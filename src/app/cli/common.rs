@@ -263,7 +263,7 @@ pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
         bail!("no scene given; pass a .ply file, a model directory or --demo");
     };
     let loaded = scene::resolve_scene_path_at(path, arg.iteration).and_then(|resolved| {
-        let (scene, _) = scene::spz::load_with_axes(&resolved, arg.spz.axes)?;
+        let (scene, _) = scene::detect::load_with_axes(&resolved, arg.spz.axes)?;
         Ok((scene, resolved))
     });
     match loaded {

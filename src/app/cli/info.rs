@@ -33,7 +33,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
     let arg = &args.scene;
     let (scene, name, format) = match arg.scene.as_deref() {
         Some(path) if !arg.demo => match scene::resolve_scene_path_at(path, arg.iteration)
-            .and_then(|file| Ok((scene::spz::load_with_axes(&file, arg.spz.axes)?, file)))
+            .and_then(|file| Ok((scene::detect::load_with_axes(&file, arg.spz.axes)?, file)))
         {
             Ok(((scene, format), file)) => (scene, file.display().to_string(), Some(format)),
             // A camera file given where a scene belongs: say what it holds.

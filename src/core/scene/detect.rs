@@ -120,6 +120,23 @@ fn looks_like_json(bytes: &[u8]) -> bool {
         .is_some_and(|&b| b == b'{')
 }
 
+/// Loads a scene as [`load_with_format`] does (any format, a model directory), an SPZ
+/// file read in `axes` ([`spz::SpzAxes`]). `Raw` for a file that is not SPZ is an error:
+/// the option would do nothing.
+pub fn load_with_axes(path: &Path, axes: spz::SpzAxes) -> Result<(Scene, SceneFormat), SceneError> {
+    let (mut scene, format) = load_with_format(path)?;
+    if axes == spz::SpzAxes::Raw {
+        if !matches!(format, SceneFormat::Spz { .. }) {
+            return Err(SceneError::invalid(
+                path,
+                format!("is {format}, not SPZ: raw SPZ axes (--spz-axes raw, spz_axes=\"raw\") apply to .spz files only"),
+            ));
+        }
+        spz::flip_rub(&mut scene);
+    }
+    Ok((scene, format))
+}
+
 /// Parses a scene held in memory, detecting its format from the content. `path` is used
 /// for messages and, for `.splat` only, its extension. An unbundled SOG needs its
 /// directory, so use [`load_with_format`] for it.

@@ -288,26 +288,6 @@ pub fn parse_with_axes(
     Ok((scene, version, compression))
 }
 
-/// Loads a scene as [`super::detect::load_with_format`] does (any format, a model
-/// directory), an SPZ file read in `axes`. [`SpzAxes::Raw`] for a file that is not SPZ is
-/// an error: the option would do nothing.
-pub fn load_with_axes(
-    path: &Path,
-    axes: SpzAxes,
-) -> Result<(Scene, super::detect::SceneFormat), SceneError> {
-    let (mut scene, format) = super::detect::load_with_format(path)?;
-    if axes == SpzAxes::Raw {
-        if !matches!(format, super::detect::SceneFormat::Spz { .. }) {
-            return Err(SceneError::invalid(
-                path,
-                format!("is {format}, not SPZ: raw SPZ axes (--spz-axes raw, spz_axes=\"raw\") apply to .spz files only"),
-            ));
-        }
-        flip_rub(&mut scene);
-    }
-    Ok((scene, format))
-}
-
 /// Decompresses a gzip-wrapped v2/v3 file, reading no more than its header says exists.
 fn gunzip_payload(bytes: &[u8], path: &Path) -> Result<Vec<u8>, SceneError> {
     let corrupt = |e: std::io::Error| {
