@@ -1,7 +1,7 @@
 //! Scene upload: the Gaussians' records, their SH coefficients and feature channels on
 //! the device ([`GpuScene`], [`GpuFeatures`]).
 
-use crate::core::model::surface::{surface_axes, SURFACE_CHANNELS};
+use crate::core::model::surface::{surface_axes, surface_axis, SURFACE_CHANNELS};
 use crate::core::model::ActivatedScene;
 use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::render::forward::types::{GpuGaussian, GpuGaussianCompact};
@@ -345,7 +345,22 @@ impl GpuRenderer {
             GpuError::Input(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
         })?;
         let mut uploaded = self.features_for_device_writes(count, SURFACE_CHANNELS)?;
-        let mut axes = surface_axes(scene);
+        // A compact upload draws the fp16-rounded shapes
+        // (`ActivatedScene::compact_rounded`), so its axes are theirs.
+        let mut axes = if self.compact {
+            let round = |x: f32| half::f16::from_f32(x).to_f32();
+            (0..n)
+                .map(|i| {
+                    surface_axis(
+                        scene.positions[i],
+                        scene.scales[i].map(round),
+                        scene.rotations[i].map(round),
+                    )
+                })
+                .collect()
+        } else {
+            surface_axes(scene)
+        };
         if axes.is_empty() {
             axes.push([0.0; 4]);
         }

@@ -284,7 +284,11 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     assert_eq!(blend.push_size as usize, size_of::<BlendPush>());
     let features = interface(
         "blend_features",
-        &[("SPLAT_KERNEL", "0u"), ("TEXEL_FETCH", "1"), ("SURFACE", "0")],
+        &[
+            ("SPLAT_KERNEL", "0u"),
+            ("TEXEL_FETCH", "1"),
+            ("SURFACE", "0"),
+        ],
     );
     let want = [
         offset_of!(FeatureBlendPush, resume),

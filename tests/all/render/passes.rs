@@ -373,3 +373,25 @@ fn surface_files_hold_the_named_channels_and_the_normal_map_colours() {
     assert!(err.to_string().contains("surface pass"), "{err}");
     assert!(!dir.path().join("p.exr").exists());
 }
+
+#[test]
+fn a_compact_surface_frame_is_the_rounded_scenes() {
+    // A compact upload draws fp16-rounded scales and rotations, so its axes are the
+    // rounded scene's: the surface planes equal the exact upload of the rounded scene's,
+    // bit for bit.
+    let mut r = renderer();
+    let s = shared_scene("playbot_lod3_31k_sh2.ply").activated();
+    let cam = orbit(PLAYBOT_ORBIT, 3, 320, 180);
+    let opts = RenderOptions::default();
+    r.set_compact(true);
+    let compact = gpu_surface(&mut r, &s, &cam, &opts);
+    r.set_compact(false);
+    let rounded = gpu_surface(&mut r, &s.compact_rounded(), &cam, &opts);
+    let bits = |f: &Frame| f.features.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert!(
+        bits(&compact) == bits(&rounded),
+        "compact surface vs rounded scene"
+    );
+    assert!(bits(&compact) != bits(&gpu_surface(&mut r, &s, &cam, &opts)));
+    assert_validation_clean(&r);
+}
