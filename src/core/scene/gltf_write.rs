@@ -33,6 +33,12 @@ struct Attribute {
 /// The JSON document and the binary buffer of a scene; `uri` names the buffer's file for a
 /// `.gltf` (`None` for a `.glb`, whose buffer is its BIN chunk).
 fn document(scene: &Scene, uri: Option<&str>) -> Result<(Value, Vec<u8>), String> {
+    let (scene, attrs) = attributes(scene)?;
+    assemble(&scene, &attrs, uri)
+}
+
+/// The scene in glTF's frame and its attributes.
+fn attributes(scene: &Scene) -> Result<(Scene, Vec<Attribute>), String> {
     if scene.is_empty() {
         return Err(
             "the scene has no Gaussians; glTF accessors must hold at least one element".into(),
@@ -122,6 +128,16 @@ fn document(scene: &Scene, uri: Option<&str>) -> Result<(Value, Vec<u8>), String
             ));
         }
     }
+    Ok((scene, attrs))
+}
+
+/// The document and buffer holding `attrs` (one view and accessor each).
+fn assemble(
+    scene: &Scene,
+    attrs: &[Attribute],
+    uri: Option<&str>,
+) -> Result<(Value, Vec<u8>), String> {
+    let n = scene.len();
     let mut bin = Vec::new();
     let mut views = Vec::new();
     let mut accessors = Vec::new();

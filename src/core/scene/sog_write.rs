@@ -222,40 +222,10 @@ pub fn encode(scene: &Scene) -> Result<SogFiles, String> {
 
     // Higher SH bands: a palette of k-means centroids, their coefficients codebooked.
     if scene.sh_degree > 0 {
-        let coeffs = scene.sh_coeffs() - 1;
-        let dim = 3 * coeffs;
-        let rest: Vec<f32> = (0..n)
-            .flat_map(|i| scene.sh[i * stride + 3..(i + 1) * stride].iter().copied())
-            .collect();
-        let k = quantize::palette_size(n);
-        let (centroids, labels) = quantize::sh_palette(&rest, dim, k);
-        let book = quantize::codebook_1d(&centroids);
-        let rows = k.div_ceil(64);
-        let mut palette = Texture::new("shN_centroids.webp", 64 * coeffs, rows);
-        for e in 0..k {
-            for c in 0..coeffs {
-                let v = &centroids[e * dim + 3 * c..e * dim + 3 * c + 3];
-                let idx = |v: f32| quantize::nearest_index(&book, v);
-                let x = (e % 64) * coeffs + c;
-                palette.set(
-                    (e / 64) * 64 * coeffs + x,
-                    [idx(v[0]), idx(v[1]), idx(v[2]), 255],
-                );
-            }
-        }
-        let mut label_tex = Texture::new("shN_labels.webp", width, height);
-        for (t, &i) in order.iter().enumerate() {
-            let l = labels[i];
-            label_tex.set(t, [l as u8, (l >> 8) as u8, 0, 255]);
-        }
+        let (palette, label_tex, sh_n) = sh_palette_textures(scene, &order, width, height);
         textures.push(palette);
         textures.push(label_tex);
-        meta["shN"] = json!({
-            "count": k,
-            "bands": scene.sh_degree,
-            "codebook": book,
-            "files": ["shN_centroids.webp", "shN_labels.webp"],
-        });
+        meta["shN"] = sh_n;
     }
     let textures = textures
         .par_iter()
@@ -263,4 +233,49 @@ pub fn encode(scene: &Scene) -> Result<SogFiles, String> {
         .collect::<Result<Vec<_>, String>>()?;
     let meta = serde_json::to_vec(&meta).map_err(|e| format!("cannot write meta.json: {e}"))?;
     Ok(SogFiles { meta, textures })
+}
+
+/// The SH palette (k-means centroids of the bands above DC, their coefficients codebooked),
+/// the per-Gaussian labels in `order`, and the `shN` entry of `meta.json`.
+fn sh_palette_textures(
+    scene: &Scene,
+    order: &[usize],
+    width: usize,
+    height: usize,
+) -> (Texture, Texture, serde_json::Value) {
+    let n = scene.len();
+    let stride = scene.sh_stride();
+    let coeffs = scene.sh_coeffs() - 1;
+    let dim = 3 * coeffs;
+    let rest: Vec<f32> = (0..n)
+        .flat_map(|i| scene.sh[i * stride + 3..(i + 1) * stride].iter().copied())
+        .collect();
+    let k = quantize::palette_size(n);
+    let (centroids, labels) = quantize::sh_palette(&rest, dim, k);
+    let book = quantize::codebook_1d(&centroids);
+    let rows = k.div_ceil(64);
+    let mut palette = Texture::new("shN_centroids.webp", 64 * coeffs, rows);
+    for e in 0..k {
+        for c in 0..coeffs {
+            let v = &centroids[e * dim + 3 * c..e * dim + 3 * c + 3];
+            let idx = |v: f32| quantize::nearest_index(&book, v);
+            let x = (e % 64) * coeffs + c;
+            palette.set(
+                (e / 64) * 64 * coeffs + x,
+                [idx(v[0]), idx(v[1]), idx(v[2]), 255],
+            );
+        }
+    }
+    let mut label_tex = Texture::new("shN_labels.webp", width, height);
+    for (t, &i) in order.iter().enumerate() {
+        let l = labels[i];
+        label_tex.set(t, [l as u8, (l >> 8) as u8, 0, 255]);
+    }
+    let sh_n = json!({
+        "count": k,
+        "bands": scene.sh_degree,
+        "codebook": book,
+        "files": ["shN_centroids.webp", "shN_labels.webp"],
+    });
+    (palette, label_tex, sh_n)
 }
