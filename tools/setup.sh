@@ -28,6 +28,13 @@ if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 9))' 2>/dev/null \
   packages+=(python3 python3-venv python3-pip)
 fi
 rm -rf "$venv_probe"
+# Node.js and npm, for tools/interop.sh (PlayCanvas splat-transform and gltf-validator from
+# npm): Debian's when the machine has no node of its own. splat-transform 3.7 needs
+# Node.js >= 20, which interop.sh checks (Debian 12's is 18: install a newer one, e.g.
+# NodeSource's, where that is what apt offers).
+if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
+  packages+=(nodejs npm)
+fi
 
 missing=()
 for p in "${packages[@]}"; do

@@ -103,6 +103,11 @@ cargo build -q --profile test --bin verisplat
 t0=$SECONDS
 VERISPLAT_BIN="$PWD/target/debug/verisplat" tools/slurm_test.sh
 echo "test.sh: slurm_test.sh took $((SECONDS - t0)) s" >&2
+# The shared scenes through PlayCanvas's splat-transform and the Khronos glTF validator
+# (pinned npm packages), both directions, with PSNR thresholds (docs/formats.md).
+t0=$SECONDS
+tools/interop.sh "$PWD/target/debug/verisplat"
+echo "test.sh: interop.sh took $((SECONDS - t0)) s" >&2
 
 if [ "$python" = 0 ]; then
   exit 0

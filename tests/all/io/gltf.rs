@@ -453,6 +453,9 @@ fn a_gltf_with_a_data_uri_or_a_bin_beside_it_loads() {
     assert!(e.contains("my scene.bin"), "{e}");
 }
 
+/// A change to a glTF document.
+type Edit = Box<dyn Fn(&mut Value)>;
+
 #[test]
 fn broken_files_get_clear_errors_never_panics() {
     let source = small(2, 3);
@@ -464,7 +467,7 @@ fn broken_files_get_clear_errors_never_panics() {
         parse(&glb_pack(&d, &bin)).unwrap_err()
     };
     let attrs = "/meshes/0/primitives/0/attributes";
-    let cases: Vec<(&str, Box<dyn Fn(&mut Value)>)> = vec![
+    let cases: Vec<(&str, Edit)> = vec![
         (
             "has no KHR_gaussian_splatting:SCALE",
             Box::new(move |d| {
@@ -564,4 +567,42 @@ fn broken_files_get_clear_errors_never_panics() {
     assert!(parse(&glb[..glb.len() - 10])
         .unwrap_err()
         .contains("truncated"));
+}
+
+#[test]
+fn convert_writes_a_gltf_with_its_bin_and_never_overwrites_either() {
+    use verisplat::core::scene::write::{self, ConvertOptions, OutputFormat};
+    let src = common::shared_data().join("playbot_lod6_1873_sh2.ply");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("robot.gltf");
+    let report = write::convert(&src, &out, &ConvertOptions::default()).unwrap();
+    assert_eq!(report.output_format, OutputFormat::Gltf);
+    assert!(dir.path().join("robot.bin").is_file());
+    let back = scene::load(&out).unwrap();
+    assert_eq!(
+        back.positions,
+        common::shared_scene("playbot_lod6_1873_sh2.ply").positions
+    );
+    let e = write::convert(&src, &out, &ConvertOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("robot.gltf"), "{e}");
+    // A .bin already there (from another file) is not replaced, and no .gltf appears.
+    let other = dir.path().join("other.gltf");
+    std::fs::write(dir.path().join("other.bin"), b"mine").unwrap();
+    let e = write::convert(&src, &other, &ConvertOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("other.bin"), "{e}");
+    assert!(!other.exists());
+    assert_eq!(
+        std::fs::read(dir.path().join("other.bin")).unwrap(),
+        b"mine"
+    );
+    // --overwrite replaces both; a .glb is one file.
+    let opts = ConvertOptions {
+        overwrite: true,
+        ..Default::default()
+    };
+    write::convert(&src, &other, &opts).unwrap();
+    assert_eq!(scene::load(&other).unwrap().len(), 1873);
+    let glb = dir.path().join("robot.glb");
+    write::convert(&src, &glb, &ConvertOptions::default()).unwrap();
+    assert!(matches!(scene::load_with_format(&glb).unwrap().1, SceneFormat::Gltf(i) if i.binary));
 }
