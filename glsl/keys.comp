@@ -86,11 +86,13 @@ void main() {
     vec4 conic_depth = texelFetch(splat_texels, int(i * 3u + 1u));
     float bound = mean_opacity_bound.w;
     uint bins_x = params.bins.y;
+    // An image that wraps: the bins of a turn of whole tiles (wrapped_bin_receives).
+    uint turn_bins = params.image.z * params.bins.w;
     // An image that wraps around (wrapped_mean): the rectangle is in the bins of three
     // turns side by side, the image the middle one; each bin is taken back to the image.
     bool wraps = params.modes.z != 0u;
     uvec2 bmin = rmin * params.bins.w;
-    uvec2 bmax = min(rmax * params.bins.w, uvec2(wraps ? 3u * bins_x : bins_x, params.bins.z));
+    uvec2 bmax = min(rmax * params.bins.w, uvec2(wraps ? 3u * turn_bins : bins_x, params.bins.z));
     uint off = OFFSET(k) - chunk.base;
     // This Gaussian's slots end where the next one's begin (or at the scan total).
     uint end = (k + 1u < n ? OFFSET(k + 1u) : counters.scan_total) - chunk.base;
@@ -104,7 +106,7 @@ void main() {
             mask &= mask - 1u;
             uint y = bmin.y + j / w, x = bmin.x + j % w;
             if (off < limit) {
-                STORE_PAIR(off, y * bins_x + x % bins_x, i);
+                STORE_PAIR(off, y * bins_x + x % turn_bins, i);
             }
             off++;
         }
@@ -115,11 +117,11 @@ void main() {
             for (x = bmin.x; x < bmax.x; x++) {
                 // The same test preprocess counted with (tile_receives in splat_common.glsl).
                 bool receives = wraps
-                    ? wrapped_bin_receives(mean_opacity_bound.xy, conic_depth.xyz, bound, uvec2(x, y), params.bins.x, bins_x, params.image.x)
+                    ? wrapped_bin_receives(mean_opacity_bound.xy, conic_depth.xyz, bound, uvec2(x, y), params.bins.x, bins_x, turn_bins, params.image.x)
                     : tile_receives(mean_opacity_bound.xy, conic_depth.xyz, bound, uvec2(x, y), params.bins.x);
                 if (!receives) continue;
                 if (off < limit) {
-                    STORE_PAIR(off, y * bins_x + x % bins_x, i);
+                    STORE_PAIR(off, y * bins_x + x % turn_bins, i);
                 }
                 off++;
             }

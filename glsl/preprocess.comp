@@ -120,6 +120,20 @@ uint clamp_tile(float v, uint hi) {
     return uint(clamp(int(v), 0, int(hi)));
 }
 
+// The tile columns [x, y) of a splat's copy centred at column `x`, `radius_x` pixels to
+// either side, on an image `width` pixels and `tiles` tiles across, as the rectangle of
+// model::Rules::extent (empty where it culls the copy: gsplat's box off the image).
+uvec2 copy_columns(bool gsplat, float x, float radius_x, uint width, uint tiles) {
+    if (gsplat) {
+        float p = x + 0.5;  // gsplat's pixel centres are at +0.5
+        if (p + radius_x <= 0.0 || p - radius_x >= float(width)) return uvec2(0u);
+        return uvec2(clamp_tile(floor((p - radius_x) / 16.0), tiles),
+                     clamp_tile(ceil((p + radius_x) / 16.0), tiles));
+    }
+    return uvec2(clamp_tile((x - radius_x) / 16.0, tiles),
+                 clamp_tile((x + radius_x + 15.0) / 16.0, tiles));
+}
+
 shared uint s_visible;
 
 void main() {
@@ -217,16 +231,18 @@ void main() {
                 uint bins_x = params.bins.y;
 #if LENSES
                 // An image that wraps around (wrapped_mean): the rectangle in the tiles of
-                // three turns side by side, the image the middle one, as cpu::preprocess_one.
+                // three turns of whole tiles side by side, the image the middle one, as
+                // model::Rules::wrapped_extent.
                 bool wraps = params.modes.z != 0u;
                 if (wraps) {
-                    at.x += float(params.image.x);
-                    size.x *= 3.0;
+                    at.x += float(gx * TILE_SIZE);
+                    size.x = float(3u * gx * TILE_SIZE);
                     gx *= 3u;
-                    bins_x *= 3u;
+                    bins_x = gx * params.bins.w;  // three turns of whole tiles
                 }
 #endif
                 float radius;
+                float radius_x;  // along x: the rectangle's half width, for the copies
                 uvec2 rmin, rmax;
                 // Whether the rules count the splat as seen (its radius, the trainer's and
                 // gsplat's visibility): the original's when its tile rectangle is not
@@ -241,6 +257,7 @@ void main() {
                     shown = opacity >= ALPHA_MIN && (r.x > 0.0 || r.y > 0.0)
                         && all(greaterThan(p + r, vec2(0.0))) && all(lessThan(p - r, size));
                     radius = max(r.x, r.y);
+                    radius_x = r.x;
                     vec2 lo = floor((p - r) / 16.0), hi = ceil((p + r) / 16.0);
                     rmin = uvec2(clamp_tile(lo.x, gx), clamp_tile(lo.y, gy));
                     rmax = uvec2(clamp_tile(hi.x, gx), clamp_tile(hi.y, gy));
@@ -249,14 +266,34 @@ void main() {
                     float mid = 0.5 * (a + c);
                     float disc = sqrt(max(mid * mid - det, 0.1));
                     radius = ceil(3.0 * sqrt(max(mid + disc, mid - disc)));
+                    radius_x = radius;
                     rmin = uvec2(clamp_tile((at.x - radius) / 16.0, gx),
                                  clamp_tile((at.y - radius) / 16.0, gy));
                     rmax = uvec2(clamp_tile((at.x + radius + 15.0) / 16.0, gx),
                                  clamp_tile((at.y + radius + 15.0) / 16.0, gy));
                 }
 #if LENSES
-                // At most one turn wide.
-                if (wraps) rmax.x = min(rmax.x, rmin.x + params.image.z);
+                if (wraps) {
+                    // A width that is not whole tiles: across the seam, the columns of the
+                    // copies one image width to the right (seen in the turn to the left)
+                    // and to the left (in the turn to the right).
+                    uint tiles = params.image.z;
+                    if (params.image.x != tiles * TILE_SIZE && rmax.x > rmin.x && rmax.y > rmin.y) {
+                        float w = float(params.image.x);
+                        uvec2 right = copy_columns(gsplat, mean2d.x + w, radius_x, params.image.x, tiles);
+                        uvec2 left = copy_columns(gsplat, mean2d.x - w, radius_x, params.image.x, tiles);
+                        if (right.y > right.x) {
+                            rmin.x = min(rmin.x, right.x);
+                            rmax.x = max(rmax.x, right.y);
+                        }
+                        if (left.y > left.x) {
+                            rmin.x = min(rmin.x, left.x + 2u * tiles);
+                            rmax.x = max(rmax.x, left.y + 2u * tiles);
+                        }
+                    }
+                    // At most one turn wide.
+                    rmax.x = min(rmax.x, rmin.x + tiles);
+                }
 #endif
                 // Count the bins of the reference rectangle that receive anything.
                 float bound = alpha_bound(opacity, uint(params.filters.w));
@@ -269,7 +306,7 @@ void main() {
                     for (bx = bmin.x; bx < bmax.x; bx++) {
 #if LENSES
                         bool receives = wraps
-                            ? wrapped_bin_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x, params.bins.y, params.image.x)
+                            ? wrapped_bin_receives(mean2d, conic, bound, uvec2(bx, by), params.bins.x, params.bins.y, params.image.z * params.bins.w, params.image.x)
                             : tile_receives(at, conic, bound, uvec2(bx, by), params.bins.x);
 #else
                         bool receives = tile_receives(at, conic, bound, uvec2(bx, by), params.bins.x);

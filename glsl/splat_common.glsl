@@ -104,9 +104,12 @@ bool tile_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size) {
 
 // tile_receives of bin `bin` of the bins of three turns side by side (the image the
 // middle one) of an image that wraps around: the bin taken back to the image, and the copy
-// of the splat the blend draws there (wrapped_mean). `bins_x` is the image's bins across.
-bool wrapped_bin_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size, uint bins_x, uint width) {
-    uvec2 real = uvec2(bin.x % bins_x, bin.y);
+// of the splat the blend draws there (wrapped_mean). Each turn is whole tiles,
+// `turn_bins` bins (FrameParams: image.z * bins.w); `bins_x` of them are the image's,
+// the others (past a width that is not whole bins' tiles) receive nothing.
+bool wrapped_bin_receives(vec2 mean2d, vec3 conic, float bound, uvec2 bin, uint size, uint bins_x, uint turn_bins, uint width) {
+    uvec2 real = uvec2(bin.x % turn_bins, bin.y);
+    if (real.x >= bins_x) return false;
     vec2 mean = wrapped_mean(mean2d, real.x * size / TILE_SIZE * TILE_SIZE, 1u, width);
     return tile_receives(mean, conic, bound, real, size);
 }

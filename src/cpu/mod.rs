@@ -133,18 +133,11 @@ pub fn preprocess_one(
     let conic = [c * det_inv, -b * det_inv, a * det_inv];
     let size = (cam.width, cam.height);
     let grid = cam.tile_grid();
-    let e = if cam.lens.wraps(cam.width) {
+    let e = if cam.lens.wraps() {
         // An image that wraps around: the rectangle in the tiles of three turns side by
-        // side (the image the middle one), at most one turn wide; the keys take each tile
-        // back to the image, and the blend draws the copy of the splat nearest the tile.
-        let moved = [mean2d[0] + cam.width as f32, mean2d[1]];
-        let turns = (3 * cam.width, cam.height);
-        rules
-            .extent([a, b, c], det, opacity, moved, turns, (3 * grid.0, grid.1))
-            .map(|mut e| {
-                e.rect_max[0] = e.rect_max[0].min(e.rect_min[0] + grid.0);
-                e
-            })
+        // side (the image the middle one); the keys take each tile back to the image, and
+        // the blend draws the copy of the splat nearest the tile.
+        rules.wrapped_extent([a, b, c], det, opacity, mean2d, size, grid)
     } else {
         rules.extent([a, b, c], det, opacity, mean2d, size, grid)
     };
@@ -287,7 +280,7 @@ pub fn tile_key(tile_id: u32, depth: f32) -> u64 {
 pub fn tile_keys(projected: &[Projected], cam: &Camera) -> (Vec<u64>, Vec<u32>) {
     let (tiles_x, _) = cam.tile_grid();
     // A wrapping image's rectangles are in the tiles of three turns ([`preprocess_one`]).
-    let wraps = cam.lens.wraps(cam.width);
+    let wraps = cam.lens.wraps();
     let total: usize = projected.iter().map(|p| p.tiles_touched() as usize).sum();
     let mut keys = Vec::with_capacity(total);
     let mut values = Vec::with_capacity(total);
@@ -467,7 +460,7 @@ pub fn blend_features(
     if k == 0 {
         return out;
     }
-    let wraps = cam.lens.wraps(cam.width);
+    let wraps = cam.lens.wraps();
     out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
         // One tile's pixels of the row at a time: its list (a wrapping image's moved
         // splats and their features) is made once for them.
@@ -543,7 +536,7 @@ pub fn blend(
 ) -> Frame {
     let (tiles_x, tiles_y) = cam.tile_grid();
     let (w, h) = (cam.width, cam.height);
-    let wraps = cam.lens.wraps(w);
+    let wraps = cam.lens.wraps();
     let tiles: Vec<Vec<(usize, PixelResult)>> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {

@@ -93,7 +93,7 @@ fn blend_surface(
     let (tiles_x, _) = cam.tile_grid();
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut out = vec![0f32; w * h * k];
-    let wraps = cam.lens.wraps(cam.width);
+    let wraps = cam.lens.wraps();
     out.par_chunks_mut(w * k).enumerate().for_each(|(y, row)| {
         let tile_row = (y as u32 / TILE_SIZE) * tiles_x;
         for (tx, pixels) in row.chunks_mut(TILE_SIZE as usize * k).enumerate() {

@@ -160,7 +160,8 @@ pub(crate) struct PathArgs {
     pub(crate) vfov: Option<f32>,
     /// Lens of generated cameras (orbit, --look-at, default camera): pinhole,
     /// fisheye[:fov=DEG] (default 180, filling the shorter side), equirect[:lon=A..B,lat=C..D]
-    /// (degrees; the whole sphere by default) or ortho[:width=W] (world units across;
+    /// (degrees; the whole sphere by default; default size 1280 wide, the window's
+    /// longitudes:latitudes ratio, 2:1 for the whole sphere) or ortho[:width=W] (world units across;
     /// default: what --vfov shows at the scene's centre). Lenses other than the pinhole are
     /// drawn by the CPU reference (--cpu) so far. docs/cameras.md, "Lenses".
     #[arg(long, value_name = "LENS", value_parser = values::lens)]
@@ -448,8 +449,13 @@ pub(crate) fn camera_path(
     };
     let vfov = p.vfov.unwrap_or(camera::DEFAULT_VFOV_DEG);
     // Generated cameras are made at the requested size (square pixels whatever the
-    // aspect); camera files are rescaled.
-    let (width, height) = camera::resized_dims((1280, 720), view.width, view.height, view.scale)?;
+    // aspect; an equirectangular window's default is its angles' ratio, 2:1 for the whole
+    // sphere); camera files are rescaled.
+    let size = p
+        .lens
+        .as_ref()
+        .map_or((1280, 720), camera::LensSpec::default_size);
+    let (width, height) = camera::resized_dims(size, view.width, view.height, view.scale)?;
     let generated = camera_file.is_none();
     let (all, label, source): (Vec<Camera>, PathBuf, String) = if let Some(frames) = p.orbit {
         if sampling {

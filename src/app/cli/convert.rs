@@ -61,6 +61,14 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
         spz_axes: args.spz_axes,
     };
     let r = convert_scene(&args.input, &args.output, &options)?;
+    if r.output_format == OutputFormat::Spz {
+        note!(
+            "note: {} is written in {}; tools that read SPZ in the other axes show it upside down (for those: --spz-axes {})",
+            args.output.display(),
+            options.spz_axes.describe(),
+            options.spz_axes.other()
+        );
+    }
     if let Some(t) = &options.transform {
         note!("transformed: {} by {t}", super::plural(r.read, "Gaussian"));
     }

@@ -58,6 +58,9 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
     outln!("scene       {name}");
     if let Some(format) = format {
         outln!("format      {format}");
+        if matches!(format, scene::SceneFormat::Spz { .. }) {
+            outln!("axes        read in {}", arg.spz.axes.describe());
+        }
         if scene.antialiased {
             outln!("antialiased yes: the file records antialiased training (rendered with the compensation by default)");
         }

@@ -213,15 +213,14 @@ impl Lens {
         }
     }
 
-    /// Whether an image `width` pixels wide through this lens wraps around: a full turn of
-    /// longitude whose width is whole tiles, so that its left edge continues its right
-    /// one tile for tile. The renderers then draw a Gaussian across the seam on both
-    /// sides; at other widths the seam cuts it (drawn on its mean's side).
-    pub fn wraps(&self, width: u32) -> bool {
+    /// Whether an image through this lens wraps around: a full turn of longitude, whose
+    /// left edge continues its right one. The renderers then draw a Gaussian across the
+    /// seam on both sides, at any width
+    /// ([`Rules::wrapped_extent`](crate::core::model::Rules::wrapped_extent)).
+    pub fn wraps(&self) -> bool {
         match self {
             Lens::Equirectangular { longitude, .. } => {
                 (longitude[1] - longitude[0]).abs() == 2.0 * PI
-                    && width % crate::core::rules::TILE_SIZE == 0
             }
             _ => false,
         }
@@ -550,6 +549,20 @@ impl LensSpec {
         (lens, fx, fy, cx, cy)
     }
 
+    /// The size of a generated camera through this lens when neither side is given:
+    /// 1280 pixels across, and 720 high but for an equirectangular window, whose pixels
+    /// are square in angle (width : height = its longitudes : its latitudes, so 1280x640
+    /// for the whole sphere). One side given, the other follows the same ratio.
+    pub fn default_size(&self) -> (u32, u32) {
+        match self {
+            LensSpec::Equirect { lon_deg, lat_deg } => {
+                let ratio = (lat_deg[1] - lat_deg[0]).abs() / (lon_deg[1] - lon_deg[0]).abs();
+                (1280, ((1280.0 * ratio).round() as u32).max(1))
+            }
+            _ => (1280, 720),
+        }
+    }
+
     /// The lens itself.
     pub fn lens(&self) -> Lens {
         match self {
@@ -668,6 +681,16 @@ fn invert_equidistant(k: &[f64; 4], rd: f64, max_theta: f64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn equirectangular_windows_default_to_square_angles() {
+        let size = |s: &str| s.parse::<LensSpec>().unwrap().default_size();
+        assert_eq!(size("equirect"), (1280, 640));
+        assert_eq!(size("equirect:lon=-90..90,lat=45..-45"), (1280, 640));
+        assert_eq!(size("equirect:lon=0..120,lat=40..-40"), (1280, 853));
+        assert_eq!(size("fisheye"), (1280, 720));
+        assert_eq!(size("pinhole"), (1280, 720));
+    }
 
     const K: Intrinsics = Intrinsics {
         fx: 300.0,

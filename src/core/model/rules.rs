@@ -272,6 +272,44 @@ impl Rules {
         (area != 0).then_some(e)
     }
 
+    /// [`Self::extent`] in an image that wraps around
+    /// ([`Lens::wraps`](crate::core::camera::Lens::wraps)), `size.0` pixels and `grid.0`
+    /// tiles across: the rectangle in the tiles of three turns side by side, the image the
+    /// middle one, at most one turn wide; tile `x` of it is the image's tile
+    /// `x % grid.0`. Each turn is whole tiles, `grid.0 * 16` pixels: the middle turn's
+    /// rectangle is that of the centre moved by one such turn; where the width is not
+    /// whole tiles (the last tile of a turn partly empty), what the splat covers across
+    /// the seam is the rectangle of its copy one image width to the left or right, in the
+    /// image's tiles, so a splat across the seam reaches the first or last tile as it
+    /// would across any other tile edge.
+    pub fn wrapped_extent<T: Real>(
+        self,
+        cov: [T; 3],
+        det: T,
+        opacity: T,
+        mean2d: [T; 2],
+        size: (u32, u32),
+        grid: (u32, u32),
+    ) -> Option<Extent> {
+        let turn = grid.0 * TILE_SIZE;
+        let moved = [mean2d[0] + T::of(turn as f64), mean2d[1]];
+        let turns = (3 * turn, size.1);
+        let mut e = self.extent(cov, det, opacity, moved, turns, (3 * grid.0, grid.1))?;
+        if size.0 != turn {
+            let w = T::of(size.0 as f64);
+            // The copy one width to the right is seen in the turn to the left, and the
+            // copy to the left in the turn to the right.
+            for (x, offset) in [(mean2d[0] + w, 0), (mean2d[0] - w, 2 * grid.0)] {
+                if let Some(s) = self.extent(cov, det, opacity, [x, mean2d[1]], size, grid) {
+                    e.rect_min[0] = e.rect_min[0].min(s.rect_min[0] + offset);
+                    e.rect_max[0] = e.rect_max[0].max(s.rect_max[0] + offset);
+                }
+            }
+        }
+        e.rect_max[0] = e.rect_max[0].min(e.rect_min[0] + grid.0);
+        Some(e)
+    }
+
     /// The value the shaders receive (`FrameParams.modes.x`).
     pub fn shader_id(self) -> u32 {
         match self {

@@ -121,8 +121,9 @@ fn looks_like_json(bytes: &[u8]) -> bool {
 }
 
 /// Loads a scene as [`load_with_format`] does (any format, a model directory), an SPZ
-/// file read in `axes` ([`spz::SpzAxes`]). `Raw` for a file that is not SPZ is an error:
-/// the option would do nothing.
+/// file read in `axes` ([`spz::SpzAxes`]), with a note on stderr where it looks upside
+/// down in them ([`spz::axes_note`]). `Raw` for a file that is not SPZ is an error: the
+/// option would do nothing.
 pub fn load_with_axes(path: &Path, axes: spz::SpzAxes) -> Result<(Scene, SceneFormat), SceneError> {
     let (mut scene, format) = load_with_format(path)?;
     if axes == spz::SpzAxes::Raw {
@@ -133,6 +134,11 @@ pub fn load_with_axes(path: &Path, axes: spz::SpzAxes) -> Result<(Scene, SceneFo
             ));
         }
         spz::flip_rub(&mut scene);
+    }
+    if matches!(format, SceneFormat::Spz { .. }) {
+        if let Some(note) = spz::axes_note(path, &scene, axes) {
+            crate::note!("{note}");
+        }
     }
     Ok((scene, format))
 }

@@ -324,6 +324,11 @@ pub fn convert(
     if raw && spz_in {
         spz::flip_rub(&mut scene);
     }
+    if spz_in {
+        if let Some(note) = spz::axes_note(input, &scene, options.spz_axes) {
+            crate::note!("{note}");
+        }
+    }
     if let Some(kernel) = options.kernel {
         scene.kernel = kernel;
     }

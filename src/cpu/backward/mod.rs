@@ -91,7 +91,7 @@ impl Cam64 {
             tiles: cam.tile_grid(),
             lens: cam.lens.clone(),
             k: cam.intrinsics(),
-            wraps: cam.lens.wraps(cam.width),
+            wraps: cam.lens.wraps(),
         }
     }
 }
@@ -300,14 +300,8 @@ fn project(p: &SplatParams<f64>, i: usize, cam: &Cam64, opts: &RenderOptions) ->
     let e = if cam.wraps {
         // An image that wraps around: the rectangle in the tiles of three turns side by
         // side, at most one turn wide (as `cpu::preprocess_one`).
-        let (w, h) = cam.size;
-        let moved = [mean2d[0] + w as f64, mean2d[1]];
-        let grid = (3 * cam.tiles.0, cam.tiles.1);
-        let mut e = cam
-            .rules
-            .extent([a, b, c], det, opacity, moved, (3 * w, h), grid)?;
-        e.rect_max[0] = e.rect_max[0].min(e.rect_min[0] + cam.tiles.0);
-        e
+        cam.rules
+            .wrapped_extent([a, b, c], det, opacity, mean2d, cam.size, cam.tiles)?
     } else {
         cam.rules
             .extent([a, b, c], det, opacity, mean2d, cam.size, cam.tiles)?

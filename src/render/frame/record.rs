@@ -139,12 +139,7 @@ fn frame_params(
             opts.rules.t_stop(),
             opts.rules.antialias_min_ratio(),
         ],
-        modes: [
-            opts.rules.shader_id(),
-            lens,
-            u32::from(cam.lens.wraps(cam.width)),
-            0,
-        ],
+        modes: [opts.rules.shader_id(), lens, u32::from(cam.lens.wraps()), 0],
         lens_a,
         lens_b,
         unscented: unscented.weights().map(|w| w as f32),

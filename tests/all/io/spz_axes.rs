@@ -121,3 +121,77 @@ fn bad_spz_axes_are_one_sentence() {
     );
     assert!(!ply.exists());
 }
+
+#[test]
+fn an_spz_read_upside_down_is_said_in_one_line() {
+    // Issue 59: SPZ read in the other convention than the one that wrote it loaded upside
+    // down without a word. The shared .spz is in the spec's RUB axes: read raw, PLAYBOT's
+    // ground patch is on top; read as the spec says, nothing to say. `info` names the axes.
+    use crate::common::cli::{stderr, stdout};
+    let spz = common::shared_data().join("playbot_lod3_31k_sh2.v3.spz");
+    let info = |axes: &str| verisplat(&["info", s(&spz), "--spz-axes", axes]);
+    let spec = info("spec");
+    assert!(spec.status.success(), "{}", stderr(&spec));
+    assert!(!stderr(&spec).contains("upside down"), "{}", stderr(&spec));
+    assert!(
+        stdout(&spec).contains("axes        read in SPZ's own RUB axes"),
+        "{}",
+        stdout(&spec)
+    );
+    let raw = info("raw");
+    assert!(raw.status.success(), "{}", stderr(&raw));
+    let note = stderr(&raw);
+    assert_eq!(note.matches("upside down").count(), 1, "{note}");
+    assert!(
+        note.contains("playbot_lod3_31k_sh2.v3.spz looks upside down read in PLY axes")
+            && note.contains("pass --spz-axes spec"),
+        "{note}"
+    );
+    assert!(
+        stdout(&raw).contains("axes        read in PLY axes"),
+        "{}",
+        stdout(&raw)
+    );
+    // splat-transform's way (raw) read by default (spec): the note on render and convert.
+    let dir = tempfile::tempdir().unwrap();
+    let raw_file = dir.path().join("raw.spz");
+    let ply = common::shared_data().join(SCENE);
+    let o = ok(&["convert", s(&ply), s(&raw_file), "--spz-axes", "raw"]);
+    assert!(
+        stderr(&o).contains("is written in PLY axes") && stderr(&o).contains("--spz-axes spec"),
+        "{}",
+        stderr(&o)
+    );
+    let back = dir.path().join("back.ply");
+    let o = ok(&["convert", s(&raw_file), s(&back)]);
+    assert!(
+        stderr(&o).contains("looks upside down read in SPZ's own RUB axes")
+            && stderr(&o).contains("pass --spz-axes raw"),
+        "{}",
+        stderr(&o)
+    );
+    let png = dir.path().join("x.png");
+    let o = ok(&[
+        "render",
+        s(&raw_file),
+        "--cpu",
+        "--width",
+        "32",
+        "-o",
+        s(&png),
+    ]);
+    assert!(stderr(&o).contains("looks upside down"), "{}", stderr(&o));
+    let o = ok(&[
+        "render",
+        s(&raw_file),
+        "--spz-axes",
+        "raw",
+        "--cpu",
+        "--width",
+        "32",
+        "-o",
+        s(&png),
+        "--overwrite",
+    ]);
+    assert!(!stderr(&o).contains("upside down"), "{}", stderr(&o));
+}

@@ -114,41 +114,41 @@ fn a_gaussian_across_the_seam_is_drawn_on_both_sides_where_the_image_wraps() {
         lens: Lens::FULL_SPHERE,
         ..axis_camera(1.0)
     };
-    // 256 is whole tiles: the image wraps, and both edges see the same Gaussian the same
-    // way, mirrored about the seam through its centre.
-    let wide = cam(256);
-    assert!(wide.lens.wraps(256) && !wide.lens.wraps(250));
-    let frame = render(&s, &wide);
-    let row = 64;
-    let (left, right) = (
-        frame.alpha[frame.index(0, row)],
-        frame.alpha[frame.index(255, row)],
-    );
-    assert!(left > 0.3 && right > 0.3, "edges {left} {right}");
-    let px = wide
-        .lens
-        .project(&wide.intrinsics(), glam::DVec3::new(-0.05, 0.0, -4.0))
-        .unwrap();
-    assert!(px.x < 6.0, "{px}");
-    // Pixel centres i + 0.5: the alpha falls off with the distance across the seam.
-    for i in 0..8u32 {
-        let x = (i + 250) % 256;
-        let d = ((x as f64 + 0.5 - px.x + 128.0).rem_euclid(256.0) - 128.0).abs();
-        let next = (x + 1) % 256;
-        let dn = ((next as f64 + 0.5 - px.x + 128.0).rem_euclid(256.0) - 128.0).abs();
-        let (a, an) = (
-            frame.alpha[frame.index(x, row)],
-            frame.alpha[frame.index(next, row)],
+    // 256 is whole tiles, 250 is not (its last tile partly empty): the image wraps at
+    // both, and both edges see the same Gaussian the same way, mirrored about the seam
+    // through its centre.
+    for width in [256, 250] {
+        let wide = cam(width);
+        assert!(wide.lens.wraps());
+        let frame = render(&s, &wide);
+        let row = 64;
+        let (left, right) = (
+            frame.alpha[frame.index(0, row)],
+            frame.alpha[frame.index(width - 1, row)],
         );
-        assert!(
-            (d < dn) == (a > an) || (a - an).abs() < 1e-6,
-            "({x}: {a} at {d}) ({next}: {an} at {dn})"
-        );
+        assert!(left > 0.3 && right > 0.3, "{width}: edges {left} {right}");
+        let px = wide
+            .lens
+            .project(&wide.intrinsics(), glam::DVec3::new(-0.05, 0.0, -4.0))
+            .unwrap();
+        assert!(px.x < 6.0, "{px}");
+        // Pixel centres i + 0.5: the alpha falls off with the distance across the seam.
+        let w = width as f64;
+        let across = |x: u32| ((x as f64 + 0.5 - px.x + w / 2.0).rem_euclid(w) - w / 2.0).abs();
+        for i in 0..12u32 {
+            let x = (i + width - 6) % width;
+            let next = (x + 1) % width;
+            let (d, dn) = (across(x), across(next));
+            let (a, an) = (
+                frame.alpha[frame.index(x, row)],
+                frame.alpha[frame.index(next, row)],
+            );
+            assert!(
+                (d < dn) == (a > an) || (a - an).abs() < 1e-6,
+                "{width}: ({x}: {a} at {d}) ({next}: {an} at {dn})"
+            );
+        }
     }
-    // 250 is not whole tiles: the seam cuts the Gaussian, drawn on its mean's side only.
-    let cut = render(&s, &cam(250));
-    assert!(cut.alpha[cut.index(0, row)] > 0.3);
-    assert_eq!(cut.alpha[cut.index(249, row)], 0.0);
 }
 
 #[test]
@@ -273,4 +273,49 @@ fn render_takes_a_lens_for_generated_cameras_and_refuses_what_cannot_draw_it() {
         );
     }
     assert!(!dir.path().join("x.png").exists() && !dir.path().join("data").exists());
+}
+
+#[test]
+fn an_equirectangular_window_defaults_to_its_angles_ratio() {
+    // Issue 59: the whole sphere came out 1280x720 by default and 1000x563 with --width
+    // 1000 alone, stretched in any 360-degree viewer.
+    use crate::common::cli::{stderr, verisplat_in};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = crate::common::shared_data().join("playbot_lod6_1873_sh2.ply");
+    let size = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            scene.to_str().unwrap(),
+            "--cpu",
+            "-o",
+            "pano.png",
+            "--overwrite",
+        ];
+        args.extend_from_slice(extra);
+        let o = verisplat_in(dir.path(), &args);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        image::image_dimensions(dir.path().join("pano.png")).unwrap()
+    };
+    assert_eq!(size(&["--lens", "equirect", "--width", "200"]), (200, 100));
+    assert_eq!(
+        size(&["--lens", "equirect", "--width", "1001", "--height", "20"]),
+        (1001, 20)
+    );
+    assert_eq!(size(&["--lens", "equirect", "--height", "51"]), (102, 51));
+    assert_eq!(
+        size(&[
+            "--lens",
+            "equirect:lon=-60..60,lat=30..-30",
+            "--width",
+            "300"
+        ]),
+        (300, 150)
+    );
+    assert_eq!(
+        size(&["--lens", "equirect:lon=0..90,lat=45..-45", "--height", "64"]),
+        (64, 64)
+    );
+    // Other lenses keep 16:9.
+    assert_eq!(size(&["--lens", "fisheye", "--width", "160"]), (160, 90));
+    assert_eq!(size(&["--width", "160"]), (160, 90));
 }

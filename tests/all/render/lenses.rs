@@ -7,8 +7,10 @@ use crate::common::gpu::{check_frame, renderer};
 use crate::common::{orbit, shared_scene};
 use glam::Vec3;
 use verisplat::core::camera::{Camera, Lens};
+use verisplat::core::frame::Frame;
 use verisplat::core::model::Rules;
-use verisplat::cpu::RenderOptions;
+use verisplat::cpu::{self, RenderOptions};
+use verisplat::render::{FrameRequest, Rendered};
 
 /// `cam` through the lens `spec` names, for its distance from the scenes' middle.
 fn through(cam: &Camera, spec: &str) -> Camera {
@@ -78,10 +80,10 @@ fn every_lens_matches_the_reference_on_playbot() {
 #[test]
 fn a_wrapping_panorama_matches_the_reference_across_its_seam() {
     // Seen from inside, looking along the seam: Gaussians straddle it, drawn on both
-    // edges; at a width that is not whole tiles the seam cuts them, on both renderers.
+    // edges, at a width of whole tiles and at one whose last tile is partly empty.
     let mut r = renderer();
     let s = shared_scene("playbot_lod6_1873_sh2.ply").activated();
-    for (width, wraps) in [(320, true), (312, false)] {
+    for width in [320, 312] {
         let cam = Camera {
             lens: Lens::FULL_SPHERE,
             ..Camera::look_at(
@@ -94,7 +96,7 @@ fn a_wrapping_panorama_matches_the_reference_across_its_seam() {
                 Vec3::NEG_Y,
             )
         };
-        assert_eq!(cam.lens.wraps(width), wraps);
+        assert!(cam.lens.wraps());
         // The original's near plane: gsplat's keeps a Gaussian 6 cm from this camera,
         // whose f32 transform moves one pixel's depth by 2 % (colour at 95 dB), past
         // the depth check's tail; the other lens tests run gsplat's rules.
@@ -141,6 +143,62 @@ fn every_lens_matches_the_reference_inside_the_scene_and_under_gsplat_rules() {
                     background: [0.2, 0.3, 0.4],
                     ..Default::default()
                 },
+            );
+        }
+    }
+}
+
+/// Mean absolute difference of 8-bit colour values between columns `a` and `b`.
+fn column_difference(f: &Frame, a: u32, b: u32) -> f64 {
+    let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as f64;
+    let sum: f64 = (0..f.height)
+        .map(|y| {
+            let (p, q) = (f.color[f.index(a, y)], f.color[f.index(b, y)]);
+            (0..3).map(|c| (byte(p[c]) - byte(q[c])).abs()).sum::<f64>()
+        })
+        .sum();
+    sum / (3 * f.height) as f64
+}
+
+#[test]
+fn a_full_sphere_panorama_has_no_seam_at_any_width() {
+    // Issue 59: at a width that was not whole tiles the seam cut every Gaussian across it
+    // (the edge columns 11.5 apart, neighbours 1.6). Now the first column continues the
+    // last as any column continues its neighbour, on both renderers, and they agree.
+    let mut r = renderer();
+    let s = shared_scene("playbot_lod3_31k_sh2.ply").activated();
+    for width in [1000, 1001, 1024] {
+        let inside = Camera::look_at(
+            "panorama",
+            width,
+            width / 2,
+            1.0,
+            Vec3::new(0.05, -0.55, -0.25),
+            Vec3::new(0.05, -0.55, 1.0),
+            Vec3::NEG_Y,
+        );
+        let cam = crate::common::through_lens(&inside, "equirect", 1.0);
+        assert_eq!(cam.lens, Lens::FULL_SPHERE);
+        let opts = RenderOptions::default();
+        check_frame(&mut r, &format!("panorama {width}"), &s, &cam, &opts);
+        let gpu = {
+            let gs = r.upload(&s).unwrap();
+            r.render(&FrameRequest::new(&gs, &cam, &opts))
+                .and_then(Rendered::into_frame)
+                .unwrap()
+        };
+        for (who, f) in [("gpu", gpu), ("cpu", cpu::render(&s, &cam, &opts))] {
+            let mut neighbours: Vec<f64> = (0..width - 1)
+                .map(|x| column_difference(&f, x, x + 1))
+                .collect();
+            let edge = column_difference(&f, 0, width - 1);
+            neighbours.sort_by(f64::total_cmp);
+            let mean = neighbours.iter().sum::<f64>() / neighbours.len() as f64;
+            let p90 = neighbours[neighbours.len() * 9 / 10];
+            eprintln!("{who} {width}: edge columns {edge:.2} apart, neighbours {mean:.2} (90th percentile {p90:.2})");
+            assert!(
+                edge <= p90,
+                "{who} at width {width}: the edge columns differ by {edge:.2}, neighbours by {mean:.2} (90th percentile {p90:.2})"
             );
         }
     }
