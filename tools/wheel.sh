@@ -8,20 +8,16 @@
 # refuses the tag if the library needs a newer symbol.
 # maturin and zig (PyPI's ziglang) are pinned and installed into target/wheel-env. The
 # build itself needs what any build needs (Rust, glslc: tools/setup.sh).
-# Usage: tools/wheel.sh [--profile dev]: release into target/wheels/ by default; the dev
-# profile (tools/test.sh) into target/wheels/dev/. Prints the wheel's path last.
+# Usage: tools/wheel.sh (no arguments): the wheel goes to target/wheels/, replacing the one
+# there; its path is printed last (tools/test.sh builds it so and runs tools/wheel_test.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-profile=release
-out=target/wheels
-if [ "${1:-}" = --profile ] && [ "${2:-}" = dev ]; then
-  profile=dev
-  out=target/wheels/dev
-elif [ $# -gt 0 ]; then
-  echo "usage: tools/wheel.sh [--profile dev]" >&2
+if [ $# -gt 0 ]; then
+  echo "usage: tools/wheel.sh (no arguments)" >&2
   exit 2
 fi
+out=target/wheels
 
 maturin_version=1.16.0
 zig_version=0.17.0
@@ -37,7 +33,7 @@ fi
 
 mkdir -p "$out"
 rm -f "$out"/verisplat-*.whl
-# maturin finds zig as `python -m ziglang` of the first python on the PATH.
-PATH="$PWD/$env_dir/bin:$PATH" maturin build --profile "$profile" --zig \
+# With the virtualenv first on the PATH, maturin finds its python and runs zig from its ziglang.
+PATH="$PWD/$env_dir/bin:$PATH" maturin build --release --zig \
   --compatibility manylinux_2_28 -m python/Cargo.toml -o "$out" >&2
 ls "$out"/verisplat-*.whl
