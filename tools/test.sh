@@ -3,7 +3,8 @@
 # whole suite on lavapipe with the Khronos validation layer enabled (any validation
 # message fails the GPU tests): the Rust tests, the GPU tests again at lavapipe's other
 # subgroup sizes (below), the Slurm job-array test (tools/slurm_test.sh), then the Python
-# package built with pip in a fresh virtualenv (target/pyenv) and its pytest suite.
+# package built with pip in a fresh virtualenv (target/pyenv) and its pytest suite, and
+# last the wheel for machines without Rust (tools/wheel.sh, tools/wheel_test.sh).
 # Arguments go to `cargo test` (e.g. a test name); VERISPLAT_SKIP_PYTHON=1 skips the Python
 # part. Each part prints its time ("test.sh: ... took"; BENCHMARKS.md, "CI time").
 set -euo pipefail
@@ -144,3 +145,15 @@ cases=${VERISPLAT_GSPLAT_CASES:-"test_strategy or batch_dims0-True-RGB-None-True
 [ "$cases" = all ] && cases=""
 VERISPLAT_GSPLAT_SUITE=gsplat VERISPLAT_REQUIRE_TORCH=1 "$venv/bin/pytest" -q python/tests/gsplat_suite -k "$cases"
 echo "test.sh: gsplat's own tests (python/tests/gsplat_suite) took $((SECONDS - t0)) s" >&2
+# The wheel for machines without Rust or glslc, built by the README's line (tools/wheel.sh:
+# release, linked by zig for manylinux_2_28), then installed into a fresh virtualenv with no
+# cargo, rustc or glslc on the PATH, where it renders the demo scene from Python against
+# the CPU reference (tools/wheel_test.sh). zig links for an explicit target, so this build
+# has its own folder (target/x86_64-unknown-linux-gnu) and shares nothing with the ones
+# above: a release build of the library and the extension from scratch.
+t0=$SECONDS
+wheel=$(tools/wheel.sh | tail -n 1)
+echo "test.sh: tools/wheel.sh took $((SECONDS - t0)) s" >&2
+t0=$SECONDS
+tools/wheel_test.sh "$wheel"
+echo "test.sh: wheel_test.sh took $((SECONDS - t0)) s" >&2
