@@ -419,9 +419,36 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
                 u.pinhole.height,
                 verisplat::train::undistort::UNDISTORTION_FILE
             );
+            if let Some(note) = upsampling_note(&data.undistorted, resolution) {
+                note!("{note}");
+            }
         }
     }
     Ok(data)
+}
+
+/// A note when the undistorted views (at the training resolution) hold many more pixels
+/// than the photos they come from: a wide lens's rim stretched to a pinhole is
+/// interpolated, which costs training time and adds no detail.
+fn upsampling_note(
+    undistorted: &[verisplat::train::undistort::Undistortion],
+    resolution: verisplat::train::data::Resolution,
+) -> Option<String> {
+    let pixels = |(w, h): (u32, u32)| u64::from(w) * u64::from(h);
+    let photos: u64 = undistorted
+        .iter()
+        .map(|u| pixels((u.photo.width, u.photo.height)))
+        .sum();
+    let views: u64 = undistorted
+        .iter()
+        .map(|u| pixels(resolution.size(u.pinhole.width, u.pinhole.height)))
+        .sum();
+    let factor = views as f64 / photos.max(1) as f64;
+    (factor >= 2.0).then(|| {
+        format!(
+            "note: the undistorted views hold {factor:.1}x the photos' pixels (the lens's rim stretched to a pinhole: interpolated, not detail, and slower to train); -r 2, 4 or 8 divides their size, -r WIDTH sets their width"
+        )
+    })
 }
 
 /// The optimisation and densification settings of the arguments.
