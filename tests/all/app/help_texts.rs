@@ -1,6 +1,7 @@
 //! `--help` as true as the binary (issue 59): every format a command reads or writes is
 //! named where that command's help lists them, checked against the code that chooses the
-//! format; the lens help says what draws lenses; and no option shows its default twice.
+//! format; the lens help says what draws lenses; no option shows its default twice; and
+//! the PyTorch page's install line installs what its imports need.
 
 use crate::common::cli::{ok, s, stdout};
 use std::path::Path;
@@ -214,4 +215,42 @@ fn no_option_shows_its_default_twice() {
         }
     }
     assert!(spz >= 3, "render, compare and convert have --spz-axes");
+}
+
+/// The PyTorch page's install line for `verisplat.gsplat` (whose strategies subclass
+/// gsplat's) installs gsplat, at the version the tests pin.
+#[test]
+fn the_gsplat_extra_installs_the_tested_gsplat() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let read = |p: &str| std::fs::read_to_string(root.join(p)).unwrap();
+    let test_sh = read("tools/test.sh");
+    let pinned = test_sh
+        .split('"')
+        .find(|w| w.starts_with("gsplat=="))
+        .expect("tools/test.sh pins gsplat");
+    let pyproject = read("python/pyproject.toml");
+    let extra = format!("gsplat = [\"torch>=2\", \"{pinned}\"]");
+    assert!(
+        pyproject.contains(&extra),
+        "no `{extra}` in python/pyproject.toml"
+    );
+    let page = read("docs/pytorch.md");
+    assert!(
+        page.contains("pip install \"./python[gsplat]\""),
+        "docs/pytorch.md gives no install line for gsplat"
+    );
+    // Every extra the docs install exists.
+    for doc in ["docs/pytorch.md", "docs/python.md", "README.md"] {
+        let text = read(doc);
+        for (at, opening) in text.match_indices("./python[") {
+            let name: String = text[at + opening.len()..]
+                .chars()
+                .take_while(|c| *c != ']')
+                .collect();
+            assert!(
+                pyproject.contains(&format!("\n{name} = [")),
+                "{doc} installs the extra [{name}], which python/pyproject.toml lacks"
+            );
+        }
+    }
 }
