@@ -22,7 +22,7 @@ struct Cli {
 // Negative numbers are values, not flags (`--orbit-elevation -10`): every subcommand
 // allows them.
 enum Command {
-    /// Render a scene to a PNG or EXR image.
+    /// Render a scene to PNG or EXR images (one frame or a camera path), or to an MP4, WebM or GIF video (ffmpeg).
     #[command(allow_negative_numbers = true)]
     Render(cli::render::RenderArgs),
     /// Print a scene's size, bounds and parameter statistics (or what a camera file holds).
@@ -31,13 +31,13 @@ enum Command {
     /// Render the same camera repeatedly and report per-stage GPU times.
     #[command(allow_negative_numbers = true)]
     Bench(cli::bench::BenchArgs),
-    /// Write a synthetic scene (seeded) as .ply, .splat or .spz, or a synthetic RF field (--rf) as .npy.
+    /// Write a synthetic scene (seeded) in any format convert writes, or a synthetic RF field (--rf) as .npy.
     #[command(allow_negative_numbers = true)]
     Gen(cli::gen::GenArgs),
     /// Fit Gaussians with feature channels to field samples (a grid .npy, or samples .npy/.csv).
     #[command(allow_negative_numbers = true)]
     Fit(cli::fit::FitArgs),
-    /// Convert a scene (any readable format) to .ply, .splat, .spz, .compressed.ply or .sog, chosen by OUT's name.
+    /// Convert a scene (any readable format) to .ply, .compressed.ply, .splat, .spz, .sog, .glb or .gltf, chosen by OUT's name.
     #[command(allow_negative_numbers = true)]
     Convert(cli::convert::ConvertArgs),
     /// Compare a scene's GPU renders with the CPU reference, or two images (PSNR, SSIM, errors).

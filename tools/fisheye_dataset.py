@@ -16,8 +16,11 @@ fisheye has no pinhole view (`train --undistort` refuses it); --fov 120 has one.
 The cameras are written to DIR/rig.json (an INRIA cameras.json with each camera's lens),
 then `verisplat render SCENE --cameras DIR/rig.json --export-colmap DIR` renders them (on
 the device). By default the rings are at 10, 35 and 60 degrees of elevation with 16, 12
-and 8 cameras, looking at the scene's bulk centre from 1.3 times its 95 % radius (from
-`verisplat info --json`); world up is -y, as in the INRIA/COLMAP captures.
+and 8 cameras, looking at the centre `render --orbit` looks at (the centre of the scene's
+2-98 % box, `bulk.box_2_98.centre` of `verisplat info --json`) from 1.3 times its 95 %
+radius; world up is -y, as in the INRIA/COLMAP captures. When verisplat fails (a scene it
+cannot read, an output that exists without --overwrite), its one-sentence error is the
+script's, with a non-zero exit.
 """
 import argparse
 import json
@@ -47,6 +50,27 @@ def look_at(eye, target, down=(0.0, 1.0, 0.0)):
     return [[right[i], cam_down[i], forward[i]] for i in range(3)]
 
 
+class Failed(Exception):
+    """A verisplat command failed; it printed its own sentence on stderr."""
+
+    def __init__(self, status):
+        super().__init__(status)
+        self.status = status
+
+
+def run(cmd, capture=False):
+    """Runs a verisplat command, its stderr passed through; its stdout when `capture`.
+    A failure raises Failed with the command's exit status (its sentence already printed)."""
+    try:
+        done = subprocess.run(cmd, stdout=subprocess.PIPE if capture else None, text=True)
+    except OSError as e:
+        print(f"error: cannot run {cmd[0]}: {e} (build it, or pass --verisplat)", file=sys.stderr)
+        raise Failed(2) from None
+    if done.returncode != 0:
+        raise Failed(done.returncode)
+    return done.stdout
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="a 3DGS scene (e.g. ../shared/data/playbot_lod3_31k_sh2.ply)")
@@ -56,15 +80,14 @@ def main():
     p.add_argument("--fov", type=float, default=180.0, help="degrees across the shorter side")
     p.add_argument("--rings", default="10:16,35:12,60:8", help="ELEVATION_DEG:CAMERAS,...")
     p.add_argument("--radius", type=float, help="distance from the centre (default 1.3 x the 95 %% radius)")
-    p.add_argument("--centre", help="X,Y,Z looked at (default the scene's bulk median)")
+    p.add_argument("--centre", help="X,Y,Z looked at (default: what render --orbit looks at)")
     p.add_argument("--verisplat", default=str(ROOT / "target" / "release" / "verisplat"))
     p.add_argument("--overwrite", action="store_true")
     a = p.parse_args()
 
-    info = json.loads(
-        subprocess.run([a.verisplat, "info", a.scene, "--json"], check=True, capture_output=True, text=True).stdout
-    )
-    centre = [float(x) for x in a.centre.split(",")] if a.centre else info["bulk"]["median"]
+    info = json.loads(run([a.verisplat, "info", a.scene, "--json"], capture=True))
+    # The orbits' centre, as the binary computes it (not the per-axis median).
+    centre = [float(x) for x in a.centre.split(",")] if a.centre else info["bulk"]["box_2_98"]["centre"]
     radius = a.radius or 1.3 * info["bulk"]["radius_95"]
     f = min(a.width, a.height) / 2.0 / math.radians(a.fov / 2.0)
     lens = {"kind": "fisheye", "k": [0.0, 0.0, 0.0, 0.0], "max_theta": math.pi}
@@ -96,11 +119,14 @@ def main():
     out = pathlib.Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     rig = out / "rig.json"
+    if rig.exists() and not a.overwrite:
+        print(f"error: {rig}: already exists; pass --overwrite to replace it", file=sys.stderr)
+        return 1
     rig.write_text(json.dumps(cams, indent=1) + "\n")
     cmd = [a.verisplat, "render", a.scene, "--cameras", str(rig), "--export-colmap", str(out), "-q"]
     if a.overwrite:
         cmd.append("--overwrite")
-    subprocess.run(cmd, check=True)
+    run(cmd)
     print(
         f"{out}: {len(cams)} fisheye photos of {a.width}x{a.height}, {a.fov:g} degrees across "
         f"the shorter side (f = {f:.2f} px), {radius:.3f} from ({centre[0]:.3f}, {centre[1]:.3f}, {centre[2]:.3f})"
@@ -108,4 +134,7 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except Failed as e:
+        sys.exit(e.status)

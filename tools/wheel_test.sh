@@ -44,11 +44,15 @@ t0=$SECONDS
 rm -rf "$venv"
 python3 -m venv "$venv"
 # Without Rust or glslc: only the virtualenv's own programs, and none of the variables
-# that would point a build at a toolchain.
+# that would point a build at a toolchain or the package at shader sources (any *_GLSL_DIR,
+# the former names included).
+unset_glsl=()
+for name in $(compgen -e); do
+  case $name in *_GLSL_DIR) unset_glsl+=(-u "$name") ;; esac
+done
 bare() {
   env -u CARGO_HOME -u RUSTUP_HOME -u CARGO_TARGET_DIR -u RUSTC -u RUSTC_WRAPPER \
-    -u RUSTC_WORKSPACE_WRAPPER -u GLSLC -u VERISPLAT_GLSL_DIR -u VKSPLAT_GLSL_DIR \
-    PATH="$venv/bin" "$@"
+    -u RUSTC_WORKSPACE_WRAPPER -u GLSLC "${unset_glsl[@]}" PATH="$venv/bin" "$@"
 }
 # --only-binary: pip must not build anything (numpy is a wheel from PyPI too).
 bare "$venv/bin/pip" install -q --only-binary :all: "$wheel"

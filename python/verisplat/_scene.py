@@ -219,8 +219,9 @@ class Scene:
 
     def save(self, path: PathLike, overwrite: bool = False, spz_axes: str = "spec") -> None:
         """Writes the scene as .ply (lossless), .splat, .spz, .compressed.ply
-        (PlayCanvas), .sog (PlayCanvas SOG bundle) or ``DIR/meta.json`` (an unbundled
-        SOG, its WebP textures beside it), by name, atomically; an existing file is refused unless ``overwrite``. ``spz_axes`` is the
+        (PlayCanvas), .sog (PlayCanvas SOG bundle), ``DIR/meta.json`` (an unbundled
+        SOG, its WebP textures beside it), .glb or .gltf (glTF with
+        KHR_gaussian_splatting; a .gltf's buffer embedded), by name, atomically; an existing file is refused unless ``overwrite``. ``spz_axes`` is the
         frame of a .spz: ``"spec"`` (the SPZ spec's RUB axes) or ``"raw"`` (PLY axes as
         they are, what PlayCanvas's splat-transform reads); docs/formats.md, "SPZ"."""
         try:

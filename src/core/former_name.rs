@@ -4,8 +4,9 @@
 //! out to publish the same Python package name. Files written under the old name (PLY
 //! header comments `comment vksplat kernel NAME`, safetensors metadata `vksplat_mlp` and
 //! `vksplat_checkpoint`) are still read, and an old `VKSPLAT_*` environment variable is
-//! still honoured, with a deprecation note, when its `VERISPLAT_*` name is not set. Nothing
-//! is written under the old name. This module is the one place in the sources that spells it.
+//! still honoured, with a deprecation note, when its `VERISPLAT_*` name is not set (when
+//! both are, a note says the old one is ignored). Nothing is written under the old name.
+//! This module is the one place in the sources that spells it.
 
 use std::collections::BTreeSet;
 use std::ffi::OsString;
@@ -40,25 +41,38 @@ pub fn former_env(name: &str) -> Option<String> {
 }
 
 /// The environment variable `name` (a `VERISPLAT_*` name): its value, else the value of
-/// its former `VKSPLAT_*` name with a note (once per variable and process) that the old
-/// name is deprecated.
+/// its former `VKSPLAT_*` name with a note that the old name is deprecated. When both are
+/// set the new one wins, with a note that the old one is ignored. Each note is printed
+/// once per variable and process.
 pub fn env_var_os(name: &str) -> Option<OsString> {
+    let old = former_env(name);
+    let old_value = old.as_deref().and_then(std::env::var_os);
     if let Some(v) = std::env::var_os(name) {
+        if let (Some(old), Some(_)) = (&old, &old_value) {
+            if first_note(old) {
+                crate::note!(
+                    "verisplat: {old} is ignored because {name} is set too (the project was called vksplat until 2026-11-28); unset {old}"
+                );
+            }
+        }
         return Some(v);
     }
-    let old = former_env(name)?;
-    let v = std::env::var_os(&old)?;
-    static NOTED: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
-    let first = NOTED
-        .lock()
-        .map(|mut set| set.insert(old.clone()))
-        .unwrap_or(false);
-    if first {
+    let (old, v) = (old?, old_value?);
+    if first_note(&old) {
         crate::note!(
             "verisplat: {old} is deprecated (the project was called vksplat until 2026-11-28); set {name} instead"
         );
     }
     Some(v)
+}
+
+/// True the first time it is asked about the former variable `old` in this process.
+fn first_note(old: &str) -> bool {
+    static NOTED: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
+    NOTED
+        .lock()
+        .map(|mut set| set.insert(old.to_string()))
+        .unwrap_or(false)
 }
 
 /// [`env_var_os`] as a string; None when unset or not valid Unicode.

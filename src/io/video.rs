@@ -80,6 +80,16 @@ impl VideoFormat {
             VideoFormat::Gif => "GIF",
         }
     }
+
+    /// [`describe`](Self::describe) with its article, as a sentence needs it: "an H.264
+    /// MP4", "a VP9 WebM", "a GIF".
+    pub fn with_article(self) -> String {
+        let article = match self {
+            VideoFormat::Mp4 => "an",
+            VideoFormat::Webm | VideoFormat::Gif => "a",
+        };
+        format!("{article} {}", self.describe())
+    }
 }
 
 /// How a video is encoded.
@@ -120,9 +130,9 @@ fn find_on_path(name: &str) -> Option<PathBuf> {
 pub fn check_ffmpeg(output: &Path, format: VideoFormat) -> Result<PathBuf, String> {
     let Some(ffmpeg) = find_ffmpeg() else {
         return Err(format!(
-            "{}: writing a {} needs ffmpeg, which is not on the PATH; {INSTALL_HINT}",
+            "{}: writing {} needs ffmpeg, which is not on the PATH; {INSTALL_HINT}",
             output.display(),
-            format.describe()
+            format.with_article()
         ));
     };
     let listed = Command::new(&ffmpeg)
@@ -137,11 +147,11 @@ pub fn check_ffmpeg(output: &Path, format: VideoFormat) -> Result<PathBuf, Strin
         .any(|l| l.split_whitespace().nth(1) == Some(format.encoder()));
     if !has {
         return Err(format!(
-            "{}: {} has no {} encoder, which a {} needs; install Debian's or Ubuntu's ffmpeg (sudo apt install ffmpeg, or tools/setup.sh)",
+            "{}: {} has no {} encoder, which {} needs; install Debian's or Ubuntu's ffmpeg (sudo apt install ffmpeg, or tools/setup.sh)",
             output.display(),
             ffmpeg.display(),
             format.encoder(),
-            format.describe()
+            format.with_article()
         ));
     }
     Ok(ffmpeg)
@@ -503,6 +513,13 @@ mod tests {
         for other in ["b.png", "b.exr", "mp4", "out/"] {
             assert_eq!(VideoFormat::from_path(Path::new(other)), None, "{other}");
         }
+    }
+
+    #[test]
+    fn messages_put_the_right_article_before_each_format() {
+        assert_eq!(VideoFormat::Mp4.with_article(), "an H.264 MP4");
+        assert_eq!(VideoFormat::Webm.with_article(), "a VP9 WebM");
+        assert_eq!(VideoFormat::Gif.with_article(), "a GIF");
     }
 
     #[test]

@@ -97,12 +97,8 @@ impl Undistortion {
         let photo = Intrinsics::of(cam);
         let fail = || {
             format!(
-                "its {} lens distortion ({:?} {:?}) leaves no pinhole image inside the {}x{} photo",
-                distortion.model,
-                distortion.radial,
-                distortion.tangential,
-                photo.width,
-                photo.height
+                "its {distortion} lens distortion leaves no pinhole image inside the {}x{} photo",
+                photo.width, photo.height
             )
         };
         let [x0, x1, y0, y1] = inner_rectangle(&photo, distortion).ok_or_else(fail)?;

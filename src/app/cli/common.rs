@@ -15,9 +15,10 @@ use verisplat::gpu::{ContextOptions, GpuContext};
 /// Where the camera comes from and at which resolution.
 #[derive(Args, Clone)]
 pub(crate) struct CameraArgs {
-    /// Camera file: INRIA cameras.json, a COLMAP sparse model (folder, or cameras/images
-    /// .txt/.bin), a nerfstudio camera_path.json or a verisplat keyframe JSON (see
-    /// docs/cameras.md); the format is detected from the content.
+    /// Camera file: INRIA cameras.json (or a trained model directory holding one), a COLMAP
+    /// sparse model (folder, or cameras/images .txt/.bin), a nerfstudio camera_path.json, a
+    /// transforms.json (nerfstudio, instant-ngp, NeRF-synthetic) or a verisplat keyframe
+    /// JSON (see docs/cameras.md); the format is detected from the content.
     #[arg(long, value_name = "FILE")]
     pub(crate) cameras: Option<PathBuf>,
     /// Cameras to use: all, an index, a list 0,3,7, a range 10..20 (end exclusive),
@@ -38,7 +39,8 @@ pub(crate) struct CameraArgs {
 
 #[derive(Args, Clone)]
 pub(crate) struct SceneArg {
-    /// Scene: INRIA .ply, compressed .ply, .splat, .spz or SOG (detected from the content),
+    /// Scene: INRIA .ply, compressed .ply, .splat, .spz, SOG (.sog, or a directory with
+    /// meta.json) or glTF (.glb, .gltf: KHR_gaussian_splatting), detected from the content;
     /// or a trained model directory (uses point_cloud/iteration_<largest>/).
     #[arg(required_unless_present = "demo")]
     pub(crate) scene: Option<PathBuf>,
@@ -58,7 +60,7 @@ pub(crate) struct SpzAxesArg {
     /// Axes of an SPZ scene: spec (the SPZ spec's RUB, converted to PLY axes: Niantic's
     /// spz library, Scaniverse, verisplat) or raw (PLY axes as they are: PlayCanvas
     /// splat-transform). A file read in the wrong one is upside down and mirrored front
-    /// to back (turned 180 degrees about x) [default: spec].
+    /// to back (turned 180 degrees about x).
     #[arg(long = "spz-axes", value_name = "spec|raw", default_value_t = SpzAxes::Spec)]
     pub(crate) axes: SpzAxes,
 }
@@ -162,8 +164,9 @@ pub(crate) struct PathArgs {
     /// fisheye[:fov=DEG] (default 180, filling the shorter side), equirect[:lon=A..B,lat=C..D]
     /// (degrees; the whole sphere by default; default size 1280 wide, the window's
     /// longitudes:latitudes ratio, 2:1 for the whole sphere) or ortho[:width=W] (world units across;
-    /// default: what --vfov shows at the scene's centre). Lenses other than the pinhole are
-    /// drawn by the CPU reference (--cpu) so far. docs/cameras.md, "Lenses".
+    /// default: what --vfov shows at the scene's centre). Every lens is drawn on the GPU
+    /// and by the CPU reference (--cpu) alike; field renders (--mode field-*) draw the
+    /// pinhole only. docs/cameras.md, "Lenses".
     #[arg(long, value_name = "LENS", value_parser = values::lens)]
     pub(crate) lens: Option<camera::LensSpec>,
     /// Frames per second of a keyframe path (default: the file's); with `render -o
@@ -401,7 +404,7 @@ pub(crate) struct CameraPath {
 }
 
 /// Refuses a `--lens` other than the pinhole where only pinhole cameras work so far (both
-/// renderers draw every lens; the viewer and field renders do not yet): `why` says so,
+/// renderers and the viewer draw every lens; field renders do not yet): `why` says so,
 /// after the lens.
 pub(crate) fn refuse_lens(p: &PathArgs, why: &str) -> Result<()> {
     match &p.lens {
@@ -425,6 +428,45 @@ fn with_lens(cam: &mut Camera, spec: &camera::LensSpec, centre: glam::Vec3) {
     cam.lens = lens;
     (cam.fx, cam.fy) = (fx as f32, fy as f32);
     (cam.cx, cam.cy) = (cx as f32, cy as f32);
+}
+
+/// The cameras of a camera file for [`camera_path`]: refuses --lens and --vfov, which set
+/// generated cameras only, and `sampling` (the flags that set a keyframe path's sampling)
+/// for files that are not keyframe paths.
+fn file_cameras(
+    path: &Path,
+    p: &PathArgs,
+    sampling: Option<&str>,
+) -> Result<(Vec<Camera>, PathBuf, String)> {
+    if p.lens.is_some() {
+        bail!(
+            "--lens sets the lens of generated cameras (--orbit, --look-at, the default camera); {} brings its own",
+            path.display()
+        );
+    }
+    if p.vfov.is_some() {
+        bail!(
+            "--vfov sets the field of view of generated cameras (--orbit, the default camera); {} brings its own intrinsics",
+            path.display()
+        );
+    }
+    let timing = camera::PathTiming {
+        frames: p.path_frames,
+        fps: p.fps,
+    };
+    let (cams, format) = camera::load_camera_file(path, &timing)?;
+    if let (Some(flags), true) = (sampling, format != CameraFormat::Keyframes) {
+        bail!(
+            "{flags} set the sampling of a keyframe path; {} is a {format} file, whose cameras are used as they are",
+            path.display()
+        );
+    }
+    let source = format!(
+        "{} ({format}, {})",
+        path.display(),
+        super::plural(cams.len(), "camera")
+    );
+    Ok((cams, path.to_path_buf(), source))
 }
 
 /// Builds the camera path of `--orbit`, `--cameras`, a model directory's own
@@ -479,35 +521,7 @@ pub(crate) fn camera_path(
             format!("an orbit of {}", super::plural(frames, "frame")),
         )
     } else if let Some(path) = &camera_file {
-        if p.lens.is_some() {
-            bail!(
-                "--lens sets the lens of generated cameras (--orbit, --look-at, the default camera); {} brings its own",
-                path.display()
-            );
-        }
-        if p.vfov.is_some() {
-            bail!(
-                "--vfov sets the field of view of generated cameras (--orbit, the default camera); {} brings its own intrinsics",
-                path.display()
-            );
-        }
-        let timing = camera::PathTiming {
-            frames: p.path_frames,
-            fps: p.fps,
-        };
-        let (cams, format) = camera::load_camera_file(path, &timing)?;
-        if sampling && format != CameraFormat::Keyframes {
-            bail!(
-                "{sampling_flags} set the sampling of a keyframe path; {} is a {format} file, whose cameras are used as they are",
-                path.display()
-            );
-        }
-        let source = format!(
-            "{} ({format}, {})",
-            path.display(),
-            super::plural(cams.len(), "camera")
-        );
-        (cams, path.clone(), source)
+        file_cameras(path, p, sampling.then_some(sampling_flags))?
     } else if let Some(l) = p.look_at {
         if sampling {
             bail!("{sampling_flags} set the sampling of a keyframe path; --look-at is one camera");

@@ -1,5 +1,5 @@
 //! `verisplat convert`: any readable scene format to PLY, .splat, SPZ, PlayCanvas compressed
-//! PLY or SOG.
+//! PLY, SOG or glTF (.glb, .gltf).
 
 use super::common::{check_output_file, FilterArgs};
 use anyhow::Result;
@@ -14,16 +14,19 @@ use verisplat::note;
   verisplat convert scene.ply scene.sog                 # PlayCanvas SOG bundle
   verisplat convert scene.ply scene_sog/meta.json       # unbundled SOG: textures beside meta.json
   verisplat convert scene.ply scene.compressed.ply      # PlayCanvas / SuperSplat compressed PLY
+  verisplat convert scene.ply scene.glb                 # glTF 2.0, KHR_gaussian_splatting (.gltf: JSON + .bin)
   verisplat convert model_dir/ small.splat --min-opacity 0.05 --max-scale 0.5
   verisplat convert scene.spz cropped.ply --crop -1,-1,-1,1,1,1 --sh-degree 1
   verisplat convert scene.ply power.ply --kernel power   # render power.ply with that kernel
   verisplat convert scene.ply for_playcanvas.spz --spz-axes raw   # splat-transform's axes")]
 pub(crate) struct ConvertArgs {
-    /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory) or a model directory.
+    /// Input scene: PLY, compressed PLY, .splat, .spz, SOG (.sog or directory), glTF (.glb,
+    /// .gltf) or a model directory.
     pub(crate) input: PathBuf,
     /// Output file: .ply (INRIA, lossless), .splat (DC colour only), .spz (SPZ v3, gzip),
-    /// .compressed.ply (PlayCanvas compressed PLY), .sog (PlayCanvas SOG bundle) or
-    /// DIR/meta.json (an unbundled SOG, its WebP textures beside meta.json).
+    /// .compressed.ply (PlayCanvas compressed PLY), .sog (PlayCanvas SOG bundle),
+    /// DIR/meta.json (an unbundled SOG, its WebP textures beside meta.json), .glb (glTF
+    /// binary, KHR_gaussian_splatting) or .gltf (glTF JSON, its buffer in a .bin beside it).
     pub(crate) output: PathBuf,
     #[command(flatten)]
     pub(crate) filter: FilterArgs,
@@ -42,8 +45,8 @@ pub(crate) struct ConvertArgs {
     pub(crate) features: Option<PathBuf>,
     /// Axes of the SPZ input and of the SPZ output, whichever are SPZ: spec (the SPZ spec's
     /// RUB: Niantic's spz library, Scaniverse) or raw (PLY axes as they are: PlayCanvas
-    /// splat-transform) [default: spec]. To change a file's axes, convert it to PLY with
-    /// one and back with the other.
+    /// splat-transform). To change a file's axes, convert it to PLY with one and back with
+    /// the other.
     #[arg(long, value_name = "spec|raw", default_value_t = verisplat::core::scene::spz::SpzAxes::Spec)]
     pub(crate) spz_axes: verisplat::core::scene::spz::SpzAxes,
 }

@@ -6,7 +6,7 @@ use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
-use verisplat::core::scene::write::{to_bytes, OutputFormat};
+use verisplat::core::scene::write::{write_scene, OutputFormat};
 use verisplat::fields::rf::{MovingSource, RfData, RfField};
 use verisplat::note;
 
@@ -47,7 +47,9 @@ pub(crate) struct GenArgs {
     /// --rf moving-source: times sampled, equally spaced over 0..1 (both ends) [default: 9].
     #[arg(long, value_name = "F", value_parser = values::int_in(2usize, 1000), requires = "rf")]
     pub(crate) times: Option<usize>,
-    /// Output file: .ply (INRIA), .splat or .spz, chosen by the extension; .npy with --rf.
+    /// Output file, its format chosen by the name as `convert` chooses it: .ply (INRIA),
+    /// .compressed.ply, .splat, .spz, .sog, DIR/meta.json (an unbundled SOG), .glb or
+    /// .gltf (with its .bin); .npy with --rf.
     #[arg(short, long)]
     pub(crate) output: Option<PathBuf>,
     /// Replace the output file if it exists.
@@ -67,18 +69,13 @@ pub(crate) fn gen(args: &GenArgs) -> Result<()> {
     let count = verisplat::app::bench::parse_count(count)
         .map_err(|m| anyhow::anyhow!("invalid value for N: {m}"))?;
     let Some(output) = &args.output else {
-        bail!("gen needs an output file: -o scene.ply|scene.splat|scene.spz");
+        bail!("gen needs an output file: -o scene.ply (or .compressed.ply, .splat, .spz, .sog, .glb, .gltf)");
     };
     let format = OutputFormat::from_path(output)?;
     check_output_file(output, args.overwrite)?;
     let scene = verisplat::core::gen::synthetic_scene(count, args.seed, args.sh_degree);
-    let bytes = to_bytes(&scene, format).map_err(|message| {
-        anyhow::anyhow!(
-            "{}: cannot be written as {format}: {message}",
-            output.display()
-        )
-    })?;
-    verisplat::io::output::write_bytes_atomically(output, args.overwrite, &bytes)?;
+    // As `convert` writes it: a .gltf with its .bin beside it, DIR/meta.json unbundled.
+    write_scene(&scene, output, format, args.overwrite)?;
     note!(
         "wrote {} synthetic Gaussians (seed {}, SH degree {}) to {} ({format})",
         scene.len(),

@@ -101,11 +101,12 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
         outln!("bounds      min {}  max {}", fmt3(lo), fmt3(hi));
     }
     outln!(
-        "bulk        centre {} (per-axis median), radius {:.4} (95% of centres within), 2-98% box {} .. {}",
+        "bulk        median {}, radius {:.4} (95% of centres within the median's), 2-98% box {} .. {} centred at {} (where the default camera and --orbit look)",
         fmt3(s.bulk.centre.into()),
         s.bulk.radius,
         fmt3(s.bulk.lo.into()),
-        fmt3(s.bulk.hi.into())
+        fmt3(s.bulk.hi.into()),
+        fmt3(s.bulk.box_centre().into())
     );
     outln!();
     outln!(
@@ -321,7 +322,7 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
         "bulk": {
             "median": v3(s.bulk.centre),
             "radius_95": s.bulk.radius,
-            "box_2_98": {"min": v3(s.bulk.lo), "max": v3(s.bulk.hi)},
+            "box_2_98": {"min": v3(s.bulk.lo), "max": v3(s.bulk.hi), "centre": v3(s.bulk.box_centre())},
         },
         "scale": summary(s.scale),
         "max_scale": summary(s.max_scale),

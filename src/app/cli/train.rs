@@ -52,11 +52,13 @@ pub(crate) struct TrainArgs {
     /// White background (synthetic data sets).
     #[arg(long, visible_alias = "white_background")]
     pub(crate) white_background: bool,
-    /// Iterations after which the model is saved (the last one always is).
-    #[arg(long, visible_alias = "save_iterations", value_delimiter = ',', default_values_t = [7000u32, 30000])]
+    /// Iterations after which the model is saved (the last one always is), space- or
+    /// comma-separated (7000 30000, as train.py, or 7000,30000).
+    #[arg(long, visible_alias = "save_iterations", value_name = "N", num_args = 1.., value_delimiter = ',', default_values_t = [7000u32, 30000])]
     pub(crate) save_iterations: Vec<u32>,
-    /// Iterations after which the test views are evaluated (PSNR, SSIM, L1).
-    #[arg(long, visible_alias = "test_iterations", value_delimiter = ',', default_values_t = [7000u32, 30000])]
+    /// Iterations after which the test views are evaluated (PSNR, SSIM, L1), space- or
+    /// comma-separated.
+    #[arg(long, visible_alias = "test_iterations", value_name = "N", num_args = 1.., value_delimiter = ',', default_values_t = [7000u32, 30000])]
     pub(crate) test_iterations: Vec<u32>,
     /// Seed of the view order, the random start and the split samples.
     #[arg(long, default_value_t = 0)]
@@ -155,8 +157,8 @@ pub(crate) struct TrainArgs {
     #[arg(long, value_name = "NORM")]
     pub(crate) clip_grad: Option<f32>,
     /// Iterations after which a checkpoint (MODEL_DIR/chkpntN.safetensors) is written;
-    /// Ctrl-C also writes one.
-    #[arg(long, visible_alias = "checkpoint_iterations", value_delimiter = ',')]
+    /// Ctrl-C also writes one. Space- or comma-separated.
+    #[arg(long, visible_alias = "checkpoint_iterations", value_name = "N", num_args = 1.., value_delimiter = ',')]
     pub(crate) checkpoint_iterations: Vec<u32>,
     /// Continue from a checkpoint, bit for bit as if never stopped (same data set and
     /// settings; the files it writes replace the run's own).
@@ -417,9 +419,36 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
                 u.pinhole.height,
                 verisplat::train::undistort::UNDISTORTION_FILE
             );
+            if let Some(note) = upsampling_note(&data.undistorted, resolution) {
+                note!("{note}");
+            }
         }
     }
     Ok(data)
+}
+
+/// A note when the undistorted views (at the training resolution) hold many more pixels
+/// than the photos they come from: a wide lens's rim stretched to a pinhole is
+/// interpolated, which costs training time and adds no detail.
+fn upsampling_note(
+    undistorted: &[verisplat::train::undistort::Undistortion],
+    resolution: verisplat::train::data::Resolution,
+) -> Option<String> {
+    let pixels = |(w, h): (u32, u32)| u64::from(w) * u64::from(h);
+    let photos: u64 = undistorted
+        .iter()
+        .map(|u| pixels((u.photo.width, u.photo.height)))
+        .sum();
+    let views: u64 = undistorted
+        .iter()
+        .map(|u| pixels(resolution.size(u.pinhole.width, u.pinhole.height)))
+        .sum();
+    let factor = views as f64 / photos.max(1) as f64;
+    (factor >= 2.0).then(|| {
+        format!(
+            "note: the undistorted views hold {factor:.1}x the photos' pixels (the lens's rim stretched to a pinhole: interpolated, not detail, and slower to train); -r 2, 4 or 8 divides their size, -r WIDTH sets their width"
+        )
+    })
 }
 
 /// The optimisation and densification settings of the arguments.

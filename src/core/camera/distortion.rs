@@ -118,6 +118,55 @@ impl Distortion {
     }
 }
 
+impl Distortion {
+    /// The model's own coefficients by name, in the model's order (COLMAP's parameter
+    /// order after the intrinsics: `k1, k2, p1, p2` for `OPENCV`, `k1..k4` for
+    /// `OPENCV_FISHEYE`), then any other that is not zero.
+    pub fn coefficients(&self) -> Vec<(&'static str, f64)> {
+        let (k, p) = (&self.radial, &self.tangential);
+        let all = [
+            ("k1", k[0]),
+            ("k2", k[1]),
+            ("k3", k[2]),
+            ("k4", k[3]),
+            ("k5", k[4]),
+            ("k6", k[5]),
+            ("p1", p[0]),
+            ("p2", p[1]),
+        ];
+        let own: &[&'static str] = match (self.fisheye, self.model.as_str()) {
+            (true, "SIMPLE_RADIAL_FISHEYE") => &["k1"],
+            (true, "RADIAL_FISHEYE") => &["k1", "k2"],
+            (true, _) => &["k1", "k2", "k3", "k4"],
+            (false, "SIMPLE_RADIAL") => &["k1"],
+            (false, "RADIAL") => &["k1", "k2"],
+            (false, "FULL_OPENCV") => &["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"],
+            (false, _) => &["k1", "k2", "p1", "p2"],
+        };
+        let value = |name: &str| all.iter().find(|(n, _)| *n == name).map_or(0.0, |c| c.1);
+        own.iter()
+            .map(|&n| (n, value(n)))
+            .chain(
+                all.iter()
+                    .filter(|(n, v)| !own.contains(n) && *v != 0.0)
+                    .copied(),
+            )
+            .collect()
+    }
+}
+
+/// `OPENCV_FISHEYE (k1 0.03, k2 -0.01, k3 0.002, k4 0)`: the model and its own coefficients.
+impl std::fmt::Display for Distortion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let coefficients: Vec<String> = self
+            .coefficients()
+            .iter()
+            .map(|(name, v)| format!("{name} {v}"))
+            .collect();
+        write!(f, "{} ({})", self.model, coefficients.join(", "))
+    }
+}
+
 /// The equidistant fisheye's normalised radius at angle `theta` from the axis:
 /// `theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)` (`k`: at least 4).
 pub fn equidistant(k: &[f64], theta: f64) -> f64 {
@@ -313,7 +362,7 @@ pub fn from_transforms<'a>(
         "EQUIRECTANGULAR" => {
             return Err(
                 "camera_model \"EQUIRECTANGULAR\" is a 360-degree camera, which has no pinhole \
-                 image to undistort to; it can be rendered from (render --cpu --cameras \
+                 image to undistort to; it can be rendered from (render --cameras \
                  transforms.json), not trained on"
                     .into(),
             )
@@ -363,6 +412,42 @@ mod tests {
         let (xd, _) = f.distort(1.0, 0.0);
         assert!((xd - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
         assert_eq!(f.undistort(2.0, 0.0), None, "beyond 90 degrees");
+    }
+
+    #[test]
+    fn messages_show_each_models_own_coefficients() {
+        let fisheye = from_colmap("OPENCV_FISHEYE", &[0.0; 4]).unwrap().unwrap();
+        assert_eq!(
+            fisheye.to_string(),
+            "OPENCV_FISHEYE (k1 0, k2 0, k3 0, k4 0)"
+        );
+        let fisheye = from_colmap("OPENCV_FISHEYE", &[0.03, -0.01, 0.002, 0.0])
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            fisheye.to_string(),
+            "OPENCV_FISHEYE (k1 0.03, k2 -0.01, k3 0.002, k4 0)"
+        );
+        let opencv = from_colmap("OPENCV", &[0.1, 0.0, 0.0, 0.01])
+            .unwrap()
+            .unwrap();
+        assert_eq!(opencv.to_string(), "OPENCV (k1 0.1, k2 0, p1 0, p2 0.01)");
+        let simple = from_colmap("SIMPLE_RADIAL_FISHEYE", &[0.2])
+            .unwrap()
+            .unwrap();
+        assert_eq!(simple.to_string(), "SIMPLE_RADIAL_FISHEYE (k1 0.2)");
+        let full = from_colmap("FULL_OPENCV", &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8])
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            full.to_string(),
+            "FULL_OPENCV (k1 0.1, k2 0.2, p1 0.3, p2 0.4, k3 0.5, k4 0.6, k5 0.7, k6 0.8)"
+        );
+        // transforms.json's OPENCV has a k3 COLMAP's has not: shown where it is set.
+        let json = serde_json::json!({"k1": 0.1, "k3": 0.05});
+        let key = |k: &str| json.get(k);
+        let d = from_transforms(&key).unwrap().unwrap();
+        assert_eq!(d.to_string(), "OPENCV (k1 0.1, k2 0, p1 0, p2 0, k3 0.05)");
     }
 
     #[test]

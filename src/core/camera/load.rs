@@ -176,7 +176,8 @@ fn detect_json(text: &str, path: &Path) -> Result<JsonKind, CameraError> {
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| {
         invalid(format!(
             "is not a camera file: not valid JSON ({e}); expected an INRIA cameras.json, a \
-             nerfstudio camera_path.json, a keyframe path, or a COLMAP model directory"
+             nerfstudio camera_path.json, a transforms.json, a keyframe path, or a COLMAP \
+             model directory"
         ))
     })?;
     match &value {
@@ -195,7 +196,7 @@ fn detect_json(text: &str, path: &Path) -> Result<JsonKind, CameraError> {
         ))),
         _ => Err(invalid(
             "is JSON but not a camera file: expected a list (INRIA cameras.json) or an object \
-             (nerfstudio camera path or keyframe path)"
+             (nerfstudio camera path, transforms.json or keyframe path)"
                 .into(),
         )),
     }

@@ -32,6 +32,8 @@ use std::path::Path;
 
 /// The GLB header's magic, `glTF` little-endian.
 pub const GLB_MAGIC: u32 = 0x4654_6C67;
+/// The GLB header's size: magic, version, total length.
+const GLB_HEADER: usize = 12;
 const CHUNK_JSON: u32 = 0x4E4F_534A;
 const CHUNK_BIN: u32 = 0x004E_4942;
 /// The extension's name.
@@ -114,7 +116,14 @@ fn split_glb<'a>(bytes: &'a [u8], path: &Path) -> Result<(&'a [u8], Option<&'a [
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     };
     let bad = |m: String| SceneError::invalid(path, m);
-    let version = u32_at(4).ok_or_else(|| bad("is a truncated GLB (no header)".into()))?;
+    // The 12-byte header and at least one chunk's 8-byte header (the JSON chunk, first).
+    if bytes.len() < GLB_HEADER + 8 {
+        return Err(bad(format!(
+            "is a truncated GLB: {} bytes, shorter than the 12-byte header and the JSON chunk that must follow it",
+            bytes.len()
+        )));
+    }
+    let version = u32_at(4).unwrap_or(0);
     if version != 2 {
         return Err(bad(format!(
             "is a GLB of version {version}; only glTF 2.0 is read"
@@ -127,7 +136,7 @@ fn split_glb<'a>(bytes: &'a [u8], path: &Path) -> Result<(&'a [u8], Option<&'a [
             bytes.len()
         )));
     }
-    let mut offset = 12;
+    let mut offset = GLB_HEADER;
     let mut json = None;
     let mut bin = None;
     while offset + 8 <= length {
@@ -210,7 +219,13 @@ impl<'a> Document<'a> {
                         bad(format!("buffer {i} is the external file {uri}; load the .gltf from its file so it can be found"))
                     })?;
                     let file = dir.join(percent_decode(uri));
-                    std::fs::read(&file).map_err(|source| SceneError::Io { path: file, source })?
+                    // The document names the file, so the error names both.
+                    std::fs::read(&file).map_err(|e| {
+                        bad(format!(
+                            "buffer {i} is the file {}, which cannot be read: {e}",
+                            file.display()
+                        ))
+                    })?
                 }
             };
             if data.len() < length {

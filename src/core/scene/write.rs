@@ -1,6 +1,6 @@
 //! Scene writers and `verisplat convert`: load any format, transform, filter, write INRIA
-//! PLY, `.splat`, SPZ v3, PlayCanvas compressed PLY or SOG chosen by the output's name,
-//! atomically.
+//! PLY, `.splat`, SPZ v3, PlayCanvas compressed PLY, SOG or glTF (`.glb`, `.gltf`) chosen
+//! by the output's name, atomically.
 
 use super::filter::SceneFilter;
 use super::transform::SceneTransform;

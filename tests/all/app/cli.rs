@@ -183,7 +183,15 @@ fn bad_inputs_give_one_clear_error_each() {
         ),
         (
             vec!["render", s, "-o", jpg.to_str().unwrap()],
-            vec!["x.jpg", "unknown image format"],
+            vec![
+                "x.jpg",
+                "unknown output format",
+                ".png",
+                ".exr",
+                ".mp4",
+                ".webm",
+                ".gif",
+            ],
         ),
         (
             vec!["info", truncated.to_str().unwrap()],

@@ -145,7 +145,7 @@ fn a_checkpoint_with_the_former_metadata_key_resumes() {
 }
 
 /// An old `VKSPLAT_*` variable is honoured with a note naming its new name; the new name
-/// wins when both are set.
+/// wins when both are set, with a note that the old one is ignored.
 #[test]
 fn a_former_environment_variable_works_with_a_deprecation_note() {
     let dir = tempfile::tempdir().unwrap();
@@ -169,8 +169,34 @@ fn a_former_environment_variable_works_with_a_deprecation_note() {
             ("VERISPLAT_EMULATE", ""),
         ],
     );
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(!stderr(&o).contains("deprecated"), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(!e.contains("deprecated"), "{e}");
+    let ignored = "VKSPLAT_EMULATE is ignored because VERISPLAT_EMULATE is set too";
+    assert_eq!(e.matches(ignored).count(), 1, "{e}");
+    // The device as the issue found it: the old name set beside the new one.
+    let o = verisplat_env(
+        &[
+            "render",
+            "--demo",
+            "--width",
+            "64",
+            "-o",
+            s(&out),
+            "--overwrite",
+        ],
+        &[
+            ("VKSPLAT_DEVICE", "no-such-device"),
+            ("VERISPLAT_DEVICE", ""),
+        ],
+    );
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("VKSPLAT_DEVICE is ignored because VERISPLAT_DEVICE is set too")
+            && e.contains("unset VKSPLAT_DEVICE"),
+        "{e}"
+    );
 }
 
 /// No tracked file spells the former name except the ones that must: this file,

@@ -290,11 +290,16 @@ fn without_ffmpeg_a_video_is_one_sentence_before_anything_renders() {
     let dir = tempfile::tempdir().unwrap();
     let empty = dir.path().join("bin");
     std::fs::create_dir(&empty).unwrap();
-    for ext in ["mp4", "webm", "gif"] {
+    for (ext, what) in [
+        ("mp4", "writing an H.264 MP4"),
+        ("webm", "writing a VP9 WebM"),
+        ("gif", "writing a GIF"),
+    ] {
         let out = dir.path().join(format!("out.{ext}"));
         let e = refused(&render_args(&out, &[]), Some(s(&empty)));
         assert!(
-            e.contains("needs ffmpeg, which is not on the PATH")
+            e.contains(what)
+                && e.contains("needs ffmpeg, which is not on the PATH")
                 && e.contains("sudo apt install ffmpeg")
                 && e.contains("tools/setup.sh"),
             "{e}"
@@ -421,7 +426,11 @@ fn options_a_video_cannot_honour_are_refused() {
             &["--quality", "20"],
             "a GIF's quality is its 256-colour palette",
         ),
-        (&mp4, &["--quality", "60"], "CRF is between 0 (best) and 51"),
+        (
+            &mp4,
+            &["--quality", "60"],
+            "an H.264 MP4's CRF is between 0 (best) and 51",
+        ),
         (
             &mp4,
             &["--skip-existing"],

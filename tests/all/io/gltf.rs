@@ -447,10 +447,44 @@ fn a_gltf_with_a_data_uri_or_a_bin_beside_it_loads() {
     let b = scene::load(&beside).unwrap();
     assert_eq!(a, b);
     assert_eq!(a.positions, source.positions);
-    // Its buffer file missing: an error naming that file.
+    // Its buffer file missing: an error naming the .gltf, the file it names and why.
     std::fs::remove_file(dir.path().join("my scene.bin")).unwrap();
     let e = scene::load(&beside).unwrap_err().to_string();
-    assert!(e.contains("my scene.bin"), "{e}");
+    assert!(
+        e.starts_with(&format!("{}: ", beside.display()))
+            && e.contains("buffer 0 is the file")
+            && e.contains("my scene.bin")
+            && e.contains("cannot be read"),
+        "{e}"
+    );
+}
+
+/// What `verisplat info` says of a `.gltf` whose `.bin` is missing and of a GLB cut short
+/// (issue 59, item 11): one sentence naming the file given, and for the `.gltf` the file
+/// it names too.
+#[test]
+fn info_names_the_gltf_and_its_missing_bin_and_a_truncated_glb() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad");
+    std::fs::create_dir(&bad).unwrap();
+    let (gltf, _) = gltf_write::to_gltf(&small(1, 2), "nobin.bin").unwrap();
+    let nobin = bad.join("nobin.gltf");
+    std::fs::write(&nobin, gltf).unwrap();
+    let e = crate::common::cli::fails(&["info", nobin.to_str().unwrap()], &bad.join("none"));
+    assert!(
+        e.contains("nobin.gltf: buffer 0 is the file") && e.contains("nobin.bin"),
+        "{e}"
+    );
+    let glb = gltf_write::to_glb(&small(1, 2)).unwrap();
+    for cut in [10, 12, 19] {
+        let short = bad.join(format!("short{cut}.glb"));
+        std::fs::write(&short, &glb[..cut]).unwrap();
+        let e = crate::common::cli::fails(&["info", short.to_str().unwrap()], &bad.join("none"));
+        assert!(
+            e.contains(&format!("short{cut}.glb: is a truncated GLB: {cut} bytes")),
+            "{e}"
+        );
+    }
 }
 
 /// A change to a glTF document.
@@ -567,6 +601,11 @@ fn broken_files_get_clear_errors_never_panics() {
     assert!(parse(&glb[..glb.len() - 10])
         .unwrap_err()
         .contains("truncated"));
+    // Cut inside the header or before the JSON chunk's header: truncated, not "no JSON".
+    for cut in [4, 10, 12, 19] {
+        let e = parse(&glb[..cut]).unwrap_err();
+        assert!(e.contains("t.glb: is a truncated GLB"), "{cut}: {e}");
+    }
 }
 
 #[test]

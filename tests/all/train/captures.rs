@@ -1,6 +1,7 @@
 //! What a real capture brings out in `train` and `render`: outputs at an iteration where
-//! the schedule also changes the model, progress in a log, cameras picked by name, and an
-//! orbit of a model whose world is not y-down.
+//! the schedule also changes the model, the iteration lists as train.py spells them,
+//! progress in a log, cameras picked by name, and an orbit of a model whose world is not
+//! y-down.
 
 use crate::common::dataset::make_dataset;
 use crate::common::{self, cli::verisplat};
@@ -220,4 +221,70 @@ fn a_colmap_text_model_reads_back_as_written() {
     assert_eq!((v.camera.width, v.camera.height), (20, 15));
     assert_eq!(v.image.len(), 20 * 15);
     assert!(data.extent > 0.0);
+}
+
+/// The iteration lists take the original train.py's spelling, `--test-iterations 2 4`
+/// (space-separated, as `--help` shows the default), as well as `2,4` (issue 59, item 8).
+#[test]
+fn iteration_lists_are_space_or_comma_separated() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    make_dataset(&data, 4, 32, 24);
+    let train = |model: &Path, lists: &[&str]| {
+        let mut args = vec![
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+            "--eval",
+            "--iterations",
+            "4",
+            "--sh-degree",
+            "0",
+        ];
+        args.extend_from_slice(lists);
+        let o = verisplat(&args);
+        let log = format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(o.status.success(), "{args:?}: {log}");
+        log
+    };
+    let spaces: &[&str] = &[
+        "--test-iterations",
+        "2",
+        "3",
+        "--save-iterations",
+        "2",
+        "3",
+        "--checkpoint-iterations",
+        "1",
+        "3",
+    ];
+    let commas: &[&str] = &[
+        "--test-iterations",
+        "2,3",
+        "--save-iterations",
+        "2,3",
+        "--checkpoint-iterations",
+        "1,3",
+    ];
+    for (name, lists) in [("spaces", spaces), ("commas", commas)] {
+        let model = dir.path().join(name);
+        let log = train(&model, lists);
+        for it in [2, 3] {
+            assert!(
+                log.contains(&format!("[ITER {it}] evaluating test")),
+                "{name}: no evaluation at {it}: {log}"
+            );
+            let ply = model.join(format!("point_cloud/iteration_{it}/point_cloud.ply"));
+            assert!(ply.is_file(), "{name}: {} missing", ply.display());
+        }
+        for it in [1, 3] {
+            let chk = model.join(format!("chkpnt{it}.safetensors"));
+            assert!(chk.is_file(), "{name}: {} missing", chk.display());
+        }
+    }
 }

@@ -691,13 +691,18 @@ fn eval_of_a_model_trained_at_r_2_on_distorted_photos_uses_the_trainers_photos()
 /// the axis (as COLMAP's fisheye reads back), rendered by the CPU reference (what
 /// `tools/fisheye_dataset.py` makes with `render --export-colmap`, small).
 fn make_fisheye_dataset(dir: &Path, views: usize, w: u32, h: u32) {
+    make_fisheye_dataset_of(dir, views, w, h, 180.0);
+}
+
+/// [`make_fisheye_dataset`] with `fov_deg` degrees across the shorter side.
+fn make_fisheye_dataset_of(dir: &Path, views: usize, w: u32, h: u32, fov_deg: f32) {
     use verisplat::core::camera::Lens;
     let scene = verisplat::core::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .expect("the shared scene")
     .0;
-    let f = w.min(h) as f32 / 2.0 / std::f32::consts::FRAC_PI_2;
+    let f = w.min(h) as f32 / 2.0 / (fov_deg / 2.0).to_radians();
     let cams: Vec<_> = verisplat::core::camera::orbit(
         &scene.positions,
         &verisplat::core::camera::OrbitParams {
@@ -843,4 +848,58 @@ fn train_through_a_fisheye_lens_learns_and_records_it() {
             && err.contains("no pinhole image"),
         "{err}"
     );
+}
+
+/// `--undistort` on fisheye photos (issue 59, item 9): a lens no pinhole view holds is
+/// refused naming the model's own coefficients (k1..k4, not the Brown-Conrady slots they
+/// are stored in), and a 120-degree fisheye at 160x120, whose pinhole views are 618x194,
+/// gets a one-line note that they hold several times the photos' pixels and how to limit
+/// them (-r), which -r 2 then silences.
+#[test]
+fn undistorting_a_fisheye_names_its_coefficients_and_notes_upsampling() {
+    let dir = tempfile::tempdir().unwrap();
+    let train = |data: &Path, model: &str, extra: &[&str]| {
+        let model = dir.path().join(model);
+        let mut args = vec![
+            "train",
+            data.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+            "--undistort",
+            "--iterations",
+            "1",
+            "--sh-degree",
+            "0",
+        ];
+        args.extend_from_slice(extra);
+        let o = verisplat(&args);
+        (o.status.success(), common::cli::stderr(&o))
+    };
+    let wide = dir.path().join("wide");
+    make_fisheye_dataset_of(&wide, 2, 32, 24, 180.0);
+    let (ok, err) = train(&wide, "wide_model", &[]);
+    assert!(
+        !ok && err.contains("OPENCV_FISHEYE (k1 0, k2 0, k3 0, k4 0) lens distortion")
+            && !err.contains("[0.0"),
+        "{err}"
+    );
+    let fish = dir.path().join("fish");
+    make_fisheye_dataset_of(&fish, 2, 160, 120, 120.0);
+    let (ok, err) = train(&fish, "m1", &[]);
+    assert!(ok, "{err}");
+    assert!(err.contains("160x120 -> 618x194"), "{err}");
+    let note: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("x the photos' pixels"))
+        .collect();
+    assert_eq!(note.len(), 1, "{err}");
+    assert!(
+        note[0].contains("6.2x") && note[0].contains("-r 2, 4 or 8"),
+        "{}",
+        note[0]
+    );
+    // At -r 2 the views hold 1.6 times the photos' pixels: no note.
+    let (ok, err) = train(&fish, "m2", &["-r", "2"]);
+    assert!(ok, "{err}");
+    assert!(!err.contains("x the photos' pixels"), "{err}");
 }

@@ -33,7 +33,14 @@ pub(super) fn check_output_options(
             output.display()
         );
     }
-    let files = output::plan_files(&pattern.path(0, "x"), None, opts)?;
+    let files = output::plan_files(&pattern.path(0, "x"), None, opts).map_err(|e| match e {
+        // The library's sentence names the image formats; render writes videos too.
+        output::OutputError::UnknownFormat(_) => anyhow::anyhow!(
+            "{}: unknown output format; render writes .png or .exr images (.npy with --mode features), or an .mp4, .webm or .gif video (through ffmpeg)",
+            output.display()
+        ),
+        e => e.into(),
+    })?;
     let writes = |pred: fn(&FileContent) -> bool| files.iter().any(|f| pred(&f.content));
     if args.png16
         && !writes(|c| {

@@ -93,8 +93,8 @@ pub(super) fn checked(args: &RenderArgs) -> Result<Option<VideoOut>> {
             "--quality sets the CRF of an MP4 or WebM; a GIF's quality is its 256-colour palette, made from the whole clip (drop --quality)"
         ),
         (Some((lo, hi, _)), Some(q)) if q < lo || q > hi => bail!(
-            "--quality {q}: a {}'s CRF is between {lo} (best) and {hi}",
-            format.describe()
+            "--quality {q}: {}'s CRF is between {lo} (best) and {hi}",
+            format.with_article()
         ),
         _ => {}
     }
