@@ -140,6 +140,19 @@ struct RawGrad {
     float logit;
 };
 
+// Mip-Splatting's 3D filter `f` (STEP_MIP) on scales `sizes`: the filtered scales (xyz)
+// and the opacity's factor sqrt(det(S^2) / det(S^2 + f^2)) (w);
+// train::model::mip::filtered.
+vec4 mip_filtered(vec3 sizes, float f) {
+    precise float f2 = f * f;
+    precise vec3 sq = sizes * sizes;
+    precise vec3 after = sq + vec3(f2);
+    precise float det1 = sq.x * sq.y * sq.z;
+    precise float det2 = after.x * after.y * after.z;
+    precise float factor = sqrt(det1 / det2);
+    return vec4(sqrt(after), factor);
+}
+
 RawGrad raw_grad(uint i, vec4 s0, vec4 s1, vec4 s2) {
     vec3 log_scale = vec3(s0.w, s1.xy);
     GaussianGrad g = grads[i];
@@ -160,6 +173,22 @@ RawGrad raw_grad(uint i, vec4 s0, vec4 s1, vec4 s2) {
     float p = sigmoid_of(s2.z);
     precise float go = g.mean_opacity.w * p * (1.0 - p);
     r.logit = go;
+    if ((pc.flags_size.x & STEP_MIP) != 0u) {
+        // Through the filter (train::model::mip::log_scale_grads).
+        float f = s2.w;
+        vec3 sizes = vec3(exp(log_scale.x), exp(log_scale.y), exp(log_scale.z));
+        vec4 mf = mip_filtered(sizes, f);
+        vec3 filtered = mf.xyz;
+        float factor = mf.w;
+        float g_op = g.mean_opacity.w;
+        precise float opacity = p * factor;
+        precise float f2 = f * f;
+        precise vec3 sq = sizes * sizes;
+        precise vec3 gl = g.scale.xyz * (sq / filtered) + vec3(g_op * opacity) * (vec3(f2) / (sq + vec3(f2)));
+        r.log_scale = gl;
+        precise float gm = g_op * factor * p * (1.0 - p);
+        r.logit = gm;
+    }
     if ((pc.flags_size.x & STEP_NOISE) != 0u) {
         // MCMC's regularisers, as Model::step adds them.
         precise float ro = go + pc.clip.z * p * (1.0 - p);
@@ -266,7 +295,14 @@ void main() {
     vec4 q = vec4(s1.zw, s2.xy);
     precise float qn = sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
     precise vec4 rot = q / qn;
-    gaussians[i] = Gaussian(vec4(s0.xyz, sigmoid_of(s2.z)), vec4(sizes, 0.0), rot);
+    float opacity = sigmoid_of(s2.z);
+    if ((flags & STEP_MIP) != 0u) {
+        vec4 mf = mip_filtered(sizes, s2.w);
+        precise float o = opacity * mf.w;
+        opacity = o;
+        sizes = mf.xyz;
+    }
+    gaussians[i] = Gaussian(vec4(s0.xyz, opacity), vec4(sizes, 0.0), rot);
     if (!features) {
         sh_step(i, base, (flags & STEP_ADAM) != 0u, scale);
         return;

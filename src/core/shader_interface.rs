@@ -171,8 +171,11 @@ constants! {
     pub const STEP_CLIP: u32 = 32;
     /// The MCMC strategy's regularisers and noise.
     pub const STEP_NOISE: u32 = 64;
+    /// Mip-Splatting's 3D filter: the record's unused float holds each Gaussian's
+    /// (`train::model::mip`).
+    pub const STEP_MIP: u32 = 128;
     /// Where the colour starts in a trained Gaussian's record of floats (a multiple of 4):
-    /// centre 3, log scale 3, quaternion 4, opacity logit 1, one unused.
+    /// centre 3, log scale 3, quaternion 4, opacity logit 1, the 3D filter (STEP_MIP).
     pub const COLOUR_OFFSET: u32 = 12;
     /// The neural shader's widest layer (inputs or outputs).
     pub const MAX_WIDTH: u32 = 128;

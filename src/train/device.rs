@@ -17,7 +17,7 @@
 
 use super::model::{Model, Settings};
 use crate::core::shader_interface::{
-    MlpPush, StepPush, STEP_ADAM, STEP_CLIP, STEP_FEATURES, STEP_NOISE, STEP_NORM,
+    MlpPush, StepPush, STEP_ADAM, STEP_CLIP, STEP_FEATURES, STEP_MIP, STEP_NOISE, STEP_NORM,
     STEP_SKIP_OPACITY, STEP_STATS,
 };
 use crate::gpu::shader::{by_binding, BindingKind};
@@ -172,6 +172,8 @@ pub struct DeviceModel<'p> {
     pub scene: GpuScene,
     /// Their feature channels (feature splats).
     pub features: Option<GpuFeatures>,
+    /// Mip-Splatting's 3D filter is on (in each record's float 11: STEP_MIP).
+    mip: bool,
 }
 
 /// The push's `clip` vector without the clipping norm: the noise scale and the
@@ -274,6 +276,7 @@ impl<'p> DeviceModel<'p> {
             shader,
             scene,
             features,
+            mip: model.mip_filters.is_some(),
         };
         if count > 0 {
             dm.state.upload(ctx, &params)?;
@@ -353,7 +356,7 @@ impl<'p> DeviceModel<'p> {
         StepPush {
             counts: [self.count, self.record, self.colours, self.texel_floats],
             flags_size: [
-                flags | features,
+                flags | features | if self.mip { STEP_MIP } else { 0 },
                 (size.0 as f32 / 2.0).to_bits(),
                 (size.1 as f32 / 2.0).to_bits(),
                 self.groups,

@@ -122,6 +122,13 @@ pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {
             r.output_format
         );
     }
+    if r.mip_filter_mark_lost {
+        note!(
+            "note: {} records that Mip-Splatting's 3D filter is folded into its scales and opacities; {} holds the same Gaussians but cannot record that",
+            args.input.display(),
+            r.output_format
+        );
+    }
     if let Some(kernel) = r.kernel_lost {
         note!(
             "note: {} records that the scene is made for the {kernel} kernel; {} cannot record that, so render the output with --kernel {kernel}",

@@ -73,6 +73,9 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
             scene.kernel
         );
     }
+    if scene.mip_filter {
+        outln!("mip filter  3d: Mip-Splatting's 3D filter is folded into the scales and opacities (train --mip-filter)");
+    }
     if scene.rules != verisplat::cpu::Rules::Original {
         outln!(
             "rules       {}: the file records that it was trained with them (rendered with them by default; --rules overrides)",
@@ -307,6 +310,7 @@ fn print_json(scene: &scene::Scene, name: &str, format: Option<String>) -> Resul
         "antialiased": scene.antialiased,
         "kernel": scene.kernel.name(),
         "rules": scene.rules.name(),
+        "mip_filter": scene.mip_filter,
         "feature_channels": scene.feature_count,
         "time": scene.time_range().map(|(lo, hi)| {
             let (slo, shi) = time_scales(scene);

@@ -52,6 +52,12 @@ pub(crate) struct TrainArgs {
     /// White background (synthetic data sets).
     #[arg(long, visible_alias = "white_background")]
     pub(crate) white_background: bool,
+    /// Mip-Splatting's 3D filter: each Gaussian smoothed by the finest sampling the
+    /// training cameras give it (renders without aliasing nearer or farther than the
+    /// photos); folded into the saved scales and opacities. docs/training.md, "Real
+    /// captures".
+    #[arg(long)]
+    pub(crate) mip_filter: bool,
     /// Iterations after which the model is saved (the last one always is), space- or
     /// comma-separated (7000 30000, as train.py, or 7000,30000).
     #[arg(long, visible_alias = "save_iterations", value_name = "N", num_args = 1.., value_delimiter = ',', default_values_t = [7000u32, 30000])]
@@ -522,6 +528,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         cancel: Some(super::render::interrupt_flag()),
         host_optimizer: false,
         resolution: args.resolution,
+        mip_filter: args.mip_filter,
     })
 }
 

@@ -199,6 +199,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let mut scene = Scene::empty(sh_degree);
     scene.kernel = header.kernel(path)?;
     scene.rules = header.rules(path)?;
+    scene.mip_filter = header.mip_filter(path)?;
     scene.antialiased = antialiased(&header);
     scene.positions.reserve_exact(n);
     scene.log_scales.reserve_exact(n);

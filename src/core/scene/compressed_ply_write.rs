@@ -18,7 +18,7 @@
 //! comment splat-transform and Brush write).
 
 use super::compressed_ply::{CHUNK_PROPS, CHUNK_SIZE, VERTEX_PROPS};
-use super::ply::{KERNEL_COMMENT, RULES_COMMENT};
+use super::ply::{KERNEL_COMMENT, MIP_FILTER_COMMENT, RULES_COMMENT};
 use super::{color_from_dc, quantize, sigmoid, Scene};
 use crate::core::model::{Rules, SplatKernel};
 
@@ -148,6 +148,9 @@ pub fn to_bytes(scene: &Scene) -> Result<Vec<u8>, String> {
     }
     if scene.rules != Rules::Original {
         header.push_str(&format!("comment {RULES_COMMENT} {}\n", scene.rules));
+    }
+    if scene.mip_filter {
+        header.push_str(&format!("comment {MIP_FILTER_COMMENT} 3d\n"));
     }
     if scene.antialiased {
         header.push_str(&format!("comment {ANTIALIASED_COMMENT}\n"));

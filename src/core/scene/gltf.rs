@@ -471,7 +471,7 @@ impl<'a> Document<'a> {
     }
 
     /// The flags verisplat records in `extras.verisplat` (antialiased training, kernel,
-    /// rules; [`super::gltf_write`]).
+    /// rules, the folded 3D filter; [`super::gltf_write`]).
     fn read_extras(&self, prim: &Value, here: &str, scene: &mut Scene) -> Result<(), SceneError> {
         let Some(ours) = prim.get("extras").and_then(|e| e.get("verisplat")) else {
             return Ok(());
@@ -489,6 +489,15 @@ impl<'a> Document<'a> {
             scene.rules = r
                 .parse()
                 .map_err(|e: String| self.bad(format!("{here}: extras.verisplat.rules: {e}")))?;
+        }
+        match ours.get("mip_filter") {
+            None => {}
+            Some(Value::String(s)) if s == "3d" => scene.mip_filter = true,
+            Some(other) => {
+                return Err(self.bad(format!(
+                    "{here}: extras.verisplat.mip_filter is {other}; the only one verisplat writes is \"3d\""
+                )))
+            }
         }
         Ok(())
     }
@@ -838,6 +847,8 @@ fn merge(parts: Vec<Scene>) -> Scene {
     out.antialiased = parts[0].antialiased;
     out.kernel = parts[0].kernel;
     out.rules = parts[0].rules;
+    // Folded filters stay folded; the mark only when every primitive has it.
+    out.mip_filter = parts.iter().all(|p| p.mip_filter);
     let stride = out.sh_stride();
     for part in parts {
         out.positions.extend(&part.positions);

@@ -202,6 +202,9 @@ fn assemble(
     if scene.rules != crate::core::model::Rules::Original {
         extras.insert("rules".into(), json!(scene.rules.name()));
     }
+    if scene.mip_filter {
+        extras.insert("mip_filter".into(), json!("3d"));
+    }
     if !extras.is_empty() {
         primitive["extras"] = json!({ "verisplat": extras });
     }

@@ -67,6 +67,11 @@ pub struct Scene {
     /// file records it (INRIA PLY: a `comment verisplat rules gsplat` header line); the
     /// original's when it records none. `render` uses them unless `--rules` says otherwise.
     pub rules: crate::core::model::Rules,
+    /// The scales and opacities hold Mip-Splatting's 3D smoothing filter (`train
+    /// --mip-filter` folded it in; INRIA PLY: a `comment verisplat mip-filter 3d` header
+    /// line, glTF: `extras.verisplat.mip_filter`). Nothing renders differently: it says
+    /// what the file's Gaussians are.
+    pub mip_filter: bool,
     /// Feature channels per Gaussian (0 without features, else 1..=[`MAX_FEATURES`]).
     pub feature_count: usize,
     /// `feature_count` floats per Gaussian, Gaussian-major: channel `k` of Gaussian `i` is
@@ -125,6 +130,7 @@ impl Scene {
         out.antialiased = self.antialiased;
         out.kernel = self.kernel;
         out.rules = self.rules;
+        out.mip_filter = self.mip_filter;
         out.feature_count = self.feature_count;
         out.time = self
             .time

@@ -120,6 +120,9 @@ pub(crate) struct Header {
 pub const KERNEL_COMMENT: &str = "verisplat kernel";
 /// The header comment that records a scene's rasterizer rules: `comment verisplat rules NAME`.
 pub const RULES_COMMENT: &str = "verisplat rules";
+/// The header comment that records Mip-Splatting's 3D filter folded into the scales and
+/// opacities: `comment verisplat mip-filter 3d` ([`Scene::mip_filter`]).
+pub const MIP_FILTER_COMMENT: &str = "verisplat mip-filter";
 
 impl Header {
     /// The element called `name`, if the header declares one.
@@ -136,6 +139,26 @@ impl Header {
     /// The rules a `comment verisplat rules NAME` line records (the original's without one).
     pub(crate) fn rules(&self, path: &Path) -> Result<crate::core::model::Rules, SceneError> {
         self.recorded(path, RULES_COMMENT)
+    }
+
+    /// Whether a `comment verisplat mip-filter 3d` line says the 3D filter is folded in; any
+    /// other value is an error naming the line.
+    pub(crate) fn mip_filter(&self, path: &Path) -> Result<bool, SceneError> {
+        let mut folded = false;
+        for (line, text) in &self.comments {
+            let words: Vec<&str> = text.split_whitespace().collect();
+            if words.len() < 2 || words[..2].join(" ") != MIP_FILTER_COMMENT {
+                continue;
+            }
+            if words[2..] != ["3d"] {
+                return Err(SceneError::invalid(
+                    path,
+                    format!("header line {line}: \"comment {text}\": the only mip-filter verisplat writes is \"3d\""),
+                ));
+            }
+            folded = true;
+        }
+        Ok(folded)
     }
 
     /// The value the last `comment PREFIX VALUE` line records (the default without one); a
@@ -523,6 +546,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
     let mut scene = Scene::empty(map.sh_degree);
     scene.kernel = header.kernel(path)?;
     scene.rules = header.rules(path)?;
+    scene.mip_filter = header.mip_filter(path)?;
     scene.feature_count = map.features.len();
     if map.time.is_some() {
         scene.time = Some(Vec::new());
@@ -732,6 +756,9 @@ pub fn to_bytes(scene: &Scene, encoding: PlyEncoding) -> Vec<u8> {
     }
     if scene.rules != crate::core::model::Rules::Original {
         out.push_str(&format!("comment {RULES_COMMENT} {}\n", scene.rules));
+    }
+    if scene.mip_filter {
+        out.push_str(&format!("comment {MIP_FILTER_COMMENT} 3d\n"));
     }
     out.push_str(&format!("element vertex {}\n", scene.len()));
     for n in &names {

@@ -90,8 +90,8 @@ impl OutputFormat {
         )
     }
 
-    /// The format records a non-Gaussian kernel and gsplat's rules (PLY header comments,
-    /// in the INRIA and the compressed PLY).
+    /// The format records a non-Gaussian kernel, gsplat's rules and a folded 3D filter
+    /// (PLY header comments, in the INRIA and the compressed PLY; glTF extras).
     pub fn records_kernel_and_rules(self) -> bool {
         matches!(
             self,
@@ -287,6 +287,9 @@ pub struct ConvertReport {
     /// The input records gsplat's rules (`model::Rules`), which the output format cannot
     /// record (only PLY can).
     pub rules_lost: Option<crate::core::model::Rules>,
+    /// The input says Mip-Splatting's 3D filter is folded into its scales and opacities
+    /// ([`Scene::mip_filter`]); the output holds the same Gaussians but cannot say so.
+    pub mip_filter_mark_lost: bool,
     /// Feature channels per Gaussian that the output format cannot hold and dropped (only
     /// PLY keeps `feat_*`); 0 when none were lost.
     pub features_dropped: usize,
@@ -401,6 +404,7 @@ pub fn convert(
         rules_lost: (scene.rules != crate::core::model::Rules::Original
             && !output_format.records_kernel_and_rules())
         .then_some(scene.rules),
+        mip_filter_mark_lost: scene.mip_filter && !output_format.records_kernel_and_rules(),
         features_dropped: if output_format == OutputFormat::Ply {
             0
         } else {

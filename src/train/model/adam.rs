@@ -120,6 +120,19 @@ impl Model {
                 g * p * (1.0 - p)
             })
             .collect();
+        if let Some(filters) = &self.mip_filters {
+            // Through Mip-Splatting's filter: the renders saw sqrt(s^2 + f^2) and the
+            // opacity times the filter's factor.
+            for (i, &f) in filters.iter().enumerate() {
+                let sc = s.log_scales[i].map(f32::exp);
+                let p = sigmoid(s.opacity_logits[i]);
+                let (_, factor) = super::mip::filtered(sc, f);
+                let g_op = grads.opacities[i];
+                let g = super::mip::log_scale_grads(grads.scales[i], g_op, p * factor, sc, f);
+                g_log[i * 3..i * 3 + 3].copy_from_slice(&g);
+                g_logit[i] = g_op * factor * p * (1.0 - p);
+            }
+        }
         if let Some(mc) = &settings.mcmc {
             // The regularisers' gradients: mean opacity over n, mean scale over 3n.
             let (ro, rs) = (mc.opacity_reg / n as f32, mc.scale_reg / (3 * n) as f32);

@@ -11,8 +11,24 @@ impl Model {
     /// The original's `reset_opacity`: every opacity to at most 0.01, its Adam state zero.
     pub fn reset_opacity(&mut self) {
         let cap = logit(0.01);
-        for o in &mut self.scene.opacity_logits {
-            *o = o.min(cap);
+        match &self.mip_filters {
+            None => {
+                for o in &mut self.scene.opacity_logits {
+                    *o = o.min(cap);
+                }
+            }
+            // With Mip-Splatting's filter the opacity the renders see is capped (its
+            // `reset_opacity`): min(sigmoid(o) * factor, 0.01) / factor.
+            Some(filters) => {
+                let s = &mut self.scene;
+                for ((o, l), &f) in s.opacity_logits.iter_mut().zip(&s.log_scales).zip(filters) {
+                    let (_, factor) = super::mip::filtered(l.map(f32::exp), f);
+                    let seen = crate::core::scene::sigmoid(*o) * factor;
+                    if seen > 0.01 {
+                        *o = logit(0.01 / factor);
+                    }
+                }
+            }
         }
         self.moments[3] = Moments::zeros(self.len());
     }

@@ -135,6 +135,7 @@ impl Model {
             grad_accum: vec![0.0; n],
             denom: vec![0; n],
             max_radii: vec![0.0; n],
+            mip_filters: None,
         }
     }
 

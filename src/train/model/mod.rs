@@ -14,6 +14,7 @@ pub mod adam;
 pub mod densify;
 pub mod init;
 pub mod mcmc;
+pub mod mip;
 pub mod settings;
 pub mod state;
 
@@ -49,6 +50,9 @@ pub struct Model {
     grad_accum: Vec<f32>,
     denom: Vec<u32>,
     max_radii: Vec<f32>,
+    /// Mip-Splatting's 3D filter per Gaussian ([`mip`], `train --mip-filter`): the
+    /// renders see each Gaussian convolved with it; `None` without the option.
+    pub mip_filters: Option<Vec<f32>>,
 }
 
 impl Model {
@@ -67,11 +71,20 @@ impl Model {
         let s = &self.scene;
         let stride = s.sh_stride();
         let k = crate::core::model::sh_coeffs_for_degree(self.active_sh_degree) * 3;
+        let mut scales: Vec<[f32; 3]> = s.log_scales.iter().map(|l| l.map(f32::exp)).collect();
+        let mut opacities: Vec<f32> = s.opacity_logits.iter().map(|&o| sigmoid(o)).collect();
+        if let Some(filters) = &self.mip_filters {
+            for ((sc, o), &f) in scales.iter_mut().zip(opacities.iter_mut()).zip(filters) {
+                let (filtered, factor) = mip::filtered(*sc, f);
+                *sc = filtered;
+                *o *= factor;
+            }
+        }
         SplatParams {
             means: s.positions.clone(),
             quats: s.rotations.clone(),
-            scales: s.log_scales.iter().map(|l| l.map(f32::exp)).collect(),
-            opacities: s.opacity_logits.iter().map(|&o| sigmoid(o)).collect(),
+            scales,
+            opacities,
             colors: if self.shader.is_some() {
                 ColorParams::Direct {
                     channels: s.feature_count,

@@ -42,6 +42,9 @@ impl Model {
             arrays.push((format!("m{g}"), m.m.clone()));
             arrays.push((format!("v{g}"), m.v.clone()));
         }
+        if let Some(f) = &self.mip_filters {
+            arrays.push(("mip_filters".to_string(), f.clone()));
+        }
         let mut meta = serde_json::Map::new();
         meta.insert("gaussians".into(), serde_json::json!(s.len()));
         meta.insert("sh_degree".into(), serde_json::json!(s.sh_degree));
@@ -73,6 +76,7 @@ impl Model {
             return Err(format!("has SH degree {sh_degree}"));
         }
         let k = num("feature_count")? as usize;
+        let has_mip_filters = arrays.contains_key("mip_filters");
         let mut take = |name: &str, len: usize| -> Result<Vec<f32>, String> {
             let v = arrays.remove(name).ok_or(format!("has no {name}"))?;
             if v.len() != len {
@@ -121,6 +125,10 @@ impl Model {
             v: take("shader_v", params)?,
         };
         model.shader = shader;
+        // Mip-Splatting's 3D filter of a `--mip-filter` run, as it was stepping with.
+        if has_mip_filters {
+            model.mip_filters = Some(take("mip_filters", n)?);
+        }
         model.active_sh_degree = num("active_sh_degree")? as u32;
         let steps = meta
             .get("steps")
@@ -134,7 +142,8 @@ impl Model {
     }
 
     /// Floats of one Gaussian's record on the device ([`crate::train::device`]): centre (3), log
-    /// scales (3), quaternion (4), opacity logit, one unused float, then from
+    /// scales (3), quaternion (4), opacity logit, the 3D filter (`--mip-filter`; else
+    /// unused), then from
     /// [`COLOUR_OFFSET`] its colour (SH coefficients up to the largest degree, or the
     /// feature channels of feature splats), padded to whole vec4s: the step loads and
     /// stores the colour a vec4 at a time (on a CPU device each buffer access is a loop
@@ -223,6 +232,12 @@ impl Model {
                     out[a][i * r + offset..i * r + offset + width]
                         .copy_from_slice(&src[i * width..(i + 1) * width]);
                 }
+            }
+        }
+        if let Some(filters) = &self.mip_filters {
+            // The record's float 11: the 3D filter the step renders with (STEP_MIP).
+            for (i, &f) in filters.iter().enumerate() {
+                out[0][i * r + 11] = f;
             }
         }
         for i in 0..n {

@@ -29,7 +29,7 @@ impl Run<'_> {
         plan: &Plan,
         due: &Due,
     ) -> Result<(), TrainError> {
-        let changes = plan.densify_now || plan.reset_now;
+        let changes = plan.densify_now || plan.reset_now || plan.mip_now;
         if let Some(d) = &self.dev {
             if changes || due.checkpoint || due.cancelled {
                 d.download(rast.renderer().ctx(), &mut self.model)?;
@@ -63,6 +63,11 @@ impl Run<'_> {
                     "every Gaussian was pruned at iteration {it}; the scene is empty (check the photos and cameras)"
                 )));
             }
+        }
+        // Mip-Splatting's order: the filter of the densified centres, then the reset
+        // (which caps the filtered opacity).
+        if plan.mip_now {
+            self.model.mip_filters = Some(job.mip_filters(&self.model.scene.positions));
         }
         if reset_now {
             self.model.reset_opacity();

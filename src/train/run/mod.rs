@@ -78,6 +78,9 @@ pub struct TrainOptions {
     /// The `-r` the photos were loaded at, for `cfg_args` (`None`: not given, written as
     /// the original's -1).
     pub resolution: Option<u32>,
+    /// Mip-Splatting's 3D filter (`--mip-filter`, [`crate::train::model::mip`]), folded
+    /// into the saved scales and opacities.
+    pub mip_filter: bool,
 }
 
 impl Default for TrainOptions {
@@ -102,6 +105,7 @@ impl Default for TrainOptions {
             cancel: None,
             host_optimizer: false,
             resolution: None,
+            mip_filter: false,
         }
     }
 }
@@ -130,7 +134,8 @@ impl TrainOptions {
             // The original's leave the fingerprints of earlier checkpoints as they were.
             crate::core::model::Rules::Original => "",
             crate::core::model::Rules::Gsplat => "|rules gsplat",
-        } + &lens_fingerprint(data)
+        } + if self.mip_filter { "|mip-filter" } else { "" }
+            + &lens_fingerprint(data)
     }
 }
 
@@ -278,6 +283,12 @@ impl<'a> Job<'a> {
                 ..Default::default()
             },
         }
+    }
+
+    /// Mip-Splatting's 3D filter of centres `positions` from the training cameras.
+    fn mip_filters(&self, positions: &[[f32; 3]]) -> Vec<f32> {
+        let cams: Vec<_> = self.data.train.iter().map(|v| v.camera.clone()).collect();
+        crate::train::model::mip::filters(positions, &cams)
     }
 }
 

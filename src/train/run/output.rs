@@ -139,10 +139,22 @@ impl Run<'_> {
             .join("point_cloud")
             .join(format!("iteration_{it}"))
             .join("point_cloud.ply");
-        let bytes = crate::core::scene::ply::to_bytes(
-            &model.scene,
-            crate::core::scene::ply::PlyEncoding::BinaryLittleEndian,
-        );
+        let bytes = match &model.mip_filters {
+            None => crate::core::scene::ply::to_bytes(
+                &model.scene,
+                crate::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+            ),
+            Some(filters) => {
+                // The scene the renders saw: the filter folded into scales and opacities,
+                // and a header comment that says so.
+                let mut scene = model.scene.clone();
+                crate::train::model::mip::fold(&mut scene, filters);
+                crate::core::scene::ply::to_bytes(
+                    &scene,
+                    crate::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+                )
+            }
+        };
         write(&path, &bytes, overwrite, &mut self.written)?;
         if let Some(mlp) = &model.shader {
             let shader_path = path.with_file_name("shader.safetensors");

@@ -23,6 +23,10 @@ pub(super) struct Plan {
     pub(super) lr_now: f32,
     /// The MCMC strategy's noise and regularisers.
     pub(super) mcmc_step: Option<McmcStep>,
+    /// Compute Mip-Splatting's 3D filter again after this iteration (after a
+    /// densification too): every 100 iterations after the densification, but in the last
+    /// 100 (the reference's schedule).
+    pub(super) mip_now: bool,
 }
 
 impl Plan {
@@ -50,6 +54,11 @@ impl Plan {
             opacity_reg: m.opacity_reg / n_now as f32,
             scale_reg: m.scale_reg / (3 * n_now) as f32,
         });
+        let mip_now = job.opts.mip_filter
+            && (densify_now
+                || (it > s.densify_until_iter
+                    && it % crate::train::model::mip::RECOMPUTE_INTERVAL == 0
+                    && it + crate::train::model::mip::RECOMPUTE_INTERVAL < s.iterations));
         Plan {
             it,
             in_densify,
@@ -57,6 +66,7 @@ impl Plan {
             reset_now,
             lr_now,
             mcmc_step,
+            mip_now,
         }
     }
 }

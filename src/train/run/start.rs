@@ -35,6 +35,17 @@ impl Run<'_> {
         if let Some(c) = &opts.resume {
             run.resume(job, c, note)?;
         }
+        if opts.mip_filter {
+            if opts.settings.mcmc.is_some() {
+                return Err(TrainError::Other(
+                    "--mip-filter and --strategy mcmc are not combined: the MCMC strategy's relocation shares opacities and scales that the filter changes; train with one of them".into(),
+                ));
+            }
+            // A checkpoint keeps the filter it was stepping with; a new run computes it.
+            if run.model.mip_filters.as_ref().map(Vec::len) != Some(run.model.len()) {
+                run.model.mip_filters = Some(job.mip_filters(&run.model.scene.positions));
+            }
+        }
         Ok(run)
     }
 

@@ -42,6 +42,7 @@ impl<'p> Run<'p> {
             reset_now,
             lr_now,
             mcmc_step,
+            ..
         } = *plan;
         let Run {
             model,
@@ -161,6 +162,7 @@ impl<'p> Run<'p> {
             reset_now,
             lr_now,
             mcmc_step,
+            ..
         } = *plan;
         let Run {
             model, stage_sums, ..
