@@ -7,5 +7,6 @@ mod gradients;
 mod gsplat_rules;
 mod lens_gradients;
 mod loss;
+mod masks;
 mod training;
 mod undistort;

@@ -473,16 +473,16 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
 
 /// The library loop of the device-versus-host tests: a data set made here, a rasterizer
 /// with the validation layer on, and the loss.
-struct Harness {
-    dir: tempfile::TempDir,
-    dataset: verisplat::train::data::Dataset,
+pub(super) struct Harness {
+    pub(super) dir: tempfile::TempDir,
+    pub(super) dataset: verisplat::train::data::Dataset,
     rast: verisplat::render::backward::differentiable::DiffRasterizer,
     loss: verisplat::train::loss::GpuLoss,
 }
 
 impl Harness {
     /// `views` photos of `w x h` ([`make_dataset_with`]), no views held out.
-    fn new(views: usize, w: u32, h: u32, shader: Option<&verisplat::fields::mlp::Mlp>) -> Harness {
+    pub(super) fn new(views: usize, w: u32, h: u32, shader: Option<&verisplat::fields::mlp::Mlp>) -> Harness {
         use verisplat::train::data;
         let dir = tempfile::tempdir().unwrap();
         let set = dir.path().join("data");
@@ -503,7 +503,7 @@ impl Harness {
     /// Trains into `name` with `opts`, its state on the device or (`host`) the host
     /// optimiser's; returns the report, each iteration's loss and the last iteration's
     /// model folder.
-    fn train(
+    pub(super) fn train(
         &mut self,
         name: &str,
         opts: &verisplat::train::run::TrainOptions,
@@ -536,13 +536,13 @@ impl Harness {
         (report, losses, at)
     }
 
-    fn assert_validation_clean(&mut self) {
+    pub(super) fn assert_validation_clean(&mut self) {
         crate::common::gpu::assert_validation_clean(self.rast.renderer());
     }
 }
 
 /// The scene and the bytes of the PLY in a model folder.
-fn model_ply(at: &Path) -> (verisplat::core::scene::Scene, Vec<u8>) {
+pub(super) fn model_ply(at: &Path) -> (verisplat::core::scene::Scene, Vec<u8>) {
     let ply = at.join("point_cloud.ply");
     let scene = verisplat::core::scene::load_with_format(&ply).unwrap().0;
     (scene, std::fs::read(&ply).unwrap())
@@ -571,7 +571,7 @@ fn worst_loss_difference(a: &[f64], b: &[f64]) -> f64 {
 
 /// Asserts that every parameter group of `a` (centres, log scales, quaternions, opacity
 /// logits, SH, feature channels) is within `max` of `b`'s (relative L2), printing each.
-fn assert_groups_agree(
+pub(super) fn assert_groups_agree(
     a: &verisplat::core::scene::Scene,
     b: &verisplat::core::scene::Scene,
     max: f64,
@@ -599,7 +599,7 @@ fn assert_groups_agree(
 
 /// 30 iterations of SH degree 1, densifying from 50 every 60, resetting at 150 (the
 /// device-vs-host tests below).
-fn device_vs_host_options() -> verisplat::train::run::TrainOptions {
+pub(super) fn device_vs_host_options() -> verisplat::train::run::TrainOptions {
     use verisplat::train::{model::Settings, run};
     run::TrainOptions {
         settings: Settings {
