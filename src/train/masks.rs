@@ -194,3 +194,43 @@ pub(super) fn missing(photo: &Path, masks: &str, others: usize) -> DataError {
         ),
     )
 }
+
+/// PSNR, SSIM and FLIP of `test` against `reference` (`H x W x 3`, `width x height`) over
+/// the pixels `keep` keeps: the test image's masked pixels are the reference's (so no
+/// window reaches a difference there), PSNR is of the mean squared error over the kept
+/// pixels, SSIM and FLIP the means of their maps over them.
+pub fn masked_metrics(
+    reference: &[f32],
+    test: &[f32],
+    (width, height): (usize, usize),
+    keep: &[bool],
+    ppd: f64,
+) -> (f64, f64, f64) {
+    use crate::io::metrics;
+    let test: Vec<f32> = (0..test.len())
+        .map(|i| if keep[i / 3] { test[i] } else { reference[i] })
+        .collect();
+    let kept = keep.iter().filter(|&&k| k).count().max(1);
+    let squared: f64 = (0..test.len())
+        .filter(|i| keep[i / 3])
+        .map(|i| ((test[i] - reference[i]) as f64).powi(2))
+        .sum();
+    let psnr = metrics::psnr_from_mse(squared / (3 * kept) as f64, 1.0);
+    let wide = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<f64>>();
+    let weights: Vec<f64> = keep.iter().map(|&k| if k { 1.0 } else { 0.0 }).collect();
+    let (ssim, _) = metrics::ssim_with_gradient_weighted(
+        &wide(&test),
+        &wide(reference),
+        width,
+        height,
+        3,
+        Some(&weights),
+    );
+    let map = metrics::flip_map(reference, &test, width, height, ppd);
+    let flip = (0..map.len())
+        .filter(|&i| keep[i])
+        .map(|i| map[i] as f64)
+        .sum::<f64>()
+        / kept as f64;
+    (psnr, ssim, flip)
+}

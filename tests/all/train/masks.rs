@@ -375,3 +375,36 @@ fn masking_an_occluder_lifts_the_held_out_psnr() {
     assert!(with > without + 2.0, "{with} vs {without}");
     h.assert_validation_clean();
 }
+
+/// A fisheye camera's pixels outside its image circle (past the field of view its
+/// polynomial images: k1 = -0.5 stops growing at 0.82 rad) are masked without any mask
+/// file: the corners are, the middle is not; a pinhole's view has no mask.
+#[test]
+fn a_fisheyes_pixels_outside_its_image_circle_are_masked() {
+    let dir = tempfile::tempdir().unwrap();
+    make_dataset(dir.path(), 2, 64, 48);
+    let cameras = dir.path().join("sparse/0/cameras.txt");
+    let text = std::fs::read_to_string(&cameras).unwrap();
+    let fisheye: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            if l.starts_with('#') || f.len() != 8 {
+                return l.to_string();
+            }
+            format!(
+                "{} OPENCV_FISHEYE {} {} 30 30 {} {} -0.5 0 0 0",
+                f[0], f[2], f[3], f[6], f[7]
+            )
+        })
+        .collect();
+    std::fs::write(&cameras, fisheye.join("\n") + "\n").unwrap();
+    let set = data::load(dir.path(), &LoadOptions::new(Resolution(1), false)).unwrap();
+    for v in &set.train {
+        let m = v.mask.as_ref().expect("the image circle's mask");
+        assert!(!m[0] && !m[63] && !m[64 * 47], "the corners are masked");
+        assert!(m[24 * 64 + 32], "the middle is kept");
+        let kept = m.iter().filter(|&&k| k).count();
+        eprintln!("{}: {kept} of {} pixels inside the circle", v.camera.name, m.len());
+    }
+}
