@@ -126,9 +126,9 @@ pub fn read_mask(
     let channel = |n: &str| planes.channel(n).map(|c| &c.values);
     let grey: Vec<f32> = match (channel("Y"), channel("R"), channel("G"), channel("B")) {
         (Some(y), ..) => y.clone(),
-        (None, Some(r), Some(g), Some(b)) => (0..r.len())
-            .map(|i| (r[i] + g[i] + b[i]) / 3.0)
-            .collect(),
+        (None, Some(r), Some(g), Some(b)) => {
+            (0..r.len()).map(|i| (r[i] + g[i] + b[i]) / 3.0).collect()
+        }
         _ => {
             return Err(data_error(
                 path,

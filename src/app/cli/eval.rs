@@ -659,12 +659,8 @@ impl Measure<'_> {
         let photo = image_file::read_image(photo_path)?;
         let truth = photo_rgb(&photo, photo_path, args.background)?;
         let (truth, pw, ph) = self.prep.prepare(cam, truth, (photo.width, photo.height));
-        let keep = super::eval_mask::photo_mask(
-            &self.prep,
-            cam,
-            photo_path,
-            (photo.width, photo.height),
-        )?;
+        let keep =
+            super::eval_mask::photo_mask(&self.prep, cam, photo_path, (photo.width, photo.height))?;
         let (w, h) = render_size(cam.width, cam.height, pw, ph).ok_or_else(|| {
             anyhow::anyhow!(
                 "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}{}; a photo may only be smaller by one factor on both sides (images downscaled for training; -r scales photos as train -r did)",

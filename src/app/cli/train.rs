@@ -446,7 +446,10 @@ fn mask_note(data: &Dataset) -> Option<String> {
         return None;
     }
     let total: usize = masked.iter().map(|m| m.len()).sum();
-    let ignored: usize = masked.iter().map(|m| m.iter().filter(|&&k| !k).count()).sum();
+    let ignored: usize = masked
+        .iter()
+        .map(|m| m.iter().filter(|&&k| !k).count())
+        .sum();
     Some(format!(
         "{} of {} views masked ({:.1} % of their pixels ignored by the loss and the densification statistics)",
         masked.len(),

@@ -153,9 +153,7 @@ fn device_loss_equals_the_reference_and_is_deterministic() {
 fn a_masked_loss_ignores_its_masked_pixels_on_the_device_as_in_the_reference() {
     let (w, h) = (23, 17);
     let (x, y) = (image(w, h, 5), image(w, h, 6));
-    let keep: Vec<bool> = (0..w * h)
-        .map(|p| !((p % w) < 7 || p % 11 == 0))
-        .collect();
+    let keep: Vec<bool> = (0..w * h).map(|p| !((p % w) < 7 || p % 11 == 0)).collect();
     let lambda = LAMBDA_DSSIM as f64;
     let masked = |x: &[f64]| loss_reference_masked(x, &y, Some(&keep), w, h, 3, lambda);
     let (value, grad) = masked(&x);

@@ -125,7 +125,10 @@ fn a_frames_mask_path_and_the_alpha_modes_are_read() {
     let default = load(None);
     let v = &default.train[0];
     assert!(right_masked(v, true));
-    assert_eq!((v.image[0], v.image[10]), ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0]));
+    assert_eq!(
+        (v.image[0], v.image[10]),
+        ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    );
     assert_eq!(load(Some(AlphaMode::Background)).train[0].image, v.image);
     // ignore: the colour as stored.
     let ignore = load(Some(AlphaMode::Ignore));
@@ -165,7 +168,12 @@ fn bad_masks_give_one_sentence_each() {
     make_dataset(&set, 4, 32, 24);
     let masks = set.join("masks");
     for i in 0..4 {
-        grey_png(&masks.join(format!("view_00{i}.png")), 32, 24, left_black(8));
+        grey_png(
+            &masks.join(format!("view_00{i}.png")),
+            32,
+            24,
+            left_black(8),
+        );
     }
     let model = dir.path().join("model");
     let fails_with = |what: &str, says: &[&str]| {
@@ -294,7 +302,10 @@ fn a_masked_run_steps_on_the_device_as_on_the_host() {
         v.mask = Some(vec![true; 64 * 48]);
     }
     let (_, all_kept) = model_ply(&h.train("all-kept", &opts, false).2);
-    assert!(plain == all_kept, "a mask keeping every pixel changed the model");
+    assert!(
+        plain == all_kept,
+        "a mask keeping every pixel changed the model"
+    );
     for v in &mut h.dataset.train {
         v.mask = Some(
             (0..64 * 48)
@@ -405,6 +416,77 @@ fn a_fisheyes_pixels_outside_its_image_circle_are_masked() {
         assert!(!m[0] && !m[63] && !m[64 * 47], "the corners are masked");
         assert!(m[24 * 64 + 32], "the middle is kept");
         let kept = m.iter().filter(|&&k| k).count();
-        eprintln!("{}: {kept} of {} pixels inside the circle", v.camera.name, m.len());
+        eprintln!(
+            "{}: {kept} of {} pixels inside the circle",
+            v.camera.name,
+            m.len()
+        );
     }
+}
+
+/// `eval` with a `masks/` folder beside `--images`: only the unmasked pixels are scored
+/// (an occluder painted on a photo and masked costs nothing: the PSNR is that of the
+/// clean photo's kept pixels), the output says so and the report marks the rows; without
+/// the folder the occluder is scored.
+#[test]
+fn eval_scores_only_the_unmasked_pixels_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("data");
+    make_dataset(&set, 2, 32, 24);
+    let photo = set.join("images/view_000.png");
+    let mut img = image::open(&photo).unwrap().to_rgb8();
+    for y in 0..12 {
+        for x in 0..16 {
+            img.put_pixel(x, y, image::Rgb([255, 0, 255]));
+        }
+    }
+    img.save(&photo).unwrap();
+    let scene = crate::common::shared_data().join("playbot_lod6_1873_sh2.ply");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let eval = |out: &str| {
+        let rep = dir.path().join(out);
+        let o = verisplat(&[
+            "eval",
+            &s(&scene),
+            "--cameras",
+            &s(&set.join("sparse/0")),
+            "--images",
+            &s(&set.join("images")),
+            "--split",
+            "all",
+            "-o",
+            &s(&rep),
+        ]);
+        let (out, err) = (
+            String::from_utf8_lossy(&o.stdout).to_string(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        );
+        assert!(o.status.success(), "{err}");
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(rep.join("report.json")).unwrap())
+                .unwrap();
+        let psnr = json["results"][0]["psnr"].as_f64().unwrap_or(f64::INFINITY);
+        (out, json, psnr)
+    };
+    let (out, _, unmasked) = eval("plain");
+    assert!(!out.contains("unmasked"), "{out}");
+    let masks = set.join("masks");
+    for i in 0..2 {
+        grey_png(&masks.join(format!("view_00{i}.png")), 32, 24, |x, y| {
+            if x < 16 && y < 12 {
+                0
+            } else {
+                255
+            }
+        });
+    }
+    let (out, json, masked) = eval("masked");
+    eprintln!("view_000: {unmasked:.2} dB scoring the occluder, {masked:.2} dB masked");
+    assert!(
+        out.contains("scored only the unmasked pixels of 2 photo(s)"),
+        "{out}"
+    );
+    assert_eq!(json["results"][0]["masked"], serde_json::json!(true));
+    assert!(unmasked < 15.0, "{unmasked}");
+    assert!(masked > 35.0, "{masked}");
 }

@@ -482,7 +482,12 @@ pub(super) struct Harness {
 
 impl Harness {
     /// `views` photos of `w x h` ([`make_dataset_with`]), no views held out.
-    pub(super) fn new(views: usize, w: u32, h: u32, shader: Option<&verisplat::fields::mlp::Mlp>) -> Harness {
+    pub(super) fn new(
+        views: usize,
+        w: u32,
+        h: u32,
+        shader: Option<&verisplat::fields::mlp::Mlp>,
+    ) -> Harness {
         use verisplat::train::data;
         let dir = tempfile::tempdir().unwrap();
         let set = dir.path().join("data");
