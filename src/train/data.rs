@@ -182,7 +182,16 @@ pub struct DataError {
     pub message: String,
 }
 
-pub(super) fn data_error(path: &Path, message: impl Into<String>) -> DataError {
+impl From<masks::MaskError> for DataError {
+    fn from(e: masks::MaskError) -> DataError {
+        DataError {
+            path: e.path,
+            message: e.message,
+        }
+    }
+}
+
+fn data_error(path: &Path, message: impl Into<String>) -> DataError {
     DataError {
         path: path.to_path_buf(),
         message: message.into(),
@@ -226,7 +235,7 @@ pub fn cameras_centre_and_extent(views: &[View]) -> (glam::Vec3, f32) {
 }
 
 /// A photo's R, G and B planes (a grey one's Y thrice) and its alpha (1 without one).
-pub(super) fn rgba_planes(
+fn rgba_planes(
     planes: &crate::io::image_file::Planes,
     path: &Path,
 ) -> Result<[Vec<f32>; 4], DataError> {
@@ -342,11 +351,9 @@ fn colmap_masks<'a>(
     let have = found.iter().flatten().count();
     if have > 0 {
         if let Some(k) = found.iter().position(Option::is_none) {
-            return Err(masks::missing(
-                &images.join(names[k]),
-                &dir.display().to_string(),
-                have,
-            ));
+            return Err(
+                masks::missing(&images.join(names[k]), &dir.display().to_string(), have).into(),
+            );
         }
     }
     Ok(found)
@@ -832,7 +839,8 @@ fn read_transforms(
             photo,
             "its frame's mask_path or the masks folder beside its folder",
             have,
-        ));
+        )
+        .into());
     }
     Ok(views)
 }

@@ -91,7 +91,7 @@ pub fn loss_reference_masked(
     channels: usize,
     lambda: f64,
 ) -> (LossValue, Vec<f64>) {
-    let kept = |i: usize| keep.is_none_or(|k| k[i / channels]);
+    let kept = |i: usize| keep.map_or(true, |k| k[i / channels]);
     let replaced: Vec<f64>;
     let image = match keep {
         None => image,

@@ -8,9 +8,25 @@
 //! masked. A mask goes through what its photo does (undistorted, then scaled to `-r` by
 //! the same area average) and is thresholded at 0.5 again at the training resolution.
 
-use super::data::{data_error, DataError};
 use crate::core::camera::{Camera, Lens};
 use std::path::{Path, PathBuf};
+
+/// A mask's error, naming the file (the data set's loader gives it as its own).
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {message}")]
+pub struct MaskError {
+    /// The mask, or the photo without one.
+    pub path: PathBuf,
+    /// What is wrong, one sentence.
+    pub message: String,
+}
+
+fn data_error(path: &Path, message: impl Into<String>) -> MaskError {
+    MaskError {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
 
 /// What the trainer does with a photo's alpha channel (`verisplat train --alpha-mode`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -102,7 +118,7 @@ pub fn read_mask(
     photo: &Path,
     size: (u32, u32),
     training: Option<(u32, u32)>,
-) -> Result<Vec<f32>, DataError> {
+) -> Result<Vec<f32>, MaskError> {
     let planes = crate::io::image_file::read_image(path)
         .map_err(|e| data_error(path, format!("cannot be read as a mask: {e}")))?;
     let got = (planes.width, planes.height);
@@ -186,7 +202,7 @@ pub fn image_circle(camera: &Camera) -> Option<Vec<bool>> {
 }
 
 /// The error of a photo without its mask when others have one.
-pub(super) fn missing(photo: &Path, masks: &str, others: usize) -> DataError {
+pub(super) fn missing(photo: &Path, masks: &str, others: usize) -> MaskError {
     data_error(
         photo,
         format!(
