@@ -47,9 +47,7 @@ impl AlphaMode {
             "ignore" => Ok(AlphaMode::Ignore),
             "mask" => Ok(AlphaMode::Mask),
             "background" => Ok(AlphaMode::Background),
-            other => Err(format!(
-                "--alpha-mode '{other}' is not one of ignore, mask, background"
-            )),
+            other => Err(format!("'{other}' is not one of ignore, mask, background")),
         }
     }
 

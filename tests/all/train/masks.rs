@@ -138,6 +138,21 @@ fn a_frames_mask_path_and_the_alpha_modes_are_read() {
     let mask = load(Some(AlphaMode::Mask));
     assert!(right_masked(&mask.train[0], false));
     assert_eq!(mask.train[0].image[0], [1.0, 0.0, 0.0]);
+    // A frame without a mask_path where the others have one: one sentence naming its
+    // photo.
+    let mut doc = doc;
+    doc["frames"][1]
+        .as_object_mut()
+        .unwrap()
+        .remove("mask_path");
+    std::fs::write(set.join("transforms.json"), doc.to_string()).unwrap();
+    let e = data::load(set, &LoadOptions::new(Resolution(1), false))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("images/f1.png") && e.contains("has no mask") && e.contains("2 other"),
+        "{e}"
+    );
     // A COLMAP data set drops alpha by default; --alpha-mode mask masks with it.
     let colmap = tempfile::tempdir().unwrap();
     make_dataset(colmap.path(), 2, 24, 16);
