@@ -37,7 +37,7 @@ fn is_left_masked(v: &data::View, edge: u32) -> bool {
 }
 
 /// `masks/` beside `images/`: a mask per photo with its stem and any extension (grey,
-/// RGB, RGBA, COLMAP's NAME.png.png), scaled with the photo under `-r` (the same area
+/// RGB, RGBA, 1-bit, 16-bit, COLMAP's NAME.png.png), scaled with the photo under `-r` (the same area
 /// average, then thresholded), or given at the `-r` size already; without `masks/` no
 /// view has a mask and the photos are as before.
 #[test]
@@ -67,6 +67,13 @@ fn a_masks_folder_beside_the_images_is_read_and_scaled_with_the_photos() {
         assert!(is_left_masked(v, 4), "{}", v.camera.name);
         assert_eq!(v.image, b.image, "the photo is as without masks");
     }
+    // A 1-bit and a 16-bit grey PNG (made with Pillow, kept beside this file).
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/all/train/mask_fixtures");
+    std::fs::copy(fixtures.join("left8_1bit.png"), masks.join("view_000.png")).unwrap();
+    std::fs::remove_file(masks.join("view_001.png.png")).unwrap();
+    std::fs::copy(fixtures.join("left8_16bit.png"), masks.join("view_001.png")).unwrap();
+    let bits = data::load(&set, &LoadOptions::new(Resolution(2), false)).unwrap();
+    assert!(is_left_masked(&bits.train[0], 4) && is_left_masked(&bits.train[1], 4));
     // A mask at the -r size is used as it is.
     grey_png(&masks.join("view_000.png"), 16, 12, left_black(5));
     let at_r = data::load(&set, &LoadOptions::new(Resolution(2), false)).unwrap();
