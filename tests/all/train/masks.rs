@@ -237,6 +237,24 @@ fn bad_masks_give_one_sentence_each() {
     );
     grey_png(&one, 32, 24, |_, _| 0);
     fails_with("a mask of nothing", &["masks/view_001.png", "every pixel"]);
+    // Good masks: the run says what they ignore.
+    grey_png(&one, 32, 24, left_black(8));
+    let o = verisplat(&[
+        "train",
+        set.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+        "--iterations",
+        "5",
+        "-r",
+        "2",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("4 of 4 views masked (25.0 % of their pixels ignored"),
+        "{err}"
+    );
 }
 
 /// A Gaussian whose footprint lies wholly in the masked part of a view gets no gradient
