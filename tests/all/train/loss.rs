@@ -215,9 +215,18 @@ fn a_masked_loss_ignores_its_masked_pixels_on_the_device_as_in_the_reference() {
     eprintln!("masked: device gradient relative L2 error {err:.2e}");
     assert!(err <= 1e-3, "relative L2 error {err:e}");
     assert!(g.iter().zip(&keep).all(|(v, &k)| k || v == &[0.0; 3]));
+    let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+    // The window through storage buffers and through texel views: the same bits.
+    for texel in [false, true] {
+        let mut other = GpuLoss::with_texel_fetch(ctx, texel).unwrap();
+        let (v, g2) = other
+            .compute_masked(ctx, &gx, &gy, Some(&keep), w as u32, h as u32, LAMBDA_DSSIM)
+            .unwrap();
+        assert_eq!(v.total.to_bits(), got.total.to_bits());
+        assert_eq!(bits(&g2), bits(&g), "texel views {texel}");
+    }
     // Every pixel kept: the unmasked loss's bits.
     let all = vec![true; w * h];
-    let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
     let (a, ga) = loss
         .compute(ctx, &gx, &gy, w as u32, h as u32, LAMBDA_DSSIM)
         .unwrap();
