@@ -2,6 +2,8 @@
 // Training loss: per pixel and channel the SSIM value from the local moments and its
 // derivatives with respect to them (metrics::ssim_with_gradient's rules), and the pixel's
 // sums over R, G, B of |x - y|, of SSIM and of (x - y)^2, which loss_reduce.comp adds up.
+// A masked pixel (target w 1) adds nothing: no sums, no derivative maps, and its image is
+// the target's.
 #extension GL_GOOGLE_include_directive : require
 #include "loss_common.glsl"
 
@@ -33,6 +35,13 @@ void main() {
     precise vec3 b2 = (exx - mx * mx) + (eyy - my * my) + C2;
     precise vec3 d = b1 * b2;
     precise vec3 s = a1 * a2 / d;
+    if (target[i].w != 0.0) {
+        maps[3u * i + 0u] = vec4(0.0);
+        maps[3u * i + 1u] = vec4(0.0);
+        maps[3u * i + 2u] = vec4(0.0);
+        sums[i] = vec4(0.0);
+        return;
+    }
     maps[3u * i + 0u] = vec4(2.0 * my * a2 / d - 2.0 * mx * s / b1 + 2.0 * mx * s / b2 - 2.0 * my * a1 / d, 0.0);
     maps[3u * i + 1u] = vec4(-s / b2, 0.0);
     maps[3u * i + 2u] = vec4(2.0 * a1 / d, 0.0);

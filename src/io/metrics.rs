@@ -383,16 +383,34 @@ pub fn ssim_with_gradient(
     height: usize,
     channels: usize,
 ) -> (f64, Vec<f64>) {
+    ssim_with_gradient_weighted(image, target, width, height, channels, None)
+}
+
+/// [`ssim_with_gradient`] of the weighted mean of the SSIM map (`weights` one per pixel,
+/// the same for every channel; `None`: all 1): `sum w S / (channels sum w)`, and its
+/// gradient with respect to `image`.
+pub fn ssim_with_gradient_weighted(
+    image: &[f64],
+    target: &[f64],
+    width: usize,
+    height: usize,
+    channels: usize,
+    weights: Option<&[f64]>,
+) -> (f64, Vec<f64>) {
     assert_eq!(image.len(), target.len(), "images of different sizes");
     assert_eq!(image.len(), width * height * channels, "size mismatch");
-    let n = image.len();
-    if n == 0 {
-        return (1.0, Vec::new());
+    let n = match weights {
+        None => image.len() as f64,
+        Some(w) => w.iter().sum::<f64>() * channels as f64,
+    };
+    if image.is_empty() || n == 0.0 {
+        return (1.0, vec![0.0; image.len()]);
     }
+    let weight = |i: usize| weights.map_or(1.0, |w| w[i]);
     let taps = ssim_taps();
     let filter = |p: &[f64]| separable_filter(p, width, height, &taps, &taps, Padding::Zero);
     let mut total = 0.0;
-    let mut grad = vec![0.0; n];
+    let mut grad = vec![0.0; image.len()];
     for c in 0..channels {
         let plane =
             |v: &[f64]| -> Vec<f64> { v.iter().skip(c).step_by(channels).copied().collect() };
@@ -412,18 +430,20 @@ pub fn ssim_with_gradient(
             let b1 = mx * mx + my * my + SSIM_C1;
             let b2 = (xx[i] - mx * mx) + (yy[i] - my * my) + SSIM_C2;
             let s = a1 * a2 / (b1 * b2);
-            total += s;
-            g_m[i] = 2.0 * my * a2 / (b1 * b2) - 2.0 * mx * s / b1 + 2.0 * mx * s / b2
-                - 2.0 * my * a1 / (b1 * b2);
-            g_xx[i] = -s / b2;
-            g_xy[i] = 2.0 * a1 / (b1 * b2);
+            let wi = weight(i);
+            total += wi * s;
+            g_m[i] = wi
+                * (2.0 * my * a2 / (b1 * b2) - 2.0 * mx * s / b1 + 2.0 * mx * s / b2
+                    - 2.0 * my * a1 / (b1 * b2));
+            g_xx[i] = wi * (-s / b2);
+            g_xy[i] = wi * (2.0 * a1 / (b1 * b2));
         }
         let (f_m, f_xx, f_xy) = (filter(&g_m), filter(&g_xx), filter(&g_xy));
         for i in 0..pixels {
-            grad[i * channels + c] = (f_m[i] + 2.0 * x[i] * f_xx[i] + y[i] * f_xy[i]) / n as f64;
+            grad[i * channels + c] = (f_m[i] + 2.0 * x[i] * f_xx[i] + y[i] * f_xy[i]) / n;
         }
     }
-    (total / n as f64, grad)
+    (total / n, grad)
 }
 
 /// FLIP's default observer: 0.7 m from a 0.7 m wide display of 3840 pixels, about 67.02

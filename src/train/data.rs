@@ -6,6 +6,7 @@
 //! out: the `llffhold` rule `verisplat eval` uses) and the scene extent the learning rates
 //! and densification scale with.
 
+use super::masks::{self, AlphaMode};
 use super::undistort::Undistortion;
 use crate::core::camera::colmap::{self, Point3D};
 use crate::core::camera::distortion::{self, Distortion};
@@ -51,6 +52,48 @@ pub struct View {
     pub camera: Camera,
     /// The photo, RGB in [0, 1] as stored (8-bit values / 255), pixel-major.
     pub image: Vec<[f32; 3]>,
+    /// Which pixels training counts (true) and which it ignores, one flag per pixel;
+    /// `None`: every pixel ([`super::masks`]).
+    pub mask: Option<Vec<bool>>,
+}
+
+/// How a data set's photos are read ([`load`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LoadOptions {
+    /// The training resolution (`-r`).
+    pub resolution: Resolution,
+    /// Hold out the test views (`--eval`).
+    pub eval: bool,
+    /// Through the lenses, or undistorted.
+    pub lenses: LensMode,
+    /// The training background ([`AlphaMode::Background`] composites onto it).
+    pub background: [f32; 3],
+    /// What is done with a photo's alpha; `None`: the format's rule of old (COLMAP drops
+    /// it, a transforms data set composites it onto the background).
+    pub alpha: Option<AlphaMode>,
+}
+
+impl LoadOptions {
+    /// `resolution` and `eval` through the lenses, a black background, the formats' alpha.
+    pub fn new(resolution: Resolution, eval: bool) -> LoadOptions {
+        LoadOptions {
+            resolution,
+            eval,
+            lenses: LensMode::Through,
+            background: [0.0; 3],
+            alpha: None,
+        }
+    }
+}
+
+/// Reads the data set at `dir`: a transforms one ([`is_transforms`]) or a COLMAP one,
+/// with its masks ([`super::masks`]).
+pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
+    if is_transforms(dir) {
+        load_transforms_from(dir, opts)
+    } else {
+        load_colmap_from(dir, opts)
+    }
 }
 
 /// A data set ready to train on.
@@ -139,6 +182,15 @@ pub struct DataError {
     pub message: String,
 }
 
+impl From<masks::MaskError> for DataError {
+    fn from(e: masks::MaskError) -> DataError {
+        DataError {
+            path: e.path,
+            message: e.message,
+        }
+    }
+}
+
 fn data_error(path: &Path, message: impl Into<String>) -> DataError {
     DataError {
         path: path.to_path_buf(),
@@ -213,6 +265,16 @@ pub fn load_colmap_with(
     eval: bool,
     lenses: LensMode,
 ) -> Result<Dataset, DataError> {
+    let opts = LoadOptions {
+        lenses,
+        ..LoadOptions::new(resolution, eval)
+    };
+    load_colmap_from(dir, &opts)
+}
+
+/// [`load_colmap_with`] as `opts` says, with the masks in `dir/masks` when there are.
+fn load_colmap_from(dir: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
+    let LoadOptions { eval, lenses, .. } = *opts;
     let (mut cameras, _) =
         colmap::load_colmap_model_distorted(dir).map_err(|e| data_error(dir, e.to_string()))?;
     if cameras.is_empty() {
@@ -235,11 +297,13 @@ pub fn load_colmap_with(
             "is not a directory: the photos must be in DATASET/images",
         ));
     }
+    let mask_files = colmap_masks(&images, cameras.iter().map(|(c, _)| c.name.as_str()))?;
     let views: Vec<Result<(View, Option<Undistortion>), DataError>> = {
         use rayon::prelude::*;
         cameras
             .par_iter()
-            .map(|(cam, d)| load_view(&images, cam, d.as_ref(), resolution, lenses))
+            .zip(&mask_files)
+            .map(|((cam, d), m)| load_view(&images, cam, d.as_ref(), m.as_deref(), opts))
             .collect()
     };
     let mut train = Vec::new();
@@ -273,14 +337,37 @@ pub fn load_colmap_with(
     })
 }
 
-/// The photo of `cam` in `images` as a view at `resolution`: taken through the lens of
-/// `distortion`, or with [`LensMode::Undistort`] undistorted through it (with how).
+/// The mask of each photo named by `names` in `images`: none without `images/../masks`
+/// (or when no photo has one there); every photo's, or an error naming one without.
+fn colmap_masks<'a>(
+    images: &Path,
+    names: impl Iterator<Item = &'a str>,
+) -> Result<Vec<Option<PathBuf>>, DataError> {
+    let names: Vec<&str> = names.collect();
+    let Some(dir) = masks::masks_dir(images) else {
+        return Ok(vec![None; names.len()]);
+    };
+    let found: Vec<Option<PathBuf>> = names.iter().map(|n| masks::find_mask(&dir, n)).collect();
+    let have = found.iter().flatten().count();
+    if have > 0 {
+        if let Some(k) = found.iter().position(Option::is_none) {
+            return Err(
+                masks::missing(&images.join(names[k]), &dir.display().to_string(), have).into(),
+            );
+        }
+    }
+    Ok(found)
+}
+
+/// The photo of `cam` in `images` (masked by the file `mask`, when given) as a view at
+/// the training resolution: taken through the lens of `distortion`, or with
+/// [`LensMode::Undistort`] undistorted through it (with how).
 fn load_view(
     images: &Path,
     cam: &Camera,
     distortion: Option<&Distortion>,
-    resolution: Resolution,
-    lenses: LensMode,
+    mask: Option<&Path>,
+    opts: &LoadOptions,
 ) -> Result<(View, Option<Undistortion>), DataError> {
     let path = images.join(&cam.name);
     let planes =
@@ -294,18 +381,49 @@ fn load_view(
             ),
         ));
     }
-    let [r, g, b, _] = rgba_planes(&planes, &path)?;
-    let full: Vec<[f32; 3]> = (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect();
-    match (distortion, lenses) {
+    let alpha = opts.alpha.unwrap_or(AlphaMode::Ignore);
+    match (distortion, opts.lenses) {
         (Some(d), LensMode::Through) => {
             let cam = Camera {
                 lens: Lens::from_distortion(d),
                 ..cam.clone()
             };
-            undistorted_view(cam, full, None, resolution, &path)
+            photo_view(cam, &planes, &path, mask, None, opts, alpha)
         }
-        (d, _) => undistorted_view(cam.clone(), full, d, resolution, &path),
+        (d, _) => photo_view(cam.clone(), &planes, &path, mask, d, opts, alpha),
     }
+}
+
+/// The view of `cam` and its photo `planes` (read from `path`): its alpha as `alpha`
+/// says, masked by the file `mask` (when given), undistorted through `distortion` (when
+/// given) and scaled to the training resolution.
+fn photo_view(
+    cam: Camera,
+    planes: &crate::io::image_file::Planes,
+    path: &Path,
+    mask: Option<&Path>,
+    distortion: Option<&Distortion>,
+    opts: &LoadOptions,
+    alpha: AlphaMode,
+) -> Result<(View, Option<Undistortion>), DataError> {
+    let rgba = rgba_planes(planes, path)?;
+    let (full, alpha_keep) = alpha.apply(&rgba, opts.background);
+    let size = (cam.width, cam.height);
+    let training = distortion
+        .is_none()
+        .then(|| opts.resolution.size(size.0, size.1));
+    let file_keep = mask
+        .map(|m| masks::read_mask(m, path, size, training))
+        .transpose()?;
+    let keep = masks::both(file_keep, alpha_keep);
+    let (view, how) = undistorted_view(cam, full, keep, distortion, opts.resolution, path)?;
+    if view.mask.as_ref().is_some_and(|m| !m.contains(&true)) {
+        return Err(data_error(
+            mask.unwrap_or(path),
+            "masks every pixel of its photo (at the training resolution); a photo needs a kept pixel",
+        ));
+    }
+    Ok((view, how))
 }
 
 /// `cam` and its photo `full` undistorted through `distortion` (when given; `path` names
@@ -313,17 +431,20 @@ fn load_view(
 fn undistorted_view(
     cam: Camera,
     full: Vec<[f32; 3]>,
+    keep: Option<Vec<f32>>,
     distortion: Option<&Distortion>,
     resolution: Resolution,
     path: &Path,
 ) -> Result<(View, Option<Undistortion>), DataError> {
+    let keep = keep.map(|k| k.iter().map(|&v| [v; 3]).collect::<Vec<_>>());
     let Some(d) = distortion else {
-        return Ok((scaled_view(cam, full, resolution), None));
+        return Ok((scaled_view(cam, full, keep, resolution), None));
     };
     let plan = Undistortion::plan(&cam, d).map_err(|m| data_error(path, m))?;
     let image = plan.apply(&full);
+    let keep = keep.map(|k| plan.apply(&k));
     Ok((
-        scaled_view(plan.camera(&cam), image, resolution),
+        scaled_view(plan.camera(&cam), image, keep, resolution),
         Some(plan),
     ))
 }
@@ -511,6 +632,18 @@ pub fn load_transforms_with(
     background: [f32; 3],
     lenses: LensMode,
 ) -> Result<Dataset, DataError> {
+    let opts = LoadOptions {
+        lenses,
+        background,
+        ..LoadOptions::new(resolution, eval)
+    };
+    load_transforms_from(dir, &opts)
+}
+
+/// [`load_transforms_with`] as `opts` says, with each frame's `mask_path` or the masks in
+/// `masks/` beside its photo's folder.
+fn load_transforms_from(dir: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
+    let LoadOptions { eval, lenses, .. } = *opts;
     let split = dir.join("transforms_train.json").is_file();
     let (train_file, test_file) = if split {
         (
@@ -522,7 +655,7 @@ pub fn load_transforms_with(
     };
     let mut undistorted = Vec::new();
     let read = |file: &Path, undistorted: &mut Vec<Undistortion>| {
-        read_transforms(file, dir, resolution, background, lenses, undistorted)
+        read_transforms(file, dir, opts, undistorted)
     };
     let mut train = read(&train_file, &mut undistorted)?;
     let mut test = Vec::new();
@@ -567,9 +700,7 @@ pub fn load_transforms_with(
 fn read_transforms(
     file: &Path,
     dir: &Path,
-    resolution: Resolution,
-    background: [f32; 3],
-    lenses: LensMode,
+    opts: &LoadOptions,
     undistorted: &mut Vec<Undistortion>,
 ) -> Result<Vec<View>, DataError> {
     let text =
@@ -581,6 +712,8 @@ fn read_transforms(
         .ok_or_else(|| data_error(file, "has no \"frames\" list"))?;
     let num = |v: &serde_json::Value| v.as_f64().filter(|x| x.is_finite());
     let mut views = Vec::with_capacity(frames.len());
+    // Each frame's photo and whether it has a mask.
+    let mut masked: Vec<(PathBuf, bool)> = Vec::with_capacity(frames.len());
     for (i, f) in frames.iter().enumerate() {
         let bad = |m: String| data_error(file, format!("frame {i}: {m}"));
         let rel = f["file_path"]
@@ -610,7 +743,7 @@ fn read_transforms(
         let (w, h) = (planes.width, planes.height);
         // The lens: the camera's own, or (undistorting) the distortion of its photo.
         let value = |k: &str| f.get(k).or_else(|| doc.get(k));
-        let (lens, distortion) = match lenses {
+        let (lens, distortion) = match opts.lenses {
             LensMode::Through => (
                 crate::core::camera::transforms::lens_from_transforms(&value).map_err(bad)?,
                 None,
@@ -685,34 +818,68 @@ fn read_transforms(
                 size.1.map_or("?".into(), |v| v.to_string())
             )));
         }
-        let [r, g, b, a] = rgba_planes(&planes, &path)?;
-        let full: Vec<[f32; 3]> = (0..r.len())
-            .map(|p| {
-                let t = 1.0 - a[p];
-                [
-                    r[p] * a[p] + background[0] * t,
-                    g[p] * a[p] + background[1] * t,
-                    b[p] * a[p] + background[2] * t,
-                ]
-            })
-            .collect();
-        let (view, how) = undistorted_view(camera, full, distortion.as_ref(), resolution, &path)?;
+        let mask = frame_mask(f, dir, &path).map_err(bad)?;
+        masked.push((path.clone(), mask.is_some()));
+        let alpha = opts.alpha.unwrap_or(AlphaMode::Background);
+        let (view, how) = photo_view(
+            camera,
+            &planes,
+            &path,
+            mask.as_deref(),
+            distortion.as_ref(),
+            opts,
+            alpha,
+        )?;
         views.push(view);
         undistorted.extend(how);
     }
+    let have = masked.iter().filter(|(_, m)| *m).count();
+    if let Some((photo, _)) = masked.iter().find(|(_, m)| !m).filter(|_| have > 0) {
+        return Err(masks::missing(
+            photo,
+            "its frame's mask_path or the masks folder beside its folder",
+            have,
+        )
+        .into());
+    }
     Ok(views)
+}
+
+/// The mask of a transforms frame `f` whose photo is `photo`: its `mask_path` (relative
+/// to the data set's folder `dir`), else the photo's in `masks/` beside the photo's
+/// folder, else none.
+fn frame_mask(f: &serde_json::Value, dir: &Path, photo: &Path) -> Result<Option<PathBuf>, String> {
+    if let Some(v) = f.get("mask_path") {
+        let rel = v.as_str().ok_or("its mask_path is not a string")?;
+        return Ok(Some(dir.join(rel)));
+    }
+    let (Some(folder), Some(name)) = (photo.parent(), photo.file_name()) else {
+        return Ok(None);
+    };
+    Ok(masks::masks_dir(folder).and_then(|m| masks::find_mask(&m, &name.to_string_lossy())))
 }
 
 /// `camera` and its photo at `resolution`: the focal lengths and principal point scale with
 /// the image (as [`Camera::with_resolution`]); a lens's coefficients are in normalised
 /// coordinates (Brown-Conrady, fisheye) or angles (equirectangular), so the lens is kept.
-fn scaled_view(cam: Camera, full: Vec<[f32; 3]>, resolution: Resolution) -> View {
+/// The keep plane `keep` (when given) goes the photo's way, then is thresholded at 0.5;
+/// a fisheye's pixels outside its image circle are masked.
+fn scaled_view(
+    cam: Camera,
+    full: Vec<[f32; 3]>,
+    keep: Option<Vec<[f32; 3]>>,
+    resolution: Resolution,
+) -> View {
     let (w, h) = resolution.size(cam.width, cam.height);
-    let image = if (w, h) == (cam.width, cam.height) {
-        full
-    } else {
-        resize(&full, cam.width, cam.height, w, h)
+    let scale = |plane: Vec<[f32; 3]>| {
+        if (w, h) == (cam.width, cam.height) {
+            plane
+        } else {
+            resize(&plane, cam.width, cam.height, w, h)
+        }
     };
+    let image = scale(full);
+    let keep = keep.map(|k| masks::to_flags(&scale(k)));
     let (sx, sy) = (w as f32 / cam.width as f32, h as f32 / cam.height as f32);
     let camera = Camera {
         width: w,
@@ -723,5 +890,13 @@ fn scaled_view(cam: Camera, full: Vec<[f32; 3]>, resolution: Resolution) -> View
         cy: cam.cy * sy,
         ..cam
     };
-    View { camera, image }
+    let mask = match (keep, masks::image_circle(&camera)) {
+        (Some(k), Some(c)) => Some(k.iter().zip(&c).map(|(a, b)| *a && *b).collect()),
+        (k, c) => k.or(c),
+    };
+    View {
+        camera,
+        image,
+        mask,
+    }
 }

@@ -17,6 +17,12 @@
 //! the sums (|x - y|, SSIM, (x - y)^2: 16 bytes) are read back. On CPU devices the window
 //! reads its source through texel views (the same bits; llvmpipe runs a storage-buffer load
 //! in the tap loop as a scalar loop per lane).
+//!
+//! Masks ([`loss_reference_masked`], [`GpuLoss::stage_target_masked`]): the loss of a
+//! masked view is the loss of the render with its masked pixels replaced by the photo's,
+//! L1 and SSIM averaged over the kept pixels only (SSIM's windows still reach across the
+//! mask's edge, where they see the photo); its gradient is zero at every masked pixel. On
+//! the device a masked pixel's target has w = 1 (0 where kept, as without a mask).
 
 use crate::core::shader_interface::{CountsPush, FilterPush, LossGradPush, RecordLayout, SizePush};
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
@@ -69,9 +75,48 @@ pub fn loss_reference(
     channels: usize,
     lambda: f64,
 ) -> (LossValue, Vec<f64>) {
-    let n = image.len().max(1) as f64;
-    let (ssim, g_ssim) =
-        crate::io::metrics::ssim_with_gradient(image, target, width, height, channels);
+    loss_reference_masked(image, target, None, width, height, channels, lambda)
+}
+
+/// [`loss_reference`] with the pixels where `keep` is false masked (`keep` one flag per
+/// pixel): the loss of the image whose masked pixels are the target's, L1, SSIM and the
+/// squared error averaged over the kept pixels (and channels), the gradient zero at the
+/// masked pixels. `None` (or every pixel kept) is [`loss_reference`].
+pub fn loss_reference_masked(
+    image: &[f64],
+    target: &[f64],
+    keep: Option<&[bool]>,
+    width: usize,
+    height: usize,
+    channels: usize,
+    lambda: f64,
+) -> (LossValue, Vec<f64>) {
+    let kept = |i: usize| keep.map_or(true, |k| k[i / channels]);
+    let replaced: Vec<f64>;
+    let image = match keep {
+        None => image,
+        Some(_) => {
+            replaced = (0..image.len())
+                .map(|i| if kept(i) { image[i] } else { target[i] })
+                .collect();
+            &replaced
+        }
+    };
+    let weights: Option<Vec<f64>> =
+        keep.map(|k| k.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect());
+    let n = match keep {
+        None => image.len(),
+        Some(k) => k.iter().filter(|&&b| b).count() * channels,
+    }
+    .max(1) as f64;
+    let (ssim, g_ssim) = crate::io::metrics::ssim_with_gradient_weighted(
+        image,
+        target,
+        width,
+        height,
+        channels,
+        weights.as_deref(),
+    );
     let l1 = image
         .iter()
         .zip(target)
@@ -88,7 +133,11 @@ pub fn loss_reference(
         .iter()
         .zip(target)
         .zip(&g_ssim)
-        .map(|((a, b), gs)| {
+        .enumerate()
+        .map(|(i, ((a, b), gs))| {
+            if !kept(i) {
+                return 0.0;
+            }
             let d = a - b;
             let sign = if d > 0.0 {
                 1.0
@@ -142,10 +191,12 @@ pub struct GpuLoss {
     target_staging: Option<GpuBuffer>,
     /// Bytes of `target_staging` staged and not yet copied.
     target_pending: Option<u64>,
+    /// The kept pixels of the staged target (all of them without a mask).
+    target_kept: u64,
     /// Where [`Self::record_image`]'s submission copies its sums, so that
     /// [`Self::read_value`] needs no submission of its own.
     sums_readback: Option<GpuBuffer>,
-    /// The work buffer the last loss left its sums in, its pixel count and lambda, and
+    /// The work buffer the last loss left its sums in, its kept pixels' count and lambda, and
     /// whether its submission also copied them to `sums_readback`.
     last: Option<(ash::vk::Buffer, u64, f32, bool)>,
 }
@@ -253,6 +304,7 @@ impl GpuLoss {
             io: None,
             target_staging: None,
             target_pending: None,
+            target_kept: 0,
             sums_readback: None,
             last: None,
         })
@@ -312,6 +364,21 @@ impl GpuLoss {
         bufs: &LossBuffers,
         width: u32,
         height: u32,
+        lambda: f32,
+    ) -> GpuResult<&GpuBuffer> {
+        let pixels = u64::from(width) * u64::from(height);
+        self.record_kept(ctx, cmd, bufs, (width, height), pixels, lambda)
+    }
+
+    /// [`Self::record`] of a target whose masked pixels (w 1) are not counted: the means
+    /// are over `kept` pixels.
+    fn record_kept(
+        &mut self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        bufs: &LossBuffers,
+        (width, height): (u32, u32),
+        kept: u64,
         lambda: f32,
     ) -> GpuResult<&GpuBuffer> {
         let pixels = u64::from(width) * u64::from(height);
@@ -410,7 +477,7 @@ impl GpuLoss {
         after_pass(ctx, cmd);
         // filtered (the maps) -> planes (x) -> filtered (y).
         filter(cmd, filtered, planes, 3)?;
-        let n = (pixels * 3) as f32;
+        let n = (kept.max(1) * 3) as f32;
         let push = LossGradPush {
             size: size.size,
             scale: [(1.0 - lambda) / n, lambda / n, 0.0, 0.0],
@@ -489,7 +556,25 @@ impl GpuLoss {
     /// had allocated a staging buffer, converted into a vector, copied that and waited for
     /// a submission of its own.)
     pub fn stage_target(&mut self, ctx: &GpuContext, target: &[[f32; 3]]) -> GpuResult<()> {
+        self.stage_target_masked(ctx, target, None)
+    }
+
+    /// [`Self::stage_target`] with the pixels where `keep` (one flag per pixel) is false
+    /// masked: they add nothing to the loss and get no gradient; the means are over the
+    /// kept pixels. `None`: every pixel kept.
+    pub fn stage_target_masked(
+        &mut self,
+        ctx: &GpuContext,
+        target: &[[f32; 3]],
+        keep: Option<&[bool]>,
+    ) -> GpuResult<()> {
         let pixels = target.len() as u64;
+        if keep.is_some_and(|k| k.len() != target.len()) {
+            return Err(GpuError::InvalidArgument(format!(
+                "the mask has {} pixels, the target {pixels}",
+                keep.map_or(0, <[bool]>::len)
+            )));
+        }
         self.ensure_io(ctx, pixels)?;
         let bytes = pixels * 16;
         if !self
@@ -511,8 +596,14 @@ impl GpuLoss {
             for (d, c) in dst.iter_mut().zip(target) {
                 *d = [c[0], c[1], c[2], 0.0];
             }
+            if let Some(keep) = keep {
+                for (d, k) in dst.iter_mut().zip(keep) {
+                    d[3] = if *k { 0.0 } else { 1.0 };
+                }
+            }
         })?;
         self.target_pending = Some(bytes);
+        self.target_kept = keep.map_or(pixels, |k| k.iter().filter(|&&b| b).count() as u64);
         Ok(())
     }
 
@@ -576,8 +667,9 @@ impl GpuLoss {
                 target: tgt.whole(),
                 grad,
             };
+            let kept = self.target_kept;
             let sums = self
-                .record(ctx, cmd, &bufs, width, height, lambda)?
+                .record_kept(ctx, cmd, &bufs, (width, height), kept, lambda)?
                 .handle();
             // The sums to host-visible memory in this submission (16 bytes).
             if self.sums_readback.is_none() {
@@ -597,7 +689,7 @@ impl GpuLoss {
                     .cmd_copy_buffer(cmd, sums, readback.handle(), &region)
             };
             barrier(ctx, cmd, Access::TransferWrite, Access::HostRead);
-            self.last = Some((sums, pixels, lambda, true));
+            self.last = Some((sums, kept, lambda, true));
             Ok(())
         })();
         self.io = Some(io);
@@ -607,7 +699,7 @@ impl GpuLoss {
     /// The loss of the last [`Self::record_image`] (or [`Self::compute`]), once its
     /// submission has finished.
     pub fn read_value(&self, ctx: &GpuContext) -> GpuResult<LossValue> {
-        let (handle, pixels, lambda, copied) = self
+        let (handle, kept, lambda, copied) = self
             .last
             .ok_or_else(|| GpuError::InvalidArgument("no loss was recorded".into()))?;
         let (_, work) = self
@@ -623,7 +715,7 @@ impl GpuLoss {
             (Some(r), true) => bytemuck::pod_collect_to_vec(r.mapped_range(0, 16)?),
             _ => b.read(ctx, 1)?,
         };
-        let n = (pixels * 3) as f64;
+        let n = (kept.max(1) * 3) as f64;
         Ok(LossValue::of(
             sums[0][0] as f64 / n,
             sums[0][1] as f64 / n,
@@ -645,6 +737,22 @@ impl GpuLoss {
         height: u32,
         lambda: f32,
     ) -> GpuResult<(LossValue, Vec<[f32; 3]>)> {
+        self.compute_masked(ctx, image, target, None, width, height, lambda)
+    }
+
+    /// [`Self::compute`] with the pixels where `keep` is false masked
+    /// ([`Self::stage_target_masked`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn compute_masked(
+        &mut self,
+        ctx: &GpuContext,
+        image: &[[f32; 3]],
+        target: &[[f32; 3]],
+        keep: Option<&[bool]>,
+        width: u32,
+        height: u32,
+        lambda: f32,
+    ) -> GpuResult<(LossValue, Vec<[f32; 3]>)> {
         let pixels = u64::from(width) * u64::from(height);
         if image.len() as u64 != pixels || target.len() as u64 != pixels {
             return Err(GpuError::InvalidArgument(format!(
@@ -653,7 +761,8 @@ impl GpuLoss {
                 target.len()
             )));
         }
-        self.stage_target(ctx, target)?;
+        self.stage_target_masked(ctx, target, keep)?;
+        let kept = self.target_kept;
         let io = self.io.take().expect("made by stage_target");
         let result = (|| {
             let [img, tgt, grad] = &io.1;
@@ -669,13 +778,13 @@ impl GpuLoss {
                 self.record_target_copy(ctx, cmd, tgt);
                 barrier(ctx, cmd, Access::Any, Access::Any);
                 sums = Some(
-                    self.record(ctx, cmd, &bufs, width, height, lambda)?
+                    self.record_kept(ctx, cmd, &bufs, (width, height), kept, lambda)?
                         .handle(),
                 );
                 barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
                 Ok(())
             })?;
-            self.last = sums.map(|h| (h, pixels, lambda, false));
+            self.last = sums.map(|h| (h, kept, lambda, false));
             let value = self.read_value(ctx)?;
             let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
             Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))

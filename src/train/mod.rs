@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod data;
 pub mod device;
 pub mod loss;
+pub mod masks;
 pub mod model;
 pub mod run;
 pub mod undistort;

@@ -18,6 +18,7 @@ use verisplat::io::metrics;
 use verisplat::io::output;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
+use verisplat::train::masks;
 use verisplat::{note, outln};
 
 /// Every `LLFF_HOLD`-th camera (in image-name order, from the first) is a test camera when
@@ -141,6 +142,9 @@ struct ImageRecord {
     psnr: f64,
     ssim: f64,
     flip: f64,
+    /// Scored over the pixels its mask keeps only.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    masked: bool,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -453,6 +457,10 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     if let Some(mean) = &mean {
         print_mean(results.len(), mean);
     }
+    let masked = results.iter().filter(|r| r.masked).count();
+    if masked > 0 {
+        outln!("scored only the unmasked pixels of {masked} photo(s) (their masks in the masks folder beside {})", images.display());
+    }
     let report = EvalReport {
         scene: name.clone(),
         cameras: cameras_file.display().to_string(),
@@ -651,6 +659,8 @@ impl Measure<'_> {
         let photo = image_file::read_image(photo_path)?;
         let truth = photo_rgb(&photo, photo_path, args.background)?;
         let (truth, pw, ph) = self.prep.prepare(cam, truth, (photo.width, photo.height));
+        let keep =
+            super::eval_mask::photo_mask(&self.prep, cam, photo_path, (photo.width, photo.height))?;
         let (w, h) = render_size(cam.width, cam.height, pw, ph).ok_or_else(|| {
             anyhow::anyhow!(
                 "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}{}; a photo may only be smaller by one factor on both sides (images downscaled for training; -r scales photos as train -r did)",
@@ -686,15 +696,24 @@ impl Measure<'_> {
             })
             .collect();
         let (wu, hu) = (w as usize, h as usize);
+        let (psnr, ssim, flip) = match keep.as_deref().filter(|k| k.len() == wu * hu) {
+            Some(k) => masks::masked_metrics(&truth, &render, (wu, hu), k, self.ppd),
+            None => (
+                metrics::psnr(&truth, &render, 1.0),
+                metrics::ssim(&truth, &render, wu, hu, 3),
+                metrics::flip(&truth, &render, wu, hu, self.ppd),
+            ),
+        };
         Ok(ImageRecord {
             frame: k,
             camera: cam.name.clone(),
             photo: photo_path.display().to_string(),
             width: w,
             height: h,
-            psnr: metrics::psnr(&truth, &render, 1.0),
-            ssim: metrics::ssim(&truth, &render, wu, hu, 3),
-            flip: metrics::flip(&truth, &render, wu, hu, self.ppd),
+            psnr,
+            ssim,
+            flip,
+            masked: keep.is_some(),
         })
     }
 }

@@ -6,6 +6,7 @@ pub mod compare;
 pub mod convert;
 pub mod doctor;
 pub mod eval;
+pub mod eval_mask;
 pub mod eval_photo;
 pub mod fit;
 pub mod gen;

@@ -58,6 +58,12 @@ pub(crate) struct TrainArgs {
     /// captures".
     #[arg(long)]
     pub(crate) mip_filter: bool,
+    /// What an RGBA photo's alpha does: ignore (dropped), mask (alpha below 0.5 is not
+    /// trained on) or background (composited onto the training background) [default:
+    /// ignore for a COLMAP data set, background for a transforms one]. Masks in
+    /// DATASET/masks/ (or a frame's mask_path) are read whatever this says.
+    #[arg(long, value_name = "ignore|mask|background", value_parser = verisplat::train::masks::AlphaMode::parse)]
+    pub(crate) alpha_mode: Option<verisplat::train::masks::AlphaMode>,
     /// Iterations after which the model is saved (the last one always is), space- or
     /// comma-separated (7000 30000, as train.py, or 7000,30000).
     #[arg(long, visible_alias = "save_iterations", value_name = "N", num_args = 1.., value_delimiter = ',', default_values_t = [7000u32, 30000])]
@@ -375,16 +381,18 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
     } else {
         LensMode::Through
     };
-    let data = if sets::is_transforms(&args.dataset) {
-        let bg = if args.white_background {
+    let opts = sets::LoadOptions {
+        resolution,
+        eval: args.eval,
+        lenses,
+        background: if args.white_background {
             [1.0; 3]
         } else {
             [0.0; 3]
-        };
-        sets::load_transforms_with(&args.dataset, resolution, args.eval, bg, lenses)?
-    } else {
-        sets::load_colmap_with(&args.dataset, resolution, args.eval, lenses)?
+        },
+        alpha: args.alpha_mode,
     };
+    let data = sets::load(&args.dataset, &opts)?;
     if !args.quiet {
         note!(
             "{}: {} training and {} test images of {}x{}, {}, scene extent {:.3}",
@@ -399,6 +407,9 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
             },
             data.extent
         );
+        if let Some(note) = mask_note(&data) {
+            note!("{note}");
+        }
         let through: Vec<String> = match data.lenses {
             LensMode::Through => data
                 .lens_counts()
@@ -431,6 +442,26 @@ fn load_dataset(args: &TrainArgs) -> Result<Dataset> {
         }
     }
     Ok(data)
+}
+
+/// How many views are masked and what share of their pixels is ignored; `None` when no
+/// view is.
+fn mask_note(data: &Dataset) -> Option<String> {
+    let masked: Vec<&Vec<bool>> = data.views().filter_map(|v| v.mask.as_ref()).collect();
+    if masked.is_empty() {
+        return None;
+    }
+    let total: usize = masked.iter().map(|m| m.len()).sum();
+    let ignored: usize = masked
+        .iter()
+        .map(|m| m.iter().filter(|&&k| !k).count())
+        .sum();
+    Some(format!(
+        "{} of {} views masked ({:.1} % of their pixels ignored by the loss and the densification statistics)",
+        masked.len(),
+        data.views().count(),
+        100.0 * ignored as f64 / total.max(1) as f64
+    ))
 }
 
 /// A note when the undistorted views (at the training resolution) hold many more pixels

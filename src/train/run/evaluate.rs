@@ -66,15 +66,28 @@ fn evaluate_views(
             .collect();
         let gt: Vec<f32> = v.image.iter().flatten().copied().collect();
         let (w, h) = (v.camera.width as usize, v.camera.height as usize);
-        psnr += crate::io::metrics::psnr(&gt, &img, 1.0);
-        ssim += crate::io::metrics::ssim(&gt, &img, w, h, 3);
-        flip += crate::io::metrics::flip(&gt, &img, w, h, crate::io::metrics::flip_default_ppd());
-        l1 += img
-            .iter()
-            .zip(&gt)
-            .map(|(a, b)| (a - b).abs() as f64)
+        let ppd = crate::io::metrics::flip_default_ppd();
+        let Some(keep) = &v.mask else {
+            psnr += crate::io::metrics::psnr(&gt, &img, 1.0);
+            ssim += crate::io::metrics::ssim(&gt, &img, w, h, 3);
+            flip += crate::io::metrics::flip(&gt, &img, w, h, ppd);
+            l1 += img
+                .iter()
+                .zip(&gt)
+                .map(|(a, b)| (a - b).abs() as f64)
+                .sum::<f64>()
+                / img.len() as f64;
+            continue;
+        };
+        // A masked view: its kept pixels only (crate::train::masks).
+        let (p, s, f) = crate::train::masks::masked_metrics(&gt, &img, (w, h), keep, ppd);
+        (psnr, ssim, flip) = (psnr + p, ssim + s, flip + f);
+        let kept = keep.iter().filter(|&&k| k).count().max(1);
+        l1 += (0..img.len())
+            .filter(|i| keep[i / 3])
+            .map(|i| (img[i] - gt[i]).abs() as f64)
             .sum::<f64>()
-            / img.len() as f64;
+            / (3 * kept) as f64;
     }
     let n = views.len().max(1) as f64;
     Ok(Evaluation {

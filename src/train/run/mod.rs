@@ -136,7 +136,26 @@ impl TrainOptions {
             crate::core::model::Rules::Gsplat => "|rules gsplat",
         } + if self.mip_filter { "|mip-filter" } else { "" }
             + &lens_fingerprint(data)
+            + &mask_fingerprint(data)
     }
+}
+
+/// The training views' masks when one has a mask (a masked run resumes only from a
+/// checkpoint of the same masks): a 64-bit FNV-1a hash of every view's flags; empty
+/// otherwise, so that the fingerprints of unmasked data sets stay those of earlier
+/// checkpoints.
+fn mask_fingerprint(data: &Dataset) -> String {
+    if data.train.iter().all(|v| v.mask.is_none()) {
+        return String::new();
+    }
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    for v in &data.train {
+        let flags = v.mask.iter().flatten().map(|&k| u8::from(k) + 1);
+        for byte in flags.chain([0]) {
+            hash = (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    format!("|masks {hash:016x}")
 }
 
 /// The training cameras' lenses when one is not the pinhole (a run through a lens resumes

@@ -89,7 +89,7 @@ impl<'p> Run<'p> {
                 cam.width, cam.height, cam.name, model.len()
             )));
         }
-        loss.stage_target(renderer.ctx(), &view.image)?;
+        loss.stage_target_masked(renderer.ctx(), &view.image, view.mask.as_deref())?;
         let step = Step {
             stats: in_densify && mcmc.is_none(),
             adam: (!densify_now).then(|| model.advance_steps(reset_now)),
@@ -171,10 +171,11 @@ impl<'p> Run<'p> {
         rast.set_shader(model.shader.as_ref())?;
         let (frame, token) = rast.forward(&params, cam, render_opts)?;
         stage_sums.add(rast.renderer().timings().stages());
-        let (value, grad) = loss.compute(
+        let (value, grad) = loss.compute_masked(
             rast.renderer().ctx(),
             &frame.color,
             &view.image,
+            view.mask.as_deref(),
             cam.width,
             cam.height,
             s.lambda_dssim,

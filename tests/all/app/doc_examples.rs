@@ -148,6 +148,11 @@ const CAPS: &[Cap] = &[
         "30,000 iterations",
     ),
     (
+        "verisplat train data/garden -o models/garden-masked --eval -r 4 --alpha-mode mask",
+        &[("--iterations", "50")],
+        "30,000 iterations",
+    ),
+    (
         "verisplat gen --rf dipole dipole.npy",
         &[("--size", "16")],
         "a 64^3 grid",

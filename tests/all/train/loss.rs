@@ -10,7 +10,7 @@
 
 use crate::common::{gpu::assert_validation_clean, Rng};
 use verisplat::core::model::grad::relative_l2;
-use verisplat::train::loss::{loss_reference, GpuLoss, LAMBDA_DSSIM};
+use verisplat::train::loss::{loss_reference, loss_reference_masked, GpuLoss, LAMBDA_DSSIM};
 
 fn image(width: usize, height: usize, seed: u64) -> Vec<f64> {
     let mut rng = Rng(seed);
@@ -142,5 +142,98 @@ fn device_loss_equals_the_reference_and_is_deterministic() {
         .compute(ctx, &[[0.0; 3]; 4], &[[0.0; 3]; 6], 2, 2, LAMBDA_DSSIM)
         .unwrap_err();
     assert!(e.to_string().contains("pixels"), "{e}");
+    assert_validation_clean(&r);
+}
+
+/// A mask (one flag per pixel; a band and scattered pixels masked): the f64 reference's
+/// gradient is the finite differences' of its loss, zero at every masked pixel (whose
+/// values change nothing), and the device's loss and gradient equal the reference's with
+/// the tolerances above; a mask keeping every pixel gives the unmasked bits.
+#[test]
+fn a_masked_loss_ignores_its_masked_pixels_on_the_device_as_in_the_reference() {
+    let (w, h) = (23, 17);
+    let (x, y) = (image(w, h, 5), image(w, h, 6));
+    let keep: Vec<bool> = (0..w * h).map(|p| !((p % w) < 7 || p % 11 == 0)).collect();
+    let lambda = LAMBDA_DSSIM as f64;
+    let masked = |x: &[f64]| loss_reference_masked(x, &y, Some(&keep), w, h, 3, lambda);
+    let (value, grad) = masked(&x);
+    let step = 1e-6;
+    let fd: Vec<f64> = (0..x.len())
+        .map(|i| {
+            let (mut plus, mut minus) = (x.clone(), x.clone());
+            plus[i] += step;
+            minus[i] -= step;
+            (masked(&plus).0.total - masked(&minus).0.total) / (2.0 * step)
+        })
+        .collect();
+    let err = relative_l2(&grad, &fd);
+    eprintln!("masked loss gradient: relative L2 error {err:.2e} against finite differences");
+    assert!(err < 1e-6, "relative L2 error {err:e}");
+    for (i, g) in grad.iter().enumerate() {
+        if !keep[i / 3] {
+            assert_eq!(*g, 0.0, "value {i} is masked");
+        }
+    }
+    // The masked pixels' values change nothing.
+    let mut other = x.clone();
+    for (i, v) in other.iter_mut().enumerate() {
+        if !keep[i / 3] {
+            *v = 1.0 - *v;
+        }
+    }
+    assert_eq!(masked(&other).0, value);
+    // L1 is the mean over the kept pixels.
+    let kept = keep.iter().filter(|&&k| k).count();
+    let l1: f64 = (0..x.len())
+        .filter(|i| keep[i / 3])
+        .map(|i| (x[i] - y[i]).abs())
+        .sum::<f64>()
+        / (3 * kept) as f64;
+    assert!((value.l1 - l1).abs() < 1e-12, "{} vs {l1}", value.l1);
+    // The device.
+    let r = crate::common::gpu::renderer();
+    let ctx = r.ctx();
+    let mut loss = GpuLoss::new(ctx).unwrap();
+    let rgb = |v: &[f64]| -> Vec<[f32; 3]> {
+        v.chunks_exact(3)
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect()
+    };
+    let (gx, gy) = (rgb(&x), rgb(&y));
+    let x32: Vec<f64> = gx.iter().flatten().map(|&v| v as f64).collect();
+    let y32: Vec<f64> = gy.iter().flatten().map(|&v| v as f64).collect();
+    let (want, want_grad) = loss_reference_masked(&x32, &y32, Some(&keep), w, h, 3, lambda);
+    let (got, g) = loss
+        .compute_masked(ctx, &gx, &gy, Some(&keep), w as u32, h as u32, LAMBDA_DSSIM)
+        .unwrap();
+    eprintln!("masked: device {got:?}, reference {want:?}");
+    assert!((got.l1 - want.l1).abs() <= 1e-5 * want.l1);
+    assert!((got.ssim - want.ssim).abs() <= 1e-5);
+    assert!((got.mse - want.mse).abs() <= 1e-5 * want.mse);
+    let g64: Vec<f64> = g.iter().flatten().map(|&v| v as f64).collect();
+    let err = relative_l2(&g64, &want_grad);
+    eprintln!("masked: device gradient relative L2 error {err:.2e}");
+    assert!(err <= 1e-3, "relative L2 error {err:e}");
+    assert!(g.iter().zip(&keep).all(|(v, &k)| k || v == &[0.0; 3]));
+    let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+    // The window through storage buffers and through texel views: the same bits.
+    for texel in [false, true] {
+        let mut other = GpuLoss::with_texel_fetch(ctx, texel).unwrap();
+        let (v, g2) = other
+            .compute_masked(ctx, &gx, &gy, Some(&keep), w as u32, h as u32, LAMBDA_DSSIM)
+            .unwrap();
+        assert_eq!(v.total.to_bits(), got.total.to_bits());
+        assert_eq!(bits(&g2), bits(&g), "texel views {texel}");
+    }
+    // Every pixel kept: the unmasked loss's bits.
+    let all = vec![true; w * h];
+    let (a, ga) = loss
+        .compute(ctx, &gx, &gy, w as u32, h as u32, LAMBDA_DSSIM)
+        .unwrap();
+    let (b, gb) = loss
+        .compute_masked(ctx, &gx, &gy, Some(&all), w as u32, h as u32, LAMBDA_DSSIM)
+        .unwrap();
+    assert_eq!(a.total.to_bits(), b.total.to_bits());
+    assert_eq!(bits(&ga), bits(&gb));
     assert_validation_clean(&r);
 }

@@ -7,6 +7,7 @@ mod gradients;
 mod gsplat_rules;
 mod lens_gradients;
 mod loss;
+mod masks;
 mod mip_filter;
 mod training;
 mod undistort;

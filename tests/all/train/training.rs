@@ -474,8 +474,8 @@ fn a_nerf_synthetic_data_set_reads_back_and_trains() {
 /// The library loop of the device-versus-host tests: a data set made here, a rasterizer
 /// with the validation layer on, and the loss.
 pub(super) struct Harness {
-    dir: tempfile::TempDir,
-    dataset: verisplat::train::data::Dataset,
+    pub(super) dir: tempfile::TempDir,
+    pub(super) dataset: verisplat::train::data::Dataset,
     rast: verisplat::render::backward::differentiable::DiffRasterizer,
     loss: verisplat::train::loss::GpuLoss,
 }
