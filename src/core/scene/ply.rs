@@ -124,6 +124,20 @@ pub const RULES_COMMENT: &str = "verisplat rules";
 /// opacities: `comment verisplat mip-filter 3d` ([`Scene::mip_filter`]).
 pub const MIP_FILTER_COMMENT: &str = "verisplat mip-filter";
 
+/// The value of a `comment verisplat mip-filter` line: "3d" is the only one written.
+#[derive(Default)]
+struct MipFilterMark(bool);
+
+impl std::str::FromStr for MipFilterMark {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "3d" => Ok(MipFilterMark(true)),
+            _ => Err("the only mip-filter verisplat writes is \"3d\"".into()),
+        }
+    }
+}
+
 impl Header {
     /// The element called `name`, if the header declares one.
     pub(crate) fn element(&self, name: &str) -> Option<&Element> {
@@ -144,21 +158,7 @@ impl Header {
     /// Whether a `comment verisplat mip-filter 3d` line says the 3D filter is folded in; any
     /// other value is an error naming the line.
     pub(crate) fn mip_filter(&self, path: &Path) -> Result<bool, SceneError> {
-        let mut folded = false;
-        for (line, text) in &self.comments {
-            let words: Vec<&str> = text.split_whitespace().collect();
-            if words.len() < 2 || words[..2].join(" ") != MIP_FILTER_COMMENT {
-                continue;
-            }
-            if words[2..] != ["3d"] {
-                return Err(SceneError::invalid(
-                    path,
-                    format!("header line {line}: \"comment {text}\": the only mip-filter verisplat writes is \"3d\""),
-                ));
-            }
-            folded = true;
-        }
-        Ok(folded)
+        Ok(self.recorded::<MipFilterMark>(path, MIP_FILTER_COMMENT)?.0)
     }
 
     /// The value the last `comment PREFIX VALUE` line records (the default without one); a

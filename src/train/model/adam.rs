@@ -126,9 +126,10 @@ impl Model {
             for (i, &f) in filters.iter().enumerate() {
                 let sc = s.log_scales[i].map(f32::exp);
                 let p = sigmoid(s.opacity_logits[i]);
-                let (_, factor) = super::mip::filtered(sc, f);
+                let (filtered, factor) = super::mip::filtered(sc, f);
                 let g_op = grads.opacities[i];
-                let g = super::mip::log_scale_grads(grads.scales[i], g_op, p * factor, sc, f);
+                let g =
+                    super::mip::log_scale_grads(grads.scales[i], g_op, p * factor, sc, f, filtered);
                 g_log[i * 3..i * 3 + 3].copy_from_slice(&g);
                 g_logit[i] = g_op * factor * p * (1.0 - p);
             }

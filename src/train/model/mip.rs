@@ -28,7 +28,7 @@ pub const RECOMPUTE_INTERVAL: u32 = 100;
 
 /// Each centre's filter (a standard deviation, world units) from the training cameras
 /// `cameras` (module docs).
-pub fn filters(positions: &[[f32; 3]], cameras: &[Camera]) -> Vec<f32> {
+pub fn filters(positions: &[[f32; 3]], cameras: &[&Camera]) -> Vec<f32> {
     let focal = cameras
         .iter()
         .map(|c| f64::from(c.fx))
@@ -76,7 +76,8 @@ pub fn filtered(s: [f32; 3], f: f32) -> ([f32; 3], f32) {
 
 /// The gradients of the log scales and of the activated opacity's factor through the
 /// filter: from the gradients `g_scale` of the filtered scales and `g_opacity` of the
-/// filtered opacity `opacity` (filtered), for scales `s` and filter `f`. Returns the
+/// filtered opacity `opacity` (filtered), for scales `s`, filter `f` and the filtered
+/// scales `filtered` ([`filtered`]'s, which the caller has made for the opacity). Returns the
 /// gradients of the log scales (d filtered scale / d log scale = s^2 / filtered scale;
 /// d log(opacity) / d log scale = f^2 / (s^2 + f^2)).
 pub fn log_scale_grads(
@@ -85,9 +86,9 @@ pub fn log_scale_grads(
     opacity: f32,
     s: [f32; 3],
     f: f32,
+    filtered: [f32; 3],
 ) -> [f32; 3] {
     let f2 = f * f;
-    let (filtered, _) = filtered(s, f);
     [0, 1, 2].map(|a| {
         let sq = s[a] * s[a];
         g_scale[a] * (sq / filtered[a]) + g_opacity * opacity * (f2 / (sq + f2))
@@ -139,7 +140,7 @@ mod tests {
         // 100/3 and 32 + 200/6 ~ 65.3: within 15 % outside), one far off axis (unseen).
         let f = filters(
             &[[0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [100.0, 0.0, 0.0]],
-            &cams,
+            &[&cams[0], &cams[1]],
         );
         let k = 0.2f64.sqrt() / 200.0;
         assert!((f[0] as f64 - 2.0 * k).abs() < 1e-9, "{f:?}");
@@ -176,6 +177,7 @@ mod tests {
             (p as f32) * factor,
             s,
             f,
+            out,
         );
         for a in 0..3 {
             let h = 1e-6;

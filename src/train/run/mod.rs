@@ -306,7 +306,7 @@ impl<'a> Job<'a> {
 
     /// Mip-Splatting's 3D filter of centres `positions` from the training cameras.
     fn mip_filters(&self, positions: &[[f32; 3]]) -> Vec<f32> {
-        let cams: Vec<_> = self.data.train.iter().map(|v| v.camera.clone()).collect();
+        let cams: Vec<_> = self.data.train.iter().map(|v| &v.camera).collect();
         crate::train::model::mip::filters(positions, &cams)
     }
 }

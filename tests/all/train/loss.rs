@@ -87,15 +87,8 @@ fn device_loss_equals_the_reference_and_is_deterministic() {
     // Odd sizes below and above the window, and one of several reduction rounds.
     for (w, h) in [(7, 5), (37, 23), (300, 160)] {
         let (x, y) = (image(w, h, 10 + w as u64), image(w, h, 20 + h as u64));
-        let rgb = |v: &[f64]| -> Vec<[f32; 3]> {
-            v.chunks_exact(3)
-                .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
-                .collect()
-        };
-        let (gx, gy) = (rgb(&x), rgb(&y));
         // The reference on the f32 values the device sees.
-        let x32: Vec<f64> = gx.iter().flatten().map(|&v| v as f64).collect();
-        let y32: Vec<f64> = gy.iter().flatten().map(|&v| v as f64).collect();
+        let ((gx, x32), (gy, y32)) = (device_rgb(&x), device_rgb(&y));
         let (want, want_grad) = loss_reference(&x32, &y32, w, h, 3, LAMBDA_DSSIM as f64);
         let (got, grad) = loss
             .compute(ctx, &gx, &gy, w as u32, h as u32, LAMBDA_DSSIM)
@@ -194,14 +187,7 @@ fn a_masked_loss_ignores_its_masked_pixels_on_the_device_as_in_the_reference() {
     let r = crate::common::gpu::renderer();
     let ctx = r.ctx();
     let mut loss = GpuLoss::new(ctx).unwrap();
-    let rgb = |v: &[f64]| -> Vec<[f32; 3]> {
-        v.chunks_exact(3)
-            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
-            .collect()
-    };
-    let (gx, gy) = (rgb(&x), rgb(&y));
-    let x32: Vec<f64> = gx.iter().flatten().map(|&v| v as f64).collect();
-    let y32: Vec<f64> = gy.iter().flatten().map(|&v| v as f64).collect();
+    let ((gx, x32), (gy, y32)) = (device_rgb(&x), device_rgb(&y));
     let (want, want_grad) = loss_reference_masked(&x32, &y32, Some(&keep), w, h, 3, lambda);
     let (got, g) = loss
         .compute_masked(ctx, &gx, &gy, Some(&keep), w as u32, h as u32, LAMBDA_DSSIM)
@@ -236,4 +222,15 @@ fn a_masked_loss_ignores_its_masked_pixels_on_the_device_as_in_the_reference() {
     assert_eq!(a.total.to_bits(), b.total.to_bits());
     assert_eq!(bits(&ga), bits(&gb));
     assert_validation_clean(&r);
+}
+
+/// An image of f64 values as the device's f32 pixels, and those f32 values in f64 (what
+/// the reference is given, so that it sees what the device sees).
+fn device_rgb(v: &[f64]) -> (Vec<[f32; 3]>, Vec<f64>) {
+    let px: Vec<[f32; 3]> = v
+        .chunks_exact(3)
+        .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+        .collect();
+    let back = px.iter().flatten().map(|&v| v as f64).collect();
+    (px, back)
 }

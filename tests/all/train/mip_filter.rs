@@ -2,9 +2,7 @@
 //! recomputed through a densification, an opacity reset and the schedule after it, and
 //! saved folded into the scene with a mark that every reader keeps.
 
-use super::training::{
-    assert_groups_agree, device_vs_host_options, model_ply, worst_loss_difference, Harness,
-};
+use super::training::{device_vs_host_options, model_ply, worst_loss_difference, Harness};
 use crate::common::cli::verisplat;
 use crate::common::dataset::make_dataset;
 
@@ -24,21 +22,9 @@ fn the_3d_filter_steps_on_the_device_as_on_the_host_and_is_saved_folded() {
     opts.settings.densify_until_iter = 100;
     opts.settings.opacity_reset_interval = 90;
     opts.mip_filter = true;
-    let (dev, dev_losses, at) = h.train("device", &opts, false);
-    let (dev_scene, dev_bytes) = model_ply(&at);
-    let (host, host_losses, at) = h.train("host", &opts, true);
-    let (host_scene, _) = model_ply(&at);
-    let (_, again_bytes) = model_ply(&h.train("device-again", &opts, false).2);
-    assert!(
-        dev_bytes == again_bytes,
-        "two device runs wrote different models"
-    );
-    assert_eq!(dev.gaussians, host.gaussians, "Gaussians after densifying");
-    let worst_loss = worst_loss_difference(&dev_losses, &host_losses);
-    eprintln!("largest relative loss difference per iteration: {worst_loss:.2e}");
-    assert!(worst_loss < 1e-3, "{worst_loss}");
-    assert_groups_agree(&dev_scene, &host_scene, 5e-3);
-    assert!(dev_scene.mip_filter && host_scene.mip_filter);
+    let dev = h.assert_device_follows_host(&opts);
+    let (dev_scene, dev_bytes, dev_losses) = (&dev.scene, &dev.bytes, &dev.losses);
+    assert!(dev_scene.mip_filter && dev.host_scene.mip_filter);
     let text = String::from_utf8_lossy(&dev_bytes[..200]);
     assert!(
         text.contains("\ncomment verisplat mip-filter 3d\n"),
@@ -49,7 +35,7 @@ fn the_3d_filter_steps_on_the_device_as_on_the_host_and_is_saved_folded() {
     let (_, plain_losses, at) = h.train("plain", &opts, false);
     let (plain_scene, _) = model_ply(&at);
     assert!(!plain_scene.mip_filter);
-    let differs = worst_loss_difference(&plain_losses, &dev_losses);
+    let differs = worst_loss_difference(&plain_losses, dev_losses);
     eprintln!("loss without the filter: relative difference up to {differs:.2e}");
     assert!(differs > 1e-4, "the filter changes what the renders see");
     // The filter keeps every Gaussian at least as wide as the photos resolve: the
@@ -61,7 +47,7 @@ fn the_3d_filter_steps_on_the_device_as_on_the_host_and_is_saved_folded() {
             .copied()
             .fold(f32::INFINITY, f32::min)
     };
-    let (with, without) = (smallest(&dev_scene), smallest(&plain_scene));
+    let (with, without) = (smallest(dev_scene), smallest(&plain_scene));
     eprintln!("smallest log scale: {with:.3} with the filter, {without:.3} without");
     assert!(with > without, "{with} {without}");
     h.assert_validation_clean();

@@ -541,9 +541,50 @@ impl Harness {
         (report, losses, at)
     }
 
+    /// Trains with `opts` on the device twice and with the host optimiser once, and asserts
+    /// what a device run through densification keeps of the host's: the two device runs
+    /// write the same bytes, the Gaussian counts are equal, each iteration's loss agrees to
+    /// 1e-3 and every parameter group to 5e-3 (relative). Returns the device run.
+    pub(super) fn assert_device_follows_host(
+        &mut self,
+        opts: &verisplat::train::run::TrainOptions,
+    ) -> DeviceRun {
+        let (dev, losses, at) = self.train("device", opts, false);
+        let (scene, bytes) = model_ply(&at);
+        let (host, host_losses, at) = self.train("host", opts, true);
+        let (host_scene, _) = model_ply(&at);
+        let (_, again_bytes) = model_ply(&self.train("device-again", opts, false).2);
+        assert!(
+            bytes == again_bytes,
+            "two device runs wrote different models"
+        );
+        assert_eq!(dev.gaussians, host.gaussians, "Gaussians after densifying");
+        let worst_loss = worst_loss_difference(&losses, &host_losses);
+        eprintln!("largest relative loss difference per iteration: {worst_loss:.2e}");
+        assert!(worst_loss < 1e-3, "{worst_loss}");
+        assert_groups_agree(&scene, &host_scene, 5e-3);
+        DeviceRun {
+            gaussians: dev.gaussians,
+            losses,
+            scene,
+            bytes,
+            host_scene,
+        }
+    }
+
     pub(super) fn assert_validation_clean(&mut self) {
         crate::common::gpu::assert_validation_clean(self.rast.renderer());
     }
+}
+
+/// What [`Harness::assert_device_follows_host`] returns: the device run's Gaussian count,
+/// its loss at each iteration, its saved scene and PLY bytes, and the host run's scene.
+pub(super) struct DeviceRun {
+    pub(super) gaussians: usize,
+    pub(super) losses: Vec<f64>,
+    pub(super) scene: verisplat::core::scene::Scene,
+    pub(super) bytes: Vec<u8>,
+    pub(super) host_scene: verisplat::core::scene::Scene,
 }
 
 /// The scene and the bytes of the PLY in a model folder.
@@ -647,21 +688,8 @@ fn densification_and_a_reset_on_the_device_follow_the_host_optimiser() {
     let mut opts = device_vs_host_options();
     let (short_dev, _) = model_ply(&h.train("device-30", &opts, false).2);
     opts.settings.iterations = 160;
-    let (dev, dev_losses, at) = h.train("device", &opts, false);
-    let (dev_scene, dev_bytes) = model_ply(&at);
-    let (host, host_losses, at) = h.train("host", &opts, true);
-    let (host_scene, _) = model_ply(&at);
-    let (_, again_bytes) = model_ply(&h.train("device-again", &opts, false).2);
-    assert!(
-        dev_bytes == again_bytes,
-        "two device runs wrote different models"
-    );
-    assert_eq!(dev.gaussians, host.gaussians, "Gaussians after densifying");
+    let dev = h.assert_device_follows_host(&opts);
     assert_ne!(dev.gaussians, short_dev.len(), "the run densified");
-    let worst_loss = worst_loss_difference(&dev_losses, &host_losses);
-    eprintln!("largest relative loss difference per iteration: {worst_loss:.2e}");
-    assert!(worst_loss < 1e-3, "{worst_loss}");
-    assert_groups_agree(&dev_scene, &host_scene, 5e-3);
     h.assert_validation_clean();
 }
 
