@@ -2,6 +2,7 @@
 //! and the CPU reference renderer ([`bench_cpu`], wall clock per phase).
 
 use super::camera::BenchCamera;
+use super::pairs::{pair_stats, BinLists};
 use super::report::BenchReport;
 use super::{per_second, push_stage_samples, stage_reports, Stat};
 use crate::core::model::{ActivatedScene, RenderOptions};
@@ -59,8 +60,8 @@ pub fn bench_gpu(
     }
     let stats = renderer.stats().clone();
     // Counted from one more frame's lists, which a frame in chunks does not keep.
-    let evaluations = if stats.chunks > 1 {
-        0
+    let (evaluations, pair_stats) = if stats.chunks > 1 {
+        (0, None)
     } else {
         let (_, inter) = renderer
             .render(&FrameRequest::new(&gpu_scene, cam, opts).readback(Readback::Intermediates))
@@ -76,10 +77,20 @@ pub fn bench_gpu(
             })
             .collect();
         let (bins_x, size) = (inter.bins.0, inter.bin_size);
-        cpu::count_evaluations(&projected, cam, opts.kernel, opts.rules, |x, y| {
-            let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
-            &inter.values[a as usize..b as usize]
-        })
+        let evaluations =
+            cpu::count_evaluations(&projected, cam, opts.kernel, opts.rules, |x, y| {
+                let [a, b] = inter.ranges[((y / size) * bins_x + x / size) as usize];
+                &inter.values[a as usize..b as usize]
+            });
+        let lists = BinLists {
+            size,
+            bins_x,
+            ranges: &inter.ranges,
+            values: &inter.values,
+        };
+        let visible = u64::from(stats.visible);
+        let pairs = pair_stats(&projected, cam, opts.kernel, opts.rules, &lists, visible);
+        (evaluations, Some(pairs))
     };
     let info = renderer.ctx().info();
     let stages = stage_reports(stage_samples);
@@ -113,6 +124,7 @@ pub fn bench_gpu(
         sort_keys_per_s: 0.0,
         blend_evaluations: evaluations,
         blend_evaluations_per_s: 0.0,
+        pair_stats,
     };
     report.sort_keys_per_s = per_second(report.pairs, report.median("sort"));
     report.blend_evaluations_per_s = per_second(evaluations, report.median("blend"));
@@ -158,6 +170,13 @@ pub fn bench_cpu(
         &sorted_values[a as usize..b as usize]
     });
     let visible = projected.iter().filter(|p| p.tiles_touched() > 0).count() as u64;
+    let lists = BinLists {
+        size: cpu::TILE_SIZE,
+        bins_x: tx,
+        ranges: &ranges,
+        values: &sorted_values,
+    };
+    let pairs_of_frame = pair_stats(&projected, cam, opts.kernel, opts.rules, &lists, visible);
     let stages = stage_reports(stage_samples);
     let wall_ms = Stat::of(&wall);
     let mut report = BenchReport {
@@ -189,6 +208,7 @@ pub fn bench_cpu(
         sort_keys_per_s: 0.0,
         blend_evaluations: evaluations,
         blend_evaluations_per_s: 0.0,
+        pair_stats: Some(pairs_of_frame),
     };
     report.sort_keys_per_s = per_second(report.pairs, report.median("sort"));
     report.blend_evaluations_per_s = per_second(evaluations, report.median("blend"));

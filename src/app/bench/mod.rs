@@ -4,13 +4,14 @@
 //!
 //! This module holds the timing summaries shared by every benchmark ([`Stat`],
 //! [`StageReport`]); the rooms below it hold the camera being timed (`camera`), the
-//! forward benchmarks (`forward`) and their report with its text, JSON and CSV forms
+//! forward benchmarks (`forward`), the statistics of a frame's pairs (`pairs`) and their report with its text, JSON and CSV forms
 //! (`report`), the backward benchmark (`backward`), the command line's value parsers
 //! (`parse`) and the SVG plots of a sweep (`plot`).
 
 mod backward;
 mod camera;
 mod forward;
+mod pairs;
 mod parse;
 mod plot;
 mod report;
@@ -18,6 +19,7 @@ mod report;
 pub use backward::{backward_to_json, bench_backward, BackwardReport};
 pub use camera::{BenchCamera, CameraReport};
 pub use forward::{bench_cpu, bench_gpu};
+pub use pairs::PairStats;
 pub use parse::{parse_count, parse_resolution};
 pub use plot::plot_sweep;
 pub use report::{summary_table, to_csv, to_json, BenchReport};

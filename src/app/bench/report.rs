@@ -2,7 +2,7 @@
 //! document, the CSV rows and the one-line-per-run summary of a sweep.
 
 use super::camera::{describe_camera, CameraReport};
-use super::{StageReport, Stat, JSON_SCHEMA_VERSION};
+use super::{PairStats, StageReport, Stat, JSON_SCHEMA_VERSION};
 use serde::Serialize;
 
 /// A benchmark of one scene and camera.
@@ -66,6 +66,9 @@ pub struct BenchReport {
     pub blend_evaluations: u64,
     /// `blend_evaluations` per second at the median blend time.
     pub blend_evaluations_per_s: f64,
+    /// How one frame's pairs fall per bin and how many of them can draw; absent when not
+    /// counted (a frame in chunks, whose lists are not kept).
+    pub pair_stats: Option<PairStats>,
 }
 
 impl BenchReport {
@@ -132,6 +135,18 @@ impl BenchReport {
             "frames/s (median wall clock) {:.2}\nvisible Gaussians {}, tile pairs {}, key bits {}\nsort {:.3e} keys/s, blend {} pixel-Gaussian evaluations, {:.3e}/s\n",
             self.fps, self.visible, self.pairs, self.key_bits, self.sort_keys_per_s, self.blend_evaluations, self.blend_evaluations_per_s
         );
+        if let Some(p) = &self.pair_stats {
+            out += &format!(
+                "pairs: {:.2} per visible Gaussian; per {s}x{s} bin ({} bins) max {}, p99 {}; {} can draw (some pixel centre gets alpha >= 1/255), {:.3}x sorted per drawing pair\n",
+                p.per_visible,
+                p.bins,
+                p.per_bin_max,
+                p.per_bin_p99,
+                p.drawing,
+                self.pairs as f64 / p.drawing.max(1) as f64,
+                s = p.bin_size,
+            );
+        }
         if self.chunks > 1 {
             out += &format!(
                 "frame keyed and blended in {} depth-ordered chunks (blend evaluations not counted)\n",

@@ -389,6 +389,53 @@ fn bench_section(md: &mut String, dir: &Path) {
         md,
         "\nMedians of device timestamps over {frames} measured frames (warm-up discarded).\n"
     );
+    pairs_table(md, &forward);
+}
+
+/// The forward frames' pairs (`pair_stats` of `verisplat bench --json`): how many are
+/// sorted, how many of them can draw, and how they fall per bin.
+fn pairs_table(md: &mut String, forward: &[Value]) {
+    let counted: Vec<&Value> = forward
+        .iter()
+        .filter(|r| r.get("pair_stats").is_some_and(|p| !p.is_null()))
+        .collect();
+    if counted.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "| scene | Gaussians | resolution | pairs sorted | per visible Gaussian | sorted / can draw | bin | pairs per bin: max | p99 |"
+    );
+    let _ = writeln!(md, "|---|--:|---|--:|--:|--:|--:|--:|--:|");
+    for r in counted {
+        let p = &r["pair_stats"];
+        let pairs = num(r, &["pairs"]);
+        let drawing = num(p, &["drawing"]);
+        let ratio = pairs.zip(drawing).map(|(a, b)| a / b.max(1.0));
+        let name = Path::new(text(r, "scene"))
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default()
+            .to_string();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {}x{} | {} | {} | {} | {} px | {} | {} |",
+            name,
+            grouped(num(r, &["gaussians"]).unwrap_or(0.0) as u64),
+            fmt(num(r, &["width"]), 0),
+            fmt(num(r, &["height"]), 0),
+            grouped(pairs.unwrap_or(0.0) as u64),
+            fmt(num(p, &["per_visible"]), 2),
+            fmt(ratio, 3),
+            fmt(num(p, &["bin_size"]), 0),
+            grouped(num(p, &["per_bin_max"]).unwrap_or(0.0) as u64),
+            grouped(num(p, &["per_bin_p99"]).unwrap_or(0.0) as u64),
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nA pair can draw when some pixel centre of its bin gets alpha >= 1/255 from the Gaussian (counted on the host from one frame's lists; frames in chunks are not counted).\n"
+    );
 }
 
 fn train_section(md: &mut String, dir: &Path) {

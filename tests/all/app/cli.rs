@@ -381,7 +381,15 @@ fn bench_reports_every_stage() {
         "{out}"
     );
     let o = verisplat(&["bench", "--demo", "--frames", "2", "--cpu"]);
-    assert!(o.status.success() && String::from_utf8_lossy(&o.stdout).contains("CPU reference"));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && out.contains("CPU reference"), "{out}");
+    // The reference sorts every tile of each rectangle, so it names pairs that cannot draw.
+    let sorted_per_drawing = out
+        .split("can draw (some pixel centre gets alpha >= 1/255), ")
+        .nth(1)
+        .and_then(|s| s.split('x').next())
+        .and_then(|s| s.parse::<f64>().ok());
+    assert!(sorted_per_drawing.is_some_and(|r| r > 1.05), "{out}");
     let o = verisplat(&["bench", "--demo", "--frames", "0"]);
     assert!(!o.status.success() && stderr(&o).contains("--frames"));
 }
@@ -496,6 +504,26 @@ fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
             && report["vulkan"].as_str().unwrap().starts_with('1')
     );
     assert!(report["pairs"].as_u64().unwrap() > 1000 && report["visible"].as_u64().unwrap() > 100);
+    // Only pairs that can draw are sorted (issue 60): the host's own count of the pairs of
+    // which some pixel centre of the bin gets alpha >= 1/255 is within 1 % of the pairs
+    // sorted (the device's test is conservative: it never drops a drawing pair).
+    let p = &report["pair_stats"];
+    let pairs = report["pairs"].as_u64().unwrap();
+    let drawing = p["drawing"].as_u64().unwrap();
+    assert!(
+        drawing <= pairs && drawing as f64 >= 0.99 * pairs as f64,
+        "{p}"
+    );
+    let (max, p99) = (
+        p["per_bin_max"].as_u64().unwrap(),
+        p["per_bin_p99"].as_u64().unwrap(),
+    );
+    assert!(max >= p99 && p99 > 0 && max < pairs, "{p}");
+    let per_visible = pairs as f64 / report["visible"].as_f64().unwrap();
+    assert!(
+        (p["per_visible"].as_f64().unwrap() - per_visible).abs() < 1e-9,
+        "{p}"
+    );
     // The stage times add up to about the frame (timestamps bracket each stage; the
     // barriers between stages take the rest). Medians are taken per stage, so under a
     // loaded machine (tests run in parallel) their sum can stray from the frame's median.

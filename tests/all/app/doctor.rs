@@ -168,6 +168,8 @@ fn the_gpu_bundle_runs_in_a_clean_environment() {
         "**Doctor: every check passed.**",
         "| playbot_lod3_31k_sh2.spz | 1 |",
         "Every step succeeded.",
+        // The bench's pairs (issue 60): sorted, per visible Gaussian, how many can draw.
+        "| scene | Gaussians | resolution | pairs sorted | per visible Gaussian | sorted / can draw |",
     ] {
         assert!(md.contains(needed), "the report lacks {needed:?}:\n{md}");
     }
