@@ -87,9 +87,9 @@ pub fn pair_stats(
     }
 }
 
-/// Whether some pixel centre of bin `bin` (of side `size`, within the image) gets alpha
-/// >= 1/255 from `g`: the blend's own evaluation (`cpu::blend_pixel_steps`) of power,
-/// falloff and the rules' alpha cap.
+/// Whether some pixel centre of bin `bin` (of side `size`, within the image) gets an alpha
+/// of at least 1/255 from `g`: the blend's own evaluation (`cpu::blend_pixel_steps`) of
+/// power, falloff and the rules' alpha cap.
 fn draws_in(
     g: &Projected,
     bin: [u32; 2],
