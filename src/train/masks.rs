@@ -209,6 +209,20 @@ pub(super) fn missing(photo: &Path, masks: &str, others: usize) -> MaskError {
     )
 }
 
+/// PSNR (peak 1) of RGB-interleaved `test` against `reference` over the pixels `keep` keeps
+/// (every pixel when `None`).
+pub fn masked_psnr(reference: &[f32], test: &[f32], keep: Option<&[bool]>) -> f64 {
+    let Some(keep) = keep else {
+        return crate::io::metrics::psnr(reference, test, 1.0);
+    };
+    let kept = keep.iter().filter(|&&k| k).count().max(1);
+    let squared: f64 = (0..test.len())
+        .filter(|i| keep[i / 3])
+        .map(|i| ((test[i] - reference[i]) as f64).powi(2))
+        .sum();
+    crate::io::metrics::psnr_from_mse(squared / (3 * kept) as f64, 1.0)
+}
+
 /// PSNR, SSIM and FLIP of `test` against `reference` (`H x W x 3`, `width x height`) over
 /// the pixels `keep` keeps: the test image's masked pixels are the reference's (so no
 /// window reaches a difference there), PSNR is of the mean squared error over the kept
@@ -224,12 +238,8 @@ pub fn masked_metrics(
     let test: Vec<f32> = (0..test.len())
         .map(|i| if keep[i / 3] { test[i] } else { reference[i] })
         .collect();
+    let psnr = masked_psnr(reference, &test, Some(keep));
     let kept = keep.iter().filter(|&&k| k).count().max(1);
-    let squared: f64 = (0..test.len())
-        .filter(|i| keep[i / 3])
-        .map(|i| ((test[i] - reference[i]) as f64).powi(2))
-        .sum();
-    let psnr = metrics::psnr_from_mse(squared / (3 * kept) as f64, 1.0);
     let wide = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<f64>>();
     let weights: Vec<f64> = keep.iter().map(|&k| if k { 1.0 } else { 0.0 }).collect();
     let (ssim, _) = metrics::ssim_with_gradient_weighted(

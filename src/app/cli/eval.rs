@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use verisplat::app::shard::Shard;
 use verisplat::core::camera::{self, Camera};
+use verisplat::io::color_fit;
 use verisplat::io::image_file::{self, Planes};
 use verisplat::io::metrics;
 use verisplat::io::output;
@@ -140,6 +141,9 @@ struct ImageRecord {
     height: u32,
     #[serde(deserialize_with = "null_is_infinite")]
     psnr: f64,
+    /// PSNR after the render's best affine colour fit to the photo (`io::color_fit`).
+    #[serde(default = "not_measured", deserialize_with = "null_is_infinite")]
+    psnr_cc: f64,
     ssim: f64,
     flip: f64,
     /// Scored over the pixels its mask keeps only.
@@ -151,6 +155,8 @@ struct ImageRecord {
 struct Means {
     #[serde(deserialize_with = "null_is_infinite")]
     psnr: f64,
+    #[serde(default = "not_measured", deserialize_with = "null_is_infinite")]
+    psnr_cc: f64,
     ssim: f64,
     flip: f64,
 }
@@ -185,6 +191,11 @@ fn null_is_infinite<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Er
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
 }
 
+/// A report written before the colour-corrected PSNR: not measured.
+fn not_measured() -> f64 {
+    f64::NAN
+}
+
 /// The means of `results`, summed in their order (a merged report sums as one run does).
 fn means(results: &[ImageRecord]) -> Option<Means> {
     if results.is_empty() {
@@ -193,6 +204,7 @@ fn means(results: &[ImageRecord]) -> Option<Means> {
     let n = results.len() as f64;
     Some(Means {
         psnr: results.iter().map(|r| r.psnr).sum::<f64>() / n,
+        psnr_cc: results.iter().map(|r| r.psnr_cc).sum::<f64>() / n,
         ssim: results.iter().map(|r| r.ssim).sum::<f64>() / n,
         flip: results.iter().map(|r| r.flip).sum::<f64>() / n,
     })
@@ -200,10 +212,10 @@ fn means(results: &[ImageRecord]) -> Option<Means> {
 
 /// The report's CSV: one row per image, then the means.
 fn report_csv(report: &EvalReport) -> String {
-    let mut csv = String::from("frame,camera,photo,width,height,psnr,ssim,flip\n");
+    let mut csv = String::from("frame,camera,photo,width,height,psnr,ssim,flip,psnr_cc\n");
     for r in &report.results {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{}\n",
             r.frame,
             csv_cell(&r.camera),
             csv_cell(&r.photo),
@@ -211,15 +223,17 @@ fn report_csv(report: &EvalReport) -> String {
             r.height,
             db_csv(r.psnr),
             r.ssim,
-            r.flip
+            r.flip,
+            db_csv(r.psnr_cc)
         ));
     }
     if let Some(mean) = &report.mean {
         csv.push_str(&format!(
-            "mean,,,,,{},{},{}\n",
+            "mean,,,,,{},{},{},{}\n",
             db_csv(mean.psnr),
             mean.ssim,
-            mean.flip
+            mean.flip,
+            db_csv(mean.psnr_cc)
         ));
     }
     csv
@@ -261,12 +275,14 @@ fn write_report(report: &EvalReport, files: &[PathBuf; 2], overwrite: bool) -> R
 /// The mean line of the table printed on stdout.
 fn print_mean(count: usize, mean: &Means) {
     outln!(
-        "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}",
+        "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}  {:>9}",
         "",
         format!("mean of {count}"),
         db(mean.psnr),
         mean.ssim,
-        mean.flip
+        mean.flip,
+        "",
+        db(mean.psnr_cc)
     );
 }
 
@@ -617,13 +633,14 @@ impl Measure<'_> {
             bar
         };
         outln!(
-            "{:>5}  {:<24} {:>9} {:>9} {:>9}  {:>9}",
+            "{:>5}  {:<24} {:>9} {:>9} {:>9}  {:>9}  {:>9}",
             "frame",
             "camera",
             "PSNR dB",
             "SSIM",
             "FLIP",
-            "size"
+            "size",
+            "PSNR cc"
         );
         let mut results = Vec::new();
         for (k, cam, photo_path) in jobs {
@@ -631,13 +648,14 @@ impl Measure<'_> {
             let record = self.image(gpu, *k, cam, photo_path)?;
             bar.suspend(|| {
                 outln!(
-                    "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}",
+                    "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}  {:>9}",
                     record.frame,
                     record.camera,
                     db(record.psnr),
                     record.ssim,
                     record.flip,
-                    format!("{}x{}", record.width, record.height)
+                    format!("{}x{}", record.width, record.height),
+                    db(record.psnr_cc)
                 )
             });
             results.push(record);
@@ -704,6 +722,9 @@ impl Measure<'_> {
                 metrics::flip(&truth, &render, wu, hu, self.ppd),
             ),
         };
+        let keep = keep.filter(|k| k.len() == wu * hu);
+        let corrected = color_fit::affine_color_corrected(&truth, &render, keep.as_deref());
+        let psnr_cc = masks::masked_psnr(&truth, &corrected, keep.as_deref());
         Ok(ImageRecord {
             frame: k,
             camera: cam.name.clone(),
@@ -711,6 +732,7 @@ impl Measure<'_> {
             width: w,
             height: h,
             psnr,
+            psnr_cc,
             ssim,
             flip,
             masked: keep.is_some(),
