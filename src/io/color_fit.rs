@@ -14,7 +14,7 @@ pub fn affine_color_corrected(reference: &[f32], test: &[f32], keep: Option<&[bo
     // Normal equations of each output channel: (sum x x^T) w = sum x y, x = (r, g, b, 1).
     let mut gram = [[0f64; 4]; 4];
     let mut rhs = [[0f64; 3]; 4];
-    let kept = |p: usize| keep.is_none_or(|k| k[p]);
+    let kept = |p: usize| keep.map_or(true, |k| k[p]);
     for (p, (t, r)) in test
         .chunks_exact(3)
         .zip(reference.chunks_exact(3))
@@ -59,13 +59,14 @@ fn solve4(mut a: [[f64; 4]; 4], mut b: [[f64; 3]; 4]) -> Option<[[f64; 3]; 4]> {
         }
         a.swap(col, pivot);
         b.swap(col, pivot);
+        let (pivot_a, pivot_b) = (a[col], b[col]);
         for row in col + 1..4 {
-            let f = a[row][col] / a[col][col];
-            for k in col..4 {
-                a[row][k] -= f * a[col][k];
+            let f = a[row][col] / pivot_a[col];
+            for (v, p) in a[row].iter_mut().zip(pivot_a).skip(col) {
+                *v -= f * p;
             }
-            for c in 0..3 {
-                b[row][c] -= f * b[col][c];
+            for (v, p) in b[row].iter_mut().zip(pivot_b) {
+                *v -= f * p;
             }
         }
     }
