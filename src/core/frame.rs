@@ -42,14 +42,57 @@ impl Frame {
     }
 }
 
+/// A frame's colour as 8-bit RGBA, packed on the device (`crate::render::Readback::Rgba8`)
+/// and quantised as `crate::io::output::to_u8` quantises a [`Frame`]'s colour.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Rgba8Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width * height * 4` bytes, row-major, top row first; alpha is 255.
+    pub rgba: Vec<u8>,
+}
+
+/// What a renderer hands the writers of a run: the float frame, or, when every output of
+/// the run is 8-bit colour, only that colour, quantised on the device
+/// (`crate::app::sequence::FramePlan`s decide which).
+#[derive(Clone, Debug, PartialEq)]
+pub enum FramePixels {
+    /// Colour, alpha and depth as floats.
+    Float(Frame),
+    /// The colour as 8-bit RGBA (alpha 255), equal to the float frame's colour through
+    /// `crate::io::output::to_u8`.
+    Rgba8(Rgba8Frame),
+}
+
+impl FramePixels {
+    /// Width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        match self {
+            FramePixels::Float(f) => (f.width, f.height),
+            FramePixels::Rgba8(f) => (f.width, f.height),
+        }
+    }
+
+    /// The float frame; `None` for an 8-bit one.
+    pub fn into_float(self) -> Option<Frame> {
+        match self {
+            FramePixels::Float(f) => Some(f),
+            FramePixels::Rgba8(_) => None,
+        }
+    }
+}
+
 /// A renderer that may keep several frames in flight: `app::sequence::run_pipelined`
 /// submits frame
 /// `n + 1` before it finishes frame `n` (the GPU renderer's path is one).
 pub trait FrameSource {
     /// Starts rendering `cam` (recorded and submitted; not waited for).
     fn submit(&mut self, cam: &Camera) -> anyhow::Result<()>;
-    /// Waits for the oldest frame submitted and not finished yet, and reads it back.
-    fn finish(&mut self) -> anyhow::Result<Frame>;
+    /// Waits for the oldest frame submitted and not finished yet, and reads it back (as
+    /// floats, or as 8-bit colour where the source was asked for that).
+    fn finish(&mut self) -> anyhow::Result<FramePixels>;
     /// Drops the frames submitted and not finished (after an error stopped the run).
     fn discard(&mut self);
 }

@@ -17,7 +17,9 @@ use crate::core::model::surface::NormalSpace;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+mod eight_bit;
 mod surface;
+pub use eight_bit::{rgb8, rgb8_into, write_pixels};
 pub use surface::{
     encode_exr_median_depth, encode_exr_normal, encode_png_median_depth, encode_png_normal,
     frame_surface, normal_color,
@@ -54,6 +56,9 @@ pub enum OutputError {
     /// A `.npy` output without `--mode features`.
     #[error("{0}: .npy output holds feature channels; add --mode features (or use a .png or .exr file name)")]
     NpyNeedsFeatures(PathBuf),
+    /// A file that needs the float frame, given a frame read back as 8-bit colour.
+    #[error("{0}: needs the frame's float planes, but it was read back as 8-bit colour")]
+    NeedsFloat(PathBuf),
     /// A feature output for a frame rendered without feature channels.
     #[error("{0}: the frame has no feature channels to write")]
     NoFeatures(PathBuf),
@@ -138,38 +143,41 @@ pub fn encode_png(
     path: &Path,
 ) -> Result<(), OutputError> {
     use image::ImageEncoder;
-    let enc_err = |e: image::ImageError| OutputError::Encode {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
-    let encoder = image::codecs::png::PngEncoder::new(out);
-    if sixteen_bit {
-        // The encoder takes native-endian samples and writes them big-endian.
-        let mut bytes = Vec::with_capacity(frame.color.len() * 6);
-        for c in &frame.color {
-            for &v in c {
-                bytes.extend_from_slice(&to_u16(v).to_ne_bytes());
-            }
-        }
-        encoder
-            .write_image(
-                &bytes,
-                frame.width,
-                frame.height,
-                image::ExtendedColorType::Rgb16,
-            )
-            .map_err(enc_err)
-    } else {
+    let size = (frame.width, frame.height);
+    if !sixteen_bit {
         let bytes: Vec<u8> = frame.color.iter().flat_map(|c| c.map(to_u8)).collect();
-        encoder
-            .write_image(
-                &bytes,
-                frame.width,
-                frame.height,
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(enc_err)
+        return encode_png_rgb8(&bytes, size, out, path);
     }
+    // The encoder takes native-endian samples and writes them big-endian.
+    let mut bytes = Vec::with_capacity(frame.color.len() * 6);
+    for c in &frame.color {
+        for &v in c {
+            bytes.extend_from_slice(&to_u16(v).to_ne_bytes());
+        }
+    }
+    image::codecs::png::PngEncoder::new(out)
+        .write_image(&bytes, size.0, size.1, image::ExtendedColorType::Rgb16)
+        .map_err(|e| OutputError::Encode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+}
+
+/// Encodes 8-bit RGB pixels (`rgb`, row-major, of `(width, height)`) as PNG: what
+/// [`encode_png`] writes of a frame whose colour quantises to them.
+pub fn encode_png_rgb8(
+    rgb: &[u8],
+    (width, height): (u32, u32),
+    out: &mut impl Write,
+    path: &Path,
+) -> Result<(), OutputError> {
+    use image::ImageEncoder;
+    image::codecs::png::PngEncoder::new(out)
+        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| OutputError::Encode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
 }
 
 /// Which planes of a frame an OpenEXR file holds, and at which precision.
@@ -698,6 +706,15 @@ pub enum FileContent {
     },
     /// OpenEXR of the median depth: `Z` (32-bit).
     ExrMedianDepth,
+}
+
+impl FileContent {
+    /// Whether the file holds only the frame's colour at 8 bits (an 8-bit RGB PNG), which
+    /// a frame packed on the device ([`crate::core::frame::FramePixels::Rgba8`]) gives bit
+    /// for bit.
+    pub fn is_rgb8(&self) -> bool {
+        matches!(self, FileContent::PngColor { sixteen_bit: false })
+    }
 }
 
 /// A file to write for a frame.

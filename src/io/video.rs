@@ -9,9 +9,9 @@
 //! file removed. ffmpeg runs in its own process group, so a Ctrl-C at the terminal reaches
 //! only verisplat, which stops it.
 
-use crate::core::frame::Frame;
+use crate::core::frame::FramePixels;
 use crate::core::fsutil;
-use crate::io::output::{to_u8, OutputError};
+use crate::io::output::{rgb8_into, to_u8, OutputError};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -396,25 +396,25 @@ impl VideoWriter {
         }
     }
 
-    /// Hands ffmpeg the next frame, as 8-bit RGB (the colour an 8-bit PNG of it holds).
+    /// Hands ffmpeg the next frame, as 8-bit RGB (the colour an 8-bit PNG of it holds:
+    /// [`rgb8_into`], from floats or from the device's packed pixels alike).
     /// On an error ffmpeg is stopped and the temporary file removed.
-    pub fn write(&self, frame: &Frame) -> Result<(), OutputError> {
+    pub fn write(&self, frame: &FramePixels) -> Result<(), OutputError> {
         let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let Some(enc) = guard.as_mut() else {
             return Err(self.error("the video is already finished or stopped".into()));
         };
-        if (frame.width, frame.height) != (self.width, self.height) {
+        let (width, height) = frame.size();
+        if (width, height) != (self.width, self.height) {
             let message = format!(
-                "frame {} is {}x{}, the video {}x{}; a video's frames have one size",
-                enc.frames, frame.width, frame.height, self.width, self.height
+                "frame {} is {width}x{height}, the video {}x{}; a video's frames have one size",
+                enc.frames, self.width, self.height
             );
             enc.abort();
             *guard = None;
             return Err(self.error(message));
         }
-        enc.rgb.clear();
-        enc.rgb
-            .extend(frame.color.iter().flat_map(|c| c.map(to_u8)));
+        rgb8_into(frame, &mut enc.rgb);
         let written = match enc.stdin.as_mut() {
             Some(stdin) => stdin.write_all(&enc.rgb),
             None => Err(std::io::ErrorKind::BrokenPipe.into()),

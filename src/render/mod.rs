@@ -3,7 +3,8 @@
 //! command buffer with a barrier between each pair of stages and a timestamp pair around
 //! each stage. The frame's recording (up to the blend) is one path for every consumer;
 //! only the readback differs by what the consumer needs ([`Readback`]): float colour,
-//! alpha and depth for files and checks, or 8-bit RGBA packed on the device for display.
+//! alpha and depth for files and checks, or 8-bit RGBA packed on the device for display
+//! and 8-bit colour files.
 //!
 //! Sorting: the reference orders each tile's Gaussians by a stable sort of
 //! `tile << 32 | depth` keys emitted in Gaussian order. Here the Gaussians are first sorted
@@ -53,6 +54,7 @@ pub fn check_storage_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuRes
 
 use crate::core::camera::Camera;
 use crate::core::frame::Frame;
+pub use crate::core::frame::Rgba8Frame;
 use crate::core::model::RenderOptions;
 use crate::gpu::{GpuContext, GpuError, GpuResult};
 
@@ -63,7 +65,8 @@ pub enum Readback {
     #[default]
     Float,
     /// Colour packed to 8-bit RGBA on the device (alpha 255), quantised as
-    /// [`crate::io::output::to_u8`]: 4 bytes per pixel. For display.
+    /// [`crate::io::output::to_u8`]: 4 bytes per pixel. For display, and for runs whose
+    /// every output is 8-bit colour (RGB PNGs, videos: [`crate::app::sequence::reads_rgb8_only`]).
     Rgba8,
     /// Nothing but the frame's counters: the colour and depth images stay on the device,
     /// ready to be copied from (the frame's [`ForwardHandle`]; training reads them there).
@@ -222,17 +225,6 @@ impl Rendered {
             _ => Err(self.wrong("Readback::Counters")),
         }
     }
-}
-
-/// A frame read back as 8-bit RGBA.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Rgba8Frame {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// `width * height * 4` bytes, row-major, top row first; alpha is 255.
-    pub rgba: Vec<u8>,
 }
 
 /// The GPU renderer: pipelines, per-frame buffers and the timestamp pool.

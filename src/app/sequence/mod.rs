@@ -22,8 +22,8 @@ mod selection;
 pub use crate::core::frame::FrameSource;
 pub use pattern::{file_safe_name, names_directory, OutputPattern};
 pub use plan::{
-    plan, plan_frames, prepare, remove_stale_temporaries_of, verify, Existing, FramePlan, Plan,
-    Problem, SequenceError,
+    plan, plan_frames, prepare, reads_rgb8_only, remove_stale_temporaries_of, verify, Existing,
+    FramePlan, Plan, Problem, SequenceError,
 };
 pub use progress::ProgressStyle;
 pub use run::{

@@ -21,6 +21,19 @@ pub struct FramePlan {
     pub files: Vec<FileSpec>,
 }
 
+/// Whether every output of a run's `frames` is the frame's colour at 8 bits, which a
+/// renderer may then quantise on the device and read back alone (4 bytes a pixel instead
+/// of the float planes' 20): each file is an 8-bit RGB PNG ([`output::FileContent::is_rgb8`]), and
+/// a frame without files (a video's) goes to the run's sink, which the video encoder's
+/// 8-bit RGB is. A run with any other file (EXR, 16-bit or RGBA PNG, depth, alpha, ...)
+/// reads back floats for every frame. Decided once per run, from the whole plan.
+pub fn reads_rgb8_only(frames: &[FramePlan]) -> bool {
+    frames
+        .iter()
+        .flat_map(|p| &p.files)
+        .all(|f| f.content.is_rgb8())
+}
+
 /// How existing files are treated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Existing {

@@ -4,7 +4,7 @@
 use super::plan::{FramePlan, SequenceError};
 use super::progress::{Progress, ProgressStyle};
 use crate::core::camera::Camera;
-use crate::core::frame::{Frame, FrameSource};
+use crate::core::frame::{Frame, FramePixels, FrameSource};
 use crate::io::output::{self, FileSpec};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -40,12 +40,13 @@ pub struct RunOptions {
 /// Takes a run's frames in path order instead of writing each to its files
 /// ([`RunOptions::sink`]): [`crate::io::video::VideoWriter`].
 pub trait FrameSink: Send + Sync + std::fmt::Debug {
-    /// Takes the next frame.
-    fn write(&self, frame: &Frame) -> Result<(), output::OutputError>;
+    /// Takes the next frame (floats, or 8-bit colour when every output of the run is that:
+    /// see [`super::plan::reads_rgb8_only`]).
+    fn write(&self, frame: &FramePixels) -> Result<(), output::OutputError>;
 }
 
 impl FrameSink for crate::io::video::VideoWriter {
-    fn write(&self, frame: &Frame) -> Result<(), output::OutputError> {
+    fn write(&self, frame: &FramePixels) -> Result<(), output::OutputError> {
         crate::io::video::VideoWriter::write(self, frame)
     }
 }
@@ -118,7 +119,7 @@ struct EachPlan<'r> {
     frames: &'r [FramePlan],
     next: usize,
     render: &'r mut dyn FnMut(&FramePlan) -> anyhow::Result<Frame>,
-    done: VecDeque<Frame>,
+    done: VecDeque<FramePixels>,
 }
 
 impl FrameSource for EachPlan<'_> {
@@ -130,11 +131,11 @@ impl FrameSource for EachPlan<'_> {
             .ok_or_else(|| anyhow::anyhow!("frames were submitted out of order"))?;
         self.next += 1;
         let frame = (self.render)(p)?;
-        self.done.push_back(frame);
+        self.done.push_back(FramePixels::Float(frame));
         Ok(())
     }
 
-    fn finish(&mut self) -> anyhow::Result<Frame> {
+    fn finish(&mut self) -> anyhow::Result<FramePixels> {
         self.done
             .pop_front()
             .ok_or_else(|| anyhow::anyhow!("no frame was submitted"))
@@ -181,14 +182,14 @@ pub fn run_pipelined(
     let mut failure: Option<SequenceError> = None;
     let overwrite = opts.overwrite;
     let skip_existing = opts.skip_existing;
-    let write_all = |frame: &Frame, files: &[FileSpec]| -> Written {
+    let write_all = |frame: &FramePixels, files: &[FileSpec]| -> Written {
         let t = Instant::now();
         let mut appeared = 0;
         if let Some(sink) = &opts.sink {
             sink.write(frame)?;
         }
         for f in files {
-            match output::write_file(frame, f, overwrite) {
+            match output::write_pixels(frame, f, overwrite) {
                 // Another process (a parallel run of the same path) wrote it meanwhile.
                 Err(output::OutputError::Exists(_)) if skip_existing => appeared += 1,
                 other => other?,
@@ -227,7 +228,7 @@ pub fn run_pipelined(
             },
         );
     } else {
-        let (job_tx, job_rx) = mpsc::sync_channel::<(Frame, Vec<FileSpec>)>(opts.queue_depth);
+        let (job_tx, job_rx) = mpsc::sync_channel::<(FramePixels, Vec<FileSpec>)>(opts.queue_depth);
         let job_rx = Arc::new(Mutex::new(job_rx));
         let (done_tx, done_rx) = mpsc::channel::<Written>();
         std::thread::scope(|scope| {
@@ -293,7 +294,7 @@ fn render_frames(
     source: &mut dyn FrameSource,
     summary: &mut Summary,
     failure: &mut Option<SequenceError>,
-    mut deliver: impl FnMut(Frame, &FramePlan, &mut Summary, &mut Option<SequenceError>),
+    mut deliver: impl FnMut(FramePixels, &FramePlan, &mut Summary, &mut Option<SequenceError>),
 ) {
     let render_error = |p: &FramePlan, e: anyhow::Error| SequenceError::Render {
         index: p.index,

@@ -4,11 +4,10 @@
 //! back and handed to the encoders, so the device renders while the CPU reads back.
 
 use crate::core::camera::Camera;
-use crate::core::frame::Frame;
-use crate::core::frame::FrameSource;
+use crate::core::frame::{FramePixels, FrameSource};
 use crate::core::model::RenderOptions;
 use crate::render::forward::shade::GpuShader;
-use crate::render::FrameRequest;
+use crate::render::{FrameRequest, Readback};
 use crate::render::{FrameStats, GpuFeatures, GpuRenderer, GpuScene};
 use crate::render::{StageTimings, Ticket, MAX_FRAMES_IN_FLIGHT};
 use std::collections::VecDeque;
@@ -18,14 +17,16 @@ type FrameHook<'a> = Box<dyn FnMut(&StageTimings, &FrameStats) + 'a>;
 
 /// Renders the frames of a path with up to `frames_in_flight` frames in flight: colour,
 /// alpha and depth ([`GpuRenderer::render`]), or with features
-/// ([`FrameRequest::features`], [`FrameRequest::shaded`]). Each frame's
-/// files equal those of the frame rendered on its own.
+/// ([`FrameRequest::features`], [`FrameRequest::shaded`]), or only the colour as 8-bit
+/// RGBA packed on the device ([`GpuPath::rgb8`]). Each frame's files equal those of the
+/// frame rendered on its own.
 pub struct GpuPath<'a> {
     renderer: &'a mut GpuRenderer,
     scene: &'a GpuScene,
     features: Option<(&'a GpuFeatures, Option<&'a GpuShader>)>,
     opts: RenderOptions,
     depth: usize,
+    readback: Readback,
     tickets: VecDeque<Ticket<'a>>,
     on_frame: Option<FrameHook<'a>>,
 }
@@ -46,6 +47,7 @@ impl<'a> GpuPath<'a> {
             features: None,
             opts: opts.clone(),
             depth: frames_in_flight.clamp(1, MAX_FRAMES_IN_FLIGHT),
+            readback: Readback::Float,
             tickets: VecDeque::new(),
             on_frame: None,
         }
@@ -58,6 +60,14 @@ impl<'a> GpuPath<'a> {
         shader: Option<&'a GpuShader>,
     ) -> Self {
         self.features = Some((features, shader));
+        self
+    }
+
+    /// With `on`, the frames read back only their colour, packed to 8-bit RGBA on the
+    /// device ([`Readback::Rgba8`], [`FramePixels::Rgba8`]): for runs whose every output
+    /// is 8-bit colour (`crate::app::sequence::reads_rgb8_only`). Not with features.
+    pub fn rgb8(mut self, on: bool) -> Self {
+        self.readback = if on { Readback::Rgba8 } else { Readback::Float };
         self
     }
 
@@ -81,26 +91,25 @@ impl FrameSource for GpuPath<'_> {
                 self.tickets.len()
             );
         }
-        let ticket = match self.features {
-            Some((f, shader)) => self.renderer.submit(
-                &FrameRequest::new(self.scene, cam, &self.opts)
-                    .features(f)
-                    .shader(shader),
-            )?,
-            None => self
-                .renderer
-                .submit(&FrameRequest::new(self.scene, cam, &self.opts))?,
-        };
+        let mut request = FrameRequest::new(self.scene, cam, &self.opts).readback(self.readback);
+        if let Some((f, shader)) = self.features {
+            request = request.features(f).shader(shader);
+        }
+        let ticket = self.renderer.submit(&request)?;
         self.tickets.push_back(ticket);
         Ok(())
     }
 
-    fn finish(&mut self) -> anyhow::Result<Frame> {
+    fn finish(&mut self) -> anyhow::Result<FramePixels> {
         let ticket = self
             .tickets
             .pop_front()
             .ok_or_else(|| anyhow::anyhow!("no frame is in flight"))?;
-        let frame = self.renderer.finish(ticket)?.into_frame()?;
+        let rendered = self.renderer.finish(ticket)?;
+        let frame = match self.readback {
+            Readback::Rgba8 => FramePixels::Rgba8(rendered.into_rgba8()?),
+            _ => FramePixels::Float(rendered.into_frame()?),
+        };
         if let Some(hook) = &mut self.on_frame {
             hook(self.renderer.timings(), self.renderer.stats());
         }

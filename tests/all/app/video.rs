@@ -244,6 +244,41 @@ fn videos_hold_the_frames_of_the_png_sequence() {
     }
 }
 
+/// A video reads back only 8-bit colour (packed on the device, said by `--timings`), and
+/// its file is the one that the float readback (`VERISPLAT_READBACK=float`) gives, byte for
+/// byte: MP4 and GIF, whose encoders are deterministic. (WebM is not: its muxer writes
+/// random segment ids, different from run to run whatever the readback; the frames fed to
+/// its encoder are compared by render::rgb8_readback.)
+#[test]
+fn a_video_is_the_same_file_with_either_readback() {
+    if !have_ffmpeg() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for ext in ["mp4", "gif"] {
+        let mut bytes = Vec::new();
+        for readback in ["auto", "float"] {
+            let video = dir.path().join(format!("{readback}.{ext}"));
+            let mut c = command();
+            c.args(render_args(&video, &["--timings"]))
+                .env("VERISPLAT_READBACK", readback);
+            let o = c.output().expect("the binary runs");
+            let e = stderr(&o);
+            assert!(o.status.success(), "{ext} {readback}: {e}");
+            let said = match readback {
+                "auto" => "readback: 8-bit colour packed on the device",
+                _ => "readback: float colour",
+            };
+            assert!(e.contains(said), "{ext} {readback}: {e}");
+            bytes.push(std::fs::read(&video).unwrap());
+        }
+        assert!(
+            bytes[0] == bytes[1],
+            "the {ext} videos differ between the readbacks"
+        );
+    }
+}
+
 #[test]
 fn one_camera_gives_a_one_frame_video_and_quality_changes_the_encoding() {
     if !have_ffmpeg() {

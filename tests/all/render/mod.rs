@@ -10,4 +10,5 @@ mod gsplat_rules;
 mod lenses;
 mod passes;
 mod pipelined;
+mod rgb8_readback;
 mod stages;

@@ -269,9 +269,9 @@ fn pipelined_frames_match_the_cpu_reference() {
                 path.submit(cam).is_err(),
                 "a third frame in flight is refused"
             );
-            frames.push(path.finish().unwrap());
+            frames.push(path.finish().unwrap().into_float().unwrap());
         }
-        frames.push(path.finish().unwrap());
+        frames.push(path.finish().unwrap().into_float().unwrap());
         assert!(path.finish().is_err(), "nothing left in flight");
     }
     assert_eq!(r.frame_sets(), 2);
@@ -325,9 +325,9 @@ fn pipelined_feature_frames_equal_unpipelined_ones() {
         path.submit(&cams[0]).unwrap();
         for cam in &cams[1..] {
             path.submit(cam).unwrap();
-            piped.push(path.finish().unwrap());
+            piped.push(path.finish().unwrap().into_float().unwrap());
         }
-        piped.push(path.finish().unwrap());
+        piped.push(path.finish().unwrap().into_float().unwrap());
     }
     for (k, (a, b)) in single.iter().zip(&piped).enumerate() {
         assert_eq!(a.feature_count, 5);

@@ -9,6 +9,7 @@ use crate::cli::plural;
 use anyhow::{bail, Result};
 use verisplat::app::sequence::{ProgressStyle, Summary};
 use verisplat::note;
+use verisplat::render::forward::shade::GpuShader;
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
@@ -33,6 +34,26 @@ pub(super) struct Job<'a> {
 /// (`core::model::surface`).
 fn surface(job: &Job) -> bool {
     job.args.mode.is_some_and(|m| m.is_surface())
+}
+
+/// The variable that makes `render` read back floats even where every output is 8-bit
+/// colour (`VERISPLAT_READBACK=float`): the files are the same bytes either way, which
+/// the tests check with it, and benchmarks compare the two readbacks with it.
+pub(super) const READBACK_ENV: &str = "VERISPLAT_READBACK";
+
+/// Whether the device path reads back only the colour, packed to 8-bit RGBA on the
+/// device: when every output of the run is 8-bit RGB colour
+/// ([`verisplat::app::sequence::reads_rgb8_only`]: RGB PNGs, a video) and the frames blend
+/// no features (a shader's or a surface pass's frames read back floats), unless
+/// [`READBACK_ENV`] asks for floats. Anything else (EXR, 16-bit or RGBA PNG, depth,
+/// alpha, features, normals, .npy) reads back the float planes.
+fn reads_rgb8(job: &Job, features: bool) -> Result<bool> {
+    match verisplat::core::former_name::env_var(READBACK_ENV).as_deref() {
+        None | Some("") | Some("auto") => {}
+        Some("float") => return Ok(false),
+        Some(other) => bail!("{READBACK_ENV}={other:?}: expected float or auto"),
+    }
+    Ok(!features && verisplat::app::sequence::reads_rgb8_only(job.frames))
 }
 
 /// Sums of per-stage times over the frames of a path, printed by `--timings`.
@@ -212,17 +233,10 @@ pub(super) fn render_on_devices(job: &Job, devices: &str) -> Result<(Summary, St
     ))
 }
 
+/// The device path: one renderer on `ctx`, the frames of a path in flight
+/// ([`render_path`]) or of an animation one by one ([`render_animation`]).
 pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(Summary, String)> {
-    let Job {
-        args,
-        scene,
-        animation,
-        frames,
-        opts,
-        run_opts,
-        features,
-        shader,
-    } = *job;
+    let args = job.args;
     let t0 = std::time::Instant::now();
     if args.gpu.verbose {
         note!("device: {}", ctx.info());
@@ -240,60 +254,86 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
             t0.elapsed().as_secs_f64() * 1e3
         );
     }
-    let gpu_shader = match shader {
-        Some(m) => Some(verisplat::render::forward::shade::GpuShader::new(
-            renderer.ctx(),
-            m,
-        )?),
+    let gpu_shader = match job.shader {
+        Some(m) => Some(GpuShader::new(renderer.ctx(), m)?),
         None => None,
     };
+    let summary = match job.animation {
+        Some(anim) => render_animation(job, anim, &mut renderer, gpu_shader.as_ref())?,
+        None => render_path(job, &mut renderer, gpu_shader.as_ref())?,
+    };
+    fail_on_validation_messages(renderer.ctx())?;
+    let device = renderer.ctx().info().name.clone();
+    Ok((summary, format!("on {device}")))
+}
+
+/// `--time-range` on the device: each frame its own scene, uploaded, rendered (read back
+/// as floats), dropped.
+fn render_animation(
+    job: &Job,
+    anim: &Animation,
+    renderer: &mut GpuRenderer,
+    gpu_shader: Option<&GpuShader>,
+) -> Result<Summary> {
+    let Job {
+        args,
+        frames,
+        opts,
+        run_opts,
+        features,
+        shader,
+        ..
+    } = *job;
     let mut sums = StageSums::default();
-    let mut last_stats = None;
-    if let Some(anim) = animation {
-        // Each frame its own scene: uploaded, rendered, dropped.
-        let mut device_bytes = 0;
-        let summary = verisplat::app::sequence::run_each(
-            frames,
-            &mut |p| {
-                let at_time = anim.scene(p.index);
-                let gpu_scene = renderer.upload(&at_time)?;
-                device_bytes = gpu_scene.device_bytes();
-                let frame = if surface(job) {
-                    let f = renderer.upload_surface(&at_time)?;
-                    renderer
-                        .render(&FrameRequest::new(&gpu_scene, &p.camera, opts).features(&f))
-                        .and_then(Rendered::into_frame)?
-                } else if features || shader.is_some() {
-                    let f = renderer.upload_features(&at_time)?;
-                    match &gpu_shader {
-                        Some(s) => renderer
-                            .render(&FrameRequest::new(&gpu_scene, &p.camera, opts).shaded(&f, s))
-                            .and_then(Rendered::into_frame)?,
-                        None => renderer
-                            .render(&FrameRequest::new(&gpu_scene, &p.camera, opts).features(&f))
-                            .and_then(Rendered::into_frame)?,
-                    }
-                } else {
-                    renderer
-                        .render(&FrameRequest::new(&gpu_scene, &p.camera, opts))
-                        .and_then(Rendered::into_frame)?
-                };
-                sums.add(&renderer.timings().stages(), renderer.timings().total);
-                Ok(frame)
-            },
-            run_opts,
-        );
-        if args.timings {
-            sums.print("GPU ms");
-        }
-        if args.gpu.verbose {
-            note!("device memory: scene {device_bytes} bytes (the last frame's)");
-        }
-        let summary = summary?;
-        fail_on_validation_messages(renderer.ctx())?;
-        let device = renderer.ctx().info().name.clone();
-        return Ok((summary, format!("on {device}")));
+    let mut device_bytes = 0;
+    let summary = verisplat::app::sequence::run_each(
+        frames,
+        &mut |p| {
+            let at_time = anim.scene(p.index);
+            let gpu_scene = renderer.upload(&at_time)?;
+            device_bytes = gpu_scene.device_bytes();
+            let request = FrameRequest::new(&gpu_scene, &p.camera, opts);
+            let frame = if surface(job) {
+                let f = renderer.upload_surface(&at_time)?;
+                renderer.render(&request.features(&f))
+            } else if features || shader.is_some() {
+                let f = renderer.upload_features(&at_time)?;
+                renderer.render(&request.features(&f).shader(gpu_shader))
+            } else {
+                renderer.render(&request)
+            }
+            .and_then(Rendered::into_frame)?;
+            sums.add(&renderer.timings().stages(), renderer.timings().total);
+            Ok(frame)
+        },
+        run_opts,
+    );
+    if args.timings {
+        sums.print("GPU ms");
     }
+    if args.gpu.verbose {
+        note!("device memory: scene {device_bytes} bytes (the last frame's)");
+    }
+    Ok(summary?)
+}
+
+/// The frames of a path of one scene on the device, up to `--frames-in-flight` at once,
+/// read back as 8-bit colour or as floats ([`reads_rgb8`]).
+fn render_path(
+    job: &Job,
+    renderer: &mut GpuRenderer,
+    gpu_shader: Option<&GpuShader>,
+) -> Result<Summary> {
+    let Job {
+        args,
+        scene,
+        frames,
+        opts,
+        run_opts,
+        features,
+        shader,
+        ..
+    } = *job;
     let gpu_scene = renderer.upload(scene)?;
     let gpu_features = if surface(job) {
         Some(renderer.upload_surface(scene)?)
@@ -302,14 +342,28 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
     } else {
         None
     };
+    let rgb8 = reads_rgb8(job, gpu_features.is_some())?;
+    if args.gpu.verbose || args.timings {
+        note!(
+            "readback: {}",
+            if rgb8 {
+                "8-bit colour packed on the device (4 bytes a pixel)"
+            } else {
+                "float colour, alpha and depth (20 bytes a pixel)"
+            }
+        );
+    }
+    let mut sums = StageSums::default();
+    let mut last_stats = None;
     let summary = {
-        let mut source = GpuPath::new(&mut renderer, &gpu_scene, opts, run_opts.frames_in_flight)
+        let mut source = GpuPath::new(renderer, &gpu_scene, opts, run_opts.frames_in_flight)
+            .rgb8(rgb8)
             .on_frame(|t, stats| {
                 sums.add(&t.stages(), t.total);
                 last_stats = Some(stats.clone());
             });
         if let Some(f) = &gpu_features {
-            source = source.with_features(f, gpu_shader.as_ref());
+            source = source.with_features(f, gpu_shader);
         }
         verisplat::app::sequence::run_pipelined(frames, &mut source, run_opts)
     };
@@ -337,8 +391,5 @@ pub(super) fn render_gpu(job: &Job, ctx: verisplat::gpu::GpuContext) -> Result<(
             }
         );
     }
-    let summary = summary?;
-    fail_on_validation_messages(renderer.ctx())?;
-    let device = renderer.ctx().info().name.clone();
-    Ok((summary, format!("on {device}")))
+    Ok(summary?)
 }
