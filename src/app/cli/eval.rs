@@ -149,6 +149,9 @@ struct ImageRecord {
     /// Scored over the pixels its mask keeps only.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     masked: bool,
+    /// Scored inside the fisheye's image circle only (`train::masks::image_circle`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    image_circle: bool,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -473,6 +476,10 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     if let Some(mean) = &mean {
         print_mean(results.len(), mean);
     }
+    let circled = results.iter().filter(|r| r.image_circle).count();
+    if circled > 0 {
+        outln!("scored only the pixels inside the image circle of {circled} fisheye photo(s) (past its field of view the lens images nothing)");
+    }
     let masked = results.iter().filter(|r| r.masked).count();
     if masked > 0 {
         outln!("scored only the unmasked pixels of {masked} photo(s) (their masks in the masks folder beside {})", images.display());
@@ -714,7 +721,16 @@ impl Measure<'_> {
             })
             .collect();
         let (wu, hu) = (w as usize, h as usize);
-        let (psnr, ssim, flip) = match keep.as_deref().filter(|k| k.len() == wu * hu) {
+        let masked = keep.is_some();
+        // A fisheye's pixels past its field of view are not scored, as they are not
+        // trained on: its lens images no ray there (the photo's black border).
+        let circle = masks::image_circle(&cam);
+        let image_circle = circle.is_some();
+        let keep = match (keep.filter(|k| k.len() == wu * hu), circle) {
+            (Some(k), Some(c)) => Some(k.iter().zip(&c).map(|(a, b)| *a && *b).collect()),
+            (k, c) => k.or(c),
+        };
+        let (psnr, ssim, flip) = match keep.as_deref() {
             Some(k) => masks::masked_metrics(&truth, &render, (wu, hu), k, self.ppd),
             None => (
                 metrics::psnr(&truth, &render, 1.0),
@@ -722,7 +738,6 @@ impl Measure<'_> {
                 metrics::flip(&truth, &render, wu, hu, self.ppd),
             ),
         };
-        let keep = keep.filter(|k| k.len() == wu * hu);
         let corrected = color_fit::affine_color_corrected(&truth, &render, keep.as_deref());
         let psnr_cc = masks::masked_psnr(&truth, &corrected, keep.as_deref());
         Ok(ImageRecord {
@@ -735,7 +750,8 @@ impl Measure<'_> {
             psnr_cc,
             ssim,
             flip,
-            masked: keep.is_some(),
+            masked,
+            image_circle,
         })
     }
 }

@@ -419,6 +419,65 @@ fn eval_reports_the_colour_corrected_psnr_beside_the_plain_one() {
     );
 }
 
+/// A fisheye camera's photo is scored inside its image circle only, as it is trained: a
+/// border of any colour past the lens's field of view changes nothing, and eval says so.
+#[test]
+fn eval_scores_a_fisheye_photo_inside_its_image_circle() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = model_dir(dir.path(), 9);
+    // Through an equidistant fisheye of 2 x 0.5 rad: at fx about 80 its circle is about
+    // 40 pixels in radius, so the 96x54 image's left, right and corners are outside.
+    let path = model.join("cameras.json");
+    let mut entries: Vec<Value> =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    for e in &mut entries {
+        e["lens"] = serde_json::json!({"kind": "fisheye", "k": [0, 0, 0, 0], "max_theta": 0.5});
+    }
+    std::fs::write(&path, serde_json::to_string(&entries).unwrap()).unwrap();
+    let cams = verisplat::core::camera::load_cameras_json(&path).unwrap();
+    let scene =
+        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+            .unwrap()
+            .activated();
+    let images = dir.path().join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    for cam in &cams {
+        let frame = verisplat::cpu::render(&scene, cam, &Default::default());
+        let circle = verisplat::train::masks::image_circle(cam).expect("pixels past the circle");
+        let photo: Vec<f32> = metrics::clamped_color(&frame)
+            .into_iter()
+            .enumerate()
+            .map(|(i, v)| if circle[i / 3] { v } else { 1.0 })
+            .collect();
+        write_png(&images.join(format!("{}.png", cam.name)), 96, 54, &photo);
+    }
+    let rep = dir.path().join("rep");
+    let o = verisplat(&[
+        "eval",
+        s(&model),
+        "--images",
+        s(&images),
+        "-o",
+        s(&rep),
+        "--cpu",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("scored only the pixels inside the image circle of 2 fisheye photo(s)"),
+        "{}",
+        stdout(&o)
+    );
+    let json = read_json(&rep.join("report.json"));
+    for r in json["results"].as_array().unwrap() {
+        assert_eq!(r["image_circle"], true, "{r}");
+        // The white border is not scored: the render and the photo are the same pixels.
+        assert!(
+            r["psnr"].is_null() || r["psnr"].as_f64().unwrap() > 60.0,
+            "{r}"
+        );
+    }
+}
+
 fn write_png(path: &Path, w: u32, h: u32, rgb: &[f32]) {
     let bytes: Vec<u8> = rgb.iter().map(|&v| (v * 255.0).round() as u8).collect();
     image::RgbImage::from_raw(w, h, bytes)
