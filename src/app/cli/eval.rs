@@ -482,7 +482,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     }
     let masked = results.iter().filter(|r| r.masked).count();
     if masked > 0 {
-        outln!("scored only the unmasked pixels of {masked} photo(s) (their masks in the masks folder beside {})", images.display());
+        outln!("scored only the unmasked pixels of {masked} photo(s) (their masks in the masks folder beside {}, or their frames' mask_path)", images.display());
     }
     let report = EvalReport {
         scene: name.clone(),

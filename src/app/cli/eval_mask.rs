@@ -2,11 +2,13 @@
 //! `verisplat train` reads, [`verisplat::train::masks`]) holds a mask per photo, prepared
 //! as its photo is (undistorted, scaled to `-r`; a mask larger than an already
 //! downscaled photo by one factor is first area-averaged to it) and thresholded at 0.5;
-//! only the kept pixels are scored.
+//! only the kept pixels are scored. Without a masks folder, a transforms file of the data
+//! set (the photos' folder's parent) may name the photo's mask in its frame's
+//! `mask_path`, as `verisplat train` reads it.
 
 use super::eval_photo::{render_size, PhotoPrep};
-use anyhow::{bail, Result};
-use std::path::Path;
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
 use verisplat::core::camera::Camera;
 use verisplat::train::data::resize;
 use verisplat::train::masks;
@@ -22,15 +24,19 @@ pub(crate) fn photo_mask(
     let (Some(folder), Some(name)) = (photo_path.parent(), photo_path.file_name()) else {
         return Ok(None);
     };
-    let Some(dir) = masks::masks_dir(folder) else {
-        return Ok(None);
-    };
-    let Some(path) = masks::find_mask(&dir, &name.to_string_lossy()) else {
-        bail!(
-            "{}: has no mask in {}; with a masks folder every photo needs its mask",
-            photo_path.display(),
-            dir.display()
-        );
+    let path = match masks::masks_dir(folder) {
+        Some(dir) => match masks::find_mask(&dir, &name.to_string_lossy()) {
+            Some(path) => path,
+            None => bail!(
+                "{}: has no mask in {}; with a masks folder every photo needs its mask",
+                photo_path.display(),
+                dir.display()
+            ),
+        },
+        None => match transforms_mask(photo_path)? {
+            Some(path) => path,
+            None => return Ok(None),
+        },
     };
     // A mask may be larger than a photo downscaled for training (data/images_4 beside
     // data/masks): area-averaged down to the photo first.
@@ -59,4 +65,58 @@ pub(crate) fn photo_mask(
         );
     }
     Ok(Some(keep))
+}
+
+/// The transforms files whose frames may give a photo's `mask_path`.
+const TRANSFORMS_FILES: [&str; 3] = [
+    "transforms.json",
+    "transforms_train.json",
+    "transforms_test.json",
+];
+
+/// The mask the data set's transforms files (in the parent of the photo's folder) give
+/// the photo at `photo_path`: the `mask_path` of the frame whose `file_path` is that photo
+/// (`.png` added when it has none), relative to the data set's folder. `None` when no
+/// frame there has a `mask_path`; an error naming the photo when other frames have one
+/// and its frame has not.
+fn transforms_mask(photo_path: &Path) -> Result<Option<PathBuf>> {
+    let Some(dir) = photo_path.parent().and_then(Path::parent) else {
+        return Ok(None);
+    };
+    let photo = std::fs::canonicalize(photo_path)
+        .with_context(|| format!("{}: cannot be read", photo_path.display()))?;
+    let mut with_masks = None;
+    for file in TRANSFORMS_FILES.map(|f| dir.join(f)) {
+        if !file.is_file() {
+            continue;
+        }
+        let text = std::fs::read_to_string(&file)
+            .with_context(|| format!("{}: cannot be read", file.display()))?;
+        let doc: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: is not a JSON transforms file", file.display()))?;
+        for frame in doc["frames"].as_array().into_iter().flatten() {
+            let Some(mask) = frame.get("mask_path") else {
+                continue;
+            };
+            let Some(mask) = mask.as_str() else {
+                bail!("{}: a frame's mask_path is not a string", file.display());
+            };
+            with_masks = Some(file.clone());
+            let mut at = dir.join(frame["file_path"].as_str().unwrap_or_default());
+            if at.extension().is_none() {
+                at.set_extension("png");
+            }
+            if std::fs::canonicalize(&at).is_ok_and(|p| p == photo) {
+                return Ok(Some(dir.join(mask)));
+            }
+        }
+    }
+    match with_masks {
+        Some(file) => bail!(
+            "{}: has no mask_path in {}, whose other frames have one; give every photo a mask, or none",
+            photo_path.display(),
+            file.display()
+        ),
+        None => Ok(None),
+    }
 }

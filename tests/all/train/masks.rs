@@ -529,4 +529,46 @@ fn eval_scores_only_the_unmasked_pixels_and_says_so() {
     assert_eq!(json["results"][0]["masked"], serde_json::json!(true));
     assert!(unmasked < 15.0, "{unmasked}");
     assert!(masked > 35.0, "{masked}");
+
+    // The same masks named by the frames' mask_path of the data set's transforms file.
+    std::fs::rename(&masks, set.join("frame_masks")).unwrap();
+    let frames = |last_mask: bool| {
+        let frame = |i: usize| {
+            let mut f = serde_json::json!({"file_path": format!("images/view_00{i}")});
+            if i == 0 || last_mask {
+                f["mask_path"] = format!("frame_masks/view_00{i}.png").into();
+            }
+            f
+        };
+        let doc = serde_json::json!({"frames": [frame(0), frame(1)]});
+        std::fs::write(set.join("transforms.json"), doc.to_string()).unwrap();
+    };
+    frames(true);
+    let (out, json, by_path) = eval("mask_path");
+    assert!(
+        out.contains("scored only the unmasked pixels of 2 photo(s)"),
+        "{out}"
+    );
+    assert_eq!(json["results"][0]["masked"], serde_json::json!(true));
+    assert_eq!(by_path, masked);
+    // A frame without its mask_path where the other has one: one sentence naming the photo.
+    frames(false);
+    let o = verisplat(&[
+        "eval",
+        &s(&scene),
+        "--cameras",
+        &s(&set.join("sparse/0")),
+        "--images",
+        &s(&set.join("images")),
+        "--split",
+        "all",
+        "-o",
+        &s(&dir.path().join("missing")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("view_001.png: has no mask_path in") && err.contains("transforms.json"),
+        "{err}"
+    );
 }
