@@ -5,6 +5,7 @@ use super::camera::{BenchCamera, CameraReport};
 use super::{push_stage_samples, stage_reports, StageReport, Stat, JSON_SCHEMA_VERSION};
 use crate::core::model::{ActivatedScene, RenderOptions};
 use crate::gpu::GpuResult;
+use crate::render::backward::BackwardRequest;
 use crate::render::FrameRequest;
 use crate::render::GpuRenderer;
 use serde::Serialize;
@@ -125,32 +126,33 @@ pub fn bench_backward(
                     renderer.render(&FrameRequest::new(&gpu_scene, cam, opts).shaded(f, s))?;
                 let forward = rendered.forward();
                 let frame = rendered.into_frame()?;
-                std::hint::black_box(renderer.backward_shaded(
-                    &forward,
-                    &gpu_scene,
+                let (values, k) = values;
+                let req = BackwardRequest::new(&forward, &gpu_scene, &frame, &grads).shaded(
                     values,
+                    k,
                     s,
                     cam,
                     opts.background,
-                    &frame,
-                    &grads,
-                )?);
+                );
+                std::hint::black_box(renderer.backward(&req)?);
             }
             (Some(f), _, _) => {
                 let rendered =
                     renderer.render(&FrameRequest::new(&gpu_scene, cam, opts).features(f))?;
                 let forward = rendered.forward();
                 let frame = rendered.into_frame()?;
-                std::hint::black_box(
-                    renderer
-                        .backward_with_features(&forward, &gpu_scene, features, &frame, &grads)?,
-                );
+                let mut req = BackwardRequest::new(&forward, &gpu_scene, &frame, &grads);
+                if let Some((values, k)) = features {
+                    req = req.features(values, k);
+                }
+                std::hint::black_box(renderer.backward(&req)?);
             }
             _ => {
                 let rendered = renderer.render(&FrameRequest::new(&gpu_scene, cam, opts))?;
                 let forward = rendered.forward();
                 let frame = rendered.into_frame()?;
-                std::hint::black_box(renderer.backward(&forward, &gpu_scene, &frame, &grads)?);
+                let req = BackwardRequest::new(&forward, &gpu_scene, &frame, &grads);
+                std::hint::black_box(renderer.backward(&req)?);
             }
         }
         let elapsed = t.elapsed().as_secs_f64() * 1e3;

@@ -11,6 +11,7 @@ use crate::core::model::grad::{ColorParams, PixelGrads, SplatGrads, SplatParams}
 use crate::core::model::RenderOptions;
 use crate::fields::mlp::{Mlp, MlpParams};
 use crate::gpu::{GpuContext, GpuError, GpuResult};
+use crate::render::backward::BackwardRequest;
 use crate::render::forward::shade::GpuShader;
 use crate::render::forward::types::Splat;
 use crate::render::{ForwardHandle, FrameRequest};
@@ -324,29 +325,21 @@ impl DiffRasterizer {
         let features = as_features(params);
         let (mut g, mlp_grads) = match (&self.shader, features) {
             (Some((mlp, gpu)), Some(features)) => {
-                let (g, flat) = self.renderer.backward_shaded(
-                    &last.handle,
-                    &last.scene,
-                    features,
-                    gpu,
-                    cam,
-                    opts.background,
-                    &last.frame,
-                    grads,
-                )?;
+                let (values, k) = features;
+                let req = BackwardRequest::new(&last.handle, &last.scene, &last.frame, grads)
+                    .shaded(values, k, gpu, cam, opts.background);
+                let g = self.renderer.backward(&req)?;
+                let flat = g.shader.unwrap_or_default();
                 let m = MlpParams::from_flat(mlp, &flat).map_err(GpuError::Internal)?;
-                (g, Some(m))
+                (g.splats, Some(m))
             }
             _ => {
                 let grads = behind_background(grads, features, opts.background);
-                let g = self.renderer.backward_with_features(
-                    &last.handle,
-                    &last.scene,
-                    features,
-                    &last.frame,
-                    &grads,
-                )?;
-                (g, None)
+                let mut req = BackwardRequest::new(&last.handle, &last.scene, &last.frame, &grads);
+                if let Some((values, k)) = features {
+                    req = req.features(values, k);
+                }
+                (self.renderer.backward(&req)?.splats, None)
             }
         };
         // The device differentiates with respect to the normalised quaternions q / |q|.

@@ -27,6 +27,7 @@ pub mod differentiable;
 pub mod grad_accumulate;
 mod pass;
 pub mod preprocess_bwd;
+mod request;
 pub mod shade_bwd;
 
 use crate::core::camera::Camera;
@@ -44,6 +45,7 @@ pub use device::DeviceBackward;
 use grad_accumulate::{Accumulation, GradAccumulate};
 use pass::BackwardPass;
 use preprocess_bwd::PreprocessBwd;
+pub use request::{BackwardRequest, Gradients};
 use shade_bwd::ShadeBwd;
 
 /// What tells blend backward pipelines apart: bin size, whether it reads rows of texels,
@@ -226,42 +228,31 @@ impl GpuRenderer {
         self.backward.as_ref().map_or(0, |b| b.device_bytes())
     }
 
-    /// The backward pass of the last frame: `frame` is that frame as
-    /// [`GpuRenderer::render`] returned it (its alpha and depth turn a depth gradient into
-    /// the sums the pass walks), `scene` the scene it rendered, `grads` dL/d(each pixel).
-    /// `forward` is the frame's handle ([`crate::render::Rendered::forward`]). The frame
-    /// must have been rendered with [`Self::set_save_forward_state`] on, in one piece, and
-    /// be the renderer's last (an older handle is refused); its options (kernel, background, scale modifier,
-    /// SH degree) are the backward's.
-    ///
-    /// Returns gradients in the layout of the uploaded scene: `quats` with respect to the
-    /// normalised quaternions it holds, `colors` with respect to its SH coefficients
-    /// (`ActivatedScene::sh` layout), `means2d` and `absgrad` in pixels.
-    pub fn backward(
-        &mut self,
-        forward: &ForwardHandle,
-        scene: &GpuScene,
-        frame: &Frame,
-        grads: &PixelGrads<f32>,
-    ) -> GpuResult<SplatGrads<f32>> {
-        self.backward_with_features(forward, scene, None, frame, grads)
-    }
-
-    /// [`Self::backward`] of a frame that blended `k` direct feature channels per
-    /// Gaussian (`features`: `(values, k)`, Gaussian-major, at most 16 channels) instead of
-    /// its SH colour, with no background: `grads.color` holds `k` channels per pixel, and
-    /// the returned `colors` are dL/d(feature values), `k` per Gaussian.
-    pub fn backward_with_features(
-        &mut self,
-        forward: &ForwardHandle,
-        scene: &GpuScene,
-        features: Option<(&[f32], usize)>,
-        frame: &Frame,
-        grads: &PixelGrads<f32>,
-    ) -> GpuResult<SplatGrads<f32>> {
-        self.check_forward(forward, (frame.width, frame.height))?;
-        self.backward_inner(scene, features, None, frame, grads)
-            .map(|(g, _)| g)
+    /// The backward pass of the last frame that `req` asks for ([`BackwardRequest`]). The
+    /// frame must have been rendered with [`Self::set_save_forward_state`] on, in one
+    /// piece, and be the renderer's last (an older handle is refused); its options
+    /// (kernel, background, scale modifier, SH degree) are the backward's.
+    pub fn backward(&mut self, req: &BackwardRequest) -> GpuResult<Gradients> {
+        let size = (req.frame.width, req.frame.height);
+        self.check_forward(req.forward, size)?;
+        let shade = match req.shader {
+            Some((shader, cam, background)) => {
+                let channels = req.features.map_or(0, |(_, k)| k);
+                self.check_shaded(shader, channels, cam, size)?;
+                Some(ShadeJob {
+                    shader,
+                    cam,
+                    background,
+                })
+            }
+            None => None,
+        };
+        let (splats, shader) =
+            self.backward_inner(req.scene, req.features, shade, req.frame, req.grads)?;
+        Ok(Gradients {
+            splats,
+            shader: req.shader.map(|_| shader.unwrap_or_default()),
+        })
     }
 
     /// Refuses a forward handle that is not the renderer's last finished frame (a later
@@ -281,36 +272,6 @@ impl GpuRenderer {
             )));
         }
         Ok(())
-    }
-
-    /// The backward pass of the last frame, rendered with a shader ([`crate::render::FrameRequest::shaded`])
-    /// with `shader` from `cam` over `background` (the options' background): `features`
-    /// are the Gaussians' `(values, k)` it blended, `grads.color` dL/d(the shaded colour,
-    /// 3 channels). Returns the Gaussians' gradients (`colors`: dL/d(feature values), `k`
-    /// per Gaussian) and the network's, in the float layout of its weights
-    /// ([`crate::fields::mlp::Mlp::gpu_words`] after the header: per layer the weights, row-major
-    /// `outputs x inputs`, then the biases).
-    #[allow(clippy::too_many_arguments)]
-    pub fn backward_shaded(
-        &mut self,
-        forward: &ForwardHandle,
-        scene: &GpuScene,
-        features: (&[f32], usize),
-        shader: &GpuShader,
-        cam: &Camera,
-        background: [f32; 3],
-        frame: &Frame,
-        grads: &PixelGrads<f32>,
-    ) -> GpuResult<(SplatGrads<f32>, Vec<f32>)> {
-        self.check_forward(forward, (frame.width, frame.height))?;
-        self.check_shaded(shader, features.1, cam, (frame.width, frame.height))?;
-        let job = ShadeJob {
-            shader,
-            cam,
-            background,
-        };
-        let (g, mlp) = self.backward_inner(scene, Some(features), Some(job), frame, grads)?;
-        Ok((g, mlp.unwrap_or_default()))
     }
 
     /// Refuses a shaded frame's backward pass that the shader, the camera (`size` the

@@ -25,6 +25,7 @@ use std::collections::{BTreeMap, HashSet};
 use verisplat::core::camera::{self, Camera};
 use verisplat::core::scene::{self, ActivatedScene};
 use verisplat::cpu::{self, Projected, RenderOptions, SplatKernel};
+use verisplat::render::backward::BackwardRequest;
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::forward::types::unpack_tile;
 use verisplat::render::{FrameRequest, Readback, Rendered};
@@ -489,13 +490,17 @@ fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
     let frame = float.into_frame().unwrap();
     r.set_save_forward_state(false);
     let grads = verisplat::core::model::grad::PixelGrads::<f32>::default();
-    let e = r.backward(&second, &gs, &frame, &grads).unwrap_err();
+    let e = r
+        .backward(&BackwardRequest::new(&second, &gs, &frame, &grads))
+        .unwrap_err();
     assert!(
         e.to_string().contains("no longer the renderer's last"),
         "{e}"
     );
     let small = verisplat::core::frame::Frame::background(32, 24, [0.0; 3]);
-    let e = r.backward(&third, &gs, &small, &grads).unwrap_err();
+    let e = r
+        .backward(&BackwardRequest::new(&third, &gs, &small, &grads))
+        .unwrap_err();
     assert!(e.to_string().contains("the frame given 32x24"), "{e}");
     assert_ne!(first, second);
     assert_eq!(second.size(), (64, 48));
