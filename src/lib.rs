@@ -17,25 +17,3 @@ pub mod gpu;
 pub mod io;
 pub mod render;
 pub mod train;
-
-// The modules' paths before the wings (`verisplat::camera`, ...), kept for one release so
-// that code written against them builds unchanged; new code names the wing.
-#[cfg(feature = "cli")]
-#[doc(hidden)]
-pub use self::app::bench;
-#[cfg(feature = "viewer")]
-#[doc(hidden)]
-pub use self::app::view;
-#[doc(hidden)]
-pub use self::app::{doctor, sequence, shard, stats};
-#[doc(hidden)]
-pub use self::core::demo::{demo_scene, DEMO_SCENE_PLY};
-#[doc(hidden)]
-pub use self::core::{
-    camera, console, file_error, former_name, frame, fsutil, gen, model, quat, rules, scene,
-    shader_interface,
-};
-#[doc(hidden)]
-pub use self::fields::{fit, mlp, rf};
-#[doc(hidden)]
-pub use self::io::{diff_image, font, image_file, metrics, output};

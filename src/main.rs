@@ -5,7 +5,7 @@ mod cli;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
-use verisplat::note;
+use verisplat::core::console::note;
 
 #[derive(Parser)]
 #[command(

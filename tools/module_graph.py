@@ -4,8 +4,11 @@
 An edge `a -> b` means some file of module `a` (src/a.rs or src/a/...) names
 `crate::b` (in a `use` line, a `use crate::{b, ...}` group, or a path in the code;
 `self::` and `super::` paths are resolved to theirs). `lib` is the crate root
-(src/lib.rs: the wings and the former paths' re-exports); an exported macro
-(`crate::note!`) counts as a use of the module defining it. Comments and strings are
+(src/lib.rs: the wings), above every wing: an edge to it runs up. An exported macro
+lives at the crate root whatever its file, so naming it there (`crate::__console_note!`)
+is a use of `lib`, except in the file that defines it, which re-exports it under its
+module's path (`pub use crate::__console_note as note;` in core/console.rs, named
+`crate::core::console::note!`). Comments and strings are
 ignored; code under `#[cfg(test)]` counts like any other code, except with
 --no-tests, which drops `#[cfg(test)] mod ... { ... }` blocks and files named
 tests.rs. The binary (src/main.rs, src/app/cli/) uses the library as `verisplat::` and is
@@ -15,8 +18,9 @@ left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
     tools/module_graph.py --wings        # checks that every arrow between wings runs
                                          # down core < io < fields < cpu < gpu < render
                                          # < train < app, and between render's floors
-                                         # forward < frame < backward (exit status 1 if
-                                         # one runs up)
+                                         # forward < frame < backward, and that none
+                                         # runs up to the crate root `lib` (exit status
+                                         # 1 if one runs up)
     tools/module_graph.py --depth 2      # the wings' modules as nodes (core::scene ->
                                          # core::fsutil, ...; --depth 3 their
                                          # submodules); edges between a module and its
@@ -28,6 +32,12 @@ left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
     tools/module_graph.py --bin --depth 2
                                          # the binary instead: src/main.rs (`main`) and
                                          # src/app/cli/ (cli::render -> cli::common, ...)
+    tools/module_graph.py --python       # the Python package instead (python/verisplat/:
+                                         # torch -> _passes, ...; --layers, --mermaid,
+                                         # --why too): an edge `a -> b` is an import of
+                                         # module b in a's file, function-local and
+                                         # `if TYPE_CHECKING:` ones included; `__init__`
+                                         # is the package (`from . import Camera`)
 
 Cycles are reported as the strongly connected components with more than one module,
 each with one shortest cycle through every edge of it, so a component that is a
@@ -227,16 +237,17 @@ def library_files(no_tests):
 def collect(depth, no_tests):
     """Modules and {(from, to): [(file, line, path)]} over the library's files.
 
-    `lib` is the crate root (src/lib.rs and its items); an
-    exported macro (`crate::note!`) counts as a use of the module that defines it.
+    `lib` is the crate root (src/lib.rs and its items, exported macros included: a path
+    `crate::x` to anything but a wing is an edge to it), except that the file defining an
+    exported macro may name it there to re-export it.
     """
     files = list(library_files(no_tests))
     modules = {module_of(rel, d) for rel, _ in files for d in range(1, depth + 1)}
     top = {m for m in modules if "::" not in m and m != root_name()}
-    macros = {}
+    macros = {}  # exported macro -> the file defining it
     for rel, text in files:
         for m in re.finditer(r"#\[macro_export\]\s*macro_rules!\s*(" + IDENT + ")", text):
-            macros[m.group(1)] = module_of(rel, depth)
+            macros[m.group(1)] = rel
     edges = defaultdict(list)
     for rel, text in files:
         src = module_of(rel, depth)
@@ -251,8 +262,8 @@ def collect(depth, no_tests):
             ]
         for line, path in refs:
             parts = path.split("::")
-            if parts[0] in macros and re.search(r"\b" + parts[0] + r"\s*!", text):
-                dst = macros[parts[0]]
+            if parts[0] in macros and macros[parts[0]] == rel:
+                dst = src  # the defining file re-exports its macro from the crate root
             elif parts[0] not in top:
                 dst = root_name()
             else:
@@ -269,6 +280,48 @@ def collect(depth, no_tests):
                 shown = os.path.join("src", os.path.dirname(BIN_DIR), rel) if BIN and rel != "main.rs" else os.path.join("src", rel)
                 edges[(src, dst)].append((shown, line, "crate::" + path))
     return sorted(modules), edges
+
+
+def python_graph(package):
+    """Modules and {(from, to): [(file, line, import)]} of the Python package in folder
+    `package`: its modules are its files (`x.py`, and `x.pyi` for the extension), the
+    package itself is `__init__`. Every import in a module's file counts, at the top,
+    inside a function or under `if TYPE_CHECKING:` alike: `from . import x` (`x` a
+    module, else the package), `from .x import y`, `import verisplat.x`, `from verisplat
+    import x`, `from verisplat.x import y`."""
+    import ast
+
+    name = os.path.basename(os.path.normpath(package))
+    files = sorted(f for f in os.listdir(package) if f.endswith((".py", ".pyi")))
+    modules = sorted({f.rsplit(".", 1)[0] for f in files})
+    edges = defaultdict(list)
+    for f in files:
+        src = f.rsplit(".", 1)[0]
+        path = os.path.join(package, f)
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+        tree = ast.parse(text, f)
+        for node in ast.walk(tree):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name.split(".") for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level > 1:
+                    continue  # above the package
+                base = (node.module or "").split(".") if node.module else []
+                if node.level == 1:
+                    base = [name] + base
+                # `from <package> import x`: x is a module or a name of the package
+                targets = [base + [a.name] if len(base) == 1 else base for a in node.names]
+            for parts in targets:
+                if parts[0] != name:
+                    continue  # another package
+                dst = parts[1] if len(parts) > 1 and parts[1] in modules else "__init__"
+                if dst != src:
+                    shown = os.path.relpath(path, os.path.join(SRC, ".."))
+                    code = " ".join(ast.get_source_segment(text, node).split())
+                    edges[(src, dst)].append((shown, node.lineno, code))
+    return modules, edges
 
 
 def sccs(nodes, adj):
@@ -366,14 +419,16 @@ def print_layers(nodes, edges):
 def check_wings(nodes, edges):
     """Every edge between two wings runs down WINGS (to a wing listed earlier), and every
     edge between two floors of a wing down its FLOORS; prints the wings' edges and each
-    edge that runs up, with the lines behind it. The crate root (`lib`: the former paths'
-    re-exports) is left out."""
+    edge that runs up, with the lines behind it. The crate root (`lib`: the wings) is above
+    every wing: an edge from a wing to it runs up."""
     wing = {w: i for i, w in enumerate(WINGS)}
     extra = sorted(n for n in nodes if "::" not in n and n != root_name() and n not in wing)
     bad = []
     down = defaultdict(set)
     for (a, b), sites in sorted(edges.items()):
         wa, wb = a.split("::")[0], b.split("::")[0]
+        if wb == root_name() and wa != wb:
+            bad.append((a, b, sites[0]))
         if root_name() in (wa, wb) or wa == wb:
             continue
         down[wa].add(wb)
@@ -410,6 +465,7 @@ def main():
     ap.add_argument("--src", help="the crate's src folder (default: this checkout's)")
     ap.add_argument("--bin", action="store_true", help="the binary (main.rs, app/cli/), not the library")
     ap.add_argument("--wings", action="store_true", help="check that every arrow between wings runs down")
+    ap.add_argument("--python", action="store_true", help="the Python package (python/verisplat/), not the crate")
     args = ap.parse_args()
     if args.bin:
         global BIN
@@ -417,9 +473,12 @@ def main():
     if args.src:
         global SRC
         SRC = args.src
-    nodes, edges = collect(args.depth, args.no_tests)
+    if args.python:
+        nodes, edges = python_graph(os.path.join(SRC, "..", "python", "verisplat"))
+    else:
+        nodes, edges = collect(args.depth, args.no_tests)
 
-    if args.wings:
+    if args.wings and not args.python:
         # the wings' edges are the edges of every module, cut to their first part
         return check_wings(nodes, collect(99, args.no_tests)[1]) | (1 if cycles(nodes, edges) else 0)
     if args.why:
@@ -433,10 +492,11 @@ def main():
         for a, b in sorted(edges):
             print(f"    {a.replace('::', '_')} --> {b.replace('::', '_')}")
     else:
-        width = max((len(a) for a, _ in edges), default=0)
+        shown = nodes if args.depth == 1 or args.python else [a for a, _ in edges]
+        width = max((len(a) for a in shown), default=0)
         for a in nodes:
             outs = sorted(b for x, b in edges if x == a)
-            if outs or args.depth == 1:
+            if outs or args.depth == 1 or args.python:
                 print(f"{a:<{width}} -> {', '.join(outs) if outs else '(nothing)'}")
     found = cycles(nodes, edges)
     print()

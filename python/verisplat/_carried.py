@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from . import _native, _projection
+from ._passes import _meta, _pair_backward, _Passes, _stack, _to_layout
 
 # The carriers' depth spread, relative to their depth: far too thin to matter, wide
 # enough that every sigma point stays in front of the camera.
@@ -173,8 +174,6 @@ class Rasterize(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means2d, cov, depth, colours, opacities, passes):  # type: ignore[override]
-        from .torch import _stack
-
         layout = passes.call.layout
         ctx.passes = passes
         ctx.means2d = means2d
@@ -191,8 +190,6 @@ class Rasterize(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, g_colors, g_alphas, g_depths):  # type: ignore[override]
-        from .torch import _pair_backward, _to_layout
-
         passes = ctx.passes
         call = passes.call
         layout = call.layout
@@ -238,8 +235,6 @@ class Rasterize(torch.autograd.Function):
 def rasterize(call, means, quats, scales, opacities, colors, viewmats, Ks):
     """The colours, alphas and expected depths [..., C, H, W, ...] and the meta dict of
     gsplat's linearised fisheye (the module's docstring)."""
-    from .torch import _Passes, _meta, _stack
-
     layout = call.layout
     B, C, N = layout.B, layout.C, layout.N
     # The carriers blend direct colours in the layout's chunks (SH: the 3 channels).

@@ -48,22 +48,27 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 import torch
 
-from . import _native, _projection
+from . import _carried, _native, _projection
 from . import raster as _raster
+from ._passes import (
+    _Call,
+    _check_tensor,
+    _from_layout,
+    _Layout,
+    _meta,
+    _np,
+    _pair_backward,
+    _Passes,
+    _stack,
+    _to_layout,
+)
 
 __all__ = ["rasterization"]
-
-# Direct channels per native pass (the most the device's backward pass takes): more are
-# blended in chunks of this many.
-_CHUNK = _native.BACKWARD_CHANNELS
-# verisplat's tiles (meta["tile_size"]; gsplat's tile_size is a speed setting).
-_TILE = _native.TILE_SIZE
 
 _RASTERIZERS: Dict[Tuple[Any, str], "_raster.Rasterizer"] = {}
 
@@ -75,28 +80,6 @@ def _rasterizer(device: Any, accumulation: str) -> "_raster.Rasterizer":
     return _RASTERIZERS[key]
 
 
-def _check_tensor(name: str, t: Any, shape: Tuple[Optional[int], ...]) -> torch.Tensor:
-    if not isinstance(t, torch.Tensor):
-        raise ValueError(f"{name} must be a torch.Tensor, got {type(t).__name__}")
-    if t.device.type != "cpu":
-        raise ValueError(
-            f"{name} is on {t.device}; verisplat.torch takes CPU tensors (the Vulkan device is "
-            "its own): pass {name}.cpu()".replace("{name}", name)
-        )
-    if t.dtype != torch.float32:
-        raise ValueError(f"{name} must be float32, got {t.dtype}")
-    if t.dim() != len(shape) or any(s is not None and s != d for s, d in zip(shape, t.shape)):
-        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
-        raise ValueError(f"{name} must have shape {want}, got {tuple(t.shape)}")
-    if not torch.isfinite(t).all():
-        raise ValueError(f"{name} holds NaN or infinite values")
-    return t
-
-
-def _np(t: torch.Tensor) -> np.ndarray:
-    return t.detach().cpu().numpy()
-
-
 def _size(name: str, v: Any) -> int:
     """A positive integer size (Python or numpy integer, or an integral 0-d tensor)."""
     if isinstance(v, torch.Tensor) and v.dim() == 0 and not v.dtype.is_floating_point:
@@ -104,74 +87,6 @@ def _size(name: str, v: Any) -> int:
     if isinstance(v, bool) or not isinstance(v, numbers.Integral) or int(v) <= 0:
         raise ValueError(f"{name} must be a positive integer, got {v!r}")
     return int(v)
-
-
-class _Layout:
-    """How the arguments' shapes map onto native passes: B Gaussian sets (the leading batch
-    dimensions ``batch`` flattened), C cameras each, N Gaussians; colours shared by the
-    cameras or per camera; SH of ``sh_degree`` or D direct channels, in chunks."""
-
-    def __init__(self, means, colors, viewmats, sh_degree, packed):
-        if not isinstance(means, torch.Tensor) or means.dim() < 2:
-            _check_tensor("means", means, (None, 3))
-        self.batch = tuple(means.shape[:-2])
-        self.B = int(np.prod(self.batch)) if self.batch else 1
-        self.N = means.shape[-2]
-        if not isinstance(viewmats, torch.Tensor) or viewmats.dim() != len(self.batch) + 3:
-            _check_tensor("viewmats", viewmats, self.batch + (None, 4, 4))
-        self.C = viewmats.shape[-3]
-        self.sh_degree = sh_degree
-        tail = 2 if sh_degree is not None else 1  # (K, 3) or (D,)
-        if not isinstance(colors, torch.Tensor):
-            _check_tensor("colors", colors, ())
-        self.per_camera = colors.dim() == len(self.batch) + 2 + tail
-        self.D = 3 if sh_degree is not None else (colors.shape[-1] if colors.dim() else 0)
-        self.chunks = (
-            [slice(0, 3)]
-            if sh_degree is not None
-            else [slice(i, min(i + _CHUNK, self.D)) for i in range(0, self.D, _CHUNK)]
-        )
-        self.packed = packed
-
-    def pairs(self) -> List[Tuple[int, int]]:
-        return [(b, c) for b in range(self.B) for c in range(self.C)]
-
-    def colour_shape(self) -> Tuple[Optional[int], ...]:
-        lead = self.batch + ((self.C,) if self.per_camera else ()) + (self.N,)
-        return lead + ((None, 3) if self.sh_degree is not None else (None,))
-
-
-@dataclass(frozen=True)
-class _Call:
-    """What one ``rasterization`` call asks for, beyond the tensors: the rasterizer, the
-    shapes, the cameras (per set, per camera: viewmat and K as numpy) and the options."""
-
-    rasterizer: "_raster.Rasterizer"
-    layout: _Layout
-    cams: List[List[Tuple[np.ndarray, np.ndarray]]]
-    lenses: List[List[Optional[Dict[str, Any]]]]
-    width: int
-    height: int
-    kernel: str
-    rules: str
-    near_plane: float
-    antialiased: bool
-    absgrad: bool
-
-
-@dataclass(frozen=True)
-class _Passes:
-    """The handle the two autograd Functions share, made by ``_Project``'s forward (one of
-    its outputs, an input of ``_Rasterize``) and kept on each one's ``ctx``: the call, its
-    native forward passes (per (set, camera) pair, one per colour chunk), the radii
-    ([B, C, N] and per axis [B, C, N, 2]) and, packed, the visible (set, camera, Gaussian)
-    triples. Nothing in it changes after the forward pass."""
-
-    call: _Call
-    fwds: Dict[Tuple[int, int], list]
-    radii: np.ndarray
-    radii_xy: np.ndarray
-    ids: Optional[Tuple[np.ndarray, ...]]
 
 
 def _native_passes(call: _Call, arrays) -> Dict[Tuple[int, int], list]:
@@ -205,13 +120,6 @@ def _native_passes(call: _Call, arrays) -> Dict[Tuple[int, int], list]:
             for ch in layout.chunks
         ]
     return fwds
-
-
-def _stack(layout: _Layout, fwds, get) -> np.ndarray:
-    """`get(forwards)` of each pair (its list of one forward pass per colour chunk), as
-    [B, C, ...]."""
-    rows = [np.stack([get(fwds[(b, c)]) for c in range(layout.C)]) for b in range(layout.B)]
-    return np.stack(rows)
 
 
 class _Project(torch.autograd.Function):
@@ -268,30 +176,6 @@ class _Project(torch.autograd.Function):
         return out[0], out[1], out[2], out[3], None, out[4], out[5], None
 
 
-def _to_layout(passes: _Passes, full: np.ndarray) -> np.ndarray:
-    """[B, C, N, ...] as meta holds it: packed rows of the visible pairs, or [..., C, N, ...]."""
-    layout = passes.call.layout
-    full = np.ascontiguousarray(full, dtype=np.float32)
-    if layout.packed:
-        return np.ascontiguousarray(full[passes.ids])
-    return full.reshape(layout.batch + (layout.C, layout.N) + full.shape[3:])
-
-
-def _from_layout(passes: _Passes, g: Optional[torch.Tensor]) -> Optional[np.ndarray]:
-    """A meta tensor's gradient as [B, C, N, ...] (None: none)."""
-    if g is None:
-        return None
-    layout = passes.call.layout
-    g = _np(g).astype(np.float32)
-    tail = g.shape[1:] if layout.packed else g.shape[len(layout.batch) + 2 :]
-    full = np.zeros((layout.B, layout.C, layout.N) + tuple(tail), np.float32)
-    if layout.packed:
-        full[passes.ids] = g
-    else:
-        full[...] = g.reshape(full.shape)
-    return full if full.any() else None
-
-
 def _meta_vjp(passes: _Passes, inputs, grads, wanted):
     """dL/d(means, quats, scales, opacities, viewmats, Ks) of losses on the meta 2D means,
     depths, conics and opacities (`grads`, [B, C, N, ...] or None), through the torch
@@ -330,31 +214,6 @@ def _meta_vjp(passes: _Passes, inputs, grads, wanted):
                 else:
                     totals[i][b, c] += g
     return [None if t is None else t.reshape(i.shape) for t, i in zip(totals, inputs)]
-
-
-def _pair_backward(r, fwds, g_colors, g_alphas, g_depths, layout: _Layout, screen: bool):
-    """One pair's gradients from its pixel gradients, summed over its colour chunks (the
-    alpha and depth gradients go with the first chunk); colours joined along channels.
-    With `screen` also the projected quantities' (``raster.Rasterizer.backward``)."""
-    total: Dict[str, np.ndarray] = {}
-    colour_parts: List[np.ndarray] = [None] * len(fwds)  # type: ignore[list-item]
-    names = ("means", "quats", "scales", "opacities", "means2d", "absgrad")
-    names += ("screen",) if screen else ()
-    # The last chunk's state is still on the device: its backward goes first.
-    for j in reversed(range(len(fwds))):
-        ch = layout.chunks[j]
-        g = r.backward(
-            fwds[j],
-            grad_colors=None if g_colors is None else np.ascontiguousarray(g_colors[..., ch]),
-            grad_alphas=g_alphas if j == 0 else None,
-            grad_depths=g_depths if j == 0 else None,
-            screen=screen,
-        )
-        for name in names:
-            total[name] = g[name] if name not in total else total[name] + g[name]
-        colour_parts[j] = g["colors"]
-    total["colors"] = colour_parts[0] if len(fwds) == 1 else np.concatenate(colour_parts, axis=1)
-    return total
 
 
 def _camera_vjp(passes: _Passes, inputs, b, c, g2d, screen):
@@ -649,34 +508,6 @@ def _backgrounds(layout: _Layout, backgrounds, render_mode):
     return colour, depth
 
 
-def _meta(passes: _Passes, projected) -> Dict[str, Any]:
-    means2d, depths, conics, opacities = projected
-    call = passes.call
-    layout, width, height = call.layout, call.width, call.height
-    radii = passes.radii_xy.astype(np.int32)
-    bs, C, N = layout.batch, layout.C, layout.N
-    meta: Dict[str, Any] = {
-        "means2d": means2d,
-        "depths": depths,
-        "conics": conics,
-        "opacities": opacities,
-        "width": width,
-        "height": height,
-        "tile_size": _TILE,
-        "n_batches": layout.B,
-        "n_cameras": C,
-    }
-    if layout.packed:
-        ids = [torch.from_numpy(i.astype(np.int64)) for i in passes.ids]
-        r = torch.from_numpy(radii[passes.ids])
-        meta.update(batch_ids=ids[0], camera_ids=ids[1], gaussian_ids=ids[2])
-    else:
-        r = torch.from_numpy(radii.reshape(bs + (C, N, 2)))
-        meta.update(batch_ids=None, camera_ids=None, gaussian_ids=None)
-    meta["radii"] = r
-    return meta
-
-
 def rasterization(
     means: torch.Tensor,
     quats: torch.Tensor,
@@ -790,8 +621,6 @@ def rasterization(
     # A zero scale is the smallest normal float (its gradient is 0, as gsplat's is).
     unsigned = scales.abs().clamp_min(torch.finfo(torch.float32).tiny)
     if camera_model == "fisheye" and not with_ut:
-        from . import _carried
-
         rgb, alphas, expected, meta = _carried.rasterize(
             call, means, quats, unsigned, opacities, colors, viewmats, Ks)
     else:

@@ -2,10 +2,10 @@
 //!
 //! `println!`/`eprintln!` panic when the stream is closed (`verisplat info scene.ply | head`
 //! closes stdout after ten lines). A closed pipe is normal use of a command-line tool, so
-//! [`outln!`](crate::outln!) stops writing to stdout quietly and lets the command finish its work (a
+//! [`outln!`] stops writing to stdout quietly and lets the command finish its work (a
 //! `bench --json` piped into `head` still writes its JSON). Any other stdout error (a full
 //! disk behind a redirect) is remembered and reported by [`stdout_error`] at the end.
-//! [`note!`](crate::note!) writes to stderr and ignores errors: there is nowhere left to report them.
+//! [`note!`] writes to stderr and ignores errors: there is nowhere left to report them.
 
 use std::fmt;
 use std::io::{ErrorKind, Write};
@@ -15,7 +15,7 @@ use std::sync::Mutex;
 static STDOUT_CLOSED: AtomicBool = AtomicBool::new(false);
 static STDOUT_ERROR: Mutex<Option<String>> = Mutex::new(None);
 
-/// Writes formatted text to stdout (used by [`out!`](crate::out!) and [`outln!`](crate::outln!)).
+/// Writes formatted text to stdout (used by [`out!`] and [`outln!`]).
 pub fn write_stdout(args: fmt::Arguments) {
     if STDOUT_CLOSED.load(Ordering::Relaxed) {
         return;
@@ -31,7 +31,7 @@ pub fn write_stdout(args: fmt::Arguments) {
     }
 }
 
-/// Writes formatted text to stderr, ignoring errors (used by [`note!`](crate::note!)).
+/// Writes formatted text to stderr, ignoring errors (used by [`note!`]).
 pub fn write_stderr(args: fmt::Arguments) {
     let _ = std::io::stderr().lock().write_fmt(args);
 }
@@ -46,25 +46,41 @@ pub fn stdout_closed() -> bool {
     STDOUT_CLOSED.load(Ordering::Relaxed)
 }
 
+// `#[macro_export]` puts a `macro_rules!` macro at the crate root whatever its file, so the
+// macros are exported under hidden names and named by this module's path
+// (`crate::core::console::note!`, `verisplat::core::console::note!`): nothing in a wing
+// reaches up to the crate root for them (`tools/module_graph.py --wings` checks it).
+
 /// `print!` that stops quietly when stdout is closed.
+#[doc(hidden)]
 #[macro_export]
-macro_rules! out {
+macro_rules! __console_out {
     ($($arg:tt)*) => { $crate::core::console::write_stdout(format_args!($($arg)*)) };
 }
 
 /// `println!` that stops quietly when stdout is closed.
+#[doc(hidden)]
 #[macro_export]
-macro_rules! outln {
+macro_rules! __console_outln {
     () => { $crate::core::console::write_stdout(format_args!("\n")) };
     ($($arg:tt)*) => { $crate::core::console::write_stdout(format_args!("{}\n", format_args!($($arg)*))) };
 }
 
 /// `eprintln!` that never panics.
+#[doc(hidden)]
 #[macro_export]
-macro_rules! note {
+macro_rules! __console_note {
     () => { $crate::core::console::write_stderr(format_args!("\n")) };
     ($($arg:tt)*) => { $crate::core::console::write_stderr(format_args!("{}\n", format_args!($($arg)*))) };
 }
+
+// The macros' names (their documentation is the macros' own, shown here).
+#[doc(inline)]
+pub use crate::__console_note as note;
+#[doc(inline)]
+pub use crate::__console_out as out;
+#[doc(inline)]
+pub use crate::__console_outln as outln;
 
 /// An error as one sentence: the outermost message with each cause appended that it
 /// does not already contain (`context: cause: cause`).

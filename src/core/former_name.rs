@@ -50,7 +50,7 @@ pub fn env_var_os(name: &str) -> Option<OsString> {
     if let Some(v) = std::env::var_os(name) {
         if let (Some(old), Some(_)) = (&old, &old_value) {
             if first_note(old) {
-                crate::note!(
+                crate::core::console::note!(
                     "verisplat: {old} is ignored because {name} is set too (the project was called vksplat until 2026-11-28); unset {old}"
                 );
             }
@@ -59,7 +59,7 @@ pub fn env_var_os(name: &str) -> Option<OsString> {
     }
     let (old, v) = (old?, old_value?);
     if first_note(&old) {
-        crate::note!(
+        crate::core::console::note!(
             "verisplat: {old} is deprecated (the project was called vksplat until 2026-11-28); set {name} instead"
         );
     }

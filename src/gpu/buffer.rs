@@ -410,7 +410,10 @@ impl Drop for GpuBuffer {
         if let Some(allocation) = self.allocation.take() {
             if let Ok(mut alloc) = self.shared.allocator.lock() {
                 if let Err(e) = alloc.free(allocation) {
-                    crate::note!("verisplat: freeing buffer '{}' failed: {e}", self.name);
+                    crate::core::console::note!(
+                        "verisplat: freeing buffer '{}' failed: {e}",
+                        self.name
+                    );
                 }
             }
         }

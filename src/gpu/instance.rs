@@ -34,7 +34,7 @@ unsafe extern "system" fn debug_callback(
             .unwrap_or_default()
     };
     let text = format!("[vulkan {severity:?} {types:?}] {message}");
-    crate::note!("{text}");
+    crate::core::console::note!("{text}");
     // SAFETY: `user` points at the boxed MessageLog owned by `Shared`, which outlives
     // the messenger (and the instance whose creation/destruction it also watches).
     if let Some(log) = unsafe { (user as *const MessageLog).as_ref() } {

@@ -73,7 +73,7 @@ pub fn load(dir: &Path, identity: &CacheIdentity) -> Option<Vec<u8>> {
     match identity.check(&data) {
         Ok(()) => Some(data),
         Err(why) => {
-            crate::note!(
+            crate::core::console::note!(
                 "verisplat: ignoring pipeline cache {} ({why}); it will be rewritten",
                 path.display()
             );

@@ -341,7 +341,7 @@ impl GpuTimer {
             Err(untimed) => {
                 static SAID: AtomicBool = AtomicBool::new(false);
                 if !SAID.swap(true, Ordering::Relaxed) {
-                    crate::note!("verisplat: {untimed}");
+                    crate::core::console::note!("verisplat: {untimed}");
                 }
                 Ok(None)
             }

@@ -9,11 +9,11 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 use verisplat::app::bench::BenchCamera;
+use verisplat::core::console::{note, out, outln};
 use verisplat::core::scene::filter::SceneFilter;
 use verisplat::core::scene::Scene;
 use verisplat::io::output;
 use verisplat::render::GpuRenderer;
-use verisplat::{note, out, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:

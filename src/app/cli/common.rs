@@ -202,7 +202,7 @@ impl KernelArg {
             return k;
         }
         if scene.kernel != SplatKernel::Gaussian {
-            verisplat::note!(
+            verisplat::core::console::note!(
                 "note: {name} records the {} kernel; rendering with it (--kernel gaussian overrides)",
                 scene.kernel
             );
@@ -217,7 +217,7 @@ impl KernelArg {
             return r;
         }
         if scene.rules != Rules::Original {
-            verisplat::note!(
+            verisplat::core::console::note!(
                 "note: {name} records that it was trained with {}'s rules; rendering with them (--rules original overrides)",
                 scene.rules
             );
@@ -304,13 +304,13 @@ pub(crate) fn model_cameras(scene: &SceneArg) -> Option<PathBuf> {
     let dir = model_dir(scene)?;
     let file = dir.join("cameras.json");
     if file.is_file() {
-        verisplat::note!(
+        verisplat::core::console::note!(
             "note: using the model's cameras, {} (--cameras or --orbit choose others)",
             file.display()
         );
         Some(file)
     } else {
-        verisplat::note!(
+        verisplat::core::console::note!(
             "note: model directory {} has no cameras.json; using the default camera",
             dir.display()
         );
@@ -346,7 +346,7 @@ fn orbit_frame(p: &PathArgs, scene_arg: &SceneArg) -> Result<(glam::Vec3, Option
         took.push(format!("centre {:.3},{:.3},{:.3}", c.x, c.y, c.z));
     }
     if !took.is_empty() {
-        verisplat::note!(
+        verisplat::core::console::note!(
             "note: the orbit's {} from the model's {} ({}; --orbit-up and --orbit-centre choose others)",
             took.join(" and "),
             super::plural(cams.len(), "camera"),

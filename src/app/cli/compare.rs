@@ -12,6 +12,7 @@ use clap::Args;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use verisplat::app::sequence::FrameSelection;
+use verisplat::core::console::{note, outln};
 use verisplat::io::diff_image;
 use verisplat::io::image_file::{self, Planes};
 use verisplat::io::metrics::{self, ErrorStats, PlaneKind};
@@ -19,7 +20,6 @@ use verisplat::io::output::{self, ImageFormat};
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
-use verisplat::{note, outln};
 
 /// Test-only knob: `VERISPLAT_TEST_PERTURB_RED=D` adds `D` to the red channel of every GPU
 /// frame before it is compared, standing in for a broken blend so the tests can check that

@@ -5,8 +5,8 @@ use super::common::{check_output_file, FilterArgs};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
+use verisplat::core::console::note;
 use verisplat::core::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
-use verisplat::note;
 
 #[derive(Args)]
 #[command(after_help = "Examples:

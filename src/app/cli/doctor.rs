@@ -7,8 +7,8 @@ use clap::Args;
 use serde::Serialize;
 use std::path::PathBuf;
 use verisplat::app::doctor::{self, DeviceRun};
+use verisplat::core::console::{note, outln};
 use verisplat::gpu::devices::{self, DeviceSummary};
-use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "\
@@ -209,7 +209,7 @@ pub(crate) fn doctor(args: &DoctorArgs) -> Result<()> {
         };
         let text = serde_json::to_string_pretty(&report)? + "\n";
         if json_to_stdout {
-            verisplat::out!("{text}");
+            verisplat::core::console::out!("{text}");
         } else {
             std::fs::write(path, text)
                 .with_context(|| format!("{}: cannot write the report", path.display()))?;
@@ -248,7 +248,7 @@ pub(crate) fn gpu_report(args: &GpuReportArgs) -> Result<()> {
     match &args.output {
         Some(path) => std::fs::write(path, md)
             .with_context(|| format!("{}: cannot write the report", path.display()))?,
-        None => verisplat::out!("{md}"),
+        None => verisplat::core::console::out!("{md}"),
     }
     Ok(())
 }

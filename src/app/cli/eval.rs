@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use verisplat::app::shard::Shard;
 use verisplat::core::camera::{self, Camera};
+use verisplat::core::console::{note, outln};
 use verisplat::io::color_fit;
 use verisplat::io::image_file::{self, Planes};
 use verisplat::io::metrics;
@@ -20,7 +21,6 @@ use verisplat::io::output;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
 use verisplat::train::masks;
-use verisplat::{note, outln};
 
 /// Every `LLFF_HOLD`-th camera (in image-name order, from the first) is a test camera when
 /// the data set names no split: the original code's `llffhold`.

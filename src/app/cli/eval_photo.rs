@@ -7,7 +7,7 @@ use anyhow::Result;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use verisplat::core::camera::Camera;
-use verisplat::note;
+use verisplat::core::console::note;
 use verisplat::train::data::{resize, Resolution};
 use verisplat::train::undistort::{self, Undistortion};
 

@@ -6,9 +6,9 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 use std::time::Instant;
+use verisplat::core::console::{note, outln};
 use verisplat::cpu::SplatKernel;
 use verisplat::fields::fit::{Columns, FieldData, FitConfig, FitOutcome, Layout};
-use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:

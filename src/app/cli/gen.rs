@@ -6,9 +6,9 @@ use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
+use verisplat::core::console::note;
 use verisplat::core::scene::write::{write_scene, OutputFormat};
 use verisplat::fields::rf::{MovingSource, RfData, RfField};
-use verisplat::note;
 
 #[derive(Args)]
 #[command(after_help = "Examples:
@@ -150,7 +150,7 @@ fn gen_moving_source(args: &GenArgs) -> Result<()> {
 /// Prints the `fit` flags that read the generated data as generated: `--bounds`, then
 /// `extra`.
 fn print_fit_flags(b: [f32; 6], extra: &str) {
-    verisplat::outln!(
+    verisplat::core::console::outln!(
         "--bounds {},{},{},{},{},{}{extra}",
         b[0],
         b[1],

@@ -6,8 +6,8 @@ use super::plural;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
+use verisplat::core::console::outln;
 use verisplat::core::scene;
-use verisplat::outln;
 
 #[derive(Args)]
 #[command(after_help = "Examples:

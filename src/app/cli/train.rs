@@ -5,10 +5,10 @@ use super::common::{fail_on_validation_messages, GpuArgs};
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
+use verisplat::core::console::{note, outln};
 use verisplat::train::data::Dataset;
 use verisplat::train::model::Settings;
 use verisplat::train::run::{TrainOptions, TrainReport};
-use verisplat::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:

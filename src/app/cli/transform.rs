@@ -94,7 +94,7 @@ pub(crate) fn apply(transform: Option<&SceneTransform>, scene: Scene) -> Result<
     };
     let n = scene.len();
     let out = t.apply(scene).map_err(anyhow::Error::msg)?;
-    verisplat::note!("transformed: {} by {t}", super::plural(n, "Gaussian"));
+    verisplat::core::console::note!("transformed: {} by {t}", super::plural(n, "Gaussian"));
     Ok(out)
 }
 

@@ -10,7 +10,7 @@ use verisplat::app::view::protocol::{
 };
 use verisplat::app::view::server::{ServedScene, Server, ServerConfig, Stopper};
 use verisplat::app::view::source::ViewSource;
-use verisplat::{note, outln};
+use verisplat::core::console::{note, outln};
 
 #[derive(Args)]
 #[command(after_help = "Examples:

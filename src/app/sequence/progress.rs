@@ -95,7 +95,7 @@ impl Progress {
             let elapsed = self.start.elapsed().as_secs_f64();
             let rate = self.done as f64 / elapsed.max(1e-9);
             let eta = (self.total - self.done) as f64 / rate.max(1e-9);
-            crate::note!(
+            crate::core::console::note!(
                 "{}/{} frames ({:.0} %), {rate:.2} frames/s, ETA {eta:.0} s",
                 self.done,
                 self.total,

@@ -137,7 +137,7 @@ pub fn load_with_axes(path: &Path, axes: spz::SpzAxes) -> Result<(Scene, SceneFo
     }
     if matches!(format, SceneFormat::Spz { .. }) {
         if let Some(note) = spz::axes_note(path, &scene, axes) {
-            crate::note!("{note}");
+            crate::core::console::note!("{note}");
         }
     }
     Ok((scene, format))

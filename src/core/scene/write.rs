@@ -329,7 +329,7 @@ pub fn convert(
     }
     if spz_in {
         if let Some(note) = spz::axes_note(input, &scene, options.spz_axes) {
-            crate::note!("{note}");
+            crate::core::console::note!("{note}");
         }
     }
     if let Some(kernel) = options.kernel {

@@ -754,6 +754,7 @@ fn readme_and_help_agree() {
         "--src",
         "--bin",
         "--wings",
+        "--python",
     ];
     let mut missing = Vec::new();
     for (i, _) in readme.match_indices("--") {

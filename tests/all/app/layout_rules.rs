@@ -1,7 +1,8 @@
 //! The repository's layout rules (the house rules of issue 36): rooms a newcomer can read
-//! in one sitting. No source file over 1,000 lines, no function over 150, and no import
-//! circle among the library's modules or the command line's (`tools/module_graph.py`, down
-//! to submodules), and no arrow back up between the library's wings (`--wings`).
+//! in one sitting. No source file over 1,000 lines, no function over 150 (Rust and Python
+//! alike), and no import circle among the library's modules, the command line's
+//! (`tools/module_graph.py`, down to submodules) or the Python package's (`--python`), and
+//! no arrow back up between the library's wings or to the crate root (`--wings`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -38,6 +39,9 @@ fn sources() -> Vec<PathBuf> {
     }
     all.push(root().join("build.rs"));
     all.extend(files("glsl", &[".comp", ".glsl"]));
+    for dir in ["python/verisplat", "python/tests", "tools"] {
+        all.extend(files(dir, &[".py"]));
+    }
     all
 }
 
@@ -87,6 +91,59 @@ fn long_functions(text: &str) -> Vec<(String, usize, usize)> {
     out
 }
 
+/// (name, first line, length) of every Python function over `MAX_FN_LINES` lines: from
+/// its `def` line past its header (until the header's brackets close) to the last line
+/// indented deeper than the `def` (blank lines and comments do not end it). Brackets in a
+/// header's strings, and a multi-line string's lines indented less than its function, are
+/// not read as such (no file here has them).
+fn long_python_functions(text: &str) -> Vec<(String, usize, usize)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let indent_of = |l: &str| l.len() - l.trim_start().len();
+    let mut out = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let rest = line.trim_start();
+        let rest = rest.strip_prefix("async ").unwrap_or(rest);
+        let Some(rest) = rest.strip_prefix("def ") else {
+            continue;
+        };
+        let name: String = rest
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        let mut header_end = i;
+        let mut depth = 0i64;
+        for (k, l) in lines.iter().enumerate().skip(i) {
+            header_end = k;
+            depth += l
+                .chars()
+                .map(|c| match c {
+                    '(' | '[' | '{' => 1,
+                    ')' | ']' | '}' => -1,
+                    _ => 0,
+                })
+                .sum::<i64>();
+            if depth <= 0 {
+                break;
+            }
+        }
+        let mut last = header_end;
+        for (j, l) in lines.iter().enumerate().skip(header_end + 1) {
+            let code = l.trim_start();
+            if code.is_empty() || code.starts_with('#') {
+                continue;
+            }
+            if indent_of(l) <= indent_of(line) {
+                break;
+            }
+            last = j;
+        }
+        if last - i + 1 > MAX_FN_LINES {
+            out.push((name, i + 1, last - i + 1));
+        }
+    }
+    out
+}
+
 #[test]
 fn the_function_finder_measures_what_it_should() {
     let body = |n: usize| "    let x = 1;\n".repeat(n);
@@ -103,6 +160,22 @@ fn the_function_finder_measures_what_it_should() {
 }
 
 #[test]
+fn the_python_function_finder_measures_what_it_should() {
+    let body = |n: usize| "        x = 1\n".repeat(n);
+    let text = format!(
+        "def short():\n{}\n\nclass A:\n    @staticmethod\n    async def long(\n        a,\n    ) -> int:\n{}\n# a comment\n{}        return 1\n\n    def after(self):\n        pass\n",
+        body(3),
+        body(MAX_FN_LINES - 10),
+        body(5)
+    );
+    let found = long_python_functions(&text);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_eq!(found[0].0, "long");
+    assert_eq!(found[0].1, 9);
+    assert_eq!(found[0].2, MAX_FN_LINES + 1);
+}
+
+#[test]
 fn no_file_over_1000_lines_and_no_function_over_150() {
     let mut faults = Vec::new();
     for path in sources() {
@@ -114,6 +187,11 @@ fn no_file_over_1000_lines_and_no_function_over_150() {
         if path.extension().is_some_and(|e| e == "rs") {
             for (name, line, len) in long_functions(&text) {
                 faults.push(format!("{}:{line}: fn {name} is {len} lines", rel(&path)));
+            }
+        }
+        if path.extension().is_some_and(|e| e == "py") {
+            for (name, line, len) in long_python_functions(&text) {
+                faults.push(format!("{}:{line}: def {name} is {len} lines", rel(&path)));
             }
         }
     }
@@ -130,6 +208,14 @@ fn no_import_circle_in_the_library_or_the_command_line() {
         let (ok, text) = module_graph(args);
         assert!(ok && text.contains("cycles: none"), "{text}");
     }
+}
+
+/// The Python package's modules import each other without a circle, function-local
+/// imports included (`_carried.py` and `torch.py` did: what both need is `_passes.py`).
+#[test]
+fn no_import_circle_in_the_python_package() {
+    let (ok, text) = module_graph(&["--python"]);
+    assert!(ok && text.contains("cycles: none"), "{text}");
 }
 
 #[test]

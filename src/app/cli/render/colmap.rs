@@ -7,7 +7,7 @@ use crate::cli::plural;
 use anyhow::{bail, Result};
 use std::path::Path;
 use verisplat::core::camera::Camera;
-use verisplat::outln;
+use verisplat::core::console::outln;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
 

@@ -10,11 +10,11 @@ use anyhow::{bail, Result};
 use std::path::Path;
 use verisplat::app::sequence::{FramePlan, RunOptions, Summary};
 use verisplat::core::camera::Camera;
+use verisplat::core::console::note;
 use verisplat::core::frame::Frame;
 use verisplat::cpu::field::{FieldGaussians, FieldMode};
 use verisplat::cpu::SplatKernel;
 use verisplat::io::output::{self, RenderMode};
-use verisplat::note;
 
 /// `field-slice` etc., for messages.
 pub(crate) fn mode_name(mode: Option<RenderMode>) -> &'static str {

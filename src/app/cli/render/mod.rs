@@ -26,8 +26,8 @@ use outputs::Outputs;
 use splat::Job;
 use std::path::Path;
 use verisplat::app::sequence::{Plan, Summary};
+use verisplat::core::console::note;
 use verisplat::io::output::RenderMode;
-use verisplat::note;
 
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     if args.cpu {

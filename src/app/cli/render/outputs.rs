@@ -12,8 +12,8 @@ use verisplat::app::sequence::{
     Existing, FramePlan, OutputPattern, Plan, ProgressStyle, RunOptions,
 };
 use verisplat::core::camera::Camera;
+use verisplat::core::console::{note, outln};
 use verisplat::io::output::{self, FileContent};
-use verisplat::{note, outln};
 
 /// Output of a single frame when `-o` is not given.
 pub(super) const DEFAULT_OUTPUT: &str = "render.png";

@@ -8,9 +8,9 @@ use super::time::{time_choice, Animation, TimeChoice};
 use crate::cli::common::{load_scene, CameraPath};
 use crate::cli::plural;
 use anyhow::{bail, Result};
+use verisplat::core::console::note;
 use verisplat::core::scene::Scene;
 use verisplat::io::output::{self, RenderMode};
-use verisplat::note;
 
 /// The loaded scene and what the options ask of it.
 pub(super) struct Loaded {

@@ -8,7 +8,7 @@ use crate::cli::common::fail_on_validation_messages;
 use crate::cli::plural;
 use anyhow::{bail, Result};
 use verisplat::app::sequence::{ProgressStyle, Summary};
-use verisplat::note;
+use verisplat::core::console::note;
 use verisplat::render::forward::shade::GpuShader;
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;

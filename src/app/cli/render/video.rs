@@ -10,9 +10,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use verisplat::app::sequence::{FramePlan, OutputPattern};
 use verisplat::core::camera::{self, Camera, CameraFormat};
+use verisplat::core::console::note;
 use verisplat::io::output::RenderMode;
 use verisplat::io::video::{self, VideoFormat, VideoOptions, VideoWriter};
-use verisplat::note;
 
 /// Frame rate of a video when neither `--fps` nor a keyframe path gives one.
 pub(super) const DEFAULT_FPS: f64 = 30.0;
