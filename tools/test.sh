@@ -64,7 +64,7 @@ width_tests=(
   app::doctor::doctor_passes gpu::limits::pair render::gsplat_rules::gsplat_rules_match
   render::gsplat_rules::gsplat_rules_blend render::gsplat_rules::gsplats_near
   train::gsplat_rules::gpu_backward render::lenses:: train::lens_gradients::gpu_
-  render::passes::
+  render::passes:: render::rgb8_readback::
 )
 misreport_tests=(
   gpu::primitives:: render::stages::stages_match_on_playbot_lod3
