@@ -7,7 +7,7 @@
 //! [`io`] (image files in and out, outputs, image metrics) < [`fields`] (feature fields,
 //! RF fits, the MLP) < [`cpu`] (the CPU reference) < [`gpu`] (Vulkan building blocks) <
 //! [`render`] (the GPU splatting pipeline) < [`train`] < [`app`] (bench, doctor, viewer,
-//! sequences, shards; the command line is the binary's `app/cli/`).
+//! sequences, shards; the command line is the binary's, in `src/cli/`).
 
 pub mod app;
 pub mod core;

@@ -1,6 +1,5 @@
-//! The `verisplat` command line. Each subcommand lives in its own file under `src/app/cli/`.
+//! The `verisplat` command line. Each subcommand lives in its own file under `src/cli/`.
 
-#[path = "app/cli/mod.rs"]
 mod cli;
 
 use clap::{Parser, Subcommand};

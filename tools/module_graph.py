@@ -11,7 +11,7 @@ module's path (`pub use crate::__console_note as note;` in core/console.rs, name
 `crate::core::console::note!`). Comments and strings are
 ignored; code under `#[cfg(test)]` counts like any other code, except with
 --no-tests, which drops `#[cfg(test)] mod ... { ... }` blocks and files named
-tests.rs. The binary (src/main.rs, src/app/cli/) uses the library as `verisplat::` and is
+tests.rs. The binary (src/main.rs, src/cli/) uses the library as `verisplat::` and is
 left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
 
     tools/module_graph.py                # the wings (core, io, ...): edges, then cycles
@@ -31,7 +31,7 @@ left out. Features (`#[cfg(feature = ...)]`) are ignored: every module counts.
     tools/module_graph.py --src DIR      # another checkout's src/ (e.g. a git worktree)
     tools/module_graph.py --bin --depth 2
                                          # the binary instead: src/main.rs (`main`) and
-                                         # src/app/cli/ (cli::render -> cli::common, ...)
+                                         # src/cli/ (cli::render -> cli::common, ...)
     tools/module_graph.py --python       # the Python package instead (python/verisplat/:
                                          # torch -> _passes, ...; --layers, --mermaid,
                                          # --why too): an edge `a -> b` is an import of
@@ -51,8 +51,8 @@ import sys
 from collections import defaultdict
 
 SRC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
-# The binary's command-line modules (src/main.rs names them `cli` with a `#[path]`).
-BIN_DIR = os.path.join("app", "cli")
+# The binary's command-line modules (src/cli/, `mod cli;` of src/main.rs).
+BIN_DIR = "cli"
 # The library's wings, each using only the wings before it (checked with --wings).
 WINGS = ["core", "io", "fields", "cpu", "gpu", "render", "train", "app"]
 # Floors inside a wing, each using only the floors before it (checked with --wings too).
@@ -211,7 +211,7 @@ def root_name():
 
 def library_files(no_tests):
     """(src-relative path, comment-free text) of every file of the library (of the
-    binary with --bin: src/main.rs and src/app/cli/)."""
+    binary with --bin: src/main.rs and src/cli/)."""
     for dirpath, dirs, files in os.walk(SRC):
         dirs.sort()
         for f in sorted(files):
@@ -223,7 +223,7 @@ def library_files(no_tests):
             if in_bin != BIN:
                 continue
             if in_bin and rel != "main.rs":
-                # the binary's modules are `cli::...` (main.rs: `#[path] mod cli;`)
+                # the binary's modules are `cli::...` (main.rs: `mod cli;`)
                 rel = os.path.relpath(full, os.path.join(SRC, os.path.dirname(BIN_DIR)))
             if no_tests and f == "tests.rs":
                 continue
@@ -463,7 +463,7 @@ def main():
     ap.add_argument("--layers", action="store_true")
     ap.add_argument("--why", nargs=2, metavar=("FROM", "TO"))
     ap.add_argument("--src", help="the crate's src folder (default: this checkout's)")
-    ap.add_argument("--bin", action="store_true", help="the binary (main.rs, app/cli/), not the library")
+    ap.add_argument("--bin", action="store_true", help="the binary (main.rs, cli/), not the library")
     ap.add_argument("--wings", action="store_true", help="check that every arrow between wings runs down")
     ap.add_argument("--python", action="store_true", help="the Python package (python/verisplat/), not the crate")
     args = ap.parse_args()

@@ -1,4 +1,4 @@
-//! The application: what the command line (the binary's `app/cli/`) drives. Benchmarks
+//! The application: what the command line (the binary's `src/cli/`) drives. Benchmarks
 //! ([`mod@bench`]), the self-check ([`doctor`]), the browser viewer ([`view`]), camera paths
 //! to image sequences ([`sequence`]), the `--shard` split ([`shard`]) and scene statistics
 //! ([`stats`]).
