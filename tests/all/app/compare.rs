@@ -369,36 +369,30 @@ fn noisy_photo(cam: &Camera, w: u32, h: u32, seed: u64) -> Vec<f32> {
         .collect()
 }
 
-/// A photo of the model taken at another exposure and white balance scores low in plain
-/// PSNR and high in the colour-corrected PSNR beside it (gsplat's `cc_psnr`), which `eval`
-/// labels and writes to both reports.
-#[test]
-fn eval_reports_the_colour_corrected_psnr_beside_the_plain_one() {
-    let dir = tempfile::tempdir().unwrap();
-    let (model, cams) = model_dir(dir.path(), 9);
-    let images = dir.path().join("images");
-    std::fs::create_dir_all(&images).unwrap();
+/// Writes, for each of `cams` (96x54), the CPU reference's render of the model's scene
+/// (its clamped colour, changed by `photo(camera, colour)`) as the camera's photo in
+/// `DIR/images`, and runs `eval --cpu` of `model` on them: its output and report.
+fn eval_rendered_photos(
+    dir: &Path,
+    model: &Path,
+    cams: &[Camera],
+    photo: impl Fn(&Camera, Vec<f32>) -> Vec<f32>,
+) -> (std::process::Output, Value) {
     let scene =
         verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
             .unwrap()
             .activated();
-    for cam in &cams {
-        let frame = verisplat::cpu::render(
-            &scene,
-            &cam.with_resolution(96, 54).unwrap(),
-            &Default::default(),
-        );
-        let photo: Vec<f32> = metrics::clamped_color(&frame)
-            .into_iter()
-            .enumerate()
-            .map(|(i, v)| [0.7 * v + 0.2, 0.9 * v + 0.05, 0.6 * v + 0.1][i % 3])
-            .collect();
-        write_png(&images.join(format!("{}.png", cam.name)), 96, 54, &photo);
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    for cam in cams {
+        let frame = verisplat::cpu::render(&scene, cam, &Default::default());
+        let rgb = photo(cam, metrics::clamped_color(&frame));
+        write_png(&images.join(format!("{}.png", cam.name)), 96, 54, &rgb);
     }
-    let rep = dir.path().join("rep");
+    let rep = dir.join("rep");
     let o = verisplat(&[
         "eval",
-        s(&model),
+        s(model),
         "--images",
         s(&images),
         "-o",
@@ -406,13 +400,29 @@ fn eval_reports_the_colour_corrected_psnr_beside_the_plain_one() {
         "--cpu",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("PSNR cc"));
     let json = read_json(&rep.join("report.json"));
+    (o, json)
+}
+
+/// A photo of the model taken at another exposure and white balance scores low in plain
+/// PSNR and high in the colour-corrected PSNR beside it (gsplat's `cc_psnr`), which `eval`
+/// labels and writes to both reports.
+#[test]
+fn eval_reports_the_colour_corrected_psnr_beside_the_plain_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, cams) = model_dir(dir.path(), 9);
+    let (o, json) = eval_rendered_photos(dir.path(), &model, &cams, |_, rgb| {
+        rgb.into_iter()
+            .enumerate()
+            .map(|(i, v)| [0.7 * v + 0.2, 0.9 * v + 0.05, 0.6 * v + 0.1][i % 3])
+            .collect()
+    });
+    assert!(stdout(&o).contains("PSNR cc"), "{}", stdout(&o));
     let r = &json["results"][0];
     let (psnr, cc) = (r["psnr"].as_f64().unwrap(), r["psnr_cc"].as_f64().unwrap());
     assert!(psnr < 25.0 && cc > 40.0, "{r}");
     assert!(json["mean"]["psnr_cc"].as_f64().unwrap() > 40.0, "{json}");
-    let csv = std::fs::read_to_string(rep.join("report.csv")).unwrap();
+    let csv = std::fs::read_to_string(dir.path().join("rep/report.csv")).unwrap();
     assert!(
         csv.starts_with("frame,camera,photo,width,height,psnr,ssim,flip,psnr_cc\n"),
         "{csv}"
@@ -435,39 +445,18 @@ fn eval_scores_a_fisheye_photo_inside_its_image_circle() {
     }
     std::fs::write(&path, serde_json::to_string(&entries).unwrap()).unwrap();
     let cams = verisplat::core::camera::load_cameras_json(&path).unwrap();
-    let scene =
-        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
-            .unwrap()
-            .activated();
-    let images = dir.path().join("images");
-    std::fs::create_dir_all(&images).unwrap();
-    for cam in &cams {
-        let frame = verisplat::cpu::render(&scene, cam, &Default::default());
+    let (o, json) = eval_rendered_photos(dir.path(), &model, &cams, |cam, rgb| {
         let circle = verisplat::train::masks::image_circle(cam).expect("pixels past the circle");
-        let photo: Vec<f32> = metrics::clamped_color(&frame)
-            .into_iter()
+        rgb.into_iter()
             .enumerate()
             .map(|(i, v)| if circle[i / 3] { v } else { 1.0 })
-            .collect();
-        write_png(&images.join(format!("{}.png", cam.name)), 96, 54, &photo);
-    }
-    let rep = dir.path().join("rep");
-    let o = verisplat(&[
-        "eval",
-        s(&model),
-        "--images",
-        s(&images),
-        "-o",
-        s(&rep),
-        "--cpu",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+            .collect()
+    });
     assert!(
         stdout(&o).contains("scored only the pixels inside the image circle of 2 fisheye photo(s)"),
         "{}",
         stdout(&o)
     );
-    let json = read_json(&rep.join("report.json"));
     for r in json["results"].as_array().unwrap() {
         assert_eq!(r["image_circle"], true, "{r}");
         // The white border is not scored: the render and the photo are the same pixels.

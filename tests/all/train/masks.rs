@@ -483,9 +483,8 @@ fn eval_scores_only_the_unmasked_pixels_and_says_so() {
     img.save(&photo).unwrap();
     let scene = crate::common::shared_data().join("playbot_lod6_1873_sh2.ply");
     let s = |p: &Path| p.to_str().unwrap().to_string();
-    let eval = |out: &str| {
-        let rep = dir.path().join(out);
-        let o = verisplat(&[
+    let run = |out: &str| {
+        verisplat(&[
             "eval",
             &s(&scene),
             "--cameras",
@@ -495,8 +494,12 @@ fn eval_scores_only_the_unmasked_pixels_and_says_so() {
             "--split",
             "all",
             "-o",
-            &s(&rep),
-        ]);
+            &s(&dir.path().join(out)),
+        ])
+    };
+    let eval = |out: &str| {
+        let rep = dir.path().join(out);
+        let o = run(out);
         let (out, err) = (
             String::from_utf8_lossy(&o.stdout).to_string(),
             String::from_utf8_lossy(&o.stderr).to_string(),
@@ -553,18 +556,7 @@ fn eval_scores_only_the_unmasked_pixels_and_says_so() {
     assert_eq!(by_path, masked);
     // A frame without its mask_path where the other has one: one sentence naming the photo.
     frames(false);
-    let o = verisplat(&[
-        "eval",
-        &s(&scene),
-        "--cameras",
-        &s(&set.join("sparse/0")),
-        "--images",
-        &s(&set.join("images")),
-        "--split",
-        "all",
-        "-o",
-        &s(&dir.path().join("missing")),
-    ]);
+    let o = run("missing");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "{err}");
     assert!(
