@@ -278,14 +278,13 @@ fn write_report(report: &EvalReport, files: &[PathBuf; 2], overwrite: bool) -> R
 /// The mean line of the table printed on stdout.
 fn print_mean(count: usize, mean: &Means) {
     outln!(
-        "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}  {:>9}",
+        "{:>5}  {:<24} {:>9} {:>9} {:>9.5} {:>9.5}",
         "",
         format!("mean of {count}"),
         db(mean.psnr),
+        db(mean.psnr_cc),
         mean.ssim,
-        mean.flip,
-        "",
-        db(mean.psnr_cc)
+        mean.flip
     );
 }
 
@@ -640,14 +639,14 @@ impl Measure<'_> {
             bar
         };
         outln!(
-            "{:>5}  {:<24} {:>9} {:>9} {:>9}  {:>9}  {:>9}",
+            "{:>5}  {:<24} {:>9} {:>9} {:>9} {:>9}  {:>9}",
             "frame",
             "camera",
             "PSNR dB",
+            "PSNR cc",
             "SSIM",
             "FLIP",
-            "size",
-            "PSNR cc"
+            "size"
         );
         let mut results = Vec::new();
         for (k, cam, photo_path) in jobs {
@@ -655,14 +654,14 @@ impl Measure<'_> {
             let record = self.image(gpu, *k, cam, photo_path)?;
             bar.suspend(|| {
                 outln!(
-                    "{:>5}  {:<24} {:>9} {:>9.5} {:>9.5}  {:>9}  {:>9}",
+                    "{:>5}  {:<24} {:>9} {:>9} {:>9.5} {:>9.5}  {:>9}",
                     record.frame,
                     record.camera,
                     db(record.psnr),
+                    db(record.psnr_cc),
                     record.ssim,
                     record.flip,
-                    format!("{}x{}", record.width, record.height),
-                    db(record.psnr_cc)
+                    format!("{}x{}", record.width, record.height)
                 )
             });
             results.push(record);
