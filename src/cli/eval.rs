@@ -463,6 +463,10 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
     let measure = Measure {
         args,
         prep: super::eval_photo::PhotoPrep::new(args.resolution, scene_arg.scene.as_deref())?,
+        frame_masks: match images.parent() {
+            Some(dir) => super::eval_mask::FrameMasks::read(dir)?,
+            None => None,
+        },
         ppd,
         scene: &act,
         opts: &opts,
@@ -617,6 +621,8 @@ type Gpu = Option<(GpuRenderer, verisplat::render::GpuScene)>;
 struct Measure<'a> {
     args: &'a EvalArgs,
     prep: super::eval_photo::PhotoPrep,
+    /// The masks the data set's transforms files name (`mask_path`), read once.
+    frame_masks: Option<super::eval_mask::FrameMasks>,
     ppd: f64,
     scene: &'a verisplat::core::model::ActivatedScene,
     opts: &'a verisplat::cpu::RenderOptions,
@@ -683,8 +689,13 @@ impl Measure<'_> {
         let photo = image_file::read_image(photo_path)?;
         let truth = photo_rgb(&photo, photo_path, args.background)?;
         let (truth, pw, ph) = self.prep.prepare(cam, truth, (photo.width, photo.height));
-        let keep =
-            super::eval_mask::photo_mask(&self.prep, cam, photo_path, (photo.width, photo.height))?;
+        let keep = super::eval_mask::photo_mask(
+            &self.prep,
+            self.frame_masks.as_ref(),
+            cam,
+            photo_path,
+            (photo.width, photo.height),
+        )?;
         let (w, h) = render_size(cam.width, cam.height, pw, ph).ok_or_else(|| {
             anyhow::anyhow!(
                 "camera {k} (\"{}\") is {}x{} but its photo {} is {}x{}{}; a photo may only be smaller by one factor on both sides (images downscaled for training; -r scales photos as train -r did)",

@@ -9,14 +9,17 @@
 use super::eval_photo::{render_size, PhotoPrep};
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
+use verisplat::core::camera::transforms::frame_photo;
 use verisplat::core::camera::Camera;
 use verisplat::train::data::resize;
 use verisplat::train::masks;
 
 /// The mask of the photo at `photo_path` (`size`, seen by `cam`) at the size the photo is
-/// prepared to, one flag per pixel (true: scored); `None` without a masks folder.
+/// prepared to, one flag per pixel (true: scored): from the masks folder beside the
+/// photo's, else from `frame_masks`; `None` without either.
 pub(crate) fn photo_mask(
     prep: &PhotoPrep,
+    frame_masks: Option<&FrameMasks>,
     cam: &Camera,
     photo_path: &Path,
     size: (u32, u32),
@@ -33,8 +36,8 @@ pub(crate) fn photo_mask(
                 dir.display()
             ),
         },
-        None => match transforms_mask(photo_path)? {
-            Some(path) => path,
+        None => match frame_masks {
+            Some(m) => m.mask_of(photo_path)?,
             None => return Ok(None),
         },
     };
@@ -74,49 +77,61 @@ const TRANSFORMS_FILES: [&str; 3] = [
     "transforms_test.json",
 ];
 
-/// The mask the data set's transforms files (in the parent of the photo's folder) give
-/// the photo at `photo_path`: the `mask_path` of the frame whose `file_path` is that photo
-/// (`.png` added when it has none), relative to the data set's folder. `None` when no
-/// frame there has a `mask_path`; an error naming the photo when other frames have one
-/// and its frame has not.
-fn transforms_mask(photo_path: &Path) -> Result<Option<PathBuf>> {
-    let Some(dir) = photo_path.parent().and_then(Path::parent) else {
-        return Ok(None);
-    };
-    let photo = std::fs::canonicalize(photo_path)
-        .with_context(|| format!("{}: cannot be read", photo_path.display()))?;
-    let mut with_masks = None;
-    for file in TRANSFORMS_FILES.map(|f| dir.join(f)) {
-        if !file.is_file() {
-            continue;
-        }
-        let text = std::fs::read_to_string(&file)
-            .with_context(|| format!("{}: cannot be read", file.display()))?;
-        let doc: serde_json::Value = serde_json::from_str(&text)
-            .with_context(|| format!("{}: is not a JSON transforms file", file.display()))?;
-        for frame in doc["frames"].as_array().into_iter().flatten() {
-            let Some(mask) = frame.get("mask_path") else {
+/// The masks a data set's transforms files name in their frames' `mask_path` (relative to
+/// the data set's folder), by the photo at each frame's `file_path`; read once per run.
+pub(crate) struct FrameMasks {
+    /// The file whose frames hold the masks, for the error of a photo without one.
+    file: PathBuf,
+    /// (the photo, canonical; its mask).
+    by_photo: Vec<(PathBuf, PathBuf)>,
+}
+
+impl FrameMasks {
+    /// The frame masks of the data set in `dir` (the parent of the photos' folder); `None`
+    /// when no frame of its transforms files has a `mask_path`.
+    pub(crate) fn read(dir: &Path) -> Result<Option<FrameMasks>> {
+        let mut found: Option<FrameMasks> = None;
+        for file in TRANSFORMS_FILES.map(|f| dir.join(f)) {
+            if !file.is_file() {
                 continue;
-            };
-            let Some(mask) = mask.as_str() else {
-                bail!("{}: a frame's mask_path is not a string", file.display());
-            };
-            with_masks = Some(file.clone());
-            let mut at = dir.join(frame["file_path"].as_str().unwrap_or_default());
-            if at.extension().is_none() {
-                at.set_extension("png");
             }
-            if std::fs::canonicalize(&at).is_ok_and(|p| p == photo) {
-                return Ok(Some(dir.join(mask)));
+            let text = std::fs::read_to_string(&file)
+                .with_context(|| format!("{}: cannot be read", file.display()))?;
+            let doc: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("{}: is not a JSON transforms file", file.display()))?;
+            for frame in doc["frames"].as_array().into_iter().flatten() {
+                let Some(mask) = frame.get("mask_path") else {
+                    continue;
+                };
+                let Some(mask) = mask.as_str() else {
+                    bail!("{}: a frame's mask_path is not a string", file.display());
+                };
+                let rel = frame["file_path"].as_str().unwrap_or_default();
+                let found = found.get_or_insert_with(|| FrameMasks {
+                    file: file.clone(),
+                    by_photo: Vec::new(),
+                });
+                // A frame whose photo is not there names no photo eval can score.
+                if let Ok(photo) = std::fs::canonicalize(frame_photo(dir, rel)) {
+                    found.by_photo.push((photo, dir.join(mask)));
+                }
             }
         }
+        Ok(found)
     }
-    match with_masks {
-        Some(file) => bail!(
-            "{}: has no mask_path in {}, whose other frames have one; give every photo a mask, or none",
-            photo_path.display(),
-            file.display()
-        ),
-        None => Ok(None),
+
+    /// The mask of the photo at `photo_path`: an error naming the photo when its frame has
+    /// none while others have one.
+    fn mask_of(&self, photo_path: &Path) -> Result<PathBuf> {
+        let photo = std::fs::canonicalize(photo_path)
+            .with_context(|| format!("{}: cannot be read", photo_path.display()))?;
+        match self.by_photo.iter().find(|(p, _)| *p == photo) {
+            Some((_, mask)) => Ok(mask.clone()),
+            None => bail!(
+                "{}: has no mask_path in {}, whose other frames have one; give every photo a mask, or none",
+                photo_path.display(),
+                self.file.display()
+            ),
+        }
     }
 }

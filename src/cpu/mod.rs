@@ -371,6 +371,28 @@ pub fn blend_pixel_with(
     blend_pixel_steps(projected, ids, px, py, kernel, rules, |id, w, _| add(id, w))
 }
 
+/// The alpha that pixel `(px, py)` gets from `g` under the reference's rules (the falloff
+/// of `kernel`, capped at `alpha_max`), or `None` where the splat adds nothing there (a
+/// positive power, or alpha below 1/255): the per-pair test of [`blend_pixel_steps`].
+#[inline]
+pub fn pixel_alpha(
+    g: &Projected,
+    px: f32,
+    py: f32,
+    kernel: SplatKernel,
+    alpha_max: f32,
+) -> Option<f32> {
+    let dx = g.mean2d[0] - px;
+    let dy = g.mean2d[1] - py;
+    let [ca, cb, cc] = g.conic;
+    let power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
+    if power > 0.0 {
+        return None;
+    }
+    let alpha = alpha_max.min(kernel.falloff(g.opacity, power));
+    (alpha >= ALPHA_MIN).then_some(alpha)
+}
+
 /// [`blend_pixel_with`], calling `add(id, alpha * T, T')` with the transmittance `T'`
 /// after each Gaussian added too (the surface pass's median depth reads it).
 pub fn blend_pixel_steps(
@@ -389,17 +411,9 @@ pub fn blend_pixel_steps(
     for &id in ids {
         evaluated += 1;
         let g = &projected[id as usize];
-        let dx = g.mean2d[0] - px;
-        let dy = g.mean2d[1] - py;
-        let [ca, cb, cc] = g.conic;
-        let power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-        if power > 0.0 {
+        let Some(alpha) = pixel_alpha(g, px, py, kernel, alpha_max) else {
             continue;
-        }
-        let alpha = alpha_max.min(kernel.falloff(g.opacity, power));
-        if alpha < ALPHA_MIN {
-            continue;
-        }
+        };
         let test_t = t * (1.0 - alpha);
         if test_t < t_stop {
             break;
@@ -510,18 +524,21 @@ pub fn wrapped_for_tile(
     x0: u32,
     width: u32,
 ) -> (Vec<Projected>, Vec<u32>) {
-    let middle = (x0 + TILE_SIZE / 2) as f32;
-    let w = width as f32;
     let moved = ids
         .iter()
-        .map(|&id| {
-            let mut p = projected[id as usize];
-            let turns = ((middle - p.mean2d[0]) / w + 0.5).floor();
-            p.mean2d[0] += turns * w;
-            p
-        })
+        .map(|&id| wrapped_copy(projected[id as usize], x0, width))
         .collect();
     (moved, (0..ids.len() as u32).collect())
+}
+
+/// `p` with its centre moved by whole turns (the wrapping image's `width`) to the copy
+/// nearest the middle of the tile starting at pixel column `x0` ([`wrapped_for_tile`]).
+pub fn wrapped_copy(mut p: Projected, x0: u32, width: u32) -> Projected {
+    let middle = (x0 + TILE_SIZE / 2) as f32;
+    let w = width as f32;
+    let turns = ((middle - p.mean2d[0]) / w + 0.5).floor();
+    p.mean2d[0] += turns * w;
+    p
 }
 
 /// Blends every tile (in parallel) into a frame, with the alpha falloff of `kernel`.

@@ -719,10 +719,7 @@ fn read_transforms(
         let rel = f["file_path"]
             .as_str()
             .ok_or_else(|| bad("has no file_path".into()))?;
-        let mut path = dir.join(rel);
-        if path.extension().is_none() {
-            path.set_extension("png");
-        }
+        let path = crate::core::camera::transforms::frame_photo(dir, rel);
         let m = f["transform_matrix"]
             .as_array()
             .filter(|rows| rows.len() >= 3)

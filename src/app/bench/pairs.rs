@@ -6,7 +6,7 @@
 //! work spent on pairs that cannot change a pixel.
 
 use crate::core::camera::Camera;
-use crate::core::model::{Rules, SplatKernel, ALPHA_MIN};
+use crate::core::model::{Rules, SplatKernel};
 use crate::cpu::{self, Projected};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -65,7 +65,7 @@ pub fn pair_stats(
                     if cam.lens.wraps() {
                         // The copy the blend draws in this bin's 16-pixel tile.
                         let x0 = bx * lists.size / cpu::TILE_SIZE * cpu::TILE_SIZE;
-                        g = cpu::wrapped_for_tile(projected, &[id], x0, cam.width).0[0];
+                        g = cpu::wrapped_copy(g, x0, cam.width);
                     }
                     draws_in(&g, [bx, by], lists.size, cam, kernel, rules)
                 })
@@ -88,8 +88,7 @@ pub fn pair_stats(
 }
 
 /// Whether some pixel centre of bin `bin` (of side `size`, within the image) gets an alpha
-/// of at least 1/255 from `g`: the blend's own evaluation (`cpu::blend_pixel_steps`) of
-/// power, falloff and the rules' alpha cap.
+/// of at least 1/255 from `g`: the blend's own per-pair test ([`cpu::pixel_alpha`]).
 fn draws_in(
     g: &Projected,
     bin: [u32; 2],
@@ -98,14 +97,9 @@ fn draws_in(
     kernel: SplatKernel,
     rules: Rules,
 ) -> bool {
-    let [ca, cb, cc] = g.conic;
     let ys = bin[1] * size..((bin[1] + 1) * size).min(cam.height);
     ys.into_iter().any(|y| {
-        (bin[0] * size..((bin[0] + 1) * size).min(cam.width)).any(|x| {
-            let dx = g.mean2d[0] - x as f32;
-            let dy = g.mean2d[1] - y as f32;
-            let power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-            power <= 0.0 && rules.alpha_max().min(kernel.falloff(g.opacity, power)) >= ALPHA_MIN
-        })
+        (bin[0] * size..((bin[0] + 1) * size).min(cam.width))
+            .any(|x| cpu::pixel_alpha(g, x as f32, y as f32, kernel, rules.alpha_max()).is_some())
     })
 }

@@ -412,15 +412,10 @@ fn pairs_table(md: &mut String, forward: &[Value]) {
         let pairs = num(r, &["pairs"]);
         let drawing = num(p, &["drawing"]);
         let ratio = pairs.zip(drawing).map(|(a, b)| a / b.max(1.0));
-        let name = Path::new(text(r, "scene"))
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or_default()
-            .to_string();
         let _ = writeln!(
             md,
             "| {} | {} | {}x{} | {} | {} | {} | {} px | {} | {} |",
-            name,
+            scene_name(r),
             grouped(num(r, &["gaussians"]).unwrap_or(0.0) as u64),
             fmt(num(r, &["width"]), 0),
             fmt(num(r, &["height"]), 0),

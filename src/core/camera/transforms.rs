@@ -25,7 +25,17 @@ use super::{
 use crate::core::file_error::FileError;
 use glam::{DMat3, DVec3};
 use serde_json::Value;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// The photo of a frame whose `file_path` is `rel`, in the data set folder `dir`: `.png`
+/// added when the path has no extension (NeRF-synthetic writes `./train/r_0`).
+pub fn frame_photo(dir: &Path, rel: &str) -> PathBuf {
+    let mut photo = dir.join(rel);
+    if photo.extension().is_none() {
+        photo.set_extension("png");
+    }
+    photo
+}
 
 /// The lens a `transforms.json` frame gives through `key` (the frame's value, else the
 /// file's): `EQUIRECTANGULAR` (no distortion coefficient allowed), else
@@ -125,10 +135,7 @@ pub fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Camera>, CameraEr
                 let rel = file_path.ok_or_else(|| {
                     bad("has no \"w\" and \"h\" and no \"file_path\" to take the size from".into())
                 })?;
-                let mut photo = dir.join(rel);
-                if photo.extension().is_none() {
-                    photo.set_extension("png");
-                }
+                let photo = frame_photo(dir, rel);
                 image::image_dimensions(&photo).map_err(|e| {
                     bad(format!(
                         "has no \"w\" and \"h\", and its photo {} gives no size ({e})",
