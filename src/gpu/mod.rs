@@ -26,6 +26,7 @@ pub mod sort;
 pub mod subgroup;
 pub mod sync;
 pub mod timing;
+pub mod traffic;
 pub mod workgroup;
 
 pub use budget::BudgetSource;
@@ -41,6 +42,7 @@ pub use shader::{ComputePipeline, ShaderError};
 pub use sort::{Count, RadixSort};
 pub use sync::Access;
 pub use timing::GpuTimer;
+pub use traffic::Traffic;
 
 use ash::vk;
 

@@ -12,6 +12,7 @@ use super::shader_set::bindings;
 use super::sync::{barrier, Access};
 use super::{
     dispatch_grid, BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
+    Traffic,
 };
 
 pub use super::shader_set::{SCAN_BLOCK, SCAN_ITEMS, SCAN_WG};
@@ -85,6 +86,20 @@ impl Scan {
             let groups = n.div_ceil(SCAN_BLOCK);
             super::align_up(u64::from(groups) * 4, SCRATCH_ALIGN) + Self::scratch_size(groups)
         }
+    }
+
+    /// The device memory a scan of `n` u32s reads and writes: one workgroup's block reads
+    /// and writes each element (and the total); a larger scan reduces every block to its
+    /// sum, scans the sums (recursively) and adds them back while scanning the blocks.
+    pub fn traffic(n: u32) -> Traffic {
+        let bytes = u64::from(n) * 4;
+        if n <= SCAN_BLOCK {
+            return Traffic::new(bytes, bytes + 4);
+        }
+        let sums = u64::from(n.div_ceil(SCAN_BLOCK)) * 4;
+        let reduce = Traffic::new(bytes, sums);
+        let add = Traffic::new(bytes + sums, bytes);
+        reduce + Self::traffic(n.div_ceil(SCAN_BLOCK)) + add
     }
 
     /// Records an exclusive prefix sum of `n` u32s from `input` into `output` (which
@@ -206,5 +221,20 @@ impl Scan {
             bytemuck::bytes_of(&push),
             grid,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn traffic_of_one_block_and_of_two_levels() {
+        let block = u64::from(SCAN_BLOCK) * 4;
+        assert_eq!(Scan::traffic(SCAN_BLOCK), Traffic::new(block, block + 4));
+        // One more element: two block sums, reduced, scanned and added back.
+        let n = block + 4;
+        let expected = Traffic::new(n, 8) + Traffic::new(8, 12) + Traffic::new(n + 8, n);
+        assert_eq!(Scan::traffic(SCAN_BLOCK + 1), expected);
     }
 }

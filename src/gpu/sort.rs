@@ -37,7 +37,7 @@ use super::shader_set::{SORT_SPEC_ITEMS, SORT_SPEC_MAX_SUBGROUPS, SORT_SPEC_RADI
 use super::sync::{barrier, barrier_uses, Access};
 use super::{
     align_up, BufferSlice, ComputePipeline, DeviceInfo, GpuBuffer, GpuContext, GpuError, GpuResult,
-    GpuTimer,
+    GpuTimer, Traffic,
 };
 
 /// Tunables of the sort kernels.
@@ -421,6 +421,33 @@ impl RadixSort {
         [layout.keys, layout.values]
     }
 
+    /// The device memory a sort of `n` pairs by `key_bits` bits reads and writes, its
+    /// scratch laid out for `max_n` (the digit tables, and so their scans, are sized by
+    /// it): per pass, the histogram reads the keys and writes the digit table, the scan
+    /// of the table, and the scatter reads the pairs and the scanned table and writes the
+    /// pairs; after an odd number of passes the copy back. The setup's few words and the
+    /// meta words each block reads are left out.
+    pub fn traffic(config: &SortConfig, n: u32, max_n: u32, key_bits: u32) -> Traffic {
+        let passes = u64::from(key_bits.div_ceil(config.radix_bits));
+        if n == 0 || passes == 0 {
+            return Traffic::default();
+        }
+        let layout = ScratchLayout::new(config, max_n.max(n));
+        let table_len = layout.hist_stride << config.radix_bits;
+        let table = u64::from(table_len) * 4;
+        let keys = u64::from(n) * config.key_bytes();
+        let pairs = keys + u64::from(n) * 4;
+        let histogram = Traffic::new(keys, table);
+        let scatter = Traffic::new(pairs + table, pairs);
+        let pass = histogram + Scan::traffic(table_len) + scatter;
+        let copy = if passes % 2 == 1 {
+            Traffic::new(pairs, pairs)
+        } else {
+            Traffic::default()
+        };
+        pass.times(passes) + copy
+    }
+
     /// The tunables in use.
     pub fn config(&self) -> SortConfig {
         self.config
@@ -785,5 +812,32 @@ impl<'a> SortViews<'a> {
             user,
             tmp,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn traffic_counts_each_pass_and_the_copy_back() {
+        // 4096 pairs of 32-bit keys: one block, a 256-entry digit table (1 KiB), scanned
+        // by one workgroup.
+        let (keys, pairs, table) = (16384, 32768, 1024);
+        let one_pass = RadixSort::traffic(&SORT_CONFIG_32, 4096, 4096, 8);
+        // Histogram, scan, scatter, and the copy back after an odd pass count.
+        let read = keys + table + (pairs + table) + pairs;
+        let written = table + (table + 4) + pairs + pairs;
+        assert_eq!(one_pass, Traffic::new(read, written));
+        let two_passes = RadixSort::traffic(&SORT_CONFIG_32, 4096, 4096, 16);
+        let pass = Traffic::new(keys + table + pairs + table, table + table + 4 + pairs);
+        assert_eq!(two_passes, pass.times(2));
+        // The digit tables follow the capacity, not the count.
+        let roomy = RadixSort::traffic(&SORT_CONFIG_32, 4096, 8 * 4096, 16);
+        assert!(roomy.total() > two_passes.total());
+        assert_eq!(
+            RadixSort::traffic(&SORT_CONFIG_32, 0, 4096, 16),
+            Traffic::default()
+        );
     }
 }

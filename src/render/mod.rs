@@ -43,6 +43,7 @@ pub use frame::schedule::{
 };
 use frame::timings::MAX_STAGES_PER_SUBMIT;
 pub use frame::timings::{FrameStats, Stage, StageTimings};
+pub use frame::traffic::frame_traffic;
 use frame::upload::FeatureJob;
 pub use frame::upload::{sh_texel_stride, GpuFeatures, GpuScene};
 

@@ -9,7 +9,7 @@ use crate::core::model::{ActivatedScene, RenderOptions};
 use crate::cpu::{self, Projected};
 use crate::gpu::GpuResult;
 use crate::render::GpuRenderer;
-use crate::render::Readback;
+use crate::render::{frame_traffic, Readback};
 use crate::render::{FrameRequest, Rendered};
 
 /// Benchmarks the GPU renderer: `warmup` discarded frames, then `frames` measured ones,
@@ -93,7 +93,16 @@ pub fn bench_gpu(
         (evaluations, Some(pairs))
     };
     let info = renderer.ctx().info();
-    let stages = stage_reports(stage_samples);
+    let mut stages = stage_reports(stage_samples);
+    let traffic = frame_traffic(&gpu_scene, cam, opts, &stats, Readback::Float, false);
+    // The readback model counts the images, not a feature scene's planes.
+    let modelled = |name: &str| scene.feature_count == 0 || name != "readback";
+    for stage in stages.iter_mut().filter(|s| modelled(&s.name)) {
+        stage.bytes = traffic
+            .iter()
+            .find(|(s, _)| s.name() == stage.name)
+            .map(|&(_, t)| t);
+    }
     let wall_ms = Stat::of(&wall);
     let mut report = BenchReport {
         scene: name.to_string(),

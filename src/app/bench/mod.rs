@@ -24,6 +24,7 @@ pub use parse::{parse_count, parse_resolution};
 pub use plot::plot_sweep;
 pub use report::{summary_table, to_csv, to_json, BenchReport};
 
+use crate::gpu::Traffic;
 use serde::Serialize;
 
 /// min / median / p95 / max of a series of samples, in milliseconds.
@@ -66,6 +67,21 @@ pub struct StageReport {
     /// Milliseconds.
     #[serde(flatten)]
     pub ms: Stat,
+    /// Device memory the stage reads and writes in one frame, counted from the frame's
+    /// counts and the records its shaders load and store
+    /// ([`crate::render::frame_traffic`]); absent where there is no model (the CPU
+    /// reference, the feature blend, the shader, the backward pass).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bytes: Option<Traffic>,
+}
+
+impl StageReport {
+    /// The bandwidth the stage reached at least: its bytes over its median time, in GB/s
+    /// (10^9 bytes a second).
+    pub fn gb_per_s(&self) -> Option<f64> {
+        let bytes = self.bytes?.total() as f64;
+        (self.ms.median > 0.0).then(|| bytes / (self.ms.median * 1e-3) / 1e9)
+    }
 }
 
 /// Version of the JSON layout written by [`to_json`]; raised when a field changes meaning
@@ -92,6 +108,7 @@ pub(crate) fn stage_reports(samples: Vec<(String, Vec<f64>)>) -> Vec<StageReport
         .map(|(name, v)| StageReport {
             name,
             ms: Stat::of(&v),
+            bytes: None,
         })
         .collect()
 }

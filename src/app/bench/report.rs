@@ -111,9 +111,19 @@ impl BenchReport {
             self.width,
             self.height,
         );
+        let traffic = self.stages.iter().any(|s| s.bytes.is_some());
         out += &format!(
-            "{:<12} {:>9} {:>9} {:>9} {:>9}\n",
-            "stage", "min ms", "median", "p95", "max"
+            "{:<12} {:>9} {:>9} {:>9} {:>9}{}\n",
+            "stage",
+            "min ms",
+            "median",
+            "p95",
+            "max",
+            if traffic {
+                format!(" {:>10} {:>8}", "MB moved", "GB/s")
+            } else {
+                String::new()
+            }
         );
         let frame_label = if self.renderer == "gpu" {
             "frame (GPU)"
@@ -123,13 +133,19 @@ impl BenchReport {
         let rows = self
             .stages
             .iter()
-            .map(|s| (s.name.as_str(), s.ms))
-            .chain([(frame_label, self.frame_ms), ("wall clock", self.wall_ms)]);
-        for (name, s) in rows {
+            .map(|s| (s.name.as_str(), s.ms, moved(s)))
+            .chain([
+                (frame_label, self.frame_ms, String::new()),
+                ("wall clock", self.wall_ms, String::new()),
+            ]);
+        for (name, s, moved) in rows {
             out += &format!(
-                "{name:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}\n",
+                "{name:<12} {:>9.3} {:>9.3} {:>9.3} {:>9.3}{moved}\n",
                 s.min, s.median, s.p95, s.max
             );
+        }
+        if traffic {
+            out += "MB moved: the bytes each stage's shaders read and write in device memory, counted from the frame's counts (caches not modelled); GB/s at the median\n";
         }
         out += &format!(
             "frames/s (median wall clock) {:.2}\nvisible Gaussians {}, tile pairs {}, key bits {}\nsort {:.3e} keys/s, blend {} pixel-Gaussian evaluations, {:.3e}/s\n",
@@ -166,6 +182,15 @@ impl BenchReport {
             );
         }
         out
+    }
+}
+
+/// A stage's MB moved and GB/s columns (blank without a model).
+fn moved(s: &StageReport) -> String {
+    match (s.bytes, s.gb_per_s()) {
+        (Some(b), Some(rate)) => format!(" {:>10.2} {:>8.2}", b.total() as f64 / 1e6, rate),
+        (Some(b), None) => format!(" {:>10.2} {:>8}", b.total() as f64 / 1e6, "-"),
+        _ => String::new(),
     }
 }
 
@@ -219,17 +244,20 @@ pub fn summary_table(reports: &[BenchReport]) -> String {
 /// CSV of reports: one row per (report, stage) plus `frame` and `wall` rows.
 pub fn to_csv(reports: &[BenchReport]) -> String {
     let mut out = String::from(
-        "scene,gaussians,width,height,renderer,stage,min_ms,median_ms,p95_ms,max_ms,pairs,visible,sort_keys_per_s,blend_evaluations_per_s,device_bytes_peak\n",
+        "scene,gaussians,width,height,renderer,stage,min_ms,median_ms,p95_ms,max_ms,pairs,visible,sort_keys_per_s,blend_evaluations_per_s,device_bytes_peak,bytes_read,bytes_written\n",
     );
     for r in reports {
         let rows = r
             .stages
             .iter()
-            .map(|s| (s.name.as_str(), s.ms))
-            .chain([("frame", r.frame_ms), ("wall", r.wall_ms)]);
-        for (stage, s) in rows {
+            .map(|s| (s.name.as_str(), s.ms, s.bytes))
+            .chain([("frame", r.frame_ms, None), ("wall", r.wall_ms, None)]);
+        for (stage, s, bytes) in rows {
+            let (read, written) = bytes.map_or((String::new(), String::new()), |b| {
+                (b.read.to_string(), b.written.to_string())
+            });
             out += &format!(
-                "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{},{},{:.1},{:.1},{}\n",
+                "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{},{},{:.1},{:.1},{},{read},{written}\n",
                 r.scene.replace(',', ";"),
                 r.gaussians,
                 r.width,

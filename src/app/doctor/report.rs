@@ -390,6 +390,73 @@ fn bench_section(md: &mut String, dir: &Path) {
         "\nMedians of device timestamps over {frames} measured frames (warm-up discarded).\n"
     );
     pairs_table(md, &forward);
+    traffic_table(md, &forward);
+}
+
+/// The forward stages' device memory traffic (`bytes` of each stage in `verisplat bench
+/// --json`) and the bandwidth it makes at the stage's median time.
+fn traffic_table(md: &mut String, forward: &[Value]) {
+    const STAGES: [&str; 8] = [
+        "preprocess",
+        "order",
+        "scan",
+        "keys",
+        "sort",
+        "ranges",
+        "blend",
+        "readback",
+    ];
+    let stage = |r: &Value, name: &str| -> Option<(f64, f64)> {
+        let s = r
+            .get("stages")?
+            .as_array()?
+            .iter()
+            .find(|s| s.get("name").and_then(Value::as_str) == Some(name))?;
+        let bytes = num(s, &["bytes", "read"])? + num(s, &["bytes", "written"])?;
+        Some((bytes, num(s, &["median"])?))
+    };
+    let counted: Vec<&Value> = forward
+        .iter()
+        .filter(|r| STAGES.iter().any(|n| stage(r, n).is_some()))
+        .collect();
+    if counted.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "| scene | Gaussians | resolution | {} |",
+        STAGES.join(" | ")
+    );
+    let _ = writeln!(md, "|---|--:|---|{}", "--:|".repeat(STAGES.len()));
+    for r in counted {
+        let cells: Vec<String> = STAGES
+            .iter()
+            .map(|n| match stage(r, n) {
+                Some((bytes, ms)) if ms > 0.0 => {
+                    format!(
+                        "{:.1} MB, {:.0} GB/s",
+                        bytes / 1e6,
+                        bytes / (ms * 1e-3) / 1e9
+                    )
+                }
+                Some((bytes, _)) => format!("{:.1} MB", bytes / 1e6),
+                None => "–".into(),
+            })
+            .collect();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {}x{} | {} |",
+            scene_name(r),
+            grouped(num(r, &["gaussians"]).unwrap_or(0.0) as u64),
+            fmt(num(r, &["width"]), 0),
+            fmt(num(r, &["height"]), 0),
+            cells.join(" | ")
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nBytes each stage's shaders read and write in device memory per frame, counted from the frame's counts and records (caches not modelled), and that over the stage's median time: the bandwidth it reached at least.\n"
+    );
 }
 
 /// The forward frames' pairs (`pair_stats` of `verisplat bench --json`): how many are

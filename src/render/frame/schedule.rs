@@ -319,6 +319,7 @@ impl GpuRenderer {
                         regrows,
                         bin_size,
                         chunks,
+                        key_capacity: capacity,
                     };
                     self.capacity = Some(self.capacity.unwrap_or(0).max(capacity));
                     break;

@@ -227,6 +227,8 @@ pub struct FrameStats {
     /// Depth-ordered chunks the pairs were keyed, sorted and blended in: 1 when they fit
     /// the key buffers at once (see [`GpuRenderer`]'s chunked frames).
     pub chunks: u32,
+    /// Pairs the key buffers hold (the pair sort's digit tables are laid out for them).
+    pub key_capacity: u32,
 }
 
 impl GpuRenderer {

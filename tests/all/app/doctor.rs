@@ -170,6 +170,9 @@ fn the_gpu_bundle_runs_in_a_clean_environment() {
         "Every step succeeded.",
         // The bench's pairs (issue 60): sorted, per visible Gaussian, how many can draw.
         "| scene | Gaussians | resolution | pairs sorted | per visible Gaussian | sorted / can draw |",
+        // Bytes per stage (issue 60, items 3 and 5), and the bandwidth they make.
+        "| scene | Gaussians | resolution | preprocess | order | scan | keys | sort | ranges | blend | readback |",
+        " GB/s |",
     ] {
         assert!(md.contains(needed), "the report lacks {needed:?}:\n{md}");
     }
