@@ -1,9 +1,13 @@
-//! Compiles every compute shader variant (`src/gpu/shader_set.rs`) to SPIR-V with `glslc`
-//! (shaderc's command line, Debian package `glslc`) and embeds the modules, so that no
-//! binary, test or Python extension links a GLSL compiler and start-up compiles no GLSL.
-//! A GLSL error fails the build with glslc's `glsl/<file>:<line>: error: ...` message.
-//! `GLSLC` names another compiler executable.
+//! Compiles every compute shader variant each wing lists (`src/gpu/shader_set.rs`,
+//! `src/render/shaders.rs`, `src/train/shaders.rs`; the GLSL in `glsl/<wing>/`) to SPIR-V
+//! with `glslc` (shaderc's command line, Debian package `glslc`) and embeds the modules,
+//! so that no binary, test or Python extension links a GLSL compiler and start-up compiles
+//! no GLSL. A GLSL error fails the build with glslc's `glsl/<wing>/<file>:<line>: error:
+//! ...` message. `GLSLC` names another compiler executable.
 
+#[path = "src/render/shaders.rs"]
+#[allow(dead_code)]
+mod render_shaders;
 #[path = "src/core/rules.rs"]
 #[allow(dead_code)]
 mod rules;
@@ -11,11 +15,18 @@ mod rules;
 #[allow(dead_code)]
 mod shader_interface;
 #[path = "src/gpu/shader_set.rs"]
-#[allow(dead_code)]
+#[allow(dead_code, unused_imports)]
 mod shader_set;
+#[path = "src/train/shaders.rs"]
+#[allow(dead_code)]
+mod train_shaders;
 /// The library's path to `rules` (`crate::core::rules`), which `shader_set` names.
 mod core {
     pub(crate) use super::rules;
+}
+/// The library's path to `shader_set` (`crate::gpu::shader_set`), which the wings name.
+mod gpu {
+    pub(crate) use super::shader_set;
 }
 
 use std::path::{Path, PathBuf};
@@ -26,6 +37,8 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=glsl");
     println!("cargo:rerun-if-changed=src/gpu/shader_set.rs");
+    println!("cargo:rerun-if-changed=src/render/shaders.rs");
+    println!("cargo:rerun-if-changed=src/train/shaders.rs");
     println!("cargo:rerun-if-changed=src/core/rules.rs");
     println!("cargo:rerun-if-changed=src/core/shader_interface.rs");
     println!("cargo:rerun-if-env-changed=GLSLC");
@@ -42,8 +55,28 @@ fn main() {
         .unwrap_or_else(|e| panic!("src/core/shader_interface.rs is not std430: {e}"));
     std::fs::write(interface_dir.join("interface.glsl"), interface).expect("write interface.glsl");
 
-    let variants = shader_set::shader_variants();
-    let shared = shader_set::shared_defines();
+    let variants: Vec<shader_set::ShaderVariant> = [
+        shader_set::shader_variants(),
+        render_shaders::shader_variants(),
+        train_shaders::shader_variants(),
+    ]
+    .concat();
+    let tables = [
+        shader_set::bindings::ALL,
+        render_shaders::bindings::ALL,
+        train_shaders::bindings::ALL,
+    ];
+    let shared = shader_set::shared_defines(&tables);
+    // Every shader by its stem (unique across the wings), and every folder, searched by
+    // `#include` (the headers are named by file alone).
+    let (sources, folders) =
+        shader_set::glsl_tree(&root.join("glsl")).unwrap_or_else(|e| panic!("reading glsl/: {e}"));
+    let mut include_dirs: Vec<PathBuf> = folders
+        .iter()
+        .map(|d| d.strip_prefix(&root).unwrap_or(d).to_path_buf())
+        .collect();
+    include_dirs.push(interface_dir.clone());
+    let include: Vec<&Path> = include_dirs.iter().map(PathBuf::as_path).collect();
     let next = AtomicUsize::new(0);
     let errors = Mutex::new(Vec::new());
     let workers = std::thread::available_parallelism()
@@ -61,15 +94,23 @@ fn main() {
                     .chain(&variant.defines)
                     .map(|(k, v)| (k.as_str(), v.as_str()))
                     .collect();
-                let file = format!("glsl/{}.comp", variant.shader);
+                let Some(path) = sources.get(&variant.shader) else {
+                    errors.lock().unwrap().push(format!(
+                        "{}: no glsl/**/{}.comp",
+                        variant.key(),
+                        variant.shader
+                    ));
+                    continue;
+                };
+                let file = path
+                    .strip_prefix(&root)
+                    .unwrap_or(path)
+                    .display()
+                    .to_string();
                 let output = spirv_dir.join(format!("{i:03}-{}.spv", variant.shader));
-                if let Err(e) = shader_set::compile_glsl_file(
-                    &root,
-                    &file,
-                    &[Path::new("glsl"), &interface_dir],
-                    &defines,
-                    &output,
-                ) {
+                if let Err(e) =
+                    shader_set::compile_glsl_file(&root, &file, &include, &defines, &output)
+                {
                     errors
                         .lock()
                         .unwrap()
@@ -94,6 +135,23 @@ fn main() {
             variant.key(),
             path.display().to_string()
         ));
+    }
+    table.push_str("];\n");
+    // The defines every shader is compiled with, for run-time compiles (shader
+    // development), and every wing's binding names.
+    table.push_str(
+        "/// The `#define`s every shader is compiled with (`shader_set::shared_defines`).\n\
+         pub static SHARED_DEFINES: &[(&str, &str)] = &[\n",
+    );
+    for (k, v) in &shared {
+        table.push_str(&format!("    ({k:?}, {v:?}),\n"));
+    }
+    table.push_str(
+        "];\n/// Every wing's binding names by shader, in binding order.\n\
+         pub static BINDINGS: &[(&str, &[&str])] = &[\n",
+    );
+    for (shader, names) in tables.iter().flat_map(|t| t.iter()) {
+        table.push_str(&format!("    ({shader:?}, &{names:?}),\n"));
     }
     table.push_str("];\n");
     std::fs::write(out.join("prebuilt_shaders.rs"), table).expect("write prebuilt_shaders.rs");

@@ -26,6 +26,6 @@ pub const GSPLAT_ALPHA_MAX: f32 = 0.999;
 /// ... and the most sigmas its screen box extends along each axis.
 pub const GSPLAT_EXTEND: f32 = 3.33;
 
-/// Most samples along a ray of a field-maximum render (`glsl/field.comp` keeps one
+/// Most samples along a ray of a field-maximum render (`glsl/render/field/field.comp` keeps one
 /// accumulator per sample; the CPU reference, `cpu::field`, takes the same range).
 pub const MAX_FIELD_SAMPLES: u32 = 256;

@@ -630,8 +630,18 @@ mod tests {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
         let mut files = 0;
         let mut blocks = 0;
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
+        // Every file of the wings' folders.
+        let (mut paths, mut folders) = (Vec::new(), vec![dir]);
+        while let Some(folder) = folders.pop() {
+            for entry in std::fs::read_dir(&folder).unwrap() {
+                let path = entry.unwrap().path();
+                match path.is_dir() {
+                    true => folders.push(path),
+                    false => paths.push(path),
+                }
+            }
+        }
+        for path in paths {
             let name = path.file_name().unwrap().to_string_lossy().to_string();
             if !(name.ends_with(".comp") || name.ends_with(".glsl")) {
                 continue;

@@ -209,7 +209,7 @@ pub fn preprocess(scene: &ActivatedScene, cam: &Camera, opts: &RenderOptions) ->
         .collect()
 }
 
-/// Mirror of `tile_receives` in `glsl/splat_common.glsl`: whether any pixel of the
+/// Mirror of `tile_receives` in `glsl/render/forward/splat_common.glsl`: whether any pixel of the
 /// `size`-pixel bin `tile` can get alpha >= 1/255 from a splat with this centre, conic
 /// and opacity under `kernel` (with the GPU's small conservative margin, see
 /// [`SplatKernel::alpha_bound`]). The GPU drops pairs for which this is false; they
@@ -517,7 +517,7 @@ pub fn render_features(scene: &ActivatedScene, cam: &Camera, opts: &RenderOption
 /// A wrapping image's ([`Lens::wraps`](crate::core::camera::Lens::wraps)) splats of the
 /// tile starting at pixel column `x0`, each with its centre moved by whole turns (the
 /// image's width) to the copy nearest the tile's middle, and their ids in that list; as
-/// `glsl/splat_common.glsl`'s `wrapped_mean`.
+/// `glsl/render/forward/splat_common.glsl`'s `wrapped_mean`.
 pub fn wrapped_for_tile(
     projected: &[Projected],
     ids: &[u32],

@@ -1,7 +1,7 @@
 //! The CPU reference of the surface pass ([`crate::core::model::surface`]): the colour
 //! blend's per-pixel loop with each Gaussian's facing normal in place of its colour, and
 //! the median depth taken where the transmittance crosses 0.5; as
-//! `glsl/blend_features.comp` with `SURFACE 1`.
+//! `glsl/render/forward/blend_features.comp` with `SURFACE 1`.
 
 use super::{
     blend, blend_pixel_steps, preprocess, sort_pairs, tile_keys, tile_ranges, wrapped_for_tile,

@@ -22,7 +22,7 @@
 //! The same information may instead come from a sidecar `FILE.json` beside the file.
 //!
 //! Evaluation is in f32 in a fixed order (for each output: the bias, then the products
-//! in input order), the same on the CPU and in `glsl/shade.comp`.
+//! in input order), the same on the CPU and in `glsl/render/forward/shade.comp`.
 
 use crate::core::camera::Camera;
 use std::path::{Path, PathBuf};

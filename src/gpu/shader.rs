@@ -10,14 +10,21 @@ use super::shader_set;
 use super::{BufferSlice, GpuContext, GpuError, GpuResult, VkContext};
 use crate::core::shader_interface::RecordLayout;
 
-/// SPIR-V compiled at build time (build.rs), by [`shader_set::ShaderVariant::key`].
+/// SPIR-V compiled at build time (build.rs), by [`shader_set::ShaderVariant::key`]; the
+/// defines and binding names of every wing it was compiled with.
 mod prebuilt {
     include!(concat!(env!("OUT_DIR"), "/prebuilt_shaders.rs"));
 }
 
+/// Every wing's binding names by shader, in binding order (`bindings::ALL` of
+/// `gpu::shader_set`, `render::shaders` and `train::shaders`, gathered by build.rs).
+pub fn all_bindings() -> &'static [(&'static str, &'static [&'static str])] {
+    prebuilt::BINDINGS
+}
+
 /// The GLSL headers, for compiling other sources at run time ([`compile_glsl`]).
 const HEADERS: &[(&str, &str)] = &[
-    ("common.glsl", include_str!("../../glsl/common.glsl")),
+    ("common.glsl", include_str!("../../glsl/gpu/common.glsl")),
     // Written by build.rs from crate::core::shader_interface.
     (
         "interface.glsl",
@@ -25,13 +32,19 @@ const HEADERS: &[(&str, &str)] = &[
     ),
     (
         "sort_common.glsl",
-        include_str!("../../glsl/sort_common.glsl"),
+        include_str!("../../glsl/gpu/sort_common.glsl"),
     ),
-    ("sort_spec.glsl", include_str!("../../glsl/sort_spec.glsl")),
-    ("subgroup.glsl", include_str!("../../glsl/subgroup.glsl")),
+    (
+        "sort_spec.glsl",
+        include_str!("../../glsl/gpu/sort_spec.glsl"),
+    ),
+    (
+        "subgroup.glsl",
+        include_str!("../../glsl/gpu/subgroup.glsl"),
+    ),
     (
         "splat_common.glsl",
-        include_str!("../../glsl/splat_common.glsl"),
+        include_str!("../../glsl/render/forward/splat_common.glsl"),
     ),
 ];
 
@@ -41,7 +54,8 @@ pub enum ShaderError {
     /// No variant with these defines was compiled at build time.
     #[error(
         "no shader variant '{0}' was compiled at build time (the variants are listed in \
-         src/gpu/shader_set.rs)"
+         each wing's shader table: src/gpu/shader_set.rs, src/render/shaders.rs, \
+         src/train/shaders.rs)"
     )]
     Unknown(String),
     /// The GLSL did not compile; the message carries `glsl/<file>:<line>:`.
@@ -54,8 +68,11 @@ pub enum ShaderError {
     },
 }
 
+/// `VERISPLAT_GLSL_DIR`, made absolute (glslc runs in a scratch directory).
 fn glsl_dir() -> Option<std::path::PathBuf> {
-    crate::core::former_name::env_var_os("VERISPLAT_GLSL_DIR").map(std::path::PathBuf::from)
+    let dir = crate::core::former_name::env_var_os("VERISPLAT_GLSL_DIR")?;
+    let dir = std::path::PathBuf::from(dir);
+    Some(std::path::absolute(&dir).unwrap_or(dir))
 }
 
 /// A scratch directory for one run-time compile, removed on drop.
@@ -125,10 +142,9 @@ fn run_glslc(
     defines: &[(&str, String)],
     output: &std::path::Path,
 ) -> Result<Vec<u32>, ShaderError> {
-    let shared = shader_set::shared_defines();
-    let all: Vec<(&str, &str)> = shared
+    let all: Vec<(&str, &str)> = prebuilt::SHARED_DEFINES
         .iter()
-        .map(|(k, v)| (k.as_str(), v.as_str()))
+        .copied()
         .chain(defines.iter().map(|(k, v)| (*k, v.as_str())))
         .collect();
     shader_set::compile_glsl_file(cwd, file, include, &all, output).map_err(|message| {
@@ -139,16 +155,22 @@ fn run_glslc(
     })
 }
 
-/// The SPIR-V of `glsl/<name>.comp` with `defines`: the module compiled at build time, or,
-/// when `VERISPLAT_GLSL_DIR` is set (shader development: edit and re-run without
-/// rebuilding), `$VERISPLAT_GLSL_DIR/<name>.comp` compiled now with `glslc`.
+/// The SPIR-V of `glsl/<wing>/<name>.comp` with `defines`: the module compiled at build
+/// time, or, when `VERISPLAT_GLSL_DIR` is set (shader development: edit and re-run without
+/// rebuilding), `<name>.comp` of that folder's tree (a copy of `glsl/`) compiled now with
+/// `glslc`, every folder of it searched by `#include`.
 pub fn shader_spirv(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, ShaderError> {
     if let Some(dir) = glsl_dir() {
-        let scratch = ScratchDir::new().map_err(|message| ShaderError::Compile {
+        let compile_error = |message: String| ShaderError::Compile {
             file: format!("{name}.comp"),
             message,
-        })?;
-        let file = dir.join(format!("{name}.comp"));
+        };
+        let scratch = ScratchDir::new().map_err(compile_error)?;
+        let (shaders, folders) = shader_set::glsl_tree(&dir).map_err(compile_error)?;
+        let file = shaders
+            .get(name)
+            .cloned()
+            .ok_or_else(|| compile_error(format!("no {name}.comp under {}", dir.display())))?;
         // The records' declarations, as build.rs writes them, beside the edited headers.
         let interface = HEADERS
             .iter()
@@ -161,10 +183,12 @@ pub fn shader_spirv(name: &str, defines: &[(&str, String)]) -> Result<Vec<u32>, 
                 message: e.to_string(),
             }
         })?;
+        let mut include: Vec<&std::path::Path> = folders.iter().map(|f| f.as_path()).collect();
+        include.push(&scratch.0);
         return run_glslc(
             &scratch.0,
             &file.display().to_string(),
-            &[&dir, &scratch.0],
+            &include,
             defines,
             &scratch.0.join("out.spv"),
         );
@@ -236,7 +260,7 @@ impl ComputePipeline {
         specialization: &[(u32, u32)],
     ) -> GpuResult<Self> {
         // A driver that misreports its subgroup size: every shader computes with the
-        // measured one (`glsl/subgroup.glsl`).
+        // measured one (`glsl/gpu/subgroup.glsl`).
         let measured = ctx.info().subgroup_size_override;
         let specialization: Vec<(u32, u32)> = specialization
             .iter()

@@ -1,11 +1,16 @@
-// Every compute shader variant verisplat ships, the constants the shaders share with the
-// host, and the one GLSL -> SPIR-V compile call (Khronos' `glslc`, shaderc's command line).
+// The shader machinery every wing shares, and the `gpu` wing's own shaders: the constants
+// the shaders share with the host, the binding-name macro ([`shader_bindings!`]), the
+// variants of the scan, the sort and the subgroup probe (`glsl/gpu/`), and the one
+// GLSL -> SPIR-V compile call (Khronos' `glslc`, shaderc's command line). The render and
+// train wings list their own shaders' bindings and variants beside their code
+// (`src/render/shaders.rs`, `src/train/shaders.rs`; their GLSL in `glsl/render/` and
+// `glsl/train/`).
 //
-// This file is compiled twice: into the library (`crate::gpu::shader_set`) and into the
-// build script (a `#[path]` module of `build.rs`), which compiles every variant below to SPIR-V
-// and embeds it, so no binary or test links a GLSL compiler. It therefore uses `std` only.
-// Runtime compilation exists only for shader development (`VERISPLAT_GLSL_DIR`), through the
-// same [`compile_glsl_file`].
+// These files are compiled twice: into the library and into the build script (`#[path]`
+// modules of `build.rs`), which compiles every variant to SPIR-V and embeds it, so no
+// binary or test links a GLSL compiler. They therefore use `std` only. Runtime
+// compilation exists only for shader development (`VERISPLAT_GLSL_DIR`), through the same
+// [`compile_glsl_file`].
 
 /// Invocations of every one-dimensional kernel's workgroup (preprocess, order, keys,
 /// ranges, the backward's accumulation and preprocess, the training step): the Vulkan
@@ -69,7 +74,7 @@ pub const MAX_GRAD_FIELDS: u32 = GRAD_FIELDS + 4 * MAX_FEATURE_GROUPS;
 pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
 /// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
 pub const GRAD_SPEC_BATCH: u32 = 1;
-/// Pixels per chunk of the neural shader's backward pass (`glsl/shade_bwd.comp`'s
+/// Pixels per chunk of the neural shader's backward pass (`glsl/render/backward/shade_bwd.comp`'s
 /// `PIXELS`): one per invocation of its workgroup; the parameters' gradients are summed
 /// over a chunk.
 pub const SHADE_CHUNK_PIXELS: u32 = 64;
@@ -107,9 +112,10 @@ fn glsl_float(x: f32) -> String {
     }
 }
 
-/// Named descriptor bindings, one module per shader (`glsl/<shader>.comp`), in binding
-/// order; each name is also a GLSL `#define <SHADER>_<NAME> <index>` (e.g.
-/// `PREPROCESS_SPLATS`), so the shader and the Rust stage that binds it name the same slot.
+/// Named descriptor bindings, one module per shader (`glsl/<wing>/<shader>.comp`), in
+/// binding order; each name is also a GLSL `#define <SHADER>_<NAME> <index>` (e.g.
+/// `PREPROCESS_SPLATS`), so the shader and the Rust stage that binds it name the same
+/// slot. Each wing invokes it once, for its own shaders.
 macro_rules! shader_bindings {
     ($($shader:ident { $($name:ident),* $(,)? })*) => {
         /// Binding indices by shader and name.
@@ -117,7 +123,7 @@ macro_rules! shader_bindings {
             $(
                 #[allow(missing_docs)]
                 pub mod $shader {
-                    shader_bindings!(@index 0u32; $($name),*);
+                    $crate::gpu::shader_set::shader_bindings!(@index 0u32; $($name),*);
                     /// The names in binding order.
                     pub const NAMES: &[&str] = &[$(stringify!($name)),*];
                 }
@@ -128,20 +134,13 @@ macro_rules! shader_bindings {
     };
     (@index $i:expr; $name:ident $(, $rest:ident)*) => {
         pub const $name: u32 = $i;
-        shader_bindings!(@index $i + 1; $($rest),*);
+        $crate::gpu::shader_set::shader_bindings!(@index $i + 1; $($rest),*);
     };
     (@index $i:expr;) => {};
 }
+pub(crate) use shader_bindings;
 
 shader_bindings! {
-    preprocess { PARAMS, GAUSSIANS, SH, SPLATS, RECTS, DEPTH_KEYS, COUNTERS, DEPTH_VALUES, BIN_MASKS, TOUCHED }
-    order { PARAMS, DEPTH_ORDER, TOUCHED, TOUCHED_IN_ORDER }
-    keys { PARAMS, SPLAT_TEXELS, RECTS, OFFSETS, KEYS, VALUES, COUNTERS, DEPTH_ORDER, BIN_MASKS }
-    ranges { KEYS, RANGES, COUNTERS }
-    blend { PARAMS, SPLATS, VALUES, RANGES, COLOR, DEPTH, COUNTERS, LAST }
-    blend_features { PARAMS, SPLATS, VALUES, RANGES, FEATURES, OUTPUT, COUNTERS, COLOR_STATE }
-    pack { COLOR, PACKED }
-    shade { WORDS, FEATURES, COLOR }
     scan_reduce { DATA_IN, BLOCK_SUMS }
     scan_block { DATA_IN, DATA_OUT, TOTALS }
     scan_add { DATA_IN, BLOCK_OFFSETS, DATA_OUT }
@@ -149,21 +148,7 @@ shader_bindings! {
     sort_histogram { META, KEYS, HIST }
     sort_scatter { META, KEYS_IN, VALUES_IN, OFFSETS, KEYS_OUT, VALUES_OUT }
     sort_copy { META, KEYS_IN, VALUES_IN, KEYS_OUT, VALUES_OUT }
-    count64_test { COUNT }
     subgroup_probe { OUT }
-    blend_bwd { PARAMS, SPLATS, VALUES, RANGES, LAST, GRAD_COLOR, GRAD_DEPTH, PAIR_GRADS, MAXIMA, FEATURES, GRAD_FEATURES }
-    grad_accumulate { VALUES, PAIR_GRADS, MAXIMA, ACC }
-    preprocess_bwd { PARAMS, GAUSSIANS, SH, SPLATS, MAXIMA, ACC, GRADS, SH_GRADS, FEATURE_GRADS }
-    shade_bwd { WORDS, FEATURES, ALPHA, GRAD_COLOR, GRAD_FEATURES, SCRATCH, PARTIALS }
-    mlp_grad_reduce { PARTIALS, GRADS }
-    ssim_prepare { IMAGE, TARGET, PLANES }
-    ssim_filter { SRC, DST }
-    ssim_map { MOMENTS, IMAGE, TARGET, MAPS, SUMS }
-    ssim_grad { FILTERED, IMAGE, TARGET, GRAD }
-    loss_reduce { VALUES, SUMS }
-    train_step { STATE, M, V, GRADS, SH_GRADS, SPLATS, STATS, GAUSSIANS, SH, FEATURE_GRADS, FEATURES, FEAT0, FEAT1, FEAT2, FEAT3, NORMS, NORM_TOTAL }
-    train_mlp_step { STATE, M, V, GRADS, WORDS, NORMS, NORM_TOTAL }
-    field { PARAMS, GAUSSIANS, FEATURES, OUTPUT }
 }
 
 /// `items` (binding index, value) in binding order: each of the `N` slots exactly once.
@@ -180,9 +165,10 @@ pub fn by_binding<T: Copy, const N: usize>(items: [(u32, T); N]) -> Result<[T; N
     Ok(out.map(|v| v.expect("each of the N slots was filled once")))
 }
 
-/// The `#define`s every shader is compiled with: the constants above and the reference's
-/// rules (`crate::core::rules`), so that the host (Rust) is their one source.
-pub fn shared_defines() -> Vec<(String, String)> {
+/// The `#define`s every shader is compiled with: the constants above, the reference's
+/// rules (`crate::core::rules`), so that the host (Rust) is their one source, and the
+/// binding names of every shader in `tables` (each wing's `bindings::ALL`).
+pub fn shared_defines(tables: &[&[(&str, &[&str])]]) -> Vec<(String, String)> {
     use crate::core::rules;
     [
         ("TILE_SIZE", format!("{}u", rules::TILE_SIZE)),
@@ -234,19 +220,23 @@ pub fn shared_defines() -> Vec<(String, String)> {
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
-    .chain(bindings::ALL.iter().flat_map(|(shader, names)| {
-        names
+    .chain(
+        tables
             .iter()
-            .enumerate()
-            .map(move |(i, name)| (format!("{}_{name}", shader.to_uppercase()), i.to_string()))
-    }))
+            .flat_map(|table| table.iter())
+            .flat_map(|(shader, names)| {
+                names.iter().enumerate().map(move |(i, name)| {
+                    (format!("{}_{name}", shader.to_uppercase()), i.to_string())
+                })
+            }),
+    )
     .collect()
 }
 
 /// One compiled variant: a shader of `glsl/` and the defines that select the variant.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ShaderVariant {
-    /// File stem under `glsl/` (`blend` for `glsl/blend.comp`).
+    /// File stem, unique under `glsl/` (`blend` for `glsl/render/forward/blend.comp`).
     pub shader: String,
     /// `NAME=VALUE` defines, in the order given.
     pub defines: Vec<(String, String)>,
@@ -280,161 +270,44 @@ pub fn variant_key<'a>(
     key
 }
 
-/// Every variant that the renderer, the sort, the scan and the tests use: each boolean or
-/// enumerated choice a stage is built with. Numeric tunables of the sort are
-/// specialization constants instead, so any configuration the device allows uses these.
+/// The variant of `shader` with `defines`.
+pub fn variant(shader: &str, defines: &[(&str, String)]) -> ShaderVariant {
+    ShaderVariant {
+        shader: shader.to_string(),
+        defines: defines
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect(),
+    }
+}
+
+/// A boolean define's value.
+pub fn bit(b: bool) -> String {
+    u32::from(b).to_string()
+}
+
+/// The `gpu` wing's variants: the scan, the sort (each key width and I/O it is built
+/// for) and the subgroup probe. Numeric tunables of the sort are specialization constants
+/// instead, so any configuration the device allows uses these.
 pub fn shader_variants() -> Vec<ShaderVariant> {
-    fn v(shader: &str, defines: &[(&str, String)]) -> ShaderVariant {
-        ShaderVariant {
-            shader: shader.to_string(),
-            defines: defines
-                .iter()
-                .map(|(k, v)| (k.to_string(), v.clone()))
-                .collect(),
-        }
-    }
-    let bit = |b: bool| u32::from(b).to_string();
-    // SplatKernel::shader_id values: 0 Gaussian, 1 power.
-    let splat_kernels = ["0u", "1u"];
-    let mut out = Vec::new();
-    for shader in [
-        "scan_reduce",
-        "scan_block",
-        "scan_add",
-        "order",
-        "pack",
-        "shade",
-        "shade_bwd",
-        "mlp_grad_reduce",
-        "ssim_prepare",
-        "ssim_map",
-        "ssim_grad",
-        "loss_reduce",
-        "train_step",
-        "train_mlp_step",
-        "count64_test",
-        "subgroup_probe",
-    ] {
-        out.push(v(shader, &[]));
-    }
-    // The loss's window: through buffers, or texel views (CPU devices).
-    for texel in [false, true] {
-        out.push(v("ssim_filter", &[("TEXEL_FETCH", bit(texel))]));
-    }
+    let mut out: Vec<ShaderVariant> = ["scan_reduce", "scan_block", "scan_add", "subgroup_probe"]
+        .into_iter()
+        .map(|shader| variant(shader, &[]))
+        .collect();
     // Sort: 64-bit keys through buffers, 32-bit keys through buffers or texel views.
     for (key, texel) in [("uvec2", false), ("uint", false), ("uint", true)] {
         for shader in ["sort_setup", "sort_histogram", "sort_scatter", "sort_copy"] {
-            out.push(v(
+            out.push(variant(
                 shader,
                 &[("SORT_KEY", key.to_string()), ("SORT_TEXEL_IO", bit(texel))],
             ));
-        }
-    }
-    for texel in [false, true] {
-        for compact in [false, true] {
-            for lenses in [false, true] {
-                out.push(v(
-                    "preprocess",
-                    &[
-                        ("COMPACT_GAUSSIANS", bit(compact)),
-                        ("PREPROCESS_TEXEL_IO", bit(texel)),
-                        ("LENSES", bit(lenses)),
-                    ],
-                ));
-            }
-        }
-        out.push(v("keys", &[("KEYS_TEXEL_IO", bit(texel))]));
-        out.push(v("ranges", &[("RANGES_TEXEL_IO", bit(texel))]));
-        for kernel in splat_kernels {
-            // The feature channels, or the surface pass (normals and median depth).
-            for surface in [false, true] {
-                out.push(v(
-                    "blend_features",
-                    &[
-                        ("SPLAT_KERNEL", kernel.to_string()),
-                        ("TEXEL_FETCH", bit(texel)),
-                        ("SURFACE", bit(surface)),
-                    ],
-                ));
-            }
-        }
-    }
-    // Field renders: slice, integral, maximum (cpu::field::FieldMode::shader_id) per kernel.
-    for mode in ["0", "1", "2"] {
-        for kernel in splat_kernels {
-            out.push(v(
-                "field",
-                &[
-                    ("FIELD_MODE", mode.to_string()),
-                    ("SPLAT_KERNEL", kernel.to_string()),
-                ],
-            ));
-        }
-    }
-    // The backward pass: the blend's per bin size (8: CPU devices, 16: GPUs) and kernel; the
-    // accumulation in fixed point or (the fast mode) with float atomics, native or by
-    // compare-and-swap; the preprocess's reading either.
-    for (bin, strip) in [("8u", 1), ("16u", 1), ("8u", 8)] {
-        for kernel in splat_kernels {
-            for groups in 0..=MAX_FEATURE_GROUPS {
-                out.push(v(
-                    "blend_bwd",
-                    &[
-                        ("BIN", bin.to_string()),
-                        ("STRIP", strip.to_string()),
-                        ("SPLAT_KERNEL", kernel.to_string()),
-                        ("FEATURE_GROUPS", groups.to_string()),
-                    ],
-                ));
-            }
-        }
-    }
-    for (float, cas, int64) in [
-        (false, false, false),
-        (false, false, true),
-        (true, false, false),
-        (true, true, false),
-    ] {
-        out.push(v(
-            "grad_accumulate",
-            &[
-                ("FLOAT_ATOMICS", bit(float)),
-                ("CAS_FALLBACK", bit(cas)),
-                ("INT64_ATOMICS", bit(int64)),
-            ],
-        ));
-    }
-    for float in [false, true] {
-        for lenses in [false, true] {
-            out.push(v(
-                "preprocess_bwd",
-                &[("FLOAT_ATOMICS", bit(float)), ("LENSES", bit(lenses))],
-            ));
-        }
-    }
-    // The shared kernel (one pixel per invocation, buffers) and the texel strips, each
-    // also saving the last contributor (frames a backward pass reads).
-    for save_last in [false, true] {
-        for kernel in splat_kernels {
-            let kernels = std::iter::once((1, false)).chain(STRIPS.map(|strip| (strip, true)));
-            for (strip, texel) in kernels {
-                out.push(v(
-                    "blend",
-                    &[
-                        ("STRIP", strip.to_string()),
-                        ("TEXEL_FETCH", bit(texel)),
-                        ("SPLAT_KERNEL", kernel.to_string()),
-                        ("SAVE_LAST", bit(save_last)),
-                    ],
-                ));
-            }
         }
     }
     out
 }
 
 /// Compiles the compute shader `file` (which `glslc` reports as `display` in its
-/// diagnostics, e.g. `glsl/blend.comp`) to SPIR-V for Vulkan 1.3 with optimisation,
+/// diagnostics, e.g. `glsl/render/forward/blend.comp`) to SPIR-V for Vulkan 1.3 with optimisation,
 /// running `glslc` in `cwd` with `include_dirs` searched by `#include`. On failure the
 /// error holds glslc's diagnostics (`glsl/<file>:<line>: error: ...`).
 pub fn compile_glsl_file(
@@ -477,6 +350,50 @@ pub fn compile_glsl_file(
     }
     let bytes = std::fs::read(output).map_err(|e| format!("{}: {e}", output.display()))?;
     spirv_words(&bytes).ok_or_else(|| format!("{display}: glslc wrote no valid SPIR-V"))
+}
+
+/// The shaders under `root` (`glsl/`) by file stem, and every folder there (`root`
+/// included), in name order: the wings keep their shaders in folders of their own, and a
+/// stem names one shader across them all (two of one stem are an error).
+#[allow(clippy::type_complexity)]
+pub fn glsl_tree(
+    root: &std::path::Path,
+) -> Result<
+    (
+        std::collections::BTreeMap<String, std::path::PathBuf>,
+        Vec<std::path::PathBuf>,
+    ),
+    String,
+> {
+    let mut shaders = std::collections::BTreeMap::new();
+    let mut folders = vec![root.to_path_buf()];
+    let mut i = 0;
+    while let Some(dir) = folders.get(i).cloned() {
+        i += 1;
+        let mut entries: Vec<std::path::PathBuf> = std::fs::read_dir(&dir)
+            .map_err(|e| format!("{}: {e}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort();
+        for path in entries {
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.extension().is_some_and(|x| x == "comp") {
+                let stem = path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().to_string())
+                    .unwrap_or_default();
+                if let Some(other) = shaders.insert(stem.clone(), path.clone()) {
+                    return Err(format!(
+                        "two shaders named {stem}: {} and {}",
+                        other.display(),
+                        path.display()
+                    ));
+                }
+            }
+        }
+    }
+    Ok((shaders, folders))
 }
 
 /// The first word of every SPIR-V module.

@@ -1,5 +1,5 @@
 //! The subgroup size the device really runs, measured once per context
-//! (`glsl/subgroup_probe.comp`), and what follows when the driver reports another.
+//! (`glsl/gpu/subgroup_probe.comp`), and what follows when the driver reports another.
 //!
 //! Every kernel is generic over the subgroup size, but it must be the size the lanes
 //! really run at: the sort lays a block out as `subgroup * size + lane`, the scans stride
@@ -15,7 +15,7 @@
 //! (`gl_SubgroupSize`) with the lanes that run together (a ballot of every lane and a
 //! subgroup sum of ones). When they disagree consistently, the measured size is used:
 //! [`DeviceInfo`](super::DeviceInfo)'s subgroup sizes become it and every pipeline gets it
-//! as the `SUBGROUP_SIZE_SPEC` specialization constant, which `glsl/subgroup.glsl`'s
+//! as the `SUBGROUP_SIZE_SPEC` specialization constant, which `glsl/gpu/subgroup.glsl`'s
 //! `SUBGROUP_SIZE` uses in place of `gl_SubgroupSize`. When the readings are inconsistent
 //! in any other way the device is refused: no kernel could be trusted on it.
 

@@ -30,6 +30,8 @@ pub mod backward;
 pub mod field;
 pub mod forward;
 pub mod frame;
+/// The render wing's shaders: their named bindings and variants (`glsl/render/`).
+pub mod shaders;
 
 use forward::{blend, shade};
 

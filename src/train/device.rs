@@ -1,8 +1,8 @@
 //! The Gaussians being trained, kept on the device between iterations: their parameters,
 //! Adam's moments and the densification statistics in device buffers, stepped by
-//! `glsl/train_step.comp` right after the backward pass in the same submission, which also
+//! `glsl/train/train_step.comp` right after the backward pass in the same submission, which also
 //! writes the activated records (and feature channels) the next forward pass reads; with
-//! feature splats the neural shader's weights too (`glsl/train_mlp_step.comp`, written
+//! feature splats the neural shader's weights too (`glsl/train/train_mlp_step.comp`, written
 //! into the shader's own buffer). With `--clip-grad` a first pass sums the squared
 //! gradients in a fixed order (`loss_reduce`) and the step scales them. Nothing per
 //! Gaussian crosses to the host during an iteration; the state comes down
@@ -21,7 +21,6 @@ use crate::core::shader_interface::{
     STEP_SKIP_OPACITY, STEP_STATS,
 };
 use crate::gpu::shader::{by_binding, BindingKind};
-use crate::gpu::shader_set::bindings::{loss_reduce, train_mlp_step as mslot, train_step as slot};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{
     dispatch_grid, BufferSlice, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
@@ -30,6 +29,7 @@ use crate::gpu::{
 use crate::render::backward::DeviceGrads;
 use crate::render::forward::shade::GpuShader;
 use crate::render::{sh_texel_stride, GpuFeatures, GpuRenderer, GpuScene};
+use crate::train::shaders::bindings::{loss_reduce, train_mlp_step as mslot, train_step as slot};
 
 /// Invocations per workgroup.
 const WORKGROUP: u32 = crate::gpu::shader_set::LINEAR_WG;

@@ -26,12 +26,12 @@
 
 use crate::core::shader_interface::{CountsPush, FilterPush, LossGradPush, RecordLayout, SizePush};
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
     MemoryKind,
 };
+use crate::train::shaders::bindings;
 
 /// The original's weight of the D-SSIM term (`lambda_dssim`).
 pub const LAMBDA_DSSIM: f32 = 0.2;

@@ -11,4 +11,6 @@ pub mod loss;
 pub mod masks;
 pub mod model;
 pub mod run;
+/// The train wing's shaders: their named bindings and variants (`glsl/train/`).
+pub mod shaders;
 pub mod undistort;

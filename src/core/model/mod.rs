@@ -69,7 +69,7 @@ impl SplatKernel {
     /// alpha >= 1/255 only when `d2 <= bound`. Gaussian: `2 ln(255 opacity)`; power:
     /// `9 (1 - 1 / (255 opacity))`. Both with the same small conservative margin (relative
     /// 1e-3 plus 0.01) against rounding in the per-pixel evaluation; negative when the
-    /// Gaussian reaches 1/255 nowhere. Mirrors `alpha_bound` in `glsl/splat_common.glsl`.
+    /// Gaussian reaches 1/255 nowhere. Mirrors `alpha_bound` in `glsl/render/forward/splat_common.glsl`.
     pub fn alpha_bound(self, opacity: f32) -> f32 {
         let exact = match self {
             SplatKernel::Gaussian => 2.0 * (255.0 * opacity).ln(),

@@ -1,15 +1,15 @@
-//! Blend backward stage (`glsl/blend_bwd.comp`): one workgroup per bin walks the bin's
+//! Blend backward stage (`glsl/render/backward/blend_bwd.comp`): one workgroup per bin walks the bin's
 //! sorted pairs back to front with the forward's saved per-pixel state and writes, per
 //! pair, the bin's summed gradient with respect to the pair's Gaussian (2D mean, conic,
 //! opacity, colour, depth, |2D mean|), plus the largest |sum| per field.
 
 use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::blend_bwd as slot;
 use crate::gpu::shader_set::{
     GRAD_FIELDS, GRAD_SPEC_BATCH, GRAD_SPEC_MAX_SUBGROUPS, MAX_FEATURE_GROUPS,
 };
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
+use crate::render::shaders::bindings::blend_bwd as slot;
 use ash::vk;
 
 /// The blend-backward pipeline for one bin size, layout and kernel.

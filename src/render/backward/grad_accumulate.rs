@@ -1,14 +1,14 @@
-//! Gradient accumulation stage (`glsl/grad_accumulate.comp`): one invocation per sorted
+//! Gradient accumulation stage (`glsl/render/backward/grad_accumulate.comp`): one invocation per sorted
 //! pair adds the pair's partial sums to its Gaussian's accumulators, in 64-bit fixed
-//! point (deterministic, the default: `glsl/grad_common.glsl` states range and resolution;
+//! point (deterministic, the default: `glsl/render/backward/grad_common.glsl` states range and resolution;
 //! one 64-bit atomic per value where the device has them, else two 32-bit halves)
 //! or with float atomics (the opt-in fast mode; by compare-and-swap where the device has no
 //! float atomic add).
 
 pub use crate::core::shader_interface::GradPush;
 use crate::gpu::shader::{by_binding, BindingKind};
-use crate::gpu::shader_set::bindings::grad_accumulate as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use crate::render::shaders::bindings::grad_accumulate as slot;
 use ash::vk;
 
 /// How per-pair gradients are added into per-Gaussian sums.

@@ -1,10 +1,10 @@
-//! Preprocess backward stage (`glsl/preprocess_bwd.comp`): one invocation per Gaussian
+//! Preprocess backward stage (`glsl/render/backward/preprocess_bwd.comp`): one invocation per Gaussian
 //! turns its accumulated gradients of the projected quantities into gradients of its
 //! centre, opacity, (normalised) quaternion, scales and SH coefficients.
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::preprocess_bwd as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use crate::render::shaders::bindings::preprocess_bwd as slot;
 use ash::vk;
 
 use crate::render::backward::grad_accumulate::GradPush;

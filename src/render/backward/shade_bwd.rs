@@ -1,4 +1,4 @@
-//! Shade backward stage (`glsl/shade_bwd.comp`, then `glsl/mlp_grad_reduce.comp`): the
+//! Shade backward stage (`glsl/render/backward/shade_bwd.comp`, then `glsl/render/backward/mlp_grad_reduce.comp`): the
 //! neural shader's ([`crate::fields::mlp`]) backward pass on the device. From dL/d(shaded colour)
 //! and dL/d(alpha) per pixel it writes dL/d(feature channels) and the shader's part of
 //! dL/d(alpha) per pixel, which the feature blend's backward then takes, and the
@@ -13,11 +13,11 @@
 use crate::core::camera::Camera;
 use crate::core::shader_interface::ShadeBwdPush;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
 use crate::gpu::shader_set::{SHADE_CHUNK_PIXELS, SHADE_SPEC_ACTIVATIONS, SHADE_SPEC_WIDEST};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
 use crate::render::forward::shade::{GpuShader, ShadePush};
+use crate::render::shaders::bindings::{mlp_grad_reduce as rslot, shade_bwd as slot};
 use ash::vk;
 
 /// Pixels per chunk: one per invocation of a workgroup.

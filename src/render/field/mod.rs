@@ -1,4 +1,4 @@
-//! Field stage (`glsl/field.comp`): renders of the fitted field itself (slice, line
+//! Field stage (`glsl/render/field/field.comp`): renders of the fitted field itself (slice, line
 //! integral, maximum along the ray; [`crate::cpu::field`] is the reference and has every
 //! formula). No projection, sort or blend: one dispatch per group of four channels, each
 //! 16x8 workgroup summing the Gaussians whose support can reach its tile.
@@ -9,9 +9,9 @@ use crate::core::model::field::{FieldGaussians, FieldMode, MAX_FIELD_SAMPLES};
 use crate::core::shader_interface::FieldPush;
 pub use crate::core::shader_interface::{FieldGaussian, FieldParams};
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::field as slot;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
+use crate::render::shaders::bindings::field as slot;
 
 use crate::gpu::shader_set::{PIXEL_WG_X as SIDE, PIXEL_WG_Y as ROWS};
 

@@ -1,14 +1,14 @@
-//! Blend stage (`glsl/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
+//! Blend stage (`glsl/render/forward/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
 use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::blend as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
+use crate::render::shaders::bindings::blend as slot;
 use ash::vk;
 
 /// Shared memory of the shared kernel per pixel of a tile: one staged Gaussian's mean and
-/// opacity, conic and colour (three vec4s, `glsl/blend.comp`).
+/// opacity, conic and colour (three vec4s, `glsl/render/forward/blend.comp`).
 const SHARED_KERNEL_BYTES_PER_PIXEL: u32 = 48;
 
 /// Which blend kernel to build. Both composite with the same per-pixel arithmetic.

@@ -1,11 +1,11 @@
-//! Feature blend stage (`glsl/blend_features.comp`): after the colour blend, composites a
+//! Feature blend stage (`glsl/render/forward/blend_features.comp`): after the colour blend, composites a
 //! scene's K feature channels over the same sorted bin lists, four channels per dispatch
 //! (one dispatch per group of four), with the colour rules and background 0.
 
 use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::blend_features as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuImage, GpuResult};
+use crate::render::shaders::bindings::blend_features as slot;
 use ash::vk;
 
 /// Channels blended per dispatch (one vec4 per Gaussian and per pixel).

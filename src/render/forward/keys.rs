@@ -1,10 +1,10 @@
-//! Duplicate-per-tile keys stage (`glsl/keys.comp`): one thread per Gaussian, in depth
+//! Duplicate-per-tile keys stage (`glsl/render/forward/keys.comp`): one thread per Gaussian, in depth
 //! order, writes its (tile | depth, index) pairs at its scanned offset; or the Gaussians
 //! of one chunk of the depth order, relative to the chunk's first offset.
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::keys as slot;
 use crate::gpu::{dispatch_grid, BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use crate::render::shaders::bindings::keys as slot;
 use ash::vk;
 
 /// Invocations per workgroup (matches `local_size_x`).

@@ -1,15 +1,15 @@
 //! Depth order stage: a stable radix sort of every Gaussian by view depth (culled ones
-//! last; 32-bit keys, the Gaussian indices as values), then `glsl/order.comp` gathers the
+//! last; 32-bit keys, the Gaussian indices as values), then `glsl/render/forward/order.comp` gathers the
 //! tiles-touched counts into that order for the scan. Emitting pairs in depth order lets the pair sort order the tile bits only, with
-//! the same result as sorting the full `tile << 32 | depth` keys (see `glsl/order.comp`).
+//! the same result as sorting the full `tile << 32 | depth` keys (see `glsl/render/forward/order.comp`).
 
 use crate::gpu::shader::{by_binding, BindingKind};
-use crate::gpu::shader_set::bindings::order as slot;
 use crate::gpu::sort::{SortJob, SortTexels};
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{
     dispatch_grid, BufferSlice, ComputePipeline, Count, GpuBuffer, GpuContext, GpuResult, RadixSort,
 };
+use crate::render::shaders::bindings::order as slot;
 use ash::vk;
 
 /// Invocations per workgroup of the gather (matches `local_size_x`).

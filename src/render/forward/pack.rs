@@ -1,10 +1,10 @@
-//! Pack stage (`glsl/pack.comp`): the colour image as 8-bit RGBA on the device, quantised
+//! Pack stage (`glsl/render/forward/pack.comp`): the colour image as 8-bit RGBA on the device, quantised
 //! as [`crate::io::output::to_u8`], so a consumer that only shows the frame reads back a
 //! quarter of the colour plane's bytes and no alpha or depth.
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::pack as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
+use crate::render::shaders::bindings::pack as slot;
 use ash::vk;
 
 use crate::gpu::shader_set::{PIXEL_WG_X as SIDE, PIXEL_WG_Y as ROWS};

@@ -1,4 +1,4 @@
-//! Preprocess stage (`glsl/preprocess.comp`): one thread per Gaussian, dispatched once per
+//! Preprocess stage (`glsl/render/forward/preprocess.comp`): one thread per Gaussian, dispatched once per
 //! window of Gaussians whose per-Gaussian arrays fit one storage binding each.
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
@@ -70,7 +70,7 @@ impl Preprocess {
     /// 32-byte ones, reading and writing storage buffers or (`texel_io`, for CPU devices)
     /// texel views, for pinhole cameras or (`lenses`) every lens.
     pub fn new(ctx: &GpuContext, compact: bool, texel_io: bool, lenses: bool) -> GpuResult<Self> {
-        use crate::gpu::shader_set::bindings::preprocess as b;
+        use crate::render::shaders::bindings::preprocess as b;
         use BindingKind::*;
         let (read, write) = if texel_io {
             (UniformTexelBuffer, StorageTexelBuffer)
@@ -122,7 +122,7 @@ impl Preprocess {
         n: u32,
         window: u32,
     ) -> GpuResult<()> {
-        use crate::gpu::shader_set::bindings::preprocess as slot;
+        use crate::render::shaders::bindings::preprocess as slot;
         let window = window.max(WORKGROUP) / WORKGROUP * WORKGROUP;
         let mut first = 0u32;
         while first < n {

@@ -1,9 +1,9 @@
-//! Tile-ranges stage (`glsl/ranges.comp`): start/end of each tile's run in the sorted keys,
+//! Tile-ranges stage (`glsl/render/forward/ranges.comp`): start/end of each tile's run in the sorted keys,
 //! dispatched indirectly over the device-side key count.
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::ranges as slot;
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuResult};
+use crate::render::shaders::bindings::ranges as slot;
 use ash::vk;
 
 /// Invocations per workgroup (matches `local_size_x`; the keys stage computes the

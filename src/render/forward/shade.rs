@@ -1,15 +1,15 @@
-//! Shade stage (`glsl/shade.comp`): the neural shader ([`crate::fields::mlp`]) over the blended
+//! Shade stage (`glsl/render/forward/shade.comp`): the neural shader ([`crate::fields::mlp`]) over the blended
 //! feature image, after the blend and the feature blend, writing the colour image.
 
 use crate::core::camera::Camera;
 pub(crate) use crate::core::shader_interface::ShadePush;
 use crate::fields::mlp::Mlp;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
-use crate::gpu::shader_set::bindings::shade as slot;
 use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuImage, GpuResult,
     MemoryKind,
 };
+use crate::render::shaders::bindings::shade as slot;
 use ash::vk;
 
 use crate::gpu::shader_set::{PIXEL_WG_X as SIDE, PIXEL_WG_Y as ROWS};

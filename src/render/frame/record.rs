@@ -86,7 +86,7 @@ impl GpuRenderer {
     }
 }
 
-/// The frame constants every stage reads (`FrameParams` in `glsl/splat_common.glsl`).
+/// The frame constants every stage reads (`FrameParams` in `glsl/render/forward/splat_common.glsl`).
 fn frame_params(
     scene: &GpuScene,
     cam: &Camera,

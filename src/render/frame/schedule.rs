@@ -368,7 +368,7 @@ impl GpuRenderer {
     /// Renders the ticket's frame in depth-ordered chunks whose pairs fit the key buffers:
     /// one submission up to the scan, whose offsets the host reads to plan the chunks, then
     /// keys, sort, ranges and blend per chunk, each blend resuming every pixel where the
-    /// previous chunk left it (`glsl/blend.comp`). The chunks' lists are, tile by tile,
+    /// previous chunk left it (`glsl/render/forward/blend.comp`). The chunks' lists are, tile by tile,
     /// consecutive runs of the one-piece frame's lists, so the image is bit-identical.
     /// Returns the frame's counters and its number of chunks, or None when the frame must
     /// be planned again (larger bins, or key buffers grown for its largest chunk).

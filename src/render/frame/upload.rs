@@ -101,7 +101,7 @@ impl GpuFeatures {
 pub(crate) type FeatureJob<'a> = (&'a GpuFeatures, Option<&'a shade::GpuShader>);
 
 /// RGBA32F texels of SH per Gaussian: the `3 (d + 1)^2` floats rounded up to whole texels
-/// (`glsl/preprocess.comp` computes the same stride).
+/// (`glsl/render/forward/preprocess.comp` computes the same stride).
 pub fn sh_texel_stride(sh_degree: u32) -> u32 {
     (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
 }

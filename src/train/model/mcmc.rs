@@ -7,7 +7,7 @@ use crate::core::gen::Rng;
 use crate::core::scene::sigmoid;
 
 /// The counter-based random numbers of the MCMC noise, the same on the host and the
-/// device (`glsl/train_step.comp`): a PCG hash.
+/// device (`glsl/train/train_step.comp`): a PCG hash.
 pub fn pcg_hash(x: u32) -> u32 {
     let state = x.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
     let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);

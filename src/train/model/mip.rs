@@ -64,7 +64,7 @@ pub fn filters(positions: &[[f32; 3]], cameras: &[&Camera]) -> Vec<f32> {
 
 /// The filtered scales and the opacity's factor `sqrt(det(S^2) / det(S^2 + f^2))` of a
 /// Gaussian with scales `s` and filter `f`, in the operations the device's training step
-/// repeats (`glsl/train_step.comp`, `mip_filtered`).
+/// repeats (`glsl/train/train_step.comp`, `mip_filtered`).
 pub fn filtered(s: [f32; 3], f: f32) -> ([f32; 3], f32) {
     let f2 = f * f;
     let sq = s.map(|v| v * v);

@@ -446,6 +446,36 @@ fn bench_backward_reports_both_passes() {
     assert!(!refused.status.success());
 }
 
+/// Bytes per stage (issue 60, item 3) of a `bench --demo` report, tied to the records the
+/// shaders load and store.
+fn assert_stage_bytes(report: &serde_json::Value) {
+    let stages = report["stages"].as_array().unwrap();
+    let bytes = |name: &str, k: &str| {
+        let s = stages.iter().find(|s| s["name"] == name).unwrap();
+        s["bytes"][k].as_u64().unwrap_or_else(|| panic!("{s}"))
+    };
+    for s in stages {
+        let name = s["name"].as_str().unwrap();
+        assert!(bytes(name, "read") > 0 && bytes(name, "written") > 0, "{s}");
+    }
+    let n = report["gaussians"].as_u64().unwrap();
+    let (visible, pairs) = (
+        report["visible"].as_u64().unwrap(),
+        report["pairs"].as_u64().unwrap(),
+    );
+    let pixels = report["width"].as_u64().unwrap() * report["height"].as_u64().unwrap();
+    // Preprocess: each 48-byte record, and the degree-2 SH (27 floats in 7 texels) of each
+    // keyed Gaussian; out, per Gaussian, its 48-byte splat and six words, and the counters.
+    assert_eq!(bytes("preprocess", "read"), n * 48 + visible * 7 * 16);
+    assert_eq!(bytes("preprocess", "written"), n * 72 + 48);
+    // Keys: a pair is 8 bytes out; blend: each pair's index and splat in, colour and depth
+    // out; readback: the two images copied, and the counters.
+    assert_eq!(bytes("keys", "written"), pairs * 8);
+    assert!(bytes("blend", "read") > pairs * 52);
+    assert_eq!(bytes("blend", "written"), pixels * 20);
+    assert_eq!(bytes("readback", "read"), pixels * 20 + 48);
+}
+
 #[test]
 fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
     let dir = tempfile::tempdir().unwrap();
@@ -489,31 +519,7 @@ fn bench_json_reports_every_stage_and_a_sweep_writes_csv_and_plot() {
             s["min"].as_f64() <= s["median"].as_f64() && s["median"].as_f64() <= s["max"].as_f64()
         );
     }
-    // Bytes per stage (issue 60, item 3), tied to the records the shaders load and store.
-    let bytes = |name: &str, k: &str| {
-        let s = stages.iter().find(|s| s["name"] == name).unwrap();
-        s["bytes"][k].as_u64().unwrap_or_else(|| panic!("{s}"))
-    };
-    for s in stages {
-        let name = s["name"].as_str().unwrap();
-        assert!(bytes(name, "read") > 0 && bytes(name, "written") > 0, "{s}");
-    }
-    let n = report["gaussians"].as_u64().unwrap();
-    let (visible, pairs) = (
-        report["visible"].as_u64().unwrap(),
-        report["pairs"].as_u64().unwrap(),
-    );
-    let pixels = report["width"].as_u64().unwrap() * report["height"].as_u64().unwrap();
-    // Preprocess: each 48-byte record, and the degree-2 SH (27 floats in 7 texels) of each
-    // keyed Gaussian; out, per Gaussian, its 48-byte splat and six words, and the counters.
-    assert_eq!(bytes("preprocess", "read"), n * 48 + visible * 7 * 16);
-    assert_eq!(bytes("preprocess", "written"), n * 72 + 48);
-    // Keys: a pair is 8 bytes out; blend: each pair's index and splat in, colour and depth
-    // out; readback: the two images copied, and the counters.
-    assert_eq!(bytes("keys", "written"), pairs * 8);
-    assert!(bytes("blend", "read") > pairs * 52);
-    assert_eq!(bytes("blend", "written"), pixels * 20);
-    assert_eq!(bytes("readback", "read"), pixels * 20 + 48);
+    assert_stage_bytes(report);
     for k in [
         "fps",
         "sort_keys_per_s",

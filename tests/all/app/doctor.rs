@@ -7,23 +7,36 @@ use crate::common::cli::{command, s, stderr, stdout};
 use std::path::Path;
 use std::process::Output;
 
-/// A copy of `glsl/` in a temporary directory with `file`'s `from` replaced by `to`
-/// (which must occur in it).
+/// A copy of `glsl/` (its wings' folders) in a temporary directory with `file`'s `from`
+/// replaced by `to` (which must occur in it).
 fn broken_glsl(file: &str, edits: &[(&str, &str)]) -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("a temporary directory");
     let glsl = Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
-    for entry in std::fs::read_dir(&glsl).expect("glsl/") {
-        let path = entry.expect("an entry").path();
-        let name = path.file_name().expect("a name");
-        let mut text = std::fs::read_to_string(&path).expect("a shader");
-        if name == file {
-            for (from, to) in edits {
-                assert!(text.contains(from), "{file} no longer contains {from:?}");
-                text = text.replace(from, to);
+    let (_, folders) = verisplat::gpu::shader_set::glsl_tree(&glsl).expect("glsl/");
+    let mut edited = false;
+    for folder in folders {
+        let copy = dir
+            .path()
+            .join(folder.strip_prefix(&glsl).expect("inside glsl/"));
+        std::fs::create_dir_all(&copy).expect("a folder of the copy");
+        for entry in std::fs::read_dir(&folder).expect("a folder of glsl/") {
+            let path = entry.expect("an entry").path();
+            if path.is_dir() {
+                continue;
             }
+            let name = path.file_name().expect("a name");
+            let mut text = std::fs::read_to_string(&path).expect("a shader");
+            if name == file {
+                for (from, to) in edits {
+                    assert!(text.contains(from), "{file} no longer contains {from:?}");
+                    text = text.replace(from, to);
+                }
+                edited = true;
+            }
+            std::fs::write(copy.join(name), text).expect("write the copy");
         }
-        std::fs::write(dir.path().join(name), text).expect("write the copy");
     }
+    assert!(edited, "no {file} under glsl/");
     dir
 }
 

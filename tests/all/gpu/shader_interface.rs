@@ -416,15 +416,21 @@ imageStore(img, ivec2(i, 0), items[i].b);
     assert!(reflect(&words[..3]).is_err());
 }
 
-/// Bindings are named once (`gpu::shader_set::bindings`): the shaders use the names'
+/// Bindings are named once, by the wing that owns the shader (`gpu::shader_set::bindings`,
+/// `render::shaders::bindings`, `train::shaders::bindings`): the shaders use the names'
 /// defines, never a literal index, and a stage's list must fill each slot exactly once.
 #[test]
 fn bindings_are_named_in_the_shaders_and_placed_once_by_the_host() {
     let glsl = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
     let literal = regex_free_literal_binding;
     let mut shaders = 0;
-    for entry in std::fs::read_dir(&glsl).unwrap() {
-        let path = entry.unwrap().path();
+    let (_, folders) = verisplat::gpu::shader_set::glsl_tree(&glsl).unwrap();
+    let files = folders
+        .iter()
+        .flat_map(|d| std::fs::read_dir(d).unwrap())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_file());
+    for path in files {
         let text = std::fs::read_to_string(&path).unwrap();
         for (i, line) in text.lines().enumerate() {
             assert!(
@@ -437,10 +443,27 @@ fn bindings_are_named_in_the_shaders_and_placed_once_by_the_host() {
         shaders += 1;
     }
     assert!(shaders >= 16, "{shaders} shader files read");
-    let names = verisplat::gpu::shader_set::bindings::ALL;
+    let names = verisplat::gpu::shader::all_bindings();
     assert!(names
         .iter()
         .any(|(s, n)| *s == "preprocess" && n.contains(&"SPLATS")));
+    // Each wing's table, gathered once, each shader once.
+    let wings = [
+        verisplat::gpu::shader_set::bindings::ALL,
+        verisplat::render::shaders::bindings::ALL,
+        verisplat::train::shaders::bindings::ALL,
+    ];
+    assert_eq!(names.len(), wings.iter().map(|w| w.len()).sum::<usize>());
+    for (shader, binding_names) in wings.iter().flat_map(|w| w.iter()) {
+        assert_eq!(
+            names
+                .iter()
+                .filter(|(s, n)| s == shader && n == binding_names)
+                .count(),
+            1,
+            "{shader}"
+        );
+    }
     use verisplat::gpu::shader::by_binding;
     assert_eq!(by_binding([(1, 'b'), (0, 'a')]).unwrap(), ['a', 'b']);
     assert!(by_binding([(0, 'a'), (0, 'b')])

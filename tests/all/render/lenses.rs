@@ -1,5 +1,5 @@
 //! The GPU renderer through every lens against the CPU reference (issue 49): the same
-//! unscented projection (`glsl/lens.glsl` in f32, `core::model::unscented` in f64), and
+//! unscented projection (`glsl/render/forward/lens.glsl` in f32, `core::model::unscented` in f64), and
 //! the thresholds of every other frame (`Thresholds::FRAME`: PSNR >= 55 dB, 99.9 % of
 //! 8-bit pixels within 1/255). Run at every lavapipe width by `tools/test.sh`.
 

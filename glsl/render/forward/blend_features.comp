@@ -47,7 +47,7 @@ layout(std430, binding = BLEND_FEATURES_COUNTERS) buffer CounterBuf { Counters c
 // A frame keyed in depth-ordered chunks runs this before each chunk's colour blend: every
 // chunk but the first resumes each pixel's channels from the output and its transmittance
 // and stop from the colour image's between-chunk state (colour = (C, T), T negated once
-// the pixel is done; glsl/blend.comp), which at that point is the state the previous
+// the pixel is done; glsl/render/forward/blend.comp), which at that point is the state the previous
 // chunk left. Compositing is sequential per pixel, so the channels equal one pass bit for
 // bit. A frame in one piece is resume 0.
 layout(binding = BLEND_FEATURES_COLOR_STATE, rgba32f) uniform readonly image2D color_state;
