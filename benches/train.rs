@@ -23,7 +23,7 @@ fn main() {
     } else {
         ("playbot_lod6_1873_sh2.ply", 40, 30, 20)
     };
-    let scene = verisplat::core::scene::load_with_format(&shared.join(file))
+    let scene = verisplat::io::scene::load_with_format(&shared.join(file))
         .expect("a shared scene")
         .0;
     let cams = orbit(

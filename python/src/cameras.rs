@@ -7,6 +7,7 @@ use glam::{Mat3, Vec3};
 use pyo3::prelude::*;
 use std::path::PathBuf;
 use verisplat::core::camera::{self, lens, Camera, Lens};
+use verisplat::io;
 
 /// A camera as it crosses the boundary: name, width, height, `[fx, fy, cx, cy]`, the
 /// world-to-camera matrix, row-major 4x4 (OpenCV axes), and the lens ([`LensTuple`]).
@@ -150,9 +151,9 @@ pub(crate) fn load_cameras(
 ) -> PyResult<Vec<CamTuple>> {
     py.detach(|| {
         guarded(|| {
-            let timing = camera::PathTiming { frames, fps };
+            let timing = io::camera::PathTiming { frames, fps };
             let (cams, _) =
-                camera::load_camera_file(&path, &timing).map_err(|e| py_err(e.into()))?;
+                io::camera::load_camera_file(&path, &timing).map_err(|e| py_err(e.into()))?;
             Ok(cams.iter().map(from_camera).collect())
         })
     })
@@ -169,7 +170,7 @@ pub(crate) fn save_cameras(path: PathBuf, cameras: Vec<CamTuple>, overwrite: boo
             .map(to_camera)
             .collect::<PyResult<Vec<_>>>()?;
         let numbered: Vec<(usize, Camera)> = cams.into_iter().enumerate().collect();
-        let text = camera::inria::to_json(&numbered).map_err(|e| py_err(e.into()))?;
+        let text = io::camera::inria::to_json(&numbered).map_err(|e| py_err(e.into()))?;
         verisplat::io::output::write_bytes_atomically(&path, overwrite, text.as_bytes())
             .map_err(|e| py_err(e.into()))
     })

@@ -8,6 +8,7 @@ use pyo3::types::{PyByteArray, PyBytes};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use verisplat::core::scene::{self, ActivatedScene, Scene};
+use verisplat::io;
 
 static NEXT_SCENE_ID: AtomicU64 = AtomicU64::new(1);
 
@@ -169,31 +170,34 @@ impl PyScene {
     /// "raw") is the frame of an SPZ output (`spz::SpzAxes`).
     #[pyo3(signature = (path, overwrite=false, spz_axes="spec"))]
     fn save(&self, py: Python<'_>, path: PathBuf, overwrite: bool, spz_axes: &str) -> PyResult<()> {
-        let axes: scene::spz::SpzAxes = spz_axes.parse().map_err(value_err)?;
+        let axes: io::scene::spz::SpzAxes = spz_axes.parse().map_err(value_err)?;
         py.detach(|| {
             guarded(|| {
-                let format =
-                    scene::write::OutputFormat::from_path(&path).map_err(|e| py_err(e.into()))?;
-                if format == scene::write::OutputFormat::Sog && axes == scene::spz::SpzAxes::Spec {
+                let format = io::scene::write::OutputFormat::from_path(&path)
+                    .map_err(|e| py_err(e.into()))?;
+                if format == io::scene::write::OutputFormat::Sog
+                    && axes == io::scene::spz::SpzAxes::Spec
+                {
                     // A SOG bundle, or an unbundled SOG's several files.
-                    return match scene::write::write_scene(&self.raw, &path, format, overwrite) {
+                    return match io::scene::write::write_scene(&self.raw, &path, format, overwrite)
+                    {
                         Ok(_) => Ok(()),
-                        Err(scene::write::ConvertError::Encode { message, .. }) => {
+                        Err(io::scene::write::ConvertError::Encode { message, .. }) => {
                             Err(value_err(format!("{}: {message}", path.display())))
                         }
                         // The write error itself, so an existing file is FileExistsError.
-                        Err(scene::write::ConvertError::Write(e)) => Err(py_err(e.into())),
+                        Err(io::scene::write::ConvertError::Write(e)) => Err(py_err(e.into())),
                         Err(e) => Err(py_err(e.into())),
                     };
                 }
                 let bytes = match (format, axes) {
-                    (scene::write::OutputFormat::Spz, axes) => {
-                        scene::spz::to_bytes_v3_with_axes(&self.raw, axes)
+                    (io::scene::write::OutputFormat::Spz, axes) => {
+                        io::scene::spz::to_bytes_v3_with_axes(&self.raw, axes)
                     }
-                    (_, scene::spz::SpzAxes::Raw) => {
+                    (_, io::scene::spz::SpzAxes::Raw) => {
                         Err("is not an .spz file: spz_axes=\"raw\" applies to SPZ only".to_string())
                     }
-                    (format, _) => scene::write::to_bytes(&self.raw, format),
+                    (format, _) => io::scene::write::to_bytes(&self.raw, format),
                 }
                 .map_err(|m| value_err(format!("{}: {m}", path.display())))?;
                 verisplat::io::output::write_bytes_atomically(&path, overwrite, &bytes)
@@ -237,13 +241,13 @@ pub(crate) fn load(
     iteration: Option<u64>,
     spz_axes: &str,
 ) -> PyResult<PyScene> {
-    let axes: scene::spz::SpzAxes = spz_axes.parse().map_err(value_err)?;
+    let axes: io::scene::spz::SpzAxes = spz_axes.parse().map_err(value_err)?;
     py.detach(|| {
         guarded(|| {
             let resolved =
-                scene::resolve_scene_path_at(&path, iteration).map_err(|e| py_err(e.into()))?;
+                io::scene::resolve_scene_path_at(&path, iteration).map_err(|e| py_err(e.into()))?;
             let (raw, _) =
-                scene::detect::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
+                io::scene::detect::load_with_axes(&resolved, axes).map_err(|e| py_err(e.into()))?;
             let act = raw.activated();
             Ok(PyScene::new(raw, act, resolved.display().to_string()))
         })
@@ -253,7 +257,7 @@ pub(crate) fn load(
 /// The built-in demo scene (PLAYBOT, 1,873 Gaussians, CC BY 4.0).
 #[pyfunction]
 pub(crate) fn demo() -> PyScene {
-    let raw = verisplat::core::demo::demo_scene();
+    let raw = verisplat::io::demo::demo_scene();
     let act = raw.activated();
     PyScene::new(raw, act, "built-in demo scene (PLAYBOT)".into())
 }

@@ -5,12 +5,15 @@ use super::values;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use verisplat::core::camera::{self, Camera, CameraFormat};
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
 use verisplat::core::scene::filter::SceneFilter;
-use verisplat::core::scene::spz::SpzAxes;
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{Rules, SplatKernel};
 use verisplat::gpu::{ContextOptions, GpuContext};
+use verisplat::io;
+use verisplat::io::camera::CameraFormat;
+use verisplat::io::scene::spz::SpzAxes;
 
 /// Where the camera comes from and at which resolution.
 #[derive(Args, Clone)]
@@ -259,22 +262,22 @@ impl FilterArgs {
 pub(crate) fn load_scene(arg: &SceneArg) -> Result<(Scene, String)> {
     if arg.demo {
         return Ok((
-            verisplat::core::demo::demo_scene(),
+            verisplat::io::demo::demo_scene(),
             "built-in demo scene (PLAYBOT)".into(),
         ));
     }
     let Some(path) = arg.scene.as_deref() else {
         bail!("no scene given; pass a .ply file, a model directory or --demo");
     };
-    let loaded = scene::resolve_scene_path_at(path, arg.iteration).and_then(|resolved| {
-        let (scene, _) = scene::detect::load_with_axes(&resolved, arg.spz.axes)?;
+    let loaded = io::scene::resolve_scene_path_at(path, arg.iteration).and_then(|resolved| {
+        let (scene, _) = io::scene::detect::load_with_axes(&resolved, arg.spz.axes)?;
         Ok((scene, resolved))
     });
     match loaded {
         Ok((scene, resolved)) => Ok((scene, resolved.display().to_string())),
         // A camera file where the scene belongs: every command says what `info` says. (A
         // model directory also holds cameras, but its scene's error is the one to show.)
-        Err(e) if path.is_file() => match verisplat::core::camera::detect_camera_format(path) {
+        Err(e) if path.is_file() => match verisplat::io::camera::detect_camera_format(path) {
             Ok(format) => bail!(
                 "{} is a camera file ({format}), not a scene: give a scene and pass this file with --cameras {}",
                 path.display(),
@@ -336,7 +339,7 @@ fn orbit_frame(p: &PathArgs, scene_arg: &SceneArg) -> Result<(glam::Vec3, Option
     let (Some(file), true) = (file, given_up.is_none() || given_centre.is_none()) else {
         return Ok((given_up.unwrap_or(glam::Vec3::NEG_Y), given_centre));
     };
-    let (cams, _) = camera::load_camera_file(&file, &Default::default())?;
+    let (cams, _) = io::camera::load_camera_file(&file, &Default::default())?;
     let (up, centre) = camera::up_and_centre_of(&cams);
     let mut took = Vec::new();
     if let (None, Some(u)) = (given_up, up) {
@@ -450,11 +453,11 @@ fn file_cameras(
             path.display()
         );
     }
-    let timing = camera::PathTiming {
+    let timing = io::camera::PathTiming {
         frames: p.path_frames,
         fps: p.fps,
     };
-    let (cams, format) = camera::load_camera_file(path, &timing)?;
+    let (cams, format) = io::camera::load_camera_file(path, &timing)?;
     if let (Some(flags), true) = (sampling, format != CameraFormat::Keyframes) {
         bail!(
             "{flags} set the sampling of a keyframe path; {} is a {format} file, whose cameras are used as they are",

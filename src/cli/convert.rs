@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
 use verisplat::core::console::note;
-use verisplat::core::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
+use verisplat::io::scene::write::{convert as convert_scene, ConvertOptions, OutputFormat};
 
 #[derive(Args)]
 #[command(after_help = "Examples:
@@ -47,8 +47,8 @@ pub(crate) struct ConvertArgs {
     /// RUB: Niantic's spz library, Scaniverse) or raw (PLY axes as they are: PlayCanvas
     /// splat-transform). To change a file's axes, convert it to PLY with one and back with
     /// the other.
-    #[arg(long, value_name = "spec|raw", default_value_t = verisplat::core::scene::spz::SpzAxes::Spec)]
-    pub(crate) spz_axes: verisplat::core::scene::spz::SpzAxes,
+    #[arg(long, value_name = "spec|raw", default_value_t = verisplat::io::scene::spz::SpzAxes::Spec)]
+    pub(crate) spz_axes: verisplat::io::scene::spz::SpzAxes,
 }
 
 pub(crate) fn convert(args: &ConvertArgs) -> Result<()> {

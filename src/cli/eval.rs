@@ -12,8 +12,10 @@ use clap::Args;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use verisplat::app::shard::Shard;
-use verisplat::core::camera::{self, Camera};
+use verisplat::core::camera::Camera;
 use verisplat::core::console::{note, outln};
+use verisplat::io;
+
 use verisplat::io::color_fit;
 use verisplat::io::image_file::{self, Planes};
 use verisplat::io::metrics;
@@ -556,7 +558,8 @@ fn split_and_shard_cameras(
     images: &Path,
     shard: Option<Shard>,
 ) -> Result<(Vec<(usize, Camera)>, String)> {
-    let (all, format) = camera::load_camera_file(cameras_file, &camera::PathTiming::default())?;
+    let (all, format) =
+        io::camera::load_camera_file(cameras_file, &io::camera::PathTiming::default())?;
     let total = all.len();
     let (cams, rule) = split_cameras(all, &args.split, images);
     if cams.is_empty() {
@@ -926,7 +929,7 @@ mod tests {
     #[test]
     fn llffhold_takes_every_eighth_camera_in_name_order() {
         let cam = |n: &str| {
-            let mut c = camera::default_camera(&[[0.0; 3]], 8, 8);
+            let mut c = verisplat::core::camera::default_camera(&[[0.0; 3]], 8, 8);
             c.name = n.into();
             c
         };
@@ -957,7 +960,7 @@ mod tests {
         .unwrap();
         let cams: Vec<Camera> = (0..9)
             .map(|i| {
-                let mut c = camera::default_camera(&[[0.0; 3]], 8, 8);
+                let mut c = verisplat::core::camera::default_camera(&[[0.0; 3]], 8, 8);
                 c.name = format!("img_{i}");
                 c
             })

@@ -9,8 +9,8 @@
 use super::eval_photo::{render_size, PhotoPrep};
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
-use verisplat::core::camera::transforms::frame_photo;
 use verisplat::core::camera::Camera;
+use verisplat::io::camera::transforms::frame_photo;
 use verisplat::train::data::resize;
 use verisplat::train::masks;
 

@@ -159,9 +159,9 @@ pub(crate) fn fit(args: &FitArgs) -> Result<()> {
     }
     let warnings = warnings(&outcome);
     let scene = verisplat::fields::fit::to_scene(&outcome, cfg.kernel, cfg.magnitude_channel);
-    let bytes = verisplat::core::scene::ply::to_bytes(
+    let bytes = verisplat::io::scene::ply::to_bytes(
         &scene,
-        verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+        verisplat::io::scene::ply::PlyEncoding::BinaryLittleEndian,
     );
     verisplat::io::output::write_bytes_atomically(&args.output, args.overwrite, &bytes)?;
     let seconds = started.elapsed().as_secs_f64();

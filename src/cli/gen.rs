@@ -7,8 +7,8 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 use verisplat::core::console::note;
-use verisplat::core::scene::write::{write_scene, OutputFormat};
 use verisplat::fields::rf::{MovingSource, RfData, RfField};
+use verisplat::io::scene::write::{write_scene, OutputFormat};
 
 #[derive(Args)]
 #[command(after_help = "Examples:

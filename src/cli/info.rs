@@ -8,6 +8,7 @@ use clap::Args;
 use serde_json::json;
 use verisplat::core::console::outln;
 use verisplat::core::scene;
+use verisplat::io;
 
 #[derive(Args)]
 #[command(after_help = "Examples:
@@ -32,12 +33,16 @@ pub(crate) fn fmt3(v: [f32; 3]) -> String {
 pub(crate) fn info(args: &InfoArgs) -> Result<()> {
     let arg = &args.scene;
     let (scene, name, format) = match arg.scene.as_deref() {
-        Some(path) if !arg.demo => match scene::resolve_scene_path_at(path, arg.iteration)
-            .and_then(|file| Ok((scene::detect::load_with_axes(&file, arg.spz.axes)?, file)))
-        {
+        Some(path) if !arg.demo => match io::scene::resolve_scene_path_at(path, arg.iteration)
+            .and_then(|file| {
+                Ok((
+                    io::scene::detect::load_with_axes(&file, arg.spz.axes)?,
+                    file,
+                ))
+            }) {
             Ok(((scene, format), file)) => (scene, file.display().to_string(), Some(format)),
             // A camera file given where a scene belongs: say what it holds.
-            Err(e) => match verisplat::core::camera::detect_camera_format(path) {
+            Err(e) => match verisplat::io::camera::detect_camera_format(path) {
                 Ok(_) => return camera_file_info(path, args.json),
                 Err(_) => return Err(e.into()),
             },
@@ -58,7 +63,7 @@ pub(crate) fn info(args: &InfoArgs) -> Result<()> {
     outln!("scene       {name}");
     if let Some(format) = format {
         outln!("format      {format}");
-        if matches!(format, scene::SceneFormat::Spz { .. }) {
+        if matches!(format, io::scene::SceneFormat::Spz { .. }) {
             outln!("axes        read in {}", arg.spz.axes.describe());
         }
         if scene.antialiased {
@@ -196,9 +201,9 @@ pub(crate) fn print_histogram(title: &str, h: &verisplat::app::stats::Histogram,
 /// What a camera file holds: its format, the number of cameras, their resolutions and
 /// the first names.
 fn camera_file_info(path: &std::path::Path, json: bool) -> Result<()> {
-    let (cams, format) = verisplat::core::camera::load_camera_file(
+    let (cams, format) = verisplat::io::camera::load_camera_file(
         path,
-        &verisplat::core::camera::PathTiming::default(),
+        &verisplat::io::camera::PathTiming::default(),
     )?;
     let mut sizes: Vec<(u32, u32)> = cams.iter().map(|c| (c.width, c.height)).collect();
     sizes.sort_unstable();

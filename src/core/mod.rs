@@ -1,6 +1,7 @@
 //! The core: what every other wing builds on. The splat model the renderers share
-//! ([`model`]), the reference's rules ([`rules`]), cameras ([`camera`]) and scenes
-//! ([`scene`]) with their readers and writers, the rendered [`frame`], NumPy arrays
+//! ([`model`]), the reference's rules ([`rules`]), cameras ([`camera`]) with their lenses
+//! and scenes ([`scene`]) (their files are read and written in [`crate::io`]), the
+//! rendered [`frame`], NumPy arrays
 //! ([`npy`]), quaternions
 //! ([`quat`]), synthetic scenes ([`gen`]), the records and flags shared with the shaders
 //! ([`shader_interface`]), and the small utilities below them all: file errors
@@ -9,7 +10,6 @@
 
 pub mod camera;
 pub mod console;
-pub mod demo;
 pub mod file_error;
 pub mod former_name;
 pub mod frame;

@@ -8,9 +8,9 @@
 
 use super::masks::{self, AlphaMode};
 use super::undistort::Undistortion;
-use crate::core::camera::colmap::{self, Point3D};
 use crate::core::camera::distortion::{self, Distortion};
 use crate::core::camera::{Camera, Lens};
+use crate::io::camera::colmap::{self, Point3D};
 use std::path::{Path, PathBuf};
 
 /// What the trainer does with a lens other than the pinhole (`verisplat train
@@ -611,7 +611,7 @@ pub fn is_transforms(dir: &Path) -> bool {
 /// `transforms.json`. No points: the original starts these from random Gaussians in the
 /// cube of half side 1.3 ([`Dataset::random_box`]). The photos are as taken, each camera
 /// with the lens its `camera_model` and distortion keys give
-/// ([`crate::core::camera::transforms::lens_from_transforms`]); [`load_transforms_with`]
+/// ([`crate::io::camera::transforms::lens_from_transforms`]); [`load_transforms_with`]
 /// undistorts them instead.
 pub fn load_transforms(
     dir: &Path,
@@ -719,7 +719,7 @@ fn read_transforms(
         let rel = f["file_path"]
             .as_str()
             .ok_or_else(|| bad("has no file_path".into()))?;
-        let path = crate::core::camera::transforms::frame_photo(dir, rel);
+        let path = crate::io::camera::transforms::frame_photo(dir, rel);
         let m = f["transform_matrix"]
             .as_array()
             .filter(|rows| rows.len() >= 3)
@@ -742,7 +742,7 @@ fn read_transforms(
         let value = |k: &str| f.get(k).or_else(|| doc.get(k));
         let (lens, distortion) = match opts.lenses {
             LensMode::Through => (
-                crate::core::camera::transforms::lens_from_transforms(&value).map_err(bad)?,
+                crate::io::camera::transforms::lens_from_transforms(&value).map_err(bad)?,
                 None,
             ),
             LensMode::Undistort => (

@@ -604,7 +604,7 @@ fn check_scan(ctx: &GpuContext) -> Result<Outcome, String> {
 }
 
 fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
-    let scene = crate::core::demo::demo_scene();
+    let scene = crate::io::demo::demo_scene();
     let (width, height) = RENDER_SIZE;
     let cams = orbit(
         &scene.positions,

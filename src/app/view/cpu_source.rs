@@ -125,7 +125,7 @@ mod tests {
     /// The source's frame is `cpu::render` with the matching options, quantised.
     #[test]
     fn frames_equal_the_reference_render() {
-        let scene = crate::core::demo::demo_scene();
+        let scene = crate::io::demo::demo_scene();
         let cam = crate::core::camera::default_camera(&scene.positions, 64, 48);
         let mut src = CpuSource::new(&scene, false);
         let act = scene.activated();

@@ -3,7 +3,8 @@
 //! writers and readers so that they are what `render --cameras` renders.
 
 use super::protocol::{camera_from_entry, KeyframeIn, PathFormat};
-use crate::core::camera::{keyframes, nerfstudio, Camera, PathTiming};
+use crate::core::camera::Camera;
+use crate::io::camera::{keyframes, nerfstudio, PathTiming};
 use std::path::Path;
 
 /// The file of an exported path and its keyframes' cameras as `render --cameras` reads

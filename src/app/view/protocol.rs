@@ -8,7 +8,8 @@
 //! length, the JSON header ([`FrameHeader`], [`ShotHeader`]), then the image bytes.
 
 use super::source::{ShotFormat, ViewSettings};
-use crate::core::camera::{inria, Camera};
+use crate::core::camera::Camera;
+use crate::io::camera::inria;
 use crate::render::StageTimings;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;

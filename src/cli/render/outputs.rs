@@ -109,7 +109,7 @@ pub(super) fn export_cameras(
     cams: &[(usize, Camera)],
     args: &RenderArgs,
 ) -> Result<()> {
-    let json = verisplat::core::camera::inria::to_json(cams)?;
+    let json = verisplat::io::camera::inria::to_json(cams)?;
     if !args.overwrite && args.skip_existing && path.exists() {
         if std::fs::read(path).ok().as_deref() == Some(json.as_bytes()) {
             return Ok(());

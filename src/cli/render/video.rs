@@ -9,8 +9,10 @@ use anyhow::{bail, Result};
 use std::path::PathBuf;
 use std::sync::Arc;
 use verisplat::app::sequence::{FramePlan, OutputPattern};
-use verisplat::core::camera::{self, Camera, CameraFormat};
+use verisplat::core::camera::Camera;
 use verisplat::core::console::note;
+use verisplat::io;
+use verisplat::io::camera::CameraFormat;
 use verisplat::io::output::RenderMode;
 use verisplat::io::video::{self, VideoFormat, VideoOptions, VideoWriter};
 
@@ -123,12 +125,12 @@ fn keyframe_fps(args: &RenderArgs) -> Result<Option<f64>> {
     let Some(file) = &args.view.cameras else {
         return Ok(None);
     };
-    if camera::detect_camera_format(file)? != CameraFormat::Keyframes {
+    if io::camera::detect_camera_format(file)? != CameraFormat::Keyframes {
         return Ok(None);
     }
     let text = std::fs::read_to_string(file)
         .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", file.display()))?;
-    Ok(Some(camera::KeyframePath::parse(&text, file)?.fps))
+    Ok(Some(io::camera::KeyframePath::parse(&text, file)?.fps))
 }
 
 /// The video's frame rate: `--fps`, else a keyframe path's own, else [`DEFAULT_FPS`].

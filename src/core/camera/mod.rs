@@ -1,28 +1,23 @@
-//! Cameras in OpenCV axes (x right, y down, z forward) with their lens, where they come
-//! from (INRIA `cameras.json`, COLMAP sparse models, nerfstudio camera paths and
-//! `transforms.json`, our keyframe paths, a built-in orbit), a default camera that frames
-//! a scene's bulk, and resolution overrides. `docs/cameras.md` writes down every
+//! Cameras in OpenCV axes (x right, y down, z forward) with their lens, a built-in orbit,
+//! a default camera that frames a scene's bulk, the choice of cameras from a list, and
+//! resolution overrides. The camera files they come from (INRIA `cameras.json`, COLMAP
+//! sparse models, nerfstudio camera paths and `transforms.json`, our keyframe paths) are
+//! read and written in [`crate::io::camera`]. `docs/cameras.md` writes down every
 //! convention and conversion.
 
-pub mod colmap;
 pub mod distortion;
-pub mod inria;
-pub mod keyframes;
 pub mod lens;
-mod load;
-pub mod nerfstudio;
 pub mod orbit;
 mod select;
-pub mod transforms;
 
-pub use inria::{load_cameras_json, parse_cameras_json};
-pub use keyframes::{keyframes_to_json, KeyframePath, MAX_FRAMES as MAX_PATH_FRAMES};
-pub use load::{detect_camera_format, load_camera_file, CameraFormat, PathTiming};
 pub use orbit::{orbit, up_and_centre_of, OrbitParams};
 pub use select::{
     describe_selection, index_span, parse_index_range, select_camera, select_camera_indices,
     select_cameras,
 };
+
+/// Frames a camera path may have at most (keyframe paths, orbits).
+pub const MAX_PATH_FRAMES: usize = 1_000_000;
 
 use crate::core::file_error::FileError;
 use glam::{DMat3, DVec3, Mat3, Vec3};

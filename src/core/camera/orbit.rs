@@ -1,7 +1,7 @@
 //! The built-in turntable: cameras evenly spaced on a circle around the scene, all looking
 //! at its centre. With default parameters, frame 0 is [`default_camera`](super::default_camera).
 
-use super::keyframes::MAX_FRAMES;
+use super::MAX_PATH_FRAMES as MAX_FRAMES;
 use super::{bulk_bounds, check_resolution, BulkBounds, Camera, CameraError, DEFAULT_VFOV_DEG};
 use glam::Vec3;
 

@@ -23,6 +23,16 @@ use super::Scene;
 use crate::core::model::sh::{SH_C1, SH_C2, SH_C3};
 use glam::{DMat3, DQuat, DVec3};
 
+/// Sign of each SH coefficient `k = 1..=15` (index `k - 1`) under `(x, y, z) -> (x, -y, -z)`:
+/// `(-1)^(deg_y + deg_z)` of its basis polynomial (band 1: y, z, x; band 2: xy, yz,
+/// 3z^2-1, xz, x^2-y^2; band 3: y(3x^2-y^2), xyz, y(4z^2-x^2-y^2), z(2z^2-3x^2-3y^2),
+/// x(4z^2-x^2-y^2), z(x^2-y^2), x(x^2-3y^2)).
+pub const RUB_SH_SIGN: [f32; 15] = [
+    -1.0, -1.0, 1.0, //
+    -1.0, 1.0, 1.0, -1.0, 1.0, //
+    -1.0, 1.0, -1.0, -1.0, 1.0, -1.0, 1.0,
+];
+
 /// Entries of `Q` and of the SH band matrices this close to -1, 0 or 1 are set to that
 /// value, so quarter and half turns and axis flips move values exactly (bitwise) instead
 /// of mixing in 1e-16 of the other coordinates (`cos 90°` is 6e-17 in f64). The change is
@@ -438,7 +448,6 @@ fn solve_spd(g: &[f64], b: &[f64], m: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::scene::spz::RUB_SH_SIGN;
 
     #[test]
     fn band_matrices_of_the_identity_are_identities() {

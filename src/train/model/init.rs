@@ -4,10 +4,10 @@
 
 use super::adam::Moments;
 use super::{logit, Model};
-use crate::core::camera::colmap::Point3D;
 use crate::core::gen::Rng;
 use crate::core::model::sh::SH_C0;
 use crate::core::scene::Scene;
+use crate::io::camera::colmap::Point3D;
 
 /// The mean squared distance to the three nearest other points (the original's
 /// `distCUDA2`), through a uniform grid.

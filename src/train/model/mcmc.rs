@@ -186,7 +186,7 @@ fn covariance_times(q: [f32; 4], s: [f32; 3], v: [f32; 3]) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::camera::colmap::Point3D;
+    use crate::io::camera::colmap::Point3D;
 
     /// The MCMC relocation keeps what a pixel sees: `n` copies of the new opacity
     /// composite to the old one (`1 - (1 - o')^n = o`), one copy changes nothing, and the

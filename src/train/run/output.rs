@@ -28,7 +28,7 @@ fn stem(name: &str) -> &str {
 }
 
 /// The points as the original's `input.ply` (x y z nx ny nz red green blue).
-pub(super) fn points_ply(points: &[crate::core::camera::colmap::Point3D]) -> Vec<u8> {
+pub(super) fn points_ply(points: &[crate::io::camera::colmap::Point3D]) -> Vec<u8> {
     let mut out = format!(
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
         points.len()
@@ -68,7 +68,7 @@ pub(super) fn write_cameras_and_cfg(
         })
         .collect();
     let json =
-        crate::core::camera::inria::to_json(&all).map_err(|e| TrainError::Other(e.to_string()))?;
+        crate::io::camera::inria::to_json(&all).map_err(|e| TrainError::Other(e.to_string()))?;
     write(
         &out.join("cameras.json"),
         json.as_bytes(),
@@ -140,18 +140,18 @@ impl Run<'_> {
             .join(format!("iteration_{it}"))
             .join("point_cloud.ply");
         let bytes = match &model.mip_filters {
-            None => crate::core::scene::ply::to_bytes(
+            None => crate::io::scene::ply::to_bytes(
                 &model.scene,
-                crate::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+                crate::io::scene::ply::PlyEncoding::BinaryLittleEndian,
             ),
             Some(filters) => {
                 // The scene the renders saw: the filter folded into scales and opacities,
                 // and a header comment that says so.
                 let mut scene = model.scene.clone();
                 crate::train::model::mip::fold(&mut scene, filters);
-                crate::core::scene::ply::to_bytes(
+                crate::io::scene::ply::to_bytes(
                     &scene,
-                    crate::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+                    crate::io::scene::ply::PlyEncoding::BinaryLittleEndian,
                 )
             }
         };

@@ -6,7 +6,7 @@ use crate::common::cli::{fails, stderr, verisplat};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use verisplat::core::scene::ply;
+use verisplat::io::scene::ply;
 
 #[test]
 fn demo_render_writes_a_picture_of_the_robot() {
@@ -635,7 +635,7 @@ fn gen_writes_a_loadable_synthetic_scene() {
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s = verisplat::core::scene::load(&out).unwrap();
+    let s = verisplat::io::scene::load(&out).unwrap();
     assert_eq!((s.len(), s.sh_degree), (2000, 1));
     assert_eq!(s, verisplat::core::gen::synthetic_scene(2000, 5, 1));
     let o = verisplat(&["gen", "10", "-o", out.to_str().unwrap()]);
@@ -693,7 +693,7 @@ fn kernel_flag_and_the_ply_kernel_comment() {
         "{header}"
     );
     assert_eq!(
-        verisplat::core::scene::load(&power).unwrap().kernel,
+        verisplat::io::scene::load(&power).unwrap().kernel,
         verisplat::cpu::SplatKernel::Power
     );
     // A Gaussian scene's PLY stays as the trainer writes it (no comment).

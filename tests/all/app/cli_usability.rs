@@ -528,7 +528,7 @@ fn frame_lists_bounds_and_hash_patterns(dir: &Path, cams: &Path) {
 fn skip_existing_keeps_a_file_that_appears_during_the_run() {
     use verisplat::app::sequence::{self, Existing, OutputPattern, RunOptions};
     let dir = tempfile::tempdir().unwrap();
-    let scene = verisplat::core::demo::demo_scene().activated();
+    let scene = verisplat::io::demo::demo_scene().activated();
     let cams: Vec<(usize, verisplat::core::camera::Camera)> = verisplat::core::camera::orbit(
         &scene.positions,
         &verisplat::core::camera::OrbitParams {

@@ -349,7 +349,7 @@ fn model_dir(root: &Path, n: usize) -> (PathBuf, Vec<Camera>) {
     }
     let path = model.join("cameras.json");
     std::fs::write(&path, serde_json::to_string(&entries).unwrap()).unwrap();
-    let cams = verisplat::core::camera::load_cameras_json(&path).unwrap();
+    let cams = verisplat::io::camera::load_cameras_json(&path).unwrap();
     (model, cams)
 }
 
@@ -357,7 +357,7 @@ fn model_dir(root: &Path, n: usize) -> (PathBuf, Vec<Camera>) {
 /// 8 bits: the "photo" of that camera, as `H x W x 3` values in [0, 1].
 fn noisy_photo(cam: &Camera, w: u32, h: u32, seed: u64) -> Vec<f32> {
     let scene =
-        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+        verisplat::io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
             .unwrap()
             .activated();
     let cam = cam.with_resolution(w, h).unwrap();
@@ -379,7 +379,7 @@ fn eval_rendered_photos(
     photo: impl Fn(&Camera, Vec<f32>) -> Vec<f32>,
 ) -> (std::process::Output, Value) {
     let scene =
-        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+        verisplat::io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
             .unwrap()
             .activated();
     let images = dir.join("images");
@@ -444,7 +444,7 @@ fn eval_scores_a_fisheye_photo_inside_its_image_circle() {
         e["lens"] = serde_json::json!({"kind": "fisheye", "k": [0, 0, 0, 0], "max_theta": 0.5});
     }
     std::fs::write(&path, serde_json::to_string(&entries).unwrap()).unwrap();
-    let cams = verisplat::core::camera::load_cameras_json(&path).unwrap();
+    let cams = verisplat::io::camera::load_cameras_json(&path).unwrap();
     let (o, json) = eval_rendered_photos(dir.path(), &model, &cams, |cam, rgb| {
         let circle = verisplat::train::masks::image_circle(cam).expect("pixels past the circle");
         rgb.into_iter()
@@ -479,7 +479,7 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: &[f32]) {
 /// render quantised to 8 bits against the photo.
 fn own_psnr(cam: &Camera, w: u32, h: u32, photo: &[f32]) -> f64 {
     let scene =
-        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+        verisplat::io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
             .unwrap()
             .activated();
     let frame = verisplat::cpu::render(

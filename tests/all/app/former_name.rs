@@ -30,7 +30,7 @@ fn replace(bytes: &[u8], from: &str, to: &str) -> Vec<u8> {
 
 /// The scene as a binary PLY.
 fn ply_bytes(scene: &verisplat::core::scene::Scene) -> Vec<u8> {
-    verisplat::core::scene::write::to_bytes(scene, verisplat::core::scene::write::OutputFormat::Ply)
+    verisplat::io::scene::write::to_bytes(scene, verisplat::io::scene::write::OutputFormat::Ply)
         .unwrap()
 }
 
@@ -43,7 +43,7 @@ fn a_ply_with_the_former_header_comments_keeps_its_kernel_and_rules() {
     let plain = common::shared_data().join("playbot_lod6_1873_sh2.ply");
     let power = d.join("power.ply");
     ok(&["convert", s(&plain), s(&power), "--kernel", "power"]);
-    let mut scene = verisplat::core::scene::load(&power).unwrap();
+    let mut scene = verisplat::io::scene::load(&power).unwrap();
     scene.rules = verisplat::core::model::Rules::Gsplat;
     let both = d.join("both.ply");
     let current = ply_bytes(&scene);
@@ -52,8 +52,8 @@ fn a_ply_with_the_former_header_comments_keeps_its_kernel_and_rules() {
     let old_path = d.join("old.ply");
     std::fs::write(&old_path, &old).unwrap();
     let (new_scene, old_scene) = (
-        verisplat::core::scene::load(&both).unwrap(),
-        verisplat::core::scene::load(&old_path).unwrap(),
+        verisplat::io::scene::load(&both).unwrap(),
+        verisplat::io::scene::load(&old_path).unwrap(),
     );
     assert_eq!(new_scene.kernel, verisplat::cpu::SplatKernel::Power);
     assert_eq!(new_scene.rules, verisplat::core::model::Rules::Gsplat);

@@ -5,7 +5,7 @@
 
 use crate::common::cli::{ok, s, stdout};
 use std::path::Path;
-use verisplat::core::scene::write::OutputFormat;
+use verisplat::io::scene::write::OutputFormat;
 use verisplat::io::video::VideoFormat;
 
 /// `verisplat [command] --help`'s text.

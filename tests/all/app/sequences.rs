@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 use verisplat::core::scene::filter::SceneFilter;
-use verisplat::core::scene::{self, ply};
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
+use verisplat::io::scene::ply;
 
 /// Every file of a directory (recursively) with its bytes, by relative path.
 fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
@@ -192,7 +193,7 @@ fn a_killed_run_resumes_to_the_files_of_an_uninterrupted_run() {
 #[test]
 fn exr_and_png16_hold_the_in_memory_render() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     // The CLI makes the default camera at the requested size (it frames the scene for
     // that aspect ratio), not a 1280x720 camera scaled down.
     let (w, h) = verisplat::core::camera::resized_dims((1280, 720), Some(200), None, None).unwrap();
@@ -321,7 +322,7 @@ fn depth_modes_write_depth() {
 fn max_scale_filter_equals_a_prefiltered_scene() {
     let dir = tempfile::tempdir().unwrap();
     let src = common::shared_data().join("playbot_lod3_31k_sh2.ply");
-    let scene = scene::load(&src).unwrap();
+    let scene = io::scene::load(&src).unwrap();
     // A threshold in the middle of the distribution removes a real share.
     let mut largest: Vec<f32> = scene
         .log_scales
@@ -503,7 +504,7 @@ fn every_camera_file_format_renders_from_the_command_line() {
 #[test]
 fn a_device_lost_mid_path_stops_cleanly_with_finished_frames_intact() {
     use verisplat::app::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     let act = scene.activated();
     let cams: Vec<(usize, verisplat::core::camera::Camera)> = verisplat::core::camera::orbit(
         &scene.positions,

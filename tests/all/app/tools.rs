@@ -31,7 +31,7 @@ fn one_sentence(o: &Output) -> String {
 #[test]
 fn fisheye_rigs_look_at_the_orbits_centre_and_fail_in_one_sentence() {
     let scene_path = common::shared_data().join("playbot_lod6_1873_sh2.ply");
-    let scene = verisplat::core::scene::load(&scene_path).unwrap();
+    let scene = verisplat::io::scene::load(&scene_path).unwrap();
     let bulk = verisplat::core::camera::bulk_bounds(&scene.positions);
     let centre = bulk.box_centre();
     // The check means something only where the median is elsewhere.

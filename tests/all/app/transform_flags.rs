@@ -6,8 +6,8 @@
 use crate::common;
 use crate::common::cli::{fails, stderr, verisplat};
 
-use verisplat::core::scene;
 use verisplat::core::scene::transform::SceneTransform;
+use verisplat::io;
 
 #[test]
 fn render_and_convert_apply_the_flags() {
@@ -42,7 +42,7 @@ fn render_and_convert_apply_the_flags() {
     // convert: the output holds exactly what the library's transform gives, and the crop
     // box is in the transformed frame.
     let input = common::shared_data().join("playbot_lod6_1873_sh2.ply");
-    let original = scene::load(&input).unwrap();
+    let original = io::scene::load(&input).unwrap();
     let ply = dir.path().join("t.ply");
     let o = verisplat(&[
         "convert",
@@ -63,7 +63,7 @@ fn render_and_convert_apply_the_flags() {
         .unwrap()
         .then(&SceneTransform::translation([10.0, -2.0, 0.5]).unwrap());
     let want = t.apply(original.clone()).unwrap();
-    assert_eq!(scene::load(&ply).unwrap(), want);
+    assert_eq!(io::scene::load(&ply).unwrap(), want);
     // A quarter turn about z maps (x, y) to (-y, x) exactly (the matrix holds 0 and 1).
     for (p, q) in original.positions.iter().zip(&want.positions) {
         assert_eq!(q[0], (-(p[1] as f64) + 10.0) as f32);
@@ -86,7 +86,7 @@ fn render_and_convert_apply_the_flags() {
         .filter(|p| p[0] + 10.0 >= 10.0)
         .count();
     assert!(kept > 0 && kept < original.len());
-    assert_eq!(scene::load(&cropped).unwrap().len(), kept);
+    assert_eq!(io::scene::load(&cropped).unwrap().len(), kept);
 }
 
 #[test]
@@ -133,9 +133,10 @@ fn bad_transform_values_are_one_sentence_and_write_nothing() {
 
 #[test]
 fn rotate_x_180_fixes_an_spz_written_without_its_axis_conversion() {
-    use verisplat::core::scene::write::{to_bytes, OutputFormat};
+    use verisplat::io::scene::write::{to_bytes, OutputFormat};
     let dir = tempfile::tempdir().unwrap();
-    let original = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+    let original =
+        io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     // A writer that skipped the RDF -> RUB conversion stores the RDF numbers as they are;
     // our encoder converts, so feeding it the half-turned scene stores exactly those.
     let half_turn = SceneTransform::rotation([1.0, 0.0, 0.0], 180.0).unwrap();
@@ -155,7 +156,7 @@ fn rotate_x_180_fixes_an_spz_written_without_its_axis_conversion() {
         "1,0,0,180",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let fixed = scene::load(&fixed).unwrap();
+    let fixed = io::scene::load(&fixed).unwrap();
     // SPZ stores positions in 12-bit fixed point: within half a step (1/8192) of the PLY.
     let worst = original
         .positions
@@ -165,7 +166,7 @@ fn rotate_x_180_fixes_an_spz_written_without_its_axis_conversion() {
         .fold(0.0f32, f32::max);
     assert!(worst <= 0.5 / 4096.0 + 1e-6, "position error {worst}");
     // Without the fix the object is upside down: y and z of the bulk are negated.
-    let unfixed = scene::load(&bad).unwrap();
+    let unfixed = io::scene::load(&bad).unwrap();
     let far = original
         .positions
         .iter()

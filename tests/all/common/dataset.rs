@@ -20,7 +20,7 @@ pub fn make_dataset_with(
     h: u32,
     shader: Option<&verisplat::fields::mlp::Mlp>,
 ) {
-    let mut scene = verisplat::core::scene::load_with_format(
+    let mut scene = verisplat::io::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .expect("the shared scene")

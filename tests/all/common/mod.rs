@@ -11,9 +11,10 @@ pub mod viewer;
 
 use glam::{Mat3, Vec3};
 use std::path::PathBuf;
-use verisplat::core::camera::{self, Camera};
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::camera::Camera;
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{RenderOptions, Rules};
+use verisplat::io;
 
 /// `../shared/data`, the read-only real scenes. They are always there (in CI too), so a
 /// test that needs them fails without them instead of skipping.
@@ -29,7 +30,7 @@ pub fn shared_data() -> PathBuf {
 
 /// A scene of `../shared/data` (see [`shared_data`]), loaded.
 pub fn shared_scene(name: &str) -> Scene {
-    scene::load(&shared_data().join(name)).unwrap()
+    io::scene::load(&shared_data().join(name)).unwrap()
 }
 
 /// The 24 cameras of the shared PLAYBOT orbit (an INRIA cameras.json in `../shared/data`).
@@ -38,7 +39,7 @@ pub const PLAYBOT_ORBIT: &str = "playbot_orbit_cameras.synthetic.json";
 /// The cameras of an orbit file of `../shared/data` (an INRIA cameras.json, e.g.
 /// [`PLAYBOT_ORBIT`] or `plant_orbit_cameras.synthetic.json`) at the file's resolution.
 pub fn orbit_cameras(file: &str) -> Vec<Camera> {
-    camera::load_cameras_json(&shared_data().join(file)).unwrap()
+    io::camera::load_cameras_json(&shared_data().join(file)).unwrap()
 }
 
 /// Camera `i` of the orbit file `file` of `../shared/data` at `w x h` (the same view:

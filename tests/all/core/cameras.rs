@@ -5,8 +5,9 @@
 
 use crate::common;
 use glam::Vec3;
-use verisplat::core::camera::{self, default_camera};
-use verisplat::core::scene;
+use verisplat::core::camera;
+use verisplat::core::camera::default_camera;
+use verisplat::io;
 
 /// Pixel coordinates and depth of a world point seen by `cam`.
 fn project_point(cam: &verisplat::core::camera::Camera, p: Vec3) -> (f32, f32, f32) {
@@ -20,7 +21,7 @@ fn project_point(cam: &verisplat::core::camera::Camera, p: Vec3) -> (f32, f32, f
 
 #[test]
 fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     let b = verisplat::core::camera::bulk_bounds(&scene.positions);
     for (w, h) in [(1280, 720), (320, 240), (100, 70), (480, 640)] {
         let default = verisplat::core::camera::default_camera(&scene.positions, w, h);
@@ -77,7 +78,7 @@ fn default_camera_frames_the_whole_robust_box_centred_and_is_orbit_frame_0() {
 
 #[test]
 fn default_camera_frames_the_bulk_despite_outliers() {
-    let mut s = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+    let mut s = io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     let before = camera::default_camera(&s.positions, 320, 180);
     // One stray Gaussian far away must not move the framing noticeably.
     s.positions.push([500.0, -800.0, 900.0]);

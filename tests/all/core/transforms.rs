@@ -8,10 +8,12 @@ use crate::common::gpu::Thresholds;
 
 use glam::{DMat3, DQuat, DVec3, Mat3, Vec3};
 
-use verisplat::core::camera::{self, Camera};
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
 use verisplat::core::scene::transform::SceneTransform;
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::scene::Scene;
 use verisplat::cpu::sh::eval_sh;
+use verisplat::io;
 
 /// The project's bar for "the same image", 55 dB, on colour and on alpha (these tests do
 /// not hold the share of 8-bit pixels within 1/255).
@@ -217,7 +219,7 @@ fn transformed_camera(cam: &Camera, t: &SceneTransform) -> Camera {
 
 #[test]
 fn a_transformed_scene_seen_by_the_transformed_camera_renders_the_same_image() {
-    let scene = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+    let scene = io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     let cam = camera::orbit(
         &scene.positions,
         &camera::OrbitParams {
@@ -296,7 +298,7 @@ fn a_transformed_scene_seen_by_the_transformed_camera_renders_the_same_image() {
 fn flip_y_seen_by_a_proper_camera_is_the_mirror_image() {
     // What a user of --flip-y sees: with the camera moved to the mirrored pose (still a
     // proper rotation), the picture is the original upside down, row j in row H-1-j.
-    let scene = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+    let scene = io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     let cam = camera::orbit(
         &scene.positions,
         &camera::OrbitParams {

@@ -274,9 +274,9 @@ fn field_options_are_refused_where_they_do_not_apply() {
     let scene = field_scene(20, 2, 3, SplatKernel::Gaussian);
     std::fs::write(
         &ply,
-        verisplat::core::scene::ply::to_bytes(
+        verisplat::io::scene::ply::to_bytes(
             &scene,
-            verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+            verisplat::io::scene::ply::PlyEncoding::BinaryLittleEndian,
         ),
     )
     .unwrap();
@@ -350,9 +350,9 @@ fn field_options_are_refused_where_they_do_not_apply() {
     plain.set_features(0, Vec::new()).unwrap();
     std::fs::write(
         &bare,
-        verisplat::core::scene::ply::to_bytes(
+        verisplat::io::scene::ply::to_bytes(
             &plain,
-            verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+            verisplat::io::scene::ply::PlyEncoding::BinaryLittleEndian,
         ),
     )
     .unwrap();

@@ -98,7 +98,7 @@ fn fit_recovers_a_sum_of_gaussians_from_scattered_samples() {
     );
     assert_eq!(r["holdout_samples"], 600);
     // The PLY loads, with the features and opacities of the fit.
-    let scene = verisplat::core::scene::load(&out).unwrap();
+    let scene = verisplat::io::scene::load(&out).unwrap();
     assert_eq!(scene.feature_count, 2);
     assert_eq!(
         scene.len() as u64,
@@ -149,7 +149,7 @@ fn gen_rf_dipole_then_fit_with_the_power_kernel() {
     eprintln!("dipole 20^3, power kernel: held-out relative L2 error {err}");
     assert!(err < 0.35, "held-out relative L2 error {err}");
     assert_eq!(r["bounds_from"], s(&side));
-    let scene = verisplat::core::scene::load(&out).unwrap();
+    let scene = verisplat::io::scene::load(&out).unwrap();
     assert_eq!(scene.kernel, verisplat::cpu::SplatKernel::Power);
     assert_eq!(scene.feature_count, 4);
     // The two-ray field and --overwrite; the sidecar is refused without it.
@@ -331,7 +331,7 @@ fn csv_samples_with_a_header() {
         "-q",
     ]);
     assert!(stdout(&o).contains("to 360 samples"), "{}", stdout(&o));
-    assert_eq!(verisplat::core::scene::load(&out).unwrap().feature_count, 2);
+    assert_eq!(verisplat::io::scene::load(&out).unwrap().feature_count, 2);
 }
 
 /// Each malformed input: one error sentence naming the file and the fault, no output.

@@ -353,7 +353,7 @@ fn complex_fields_fit_as_iq_and_render_their_magnitude_and_phase() {
     );
     std::fs::write(
         p("cam.json"),
-        verisplat::core::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::io::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let npy = p("slice.npy");

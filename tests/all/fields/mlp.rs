@@ -3,9 +3,9 @@
 //! reference on a real scene (PSNR >= 55 dB, >= 99.9 % of 8-bit pixels within 1/255).
 
 use crate::common;
-use verisplat::core::scene;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
 use verisplat::fields::mlp::{self, Activation, Mlp, MlpInput};
+use verisplat::io;
 use verisplat::render::{FrameRequest, Rendered};
 
 /// A safetensors file: F32 tensors and an optional `verisplat_mlp` description.
@@ -297,7 +297,7 @@ fn background_is_applied_after_shading_with_alpha() {
 #[test]
 fn gpu_shade_stage_matches_the_reference() {
     let mut r = common::gpu::renderer();
-    let mut s = scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
+    let mut s = io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
     for (k, inputs, kernel, bg) in [
         (
             5usize,
@@ -371,7 +371,7 @@ fn render_shader_on_the_gpu_and_the_cpu_and_its_errors() {
     use common::cli::{fails, ok, s};
     let dir = tempfile::tempdir().unwrap();
     let scene_file = common::shared_data().join("playbot_lod6_1873_sh2.ply");
-    let n = scene::load(&scene_file).unwrap().len();
+    let n = io::scene::load(&scene_file).unwrap().len();
     let k = 3;
     let mut rng = common::Rng(9);
     let feats: Vec<f32> = (0..n * k).map(|_| rng.range(0.0, 1.0)).collect();

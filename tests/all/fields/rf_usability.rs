@@ -17,9 +17,9 @@ fn field_ply(dir: &Path) -> std::path::PathBuf {
     let feats = (0..60).map(|_| rng.range(0.0, 1.0)).collect();
     scene.set_features(2, feats).unwrap();
     let path = dir.join("rf_field.ply");
-    let bytes = verisplat::core::scene::ply::to_bytes(
+    let bytes = verisplat::io::scene::ply::to_bytes(
         &scene,
-        verisplat::core::scene::ply::PlyEncoding::BinaryLittleEndian,
+        verisplat::io::scene::ply::PlyEncoding::BinaryLittleEndian,
     );
     std::fs::write(&path, bytes).unwrap();
     path
@@ -322,7 +322,7 @@ fn look_at_is_one_camera_from_an_eye_to_a_target() {
     a.extend(common_args);
     ok(&a);
     let (cams, _) =
-        verisplat::core::camera::load_camera_file(&p("cam.json"), &Default::default()).unwrap();
+        verisplat::io::camera::load_camera_file(&p("cam.json"), &Default::default()).unwrap();
     assert_eq!(cams.len(), 1);
     let c = &cams[0];
     assert!(

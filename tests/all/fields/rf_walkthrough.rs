@@ -146,7 +146,7 @@ fn gen_fit_and_render_the_field_against_the_analytic_dipole() {
     );
     std::fs::write(
         p("cam.json"),
-        verisplat::core::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::io::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let (ply, cams) = (p("d.ply"), p("cam.json"));

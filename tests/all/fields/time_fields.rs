@@ -7,10 +7,10 @@ use crate::common::cli::{fails, ok, s, stderr, verisplat};
 use crate::common::npy_image as npy;
 use crate::common::push_gaussian;
 use std::path::Path;
-use verisplat::core::scene::ply::{self, PlyEncoding};
 use verisplat::core::scene::Scene;
 use verisplat::cpu::field;
 use verisplat::fields::rf::MovingSource;
+use verisplat::io::scene::ply::{self, PlyEncoding};
 
 /// The moving source fitted in space and time, rendered at three times (two of them
 /// between the sampled times) as a slice through z = 0 and as a maximum along each ray,
@@ -35,7 +35,7 @@ fn moving_source_renders_match_the_analytic_field_at_three_times() {
     let cam = moving_source_camera(w, h);
     std::fs::write(
         p("cam.json"),
-        verisplat::core::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
+        verisplat::io::camera::inria::to_json(&[(0, cam.clone())]).unwrap(),
     )
     .unwrap();
     let (ply, cams) = (p("m.ply"), p("cam.json"));
@@ -139,7 +139,7 @@ fn fit_the_moving_source(dir: &Path) -> f32 {
     assert!(holdout < 0.06, "held-out error {holdout}");
     assert_eq!(report["time_column"], 3);
     assert_eq!(report["time_range"], serde_json::json!([0.0, 1.0]));
-    let scene = verisplat::core::scene::load(&p("m.ply")).unwrap();
+    let scene = verisplat::io::scene::load(&p("m.ply")).unwrap();
     let (lo, hi) = scene.time_range().unwrap();
     let jump = (0..scene.len())
         .map(|i| verisplat::core::scene::sigmoid(scene.opacity_logits[i]) * scene.features[i].abs())
@@ -270,7 +270,7 @@ fn front_camera(dir: &Path) -> std::path::PathBuf {
     let path = dir.join("cam.json");
     std::fs::write(
         &path,
-        verisplat::core::camera::inria::to_json(&[(0, cam)]).unwrap(),
+        verisplat::io::camera::inria::to_json(&[(0, cam)]).unwrap(),
     )
     .unwrap();
     path
@@ -289,18 +289,18 @@ fn ply_round_trips_t_mean_and_t_scale() {
         let bytes = ply::to_bytes(&sc, enc);
         let text = String::from_utf8_lossy(&bytes).to_string();
         assert!(text.contains("property float t_mean\nproperty float t_scale\n"));
-        let (back, _) = verisplat::core::scene::parse_bytes(&bytes, Path::new("b.ply")).unwrap();
+        let (back, _) = verisplat::io::scene::parse_bytes(&bytes, Path::new("b.ply")).unwrap();
         assert_eq!(back, sc, "{enc:?}");
     }
     let mut static_scene = sc.clone();
     static_scene.time = None;
     let bytes = ply::to_bytes(&static_scene, PlyEncoding::Ascii);
     assert!(!String::from_utf8_lossy(&bytes).contains("t_mean"));
-    let (back, _) = verisplat::core::scene::parse_bytes(&bytes, Path::new("s.ply")).unwrap();
+    let (back, _) = verisplat::io::scene::parse_bytes(&bytes, Path::new("s.ply")).unwrap();
     assert_eq!(back.time, None);
     let half = String::from_utf8_lossy(&ply::to_bytes(&sc, PlyEncoding::Ascii))
         .replace("property float t_scale\n", "property float other\n");
-    let e = verisplat::core::scene::parse_bytes(half.as_bytes(), Path::new("half.ply"))
+    let e = verisplat::io::scene::parse_bytes(half.as_bytes(), Path::new("half.ply"))
         .unwrap_err()
         .to_string();
     assert!(e.contains("half.ply") && e.contains("\"t_scale\""), "{e}");

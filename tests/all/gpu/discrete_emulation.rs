@@ -17,7 +17,7 @@ use crate::common::gpu::{assert_validation_clean, check_against_reference, rende
 use crate::common::{orbit, PLAYBOT_ORBIT};
 use verisplat::core::camera::Camera;
 use verisplat::core::frame::Frame;
-use verisplat::core::scene::{self, ActivatedScene};
+use verisplat::core::scene::ActivatedScene;
 use verisplat::cpu::RenderOptions;
 use verisplat::gpu::emulate::Emulation;
 use verisplat::gpu::sync::{barrier, Access};
@@ -25,6 +25,8 @@ use verisplat::gpu::timing::Untimed;
 use verisplat::gpu::{
     limits, ContextOptions, GpuBuffer, GpuContext, GpuError, GpuTimer, MemoryKind,
 };
+use verisplat::io;
+
 use verisplat::render::{GpuRenderer, Intermediates, SplitLimits};
 
 fn context(emulate: &str) -> GpuContext {
@@ -41,7 +43,7 @@ fn emulated_renderer(emulate: &str) -> GpuRenderer {
 }
 
 fn lod3() -> ActivatedScene {
-    scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
+    io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
         .unwrap()
         .activated()
 }

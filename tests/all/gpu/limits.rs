@@ -67,7 +67,7 @@ fn pair_counting_is_exact_far_beyond_2_pow_32() {
 
 fn check(label: &str, w: u32, h: u32) {
     let mut r = renderer();
-    let s = verisplat::core::demo::demo_scene().activated();
+    let s = verisplat::io::demo::demo_scene().activated();
     let cam = camera::default_camera(&s.positions, w, h);
     let gs = r.upload(&s).unwrap();
     let g = r

@@ -7,8 +7,10 @@ use crate::common;
 use std::path::Path;
 use std::process::Command;
 use verisplat::app::sequence::{self, Existing, OutputPattern, ProgressStyle, RunOptions};
-use verisplat::core::camera::{self, OrbitParams};
+use verisplat::core::camera;
+use verisplat::core::camera::OrbitParams;
 use verisplat::cpu::RenderOptions;
+
 use verisplat::io::output::OutputOptions;
 use verisplat::render::{FrameRequest, Rendered};
 
@@ -61,7 +63,7 @@ fn thousand_frame_path() {
         .unwrap_or(1000);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("long");
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     // The path `verisplat render --demo --orbit N --width 64` renders.
     let cams: Vec<(usize, camera::Camera)> = camera::orbit(
         &scene.positions,

@@ -9,10 +9,9 @@ mod lenses;
 use crate::common;
 use glam::{DMat3, Mat3, Vec2, Vec3};
 use std::path::{Path, PathBuf};
-use verisplat::core::camera::{
-    self, default_camera, load_camera_file, orbit, select_cameras, Camera, CameraFormat,
-    OrbitParams, PathTiming,
-};
+use verisplat::core::camera::{self, default_camera, orbit, select_cameras, Camera, OrbitParams};
+use verisplat::io;
+use verisplat::io::camera::{load_camera_file, CameraFormat, PathTiming};
 
 fn fixtures() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/cameras")
@@ -362,7 +361,7 @@ fn orbit_front_view_and_invariants() {
         cams[1].position()
     );
 
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     let p = OrbitParams {
         frames: 36,
         start_deg: 0.0,
@@ -443,11 +442,11 @@ fn format_detection_and_bad_files() {
     assert!(load_err(&dir.path().join("missing.json")).contains("cannot read"));
     assert!(load_err(&write(dir.path(), "empty.json", "[]")).contains("no cameras"));
     assert_eq!(
-        camera::detect_camera_format(&fixtures().join("keyframes_example.json")).unwrap(),
+        io::camera::detect_camera_format(&fixtures().join("keyframes_example.json")).unwrap(),
         CameraFormat::Keyframes
     );
     assert_eq!(
-        camera::detect_camera_format(&fixtures().join("colmap_text")).unwrap(),
+        io::camera::detect_camera_format(&fixtures().join("colmap_text")).unwrap(),
         CameraFormat::ColmapText
     );
     assert_eq!(

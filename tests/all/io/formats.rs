@@ -7,10 +7,12 @@ use crate::common;
 use crate::common::cli::{s, stderr, verisplat};
 use std::path::{Path, PathBuf};
 use verisplat::core::camera;
-use verisplat::core::scene::spz::SpzCompression;
-use verisplat::core::scene::write::{self, OutputFormat};
-use verisplat::core::scene::{self, ply, sigmoid, Scene, SceneFormat};
+use verisplat::core::scene::{self, sigmoid, Scene};
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
+use verisplat::io::scene::spz::SpzCompression;
+use verisplat::io::scene::write::{self, OutputFormat};
+use verisplat::io::scene::{ply, SceneFormat};
 
 const SH_C0: f32 = verisplat::cpu::sh::SH_C0;
 /// Slack for f32 evaluation differences between two decoders of the same bytes.
@@ -21,7 +23,7 @@ fn data(name: &str) -> PathBuf {
 }
 
 fn load(name: &str) -> (Scene, SceneFormat) {
-    scene::load_with_format(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+    io::scene::load_with_format(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
 /// Largest per-field differences between two scenes whose Gaussian `i` of `a` corresponds
@@ -250,7 +252,7 @@ fn sog_directory_and_zip_match_the_playbot_ply() {
     let dir = tempfile::tempdir().unwrap();
     let bundle = dir.path().join("playbot.sog");
     std::fs::write(&bundle, sog_zip(&data("playbot_lod3_31k_sh2_sog"), None)).unwrap();
-    let (zipped, format) = scene::load_with_format(&bundle).unwrap();
+    let (zipped, format) = io::scene::load_with_format(&bundle).unwrap();
     assert_eq!(format.to_string(), "PlayCanvas SOG v2 (zip)");
     assert_eq!(zipped, s);
 }
@@ -430,7 +432,7 @@ fn renders_agree_with_the_ply_render() {
 #[test]
 fn ply_round_trip_is_byte_exact() {
     let bytes = std::fs::read(data("playbot_lod6_1873_sh2.ply")).unwrap();
-    let (s, format) = scene::parse_bytes(&bytes, Path::new("x.ply")).unwrap();
+    let (s, format) = io::scene::parse_bytes(&bytes, Path::new("x.ply")).unwrap();
     assert_eq!(format.to_string(), "INRIA PLY (binary little-endian)");
     assert_eq!(write::to_bytes(&s, OutputFormat::Ply).unwrap(), bytes);
 }
@@ -442,7 +444,7 @@ fn splat_and_spz_round_trips_stay_within_quantisation() {
     // whose half step of 0.5/128 per byte can grow to about 1/128 after normalising.
     let bytes = write::to_bytes(&reference, OutputFormat::Splat).unwrap();
     assert_eq!(bytes.len(), 32 * reference.len());
-    let (s, format) = scene::parse_bytes(&bytes, Path::new("x.splat")).unwrap();
+    let (s, format) = io::scene::parse_bytes(&bytes, Path::new("x.splat")).unwrap();
     assert_eq!(format, SceneFormat::Splat);
     let in_gamut = |v: f32| (0.0..=1.0).contains(&(0.5 + SH_C0 * v));
     let e = field_errors(&reference, &s, &identity(s.len()), in_gamut, |v| v);
@@ -462,7 +464,7 @@ fn splat_and_spz_round_trips_stay_within_quantisation() {
     // SPZ v3 written by this crate: the SPZ bounds, without the extra byte of Niantic's SH
     // encoder (this one quantises exactly as the decoder inverts).
     let bytes = write::to_bytes(&reference, OutputFormat::Spz).unwrap();
-    let (s, format) = scene::parse_bytes(&bytes, Path::new("x.bin")).unwrap();
+    let (s, format) = io::scene::parse_bytes(&bytes, Path::new("x.bin")).unwrap();
     assert_eq!(format.to_string(), "SPZ v3 (gzip)");
     let e = field_errors(
         &reference,
@@ -483,7 +485,7 @@ fn splat_and_spz_round_trips_stay_within_quantisation() {
     // Re-encoding the decoded scene lands on the same grid: positions, scales and opacity
     // bytes reproduce exactly.
     let again = write::to_bytes(&s, OutputFormat::Spz).unwrap();
-    let (s2, _) = scene::parse_bytes(&again, Path::new("x.spz")).unwrap();
+    let (s2, _) = io::scene::parse_bytes(&again, Path::new("x.spz")).unwrap();
     assert_eq!(s2.positions, s.positions);
     assert_eq!(s2.log_scales, s.log_scales);
     assert_eq!(s2.opacity_logits, s.opacity_logits);
@@ -496,7 +498,7 @@ fn spz_writer_reproduces_niantics_train3_payload_values() {
     let (reference, _) = load("train3_sh3.ply");
     let (niantic, _) = load("train3_sh3.v3.spz");
     let ours = write::to_bytes(&reference, OutputFormat::Spz).unwrap();
-    let (ours, _) = scene::parse_bytes(&ours, Path::new("t.spz")).unwrap();
+    let (ours, _) = io::scene::parse_bytes(&ours, Path::new("t.spz")).unwrap();
     assert_eq!(ours.positions, niantic.positions);
     assert_eq!(ours.log_scales, niantic.log_scales);
     assert_eq!(ours.opacity_logits, niantic.opacity_logits);
@@ -507,7 +509,7 @@ fn spz_writer_reproduces_niantics_train3_payload_values() {
 }
 
 fn err_of(bytes: &[u8], name: &str) -> String {
-    match scene::parse_bytes(bytes, Path::new(name)) {
+    match io::scene::parse_bytes(bytes, Path::new(name)) {
         Ok((s, f)) => panic!(
             "{name}: malformed input accepted as {f} with {} Gaussians",
             s.len()
@@ -574,7 +576,7 @@ fn malformed_spz_gives_clear_errors() {
     let mut bad = v4.clone();
     let last = bad.len() - 10;
     bad[last] ^= 0xff;
-    let _ = scene::parse_bytes(&bad, Path::new("t.spz")); // corrupt zstd: any result, no panic
+    let _ = io::scene::parse_bytes(&bad, Path::new("t.spz")); // corrupt zstd: any result, no panic
 }
 
 #[test]
@@ -646,7 +648,7 @@ fn malformed_compressed_ply_and_sog_give_clear_errors() {
     let meta = std::fs::read_to_string(&meta_path).unwrap();
     let set_meta = |m: &str| {
         std::fs::write(&meta_path, m).unwrap();
-        scene::load(&sog_dir).unwrap_err().to_string()
+        io::scene::load(&sog_dir).unwrap_err().to_string()
     };
     let e = set_meta("{not json");
     assert!(e.contains("meta.json that is not valid"), "{e}");
@@ -658,7 +660,7 @@ fn malformed_compressed_ply_and_sog_give_clear_errors() {
     assert!(e.contains("only plain file names"), "{e}");
     std::fs::write(&meta_path, &meta).unwrap();
     std::fs::write(sog_dir.join("quats.webp"), b"RIFF....WEBPjunk").unwrap();
-    let e = scene::load(&sog_dir).unwrap_err().to_string();
+    let e = io::scene::load(&sog_dir).unwrap_err().to_string();
     assert!(e.contains("quats.webp") && e.contains("WebP"), "{e}");
     // A zip that is not a SOG.
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
@@ -673,14 +675,14 @@ fn malformed_compressed_ply_and_sog_give_clear_errors() {
 fn detection_uses_content_not_extension() {
     // An SPZ named .ply and a PLY named .spz still load as what they are.
     let spz = std::fs::read(data("train3_sh3.v3.spz")).unwrap();
-    let (_, f) = scene::parse_bytes(&spz, Path::new("misnamed.ply")).unwrap();
+    let (_, f) = io::scene::parse_bytes(&spz, Path::new("misnamed.ply")).unwrap();
     assert_eq!(f.to_string(), "SPZ v3 (gzip)");
     let ply_bytes = std::fs::read(data("train3_sh3.ply")).unwrap();
-    let (_, f) = scene::parse_bytes(&ply_bytes, Path::new("misnamed.spz")).unwrap();
+    let (_, f) = io::scene::parse_bytes(&ply_bytes, Path::new("misnamed.spz")).unwrap();
     assert!(matches!(f, SceneFormat::InriaPly(_)));
     // A .splat without its extension is recognised by its plausible records.
     let splat = std::fs::read(data("train3.splat")).unwrap();
-    let (_, f) = scene::parse_bytes(&splat, Path::new("noext")).unwrap();
+    let (_, f) = io::scene::parse_bytes(&splat, Path::new("noext")).unwrap();
     assert_eq!(f, SceneFormat::Splat);
     // Random bytes of a multiple of 32 without the extension are not guessed as .splat.
     let junk: Vec<u8> = (0..64u32).map(|i| (i * 37 % 251) as u8 | 0x80).collect();
@@ -730,9 +732,12 @@ fn cli_convert_and_info() {
         "--overwrite",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert_eq!(scene::load(Path::new(&d("a.spz"))).unwrap().sh_degree, 0);
+    assert_eq!(
+        io::scene::load(Path::new(&d("a.spz"))).unwrap().sh_degree,
+        0
+    );
     // Filters: the same selection SceneFilter makes in the library.
-    let full = scene::load(Path::new(src)).unwrap();
+    let full = io::scene::load(Path::new(src)).unwrap();
     let o = verisplat(&[
         "convert",
         src,
@@ -755,7 +760,7 @@ fn cli_convert_and_info() {
     };
     let expected = filter.apply(&full);
     assert!(expected.len() > 100 && expected.len() < full.len());
-    assert_eq!(scene::load(Path::new(&d("f.ply"))).unwrap(), expected);
+    assert_eq!(io::scene::load(Path::new(&d("f.ply"))).unwrap(), expected);
     // .splat output; unknown extensions and bad filters are one clear error, no file.
     let o = verisplat(&["convert", src, &d("b.splat")]);
     assert!(o.status.success());
@@ -813,11 +818,11 @@ fn mutated_files_never_panic() {
                 let at = (rng.range(0.0, 1.0) * b.len() as f32) as usize % b.len();
                 b[at] = (rng.range(0.0, 256.0) as u32 % 256) as u8;
             }
-            let _ = scene::parse_bytes(&b, Path::new(name));
+            let _ = io::scene::parse_bytes(&b, Path::new(name));
         }
     }
     // The uncompressed payload itself is a valid SPZ v3.
-    let (_, f) = scene::parse_bytes(&files[0].1, Path::new("raw.spz")).unwrap();
+    let (_, f) = io::scene::parse_bytes(&files[0].1, Path::new("raw.spz")).unwrap();
     assert_eq!(f.to_string(), "SPZ v3 (uncompressed)");
 }
 
@@ -828,21 +833,21 @@ fn mutated_files_never_panic() {
 fn antialiased_training_flag_is_read_written_and_honoured() {
     let dir = tempfile::tempdir().unwrap();
     let mut scene =
-        verisplat::core::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+        verisplat::io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
             .unwrap();
     scene.antialiased = true;
     let spz = dir.path().join("aa.spz");
     std::fs::write(
         &spz,
-        verisplat::core::scene::spz::to_bytes_v3(&scene).unwrap(),
+        verisplat::io::scene::spz::to_bytes_v3(&scene).unwrap(),
     )
     .unwrap();
-    let back = verisplat::core::scene::load(&spz).unwrap();
+    let back = verisplat::io::scene::load(&spz).unwrap();
     assert!(back.antialiased);
     scene.antialiased = false;
-    let plain = verisplat::core::scene::spz::to_bytes_v3(&scene).unwrap();
+    let plain = verisplat::io::scene::spz::to_bytes_v3(&scene).unwrap();
     assert!(
-        !verisplat::core::scene::parse_bytes(&plain, Path::new("plain.spz"))
+        !verisplat::io::scene::parse_bytes(&plain, Path::new("plain.spz"))
             .unwrap()
             .0
             .antialiased
@@ -873,13 +878,13 @@ fn antialiased_training_flag_is_read_written_and_honoured() {
         let e = e.unwrap();
         std::fs::copy(e.path(), sog.join(e.file_name())).unwrap();
     }
-    assert!(!verisplat::core::scene::load(&sog).unwrap().antialiased);
+    assert!(!verisplat::io::scene::load(&sog).unwrap().antialiased);
     let meta = sog.join("meta.json");
     let mut json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&meta).unwrap()).unwrap();
     json["antialias"] = true.into();
     std::fs::write(&meta, json.to_string()).unwrap();
-    assert!(verisplat::core::scene::load(&sog).unwrap().antialiased);
+    assert!(verisplat::io::scene::load(&sog).unwrap().antialiased);
 
     // PLY cannot record the flag: convert says so.
     let o = verisplat(&["convert", s(&spz), s(&dir.path().join("aa.ply"))]);

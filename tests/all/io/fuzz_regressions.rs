@@ -5,8 +5,8 @@
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use verisplat::core::camera::{self, KeyframePath, PathTiming};
-use verisplat::core::scene;
+use verisplat::io;
+use verisplat::io::camera::{KeyframePath, PathTiming};
 
 /// A found input runs in well under this (they are small); more means a hang came back.
 const PER_INPUT: Duration = Duration::from_secs(10);
@@ -22,28 +22,28 @@ fn run(target: &str, data: &[u8]) -> Result<(), String> {
     let p = Path::new;
     let text = || std::str::from_utf8(data).map_err(|e| format!("not UTF-8: {e}"));
     match target {
-        "ply" => scene::ply::parse(data, p("fuzz.ply"))
+        "ply" => io::scene::ply::parse(data, p("fuzz.ply"))
             .map(drop)
             .map_err(|e| e.to_string()),
         "splat" => {
-            let _ = scene::splat::is_plausible(data);
-            scene::splat::parse(data, p("fuzz.splat"))
+            let _ = io::scene::splat::is_plausible(data);
+            io::scene::splat::parse(data, p("fuzz.splat"))
                 .map(drop)
                 .map_err(|e| e.to_string())
         }
-        "spz" => scene::spz::parse(data, p("fuzz.spz"))
+        "spz" => io::scene::spz::parse(data, p("fuzz.spz"))
             .map(drop)
             .map_err(|e| e.to_string()),
-        "compressed_ply" => scene::compressed_ply::parse(data, p("fuzz.compressed.ply"))
+        "compressed_ply" => io::scene::compressed_ply::parse(data, p("fuzz.compressed.ply"))
             .map(drop)
             .map_err(|e| e.to_string()),
-        "sog_zip" => scene::sog::parse_zip(data, p("fuzz.sog"))
+        "sog_zip" => io::scene::sog::parse_zip(data, p("fuzz.sog"))
             .map(drop)
             .map_err(|e| e.to_string()),
-        "detect" => scene::parse_bytes(data, p("fuzz.bin"))
+        "detect" => io::scene::parse_bytes(data, p("fuzz.bin"))
             .map(drop)
             .map_err(|e| e.to_string()),
-        "cameras_json" => camera::parse_cameras_json(text()?, p("cameras.json"))
+        "cameras_json" => io::camera::parse_cameras_json(text()?, p("cameras.json"))
             .map(drop)
             .map_err(|e| e.to_string()),
         "colmap_text" => {
@@ -55,7 +55,7 @@ fn run(target: &str, data: &[u8]) -> Result<(), String> {
             let (Ok(c), Ok(i)) = (c, i) else {
                 return Err("not UTF-8".into());
             };
-            camera::colmap::parse_colmap_text(c, p("cameras.txt"), i, p("images.txt"))
+            io::camera::colmap::parse_colmap_text(c, p("cameras.txt"), i, p("images.txt"))
                 .map(drop)
                 .map_err(|e| e.to_string())
         }
@@ -67,11 +67,11 @@ fn run(target: &str, data: &[u8]) -> Result<(), String> {
                 let rest = &data[4..];
                 rest.split_at(len.min(rest.len()))
             };
-            camera::colmap::parse_colmap_binary(c, p("cameras.bin"), i, p("images.bin"))
+            io::camera::colmap::parse_colmap_binary(c, p("cameras.bin"), i, p("images.bin"))
                 .map(drop)
                 .map_err(|e| e.to_string())
         }
-        "nerfstudio" => camera::nerfstudio::parse_camera_path(text()?, p("camera_path.json"))
+        "nerfstudio" => io::camera::nerfstudio::parse_camera_path(text()?, p("camera_path.json"))
             .map(drop)
             .map_err(|e| e.to_string()),
         "keyframes" => {

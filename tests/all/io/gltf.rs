@@ -7,9 +7,12 @@ use glam::{DMat3, DQuat, DVec3, Vec3};
 use serde_json::{json, Value};
 use std::path::Path;
 use verisplat::core::model::sh::eval_sh;
-use verisplat::core::scene::{self, gltf_write, spz, Scene, SceneFormat};
+use verisplat::core::scene;
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
 use verisplat::io::metrics;
+use verisplat::io::scene::{gltf_write, spz, SceneFormat};
 
 /// The JSON document and BIN chunk of a GLB.
 fn glb_parts(glb: &[u8]) -> (Value, Vec<u8>) {
@@ -44,7 +47,7 @@ fn glb_pack(doc: &Value, bin: &[u8]) -> Vec<u8> {
 }
 
 fn parse(bytes: &[u8]) -> Result<(Scene, SceneFormat), String> {
-    scene::parse_bytes(bytes, Path::new("t.glb")).map_err(|e| e.to_string())
+    io::scene::parse_bytes(bytes, Path::new("t.glb")).map_err(|e| e.to_string())
 }
 
 /// The covariance of Gaussian `i`, in f64.
@@ -434,7 +437,7 @@ fn a_gltf_with_a_data_uri_or_a_bin_beside_it_loads() {
     ));
     let embedded = dir.path().join("embedded.gltf");
     std::fs::write(&embedded, serde_json::to_vec(&doc).unwrap()).unwrap();
-    let (a, format) = scene::load_with_format(&embedded).unwrap();
+    let (a, format) = io::scene::load_with_format(&embedded).unwrap();
     assert!(
         matches!(format, SceneFormat::Gltf(i) if !i.binary),
         "{format}"
@@ -444,12 +447,12 @@ fn a_gltf_with_a_data_uri_or_a_bin_beside_it_loads() {
     let beside = dir.path().join("beside.gltf");
     std::fs::write(&beside, &gltf).unwrap();
     assert!(String::from_utf8_lossy(&gltf).contains("my%20scene.bin"));
-    let b = scene::load(&beside).unwrap();
+    let b = io::scene::load(&beside).unwrap();
     assert_eq!(a, b);
     assert_eq!(a.positions, source.positions);
     // Its buffer file missing: an error naming the .gltf, the file it names and why.
     std::fs::remove_file(dir.path().join("my scene.bin")).unwrap();
-    let e = scene::load(&beside).unwrap_err().to_string();
+    let e = io::scene::load(&beside).unwrap_err().to_string();
     assert!(
         e.starts_with(&format!("{}: ", beside.display()))
             && e.contains("buffer 0 is the file")
@@ -610,14 +613,14 @@ fn broken_files_get_clear_errors_never_panics() {
 
 #[test]
 fn convert_writes_a_gltf_with_its_bin_and_never_overwrites_either() {
-    use verisplat::core::scene::write::{self, ConvertOptions, OutputFormat};
+    use verisplat::io::scene::write::{self, ConvertOptions, OutputFormat};
     let src = common::shared_data().join("playbot_lod6_1873_sh2.ply");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("robot.gltf");
     let report = write::convert(&src, &out, &ConvertOptions::default()).unwrap();
     assert_eq!(report.output_format, OutputFormat::Gltf);
     assert!(dir.path().join("robot.bin").is_file());
-    let back = scene::load(&out).unwrap();
+    let back = io::scene::load(&out).unwrap();
     assert_eq!(
         back.positions,
         common::shared_scene("playbot_lod6_1873_sh2.ply").positions
@@ -640,8 +643,10 @@ fn convert_writes_a_gltf_with_its_bin_and_never_overwrites_either() {
         ..Default::default()
     };
     write::convert(&src, &other, &opts).unwrap();
-    assert_eq!(scene::load(&other).unwrap().len(), 1873);
+    assert_eq!(io::scene::load(&other).unwrap().len(), 1873);
     let glb = dir.path().join("robot.glb");
     write::convert(&src, &glb, &ConvertOptions::default()).unwrap();
-    assert!(matches!(scene::load_with_format(&glb).unwrap().1, SceneFormat::Gltf(i) if i.binary));
+    assert!(
+        matches!(io::scene::load_with_format(&glb).unwrap().1, SceneFormat::Gltf(i) if i.binary)
+    );
 }

@@ -3,7 +3,7 @@
 //!
 //! The files are generated here (the table below is the source of truth) into a temporary
 //! `malformed/<case>/` directory. Each case is checked twice:
-//! * through the library (`scene::load`, `camera::load_camera_file`): an error is one
+//! * through the library (`io::scene::load`, `io::camera::load_camera_file`): an error is one
 //!   sentence that names the file and contains the expected fragment; a usable file decodes
 //!   to the stated number of Gaussians and renders correctly on the CPU reference;
 //! * through the `verisplat` binary (with `VERISPLAT_VALIDATE=1`, under a timeout): a bad file
@@ -38,10 +38,12 @@ use spz::spz_v4;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use verisplat::core::camera::{self, Camera, PathTiming};
-use verisplat::core::scene::compressed_ply::CHUNK_PROPS;
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::camera::Camera;
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
+use verisplat::io::camera::PathTiming;
+use verisplat::io::scene::compressed_ply::CHUNK_PROPS;
 
 /// The longest a CLI run on a tiny file may take before it counts as a hang.
 const CLI_TIMEOUT: Duration = Duration::from_secs(120);
@@ -174,7 +176,7 @@ fn check_message(name: &str, msg: &str, file: &Path, fragment: &str) {
 fn library_check(case: &Case, path: &Path) {
     let name = case.name;
     match case.kind {
-        Kind::Scene => match (scene::load(path), &case.expect) {
+        Kind::Scene => match (io::scene::load(path), &case.expect) {
             (Err(e), Expect::Error(frag)) => check_message(name, &e.to_string(), path, frag),
             (Ok(s), Expect::Renders(n)) => {
                 assert_eq!(s.len(), *n, "{name}");
@@ -187,7 +189,7 @@ fn library_check(case: &Case, path: &Path) {
             (Err(e), Expect::Renders(_)) => panic!("{name}: {e}"),
         },
         Kind::Cameras => match (
-            camera::load_camera_file(path, &PathTiming::default()),
+            io::camera::load_camera_file(path, &PathTiming::default()),
             &case.expect,
         ) {
             (Err(e), Expect::Error(frag)) => check_message(name, &e.to_string(), path, frag),
@@ -330,18 +332,18 @@ fn valid_scene_files() -> Vec<(&'static str, Vec<u8>)> {
     vec![
         (
             "t.ply",
-            scene::ply::to_bytes(&s, scene::ply::PlyEncoding::BinaryLittleEndian),
+            io::scene::ply::to_bytes(&s, io::scene::ply::PlyEncoding::BinaryLittleEndian),
         ),
         (
             "t_be.ply",
-            scene::ply::to_bytes(&s0, scene::ply::PlyEncoding::BinaryBigEndian),
+            io::scene::ply::to_bytes(&s0, io::scene::ply::PlyEncoding::BinaryBigEndian),
         ),
         (
             "t_ascii.ply",
-            scene::ply::to_bytes(&s0, scene::ply::PlyEncoding::Ascii),
+            io::scene::ply::to_bytes(&s0, io::scene::ply::PlyEncoding::Ascii),
         ),
-        ("t.splat", scene::splat::to_bytes(&s)),
-        ("t.spz", scene::spz::to_bytes_v3(&s).unwrap()),
+        ("t.splat", io::scene::splat::to_bytes(&s)),
+        ("t.spz", io::scene::spz::to_bytes_v3(&s).unwrap()),
         ("t_v4.spz", spz_v4(3, 3, 32, 0)),
         (
             "t.compressed.ply",
@@ -377,11 +379,11 @@ fn truncated_scene_files_fail_clearly_at_every_offset() {
     for (name, bytes) in valid_scene_files() {
         let full = tmp.path().join(name);
         std::fs::write(&full, &bytes).unwrap();
-        scene::load(&full).unwrap_or_else(|e| panic!("the uncut {name} must load: {e}"));
+        io::scene::load(&full).unwrap_or_else(|e| panic!("the uncut {name} must load: {e}"));
         for cut in 0..bytes.len() {
             let path = tmp.path().join(format!("cut_{cut}_{name}"));
             std::fs::write(&path, &bytes[..cut]).unwrap();
-            match scene::load(&path) {
+            match io::scene::load(&path) {
                 Ok(s) => assert!(
                     truncation_ok(name, cut),
                     "{name} cut at {cut} loaded {} Gaussians",
@@ -419,7 +421,7 @@ fn truncated_camera_files_fail_clearly_at_every_offset() {
         for cut in 0..text.len() {
             let path = tmp.path().join(format!("cut_{cut}_{name}"));
             std::fs::write(&path, &text.as_bytes()[..cut]).unwrap();
-            let e = camera::load_camera_file(&path, &PathTiming::default())
+            let e = io::camera::load_camera_file(&path, &PathTiming::default())
                 .expect_err(&format!("{name} cut at {cut}"));
             let msg = e.to_string();
             assert!(
@@ -446,7 +448,7 @@ fn truncated_camera_files_fail_clearly_at_every_offset() {
             };
             std::fs::write(dir.join("cameras.bin"), cc).unwrap();
             std::fs::write(dir.join("images.bin"), ii).unwrap();
-            let e = camera::load_camera_file(&dir, &PathTiming::default())
+            let e = io::camera::load_camera_file(&dir, &PathTiming::default())
                 .expect_err(&format!("COLMAP binary file {which} cut at {cut}"));
             let msg = e.to_string();
             assert!(
@@ -474,7 +476,7 @@ fn truncated_scene_files_fail_cleanly_through_the_cli() {
             let case = format!("cut_{cut}_{name}");
             let path = tmp.path().join(&case);
             std::fs::write(&path, &bytes[..cut]).unwrap();
-            let msg = scene::load(&path).expect_err(&case).to_string();
+            let msg = io::scene::load(&path).expect_err(&case).to_string();
             let frag = TRUNCATION_FRAGMENTS
                 .iter()
                 .find(|f| msg.contains(*f))

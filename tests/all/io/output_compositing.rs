@@ -8,27 +8,30 @@ use crate::common::cli::{fails, ok, s};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use verisplat::core::camera::{self, Camera};
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
 use verisplat::core::frame::Frame;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
+
 use verisplat::io::output;
 
 /// The demo scene's default camera at 200x113, written as a cameras.json for the binary;
 /// returns the file and the camera as read back (what the binary renders).
 fn demo_camera(dir: &Path) -> (PathBuf, Camera) {
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     let cam = camera::default_camera(&scene.positions, 1280, 720)
         .resized(Some(200), None, None)
         .unwrap();
     let path = dir.join("camera.json");
-    std::fs::write(&path, camera::inria::to_json(&[(0, cam)]).unwrap()).unwrap();
-    let cam = camera::load_cameras_json(&path).unwrap().remove(0);
+    std::fs::write(&path, io::camera::inria::to_json(&[(0, cam)]).unwrap()).unwrap();
+    let cam = io::camera::load_cameras_json(&path).unwrap().remove(0);
     (path, cam)
 }
 
 fn cpu_render(cam: &Camera, background: [f32; 3]) -> Frame {
     cpu::render(
-        &verisplat::core::demo::demo_scene().activated(),
+        &verisplat::io::demo::demo_scene().activated(),
         cam,
         &RenderOptions {
             background,
@@ -342,7 +345,7 @@ fn an_exported_orbit_renders_the_same_files_as_the_orbit() {
         );
     }
     // The INRIA layout: id, img_name, size, centre, camera-to-world rows, focal lengths.
-    let scene = verisplat::core::demo::demo_scene();
+    let scene = verisplat::io::demo::demo_scene();
     let cams = camera::orbit(
         &scene.positions,
         &camera::OrbitParams {
@@ -408,7 +411,7 @@ fn an_exported_orbit_renders_the_same_files_as_the_orbit() {
     ]);
     args.retain(|a| !["--width", "160", "--height", "100"].contains(a));
     ok(&args);
-    let read = camera::load_cameras_json(&picked).unwrap();
+    let read = io::camera::load_cameras_json(&picked).unwrap();
     assert_eq!(read.len(), 2);
     assert_eq!((read[0].width, read[0].height), (640, 360));
     assert_eq!(read[1].name, "orbit_00003");
@@ -432,8 +435,8 @@ fn cameras_json_round_trip_keeps_an_off_centre_principal_point() {
         glam::Vec3::NEG_Y,
     );
     cam.cx = 160.25;
-    let json = camera::inria::to_json(&[(7, cam.clone())]).unwrap();
-    let back = camera::parse_cameras_json(&json, Path::new("x.json"))
+    let json = io::camera::inria::to_json(&[(7, cam.clone())]).unwrap();
+    let back = io::camera::parse_cameras_json(&json, Path::new("x.json"))
         .unwrap()
         .remove(0);
     assert_eq!(back.cx, 160.25);

@@ -4,7 +4,9 @@
 use crate::common;
 use crate::common::random_scene;
 use std::path::Path;
-use verisplat::core::scene::{self, ply, Scene, SceneError};
+use verisplat::core::scene::{Scene, SceneError};
+use verisplat::io;
+use verisplat::io::scene::ply;
 
 fn parse(bytes: &[u8]) -> Result<Scene, SceneError> {
     ply::parse(bytes, Path::new("test.ply"))
@@ -152,16 +154,16 @@ fn model_directory_picks_the_largest_iteration() {
     }
     // A higher iteration without a point cloud is ignored.
     std::fs::create_dir_all(dir.path().join("point_cloud/iteration_99999")).unwrap();
-    let s = scene::load(dir.path()).unwrap();
+    let s = io::scene::load(dir.path()).unwrap();
     assert_eq!(s, random_scene(5, 1, 30000));
     let empty = tempfile::tempdir().unwrap();
-    let e = scene::load(empty.path()).unwrap_err().to_string();
+    let e = io::scene::load(empty.path()).unwrap_err().to_string();
     assert!(e.contains("point_cloud"), "{e}");
 }
 
 #[test]
 fn missing_file_names_the_file() {
-    let e = scene::load(Path::new("/nonexistent/scene.ply"))
+    let e = io::scene::load(Path::new("/nonexistent/scene.ply"))
         .unwrap_err()
         .to_string();
     assert!(

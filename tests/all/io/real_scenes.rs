@@ -2,9 +2,10 @@
 //! the orbit cameras.json beside them follows the documented convention.
 
 use crate::common;
-use verisplat::core::camera::{self, Camera};
-use verisplat::core::scene;
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
 
 /// Camera `index` of an orbit file of the shared scenes at 320x180; the file holds the 24
 /// cameras of its orbit.
@@ -49,7 +50,7 @@ fn real_scenes_load_and_render() {
         ("train3_sh3.ply", 3, 3, None),
     ];
     for (file, count, deg, cams) in cases {
-        let s = scene::load(&common::shared_data().join(file)).unwrap();
+        let s = io::scene::load(&common::shared_data().join(file)).unwrap();
         assert_eq!((s.len(), s.sh_degree), (count, deg), "{file}");
         let cam = match cams {
             Some(c) => orbit_camera(c, 3),

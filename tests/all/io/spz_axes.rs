@@ -7,7 +7,9 @@
 use crate::common;
 use crate::common::cli::{ok, s, verisplat};
 use std::path::Path;
-use verisplat::core::scene::{self, spz, Scene};
+use verisplat::core::scene::Scene;
+use verisplat::io;
+use verisplat::io::scene::spz;
 
 /// The shared 31k-Gaussian scene with SH degree 2.
 const SCENE: &str = "playbot_lod3_31k_sh2.ply";
@@ -21,7 +23,7 @@ fn convert(input: &Path, output: &Path, extra: &[&str]) {
 
 /// The scene of a PLY `verisplat convert` wrote.
 fn load(path: &Path) -> Scene {
-    scene::load(path).unwrap()
+    io::scene::load(path).unwrap()
 }
 
 /// The largest difference of two scenes' positions, per axis.

@@ -3,11 +3,15 @@
 //! give the same bytes every time, and refuse what they cannot write.
 
 use crate::common;
-use verisplat::core::camera::{self, Camera};
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
 use verisplat::core::model::{Rules, SplatKernel};
-use verisplat::core::scene::write::{self, ConvertError, ConvertOptions, OutputFormat};
-use verisplat::core::scene::{self, quantize, sigmoid, Scene, SceneFormat};
+use verisplat::core::scene::{self, sigmoid, Scene};
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
+
+use verisplat::io::scene::write::{self, ConvertError, ConvertOptions, OutputFormat};
+use verisplat::io::scene::{quantize, SceneFormat};
 
 const SH_C0: f32 = 0.282_094_8;
 /// Rounding of f32 arithmetic on values of order 1..10.
@@ -16,7 +20,7 @@ const F32_SLACK: f32 = 1e-5;
 /// `scene` written in `format` and read back, and the format the reader saw.
 fn round_trip(scene: &Scene, format: OutputFormat) -> (Scene, SceneFormat) {
     let bytes = write::to_bytes(scene, format).unwrap();
-    scene::parse_bytes(&bytes, std::path::Path::new("written")).unwrap()
+    io::scene::parse_bytes(&bytes, std::path::Path::new("written")).unwrap()
 }
 
 /// The source scene in the writers' order (Morton), to compare with the decoded one.
@@ -280,7 +284,7 @@ fn writers_give_the_same_bytes_and_keep_the_flags() {
 fn convert_writes_sog_bundles_and_directories_without_overwriting() {
     let dir = tempfile::tempdir().unwrap();
     let src = common::shared_data().join("playbot_lod6_1873_sh2.ply");
-    let source = scene::load(&src).unwrap();
+    let source = io::scene::load(&src).unwrap();
     let opts = ConvertOptions::default();
     for (out, format) in [
         (
@@ -295,7 +299,7 @@ fn convert_writes_sog_bundles_and_directories_without_overwriting() {
         assert_eq!((r.written, r.sh_degree, r.output_format), (1873, 2, format));
         assert!(!r.antialiased_flag_lost);
         // Read back through the loader, directory or file.
-        let back = scene::load(&out).unwrap();
+        let back = io::scene::load(&out).unwrap();
         assert_eq!(back.len(), source.len());
         // An existing output is refused and left as it was, then replaced on request.
         let before = std::fs::read(&out).unwrap();

@@ -567,11 +567,10 @@ fn tile_culling_is_exact_for_each_kernel() {
 /// scene from an orbit and a close-up, for both kernels.
 #[test]
 fn tile_culled_render_equals_the_reference_render_bit_for_bit() {
-    let scene =
-        verisplat::core::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
-            .unwrap()
-            .activated();
-    let cams = verisplat::core::camera::load_cameras_json(
+    let scene = verisplat::io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
+        .unwrap()
+        .activated();
+    let cams = verisplat::io::camera::load_cameras_json(
         &common::shared_data().join("playbot_orbit_cameras.synthetic.json"),
     )
     .unwrap();

@@ -17,14 +17,16 @@ use crate::common::gpu::{
 use crate::common::orbit;
 use verisplat::core::camera::Camera;
 use verisplat::core::frame::Frame;
-use verisplat::core::scene::{self, ActivatedScene};
+use verisplat::core::scene::ActivatedScene;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
+use verisplat::io;
+
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::render::{GpuRenderer, SplitLimits};
 
 fn load(name: &str) -> ActivatedScene {
-    scene::load(&common::shared_data().join(name))
+    io::scene::load(&common::shared_data().join(name))
         .unwrap()
         .activated()
 }
@@ -163,7 +165,7 @@ fn features_frames_in_chunks_equal_one_piece_and_the_reference() {
     // Feature channels are blended chunk by chunk, each chunk resuming every pixel's
     // channels and transmittance: K = 5 (two groups of four) must not change by a bit.
     let mut r = renderer();
-    let mut sc = scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
+    let mut sc = io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
     let k = 5;
     let mut rng = common::Rng(5);
     let v = (0..sc.len() * k).map(|_| rng.range(-1.0, 1.0)).collect();

@@ -8,8 +8,8 @@
 use crate::common;
 use crate::common::gpu::{assert_validation_clean, compare, renderer, Thresholds, MIN_WITHIN};
 use verisplat::core::camera;
-use verisplat::core::scene;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
 use verisplat::render::{FrameRequest, Rendered};
 
 #[test]
@@ -20,7 +20,7 @@ fn compact_scenes_render_their_fp16_rounding_exactly_in_fewer_bytes() {
         ("playbot_lod3_31k_sh2.ply", 28u64), // 27 floats padded to 7 texels
         ("train3_sh3.ply", 48),
     ] {
-        let s = scene::load(&data.join(file)).unwrap().activated();
+        let s = io::scene::load(&data.join(file)).unwrap().activated();
         let cam = if file.starts_with("train3") {
             camera::default_camera(&s.positions, 320, 240)
         } else {

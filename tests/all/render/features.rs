@@ -10,8 +10,10 @@ use crate::common;
 use crate::common::gpu::MIN_PSNR;
 use crate::common::{axis_camera, orbit, push_gaussian, PLAYBOT_ORBIT};
 use std::path::Path;
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, RenderOptions, SplatKernel};
+use verisplat::io;
+
 use verisplat::render::{FrameRequest, Rendered};
 
 /// Random features in [-2, 3) for every Gaussian.
@@ -92,7 +94,7 @@ fn one_and_two_splats_blend_features_like_colour() {
 /// colour image's red (background 0), bit for bit, on a real scene.
 #[test]
 fn a_feature_equal_to_the_colour_gives_the_colour_image() {
-    let mut s = scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
+    let mut s = io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
     s.sh_degree = 0;
     let s = s.select(&(0..s.len()).collect::<Vec<_>>(), 0);
     let cam = orbit(PLAYBOT_ORBIT, 3, 320, 180);
@@ -220,7 +222,7 @@ pub(crate) fn check_gpu_cases_with(
     rules: verisplat::cpu::Rules,
 ) {
     for &(file, k, cam_index, w, h, kernel) in cases {
-        let mut s = scene::load(&common::shared_data().join(file)).unwrap();
+        let mut s = io::scene::load(&common::shared_data().join(file)).unwrap();
         random_features(&mut s, k, k as u64);
         let act = s.activated();
         let cam = if file.starts_with("plant") {
@@ -291,7 +293,7 @@ fn features_through_the_cli() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let plain = common::shared_data().join("playbot_lod6_1873_sh2.ply");
-    let n = scene::load(&plain).unwrap().len();
+    let n = io::scene::load(&plain).unwrap().len();
     let k = 6;
     let mut rng = common::Rng(5);
     let values: Vec<f32> = (0..n * k).map(|_| rng.range(-1.0, 2.0)).collect();
@@ -307,7 +309,7 @@ fn features_through_the_cli() {
     // PLY round trip through convert --features.
     let with = d.join("with.ply");
     ok(&["convert", s(&plain), s(&with), "--features", s(&f32_file)]);
-    let loaded = scene::load(&with).unwrap();
+    let loaded = io::scene::load(&with).unwrap();
     assert_eq!(loaded.feature_count, k);
     assert_eq!(loaded.features, values);
     let again = d.join("again.ply");
@@ -323,7 +325,7 @@ fn features_through_the_cli() {
         stderr(&o)
     );
     // float16 features load to the float16 values.
-    let mut h = scene::load(&plain).unwrap();
+    let mut h = io::scene::load(&plain).unwrap();
     verisplat::core::scene::features::attach_npy(&mut h, &f16_file).unwrap();
     assert_eq!(h.feature_count, k);
     for (a, b) in h.features.iter().zip(&values) {
@@ -405,7 +407,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let plain = common::shared_data().join("playbot_lod6_1873_sh2.ply");
-    let n = scene::load(&plain).unwrap().len();
+    let n = io::scene::load(&plain).unwrap().len();
     let write = |name: &str, bytes: Vec<u8>| {
         let p = d.join(name);
         std::fs::write(&p, bytes).unwrap();
@@ -522,9 +524,9 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
     let e = fails(&["render", s(&plain), "-o", s(&out)], &out);
     assert!(e.contains("--mode features"), "{e}");
     // A PLY with a gap in its feat_* properties or more than 64 of them.
-    let mut sc = scene::load(&plain).unwrap();
+    let mut sc = io::scene::load(&plain).unwrap();
     sc.set_features(2, vec![0.0; n * 2]).unwrap();
-    let bytes = scene::ply::to_bytes(&sc, scene::ply::PlyEncoding::BinaryLittleEndian);
+    let bytes = io::scene::ply::to_bytes(&sc, io::scene::ply::PlyEncoding::BinaryLittleEndian);
     let header_end = bytes.windows(10).position(|w| w == b"end_header").unwrap();
     let mut gap = bytes.clone();
     let at = gap[..header_end]
@@ -542,7 +544,7 @@ fn malformed_feature_inputs_give_one_clear_error_and_no_output() {
 /// each Gaussian's features with it, and `select` carries them.
 #[test]
 fn ply_features_round_trip_and_follow_the_gaussians() {
-    use verisplat::core::scene::ply::{parse, to_bytes, PlyEncoding};
+    use verisplat::io::scene::ply::{parse, to_bytes, PlyEncoding};
     let mut s = common::random_scene(50, 1, 9);
     random_features(&mut s, 9, 3);
     for enc in [

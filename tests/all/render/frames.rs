@@ -15,9 +15,11 @@ use crate::common::gpu::{
 };
 use crate::common::{orbit, shared_scene};
 use glam::Vec3;
-use verisplat::core::camera::{self, Camera};
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
 use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, RenderOptions};
+
 use verisplat::render::{FrameRequest, Readback, Rendered};
 
 #[test]
@@ -115,7 +117,7 @@ fn plant_and_train_match() {
         &camera::default_camera(&train.positions, 320, 240),
         &RenderOptions::default(),
     );
-    let demo = verisplat::core::demo::demo_scene().activated();
+    let demo = verisplat::io::demo::demo_scene().activated();
     check_frame(
         &mut r,
         "demo default",

@@ -15,10 +15,13 @@ use std::path::Path;
 use verisplat::app::sequence::{
     self, Existing, FrameSource, OutputPattern, ProgressStyle, RunOptions,
 };
-use verisplat::core::camera::{self, Camera};
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::camera::Camera;
+use verisplat::core::scene::Scene;
 use verisplat::cpu::{self, RenderOptions};
+use verisplat::io;
+
 use verisplat::io::output::{self, OutputOptions};
+
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::GpuRenderer;
 use verisplat::render::{FrameRequest, Rendered};
@@ -250,7 +253,7 @@ fn a_frame_that_regrows_while_another_is_in_flight_gives_the_same_files() {
 
 #[test]
 fn pipelined_frames_match_the_cpu_reference() {
-    let act = scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
+    let act = io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply"))
         .unwrap()
         .activated();
     let cams = orbit_path(PLAYBOT_ORBIT, 5, 160, 90);
@@ -299,7 +302,7 @@ fn pipelined_frames_match_the_cpu_reference() {
 /// images).
 #[test]
 fn pipelined_feature_frames_equal_unpipelined_ones() {
-    let mut s = scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
+    let mut s = io::scene::load(&common::shared_data().join("playbot_lod6_1873_sh2.ply")).unwrap();
     let n = s.len();
     let values: Vec<f32> = (0..n * 5)
         .map(|i| ((i * 37) % 101) as f32 / 50.0 - 1.0)
@@ -350,7 +353,7 @@ fn an_error_mid_path_names_its_frame_and_leaves_only_complete_files() {
     let ply = dir.path().join("crowd.ply");
     std::fs::write(
         &ply,
-        scene::ply::to_bytes(&crowd(), scene::ply::PlyEncoding::BinaryLittleEndian),
+        io::scene::ply::to_bytes(&crowd(), io::scene::ply::PlyEncoding::BinaryLittleEndian),
     )
     .unwrap();
     let path = crowd_path();
@@ -361,7 +364,7 @@ fn an_error_mid_path_names_its_frame_and_leaves_only_complete_files() {
         .enumerate()
         .collect();
     let json = dir.path().join("cams.json");
-    std::fs::write(&json, camera::inria::to_json(&cams).unwrap()).unwrap();
+    std::fs::write(&json, io::camera::inria::to_json(&cams).unwrap()).unwrap();
     for depth in ["1", "2"] {
         let out = dir.path().join(format!("out{depth}"));
         let o = verisplat(&[

@@ -16,9 +16,11 @@ use verisplat::app::sequence::{
 };
 use verisplat::core::camera::Camera;
 use verisplat::core::frame::{FramePixels, Rgba8Frame};
-use verisplat::core::scene::{self, Scene};
+use verisplat::core::scene::Scene;
 use verisplat::cpu::RenderOptions;
+use verisplat::io;
 use verisplat::io::output::{self, OutputError, OutputOptions, RenderMode};
+
 use verisplat::render::frame::path::GpuPath;
 use verisplat::render::{GpuRenderer, GpuScene};
 
@@ -90,7 +92,7 @@ fn clamped_scene() -> Scene {
 /// The test scenes with a path each: the shared PLAYBOT (LOD3) on its orbit over a
 /// coloured background, and [`clamped_scene`] from the axis camera, both at odd sizes.
 fn scenes() -> Vec<(Scene, Vec<Camera>, RenderOptions)> {
-    let playbot = scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
+    let playbot = io::scene::load(&common::shared_data().join("playbot_lod3_31k_sh2.ply")).unwrap();
     let axis = common::axis_camera(60.0).with_resolution(97, 61).unwrap();
     let mut moved = axis.clone();
     moved.translation = glam::Vec3::new(0.2, -0.1, 0.5);

@@ -22,9 +22,12 @@ use crate::common;
 use crate::common::gpu::{assert_validation_clean, move_towards, new_renderer, renderer};
 use crate::common::orbit;
 use std::collections::{BTreeMap, HashSet};
-use verisplat::core::camera::{self, Camera};
-use verisplat::core::scene::{self, ActivatedScene};
+use verisplat::core::camera;
+use verisplat::core::camera::Camera;
+use verisplat::core::scene::ActivatedScene;
 use verisplat::cpu::{self, Projected, RenderOptions, SplatKernel};
+use verisplat::io;
+
 use verisplat::render::backward::BackwardRequest;
 use verisplat::render::forward::blend::BlendKernel;
 use verisplat::render::forward::types::unpack_tile;
@@ -32,7 +35,7 @@ use verisplat::render::{FrameRequest, Readback, Rendered};
 use verisplat::render::{GpuRenderer, Intermediates};
 
 fn load(name: &str) -> ActivatedScene {
-    scene::load(&common::shared_data().join(name))
+    io::scene::load(&common::shared_data().join(name))
         .unwrap()
         .activated()
 }

@@ -19,7 +19,7 @@ fn text(out: &std::process::Output) -> String {
 /// The largest opacity of the model saved at `iteration`.
 fn max_opacity(model: &Path, iteration: u32) -> f32 {
     let ply = model.join(format!("point_cloud/iteration_{iteration}/point_cloud.ply"));
-    let scene = verisplat::core::scene::load_with_format(&ply)
+    let scene = verisplat::io::scene::load_with_format(&ply)
         .expect("the saved model")
         .0;
     scene
@@ -133,7 +133,7 @@ fn z_up_model(dir: &Path) -> std::path::PathBuf {
         .collect();
     std::fs::write(
         model.join("cameras.json"),
-        verisplat::core::camera::inria::to_json(&cams).unwrap(),
+        verisplat::io::camera::inria::to_json(&cams).unwrap(),
     )
     .unwrap();
     model
@@ -156,7 +156,7 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
         all.push(json.to_str().unwrap());
         let out = verisplat(&all);
         assert!(out.status.success(), "{}", text(&out));
-        let cams = verisplat::core::camera::inria::load_cameras_json(&json).unwrap();
+        let cams = verisplat::io::camera::inria::load_cameras_json(&json).unwrap();
         (cams, text(&out))
     };
     let (cams, log) = exported(&["--camera", "0002"], "by_name");
@@ -203,9 +203,9 @@ fn cameras_by_name_and_an_orbit_in_the_model_s_frame() {
 fn a_colmap_text_model_reads_back_as_written() {
     let dir = tempfile::tempdir().unwrap();
     make_dataset(dir.path(), 5, 40, 30);
-    let (cams, _) = verisplat::core::camera::colmap::load_colmap_model(dir.path()).unwrap();
+    let (cams, _) = verisplat::io::camera::colmap::load_colmap_model(dir.path()).unwrap();
     assert_eq!(cams.len(), 5);
-    let points = verisplat::core::camera::colmap::load_colmap_points(dir.path())
+    let points = verisplat::io::camera::colmap::load_colmap_points(dir.path())
         .unwrap()
         .unwrap();
     assert_eq!(points.len(), 1873_usize.div_ceil(2));

@@ -121,7 +121,7 @@ fn a_model_trained_with_gsplats_rules_records_and_renders_with_them() {
         "-q",
     ]);
     let ply = model.join("point_cloud/iteration_60/point_cloud.ply");
-    let (scene, _) = verisplat::core::scene::load_with_format(&ply).unwrap();
+    let (scene, _) = verisplat::io::scene::load_with_format(&ply).unwrap();
     assert_eq!(scene.rules, Rules::Gsplat);
     let head = std::fs::read(&ply).unwrap();
     let head = String::from_utf8_lossy(&head[..400]);

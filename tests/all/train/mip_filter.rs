@@ -64,17 +64,17 @@ fn the_3d_filter_steps_on_the_device_as_on_the_host_and_is_saved_folded() {
 /// MCMC strategy is refused beside the filter in one sentence.
 #[test]
 fn the_mark_travels_with_the_scene_and_mcmc_is_refused() {
-    use verisplat::core::scene;
+    use verisplat::io;
     let dir = tempfile::tempdir().unwrap();
     let mut s = verisplat::core::gen::synthetic_scene(300, 2, 1);
     s.mip_filter = true;
     let ply = dir.path().join("m.ply");
     std::fs::write(
         &ply,
-        scene::ply::to_bytes(&s, scene::ply::PlyEncoding::BinaryLittleEndian),
+        io::scene::ply::to_bytes(&s, io::scene::ply::PlyEncoding::BinaryLittleEndian),
     )
     .unwrap();
-    assert!(scene::load_with_format(&ply).unwrap().0.mip_filter);
+    assert!(io::scene::load_with_format(&ply).unwrap().0.mip_filter);
     for ext in ["compressed.ply", "glb", "gltf"] {
         let out = dir.path().join(format!("m.{ext}"));
         let run = verisplat(&["convert", ply.to_str().unwrap(), out.to_str().unwrap()]);
@@ -83,7 +83,10 @@ fn the_mark_travels_with_the_scene_and_mcmc_is_refused() {
             "{}",
             String::from_utf8_lossy(&run.stderr)
         );
-        assert!(scene::load_with_format(&out).unwrap().0.mip_filter, "{ext}");
+        assert!(
+            io::scene::load_with_format(&out).unwrap().0.mip_filter,
+            "{ext}"
+        );
     }
     let info = verisplat(&["info", ply.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&info.stdout).contains("mip filter  3d"));
@@ -95,7 +98,7 @@ fn the_mark_travels_with_the_scene_and_mcmc_is_refused() {
         err.contains("3D filter is folded into its scales and opacities"),
         "{err}"
     );
-    assert!(!scene::load_with_format(&spz).unwrap().0.mip_filter);
+    assert!(!io::scene::load_with_format(&spz).unwrap().0.mip_filter);
     // Another value in the comment is an error naming the file and the line.
     let bad = dir.path().join("bad.ply");
     let bytes = std::fs::read(&ply).unwrap();
@@ -104,7 +107,7 @@ fn the_mark_travels_with_the_scene_and_mcmc_is_refused() {
     let at = text.find("mip-filter 2d").unwrap();
     changed[at..at + 13].copy_from_slice(b"mip-filter 2d");
     std::fs::write(&bad, changed).unwrap();
-    let e = scene::load_with_format(&bad).unwrap_err().to_string();
+    let e = io::scene::load_with_format(&bad).unwrap_err().to_string();
     assert!(
         e.contains("bad.ply") && e.contains("header line") && e.contains("\"3d\""),
         "{e}"

@@ -6,8 +6,8 @@
 use crate::common::dataset::{make_dataset, make_dataset_with};
 use crate::common::{self, cli::verisplat, cli::verisplat_in};
 use std::path::Path;
-use verisplat::core::camera::colmap;
 use verisplat::core::camera::orbit::{orbit, OrbitParams};
+use verisplat::io::camera::colmap;
 
 /// The held-out PSNR that `train`'s summary line states.
 fn summary_psnr(stdout: &str) -> f64 {
@@ -343,7 +343,7 @@ fn bad_data_sets_give_one_clear_error_each() {
 /// composited over the background, and training from random Gaussians learns the views.
 #[test]
 fn a_nerf_synthetic_data_set_reads_back_and_trains() {
-    let scene = verisplat::core::scene::load_with_format(
+    let scene = verisplat::io::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .expect("the shared scene")
@@ -593,7 +593,7 @@ pub(super) struct DeviceRun {
 /// The scene and the bytes of the PLY in a model folder.
 pub(super) fn model_ply(at: &Path) -> (verisplat::core::scene::Scene, Vec<u8>) {
     let ply = at.join("point_cloud.ply");
-    let scene = verisplat::core::scene::load_with_format(&ply).unwrap().0;
+    let scene = verisplat::io::scene::load_with_format(&ply).unwrap().0;
     (scene, std::fs::read(&ply).unwrap())
 }
 
@@ -973,7 +973,7 @@ fn train_with_the_mcmc_strategy_stays_within_its_cap() {
     let psnr = summary_psnr(&text);
     assert!(psnr >= 30.0, "held-out PSNR {psnr} dB (measured 32.45)");
     let ply = model.join("point_cloud/iteration_600/point_cloud.ply");
-    let n = verisplat::core::scene::load_with_format(&ply)
+    let n = verisplat::io::scene::load_with_format(&ply)
         .unwrap()
         .0
         .len();

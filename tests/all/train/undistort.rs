@@ -17,12 +17,10 @@ use verisplat::train::data::{self, LensMode, Resolution};
 
 /// The shared scene (PLAYBOT LOD6, CC BY 4.0), activated.
 fn scene() -> verisplat::core::model::ActivatedScene {
-    verisplat::core::scene::load_with_format(
-        &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
-    )
-    .expect("the shared scene")
-    .0
-    .activated()
+    verisplat::io::scene::load_with_format(&common::shared_data().join("playbot_lod6_1873_sh2.ply"))
+        .expect("the shared scene")
+        .0
+        .activated()
 }
 
 /// `cam` rendered by the CPU reference at 3x and area-averaged down (what a photo of
@@ -147,7 +145,7 @@ fn write_colmap(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], model: &s
     )
     .unwrap();
     // Every image on camera 1.
-    let [_, (_, images), _] = verisplat::core::camera::colmap::to_text_model(cams, &[]).unwrap();
+    let [_, (_, images), _] = verisplat::io::camera::colmap::to_text_model(cams, &[]).unwrap();
     let images: String = images
         .lines()
         .map(|l| {
@@ -201,7 +199,7 @@ fn write_transforms(dir: &Path, cams: &[Camera], photos: &[Vec<[f32; 3]>], lens:
 /// `n` orbit cameras of `w x h` around the scene, named `view_NNN.png`, with the
 /// principal point a little off centre.
 fn cameras(n: usize, w: u32, h: u32) -> Vec<Camera> {
-    let positions = verisplat::core::scene::load_with_format(
+    let positions = verisplat::io::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .unwrap()
@@ -652,7 +650,7 @@ fn eval_of_a_model_trained_at_r_2_on_distorted_photos_uses_the_trainers_photos()
     assert_eq!(record["lenses"], "undistort", "{record}");
     assert_eq!(record["photos"]["distorted"], 9, "{record}");
     let (cams, _) =
-        verisplat::core::camera::load_camera_file(&model.join("cameras.json"), &Default::default())
+        verisplat::io::camera::load_camera_file(&model.join("cameras.json"), &Default::default())
             .unwrap();
     assert!(cams.iter().all(|c| c.lens.is_pinhole()));
     let images = set.join("images");
@@ -697,7 +695,7 @@ fn make_fisheye_dataset(dir: &Path, views: usize, w: u32, h: u32) {
 /// [`make_fisheye_dataset`] with `fov_deg` degrees across the shorter side.
 fn make_fisheye_dataset_of(dir: &Path, views: usize, w: u32, h: u32, fov_deg: f32) {
     use verisplat::core::camera::Lens;
-    let scene = verisplat::core::scene::load_with_format(
+    let scene = verisplat::io::scene::load_with_format(
         &common::shared_data().join("playbot_lod6_1873_sh2.ply"),
     )
     .expect("the shared scene")
@@ -801,7 +799,7 @@ fn train_through_a_fisheye_lens_learns_and_records_it() {
     assert_eq!(record["lenses"], "through", "{record}");
     assert_eq!(record["photos"]["fisheye"], 16, "{record}");
     let (cams, _) =
-        verisplat::core::camera::load_camera_file(&model.join("cameras.json"), &Default::default())
+        verisplat::io::camera::load_camera_file(&model.join("cameras.json"), &Default::default())
             .unwrap();
     assert_eq!(cams.len(), 16);
     for c in &cams {

@@ -7,8 +7,10 @@ use super::{
 };
 use glam::{DQuat, Vec2, Vec3};
 use std::path::Path;
-use verisplat::core::camera::{self, Camera, CameraError, CameraFormat, Lens};
+use verisplat::core::camera::{self, Camera, CameraError, Lens};
 use verisplat::core::file_error::FileError;
+use verisplat::io;
+use verisplat::io::camera::CameraFormat;
 
 /// `cameras` with id i + 1 as PINHOLE and images named by camera name, as COLMAP text.
 fn colmap_text(cams: &[Camera]) -> (String, String) {
@@ -322,7 +324,8 @@ fn colmap_models_carry_their_lens_and_unmappable_ones_are_refused() {
                 c.name = line.into();
                 assert_front_view(&c);
                 // The trainer's reading: the pinhole part, the distortion beside it.
-                let (cams, _) = camera::colmap::load_colmap_model_distorted(dir.path()).unwrap();
+                let (cams, _) =
+                    io::camera::colmap::load_colmap_model_distorted(dir.path()).unwrap();
                 assert_eq!(cams[0].0.lens, Lens::Pinhole, "{line}");
                 assert_eq!(cams[0].1.is_some(), lens != Lens::Pinhole, "{line}");
             }
@@ -420,20 +423,20 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
     let path = Path::new("model");
     // The whole files parse; every strict prefix, and every extension, is an error.
     assert_eq!(
-        camera::colmap::parse_colmap_binary(&c, path, &im, path)
+        io::camera::colmap::parse_colmap_binary(&c, path, &im, path)
             .unwrap()
             .len(),
         3
     );
     for cut in 0..c.len() {
-        let r = camera::colmap::parse_colmap_binary(&c[..cut], path, &im, path);
+        let r = io::camera::colmap::parse_colmap_binary(&c[..cut], path, &im, path);
         assert!(
             matches!(r, Err(CameraError::File(FileError::Invalid { .. }))),
             "cameras.bin cut at {cut}"
         );
     }
     for cut in 0..im.len() {
-        let r = camera::colmap::parse_colmap_binary(&c, path, &im[..cut], path);
+        let r = io::camera::colmap::parse_colmap_binary(&c, path, &im[..cut], path);
         assert!(
             matches!(r, Err(CameraError::File(FileError::Invalid { .. }))),
             "images.bin cut at {cut}"
@@ -441,7 +444,7 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
     }
     let mut longer = im.clone();
     longer.push(0);
-    let e = camera::colmap::parse_colmap_binary(&c, path, &longer, path)
+    let e = io::camera::colmap::parse_colmap_binary(&c, path, &longer, path)
         .unwrap_err()
         .to_string();
     assert!(e.contains("unexpected bytes"), "{e}");
@@ -449,13 +452,13 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
     // Counts that lie: huge image/camera counts and a huge 2D point count.
     let mut lie = im.clone();
     lie[..8].copy_from_slice(&u64::MAX.to_le_bytes());
-    let e = camera::colmap::parse_colmap_binary(&c, path, &lie, path)
+    let e = io::camera::colmap::parse_colmap_binary(&c, path, &lie, path)
         .unwrap_err()
         .to_string();
     assert!(e.contains("claims 18446744073709551615 images"), "{e}");
     let mut lie = c.clone();
     lie[..8].copy_from_slice(&1_000_000u64.to_le_bytes());
-    let e = camera::colmap::parse_colmap_binary(&lie, path, &im, path)
+    let e = io::camera::colmap::parse_colmap_binary(&lie, path, &im, path)
         .unwrap_err()
         .to_string();
     assert!(e.contains("claims 1000000 cameras"), "{e}");
@@ -464,7 +467,7 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
         bin_image(&mut im, 1, [1.0, 0.0, 0.0, 0.0], [0.0; 3], 1, "a", 0);
         let n = im.len();
         im[n - 8..].copy_from_slice(&points.to_le_bytes());
-        let e = camera::colmap::parse_colmap_binary(&c, path, &im, path)
+        let e = io::camera::colmap::parse_colmap_binary(&c, path, &im, path)
             .unwrap_err()
             .to_string();
         assert!(e.contains("2D points"), "{e}");
@@ -475,7 +478,7 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
     im.extend([0u8; 56]);
     im.extend(1u32.to_le_bytes());
     im.extend(b"no terminator at all, just letters");
-    let e = camera::colmap::parse_colmap_binary(&c, path, &im, path)
+    let e = io::camera::colmap::parse_colmap_binary(&c, path, &im, path)
         .unwrap_err()
         .to_string();
     assert!(e.contains("NUL") || e.contains("claims"), "{e}");
@@ -525,7 +528,7 @@ fn colmap_truncated_and_lying_binaries_never_panic() {
             "not finite",
         ),
     ] {
-        let e = camera::colmap::parse_colmap_binary(&c, path, &im, path)
+        let e = io::camera::colmap::parse_colmap_binary(&c, path, &im, path)
             .unwrap_err()
             .to_string();
         assert!(e.contains(msg), "{msg}: {e}");

@@ -7,9 +7,9 @@ use super::{
 };
 use glam::{Mat3, Vec2, Vec3};
 use std::path::Path;
-use verisplat::core::camera::{
-    keyframes_to_json, load_camera_file, orbit, Camera, CameraError, CameraFormat, KeyframePath,
-    OrbitParams, PathTiming,
+use verisplat::core::camera::{orbit, Camera, CameraError, OrbitParams};
+use verisplat::io::camera::{
+    keyframes_to_json, load_camera_file, CameraFormat, KeyframePath, PathTiming,
 };
 
 #[test]

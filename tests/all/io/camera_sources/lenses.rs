@@ -6,7 +6,9 @@
 
 use crate::common::cli::{stderr, stdout, verisplat_in};
 use std::path::Path;
-use verisplat::core::camera::{self, Lens, LensSpec, PathTiming};
+use verisplat::core::camera::{Lens, LensSpec};
+use verisplat::io;
+use verisplat::io::camera::PathTiming;
 
 /// The demo scene from (0, -0.5, -1.5), looking along +z with -y up: the camera whose
 /// rotation is the identity and translation (0, 0.5, 1.5).
@@ -151,7 +153,7 @@ fn camera_files_render_through_their_lens_as_render_lens_draws_it() {
     render(dir, &["--cameras", "ns_equivalent", "-o", "ns_colmap.png"]);
     assert!(pixels(&dir.join("ns_fisheye.png")) == pixels(&dir.join("ns_colmap.png")));
     let (cams, _) =
-        camera::load_camera_file(&dir.join("fisheye.json"), &PathTiming::default()).unwrap();
+        io::camera::load_camera_file(&dir.join("fisheye.json"), &PathTiming::default()).unwrap();
     assert_eq!(
         cams[0].lens,
         Lens::Fisheye {
@@ -241,7 +243,8 @@ fn exports_keep_the_lens_and_colmap_refuses_what_it_has_no_model_for() {
                 &["-o", &format!("x_{i}.png"), "--export-cameras", &file],
             ),
         );
-        let (cams, _) = camera::load_camera_file(&dir.join(&file), &PathTiming::default()).unwrap();
+        let (cams, _) =
+            io::camera::load_camera_file(&dir.join(&file), &PathTiming::default()).unwrap();
         assert_eq!(
             cams[0].lens,
             lens.parse::<LensSpec>().unwrap().lens(),
@@ -279,7 +282,7 @@ fn exports_keep_the_lens_and_colmap_refuses_what_it_has_no_model_for() {
         "FULL_OPENCV 48 32 40 41 24 16 -0.2 0.03 0.001 -0.002 0.004 0.1 0 0",
     );
     render(dir, &["--cameras", "full", "--export-colmap", "data3"]);
-    let (cams, _) = camera::colmap::load_colmap_model(&dir.join("data3")).unwrap();
+    let (cams, _) = io::camera::colmap::load_colmap_model(&dir.join("data3")).unwrap();
     assert_eq!(
         cams[0].lens,
         Lens::RadialTangential {

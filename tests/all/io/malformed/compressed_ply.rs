@@ -2,7 +2,7 @@
 
 use super::case::{scene_case, Case, Expect};
 use super::ply::replace_first;
-use verisplat::core::scene::compressed_ply::{CHUNK_PROPS, VERTEX_PROPS};
+use verisplat::io::scene::compressed_ply::{CHUNK_PROPS, VERTEX_PROPS};
 
 /// A PlayCanvas compressed PLY: `chunks` chunk rows of `bounds`, `verts` packed vertices of
 /// type `packed_ty`, and the element counts the header declares.

@@ -42,15 +42,7 @@ pub const COLOR_SCALE: f32 = 0.15;
 /// Fractional bits the writer uses when the positions fit (Niantic's default, 1/4096).
 pub const DEFAULT_FRACTIONAL_BITS: u8 = 12;
 
-/// Sign of each SH coefficient `k = 1..=15` (index `k - 1`) under `(x, y, z) -> (x, -y, -z)`:
-/// `(-1)^(deg_y + deg_z)` of its basis polynomial (band 1: y, z, x; band 2: xy, yz,
-/// 3z^2-1, xz, x^2-y^2; band 3: y(3x^2-y^2), xyz, y(4z^2-x^2-y^2), z(2z^2-3x^2-3y^2),
-/// x(4z^2-x^2-y^2), z(x^2-y^2), x(x^2-3y^2)).
-pub const RUB_SH_SIGN: [f32; 15] = [
-    -1.0, -1.0, 1.0, //
-    -1.0, 1.0, 1.0, -1.0, 1.0, //
-    -1.0, 1.0, -1.0, -1.0, 1.0, -1.0, 1.0,
-];
+pub use crate::core::scene::transform::RUB_SH_SIGN;
 
 const FLAG_EXTENSIONS: u8 = 0x2;
 /// Header flag: the scene was trained with antialiasing.

@@ -18,7 +18,7 @@ pub const KEYFRAME_VERSION: u32 = 1;
 /// Frames per second when the file gives none.
 pub const DEFAULT_FPS: f64 = 30.0;
 /// Largest number of frames a generated path (keyframes or orbit) may have.
-pub const MAX_FRAMES: usize = 1_000_000;
+pub use crate::core::camera::MAX_PATH_FRAMES as MAX_FRAMES;
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -5,7 +5,7 @@ pub const DEMO_SCENE_PLY: &[u8] = include_bytes!("../../assets/playbot_lod6_1873
 
 /// Loads the built-in demo scene.
 pub fn demo_scene() -> crate::core::scene::Scene {
-    crate::core::scene::ply::parse(
+    crate::io::scene::ply::parse(
         DEMO_SCENE_PLY,
         std::path::Path::new("<built-in demo scene>"),
     )
