@@ -85,9 +85,22 @@ pub enum Readback {
 /// frame, whose state replaced this one's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ForwardHandle {
-    serial: u64,
+    frame: LastFrame,
     width: u32,
     height: u32,
+}
+
+/// A finished frame as its backward pass needs to know it: the set that holds its saved
+/// state, its serial (a later frame's replaces it), the alpha falloff it was drawn with
+/// and whether through a lens other than the pinhole (its backward pass differentiates the
+/// unscented transform). The renderer keeps its last one; a [`ForwardHandle`] carries its
+/// frame's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct LastFrame {
+    pub(crate) set: usize,
+    pub(crate) serial: u64,
+    pub(crate) kernel: crate::core::model::SplatKernel,
+    pub(crate) lens: bool,
 }
 
 impl ForwardHandle {
@@ -238,10 +251,9 @@ pub struct GpuRenderer {
     sets: Vec<FrameSet>,
     /// Built the first time a frame needs each.
     pipelines: Pipelines,
-    /// The set of the last finished frame (what [`Readback::Intermediates`] reads).
-    last: usize,
-    /// The serial of the last finished frame ([`ForwardHandle`]s name it).
-    last_serial: u64,
+    /// The last finished frame (its set is what [`Readback::Intermediates`] reads;
+    /// [`ForwardHandle`]s name it by its serial).
+    last: LastFrame,
     /// Key capacity the frames have needed so far (the largest set's); a new or resized
     /// set starts with it.
     capacity: Option<u32>,
@@ -261,11 +273,6 @@ pub struct GpuRenderer {
     compact: bool,
     /// Frames save what a backward pass reads ([`Self::set_save_forward_state`]).
     save_forward: bool,
-    /// The alpha falloff of the last finished frame (its backward pass's).
-    last_kernel: crate::core::model::SplatKernel,
-    /// Whether the last finished frame was drawn through a lens other than the pinhole
-    /// (its backward pass differentiates the unscented transform).
-    last_lens: bool,
     /// The backward pass's pipelines and buffers, made by the first pass.
     backward: Option<backward::BackwardState>,
     ctx: GpuContext,
@@ -325,8 +332,12 @@ impl GpuRenderer {
         Ok(GpuRenderer {
             pipelines: Pipelines::new(kernel),
             sets: vec![FrameSet::new(&ctx, 0, kernel.bin_size())?],
-            last: 0,
-            last_serial: u64::MAX,
+            last: LastFrame {
+                set: 0,
+                serial: u64::MAX,
+                kernel: Default::default(),
+                lens: false,
+            },
             capacity: None,
             serial: 0,
             timings: StageTimings::default(),
@@ -336,8 +347,6 @@ impl GpuRenderer {
             split: SplitLimits::default(),
             compact: false,
             save_forward: false,
-            last_kernel: Default::default(),
-            last_lens: false,
             backward: None,
             ctx,
         })
@@ -392,7 +401,7 @@ impl GpuRenderer {
     /// The handle of the frame just finished, rendered from `cam`.
     fn forward_handle(&self, cam: &Camera) -> ForwardHandle {
         ForwardHandle {
-            serial: self.last_serial,
+            frame: self.last,
             width: cam.width,
             height: cam.height,
         }

@@ -258,7 +258,7 @@ impl GpuRenderer {
     /// Refuses a forward handle that is not the renderer's last finished frame (a later
     /// frame replaced its state) or is not `size`.
     fn check_forward(&self, forward: &ForwardHandle, size: (u32, u32)) -> GpuResult<()> {
-        if forward.serial != self.last_serial {
+        if forward.frame.serial != self.last.serial {
             return Err(GpuError::InvalidArgument(
                 "the frame of this forward handle is no longer the renderer's last: its state \
                  was replaced by a later frame's"
@@ -463,16 +463,15 @@ impl GpuRenderer {
         let GpuRenderer {
             ctx,
             sets,
-            last,
             backward,
-            last_kernel,
-            last_lens,
             ..
         } = self;
+        // The handle's frame: the renderer's last (checked above).
+        let frame = forward.frame;
         let (pass, clock, _) = prepare(
             ctx,
             backward.as_mut().expect("made above"),
-            (&sets[*last], *last_kernel, *last_lens),
+            (&sets[frame.set], frame.kernel, frame.lens),
             scene,
             size,
             None,
@@ -500,7 +499,7 @@ impl GpuRenderer {
         let (pass, clock, shape) = prepare(
             ctx,
             st,
-            (&self.sets[self.last], self.last_kernel, self.last_lens),
+            (&self.sets[self.last.set], self.last.kernel, self.last.lens),
             scene,
             size,
             Some(pixels),

@@ -127,14 +127,14 @@ impl GpuRenderer {
         scene: &GpuScene,
         cam: &Camera,
     ) -> GpuResult<Intermediates> {
-        let set = &self.sets[self.last];
+        let set = &self.sets[self.last.set];
         let f = set
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
         let ctx = &self.ctx;
         let n = scene.count as usize;
-        let counters = self.read_counters(self.last)?;
+        let counters = self.read_counters(self.last.set)?;
         let sorted = counters.sort_count as usize;
         let bin_size = set.bin_size;
         let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
@@ -201,7 +201,7 @@ pub struct ForwardState<'a> {
 impl GpuRenderer {
     /// The saved state of the last finished frame ([`ForwardState`]).
     pub fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
-        self.sets[self.last].forward_state()
+        self.sets[self.last.set].forward_state()
     }
 }
 

@@ -7,7 +7,7 @@ use crate::gpu::{limits, GpuBuffer, GpuError, GpuResult, MemoryKind};
 use crate::render::forward::types::{Counters, Splat};
 
 use crate::render::forward::{keys, preprocess};
-use crate::render::{FeatureJob, FrameStats, GpuRenderer, GpuScene, Readback, Ticket};
+use crate::render::{FeatureJob, FrameStats, GpuRenderer, GpuScene, LastFrame, Readback, Ticket};
 
 /// Key bits that order the pairs for `num_tiles` bins: 32 depth bits plus the bin id's.
 pub fn key_bits(num_tiles: u32) -> u32 {
@@ -358,10 +358,12 @@ impl GpuRenderer {
         if !chunked {
             self.timings = self.read_timings(t.set)?;
         }
-        self.last = t.set;
-        self.last_serial = t.serial;
-        self.last_kernel = t.opts.kernel;
-        self.last_lens = !cam.lens.is_pinhole();
+        self.last = LastFrame {
+            set: t.set,
+            serial: t.serial,
+            kernel: t.opts.kernel,
+            lens: !cam.lens.is_pinhole(),
+        };
         Ok(())
     }
 
