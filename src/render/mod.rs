@@ -58,7 +58,7 @@ pub fn check_storage_binding(ctx: &GpuContext, what: &str, bytes: u64) -> GpuRes
 use crate::core::camera::Camera;
 use crate::core::frame::Frame;
 pub use crate::core::frame::Rgba8Frame;
-use crate::core::model::RenderOptions;
+use crate::core::model::{ActivatedScene, RenderOptions};
 use crate::gpu::{GpuContext, GpuError, GpuResult};
 
 /// What a frame reads back to the host after it is rendered.
@@ -321,6 +321,53 @@ impl Ticket<'_> {
 }
 
 impl GpuRenderer {
+    /// The saved state of the last finished frame ([`ForwardState`]).
+    pub fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
+        self.sets[self.last.set].forward_state()
+    }
+
+    /// Uploads activated Gaussians.
+    pub fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
+        self.uploader().upload(scene)
+    }
+
+    /// A scene of `count` Gaussians whose records and SH texels (degree `sh_degree`) a
+    /// device pass writes ([`GpuScene::device_buffers`]) instead of an upload: training
+    /// keeps its parameters on the device and writes the activated values there.
+    pub fn scene_for_device_writes(&self, count: u32, sh_degree: u32) -> GpuResult<GpuScene> {
+        self.uploader().scene_for_device_writes(count, sh_degree)
+    }
+
+    /// Feature channels (`k` per Gaussian, in groups of four: a buffer of a vec4 per
+    /// Gaussian each) for `count` Gaussians, not filled: a device pass writes them
+    /// ([`GpuFeatures::device_buffers`]), or [`Self::upload_features`] uploads them.
+    pub fn features_for_device_writes(&self, count: u32, k: usize) -> GpuResult<GpuFeatures> {
+        self.uploader().features_for_device_writes(count, k)
+    }
+
+    /// Uploads the scene's feature channels (four per buffer, for the feature blend).
+    pub fn upload_features(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+        self.uploader().upload_features(scene)
+    }
+
+    /// Uploads the surface pass's axes of `scene` ([`surface_axes`](crate::core::model::surface::surface_axes): each Gaussian's unit
+    /// smallest-scale axis and its dot product with the centre, one group of four): frames
+    /// blended with them ([`crate::render::FrameRequest::features`]) hold, per pixel, the
+    /// blended facing normals and the median depth
+    /// ([`crate::core::model::surface::surface_planes`] reads them).
+    pub fn upload_surface(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+        self.uploader().upload_surface(scene)
+    }
+
+    /// What an upload needs of the renderer.
+    fn uploader(&self) -> frame::upload::Uploader<'_> {
+        frame::upload::Uploader {
+            ctx: &self.ctx,
+            compact: self.compact,
+            texel_io: self.pipelines.texel_io(),
+        }
+    }
+
     /// Builds every pipeline on `ctx`, with the blend kernel suited to the device.
     pub fn new(ctx: GpuContext) -> GpuResult<Self> {
         let kernel = blend::BlendKernel::for_device(&ctx);
@@ -525,20 +572,27 @@ impl GpuRenderer {
         self.complete(&ticket)?;
         let output = match ticket.readback {
             Readback::Float => {
-                let mut frame = self.read_frame(ticket.set, &ticket.cam)?;
+                let mut frame = self.sets[ticket.set].read_frame(&ticket.cam)?;
                 if let Some((features, None)) = ticket.features {
                     let pixels = ticket.cam.width as usize * ticket.cam.height as usize;
                     frame.feature_count = features.channels;
-                    frame.features =
-                        self.read_feature_planes(ticket.set, features.channels, pixels)?;
+                    frame.features = self.sets[ticket.set].read_feature_planes(
+                        &self.ctx,
+                        features.channels,
+                        pixels,
+                    )?;
                 }
                 Output::Frame(frame)
             }
-            Readback::Rgba8 => Output::Rgba8(self.read_rgba8(ticket.set, &ticket.cam)?),
+            Readback::Rgba8 => Output::Rgba8(self.sets[ticket.set].read_rgba8(&ticket.cam)?),
             Readback::Counters => Output::OnDevice,
             Readback::Intermediates => Output::Intermediates(Box::new((
-                self.read_frame(ticket.set, &ticket.cam)?,
-                self.read_intermediates(ticket.scene, &ticket.cam)?,
+                self.sets[ticket.set].read_frame(&ticket.cam)?,
+                self.sets[self.last.set].read_intermediates(
+                    &self.ctx,
+                    ticket.scene,
+                    &ticket.cam,
+                )?,
             ))),
         };
         Ok(Rendered {

@@ -9,7 +9,7 @@
 //! weights `w_i = alpha_i T_i` into the first three channels of a four-channel plane; the
 //! fourth holds the median depth: the depth of the Gaussian whose compositing takes the
 //! pixel's transmittance from above 0.5 to 0.5 or below (0 where it never gets there).
-//! The GPU's `glsl/render/forward/blend_features.comp` (`SURFACE 1`) and [`crate::cpu::render_surface`]
+//! The GPU's `glsl/render/forward/blend_features.comp` (`SURFACE 1`) and [`crate::cpu::surface::render_surface`]
 //! do exactly this; [`surface_planes`] turns the blended plane into unit normals in world
 //! or camera space and the median depth.
 

@@ -4,7 +4,7 @@
 //! output pixel (colour, alpha, depth) to the gradient with respect to every Gaussian's
 //! centre, quaternion, scale, opacity and colour (SH coefficients or direct channels).
 //! A pinhole camera projects by the EWA rule; every other lens by the unscented
-//! transform, differentiated through its sigma points ([`lens`]); a panorama that wraps
+//! transform, differentiated through its sigma points (`lens.rs`); a panorama that wraps
 //! around draws each Gaussian at the copy nearest each tile, as the renderers do.
 //!
 //! It is the yardstick of the Vulkan backward pass and is itself checked against central

@@ -3,12 +3,12 @@
 
 use crate::core::camera::Camera;
 use crate::core::frame::Frame;
-use crate::gpu::{BufferSlice, GpuError, GpuImage, GpuResult};
+use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuImage, GpuResult};
 use crate::render::forward::types::{Counters, Splat};
 
 use crate::render::forward::features;
 use crate::render::frame::buffers::FrameSet;
-use crate::render::{bin_grid, GpuRenderer, GpuScene, Rgba8Frame};
+use crate::render::{bin_grid, GpuScene, Rgba8Frame};
 
 /// Intermediate buffers of a frame, read back for tests against the CPU reference.
 #[derive(Clone, Debug, Default)]
@@ -37,21 +37,21 @@ pub struct Intermediates {
     pub bins: (u32, u32),
 }
 
-impl GpuRenderer {
-    /// The `k` blended channels of set `set`'s last features frame, pixel-major.
+impl FrameSet {
+    /// The `k` blended channels of the set's last features frame, pixel-major.
     pub(crate) fn read_feature_planes(
         &self,
-        set: usize,
+        ctx: &GpuContext,
         k: usize,
         pixels: usize,
     ) -> GpuResult<Vec<f32>> {
-        let planes = self.sets[set]
+        let planes = self
             .feature_planes
             .as_ref()
             .ok_or_else(|| GpuError::InvalidArgument("no feature image was rendered".into()))?;
         let stride = (planes.plane_bytes / 16) as usize;
         let groups = features::groups(k);
-        let all: Vec<[f32; 4]> = planes.buffer.read(&self.ctx, stride * groups)?;
+        let all: Vec<[f32; 4]> = planes.buffer.read(ctx, stride * groups)?;
         let mut out = vec![0f32; pixels * k];
         for g in 0..groups {
             let plane = &all[g * stride..g * stride + pixels];
@@ -67,12 +67,9 @@ impl GpuRenderer {
         Ok(out)
     }
 
-    pub(crate) fn read_counters(&self, set: usize) -> GpuResult<Counters> {
-        self.sets[set].counters()
-    }
-
-    pub(crate) fn read_frame(&self, set: usize, cam: &Camera) -> GpuResult<Frame> {
-        let f = self.sets[set]
+    /// The finished frame's colour, alpha and depth, read back as floats.
+    pub(crate) fn read_frame(&self, cam: &Camera) -> GpuResult<Frame> {
+        let f = self
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
@@ -107,8 +104,9 @@ impl GpuRenderer {
         })
     }
 
-    pub(crate) fn read_rgba8(&self, set: usize, cam: &Camera) -> GpuResult<Rgba8Frame> {
-        let f = self.sets[set]
+    /// The finished frame's colour, packed to 8 bits on the device.
+    pub(crate) fn read_rgba8(&self, cam: &Camera) -> GpuResult<Rgba8Frame> {
+        let f = self
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
@@ -121,22 +119,21 @@ impl GpuRenderer {
         })
     }
 
-    /// The intermediate buffers of the last frame finished.
+    /// The intermediate buffers of the frame finished in this set.
     pub(crate) fn read_intermediates(
         &self,
+        ctx: &GpuContext,
         scene: &GpuScene,
         cam: &Camera,
     ) -> GpuResult<Intermediates> {
-        let set = &self.sets[self.last.set];
-        let f = set
+        let f = self
             .frame
             .as_ref()
             .ok_or_else(|| GpuError::Internal("no frame buffers for a finished frame".into()))?;
-        let ctx = &self.ctx;
         let n = scene.count as usize;
-        let counters = self.read_counters(self.last.set)?;
+        let counters = self.counters()?;
         let sorted = counters.sort_count as usize;
-        let bin_size = set.bin_size;
+        let bin_size = self.bin_size;
         let (bx, by) = bin_grid(bin_size, cam.width, cam.height);
         Ok(Intermediates {
             splats: f.splats.read(ctx, n)?,
@@ -158,7 +155,7 @@ impl GpuRenderer {
 /// of them, and the colour image whose alpha is each pixel's `1 - T_final`. Valid until
 /// the renderer records its next frame. For a frame rendered in depth-ordered chunks the
 /// pairs and ranges are the last chunk's ([`crate::render::FrameStats::chunks`] says how many there were).
-/// With [`GpuRenderer::set_save_forward_state`] a frame in one piece also saves each
+/// With [`GpuRenderer::set_save_forward_state`](crate::render::GpuRenderer::set_save_forward_state) a frame in one piece also saves each
 /// pixel's last contributor.
 #[derive(Clone, Copy)]
 pub struct ForwardState<'a> {
@@ -191,18 +188,11 @@ pub struct ForwardState<'a> {
     /// Two u32 per pixel (row-major): one past the index into the sorted pairs of the
     /// last Gaussian composited into the pixel (0 for none), and the bits of the pixel's
     /// final transmittance (f32). Only when the frame was rendered with
-    /// [`GpuRenderer::set_save_forward_state`] and in one piece.
+    /// [`GpuRenderer::set_save_forward_state`](crate::render::GpuRenderer::set_save_forward_state) and in one piece.
     pub last_contributor: Option<BufferSlice<'a>>,
     /// The blended feature channels of a features frame: one plane of vec4s per group of
     /// four channels, and the vec4s from one plane to the next.
     pub feature_planes: Option<(BufferSlice<'a>, u32)>,
-}
-
-impl GpuRenderer {
-    /// The saved state of the last finished frame ([`ForwardState`]).
-    pub fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
-        self.sets[self.last.set].forward_state()
-    }
 }
 
 impl FrameSet {

@@ -290,7 +290,7 @@ impl GpuRenderer {
                     }
                 }
             } else {
-                (self.read_counters(t.set)?, 1)
+                (self.sets[t.set].counters()?, 1)
             };
             let pairs = counters.pairs();
             let set = &self.sets[t.set];
@@ -390,7 +390,7 @@ impl GpuRenderer {
         }
         self.record_ticket(t, true, Pass::Front)?;
         let mut timings = self.read_timings(t.set)?;
-        let front = self.read_counters(t.set)?;
+        let front = self.sets[t.set].counters()?;
         let pairs = front.pairs();
         let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
         let too_many = pairs > small_bin_limit(max);
@@ -445,7 +445,7 @@ impl GpuRenderer {
         }
         self.timings = timings;
         // Copied after the last chunk: the front's totals, the chunks' loop lengths.
-        let counters = self.read_counters(t.set)?;
+        let counters = self.sets[t.set].counters()?;
         Ok(Some((counters, chunks.len() as u32)))
     }
 }

@@ -3,12 +3,12 @@
 
 use crate::core::model::surface::{surface_axes, surface_axis, SURFACE_CHANNELS};
 use crate::core::model::ActivatedScene;
-use crate::gpu::{BufferView, GpuBuffer, GpuError, GpuResult, MemoryKind};
+use crate::gpu::{BufferView, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
 use crate::render::forward::types::{GpuGaussian, GpuGaussianCompact};
 use ash::vk;
 
+use crate::render::check_binding;
 use crate::render::forward::{features, shade};
-use crate::render::{check_binding, GpuRenderer};
 
 /// A scene uploaded to the device.
 pub struct GpuScene {
@@ -38,7 +38,7 @@ impl GpuScene {
     pub fn uploaded_len(&self) -> u32 {
         self.uploaded
     }
-    /// Whether the scene was uploaded compact ([`GpuRenderer::set_compact`]: fp16 SH, scales and rotations).
+    /// Whether the scene was uploaded compact ([`GpuRenderer::set_compact`](crate::render::GpuRenderer::set_compact): fp16 SH, scales and rotations).
     pub fn is_compact(&self) -> bool {
         self.compact
     }
@@ -56,7 +56,7 @@ impl GpuScene {
     }
     /// The records (`GpuGaussian`, 48 bytes each) and the SH coefficients (RGBA32F texels,
     /// [`sh_texel_stride`] per Gaussian) as storage buffers, for a device pass that writes
-    /// them ([`GpuRenderer::scene_for_device_writes`]).
+    /// them ([`GpuRenderer::scene_for_device_writes`](crate::render::GpuRenderer::scene_for_device_writes)).
     pub fn device_buffers(&self) -> (crate::gpu::BufferSlice<'_>, crate::gpu::BufferSlice<'_>) {
         (self.gaussians.whole(), self.sh.whole())
     }
@@ -70,7 +70,7 @@ pub struct GpuFeatures {
     pub(crate) groups: Vec<GpuBuffer>,
     pub(crate) channels: usize,
     pub(crate) count: u32,
-    /// The surface pass's axes ([`GpuRenderer::upload_surface`]), blended by the feature
+    /// The surface pass's axes ([`GpuRenderer::upload_surface`](crate::render::GpuRenderer::upload_surface)), blended by the feature
     /// blend's surface variant.
     pub(crate) surface: bool,
 }
@@ -80,7 +80,7 @@ impl GpuFeatures {
     pub fn channels(&self) -> usize {
         self.channels
     }
-    /// Whether these are the surface pass's axes ([`GpuRenderer::upload_surface`]): frames
+    /// Whether these are the surface pass's axes ([`GpuRenderer::upload_surface`](crate::render::GpuRenderer::upload_surface)): frames
     /// blended with them hold facing normals and the median depth.
     pub fn is_surface(&self) -> bool {
         self.surface
@@ -90,7 +90,7 @@ impl GpuFeatures {
         self.groups.iter().map(|b| b.size()).sum()
     }
     /// The groups' buffers (a vec4 per Gaussian each), for a device pass that writes them
-    /// ([`GpuRenderer::features_for_device_writes`]).
+    /// ([`GpuRenderer::features_for_device_writes`](crate::render::GpuRenderer::features_for_device_writes)).
     pub fn device_buffers(&self) -> Vec<crate::gpu::BufferSlice<'_>> {
         self.groups.iter().map(|b| b.whole()).collect()
     }
@@ -106,9 +106,18 @@ pub fn sh_texel_stride(sh_degree: u32) -> u32 {
     (3 * (sh_degree + 1) * (sh_degree + 1)).div_ceil(4)
 }
 
-impl GpuRenderer {
-    /// Uploads activated Gaussians.
-    pub fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
+/// What an upload needs of the renderer: the device, whether scenes go up compact
+/// ([`GpuRenderer::set_compact`](crate::render::GpuRenderer::set_compact)) and whether preprocess reads the records through texel
+/// views (CPU devices).
+pub(crate) struct Uploader<'a> {
+    pub(crate) ctx: &'a GpuContext,
+    pub(crate) compact: bool,
+    pub(crate) texel_io: bool,
+}
+
+impl Uploader<'_> {
+    /// [`GpuRenderer::upload`](crate::render::GpuRenderer::upload).
+    pub(crate) fn upload(&self, scene: &ActivatedScene) -> GpuResult<GpuScene> {
         let count = u32::try_from(scene.len()).map_err(|_| {
             GpuError::Input(format!(
                 "{} Gaussians exceed the 2^32 limit of one upload",
@@ -169,17 +178,17 @@ impl GpuRenderer {
                 .collect();
             let bytes = (halves.len() * 2).max(8) as u64;
             let sh = GpuBuffer::new(
-                &self.ctx,
+                self.ctx,
                 "sh coefficients (fp16)",
                 bytes,
                 MemoryKind::Device,
             )?;
-            sh.upload(&self.ctx, &halves)?;
+            sh.upload(self.ctx, &halves)?;
             (sh, vk::Format::R16G16B16A16_SFLOAT, bytes)
         } else {
             let bytes = (sh_padded.len() * 4).max(16) as u64;
-            let sh = GpuBuffer::new(&self.ctx, "sh coefficients", bytes, MemoryKind::Device)?;
-            sh.upload(&self.ctx, &sh_padded)?;
+            let sh = GpuBuffer::new(self.ctx, "sh coefficients", bytes, MemoryKind::Device)?;
+            sh.upload(self.ctx, &sh_padded)?;
             (sh, vk::Format::R32G32B32A32_SFLOAT, bytes)
         };
         self.scene_of(gaussians, (sh, format, sh_bytes), count, scene.sh_degree)
@@ -213,11 +222,11 @@ impl GpuRenderer {
         count: u32,
         sh_degree: u32,
     ) -> GpuResult<GpuScene> {
-        let sh_texels = BufferView::new(&self.ctx, &sh, format, 0, sh_bytes)?;
-        let gaussian_texels = if self.pipelines.texel_io() {
+        let sh_texels = BufferView::new(self.ctx, &sh, format, 0, sh_bytes)?;
+        let gaussian_texels = if self.texel_io {
             let bytes = gaussians.size() / 16 * 16;
             Some(BufferView::new(
-                &self.ctx,
+                self.ctx,
                 &gaussians,
                 vk::Format::R32G32B32A32_UINT,
                 0,
@@ -239,10 +248,12 @@ impl GpuRenderer {
         })
     }
 
-    /// A scene of `count` Gaussians whose records and SH texels (degree `sh_degree`) a
-    /// device pass writes ([`GpuScene::device_buffers`]) instead of an upload: training
-    /// keeps its parameters on the device and writes the activated values there.
-    pub fn scene_for_device_writes(&self, count: u32, sh_degree: u32) -> GpuResult<GpuScene> {
+    /// [`GpuRenderer::scene_for_device_writes`](crate::render::GpuRenderer::scene_for_device_writes).
+    pub(crate) fn scene_for_device_writes(
+        &self,
+        count: u32,
+        sh_degree: u32,
+    ) -> GpuResult<GpuScene> {
         if self.compact {
             return Err(GpuError::InvalidArgument(
                 "a scene written on the device is full precision; turn the compact upload off"
@@ -250,19 +261,21 @@ impl GpuRenderer {
             ));
         }
         let record_bytes = (u64::from(count) * std::mem::size_of::<GpuGaussian>() as u64).max(16);
-        let gaussians = GpuBuffer::new(&self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
+        let gaussians = GpuBuffer::new(self.ctx, "gaussians", record_bytes, MemoryKind::Device)?;
         self.check_sh_texels(count, sh_degree)?;
         let sh_bytes = (u64::from(count) * u64::from(sh_texel_stride(sh_degree)) * 16).max(16);
-        check_binding(&self.ctx, "sh coefficients", sh_bytes)?;
-        let sh = GpuBuffer::new(&self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
+        check_binding(self.ctx, "sh coefficients", sh_bytes)?;
+        let sh = GpuBuffer::new(self.ctx, "sh coefficients", sh_bytes, MemoryKind::Device)?;
         let format = vk::Format::R32G32B32A32_SFLOAT;
         self.scene_of(gaussians, (sh, format, sh_bytes), count, sh_degree)
     }
 
-    /// Feature channels (`k` per Gaussian, in groups of four: a buffer of a vec4 per
-    /// Gaussian each) for `count` Gaussians, not filled: a device pass writes them
-    /// ([`GpuFeatures::device_buffers`]), or [`Self::upload_features`] uploads them.
-    pub fn features_for_device_writes(&self, count: u32, k: usize) -> GpuResult<GpuFeatures> {
+    /// [`GpuRenderer::features_for_device_writes`](crate::render::GpuRenderer::features_for_device_writes).
+    pub(crate) fn features_for_device_writes(
+        &self,
+        count: u32,
+        k: usize,
+    ) -> GpuResult<GpuFeatures> {
         if k == 0 {
             return Err(GpuError::InvalidArgument("no feature channels".into()));
         }
@@ -270,11 +283,11 @@ impl GpuRenderer {
         for g in 0..features::groups(k) {
             let name = format!("features {}..{}", g * 4, (g * 4 + 4).min(k));
             let bytes = (u64::from(count) * 16).max(16);
-            check_binding(&self.ctx, &name, bytes)?;
-            let buf = GpuBuffer::new(&self.ctx, &name, bytes, MemoryKind::Device)?;
-            if self.pipelines.texel_io() {
+            check_binding(self.ctx, &name, bytes)?;
+            let buf = GpuBuffer::new(self.ctx, &name, bytes, MemoryKind::Device)?;
+            if self.texel_io {
                 views.push(BufferView::new(
-                    &self.ctx,
+                    self.ctx,
                     &buf,
                     vk::Format::R32G32B32A32_SFLOAT,
                     0,
@@ -300,13 +313,13 @@ impl GpuRenderer {
     ) -> GpuResult<GpuBuffer> {
         // At least one texel, so the preprocess's texel view is valid for an empty scene.
         let bytes = (std::mem::size_of_val(records) as u64).max(16);
-        let buffer = GpuBuffer::new(&self.ctx, name, bytes, MemoryKind::Device)?;
-        buffer.upload(&self.ctx, records)?;
+        let buffer = GpuBuffer::new(self.ctx, name, bytes, MemoryKind::Device)?;
+        buffer.upload(self.ctx, records)?;
         Ok(buffer)
     }
 
-    /// Uploads the scene's feature channels (four per buffer, for the feature blend).
-    pub fn upload_features(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+    /// [`GpuRenderer::upload_features`](crate::render::GpuRenderer::upload_features).
+    pub(crate) fn upload_features(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
         let k = scene.feature_count;
         let n = scene.len();
         if k == 0 || scene.features.len() != n * k {
@@ -329,17 +342,13 @@ impl GpuRenderer {
                     }
                 }
             }
-            buf.upload(&self.ctx, &v)?;
+            buf.upload(self.ctx, &v)?;
         }
         Ok(uploaded)
     }
 
-    /// Uploads the surface pass's axes of `scene` ([`surface_axes`]: each Gaussian's unit
-    /// smallest-scale axis and its dot product with the centre, one group of four): frames
-    /// blended with them ([`crate::render::FrameRequest::features`]) hold, per pixel, the
-    /// blended facing normals and the median depth
-    /// ([`crate::core::model::surface::surface_planes`] reads them).
-    pub fn upload_surface(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
+    /// [`GpuRenderer::upload_surface`](crate::render::GpuRenderer::upload_surface).
+    pub(crate) fn upload_surface(&self, scene: &ActivatedScene) -> GpuResult<GpuFeatures> {
         let n = scene.len();
         let count = u32::try_from(n).map_err(|_| {
             GpuError::Input(format!("{n} Gaussians exceed the 2^32 limit of one upload"))
@@ -364,7 +373,7 @@ impl GpuRenderer {
         if axes.is_empty() {
             axes.push([0.0; 4]);
         }
-        uploaded.groups[0].upload(&self.ctx, &axes)?;
+        uploaded.groups[0].upload(self.ctx, &axes)?;
         uploaded.surface = true;
         Ok(uploaded)
     }
