@@ -18,71 +18,58 @@ use crate::render::forward::shade::ShadeBindings;
 use crate::render::forward::types::{self, Counters, FrameParams};
 use crate::render::forward::{blend, keys, preprocess};
 use crate::render::frame::buffers::FeaturePlanes;
-use crate::render::frame::pipelines::FramePipelines;
+use crate::render::frame::pipelines::{FramePipelines, Pipelines};
 use crate::render::{
-    bin_grid, tile_bits, FrameBuffers, FrameSet, GpuFeatures, GpuRenderer, GpuScene, Pass,
-    Readback, Stage, Ticket,
+    bin_grid, tile_bits, FrameBuffers, FrameSet, GpuFeatures, GpuScene, Pass, Readback, Stage,
+    Ticket,
 };
 use ash::vk;
 
-impl GpuRenderer {
-    /// Builds the pipelines the ticket's frame needs, records `pass` of it into its set's
-    /// command buffer and submits it; waits for it when `wait`.
-    pub(crate) fn record_and_submit(
-        &mut self,
-        t: &Ticket,
-        wait: bool,
-        pass: Pass,
-    ) -> GpuResult<()> {
-        let set = self
-            .sets
-            .get(t.set)
-            .ok_or_else(|| GpuError::Internal(format!("no frame set {}", t.set)))?;
-        let needs = t.needs(set.saves_last);
-        self.pipelines.prepare(&self.ctx, needs)?;
-        let window = self.preprocess_window();
-        let Self {
-            pipelines,
-            sets,
-            ctx,
-            ..
-        } = self;
-        let FrameSet {
-            slot,
-            timer,
-            frame,
-            feature_planes,
-            bin_size,
-            ..
-        } = sets
-            .get_mut(t.set)
-            .ok_or_else(|| GpuError::Internal(format!("no frame set {}", t.set)))?;
-        let f = frame
-            .as_ref()
-            .ok_or_else(|| GpuError::Internal("the frame buffers were not made".into()))?;
-        let mut recorder = FrameRecorder {
-            ctx,
-            timer,
-            buffers: f,
-            pipelines: pipelines.frame(needs)?,
-            scene: t.scene,
-            cam: &t.cam,
-            opts: &t.opts,
-            readback: t.readback,
-            features: t.features.map(|(features, _)| features),
-            shader: t.features.and_then(|(_, shader)| shader),
-            feature_planes: feature_planes.as_ref(),
-            params: frame_params(t.scene, &t.cam, &t.opts, f.capacity, *bin_size),
-            bin_size: *bin_size,
-            window,
-            save_last: needs.save_last,
-        };
-        let record = |cmd| recorder.record(cmd, pass);
-        if wait {
-            ctx.submit_slot(slot, record)
-        } else {
-            ctx.submit_slot_nowait(slot, record)
-        }
+/// Builds the pipelines the ticket's frame needs, records `pass` of it into its set's
+/// command buffer (`set`, the ticket's) and submits it; waits for it when `wait`.
+/// `window`: Gaussians per preprocess dispatch.
+pub(crate) fn record_and_submit(
+    ctx: &GpuContext,
+    pipelines: &mut Pipelines,
+    set: &mut FrameSet,
+    window: u32,
+    (t, wait, pass): (&Ticket, bool, Pass),
+) -> GpuResult<()> {
+    let needs = t.needs(set.saves_last);
+    pipelines.prepare(ctx, needs)?;
+    let FrameSet {
+        slot,
+        timer,
+        frame,
+        feature_planes,
+        bin_size,
+        ..
+    } = set;
+    let f = frame
+        .as_ref()
+        .ok_or_else(|| GpuError::Internal("the frame buffers were not made".into()))?;
+    let mut recorder = FrameRecorder {
+        ctx,
+        timer,
+        buffers: f,
+        pipelines: pipelines.frame(needs)?,
+        scene: t.scene,
+        cam: &t.cam,
+        opts: &t.opts,
+        readback: t.readback,
+        features: t.features.map(|(features, _)| features),
+        shader: t.features.and_then(|(_, shader)| shader),
+        feature_planes: feature_planes.as_ref(),
+        params: frame_params(t.scene, &t.cam, &t.opts, f.capacity, *bin_size),
+        bin_size: *bin_size,
+        window,
+        save_last: needs.save_last,
+    };
+    let record = |cmd| recorder.record(cmd, pass);
+    if wait {
+        ctx.submit_slot(slot, record)
+    } else {
+        ctx.submit_slot_nowait(slot, record)
     }
 }
 

@@ -255,7 +255,18 @@ impl GpuRenderer {
             let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
             self.ensure_feature_planes(t.set, features, pixels)?;
         }
-        self.record_and_submit(t, wait, pass)
+        let window = self.preprocess_window();
+        let set = self
+            .sets
+            .get_mut(t.set)
+            .ok_or_else(|| GpuError::Internal(format!("no frame set {}", t.set)))?;
+        super::record::record_and_submit(
+            &self.ctx,
+            &mut self.pipelines,
+            set,
+            window,
+            (t, wait, pass),
+        )
     }
 
     /// Waits for the ticket's frame and checks its counters: when the frame needed more
@@ -356,7 +367,7 @@ impl GpuRenderer {
             }
         }
         if !chunked {
-            self.timings = self.read_timings(t.set)?;
+            self.timings = self.sets[t.set].read_timings(&self.ctx)?;
         }
         self.last = LastFrame {
             set: t.set,
@@ -389,7 +400,7 @@ impl GpuRenderer {
             )?);
         }
         self.record_ticket(t, true, Pass::Front)?;
-        let mut timings = self.read_timings(t.set)?;
+        let mut timings = self.sets[t.set].read_timings(&self.ctx)?;
         let front = self.sets[t.set].counters()?;
         let pairs = front.pairs();
         let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
@@ -441,7 +452,7 @@ impl GpuRenderer {
                 last: b + 1 == batches,
             };
             self.record_ticket(t, true, pass)?;
-            timings.add(&self.read_timings(t.set)?);
+            timings.add(&self.sets[t.set].read_timings(&self.ctx)?);
         }
         self.timings = timings;
         // Copied after the last chunk: the front's totals, the chunks' loop lengths.

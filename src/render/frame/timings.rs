@@ -2,7 +2,9 @@
 
 use crate::gpu::{GpuError, GpuResult};
 
-use crate::render::{GpuRenderer, CHUNKS_PER_SUBMIT};
+use crate::gpu::GpuContext;
+use crate::render::frame::buffers::FrameSet;
+use crate::render::CHUNKS_PER_SUBMIT;
 
 /// The timed stages of a frame and of its backward pass: each stage's timestamp pair and
 /// debug label are named by it.
@@ -225,16 +227,17 @@ pub struct FrameStats {
     /// frame needed more pairs than one buffer holds at the smaller size).
     pub bin_size: u32,
     /// Depth-ordered chunks the pairs were keyed, sorted and blended in: 1 when they fit
-    /// the key buffers at once (see [`GpuRenderer`]'s chunked frames).
+    /// the key buffers at once (see [`GpuRenderer`](crate::render::GpuRenderer)'s chunked frames).
     pub chunks: u32,
     /// Pairs the key buffers hold (the pair sort's digit tables are laid out for them).
     pub key_capacity: u32,
 }
 
-impl GpuRenderer {
-    pub(crate) fn read_timings(&self, set: usize) -> GpuResult<StageTimings> {
-        let timer = &self.sets[set].timer;
-        let stages = timer.read(&self.ctx)?;
+impl FrameSet {
+    /// The stage times of the set's last submission, each stage's chunks added.
+    pub(crate) fn read_timings(&self, ctx: &GpuContext) -> GpuResult<StageTimings> {
+        let timer = &self.timer;
+        let stages = timer.read(ctx)?;
         let mut t = StageTimings::default();
         for (name, ms) in &stages {
             // Chunks time their stages once each.
@@ -243,7 +246,7 @@ impl GpuRenderer {
                 GpuError::Internal(format!("the frame timed an unknown stage {name:?}"))
             })? += *ms;
         }
-        t.total = timer.span_ms(&self.ctx)?;
+        t.total = timer.span_ms(ctx)?;
         Ok(t)
     }
 }
