@@ -293,6 +293,28 @@ pub fn variant_key<'a>(
     key
 }
 
+/// The shaders built in one variant, without defines of their own.
+const SHADERS_WITHOUT_DEFINES: [&str; 18] = [
+    "scan_reduce",
+    "scan_block",
+    "scan_add",
+    "order",
+    "pack",
+    "shade",
+    "shade_bwd",
+    "mlp_grad_reduce",
+    "ssim_prepare",
+    "ssim_map",
+    "ssim_grad",
+    "loss_reduce",
+    "appearance_apply",
+    "appearance_grad",
+    "train_step",
+    "train_mlp_step",
+    "count64_test",
+    "subgroup_probe",
+];
+
 /// Every variant that the renderer, the sort, the scan and the tests use: each boolean or
 /// enumerated choice a stage is built with. Numeric tunables of the sort are
 /// specialization constants instead, so any configuration the device allows uses these.
@@ -310,26 +332,7 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
     // SplatKernel::shader_id values: 0 Gaussian, 1 power.
     let splat_kernels = ["0u", "1u"];
     let mut out = Vec::new();
-    for shader in [
-        "scan_reduce",
-        "scan_block",
-        "scan_add",
-        "order",
-        "pack",
-        "shade",
-        "shade_bwd",
-        "mlp_grad_reduce",
-        "ssim_prepare",
-        "ssim_map",
-        "ssim_grad",
-        "loss_reduce",
-        "appearance_apply",
-        "appearance_grad",
-        "train_step",
-        "train_mlp_step",
-        "count64_test",
-        "subgroup_probe",
-    ] {
+    for shader in SHADERS_WITHOUT_DEFINES {
         out.push(v(shader, &[]));
     }
     // The loss's window: through buffers, or texel views (CPU devices).
