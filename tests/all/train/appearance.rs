@@ -279,7 +279,8 @@ fn a_known_colour_change_is_fit_by_the_changed_photos_transforms() {
 /// `train --appearance affine` from the command line: the same seed writes the same PLY
 /// and `appearance.json` bytes; a run resumed from its checkpoint writes the same files as
 /// the run that never stopped; a checkpoint without the transforms does not resume a run
-/// with them; the PLY is the scene alone (a plain run's format).
+/// with them, nor the reverse; before `--appearance-from` the run is the plain run, bit for
+/// bit; the PLY is the scene alone (a plain run's format).
 #[test]
 fn affine_runs_are_reproducible_and_resume_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
@@ -359,6 +360,18 @@ fn affine_runs_are_reproducible_and_resume_bit_for_bit() {
     assert!(String::from_utf8_lossy(&refused.stderr).contains("other settings"));
     let (refused, _) = run("e", &["--resume".into(), chk.to_str().unwrap().into()]);
     assert!(!refused.status.success());
+    // Before --appearance-from the run is the plain run: the same PLY bytes, and the
+    // identity written for every photo.
+    let late = ["--appearance", "affine", "--appearance-from", "500"].map(String::from);
+    let (late_run, l) = run("l", &late);
+    assert!(late_run.status.success());
+    let ply = |m: &std::path::Path| std::fs::read(m.join(at).join("point_cloud.ply")).unwrap();
+    assert!(
+        ply(&l) == ply(&p),
+        "a run whose transforms never started differs from a plain one"
+    );
+    let identities = read_transforms(&l.join(at).join(app::APPEARANCE_FILE));
+    assert!(identities.iter().all(|(_, t)| *t == app::IDENTITY));
     // The PLY is the scene alone: no appearance in it, the format of a plain run's.
     assert!(!p.join(at).join(app::APPEARANCE_FILE).exists());
     let header = |m: &std::path::Path| {
