@@ -70,7 +70,7 @@ pub(crate) struct TrainArgs {
     #[arg(long, value_name = "LR")]
     pub(crate) appearance_lr: Option<f32>,
     /// --appearance affine: weight of ||A - I||^2 + ||b||^2 in each photo's loss
-    /// [default: 0.01]
+    /// [default: 0.1]
     #[arg(long, value_name = "WEIGHT")]
     pub(crate) appearance_reg: Option<f32>,
     /// --appearance affine: the first iteration that applies and learns the transforms

@@ -317,7 +317,7 @@ impl GpuLoss {
         })
     }
 
-    /// Device bytes of the work buffers.
+    /// Device bytes of the work buffers (the appearance's too).
     pub fn device_bytes(&self) -> u64 {
         let work = self
             .work
@@ -327,7 +327,8 @@ impl GpuLoss {
             .io
             .as_ref()
             .map_or(0, |(_, b)| b.iter().map(|b| b.size()).sum());
-        work + io
+        let affine = self.affine.as_ref().map_or(0, AffinePasses::device_bytes);
+        work + io + affine
     }
 
     fn ensure_work(&mut self, ctx: &GpuContext, pixels: u64) -> GpuResult<()> {

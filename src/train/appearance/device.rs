@@ -98,6 +98,13 @@ impl AffinePasses {
         Ok(())
     }
 
+    /// Device bytes of the buffers (the read-back copy too).
+    pub fn device_bytes(&self) -> u64 {
+        self.bufs
+            .as_ref()
+            .map_or(0, |(_, b)| b.iter().map(GpuBuffer::size).sum())
+    }
+
     fn buffers(&self) -> GpuResult<&[GpuBuffer; 3]> {
         self.bufs
             .as_ref()
