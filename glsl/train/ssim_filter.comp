@@ -14,7 +14,7 @@
 #extension GL_EXT_control_flow_attributes : require
 #include "loss_common.glsl"
 
-layout(push_constant) uniform FilterBlock { FilterPush p; };
+layout(push_constant) uniform FilterBlock { ImageRowsPush p; };
 
 #ifndef TEXEL_FETCH
 #define TEXEL_FETCH 0
@@ -55,7 +55,7 @@ void main() {
         }
         [[unroll]] for (int j = 0; j < RUN; j++) {
             precise vec4 acc = vec4(0.0);
-            [[unroll]] for (int k = 0; k < 11; k++) acc += p.taps[k >> 2][k & 3] * win[j + k];
+            [[unroll]] for (int k = 0; k < 11; k++) acc += p.rows[k >> 2][k & 3] * win[j + k];
             if (at0 + j < int(len)) dst[(base + uint(at0 + j) * step) * groups + g] = acc;
         }
     }

@@ -58,6 +58,25 @@ pub(crate) struct TrainArgs {
     /// captures".
     #[arg(long)]
     pub(crate) mip_filter: bool,
+    /// Per-photo appearance: none, or affine (a 3x3 colour matrix and an offset per
+    /// training photo, applied to its render, background included, before the loss and
+    /// learnt with the scene, regularised towards the identity: exposure and white
+    /// balance that change between photos go there, not into the scene). Renders, the
+    /// PLY and evaluations are the scene alone; the transforms are written to
+    /// point_cloud/iteration_N/appearance.json. docs/training.md, "Appearance".
+    #[arg(long, default_value = "none", value_name = "none|affine")]
+    pub(crate) appearance: verisplat::train::appearance::AppearanceMode,
+    /// --appearance affine: Adam's learning rate of the transforms [default: 0.002]
+    #[arg(long, value_name = "LR")]
+    pub(crate) appearance_lr: Option<f32>,
+    /// --appearance affine: weight of ||A - I||^2 + ||b||^2 in each photo's loss
+    /// [default: 0.1]
+    #[arg(long, value_name = "WEIGHT")]
+    pub(crate) appearance_reg: Option<f32>,
+    /// --appearance affine: the first iteration that applies and learns the transforms
+    /// (before it the scene learns alone) [default: 500]
+    #[arg(long, value_name = "N")]
+    pub(crate) appearance_from: Option<u32>,
     /// What an RGBA photo's alpha does: ignore (dropped), mask (alpha below 0.5 is not
     /// trained on) or background (composited onto the training background) [default:
     /// ignore for a COLMAP data set, background for a transforms one]. Masks in
@@ -359,6 +378,7 @@ fn check_args(args: &TrainArgs) -> Result<()> {
             }
         }
     }
+    check_appearance_args(args)?;
     if args.densification_interval == 0 || args.opacity_reset_interval == 0 {
         bail!("--densification-interval and --opacity-reset-interval must be at least 1");
     }
@@ -367,6 +387,34 @@ fn check_args(args: &TrainArgs) -> Result<()> {
             "{}: is not a directory (a COLMAP data set: images/ and sparse/0/, or a NeRF-synthetic or nerfstudio one: transforms*.json)",
             args.dataset.display()
         );
+    }
+    Ok(())
+}
+
+/// Refuses the appearance flags without `--appearance affine`, a learning rate that is not
+/// positive and a negative weight.
+fn check_appearance_args(args: &TrainArgs) -> Result<()> {
+    use verisplat::train::appearance::AppearanceMode;
+    if args.appearance == AppearanceMode::None {
+        for (name, given) in [
+            ("--appearance-lr", args.appearance_lr.is_some()),
+            ("--appearance-reg", args.appearance_reg.is_some()),
+            ("--appearance-from", args.appearance_from.is_some()),
+        ] {
+            if given {
+                bail!("{name} belongs to --appearance affine");
+            }
+        }
+    }
+    if let Some(lr) = args.appearance_lr {
+        if !(lr.is_finite() && lr > 0.0) {
+            bail!("--appearance-lr must be a positive number, not {lr}");
+        }
+    }
+    if let Some(reg) = args.appearance_reg {
+        if !(reg.is_finite() && reg >= 0.0) {
+            bail!("--appearance-reg must be a number >= 0, not {reg}");
+        }
     }
     Ok(())
 }
@@ -560,6 +608,15 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         host_optimizer: false,
         resolution: args.resolution,
         mip_filter: args.mip_filter,
+        appearance: {
+            use verisplat::train::appearance as app;
+            app::AppearanceSettings {
+                mode: args.appearance,
+                lr: args.appearance_lr.unwrap_or(app::DEFAULT_LR),
+                reg: args.appearance_reg.unwrap_or(app::DEFAULT_REG),
+                from: args.appearance_from.unwrap_or(app::DEFAULT_FROM),
+            }
+        },
     })
 }
 

@@ -467,12 +467,18 @@ records! {
         pub counts: uvec4,
     }
 
-    /// The SSIM filter (`ssim_filter`).
-    pub struct FilterPush {
-        /// Width, height, vec4s per pixel, axis (0: x, 1: y).
+    /// An image's size and three vec4 rows: the SSIM filter's (`ssim_filter`) and a
+    /// training photo's affine colour transform (`appearance_apply`, `appearance_grad`).
+    /// One record for both: glslang 2023.2 (Debian's glslc) takes gigabytes and minutes on
+    /// `train_step` once `interface.glsl` declares a 27th record, so a push block of the
+    /// same layout shares this one.
+    pub struct ImageRowsPush {
+        /// `ssim_filter`: width, height, vec4s per pixel, axis (0: x, 1: y); the
+        /// appearance: width, height, 0, 0.
         pub size: uvec4,
-        /// The 11 normalised taps (`metrics::ssim`'s, in f32).
-        pub taps: [vec4; 3],
+        /// `ssim_filter`: the 11 normalised taps (`metrics::ssim`'s, in f32); the
+        /// appearance: row r of `[A | b]`, that is (A[r][0], A[r][1], A[r][2], b[r]).
+        pub rows: [vec4; 3],
     }
 
     /// The loss gradient (`ssim_grad`).

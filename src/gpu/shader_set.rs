@@ -41,6 +41,14 @@ pub const REDUCE_WG: u32 = 128;
 pub const REDUCE_ITEMS: u32 = 32;
 /// Values one `loss_reduce` workgroup sums.
 pub const REDUCE_SPAN: u32 = REDUCE_WG * REDUCE_ITEMS;
+/// Invocations per workgroup of the appearance transform's gradient (`appearance_grad`):
+/// a fixed-shape tree in shared memory, no subgroup operations, so that its partial sums
+/// are the same bits at every subgroup size.
+pub const APPEARANCE_WG: u32 = 128;
+/// Pixels each `appearance_grad` invocation adds, strided by [`APPEARANCE_WG`].
+pub const APPEARANCE_ITEMS: u32 = 8;
+/// Pixels one `appearance_grad` workgroup sums.
+pub const APPEARANCE_SPAN: u32 = APPEARANCE_WG * APPEARANCE_ITEMS;
 /// Invocations per workgroup of the neural shader's gradient sum (`mlp_grad_reduce`), one
 /// per parameter.
 pub const MLP_REDUCE_WG: u32 = 64;
@@ -190,6 +198,9 @@ pub fn shared_defines(tables: &[&[(&str, &[&str])]]) -> Vec<(String, String)> {
         ("REDUCE_ITEMS", format!("{REDUCE_ITEMS}u")),
         ("REDUCE_SPAN", format!("{REDUCE_SPAN}u")),
         ("MLP_REDUCE_WG", format!("{MLP_REDUCE_WG}u")),
+        ("APPEARANCE_WG", format!("{APPEARANCE_WG}u")),
+        ("APPEARANCE_ITEMS", format!("{APPEARANCE_ITEMS}u")),
+        ("APPEARANCE_SPAN", format!("{APPEARANCE_SPAN}u")),
         ("SCAN_WG", SCAN_WG.to_string()),
         ("SCAN_ITEMS", SCAN_ITEMS.to_string()),
         ("SCAN_BLOCK", format!("{SCAN_BLOCK}u")),

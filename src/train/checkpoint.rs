@@ -1,7 +1,7 @@
 //! Training checkpoints: everything a run needs to continue exactly as if it had never
 //! stopped (the Gaussians, Adam's moments and step counts, the densification statistics,
 //! the SH degree in use, the shader and its moments, the random state and the rest of the
-//! view order, the iteration), as one safetensors file (`chkpntN.safetensors` in the model
+//! view order, the iteration, the photos' appearance transforms and their moments), as one safetensors file (`chkpntN.safetensors` in the model
 //! directory): arrays as tensors, the rest in its metadata.
 
 use super::model::Model;
@@ -21,6 +21,9 @@ pub struct Checkpoint {
     pub model: Model,
     /// The data set and settings it belongs to (checked on resume).
     pub fingerprint: String,
+    /// The training photos' appearance transforms and their optimiser
+    /// (`--appearance affine`); their names are the data set's, not stored.
+    pub appearance: Option<crate::train::appearance::Appearances>,
 }
 
 const META: &str = "verisplat_checkpoint";
@@ -29,7 +32,12 @@ impl Checkpoint {
     /// The file's bytes.
     pub fn to_bytes(&self) -> Vec<u8> {
         use safetensors::tensor::TensorView;
-        let (arrays, meta) = self.model.state();
+        let (mut arrays, mut meta) = self.model.state();
+        if let Some(a) = &self.appearance {
+            let (more, steps) = a.state();
+            arrays.extend(more);
+            meta.insert("appearance_steps".into(), serde_json::json!(steps));
+        }
         let le = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
         let mut owned: Vec<(String, safetensors::Dtype, Vec<usize>, Vec<u8>)> = arrays
             .into_iter()
@@ -102,6 +110,22 @@ impl Checkpoint {
             ),
             Err(_) => None,
         };
+        let steps = match meta.get("appearance_steps") {
+            None => None,
+            Some(v) => Some(
+                v.as_array()
+                    .ok_or("has a broken appearance_steps")?
+                    .iter()
+                    .map(|s| {
+                        s.as_u64()
+                            .map(|x| x as u32)
+                            .ok_or("a bad appearance step count")
+                    })
+                    .collect::<Result<Vec<u32>, _>>()?,
+            ),
+        };
+        let appearance =
+            crate::train::appearance::Appearances::from_state(&mut arrays, steps, Vec::new())?;
         let model = Model::from_state(arrays, &meta, shader)?;
         let num = |k: &str| {
             meta.get(k)
@@ -128,6 +152,7 @@ impl Checkpoint {
                 .and_then(|v| v.as_str())
                 .unwrap_or_default()
                 .to_string(),
+            appearance,
         })
     }
 }

@@ -24,13 +24,16 @@
 //! mask's edge, where they see the photo); its gradient is zero at every masked pixel. On
 //! the device a masked pixel's target has w = 1 (0 where kept, as without a mask).
 
-use crate::core::shader_interface::{CountsPush, FilterPush, LossGradPush, RecordLayout, SizePush};
+use crate::core::shader_interface::{
+    CountsPush, ImageRowsPush, LossGradPush, RecordLayout, SizePush,
+};
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{
     BufferSlice, BufferView, ComputePipeline, GpuBuffer, GpuContext, GpuError, GpuResult,
     MemoryKind,
 };
+use crate::train::appearance::device::AffinePasses;
 use crate::train::shaders::bindings;
 
 /// The original's weight of the D-SSIM term (`lambda_dssim`).
@@ -199,6 +202,9 @@ pub struct GpuLoss {
     /// The work buffer the last loss left its sums in, its kept pixels' count and lambda, and
     /// whether its submission also copied them to `sums_readback`.
     last: Option<(ash::vk::Buffer, u64, f32, bool)>,
+    /// The affine appearance's passes ([`Self::record_image_affine`]), built at its first
+    /// use.
+    affine: Option<AffinePasses>,
 }
 
 /// A pass's writes before the next one's reads (through buffers or texel views).
@@ -257,7 +263,7 @@ impl GpuLoss {
                 "ssim_filter",
                 &[("TEXEL_FETCH", "0".into())],
                 &by_binding([(ssim_filter::SRC, s), (ssim_filter::DST, s)])?,
-                &FilterPush::LAYOUT,
+                &ImageRowsPush::LAYOUT,
             )?,
             filter_texel: if texel {
                 Some(ComputePipeline::from_embedded(
@@ -268,7 +274,7 @@ impl GpuLoss {
                         (ssim_filter::SRC, BindingKind::UniformTexelBuffer),
                         (ssim_filter::DST, s),
                     ])?,
-                    &FilterPush::LAYOUT,
+                    &ImageRowsPush::LAYOUT,
                 )?)
             } else {
                 None
@@ -307,10 +313,11 @@ impl GpuLoss {
             target_kept: 0,
             sums_readback: None,
             last: None,
+            affine: None,
         })
     }
 
-    /// Device bytes of the work buffers.
+    /// Device bytes of the work buffers (the appearance's too).
     pub fn device_bytes(&self) -> u64 {
         let work = self
             .work
@@ -320,7 +327,8 @@ impl GpuLoss {
             .io
             .as_ref()
             .map_or(0, |(_, b)| b.iter().map(|b| b.size()).sum());
-        work + io
+        let affine = self.affine.as_ref().map_or(0, AffinePasses::device_bytes);
+        work + io + affine
     }
 
     fn ensure_work(&mut self, ctx: &GpuContext, pixels: u64) -> GpuResult<()> {
@@ -435,9 +443,9 @@ impl GpuLoss {
         let filter = |cmd, src: &GpuBuffer, dst: &GpuBuffer, vecs: u32| -> GpuResult<()> {
             for (axis, (a, b)) in [(0u32, (src, dst)), (1u32, (dst, src))] {
                 let groups = filter_groups[axis as usize];
-                let push = FilterPush {
+                let push = ImageRowsPush {
                     size: [width, height, vecs, axis],
-                    taps,
+                    rows: taps,
                 };
                 match (&self.filter_texel, view_of(a)) {
                     (Some(pipeline), Some(view)) => pipeline.dispatch_resources(
@@ -643,6 +651,54 @@ impl GpuLoss {
         height: u32,
         lambda: f32,
     ) -> GpuResult<()> {
+        self.record_image_with(ctx, cmd, image, grad, (width, height), lambda, None)
+    }
+
+    /// [`Self::record_image`] of the photo's affine appearance `rows` (row r of `[A | b]`,
+    /// [`crate::train::appearance`]): the loss is that of `A c + b` (c the rendered pixel,
+    /// background included), `grad` ends as the render's gradient (`A^T` times the
+    /// loss's) and, after the submission, [`Self::read_affine_grads`] reads the
+    /// transform's.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_image_affine(
+        &mut self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        image: &crate::gpu::GpuImage,
+        grad: BufferSlice,
+        width: u32,
+        height: u32,
+        lambda: f32,
+        rows: &[[f32; 4]; 3],
+    ) -> GpuResult<()> {
+        if self.affine.is_none() {
+            self.affine = Some(AffinePasses::new(ctx)?);
+        }
+        self.record_image_with(ctx, cmd, image, grad, (width, height), lambda, Some(rows))
+    }
+
+    /// The affine appearance's 12 gradients (row r of `[A | b]` at `4 r..4 r + 4`) of the
+    /// last [`Self::record_image_affine`] (or [`Self::compute_affine`]), once its
+    /// submission has finished.
+    pub fn read_affine_grads(&self) -> GpuResult<[f64; 12]> {
+        self.affine
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidArgument("no appearance was recorded".into()))?
+            .read_grads()
+    }
+
+    /// [`Self::record_image`], through the appearance's passes with `rows`.
+    #[allow(clippy::too_many_arguments)]
+    fn record_image_with(
+        &mut self,
+        ctx: &GpuContext,
+        cmd: ash::vk::CommandBuffer,
+        image: &crate::gpu::GpuImage,
+        grad: BufferSlice,
+        (width, height): (u32, u32),
+        lambda: f32,
+        rows: Option<&[[f32; 4]; 3]>,
+    ) -> GpuResult<()> {
         let pixels = u64::from(width) * u64::from(height);
         if image.size() != (width, height) {
             return Err(GpuError::InvalidArgument(format!(
@@ -657,13 +713,25 @@ impl GpuLoss {
             ));
         }
         let io = self.io.take().expect("checked above");
+        let mut affine = self.affine.take();
         let result = (|| {
             let [img, tgt, _] = &io.1;
             image.copy_to_buffer(ctx, cmd, img, 0);
             self.record_target_copy(ctx, cmd, tgt);
             barrier(ctx, cmd, Access::TransferWrite, Access::ComputeRead);
+            let passes = match (rows, affine.as_mut()) {
+                (Some(rows), Some(passes)) => {
+                    passes.ensure(ctx, pixels)?;
+                    passes.record_apply(ctx, cmd, img.whole(), (width, height), rows)?;
+                    Some((passes, rows))
+                }
+                _ => None,
+            };
             let bufs = LossBuffers {
-                image: img.whole(),
+                image: match &passes {
+                    Some((p, _)) => p.corrected()?,
+                    None => img.whole(),
+                },
                 target: tgt.whole(),
                 grad,
             };
@@ -671,6 +739,9 @@ impl GpuLoss {
             let sums = self
                 .record_kept(ctx, cmd, &bufs, (width, height), kept, lambda)?
                 .handle();
+            if let Some((p, rows)) = passes {
+                p.record_grad(ctx, cmd, img.whole(), grad, (width, height), rows)?;
+            }
             // The sums to host-visible memory in this submission (16 bytes).
             if self.sums_readback.is_none() {
                 self.sums_readback = Some(GpuBuffer::new(
@@ -693,6 +764,7 @@ impl GpuLoss {
             Ok(())
         })();
         self.io = Some(io);
+        self.affine = affine;
         result
     }
 
@@ -753,6 +825,52 @@ impl GpuLoss {
         height: u32,
         lambda: f32,
     ) -> GpuResult<(LossValue, Vec<[f32; 3]>)> {
+        self.compute_with(ctx, image, target, keep, (width, height), lambda, None)
+            .map(|(value, grad, _)| (value, grad))
+    }
+
+    /// [`Self::compute_masked`] through the affine appearance `rows` (row r of `[A | b]`,
+    /// as [`Self::record_image_affine`]): the loss of `A image + b`, the gradient with
+    /// respect to `image` (`A^T` times the loss's) and the transform's 12 gradients.
+    #[allow(clippy::too_many_arguments)]
+    pub fn compute_affine(
+        &mut self,
+        ctx: &GpuContext,
+        image: &[[f32; 3]],
+        target: &[[f32; 3]],
+        keep: Option<&[bool]>,
+        width: u32,
+        height: u32,
+        lambda: f32,
+        rows: &[[f32; 4]; 3],
+    ) -> GpuResult<(LossValue, Vec<[f32; 3]>, [f64; 12])> {
+        if self.affine.is_none() {
+            self.affine = Some(AffinePasses::new(ctx)?);
+        }
+        let (value, grad, affine) = self.compute_with(
+            ctx,
+            image,
+            target,
+            keep,
+            (width, height),
+            lambda,
+            Some(rows),
+        )?;
+        Ok((value, grad, affine.expect("the passes ran")))
+    }
+
+    /// [`Self::compute_masked`], through the appearance's passes with `rows`.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn compute_with(
+        &mut self,
+        ctx: &GpuContext,
+        image: &[[f32; 3]],
+        target: &[[f32; 3]],
+        keep: Option<&[bool]>,
+        (width, height): (u32, u32),
+        lambda: f32,
+        rows: Option<&[[f32; 4]; 3]>,
+    ) -> GpuResult<(LossValue, Vec<[f32; 3]>, Option<[f64; 12]>)> {
         let pixels = u64::from(width) * u64::from(height);
         if image.len() as u64 != pixels || target.len() as u64 != pixels {
             return Err(GpuError::InvalidArgument(format!(
@@ -764,32 +882,62 @@ impl GpuLoss {
         self.stage_target_masked(ctx, target, keep)?;
         let kept = self.target_kept;
         let io = self.io.take().expect("made by stage_target");
+        // The passes, taken while the closure borrows `self` (put back below).
+        let mut affine = if rows.is_some() {
+            self.affine.take()
+        } else {
+            None
+        };
         let result = (|| {
             let [img, tgt, grad] = &io.1;
             let wide: Vec<[f32; 4]> = image.iter().map(|c| [c[0], c[1], c[2], 0.0]).collect();
             img.upload(ctx, &wide)?;
-            let bufs = LossBuffers {
-                image: img.whole(),
-                target: tgt.whole(),
-                grad: grad.whole(),
-            };
+            if let Some(p) = affine.as_mut() {
+                p.ensure(ctx, pixels)?;
+            }
             let mut sums = None;
             ctx.submit_and_wait("loss", |cmd| {
                 self.record_target_copy(ctx, cmd, tgt);
                 barrier(ctx, cmd, Access::Any, Access::Any);
+                let passes = affine.as_mut().zip(rows);
+                if let Some((p, rows)) = &passes {
+                    p.record_apply(ctx, cmd, img.whole(), (width, height), rows)?;
+                }
+                let bufs = LossBuffers {
+                    image: match &passes {
+                        Some((p, _)) => p.corrected()?,
+                        None => img.whole(),
+                    },
+                    target: tgt.whole(),
+                    grad: grad.whole(),
+                };
                 sums = Some(
                     self.record_kept(ctx, cmd, &bufs, (width, height), kept, lambda)?
                         .handle(),
                 );
+                if let Some((p, rows)) = passes {
+                    p.record_grad(ctx, cmd, img.whole(), grad.whole(), (width, height), rows)?;
+                }
                 barrier(ctx, cmd, Access::ComputeWrite, Access::Any);
                 Ok(())
             })?;
             self.last = sums.map(|h| (h, kept, lambda, false));
             let value = self.read_value(ctx)?;
             let g: Vec<[f32; 4]> = grad.read(ctx, pixels as usize)?;
-            Ok((value, g.iter().map(|v| [v[0], v[1], v[2]]).collect()))
+            let affine_grads = match &affine {
+                Some(p) => Some(p.read_grads()?),
+                None => None,
+            };
+            Ok((
+                value,
+                g.iter().map(|v| [v[0], v[1], v[2]]).collect(),
+                affine_grads,
+            ))
         })();
         self.io = Some(io);
+        if affine.is_some() {
+            self.affine = affine;
+        }
         result
     }
 }

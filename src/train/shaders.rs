@@ -1,5 +1,5 @@
 // The train wing's shaders (`glsl/train/`): the loss (SSIM's passes and the fixed-order
-// sum) and the optimiser steps, each shader's named bindings and every variant.
+// sum), the per-photo colour transforms (`appearance_*`) and the optimiser steps, each shader's named bindings and every variant.
 //
 // Compiled into the library (`crate::train::shaders`) and into the build script (a
 // `#[path]` module of `build.rs`), which compiles the variants: `std` only.
@@ -12,6 +12,8 @@ shader_bindings! {
     ssim_map { MOMENTS, IMAGE, TARGET, MAPS, SUMS }
     ssim_grad { FILTERED, IMAGE, TARGET, GRAD }
     loss_reduce { VALUES, SUMS }
+    appearance_apply { IMAGE, CORRECTED }
+    appearance_grad { IMAGE, GRAD, PARTIALS }
     train_step { STATE, M, V, GRADS, SH_GRADS, SPLATS, STATS, GAUSSIANS, SH, FEATURE_GRADS, FEATURES, FEAT0, FEAT1, FEAT2, FEAT3, NORMS, NORM_TOTAL }
     train_mlp_step { STATE, M, V, GRADS, WORDS, NORMS, NORM_TOTAL }
 }
@@ -23,6 +25,8 @@ pub fn shader_variants() -> Vec<ShaderVariant> {
         "ssim_map",
         "ssim_grad",
         "loss_reduce",
+        "appearance_apply",
+        "appearance_grad",
         "train_step",
         "train_mlp_step",
     ]

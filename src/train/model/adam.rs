@@ -19,9 +19,9 @@ pub(in crate::train) fn adam_corrections(t: u32) -> (f32, f32) {
 
 /// Adam's moments of one parameter array.
 #[derive(Clone, Debug, Default)]
-pub(super) struct Moments {
-    pub(super) m: Vec<f32>,
-    pub(super) v: Vec<f32>,
+pub(in crate::train) struct Moments {
+    pub(in crate::train) m: Vec<f32>,
+    pub(in crate::train) v: Vec<f32>,
 }
 
 impl Moments {
@@ -34,7 +34,7 @@ impl Moments {
 
     /// torch.optim.Adam's step (betas 0.9, 0.999, eps 1e-15 as the original sets it) with
     /// `lr(i)` per value, at step `t` (1-based).
-    pub(super) fn step(
+    pub(in crate::train) fn step(
         &mut self,
         params: &mut [f32],
         grads: &[f32],

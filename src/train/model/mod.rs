@@ -19,13 +19,13 @@ pub mod settings;
 pub mod state;
 
 pub(super) use adam::adam_corrections;
+pub(super) use adam::Moments;
 pub use init::{mean_sq_dist3, random_points};
 pub use mcmc::{noise_key, noise_normal, pcg_hash, relocation};
 pub use settings::{position_lr, Mcmc, Settings};
 
 use crate::core::model::grad::{ColorParams, SplatGrads, SplatParams};
 use crate::core::scene::{sigmoid, Scene};
-use adam::Moments;
 
 /// The logit (inverse sigmoid) of the probability `p`.
 fn logit(p: f32) -> f32 {

@@ -81,6 +81,9 @@ pub struct TrainOptions {
     /// Mip-Splatting's 3D filter (`--mip-filter`, [`crate::train::model::mip`]), folded
     /// into the saved scales and opacities.
     pub mip_filter: bool,
+    /// Per-photo appearance (`--appearance`, [`crate::train::appearance`]): none, or an
+    /// affine colour transform per training photo learnt with the scene.
+    pub appearance: crate::train::appearance::AppearanceSettings,
 }
 
 impl Default for TrainOptions {
@@ -106,6 +109,7 @@ impl Default for TrainOptions {
             host_optimizer: false,
             resolution: None,
             mip_filter: false,
+            appearance: Default::default(),
         }
     }
 }
@@ -135,6 +139,7 @@ impl TrainOptions {
             crate::core::model::Rules::Original => "",
             crate::core::model::Rules::Gsplat => "|rules gsplat",
         } + if self.mip_filter { "|mip-filter" } else { "" }
+            + &appearance_fingerprint(&self.appearance)
             + &lens_fingerprint(data)
             + &mask_fingerprint(data)
     }
@@ -156,6 +161,19 @@ fn mask_fingerprint(data: &Dataset) -> String {
         }
     }
     format!("|masks {hash:016x}")
+}
+
+/// The per-photo appearance's settings when one is learnt (a run with one resumes only
+/// from a checkpoint of the same); empty without, so that the fingerprints of earlier
+/// checkpoints stay as they were.
+fn appearance_fingerprint(a: &crate::train::appearance::AppearanceSettings) -> String {
+    match a.mode {
+        crate::train::appearance::AppearanceMode::None => String::new(),
+        mode => format!(
+            "|appearance {mode} lr {:?} reg {:?} from {}",
+            a.lr, a.reg, a.from
+        ),
+    }
 }
 
 /// The training cameras' lenses when one is not the pinhole (a run through a lens resumes
@@ -326,6 +344,8 @@ struct Run<'p> {
     /// Device memory at the peak so far, bytes.
     peak: u64,
     stage_sums: StageSums,
+    /// The training photos' appearance transforms (`--appearance affine`).
+    appearance: Option<crate::train::appearance::Appearances>,
 }
 
 /// Refuses options no run can start with.
@@ -373,7 +393,7 @@ pub fn train(
     let device_path = !opts.host_optimizer;
     for it in run.first..=s.iterations {
         let mut t = std::time::Instant::now();
-        let view = run.next_view(&job, it);
+        let (photo, view) = run.next_view(&job, it);
         let plan = Plan::at(&job, it, run.model.len());
         let due = Due::at(&job, it);
         // The original's order: the evaluation and the save at an iteration see the model
@@ -392,9 +412,9 @@ pub fn train(
         lap(&mut host, "outputs", &mut t);
         let before = rast.renderer().ctx().host_time();
         let value = if device_path {
-            run.device_step(&job, &pipelines, rast, loss, view, &plan)?
+            run.device_step(&job, &pipelines, rast, loss, (photo, view), &plan)?
         } else {
-            run.host_step(&job, rast, loss, view, &plan)?
+            run.host_step(&job, rast, loss, (photo, view), &plan)?
         };
         calls += rast.renderer().ctx().host_time().since(&before);
         lap(&mut host, "step", &mut t);

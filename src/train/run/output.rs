@@ -1,6 +1,7 @@
 //! The model directory as the original writes it: `input.ply` (the starting points),
 //! `cameras.json`, `cfg_args`, `point_cloud/iteration_N/point_cloud.ply` (and the
-//! shader of feature splats beside it), and the checkpoints (`chkpntN.safetensors`).
+//! shader of feature splats and the photos' appearance transforms beside it), and the
+//! checkpoints (`chkpntN.safetensors`).
 
 use super::{Job, Run, TrainError};
 use crate::core::camera::Camera;
@@ -120,6 +121,7 @@ impl Run<'_> {
             order: self.order.to_vec(),
             model: self.model.clone(),
             fingerprint: job.fingerprint.clone(),
+            appearance: self.appearance.clone(),
         };
         let path = job.out.join(format!("chkpnt{it}.safetensors"));
         write(&path, &c.to_bytes(), overwrite, &mut self.written).map(|()| path)
@@ -164,6 +166,11 @@ impl Run<'_> {
                 overwrite,
                 &mut self.written,
             )?;
+        }
+        if let Some(a) = &self.appearance {
+            let json = a.to_json(it);
+            let app_path = path.with_file_name(crate::train::appearance::APPEARANCE_FILE);
+            write(&app_path, json.as_bytes(), overwrite, &mut self.written)?;
         }
         note(format!(
             "[ITER {it}] saved {} ({} Gaussians)",

@@ -102,8 +102,9 @@ impl Due {
 impl Run<'_> {
     /// The start of iteration `it`: the SH degree in use rises every
     /// `sh_increase_interval` iterations, and the next training view is taken (a fresh
-    /// random order of them when the round is done).
-    pub(super) fn next_view<'d>(&mut self, job: &Job<'d>, it: u32) -> &'d View {
+    /// random order of them when the round is done): its index among the training views,
+    /// and the view.
+    pub(super) fn next_view<'d>(&mut self, job: &Job<'d>, it: u32) -> (usize, &'d View) {
         let (s, data) = (&job.opts.settings, job.data);
         if it % s.sh_increase_interval == 0 && self.model.active_sh_degree < job.opts.sh_degree {
             self.model.active_sh_degree += 1;
@@ -116,6 +117,7 @@ impl Run<'_> {
                     .swap(i, (self.rng.next_u64() % (i as u64 + 1)) as usize);
             }
         }
-        &data.train[self.order.pop().expect("refilled above")]
+        let photo = self.order.pop().expect("refilled above");
+        (photo, &data.train[photo])
     }
 }

@@ -5,6 +5,7 @@
 use super::output::{points_ply, write};
 use super::{Job, Run, StageSums, TrainError};
 use crate::core::gen::Rng;
+use crate::train::appearance::{AppearanceMode, Appearances};
 use crate::train::checkpoint::Checkpoint;
 use crate::train::model::{random_points, Model};
 use std::path::PathBuf;
@@ -31,6 +32,16 @@ impl Run<'_> {
             evaluations: Vec::new(),
             peak: 0,
             stage_sums: StageSums::default(),
+            appearance: match opts.appearance.mode {
+                AppearanceMode::None => None,
+                AppearanceMode::Affine => Some(Appearances::identity(
+                    job.data
+                        .train
+                        .iter()
+                        .map(|v| v.camera.name.clone())
+                        .collect(),
+                )),
+            },
         };
         if let Some(c) = &opts.resume {
             run.resume(job, c, note)?;
@@ -70,6 +81,28 @@ impl Run<'_> {
             )));
         }
         self.model = c.model.clone();
+        if self.appearance.is_some() {
+            let mut a = c.appearance.clone().ok_or_else(|| {
+                TrainError::Other(
+                    "the checkpoint has no appearance transforms; resume with the settings it was written with".into(),
+                )
+            })?;
+            let names: Vec<String> = job
+                .data
+                .train
+                .iter()
+                .map(|v| v.camera.name.clone())
+                .collect();
+            if a.affines.len() != names.len() {
+                return Err(TrainError::Other(format!(
+                    "the checkpoint has appearance transforms of {} photos, the data set {} training photos",
+                    a.affines.len(),
+                    names.len()
+                )));
+            }
+            a.names = names;
+            self.appearance = Some(a);
+        }
         self.rng = Rng(c.rng);
         self.order = c.order.clone();
         self.first = c.iteration + 1;

@@ -27,12 +27,13 @@ impl<'p> Run<'p> {
         pipelines: &'p OnceCell<StepPipelines>,
         rast: &mut DiffRasterizer,
         loss: &mut GpuLoss,
-        view: &View,
+        (photo, view): (usize, &View),
         plan: &Plan,
     ) -> Result<LossValue, TrainError> {
         let s = &job.opts.settings;
         let render_opts = &job.render_opts;
         let bg = render_opts.background;
+        let affine = self.affine_of(job, photo, plan.it);
         let cam = &view.camera;
         let mcmc = s.mcmc.as_ref();
         let Plan {
@@ -48,6 +49,7 @@ impl<'p> Run<'p> {
             model,
             dev,
             stage_sums,
+            appearance,
             ..
         } = self;
         if dev.is_none() {
@@ -117,7 +119,14 @@ impl<'p> Run<'p> {
         let mut norm_buffer = None;
         ctx.submit_and_wait("backward", |cmd| {
             let (image, pixel_grads) = pass.begin(cmd)?;
-            loss.record_image(ctx, cmd, image, pixel_grads, w, h, lambda)?;
+            match affine.as_ref().map(crate::train::appearance::rows) {
+                // The photo's transform between the render and the loss; the pixels'
+                // gradients leave it as the render's.
+                Some(rows) => {
+                    loss.record_image_affine(ctx, cmd, image, pixel_grads, w, h, lambda, &rows)?
+                }
+                None => loss.record_image(ctx, cmd, image, pixel_grads, w, h, lambda)?,
+            }
             let grads = pass.record(cmd)?;
             barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
             norm_buffer = d.record_step(ctx, cmd, grads, &step, s)?;
@@ -127,6 +136,11 @@ impl<'p> Run<'p> {
         stage_sums.add(rast.renderer().backward_timings());
         let ctx = rast.renderer().ctx();
         let value = loss.read_value(ctx)?;
+        if let (Some(a), Some(_)) = (appearance.as_mut(), affine) {
+            if value.total.is_finite() {
+                a.step(photo, &loss.read_affine_grads()?, &job.opts.appearance);
+            }
+        }
         if let Some(b) = norm_buffer {
             // The squared norm of the whole gradient, clipped against (one float).
             let sq: Vec<[f32; 4]> = b.read(ctx, 1)?;
@@ -148,12 +162,13 @@ impl<'p> Run<'p> {
         job: &Job,
         rast: &mut DiffRasterizer,
         loss: &mut GpuLoss,
-        view: &View,
+        (photo, view): (usize, &View),
         plan: &Plan,
     ) -> Result<LossValue, TrainError> {
         let s = &job.opts.settings;
         let render_opts = &job.render_opts;
         let cam = &view.camera;
+        let affine = self.affine_of(job, photo, plan.it);
         let mcmc = s.mcmc.as_ref();
         let Plan {
             it,
@@ -165,21 +180,33 @@ impl<'p> Run<'p> {
             ..
         } = *plan;
         let Run {
-            model, stage_sums, ..
+            model,
+            stage_sums,
+            appearance,
+            ..
         } = self;
         let params = model.params();
         rast.set_shader(model.shader.as_ref())?;
         let (frame, token) = rast.forward(&params, cam, render_opts)?;
         stage_sums.add(rast.renderer().timings().stages());
-        let (value, grad) = loss.compute_masked(
+        // The photo's transform between the render and the loss, and back.
+        let transformed = affine.map(|a| crate::train::appearance::apply(&frame.color, &a));
+        let (value, mut grad) = loss.compute_masked(
             rast.renderer().ctx(),
-            &frame.color,
+            transformed.as_deref().unwrap_or(&frame.color),
             &view.image,
             view.mask.as_deref(),
             cam.width,
             cam.height,
             s.lambda_dssim,
         )?;
+        if let (Some(a), Some(t)) = (appearance.as_mut(), affine) {
+            let (pixel, sums) = crate::train::appearance::backward(&frame.color, &grad, &t);
+            grad = pixel;
+            if value.total.is_finite() {
+                a.step(photo, &sums, &job.opts.appearance);
+            }
+        }
         if value.total.is_finite() {
             let pixel_grads = PixelGrads {
                 color: grad.iter().flatten().copied().collect(),
@@ -218,5 +245,17 @@ impl<'p> Run<'p> {
             }
         }
         Ok(value)
+    }
+
+    /// The transform of training photo `photo` at iteration `it` (row r of `[A | b]`), when
+    /// the run learns one and its steps have begun (`--appearance-from`).
+    fn affine_of(
+        &self,
+        job: &Job,
+        photo: usize,
+        it: u32,
+    ) -> Option<crate::train::appearance::Affine> {
+        let a = self.appearance.as_ref()?;
+        (it >= job.opts.appearance.from).then(|| a.affines[photo])
     }
 }

@@ -1,7 +1,8 @@
 //! Training: the backward pass against finite differences and on the device, the loss,
 //! `verisplat train` on data sets made here and from real captures, distorted photos, and
-//! training under gsplat's rules.
+//! training under gsplat's rules, and the per-photo appearance.
 
+mod appearance;
 mod captures;
 mod gradients;
 mod gsplat_rules;
