@@ -396,16 +396,14 @@ fn bench_section(md: &mut String, dir: &Path) {
 /// The forward stages' device memory traffic (`bytes` of each stage in `verisplat bench
 /// --json`) and the bandwidth it makes at the stage's median time.
 fn traffic_table(md: &mut String, forward: &[Value]) {
-    const STAGES: [&str; 8] = [
-        "preprocess",
-        "order",
-        "scan",
-        "keys",
-        "sort",
-        "ranges",
-        "blend",
-        "readback",
-    ];
+    // The stages `bench` counts the bytes of: every forward stage but the feature blend
+    // and the shader.
+    use crate::render::Stage;
+    let stages: Vec<&str> = Stage::FORWARD
+        .into_iter()
+        .filter(|s| !matches!(s, Stage::Features | Stage::Shade))
+        .map(Stage::name)
+        .collect();
     let stage = |r: &Value, name: &str| -> Option<(f64, f64)> {
         let s = r
             .get("stages")?
@@ -417,7 +415,7 @@ fn traffic_table(md: &mut String, forward: &[Value]) {
     };
     let counted: Vec<&Value> = forward
         .iter()
-        .filter(|r| STAGES.iter().any(|n| stage(r, n).is_some()))
+        .filter(|r| stages.iter().any(|n| stage(r, n).is_some()))
         .collect();
     if counted.is_empty() {
         return;
@@ -425,11 +423,11 @@ fn traffic_table(md: &mut String, forward: &[Value]) {
     let _ = writeln!(
         md,
         "| scene | Gaussians | resolution | {} |",
-        STAGES.join(" | ")
+        stages.join(" | ")
     );
-    let _ = writeln!(md, "|---|--:|---|{}", "--:|".repeat(STAGES.len()));
+    let _ = writeln!(md, "|---|--:|---|{}", "--:|".repeat(stages.len()));
     for r in counted {
-        let cells: Vec<String> = STAGES
+        let cells: Vec<String> = stages
             .iter()
             .map(|n| match stage(r, n) {
                 Some((bytes, ms)) if ms > 0.0 => {

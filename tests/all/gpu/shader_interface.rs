@@ -76,6 +76,9 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     // The loss's five stages, its window also through texel views.
     verisplat::train::loss::GpuLoss::with_texel_fetch(ctx, true).expect("the training loss");
     built += 1 + 3 + 1 + 1 + 2 + 5 + 1;
+    // The per-photo colour transform's two passes (`train --appearance affine`).
+    verisplat::train::appearance::device::AffinePasses::new(ctx).expect("the appearance passes");
+    built += 2;
     // The training step's: the Gaussians' and the shader's (its norm's reduce is the
     // loss's, counted above).
     verisplat::train::device::StepPipelines::new(ctx).expect("the training step's stages");
