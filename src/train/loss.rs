@@ -671,10 +671,16 @@ impl GpuLoss {
         lambda: f32,
         rows: &[[f32; 4]; 3],
     ) -> GpuResult<()> {
+        self.ensure_affine(ctx)?;
+        self.record_image_with(ctx, cmd, image, grad, (width, height), lambda, Some(rows))
+    }
+
+    /// Builds the appearance's passes the first time a photo's transform is recorded.
+    fn ensure_affine(&mut self, ctx: &GpuContext) -> GpuResult<()> {
         if self.affine.is_none() {
             self.affine = Some(AffinePasses::new(ctx)?);
         }
-        self.record_image_with(ctx, cmd, image, grad, (width, height), lambda, Some(rows))
+        Ok(())
     }
 
     /// The affine appearance's 12 gradients (row r of `[A | b]` at `4 r..4 r + 4`) of the
@@ -844,9 +850,7 @@ impl GpuLoss {
         lambda: f32,
         rows: &[[f32; 4]; 3],
     ) -> GpuResult<(LossValue, Vec<[f32; 3]>, [f64; 12])> {
-        if self.affine.is_none() {
-            self.affine = Some(AffinePasses::new(ctx)?);
-        }
+        self.ensure_affine(ctx)?;
         let (value, grad, affine) = self.compute_with(
             ctx,
             image,

@@ -95,9 +95,7 @@ pub fn bench_gpu(
     let info = renderer.ctx().info();
     let mut stages = stage_reports(stage_samples);
     let traffic = frame_traffic(&gpu_scene, cam, opts, &stats, Readback::Float, false);
-    // The readback model counts the images, not a feature scene's planes.
-    let modelled = |name: &str| scene.feature_count == 0 || name != "readback";
-    for stage in stages.iter_mut().filter(|s| modelled(&s.name)) {
+    for stage in stages.iter_mut() {
         stage.bytes = traffic
             .iter()
             .find(|(s, _)| s.name() == stage.name)

@@ -80,7 +80,9 @@ pub fn frame_traffic(
     );
     let counters = bytes::<Counters>();
     let copied = match readback {
-        // The images (an Intermediates readback's buffers are not counted).
+        // The images. A feature frame's planes and an Intermediates readback's buffers
+        // are read after the frame, through staging copies of their own, outside the
+        // stage.
         Readback::Float | Readback::Intermediates => copy(pixels * PIXEL_STATE),
         // The pack reads the colour image and writes 4 bytes a pixel, which are copied.
         Readback::Rgba8 => Traffic::new(pixels * 16, pixels * 4) + copy(pixels * 4),
