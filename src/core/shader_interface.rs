@@ -320,12 +320,19 @@ records! {
         pub base: uint,
     }
 
-    /// A chunk of the blend: whether it resumes the pixels' state and is the last.
+    /// A chunk of the blend: whether it resumes the pixels' state and is the last; and
+    /// the band of tile rows it runs (a frame whose last contributors exceed one binding
+    /// saves them in bands).
     pub struct BlendPush {
         /// Non-zero: read the state the previous chunk left.
         pub resume: uint,
         /// Non-zero: the frame's last chunk (write the final colour).
         pub last: uint,
+        /// The first tile row dispatched (workgroup row 0), whose first pixel row is where
+        /// the last-contributor binding starts.
+        pub first_tile_row: uint,
+        /// Padding.
+        pub pad: uint,
     }
 
     /// A chunk of the feature blend.
@@ -461,7 +468,9 @@ records! {
         pub size: uvec4,
     }
 
-    /// A reduction's counts (`loss_reduce`: values; `mlp_grad_reduce`: parameters, slots).
+    /// A reduction's counts (`loss_reduce`: values; `mlp_grad_reduce`: parameters, slots),
+    /// or the blend backward's band (`blend_bwd`: its pairs, first bin row and first pixel
+    /// row).
     pub struct CountsPush {
         /// The counts.
         pub counts: uvec4,

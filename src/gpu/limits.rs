@@ -18,7 +18,11 @@ pub fn elements_per_binding(info: &DeviceInfo, element_bytes: u64) -> u64 {
 /// Refuses `bytes` in one storage binding beyond maxStorageBufferRange, with a
 /// [`GpuError::DeviceLimit`] naming `what` and saying what to do (`advice`).
 pub fn check_binding(info: &DeviceInfo, what: &str, bytes: u64, advice: &str) -> GpuResult<()> {
-    let max = storage_binding_bytes(info);
+    check_binding_bytes(storage_binding_bytes(info), what, bytes, advice)
+}
+
+/// [`check_binding`] against a binding of `max` bytes.
+pub fn check_binding_bytes(max: u64, what: &str, bytes: u64, advice: &str) -> GpuResult<()> {
     if bytes > max {
         return Err(GpuError::DeviceLimit {
             limit: "maxStorageBufferRange",

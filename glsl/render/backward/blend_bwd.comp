@@ -85,6 +85,14 @@ layout(std430, binding = BLEND_BWD_GRAD_FEATURES) readonly buffer GradFeatureBuf
 #endif
 // Largest |pair sum| per field, as float bits (non-negative floats order like their bits).
 layout(std430, binding = BLEND_BWD_MAXIMA) buffer MaximaBuf { uint maxima[]; };
+// The band this dispatch covers: the host splits a frame whose per-pair or per-pixel
+// buffers exceed one storage binding (render::backward::bands). counts.xy: the pairs
+// [lo, hi) whose sums this dispatch writes, to pair_grads[k - lo] (each band its own
+// buffer); counts.z: the first bin row dispatched (workgroup row 0); counts.w: the first
+// pixel row of the per-pixel buffers as bound. A bin is walked exactly as in one piece
+// (from its last composited pair down to lo), so every pair's sum is bit-identical to the
+// unsplit pass's. A frame in one piece is (0, pairs, 0, 0).
+layout(push_constant) uniform BandBlock { CountsPush band; };
 
 // One pixel's state for the walk back to front.
 struct Pixel {
@@ -110,7 +118,7 @@ Pixel load_pixel(uvec2 pix) {
         p.behind_f[gi] = vec4(0.0);
     }
     if (pix.x < params.image.x && pix.y < params.image.y) {
-        uint i = pix.y * params.image.x + pix.x;
+        uint i = (pix.y - band.counts.w) * params.image.x + pix.x;
         uvec2 state = last_state[i];
         p.last = state.x;
         p.T = uintBitsToFloat(state.y);
@@ -168,7 +176,9 @@ void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec4 fv[FG], vec2 pixf, inout Pix
     }
 }
 
+// Stores pair k's sums in its band's slot (k in [lo, hi)).
 void store_pair(uint k, vec4 s0, vec4 s1, vec4 s2, vec4 sf[FG]) {
+    k -= band.counts.x;
     pair_grads[VECS * k] = s0;
     pair_grads[VECS * k + 1u] = s1;
     pair_grads[VECS * k + 2u] = s2;
@@ -202,10 +212,13 @@ shared uint s_last;
 shared uint s_max[4u * VECS];
 
 void main() {
-    uvec2 bin = gl_WorkGroupID.xy;
+    uvec2 bin = gl_WorkGroupID.xy + uvec2(0u, band.counts.z);
     uvec2 pix = bin * BIN + gl_LocalInvocationID.xy;
     vec2 pixf = vec2(pix);
     uvec2 range = ranges[bin.y * params.bins.y + bin.x];
+    uint lo = band.counts.x, hi = band.counts.y;
+    // A bin with no pair in the band (the whole workgroup returns: no barrier is missed).
+    if (range.y <= lo || range.x >= hi) return;
     Pixel px = load_pixel(pix);
     uint li = gl_LocalInvocationIndex;
     if (li == 0u) s_last = 0u;
@@ -217,10 +230,15 @@ void main() {
     uint end = max(s_last, range.x);
     vec4 zf[FG];
     zero_features(zf);
-    for (uint k = end + li; k < range.y; k += BIN * BIN) store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
+    for (uint k = max(end, lo) + li; k < min(range.y, hi); k += BIN * BIN) {
+        store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
+    }
+    // Back to front from the last composited pair (the pairs past hi too, to undo the
+    // pixels' state), down to the band's first.
+    uint stop = max(range.x, lo);
     uint batch_end = end;
-    while (batch_end > range.x) {
-        uint count = min(BATCH, batch_end - range.x);
+    while (batch_end > stop) {
+        uint count = min(BATCH, batch_end - stop);
         if (li < count) {
             uint gaussian = values[batch_end - 1u - li];
             Splat s = splats[gaussian];
@@ -267,7 +285,9 @@ void main() {
             uint j = t / VECS, v = t % VECS;
             vec4 s = vec4(0.0);
             for (uint sg = 0u; sg < gl_NumSubgroups; sg++) s += s_part[(j * MAX_SUBGROUPS + sg) * VECS + v];
-            pair_grads[VECS * (batch_end - 1u - j) + v] = s;
+            uint k = batch_end - 1u - j;
+            if (k >= hi) continue;
+            pair_grads[VECS * (k - lo) + v] = s;
             for (uint c = 0u; c < 4u; c++) {
                 if (s[c] != 0.0) atomicMax(s_max[4u * v + c], floatBitsToUint(abs(s[c])));
             }
@@ -280,9 +300,12 @@ void main() {
 }
 #else
 void main() {
-    uvec2 bin = spread_workgroup();
+    uvec2 bin = spread_workgroup() + uvec2(0u, band.counts.z);
     uvec2 pix0 = bin * BIN + uvec2(0u, gl_LocalInvocationID.x);
     uvec2 range = ranges[bin.y * params.bins.y + bin.x];
+    uint lo = band.counts.x, hi = band.counts.y;
+    // A bin with no pair in the band.
+    if (range.y <= lo || range.x >= hi) return;
     Pixel px[STRIP];
     uint my_last = 0u;
     [[unroll]] for (uint p = 0u; p < STRIP; p++) {
@@ -293,13 +316,15 @@ void main() {
     uint end = max(subgroupMax(my_last), range.x);
     vec4 zf[FG];
     zero_features(zf);
-    for (uint k = end + gl_SubgroupInvocationID; k < range.y; k += SUBGROUP_SIZE) {
+    for (uint k = max(end, lo) + gl_SubgroupInvocationID; k < min(range.y, hi); k += SUBGROUP_SIZE) {
         store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
     }
     vec4 m0 = vec4(0.0), m1 = vec4(0.0), m2 = vec4(0.0);
     vec4 mf[FG];
     zero_features(mf);
-    for (uint k = end; k > range.x;) {
+    // Back to front from the last composited pair (the pairs past hi too, to undo the
+    // pixels' state), down to the band's first.
+    for (uint k = end; k > max(range.x, lo);) {
         k--;
         uint gaussian = texelFetch(value_texels, int(k)).x;
         int g = int(gaussian) * 3;
@@ -323,6 +348,7 @@ void main() {
                 px[p] = q;
             }
         }
+        if (k >= hi) continue;  // walked for the pixels' state only (uniform)
         vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0);
         vec4 sf[FG];
         zero_features(sf);

@@ -52,7 +52,9 @@ layout(std430, binding = BLEND_LAST) writeonly buffer LastBuf { uvec2 last_state
 // every chunk but the first resumes each pixel from the state the previous one left in
 // the images, and every chunk but the last leaves that state instead of the final pixel.
 // Compositing is sequential per pixel, so the result equals one pass bit for bit. A frame
-// in one piece is (resume 0, last 1).
+// in one piece is (resume 0, last 1). A frame in one piece whose last contributors exceed
+// one storage binding is blended in bands of tile rows (first_tile_row on), each binding
+// its rows of last_state: the same pixels, each written once.
 layout(push_constant) uniform BlendBlock { BlendPush chunk; };
 
 // Composites one Gaussian into one pixel's state (the reference's per-pixel rule),
@@ -84,7 +86,9 @@ bool composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
 void write_last(uvec2 pix, uint last, float T) {
 #if SAVE_LAST
     if (pix.x < params.image.x && pix.y < params.image.y) {
-        last_state[pix.y * params.image.x + pix.x] = uvec2(last, floatBitsToUint(T));
+        // The binding starts at the band's first pixel row.
+        uint row = pix.y - chunk.first_tile_row * TILE_SIZE;
+        last_state[row * params.image.x + pix.x] = uvec2(last, floatBitsToUint(T));
     }
 #endif
 }
@@ -123,7 +127,7 @@ shared uint s_done;
 void main() {
     alpha_max = params.rules.y;
     t_stop = params.rules.z;
-    uvec2 tile = gl_WorkGroupID.xy;
+    uvec2 tile = gl_WorkGroupID.xy + uvec2(0u, chunk.first_tile_row);
     uint tile_id = tile.y * params.bins.y + tile.x;  // this kernel runs with 16-pixel bins
     uvec2 pix = tile * TILE_SIZE + gl_LocalInvocationID.xy;
     bool inside = pix.x < params.image.x && pix.y < params.image.y;
@@ -170,7 +174,7 @@ void main() {
 void main() {
     alpha_max = params.rules.y;
     t_stop = params.rules.z;
-    uvec2 tile = spread_workgroup();
+    uvec2 tile = spread_workgroup() + uvec2(0u, chunk.first_tile_row);
     // Each run of 8 consecutive invocations (what lavapipe executes as one SIMD vector)
     // covers a compact block of CHUNK_W strips by 8 / CHUNK_W rows instead of one long row:
     // neighbouring pixels see the same Gaussians and finish together (measured: 8x2 pixel

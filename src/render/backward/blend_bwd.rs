@@ -4,6 +4,7 @@
 //! opacity, colour, depth, |2D mean|), plus the largest |sum| per field.
 
 use crate::core::model::SplatKernel;
+use crate::core::shader_interface::CountsPush;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::{
     GRAD_FIELDS, GRAD_SPEC_BATCH, GRAD_SPEC_MAX_SUBGROUPS, MAX_FEATURE_GROUPS,
@@ -45,6 +46,19 @@ pub struct BlendBwdBindings<'a> {
     pub features: BufferSlice<'a>,
     /// dL/d feature channel per pixel.
     pub grad_features: BufferSlice<'a>,
+}
+
+/// One dispatch of a split pass ([`super::bands`]): the pairs `[lo, hi)` whose sums it
+/// writes, the bin rows `[first, end)` it runs, and the first pixel row of the per-pixel
+/// bindings.
+#[derive(Clone, Copy, Debug)]
+pub struct BlendBwdBand {
+    /// Pairs `[lo, hi)`.
+    pub pairs: (u32, u32),
+    /// Bin rows `[first, end)`.
+    pub bin_rows: (u32, u32),
+    /// The pixel row the per-pixel bindings start at.
+    pub first_row: u32,
 }
 
 impl BlendBwd {
@@ -133,7 +147,7 @@ impl BlendBwd {
                 (slot::FEATURES, storage),
                 (slot::GRAD_FEATURES, storage),
             ])?,
-            &crate::core::shader_interface::NO_PUSH_CONSTANTS,
+            &CountsPush::LAYOUT,
             &if rows {
                 Vec::new()
             } else {
@@ -160,7 +174,7 @@ impl BlendBwd {
         self.rows
     }
 
-    /// Records the dispatch over the `bins` grid.
+    /// Records the dispatch over the `bins` grid of a frame in one piece.
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -168,6 +182,29 @@ impl BlendBwd {
         bins: (u32, u32),
         b: &BlendBwdBindings,
     ) -> GpuResult<()> {
+        let band = BlendBwdBand {
+            pairs: (0, u32::MAX),
+            bin_rows: (0, bins.1),
+            first_row: 0,
+        };
+        self.record_band(ctx, cmd, bins.0, band, b)
+    }
+
+    /// Records the dispatch over the bins of `bins_x` columns and `band`'s rows, writing
+    /// the sums of `band`'s pairs ([`super::bands`]): `pair_grads` holds the band's pairs
+    /// from its first, and the per-pixel bindings start at its first pixel row.
+    pub fn record_band(
+        &self,
+        ctx: &GpuContext,
+        cmd: vk::CommandBuffer,
+        bins_x: u32,
+        band: BlendBwdBand,
+        b: &BlendBwdBindings,
+    ) -> GpuResult<()> {
+        let bins = (bins_x, band.bin_rows.1 - band.bin_rows.0);
+        if bins.1 == 0 {
+            return Ok(());
+        }
         let BlendBwdBindings {
             params,
             splats,
@@ -203,7 +240,15 @@ impl BlendBwd {
                 message: format!("{}x{} bins exceed the dispatch limits", bins.0, bins.1),
             });
         }
-        self.pipeline
-            .dispatch_resources(ctx, cmd, &buffers, &[], [bins.0, bins.1, 1])
+        let push = CountsPush {
+            counts: [band.pairs.0, band.pairs.1, band.bin_rows.0, band.first_row],
+        };
+        self.pipeline.dispatch_resources(
+            ctx,
+            cmd,
+            &buffers,
+            bytemuck::bytes_of(&push),
+            [bins.0, bins.1, 1],
+        )
     }
 }

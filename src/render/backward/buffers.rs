@@ -16,8 +16,9 @@ pub(super) struct BackwardBuffers {
     pub(super) grad_color: Option<GpuBuffer>,
     /// dL/d depth per pixel.
     pub(super) grad_depth: Option<GpuBuffer>,
-    /// Each pair's gradient fields, summed over its bin.
-    pub(super) pair_grads: Option<GpuBuffer>,
+    /// Each pair's gradient fields, summed over its bin: one buffer per pair band
+    /// ([`super::bands`]).
+    pub(super) pair_grads: Vec<GpuBuffer>,
     /// Each field's largest magnitude (the fixed-point scale).
     pub(super) maxima: Option<GpuBuffer>,
     /// Each Gaussian's sums, 64-bit fixed point (or float).
@@ -42,15 +43,26 @@ pub(super) struct BackwardBuffers {
     pub(super) mlp_grads: Option<GpuBuffer>,
 }
 
-/// A device buffer of at least `bytes`, made or grown (never shrunk) as needed.
+/// A device buffer of at least `bytes`, made or grown (never shrunk) as needed, and
+/// refused when one binding cannot hold it.
 fn ensure<'a>(
     ctx: &GpuContext,
     slot: &'a mut Option<GpuBuffer>,
     name: &str,
     bytes: u64,
 ) -> GpuResult<&'a GpuBuffer> {
+    check_binding(ctx, name, bytes.max(16))?;
+    ensure_banded(ctx, slot, name, bytes)
+}
+
+/// [`ensure`] for a buffer bound in bands ([`super::bands`] checked them).
+fn ensure_banded<'a>(
+    ctx: &GpuContext,
+    slot: &'a mut Option<GpuBuffer>,
+    name: &str,
+    bytes: u64,
+) -> GpuResult<&'a GpuBuffer> {
     let bytes = bytes.max(16);
-    check_binding(ctx, name, bytes)?;
     if !matches!(slot, Some(b) if b.size() >= bytes) {
         *slot = None;
         *slot = Some(GpuBuffer::new(ctx, name, bytes, MemoryKind::Device)?);
@@ -64,19 +76,42 @@ impl BackwardBuffers {
         let PassShape {
             n,
             fields: f,
-            pairs,
             sh_floats,
             pixels,
             groups,
+            bands,
             ..
         } = *shape;
         let g16 = u64::from(groups) * 16;
         let colour = pixels_bytes(pixels as usize, 16);
         let depth = pixels_bytes(pixels as usize, 4);
+        // Per pixel, bound in pixel bands.
         for (slot, name, bytes) in [
             (&mut self.grad_color, "pixel colour gradients", colour),
             (&mut self.grad_depth, "pixel depth gradients", depth),
-            (&mut self.pair_grads, "pair gradients", pairs * f * 4),
+            (
+                &mut self.grad_features,
+                "pixel feature gradients",
+                pixels * g16,
+            ),
+        ] {
+            ensure_banded(ctx, slot, name, bytes)?;
+        }
+        // Per pair, one buffer per pair band.
+        let pair_bands = bands.pair_bands();
+        self.pair_grads.truncate(pair_bands.len());
+        for (j, &(lo, hi)) in pair_bands.iter().enumerate() {
+            let bytes = ((hi - lo) * f * 4).max(16);
+            if self.pair_grads.get(j).is_some_and(|b| b.size() >= bytes) {
+                continue;
+            }
+            // Freed before the new one is made, so peak memory is not doubled.
+            self.pair_grads.truncate(j);
+            let name = format!("pair gradients (band {j})");
+            let buffer = GpuBuffer::new(ctx, &name, bytes, MemoryKind::Device)?;
+            self.pair_grads.push(buffer);
+        }
+        for (slot, name, bytes) in [
             (&mut self.maxima, "gradient maxima", f * 4),
             (&mut self.acc, "gradient sums", n * f * 8),
             (
@@ -87,11 +122,6 @@ impl BackwardBuffers {
             (&mut self.sh_grads, "SH gradients", n * sh_floats * 4),
             (&mut self.feature_grads, "feature gradients", n * g16),
             (&mut self.features, "feature values", n * g16),
-            (
-                &mut self.grad_features,
-                "pixel feature gradients",
-                pixels * g16,
-            ),
         ] {
             ensure(ctx, slot, name, bytes)?;
         }
@@ -130,24 +160,25 @@ impl BackwardBuffers {
 
     /// Bytes of device memory they hold.
     pub(super) fn device_bytes(&self) -> u64 {
-        [
-            &self.grad_color,
-            &self.grad_depth,
-            &self.pair_grads,
-            &self.maxima,
-            &self.acc,
-            &self.grads,
-            &self.sh_grads,
-            &self.features,
-            &self.grad_features,
-            &self.feature_grads,
-            &self.alpha,
-            &self.scratch,
-            &self.partials,
-            &self.mlp_grads,
-        ]
-        .iter()
-        .map(|b| b.as_ref().map_or(0, |b| b.size()))
-        .sum()
+        let pairs: u64 = self.pair_grads.iter().map(|b| b.size()).sum();
+        pairs
+            + [
+                &self.grad_color,
+                &self.grad_depth,
+                &self.maxima,
+                &self.acc,
+                &self.grads,
+                &self.sh_grads,
+                &self.features,
+                &self.grad_features,
+                &self.feature_grads,
+                &self.alpha,
+                &self.scratch,
+                &self.partials,
+                &self.mlp_grads,
+            ]
+            .iter()
+            .map(|b| b.as_ref().map_or(0, |b| b.size()))
+            .sum::<u64>()
     }
 }

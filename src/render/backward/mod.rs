@@ -13,6 +13,9 @@
 //! 3. preprocess backward (`preprocess_bwd`): the chain rule through projection,
 //!    covariance and SH to centres, quaternions, scales, opacities and SH coefficients.
 //!
+//! A frame whose per-pair or per-pixel buffers exceed one storage binding runs the first
+//! two stages in bands that fit ([`bands`]), bit-identical to one piece.
+//!
 //! A frame shaded by a neural shader starts with the shader's own backward pass
 //! ([`shade_bwd`]), which turns the colour's gradients into the feature
 //! channels' and the network's.
@@ -20,6 +23,7 @@
 //! The rules are those of the CPU reference [`crate::cpu::backward`], which the tests hold
 //! this pass to.
 
+pub(crate) mod bands;
 pub mod blend_bwd;
 mod buffers;
 mod device;
@@ -39,6 +43,7 @@ use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::render::forward::shade::GpuShader;
 use crate::render::frame::buffers::FrameSet;
 use crate::render::{check_binding, ForwardHandle, ForwardState, GpuRenderer, GpuScene, Stage};
+use bands::Bands;
 use blend_bwd::BlendBwd;
 use buffers::BackwardBuffers;
 pub use device::DeviceBackward;
@@ -66,6 +71,8 @@ pub(super) struct BackwardState {
     mode: Accumulation,
     /// Whether read-backs decode [`SplatGrads::screen`] from the per-Gaussian sums.
     screen: bool,
+    /// The last pass's pixel bands and pair bands ([`bands`]).
+    bands: (usize, usize),
 }
 
 /// The backward pass's timer and what it read after the last pass.
@@ -101,6 +108,7 @@ impl BackwardState {
             },
             mode: Accumulation::default(),
             screen: false,
+            bands: (0, 0),
         })
     }
 
@@ -221,6 +229,13 @@ impl GpuRenderer {
         self.backward
             .as_ref()
             .map_or_else(Accumulation::default, |b| b.mode)
+    }
+
+    /// How the last backward pass was split to fit the device's storage bindings: its
+    /// bands of pixel rows and its bands of sorted pairs, (1, 1) for a pass in one piece
+    /// ((0, 0) before the first pass).
+    pub fn backward_bands(&self) -> (usize, usize) {
+        self.backward.as_ref().map_or((0, 0), |b| b.bands)
     }
 
     /// Device bytes the backward pass holds (its buffers, sized by the largest pass so far).
@@ -533,7 +548,20 @@ fn prepare<'a>(
 ) -> GpuResult<(BackwardPass<'a>, &'a mut BackwardClock, PassShape)> {
     let groups = features.map_or(0, |(_, _, k)| k.div_ceil(4)) as u32;
     let (fs, last) = saved_forward(set, size)?;
-    let shape = PassShape::new(scene, size, &fs, groups);
+    let shape = PassShape::new(ctx, scene, size, &fs, groups)?;
+    if shape.bands.pixels_split() && (pixels.is_none() || shade.is_some()) {
+        // The training step's loss and the shader's backward pass bind whole frames.
+        let what = match shade {
+            Some(_) => "a shaded frame's pixel gradients",
+            None => "a training frame's pixel gradients",
+        };
+        crate::gpu::limits::check_binding(
+            ctx.info(),
+            what,
+            shape.pixels * 16,
+            "use a smaller frame",
+        )?;
+    }
     let pipelines = st.build_pipelines(ctx, &fs, (kernel, lens), groups)?;
     st.ensure_buffers(ctx, &shape, pixels, features)?;
     let feature_planes = match shade {
@@ -541,6 +569,10 @@ fn prepare<'a>(
         None => None,
     };
     check_binding(ctx, "Gaussians", scene.gaussians.size())?;
+    st.bands = (
+        shape.bands.row_bands().len(),
+        shape.bands.pair_bands().len(),
+    );
     let (pass, clock) = BackwardPass::resolve(
         st,
         fs,
@@ -592,29 +624,49 @@ struct PassShape {
     vecs: u32,
     /// Gradient fields per pair.
     fields: u64,
-    /// Pairs sorted by the forward.
-    pairs: u64,
     /// Bits of a bin index.
     bits: u32,
     /// Floats of SH texels per Gaussian.
     sh_floats: u64,
     /// Pixels of the frame.
     pixels: u64,
+    /// Width and height of the frame.
+    width: u32,
+    height: u32,
+    /// How the per-pair and per-pixel buffers are split to fit one binding.
+    bands: Bands,
 }
 
 impl PassShape {
-    fn new(scene: &GpuScene, size: (u32, u32), fs: &ForwardState, groups: u32) -> Self {
+    fn new(
+        ctx: &GpuContext,
+        scene: &GpuScene,
+        size: (u32, u32),
+        fs: &ForwardState,
+        groups: u32,
+    ) -> GpuResult<Self> {
         let bins = fs.bins;
-        PassShape {
+        let fields = u64::from(GRAD_FIELDS + 4 * groups);
+        let pairs = u64::from(fs.pairs);
+        // The largest per-pixel element: a colour gradient (vec4), or the pixel's feature
+        // gradients (a vec4 per group).
+        let pixel = match groups {
+            0 | 1 => ("pixel colour gradients", 16),
+            g => ("pixel feature gradients", 16 * u64::from(g)),
+        };
+        let max = crate::gpu::limits::storage_binding_bytes(ctx.info());
+        Ok(PassShape {
             n: scene.count as u64,
             groups,
             vecs: 3 + groups,
-            fields: u64::from(GRAD_FIELDS + 4 * groups),
-            pairs: u64::from(fs.pairs),
+            fields,
             bits: bits_for(u64::from(bins.0) * u64::from(bins.1)),
             sh_floats: u64::from(crate::render::sh_texel_stride(scene.sh_degree)) * 4,
             pixels: u64::from(size.0) * u64::from(size.1),
-        }
+            width: size.0,
+            height: size.1,
+            bands: Bands::plan(max, pairs, fields * 4, size, pixel)?,
+        })
     }
 }
 

@@ -10,7 +10,7 @@ use super::{
 use crate::gpu::shader::Resource;
 use crate::gpu::sync::{barrier, Access};
 use crate::gpu::{BufferSlice, GpuBuffer, GpuContext, GpuResult, GpuTimer};
-use crate::render::backward::blend_bwd::{BlendBwd, BlendBwdBindings};
+use crate::render::backward::blend_bwd::{BlendBwd, BlendBwdBand, BlendBwdBindings};
 use crate::render::backward::grad_accumulate::{AccumulateBindings, GradAccumulate, GradPush};
 use crate::render::backward::preprocess_bwd::{PreprocessBwd, PreprocessBwdBindings};
 use crate::render::backward::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
@@ -39,7 +39,8 @@ pub(super) struct BackwardPass<'a> {
     preprocess: &'a PreprocessBwd,
     grad_color: BufferSlice<'a>,
     grad_depth: BufferSlice<'a>,
-    pair_grads: BufferSlice<'a>,
+    /// One per pair band.
+    pair_grads: Vec<BufferSlice<'a>>,
     maxima: BufferSlice<'a>,
     acc: BufferSlice<'a>,
     grads: BufferSlice<'a>,
@@ -150,7 +151,7 @@ impl<'a> BackwardPass<'a> {
             preprocess,
             grad_color,
             grad_depth: buf(grad_depth),
-            pair_grads: buf(pair_grads),
+            pair_grads: pair_grads.iter().map(GpuBuffer::whole).collect(),
             maxima: buf(maxima),
             acc: buf(acc),
             grads: buf(grads),
@@ -252,7 +253,9 @@ impl<'a> BackwardPass<'a> {
     }
 
     /// Blend backward, accumulation and preprocess backward, each after a barrier on the
-    /// one before.
+    /// one before. The blend backward runs once per pixel band and pair band, the
+    /// accumulation once per pair band ([`super::bands`]; one of each for a frame whose
+    /// buffers fit their bindings).
     fn record_gaussian_stages(
         &self,
         ctx: &GpuContext,
@@ -260,40 +263,72 @@ impl<'a> BackwardPass<'a> {
         timer: &mut GpuTimer,
     ) -> GpuResult<()> {
         let (fs, shape) = (self.fs, &self.shape);
+        let pair_bands = shape.bands.pair_bands();
+        let row_bands = shape.bands.row_bands();
+        let width = u64::from(shape.width);
+        let groups = u64::from(shape.groups);
         timer.stage(ctx, cmd, Stage::BlendBwd.name(), |cmd| {
-            let bindings = BlendBwdBindings {
-                params: fs.params,
-                splats: self.splats,
-                values: self.values,
-                ranges: fs.ranges,
-                last: self.last,
-                grad_color: self.grad_color,
-                grad_depth: self.grad_depth,
-                pair_grads: self.pair_grads,
-                maxima: self.maxima,
-                features: self.features,
-                grad_features: self.grad_features,
-            };
-            self.blend.record(ctx, cmd, fs.bins, &bindings)
+            for &(y0, y1) in &row_bands {
+                let rows = |s: BufferSlice<'a>, each: u64| pixel_rows(s, (y0, y1), width * each);
+                let bin_rows = (
+                    y0 / fs.bin_size,
+                    if y1 >= shape.height {
+                        fs.bins.1
+                    } else {
+                        y1 / fs.bin_size
+                    },
+                );
+                for (&(lo, hi), &pair_grads) in pair_bands.iter().zip(&self.pair_grads) {
+                    let bindings = BlendBwdBindings {
+                        params: fs.params,
+                        splats: self.splats,
+                        values: self.values,
+                        ranges: fs.ranges,
+                        last: rows(self.last, 8),
+                        grad_color: rows(self.grad_color, 16),
+                        grad_depth: rows(self.grad_depth, 4),
+                        pair_grads,
+                        maxima: self.maxima,
+                        features: self.features,
+                        grad_features: rows(self.grad_features, 16 * groups),
+                    };
+                    let band = BlendBwdBand {
+                        pairs: (lo as u32, hi as u32),
+                        bin_rows,
+                        first_row: y0,
+                    };
+                    self.blend
+                        .record_band(ctx, cmd, fs.bins.0, band, &bindings)?;
+                }
+            }
+            Ok(())
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
         timer.stage(ctx, cmd, Stage::Accumulate.name(), |cmd| {
-            let bindings = AccumulateBindings {
-                values: fs.sorted_gaussians,
-                pair_grads: self.pair_grads,
-                maxima: self.maxima,
-                acc: self.acc,
-            };
-            self.accumulate.record(
-                ctx,
-                cmd,
-                &bindings,
-                GradPush {
-                    count: fs.pairs,
-                    bits: shape.bits,
-                    vecs: shape.vecs,
-                },
-            )
+            for (&(lo, hi), &pair_grads) in pair_bands.iter().zip(&self.pair_grads) {
+                let values = fs.sorted_gaussians;
+                let bindings = AccumulateBindings {
+                    values: BufferSlice {
+                        offset: values.offset + lo * 4,
+                        size: ((hi - lo) * 4).max(4),
+                        ..values
+                    },
+                    pair_grads,
+                    maxima: self.maxima,
+                    acc: self.acc,
+                };
+                self.accumulate.record(
+                    ctx,
+                    cmd,
+                    &bindings,
+                    GradPush {
+                        count: (hi - lo) as u32,
+                        bits: shape.bits,
+                        vecs: shape.vecs,
+                    },
+                )?;
+            }
+            Ok(())
         })?;
         barrier(ctx, cmd, Access::ComputeReadWrite, Access::ComputeReadWrite);
         timer.stage(ctx, cmd, Stage::PreprocessBwd.name(), |cmd| {
@@ -319,5 +354,18 @@ impl<'a> BackwardPass<'a> {
                 },
             )
         })
+    }
+}
+
+/// Rows `[y0, y1)` of a per-pixel buffer of `row_bytes` a row (the whole slice for an
+/// element of no bytes: a buffer the pass does not read).
+fn pixel_rows(s: BufferSlice<'_>, (y0, y1): (u32, u32), row_bytes: u64) -> BufferSlice<'_> {
+    if row_bytes == 0 {
+        return s;
+    }
+    BufferSlice {
+        offset: s.offset + u64::from(y0) * row_bytes,
+        size: u64::from(y1 - y0) * row_bytes,
+        ..s
     }
 }

@@ -156,8 +156,11 @@ pub struct BlendBindings<'a> {
     /// Write the final pixels (else the state for the next chunk).
     pub last: bool,
     /// One u32 per pixel: one past the sorted-pair index of its last composited Gaussian
-    /// (0: none); bound by (and only by) a pipeline built with `save_last`.
+    /// (0: none); bound by (and only by) a pipeline built with `save_last`. It starts at
+    /// the first pixel row of `first_tile_row`.
     pub last_contributor: Option<BufferSlice<'a>>,
+    /// The first tile row of the dispatch (0 but for a frame saved in bands).
+    pub first_tile_row: u32,
 }
 
 impl Blend {
@@ -227,7 +230,8 @@ impl Blend {
         self.kernel.texel()
     }
 
-    /// Records one workgroup per tile (the tile grid is at most 1024x1024).
+    /// Records one workgroup per tile of `tiles` (columns, rows from `b.first_tile_row`;
+    /// the tile grid is at most 1024x1024).
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -290,6 +294,8 @@ impl Blend {
             bytemuck::bytes_of(&crate::render::forward::types::BlendPush {
                 resume: u32::from(b.resume),
                 last: u32::from(b.last),
+                first_tile_row: b.first_tile_row,
+                pad: 0,
             }),
             [tiles.0, tiles.1, 1],
         )

@@ -57,6 +57,9 @@ pub(crate) struct SortViews {
 }
 
 /// Per-frame device buffers, sized by the scene, the resolution and the key capacity.
+/// The name of the buffer of the pixels' last contributors, in errors.
+pub(crate) const LAST_CONTRIBUTOR: &str = "last contributor per pixel";
+
 /// (Fields drop in order: the texel views go before the buffers they view.)
 pub(crate) struct FrameBuffers {
     pub(crate) sort_views: Option<SortViews>,
@@ -464,12 +467,16 @@ impl GpuRenderer {
             .as_mut()
             .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
         if f.last_contributor.is_none() {
-            // (last contributor, final transmittance's bits) per pixel.
-            let bytes = (u64::from(f.width) * u64::from(f.height) * 8).max(8);
-            check_binding(&self.ctx, "last contributor per pixel", bytes)?;
+            // (last contributor, final transmittance's bits) per pixel, written and read in
+            // bands of rows where one binding cannot hold them all: refused only when no
+            // band fits.
+            let (w, h) = (f.width, f.height);
+            let max = crate::gpu::limits::storage_binding_bytes(self.ctx.info());
+            crate::render::backward::bands::Bands::plan(max, 0, 0, (w, h), (LAST_CONTRIBUTOR, 8))?;
+            let bytes = (u64::from(w) * u64::from(h) * 8).max(8);
             f.last_contributor = Some(GpuBuffer::new(
                 &self.ctx,
-                "last contributor per pixel",
+                LAST_CONTRIBUTOR,
                 bytes,
                 MemoryKind::Device,
             )?);

@@ -5,10 +5,12 @@
 
 use crate::core::camera::Camera;
 use crate::core::model::RenderOptions;
+use crate::gpu::limits::storage_binding_bytes;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::SortJob;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
-use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
+use crate::gpu::{BufferSlice, Count, GpuContext, GpuError, GpuResult, GpuTimer};
+use crate::render::backward::bands::Bands;
 use crate::render::forward::features::FeatureBindings;
 use crate::render::forward::order::OrderBindings;
 use crate::render::forward::pack::PackBindings;
@@ -18,6 +20,7 @@ use crate::render::forward::shade::ShadeBindings;
 use crate::render::forward::types::{self, Counters, FrameParams};
 use crate::render::forward::{blend, keys, preprocess};
 use crate::render::frame::buffers::FeaturePlanes;
+use crate::render::frame::buffers::LAST_CONTRIBUTOR;
 use crate::render::frame::pipelines::{FramePipelines, Pipelines};
 use crate::render::{
     bin_grid, tile_bits, FrameBuffers, FrameSet, GpuFeatures, GpuScene, Pass, Readback, Stage,
@@ -401,26 +404,52 @@ impl FrameRecorder<'_> {
                 ))
             }
         };
+        // Last contributors that exceed one storage binding are saved in bands of rows
+        // (multiples of 64, so of the 16-pixel tiles), one dispatch each.
+        let (width, height) = (self.cam.width, self.cam.height);
+        let bands = match last_contributor {
+            Some(_) => Bands::plan(
+                storage_binding_bytes(ctx.info()),
+                0,
+                0,
+                (width, height),
+                (LAST_CONTRIBUTOR, 8),
+            )?
+            .row_bands(),
+            None => vec![(0, height)],
+        };
+        let tile = crate::core::rules::TILE_SIZE;
         self.timer.stage(ctx, cmd, Stage::Blend.name(), |cmd| {
-            p.blend.record(
-                ctx,
-                cmd,
-                &blend::BlendBindings {
-                    params: f.params.whole(),
-                    splats: f.splats.whole(),
-                    values: f.values.whole(),
-                    splat_texels: Some(f.splat_texels.handle()),
-                    value_texels: f.value_texels.as_ref().map(|v| v.handle()),
-                    ranges: f.ranges.whole(),
-                    color: &f.color,
-                    depth: &f.depth,
-                    counters: f.counters.whole(),
-                    resume,
-                    last,
-                    last_contributor,
-                },
-                tiles,
-            )
+            for &(y0, y1) in &bands {
+                let rows = (y0 / tile, if y1 >= height { tiles.1 } else { y1 / tile });
+                let row_bytes = u64::from(width) * 8;
+                let last_contributor = last_contributor.map(|s| BufferSlice {
+                    offset: s.offset + u64::from(y0) * row_bytes,
+                    size: u64::from(y1 - y0) * row_bytes,
+                    ..s
+                });
+                p.blend.record(
+                    ctx,
+                    cmd,
+                    &blend::BlendBindings {
+                        params: f.params.whole(),
+                        splats: f.splats.whole(),
+                        values: f.values.whole(),
+                        splat_texels: Some(f.splat_texels.handle()),
+                        value_texels: f.value_texels.as_ref().map(|v| v.handle()),
+                        ranges: f.ranges.whole(),
+                        color: &f.color,
+                        depth: &f.depth,
+                        counters: f.counters.whole(),
+                        resume,
+                        last,
+                        last_contributor,
+                        first_tile_row: rows.0,
+                    },
+                    (tiles.0, rows.1 - rows.0),
+                )?;
+            }
+            Ok(())
         })
     }
 

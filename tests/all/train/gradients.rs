@@ -468,7 +468,7 @@ use crate::common::gpu::{assert_validation_clean, new_renderer};
 use verisplat::render::backward::differentiable::{Accumulation, DiffRasterizer};
 use verisplat::render::forward::blend::BlendKernel;
 
-fn to_f32(g: &PixelGrads<f64>) -> PixelGrads<f32> {
+pub(crate) fn to_f32(g: &PixelGrads<f64>) -> PixelGrads<f32> {
     let f = |v: &Vec<f64>| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
     PixelGrads {
         color: f(&g.color),

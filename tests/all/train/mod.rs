@@ -3,6 +3,7 @@
 //! training under gsplat's rules, and the per-photo appearance.
 
 mod appearance;
+mod banded_backward;
 mod captures;
 mod gradients;
 mod gsplat_rules;
