@@ -242,6 +242,21 @@ impl PyRasterizer {
             .map_err(|e| py_err(e.into()))
     }
 
+    /// The last frame's sorted pairs, and the bands its backward pass was split into to
+    /// fit the device's storage bindings (1 each for a pass in one piece).
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        if let Ok(mut st) = self.state.lock() {
+            let r = st.renderer();
+            d.set_item("pairs", r.stats().pairs)?;
+            let (rows, pairs) = r.backward_bands();
+            d.set_item("backward_pixel_bands", rows)?;
+            d.set_item("backward_pair_bands", pairs)?;
+        }
+        Ok(d)
+    }
+
     /// Device milliseconds of the last forward and backward passes' stages.
     #[getter]
     fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {

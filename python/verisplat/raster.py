@@ -303,6 +303,14 @@ class Rasterizer:
         return "CPU reference (f64)" if self._native is None else self._native.device
 
     @property
+    def stats(self) -> Dict[str, int]:
+        """The device's last frame: its sorted (tile, Gaussian) ``pairs``, and the bands its
+        backward pass was split into where its buffers exceed one storage binding
+        (``backward_pixel_bands``, ``backward_pair_bands``; 1 each in one piece). Empty for
+        the reference."""
+        return {} if self._native is None else dict(self._native.stats)
+
+    @property
     def timings(self) -> Dict[str, float]:
         """Device milliseconds of the last passes' stages (``forward/...``, ``backward/...``)."""
         return {} if self._native is None else dict(self._native.timings)
