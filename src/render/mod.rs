@@ -33,11 +33,17 @@ pub mod frame;
 /// The render wing's shaders: their named bindings and variants (`glsl/render/`).
 pub mod shaders;
 
+use backward::grad_accumulate::Accumulation;
+use backward::{
+    BackwardRequest, BackwardState, DeviceBackward, DeviceFeatures, Gradients, LastFrameState,
+};
+
 use forward::{blend, shade};
 
 use frame::buffers::{check_binding, FrameBuffers, FrameSet};
-use frame::pipelines::{FrameNeeds, Pipelines};
+use frame::pipelines::FrameNeeds;
 pub use frame::readback::{ForwardState, Intermediates};
+use frame::schedule::Frames;
 use frame::schedule::Pass;
 use frame::schedule::CHUNKS_PER_SUBMIT;
 pub use frame::schedule::{
@@ -245,34 +251,11 @@ impl Rendered {
 
 /// The GPU renderer: pipelines, per-frame buffers and the timestamp pool.
 pub struct GpuRenderer {
-    /// The resources of each frame in flight: one set, and a second one made when a frame
-    /// is submitted while another is still in flight ([`Self::submit`]). First, so that
-    /// it drops first: a set waits for a frame still in flight before the pipelines go.
-    sets: Vec<FrameSet>,
-    /// Built the first time a frame needs each.
-    pipelines: Pipelines,
-    /// The last finished frame (its set is what [`Readback::Intermediates`] reads;
-    /// [`ForwardHandle`]s name it by its serial).
-    last: LastFrame,
-    /// Key capacity the frames have needed so far (the largest set's); a new or resized
-    /// set starts with it.
-    capacity: Option<u32>,
-    /// Number of the next frame submitted (matches tickets to their sets).
-    serial: u64,
-    timings: StageTimings,
-    stats: FrameStats,
-    /// (Gaussians, width, height) of the last finished frame that needed 16-pixel bins
-    /// for its pairs where the kernel prefers smaller ones: the next frames of that size
-    /// start with 16-pixel bins instead of planning and dropping a first attempt.
-    large_bins: Option<(u32, u32, u32)>,
-    /// Whether frames are rendered in chunks: set by the first frame whose pairs do not
-    /// fit one key buffer, and kept (a camera path does not find out again).
-    chunked: bool,
-    split: SplitLimits,
+    /// The frames' sets, pipelines and schedule ([`Frames`]). First, so that it drops
+    /// first: a set waits for a frame still in flight before the pipelines go.
+    frames: Frames,
     /// Upload scenes compact: fp16 SH, scales and rotations ([`Self::set_compact`]).
     compact: bool,
-    /// Frames save what a backward pass reads ([`Self::set_save_forward_state`]).
-    save_forward: bool,
     /// The backward pass's pipelines and buffers, made by the first pass.
     backward: Option<backward::BackwardState>,
     ctx: GpuContext,
@@ -323,7 +306,7 @@ impl Ticket<'_> {
 impl GpuRenderer {
     /// The saved state of the last finished frame ([`ForwardState`]).
     pub fn forward_state(&self) -> GpuResult<ForwardState<'_>> {
-        self.sets[self.last.set].forward_state()
+        self.frames.sets[self.frames.last.set].forward_state()
     }
 
     /// Uploads activated Gaussians.
@@ -364,7 +347,7 @@ impl GpuRenderer {
         frame::upload::Uploader {
             ctx: &self.ctx,
             compact: self.compact,
-            texel_io: self.pipelines.texel_io(),
+            texel_io: self.frames.pipelines.texel_io(),
         }
     }
 
@@ -377,23 +360,8 @@ impl GpuRenderer {
     /// Builds every pipeline with the given blend kernel.
     pub fn with_blend_kernel(ctx: GpuContext, kernel: blend::BlendKernel) -> GpuResult<Self> {
         Ok(GpuRenderer {
-            pipelines: Pipelines::new(kernel),
-            sets: vec![FrameSet::new(&ctx, 0, kernel.bin_size())?],
-            last: LastFrame {
-                set: 0,
-                serial: u64::MAX,
-                kernel: Default::default(),
-                lens: false,
-            },
-            capacity: None,
-            serial: 0,
-            timings: StageTimings::default(),
-            stats: FrameStats::default(),
-            chunked: false,
-            large_bins: None,
-            split: SplitLimits::default(),
+            frames: Frames::new(&ctx, kernel)?,
             compact: false,
-            save_forward: false,
             backward: None,
             ctx,
         })
@@ -402,7 +370,7 @@ impl GpuRenderer {
     /// Splits frames as if the device's limits were `limits` (for tests; see
     /// [`SplitLimits`]).
     pub fn set_split_limits(&mut self, limits: SplitLimits) {
-        self.split = limits;
+        self.frames.split = limits;
     }
 
     /// Whether the frames from now on also save each pixel's last contributor for a
@@ -410,18 +378,18 @@ impl GpuRenderer {
     /// compute nor store it. Frames in one piece only: a frame rendered in chunks saves no
     /// last contributor.
     pub fn set_save_forward_state(&mut self, on: bool) {
-        self.save_forward = on;
+        self.frames.save_forward = on;
     }
 
     /// Pipelines built so far (each the first time a frame needed it) and the
     /// milliseconds that took.
     pub fn pipelines_built(&self) -> (u32, f64) {
-        self.pipelines.built()
+        self.frames.pipelines.built()
     }
 
     /// The blend kernel in use.
     pub fn blend_kernel(&self) -> blend::BlendKernel {
-        self.pipelines.kernel()
+        self.frames.pipelines.kernel()
     }
 
     /// Destroys the pipelines and per-frame resources and returns the context (for
@@ -448,7 +416,7 @@ impl GpuRenderer {
     /// The handle of the frame just finished, rendered from `cam`.
     fn forward_handle(&self, cam: &Camera) -> ForwardHandle {
         ForwardHandle {
-            frame: self.last,
+            frame: self.frames.last,
             width: cam.width,
             height: cam.height,
         }
@@ -476,7 +444,7 @@ impl GpuRenderer {
                     features.channels
                 )));
             }
-            if self.loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
+            if self.ctx.info().loop_limited() && shader.iterations > u64::from(CPU_LOOP_LIMIT) {
                 return Err(GpuError::DeviceLimit {
                     limit: "llvmpipe's loop iterations per invocation",
                     needed: shader.iterations,
@@ -494,18 +462,19 @@ impl GpuRenderer {
 
     /// GPU time per stage of the last frame finished.
     pub fn timings(&self) -> &StageTimings {
-        &self.timings
+        &self.frames.timings
     }
 
     /// Counts of the last frame finished.
     pub fn stats(&self) -> &FrameStats {
-        &self.stats
+        &self.frames.stats
     }
 
     /// Device bytes held by the per-frame buffers, of every frame in flight: with two
     /// frames in flight ([`Self::submit`]) there are two sets of them.
     pub fn frame_device_bytes(&self) -> u64 {
-        self.sets
+        self.frames
+            .sets
             .iter()
             .filter_map(|s| s.frame.as_ref())
             .map(|f| f.device_bytes())
@@ -514,12 +483,16 @@ impl GpuRenderer {
 
     /// Sets of per-frame resources made so far: 1, or 2 once two frames were in flight.
     pub fn frame_sets(&self) -> usize {
-        self.sets.len()
+        self.frames.sets.len()
     }
 
     /// Frames submitted and not finished yet.
     pub fn frames_in_flight(&self) -> usize {
-        self.sets.iter().filter(|s| s.pending.is_some()).count()
+        self.frames
+            .sets
+            .iter()
+            .filter(|s| s.pending.is_some())
+            .count()
     }
 
     /// Renders the frame `request` asks for: [`Self::submit`] and [`Self::finish`].
@@ -553,7 +526,8 @@ impl GpuRenderer {
                 "a frame of feature channels reads back floats or nothing, not Readback::{readback:?}"
             )));
         }
-        self.submit_with(
+        self.frames.submit_with(
+            &self.ctx,
             request.scene,
             request.camera,
             request.options,
@@ -569,14 +543,14 @@ impl GpuRenderer {
     /// recorded again (and waited for) here. The timings and counts ([`Self::timings`],
     /// [`Self::stats`]) become this frame's.
     pub fn finish(&mut self, ticket: Ticket) -> GpuResult<Rendered> {
-        self.complete(&ticket)?;
+        self.frames.complete(&self.ctx, &ticket)?;
         let output = match ticket.readback {
             Readback::Float => {
-                let mut frame = self.sets[ticket.set].read_frame(&ticket.cam)?;
+                let mut frame = self.frames.sets[ticket.set].read_frame(&ticket.cam)?;
                 if let Some((features, None)) = ticket.features {
                     let pixels = ticket.cam.width as usize * ticket.cam.height as usize;
                     frame.feature_count = features.channels;
-                    frame.features = self.sets[ticket.set].read_feature_planes(
+                    frame.features = self.frames.sets[ticket.set].read_feature_planes(
                         &self.ctx,
                         features.channels,
                         pixels,
@@ -584,11 +558,11 @@ impl GpuRenderer {
                 }
                 Output::Frame(frame)
             }
-            Readback::Rgba8 => Output::Rgba8(self.sets[ticket.set].read_rgba8(&ticket.cam)?),
+            Readback::Rgba8 => Output::Rgba8(self.frames.sets[ticket.set].read_rgba8(&ticket.cam)?),
             Readback::Counters => Output::OnDevice,
             Readback::Intermediates => Output::Intermediates(Box::new((
-                self.sets[ticket.set].read_frame(&ticket.cam)?,
-                self.sets[self.last.set].read_intermediates(
+                self.frames.sets[ticket.set].read_frame(&ticket.cam)?,
+                self.frames.sets[self.frames.last.set].read_intermediates(
                     &self.ctx,
                     ticket.scene,
                     &ticket.cam,
@@ -604,7 +578,7 @@ impl GpuRenderer {
     /// Waits for a submitted frame without reading it back, freeing its resources for the
     /// next frame (after an error stopped a path).
     pub fn discard(&mut self, ticket: Ticket) -> GpuResult<()> {
-        let set = self.sets.get_mut(ticket.set).ok_or_else(|| {
+        let set = self.frames.sets.get_mut(ticket.set).ok_or_else(|| {
             GpuError::InvalidArgument("the ticket is not from this renderer".into())
         })?;
         if set.pending == Some(ticket.serial) {
@@ -612,5 +586,101 @@ impl GpuRenderer {
             self.ctx.wait_slot(&mut set.slot)?;
         }
         Ok(())
+    }
+}
+
+/// The backward pass ([`backward`]): from the gradients of a loss with respect to the last
+/// frame's pixels to the Gaussians'.
+impl GpuRenderer {
+    /// The backward pass of the last frame that `req` asks for ([`BackwardRequest`]). The
+    /// frame must have been rendered with [`Self::set_save_forward_state`] on, in one
+    /// piece, and be the renderer's last (an older handle is refused); its options
+    /// (kernel, background, scale modifier, SH degree) are the backward's. A frame whose
+    /// buffers exceed one storage binding is taken in bands ([`Self::backward_bands`]).
+    pub fn backward(&mut self, req: &BackwardRequest) -> GpuResult<Gradients> {
+        let GpuRenderer {
+            ctx,
+            frames,
+            backward,
+            ..
+        } = self;
+        let frame = LastFrameState {
+            sets: &frames.sets,
+            last: frames.last,
+        };
+        BackwardState::get(ctx, backward)?.backward(ctx, frame, req)
+    }
+
+    /// The backward pass of the frame `forward` names (rendered with [`Readback::Counters`],
+    /// with the forward state saved) entirely on the device, recorded by the caller in one
+    /// submission with what makes the pixels' gradients and what reads the results
+    /// ([`DeviceBackward`]). A frame of SH colour, or of feature channels shaded by a
+    /// neural shader ([`FrameRequest::shaded`], `features`); no depth gradient. Nothing is
+    /// read back. Refused when the renderer has finished another frame since.
+    pub fn device_backward<'r>(
+        &'r mut self,
+        forward: &ForwardHandle,
+        scene: &'r GpuScene,
+        features: Option<DeviceFeatures<'r>>,
+    ) -> GpuResult<DeviceBackward<'r>> {
+        let GpuRenderer {
+            ctx,
+            frames,
+            backward,
+            ..
+        } = self;
+        let frame = LastFrameState {
+            sets: &frames.sets,
+            last: frames.last,
+        };
+        BackwardState::get(ctx, backward)?.device_backward(ctx, frame, forward, scene, features)
+    }
+
+    /// How the backward passes add per-pair gradients into per-Gaussian sums
+    /// ([`Accumulation::Deterministic`] by default).
+    pub fn set_gradient_accumulation(&mut self, mode: Accumulation) -> GpuResult<()> {
+        BackwardState::get(&self.ctx, &mut self.backward)?.set_accumulation(mode);
+        Ok(())
+    }
+
+    /// The accumulation the backward passes use.
+    pub fn gradient_accumulation(&self) -> Accumulation {
+        self.backward
+            .as_ref()
+            .map_or_else(Accumulation::default, BackwardState::accumulation)
+    }
+
+    /// Whether the backward passes that read their gradients back also return the
+    /// projected quantities' ([`crate::core::model::grad::SplatGrads::screen`], what a
+    /// camera's gradient needs; off by default: it reads every Gaussian's sums back).
+    pub fn set_screen_grads(&mut self, on: bool) -> GpuResult<()> {
+        BackwardState::get(&self.ctx, &mut self.backward)?.set_screen(on);
+        Ok(())
+    }
+
+    /// Milliseconds of each stage of the last backward pass (device timestamps), in order.
+    pub fn backward_timings(&self) -> Vec<(String, f64)> {
+        self.backward
+            .as_ref()
+            .map_or_else(Vec::new, |b| b.timings().to_vec())
+    }
+
+    /// Milliseconds of the last backward pass on the device, first timestamp to last.
+    pub fn backward_total_ms(&self) -> f64 {
+        self.backward.as_ref().map_or(0.0, BackwardState::total_ms)
+    }
+
+    /// How the last backward pass was split to fit the device's storage bindings: its
+    /// bands of pixel rows and its bands of sorted pairs, (1, 1) for a pass in one piece
+    /// ((0, 0) before the first pass).
+    pub fn backward_bands(&self) -> (usize, usize) {
+        self.backward.as_ref().map_or((0, 0), BackwardState::bands)
+    }
+
+    /// Device bytes the backward pass holds (its buffers, sized by the largest pass so far).
+    pub fn backward_device_bytes(&self) -> u64 {
+        self.backward
+            .as_ref()
+            .map_or(0, BackwardState::device_bytes)
     }
 }

@@ -86,7 +86,7 @@ layout(std430, binding = BLEND_BWD_GRAD_FEATURES) readonly buffer GradFeatureBuf
 // Largest |pair sum| per field, as float bits (non-negative floats order like their bits).
 layout(std430, binding = BLEND_BWD_MAXIMA) buffer MaximaBuf { uint maxima[]; };
 // The band this dispatch covers: the host splits a frame whose per-pair or per-pixel
-// buffers exceed one storage binding (render::backward::bands). counts.xy: the pairs
+// buffers exceed one storage binding (render::frame::bands). counts.xy: the pairs
 // [lo, hi) whose sums this dispatch writes, to pair_grads[k - lo] (each band its own
 // buffer); counts.z: the first bin row dispatched (workgroup row 0); counts.w: the first
 // pixel row of the per-pixel buffers as bound. A bin is walked exactly as in one piece

@@ -48,7 +48,7 @@ pub struct BlendBwdBindings<'a> {
     pub grad_features: BufferSlice<'a>,
 }
 
-/// One dispatch of a split pass ([`super::bands`]): the pairs `[lo, hi)` whose sums it
+/// One dispatch of a split pass ([`crate::render::frame::bands`]): the pairs `[lo, hi)` whose sums it
 /// writes, the bin rows `[first, end)` it runs, and the first pixel row of the per-pixel
 /// bindings.
 #[derive(Clone, Copy, Debug)]
@@ -191,7 +191,7 @@ impl BlendBwd {
     }
 
     /// Records the dispatch over the bins of `bins_x` columns and `band`'s rows, writing
-    /// the sums of `band`'s pairs ([`super::bands`]): `pair_grads` holds the band's pairs
+    /// the sums of `band`'s pairs ([`crate::render::frame::bands`]): `pair_grads` holds the band's pairs
     /// from its first, and the per-pixel bindings start at its first pixel row.
     pub fn record_band(
         &self,

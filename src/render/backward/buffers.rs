@@ -17,7 +17,7 @@ pub(super) struct BackwardBuffers {
     /// dL/d depth per pixel.
     pub(super) grad_depth: Option<GpuBuffer>,
     /// Each pair's gradient fields, summed over its bin: one buffer per pair band
-    /// ([`super::bands`]).
+    /// ([`crate::render::frame::bands`]).
     pub(super) pair_grads: Vec<GpuBuffer>,
     /// Each field's largest magnitude (the fixed-point scale).
     pub(super) maxima: Option<GpuBuffer>,
@@ -55,7 +55,7 @@ fn ensure<'a>(
     ensure_banded(ctx, slot, name, bytes)
 }
 
-/// [`ensure`] for a buffer bound in bands ([`super::bands`] checked them).
+/// [`ensure`] for a buffer bound in bands ([`crate::render::frame::bands`] checked them).
 fn ensure_banded<'a>(
     ctx: &GpuContext,
     slot: &'a mut Option<GpuBuffer>,

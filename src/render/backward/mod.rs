@@ -14,7 +14,7 @@
 //!    covariance and SH to centres, quaternions, scales, opacities and SH coefficients.
 //!
 //! A frame whose per-pair or per-pixel buffers exceed one storage binding runs the first
-//! two stages in bands that fit ([`bands`]), bit-identical to one piece.
+//! two stages in bands that fit ([`crate::render::frame::bands`]), bit-identical to one piece.
 //!
 //! A frame shaded by a neural shader starts with the shader's own backward pass
 //! ([`shade_bwd`]), which turns the colour's gradients into the feature
@@ -23,7 +23,6 @@
 //! The rules are those of the CPU reference [`crate::cpu::backward`], which the tests hold
 //! this pass to.
 
-pub(crate) mod bands;
 pub mod blend_bwd;
 mod buffers;
 mod device;
@@ -42,8 +41,8 @@ use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
 use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::render::forward::shade::GpuShader;
 use crate::render::frame::buffers::FrameSet;
-use crate::render::{check_binding, ForwardHandle, ForwardState, GpuRenderer, GpuScene, Stage};
-use bands::Bands;
+use crate::render::{check_binding, ForwardHandle, ForwardState, GpuScene, LastFrame, Stage};
+use crate::render::frame::bands::Bands;
 use blend_bwd::BlendBwd;
 use buffers::BackwardBuffers;
 pub use device::DeviceBackward;
@@ -59,7 +58,7 @@ type BlendKey = (u32, bool, SplatKernel, u32);
 
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
-pub(super) struct BackwardState {
+pub(crate) struct BackwardState {
     blend: Vec<(BlendKey, BlendBwd)>,
     accumulate: Vec<(Accumulation, GradAccumulate)>,
     /// By `float_sums + 2 lens` ([`PreprocessBwd::new`]).
@@ -71,7 +70,7 @@ pub(super) struct BackwardState {
     mode: Accumulation,
     /// Whether read-backs decode [`SplatGrads::screen`] from the per-Gaussian sums.
     screen: bool,
-    /// The last pass's pixel bands and pair bands ([`bands`]).
+    /// The last pass's pixel bands and pair bands ([`crate::render::frame::bands`]).
     bands: (usize, usize),
 }
 
@@ -112,7 +111,7 @@ impl BackwardState {
         })
     }
 
-    fn device_bytes(&self) -> u64 {
+    pub(crate) fn device_bytes(&self) -> u64 {
         self.buffers.device_bytes()
     }
 }
@@ -188,72 +187,76 @@ fn bits_for(n: u64) -> u32 {
     64 - n.max(1).saturating_sub(1).leading_zeros()
 }
 
-impl GpuRenderer {
-    /// How the backward passes add per-pair gradients into per-Gaussian sums
-    /// ([`Accumulation::Deterministic`] by default).
-    pub fn set_gradient_accumulation(&mut self, mode: Accumulation) -> GpuResult<()> {
-        self.backward_state()?.mode = mode;
-        Ok(())
-    }
+/// The renderer's last finished frame as a backward pass reads it: the frame sets and
+/// which of them holds the frame ([`LastFrame`]: its set, serial, kernel and lens).
+#[derive(Clone, Copy)]
+pub(crate) struct LastFrameState<'a> {
+    pub(crate) sets: &'a [FrameSet],
+    pub(crate) last: LastFrame,
+}
 
-    /// The backward pass's state, made the first time it is asked for.
-    fn backward_state(&mut self) -> GpuResult<&mut BackwardState> {
-        if self.backward.is_none() {
-            self.backward = Some(BackwardState::new(&self.ctx)?);
+impl<'a> LastFrameState<'a> {
+    fn set(&self) -> (&'a FrameSet, SplatKernel, bool) {
+        (&self.sets[self.last.set], self.last.kernel, self.last.lens)
+    }
+}
+
+impl BackwardState {
+    /// The state in `slot`, made the first time it is asked for.
+    pub(crate) fn get<'s>(
+        ctx: &GpuContext,
+        slot: &'s mut Option<BackwardState>,
+    ) -> GpuResult<&'s mut BackwardState> {
+        if slot.is_none() {
+            *slot = Some(BackwardState::new(ctx)?);
         }
-        Ok(self.backward.as_mut().expect("made above"))
+        Ok(slot.as_mut().expect("made above"))
     }
 
-    /// Whether the backward passes that read their gradients back also return the
-    /// projected quantities' ([`SplatGrads::screen`], what a camera's gradient needs;
-    /// off by default: it reads every Gaussian's sums back).
-    pub fn set_screen_grads(&mut self, on: bool) -> GpuResult<()> {
-        self.backward_state()?.screen = on;
-        Ok(())
+    /// Sets how the passes add per-pair gradients into per-Gaussian sums.
+    pub(crate) fn set_accumulation(&mut self, mode: Accumulation) {
+        self.mode = mode;
     }
 
-    /// Milliseconds of each stage of the last backward pass (device timestamps), in order.
-    pub fn backward_timings(&self) -> Vec<(String, f64)> {
-        self.backward
-            .as_ref()
-            .map_or_else(Vec::new, |b| b.clock.timings.clone())
+    /// The accumulation the passes use.
+    pub(crate) fn accumulation(&self) -> Accumulation {
+        self.mode
     }
 
-    /// Milliseconds of the last backward pass on the device, first timestamp to last.
-    pub fn backward_total_ms(&self) -> f64 {
-        self.backward.as_ref().map_or(0.0, |b| b.clock.span_ms)
+    /// Sets whether read-backs also decode [`SplatGrads::screen`].
+    pub(crate) fn set_screen(&mut self, on: bool) {
+        self.screen = on;
     }
 
-    /// The accumulation the backward passes use.
-    pub fn gradient_accumulation(&self) -> Accumulation {
-        self.backward
-            .as_ref()
-            .map_or_else(Accumulation::default, |b| b.mode)
+    /// Milliseconds of each stage of the last pass.
+    pub(crate) fn timings(&self) -> &[(String, f64)] {
+        &self.clock.timings
     }
 
-    /// How the last backward pass was split to fit the device's storage bindings: its
-    /// bands of pixel rows and its bands of sorted pairs, (1, 1) for a pass in one piece
-    /// ((0, 0) before the first pass).
-    pub fn backward_bands(&self) -> (usize, usize) {
-        self.backward.as_ref().map_or((0, 0), |b| b.bands)
+    /// Milliseconds of the last pass on the device, first timestamp to last.
+    pub(crate) fn total_ms(&self) -> f64 {
+        self.clock.span_ms
     }
 
-    /// Device bytes the backward pass holds (its buffers, sized by the largest pass so far).
-    pub fn backward_device_bytes(&self) -> u64 {
-        self.backward.as_ref().map_or(0, |b| b.device_bytes())
+    /// The last pass's pixel bands and pair bands.
+    pub(crate) fn bands(&self) -> (usize, usize) {
+        self.bands
     }
 
-    /// The backward pass of the last frame that `req` asks for ([`BackwardRequest`]). The
-    /// frame must have been rendered with [`Self::set_save_forward_state`] on, in one
-    /// piece, and be the renderer's last (an older handle is refused); its options
-    /// (kernel, background, scale modifier, SH degree) are the backward's.
-    pub fn backward(&mut self, req: &BackwardRequest) -> GpuResult<Gradients> {
+    /// The backward pass `req` asks for, of the renderer's last frame `frame`, read back
+    /// ([`crate::render::GpuRenderer::backward`]).
+    pub(crate) fn backward(
+        &mut self,
+        ctx: &GpuContext,
+        frame: LastFrameState,
+        req: &BackwardRequest,
+    ) -> GpuResult<Gradients> {
         let size = (req.frame.width, req.frame.height);
-        self.check_forward(req.forward, size)?;
+        check_forward(frame.last, req.forward, size)?;
         let shade = match req.shader {
             Some((shader, cam, background)) => {
                 let channels = req.features.map_or(0, |(_, k)| k);
-                self.check_shaded(shader, channels, cam, size)?;
+                check_shaded(ctx, shader, channels, cam, size)?;
                 Some(ShadeJob {
                     shader,
                     cam,
@@ -262,74 +265,26 @@ impl GpuRenderer {
             }
             None => None,
         };
-        let (splats, shader) =
-            self.backward_inner(req.scene, req.features, shade, req.frame, req.grads)?;
+        let (splats, shader) = self.backward_inner(
+            ctx,
+            frame,
+            req.scene,
+            req.features,
+            shade,
+            req.frame,
+            req.grads,
+        )?;
         Ok(Gradients {
             splats,
             shader: req.shader.map(|_| shader.unwrap_or_default()),
         })
     }
 
-    /// Refuses a forward handle that is not the renderer's last finished frame (a later
-    /// frame replaced its state) or is not `size`.
-    fn check_forward(&self, forward: &ForwardHandle, size: (u32, u32)) -> GpuResult<()> {
-        if forward.frame.serial != self.last.serial {
-            return Err(GpuError::InvalidArgument(
-                "the frame of this forward handle is no longer the renderer's last: its state \
-                 was replaced by a later frame's"
-                    .into(),
-            ));
-        }
-        if forward.size() != size {
-            return Err(GpuError::InvalidArgument(format!(
-                "the forward handle's frame is {}x{}, the frame given {}x{}",
-                forward.width, forward.height, size.0, size.1
-            )));
-        }
-        Ok(())
-    }
-
-    /// Refuses a shaded frame's backward pass that the shader, the camera (`size` the
-    /// frame's) or the device's loop limit cannot run.
-    fn check_shaded(
-        &self,
-        shader: &GpuShader,
-        channels: usize,
-        cam: &Camera,
-        size: (u32, u32),
-    ) -> GpuResult<()> {
-        if shader.channels() != channels {
-            return Err(GpuError::InvalidArgument(format!(
-                "the shader takes {} feature channels but the Gaussians have {channels}",
-                shader.channels()
-            )));
-        }
-        if (cam.width, cam.height) != size {
-            return Err(GpuError::InvalidArgument(format!(
-                "the camera is {}x{}, the frame {}x{}",
-                cam.width, cam.height, size.0, size.1
-            )));
-        }
-        if self.loop_limited()
-            && shader.backward_iterations > u64::from(crate::render::CPU_LOOP_LIMIT)
-        {
-            return Err(GpuError::DeviceLimit {
-                limit: "llvmpipe's loop iterations per invocation",
-                needed: shader.backward_iterations,
-                max: u64::from(crate::render::CPU_LOOP_LIMIT),
-                message: format!(
-                    "the neural shader's backward pass needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {} iterations; use narrower layers, or the CPU reference",
-                    shader.backward_iterations,
-                    self.ctx.info().name,
-                    crate::render::CPU_LOOP_LIMIT
-                ),
-            });
-        }
-        Ok(())
-    }
-
+    #[allow(clippy::too_many_arguments)]
     fn backward_inner(
         &mut self,
+        ctx: &GpuContext,
+        frame_state: LastFrameState,
         scene: &GpuScene,
         features: Option<(&[f32], usize)>,
         shade: Option<ShadeJob>,
@@ -349,11 +304,7 @@ impl GpuRenderer {
                 )));
             }
         }
-        if scene.compact {
-            return Err(GpuError::InvalidArgument(
-                "the backward pass needs a full-precision upload, not a compact one".into(),
-            ));
-        }
+        check_full_precision(scene)?;
         let (w, h) = (frame.width as usize, frame.height as usize);
         let pixels = w * h;
         for (name, len, want) in [
@@ -418,10 +369,6 @@ impl GpuRenderer {
             }
             grad_color[i] = g;
         }
-        let mut state = match self.backward.take() {
-            Some(s) => s,
-            None => BackwardState::new(&self.ctx)?,
-        };
         // The Gaussians' feature values, in groups of four.
         let feature_values: Option<Vec<[f32; 4]>> = features.map(|(values, k)| {
             let mut packed = vec![[0f32; 4]; scene.count as usize * groups];
@@ -436,8 +383,9 @@ impl GpuRenderer {
         let feature_job = feature_values
             .as_deref()
             .map(|v| (FeatureValues::Host(v), pixel_feature_grads, channels));
-        let result = self.run_backward(
-            &mut state,
+        self.run_backward(
+            ctx,
+            frame_state,
             scene,
             (frame.width, frame.height),
             HostPixels {
@@ -446,47 +394,30 @@ impl GpuRenderer {
             },
             feature_job,
             shade,
-        );
-        self.backward = Some(state);
-        result
+        )
     }
 
-    /// The backward pass of the frame `forward` names (rendered with [`Readback::Counters`](crate::render::Readback), with
-    /// the forward state saved) entirely on the device, recorded by the caller in one
-    /// submission with what makes the pixels' gradients and what reads the results
-    /// ([`DeviceBackward`]). A frame of SH colour, or of feature channels shaded by a
-    /// neural shader ([`crate::render::FrameRequest::shaded`], `features`); no depth gradient.
-    /// Nothing is read back. Refused when the renderer has finished another frame since.
-    pub fn device_backward<'r>(
+    /// The backward pass of the frame `forward` names, recorded by the caller on the
+    /// device ([`crate::render::GpuRenderer::device_backward`]).
+    pub(crate) fn device_backward<'r>(
         &'r mut self,
+        ctx: &'r GpuContext,
+        frame: LastFrameState<'r>,
         forward: &ForwardHandle,
         scene: &'r GpuScene,
         features: Option<DeviceFeatures<'r>>,
     ) -> GpuResult<DeviceBackward<'r>> {
         let size = forward.size();
-        self.check_forward(forward, size)?;
+        check_forward(frame.last, forward, size)?;
         if let Some(f) = &features {
             check_feature_channels(f.channels)?;
-            self.check_shaded(f.shader, f.channels, f.cam, size)?;
+            check_shaded(ctx, f.shader, f.channels, f.cam, size)?;
         }
-        if scene.compact {
-            return Err(GpuError::InvalidArgument(
-                "the backward pass needs a full-precision upload, not a compact one".into(),
-            ));
-        }
-        self.backward_state()?;
-        let GpuRenderer {
-            ctx,
-            sets,
-            backward,
-            ..
-        } = self;
-        // The handle's frame: the renderer's last (checked above).
-        let frame = forward.frame;
+        check_full_precision(scene)?;
         let (pass, clock, _) = prepare(
             ctx,
-            backward.as_mut().expect("made above"),
-            (&sets[frame.set], frame.kernel, frame.lens),
+            self,
+            frame.set(),
             scene,
             size,
             None,
@@ -501,20 +432,21 @@ impl GpuRenderer {
     }
 
     /// A backward pass with the pixels' gradients from the host, read back.
+    #[allow(clippy::too_many_arguments)]
     fn run_backward(
-        &self,
-        st: &mut BackwardState,
+        &mut self,
+        ctx: &GpuContext,
+        frame: LastFrameState,
         scene: &GpuScene,
         size: (u32, u32),
         pixels: HostPixels,
         features: Option<FeatureJob>,
         shade: Option<ShadeJob>,
     ) -> GpuResult<HostGrads> {
-        let ctx = &self.ctx;
         let (pass, clock, shape) = prepare(
             ctx,
-            st,
-            (&self.sets[self.last.set], self.last.kernel, self.last.lens),
+            self,
+            frame.set(),
             scene,
             size,
             Some(pixels),
@@ -528,8 +460,76 @@ impl GpuRenderer {
             Ok(())
         })?;
         clock.read(ctx)?;
-        st.read_back(ctx, scene, &shape, features, shade)
+        self.read_back(ctx, scene, &shape, features, shade)
     }
+}
+
+/// Refuses a compact upload: the backward pass reads full-precision Gaussians.
+fn check_full_precision(scene: &GpuScene) -> GpuResult<()> {
+    if scene.compact {
+        return Err(GpuError::InvalidArgument(
+            "the backward pass needs a full-precision upload, not a compact one".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a forward handle that is not the renderer's last finished frame (`last`: a
+/// later frame replaced its state) or is not `size`.
+fn check_forward(last: LastFrame, forward: &ForwardHandle, size: (u32, u32)) -> GpuResult<()> {
+    if forward.frame.serial != last.serial {
+        return Err(GpuError::InvalidArgument(
+            "the frame of this forward handle is no longer the renderer's last: its state \
+             was replaced by a later frame's"
+                .into(),
+        ));
+    }
+    if forward.size() != size {
+        return Err(GpuError::InvalidArgument(format!(
+            "the forward handle's frame is {}x{}, the frame given {}x{}",
+            forward.width, forward.height, size.0, size.1
+        )));
+    }
+    Ok(())
+}
+
+/// Refuses a shaded frame's backward pass that the shader, the camera (`size` the
+/// frame's) or the device's loop limit cannot run.
+fn check_shaded(
+    ctx: &GpuContext,
+    shader: &GpuShader,
+    channels: usize,
+    cam: &Camera,
+    size: (u32, u32),
+) -> GpuResult<()> {
+    if shader.channels() != channels {
+        return Err(GpuError::InvalidArgument(format!(
+            "the shader takes {} feature channels but the Gaussians have {channels}",
+            shader.channels()
+        )));
+    }
+    if (cam.width, cam.height) != size {
+        return Err(GpuError::InvalidArgument(format!(
+            "the camera is {}x{}, the frame {}x{}",
+            cam.width, cam.height, size.0, size.1
+        )));
+    }
+    if ctx.info().loop_limited()
+        && shader.backward_iterations > u64::from(crate::render::CPU_LOOP_LIMIT)
+    {
+        return Err(GpuError::DeviceLimit {
+            limit: "llvmpipe's loop iterations per invocation",
+            needed: shader.backward_iterations,
+            max: u64::from(crate::render::CPU_LOOP_LIMIT),
+            message: format!(
+                "the neural shader's backward pass needs {} loop iterations per pixel, but {} ends every shader invocation's loops after {} iterations; use narrower layers, or the CPU reference",
+                shader.backward_iterations,
+                ctx.info().name,
+                crate::render::CPU_LOOP_LIMIT
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// A pass over the last frame of `set` (rendered with `kernel`): the pipelines and buffers

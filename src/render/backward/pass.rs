@@ -254,7 +254,7 @@ impl<'a> BackwardPass<'a> {
 
     /// Blend backward, accumulation and preprocess backward, each after a barrier on the
     /// one before. The blend backward runs once per pixel band and pair band, the
-    /// accumulation once per pair band ([`super::bands`]; one of each for a frame whose
+    /// accumulation once per pair band ([`crate::render::frame::bands`]; one of each for a frame whose
     /// buffers fit their bindings).
     fn record_gaussian_stages(
         &self,

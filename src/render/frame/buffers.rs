@@ -12,9 +12,8 @@ use crate::render::forward::types::{Counters, FrameParams, Splat};
 use ash::vk;
 
 use crate::render::forward::{keys, preprocess};
-use crate::render::{
-    bin_grid, GpuFeatures, GpuRenderer, GpuScene, MAX_FRAMES_IN_FLIGHT, MAX_STAGES_PER_SUBMIT,
-};
+use crate::render::frame::pipelines::Pipelines;
+use crate::render::{bin_grid, GpuFeatures, GpuScene, MAX_FRAMES_IN_FLIGHT, MAX_STAGES_PER_SUBMIT};
 
 /// The feature images of a frame: one plane per group of four channels.
 pub(crate) struct FeaturePlanes {
@@ -376,27 +375,27 @@ impl FrameSet {
     }
 }
 
-impl GpuRenderer {
-    /// Makes set `set`'s feature planes hold `features`' groups for `pixels` pixels.
+impl FrameSet {
+    /// Makes the set's feature planes hold `features`' groups for `pixels` pixels.
     pub(crate) fn ensure_feature_planes(
         &mut self,
-        set: usize,
+        ctx: &GpuContext,
         features: &GpuFeatures,
         pixels: u64,
     ) -> GpuResult<()> {
         let groups = features.groups.len() as u64;
-        let align = self.ctx.info().min_storage_buffer_offset_alignment.max(16);
+        let align = ctx.info().min_storage_buffer_offset_alignment.max(16);
         let plane_bytes = (pixels * 16).div_ceil(align) * align;
-        let planes = &mut self.sets[set].feature_planes;
+        let planes = &mut self.feature_planes;
         let fits = planes
             .as_ref()
             .is_some_and(|p| p.plane_bytes == plane_bytes && p.groups >= groups);
         if !fits {
             *planes = None;
-            check_binding(&self.ctx, "feature image", plane_bytes * groups)?;
+            check_binding(ctx, "feature image", plane_bytes * groups)?;
             *planes = Some(FeaturePlanes {
                 buffer: GpuBuffer::new(
-                    &self.ctx,
+                    ctx,
                     "feature images",
                     plane_bytes * groups,
                     MemoryKind::Device,
@@ -409,15 +408,17 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Makes set `set`'s frame buffers fit the scene, the camera and `capacity` pairs.
+    /// Makes the set's frame buffers fit the scene, the camera and `capacity` pairs (with
+    /// the texel views `pipelines` read and their kernel's bins).
     pub(crate) fn ensure_frame(
         &mut self,
-        set: usize,
+        ctx: &GpuContext,
+        pipelines: &Pipelines,
         scene: &GpuScene,
         cam: &Camera,
         capacity: u32,
     ) -> GpuResult<()> {
-        let frame = &mut self.sets[set].frame;
+        let frame = &mut self.frame;
         let fits = frame.as_ref().is_some_and(|f| {
             f.gaussians >= scene.count
                 && f.width == cam.width
@@ -427,42 +428,23 @@ impl GpuRenderer {
         if !fits {
             // Free the old buffers first so peak memory is not doubled.
             *frame = None;
-            let views = self.pipelines.texel_io();
+            let views = pipelines.texel_io();
             *frame = Some(FrameBuffers::new(
-                &self.ctx,
+                ctx,
                 scene.count,
                 cam.width,
                 cam.height,
                 capacity,
                 views,
-                self.pipelines.kernel().bin_size(),
+                pipelines.kernel().bin_size(),
             )?);
         }
         Ok(())
     }
 
-    /// A set with no frame in flight (made when every set made so far is busy).
-    pub(crate) fn free_set(&mut self) -> GpuResult<usize> {
-        if let Some(i) = self.sets.iter().position(|s| s.pending.is_none()) {
-            return Ok(i);
-        }
-        if self.sets.len() >= MAX_FRAMES_IN_FLIGHT {
-            return Err(GpuError::InvalidArgument(format!(
-                "{MAX_FRAMES_IN_FLIGHT} frames are in flight already; finish one before submitting another"
-            )));
-        }
-        let set = FrameSet::new(
-            &self.ctx,
-            self.sets.len(),
-            self.pipelines.kernel().bin_size(),
-        )?;
-        self.sets.push(set);
-        Ok(self.sets.len() - 1)
-    }
-
-    /// Makes the last-contributor buffer of set `set`'s frame buffers.
-    pub(crate) fn ensure_last_contributor(&mut self, set: usize) -> GpuResult<()> {
-        let f = self.sets[set]
+    /// Makes the last-contributor buffer of the set's frame buffers.
+    pub(crate) fn ensure_last_contributor(&mut self, ctx: &GpuContext) -> GpuResult<()> {
+        let f = self
             .frame
             .as_mut()
             .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
@@ -471,11 +453,11 @@ impl GpuRenderer {
             // bands of rows where one binding cannot hold them all: refused only when no
             // band fits.
             let (w, h) = (f.width, f.height);
-            let max = crate::gpu::limits::storage_binding_bytes(self.ctx.info());
-            crate::render::backward::bands::Bands::plan(max, 0, 0, (w, h), (LAST_CONTRIBUTOR, 8))?;
+            let max = crate::gpu::limits::storage_binding_bytes(ctx.info());
+            crate::render::frame::bands::Bands::plan(max, 0, 0, (w, h), (LAST_CONTRIBUTOR, 8))?;
             let bytes = (u64::from(w) * u64::from(h) * 8).max(8);
             f.last_contributor = Some(GpuBuffer::new(
-                &self.ctx,
+                ctx,
                 LAST_CONTRIBUTOR,
                 bytes,
                 MemoryKind::Device,
@@ -484,17 +466,17 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Makes the packed RGBA8 buffer of set `set`'s frame buffers.
-    pub(crate) fn ensure_packed(&mut self, set: usize) -> GpuResult<()> {
-        let f = self.sets[set]
+    /// Makes the packed RGBA8 buffer of the set's frame buffers.
+    pub(crate) fn ensure_packed(&mut self, ctx: &GpuContext) -> GpuResult<()> {
+        let f = self
             .frame
             .as_mut()
             .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
         if f.packed.is_none() {
             let bytes = u64::from(f.width) * u64::from(f.height) * 4;
-            check_binding(&self.ctx, "packed rgba8 frame", bytes)?;
+            check_binding(ctx, "packed rgba8 frame", bytes)?;
             f.packed = Some(GpuBuffer::new(
-                &self.ctx,
+                ctx,
                 "packed rgba8 frame",
                 bytes,
                 MemoryKind::Device,
@@ -502,4 +484,24 @@ impl GpuRenderer {
         }
         Ok(())
     }
+}
+
+/// A set of `sets` with no frame in flight (made, for `bin_size`-pixel bins, when every set
+/// made so far is busy).
+pub(crate) fn free_set(
+    sets: &mut Vec<FrameSet>,
+    ctx: &GpuContext,
+    bin_size: u32,
+) -> GpuResult<usize> {
+    if let Some(i) = sets.iter().position(|s| s.pending.is_none()) {
+        return Ok(i);
+    }
+    if sets.len() >= MAX_FRAMES_IN_FLIGHT {
+        return Err(GpuError::InvalidArgument(format!(
+            "{MAX_FRAMES_IN_FLIGHT} frames are in flight already; finish one before submitting another"
+        )));
+    }
+    let set = FrameSet::new(ctx, sets.len(), bin_size)?;
+    sets.push(set);
+    Ok(sets.len() - 1)
 }

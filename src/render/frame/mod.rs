@@ -5,6 +5,7 @@
 //! feature [`upload`], the [`pipelines`] built on first use and the pipelined camera
 //! [`path`].
 
+pub(crate) mod bands;
 pub mod buffers;
 pub mod path;
 pub mod pipelines;

@@ -10,7 +10,7 @@ use crate::gpu::shader::Resource;
 use crate::gpu::sort::SortJob;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
 use crate::gpu::{BufferSlice, Count, GpuContext, GpuError, GpuResult, GpuTimer};
-use crate::render::backward::bands::Bands;
+use crate::render::frame::bands::Bands;
 use crate::render::forward::features::FeatureBindings;
 use crate::render::forward::order::OrderBindings;
 use crate::render::forward::pack::PackBindings;

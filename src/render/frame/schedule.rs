@@ -3,11 +3,14 @@
 
 use crate::core::camera::Camera;
 use crate::core::model::RenderOptions;
-use crate::gpu::{limits, GpuBuffer, GpuError, GpuResult, MemoryKind};
+use crate::gpu::{limits, GpuBuffer, GpuContext, GpuError, GpuResult, MemoryKind};
 use crate::render::forward::types::{Counters, Splat};
 
+use crate::render::forward::blend::BlendKernel;
 use crate::render::forward::{keys, preprocess};
-use crate::render::{FeatureJob, FrameStats, GpuRenderer, GpuScene, LastFrame, Readback, Ticket};
+use crate::render::frame::buffers::{free_set, FrameSet};
+use crate::render::frame::pipelines::Pipelines;
+use crate::render::{FeatureJob, FrameStats, GpuScene, LastFrame, Readback, StageTimings, Ticket};
 
 /// Key bits that order the pairs for `num_tiles` bins: 32 depth bits plus the bin id's.
 pub fn key_bits(num_tiles: u32) -> u32 {
@@ -154,12 +157,71 @@ pub(crate) fn next_attempt(r: &Reading) -> Next {
     Next::Grow((r.pairs + r.pairs / 4).min(u64::from(r.max)) as u32)
 }
 
-impl GpuRenderer {
+/// The frame machinery's state, which [`crate::render::GpuRenderer`] owns and drives: the
+/// frame sets, the pipelines, the last finished frame and what the schedule learned from
+/// the frames before (key capacity, bin size, chunks).
+pub(crate) struct Frames {
+    /// The resources of each frame in flight: one set, and a second one made when a frame
+    /// is submitted while another is still in flight. First, so that it drops first: a
+    /// set waits for a frame still in flight before the pipelines go.
+    pub(crate) sets: Vec<FrameSet>,
+    /// Built the first time a frame needs each.
+    pub(crate) pipelines: Pipelines,
+    /// The last finished frame (its set is what [`Readback::Intermediates`] reads;
+    /// forward handles name it by its serial).
+    pub(crate) last: LastFrame,
+    /// Key capacity the frames have needed so far (the largest set's); a new or resized
+    /// set starts with it.
+    pub(crate) capacity: Option<u32>,
+    /// Number of the next frame submitted (matches tickets to their sets).
+    pub(crate) serial: u64,
+    pub(crate) timings: StageTimings,
+    pub(crate) stats: FrameStats,
+    /// (Gaussians, width, height) of the last finished frame that needed 16-pixel bins
+    /// for its pairs where the kernel prefers smaller ones: the next frames of that size
+    /// start with 16-pixel bins instead of planning and dropping a first attempt.
+    pub(crate) large_bins: Option<(u32, u32, u32)>,
+    /// Whether frames are rendered in chunks: set by the first frame whose pairs do not
+    /// fit one key buffer, and kept (a camera path does not find out again).
+    pub(crate) chunked: bool,
+    pub(crate) split: SplitLimits,
+    /// Frames save what a backward pass reads.
+    pub(crate) save_forward: bool,
+}
+
+/// Keys and values are 4 bytes; one storage-buffer binding must cover them all.
+pub(crate) fn max_capacity(ctx: &GpuContext) -> u32 {
+    limits::elements_per_binding(ctx.info(), 4).min(u64::from(u32::MAX)) as u32
+}
+
+impl Frames {
+    /// No frame yet, one set, pipelines for the blend `kernel` built on first use.
+    pub(crate) fn new(ctx: &GpuContext, kernel: BlendKernel) -> GpuResult<Self> {
+        Ok(Frames {
+            sets: vec![FrameSet::new(ctx, 0, kernel.bin_size())?],
+            pipelines: Pipelines::new(kernel),
+            last: LastFrame {
+                set: 0,
+                serial: u64::MAX,
+                kernel: Default::default(),
+                lens: false,
+            },
+            capacity: None,
+            serial: 0,
+            timings: StageTimings::default(),
+            stats: FrameStats::default(),
+            large_bins: None,
+            chunked: false,
+            split: SplitLimits::default(),
+            save_forward: false,
+        })
+    }
+
     /// Gaussians per preprocess window: as many as one storage binding holds of the
     /// largest per-Gaussian record (48 bytes), a multiple of the workgroup.
-    pub(crate) fn preprocess_window(&self) -> u32 {
+    pub(crate) fn preprocess_window(&self, ctx: &GpuContext) -> u32 {
         let per_binding =
-            limits::elements_per_binding(self.ctx.info(), std::mem::size_of::<Splat>() as u64)
+            limits::elements_per_binding(ctx.info(), std::mem::size_of::<Splat>() as u64)
                 .min(u64::from(u32::MAX));
         let device = (per_binding as u32 / preprocess::WORKGROUP * preprocess::WORKGROUP)
             .max(preprocess::WORKGROUP);
@@ -169,20 +231,10 @@ impl GpuRenderer {
         }
     }
 
-    /// Whether the device is a CPU implementation with llvmpipe's loop limit.
-    pub(crate) fn loop_limited(&self) -> bool {
-        self.ctx.info().loop_limited()
-    }
-
-    pub(crate) fn max_capacity(&self) -> u32 {
-        // Keys and values are 4 bytes; one storage-buffer binding must cover them all.
-        limits::elements_per_binding(self.ctx.info(), 4).min(u64::from(u32::MAX)) as u32
-    }
-
     /// Pairs one piece of a frame may hold: one key buffer's worth, or fewer under the
     /// split limits of tests ([`SplitLimits::chunk_pairs`]).
-    pub(crate) fn pairs_per_piece(&self) -> u32 {
-        let max = self.max_capacity();
+    pub(crate) fn pairs_per_piece(&self, ctx: &GpuContext) -> u32 {
+        let max = max_capacity(ctx);
         match self.split.chunk_pairs {
             0 => max,
             forced => forced.min(max),
@@ -192,6 +244,7 @@ impl GpuRenderer {
     /// Checks a frame, makes its resources in a free set, and records and submits it.
     pub(crate) fn submit_with<'a>(
         &mut self,
+        ctx: &GpuContext,
         scene: &'a GpuScene,
         cam: &Camera,
         opts: &RenderOptions,
@@ -200,12 +253,12 @@ impl GpuRenderer {
     ) -> GpuResult<Ticket<'a>> {
         cam.validate().map_err(|e| GpuError::Input(e.to_string()))?;
         opts.validate().map_err(GpuError::Input)?;
-        let set = self.free_set()?;
+        let set = free_set(&mut self.sets, ctx, self.pipelines.kernel().bin_size())?;
         let initial = self
             .capacity
             .unwrap_or(MIN_CAPACITY.max(scene.count.saturating_mul(4)))
-            .min(self.max_capacity());
-        self.ensure_frame(set, scene, cam, initial)?;
+            .min(max_capacity(ctx));
+        self.sets[set].ensure_frame(ctx, &self.pipelines, scene, cam, initial)?;
         let preferred = self.pipelines.kernel().bin_size();
         self.sets[set].bin_size = if self.large_bins == Some((scene.count, cam.width, cam.height)) {
             LARGE_BIN
@@ -220,7 +273,7 @@ impl GpuRenderer {
         // colour blend), and the neural shader runs once after the last chunk.
         let chunked = self.chunked
             || self.split.chunk_pairs > 0
-            || u64::from(scene.count) * 4 > u64::from(self.max_capacity());
+            || u64::from(scene.count) * 4 > u64::from(max_capacity(ctx));
         let ticket = Ticket {
             set,
             serial: self.serial,
@@ -233,7 +286,7 @@ impl GpuRenderer {
         };
         self.serial += 1;
         if !chunked {
-            self.record_ticket(&ticket, false, Pass::Whole)?;
+            self.record_ticket(ctx, &ticket, false, Pass::Whole)?;
         }
         self.sets[set].pending = Some(ticket.serial);
         Ok(ticket)
@@ -241,32 +294,32 @@ impl GpuRenderer {
 
     /// Makes what the ticket's readback and features need in its set, then records and
     /// submits `pass` of the frame (and waits for it when `wait`).
-    pub(crate) fn record_ticket(&mut self, t: &Ticket, wait: bool, pass: Pass) -> GpuResult<()> {
+    pub(crate) fn record_ticket(
+        &mut self,
+        ctx: &GpuContext,
+        t: &Ticket,
+        wait: bool,
+        pass: Pass,
+    ) -> GpuResult<()> {
         if t.readback == Readback::Rgba8 {
-            self.ensure_packed(t.set)?;
+            self.sets[t.set].ensure_packed(ctx)?;
         }
         // Only a frame in one piece has one list per bin for the index to point into.
         let saves_last = self.save_forward && matches!(pass, Pass::Whole);
         if saves_last {
-            self.ensure_last_contributor(t.set)?;
+            self.sets[t.set].ensure_last_contributor(ctx)?;
         }
         self.sets[t.set].saves_last = saves_last;
         if let Some((features, _)) = t.features {
             let pixels = u64::from(t.cam.width) * u64::from(t.cam.height);
-            self.ensure_feature_planes(t.set, features, pixels)?;
+            self.sets[t.set].ensure_feature_planes(ctx, features, pixels)?;
         }
-        let window = self.preprocess_window();
+        let window = self.preprocess_window(ctx);
         let set = self
             .sets
             .get_mut(t.set)
             .ok_or_else(|| GpuError::Internal(format!("no frame set {}", t.set)))?;
-        super::record::record_and_submit(
-            &self.ctx,
-            &mut self.pipelines,
-            set,
-            window,
-            (t, wait, pass),
-        )
+        super::record::record_and_submit(ctx, &mut self.pipelines, set, window, (t, wait, pass))
     }
 
     /// Waits for the ticket's frame and checks its counters: when the frame needed more
@@ -274,7 +327,7 @@ impl GpuRenderer {
     /// buffers or bins and waited for, until it is complete; when it needs more pairs than
     /// one key buffer holds, it is rendered in chunks. Then the timings and counts are the
     /// frame's.
-    pub(crate) fn complete(&mut self, t: &Ticket) -> GpuResult<()> {
+    pub(crate) fn complete(&mut self, ctx: &GpuContext, t: &Ticket) -> GpuResult<()> {
         let set = self.sets.get_mut(t.set).ok_or_else(|| {
             GpuError::InvalidArgument("the ticket is not from this renderer".into())
         })?;
@@ -285,14 +338,14 @@ impl GpuRenderer {
         }
         // The set is free again whatever happens below.
         set.pending = None;
-        self.ctx.wait_slot(&mut set.slot)?;
+        ctx.wait_slot(&mut set.slot)?;
         let cam = &t.cam;
-        let max = self.max_capacity();
+        let max = max_capacity(ctx);
         let mut chunked = t.chunked;
         let mut regrows = 0;
         loop {
             let (counters, chunks) = if chunked {
-                match self.render_chunks(t)? {
+                match self.render_chunks(ctx, t)? {
                     Some(done) => done,
                     None => {
                         // Larger bins or key buffers: the frame is planned again.
@@ -316,7 +369,7 @@ impl GpuRenderer {
                 chunked,
                 bins_loop: counters.max_bins_loop,
                 list_loop: counters.max_list_loop,
-                loop_limited: self.loop_limited(),
+                loop_limited: ctx.info().loop_limited(),
             };
             match next_attempt(&reading) {
                 Next::Done { large_bins_stick } => {
@@ -344,14 +397,14 @@ impl GpuRenderer {
                         "this frame needs a shader loop of {worst} iterations ({} bins of one Gaussian, {} Gaussians in one bin), but {} ends every shader invocation's loops after {CPU_LOOP_LIMIT} iterations in total, which would silently drop Gaussians; render at a lower resolution, or on another device",
                         counters.max_bins_loop,
                         counters.max_list_loop,
-                        self.ctx.info().name
+                        ctx.info().name
                     ),
                     });
                 }
                 Next::LargerBins => {
                     regrows += 1;
                     self.sets[t.set].bin_size = LARGE_BIN;
-                    self.record_ticket(t, true, Pass::Whole)?;
+                    self.record_ticket(ctx, t, true, Pass::Whole)?;
                 }
                 Next::Chunks => {
                     // This frame and the next in chunks.
@@ -361,13 +414,13 @@ impl GpuRenderer {
                 }
                 Next::Grow(grown) => {
                     regrows += 1;
-                    self.ensure_frame(t.set, t.scene, cam, grown)?;
-                    self.record_ticket(t, true, Pass::Whole)?;
+                    self.sets[t.set].ensure_frame(ctx, &self.pipelines, t.scene, cam, grown)?;
+                    self.record_ticket(ctx, t, true, Pass::Whole)?;
                 }
             }
         }
         if !chunked {
-            self.timings = self.sets[t.set].read_timings(&self.ctx)?;
+            self.timings = self.sets[t.set].read_timings(ctx)?;
         }
         self.last = LastFrame {
             set: t.set,
@@ -385,32 +438,36 @@ impl GpuRenderer {
     /// consecutive runs of the one-piece frame's lists, so the image is bit-identical.
     /// Returns the frame's counters and its number of chunks, or None when the frame must
     /// be planned again (larger bins, or key buffers grown for its largest chunk).
-    pub(crate) fn render_chunks(&mut self, t: &Ticket) -> GpuResult<Option<(Counters, u32)>> {
-        let max = self.max_capacity();
+    pub(crate) fn render_chunks(
+        &mut self,
+        ctx: &GpuContext,
+        t: &Ticket,
+    ) -> GpuResult<Option<(Counters, u32)>> {
+        let max = max_capacity(ctx);
         let f = self.sets[t.set]
             .frame
             .as_mut()
             .ok_or_else(|| GpuError::Internal("frame buffers missing".into()))?;
         if f.chunk_offsets.is_none() {
             f.chunk_offsets = Some(GpuBuffer::new(
-                &self.ctx,
+                ctx,
                 "scanned offsets (chunk planning)",
                 u64::from(f.gaussians.max(1)) * 4,
                 MemoryKind::Readback,
             )?);
         }
-        self.record_ticket(t, true, Pass::Front)?;
-        let mut timings = self.sets[t.set].read_timings(&self.ctx)?;
+        self.record_ticket(ctx, t, true, Pass::Front)?;
+        let mut timings = self.sets[t.set].read_timings(ctx)?;
         let front = self.sets[t.set].counters()?;
         let pairs = front.pairs();
-        let bins_cut = self.loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
+        let bins_cut = ctx.info().loop_limited() && front.max_bins_loop > CPU_LOOP_LIMIT;
         let too_many = pairs > small_bin_limit(max);
         if wants_large_bins(self.sets[t.set].bin_size, too_many, bins_cut) {
             // As in one piece: 16-pixel bins first (fewer pairs and bin-loop iterations).
             self.sets[t.set].bin_size = LARGE_BIN;
             return Ok(None);
         }
-        let limit = self.pairs_per_piece();
+        let limit = self.pairs_per_piece(ctx);
         let (chunks, capacity) = {
             let f = self.sets[t.set]
                 .frame
@@ -441,7 +498,7 @@ impl GpuRenderer {
                 });
             }
             let grown = (largest + largest / 4).min(u64::from(max)) as u32;
-            self.ensure_frame(t.set, t.scene, &t.cam, grown)?;
+            self.sets[t.set].ensure_frame(ctx, &self.pipelines, t.scene, &t.cam, grown)?;
             return Ok(None);
         }
         let batches = chunks.len().div_ceil(CHUNKS_PER_SUBMIT);
@@ -451,8 +508,8 @@ impl GpuRenderer {
                 first: b == 0,
                 last: b + 1 == batches,
             };
-            self.record_ticket(t, true, pass)?;
-            timings.add(&self.sets[t.set].read_timings(&self.ctx)?);
+            self.record_ticket(ctx, t, true, pass)?;
+            timings.add(&self.sets[t.set].read_timings(ctx)?);
         }
         self.timings = timings;
         // Copied after the last chunk: the front's totals, the chunks' loop lengths.

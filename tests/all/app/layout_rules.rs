@@ -202,6 +202,40 @@ fn no_file_over_1000_lines_and_no_function_over_150() {
     );
 }
 
+/// `GpuRenderer`'s face is one file (issue 64, item 1): every `impl GpuRenderer` block is
+/// in `src/render/mod.rs`, and the frame machinery and the stages below it never name the
+/// renderer (they are methods of the types that own their state: `Frames`, `FrameSet`,
+/// `BackwardState`, ...). The two files below it that do are its clients, built on its
+/// public face: the pipelined camera path (`frame/path.rs`) and the differentiable
+/// rasterizer (`backward/differentiable.rs`).
+#[test]
+fn the_renderer_has_one_face_and_its_machinery_never_names_it() {
+    let clients = ["src/render/frame/path.rs", "src/render/backward/differentiable.rs"];
+    let mut found = Vec::new();
+    for path in files("src", &[".rs"]) {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let name = rel(&path);
+        let code = || {
+            text.lines()
+                .filter(|l| !l.trim_start().starts_with("//"))
+                .collect::<Vec<_>>()
+        };
+        if name != "src/render/mod.rs" && code().iter().any(|l| l.starts_with("impl GpuRenderer")) {
+            found.push(format!("{name}: impl GpuRenderer"));
+        }
+        if name.starts_with("src/render/")
+            && name != "src/render/mod.rs"
+            && !clients.contains(&name.as_str())
+            && code().iter().any(|l| l.contains("GpuRenderer"))
+        {
+            found.push(format!("{name}: names GpuRenderer"));
+        }
+    }
+    assert!(found.is_empty(), "{found:#?}");
+    let face = std::fs::read_to_string(root().join("src/render/mod.rs")).unwrap();
+    assert!(face.lines().any(|l| l.starts_with("impl GpuRenderer")));
+}
+
 #[test]
 fn no_import_circle_in_the_library_or_the_command_line() {
     for args in [&["--depth", "3"][..], &["--bin", "--depth", "2"]] {

@@ -1,7 +1,7 @@
 //! The backward pass of frames whose buffers exceed one storage binding (issue 61, item 4):
 //! under an emulated small maxStorageBufferRange the pairs' gradient records, the pixels'
 //! gradients and the forward's last contributors are split into bands
-//! (`render::backward::bands`), and the gradients equal the unsplit pass's on the plain
+//! (`render::frame::bands`), and the gradients equal the unsplit pass's on the plain
 //! device bit for bit, in both blend layouts, for SH colour and for feature channels. A
 //! frame no band fits is refused with the binding's sentence.
 
