@@ -34,9 +34,7 @@ pub mod frame;
 pub mod shaders;
 
 use backward::grad_accumulate::Accumulation;
-use backward::{
-    BackwardRequest, BackwardState, DeviceBackward, DeviceFeatures, Gradients, LastFrameState,
-};
+use backward::{BackwardRequest, BackwardState, DeviceBackward, Gradients, LastFrameState};
 
 use forward::{blend, shade};
 
@@ -611,17 +609,17 @@ impl GpuRenderer {
         BackwardState::get(ctx, backward)?.backward(ctx, frame, req)
     }
 
-    /// The backward pass of the frame `forward` names (rendered with [`Readback::Counters`],
-    /// with the forward state saved) entirely on the device, recorded by the caller in one
-    /// submission with what makes the pixels' gradients and what reads the results
-    /// ([`DeviceBackward`]). A frame of SH colour, or of feature channels shaded by a
-    /// neural shader ([`FrameRequest::shaded`], `features`); no depth gradient. Nothing is
-    /// read back. Refused when the renderer has finished another frame since.
+    /// The backward pass `req` asks for ([`BackwardRequest::recorded`]) of the frame its
+    /// handle names (rendered with [`Readback::Counters`], with the forward state saved),
+    /// entirely on the device, recorded by the caller in one submission with what makes
+    /// the pixels' gradients and what reads the results ([`DeviceBackward`]). A frame of
+    /// SH colour, or of feature channels shaded by a neural shader
+    /// ([`FrameRequest::shaded`], [`BackwardRequest::shaded_on_device`]); no depth
+    /// gradient. Nothing is read back. Refused when the renderer has finished another
+    /// frame since.
     pub fn device_backward<'r>(
         &'r mut self,
-        forward: &ForwardHandle,
-        scene: &'r GpuScene,
-        features: Option<DeviceFeatures<'r>>,
+        req: &BackwardRequest<'r>,
     ) -> GpuResult<DeviceBackward<'r>> {
         let GpuRenderer {
             ctx,
@@ -633,7 +631,7 @@ impl GpuRenderer {
             sets: &frames.sets,
             last: frames.last,
         };
-        BackwardState::get(ctx, backward)?.device_backward(ctx, frame, forward, scene, features)
+        BackwardState::get(ctx, backward)?.device_backward(ctx, frame, req)
     }
 
     /// How the backward passes add per-pair gradients into per-Gaussian sums

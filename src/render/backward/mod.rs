@@ -40,9 +40,9 @@ use crate::core::model::{sh_coeffs_for_degree, SplatKernel};
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
 use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::render::forward::shade::GpuShader;
+use crate::render::frame::bands::Bands;
 use crate::render::frame::buffers::FrameSet;
 use crate::render::{check_binding, ForwardHandle, ForwardState, GpuScene, LastFrame, Stage};
-use crate::render::frame::bands::Bands;
 use blend_bwd::BlendBwd;
 use buffers::BackwardBuffers;
 pub use device::DeviceBackward;
@@ -251,7 +251,21 @@ impl BackwardState {
         frame: LastFrameState,
         req: &BackwardRequest,
     ) -> GpuResult<Gradients> {
-        let size = (req.frame.width, req.frame.height);
+        let Some((pixels, grads)) = req.pixels else {
+            return Err(GpuError::InvalidArgument(
+                "a backward pass read back takes the pixels' gradients from the host \
+                 (BackwardRequest::new); one recorded on the device is device_backward's"
+                    .into(),
+            ));
+        };
+        if req.device_features.is_some() {
+            return Err(GpuError::InvalidArgument(
+                "feature values on the device are for a pass recorded on the device \
+                 (device_backward); give the host's with BackwardRequest::features or shaded"
+                    .into(),
+            ));
+        }
+        let size = (pixels.width, pixels.height);
         check_forward(frame.last, req.forward, size)?;
         let shade = match req.shader {
             Some((shader, cam, background)) => {
@@ -265,15 +279,8 @@ impl BackwardState {
             }
             None => None,
         };
-        let (splats, shader) = self.backward_inner(
-            ctx,
-            frame,
-            req.scene,
-            req.features,
-            shade,
-            req.frame,
-            req.grads,
-        )?;
+        let (splats, shader) =
+            self.backward_inner(ctx, frame, req.scene, req.features, shade, pixels, grads)?;
         Ok(Gradients {
             splats,
             shader: req.shader.map(|_| shader.unwrap_or_default()),
@@ -397,18 +404,25 @@ impl BackwardState {
         )
     }
 
-    /// The backward pass of the frame `forward` names, recorded by the caller on the
-    /// device ([`crate::render::GpuRenderer::device_backward`]).
+    /// The backward pass `req` asks for, recorded by the caller on the device
+    /// ([`crate::render::GpuRenderer::device_backward`]).
     pub(crate) fn device_backward<'r>(
         &'r mut self,
         ctx: &'r GpuContext,
         frame: LastFrameState<'r>,
-        forward: &ForwardHandle,
-        scene: &'r GpuScene,
-        features: Option<DeviceFeatures<'r>>,
+        req: &BackwardRequest<'r>,
     ) -> GpuResult<DeviceBackward<'r>> {
-        let size = forward.size();
-        check_forward(frame.last, forward, size)?;
+        if req.pixels.is_some() || req.features.is_some() {
+            return Err(GpuError::InvalidArgument(
+                "a backward pass recorded on the device takes its pixels' gradients and \
+                 feature values on the device (BackwardRequest::recorded, \
+                 shaded_on_device); one from the host is backward's"
+                    .into(),
+            ));
+        }
+        let (scene, features) = (req.scene, req.device_features);
+        let size = req.forward.size();
+        check_forward(frame.last, req.forward, size)?;
         if let Some(f) = &features {
             check_feature_channels(f.channels)?;
             check_shaded(ctx, f.shader, f.channels, f.cam, size)?;

@@ -8,7 +8,7 @@ use crate::core::model::grad::PixelGrads;
 use crate::core::model::RenderOptions;
 use crate::gpu::sync::{barrier, Access};
 use crate::render::backward::differentiable::DiffRasterizer;
-use crate::render::backward::DeviceFeatures;
+use crate::render::backward::{BackwardRequest, DeviceFeatures};
 use crate::render::{FrameRequest, Readback, Rendered};
 use crate::train::data::View;
 use crate::train::device::{DeviceModel, Step, StepPipelines};
@@ -114,7 +114,11 @@ impl<'p> Run<'p> {
         stage_sums.add(renderer.timings().stages());
         // One submission, top to bottom: the loss writes the pixels' gradients, the
         // backward pass turns them into the Gaussians', the step reads those.
-        let mut pass = renderer.device_backward(&forward, &d.scene, features)?;
+        let mut req = BackwardRequest::recorded(&forward, &d.scene);
+        if let Some(features) = features {
+            req = req.shaded_on_device(features);
+        }
+        let mut pass = renderer.device_backward(&req)?;
         let ctx = pass.ctx();
         let mut norm_buffer = None;
         ctx.submit_and_wait("backward", |cmd| {

@@ -210,7 +210,10 @@ fn no_file_over_1000_lines_and_no_function_over_150() {
 /// rasterizer (`backward/differentiable.rs`).
 #[test]
 fn the_renderer_has_one_face_and_its_machinery_never_names_it() {
-    let clients = ["src/render/frame/path.rs", "src/render/backward/differentiable.rs"];
+    let clients = [
+        "src/render/frame/path.rs",
+        "src/render/backward/differentiable.rs",
+    ];
     let mut found = Vec::new();
     for path in files("src", &[".rs"]) {
         let text = std::fs::read_to_string(&path).unwrap();

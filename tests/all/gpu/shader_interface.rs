@@ -282,7 +282,12 @@ fn record_strides_and_push_constants_match_the_host_structs() {
     ];
     assert_eq!(keys.push_offsets, want.map(|o| o as u32));
     assert_eq!(keys.push_size as usize, size_of::<KeysPush>());
-    let want = [offset_of!(BlendPush, resume), offset_of!(BlendPush, last)];
+    let want = [
+        offset_of!(BlendPush, resume),
+        offset_of!(BlendPush, last),
+        offset_of!(BlendPush, first_tile_row),
+        offset_of!(BlendPush, pad),
+    ];
     assert_eq!(blend.push_offsets, want.map(|o| o as u32));
     assert_eq!(blend.push_size as usize, size_of::<BlendPush>());
     let features = interface(

@@ -470,7 +470,8 @@ fn the_last_contributor_is_the_last_gaussian_each_pixel_composited() {
 
 /// A device backward pass takes the forward handle of the frame it differentiates, and
 /// the renderer refuses a handle once it has finished a later frame (whose state replaced
-/// the first's).
+/// the first's); the one request type serves both entry points, each refusing the other's
+/// kind of pixel gradients.
 #[test]
 fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
     let mut r = renderer();
@@ -508,14 +509,27 @@ fn a_device_backward_takes_the_handle_of_the_renderers_last_frame() {
     assert_ne!(first, second);
     assert_eq!(second.size(), (64, 48));
     let e = r
-        .device_backward(&second, &gs, None)
+        .device_backward(&BackwardRequest::recorded(&second, &gs))
         .err()
         .expect("an old handle is refused");
     assert!(
         e.to_string().contains("no longer the renderer's last"),
         "{e}"
     );
-    r.device_backward(&third, &gs, None)
+    // One request for both entry points; each refuses the other's pixel gradients.
+    let e = r
+        .device_backward(&BackwardRequest::new(&third, &gs, &frame, &grads))
+        .err()
+        .expect("host gradients on the device path");
+    assert!(
+        e.to_string().contains("one from the host is backward's"),
+        "{e}"
+    );
+    let e = r
+        .backward(&BackwardRequest::recorded(&third, &gs))
+        .unwrap_err();
+    assert!(e.to_string().contains("device_backward's"), "{e}");
+    r.device_backward(&BackwardRequest::recorded(&third, &gs))
         .expect("the last frame's handle");
     assert_validation_clean(&r);
 }
