@@ -63,6 +63,9 @@ pub struct BackwardReport {
     pub device_bytes_per_gaussian: f64,
     /// Of which the backward pass's own buffers, bytes.
     pub backward_device_bytes: u64,
+    /// The bands of pixel rows and of sorted pairs the backward pass ran in, to fit the
+    /// device's storage bindings ([1, 1]: in one piece).
+    pub backward_bands: [usize; 2],
 }
 
 /// Times `iterations` forward + backward passes of `scene` from `camera` (after `warmup`
@@ -205,6 +208,10 @@ pub fn bench_backward(
         device_bytes_peak: peak,
         device_bytes_per_gaussian: peak as f64 / scene.len().max(1) as f64,
         backward_device_bytes: renderer.backward_device_bytes(),
+        backward_bands: {
+            let (rows, pairs) = renderer.backward_bands();
+            [rows, pairs]
+        },
     })
 }
 
@@ -264,6 +271,13 @@ impl BackwardReport {
             self.device_bytes_per_gaussian,
             self.backward_device_bytes as f64 / 1e6
         );
+        let [rows, pairs] = self.backward_bands;
+        if rows > 1 || pairs > 1 {
+            let _ = write!(
+                t,
+                "\n  backward in {rows} bands of pixel rows and {pairs} of pairs: its buffers exceed one storage binding"
+            );
+        }
         t
     }
 }

@@ -442,8 +442,43 @@ fn bench_backward_reports_both_passes() {
     assert!(run["backward_ms"]["median"].as_f64().unwrap() > 0.0);
     assert!(run["backward_over_forward"].as_f64().unwrap() > 0.0);
     assert!(run["device_bytes_per_gaussian"].as_f64().unwrap() > 0.0);
+    assert_eq!(run["backward_bands"], serde_json::json!([1, 1]));
+    assert!(!text.contains("bands of pixel rows"), "{text}");
     let refused = verisplat(&["bench", "--demo", "--backward", "--cpu"]);
     assert!(!refused.status.success());
+    // Storage bindings of 256 KiB: 4 KiB rows of colour gradients in bands of 64 rows (3
+    // for 192), and 11k pair records of 48 bytes in bands of 5,440 (3); said in the report.
+    let split = dir.path().join("split.json");
+    let args = [
+        "bench",
+        "--demo",
+        "--width",
+        "256",
+        "--height",
+        "192",
+        "--frames",
+        "1",
+        "--warmup",
+        "0",
+        "--backward",
+        "--json",
+        split.to_str().unwrap(),
+    ];
+    let o = crate::common::cli::verisplat_env(
+        &args,
+        &[("VERISPLAT_EMULATE", "max-storage-buffer-range=256K")],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = crate::common::cli::stdout(&o);
+    assert!(
+        text.contains("backward in 3 bands of pixel rows and 3 of pairs"),
+        "{text}"
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&split).unwrap()).unwrap();
+    assert_eq!(
+        doc["backward_runs"][0]["backward_bands"],
+        serde_json::json!([3, 3])
+    );
 }
 
 /// Bytes per stage (issue 60, item 3) of a `bench --demo` report, tied to the records the
