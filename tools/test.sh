@@ -54,6 +54,7 @@ echo "test.sh: cargo test took $((SECONDS - t0)) s" >&2
 # VERISPLAT_WIDTHS="" skips them (a test name given to this script skips them too).
 width_tests=(
   gpu::primitives:: render::stages:: train::gradients::gpu_ train::loss::device_loss
+  train::banded_backward::
   render::features::gpu_ fields::mlp::gpu_shade fields::field_renders::gpu_field
   fields::time_fields::gpu_equals render::compact::compact_scenes
   render::frames::every_blend_kernel render::frames::antialiased
@@ -67,7 +68,7 @@ width_tests=(
   render::passes:: render::rgb8_readback::
 )
 misreport_tests=(
-  gpu::primitives:: render::stages::stages_match_on_playbot_lod3
+  gpu::primitives:: render::stages::stages_match_on_playbot_lod3 train::banded_backward::
   render::stages::forward_state train::gradients::gpu_ train::loss::device_loss
   render::features::gpu_feature_blend_matches fields::mlp::gpu_shade
   fields::field_renders::gpu_field fields::time_fields::gpu_equals
