@@ -596,17 +596,8 @@ impl GpuRenderer {
     /// (kernel, background, scale modifier, SH degree) are the backward's. A frame whose
     /// buffers exceed one storage binding is taken in bands ([`Self::backward_bands`]).
     pub fn backward(&mut self, req: &BackwardRequest) -> GpuResult<Gradients> {
-        let GpuRenderer {
-            ctx,
-            frames,
-            backward,
-            ..
-        } = self;
-        let frame = LastFrameState {
-            sets: &frames.sets,
-            last: frames.last,
-        };
-        BackwardState::get(ctx, backward)?.backward(ctx, frame, req)
+        let (ctx, frame, state) = self.backward_parts()?;
+        state.backward(ctx, frame, req)
     }
 
     /// The backward pass `req` asks for ([`BackwardRequest::recorded`]) of the frame its
@@ -621,6 +612,15 @@ impl GpuRenderer {
         &'r mut self,
         req: &BackwardRequest<'r>,
     ) -> GpuResult<DeviceBackward<'r>> {
+        let (ctx, frame, state) = self.backward_parts()?;
+        state.device_backward(ctx, frame, req)
+    }
+
+    /// The context, the last frame as a backward pass reads it, and the backward pass's
+    /// state (made the first time it is asked for).
+    fn backward_parts(
+        &mut self,
+    ) -> GpuResult<(&GpuContext, LastFrameState<'_>, &mut BackwardState)> {
         let GpuRenderer {
             ctx,
             frames,
@@ -631,7 +631,7 @@ impl GpuRenderer {
             sets: &frames.sets,
             last: frames.last,
         };
-        BackwardState::get(ctx, backward)?.device_backward(ctx, frame, req)
+        Ok((ctx, frame, BackwardState::get(ctx, backward)?))
     }
 
     /// How the backward passes add per-pair gradients into per-Gaussian sums
