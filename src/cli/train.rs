@@ -606,6 +606,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         },
         cancel: Some(super::render::interrupt_flag()),
         host_optimizer: false,
+        photos_on_device: photos_on_device()?,
         resolution: args.resolution,
         mip_filter: args.mip_filter,
         appearance: {
@@ -731,5 +732,19 @@ fn print_report(args: &TrainArgs, report: &TrainReport) {
                 outln!("  {name:<15} {ms:>9.3} ms");
             }
         }
+    }
+}
+
+/// The variable that makes `train` upload each photo every time it is trained on instead of
+/// keeping the photos on the device (`VERISPLAT_TRAIN_PHOTOS=host`): the models are the same
+/// bytes either way, which the tests check with it.
+const PHOTOS_ENV: &str = "VERISPLAT_TRAIN_PHOTOS";
+
+/// Whether the photos stay on the device ([`PHOTOS_ENV`]).
+fn photos_on_device() -> Result<bool> {
+    match verisplat::core::former_name::env_var(PHOTOS_ENV).as_deref() {
+        None | Some("") | Some("device") => Ok(true),
+        Some("host") => Ok(false),
+        Some(other) => bail!("{PHOTOS_ENV}={other:?}: expected device or host"),
     }
 }

@@ -173,6 +173,27 @@ pub struct LossBuffers<'a> {
     pub grad: BufferSlice<'a>,
 }
 
+/// The target a loss submission copies to the device: staged by the host (and, for a photo
+/// kept on the device the first time, copied into its place too), or a kept photo.
+#[derive(Clone, Copy)]
+enum PendingTarget {
+    Staged { bytes: u64, keep_at: Option<u64> },
+    Kept { offset: u64, bytes: u64 },
+}
+
+/// The training photos on the device ([`GpuLoss::keep_photos`]): one buffer, a slot each.
+struct PhotoStore {
+    buffer: GpuBuffer,
+    slots: Vec<PhotoSlot>,
+}
+
+/// One photo's place in the store, and its kept pixels once it has been staged there.
+struct PhotoSlot {
+    offset: u64,
+    bytes: u64,
+    kept: Option<u64>,
+}
+
 /// The loss on the device: its pipelines and work buffers (grown as images need).
 pub struct GpuLoss {
     prepare: ComputePipeline,
@@ -192,8 +213,10 @@ pub struct GpuLoss {
     /// by the submission that computes the loss (no submission of its own); kept from
     /// iteration to iteration.
     target_staging: Option<GpuBuffer>,
-    /// Bytes of `target_staging` staged and not yet copied.
-    target_pending: Option<u64>,
+    /// The target staged and not yet copied, and where from.
+    target_pending: Option<PendingTarget>,
+    /// The training photos kept on the device ([`Self::keep_photos`]).
+    photos: Option<PhotoStore>,
     /// The kept pixels of the staged target (all of them without a mask).
     target_kept: u64,
     /// Where [`Self::record_image`]'s submission copies its sums, so that
@@ -310,6 +333,7 @@ impl GpuLoss {
             io: None,
             target_staging: None,
             target_pending: None,
+            photos: None,
             target_kept: 0,
             sums_readback: None,
             last: None,
@@ -610,8 +634,90 @@ impl GpuLoss {
                 }
             }
         })?;
-        self.target_pending = Some(bytes);
+        self.target_pending = Some(PendingTarget::Staged {
+            bytes,
+            keep_at: None,
+        });
         self.target_kept = keep.map_or(pixels, |k| k.iter().filter(|&&b| b).count() as u64);
+        Ok(())
+    }
+
+    /// Keeps the training photos on the device, `pixels[i]` for photo `i`, when together
+    /// they take at most `max_bytes` (as the loss reads them: a vec4 per pixel, the mask
+    /// in `w`, so the targets are the same bits): each is staged once, the first time it is
+    /// the target ([`Self::stage_photo`]), and copied on the device from then on, so an
+    /// iteration's host writes no pixel. Returns whether they are kept; otherwise every
+    /// photo is staged each time, as [`Self::stage_target_masked`] does.
+    pub fn keep_photos(
+        &mut self,
+        ctx: &GpuContext,
+        pixels: &[u64],
+        max_bytes: u64,
+    ) -> GpuResult<bool> {
+        self.photos = None;
+        let total: u64 = pixels.iter().map(|p| p * 16).sum();
+        if pixels.is_empty() || total > max_bytes {
+            return Ok(false);
+        }
+        let mut offset = 0;
+        let slots = pixels
+            .iter()
+            .map(|p| {
+                let slot = PhotoSlot {
+                    offset,
+                    bytes: p * 16,
+                    kept: None,
+                };
+                offset += p * 16;
+                slot
+            })
+            .collect();
+        let buffer = GpuBuffer::new(
+            ctx,
+            "training photos",
+            total.max(16),
+            crate::gpu::MemoryKind::Device,
+        )?;
+        self.photos = Some(PhotoStore { buffer, slots });
+        Ok(true)
+    }
+
+    /// [`Self::stage_target_masked`] of training photo `index`: from the photos kept on the
+    /// device when it was staged before ([`Self::keep_photos`]), else staged (and, when
+    /// the photos are kept, copied into its place too).
+    pub fn stage_photo(
+        &mut self,
+        ctx: &GpuContext,
+        index: usize,
+        target: &[[f32; 3]],
+        keep: Option<&[bool]>,
+    ) -> GpuResult<()> {
+        let pixels = target.len() as u64;
+        let slot = self
+            .photos
+            .as_ref()
+            .and_then(|p| p.slots.get(index))
+            .filter(|s| s.bytes == pixels * 16)
+            .map(|s| (s.offset, s.bytes, s.kept));
+        match slot {
+            Some((offset, bytes, Some(kept))) => {
+                self.ensure_io(ctx, pixels)?;
+                self.target_pending = Some(PendingTarget::Kept { offset, bytes });
+                self.target_kept = kept;
+            }
+            Some((offset, bytes, None)) => {
+                self.stage_target_masked(ctx, target, keep)?;
+                self.target_pending = Some(PendingTarget::Staged {
+                    bytes,
+                    keep_at: Some(offset),
+                });
+                let kept = self.target_kept;
+                if let Some(p) = self.photos.as_mut() {
+                    p.slots[index].kept = Some(kept);
+                }
+            }
+            None => self.stage_target_masked(ctx, target, keep)?,
+        }
         Ok(())
     }
 
@@ -623,17 +729,37 @@ impl GpuLoss {
         cmd: ash::vk::CommandBuffer,
         tgt: &GpuBuffer,
     ) {
-        let (Some(bytes), Some(staging)) = (self.target_pending.take(), &self.target_staging)
-        else {
+        let Some(pending) = self.target_pending.take() else {
             return;
         };
-        let region = [ash::vk::BufferCopy::default().size(bytes)];
-        // SAFETY: both buffers are alive and hold `bytes`; the host's writes to the staging
-        // buffer are visible to the device from the submission on.
-        unsafe {
-            ctx.device()
-                .cmd_copy_buffer(cmd, staging.handle(), tgt.handle(), &region)
+        let copy = |src: &GpuBuffer, dst: &GpuBuffer, (from, to, bytes): (u64, u64, u64)| {
+            let region = [ash::vk::BufferCopy::default()
+                .src_offset(from)
+                .dst_offset(to)
+                .size(bytes)];
+            // SAFETY: both buffers are alive and hold `bytes` from their offsets (the
+            // photo store's slots and the staged target were sized together); the host's
+            // writes to the staging buffer are visible to the device from the submission
+            // on, and the store's were ordered by the caller's barriers.
+            unsafe {
+                ctx.device()
+                    .cmd_copy_buffer(cmd, src.handle(), dst.handle(), &region)
+            };
         };
+        match (pending, &self.target_staging, &self.photos) {
+            (PendingTarget::Staged { bytes, keep_at }, Some(staging), photos) => {
+                copy(staging, tgt, (0, 0, bytes));
+                if let (Some(at), Some(p)) = (keep_at, photos) {
+                    copy(staging, &p.buffer, (0, at, bytes));
+                }
+            }
+            (PendingTarget::Kept { offset, bytes }, _, Some(p)) => {
+                // The photo was copied into the store by an earlier submission.
+                barrier(ctx, cmd, Access::TransferWrite, Access::TransferRead);
+                copy(&p.buffer, tgt, (offset, 0, bytes));
+            }
+            _ => {}
+        }
     }
 
     /// Records the loss of a rendered colour image (RGBA32F, `width x height`, a copy

@@ -75,6 +75,11 @@ pub struct TrainOptions {
     /// Step on the host (upload the Gaussians and read their gradients back every
     /// iteration) even where the device could: for comparisons.
     pub host_optimizer: bool,
+    /// Keep the training photos on the device, each uploaded once, when they take at most
+    /// a quarter of its memory budget (the default); false: upload each photo every time
+    /// it is trained on. The same bits either way (`VERISPLAT_TRAIN_PHOTOS=host` in
+    /// `verisplat train`, for comparisons).
+    pub photos_on_device: bool,
     /// The `-r` the photos were loaded at, for `cfg_args` (`None`: not given, written as
     /// the original's -1).
     pub resolution: Option<u32>,
@@ -107,6 +112,7 @@ impl Default for TrainOptions {
             resume: None,
             cancel: None,
             host_optimizer: false,
+            photos_on_device: true,
             resolution: None,
             mip_filter: false,
             appearance: Default::default(),
@@ -391,6 +397,19 @@ pub fn train(
     };
     // The state on the device, unless the caller asks for the host optimiser.
     let device_path = !opts.host_optimizer;
+    // The photos on the device too, each uploaded once, when they take at most a quarter
+    // of the device's memory budget.
+    if device_path && opts.photos_on_device {
+        let ctx = rast.renderer().ctx();
+        let pixels: Vec<u64> = data.train.iter().map(|v| v.image.len() as u64).collect();
+        let kept = loss.keep_photos(ctx, &pixels, ctx.info().memory_budget / 4)?;
+        if !kept {
+            note(format!(
+                "the {} training photos take more than a quarter of the device's memory budget: each is uploaded when it is trained on",
+                pixels.len()
+            ));
+        }
+    }
     for it in run.first..=s.iterations {
         let mut t = std::time::Instant::now();
         let (photo, view) = run.next_view(&job, it);

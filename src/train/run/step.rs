@@ -91,7 +91,7 @@ impl<'p> Run<'p> {
                 cam.width, cam.height, cam.name, model.len()
             )));
         }
-        loss.stage_target_masked(renderer.ctx(), &view.image, view.mask.as_deref())?;
+        loss.stage_photo(renderer.ctx(), photo, &view.image, view.mask.as_deref())?;
         let step = Step {
             stats: in_densify && mcmc.is_none(),
             adam: (!densify_now).then(|| model.advance_steps(reset_now)),
