@@ -398,12 +398,18 @@ pub fn train(
     // The state on the device, unless the caller asks for the host optimiser.
     let device_path = !opts.host_optimizer;
     // The photos on the device too, each uploaded once, when they take at most a quarter
-    // of the device's memory budget.
-    if device_path && opts.photos_on_device {
+    // of the device's memory budget (and none kept from a run before, whatever the path).
+    {
         let ctx = rast.renderer().ctx();
+        let wanted = device_path && opts.photos_on_device;
         let pixels: Vec<u64> = data.train.iter().map(|v| v.image.len() as u64).collect();
-        let kept = loss.keep_photos(ctx, &pixels, ctx.info().memory_budget / 4)?;
-        if !kept {
+        let max = if wanted {
+            ctx.info().memory_budget / 4
+        } else {
+            0
+        };
+        let kept = loss.keep_photos(ctx, &pixels, max)?;
+        if wanted && !kept {
             note(format!(
                 "the {} training photos take more than a quarter of the device's memory budget: each is uploaded when it is trained on",
                 pixels.len()
