@@ -11,5 +11,6 @@ mod lens_gradients;
 mod loss;
 mod masks;
 mod mip_filter;
+mod photos;
 mod training;
 mod undistort;
