@@ -174,26 +174,10 @@ impl BlendBwd {
         self.rows
     }
 
-    /// Records the dispatch over the `bins` grid of a frame in one piece.
-    pub fn record(
-        &self,
-        ctx: &GpuContext,
-        cmd: vk::CommandBuffer,
-        bins: (u32, u32),
-        b: &BlendBwdBindings,
-    ) -> GpuResult<()> {
-        let band = BlendBwdBand {
-            pairs: (0, u32::MAX),
-            bin_rows: (0, bins.1),
-            first_row: 0,
-        };
-        self.record_band(ctx, cmd, bins.0, band, b)
-    }
-
     /// Records the dispatch over the bins of `bins_x` columns and `band`'s rows, writing
     /// the sums of `band`'s pairs ([`crate::render::frame::bands`]): `pair_grads` holds the band's pairs
     /// from its first, and the per-pixel bindings start at its first pixel row.
-    pub fn record_band(
+    pub fn record(
         &self,
         ctx: &GpuContext,
         cmd: vk::CommandBuffer,

@@ -564,15 +564,17 @@ fn prepare<'a>(
     let (fs, last) = saved_forward(set, size)?;
     let shape = PassShape::new(ctx, scene, size, &fs, groups)?;
     if shape.bands.pixels_split() && (pixels.is_none() || shade.is_some()) {
-        // The training step's loss and the shader's backward pass bind whole frames.
+        // The training step's loss and the shader's backward pass bind whole frames: the
+        // largest per-pixel buffer, which split the pass, is refused.
         let what = match shade {
-            Some(_) => "a shaded frame's pixel gradients",
-            None => "a training frame's pixel gradients",
+            Some(_) => "a shaded frame's",
+            None => "a training frame's",
         };
+        let (name, bytes) = pixel_element(groups);
         crate::gpu::limits::check_binding(
             ctx.info(),
-            what,
-            shape.pixels * 16,
+            &format!("{what} {name}"),
+            shape.pixels * bytes,
             "use a smaller frame",
         )?;
     }
@@ -651,6 +653,15 @@ struct PassShape {
     bands: Bands,
 }
 
+/// The largest per-pixel element of a pass of `groups` groups of four feature channels,
+/// named: a colour gradient (vec4), or the pixel's feature gradients (a vec4 per group).
+fn pixel_element(groups: u32) -> (&'static str, u64) {
+    match groups {
+        0 | 1 => ("pixel colour gradients", 16),
+        g => ("pixel feature gradients", 16 * u64::from(g)),
+    }
+}
+
 impl PassShape {
     fn new(
         ctx: &GpuContext,
@@ -662,12 +673,7 @@ impl PassShape {
         let bins = fs.bins;
         let fields = u64::from(GRAD_FIELDS + 4 * groups);
         let pairs = u64::from(fs.pairs);
-        // The largest per-pixel element: a colour gradient (vec4), or the pixel's feature
-        // gradients (a vec4 per group).
-        let pixel = match groups {
-            0 | 1 => ("pixel colour gradients", 16),
-            g => ("pixel feature gradients", 16 * u64::from(g)),
-        };
+        let pixel = pixel_element(groups);
         let max = crate::gpu::limits::storage_binding_bytes(ctx.info());
         Ok(PassShape {
             n: scene.count as u64,

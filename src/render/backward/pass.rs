@@ -14,6 +14,7 @@ use crate::render::backward::blend_bwd::{BlendBwd, BlendBwdBand, BlendBwdBinding
 use crate::render::backward::grad_accumulate::{AccumulateBindings, GradAccumulate, GradPush};
 use crate::render::backward::preprocess_bwd::{PreprocessBwd, PreprocessBwdBindings};
 use crate::render::backward::shade_bwd::{ShadeBwd, ShadeBwdBuffers};
+use crate::render::frame::bands::{band_rows, bin_rows};
 use crate::render::Stage;
 use crate::render::{ForwardState, GpuScene};
 
@@ -269,15 +270,8 @@ impl<'a> BackwardPass<'a> {
         let groups = u64::from(shape.groups);
         timer.stage(ctx, cmd, Stage::BlendBwd.name(), |cmd| {
             for &(y0, y1) in &row_bands {
-                let rows = |s: BufferSlice<'a>, each: u64| pixel_rows(s, (y0, y1), width * each);
-                let bin_rows = (
-                    y0 / fs.bin_size,
-                    if y1 >= shape.height {
-                        fs.bins.1
-                    } else {
-                        y1 / fs.bin_size
-                    },
-                );
+                let rows = |s: BufferSlice<'a>, each: u64| band_rows(s, (y0, y1), width * each);
+                let bin_rows = bin_rows((y0, y1), shape.height, fs.bin_size, fs.bins.1);
                 for (&(lo, hi), &pair_grads) in pair_bands.iter().zip(&self.pair_grads) {
                     let bindings = BlendBwdBindings {
                         params: fs.params,
@@ -297,8 +291,7 @@ impl<'a> BackwardPass<'a> {
                         bin_rows,
                         first_row: y0,
                     };
-                    self.blend
-                        .record_band(ctx, cmd, fs.bins.0, band, &bindings)?;
+                    self.blend.record(ctx, cmd, fs.bins.0, band, &bindings)?;
                 }
             }
             Ok(())
@@ -354,18 +347,5 @@ impl<'a> BackwardPass<'a> {
                 },
             )
         })
-    }
-}
-
-/// Rows `[y0, y1)` of a per-pixel buffer of `row_bytes` a row (the whole slice for an
-/// element of no bytes: a buffer the pass does not read).
-fn pixel_rows(s: BufferSlice<'_>, (y0, y1): (u32, u32), row_bytes: u64) -> BufferSlice<'_> {
-    if row_bytes == 0 {
-        return s;
-    }
-    BufferSlice {
-        offset: s.offset + u64::from(y0) * row_bytes,
-        size: u64::from(y1 - y0) * row_bytes,
-        ..s
     }
 }

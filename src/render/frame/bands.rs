@@ -13,12 +13,12 @@
 //! fixed-point sums then make the Gaussians' gradients bit-identical too
 //! (`glsl/render/backward/blend_bwd.comp`'s band).
 
-use crate::gpu::{limits, GpuResult};
+use crate::gpu::{limits, BufferSlice, GpuResult};
 
 /// Pixel rows of a pixel band are a multiple of this: a whole number of 8- and 16-pixel
 /// bin rows, and with elements of at least 4 bytes a band's offset is a multiple of 256
 /// bytes (the largest minStorageBufferOffsetAlignment the spec allows).
-pub(crate) const BAND_ROW_ALIGN: u32 = 64;
+const BAND_ROW_ALIGN: u32 = 64;
 
 /// Pairs of a pair band are a multiple of this: the band's slice of the sorted values (4
 /// bytes each) starts at a multiple of 256 bytes.
@@ -62,24 +62,11 @@ impl Bands {
             )?;
             fit
         };
-        let row_bytes = u64::from(width) * pixel_bytes;
-        let row_band = if u64::from(height) * row_bytes <= max {
-            height.max(1)
-        } else {
-            let what = format!("{pixel_what} ({BAND_ROW_ALIGN} rows of {width} pixels)");
-            limits::check_binding_bytes(
-                max,
-                &what,
-                u64::from(BAND_ROW_ALIGN) * row_bytes,
-                "use a narrower frame",
-            )?;
-            (max / row_bytes.max(1)) as u32 / BAND_ROW_ALIGN * BAND_ROW_ALIGN
-        };
         Ok(Bands {
             pairs,
             pair_band,
             height,
-            row_band,
+            row_band: rows_per_band(max, (width, height), (pixel_what, pixel_bytes))?,
         })
     }
 
@@ -96,19 +83,79 @@ impl Bands {
 
     /// The pixel bands, `[y0, y1)` rows each.
     pub(crate) fn row_bands(&self) -> Vec<(u32, u32)> {
-        let n = self.height.div_ceil(self.row_band).max(1);
-        (0..n)
-            .map(|b| {
-                let y0 = b * self.row_band;
-                (y0, (y0 + self.row_band).min(self.height))
-            })
-            .collect()
+        row_runs(self.height, self.row_band)
     }
 
     /// Whether the per-pixel buffers are split.
     pub(crate) fn pixels_split(&self) -> bool {
         self.row_bands().len() > 1
     }
+}
+
+/// The pixel bands of a frame of `size` pixels whose per-pixel buffer (`what`) holds
+/// `bytes` a pixel, on a device that binds `max` bytes: `[y0, y1)` rows each, one band
+/// when the buffer fits one binding; refused when not even 64 rows do.
+pub(crate) fn pixel_bands(
+    max: u64,
+    size: (u32, u32),
+    (what, bytes): (&str, u64),
+) -> GpuResult<Vec<(u32, u32)>> {
+    Ok(row_runs(size.1, rows_per_band(max, size, (what, bytes))?))
+}
+
+/// Rows of a pixel band: the whole frame when it fits one binding, else as many multiples
+/// of [`BAND_ROW_ALIGN`] as fit.
+fn rows_per_band(
+    max: u64,
+    (width, height): (u32, u32),
+    (what, bytes): (&str, u64),
+) -> GpuResult<u32> {
+    let row_bytes = u64::from(width) * bytes;
+    if u64::from(height) * row_bytes <= max {
+        return Ok(height.max(1));
+    }
+    limits::check_binding_bytes(
+        max,
+        &format!("{what} ({BAND_ROW_ALIGN} rows of {width} pixels)"),
+        u64::from(BAND_ROW_ALIGN) * row_bytes,
+        "use a narrower frame",
+    )?;
+    Ok((max / row_bytes.max(1)) as u32 / BAND_ROW_ALIGN * BAND_ROW_ALIGN)
+}
+
+/// `[y0, y1)` runs of `band` rows over `height` rows (one, possibly empty, at least).
+fn row_runs(height: u32, band: u32) -> Vec<(u32, u32)> {
+    let n = height.div_ceil(band).max(1);
+    (0..n)
+        .map(|b| {
+            let y0 = b * band;
+            (y0, (y0 + band).min(height))
+        })
+        .collect()
+}
+
+/// Rows `[y0, y1)` of a per-pixel buffer of `row_bytes` a row, as a band binds them (the
+/// whole slice for an element of no bytes: a buffer the pass does not read).
+pub(crate) fn band_rows(
+    s: BufferSlice<'_>,
+    (y0, y1): (u32, u32),
+    row_bytes: u64,
+) -> BufferSlice<'_> {
+    if row_bytes == 0 {
+        return s;
+    }
+    BufferSlice {
+        offset: s.offset + u64::from(y0) * row_bytes,
+        size: u64::from(y1 - y0) * row_bytes,
+        ..s
+    }
+}
+
+/// The rows `[first, end)` of `bin`-pixel bins (tiles) that cover pixel rows `[y0, y1)` of
+/// a frame `height` rows tall with `bins_y` rows of bins (a band's rows are whole bin
+/// rows but at the frame's foot).
+pub(crate) fn bin_rows((y0, y1): (u32, u32), height: u32, bin: u32, bins_y: u32) -> (u32, u32) {
+    (y0 / bin, if y1 >= height { bins_y } else { y1 / bin })
 }
 
 #[cfg(test)]
@@ -147,6 +194,10 @@ mod tests {
         assert_eq!(rows[0], (0, 128));
         assert_eq!(rows[8], (1024, 1080));
         assert!(rows.windows(2).all(|w| w[0].1 == w[1].0));
+        assert_eq!(pixel_bands(4 << 20, (1920, 1080), ("x", 16)).unwrap(), rows);
+        // Bin rows of 8- and 16-pixel bins: whole rows, and the foot's partial one.
+        assert_eq!(bin_rows((128, 256), 1080, 8, 135), (16, 32));
+        assert_eq!(bin_rows((1024, 1080), 1080, 16, 68), (64, 68));
         assert!(b.pixels_split());
     }
 }

@@ -454,7 +454,7 @@ impl FrameSet {
             // band fits.
             let (w, h) = (f.width, f.height);
             let max = crate::gpu::limits::storage_binding_bytes(ctx.info());
-            crate::render::frame::bands::Bands::plan(max, 0, 0, (w, h), (LAST_CONTRIBUTOR, 8))?;
+            crate::render::frame::bands::pixel_bands(max, (w, h), (LAST_CONTRIBUTOR, 8))?;
             let bytes = (u64::from(w) * u64::from(h) * 8).max(8);
             f.last_contributor = Some(GpuBuffer::new(
                 ctx,

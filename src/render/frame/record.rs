@@ -9,7 +9,7 @@ use crate::gpu::limits::storage_binding_bytes;
 use crate::gpu::shader::Resource;
 use crate::gpu::sort::SortJob;
 use crate::gpu::sync::{barrier, barrier_uses, Access};
-use crate::gpu::{BufferSlice, Count, GpuContext, GpuError, GpuResult, GpuTimer};
+use crate::gpu::{Count, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::render::forward::features::FeatureBindings;
 use crate::render::forward::order::OrderBindings;
 use crate::render::forward::pack::PackBindings;
@@ -18,7 +18,7 @@ use crate::render::forward::shade::GpuShader;
 use crate::render::forward::shade::ShadeBindings;
 use crate::render::forward::types::{self, Counters, FrameParams};
 use crate::render::forward::{blend, keys, preprocess};
-use crate::render::frame::bands::Bands;
+use crate::render::frame::bands;
 use crate::render::frame::buffers::FeaturePlanes;
 use crate::render::frame::buffers::LAST_CONTRIBUTOR;
 use crate::render::frame::pipelines::{FramePipelines, Pipelines};
@@ -407,27 +407,21 @@ impl FrameRecorder<'_> {
         // Last contributors that exceed one storage binding are saved in bands of rows
         // (multiples of 64, so of the 16-pixel tiles), one dispatch each.
         let (width, height) = (self.cam.width, self.cam.height);
-        let bands = match last_contributor {
-            Some(_) => Bands::plan(
+        let row_bands = match last_contributor {
+            Some(_) => bands::pixel_bands(
                 storage_binding_bytes(ctx.info()),
-                0,
-                0,
                 (width, height),
                 (LAST_CONTRIBUTOR, 8),
-            )?
-            .row_bands(),
+            )?,
             None => vec![(0, height)],
         };
         let tile = crate::core::rules::TILE_SIZE;
         self.timer.stage(ctx, cmd, Stage::Blend.name(), |cmd| {
-            for &(y0, y1) in &bands {
-                let rows = (y0 / tile, if y1 >= height { tiles.1 } else { y1 / tile });
+            for &(y0, y1) in &row_bands {
+                let rows = bands::bin_rows((y0, y1), height, tile, tiles.1);
                 let row_bytes = u64::from(width) * 8;
-                let last_contributor = last_contributor.map(|s| BufferSlice {
-                    offset: s.offset + u64::from(y0) * row_bytes,
-                    size: u64::from(y1 - y0) * row_bytes,
-                    ..s
-                });
+                let last_contributor =
+                    last_contributor.map(|s| bands::band_rows(s, (y0, y1), row_bytes));
                 p.blend.record(
                     ctx,
                     cmd,

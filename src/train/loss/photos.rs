@@ -127,7 +127,7 @@ impl GpuLoss {
             // SAFETY: both buffers are alive and hold `bytes` from their offsets (the
             // photo store's slots and the staged target were sized together); the host's
             // writes to the staging buffer are visible to the device from the submission
-            // on, and the store's were ordered by the caller's barriers.
+            // on, and a copy out of the store follows the barrier recorded before it.
             unsafe {
                 ctx.device()
                     .cmd_copy_buffer(cmd, src.handle(), dst.handle(), &region)
