@@ -119,7 +119,8 @@ fn forward_variants() -> Vec<ShaderVariant> {
 /// or by compare-and-swap; the preprocess's reading either.
 fn backward_variants() -> Vec<ShaderVariant> {
     let mut out = Vec::new();
-    for (bin, strip) in [("8u", 1), ("16u", 1), ("8u", 8)] {
+    // The row layout (strip 8) with its workgroup in one subgroup (1) or not (0).
+    for (bin, strip, one) in [("8u", 1, 1), ("16u", 1, 1), ("8u", 8, 1), ("8u", 8, 0)] {
         for kernel in SPLAT_KERNELS {
             for groups in 0..=MAX_FEATURE_GROUPS {
                 out.push(variant(
@@ -129,6 +130,7 @@ fn backward_variants() -> Vec<ShaderVariant> {
                         ("STRIP", strip.to_string()),
                         ("SPLAT_KERNEL", kernel.to_string()),
                         ("FEATURE_GROUPS", groups.to_string()),
+                        ("ROWS_SUBGROUP", one.to_string()),
                     ],
                 ));
             }

@@ -29,9 +29,13 @@
 //  - STRIP == 1 (GPUs): one invocation per pixel; pairs are staged in shared memory in
 //    batches, and each pair's sum is a subgroup sum per subgroup, then the subgroups' sums
 //    in index order.
-//  - STRIP == BIN (CPU devices, 8-pixel bins, a workgroup no larger than one subgroup): one
-//    invocation per row of the bin reads each pair once through texel views for its BIN
-//    pixels; a pair's sum is one subgroup sum, with no shared memory and no barrier.
+//  - STRIP == BIN (CPU devices, 8-pixel bins): one invocation per row of the bin reads
+//    each pair once through texel views for its BIN pixels. A pair's sum adds the rows in
+//    row order: where the workgroup is one subgroup (ROWS_SUBGROUP == 1), one subgroup sum
+//    (llvmpipe adds the lanes, which are the rows, one after another; no shared memory and
+//    no barrier); where subgroups are narrower than the bin (ROWS_SUBGROUP == 0: lavapipe at
+//    4 lanes), the rows' sums go through shared memory and are added in the same order, so
+//    the gradients are the same bits at every llvmpipe width.
 #ifndef STRIP
 #define STRIP 1
 #endif
@@ -55,9 +59,13 @@
 layout(local_size_x = BIN, local_size_y = BIN) in;
 #else
 // One row of the bin per invocation, a 1D workgroup of BIN (8) invocations: with the
-// device's minimum subgroup size >= 8 (the host checks) it is exactly one subgroup. (A
-// (1, 8) workgroup is not: llvmpipe forms subgroups along x, one invocation each.)
+// device's minimum subgroup size >= 8 (ROWS_SUBGROUP, the host's) it is exactly one
+// subgroup. (A (1, 8) workgroup is not: llvmpipe forms subgroups along x, one invocation
+// each.)
 layout(local_size_x = BIN, local_size_y = 1) in;
+#ifndef ROWS_SUBGROUP
+#define ROWS_SUBGROUP 1
+#endif
 #endif
 
 layout(std430, binding = BLEND_BWD_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
@@ -299,6 +307,51 @@ void main() {
     if (li < 4u * VECS && s_max[li] != 0u) atomicMax(maxima[li], s_max[li]);
 }
 #else
+#if ROWS_SUBGROUP == 0
+// The rows' values of one pair (VECS vec4 each), and their last composited pairs.
+shared vec4 s_rows[BIN * VECS];
+shared uint s_row_last[BIN];
+#endif
+
+// The bin's largest `v` (each row's last composited pair).
+uint bin_max(uint v) {
+#if ROWS_SUBGROUP
+    return subgroupMax(v);
+#else
+    s_row_last[gl_LocalInvocationIndex] = v;
+    barrier();
+    uint m = 0u;
+    for (uint r = 0u; r < BIN; r++) m = max(m, s_row_last[r]);
+    return m;
+#endif
+}
+
+#if ROWS_SUBGROUP == 0
+// The rows' vec4s of one pair added in row order from 0 (what llvmpipe's subgroupAdd does
+// with the lanes, here the rows), by invocation 0. Every invocation calls it (barriers).
+void rows_sum(inout vec4 s0, inout vec4 s1, inout vec4 s2, inout vec4 sf[FG]) {
+    uint r = gl_LocalInvocationIndex;
+    s_rows[r * VECS] = s0;
+    s_rows[r * VECS + 1u] = s1;
+    s_rows[r * VECS + 2u] = s2;
+    for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) s_rows[r * VECS + 3u + gi] = sf[gi];
+    barrier();
+    if (r == 0u) {
+        s0 = vec4(0.0);
+        s1 = vec4(0.0);
+        s2 = vec4(0.0);
+        zero_features(sf);
+        for (uint q = 0u; q < BIN; q++) {
+            s0 += s_rows[q * VECS];
+            s1 += s_rows[q * VECS + 1u];
+            s2 += s_rows[q * VECS + 2u];
+            for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] += s_rows[q * VECS + 3u + gi];
+        }
+    }
+    barrier();
+}
+#endif
+
 void main() {
     uvec2 bin = spread_workgroup() + uvec2(0u, band.counts.z);
     uvec2 pix0 = bin * BIN + uvec2(0u, gl_LocalInvocationID.x);
@@ -312,11 +365,13 @@ void main() {
         px[p] = load_pixel(pix0 + uvec2(p, 0u));
         my_last = max(my_last, px[p].last);
     }
-    // The workgroup is one subgroup: its maximum is the bin's.
-    uint end = max(subgroupMax(my_last), range.x);
+    uint end = max(bin_max(my_last), range.x);
     vec4 zf[FG];
     zero_features(zf);
-    for (uint k = max(end, lo) + gl_SubgroupInvocationID; k < min(range.y, hi); k += SUBGROUP_SIZE) {
+    // Strided by the workgroup's invocations (BIN), not the subgroup's lanes: a subgroup
+    // wider than the workgroup (16 lanes at LP_NATIVE_VECTOR_WIDTH=512) has only BIN of
+    // them active, and a stride of its size skipped pairs, leaving an earlier frame's sums.
+    for (uint k = max(end, lo) + gl_LocalInvocationIndex; k < min(range.y, hi); k += BIN) {
         store_pair(k, vec4(0.0), vec4(0.0), vec4(0.0), zf);
     }
     vec4 m0 = vec4(0.0), m1 = vec4(0.0), m2 = vec4(0.0);
@@ -352,6 +407,7 @@ void main() {
         vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0);
         vec4 sf[FG];
         zero_features(sf);
+#if ROWS_SUBGROUP
         if (subgroupAny(used)) {
             s0 = subgroupAdd(a0);
             s1 = subgroupAdd(a1);
@@ -359,6 +415,16 @@ void main() {
             for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroupAdd(af[gi]);
         }
         if (subgroupElect()) {
+#else
+        // Summed whether or not a row composited the pair (a sum of zeros is the 0 the
+        // skip gives): the barriers need every invocation.
+        rows_sum(a0, a1, a2, af);
+        s0 = a0;
+        s1 = a1;
+        s2 = a2;
+        for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = af[gi];
+        if (gl_LocalInvocationIndex == 0u) {
+#endif
             store_pair(k, s0, s1, s2, sf);
             m0 = max(m0, abs(s0));
             m1 = max(m1, abs(s1));
@@ -366,11 +432,15 @@ void main() {
             for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = max(mf[gi], abs(sf[gi]));
         }
     }
+#if ROWS_SUBGROUP
     m0 = subgroupMax(m0);
     m1 = subgroupMax(m1);
     m2 = subgroupMax(m2);
     for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = subgroupMax(mf[gi]);
     if (subgroupElect()) {
+#else
+    if (gl_LocalInvocationIndex == 0u) {  // the one invocation that stored
+#endif
         for (uint c = 0u; c < 4u; c++) {
             if (m0[c] != 0.0) atomicMax(maxima[c], floatBitsToUint(m0[c]));
             if (m1[c] != 0.0) atomicMax(maxima[4u + c], floatBitsToUint(m1[c]));

@@ -63,10 +63,13 @@ pub struct BlendBwdBand {
 
 impl BlendBwd {
     /// Whether `ctx` runs the row layout for `bin`-pixel bins: one invocation per row of
-    /// an 8-pixel bin, reading through texel views (`texel_views`: the frame has them),
-    /// whose workgroup (8 invocations) must be a single subgroup. CPU devices.
-    pub fn rows_for(ctx: &GpuContext, bin: u32, texel_views: bool) -> bool {
-        bin == 8 && texel_views && ctx.info().min_subgroup_size >= 8
+    /// an 8-pixel bin, reading through texel views (`texel_views`: the frame has them).
+    /// CPU devices. Its workgroup (8 invocations) is one subgroup where the device's
+    /// smallest subgroup has 8 lanes or more; otherwise (lavapipe at 4 lanes) the rows'
+    /// sums go through shared memory in the order llvmpipe's subgroup sum adds them, so
+    /// the gradients are the same bits at every width.
+    pub fn rows_for(_ctx: &GpuContext, bin: u32, texel_views: bool) -> bool {
+        bin == 8 && texel_views
     }
 
     /// Builds the pipeline for `bin`-pixel bins (8 or 16) and `kernel`: with `rows`, the
@@ -133,6 +136,10 @@ impl BlendBwd {
                 ("STRIP", strip.to_string()),
                 ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
                 ("FEATURE_GROUPS", feature_groups.to_string()),
+                (
+                    "ROWS_SUBGROUP",
+                    u32::from(!rows || info.min_subgroup_size >= bin).to_string(),
+                ),
             ],
             &by_binding([
                 (slot::PARAMS, storage),

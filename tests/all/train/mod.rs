@@ -14,3 +14,4 @@ mod mip_filter;
 mod photos;
 mod training;
 mod undistort;
+mod widths;
