@@ -4,9 +4,10 @@
 //! shown the same answers as the CPU. [`report`] turns a bundle run's results into one
 //! markdown report.
 
+pub mod bits;
 pub mod report;
 
-use crate::render::{FrameRequest, Rendered};
+use crate::render::{FrameRequest, Readback, Rendered};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -65,6 +66,9 @@ pub struct Check {
     pub warning: Option<String>,
     /// The rest of a failure's message when it has several lines (compiler output).
     pub detail: Option<String>,
+    /// What the check learnt beside its figure (the render check: whether the device
+    /// reproduces the CPU reference bit for bit, [`bits::BitReport`]).
+    pub note: Option<String>,
     /// Wall-clock seconds the check took.
     pub seconds: f64,
 }
@@ -131,6 +135,9 @@ impl Check {
         if let Some(w) = &self.warning {
             lines.push(format!("  {:<10} WARN: {w}", self.name));
         }
+        if let Some(n) = &self.note {
+            lines.push(format!("  {:<10} {n}", self.name));
+        }
         if let Some(d) = &self.detail {
             lines.extend(d.lines().map(|l| format!("      {l}")));
         }
@@ -138,12 +145,13 @@ impl Check {
     }
 }
 
-/// What a check function returns: figure, value, passed, warning.
+/// What a check function returns: figure, value, passed, warning, note.
 struct Outcome {
     figure: String,
     value: Option<f64>,
     passed: bool,
     warning: Option<String>,
+    note: Option<String>,
 }
 
 impl Outcome {
@@ -153,6 +161,7 @@ impl Outcome {
             value,
             passed,
             warning: None,
+            note: None,
         }
     }
 }
@@ -198,6 +207,7 @@ fn run_check(
         passed: outcome.passed,
         warning: outcome.warning,
         detail,
+        note: outcome.note,
         seconds: t0.elapsed().as_secs_f64(),
     }
 }
@@ -446,6 +456,7 @@ fn check_subgroups(ctx: &GpuContext) -> Result<Outcome, String> {
                 "the driver reports {reported} lanes per subgroup but {runs} run together; \
                  verisplat follows the measured {runs}"
             )),
+            note: None,
         },
         Err(e) => Outcome::new(format!("inconsistent: {e}"), None, false),
     })
@@ -620,11 +631,14 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
     let opts = RenderOptions::default();
     let gpu_scene = gpu(renderer.upload(&act))?;
     let (mut colour, mut alpha, mut within) = (f64::INFINITY, f64::INFINITY, 1.0f64);
+    let mut bits = bits::BitReport::default();
     for cam in &cams {
-        let frame = gpu(renderer
-            .render(&FrameRequest::new(&gpu_scene, cam, &opts))
-            .and_then(Rendered::into_frame))?;
+        let (frame, stages) = gpu(renderer
+            .render(&FrameRequest::new(&gpu_scene, cam, &opts).readback(Readback::Intermediates))
+            .and_then(Rendered::into_intermediates))?;
         let reference = crate::cpu::render(&act, cam, &opts);
+        bits.add_preprocess(&crate::cpu::preprocess(&act, cam, &opts), &stages);
+        bits.add_frame(&reference, &frame);
         let m = crate::io::metrics::compare_frames(&reference, &frame);
         // NaN (a frame of NaNs) must fail: `min` would drop it.
         let worst = |a: f64, b: f64| if b.is_nan() || b < a { b } else { a };
@@ -640,7 +654,7 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
             format!("{v:.2}")
         }
     };
-    Ok(Outcome::new(
+    let mut outcome = Outcome::new(
         format!(
             "lowest colour {} dB, alpha {} dB, {:.3} % within 1/255",
             db(colour),
@@ -649,7 +663,9 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
         ),
         Some(colour.min(alpha)),
         passed,
-    ))
+    );
+    outcome.note = Some(bits.sentence());
+    Ok(outcome)
 }
 
 fn backward_camera() -> Camera {

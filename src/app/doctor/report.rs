@@ -219,6 +219,17 @@ fn doctor_section(md: &mut String, doctor: Option<&Value>) {
             );
         }
         md.push('\n');
+        // Whether the device reproduces the CPU reference bit for bit (the render check's
+        // note), as a line of its own.
+        for note in run
+            .get("checks")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+            .filter_map(|c| c.get("note").and_then(Value::as_str))
+        {
+            let _ = writeln!(md, "{}\n", note.replace('|', "/"));
+        }
     }
     let passed = d.get("passed") == Some(&Value::Bool(true));
     let _ = writeln!(

@@ -86,6 +86,20 @@ fn doctor_passes_here_and_its_json_says_so() {
             assert_eq!(c["passed"], true, "{c}");
             assert!(c["threshold"].is_string() && c["figure"].is_string(), "{c}");
         }
+        // The render check says whether the device reproduces the CPU reference bit for
+        // bit, and where it first does not when it does not.
+        let render = checks
+            .iter()
+            .find(|c| c["name"] == "render")
+            .expect("render");
+        let note = render["note"].as_str().expect("the render check's note");
+        assert!(
+            note.starts_with("bit for bit: yes")
+                || (note.starts_with("bit for bit: no, first in ")
+                    && (note.contains("preprocess (") || note.contains("in blend;"))),
+            "{note}"
+        );
+        assert!(out.contains(note), "{out}");
     }
 }
 
