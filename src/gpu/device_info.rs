@@ -72,6 +72,11 @@ pub struct DeviceInfo {
     /// 32-bit halves and a carry (the same sums). Off under `spec-limits`, which the
     /// specification does not require.
     pub int64_atomics: bool,
+    /// Subgroup shuffles in compute shaders (`VK_SUBGROUP_FEATURE_SHUFFLE_BIT`, optional in
+    /// the specification; off under `spec-limits`): the blend backward's per-pixel layout
+    /// sums a pair's pixels as a balanced tree with them, the same bits at every subgroup
+    /// size (docs/reproducibility.md).
+    pub subgroup_shuffle: bool,
     /// The device traits pretended ([`super::emulate`]): the limits above already
     /// include them.
     pub emulation: Emulation,
@@ -209,6 +214,9 @@ impl DeviceInfo {
             budget_source,
             float_atomic_add: false,
             int64_atomics: false,
+            subgroup_shuffle: props11
+                .subgroup_supported_operations
+                .contains(vk::SubgroupFeatureFlags::SHUFFLE),
             emulation: Default::default(),
             same_kind_devices: chosen.same_kind_devices.clone(),
         }
@@ -230,6 +238,10 @@ impl Emulation {
         if self.spec_limits || self.no_int64_atomics {
             // An optional feature: the 32-bit fallback runs instead.
             info.int64_atomics = false;
+        }
+        if self.spec_limits || self.no_subgroup_shuffle {
+            // Optional too: the driver's subgroup sums run instead.
+            info.subgroup_shuffle = false;
         }
         if let Some(bits) = self.timestamp_bits {
             if info.timestamp_valid_bits != 0 {

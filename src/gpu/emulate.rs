@@ -46,13 +46,17 @@ pub struct Emulation {
     /// specification; also off under `spec-limits`): the gradient accumulation adds
     /// 32-bit halves with a carry.
     pub no_int64_atomics: bool,
+    /// No subgroup shuffles (optional in the specification; also off under
+    /// `spec-limits`): the blend backward's per-pixel layout sums with the driver's
+    /// subgroupAdd.
+    pub no_subgroup_shuffle: bool,
 }
 
 impl Emulation {
     /// Parses a `VERISPLAT_EMULATE` list: `spec-limits`, `discrete` (device-local memory not
     /// host-visible and host memory not coherent), `no-host-visible-device`,
     /// `non-coherent`, `timestamp-bits=N`, `max-storage-buffer-range=BYTES`,
-    /// `max-workgroup-count=N`, `no-int64-atomics`.
+    /// `max-workgroup-count=N`, `no-int64-atomics`, `no-subgroup-shuffle`.
     pub fn parse(text: &str) -> Result<Emulation, String> {
         let mut e = Emulation::default();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -76,6 +80,7 @@ impl Emulation {
                 "no-host-visible-device" => e.device_local_not_host_visible = true,
                 "non-coherent" => e.non_coherent = true,
                 "no-int64-atomics" => e.no_int64_atomics = true,
+                "no-subgroup-shuffle" => e.no_subgroup_shuffle = true,
                 "timestamp-bits" => {
                     let bits = number(name)?;
                     if !(1..=64).contains(&bits) {
@@ -96,7 +101,7 @@ impl Emulation {
                         "unknown trait '{other}' (spec-limits, discrete, \
                          no-host-visible-device, non-coherent, timestamp-bits=N, \
                          max-storage-buffer-range=BYTES, max-workgroup-count=N, \
-                         no-int64-atomics)"
+                         no-int64-atomics, no-subgroup-shuffle)"
                     ))
                 }
             }
@@ -130,6 +135,7 @@ impl Emulation {
             ),
             max_workgroup_count_x: min(self.max_workgroup_count_x, other.max_workgroup_count_x),
             no_int64_atomics: self.no_int64_atomics || other.no_int64_atomics,
+            no_subgroup_shuffle: self.no_subgroup_shuffle || other.no_subgroup_shuffle,
         }
     }
 

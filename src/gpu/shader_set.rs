@@ -82,6 +82,9 @@ pub const MAX_GRAD_FIELDS: u32 = GRAD_FIELDS + 4 * MAX_FEATURE_GROUPS;
 pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
 /// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
 pub const GRAD_SPEC_BATCH: u32 = 1;
+/// Specialization constant id of whether the blend backward's row layout runs its
+/// workgroup as one subgroup (otherwise its rows' sums go through shared memory).
+pub const GRAD_SPEC_ROWS_SUBGROUP: u32 = 2;
 /// Pixels per chunk of the neural shader's backward pass (`glsl/render/backward/shade_bwd.comp`'s
 /// `PIXELS`): one per invocation of its workgroup; the parameters' gradients are summed
 /// over a chunk.
@@ -221,6 +224,10 @@ pub fn shared_defines(tables: &[&[(&str, &[&str])]]) -> Vec<(String, String)> {
             GRAD_SPEC_MAX_SUBGROUPS.to_string(),
         ),
         ("GRAD_SPEC_BATCH", GRAD_SPEC_BATCH.to_string()),
+        (
+            "GRAD_SPEC_ROWS_SUBGROUP",
+            GRAD_SPEC_ROWS_SUBGROUP.to_string(),
+        ),
         ("SHADE_SPEC_ACTIVATIONS", SHADE_SPEC_ACTIVATIONS.to_string()),
         ("SHADE_SPEC_WIDEST", SHADE_SPEC_WIDEST.to_string()),
         ("SHADE_CHUNK_PIXELS", format!("{SHADE_CHUNK_PIXELS}u")),

@@ -119,8 +119,15 @@ fn forward_variants() -> Vec<ShaderVariant> {
 /// or by compare-and-swap; the preprocess's reading either.
 fn backward_variants() -> Vec<ShaderVariant> {
     let mut out = Vec::new();
-    // The row layout (strip 8) with its workgroup in one subgroup (1) or not (0).
-    for (bin, strip, one) in [("8u", 1, 1), ("16u", 1, 1), ("8u", 8, 1), ("8u", 8, 0)] {
+    // The per-pixel layout (strip 1) with subgroup shuffles' balanced tree (canonical 1) or
+    // the driver's subgroup sums (0); the row layout (strip 8).
+    for (bin, strip, canonical) in [
+        ("8u", 1, 0),
+        ("8u", 1, 1),
+        ("16u", 1, 0),
+        ("16u", 1, 1),
+        ("8u", 8, 0),
+    ] {
         for kernel in SPLAT_KERNELS {
             for groups in 0..=MAX_FEATURE_GROUPS {
                 out.push(variant(
@@ -130,7 +137,7 @@ fn backward_variants() -> Vec<ShaderVariant> {
                         ("STRIP", strip.to_string()),
                         ("SPLAT_KERNEL", kernel.to_string()),
                         ("FEATURE_GROUPS", groups.to_string()),
-                        ("ROWS_SUBGROUP", one.to_string()),
+                        ("CANONICAL_SUM", canonical.to_string()),
                     ],
                 ));
             }

@@ -31,10 +31,9 @@
 //    in index order.
 //  - STRIP == BIN (CPU devices, 8-pixel bins): one invocation per row of the bin reads
 //    each pair once through texel views for its BIN pixels. A pair's sum adds the rows in
-//    row order: where the workgroup is one subgroup (ROWS_SUBGROUP == 1), one subgroup sum
-//    (llvmpipe adds the lanes, which are the rows, one after another; no shared memory and
-//    no barrier); where subgroups are narrower than the bin (ROWS_SUBGROUP == 0: lavapipe at
-//    4 lanes), the rows' sums go through shared memory and are added in the same order, so
+//    row order: where the workgroup is one subgroup (ROWS_SUBGROUP), one subgroup sum
+//    (llvmpipe adds the lanes, which are the rows, one after another; no barrier); where
+//    subgroups are narrower than the bin (lavapipe at 4 lanes), the rows' sums go through shared memory and are added in the same order, so
 //    the gradients are the same bits at every llvmpipe width.
 #ifndef STRIP
 #define STRIP 1
@@ -59,13 +58,9 @@
 layout(local_size_x = BIN, local_size_y = BIN) in;
 #else
 // One row of the bin per invocation, a 1D workgroup of BIN (8) invocations: with the
-// device's minimum subgroup size >= 8 (ROWS_SUBGROUP, the host's) it is exactly one
-// subgroup. (A (1, 8) workgroup is not: llvmpipe forms subgroups along x, one invocation
-// each.)
+// device's minimum subgroup size >= 8 (ROWS_SUBGROUP below) it is exactly one subgroup.
+// (A (1, 8) workgroup is not: llvmpipe forms subgroups along x, one invocation each.)
 layout(local_size_x = BIN, local_size_y = 1) in;
-#ifndef ROWS_SUBGROUP
-#define ROWS_SUBGROUP 1
-#endif
 #endif
 
 layout(std430, binding = BLEND_BWD_PARAMS) readonly buffer ParamsBuf { FrameParams params; };
@@ -206,6 +201,27 @@ void zero_features(out vec4 a[FG]) {
 }
 
 #if STRIP == 1
+#ifndef CANONICAL_SUM
+#define CANONICAL_SUM 0
+#endif
+#if CANONICAL_SUM
+#extension GL_KHR_shader_subgroup_shuffle : require
+#endif
+// A subgroup's sum of v. CANONICAL_SUM (devices with subgroup shuffles): a butterfly, so
+// each subgroup of 2^m lanes adds its pixels as a balanced binary tree over their index,
+// and the subgroups' sums continue that tree (main): a pair's sum over the bin's pixels is
+// then the same tree, so the same bits, at every subgroup size (lanes numbered along the
+// workgroup's invocation index, as drivers lay them out). Otherwise the driver's
+// subgroupAdd, whose order is its own.
+vec4 subgroup_sum(vec4 v) {
+#if CANONICAL_SUM
+    for (uint d = 1u; d < SUBGROUP_SIZE; d *= 2u) v = v + subgroupShuffleXor(v, d);
+    return v;
+#else
+    return subgroupAdd(v);
+#endif
+}
+
 // At least the number of subgroups of a BIN x BIN workgroup (the host passes it from the
 // device's minimum subgroup size), and the pairs staged at a time: the host picks the
 // largest of 16, 8, 4, 2 whose partial sums fit the device's shared memory.
@@ -273,10 +289,10 @@ void main() {
             // The subgroup's sum (skipped where none of its pixels composited the pair).
             uint slot = (j * MAX_SUBGROUPS + gl_SubgroupID) * VECS;
             if (subgroupAny(used)) {
-                vec4 s0 = subgroupAdd(a0), s1 = subgroupAdd(a1), s2 = subgroupAdd(a2);
+                vec4 s0 = subgroup_sum(a0), s1 = subgroup_sum(a1), s2 = subgroup_sum(a2);
                 vec4 sf[FG];
                 zero_features(sf);
-                for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroupAdd(af[gi]);
+                for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroup_sum(af[gi]);
                 if (subgroupElect()) {
                     s_part[slot] = s0;
                     s_part[slot + 1u] = s1;
@@ -288,11 +304,23 @@ void main() {
             }
         }
         barrier();
-        // The workgroup's sum per pair and vec4: subgroups in index order.
+        // The workgroup's sum per pair and vec4 from its subgroups' sums.
         for (uint t = li; t < count * VECS; t += BIN * BIN) {
             uint j = t / VECS, v = t % VECS;
+#if CANONICAL_SUM
+            // The rest of the balanced tree: pairs of neighbouring subgroups' sums, then
+            // pairs of those, ..., in place (this invocation owns these slots).
+            for (uint w = 1u; w < gl_NumSubgroups; w *= 2u) {
+                for (uint sg = 0u; sg + w < gl_NumSubgroups; sg += 2u * w) {
+                    uint at = (j * MAX_SUBGROUPS + sg) * VECS + v;
+                    s_part[at] = s_part[at] + s_part[at + w * VECS];
+                }
+            }
+            vec4 s = s_part[j * MAX_SUBGROUPS * VECS + v];
+#else
             vec4 s = vec4(0.0);
             for (uint sg = 0u; sg < gl_NumSubgroups; sg++) s += s_part[(j * MAX_SUBGROUPS + sg) * VECS + v];
+#endif
             uint k = batch_end - 1u - j;
             if (k >= hi) continue;
             pair_grads[VECS * (k - lo) + v] = s;
@@ -307,26 +335,23 @@ void main() {
     if (li < 4u * VECS && s_max[li] != 0u) atomicMax(maxima[li], s_max[li]);
 }
 #else
-#if ROWS_SUBGROUP == 0
+// Whether the workgroup is one subgroup (the host's choice from the device's smallest
+// subgroup size); if not, the rows' sums go through shared memory.
+layout(constant_id = GRAD_SPEC_ROWS_SUBGROUP) const bool ROWS_SUBGROUP = true;
 // The rows' values of one pair (VECS vec4 each), and their last composited pairs.
 shared vec4 s_rows[BIN * VECS];
 shared uint s_row_last[BIN];
-#endif
 
 // The bin's largest `v` (each row's last composited pair).
 uint bin_max(uint v) {
-#if ROWS_SUBGROUP
-    return subgroupMax(v);
-#else
+    if (ROWS_SUBGROUP) return subgroupMax(v);
     s_row_last[gl_LocalInvocationIndex] = v;
     barrier();
     uint m = 0u;
     for (uint r = 0u; r < BIN; r++) m = max(m, s_row_last[r]);
     return m;
-#endif
 }
 
-#if ROWS_SUBGROUP == 0
 // The rows' vec4s of one pair added in row order from 0 (what llvmpipe's subgroupAdd does
 // with the lanes, here the rows), by invocation 0. Every invocation calls it (barriers).
 void rows_sum(inout vec4 s0, inout vec4 s1, inout vec4 s2, inout vec4 sf[FG]) {
@@ -350,7 +375,6 @@ void rows_sum(inout vec4 s0, inout vec4 s1, inout vec4 s2, inout vec4 sf[FG]) {
     }
     barrier();
 }
-#endif
 
 void main() {
     uvec2 bin = spread_workgroup() + uvec2(0u, band.counts.z);
@@ -407,24 +431,25 @@ void main() {
         vec4 s0 = vec4(0.0), s1 = vec4(0.0), s2 = vec4(0.0);
         vec4 sf[FG];
         zero_features(sf);
-#if ROWS_SUBGROUP
-        if (subgroupAny(used)) {
-            s0 = subgroupAdd(a0);
-            s1 = subgroupAdd(a1);
-            s2 = subgroupAdd(a2);
-            for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroupAdd(af[gi]);
+        if (ROWS_SUBGROUP) {
+            if (subgroupAny(used)) {
+                s0 = subgroupAdd(a0);
+                s1 = subgroupAdd(a1);
+                s2 = subgroupAdd(a2);
+                for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = subgroupAdd(af[gi]);
+            }
+        } else {
+            // Summed whether or not a row composited the pair (a sum of zeros is the 0
+            // the skip gives): the barriers need every invocation.
+            rows_sum(a0, a1, a2, af);
+            s0 = a0;
+            s1 = a1;
+            s2 = a2;
+            for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = af[gi];
         }
-        if (subgroupElect()) {
-#else
-        // Summed whether or not a row composited the pair (a sum of zeros is the 0 the
-        // skip gives): the barriers need every invocation.
-        rows_sum(a0, a1, a2, af);
-        s0 = a0;
-        s1 = a1;
-        s2 = a2;
-        for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = af[gi];
-        if (gl_LocalInvocationIndex == 0u) {
-#endif
+        // The one invocation that stores: the elected lane, or the one that summed.
+        bool leader = ROWS_SUBGROUP ? subgroupElect() : gl_LocalInvocationIndex == 0u;
+        if (leader) {
             store_pair(k, s0, s1, s2, sf);
             m0 = max(m0, abs(s0));
             m1 = max(m1, abs(s1));
@@ -432,15 +457,13 @@ void main() {
             for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = max(mf[gi], abs(sf[gi]));
         }
     }
-#if ROWS_SUBGROUP
-    m0 = subgroupMax(m0);
-    m1 = subgroupMax(m1);
-    m2 = subgroupMax(m2);
-    for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = subgroupMax(mf[gi]);
-    if (subgroupElect()) {
-#else
-    if (gl_LocalInvocationIndex == 0u) {  // the one invocation that stored
-#endif
+    if (ROWS_SUBGROUP) {
+        m0 = subgroupMax(m0);
+        m1 = subgroupMax(m1);
+        m2 = subgroupMax(m2);
+        for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = subgroupMax(mf[gi]);
+    }
+    if (ROWS_SUBGROUP ? subgroupElect() : gl_LocalInvocationIndex == 0u) {
         for (uint c = 0u; c < 4u; c++) {
             if (m0[c] != 0.0) atomicMax(maxima[c], floatBitsToUint(m0[c]));
             if (m1[c] != 0.0) atomicMax(maxima[4u + c], floatBitsToUint(m1[c]));

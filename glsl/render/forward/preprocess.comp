@@ -173,7 +173,7 @@ void main() {
         if (kept && depth > params.rules.x) {
             // The reference's scaling_modifier: S = modifier * scale.
             float sm = params.filters.x;
-            mat3 m = quat_to_mat3(g.rotation) * mat3(sm * g.scale.x, 0.0, 0.0, 0.0, sm * g.scale.y, 0.0, 0.0, 0.0, sm * g.scale.z);
+            mat3 m = mat_mat(quat_to_mat3(g.rotation), mat3(sm * g.scale.x, 0.0, 0.0, 0.0, sm * g.scale.y, 0.0, 0.0, 0.0, sm * g.scale.z));
             float fx = params.focal.x, fy = params.focal.y;
             float a, b, c;
             vec2 mean2d;
@@ -181,7 +181,7 @@ void main() {
             // GLSL's mat3(a, b, c) takes columns, so the rows of W as columns give W^T.
             mat3 w_t = mat3(params.w2c_row0.xyz, params.w2c_row1.xyz, params.w2c_row2.xyz);
             if (lens == LENS_PINHOLE) {
-                mat3 cov3d = m * transpose(m);
+                mat3 cov3d = mat_mat(m, transpose(m));
                 vec4 lim = params.limits;
                 float z = view.z;
                 float tx = clamp(view.x / z, -lim.x, lim.y) * z;
@@ -189,10 +189,10 @@ void main() {
                 vec3 j0 = vec3(fx / z, 0.0, -(fx * tx) / (z * z));
                 vec3 j1 = vec3(0.0, fy / z, -(fy * ty) / (z * z));
                 // Rows of T = J W, with W the world-to-camera rotation: t_i = W^T j_i.
-                vec3 t0 = w_t * j0;
-                vec3 t1 = w_t * j1;
-                vec3 s0 = cov3d * t0;
-                vec3 s1 = cov3d * t1;
+                vec3 t0 = mat_vec(w_t, j0);
+                vec3 t1 = mat_vec(w_t, j1);
+                vec3 s0 = mat_vec(cov3d, t0);
+                vec3 s1 = mat_vec(cov3d, t1);
                 a = dot(t0, s0);
                 b = dot(t0, s1);
                 c = dot(t1, s1);
@@ -323,7 +323,7 @@ void main() {
                 // The record says what the rules see (the radius); only a splat some bin
                 // receives is keyed (its rectangle, for the keys stage).
                 if (shown && rmax.x > rmin.x && rmax.y > rmin.y) {
-                    vec3 dir = normalize(mean - params.cam_pos.xyz);
+                    vec3 dir = unit(mean - params.cam_pos.xyz);
                     uint stride = ((params.counts.z * 3u + 3u) / 4u) * 4u;
                     vec3 color = eval_sh(i * stride, params.counts.y, dir);
                     s.mean_opacity_bound = vec4(mean2d, opacity, bound);

@@ -24,13 +24,14 @@ vec3 coeff(uint base, uint k) {
 }
 
 vec3 eval_sh(uint base, uint degree, vec3 dir) {
-    vec3 result = SH_C0 * coeff(base, 0u);
+    // precise: the terms in the order written, as the CPU reference adds them.
+    precise vec3 result = SH_C0 * coeff(base, 0u);
     if (degree > 0u) {
         float x = dir.x, y = dir.y, z = dir.z;
         result = result - SH_C1 * y * coeff(base, 1u) + SH_C1 * z * coeff(base, 2u) - SH_C1 * x * coeff(base, 3u);
         if (degree > 1u) {
-            float xx = x * x, yy = y * y, zz = z * z;
-            float xy = x * y, yz = y * z, xz = x * z;
+            precise float xx = x * x, yy = y * y, zz = z * z;
+            precise float xy = x * y, yz = y * z, xz = x * z;
             result = result + SH_C2[0] * xy * coeff(base, 4u) + SH_C2[1] * yz * coeff(base, 5u)
                 + SH_C2[2] * (2.0 * zz - xx - yy) * coeff(base, 6u) + SH_C2[3] * xz * coeff(base, 7u)
                 + SH_C2[4] * (xx - yy) * coeff(base, 8u);
@@ -46,6 +47,27 @@ vec3 eval_sh(uint base, uint degree, vec3 dir) {
         }
     }
     return max(result + 0.5, vec3(0.0));
+}
+
+// M v and A B with the columns added in order, 0, 1 then 2, as the CPU reference (glam)
+// adds them: GLSL's own products add them in an order the compiler picks (SPIR-V to NIR
+// adds the last column first), which changes the last bits.
+vec3 mat_vec(mat3 m, vec3 v) {
+    precise vec3 r = m[0] * v.x + m[1] * v.y + m[2] * v.z;
+    return r;
+}
+
+mat3 mat_mat(mat3 a, mat3 b) {
+    return mat3(mat_vec(a, b[0]), mat_vec(a, b[1]), mat_vec(a, b[2]));
+}
+
+// v / |v| as the CPU reference (glam's normalize) computes it: v times the reciprocal of
+// the square root, each correctly rounded. (GLSL's normalize may take an approximate
+// reciprocal square root: llvmpipe's differs in the last bits.)
+vec3 unit(vec3 v) {
+    precise float len = sqrt(dot(v, v));
+    precise vec3 r = v * (1.0 / len);
+    return r;
 }
 
 // Rotation matrix of a unit quaternion (w, x, y, z), as columns.

@@ -7,7 +7,8 @@ use crate::core::model::SplatKernel;
 use crate::core::shader_interface::CountsPush;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::{
-    GRAD_FIELDS, GRAD_SPEC_BATCH, GRAD_SPEC_MAX_SUBGROUPS, MAX_FEATURE_GROUPS,
+    GRAD_FIELDS, GRAD_SPEC_BATCH, GRAD_SPEC_MAX_SUBGROUPS, GRAD_SPEC_ROWS_SUBGROUP,
+    MAX_FEATURE_GROUPS,
 };
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
 use crate::render::shaders::bindings::blend_bwd as slot;
@@ -137,8 +138,8 @@ impl BlendBwd {
                 ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
                 ("FEATURE_GROUPS", feature_groups.to_string()),
                 (
-                    "ROWS_SUBGROUP",
-                    u32::from(!rows || info.min_subgroup_size >= bin).to_string(),
+                    "CANONICAL_SUM",
+                    u32::from(!rows && info.subgroup_shuffle).to_string(),
                 ),
             ],
             &by_binding([
@@ -156,7 +157,10 @@ impl BlendBwd {
             ])?,
             &CountsPush::LAYOUT,
             &if rows {
-                Vec::new()
+                vec![(
+                    GRAD_SPEC_ROWS_SUBGROUP,
+                    u32::from(info.min_subgroup_size >= bin),
+                )]
             } else {
                 vec![
                     (GRAD_SPEC_MAX_SUBGROUPS, max_subgroups),

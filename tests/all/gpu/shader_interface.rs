@@ -107,15 +107,69 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     // The subgroup self-check every context runs.
     verisplat::gpu::subgroup::probe(ctx).expect("the subgroup probe");
     built += 1;
-    // The backward pass: both blend layouts and bin sizes, every accumulation, both reads.
+    built += build_backward_variants(ctx);
+    // The field renders: every mode and kernel (each pipeline is built by its first frame).
+    for kernel in SplatKernel::ALL {
+        let mut scene = verisplat::core::scene::Scene::empty(0);
+        common::push_gaussian(&mut scene, [0.0, 0.0, 3.0], 0.5, 0.5, [0.5; 3]);
+        scene.set_features(1, vec![1.0]).unwrap();
+        let g = verisplat::cpu::field::FieldGaussians::new(&scene.activated(), kernel);
+        let field = verisplat::render::field::GpuField::new(ctx, &g).expect("field upload");
+        let mut renderer = verisplat::render::field::FieldRenderer::new(kernel);
+        for mode in [
+            verisplat::cpu::field::FieldMode::Slice {
+                point: [0.0, 0.0, 3.0],
+                normal: [0.0, 0.0, 1.0],
+            },
+            verisplat::cpu::field::FieldMode::Integral,
+            verisplat::cpu::field::FieldMode::Max { samples: 8 },
+        ] {
+            renderer
+                .render(ctx, &field, &common::axis_camera(32.0), &mode)
+                .expect("field render");
+            built += 1;
+        }
+    }
+    // Every prebuilt module was built above: none is dead weight, none unchecked.
+    assert_eq!(built, prebuilt_variants().count());
+    common::gpu::assert_validation_clean(&r);
+}
+
+/// Builds every backward-pass pipeline variant (both blend layouts and bin sizes, with and
+/// without subgroup shuffles, every accumulation, both reads); returns how many.
+fn build_backward_variants(ctx: &verisplat::gpu::GpuContext) -> usize {
+    let mut built = 0;
+    // The backward pass: both blend layouts and bin sizes (the per-pixel layout with
+    // subgroup shuffles' balanced sums where the device has them, as lavapipe does, and
+    // without on a context that pretends not to), every accumulation, both reads.
+    let no_shuffle = verisplat::gpu::GpuContext::new(&verisplat::gpu::ContextOptions {
+        validation: true,
+        emulate: verisplat::gpu::emulate::Emulation::parse("no-subgroup-shuffle").unwrap(),
+        ..Default::default()
+    })
+    .expect("a context without shuffles");
+    assert!(!no_shuffle.info().subgroup_shuffle);
+    if !ctx.info().subgroup_shuffle {
+        eprintln!(
+            "no subgroup shuffles on {}: the balanced sums are not built",
+            ctx.info().name
+        );
+    }
     for (bin, rows) in [(8, false), (16, false), (8, true)] {
         for kernel in SplatKernel::ALL {
             for groups in 0..=MAX_FEATURE_GROUPS {
                 BlendBwd::new(ctx, bin, rows, kernel, groups).expect("blend backward");
                 built += 1;
+                if !rows {
+                    BlendBwd::new(&no_shuffle, bin, rows, kernel, groups)
+                        .expect("blend backward without shuffles");
+                    built += 1;
+                }
             }
         }
     }
+    let msgs = no_shuffle.validation_messages();
+    assert!(msgs.is_empty(), "validation messages:\n{}", msgs.join("\n"));
     for mode in [
         Accumulation::Deterministic,
         Accumulation::FloatAtomics,
@@ -157,31 +211,7 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
             built += 1;
         }
     }
-    // The field renders: every mode and kernel (each pipeline is built by its first frame).
-    for kernel in SplatKernel::ALL {
-        let mut scene = verisplat::core::scene::Scene::empty(0);
-        common::push_gaussian(&mut scene, [0.0, 0.0, 3.0], 0.5, 0.5, [0.5; 3]);
-        scene.set_features(1, vec![1.0]).unwrap();
-        let g = verisplat::cpu::field::FieldGaussians::new(&scene.activated(), kernel);
-        let field = verisplat::render::field::GpuField::new(ctx, &g).expect("field upload");
-        let mut renderer = verisplat::render::field::FieldRenderer::new(kernel);
-        for mode in [
-            verisplat::cpu::field::FieldMode::Slice {
-                point: [0.0, 0.0, 3.0],
-                normal: [0.0, 0.0, 1.0],
-            },
-            verisplat::cpu::field::FieldMode::Integral,
-            verisplat::cpu::field::FieldMode::Max { samples: 8 },
-        ] {
-            renderer
-                .render(ctx, &field, &common::axis_camera(32.0), &mode)
-                .expect("field render");
-            built += 1;
-        }
-    }
-    // Every prebuilt module was built above: none is dead weight, none unchecked.
-    assert_eq!(built, prebuilt_variants().count());
-    common::gpu::assert_validation_clean(&r);
+    built
 }
 
 #[test]

@@ -635,7 +635,7 @@ fn gpu_direct_rgb_is_not_clamped_and_matches_the_reference() {
 fn gpu_backward_is_deterministic_and_the_fast_modes_agree() {
     let cam = gpu_camera();
     let mut r = diff_rasterizer(None);
-    let p = grad_scene(80, 900, Some(3), 3);
+    let p = grad_scene(50000, 900, Some(1), 3);
     let opts = RenderOptions::default();
     let g = to_f32(&pixel_grads(&cam, 3, 91, true));
     let (_, token) = r.forward(&p, &cam, &opts).unwrap();

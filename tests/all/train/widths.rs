@@ -16,8 +16,13 @@ use std::path::Path;
 const WIDTHS: [&str; 5] = ["128", "256", "512", "1024", "2048"];
 
 /// The model's bytes (the PLY, and the shader or the transforms where written) after
-/// training `data` with `args` at `width`.
-fn train_at(data: &Path, out: &Path, width: &str, args: &[&str]) -> Vec<(String, Vec<u8>)> {
+/// training `data` with `args` at `width`, with `env` set too.
+fn train_at(
+    data: &Path,
+    out: &Path,
+    (width, env): (&str, &[(&str, &str)]),
+    args: &[&str],
+) -> Vec<(String, Vec<u8>)> {
     let model = out.join(format!("w{width}"));
     let mut all = vec![
         "train",
@@ -29,7 +34,9 @@ fn train_at(data: &Path, out: &Path, width: &str, args: &[&str]) -> Vec<(String,
         "-q",
     ];
     all.extend_from_slice(args);
-    let o = verisplat_env(&all, &[("LP_NATIVE_VECTOR_WIDTH", width)]);
+    let mut env = env.to_vec();
+    env.push(("LP_NATIVE_VECTOR_WIDTH", width));
+    let o = verisplat_env(&all, &env);
     assert!(
         o.status.success(),
         "width {width}: {}",
@@ -55,6 +62,35 @@ fn train_at(data: &Path, out: &Path, width: &str, args: &[&str]) -> Vec<(String,
 fn same_bytes_at_every_width(name: &str, iterations: &str, extra: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
+    lod3_dataset(&data);
+    let runs = runs_at_every_width(&data, dir.path(), &[], iterations, extra);
+    assert_all_equal(name, &runs);
+}
+
+/// The training runs of `data` at each of [`WIDTHS`].
+fn runs_at_every_width(
+    data: &Path,
+    out: &Path,
+    env: &[(&str, &str)],
+    iterations: &str,
+    extra: &[&str],
+) -> Vec<Vec<(String, Vec<u8>)>> {
+    let mut args = vec![
+        "--iterations",
+        iterations,
+        "--save-iterations",
+        iterations,
+        "--test-iterations",
+        iterations,
+    ];
+    args.extend_from_slice(extra);
+    WIDTHS
+        .iter()
+        .map(|w| train_at(data, out, (w, env), &args))
+        .collect()
+}
+
+fn lod3_dataset(data: &Path) {
     // PLAYBOT LOD3 (31k Gaussians, all of them the start) from 8 orbit views: dense
     // enough that bins stop early with pairs behind their last composited one.
     let ply = common::shared_data().join("playbot_lod3_31k_sh2.ply");
@@ -75,26 +111,17 @@ fn same_bytes_at_every_width(name: &str, iterations: &str, extra: &[&str]) {
         &[],
     );
     assert!(made.status.success(), "{}", common::cli::stderr(&made));
-    let mut args = vec![
-        "--iterations",
-        iterations,
-        "--save-iterations",
-        iterations,
-        "--test-iterations",
-        iterations,
-    ];
-    args.extend_from_slice(extra);
-    let runs: Vec<_> = WIDTHS
-        .iter()
-        .map(|w| train_at(&data, dir.path(), w, &args))
-        .collect();
+}
+
+/// Every run wrote the same files with the same bytes.
+fn assert_all_equal(name: &str, runs: &[Vec<(String, Vec<u8>)>]) {
     let names = |r: &[(String, Vec<u8>)]| r.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
     assert!(
         runs[0].iter().any(|f| f.0 == "point_cloud.ply"),
         "{:?}",
         names(&runs[0])
     );
-    for (w, run) in WIDTHS.iter().zip(&runs).skip(1) {
+    for (w, run) in WIDTHS.iter().zip(runs).skip(1) {
         assert_eq!(names(run), names(&runs[0]), "{name}: files at width {w}");
         for (a, b) in run.iter().zip(&runs[0]) {
             assert!(
@@ -150,5 +177,49 @@ fn mcmc_features_and_appearance_train_the_same_bytes_at_every_width() {
         "appearance",
         "40",
         &["--appearance", "affine", "--appearance-from", "10"],
+    );
+}
+
+/// The per-pixel layout of the blend backward (GPUs': 16-pixel bins, one invocation a
+/// pixel, forced here with `VERISPLAT_BLEND=shared`) sums a pair's pixels as a balanced
+/// tree with subgroup shuffles, so it too trains the same bytes at 4, 8 and 16 lanes. Its
+/// fallback without shuffles (the driver's subgroupAdd, `VERISPLAT_EMULATE=
+/// no-subgroup-shuffle`) does not: the run shows the test can tell. A small scene (LOD6
+/// from 8 views at 48x36): dense frames pass llvmpipe's loop limit in this layout at 4
+/// lanes (docs/reproducibility.md).
+#[test]
+fn the_per_pixel_backward_trains_the_same_bytes_at_every_width() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    common::dataset::make_dataset(&data, 8, 48, 36);
+    let args = [
+        "--densify-from-iter",
+        "20",
+        "--densification-interval",
+        "20",
+        "--densify-grad-threshold",
+        "0.00005",
+        "--sh-degree",
+        "1",
+    ];
+    let shared = [("VERISPLAT_BLEND", "shared")];
+    let runs = runs_at_every_width(&data, &dir.path().join("a"), &shared, "60", &args);
+    assert_all_equal("per-pixel layout", &runs);
+    let fallback = [
+        ("VERISPLAT_BLEND", "shared"),
+        ("VERISPLAT_EMULATE", "no-subgroup-shuffle"),
+    ];
+    let runs = runs_at_every_width(&data, &dir.path().join("b"), &fallback, "60", &args);
+    let ply = |r: &Vec<(String, Vec<u8>)>| {
+        r.iter()
+            .find(|f| f.0 == "point_cloud.ply")
+            .unwrap()
+            .1
+            .clone()
+    };
+    assert!(
+        runs.iter().skip(1).any(|r| ply(r) != ply(&runs[0])),
+        "the driver's subgroup sums trained the same bytes at 4, 8 and 16 lanes: the \
+         balanced tree is not what makes them equal"
     );
 }
