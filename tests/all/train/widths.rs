@@ -14,6 +14,16 @@ use crate::common::{self, cli::verisplat_env};
 use std::path::Path;
 
 const WIDTHS: [&str; 5] = ["128", "256", "512", "1024", "2048"];
+/// Densification every 20 iterations from the 20th, at a low threshold (it clones and
+/// splits within a short run).
+const DENSIFY: &[&str] = &[
+    "--densify-from-iter",
+    "20",
+    "--densification-interval",
+    "20",
+    "--densify-grad-threshold",
+    "0.00005",
+];
 
 /// The model's bytes (the PLY, and the shader or the transforms where written) after
 /// training `data` with `args` at `width`, with `env` set too.
@@ -140,17 +150,10 @@ fn densification_and_a_reset_train_the_same_bytes_at_every_width() {
         "default strategy",
         "80",
         &[
-            "--densify-from-iter",
-            "20",
-            "--densification-interval",
-            "20",
-            "--densify-grad-threshold",
-            "0.00005",
-            "--opacity-reset-interval",
-            "50",
-            "--sh-degree",
-            "2",
-        ],
+            DENSIFY,
+            &["--opacity-reset-interval", "50", "--sh-degree", "2"],
+        ]
+        .concat(),
     );
 }
 
@@ -192,16 +195,7 @@ fn the_per_pixel_backward_trains_the_same_bytes_at_every_width() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     common::dataset::make_dataset(&data, 8, 48, 36);
-    let args = [
-        "--densify-from-iter",
-        "20",
-        "--densification-interval",
-        "20",
-        "--densify-grad-threshold",
-        "0.00005",
-        "--sh-degree",
-        "1",
-    ];
+    let args = [DENSIFY, &["--sh-degree", "1"]].concat();
     let shared = [("VERISPLAT_BLEND", "shared")];
     let runs = runs_at_every_width(&data, &dir.path().join("a"), &shared, "60", &args);
     assert_all_equal("per-pixel layout", &runs);
