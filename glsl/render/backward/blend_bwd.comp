@@ -6,9 +6,8 @@
 // to the pair's Gaussian: 2D mean (2), conic (3), opacity, colour (3), depth, and the sum of
 // |dL/d mean2d| per axis (gsplat's absgrad). Mirrors the pixel loop of cpu::backward.
 //
-// Determinism: a pixel's contribution is summed over the workgroup in a fixed order (a
-// subgroup sum, then the subgroups in index order), and each pair's sum is written to the
-// pair's own slot: no float atomics. grad_accumulate.comp then adds the pairs of each
+// Determinism: a pixel's contribution is summed over the workgroup in a fixed order (per
+// layout, below), and each pair's sum is written to the pair's own slot: no float atomics. grad_accumulate.comp then adds the pairs of each
 // Gaussian in fixed point, where the order of additions cannot change the result. The
 // largest |sum| of each field is kept (an order-independent max) to choose that fixed point.
 #extension GL_GOOGLE_include_directive : require
@@ -27,14 +26,16 @@
 #endif
 // Two variants of the same arithmetic, chosen per device like the forward blend's:
 //  - STRIP == 1 (GPUs): one invocation per pixel; pairs are staged in shared memory in
-//    batches, and each pair's sum is a subgroup sum per subgroup, then the subgroups' sums
-//    in index order.
+//    batches, and each pair's sum is a balanced tree over the bin's pixels, the same at
+//    every subgroup size (subgroup_sum, CANONICAL_SUM; without shuffles the driver's
+//    subgroup sums, then the subgroups' in index order).
 //  - STRIP == BIN (CPU devices, 8-pixel bins): one invocation per row of the bin reads
 //    each pair once through texel views for its BIN pixels. A pair's sum adds the rows in
 //    row order: where the workgroup is one subgroup (ROWS_SUBGROUP), one subgroup sum
 //    (llvmpipe adds the lanes, which are the rows, one after another; no barrier); where
-//    subgroups are narrower than the bin (lavapipe at 4 lanes), the rows' sums go through shared memory and are added in the same order, so
-//    the gradients are the same bits at every llvmpipe width.
+//    subgroups are narrower than the bin (lavapipe at 4 lanes), the rows' sums go through
+//    shared memory and are added in the same order, so the gradients are the same bits
+//    at every llvmpipe width.
 #ifndef STRIP
 #define STRIP 1
 #endif
