@@ -391,6 +391,9 @@ void main() {
         my_last = max(my_last, px[p].last);
     }
     uint end = max(bin_max(my_last), range.x);
+    // The one invocation that stores the pairs' sums and the maxima: the elected lane (every
+    // lane holds the subgroup sum), or invocation 0, which sums the rows in shared memory.
+    bool leader = ROWS_SUBGROUP ? subgroupElect() : gl_LocalInvocationIndex == 0u;
     vec4 zf[FG];
     zero_features(zf);
     // Strided by the workgroup's invocations (BIN), not the subgroup's lanes: a subgroup
@@ -448,8 +451,6 @@ void main() {
             s2 = a2;
             for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) sf[gi] = af[gi];
         }
-        // The one invocation that stores: the elected lane, or the one that summed.
-        bool leader = ROWS_SUBGROUP ? subgroupElect() : gl_LocalInvocationIndex == 0u;
         if (leader) {
             store_pair(k, s0, s1, s2, sf);
             m0 = max(m0, abs(s0));
@@ -464,7 +465,7 @@ void main() {
         m2 = subgroupMax(m2);
         for (uint gi = 0u; gi < uint(FEATURE_GROUPS); gi++) mf[gi] = subgroupMax(mf[gi]);
     }
-    if (ROWS_SUBGROUP ? subgroupElect() : gl_LocalInvocationIndex == 0u) {
+    if (leader) {
         for (uint c = 0u; c < 4u; c++) {
             if (m0[c] != 0.0) atomicMax(maxima[c], floatBitsToUint(m0[c]));
             if (m1[c] != 0.0) atomicMax(maxima[4u + c], floatBitsToUint(m1[c]));

@@ -29,8 +29,20 @@ pub struct BitReport {
     pub frame_differing: [usize; 3],
 }
 
-fn differs(a: &[f32], b: &[f32]) -> bool {
-    a.iter().zip(b).any(|(x, y)| x.to_bits() != y.to_bits())
+/// How many of the pairs of values differ in any bit.
+fn differing<'a>(
+    a: impl IntoIterator<Item = &'a f32>,
+    b: impl IntoIterator<Item = &'a f32>,
+) -> usize {
+    a.into_iter()
+        .zip(b)
+        .filter(|(x, y)| x.to_bits() != y.to_bits())
+        .count()
+}
+
+/// 1 when any of the values differ, else 0 (one Gaussian's field).
+fn differs(a: &[f32], b: &[f32]) -> usize {
+    usize::from(differing(a, b) > 0)
 }
 
 impl BitReport {
@@ -50,37 +62,34 @@ impl BitReport {
             let [mx, my, opacity, _] = g.mean_opacity_bound;
             let [a, b, cc, depth] = g.conic_depth;
             let [r, gg, bb, _] = g.color_radius;
-            self.depth += usize::from(differs(&[depth], &[c.depth]));
-            self.mean2d += usize::from(differs(&[mx, my], &c.mean2d));
-            self.conic += usize::from(differs(&[a, b, cc], &c.conic));
-            self.opacity += usize::from(differs(&[opacity], &[c.opacity]));
-            self.colour += usize::from(differs(&[r, gg, bb], &c.color));
+            self.depth += differs(&[depth], &[c.depth]);
+            self.mean2d += differs(&[mx, my], &c.mean2d);
+            self.conic += differs(&[a, b, cc], &c.conic);
+            self.opacity += differs(&[opacity], &[c.opacity]);
+            self.colour += differs(&[r, gg, bb], &c.color);
             self.radius += usize::from(g_radius != c.radius as f32);
         }
     }
 
     /// Adds one frame: the device's (`gpu`) against the reference's.
     pub fn add_frame(&mut self, reference: &Frame, gpu: &Frame) {
-        let count = |a: &[f32], b: &[f32]| {
-            a.iter()
-                .zip(b)
-                .filter(|(x, y)| x.to_bits() != y.to_bits())
-                .count()
-        };
-        let (rc, gc): (Vec<f32>, Vec<f32>) = (
-            reference.color.iter().flatten().copied().collect(),
-            gpu.color.iter().flatten().copied().collect(),
-        );
-        for (k, (a, b)) in [
-            (&rc, &gc),
-            (&reference.alpha, &gpu.alpha),
-            (&reference.depth, &gpu.depth),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            self.frame_values[k] += a.len();
-            self.frame_differing[k] += count(a, b);
+        let planes = [
+            (
+                reference.color.len() * 3,
+                differing(reference.color.iter().flatten(), gpu.color.iter().flatten()),
+            ),
+            (
+                reference.alpha.len(),
+                differing(&reference.alpha, &gpu.alpha),
+            ),
+            (
+                reference.depth.len(),
+                differing(&reference.depth, &gpu.depth),
+            ),
+        ];
+        for (k, (values, differ)) in planes.into_iter().enumerate() {
+            self.frame_values[k] += values;
+            self.frame_differing[k] += differ;
         }
     }
 
