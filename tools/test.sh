@@ -65,7 +65,7 @@ width_tests=(
   app::doctor::doctor_passes gpu::limits::pair render::gsplat_rules::gsplat_rules_match
   render::gsplat_rules::gsplat_rules_blend render::gsplat_rules::gsplats_near
   train::gsplat_rules::gpu_backward render::lenses:: train::lens_gradients::gpu_
-  render::passes:: render::rgb8_readback::
+  render::passes:: render::rgb8_readback:: render::reproducible::
 )
 misreport_tests=(
   gpu::primitives:: render::stages::stages_match_on_playbot_lod3 train::banded_backward::
@@ -77,7 +77,7 @@ misreport_tests=(
   render::pipelined::pipelined_frames_match train::training::the_state_on_the_device
   app::doctor::doctor_passes gpu::limits::pair render::gsplat_rules::gsplats_near
   train::gsplat_rules::gpu_backward render::lenses::every_lens_matches_the_reference_inside
-  train::lens_gradients::gpu_ render::passes::
+  train::lens_gradients::gpu_ render::passes:: render::reproducible::
   --skip every_blend_kernel_matches_the_reference_with_the_power_kernel
 )
 widths=${VERISPLAT_WIDTHS-128 512 1024 2048}

@@ -274,7 +274,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false, rules="original", near_plane=None))]
+    #[pyo3(signature = (params, camera, background, kernel, shader=None, antialiased=false, rules="original", near_plane=None, reproducible=false))]
     fn forward<'py>(
         &self,
         py: Python<'py>,
@@ -286,12 +286,13 @@ impl PyRasterizer {
         antialiased: bool,
         rules: &str,
         near_plane: Option<f32>,
+        reproducible: bool,
     ) -> PyResult<ForwardOut<'py>> {
         let DiffInputs {
             p,
             cam,
             shader,
-            opts,
+            mut opts,
             ..
         } = diff_inputs(
             &params,
@@ -302,6 +303,7 @@ impl PyRasterizer {
             antialiased,
             (rules, near_plane),
         )?;
+        opts.reproducible = reproducible;
         let (frame, token, projected) = py.detach(|| {
             guarded(|| {
                 let mut st = self.state.lock().map_err(|_| {
@@ -331,7 +333,7 @@ impl PyRasterizer {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false, antialiased=false, rules="original", near_plane=None))]
+    #[pyo3(signature = (params, camera, background, kernel, token, grad_color=None, grad_alpha=None, grad_depth=None, shader=None, screen=false, antialiased=false, rules="original", near_plane=None, reproducible=false))]
     fn backward<'py>(
         &self,
         py: Python<'py>,
@@ -348,13 +350,14 @@ impl PyRasterizer {
         antialiased: bool,
         rules: &str,
         near_plane: Option<f32>,
+        reproducible: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let DiffInputs {
             p,
             cam,
             shader,
             channels,
-            opts,
+            mut opts,
         } = diff_inputs(
             &params,
             &camera,
@@ -364,6 +367,7 @@ impl PyRasterizer {
             antialiased,
             (rules, near_plane),
         )?;
+        opts.reproducible = reproducible;
         let pixels = cam.width as usize * cam.height as usize;
         let g = pixel_grads(grad_color, grad_alpha, grad_depth, pixels, channels)?;
         let (grads, shader_grads) = py.detach(|| {

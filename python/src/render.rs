@@ -39,7 +39,8 @@ struct Want {
 
 /// Per-frame options as the Python side passes them: background, SH degree, scale
 /// modifier, max scale, min opacity, antialiased (None: the scene's flag), kernel (None:
-/// the scene's), rules (None: the scene's) and near plane (None: the rules' default).
+/// the scene's), rules (None: the scene's), near plane (None: the rules' default) and the
+/// reproducible mode.
 type OptTuple = (
     [f32; 3],
     Option<u32>,
@@ -50,6 +51,7 @@ type OptTuple = (
     Option<String>,
     Option<String>,
     Option<f32>,
+    bool,
 );
 
 /// The planes wanted: rgb, alpha, depth, features, and the surface pass's normal space
@@ -80,6 +82,7 @@ fn request(
         kernel,
         rules,
         near_plane,
+        reproducible,
     ) = options;
     if let Some(d) = sh_degree {
         if d > 3 {
@@ -106,6 +109,7 @@ fn request(
         kernel,
         rules,
         near_plane,
+        reproducible,
     };
     opts.validate().map_err(value_err)?;
     let (rgb, alpha, depth, features, surface) = want;

@@ -160,7 +160,8 @@ def native_passes(call, m2d, cov, depth, opacities, colours):
             r.forward(means, quats, scales, opacities[b],
                       np.ascontiguousarray(colours[b, c][:, ch]), _IDENTITY, _UNIT_K,
                       call.width, call.height, kernel=call.kernel, antialiased=call.antialiased,
-                      rules=call.rules, near_plane=call.near_plane, lens=_ORTHO_LENS)
+                      rules=call.rules, near_plane=call.near_plane,
+                      reproducible=call.reproducible, lens=_ORTHO_LENS)
             for ch in layout.chunks
         ]
     return fwds

@@ -6,10 +6,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 LensTuple = Tuple[str, Sequence[float]]
 CamTuple = Tuple[str, int, int, Sequence[float], Sequence[float], LensTuple]
 # background, sh_degree, scale_modifier, max_scale, min_opacity, antialiased, kernel, rules,
-# near plane
+# near plane, reproducible
 Options = Tuple[
     Sequence[float], Optional[int], float, Optional[float], Optional[float], Optional[bool],
-    Optional[str], Optional[str], Optional[float],
+    Optional[str], Optional[str], Optional[float], bool,
 ]
 Planes = Tuple[Optional[bytearray], Optional[bytearray], Optional[bytearray], Optional[bytearray]]
 
@@ -183,6 +183,7 @@ class Rasterizer:
         antialiased: bool = False,
         rules: str = "original",
         near_plane: Optional[float] = None,
+        reproducible: bool = False,
     ) -> Tuple[bytearray, bytearray, bytearray, int, bytearray]: ...
     def backward(
         self,
@@ -199,6 +200,7 @@ class Rasterizer:
         antialiased: bool = False,
         rules: str = "original",
         near_plane: Optional[float] = None,
+        reproducible: bool = False,
     ) -> Dict[str, Any]: ...
 
 def reference_forward(

@@ -97,6 +97,7 @@ class _Call:
     kernel: str
     rules: str
     near_plane: float
+    reproducible: bool
     antialiased: bool
     absgrad: bool
 

@@ -97,6 +97,7 @@ def _render(native_render, scene: "Scene", camera, kw: Dict[str, Any]) -> Dict[s
         kw["kernel"],
         kw["rules"],
         None if kw["near_plane"] is None else float(kw["near_plane"]),
+        bool(kw.get("reproducible", False)),
     )
     native_want = (*want[:4], space if surface else None)
     planes = native_render(scene._s, [c._tuple() for c in cams], opts, native_want)
@@ -171,6 +172,7 @@ class Renderer:
         near_plane: Optional[float] = None,
         mode: str = "rgb+alpha+depth",
         normal_space: str = "camera",
+        reproducible: bool = False,
     ) -> Dict[str, np.ndarray]:
         """Renders ``scene`` from ``camera`` (or ``viewmat``/``K``/``width``/``height``).
 
@@ -192,7 +194,9 @@ class Renderer:
         drops to 0.5 or below (0 where it never does). A list of cameras (or a ``(B, 4, 4)`` viewmat) renders a
         batch: arrays gain a leading ``B``. ``max_scale``/``min_opacity`` drop
         Gaussians for this frame only, exactly as ``--max-scale``/``--min-opacity``.
-        The GIL is released while rendering."""
+        ``reproducible``: the blends with the CPU reference's exp and unfused arithmetic,
+        as ``--reproducible`` (on lavapipe, pinhole frames equal ``render_cpu``'s bit for
+        bit; docs/reproducibility.md). The GIL is released while rendering."""
         kw = dict(locals())
         return _render(self._r.render, kw.pop("scene"), kw.pop("camera"), kw)
 

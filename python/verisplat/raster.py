@@ -160,6 +160,7 @@ class Forward:
         "_kernel",
         "_antialiased",
         "_rules",
+        "_reproducible",
         "_token",
         "_channels",
         "_k",
@@ -334,6 +335,7 @@ class Rasterizer:
         rules: str = "original",
         near_plane: Optional[float] = None,
         lens: Any = None,
+        reproducible: bool = False,
     ) -> Forward:
         """Renders the Gaussians from one camera: ``colors`` (H, W, D) with the background,
         ``alphas`` (H, W), ``depths`` (H, W, alpha-normalised), and per Gaussian ``radii``,
@@ -351,7 +353,10 @@ class Rasterizer:
         (``means2d`` its mean, ``conics`` its covariance's inverse; ``gaussian_depths`` and
         ``depths`` the distance from the camera through a fisheye or equirectangular lens,
         else ``z``). The backward pass differentiates through the lens on both backends
-        (the chain rule through the sigma points)."""
+        (the chain rule through the sigma points). ``reproducible``: the Vulkan backend
+        blends with the CPU reference's exp and unfused arithmetic (the same bits on every
+        device where the preprocess gives them; docs/reproducibility.md), forward and
+        backward (the reference backend, in f64, has no such mode)."""
         cam = Camera(viewmat, K, width, height, lens=lens)
         params, channels, k = _params(means, quats, scales, opacities, colors, sh_degree)
         shader_bytes = None
@@ -385,6 +390,7 @@ class Rasterizer:
         f._params, f._camera, f._background, f._kernel = params, cam._tuple(), bg, kernel
         f._antialiased = bool(antialiased)
         f._rules = (rules, near_plane)
+        f._reproducible = bool(reproducible)
         f._channels, f._k, f._backend, f._shader = channels, k, self.backend, shader
         h, w, n = cam.height, cam.width, params[0]
         if self._native is None:
@@ -399,7 +405,8 @@ class Rasterizer:
             f.opacities = None
             return f
         color, alpha, depth, token, projected = self._native.forward(
-            params, f._camera, bg, kernel, shader_bytes, f._antialiased, rules, near_plane
+            params, f._camera, bg, kernel, shader_bytes, f._antialiased, rules, near_plane,
+            f._reproducible,
         )
         f.colors = np.frombuffer(color, dtype="<f4").reshape(h, w, channels)
         f.alphas = np.frombuffer(alpha, dtype="<f4").reshape(h, w)
@@ -469,6 +476,7 @@ class Rasterizer:
                 bool(screen),
                 fwd._antialiased,
                 *fwd._rules,
+                fwd._reproducible,
             )
             if not screen:
                 raw.pop("screen", None)

@@ -115,6 +115,7 @@ def _native_passes(call: _Call, arrays) -> Dict[Tuple[int, int], list]:
                 antialiased=call.antialiased,
                 rules=call.rules,
                 near_plane=call.near_plane,
+                reproducible=call.reproducible,
                 lens=lenses[b][c],
             )
             for ch in layout.chunks
@@ -547,6 +548,7 @@ def rasterization(
     accumulation: str = "deterministic",
     kernel: str = "gaussian",
     rules: str = "original",
+    reproducible: bool = False,
     **unsupported: Any,
 ) -> Tuple[torch.Tensor, torch.Tensor, Dict[str, Any]]:
     """gsplat's ``rasterization`` (see the module's docstring for where the rules differ).
@@ -564,7 +566,9 @@ def rasterization(
     verisplat's own: ``device`` (Vulkan device index or name), ``accumulation``,
     ``kernel`` (``"power"``: the power-function falloff) and ``rules`` (``"original"``,
     the 3DGS rasterizer's, the default; ``"gsplat"``, gsplat's: see the module's
-    docstring). ``near_plane``: None is the rules' (0.2; gsplat's 0.01).
+    docstring), ``reproducible`` (the blends with the CPU reference's exp and unfused
+    arithmetic: the same bits on every device where the preprocess gives them;
+    docs/reproducibility.md). ``near_plane``: None is the rules' (0.2; gsplat's 0.01).
     ``camera_model`` (``"pinhole"``, ``"ortho"``, ``"fisheye"``), ``with_ut``,
     ``radial_coeffs`` ([..., C, 6] for the pinhole, [..., C, 4] for the fisheye) and
     ``tangential_coeffs`` ([..., C, 2], the pinhole's): gsplat's lenses (the module's
@@ -614,6 +618,7 @@ def rasterization(
         kernel=kernel,
         rules=rules,
         near_plane=float(near_plane),
+        reproducible=bool(reproducible),
         antialiased=rasterize_mode == "antialiased",
         absgrad=absgrad,
     )

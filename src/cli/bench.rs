@@ -576,6 +576,7 @@ impl Runs {
             scale_modifier: args.scale_modifier,
             kernel,
             rules,
+            reproducible: args.kernel.reproducible,
             ..Default::default()
         };
         let points = self.points;

@@ -195,6 +195,11 @@ pub(crate) struct KernelArg {
     /// [default: the rules the scene file records, else original].
     #[arg(long, value_name = "original|gsplat")]
     pub(crate) rules: Option<Rules>,
+    /// Render the CPU reference's bits on the GPU: the blends use the reference's own exp
+    /// (from +, -, x) and unfused arithmetic. Exact on lavapipe for pinhole cameras; costs
+    /// blend time (docs/reproducibility.md).
+    #[arg(long)]
+    pub(crate) reproducible: bool,
 }
 
 impl KernelArg {

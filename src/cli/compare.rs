@@ -244,6 +244,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(&scene, &name),
         rules: args.kernel.resolve_rules(&scene, &name),
+        reproducible: args.kernel.reproducible,
         ..Default::default()
     };
     let ctx = args.gpu.context()?;
@@ -295,7 +296,7 @@ fn compare_renders(args: &CompareArgs, gate: Gate) -> Result<()> {
         scene: name.clone(),
         reference: "CPU reference renderer".into(),
         test: format!("GPU pipeline on {device}"),
-        blend_kernel: kernel_name(kernel),
+        blend_kernel: kernel_name(renderer.blend_kernel_for(&opts)),
         kernel: opts.kernel.to_string(),
         thresholds: gate,
         magnify: args.magnify,

@@ -448,6 +448,7 @@ pub(crate) fn eval(args: &EvalArgs) -> Result<()> {
         antialiased,
         kernel: args.kernel.resolve(&scene, &name),
         rules: args.kernel.resolve_rules(&scene, &name),
+        reproducible: args.kernel.reproducible,
         ..Default::default()
     };
     let act = scene.activated();

@@ -164,6 +164,11 @@ pub(crate) struct TrainArgs {
     /// records them, so `render` and `eval` use them too.
     #[arg(long, default_value = "original", value_name = "original|gsplat")]
     pub(crate) rules: verisplat::core::model::Rules,
+    /// Train with the reproducible mode's blends (the CPU reference's exp, unfused
+    /// arithmetic), as `render --reproducible` draws; costs blend time
+    /// (docs/reproducibility.md).
+    #[arg(long)]
+    pub(crate) reproducible: bool,
     /// How the Gaussians are added and removed: default (the original's densification:
     /// clone, split, prune, opacity resets) or mcmc (3DGS as Markov chain Monte Carlo:
     /// dead Gaussians relocated onto live ones, 5 % growth per refinement up to
@@ -596,6 +601,7 @@ fn options(args: &TrainArgs, settings: Settings) -> Result<TrainOptions> {
         shader,
         kernel: args.kernel,
         rules: args.rules,
+        reproducible: args.reproducible,
         checkpoint_iterations: args.checkpoint_iterations.clone(),
         resume: match &args.resume {
             Some(path) => Some(

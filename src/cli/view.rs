@@ -126,12 +126,13 @@ fn serve(args: &ViewArgs) -> Result<(Box<dyn ViewSource>, ServedScene, String)> 
         let device = src.device_name();
         (Box::new(src), device)
     } else {
-        let src = verisplat::app::view::source::GpuSource::new(
+        let mut src = verisplat::app::view::source::GpuSource::new(
             &scene,
             args.device,
             antialiased,
             args.preview_gaussians,
         )?;
+        src.set_reproducible(args.kernel.reproducible);
         if src.preview_subset() > 0 {
             note!(
                 "previews while the camera moves may draw fewer of the {} Gaussians, the most important (up to {} short of all; as many as keep them fluid); the view at rest draws all (--preview-gaussians N changes the most)",

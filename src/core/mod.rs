@@ -4,7 +4,8 @@
 //! rendered [`frame`], NumPy arrays
 //! ([`npy`]), quaternions
 //! ([`quat`]), synthetic scenes ([`gen`]), the records and flags shared with the shaders
-//! ([`shader_interface`]), and the small utilities below them all: file errors
+//! ([`shader_interface`]), arithmetic with the same bits on every device ([`math`]), and
+//! the small utilities below them all: file errors
 //! ([`file_error`]), atomic writes ([`fsutil`]), console output ([`console`]) and the
 //! former name's environment variables ([`former_name`]).
 
@@ -15,6 +16,7 @@ pub mod former_name;
 pub mod frame;
 pub mod fsutil;
 pub mod gen;
+pub mod math;
 pub mod model;
 pub mod npy;
 pub mod quat;

@@ -78,6 +78,9 @@ pub const GRAD_FIELDS: u32 = 12;
 pub const MAX_FEATURE_GROUPS: u32 = 4;
 /// Fields per pair at most: [`GRAD_FIELDS`] and four per feature group.
 pub const MAX_GRAD_FIELDS: u32 = GRAD_FIELDS + 4 * MAX_FEATURE_GROUPS;
+/// Specialization constant id of the blends' reproducible mode (`splat_common.glsl`'s
+/// `REPRODUCIBLE`: the portable exp, unfused arithmetic; docs/reproducibility.md).
+pub const REPRODUCIBLE_SPEC: u32 = 102;
 /// Specialization constant id of the most subgroups a blend-backward workgroup may have.
 pub const GRAD_SPEC_MAX_SUBGROUPS: u32 = 0;
 /// Specialization constant id of the pairs a blend-backward workgroup stages at a time.
@@ -234,6 +237,7 @@ pub fn shared_defines(tables: &[&[(&str, &[&str])]]) -> Vec<(String, String)> {
         ("MAX_FIELD_SAMPLES", MAX_FIELD_SAMPLES.to_string()),
         ("SUBGROUP_SIZE_SPEC", SUBGROUP_SIZE_SPEC.to_string()),
         ("WIDE_WG_SPEC", WIDE_WG_SPEC.to_string()),
+        ("REPRODUCIBLE_SPEC", REPRODUCIBLE_SPEC.to_string()),
         ("SSIM_FILTER_RUN", SSIM_FILTER_RUN.to_string()),
     ]
     .into_iter()

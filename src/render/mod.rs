@@ -39,6 +39,7 @@ use backward::{BackwardRequest, BackwardState, DeviceBackward, Gradients, LastFr
 use forward::{blend, shade};
 
 use frame::buffers::{check_binding, FrameBuffers, FrameSet};
+pub use frame::pipelines::Falloff;
 use frame::pipelines::FrameNeeds;
 pub use frame::readback::{ForwardState, Intermediates};
 use frame::schedule::Frames;
@@ -103,7 +104,7 @@ pub struct ForwardHandle {
 pub(crate) struct LastFrame {
     pub(crate) set: usize,
     pub(crate) serial: u64,
-    pub(crate) kernel: crate::core::model::SplatKernel,
+    pub(crate) falloff: Falloff,
     pub(crate) lens: bool,
 }
 
@@ -286,7 +287,7 @@ impl Ticket<'_> {
         FrameNeeds {
             compact: self.scene.compact,
             lens: !self.cam.lens.is_pinhole(),
-            kernel: self.opts.kernel,
+            falloff: Falloff::of(&self.opts),
             features: self.features.is_some(),
             surface: matches!(self.features, Some((f, _)) if f.surface),
             shade: matches!(self.features, Some((_, Some(_)))),
@@ -388,6 +389,15 @@ impl GpuRenderer {
     /// The blend kernel in use.
     pub fn blend_kernel(&self) -> blend::BlendKernel {
         self.frames.pipelines.kernel()
+    }
+
+    /// The blend kernel frames with `opts` use: [`Self::blend_kernel`], or in the
+    /// reproducible mode [`blend::BlendKernel::reproducible`].
+    pub fn blend_kernel_for(&self, opts: &RenderOptions) -> blend::BlendKernel {
+        match opts.reproducible {
+            true => self.blend_kernel().reproducible(self.ctx().info()),
+            false => self.blend_kernel(),
+        }
     }
 
     /// Destroys the pipelines and per-frame resources and returns the context (for

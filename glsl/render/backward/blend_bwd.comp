@@ -144,7 +144,7 @@ Pixel load_pixel(uvec2 pix) {
 void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec4 fv[FG], vec2 pixf, inout Pixel px,
                 inout vec4 a0, inout vec4 a1, inout vec4 a2, inout vec4 af[FG]) {
     vec2 d = mo.xy - pixf;
-    float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+    float power = splat_power(conic, d);
     float unclamped = kernel_falloff(SPLAT_KERNEL, mo.z, min(power, 0.0));
     float alpha = min(params.rules.y, unclamped);
     if (power > 0.0 || alpha < ALPHA_MIN) return;
@@ -170,7 +170,7 @@ void pixel_grad(vec4 mo, vec3 conic, vec3 col, vec4 fv[FG], vec2 pixf, inout Pix
     if (unclamped < params.rules.y) {
         // d alpha / d opacity and d alpha / d power (a constant branch).
         bool power_kernel = SPLAT_KERNEL == SPLAT_KERNEL_POWER;
-        float da_do = power_kernel ? 1.0 + 2.0 * power / 9.0 : exp(power);
+        float da_do = power_kernel ? 1.0 + 2.0 * power / 9.0 : (REPRODUCIBLE ? portable_exp(power) : exp(power));
         float da_dp = power_kernel ? mo.z * (2.0 / 9.0) : unclamped;
         float gp = g_a * da_dp;
         vec2 gm = gp * -vec2(conic.x * d.x + conic.y * d.y, conic.z * d.y + conic.y * d.x);

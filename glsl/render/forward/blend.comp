@@ -67,15 +67,23 @@ float t_stop;
 bool composite(vec4 mean_opacity_depth, vec3 conic, vec3 color, vec2 pixf,
                inout float T, inout vec3 C, inout float D, inout bool done) {
     vec2 d = mean_opacity_depth.xy - pixf;
-    float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+    float power = splat_power(conic, d);
     float alpha = min(alpha_max, kernel_falloff(SPLAT_KERNEL, mean_opacity_depth.z, min(power, 0.0)));
     bool take = !done && power <= 0.0 && alpha >= ALPHA_MIN;
     float test_t = T * (1.0 - alpha);
     bool stop = take && test_t < t_stop;
     bool add = take && !stop;
     float w = add ? alpha * T : 0.0;
-    C += color * w;
-    D += mean_opacity_depth.w * w;
+    if (REPRODUCIBLE) {
+        // Unfused, as the CPU reference adds them.
+        precise vec3 c = C + color * w;
+        precise float dw = D + mean_opacity_depth.w * w;
+        C = c;
+        D = dw;
+    } else {
+        C += color * w;
+        D += mean_opacity_depth.w * w;
+    }
     T = add ? test_t : T;
     done = done || stop;
     return add;

@@ -89,7 +89,7 @@ void main() {
 #endif
         vec3 conic = conic_depth.xyz;
         vec2 d = wrapped_mean(mob.xy, pix.x / TILE_SIZE * TILE_SIZE, params.modes.z, params.image.x) - pixf;
-        float power = -0.5 * (conic.x * d.x * d.x + conic.z * d.y * d.y) - conic.y * d.x * d.y;
+        float power = splat_power(conic, d);
         float alpha = min(alpha_max, kernel_falloff(SPLAT_KERNEL, mob.z, min(power, 0.0)));
         bool take = power <= 0.0 && alpha >= ALPHA_MIN;
         float test_t = T * (1.0 - alpha);
@@ -100,10 +100,22 @@ void main() {
         precise float nc = feature.x * centre.x + feature.y * centre.y + feature.z * centre.z;
         precise float facing = feature.w - nc;
         vec3 n = facing > 0.0 ? -feature.xyz : feature.xyz;
-        F.xyz += n * (add ? alpha * T : 0.0);
+        float w = add ? alpha * T : 0.0;
+        if (REPRODUCIBLE) {
+            precise vec3 f = F.xyz + n * w;
+            F.xyz = f;
+        } else {
+            F.xyz += n * w;
+        }
         F.w = add && T > 0.5 && test_t <= 0.5 ? conic_depth.w : F.w;
 #else
-        F += feature * (add ? alpha * T : 0.0);
+        float w = add ? alpha * T : 0.0;
+        if (REPRODUCIBLE) {
+            precise vec4 f = F + feature * w;
+            F = f;
+        } else {
+            F += feature * w;
+        }
 #endif
         T = add ? test_t : T;
         done = stop;

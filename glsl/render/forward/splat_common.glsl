@@ -5,6 +5,7 @@
 #define SPLAT_COMMON_GLSL
 
 #include "interface.glsl"
+#include "portable_math.glsl"
 
 // Reference rules (shared/docs/reference-semantics.md): TILE_SIZE, TILE_PIXELS,
 // COV2D_DILATION, ALPHA_MIN, GSPLAT_EXTEND and T_MIN are #defines from the host, which
@@ -15,16 +16,44 @@
 #error "the reference's constants come from the host: compile the shaders through the crate's build"
 #endif
 
+// The reproducible mode (RenderOptions::reproducible, docs/reproducibility.md): the blends
+// take exp from portable_exp, the CPU reference's own, and keep their arithmetic unfused
+// (`precise`), so that every device computes the reference's bits. A specialization
+// constant: a pipeline holds one of the two only.
+layout(constant_id = REPRODUCIBLE_SPEC) const bool REPRODUCIBLE = false;
+
 // Alpha falloff with the squared Mahalanobis distance d2 = -2 power (the splat kernel):
 // Gaussian opacity * exp(-d2 / 2), the reference; power opacity * max(0, 1 - d2 / 9).
 // Alpha before the clamp (0.99, gsplat's 0.999) where the reference's exponent is `power` (<= 0). The blend
 // passes its compile-time SPLAT_KERNEL, so each blend pipeline holds one formula only.
 float kernel_falloff(uint kernel, float opacity, float power) {
     if (kernel == SPLAT_KERNEL_POWER) {
+        if (REPRODUCIBLE) {
+            // A division by a constant is otherwise a product with its reciprocal.
+            precise float d2 = -2.0 * power;
+            precise float a = opacity * max(0.0, 1.0 - d2 / 9.0);
+            return a;
+        }
         float d2 = -2.0 * power;
         return opacity * max(0.0, 1.0 - d2 / 9.0);
     }
+    if (REPRODUCIBLE) {
+        precise float a = opacity * portable_exp(power);
+        return a;
+    }
     return opacity * exp(power);
+}
+
+// The exponent of a splat at offset d from its 2D centre, with its conic (A, B, C):
+// -(A dx^2 + C dy^2) / 2 - B dx dy, in the CPU reference's order (cpu::pixel_alpha).
+#define SPLAT_POWER(conic, d) \
+    (-0.5 * ((conic).x * (d).x * (d).x + (conic).z * (d).y * (d).y) - (conic).y * (d).x * (d).y)
+float splat_power(vec3 conic, vec2 d) {
+    if (REPRODUCIBLE) {
+        precise float p = SPLAT_POWER(conic, d);
+        return p;
+    }
+    return SPLAT_POWER(conic, d);
 }
 
 // Pairs are keyed by bins: the reference's 16x16 tiles, or 8x8 quarters of them (for CPU

@@ -112,7 +112,7 @@ pub fn bench_gpu(
         device: info.name.clone(),
         driver: info.driver.clone(),
         vulkan: info.api_version.clone(),
-        blend_kernel: Some(renderer.blend_kernel().to_string()),
+        blend_kernel: Some(renderer.blend_kernel_for(opts).to_string()),
         kernel: opts.kernel.to_string(),
         feature_channels: scene.feature_count,
         compact: gpu_scene.is_compact(),

@@ -182,6 +182,8 @@ pub struct GpuSource {
     kernel: SplatKernel,
     /// The rasterizer's rules (the scene's [`Scene::rules`]).
     rules: crate::core::model::Rules,
+    /// The reproducible mode ([`RenderOptions::reproducible`]).
+    reproducible: bool,
 }
 
 /// The most Gaussians a preview draws by default short of the whole scene (the size of
@@ -229,9 +231,15 @@ impl GpuSource {
             antialiased,
             kernel: scene.kernel,
             rules: scene.rules,
+            reproducible: false,
         };
         source.set_preview(scene, preview_gaussians)?;
         Ok(source)
+    }
+
+    /// Renders in the reproducible mode ([`RenderOptions::reproducible`]) or not.
+    pub fn set_reproducible(&mut self, on: bool) {
+        self.reproducible = on;
     }
 
     /// Previews (frames while the camera moves) may draw fewer Gaussians: the `n` most
@@ -303,7 +311,9 @@ impl GpuSource {
 
     fn options(&self, s: &ViewSettings) -> anyhow::Result<RenderOptions> {
         s.validate(self.sh_degree).map_err(anyhow::Error::msg)?;
-        Ok(render_options(s, self.antialiased, self.kernel, self.rules))
+        let mut opts = render_options(s, self.antialiased, self.kernel, self.rules);
+        opts.reproducible = self.reproducible;
+        Ok(opts)
     }
 }
 
@@ -324,6 +334,7 @@ pub fn render_options(
         kernel,
         rules,
         near_plane: None,
+        reproducible: false,
     }
 }
 

@@ -38,6 +38,7 @@ pub(super) fn export_colmap(
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(scene, name),
         rules: args.kernel.resolve_rules(scene, name),
+        reproducible: args.kernel.reproducible,
         ..Default::default()
     };
     let t = std::time::Instant::now();

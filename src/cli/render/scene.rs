@@ -151,6 +151,7 @@ pub(super) fn render_options(
         scale_modifier: args.scale_modifier,
         kernel: args.kernel.resolve(scene, name),
         rules: args.kernel.resolve_rules(scene, name),
+        reproducible: args.kernel.reproducible,
         ..Default::default()
     }
 }

@@ -54,10 +54,11 @@ impl SplatKernel {
     }
 
     /// Alpha before the 0.99 clamp at a pixel where the reference's exponent is `power`
-    /// (`power = -d2 / 2 <= 0`).
+    /// (`power = -d2 / 2 <= 0`). The Gaussian's exp is [`crate::core::math::exp`], the
+    /// same bits on every platform and the shaders' in the reproducible mode.
     pub fn falloff(self, opacity: f32, power: f32) -> f32 {
         match self {
-            SplatKernel::Gaussian => opacity * power.exp(),
+            SplatKernel::Gaussian => opacity * crate::core::math::exp(power),
             SplatKernel::Power => {
                 let d2 = -2.0 * power;
                 opacity * (1.0 - d2 / 9.0).max(0.0)
@@ -132,6 +133,11 @@ pub struct RenderOptions {
     /// Gaussians nearer than this view depth are culled; `None`: the rules' default (0.2,
     /// gsplat's 0.01). Must be positive.
     pub near_plane: Option<f32>,
+    /// The reproducible mode: the blends take exp from [`crate::core::math::exp`] (the CPU
+    /// reference's) and keep their arithmetic unfused, so a device renders the reference's
+    /// bits where its preprocess does too (docs/reproducibility.md). Off by default: it
+    /// costs blend time.
+    pub reproducible: bool,
 }
 
 impl Default for RenderOptions {
@@ -146,6 +152,7 @@ impl Default for RenderOptions {
             kernel: SplatKernel::Gaussian,
             rules: Rules::Original,
             near_plane: None,
+            reproducible: false,
         }
     }
 }

@@ -3,7 +3,6 @@
 //! pair, the bin's summed gradient with respect to the pair's Gaussian (2D mean, conic,
 //! opacity, colour, depth, |2D mean|), plus the largest |sum| per field.
 
-use crate::core::model::SplatKernel;
 use crate::core::shader_interface::CountsPush;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::shader_set::{
@@ -11,6 +10,7 @@ use crate::gpu::shader_set::{
     MAX_FEATURE_GROUPS,
 };
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
+use crate::render::frame::pipelines::Falloff;
 use crate::render::shaders::bindings::blend_bwd as slot;
 use ash::vk;
 
@@ -73,7 +73,7 @@ impl BlendBwd {
         bin == 8 && texel_views
     }
 
-    /// Builds the pipeline for `bin`-pixel bins (8 or 16) and `kernel`: with `rows`, the
+    /// Builds the pipeline for `bin`-pixel bins (8 or 16) and `falloff`: with `rows`, the
     /// row layout ([`Self::rows_for`]); otherwise one invocation per pixel, whose shared
     /// memory holds one partial sum per subgroup, pair of a batch and field (the device's
     /// smallest subgroup size decides how many subgroups a workgroup can have).
@@ -81,7 +81,7 @@ impl BlendBwd {
         ctx: &GpuContext,
         bin: u32,
         rows: bool,
-        kernel: SplatKernel,
+        falloff: Falloff,
         feature_groups: u32,
     ) -> GpuResult<Self> {
         if feature_groups > MAX_FEATURE_GROUPS {
@@ -135,7 +135,7 @@ impl BlendBwd {
             &[
                 ("BIN", format!("{bin}u")),
                 ("STRIP", strip.to_string()),
-                ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
+                ("SPLAT_KERNEL", format!("{}u", falloff.kernel.shader_id())),
                 ("FEATURE_GROUPS", feature_groups.to_string()),
                 (
                     "CANONICAL_SUM",
@@ -157,14 +157,18 @@ impl BlendBwd {
             ])?,
             &CountsPush::LAYOUT,
             &if rows {
-                vec![(
-                    GRAD_SPEC_ROWS_SUBGROUP,
-                    u32::from(info.min_subgroup_size >= bin),
-                )]
+                vec![
+                    (
+                        GRAD_SPEC_ROWS_SUBGROUP,
+                        u32::from(info.min_subgroup_size >= bin),
+                    ),
+                    falloff.specialization()[0],
+                ]
             } else {
                 vec![
                     (GRAD_SPEC_MAX_SUBGROUPS, max_subgroups),
                     (GRAD_SPEC_BATCH, batch),
+                    falloff.specialization()[0],
                 ]
             },
         )?;

@@ -36,13 +36,15 @@ pub mod shade_bwd;
 use crate::core::camera::Camera;
 use crate::core::frame::Frame;
 use crate::core::model::grad::{PixelGrads, SplatGrads};
-use crate::core::model::{sh_coeffs_for_degree, SplatKernel};
+use crate::core::model::sh_coeffs_for_degree;
 use crate::gpu::shader_set::{GRAD_FIELDS, MAX_FEATURE_GROUPS};
 use crate::gpu::{BufferSlice, GpuContext, GpuError, GpuResult, GpuTimer};
 use crate::render::forward::shade::GpuShader;
 use crate::render::frame::bands::Bands;
 use crate::render::frame::buffers::FrameSet;
-use crate::render::{check_binding, ForwardHandle, ForwardState, GpuScene, LastFrame, Stage};
+use crate::render::{
+    check_binding, Falloff, ForwardHandle, ForwardState, GpuScene, LastFrame, Stage,
+};
 use blend_bwd::BlendBwd;
 use buffers::BackwardBuffers;
 pub use device::DeviceBackward;
@@ -54,7 +56,7 @@ use shade_bwd::ShadeBwd;
 
 /// What tells blend backward pipelines apart: bin size, whether it reads rows of texels,
 /// the splat kernel, groups of four feature channels.
-type BlendKey = (u32, bool, SplatKernel, u32);
+type BlendKey = (u32, bool, Falloff, u32);
 
 /// Pipelines (built the first time a pass needs each), buffers (grown as frames need) and
 /// the timer of the backward pass.
@@ -196,8 +198,8 @@ pub(crate) struct LastFrameState<'a> {
 }
 
 impl<'a> LastFrameState<'a> {
-    fn set(&self) -> (&'a FrameSet, SplatKernel, bool) {
-        (&self.sets[self.last.set], self.last.kernel, self.last.lens)
+    fn set(&self) -> (&'a FrameSet, Falloff, bool) {
+        (&self.sets[self.last.set], self.last.falloff, self.last.lens)
     }
 }
 
@@ -553,7 +555,7 @@ fn check_shaded(
 fn prepare<'a>(
     ctx: &'a GpuContext,
     st: &'a mut BackwardState,
-    (set, kernel, lens): (&'a FrameSet, SplatKernel, bool),
+    (set, falloff, lens): (&'a FrameSet, Falloff, bool),
     scene: &'a GpuScene,
     size: (u32, u32),
     pixels: Option<HostPixels>,
@@ -578,7 +580,7 @@ fn prepare<'a>(
             "use a smaller frame",
         )?;
     }
-    let pipelines = st.build_pipelines(ctx, &fs, (kernel, lens), groups)?;
+    let pipelines = st.build_pipelines(ctx, &fs, (falloff, lens), groups)?;
     st.ensure_buffers(ctx, &shape, pixels, features)?;
     let feature_planes = match shade {
         Some(job) => Some(st.ensure_shade_buffers(ctx, job, shape.pixels, &fs)?),
@@ -698,17 +700,17 @@ impl BackwardState {
         &mut self,
         ctx: &GpuContext,
         fs: &ForwardState,
-        (kernel, lens): (SplatKernel, bool),
+        (falloff, lens): (Falloff, bool),
         groups: u32,
     ) -> GpuResult<(BlendKey, bool, usize)> {
         let float_sums = self.mode != Accumulation::Deterministic;
         // Pipelines, the first time a pass needs each.
         let rows = BlendBwd::rows_for(ctx, fs.bin_size, fs.value_texels.is_some());
-        let blend_key = (fs.bin_size, rows, kernel, groups);
+        let blend_key = (fs.bin_size, rows, falloff, groups);
         if !self.blend.iter().any(|(k, _)| *k == blend_key) {
             self.blend.push((
                 blend_key,
-                BlendBwd::new(ctx, fs.bin_size, rows, kernel, groups)?,
+                BlendBwd::new(ctx, fs.bin_size, rows, falloff, groups)?,
             ));
         }
         if !self.accumulate.iter().any(|(m, _)| *m == self.mode) {

@@ -1,9 +1,9 @@
 //! Blend stage (`glsl/render/forward/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
-use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
+use crate::render::frame::pipelines::Falloff;
 use crate::render::shaders::bindings::blend as slot;
 use ash::vk;
 
@@ -62,6 +62,19 @@ impl BlendKernel {
                     && info.max_shared_memory >= SHARED_KERNEL_BYTES_PER_PIXEL * tile + 4
             }
             BlendKernel::Texel { strip } => info.max_workgroup_invocations >= tile / strip,
+        }
+    }
+
+    /// The kernel the reproducible mode blends with in place of this one: the one-pixel
+    /// texel kernel in place of the longer strips where the device's workgroups hold it.
+    /// lavapipe computes a strip's later pixels with different roundings in rare pixels
+    /// (a few in 100,000 colour values differ by an ulp; not understood yet), which the
+    /// one-pixel strip does not (docs/reproducibility.md).
+    pub fn reproducible(self, info: &crate::gpu::DeviceInfo) -> BlendKernel {
+        let one = BlendKernel::Texel { strip: 1 };
+        match self {
+            BlendKernel::Texel { strip } if strip > 1 && one.fits(info) => one,
+            other => other,
         }
     }
 
@@ -127,7 +140,7 @@ impl std::str::FromStr for BlendKernel {
 pub struct Blend {
     pipeline: ComputePipeline,
     kernel: BlendKernel,
-    splat_kernel: SplatKernel,
+    falloff: Falloff,
     save_last: bool,
 }
 
@@ -164,12 +177,12 @@ pub struct BlendBindings<'a> {
 }
 
 impl Blend {
-    /// Compiles the shader for `kernel` with the falloff of `splat_kernel`; `save_last`
-    /// also writes each pixel's last contributor (`SAVE_LAST`, for a backward pass).
+    /// Compiles the shader for `kernel` with `falloff`; `save_last` also writes each
+    /// pixel's last contributor (`SAVE_LAST`, for a backward pass).
     pub fn new(
         ctx: &GpuContext,
         kernel: BlendKernel,
-        splat_kernel: SplatKernel,
+        falloff: Falloff,
         save_last: bool,
     ) -> GpuResult<Self> {
         use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
@@ -182,7 +195,7 @@ impl Blend {
         let defines = [
             ("STRIP", kernel.strip().to_string()),
             ("TEXEL_FETCH", u32::from(kernel.texel()).to_string()),
-            ("SPLAT_KERNEL", format!("{}u", splat_kernel.shader_id())),
+            ("SPLAT_KERNEL", format!("{}u", falloff.kernel.shader_id())),
             ("SAVE_LAST", u32::from(save_last).to_string()),
         ];
         let read = if kernel.texel() { T } else { B };
@@ -200,17 +213,18 @@ impl Blend {
         if !save_last {
             bindings.truncate(slot::LAST as usize);
         }
-        let pipeline = ComputePipeline::from_embedded(
+        let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "blend",
             &defines,
             &bindings,
             &crate::render::forward::types::BlendPush::LAYOUT,
+            &falloff.specialization(),
         )?;
         Ok(Blend {
             pipeline,
             kernel,
-            splat_kernel,
+            falloff,
             save_last,
         })
     }
@@ -221,8 +235,8 @@ impl Blend {
     }
 
     /// The alpha falloff compiled in.
-    pub fn splat_kernel(&self) -> SplatKernel {
-        self.splat_kernel
+    pub fn falloff(&self) -> Falloff {
+        self.falloff
     }
 
     /// Whether the kernel reads texel-buffer views of the splats and values.

@@ -2,9 +2,9 @@
 //! scene's K feature channels over the same sorted bin lists, four channels per dispatch
 //! (one dispatch per group of four), with the colour rules and background 0.
 
-use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuImage, GpuResult};
+use crate::render::frame::pipelines::Falloff;
 use crate::render::shaders::bindings::blend_features as slot;
 use ash::vk;
 
@@ -53,15 +53,10 @@ impl FeatureBlend {
     /// and features through texel-buffer views (for CPU devices, as the texel blend);
     /// `surface` blends the surface pass's facing normals and median depth
     /// ([`crate::core::model::surface`]) instead of the channels as they are.
-    pub fn new(
-        ctx: &GpuContext,
-        kernel: SplatKernel,
-        texel: bool,
-        surface: bool,
-    ) -> GpuResult<Self> {
+    pub fn new(ctx: &GpuContext, falloff: Falloff, texel: bool, surface: bool) -> GpuResult<Self> {
         use BindingKind::{StorageBuffer as B, StorageImage as I, UniformTexelBuffer as T};
         let defines = [
-            ("SPLAT_KERNEL", format!("{}u", kernel.shader_id())),
+            ("SPLAT_KERNEL", format!("{}u", falloff.kernel.shader_id())),
             ("TEXEL_FETCH", u32::from(texel).to_string()),
             ("SURFACE", u32::from(surface).to_string()),
         ];
@@ -76,12 +71,13 @@ impl FeatureBlend {
             (slot::COUNTERS, B),
             (slot::COLOR_STATE, I),
         ])?;
-        let pipeline = ComputePipeline::from_embedded(
+        let pipeline = ComputePipeline::from_embedded_specialized(
             ctx,
             "blend_features",
             &defines,
             &bindings,
             &crate::render::forward::types::FeatureBlendPush::LAYOUT,
+            &falloff.specialization(),
         )?;
         Ok(FeatureBlend { pipeline, texel })
     }

@@ -15,6 +15,48 @@ use crate::render::forward::preprocess::Preprocess;
 use crate::render::forward::ranges::Ranges;
 use crate::render::forward::shade::Shade;
 
+/// The blends' alpha formula: the splat kernel and the arithmetic (the reproducible
+/// mode's portable exp and unfused operations, [`crate::core::model::RenderOptions::reproducible`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Falloff {
+    /// The splat kernel (`SPLAT_KERNEL`, a variant each).
+    pub kernel: SplatKernel,
+    /// The reproducible mode (`REPRODUCIBLE`, a specialization constant).
+    pub reproducible: bool,
+}
+
+impl From<SplatKernel> for Falloff {
+    fn from(kernel: SplatKernel) -> Self {
+        Falloff {
+            kernel,
+            reproducible: false,
+        }
+    }
+}
+
+impl Falloff {
+    /// The falloff a frame with `opts` blends with.
+    pub fn of(opts: &crate::core::model::RenderOptions) -> Self {
+        Falloff {
+            kernel: opts.kernel,
+            reproducible: opts.reproducible,
+        }
+    }
+
+    /// Its pipelines' slot: the kernel's shader id, plus 2 when reproducible.
+    pub fn index(self) -> usize {
+        self.kernel.shader_id() as usize + 2 * usize::from(self.reproducible)
+    }
+
+    /// The specialization constant a blend pipeline is built with.
+    pub fn specialization(self) -> [(u32, u32); 1] {
+        [(
+            crate::gpu::shader_set::REPRODUCIBLE_SPEC,
+            u32::from(self.reproducible),
+        )]
+    }
+}
+
 /// What one frame records, so what it needs built.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct FrameNeeds {
@@ -22,8 +64,8 @@ pub(crate) struct FrameNeeds {
     pub compact: bool,
     /// A lens other than the pinhole (the preprocess variant of every lens).
     pub lens: bool,
-    /// The alpha falloff (a blend variant each).
-    pub kernel: SplatKernel,
+    /// The alpha falloff (a blend pipeline each).
+    pub falloff: Falloff,
     /// Feature channels are blended.
     pub features: bool,
     /// The features are the surface pass's axes (the feature blend's surface variant).
@@ -54,10 +96,10 @@ pub(crate) struct Pipelines {
     keys: Option<Keys>,
     sort: Option<RadixSort>,
     ranges: Option<Ranges>,
-    /// By `save_last`, then [`SplatKernel::shader_id`].
-    blend: [[Option<Blend>; 2]; 2],
-    /// By [`FrameNeeds::surface`], then [`SplatKernel::shader_id`].
-    feature_blend: [[Option<FeatureBlend>; 2]; 2],
+    /// By `save_last`, then [`Falloff::index`].
+    blend: [[Option<Blend>; 4]; 2],
+    /// By [`FrameNeeds::surface`], then [`Falloff::index`].
+    feature_blend: [[Option<FeatureBlend>; 4]; 2],
     shade: Option<Shade>,
     pack: Option<Pack>,
     /// Pipelines built so far, and the milliseconds it took.
@@ -112,8 +154,8 @@ impl Pipelines {
             keys: None,
             sort: None,
             ranges: None,
-            blend: [[None, None], [None, None]],
-            feature_blend: [[None, None], [None, None]],
+            blend: Default::default(),
+            feature_blend: Default::default(),
             shade: None,
             pack: None,
             built: (0, 0.0),
@@ -162,17 +204,21 @@ impl Pipelines {
         ensure(&mut self.built, &mut self.ranges, || {
             Ranges::new(ctx, texel)
         })?;
-        let id = needs.kernel.shader_id() as usize;
+        let id = needs.falloff.index();
         let save = usize::from(needs.save_last);
+        let blend = match needs.falloff.reproducible {
+            true => kernel.reproducible(ctx.info()),
+            false => kernel,
+        };
         ensure(&mut self.built, &mut self.blend[save][id], || {
-            Blend::new(ctx, kernel, needs.kernel, needs.save_last)
+            Blend::new(ctx, blend, needs.falloff, needs.save_last)
         })?;
         if needs.features {
             let surface = needs.surface;
             ensure(
                 &mut self.built,
                 &mut self.feature_blend[usize::from(surface)][id],
-                || FeatureBlend::new(ctx, needs.kernel, texel, surface),
+                || FeatureBlend::new(ctx, needs.falloff, texel, surface),
             )?;
         }
         if needs.shade {
@@ -186,7 +232,7 @@ impl Pipelines {
 
     /// The pipelines of a frame with `needs` ([`Self::prepare`]d before).
     pub fn frame(&self, needs: FrameNeeds) -> GpuResult<FramePipelines<'_>> {
-        let id = needs.kernel.shader_id() as usize;
+        let id = needs.falloff.index();
         Ok(FramePipelines {
             preprocess: built(&self.preprocess[needs.preprocess_variant()], "preprocess")?,
             order: built(&self.order, "depth order")?,

@@ -203,7 +203,7 @@ impl Frames {
             last: LastFrame {
                 set: 0,
                 serial: u64::MAX,
-                kernel: Default::default(),
+                falloff: Default::default(),
                 lens: false,
             },
             capacity: None,
@@ -425,7 +425,7 @@ impl Frames {
         self.last = LastFrame {
             set: t.set,
             serial: t.serial,
-            kernel: t.opts.kernel,
+            falloff: crate::render::Falloff::of(&t.opts),
             lens: !cam.lens.is_pinhole(),
         };
         Ok(())

@@ -66,6 +66,9 @@ pub struct TrainOptions {
     pub kernel: crate::core::model::SplatKernel,
     /// The rasterizer's rules (`--rules`), recorded in the model.
     pub rules: crate::core::model::Rules,
+    /// The reproducible mode (`--reproducible`, [`RenderOptions::reproducible`]): the
+    /// blends and their backward take the CPU reference's exp and unfused arithmetic.
+    pub reproducible: bool,
     /// Iterations after which a checkpoint (`chkpntN.safetensors`) is written.
     pub checkpoint_iterations: Vec<u32>,
     /// Continue from this checkpoint (of the same data set and settings).
@@ -108,6 +111,7 @@ impl Default for TrainOptions {
             shader: None,
             kernel: crate::core::model::SplatKernel::default(),
             rules: crate::core::model::Rules::default(),
+            reproducible: false,
             checkpoint_iterations: Vec::new(),
             resume: None,
             cancel: None,
@@ -145,6 +149,11 @@ impl TrainOptions {
             crate::core::model::Rules::Original => "",
             crate::core::model::Rules::Gsplat => "|rules gsplat",
         } + if self.mip_filter { "|mip-filter" } else { "" }
+            + if self.reproducible {
+                "|reproducible"
+            } else {
+                ""
+            }
             + &appearance_fingerprint(&self.appearance)
             + &lens_fingerprint(data)
             + &mask_fingerprint(data)
@@ -323,6 +332,7 @@ impl<'a> Job<'a> {
                 background: bg,
                 kernel: opts.kernel,
                 rules: opts.rules,
+                reproducible: opts.reproducible,
                 ..Default::default()
             },
         }

@@ -31,6 +31,7 @@ use verisplat::render::forward::preprocess::Preprocess;
 use verisplat::render::forward::ranges::Ranges;
 use verisplat::render::forward::shade::Shade;
 use verisplat::render::forward::types::{GpuGaussian, GpuGaussianCompact, Splat};
+use verisplat::render::Falloff;
 
 fn interface(shader: &str, defines: &[(&str, &str)]) -> Interface {
     let defines: Vec<(&str, String)> = defines.iter().map(|&(k, v)| (k, v.to_string())).collect();
@@ -55,7 +56,10 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
         built += 2;
         for kernel in SplatKernel::ALL {
             for surface in [false, true] {
-                FeatureBlend::new(ctx, kernel, texel, surface).expect("feature blend");
+                // Each module also with the reproducible mode's specialization (one module).
+                for falloff in falloffs(kernel) {
+                    FeatureBlend::new(ctx, falloff, texel, surface).expect("feature blend");
+                }
                 built += 1;
             }
         }
@@ -63,7 +67,9 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
     for save_last in [false, true] {
         for kernel in SplatKernel::ALL {
             for blend in BlendKernel::all() {
-                Blend::new(ctx, blend, kernel, save_last).expect("blend");
+                for falloff in falloffs(kernel) {
+                    Blend::new(ctx, blend, falloff, save_last).expect("blend");
+                }
                 built += 1;
             }
         }
@@ -137,6 +143,15 @@ fn every_stage_variant_builds_against_its_compiled_interface() {
 
 /// Builds every backward-pass pipeline variant (both blend layouts and bin sizes, with and
 /// without subgroup shuffles, every accumulation, both reads); returns how many.
+/// `kernel`'s falloffs: the default mode's and the reproducible mode's (the same module,
+/// specialized).
+fn falloffs(kernel: SplatKernel) -> [Falloff; 2] {
+    [false, true].map(|reproducible| Falloff {
+        kernel,
+        reproducible,
+    })
+}
+
 fn build_backward_variants(ctx: &verisplat::gpu::GpuContext) -> usize {
     let mut built = 0;
     // The backward pass: both blend layouts and bin sizes (the per-pixel layout with
@@ -158,10 +173,12 @@ fn build_backward_variants(ctx: &verisplat::gpu::GpuContext) -> usize {
     for (bin, rows) in [(8, false), (16, false), (8, true)] {
         for kernel in SplatKernel::ALL {
             for groups in 0..=MAX_FEATURE_GROUPS {
-                BlendBwd::new(ctx, bin, rows, kernel, groups).expect("blend backward");
+                for falloff in falloffs(kernel) {
+                    BlendBwd::new(ctx, bin, rows, falloff, groups).expect("blend backward");
+                }
                 built += 1;
                 if !rows {
-                    BlendBwd::new(&no_shuffle, bin, rows, kernel, groups)
+                    BlendBwd::new(&no_shuffle, bin, rows, kernel.into(), groups)
                         .expect("blend backward without shuffles");
                     built += 1;
                 }

@@ -10,5 +10,6 @@ mod gsplat_rules;
 mod lenses;
 mod passes;
 mod pipelined;
+mod reproducible;
 mod rgb8_readback;
 mod stages;

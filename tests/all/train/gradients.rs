@@ -562,6 +562,16 @@ fn gpu_backward_matches_the_reference_for_sh_degrees_and_kernels() {
             ..Default::default()
         };
         gpu_against_reference(&mut r, &p, &cam, &opts, 92);
+        // The reproducible mode's blends (the portable exp, unfused arithmetic; its own
+        // pipelines) differentiate as the reference does too.
+        for kernel in SplatKernel::ALL {
+            let opts = RenderOptions {
+                kernel,
+                reproducible: true,
+                ..Default::default()
+            };
+            gpu_against_reference(&mut r, &p, &cam, &opts, 93);
+        }
     }
 }
 
