@@ -181,6 +181,9 @@ struct FrameRecord {
     flip: f64,
     alpha: ErrorStats,
     depth: ErrorStats,
+    /// Colour, alpha and depth values whose bits differ from the reference's (0, 0, 0:
+    /// the same frame bit for bit; docs/reproducibility.md).
+    differing_values: [usize; 3],
     diff: String,
     pass: bool,
     failures: Vec<String>,
@@ -458,6 +461,7 @@ impl FrameComparison<'_> {
             flip,
             alpha: m.alpha,
             depth: m.depth,
+            differing_values: cpu.differing_values(&gpu),
             diff: diff_name(k),
             pass: failures.is_empty(),
             failures,
@@ -477,8 +481,22 @@ fn summarise_renders(
     let (gate, failed) = (report.thresholds, &report.failed_frames);
     let min =
         |f: &dyn Fn(&FrameRecord) -> f64| report.frames.iter().map(f).fold(f64::INFINITY, f64::min);
+    let differing: usize = report
+        .frames
+        .iter()
+        .map(|r| r.differing_values.iter().sum::<usize>())
+        .sum();
+    let values: usize = report
+        .frames
+        .iter()
+        .map(|r| 5 * r.width as usize * r.height as usize)
+        .sum();
+    let bits = match differing {
+        0 => "every value the reference's bits".to_string(),
+        n => format!("{n} of {values} values differ from the reference's bits"),
+    };
     outln!(
-        "{} frame(s) of {name} from {source}: GPU ({device}, blend kernel {}) vs CPU reference: lowest colour PSNR {} dB, lowest alpha PSNR {} dB, lowest within 1/255 {:.3} %; {}; report in {}",
+        "{} frame(s) of {name} from {source}: GPU ({device}, blend kernel {}) vs CPU reference: lowest colour PSNR {} dB, lowest alpha PSNR {} dB, lowest within 1/255 {:.3} %; {bits}; {}; report in {}",
         report.frames.len(),
         report.blend_kernel,
         db(min(&|r| r.color.psnr)),
@@ -558,11 +576,12 @@ pub(crate) fn db_csv(v: f64) -> String {
 
 fn render_csv(frames: &[FrameRecord]) -> String {
     let mut s = String::from(
-        "frame,camera,width,height,color_psnr,color_max_abs,color_mean_abs,color_within,ssim,flip,alpha_psnr,alpha_max_abs,alpha_mean_abs,alpha_within,depth_psnr,depth_max_abs,depth_mean_abs,depth_within,depth_peak,diff,pass\n",
+        "frame,camera,width,height,color_psnr,color_max_abs,color_mean_abs,color_within,ssim,flip,alpha_psnr,alpha_max_abs,alpha_mean_abs,alpha_within,depth_psnr,depth_max_abs,depth_mean_abs,depth_within,depth_peak,color_differing,alpha_differing,depth_differing,diff,pass\n",
     );
     for r in frames {
+        let [dc, da, dd] = r.differing_values;
         s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.frame,
             csv_cell(&r.camera),
             r.width,
@@ -573,6 +592,9 @@ fn render_csv(frames: &[FrameRecord]) -> String {
             stats_cells(&r.alpha),
             stats_cells(&r.depth),
             r.depth.peak,
+            dc,
+            da,
+            dd,
             csv_cell(&r.diff),
             r.pass
         ));

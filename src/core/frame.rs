@@ -36,6 +36,20 @@ impl Frame {
         }
     }
 
+    /// How many values of colour, alpha and depth (in that order) differ from `other`'s in
+    /// their bits (NaNs compared by bits too): 0, 0, 0 for the same frame bit for bit.
+    /// Frames of different sizes compare only their common prefix.
+    pub fn differing_values(&self, other: &Frame) -> [usize; 3] {
+        fn count<'a>(a: impl Iterator<Item = &'a f32>, b: impl Iterator<Item = &'a f32>) -> usize {
+            a.zip(b).filter(|(x, y)| x.to_bits() != y.to_bits()).count()
+        }
+        [
+            count(self.color.iter().flatten(), other.color.iter().flatten()),
+            count(self.alpha.iter(), other.alpha.iter()),
+            count(self.depth.iter(), other.depth.iter()),
+        ]
+    }
+
     /// Row-major pixel index.
     pub fn index(&self, x: u32, y: u32) -> usize {
         y as usize * self.width as usize + x as usize

@@ -73,23 +73,15 @@ impl BitReport {
 
     /// Adds one frame: the device's (`gpu`) against the reference's.
     pub fn add_frame(&mut self, reference: &Frame, gpu: &Frame) {
-        let planes = [
-            (
-                reference.color.len() * 3,
-                differing(reference.color.iter().flatten(), gpu.color.iter().flatten()),
-            ),
-            (
-                reference.alpha.len(),
-                differing(&reference.alpha, &gpu.alpha),
-            ),
-            (
-                reference.depth.len(),
-                differing(&reference.depth, &gpu.depth),
-            ),
+        let values = [
+            reference.color.len() * 3,
+            reference.alpha.len(),
+            reference.depth.len(),
         ];
-        for (k, (values, differ)) in planes.into_iter().enumerate() {
-            self.frame_values[k] += values;
-            self.frame_differing[k] += differ;
+        let differ = reference.differing_values(gpu);
+        for k in 0..3 {
+            self.frame_values[k] += values[k];
+            self.frame_differing[k] += differ[k];
         }
     }
 
@@ -131,6 +123,21 @@ impl BitReport {
             ));
         }
         (!self.identical()).then(|| "blend".to_string())
+    }
+
+    /// "yes", or "no, first in <stage>" with the share of frame values that differ.
+    pub fn verdict(&self) -> String {
+        match self.first_stage() {
+            None => "yes".to_string(),
+            Some(stage) => {
+                let differ: usize = self.frame_differing.iter().sum();
+                let values: usize = self.frame_values.iter().sum();
+                format!(
+                    "no, first in {stage}; {:.2} % of frame values differ",
+                    100.0 * differ as f64 / values.max(1) as f64
+                )
+            }
+        }
     }
 
     /// One sentence for the doctor's report.

@@ -631,14 +631,27 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
     let opts = RenderOptions::default();
     let gpu_scene = gpu(renderer.upload(&act))?;
     let (mut colour, mut alpha, mut within) = (f64::INFINITY, f64::INFINITY, 1.0f64);
-    let mut bits = bits::BitReport::default();
+    // The default mode's bits and the reproducible mode's (`--reproducible`), against
+    // the same reference frames.
+    let (mut bits, mut repro) = (bits::BitReport::default(), bits::BitReport::default());
+    let repro_opts = RenderOptions {
+        reproducible: true,
+        ..opts
+    };
     for cam in &cams {
-        let (frame, stages) = gpu(renderer
-            .render(&FrameRequest::new(&gpu_scene, cam, &opts).readback(Readback::Intermediates))
-            .and_then(Rendered::into_intermediates))?;
         let reference = crate::cpu::render(&act, cam, &opts);
-        bits.add_preprocess(&crate::cpu::preprocess(&act, cam, &opts), &stages);
-        bits.add_frame(&reference, &frame);
+        let projected = crate::cpu::preprocess(&act, cam, &opts);
+        let mut render = |o: &RenderOptions, report: &mut bits::BitReport| {
+            let request = FrameRequest::new(&gpu_scene, cam, o).readback(Readback::Intermediates);
+            let (frame, stages) = gpu(renderer
+                .render(&request)
+                .and_then(Rendered::into_intermediates))?;
+            report.add_preprocess(&projected, &stages);
+            report.add_frame(&reference, &frame);
+            Ok::<_, String>(frame)
+        };
+        render(&repro_opts, &mut repro)?;
+        let frame = render(&opts, &mut bits)?;
         let m = crate::io::metrics::compare_frames(&reference, &frame);
         // NaN (a frame of NaNs) must fail: `min` would drop it.
         let worst = |a: f64, b: f64| if b.is_nan() || b < a { b } else { a };
@@ -664,7 +677,11 @@ fn check_render(renderer: &mut GpuRenderer) -> Result<Outcome, String> {
         Some(colour.min(alpha)),
         passed,
     );
-    outcome.note = Some(bits.sentence());
+    outcome.note = Some(format!(
+        "{}; with --reproducible: {}",
+        bits.sentence(),
+        repro.verdict()
+    ));
     Ok(outcome)
 }
 

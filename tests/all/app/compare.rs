@@ -197,6 +197,44 @@ fn demo_render(path: &Path, extra: &[&str]) {
     succeeds(&args);
 }
 
+/// `--reproducible`: every value of every frame is the CPU reference's (0 differing in
+/// report.json and the closing line); without it lavapipe's exp makes some differ.
+#[test]
+fn compare_reproducible_reports_every_value_the_references_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, exact) in [(Some("--reproducible"), true), (None, false)] {
+        let report = dir.path().join(format!("r{exact}"));
+        let mut args = vec![
+            "compare",
+            "--demo",
+            "--orbit",
+            "2",
+            "--width",
+            "320",
+            "-o",
+            s(&report),
+        ];
+        args.extend(flag);
+        let out = succeeds(&args);
+        let json = read_json(&report.join("report.json"));
+        let differing: u64 = json["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|f| f["differing_values"].as_array().unwrap().clone())
+            .map(|v| v.as_u64().unwrap())
+            .sum();
+        if exact {
+            assert_eq!(differing, 0, "{out}");
+            assert!(out.contains("every value the reference's bits"), "{out}");
+        } else {
+            assert!(differing > 0, "{out}");
+            let said = format!("{differing} of 576000 values differ from the reference's bits");
+            assert!(out.contains(&said), "{out}");
+        }
+    }
+}
+
 #[test]
 fn two_images_compare_by_channel_with_clear_errors_for_mismatches() {
     let dir = tempfile::tempdir().unwrap();

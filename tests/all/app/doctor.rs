@@ -99,6 +99,12 @@ fn doctor_passes_here_and_its_json_says_so() {
                     && (note.contains("preprocess (") || note.contains("in blend;"))),
             "{note}"
         );
+        // And whether it does in the reproducible mode.
+        assert!(
+            note.contains("; with --reproducible: yes")
+                || note.contains("; with --reproducible: no, first in "),
+            "{note}"
+        );
         assert!(out.contains(note), "{out}");
     }
 }
