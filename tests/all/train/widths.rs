@@ -3,7 +3,9 @@
 //! 32 and 64 lanes and run 16; docs/portability.md). Each run is the `train` binary in a
 //! child process, so each gets its own device at its own width. Covered: the default
 //! strategy through densification (clone, split, prune) and an opacity reset, MCMC through
-//! relocation and growth, feature splats with their shader, and the affine appearance.
+//! relocation and growth, feature splats with their shader, the affine appearance, and the
+//! reproducible mode (`--reproducible`: its one-pixel blend, or the two-pixel strips where
+//! the one-pixel kernel does not fit).
 //!
 //! On a device other than lavapipe the variable changes nothing and the runs agree
 //! trivially; the test speaks about lavapipe (the issue 63 baseline: 256 and 512 trained
@@ -158,7 +160,7 @@ fn densification_and_a_reset_train_the_same_bytes_at_every_width() {
 }
 
 #[test]
-fn mcmc_features_and_appearance_train_the_same_bytes_at_every_width() {
+fn mcmc_features_appearance_and_the_reproducible_mode_train_the_same_bytes_at_every_width() {
     same_bytes_at_every_width(
         "mcmc",
         "60",
@@ -180,6 +182,11 @@ fn mcmc_features_and_appearance_train_the_same_bytes_at_every_width() {
         "appearance",
         "40",
         &["--appearance", "affine", "--appearance-from", "10"],
+    );
+    same_bytes_at_every_width(
+        "reproducible",
+        "40",
+        &["--reproducible", "--sh-degree", "1"],
     );
 }
 
