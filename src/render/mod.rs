@@ -38,8 +38,8 @@ use backward::{BackwardRequest, BackwardState, DeviceBackward, Gradients, LastFr
 
 use forward::{blend, shade};
 
+pub use forward::blend::Falloff;
 use frame::buffers::{check_binding, FrameBuffers, FrameSet};
-pub use frame::pipelines::Falloff;
 use frame::pipelines::FrameNeeds;
 pub use frame::readback::{ForwardState, Intermediates};
 use frame::schedule::Frames;

@@ -10,7 +10,7 @@ use crate::gpu::shader_set::{
     MAX_FEATURE_GROUPS,
 };
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuResult};
-use crate::render::frame::pipelines::Falloff;
+use crate::render::forward::blend::Falloff;
 use crate::render::shaders::bindings::blend_bwd as slot;
 use ash::vk;
 

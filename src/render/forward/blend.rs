@@ -1,9 +1,9 @@
 //! Blend stage (`glsl/render/forward/blend.comp`): one 16x16 workgroup per tile, writing colour+alpha and
 //! depth storage images.
 
+use crate::core::model::SplatKernel;
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuImage, GpuResult};
-use crate::render::frame::pipelines::Falloff;
 use crate::render::shaders::bindings::blend as slot;
 use ash::vk;
 
@@ -132,6 +132,48 @@ impl std::str::FromStr for BlendKernel {
                 .map(|strip| BlendKernel::Texel { strip })
                 .ok_or_else(|| format!("unknown blend kernel {other:?}; use shared, texel or texel:N (N in {STRIPS:?})")),
         }
+    }
+}
+
+/// The blends' alpha formula: the splat kernel and the arithmetic (the reproducible
+/// mode's portable exp and unfused operations, [`crate::core::model::RenderOptions::reproducible`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Falloff {
+    /// The splat kernel (`SPLAT_KERNEL`, a variant each).
+    pub kernel: SplatKernel,
+    /// The reproducible mode (`REPRODUCIBLE`, a specialization constant).
+    pub reproducible: bool,
+}
+
+impl From<SplatKernel> for Falloff {
+    fn from(kernel: SplatKernel) -> Self {
+        Falloff {
+            kernel,
+            reproducible: false,
+        }
+    }
+}
+
+impl Falloff {
+    /// The falloff a frame with `opts` blends with.
+    pub fn of(opts: &crate::core::model::RenderOptions) -> Self {
+        Falloff {
+            kernel: opts.kernel,
+            reproducible: opts.reproducible,
+        }
+    }
+
+    /// Its pipelines' slot: the kernel's shader id, plus 2 when reproducible.
+    pub fn index(self) -> usize {
+        self.kernel.shader_id() as usize + 2 * usize::from(self.reproducible)
+    }
+
+    /// The specialization constant a blend pipeline is built with.
+    pub fn specialization(self) -> [(u32, u32); 1] {
+        [(
+            crate::gpu::shader_set::REPRODUCIBLE_SPEC,
+            u32::from(self.reproducible),
+        )]
     }
 }
 

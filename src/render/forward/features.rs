@@ -4,7 +4,7 @@
 
 use crate::gpu::shader::{by_binding, BindingKind, Resource};
 use crate::gpu::{BufferSlice, ComputePipeline, GpuContext, GpuError, GpuImage, GpuResult};
-use crate::render::frame::pipelines::Falloff;
+use crate::render::forward::blend::Falloff;
 use crate::render::shaders::bindings::blend_features as slot;
 use ash::vk;
 

@@ -2,11 +2,10 @@
 //! never renders features builds no feature blend, a command that only uploads builds no
 //! pipeline at all, and the compact and power-kernel variants cost nothing until used.
 
-use crate::core::model::SplatKernel;
 use crate::gpu::sort::{SortConfig, SORT_CONFIG_32};
 use crate::gpu::{GpuContext, GpuError, GpuResult, RadixSort, Scan};
 
-use crate::render::forward::blend::{Blend, BlendKernel};
+use crate::render::forward::blend::{Blend, BlendKernel, Falloff};
 use crate::render::forward::features::FeatureBlend;
 use crate::render::forward::keys::Keys;
 use crate::render::forward::order::Order;
@@ -14,48 +13,6 @@ use crate::render::forward::pack::Pack;
 use crate::render::forward::preprocess::Preprocess;
 use crate::render::forward::ranges::Ranges;
 use crate::render::forward::shade::Shade;
-
-/// The blends' alpha formula: the splat kernel and the arithmetic (the reproducible
-/// mode's portable exp and unfused operations, [`crate::core::model::RenderOptions::reproducible`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Falloff {
-    /// The splat kernel (`SPLAT_KERNEL`, a variant each).
-    pub kernel: SplatKernel,
-    /// The reproducible mode (`REPRODUCIBLE`, a specialization constant).
-    pub reproducible: bool,
-}
-
-impl From<SplatKernel> for Falloff {
-    fn from(kernel: SplatKernel) -> Self {
-        Falloff {
-            kernel,
-            reproducible: false,
-        }
-    }
-}
-
-impl Falloff {
-    /// The falloff a frame with `opts` blends with.
-    pub fn of(opts: &crate::core::model::RenderOptions) -> Self {
-        Falloff {
-            kernel: opts.kernel,
-            reproducible: opts.reproducible,
-        }
-    }
-
-    /// Its pipelines' slot: the kernel's shader id, plus 2 when reproducible.
-    pub fn index(self) -> usize {
-        self.kernel.shader_id() as usize + 2 * usize::from(self.reproducible)
-    }
-
-    /// The specialization constant a blend pipeline is built with.
-    pub fn specialization(self) -> [(u32, u32); 1] {
-        [(
-            crate::gpu::shader_set::REPRODUCIBLE_SPEC,
-            u32::from(self.reproducible),
-        )]
-    }
-}
 
 /// What one frame records, so what it needs built.
 #[derive(Clone, Copy, Debug)]
