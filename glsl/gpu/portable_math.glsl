@@ -1,7 +1,7 @@
 // Arithmetic that gives the same bits on every device (docs/reproducibility.md): what the
 // Vulkan specification only bounds in ulps (exp), written with the operations it rounds
 // correctly (+, -, x, `precise`, so no compiler fuses them) and exact ones (floor,
-// exponent bits). The twin of src/core/math.rs, operation for operation; its constants are
+// exponent bits). The twin of core::math::exp, operation for operation; its constants are
 // the same bits (checked there), its accuracy is measured there (within 2 ulp).
 #ifndef PORTABLE_MATH_GLSL
 #define PORTABLE_MATH_GLSL
