@@ -30,6 +30,8 @@ pub struct BackwardReport {
     pub driver: String,
     /// The alpha falloff (`gaussian` or `power`).
     pub kernel: String,
+    /// Run in the reproducible mode (`--reproducible`).
+    pub reproducible: bool,
     /// How per-pair gradients are summed (`deterministic`, `float-atomics`, `cas`).
     pub accumulation: String,
     /// Feature channels differentiated instead of the colour (0: the SH colour).
@@ -185,6 +187,7 @@ pub fn bench_backward(
         device: info.name.clone(),
         driver: info.driver.clone(),
         kernel: opts.kernel.to_string(),
+        reproducible: opts.reproducible,
         accumulation: renderer.gradient_accumulation().name().to_string(),
         feature_channels: k,
         shader: shader.map(|m| {
@@ -222,7 +225,7 @@ impl BackwardReport {
         let mut t = String::new();
         let _ = writeln!(
             t,
-            "{}: {} Gaussians, {}x{}, {} ({}), kernel {}, accumulation {}, {}, {} iterations",
+            "{}: {} Gaussians, {}x{}, {} ({}), kernel {}{}, accumulation {}, {}, {} iterations",
             self.scene,
             self.gaussians,
             self.width,
@@ -230,6 +233,11 @@ impl BackwardReport {
             self.device,
             self.driver,
             self.kernel,
+            if self.reproducible {
+                " (reproducible mode)"
+            } else {
+                ""
+            },
             self.accumulation,
             match (self.feature_channels, &self.shader) {
                 (0, _) => "SH colour".to_string(),

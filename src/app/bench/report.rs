@@ -30,6 +30,8 @@ pub struct BenchReport {
     pub blend_kernel: Option<String>,
     /// The alpha falloff rendered (`gaussian` or `power`, `--kernel`).
     pub kernel: String,
+    /// Rendered in the reproducible mode (`--reproducible`; docs/reproducibility.md).
+    pub reproducible: bool,
     /// Feature channels blended per frame (the `features` stage), 0 for colour only.
     pub feature_channels: usize,
     /// The scene was uploaded compact (SH, scales and rotations as fp16; `--compact`).
@@ -100,6 +102,9 @@ impl BenchReport {
         } else {
             format!("{renderer}, {} kernel", self.kernel)
         };
+        if self.reproducible {
+            renderer += ", reproducible mode";
+        }
         if self.feature_channels > 0 {
             renderer += &format!(", {} feature channels blended", self.feature_channels);
         }

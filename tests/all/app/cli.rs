@@ -804,6 +804,27 @@ fn kernel_flag_and_the_ply_kernel_comment() {
         "0",
     ]);
     assert!(stdout(&o).contains("power kernel"), "{}", stdout(&o));
+    assert!(!stdout(&o).contains("reproducible mode"), "{}", stdout(&o));
+    // The reproducible mode is said in the table and the JSON report.
+    let bench_json = d.join("bench.json");
+    let o = ok(&[
+        "bench",
+        s(&power),
+        "--width",
+        "160",
+        "--frames",
+        "1",
+        "--warmup",
+        "0",
+        "--reproducible",
+        "--json",
+        s(&bench_json),
+    ]);
+    assert!(stdout(&o).contains("power kernel, reproducible mode"), "{}", stdout(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&bench_json).unwrap()).unwrap();
+    let runs = json["runs"].as_array().map_or(vec![json.clone()], |r| r.clone());
+    assert!(runs.iter().all(|r| r["reproducible"] == true), "{json}");
     // The table's bytes per stage and the bandwidth they make at the median.
     let text = stdout(&o);
     let blend = text.lines().find(|l| l.starts_with("blend ")).unwrap();
