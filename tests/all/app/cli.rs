@@ -820,10 +820,16 @@ fn kernel_flag_and_the_ply_kernel_comment() {
         "--json",
         s(&bench_json),
     ]);
-    assert!(stdout(&o).contains("power kernel, reproducible mode"), "{}", stdout(&o));
+    assert!(
+        stdout(&o).contains("power kernel, reproducible mode"),
+        "{}",
+        stdout(&o)
+    );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&bench_json).unwrap()).unwrap();
-    let runs = json["runs"].as_array().map_or(vec![json.clone()], |r| r.clone());
+    let runs = json["runs"]
+        .as_array()
+        .map_or(vec![json.clone()], |r| r.clone());
     assert!(runs.iter().all(|r| r["reproducible"] == true), "{json}");
     // The table's bytes per stage and the bandwidth they make at the median.
     let text = stdout(&o);
