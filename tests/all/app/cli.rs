@@ -709,6 +709,36 @@ fn info_prints_log_binned_histograms_that_count_every_gaussian() {
     }
 }
 
+/// `bench --reproducible` says the mode in its table and in each run of the JSON report.
+#[test]
+fn bench_names_the_reproducible_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    let bench_json = dir.path().join("bench.json");
+    let args = [
+        "bench", "--demo", "--width", "160", "--frames", "1", "--warmup", "0",
+    ];
+    let o = common::cli::ok(
+        &[
+            &args[..],
+            &["--reproducible", "--json", common::cli::s(&bench_json)],
+        ]
+        .concat(),
+    );
+    assert!(
+        common::cli::stdout(&o).contains("reproducible mode"),
+        "{}",
+        common::cli::stdout(&o)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&bench_json).unwrap()).unwrap();
+    let runs = json["runs"].as_array().expect("runs");
+    assert!(
+        !runs.is_empty() && runs.iter().all(|r| r["reproducible"] == true),
+        "{json}"
+    );
+    assert!(!common::cli::stdout(&common::cli::ok(&args)).contains("reproducible mode"));
+}
+
 /// `--kernel power` on render, bench and compare; a PLY that records the kernel (header
 /// `comment verisplat kernel power`, written by `convert --kernel`) renders with it, with a
 /// note, unless `--kernel` overrides; `info` prints it; `convert` keeps it in PLY and says
@@ -805,32 +835,6 @@ fn kernel_flag_and_the_ply_kernel_comment() {
     ]);
     assert!(stdout(&o).contains("power kernel"), "{}", stdout(&o));
     assert!(!stdout(&o).contains("reproducible mode"), "{}", stdout(&o));
-    // The reproducible mode is said in the table and the JSON report.
-    let bench_json = d.join("bench.json");
-    let o = ok(&[
-        "bench",
-        s(&power),
-        "--width",
-        "160",
-        "--frames",
-        "1",
-        "--warmup",
-        "0",
-        "--reproducible",
-        "--json",
-        s(&bench_json),
-    ]);
-    assert!(
-        stdout(&o).contains("power kernel, reproducible mode"),
-        "{}",
-        stdout(&o)
-    );
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&bench_json).unwrap()).unwrap();
-    let runs = json["runs"]
-        .as_array()
-        .map_or(vec![json.clone()], |r| r.clone());
-    assert!(runs.iter().all(|r| r["reproducible"] == true), "{json}");
     // The table's bytes per stage and the bandwidth they make at the median.
     let text = stdout(&o);
     let blend = text.lines().find(|l| l.starts_with("blend ")).unwrap();
